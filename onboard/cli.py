@@ -1,0 +1,116 @@
+"""Command line: ``onboard <command>`` (also ``python -m onboard``).
+
+The commands and their flags are a contract (architecture.md §4.1). This module only
+parses arguments and dispatches; each command's work lives in its own module, imported
+when the command runs so that ``onboard run`` on the vehicle never imports plotting or
+optimization libraries.
+
+Exit status: 0 success, 2 bad usage or unreadable input (one line on stderr), 1 internal
+error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+from onboard import __version__
+from onboard.errors import UsageError
+
+
+def _add_zenoh_flags(p: argparse.ArgumentParser) -> None:
+    """The Zenoh connection flags shared by every command that talks Zenoh."""
+    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                   help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
+                   help="Zenoh endpoint to listen on (repeatable)")
+    p.add_argument("--mode", choices=("peer", "client"), default=None,
+                   help="Zenoh session mode")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="onboard",
+        description="Onboard estimation for small marine vehicles: thrust, current, "
+        "disturbances, from GPS, IMU, compass, DVL and actuator commands.",
+    )
+    parser.add_argument("--version", action="version", version=f"onboard {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser("run", help="the onboard service (systemd ExecStart)")
+    p.add_argument("--config", required=True, help="vehicle/deployment TOML file")
+    p.add_argument("--state-dir", default=None, help="directory for recordings and state "
+                   "(default: $STATE_DIRECTORY or the current directory)")
+    p.set_defaults(handler="onboard.service:main")
+
+    p = sub.add_parser("demo", help="simulated vehicle + service + shore view on loopback")
+    p.add_argument("--duration", type=float, default=60.0, help="simulated seconds (default 60)")
+    p.add_argument("--scenario", default=None, help="SITL scenario (default: jaiabot-turns)")
+    p.add_argument("--realtime", action="store_true", help="run at wall-clock speed")
+    p.set_defaults(handler="onboard.demo:main")
+
+    p = sub.add_parser("sitl", help="the simulator alone, emitting real protocols")
+    p.add_argument("--list", action="store_true", help="list the scenarios")
+    p.add_argument("--scenario", help="scenario name (see --list)")
+    p.add_argument("--duration", type=float, default=None, help="simulated seconds")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--tlog", help="write the MAVLink stream to this .tlog")
+    p.add_argument("--truth", help="write the hidden truth (JSON lines) to this file")
+    p.add_argument("--link", help="udp:HOST:PORT, tcp:HOST:PORT or pty")
+    p.add_argument("--nmea-pty", action="store_true", help="emit NMEA on a pseudo-terminal")
+    p.add_argument("--dvl", metavar="tcp:HOST:PORT", help="serve Water Linked DVL JSON")
+    p.add_argument("--realtime", action="store_true", help="run at wall-clock speed")
+    p.add_argument("--controller", choices=("pid", "nmpc", "ampc"), default=None,
+                   help="closed-loop controller (bluerov2-circle)")
+    p.add_argument("--report", help="write a JSON report of the closed-loop run")
+    p.set_defaults(handler="sitl.cli:main")
+
+    p = sub.add_parser("replay", help="run the pipelines over a recorded log")
+    p.add_argument("log", metavar="LOG", help=".tlog, .bin, NMEA/DVL capture, CSV (file or "
+                   "directory), or an onboard recording")
+    p.add_argument("--config", help="vehicle config (default: detect from the log)")
+    p.add_argument("--out", default="replay-out", help="output directory (default replay-out)")
+    p.add_argument("--no-plot", action="store_true", help="skip the track figure")
+    p.set_defaults(handler="onboard.replay:main")
+
+    p = sub.add_parser("diagnose", help="residuals, the missing effect, before/after")
+    p.add_argument("log", metavar="LOG")
+    p.add_argument("--config", help="vehicle config (default: detect from the log)")
+    p.add_argument("--out", default="diagnose-out", help="output directory")
+    p.set_defaults(handler="onboard.diagnose:main")
+
+    p = sub.add_parser("shore", help="live view of a vehicle's estimates from Zenoh")
+    _add_zenoh_flags(p)
+    p.add_argument("--vehicle", default="*", help="vehicle id (default: all)")
+    p.add_argument("--once", action="store_true", help="print one snapshot and exit")
+    p.set_defaults(handler="onboard.shore:main")
+
+    p = sub.add_parser("bench", help="performance figures")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.set_defaults(handler="onboard.bench:main")
+
+    p = sub.add_parser("design-gain", help="solve the high-gain observer LMI offline")
+    p.add_argument("--config", required=True)
+    p.add_argument("--out", help="write the gain here (default: beside the config)")
+    p.set_defaults(handler="onboard.design_gain:main")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    module_name, func_name = args.handler.split(":")
+    try:
+        module = importlib.import_module(module_name)
+        return int(getattr(module, func_name)(args) or 0)
+    except UsageError as err:
+        print(f"onboard {args.command}: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

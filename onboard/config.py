@@ -1,0 +1,294 @@
+"""Configuration: TOML files under ``config/`` decoded into typed msgspec Structs.
+
+One file per vehicle class (``rudder-boat.toml``, ``twin-thruster-boat.toml``,
+``bluerov2.toml``, ``torpedo-auv.toml``, ...) and per deployment. A bad file is reported
+with the dotted key and what was expected, e.g.::
+
+    config/mine.toml: inputs.throttle.channel: expected int, got str
+
+Pipelines own their hyperparameters: ``[pipelines.<name>]`` is kept as a table here and
+decoded by the pipeline with :func:`decode_section`, so the error still names the key.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+from typing import Any, Literal, TypeVar
+
+import msgspec
+
+from onboard.errors import UsageError
+
+VehicleClass = Literal[
+    "rudder-boat", "twin-thruster-boat", "bluerov2", "torpedo-auv", "spheroid", "unknown"
+]
+
+T = TypeVar("T")
+
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
+"""Where the bundled vehicle configs live in a source checkout."""
+
+
+class ConfigError(UsageError, ValueError):
+    """A configuration file is missing, unreadable or does not match the schema."""
+
+
+class _Strict(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """Base for config tables: unknown keys are errors (they are almost always typos)."""
+
+
+class Vehicle(_Strict):
+    """``[vehicle]``: identity and class."""
+
+    id: str = "vehicle"
+    vehicle_class: VehicleClass = msgspec.field(default="unknown", name="class")
+    system_id: int = 1
+    description: str = ""
+
+
+class Engine(_Strict):
+    """``[engine]``: the fixed-rate tick that drives the pipelines."""
+
+    rate_hz: float = 10.0
+    max_sample_age_s: float = 2.0
+    """Samples older than this relative to the newest one are rejected as late."""
+
+
+class ChannelMap(_Strict):
+    """How one actuator role is read from a log or telemetry field.
+
+    ``source`` is ``servo`` (SERVO_OUTPUT_RAW / RCOU), ``rc`` (RC_CHANNELS / RCIN),
+    ``rpm`` (RPM message) or ``column`` (a CSV column named by ``column``).
+    PWM is normalized as ``(pwm - neutral_us) / half_range_us`` with ``deadband_us``
+    around neutral set to zero, clipped to [-1, 1], negated when ``reverse``; then
+    multiplied by ``full_scale`` (e.g. 0.2618 rad for a +-15 deg rudder, or the rpm at
+    full throttle). A ``rpm`` source is multiplied by ``full_scale`` directly (1 = rpm).
+    """
+
+    source: Literal["servo", "rc", "rpm", "column"] = "servo"
+    channel: int = 1
+    column: str = ""
+    neutral_us: float = 1500.0
+    half_range_us: float = 400.0
+    deadband_us: float = 0.0
+    reverse: bool = False
+    full_scale: float = 1.0
+
+
+class Inputs(_Strict):
+    """``[inputs]``: which field is which actuator. Roles match ActuatorCommand."""
+
+    throttle: ChannelMap | None = None
+    rudder: ChannelMap | None = None
+    left: ChannelMap | None = None
+    right: ChannelMap | None = None
+    propeller_rpm: ChannelMap | None = None
+    stern_plane: ChannelMap | None = None
+    thrusters: list[ChannelMap] = []
+
+
+class GnssNoise(_Strict):
+    position_std_m: float = 2.0
+    velocity_std_mps: float = 0.1
+    rate_hz: float = 5.0
+
+
+class ImuNoise(_Strict):
+    accel_std_mps2: float = 0.05
+    gyro_std_rps: float = 0.005
+    rate_hz: float = 50.0
+
+
+class CompassNoise(_Strict):
+    heading_std_rad: float = 0.02
+    rate_hz: float = 10.0
+
+
+class DvlNoise(_Strict):
+    velocity_std_mps: float = 0.01
+    max_fom_mps: float = 0.05
+    """Reports with a larger figure of merit are not fused."""
+    max_altitude_m: float = 50.0
+    rate_hz: float = 5.0
+
+
+class DepthNoise(_Strict):
+    depth_std_m: float = 0.02
+    surface_depth_m: float = 0.3
+    """Shallower than this the vehicle is at the surface and GNSS is accepted."""
+    water_density_kgm3: float = 1025.0
+    surface_pressure_pa: float = 101325.0
+
+
+class Sensors(_Strict):
+    """``[sensors]``: noise figures the pipelines use for their R matrices."""
+
+    gnss: GnssNoise = GnssNoise()
+    imu: ImuNoise = ImuNoise()
+    compass: CompassNoise = CompassNoise()
+    dvl: DvlNoise = DvlNoise()
+    depth: DepthNoise = DepthNoise()
+
+
+class CsvFormat(_Strict):
+    """``[csv]``: column mapping of the generic CSV reader (see README, "CSV logs").
+
+    ``time`` is the time column and ``time_scale`` turns it into seconds (0.001 for ms).
+    Each other entry maps a sample field to a column name; a sample type is produced for
+    each row where all of its required columns are present and numeric.
+    """
+
+    time: str = "t"
+    time_scale: float = 1.0
+    lat_deg: str = ""
+    lon_deg: str = ""
+    north_m: str = ""
+    east_m: str = ""
+    heading: str = ""
+    heading_unit: Literal["rad", "deg"] = "rad"
+    yaw_rate: str = ""
+    yaw_rate_unit: Literal["rad/s", "deg/s"] = "rad/s"
+    surge_mps: str = ""
+    sway_mps: str = ""
+    sog_mps: str = ""
+    depth_m: str = ""
+    pwm_columns: list[str] = []
+    """Columns that form ActuatorOutputs.pwm_us, channel 1 first."""
+    run_column: str = ""
+    """Optional column naming the run; a directory of CSV files uses the file name."""
+
+
+class ZenohOut(_Strict):
+    enabled: bool = True
+    mode: Literal["peer", "client", "router"] = "peer"
+    connect: list[str] = []
+    listen: list[str] = []
+    key_prefix: str = "onboard"
+    config_file: str = ""
+    """An optional Zenoh JSON5 config (TLS, user/password, access control)."""
+
+
+class MavlinkOut(_Strict):
+    enabled: bool = True
+    url: str = "udpout:127.0.0.1:14550"
+    component_id: int = 191
+    rate_hz: float = 5.0
+    signing_key_file: str = ""
+    require_signing: bool = False
+    odometry: bool = False
+
+
+class SourceConfig(_Strict):
+    """One live input: ``kind`` is the protocol, ``url`` the transport.
+
+    URLs: ``serial:/dev/ttyUSB0:115200``, ``udp:0.0.0.0:14551``, ``tcp:192.168.2.95:16171``,
+    ``pty:/tmp/gps`` (a pseudo-terminal path).
+    """
+
+    kind: Literal["mavlink", "nmea", "dvl-json", "pd6"]
+    url: str
+    name: str = ""
+
+
+class Recorder(_Strict):
+    enabled: bool = True
+    directory: str = "recordings"
+    flush_interval_s: float = 0.5
+    rotate_mb: float = 64.0
+    max_total_mb: float = 2048.0
+
+
+class Service(_Strict):
+    """``[service]``: live inputs, publishers, recorder and persistence."""
+
+    sources: list[SourceConfig] = []
+    zenoh: ZenohOut = ZenohOut()
+    mavlink: MavlinkOut = MavlinkOut()
+    recorder: Recorder = Recorder()
+    state_file: str = "state/adaptive.json"
+    state_save_interval_s: float = 30.0
+    queue_size: int = 4096
+    watchdog: bool = True
+
+
+class Config(_Strict):
+    """A whole configuration file."""
+
+    vehicle: Vehicle = Vehicle()
+    engine: Engine = Engine()
+    inputs: Inputs = Inputs()
+    sensors: Sensors = Sensors()
+    csv: CsvFormat = CsvFormat()
+    service: Service = Service()
+    pipelines: dict[str, dict[str, Any]] = {}
+    """Per-pipeline tables, decoded by each pipeline (see :func:`decode_section`)."""
+
+
+_PATH_RE = re.compile(r" - at `\$(?P<path>[^`]*)`")
+
+
+def _explain(err: msgspec.ValidationError, prefix: str = "") -> str:
+    """Turn msgspec's message into ``dotted.key: what was expected``."""
+    msg = str(err)
+    m = _PATH_RE.search(msg)
+    path = ""
+    if m:
+        path = m.group("path").lstrip(".")
+        path = re.sub(r"\[(\d+)\]", r"[\1]", path)
+        msg = msg[: m.start()]
+    key = ".".join(p for p in (prefix, path) if p)
+    msg = msg[0].lower() + msg[1:] if msg else msg
+    msg = msg.replace("`", "")
+    return f"{key}: {msg}" if key else msg
+
+
+def from_dict(data: dict[str, Any], origin: str = "<dict>") -> Config:
+    """Decode a configuration from a plain mapping; raises ConfigError naming the key."""
+    try:
+        return msgspec.convert(data, Config)
+    except msgspec.ValidationError as err:
+        raise ConfigError(f"{origin}: {_explain(err)}") from None
+
+
+def load(path: str | Path) -> Config:
+    """Read and validate a TOML configuration file.
+
+    A bare name such as ``rudder-boat`` is looked up in the bundled ``config/`` directory.
+    """
+    p = resolve(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as err:
+        raise ConfigError(f"{p}: cannot read: {err.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{p}: not valid TOML: {err}") from None
+    return from_dict(data, str(p))
+
+
+def resolve(path: str | Path) -> Path:
+    """A config path as given, or a bundled config by name (with or without ``.toml``)."""
+    p = Path(path)
+    if p.exists():
+        return p
+    for cand in (CONFIG_DIR / p.name, CONFIG_DIR / f"{p.name}.toml"):
+        if cand.exists():
+            return cand
+    raise ConfigError(f"{path}: no such config file (bundled: {', '.join(bundled())})")
+
+
+def bundled() -> list[str]:
+    """Names of the configs shipped in ``config/``."""
+    return sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
+
+
+def decode_section(cfg: Config, pipeline: str, schema: type[T]) -> T:
+    """Decode ``[pipelines.<pipeline>]`` into ``schema`` (defaults when absent)."""
+    raw = cfg.pipelines.get(pipeline, {})
+    try:
+        return msgspec.convert(raw, schema)
+    except msgspec.ValidationError as err:
+        raise ConfigError(_explain(err, f"pipelines.{pipeline}")) from None

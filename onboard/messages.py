@@ -1,0 +1,279 @@
+"""Typed messages: every sensor sample and every estimate the project passes around.
+
+These msgspec Structs are the single source of truth for the data model. Drivers produce
+them, the engine orders them, pipelines consume them, publishers encode them. Neither
+``drivers`` nor ``onboard.pipelines`` knows the other; both know only this module.
+
+Conventions (everywhere in the project):
+
+* time ``t`` is in seconds. For live data it is the receive time on the service clock;
+  for logs it is the log's own time stamp (a tlog's receive time, a DataFlash ``TimeUS``);
+* earth frame is NED (north, east, down), body frame FRD (forward, right, down);
+* angles in radians, headings clockwise from north in [0, 2*pi) or (-pi, pi];
+* SI units; a field name carries its unit when it is not the SI base unit (``_deg``,
+  ``_us``, ``_rpm``);
+* a quantity that the source did not provide is ``None`` (never 0, never NaN).
+"""
+
+from __future__ import annotations
+
+from typing import Literal, Union
+
+import msgspec
+
+SCHEMA_VERSION = 1
+"""Version of the wire schema of :class:`EstimateRecord` and :class:`HealthRecord`."""
+
+
+class Sample(msgspec.Struct, frozen=True, kw_only=True, tag_field="type"):
+    """Base of every sensor sample.
+
+    ``t`` is the time of the sample in seconds (see the module docstring);
+    ``source`` names where it came from (``"mavlink"``, ``"nmea"``, ``"dvl"``, a log
+    channel...), so a vehicle with two GPS receivers keeps them apart.
+    """
+
+    t: float
+    source: str = ""
+
+
+class GnssFix(Sample, frozen=True, tag="gnss"):
+    """A GNSS position fix, optionally with velocity over ground.
+
+    ``fix_quality`` follows NMEA GGA: 0 none, 1 GPS, 2 DGPS, 4 RTK fixed, 5 RTK float;
+    MAVLink ``fix_type`` is mapped onto it by the drivers (3D fix -> 1, DGPS -> 2, RTK
+    fixed -> 4, RTK float -> 5). ``sog_mps`` and ``cog_rad`` are speed and course over
+    ground; ``h_acc_m`` and ``v_acc_m`` are one-sigma horizontal and vertical accuracies.
+    """
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float | None = None
+    fix_quality: int = 1
+    num_sats: int | None = None
+    hdop: float | None = None
+    sog_mps: float | None = None
+    cog_rad: float | None = None
+    h_acc_m: float | None = None
+    v_acc_m: float | None = None
+
+
+class VelocityOverGround(Sample, frozen=True, tag="vog"):
+    """Earth-frame velocity over ground from a navigation solution (INS, EKF, DVL-aided INS).
+
+    MAVLink GLOBAL_POSITION_INT vx/vy/vz and LOCAL_POSITION_NED map here.
+    """
+
+    v_north_mps: float
+    v_east_mps: float
+    v_down_mps: float | None = None
+
+
+class Imu(Sample, frozen=True, tag="imu"):
+    """Inertial measurement: specific force (m/s^2) and angular rate (rad/s), body FRD."""
+
+    accel_x: float
+    accel_y: float
+    accel_z: float
+    gyro_x: float
+    gyro_y: float
+    gyro_z: float
+
+
+class Heading(Sample, frozen=True, tag="heading"):
+    """A heading measurement (rad, clockwise from north).
+
+    ``reference`` says whether it is relative to true or magnetic north; a magnetic
+    heading needs the declination (``declination_rad`` when the source gives it).
+    """
+
+    heading_rad: float
+    reference: Literal["true", "magnetic"] = "true"
+    declination_rad: float | None = None
+
+
+class Attitude(Sample, frozen=True, tag="attitude"):
+    """Attitude as ZYX Euler angles (rad) and optionally the body rates (rad/s)."""
+
+    roll_rad: float
+    pitch_rad: float
+    yaw_rad: float
+    roll_rate_rps: float | None = None
+    pitch_rate_rps: float | None = None
+    yaw_rate_rps: float | None = None
+
+
+class DvlVelocity(Sample, frozen=True, tag="dvl"):
+    """A Doppler velocity log report, instrument/body frame (m/s).
+
+    ``track`` is ``"bottom"`` (velocity over ground) or ``"water"`` (velocity through
+    water). ``valid`` is the instrument's own validity flag: an invalid report is kept
+    (it is information: the DVL lost lock) but never fused. ``fom_mps`` is the figure of
+    merit (one-sigma velocity error), ``covariance`` the row-major 3x3 covariance
+    (m^2/s^2), ``altitude_m`` the range to the bottom.
+    """
+
+    vx: float
+    vy: float
+    vz: float
+    track: Literal["bottom", "water"] = "bottom"
+    valid: bool = True
+    fom_mps: float | None = None
+    covariance: tuple[float, ...] | None = None
+    altitude_m: float | None = None
+
+
+class DvlPosition(Sample, frozen=True, tag="dvl_position"):
+    """A DVL's own dead-reckoned position (m, NED from its reset point) and attitude."""
+
+    north_m: float
+    east_m: float
+    down_m: float
+    roll_rad: float | None = None
+    pitch_rad: float | None = None
+    yaw_rad: float | None = None
+    std_m: float | None = None
+
+
+class Depth(Sample, frozen=True, tag="depth"):
+    """Depth below the surface (m, positive down), optionally with the absolute pressure."""
+
+    depth_m: float
+    pressure_pa: float | None = None
+    temperature_c: float | None = None
+
+
+class Pressure(Sample, frozen=True, tag="pressure"):
+    """An absolute pressure reading (Pa) that has not yet been turned into depth.
+
+    The engine converts it with the configured water density and surface pressure.
+    """
+
+    pressure_pa: float
+    temperature_c: float | None = None
+
+
+class Altitude(Sample, frozen=True, tag="altitude"):
+    """Range to the bottom (m), from an echo sounder or DISTANCE_SENSOR."""
+
+    altitude_m: float
+
+
+class ActuatorOutputs(Sample, frozen=True, tag="actuators"):
+    """Raw actuator outputs: PWM pulse widths (us) per output channel, channel 1 first.
+
+    Which channel drives which actuator is configuration (``[inputs]`` in the vehicle
+    config), applied by the engine, not by the drivers.
+    """
+
+    pwm_us: tuple[float, ...]
+
+
+class RcChannels(Sample, frozen=True, tag="rc"):
+    """RC input pulse widths (us) per channel, channel 1 first."""
+
+    pwm_us: tuple[float, ...]
+
+
+class PropellerRpm(Sample, frozen=True, tag="rpm"):
+    """Measured shaft speeds (rev/min), one per sensor (MAVLink RPM.rpm1, rpm2)."""
+
+    rpm: tuple[float, ...]
+
+
+class ActuatorCommand(Sample, frozen=True, tag="command"):
+    """Normalized actuator command, the vehicle-independent input to the pipelines.
+
+    Produced from raw outputs by the configured input mapping. Normalized values are in
+    [-1, 1] (1 = full ahead / full right); angles in rad; ``None`` where the vehicle has
+    no such actuator.
+
+    * ``throttle``: a single propulsor (rudder boats, torpedo AUVs);
+    * ``rudder_rad``: rudder deflection, positive turns the bow to starboard;
+    * ``left``, ``right``: the two thrusters of a skid-steered boat;
+    * ``propeller_rpm``: commanded or measured shaft speed;
+    * ``stern_plane_rad``: stern/dive plane deflection, positive pitches the nose down;
+    * ``thrusters``: per-thruster commands of a multi-thruster vehicle (BlueROV2 order).
+    """
+
+    throttle: float | None = None
+    rudder_rad: float | None = None
+    left: float | None = None
+    right: float | None = None
+    propeller_rpm: float | None = None
+    stern_plane_rad: float | None = None
+    thrusters: tuple[float, ...] | None = None
+
+
+class Parameter(Sample, frozen=True, tag="param"):
+    """An autopilot parameter (PARAM_VALUE, DataFlash PARM)."""
+
+    name: str
+    value: float
+
+
+class VehicleInfo(Sample, frozen=True, tag="vehicle"):
+    """What a HEARTBEAT says about the sender: MAV_TYPE and MAV_AUTOPILOT numbers."""
+
+    system_id: int
+    component_id: int
+    mav_type: int
+    autopilot: int
+
+
+AnySample = Union[
+    GnssFix,
+    VelocityOverGround,
+    Imu,
+    Heading,
+    Attitude,
+    DvlVelocity,
+    DvlPosition,
+    Depth,
+    Pressure,
+    Altitude,
+    ActuatorOutputs,
+    RcChannels,
+    PropellerRpm,
+    ActuatorCommand,
+    Parameter,
+    VehicleInfo,
+]
+"""Every concrete sample type; a tagged union for msgspec decoding."""
+
+
+class EstimateRecord(msgspec.Struct, frozen=True, kw_only=True):
+    """One pipeline's estimates at one tick, as published on ``onboard/<id>/est/<pipeline>``.
+
+    ``values`` maps quantity name (the part after ``<pipeline>.`` in estimates.csv) to its
+    value in SI units; ``std`` gives one-sigma uncertainties where the pipeline has them.
+    ``t_sensor`` is the time of the newest input sample that contributed, so consumers can
+    measure latency.
+    """
+
+    schema: int = SCHEMA_VERSION
+    vehicle: str
+    pipeline: str
+    t: float
+    values: dict[str, float]
+    std: dict[str, float] = {}
+    t_sensor: float | None = None
+
+
+class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
+    """Service health, published on ``onboard/<id>/health``.
+
+    ``rates_hz`` per source, ``rejected`` counts per reason, ``innovations`` and ``nis``
+    per pipeline channel, ``events`` recent human-readable events.
+    """
+
+    schema: int = SCHEMA_VERSION
+    vehicle: str
+    t: float
+    rates_hz: dict[str, float] = {}
+    rejected: dict[str, int] = {}
+    dropped: dict[str, int] = {}
+    innovations: dict[str, float] = {}
+    nis: dict[str, float] = {}
+    events: list[str] = []
+    mode: str = ""

@@ -1,0 +1,55 @@
+"""The contract every estimation pipeline fulfils.
+
+A pipeline is pure and synchronous: numbers in, numbers out. No I/O, no clock, no
+asyncio, no global state. The engine calls :meth:`Pipeline.step` once per fixed-rate tick
+with the samples that arrived since the previous tick, in time order. Because the
+pipeline sees only its inputs, live operation and replay give identical results.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
+
+from onboard.config import Config
+from onboard.messages import Sample
+
+
+@runtime_checkable
+class Pipeline(Protocol):
+    """One estimator family, e.g. ``aie`` or ``current``.
+
+    Attributes:
+        name: the pipeline name, the prefix of its columns in estimates.csv and its
+            Zenoh key ``onboard/<id>/est/<name>``.
+        columns: the quantities it can estimate (without the prefix), in the order they
+            appear in estimates.csv. Fixed at construction.
+    """
+
+    name: str
+    columns: tuple[str, ...]
+
+    def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
+        """Advance to tick time ``t`` (s) given the new ``samples`` (time-ordered, all
+        with ``sample.t <= t``); return the current estimates by quantity name. A quantity
+        with no estimate yet is simply absent from the mapping."""
+        ...
+
+    def health(self) -> Mapping[str, float]:
+        """Innovations, their variances and NIS by channel name, e.g.
+        ``{"surge.innovation": 0.1, "surge.S": 0.02, "surge.nis": 0.5}``; also
+        event counters such as ``"diverged": 1``."""
+        ...
+
+    def get_state(self) -> dict[str, Any]:
+        """Adaptive state worth keeping across a restart (JSON-serializable)."""
+        ...
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore what :meth:`get_state` returned; ignore what does not fit."""
+        ...
+
+
+class PipelineFactory(Protocol):
+    def __call__(self, cfg: Config) -> Pipeline | None:
+        """Build the pipeline for this configuration, or None if it does not apply."""
+        ...
