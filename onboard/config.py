@@ -35,7 +35,7 @@ class ConfigError(UsageError, ValueError):
     """A configuration file is missing, unreadable or does not match the schema."""
 
 
-class _Strict(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+class _Strict(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
     """Base for config tables: unknown keys are errors (they are almost always typos)."""
 
 
@@ -239,9 +239,35 @@ def _explain(err: msgspec.ValidationError, prefix: str = "") -> str:
         path = re.sub(r"\[(\d+)\]", r"[\1]", path)
         msg = msg[: m.start()]
     key = ".".join(p for p in (prefix, path) if p)
+    unknown = re.match(r"Object contains unknown field `(\w+)`", msg)
+    if unknown:
+        key = ".".join(p for p in (key, unknown.group(1)) if p)
+        return f"{key}: unknown key (misspelt?)"
+    if msg.startswith("Invalid enum value") and key:
+        allowed = _enum_choices(key)
+        if allowed:
+            msg += f"; expected one of {', '.join(allowed)}"
     msg = msg[0].lower() + msg[1:] if msg else msg
     msg = msg.replace("`", "")
     return f"{key}: {msg}" if key else msg
+
+
+def _enum_choices(key: str) -> list[str]:
+    """The allowed values of a Literal-typed config key, for error messages."""
+    import typing
+
+    node: Any = Config
+    for part in re.sub(r"\[\d+\]", "", key).split("."):
+        hints = typing.get_type_hints(node) if isinstance(node, type) else {}
+        fields = {f.encode_name: f.name for f in msgspec.structs.fields(node)} if hints else {}
+        node = hints.get(fields.get(part, part))
+        while typing.get_origin(node) in (list, typing.Union) or (
+            node is not None and type(node).__name__ == "UnionType"
+        ):
+            node = next(a for a in typing.get_args(node) if a is not type(None))
+        if node is None:
+            return []
+    return [str(a) for a in typing.get_args(node)] if typing.get_origin(node) is Literal else []
 
 
 def from_dict(data: dict[str, Any], origin: str = "<dict>") -> Config:

@@ -1,0 +1,151 @@
+"""The service's own recording: every raw input with its receive time, crash-safe.
+
+Layout: an 8-byte file magic ``ONBREC01`` followed by frames::
+
+    0xA5 0x5A | u32 length | u32 crc32(payload) | payload (msgpack RawRecord)
+
+all little-endian. Frames are only ever appended. A crash can leave at most a torn last
+frame, which the reader detects (length or CRC) and counts as ``truncated``; a damaged
+frame in the middle is counted as ``crc`` and the reader resynchronizes on the next frame
+marker, so one bad sector never costs the rest of the file.
+
+A :class:`RawRecord` holds the bytes exactly as received on one input (``kind`` names the
+protocol: ``mavlink``, ``nmea``, ``dvl-json``, ``pd6``; ``sample`` is an already typed
+sample encoded as msgpack, used by the simulator; ``tick`` marks a live engine tick, so a
+replay reproduces the live estimates exactly; ``meta`` carries JSON metadata such as the
+config used).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from pathlib import Path
+from typing import BinaryIO, Iterator
+
+import msgspec
+
+from drivers.base import ReadStats, UnreadableLog
+
+FILE_MAGIC = b"ONBREC01"
+FRAME_MARK = b"\xa5\x5a"
+_HEAD = struct.Struct("<2sII")
+MAX_FRAME = 1 << 20
+"""Largest payload accepted (1 MiB); a longer length field means corruption."""
+
+
+class RawRecord(msgspec.Struct, array_like=True):
+    """One raw input: receive time ``t`` (s, service clock), input name, protocol, bytes."""
+
+    t: float
+    source: str
+    kind: str
+    data: bytes
+
+
+_enc = msgspec.msgpack.Encoder()
+_dec = msgspec.msgpack.Decoder(RawRecord)
+
+
+def encode_frame(rec: RawRecord) -> bytes:
+    """The bytes of one frame holding ``rec``."""
+    payload = _enc.encode(rec)
+    return _HEAD.pack(FRAME_MARK, len(payload), zlib.crc32(payload)) + payload
+
+
+class RecordingWriter:
+    """Appends frames to a recording; the caller decides when to :meth:`flush`.
+
+    ``fsync`` on flush makes the data durable against power loss, not only a crash of
+    the process. Rotation and size caps are the recorder's job (onboard.recorder); this
+    class writes one file.
+    """
+
+    def __init__(self, path: str | Path, *, fsync: bool = True) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        new = not self.path.exists() or self.path.stat().st_size == 0
+        self._f: BinaryIO = open(self.path, "ab", buffering=1 << 16)
+        self._fsync = fsync
+        self.bytes_written = 0 if new else self.path.stat().st_size
+        if new:
+            self._f.write(FILE_MAGIC)
+            self.bytes_written = len(FILE_MAGIC)
+
+    def write(self, rec: RawRecord) -> None:
+        frame = encode_frame(rec)
+        self._f.write(frame)
+        self.bytes_written += len(frame)
+
+    def flush(self) -> None:
+        self._f.flush()
+        if self._fsync:
+            os.fsync(self._f.fileno())
+
+    def close(self) -> None:
+        if not self._f.closed:
+            self.flush()
+            self._f.close()
+
+    def __enter__(self) -> "RecordingWriter":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def is_recording(path: str | Path) -> bool:
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(FILE_MAGIC)) == FILE_MAGIC
+    except OSError:
+        return False
+
+
+def read_records(path: str | Path, stats: ReadStats | None = None) -> Iterator[RawRecord]:
+    """Every intact record of a recording, in file order; damage is skipped and counted."""
+    stats = stats if stats is not None else ReadStats()
+    try:
+        data = Path(path).read_bytes()
+    except OSError as err:
+        raise UnreadableLog(f"{path}: {err.strerror}") from None
+    if not data.startswith(FILE_MAGIC):
+        raise UnreadableLog(f"{path}: not an onboard recording (bad magic)")
+    pos = len(FILE_MAGIC)
+    n = len(data)
+    while pos < n:
+        if data[pos:pos + 2] != FRAME_MARK:
+            nxt = data.find(FRAME_MARK, pos + 1)
+            stats.reject("garbage")
+            if nxt < 0:
+                break
+            pos = nxt
+            continue
+        if pos + _HEAD.size > n:
+            stats.reject("truncated")
+            break
+        _, length, crc = _HEAD.unpack_from(data, pos)
+        end = pos + _HEAD.size + length
+        if length > MAX_FRAME:
+            stats.reject("length")
+            pos += 2
+            continue
+        if end > n:
+            stats.reject("truncated")
+            break
+        payload = data[pos + _HEAD.size:end]
+        if zlib.crc32(payload) != crc:
+            stats.reject("crc")
+            pos += 2
+            continue
+        try:
+            rec = _dec.decode(payload)
+        except msgspec.DecodeError:
+            stats.reject("decode")
+            pos = end
+            continue
+        stats.records += 1
+        stats.by_type[rec.kind] += 1
+        pos = end
+        yield rec

@@ -1,0 +1,104 @@
+"""Rotation-group helpers for the error-state filters (Sola, "Quaternion kinematics for the
+error-state Kalman filter", 2017, sections 2-4; the ESESO paper eqs. (6)-(8)).
+
+Conventions: a rotation matrix ``R`` maps body (FRD) vectors into the earth (NED) frame,
+``x_ned = R @ x_frd``. Perturbations are *right* (local, body-frame) ones,
+``R_true = R @ Exp(dtheta)``, as in the ESESO paper eq. (6). Angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+_EPS = 1e-9
+
+
+def skew(w: Array) -> Array:
+    """The 3x3 skew-symmetric matrix ``[w]x`` with ``[w]x @ a == cross(w, a)``."""
+    return np.array(
+        [[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]], dtype=float
+    )
+
+
+def exp_so3(theta: Array) -> Array:
+    """``Exp(theta)``: rotation vector (rad) to rotation matrix, Rodrigues' formula (paper
+    eq. 7): ``cos|t| I + (1 - cos|t|) a a^T + sin|t| [a]x``, ``a = t/|t|``."""
+    angle = math.sqrt(float(theta[0] ** 2 + theta[1] ** 2 + theta[2] ** 2))
+    K = skew(theta)
+    if angle < 1e-6:
+        # second-order series, exact to O(angle^3)
+        return np.eye(3) + K + 0.5 * (K @ K)
+    s = math.sin(angle) / angle
+    c = (1.0 - math.cos(angle)) / (angle * angle)
+    return np.eye(3) + s * K + c * (K @ K)
+
+
+def log_so3(R: Array) -> Array:
+    """``Log(R)``: rotation matrix to rotation vector (rad), the inverse of :func:`exp_so3`
+    for angles in [0, pi]."""
+    cos_a = max(-1.0, min(1.0, 0.5 * (float(np.trace(R)) - 1.0)))
+    angle = math.acos(cos_a)
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-6:
+        return 0.5 * v
+    if math.pi - angle < 1e-4:
+        # near pi: axis from the symmetric part, R = 2 a a^T - I
+        B = 0.5 * (R + np.eye(3))
+        i = int(np.argmax(np.diag(B)))
+        a = B[:, i] / math.sqrt(max(B[i, i], _EPS))
+        if float(a @ v) < 0.0:
+            a = -a
+        return angle * a / np.linalg.norm(a)
+    return angle / (2.0 * math.sin(angle)) * v
+
+
+def right_jacobian(theta: Array) -> Array:
+    """Right Jacobian of SO(3), ``Exp(t + d) ~= Exp(t) Exp(Jr(t) d)`` (Sola eq. 143)."""
+    angle = float(np.linalg.norm(theta))
+    K = skew(theta)
+    if angle < 1e-6:
+        return np.eye(3) - 0.5 * K + (K @ K) / 6.0
+    a2 = angle * angle
+    return (
+        np.eye(3)
+        - (1.0 - math.cos(angle)) / a2 * K
+        + (angle - math.sin(angle)) / (a2 * angle) * (K @ K)
+    )
+
+
+def euler_to_matrix(roll: float, pitch: float, yaw: float) -> Array:
+    """Body-to-earth rotation from ZYX Euler angles (rad), Fossen (2011) eq. 2.18 (the
+    paper's ``R_Theta``)."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def matrix_to_euler(R: Array) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) in rad of a body-to-earth rotation (ZYX); yaw in (-pi, pi]."""
+    pitch = -math.asin(max(-1.0, min(1.0, float(R[2, 0]))))
+    roll = math.atan2(float(R[2, 1]), float(R[2, 2]))
+    yaw = math.atan2(float(R[1, 0]), float(R[0, 0]))
+    return roll, pitch, yaw
+
+
+def orthonormalize(R: Array) -> Array:
+    """The nearest rotation matrix (SVD projection); removes round-off drift."""
+    U, _, Vt = np.linalg.svd(R)
+    out = U @ Vt
+    if np.linalg.det(out) < 0.0:
+        U[:, -1] = -U[:, -1]
+        out = U @ Vt
+    return out
