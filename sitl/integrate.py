@@ -1,0 +1,100 @@
+"""Numerical helpers shared by the plants: fixed-step RK4, angle wrapping, rotations.
+
+Conventions: NED earth frame, FRD body frame, ZYX (yaw-pitch-roll) Euler angles
+``(phi, theta, psi)`` in rad, as in Fossen, *Handbook of Marine Craft Hydrodynamics and
+Motion Control* (2nd ed., 2021), eqs. (2.18) and (2.41).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+__all__ = [
+    "rk4_step",
+    "integrate_rk4",
+    "wrap_pi",
+    "wrap_2pi",
+    "rotation_body_to_ned",
+    "euler_rate_matrix",
+    "GRAVITY",
+]
+
+GRAVITY = 9.81
+"""Standard gravity used by every plant (m/s^2); the BlueROV2 paper uses 9.81 too."""
+
+Derivative = Callable[[float, np.ndarray], np.ndarray]
+
+
+def rk4_step(f: Derivative, t: float, x: np.ndarray, h: float) -> np.ndarray:
+    """One classical fourth-order Runge-Kutta step of ``x' = f(t, x)`` of length ``h`` (s).
+
+    Local error O(h^5), global O(h^4). Returns the new state; ``x`` is not modified.
+    """
+    k1 = f(t, x)
+    k2 = f(t + 0.5 * h, x + (0.5 * h) * k1)
+    k3 = f(t + 0.5 * h, x + (0.5 * h) * k2)
+    k4 = f(t + h, x + h * k3)
+    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def integrate_rk4(
+    f: Derivative, t: float, x: np.ndarray, duration: float, max_step: float
+) -> np.ndarray:
+    """Advance ``x' = f(t, x)`` from ``t`` by ``duration`` (s) with equal RK4 sub-steps.
+
+    The number of sub-steps is ``ceil(duration / max_step)`` so every sub-step is
+    ``<= max_step``; a zero ``duration`` returns a copy of ``x``.
+    """
+    if duration <= 0.0:
+        return np.array(x, dtype=float)
+    n = max(1, math.ceil(duration / max_step - 1e-9))
+    h = duration / n
+    for i in range(n):
+        x = rk4_step(f, t + i * h, x, h)
+    return x
+
+
+def wrap_pi(angle: float) -> float:
+    """Wrap an angle (rad) to [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def wrap_2pi(angle: float) -> float:
+    """Wrap an angle (rad) to [0, 2*pi)."""
+    return angle % (2.0 * math.pi)
+
+
+def rotation_body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:
+    """Rotation matrix R(Theta) from body FRD to NED, ZYX Euler angles (Fossen eq. 2.18).
+
+    A body-frame vector ``v_b`` is ``R @ v_b`` in NED; ``R.T`` maps NED to body.
+    """
+    cphi, sphi = math.cos(phi), math.sin(phi)
+    cth, sth = math.cos(theta), math.sin(theta)
+    cpsi, spsi = math.cos(psi), math.sin(psi)
+    return np.array(
+        [
+            [cpsi * cth, -spsi * cphi + cpsi * sth * sphi, spsi * sphi + cpsi * cphi * sth],
+            [spsi * cth, cpsi * cphi + sphi * sth * spsi, -cpsi * sphi + sth * spsi * cphi],
+            [-sth, cth * sphi, cth * cphi],
+        ]
+    )
+
+
+def euler_rate_matrix(phi: float, theta: float) -> np.ndarray:
+    """T(Theta) with ``[phi', theta', psi'] = T @ [p, q, r]`` (Fossen eq. 2.41).
+
+    Singular at theta = +-pi/2, which none of our vehicles reaches.
+    """
+    cphi, sphi = math.cos(phi), math.sin(phi)
+    cth, tth = math.cos(theta), math.tan(theta)
+    return np.array(
+        [
+            [1.0, sphi * tth, cphi * tth],
+            [0.0, cphi, -sphi],
+            [0.0, sphi / cth, cphi / cth],
+        ]
+    )
