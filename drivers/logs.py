@@ -1,0 +1,72 @@
+"""Open any supported log by sniffing its content, not trusting its name alone.
+
+Supported: MAVLink telemetry logs (``.tlog``), ArduPilot DataFlash (``.bin``), the
+service's own recordings, NMEA / Water Linked DVL JSON / PD6 text captures, and CSV (one
+file or a directory of runs, which needs a ``[csv]`` mapping in the config).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from drivers.base import LogReader, UnreadableLog
+
+DATAFLASH_MAGIC = b"\xa3\x95"
+
+
+def sniff(path: str | Path) -> str:
+    """The format of ``path``: tlog, dataflash, recording, csv, csv-dir or text."""
+    p = Path(path)
+    if p.is_dir():
+        if any(p.glob("*.csv")):
+            return "csv-dir"
+        raise UnreadableLog(f"{p}: a directory with no .csv files")
+    try:
+        with open(p, "rb") as f:
+            head = f.read(4096)
+    except OSError as err:
+        raise UnreadableLog(f"{p}: {err.strerror or err}") from None
+    if not head:
+        raise UnreadableLog(f"{p}: empty file")
+    from drivers.recording import FILE_MAGIC
+
+    if head.startswith(FILE_MAGIC):
+        return "recording"
+    if head.startswith(DATAFLASH_MAGIC):
+        return "dataflash"
+    suffix = p.suffix.lower()
+    if suffix == ".tlog" or (len(head) > 9 and head[8] in (0xFD, 0xFE)):
+        return "tlog"
+    if suffix == ".csv":
+        return "csv"
+    if b"\x00" in head:
+        raise UnreadableLog(f"{p}: binary data in no format this tool reads")
+    return "text"
+
+
+def open_log(path: str | Path, csv_format=None) -> tuple[str, LogReader]:
+    """(format, reader) for ``path``. ``csv_format`` is the config's [csv] section."""
+    fmt = sniff(path)
+    if fmt == "tlog":
+        from drivers.tlog import TlogReader
+
+        return fmt, TlogReader(path)
+    if fmt == "dataflash":
+        from drivers.dataflash import DataflashReader
+
+        return fmt, DataflashReader(path)
+    if fmt == "recording":
+        from drivers.recording import RecordingReader
+
+        return fmt, RecordingReader(path)
+    if fmt in ("csv", "csv-dir"):
+        if csv_format is None or not (csv_format.lat_deg or csv_format.north_m):
+            raise UnreadableLog(
+                f"{path}: CSV logs need --config with a [csv] column mapping "
+                "(e.g. config/blueboat-ntnu-csv.toml)")
+        from drivers.csvlog import CsvReader
+
+        return fmt, CsvReader(path, csv_format)
+    from drivers.textlog import open_text_log
+
+    return fmt, open_text_log(path)

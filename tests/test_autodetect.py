@@ -1,0 +1,35 @@
+"""Vehicle class and input mapping are detected from HEARTBEAT and SERVOn_FUNCTION."""
+
+from onboard.autodetect import detect
+from onboard.messages import Parameter, VehicleInfo
+
+
+def p(name, value):
+    return Parameter(t=1.0, name=name, value=value)
+
+
+def test_skid_steering_functions_give_a_twin_thruster_boat():
+    cfg, why = detect([p("SERVO2_FUNCTION", 73), p("SERVO4_FUNCTION", 74),
+                       p("SERVO4_TRIM", 1510), p("SERVO4_MIN", 1100), p("SERVO4_MAX", 1900)])
+    assert cfg.vehicle.vehicle_class == "twin-thruster-boat"
+    assert (cfg.inputs.left.channel, cfg.inputs.right.channel) == (2, 4)
+    assert cfg.inputs.right.neutral_us == 1510 and cfg.inputs.right.half_range_us == 390
+    assert "73" in why
+
+
+def test_steering_and_throttle_functions_give_a_rudder_boat():
+    cfg, _ = detect([p("SERVO2_FUNCTION", 26), p("SERVO5_FUNCTION", 70)])
+    assert cfg.vehicle.vehicle_class == "rudder-boat"
+    assert (cfg.inputs.rudder.channel, cfg.inputs.throttle.channel) == (2, 5)
+
+
+def test_submarine_heartbeat_gives_a_bluerov2():
+    cfg, why = detect([VehicleInfo(t=1, system_id=1, component_id=1, mav_type=12, autopilot=3)])
+    assert cfg.vehicle.vehicle_class == "bluerov2"
+    assert [m.channel for m in cfg.inputs.thrusters] == [1, 2, 3, 4, 5, 6]
+
+
+def test_ground_station_heartbeats_are_ignored():
+    cfg, why = detect([VehicleInfo(t=1, system_id=255, component_id=190, mav_type=6, autopilot=8)])
+    assert cfg.vehicle.vehicle_class == "rudder-boat"
+    assert "defaults" in why
