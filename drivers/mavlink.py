@@ -1,0 +1,664 @@
+"""MAVLink v1/v2 frames -> typed samples: a fast, selective decoder.
+
+Only the messages the estimators need are decoded (table :data:`HANDLERS`); every other
+frame is framed by its length byte, CRC-checked when its id is in the dialect (cheap, see
+below) and skipped. Field layouts and ``CRC_EXTRA`` bytes come from pymavlink's
+``ardupilotmega`` dialect at import time, so they always match the installed pymavlink.
+
+Speed
+-----
+The MAVLink checksum is CRC-16/MCRF4XX ("x25": reflected polynomial 0x8408, init 0xFFFF,
+no final xor). It is computed in C as the non-reflected CRC-CCITT of
+:func:`binascii.crc_hqx` over the bit-reversed bytes (``bytes.translate``), then
+bit-reversed: about 0.6 us per frame in CPython 3.11, against ~15 us for a table-driven
+pure-Python loop. Payloads are decoded with one precompiled :class:`struct.Struct` per
+message id; v2 zero-truncated payloads are padded with zeros to the full length.
+
+Mapping (units and frames in ``docs/formats-mavlink.md``)
+---------------------------------------------------------
+GPS_RAW_INT, GPS2_RAW -> GnssFix; GLOBAL_POSITION_INT -> VelocityOverGround + Heading;
+ATTITUDE -> Attitude; SCALED_IMU/2/3, RAW_IMU (ArduPilot only), HIGHRES_IMU -> Imu;
+VFR_HUD -> Heading; SERVO_OUTPUT_RAW -> ActuatorOutputs; RC_CHANNELS -> RcChannels;
+RPM -> PropellerRpm; VISION_SPEED_ESTIMATE -> VelocityOverGround;
+VISION_POSITION_DELTA -> DvlVelocity; DISTANCE_SENSOR (downward) -> Altitude;
+SCALED_PRESSURE/2/3 -> Pressure; HEARTBEAT -> VehicleInfo; PARAM_VALUE -> Parameter.
+
+``Sample.source`` is ``"mavlink:<sysid>/<MSGNAME>"`` for the autopilot component
+(component id 1) and ``"mavlink:<sysid>.<compid>/<MSGNAME>"`` for any other component, so
+two IMUs (SCALED_IMU vs SCALED_IMU2) or two barometers never mix.
+"""
+
+from __future__ import annotations
+
+import binascii
+import math
+import re
+import struct
+from collections import Counter
+from typing import Callable, Iterable
+
+from pymavlink.dialects.v20 import ardupilotmega as _dialect
+
+from drivers.base import ReadStats
+from onboard.messages import (
+    ActuatorOutputs,
+    Altitude,
+    Attitude,
+    DvlVelocity,
+    GnssFix,
+    Heading,
+    Imu,
+    Parameter,
+    PropellerRpm,
+    Pressure,
+    RcChannels,
+    Sample,
+    VehicleInfo,
+    VelocityOverGround,
+)
+
+MAGIC_V1 = 0xFE
+"""Start byte of a MAVLink 1 frame (6-byte header, 2-byte CRC)."""
+MAGIC_V2 = 0xFD
+"""Start byte of a MAVLink 2 frame (10-byte header, 2-byte CRC, optional 13-byte signature)."""
+MAVLINK_IFLAG_SIGNED = 0x01
+"""The only incompatibility flag defined by MAVLink 2: a 13-byte signature follows the CRC."""
+SIGNATURE_LEN = 13
+
+GRAVITY_MSS = 9.80665
+"""Standard gravity (m/s^2); ArduPilot scales mg with this constant (``GRAVITY_MSS``)."""
+UINT16_MAX = 0xFFFF
+MAV_TYPE_GCS = 6
+MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+MAV_AUTOPILOT_INVALID = 8
+MAV_AUTOPILOT_PX4 = 12
+MAV_SENSOR_ROTATION_PITCH_270 = 25
+"""DISTANCE_SENSOR orientation of a downward-looking range finder."""
+
+GPS_FIX_TO_QUALITY: dict[int, int] = {2: 1, 3: 1, 4: 2, 5: 5, 6: 4, 7: 1, 8: 2}
+"""MAVLink ``GPS_FIX_TYPE`` -> NMEA GGA fix quality (see :class:`GnssFix`).
+
+2D and 3D fix -> 1, DGPS -> 2, RTK float -> 5, RTK fixed -> 4, STATIC -> 1, PPP -> 2.
+NO_GPS (0) and NO_FIX (1) have no position: the frame is skipped and counted as the
+rejection ``"no_fix"``."""
+
+# --------------------------------------------------------------------------- CRC
+
+_REV = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
+"""Bit-reversal of every byte value."""
+_REV_BYTE = [bytes((_REV[i],)) for i in range(256)]
+_REV16_LO = [_REV[i] << 8 for i in range(256)]
+
+
+def x25crc(data: bytes, crc_extra: int | None = None) -> int:
+    """MAVLink checksum (CRC-16/MCRF4XX) of ``data``, then of ``crc_extra`` when given."""
+    c = binascii.crc_hqx(data.translate(_REV), 0xFFFF)
+    if crc_extra is not None:
+        c = binascii.crc_hqx(_REV_BYTE[crc_extra], c)
+    return _REV16_LO[c & 0xFF] | _REV[c >> 8]
+
+
+# --------------------------------------------------------------------------- dialect tables
+
+CRC_EXTRA: dict[int, int] = {mid: cls.crc_extra for mid, cls in _dialect.mavlink_map.items()}
+"""CRC_EXTRA byte per message id, from pymavlink's ardupilotmega dialect."""
+MSG_NAMES: dict[int, str] = {mid: cls.msgname for mid, cls in _dialect.mavlink_map.items()}
+"""Message name per id."""
+
+_TOKEN = re.compile(r"(\d*)([a-zA-Z?])")
+
+
+def _layout(name: str) -> tuple[int, struct.Struct, dict[str, int]]:
+    """(msgid, wire Struct, field name -> index of its first element in the unpacked tuple).
+
+    The wire order is pymavlink's ``ordered_fieldnames``; a ``char[n]`` array unpacks to one
+    bytes element, any other array ``T[n]`` to ``n`` elements.
+    """
+    cls = getattr(_dialect, f"MAVLink_{name.lower()}_message")
+    st: struct.Struct = cls.unpacker
+    tokens = _TOKEN.findall(st.format.lstrip("<"))
+    if len(tokens) != len(cls.ordered_fieldnames):
+        raise RuntimeError(f"unexpected pymavlink layout for {name}: {st.format}")
+    idx: dict[str, int] = {}
+    k = 0
+    for (count, code), fname in zip(tokens, cls.ordered_fieldnames):
+        idx[fname] = k
+        k += 1 if (code == "s" or not count) else int(count)
+    return cls.id, st, idx
+
+
+# --------------------------------------------------------------------------- context
+
+class DecodeContext:
+    """State shared by the handlers of one parser or reader.
+
+    ``stats`` receives rejections; ``autopilot`` maps a system id to the MAV_AUTOPILOT of
+    its HEARTBEAT (RAW_IMU scaling and PX4 parameter encoding depend on it);
+    ``include_gcs`` keeps ground-station heartbeats.
+    """
+
+    __slots__ = ("stats", "autopilot", "include_gcs", "_sources")
+
+    def __init__(self, stats: ReadStats, include_gcs: bool = False) -> None:
+        self.stats = stats
+        self.autopilot: dict[int, int] = {}
+        self.include_gcs = include_gcs
+        self._sources: dict[int, str] = {}
+
+    def source(self, sysid: int, compid: int, msgid: int) -> str:
+        """The ``Sample.source`` string of a frame (cached)."""
+        key = (sysid << 32) | (compid << 24) | msgid
+        s = self._sources.get(key)
+        if s is None:
+            who = f"{sysid}" if compid == 1 else f"{sysid}.{compid}"
+            s = self._sources[key] = f"mavlink:{who}/{MSG_NAMES.get(msgid, msgid)}"
+        return s
+
+
+Handler = Callable[[tuple, float, int, int, int, bool, DecodeContext], "Sample | list[Sample] | None"]
+"""``handler(values, t, sysid, compid, msgid, v2, ctx)`` -> sample(s) or None."""
+
+
+class Spec:
+    """What the decoder needs to know about one message id."""
+
+    __slots__ = ("msgid", "name", "struct", "size", "crc_extra", "handler", "produces")
+
+    def __init__(self, name: str, handler: Handler, produces: tuple[type, ...]) -> None:
+        self.msgid, self.struct, _ = _layout(name)
+        self.name = name
+        self.size = self.struct.size
+        self.crc_extra = CRC_EXTRA[self.msgid]
+        self.handler = handler
+        self.produces = produces
+
+
+HANDLERS: dict[int, Spec] = {}
+"""Decoded message ids -> :class:`Spec`."""
+
+
+def _register(name: str, produces: tuple[type, ...]):
+    def deco(make: Callable[[dict[str, int], int], Handler]) -> Callable:
+        msgid, _, idx = _layout(name)
+        HANDLERS[msgid] = Spec(name, make(idx, msgid), produces)
+        return make
+    return deco
+
+
+# --------------------------------------------------------------------------- handlers
+
+def _gps(idx: dict[str, int], msgid: int) -> Handler:
+    i_lat, i_lon, i_alt = idx["lat"], idx["lon"], idx["alt"]
+    i_eph, i_vel, i_cog = idx["eph"], idx["vel"], idx["cog"]
+    i_fix, i_sat, i_hacc, i_vacc = idx["fix_type"], idx["satellites_visible"], idx["h_acc"], idx["v_acc"]
+    fixmap = GPS_FIX_TO_QUALITY
+    rad = math.pi / 18000.0
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        q = fixmap.get(v[i_fix])
+        if q is None:
+            ctx.stats.reject("no_fix")
+            return None
+        eph, vel, cog, sat, hacc, vacc = v[i_eph], v[i_vel], v[i_cog], v[i_sat], v[i_hacc], v[i_vacc]
+        return GnssFix(
+            t=t, source=ctx.source(sysid, compid, mid),
+            lat_deg=v[i_lat] * 1e-7, lon_deg=v[i_lon] * 1e-7,
+            alt_m=v[i_alt] * 1e-3 if v[i_fix] >= 3 else None,
+            fix_quality=q,
+            num_sats=sat if sat != 255 else None,
+            hdop=eph * 0.01 if eph != UINT16_MAX else None,
+            sog_mps=vel * 0.01 if vel != UINT16_MAX else None,
+            cog_rad=(cog * rad) % (2 * math.pi) if cog != UINT16_MAX else None,
+            h_acc_m=hacc * 1e-3 if hacc else None,
+            v_acc_m=vacc * 1e-3 if vacc else None,
+        )
+    return h
+
+
+_register("GPS_RAW_INT", (GnssFix,))(_gps)
+_register("GPS2_RAW", (GnssFix,))(_gps)
+
+
+@_register("GLOBAL_POSITION_INT", (VelocityOverGround, Heading))
+def _global_position_int(idx, msgid):
+    i_vx, i_vy, i_vz, i_hdg = idx["vx"], idx["vy"], idx["vz"], idx["hdg"]
+    rad = math.pi / 18000.0
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        src = ctx.source(sysid, compid, mid)
+        vel = VelocityOverGround(t=t, source=src, v_north_mps=v[i_vx] * 0.01,
+                                 v_east_mps=v[i_vy] * 0.01, v_down_mps=v[i_vz] * 0.01)
+        hdg = v[i_hdg]
+        if hdg == UINT16_MAX:
+            return vel
+        return [vel, Heading(t=t, source=src, heading_rad=(hdg * rad) % (2 * math.pi))]
+    return h
+
+
+@_register("ATTITUDE", (Attitude,))
+def _attitude(idx, msgid):
+    i = idx["roll"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        r, p, y, rr, pr, yr = v[i:i + 6]
+        if r != r or p != p or y != y:
+            ctx.stats.reject("nan")
+            return None
+        return Attitude(t=t, source=ctx.source(sysid, compid, mid), roll_rad=r, pitch_rad=p,
+                        yaw_rad=y, roll_rate_rps=rr if rr == rr else None,
+                        pitch_rate_rps=pr if pr == pr else None,
+                        yaw_rate_rps=yr if yr == yr else None)
+    return h
+
+
+def _scaled_imu(idx: dict[str, int], msgid: int) -> Handler:
+    """SCALED_IMU*: mg and mrad/s, body FRD. ArduPilot fills xacc..zgyro with the
+    calibrated specific force (a level vehicle at rest reads zacc ~ -1000 mg) and sends
+    all zeros for an IMU instance it does not have; an all-zero accelerometer is skipped
+    (rejection ``"empty"``)."""
+    i = idx["xacc"]
+    k_a = GRAVITY_MSS * 1e-3
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        ax, ay, az, gx, gy, gz = v[i:i + 6]
+        if ax == 0 and ay == 0 and az == 0:
+            ctx.stats.reject("empty")
+            return None
+        return Imu(t=t, source=ctx.source(sysid, compid, mid), accel_x=ax * k_a,
+                   accel_y=ay * k_a, accel_z=az * k_a, gyro_x=gx * 1e-3, gyro_y=gy * 1e-3,
+                   gyro_z=gz * 1e-3)
+    return h
+
+
+_register("SCALED_IMU", (Imu,))(_scaled_imu)
+_register("SCALED_IMU2", (Imu,))(_scaled_imu)
+_register("SCALED_IMU3", (Imu,))(_scaled_imu)
+
+
+@_register("RAW_IMU", (Imu,))
+def _raw_imu(idx, msgid):
+    """RAW_IMU is "raw sensor units" in the spec, but ArduPilot fills it with the same
+    scaling as SCALED_IMU (mg, mrad/s; GCS_MAVLINK::send_raw_imu). It is decoded only for a
+    system whose HEARTBEAT says MAV_AUTOPILOT_ARDUPILOTMEGA; otherwise skipped (rejection
+    ``"unknown_scaling"``)."""
+    inner = _scaled_imu(idx, msgid)
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        if ctx.autopilot.get(sysid) != MAV_AUTOPILOT_ARDUPILOTMEGA:
+            ctx.stats.reject("unknown_scaling")
+            return None
+        return inner(v, t, sysid, compid, mid, v2, ctx)
+    return h
+
+
+@_register("HIGHRES_IMU", (Imu,))
+def _highres_imu(idx, msgid):
+    i = idx["xacc"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        ax, ay, az, gx, gy, gz = v[i:i + 6]
+        if ax != ax or ay != ay or az != az or gx != gx or gy != gy or gz != gz:
+            ctx.stats.reject("nan")
+            return None
+        return Imu(t=t, source=ctx.source(sysid, compid, mid), accel_x=ax, accel_y=ay,
+                   accel_z=az, gyro_x=gx, gyro_y=gy, gyro_z=gz)
+    return h
+
+
+@_register("VFR_HUD", (Heading,))
+def _vfr_hud(idx, msgid):
+    """VFR_HUD.heading: integer degrees, the autopilot's yaw (ArduPilot: ahrs yaw, true
+    north since the EKF applies the declination). 1-degree resolution: prefer ATTITUDE."""
+    i = idx["heading"]
+    rad = math.pi / 180.0
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        return Heading(t=t, source=ctx.source(sysid, compid, mid),
+                       heading_rad=(v[i] * rad) % (2 * math.pi), reference="true")
+    return h
+
+
+@_register("SERVO_OUTPUT_RAW", (ActuatorOutputs,))
+def _servo_output_raw(idx, msgid):
+    """servo1..8_raw, and servo9..16_raw when the frame is MAVLink 2 (extension fields; a
+    v1 frame cannot carry them). Values as sent: 0 means "output not configured"."""
+    i1, i9, i_port = idx["servo1_raw"], idx["servo9_raw"], idx["port"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        pwm = v[i1:i1 + 8] + v[i9:i9 + 8] if v2 else v[i1:i1 + 8]
+        src = ctx.source(sysid, compid, mid)
+        if v[i_port]:
+            src = f"{src}:port{v[i_port]}"
+        return ActuatorOutputs(t=t, source=src, pwm_us=tuple(float(x) for x in pwm))
+    return h
+
+
+@_register("RC_CHANNELS", (RcChannels,))
+def _rc_channels(idx, msgid):
+    """The first ``chancount`` channels; when chancount is 0 (ArduSub sends 0), the 18
+    channels with trailing unused ones (0 or UINT16_MAX) removed."""
+    i1, i_n = idx["chan1_raw"], idx["chancount"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        n = v[i_n]
+        ch = v[i1:i1 + 18]
+        if 0 < n <= 18:
+            ch = ch[:n]
+        else:
+            n = 18
+            while n and ch[n - 1] in (0, UINT16_MAX):
+                n -= 1
+            ch = ch[:n]
+        return RcChannels(t=t, source=ctx.source(sysid, compid, mid), pwm_us=tuple(float(x) for x in ch))
+    return h
+
+
+@_register("RPM", (PropellerRpm,))
+def _rpm(idx, msgid):
+    """ArduPilot RPM (id 226): rpm1, rpm2; a negative value (ArduPilot's -1) means the
+    sensor is absent/unhealthy. rpm2 is dropped when invalid; the sample is skipped
+    (rejection ``"invalid"``) when rpm1 is."""
+    i1, i2 = idx["rpm1"], idx["rpm2"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        r1, r2 = v[i1], v[i2]
+        if not r1 >= 0:
+            ctx.stats.reject("invalid")
+            return None
+        rpm = (r1, r2) if r2 >= 0 else (r1,)
+        return PropellerRpm(t=t, source=ctx.source(sysid, compid, mid), rpm=rpm)
+    return h
+
+
+@_register("VISION_SPEED_ESTIMATE", (VelocityOverGround,))
+def _vision_speed(idx, msgid):
+    """x, y, z (m/s) in the local NED frame -> VelocityOverGround (source names the message:
+    this is the external-vision / DVL velocity input of ArduPilot)."""
+    i = idx["x"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        x, y, z = v[i:i + 3]
+        if x != x or y != y:
+            ctx.stats.reject("nan")
+            return None
+        return VelocityOverGround(t=t, source=ctx.source(sysid, compid, mid), v_north_mps=x,
+                                  v_east_mps=y, v_down_mps=z if z == z else None)
+    return h
+
+
+@_register("VISION_POSITION_DELTA", (DvlVelocity,))
+def _vision_position_delta(idx, msgid):
+    """The DVL message of ArduSub (BlueOS DVL extension): ``position_delta`` (m, FRD of the
+    current frame) over ``time_delta_usec`` -> DvlVelocity(vx, vy, vz) = delta / dt,
+    bottom track, ``valid`` = confidence > 0. ``angle_delta`` is not carried."""
+    i_dt, i_pd, i_c = idx["time_delta_usec"], idx["position_delta"], idx["confidence"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        dt = v[i_dt] * 1e-6
+        dx, dy, dz = v[i_pd:i_pd + 3]
+        if dt <= 0:
+            ctx.stats.reject("dt")
+            return None
+        if dx != dx or dy != dy or dz != dz:
+            ctx.stats.reject("nan")
+            return None
+        c = v[i_c]
+        return DvlVelocity(t=t, source=ctx.source(sysid, compid, mid), vx=dx / dt, vy=dy / dt,
+                           vz=dz / dt, track="bottom", valid=bool(c > 0))
+    return h
+
+
+@_register("DISTANCE_SENSOR", (Altitude,))
+def _distance_sensor(idx, msgid):
+    """Downward range finders only (orientation 25, PITCH_270); current_distance (cm) ->
+    m. Outside [min_distance, max_distance] -> rejection ``"out_of_range"``;
+    signal_quality 1 (invalid) -> ``"invalid"``. Other orientations are skipped silently."""
+    i_min, i_max, i_cur = idx["min_distance"], idx["max_distance"], idx["current_distance"]
+    i_or, i_q = idx["orientation"], idx["signal_quality"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        if v[i_or] != MAV_SENSOR_ROTATION_PITCH_270:
+            return None
+        cur = v[i_cur]
+        if not v[i_min] <= cur <= v[i_max]:
+            ctx.stats.reject("out_of_range")
+            return None
+        if v[i_q] == 1:
+            ctx.stats.reject("invalid")
+            return None
+        return Altitude(t=t, source=ctx.source(sysid, compid, mid), altitude_m=cur * 0.01)
+    return h
+
+
+def _scaled_pressure(idx: dict[str, int], msgid: int) -> Handler:
+    i_p, i_t = idx["press_abs"], idx["temperature"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        p = v[i_p]
+        if not p > 0:  # also NaN
+            ctx.stats.reject("invalid")
+            return None
+        return Pressure(t=t, source=ctx.source(sysid, compid, mid), pressure_pa=p * 100.0,
+                        temperature_c=v[i_t] * 0.01)
+    return h
+
+
+_register("SCALED_PRESSURE", (Pressure,))(_scaled_pressure)
+_register("SCALED_PRESSURE2", (Pressure,))(_scaled_pressure)
+_register("SCALED_PRESSURE3", (Pressure,))(_scaled_pressure)
+
+
+@_register("HEARTBEAT", (VehicleInfo,))
+def _heartbeat(idx, msgid):
+    """HEARTBEAT -> VehicleInfo; ground stations (type 6) are skipped unless
+    ``include_gcs``. Also records the system's autopilot in the context."""
+    i_type, i_ap = idx["type"], idx["autopilot"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        typ, ap = v[i_type], v[i_ap]
+        if ap != MAV_AUTOPILOT_INVALID:
+            ctx.autopilot[sysid] = ap
+        if typ == MAV_TYPE_GCS and not ctx.include_gcs:
+            return None
+        return VehicleInfo(t=t, source=ctx.source(sysid, compid, mid), system_id=sysid,
+                           component_id=compid, mav_type=typ, autopilot=ap)
+    return h
+
+
+_PX4_INT = {1: "<B", 2: "<b", 3: "<H", 4: "<h", 5: "<I", 6: "<i"}
+
+
+@_register("PARAM_VALUE", (Parameter,))
+def _param_value(idx, msgid):
+    """PARAM_VALUE -> Parameter(name, value). ArduPilot sends integers cast to float (used
+    as is); PX4 (autopilot 12) sends them bytewise in the float, which is undone here."""
+    i_v, i_id, i_ty = idx["param_value"], idx["param_id"], idx["param_type"]
+
+    def h(v, t, sysid, compid, mid, v2, ctx):
+        name = v[i_id].split(b"\0", 1)[0].decode("ascii", "replace")
+        val = v[i_v]
+        if ctx.autopilot.get(sysid) == MAV_AUTOPILOT_PX4 and v[i_ty] in _PX4_INT:
+            raw = struct.pack("<f", val)
+            fmt = _PX4_INT[v[i_ty]]
+            val = float(struct.unpack_from(fmt, raw)[0])
+        if not name or val != val:
+            ctx.stats.reject("invalid")
+            return None
+        return Parameter(t=t, source=ctx.source(sysid, compid, mid), name=name, value=float(val))
+    return h
+
+
+HEARTBEAT_ID = 0
+
+
+def select(types: Iterable[type | str] | None) -> dict[int, Spec]:
+    """The handler table restricted to message ids producing any of ``types``.
+
+    ``types`` are Sample subclasses or their tags (``"imu"``, ``"gnss"``...); None = all.
+    HEARTBEAT is always kept (its handler records the autopilot type the RAW_IMU and
+    PARAM_VALUE handlers need); its samples are filtered out by the caller when
+    VehicleInfo is not wanted (see :func:`wants`).
+    """
+    if types is None:
+        return dict(HANDLERS)
+    wanted = _normalize(types)
+    out = {mid: s for mid, s in HANDLERS.items() if any(p in wanted for p in s.produces)}
+    out[HEARTBEAT_ID] = HANDLERS[HEARTBEAT_ID]
+    return out
+
+
+def _normalize(types: Iterable[type | str]) -> set[type]:
+    by_tag = {c.__struct_config__.tag: c for s in HANDLERS.values() for c in s.produces}
+    out: set[type] = set()
+    for x in types:
+        if isinstance(x, str):
+            if x not in by_tag:
+                raise ValueError(f"unknown sample type {x!r}; known: {sorted(by_tag)}")
+            out.add(by_tag[x])
+        else:
+            out.add(x)
+    return out
+
+
+def wanted_types(types: Iterable[type | str] | None) -> tuple[type, ...] | None:
+    """``types`` as a tuple of classes for isinstance filtering (None = everything)."""
+    return None if types is None else tuple(_normalize(types))
+
+
+# --------------------------------------------------------------------------- frame decoding
+
+def decode_payload(spec: Spec, buf, start: int, plen: int, t: float, sysid: int, compid: int,
+                   v2: bool, ctx: DecodeContext) -> Sample | list[Sample] | None:
+    """Unpack the payload ``buf[start:start+plen]`` of a CRC-checked frame with ``spec``.
+
+    A shorter payload (v2 zero truncation, or a v1 frame without extension fields) is
+    padded with zeros; a longer one (newer dialect) is cut to the known fields.
+    """
+    size = spec.size
+    if plen >= size:
+        values = spec.struct.unpack_from(buf, start)
+    else:
+        values = spec.struct.unpack(bytes(buf[start:start + plen]) + bytes(size - plen))
+    return spec.handler(values, t, sysid, compid, spec.msgid, v2, ctx)
+
+
+_MAGIC_RE = re.compile(rb"[\xfd\xfe]")
+
+
+class MavlinkParser:
+    """Incremental MAVLink 1/2 parser for a live byte stream (serial, UDP, TCP).
+
+    ``feed(data, t_rx)`` returns the samples of the frames completed by ``data``, all
+    stamped ``t_rx``. Every frame whose id is in the dialect is CRC-checked (a failed frame
+    is counted ``"crc"`` and the search resumes one byte after its start byte); bytes
+    between frames count as one ``"garbage"`` rejection per run; a frame with unknown
+    incompatibility flags is ``"incompat"``. Frames of ids outside the dialect cannot be
+    checked and are skipped by their length (counted in ``by_type`` as ``UNKNOWN_<id>``).
+    Signed MAVLink 2 frames are accepted; the 13-byte signature is skipped, not verified.
+    The result does not depend on how the stream is cut into chunks.
+
+    ``types`` restricts the samples produced (Sample classes or tags); ``include_gcs``
+    keeps ground-station heartbeats.
+    """
+
+    def __init__(self, *, types: Iterable[type | str] | None = None, include_gcs: bool = False) -> None:
+        self.stats = ReadStats()
+        self._ctx = DecodeContext(self.stats, include_gcs)
+        self._specs = select(types)
+        self._want = wanted_types(types)
+        self._buf = bytearray()
+        self._in_garbage = False
+        self._counts: Counter[int] = Counter()
+
+    def feed(self, data: bytes, t_rx: float) -> list[Sample]:
+        """Consume ``data`` received at ``t_rx`` (s); return the samples completed."""
+        buf = self._buf
+        buf += data
+        out: list[Sample] = []
+        n = len(buf)
+        i = 0
+        specs, ctx, stats = self._specs, self._ctx, self.stats
+        find = _MAGIC_RE.search
+        while i < n:
+            m = find(buf, i)
+            if m is None:
+                if not self._in_garbage:
+                    stats.reject("garbage")
+                    self._in_garbage = True
+                i = n
+                break
+            j = m.start()
+            if j > i and not self._in_garbage:
+                stats.reject("garbage")
+                self._in_garbage = True
+            i = j
+            if buf[j] == MAGIC_V2:
+                if j + 10 > n:
+                    break
+                plen = buf[j + 1]
+                inc = buf[j + 2]
+                end = j + 12 + plen + (SIGNATURE_LEN if inc & MAVLINK_IFLAG_SIGNED else 0)
+                msgid = buf[j + 7] | (buf[j + 8] << 8) | (buf[j + 9] << 16)
+                sysid, compid, hdr, v2 = buf[j + 5], buf[j + 6], 10, True
+            else:
+                if j + 6 > n:
+                    break
+                plen = buf[j + 1]
+                end = j + 8 + plen
+                msgid = buf[j + 5]
+                sysid, compid, hdr, v2, inc = buf[j + 3], buf[j + 4], 6, False, 0
+            if end > n:
+                break
+            if inc & ~MAVLINK_IFLAG_SIGNED:
+                stats.reject("incompat")
+                self._in_garbage = True
+                i = j + 1
+                continue
+            extra = CRC_EXTRA.get(msgid)
+            if extra is None:
+                self._counts[-1 - msgid] += 1  # negative key: unknown id
+                stats.records += 1
+                self._in_garbage = False
+                i = end
+                continue
+            ce = j + hdr + plen
+            if x25crc(buf[j + 1:ce], extra) != (buf[ce] | (buf[ce + 1] << 8)):
+                stats.reject("crc")
+                self._in_garbage = True
+                i = j + 1
+                continue
+            self._in_garbage = False
+            stats.records += 1
+            self._counts[msgid] += 1
+            i = end
+            spec = specs.get(msgid)
+            if spec is None:
+                continue
+            res = decode_payload(spec, buf, j + hdr, plen, t_rx, sysid, compid, v2, ctx)
+            if res is not None:
+                _emit(res, out, self._want)
+        del buf[:i]
+        stats.samples += len(out)
+        self._flush_counts()
+        return out
+
+    def _flush_counts(self) -> None:
+        for k, c in self._counts.items():
+            self.stats.by_type[type_name(k)] += c
+        self._counts.clear()
+
+
+def type_name(key: int) -> str:
+    """by_type key of a message id (negative keys: ``UNKNOWN_<id>`` outside the dialect)."""
+    if key < 0:
+        return f"UNKNOWN_{-1 - key}"
+    return MSG_NAMES.get(key, f"UNKNOWN_{key}")
+
+
+def _emit(res, out: list, want: tuple[type, ...] | None) -> None:
+    if type(res) is list:
+        for s in res:
+            if want is None or isinstance(s, want):
+                out.append(s)
+    elif want is None or isinstance(res, want):
+        out.append(res)

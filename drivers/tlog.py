@@ -1,0 +1,339 @@
+"""MAVLink telemetry logs (``.tlog``, as written by QGroundControl, MAVProxy, Mission Planner).
+
+A tlog is a sequence of records ``[8-byte big-endian receive time, us since the epoch]
+[one MAVLink 1 or 2 frame]`` with nothing in between. :class:`TlogReader` walks it by
+record: the frame's length byte gives the next record's start, so unneeded messages are
+skipped without being decoded. Every frame whose id is in the dialect is CRC-checked
+(about 0.6 us, see :mod:`drivers.mavlink`).
+
+Time base: ``Sample.t`` is the record's receive time in seconds since the epoch (the
+logger's clock), never the autopilot's boot time inside the message.
+
+Rejections (``stats.rejected``): ``"crc"`` bad checksum; ``"garbage"`` bytes that are not a
+record (the reader resynchronizes on the next plausible record: time stamp within
+[-1 s, +1 day] of the last good one, start byte, fitting frame, valid CRC); ``"truncated"``
+an incomplete record at the end of the file; ``"incompat"`` unknown MAVLink 2
+incompatibility flags; ``"time_backwards"`` a record older than the last sample emitted
+(dropped, so samples come out in time order); plus the content rejections of the
+handlers (``"no_fix"``, ``"empty"``, ``"nan"``, ``"invalid"``, ...).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import time
+from collections import Counter
+from pathlib import Path
+from typing import BinaryIO, Iterable, Iterator
+
+from drivers.base import ReadStats, UnreadableLog
+from drivers.mavlink import (
+    CRC_EXTRA,
+    MAGIC_V1,
+    MAGIC_V2,
+    MAVLINK_IFLAG_SIGNED,
+    SIGNATURE_LEN,
+    DecodeContext,
+    _MAGIC_RE,
+    decode_payload,
+    select,
+    type_name,
+    wanted_types,
+    x25crc,
+)
+from onboard.messages import Parameter, Sample, VehicleInfo
+
+_TS = struct.Struct(">Q")
+_PROBE_BYTES = 1 << 16
+"""How far into the file :class:`TlogReader` looks for a first valid record."""
+_RESYNC_BACK_US = 1_000_000
+_RESYNC_AHEAD_US = 86_400_000_000
+
+
+def _frame_at(data: bytes, p: int, n: int) -> tuple[int, int, int, int, int, bool] | None:
+    """Framing of the record starting at ``p``: (end, msgid, payload start, payload length,
+    incompat flags, v2), or None when the bytes there cannot be a complete record."""
+    if p < 0 or p + 9 > n or data[p] != 0:
+        return None
+    m = data[p + 8]
+    if m == MAGIC_V2:
+        if p + 18 > n:
+            return None
+        plen, inc = data[p + 9], data[p + 10]
+        end = p + 20 + plen + (SIGNATURE_LEN if inc & MAVLINK_IFLAG_SIGNED else 0)
+        msgid = data[p + 15] | (data[p + 16] << 8) | (data[p + 17] << 16)
+        if end > n:
+            return None
+        return end, msgid, p + 18, plen, inc, True
+    if m == MAGIC_V1:
+        if p + 14 > n:
+            return None
+        plen = data[p + 9]
+        end = p + 16 + plen
+        if end > n:
+            return None
+        return end, data[p + 13], p + 14, plen, 0, False
+    return None
+
+
+def _crc_ok(data: bytes, p: int, msgid: int, plen: int, v2: bool) -> bool | None:
+    """CRC of the frame of the record at ``p``: True/False, None when the id is unknown."""
+    extra = CRC_EXTRA.get(msgid)
+    if extra is None:
+        return None
+    ce = p + 8 + (10 if v2 else 6) + plen
+    return x25crc(data[p + 9:ce], extra) == (data[ce] | (data[ce + 1] << 8))
+
+
+def _plausible(data: bytes, p: int, n: int, lo: int, hi: int) -> int:
+    """End of a believable record at ``p`` (time stamp in [lo, hi], framing, CRC or, for an
+    id outside the dialect, a following record start), else -1."""
+    f = _frame_at(data, p, n)
+    if f is None:
+        return -1
+    end, msgid, _, plen, inc, v2 = f
+    if inc & ~MAVLINK_IFLAG_SIGNED:
+        return -1
+    ts = _TS.unpack_from(data, p)[0]
+    if not lo <= ts <= hi:
+        return -1
+    ok = _crc_ok(data, p, msgid, plen, v2)
+    if ok is None:
+        ok = end == n or (end + 9 <= n and data[end] == 0 and data[end + 8] in (MAGIC_V1, MAGIC_V2))
+    return end if ok else -1
+
+
+def _resync(data: bytes, start: int, n: int, lo: int, hi: int) -> int:
+    """Start of the first believable record at or after ``start``, or -1."""
+    for m in _MAGIC_RE.finditer(data, start + 8):
+        p = m.start() - 8
+        if _plausible(data, p, n, lo, hi) >= 0:
+            return p
+    return -1
+
+
+class TlogReader:
+    """Samples of a MAVLink telemetry log, in time order (see the module docstring).
+
+    ``types`` restricts the samples produced (Sample classes or tags such as ``"imu"``);
+    only the messages producing them are decoded. ``verify`` = ``"all"`` (default)
+    CRC-checks every frame of a known id, so a corrupt frame of any message is counted;
+    ``"needed"`` checks only the decoded ones (faster, for quick scans).
+    ``include_gcs`` keeps ground-station HEARTBEATs.
+
+    Raises :class:`UnreadableLog` at construction when the file cannot be read, is empty,
+    or has no valid tlog record in its first 64 KiB. Nothing else raises: ``stats``
+    (reset at each iteration) counts what was skipped.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, types: Iterable[type | str] | None = None,
+                 verify: str = "all", include_gcs: bool = False) -> None:
+        if verify not in ("all", "needed"):
+            raise ValueError("verify must be 'all' or 'needed'")
+        self.path = Path(path)
+        self.stats = ReadStats()
+        self._specs = select(types)
+        self._want = wanted_types(types)
+        self._verify_all = verify == "all"
+        self._include_gcs = include_gcs
+        try:
+            with open(self.path, "rb") as f:
+                head = f.read(_PROBE_BYTES + 300)
+        except OSError as e:
+            raise UnreadableLog(f"{self.path}: {e.strerror or e}") from e
+        if not head:
+            raise UnreadableLog(f"{self.path}: empty file")
+        self._first = _resync(head, 0, len(head), 0, 1 << 63)
+        if self._first < 0 or self._first > _PROBE_BYTES:
+            raise UnreadableLog(f"{self.path}: not a MAVLink telemetry log (no valid tlog record)")
+
+    def _read(self) -> bytes:
+        try:
+            return self.path.read_bytes()
+        except OSError as e:
+            raise UnreadableLog(f"{self.path}: {e.strerror or e}") from e
+
+    def __iter__(self) -> Iterator[Sample]:
+        data = self._read()
+        stats = self.stats = ReadStats()
+        ctx = DecodeContext(stats, self._include_gcs)
+        counts: Counter[int] = Counter()
+        try:
+            yield from self._walk(data, stats, ctx, counts)
+        finally:
+            for k, c in counts.items():
+                stats.by_type[type_name(k)] += c
+
+    def _walk(self, data: bytes, stats: ReadStats, ctx: DecodeContext,
+              counts: Counter[int]) -> Iterator[Sample]:
+        n = len(data)
+        specs = self._specs
+        spec_get = specs.get
+        crc_get = CRC_EXTRA.get
+        verify_all = self._verify_all
+        want = self._want
+        ts_unpack = _TS.unpack_from
+        crc = x25crc
+        V2, V1 = MAGIC_V2, MAGIC_V1
+        pos = self._first
+        if pos > 0:
+            stats.reject("garbage")
+        last_us = 0  # time stamp of the last record decoded (us)
+        good = -1  # start of the last good record
+        records = 0
+        n_samples = 0
+        while pos < n:
+            # ---- framing (inline copy of _frame_at, for speed)
+            reason = None
+            end = -1
+            if pos + 9 <= n and data[pos] == 0:
+                m = data[pos + 8]
+                if m == V2:
+                    if pos + 18 <= n:
+                        plen = data[pos + 9]
+                        inc = data[pos + 10]
+                        end = pos + 20 + plen + (SIGNATURE_LEN if inc & 1 else 0)
+                        msgid = data[pos + 15] | (data[pos + 16] << 8) | (data[pos + 17] << 16)
+                        hdr, v2 = 10, True
+                elif m == V1:
+                    if pos + 14 <= n:
+                        plen = data[pos + 9]
+                        end = pos + 16 + plen
+                        msgid = data[pos + 13]
+                        hdr, v2, inc = 6, False, 0
+                else:
+                    reason = "garbage"
+                if reason is None and (end < 0 or end > n):
+                    reason = "truncated"
+            else:
+                reason = "garbage" if pos + 9 <= n else "truncated"
+            if reason is None:
+                next_ok = end == n or (end + 9 <= n and data[end] == 0 and data[end + 8] in (V1, V2))
+                if inc & 0xFE:
+                    reason = "incompat"
+                else:
+                    extra = crc_get(msgid)
+                    spec = spec_get(msgid)
+                    if extra is None:
+                        if not next_ok:
+                            reason = "garbage"
+                    elif spec is not None or verify_all:
+                        ce = pos + 8 + hdr + plen
+                        if crc(data[pos + 9:ce], extra) != (data[ce] | (data[ce + 1] << 8)):
+                            reason = "crc"
+                if reason is None:
+                    records += 1
+                    counts[msgid if extra is not None else -1 - msgid] += 1
+                    good = pos
+                    if spec is not None:
+                        ts = ts_unpack(data, pos)[0]
+                        if ts < last_us:
+                            stats.reject("time_backwards")
+                        else:
+                            last_us = ts
+                            res = decode_payload(spec, data, pos + 8 + hdr, plen, ts * 1e-6,
+                                                 data[pos + 8 + hdr - 5 if v2 else pos + 11],
+                                                 data[pos + 8 + hdr - 4 if v2 else pos + 12],
+                                                 v2, ctx)
+                            if res is not None:
+                                if type(res) is list:
+                                    for s in res:
+                                        if want is None or isinstance(s, want):
+                                            n_samples += 1
+                                            yield s
+                                elif want is None or isinstance(res, want):
+                                    n_samples += 1
+                                    yield res
+                    if next_ok:
+                        pos = end
+                        continue
+                    # the frame was fine but what follows is not a record
+                    pos = end - 1
+                    reason = "garbage" if end + 9 <= n else "truncated"
+                elif next_ok and reason in ("crc", "incompat"):
+                    # a corrupt frame inside intact framing: skip just this record
+                    records += 1
+                    stats.reject(reason)
+                    pos = end
+                    continue
+            # ---- lost the framing: count once, resynchronize
+            stats.reject(reason)
+            stats.records = records
+            stats.samples = n_samples
+            ref = ts_unpack(data, good)[0] if good >= 0 else last_us
+            lo = max(0, ref - _RESYNC_BACK_US) if good >= 0 else 0
+            hi = ref + _RESYNC_AHEAD_US if good >= 0 else 1 << 63
+            nxt = _resync(data, pos + 1, n, lo, hi)
+            if nxt < 0:
+                break
+            pos = nxt
+        stats.records = records
+        stats.samples = n_samples
+
+
+def scan_header(path: str | os.PathLike) -> tuple[list[VehicleInfo], list[Parameter]]:
+    """Quick pass over a tlog decoding only HEARTBEAT and PARAM_VALUE.
+
+    Returns the distinct vehicle heartbeats (first occurrence of each (system, component,
+    MAV_TYPE, MAV_AUTOPILOT); ground stations excluded) and the parameters, the last value
+    of each (source, name), in order of first appearance. Used to detect the vehicle class
+    and the ``SERVOn_FUNCTION`` mapping. Raises :class:`UnreadableLog` like the reader.
+    """
+    reader = TlogReader(path, types=(VehicleInfo, Parameter), verify="needed")
+    vehicles: dict[tuple[int, int, int, int], VehicleInfo] = {}
+    params: dict[tuple[str, str], Parameter] = {}
+    for s in reader:
+        if isinstance(s, VehicleInfo):
+            vehicles.setdefault((s.system_id, s.component_id, s.mav_type, s.autopilot), s)
+        else:
+            params[(s.source, s.name)] = s  # type: ignore[union-attr]
+    return list(vehicles.values()), list(params.values())
+
+
+class TlogWriter:
+    """Write a tlog: ``write(t, frame)`` appends ``[t as big-endian us][frame]``.
+
+    ``frame`` is one packed MAVLink frame, e.g. ``MAVLink(None, 1, 1).attitude_encode(...)
+    .pack(mav)``; ``t`` is the receive time in seconds (epoch for real logs; any monotonic
+    origin for simulations). Use as a context manager or call :meth:`close`.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, append: bool = False) -> None:
+        self.path = Path(path)
+        self._f: BinaryIO = open(self.path, "ab" if append else "wb")
+
+    def write(self, t: float, mav_msg_bytes: bytes) -> None:
+        """Append one record received at ``t`` (s, >= 0)."""
+        self._f.write(_TS.pack(round(t * 1e6)) + bytes(mav_msg_bytes))
+
+    def flush(self) -> None:
+        self._f.flush()
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> "TlogWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def pymavlink_parse_seconds(path: str | os.PathLike) -> float:
+    """Wall time (s) of pymavlink's plain parse-only loop over a tlog: the reference figure
+    of ``onboard bench`` (``mavutil.mavlink_connection(path)`` then ``recv_match()`` until
+    None)."""
+    from pymavlink import mavutil
+
+    p = str(path)
+    t0 = time.perf_counter()
+    if p.lower().endswith(".tlog"):
+        conn = mavutil.mavlink_connection(p)
+    else:
+        conn = mavutil.mavlogfile(p)
+    while conn.recv_match() is not None:
+        pass
+    dt = time.perf_counter() - t0
+    conn.close()
+    return dt
