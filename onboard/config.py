@@ -133,7 +133,7 @@ class Sensors(_Strict):
 
 
 class CsvFormat(_Strict):
-    """``[csv]``: column mapping of the generic CSV reader (see README, "CSV logs").
+    """``[csv]``: column mapping of the generic CSV reader (see docs/formats-text.md).
 
     ``time`` is the time column and ``time_scale`` turns it into seconds (0.001 for ms).
     Each other entry maps a sample field to a column name; a sample type is produced for
@@ -158,6 +158,25 @@ class CsvFormat(_Strict):
     """Columns that form ActuatorOutputs.pwm_us, channel 1 first."""
     run_column: str = ""
     """Optional column naming the run; a directory of CSV files uses the file name."""
+    # Added for drivers/csvlog.py (all optional; defaults keep older files valid):
+    alt_m: str = ""
+    """Column of the GNSS altitude (m), put into GnssFix.alt_m."""
+    heading_reference: Literal["true", "magnetic"] = "true"
+    """Whether the ``heading`` column is relative to true or magnetic north."""
+    roll: str = ""
+    """Column of the roll angle (``heading_unit``); with ``pitch``, heading and yaw rate
+    make an Attitude sample."""
+    pitch: str = ""
+    """Column of the pitch angle (``heading_unit``)."""
+    assume_level: bool = False
+    """Emit Attitude (roll = pitch = 0, yaw = heading, yaw rate) when the log has heading
+    and yaw rate but no roll/pitch: an explicit approximation for surface boats."""
+    origin_lat_deg: float = 0.0
+    """Latitude (deg) of the ``north_m``/``east_m`` origin, used when lat/lon are absent."""
+    origin_lon_deg: float = 0.0
+    """Longitude (deg) of the ``north_m``/``east_m`` origin."""
+    run_gap_s: float = 10.0
+    """Gap (s) put between consecutive runs when they are joined on one time line."""
 
 
 class ZenohOut(_Strict):

@@ -1,0 +1,337 @@
+"""Generic CSV log reader driven by the ``[csv]`` mapping (:class:`onboard.config.CsvFormat`).
+
+Input: one CSV file with a header row, or a directory of such files (one *run* per file,
+read in file-name order). A single file can also hold several runs told apart by
+``run_column``.
+
+Per row, one sample of each type whose columns are mapped and numeric:
+
+==================  ==========================================================  ==========
+sample              columns                                                     notes
+==================  ==========================================================  ==========
+GnssFix             ``lat_deg``, ``lon_deg`` (+ ``alt_m``, ``sog_mps``)         decimal deg
+GnssFix             ``north_m``, ``east_m`` when lat/lon are not mapped         flat earth
+                                                                                around
+                                                                                ``origin_*``
+Heading             ``heading`` (``heading_unit``, ``heading_reference``)       rad
+Attitude            ``heading`` + ``yaw_rate`` + (``roll``, ``pitch`` or         rad, rad/s
+                    ``assume_level = true``)
+VelocityOverGround  ``surge_mps``, ``sway_mps`` + ``heading``                    rotated to
+                                                                                NED
+Depth               ``depth_m``                                                 m, down +
+ActuatorOutputs     ``pwm_columns`` (channel 1 first)                           us
+==================  ==========================================================  ==========
+
+Surge and sway are taken as velocity *over ground* in body axes (as in the BlueBoat NTNU
+runs, where they were derived from GNSS) and rotated by the heading of the same row into
+an earth-frame VelocityOverGround: ``vn = u cos(psi) - v sin(psi)``,
+``ve = u sin(psi) + v cos(psi)``. ``v_down_mps`` is None.
+
+Time: ``t = time * time_scale``. Runs are joined on one time line so that the reader yields
+samples in time order: the first run keeps its own time; every later run is shifted to
+start ``run_gap_s`` after the previous run's last row. :attr:`CsvReader.runs` lists each
+run (name, source, first/last ``t`` after the shift, the shift, rows) before iteration,
+so model-closure code can split train/test by run; each sample's ``source`` is
+``"csv:<run>"`` (e.g. ``"csv:fixed_00000216"``).
+
+Rejections (per row): ``"malformed"`` (wrong number of cells), ``"bad_time"`` (time not
+numeric or not finite), ``"time_backwards"`` (time earlier than the previous row of the
+run). Per sample type of a row: ``"nan"`` (empty or NaN cell), ``"non_numeric"``. A
+mapped column missing from a file's header raises :class:`UnreadableLog`.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+from drivers.base import ReadStats, UnreadableLog
+from onboard.config import CsvFormat
+from onboard.messages import (
+    ActuatorOutputs,
+    Attitude,
+    Depth,
+    GnssFix,
+    Heading,
+    Sample,
+    VelocityOverGround,
+)
+
+EARTH_RADIUS_M = 6378137.0
+"""WGS-84 equatorial radius, for the flat-earth north/east -> lat/lon conversion."""
+
+
+@dataclass
+class RunInfo:
+    """One run of a CSV log. Times in s on the reader's joined time line."""
+
+    name: str
+    source: str
+    path: Path
+    t_start: float
+    t_end: float
+    t_offset: float
+    """Added to ``time * time_scale`` to place the run on the joined time line."""
+    rows: int
+
+
+class _Bad(Exception):
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+
+
+class CsvReader:
+    """Read a CSV file or a directory of CSV runs with a ``[csv]`` column mapping.
+
+    Raises :class:`UnreadableLog` when the path is missing, holds no CSV, has no header,
+    or lacks a mapped column. Iterating yields samples in time order; ``stats`` counts.
+    """
+
+    def __init__(self, path: str | Path, fmt: CsvFormat, source_prefix: str = "csv") -> None:
+        self.path = Path(path)
+        self.fmt = fmt
+        self.prefix = source_prefix
+        self.stats = ReadStats()
+        if self.path.is_dir():
+            files = sorted(self.path.glob("*.csv"))
+            if not files:
+                raise UnreadableLog(f"{self.path}: a directory with no .csv files")
+        elif self.path.is_file():
+            files = [self.path]
+        else:
+            raise UnreadableLog(f"{self.path}: no such file or directory")
+        self.files = files
+        self.runs: list[RunInfo] = []
+        """The runs in order, known before iteration (see the module docstring)."""
+        self._scan()
+
+    # -- helpers
+
+    def _open(self, path: Path) -> tuple[list[str], Iterator[list[str]], object]:
+        try:
+            fh = open(path, newline="", encoding="utf-8", errors="replace")
+        except OSError as err:
+            raise UnreadableLog(f"{path}: {err.strerror or err}") from None
+        rd = csv.reader(fh)
+        try:
+            header = next(rd)
+        except StopIteration:
+            fh.close()
+            raise UnreadableLog(f"{path}: empty file") from None
+        except csv.Error as err:
+            fh.close()
+            raise UnreadableLog(f"{path}: not CSV: {err}") from None
+        return [h.strip() for h in header], rd, fh
+
+    def _columns(self) -> list[str]:
+        f = self.fmt
+        cols = [f.time, f.lat_deg, f.lon_deg, f.alt_m, f.north_m, f.east_m, f.heading,
+                f.yaw_rate, f.surge_mps, f.sway_mps, f.sog_mps, f.depth_m, f.roll, f.pitch,
+                f.run_column, *f.pwm_columns]
+        return [c for c in cols if c]
+
+    def _index(self, header: list[str], path: Path) -> dict[str, int]:
+        idx = {name: i for i, name in enumerate(header)}
+        missing = [c for c in self._columns() if c not in idx]
+        if missing:
+            raise UnreadableLog(f"{path}: column(s) {', '.join(map(repr, missing))} not in the "
+                                f"header (check the [csv] mapping)")
+        return idx
+
+    @staticmethod
+    def _time(row: list[str], i: int, scale: float) -> float | None:
+        try:
+            v = float(row[i]) * scale
+        except (ValueError, IndexError):
+            return None
+        return v if math.isfinite(v) else None
+
+    def _run_name(self, path: Path, row: list[str], idx: dict[str, int]) -> str:
+        if self.fmt.run_column:
+            i = idx[self.fmt.run_column]
+            return row[i].strip() if i < len(row) and row[i].strip() else path.stem
+        return path.stem
+
+    # -- pre-scan: run boundaries and time offsets
+
+    def _scan(self) -> None:
+        f = self.fmt
+        prev_end: float | None = None
+        for path in self.files:
+            header, rd, fh = self._open(path)
+            try:
+                idx = self._index(header, path)
+                ti = idx[f.time]
+                cur: str | None = None
+                first = last = None
+                rows = 0
+                try:
+                    for row in rd:
+                        if not row or not any(c.strip() for c in row):
+                            continue
+                        name = self._run_name(path, row, idx)
+                        t = self._time(row, ti, f.time_scale)
+                        if cur is not None and name != cur:
+                            prev_end = self._add_run(cur, path, first, last, rows, prev_end)
+                            first = last = None
+                            rows = 0
+                        cur = name
+                        rows += 1
+                        if t is not None:
+                            if first is None:
+                                first = t
+                            last = t if last is None else max(last, t)
+                except csv.Error as err:
+                    raise UnreadableLog(f"{path}: not CSV: {err}") from None
+                if cur is not None:
+                    prev_end = self._add_run(cur, path, first, last, rows, prev_end)
+            finally:
+                fh.close()  # type: ignore[attr-defined]
+
+    def _add_run(self, name: str, path: Path, first: float | None, last: float | None,
+                 rows: int, prev_end: float | None) -> float | None:
+        if first is None or last is None:
+            self.runs.append(RunInfo(name, f"{self.prefix}:{name}", path, math.nan, math.nan,
+                                     0.0, rows))
+            return prev_end
+        offset = 0.0 if prev_end is None else prev_end + self.fmt.run_gap_s - first
+        self.runs.append(RunInfo(name, f"{self.prefix}:{name}", path, first + offset,
+                                 last + offset, offset, rows))
+        return last + offset
+
+    # -- iteration
+
+    def __iter__(self) -> Iterator[Sample]:
+        f = self.fmt
+        runs = {(r.path, r.name): r for r in self.runs}
+        st = self.stats
+        for path in self.files:
+            header, rd, fh = self._open(path)
+            try:
+                idx = self._index(header, path)
+                ncol = len(header)
+                last_t: float | None = None
+                cur = None
+                for row in rd:
+                    if not row or not any(c.strip() for c in row):
+                        continue
+                    st.records += 1
+                    name = self._run_name(path, row, idx)
+                    run = runs.get((path, name))
+                    if run is None:
+                        st.reject("malformed")
+                        continue
+                    if run is not cur:
+                        cur, last_t = run, None
+                    if len(row) != ncol:
+                        st.reject("malformed")
+                        continue
+                    t = self._time(row, idx[f.time], f.time_scale)
+                    if t is None:
+                        st.reject("bad_time")
+                        continue
+                    t += run.t_offset
+                    if last_t is not None and t < last_t:
+                        st.reject("time_backwards")
+                        continue
+                    last_t = t
+                    st.by_type["row"] += 1
+                    for s in self._samples(row, idx, t, run.source):
+                        st.samples += 1
+                        yield s
+            except csv.Error:
+                st.reject("malformed")
+            finally:
+                fh.close()  # type: ignore[attr-defined]
+
+    def _samples(self, row: list[str], idx: dict[str, int], t: float, src: str) -> list[Sample]:
+        f = self.fmt
+        st = self.stats
+        out: list[Sample] = []
+
+        def num(col: str) -> float:
+            s = row[idx[col]].strip()
+            if not s:
+                raise _Bad("nan")
+            try:
+                v = float(s)
+            except ValueError:
+                raise _Bad("non_numeric") from None
+            if not math.isfinite(v):
+                raise _Bad("nan")
+            return v
+
+        def opt(col: str) -> float | None:
+            if not col:
+                return None
+            try:
+                return num(col)
+            except _Bad:
+                return None
+
+        ang = math.radians if f.heading_unit == "deg" else float
+        rate = math.radians if f.yaw_rate_unit == "deg/s" else float
+
+        # position
+        try:
+            if f.lat_deg and f.lon_deg:
+                lat, lon = num(f.lat_deg), num(f.lon_deg)
+                if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+                    raise _Bad("out_of_range")
+            elif f.north_m and f.east_m:
+                n, e = num(f.north_m), num(f.east_m)
+                lat = f.origin_lat_deg + math.degrees(n / EARTH_RADIUS_M)
+                lon = f.origin_lon_deg + math.degrees(
+                    e / (EARTH_RADIUS_M * math.cos(math.radians(f.origin_lat_deg))))
+            else:
+                lat = lon = None
+            if lat is not None:
+                out.append(GnssFix(t=t, source=src, lat_deg=lat, lon_deg=lon,  # type: ignore[arg-type]
+                                   alt_m=opt(f.alt_m), sog_mps=opt(f.sog_mps)))
+        except _Bad as b:
+            st.reject(b.reason)
+
+        heading: float | None = None
+        if f.heading:
+            try:
+                heading = ang(num(f.heading)) % (2.0 * math.pi)
+                out.append(Heading(t=t, source=src, heading_rad=heading,
+                                   reference=f.heading_reference))
+            except _Bad as b:
+                st.reject(b.reason)
+
+        if f.yaw_rate and heading is not None and ((f.roll and f.pitch) or f.assume_level):
+            try:
+                r = rate(num(f.yaw_rate))
+                roll = ang(num(f.roll)) if f.roll else 0.0
+                pitch = ang(num(f.pitch)) if f.pitch else 0.0
+                out.append(Attitude(t=t, source=src, roll_rad=roll, pitch_rad=pitch,
+                                    yaw_rad=heading, yaw_rate_rps=r))
+            except _Bad as b:
+                st.reject(b.reason)
+
+        if f.surge_mps and f.sway_mps and heading is not None:
+            try:
+                u, v = num(f.surge_mps), num(f.sway_mps)
+                c, s = math.cos(heading), math.sin(heading)
+                out.append(VelocityOverGround(t=t, source=src, v_north_mps=u * c - v * s,
+                                              v_east_mps=u * s + v * c))
+            except _Bad as b:
+                st.reject(b.reason)
+
+        if f.depth_m:
+            try:
+                out.append(Depth(t=t, source=src, depth_m=num(f.depth_m)))
+            except _Bad as b:
+                st.reject(b.reason)
+
+        if f.pwm_columns:
+            try:
+                out.append(ActuatorOutputs(t=t, source=src,
+                                           pwm_us=tuple(num(c) for c in f.pwm_columns)))
+            except _Bad as b:
+                st.reject(b.reason)
+        return out
