@@ -232,7 +232,7 @@ class TlogReader:
                             stats.reject("time_backwards")
                         else:
                             last_us = ts
-                            res = decode_payload(spec, data, pos + 8 + hdr, plen, ts * 1e-6,
+                            res = decode_payload(spec, data, pos + 8 + hdr, plen, ts / 1e6,
                                                  data[pos + 8 + hdr - 5 if v2 else pos + 11],
                                                  data[pos + 8 + hdr - 4 if v2 else pos + 12],
                                                  v2, ctx)
