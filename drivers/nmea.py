@@ -374,6 +374,9 @@ class NmeaParser:
         POSIX time of the UTC midnight to use until an RMC date arrives (``utc`` base).
     max_line:
         Longest line accepted by :meth:`feed` (bytes).
+    monotonic:
+        In ``utc`` time base, reject samples older than the last one (``"time_backwards"``).
+        A capture reader that repairs GPS clock jumps itself turns this off.
     """
 
     def __init__(
@@ -384,8 +387,10 @@ class NmeaParser:
         hold_s: float = 0.25,
         date: float | None = None,
         max_line: int = MAX_LINE,
+        monotonic: bool = True,
     ) -> None:
         self.source = source
+        self.monotonic = monotonic
         self.time_base = time_base
         self.require_checksum = require_checksum
         self.hold_s = hold_s
@@ -617,7 +622,8 @@ class NmeaParser:
     def _emit(self, samples: list[Sample]) -> list[Sample]:
         out = []
         for s in samples:
-            if self.time_base == "utc" and self._last_t is not None and s.t < self._last_t:
+            if (self.monotonic and self.time_base == "utc" and self._last_t is not None
+                    and s.t < self._last_t):
                 self.stats.reject("time_backwards")
                 continue
             self._last_t = s.t

@@ -1,0 +1,470 @@
+"""Text captures: sniff the content and read it as NMEA, DVL JSON, PD6 or a mixed capture.
+
+:func:`open_text_log` looks at the first 64 kB of a text file and returns a log reader:
+
+``nmea``
+    NMEA 0183 sentences, one per line (:class:`NmeaCaptureReader`). Lines may carry a
+    wall-clock prefix ``YYYY-MM-DD HH:MM:SS[.,]fff ... $GP...`` (a loguru/logging capture,
+    as ``ardusub_small_logs/nmea_log.txt``): that prefix is the receive time (parsed as
+    UTC, the capture does not say its time zone) and samples are stamped with it.
+    Without prefixes the sentences' own UTC times are used (see :mod:`drivers.nmea`),
+    with the date of the first RMC in the file applied from the start.
+``dvl-json``
+    Water Linked DVL JSON lines (:class:`drivers.dvl_json.DvlJsonLogReader`).
+``pd6``
+    Teledyne PD6 lines (:class:`drivers.pd6.Pd6LogReader`).
+``mixed``
+    A raw serial capture of an Arduino logger that interleaves NMEA from a GPS with
+    CSV rows ``ax,ay,az,mx,my,mz,rx,ry,rz,roll,pitch,yaw,throttle,rudder`` (the
+    ``survey_boat_arduino_rc`` captures; :class:`MixedCaptureReader`).
+``ddboat``
+    The ENSTA DDBoat Python ``logging`` lines (:class:`DdboatLogReader`).
+
+Anything else raises :class:`~drivers.base.UnreadableLog`.
+
+Mixed captures: timing the CSV rows
+-----------------------------------
+The CSV rows carry no time. Every change of the GPS's UTC (GGA/RMC, fix or no fix) is an
+*epoch mark* at its place in the file. The row rate is the median of rows per second
+between marks at most ``max_gap_s`` apart (30 Hz if there are none). A mark whose time
+goes backwards, or forwards by more than ``max(max_gap_s, 2 x (rows since the last mark
+/ rate) + 1 s)``, is a *clock jump* (the GPS setting its clock: ``Test1`` starts in 2009
+and jumps to 2018; ``Test3`` steps back 2 s at 17:56:08): the jump is removed -- the mark
+is placed ``rows / rate`` after the previous one and every later time (rows and NMEA
+samples) is shifted by the same amount -- and counted in ``stats.by_type["clock_jump"]``.
+So ``t`` is one continuous time line that equals the GPS UTC up to the first jump. The rows
+between two marks are spread evenly: row ``j`` of ``n`` gets ``t_k + j (t_k+1 - t_k) / n``;
+rows before the first mark and after the last are placed at the row rate. The GPS sentences reach the logger
+after their epoch (4800 baud), so rows are stamped up to ~0.3 s late relative to UTC; the
+offset is nearly constant within a capture. The reader holds the whole capture in memory
+and yields all samples sorted by time.
+
+Row -> samples (source ``"arduino"``; the NMEA samples have source ``"nmea"``):
+
+* :class:`~onboard.messages.Imu`: the sensor reads +9.8 m/s^2 on ``az`` when level, so
+  its axes are taken as x forward, y left, z up and turned to FRD by negating y and z
+  (accelerations m/s^2; gyro deg/s -> rad/s). The gyro sign was not verified against the
+  yaw column (their correlation in ``Test2_clockwise`` is ~0).
+* :class:`~onboard.messages.Heading`: ``yaw`` (deg, compass) as a magnetic heading.
+* :class:`~onboard.messages.RcChannels`: ``(throttle, rudder)`` pulse widths (us),
+  channel 1 = throttle, channel 2 = rudder.
+
+Row rejections: ``"truncated"`` (fewer fields, or a row cut by a following sentence or
+``START OF TEST``), ``"garbage"`` (binary noise), ``"malformed"`` (14 fields, not all
+numeric), ``"out_of_range"`` (|a| > 160 m/s^2, |gyro| > 2000 deg/s, yaw outside
+[0, 360], PWM outside [800, 2200] us). ``START OF TEST`` and the header row are counted
+in ``stats.by_type``.
+"""
+
+from __future__ import annotations
+
+import calendar
+import math
+import re
+import statistics
+from pathlib import Path
+from typing import Iterator
+
+import msgspec
+
+from drivers.base import LogReader, ReadStats, UnreadableLog
+from drivers.nmea import NmeaError, NmeaParser, parse_rmc, split_sentence
+from onboard.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
+
+SNIFF_BYTES = 65536
+_PREFIX = re.compile(rb"^(\d{4})-(\d{2})-(\d{2})[ T](\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,6}))?")
+_NMEA = re.compile(rb"[$!][A-Z]{2}[A-Z0-9]{2,4},[^*\r\n]*\*[0-9A-Fa-f]{2}")
+_PD6 = re.compile(rb"^:[A-Z]{2},")
+_NUM = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)$")
+ARDUINO_FIELDS = ("ax", "ay", "az", "mx", "my", "mz", "rx", "ry", "rz", "roll", "pitch",
+                  "yaw", "throttle", "rudder")
+
+
+def prefix_time(line: bytes) -> tuple[float, int] | None:
+    """A leading ``YYYY-MM-DD HH:MM:SS[.,]fff`` as (POSIX s, taken as UTC; end index)."""
+    m = _PREFIX.match(line)
+    if not m:
+        return None
+    y, mo, d, h, mi, s = (int(x) for x in m.groups()[:6])
+    frac = m.group(7)
+    try:
+        t = calendar.timegm((y, mo, d, h, mi, s))
+    except (ValueError, OverflowError):
+        return None
+    if frac:
+        t += int(frac) / 10 ** len(frac)
+    return float(t), m.end()
+
+
+def sniff_text(head: bytes) -> str:
+    """The kind of a text capture from its first bytes (see the module docstring), or ``""``."""
+    lines = [ln.strip() for ln in head.splitlines()[:-1] or head.splitlines()]
+    n_nmea = n_json = n_pd6 = n_csv = n_ddboat = 0
+    for ln in lines:
+        if not ln:
+            continue
+        if b"/cmd motors l,r are" in ln or b"/GPS [" in ln or b"/GPS timeout" in ln:
+            n_ddboat += 1
+        elif ln.startswith(b"{"):
+            n_json += 1
+        elif _PD6.match(ln):
+            n_pd6 += 1
+        elif _NMEA.search(ln):
+            n_nmea += 1
+        elif ln.count(b",") == 13 and _arduino_values(ln) is not None:
+            n_csv += 1
+    if n_ddboat:
+        return "ddboat"
+    if n_csv and n_csv >= max(n_json, n_pd6):
+        return "mixed"
+    best = max((n_nmea, "nmea"), (n_json, "dvl-json"), (n_pd6, "pd6"))
+    return best[1] if best[0] > 0 else ""
+
+
+def open_text_log(path: str | Path) -> LogReader:
+    """A reader for the text capture at ``path``; UnreadableLog if it is none we know."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(SNIFF_BYTES)
+    except OSError as err:
+        raise UnreadableLog(f"{p}: {err.strerror or err}") from None
+    if not head.strip():
+        raise UnreadableLog(f"{p}: empty file")
+    kind = sniff_text(head)
+    if kind == "nmea":
+        return NmeaCaptureReader(p)
+    if kind == "dvl-json":
+        from drivers.dvl_json import DvlJsonLogReader
+
+        return DvlJsonLogReader(p)
+    if kind == "pd6":
+        from drivers.pd6 import Pd6LogReader
+
+        return Pd6LogReader(p)
+    if kind == "mixed":
+        return MixedCaptureReader(p)
+    if kind == "ddboat":
+        return DdboatLogReader(p)
+    raise UnreadableLog(f"{p}: no NMEA, DVL JSON, PD6 or known logger lines in the first "
+                        f"{SNIFF_BYTES // 1024} kB")
+
+
+def _read_lines(path: Path) -> list[bytes]:
+    try:
+        data = path.read_bytes()
+    except OSError as err:
+        raise UnreadableLog(f"{path}: {err.strerror or err}") from None
+    return data.replace(b"\r\n", b"\n").replace(b"\r", b"\n").split(b"\n")
+
+
+def first_rmc_date(lines: list[bytes]) -> float | None:
+    """POSIX midnight of the first RMC date in a capture (valid checksum), or None."""
+    for ln in lines:
+        i = ln.find(b"RMC,")
+        if i < 3:
+            continue
+        j = ln.rfind(b"$", 0, i)
+        if j < 0:
+            continue
+        try:
+            _, kind, f, _ = split_sentence(ln[j:].decode("ascii", "replace"))
+            if kind == "RMC":
+                day = parse_rmc(f).day_s
+                if day is not None:
+                    return day
+        except NmeaError:
+            continue
+    return None
+
+
+class NmeaCaptureReader:
+    """An NMEA text capture, with or without wall-clock receive-time prefixes."""
+
+    def __init__(self, path: str | Path, source: str = "nmea") -> None:
+        self.path = Path(path)
+        self.source = source
+        self._lines = _read_lines(self.path)
+        stamped = sum(1 for ln in self._lines[:500] if _PREFIX.match(ln) and b"$" in ln)
+        nmea = sum(1 for ln in self._lines[:500] if b"$" in ln)
+        self.receive_times = nmea > 0 and stamped >= nmea / 2
+        """True when the lines carry wall-clock receive times (used as ``t``)."""
+        self._parser = NmeaParser(
+            source=source, time_base="rx" if self.receive_times else "utc",
+            date=None if self.receive_times else first_rmc_date(self._lines),
+            hold_s=1e9 if self.receive_times else 0.25,
+        )
+        self.stats = self._parser.stats
+
+    def __iter__(self) -> Iterator[Sample]:
+        p, st = self._parser, self.stats
+        last_t: float | None = None
+
+        def ordered(samples: list[Sample]) -> Iterator[Sample]:
+            nonlocal last_t
+            for s in samples:
+                if last_t is not None and s.t < last_t:
+                    st.reject("time_backwards")
+                    st.samples -= 1
+                    continue
+                last_t = s.t
+                yield s
+
+        for ln in self._lines:
+            ln = ln.strip()
+            if not ln:
+                continue
+            if self.receive_times:
+                pt = prefix_time(ln)
+                i = ln.find(b"$")
+                if pt is None or i < 0:
+                    st.records += 1
+                    st.reject("unrecognized")
+                    continue
+                yield from ordered(p.feed_line(ln[i:], pt[0]))
+            else:
+                yield from ordered(p.feed_line(ln))
+        yield from ordered(p.flush())
+
+
+def _arduino_values(line: bytes) -> list[float] | None:
+    parts = line.decode("ascii", "replace").split(",")
+    if len(parts) != len(ARDUINO_FIELDS):
+        return None
+    out = []
+    for s in parts:
+        s = s.strip()
+        if not _NUM.match(s):
+            return None
+        out.append(float(s))
+    return out
+
+
+class MixedCaptureReader:
+    """The survey-boat Arduino capture: NMEA interleaved with CSV IMU/RC rows.
+
+    ``imu_rate_hz`` is the row rate assumed when the GPS gives no usable time;
+    ``max_gap_s`` the longest interval between epoch marks that rows are spread over.
+    """
+
+    def __init__(self, path: str | Path, imu_rate_hz: float = 30.0, max_gap_s: float = 3.0,
+                 source: str = "arduino") -> None:
+        self.path = Path(path)
+        self.source = source
+        self.imu_rate_hz = imu_rate_hz
+        self.max_gap_s = max_gap_s
+        self._lines = _read_lines(self.path)
+        self.stats = ReadStats()
+        self.row_rate_hz: float | None = None
+        """Median row rate between good epoch marks (after iteration)."""
+
+    def __iter__(self) -> Iterator[Sample]:
+        st = self.stats
+        nmea = NmeaParser(source="nmea", time_base="utc", date=first_rmc_date(self._lines),
+                          monotonic=False)
+        nmea.stats = st  # one set of counters for the whole capture
+        fixes: list[tuple[Sample, int]] = []  # (sample, index of the latest mark)
+        rows: list[list[float]] = []
+        marks: list[tuple[int, float]] = []  # (index of the next row, GPS UTC)
+        last_utc: float | None = None
+        for raw in self._lines:
+            ln = raw.strip()
+            if not ln:
+                continue
+            i = ln.find(b"$")
+            if i >= 0:
+                if i > 0:
+                    st.records += 1
+                    st.reject("truncated" if _looks_csv(ln[:i]) else "garbage")
+                k = len(marks) - 1
+                fixes.extend((s, k) for s in nmea.feed_line(ln[i:]))
+                if nmea.utc_time is not None and nmea.utc_time != last_utc:
+                    last_utc = nmea.utc_time
+                    marks.append((len(rows), last_utc))
+                continue
+            st.records += 1
+            vals = _arduino_values(ln) if ln.count(b",") == 13 else None
+            if vals is not None:
+                reason = _check_row(vals)
+                if reason:
+                    st.reject(reason)
+                else:
+                    rows.append(vals)
+                    st.by_type["arduino"] += 1
+                continue
+            text = ln.decode("ascii", "replace")
+            if text == "START OF TEST":
+                st.by_type["start_of_test"] += 1
+            elif text.replace(" ", "").startswith("ax,ay,az"):
+                st.by_type["header"] += 1
+            elif not ln.isascii() or not text.isprintable():
+                st.reject("garbage")
+            elif ln.count(b",") != 13 or "START OF TEST" in text:
+                st.reject("truncated")
+            else:
+                st.reject("malformed")
+        fixes.extend((s, len(marks) - 1) for s in nmea.flush())
+        adj = self._timeline(marks)
+        samples: list[Sample] = []
+        for s, k in fixes:
+            # the sample belongs to mark k (or k + 1 when it closed with the line of k + 1)
+            cands = [j for j in (k, k + 1) if 0 <= j < len(marks)]
+            if not cands:
+                samples.append(s)
+                continue
+            j = min(cands, key=lambda j: abs(marks[j][1] - s.t))
+            samples.append(msgspec.structs.replace(s, t=s.t + adj[j] - marks[j][1]))
+        times = self._row_times(len(rows), [(p, a) for (p, _), a in zip(marks, adj)])
+        for t, v in zip(times, rows):
+            samples.extend(self._row_samples(t, v))
+        samples.sort(key=lambda s: s.t)
+        st.samples = len(samples)
+        yield from samples
+
+    def _timeline(self, marks: list[tuple[int, float]]) -> list[float]:
+        """Mark times with GPS clock jumps removed (see the module docstring)."""
+        rates = [(p1 - p0) / (t1 - t0) for (p0, t0), (p1, t1) in zip(marks, marks[1:])
+                 if p1 > p0 and 0.0 < t1 - t0 <= self.max_gap_s]
+        rate = statistics.median(rates) if rates else self.imu_rate_hz
+        self.row_rate_hz = rate
+        adj: list[float] = []
+        for k, (p, t) in enumerate(marks):
+            if k == 0:
+                adj.append(t)
+                continue
+            p0, t0 = marks[k - 1]
+            d = t - t0
+            expected = (p - p0) / rate
+            if 0.0 < d <= max(self.max_gap_s, 2.0 * expected + 1.0):
+                adj.append(adj[-1] + d)
+            else:
+                self.stats.by_type["clock_jump"] += 1
+                adj.append(adj[-1] + max(expected, 1e-3))
+        return adj
+
+    def _row_times(self, n: int, marks: list[tuple[int, float]]) -> list[float]:
+        """Row times from (row index, time) marks whose times increase."""
+        rate = self.row_rate_hz or self.imu_rate_hz
+        if not marks:
+            return [j / rate for j in range(n)]
+        times = [0.0] * n
+        p0, t0 = marks[0]
+        for j in range(min(p0, n)):
+            times[j] = t0 - (p0 - j) / rate
+        for k, (pk, tk) in enumerate(marks):
+            pn, tn = marks[k + 1] if k + 1 < len(marks) else (n, None)
+            span = pn - pk
+            if span <= 0:
+                continue
+            dt = (tn - tk) / span if tn is not None else 1.0 / rate
+            for j in range(pk, min(pn, n)):
+                times[j] = tk + (j - pk) * dt
+        return times
+
+    def _row_samples(self, t: float, v: list[float]) -> list[Sample]:
+        ax, ay, az, _mx, _my, _mz, rx, ry, rz, _roll, _pitch, yaw, thr, rud = v
+        src = self.source
+        d2r = math.pi / 180.0
+        return [
+            Imu(t=t, source=src, accel_x=ax, accel_y=-ay, accel_z=-az,
+                gyro_x=rx * d2r, gyro_y=-ry * d2r, gyro_z=-rz * d2r),
+            Heading(t=t, source=src, heading_rad=(yaw * d2r) % (2.0 * math.pi),
+                    reference="magnetic"),
+            RcChannels(t=t, source=src, pwm_us=(thr, rud)),
+        ]
+
+
+def _looks_csv(b: bytes) -> bool:
+    s = b.decode("ascii", "replace").strip().rstrip(",")
+    return bool(s) and all(_NUM.match(x.strip()) for x in s.split(",") if x.strip())
+
+
+def _check_row(v: list[float]) -> str:
+    ax, ay, az, _mx, _my, _mz, rx, ry, rz, _roll, _pitch, yaw, thr, rud = v
+    if max(abs(ax), abs(ay), abs(az)) > 160.0 or max(abs(rx), abs(ry), abs(rz)) > 2000.0:
+        return "out_of_range"
+    if not 0.0 <= yaw <= 360.0 or not (800.0 <= thr <= 2200.0 and 800.0 <= rud <= 2200.0):
+        return "out_of_range"
+    return ""
+
+
+_DD_GPS = re.compile(r"/GPS \[([\d.]+), '([NS])', ([\d.]+), '([EW])', ([\d.]+), '([AV])'\]")
+_DD_CMD = re.compile(r"dirl: (\d), motl: (\d+), dirr: (\d), motr: (\d+)")
+
+
+class DdboatLogReader:
+    """ENSTA DDBoat ``logging`` lines: GPS fixes and left/right motor commands.
+
+    ``t`` is the line's wall-clock stamp (the boat's clock, taken as UTC). ``GPS [ddmm.mmmm,
+    'N', dddmm.mmmm, 'W', hhmmss, 'A']`` gives a GnssFix (status ``V`` is ``"no_fix"``, a
+    repeat of the previous GPS time ``"duplicate"``). ``cmd motors`` gives an
+    ActuatorCommand with ``left``/``right`` = +-mot/255 (``dir`` 0 = ahead, as the
+    controller's positive CMDL/CMDR show). The raw IMU counts are unscaled and not used.
+    """
+
+    def __init__(self, path: str | Path, source: str = "ddboat", full_scale: float = 255.0) -> None:
+        self.path = Path(path)
+        self.source = source
+        self.full_scale = full_scale
+        self._lines = _read_lines(self.path)
+        self.stats = ReadStats()
+
+    def __iter__(self) -> Iterator[Sample]:
+        st, src = self.stats, self.source
+        last_t: float | None = None
+        last_gps: str | None = None
+        for raw in self._lines:
+            ln = raw.strip()
+            if not ln:
+                continue
+            st.records += 1
+            pt = prefix_time(ln)
+            if pt is None:
+                st.reject("unrecognized")
+                continue
+            t = pt[0]
+            if last_t is not None and t < last_t:
+                st.reject("time_backwards")
+                continue
+            last_t = t
+            text = ln.decode("utf-8", "replace")
+            out: list[Sample] = []
+            m = _DD_GPS.search(text)
+            if m:
+                st.by_type["gps"] += 1
+                lat = _ddmm(m.group(1), m.group(2))
+                lon = _ddmm(m.group(3), m.group(4))
+                if m.group(6) != "A" or lat is None or lon is None:
+                    st.reject("no_fix")
+                elif m.group(5) == last_gps:
+                    st.reject("duplicate")
+                else:
+                    last_gps = m.group(5)
+                    out.append(GnssFix(t=t, source=src, lat_deg=lat, lon_deg=lon))
+            elif "/GPS timeout" in text:
+                st.by_type["gps_timeout"] += 1
+            m = _DD_CMD.search(text)
+            if m:
+                st.by_type["cmd"] += 1
+                dl, ml, dr, mr = (int(x) for x in m.groups())
+                fs = self.full_scale
+                left = min(ml / fs, 1.0) * (-1.0 if dl else 1.0)
+                right = min(mr / fs, 1.0) * (-1.0 if dr else 1.0)
+                out.append(ActuatorCommand(t=t, source=src, left=left + 0.0, right=right + 0.0))
+            if not out and not m:
+                st.by_type["other"] += 1
+            st.samples += len(out)
+            yield from out
+
+
+def _ddmm(value: str, hemi: str) -> float | None:
+    try:
+        v = float(value)
+    except ValueError:
+        return None
+    deg = math.floor(v / 100.0)
+    minutes = v - 100.0 * deg
+    if minutes >= 60.0 or not math.isfinite(v):
+        return None
+    d = deg + minutes / 60.0
+    return -d if hemi in ("S", "W") else d
