@@ -20,6 +20,7 @@ handlers (``"no_fix"``, ``"empty"``, ``"nan"``, ``"invalid"``, ...).
 
 from __future__ import annotations
 
+import binascii
 import os
 import struct
 import time
@@ -36,7 +37,9 @@ from drivers.mavlink import (
     SIGNATURE_LEN,
     DecodeContext,
     _MAGIC_RE,
-    decode_payload,
+    _REV,
+    _REV16_LO,
+    _REV_BYTE,
     select,
     type_name,
     wanted_types,
@@ -159,14 +162,6 @@ class TlogReader:
         stats = self.stats = ReadStats()
         ctx = DecodeContext(stats, self._include_gcs)
         counts: Counter[int] = Counter()
-        try:
-            yield from self._walk(data, stats, ctx, counts)
-        finally:
-            for k, c in counts.items():
-                stats.by_type[type_name(k)] += c
-
-    def _walk(self, data: bytes, stats: ReadStats, ctx: DecodeContext,
-              counts: Counter[int]) -> Iterator[Sample]:
         n = len(data)
         specs = self._specs
         spec_get = specs.get
@@ -174,7 +169,8 @@ class TlogReader:
         verify_all = self._verify_all
         want = self._want
         ts_unpack = _TS.unpack_from
-        crc = x25crc
+        crc_hqx = binascii.crc_hqx
+        rev, rev_byte, rev16_lo = _REV, _REV_BYTE, _REV16_LO
         V2, V1 = MAGIC_V2, MAGIC_V1
         pos = self._first
         if pos > 0:
@@ -183,93 +179,103 @@ class TlogReader:
         good = -1  # start of the last good record
         records = 0
         n_samples = 0
-        while pos < n:
-            # ---- framing (inline copy of _frame_at, for speed)
-            reason = None
-            end = -1
-            if pos + 9 <= n and data[pos] == 0:
-                m = data[pos + 8]
-                if m == V2:
-                    if pos + 18 <= n:
-                        plen = data[pos + 9]
-                        inc = data[pos + 10]
-                        end = pos + 20 + plen + (SIGNATURE_LEN if inc & 1 else 0)
-                        msgid = data[pos + 15] | (data[pos + 16] << 8) | (data[pos + 17] << 16)
-                        hdr, v2 = 10, True
-                elif m == V1:
-                    if pos + 14 <= n:
-                        plen = data[pos + 9]
-                        end = pos + 16 + plen
-                        msgid = data[pos + 13]
-                        hdr, v2, inc = 6, False, 0
+        try:
+            while pos < n:
+                # ---- framing (inline copy of _frame_at, for speed)
+                reason = None
+                end = -1
+                if pos + 9 <= n and data[pos] == 0:
+                    m = data[pos + 8]
+                    if m == V2:
+                        if pos + 18 <= n:
+                            plen = data[pos + 9]
+                            inc = data[pos + 10]
+                            end = pos + 20 + plen + (SIGNATURE_LEN if inc & 1 else 0)
+                            msgid = data[pos + 15] | (data[pos + 16] << 8) | (data[pos + 17] << 16)
+                            hdr, v2 = 10, True
+                    elif m == V1:
+                        if pos + 14 <= n:
+                            plen = data[pos + 9]
+                            end = pos + 16 + plen
+                            msgid = data[pos + 13]
+                            hdr, v2, inc = 6, False, 0
+                    else:
+                        reason = "garbage"
+                    if reason is None and (end < 0 or end > n):
+                        reason = "truncated"
                 else:
-                    reason = "garbage"
-                if reason is None and (end < 0 or end > n):
-                    reason = "truncated"
-            else:
-                reason = "garbage" if pos + 9 <= n else "truncated"
-            if reason is None:
-                next_ok = end == n or (end + 9 <= n and data[end] == 0 and data[end + 8] in (V1, V2))
-                if inc & 0xFE:
-                    reason = "incompat"
-                else:
-                    extra = crc_get(msgid)
-                    spec = spec_get(msgid)
-                    if extra is None:
-                        if not next_ok:
-                            reason = "garbage"
-                    elif spec is not None or verify_all:
-                        ce = pos + 8 + hdr + plen
-                        if crc(data[pos + 9:ce], extra) != (data[ce] | (data[ce + 1] << 8)):
-                            reason = "crc"
+                    reason = "garbage" if pos + 9 <= n else "truncated"
                 if reason is None:
-                    records += 1
-                    counts[msgid if extra is not None else -1 - msgid] += 1
-                    good = pos
-                    if spec is not None:
-                        ts = ts_unpack(data, pos)[0]
-                        if ts < last_us:
-                            stats.reject("time_backwards")
-                        else:
-                            last_us = ts
-                            res = decode_payload(spec, data, pos + 8 + hdr, plen, ts / 1e6,
-                                                 data[pos + 8 + hdr - 5 if v2 else pos + 11],
-                                                 data[pos + 8 + hdr - 4 if v2 else pos + 12],
-                                                 v2, ctx)
-                            if res is not None:
-                                if type(res) is list:
-                                    for s in res:
-                                        if want is None or isinstance(s, want):
-                                            n_samples += 1
-                                            yield s
-                                elif want is None or isinstance(res, want):
-                                    n_samples += 1
-                                    yield res
-                    if next_ok:
+                    next_ok = end == n or (end + 9 <= n and data[end] == 0 and data[end + 8] in (V1, V2))
+                    if inc & 0xFE:
+                        reason = "incompat"
+                    else:
+                        extra = crc_get(msgid)
+                        spec = spec_get(msgid)
+                        if extra is None:
+                            if not next_ok:
+                                reason = "garbage"
+                        elif spec is not None or verify_all:
+                            ce = pos + 8 + hdr + plen
+                            c = crc_hqx(rev_byte[extra], crc_hqx(data[pos + 9:ce].translate(rev), 0xFFFF))
+                            if (rev16_lo[c & 0xFF] | rev[c >> 8]) != (data[ce] | (data[ce + 1] << 8)):
+                                reason = "crc"
+                    if reason is None:
+                        records += 1
+                        counts[msgid if extra is not None else -1 - msgid] += 1
+                        good = pos
+                        if spec is not None:
+                            ts = ts_unpack(data, pos)[0]
+                            if ts < last_us:
+                                stats.reject("time_backwards")
+                            else:
+                                last_us = ts
+                                ps = pos + 8 + hdr
+                                if plen >= spec.size:
+                                    values = spec.struct.unpack_from(data, ps)
+                                else:  # v2 zero-truncated payload (or v1 without extensions)
+                                    values = spec.struct.unpack(data[ps:ps + plen] + bytes(spec.size - plen))
+                                if v2:
+                                    res = spec.handler(values, ts / 1e6, data[pos + 13], data[pos + 14], msgid, True, ctx)
+                                else:
+                                    res = spec.handler(values, ts / 1e6, data[pos + 11], data[pos + 12], msgid, False, ctx)
+                                if res is not None:
+                                    if type(res) is list:
+                                        for s in res:
+                                            if want is None or isinstance(s, want):
+                                                n_samples += 1
+                                                yield s
+                                    elif want is None or isinstance(res, want):
+                                        n_samples += 1
+                                        yield res
+                        if next_ok:
+                            pos = end
+                            continue
+                        # the frame was fine but what follows is not a record
+                        pos = end - 1
+                        reason = "garbage" if end + 9 <= n else "truncated"
+                    elif next_ok and reason in ("crc", "incompat"):
+                        # a corrupt frame inside intact framing: skip just this record
+                        records += 1
+                        stats.reject(reason)
                         pos = end
                         continue
-                    # the frame was fine but what follows is not a record
-                    pos = end - 1
-                    reason = "garbage" if end + 9 <= n else "truncated"
-                elif next_ok and reason in ("crc", "incompat"):
-                    # a corrupt frame inside intact framing: skip just this record
-                    records += 1
-                    stats.reject(reason)
-                    pos = end
-                    continue
-            # ---- lost the framing: count once, resynchronize
-            stats.reject(reason)
+                # ---- lost the framing: count once, resynchronize
+                stats.reject(reason)
+                stats.records = records
+                stats.samples = n_samples
+                ref = ts_unpack(data, good)[0] if good >= 0 else last_us
+                lo = max(0, ref - _RESYNC_BACK_US) if good >= 0 else 0
+                hi = ref + _RESYNC_AHEAD_US if good >= 0 else 1 << 63
+                nxt = _resync(data, pos + 1, n, lo, hi)
+                if nxt < 0:
+                    break
+                pos = nxt
+        finally:
             stats.records = records
             stats.samples = n_samples
-            ref = ts_unpack(data, good)[0] if good >= 0 else last_us
-            lo = max(0, ref - _RESYNC_BACK_US) if good >= 0 else 0
-            hi = ref + _RESYNC_AHEAD_US if good >= 0 else 1 << 63
-            nxt = _resync(data, pos + 1, n, lo, hi)
-            if nxt < 0:
-                break
-            pos = nxt
-        stats.records = records
-        stats.samples = n_samples
+            for k, c in counts.items():
+                stats.by_type[type_name(k)] += c
 
 
 def scan_header(path: str | os.PathLike) -> tuple[list[VehicleInfo], list[Parameter]]:
