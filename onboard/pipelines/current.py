@@ -1,0 +1,610 @@
+"""Water current from over-ground minus through-water velocity (algorithms.md §3-§4).
+
+Papers: Kim, Fan & Bose, IEEE Access 6 (2018) (model-based high-gain observer, RLS
+identification, Gavia AUV); Fan, Xu, Chen & Zhang, OCEANS (~2016) (nonlinear observer,
+flow-relative model, pole placement).
+
+Both papers compute ``V_c = v_OG - R nu_r`` (Kim eq. 1) with ``nu_r`` the body-frame
+velocity through water from a model-based observer. Here the current is not a difference
+of two separately estimated quantities but a state of its own, estimated jointly with the
+through-water velocity:
+
+    x = [nu_r (body, nd), V_c (earth, nd)]        nd = 3 submerged vehicles, 2 surface boats
+    nu_r' = f(nu_r, omega, attitude, u; theta)    regression model, vehicle_models.py
+    V_c'  = w_c                                   slowly varying (random walk)
+
+Measurements (each with its own noise):
+
+* velocity over ground in earth axes (``VelocityOverGround``; GNSS SOG/COG at the surface):
+  ``z = R nu_r + V_c`` (Kim eq. 1);
+* DVL bottom track, body axes: ``z = nu_r + R^T V_c``;
+* DVL water track, body axes: ``z = nu_r`` (direct through-water measurement).
+
+A straight line at constant thrust cannot separate a current along the track from a thrust
+error; a turn can, because the current is fixed in the earth frame while the model acts in
+the body frame (notably: the sway equation says a hull does not crab through water in steady
+flight). The filter's covariance says so honestly: ``std_*`` stays large until the vehicle
+has turned.
+
+Three gains for the same model and state, ``[pipelines.current] observer =``:
+
+* ``"kf"`` (default): the Kalman gain (extended KF);
+* ``"hgo"``: the high-gain observer of Kim et al. with the LMI gain and the increasing-gain
+  law of Alessandri & Rossi (:mod:`.hgo`);
+* ``"flow"``: the nonlinear observer of Fan et al. (:mod:`.flow_observer`), which observes
+  ``nu_r`` from the attitude through the yaw dynamics; the current is then ``V_g - R nu_r``.
+
+Whatever the gain, the covariance is propagated for that gain (Joseph form), so the
+one-sigma values are those of the observer actually running, and a running mean of the
+innovation NIS rescales the process noise (innovation-based calibration).
+
+Online identification (Kim et al. §II.B use RLS). The coefficients ``theta`` of the
+velocity DOFs are appended to the state, ``x = [nu_r, V_c, theta]``, with
+``theta' = 0`` and the RLS forgetting/bounded-covariance rule of :mod:`.rls` applied to
+their covariance block. For a known regressor this *is* RLS with forgetting; here the
+regressor depends on ``nu_r = R^T (v_g - V_c)``, and the joint filter keeps the
+correlation between ``theta`` and ``V_c``. A separate identify-then-observe loop (RLS on
+``v_g - V_c_hat``) was tried first and locks in its own errors: on a straight leg after a
+turn a biased current makes the sway regressor constant, RLS forgets the sway damping and
+the bias stays (measured: 0.14 m/s bias, 0.03 m/s claimed sigma, synthetic boat). The
+auxiliary yaw channel (needed by the flow observer) uses :class:`.rls.RecursiveLeastSquares`
+on state-variable-filtered data, with ``nu_r`` from this filter. Mode (a): coefficients
+configured in ``[pipelines.current.model.<dof>]`` (tight prior, refined unless
+``identify = false``); mode (b): no coefficients, a weak generic prior (vehicle_models.py).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Literal, Mapping, Sequence
+
+import msgspec
+import numpy as np
+
+from onboard.config import Config, ConfigError, decode_section
+from onboard.messages import (ActuatorCommand, Attitude, Depth, DvlVelocity, GnssFix,
+                              Heading, Imu, Sample, VelocityOverGround)
+from onboard.pipelines.geo import wrap_pi
+from onboard.pipelines.hgo import GainDesign, IncreasingGain, current_hgo_gain
+from onboard.pipelines.rls import RecursiveLeastSquares
+from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel, kind_for_class
+
+GAIN_DIR = Path(__file__).resolve().parent.parent.parent / "config" / "gains"
+"""Precomputed LMI gains for the bundled configs (``onboard design-gain``)."""
+
+
+class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """``[pipelines.current]``: hyperparameters of the current pipeline (SI units)."""
+
+    enabled: bool = True
+    observer: Literal["kf", "hgo", "flow"] = "kf"
+    model_kind: Literal["", "torpedo", "surface-rudder", "surface-twin", "rov"] = ""
+    """Regression model; empty: from ``vehicle.class``."""
+    model: dict[str, dict[str, float]] = {}
+    """Configured coefficients by DOF and term (vehicle_models.py names), mode (a)."""
+    identify: bool = True
+    """Identify the model online (joint state). False: keep the configured model fixed."""
+    model_rel_std: float = 0.2
+    """Prior one-sigma of configured coefficients, relative (plus ``theta_std_floor``)."""
+    theta_std: float = 1.0
+    """Prior one-sigma of unconfigured coefficients (mode (b))."""
+    theta_std_floor: float = 0.02
+    forgetting: float = 0.9995
+    """Forgetting of the coefficient covariance per tick (0.9995 at 10 Hz: 200 s memory),
+    variable-rate: none once the covariance is back at its prior (bounded, rls.py)."""
+    rpm_scale: float = 1000.0
+    """Propeller rpm divided by this gives the normalized propulsion ``n``."""
+    svf_cutoff_hz: float = 0.3
+    """State-variable filter cut-off for the yaw-channel RLS (algorithms.md §3.4)."""
+    current_walk: float = 0.002
+    """Random walk of the current, m/s per sqrt(s) (0.002: 0.12 m/s in an hour, 1 sigma)."""
+    accel_std: float = 0.02
+    """Model acceleration error (process noise) per DOF, m/s^2 over ``model_error_time_s``."""
+    model_error_time_s: float = 1.0
+    init_current_std: float = 0.5
+    """Prior one-sigma of the current (m/s) before any turn has made it observable."""
+    identify_min_speed: float = 0.2
+    """Below this through-water speed the yaw RLS does not learn."""
+    gnss_velocity_std: float | None = None
+    """One-sigma of GNSS velocity components (m/s); default from ``[sensors.gnss]``."""
+    dvl_velocity_std: float | None = None
+    gate_nis: float = 30.0
+    """Innovations with a larger NIS are rejected (counted in health)."""
+    calibrate: bool = True
+    """Inflate the process noise when the innovation NIS says it is too small."""
+    gain_file: str = ""
+    """HGO gain JSON (``onboard design-gain``); default ``config/gains/<class>.json``."""
+    gamma: float | None = None
+    gamma_0: float | None = None
+    rho: float | None = None
+    gamma_max: float | None = None
+    flow_poles: list[float] = []
+    """Flow-observer poles (1/s, negative); empty: the defaults of flow_observer.py."""
+
+
+def _rot(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """Body-to-earth rotation (ZYX Euler), NED/FRD."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array([
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ])
+
+
+class StateVariableFilter:
+    """``H(s) = w^2 / (s^2 + 2 zeta w s + w^2)`` on a vector; gives the filtered value and
+    its derivative, so ``d/dt (H y) = (H phi)^T theta`` holds exactly for constant theta."""
+
+    def __init__(self, n: int, cutoff_hz: float, zeta: float = 0.8) -> None:
+        self.w = 2.0 * math.pi * cutoff_hz
+        self.zeta = zeta
+        self.y = np.zeros(n)
+        self.dy = np.zeros(n)
+        self.primed = False
+
+    def update(self, dt: float, u: np.ndarray) -> None:
+        if not self.primed:
+            self.y = u.copy()
+            self.dy[:] = 0.0
+            self.primed = True
+            return
+        w, z = self.w, self.zeta
+        n_sub = max(1, math.ceil(dt * w / 0.3))
+        h = dt / n_sub
+        for _ in range(n_sub):  # semi-implicit Euler, stable for w h < 2
+            self.dy = self.dy + h * (w * w * (u - self.y) - 2.0 * z * w * self.dy)
+            self.y = self.y + h * self.dy
+
+
+class CurrentPipeline:
+    """Pipeline ``current``: water current with one-sigma, any vehicle class.
+
+    Inspectable attributes (filterpy style): ``x`` (state ``[nu_r, V_c, theta]``), ``P``
+    (covariance), ``y`` (last velocity innovation), ``S`` (its covariance), ``nis``,
+    ``thetas`` (model coefficients in use, per channel), ``yaw_rls`` (aux yaw channel),
+    ``gamma`` (HGO gain).
+    """
+
+    name = "current"
+
+    def __init__(self, cfg: CurrentConfig, kind: str, sensors: Any,
+                 configured: bool, gain: GainDesign | None = None) -> None:
+        self.cfg = cfg
+        self.model = RegressionModel(kind)
+        self.nd = nd = self.model.nd
+        self.columns: tuple[str, ...] = ("north", "east") + (("down",) if nd == 3 else ()) + (
+            "std_north", "std_east") + (("std_down",) if nd == 3 else ()) + (
+            "u_r", "v_r") + (("w_r",) if nd == 3 else ())
+        self.configured = configured
+        base = self.model.default_thetas()
+        self.thetas = (self.model.thetas_from_mapping(cfg.model, base) if cfg.model else base)
+        # coefficient prior: configured terms tight, the others loose
+        prior_sd: list[np.ndarray] = []
+        for ch, th in zip(self.model.channels, self.thetas):
+            given = cfg.model.get(ch, {})
+            sd = np.array([cfg.model_rel_std * abs(v) + cfg.theta_std_floor if k in given
+                           else cfg.theta_std for k, v in zip(self.model.terms[ch], th)])
+            prior_sd.append(sd)
+        self._sizes = [len(self.model.terms[c]) for c in self.model.dofs]
+        self.n_theta = sum(self._sizes) if cfg.identify else 0
+        n = 2 * nd + self.n_theta
+        self.x = np.zeros(n)
+        if self.n_theta:
+            self.x[2 * nd:] = np.concatenate(self.thetas[:nd])
+        p_diag = [1.0] * nd + [cfg.init_current_std ** 2] * nd
+        if self.n_theta:
+            p_diag += list(np.concatenate(prior_sd[:nd]) ** 2)
+        self.P = np.diag(p_diag)
+        self._tr_theta_max = float(np.sum(p_diag[2 * nd:])) if self.n_theta else 0.0
+        self.yaw_rls = None
+        if "yaw" in self.model.aux:
+            i = self.model.channels.index("yaw")
+            self.yaw_rls = RecursiveLeastSquares(
+                len(self.thetas[i]), forgetting=0.999, p0=float(np.max(prior_sd[i]) ** 2),
+                theta0=self.thetas[i], names=self.model.terms["yaw"], sigma2_0=1e-3)
+            if "yaw" in cfg.model:
+                self.yaw_rls.P = np.diag(prior_sd[i] ** 2)
+        self.gnss_std = cfg.gnss_velocity_std or sensors.gnss.velocity_std_mps
+        self.dvl_std = cfg.dvl_velocity_std or sensors.dvl.velocity_std_mps
+        self.dvl_max_fom = sensors.dvl.max_fom_mps
+        self.surface_depth = sensors.depth.surface_depth_m
+        self.y = np.zeros(nd)
+        self.S = np.eye(nd)
+        self.nis = 0.0
+        self.q_scale = 1.0
+        self._nis_avg = 1.0
+        self._J = -np.eye(nd)
+        # vehicle state from samples
+        self.inp = ModelInputs()
+        self.roll = self.pitch = 0.0
+        self.yaw: float | None = None
+        self._have_rates = False
+        self._yaw_prev: tuple[float, float] | None = None
+        self.depth: float | None = None
+        self._t: float | None = None
+        self._started = False
+        self._last_vg: tuple[float, np.ndarray, str] | None = None  # (t, body nu_g, kind)
+        self._last_meas_t: float | None = None
+        self._svf = (StateVariableFilter(1 + len(self.model.terms["yaw"]), cfg.svf_cutoff_hz)
+                     if self.yaw_rls is not None else None)
+        # HGO
+        self.gain = gain
+        self.gamma = 0.0
+        self._law: IncreasingGain | None = None
+        if cfg.observer == "hgo":
+            g = gain or GainDesign.analytic()
+            self.gain = g
+            self._k = g.chain_gain(0) / g.time_scale_s ** np.arange(1, 3)
+            g0 = cfg.gamma_0 if cfg.gamma_0 is not None else (
+                cfg.gamma if cfg.gamma is not None else g.gamma_0)
+            self._law = IncreasingGain(g0, cfg.rho if cfg.rho is not None else (
+                0.0 if cfg.gamma is not None else g.rho),
+                cfg.gamma_max if cfg.gamma_max is not None else (
+                    cfg.gamma if cfg.gamma is not None else g.gamma_max))
+            self.gamma = self._law.gamma
+        self.flow = None
+        if cfg.observer == "flow":
+            from onboard.pipelines.flow_observer import FlowObserver
+            self.flow = FlowObserver(self.model, poles=cfg.flow_poles or None)
+        self.counters: dict[str, float] = {"rejected_invalid_dvl": 0, "rejected_gate": 0,
+                                           "rejected_nonfinite": 0, "updates": 0,
+                                           "rls_updates": 0}
+
+    # ------------------------------------------------------------------ samples
+    def _ingest(self, s: Sample, meas: list) -> None:
+        if isinstance(s, Attitude):
+            if not all(math.isfinite(v) for v in (s.roll_rad, s.pitch_rad, s.yaw_rad)):
+                self.counters["rejected_nonfinite"] += 1
+                return
+            self.roll, self.pitch = s.roll_rad, s.pitch_rad
+            self._set_yaw(s.t, s.yaw_rad)
+            if s.yaw_rate_rps is not None:
+                self.inp.p = s.roll_rate_rps or 0.0
+                self.inp.q = s.pitch_rate_rps or 0.0
+                self.inp.r = s.yaw_rate_rps
+                self._have_rates = True
+        elif isinstance(s, Heading):
+            if not math.isfinite(s.heading_rad):
+                self.counters["rejected_nonfinite"] += 1
+                return
+            h = s.heading_rad + ((s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0)
+            self._set_yaw(s.t, h)
+        elif isinstance(s, Imu):
+            if math.isfinite(s.gyro_z):
+                self.inp.p, self.inp.q, self.inp.r = s.gyro_x, s.gyro_y, s.gyro_z
+                self._have_rates = True
+        elif isinstance(s, ActuatorCommand):
+            x = self.inp
+            if s.propeller_rpm is not None:
+                x.n = s.propeller_rpm / self.cfg.rpm_scale
+            elif s.throttle is not None:
+                x.n = s.throttle
+            if s.rudder_rad is not None:
+                x.dr = s.rudder_rad
+            if s.stern_plane_rad is not None:
+                x.ds = s.stern_plane_rad
+            if s.left is not None:
+                x.left = s.left
+            if s.right is not None:
+                x.right = s.right
+            if s.thrusters is not None:
+                x.thrusters = s.thrusters
+        elif isinstance(s, Depth):
+            self.depth = s.depth_m
+        elif isinstance(s, VelocityOverGround):
+            z = [s.v_north_mps, s.v_east_mps] + ([s.v_down_mps] if (
+                self.nd == 3 and s.v_down_mps is not None) else [])
+            if not all(math.isfinite(v) for v in z):
+                self.counters["rejected_nonfinite"] += 1
+                return
+            meas.append(("earth", s.t, np.array(z), self.dvl_std))
+        elif isinstance(s, DvlVelocity):
+            if not s.valid or (s.fom_mps is not None and s.fom_mps > self.dvl_max_fom):
+                self.counters["rejected_invalid_dvl"] += 1
+                return
+            z = np.array([s.vx, s.vy, s.vz][: self.nd])
+            if not np.all(np.isfinite(z)):
+                self.counters["rejected_nonfinite"] += 1
+                return
+            std = max(self.dvl_std, s.fom_mps or 0.0)
+            meas.append(("bottom" if s.track == "bottom" else "water", s.t, z, std))
+        elif isinstance(s, GnssFix):
+            if s.sog_mps is None or s.cog_rad is None or s.fix_quality == 0:
+                return
+            if self.depth is not None and self.depth > self.surface_depth:
+                return
+            if not (math.isfinite(s.sog_mps) and math.isfinite(s.cog_rad)):
+                self.counters["rejected_nonfinite"] += 1
+                return
+            z = np.array([s.sog_mps * math.cos(s.cog_rad), s.sog_mps * math.sin(s.cog_rad)])
+            meas.append(("earth", s.t, z, self.gnss_std))
+
+    def _set_yaw(self, t: float, yaw: float) -> None:
+        if not self._have_rates and self._yaw_prev is not None:
+            t0, y0 = self._yaw_prev
+            if t - t0 > 1e-3:
+                r = wrap_pi(yaw - y0) / (t - t0)
+                self.inp.r += min(1.0, (t - t0) / 0.3) * (r - self.inp.r)
+        self._yaw_prev = (t, yaw)
+        self.yaw = yaw
+
+    # ------------------------------------------------------------------ filter
+    def _R(self) -> np.ndarray:
+        if self.nd == 3:
+            return _rot(self.roll, self.pitch, self.yaw or 0.0)
+        c, s = math.cos(self.yaw or 0.0), math.sin(self.yaw or 0.0)
+        return np.array([[c, -s], [s, c]])
+
+    def _unpack_thetas(self) -> None:
+        """Copy the coefficient part of the state into ``thetas`` (velocity DOFs)."""
+        if not self.n_theta:
+            return
+        o = 2 * self.nd
+        for i, k in enumerate(self._sizes):
+            self.thetas[i] = self.x[o:o + k]
+            o += k
+
+    def _predict(self, dt: float) -> None:
+        """x <- x + dt f(x); P <- F P F^T + Q, then coefficient forgetting (rls.py rule)."""
+        nd, nt = self.nd, self.n_theta
+        nu = self.x[:nd]
+        phis = self.model.regressors(nu, self.inp)
+        f = np.array([phis[i] @ self.thetas[i] for i in range(nd)])
+        J = self.model.jacobian(nu, self.inp, self.thetas, f)
+        self._J = J
+        n = 2 * nd + nt
+        F = np.eye(n)
+        F[:nd, :nd] += dt * J
+        if nt:
+            o = 2 * nd
+            for i, k in enumerate(self._sizes):
+                F[i, o:o + k] = dt * phis[i]
+                o += k
+        self.x[:nd] = nu + dt * f
+        q_nu = self.cfg.accel_std ** 2 * self.cfg.model_error_time_s * self.q_scale
+        q = np.zeros(n)
+        q[:nd] = q_nu * dt
+        q[nd:2 * nd] = self.cfg.current_walk ** 2 * dt
+        self.P = F @ self.P @ F.T
+        self.P[np.diag_indices(n)] += q
+        if nt:
+            # variable-rate forgetting on the coefficient block, bounded by its prior trace
+            o = 2 * nd
+            tr = float(np.trace(self.P[o:, o:]))
+            lam = 1.0 - (1.0 - self.cfg.forgetting) * max(0.0, 1.0 - tr / self._tr_theta_max)
+            lam = lam ** (dt / 0.1)
+            if lam < 1.0:
+                d = np.ones(n)
+                d[o:] = 1.0 / math.sqrt(lam)
+                self.P = self.P * np.outer(d, d)
+
+    def _update(self, kind: str, t: float, z: np.ndarray, std: float, dt_meas: float) -> None:
+        nd, n = self.nd, len(self.x)
+        R = self._R()
+        m = len(z)
+        H = np.zeros((m, n))
+        if kind == "earth":
+            H[:, :nd] = R[:m]
+            H[:, nd:2 * nd] = np.eye(nd)[:m]
+        elif kind == "bottom":
+            H[:, :nd] = np.eye(nd)[:m]
+            H[:, nd:2 * nd] = R.T[:m]
+        else:
+            H[:, :nd] = np.eye(nd)[:m]
+        Rm = np.eye(m) * std * std
+        y = z - H @ self.x
+        PHt = self.P @ H.T
+        S = H @ PHt + Rm
+        Sinv = np.linalg.inv(S)
+        nis = float(y @ Sinv @ y)
+        if nis > self.cfg.gate_nis and self._started and self.counters["updates"] > 50:
+            self.counters["rejected_gate"] += 1
+            return
+        K = PHt @ Sinv
+        if self._law is not None and kind != "water" and m == nd:
+            # HGO gain (Kim eq. 11, increasing-gain law) on [nu_r, V_c]; the coefficient
+            # rows keep their Kalman gain (the identification of Kim §II.B).
+            e_earth = y if kind == "earth" else R @ y
+            gamma = self._law.update(dt_meas, float(e_earth @ e_earth) / (std * std) / m)
+            self.gamma = gamma
+            G = current_hgo_gain(float(self._k[0]), float(self._k[1]), gamma, self._J, R,
+                                 np.array([self.inp.p, self.inp.q, self.inp.r]))
+            Kh = G * dt_meas
+            K[:2 * nd] = Kh @ R if kind == "bottom" else Kh
+        self.x = self.x + K @ y
+        IKH = np.eye(n) - K @ H
+        self.P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
+        self._unpack_thetas()
+        self.y, self.S, self.nis = y, S, nis
+        self.counters["updates"] += 1
+        if self.cfg.calibrate and self._started:
+            # innovation-based calibration: E[NIS] = m for a consistent filter; inflate only
+            self._nis_avg += 0.01 * (min(nis, 5.0 * m) / m - self._nis_avg)
+            self.q_scale = float(np.clip(self.q_scale * math.exp(0.01 * (self._nis_avg - 1.0)),
+                                         1.0, 20.0))
+
+    def _start(self, kind: str, z: np.ndarray) -> None:
+        """Initialize nu_r from the first velocity, assuming no current (P says so)."""
+        nd = self.nd
+        R = self._R()
+        zz = np.zeros(nd)
+        zz[: len(z)] = z
+        nu = R.T @ zz if kind == "earth" else zz
+        self.x[:nd] = nu
+        self._started = True
+
+    # ------------------------------------------------------------------ identification
+    def _identify_yaw(self, dt: float) -> None:
+        """RLS on the auxiliary yaw channel: r' = phi_yaw(nu_r, r, u)^T theta_yaw, with both
+        sides through the same state-variable filter (algorithms.md §3.4)."""
+        if self.yaw_rls is None or self._svf is None:
+            return
+        i = self.model.channels.index("yaw")
+        phi = self.model.regressors(self.x[: self.nd], self.inp)[i]
+        self._svf.update(dt, np.concatenate([[self.inp.r], phi]))
+        if not self.cfg.identify or self.x[0] < self.cfg.identify_min_speed:
+            return
+        if self._last_vg is None or (self._t or 0.0) - self._last_vg[0] > 1.0:
+            return
+        self.yaw_rls.update(self._svf.y[1:], float(self._svf.dy[0]))
+        self.thetas[i] = self.yaw_rls.theta.copy()
+        self.counters["rls_updates"] += 1
+
+    # ------------------------------------------------------------------ protocol
+    def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
+        """Advance to tick ``t`` (s) with the new samples; returns the estimates."""
+        meas: list = []
+        for s in samples:
+            self._ingest(s, meas)
+        if self.yaw is None:
+            return {}
+        if not self._started:
+            if not meas:
+                return {}
+            self._start(meas[-1][0], meas[-1][2])
+            self._t = t
+        dt = t - (self._t if self._t is not None else t)
+        if dt > 0:
+            n_sub = max(1, math.ceil(dt / 0.2))
+            for _ in range(n_sub):
+                self._predict(dt / n_sub)
+        self._t = t if dt >= 0 else self._t
+        for kind, tm, z, std in meas:
+            dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else 0.1
+            dt_meas = min(max(dt_meas, 1e-3), 1.0)
+            self._last_meas_t = tm
+            self._update(kind, tm, z, std, dt_meas)
+            R = self._R()
+            if kind == "earth":
+                zz = np.zeros(self.nd)
+                zz[: len(z)] = z
+                if len(z) < self.nd:  # no vertical: take the filter's own
+                    zz[2:] = (R @ self.x[: self.nd] + self.x[self.nd:])[2:]
+                self._last_vg = (tm, R.T @ zz, kind)
+            else:
+                self._last_vg = (tm, z.copy(), kind)
+        if dt > 0:
+            self._identify_yaw(dt)
+        if self.flow is not None and self._last_vg is not None:
+            self.flow.step(dt if dt > 0 else 0.0, self.yaw, self.inp, self.thetas,
+                           self.x[: self.nd])
+        return self._outputs()
+
+    def _outputs(self) -> dict[str, float]:
+        nd = self.nd
+        c = self.x[nd:]
+        nu = self.x[:nd]
+        std = np.sqrt(np.diag(self.P)[nd:])
+        if self.flow is not None and self.flow.ready and self._last_vg is not None:
+            # Fan et al.: V_c = R (v - v_r); v from the last over-ground velocity.
+            R = self._R()
+            nu = self.flow.nu_r(nd)
+            _, nu_g, kind = self._last_vg
+            if kind != "water":
+                c = R @ (nu_g - nu)
+            std = np.sqrt(np.maximum(np.diag(R @ self.flow.nu_cov(nd) @ R.T), 0.0)
+                          + (self.dvl_std if kind != "earth" else self.gnss_std) ** 2)
+        out = {"north": float(c[0]), "east": float(c[1]),
+               "std_north": float(std[0]), "std_east": float(std[1]),
+               "u_r": float(nu[0]), "v_r": float(nu[1])}
+        if nd == 3:
+            out.update(down=float(c[2]), std_down=float(std[2]), w_r=float(nu[2]))
+        return out
+
+    def health(self) -> Mapping[str, float]:
+        """Velocity innovation, its variance and NIS; RLS residuals; counters."""
+        h: dict[str, float] = dict(self.counters)
+        for i, ax in enumerate(("n", "e", "d")[: len(self.y)]):
+            h[f"velocity.innovation_{ax}"] = float(self.y[i])
+            h[f"velocity.S_{ax}"] = float(self.S[i, i])
+        h["velocity.nis"] = self.nis
+        h["velocity.nis_avg"] = self._nis_avg
+        h["q_scale"] = self.q_scale
+        if self.n_theta:
+            o = 2 * self.nd
+            h["theta.std_max"] = float(np.sqrt(np.max(np.diag(self.P)[o:])))
+        if self.yaw_rls is not None:
+            h["rls.yaw.residual"] = self.yaw_rls.e
+            h["rls.yaw.sigma"] = math.sqrt(self.yaw_rls.sigma2)
+            h["rls.yaw.nis"] = self.yaw_rls.nis
+        if self._law is not None:
+            h["gamma"] = self.gamma
+        return h
+
+    def get_state(self) -> dict[str, Any]:
+        """Identified model (coefficients and their covariance) and the last current."""
+        nd, o = self.nd, 2 * self.nd
+        st: dict[str, Any] = {"model_kind": self.model.kind,
+                              "thetas": self.model.thetas_to_mapping(self.thetas),
+                              "current": self.x[nd:o].tolist(),
+                              "current_std": np.sqrt(np.diag(self.P)[nd:o]).tolist()}
+        if self.n_theta:
+            st["theta_cov"] = self.P[o:, o:].tolist()
+        if self.yaw_rls is not None:
+            st["yaw_rls"] = self.yaw_rls.get_state()
+        return st
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore the identified model; the current restarts from its saved value with
+        its saved uncertainty inflated (it may have changed while the service was down)."""
+        if state.get("model_kind") != self.model.kind:
+            return
+        nd, o = self.nd, 2 * self.nd
+        try:
+            thetas = self.model.thetas_from_mapping(state.get("thetas", {}), self.thetas)
+            if not all(np.all(np.isfinite(t)) for t in thetas):
+                return
+            self.thetas = thetas
+            if self.n_theta:
+                self.x[o:] = np.concatenate(thetas[:nd])
+                cov = np.asarray(state.get("theta_cov", []), float)
+                if cov.shape == (self.n_theta, self.n_theta) and np.all(np.isfinite(cov)):
+                    self.P[o:, :] = 0.0
+                    self.P[:, o:] = 0.0
+                    self.P[o:, o:] = cov
+            if self.yaw_rls is not None and "yaw_rls" in state:
+                self.yaw_rls.set_state(state["yaw_rls"])
+                self.thetas[self.model.channels.index("yaw")] = self.yaw_rls.theta.copy()
+            c = np.asarray(state["current"], float)
+            if c.shape == (nd,) and np.all(np.isfinite(c)):
+                self.x[nd:o] = c
+                sd = np.asarray(state.get("current_std", [0.3] * nd), float)
+                self.P[nd:o, :] = 0.0
+                self.P[:, nd:o] = 0.0
+                self.P[nd:o, nd:o] = np.diag(np.maximum(sd, 0.2) ** 2)
+        except (KeyError, TypeError, ValueError):
+            return
+
+
+def _gain_for(cfg: Config, ccfg: CurrentConfig) -> GainDesign | None:
+    if ccfg.observer != "hgo":
+        return None
+    path = Path(ccfg.gain_file) if ccfg.gain_file else GAIN_DIR / f"{cfg.vehicle.vehicle_class}.json"
+    if path.exists():
+        try:
+            return GainDesign.load(path)
+        except (OSError, ValueError, KeyError) as err:
+            raise ConfigError(f"pipelines.current.gain_file: {path}: {err}") from None
+    if ccfg.gain_file:
+        raise ConfigError(f"pipelines.current.gain_file: {path}: no such file "
+                          "(run `onboard design-gain --config ...`)")
+    return None
+
+
+def create(cfg: Config) -> CurrentPipeline | None:
+    """The ``current`` pipeline for this configuration (every vehicle class)."""
+    ccfg = decode_section(cfg, "current", CurrentConfig)
+    if not ccfg.enabled:
+        return None
+    has_twin = cfg.inputs.left is not None and cfg.inputs.right is not None
+    kind = ccfg.model_kind or kind_for_class(cfg.vehicle.vehicle_class, has_twin)
+    try:
+        RegressionModel(kind).thetas_from_mapping(ccfg.model)
+    except ValueError as err:
+        raise ConfigError(f"pipelines.current.{err}") from None
+    return CurrentPipeline(ccfg, kind, cfg.sensors, configured=bool(ccfg.model),
+                           gain=_gain_for(cfg, ccfg))

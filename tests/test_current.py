@@ -1,0 +1,169 @@
+"""Current pipeline on synthetic plants (independent of SITL): error and 2-sigma coverage.
+
+The plants here are the regression models of vehicle_models.py with "true" coefficients,
+a current and sensor noise; they are the pipeline's own specification test. The SITL
+scenarios (other plants, other models) are in test_current_sitl.py.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from onboard.config import from_dict
+from onboard.messages import (ActuatorCommand, Attitude, DvlVelocity, GnssFix, Heading)
+from onboard.pipelines import current as current_mod
+from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel
+
+BOAT_TRUE = {
+    "surge": {"u|u|": -0.08, "u": -0.05, "vr": 0.3, "tau_u": 0.3},
+    "sway": {"v": -1.2, "v|v|": -0.5, "ur": -0.4, "r": 0.05},
+    "yaw": {"r": -1.5, "r|r|": -0.5, "uv": 0.1, "u|u|dr": 0.8, "n|n|dr": 0.3},
+}
+TORPEDO_TRUE = {
+    "surge": {"u|u|": -0.045, "wq": -0.9, "q^2": 0.0, "vr": 0.9, "r^2": 0.0,
+              "sin(theta)": 0.0, "n|n|": 0.12},
+    "sway": {"v|v|": -1.5, "r|r|": 0.0, "uv": -0.9, "ur": -0.5, "wp": 0.0, "pq": 0.0,
+             "cos(theta)sin(phi)": 0.0, "u|u|dr": 0.1},
+    "heave": {"w|w|": -1.5, "q|q|": 0.0, "uw": -0.9, "uq": 0.5, "vp": 0.0, "rp": 0.0,
+              "cos(theta)cos(phi)": 0.0, "u|u|ds": -0.1},
+    "yaw": {"r": -0.8, "r|r|": -0.3, "uv": 0.6, "u|u|dr": -1.2},
+}
+
+
+def simulate_boat(duration: float = 600.0, current=(0.3, -0.2), seed: int = 0,
+                  tick: float = 0.1, leg_s: float = 60.0, current_fn=None):
+    """Rudder boat, zig-zag heading legs; yields (t, samples, true current (n, e))."""
+    rng = np.random.default_rng(seed)
+    m = RegressionModel("surface-rudder")
+    th = m.thetas_from_mapping(BOAT_TRUE)
+    x = ModelInputs()
+    x.n = 0.8
+    nu = np.array([1.0, 0.0])
+    psi, r = 0.0, 0.0
+    north = east = 0.0
+    h = 0.01
+    n_sub = int(round(tick / h))
+    headings = [0.0, 1.6, 3.2, -1.6, 0.8, 2.4, -2.4, -0.8]
+    t = 0.0
+    k = 0
+    while t < duration - 1e-9:
+        samples = []
+        for _ in range(n_sub):
+            ref = headings[int(t // leg_s) % len(headings)]
+            x.dr = float(np.clip(0.6 * math.remainder(ref - psi, 2 * math.pi) - 0.3 * r, -0.5, 0.5))
+            x.r = r
+            phis = m.regressors(nu, x)
+            acc = np.array([phis[i] @ th[i] for i in range(3)])
+            nu = nu + h * acc[:2]
+            r = r + h * acc[2]
+            psi = psi + h * r
+            t += h
+            c = np.array(current_fn(t) if current_fn else current)
+            vg = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]]) @ nu + c
+            north += h * vg[0]
+            east += h * vg[1]
+        k += 1
+        samples.append(ActuatorCommand(t=t, throttle=x.n, rudder_rad=x.dr))
+        samples.append(Heading(t=t, heading_rad=wrap(psi + rng.normal(0, 0.01))))
+        samples.append(Attitude(t=t, roll_rad=0.0, pitch_rad=0.0, yaw_rad=wrap(psi + rng.normal(0, 0.01)),
+                                yaw_rate_rps=r + rng.normal(0, 0.005)))
+        if k % 2 == 0:
+            vgn = vg + rng.normal(0, 0.05, 2)
+            samples.append(GnssFix(t=t, lat_deg=0.0, lon_deg=0.0, sog_mps=float(np.hypot(*vgn)),
+                                   cog_rad=float(math.atan2(vgn[1], vgn[0]))))
+        yield t, samples, c
+
+
+def simulate_torpedo(duration: float = 600.0, current=(-0.6, 0.3, 0.02), seed: int = 0,
+                     tick: float = 0.1, leg_s: float = 100.0, water_track: bool = False):
+    """Torpedo AUV at constant depth, heading legs; DVL bottom track at 5 Hz."""
+    rng = np.random.default_rng(seed)
+    m = RegressionModel("torpedo")
+    th = m.thetas_from_mapping(TORPEDO_TRUE)
+    x = ModelInputs()
+    x.n = 1.5 * 0.7  # 1500 rpm / rpm_scale 1000 ~ cruise
+    nu = np.array([1.5, 0.0, 0.0])
+    psi, r = 0.0, 0.0
+    h = 0.01
+    n_sub = int(round(tick / h))
+    headings = [0.0, 2.0, -2.0, 1.0, 3.0, -1.0]
+    t = 0.0
+    k = 0
+    c = np.array(current, float)
+    while t < duration - 1e-9:
+        samples = []
+        for _ in range(n_sub):
+            ref = headings[int(t // leg_s) % len(headings)]
+            x.dr = float(np.clip(-0.5 * math.remainder(ref - psi, 2 * math.pi) + 0.3 * r, -0.3, 0.3))
+            x.r = r
+            x.pitch = 0.05 * math.sin(0.05 * t)
+            x.q = 0.0025 * math.cos(0.05 * t)
+            phis = m.regressors(nu, x)
+            acc = np.array([phis[i] @ th[i] for i in range(4)])
+            nu = nu + h * acc[:3]
+            r = r + h * acc[3]
+            psi = psi + h * r
+            t += h
+        k += 1
+        R = current_mod._rot(0.0, x.pitch, psi)
+        samples.append(ActuatorCommand(t=t, propeller_rpm=x.n * 1000.0, rudder_rad=x.dr,
+                                       stern_plane_rad=0.0))
+        samples.append(Attitude(t=t, roll_rad=0.0, pitch_rad=x.pitch, yaw_rad=wrap(psi),
+                                roll_rate_rps=0.0, pitch_rate_rps=x.q, yaw_rate_rps=r))
+        if k % 2 == 0:
+            if water_track:
+                z = nu + rng.normal(0, 0.01, 3)
+            else:
+                z = nu + R.T @ c + rng.normal(0, 0.01, 3)
+            samples.append(DvlVelocity(t=t, vx=z[0], vy=z[1], vz=z[2],
+                                       track="water" if water_track else "bottom"))
+        yield t, samples, c
+
+
+def wrap(a: float) -> float:
+    return math.remainder(a, 2 * math.pi)
+
+
+def run(pipe, gen, after: float = 120.0):
+    """Errors (after ``after`` s) and 2-sigma coverage per horizontal axis."""
+    errs, stds = [], []
+    for t, samples, c in gen:
+        out = pipe.step(t, samples)
+        if t >= after and "north" in out:
+            errs.append([out["north"] - c[0], out["east"] - c[1]])
+            stds.append([out["std_north"], out["std_east"]])
+    e, s = np.array(errs), np.array(stds)
+    rms = np.sqrt(np.mean(e ** 2, axis=0))
+    cover = np.mean(np.abs(e) <= 2 * s, axis=0)
+    return rms, cover, e, s
+
+
+def make(vclass: str, **section):
+    cfg = from_dict({"vehicle": {"class": vclass}, "pipelines": {"current": section}})
+    return current_mod.create(cfg)
+
+
+def test_boat_known_model_constant_current():
+    pipe = make("rudder-boat", model=BOAT_TRUE, identify=False)
+    rms, cover, _, _ = run(pipe, simulate_boat(600.0))
+    print("boat known model rms", rms, "cover", cover)
+    assert np.all(rms < 0.05)
+    assert np.all(cover > 0.85)
+
+
+def test_boat_no_model_identified_online():
+    pipe = make("rudder-boat")
+    rms, cover, _, _ = run(pipe, simulate_boat(900.0), after=300.0)
+    print("boat no model rms", rms, "cover", cover)
+    assert np.all(rms < 0.05)
+    assert np.all(cover > 0.85)
+
+
+def test_torpedo_known_model_bottom_track():
+    pipe = make("torpedo-auv", model=TORPEDO_TRUE, identify=False)
+    rms, cover, _, _ = run(pipe, simulate_torpedo(600.0), after=150.0)
+    print("torpedo known rms", rms, "cover", cover)
+    assert np.all(rms < 0.05)
