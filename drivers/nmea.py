@@ -28,7 +28,8 @@ has no time). They are merged into one :class:`~onboard.messages.GnssFix`:
   speed and course over ground (SOG/COG); VTG gives SOG/COG too (RMC wins when both).
 * An epoch is opened by the first timed sentence (GGA or RMC) with a new UTC time and
   closed -- the fix emitted -- as soon as every timed sentence type this stream has sent
-  so far is present (GGA+RMC on a receiver that sends both), or when a timed sentence of
+  so far is present (GGA+RMC on a receiver that sends both; this rule starts after the
+  first epoch, once the stream's sentence set is known), or when a timed sentence of
   another UTC time arrives, or when ``hold_s`` of receive time has passed, or on
   :meth:`NmeaParser.flush`. An RMC-only (or GGA-only) epoch thus yields a fix too.
 * A VTG received while an epoch is open belongs to it; a VTG received between epochs is
@@ -402,6 +403,7 @@ class NmeaParser:
         self._day0: float | None = date
         self._last_tod: float | None = None
         self._timed_types: set[str] = set()
+        self._learned = False  # True once one epoch has been closed by the next one
         self._epoch: _Epoch | None = None
         self._pending_vtg: Vtg | None = None
         self._pending_headings: list[tuple[float, str, float | None]] = []
@@ -524,6 +526,7 @@ class NmeaParser:
     def _expire(self, t_rx: float) -> list[Sample]:
         e = self._epoch
         if e is not None and e.t_rx is not None and t_rx - e.t_rx > self.hold_s:
+            self._learned = True
             return self._close()
         return []
 
@@ -542,6 +545,7 @@ class NmeaParser:
         e = self._epoch
         if e is not None and abs(e.tod_s - tod) > 1e-6:
             out.extend(self._close())
+            self._learned = True
             e = None
         if e is None:
             e = self._epoch = _Epoch(tod_s=tod, t_rx=t_rx, vtg=self._pending_vtg,
@@ -554,7 +558,7 @@ class NmeaParser:
         else:
             e.rmc = rmc
         have = {k for k, v in (("GGA", e.gga), ("RMC", e.rmc)) if v is not None}
-        if have >= self._timed_types:
+        if self._learned and have >= self._timed_types:
             out.extend(self._close())
         return out
 
