@@ -1,0 +1,191 @@
+"""Generic CSV reader: mapping, runs, bad rows; the BlueBoat NTNU runs and their config."""
+
+from __future__ import annotations
+
+import math
+import statistics
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from drivers.base import UnreadableLog
+from drivers.csvlog import CsvReader
+from onboard.config import CONFIG_DIR, CsvFormat, load
+from onboard.inputs import InputMapper
+from onboard.messages import (
+    ActuatorOutputs,
+    Attitude,
+    Depth,
+    GnssFix,
+    Heading,
+    VelocityOverGround,
+)
+
+FMT = CsvFormat(time="ms", time_scale=0.001, lat_deg="lat", lon_deg="lon", heading="hdg",
+                heading_unit="deg", yaw_rate="r", surge_mps="u", sway_mps="v", depth_m="d",
+                pwm_columns=["pl", "pr"])
+HEADER = "ms,lat,lon,hdg,r,u,v,d,pl,pr"
+
+
+def write(path: Path, rows: list[str], header: str = HEADER) -> Path:
+    path.write_text("\n".join([header, *rows]) + "\n")
+    return path
+
+
+def test_row_to_samples(tmp_path: Path):
+    f = write(tmp_path / "a.csv", ["1000,63.4,10.3,90,0.1,2.0,0.5,1.5,1600,1400"])
+    out = list(CsvReader(f, FMT))
+    kinds = [type(s).__name__ for s in out]
+    assert kinds == ["GnssFix", "Heading", "VelocityOverGround", "Depth", "ActuatorOutputs"]
+    fix, hdg, vog, dep, act = out
+    assert fix.t == 1.0 and fix.source == "csv:a" and fix.lat_deg == 63.4
+    assert hdg.heading_rad == pytest.approx(math.pi / 2)
+    # heading east: surge goes east, sway (starboard) goes south
+    assert vog.v_east_mps == pytest.approx(2.0) and vog.v_north_mps == pytest.approx(-0.5)
+    assert dep.depth_m == 1.5 and act.pwm_us == (1600.0, 1400.0)
+
+
+def test_attitude_only_with_roll_pitch_or_explicit_level_assumption(tmp_path: Path):
+    f = write(tmp_path / "a.csv", ["0,63.4,10.3,45,-5.0,0,0,0,1500,1500"])
+    assert not any(isinstance(s, Attitude) for s in CsvReader(f, FMT))
+    level = FMT.__class__(**{**{k: getattr(FMT, k) for k in FMT.__struct_fields__},
+                             "assume_level": True, "yaw_rate_unit": "deg/s"})
+    (att,) = [s for s in CsvReader(f, level) if isinstance(s, Attitude)]
+    assert att.yaw_rate_rps == pytest.approx(math.radians(-5.0))
+    assert att.yaw_rad == pytest.approx(math.pi / 4) and att.roll_rad == 0.0
+
+
+def test_bad_rows_are_skipped_and_counted(tmp_path: Path):
+    f = write(tmp_path / "a.csv", [
+        "0,63.4,10.3,90,0,1,0,1,1500,1500",
+        "100,63.4,10.3,90,0,,0,1,1500,1500",       # empty surge: no VOG
+        "200,63.4,10.3,NaN,0,1,0,1,1500,1500",     # NaN heading: no heading, no VOG
+        "300,63.4,abc,90,0,1,0,1,1500,1500",       # non-numeric lon: no fix
+        "400,63.4,10.3,90,0,1,0,1,1500",           # missing cell
+        "xyz,63.4,10.3,90,0,1,0,1,1500,1500",      # bad time
+        "250,63.4,10.3,90,0,1,0,1,1500,1500",      # time backwards
+        "500,95.0,10.3,90,0,1,0,1,1500,1500",      # latitude out of range
+        "",
+        "600,63.4,10.3,90,0,1,0,1,inf,1500",       # infinite PWM
+    ])
+    r = CsvReader(f, FMT)
+    out = list(r)
+    assert r.stats.records == 9
+    assert dict(r.stats.rejected) == {"nan": 3, "non_numeric": 1, "malformed": 1, "bad_time": 1,
+                                      "time_backwards": 1, "out_of_range": 1}
+    assert all(math.isfinite(getattr(s, "heading_rad", 0.0)) for s in out)
+    assert len([s for s in out if isinstance(s, ActuatorOutputs)]) == 5
+
+
+def test_directory_of_runs_joined_in_name_order(tmp_path: Path):
+    d = tmp_path / "runs"
+    d.mkdir()
+    write(d / "run_b.csv", ["5000,63.4,10.3,0,0,1,0,0,1500,1500", "6000,63.4,10.3,0,0,1,0,0,1500,1500"])
+    write(d / "run_a.csv", ["9000,63.4,10.3,0,0,1,0,0,1500,1500", "9500,63.4,10.3,0,0,1,0,0,1500,1500"])
+    (d / "notes.txt").write_text("ignored")
+    r = CsvReader(d, FMT)
+    assert [x.name for x in r.runs] == ["run_a", "run_b"]
+    a, b = r.runs
+    assert (a.t_start, a.t_end, a.t_offset) == (9.0, 9.5, 0.0)
+    assert b.t_start == pytest.approx(9.5 + FMT.run_gap_s) and b.t_end == pytest.approx(20.5)
+    out = list(r)
+    assert all(x.t <= y.t for x, y in zip(out, out[1:]))
+    assert {s.source for s in out} == {"csv:run_a", "csv:run_b"}
+
+
+def test_run_column_splits_one_file(tmp_path: Path):
+    fmt = CsvFormat(time="t", lat_deg="lat", lon_deg="lon", run_column="run")
+    f = write(tmp_path / "all.csv", ["r1,0,1,2", "r1,1,1,2", "r2,0,1,2"], header="run,t,lat,lon")
+    r = CsvReader(f, fmt)
+    assert [(x.name, x.rows) for x in r.runs] == [("r1", 2), ("r2", 1)]
+    assert [s.t for s in r] == [0.0, 1.0, 11.0]
+
+
+def test_north_east_without_lat_lon_uses_the_origin(tmp_path: Path):
+    fmt = CsvFormat(time="t", north_m="n", east_m="e", origin_lat_deg=60.0, origin_lon_deg=5.0)
+    f = write(tmp_path / "ne.csv", ["0,0,0", "1,111.32,55.8"], header="t,n,e")
+    a, b = list(CsvReader(f, fmt))
+    assert (a.lat_deg, a.lon_deg) == (60.0, 5.0)
+    assert (b.lat_deg - 60.0) * 111_320 == pytest.approx(111.32, rel=0.01)
+    assert (b.lon_deg - 5.0) * 111_320 * 0.5 == pytest.approx(55.8, rel=0.01)
+
+
+def test_unreadable_inputs(tmp_path: Path):
+    with pytest.raises(UnreadableLog):
+        CsvReader(tmp_path / "missing.csv", FMT)
+    (tmp_path / "empty.csv").write_text("")
+    with pytest.raises(UnreadableLog):
+        CsvReader(tmp_path / "empty.csv", FMT)
+    with pytest.raises(UnreadableLog, match="'pr'"):
+        CsvReader(write(tmp_path / "x.csv", ["0,1,2"], header="ms,lat,lon"), FMT)
+    empty_dir = tmp_path / "nothing"
+    empty_dir.mkdir()
+    with pytest.raises(UnreadableLog):
+        CsvReader(empty_dir, FMT)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.lists(st.sampled_from(["0", "1.5", "-2", "", "nan", "inf", "x", "1e400",
+                                          "63.4", "1500"]), min_size=9, max_size=11),
+                max_size=6))
+def test_property_rows_never_raise_and_are_counted(tmp_path_factory, rows):
+    d = tmp_path_factory.mktemp("h")
+    f = write(d / "h.csv", [",".join(r) for r in rows])
+    r = CsvReader(f, FMT)
+    out = list(r)
+    assert r.stats.records == len(rows)
+    for s in out:
+        assert math.isfinite(s.t)
+        for name in s.__struct_fields__:
+            v = getattr(s, name)
+            if isinstance(v, float):
+                assert math.isfinite(v)
+
+
+def test_bundled_blueboat_config_decodes():
+    cfg = load(CONFIG_DIR / "blueboat-ntnu-csv.toml")
+    assert cfg.vehicle.vehicle_class == "twin-thruster-boat"
+    assert cfg.csv.pwm_columns == ["thr_left", "thr_right"]
+    assert cfg.inputs.left.neutral_us == 1510 and cfg.inputs.right.channel == 2
+
+
+@pytest.mark.data
+def test_blueboat_ntnu_runs(shared_data):
+    cfg = load(CONFIG_DIR / "blueboat-ntnu-csv.toml")
+    r = CsvReader(shared_data / "blueboat_sysid_ntnu", cfg.csv)
+    # SOURCE.md: 16 runs, 449-3098 rows each, 17,753 rows, 10 Hz, 29 NaN cells (run 216)
+    assert len(r.runs) == 16 and r.runs[0].name == "fixed_00000216"
+    assert sum(x.rows for x in r.runs) == 17753
+    assert min(x.rows for x in r.runs) == 449 and max(x.rows for x in r.runs) == 3098
+    out = list(r)
+    assert r.stats.records == 17753
+    assert dict(r.stats.rejected) == {"nan": 13}  # measured: 12 rows without surge/sway, 1 without lat/lon
+    assert all(a.t <= b.t for a, b in zip(out, out[1:]))
+    for a, b in zip(r.runs, r.runs[1:]):
+        assert b.t_start == pytest.approx(a.t_end + cfg.csv.run_gap_s)
+    fixes = [s for s in out if isinstance(s, GnssFix)]
+    assert len(fixes) == 17752
+    assert statistics.median(f.lat_deg for f in fixes) == pytest.approx(63.4015, abs=0.002)
+    by_run = {}
+    for f in fixes:
+        by_run.setdefault(f.source, []).append(f.t)
+    assert len(by_run) == 16
+    dts = [b - a for ts in by_run.values() for a, b in zip(ts, ts[1:])]
+    assert statistics.median(dts) == pytest.approx(0.1, abs=1e-6)
+    vog = [s for s in out if isinstance(s, VelocityOverGround)]
+    speed = [math.hypot(s.v_north_mps, s.v_east_mps) for s in vog]
+    assert max(speed) < 4.0  # SOURCE.md: surge -2.3..+3.4 m/s
+    att = [s for s in out if isinstance(s, Attitude)]
+    assert max(abs(a.yaw_rate_rps) for a in att) < 1.2  # SOURCE.md: r within +-1.0 rad/s
+    assert all(isinstance(s, Heading) and s.reference == "true" for s in out if isinstance(s, Heading))
+    acts = [s for s in out if isinstance(s, ActuatorOutputs)]
+    pwm = [p for s in acts for p in s.pwm_us]
+    assert min(pwm) == 1100 and max(pwm) == 1900
+    mapper = InputMapper(cfg.inputs)
+    cmds = [mapper.map(s) for s in acts]
+    assert all(-1.0 <= c.left <= 1.0 and -1.0 <= c.right <= 1.0 for c in cmds)
+    idle = statistics.median(abs(c.left) for c in cmds)
+    assert idle == 0.0  # 1510 us idle is neutral
+    assert not any(isinstance(s, Depth) for s in out)
