@@ -106,7 +106,7 @@ class _State:
 
 
 class _Format:
-    __slots__ = ("type", "name", "length", "struct", "columns", "scales", "handler")
+    __slots__ = ("type", "name", "length", "struct", "columns", "scales", "handler", "timed")
 
     def __init__(self, typ: int, name: str, length: int, fmt: str, columns: list[str]) -> None:
         codes = []
@@ -121,6 +121,8 @@ class _Format:
         self.type, self.name, self.length = typ, name, length
         self.columns = {c: i for i, c in enumerate(columns)}
         self.scales = scales
+        self.timed = bool(columns) and columns[0] == "TimeUS"
+        """The first column is TimeUS (us since boot)."""
         self.handler: _Handler | None = None
 
 
@@ -356,7 +358,8 @@ class DataflashReader:
         if i + 89 > len(data):
             return False
         typ, length, name, fmt, cols = _FMT.unpack_from(data, i + 3)
-        return typ == FMT_ID and length == 89 and name.rstrip(b"\0") == b"FMT"
+        name_s, fmt_s = _text(name), _text(fmt)
+        return length >= 3 and name_s.isalnum() and all(c in FORMAT_CHARS for c in fmt_s)
 
     def _wanted_name(self, name: str) -> bool:
         if name == "PARM":
@@ -430,7 +433,7 @@ class DataflashReader:
             h = f.handler
             if h is not None:
                 v = f.struct.unpack_from(data, pos + 3)
-                t = v[0] / 1e6 if "TimeUS" in f.columns and f.columns["TimeUS"] == 0 else latest_t
+                t = v[0] / 1e6 if f.timed else latest_t
                 if t == -math.inf:
                     t = 0.0
                 s = h(v, t, st)
