@@ -457,3 +457,17 @@ def test_ddboat_log(shared_data):
 def test_notes_file_is_unreadable(shared_data):
     with pytest.raises(UnreadableLog):
         open_text_log(shared_data / "survey_boat_arduino_rc" / "Notes_Test.txt")
+
+
+@pytest.mark.data
+def test_survey_boat_config_maps_rc_channels(shared_data):
+    from onboard.config import CONFIG_DIR, load
+    from onboard.inputs import InputMapper
+
+    cfg = load(CONFIG_DIR / "survey-boat-csv.toml")
+    mapper = InputMapper(cfg.inputs)
+    out = list(open_text_log(shared_data / "survey_boat_arduino_rc" / "Test2_clockwise.txt"))
+    cmds = [mapper.map(s) for s in out if isinstance(s, RcChannels)]
+    # clockwise circles: the rudder sits at 1877-1900 us for the turning part (>= 30 %)
+    right = sum(1 for c in cmds if c.rudder_rad > 0.4) / len(cmds)
+    assert right > 0.3 and all(-1.0 <= c.throttle <= 1.0 for c in cmds)
