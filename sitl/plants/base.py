@@ -36,7 +36,7 @@ import numpy as np
 
 from onboard.messages import ActuatorCommand
 from sitl.environment import Environment
-from sitl.integrate import GRAVITY, euler_rate_matrix, rk4_step, rotation_body_to_ned, wrap_pi
+from sitl.integrate import GRAVITY, rk4_step, rotation_body_to_ned, wrap_pi
 from sitl.truth import TruthRecord
 
 __all__ = ["Command", "Plant", "PlantBase", "PropulsionWrench"]
@@ -182,11 +182,13 @@ class PlantBase:
         self._command = Command()
         self._vc = (0.0, 0.0, 0.0)
         self._xdot = None
+        self._prepare(self._command)
 
     def step(self, dt: float, command: Command, env: Environment, t: float) -> None:
         """Advance by ``dt`` (s) from ``t`` with equal RK4 sub-steps of at most ``self.dt``."""
         self._command = command
         self._env = env
+        self._prepare(command)
         if dt > 0.0:
             n = max(1, math.ceil(dt / self.dt - 1e-9))
             h = dt / n
@@ -238,8 +240,8 @@ class PlantBase:
             current_north=float(vc[0]),
             current_east=float(vc[1]),
             current_down=float(vc[2]),
-            surge_input=wr.surge_input,
-            yaw_input=wr.yaw_input,
+            surge_input=None if wr.surge_input is None else float(wr.surge_input),
+            yaw_input=None if wr.yaw_input is None else float(wr.yaw_input),
             force_x=float(wr.force[0]),
             force_y=float(wr.force[1]),
             force_z=float(wr.force[2]),
@@ -322,16 +324,27 @@ class PlantBase:
         return self._xdot
 
     def _kinematics(self, x: np.ndarray) -> list[float]:
-        """``[N', E', D', phi', theta', psi']`` for the state ``x`` and the held current."""
-        phi, theta, psi = x[3], x[4], x[5]
-        rot = rotation_body_to_ned(phi, theta, psi)
-        pdot = rot @ x[6:9]
-        tm = euler_rate_matrix(phi, theta)
-        edot = tm @ x[9:12]
+        """``[N', E', D', phi', theta', psi']`` for the state ``x`` and the held current:
+        ``R(Theta) nu_r[0:3] + V_c`` and ``T(Theta) omega`` written out in scalars (the
+        same matrices as :func:`rotation_body_to_ned` and :func:`euler_rate_matrix`)."""
+        phi, theta, psi, u, v, w, p, q, r = x[3:12].tolist()
+        cphi, sphi = math.cos(phi), math.sin(phi)
+        cth, sth = math.cos(theta), math.sin(theta)
+        cpsi, spsi = math.cos(psi), math.sin(psi)
         vc = self._vc
         return [
-            pdot[0] + vc[0], pdot[1] + vc[1], pdot[2] + vc[2], edot[0], edot[1], edot[2],
+            cpsi * cth * u + (-spsi * cphi + cpsi * sth * sphi) * v
+            + (spsi * sphi + cpsi * cphi * sth) * w + vc[0],
+            spsi * cth * u + (cpsi * cphi + sphi * sth * spsi) * v
+            + (-cpsi * sphi + sth * spsi * cphi) * w + vc[1],
+            -sth * u + cth * sphi * v + cth * cphi * w + vc[2],
+            p + (sphi * q + cphi * r) * sth / cth,
+            cphi * q - sphi * r,
+            (sphi * q + cphi * r) / cth,
         ]
+
+    def _prepare(self, command: Command) -> None:
+        """Precompute what depends only on the command (called once per :meth:`step`)."""
 
     def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
         """State derivative ``x'`` (same layout as ``x``)."""
