@@ -32,8 +32,9 @@ present; for json_v1, ``t`` is the running sum of ``time`` (s since the first re
 
 Rejections: ``"json"`` (not JSON, or not an object), ``"malformed"`` (missing or wrongly
 typed field, non-finite number), ``"duplicate"`` (a line identical to the previous one --
-the tank captures repeat readings), ``"unsupported"`` (command responses and other
-types), ``"too_long"`` (a line over ``max_line`` bytes), ``"time_backwards"`` (reader).
+the tank captures repeat readings), ``"too_long"`` (a line over ``max_line`` bytes), ``"time_backwards"`` (reader).
+Well-formed reports of other types (command responses) are counted in ``stats.by_type``
+(by type and under ``"ignored"``), not rejected.
 """
 
 from __future__ import annotations
@@ -234,7 +235,10 @@ class DvlJsonParser:
         try:
             s = decode_report(obj, t, self.source)
         except DvlJsonError as err:
-            st.reject(err.reason)
+            if err.reason == "unsupported":
+                st.by_type["ignored"] += 1
+            else:
+                st.reject(err.reason)
             return None
         st.samples += 1
         return s

@@ -15,9 +15,11 @@ bytes) and on text captures (``feed_line(line, t_rx)``, see :mod:`drivers.textlo
 * Empty fields become ``None``. ``nan``/``inf`` or non-numeric fields reject the sentence
   as ``"malformed"``, out-of-range values (latitude > 90 deg, minutes >= 60) as
   ``"out_of_range"``.
+* Valid sentences of other types (GSA, GSV, proprietary ``$P...``) are not errors: they
+  are counted in ``stats.by_type`` (by type and under ``"ignored"``), not rejected.
 * Sentences that carry no usable data are rejected with a reason: ``"no_fix"`` (GGA
   quality 0, RMC status ``V``, empty position), ``"empty"`` (HDT/HDG/HDM without a
-  heading, VTG without speed and course), ``"unsupported"`` (GSA, GSV, proprietary...).
+  heading, VTG without speed and course).
 
 Epochs: one GnssFix per receiver epoch
 --------------------------------------
@@ -487,7 +489,7 @@ class NmeaParser:
             st.by_type["no_checksum"] += 1
         st.by_type[kind if talker != "P" else "P" + kind] += 1
         if talker == "P" or kind not in SUPPORTED:
-            st.reject("unsupported")
+            st.by_type["ignored"] += 1
             return []
         try:
             if kind == "GGA":

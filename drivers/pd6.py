@@ -34,8 +34,8 @@ Samples:
 * ``TS`` -> Depth (transducer depth, temperature) and the ensemble time.
 * ``SA`` -> Attitude (roll, pitch, heading as yaw; rad).
 * ``BD`` -> Altitude (range to the bottom) when > 0.
-* ``WE`` and ``WD`` carry nothing the estimators use: counted as ``"unsupported"``, as are
-  unknown ids.
+* ``WE`` and ``WD`` carry nothing the estimators use: counted in ``stats.by_type`` (by id
+  and under ``"ignored"``), not rejected. Unknown ids are rejected as ``"unsupported"``.
 
 Time: ``time_base="rx"`` stamps samples with the receive time (live);
 ``time_base="instrument"`` with the last ``TS`` time (POSIX s; captures), and lines before
@@ -119,7 +119,7 @@ class Pd6Parser:
 
     ``velocity_frame`` chooses BS (``"ship"``, default) or BI (``"instrument"``) as the
     bottom-track DvlVelocity (and WS or WI for water track); the other frame is counted
-    as ``"unsupported"`` so a vehicle never fuses the same ping twice.
+    as ``"ignored"`` (in ``stats.by_type``) so a vehicle never fuses the same ping twice.
     """
 
     def __init__(
@@ -197,7 +197,10 @@ class Pd6Parser:
         try:
             samples = self._parse(kind, [p.strip() for p in parts[1:]], t_rx)
         except Pd6Error as err:
-            st.reject(err.reason)
+            if err.reason == "ignored":
+                st.by_type["ignored"] += 1
+            else:
+                st.reject(err.reason)
             return []
         out = []
         for s in samples:
@@ -246,7 +249,7 @@ class Pd6Parser:
             x, y, z, e = (_vel(v) for v in f[:4])
             ok = _status(f[4])
             if self.velocity_frame != "instrument":
-                raise Pd6Error("unsupported")
+                raise Pd6Error("ignored")
             t = self._time(t_rx)
             valid = ok and MISSING not in (x, y, z)
             fom = abs(e) / 1000.0 if valid and e != MISSING else None
@@ -257,7 +260,7 @@ class Pd6Parser:
             tr, lo, no = (_vel(v) for v in f[:3])
             ok = _status(f[3])
             if self.velocity_frame != "ship":
-                raise Pd6Error("unsupported")
+                raise Pd6Error("ignored")
             t = self._time(t_rx)
             valid = ok and MISSING not in (tr, lo, no)
             return [self._dvl(t, kind, valid, lo / 1000.0, tr / 1000.0, -no / 1000.0, None)]
@@ -281,6 +284,8 @@ class Pd6Parser:
             if rng <= 0.0:
                 raise Pd6Error("invalid")
             return [Altitude(t=t, source=src, altitude_m=rng)]
+        if kind in ("WE", "WD", "RA"):
+            raise Pd6Error("ignored")
         raise Pd6Error("unsupported")
 
     def _dvl(self, t: float, kind: str, valid: bool, vx: float, vy: float, vz: float,

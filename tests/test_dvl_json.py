@@ -92,7 +92,8 @@ def test_corrupt_lines_are_counted():
     out = p.feed(data, 0.0)
     assert len(out) == 1
     r = p.stats.rejected
-    assert r == {"duplicate": 1, "json": 4, "malformed": 2, "unsupported": 1, "too_long": 1}
+    assert r == {"duplicate": 1, "json": 4, "malformed": 2, "too_long": 1}
+    assert p.stats.by_type["ignored"] == 1  # the command response
     assert p.stats.records == 10
 
 
@@ -138,9 +139,9 @@ def test_property_every_line_is_a_sample_or_a_rejection(lines):
     for ln in lines:
         if b"\n" in ln or not ln.strip():
             continue
-        before = (p.stats.samples, sum(p.stats.rejected.values()))
+        before = (p.stats.samples, sum(p.stats.rejected.values()), p.stats.by_type["ignored"])
         p.feed(ln + b"\n", 0.0)
-        after = (p.stats.samples, sum(p.stats.rejected.values()))
+        after = (p.stats.samples, sum(p.stats.rejected.values()), p.stats.by_type["ignored"])
         assert sum(after) == sum(before) + 1
 
 
