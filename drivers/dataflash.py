@@ -126,6 +126,15 @@ class _Format:
         self.handler: _Handler | None = None
 
 
+_BIG = 1e30
+"""Finite-value guard: ``abs(x) < _BIG`` is False for NaN and +-inf."""
+
+
+def _finite(x: float | None) -> float | None:
+    """``x``, or None when it is missing, NaN or infinite."""
+    return x if x is not None and abs(x) < _BIG else None
+
+
 def _text(b: bytes) -> str:
     return b.split(b"\0", 1)[0].decode("ascii", "replace")
 
@@ -163,7 +172,8 @@ def _imu(f: _Format, base: str) -> _Handler | None:
 
     def h(v, t, st):
         ax, ay, az, gx, gy, gz = v[a0], v[a1], v[a2], v[g0], v[g1], v[g2]
-        if ax != ax or ay != ay or az != az or gx != gx or gy != gy or gz != gz:
+        if not (abs(ax) < _BIG and abs(ay) < _BIG and abs(az) < _BIG and abs(gx) < _BIG
+                and abs(gy) < _BIG and abs(gz) < _BIG):  # NaN or inf
             st.stats.reject("nan")
             return None
         n = inst(v)
@@ -180,7 +190,7 @@ def _att(f: _Format, base: str) -> _Handler | None:
 
     def h(v, t, st):
         roll, pitch, yaw = r(v), p(v), y(v)
-        if roll != roll or pitch != pitch or yaw != yaw:
+        if not (abs(roll) < _BIG and abs(pitch) < _BIG and abs(yaw) < _BIG):
             st.stats.reject("nan")
             return None
         return Attitude(t=t, source="dataflash/ATT", roll_rad=roll * d2r, pitch_rad=pitch * d2r,
@@ -209,7 +219,7 @@ def _gps(f: _Format, base: str) -> _Handler | None:
         if q is None:
             st.stats.reject("no_fix")
             return None
-        alt, spd, crs, hdop, ns = val("Alt", v), val("Spd", v), val("GCrs", v), val("HDop", v), val("NSats", v)
+        alt, spd, crs, hdop, ns = (_finite(val(c, v)) for c in ("Alt", "Spd", "GCrs", "HDop", "NSats"))
         return GnssFix(t=t, source="dataflash/GPS[0]", lat_deg=g["Lat"](v), lon_deg=g["Lng"](v),
                        alt_m=alt if status >= 3 else None, fix_quality=q, num_sats=ns,
                        hdop=hdop, sog_mps=spd,
@@ -226,13 +236,13 @@ def _baro(f: _Format, base: str) -> _Handler | None:
 
     def h(v, t, st):
         pa = p(v)
-        if not pa > 0:
+        if not 0 < pa < _BIG:
             st.stats.reject("invalid")
             return None
         n = inst(v)
         src = sources.get(n) or sources.setdefault(n, f"dataflash/BARO[{n}]")
         return Pressure(t=t, source=src, pressure_pa=float(pa),
-                        temperature_c=tmp(v) if tmp is not None else None)
+                        temperature_c=_finite(tmp(v)) if tmp is not None else None)
     return h
 
 
@@ -258,7 +268,7 @@ def _parm(f: _Format, base: str) -> _Handler | None:
 
     def h(v, t, st):
         name, x = _text(v[n]), val(v)
-        if not name or x != x:
+        if not name or not abs(x) < _BIG:
             st.stats.reject("invalid")
             return None
         st.params[name] = x
@@ -297,14 +307,14 @@ def _rpm(f: _Format, base: str) -> _Handler | None:
         if r1 is not None:
             a = r1(v)
             b = r2(v) if r2 is not None else -1.0
-            if not a >= 0:
+            if not 0 <= a < _BIG:
                 st.stats.reject("invalid")
                 return None
-            rpm = (a, b) if b >= 0 else (a,)
+            rpm = (a, b) if 0 <= b < _BIG else (a,)
             src = "dataflash/RPM"
         else:
             a = r(v)
-            if not a >= 0:
+            if not 0 <= a < _BIG:
                 st.stats.reject("invalid")
                 return None
             rpm = (a,)

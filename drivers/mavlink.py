@@ -68,6 +68,8 @@ SIGNATURE_LEN = 13
 GRAVITY_MSS = 9.80665
 """Standard gravity (m/s^2); ArduPilot scales mg with this constant (``GRAVITY_MSS``)."""
 UINT16_MAX = 0xFFFF
+_BIG = 1e30
+"""Finite-value guard: ``abs(x) < _BIG`` is False for NaN and +-inf."""
 MAV_TYPE_GCS = 6
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_AUTOPILOT_INVALID = 8
@@ -241,13 +243,13 @@ def _attitude(idx, msgid):
 
     def h(v, t, sysid, compid, mid, v2, ctx):
         r, p, y, rr, pr, yr = v[i:i + 6]
-        if r != r or p != p or y != y:
+        if not (abs(r) < _BIG and abs(p) < _BIG and abs(y) < _BIG):  # NaN or inf
             ctx.stats.reject("nan")
             return None
         return Attitude(t=t, source=ctx.source(sysid, compid, mid), roll_rad=r, pitch_rad=p,
-                        yaw_rad=y, roll_rate_rps=rr if rr == rr else None,
-                        pitch_rate_rps=pr if pr == pr else None,
-                        yaw_rate_rps=yr if yr == yr else None)
+                        yaw_rad=y, roll_rate_rps=rr if abs(rr) < _BIG else None,
+                        pitch_rate_rps=pr if abs(pr) < _BIG else None,
+                        yaw_rate_rps=yr if abs(yr) < _BIG else None)
     return h
 
 
@@ -297,7 +299,8 @@ def _highres_imu(idx, msgid):
 
     def h(v, t, sysid, compid, mid, v2, ctx):
         ax, ay, az, gx, gy, gz = v[i:i + 6]
-        if ax != ax or ay != ay or az != az or gx != gx or gy != gy or gz != gz:
+        if not (abs(ax) < _BIG and abs(ay) < _BIG and abs(az) < _BIG and abs(gx) < _BIG
+                and abs(gy) < _BIG and abs(gz) < _BIG):
             ctx.stats.reject("nan")
             return None
         return Imu(t=t, source=ctx.source(sysid, compid, mid), accel_x=ax, accel_y=ay,
@@ -362,10 +365,10 @@ def _rpm(idx, msgid):
 
     def h(v, t, sysid, compid, mid, v2, ctx):
         r1, r2 = v[i1], v[i2]
-        if not r1 >= 0:
+        if not 0 <= r1 < _BIG:
             ctx.stats.reject("invalid")
             return None
-        rpm = (r1, r2) if r2 >= 0 else (r1,)
+        rpm = (r1, r2) if 0 <= r2 < _BIG else (r1,)
         return PropellerRpm(t=t, source=ctx.source(sysid, compid, mid), rpm=rpm)
     return h
 
@@ -378,11 +381,11 @@ def _vision_speed(idx, msgid):
 
     def h(v, t, sysid, compid, mid, v2, ctx):
         x, y, z = v[i:i + 3]
-        if x != x or y != y:
+        if not (abs(x) < _BIG and abs(y) < _BIG):
             ctx.stats.reject("nan")
             return None
         return VelocityOverGround(t=t, source=ctx.source(sysid, compid, mid), v_north_mps=x,
-                                  v_east_mps=y, v_down_mps=z if z == z else None)
+                                  v_east_mps=y, v_down_mps=z if abs(z) < _BIG else None)
     return h
 
 
@@ -399,7 +402,7 @@ def _vision_position_delta(idx, msgid):
         if dt <= 0:
             ctx.stats.reject("dt")
             return None
-        if dx != dx or dy != dy or dz != dz:
+        if not (abs(dx) < _BIG and abs(dy) < _BIG and abs(dz) < _BIG):
             ctx.stats.reject("nan")
             return None
         c = v[i_c]
@@ -435,7 +438,7 @@ def _scaled_pressure(idx: dict[str, int], msgid: int) -> Handler:
 
     def h(v, t, sysid, compid, mid, v2, ctx):
         p = v[i_p]
-        if not p > 0:  # also NaN
+        if not 0 < p < _BIG:  # also NaN, inf
             ctx.stats.reject("invalid")
             return None
         return Pressure(t=t, source=ctx.source(sysid, compid, mid), pressure_pa=p * 100.0,
@@ -481,7 +484,7 @@ def _param_value(idx, msgid):
             raw = struct.pack("<f", val)
             fmt = _PX4_INT[v[i_ty]]
             val = float(struct.unpack_from(fmt, raw)[0])
-        if not name or val != val:
+        if not name or not abs(val) < _BIG:
             ctx.stats.reject("invalid")
             return None
         return Parameter(t=t, source=ctx.source(sysid, compid, mid), name=name, value=float(val))

@@ -133,6 +133,10 @@ def test_highres_imu_si_units():
     f = m.highres_imu_encode(0, 0.1, 0.2, -9.8, 0.01, 0.02, 0.03, 0, 0, 0, 0, 0, 0, 0, 0x3F).pack(m)
     (s,), _ = parse(f)
     assert (s.accel_x, s.accel_z, s.gyro_z) == pytest.approx((0.1, -9.8, 0.03))
+    for bad in (float("nan"), float("inf")):
+        f = m.highres_imu_encode(0, bad, 0, -9.8, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x3F).pack(m)
+        out, p = parse(f)
+        assert out == [] and p.stats.rejected["nan"] == 1
 
 
 def test_vfr_hud_heading():
