@@ -536,14 +536,12 @@ class NmeaParser:
         kind = "GGA" if gga is not None else "RMC"
         tod = gga.tod_s if gga is not None else rmc.tod_s  # type: ignore[union-attr]
         out: list[Sample] = []
-        if rmc is not None and rmc.day_s is not None:
-            self._day0 = rmc.day_s
         if tod is None:
             # An untimed GGA/RMC (seen while a receiver has no time yet): no epoch to join.
             no_fix = (gga is not None and gga.quality <= 0) or (rmc is not None and not rmc.valid)
             self.stats.reject("no_fix" if no_fix else "no_time")
             return out
-        self._advance_clock(tod)
+        self._advance_clock(tod, rmc.day_s if rmc is not None else None)
         e = self._epoch
         if e is not None and abs(e.tod_s - tod) > 1e-6:
             out.extend(self._close())
@@ -564,10 +562,12 @@ class NmeaParser:
             out.extend(self._close())
         return out
 
-    def _advance_clock(self, tod: float) -> None:
-        if self._day0 is None:
+    def _advance_clock(self, tod: float, day: float | None = None) -> None:
+        if day is not None:
+            self._day0 = day  # an RMC date is authoritative
+        elif self._day0 is None:
             self._day0 = 0.0
-        if self._last_tod is not None and tod < self._last_tod - 43200.0:
+        elif self._last_tod is not None and tod < self._last_tod - 43200.0:
             self._day0 += 86400.0  # midnight rollover before the RMC date catches up
         self._last_tod = tod
         self.utc_time = self._day0 + tod

@@ -68,7 +68,7 @@ from typing import Iterator
 import msgspec
 
 from drivers.base import LogReader, ReadStats, UnreadableLog
-from drivers.nmea import NmeaError, NmeaParser, parse_rmc, split_sentence
+from drivers.nmea import NmeaError, NmeaParser, parse_gga, parse_rmc, split_sentence
 from onboard.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
 
 SNIFF_BYTES = 65536
@@ -159,9 +159,11 @@ def _read_lines(path: Path) -> list[bytes]:
 
 
 def first_rmc_date(lines: list[bytes]) -> float | None:
-    """POSIX midnight of the first RMC date in a capture (valid checksum), or None."""
+    """POSIX midnight of the capture's first day: the first RMC date (valid checksum), a
+    day earlier when that RMC comes after midnight and an earlier sentence before it."""
+    first_tod: float | None = None
     for ln in lines:
-        i = ln.find(b"RMC,")
+        i = max(ln.find(b"RMC,"), ln.find(b"GGA,"))
         if i < 3:
             continue
         j = ln.rfind(b"$", 0, i)
@@ -169,10 +171,19 @@ def first_rmc_date(lines: list[bytes]) -> float | None:
             continue
         try:
             _, kind, f, _ = split_sentence(ln[j:].decode("ascii", "replace"))
-            if kind == "RMC":
-                day = parse_rmc(f).day_s
-                if day is not None:
-                    return day
+            if kind == "GGA":
+                tod = parse_gga(f).tod_s
+            elif kind == "RMC":
+                rmc = parse_rmc(f)
+                tod = rmc.tod_s
+                if rmc.day_s is not None:
+                    if first_tod is not None and tod is not None and tod < first_tod - 43200.0:
+                        return rmc.day_s - 86400.0
+                    return rmc.day_s
+            else:
+                continue
+            if first_tod is None and tod is not None:
+                first_tod = tod
         except NmeaError:
             continue
     return None

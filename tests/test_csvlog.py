@@ -126,7 +126,7 @@ def test_unreadable_inputs(tmp_path: Path):
         CsvReader(empty_dir, FMT)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)  # each example writes a file
 @given(st.lists(st.lists(st.sampled_from(["0", "1.5", "-2", "", "nan", "inf", "x", "1e400",
                                           "63.4", "1500"]), min_size=9, max_size=11),
                 max_size=6))

@@ -472,3 +472,13 @@ def test_survey_boat_config_maps_rc_channels(shared_data):
     # clockwise circles: the rudder sits at 1877-1900 us for the turning part (>= 30 %)
     right = sum(1 for c in cmds if c.rudder_rad > 0.4) / len(cmds)
     assert right > 0.3 and all(-1.0 <= c.throttle <= 1.0 for c in cmds)
+
+
+def test_capture_starting_just_before_midnight_gets_the_right_day(tmp_path: Path):
+    day2 = DAY + 86400.0
+    lines = [encode_gga(day2 - 0.5, 48.0, 11.0), encode_gga(day2 + 0.5, 48.0, 11.0),
+             encode_rmc(day2 + 0.5, 48.0, 11.0, 1.0, 0.2)]
+    path = tmp_path / "midnight.nmea"
+    path.write_bytes(b"".join(lines))
+    out = list(open_text_log(path))
+    assert [s.t - DAY for s in out] == pytest.approx([86399.5, 86400.5])
