@@ -1,0 +1,519 @@
+"""The surge/heading estimation pipeline shared by ``aie`` and its ``kf`` baseline.
+
+Everything except the input of the Kalman filter is common to the two pipelines, so the
+comparison of the seed paper (Faros & Tanner 2025, §3) is like for like:
+
+* measurement windows of ``step_s`` seconds (the AIE step Ts, algorithms.md §1.2). All
+  GNSS fixes and headings in a window are averaged to one point at the window's mean time
+  (a 1 Hz receiver gives the plain fix; a 5 Hz one five times less variance). Consecutive
+  points give the heading increment (§1.2, wrapped) and the path increment (§1.3, with
+  the circular-arc correction). Steps are as long as the actual time between points, so
+  irregular and missing fixes only change ``dt``; past ``max_gap_s`` the chain restarts;
+* two independent axis filters (surge, heading) of :mod:`onboard.pipelines.kalman`, fed
+  by an :class:`AxisFilter` subclass that chooses the input (AIE: estimated; KF: command);
+* trajectory reconstruction of the paper's §3.3: ``N += y_s cos(psi)``, ``E += y_s
+  sin(psi)`` from the estimated increments (``psi`` at the chord's mid heading), and
+  ``psi += y_psi``; both optionally pulled toward the measurement by a small gain
+  (``position_anchor``, ``heading_anchor``) because their common mode is unobservable from
+  increments and would otherwise random-walk;
+* estimates between steps are predicted with the model and the current input.
+
+Inputs: :class:`GnssFix`, :class:`Heading` (preferred) or :class:`Attitude` yaw, and
+:class:`ActuatorCommand` (optional: without it AIE runs unchanged and the KF baseline
+runs with zero input).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Callable, Literal, Mapping, Sequence
+
+import msgspec
+
+from onboard.config import Config
+from onboard.messages import ActuatorCommand, Attitude, GnssFix, Heading, Sample
+from onboard.pipelines.geo import LocalFrame, wrap_2pi, wrap_pi
+from onboard.pipelines.kalman import IncrementKF
+from onboard.pipelines.surge_heading import (
+    AxisModel,
+    Discrete,
+    axis_commands,
+    discretize,
+    path_increment,
+)
+
+# ---------------------------------------------------------------------------------------
+# Configuration: [pipelines.aie] (the kf baseline reads the same table, see kf.py)
+
+
+class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """One axis: its model (§1.2), the RCIE hyperparameters (§2.10), the KF noise.
+
+    Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized.
+    """
+
+    a: float = 1.0
+    """Damping rate a (1/s), identified (§1.2) or the §1.4 default."""
+    gain: float = 1.0
+    """Nominal input per unit command (the KF baseline's input scaling)."""
+    offset: float = 0.0
+    """Nominal input at zero command."""
+    u_max: float = 5.0
+    """Saturation of the input estimate |d_hat| (physical bound)."""
+    u_scale: float = 1.0
+    """Typical input magnitude: the normalization of d_hat for RLS (§2.10)."""
+    n_c: int = 4
+    """Input-estimator order (§2.3); l_theta = 2 n_c + 1."""
+    n_f: int = 1
+    """Taps of G_f (§2.4)."""
+    r_z: float = 1.0
+    """Retrospective weight R_z (§2.5)."""
+    r_d: float = 10.0
+    """Input-size penalty R_d (normalized, §2.5)."""
+    r_theta: float = 0.01
+    """Regularization R_theta; P_0 = I / r_theta (normalized, §2.5)."""
+    rate_penalty: bool = True
+    """Apply R_d to the change of the input estimate (d_hat_k - d_hat_{k-1}) instead of
+    its size: penalizes noise amplification without biasing a nonzero mean input."""
+    lam: float = 0.999
+    """RLS forgetting factor lambda (§2.6); memory ~ 1/(1 - lambda) steps."""
+    v_d: float = 0.3
+    """AIE: variance of the input-estimation error V_d (u^2), §2.2."""
+    kf_v_d: float = 0.5
+    """KF baseline: variance of the commanded input's error (u^2)."""
+    q_v: float = 0.0
+    """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
+    known_input: bool = False
+    """AIE: add the nominal commanded input to the forecast, so RCIE estimates only the
+    remainder (§2.1 "known input"). Off: the whole input is unknown, as in the paper."""
+
+
+class SurgeAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.aie.surge]`` (defaults for a 1-3 m boat, m/s^2)."""
+
+    a: float = 1.0
+    gain: float = 3.0
+    u_max: float = 5.0
+    u_scale: float = 1.0
+
+
+class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.aie.heading]`` (defaults, rad/s^2)."""
+
+    a: float = 2.0
+    gain: float = 2.0
+    u_max: float = 5.0
+    u_scale: float = 0.5
+    v_d: float = 0.05
+    kf_v_d: float = 0.2
+
+
+class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.aie]``: measurement handling, reconstruction, both axes."""
+
+    enabled: bool = True
+    step_s: float = 1.0
+    """The AIE step Ts (s): measurement window length (§1.2)."""
+    max_gap_s: float = 5.0
+    """Longer without a measurement point restarts the increment chain."""
+    input_mode: Literal["auto", "throttle-rudder", "differential"] = "auto"
+    """How commands map to the two axes (see surge_heading.axis_commands)."""
+    gnss_std_m: float | None = None
+    """GNSS position noise, one sigma (m); default [sensors.gnss] position_std_m."""
+    heading_std_rad: float | None = None
+    """Compass noise, one sigma (rad); default [sensors.compass] heading_std_rad."""
+    heading_anchor: float = 0.05
+    """Gain pulling the reconstructed heading toward the measured one per step (0: the
+    paper's pure integration of increments)."""
+    position_anchor: float = 0.05
+    """Same for the reconstructed position (0: pure dead reckoning, paper §3.3)."""
+    correlated_noise: bool = True
+    """Model the MA(1) noise of increments formed from noisy points (kalman.py)."""
+    nis_gate: float = 400.0
+    """An innovation with z^2/S above this is rejected as an outlier."""
+    adaptive: bool = False
+    """Adapt V_d to the innovation statistics (ASE, §2.8)."""
+    adaptive_window: int = 50
+    """Window N_w of the innovation sample variance (steps)."""
+    divergence_input: float = 3.0
+    """Input estimate beyond this multiple of u_max (before saturation) is divergence."""
+    divergence_nis: float = 25.0
+    """Mean NIS over ~20 steps above this is divergence (expected value ~1)."""
+    surge: SurgeAxisConfig = SurgeAxisConfig()
+    heading: HeadingAxisConfig = HeadingAxisConfig()
+
+
+def load_config(cfg: Config) -> AieConfig:
+    """Decode ``[pipelines.aie]`` (shared by the aie and kf pipelines)."""
+    from onboard.config import decode_section
+
+    return decode_section(cfg, "aie", AieConfig)
+
+
+# ---------------------------------------------------------------------------------------
+# One axis: Kalman filter plus the choice of its input
+
+
+class AxisFilter:
+    """One axis (surge or heading): the §2.2 filter, outlier gate, counters.
+
+    Subclasses define :meth:`forecast_input` (the input over the step just ended) and
+    :meth:`after_innovation` (AIE: the RCIE step). Units: ``y`` in m or rad per step.
+    """
+
+    def __init__(self, model: AxisModel, cfg: AxisConfig, top: AieConfig, V_u: float) -> None:
+        self.model = model
+        self.cfg = cfg
+        self.top = top
+        self.V_u = V_u
+        self.kf = IncrementKF(R=1.0, q_v=cfg.q_v, correlated=top.correlated_noise)
+        self.u = 0.0
+        """Input applied over the coming step (m/s^2 or rad/s^2)."""
+        self.last_command: float | None = None
+        self.steps = 0
+        self.rejected = 0
+        self.diverged = 0
+        self.restarts = 0
+        self._consecutive_rejects = 0
+        self.nis_avg = 1.0
+
+    def restart(self) -> None:
+        """Forget the state (a gap in the measurements); keep adaptive coefficients."""
+        self.kf.initialized = False
+        self.restarts += 1
+
+    def damping(self, command: float | None) -> float:
+        """The damping rate ``a`` (1/s) of the model used over a step."""
+        return self.model.a
+
+    def forecast_input(self, command: float | None) -> float:
+        raise NotImplementedError
+
+    def after_innovation(self, k: Discrete, command: float | None) -> None:
+        """Hook between innovation and update (AIE computes d_hat here, §2.7)."""
+
+    def step(self, k: Discrete, y: float, R: float, R_prev: float,
+             command: float | None) -> None:
+        """One step: forecast over ``k.dt`` with the input, innovation, update (§2.7).
+
+        ``y``: increment (m or rad); ``R``, ``R_prev``: noise variances of the two
+        points it was formed from; ``command``: mean normalized command over the step
+        (None if unknown).
+        """
+        kf = self.kf
+        self.last_command = command
+        kf.R = R if kf.correlated else R + R_prev
+        if not kf.initialized:
+            var_v = (self.cfg.u_max * k.dt) ** 2
+            kf.init(y, k.dt, R_prev, var_v)
+            if self.cfg.known_input and command is not None:
+                self.u = self.model.input(command)
+            return
+        kf.forecast(k, self.forecast_input(command), self.V_u)
+        kf.innovation(y)
+        if kf.nis > self.top.nis_gate and self._consecutive_rejects < 5:
+            self.rejected += 1
+            self._consecutive_rejects += 1
+            kf.skip()
+            return
+        self._consecutive_rejects = 0
+        self.nis_avg += 0.05 * (min(kf.nis, 1e6) - self.nis_avg)
+        self.after_innovation(k, command)
+        kf.update()
+        self.steps += 1
+
+
+# ---------------------------------------------------------------------------------------
+# The pipeline
+
+
+class _Window:
+    """Running sums of one measurement window."""
+
+    __slots__ = ("n_fix", "st_fix", "sn", "se", "n_h", "st_h", "sh")
+
+    def __init__(self) -> None:
+        self.n_fix = 0
+        self.st_fix = self.sn = self.se = 0.0
+        self.n_h = 0
+        self.st_h = self.sh = 0.0
+
+
+AxisFactory = Callable[[AxisModel, AxisConfig, AieConfig], AxisFilter]
+
+
+class SurgeHeadingPipeline:
+    """Surge and heading filters with trajectory reconstruction (``aie`` or ``kf``).
+
+    ``columns``: north, east (m from the first fix), heading (rad, [0, 2 pi)), speed
+    (m/s), yaw_rate (rad/s), and for AIE surge_input (m/s^2), yaw_input (rad/s^2).
+    """
+
+    def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig,
+                 gnss_std_m: float, heading_std_rad: float, factory: AxisFactory) -> None:
+        self.name = name
+        self.columns = columns
+        self.cfg = cfg
+        self.sigma_p = cfg.gnss_std_m if cfg.gnss_std_m is not None else gnss_std_m
+        self.sigma_h = cfg.heading_std_rad if cfg.heading_std_rad is not None else heading_std_rad
+        s, h = cfg.surge, cfg.heading
+        self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg)
+        self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg)
+        self.frame: LocalFrame | None = None
+        self._t0: float | None = None
+        self._w = _Window()
+        self._w_end = math.inf
+        self._heading_source_seen = False
+        self._psi_last: float | None = None       # last raw heading (unwrapped, rad)
+        self._cmds: list[tuple[float, float | None, float | None]] = []
+        # previous measurement point
+        self._pt_prev: tuple[float, float, float] | None = None   # t, N, E
+        self._h_prev: tuple[float, float] | None = None           # t, psi (unwrapped)
+        # reconstruction
+        self._t_est: float | None = None
+        self._n = self._e = 0.0
+        self._psi: float | None = None
+        self._have_pos = False
+        self._prev_nfix = 1
+        self._R_h_prev = heading_std_rad ** 2
+        self._disc_cache: dict[tuple[float, float], Discrete] = {}
+
+    # -- helpers -----------------------------------------------------------------------
+
+    def _disc(self, a: float, dt: float) -> Discrete:
+        key = (a, round(dt, 4))
+        d = self._disc_cache.get(key)
+        if d is None:
+            if len(self._disc_cache) > 64:
+                self._disc_cache.clear()
+            d = self._disc_cache[key] = discretize(a, key[1])
+        return d
+
+    def _mean_command(self, t_a: float, t_b: float) -> tuple[float | None, float | None]:
+        """Time-weighted mean of the (surge, yaw) commands over [t_a, t_b] (ZOH)."""
+        cmds = self._cmds
+        if not cmds or t_b <= t_a:
+            return (cmds[-1][1], cmds[-1][2]) if cmds else (None, None)
+        out: list[float | None] = []
+        for j in (1, 2):
+            acc = 0.0
+            tot = 0.0
+            for i, c in enumerate(cmds):
+                t_s = max(c[0], t_a)
+                t_e = min(cmds[i + 1][0] if i + 1 < len(cmds) else t_b, t_b)
+                if t_e <= t_s or c[j] is None:
+                    continue
+                acc += c[j] * (t_e - t_s)  # type: ignore[operator]
+                tot += t_e - t_s
+            out.append(acc / tot if tot > 0.0 else None)
+        # keep the command in force at t_b and later ones
+        keep = 0
+        for i, c in enumerate(cmds):
+            if c[0] <= t_b:
+                keep = i
+        del cmds[:keep]
+        return out[0], out[1]
+
+    # -- sample intake -----------------------------------------------------------------
+
+    def _add_heading(self, t: float, psi: float) -> None:
+        if self._psi_last is None:
+            u = psi
+        else:
+            u = self._psi_last + wrap_pi(psi - self._psi_last)
+        self._psi_last = u
+        w = self._w
+        w.n_h += 1
+        w.st_h += t
+        w.sh += u
+
+    def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
+        """Consume samples (time-ordered) and return the estimates at time ``t``."""
+        step_s = self.cfg.step_s
+        for s in samples:
+            if self._t0 is None and isinstance(s, (GnssFix, Heading, Attitude)):
+                self._t0 = s.t
+                self._w_end = s.t + step_s
+            while s.t >= self._w_end:
+                self._close_window(self._w_end)
+                self._w_end += step_s
+                if s.t - self._w_end > self.cfg.max_gap_s:   # jump across a long silence
+                    self._w_end = self._t0 + step_s * (math.floor((s.t - self._t0) / step_s) + 1)
+            if isinstance(s, GnssFix):
+                if s.fix_quality <= 0:
+                    continue
+                if self.frame is None:
+                    self.frame = LocalFrame(s.lat_deg, s.lon_deg)
+                n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
+                w = self._w
+                w.n_fix += 1
+                w.st_fix += s.t
+                w.sn += n
+                w.se += e
+            elif isinstance(s, Heading):
+                self._heading_source_seen = True
+                self._add_heading(s.t, s.heading_rad + (s.declination_rad or 0.0))
+            elif isinstance(s, Attitude):
+                if not self._heading_source_seen:
+                    self._add_heading(s.t, s.yaw_rad)
+            elif isinstance(s, ActuatorCommand):
+                sc, yc = axis_commands(s, self.cfg.input_mode)
+                self._cmds.append((s.t, sc, yc))
+                if len(self._cmds) > 4096:   # no measurements for a long time
+                    del self._cmds[:2048]
+        return self._output(t)
+
+    # -- one AIE/KF step per window ----------------------------------------------------
+
+    def _close_window(self, t_end: float) -> None:
+        w = self._w
+        self._w = _Window()
+        if w.n_h == 0:
+            return
+        th = w.st_h / w.n_h
+        psi = w.sh / w.n_h
+        R_h = self.sigma_h ** 2 / w.n_h
+        R_h_prev, self._R_h_prev = self._R_h_prev, R_h
+        cmd_s: float | None = None
+        # heading axis (needs only the compass)
+        hp = self._h_prev
+        self._h_prev = (th, psi)
+        if hp is not None and th - hp[0] > self.cfg.max_gap_s:
+            self.yaw.restart()
+            hp = None
+        if hp is None:
+            # (re)start: reconstruction heading from the measurement
+            self._psi = psi
+            self._t_est = th
+            dpsi_m = 0.0
+        else:
+            dt = th - hp[0]
+            if dt <= 1e-3:
+                return
+            dpsi_m = wrap_pi(psi - hp[1])
+            cmd_s, cmd_y = self._mean_command(hp[0], th)
+            ky = self._disc(self.yaw.damping(cmd_y), dt)
+            self.yaw.step(ky, dpsi_m, R_h, R_h_prev, cmd_y)
+            # §3.3 heading: integrate the estimated increment ...
+            kfy = self.yaw.kf
+            psi_prev_est = self._psi if self._psi is not None else hp[1]
+            pred = psi_prev_est + kfy.d
+            n_hat = kfy.point_noise()
+            if n_hat is not None:
+                # ... which with the MA(1) noise model equals the measured point minus its
+                # estimated noise (the e-state makes the absolute heading observable)
+                self._psi = pred + wrap_pi(psi - n_hat - pred)
+            else:   # white-noise increments: pull toward the measurement
+                self._psi = pred + self.cfg.heading_anchor * wrap_pi(psi - pred)
+            self._t_est = th
+        # surge axis (needs fixes in this and the previous window)
+        if w.n_fix == 0:
+            return
+        tp = w.st_fix / w.n_fix
+        n, e = w.sn / w.n_fix, w.se / w.n_fix
+        pp = self._pt_prev
+        self._pt_prev = (tp, n, e)
+        if pp is None or tp - pp[0] > self.cfg.max_gap_s or hp is None:
+            if pp is not None:
+                self.surge.restart()
+            if not self._have_pos or pp is None:
+                self._n, self._e = n, e
+            else:  # across a gap: follow the measured displacement
+                self._n += n - pp[1]
+                self._e += e - pp[2]
+            self._have_pos = True
+            self._prev_nfix = w.n_fix
+            return
+        dt = tp - pp[0]
+        if dt <= 1e-3:
+            return
+        R_s = self.sigma_p ** 2 / w.n_fix
+        R_s_prev = self.sigma_p ** 2 / max(self._prev_nfix, 1)
+        self._prev_nfix = w.n_fix
+        dn, de = n - pp[1], e - pp[2]
+        y = path_increment(dn, de, hp[1], dpsi_m)
+        ks = self._disc(self.surge.damping(cmd_s), dt)
+        self.surge.step(ks, y, R_s, R_s_prev, cmd_s)
+        # §3.3 position from the estimated increment along the mid-chord heading
+        ys = self.surge.kf.d
+        psi_now = self._psi if self._psi is not None else psi
+        mid = psi_now - 0.5 * self.yaw.kf.d
+        self._n += ys * math.cos(mid)
+        self._e += ys * math.sin(mid)
+        ka = self.cfg.position_anchor
+        self._n += ka * (n - self._n)
+        self._e += ka * (e - self._e)
+
+    # -- output ------------------------------------------------------------------------
+
+    def _output(self, t: float) -> dict[str, float]:
+        out: dict[str, float] = {}
+        if self._psi is None or self._t_est is None:
+            return out
+        tau = min(max(t - self._t_est, 0.0), self.cfg.max_gap_s)
+        yaw, surge = self.yaw, self.surge
+        dpsi, r = yaw.kf.v * tau, yaw.kf.v
+        if yaw.kf.initialized and tau > 1e-6:
+            dpsi, r = yaw.kf.predict_ahead(
+                self._disc(yaw.damping(yaw.last_command), tau), yaw.u)
+        psi = self._psi + dpsi
+        out["heading"] = wrap_2pi(psi)
+        if yaw.kf.initialized:
+            out["yaw_rate"] = r
+        if surge.kf.initialized:
+            ds, v = surge.kf.v * tau, surge.kf.v
+            if tau > 1e-6:
+                ds, v = surge.kf.predict_ahead(
+                    self._disc(surge.damping(surge.last_command), tau), surge.u)
+            out["speed"] = v
+            mid = self._psi + 0.5 * dpsi
+            out["north"] = self._n + ds * math.cos(mid)
+            out["east"] = self._e + ds * math.sin(mid)
+        elif self._have_pos:
+            out["north"], out["east"] = self._n, self._e
+        self._extra_outputs(out)
+        return out
+
+    def _extra_outputs(self, out: dict[str, float]) -> None:
+        """Hook for subclasses (AIE adds the input estimates)."""
+
+    # -- health and state --------------------------------------------------------------
+
+    def health(self) -> Mapping[str, float]:
+        """Innovation ``z = C x_fc - y``, its variance S and NIS per axis, counters."""
+        h: dict[str, float] = {}
+        for nm, ax in (("surge", self.surge), ("heading", self.yaw)):
+            kf = ax.kf
+            h[f"{nm}.innovation"] = kf.z
+            h[f"{nm}.S"] = kf.S
+            h[f"{nm}.nis"] = kf.nis
+            h[f"{nm}.nis_mean"] = ax.nis_avg
+            h[f"{nm}.steps"] = float(ax.steps)
+            h[f"{nm}.rejected"] = float(ax.rejected)
+            h[f"{nm}.diverged"] = float(ax.diverged)
+            h[f"{nm}.restarts"] = float(ax.restarts)
+        return h
+
+    def get_state(self) -> dict[str, Any]:
+        return {"surge": {"model": self.surge.model.to_dict()},
+                "heading": {"model": self.yaw.model.to_dict()}}
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        for nm, ax in (("surge", self.surge), ("heading", self.yaw)):
+            m = state.get(nm, {}).get("model") if isinstance(state.get(nm), dict) else None
+            if isinstance(m, dict):
+                try:
+                    a, g, o = float(m["a"]), float(m["gain"]), float(m.get("offset", 0.0))
+                except (KeyError, TypeError, ValueError):
+                    continue
+                if math.isfinite(a) and a > 0 and math.isfinite(g) and math.isfinite(o):
+                    ax.model = AxisModel(a, g, o)
+
+    def set_model(self, axis: Literal["surge", "heading"], model: AxisModel) -> None:
+        """Use an identified model (e.g. from surge_heading.identify_surge)."""
+        (self.surge if axis == "surge" else self.yaw).model = model
+
+
+def sensor_noise(cfg: Config) -> tuple[float, float]:
+    """``(gnss_std_m, heading_std_rad)`` from ``[sensors]``."""
+    return cfg.sensors.gnss.position_std_m, cfg.sensors.compass.heading_std_rad

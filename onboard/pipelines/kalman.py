@@ -1,0 +1,180 @@
+"""The Kalman filter of one surge or heading axis, shared by AIE and the KF baseline.
+
+algorithms.md §2.2 on the §1.2 model. The seed paper's augmented state is
+``X = [s_k, v_k, s_{k-1}]`` with output ``y = s_k - s_{k-1}``. Its direction ``[1, 0, 1]``
+(adding a constant to both path lengths) is unobservable from increments, so the
+covariance of the 3-state filter grows without bound along it. In the coordinates
+``(d_k, v_k, s_{k-1})`` with ``d_k = s_k - s_{k-1}`` the block ``(d, v)`` evolves on its
+own::
+
+    d_{k+1} = c1 v_k + c2 u_k          (c1, c2: ZOH coefficients, §1.2)
+    v_{k+1} = alpha v_k + c1 u_k
+    y_k     = d_k + noise
+
+and the measurement sees only that block, so the Kalman filter of ``(d, v)`` gives
+exactly the same innovations, gains and ``(d, v)`` estimates as the 3-state filter of the
+paper (tests/test_kf.py checks this against the 3-state numpy filter) without the
+unbounded direction. This module runs that 2-state filter with plain floats: at n = 2 a
+numpy call costs more than the whole arithmetic.
+
+Sign convention of §2.2: innovation ``z = C x_fc - y``; ``x_da = x_fc - L z``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from onboard.pipelines.surge_heading import Discrete
+
+
+class IncrementKF:
+    """Kalman filter of ``x = (d, v, e)`` for one axis (§2.2), scalar-specialised.
+
+    The increment measured from two noisy points, ``y_k = d_k + n_k - n_{k-1}``, has
+    MA(1) noise (§1.3: lag-1 correlation -1/2). With ``correlated=True`` (default) the
+    previous point's noise ``e = n_{k-1}`` is a state, ``y_k = d_k - e_k + n_k`` with
+    ``C = [1, 0, -1]`` and ``Var(n_k) = R``; after the update ``n_k = y_k - d_k + e_k``
+    becomes the next ``e``. This is exact, and equivalent to filtering the cumulative path
+    with white noise: the velocity error roughly halves against treating the increments as
+    white (the simpler filter, ``correlated=False``, with ``R`` the increment variance).
+
+    Attributes (filterpy-style, read them to debug):
+        d, v, e: the estimate after :meth:`update` (increment over the last step in m or
+            rad; rate in m/s or rad/s; noise of the previous point, m or rad).
+        P: covariance, packed ``(dd, dv, de, vv, ve, ee)``, symmetric by construction.
+        z: last innovation ``C x_fc - y``; S: its predicted variance; nis: ``z^2 / S``.
+        Ld, Lv: the gains of ``d`` and ``v`` in the last update.
+        R: variance of one point's noise (correlated) or of the increment (white).
+    """
+
+    __slots__ = ("d", "v", "e", "P", "z", "S", "nis", "Ld", "Lv", "R", "q_v",
+                 "correlated", "initialized", "_y", "_skipped")
+
+    def __init__(self, R: float, q_v: float = 0.0, correlated: bool = True) -> None:
+        """``R``: measurement variance (see the class doc); ``q_v``: extra rate random
+        walk per step (m^2/s^2 or rad^2/s^2)."""
+        self.R = R
+        self.q_v = q_v
+        self.correlated = correlated
+        self.d = self.v = self.e = 0.0
+        self.P = [0.0] * 6
+        self.z = 0.0
+        self.S = R
+        self.nis = 0.0
+        self.Ld = self.Lv = 0.0
+        self.initialized = False
+        self._y = 0.0
+        self._skipped = False
+
+    @property
+    def pvv(self) -> float:
+        """Variance of the rate estimate."""
+        return self.P[3]
+
+    @pvv.setter
+    def pvv(self, value: float) -> None:
+        self.P[3] = value
+
+    def init(self, y: float, dt: float, R_prev: float, var_v: float) -> None:
+        """Start from a first increment ``y`` over ``dt``: ``v = y/dt`` (variance
+        ``var_v``) and the previous point's noise of variance ``R_prev``, then update."""
+        self.d, self.v, self.e = y, y / dt, 0.0
+        big = 100.0 * (R_prev + self.R) + var_v * dt * dt
+        pe = R_prev if self.correlated else 0.0
+        self.P = [big, 0.0, 0.0, var_v, 0.0, pe]
+        self.initialized = True
+        self.innovation(y)
+        self.update()
+
+    def forecast(self, k: Discrete, u: float, V_u: float) -> None:
+        """Forecast over one step with input ``u`` (m/s^2 or rad/s^2) of error variance
+        ``V_u`` (§2.2: ``x_fc = A x_da + B u``, ``P_f = A P A^T + V_u B B^T + Q_w``).
+
+        First the last point's noise ``n = y - d + e`` replaces ``e`` (a linear map of
+        the error), then ``d+ = c1 v + c2 u``, ``v+ = alpha v + c1 u``, ``e+ = n``.
+        """
+        c1, c2, al = k.c1, k.c2, k.alpha
+        dd, dv, de, vv, ve, ee = self.P
+        v = self.v
+        if self.correlated and self._skipped:   # last point unused: its noise is prior
+            self.e, vn, nn = 0.0, 0.0, self.R
+        elif self.correlated:
+            self.e = self._y - self.d + self.e
+            # error of n = -err(d) + err(e): covariances with v and n
+            vn = ve - dv
+            nn = dd - 2.0 * de + ee
+        else:
+            self.e = 0.0
+            vn = nn = 0.0
+        self._skipped = False
+        self.d = c1 * v + c2 * u
+        self.v = al * v + c1 * u
+        self.P = [c1 * c1 * vv + V_u * c2 * c2,
+                  c1 * al * vv + V_u * c2 * c1,
+                  c1 * vn,
+                  al * al * vv + V_u * c1 * c1 + self.q_v,
+                  al * vn,
+                  nn]
+
+    def innovation(self, y: float) -> float:
+        """Set and return ``z = (d - e)_fc - y``, ``S`` and ``nis`` before the update."""
+        dd, dv, de, vv, ve, ee = self.P
+        z = self.d - self.e - y
+        S = dd - 2.0 * de + ee + self.R
+        self._y = y
+        self.z = z
+        self.S = S
+        self.nis = z * z / S
+        return z
+
+    def point_noise(self) -> float | None:
+        """Estimated noise ``n_k = y_k - d_k + e_k`` of the newest point (m or rad) after
+        an update in the correlated filter, else None. ``point - n_k`` is then the
+        filtered point itself (e.g. the absolute heading)."""
+        if not (self.correlated and self.initialized) or self._skipped:
+            return None
+        return self._y - self.d + self.e
+
+    def skip(self) -> None:
+        """Do not assimilate the last measurement (an outlier): keep the forecast."""
+        self._skipped = True
+
+    def update(self) -> None:
+        """Data assimilation with the innovation of :meth:`innovation` (§2.2),
+        ``C = [1, 0, -1]``; Joseph-equivalent for the optimal gain, symmetric storage."""
+        dd, dv, de, vv, ve, ee = self.P
+        S = self.S
+        # P C^T
+        cd = dd - de
+        cv = dv - ve
+        ce = de - ee
+        Ld, Lv, Le = cd / S, cv / S, ce / S
+        z = self.z
+        self.d -= Ld * z
+        self.v -= Lv * z
+        self.e -= Le * z
+        vv_n = vv - Lv * cv
+        self.P = [dd - Ld * cd, dv - Ld * cv, de - Ld * ce,
+                  vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ce, ee - Le * ce]
+        self.Ld, self.Lv = Ld, Lv
+
+    def predict_ahead(self, k: Discrete, u: float) -> tuple[float, float]:
+        """``(increment, rate)`` ``k.dt`` seconds after the last update with input ``u``
+        held (estimates between measurement steps). The state is unchanged."""
+        return k.c1 * self.v + k.c2 * u, k.alpha * self.v + k.c1 * u
+
+    def markov(self, k: Discrete, n_f: int) -> list[float]:
+        """``H_i = C A_bar^{i-1} B``, ``i = 1..n_f``, ``A_bar = A (I - L C)`` (§2.4),
+        on the ``(d, v)`` block with the gains of the last update. ``H_1 = c2``."""
+        c1, c2, al = k.c1, k.c2, k.alpha
+        out = [c2]
+        wd, wv = c2, c1
+        Lv = self.Lv
+        for _ in range(n_f - 1):
+            wd, wv = -c1 * Lv * wd + c1 * wv, -al * Lv * wd + al * wv
+            out.append(wd)
+        return out
+
+    @property
+    def std_v(self) -> float:
+        return math.sqrt(self.P[3])

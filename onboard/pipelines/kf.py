@@ -1,0 +1,57 @@
+"""The classical Kalman-filter baseline of the AIE paper: pipeline ``kf``.
+
+Faros & Tanner (arXiv 2504.02005, §3): "a standard Kalman filter is also implemented with
+the assumption that the nominal operator control input is the one that is implemented".
+Here: the same surge/heading filters as :mod:`onboard.pipelines.aie` (same model, same
+measurements, same reconstruction, same ``[pipelines.aie]`` table) with the input taken
+as the commanded one at nominal scaling, ``u = gain * command + offset``
+(algorithms.md §2.12), and input-error variance ``kf_v_d``. Without commands in the log
+the input is zero (a random-walk-driven filter).
+"""
+
+from __future__ import annotations
+
+from onboard.config import Config
+from onboard.pipelines.aie_pipeline import (
+    AieConfig,
+    AxisConfig,
+    AxisFilter,
+    SurgeHeadingPipeline,
+    load_config,
+    sensor_noise,
+)
+from onboard.pipelines.surge_heading import AxisModel
+
+COLUMNS = ("north", "east", "heading", "speed", "yaw_rate")
+
+
+class AxisKf(AxisFilter):
+    """One axis forecast with the nominal commanded input (§2.2 with known input)."""
+
+    def __init__(self, model: AxisModel, cfg: AxisConfig, top: AieConfig) -> None:
+        super().__init__(model, cfg, top, cfg.kf_v_d)
+
+    def damping(self, command: float | None) -> float:
+        """Without a command the damped model with zero input would pull the rate to 0
+        (and bias it by ``dt / c1``): use the constant-rate model (a -> 0) instead."""
+        return self.model.a if command is not None else 1e-9
+
+    def forecast_input(self, command: float | None) -> float:
+        """Nominal input ``gain * command + offset``; without a command zero (with the
+        constant-rate model of :meth:`damping`, the random-walk form of §2.12)."""
+        self.u = 0.0 if command is None else self.model.input(command)
+        return self.u
+
+
+def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03
+          ) -> SurgeHeadingPipeline:
+    """A KF baseline pipeline from an :class:`AieConfig` (for code and tests)."""
+    return SurgeHeadingPipeline("kf", COLUMNS, cfg, gnss_std_m, heading_std_rad, AxisKf)
+
+
+def create(cfg: Config) -> SurgeHeadingPipeline | None:
+    """Pipeline ``kf`` wherever ``aie`` applies; ``[pipelines.kf] enabled = false`` is
+    honoured by the pipeline registry. Its settings come from ``[pipelines.aie]``."""
+    if cfg.vehicle.vehicle_class in ("bluerov2", "spheroid"):
+        return None
+    return build(load_config(cfg), *sensor_noise(cfg))
