@@ -523,6 +523,13 @@ class NmeaParser:
         """Close the open epoch (end of stream); return its samples."""
         return self._close()
 
+    def poll(self, t_now: float) -> list[Sample]:
+        """Close the open epoch if it has waited more than ``hold_s`` (receive time, s).
+
+        A live transport may call this on its own timer so that the last fix before a
+        pause in the stream is not held until the next bytes arrive."""
+        return self._expire(t_now)
+
     # -- epochs
 
     def _expire(self, t_rx: float) -> list[Sample]:

@@ -180,6 +180,11 @@ def test_receive_time_stamps_and_hold_timeout():
     assert p.feed_line(gga2, 11.2) == []
     (fix2,) = p.feed_line(rmc2, 11.21)  # GGA+RMC learned: complete at once
     assert fix2.t == 11.2
+    gga3 = sentence(gga2[1 : gga2.rfind("*")].replace("094155.40", "094155.60"))
+    assert p.feed_line(gga3, 11.4) == []  # waits for its RMC ...
+    assert p.poll(11.5) == []
+    (fix3,) = p.poll(11.7)  # ... until the hold expires on the transport's timer
+    assert fix3.t == 11.4 and fix3.sog_mps is None
 
 
 # ----------------------------------------------------------------------------- the stream
