@@ -1,0 +1,492 @@
+"""``onboard bench [--json]``: the performance figures, each measured in one run.
+
+Every figure is a ratio or a distribution measured within the same process, so it holds on a
+noisy machine (a laptop on battery, a CI runner shared with other jobs): the reference and
+the thing measured run interleaved, several times, and the median is reported.
+
+==============================  =========================================================  =========
+key                             what                                                       goal
+==============================  =========================================================  =========
+``replay_vs_pymavlink_parse``   whole ``onboard replay`` of a 15-min 50 Hz-IMU tlog        <= 0.5
+                                divided by pymavlink's parse-only ``recv_match`` loop
+                                over the same file (median of interleaved pairs)
+``aie_step_vs_filterpy_kf``     one AIE axis step / filterpy ``KalmanFilter(dim_x=3)``     <= 0.5
+                                predict+update (median of repeats)
+``service_cpu_fraction``        CPU s per wall s of ``onboard run`` fed by SITL            <= 0.03
+``sensor_to_zenoh_p50_ms``      sensor receive to Zenoh publication, median (ms)           context
+``sensor_to_zenoh_p99_ms``      same, 99th percentile (ms)                                 <= 5
+``service_rss_mb``              resident memory of the service (MB)                        <= 100
+``startup_to_ready_s``          process start to READY (s)                                 <= 1.5
+``mpc_solve_p99_ms``            NMPC solve time on the BlueROV2 circle, p99 (ms)           < 50
+``pipeline_step_us``            per-pipeline step cost, µs per engine tick (context)       --
+==============================  =========================================================  =========
+
+A piece whose module has not landed (or fails) gives ``null`` in the JSON and
+``not available: <reason>`` in the table; the JSON always has exactly the keys above.
+
+Environment: ``ONBOARD_BENCH_FAST=1`` shortens everything (a 20 s log, few repeats; for the
+test suite, figures then only show the command works), ``ONBOARD_BENCH_REPEATS=N`` sets the
+number of interleaved replay/parse pairs (default 3), ``ONBOARD_BENCH_MINUTES`` the log
+length (default 15).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import os
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+KEYS: tuple[str, ...] = (
+    "replay_vs_pymavlink_parse",
+    "aie_step_vs_filterpy_kf",
+    "service_cpu_fraction",
+    "sensor_to_zenoh_p50_ms",
+    "sensor_to_zenoh_p99_ms",
+    "service_rss_mb",
+    "startup_to_ready_s",
+    "mpc_solve_p99_ms",
+    "pipeline_step_us",
+)
+"""The JSON keys of ``onboard bench --json``, in table order (a contract: issue 9)."""
+
+GOALS: dict[str, tuple[str, float | None]] = {
+    "replay_vs_pymavlink_parse": ("<=", 0.5),
+    "aie_step_vs_filterpy_kf": ("<=", 0.5),
+    "service_cpu_fraction": ("<=", 0.03),
+    "sensor_to_zenoh_p50_ms": ("", None),
+    "sensor_to_zenoh_p99_ms": ("<=", 5.0),
+    "service_rss_mb": ("<=", 100.0),
+    "startup_to_ready_s": ("<=", 1.5),
+    "mpc_solve_p99_ms": ("<", 50.0),
+    "pipeline_step_us": ("", None),
+}
+"""Goal of each figure: (comparison, bound); None = context only."""
+
+REPLAY_SCENARIO = "jaiabot-turns"
+"""SITL scenario of the replay log: rudder boat, 50 Hz IMU, 5 Hz GPS, 10 Hz compass."""
+
+CLASS_SCENARIOS: tuple[tuple[str, str], ...] = (
+    ("rudder-boat", "jaiabot-turns"),
+    ("twin-thruster-boat", "twin-thruster-turns"),
+    ("bluerov2", "bluerov2-circle"),
+    ("torpedo-auv", "gavia-tidal"),
+)
+"""(bundled config, SITL scenario) pairs used to time every pipeline on the vehicle it
+applies to."""
+
+
+@dataclass
+class Settings:
+    """How long and how often to measure."""
+
+    fast: bool = False
+    minutes: float = 15.0
+    repeats: int = 3
+    aie_steps: int = 20000
+    aie_repeats: int = 3
+    mpc_solves: int = 200
+    service_s: float = 30.0
+    pipeline_sim_s: float = 120.0
+
+    @classmethod
+    def from_env(cls) -> "Settings":
+        fast = os.environ.get("ONBOARD_BENCH_FAST", "") not in ("", "0")
+        s = cls(fast=True, minutes=20 / 60, repeats=1, aie_steps=500, aie_repeats=1,
+                mpc_solves=5, service_s=2.0, pipeline_sim_s=5.0) if fast else cls()
+        if os.environ.get("ONBOARD_BENCH_MINUTES"):
+            s.minutes = float(os.environ["ONBOARD_BENCH_MINUTES"])
+        if os.environ.get("ONBOARD_BENCH_REPEATS"):
+            s.repeats = max(1, int(os.environ["ONBOARD_BENCH_REPEATS"]))
+        return s
+
+
+@dataclass
+class Report:
+    """Figures (``None`` when not available), why not, and the detail behind each."""
+
+    values: dict[str, Any] = field(default_factory=lambda: {k: None for k in KEYS})
+    reasons: dict[str, str] = field(default_factory=dict)
+    detail: dict[str, Any] = field(default_factory=dict)
+
+    def missing(self, keys: Iterable[str], reason: str) -> None:
+        for k in keys:
+            self.values[k] = None
+            self.reasons[k] = reason
+
+
+class NotAvailable(Exception):
+    """A piece of the bench cannot run yet (module missing, optional dependency absent)."""
+
+
+def _quiet(fn: Callable[[], Any]) -> Any:
+    """Run ``fn`` with stdout and stderr captured (no progress output, no prints)."""
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        return fn()
+
+
+def _import(module: str, attr: str) -> Callable:
+    import importlib
+
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as err:
+        raise NotAvailable(f"module {err.name} missing (not written yet or not installed)") from None
+    fn = getattr(mod, attr, None)
+    if fn is None:
+        raise NotAvailable(f"{module}.{attr} missing")
+    return fn
+
+
+# --------------------------------------------------------------------------- the replay log
+
+
+def make_tlog(path: Path, duration_s: float, seed: int = 0) -> dict[str, Any]:
+    """Write a deterministic tlog of ``duration_s`` seconds with a 50 Hz IMU to ``path``.
+
+    With the simulator (:func:`sitl.runner.run_to_tlog`, scenario :data:`REPLAY_SCENARIO`)
+    when it is there, else :func:`synthesize_tlog`. Returns what was written.
+    """
+    try:
+        from sitl.runner import run_to_tlog
+    except ImportError:
+        run_to_tlog = None
+    if run_to_tlog is not None:
+        summary = run_to_tlog(REPLAY_SCENARIO, path, duration=duration_s, seed=seed)
+        return {"source": f"sitl:{REPLAY_SCENARIO}", "frames": sum(summary.frames.values()),
+                "samples": dict(sorted(summary.samples.items()))}
+    return synthesize_tlog(path, duration_s, seed)
+
+
+def synthesize_tlog(path: Path, duration_s: float, seed: int = 0) -> dict[str, Any]:
+    """A boat-like tlog from pymavlink encoders alone: HEARTBEAT and SERVO_OUTPUT_RAW at 1 and
+    10 Hz, SCALED_IMU 50 Hz, GPS_RAW_INT and GLOBAL_POSITION_INT 5 Hz, ATTITUDE and VFR_HUD
+    10 Hz, PARAM_VALUE for the rudder/throttle mapping once. Deterministic for ``seed``."""
+    import random
+
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    from drivers.tlog import TlogWriter
+
+    rng = random.Random(seed)
+    m = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    m.robust_parsing = True
+    epoch = 1.7e9
+    lat0, lon0 = 41.6, -71.3
+    n_ticks = int(round(duration_s * 50))
+    frames = 0
+    with TlogWriter(path) as w:
+        def put(t: float, msg) -> None:
+            nonlocal frames
+            w.write(epoch + t, msg.pack(m))
+            frames += 1
+
+        for i, (name, value) in enumerate((("SERVO1_FUNCTION", 26.0), ("SERVO3_FUNCTION", 70.0))):
+            put(0.0, mav.MAVLink_param_value_message(name.encode(), value, 9, 2, i))
+        north = east = 0.0
+        psi = 0.0
+        for k in range(n_ticks):
+            t = k / 50.0
+            ms = int(t * 1000)
+            r = 0.1 * math.sin(0.05 * t)
+            psi = (psi + r / 50.0) % (2 * math.pi)
+            u = 1.5 + 0.5 * math.sin(0.01 * t)
+            north += u * math.cos(psi) / 50.0
+            east += u * math.sin(psi) / 50.0
+            put(t, mav.MAVLink_scaled_imu_message(
+                ms, int(rng.gauss(0, 50)), int(rng.gauss(0, 50)), int(-1000 + rng.gauss(0, 50)),
+                int(rng.gauss(0, 5)), int(rng.gauss(0, 5)), int(r * 1000), 200, 0, -400))
+            if k % 50 == 0:
+                put(t, mav.MAVLink_heartbeat_message(11, 3, 209, 0, 4, 3))
+            if k % 5 == 0:
+                put(t, mav.MAVLink_attitude_message(ms, 0.0, 0.0, psi - math.pi, 0.0, 0.0, r))
+                put(t, mav.MAVLink_vfr_hud_message(u, u, int(math.degrees(psi)) % 360, 40, 0, 0))
+                put(t, mav.MAVLink_servo_output_raw_message(
+                    ms * 1000, 0, 1500 + int(r * 1000), 1500, 1700, 1500, 0, 0, 0, 0))
+            if k % 10 == 0:
+                lat = lat0 + north / 111_320.0
+                lon = lon0 + east / (111_320.0 * math.cos(math.radians(lat0)))
+                put(t, mav.MAVLink_gps_raw_int_message(
+                    ms * 1000, 3, int(lat * 1e7), int(lon * 1e7), 0, 120, 65535,
+                    int(u * 100), int(math.degrees(psi) * 100) % 36000, 12))
+                put(t, mav.MAVLink_global_position_int_message(
+                    ms, int(lat * 1e7), int(lon * 1e7), 0, 0, int(u * math.cos(psi) * 100),
+                    int(u * math.sin(psi) * 100), 0, int(math.degrees(psi) * 100) % 36000))
+    return {"source": "synthetic (pymavlink encoders)", "frames": frames}
+
+
+# --------------------------------------------------------------------------- the figures
+
+
+def bench_replay(s: Settings, workdir: Path, rep: Report) -> None:
+    """``replay_vs_pymavlink_parse``: interleaved pairs, median ratio."""
+    from drivers.tlog import pymavlink_parse_seconds
+    from onboard.cli import main as cli_main
+
+    log = workdir / "bench.tlog"
+    t0 = time.perf_counter()
+    made = make_tlog(log, s.minutes * 60.0)
+    made["generate_s"] = round(time.perf_counter() - t0, 2)
+    made["bytes"] = log.stat().st_size
+    out = workdir / "replay-out"
+
+    def one_replay() -> float:
+        t = time.perf_counter()
+        status = _quiet(lambda: cli_main(["replay", str(log), "--out", str(out), "--no-plot"]))
+        dt = time.perf_counter() - t
+        if status != 0:
+            raise RuntimeError(f"onboard replay exited {status}")
+        return dt
+
+    one_replay()  # warm-up: imports and caches are not what is measured
+    replays, parses, ratios = [], [], []
+    for i in range(s.repeats):
+        # alternate the order so a slow phase of the machine hits both sides
+        if i % 2 == 0:
+            p = pymavlink_parse_seconds(log)
+            r = one_replay()
+        else:
+            r = one_replay()
+            p = pymavlink_parse_seconds(log)
+        replays.append(r)
+        parses.append(p)
+        ratios.append(r / p)
+    summary = json.loads((out / "summary.json").read_text())
+    rep.values["replay_vs_pymavlink_parse"] = round(statistics.median(ratios), 3)
+    rep.detail["replay"] = {
+        "log": made, "duration_s": summary["time_span"]["duration_s"],
+        "samples": summary["read"]["samples"], "pipelines": summary["pipelines"],
+        "replay_s": [round(x, 3) for x in replays], "pymavlink_parse_s": [round(x, 3) for x in parses],
+        "ratios": [round(x, 3) for x in ratios],
+    }
+
+
+def bench_aie(s: Settings, rep: Report) -> None:
+    """``aie_step_vs_filterpy_kf`` from :func:`onboard.pipelines.aie.bench_step_ratio`."""
+    fn = _import("onboard.pipelines.aie", "bench_step_ratio")
+    try:
+        import filterpy  # noqa: F401
+    except ImportError:
+        raise NotAvailable("filterpy not installed (pip install 'onboard[bench]')") from None
+    runs = [fn(s.aie_steps) for _ in range(s.aie_repeats)]
+    ratios = [r["ratio"] for r in runs]
+    rep.values["aie_step_vs_filterpy_kf"] = round(statistics.median(ratios), 3)
+    rep.detail["aie"] = {
+        "aie_axis_step_us": round(statistics.median(r["aie_axis_step_us"] for r in runs), 2),
+        "filterpy_kf3_step_us": round(statistics.median(r["filterpy_kf3_step_us"] for r in runs), 2),
+        "ratios": [round(x, 3) for x in ratios], "steps": s.aie_steps,
+    }
+
+
+SERVICE_KEYS = ("service_cpu_fraction", "sensor_to_zenoh_p50_ms", "sensor_to_zenoh_p99_ms",
+                "service_rss_mb", "startup_to_ready_s")
+_SERVICE_ALIASES: dict[str, tuple[str, ...]] = {
+    "service_cpu_fraction": ("service_cpu_fraction", "cpu_fraction", "cpu"),
+    "sensor_to_zenoh_p50_ms": ("sensor_to_zenoh_p50_ms", "latency_p50_ms", "p50_ms"),
+    "sensor_to_zenoh_p99_ms": ("sensor_to_zenoh_p99_ms", "latency_p99_ms", "p99_ms"),
+    "service_rss_mb": ("service_rss_mb", "rss_mb", "max_rss_mb"),
+    "startup_to_ready_s": ("startup_to_ready_s", "ready_s", "startup_s"),
+}
+
+
+def bench_service(s: Settings, rep: Report) -> None:
+    """The service figures from :func:`onboard.service_bench.measure`."""
+    fn = _import("onboard.service_bench", "measure")
+    res = _quiet(lambda: fn(s.service_s))
+    rep.detail["service"] = {k: v for k, v in res.items() if _jsonable(v)}
+    for key in SERVICE_KEYS:
+        v = next((res[a] for a in _SERVICE_ALIASES[key] if a in res), None)
+        if v is None or not _finite(v):
+            rep.missing([key], f"service_bench.measure gave no {key}")
+        else:
+            rep.values[key] = round(float(v), 4)
+
+
+def bench_mpc(s: Settings, rep: Report) -> None:
+    """``mpc_solve_p99_ms`` from :func:`sitl.controllers.nmpc.solve_time_stats`."""
+    fn = _import("sitl.controllers.nmpc", "solve_time_stats")
+    res = _quiet(lambda: fn(s.mpc_solves))
+    rep.values["mpc_solve_p99_ms"] = round(float(res["p99_ms"]), 2)
+    rep.detail["mpc"] = res
+
+
+class _Timed:
+    """A pipeline whose ``step`` time is accumulated; everything else passes through."""
+
+    def __init__(self, inner: Any) -> None:
+        self._inner = inner
+        self.seconds = 0.0
+        self.calls = 0
+
+    def step(self, t: float, samples):
+        t0 = time.perf_counter()
+        out = self._inner.step(t, samples)
+        self.seconds += time.perf_counter() - t0
+        self.calls += 1
+        return out
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)
+
+
+def bench_pipelines(s: Settings, rep: Report) -> None:
+    """``pipeline_step_us``: mean step cost per engine tick of every pipeline, on the SITL
+    stream of a vehicle it applies to (each pipeline timed once, on its first vehicle)."""
+    from onboard import config as configmod
+    from onboard.engine import Engine, run
+    from onboard.pipelines import build
+
+    try:
+        from sitl.runner import simulate
+    except ImportError:
+        simulate = None
+    costs: dict[str, float] = {}
+    where: dict[str, str] = {}
+    for cfg_name, scenario in CLASS_SCENARIOS:
+        try:
+            cfg = configmod.load(configmod.resolve(cfg_name))
+        except Exception:  # noqa: BLE001 - a config that does not load is just skipped
+            continue
+        todo = [p for p in build(cfg) if p.name not in costs]
+        if not todo or simulate is None:
+            continue
+        timed = [_Timed(p) for p in todo]
+        engine = Engine(cfg, pipelines=timed)  # type: ignore[arg-type]
+        stream = (x for _, samples, _ in simulate(scenario, s.pipeline_sim_s, seed=0)
+                  for x in samples)
+        run(engine, stream, lambda t, recs: None)
+        for p in timed:
+            if p.calls:
+                costs[p.name] = round(p.seconds / p.calls * 1e6, 1)
+                where[p.name] = f"{cfg_name} / {scenario}"
+    if "eseso" not in costs:
+        try:
+            fn = _import("onboard.pipelines.eseso", "bench_step_cost")
+            res = fn(max(2.0, s.pipeline_sim_s / 6))
+            costs["eseso"] = round(float(res["per_tick_us_p50"]), 1)
+            where["eseso"] = "eseso.bench_step_cost (synthetic ROV stream), p50"
+        except (NotAvailable, Exception):  # noqa: BLE001
+            pass
+    if not costs:
+        raise NotAvailable("no pipeline applies to the bundled configs, or no simulator")
+    rep.values["pipeline_step_us"] = dict(sorted(costs.items()))
+    rep.detail["pipelines"] = {"measured_on": where, "sim_s": s.pipeline_sim_s,
+                               "engine_rate_hz": "from each config"}
+
+
+def collect(s: Settings | None = None, progress: Callable[[str], None] | None = None) -> Report:
+    """Measure everything; a failing or missing piece becomes ``None`` with its reason."""
+    s = s or Settings.from_env()
+    say = progress or (lambda msg: None)
+    rep = Report()
+    rep.detail["settings"] = {"fast": s.fast, "minutes": s.minutes, "repeats": s.repeats}
+    with tempfile.TemporaryDirectory(prefix="onboard-bench-") as tmp:
+        steps: list[tuple[str, tuple[str, ...], Callable[[], None]]] = [
+            ("replay vs pymavlink", ("replay_vs_pymavlink_parse",),
+             lambda: bench_replay(s, Path(tmp), rep)),
+            ("AIE step vs filterpy", ("aie_step_vs_filterpy_kf",), lambda: bench_aie(s, rep)),
+            ("service", SERVICE_KEYS, lambda: bench_service(s, rep)),
+            ("MPC solve", ("mpc_solve_p99_ms",), lambda: bench_mpc(s, rep)),
+            ("pipeline steps", ("pipeline_step_us",), lambda: bench_pipelines(s, rep)),
+        ]
+        for label, keys, fn in steps:
+            say(f"measuring {label} ...")
+            t0 = time.perf_counter()
+            try:
+                fn()
+            except NotAvailable as err:
+                rep.missing(keys, str(err))
+            except Exception as err:  # noqa: BLE001 - one broken piece must not hide the rest
+                rep.missing(keys, f"failed: {type(err).__name__}: {err}")
+            rep.detail.setdefault("bench_wall_s", {})[label] = round(time.perf_counter() - t0, 2)
+    return rep
+
+
+# --------------------------------------------------------------------------- output
+
+
+def _finite(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _jsonable(v: Any) -> bool:
+    try:
+        json.dumps(v)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def verdict(key: str, value: Any) -> str:
+    """``ok``/``MISSED`` against the goal, ``""`` for context figures."""
+    op, bound = GOALS[key]
+    if bound is None or not _finite(value):
+        return ""
+    ok = value <= bound if op == "<=" else value < bound
+    return "ok" if ok else "MISSED"
+
+
+def table(rep: Report) -> str:
+    """The figures as a text table, goals beside them."""
+    rows = [("figure", "value", "goal", "")]
+    for k in KEYS:
+        v = rep.values[k]
+        op, bound = GOALS[k]
+        goal = f"{op} {bound:g}" if bound is not None else "context"
+        if k == "sensor_to_zenoh_p50_ms":
+            goal = "context"
+        if v is None:
+            rows.append((k, f"not available: {rep.reasons.get(k, 'unknown')}", goal, ""))
+        elif isinstance(v, dict):
+            rows.append((k, ", ".join(f"{n} {c:g}" for n, c in v.items()), goal, ""))
+        else:
+            rows.append((k, f"{v:g}", goal, verdict(k, v)))
+    w0 = max(len(r[0]) for r in rows)
+    w2 = max(len(r[2]) for r in rows)
+    lines = []
+    for i, (a, b, c, d) in enumerate(rows):
+        # a long "not available" reason goes last so the goal column stays aligned
+        lines.append(f"{a:<{w0}}  {c:<{w2}}  {d:<6}  {b}".rstrip())
+        if i == 0:
+            lines.append("-" * min(100, w0 + w2 + 40))
+    r = rep.detail.get("replay")
+    if r:
+        lines.append("")
+        lines.append(f"replay log: {r['log']['source']}, {r['duration_s']:.0f} s, "
+                     f"{r['samples']:,} samples, pipelines {', '.join(r['pipelines'])}; replay "
+                     f"{min(r['replay_s']):.2f} s, pymavlink {min(r['pymavlink_parse_s']):.2f} s "
+                     f"(best of {len(r['ratios'])})")
+    a = rep.detail.get("aie")
+    if a:
+        lines.append(f"AIE axis step {a['aie_axis_step_us']:.1f} us, filterpy KF(3) "
+                     f"predict+update {a['filterpy_kf3_step_us']:.1f} us")
+    if rep.detail.get("settings", {}).get("fast"):
+        lines.append("(fast mode: ONBOARD_BENCH_FAST is set; figures are not meaningful)")
+    return "\n".join(lines)
+
+
+def main(args) -> int:
+    """Entry point of ``onboard bench``."""
+    as_json = bool(getattr(args, "json", False))
+    progress = None if as_json or not sys.stderr.isatty() else (
+        lambda msg: print(msg, file=sys.stderr, flush=True))
+    rep = collect(Settings.from_env(), progress)
+    if as_json:
+        print(json.dumps({k: rep.values[k] for k in KEYS}, indent=2))
+        for k, why in rep.reasons.items():
+            print(f"onboard bench: {k} not available: {why}", file=sys.stderr)
+        if os.environ.get("ONBOARD_BENCH_DETAIL"):
+            Path(os.environ["ONBOARD_BENCH_DETAIL"]).write_text(
+                json.dumps({"values": rep.values, "reasons": rep.reasons, "detail": rep.detail},
+                           indent=2, default=str) + "\n")
+    else:
+        print(table(rep))
+    return 0
