@@ -23,7 +23,9 @@ from typing import Callable, Iterable, Sequence
 from onboard.config import Config
 from onboard.inputs import InputMapper
 from onboard.messages import (
-    ActuatorCommand,
+    ActuatorOutputs,
+    PropellerRpm,
+    RcChannels,
     Depth,
     EstimateRecord,
     GnssFix,
@@ -38,6 +40,9 @@ from onboard.validate import check_values, sample_type
 GRAVITY = 9.80665
 """Standard gravity, m/s^2 (used for pressure -> depth)."""
 
+_SPECIAL = {Pressure, Depth, GnssFix}
+_RAW_ACTUATORS = {ActuatorOutputs, RcChannels, PropellerRpm}
+
 TickCallback = Callable[[float, Sequence[EstimateRecord]], None]
 
 
@@ -46,7 +51,7 @@ class Engine:
 
     Attributes:
         pipelines: the pipelines, in column order.
-        accepted: samples accepted, by ``<type>:<source>``.
+        accepted: samples accepted, by ``(type, source)``.
         rejected: samples rejected, by ``<type>:<reason>``.
         mode: ``"surface"`` or ``"submerged"`` (from the newest depth).
         latest: the newest record of each pipeline.
@@ -57,7 +62,7 @@ class Engine:
         self.pipelines = build(cfg) if pipelines is None else pipelines
         self.mapper = InputMapper(cfg.inputs)
         self.max_age = cfg.engine.max_sample_age_s
-        self.accepted: Counter[str] = Counter()
+        self.accepted: Counter[tuple[str, str]] = Counter()
         self.rejected: Counter[str] = Counter()
         self.mode = "surface"
         self.depth_m: float | None = None
@@ -91,31 +96,35 @@ class Engine:
         reason = check_values(sample)
         if reason is not None:
             return self._reject(kind, reason)
-        if now is not None and sample.t > now + 1.0:
+        t = sample.t
+        if now is not None and t > now + 1.0:
             return self._reject(kind, "future")
         key = (kind, sample.source)
         last = self._last_t.get(key)
-        if last is not None and sample.t < last:
+        if last is not None and t < last:
             return self._reject(kind, "backwards")
-        if sample.t < self.t_newest - self.max_age:
+        if t < self.t_newest - self.max_age:
             return self._reject(kind, "late")
-        if isinstance(sample, Pressure):
-            sample = Depth(t=sample.t, source=sample.source,
-                           depth_m=(sample.pressure_pa - self._p_surface) / self._rho_g,
-                           pressure_pa=sample.pressure_pa, temperature_c=sample.temperature_c)
-        if isinstance(sample, Depth):
-            self.depth_m = sample.depth_m
-            self.mode = "submerged" if sample.depth_m > self._surface_depth else "surface"
-        elif isinstance(sample, GnssFix) and self.mode == "submerged":
-            return self._reject(kind, "submerged")
-        self._last_t[key] = sample.t
-        if sample.t > self.t_newest:
-            self.t_newest = sample.t
+        cls = type(sample)
+        if cls in _SPECIAL:
+            if cls is Pressure:
+                sample = Depth(t=t, source=sample.source,
+                               depth_m=(sample.pressure_pa - self._p_surface) / self._rho_g,
+                               pressure_pa=sample.pressure_pa, temperature_c=sample.temperature_c)
+                cls = Depth
+            if cls is Depth:
+                self.depth_m = sample.depth_m
+                self.mode = "submerged" if sample.depth_m > self._surface_depth else "surface"
+            elif cls is GnssFix and self.mode == "submerged":
+                return self._reject(kind, "submerged")
+        self._last_t[key] = t
+        if t > self.t_newest:
+            self.t_newest = t
         if self.t_first is None:
-            self.t_first = sample.t
-        self.accepted[f"{kind}:{sample.source}"] += 1
+            self.t_first = t
+        self.accepted[key] += 1
         self._pending.append(sample)
-        if self.mapper.active and not isinstance(sample, ActuatorCommand):
+        if cls in _RAW_ACTUATORS and self.mapper.active:
             cmd = self.mapper.map(sample)
             if cmd is not None:
                 self._pending.append(cmd)

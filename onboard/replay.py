@@ -115,31 +115,26 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         raise UnreadableLog(f"{log}: no usable samples ({reader.stats.as_dict()['rejected']})")
     csv = EstimatesCsv(out_dir / "estimates.csv", engine.columns, first.t)
     meter = _Progress(progress)
-    kinds: dict[str, int] = {}
-    t_last = [first.t]
-
-    def counted(stream: Iterable[Sample]) -> Iterator[Sample]:
-        for s in stream:
-            k = type(s).__struct_config__.tag
-            kinds[k] = kinds.get(k, 0) + 1
-            t_last[0] = s.t
-            yield s
 
     def stream() -> Iterator[Sample]:
         yield first
         yield from samples
 
-    tick_times = getattr(reader, "tick_times", None) if fmt == "recording" else None
+    source = meter.wrap(stream()) if progress else stream()
     if fmt == "recording":
-        # Tick records precede nothing they depend on; collect them in one pass first.
-        buffered = list(stream())
-        ticks = run(engine, counted(meter.wrap(buffered)), csv.write,
+        # The live tick times are recorded beside the inputs; read them all first.
+        buffered = list(source)
+        ticks = run(engine, buffered, csv.write,
                     tick_times=reader.tick_times or None)  # type: ignore[attr-defined]
     else:
-        ticks = run(engine, counted(meter.wrap(stream())), csv.write)
+        ticks = run(engine, source, csv.write)
     csv.close()
     meter.done()
-    span = t_last[0] - first.t
+    t_end = max(engine.t_newest, first.t)
+    span = t_end - first.t
+    kinds: dict[str, int] = {}
+    for (kind, _), n in engine.accepted.items():
+        kinds[kind] = kinds.get(kind, 0) + n
     summary = {
         "log": str(log),
         "format": fmt,
@@ -148,11 +143,11 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "vehicle_id": cfg.vehicle.id,
         "pipelines": [p.name for p in engine.pipelines],
         "columns": engine.columns,
-        "time_span": {"start": first.t, "end": t_last[0], "duration_s": span},
+        "time_span": {"start": first.t, "end": t_end, "duration_s": span},
         "read": reader.stats.as_dict(),
-        "samples_by_type": dict(sorted(kinds.items())),
+        "samples_accepted_by_type": dict(sorted(kinds.items())),
         "rates_hz": {k: (n / span if span > 0 else None) for k, n in sorted(kinds.items())},
-        "accepted": dict(sorted(engine.accepted.items())),
+        "accepted": {f"{k}:{src}": n for (k, src), n in sorted(engine.accepted.items())},
         "rejected": dict(sorted(engine.rejected.items())),
         "ticks": ticks,
         "rows": csv.rows,

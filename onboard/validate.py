@@ -12,7 +12,8 @@ counted but never fused).
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from operator import attrgetter
+from typing import Callable
 
 from onboard.messages import (
     ActuatorOutputs,
@@ -47,48 +48,93 @@ _BOUNDS: dict[type, tuple[tuple[str, float, float], ...]] = {
     Pressure: (("pressure_pa", 5e3, 1.2e8),),
     Altitude: (("altitude_m", 0.0, 1e4),),
 }
-_ALWAYS_OK = (Parameter, VehicleInfo)
+_ALWAYS_OK = {Parameter, VehicleInfo}
 
 
-def _numbers(sample: Sample) -> Iterable[float]:
-    for name in sample.__struct_fields__:
-        v = getattr(sample, name)
-        if isinstance(v, float):
-            yield v
-        elif isinstance(v, tuple):
-            for x in v:
-                if isinstance(x, float):
-                    yield x
+def _float_fields(cls: type) -> tuple[list[str], list[str]]:
+    """Names of the float-valued and tuple-valued fields of a sample type."""
+    import typing
+
+    floats, tuples = [], []
+    for name, hint in typing.get_type_hints(cls).items():
+        args = (hint,) if typing.get_origin(hint) is tuple else (typing.get_args(hint) or (hint,))
+        if float in args:
+            floats.append(name)
+        elif any(typing.get_origin(a) is tuple for a in args):
+            tuples.append(name)
+    return floats, tuples
+
+
+def _make_checker(cls: type) -> Callable[[Sample], str | None]:
+    """A checker specialised to one sample type: finiteness of every number by one sum
+    (NaN and infinities propagate through addition), then the type's physical bounds."""
+    floats, tuples = _float_fields(cls)
+    get_floats = attrgetter(*floats) if len(floats) > 1 else (
+        (lambda s, _g=attrgetter(floats[0]): (_g(s),)) if floats else (lambda s: ()))
+    get_tuples = [attrgetter(n) for n in tuples]
+    bounds = [(attrgetter(n), lo, hi) for n, lo, hi in _BOUNDS.get(cls, ())]
+    isfinite = math.isfinite
+
+    def check(sample: Sample) -> str | None:
+        total = 0.0
+        for v in get_floats(sample):
+            if v is not None:
+                total += v
+        for g in get_tuples:
+            tup = g(sample)
+            if tup:
+                total += sum(tup)
+        if not isfinite(total):
+            return "nan"
+        for g, lo, hi in bounds:
+            v = g(sample)
+            if v is not None and not lo <= v <= hi:
+                return "range"
+        return None
+
+    return check
+
+
+_CHECKERS: dict[type, Callable[[Sample], str | None]] = {}
 
 
 def check_values(sample: Sample) -> str | None:
     """The reason ``sample`` is unusable on its own, or None if it is fine."""
-    if not math.isfinite(sample.t):
+    t = sample.t
+    if not math.isfinite(t):
         return "nan"
-    if isinstance(sample, _ALWAYS_OK):
+    cls = type(sample)
+    if cls in _ALWAYS_OK:
         return None
-    if sample.t <= 0.0:
+    if t <= 0.0:
         return "zero_time"
-    for v in _numbers(sample):
-        if not math.isfinite(v):
-            return "nan"
-    for name, lo, hi in _BOUNDS.get(type(sample), ()):
-        v = getattr(sample, name)
-        if v is not None and not lo <= v <= hi:
+    checker = _CHECKERS.get(cls)
+    if checker is None:
+        checker = _CHECKERS[cls] = _make_checker(cls)
+    reason = checker(sample)
+    if reason is not None:
+        return reason
+    if cls is ActuatorOutputs or cls is RcChannels:
+        for p in sample.pwm_us:  # type: ignore[attr-defined]
+            if p < 0.0 or p > 3000.0:
+                return "range"
+    elif cls is PropellerRpm:
+        if any(abs(r) > 1e5 for r in sample.rpm):  # type: ignore[attr-defined]
             return "range"
-    if isinstance(sample, (ActuatorOutputs, RcChannels)):
-        if any(p < 0.0 or p > 3000.0 for p in sample.pwm_us):
-            return "range"
-    elif isinstance(sample, PropellerRpm):
-        if any(abs(r) > 1e5 for r in sample.rpm):
-            return "range"
-    elif isinstance(sample, DvlVelocity) and not sample.valid:
+    elif cls is DvlVelocity and not sample.valid:  # type: ignore[attr-defined]
         return "invalid"
-    elif isinstance(sample, GnssFix) and sample.fix_quality <= 0:
+    elif cls is GnssFix and sample.fix_quality <= 0:  # type: ignore[attr-defined]
         return "no_fix"
     return None
 
 
+_TAGS: dict[type, str] = {}
+
+
 def sample_type(sample: Sample) -> str:
     """The tag of a sample (``gnss``, ``imu``, ...), used in counters."""
-    return type(sample).__struct_config__.tag  # type: ignore[return-value]
+    cls = type(sample)
+    tag = _TAGS.get(cls)
+    if tag is None:
+        tag = _TAGS[cls] = cls.__struct_config__.tag  # type: ignore[attr-defined]
+    return tag

@@ -1,0 +1,23 @@
+"""``quadratic_drag``: hull resistance grows with the square of speed, ``-d U|U|`` in the
+surge equation (d in 1/m). At planing or displacement speeds of a small boat it dominates
+the linear term."""
+
+from __future__ import annotations
+
+from onboard.closure.effects.base import Effect
+
+
+class QuadraticDrag(Effect):
+    name = "quadratic_drag"
+    params = ("d",)
+    needs_commands = True
+
+    def columns(self, ds, ctx):
+        u = ds.along_s
+        return {"along": (-u * abs(u))[:, None]}
+
+    def dynamics(self, theta, u, i, ds):
+        return -theta[0] * u * abs(u)
+
+
+EFFECT = QuadraticDrag()

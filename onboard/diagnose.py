@@ -1,0 +1,64 @@
+"""``onboard diagnose LOG [--config FILE] [--out DIR]``: model closure on measured data.
+
+Reads the log with the same readers and engine as ``onboard replay``, fits the base model,
+selects the effects that explain its structured residuals on held-out data, and writes
+``DIR/diagnosis.json`` and ``DIR/report.html`` (architecture.md §4.3). Options in the
+config's ``[pipelines.diagnose]`` table: ``declared`` (effects already in the model),
+``holdout_metric``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import msgspec
+
+from drivers.base import UnreadableLog
+from onboard.closure import dataset, report
+from onboard.closure.effects import ALL
+from onboard.closure.select import select
+from onboard.config import decode_section
+from onboard.errors import UsageError
+from onboard.replay import choose_config
+
+
+class DiagnoseConfig(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """``[pipelines.diagnose]``."""
+
+    enabled: bool = True
+    declared: list[str] = []
+    """Effects the model already contains (e.g. a known sideslip), not to be searched."""
+    holdout_metric: str = ""
+    """``surge_speed_open_loop_rmse_mps``, ``ground_velocity_rmse_mps`` or
+    ``lateral_velocity_rmse_mps``; default: the ground velocity when commands exist."""
+    rate_hz: float = 10.0
+
+
+def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = ()) -> dict:
+    opts = decode_section(cfg, "diagnose", DiagnoseConfig)
+    declared = tuple(declared) or tuple(opts.declared)
+    unknown = [d for d in declared if d not in ALL]
+    if unknown:
+        raise UsageError(f"unknown declared effect(s) {unknown}; known: {', '.join(ALL)}")
+    try:
+        ds = dataset.from_log(log, cfg, rate_hz=opts.rate_hz)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    sel = select(ds, declared=declared, metric=opts.holdout_metric or None)
+    return report.write(sel, log, out_dir)
+
+
+def main(args) -> int:
+    if not Path(args.log).exists():
+        raise UsageError(f"{args.log}: no such file or directory")
+    try:
+        cfg, _ = choose_config(args.log, args.config)
+        doc = diagnose(args.log, cfg, Path(args.out))
+    except UnreadableLog as err:
+        raise UsageError(str(err)) from None
+    found = [e for e in doc["effects"] if e["detected"]]
+    names = ", ".join(e["name"] for e in found) or "none"
+    print(f"effects: {names}; held-out {doc['holdout_metric']}: "
+          f"{doc['holdout_error_before']:.4g} -> {doc['holdout_error_after']:.4g} "
+          f"({Path(args.out) / 'diagnosis.json'})")
+    return 0
