@@ -14,6 +14,7 @@ import numpy as np
 
 __all__ = [
     "rk4_step",
+    "rk4_step_list",
     "integrate_rk4",
     "wrap_pi",
     "wrap_2pi",
@@ -38,6 +39,22 @@ def rk4_step(f: Derivative, t: float, x: np.ndarray, h: float) -> np.ndarray:
     k3 = f(t + 0.5 * h, x + (0.5 * h) * k2)
     k4 = f(t + h, x + h * k3)
     return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def rk4_step_list(
+    f: Callable[[float, list[float]], list[float]], t: float, x: list[float], h: float
+) -> list[float]:
+    """:func:`rk4_step` on plain lists of floats: for the small states of the plants this
+    is ~3x faster than numpy, whose per-call overhead dominates 12-element arithmetic."""
+    hh = 0.5 * h
+    k1 = f(t, x)
+    k2 = f(t + hh, [a + hh * b for a, b in zip(x, k1)])
+    k3 = f(t + hh, [a + hh * b for a, b in zip(x, k2)])
+    k4 = f(t + h, [a + h * b for a, b in zip(x, k3)])
+    h6 = h / 6.0
+    return [
+        a + h6 * (b1 + 2.0 * b2 + 2.0 * b3 + b4) for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4)
+    ]
 
 
 def integrate_rk4(

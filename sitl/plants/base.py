@@ -36,7 +36,7 @@ import numpy as np
 
 from onboard.messages import ActuatorCommand
 from sitl.environment import Environment
-from sitl.integrate import GRAVITY, rk4_step, rotation_body_to_ned, wrap_pi
+from sitl.integrate import GRAVITY, rk4_step_list, rotation_body_to_ned, wrap_pi
 from sitl.truth import TruthRecord
 
 __all__ = ["Command", "Plant", "PlantBase", "PropulsionWrench"]
@@ -192,12 +192,13 @@ class PlantBase:
         if dt > 0.0:
             n = max(1, math.ceil(dt / self.dt - 1e-9))
             h = dt / n
-            x = self.x
+            x = self.x.tolist()
+            f = self._f
             for i in range(n):
                 ti = t + i * h
-                self._vc = tuple(float(c) for c in env.current_ned(ti, x[0:3]))
-                x = rk4_step(self._f, ti, x, h)
-            self.x = x
+                self._vc = tuple(env.current_ned(ti, x[0:3]).tolist())
+                x = rk4_step_list(f, ti, x, h)
+            self.x = np.array(x)
         self._t = t + dt
         self._vc = tuple(float(c) for c in env.current_ned(self._t, self.x[0:3]))
         self._xdot = None
@@ -315,19 +316,19 @@ class PlantBase:
         return rot @ x[6:9] + np.asarray(self._vc)
 
     # --------------------------------------------------------- for subclasses
-    def _f(self, t: float, x: np.ndarray) -> np.ndarray:
+    def _f(self, t: float, x: list[float]) -> list[float]:
         return self._rhs(t, x, self._command)
 
     def _derivative_now(self) -> np.ndarray:
         if self._xdot is None:
-            self._xdot = self._rhs(self._t, self.x, self._command)
+            self._xdot = np.array(self._rhs(self._t, self.x.tolist(), self._command))
         return self._xdot
 
-    def _kinematics(self, x: np.ndarray) -> list[float]:
+    def _kinematics(self, x: list[float]) -> list[float]:
         """``[N', E', D', phi', theta', psi']`` for the state ``x`` and the held current:
         ``R(Theta) nu_r[0:3] + V_c`` and ``T(Theta) omega`` written out in scalars (the
         same matrices as :func:`rotation_body_to_ned` and :func:`euler_rate_matrix`)."""
-        phi, theta, psi, u, v, w, p, q, r = x[3:12].tolist()
+        phi, theta, psi, u, v, w, p, q, r = x[3:12]
         cphi, sphi = math.cos(phi), math.sin(phi)
         cth, sth = math.cos(theta), math.sin(theta)
         cpsi, spsi = math.cos(psi), math.sin(psi)
@@ -346,8 +347,8 @@ class PlantBase:
     def _prepare(self, command: Command) -> None:
         """Precompute what depends only on the command (called once per :meth:`step`)."""
 
-    def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
-        """State derivative ``x'`` (same layout as ``x``)."""
+    def _rhs(self, t: float, x: list[float], command: Command) -> list[float]:
+        """State derivative ``x'`` (same layout as ``x``), on plain lists of floats."""
         raise NotImplementedError
 
     def propulsion(self, command: Command) -> PropulsionWrench:

@@ -182,11 +182,11 @@ class BlueROV2(PlantBase):
             + cth * cphi * fd,
         )
 
-    def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
+    def _rhs(self, t: float, x: list[float], command: Command) -> list[float]:
         p = self.params
         kin = self._kinematics(x)
         phi, theta, psi = float(x[3]), float(x[4]), float(x[5])
-        nu = x[6:12].tolist()
+        nu = x[6:12]
         b = p.buoyancy * submerged_fraction(float(x[2]), p.height)
         g = restoring_forces(p.weight, b, (0.0, 0.0, p.z_g), (0.0, 0.0, 0.0), phi, theta)
         fx, fy, fz = self._external_body(phi, theta, psi)
@@ -200,7 +200,7 @@ class BlueROV2(PlantBase):
         rhs[0] += fx
         rhs[1] += fy
         rhs[2] += fz
-        return np.array(kin + self._minv_sp.matvec(rhs))
+        return kin + self._minv_sp.matvec(rhs)
 
     def propulsion(self, command: Command) -> PropulsionWrench:
         tau = ALLOCATION @ thruster_forces(command.thrusters)

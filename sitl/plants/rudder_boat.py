@@ -139,7 +139,7 @@ class RudderBoat(PlantBase):
         d = command.rudder_rad or 0.0
         return p.thrust(th), min(p.rudder_max, max(-p.rudder_max, d))
 
-    def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
+    def _rhs(self, t: float, x: list[float], command: Command) -> list[float]:
         p = self.params
         thrust, d = self._inputs(command)
         psi, u, v, r = x[5], x[6], x[7], x[11]
@@ -151,11 +151,11 @@ class RudderBoat(PlantBase):
         vdot = (-m11 * u * r - (p.y_v0 + p.y_vu * au) * v - p.y_vv * v * abs(v)
                 + p.y_d * u * au * d) / m22
         rdot = (p.n_d * u * au * d - (p.n_r0 + p.n_ru * au) * r - p.n_rr * r * abs(r)) / m33
-        return np.array([
+        return [
             cpsi * u - spsi * v + vc[0], spsi * u + cpsi * v + vc[1], 0.0,
             0.0, 0.0, r,
             udot, vdot, 0.0, 0.0, 0.0, rdot,
-        ])
+        ]
 
     def propulsion(self, command: Command) -> PropulsionWrench:
         p = self.params

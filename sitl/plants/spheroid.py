@@ -188,11 +188,11 @@ class SpheroidAUV(PlantBase):
         z_f = -cu * (w - p.x_fin * q + u * self._ds)
         return y_f, z_f
 
-    def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
+    def _rhs(self, t: float, x: list[float], command: Command) -> list[float]:
         c = self.params
         kin = self._kinematics(x)
         phi, theta = float(x[3]), float(x[4])
-        nu = x[6:12].tolist()
+        nu = x[6:12]
         u, v, w, p, q, r = nu
         n = float(x[12])
         b = self._weight * submerged_fraction(float(x[2]), 2.0 * c.b)
@@ -209,7 +209,7 @@ class SpheroidAUV(PlantBase):
             xf * y_f + c.n_rr * r * abs(r),
         ]
         nudot = self._minv.matvec([tau[i] - cor[i] - g[i] for i in range(6)])
-        return np.array(kin + nudot + [(self._rpm_cmd - n) / c.tau_rpm])
+        return kin + nudot + [(self._rpm_cmd - n) / c.tau_rpm]
 
     @property
     def rpm(self) -> float:

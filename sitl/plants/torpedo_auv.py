@@ -207,11 +207,11 @@ class TorpedoAUV(PlantBase):
         self._dr = -min(lim, max(-lim, command.rudder_rad or 0.0))
         self._ds = min(lim, max(-lim, command.stern_plane_rad or 0.0))
 
-    def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
+    def _rhs(self, t: float, x: list[float], command: Command) -> list[float]:
         c = self.params
         kin = self._kinematics(x)
         phi, theta = float(x[3]), float(x[4])
-        u, v, w, p, q, r, n = x[6:13].tolist()
+        u, v, w, p, q, r, n = x[6:13]
         m, zg = c.m, c.z_g
         b = c.buoyancy * submerged_fraction(float(x[2]), c.diameter)
         wb = c.weight - b
@@ -236,7 +236,7 @@ class TorpedoAUV(PlantBase):
         mn = (c.n_vv * v * abs(v) + c.n_rr * r * abs(r) + c.n_uv * u * v + c.n_ur * u * r
               + c.n_wp * w * p + (c.n_pq - (c.i_yy - c.i_xx)) * p * q + c.n_uudr * uu * dr)
         nudot = self._minv.matvec([fx, fy, fz, mk, mm, mn])
-        return np.array(kin + nudot + [(self._rpm_cmd - n) / c.tau_rpm])
+        return kin + nudot + [(self._rpm_cmd - n) / c.tau_rpm]
 
     @property
     def rpm(self) -> float:

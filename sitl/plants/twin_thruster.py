@@ -132,7 +132,7 @@ class TwinThrusterBoat(PlantBase):
         """(left, right) shaft speeds (rev/s)."""
         return float(self.x[12]), float(self.x[13])
 
-    def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
+    def _rhs(self, t: float, x: list[float], command: Command) -> list[float]:
         p = self.params
         cl = min(1.0, max(-1.0, command.left or 0.0))
         cr = min(1.0, max(-1.0, command.right or 0.0))
@@ -144,12 +144,12 @@ class TwinThrusterBoat(PlantBase):
         udot = (tl + tr + m22 * v * r - (p.d_u + p.d_uu * abs(u)) * u) / m11
         vdot = (-m11 * u * r - (p.d_v + p.d_vv * abs(v)) * v) / m22
         rdot = (p.b * (tl - tr) - (m22 - m11) * u * v - (p.d_r + p.d_rr * abs(r)) * r) / m33
-        return np.array([
+        return [
             cpsi * u - spsi * v + vc[0], spsi * u + cpsi * v + vc[1], 0.0,
             0.0, 0.0, r,
             udot, vdot, 0.0, 0.0, 0.0, rdot,
             (p.n_max * cl - nl) / p.tau_m, (p.n_max * cr - nr) / p.tau_m,
-        ])
+        ]
 
     def propulsion(self, command: Command) -> PropulsionWrench:
         p = self.params
