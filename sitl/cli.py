@@ -1,0 +1,182 @@
+"""``onboard sitl``: run a scenario and emit its sensor streams on real protocols.
+
+Examples::
+
+    onboard sitl --list
+    onboard sitl --scenario jaiabot-turns --duration 300 --seed 1 \\
+        --tlog run.tlog --truth run.truth.jsonl          # as fast as possible, to files
+    onboard sitl --scenario jaiabot-turns --realtime --link udp:127.0.0.1:14550
+    onboard sitl --scenario bluerov2-circle --realtime --link tcp:0.0.0.0:5760 \\
+        --dvl tcp:0.0.0.0:16171                           # Water Linked DVL JSON server
+    onboard sitl --scenario gavia-tidal --realtime --link pty --nmea-pty --dvl pty
+
+Outputs: ``--tlog`` (MAVLink telemetry log; the scenario metadata an estimator may read is
+written beside it as ``<name>.scenario.json``), ``--truth`` (hidden truth, JSON lines),
+``--link`` (MAVLink over ``udp:HOST:PORT``, a ``tcp:HOST:PORT`` server, or ``pty``),
+``--nmea-pty`` (GGA/RMC/VTG/HDT on a pseudo-terminal), ``--dvl tcp:HOST:PORT`` (Water
+Linked A50 JSON server) or ``--dvl pty`` (PD6 on a pseudo-terminal). Pseudo-terminal
+paths and server ports are printed before the run starts. With no output at all, MAVLink
+goes to ``udp:127.0.0.1:14550`` (where a ground station listens).
+
+``--controller pid|nmpc|ampc`` flies ``bluerov2-circle`` with a controller of
+:mod:`sitl.controllers`; ``--report FILE`` writes the run summary (with the tracking
+error for reference-tracking scenarios) as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from onboard.errors import UsageError
+from sitl.emitters import PtySink, Sink, TcpServerSink, TlogSink, open_link
+from sitl.guidance import ControlInput, Controller
+from sitl.plants.base import Command
+from sitl.runner import run
+from sitl.scenarios import SCENARIOS, Scenario, get
+
+DEFAULT_LINK = "udp:127.0.0.1:14550"
+
+
+def list_scenarios() -> str:
+    """One line per scenario: name, vehicle class, default duration, description."""
+    w = max(len(n) for n in SCENARIOS)
+    return "\n".join(f"{sc.name:<{w}}  {sc.vehicle.vehicle_class:<18}  {sc.duration_s:5.0f} s  "
+                     f"{sc.description}" for sc in SCENARIOS.values())
+
+
+class EstimateController:
+    """Adapts a :mod:`sitl.controllers` controller (``update(t, estimate, reference)``) to
+    the simulator's :class:`~sitl.guidance.Controller` hook. The estimate record is built
+    from the true state (perfect navigation), as in the paper's Gazebo runs."""
+
+    def __init__(self, inner: Any, reference: Any, rate_hz: float = 20.0) -> None:
+        self.inner = inner
+        self.reference = reference
+        self.rate_hz = rate_hz
+        self.last_output: Any = None
+
+    def __call__(self, inp: ControlInput) -> Command:
+        from onboard.messages import EstimateRecord
+
+        tr = inp.truth
+        rec = EstimateRecord(vehicle="sitl", pipeline="eseso", t=inp.t, values={
+            "north": tr.north, "east": tr.east, "down": tr.down, "yaw": tr.yaw,
+            "u": tr.u, "v": tr.v, "w": tr.w, "rate_r": tr.r})
+        out = self.inner.update(inp.t, rec, self.reference)
+        self.last_output = out
+        return Command(thrusters=tuple(float(c) for c in out.thrusters))
+
+
+def make_controller(name: str, sc: Scenario) -> Controller:
+    """The closed-loop controller ``name`` for scenario ``sc`` (UsageError if unavailable).
+
+    Uses ``sitl.controllers.make_policy(name, scenario)`` when the controllers package
+    provides it (a policy on the simulator's hook, e.g. with the ESESO in the loop), else
+    wraps ``sitl.controllers.make_controller(name)`` with :class:`EstimateController`.
+    """
+    if sc.name != "bluerov2-circle":
+        raise UsageError(f"--controller applies to bluerov2-circle, not {sc.name}")
+    try:
+        import sitl.controllers as controllers
+    except ImportError as err:
+        raise UsageError(f"controllers not available: {err}") from None
+    try:
+        if hasattr(controllers, "make_policy"):
+            return controllers.make_policy(name, sc)
+        ref = sc.reference
+        reference = controllers.CircleReference(radius=ref.radius, speed=ref.speed,
+                                                depth=ref.depth)
+        return EstimateController(controllers.make_controller(name), reference)
+    except (ImportError, ValueError) as err:
+        raise UsageError(f"controller {name!r} not available: {err}") from None
+
+
+def _server(url: str) -> tuple[str, int]:
+    kind, _, rest = url.partition(":")
+    host, _, port = rest.rpartition(":")
+    if kind != "tcp" or not host or not port.isdigit():
+        raise UsageError(f"--dvl expects tcp:HOST:PORT or pty, got {url!r}")
+    return host, int(port)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Entry point of ``onboard sitl`` (arguments parsed by :mod:`onboard.cli`)."""
+    if getattr(args, "list", False):
+        print(list_scenarios())
+        return 0
+    if not args.scenario:
+        raise UsageError("give --scenario NAME (see --list)")
+    sc = get(args.scenario)
+    duration = sc.duration_s if args.duration is None else float(args.duration)
+    if not (duration > 0 and math.isfinite(duration)):
+        raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
+    controller = make_controller(args.controller, sc) if args.controller else None
+
+    mavlink: list[Sink] = []
+    nmea: list[Sink] = []
+    dvl_json: list[Sink] = []
+    pd6: list[Sink] = []
+    ptys: list[PtySink] = []
+    meta = None
+    try:
+        if args.tlog:
+            mavlink.append(TlogSink(args.tlog))
+            p = Path(args.tlog)
+            meta = p.with_name(p.stem + ".scenario.json")
+        link = args.link
+        if not (args.tlog or link or args.nmea_pty or args.dvl or args.truth):
+            link = DEFAULT_LINK
+        if link:
+            try:
+                sink = open_link(link)
+            except (ValueError, OSError) as err:
+                raise UsageError(f"--link: {err}") from None
+            mavlink.append(sink)
+            if isinstance(sink, PtySink):
+                ptys.append(sink)
+                print(f"MAVLink on {sink.path}", flush=True)
+            elif isinstance(sink, TcpServerSink):
+                print(f"MAVLink TCP server on port {sink.port}", flush=True)
+            else:
+                print(f"MAVLink to {link}", flush=True)
+        if args.nmea_pty:
+            sink = PtySink()
+            ptys.append(sink)
+            nmea.append(sink)
+            print(f"NMEA on {sink.path}", flush=True)
+        if args.dvl:
+            if sc.sensors.dvl is None:
+                raise UsageError(f"scenario {sc.name} has no DVL")
+            if args.dvl == "pty":
+                sink = PtySink()
+                ptys.append(sink)
+                pd6.append(sink)
+                print(f"DVL PD6 on {sink.path}", flush=True)
+            else:
+                host, port = _server(args.dvl)
+                try:
+                    srv = TcpServerSink(host, port)
+                except OSError as err:
+                    raise UsageError(f"--dvl: cannot listen on {args.dvl}: {err}") from None
+                dvl_json.append(srv)
+                print(f"DVL JSON TCP server on port {srv.port}", flush=True)
+        summary = run(sc, duration, args.seed, mavlink=mavlink, nmea=nmea, dvl_json=dvl_json,
+                      pd6=pd6, truth_path=args.truth, meta_path=meta,
+                      realtime=bool(args.realtime), controller=controller)
+    except OSError as err:
+        raise UsageError(f"cannot write output: {err}") from None
+    if args.tlog:
+        summary.outputs["tlog"] = args.tlog
+    if args.controller:
+        summary.outputs["controller"] = args.controller
+    print(f"{sc.name}: {duration:.0f} s simulated in {summary.wall_s:.2f} s, "
+          f"{sum(summary.samples.values())} samples, {sum(summary.frames.values())} frames"
+          + (f", tracking RMS {summary.tracking['rms_position_error_m']:.2f} m"
+             if summary.tracking else ""), flush=True)
+    if args.report:
+        Path(args.report).write_text(json.dumps(summary.as_dict(), indent=2) + "\n")
+    return 0

@@ -1,0 +1,587 @@
+"""Emitters: typed samples out as the bytes real instruments and autopilots send.
+
+Two layers, kept apart so each can be tested alone:
+
+* **encoders** turn the samples of one instant into protocol frames:
+  :class:`MavlinkEncoder` (MAVLink 2, pymavlink's ``ardupilotmega`` dialect, CRCs by
+  pymavlink), :class:`NmeaEncoder` (GGA, RMC, VTG, HDT via :mod:`drivers.nmea`),
+  :class:`DvlJsonEncoder` (Water Linked A50 JSON lines via :mod:`drivers.dvl_json`) and
+  :class:`Pd6Encoder` (Teledyne RDI PD6 ensembles via :mod:`drivers.pd6`);
+* **sinks** move frames: :class:`TlogSink` (a ``.tlog``: 8-byte big-endian microseconds
+  since the Unix epoch, then the frame), :class:`UdpSink`, :class:`TcpServerSink` (a
+  listening socket; every connected client gets every frame), :class:`PtySink` (a serial
+  pseudo-terminal; the slave path is what a reader opens) and :class:`FileSink`.
+
+Every encoder is deterministic: the same samples give the same bytes (MAVLink sequence
+numbers start at 0; time fields derive from the sample times and ``epoch_s``).
+
+MAVLink mapping (what :mod:`drivers.mavlink` reads back):
+
+=====================  ====================================================================
+sample                 MAVLink message
+=====================  ====================================================================
+VehicleInfo            HEARTBEAT (MAV_TYPE of the vehicle, MAV_AUTOPILOT_ARDUPILOTMEGA)
+Parameter              PARAM_VALUE (SERVOn_FUNCTION, as an ArduPilot INT16 parameter)
+GnssFix                GPS_RAW_INT (fix_type 3)
+VelocityOverGround     GLOBAL_POSITION_INT (vx, vy, vz; lat/lon dead-reckoned from them;
+                       hdg from the last attitude; alt from the last depth)
+Imu                    SCALED_IMU (mg, mrad/s; xmag..zmag from the last heading)
+Attitude               ATTITUDE
+Heading                VFR_HUD (groundspeed from the last fix/INS, throttle from the last
+                       outputs), at most ``vfr_hud_hz``
+Depth                  SCALED_PRESSURE2 (the external pressure sensor of ArduSub)
+ActuatorOutputs        SERVO_OUTPUT_RAW
+PropellerRpm           RPM (rpm1, rpm2 = -1 when absent)
+DvlVelocity (bottom)   VISION_POSITION_DELTA (position delta over the time since the
+                       previous report, confidence 0 on lock loss) and DISTANCE_SENSOR
+                       (downward, the DVL altitude)
+=====================  ====================================================================
+
+DvlPosition and water-track DvlVelocity have no MAVLink message here; they go out on the
+DVL JSON and PD6 links.
+"""
+
+from __future__ import annotations
+
+import array
+import fcntl
+import math
+import os
+import select
+import socket
+import termios
+import time
+import tty
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol, Sequence
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from onboard.messages import (
+    ActuatorOutputs,
+    Attitude,
+    Depth,
+    DvlPosition,
+    DvlVelocity,
+    GnssFix,
+    Heading,
+    Imu,
+    Parameter,
+    PropellerRpm,
+    Sample,
+    VehicleInfo,
+    VelocityOverGround,
+)
+
+DEFAULT_EPOCH_S = 1_767_225_600.0
+"""Unix time of simulation t = 0 in logs: 2026-01-01T00:00:00Z (fixed, for determinism)."""
+
+MAV_TYPE_SURFACE_BOAT = 11
+MAV_TYPE_SUBMARINE = 12
+MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+MAV_STATE_ACTIVE = 4
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
+MAV_PARAM_TYPE_INT16 = 4
+MAV_SENSOR_ROTATION_PITCH_270 = 25
+MAV_DISTANCE_SENSOR_ULTRASOUND = 1
+GRAVITY_MSS = 9.80665
+"""ArduPilot's mg scaling constant (m/s^2 per 1000 mg)."""
+EARTH_FIELD_GAUSS = (0.2, 0.0, 0.4)
+"""A mid-latitude magnetic field in NED (gauss), for SCALED_IMU's magnetometer fields."""
+
+
+def _i16(x: float) -> int:
+    return max(-32768, min(32767, int(round(x))))
+
+
+def _u16(x: float) -> int:
+    return max(0, min(65535, int(round(x))))
+
+
+class MavlinkEncoder:
+    """Samples -> MAVLink 2 frames from one vehicle (system ``system_id``, component 1).
+
+    ``origin`` is the (lat, lon) in degrees of the local frame, used to dead-reckon the
+    GLOBAL_POSITION_INT position from the INS velocity (starting at ``start_ne``, m).
+    ``dvl_period_s`` is the time delta of the first VISION_POSITION_DELTA.
+    """
+
+    def __init__(self, *, mav_type: int, system_id: int = 1, component_id: int = 1,
+                 custom_mode: int = 0, origin: tuple[float, float] = (0.0, 0.0),
+                 start_ne: tuple[float, float] = (0.0, 0.0), dvl_period_s: float = 0.2,
+                 dvl_max_altitude_m: float = 50.0, vfr_hud_hz: float = 2.0,
+                 epoch_s: float = DEFAULT_EPOCH_S) -> None:
+        self.mav = mavlink2.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.mav_type = mav_type
+        self.custom_mode = custom_mode
+        lat0 = math.radians(origin[0])
+        self.m_lat = 111132.954 - 559.822 * math.cos(2 * lat0) + 1.175 * math.cos(4 * lat0)
+        self.m_lon = math.pi / 180.0 * 6367449.0 * math.cos(lat0)
+        self.origin = origin
+        self.ins_ne = list(start_ne)
+        self.epoch_s = epoch_s
+        self.dvl_period_s = dvl_period_s
+        self.dvl_max_cm = _u16(dvl_max_altitude_m * 100.0)
+        self.vfr_period = 1.0 / vfr_hud_hz if vfr_hud_hz > 0 else math.inf
+        self._t_vfr = -math.inf
+        self._t_ins: float | None = None
+        self._t_dvl: float | None = None
+        self._att: Attitude | None = None
+        self._depth = 0.0
+        self._climb = 0.0
+        self._speed = 0.0
+        self._throttle = 0
+        self._heading = 0.0
+        self._params: list[Parameter] = []
+        self.frames = 0
+
+    def _pack(self, msg) -> bytes:
+        buf = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        self.frames += 1
+        return buf
+
+    def set_parameters(self, params: Sequence[Parameter]) -> None:
+        """The parameter set, so PARAM_VALUE carries the right count and indices."""
+        self._params = list(params)
+
+    def encode(self, samples: Sequence[Sample]) -> list[bytes]:
+        """The frames for ``samples`` (one instant, in order)."""
+        out: list[bytes] = []
+        m = self.mav
+        for s in samples:
+            t = s.t
+            ms = int(round(t * 1000.0)) & 0xFFFFFFFF
+            if isinstance(s, Imu):
+                out.append(self._pack(m.scaled_imu_encode(
+                    ms, _i16(s.accel_x / GRAVITY_MSS * 1000.0),
+                    _i16(s.accel_y / GRAVITY_MSS * 1000.0),
+                    _i16(s.accel_z / GRAVITY_MSS * 1000.0),
+                    _i16(s.gyro_x * 1000.0), _i16(s.gyro_y * 1000.0), _i16(s.gyro_z * 1000.0),
+                    *self._mag_mgauss(), 2000)))
+            elif isinstance(s, Attitude):
+                self._att = s
+                out.append(self._pack(m.attitude_encode(
+                    ms, s.roll_rad, s.pitch_rad, s.yaw_rad, s.roll_rate_rps or 0.0,
+                    s.pitch_rate_rps or 0.0, s.yaw_rate_rps or 0.0)))
+            elif isinstance(s, GnssFix):
+                self._speed = s.sog_mps or 0.0
+                cog = 65535 if s.cog_rad is None else _u16(
+                    math.degrees(s.cog_rad) % 360.0 * 100.0) % 36000
+                alt_mm = int(round((s.alt_m or 0.0) * 1000.0))
+                out.append(self._pack(m.gps_raw_int_encode(
+                    int(round((self.epoch_s + t) * 1e6)), 3 if s.fix_quality == 1 else 4,
+                    int(round(s.lat_deg * 1e7)), int(round(s.lon_deg * 1e7)), alt_mm,
+                    _u16((s.hdop or 0.0) * 100.0) if s.hdop is not None else 65535, 65535,
+                    _u16((s.sog_mps or 0.0) * 100.0), cog, s.num_sats or 255, alt_mm,
+                    int(round((s.h_acc_m or 0.0) * 1000.0)),
+                    int(round((s.v_acc_m or 0.0) * 1000.0)), 0, 0, 0)))
+            elif isinstance(s, VelocityOverGround):
+                out.append(self._global_position(s, ms))
+            elif isinstance(s, Heading):
+                self._heading = s.heading_rad
+                if t >= self._t_vfr + self.vfr_period - 1e-9:
+                    self._t_vfr = t
+                    out.append(self._pack(m.vfr_hud_encode(
+                        self._speed, self._speed, int(round(math.degrees(s.heading_rad))) % 360,
+                        self._throttle, -self._depth, self._climb)))
+            elif isinstance(s, Depth):
+                self._depth = s.depth_m
+                p = s.pressure_pa if s.pressure_pa is not None else 101325.0 + 1025.0 * GRAVITY_MSS * s.depth_m
+                out.append(self._pack(m.scaled_pressure2_encode(
+                    ms, p / 100.0, (p - 101325.0) / 100.0,
+                    _i16((s.temperature_c if s.temperature_c is not None else 15.0) * 100.0))))
+            elif isinstance(s, ActuatorOutputs):
+                pwm = [_u16(x) for x in s.pwm_us[:16]] + [0] * max(0, 16 - len(s.pwm_us))
+                self._throttle = self._throttle_percent(pwm)
+                out.append(self._pack(m.servo_output_raw_encode(
+                    int(round(t * 1e6)) & 0xFFFFFFFF, 0, *pwm)))
+            elif isinstance(s, PropellerRpm):
+                r = list(s.rpm) + [-1.0]
+                out.append(self._pack(m.rpm_encode(float(r[0]), float(r[1]))))
+            elif isinstance(s, DvlVelocity):
+                if s.track == "bottom":
+                    out.extend(self._dvl(s, ms))
+            elif isinstance(s, VehicleInfo):
+                out.append(self._pack(m.heartbeat_encode(
+                    self.mav_type, MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    MAV_MODE_FLAG_SAFETY_ARMED | MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                    self.custom_mode, MAV_STATE_ACTIVE, 3)))
+            elif isinstance(s, Parameter):
+                names = [p.name for p in self._params]
+                idx = names.index(s.name) if s.name in names else 65535
+                out.append(self._pack(m.param_value_encode(
+                    s.name.encode("ascii")[:16], float(s.value), MAV_PARAM_TYPE_INT16,
+                    max(len(self._params), 1), idx)))
+            # DvlPosition: no MAVLink message (DVL JSON / PD6 only)
+        return out
+
+    def _throttle_percent(self, pwm: list[int]) -> int:
+        """VFR_HUD throttle (%): the largest deflection of any output from 1500 us."""
+        dev = [abs(p - 1500) for p in pwm if p]
+        return min(100, int(round(max(dev, default=0) / 4.0)))
+
+    def _mag_mgauss(self) -> tuple[int, int, int]:
+        """Body-frame magnetometer (mgauss) consistent with the last heading and attitude."""
+        psi = self._heading
+        phi = self._att.roll_rad if self._att else 0.0
+        th = self._att.pitch_rad if self._att else 0.0
+        bn, be, bd = EARTH_FIELD_GAUSS
+        cp, sp = math.cos(psi), math.sin(psi)
+        # earth -> yaw frame
+        x1, y1, z1 = cp * bn + sp * be, -sp * bn + cp * be, bd
+        ct, st = math.cos(th), math.sin(th)
+        x2, z2 = ct * x1 - st * z1, st * x1 + ct * z1
+        cf, sf = math.cos(phi), math.sin(phi)
+        y3, z3 = cf * y1 + sf * z2, -sf * y1 + cf * z2
+        return _i16(x2 * 1000.0), _i16(y3 * 1000.0), _i16(z3 * 1000.0)
+
+    def _global_position(self, s: VelocityOverGround, ms: int) -> bytes:
+        t = s.t
+        if self._t_ins is not None:
+            dt = t - self._t_ins
+            self.ins_ne[0] += s.v_north_mps * dt
+            self.ins_ne[1] += s.v_east_mps * dt
+        self._t_ins = t
+        self._speed = math.hypot(s.v_north_mps, s.v_east_mps)
+        self._climb = -(s.v_down_mps or 0.0)
+        lat = self.origin[0] + self.ins_ne[0] / self.m_lat
+        lon = self.origin[1] + self.ins_ne[1] / self.m_lon
+        yaw = self._att.yaw_rad if self._att is not None else self._heading
+        hdg = _u16(math.degrees(yaw) % 360.0 * 100.0) % 36000
+        alt_mm = int(round(-self._depth * 1000.0))
+        return self._pack(self.mav.global_position_int_encode(
+            ms, int(round(lat * 1e7)), int(round(lon * 1e7)), alt_mm, alt_mm,
+            _i16(s.v_north_mps * 100.0), _i16(s.v_east_mps * 100.0),
+            _i16((s.v_down_mps or 0.0) * 100.0), hdg))
+
+    def _dvl(self, s: DvlVelocity, ms: int) -> list[bytes]:
+        t = s.t
+        dt = self.dvl_period_s if self._t_dvl is None else t - self._t_dvl
+        self._t_dvl = t
+        dt_us = max(1, int(round(dt * 1e6)))
+        dts = dt_us * 1e-6
+        a = self._att
+        ang = [0.0, 0.0, 0.0]
+        if a is not None:
+            ang = [(a.roll_rate_rps or 0.0) * dts, (a.pitch_rate_rps or 0.0) * dts,
+                   (a.yaw_rate_rps or 0.0) * dts]
+        if s.valid:
+            pos = [s.vx * dts, s.vy * dts, s.vz * dts]
+            conf = 100.0 if s.fom_mps is None else max(1.0, min(100.0, 100.0 - 1000.0 * s.fom_mps))
+        else:
+            pos, conf = [0.0, 0.0, 0.0], 0.0
+        out = [self._pack(self.mav.vision_position_delta_encode(
+            int(round((self.epoch_s + t) * 1e6)), dt_us, ang, pos, conf))]
+        if s.valid and s.altitude_m is not None:
+            out.append(self._pack(self.mav.distance_sensor_encode(
+                ms, 5, self.dvl_max_cm, _u16(s.altitude_m * 100.0),
+                MAV_DISTANCE_SENSOR_ULTRASOUND, 1, MAV_SENSOR_ROTATION_PITCH_270, 255,
+                0.0, 0.0, (0.0, 0.0, 0.0, 0.0), 100)))
+        return out
+
+
+class NmeaEncoder:
+    """GnssFix -> GGA, RMC, VTG (talker GP); Heading -> HDT (talker HE). Time of day from
+    ``epoch_s + t``."""
+
+    def __init__(self, epoch_s: float = DEFAULT_EPOCH_S) -> None:
+        self.epoch_s = epoch_s
+
+    def encode(self, samples: Sequence[Sample]) -> list[bytes]:
+        from drivers import nmea
+
+        out: list[bytes] = []
+        for s in samples:
+            if isinstance(s, GnssFix):
+                tu = self.epoch_s + s.t
+                out.append(nmea.encode_gga(tu, s.lat_deg, s.lon_deg, s.alt_m or 0.0,
+                                           s.fix_quality, s.num_sats or 0, s.hdop or 1.0))
+                out.append(nmea.encode_rmc(tu, s.lat_deg, s.lon_deg, s.sog_mps or 0.0,
+                                           s.cog_rad))
+                out.append(nmea.encode_vtg(s.sog_mps or 0.0, s.cog_rad))
+            elif isinstance(s, Heading):
+                out.append(nmea.encode_hdt(s.heading_rad))
+        return out
+
+
+class DvlJsonEncoder:
+    """DvlVelocity -> Water Linked ``velocity`` (or ``velocity_water``) reports;
+    DvlPosition -> ``position_local`` reports (one JSON object per line)."""
+
+    def __init__(self, epoch_s: float = DEFAULT_EPOCH_S, period_s: float = 0.2) -> None:
+        self.epoch_s = epoch_s
+        self.period_s = period_s
+        self._t_last: dict[str, float] = {}
+
+    def encode(self, samples: Sequence[Sample]) -> list[bytes]:
+        from drivers import dvl_json
+
+        out: list[bytes] = []
+        for s in samples:
+            if isinstance(s, DvlVelocity):
+                last = self._t_last.get(s.track)
+                dt = self.period_s if last is None else s.t - last
+                self._t_last[s.track] = s.t
+                tu = self.epoch_s + s.t
+                out.append(dvl_json.encode_velocity_report(
+                    s.vx, s.vy, s.vz, valid=s.valid, fom_mps=s.fom_mps or 0.0,
+                    altitude_m=s.altitude_m if s.altitude_m is not None else -1.0,
+                    dt_ms=dt * 1000.0, t_validity_s=tu, t_transmission_s=tu,
+                    covariance=s.covariance, track=s.track))
+            elif isinstance(s, DvlPosition):
+                out.append(dvl_json.encode_position_local(
+                    s.north_m, s.east_m, s.down_m, t_s=self.epoch_s + s.t,
+                    std_m=s.std_m if s.std_m is not None else 0.1,
+                    roll_rad=s.roll_rad or 0.0, pitch_rad=s.pitch_rad or 0.0,
+                    yaw_rad=s.yaw_rad or 0.0))
+        return out
+
+
+class Pd6Encoder:
+    """Bottom-track DvlVelocity -> a PD6 ensemble (SA, TS, BI, BS, BE, BD) using the last
+    Attitude and Depth; water-track DvlVelocity -> WI and WS lines."""
+
+    def __init__(self, epoch_s: float = DEFAULT_EPOCH_S) -> None:
+        self.epoch_s = epoch_s
+        self._att: Attitude | None = None
+        self._depth = 0.0
+
+    def encode(self, samples: Sequence[Sample]) -> list[bytes]:
+        from drivers import pd6
+
+        out: list[bytes] = []
+        for s in samples:
+            if isinstance(s, Attitude):
+                self._att = s
+            elif isinstance(s, Depth):
+                self._depth = s.depth_m
+            elif isinstance(s, DvlVelocity):
+                if s.track == "water":
+                    out.append(pd6.encode_bi(s.vx, s.vy, s.vz, valid=s.valid, water=True)
+                               + pd6.encode_bs(s.vx, s.vy, s.vz, valid=s.valid, water=True))
+                    continue
+                a = self._att
+                out.append(pd6.encode_ensemble(
+                    self.epoch_s + s.t, s.vx, s.vy, s.vz, valid=s.valid,
+                    depth_m=max(0.0, self._depth),
+                    altitude_m=s.altitude_m if s.altitude_m is not None else 0.0,
+                    roll_rad=a.roll_rad if a else 0.0, pitch_rad=a.pitch_rad if a else 0.0,
+                    heading_rad=a.yaw_rad if a else 0.0))
+        return out
+
+
+# --------------------------------------------------------------------------- sinks
+
+
+class Sink(Protocol):
+    """Where frames go. ``t`` is the simulation time of the frame (s)."""
+
+    def write(self, t: float, frame: bytes) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class TlogSink:
+    """A MAVLink telemetry log (:class:`drivers.tlog.TlogWriter`): per frame, the receive
+    time ``epoch_s + t`` as big-endian microseconds since the Unix epoch, then the frame."""
+
+    def __init__(self, path: str | Path, epoch_s: float = DEFAULT_EPOCH_S) -> None:
+        from drivers.tlog import TlogWriter
+
+        self.path = Path(path)
+        self.epoch_s = epoch_s
+        self._w = TlogWriter(self.path)
+
+    def write(self, t: float, frame: bytes) -> None:
+        self._w.write(self.epoch_s + t, frame)
+
+    def close(self) -> None:
+        self._w.close()
+
+
+class FileSink:
+    """Raw bytes to a file (an NMEA, DVL JSON or PD6 capture)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self._f = open(path, "wb", buffering=1 << 16)
+
+    def write(self, t: float, frame: bytes) -> None:
+        self._f.write(frame)
+
+    def close(self) -> None:
+        self._f.close()
+
+
+class UdpSink:
+    """One datagram per frame to ``host:port`` (what ``mavutil`` calls ``udpin`` on the
+    receiving side listens for)."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self.addr = (host, port)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.dropped = 0
+
+    def write(self, t: float, frame: bytes) -> None:
+        try:
+            self.sock.sendto(frame, self.addr)
+        except OSError:  # nobody listening (ICMP refused) or buffer full: a lost datagram
+            self.dropped += 1
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class TcpServerSink:
+    """A TCP server on ``host:port`` (port 0 picks a free one, see :attr:`port`); every
+    connected client receives every frame written after it connected. A client that
+    cannot keep up or goes away is dropped; the simulation never blocks on it."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self.server.bind((host, port))
+        self.server.listen(4)
+        self.server.setblocking(False)
+        self.port = self.server.getsockname()[1]
+        self.clients: list[socket.socket] = []
+        self.dropped = 0
+
+    def accept(self) -> None:
+        """Accept any pending connections (called on each write)."""
+        while True:
+            try:
+                c, _ = self.server.accept()
+            except (BlockingIOError, InterruptedError):
+                return
+            c.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            c.settimeout(1.0)
+            self.clients.append(c)
+
+    def wait_for_client(self, timeout_s: float) -> bool:
+        """Block up to ``timeout_s`` for a first client; True when one is connected."""
+        if not self.clients:
+            r, _, _ = select.select([self.server], [], [], timeout_s)
+            if r:
+                self.accept()
+        return bool(self.clients)
+
+    def write(self, t: float, frame: bytes) -> None:
+        self.accept()
+        for c in list(self.clients):
+            try:
+                c.sendall(frame)
+            except OSError:
+                self.dropped += 1
+                self.clients.remove(c)
+                c.close()
+
+    def close(self) -> None:
+        for c in self.clients:
+            c.close()
+        self.server.close()
+
+
+class PtySink:
+    """A serial pseudo-terminal: frames go to the master side; readers open
+    :attr:`path` (the slave, e.g. ``/dev/pts/5``) as they would a USB serial port.
+
+    The slave is in raw mode (no echo, no newline translation). Writes never block: while
+    nobody reads, whole frames beyond ``max_pending`` bytes are dropped and counted, as
+    bytes are lost on a serial line nobody listens to; a frame is never cut.
+    """
+
+    def __init__(self, max_pending: int = 1 << 20) -> None:
+        self.master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        os.set_blocking(self.master, False)
+        self.path = os.ttyname(self._slave)
+        self._pending: deque[bytes] = deque()
+        self._pending_bytes = 0
+        self.max_pending = max_pending
+        self.dropped = 0
+
+    def flush(self) -> None:
+        """Write as much pending data as the terminal takes now."""
+        q = self._pending
+        while q:
+            head = q[0]
+            try:
+                n = os.write(self.master, head)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:  # slave side gone
+                self.dropped += len(q)
+                q.clear()
+                self._pending_bytes = 0
+                return
+            self._pending_bytes -= n
+            if n < len(head):
+                q[0] = head[n:]
+                return
+            q.popleft()
+
+    def write(self, t: float, frame: bytes) -> None:
+        if self._pending_bytes + len(frame) > self.max_pending:
+            self.flush()
+            if self._pending_bytes + len(frame) > self.max_pending:
+                self.dropped += 1
+                return
+        self._pending.append(frame)
+        self._pending_bytes += len(frame)
+        self.flush()
+
+    def unread(self) -> int:
+        """Bytes written but not yet read by the other side (in the terminal's queue)."""
+        buf = array.array("i", [0])
+        try:
+            fcntl.ioctl(self._slave, termios.FIONREAD, buf)
+        except OSError:
+            return 0
+        return buf[0]
+
+    def close(self, drain_s: float = 1.0) -> None:
+        """Give a reader up to ``drain_s`` seconds to take what is pending (ours and the
+        terminal's queue), then close."""
+        deadline = time.monotonic() + drain_s
+        self.flush()
+        quiet = 0  # the terminal moves data to the slave asynchronously: see it empty twice
+        while quiet < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+            self.flush()
+            quiet = quiet + 1 if not (self._pending or self.unread()) else 0
+        os.close(self.master)
+        os.close(self._slave)
+
+
+def open_link(url: str) -> Sink:
+    """A sink from ``udp:HOST:PORT``, ``tcp:HOST:PORT`` or ``pty``; ValueError otherwise."""
+    if url == "pty":
+        return PtySink()
+    kind, _, rest = url.partition(":")
+    host, _, port = rest.rpartition(":")
+    if kind not in ("udp", "tcp") or not host or not port.isdigit():
+        raise ValueError(f"link must be udp:HOST:PORT, tcp:HOST:PORT or pty, got {url!r}")
+    return UdpSink(host, int(port)) if kind == "udp" else TcpServerSink(host, int(port))
+
+
+@dataclass
+class Channel:
+    """An encoder feeding one or more sinks; :meth:`emit` pushes one instant's samples."""
+
+    encoder: MavlinkEncoder | NmeaEncoder | DvlJsonEncoder | Pd6Encoder
+    sinks: list[Sink]
+
+    def emit(self, t: float, samples: Sequence[Sample]) -> int:
+        frames = self.encoder.encode(samples)
+        for f in frames:
+            for s in self.sinks:
+                s.write(t, f)
+        return len(frames)
+
+    def close(self) -> None:
+        for s in self.sinks:
+            s.close()

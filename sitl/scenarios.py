@@ -1,0 +1,628 @@
+"""Scenarios: a vehicle, its sea, its sensors, its mission and the effects injected.
+
+``sitl.scenarios.get(name)`` returns a :class:`Scenario`; :data:`SCENARIOS` lists them all
+(``onboard sitl --list``). The names are a contract (tests and docs use them):
+
+* the four papers' experiments: ``jaiabot-turns`` (AIE paper), ``bluerov2-circle``
+  (ESESO paper), ``gavia-tidal`` (HGO paper), ``spheroid-sawtooth`` (nonlinear-observer
+  paper), and ``twin-thruster-turns`` (a BlueBoat doing skid-steering manoeuvres);
+* the model-closure material, one undeclared effect each on a rudder boat whose nominal
+  dynamics are the linear surge model of algorithms.md §1 (linear thrust, linear drag):
+  ``effect-current``, ``effect-compass-deviation``, ``effect-heading-bias``,
+  ``effect-gyro-bias``, ``effect-gps-latency``, ``effect-thrust-nonlinearity``,
+  ``effect-quadratic-drag``, ``effect-surge-yaw-coupling``, ``effect-sideslip``,
+  ``effect-waves``, ``effect-two`` (current and compass deviation at once) and ``clean``
+  (the same boat and mission, nothing injected).
+
+What the estimator may know of a scenario is :meth:`Scenario.metadata` (vehicle class,
+sensor rates and noise figures, the *declared* effects); the injected effects'
+parameters are only in the truth file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from onboard.errors import UsageError
+from onboard.messages import Parameter
+from sitl.effects import Effect
+from sitl.emitters import MAV_TYPE_SUBMARINE, MAV_TYPE_SURFACE_BOAT
+from sitl.environment import CurrentField, Environment
+from sitl.guidance import (
+    AuvAutopilot,
+    BoatAutopilot,
+    CircleReference,
+    Controller,
+    HeadingSchedule,
+    Leg,
+    RovCirclePid,
+)
+from sitl.plants.base import Command, Plant
+from sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
+from sitl.plants.twin_thruster import TwinThrusterBoat, TwinThrusterParams
+from sitl.sensors import (
+    ActuatorConfig,
+    CompassConfig,
+    DepthConfig,
+    DvlConfig,
+    GnssConfig,
+    ImuConfig,
+    InsConfig,
+    PwmChannel,
+    RpmConfig,
+    SensorSuiteConfig,
+)
+
+DEG = math.pi / 180.0
+
+# ArduPilot SERVOn_FUNCTION numbers
+FN_GROUND_STEERING = 26
+FN_THROTTLE = 70
+FN_THROTTLE_LEFT = 73
+FN_THROTTLE_RIGHT = 74
+FN_ELEVATOR = 19
+FN_RUDDER = 21
+FN_MOTOR1 = 33
+"""Motor1..Motor6 are 33..38 (ArduSub vectored frame)."""
+
+# ArduPilot custom modes carried in HEARTBEAT
+ROVER_MODE_AUTO = 10
+SUB_MODE_GUIDED = 4
+SUB_MODE_AUTO = 3
+
+
+# --------------------------------------------------------------------------- vehicles
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """A vehicle class as the simulator needs it.
+
+    ``make_plant()`` builds the plant; ``channels`` are its PWM outputs (SERVO_OUTPUT_RAW
+    order and SERVOn_FUNCTION); ``to_channels(cmd)`` the normalized value of each channel
+    for a command and ``from_channels(values, cmd)`` the command the plant receives from
+    the effective channel values (after PWM quantization, saturation and ESC deadband);
+    ``thrust_level(cmd)`` the signed propulsion level in [-1, 1] (compass interference);
+    ``shaft_rpm(plant, cmd)`` the true propeller speeds (rev/min) for the RPM sensor;
+    ``surge_mass(plant)`` the effective surge mass (kg) for force effects.
+    """
+
+    vehicle_class: str
+    mav_type: int
+    custom_mode: int
+    make_plant: Callable[[], Plant]
+    channels: tuple[PwmChannel, ...]
+    to_channels: Callable[[Command], tuple[float, ...]]
+    from_channels: Callable[[tuple[float, ...], Command], Command]
+    thrust_level: Callable[[Command], float]
+    shaft_rpm: Callable[[Any, Command], tuple[float, ...]] = lambda plant, cmd: ()
+    surge_mass: Callable[[Any], float] = lambda plant: 1.0
+
+    def parameters(self) -> list[Parameter]:
+        """SERVOn_FUNCTION parameters of the outputs, as the autopilot would report them."""
+        return [Parameter(t=0.0, source="autopilot", name=f"SERVO{ch.channel}_FUNCTION",
+                          value=float(ch.function)) for ch in self.channels]
+
+
+RUDDER_FULL_RAD = 0.5236
+"""Rudder angle at full PWM deflection (+-500 us = +-30 deg, config/rudder-boat.toml)."""
+FIN_FULL_RAD = 0.2618
+"""Fin angle at full PWM deflection (+-500 us = +-15 deg, config/torpedo-auv.toml)."""
+
+
+@dataclass(frozen=True)
+class NominalRudderBoatParams(RudderBoatParams):
+    """Rudder-boat parameters with a configurable thrust law ``T = k sign(th) |th|^e``
+    (``thrust_exponent`` e; the plant's own law is e = 2)."""
+
+    thrust_exponent: float = 2.0
+
+    def thrust(self, throttle: float) -> float:
+        th = min(1.0, max(-1.0, throttle))
+        k = self.t_max if th >= 0.0 else self.k_rev * self.t_max
+        return k * math.copysign(abs(th) ** self.thrust_exponent, th)
+
+    def steady_speed(self, throttle: float) -> float:
+        """Straight-line speed (m/s), root of d_uu u^2 + d_u u = T (also for d_uu = 0)."""
+        t = self.thrust(throttle)
+        if self.d_uu == 0.0:
+            return t / self.d_u
+        return (-self.d_u + math.sqrt(self.d_u**2 + 4.0 * self.d_uu * t)) / (2.0 * self.d_uu)
+
+
+NOMINAL_BOAT = NominalRudderBoatParams(thrust_exponent=1.0, d_u=4.0, d_uu=0.0, x_dd=0.0)
+"""The effect scenarios' boat: linear thrust (12.5 N at full throttle), linear surge drag
+(4 N s/m: time constant 0.79 s, 3.1 m/s at full throttle), no rudder drag, so that its
+surge obeys algorithms.md §1's v' = -a v + b tau exactly and every nonlinearity in the
+data is an injected effect."""
+
+
+class ForcedRudderBoat(RudderBoat):
+    """The rudder boat with ``command.external_force_world`` (N, NED) applied at the origin
+    (used by the force effects; the base plant reports but does not apply it)."""
+
+    def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
+        xd = super()._rhs(t, x, command)
+        f = command.external_force_world
+        if f is not None:
+            p = self.params
+            c, s = math.cos(x[5]), math.sin(x[5])
+            xd[6] += (c * f[0] + s * f[1]) / p.m11
+            xd[7] += (-s * f[0] + c * f[1]) / p.m22
+        return xd
+
+
+class ForcedTwinThrusterBoat(TwinThrusterBoat):
+    """The twin-thruster boat with ``command.external_force_world`` applied."""
+
+    def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
+        xd = super()._rhs(t, x, command)
+        f = command.external_force_world
+        if f is not None:
+            p = self.params
+            c, s = math.cos(x[5]), math.sin(x[5])
+            xd[6] += (c * f[0] + s * f[1]) / p.m11
+            xd[7] += (-s * f[0] + c * f[1]) / p.m22
+        return xd
+
+
+def _rudder_boat(params: RudderBoatParams | None = None) -> VehicleSpec:
+    p = params or RudderBoatParams()
+    return VehicleSpec(
+        vehicle_class="rudder-boat",
+        mav_type=MAV_TYPE_SURFACE_BOAT,
+        custom_mode=ROVER_MODE_AUTO,
+        make_plant=lambda: ForcedRudderBoat(p),
+        channels=(PwmChannel(channel=1, function=FN_GROUND_STEERING, half_range_us=500,
+                             min_us=1000, max_us=2000),
+                  PwmChannel(channel=3, function=FN_THROTTLE, half_range_us=500,
+                             min_us=1000, max_us=2000)),
+        to_channels=lambda c: ((c.rudder_rad or 0.0) / RUDDER_FULL_RAD, c.throttle or 0.0),
+        from_channels=lambda v, c: Command(rudder_rad=v[0] * RUDDER_FULL_RAD, throttle=v[1]),
+        thrust_level=lambda c: c.throttle or 0.0,
+        surge_mass=lambda plant: plant.params.m11,
+    )
+
+
+def _twin_thruster() -> VehicleSpec:
+    return VehicleSpec(
+        vehicle_class="twin-thruster-boat",
+        mav_type=MAV_TYPE_SURFACE_BOAT,
+        custom_mode=ROVER_MODE_AUTO,
+        make_plant=lambda: ForcedTwinThrusterBoat(),
+        channels=(PwmChannel(channel=1, function=FN_THROTTLE_LEFT, deadband_us=25),
+                  PwmChannel(channel=3, function=FN_THROTTLE_RIGHT, deadband_us=25)),
+        to_channels=lambda c: (c.left or 0.0, c.right or 0.0),
+        from_channels=lambda v, c: Command(left=v[0], right=v[1]),
+        thrust_level=lambda c: 0.5 * ((c.left or 0.0) + (c.right or 0.0)),
+        shaft_rpm=lambda plant, c: tuple(n * 60.0 for n in plant.shaft_speeds),
+        surge_mass=lambda plant: plant.params.m11,
+    )
+
+
+def _bluerov2() -> VehicleSpec:
+    from sitl.plants.bluerov2 import BlueROV2
+
+    return VehicleSpec(
+        vehicle_class="bluerov2",
+        mav_type=MAV_TYPE_SUBMARINE,
+        custom_mode=SUB_MODE_GUIDED,
+        make_plant=lambda: BlueROV2(),
+        channels=tuple(PwmChannel(channel=i + 1, function=FN_MOTOR1 + i, deadband_us=25)
+                       for i in range(6)),
+        to_channels=lambda c: tuple(c.thrusters or (0.0,) * 6),
+        from_channels=lambda v, c: Command(thrusters=tuple(v)),
+        thrust_level=lambda c: float(np.mean(np.abs(c.thrusters))) if c.thrusters else 0.0,
+        surge_mass=lambda plant: float(plant.params.mass_matrix[0, 0]),
+    )
+
+
+def _auv(kind: str) -> VehicleSpec:
+    """A torpedo-shaped AUV (``"torpedo"`` or ``"spheroid"``): rudder on SERVO1, stern
+    plane on SERVO2 (1500 us neutral, +-500 us = +-15 deg), propeller speed on SERVO3
+    (throttle, 1500 + 500 rpm / max_rpm us) and reported by RPM.rpm1."""
+    if kind == "torpedo":
+        from sitl.plants.torpedo_auv import REMUS100, TorpedoAUV
+
+        max_rpm, make, cls = REMUS100.max_rpm, TorpedoAUV, "torpedo-auv"
+    else:
+        from sitl.plants.spheroid import SpheroidAUV, SpheroidParams
+
+        max_rpm, make, cls = SpheroidParams().max_rpm, SpheroidAUV, "spheroid"
+    return VehicleSpec(
+        vehicle_class=cls,
+        mav_type=MAV_TYPE_SUBMARINE,
+        custom_mode=SUB_MODE_AUTO,
+        make_plant=lambda: make(),
+        channels=(PwmChannel(channel=1, function=FN_RUDDER, half_range_us=500,
+                             min_us=1000, max_us=2000),
+                  PwmChannel(channel=2, function=FN_ELEVATOR, half_range_us=500,
+                             min_us=1000, max_us=2000),
+                  PwmChannel(channel=3, function=FN_THROTTLE, half_range_us=500,
+                             min_us=1000, max_us=2000)),
+        to_channels=lambda c: ((c.rudder_rad or 0.0) / FIN_FULL_RAD,
+                               (c.stern_plane_rad or 0.0) / FIN_FULL_RAD,
+                               (c.propeller_rpm or 0.0) / max_rpm),
+        from_channels=lambda v, c: Command(rudder_rad=v[0] * FIN_FULL_RAD,
+                                           stern_plane_rad=v[1] * FIN_FULL_RAD,
+                                           propeller_rpm=v[2] * max_rpm),
+        thrust_level=lambda c: (c.propeller_rpm or 0.0) / max_rpm,
+        shaft_rpm=lambda plant, c: (plant.rpm,),
+        surge_mass=lambda plant: float(plant.params.mass_matrix()[0, 0]),
+    )
+
+
+def _speed_to_command(speed_of: Callable[[float], float]) -> Callable[[float], float]:
+    """Invert a monotonic steady-speed map ``speed_of(command)`` on [0, 1] by bisection."""
+    table = np.linspace(0.0, 1.0, 201)
+    speeds = np.array([speed_of(float(c)) for c in table])
+
+    def f(v: float) -> float:
+        return float(np.interp(v, speeds, table)) if v > 0 else 0.0
+    return f
+
+
+# --------------------------------------------------------------------------- sea
+
+
+class TurbulentCurrent(CurrentField):
+    """Small-scale turbulence of an estuary: a deterministic sum of ``modes`` frozen
+    sinusoidal eddies advected past the vehicle, zero mean, ``std`` (m/s) per horizontal
+    axis and ``std * vertical_ratio`` vertically; length scales 5-40 m, periods 20-120 s.
+    Deterministic (fixed internal seed): part of the scenario, not of the sensor noise."""
+
+    def __init__(self, std: float = 0.05, vertical_ratio: float = 0.5, modes: int = 8,
+                 seed: int = 7) -> None:
+        rng = np.random.default_rng(seed)
+        self.k = rng.uniform(2 * math.pi / 40.0, 2 * math.pi / 5.0, (modes, 3))
+        self.k *= rng.choice([-1.0, 1.0], (modes, 3))
+        self.w = rng.uniform(2 * math.pi / 120.0, 2 * math.pi / 20.0, modes)
+        self.phase = rng.uniform(0.0, 2 * math.pi, (modes, 3))
+        amp = std * math.sqrt(2.0 / modes)
+        self.amp = np.array([amp, amp, amp * vertical_ratio])
+
+    def velocity_ned(self, t: float, position_ned: np.ndarray) -> np.ndarray:
+        arg = self.k @ np.asarray(position_ned, dtype=float) - self.w * t
+        return self.amp * np.sum(np.cos(arg[:, None] + self.phase), axis=0)
+
+
+# --------------------------------------------------------------------------- scenario
+
+
+@dataclass(frozen=True)
+class Initial:
+    """Initial pose (m, rad) and surge speed through water (m/s)."""
+
+    north: float = 0.0
+    east: float = 0.0
+    down: float = 0.0
+    yaw: float = 0.0
+    u: float = 0.0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything that defines a simulated run except the seed and the duration.
+
+    ``controller`` is a factory (a fresh controller per run); ``reference(t)`` the
+    reference trajectory a tracking controller follows (None for missions);
+    ``injected`` the effects added to the world, ``declared`` the names of those the
+    estimator is told about; ``bottom_depth_m`` the flat sea floor (for the DVL), None
+    for no bottom in range; ``origin`` the (lat, lon) in degrees of the local frame.
+    """
+
+    name: str
+    description: str
+    reproduces: str
+    vehicle: VehicleSpec
+    sensors: SensorSuiteConfig
+    controller: Callable[[], Controller]
+    duration_s: float
+    environment: Callable[[], Environment] = Environment
+    injected: tuple[Effect, ...] = ()
+    declared: tuple[str, ...] = ()
+    initial: Initial = Initial()
+    origin: tuple[float, float] = (41.49, -71.42)
+    bottom_depth_m: float | None = None
+    reference: Callable[[float], Any] | None = None
+    system_id: int = 1
+
+    def metadata(self) -> dict[str, Any]:
+        """What an estimator may read about this scenario (JSON-ready): the vehicle class,
+        the sensors and their configured noise and rates, the declared effects with their
+        parameters. Undeclared effects are not here."""
+        declared = [{"name": e.name, "params": dict(e.params)} for e in self.injected
+                    if e.name in self.declared]
+        sensors = {k: (dataclasses.asdict(v) if v is not None else None)
+                   for k, v in ((f.name, getattr(self.sensors, f.name))
+                                for f in dataclasses.fields(self.sensors))}
+        # the sensor error knobs that effects drive are not declared unless the effect is
+        for k in ("gyro_bias_injected",):
+            if sensors.get("imu"):
+                sensors["imu"].pop(k, None)
+        return {
+            "scenario": self.name,
+            "description": self.description,
+            "vehicle_class": self.vehicle.vehicle_class,
+            "origin_deg": list(self.origin),
+            "duration_s": self.duration_s,
+            "declared_effects": declared,
+            "sensors": sensors,
+        }
+
+
+# --------------------------------------------------------------------------- sensors
+
+
+def _boat_sensors(gnss_hz: float = 5.0) -> SensorSuiteConfig:
+    """A small boat: consumer GNSS (total ~1.5 m), MEMS IMU at 50 Hz, magnetic compass."""
+    return SensorSuiteConfig(
+        gnss=GnssConfig(rate_hz=gnss_hz, position_std_m=1.0, drift_std_m=1.1,
+                        drift_tau_s=120.0, velocity_std_mps=0.1),
+        imu=ImuConfig(rate_hz=50.0, accel_noise_std=0.05, gyro_noise_std=0.005),
+        compass=CompassConfig(rate_hz=10.0, noise_std_rad=0.03),
+    )
+
+
+def _effect_sensors() -> SensorSuiteConfig:
+    """The effect scenarios' sensors: a good GNSS at 5 Hz and a quiet compass, so that one
+    effect at a time stands out of the noise."""
+    return SensorSuiteConfig(
+        gnss=GnssConfig(rate_hz=5.0, position_std_m=0.5, drift_std_m=0.3, drift_tau_s=120.0,
+                        velocity_std_mps=0.05),
+        imu=ImuConfig(rate_hz=50.0, accel_noise_std=0.03, gyro_noise_std=0.003),
+        compass=CompassConfig(rate_hz=10.0, noise_std_rad=0.015),
+    )
+
+
+# --------------------------------------------------------------------------- missions
+
+
+JAIABOT_LEGS = (
+    Leg(30.0, 0.0, speed_mps=1.0),
+    Leg(25.0, 90 * DEG, speed_mps=1.5),
+    Leg(20.0, None, 0.25, speed_mps=1.5),          # a circle to starboard
+    Leg(25.0, 200 * DEG, speed_mps=0.8),
+    Leg(25.0, 315 * DEG, speed_mps=2.0),
+    Leg(20.0, None, -0.3, speed_mps=1.2),          # a circle to port
+    Leg(20.0, 45 * DEG, speed_mps=1.8),
+    Leg(20.0, 160 * DEG, speed_mps=0.6),
+    Leg(15.0, 250 * DEG, speed_mps=2.2),
+)
+"""The AIE paper's kind of data: step turns, circles both ways and speed steps (200 s)."""
+
+EFFECT_LEGS = (
+    Leg(30.0, 0.0, speed_mps=1.5),
+    Leg(21.0, None, 0.3, speed_mps=1.5),           # one full circle to starboard
+    Leg(25.0, 90 * DEG, speed_mps=0.8),
+    Leg(25.0, 200 * DEG, speed_mps=2.2),
+    Leg(25.0, None, -0.25, speed_mps=1.2),         # one full circle to port
+    Leg(25.0, 300 * DEG, speed_mps=1.8),
+    Leg(20.0, 45 * DEG, speed_mps=1.0),
+    Leg(20.0, 135 * DEG, speed_mps=2.5),
+    Leg(20.0, 250 * DEG, speed_mps=0.6),
+)
+"""Headings all round (compass deviation), circles (latency, coupling, sideslip), speed
+steps from 0.6 to 2.5 m/s (thrust law, drag): 211 s, repeated."""
+
+BLUEBOAT_LEGS = (
+    Leg(30.0, 0.0, speed_mps=1.5),
+    Leg(20.0, 90 * DEG, speed_mps=2.0),
+    Leg(15.0, None, 0.6, speed_mps=0.0),           # spin on the spot to starboard
+    Leg(25.0, 240 * DEG, speed_mps=1.0),
+    Leg(20.0, None, -0.35, speed_mps=1.8),         # circle to port
+    Leg(25.0, 330 * DEG, speed_mps=2.5),
+    Leg(15.0, None, -0.5, speed_mps=0.0),          # spin to port
+    Leg(20.0, 150 * DEG, speed_mps=1.2),
+)
+
+
+def _nominal_boat_autopilot() -> Controller:
+    p = NOMINAL_BOAT
+    return BoatAutopilot(EFFECT_LEGS, _speed_to_command(p.steady_speed))
+
+
+def _jaiabot_autopilot() -> Controller:
+    p = RudderBoatParams()
+    return BoatAutopilot(JAIABOT_LEGS, _speed_to_command(p.steady_speed))
+
+
+def _blueboat_autopilot() -> Controller:
+    p = TwinThrusterParams()
+    return BoatAutopilot(
+        BLUEBOAT_LEGS,
+        _speed_to_command(lambda c: p.steady_speed(2.0 * p.thrust(c * p.n_max))),
+        steering="skid", kp=0.8, ki=0.02, kd=0.3, steer_limit=0.6)
+
+
+def _gavia_autopilot() -> Controller:
+    return AuvAutopilot(rpm=1500.0, depth_m=5.0, schedule=HeadingSchedule((0.0,), 1e9))
+
+
+def _spheroid_autopilot() -> Controller:
+    return AuvAutopilot(rpm=1000.0, depth_m=10.0,
+                        schedule=HeadingSchedule((15 * DEG, -15 * DEG), 100.0, tau_s=5.0),
+                        kz=0.1, kw=0.5, k_theta=1.0, kq=1.0, kpsi=0.8, kr=2.0,
+                        fin_limit=0.26)
+
+
+def _rov_pid() -> Controller:
+    from sitl.plants.bluerov2 import thruster_commands
+
+    return RovCirclePid(CircleReference(), thruster_commands)
+
+
+# --------------------------------------------------------------------------- registry
+
+
+def _effect_scenario(name: str, description: str, effects: tuple[Effect, ...],
+                     params: RudderBoatParams = NOMINAL_BOAT) -> Scenario:
+    return Scenario(
+        name=name,
+        description=description,
+        reproduces="model closure: an effect the estimator is not told about",
+        vehicle=_rudder_boat(params),
+        sensors=_effect_sensors(),
+        controller=_nominal_boat_autopilot,
+        duration_s=600.0,
+        injected=effects,
+        declared=(),
+    )
+
+
+def _build() -> dict[str, Scenario]:
+    s: list[Scenario] = [
+        Scenario(
+            name="jaiabot-turns",
+            description="Jaiabot-class rudder boat: step turns, circles and speed steps "
+                        "(GPS 5 Hz, compass, IMU)",
+            reproduces="Faros & Tanner 2025, AIE of the Jaiabot's surge and heading inputs",
+            vehicle=_rudder_boat(),
+            sensors=_boat_sensors(gnss_hz=5.0),
+            controller=_jaiabot_autopilot,
+            duration_s=300.0,
+        ),
+        Scenario(
+            name="twin-thruster-turns",
+            description="BlueBoat-class twin-thruster boat: skid-steered turns, spins on "
+                        "the spot, speed steps",
+            reproduces="BlueBoat system identification runs (skid steering, PWM logged)",
+            vehicle=_twin_thruster(),
+            sensors=_boat_sensors(gnss_hz=5.0),
+            controller=_blueboat_autopilot,
+            duration_s=300.0,
+            origin=(63.4390, 10.3990),
+        ),
+        Scenario(
+            name="bluerov2-circle",
+            description="BlueROV2 on a 2 m circle at 1.5 m/s, 20 m deep, under a constant "
+                        "[40, 40, 10] N world-frame push",
+            reproduces="Lo, Hu et al., ESESO + AMPC circle test (algorithms.md §5.3)",
+            vehicle=_bluerov2(),
+            sensors=SensorSuiteConfig(
+                # acoustic positioning (Water Linked UGPS fed to ArduSub as GPS)
+                gnss=GnssConfig(rate_hz=5.0, position_std_m=0.1, drift_std_m=0.05,
+                                drift_tau_s=60.0, velocity_std_mps=0.05,
+                                altitude_std_m=0.1, max_depth_m=math.inf),
+                imu=ImuConfig(rate_hz=50.0, accel_noise_std=0.05, gyro_noise_std=0.005),
+                compass=CompassConfig(rate_hz=10.0, noise_std_rad=0.02),
+                depth=DepthConfig(rate_hz=10.0, depth_std_m=0.02),
+                dvl=DvlConfig(rate_hz=5.0, velocity_std_mps=0.01, max_altitude_m=50.0),
+                ins=InsConfig(rate_hz=10.0, velocity_std_mps=0.02, bias_std_mps=0.01),
+            ),
+            controller=_rov_pid,
+            duration_s=240.0,
+            injected=(Effect("external_force", {"north": 40.0, "east": 40.0, "down": 10.0}),),
+            declared=("external_force",),
+            initial=Initial(north=0.0, east=-2.0, down=20.0, yaw=math.pi),
+            origin=(22.3040, 114.1800),
+            bottom_depth_m=30.0,
+            reference=CircleReference(),
+        ),
+    ]
+    s += [
+        Scenario(
+            name="gavia-tidal",
+            description="Gavia/REMUS-class torpedo AUV: straight run at 5 m depth against a "
+                        "~1 m/s tidal stream (DVL bottom track, INS, rpm, fins)",
+            reproduces="Kim, Fan & Bose 2018 (HGO) / Randeni et al. 2017, Tamar estuary run",
+            vehicle=_auv("torpedo"),
+            sensors=SensorSuiteConfig(
+                gnss=GnssConfig(rate_hz=1.0, position_std_m=1.5, drift_std_m=2.0),
+                imu=ImuConfig(rate_hz=100.0, accel_noise_std=0.02, gyro_noise_std=0.001,
+                              gyro_bias_std=5e-5, gyro_bias_walk=2e-6),
+                compass=CompassConfig(rate_hz=20.0, noise_std_rad=0.003,
+                                      attitude_noise_std_rad=0.001),
+                depth=DepthConfig(rate_hz=10.0, depth_std_m=0.02),
+                dvl=DvlConfig(rate_hz=5.0, velocity_std_mps=0.005, max_altitude_m=30.0,
+                              dropout_rate_hz=0.003),
+                ins=InsConfig(rate_hz=10.0, velocity_std_mps=0.01, bias_std_mps=0.003),
+                rpm=RpmConfig(rate_hz=10.0, noise_std_rpm=5.0),
+            ),
+            controller=_gavia_autopilot,
+            duration_s=600.0,
+            environment=lambda: Environment(current=TurbulentCurrent()),
+            injected=(Effect("tidal_current", {"amplitude": 1.1, "period": 44712.0,
+                                               "direction": math.pi, "phase": 0.5}),),
+            declared=("tidal_current",),
+            initial=Initial(down=5.0, yaw=0.0, u=1.5),
+            origin=(50.4030, -4.2010),
+            bottom_depth_m=15.0,
+        ),
+        Scenario(
+            name="spheroid-sawtooth",
+            description="2 m spheroid at 0.77 m/s, heading +15/-15 deg switching every 100 s "
+                        "in the nonuniform flow V = [0, -0.3 sqrt((500+N)/500), 0]",
+            reproduces="Fan et al., nonlinear observer for current in nonuniform flow",
+            vehicle=_auv("spheroid"),
+            sensors=SensorSuiteConfig(
+                imu=ImuConfig(rate_hz=50.0, accel_noise_std=0.02, gyro_noise_std=0.002),
+                compass=CompassConfig(rate_hz=10.0, noise_std_rad=0.005,
+                                      attitude_noise_std_rad=0.002),
+                depth=DepthConfig(rate_hz=10.0, depth_std_m=0.02),
+                dvl=DvlConfig(rate_hz=5.0, velocity_std_mps=0.005, max_altitude_m=50.0),
+                ins=InsConfig(rate_hz=10.0, velocity_std_mps=0.01, bias_std_mps=0.003),
+                rpm=RpmConfig(rate_hz=10.0, noise_std_rpm=3.0),
+            ),
+            controller=_spheroid_autopilot,
+            duration_s=600.0,
+            injected=(Effect("nonuniform_current", {"amplitude": 0.3, "length": 500.0}),),
+            declared=("nonuniform_current",),
+            initial=Initial(down=10.0, yaw=15 * DEG, u=0.77),
+            origin=(30.2700, 122.3000),
+            bottom_depth_m=40.0,
+        ),
+        _effect_scenario("clean", "the effect scenarios' boat and mission with no effect", ()),
+        _effect_scenario("effect-current", "undeclared uniform water current 0.29 m/s",
+                         (Effect("water_current", {"north": 0.25, "east": -0.15}),)),
+        _effect_scenario("effect-compass-deviation",
+                         "undeclared compass deviation 0.12 sin(psi + 0.7) rad",
+                         (Effect("compass_deviation", {"amplitude": 0.12, "phase": 0.7}),)),
+        _effect_scenario("effect-heading-bias", "undeclared constant heading error 0.08 rad",
+                         (Effect("heading_bias", {"radians": 0.08}),)),
+        _effect_scenario("effect-gyro-bias", "undeclared gyro bias 0.01 rad/s in yaw",
+                         (Effect("gyro_bias", {"z": 0.01}),)),
+        _effect_scenario("effect-gps-latency", "undeclared GNSS latency 0.6 s",
+                         (Effect("gps_latency", {"seconds": 0.6}),)),
+        _effect_scenario("effect-thrust-nonlinearity",
+                         "undeclared thrust law thrust ~ throttle^1.5 (model: linear)",
+                         (Effect("thrust_nonlinearity", {"exponent": 1.5}),)),
+        _effect_scenario("effect-quadratic-drag",
+                         "undeclared quadratic surge drag 1.5 N s^2/m^2",
+                         (Effect("quadratic_drag", {"coefficient": 1.5}),)),
+        _effect_scenario("effect-surge-yaw-coupling",
+                         "undeclared speed loss in turns, surge accel -3 u r^2",
+                         (Effect("surge_yaw_coupling", {"coefficient": 3.0}),)),
+        _effect_scenario("effect-sideslip", "undeclared side force 1.0 u|u| N: a crab angle",
+                         (Effect("sideslip", {"coefficient": 1.0}),)),
+        _effect_scenario("effect-waves", "undeclared regular waves, 2.5 s period, 0.3 m high",
+                         (Effect("wave_oscillation", {"period": 2.5, "height": 0.3,
+                                                      "direction": 0.5}),)),
+        _effect_scenario("effect-two",
+                         "two undeclared effects: current 0.22 m/s and compass deviation",
+                         (Effect("water_current", {"north": 0.2, "east": 0.1}),
+                          Effect("compass_deviation", {"amplitude": 0.1, "phase": -1.0}))),
+    ]
+    return {sc.name: sc for sc in s}
+
+
+SCENARIOS: dict[str, Scenario] = _build()
+"""Every scenario by name."""
+
+
+def names() -> list[str]:
+    """The scenario names, in listing order."""
+    return list(SCENARIOS)
+
+
+def get(name: str) -> Scenario:
+    """The scenario called ``name``; :class:`~onboard.errors.UsageError` if there is none."""
+    try:
+        return SCENARIOS[name]
+    except KeyError:
+        raise UsageError(f"unknown scenario {name!r}; try `onboard sitl --list`") from None

@@ -1,0 +1,760 @@
+"""Sensor models: the true state in, typed samples with realistic errors out.
+
+Each sensor is a small class with a configuration (a frozen dataclass, SI units) and a
+``measure(world)`` method that the runner calls at the sensor's rate. Errors are drawn from
+the sensor's own :class:`numpy.random.Generator`, seeded from the run seed and the sensor's
+name, so the same seed gives the same errors and adding a sensor does not change the
+errors of the others.
+
+Error models (all one-sigma figures, per axis unless said otherwise):
+
+* **GNSS** (:class:`Gnss`): horizontal position = truth + white noise ``position_std_m`` +
+  a first-order Gauss-Markov drift (stationary std ``drift_std_m``, correlation time
+  ``drift_tau_s``); SOG/COG from the true velocity over ground plus white noise
+  ``velocity_std_mps``; a fixed ``latency_s`` between the instant measured and the instant
+  reported; outages (Poisson onset ``outage_rate_hz``, exponential length of mean
+  ``outage_mean_s``); no fix at all deeper than ``max_depth_m`` (0.3 m).
+* **IMU** (:class:`Imu`): specific force and angular rate (body FRD) + turn-on bias +
+  random-walk bias + white noise; an injected constant gyro bias on top.
+* **Compass/AHRS** (:class:`Compass`): heading error
+  ``c + A1 sin(psi + phi1) + A2 sin(2 psi + phi2) + k_motor * thrust`` (hard iron, soft iron,
+  constant offset, motor interference) plus white noise; the AHRS attitude carries the same
+  yaw, roll and pitch with small noise, and the gyro rates.
+* **DVL** (:class:`Dvl`): bottom-track velocity over ground and (optionally) water-track
+  velocity through water, in the instrument = body frame; white noise growing with
+  altitude; a figure of merit; lock lost above ``max_altitude_m``, below
+  ``min_altitude_m`` and in random dropouts. A lost lock is reported the way a Water Linked
+  A50 reports it: ``valid=False``, zero velocity, a large figure of merit, no altitude.
+* **Depth** (:class:`DepthSensor`): pressure = p0 + rho g (depth + white noise).
+* **Actuators** (:class:`ActuatorModel`, :class:`RpmSensor`): commanded normalized values
+  to PWM pulse widths (integer us, saturated at the end points), the ESC deadband applied
+  to what the plant receives; shaft speed with white noise.
+* **INS** (:class:`Ins`): the velocity over ground of a DVL-aided INS (torpedo AUVs'
+  GLOBAL_POSITION_INT): truth + white noise + Gauss-Markov bias.
+
+Sample times ``t`` are simulation seconds since the start of the scenario (emitters add the
+log's epoch).
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Protocol, Sequence
+
+import numpy as np
+
+from onboard.messages import (
+    Attitude,
+    Depth,
+    DvlPosition,
+    DvlVelocity,
+    GnssFix,
+    Heading,
+    Imu as ImuSample,
+    PropellerRpm,
+    Sample,
+    VelocityOverGround,
+    ActuatorOutputs,
+)
+from sitl.truth import TruthRecord
+
+TWO_PI = 2.0 * math.pi
+GRAVITY = 9.80665
+"""Standard gravity (m/s^2)."""
+
+
+def sensor_rng(seed: int, name: str) -> np.random.Generator:
+    """The random generator of sensor ``name`` for run ``seed``: independent, reproducible."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed) & 0xFFFFFFFF,
+                                                         zlib.crc32(name.encode())]))
+
+
+def wrap_2pi(a: float) -> float:
+    """Wrap an angle (rad) to [0, 2 pi)."""
+    a = math.fmod(a, TWO_PI)
+    return a + TWO_PI if a < 0.0 else a
+
+
+def wrap_pi(a: float) -> float:
+    """Wrap an angle (rad) to (-pi, pi]."""
+    a = math.fmod(a + math.pi, TWO_PI)
+    if a <= 0.0:
+        a += TWO_PI
+    return a - math.pi
+
+
+class GeoOrigin:
+    """Equirectangular local tangent plane about ``(lat0, lon0)`` (deg), algorithms.md §1.3.
+
+    The same formulas the pipelines use, so the projection contributes no error to a
+    comparison of estimates with truth.
+    """
+
+    __slots__ = ("lat0", "lon0", "m_lat", "m_lon")
+
+    def __init__(self, lat0_deg: float, lon0_deg: float) -> None:
+        self.lat0 = lat0_deg
+        self.lon0 = lon0_deg
+        lat = math.radians(lat0_deg)
+        self.m_lat = 111132.954 - 559.822 * math.cos(2 * lat) + 1.175 * math.cos(4 * lat)
+        self.m_lon = math.pi / 180.0 * 6367449.0 * math.cos(lat)
+
+    def to_latlon(self, north_m: float, east_m: float) -> tuple[float, float]:
+        """(lat, lon) in degrees of a local point (m)."""
+        return self.lat0 + north_m / self.m_lat, self.lon0 + east_m / self.m_lon
+
+
+@dataclass(slots=True)
+class WorldView:
+    """What the sensors may look at in one instant: the truth, as the runner provides it.
+
+    ``specific_force`` (m/s^2) and ``angular_rate`` (rad/s) are body FRD; ``v_ned`` the
+    velocity over ground (m/s, NED); ``thrust`` the signed propulsion level in [-1, 1]
+    (drives compass motor interference); ``channels`` the commanded normalized actuator
+    values per output channel; ``shaft_rpm`` the true propeller speeds (rev/min);
+    ``altitude`` the true range to the bottom (m) or None without a bottom.
+    """
+
+    t: float
+    truth: TruthRecord
+    specific_force: tuple[float, float, float]
+    angular_rate: tuple[float, float, float]
+    v_ned: tuple[float, float, float]
+    thrust: float = 0.0
+    channels: tuple[float, ...] = ()
+    shaft_rpm: tuple[float, ...] = ()
+    altitude: float | None = None
+
+
+class Sensor(Protocol):
+    """A sensor model. ``measure`` is called every ``1/rate_hz`` seconds of simulation."""
+
+    name: str
+    rate_hz: float
+
+    def measure(self, world: WorldView) -> list[Sample]:
+        """Samples measured at ``world.t`` (may be empty: outage, underwater, latency)."""
+        ...
+
+    def due(self, t: float) -> list[Sample]:
+        """Samples measured earlier whose report time has come (latency); usually []."""
+        ...
+
+    def error_state(self) -> dict[str, float]:
+        """The sensor's current hidden error states, for the truth file (``sensor.*``)."""
+        ...
+
+
+class _Base:
+    """Shared plumbing: name, rate, generator; no latency, no hidden state."""
+
+    name: str = "sensor"
+
+    def __init__(self, rate_hz: float, rng: np.random.Generator, name: str | None = None):
+        if rate_hz <= 0:
+            raise ValueError(f"{name or self.name}: rate_hz must be > 0, got {rate_hz}")
+        self.rate_hz = float(rate_hz)
+        self.rng = rng
+        if name:
+            self.name = name
+
+    def due(self, t: float) -> list[Sample]:
+        return []
+
+    def error_state(self) -> dict[str, float]:
+        return {}
+
+
+def _gauss_markov(x: np.ndarray, dt: float, tau: float, std: float,
+                  rng: np.random.Generator) -> np.ndarray:
+    """Exact discrete step of a first-order Gauss-Markov process of stationary ``std``."""
+    if std <= 0.0:
+        return x * 0.0
+    if tau <= 0.0:
+        return std * rng.standard_normal(x.shape)
+    phi = math.exp(-dt / tau)
+    return phi * x + std * math.sqrt(1.0 - phi * phi) * rng.standard_normal(x.shape)
+
+
+class _Outages:
+    """Two-state renewal process: Poisson onsets at ``rate_hz``, exponential lengths."""
+
+    __slots__ = ("rate_hz", "mean_s", "until", "rng", "count")
+
+    def __init__(self, rate_hz: float, mean_s: float, rng: np.random.Generator) -> None:
+        self.rate_hz = rate_hz
+        self.mean_s = mean_s
+        self.until = -math.inf
+        self.rng = rng
+        self.count = 0
+
+    def active(self, t: float, dt: float) -> bool:
+        """Whether the sensor is out at ``t``; ``dt`` is the time since the last call."""
+        if t < self.until:
+            return True
+        if self.rate_hz > 0.0 and self.rng.random() < -math.expm1(-self.rate_hz * dt):
+            self.until = t + self.rng.exponential(self.mean_s)
+            self.count += 1
+            return True
+        return False
+
+
+# --------------------------------------------------------------------------- GNSS
+
+
+@dataclass(frozen=True, kw_only=True)
+class GnssConfig:
+    """GNSS receiver error model (m, m/s, s, Hz).
+
+    Defaults are a consumer receiver with SBAS: ~1 m white, ~1 m slowly wandering drift.
+    """
+
+    rate_hz: float = 5.0
+    position_std_m: float = 0.8
+    """White horizontal noise per axis (m)."""
+    drift_std_m: float = 0.8
+    """Stationary std of the Gauss-Markov horizontal drift per axis (m)."""
+    drift_tau_s: float = 120.0
+    """Correlation time of the drift (s)."""
+    altitude_std_m: float = 2.0
+    velocity_std_mps: float = 0.05
+    """White noise on each earth-frame velocity component (m/s); SOG/COG derive from it."""
+    latency_s: float = 0.0
+    """Time between the instant measured and the report (s)."""
+    outage_rate_hz: float = 0.0
+    """Mean number of outage onsets per second."""
+    outage_mean_s: float = 10.0
+    max_depth_m: float = 0.3
+    """No fix when the antenna is deeper than this (m)."""
+    num_sats: int = 12
+    hdop: float = 0.9
+
+
+class Gnss(_Base):
+    """GNSS receiver: :class:`GnssFix` samples with position, SOG and COG (see module doc)."""
+
+    name = "gnss"
+
+    def __init__(self, cfg: GnssConfig, origin: GeoOrigin, rng: np.random.Generator,
+                 name: str | None = None) -> None:
+        super().__init__(cfg.rate_hz, rng, name)
+        self.cfg = cfg
+        self.origin = origin
+        self.drift = cfg.drift_std_m * rng.standard_normal(2)
+        self._t_last: float | None = None
+        self._queue: deque[tuple[float, GnssFix]] = deque()
+        self._outages = _Outages(cfg.outage_rate_hz, cfg.outage_mean_s, rng)
+
+    def measure(self, world: WorldView) -> list[Sample]:
+        c = self.cfg
+        t = world.t
+        dt = 1.0 / self.rate_hz if self._t_last is None else t - self._t_last
+        self._t_last = t
+        self.drift = _gauss_markov(self.drift, dt, c.drift_tau_s, c.drift_std_m, self.rng)
+        n = self.rng.standard_normal(5).tolist()
+        drift = self.drift.tolist()
+        out = self._outages.active(t, dt)
+        tr = world.truth
+        if out or tr.down > c.max_depth_m:
+            return self.due(t)
+        north = tr.north + drift[0] + c.position_std_m * n[0]
+        east = tr.east + drift[1] + c.position_std_m * n[1]
+        lat, lon = self.origin.to_latlon(north, east)
+        vn = world.v_ned[0] + c.velocity_std_mps * n[2]
+        ve = world.v_ned[1] + c.velocity_std_mps * n[3]
+        t_report = t + c.latency_s
+        fix = GnssFix(
+            t=t_report, source=self.name, lat_deg=lat, lon_deg=lon,
+            alt_m=-tr.down + c.altitude_std_m * n[4], fix_quality=1,
+            num_sats=c.num_sats, hdop=c.hdop,
+            sog_mps=math.hypot(vn, ve), cog_rad=wrap_2pi(math.atan2(ve, vn)),
+            h_acc_m=math.hypot(c.position_std_m, c.drift_std_m),
+            v_acc_m=c.altitude_std_m,
+        )
+        self._queue.append((t_report, fix))
+        return self.due(t)
+
+    def due(self, t: float) -> list[Sample]:
+        q = self._queue
+        out: list[Sample] = []
+        while q and q[0][0] <= t + 1e-9:
+            out.append(q.popleft()[1])
+        return out
+
+    def error_state(self) -> dict[str, float]:
+        return {"sensor.gnss_drift_north": float(self.drift[0]),
+                "sensor.gnss_drift_east": float(self.drift[1]),
+                "sensor.gnss_outage": 1.0 if self._t_last is not None
+                and self._t_last < self._outages.until else 0.0}
+
+
+# --------------------------------------------------------------------------- IMU
+
+
+@dataclass(frozen=True, kw_only=True)
+class ImuConfig:
+    """MEMS IMU error model, per axis (SI units).
+
+    Defaults: a hobby-grade MEMS IMU after the autopilot's boot-time gyro calibration.
+    """
+
+    rate_hz: float = 50.0
+    accel_noise_std: float = 0.03
+    """White noise per sample (m/s^2)."""
+    accel_bias_std: float = 0.02
+    """Turn-on accelerometer bias, drawn once per run (m/s^2)."""
+    accel_bias_walk: float = 2e-4
+    """Accelerometer bias random walk (m/s^2/sqrt(s))."""
+    gyro_noise_std: float = 0.003
+    """White noise per sample (rad/s)."""
+    gyro_bias_std: float = 2e-4
+    """Turn-on gyro bias left after calibration (rad/s)."""
+    gyro_bias_walk: float = 1e-5
+    """Gyro bias random walk (rad/s/sqrt(s))."""
+    gyro_bias_injected: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """A constant gyro bias injected by the ``gyro_bias`` effect (rad/s)."""
+
+
+class Imu(_Base):
+    """IMU: :class:`onboard.messages.Imu` samples of specific force and angular rate."""
+
+    name = "imu"
+
+    def __init__(self, cfg: ImuConfig, rng: np.random.Generator, name: str | None = None):
+        super().__init__(cfg.rate_hz, rng, name)
+        self.cfg = cfg
+        self.accel_bias = cfg.accel_bias_std * rng.standard_normal(3)
+        self.gyro_bias = cfg.gyro_bias_std * rng.standard_normal(3)
+        self._injected = np.asarray(cfg.gyro_bias_injected, dtype=float)
+        self._sq = math.sqrt(1.0 / cfg.rate_hz)
+
+    @property
+    def total_gyro_bias(self) -> np.ndarray:
+        """The gyro bias right now, calibration residue plus injected (rad/s, body)."""
+        return self.gyro_bias + self._injected
+
+    def measure(self, world: WorldView) -> list[Sample]:
+        c = self.cfg
+        nv = self.rng.standard_normal(12)
+        self.accel_bias += c.accel_bias_walk * self._sq * nv[6:9]
+        self.gyro_bias += c.gyro_bias_walk * self._sq * nv[9:12]
+        n = nv.tolist()
+        f = world.specific_force
+        w = world.angular_rate
+        ab = self.accel_bias.tolist()
+        gb = (self.gyro_bias + self._injected).tolist()
+        an, gn = c.accel_noise_std, c.gyro_noise_std
+        return [ImuSample(
+            t=world.t, source=self.name,
+            accel_x=f[0] + ab[0] + an * n[0], accel_y=f[1] + ab[1] + an * n[1],
+            accel_z=f[2] + ab[2] + an * n[2],
+            gyro_x=w[0] + gb[0] + gn * n[3], gyro_y=w[1] + gb[1] + gn * n[4],
+            gyro_z=w[2] + gb[2] + gn * n[5],
+        )]
+
+    def error_state(self) -> dict[str, float]:
+        gb = self.total_gyro_bias
+        ab = self.accel_bias
+        return {"sensor.gyro_bias_x": float(gb[0]), "sensor.gyro_bias_y": float(gb[1]),
+                "sensor.gyro_bias_z": float(gb[2]), "sensor.accel_bias_x": float(ab[0]),
+                "sensor.accel_bias_y": float(ab[1]), "sensor.accel_bias_z": float(ab[2])}
+
+
+# --------------------------------------------------------------------------- compass / AHRS
+
+
+@dataclass(frozen=True, kw_only=True)
+class CompassConfig:
+    """Magnetic compass (AHRS heading) error model (rad, Hz).
+
+    Heading error = ``offset_rad + hard_iron_rad sin(psi + hard_iron_phase_rad)
+    + soft_iron_rad sin(2 psi + soft_iron_phase_rad) + motor_rad_per_thrust * thrust``
+    + white noise ``noise_std_rad``. ``compass_deviation`` sets the hard-iron term,
+    ``heading_bias`` adds to ``offset_rad``.
+    """
+
+    rate_hz: float = 10.0
+    noise_std_rad: float = 0.01
+    offset_rad: float = 0.0
+    hard_iron_rad: float = 0.0
+    hard_iron_phase_rad: float = 0.0
+    soft_iron_rad: float = 0.0
+    soft_iron_phase_rad: float = 0.0
+    motor_rad_per_thrust: float = 0.0
+    """Heading error at full thrust (rad), from the motor current's magnetic field."""
+    attitude_noise_std_rad: float = 0.005
+    """White noise on the AHRS roll and pitch (rad)."""
+    emit_attitude: bool = True
+    """Also emit :class:`Attitude` (roll, pitch, the same yaw, gyro rates)."""
+
+
+class Compass(_Base):
+    """Compass and AHRS: :class:`Heading` and :class:`Attitude` samples.
+
+    The AHRS reports the compass heading as yaw and the IMU's gyro (with its bias) as rates,
+    so ``imu`` (an :class:`Imu`) is passed in to share its bias.
+    """
+
+    name = "compass"
+
+    def __init__(self, cfg: CompassConfig, rng: np.random.Generator, imu: Imu | None = None,
+                 name: str | None = None) -> None:
+        super().__init__(cfg.rate_hz, rng, name)
+        self.cfg = cfg
+        self.imu = imu
+        self.last_error = 0.0
+
+    def deviation(self, psi: float, thrust: float) -> float:
+        """Deterministic heading error (rad) at true heading ``psi`` and ``thrust``."""
+        c = self.cfg
+        return (c.offset_rad + c.hard_iron_rad * math.sin(psi + c.hard_iron_phase_rad)
+                + c.soft_iron_rad * math.sin(2.0 * psi + c.soft_iron_phase_rad)
+                + c.motor_rad_per_thrust * thrust)
+
+    def measure(self, world: WorldView) -> list[Sample]:
+        c = self.cfg
+        tr = world.truth
+        n = self.rng.standard_normal(6).tolist()
+        err = self.deviation(tr.yaw, world.thrust) + c.noise_std_rad * n[0]
+        self.last_error = err
+        psi = wrap_2pi(tr.yaw + err)
+        out: list[Sample] = [Heading(t=world.t, source=self.name, heading_rad=psi)]
+        if c.emit_attitude:
+            w = world.angular_rate
+            if self.imu is not None:
+                gb = self.imu.total_gyro_bias.tolist()
+                gn = self.imu.cfg.gyro_noise_std
+            else:
+                gb, gn = (0.0, 0.0, 0.0), 0.0
+            an = c.attitude_noise_std_rad
+            out.append(Attitude(
+                t=world.t, source="ahrs",
+                roll_rad=wrap_pi(tr.roll + an * n[1]), pitch_rad=tr.pitch + an * n[2],
+                yaw_rad=wrap_pi(psi),
+                roll_rate_rps=w[0] + gb[0] + gn * n[3],
+                pitch_rate_rps=w[1] + gb[1] + gn * n[4],
+                yaw_rate_rps=w[2] + gb[2] + gn * n[5],
+            ))
+        return out
+
+    def error_state(self) -> dict[str, float]:
+        return {"sensor.heading_error": float(self.last_error)}
+
+
+# --------------------------------------------------------------------------- DVL
+
+
+@dataclass(frozen=True, kw_only=True)
+class DvlConfig:
+    """Doppler velocity log (m/s, m, Hz). Defaults: a Water Linked A50-class instrument."""
+
+    rate_hz: float = 5.0
+    velocity_std_mps: float = 0.005
+    """White noise per axis at zero altitude (m/s)."""
+    velocity_std_per_m: float = 0.0002
+    """Noise growth with altitude (m/s per m)."""
+    min_altitude_m: float = 0.05
+    max_altitude_m: float = 50.0
+    """Beyond this range the bottom is lost (m)."""
+    altitude_std_m: float = 0.02
+    dropout_rate_hz: float = 0.002
+    """Random lock losses per second (bubbles, fish, steep slopes)."""
+    dropout_mean_s: float = 2.0
+    water_track: bool = False
+    """Also report velocity through water (track ``"water"``)."""
+    dead_reckoning: bool = True
+    """Also report the DVL's own dead-reckoned position (:class:`DvlPosition`)."""
+    invalid_fom_mps: float = 2.0
+    """Figure of merit reported without lock (the A50 reports a large value)."""
+
+
+class Dvl(_Base):
+    """DVL: :class:`DvlVelocity` (body frame) and :class:`DvlPosition` samples."""
+
+    name = "dvl"
+
+    def __init__(self, cfg: DvlConfig, rng: np.random.Generator, name: str | None = None):
+        super().__init__(cfg.rate_hz, rng, name)
+        self.cfg = cfg
+        self._outages = _Outages(cfg.dropout_rate_hz, cfg.dropout_mean_s, rng)
+        self._t_last: float | None = None
+        self.pos = np.zeros(3)
+        self.locked = False
+        self.lock_losses = 0
+
+    def measure(self, world: WorldView) -> list[Sample]:
+        c = self.cfg
+        t = world.t
+        dt = 1.0 / self.rate_hz if self._t_last is None else t - self._t_last
+        self._t_last = t
+        tr = world.truth
+        alt = world.altitude
+        n = self.rng.standard_normal(7).tolist()
+        dropped = self._outages.active(t, dt)
+        valid = (alt is not None and c.min_altitude_m <= alt <= c.max_altitude_m
+                 and not dropped and tr.down > 0.1)
+        if self.locked and not valid:
+            self.lock_losses += 1
+        self.locked = valid
+        out: list[Sample] = []
+        if valid:
+            std = c.velocity_std_mps + c.velocity_std_per_m * alt
+            vx, vy, vz = tr.u + std * n[0], tr.v + std * n[1], tr.w + std * n[2]
+            var = std * std
+            out.append(DvlVelocity(
+                t=t, source=self.name, vx=vx, vy=vy, vz=vz, track="bottom", valid=True,
+                fom_mps=std, covariance=(var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var),
+                altitude_m=max(0.0, alt + c.altitude_std_m * n[6]),
+            ))
+            if c.dead_reckoning:
+                self.pos += dt * _body_to_ned(tr.roll, tr.pitch, tr.yaw, (vx, vy, vz))
+        else:
+            out.append(DvlVelocity(t=t, source=self.name, vx=0.0, vy=0.0, vz=0.0,
+                                   track="bottom", valid=False, fom_mps=c.invalid_fom_mps,
+                                   altitude_m=None))
+        if c.water_track:
+            if tr.down > 0.1 and not dropped:
+                std = c.velocity_std_mps * 2.0
+                out.append(DvlVelocity(
+                    t=t, source=self.name, vx=tr.u_r + std * n[3], vy=tr.v_r + std * n[4],
+                    vz=tr.w_r + std * n[5], track="water", valid=True, fom_mps=std))
+            else:
+                out.append(DvlVelocity(t=t, source=self.name, vx=0.0, vy=0.0, vz=0.0,
+                                       track="water", valid=False,
+                                       fom_mps=c.invalid_fom_mps))
+        if c.dead_reckoning:
+            out.append(DvlPosition(t=t, source=self.name, north_m=float(self.pos[0]),
+                                   east_m=float(self.pos[1]), down_m=float(self.pos[2]),
+                                   roll_rad=tr.roll, pitch_rad=tr.pitch, yaw_rad=tr.yaw))
+        return out
+
+    def error_state(self) -> dict[str, float]:
+        return {"sensor.dvl_locked": 1.0 if self.locked else 0.0}
+
+
+def _body_to_ned(phi: float, theta: float, psi: float,
+                 v: Sequence[float]) -> np.ndarray:
+    """Rotate a body-frame vector into NED with ZYX Euler angles (rad)."""
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(psi), math.sin(psi)
+    x, y, z = v
+    return np.array([
+        cp * ct * x + (cp * st * sf - sp * cf) * y + (cp * st * cf + sp * sf) * z,
+        sp * ct * x + (sp * st * sf + cp * cf) * y + (sp * st * cf - cp * sf) * z,
+        -st * x + ct * sf * y + ct * cf * z,
+    ])
+
+
+# --------------------------------------------------------------------------- depth
+
+
+@dataclass(frozen=True, kw_only=True)
+class DepthConfig:
+    """Pressure depth sensor (Bar30 class): m, Pa, kg/m^3, Hz."""
+
+    rate_hz: float = 10.0
+    depth_std_m: float = 0.02
+    water_density_kgm3: float = 1025.0
+    surface_pressure_pa: float = 101325.0
+    temperature_c: float = 12.0
+
+
+class DepthSensor(_Base):
+    """Depth: :class:`Depth` samples with the absolute pressure that gave them."""
+
+    name = "depth"
+
+    def __init__(self, cfg: DepthConfig, rng: np.random.Generator, name: str | None = None):
+        super().__init__(cfg.rate_hz, rng, name)
+        self.cfg = cfg
+
+    def measure(self, world: WorldView) -> list[Sample]:
+        c = self.cfg
+        d = world.truth.down + c.depth_std_m * float(self.rng.standard_normal())
+        p = c.surface_pressure_pa + c.water_density_kgm3 * GRAVITY * d
+        return [Depth(t=world.t, source=self.name, depth_m=d, pressure_pa=p,
+                      temperature_c=c.temperature_c)]
+
+
+# --------------------------------------------------------------------------- INS
+
+
+@dataclass(frozen=True, kw_only=True)
+class InsConfig:
+    """Velocity over ground of a DVL-aided INS (m/s, s, Hz)."""
+
+    rate_hz: float = 10.0
+    velocity_std_mps: float = 0.01
+    bias_std_mps: float = 0.005
+    bias_tau_s: float = 300.0
+
+
+class Ins(_Base):
+    """DVL-aided INS: :class:`VelocityOverGround` samples (earth frame)."""
+
+    name = "ins"
+
+    def __init__(self, cfg: InsConfig, rng: np.random.Generator, name: str | None = None):
+        super().__init__(cfg.rate_hz, rng, name)
+        self.cfg = cfg
+        self.bias = cfg.bias_std_mps * rng.standard_normal(3)
+
+    def measure(self, world: WorldView) -> list[Sample]:
+        c = self.cfg
+        self.bias = _gauss_markov(self.bias, 1.0 / self.rate_hz, c.bias_tau_s,
+                                  c.bias_std_mps, self.rng)
+        n = self.rng.standard_normal(3).tolist()
+        b = self.bias.tolist()
+        v = world.v_ned
+        s = c.velocity_std_mps
+        return [VelocityOverGround(
+            t=world.t, source=self.name,
+            v_north_mps=v[0] + b[0] + s * n[0],
+            v_east_mps=v[1] + b[1] + s * n[1],
+            v_down_mps=v[2] + b[2] + s * n[2])]
+
+    def error_state(self) -> dict[str, float]:
+        return {"sensor.ins_bias_north": float(self.bias[0]),
+                "sensor.ins_bias_east": float(self.bias[1])}
+
+
+# --------------------------------------------------------------------------- actuators
+
+
+@dataclass(frozen=True, kw_only=True)
+class PwmChannel:
+    """One PWM output: normalized command in [-1, 1] to a pulse width (us).
+
+    ``pwm = neutral_us + x * half_range_us`` (negated when ``reverse``), rounded to an
+    integer microsecond and saturated to ``[min_us, max_us]``. The ESC/servo sees the pulse;
+    within ``deadband_us`` of neutral it does nothing (the plant receives 0).
+    """
+
+    channel: int
+    """Output channel number, 1 first (SERVOn)."""
+    function: int = 0
+    """ArduPilot SERVOn_FUNCTION (26 steering, 70 throttle, 73/74 left/right, 33.. motors)."""
+    neutral_us: float = 1500.0
+    half_range_us: float = 400.0
+    min_us: float = 1100.0
+    max_us: float = 1900.0
+    deadband_us: float = 0.0
+    reverse: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class ActuatorConfig:
+    """The vehicle's PWM outputs and the rate SERVO_OUTPUT_RAW is reported at (Hz)."""
+
+    channels: tuple[PwmChannel, ...] = ()
+    rate_hz: float = 10.0
+
+
+class ActuatorModel(_Base):
+    """Commanded normalized values -> PWM -> what the plant actually receives.
+
+    :meth:`apply` is called by the runner at every control step: it returns the effective
+    normalized values (quantized to 1 us, saturated, deadband applied) that drive the
+    plant. :meth:`measure` reports the PWM outputs as :class:`ActuatorOutputs` (channels
+    1..max, unused channels 0).
+    """
+
+    name = "actuators"
+
+    def __init__(self, cfg: ActuatorConfig, rng: np.random.Generator,
+                 name: str | None = None) -> None:
+        super().__init__(cfg.rate_hz, rng, name)
+        self.cfg = cfg
+        n = max((ch.channel for ch in cfg.channels), default=0)
+        self.pwm = [0.0] * max(n, 8)
+        for ch in cfg.channels:
+            self.pwm[ch.channel - 1] = ch.neutral_us
+
+    def apply(self, values: Sequence[float]) -> tuple[float, ...]:
+        """PWM for each configured channel from ``values`` (same order); effective values."""
+        eff = []
+        for ch, x in zip(self.cfg.channels, values):
+            sgn = -1.0 if ch.reverse else 1.0
+            pwm = float(round(ch.neutral_us + sgn * x * ch.half_range_us))
+            pwm = min(max(pwm, ch.min_us), max(ch.max_us, ch.min_us))
+            self.pwm[ch.channel - 1] = pwm
+            d = pwm - ch.neutral_us
+            if abs(d) <= ch.deadband_us:
+                eff.append(0.0)
+            else:
+                eff.append(max(-1.0, min(1.0, sgn * d / ch.half_range_us)))
+        return tuple(eff)
+
+    def measure(self, world: WorldView) -> list[Sample]:
+        return [ActuatorOutputs(t=world.t, source=self.name, pwm_us=tuple(self.pwm))]
+
+
+@dataclass(frozen=True, kw_only=True)
+class RpmConfig:
+    """Shaft-speed sensor (rev/min, Hz)."""
+
+    rate_hz: float = 10.0
+    noise_std_rpm: float = 5.0
+
+
+class RpmSensor(_Base):
+    """Propeller speed: :class:`PropellerRpm` from the true shaft speed plus white noise."""
+
+    name = "rpm"
+
+    def __init__(self, cfg: RpmConfig, rng: np.random.Generator, name: str | None = None):
+        super().__init__(cfg.rate_hz, rng, name)
+        self.cfg = cfg
+
+    def measure(self, world: WorldView) -> list[Sample]:
+        if not world.shaft_rpm:
+            return []
+        n = self.rng.standard_normal(len(world.shaft_rpm))
+        return [PropellerRpm(t=world.t, source=self.name, rpm=tuple(
+            float(round(r + self.cfg.noise_std_rpm * e, 1)) for r, e in zip(world.shaft_rpm, n)))]
+
+
+# --------------------------------------------------------------------------- the suite
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorSuiteConfig:
+    """Which sensors a vehicle carries and their error models (None = not fitted)."""
+
+    gnss: GnssConfig | None = None
+    imu: ImuConfig | None = None
+    compass: CompassConfig | None = None
+    dvl: DvlConfig | None = None
+    depth: DepthConfig | None = None
+    ins: InsConfig | None = None
+    rpm: RpmConfig | None = None
+    actuators: ActuatorConfig = field(default_factory=ActuatorConfig)
+
+
+def build_sensors(cfg: SensorSuiteConfig, origin: GeoOrigin,
+                  seed: int) -> tuple[list[Sensor], ActuatorModel]:
+    """Instantiate the suite for one run; each sensor seeded from ``seed`` and its name."""
+    sensors: list[Sensor] = []
+    imu = None
+    if cfg.imu is not None:
+        imu = Imu(cfg.imu, sensor_rng(seed, "imu"))
+        sensors.append(imu)
+    if cfg.gnss is not None:
+        sensors.append(Gnss(cfg.gnss, origin, sensor_rng(seed, "gnss")))
+    if cfg.compass is not None:
+        sensors.append(Compass(cfg.compass, sensor_rng(seed, "compass"), imu=imu))
+    if cfg.dvl is not None:
+        sensors.append(Dvl(cfg.dvl, sensor_rng(seed, "dvl")))
+    if cfg.depth is not None:
+        sensors.append(DepthSensor(cfg.depth, sensor_rng(seed, "depth")))
+    if cfg.ins is not None:
+        sensors.append(Ins(cfg.ins, sensor_rng(seed, "ins")))
+    if cfg.rpm is not None:
+        sensors.append(RpmSensor(cfg.rpm, sensor_rng(seed, "rpm")))
+    actuators = ActuatorModel(cfg.actuators, sensor_rng(seed, "actuators"))
+    sensors.append(actuators)
+    return sensors, actuators
