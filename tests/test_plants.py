@@ -11,7 +11,13 @@ import pytest
 
 from sitl.environment import Environment, NonuniformCurrent, UniformCurrent, WaveField
 from sitl.plants import PLANTS, Command, Plant, make_plant
-from sitl.plants.bluerov2 import ALLOCATION, BlueROV2, BlueROV2Params, thruster_commands, thruster_forces
+from sitl.plants.bluerov2 import (
+    ALLOCATION,
+    BlueROV2,
+    BlueROV2Params,
+    thruster_commands,
+    thruster_forces,
+)
 from sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
 from sitl.plants.spheroid import NOMINAL_RPM, NOMINAL_SPEED, SpheroidAUV, SpheroidParams
 from sitl.plants.torpedo_auv import REMUS100, TorpedoAUV
@@ -52,8 +58,8 @@ def autopilot(plant, rpm, duration, psi_ref=0.0, z_ref=20.0, kp=2.0, kd=1.0, env
 def test_every_plant_implements_the_interface_and_fills_the_truth(name):
     plant = make_plant(name)
     assert isinstance(plant, Plant) and plant.name == name and plant.dt <= 0.01
-    plant.reset(north=5.0, east=-2.0, down=3.0 if name in ("bluerov2", "torpedo_auv", "spheroid") else 0.0,
-                yaw=0.5, u=0.5)
+    down = 3.0 if name in ("bluerov2", "torpedo_auv", "spheroid") else 0.0
+    plant.reset(north=5.0, east=-2.0, down=down, yaw=0.5, u=0.5)
     env = Environment(current=UniformCurrent(0.1, 0.2), origin_lat_deg=50.0, origin_lon_deg=-4.0)
     plant.step(0.05, Command(throttle=0.5, left=0.5, right=0.5, propeller_rpm=800.0,
                              thrusters=(0.5, 0.5, -0.5, -0.5, 0.0, 0.0)), env, 0.0)
@@ -374,7 +380,9 @@ def test_spheroid_is_directionally_stable_and_answers_heading_steps():
     # +15 deg heading step under a PD rudder autopilot (the paper's zig-zag amplitude)
     auv.reset(down=10.0, u=NOMINAL_SPEED)
     log: list = []
-    autopilot(auv, NOMINAL_RPM, 60.0, psi_ref=math.radians(15.0), z_ref=10.0, kp=1.0, kd=2.0, log=log)
+    autopilot(
+        auv, NOMINAL_RPM, 60.0, psi_ref=math.radians(15.0), z_ref=10.0, kp=1.0, kd=2.0, log=log
+    )
     psi = np.degrees([x[5] for x in log])
     t90 = 0.1 * (1 + int(np.argmax(psi > 13.5)))
     assert 4.0 < t90 < 15.0  # measured 8.1 s

@@ -31,7 +31,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
 
 from sitl.plants.base import Command, PlantBase, PropulsionWrench
 
