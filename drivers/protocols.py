@@ -1,0 +1,92 @@
+"""Protocol registry: a source ``kind`` -> a fresh stream parser for it.
+
+The live service and the replay of the service's own recordings both turn raw chunks
+into samples through :func:`parser_for`, so the same bytes give the same samples in both.
+
+=========  ==========================================  ===================================
+kind       parser                                      what it reads
+=========  ==========================================  ===================================
+mavlink    :class:`drivers.mavlink.MavlinkParser`      MAVLink 1/2 frames (autopilot link)
+nmea       :class:`drivers.nmea.NmeaParser`            NMEA 0183 GNSS and heading lines
+dvl-json   :class:`drivers.dvl_json.DvlJsonParser`     Water Linked DVL TCP JSON lines
+pd6        :class:`drivers.pd6.Pd6Parser`              Teledyne RDI PD6 ensembles
+sample     :class:`SampleParser`                       typed samples as msgpack (simulator)
+=========  ==========================================  ===================================
+
+Every parser has ``feed(data, t_rx) -> list[Sample]`` and ``stats`` (a
+:class:`drivers.base.ReadStats`); none raises on bad bytes. Parser modules are imported
+only when a source of that kind exists.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Callable
+
+import msgspec
+
+from drivers.base import ReadStats, StreamParser
+from onboard.messages import AnySample, Sample
+
+KINDS: tuple[str, ...] = ("mavlink", "nmea", "dvl-json", "pd6", "sample")
+"""Protocols a source (or a raw record of a recording) may have."""
+
+_CLASSES: dict[str, tuple[str, str]] = {
+    "mavlink": ("drivers.mavlink", "MavlinkParser"),
+    "nmea": ("drivers.nmea", "NmeaParser"),
+    "dvl-json": ("drivers.dvl_json", "DvlJsonParser"),
+    "pd6": ("drivers.pd6", "Pd6Parser"),
+}
+
+
+class UnknownProtocol(ValueError):
+    """A kind that no parser reads."""
+
+
+class SampleParser:
+    """Typed samples encoded as msgpack (one sample per chunk), e.g. from the simulator.
+
+    A chunk that does not decode is counted as ``"decode"``. The sample's own ``t`` is
+    kept (the producer stamped it); ``source`` is kept when set, else this parser's.
+    """
+
+    def __init__(self, source: str = "sample") -> None:
+        self.source = source
+        self.stats = ReadStats()
+        self._dec = msgspec.msgpack.Decoder(AnySample)
+
+    def feed(self, data: bytes, t_rx: float) -> list[Sample]:
+        self.stats.records += 1
+        try:
+            s = self._dec.decode(data)
+        except (msgspec.DecodeError, ValueError):
+            self.stats.reject("decode")
+            return []
+        self.stats.by_type[type(s).__name__] += 1
+        if not s.source:
+            s = msgspec.structs.replace(s, source=self.source)
+        self.stats.samples += 1
+        return [s]
+
+
+def encode_sample(sample: Sample) -> bytes:
+    """The bytes a :class:`SampleParser` reads back as ``sample``."""
+    return msgspec.msgpack.encode(sample)
+
+
+def parser_for(kind: str, source: str = "") -> StreamParser:
+    """A new stream parser for ``kind``; ``source`` names its samples where the protocol
+    lets the parser choose (MAVLink names sources by system id and message itself).
+
+    Raises :class:`UnknownProtocol` for an unknown kind.
+    """
+    if kind == "sample":
+        return SampleParser(source or "sample")
+    try:
+        module_name, class_name = _CLASSES[kind]
+    except KeyError:
+        raise UnknownProtocol(f"unknown protocol {kind!r}; known: {', '.join(KINDS)}") from None
+    cls: Callable[..., StreamParser] = getattr(importlib.import_module(module_name), class_name)
+    if kind == "mavlink":
+        return cls()
+    return cls(source=source or kind)

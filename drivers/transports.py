@@ -1,0 +1,350 @@
+"""Async byte transports: serial ports (real and pseudo-terminals), UDP and TCP.
+
+Every transport is an async iterator of ``(data, t_rx)``: a chunk of bytes exactly as
+received and its receive time ``t_rx`` in seconds on the caller's clock (default
+:func:`time.monotonic`). Transports know nothing of protocols; a stream parser
+(:mod:`drivers.protocols`) turns the chunks into samples.
+
+URLs (:class:`onboard.config.SourceConfig`)::
+
+    serial:/dev/ttyUSB0:115200    a serial port at 115200 baud (8N1, raw)
+    pty:/tmp/gps                  a pseudo-terminal (or any tty) by path; baud ignored
+    udp:0.0.0.0:14551             listen for datagrams on this address
+    tcp:192.168.2.95:16171        connect as a TCP client
+
+A port that disappears (USB serial unplugged, the pty's other end closed, TCP peer gone,
+UDP bind failing) never ends the iteration: the transport counts the loss, waits with
+exponential backoff (``backoff_initial_s`` doubling up to ``backoff_max_s``, reset after a
+connection that lasted ``backoff_reset_s``) and opens it again. The only way out is
+cancelling the task that iterates.
+
+Serial and pty reads use pyserial to configure the port (raw, non-blocking) and
+``loop.add_reader`` on its file descriptor, so no thread and no serial_asyncio.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import errno
+import os
+import socket
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import AsyncIterator, Callable, Literal
+
+Clock = Callable[[], float]
+Chunk = tuple[bytes, float]
+
+READ_SIZE = 65536
+"""Largest read per wake-up (bytes)."""
+
+
+class TransportUrlError(ValueError):
+    """A source URL that does not parse."""
+
+
+@dataclass(frozen=True)
+class TransportSpec:
+    """A parsed source URL."""
+
+    scheme: Literal["serial", "pty", "udp", "tcp"]
+    path: str = ""
+    host: str = ""
+    port: int = 0
+    baud: int = 115200
+
+    def __str__(self) -> str:
+        if self.scheme == "serial":
+            return f"serial:{self.path}:{self.baud}"
+        if self.scheme == "pty":
+            return f"pty:{self.path}"
+        return f"{self.scheme}:{self.host}:{self.port}"
+
+
+def parse_url(url: str) -> TransportSpec:
+    """Parse a source URL (see the module docstring); raise TransportUrlError."""
+    scheme, sep, rest = url.partition(":")
+    if not sep or not rest:
+        raise TransportUrlError(f"{url!r}: expected scheme:address (serial:, pty:, udp:, tcp:)")
+    if scheme == "serial":
+        path, _, baud = rest.rpartition(":")
+        if not path:
+            path, baud = rest, "115200"
+        try:
+            b = int(baud)
+        except ValueError:
+            raise TransportUrlError(f"{url!r}: baud rate {baud!r} is not an integer") from None
+        if b <= 0:
+            raise TransportUrlError(f"{url!r}: baud rate must be positive")
+        return TransportSpec("serial", path=path, baud=b)
+    if scheme == "pty":
+        return TransportSpec("pty", path=rest)
+    if scheme in ("udp", "tcp"):
+        host, _, port = rest.rpartition(":")
+        try:
+            p = int(port)
+        except ValueError:
+            raise TransportUrlError(f"{url!r}: port {port!r} is not an integer") from None
+        if not host or not 0 <= p <= 65535:
+            raise TransportUrlError(f"{url!r}: expected {scheme}:HOST:PORT")
+        return TransportSpec(scheme, host=host.strip("[]"), port=p)  # type: ignore[arg-type]
+    raise TransportUrlError(f"{url!r}: unknown scheme {scheme!r} (serial, pty, udp, tcp)")
+
+
+@dataclass
+class TransportStats:
+    """What a transport has seen; read by the service for health."""
+
+    chunks: int = 0
+    bytes: int = 0
+    connects: int = 0
+    disconnects: int = 0
+    dropped_chunks: int = 0
+    """Chunks lost because the consumer fell behind (bounded internal queue)."""
+    last_error: str = ""
+    connected: bool = False
+    t_last_rx: float | None = None
+    errors: list[str] = field(default_factory=list)
+
+
+class Transport:
+    """Base: reconnect loop with exponential backoff around one connection attempt.
+
+    Subclasses implement :meth:`_session`, an async generator of chunks for one
+    connection that returns (or raises OSError) when the connection is lost.
+    """
+
+    def __init__(self, spec: TransportSpec, *, clock: Clock = time.monotonic,
+                 backoff_initial_s: float = 0.1, backoff_max_s: float = 5.0,
+                 backoff_reset_s: float = 5.0, queue_size: int = 1024,
+                 on_event: Callable[[str], None] | None = None) -> None:
+        self.spec = spec
+        self.clock = clock
+        self.backoff_initial_s = backoff_initial_s
+        self.backoff_max_s = backoff_max_s
+        self.backoff_reset_s = backoff_reset_s
+        self.queue_size = queue_size
+        self.stats = TransportStats()
+        self._on_event = on_event
+
+    def _event(self, text: str) -> None:
+        if self._on_event is not None:
+            self._on_event(text)
+
+    async def __aiter__(self) -> AsyncIterator[Chunk]:
+        delay = self.backoff_initial_s
+        while True:
+            t_open = time.monotonic()
+            try:
+                async with contextlib.aclosing(self._session()) as session:
+                    async for chunk in session:
+                        yield chunk
+                reason = "closed by peer"
+            except (OSError, EOFError, ValueError) as err:  # serial.SerialException is OSError
+                reason = _describe(err)
+            except (asyncio.CancelledError, GeneratorExit):
+                self.stats.connected = False
+                raise
+            was_connected = self.stats.connected
+            self.stats.connected = False
+            self.stats.last_error = reason
+            if was_connected:
+                self.stats.disconnects += 1
+                self._event(f"{self.spec}: lost ({reason})")
+            if time.monotonic() - t_open >= self.backoff_reset_s:
+                delay = self.backoff_initial_s
+            await asyncio.sleep(delay)
+            delay = min(delay * 2.0, self.backoff_max_s)
+
+    def _connected(self) -> None:
+        self.stats.connected = True
+        self.stats.connects += 1
+        self._event(f"{self.spec}: connected")
+
+    def _count(self, data: bytes, t_rx: float) -> Chunk:
+        self.stats.chunks += 1
+        self.stats.bytes += len(data)
+        self.stats.t_last_rx = t_rx
+        return data, t_rx
+
+    async def _session(self) -> AsyncIterator[Chunk]:  # pragma: no cover - abstract
+        raise NotImplementedError
+        yield  # noqa
+
+
+def _describe(err: BaseException) -> str:
+    if isinstance(err, OSError) and err.errno is not None:
+        return f"{errno.errorcode.get(err.errno, err.errno)}: {err.strerror}"
+    return str(err) or type(err).__name__
+
+
+class _Mailbox:
+    """A bounded hand-off from a loop callback to the iterating coroutine."""
+
+    def __init__(self, size: int, stats: TransportStats) -> None:
+        self._q: deque[Chunk | BaseException] = deque()
+        self._size = size
+        self._stats = stats
+        self._waiter: asyncio.Future[None] | None = None
+
+    def put(self, item: Chunk | BaseException) -> None:
+        if not isinstance(item, BaseException) and len(self._q) >= self._size:
+            self._stats.dropped_chunks += 1
+            return
+        self._q.append(item)
+        w = self._waiter
+        if w is not None and not w.done():
+            w.set_result(None)
+
+    async def get(self) -> Chunk:
+        while not self._q:
+            self._waiter = asyncio.get_running_loop().create_future()
+            try:
+                await self._waiter
+            finally:
+                self._waiter = None
+        item = self._q.popleft()
+        if isinstance(item, BaseException):
+            raise item
+        return item
+
+
+class SerialTransport(Transport):
+    """A serial port or pseudo-terminal, read with ``loop.add_reader`` (no thread).
+
+    The port is opened with pyserial (raw mode, 8N1, non-blocking). End of file or an I/O
+    error (the device unplugged, the pty master closed) ends the session; the port is
+    then reopened with backoff, which also covers a device that is not there yet.
+    """
+
+    async def _session(self) -> AsyncIterator[Chunk]:
+        import serial  # pyserial
+
+        spec = self.spec
+        if not os.path.exists(spec.path):
+            raise FileNotFoundError(errno.ENOENT, "no such device", spec.path)
+        port = serial.Serial()
+        port.port = spec.path
+        port.baudrate = spec.baud
+        port.timeout = 0
+        port.exclusive = spec.scheme == "serial"
+        try:
+            port.open()
+        except serial.SerialException as err:
+            raise OSError(errno.EIO, str(err)) from None
+        fd = port.fileno()
+        loop = asyncio.get_running_loop()
+        box = _Mailbox(self.queue_size, self.stats)
+
+        def readable() -> None:
+            try:
+                data = os.read(fd, READ_SIZE)
+            except BlockingIOError:
+                return
+            except OSError as err:
+                loop.remove_reader(fd)
+                box.put(err)
+                return
+            if not data:
+                loop.remove_reader(fd)
+                box.put(EOFError("end of file"))
+                return
+            box.put((data, self.clock()))
+
+        loop.add_reader(fd, readable)
+        self._connected()
+        try:
+            while True:
+                data, t_rx = await box.get()
+                yield self._count(data, t_rx)
+        finally:
+            loop.remove_reader(fd)
+            try:
+                port.close()
+            except Exception:  # noqa: BLE001 - closing a vanished device may fail
+                pass
+
+
+class _UdpProtocol(asyncio.DatagramProtocol):
+    def __init__(self, box: _Mailbox, clock: Clock) -> None:
+        self.box = box
+        self.clock = clock
+
+    def datagram_received(self, data: bytes, addr: object) -> None:
+        self.box.put((data, self.clock()))
+
+    def error_received(self, exc: Exception) -> None:  # ICMP errors: not fatal for a listener
+        pass
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.box.put(exc if exc is not None else EOFError("socket closed"))
+
+
+class UdpTransport(Transport):
+    """Listens for datagrams on ``host:port``; each datagram is one chunk."""
+
+    async def _session(self) -> AsyncIterator[Chunk]:
+        loop = asyncio.get_running_loop()
+        box = _Mailbox(self.queue_size, self.stats)
+        family = socket.AF_INET6 if ":" in self.spec.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+            sock.bind((self.spec.host, self.spec.port))
+        except OSError:
+            sock.close()
+            raise
+        transport, _ = await loop.create_datagram_endpoint(
+            lambda: _UdpProtocol(box, self.clock), sock=sock)
+        self._connected()
+        try:
+            while True:
+                data, t_rx = await box.get()
+                yield self._count(data, t_rx)
+        finally:
+            transport.close()
+
+    @property
+    def local_port(self) -> int:
+        return self.spec.port
+
+
+class TcpTransport(Transport):
+    """A TCP client; reconnects when the server goes away."""
+
+    connect_timeout_s = 5.0
+
+    async def _session(self) -> AsyncIterator[Chunk]:
+        reader, writer = await asyncio.wait_for(
+            asyncio.open_connection(self.spec.host, self.spec.port), self.connect_timeout_s)
+        try:
+            sock = writer.get_extra_info("socket")
+            if sock is not None:
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+        except OSError:
+            pass
+        self._connected()
+        try:
+            while True:
+                data = await reader.read(READ_SIZE)
+                if not data:
+                    return
+                yield self._count(data, self.clock())
+        finally:
+            writer.close()
+            try:
+                await asyncio.wait_for(writer.wait_closed(), 1.0)
+            except (OSError, asyncio.TimeoutError):
+                pass
+
+
+def open_transport(url: str, **kwargs: object) -> Transport:
+    """The transport for a source URL; ``kwargs`` go to :class:`Transport`."""
+    spec = parse_url(url)
+    cls = {"serial": SerialTransport, "pty": SerialTransport, "udp": UdpTransport,
+           "tcp": TcpTransport}[spec.scheme]
+    return cls(spec, **kwargs)  # type: ignore[arg-type]

@@ -1,0 +1,320 @@
+"""MAVLink publisher: estimates to the autopilot and ground stations (architecture.md §4.5).
+
+The service speaks as component 191 (MAV_COMP_ID_ONBOARD_COMPUTER) on the vehicle's
+system id, MAVLink 2, by default to ``udpout:127.0.0.1:14550`` where ground stations
+listen. What it sends:
+
+=================  ===========================================================  =========
+message            content                                                      rate
+=================  ===========================================================  =========
+HEARTBEAT          MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID,           1 Hz
+                   MAV_STATE_ACTIVE (MAV_STATE_STANDBY until the first estimate)
+NAMED_VALUE_FLOAT  ``CUR_N``, ``CUR_E``, ``CUR_D`` water current (m/s, NED);     rate_hz
+                   ``CUR_SN``, ``CUR_SE`` its one-sigma (m/s); ``THR_EST`` surge
+                   input (AIE, m/s^2 = force/mass); ``TRQ_EST`` yaw input (AIE,
+                   rad/s^2 = moment/inertia); ``SPD_EST`` speed (m/s, AIE, else KF)
+DEBUG_VECT         ``DIST`` ESESO disturbance force, body FRD (N);               rate_hz
+                   ``DIST_NED`` the same in NED (N)
+WIND_COV           the **water current** (not wind): wind_x/y/z = current        rate_hz
+                   north/east/down (m/s, the direction it flows to), var_horiz =
+                   std_north^2 + std_east^2, var_vert = std_down^2 (m^2/s^2), so
+                   ground stations draw it with their wind widget
+ESTIMATOR_STATUS   health: test ratios sqrt(NIS)/3 (1 = a 3-sigma innovation) of    1 Hz
+                   the velocity (vel_ratio), position (pos_horiz_ratio), depth
+                   (pos_vert_ratio) and heading (mag_ratio) channels; flags
+                   VELOCITY_HORIZ / POS_HORIZ_REL when estimating, GPS_GLITCH when
+                   GNSS fixes were rejected since the last report
+STATUSTEXT         events (source lost or silent, state restored or corrupt),   <= 1 per
+                   rate-limited by a token bucket (burst 5); the number           2 s avg
+                   suppressed is reported when the bucket refills
+ODOMETRY           only with ``odometry = true``: position NED (m, from the     rate_hz
+                   first fix), heading, body-frame surge speed
+=================  ===========================================================  =========
+
+Signing: with ``signing_key_file`` every frame is signed (MAVLink 2 signing, link id 0,
+timestamp from the wall clock). The file holds the 32-byte secret as raw bytes or 64 hex
+digits, or a passphrase whose SHA-256 is the key (MAVProxy's ``signing setup``). It must
+be readable by its owner only (mode 0600 or stricter); otherwise the service refuses to
+start. ``require_signing = true`` without a key file is a configuration error.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import math
+import os
+import socket
+import stat
+import time
+from pathlib import Path
+from typing import Callable, Sequence
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from onboard.config import ConfigError, MavlinkOut
+from onboard.messages import EstimateRecord, HealthRecord
+
+log = logging.getLogger(__name__)
+
+COMPONENT_ID = 191
+NAMED_VALUES: dict[tuple[str, str], str] = {
+    ("current", "north"): "CUR_N",
+    ("current", "east"): "CUR_E",
+    ("current", "down"): "CUR_D",
+    ("current", "std_north"): "CUR_SN",
+    ("current", "std_east"): "CUR_SE",
+    ("aie", "surge_input"): "THR_EST",
+    ("aie", "yaw_input"): "TRQ_EST",
+}
+"""(pipeline, quantity) -> NAMED_VALUE_FLOAT name (at most 10 characters)."""
+DEBUG_VECTORS: dict[str, tuple[str, tuple[str, str, str]]] = {
+    "DIST": ("eseso", ("dist_x", "dist_y", "dist_z")),
+    "DIST_NED": ("eseso", ("dist_north", "dist_east", "dist_down")),
+}
+"""DEBUG_VECT name -> (pipeline, (x, y, z) quantities)."""
+SIGNING_EPOCH = 1420070400
+"""MAVLink 2 signing timestamps count 10 us units from 2015-01-01T00:00:00Z."""
+
+
+def load_signing_key(path: str | Path) -> bytes:
+    """The 32-byte signing key from ``path`` (see the module docstring).
+
+    Raises ConfigError when the file is missing, empty or readable by group or others.
+    """
+    p = Path(path)
+    try:
+        st = p.stat()
+        raw = p.read_bytes()
+    except OSError as err:
+        raise ConfigError(f"service.mavlink.signing_key_file: {p}: {err.strerror}") from None
+    if st.st_mode & (stat.S_IRWXG | stat.S_IRWXO):
+        raise ConfigError(f"service.mavlink.signing_key_file: {p} is accessible by group or "
+                          f"others (mode {stat.S_IMODE(st.st_mode):04o}); chmod 600 it")
+    if len(raw) == 32:
+        return raw
+    text = raw.decode("utf-8", "replace").strip()
+    if not text:
+        raise ConfigError(f"service.mavlink.signing_key_file: {p} is empty")
+    if len(text) == 64:
+        try:
+            return bytes.fromhex(text)
+        except ValueError:
+            pass
+    return hashlib.sha256(text.encode()).digest()
+
+
+class _UdpOut:
+    """A non-blocking UDP sender (``udpout:HOST:PORT``); send errors are counted."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self.addr = (host, port)
+        self.sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET,
+                                  socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.errors = 0
+
+    def write(self, buf: bytes) -> None:
+        try:
+            self.sock.sendto(buf, self.addr)
+        except OSError:  # nobody listening (ICMP), buffer full: drop, never block
+            self.errors += 1
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def _open_link(url: str) -> object:
+    scheme, _, rest = url.partition(":")
+    if scheme in ("udpout", "udp") and rest:
+        host, _, port = rest.rpartition(":")
+        return _UdpOut(host or "127.0.0.1", int(port))
+    from pymavlink import mavutil  # serial ports, tcp:, tcpin: ...
+
+    return mavutil.mavlink_connection(url, autoreconnect=True)
+
+
+class MavlinkPublisher:
+    """Sends estimates, health and events as MAVLink 2 (see the module docstring).
+
+    Parameters:
+        cfg: the ``[service.mavlink]`` table.
+        system_id: the vehicle's MAVLink system id.
+        clock: the service clock (s) used for pacing.
+    """
+
+    def __init__(self, cfg: MavlinkOut, system_id: int,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.cfg = cfg
+        self.system_id = system_id
+        self.clock = clock
+        self.t_start = clock()
+        self.link: object | None = None
+        self.mav: mavlink2.MAVLink | None = None
+        self.sent = 0
+        self.suppressed = 0
+        self._latest: dict[str, EstimateRecord] = {}
+        self._next_hb = -math.inf
+        self._next_est = -math.inf
+        self._est_period = 1.0 / cfg.rate_hz if cfg.rate_hz > 0 else 0.2
+        self._tokens = 5.0
+        self._t_tokens = self.t_start
+        self._gnss_rejected = 0
+        self.signing = False
+
+    def start(self) -> None:
+        """Open the link; set up signing when a key file is configured."""
+        cfg = self.cfg
+        if cfg.require_signing and not cfg.signing_key_file:
+            raise ConfigError("service.mavlink.require_signing is true but no "
+                              "signing_key_file is configured")
+        key = load_signing_key(cfg.signing_key_file) if cfg.signing_key_file else None
+        self.link = _open_link(cfg.url)
+        self.mav = mavlink2.MAVLink(self.link, srcSystem=self.system_id,
+                                    srcComponent=cfg.component_id or COMPONENT_ID)
+        self.mav.robust_parsing = True
+        if key is not None:
+            sg = self.mav.signing
+            sg.secret_key = key
+            sg.link_id = 0
+            sg.timestamp = int((time.time() - SIGNING_EPOCH) * 1e5)
+            sg.sign_outgoing = True
+            self.signing = True
+
+    def _boot_ms(self, now: float) -> int:
+        return int((now - self.t_start) * 1000.0) & 0xFFFFFFFF
+
+    def _send(self, msg: object) -> None:
+        if self.mav is None:
+            return
+        try:
+            self.mav.send(msg)
+            self.sent += 1
+        except Exception as err:  # noqa: BLE001 - a serial hiccup never stops the loop
+            log.debug("mavlink send failed: %s", err)
+
+    def publish_estimates(self, records: Sequence[EstimateRecord], now: float | None = None) -> None:
+        """Keep the newest record per pipeline; send at ``rate_hz``; heartbeat at 1 Hz."""
+        now = self.clock() if now is None else now
+        for r in records:
+            self._latest[r.pipeline] = r
+        if now >= self._next_hb:
+            self._next_hb = now + 1.0
+            self._heartbeat()
+        if now >= self._next_est and self._latest:
+            self._next_est = now + self._est_period
+            self._send_estimates(now)
+
+    def _heartbeat(self) -> None:
+        state = (mavlink2.MAV_STATE_ACTIVE if self._latest else mavlink2.MAV_STATE_STANDBY)
+        self._send(mavlink2.MAVLink_heartbeat_message(
+            mavlink2.MAV_TYPE_ONBOARD_CONTROLLER, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, state, 3))
+
+    def _send_estimates(self, now: float) -> None:
+        ms = self._boot_ms(now)
+        usec = int(now * 1e6)
+        lat = self._latest
+        for (pipe, q), name in NAMED_VALUES.items():
+            rec = lat.get(pipe)
+            if rec is not None and q in rec.values:
+                self._send(mavlink2.MAVLink_named_value_float_message(
+                    ms, name.encode(), float(rec.values[q])))
+        spd = next((lat[p].values["speed"] for p in ("aie", "kf")
+                    if p in lat and "speed" in lat[p].values), None)
+        if spd is not None:
+            self._send(mavlink2.MAVLink_named_value_float_message(ms, b"SPD_EST", float(spd)))
+        for name, (pipe, qs) in DEBUG_VECTORS.items():
+            rec = lat.get(pipe)
+            if rec is not None and all(q in rec.values for q in qs):
+                x, y, z = (float(rec.values[q]) for q in qs)
+                self._send(mavlink2.MAVLink_debug_vect_message(name.encode(), usec, x, y, z))
+        cur = lat.get("current")
+        if cur is not None and "north" in cur.values and "east" in cur.values:
+            v, s = cur.values, cur.std
+            sn, se = s.get("north", math.nan), s.get("east", math.nan)
+            sd = s.get("down", math.nan)
+            self._send(mavlink2.MAVLink_wind_cov_message(
+                usec, float(v["north"]), float(v["east"]), float(v.get("down", 0.0)),
+                sn * sn + se * se, sd * sd, 0.0, math.hypot(sn, se), abs(sd)))
+        if self.cfg.odometry:
+            self._odometry(usec)
+
+    def _odometry(self, usec: int) -> None:
+        src = next((self._latest[p] for p in ("kf", "aie", "nav") if p in self._latest
+                    and {"north", "east", "heading"} <= self._latest[p].values.keys()), None)
+        if src is None:
+            return
+        v = src.values
+        yaw = float(v["heading"])
+        q = [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
+        depth = float(self._latest["nav"].values.get("depth", 0.0)) if "nav" in self._latest else 0.0
+        cov = [math.nan] * 21
+        self._send(mavlink2.MAVLink_odometry_message(
+            usec, mavlink2.MAV_FRAME_LOCAL_NED, mavlink2.MAV_FRAME_BODY_FRD,
+            float(v["north"]), float(v["east"]), depth, q,
+            float(v.get("speed", math.nan)), math.nan, math.nan,
+            math.nan, math.nan, float(v.get("yaw_rate", math.nan)), cov, cov, 0,
+            mavlink2.MAV_ESTIMATOR_TYPE_NAIVE, 0))
+
+    def publish_health(self, health: HealthRecord, now: float | None = None) -> None:
+        """ESTIMATOR_STATUS from the NIS of the pipelines; STATUSTEXT for its events."""
+        now = self.clock() if now is None else now
+
+        def ratio(*words: str) -> float:
+            vals = [v for k, v in health.nis.items()
+                    if any(w in k for w in words) and "avg" not in k and math.isfinite(v)]
+            return math.sqrt(max(vals)) / 3.0 if vals else 0.0
+
+        flags = 0
+        vals = {q for r in self._latest.values() for q in r.values}
+        if {"speed", "north"} & vals or "current" in self._latest:
+            flags |= mavlink2.ESTIMATOR_VELOCITY_HORIZ
+        if {"north", "east"} <= vals:
+            flags |= mavlink2.ESTIMATOR_POS_HORIZ_REL
+        gnss_rej = sum(n for k, n in health.rejected.items() if k.startswith("gnss:"))
+        if gnss_rej > self._gnss_rejected:
+            flags |= mavlink2.ESTIMATOR_GPS_GLITCH
+        self._gnss_rejected = gnss_rej
+        acc = [r.std[q] for r in self._latest.values() for q in ("north", "east") if q in r.std]
+        h_acc = max(acc) if acc else 0.0
+        self._send(mavlink2.MAVLink_estimator_status_message(
+            int(now * 1e6), flags, ratio("velocity", "surge", "speed"),
+            ratio("position", "gnss", "north", "east"), ratio("depth", "down"),
+            ratio("heading", "yaw"), 0.0, 0.0, float(h_acc), 0.0))
+        for ev in health.events:
+            self.event(ev, now=now)
+
+    def event(self, text: str, severity: int | None = None, now: float | None = None) -> bool:
+        """STATUSTEXT ``text`` (first 50 characters) if the rate limit allows; else count it.
+
+        Default severity: WARNING for losses and errors, INFO otherwise.
+        """
+        now = self.clock() if now is None else now
+        self._tokens = min(5.0, self._tokens + max(0.0, now - self._t_tokens) * 0.5)
+        self._t_tokens = now
+        if self._tokens < 1.0:
+            self.suppressed += 1
+            return False
+        self._tokens -= 1.0
+        if severity is None:
+            low = text.lower()
+            bad = any(w in low for w in ("lost", "silent", "corrupt", "error", "fail", "drop"))
+            severity = mavlink2.MAV_SEVERITY_WARNING if bad else mavlink2.MAV_SEVERITY_INFO
+        if self.suppressed and self._tokens >= 1.0:
+            self._tokens -= 1.0
+            self._send(mavlink2.MAVLink_statustext_message(
+                mavlink2.MAV_SEVERITY_NOTICE, f"onboard: {self.suppressed} msgs suppressed".encode()))
+            self.suppressed = 0
+        self._send(mavlink2.MAVLink_statustext_message(
+            severity, text.encode("utf-8", "replace")[:50]))
+        return True
+
+    def close(self) -> None:
+        link = self.link
+        self.link = None
+        self.mav = None
+        if link is not None:
+            try:
+                link.close()  # type: ignore[attr-defined]
+            except Exception:  # noqa: BLE001
+                pass

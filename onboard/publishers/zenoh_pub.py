@@ -1,0 +1,166 @@
+"""Zenoh publisher: estimates and health to shore (architecture.md §4.4).
+
+Keys (``<prefix>`` is ``onboard`` unless configured)::
+
+    <prefix>/<vehicle_id>/est/<pipeline>   EstimateRecord, every tick
+    <prefix>/<vehicle_id>/health           HealthRecord, 1 Hz
+    <prefix>/<vehicle_id>/alive            liveliness token (present while running)
+    <prefix>/<vehicle_id>/**               queryable: the latest value of every key above
+
+Payloads are the msgspec structs of :mod:`onboard.messages` as JSON (encoding
+``application/json``), each with its ``schema`` version. The vehicle's session is a peer
+or client with multicast scouting off: it connects to the endpoints configured (a router
+on the vehicle or on shore) and listens where configured. :func:`open_router` starts an
+in-process router session for the demo and the tests (no zenohd binary).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import msgspec
+
+from onboard.config import ZenohOut
+from onboard.messages import EstimateRecord, HealthRecord
+
+log = logging.getLogger(__name__)
+
+DEFAULT_ROUTER_ENDPOINT = "tcp/127.0.0.1:7447"
+JSON_ENCODING = "application/json"
+
+
+def session_config(mode: str = "peer", connect: Iterable[str] = (), listen: Iterable[str] = (),
+                   config_file: str = "") -> "zenoh.Config":  # noqa: F821
+    """A Zenoh configuration: ``mode`` peer/client/router, multicast scouting off,
+    ``connect``/``listen`` endpoints; ``config_file`` (JSON5: TLS, credentials, access
+    control) is the base when given."""
+    import zenoh
+
+    conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    connect, listen = list(connect), list(listen)
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(connect))
+    if listen:
+        conf.insert_json5("listen/endpoints", json.dumps(listen))
+    elif mode != "router":
+        conf.insert_json5("listen/endpoints", "[]")  # a vehicle listens only where told
+    return conf
+
+
+def open_router(listen: str | Sequence[str] = DEFAULT_ROUTER_ENDPOINT) -> "zenoh.Session":  # noqa: F821
+    """An in-process Zenoh router listening on ``listen`` (default tcp/127.0.0.1:7447).
+
+    Close it with ``session.close()`` (an open session keeps the interpreter alive).
+    """
+    import zenoh
+
+    eps = [listen] if isinstance(listen, str) else list(listen)
+    return zenoh.open(session_config("router", listen=eps))
+
+
+class ZenohPublisher:
+    """Publishes one vehicle's records; answers queries with the latest of each.
+
+    Parameters:
+        cfg: the ``[service.zenoh]`` table.
+        vehicle: the vehicle id (the second key segment).
+    """
+
+    def __init__(self, cfg: ZenohOut, vehicle: str) -> None:
+        self.cfg = cfg
+        self.vehicle = vehicle
+        self.base = f"{cfg.key_prefix}/{vehicle}"
+        self.session = None
+        self.published = 0
+        self.errors = 0
+        self.queries = 0
+        self._pubs: dict[str, object] = {}
+        self._latest: dict[str, bytes] = {}
+        self._lock = threading.Lock()
+        self._token = None
+        self._queryable = None
+        self._enc = msgspec.json.Encoder()
+
+    def start(self) -> None:
+        """Open the session, declare the liveliness token and the queryable."""
+        import zenoh
+
+        if self.cfg.config_file and not Path(self.cfg.config_file).exists():
+            raise FileNotFoundError(f"zenoh config file {self.cfg.config_file} not found")
+        mode = self.cfg.mode if self.cfg.mode in ("peer", "client", "router") else "peer"
+        self.session = zenoh.open(session_config(mode, self.cfg.connect, self.cfg.listen,
+                                                 self.cfg.config_file))
+        self._encoding = zenoh.Encoding.APPLICATION_JSON
+        self._token = self.session.liveliness().declare_token(f"{self.base}/alive")
+        self._queryable = self.session.declare_queryable(f"{self.base}/**", self._on_query)
+        self._pubs["health"] = self.session.declare_publisher(
+            f"{self.base}/health", encoding=self._encoding)
+
+    def _publisher(self, suffix: str) -> object:
+        pub = self._pubs.get(suffix)
+        if pub is None:
+            pub = self._pubs[suffix] = self.session.declare_publisher(  # type: ignore[union-attr]
+                f"{self.base}/{suffix}", encoding=self._encoding)
+        return pub
+
+    def _put(self, suffix: str, payload: bytes) -> None:
+        with self._lock:
+            self._latest[f"{self.base}/{suffix}"] = payload
+        if self.session is None:
+            return
+        try:
+            self._publisher(suffix).put(payload)  # type: ignore[attr-defined]
+            self.published += 1
+        except Exception as err:  # noqa: BLE001 - a network hiccup never stops the loop
+            self.errors += 1
+            if self.errors == 1 or self.errors % 1000 == 0:
+                log.warning("zenoh put on %s/%s failed (%d): %s", self.base, suffix,
+                            self.errors, err)
+
+    def publish_estimates(self, records: Sequence[EstimateRecord]) -> None:
+        """Put each record on ``<base>/est/<pipeline>``."""
+        enc = self._enc.encode
+        for rec in records:
+            self._put(f"est/{rec.pipeline}", enc(rec))
+
+    def publish_health(self, health: HealthRecord) -> None:
+        self._put("health", self._enc.encode(health))
+
+    def _on_query(self, query: object) -> None:
+        """Reply with the latest value of every key the query's selector matches."""
+        import zenoh
+
+        self.queries += 1
+        try:
+            sel = query.key_expr  # type: ignore[attr-defined]
+            with self._lock:
+                items = list(self._latest.items())
+            for key, payload in items:
+                if sel.intersects(zenoh.KeyExpr(key)):
+                    query.reply(key, payload, encoding=self._encoding)  # type: ignore[attr-defined]
+        except Exception as err:  # noqa: BLE001 - never let a query kill the session thread
+            self.errors += 1
+            log.warning("zenoh query failed: %s", err)
+
+    def close(self) -> None:
+        """Undeclare everything and close the session (removes the liveliness token)."""
+        for obj in [self._queryable, self._token, *self._pubs.values()]:
+            if obj is not None:
+                try:
+                    obj.undeclare()  # type: ignore[attr-defined]
+                except Exception:  # noqa: BLE001
+                    pass
+        self._pubs.clear()
+        self._queryable = self._token = None
+        if self.session is not None:
+            try:
+                self.session.close()
+            except Exception:  # noqa: BLE001
+                pass
+            self.session = None

@@ -1,0 +1,465 @@
+"""The onboard service: ``onboard run --config FILE`` (the systemd ExecStart).
+
+One asyncio loop, one thread doing estimation::
+
+    transports (serial/pty, UDP, TCP; reconnect with backoff)      drivers.transports
+      -> Intake.chunk: record raw bytes + receive time, parse,      onboard.recorder
+         bounded queue (drops counted per input)
+      -> every 1/rate_hz s on the monotonic clock: Intake.tick:      onboard.engine
+         push queued samples (checked, rejections counted with their reason, GNSS only
+         at the surface), step the pipelines
+      -> Zenoh (every tick), MAVLink (rate_hz), health at 1 Hz      onboard.publishers
+      -> adaptive state saved atomically every state_save_interval_s onboard.persistence
+      -> systemd: READY=1 once inputs and publishers are up, STATUS every 5 s,
+         WATCHDOG=1 from the tick loop itself                        onboard.sdnotify
+
+SIGTERM or SIGINT stops it gracefully: STOPPING=1, the last state saved, the recording
+flushed and closed, the Zenoh liveliness token withdrawn.
+
+Relative paths in the configuration (``service.state_file``, ``service.recorder.directory``)
+are resolved against the state directory: ``--state-dir``, else ``$STATE_DIRECTORY``
+(systemd's ``StateDirectory=``), else the current directory; the recorder directory is
+resolved against ``$LOGS_DIRECTORY`` (systemd's ``LogsDirectory=``) when that is set and
+``--state-dir`` is not given.
+
+Nothing that arrives on an input can stop the service: a parser exception is counted as
+``parse:<input>:parser_error``, a failing publisher or disk is counted and reported in the
+health events, a vanished port is reopened with backoff.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import math
+import os
+import signal
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import msgspec
+
+from drivers.transports import Transport, open_transport
+from onboard.config import Config, ConfigError, SourceConfig, load
+from onboard.engine import Engine
+from onboard.messages import EstimateRecord, HealthRecord
+from onboard.persistence import StateFile
+from onboard.recorder import Intake, Recorder, config_to_dict
+from onboard.sdnotify import Notifier
+
+log = logging.getLogger("onboard.service")
+
+HEALTH_PERIOD_S = 1.0
+STATUS_PERIOD_S = 5.0
+SILENT_AFTER_S = 3.0
+"""An input with no bytes for this long is reported silent (s)."""
+READY_WAIT_S = 1.0
+"""Longest wait (s) for the inputs to connect before READY=1 (a missing port does not
+hold the service back: it becomes READY degraded and keeps reconnecting)."""
+MAX_TICK_LAG_S = 1.0
+"""A tick more than this late (s) means the loop stalled: the missed ticks are skipped."""
+
+
+class ServiceClock:
+    """The service's time base: seconds on the monotonic clock, optionally scaled.
+
+    ``now()`` is ``origin + speed * (monotonic - start)``. The live service uses
+    ``speed = 1`` and ``origin = time.monotonic()`` at start (so ``now()`` is the monotonic
+    clock); the demo runs the simulator and the service ``speed`` times faster than the
+    wall clock on one shared scaled clock.
+    """
+
+    def __init__(self, speed: float = 1.0, origin: float | None = None) -> None:
+        if not speed > 0:
+            raise ValueError("clock speed must be positive")
+        self.speed = speed
+        self._start = time.monotonic()
+        self.origin = self._start if origin is None else origin
+
+    def now(self) -> float:
+        """Service time (s)."""
+        return self.origin + (time.monotonic() - self._start) * self.speed
+
+    def wall_delay(self, t: float) -> float:
+        """Wall seconds until service time ``t`` (<= 0 when past)."""
+        return (t - self.now()) / self.speed
+
+    async def sleep_until(self, t: float) -> None:
+        d = self.wall_delay(t)
+        if d > 0:
+            await asyncio.sleep(d)
+
+
+@dataclass
+class _Input:
+    cfg: SourceConfig
+    name: str
+    transport: Transport
+    task: asyncio.Task | None = None
+    silent: bool = False
+    t_started: float = 0.0
+
+
+@dataclass
+class ServiceStats:
+    """Counters and timings for health, tests and the benchmark."""
+
+    ticks: int = 0
+    tick_skips: int = 0
+    health_published: int = 0
+    state_saves: int = 0
+    state_errors: int = 0
+    t_start: float = 0.0
+    t_ready: float | None = None
+    """Wall-clock (time.monotonic) seconds from construction to READY."""
+    tick_compute_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
+    """Wall time of each tick's work (s): push, pipelines, publishing."""
+
+
+def resolve_dirs(args_state_dir: str | None) -> tuple[Path, Path | None]:
+    """(state directory, logs directory or None) per the module docstring."""
+    if args_state_dir:
+        return Path(args_state_dir), None
+    state = Path(os.environ.get("STATE_DIRECTORY", "").split(":")[0] or ".")
+    logs = os.environ.get("LOGS_DIRECTORY", "").split(":")[0]
+    return state, Path(logs) if logs else None
+
+
+class Service:
+    """The daemon, usable in-process (tests, demo, benchmark) or from :func:`main`.
+
+    Parameters:
+        cfg: the configuration.
+        state_dir: base of relative paths (state file, recordings).
+        logs_dir: base of a relative recorder directory, when given.
+        clock: the time base (default: the monotonic clock).
+        notifier: systemd notifier (default: from the environment).
+        on_tick: called ``(t, records)`` after every tick, on the loop (tests, demo).
+        on_health: called with every HealthRecord.
+    """
+
+    def __init__(self, cfg: Config, *, state_dir: str | Path = ".",
+                 logs_dir: str | Path | None = None, clock: ServiceClock | None = None,
+                 notifier: Notifier | None = None,
+                 on_tick: Callable[[float, Sequence[EstimateRecord]], None] | None = None,
+                 on_health: Callable[[HealthRecord], None] | None = None) -> None:
+        self.t_construct = time.monotonic()
+        self.cfg = cfg
+        self.clock = clock or ServiceClock()
+        self.notifier = notifier or Notifier()
+        self.on_tick = on_tick
+        self.on_health = on_health
+        self.state_dir = Path(state_dir)
+        svc = cfg.service
+        self.engine = Engine(cfg)
+        self.stats = ServiceStats(t_start=self.t_construct)
+        self.events: deque[str] = deque(maxlen=64)
+        self.state_file = StateFile(self._path(svc.state_file), cfg.vehicle.id,
+                                    cfg.vehicle.vehicle_class)
+        self.restored: dict | None = None
+        rec_base = Path(logs_dir) if logs_dir is not None else self.state_dir
+        self.recorder_dir = (Path(svc.recorder.directory) if Path(svc.recorder.directory).is_absolute()
+                             else rec_base / svc.recorder.directory)
+        self.recorder: Recorder | None = None
+        self.intake = Intake(self.engine, queue_size=svc.queue_size)
+        self.inputs: list[_Input] = []
+        self.zenoh = None
+        self.mavlink = None
+        self._tasks: list[asyncio.Task] = []
+        self._stop = asyncio.Event()
+        self._rate_prev: dict[str, int] = {}
+        self._accepted_prev: dict[str, int] = {}
+        self._t_rate_prev: float | None = None
+        self._health_events: list[str] = []
+        self.latest_health: HealthRecord | None = None
+
+    def _path(self, p: str) -> Path:
+        q = Path(p)
+        return q if q.is_absolute() else self.state_dir / q
+
+    def event(self, text: str) -> None:
+        """Record an event: log, health ``events`` (next 1 Hz record), STATUSTEXT."""
+        log.info("%s", text)
+        self.events.append(text)
+        self._health_events.append(text)
+
+    # ------------------------------------------------------------------ lifecycle
+
+    async def start(self) -> None:
+        """Restore state, open recorder, publishers and inputs; then READY=1."""
+        cfg, svc = self.cfg, self.cfg.service
+        loaded = self.state_file.load()
+        if loaded.state is not None:
+            self.engine.set_state(loaded.state)
+            self.restored = loaded.state
+        if loaded.state is not None or not loaded.ok:
+            self.event(loaded.message)
+        else:
+            log.info("%s", loaded.message)
+        if svc.recorder.enabled:
+            meta = {"vehicle": cfg.vehicle.id, "config": config_to_dict(cfg),
+                    "sources": {self._name(i, s): s.kind for i, s in enumerate(svc.sources)},
+                    "queue_size": svc.queue_size, "state": self.restored}
+            try:
+                self.recorder = Recorder(self.recorder_dir, flush_interval_s=svc.recorder.flush_interval_s,
+                                         rotate_mb=svc.recorder.rotate_mb,
+                                         max_total_mb=svc.recorder.max_total_mb, meta=meta,
+                                         clock=self.clock.now)
+                self.intake.recorder = self.recorder
+            except OSError as err:
+                self.event(f"recorder disabled: cannot write {self.recorder_dir}: {err.strerror}")
+        for i, src in enumerate(svc.sources):
+            name = self._name(i, src)
+            self.intake.add_source(name, src.kind)
+            tr = open_transport(src.url, clock=self.clock.now, queue_size=svc.queue_size,
+                                on_event=lambda text, n=name: self.event(f"{n}: {text.split(': ', 1)[-1]}"))
+            self.inputs.append(_Input(src, name, tr, t_started=self.clock.now()))
+        await self._start_publishers()
+        for inp in self.inputs:
+            inp.task = asyncio.create_task(self._read(inp), name=f"input:{inp.name}")
+            self._tasks.append(inp.task)
+        deadline = time.monotonic() + READY_WAIT_S
+        while time.monotonic() < deadline and not all(i.transport.stats.connected for i in self.inputs):
+            await asyncio.sleep(0.01)
+        self._tasks.append(asyncio.create_task(self._tick_loop(), name="ticks"))
+        self.stats.t_ready = time.monotonic() - self.t_construct
+        up = sum(i.transport.stats.connected for i in self.inputs)
+        self.notifier.ready(f"ready: {up}/{len(self.inputs)} inputs up, "
+                            f"{len(self.engine.pipelines)} pipelines at {cfg.engine.rate_hz:g} Hz")
+        log.info("ready in %.2f s: %d/%d inputs up", self.stats.t_ready, up, len(self.inputs))
+
+    @staticmethod
+    def _name(i: int, src: SourceConfig) -> str:
+        return src.name or f"{src.kind}{i}"
+
+    async def _start_publishers(self) -> None:
+        cfg = self.cfg
+        if cfg.service.mavlink.enabled:
+            from onboard.publishers.mavlink_pub import MavlinkPublisher
+
+            pub = MavlinkPublisher(cfg.service.mavlink, cfg.vehicle.system_id, clock=self.clock.now)
+            pub.start()  # a bad key file is a configuration error: fail at start
+            self.mavlink = pub
+        if cfg.service.zenoh.enabled:
+            if not await self._open_zenoh():
+                self._tasks.append(asyncio.create_task(self._zenoh_retry(), name="zenoh-retry"))
+
+    async def _open_zenoh(self) -> bool:
+        from onboard.publishers.zenoh_pub import ZenohPublisher
+
+        pub = ZenohPublisher(self.cfg.service.zenoh, self.cfg.vehicle.id)
+        try:
+            await asyncio.get_running_loop().run_in_executor(None, pub.start)
+        except Exception as err:  # noqa: BLE001 - zenoh raises its own ZError
+            self.event(f"zenoh: cannot open session: {str(err).split(' at ')[0]}")
+            pub.close()
+            return False
+        self.zenoh = pub
+        return True
+
+    async def _zenoh_retry(self) -> None:
+        delay = 1.0
+        while self.zenoh is None:
+            await asyncio.sleep(delay)
+            delay = min(delay * 2.0, 30.0)
+            if await self._open_zenoh():
+                self.event("zenoh: session open")
+
+    async def _read(self, inp: _Input) -> None:
+        chunk = self.intake.chunk
+        name, kind = inp.name, inp.cfg.kind
+        async for data, t_rx in inp.transport:
+            chunk(name, kind, data, t_rx)
+
+    async def run(self) -> None:
+        """Start (if not started) and run until :meth:`request_stop`; then shut down."""
+        if not self._tasks:
+            await self.start()
+        try:
+            await self._stop.wait()
+        finally:
+            await self.shutdown()
+
+    def request_stop(self) -> None:
+        self._stop.set()
+
+    async def shutdown(self) -> None:
+        """Graceful stop: STOPPING=1, tasks cancelled, state saved, recording closed."""
+        self.notifier.stopping("stopping")
+        for t in self._tasks:
+            t.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        self._tasks.clear()
+        self._save_state_now()
+        if self.recorder is not None:
+            self.recorder.close()
+        if self.zenoh is not None:
+            self.zenoh.close()
+        if self.mavlink is not None:
+            self.mavlink.close()
+        self.notifier.close()
+
+    # ------------------------------------------------------------------ the loop
+
+    async def _tick_loop(self) -> None:
+        clock = self.clock
+        period = 1.0 / self.cfg.engine.rate_hz
+        k0 = math.ceil(clock.now() / period)
+        k = k0
+        next_health = clock.now() + HEALTH_PERIOD_S
+        next_status = clock.now() + STATUS_PERIOD_S
+        save_every = self.cfg.service.state_save_interval_s
+        next_save = clock.now() + save_every if save_every > 0 else math.inf
+        perf = time.perf_counter
+        while True:
+            t = k * period
+            await clock.sleep_until(t)
+            now = clock.now()
+            if now - t > MAX_TICK_LAG_S:
+                k_new = math.floor(now / period)
+                self.stats.tick_skips += k_new - k
+                self.event(f"estimator loop stalled {now - t:.1f} s: skipped {k_new - k} ticks")
+                k = k_new
+                t = k * period
+            w0 = perf()
+            try:
+                self._tick(t, now)
+                if now >= next_health:
+                    next_health += HEALTH_PERIOD_S * max(1, math.ceil((now - next_health) / HEALTH_PERIOD_S))
+                    self._health(now)
+                if now >= next_status:
+                    next_status = now + STATUS_PERIOD_S
+                    self.notifier.status(self.status_line())
+                if now >= next_save:
+                    next_save = now + save_every
+                    self._save_state_async()
+                if self.recorder is not None:
+                    self.recorder.poll(now)
+            except Exception:  # noqa: BLE001 - a pipeline bug must not stop the loop
+                log.exception("tick at %.3f failed", t)
+                self.event("tick failed: see the log")
+            self.stats.tick_compute_s.append(perf() - w0)
+            self.notifier.watchdog()
+            k += 1
+
+    def _tick(self, t: float, now: float) -> None:
+        records = self.intake.tick(t)
+        self.stats.ticks += 1
+        if self.zenoh is not None and records:
+            self.zenoh.publish_estimates(records)
+        if self.mavlink is not None:
+            self.mavlink.publish_estimates(records, now)
+        if self.on_tick is not None:
+            self.on_tick(t, records)
+
+    def _health(self, now: float) -> None:
+        for inp in self.inputs:
+            t_last = inp.transport.stats.t_last_rx
+            quiet = now - (t_last if t_last is not None else inp.t_started)
+            if not inp.silent and quiet > SILENT_AFTER_S:
+                inp.silent = True
+                self.event(f"{inp.name}: silent for {quiet:.0f} s")
+            elif inp.silent and quiet < SILENT_AFTER_S:
+                inp.silent = False
+                self.event(f"{inp.name}: data again")
+        h = self.health(now)
+        self.latest_health = h
+        self.stats.health_published += 1
+        if self.zenoh is not None:
+            self.zenoh.publish_health(h)
+        if self.mavlink is not None:
+            self.mavlink.publish_health(h, now)
+        if self.on_health is not None:
+            self.on_health(h)
+
+    def health(self, now: float) -> HealthRecord:
+        """The HealthRecord at ``now``: per-input and per-sample-stream rates (samples/s
+        since the previous call), engine and parser rejections, drops, innovations, NIS,
+        the events since the previous call."""
+        dt = now - self._t_rate_prev if self._t_rate_prev is not None else None
+        rates: dict[str, float] = {}
+        for name, st in self.intake.sources.items():
+            prev = self._rate_prev.get(name, 0)
+            rates[name] = (st.samples - prev) / dt if dt else 0.0
+            self._rate_prev[name] = st.samples
+        for key, n in self.engine.accepted.items():
+            k = ":".join(key) if isinstance(key, tuple) else str(key)
+            prev = self._accepted_prev.get(k, 0)
+            rates[k] = (n - prev) / dt if dt else 0.0
+            self._accepted_prev[k] = n
+        self._t_rate_prev = now
+        events, self._health_events = self._health_events[-20:], []
+        h = self.engine.health(now, rates, events)
+        dropped = dict(self.intake.dropped)
+        for inp in self.inputs:
+            if inp.transport.stats.dropped_chunks:
+                dropped[f"{inp.name}:chunks"] = inp.transport.stats.dropped_chunks
+        if self.stats.tick_skips:
+            dropped["ticks"] = self.stats.tick_skips
+        rejected = dict(h.rejected)
+        rejected.update(self.intake.parse_rejections())
+        return msgspec.structs.replace(h, rejected=rejected, dropped=dropped)
+
+    def status_line(self) -> str:
+        up = sum(i.transport.stats.connected and not i.silent for i in self.inputs)
+        est = ",".join(sorted(self.engine.latest)) or "none yet"
+        rej = sum(self.engine.rejected.values())
+        return (f"{self.cfg.engine.rate_hz:g} Hz, inputs {up}/{len(self.inputs)} live, "
+                f"estimating {est}, {rej} samples rejected, {sum(self.intake.dropped.values())} dropped")
+
+    # ------------------------------------------------------------------ persistence
+
+    def _save_state_async(self) -> None:
+        state = self.engine.get_state()
+        loop = asyncio.get_running_loop()
+        fut = loop.run_in_executor(None, self.state_file.save, state)
+        fut.add_done_callback(self._saved)
+
+    def _saved(self, fut: asyncio.Future) -> None:
+        err = fut.exception()
+        if err is None:
+            self.stats.state_saves += 1
+        else:
+            self.stats.state_errors += 1
+            self.event(f"state save failed: {err}")
+
+    def _save_state_now(self) -> None:
+        try:
+            self.state_file.save(self.engine.get_state())
+            self.stats.state_saves += 1
+        except (OSError, TypeError, ValueError) as err:
+            self.stats.state_errors += 1
+            log.error("state save failed: %s", err)
+
+
+async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None) -> int:
+    """Run until SIGTERM/SIGINT; return the exit status."""
+    svc = Service(cfg, state_dir=state_dir, logs_dir=logs_dir)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        try:
+            loop.add_signal_handler(sig, svc.request_stop)
+        except (NotImplementedError, RuntimeError):
+            pass
+    await svc.run()
+    return 0
+
+
+def main(args: argparse.Namespace) -> int:
+    """``onboard run --config FILE [--state-dir DIR]``."""
+    logging.basicConfig(level=os.environ.get("ONBOARD_LOG_LEVEL", "INFO"),
+                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    cfg = load(args.config)
+    if not cfg.service.sources:
+        raise ConfigError(f"{args.config}: service.sources is empty: nothing to read")
+    state_dir, logs_dir = resolve_dirs(getattr(args, "state_dir", None))
+    try:
+        state_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f"state directory {state_dir}: {err.strerror}") from None
+    return asyncio.run(run_service(cfg, state_dir, logs_dir))

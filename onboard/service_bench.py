@@ -1,0 +1,294 @@
+"""Service performance figures, for ``onboard bench`` and the report.
+
+:func:`measure` starts the real service (``python -m onboard run``) as a child process
+with a notify socket of its own, feeds it the nominal sensor load over UDP in real
+protocols -- 50 Hz IMU (MAVLink SCALED_IMU), 10 Hz actuator outputs (SERVO_OUTPUT_RAW),
+1 Hz HEARTBEAT, 5 Hz GNSS (NMEA GGA + RMC) and 10 Hz compass (NMEA HDT) -- from a boat
+turning in a circle, subscribes to its estimates through an in-process Zenoh router and
+reports:
+
+* ``service_cpu_fraction``: CPU seconds (user + system) of the service per wall second
+  over the measurement window (0.03 = 3 % of one core);
+* ``sensor_to_zenoh_p50_ms``/``_p99_ms``: from the receipt of the newest sample an
+  estimate used (``EstimateRecord.t_sensor``, the service's CLOCK_MONOTONIC) to the
+  delivery of that estimate to a Zenoh subscriber in another process (same clock). This
+  includes the wait for the next fixed-rate tick (up to ``1/rate_hz``);
+* ``tick_to_zenoh_p50_ms``/``_p99_ms``: from the tick time to delivery: what the service
+  adds (pushing, all pipelines, encoding, Zenoh) beyond the fixed tick grid;
+* ``service_rss_mb``: resident memory at the end (MB = 2^20 B), and its peak;
+* ``startup_to_ready_s``: from spawning the process to READY=1 on the notify socket
+  (interpreter start, imports, state restore, inputs and publishers up).
+
+:class:`TrafficGenerator` (the byte streams) is reused by the service tests.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from drivers.nmea import encode_gga, encode_hdt, encode_rmc
+
+EPOCH_S = 1_767_225_600.0
+"""UTC of t = 0 in the generated NMEA (2026-01-01)."""
+ORIGIN = (41.49, -71.42)
+
+
+class TrafficGenerator:
+    """Real-protocol bytes of a rudder boat turning a 40 m circle at 1.5 m/s.
+
+    ``mavlink(t)`` and ``nmea(t)`` return the frames due at time ``t`` (s) for the
+    nominal rates: IMU 50 Hz, servo outputs 10 Hz, heartbeat 1 Hz (MAVLink, system id
+    ``system_id``), GNSS 5 Hz and heading 10 Hz (NMEA). Call them on a 50 Hz grid.
+    """
+
+    def __init__(self, system_id: int = 1, speed_mps: float = 1.5, radius_m: float = 40.0) -> None:
+        self.mav = mavlink2.MAVLink(None, srcSystem=system_id, srcComponent=1)
+        self.mav.robust_parsing = True
+        self.speed = speed_mps
+        self.radius = radius_m
+        self.k = 0
+
+    def _pack(self, msg: Any) -> bytes:
+        return msg.pack(self.mav)
+
+    def state(self, t: float) -> tuple[float, float, float, float]:
+        """(north m, east m, heading rad, yaw rate rad/s) at ``t``."""
+        w = self.speed / self.radius
+        a = w * t
+        return self.radius * math.sin(a), self.radius * (1.0 - math.cos(a)), a % (2 * math.pi), w
+
+    def mavlink(self, t: float) -> list[bytes]:
+        """MAVLink frames due at ``t`` (call at 50 Hz)."""
+        k = int(round(t * 50.0))
+        out: list[bytes] = []
+        ms = int(t * 1000) & 0xFFFFFFFF
+        _, _, hdg, w = self.state(t)
+        if k % 50 == 0:
+            out.append(self._pack(mavlink2.MAVLink_heartbeat_message(
+                11, 3, 0, 0, mavlink2.MAV_STATE_ACTIVE, 3)))
+        ay_mg = int(self.speed * w / 9.80665 * 1000)
+        out.append(self._pack(mavlink2.MAVLink_scaled_imu_message(
+            ms, 0, ay_mg, -1000, 0, 0, int(w * 1000), 0, 0, 0)))
+        if k % 5 == 0:
+            out.append(self._pack(mavlink2.MAVLink_servo_output_raw_message(
+                ms * 1000 & 0xFFFFFFFF, 0, 1600, 1500, 1700, 1500, 1500, 1500, 1500, 1500)))
+        return out
+
+    def nmea(self, t: float) -> list[bytes]:
+        """NMEA sentences due at ``t`` (call at 50 Hz): GGA+RMC at 5 Hz, HDT at 10 Hz."""
+        k = int(round(t * 50.0))
+        out: list[bytes] = []
+        n, e, hdg, _ = self.state(t)
+        if k % 10 == 0:
+            lat = ORIGIN[0] + n / 111_320.0
+            lon = ORIGIN[1] + e / (111_320.0 * math.cos(math.radians(ORIGIN[0])))
+            out.append(encode_gga(EPOCH_S + t, lat, lon) + encode_rmc(
+                EPOCH_S + t, lat, lon, self.speed, hdg))
+        if k % 5 == 0:
+            out.append(encode_hdt(hdg))
+        return out
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def free_tcp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def bench_config_toml(mav_port: int, nmea_port: int, zenoh_endpoint: str, mav_out_port: int,
+                      vehicle: str = "bench") -> str:
+    """A rudder-boat configuration reading the generator over UDP, all pipelines on."""
+    from onboard.config import resolve
+
+    base = resolve("rudder-boat").read_text()
+    base = base.replace('id = "rudder-boat"', f'id = "{vehicle}"', 1)
+    return base + f"""
+[service]
+state_file = "state/adaptive.json"
+state_save_interval_s = 10.0
+
+[[service.sources]]
+kind = "mavlink"
+url = "udp:127.0.0.1:{mav_port}"
+name = "autopilot"
+
+[[service.sources]]
+kind = "nmea"
+url = "udp:127.0.0.1:{nmea_port}"
+name = "gps"
+
+[service.zenoh]
+mode = "client"
+connect = ["{zenoh_endpoint}"]
+
+[service.mavlink]
+url = "udpout:127.0.0.1:{mav_out_port}"
+
+[service.recorder]
+directory = "recordings"
+"""
+
+
+def _proc_cpu_s(pid: int) -> float:
+    with open(f"/proc/{pid}/stat") as f:
+        parts = f.read().rsplit(")", 1)[1].split()
+    ticks = os.sysconf("SC_CLK_TCK")
+    return (int(parts[11]) + int(parts[12])) / ticks
+
+
+def _proc_rss_mb(pid: int) -> tuple[float, float]:
+    rss = hwm = math.nan
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                rss = int(line.split()[1]) / 1024.0
+            elif line.startswith("VmHWM:"):
+                hwm = int(line.split()[1]) / 1024.0
+    return rss, hwm
+
+
+def _pct(xs: list[float], q: float) -> float:
+    if not xs:
+        return math.nan
+    xs = sorted(xs)
+    i = min(len(xs) - 1, max(0, int(math.ceil(q / 100.0 * len(xs))) - 1))
+    return xs[i]
+
+
+def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0) -> dict[str, Any]:
+    """Run the service under nominal load for ``duration_s`` wall seconds (after
+    ``warmup_s``); return the figures of the module docstring (and a few more)."""
+    from onboard.publishers.zenoh_pub import open_router
+
+    zport = free_tcp_port()
+    endpoint = f"tcp/127.0.0.1:{zport}"
+    mav_port, nmea_port, mav_out = free_udp_port(), free_udp_port(), free_udp_port()
+    router = open_router(endpoint)
+    tmp = tempfile.TemporaryDirectory(prefix="onboard-bench-")
+    d = Path(tmp.name)
+    (d / "bench.toml").write_text(bench_config_toml(mav_port, nmea_port, endpoint, mav_out))
+    notify_path = str(d / "notify.sock")
+    nsock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    nsock.bind(notify_path)
+    nsock.settimeout(0.05)
+    lat_sensor: list[float] = []
+    lat_tick: list[float] = []
+    measuring = threading.Event()
+    import msgspec
+
+    from onboard.messages import EstimateRecord
+
+    dec = msgspec.json.Decoder(EstimateRecord)
+
+    def on_sample(sample: Any) -> None:
+        t_rx = time.monotonic()
+        if not measuring.is_set():
+            return
+        try:
+            rec = dec.decode(sample.payload.to_bytes())
+        except msgspec.DecodeError:
+            return
+        lat_tick.append((t_rx - rec.t) * 1000.0)
+        if rec.t_sensor is not None:
+            lat_sensor.append((t_rx - rec.t_sensor) * 1000.0)
+
+    sub = router.declare_subscriber("onboard/bench/est/**", on_sample)
+    env = dict(os.environ, NOTIFY_SOCKET=notify_path, ONBOARD_LOG_LEVEL="WARNING")
+    env.pop("WATCHDOG_USEC", None)
+    t_spawn = time.monotonic()
+    proc = subprocess.Popen([sys.executable, "-m", "onboard", "run", "--config",
+                             str(d / "bench.toml"), "--state-dir", str(d)],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    ready_s = math.nan
+    out: dict[str, Any] = {}
+    try:
+        deadline = t_spawn + 30.0
+        while time.monotonic() < deadline and proc.poll() is None:
+            try:
+                msg = nsock.recv(4096)
+            except socket.timeout:
+                continue
+            if b"READY=1" in msg:
+                ready_s = time.monotonic() - t_spawn
+                break
+        if proc.poll() is not None:
+            raise RuntimeError("service exited: " + proc.stderr.read().decode()[-500:])  # type: ignore[union-attr]
+        gen = TrafficGenerator()
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        t0 = time.monotonic()
+        k = 0
+        cpu0 = wall0 = None
+        total = warmup_s + duration_s
+        while True:
+            t = k / 50.0
+            if t > total:
+                break
+            delay = t0 + t - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            if cpu0 is None and t >= warmup_s:
+                cpu0, wall0 = _proc_cpu_s(proc.pid), time.monotonic()
+                measuring.set()
+            for f in gen.mavlink(t):
+                tx.sendto(f, ("127.0.0.1", mav_port))
+            for f in gen.nmea(t):
+                tx.sendto(f, ("127.0.0.1", nmea_port))
+            k += 1
+        measuring.clear()
+        cpu1, wall1 = _proc_cpu_s(proc.pid), time.monotonic()
+        rss, hwm = _proc_rss_mb(proc.pid)
+        tx.close()
+        assert cpu0 is not None and wall0 is not None
+        out = {
+            "service_cpu_fraction": (cpu1 - cpu0) / (wall1 - wall0),
+            "sensor_to_zenoh_p50_ms": _pct(lat_sensor, 50),
+            "sensor_to_zenoh_p99_ms": _pct(lat_sensor, 99),
+            "tick_to_zenoh_p50_ms": _pct(lat_tick, 50),
+            "tick_to_zenoh_p99_ms": _pct(lat_tick, 99),
+            "tick_to_zenoh_mean_ms": statistics.fmean(lat_tick) if lat_tick else math.nan,
+            "service_rss_mb": rss,
+            "service_peak_rss_mb": hwm,
+            "startup_to_ready_s": ready_s,
+            "estimates_received": len(lat_tick),
+            "duration_s": wall1 - wall0,
+            "load": "IMU 50 Hz, servo 10 Hz, heartbeat 1 Hz (MAVLink/UDP); GNSS 5 Hz, "
+                    "heading 10 Hz (NMEA/UDP)",
+        }
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        if proc.stderr is not None:
+            proc.stderr.close()
+        sub.undeclare()
+        router.close()
+        nsock.close()
+        tmp.cleanup()
+    return out
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import json
+
+    print(json.dumps(measure(float(sys.argv[1]) if len(sys.argv) > 1 else 10.0), indent=2))

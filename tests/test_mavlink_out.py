@@ -1,0 +1,149 @@
+"""MAVLink out: component 191, HEARTBEAT, estimates, health, events, signing (architecture §4.5)."""
+
+from __future__ import annotations
+
+import os
+import socket
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from onboard.config import ConfigError, MavlinkOut
+from onboard.messages import EstimateRecord, HealthRecord
+from onboard.publishers.mavlink_pub import MavlinkPublisher, load_signing_key
+
+
+@pytest.fixture
+def listener():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.settimeout(5.0)
+    yield s
+    s.close()
+
+
+def receive(sock, key: bytes | None = None) -> list:
+    mav = mavlink2.MAVLink(None)
+    mav.robust_parsing = True
+    if key is not None:
+        mav.signing.secret_key = key
+        mav.signing.allow_unsigned_callback = lambda *a: False
+    out = []
+    sock.settimeout(0.5)
+    while True:
+        try:
+            data = sock.recv(65536)
+        except socket.timeout:
+            return out
+        for m in mav.parse_buffer(data) or []:
+            if m.get_type() != "BAD_DATA":
+                out.append(m)
+
+
+def _records():
+    cur = EstimateRecord(vehicle="b", pipeline="current", t=1.0,
+                         values={"north": 0.3, "east": -0.2, "down": 0.0, "std_north": 0.05,
+                                 "std_east": 0.04},
+                         std={"north": 0.05, "east": 0.04})
+    aie = EstimateRecord(vehicle="b", pipeline="aie", t=1.0,
+                         values={"surge_input": 0.8, "yaw_input": -0.1, "speed": 1.4,
+                                 "north": 3.0, "east": 4.0, "heading": 1.0})
+    eseso = EstimateRecord(vehicle="b", pipeline="eseso", t=1.0,
+                           values={"dist_x": 1.0, "dist_y": 2.0, "dist_z": 3.0,
+                                   "dist_north": 4.0, "dist_east": 5.0, "dist_down": 6.0})
+    return [cur, aie, eseso]
+
+
+def test_heartbeat_estimates_and_health_from_component_191(listener):
+    port = listener.getsockname()[1]
+    pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), system_id=7,
+                           clock=lambda: 10.0)
+    pub.start()
+    pub.publish_estimates(_records(), now=10.0)
+    pub.publish_health(HealthRecord(vehicle="b", t=10.0, nis={"current.velocity.nis": 9.0,
+                                                              "aie.heading.nis": 2.25},
+                                    rejected={"gnss:submerged": 3}, events=["gps: lost (EIO)"]),
+                       now=10.0)
+    pub.close()
+    msgs = receive(listener)
+    assert {(m.get_srcSystem(), m.get_srcComponent()) for m in msgs} == {(7, 191)}
+    by = {}
+    for m in msgs:
+        by.setdefault(m.get_type(), []).append(m)
+    hb = by["HEARTBEAT"][0]
+    assert hb.type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
+    assert hb.autopilot == mavlink2.MAV_AUTOPILOT_INVALID
+    named = {m.name: m.value for m in by["NAMED_VALUE_FLOAT"]}
+    assert named["CUR_N"] == pytest.approx(0.3) and named["CUR_E"] == pytest.approx(-0.2)
+    assert named["THR_EST"] == pytest.approx(0.8) and named["TRQ_EST"] == pytest.approx(-0.1)
+    assert named["SPD_EST"] == pytest.approx(1.4)
+    vec = {m.name: (m.x, m.y, m.z) for m in by["DEBUG_VECT"]}
+    assert vec["DIST"] == (1.0, 2.0, 3.0) and vec["DIST_NED"] == (4.0, 5.0, 6.0)
+    w = by["WIND_COV"][0]  # the water current, drawn by ground stations as wind
+    assert (w.wind_x, w.wind_y) == pytest.approx((0.3, -0.2))
+    assert w.var_horiz == pytest.approx(0.05 ** 2 + 0.04 ** 2)
+    st = by["ESTIMATOR_STATUS"][0]
+    assert st.vel_ratio == pytest.approx(1.0)  # sqrt(9)/3: a 3-sigma velocity innovation
+    assert st.mag_ratio == pytest.approx(0.5)
+    assert st.flags & mavlink2.ESTIMATOR_GPS_GLITCH
+    assert by["STATUSTEXT"][0].text.startswith("gps: lost")
+    assert "ODOMETRY" not in by  # only when configured
+
+
+def test_odometry_only_when_configured(listener):
+    port = listener.getsockname()[1]
+    pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}", odometry=True), 1)
+    pub.start()
+    pub.publish_estimates(_records(), now=1.0)
+    pub.close()
+    odo = [m for m in receive(listener) if m.get_type() == "ODOMETRY"]
+    assert odo and (odo[0].x, odo[0].y) == (3.0, 4.0)
+
+
+def test_statustext_is_rate_limited_and_suppressions_are_reported(listener):
+    port = listener.getsockname()[1]
+    pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), 1)
+    pub.start()
+    sent = [pub.event(f"event {i}", now=0.0) for i in range(20)]
+    assert sum(sent) == 5 and pub.suppressed == 15  # burst of 5
+    assert pub.event("later", now=10.0)
+    pub.close()
+    texts = [m.text for m in receive(listener) if m.get_type() == "STATUSTEXT"]
+    assert "onboard: 15 msgs suppressed" in texts and texts[-1] == "later"
+
+
+def test_frames_are_signed_when_a_key_file_is_configured(listener, tmp_path):
+    port = listener.getsockname()[1]
+    key_file = tmp_path / "mav.key"
+    key_file.write_text("a1" * 32)
+    os.chmod(key_file, 0o600)
+    key = load_signing_key(key_file)
+    assert key == bytes.fromhex("a1" * 32)
+    pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}",
+                                      signing_key_file=str(key_file), require_signing=True), 1)
+    pub.start()
+    pub.publish_estimates(_records(), now=0.0)
+    pub.close()
+    good = receive(listener, key)
+    assert good and all(m._signed for m in good)
+    # a receiver with another key rejects every frame
+    pub2 = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}",
+                                       signing_key_file=str(key_file)), 1)
+    pub2.start()
+    pub2.publish_estimates(_records(), now=0.0)
+    pub2.close()
+    assert receive(listener, b"\x00" * 32) == []
+
+
+def test_a_key_file_readable_by_others_or_a_missing_required_key_is_a_config_error(tmp_path):
+    key_file = tmp_path / "mav.key"
+    key_file.write_text("passphrase")
+    os.chmod(key_file, 0o644)
+    with pytest.raises(ConfigError, match="chmod 600"):
+        load_signing_key(key_file)
+    with pytest.raises(ConfigError, match="require_signing"):
+        MavlinkPublisher(MavlinkOut(require_signing=True), 1).start()
+    os.chmod(key_file, 0o600)
+    import hashlib
+
+    assert load_signing_key(key_file) == hashlib.sha256(b"passphrase").digest()

@@ -1,0 +1,178 @@
+"""Async transports: URL parsing, UDP, TCP and pseudo-terminal reads, reconnect with backoff."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import socket
+import tty
+
+import pytest
+
+from drivers.transports import (
+    TcpTransport,
+    TransportUrlError,
+    UdpTransport,
+    open_transport,
+    parse_url,
+)
+from onboard.service_bench import free_tcp_port, free_udp_port
+
+TIMEOUT = 20.0  # generous: a loaded 2-core CI machine
+
+
+def run(coro):
+    return asyncio.run(asyncio.wait_for(coro, TIMEOUT * 2))
+
+
+def test_parse_url_accepts_the_documented_forms():
+    assert parse_url("serial:/dev/ttyUSB0:57600").baud == 57600
+    assert parse_url("serial:/dev/ttyUSB0").path == "/dev/ttyUSB0"
+    assert parse_url("pty:/tmp/gps").path == "/tmp/gps"
+    u = parse_url("udp:0.0.0.0:14551")
+    assert (u.scheme, u.host, u.port) == ("udp", "0.0.0.0", 14551)
+    t = parse_url("tcp:192.168.2.95:16171")
+    assert (t.scheme, t.host, t.port) == ("tcp", "192.168.2.95", 16171)
+    assert str(parse_url("tcp:[::1]:5000")) == "tcp:::1:5000"
+
+
+@pytest.mark.parametrize("bad", ["", "udp", "udp:host", "udp:h:x", "serial:/dev/x:fast",
+                                 "ftp:a:1", "tcp::5", "udp:h:70000"])
+def test_parse_url_rejects_malformed_urls_with_a_reason(bad):
+    with pytest.raises(TransportUrlError):
+        parse_url(bad)
+
+
+async def _take(tr, n, timeout=TIMEOUT):
+    out = []
+    agen = tr.__aiter__()
+    try:
+        while len(out) < n:
+            out.append(await asyncio.wait_for(agen.__anext__(), timeout))
+    finally:
+        await agen.aclose()
+    return out
+
+
+def test_udp_transport_yields_each_datagram_with_its_receive_time():
+    port = free_udp_port()
+    clock_values = iter(range(100, 200))
+
+    async def main():
+        tr = open_transport(f"udp:127.0.0.1:{port}", clock=lambda: float(next(clock_values)))
+        assert isinstance(tr, UdpTransport)
+
+        async def send():
+            while not tr.stats.connected:
+                await asyncio.sleep(0.01)
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            for i in range(3):
+                s.sendto(b"msg%d" % i, ("127.0.0.1", port))
+            s.close()
+
+        sender = asyncio.create_task(send())
+        got = await _take(tr, 3)
+        await sender
+        return got, tr.stats
+
+    got, stats = run(main())
+    assert [d for d, _ in got] == [b"msg0", b"msg1", b"msg2"]
+    assert [t for _, t in got] == sorted(t for _, t in got)
+    assert stats.chunks == 3 and stats.bytes == 12
+
+
+def test_tcp_transport_reconnects_after_the_server_goes_away():
+    port = free_tcp_port()
+
+    async def main():
+        conns = []
+
+        async def serve(reader, writer):
+            conns.append(writer)
+            writer.write(b"hello %d\n" % len(conns))
+            await writer.drain()
+
+        server = await asyncio.start_server(serve, "127.0.0.1", port)
+        tr = TcpTransport(parse_url(f"tcp:127.0.0.1:{port}"), backoff_initial_s=0.05,
+                          backoff_max_s=0.2)
+        agen = tr.__aiter__()
+        first = await asyncio.wait_for(agen.__anext__(), TIMEOUT)
+        # the server drops the client and stops listening: the transport backs off...
+        for w in conns:
+            w.close()
+        server.close()
+        await server.wait_closed()
+        await asyncio.sleep(0.3)
+        # ...and reconnects once the server is back
+        server = await asyncio.start_server(serve, "127.0.0.1", port)
+        second = await asyncio.wait_for(agen.__anext__(), TIMEOUT)
+        await agen.aclose()
+        server.close()
+        await server.wait_closed()
+        return first, second, tr.stats
+
+    first, second, stats = run(main())
+    assert first[0] == b"hello 1\n"
+    assert second[0].startswith(b"hello ")
+    assert stats.connects >= 2 and stats.disconnects >= 1
+
+
+def _new_pty(link: str) -> int:
+    master, slave = os.openpty()
+    tty.setraw(master)
+    name = os.ttyname(slave)
+    os.close(slave)
+    tmp = link + ".new"
+    os.symlink(name, tmp)
+    os.replace(tmp, link)
+    return master
+
+
+def test_pty_transport_reads_and_reopens_a_pseudo_terminal_that_disappears(tmp_path):
+    link = str(tmp_path / "gps")
+    events: list[str] = []
+
+    async def main():
+        master = _new_pty(link)
+        tr = open_transport(f"pty:{link}", on_event=events.append, backoff_initial_s=0.05,
+                            backoff_max_s=0.2)
+        agen = tr.__aiter__()
+        task = asyncio.ensure_future(agen.__anext__())
+        while not tr.stats.connected:
+            await asyncio.sleep(0.01)
+        os.write(master, b"$GPHDT,1.0,T*00\r\n")
+        first = await asyncio.wait_for(task, TIMEOUT)
+        os.close(master)  # the device is unplugged: the reader sees EIO/EOF
+        await asyncio.sleep(0.2)
+        master2 = _new_pty(link)  # and comes back (udev recreates the symlink)
+        task = asyncio.ensure_future(agen.__anext__())
+        while tr.stats.connects < 2:
+            await asyncio.sleep(0.01)
+        os.write(master2, b"again\r\n")
+        second = await asyncio.wait_for(task, TIMEOUT)
+        await agen.aclose()
+        os.close(master2)
+        return first, second, tr.stats
+
+    first, second, stats = run(main())
+    assert first[0].startswith(b"$GPHDT")
+    assert second[0].startswith(b"again")
+    assert stats.connects == 2 and stats.disconnects == 1
+    assert any("lost" in e for e in events)
+
+
+def test_a_missing_serial_port_is_retried_not_fatal(tmp_path):
+    async def main():
+        tr = open_transport(f"serial:{tmp_path / 'ttyNONE'}:115200", backoff_initial_s=0.01,
+                            backoff_max_s=0.02)
+        agen = tr.__aiter__()
+        task = asyncio.ensure_future(agen.__anext__())
+        await asyncio.sleep(0.3)
+        assert not task.done()  # still trying, no exception
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        return tr.stats
+
+    stats = run(main())
+    assert not stats.connected and "ENOENT" in stats.last_error

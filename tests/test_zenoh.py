@@ -1,0 +1,98 @@
+"""Zenoh publisher: keys, JSON payloads with schema, liveliness, queryable (in-process router)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import msgspec
+import pytest
+
+from onboard.config import ZenohOut
+from onboard.messages import SCHEMA_VERSION, EstimateRecord, HealthRecord
+from onboard.publishers.zenoh_pub import ZenohPublisher, open_router, session_config
+from onboard.service_bench import free_tcp_port
+
+TIMEOUT = 20.0
+
+
+def wait_for(cond, timeout=TIMEOUT):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+@pytest.fixture
+def router():
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    r = open_router(endpoint)
+    yield endpoint, r
+    r.close()
+
+
+def _client(endpoint):
+    import zenoh
+
+    return zenoh.open(session_config("client", connect=[endpoint]))
+
+
+def test_estimates_and_health_arrive_as_json_with_schema_on_the_contract_keys(router):
+    endpoint, _ = router
+    shore = _client(endpoint)
+    got: list[tuple[str, bytes, str]] = []
+    lock = threading.Lock()
+
+    def on(sample):
+        with lock:
+            got.append((str(sample.key_expr), sample.payload.to_bytes(), str(sample.encoding)))
+
+    sub = shore.declare_subscriber("onboard/**", on)
+    pub = ZenohPublisher(ZenohOut(mode="peer", connect=[endpoint]), "boat7")
+    pub.start()
+    try:
+        rec = EstimateRecord(vehicle="boat7", pipeline="current", t=12.5,
+                             values={"north": 0.2, "east": -0.1}, std={"north": 0.05}, t_sensor=12.49)
+        health = HealthRecord(vehicle="boat7", t=12.5, rates_hz={"gps": 5.0},
+                              rejected={"gnss:nan": 2}, nis={"current.velocity.nis": 1.2},
+                              events=["gps: connected"], mode="surface")
+        assert wait_for(lambda: (pub.publish_estimates([rec]), pub.publish_health(health),
+                                 len(got) >= 2)[-1])
+        with lock:
+            keys = {k for k, _, _ in got}
+            by_key = {k: (p, e) for k, p, e in got}
+        assert {"onboard/boat7/est/current", "onboard/boat7/health"} <= keys
+        payload, enc = by_key["onboard/boat7/est/current"]
+        assert enc == "application/json"
+        back = msgspec.json.decode(payload, type=EstimateRecord)
+        assert back == rec and back.schema == SCHEMA_VERSION
+        h = msgspec.json.decode(by_key["onboard/boat7/health"][0], type=HealthRecord)
+        assert h.rejected == {"gnss:nan": 2} and h.schema == SCHEMA_VERSION
+
+        # the queryable answers the latest value of every key under onboard/boat7/**
+        replies = {str(r.ok.key_expr): r.ok.payload.to_bytes()
+                   for r in shore.get("onboard/boat7/**", timeout=TIMEOUT) if r.ok is not None}
+        assert set(replies) == {"onboard/boat7/est/current", "onboard/boat7/health"}
+        only = [str(r.ok.key_expr) for r in shore.get("onboard/boat7/est/*", timeout=TIMEOUT)
+                if r.ok is not None]
+        assert only == ["onboard/boat7/est/current"]
+
+        # liveliness: present while running, gone after close
+        alive = [str(r.ok.key_expr) for r in shore.liveliness().get("onboard/*/alive", timeout=TIMEOUT)
+                 if r.ok is not None]
+        assert alive == ["onboard/boat7/alive"]
+    finally:
+        pub.close()
+        sub.undeclare()
+    assert wait_for(lambda: not [r for r in shore.liveliness().get("onboard/*/alive", timeout=5)
+                                 if r.ok is not None])
+    shore.close()
+
+
+def test_client_mode_without_a_router_fails_at_start_with_a_reason():
+    pub = ZenohPublisher(ZenohOut(mode="client", connect=[f"tcp/127.0.0.1:{free_tcp_port()}"]), "x")
+    with pytest.raises(Exception, match="(?i)connect"):
+        pub.start()
+    pub.close()
