@@ -148,7 +148,9 @@ def test_bundled_blueboat_config_decodes():
     cfg = load(CONFIG_DIR / "blueboat-ntnu-csv.toml")
     assert cfg.vehicle.vehicle_class == "twin-thruster-boat"
     assert cfg.csv.pwm_columns == ["thr_left", "thr_right"]
-    assert cfg.inputs.left.neutral_us == 1510 and cfg.inputs.right.channel == 2
+    # The thr_left column drives the starboard thruster, reversed (see the config's note).
+    assert cfg.inputs.left.neutral_us == 1510 and cfg.inputs.left.channel == 2
+    assert cfg.inputs.right.channel == 1 and cfg.inputs.right.reverse
 
 
 @pytest.mark.data

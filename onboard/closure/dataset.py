@@ -61,7 +61,7 @@ class _Collector:
         self.gnss_vn = self.gnss_ve = math.nan
         self.north = self.east = math.nan
         self.fix_t = -math.inf
-        self.cmd_surge = self.cmd_yaw = self.cmd_quad = math.nan
+        self.cmd_surge = self.cmd_yaw = self.cmd_quad = self.cmd_rev = math.nan
         self.run = ""
         self.has_gyro = False
 
@@ -97,11 +97,13 @@ class _Collector:
                 if s.throttle is not None:
                     self.cmd_surge = s.throttle
                     self.cmd_quad = s.throttle * abs(s.throttle)
+                    self.cmd_rev = min(s.throttle, 0.0)
                     self.cmd_yaw = s.rudder_rad if s.rudder_rad is not None else math.nan
                 elif s.left is not None and s.right is not None:
                     self.cmd_surge = 0.5 * (s.left + s.right)
                     self.cmd_yaw = 0.5 * (s.left - s.right)
                     self.cmd_quad = 0.5 * (s.left * abs(s.left) + s.right * abs(s.right))
+                    self.cmd_rev = 0.5 * (min(s.left, 0.0) + min(s.right, 0.0))
         if self.gyro_n:
             self.gyro_last = self.gyro_sum / self.gyro_n
             self.gyro_sum, self.gyro_n = 0.0, 0
@@ -110,7 +112,7 @@ class _Collector:
             t, self.heading, self.gyro_last,
             self.vn if vog_fresh else self.gnss_vn, self.ve if vog_fresh else self.gnss_ve,
             self.north, self.east, self.fix_t, self.cmd_surge, self.cmd_yaw, self.cmd_quad,
-            self.run,
+            self.cmd_rev, self.run,
         ))
         return {}
 
@@ -144,6 +146,8 @@ class Dataset:
     cmd_yaw: np.ndarray
     thrust_quadratic: np.ndarray
     """Mean of c|c| over the propulsors (c|c| for one, (l|l| + r|r|)/2 for two)."""
+    thrust_reverse: np.ndarray
+    """Mean of min(c, 0) over the propulsors (the astern part of the command)."""
     run: np.ndarray
     north: np.ndarray
     east: np.ndarray
@@ -170,7 +174,7 @@ def _smooth(x: np.ndarray, window: int, deriv: int = 0, dt: float = 1.0) -> np.n
 
 
 def from_arrays(t, psi, v_n, v_e, *, r=None, cmd_surge=None, cmd_yaw=None,
-                thrust_quadratic=None, run=None,
+                thrust_quadratic=None, thrust_reverse=None, run=None,
                 north=None, east=None, smooth_s: float = 1.0, source: str = "") -> Dataset:
     """Build a dataset from uniformly sampled arrays (SI units, heading in rad)."""
     t = np.asarray(t, float)
@@ -193,10 +197,13 @@ def from_arrays(t, psi, v_n, v_e, *, r=None, cmd_surge=None, cmd_yaw=None,
     cmd_yaw = nan if cmd_yaw is None else np.asarray(cmd_yaw, float)
     if thrust_quadratic is None:
         thrust_quadratic = cmd_surge * np.abs(cmd_surge)
+    if thrust_reverse is None:
+        thrust_reverse = np.minimum(cmd_surge, 0.0)
     return Dataset(
         t=t, dt=dt, psi=psi, r=r, psi_dot=psi_dot, v_n=v_n, v_e=v_e, along=along,
         lateral=lateral, speed_dot=speed_dot, along_s=along_s, cmd_surge=cmd_surge, cmd_yaw=cmd_yaw,
         thrust_quadratic=np.asarray(thrust_quadratic, float),
+        thrust_reverse=np.asarray(thrust_reverse, float),
         run=np.asarray(run if run is not None else [""] * n, dtype=object),
         north=nan if north is None else np.asarray(north, float),
         east=nan if east is None else np.asarray(east, float),
@@ -215,7 +222,7 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     if not col.rows:
         raise ValueError(f"{path}: no samples")
     cols = list(zip(*col.rows))
-    t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, runs = (
+    t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs = (
         np.array(c) for c in cols)
     t = t.astype(float)
     ok = np.isfinite(psi.astype(float)) & np.isfinite(v_n.astype(float)) & np.isfinite(
@@ -234,6 +241,7 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
         t, psi[idx].astype(float), v_n[idx].astype(float), v_e[idx].astype(float),
         r=gyro if col.has_gyro and np.isfinite(gyro).all() else None,
         cmd_surge=cmd_s[idx].astype(float), cmd_yaw=cmd_y[idx].astype(float),
-        thrust_quadratic=cmd_q[idx].astype(float), run=labels,
+        thrust_quadratic=cmd_q[idx].astype(float), thrust_reverse=cmd_r[idx].astype(float),
+        run=labels,
         north=north[idx].astype(float), east=east[idx].astype(float), source=str(path))
     return ds

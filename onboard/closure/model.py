@@ -60,11 +60,12 @@ def _decorrelation(ds: Dataset, seconds: float = 2.0) -> float:
 
 
 def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
-        ctx: Context | None = None) -> Fit:
+        ctx: Context | None = None, output_error: bool = True) -> Fit:
     """Weighted least squares of the base model plus ``effects`` on ``ds``.
 
     ``sigma`` gives each channel's noise scale (its rows are divided by it), so channels
-    in different units weigh alike.
+    in different units weigh alike. With ``output_error`` the surge parameters are then
+    refined to minimise the open-loop speed error (:func:`refine_output_error`).
     """
     ctx = Context(**vars(ctx)) if ctx is not None else Context()
     targets = channel_targets(ds)
@@ -128,8 +129,11 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
             j += k
         if abs(ctx.a - a_prev) < 1e-4 * max(1.0, abs(ctx.a)):
             break
-    return Fit(effects=tuple(effects), base=base, theta=theta, std=std, ctx=ctx,
-               sigma=dict(sigma), n=n)
+    f = Fit(effects=tuple(effects), base=base, theta=theta, std=std, ctx=ctx,
+            sigma=dict(sigma), n=n)
+    if output_error and ds.has_commands:
+        f = refine_output_error(ds, f)
+    return f
 
 
 def _segments(ds: Dataset) -> list[np.ndarray]:
@@ -144,6 +148,45 @@ def _segments(ds: Dataset) -> list[np.ndarray]:
     return out
 
 
+def _surge_inputs(ds: Dataset, base: np.ndarray, dyn: list[tuple[Effect, np.ndarray]]):
+    """Per-tick forcing ``f`` (m/s^2), linear damping ``k`` (1/s) and quadratic drag ``d``
+    (1/m) of ``U' = -k U - d U|U| + f`` for the base model plus dynamic effects."""
+    a, b, c0 = (float(x) for x in base)
+    f = b * np.nan_to_num(ds.cmd_surge) + c0
+    k = np.full(len(ds), a)
+    d = 0.0
+    for e, th in dyn:
+        fe, ke, de = e.surge_terms(th, ds)
+        if fe is not None:
+            f = f + fe
+        if ke is not None:
+            k = k + ke
+        d += de
+    return f, k, d
+
+
+def simulate_speed(ds: Dataset, base: np.ndarray, dyn: list[tuple[Effect, np.ndarray]],
+                   u0_offset: np.ndarray | None = None) -> np.ndarray:
+    """Open-loop through-water speed (m/s) from the commands, restarted from the measured
+    along-track speed (minus ``u0_offset``, the kinematic effects' part) at the start of
+    each contiguous segment. Forward Euler at the tick rate (dt <= 0.1 s against time
+    constants of seconds)."""
+    f, k, d = _surge_inputs(ds, base, dyn)
+    f, k = f.tolist(), k.tolist()
+    dt = ds.dt
+    out = [0.0] * len(ds)
+    along = ds.along
+    for seg in _segments(ds):
+        i0, i1 = int(seg[0]), int(seg[-1]) + 1
+        u = float(along[i0] - (u0_offset[i0] if u0_offset is not None else 0.0))
+        for i in range(i0, i1):
+            out[i] = u
+            u += dt * (f[i] - k[i] * u - d * u * abs(u))
+            if not -50.0 < u < 50.0:
+                u = math.nan
+    return np.asarray(out)
+
+
 def predict(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
     """Model predictions of each channel on ``ds``; the along-track speed open loop.
 
@@ -156,40 +199,84 @@ def predict(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
     lat = np.zeros(n)
     hr = np.zeros(n)
     out_along = np.zeros(n)
-    dyn_effects = []
-    delay = sum(ALL[name].output_delay_s(f.theta[name]) for name in f.effects)
+    dyn = []
+    delay = 0.0
     for name in f.effects:
         e, th = ALL[name], f.theta[name]
         lat += e.lateral_output(th, ds, ctx)
         hr += e.heading_rate_output(th, ds, ctx)
         out_along += e.along_output(th, ds, ctx)
-        if type(e).dynamics is not Effect.dynamics:
-            dyn_effects.append((e, th))
+        delay += e.output_delay_s(th)
+        if e.dynamic:
+            dyn.append((e, th))
     preds = {"lateral": lat}
     if ds.has_gyro:
         preds["heading_rate"] = hr
     if ds.has_commands:
-        a, b, c0 = (float(x) for x in f.base)
-        cmd = np.nan_to_num(ds.cmd_surge)
-        along = np.full(n, np.nan)
-        dt = ds.dt
-        for seg in _segments(ds):
-            i0 = seg[0]
-            u = float(ds.along[i0] - out_along[i0])
-            for i in seg:
-                along[i] = u
-                du = -a * u + b * cmd[i] + c0
-                for e, th in dyn_effects:
-                    du += e.dynamics(th, u, i, ds)
-                u += dt * du
-                if not math.isfinite(u) or abs(u) > 50.0:
-                    u = float("nan")
-            if delay > 0.0:
+        along = simulate_speed(ds, f.base, dyn, out_along)
+        if delay > 0.0:
+            for seg in _segments(ds):
                 ts = ds.t[seg]
                 along[seg] = np.interp(ts - delay, ts, along[seg])
-            along[seg] += out_along[seg]
-        preds["along"] = along
+        preds["along"] = along + out_along
     return preds
+
+
+def refine_output_error(ds: Dataset, f: Fit, max_nfev: int = 30) -> Fit:
+    """Refit the surge parameters (base and dynamic effects) to minimise the open-loop
+    along-track speed error, the quantity the held-out metric measures; the equation-error
+    solution is the starting point. Kinematic effects stay as fitted."""
+    from scipy.optimize import least_squares
+
+    dyn_names = [n for n in f.effects if ALL[n].dynamic]
+    sizes = [len(f.theta[n]) for n in dyn_names]
+    p0 = np.concatenate([f.base, *[f.theta[n] for n in dyn_names]])
+    out_along = np.zeros(len(ds))
+    delay = 0.0
+    for name in f.effects:
+        out_along += ALL[name].along_output(f.theta[name], ds, f.ctx)
+        delay += ALL[name].output_delay_s(f.theta[name])
+    target = ds.along - out_along
+    segs = _segments(ds) if delay > 0 else []
+
+    def unpack(p):
+        dyn, j = [], 3
+        for n, k in zip(dyn_names, sizes):
+            dyn.append((ALL[n], p[j:j + k]))
+            j += k
+        return p[:3], dyn
+
+    def resid(p):
+        base, dyn = unpack(p)
+        u = simulate_speed(ds, base, dyn, out_along)
+        for seg in segs:
+            ts = ds.t[seg]
+            u[seg] = np.interp(ts - delay, ts, u[seg])
+        r = u - target
+        return np.where(np.isfinite(r), r, 10.0)
+
+    try:
+        sol = least_squares(resid, p0, x_scale="jac", max_nfev=max_nfev)
+    except ValueError:
+        return f
+    if not np.all(np.isfinite(sol.x)) or sol.cost > 0.5 * float(resid(p0) @ resid(p0)):
+        return f
+    base, dyn = unpack(sol.x)
+    theta, std = dict(f.theta), dict(f.std)
+    try:
+        s2 = 2.0 * sol.cost / max(1, len(ds) - len(p0))
+        cov = np.linalg.pinv(sol.jac.T @ sol.jac) * s2 * _decorrelation(ds)
+        sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    except np.linalg.LinAlgError:
+        sd = np.full(len(p0), np.inf)
+    j = 3
+    for n, k in zip(dyn_names, sizes):
+        theta[n] = sol.x[j:j + k].copy()
+        std[n] = sd[j:j + k].copy()
+        j += k
+    ctx = Context(**vars(f.ctx))
+    return Fit(effects=f.effects, base=np.asarray(base, float).copy(), theta=theta, std=std,
+               ctx=ctx, sigma=f.sigma, n=f.n)
 
 
 def residuals(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:

@@ -58,6 +58,8 @@ def diagnosis(sel: Selection, log: str) -> dict:
             entry["evidence"].update({
                 "held_out_gain": round(cand.gain, 4), "t_max": round(cand.t_max, 2),
                 "held_out_headline": cand.headline})
+            if not cand.physical:
+                entry["evidence"]["unphysical_fit"] = True
         elif not ALL[name].applies(sel.split.fit, f.ctx):
             entry["evidence"]["not_testable"] = _why_not(name, sel)
         effects.append(entry)

@@ -8,7 +8,8 @@
    (geometric mean over channels of held-out MSE relative to the base model's, times
    ``exp(penalty * k / n_eff)`` for k parameters and n_eff independent samples), keep the
    best if it lowers the score by at least ``min_gain`` and one of its parameters is at
-   least ``min_t`` standard errors from zero. Repeat until nothing is kept.
+   least ``min_t`` standard errors from zero and its parameters are physical (no negative
+   latency or drag). Repeat until nothing is kept.
 4. ``unexplained``: if a held-out residual is still structured (a generic basis of heading
    harmonics, speed, turn rate, commands and time predicts it on held-out data) the
    residual is reported as unexplained rather than forced onto the nearest name.
@@ -57,6 +58,7 @@ class Candidate:
     gain: float
     t_max: float
     headline: float
+    physical: bool = True
     accepted: bool = False
 
 
@@ -106,7 +108,7 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
     sp = split(ds)
     metric = M.metric_name(ds, metric)
     ctx = Context()
-    base0 = M.fit(sp.fit, declared, {}, ctx)
+    base0 = M.fit(sp.fit, declared, {}, ctx, output_error=False)
     sigma = _sigma(sp.fit, base0)
     base = M.fit(sp.fit, declared, sigma, base0.ctx)
     ctx = base.ctx
@@ -140,11 +142,15 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
             k = sum(len(ALL[e].params) for e in (*chosen, name))
             rel = _relative(s, before) * math.exp(penalty * k / n_eff)
             t = f.theta[name] / np.where(f.std[name] > 0, f.std[name], np.inf)
-            round_.append(Candidate(name, rel, 1.0 - rel / current_rel,
-                                    float(np.max(np.abs(t))), s.headline))
+            cand = Candidate(name, rel, 1.0 - rel / current_rel, float(np.max(np.abs(t))),
+                             s.headline, physical=ALL[name].physical(f.theta[name]))
+            round_.append(cand)
         round_.sort(key=lambda c: c.score)
         rounds.append(round_)
-        top = round_[0]
+        usable = [c for c in round_ if c.physical]
+        if not usable:
+            break
+        top = usable[0]
         if top.gain >= min_gain and top.t_max >= min_t:
             top.accepted = True
             chosen.append(top.name)

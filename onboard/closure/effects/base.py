@@ -55,13 +55,22 @@ class Effect:
         """Regressor columns, channel -> array (n, len(params))."""
         raise NotImplementedError
 
-    def dynamics(self, theta: np.ndarray, u: float, i: int, ds: Dataset) -> float:
-        """Additive term of the through-water surge acceleration (m/s^2) at tick ``i``."""
-        return 0.0
+    dynamic: bool = False
+    """True if the effect changes the surge dynamics (see :meth:`surge_terms`)."""
+
+    def surge_terms(self, theta: np.ndarray, ds: Dataset) -> tuple:
+        """The effect's terms in ``U' = -(a + k(t)) U - d U|U| + b c + c0 + f(t)``:
+        ``(f, k, d)`` with ``f`` and ``k`` arrays over ticks (or None) and ``d`` a float."""
+        return None, None, 0.0
 
     def along_output(self, theta: np.ndarray, ds: Dataset, ctx: Context) -> np.ndarray:
         """Additive term of the predicted along-track speed over ground (m/s)."""
         return np.zeros(len(ds))
+
+    def physical(self, theta: np.ndarray) -> bool:
+        """False if the fitted parameters are physically impossible (a negative latency,
+        a negative drag): such a fit is evidence of something else, not of this effect."""
+        return True
 
     def output_delay_s(self, theta: np.ndarray) -> float:
         """Delay (s) of the measured along-track speed behind the simulated one."""

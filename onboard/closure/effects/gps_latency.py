@@ -31,5 +31,8 @@ class GpsLatency(Effect):
     def output_delay_s(self, theta):
         return float(theta[0])
 
+    def physical(self, theta):
+        return bool(theta[0] > 0.0)
+
 
 EFFECT = GpsLatency()

@@ -11,13 +11,17 @@ class QuadraticDrag(Effect):
     name = "quadratic_drag"
     params = ("d",)
     needs_commands = True
+    dynamic = True
 
     def columns(self, ds, ctx):
         u = ds.along_s
         return {"along": (-u * abs(u))[:, None]}
 
-    def dynamics(self, theta, u, i, ds):
-        return -theta[0] * u * abs(u)
+    def surge_terms(self, theta, ds):
+        return None, None, float(theta[0])
+
+    def physical(self, theta):
+        return bool(theta[0] > 0.0)
 
 
 EFFECT = QuadraticDrag()

@@ -11,12 +11,16 @@ class SurgeYawCoupling(Effect):
     name = "surge_yaw_coupling"
     params = ("k",)
     needs_commands = True
+    dynamic = True
 
     def columns(self, ds, ctx):
         return {"along": (-ds.r**2 * ds.along_s)[:, None]}
 
-    def dynamics(self, theta, u, i, ds):
-        return -theta[0] * ds.r[i] ** 2 * u
+    def surge_terms(self, theta, ds):
+        return None, theta[0] * ds.r**2, 0.0
+
+    def physical(self, theta):
+        return bool(theta[0] > 0.0)
 
 
 EFFECT = SurgeYawCoupling()

@@ -1,25 +1,31 @@
-"""``thrust_nonlinearity``: propeller thrust grows with the square of the command.
+"""``thrust_nonlinearity``: thrust is not proportional to the command.
 
-A fixed-pitch propeller gives thrust proportional to ``n |n|``; with the command roughly
-proportional to shaft speed the surge equation gains ``b2 c|c|`` (for a skid-steered boat
-the mean of ``l|l|`` and ``r|r|``). ``quadratic_fraction`` is ``b2 / (b + b2)``: 0 for a
-linear map, 1 for a purely quadratic one."""
+Two shapes every small-craft propulsor has: a fixed-pitch propeller's thrust grows like
+``n |n|`` (the square of the command, ``b2 c|c|``), and it pushes less astern than ahead
+(a thruster's reverse thrust is typically 60-80 % of its forward thrust: ``b_rev min(c,
+0)``). For a skid-steered boat both are averaged over the two thrusters. Reported:
+``quadratic_gain`` ``b2`` and ``reverse_gain`` ``b_rev`` (m/s^2 per unit command), with
+``reverse_ratio = (b + b_rev) / b`` once the base gain ``b`` is known.
+"""
 
 from __future__ import annotations
+
+import numpy as np
 
 from onboard.closure.effects.base import Effect
 
 
 class ThrustNonlinearity(Effect):
     name = "thrust_nonlinearity"
-    params = ("b2",)
+    params = ("quadratic_gain", "reverse_gain")
     needs_commands = True
+    dynamic = True
 
     def columns(self, ds, ctx):
-        return {"along": ds.thrust_quadratic[:, None]}
+        return {"along": np.column_stack([ds.thrust_quadratic, ds.thrust_reverse])}
 
-    def dynamics(self, theta, u, i, ds):
-        return theta[0] * ds.thrust_quadratic[i]
+    def surge_terms(self, theta, ds):
+        return theta[0] * ds.thrust_quadratic + theta[1] * ds.thrust_reverse, None, 0.0
 
 
 EFFECT = ThrustNonlinearity()
