@@ -2,21 +2,24 @@
 
     M nu_r' + C(nu_r) nu_r + D(nu_r) nu_r + g(eta) = tau_thr + tau_ext        (Fossen eq. 10.146)
 
-* ``M = M_RB + M_A``: m = 11.26 kg, inertia diag(0.3, 0.63, 0.58) kg m^2 about the origin,
-  CG at r_g = (0, 0, z_G) below the centre of buoyancy (the origin),
-  ``M_A = diag(1.7182, 0, 5.468, 0, 1.2481, 0.4006)`` (kg, kg m^2/rad).
-  Source: ESESO paper Table I (../papers/eseso-ampc-bluerov2.txt) and HKPolyU-UAV/bluerov2
-  bluerov2_dob.h (algorithms.md section 5.4).
+* ``M = M_RB + M_A``: m = 11.26 kg, inertia diag(0.3, 0.63, 0.58) kg m^2 about the CG
+  (shifted to the origin by the parallel-axis theorem), CG at r_g = (0, 0, z_G) below the
+  centre of buoyancy (the origin), ``M_A = diag(1.7182, 0, 5.468, 0, 1.2481, 0.4006)``
+  (kg, kg m^2/rad). Source: ESESO paper Table I (../papers/eseso-ampc-bluerov2.txt) and
+  HKPolyU-UAV/bluerov2 bluerov2_dob.h (algorithms.md section 5.4).
 * ``C(nu_r)``: rigid-body plus added-mass Coriolis/centripetal, :func:`coriolis_times_nu`.
 * ``D(nu_r) nu_r = -(D_l + D_nl |nu_r|) nu_r`` element-wise with the Table I values
   ``D_l = [-11.7391, -20, -31.8678, -25, -44.9085, -5]`` and
   ``D_nl = [-18.18, -21.66, -36.99, -1.55, -1.55, -1.55]`` (negative numbers).
 * ``g(eta)``: weight W = 112.8 N, buoyancy B = 114.8 N (Table I; 2 N net upward, so an
-  idle vehicle rises at ~0.059 m/s), CB at the origin, CG at z_G = 0.02 m. Table I prints
-  z_CG = 0.2 m; the code (ImuDo.h, bluerov2_dob.h) uses 0.02 m, which we take: a 20 cm
-  CG-CB separation is impossible in a 25 cm tall frame. Note W / g = 11.5 kg != m: we keep
-  both values as published (m for inertia, W for weight). Buoyancy fades out as the hull
-  breaks the surface (:func:`submerged_fraction`, height 0.25 m).
+  idle vehicle rises at ~0.059 m/s), CB at the origin, CG at z_G = 0.2 m below it
+  (Table I). The HKPolyU code uses z_G = 0.02 m; with it the righting moment W z_G =
+  2.3 N m/rad is weaker than the Munk pitch moment of the added masses, and the paper's
+  [40, 40, 10] N disturbance pitches the model by ~65 deg, which the vehicle does not do;
+  Table I's 0.2 m gives 22.6 N m/rad. (With the inertias taken about the origin, 0.2 m
+  would make M indefinite: hence "about the CG" above.) W / g = 11.5 kg differs from
+  m = 11.26 kg; both are kept as published (m for inertia, W for weight). Buoyancy fades
+  out as the hull breaks the surface (:func:`submerged_fraction`, height 0.25 m).
 * ``tau_thr = K f(c)``: six T200 thrusters, normalized commands ``c_i in [-1, 1]``
   (``command.thrusters``), thrust ``f = 40 c|c|`` N ahead, ``30 c|c|`` N astern (T200 at
   ~14.8 V), no motor lag. Order and geometry (body FRD; the HKPolyU K_alloc, which is
@@ -29,9 +32,9 @@
 
   :data:`ALLOCATION` rows (X, Y, Z, K, M, N); yaw arms 0.167 m (front) and 0.175 m (rear)
   and the vertical thrusters' roll arm 0.1105 m are the HKPolyU values. The horizontal
-  thrusters are taken at the CG height (no roll/pitch from them): the code's +-0.0513 m
-  roll arm would, with the weak righting moment W z_G = 2.3 N m/rad, pitch the vehicle
-  by tens of degrees at full surge, which the real vehicle does not do.
+  thrusters act at the height of the origin (no roll/pitch moment from them): the code's
+  +-0.0513 m roll arm would roll and pitch the vehicle under surge and sway thrust (18 deg
+  at full surge), which the real vehicle does not do.
 * ``tau_ext = [R^T F_ext; 0]``: ``command.external_force_world`` (N, NED) at the origin.
 
 With all horizontal thrusters at full surge, X = 0.707 (40 + 40 + 30 + 30) = 99 N and the
@@ -117,9 +120,9 @@ class BlueROV2Params:
     buoyancy: float = 114.8
     """B (N), Table I."""
     z_g: float = 0.2
-    """CG below the CB (m); code value (Table I prints 0.2)."""
+    """CG below the CB (m), Table I (the HKPolyU code uses 0.02; see the module doc)."""
     inertia: tuple[float, float, float] = (0.3, 0.63, 0.58)
-    """Ix, Iy, Iz (kg m^2)."""
+    """Ix, Iy, Iz about the CG (kg m^2)."""
     added_mass: tuple[float, ...] = (1.7182, 0.0, 5.468, 0.0, 1.2481, 0.4006)
     """Diagonal of M_A (kg, kg m^2)."""
     d_lin: tuple[float, ...] = (-11.7391, -20.0, -31.8678, -25.0, -44.9085, -5.0)

@@ -45,7 +45,13 @@ pitches the nose down, Prestero's positive delta_s (M_uuds < 0). Fins are limite
 Changes from the printed table, so that the axisymmetric hull stays symmetric: the
 printed Y_vv (-1.31e3) and M_qq (-1.88e2) are replaced by Z_ww (-131 kg/m) and N_rr
 (-94 kg m^2/rad^2): a cross-flow drag coefficient of ~1 on a 1.33 m x 0.19 m hull gives
-~130 kg/m, not 1310. REMUS is 7 N positively buoyant (W = 299 N, B = 306 N); without a
+~130 kg/m, not 1310.
+
+Open-loop stability: linearized at 1.54 m/s the yaw mode is +0.99 1/s and the pitch modes
++0.44 +- 0.16j 1/s, i.e. Prestero's REMUS is unstable without its autopilot (Munk moment
+|N_uv| = 24 kg against a fin yaw damping N_ur of only -2 kg m); open loop it settles into
+a slow turn limited by the quadratic damping. Scenarios must close heading and depth
+loops (the tests use a PD rudder/stern-plane autopilot). REMUS is 7 N positively buoyant (W = 299 N, B = 306 N); without a
 depth controller it rises and floats (:func:`sitl.plants.fossen.submerged_fraction`).
 """
 
