@@ -62,7 +62,7 @@ READY_WAIT_S = 1.0
 """Longest wait (s) for the inputs to connect before READY=1 (a missing port does not
 hold the service back: it becomes READY degraded and keeps reconnecting)."""
 MAX_TICK_LAG_S = 1.0
-"""A tick more than this late (s) means the loop stalled: the missed ticks are skipped."""
+"""A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 
 
 class ServiceClock:
@@ -74,11 +74,13 @@ class ServiceClock:
     wall clock on one shared scaled clock.
     """
 
-    def __init__(self, speed: float = 1.0, origin: float | None = None) -> None:
+    def __init__(self, speed: float = 1.0, origin: float | None = None,
+                 start: float | None = None) -> None:
         if not speed > 0:
             raise ValueError("clock speed must be positive")
         self.speed = speed
-        self._start = time.monotonic()
+        self._start = time.monotonic() if start is None else start
+        """The time.monotonic() instant at which ``now() == origin``."""
         self.origin = self._start if origin is None else origin
 
     def now(self) -> float:
@@ -320,7 +322,7 @@ class Service:
             t = k * period
             await clock.sleep_until(t)
             now = clock.now()
-            if now - t > MAX_TICK_LAG_S:
+            if -clock.wall_delay(t) > MAX_TICK_LAG_S:
                 k_new = math.floor(now / period)
                 self.stats.tick_skips += k_new - k
                 self.event(f"estimator loop stalled {now - t:.1f} s: skipped {k_new - k} ticks")

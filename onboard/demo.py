@@ -1,0 +1,484 @@
+"""``onboard demo``: a simulated vehicle, the service and a shore view, on loopback.
+
+What runs (all on 127.0.0.1, nothing to install beyond the package)::
+
+    SITL child process (python -m onboard.demo --sitl-child: sitl.runner.Simulation,
+    paced to the shared clock)
+       MAVLink 2 over UDP  (IMU, attitude, servo outputs, heartbeat, pressure ...)  --+
+       NMEA over a pty     (GGA/RMC/VTG fixes, HDT headings: a serial GPS/compass)    +--> service
+       DVL JSON over TCP   (Water Linked A50 reports; vehicles with a DVL)          --+   (in-process)
+    service  -> in-process Zenoh router (tcp/127.0.0.1:7447, or a free port when taken)
+             -> MAVLink out (udpout:127.0.0.1:14550: a ground station there sees it)
+             -> recording + adaptive state in ./demo-out/
+    shore subscriber (onboard.shore.ShoreView) on the router: the live line every
+    second, and at the end the estimates it received scored against the simulator's
+    hidden truth (RMSE per quantity).
+
+Clock: by default the simulator and the service share a clock running ``SPEED`` (10)
+times faster than the wall clock, so the default 60 simulated seconds take about 6 s
+plus start-up. Everything else is real: the bytes on the links, the fixed-rate ticks
+(on the scaled clock), Zenoh, the recorder. ``--realtime`` runs at wall-clock speed.
+
+The recording (``demo-out/recordings``) replays exactly with ``onboard replay``; the
+adaptive state (``demo-out/state``) is restored by the next demo run of the same vehicle.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import subprocess
+import dataclasses
+import shutil
+import socket
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, TextIO
+
+import msgspec
+
+from onboard.config import Config, SourceConfig, load
+from onboard.errors import UsageError
+from onboard.messages import EstimateRecord
+
+DEFAULT_SCENARIO = "jaiabot-turns"
+SPEED = 10.0
+"""Default clock speed-up of the demo (simulated seconds per wall second)."""
+DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+OUT_DIR = Path("demo-out")
+
+
+def config_for(vehicle_class: str) -> str:
+    """The bundled config name of a vehicle class."""
+    return vehicle_class
+
+
+# --------------------------------------------------------------------------- SITL child
+
+
+@dataclass
+class LinkPlan:
+    """What the SITL child emits where (picklable: it crosses a process boundary)."""
+
+    scenario: str
+    duration_s: float
+    seed: int
+    speed: float
+    mavlink_udp_port: int
+    dvl_tcp_port: int | None
+    truth_path: str
+    nmea: bool = True
+    routes: dict[str, str] = field(default_factory=dict)
+
+
+def _route(sample: Any, dvl: bool, nmea: bool) -> str:
+    from onboard.messages import DvlPosition, DvlVelocity, GnssFix, Heading
+
+    if nmea and isinstance(sample, (GnssFix, Heading)):
+        return "nmea"
+    if dvl and isinstance(sample, (DvlVelocity, DvlPosition)):
+        return "dvl"
+    return "mavlink"
+
+
+def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdout) -> None:
+    """Run in a child process: emit the scenario on the links of ``plan``, paced to the
+    shared clock. Protocol on stdin/stdout, one JSON object per line: the child writes
+    ``{"nmea_pty": path, "dvl": bool, "vehicle_class": str}``; the parent answers
+    ``{"start": s}`` (the time.monotonic() instant of simulated t = 0); the child writes
+    ``{"done": frames}`` at the end. Closing stdin stops it early."""
+    import os
+    import select
+
+    from sitl.emitters import Channel, DvlJsonEncoder, NmeaEncoder, PtySink, TcpServerSink, UdpSink
+    from sitl.runner import Simulation, mavlink_encoder
+
+    def send(obj: dict) -> None:
+        outp.write(json.dumps(obj) + "\n")
+        outp.flush()
+
+    sim = Simulation(plan.scenario, plan.seed)
+    channels: dict[str, Channel] = {
+        "mavlink": Channel(mavlink_encoder(sim), [UdpSink("127.0.0.1", plan.mavlink_udp_port)])}
+    pty = None
+    if plan.nmea:
+        pty = PtySink()
+        channels["nmea"] = Channel(NmeaEncoder(), [pty])
+    dvl_cfg = sim.sensor_config.dvl
+    dvl = plan.dvl_tcp_port is not None and dvl_cfg is not None
+    if dvl:
+        channels["dvl"] = Channel(DvlJsonEncoder(period_s=1.0 / dvl_cfg.rate_hz),  # type: ignore[union-attr]
+                                  [TcpServerSink("127.0.0.1", plan.dvl_tcp_port)])  # type: ignore[arg-type]
+    send({"nmea_pty": pty.path if pty else None, "dvl": dvl,
+          "vehicle_class": sim.scenario.vehicle.vehicle_class})
+    line = inp.readline()
+    if not line:
+        return
+    start = float(json.loads(line)["start"])
+    enc = msgspec.json.Encoder()
+    frames = {k: 0 for k in channels}
+    fd = inp.fileno()
+    with open(plan.truth_path, "wb") as truth_f:
+        for t, samples, truth in sim.steps(plan.duration_s):
+            delay = start + t / plan.speed - time.monotonic()
+            if delay > 0:
+                r, _, _ = select.select([fd], [], [], delay)
+                if r and not os.read(fd, 4096):
+                    break  # the parent closed stdin: stop
+            if samples:
+                split: dict[str, list] = {}
+                for s in samples:
+                    split.setdefault(_route(s, dvl, plan.nmea), []).append(s)
+                for k, ss in split.items():
+                    frames[k] += channels[k].emit(t, ss)
+            if truth is not None:
+                truth_f.write(enc.encode(truth) + b"\n")
+    for ch in channels.values():
+        ch.close()
+    send({"done": frames})
+
+
+# --------------------------------------------------------------------------- scoring
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+_TRUTH: dict[str, Callable[[Any], float | None]] = {
+    "heading": lambda tr: tr.yaw, "yaw": lambda tr: tr.yaw,
+    "roll": lambda tr: tr.roll, "pitch": lambda tr: tr.pitch,
+    "speed": lambda tr: math.hypot(tr.u, tr.v), "yaw_rate": lambda tr: tr.r,
+    "u": lambda tr: tr.u, "v": lambda tr: tr.v, "w": lambda tr: tr.w,
+    "u_r": lambda tr: tr.u_r, "v_r": lambda tr: tr.v_r, "w_r": lambda tr: tr.w_r,
+    "rate_p": lambda tr: tr.p, "rate_q": lambda tr: tr.q, "rate_r": lambda tr: tr.r,
+    "surge_input": lambda tr: tr.surge_input, "yaw_input": lambda tr: tr.yaw_input,
+    "dist_x": lambda tr: tr.disturbance_x, "dist_y": lambda tr: tr.disturbance_y,
+    "dist_z": lambda tr: tr.disturbance_z, "depth": lambda tr: tr.down,
+}
+_ANGLES = {"heading", "yaw", "roll", "pitch"}
+_POSITIONS = {"north": "north", "east": "east", "down": "down"}
+_CURRENT = {"north": "current_north", "east": "current_east", "down": "current_down"}
+
+
+@dataclass
+class ScoreRow:
+    """RMSE of one estimated quantity against the truth."""
+
+    column: str
+    n: int
+    rmse: float
+    truth_std: float
+    unit: str
+
+
+def _unit(pipeline: str, q: str) -> str:
+    if pipeline == "current" and q in _CURRENT:
+        return "m/s"
+    if q in _ANGLES:
+        return "deg"
+    if q in ("yaw_rate", "rate_p", "rate_q", "rate_r"):
+        return "deg/s"
+    if q == "surge_input":
+        return "m/s^2"
+    if q == "yaw_input":
+        return "rad/s^2"
+    if q.startswith("dist_"):
+        return "N"
+    if q in _POSITIONS or q == "depth":
+        return "m"
+    return "m/s"
+
+
+def score(history: list[EstimateRecord], truth: list[Any]) -> list[ScoreRow]:
+    """RMSE of every estimated quantity that has a truth counterpart.
+
+    Estimates are matched to the truth record nearest in time (within 60 ms). Positions
+    (``north``/``east``/``down`` of pipelines other than ``current``) are compared as
+    displacements from the pipeline's first estimate, as the estimators report them from
+    their first fix.
+    """
+    if not truth:
+        return []
+    ts = [tr.t for tr in truth]
+    dt = (ts[-1] - ts[0]) / max(1, len(ts) - 1) if len(ts) > 1 else 0.1
+
+    def at(t: float) -> Any | None:
+        i = int(round((t - ts[0]) / dt)) if dt > 0 else 0
+        for j in (i, i - 1, i + 1):
+            if 0 <= j < len(ts) and abs(ts[j] - t) <= 0.06:
+                return truth[j]
+        return None
+
+    errs: dict[str, list[float]] = {}
+    refs: dict[str, list[float]] = {}
+    first: dict[tuple[str, str], tuple[float, float]] = {}
+    for rec in history:
+        tr = at(rec.t)
+        if tr is None:
+            continue
+        for q, v in rec.values.items():
+            if q.startswith("std_") or not math.isfinite(v):
+                continue
+            if rec.pipeline == "current" and q in _CURRENT:
+                ref = getattr(tr, _CURRENT[q])
+            elif q in _POSITIONS:
+                key = (rec.pipeline, q)
+                base = first.setdefault(key, (v, getattr(tr, _POSITIONS[q])))
+                ref = base[0] + getattr(tr, _POSITIONS[q]) - base[1]
+            elif q in _TRUTH:
+                ref = _TRUTH[q](tr)
+            else:
+                continue
+            if ref is None or not math.isfinite(ref):
+                continue
+            e = _wrap(v - ref) if q in _ANGLES else v - ref
+            col = f"{rec.pipeline}.{q}"
+            errs.setdefault(col, []).append(e)
+            refs.setdefault(col, []).append(ref)
+    rows = []
+    for col, es in errs.items():
+        q = col.split(".", 1)[1]
+        rmse = math.sqrt(sum(e * e for e in es) / len(es))
+        r = refs[col]
+        mean = sum(r) / len(r)
+        std = math.sqrt(sum((x - mean) ** 2 for x in r) / len(r))
+        if q in _ANGLES or q in ("yaw_rate", "rate_p", "rate_q", "rate_r"):
+            rmse, std = math.degrees(rmse), math.degrees(std)
+        rows.append(ScoreRow(col, len(es), rmse, std, _unit(col.split(".", 1)[0], q)))
+    return sorted(rows, key=lambda r: r.column)
+
+
+def format_scores(rows: list[ScoreRow]) -> str:
+    if not rows:
+        return "no estimates matched the truth (nothing to score)"
+    w = max(len(r.column) for r in rows)
+    out = [f"{'estimate':<{w}}  {'n':>5}  {'RMSE':>9}  {'truth std':>9}  unit"]
+    for r in rows:
+        out.append(f"{r.column:<{w}}  {r.n:>5}  {r.rmse:9.3f}  {r.truth_std:9.3f}  {r.unit}")
+    return "\n".join(out)
+
+
+# --------------------------------------------------------------------------- the demo
+
+
+def _free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _port_free(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def demo_config(base: Config, *, mav_port: int, nmea_pty: str | None, dvl_port: int | None,
+                zenoh_endpoint: str, mavlink_out: str = "udpout:127.0.0.1:14550") -> Config:
+    """The vehicle's config with the demo's inputs, a Zenoh client to the demo router,
+    MAVLink out and the recorder/state under the demo directory."""
+    srcs = [SourceConfig(kind="mavlink", url=f"udp:127.0.0.1:{mav_port}", name="autopilot")]
+    if nmea_pty:
+        srcs.append(SourceConfig(kind="nmea", url=f"pty:{nmea_pty}", name="gps"))
+    if dvl_port is not None:
+        srcs.append(SourceConfig(kind="dvl-json", url=f"tcp:127.0.0.1:{dvl_port}", name="dvl"))
+    s = base.service
+    service = msgspec.structs.replace(
+        s, sources=srcs,
+        zenoh=msgspec.structs.replace(s.zenoh, enabled=True, mode="client",
+                                      connect=[zenoh_endpoint], listen=[]),
+        mavlink=msgspec.structs.replace(s.mavlink, enabled=True, url=mavlink_out),
+        recorder=msgspec.structs.replace(s.recorder, enabled=True, directory="recordings"),
+        state_file="state/adaptive.json", state_save_interval_s=10.0)
+    return msgspec.structs.replace(base, service=service)
+
+
+@dataclass
+class DemoResult:
+    """What a demo run produced (for the tests and the printout)."""
+
+    scenario: str
+    vehicle: str
+    duration_s: float
+    wall_s: float
+    estimates: list[EstimateRecord]
+    health: Any
+    scores: list[ScoreRow]
+    frames: dict[str, int]
+    recording: list[str]
+    events: list[str]
+    mavlink_sent: int
+    sources: dict[str, str]
+
+
+async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *,
+                   speed: float = SPEED, seed: int = 1, out_dir: Path = OUT_DIR,
+                   router_endpoint: str | None = None, mavlink_out: str = "udpout:127.0.0.1:14550",
+                   out: TextIO | None = sys.stdout, keep_state: bool = True,
+                   config: Config | None = None) -> DemoResult:
+    """Run the whole demo; print the live line every wall second and the scores to
+    ``out`` (None: silent). ``router_endpoint`` None: 7447, or a free port when taken."""
+    from onboard.publishers.zenoh_pub import open_router
+    from onboard.service import Service, ServiceClock
+    from onboard.shore import ShoreView, open_session
+    from sitl.runner import read_truth
+    from sitl.scenarios import get
+
+    def say(text: str) -> None:
+        if out is not None:
+            print(text, file=out, flush=True)
+
+    try:
+        sc = get(scenario)
+    except (KeyError, ValueError) as err:
+        raise UsageError(f"unknown scenario {scenario!r}: {err}") from None
+    out_dir = Path(out_dir)
+    shutil.rmtree(out_dir / "recordings", ignore_errors=True)
+    if not keep_state:
+        shutil.rmtree(out_dir / "state", ignore_errors=True)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    endpoint = router_endpoint
+    if endpoint is None:
+        endpoint = DEFAULT_ROUTER if _port_free(7447) else f"tcp/127.0.0.1:{_free_port(socket.SOCK_STREAM)}"
+    t_wall0 = time.monotonic()
+    router = open_router(endpoint)
+    shore = None
+    sub = None
+    proc = None
+    svc = None
+    view = ShoreView(keep_history=True)
+    plan = LinkPlan(scenario=sc.name, duration_s=duration_s, seed=seed, speed=speed,
+                    mavlink_udp_port=_free_port(socket.SOCK_DGRAM),
+                    dvl_tcp_port=_free_port(socket.SOCK_STREAM) if sc.sensors.dvl else None,
+                    truth_path=str(out_dir / "truth.jsonl"))
+    frames: dict[str, int] = {}
+    try:
+        shore = open_session([endpoint], None, "client")
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "onboard.demo", "--sitl-child",
+             json.dumps(dataclasses.asdict(plan))],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1)
+        hello = await _read_json(proc, 60.0)
+        if hello is None:
+            raise RuntimeError(f"the simulator did not start (exit status {proc.poll()})")
+        base = config if config is not None else load(config_for(hello["vehicle_class"]))
+        cfg = demo_config(base, mav_port=plan.mavlink_udp_port, nmea_pty=hello["nmea_pty"],
+                          dvl_port=plan.dvl_tcp_port if hello["dvl"] else None,
+                          zenoh_endpoint=endpoint, mavlink_out=mavlink_out)
+        vid = cfg.vehicle.id
+        sub = shore.declare_subscriber(f"onboard/{vid}/**", view.on_sample)
+        start = time.monotonic() + 1.0  # simulated t = 0, one wall second from now
+        clock = ServiceClock(speed=speed, origin=0.0, start=start)
+        svc = Service(cfg, state_dir=out_dir, clock=clock)
+        await svc.start()
+        say(f"onboard demo: scenario {sc.name} ({sc.vehicle.vehicle_class}), "
+            f"{duration_s:g} s simulated at {speed:g}x, vehicle id {vid!r}")
+        say("  inputs: " + ", ".join(f"{s.name}={s.kind} over {s.url}" for s in cfg.service.sources))
+        say(f"  Zenoh router {endpoint}; MAVLink out {cfg.service.mavlink.url}; "
+            f"recording in {svc.recorder_dir}")
+        for e in list(svc.events):
+            say(f"  {e}")
+        assert proc.stdin is not None
+        proc.stdin.write(json.dumps({"start": start}) + "\n")
+        proc.stdin.flush()
+        done_task = asyncio.ensure_future(_read_json(proc, duration_s / speed + 60.0))
+        next_print = time.monotonic() + 1.0
+        deadline = start + duration_s / speed + 60.0
+        while time.monotonic() < deadline:
+            if done_task.done():
+                msg = done_task.result()
+                frames = msg.get("done", {}) if isinstance(msg, dict) else {}
+                break
+            if time.monotonic() >= next_print:
+                next_print += 1.0
+                say("  " + view.line(vid))
+            await asyncio.sleep(0.05)
+        await asyncio.sleep(max(0.3, 2.0 / speed))  # the last ticks reach the shore
+        svc.request_stop()
+        await svc.shutdown()
+        health = svc.latest_health
+        events = list(svc.events)
+        rec_files = [str(p) for p in (svc.recorder.files if svc.recorder else [])]
+        mav_sent = svc.mavlink.sent if svc.mavlink else 0
+        svc = None
+    finally:
+        if svc is not None:
+            svc.request_stop()
+            await svc.shutdown()
+        if proc is not None:
+            try:
+                if proc.stdin is not None:
+                    proc.stdin.close()  # tells the simulator to stop
+            except OSError:
+                pass
+            try:
+                proc.wait(10.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            if proc.stdout is not None:
+                proc.stdout.close()
+        if sub is not None:
+            sub.undeclare()
+        if shore is not None:
+            shore.close()
+        router.close()
+    truth = read_truth(plan.truth_path) if Path(plan.truth_path).exists() else []
+    with view.lock:
+        history = list(view.history)
+    rows = score(history, truth)
+    wall = time.monotonic() - t_wall0
+    say("")
+    say(f"estimates vs the simulator's truth ({len(history)} records received over Zenoh):")
+    say(format_scores(rows))
+    if health is not None:
+        rej = ", ".join(f"{k}={n}" for k, n in sorted(health.rejected.items())) or "none"
+        say(f"rejected inputs: {rej}")
+    say(f"recording: {', '.join(rec_files) or '-'} (onboard replay {out_dir / 'recordings'})")
+    say(f"done in {wall:.1f} s wall")
+    return DemoResult(scenario=sc.name, vehicle=vid, duration_s=duration_s, wall_s=wall,
+                      estimates=history, health=health, scores=rows, frames=frames,
+                      recording=rec_files, events=events, mavlink_sent=mav_sent,
+                      sources={s.name: s.kind for s in cfg.service.sources})
+
+
+async def _read_json(proc: subprocess.Popen, timeout_s: float) -> dict | None:
+    """The next JSON line from the child's stdout (None on EOF, timeout or garbage)."""
+    loop = asyncio.get_running_loop()
+    try:
+        line = await asyncio.wait_for(loop.run_in_executor(None, proc.stdout.readline),  # type: ignore[union-attr]
+                                      timeout_s)
+    except (asyncio.TimeoutError, ValueError, OSError):
+        return None
+    try:
+        obj = json.loads(line) if line else None
+    except ValueError:
+        return None
+    return obj if isinstance(obj, dict) else None
+
+
+def main(args: argparse.Namespace) -> int:
+    """``onboard demo [--duration S] [--scenario NAME] [--realtime]``."""
+    duration = float(args.duration)
+    if not (duration > 0 and math.isfinite(duration)):
+        raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
+    scenario = args.scenario or DEFAULT_SCENARIO
+    speed = 1.0 if args.realtime else SPEED
+    res = asyncio.run(run_demo(scenario, duration, speed=speed))
+    return 0 if res.estimates else 1
+
+
+if __name__ == "__main__":  # pragma: no cover - the simulator child of run_demo
+    if len(sys.argv) == 3 and sys.argv[1] == "--sitl-child":
+        sitl_child(LinkPlan(**json.loads(sys.argv[2])))
+    else:
+        print("usage: onboard demo [--duration S] [--scenario NAME] [--realtime]", file=sys.stderr)
+        sys.exit(2)
