@@ -417,3 +417,60 @@ def test_waves_add_an_oscillation_without_drift():
     assert abs(arr[:, 0].mean()) < 0.02 and np.allclose(boat.x[0:3], 0.0)  # no drift
     w = 2 * math.pi / 4.0
     assert np.ptp(arr[:, 2]) == pytest.approx(2 * 0.25 * w * w, rel=0.05)  # heave accel a w^2
+
+
+# ------------------------------------------------------------------ robustness and docs
+
+
+@pytest.mark.parametrize("name", list(PLANTS))
+def test_random_bounded_commands_keep_the_state_finite_and_physical(name):
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    unit = st.floats(-1.0, 1.0)
+
+    @settings(max_examples=8, deadline=None, derandomize=True)
+    @given(th=unit, rud=unit, left=unit, right=unit, thr=st.tuples(*[unit] * 6), yaw=unit)
+    def check(th, rud, left, right, thr, yaw):
+        plant = make_plant(name)
+        plant.reset(down=0.0 if name in SURFACE else 20.0, yaw=3 * yaw, u=1.0)
+        cmd = Command(throttle=th, rudder_rad=rud, left=left, right=right,
+                      propeller_rpm=2500.0 * th, stern_plane_rad=0.3 * rud, thrusters=thr)
+        run(plant, cmd, 5.0, dt=0.5)
+        assert np.all(np.isfinite(plant.x))
+        assert np.linalg.norm(plant.x[6:9]) < 4.0  # no vehicle here exceeds ~3 m/s
+        assert np.all(np.abs(plant.x[9:12]) < 5.0)
+
+    check()
+
+
+def test_public_plant_and_environment_api_is_documented():
+    import inspect
+
+    import sitl.environment
+    import sitl.integrate
+    import sitl.plants
+    import sitl.plants.base
+    import sitl.plants.bluerov2
+    import sitl.plants.fossen
+    import sitl.plants.rudder_boat
+    import sitl.plants.spheroid
+    import sitl.plants.torpedo_auv
+    import sitl.plants.twin_thruster
+
+    mods = [sitl.environment, sitl.integrate, sitl.plants, sitl.plants.base,
+            sitl.plants.bluerov2, sitl.plants.fossen, sitl.plants.rudder_boat,
+            sitl.plants.spheroid, sitl.plants.torpedo_auv, sitl.plants.twin_thruster]
+    missing = []
+    for mod in mods:
+        assert mod.__doc__, mod.__name__
+        for name in mod.__all__:
+            obj = getattr(mod, name)
+            if inspect.isclass(obj) or inspect.isfunction(obj):
+                if not inspect.getdoc(obj):
+                    missing.append(f"{mod.__name__}.{name}")
+                for mname, meth in vars(obj).items() if inspect.isclass(obj) else []:
+                    if not mname.startswith("_") and inspect.isfunction(meth):
+                        if not inspect.getdoc(meth):
+                            missing.append(f"{mod.__name__}.{name}.{mname}")
+    assert not missing, missing
