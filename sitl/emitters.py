@@ -494,7 +494,8 @@ class PtySink:
     bytes are lost on a serial line nobody listens to; a frame is never cut.
     """
 
-    def __init__(self, max_pending: int = 1 << 20) -> None:
+    def __init__(self, max_pending: int = 1 << 20, drain_s: float = 2.0) -> None:
+        self.drain_s = drain_s
         self.master, self._slave = os.openpty()
         tty.setraw(self._slave)
         os.set_blocking(self.master, False)
@@ -543,10 +544,10 @@ class PtySink:
             return 0
         return buf[0]
 
-    def close(self, drain_s: float = 1.0) -> None:
-        """Give a reader up to ``drain_s`` seconds to take what is pending (ours and the
-        terminal's queue), then close."""
-        deadline = time.monotonic() + drain_s
+    def close(self, drain_s: float | None = None) -> None:
+        """Give a reader up to ``drain_s`` seconds (default: the constructor's) to take
+        what is pending (ours and the terminal's queue), then close."""
+        deadline = time.monotonic() + (self.drain_s if drain_s is None else drain_s)
         self.flush()
         quiet = 0  # the terminal moves data to the slave asynchronously: see it empty twice
         while quiet < 2 and time.monotonic() < deadline:

@@ -64,7 +64,7 @@ from sitl.emitters import (
 from sitl.guidance import ControlInput, Controller
 from sitl.plants.base import Command
 from sitl.scenarios import Scenario, get
-from sitl.sensors import GeoOrigin, Sensor, WorldView, _body_to_ned, build_sensors
+from sitl.sensors import GeoOrigin, Sensor, WorldView, build_sensors
 from sitl.truth import TruthRecord
 
 Step = tuple[float, list[Sample], "TruthRecord | None"]
@@ -181,14 +181,14 @@ class Simulation:
             for s, per in zip(sensors, periods):
                 if k % per == 0:
                     if view is None:
-                        if truth is None:
-                            truth = self._truth(t)
                         view = self._view(t, truth, bottom)
                     samples.extend(s.measure(view))
                 else:
                     late = s.due(t)
                     if late:
                         samples.extend(late)
+            if view is not None and view._truth is not None:
+                truth = view._truth
             out_truth = None
             if k % self.truth_period == 0:
                 if truth is None:
@@ -202,21 +202,20 @@ class Simulation:
             if k < n_ticks:
                 plant.step(dt, self.plant_command, env, t)
 
-    def _view(self, t: float, truth: TruthRecord, bottom: float | None) -> WorldView:
+    def _view(self, t: float, truth: TruthRecord | None, bottom: float | None) -> WorldView:
         plant = self.plant
-        f = plant.specific_force_body()
-        w = plant.angular_rate_body()
-        v = _body_to_ned(truth.roll, truth.pitch, truth.yaw, (truth.u, truth.v, truth.w))
+        w = plant.angular_rate_body().tolist()
         cmd = self.plant_command
+        vehicle = self.scenario.vehicle
+
+        def sf() -> tuple[float, float, float]:
+            f = plant.specific_force_body().tolist()
+            return (f[0], f[1], f[2])
+
         return WorldView(
-            t=t, truth=truth,
-            specific_force=(float(f[0]), float(f[1]), float(f[2])),
-            angular_rate=(float(w[0]), float(w[1]), float(w[2])),
-            v_ned=(float(v[0]), float(v[1]), float(v[2])),
-            thrust=self.scenario.vehicle.thrust_level(cmd),
-            shaft_rpm=self.scenario.vehicle.shaft_rpm(plant, cmd),
-            altitude=None if bottom is None else bottom - truth.down,
-        )
+            t, truth, angular_rate=(w[0], w[1], w[2]),
+            thrust=vehicle.thrust_level(cmd), shaft_rpm=vehicle.shaft_rpm(plant, cmd),
+            truth_fn=lambda: self._truth(t), specific_force_fn=sf, bottom_depth=bottom)
 
     def _truth_effects(self) -> dict[str, float]:
         d = dict(self.effects_truth)

@@ -279,16 +279,25 @@ class TurbulentCurrent(CurrentField):
     def __init__(self, std: float = 0.05, vertical_ratio: float = 0.5, modes: int = 8,
                  seed: int = 7) -> None:
         rng = np.random.default_rng(seed)
-        self.k = rng.uniform(2 * math.pi / 40.0, 2 * math.pi / 5.0, (modes, 3))
-        self.k *= rng.choice([-1.0, 1.0], (modes, 3))
-        self.w = rng.uniform(2 * math.pi / 120.0, 2 * math.pi / 20.0, modes)
-        self.phase = rng.uniform(0.0, 2 * math.pi, (modes, 3))
+        k = rng.uniform(2 * math.pi / 40.0, 2 * math.pi / 5.0, (modes, 3))
+        k *= rng.choice([-1.0, 1.0], (modes, 3))
+        w = rng.uniform(2 * math.pi / 120.0, 2 * math.pi / 20.0, modes)
+        phase = rng.uniform(0.0, 2 * math.pi, (modes, 3))
         amp = std * math.sqrt(2.0 / modes)
-        self.amp = np.array([amp, amp, amp * vertical_ratio])
+        self.amp = (amp, amp, amp * vertical_ratio)
+        # plain floats: this is evaluated at every integration sub-step
+        self._modes = [(*k[i].tolist(), float(w[i]), *phase[i].tolist()) for i in range(modes)]
 
     def velocity_ned(self, t: float, position_ned: np.ndarray) -> np.ndarray:
-        arg = self.k @ np.asarray(position_ned, dtype=float) - self.w * t
-        return self.amp * np.sum(np.cos(arg[:, None] + self.phase), axis=0)
+        n, e, d = float(position_ned[0]), float(position_ned[1]), float(position_ned[2])
+        cos = math.cos
+        vn = ve = vd = 0.0
+        for kn, ke, kd, w, pn, pe, pd in self._modes:
+            a = kn * n + ke * e + kd * d - w * t
+            vn += cos(a + pn)
+            ve += cos(a + pe)
+            vd += cos(a + pd)
+        return np.array([self.amp[0] * vn, self.amp[1] * ve, self.amp[2] * vd])
 
 
 # --------------------------------------------------------------------------- scenario

@@ -107,26 +107,67 @@ class GeoOrigin:
         return self.lat0 + north_m / self.m_lat, self.lon0 + east_m / self.m_lon
 
 
-@dataclass(slots=True)
 class WorldView:
     """What the sensors may look at in one instant: the truth, as the runner provides it.
 
-    ``specific_force`` (m/s^2) and ``angular_rate`` (rad/s) are body FRD; ``v_ned`` the
-    velocity over ground (m/s, NED); ``thrust`` the signed propulsion level in [-1, 1]
-    (drives compass motor interference); ``channels`` the commanded normalized actuator
-    values per output channel; ``shaft_rpm`` the true propeller speeds (rev/min);
-    ``altitude`` the true range to the bottom (m) or None without a bottom.
+    ``truth`` is the :class:`TruthRecord`; ``specific_force`` (m/s^2) and
+    ``angular_rate`` (rad/s) are body FRD; ``v_ned`` the velocity over ground (m/s, NED,
+    derived from the truth when not given); ``thrust`` the signed propulsion level in
+    [-1, 1] (drives compass motor interference); ``shaft_rpm`` the true propeller speeds
+    (rev/min); ``altitude`` the true range to the bottom (m) or None without a bottom.
+
+    The runner passes ``truth_fn`` and ``specific_force_fn`` instead of values so that
+    an instant where only the IMU measures never builds a truth record (and one where
+    no IMU measures never computes the specific force).
     """
 
-    t: float
-    truth: TruthRecord
-    specific_force: tuple[float, float, float]
-    angular_rate: tuple[float, float, float]
-    v_ned: tuple[float, float, float]
-    thrust: float = 0.0
-    channels: tuple[float, ...] = ()
-    shaft_rpm: tuple[float, ...] = ()
-    altitude: float | None = None
+    __slots__ = ("t", "_truth", "_truth_fn", "_sf", "_sf_fn", "angular_rate", "_v_ned",
+                 "thrust", "shaft_rpm", "_altitude", "_bottom")
+
+    def __init__(self, t: float, truth: TruthRecord | None = None,
+                 specific_force: tuple[float, float, float] | None = None,
+                 angular_rate: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 v_ned: tuple[float, float, float] | None = None, thrust: float = 0.0,
+                 shaft_rpm: tuple[float, ...] = (), altitude: float | None = None, *,
+                 truth_fn=None, specific_force_fn=None,
+                 bottom_depth: float | None = None) -> None:
+        self.t = t
+        self._truth = truth
+        self._truth_fn = truth_fn
+        self._sf = specific_force
+        self._sf_fn = specific_force_fn
+        self.angular_rate = angular_rate
+        self._v_ned = v_ned
+        self.thrust = thrust
+        self.shaft_rpm = shaft_rpm
+        self._altitude = altitude
+        self._bottom = bottom_depth
+
+    @property
+    def truth(self) -> TruthRecord:
+        if self._truth is None:
+            self._truth = self._truth_fn()
+        return self._truth
+
+    @property
+    def specific_force(self) -> tuple[float, float, float]:
+        if self._sf is None:
+            self._sf = self._sf_fn() if self._sf_fn is not None else (0.0, 0.0, -GRAVITY)
+        return self._sf
+
+    @property
+    def v_ned(self) -> tuple[float, float, float]:
+        if self._v_ned is None:
+            tr = self.truth
+            v = _body_to_ned(tr.roll, tr.pitch, tr.yaw, (tr.u, tr.v, tr.w)).tolist()
+            self._v_ned = (v[0], v[1], v[2])
+        return self._v_ned
+
+    @property
+    def altitude(self) -> float | None:
+        if self._altitude is None and self._bottom is not None:
+            self._altitude = self._bottom - self.truth.down
+        return self._altitude
 
 
 class Sensor(Protocol):

@@ -60,7 +60,7 @@ def test_water_current_is_in_the_truth_and_in_the_motion():
 
 
 def test_compass_deviation_shows_in_the_headings():
-    truth, samples = _collect("effect-compass-deviation", 211.0)  # one mission: all headings
+    truth, samples = _collect("effect-compass-deviation", 55.0)  # the circle: all headings
     err, psi = [], []
     for s in samples:
         if isinstance(s, Heading) and round(s.t, 3) in truth:

@@ -56,7 +56,7 @@ def _parse_mavlink(data: bytes) -> tuple[dict[str, int], int]:
 
 
 def test_mavlink_through_a_pty_parses_without_a_bad_frame():
-    sink = PtySink()
+    sink = PtySink(drain_s=20.0)  # generous: the reader thread may be slow on a busy machine
     reader = _PtyReader(sink.path)
     reader.start()
     summary = run("jaiabot-turns", 8.0, seed=1, mavlink=[sink])
@@ -69,7 +69,7 @@ def test_mavlink_through_a_pty_parses_without_a_bad_frame():
 
 
 def test_nmea_through_a_pty_has_right_checksums():
-    sink = PtySink()
+    sink = PtySink(drain_s=20.0)  # generous: the reader thread may be slow on a busy machine
     reader = _PtyReader(sink.path)
     reader.start()
     summary = run("jaiabot-turns", 10.0, seed=2, nmea=[sink])
@@ -87,7 +87,7 @@ def test_nmea_through_a_pty_has_right_checksums():
 
 
 def test_pd6_through_a_pty_parses():
-    sink = PtySink()
+    sink = PtySink(drain_s=20.0)  # generous: the reader thread may be slow on a busy machine
     reader = _PtyReader(sink.path)
     reader.start()
     run("gavia-tidal", 6.0, seed=1, pd6=[sink])

@@ -120,15 +120,15 @@ def test_no_gnss_fix_from_a_submerged_auv():
     assert kinds["GnssFix"] == 0 and kinds["VelocityOverGround"] == 51
 
 
-def test_bluerov2_circle_flies_the_circle_under_the_push():
+def test_bluerov2_circle_flies_the_circle_under_the_push(tmp_path):
     """The spec's circle (r = 2 m, 1.5 m/s) under 56.6 N of push needs up to ~115 N of
     thrust where the six T200s give ~99 N; the PID keeps within metres of it."""
     from sitl.runner import run
 
-    s = run("bluerov2-circle", 40.0, seed=0)
-    # measured 1.1 m RMS over 40 s (thrusters saturate for part of each lap)
+    s = run("bluerov2-circle", 30.0, seed=0, truth_path=tmp_path / "t.jsonl")
+    # measured 1.29 m RMS over 30 s from rest (thrusters saturate for part of each lap)
     assert s.tracking["rms_position_error_m"] < 1.6
-    truth = [tr for _, _, tr in simulate("bluerov2-circle", 20.0) if tr is not None]
+    truth = read_truth(tmp_path / "t.jsonl")
     assert truth[-1].disturbance_x is not None
     assert abs(truth[-1].down - 20.0) < 0.5
 
