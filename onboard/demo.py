@@ -311,6 +311,9 @@ class DemoResult:
     wall_s: float
     estimates: list[EstimateRecord]
     health: Any
+    """The last HealthRecord (after the simulator stopped: rates 0)."""
+    healths: list[Any]
+    """Every HealthRecord of the run (1 Hz on the simulated clock)."""
     scores: list[ScoreRow]
     frames: dict[str, int]
     recording: list[str]
@@ -377,7 +380,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
         sub = shore.declare_subscriber(f"onboard/{vid}/**", view.on_sample)
         start = time.monotonic() + 1.0  # simulated t = 0, one wall second from now
         clock = ServiceClock(speed=speed, origin=0.0, start=start)
-        svc = Service(cfg, state_dir=out_dir, clock=clock)
+        healths: list[Any] = []
+        svc = Service(cfg, state_dir=out_dir, clock=clock, on_health=healths.append)
         await svc.start()
         say(f"onboard demo: scenario {sc.name} ({sc.vehicle.vehicle_class}), "
             f"{duration_s:g} s simulated at {speed:g}x, vehicle id {vid!r}")
@@ -445,7 +449,7 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
     say(f"recording: {', '.join(rec_files) or '-'} (onboard replay {out_dir / 'recordings'})")
     say(f"done in {wall:.1f} s wall")
     return DemoResult(scenario=sc.name, vehicle=vid, duration_s=duration_s, wall_s=wall,
-                      estimates=history, health=health, scores=rows, frames=frames,
+                      estimates=history, health=health, healths=healths, scores=rows, frames=frames,
                       recording=rec_files, events=events, mavlink_sent=mav_sent,
                       sources={s.name: s.kind for s in cfg.service.sources})
 

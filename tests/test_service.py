@@ -1,0 +1,321 @@
+"""The service end to end with hand-made protocol bytes: UDP, pty and TCP in; Zenoh and
+MAVLink out; bad input counted; replay of the recording reproduces the live estimates
+exactly; adaptive state across restarts; SIGTERM and READY in a real child process."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import tty
+from pathlib import Path
+
+import msgspec
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+import onboard.pipelines as pipelines_pkg
+from drivers.dvl_json import encode_velocity_report
+from drivers.recording import read_records
+from onboard.config import from_dict
+from onboard.engine import Engine
+from onboard.messages import EstimateRecord, HealthRecord
+from onboard.publishers.zenoh_pub import open_router
+from onboard.recorder import replay_recording
+from onboard.service import Service
+from onboard.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
+
+REPO = Path(__file__).resolve().parent.parent
+TIMEOUT = 60.0
+
+
+def _all_pipelines(monkeypatch) -> None:
+    """Run every pipeline module that exists (the integrator registers them in MODULES)."""
+    mods = [m for m in ("nav", "aie", "kf", "current", "eseso")
+            if (REPO / "onboard" / "pipelines" / f"{m}.py").exists()]
+    monkeypatch.setattr(pipelines_pkg, "MODULES", tuple(mods))
+
+
+def _config(**service) -> object:
+    data = {"vehicle": {"id": "testboat", "class": "rudder-boat", "system_id": 3},
+            "engine": {"rate_hz": 10.0},
+            "inputs": {"rudder": {"source": "servo", "channel": 1, "half_range_us": 500,
+                                  "full_scale": 0.5236},
+                       "throttle": {"source": "servo", "channel": 3, "half_range_us": 500}},
+            "service": service}
+    return from_dict(data)
+
+
+def _new_pty() -> tuple[int, str]:
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    return master, os.ttyname(slave)
+
+
+class Traffic:
+    """Sends the generator's frames: MAVLink over UDP, NMEA on a pty (split mid-line),
+    DVL JSON to a TCP client, plus garbage on every link."""
+
+    def __init__(self, mav_port: int, nmea_master: int) -> None:
+        self.gen = TrafficGenerator(system_id=1)
+        self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.mav_port = mav_port
+        self.master = nmea_master
+        self.dvl_clients: list[socket.socket] = []
+
+    def send(self, t: float, k: int) -> None:
+        for f in self.gen.mavlink(t):
+            self.udp.sendto(f, ("127.0.0.1", self.mav_port))
+        for f in self.gen.nmea(t):
+            half = len(f) // 2  # a serial line delivers sentences in arbitrary pieces
+            os.write(self.master, f[:half])
+            os.write(self.master, f[half:])
+        if k % 10 == 0:
+            line = encode_velocity_report(1.5, 0.0, 0.0, altitude_m=3.0)
+            for c in list(self.dvl_clients):
+                try:
+                    c.sendall(line)
+                except OSError:
+                    self.dvl_clients.remove(c)
+        if k % 25 == 7:  # bad input on every link
+            self.udp.sendto(b"\xfd\x09garbage-not-mavlink", ("127.0.0.1", self.mav_port))
+            os.write(self.master, b"$GPHDT,123.4,T*00\r\n")  # wrong checksum
+            os.write(self.master, b"$GPGGA," + b"9" * 400 + b"\r\n")  # oversize line
+            for c in list(self.dvl_clients):
+                c.sendall(b'{"type": "velocity", "vx": NaN}\n')
+
+    def close(self) -> None:
+        self.udp.close()
+        for c in self.dvl_clients:
+            c.close()
+
+
+async def _drive(svc: Service, traffic: Traffic, seconds: float) -> None:
+    t0 = time.monotonic()
+    k = 0
+    while k / 50.0 < seconds:
+        delay = t0 + k / 50.0 - time.monotonic()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        traffic.send(k / 50.0, k)
+        k += 1
+
+
+def test_service_end_to_end_over_udp_pty_tcp_to_zenoh_and_mavlink_and_exact_replay(
+        tmp_path, monkeypatch):
+    _all_pipelines(monkeypatch)
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_router(endpoint)
+    import zenoh
+
+    from onboard.publishers.zenoh_pub import session_config
+
+    shore = zenoh.open(session_config("client", connect=[endpoint]))
+    got: dict[str, list[bytes]] = {}
+    lock = threading.Lock()
+
+    def on(sample):
+        with lock:
+            got.setdefault(str(sample.key_expr), []).append(sample.payload.to_bytes())
+
+    sub = shore.declare_subscriber("onboard/testboat/**", on)
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.setblocking(False)
+    master, pty_path = _new_pty()
+    dvl_server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    dvl_server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    dvl_server.bind(("127.0.0.1", 0))
+    dvl_server.listen(1)
+    mav_port = free_udp_port()
+    cfg = _config(
+        sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{mav_port}", "name": "autopilot"},
+                 {"kind": "nmea", "url": f"pty:{pty_path}", "name": "gps"},
+                 {"kind": "dvl-json", "url": f"tcp:127.0.0.1:{dvl_server.getsockname()[1]}",
+                  "name": "dvl"}],
+        zenoh={"mode": "client", "connect": [endpoint]},
+        mavlink={"url": f"udpout:127.0.0.1:{gcs.getsockname()[1]}"},
+        recorder={"flush_interval_s": 0.2})
+    live: list[tuple[float, list[bytes]]] = []
+    enc = msgspec.json.Encoder()
+    traffic = Traffic(mav_port, master)
+
+    async def main() -> Service:
+        svc = Service(cfg, state_dir=tmp_path,
+                      on_tick=lambda t, recs: live.append((t, [enc.encode(r) for r in recs])))
+        accept = asyncio.get_running_loop().run_in_executor(None, dvl_server.accept)
+        await svc.start()
+        conn, _ = await asyncio.wait_for(accept, TIMEOUT)
+        traffic.dvl_clients.append(conn)
+        await _drive(svc, traffic, 3.0)
+        await asyncio.sleep(0.5)
+        svc._health(svc.clock.now())
+        svc.request_stop()
+        await svc.shutdown()
+        return svc
+
+    try:
+        svc = asyncio.run(asyncio.wait_for(main(), TIMEOUT))
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            with lock:
+                if "onboard/testboat/health" in got and "onboard/testboat/est/nav" in got:
+                    break
+            time.sleep(0.05)
+    finally:
+        traffic.close()
+        sub.undeclare()
+        shore.close()
+        router.close()
+        os.close(master)
+        dvl_server.close()
+
+    # inputs: every link connected and delivered samples; bad input counted, not fatal
+    assert {s: st.samples > 0 for s, st in svc.intake.sources.items()} == {
+        "autopilot": True, "gps": True, "dvl": True}
+    h = svc.health(svc.clock.now())
+    assert h.rejected.get("parse:gps:checksum", 0) >= 1
+    assert h.rejected.get("parse:gps:too_long", 0) >= 1
+    assert any(k.startswith("parse:autopilot:") for k in h.rejected)  # "incompat" here
+    assert any(k.startswith("parse:dvl:") for k in h.rejected)
+    # Zenoh: estimates and health on the contract keys, JSON with schema
+    with lock:
+        keys = set(got)
+        nav = [msgspec.json.decode(p, type=EstimateRecord) for p in got["onboard/testboat/est/nav"]]
+        healths = [msgspec.json.decode(p, type=HealthRecord) for p in got["onboard/testboat/health"]]
+    assert "onboard/testboat/est/nav" in keys and nav[-1].vehicle == "testboat"
+    assert {"north", "east", "heading"} <= set(nav[-1].values)
+    assert max(x.rates_hz.get("autopilot", 0) for x in healths) > 10  # ~60 samples/s
+    assert max(x.rates_hz.get("gps", 0) for x in healths) > 3  # 5 fixes + 10 headings/s
+    assert healths[-1].schema == 1 and healths[-1].mode == "surface"
+    # MAVLink out: heartbeat from (3, 191) and ESTIMATOR_STATUS reached the "GCS"
+    mav = mavlink2.MAVLink(None)
+    types = set()
+    while True:
+        try:
+            data = gcs.recv(65536)
+        except BlockingIOError:
+            break
+        for m in mav.parse_buffer(data) or []:
+            assert (m.get_srcSystem(), m.get_srcComponent()) == (3, 191)
+            types.add(m.get_type())
+    gcs.close()
+    assert {"HEARTBEAT", "ESTIMATOR_STATUS"} <= types
+
+    # replay of the recording reproduces every live tick exactly, record for record
+    files = svc.recorder.files
+    kinds = {r.kind for f in files for r in read_records(f)}
+    assert {"meta", "tick", "mavlink", "nmea", "dvl-json"} <= kinds
+    replayed: list[tuple[float, list[bytes]]] = []
+    res = replay_recording(files, Engine(cfg),
+                           lambda t, recs: replayed.append((t, [enc.encode(r) for r in recs])))
+    assert res.ticks == len(live) > 20
+    assert replayed == live
+    n_values = sum(len(msgspec.json.decode(b)["values"]) for _, recs in live for b in recs)
+    assert n_values > 100
+
+
+def test_adaptive_state_is_saved_on_stop_and_restored_on_start_corrupt_is_ignored(tmp_path):
+    cfg = _config(sources=[{"kind": "nmea", "url": f"udp:127.0.0.1:{free_udp_port()}"}],
+                  zenoh={"enabled": False}, mavlink={"enabled": False},
+                  recorder={"enabled": False}, state_file="st/adaptive.json")
+
+    async def once() -> Service:
+        svc = Service(cfg, state_dir=tmp_path)
+        await svc.start()
+        await asyncio.sleep(0.3)
+        svc.request_stop()
+        await svc.shutdown()
+        return svc
+
+    first = asyncio.run(asyncio.wait_for(once(), TIMEOUT))
+    doc = json.loads((tmp_path / "st" / "adaptive.json").read_text())
+    assert doc["format"] == "onboard-state" and doc["vehicle"] == "testboat"
+    assert first.stats.state_saves >= 1
+    second = asyncio.run(asyncio.wait_for(once(), TIMEOUT))
+    assert any("restored adaptive state" in e for e in second.events)
+    (tmp_path / "st" / "adaptive.json").write_text("{ not json")
+    third = asyncio.run(asyncio.wait_for(once(), TIMEOUT))
+    assert any("corrupt" in e for e in third.events)
+    assert third.stats.ticks > 0  # and it ran anyway
+
+
+def _write_config(path: Path, udp_port: int) -> None:
+    path.write_text(f"""
+[vehicle]
+id = "proc"
+class = "rudder-boat"
+
+[[service.sources]]
+kind = "mavlink"
+url = "udp:127.0.0.1:{udp_port}"
+
+[service.zenoh]
+enabled = false
+
+[service.mavlink]
+url = "udpout:127.0.0.1:{free_udp_port()}"
+""")
+
+
+def test_onboard_run_notifies_ready_and_stops_cleanly_on_sigterm(tmp_path):
+    cfg_path = tmp_path / "boat.toml"
+    port = free_udp_port()
+    _write_config(cfg_path, port)
+    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    notify.bind(str(tmp_path / "notify"))
+    notify.settimeout(TIMEOUT)
+    env = dict(os.environ, NOTIFY_SOCKET=str(tmp_path / "notify"), WATCHDOG_USEC="1000000")
+    proc = subprocess.Popen([sys.executable, "-m", "onboard", "run", "--config", str(cfg_path),
+                             "--state-dir", str(tmp_path / "state")], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        msgs = [notify.recv(4096)]
+        while not msgs[-1].startswith(b"READY=1"):
+            msgs.append(notify.recv(4096))
+        gen = TrafficGenerator()
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for k in range(50):
+            for f in gen.mavlink(k / 50.0):
+                tx.sendto(f, ("127.0.0.1", port))
+            time.sleep(0.01)
+        tx.close()
+        while b"WATCHDOG=1" not in msgs:
+            msgs.append(notify.recv(4096))
+        proc.send_signal(signal.SIGTERM)
+        rc = proc.wait(TIMEOUT)
+        while not msgs[-1].startswith(b"STOPPING=1"):
+            msgs.append(notify.recv(4096))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        err = proc.stderr.read().decode()
+        proc.stdout.close()
+        proc.stderr.close()
+        notify.close()
+    assert rc == 0, err
+    recs = list((tmp_path / "state" / "recordings").glob("*.onbrec"))
+    assert len(recs) == 1
+    kinds = [r.kind for r in read_records(recs[0])]
+    assert kinds[0] == "meta" and "mavlink" in kinds and "tick" in kinds
+    assert (tmp_path / "state" / "state" / "adaptive.json").exists()
+
+
+@pytest.mark.parametrize("text, reason", [
+    ("[vehicle]\nid = 3\n", "vehicle.id"),
+    ("[vehicle]\nid = \"x\"\n", "sources is empty"),
+])
+def test_onboard_run_with_a_bad_config_exits_2_with_a_one_line_reason(tmp_path, text, reason):
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    r = subprocess.run([sys.executable, "-m", "onboard", "run", "--config", str(p),
+                        "--state-dir", str(tmp_path)], capture_output=True, text=True,
+                       timeout=TIMEOUT)
+    assert r.returncode == 2 and reason in r.stderr and len(r.stderr.strip().splitlines()) == 1
