@@ -196,7 +196,7 @@ class PlantBase:
             f = self._f
             for i in range(n):
                 ti = t + i * h
-                self._vc = tuple(env.current_ned(ti, x[0:3]).tolist())
+                self._vc = tuple(env.current_ned(ti, np.array(x[0:3])).tolist())
                 x = rk4_step_list(f, ti, x, h)
             self.x = np.array(x)
         self._t = t + dt
