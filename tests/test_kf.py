@@ -130,10 +130,10 @@ def test_kf_baseline_without_commands_runs_with_zero_input() -> None:
     p = _kf()
     out = run_pipelines(samples, [p], sim.t)[0]
     sc = score(sim, out, t_min=40.0)
-    # measured: speed 0.56 m/s, heading 0.097 rad (constant-rate model, random
+    # measured: speed 0.68 m/s, heading 0.027 rad (constant-rate model, random
     # acceleration of variance kf_v_d: the classical filter without inputs)
-    assert sc["speed"] < 0.7
-    assert sc["heading"] < 0.13
+    assert sc["speed"] < 0.8
+    assert sc["heading"] < 0.04
     assert p.surge.u == 0.0
 
 
@@ -141,10 +141,10 @@ def test_kf_baseline_with_the_true_model_tracks_the_synthetic_boat() -> None:
     sim = simulate(SimConfig(duration=300.0, seed=0))
     out = run_pipelines(sim.samples, [_kf()], sim.t)[0]
     sc = score(sim, out)
-    # measured: speed 0.123 m/s, heading 0.068 rad, position 2.0 m (exact nominal model)
-    assert sc["speed"] < 0.16
-    assert sc["heading"] < 0.09
-    assert sc["position"] < 2.6
+    # measured: speed 0.149 m/s, heading 0.022 rad, position 2.6 m (exact nominal model)
+    assert sc["speed"] < 0.18
+    assert sc["heading"] < 0.03
+    assert sc["position"] < 3.0
 
 
 def test_kf_create_reads_the_aie_table_and_skips_rovs() -> None:

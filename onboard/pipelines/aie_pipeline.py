@@ -49,7 +49,9 @@ from onboard.pipelines.surge_heading import (
 class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
     """One axis: its model (§1.2), the RCIE hyperparameters (§2.10), the KF noise.
 
-    Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized.
+    Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized. The
+    defaults were tuned by the §2.10 procedure on SITL ``jaiabot-turns`` and
+    ``twin-thruster-turns`` (seed 10, held out from the reported seeds); see docs/aie.md.
     """
 
     a: float = 1.0
@@ -63,49 +65,51 @@ class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, froze
     u_scale: float = 1.0
     """Typical input magnitude: the normalization of d_hat for RLS (§2.10)."""
     n_c: int = 4
-    """Input-estimator order (§2.3); l_theta = 2 n_c + 1."""
+    """Input-estimator order (§2.3); l_theta = 2 n_c + 1 (the paper's 9 coefficients)."""
     n_f: int = 1
-    """Taps of G_f (§2.4)."""
+    """Taps of G_f (§2.4); 1 suffices for the relative-degree-1 increment model."""
     r_z: float = 1.0
     """Retrospective weight R_z (§2.5)."""
-    r_d: float = 10.0
-    """Input-size penalty R_d (normalized, §2.5)."""
-    r_theta: float = 0.01
-    """Regularization R_theta; P_0 = I / r_theta (normalized, §2.5)."""
+    r_d: float = 1.0
+    """Input penalty R_d (normalized, §2.5), on the size or the change of d_hat."""
     rate_penalty: bool = True
     """Apply R_d to the change of the input estimate (d_hat_k - d_hat_{k-1}) instead of
     its size: penalizes noise amplification without biasing a nonzero mean input."""
+    r_theta: float = 0.01
+    """Regularization R_theta; P_0 = I / r_theta (normalized, §2.5)."""
     lam: float = 0.999
     """RLS forgetting factor lambda (§2.6); memory ~ 1/(1 - lambda) steps."""
     v_d: float = 0.3
     """AIE: variance of the input-estimation error V_d (u^2), §2.2."""
-    kf_v_d: float = 0.5
+    kf_v_d: float = 1.0
     """KF baseline: variance of the commanded input's error (u^2)."""
     q_v: float = 0.0
     """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
-    known_input: bool = False
-    """AIE: add the nominal commanded input to the forecast, so RCIE estimates only the
-    remainder (§2.1 "known input"). Off: the whole input is unknown, as in the paper."""
+    known_input: bool = True
+    """AIE: forecast with the nominal commanded input plus the RCIE estimate, so RCIE
+    estimates what the nominal map misses (§2.1 "known input"). Without commands, and
+    with ``false``, the whole input is unknown, as in the paper."""
 
 
 class SurgeAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
-    """``[pipelines.aie.surge]`` (defaults for a 1-3 m boat, m/s^2)."""
+    """``[pipelines.aie.surge]`` (m/s^2)."""
 
     a: float = 1.0
     gain: float = 3.0
     u_max: float = 5.0
     u_scale: float = 1.0
+    r_d: float = 10.0
 
 
-class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
-    """``[pipelines.aie.heading]`` (defaults, rad/s^2)."""
+class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
+                        frozen=True):
+    """``[pipelines.aie.heading]`` (rad/s^2)."""
 
     a: float = 2.0
     gain: float = 2.0
     u_max: float = 5.0
-    u_scale: float = 0.5
-    v_d: float = 0.05
-    kf_v_d: float = 0.2
+    u_scale: float = 2.0
+    r_d: float = 1.0
 
 
 class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
@@ -113,7 +117,9 @@ class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
 
     enabled: bool = True
     step_s: float = 1.0
-    """The AIE step Ts (s): measurement window length (§1.2)."""
+    """The AIE step Ts (s) of the surge axis: GNSS window length (§1.2)."""
+    heading_step_s: float = 0.1
+    """The step of the heading axis (compass windows); <= 0: same as step_s."""
     max_gap_s: float = 5.0
     """Longer without a measurement point restarts the increment chain."""
     input_mode: Literal["auto", "throttle-rudder", "differential"] = "auto"
@@ -122,15 +128,16 @@ class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     """GNSS position noise, one sigma (m); default [sensors.gnss] position_std_m."""
     heading_std_rad: float | None = None
     """Compass noise, one sigma (rad); default [sensors.compass] heading_std_rad."""
-    heading_anchor: float = 0.05
-    """Gain pulling the reconstructed heading toward the measured one per step (0: the
-    paper's pure integration of increments)."""
-    position_anchor: float = 0.05
-    """Same for the reconstructed position (0: pure dead reckoning, paper §3.3)."""
     correlated_noise: bool = True
     """Model the MA(1) noise of increments formed from noisy points (kalman.py)."""
+    heading_anchor: float = 0.05
+    """With ``correlated_noise = false`` only: gain pulling the reconstructed heading
+    toward the measured one per step (0: the paper's pure integration of increments)."""
+    position_anchor: float = 0.05
+    """Gain pulling the reconstructed position toward the GNSS point per surge step
+    (0: pure dead reckoning from the estimates, paper §3.3)."""
     nis_gate: float = 400.0
-    """An innovation with z^2/S above this is rejected as an outlier."""
+    """An innovation with z^2/S above this is rejected as an outlier (20 sigma)."""
     adaptive: bool = False
     """Adapt V_d to the innovation statistics (ASE, §2.8)."""
     adaptive_window: int = 50
@@ -247,6 +254,9 @@ class SurgeHeadingPipeline:
 
     ``columns``: north, east (m from the first fix), heading (rad, [0, 2 pi)), speed
     (m/s), yaw_rate (rad/s), and for AIE surge_input (m/s^2), yaw_input (rad/s^2).
+
+    The surge axis steps every ``step_s`` (GNSS windows), the heading axis every
+    ``heading_step_s`` (compass windows); each window's points are averaged.
     """
 
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig,
@@ -255,27 +265,31 @@ class SurgeHeadingPipeline:
         self.columns = columns
         self.cfg = cfg
         self.sigma_p = cfg.gnss_std_m if cfg.gnss_std_m is not None else gnss_std_m
-        self.sigma_h = cfg.heading_std_rad if cfg.heading_std_rad is not None else heading_std_rad
+        self.sigma_h = (cfg.heading_std_rad if cfg.heading_std_rad is not None
+                        else heading_std_rad)
         s, h = cfg.surge, cfg.heading
         self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg)
         self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg)
         self.frame: LocalFrame | None = None
         self._t0: float | None = None
-        self._w = _Window()
-        self._w_end = math.inf
+        self._step_h = cfg.heading_step_s if cfg.heading_step_s > 0 else cfg.step_s
+        self._w = _Window()          # surge window: fixes and the headings among them
+        self._hw = _Window()         # heading-axis window
+        self._w_end = self._hw_end = math.inf
         self._heading_source_seen = False
         self._psi_last: float | None = None       # last raw heading (unwrapped, rad)
         self._cmds: list[tuple[float, float | None, float | None]] = []
-        # previous measurement point
-        self._pt_prev: tuple[float, float, float] | None = None   # t, N, E
-        self._h_prev: tuple[float, float] | None = None           # t, psi (unwrapped)
-        # reconstruction
-        self._t_est: float | None = None
+        # previous points
+        self._pt_prev: tuple[float, float, float, float] | None = None  # t, N, E, psi
+        self._h_prev: tuple[float, float] | None = None                 # t, psi
+        # reconstruction: heading at _t_h, position at _t_s
+        self._t_h: float | None = None
+        self._t_s: float | None = None
         self._n = self._e = 0.0
         self._psi: float | None = None
         self._have_pos = False
         self._prev_nfix = 1
-        self._R_h_prev = heading_std_rad ** 2
+        self._R_h_prev = self.sigma_h ** 2
         self._disc_cache: dict[tuple[float, float], Discrete] = {}
 
     # -- helpers -----------------------------------------------------------------------
@@ -289,56 +303,79 @@ class SurgeHeadingPipeline:
             d = self._disc_cache[key] = discretize(a, key[1])
         return d
 
-    def _mean_command(self, t_a: float, t_b: float) -> tuple[float | None, float | None]:
-        """Time-weighted mean of the (surge, yaw) commands over [t_a, t_b] (ZOH)."""
+    def _mean_command(self, t_a: float, t_b: float, j: int) -> float | None:
+        """Time-weighted mean of command ``j`` (1 surge, 2 yaw) over [t_a, t_b] (ZOH)."""
         cmds = self._cmds
-        if not cmds or t_b <= t_a:
-            return (cmds[-1][1], cmds[-1][2]) if cmds else (None, None)
-        out: list[float | None] = []
-        for j in (1, 2):
-            acc = 0.0
-            tot = 0.0
-            for i, c in enumerate(cmds):
-                t_s = max(c[0], t_a)
-                t_e = min(cmds[i + 1][0] if i + 1 < len(cmds) else t_b, t_b)
-                if t_e <= t_s or c[j] is None:
-                    continue
-                acc += c[j] * (t_e - t_s)  # type: ignore[operator]
-                tot += t_e - t_s
-            out.append(acc / tot if tot > 0.0 else None)
-        # keep the command in force at t_b and later ones
-        keep = 0
+        if not cmds:
+            return None
+        if t_b <= t_a:
+            return cmds[-1][j]
+        acc = tot = 0.0
         for i, c in enumerate(cmds):
-            if c[0] <= t_b:
+            t_s = max(c[0], t_a)
+            t_e = min(cmds[i + 1][0] if i + 1 < len(cmds) else t_b, t_b)
+            v = c[j]
+            if t_e <= t_s or v is None:
+                continue
+            acc += v * (t_e - t_s)
+            tot += t_e - t_s
+        return acc / tot if tot > 0.0 else None
+
+    def _trim_commands(self) -> None:
+        """Drop commands no future step needs (keep the one in force at the oldest
+        previous point)."""
+        ts = [p[0] for p in (self._pt_prev, self._h_prev) if p is not None]
+        if not ts or not self._cmds:
+            return
+        t_keep = min(ts)
+        keep = 0
+        for i, c in enumerate(self._cmds):
+            if c[0] <= t_keep:
                 keep = i
-        del cmds[:keep]
-        return out[0], out[1]
+            else:
+                break
+        if keep:
+            del self._cmds[:keep]
 
     # -- sample intake -----------------------------------------------------------------
 
     def _add_heading(self, t: float, psi: float) -> None:
-        if self._psi_last is None:
-            u = psi
-        else:
-            u = self._psi_last + wrap_pi(psi - self._psi_last)
+        u = psi if self._psi_last is None else self._psi_last + wrap_pi(psi - self._psi_last)
         self._psi_last = u
-        w = self._w
-        w.n_h += 1
-        w.st_h += t
-        w.sh += u
+        for w in (self._w, self._hw):
+            w.n_h += 1
+            w.st_h += t
+            w.sh += u
+
+    def _advance(self, t: float) -> None:
+        """Close every window that ends at or before ``t`` (heading first)."""
+        if self._t0 is None:
+            return
+        gap = self.cfg.max_gap_s
+        for which in ("h", "s"):
+            step = self._step_h if which == "h" else self.cfg.step_s
+            end = self._hw_end if which == "h" else self._w_end
+            while t >= end:
+                if which == "h":
+                    self._close_heading_window()
+                else:
+                    self._close_surge_window()
+                end += step
+                if t - end > gap:   # jump across a long silence
+                    end = self._t0 + step * (math.floor((t - self._t0) / step) + 1)
+            if which == "h":
+                self._hw_end = end
+            else:
+                self._w_end = end
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         """Consume samples (time-ordered) and return the estimates at time ``t``."""
-        step_s = self.cfg.step_s
         for s in samples:
             if self._t0 is None and isinstance(s, (GnssFix, Heading, Attitude)):
                 self._t0 = s.t
-                self._w_end = s.t + step_s
-            while s.t >= self._w_end:
-                self._close_window(self._w_end)
-                self._w_end += step_s
-                if s.t - self._w_end > self.cfg.max_gap_s:   # jump across a long silence
-                    self._w_end = self._t0 + step_s * (math.floor((s.t - self._t0) / step_s) + 1)
+                self._w_end = s.t + self.cfg.step_s
+                self._hw_end = s.t + self._step_h
+            self._advance(s.t)
             if isinstance(s, GnssFix):
                 if s.fix_quality <= 0:
                     continue
@@ -363,57 +400,68 @@ class SurgeHeadingPipeline:
                     del self._cmds[:2048]
         return self._output(t)
 
-    # -- one AIE/KF step per window ----------------------------------------------------
+    # -- one step per window -----------------------------------------------------------
 
-    def _close_window(self, t_end: float) -> None:
-        w = self._w
-        self._w = _Window()
+    def _close_heading_window(self) -> None:
+        w = self._hw
+        self._hw = _Window()
         if w.n_h == 0:
             return
         th = w.st_h / w.n_h
         psi = w.sh / w.n_h
         R_h = self.sigma_h ** 2 / w.n_h
         R_h_prev, self._R_h_prev = self._R_h_prev, R_h
-        cmd_s: float | None = None
-        # heading axis (needs only the compass)
         hp = self._h_prev
+        if hp is not None and th - hp[0] <= 1e-3:
+            return
         self._h_prev = (th, psi)
         if hp is not None and th - hp[0] > self.cfg.max_gap_s:
             self.yaw.restart()
             hp = None
-        if hp is None:
-            # (re)start: reconstruction heading from the measurement
+        if hp is None:   # (re)start the reconstruction from the measurement
             self._psi = psi
-            self._t_est = th
-            dpsi_m = 0.0
-        else:
-            dt = th - hp[0]
-            if dt <= 1e-3:
-                return
-            dpsi_m = wrap_pi(psi - hp[1])
-            cmd_s, cmd_y = self._mean_command(hp[0], th)
-            ky = self._disc(self.yaw.damping(cmd_y), dt)
-            self.yaw.step(ky, dpsi_m, R_h, R_h_prev, cmd_y)
-            # §3.3 heading: integrate the estimated increment ...
-            kfy = self.yaw.kf
-            psi_prev_est = self._psi if self._psi is not None else hp[1]
-            pred = psi_prev_est + kfy.d
-            n_hat = kfy.point_noise()
-            if n_hat is not None:
-                # ... which with the MA(1) noise model equals the measured point minus its
-                # estimated noise (the e-state makes the absolute heading observable)
-                self._psi = pred + wrap_pi(psi - n_hat - pred)
-            else:   # white-noise increments: pull toward the measurement
-                self._psi = pred + self.cfg.heading_anchor * wrap_pi(psi - pred)
-            self._t_est = th
-        # surge axis (needs fixes in this and the previous window)
-        if w.n_fix == 0:
+            self._t_h = th
+            return
+        dt = th - hp[0]
+        cmd = self._mean_command(hp[0], th, 2)
+        self.yaw.step(self._disc(self.yaw.damping(cmd), dt), wrap_pi(psi - hp[1]), R_h,
+                      R_h_prev, cmd)
+        # §3.3 heading: integrate the estimated increment ...
+        kfy = self.yaw.kf
+        pred = (self._psi if self._psi is not None else hp[1]) + kfy.d
+        n_hat = kfy.point_noise()
+        if n_hat is not None:
+            # ... which with the MA(1) noise model equals the measured point minus its
+            # estimated noise (the e-state makes the absolute heading observable)
+            self._psi = pred + wrap_pi(psi - n_hat - pred)
+        else:   # white-noise increments: pull toward the measurement
+            self._psi = pred + self.cfg.heading_anchor * wrap_pi(psi - pred)
+        self._t_h = th
+        self._trim_commands()
+
+    def _heading_at(self, t: float) -> float:
+        """The reconstructed heading (rad, unwrapped) predicted to time ``t``."""
+        assert self._psi is not None and self._t_h is not None
+        tau = min(max(t - self._t_h, 0.0), self.cfg.max_gap_s)
+        yaw = self.yaw
+        if not yaw.kf.initialized or tau <= 1e-6:
+            return self._psi
+        dpsi, _ = yaw.kf.predict_ahead(self._disc(yaw.damping(yaw.last_command), tau), yaw.u)
+        return self._psi + dpsi
+
+    def _close_surge_window(self) -> None:
+        w = self._w
+        self._w = _Window()
+        if w.n_fix == 0 or w.n_h == 0:
             return
         tp = w.st_fix / w.n_fix
         n, e = w.sn / w.n_fix, w.se / w.n_fix
+        psi = w.sh / w.n_h
         pp = self._pt_prev
-        self._pt_prev = (tp, n, e)
-        if pp is None or tp - pp[0] > self.cfg.max_gap_s or hp is None:
+        if pp is not None and tp - pp[0] <= 1e-3:
+            return
+        self._pt_prev = (tp, n, e, psi)
+        if pp is None or tp - pp[0] > self.cfg.max_gap_s:
             if pp is not None:
                 self.surge.restart()
             if not self._have_pos or pp is None:
@@ -422,51 +470,55 @@ class SurgeHeadingPipeline:
                 self._n += n - pp[1]
                 self._e += e - pp[2]
             self._have_pos = True
+            self._t_s = tp
             self._prev_nfix = w.n_fix
             return
         dt = tp - pp[0]
-        if dt <= 1e-3:
-            return
         R_s = self.sigma_p ** 2 / w.n_fix
         R_s_prev = self.sigma_p ** 2 / max(self._prev_nfix, 1)
         self._prev_nfix = w.n_fix
-        dn, de = n - pp[1], e - pp[2]
-        y = path_increment(dn, de, hp[1], dpsi_m)
-        ks = self._disc(self.surge.damping(cmd_s), dt)
-        self.surge.step(ks, y, R_s, R_s_prev, cmd_s)
+        dpsi = wrap_pi(psi - pp[3])
+        y = path_increment(n - pp[1], e - pp[2], pp[3], dpsi)
+        cmd = self._mean_command(pp[0], tp, 1)
+        self.surge.step(self._disc(self.surge.damping(cmd), dt), y, R_s, R_s_prev, cmd)
         # §3.3 position from the estimated increment along the mid-chord heading
         ys = self.surge.kf.d
-        psi_now = self._psi if self._psi is not None else psi
-        mid = psi_now - 0.5 * self.yaw.kf.d
+        if self._psi is not None and self._t_h is not None:
+            mid = 0.5 * (self._heading_at(pp[0]) + self._heading_at(tp))
+        else:
+            mid = pp[3] + 0.5 * dpsi
         self._n += ys * math.cos(mid)
         self._e += ys * math.sin(mid)
         ka = self.cfg.position_anchor
         self._n += ka * (n - self._n)
         self._e += ka * (e - self._e)
+        self._t_s = tp
+        self._trim_commands()
 
     # -- output ------------------------------------------------------------------------
 
     def _output(self, t: float) -> dict[str, float]:
         out: dict[str, float] = {}
-        if self._psi is None or self._t_est is None:
+        if self._psi is None or self._t_h is None:
             return out
-        tau = min(max(t - self._t_est, 0.0), self.cfg.max_gap_s)
         yaw, surge = self.yaw, self.surge
-        dpsi, r = yaw.kf.v * tau, yaw.kf.v
-        if yaw.kf.initialized and tau > 1e-6:
-            dpsi, r = yaw.kf.predict_ahead(
-                self._disc(yaw.damping(yaw.last_command), tau), yaw.u)
-        psi = self._psi + dpsi
+        psi = self._heading_at(t)
         out["heading"] = wrap_2pi(psi)
         if yaw.kf.initialized:
+            tau = min(max(t - self._t_h, 0.0), self.cfg.max_gap_s)
+            r = yaw.kf.v
+            if tau > 1e-6:
+                _, r = yaw.kf.predict_ahead(
+                    self._disc(yaw.damping(yaw.last_command), tau), yaw.u)
             out["yaw_rate"] = r
-        if surge.kf.initialized:
+        if surge.kf.initialized and self._t_s is not None:
+            tau = min(max(t - self._t_s, 0.0), self.cfg.max_gap_s)
             ds, v = surge.kf.v * tau, surge.kf.v
             if tau > 1e-6:
                 ds, v = surge.kf.predict_ahead(
                     self._disc(surge.damping(surge.last_command), tau), surge.u)
             out["speed"] = v
-            mid = self._psi + 0.5 * dpsi
+            mid = 0.5 * (self._heading_at(self._t_s) + psi)
             out["north"] = self._n + ds * math.cos(mid)
             out["east"] = self._e + ds * math.sin(mid)
         elif self._have_pos:

@@ -59,6 +59,7 @@ class SitlRun:
     est: dict[str, np.ndarray]        # "aie.speed", "kf.heading", ...
     truth: dict[str, np.ndarray]      # north, east (in the pipeline frame), heading, ...
     pipelines: list[SurgeHeadingPipeline]
+    theta: dict[str, list[list[float]]]   # RCIE coefficients after each step, per axis
 
 
 SCENARIO_CONFIG = {"jaiabot-turns": "rudder-boat", "twin-thruster-turns": "twin-thruster-boat"}
@@ -92,9 +93,14 @@ def run_sitl(scenario: str, duration: float | None = None, seed: int = 1,
     tr: dict[str, list[float]] = {k: [] for k in ("lat", "lon", "heading", "speed", "u",
                                                   "yaw_rate", "surge_input", "yaw_input")}
     next_tick = None
+    theta: dict[str, list[list[float]]] = {"surge": [], "heading": []}
     for t, samples, truth in simulate(scenario, duration=duration, seed=seed):
         for s in samples:
             eng.push(s)
+        for nm, ax in (("surge", pa.surge), ("heading", pa.yaw)):
+            rc = ax.rcie  # type: ignore[attr-defined]
+            if rc.steps and (not theta[nm] or len(theta[nm]) < ax.steps):
+                theta[nm].append(list(rc.theta))
         if next_tick is None:
             next_tick = t
         if t + 1e-9 < next_tick or truth is None:
@@ -121,7 +127,18 @@ def run_sitl(scenario: str, duration: float | None = None, seed: int = 1,
         truth_a["north"] = np.array([x[0] for x in ne])
         truth_a["east"] = np.array([x[1] for x in ne])
     return SitlRun(scenario, np.asarray(ts), {k: np.asarray(v, float) for k, v in est.items()},
-                   truth_a, [pa, pk])
+                   truth_a, [pa, pk], theta)
+
+
+def convergence_step(history: Sequence[Sequence[float]], tol: float = 0.2) -> int:
+    """First RCIE step after which theta stays within ``tol`` (relative) of its final
+    value: the paper's "coefficients converge after ~100 iterations"."""
+    if not history:
+        return -1
+    th = np.asarray(history, float)
+    err = np.linalg.norm(th - th[-1], axis=1) / max(np.linalg.norm(th[-1]), 1e-12)
+    bad = np.flatnonzero(err > tol)
+    return int(bad[-1] + 1) if bad.size else 0
 
 
 def sitl_metrics(run: SitlRun, t_min: float = 30.0) -> dict[str, dict[str, float]]:
