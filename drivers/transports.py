@@ -7,7 +7,7 @@ received and its receive time ``t_rx`` in seconds on the caller's clock (default
 
 URLs (:class:`onboard.config.SourceConfig`)::
 
-    serial:/dev/ttyUSB0:115200    a serial port at 115200 baud (8N1, raw)
+    serial:/dev/ttyUSB0:115200    a serial port at 115200 baud (8N1, raw; default 115200)
     pty:/tmp/gps                  a pseudo-terminal (or any tty) by path; baud ignored
     udp:0.0.0.0:14551             listen for datagrams on this address
     tcp:192.168.2.95:16171        connect as a TCP client
@@ -70,12 +70,9 @@ def parse_url(url: str) -> TransportSpec:
         raise TransportUrlError(f"{url!r}: expected scheme:address (serial:, pty:, udp:, tcp:)")
     if scheme == "serial":
         path, _, baud = rest.rpartition(":")
-        if not path:
-            path, baud = rest, "115200"
-        try:
-            b = int(baud)
-        except ValueError:
-            raise TransportUrlError(f"{url!r}: baud rate {baud!r} is not an integer") from None
+        if not path or not baud.isdigit():  # no baud; or a by-path name with colons
+            path, baud = rest, "115200"   # (give the baud explicitly for such names)
+        b = int(baud)
         if b <= 0:
             raise TransportUrlError(f"{url!r}: baud rate must be positive")
         return TransportSpec("serial", path=path, baud=b)

@@ -221,10 +221,19 @@ class Service:
             tr = open_transport(src.url, clock=self.clock.now, queue_size=svc.queue_size,
                                 on_event=lambda text, n=name: self.event(f"{n}: {text.split(': ', 1)[-1]}"))
             self.inputs.append(_Input(src, name, tr, t_started=self.clock.now()))
-        await self._start_publishers()
-        for inp in self.inputs:
+        for inp in self.inputs:  # inputs open while the publishers start
             inp.task = asyncio.create_task(self._read(inp), name=f"input:{inp.name}")
             self._tasks.append(inp.task)
+        try:
+            await self._start_publishers()
+        except BaseException:
+            for t in self._tasks:
+                t.cancel()
+            await asyncio.gather(*self._tasks, return_exceptions=True)
+            self._tasks.clear()
+            if self.recorder is not None:
+                self.recorder.close()
+            raise
         deadline = time.monotonic() + READY_WAIT_S
         while time.monotonic() < deadline and not all(i.transport.stats.connected for i in self.inputs):
             await asyncio.sleep(0.01)

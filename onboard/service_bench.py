@@ -173,9 +173,14 @@ def _pct(xs: list[float], q: float) -> float:
     return xs[i]
 
 
-def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0) -> dict[str, Any]:
+def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
+            pipelines: tuple[str, ...] | None = None) -> dict[str, Any]:
     """Run the service under nominal load for ``duration_s`` wall seconds (after
-    ``warmup_s``); return the figures of the module docstring (and a few more)."""
+    ``warmup_s``); return the figures of the module docstring (and a few more).
+
+    ``pipelines`` overrides the registered pipeline modules (``onboard.pipelines.MODULES``)
+    in the child, e.g. ``("nav", "aie", "kf", "current")``; None runs those registered.
+    """
     from onboard.publishers.zenoh_pub import open_router
 
     zport = free_tcp_port()
@@ -214,8 +219,14 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0) -> dict[str, Any
     env = dict(os.environ, NOTIFY_SOCKET=notify_path, ONBOARD_LOG_LEVEL="WARNING")
     env.pop("WATCHDOG_USEC", None)
     t_spawn = time.monotonic()
-    proc = subprocess.Popen([sys.executable, "-m", "onboard", "run", "--config",
-                             str(d / "bench.toml"), "--state-dir", str(d)],
+    argv = ["run", "--config", str(d / "bench.toml"), "--state-dir", str(d)]
+    if pipelines is None:
+        cmd = [sys.executable, "-m", "onboard", *argv]
+    else:
+        cmd = [sys.executable, "-c", "import sys, onboard.pipelines as p; "
+               f"p.MODULES = {tuple(pipelines)!r}; from onboard.cli import main; "
+               f"sys.exit(main({argv!r}))"]
+    proc = subprocess.Popen(cmd,
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     ready_s = math.nan
     out: dict[str, Any] = {}
@@ -268,6 +279,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0) -> dict[str, Any
             "service_peak_rss_mb": hwm,
             "startup_to_ready_s": ready_s,
             "estimates_received": len(lat_tick),
+            "pipelines": list(pipelines) if pipelines is not None else "registered",
             "duration_s": wall1 - wall0,
             "load": "IMU 50 Hz, servo 10 Hz, heartbeat 1 Hz (MAVLink/UDP); GNSS 5 Hz, "
                     "heading 10 Hz (NMEA/UDP)",
@@ -291,4 +303,6 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0) -> dict[str, Any
 if __name__ == "__main__":  # pragma: no cover
     import json
 
-    print(json.dumps(measure(float(sys.argv[1]) if len(sys.argv) > 1 else 10.0), indent=2))
+    pipes = tuple(sys.argv[2].split(",")) if len(sys.argv) > 2 else None
+    print(json.dumps(measure(float(sys.argv[1]) if len(sys.argv) > 1 else 10.0, pipelines=pipes),
+                     indent=2))

@@ -107,3 +107,24 @@ def test_the_service_sends_ready_then_watchdog_from_its_tick_loop(notify_socket,
     assert msgs[0].startswith(b"READY=1\nSTATUS=ready: 1/1 inputs up")
     assert msgs.count(b"WATCHDOG=1") >= 2
     assert msgs[-1].startswith(b"STOPPING=1")
+
+
+def test_the_unit_file_is_type_notify_with_a_watchdog_and_hardening():
+    from pathlib import Path
+
+    unit = (Path(__file__).resolve().parent.parent / "systemd" / "onboard.service").read_text()
+    keys = {}
+    for line in unit.splitlines():
+        if "=" in line and not line.lstrip().startswith("#"):
+            k, v = line.split("=", 1)
+            keys.setdefault(k.strip(), []).append(v.strip())
+    assert keys["Type"] == ["notify"] and keys["WatchdogSec"][0].rstrip("s").isdigit()
+    assert "onboard run --config" in keys["ExecStart"][0]
+    for k, v in {"DynamicUser": "yes", "SupplementaryGroups": "dialout",
+                 "ProtectSystem": "strict", "NoNewPrivileges": "yes", "ProtectHome": "yes",
+                 "PrivateTmp": "yes", "StateDirectory": "onboard", "LogsDirectory": "onboard"}.items():
+        assert keys[k] == [v], k
+    assert "AF_INET" in keys["RestrictAddressFamilies"][0]
+    assert keys["SystemCallFilter"][0] == "@system-service"
+    env = (Path(__file__).resolve().parent.parent / "systemd" / "onboard.env.example").read_text()
+    assert "ONBOARD_CONFIG=" in env

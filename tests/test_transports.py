@@ -36,7 +36,7 @@ def test_parse_url_accepts_the_documented_forms():
     assert str(parse_url("tcp:[::1]:5000")) == "tcp:::1:5000"
 
 
-@pytest.mark.parametrize("bad", ["", "udp", "udp:host", "udp:h:x", "serial:/dev/x:fast",
+@pytest.mark.parametrize("bad", ["", "udp", "udp:host", "udp:h:x", "serial:/dev/x:0",
                                  "ftp:a:1", "tcp::5", "udp:h:70000"])
 def test_parse_url_rejects_malformed_urls_with_a_reason(bad):
     with pytest.raises(TransportUrlError):
@@ -176,3 +176,9 @@ def test_a_missing_serial_port_is_retried_not_fatal(tmp_path):
 
     stats = run(main())
     assert not stats.connected and "ENOENT" in stats.last_error
+
+
+def test_serial_paths_with_colons_keep_the_default_baud():
+    u = parse_url("serial:/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0")
+    assert u.path == "/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0"
+    assert u.baud == 115200

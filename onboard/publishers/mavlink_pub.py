@@ -50,7 +50,7 @@ import time
 from pathlib import Path
 from typing import Callable, Sequence
 
-from pymavlink.dialects.v20 import common as mavlink2
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from onboard.config import ConfigError, MavlinkOut
 from onboard.messages import EstimateRecord, HealthRecord
