@@ -113,6 +113,7 @@ class ServiceStats:
 
     ticks: int = 0
     tick_skips: int = 0
+    tick_errors: int = 0
     health_published: int = 0
     state_saves: int = 0
     state_errors: int = 0
@@ -282,10 +283,20 @@ class Service:
                 self.event("zenoh: session open")
 
     async def _read(self, inp: _Input) -> None:
+        """Feed one input's chunks to the intake, forever. The transport reconnects by
+        itself; an unexpected error (a bug) is logged and the input restarted after 1 s."""
         chunk = self.intake.chunk
         name, kind = inp.name, inp.cfg.kind
-        async for data, t_rx in inp.transport:
-            chunk(name, kind, data, t_rx)
+        while True:
+            try:
+                async for data, t_rx in inp.transport:
+                    chunk(name, kind, data, t_rx)
+            except asyncio.CancelledError:
+                raise
+            except Exception as err:  # noqa: BLE001
+                log.exception("input %s failed", name)
+                self.event(f"{name}: input failed ({type(err).__name__}), restarting")
+            await asyncio.sleep(1.0)
 
     async def run(self) -> None:
         """Start (if not started) and run until :meth:`request_stop`; then shut down."""
@@ -327,6 +338,7 @@ class Service:
         save_every = self.cfg.service.state_save_interval_s
         next_save = clock.now() + save_every if save_every > 0 else math.inf
         perf = time.perf_counter
+        watchdog = self.cfg.service.watchdog
         while True:
             t = k * period
             await clock.sleep_until(t)
@@ -351,11 +363,15 @@ class Service:
                     self._save_state_async()
                 if self.recorder is not None:
                     self.recorder.poll(now)
-            except Exception:  # noqa: BLE001 - a pipeline bug must not stop the loop
-                log.exception("tick at %.3f failed", t)
-                self.event("tick failed: see the log")
+            except Exception as err:  # noqa: BLE001 - a pipeline bug must not stop the loop
+                self.stats.tick_errors += 1
+                if self.stats.tick_errors == 1 or self.stats.tick_errors % 600 == 0:
+                    log.exception("tick at %.3f failed (%d so far)", t, self.stats.tick_errors)
+                    self.event(f"tick failed ({type(err).__name__}; {self.stats.tick_errors} "
+                               "so far): see the log")
             self.stats.tick_compute_s.append(perf() - w0)
-            self.notifier.watchdog()
+            if watchdog:
+                self.notifier.watchdog()
             k += 1
 
     def _tick(self, t: float, now: float) -> None:

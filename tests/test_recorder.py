@@ -140,3 +140,17 @@ def test_nmea_fix_timestamps_survive_the_tick_between_its_sentences():
     intake.chunk("gps", "nmea", encode_rmc(tu + 0.2, 41.0, -71.0, 1.0, 0.0), 1.22)
     intake.tick(1.31)
     assert engine.accepted[("gnss", "gps")] == 2 or engine.accepted.get("gnss:gps") == 2
+
+
+def test_a_parser_that_raises_is_counted_and_the_intake_carries_on():
+    engine = Engine(_cfg())
+    intake = Intake(engine)
+    st = intake.add_source("gps", "nmea")
+
+    def boom(data, t_rx):
+        raise RuntimeError("parser bug")
+
+    st.parser.feed = boom  # type: ignore[method-assign]
+    assert intake.chunk("gps", "nmea", b"$GPHDT,1,T*00\r\n", 1.0) == 0
+    intake.tick(1.0)
+    assert intake.parse_rejections() == {"parse:gps:parser_error": 1}

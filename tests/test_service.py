@@ -319,3 +319,45 @@ def test_onboard_run_with_a_bad_config_exits_2_with_a_one_line_reason(tmp_path, 
                         "--state-dir", str(tmp_path)], capture_output=True, text=True,
                        timeout=TIMEOUT)
     assert r.returncode == 2 and reason in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_an_unplugged_input_is_reported_and_picked_up_again_while_the_service_runs(tmp_path):
+    link = tmp_path / "gps"
+
+    def plug() -> int:
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        name = os.ttyname(slave)
+        os.close(slave)
+        os.symlink(name, str(link) + ".new")
+        os.replace(str(link) + ".new", link)
+        return master
+
+    cfg = _config(sources=[{"kind": "nmea", "url": f"pty:{link}", "name": "gps"}],
+                  zenoh={"enabled": False}, mavlink={"enabled": False},
+                  recorder={"enabled": False})
+    from drivers.nmea import encode_hdt
+
+    async def main() -> Service:
+        master = plug()
+        svc = Service(cfg, state_dir=tmp_path)
+        await svc.start()
+        os.write(master, encode_hdt(1.0))
+        await asyncio.sleep(0.3)
+        os.close(master)  # unplugged
+        await asyncio.sleep(0.5)
+        master = plug()  # back
+        deadline = time.monotonic() + 20
+        while svc.inputs[0].transport.stats.connects < 2 and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
+        os.write(master, encode_hdt(2.0))
+        await asyncio.sleep(0.3)
+        svc.request_stop()
+        await svc.shutdown()
+        os.close(master)
+        return svc
+
+    svc = asyncio.run(asyncio.wait_for(main(), TIMEOUT))
+    assert any("gps: lost" in e for e in svc.events), list(svc.events)
+    assert svc.intake.sources["gps"].samples == 2  # one heading before, one after
+    assert svc.stats.ticks > 5

@@ -31,6 +31,7 @@ log = logging.getLogger(__name__)
 
 DEFAULT_ROUTER_ENDPOINT = "tcp/127.0.0.1:7447"
 JSON_ENCODING = "application/json"
+"""Publishers are declared ``express`` (no batching: each record leaves at once)."""
 
 
 def session_config(mode: str = "peer", connect: Iterable[str] = (), listen: Iterable[str] = (),
@@ -100,13 +101,13 @@ class ZenohPublisher:
         self._token = self.session.liveliness().declare_token(f"{self.base}/alive")
         self._queryable = self.session.declare_queryable(f"{self.base}/**", self._on_query)
         self._pubs["health"] = self.session.declare_publisher(
-            f"{self.base}/health", encoding=self._encoding)
+            f"{self.base}/health", encoding=self._encoding, express=True)
 
     def _publisher(self, suffix: str) -> object:
         pub = self._pubs.get(suffix)
         if pub is None:
             pub = self._pubs[suffix] = self.session.declare_publisher(  # type: ignore[union-attr]
-                f"{self.base}/{suffix}", encoding=self._encoding)
+                f"{self.base}/{suffix}", encoding=self._encoding, express=True)
         return pub
 
     def _put(self, suffix: str, payload: bytes) -> None:
