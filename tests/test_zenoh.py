@@ -96,3 +96,31 @@ def test_client_mode_without_a_router_fails_at_start_with_a_reason():
     with pytest.raises(Exception, match="(?i)connect"):
         pub.start()
     pub.close()
+
+
+def test_onboard_shore_once_prints_a_snapshot_from_the_queryables(router, capsys):
+    import argparse
+
+    from onboard import shore
+
+    endpoint, _ = router
+    pub = ZenohPublisher(ZenohOut(mode="client", connect=[endpoint]), "boat9")
+    pub.start()
+    try:
+        pub.publish_estimates([EstimateRecord(vehicle="boat9", pipeline="aie", t=5.0,
+                                              values={"heading": 1.5708, "speed": 1.25})])
+        pub.publish_health(HealthRecord(vehicle="boat9", t=5.0, rates_hz={"gps": 5.0},
+                                        rejected={"gnss:nan": 1}, mode="surface"))
+        args = argparse.Namespace(connect=[endpoint], listen=None, mode=None, vehicle="boat9",
+                                  once=True)
+        rc = shore.main(args)
+        out = capsys.readouterr().out
+    finally:
+        pub.close()
+    assert rc == 0
+    assert "== boat9 (alive), mode surface" in out
+    assert "heading=90.0°" in out and "speed=+1.25" in out
+    assert "gnss:nan=1" in out and "gps=5.0" in out
+    args = argparse.Namespace(connect=[endpoint], listen=None, mode=None, vehicle="nobody",
+                              once=True)
+    assert shore.main(args) == 1  # nothing answered
