@@ -5,7 +5,8 @@ Evidence, strongest first:
 1. ``SERVOn_FUNCTION`` parameters (PARAM_VALUE in a tlog, PARM in a DataFlash log):
    73/74 (ThrottleLeft/Right) mean skid steering -> ``twin-thruster-boat`` with those
    channels; 26 (GroundSteering) with 70 (Throttle) -> ``rudder-boat``; 33-38
-   (Motor1-6) -> ``bluerov2`` thrusters on those channels.
+   (Motor1-6) -> ``bluerov2`` thrusters on those channels; a submarine with 21 (Rudder)
+   and 19 (Elevator) -> ``torpedo-auv`` (propeller speed from ``RPM.rpm1``).
 2. The autopilot's HEARTBEAT ``MAV_TYPE``: 12 (SUBMARINE) -> ``bluerov2`` (ArduSub),
    10/11 (GROUND_ROVER/SURFACE_BOAT) -> a boat.
 3. ArduPilot defaults otherwise: Rover with SERVO1 = steering and SERVO3 = throttle.
@@ -29,6 +30,8 @@ MAV_TYPE_SURFACE_BOAT = 11
 MAV_TYPE_SUBMARINE = 12
 _GCS_TYPES = {6, 18, 26}  # GCS, ONBOARD_CONTROLLER, GIMBAL... not the vehicle
 
+SERVO_ELEVATOR = 19
+SERVO_RUDDER = 21
 SERVO_GROUND_STEERING = 26
 SERVO_THROTTLE = 70
 SERVO_THROTTLE_LEFT = 73
@@ -85,6 +88,16 @@ def detect(samples: Iterable[Sample]) -> tuple[Config, str]:
             base.inputs, left=_refine(base.inputs.left, left, params),
             right=_refine(base.inputs.right, right, params))
         why = f"SERVO{left}_FUNCTION=73, SERVO{right}_FUNCTION=74 (skid steering)"
+    elif mav_type == MAV_TYPE_SUBMARINE and SERVO_RUDDER in by_function and (
+        SERVO_ELEVATOR in by_function
+    ):
+        base = configmod.load("torpedo-auv")
+        rudder, plane = by_function[SERVO_RUDDER], by_function[SERVO_ELEVATOR]
+        inputs = msgspec.structs.replace(
+            base.inputs, rudder=_refine(base.inputs.rudder, rudder, params),
+            stern_plane=_refine(base.inputs.stern_plane, plane, params))
+        why = (f"HEARTBEAT MAV_TYPE_SUBMARINE with SERVO{rudder}_FUNCTION=21 rudder and "
+               f"SERVO{plane}_FUNCTION=19 elevator (torpedo AUV; propeller from RPM.rpm1)")
     elif any(SERVO_MOTOR1 <= f < SERVO_MOTOR1 + 6 for f in functions.values()) or (
         mav_type == MAV_TYPE_SUBMARINE
     ):
@@ -99,7 +112,7 @@ def detect(samples: Iterable[Sample]) -> tuple[Config, str]:
                else "HEARTBEAT MAV_TYPE_SUBMARINE, ArduSub default motor channels 1-6")
     else:
         base = configmod.load("rudder-boat")
-        steer = by_function.get(SERVO_GROUND_STEERING, 1)
+        steer = by_function.get(SERVO_GROUND_STEERING, by_function.get(SERVO_RUDDER, 1))
         throttle = by_function.get(SERVO_THROTTLE, 3)
         inputs = msgspec.structs.replace(
             base.inputs, rudder=_refine(base.inputs.rudder, steer, params),

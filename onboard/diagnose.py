@@ -28,6 +28,10 @@ class DiagnoseConfig(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     enabled: bool = True
     declared: list[str] = []
     """Effects the model already contains (e.g. a known sideslip), not to be searched."""
+    known: dict[str, list[float]] = {}
+    """Effects that are part of this vehicle's model with fixed parameters (internal
+    parameter order of each effect module), e.g. from a calm-water calibration run:
+    ``known = { surge_yaw_coupling = [0.3] }``."""
     holdout_metric: str = ""
     """``surge_speed_open_loop_rmse_mps``, ``ground_velocity_rmse_mps`` or
     ``lateral_velocity_rmse_mps``; default: the ground velocity when commands exist."""
@@ -37,14 +41,14 @@ class DiagnoseConfig(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
 def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = ()) -> dict:
     opts = decode_section(cfg, "diagnose", DiagnoseConfig)
     declared = tuple(declared) or tuple(opts.declared)
-    unknown = [d for d in declared if d not in ALL]
+    unknown = [d for d in (*declared, *opts.known) if d not in ALL]
     if unknown:
         raise UsageError(f"unknown declared effect(s) {unknown}; known: {', '.join(ALL)}")
     try:
         ds = dataset.from_log(log, cfg, rate_hz=opts.rate_hz)
     except ValueError as err:
         raise UsageError(str(err)) from None
-    sel = select(ds, declared=declared, metric=opts.holdout_metric or None)
+    sel = select(ds, declared=declared, metric=opts.holdout_metric or None, known=opts.known)
     return report.write(sel, log, out_dir)
 
 

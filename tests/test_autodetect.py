@@ -33,3 +33,11 @@ def test_ground_station_heartbeats_are_ignored():
     cfg, why = detect([VehicleInfo(t=1, system_id=255, component_id=190, mav_type=6, autopilot=8)])
     assert cfg.vehicle.vehicle_class == "rudder-boat"
     assert "defaults" in why
+
+
+def test_submarine_with_rudder_and_elevator_is_a_torpedo_auv():
+    cfg, why = detect([VehicleInfo(t=1, system_id=1, component_id=1, mav_type=12, autopilot=3),
+                       p("SERVO1_FUNCTION", 21), p("SERVO2_FUNCTION", 19), p("SERVO3_FUNCTION", 70)])
+    assert cfg.vehicle.vehicle_class == "torpedo-auv"
+    assert (cfg.inputs.rudder.channel, cfg.inputs.stern_plane.channel) == (1, 2)
+    assert cfg.inputs.propeller_rpm.source == "rpm"

@@ -33,7 +33,8 @@ def synth(seed=0, T=900.0, dt=0.1, current=(0.0, 0.0), dev=(0.0, 0.0), gyro_bias
         r += dt * (-1.0 * r + 0.6 * rud[i] * u)
         psi += dt * r
         U[i], PSI[i], R[i] = u, psi, r
-    vlat = slip * R
+    # Every hull sways in turns (pivot point 0.3 m ahead of the CG): in the base model.
+    vlat = -0.3 * R + slip * U * np.abs(U)
     vn = U * np.cos(PSI) - vlat * np.sin(PSI) + current[0]
     ve = U * np.sin(PSI) + vlat * np.cos(PSI) + current[1]
     if wave:
@@ -95,10 +96,17 @@ def test_gps_latency_is_told_from_sideslip():
     assert found["gps_latency"]["params"]["seconds"] == pytest.approx(0.6, abs=0.12)
 
 
-def test_sideslip_is_told_from_gps_latency():
-    _, found = detected(synth(slip=-0.4))
+def test_sideslip_is_told_from_gps_latency_and_heading_bias():
+    _, found = detected(synth(slip=0.05))
     assert set(found) == {"sideslip"}
-    assert found["sideslip"]["params"]["k_m"] == pytest.approx(-0.4, abs=0.05)
+    assert found["sideslip"]["params"]["k"] == pytest.approx(0.05, abs=0.01)
+
+
+def test_heading_bias_is_told_from_sideslip():
+    _, found = detected(synth(heading_bias=0.08))
+    assert set(found) == {"heading_bias"}
+    # lateral = -U bias: the fitted bias is the heading error (rad)
+    assert found["heading_bias"]["params"]["bias"] == pytest.approx(0.08, abs=0.01)
 
 
 def test_thrust_nonlinearity():

@@ -49,6 +49,15 @@ class Fit:
     ctx: Context
     sigma: dict[str, float]
     n: int = 0
+    x_p: float = 0.0
+    """Hull sway per yaw rate (m): the base model's lateral velocity ``x_p r`` in turns."""
+    known: dict[str, np.ndarray] = field(default_factory=dict)
+    """Effects with known, fixed parameters (from a calm-water calibration, say)."""
+
+    def all_effects(self) -> list[tuple[Effect, np.ndarray]]:
+        """Known and fitted effects with their parameters."""
+        return [(ALL[n], th) for n, th in self.known.items()] + [
+            (ALL[n], self.theta[n]) for n in self.effects]
 
     def effect(self, name: str) -> Effect:
         return ALL[name]
@@ -60,7 +69,8 @@ def _decorrelation(ds: Dataset, seconds: float = 2.0) -> float:
 
 
 def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
-        ctx: Context | None = None, output_error: bool = True) -> Fit:
+        ctx: Context | None = None, output_error: bool = True,
+        known: dict[str, np.ndarray] | None = None) -> Fit:
     """Weighted least squares of the base model plus ``effects`` on ``ds``.
 
     ``sigma`` gives each channel's noise scale (its rows are divided by it), so channels
@@ -68,9 +78,11 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
     refined to minimise the open-loop speed error (:func:`refine_output_error`).
     """
     ctx = Context(**vars(ctx)) if ctx is not None else Context()
+    known = dict(known or {})
     targets = channel_targets(ds)
     n = len(ds)
     base = np.array([ctx.a, ctx.b, 0.0])
+    x_p = 0.0
     theta: dict[str, np.ndarray] = {}
     std: dict[str, np.ndarray] = {}
     for _ in range(8 if ds.has_commands else 1):
@@ -79,17 +91,26 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
         layout: list[tuple[str, int]] = []
         if ds.has_commands:
             layout.append(("__base__", 3))
+        layout.append(("__pivot__", 1))
         for name in effects:
             layout.append((name, len(ALL[name].params)))
         n_par = sum(k for _, k in layout)
         cols_cache = {name: ALL[name].columns(ds, ctx) for name in effects}
+        known_cols = {name: ALL[name].columns(ds, ctx) for name in known}
         for ch, y in targets.items():
+            for name, th in known.items():
+                c = known_cols[name].get(ch)
+                if c is not None:
+                    y = y - c @ th
             X = np.zeros((n, n_par))
             j = 0
             for name, k in layout:
                 if name == "__base__":
                     if ch == "along":
                         X[:, j:j + k] = _base_columns(ds)
+                elif name == "__pivot__":
+                    if ch == "lateral":
+                        X[:, j] = ds.r
                 else:
                     c = cols_cache[name].get(ch)
                     if c is not None:
@@ -123,6 +144,8 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
                 a = float(base[0])
                 ctx.a = a if 0.01 < a < 20.0 else ctx.a
                 ctx.b = float(base[1])
+            elif name == "__pivot__":
+                x_p = float(sol[j])
             else:
                 theta[name] = sol[j:j + k].copy()
                 std[name] = sd[j:j + k].copy()
@@ -130,7 +153,7 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
         if abs(ctx.a - a_prev) < 1e-4 * max(1.0, abs(ctx.a)):
             break
     f = Fit(effects=tuple(effects), base=base, theta=theta, std=std, ctx=ctx,
-            sigma=dict(sigma), n=n)
+            sigma=dict(sigma), n=n, x_p=x_p, known=known)
     if output_error and ds.has_commands:
         f = refine_output_error(ds, f)
     return f
@@ -196,14 +219,13 @@ def predict(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
     """
     n = len(ds)
     ctx = f.ctx
-    lat = np.zeros(n)
+    lat = f.x_p * ds.r
     hr = np.zeros(n)
     out_along = np.zeros(n)
     dyn = []
     delay = 0.0
-    for name in f.effects:
-        e, th = ALL[name], f.theta[name]
-        lat += e.lateral_output(th, ds, ctx)
+    for e, th in f.all_effects():
+        lat = lat + e.lateral_output(th, ds, ctx)
         hr += e.heading_rate_output(th, ds, ctx)
         out_along += e.along_output(th, ds, ctx)
         delay += e.output_delay_s(th)
@@ -233,14 +255,15 @@ def refine_output_error(ds: Dataset, f: Fit, max_nfev: int = 30) -> Fit:
     p0 = np.concatenate([f.base, *[f.theta[n] for n in dyn_names]])
     out_along = np.zeros(len(ds))
     delay = 0.0
-    for name in f.effects:
-        out_along += ALL[name].along_output(f.theta[name], ds, f.ctx)
-        delay += ALL[name].output_delay_s(f.theta[name])
+    fixed_dyn = [(ALL[n], th) for n, th in f.known.items() if ALL[n].dynamic]
+    for e, th in f.all_effects():
+        out_along += e.along_output(th, ds, f.ctx)
+        delay += e.output_delay_s(th)
     target = ds.along - out_along
     segs = _segments(ds) if delay > 0 else []
 
     def unpack(p):
-        dyn, j = [], 3
+        dyn, j = list(fixed_dyn), 3
         for n, k in zip(dyn_names, sizes):
             dyn.append((ALL[n], p[j:j + k]))
             j += k
@@ -276,7 +299,7 @@ def refine_output_error(ds: Dataset, f: Fit, max_nfev: int = 30) -> Fit:
         j += k
     ctx = Context(**vars(f.ctx))
     return Fit(effects=f.effects, base=np.asarray(base, float).copy(), theta=theta, std=std,
-               ctx=ctx, sigma=f.sigma, n=f.n)
+               ctx=ctx, sigma=f.sigma, n=f.n, x_p=f.x_p, known=f.known)
 
 
 def residuals(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:

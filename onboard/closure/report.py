@@ -16,8 +16,9 @@ from onboard.closure import stats
 from onboard.closure.effects import ALL
 from onboard.closure.select import Selection
 
-BASE_MODEL = ("velocity over ground along the measured heading; heading rate equal to the "
-              "gyro's; first-order surge model U' = -a U + b c + c0 from the normalized command")
+BASE_MODEL = ("velocity over ground along the measured heading but for the hull's sway in "
+              "turns (v = x_p r); heading rate equal to the gyro's; first-order surge model "
+              "U' = -a U + b c + c0 from the normalized command")
 
 
 def _clean(x):
@@ -49,7 +50,10 @@ def diagnosis(sel: Selection, log: str) -> dict:
         detected = name in sel.chosen
         entry = {"name": name, "detected": detected, "params": {}, "evidence": {}}
         if detected:
-            params, std = ALL[name].describe(f.theta[name], f.std[name])
+            if name == "thrust_nonlinearity":
+                params, std = ALL[name].describe(f.theta[name], f.std[name], float(f.base[1]))
+            else:
+                params, std = ALL[name].describe(f.theta[name], f.std[name])
             if name == "wave_oscillation":
                 params["period"] = f.ctx.wave_period_s
             entry["params"] = params
@@ -71,7 +75,9 @@ def diagnosis(sel: Selection, log: str) -> dict:
         "log": log,
         "model": BASE_MODEL + (f"; declared: {', '.join(sel.declared)}" if sel.declared else ""),
         "split": sel.split.how,
-        "base_params": {"a": a, "b": b, "c0": c0} if sel.split.fit.has_commands else {},
+        "base_params": {**({"a": a, "b": b, "c0": c0} if sel.split.fit.has_commands else {}),
+                        "x_p": float(f.x_p)},
+        "known": {k: v.tolist() for k, v in f.known.items()},
         "residuals_before": _residual_stats(sel, sel.base_fit),
         "effects": effects,
         "residuals_after": _residual_stats(sel, f),

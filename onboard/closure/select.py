@@ -85,6 +85,8 @@ def _sigma(ds: Dataset, f: M.Fit) -> dict[str, float]:
         pred = np.zeros(len(ds))
         if ch == "along":
             pred = M._base_columns(ds) @ f.base
+        elif ch == "lateral":
+            pred = f.x_p * ds.r
         r = y - pred
         r = r[np.isfinite(r)]
         mad = float(np.median(np.abs(r - np.median(r)))) * 1.4826 if len(r) else 1.0
@@ -104,13 +106,21 @@ def _relative(s: M.Score, ref: M.Score) -> float:
 
 def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = None,
            min_gain: float = 0.03, min_t: float = 4.0, penalty: float = 2.0,
-           candidates: tuple[str, ...] | None = None) -> Selection:
+           candidates: tuple[str, ...] | None = None,
+           known: dict[str, np.ndarray] | None = None) -> Selection:
+    """Choose the effects that explain the base model's held-out residuals (module doc).
+
+    ``declared`` effects are fitted as part of the model from the start; ``known`` effects
+    are part of it with fixed parameters (a calm-water calibration) and may still be found
+    again as candidates, for the part the calibration does not cover.
+    """
     sp = split(ds)
+    known = {k: np.asarray(v, float) for k, v in (known or {}).items()}
     metric = M.metric_name(ds, metric)
     ctx = Context()
-    base0 = M.fit(sp.fit, declared, {}, ctx, output_error=False)
+    base0 = M.fit(sp.fit, declared, {}, ctx, output_error=False, known=known)
     sigma = _sigma(sp.fit, base0)
-    base = M.fit(sp.fit, declared, sigma, base0.ctx)
+    base = M.fit(sp.fit, declared, sigma, base0.ctx, known=known)
     ctx = base.ctx
     # A wave period from the residual spectrum, for the wave effect's regressors.
     res_fit = M.residuals(sp.fit, base)
@@ -125,7 +135,7 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
         ctx.wave_period_s = _refine_period(sp.fit, best[0])
         wave = {"period": ctx.wave_period_s, "periodogram_period": best[0],
                 "false_alarm_p": best[1], "power_share": best[2]}
-    base = M.fit(sp.fit, declared, sigma, ctx)
+    base = M.fit(sp.fit, declared, sigma, ctx, known=known)
     before = M.score(sp.holdout, base, metric)
     n_eff = max(10.0, len(sp.holdout) * ds.dt / 2.0)
 
@@ -137,7 +147,7 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
     while pool:
         round_: list[Candidate] = []
         for name in pool:
-            f = M.fit(sp.fit, (*declared, *chosen, name), sigma, ctx)
+            f = M.fit(sp.fit, (*declared, *chosen, name), sigma, ctx, known=known)
             s = M.score(sp.holdout, f, metric)
             k = sum(len(ALL[e].params) for e in (*chosen, name))
             rel = _relative(s, before) * math.exp(penalty * k / n_eff)
@@ -155,7 +165,7 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
             top.accepted = True
             chosen.append(top.name)
             pool.remove(top.name)
-            current_fit = M.fit(sp.fit, (*declared, *chosen), sigma, ctx)
+            current_fit = M.fit(sp.fit, (*declared, *chosen), sigma, ctx, known=known)
             current_rel = top.score
         else:
             break

@@ -11,7 +11,7 @@ import importlib
 from onboard.config import Config
 from onboard.pipelines.base import Pipeline
 
-MODULES: tuple[str, ...] = ("nav",)
+MODULES: tuple[str, ...] = ("nav", "aie", "kf", "current", "eseso")
 """Pipeline modules in the order their columns appear in estimates.csv."""
 
 

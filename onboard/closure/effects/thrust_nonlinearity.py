@@ -24,6 +24,18 @@ class ThrustNonlinearity(Effect):
     def columns(self, ds, ctx):
         return {"along": np.column_stack([ds.thrust_quadratic, ds.thrust_reverse])}
 
+    def describe(self, theta, std, base_gain: float | None = None):
+        params, sd = super().describe(theta, std)
+        if base_gain:
+            # The power law c^n closest to (b c + b2 c^2) / (b + b2) over c in (0, 1].
+            c = np.linspace(0.05, 1.0, 40)
+            shape = (base_gain * c + theta[0] * c * c) / (base_gain + theta[0])
+            ok = shape > 0
+            if ok.sum() > 5:
+                params["exponent"] = float(np.polyfit(np.log(c[ok]), np.log(shape[ok]), 1)[0])
+            params["reverse_ratio"] = float((base_gain + theta[1]) / base_gain)
+        return params, sd
+
     def surge_terms(self, theta, ds):
         return theta[0] * ds.thrust_quadratic + theta[1] * ds.thrust_reverse, None, 0.0
 
