@@ -44,7 +44,7 @@ from typing import Callable, Sequence
 
 import msgspec
 
-from drivers.transports import Transport, open_transport
+from drivers.transports import Transport, TransportUrlError, open_transport, parse_url
 from onboard.config import Config, ConfigError, SourceConfig, load
 from onboard.engine import Engine
 from onboard.messages import EstimateRecord, HealthRecord
@@ -251,15 +251,38 @@ class Service:
 
     async def _start_publishers(self) -> None:
         cfg = self.cfg
-        if cfg.service.mavlink.enabled:
-            from onboard.publishers.mavlink_pub import MavlinkPublisher
-
-            pub = MavlinkPublisher(cfg.service.mavlink, cfg.vehicle.system_id, clock=self.clock.now)
-            pub.start()  # a bad key file is a configuration error: fail at start
-            self.mavlink = pub
+        if cfg.service.mavlink.enabled and not self._open_mavlink():
+            self._tasks.append(asyncio.create_task(self._mavlink_retry(), name="mavlink-retry"))
         if cfg.service.zenoh.enabled:
             if not await self._open_zenoh():
                 self._tasks.append(asyncio.create_task(self._zenoh_retry(), name="zenoh-retry"))
+
+    def _open_mavlink(self) -> bool:
+        """Open MAVLink out; a bad key file or signing setup is a configuration error
+        (raised: the service must not run unsigned by mistake); a link that cannot be
+        opened (serial port missing) is an event and retried."""
+        from onboard.publishers.mavlink_pub import MavlinkPublisher
+
+        pub = MavlinkPublisher(self.cfg.service.mavlink, self.cfg.vehicle.system_id,
+                               clock=self.clock.now)
+        try:
+            pub.start()
+        except ConfigError:
+            raise
+        except Exception as err:  # noqa: BLE001 - pymavlink raises assorted errors
+            self.event(f"mavlink out: cannot open {self.cfg.service.mavlink.url}: {err}")
+            pub.close()
+            return False
+        self.mavlink = pub
+        return True
+
+    async def _mavlink_retry(self) -> None:
+        delay = 1.0
+        while self.mavlink is None:
+            await asyncio.sleep(delay)
+            delay = min(delay * 2.0, 30.0)
+            if self._open_mavlink():
+                self.event("mavlink out: open")
 
     async def _open_zenoh(self) -> bool:
         from onboard.publishers.zenoh_pub import ZenohPublisher
@@ -484,6 +507,16 @@ def main(args: argparse.Namespace) -> int:
     cfg = load(args.config)
     if not cfg.service.sources:
         raise ConfigError(f"{args.config}: service.sources is empty: nothing to read")
+    for i, src in enumerate(cfg.service.sources):
+        try:
+            parse_url(src.url)
+        except TransportUrlError as err:
+            raise ConfigError(f"{args.config}: service.sources[{i}].url: {err}") from None
+    mav = cfg.service.mavlink
+    if mav.enabled and (mav.require_signing or mav.signing_key_file):
+        from onboard.publishers.mavlink_pub import check_signing
+
+        check_signing(mav)  # fail before anything starts, with one line
     state_dir, logs_dir = resolve_dirs(getattr(args, "state_dir", None))
     try:
         state_dir.mkdir(parents=True, exist_ok=True)

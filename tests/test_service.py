@@ -311,6 +311,9 @@ def test_onboard_run_notifies_ready_and_stops_cleanly_on_sigterm(tmp_path):
 @pytest.mark.parametrize("text, reason", [
     ("[vehicle]\nid = 3\n", "vehicle.id"),
     ("[vehicle]\nid = \"x\"\n", "sources is empty"),
+    ("[[service.sources]]\nkind = \"nmea\"\nurl = \"udp:nowhere\"\n", "sources[0].url"),
+    ("[[service.sources]]\nkind = \"nmea\"\nurl = \"udp:127.0.0.1:1\"\n"
+     "[service.mavlink]\nrequire_signing = true\n", "require_signing"),
 ])
 def test_onboard_run_with_a_bad_config_exits_2_with_a_one_line_reason(tmp_path, text, reason):
     p = tmp_path / "bad.toml"

@@ -104,6 +104,15 @@ def load_signing_key(path: str | Path) -> bytes:
     return hashlib.sha256(text.encode()).digest()
 
 
+def check_signing(cfg: MavlinkOut) -> bytes | None:
+    """The signing key the configuration asks for (None: unsigned); ConfigError when
+    ``require_signing`` has no key file or the key file is unusable."""
+    if cfg.require_signing and not cfg.signing_key_file:
+        raise ConfigError("service.mavlink.require_signing is true but no "
+                          "signing_key_file is configured")
+    return load_signing_key(cfg.signing_key_file) if cfg.signing_key_file else None
+
+
 class _UdpOut:
     """A non-blocking UDP sender (``udpout:HOST:PORT``); send errors are counted."""
 
@@ -165,10 +174,7 @@ class MavlinkPublisher:
     def start(self) -> None:
         """Open the link; set up signing when a key file is configured."""
         cfg = self.cfg
-        if cfg.require_signing and not cfg.signing_key_file:
-            raise ConfigError("service.mavlink.require_signing is true but no "
-                              "signing_key_file is configured")
-        key = load_signing_key(cfg.signing_key_file) if cfg.signing_key_file else None
+        key = check_signing(cfg)
         self.link = _open_link(cfg.url)
         self.mav = mavlink2.MAVLink(self.link, srcSystem=self.system_id,
                                     srcComponent=cfg.component_id or COMPONENT_ID)
