@@ -1,0 +1,351 @@
+"""Properties of the filters: covariances stay symmetric positive (semi-)definite, NIS is
+consistent.
+
+Covariance (default suite, hypothesis): random but valid sample streams -- fixes jumping
+about, headings anywhere, commands saturating, DVL dropping out, samples bunched or
+sparse -- go through the engine into each pipeline (``aie``, ``kf``, ``current``,
+``eseso``); after every tick the covariance is finite, symmetric to rounding
+(``|P - P^T| <= 1e-9 max(1, |P|)``) and has no eigenvalue below ``-1e-9 max(1, |P|)``
+(positive semi-definite to rounding; the filters hold a few directions at ~1e-9 on
+purpose, e.g. ESESO's unobservable yaw before a heading arrives). The cores are tested
+directly too: :class:`~onboard.pipelines.kalman.IncrementKF` over random model steps and
+:class:`~onboard.pipelines.aie.Rcie`'s RLS covariance (positive definite: the RLS
+covariance only shrinks from ``I / R_theta``, never to a singular matrix).
+
+NIS (consistency): on data drawn from the filter's own model the mean NIS must equal the
+measurement dimension; :class:`IncrementKF` (the filter of ``aie`` and ``kf``) gives
+1.00 +- 0.03 over 5,000 steps (tolerance 0.12, 4 standard errors). On the simulator
+(``slow``: model mismatch is real there, so the bands are wide and the measured means are
+recorded below and in docs/performance.md) every channel's mean NIS must stay within a
+factor of 10 of its dimension -- a filter that is grossly over- or under-confident fails.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import random
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+
+from onboard import config as configmod
+from onboard.engine import Engine, run
+from onboard.messages import (
+    ActuatorCommand,
+    Attitude,
+    Depth,
+    DvlVelocity,
+    GnssFix,
+    Heading,
+    Imu,
+    VelocityOverGround,
+)
+
+PROPS = settings(max_examples=40, deadline=None, derandomize=True,
+                 suppress_health_check=[HealthCheck.too_slow])
+
+
+def assert_spd(P, what: str, strict: bool = False) -> None:
+    """Finite, symmetric to rounding, no eigenvalue below -1e-9 * scale (or <= 0 when
+    ``strict``)."""
+    P = np.asarray(P, dtype=float)
+    assert np.all(np.isfinite(P)), f"{what}: non-finite covariance"
+    scale = max(1.0, float(np.max(np.abs(P))))
+    asym = float(np.max(np.abs(P - P.T)))
+    assert asym <= 1e-9 * scale, f"{what}: asymmetry {asym:.3g}"
+    eig = np.linalg.eigvalsh(0.5 * (P + P.T))
+    if strict:
+        assert eig.min() > 0.0, f"{what}: min eigenvalue {eig.min():.3g}"
+    else:
+        assert eig.min() >= -1e-9 * scale, f"{what}: min eigenvalue {eig.min():.3g}"
+
+
+def _packed3(P: list[float]) -> np.ndarray:
+    dd, dv, de, vv, ve, ee = P
+    return np.array([[dd, dv, de], [dv, vv, ve], [de, ve, ee]])
+
+
+# --------------------------------------------------------------------------- IncrementKF
+
+
+@PROPS
+@given(seed=st.integers(0, 2**32 - 1), correlated=st.booleans())
+def test_increment_kf_covariance_stays_psd(seed, correlated):
+    from onboard.pipelines.kalman import IncrementKF
+    from onboard.pipelines.surge_heading import discretize
+
+    rng = random.Random(seed)
+    kf = IncrementKF(R=10 ** rng.uniform(-4, 2), q_v=rng.choice((0.0, 1e-4, 1e-1)),
+                     correlated=correlated)
+    k = discretize(rng.uniform(0.0, 5.0), rng.uniform(0.01, 2.0))
+    kf.init(rng.gauss(0, 1), k.dt, kf.R, rng.uniform(0.01, 10.0))
+    for i in range(200):
+        if rng.random() < 0.1:
+            k = discretize(rng.uniform(0.0, 5.0), rng.uniform(0.01, 2.0))
+        kf.forecast(k, rng.uniform(-5, 5), rng.choice((0.0, 0.01, 1.0, 100.0)))
+        kf.innovation(rng.gauss(0, 1) * rng.choice((1.0, 1.0, 100.0)))
+        assert kf.S > 0.0
+        if rng.random() < 0.1:
+            kf.skip()
+        else:
+            kf.update()
+        assert_spd(_packed3(kf.P), f"IncrementKF step {i}")
+
+
+def test_increment_kf_nis_is_consistent_on_its_own_model():
+    """Exact §1.2 model, input error of variance V_u, point noise R: mean NIS = 1.
+    Measured 1.00 (seeds 0-4: 0.98-1.02) over 5,000 steps."""
+    from onboard.pipelines.kalman import IncrementKF
+    from onboard.pipelines.surge_heading import discretize
+
+    rng = np.random.default_rng(0)
+    a, dt, R, V_u = 0.3, 1.0, 2.0, 0.05
+    k = discretize(a, dt)
+    kf = IncrementKF(R=R, correlated=True)
+    s, v = 0.0, 1.0
+    n_prev = rng.normal(0, math.sqrt(R))
+    nis = []
+    for i in range(5000):
+        u = 0.5 * math.sin(0.01 * i)
+        w = rng.normal(0, math.sqrt(V_u))
+        s, v = s + k.c1 * v + k.c2 * (u + w), k.alpha * v + k.c1 * (u + w)
+        n = rng.normal(0, math.sqrt(R))
+        y = (s + n) - (s_prev_meas if i else 0.0)
+        s_prev_meas = s + n
+        if i == 0:
+            continue
+        if not kf.initialized:
+            kf.init(y, dt, R, 1.0)
+            continue
+        kf.forecast(k, u, V_u)
+        kf.innovation(y)
+        kf.update()
+        if i > 100:
+            nis.append(kf.nis)
+        del n_prev
+        n_prev = n
+    m = float(np.mean(nis))
+    assert abs(m - 1.0) < 0.12, m
+
+
+# --------------------------------------------------------------------------- RCIE (AIE)
+
+
+@PROPS
+@given(seed=st.integers(0, 2**32 - 1))
+def test_rcie_rls_covariance_stays_positive_definite(seed):
+    from onboard.pipelines.aie import Rcie, unpack
+
+    rng = random.Random(seed)
+    n_c = rng.randint(0, 4)
+    est = Rcie(n_c=n_c, n_f=rng.randint(1, 4), r_z=10 ** rng.uniform(-2, 1),
+               r_d=rng.choice((0.0, 0.1, 10.0)), r_theta=10 ** rng.uniform(-1, 2),
+               lam=rng.uniform(0.95, 1.0), u_scale=rng.uniform(0.1, 5.0),
+               z_scale=rng.uniform(0.1, 5.0), u_max=rng.uniform(0.5, 10.0),
+               rate_penalty=rng.random() < 0.5)
+    for i in range(150):
+        H = [rng.gauss(0, 1) for _ in range(est.n_f)]
+        z = rng.gauss(0, 1) * rng.choice((1.0, 1.0, 1e3))
+        if est.step(z, H) is None:
+            est.reset()
+        assert all(math.isfinite(x) for x in est.theta)
+        assert_spd(unpack(est.P, est.n), f"Rcie step {i}", strict=True)
+
+
+# --------------------------------------------------------------------------- pipelines
+
+
+def random_stream(rng: random.Random, seconds: float, *, dvl: bool, depth: bool) -> list:
+    """Valid samples (they pass the engine's checks) at irregular, bunched rates, with
+    outliers a real log has: fix jumps, heading wraps, dropped DVL, saturating commands."""
+    lat0, lon0 = rng.uniform(-60, 60), rng.uniform(-170, 170)
+    out = []
+    t = 1000.0
+    n = e = 0.0
+    psi = rng.uniform(0, 2 * math.pi)
+    while t < 1000.0 + seconds:
+        t += rng.choice((0.02, 0.02, 0.02, 0.0, 0.1, 0.5)) if rng.random() > 0.01 else 5.0
+        psi += rng.gauss(0, 0.05)
+        spd = abs(rng.gauss(1.5, 1.0))
+        n += spd * math.cos(psi) * 0.02
+        e += spd * math.sin(psi) * 0.02
+        r = rng.random()
+        if r < 0.5:
+            out.append(Imu(t=t, source="imu", accel_x=rng.gauss(0, 1), accel_y=rng.gauss(0, 1),
+                           accel_z=-9.81 + rng.gauss(0, 1), gyro_x=rng.gauss(0, 0.1),
+                           gyro_y=rng.gauss(0, 0.1), gyro_z=rng.gauss(0, 0.3)))
+        elif r < 0.6:
+            jump = rng.choice((0.0, 0.0, 0.0, 30.0))
+            out.append(GnssFix(t=t, source="gps",
+                               lat_deg=lat0 + (n + rng.gauss(0, 2) + jump) / 111_320.0,
+                               lon_deg=lon0 + (e + rng.gauss(0, 2)) / 111_320.0,
+                               sog_mps=spd, cog_rad=psi % (2 * math.pi), fix_quality=1))
+        elif r < 0.7:
+            out.append(Heading(t=t, source="compass",
+                               heading_rad=(psi + rng.gauss(0, 0.05)) % (2 * math.pi)))
+        elif r < 0.78:
+            out.append(Attitude(t=t, source="ahrs", roll_rad=rng.gauss(0, 0.1),
+                                pitch_rad=rng.gauss(0, 0.1),
+                                yaw_rad=(psi + math.pi) % (2 * math.pi) - math.pi))
+        elif r < 0.86:
+            out.append(ActuatorCommand(t=t, source="cmd", throttle=rng.uniform(-1, 1),
+                                       rudder_rad=rng.uniform(-0.6, 0.6),
+                                       thrusters=tuple(rng.uniform(-1, 1) for _ in range(6))))
+        elif r < 0.92 and dvl:
+            out.append(DvlVelocity(t=t, source="dvl", vx=spd + rng.gauss(0, 0.05),
+                                   vy=rng.gauss(0, 0.1), vz=rng.gauss(0, 0.05),
+                                   valid=rng.random() > 0.1, fom_mps=0.01, altitude_m=5.0))
+        elif r < 0.96 and depth:
+            out.append(Depth(t=t, source="depth", depth_m=abs(rng.gauss(5, 3))))
+        else:
+            out.append(VelocityOverGround(t=t, source="ins", v_north_mps=spd * math.cos(psi),
+                                          v_east_mps=spd * math.sin(psi),
+                                          v_down_mps=rng.gauss(0, 0.05)))
+    return out
+
+
+def _pipeline(module: str, cfg_name: str):
+    try:
+        mod = importlib.import_module(f"onboard.pipelines.{module}")
+    except ImportError:
+        pytest.skip(f"onboard.pipelines.{module} not there")
+    cfg = configmod.load(configmod.resolve(cfg_name))
+    p = mod.create(cfg)
+    if p is None:
+        pytest.skip(f"{module} does not apply to {cfg_name}")
+    return cfg, p
+
+
+def _covariances(p) -> dict[str, np.ndarray]:
+    """Every covariance a pipeline exposes, by name."""
+    out: dict[str, np.ndarray] = {}
+    if hasattr(p, "surge") and hasattr(p, "yaw"):       # aie / kf: two axes
+        for ax in ("surge", "yaw"):
+            f = getattr(p, ax)
+            if f.kf.initialized:
+                out[f"{ax}.kf.P"] = _packed3(f.kf.P)
+            rcie = getattr(f, "rcie", None)
+            if rcie is not None:
+                from onboard.pipelines.aie import unpack
+
+                out[f"{ax}.rcie.P"] = np.array(unpack(rcie.P, rcie.n))
+    P = getattr(p, "P", None)
+    if P is not None:
+        out["P"] = np.asarray(P, dtype=float)
+    hP = getattr(p, "hP", None)
+    if hP is not None:
+        out["hP"] = np.asarray(hP, dtype=float)
+    return out
+
+
+def _check_over_stream(module: str, cfg_name: str, seed: int, *, dvl: bool, depth: bool) -> None:
+    cfg, p = _pipeline(module, cfg_name)
+    eng = Engine(cfg, pipelines=[p])
+    seen = set()
+
+    def on_tick(t, recs):
+        for name, P in _covariances(p).items():
+            seen.add(name)
+            assert_spd(P, f"{module} {name} at t={t:.2f}")
+
+    run(eng, random_stream(random.Random(seed), 20.0, dvl=dvl, depth=depth), on_tick)
+    assert seen, f"{module}: no covariance exposed"
+
+
+@settings(PROPS, max_examples=15)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_aie_covariances_stay_psd(seed):
+    _check_over_stream("aie", "rudder-boat", seed, dvl=False, depth=False)
+
+
+@settings(PROPS, max_examples=15)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_kf_covariances_stay_psd(seed):
+    _check_over_stream("kf", "rudder-boat", seed, dvl=False, depth=False)
+
+
+@settings(PROPS, max_examples=8)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_current_covariance_stays_psd_on_a_boat(seed):
+    _check_over_stream("current", "rudder-boat", seed, dvl=False, depth=False)
+
+
+@pytest.mark.xfail(reason="finding 6 (current: ValueError on a 2-D GNSS velocity with a 3-D "
+                   "model with identification); see the reproducer below", strict=False)
+@settings(PROPS, max_examples=5, phases=[Phase.explicit, Phase.reuse, Phase.generate])
+@given(seed=st.integers(0, 2**32 - 1))
+def test_current_covariance_stays_psd_on_a_torpedo_auv(seed):
+    _check_over_stream("current", "torpedo-auv", seed, dvl=True, depth=True)
+
+
+@settings(PROPS, max_examples=5)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_eseso_covariance_stays_psd(seed):
+    _check_over_stream("eseso", "bluerov2", seed, dvl=True, depth=True)
+
+
+@pytest.mark.xfail(reason="finding 6: current.py step, 'zz[2:] = (R @ x[:nd] + x[nd:])[2:]' "
+                   "adds the whole tail of x (current and coefficients) when n_theta > 0",
+                   strict=False)
+def test_current_torpedo_auv_takes_a_surface_gnss_velocity():
+    cfg, p = _pipeline("current", "torpedo-auv")
+    p.step(1.0, [Attitude(t=1.0, source="a", roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0)])
+    p.step(1.05, [GnssFix(t=1.05, source="g", lat_deg=50.0, lon_deg=-4.0, sog_mps=1.5,
+                          cog_rad=0.0)])
+
+
+# --------------------------------------------------------------------------- NIS on the simulator
+
+SIM_NIS_CASES = [
+    # (pipeline, config, scenario, seconds, {channel: dimension})
+    ("kf", "rudder-boat", "jaiabot-turns", 300.0, {"surge.nis": 1, "heading.nis": 1}),
+    ("aie", "rudder-boat", "jaiabot-turns", 300.0, {"surge.nis": 1, "heading.nis": 1}),
+    ("current", "rudder-boat", "effect-current", 300.0, {"velocity.nis": 2}),
+    ("current", "torpedo-auv", "gavia-tidal", 300.0, {"velocity.nis": 3}),
+    ("eseso", "bluerov2", "bluerov2-circle", 120.0,
+     {"thrust.nis": 3, "attitude.nis": 3, "dvl.nis": 3, "depth.nis": 1}),
+    pytest.param("eseso", "bluerov2", "bluerov2-circle", 120.0, {"vog.nis": 2},
+                 marks=pytest.mark.xfail(reason="finding 8: ESESO's velocity-over-ground NIS "
+                                         "averages 0.12 for dimension 2 (R ~17x too large "
+                                         "for the simulated INS)", strict=False),
+                 id="eseso-vog-bluerov2-circle"),
+]
+"""Measured mean NIS (seed 1, 2026-11-22): kf surge 0.49, heading 0.85; aie surge 0.53,
+heading 0.99; current on effect-current 1.62 (dim 2), on gavia-tidal 4.0 (dim 3); eseso
+thrust 0.51 (3), attitude 4.7 (3), dvl 4.0 (3), depth 1.09 (1), vog 0.12 (2)."""
+
+
+def sim_nis(module: str, cfg_name: str, scenario: str, seconds: float, seed: int = 1
+            ) -> dict[str, float]:
+    """Mean NIS of each channel over a SITL run (one value per update: a channel's NIS is
+    recorded each tick it changed)."""
+    from sitl.runner import simulate
+
+    cfg, p = _pipeline(module, cfg_name)
+    eng = Engine(cfg, pipelines=[p])
+    values: dict[str, list[float]] = {}
+    prev: dict[str, float] = {}
+
+    def on_tick(t, recs):
+        for k, v in p.health().items():
+            if k.endswith(".nis") and prev.get(k) != v:
+                values.setdefault(k, []).append(float(v))
+                prev[k] = v
+
+    stream = (s for _, samples, _ in simulate(scenario, seconds, seed=seed) for s in samples)
+    run(eng, stream, on_tick)
+    return {k: float(np.mean(v)) for k, v in values.items()}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("module,cfg_name,scenario,seconds,dims", SIM_NIS_CASES,
+                         ids=[f"{c[0]}-{c[2]}" if isinstance(c, tuple) else None
+                              for c in SIM_NIS_CASES])
+def test_nis_on_the_simulator_within_a_factor_of_ten(module, cfg_name, scenario, seconds, dims):
+    means = sim_nis(module, cfg_name, scenario, seconds)
+    for ch, dim in dims.items():
+        assert ch in means, f"{module}: no {ch} updates ({sorted(means)})"
+        assert dim / 10 <= means[ch] <= dim * 10, (ch, means[ch], dim)
