@@ -220,7 +220,7 @@ class DvlJsonParser:
         self._last_line = line
         try:
             obj = _decoder.decode(line)
-        except msgspec.DecodeError:
+        except (msgspec.DecodeError, UnicodeDecodeError):
             st.reject("json")
             return None
         if not isinstance(obj, dict):

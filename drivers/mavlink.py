@@ -619,6 +619,16 @@ class MavlinkParser:
                 continue
             extra = CRC_EXTRA.get(msgid)
             if extra is None:
+                # No CRC to check an id outside the dialect: take it as a frame only if
+                # another frame starts right after it (wait for that byte), so a stray
+                # start byte in line noise cannot swallow the intact frames behind it.
+                if end >= n:
+                    break
+                if buf[end] not in (0xFD, 0xFE):
+                    stats.reject("garbage")
+                    self._in_garbage = True
+                    i = j + 1
+                    continue
                 self._counts[-1 - msgid] += 1  # negative key: unknown id
                 stats.records += 1
                 self._in_garbage = False

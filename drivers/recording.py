@@ -132,8 +132,15 @@ def read_records(path: str | Path, stats: ReadStats | None = None) -> Iterator[R
             pos += 2
             continue
         if end > n:
-            stats.reject("truncated")
-            break
+            # A torn last frame, or a damaged length field: resynchronize on the next
+            # frame marker if there is one, so damage never costs the frames after it.
+            nxt = data.find(FRAME_MARK, pos + 2)
+            if nxt < 0:
+                stats.reject("truncated")
+                break
+            stats.reject("length")
+            pos = nxt
+            continue
         payload = data[pos + _HEAD.size:end]
         if zlib.crc32(payload) != crc:
             stats.reject("crc")
@@ -141,7 +148,7 @@ def read_records(path: str | Path, stats: ReadStats | None = None) -> Iterator[R
             continue
         try:
             rec = _dec.decode(payload)
-        except msgspec.DecodeError:
+        except (msgspec.DecodeError, UnicodeDecodeError):
             stats.reject("decode")
             pos = end
             continue
@@ -194,7 +201,7 @@ class RecordingReader:
             if rec.kind == "sample":
                 try:
                     out = [decode_sample(rec.data)]
-                except msgspec.DecodeError:
+                except (msgspec.DecodeError, UnicodeDecodeError):
                     self.stats.reject("sample_decode")
                     continue
             else:
@@ -203,7 +210,7 @@ class RecordingReader:
                 if parser is None:
                     try:
                         parser = parsers[key] = parser_for(rec.kind, rec.source)
-                    except KeyError:
+                    except (KeyError, ValueError):
                         self.stats.reject(f"unknown_kind:{rec.kind}")
                         continue
                 out = parser.feed(rec.data, rec.t)  # type: ignore[attr-defined]

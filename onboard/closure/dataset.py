@@ -167,6 +167,27 @@ class Dataset:
         return Dataset(**kw)
 
 
+def segment_starts(ds: "Dataset") -> np.ndarray:
+    """For each tick, the index of the first tick of its contiguous segment (run label)."""
+    n = len(ds)
+    if n == 0:
+        return np.zeros(0, int)
+    change = np.r_[True, ds.run[1:] != ds.run[:-1]]
+    starts = np.flatnonzero(change)
+    return starts[np.cumsum(change) - 1]
+
+
+def heading_drift(ds: "Dataset") -> np.ndarray:
+    """Measured heading change minus the integrated gyro yaw rate since the start of each
+    segment (rad). Zero for a perfect compass and gyro; ``-b (t - t0)`` for a gyro bias
+    ``b``; ``delta(psi) - delta(psi0)`` for a compass deviation ``delta``. Integrating
+    keeps the compass's quantization (1 deg in VFR_HUD) from swamping a small rate bias."""
+    s0 = segment_starts(ds)
+    inc = np.r_[0.0, 0.5 * (ds.r[1:] + ds.r[:-1]) * np.diff(ds.t)]
+    cum = np.cumsum(inc)
+    return (ds.psi - ds.psi[s0]) - (cum - cum[s0])
+
+
 def _smooth(x: np.ndarray, window: int, deriv: int = 0, dt: float = 1.0) -> np.ndarray:
     if len(x) < window:
         return np.gradient(x, dt) if deriv else x.copy()

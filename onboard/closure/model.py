@@ -1,8 +1,8 @@
 """The base vehicle model, its augmentation by effects, fitting and open-loop prediction.
 
 Base model (what the AIE and current pipelines assume): the vehicle moves along its
-measured heading (lateral velocity over ground 0), the measured heading turns with the
-gyro (heading rate minus gyro 0), and its through-water speed follows the first-order
+measured heading but for the hull's sway in turns (lateral velocity ``x_p r``), the
+measured heading turns with the gyro (heading change minus integrated gyro 0), and its through-water speed follows the first-order
 surge model of algorithms.md §1.1, ``U' = -a U + b c + c0``, from the normalized command
 ``c``. Effects add linear regressors to those channels (:mod:`.effects`). All parameters
 enter linearly once ``a`` and ``b`` are fixed, so a fit is a weighted least-squares problem
@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from onboard.closure.dataset import Dataset
+from onboard.closure.dataset import Dataset, heading_drift
 from onboard.closure.effects import ALL, Context, Effect
 
-CHANNELS = ("lateral", "heading_rate", "along")
+CHANNELS = ("lateral", "heading", "along")
 BASE_PARAMS = ("a", "b", "c0")
 
 
@@ -27,7 +27,7 @@ def channel_targets(ds: Dataset) -> dict[str, np.ndarray]:
     """The measured quantity each channel's regression explains."""
     out = {"lateral": ds.lateral}
     if ds.has_gyro:
-        out["heading_rate"] = ds.psi_dot - ds.r
+        out["heading"] = heading_drift(ds)
     if ds.has_commands:
         out["along"] = ds.speed_dot
     return out
@@ -226,14 +226,14 @@ def predict(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
     delay = 0.0
     for e, th in f.all_effects():
         lat = lat + e.lateral_output(th, ds, ctx)
-        hr += e.heading_rate_output(th, ds, ctx)
+        hr += e.heading_output(th, ds, ctx)
         out_along += e.along_output(th, ds, ctx)
         delay += e.output_delay_s(th)
         if e.dynamic:
             dyn.append((e, th))
     preds = {"lateral": lat}
     if ds.has_gyro:
-        preds["heading_rate"] = hr
+        preds["heading"] = hr
     if ds.has_commands:
         along = simulate_speed(ds, f.base, dyn, out_along)
         if delay > 0.0:
@@ -306,8 +306,8 @@ def residuals(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
     """Measured minus predicted, per channel (along: open-loop speed error, m/s)."""
     p = predict(ds, f)
     out = {"lateral": ds.lateral - p["lateral"]}
-    if "heading_rate" in p:
-        out["heading_rate"] = (ds.psi_dot - ds.r) - p["heading_rate"]
+    if "heading" in p:
+        out["heading"] = heading_drift(ds) - p["heading"]
     if "along" in p:
         out["along"] = ds.along - p["along"]
     return out

@@ -221,8 +221,8 @@ def structure_left(sp: Split, f: M.Fit, min_gain: float = 0.15) -> dict | None:
     Xh, _ = _generic_basis(sp.holdout)
     found = {}
     for ch in res_fit:
-        if ch == "along":
-            continue  # open-loop error: its structure is drift, judged by the metric
+        if ch != "lateral":
+            continue  # along: open-loop drift, judged by the metric; heading: integrated
         yf, yh = res_fit[ch], res_hold[ch]
         okf = np.isfinite(yf) & np.isfinite(Xf).all(1)
         okh = np.isfinite(yh) & np.isfinite(Xh).all(1)

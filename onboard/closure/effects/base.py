@@ -4,7 +4,8 @@ The base model (see :mod:`onboard.closure.model`) predicts three residual channe
 
 * ``lateral``: velocity over ground across the measured heading (m/s); the base model
   says 0 (the vehicle moves where it points);
-* ``heading_rate``: measured heading rate minus gyro yaw rate (rad/s); base 0;
+* ``heading``: measured heading change minus the integrated gyro yaw rate since the start
+  of each segment (rad); base 0;
 * ``along``: the surge dynamics ``U' = -a U + b c + c0`` of the through-water speed ``U``
   from the command ``c``, fitted in derivative form (m/s^2) and evaluated open loop.
 
@@ -80,8 +81,8 @@ class Effect:
         cols = self.columns(ds, ctx).get("lateral")
         return np.zeros(len(ds)) if cols is None else cols @ theta
 
-    def heading_rate_output(self, theta: np.ndarray, ds: Dataset, ctx: Context) -> np.ndarray:
-        cols = self.columns(ds, ctx).get("heading_rate")
+    def heading_output(self, theta: np.ndarray, ds: Dataset, ctx: Context) -> np.ndarray:
+        cols = self.columns(ds, ctx).get("heading")
         return np.zeros(len(ds)) if cols is None else cols @ theta
 
     def describe(self, theta: np.ndarray, std: np.ndarray) -> tuple[dict, dict]:

@@ -3,9 +3,8 @@
 Hard- and soft-iron magnetism of the hull gives a heading error that is periodic in the
 heading. Writing ``delta = a sin(psi) + b cos(psi)`` (``amplitude = hypot(a, b)``,
 ``phase = atan2(b, a)``): the vehicle moves along the true heading, so across the
-measured heading the velocity is ``-U delta``; and the measured heading turns at
-``r (1 + d delta / d psi)``, so against the gyro the heading rate differs by
-``r (a cos(psi) - b sin(psi))``. It leaves the along-track speed alone, which is what
+measured heading the velocity is ``-U delta``; and against the integrated gyro the measured heading drifts by
+``delta(psi) - delta(psi0)``. It leaves the along-track speed alone, which is what
 separates it from a current (whose naive fit would report a false current of several
 cm/s).
 """
@@ -16,6 +15,7 @@ import math
 
 import numpy as np
 
+from onboard.closure.dataset import segment_starts
 from onboard.closure.effects.base import Context, Effect, speed
 
 
@@ -28,7 +28,8 @@ class CompassDeviation(Effect):
         u = speed(ds)
         cols = {"lateral": np.column_stack([-u * s, -u * c])}
         if ds.has_gyro:
-            cols["heading_rate"] = np.column_stack([ds.r * c, -ds.r * s])
+            s0 = segment_starts(ds)
+            cols["heading"] = np.column_stack([s - s[s0], c - c[s0]])
         return cols
 
     def describe(self, theta, std):

@@ -1,12 +1,13 @@
 """``gyro_bias``: a constant offset of the gyro's yaw rate (rad/s).
 
 The measured heading turns at the true rate ``r`` and the gyro reads ``r + bias``, so the
-heading-rate channel (heading derivative minus gyro) is ``-bias``. Needs a gyro."""
+measured heading drifts against the integrated gyro by ``-bias (t - t0)``. Needs a gyro."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from onboard.closure.dataset import segment_starts
 from onboard.closure.effects.base import Effect
 
 
@@ -16,7 +17,8 @@ class GyroBias(Effect):
     needs_gyro = True
 
     def columns(self, ds, ctx):
-        return {"heading_rate": -np.ones((len(ds), 1))}
+        s0 = segment_starts(ds)
+        return {"heading": -(ds.t - ds.t[s0])[:, None]}
 
 
 EFFECT = GyroBias()
