@@ -39,8 +39,12 @@ _CLASSES: dict[str, tuple[str, str]] = {
 }
 
 
-class UnknownProtocol(ValueError):
-    """A kind that no parser reads."""
+class UnknownProtocol(KeyError, ValueError):
+    """A kind that no parser reads (a KeyError for registry lookups, a ValueError for
+    configuration checks)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else "unknown protocol"
 
 
 class SampleParser:

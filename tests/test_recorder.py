@@ -154,3 +154,22 @@ def test_a_parser_that_raises_is_counted_and_the_intake_carries_on():
     assert intake.chunk("gps", "nmea", b"$GPHDT,1,T*00\r\n", 1.0) == 0
     intake.tick(1.0)
     assert intake.parse_rejections() == {"parse:gps:parser_error": 1}
+
+
+def test_protocol_registry_gives_a_fresh_parser_per_kind_and_refuses_unknown_kinds():
+    import pytest
+
+    from drivers.protocols import KINDS, SampleParser, UnknownProtocol, parser_for
+
+    for kind in KINDS:
+        a, b = parser_for(kind, "src"), parser_for(kind, "src")
+        assert a is not b and hasattr(a, "feed") and a.stats.records == 0
+    with pytest.raises(KeyError):
+        parser_for("ubx")
+    with pytest.raises(UnknownProtocol, match="known: mavlink"):
+        parser_for("ubx")
+    p = SampleParser("sim")
+    s = Imu(t=2.0, accel_x=0.1, accel_y=0, accel_z=-9.8, gyro_x=0, gyro_y=0, gyro_z=0.01)
+    (back,) = p.feed(encode_sample(s), 2.0)
+    assert back.t == 2.0 and back.accel_x == 0.1 and back.source == "sim"
+    assert p.feed(b"\xc1junk", 2.1) == [] and p.stats.rejected["decode"] == 1
