@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import json
+import os
 import logging
 import time
 from collections import Counter, deque
@@ -81,7 +82,8 @@ class Recorder:
         self.meta = dict(meta or {})
         self.clock = clock
         self.fsync = fsync
-        self.run_id = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+        self.run_id = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime()) + "-" + os.urandom(2).hex()
+        """Names this service start: UTC start time and a random suffix."""
         self.part = 0
         self.records = 0
         self.files: list[Path] = []
@@ -348,6 +350,19 @@ def recording_files(path: str | Path) -> list[Path]:
     return [p]
 
 
+def recording_runs(directory: str | Path) -> dict[str, list[Path]]:
+    """The recordings in ``directory`` grouped by run (one service start each), parts in
+    order. Replay one run's parts together for an exact replay."""
+    runs: dict[str, list[Path]] = {}
+    for p in recording_files(directory):
+        meta = recording_meta(p)
+        run = str(meta.get("run") or p.stem)
+        runs.setdefault(run, []).append(p)
+    for parts in runs.values():
+        parts.sort(key=lambda p: (int(recording_meta(p).get("part", 0) or 0), p.name))
+    return runs
+
+
 def recording_meta(path: str | Path) -> dict[str, Any]:
     """The first ``meta`` record of a recording file ({} when there is none)."""
     for rec in read_records(path):
@@ -377,7 +392,9 @@ def replay_recording(paths: str | Path | Iterable[str | Path], engine: Engine,
                      restore_state: bool = True) -> ReplayResult:
     """Replay the service's recording(s) through ``engine`` exactly as live.
 
-    ``paths`` is a file, a directory of parts, or a list of files in order. The adaptive
+    ``paths`` is a file, a directory of parts, or a list of files in order (a directory
+    holding several runs replays them one after the other, as one; pick one run with
+    :func:`recording_runs` for an exact replay). The adaptive
     state the live service restored at start (meta ``state``) is restored into ``engine``
     first when ``restore_state``. ``on_tick(t, records)`` is called at every recorded tick.
     """

@@ -173,3 +173,18 @@ def test_protocol_registry_gives_a_fresh_parser_per_kind_and_refuses_unknown_kin
     (back,) = p.feed(encode_sample(s), 2.0)
     assert back.t == 2.0 and back.accel_x == 0.1 and back.source == "sim"
     assert p.feed(b"\xc1junk", 2.1) == [] and p.stats.rejected["decode"] == 1
+
+
+def test_recordings_are_grouped_by_run_with_parts_in_order(tmp_path):
+    from onboard.recorder import recording_runs
+
+    clock = FakeClock()
+    a = Recorder(tmp_path, rotate_mb=0.004, clock=clock, fsync=False)
+    for i in range(60):
+        a.write(RawRecord(t=float(i), source="s", kind="nmea", data=bytes(200)))
+    a.close()
+    b = Recorder(tmp_path, clock=clock, fsync=False)  # a restart within the same second
+    b.close()
+    runs = recording_runs(tmp_path)
+    assert runs[a.run_id] == a.files and len(a.files) >= 3
+    assert runs[b.run_id] == b.files and a.run_id != b.run_id
