@@ -364,3 +364,24 @@ def test_an_unplugged_input_is_reported_and_picked_up_again_while_the_service_ru
     assert any("gps: lost" in e for e in svc.events), list(svc.events)
     assert svc.intake.sources["gps"].samples == 2  # one heading before, one after
     assert svc.stats.ticks > 5
+
+
+def test_the_bench_traffic_is_real_protocol_at_the_nominal_rates():
+    """50 Hz IMU, 5 Hz GNSS, 10 Hz heading, 10 Hz servo outputs, 1 Hz heartbeat."""
+    from collections import Counter
+
+    from drivers.protocols import parser_for
+
+    gen = TrafficGenerator()
+    mav, nmea = parser_for("mavlink"), parser_for("nmea", "gps")
+    kinds: Counter[str] = Counter()
+    for k in range(500):  # 10 s
+        t = k / 50.0
+        for f in gen.mavlink(t):
+            kinds.update(type(s).__name__ for s in mav.feed(f, t))
+        for f in gen.nmea(t):
+            kinds.update(type(s).__name__ for s in nmea.feed(f, t))
+    assert not mav.stats.rejected and not nmea.stats.rejected
+    assert kinds["Imu"] == 500 and kinds["ActuatorOutputs"] == 100
+    assert kinds["Heading"] == 100 and 49 <= kinds["GnssFix"] <= 50
+    assert kinds["VehicleInfo"] == 10
