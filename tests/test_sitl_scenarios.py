@@ -25,7 +25,7 @@ EXPECTED_MESSAGES = {
                     "SERVO_OUTPUT_RAW", "VFR_HUD"},
     "twin-thruster-boat": {"HEARTBEAT", "PARAM_VALUE", "GPS_RAW_INT", "ATTITUDE", "SCALED_IMU",
                            "SERVO_OUTPUT_RAW", "VFR_HUD"},
-    "bluerov2": {"HEARTBEAT", "PARAM_VALUE", "GPS_RAW_INT", "GLOBAL_POSITION_INT", "ATTITUDE",
+    "bluerov2": {"HEARTBEAT", "PARAM_VALUE", "GLOBAL_POSITION_INT", "ATTITUDE",
                  "SCALED_IMU", "SCALED_PRESSURE2", "SERVO_OUTPUT_RAW", "VISION_POSITION_DELTA",
                  "DISTANCE_SENSOR"},
     "torpedo-auv": {"HEARTBEAT", "PARAM_VALUE", "GLOBAL_POSITION_INT", "ATTITUDE", "SCALED_IMU",
