@@ -18,22 +18,30 @@ An error-state Kalman filter on ``R^6 x SO(3) x R^12`` (paper eq. 5). Nominal st
 Error state (21): ``dx = [dp, dv, dtheta, db_a, db_g, dg, dxi]`` with the right (local)
 perturbation ``R_true = R Exp(dtheta)`` (paper eqs. 6, 9).
 
-* **Propagation** at every IMU sample (paper eq. 10, Sola 2017 eq. 260), dt the real
-  interval between samples. ``xi`` is propagated either as a constant in the body frame
-  (the paper's random walk, ``disturbance_model = "body_fixed"``) or, by default, as a force
-  fixed in the earth frame whose body components turn with the vehicle
-  (``xi <- Exp(-w dt) xi``; a push, a tether or a current drag is earth-fixed, and on the
-  paper's 2 m circle the body-frame components turn at 0.75 rad/s, which a random walk
-  cannot follow).
+* **Propagation** at every IMU sample (paper eqs. 10-13; Sola, "Quaternion kinematics for
+  the error-state Kalman filter", 2017, §5), over the real interval since the previous
+  sample, which the sample's mean specific force and rate drive (an IMU's delta-velocity /
+  anti-aliased output belongs to the interval ending at its stamp). ``F[dtheta, db_g]`` is
+  the exact ``-Jr(w dt) dt``. ``xi`` is propagated either as a constant in the body frame
+  (the paper's random walk, ``disturbance_model = "body_fixed"``) or, by default, as a
+  force fixed in the earth frame whose body components turn with the vehicle
+  (``xi <- Exp(-w dt) xi``): a push, a tether or a current drag is earth-fixed, and on the
+  paper's 2 m circle the body components turn at up to 0.75 rad/s, which a random walk
+  cannot follow.
 * **Updates** (paper eqs. 14, 16), each through :meth:`Eseso._update`, Joseph form, with
-  its innovation, S and NIS kept for :meth:`Eseso.health` and a chi-square gate:
-  GNSS horizontal position and velocity (only at the surface), depth, DVL bottom-track
-  velocity (body frame), attitude (``Log(R^T R_meas)``), heading, and the thrust model
-  ``h_tau`` below.
+  the innovation ``y``, its covariance ``S`` and the NIS kept for :meth:`Eseso.health`
+  and a chi-square gate (99.9 %; after ``max_consecutive_rejects`` gated samples in a row
+  the channel is fused again, down-weighted, so a sensor cannot be locked out for good):
+  GNSS horizontal position and velocity (only at the surface: a fix while the filter is
+  deeper than ``gnss_max_depth_m`` is rejected), velocity over ground (INS), depth, DVL
+  bottom-track velocity (body frame, its figure of merit as sigma), attitude
+  (``Log(R^T R_meas)``), heading (only without an attitude stream, which carries the same
+  yaw), and the thrust model ``h_tau`` below at every IMU sample while a thruster command
+  is fresh.
 * **Injection and reset** (paper eqs. 16d, 17, 18): every component of ``dx`` is injected
-  (``v`` once, biases and gravity too, unlike the public code), then
-  ``P <- G P G^T`` with the reset Jacobian ``G = blockdiag(I, I, I - [dtheta/2]x, I, ...)``
-  (Sola eq. 287).
+  (``v`` once, biases and gravity too, unlike the public code), then ``P <- G P G^T``
+  with the reset Jacobian ``G = blockdiag(I, I, I - [dtheta/2]x, I, I, I, I)``
+  (Sola 2017, §6.3).
 
 Thrust model (paper eq. 14b, re-derived in NED/FRD with the Coriolis terms the paper
 drops, because on a 2 m circle at 1.5 m/s they are 2-15 N, more than the 4 N target).
@@ -49,11 +57,22 @@ with ``M = m I + A``, ``A = diag(X_udot, Y_vdot, Z_wdot)`` (positive added masse
 buoyancy (a positively buoyant vehicle has ``W - B < 0``), ``r_g = (0, 0, z_G)`` the centre
 of gravity and ``w'`` the angular acceleration from differenced gyro samples (with
 z_G = 0.2 m the ``m w' x r_g`` term reaches 50 N when a thruster step rolls the vehicle;
-its Jacobian is neglected). ``tau`` is the commanded
-thruster force in body axes, the first three rows of the allocation matrix times the
-per-thruster forces from the thrust curve. The paper's ``M_RB (u_a - b_a)`` misses the
-``m g_B`` term, which only cancels against the weight if the restoring term is written
-with ``B`` alone; here both are explicit.
+its Jacobian is neglected). ``tau`` is the commanded thruster force in body axes: the
+force rows of the allocation matrix times the per-thruster forces of the thrust curve
+(``f = f_max c|c|`` for the T200). The paper's ``M_RB (u_a - b_a)`` misses the ``m g_B``
+term, which only cancels against the weight if the restoring term is written with ``B``
+alone; here both are explicit.
+
+By default (``thrust_states = "disturbance"``, the paper's H with -I on ``dxi`` only) the
+thrust update corrects the disturbance alone and carries the other states' uncertainty
+in its noise (``R + H_o P_oo H_o^T``): the damping slope (up to 66 N per m/s) would
+otherwise make it a velocity sensor that thruster and model errors drag away from the
+DVL. Its residual is down-weighted Huber-style above ``thrust_huber``: thruster steps
+excite roll and pitch accelerations faster than the IMU rate resolves.
+
+Position: from the first fused GNSS fix (the local origin), or without one from the
+configured start point (``initial_north_m``/``initial_east_m``, a surveyed launch), then
+dead-reckoned with the DVL; its std grows without GNSS.
 
 All numbers in, numbers out; no I/O and no clock (``bench_step_cost`` is a bench helper
 outside the pipeline).
@@ -373,7 +392,10 @@ class Eseso:
         nis = float(y @ Sinv @ y)
         self.last[channel] = {"y": y.copy(), "S": np.diag(S).copy(), "nis": nis}
         if gate is None:
-            gate = (self.cfg.gate_sigma ** 2 * len(y)) if self.cfg.gate_sigma > 0 else CHI2_999.get(len(y), 3.0 * len(y) + 8)
+            if self.cfg.gate_sigma > 0:
+                gate = self.cfg.gate_sigma ** 2 * len(y)
+            else:
+                gate = CHI2_999.get(len(y), 3.0 * len(y) + 8.0)
         if gate > 0 and nis > gate:
             self._count(f"rejected.{channel}.gate")
             n_rej = self._consecutive.get(channel, 0) + 1
@@ -427,7 +449,8 @@ class Eseso:
         r_g = np.array([0.0, 0.0, self.cfg.cg_z_m])
         if wdot is not None:
             h = h + self.cfg.mass_kg * (np.cross(wdot, r_g) + np.cross(w, np.cross(w, r_g)))
-        J_nu = -self.A @ skew(w) + skew(w) @ self.A + np.diag(self.d_l + 2.0 * self.d_nl * np.abs(nu))
+        J_nu = (-self.A @ skew(w) + skew(w) @ self.A
+                + np.diag(self.d_l + 2.0 * self.d_nl * np.abs(nu)))
         J_w = self.A @ skew(nu) - skew(Anu)
         M = np.diag(self.m_vec)
         H = np.zeros((3, N_ERR))

@@ -1,5 +1,5 @@
 """Rotation-group helpers for the error-state filters (Sola, "Quaternion kinematics for the
-error-state Kalman filter", 2017, sections 2-4; the ESESO paper eqs. (6)-(8)).
+error-state Kalman filter", 2017; the ESESO paper eqs. (6)-(8)).
 
 Conventions: a rotation matrix ``R`` maps body (FRD) vectors into the earth (NED) frame,
 ``x_ned = R @ x_frd``. Perturbations are *right* (local, body-frame) ones,
@@ -58,7 +58,8 @@ def log_so3(R: Array) -> Array:
 
 
 def right_jacobian(theta: Array) -> Array:
-    """Right Jacobian of SO(3), ``Exp(t + d) ~= Exp(t) Exp(Jr(t) d)`` (Sola eq. 143)."""
+    """Right Jacobian of SO(3), ``Exp(t + d) ~= Exp(t) Exp(Jr(t) d)`` (Sola, Deray and
+    Atchuthan, "A micro Lie theory for state estimation in robotics", 2018)."""
     angle = float(np.linalg.norm(theta))
     K = skew(theta)
     if angle < 1e-6:

@@ -164,7 +164,8 @@ class Controller(Protocol):
 
     name: str
 
-    def update(self, t: float, estimate: EstimateRecord, reference: CircleReference) -> ControlOutput:
+    def update(self, t: float, estimate: EstimateRecord,
+               reference: CircleReference) -> ControlOutput:
         """The command for time ``t`` (s) from the published estimate and the reference."""
         ...
 

@@ -235,7 +235,8 @@ class Nmpc:
             out[:, k] = [*rp.position, yaw, *rp.velocity_body, rp.yaw_rate]
         return out
 
-    def solve(self, x0: np.ndarray, ref: np.ndarray, xi: np.ndarray) -> tuple[np.ndarray, float, bool]:
+    def solve(self, x0: np.ndarray, ref: np.ndarray,
+              xi: np.ndarray) -> tuple[np.ndarray, float, bool]:
         """Solve the OCP from state ``x0`` (8); returns (first thrusts N (6), solve time s,
         ok)."""
         N = self.tn.horizon
@@ -247,6 +248,11 @@ class Nmpc:
                 w0[k * stage:k * stage + NX] = ref[:, k]
         else:
             w0 = self._w0
+            # the estimate's yaw is wrapped to (-pi, pi]: move the warm start's yaw onto the
+            # same branch, or the single SQP iteration starts 2 pi away
+            turns = round((x0[3] - w0[3]) / (2 * math.pi))
+            if turns:
+                w0[3::stage] += 2 * math.pi * turns
         w0[0:NX] = x0
         lbx, ubx = self._lbx.copy(), self._ubx.copy()
         lbx[0:NX] = x0
@@ -274,7 +280,8 @@ class Nmpc:
         self._lam_x = None
         return T0, dt, True
 
-    def update(self, t: float, estimate: EstimateRecord, reference: CircleReference) -> ControlOutput:
+    def update(self, t: float, estimate: EstimateRecord,
+               reference: CircleReference) -> ControlOutput:
         """Command for time ``t`` (s): solve from the estimated state, apply the first
         interval's thrusts."""
         x0 = state_from_record(estimate)
@@ -287,7 +294,8 @@ class Nmpc:
                              solve_time_s=dt, status="ok" if ok else "failed")
 
 
-def solve_time_stats(n: int = 200, horizon: int | None = None, disturbance: bool = True) -> dict[str, float]:
+def solve_time_stats(n: int = 200, horizon: int | None = None,
+                     disturbance: bool = True) -> dict[str, float]:
     """Bench (``onboard bench``): ``n`` solves of the AMPC problem along the circle, the
     state advanced by the prediction model itself under the [40, 40, 10] N push so that
     warm starts behave as in flight. Returns wall-clock p50/p99/max and CPU p50/p99 in

@@ -53,7 +53,8 @@ class PidController:
         self._int = np.zeros(3)
         self._int_yaw = 0.0
 
-    def update(self, t: float, estimate: EstimateRecord, reference: CircleReference) -> ControlOutput:
+    def update(self, t: float, estimate: EstimateRecord,
+               reference: CircleReference) -> ControlOutput:
         x = state_from_record(estimate)
         rp = reference(t)
         g = self.g
@@ -69,11 +70,12 @@ class PidController:
         fb[2] -= self.p.weight - self.p.buoyancy
         wrench = np.array([fb[0], fb[1], fb[2], Nz])
         forces = self.p.B_pinv @ wrench
-        saturated = bool(np.any(forces > self.p.thrust_max_n) or np.any(forces < self.p.thrust_min_n))
+        saturated = bool(np.any(forces > self.p.thrust_max_n)
+                         or np.any(forces < self.p.thrust_min_n))
         if not saturated:
             lim = g.integral_limit_n
             ki = np.maximum(np.asarray(g.ki), 1e-9)
             self._int = np.clip(self._int + e * self.dt, -lim / ki, lim / ki)
-            self._int_yaw = float(np.clip(self._int_yaw + e_psi * self.dt, -lim / max(g.ki_yaw, 1e-9),
-                                          lim / max(g.ki_yaw, 1e-9)))
+            lim_yaw = lim / max(g.ki_yaw, 1e-9)
+            self._int_yaw = float(np.clip(self._int_yaw + e_psi * self.dt, -lim_yaw, lim_yaw))
         return ControlOutput(wrench=wrench, thrusters=self.p.thrusters_from_wrench(wrench))
