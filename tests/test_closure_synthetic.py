@@ -127,7 +127,7 @@ def test_wave_oscillation_period_and_amplitude():
     p = found["wave_oscillation"]["params"]
     # measured: period 6.001 s, amplitude 0.196 m/s
     assert p["period"] == pytest.approx(6.0, abs=0.05)
-    assert p["amplitude_mps"] == pytest.approx(0.2, abs=0.03)
+    assert p["velocity_amplitude_mps"] == pytest.approx(0.2, abs=0.03)
 
 
 def test_two_effects_at_once():

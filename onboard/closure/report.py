@@ -56,6 +56,7 @@ def diagnosis(sel: Selection, log: str) -> dict:
                 params, std = ALL[name].describe(f.theta[name], f.std[name])
             if name == "wave_oscillation":
                 params["period"] = f.ctx.wave_period_s
+                params["direction"] = f.ctx.extra.get("wave_direction")
             entry["params"] = params
             entry["evidence"]["std"] = std
         if cand is not None:
@@ -86,7 +87,7 @@ def diagnosis(sel: Selection, log: str) -> dict:
         "holdout_metric": sel.metric,
         "holdout_channels_before": sel.before.channels,
         "holdout_channels_after": sel.after.channels,
-        "wave_peak": sel.wave,
+        "wave_search": sel.wave,
     })
 
 

@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from onboard.closure import model as M
-from onboard.closure import stats
 from onboard.closure.dataset import Dataset
 from onboard.closure.effects import ALL, Context
 
@@ -122,19 +121,12 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
     sigma = _sigma(sp.fit, base0)
     base = M.fit(sp.fit, declared, sigma, base0.ctx, known=known)
     ctx = base.ctx
-    # A wave period from the residual spectrum, for the wave effect's regressors.
+    # A wave (period, direction) from the residual, for the wave effect's regressors.
     res_fit = M.residuals(sp.fit, base)
-    wave = None
-    best = (None, 1.0, 0.0)
-    for ch in ("lateral", "along"):
-        if ch in res_fit:
-            period, p, g = stats.spectral_peak(sp.fit.t, res_fit[ch])
-            if period is not None and p < best[1]:
-                best = (period, p, g)
-    if best[0] is not None and best[1] < 1e-6:
-        ctx.wave_period_s = _refine_period(sp.fit, best[0])
-        wave = {"period": ctx.wave_period_s, "periodogram_period": best[0],
-                "false_alarm_p": best[1], "power_share": best[2]}
+    wave = find_wave(sp.fit, res_fit["lateral"])
+    if wave is not None:
+        ctx.wave_period_s = wave["period"]
+        ctx.extra["wave_direction"] = wave["direction"]
     base = M.fit(sp.fit, declared, sigma, ctx, known=known)
     before = M.score(sp.holdout, base, metric)
     n_eff = max(10.0, len(sp.holdout) * ds.dt / 2.0)
@@ -177,21 +169,51 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
     return sel
 
 
-def _refine_period(ds: Dataset, period: float) -> float:
-    """The period near the periodogram's peak that best fits the earth-frame wave model
-    in the lateral channel (the heading modulates the projected oscillation, which biases
-    the raw peak)."""
+def find_wave(ds: Dataset, residual: np.ndarray, min_period_s: float = 2.0,
+              max_period_s: float = 15.0, max_p: float = 1e-6) -> dict | None:
+    """The regular wave (period, direction) that best explains a lateral residual, or
+    None if no wave is significant.
+
+    A grid search: for each period (log-spaced) and direction, the earth-frame wave
+    regressors of :mod:`.effects.wave_oscillation` are fitted to the residual and the
+    explained share of variance kept; the best cell is refined on a finer grid. The
+    false-alarm probability uses one effective sample per second and the number of
+    cells searched, and the share must be 20 times the median share, so a coloured
+    residual is not taken for a wave.
+    """
     wave = ALL["wave_oscillation"]
-    y = ds.lateral - np.nanmean(ds.lateral)
+    y = np.asarray(residual, float)
     ok = np.isfinite(y)
-    best, best_cost = period, math.inf
-    for p in period * np.linspace(0.9, 1.1, 161):
-        X = wave.columns(ds, Context(wave_period_s=float(p)))["lateral"][ok]
-        coef, *_ = np.linalg.lstsq(X, y[ok], rcond=None)
-        cost = float(np.mean((y[ok] - X @ coef) ** 2))
-        if cost < best_cost:
-            best, best_cost = float(p), cost
-    return best
+    if ok.sum() < 200 or np.ptp(ds.t) < 10 * max_period_s:
+        return None
+    y = y[ok] - y[ok].mean()
+    total = float(y @ y)
+    if total <= 0:
+        return None
+    has_pos = bool(np.isfinite(ds.north).any())
+    directions = np.linspace(0.0, 2 * np.pi, 24, endpoint=False) if has_pos else [0.0]
+
+    def share(period: float, direction: float) -> float:
+        ctx = Context(wave_period_s=float(period), extra={"wave_direction": float(direction)})
+        X = wave.columns(ds, ctx)["lateral"][ok]
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        return 1.0 - float(np.sum((y - X @ coef) ** 2)) / total
+
+    periods = np.geomspace(min_period_s, max_period_s, 120)
+    grid = np.array([[share(p, d) for d in directions] for p in periods])
+    i, j = np.unravel_index(int(np.argmax(grid)), grid.shape)
+    best = (float(grid[i, j]), float(periods[i]), float(directions[j]))
+    for p in periods[i] * np.linspace(0.97, 1.03, 25):
+        for d in directions[j] + np.linspace(-0.15, 0.15, 7 if has_pos else 1):
+            sh = share(p, d)
+            if sh > best[0]:
+                best = (sh, float(p), float(d % (2 * np.pi)))
+    sh, period, direction = best
+    n_eff = max(8.0, float(np.ptp(ds.t)))
+    fap = min(1.0, grid.size * (1.0 - sh) ** ((n_eff - 5) / 2))
+    if sh < 20.0 * float(np.median(grid)) or fap > max_p:
+        return None
+    return {"period": period, "direction": direction, "share": sh, "false_alarm_p": fap}
 
 
 def _generic_basis(ds: Dataset) -> tuple[np.ndarray, list[str]]:

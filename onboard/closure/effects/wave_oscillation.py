@@ -1,11 +1,15 @@
-"""``wave_oscillation``: first-order wave motion, an oscillation of the velocity over
-ground at the wave encounter period (s), found as the strongest peak of the residual
-spectrum.
+"""``wave_oscillation``: first-order wave motion, the orbital velocity of a regular sea.
 
-The orbital velocity of a long-crested sea is along the (fixed) wave direction, so the
-oscillation is modelled in the earth frame, ``w_n = A_n sin(w t) + B_n cos(w t)`` and
-``w_e`` alike, and projected on the measured heading for the lateral and along-track
-channels. Reported: the period and the amplitude of the horizontal oscillation (m/s).
+A long-crested sea of period ``T`` travelling toward ``direction`` moves the water, and a
+small boat with it, back and forth along ``direction`` at the phase
+``w t - k (N cos(direction) + E sin(direction))`` (``w = 2 pi / T``, deep-water
+wavenumber ``k = w^2 / g``): a moving boat meets the crests at the *encounter* frequency,
+which changes with its heading and speed. The oscillation is modelled in the earth frame,
+``w_n = A_n sin(phase) + B_n cos(phase)`` and ``w_e`` alike (four linear parameters once
+period and direction are fixed), and projected on the measured heading for the lateral and
+along-track channels. Period and direction come from a search of the residual
+(:func:`onboard.closure.select.find_wave`). Without positions, ``k`` is taken as 0.
+Reported: ``period`` (s), ``direction`` (rad) and the velocity amplitude (m/s).
 """
 
 from __future__ import annotations
@@ -16,6 +20,18 @@ import numpy as np
 
 from onboard.closure.effects.base import Context, Effect
 
+GRAVITY = 9.81
+
+
+def wave_phase(ds, period_s: float, direction_rad: float) -> np.ndarray:
+    """Phase (rad) of a deep-water wave of ``period_s`` toward ``direction_rad`` as seen
+    by the vehicle at its measured positions."""
+    w = 2.0 * math.pi / period_s
+    k = w * w / GRAVITY
+    north = np.nan_to_num(ds.north)
+    east = np.nan_to_num(ds.east)
+    return w * ds.t - k * (north * math.cos(direction_rad) + east * math.sin(direction_rad))
+
 
 class WaveOscillation(Effect):
     name = "wave_oscillation"
@@ -25,16 +41,17 @@ class WaveOscillation(Effect):
         return ctx.wave_period_s is not None
 
     def _basis(self, ds, ctx):
-        w = 2.0 * math.pi / ctx.wave_period_s
-        return w, np.sin(w * ds.t), np.cos(w * ds.t)
+        ph = wave_phase(ds, ctx.wave_period_s, ctx.extra.get("wave_direction", 0.0))
+        return np.sin(ph), np.cos(ph)
 
     def columns(self, ds, ctx):
-        w, s, c = self._basis(ds, ctx)
+        s, c = self._basis(ds, ctx)
         cp, sp = np.cos(ds.psi), np.sin(ds.psi)
         cols = {"lateral": np.column_stack([-sp * s, -sp * c, cp * s, cp * c])}
         if ds.has_commands:
             # along = U + out, out = cos(psi) w_n + sin(psi) w_e; in the derivative-form
-            # channel the effect adds out' + a out.
+            # channel the effect adds out' + a out (phase rate taken as 2 pi / T).
+            w = 2.0 * math.pi / ctx.wave_period_s
             r = ds.r
             ds_, dc = w * c, -w * s
             cols["along"] = np.column_stack([
@@ -46,18 +63,16 @@ class WaveOscillation(Effect):
         return cols
 
     def along_output(self, theta, ds, ctx):
-        _, s, c = self._basis(ds, ctx)
+        s, c = self._basis(ds, ctx)
         wn = theta[0] * s + theta[1] * c
         we = theta[2] * s + theta[3] * c
         return np.cos(ds.psi) * wn + np.sin(ds.psi) * we
 
     def describe(self, theta, std):
-        amp_n = math.hypot(theta[0], theta[1])
-        amp_e = math.hypot(theta[2], theta[3])
-        amp = math.hypot(amp_n, amp_e)
-        return ({"period": float("nan"), "amplitude_mps": amp,
-                 "direction": math.atan2(amp_e, amp_n)},
-                {"amplitude_mps": float(np.sqrt(np.mean(np.asarray(std) ** 2)))})
+        amp = math.sqrt(0.5 * float(np.sum(np.asarray(theta) ** 2)))
+        return ({"period": float("nan"), "direction": float("nan"),
+                 "velocity_amplitude_mps": math.sqrt(2.0) * amp},
+                {"velocity_amplitude_mps": float(np.sqrt(np.mean(np.asarray(std) ** 2)))})
 
 
 EFFECT = WaveOscillation()
