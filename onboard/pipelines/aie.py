@@ -339,6 +339,11 @@ class AxisAie(AxisFilter):
             u += self.model.input(command)
         return u
 
+    def input_ahead(self, command: float | None) -> float:
+        if self.cfg.known_input and command is not None:
+            return self.d_hat + self.model.input(command)
+        return self.u
+
     def step(self, k: Discrete, y: float, R: float, R_prev: float,
              command: float | None) -> None:
         if not self._z_scale_set:            # normalize z by the measurement std (§2.10)
@@ -393,10 +398,12 @@ class AiePipeline(SurgeHeadingPipeline):
     """Pipeline ``aie``: surge and heading AIE with trajectory reconstruction."""
 
     def _extra_outputs(self, out: dict[str, float]) -> None:
+        """The input estimates now: RCIE's d_hat plus, with ``known_input``, the nominal
+        input of the newest command (m/s^2, rad/s^2)."""
         if self.surge.kf.initialized:
-            out["surge_input"] = self.surge.u
+            out["surge_input"] = self.surge.input_ahead(self._latest_command(1))
         if self.yaw.kf.initialized:
-            out["yaw_input"] = self.yaw.u
+            out["yaw_input"] = self.yaw.input_ahead(self._latest_command(2))
 
     def health(self) -> Mapping[str, float]:
         h = dict(super().health())

@@ -198,6 +198,10 @@ class AxisFilter:
     def forecast_input(self, command: float | None) -> float:
         raise NotImplementedError
 
+    def input_ahead(self, command: float | None) -> float:
+        """The input to predict with beyond the last step, given the newest command."""
+        return self.u
+
     def after_innovation(self, k: Discrete, command: float | None) -> None:
         """Hook between innovation and update (AIE computes d_hat here, §2.7)."""
 
@@ -448,8 +452,12 @@ class SurgeHeadingPipeline:
         yaw = self.yaw
         if not yaw.kf.initialized or tau <= 1e-6:
             return self._psi
-        dpsi, _ = yaw.kf.predict_ahead(self._disc(yaw.damping(yaw.last_command), tau), yaw.u)
+        dpsi, _ = yaw.kf.predict_ahead(self._disc(yaw.damping(yaw.last_command), tau),
+                                       yaw.input_ahead(self._latest_command(2)))
         return self._psi + dpsi
+
+    def _latest_command(self, j: int) -> float | None:
+        return self._cmds[-1][j] if self._cmds else None
 
     def _close_surge_window(self) -> None:
         w = self._w
@@ -511,14 +519,16 @@ class SurgeHeadingPipeline:
             r = yaw.kf.v
             if tau > 1e-6:
                 _, r = yaw.kf.predict_ahead(
-                    self._disc(yaw.damping(yaw.last_command), tau), yaw.u)
+                    self._disc(yaw.damping(yaw.last_command), tau),
+                    yaw.input_ahead(self._latest_command(2)))
             out["yaw_rate"] = r
         if surge.kf.initialized and self._t_s is not None:
             tau = min(max(t - self._t_s, 0.0), self.cfg.max_gap_s)
             ds, v = surge.kf.v * tau, surge.kf.v
             if tau > 1e-6:
                 ds, v = surge.kf.predict_ahead(
-                    self._disc(surge.damping(surge.last_command), tau), surge.u)
+                    self._disc(surge.damping(surge.last_command), tau),
+                    surge.input_ahead(self._latest_command(1)))
             out["speed"] = v
             mid = 0.5 * (self._heading_at(self._t_s) + psi)
             out["north"] = self._n + ds * math.cos(mid)

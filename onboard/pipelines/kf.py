@@ -42,6 +42,10 @@ class AxisKf(AxisFilter):
         self.u = 0.0 if command is None else self.model.input(command)
         return self.u
 
+    def input_ahead(self, command: float | None) -> float:
+        return self.u if command is None or self.last_command is None else \
+            self.model.input(command)
+
 
 def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03
           ) -> SurgeHeadingPipeline:

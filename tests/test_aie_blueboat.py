@@ -1,0 +1,61 @@
+"""AIE and KF on the real BlueBoat runs (../shared/data/blueboat_sysid_ntnu).
+
+The logs have no truth: speed is compared with the log's own body-frame surge (an
+autopilot estimate), yaw rate with its gyro yaw rate, position with its GNSS track.
+Models are identified on the even-numbered runs and the filters scored on the others.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from onboard.reports.aie_validation import (
+    blueboat_metrics,
+    blueboat_runs,
+    identify_blueboat,
+    run_blueboat,
+)
+
+pytestmark = pytest.mark.data
+
+
+@pytest.fixture(scope="module")
+def runs(shared_data):
+    if not (shared_data / "blueboat_sysid_ntnu").is_dir():
+        pytest.skip("blueboat_sysid_ntnu not in the shared data")
+    return blueboat_runs(shared_data)
+
+
+@pytest.fixture(scope="module")
+def models(runs):
+    return identify_blueboat(runs[::2])
+
+
+def test_identification_from_the_training_runs(models) -> None:
+    surge, yaw = models
+    # measured: surge a 0.622 1/s, gain 2.21 m/s^2, explains 86 % of the speed variance;
+    # yaw a 1.75 1/s, gain 1.16 rad/s^2, 67 %
+    assert 0.4 < surge.a < 0.9 and 1.5 < surge.gain < 3.0 and surge.fit_ratio > 0.8
+    assert 1.0 < yaw.a < 2.5 and 0.7 < yaw.gain < 1.6 and yaw.fit_ratio > 0.6
+
+
+def test_aie_on_held_out_runs(runs, models) -> None:
+    surge, yaw = models
+    acc: dict[str, list[float]] = {}
+    for r in runs[1::2]:         # 218, 221, 223, 225, 228, 232, 234, 239
+        res = run_blueboat(r, surge, yaw)
+        assert res["health.surge.diverged"][0] == 0
+        for k, v in blueboat_metrics(r, res, surge, yaw).items():
+            acc.setdefault(k, []).append(v)
+    m = {k: float(np.mean(v)) for k, v in acc.items()}
+    # measured (mean of the 8 test runs): speed AIE 0.188 vs KF 0.203 m/s against the
+    # logged surge (on runs 218-225 alone the KF is ahead, 0.184 vs 0.234); yaw rate 0.023
+    # vs 0.026 rad/s against the gyro; position 1.20 vs 1.17 m from GNSS; the AIE inputs
+    # follow the identified command maps with correlation 0.91 (surge), 0.60 (yaw)
+    assert m["aie.speed"] < m["kf.speed"]
+    assert m["aie.speed"] < 0.22
+    assert m["aie.yaw_rate"] < m["kf.yaw_rate"]
+    assert m["aie.position"] < 1.4
+    assert m["input.surge_corr"] > 0.85
+    assert m["input.yaw_corr"] > 0.5
