@@ -154,6 +154,21 @@ def _proc_cpu_s(pid: int) -> float:
     return (int(parts[11]) + int(parts[12])) / ticks
 
 
+def _threads_cpu_s(pid: int) -> dict[str, float]:
+    """CPU seconds per thread name (``comm``) of a process, summed over same-named threads."""
+    out: dict[str, float] = {}
+    ticks = os.sysconf("SC_CLK_TCK")
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            stat = (task / "stat").read_text()
+        except OSError:
+            continue
+        comm = stat[stat.index("(") + 1:stat.rindex(")")]
+        parts = stat.rsplit(")", 1)[1].split()
+        out[comm] = out.get(comm, 0.0) + (int(parts[11]) + int(parts[12])) / ticks
+    return out
+
+
 def _proc_rss_mb(pid: int) -> tuple[float, float]:
     rss = hwm = math.nan
     with open(f"/proc/{pid}/status") as f:
@@ -173,13 +188,22 @@ def _pct(xs: list[float], q: float) -> float:
     return xs[i]
 
 
+def _renice(n: int) -> None:
+    try:
+        os.nice(n)
+    except OSError:  # not permitted for a negative increment without CAP_SYS_NICE
+        pass
+
+
 def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
-            pipelines: tuple[str, ...] | None = None) -> dict[str, Any]:
+            pipelines: tuple[str, ...] | None = None, nice: int = -5) -> dict[str, Any]:
     """Run the service under nominal load for ``duration_s`` wall seconds (after
     ``warmup_s``); return the figures of the module docstring (and a few more).
 
     ``pipelines`` overrides the registered pipeline modules (``onboard.pipelines.MODULES``)
     in the child, e.g. ``("nav", "aie", "kf", "current")``; None runs those registered.
+    ``nice`` is applied to the child as systemd/onboard.service does (``Nice=-5``) when
+    permitted (root or CAP_SYS_NICE), else ignored; ``nice_applied`` says which.
     """
     from onboard.publishers.zenoh_pub import open_router
 
@@ -226,7 +250,8 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
         cmd = [sys.executable, "-c", "import sys, onboard.pipelines as p; "
                f"p.MODULES = {tuple(pipelines)!r}; from onboard.cli import main; "
                f"sys.exit(main({argv!r}))"]
-    proc = subprocess.Popen(cmd,
+    nice_ok = nice >= 0 or os.geteuid() == 0
+    proc = subprocess.Popen(cmd, preexec_fn=(lambda: _renice(nice)) if nice else None,
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     ready_s = math.nan
     out: dict[str, Any] = {}
@@ -247,6 +272,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
         t0 = time.monotonic()
         k = 0
         cpu0 = wall0 = None
+        threads0: dict[str, float] | None = None
         total = warmup_s + duration_s
         while True:
             t = k / 50.0
@@ -257,6 +283,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
                 time.sleep(delay)
             if cpu0 is None and t >= warmup_s:
                 cpu0, wall0 = _proc_cpu_s(proc.pid), time.monotonic()
+                threads0 = _threads_cpu_s(proc.pid)
                 measuring.set()
             for f in gen.mavlink(t):
                 tx.sendto(f, ("127.0.0.1", mav_port))
@@ -265,11 +292,15 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
             k += 1
         measuring.clear()
         cpu1, wall1 = _proc_cpu_s(proc.pid), time.monotonic()
+        threads1 = _threads_cpu_s(proc.pid)
         rss, hwm = _proc_rss_mb(proc.pid)
         tx.close()
-        assert cpu0 is not None and wall0 is not None
+        assert cpu0 is not None and wall0 is not None and threads0 is not None
         out = {
             "service_cpu_fraction": (cpu1 - cpu0) / (wall1 - wall0),
+            "cpu_fraction_by_thread": {
+                k: round((v - threads0.get(k, 0.0)) / (wall1 - wall0), 4)
+                for k, v in sorted(threads1.items()) if v - threads0.get(k, 0.0) > 0},
             "sensor_to_zenoh_p50_ms": _pct(lat_sensor, 50),
             "sensor_to_zenoh_p99_ms": _pct(lat_sensor, 99),
             "tick_to_zenoh_p50_ms": _pct(lat_tick, 50),
@@ -280,6 +311,8 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
             "startup_to_ready_s": ready_s,
             "estimates_received": len(lat_tick),
             "pipelines": list(pipelines) if pipelines is not None else "registered",
+            "nice_applied": nice if nice_ok else 0,
+            "loadavg_1min": os.getloadavg()[0],
             "duration_s": wall1 - wall0,
             "load": "IMU 50 Hz, servo 10 Hz, heartbeat 1 Hz (MAVLink/UDP); GNSS 5 Hz, "
                     "heading 10 Hz (NMEA/UDP)",
