@@ -446,7 +446,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
     if health is not None:
         rej = ", ".join(f"{k}={n}" for k, n in sorted(health.rejected.items())) or "none"
         say(f"rejected inputs: {rej}")
-    say(f"recording: {', '.join(rec_files) or '-'} (onboard replay {out_dir / 'recordings'})")
+    if rec_files:
+        say(f"recording: {', '.join(rec_files)} (replay it: onboard replay {rec_files[0]})")
     say(f"done in {wall:.1f} s wall")
     return DemoResult(scenario=sc.name, vehicle=vid, duration_s=duration_s, wall_s=wall,
                       estimates=history, health=health, healths=healths, scores=rows, frames=frames,
