@@ -43,14 +43,16 @@ class LoadResult:
     """False when a file was there but could not be used."""
 
 
-def _clean(x: Any) -> Any:
-    """JSON-safe copy: NaN/inf become None, tuples lists, numpy scalars and arrays plain."""
+def plain(x: Any) -> Any:
+    """A JSON-safe deep copy: NaN/inf become None, tuples lists, numpy scalars and arrays
+    plain Python. Take it on the estimator loop (the pipelines keep mutating their arrays);
+    write it from any thread."""
     if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
+        return {str(k): plain(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
+        return [plain(v) for v in x]
     if hasattr(x, "tolist"):  # numpy arrays and scalars
-        return _clean(x.tolist())
+        return plain(x.tolist())
     if isinstance(x, float) and not math.isfinite(x):
         return None
     return x
@@ -126,7 +128,7 @@ class StateFile:
         """
         doc = {"format": STATE_FORMAT, "version": STATE_VERSION, "vehicle": self.vehicle,
                "vehicle_class": self.vehicle_class, "saved_at": time.time(),
-               "pipelines": _clean(pipelines)}
+               "pipelines": plain(pipelines)}
         data = json.dumps(doc, allow_nan=False, separators=(",", ":")).encode()
         d = self.path.parent
         d.mkdir(parents=True, exist_ok=True)

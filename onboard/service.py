@@ -48,7 +48,7 @@ from drivers.transports import Transport, TransportUrlError, open_transport, par
 from onboard.config import Config, ConfigError, SourceConfig, load
 from onboard.engine import Engine
 from onboard.messages import EstimateRecord, HealthRecord
-from onboard.persistence import StateFile
+from onboard.persistence import StateFile, plain
 from onboard.recorder import Intake, Recorder, config_to_dict
 from onboard.sdnotify import Notifier
 
@@ -465,7 +465,7 @@ class Service:
     # ------------------------------------------------------------------ persistence
 
     def _save_state_async(self) -> None:
-        state = self.engine.get_state()
+        state = plain(self.engine.get_state())  # a copy taken between ticks
         loop = asyncio.get_running_loop()
         fut = loop.run_in_executor(None, self.state_file.save, state)
         fut.add_done_callback(self._saved)
