@@ -340,6 +340,11 @@ class ReplayResult:
     records: int = 0
     meta: list[dict[str, Any]] = field(default_factory=list)
     stats: ReadStats = field(default_factory=ReadStats)
+    """Frame-level damage of the recording files (``truncated``, ``crc``, ...)."""
+    rejected: dict[str, int] = field(default_factory=dict)
+    """Parser rejections by ``parse:<input>:<reason>`` (engine ones are in engine.rejected)."""
+    dropped: dict[str, int] = field(default_factory=dict)
+    """Queue drops by input, as live."""
 
 
 def recording_files(path: str | Path) -> list[Path]:
@@ -426,6 +431,8 @@ def replay_recording(paths: str | Path | Iterable[str | Path], engine: Engine,
             else:
                 intake.chunk(rec.source, kind, rec.data, rec.t)
             first = False if kind != "meta" else first
+    result.rejected = intake.parse_rejections()
+    result.dropped = dict(intake.dropped)
     return result
 
 

@@ -217,6 +217,7 @@ def test_service_end_to_end_over_udp_pty_tcp_to_zenoh_and_mavlink_and_exact_repl
                            lambda t, recs: replayed.append((t, [enc.encode(r) for r in recs])))
     assert res.ticks == len(live) > 20
     assert replayed == live
+    assert res.rejected == svc.intake.parse_rejections()  # same bad input, same counts
     n_values = sum(len(msgspec.json.decode(b)["values"]) for _, recs in live for b in recs)
     assert n_values > 100
 
