@@ -59,7 +59,6 @@ from sitl.environment import (
     WaveField,
 )
 from sitl.sensors import SensorSuiteConfig
-from sitl.truth import TruthRecord
 
 VOCABULARY: dict[str, tuple[str, ...]] = {
     "water_current": ("north", "east"),
@@ -174,23 +173,23 @@ def apply_to_plant(effects: tuple[Effect, ...], plant: object) -> None:
 FORCE_EFFECTS = ("quadratic_drag", "surge_yaw_coupling", "sideslip", "external_force")
 
 
-def external_force_ned(effects: tuple[Effect, ...], truth: TruthRecord,
+def external_force_ned(effects: tuple[Effect, ...], u_r: float, r: float, yaw: float,
                        surge_mass_kg: float) -> np.ndarray | None:
-    """Sum of the force effects (N, NED) at the state ``truth``; None when there are none.
-
-    ``surge_mass_kg`` (the plant's effective surge mass) turns the ``surge_yaw_coupling``
-    acceleration into a force.
-    """
+    """Sum of the force effects (N, NED) for a vehicle with surge speed through the water
+    ``u_r`` (m/s), yaw rate ``r`` (rad/s) and heading ``yaw`` (rad); None when there are
+    none. ``surge_mass_kg`` (the plant's effective surge mass) turns the
+    ``surge_yaw_coupling`` acceleration into a force. Body forces are turned into the
+    earth frame with the heading only (surface vehicles)."""
     fx = fy = 0.0
     f_ned = np.zeros(3)
     any_force = False
-    u = truth.u_r
+    u = u_r
     for e in effects:
         p = e.params
         if e.name == "quadratic_drag":
             fx -= p["coefficient"] * u * abs(u)
         elif e.name == "surge_yaw_coupling":
-            fx -= surge_mass_kg * p["coefficient"] * u * truth.r * truth.r
+            fx -= surge_mass_kg * p["coefficient"] * u * r * r
         elif e.name == "sideslip":
             fy += p["coefficient"] * u * abs(u)
         elif e.name == "external_force":
@@ -201,7 +200,7 @@ def external_force_ned(effects: tuple[Effect, ...], truth: TruthRecord,
     if not any_force:
         return None
     if fx or fy:
-        c, s = math.cos(truth.yaw), math.sin(truth.yaw)
+        c, s = math.cos(yaw), math.sin(yaw)
         f_ned[0] += c * fx - s * fy
         f_ned[1] += s * fx + c * fy
     return f_ned

@@ -135,6 +135,7 @@ class Simulation:
         self.controller = controller if controller is not None else sc.controller()
         self.truth_rate_hz = truth_rate_hz
         self.force_effects = tuple(e for e in sc.injected if e.name in FORCE_EFFECTS)
+        self.surge_mass = sc.vehicle.surge_mass(self.plant)
         self.effects_truth = effect_params(sc.injected)
         rates = [s.rate_hz for s in self.sensors] + [self.controller.rate_hz, truth_rate_hz]
         self.tick_hz = _tick_rate(rates)
@@ -171,9 +172,9 @@ class Simulation:
                 eff = self.actuators.apply(vehicle.to_channels(self.command))
                 self.plant_command = vehicle.from_channels(eff, self.command)
             if self.force_effects:
-                if truth is None:
-                    truth = self._truth(t)
-                f = external_force_ned(self.force_effects, truth, vehicle.surge_mass(plant))
+                x = plant.x  # [N, E, D, phi, theta, psi, u_r, v_r, w_r, p, q, r, ...]
+                f = external_force_ned(self.force_effects, float(x[6]), float(x[11]),
+                                       float(x[5]), self.surge_mass)
                 self.plant_command = dataclasses.replace(self.plant_command,
                                                          external_force_world=f)
             samples: list[Sample] = []

@@ -155,10 +155,10 @@ def test_force_effects_are_applied_to_a_surface_plant_exactly_once():
 
 
 def test_external_force_effect_rotates_body_forces_into_the_earth_frame():
-    from sitl.truth import TruthRecord
-
-    tr = TruthRecord(t=0, north=0, east=0, down=0, roll=0, pitch=0, yaw=math.pi / 2, u=1.0,
-                     v=0, w=0, p=0, q=0, r=0, u_r=1.0, v_r=0, w_r=0)
-    f = external_force_ned((Effect("quadratic_drag", {"coefficient": 2.0}),), tr, 3.0)
+    f = external_force_ned((Effect("quadratic_drag", {"coefficient": 2.0}),), 1.0, 0.0,
+                           math.pi / 2, 3.0)
     assert f == pytest.approx([0.0, -2.0, 0.0], abs=1e-12)  # heading east: drag points west
-    assert external_force_ned((Effect("gyro_bias", {"z": 0.1}),), tr, 3.0) is None
+    assert external_force_ned((Effect("gyro_bias", {"z": 0.1}),), 1.0, 0.0, 0.0, 3.0) is None
+    f = external_force_ned((Effect("surge_yaw_coupling", {"coefficient": 3.0}),), 1.5, 0.3,
+                           0.0, 3.15)
+    assert f[0] == pytest.approx(-3.15 * 3.0 * 1.5 * 0.09)
