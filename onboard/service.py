@@ -61,6 +61,8 @@ SILENT_AFTER_S = 3.0
 READY_WAIT_S = 1.0
 """Longest wait (s) for the inputs to connect before READY=1 (a missing port does not
 hold the service back: it becomes READY degraded and keeps reconnecting)."""
+FINE_SLEEP_S = 0.0012
+"""The last part (wall s) of the wait for a tick is slept precisely (see sleep_until)."""
 MAX_TICK_LAG_S = 1.0
 """A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 
@@ -92,9 +94,16 @@ class ServiceClock:
         return (t - self.now()) / self.speed
 
     async def sleep_until(self, t: float) -> None:
+        """Sleep until service time ``t``: on the event loop until ~1 ms before, then the
+        last fraction of a millisecond in ``time.sleep`` (epoll, under asyncio, only
+        wakes with millisecond granularity, rounded up; this removes ~0.5 ms of average
+        lateness at the cost of blocking the loop for < 1.2 ms per tick)."""
         d = self.wall_delay(t)
+        if d > FINE_SLEEP_S:
+            await asyncio.sleep(d - FINE_SLEEP_S)
+            d = self.wall_delay(t)
         if d > 0:
-            await asyncio.sleep(d)
+            time.sleep(min(d, FINE_SLEEP_S))
 
 
 @dataclass
