@@ -75,7 +75,6 @@ def test_correlated_noise_filter_equals_filtering_the_cumulative_path() -> None:
     A = np.array([[1.0, k.c1], [0.0, k.alpha]])
     B = np.array([k.c2, k.c1])
     x = np.array([pos[1], y[0] / dt])
-    big = 100.0 * 2 * r + 1.0 * dt * dt
     P = np.array([[r, 0.0], [0.0, 1.0]])
     f = IncrementKF(r, correlated=True)
     f.init(y[0], dt, r, 1.0)
@@ -102,7 +101,6 @@ def test_correlated_noise_filter_equals_filtering_the_cumulative_path() -> None:
     # measured: correlated 0.130, position filter 0.130, white 0.166 m/s
     assert rc == pytest.approx(rp, rel=0.05)
     assert rc < 0.9 * rw
-    del big
 
 
 def test_covariance_stays_symmetric_positive() -> None:

@@ -3,19 +3,21 @@
 Everything except the input of the Kalman filter is common to the two pipelines, so the
 comparison of the seed paper (Faros & Tanner 2025, §3) is like for like:
 
-* measurement windows of ``step_s`` seconds (the AIE step Ts, algorithms.md §1.2). All
-  GNSS fixes and headings in a window are averaged to one point at the window's mean time
-  (a 1 Hz receiver gives the plain fix; a 5 Hz one five times less variance). Consecutive
-  points give the heading increment (§1.2, wrapped) and the path increment (§1.3, with
-  the circular-arc correction). Steps are as long as the actual time between points, so
-  irregular and missing fixes only change ``dt``; past ``max_gap_s`` the chain restarts;
+* measurement windows: ``step_s`` seconds for surge (the AIE step Ts, algorithms.md
+  §1.2), ``heading_step_s`` for heading. All GNSS fixes (headings) in a window are
+  averaged to one point at the window's mean time (a 1 Hz receiver gives the plain fix; a
+  5 Hz one five times less variance). Consecutive points give the heading increment
+  (§1.2, wrapped) and the path increment (§1.3, with the circular-arc correction). Steps
+  are as long as the actual time between points, so irregular and missing fixes only
+  change ``dt``; past ``max_gap_s`` the chain restarts;
 * two independent axis filters (surge, heading) of :mod:`onboard.pipelines.kalman`, fed
   by an :class:`AxisFilter` subclass that chooses the input (AIE: estimated; KF: command);
 * trajectory reconstruction of the paper's §3.3: ``N += y_s cos(psi)``, ``E += y_s
   sin(psi)`` from the estimated increments (``psi`` at the chord's mid heading), and
-  ``psi += y_psi``; both optionally pulled toward the measurement by a small gain
-  (``position_anchor``, ``heading_anchor``) because their common mode is unobservable from
-  increments and would otherwise random-walk;
+  ``psi += y_psi``. The common mode of increments is unobservable, so the position is
+  pulled toward the GNSS point by a small gain (``position_anchor``); the heading comes
+  out exactly as the measured point minus its estimated noise when the MA(1) noise is
+  modelled (``correlated_noise``), else it is pulled with ``heading_anchor``;
 * estimates between steps are predicted with the model and the current input.
 
 Inputs: :class:`GnssFix`, :class:`Heading` (preferred) or :class:`Attitude` yaw, and

@@ -141,6 +141,54 @@ def convergence_step(history: Sequence[Sequence[float]], tol: float = 0.2) -> in
     return int(bad[-1] + 1) if bad.size else 0
 
 
+def identify_sitl(scenario: str, seed: int = 10, dt: float = 1.0
+                  ) -> tuple[AxisModel, AxisModel]:
+    """Identify the surge and heading models from one SITL log as a user would from a
+    field log: GNSS speed over ground and compass heading against the mapped commands
+    (§1.2; surge in rate form, heading from its increments, output-error fit)."""
+    from onboard.inputs import InputMapper
+    from onboard.pipelines.surge_heading import axis_commands
+    from sitl.runner import simulate
+
+    cfg = pipeline_config(SCENARIO_CONFIG.get(scenario, "rudder-boat"))
+    mapper = InputMapper(cfg.inputs)
+    tg, sog, th, hd, tc, sc, yc = [], [], [], [], [], [], []
+    last_h = None
+    for _, samples, _ in simulate(scenario, seed=seed):
+        for smp in samples:
+            if isinstance(smp, GnssFix) and smp.sog_mps is not None:
+                tg.append(smp.t)
+                sog.append(smp.sog_mps)
+            elif isinstance(smp, Heading):
+                h = smp.heading_rad
+                if last_h is not None:
+                    h = last_h + math.remainder(h - last_h, 2 * math.pi)
+                last_h = h
+                th.append(smp.t)
+                hd.append(h)
+            cmd = mapper.map(smp)
+            if cmd is not None:
+                a, b = axis_commands(cmd)
+                tc.append(cmd.t)
+                sc.append(a if a is not None else 0.0)
+                yc.append(b if b is not None else 0.0)
+    t0, t1 = max(tg[0], th[0], tc[0]), min(tg[-1], th[-1], tc[-1])
+    grid = np.arange(t0, t1, dt)
+    # commands held over each step: mean of the ZOH signal over (k, k+1]
+    fine = np.arange(t0, t1, 0.05)
+    idx = np.clip(np.searchsorted(tc, fine, side="right") - 1, 0, len(tc) - 1)
+    per = int(round(dt / 0.05))
+    nb = len(fine) // per
+    scg = np.asarray(sc)[idx][: nb * per].reshape(nb, per).mean(axis=1)
+    ycg = np.asarray(yc)[idx][: nb * per].reshape(nb, per).mean(axis=1)
+    vg = np.interp(grid[:nb], tg, sog)
+    hg = np.interp(grid[:nb], th, hd)
+    yg = np.concatenate(([0.0], np.diff(hg)))
+    ms = fit_axis([(vg, scg)], dt, "rate", "oe", offset=True)
+    mh = fit_axis([(yg, ycg)], dt, "increment", "oe")
+    return ms, mh
+
+
 def sitl_metrics(run: SitlRun, t_min: float = 30.0) -> dict[str, dict[str, float]]:
     """RMSE per pipeline after ``t_min`` seconds (speed m/s, heading rad, position m,
     yaw rate rad/s; AIE also input errors in m/s^2 and rad/s^2)."""
@@ -308,8 +356,9 @@ def blueboat_runs(data_dir: Path) -> list[BlueBoatRun]:
 def _fmt_table(rows: Iterable[Sequence[Any]], header: Sequence[str]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in rows:
-        lines.append("| " + " | ".join(f"{x:.3f}" if isinstance(x, float) else str(x)
-                                       for x in r) + " |")
+        lines.append("| " + " | ".join(
+            (f"{x:.4f}" if abs(x) < 0.1 else f"{x:.3f}") if isinstance(x, float) else str(x)
+            for x in r) + " |")
     return "\n".join(lines)
 
 
@@ -348,6 +397,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     print("\nPure AIE (known_input = false: no use of the commands, as in the paper)")
     print(_fmt_table(prow, ("scenario", "speed", "heading", "position", "surge_input",
                             "yaw_input")))
+    # both filters with the model identified from a training log (seed 10)
+    irows = []
+    for sc in ("jaiabot-turns", "twin-thruster-turns"):
+        ms, mh = identify_sitl(sc, seed=10)
+        tab = {"surge": {"a": ms.a, "gain": ms.gain, "offset": ms.offset},
+               "heading": {"a": mh.a, "gain": mh.gain, "offset": mh.offset}}
+        met = [sitl_metrics(run_sitl(sc, seed=seed, aie_table=tab)) for seed in seeds]
+        irows.append((sc, f"a={ms.a:.2f} g={ms.gain:.2f} / a={mh.a:.2f} g={mh.gain:.2f}",
+                      *[float(np.mean([m[p][q] for m in met]))
+                        for q in ("speed", "heading", "position") for p in ("aie", "kf")]))
+    print("\nIdentified models (surge / heading, from seed 10's GNSS SOG and compass)")
+    print(_fmt_table(irows, ("scenario", "model", "AIE speed", "KF speed", "AIE heading",
+                             "KF heading", "AIE pos", "KF pos")))
     # sensitivity: model parameters (a, gain of both axes) off by -30 % / +30 %
     srows = []
     for sc in ("jaiabot-turns", "twin-thruster-turns"):
@@ -389,7 +451,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                                  "KF yaw rate", "AIE pos", "KF pos", "corr surge",
                                  "corr yaw")))
         if not args.no_figures:
-            _figure_blueboat(test[0] if test else runs[0], ms, my)
+            pick = [r for r in test if r.name.endswith("239")] or test or runs
+            _figure_blueboat(pick[0], ms, my)
     return 0
 
 
