@@ -23,8 +23,9 @@ One tick of the loop at time ``t`` (state x(t)):
 5. the plant advances to ``t + 1/tick_hz`` (RK4 sub-steps <= plant.dt).
 
 The tick rate is the least common multiple of the integer sensor, control and truth rates
-(capped at 200 Hz; otherwise 100 Hz with rates rounded to whole ticks), so sample times
-are exact multiples of the sensor periods. Same scenario, duration and seed: the same
+when that is at most 200 Hz, so sample times are exact multiples of the sensor periods;
+otherwise it is the fastest rate (at least 100 Hz) and the other periods are rounded to
+whole ticks (a 7 Hz GNSS beside a 200 Hz IMU reports at 200/29 = 6.9 Hz). Same scenario, duration and seed: the same
 samples and, through the emitters, the same bytes.
 """
 
@@ -74,7 +75,9 @@ MAX_TICK_HZ = 200
 
 
 def _tick_rate(rates: Sequence[float]) -> int:
-    """The loop rate (Hz) for the given event rates (see the module docstring)."""
+    """The loop rate (Hz) for the given event rates (see the module docstring): their
+    least common multiple when they are whole numbers and it is at most 200 Hz, else the
+    fastest rate (at least 100 Hz), the others then rounded to whole ticks."""
     ints = [int(round(r)) for r in rates]
     if all(abs(r - i) < 1e-9 and i > 0 for r, i in zip(rates, ints)):
         lcm = 1
@@ -82,7 +85,7 @@ def _tick_rate(rates: Sequence[float]) -> int:
             lcm = math.lcm(lcm, i)
         if lcm <= MAX_TICK_HZ:
             return lcm
-    return 100
+    return max(100, int(math.ceil(max(rates) - 1e-9)))
 
 
 class _Heartbeat:

@@ -158,3 +158,13 @@ def test_cli_writes_tlog_truth_metadata_and_report(tmp_path, capsys):
     assert meta["declared_effects"] == [] and "water_current" not in json.dumps(meta)
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["scenario"] == "effect-current" and report["frames"]["mavlink"] > 0
+
+
+def test_tick_rate_keeps_every_sensor_rate():
+    from sitl.runner import _tick_rate
+
+    assert _tick_rate([50, 10, 5, 1, 10]) == 50
+    assert _tick_rate([100, 20, 5, 1]) == 100
+    assert _tick_rate([50, 3, 10]) == 150
+    assert _tick_rate([200, 7, 10]) == 200  # lcm 1400: the fastest rate, 7 Hz rounded
+    assert _tick_rate([50, 2.5]) == 100
