@@ -61,18 +61,12 @@ _TMP = Path(tempfile.mkdtemp(prefix="onboard-fuzz-"))
 # --------------------------------------------------------------------------- known bugs
 
 KNOWN_BUGS: dict[tuple[str, str, str], str] = {
-    ("UnicodeDecodeError", "dvl_json.py", "decode_line"):
-        "finding 2: invalid UTF-8 inside a JSON string escapes DvlJsonParser as "
-        "UnicodeDecodeError (msgspec raises it, not DecodeError)",
-    ("UnknownProtocol", "protocols.py", "parser_for"):
-        "finding 3: a recording record of unknown kind raises UnknownProtocol out of "
-        "RecordingReader (it catches KeyError)",
-    ("UnicodeDecodeError", "recording.py", "read_records"):
-        "finding 4: a CRC-valid recording frame with invalid UTF-8 in a string field "
-        "escapes read_records as UnicodeDecodeError",
-    ("UnicodeDecodeError", "recording.py", "decode_sample"):
-        "finding 4: a CRC-valid 'sample' record with invalid UTF-8 in a string field "
-        "escapes RecordingReader as UnicodeDecodeError",
+    ("TypeError", "dataflash.py", "_finite"):
+        "finding 9: a FMT that types a numeric column as text (n/N/Z) makes the DataFlash "
+        "handlers raise TypeError (abs() of bytes)",
+    ("TypeError", "dataflash.py", "h"):
+        "finding 9: a FMT that types a numeric column as text (n/N/Z) makes the DataFlash "
+        "handlers raise TypeError (abs() of bytes)",
 }
 """Exceptions found by fuzzing in code outside this test's owner's area, reported in
 docs/fuzzing.md with reproducers (and pinned by the xfail tests below). The fuzz targets
@@ -375,8 +369,8 @@ def test_mavlink_stream_never_raises_and_is_chunking_invariant(seed, cuts):
 
 @FUZZ
 @given(seed=st.integers(0, 2**32 - 1), cuts=st.lists(st.integers(0, 4000), max_size=6))
-def test_mavlink_intact_frames_survive_magic_free_garbage(seed, cuts):
-    data, intact = mavlink_input(random.Random(seed), garbage_magic=False, damaged=False)
+def test_mavlink_intact_frames_survive_garbage(seed, cuts):
+    data, intact = mavlink_input(random.Random(seed), damaged=False)
     run_mavlink(data, cuts, intact)
 
 
@@ -386,10 +380,6 @@ def _unknown_id_header(plen: int = 32) -> bytes:
     return bytes([0xFD, plen, 0, 0, 0, 1, 1, 0x11, 0x22, 0x33])
 
 
-@pytest.mark.xfail(reason="MavlinkParser skips a frame of unknown id by its length without "
-                   "checking that a frame follows (TlogReader does): a stray 0xFD in line noise "
-                   "swallows up to 267 bytes of intact frames, counted as a record UNKNOWN_<id>, "
-                   "not as a rejection (docs/fuzzing.md, finding 1)", strict=False)
 def test_mavlink_noise_with_a_start_byte_does_not_swallow_the_next_frame():
     good = mav_frame(30, bytes(28))  # ATTITUDE, all zeros: a valid sample
     p = MavlinkParser()
@@ -749,9 +739,6 @@ def test_recording_never_raises(seed):
     run_recording(data, None)
 
 
-@pytest.mark.xfail(reason="finding 5: a damaged length field past the end of the file stops "
-                   "read_records (test_recording_damaged_length_does_not_cost_the_rest_of_the_file)",
-                   strict=False)
 @FUZZ
 @given(seed=st.integers(0, 2**32 - 1))
 def test_recording_damage_never_costs_an_intact_frame(seed):
@@ -839,7 +826,8 @@ run_text = _guarded(_run_text)
 
 TARGETS: dict[str, tuple[Callable[[random.Random], Any], Callable[[Any, random.Random], None]]] = {
     "nmea": (nmea_input, lambda d, r: run_nmea(d, [r.randrange(len(d) + 1)], r.choice(("rx", "utc")))),
-    "mavlink": (lambda r: mavlink_input(r)[0], lambda d, r: run_mavlink(d, [r.randrange(len(d) + 1)])),
+    "mavlink": (lambda r: mavlink_input(r, damaged=r.random() < 0.5),
+                lambda d, r: run_mavlink(d[0], [r.randrange(len(d[0]) + 1)])),
     "dvl_json": (dvl_input, lambda d, r: run_dvl(d, [r.randrange(len(d) + 1)])),
     "pd6": (pd6_input, lambda d, r: run_pd6(d, [r.randrange(len(d) + 1)],
                                             r.choice(("rx", "instrument")),
@@ -848,7 +836,7 @@ TARGETS: dict[str, tuple[Callable[[random.Random], Any], Callable[[Any, random.R
     "tlog": (lambda r: mutate(tlog_bytes(), r, r.randint(1, 12)), lambda d, r: run_tlog(d, "c.tlog")),
     "dataflash": (lambda r: mutate(dataflash_bytes(), r, r.randint(1, 12)),
                   lambda d, r: run_dataflash(d, "c.bin")),
-    "recording": (recording_input, lambda d, r: run_recording(d[0], None, "c.onbrec")),
+    "recording": (recording_input, lambda d, r: run_recording(d[0], d[1], "c.onbrec")),
     "text": (text_capture_input, lambda d, r: run_text(d, "c.txt")),
 }
 """name -> (make an input from an RNG, run the parser on it and check the properties);
@@ -856,7 +844,7 @@ used by the long campaign (``test_fuzz_campaign.py``)."""
 
 
 @pytest.mark.parametrize("name", sorted(TARGETS))
-def test_every_target_runs_on_its_clean_corpus(name):
+def test_every_target_runs_on_its_corpus(name):
     make, run = TARGETS[name]
     rng = random.Random(0)
     for _ in range(3):
@@ -864,13 +852,11 @@ def test_every_target_runs_on_its_clean_corpus(name):
 
 
 # --------------------------------------------------------------------------- findings
-# Minimal reproducers of what fuzzing found outside this file's owner's area (see
-# docs/fuzzing.md). xfail (not strict) so the suite stays green while they are open; an
-# XPASS in the report means the fix landed: remove the marker and the KNOWN_BUGS entry.
+# Minimal reproducers of what fuzzing found (docs/fuzzing.md). Fixed ones are plain
+# regression tests; open ones are xfail (not strict) so the suite stays green while they
+# are open: an XPASS means the fix landed -- remove the marker and the KNOWN_BUGS entry.
 
 
-@pytest.mark.xfail(reason="finding 2 (drivers/dvl_json.py decode_line catches only "
-                   "msgspec.DecodeError)", strict=False)
 def test_dvl_json_invalid_utf8_in_a_string_is_a_counted_rejection():
     p = dvl_json.DvlJsonParser()
     assert p.feed(b'{"type":"\xc6"}\n', 0.0) == []
@@ -885,8 +871,6 @@ def _recording(tmp_path: Path, *frames: bytes) -> Path:
     return p
 
 
-@pytest.mark.xfail(reason="finding 3 (drivers/recording.py RecordingReader catches KeyError, "
-                   "parser_for raises UnknownProtocol)", strict=False)
 def test_recording_unknown_kind_is_a_counted_rejection(tmp_path):
     from drivers.recording import RawRecord, RecordingReader, encode_frame
 
@@ -895,8 +879,6 @@ def test_recording_unknown_kind_is_a_counted_rejection(tmp_path):
     assert list(r) == [] and r.stats.rejected
 
 
-@pytest.mark.xfail(reason="finding 4 (drivers/recording.py read_records catches only "
-                   "msgspec.DecodeError)", strict=False)
 def test_recording_invalid_utf8_string_is_a_counted_rejection(tmp_path):
     import zlib
 
@@ -909,8 +891,6 @@ def test_recording_invalid_utf8_string_is_a_counted_rejection(tmp_path):
     assert list(read_records(p, stats)) == [] and stats.rejected["decode"] == 1
 
 
-@pytest.mark.xfail(reason="finding 5 (drivers/recording.py read_records stops at a damaged "
-                   "length field that points past the end of the file)", strict=False)
 def test_recording_damaged_length_does_not_cost_the_rest_of_the_file(tmp_path):
     from drivers.recording import RawRecord, encode_frame, read_records
 
@@ -921,3 +901,23 @@ def test_recording_damaged_length_does_not_cost_the_rest_of_the_file(tmp_path):
     p = _recording(tmp_path, bytes(bad), b, b)
     stats = ReadStats()
     assert len(list(read_records(p, stats))) == 2
+
+
+@pytest.mark.xfail(reason="finding 9 (drivers/dataflash.py: handlers assume the FMT types "
+                   "their columns as numbers)", strict=False)
+def test_dataflash_fmt_typing_a_number_as_text_is_a_counted_rejection(tmp_path):
+    import struct
+
+    from drivers.dataflash import DataflashReader
+
+    def fmt(typ: int, name: str, f: str, cols: str, size: int) -> bytes:
+        return b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", typ, 3 + size, name.encode(),
+                                               f.encode(), cols.encode())
+
+    data = (fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns", 86)
+            + fmt(64, "PARM", "QNN", "TimeUS,Name,Value", 40)           # Value as char[16]
+            + b"\xa3\x95\x40" + struct.pack("<Q16s16s", 1000, b"FRAME_CLASS", b"2"))
+    p = tmp_path / "parm.bin"
+    p.write_bytes(data)
+    r = DataflashReader(p)
+    assert list(r) == [] and r.stats.rejected
