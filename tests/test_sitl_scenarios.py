@@ -168,3 +168,17 @@ def test_tick_rate_keeps_every_sensor_rate():
     assert _tick_rate([50, 3, 10]) == 150
     assert _tick_rate([200, 7, 10]) == 200  # lcm 1400: the fastest rate, 7 Hz rounded
     assert _tick_rate([50, 2.5]) == 100
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--scenario", "clean", "--link", "serial:/dev/x"], "--link"),
+    (["--scenario", "clean", "--dvl", "tcp:127.0.0.1:0"], "has no DVL"),
+    (["--scenario", "gavia-tidal", "--dvl", "udp:1.2.3.4:5"], "--dvl expects"),
+    (["--scenario", "clean", "--duration", "-1"], "--duration"),
+    (["--scenario", "clean", "--controller", "pid"], "bluerov2-circle"),
+    ([], "--scenario"),
+])
+def test_cli_bad_usage_exits_2_with_one_line(argv, message, capsys):
+    assert onboard_main(["sitl", *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
