@@ -146,10 +146,12 @@ class Transport:
                 raise
             was_connected = self.stats.connected
             self.stats.connected = False
-            self.stats.last_error = reason
             if was_connected:
                 self.stats.disconnects += 1
                 self._event(f"{self.spec}: lost ({reason})")
+            elif reason != self.stats.last_error:  # first failure, or a different one
+                self._event(f"{self.spec}: cannot open ({reason}); retrying")
+            self.stats.last_error = reason
             if time.monotonic() - t_open >= self.backoff_reset_s:
                 delay = self.backoff_initial_s
             await asyncio.sleep(delay)

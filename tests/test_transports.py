@@ -162,9 +162,11 @@ def test_pty_transport_reads_and_reopens_a_pseudo_terminal_that_disappears(tmp_p
 
 
 def test_a_missing_serial_port_is_retried_not_fatal(tmp_path):
+    events: list[str] = []
+
     async def main():
         tr = open_transport(f"serial:{tmp_path / 'ttyNONE'}:115200", backoff_initial_s=0.01,
-                            backoff_max_s=0.02)
+                            backoff_max_s=0.02, on_event=events.append)
         agen = tr.__aiter__()
         task = asyncio.ensure_future(agen.__anext__())
         await asyncio.sleep(0.3)
@@ -176,6 +178,7 @@ def test_a_missing_serial_port_is_retried_not_fatal(tmp_path):
 
     stats = run(main())
     assert not stats.connected and "ENOENT" in stats.last_error
+    assert len(events) == 1 and "cannot open" in events[0]  # said once, not every retry
 
 
 def test_serial_paths_with_colons_keep_the_default_baud():
