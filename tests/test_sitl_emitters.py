@@ -173,3 +173,33 @@ def test_pty_never_blocks_without_a_reader():
     sink.close(drain_s=0.0)
     assert time.perf_counter() - t0 < 2.0
     assert sink.dropped > 0
+
+
+def test_pymavlink_opens_the_pty_as_a_serial_port():
+    """What a ground station or the service does: mavutil on the printed /dev/pts path."""
+    from pymavlink import mavutil
+
+    sink = PtySink(drain_s=20.0)
+    conn = mavutil.mavlink_connection(sink.path, baud=115200)
+    got: dict[str, int] = {}
+
+    def receive() -> None:
+        import serial
+
+        while True:
+            try:
+                m = conn.recv_match(blocking=True, timeout=1.0)
+            except serial.SerialException:  # the simulator closed the pty: unplugged
+                return
+            if m is None:
+                return
+            got[m.get_type()] = got.get(m.get_type(), 0) + 1
+
+    th = threading.Thread(target=receive, daemon=True)
+    th.start()
+    summary = run("twin-thruster-turns", 4.0, seed=3, mavlink=[sink])
+    th.join(10)
+    conn.close()
+    assert got.get("BAD_DATA", 0) == 0
+    assert sum(got.values()) == summary.frames["mavlink"]
+    assert got["HEARTBEAT"] == 5 and got["PARAM_VALUE"] == 2
