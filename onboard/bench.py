@@ -278,7 +278,32 @@ def bench_replay(s: Settings, workdir: Path, rep: Report) -> None:
         "cpu_ratios": [round(x, 3) for x in cpu_ratios],
         "wall_ratios": [round(x, 3) for x in wall_ratios],
         "wall_ratio_median": round(statistics.median(wall_ratios), 3),
+        "breakdown_cpu_s": replay_breakdown(log),
     }
+
+
+def replay_breakdown(log: Path) -> dict[str, float]:
+    """Where the replay's CPU time goes: reading the tlog, the engine (validation, ticks),
+    each pipeline's ``step``; one in-process pass (the CSV and summary are not included)."""
+    from drivers.tlog import TlogReader
+    from onboard.engine import Engine, run
+    from onboard.replay import choose_config
+
+    cfg, _ = choose_config(str(log), None)
+    c = time.process_time()
+    samples = list(TlogReader(log))
+    read = time.process_time() - c
+    engine = Engine(cfg)
+    timed = [_Timed(p) for p in engine.pipelines]
+    engine.pipelines = timed  # type: ignore[assignment]
+    c = time.process_time()
+    ticks = run(engine, iter(samples), lambda t, recs: None)
+    total = time.process_time() - c
+    out = {"read": round(read, 3), "engine": round(total - sum(p.seconds for p in timed), 3)}
+    for p in timed:
+        out[f"pipeline.{p.name}"] = round(p.seconds, 3)
+    out["ticks"] = ticks
+    return out
 
 
 def bench_aie(s: Settings, rep: Report) -> None:
@@ -334,7 +359,7 @@ def bench_mpc(s: Settings, rep: Report) -> None:
 
 
 class _Timed:
-    """A pipeline whose ``step`` time is accumulated; everything else passes through."""
+    """A pipeline whose ``step`` CPU time is accumulated; everything else passes through."""
 
     def __init__(self, inner: Any) -> None:
         self._inner = inner
@@ -342,9 +367,9 @@ class _Timed:
         self.calls = 0
 
     def step(self, t: float, samples):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         out = self._inner.step(t, samples)
-        self.seconds += time.perf_counter() - t0
+        self.seconds += time.process_time() - t0
         self.calls += 1
         return out
 
@@ -481,6 +506,11 @@ def table(rep: Report) -> str:
                      f"{statistics.median(r['pymavlink_cpu_s']):.2f} s CPU (median of "
                      f"{len(r['cpu_ratios'])} interleaved pairs; ratio of CPU times; wall-time "
                      f"ratio {r['wall_ratio_median']:g})")
+        b = dict(r.get("breakdown_cpu_s") or {})
+        ticks = b.pop("ticks", 0)
+        if b:
+            lines.append("  replay CPU by stage: " + ", ".join(
+                f"{k} {v:.2f} s" for k, v in b.items()) + f" ({ticks:,} ticks)")
     a = rep.detail.get("aie")
     if a:
         lines.append(f"AIE axis step {a['aie_axis_step_us']:.1f} us, filterpy KF(3) "
