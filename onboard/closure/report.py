@@ -33,9 +33,9 @@ def _clean(x):
     return x
 
 
-def _residual_stats(sel: Selection, f: M.Fit) -> dict:
-    res = M.residuals(sel.split.holdout, f)
-    return {ch: stats.summary(r, sel.split.holdout.dt) for ch, r in res.items()}
+def _residual_stats(hold, f: M.Fit) -> dict:
+    res = M.residuals(hold, f)
+    return {ch: stats.summary(r, hold.dt) for ch, r in res.items()}
 
 
 def diagnosis(sel: Selection, log: str) -> dict:
@@ -49,7 +49,11 @@ def diagnosis(sel: Selection, log: str) -> dict:
         cand = last_round.get(name)
         detected = name in sel.chosen
         entry = {"name": name, "detected": detected, "params": {}, "evidence": {}}
-        if detected:
+        if detected and name in sel.transformed:
+            value, sd = sel.transformed[name]
+            entry["params"] = {ALL[name].params[0]: value}
+            entry["evidence"]["std"] = {ALL[name].params[0]: sd}
+        elif detected:
             if name == "thrust_nonlinearity":
                 params, std = ALL[name].describe(f.theta[name], f.std[name], float(f.base[1]))
             else:
@@ -79,9 +83,9 @@ def diagnosis(sel: Selection, log: str) -> dict:
         "base_params": {**({"a": a, "b": b, "c0": c0} if sel.split.fit.has_commands else {}),
                         "x_p": float(f.x_p)},
         "known": {k: v.tolist() for k, v in f.known.items()},
-        "residuals_before": _residual_stats(sel, sel.base_fit),
+        "residuals_before": _residual_stats(sel.split.holdout, sel.base_fit),
         "effects": effects,
-        "residuals_after": _residual_stats(sel, f),
+        "residuals_after": _residual_stats(sel.final_split.holdout, f),
         "holdout_error_before": sel.before.headline,
         "holdout_error_after": sel.after.headline,
         "holdout_metric": sel.metric,
@@ -117,7 +121,11 @@ def figures(sel: Selection) -> dict[str, str]:
 
     hold = sel.split.holdout
     rb = M.residuals(hold, sel.base_fit)
-    ra = M.residuals(hold, sel.final_fit)
+    ra_full = M.residuals(sel.final_split.holdout, sel.final_fit)
+    # After a latency re-alignment the final data are shorter; compare on common ticks.
+    idx = np.searchsorted(sel.final_split.holdout.t, hold.t).clip(0, len(sel.final_split.holdout) - 1)
+    same = sel.final_split.holdout.t[idx] == hold.t
+    ra = {k: np.where(same, v[idx], np.nan) for k, v in ra_full.items()}
     out = {}
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
     heading = np.mod(hold.psi, 2 * np.pi)
@@ -147,7 +155,8 @@ def figures(sel: Selection) -> dict[str, str]:
     plt.close(fig)
 
     pb = M.predict(hold, sel.base_fit)
-    pa = M.predict(hold, sel.final_fit)
+    pa_full = M.predict(sel.final_split.holdout, sel.final_fit)
+    pa = {k: np.where(same, v[idx], np.nan) for k, v in pa_full.items()}
     rows = 2 if "along" in pb else 1
     fig, axes = plt.subplots(rows, 1, figsize=(10, 3.0 * rows), sharex=True, squeeze=False)
     t = hold.t - hold.t[0]

@@ -59,6 +59,7 @@ class Candidate:
     headline: float
     physical: bool = True
     accepted: bool = False
+    value: tuple[float, float] | None = None
 
 
 @dataclass
@@ -74,6 +75,10 @@ class Selection:
     rounds: list[list[Candidate]] = field(default_factory=list)
     unexplained: dict | None = None
     wave: dict | None = None
+    final_split: Split | None = None
+    """The data the final model was fitted and scored on (re-aligned by a latency)."""
+    transformed: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """Data-transforming effects chosen: name -> (value, one-sigma)."""
 
 
 def _sigma(ds: Dataset, f: M.Fit) -> dict[str, float]:
@@ -104,7 +109,7 @@ def _relative(s: M.Score, ref: M.Score) -> float:
 
 
 def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = None,
-           min_gain: float = 0.03, min_t: float = 4.0, penalty: float = 2.0,
+           min_gain: float = 0.05, min_t: float = 4.0, penalty: float = 2.0,
            candidates: tuple[str, ...] | None = None,
            known: dict[str, np.ndarray] | None = None) -> Selection:
     """Choose the effects that explain the base model's held-out residuals (module doc).
@@ -134,18 +139,40 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
     pool = [n for n in (candidates or tuple(ALL)) if n not in declared
             and ALL[n].applies(sp.fit, ctx)]
     chosen: list[str] = []
+    transformed: dict[str, tuple[float, float]] = {}
+    fit_data, hold_data = sp.fit, sp.holdout
     current_fit, current_rel = base, 1.0
     rounds: list[list[Candidate]] = []
+
+    def model_effects(names):
+        return tuple(n for n in names if not ALL[n].transforms_data)
+
     while pool:
         round_: list[Candidate] = []
+        trials: dict[str, tuple[Dataset, Dataset]] = {}
         for name in pool:
-            f = M.fit(sp.fit, (*declared, *chosen, name), sigma, ctx, known=known)
-            s = M.score(sp.holdout, f, metric)
-            k = sum(len(ALL[e].params) for e in (*chosen, name))
+            e = ALL[name]
+            fd, hd = fit_data, hold_data
+            if e.transforms_data:
+                found = e.search(fit_data)
+                if found is None:
+                    continue
+                value, value_std = found
+                fd, hd = e.transform(fit_data, value), e.transform(hold_data, value)
+                trials[name] = (fd, hd)
+                theta, std = np.array([value]), np.array([value_std])
+                f = M.fit(fd, model_effects((*declared, *chosen)), sigma, ctx, known=known)
+            else:
+                f = M.fit(fd, model_effects((*declared, *chosen, name)), sigma, ctx, known=known)
+                theta, std = f.theta[name], f.std[name]
+            s = M.score(hd, f, metric)
+            k = sum(len(ALL[x].params) for x in (*chosen, name))
             rel = _relative(s, before) * math.exp(penalty * k / n_eff)
-            t = f.theta[name] / np.where(f.std[name] > 0, f.std[name], np.inf)
+            t = theta / np.where(std > 0, std, np.inf)
             cand = Candidate(name, rel, 1.0 - rel / current_rel, float(np.max(np.abs(t))),
-                             s.headline, physical=ALL[name].physical(f.theta[name]))
+                             s.headline, physical=e.physical(theta))
+            if e.transforms_data:
+                cand.value = (float(theta[0]), float(std[0]))
             round_.append(cand)
         round_.sort(key=lambda c: c.score)
         rounds.append(round_)
@@ -157,15 +184,20 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
             top.accepted = True
             chosen.append(top.name)
             pool.remove(top.name)
-            current_fit = M.fit(sp.fit, (*declared, *chosen), sigma, ctx, known=known)
+            if top.name in trials:
+                fit_data, hold_data = trials[top.name]
+                transformed[top.name] = top.value
+            current_fit = M.fit(fit_data, model_effects((*declared, *chosen)), sigma, ctx,
+                                known=known)
             current_rel = top.score
         else:
             break
-    after = M.score(sp.holdout, current_fit, metric)
+    final_split = Split(fit_data, hold_data, sp.how)
+    after = M.score(hold_data, current_fit, metric)
     sel = Selection(split=sp, metric=metric, declared=tuple(declared), chosen=tuple(chosen),
                     base_fit=base, final_fit=current_fit, before=before, after=after,
-                    rounds=rounds, wave=wave)
-    sel.unexplained = structure_left(sp, current_fit)
+                    rounds=rounds, wave=wave, final_split=final_split, transformed=transformed)
+    sel.unexplained = structure_left(final_split, current_fit)
     return sel
 
 

@@ -56,6 +56,8 @@ class Effect:
         """Regressor columns, channel -> array (n, len(params))."""
         raise NotImplementedError
 
+    transforms_data: bool = False
+    """True if the effect is applied to the data (a delay) rather than as regressors."""
     dynamic: bool = False
     """True if the effect changes the surge dynamics (see :meth:`surge_terms`)."""
 
