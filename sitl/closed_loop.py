@@ -36,12 +36,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
+import msgspec
 import numpy as np
 
 from onboard import config as onboard_config
@@ -131,7 +131,7 @@ def eseso_engine(start_north: float, start_east: float, plant: BlueROV2,
                    weight_n=pp.weight, buoyancy_n=pp.buoyancy, cg_z_m=pp.z_g)
     section.update(overrides or {})
     pipelines["eseso"] = section
-    data = onboard_config.msgspec.to_builtins(cfg)  # type: ignore[attr-defined]
+    data = msgspec.to_builtins(cfg)
     data["pipelines"] = pipelines
     cfg = onboard_config.from_dict(data)
     pipe = eseso_mod.create(cfg)

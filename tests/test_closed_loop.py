@@ -12,7 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from sitl import closed_loop
+pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
+
+from sitl import closed_loop  # noqa: E402
 
 DURATION = 30.0
 

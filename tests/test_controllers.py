@@ -9,12 +9,23 @@ import math
 import numpy as np
 import pytest
 
-from onboard.messages import EstimateRecord
-from sitl.controllers import Bluerov2Params, CircleReference, make_controller
-from sitl.controllers.ampc import Ampc
-from sitl.controllers.nmpc import Nmpc, NmpcTuning, _dynamics, solve_time_stats
-from sitl.controllers.pid import PidController
-from sitl.plants import bluerov2 as plant_mod
+pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
+
+from onboard.messages import EstimateRecord  # noqa: E402
+from sitl.controllers import (  # noqa: E402
+    Bluerov2Params,
+    CircleReference,
+    make_controller,
+)
+from sitl.controllers.ampc import Ampc  # noqa: E402
+from sitl.controllers.nmpc import (  # noqa: E402
+    Nmpc,
+    NmpcTuning,
+    _dynamics,
+    solve_time_stats,
+)
+from sitl.controllers.pid import PidController  # noqa: E402
+from sitl.plants import bluerov2 as plant_mod  # noqa: E402
 
 
 def _record(values: dict[str, float]) -> EstimateRecord:

@@ -17,7 +17,7 @@ from onboard import config
 from onboard.messages import ActuatorCommand, Attitude, Depth, DvlVelocity, GnssFix, Imu
 from onboard.pipelines import eseso
 from onboard.pipelines.base import Pipeline
-from onboard.pipelines.so3 import euler_to_matrix, exp_so3, log_so3
+from onboard.pipelines.so3 import euler_to_matrix, log_so3
 
 RNG = np.random.default_rng(3)
 

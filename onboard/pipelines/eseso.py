@@ -65,9 +65,10 @@ alone; here both are explicit.
 
 By default (``thrust_states = "disturbance"``, the paper's H with -I on ``dxi`` only) the
 thrust update corrects the disturbance alone and carries the other states' uncertainty
-in its noise (``R + H_o P_oo H_o^T``): the damping slope (up to 66 N per m/s) would
-otherwise make it a velocity sensor that thruster and model errors drag away from the
-DVL. Its residual is down-weighted Huber-style above ``thrust_huber``: thruster steps
+in its noise (``R + H_o P_oo H_o^T``): through the damping slope (up to 66 N per m/s) the
+full Jacobian makes it a velocity sensor too, which thruster lag or model errors would
+drag away from the DVL (on the simulated circle both choices give the same figures,
+docs/eseso-mpc.md). Its residual is down-weighted Huber-style above ``thrust_huber``: thruster steps
 excite roll and pitch accelerations faster than the IMU rate resolves.
 
 Position: from the first fused GNSS fix (the local origin), or without one from the
@@ -202,8 +203,8 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     thrust_states: Literal["disturbance", "all"] = "disturbance"
     """Which error states the thrust update corrects. ``"disturbance"`` (the paper's H,
     -I on dxi only): the other states' uncertainty is added to the update's noise
-    instead (``R + H_o P_oo H_o^T``), so thruster and model errors cannot drag the
-    velocity away from the DVL. ``"all"``: the full Jacobian."""
+    instead (``R + H_o P_oo H_o^T``), so thruster and model errors cannot move the
+    velocity. ``"all"``: the full Jacobian."""
     max_consecutive_rejects: int = 5
     """After this many gated samples in a row a channel is fused again, down-weighted by
     NIS / gate, so one bad spell cannot lock a sensor out for good."""
