@@ -561,8 +561,11 @@ class SurgeHeadingPipeline:
         return h
 
     def get_state(self) -> dict[str, Any]:
-        return {"surge": {"model": self.surge.model.to_dict()},
-                "heading": {"model": self.yaw.model.to_dict()}}
+        """The models in use (JSON-safe: finite floats only)."""
+        def model(m: AxisModel) -> dict[str, float]:
+            return {"a": m.a, "gain": m.gain, "offset": m.offset}
+        return {"surge": {"model": model(self.surge.model)},
+                "heading": {"model": model(self.yaw.model)}}
 
     def set_state(self, state: Mapping[str, Any]) -> None:
         for nm, ax in (("surge", self.surge), ("heading", self.yaw)):
