@@ -188,3 +188,22 @@ def test_gnss_gap_restarts_the_chain_without_jumping() -> None:
     assert p.surge.restarts == 1
     assert out["east"] == pytest.approx(39.8, abs=1.5)
     assert out["speed"] == pytest.approx(1.0, abs=0.15)
+
+
+def test_attitude_yaw_serves_when_no_compass_and_heading_wins_when_present() -> None:
+    from onboard.messages import Attitude
+
+    p = _kf()
+    out = {}
+    for i in range(40):
+        t = i * 0.1
+        out = p.step(t, [Attitude(t=t, roll_rad=0.0, pitch_rad=0.0, yaw_rad=3.1 + 0.05 * t)])
+    # wraps through pi: 3.1 + 0.2 rad -> 3.3 - 2 pi
+    assert out["heading"] == pytest.approx((3.1 + 0.05 * 3.9) % (2 * math.pi), abs=0.02)
+    q = _kf()
+    for i in range(40):
+        t = i * 0.1
+        out = q.step(t, [Attitude(t=t, roll_rad=0.0, pitch_rad=0.0, yaw_rad=1.0),
+                         Heading(t=t, heading_rad=0.5, reference="magnetic",
+                                 declination_rad=0.1)])
+    assert out["heading"] == pytest.approx(0.6, abs=0.01)
