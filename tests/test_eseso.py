@@ -222,3 +222,21 @@ def test_bench_step_cost_reports_per_tick_figures() -> None:
     res = eseso.bench_step_cost(2.0)
     assert {"per_tick_us_p50", "per_tick_us_p99", "per_imu_sample_us"} <= set(res)
     assert res["ticks"] == 40
+
+
+def test_heading_alone_fixes_the_yaw_when_there_is_no_attitude_stream() -> None:
+    from onboard.messages import Heading
+
+    f = eseso.create(config.load("bluerov2"))
+    samples = []
+    for k in range(250):
+        t = k / 50.0
+        samples.append(Imu(t=t, accel_x=0, accel_y=0, accel_z=-9.81, gyro_x=0, gyro_y=0,
+                           gyro_z=0))
+        if k % 5 == 0:
+            samples.append(Heading(t=t, heading_rad=1.0))
+    est = _run(f, samples)
+    # levelled from gravity after 1 s with the yaw unknown (std pi), then 40 headings
+    assert abs(est["yaw"] - 1.0) < 0.02
+    assert abs(est["roll"]) < 0.01 and abs(est["pitch"]) < 0.01
+    assert f.health()["fused.heading"] > 30

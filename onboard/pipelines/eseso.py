@@ -103,6 +103,7 @@ from onboard.messages import (
 )
 from onboard.pipelines.geo import LocalFrame, wrap_pi
 from onboard.pipelines.so3 import (
+    cross,
     euler_to_matrix,
     exp_so3,
     log_so3,
@@ -445,11 +446,11 @@ class Eseso:
         Anu = self.A @ nu
         W_B = self.cfg.weight_n - self.cfg.buoyancy_n
         damp = (self.d_l + self.d_nl * np.abs(nu)) * nu
-        h = (self.m_vec * (f + gB) - self.A @ np.cross(w, nu) + np.cross(w, Anu)
+        h = (self.m_vec * (f + gB) - self.A @ cross(w, nu) + cross(w, Anu)
              + damp - W_B * zB - self.xi)
         r_g = np.array([0.0, 0.0, self.cfg.cg_z_m])
         if wdot is not None:
-            h = h + self.cfg.mass_kg * (np.cross(wdot, r_g) + np.cross(w, np.cross(w, r_g)))
+            h = h + self.cfg.mass_kg * (cross(wdot, r_g) + cross(w, cross(w, r_g)))
         J_nu = (-self.A @ skew(w) + skew(w) @ self.A
                 + np.diag(self.d_l + 2.0 * self.d_nl * np.abs(nu)))
         J_w = self.A @ skew(nu) - skew(Anu)
