@@ -114,6 +114,11 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """A yaw rate (rad/s) above this marks a turn, which makes the model identifiable."""
     identify_after_turn_s: float = 30.0
     """Coefficients are updated during turns and this long after them (s)."""
+    yaw_rls_p0: float = 1e6
+    """Initial covariance of the yaw-channel RLS: large, because its regressors (u v,
+    u^2 dr at small rates) are O(0.001-0.01) and ``lambda + phi^T P phi`` must be ruled by
+    the data (p0 = 100 gave coefficients 6x too small, spheroid)."""
+    yaw_forgetting: float = 0.9995
     identify_straight: bool = False
     """Identify on straight lines too: only where the current is known (a calm-water
     identification run with ``init_current_std`` ~ 0 and ``current_walk`` ~ 0)."""
@@ -232,7 +237,7 @@ class CurrentPipeline:
         if "yaw" in self.model.aux:
             i = self.model.channels.index("yaw")
             self.yaw_rls = RecursiveLeastSquares(
-                len(self.thetas[i]), forgetting=0.999, p0=float(np.max(prior_sd[i]) ** 2),
+                len(self.thetas[i]), forgetting=cfg.yaw_forgetting, p0=cfg.yaw_rls_p0,
                 theta0=self.thetas[i], names=self.model.terms["yaw"], sigma2_0=1e-3)
             if "yaw" in cfg.model:
                 self.yaw_rls.P = np.diag(prior_sd[i] ** 2)
@@ -249,6 +254,7 @@ class CurrentPipeline:
         self._blk_S = np.zeros((nd, nd))
         self._blk_n = 0
         self._J = -np.eye(nd)
+        self._eye_n = np.eye(2 * nd + self.n_theta)
         # vehicle state from samples
         self.inp = ModelInputs()
         self.roll = self.pitch = 0.0
@@ -262,6 +268,7 @@ class CurrentPipeline:
         self._started = False
         self._last_vg: tuple[float, np.ndarray, str] | None = None  # (t, body nu_g, kind)
         self._last_meas_t: float | None = None
+        self._last_vg_std = 0.0
         self._svf = (StateVariableFilter(1 + len(self.model.terms["yaw"]), cfg.svf_cutoff_hz)
                      if self.yaw_rls is not None else None)
         # HGO
@@ -389,14 +396,14 @@ class CurrentPipeline:
         """x <- x + dt f(x); P <- F P F^T + Q, then coefficient forgetting (rls.py rule)."""
         nd, nt = self.nd, self.n_theta
         nu = self.x[:nd]
-        phis = self.model.regressors(nu, self.inp)
+        phis = self.model.regressors(nu, self.inp, dofs_only=True)
         f = np.array([phis[i] @ self.thetas[i] for i in range(nd)])
         J = self.model.jacobian(nu, self.inp, self.thetas, f)
         if self._prior_mask is not None:
             J = J * self._prior_mask
         self._J = J
         n = 2 * nd + nt
-        F = np.eye(n)
+        F = self._eye_n.copy()
         F[:nd, :nd] += dt * J
         if nt:
             # coefficient uncertainty flows into nu_r while identifying, and always for
@@ -658,6 +665,7 @@ class CurrentPipeline:
                 self._last_vg = (tm, R.T @ zz, kind)
             else:
                 self._last_vg = (tm, z.copy(), kind)
+            self._last_vg_std = std
         if dt > 0:
             self._identify_yaw(dt)
         if self.flow is not None and self._last_vg is not None:
@@ -692,7 +700,7 @@ class CurrentPipeline:
             if kind != "water":
                 c = R @ (nu_g - nu)
             std = np.sqrt(np.maximum(np.diag(R @ self.flow.nu_cov(nd) @ R.T), 0.0)
-                          + (self.dvl_std if kind != "earth" else self.gnss_std) ** 2)
+                          + self._last_vg_std ** 2)
         out = {"north": float(c[0]), "east": float(c[1]),
                "std_north": float(std[0]), "std_east": float(std[1]),
                "u_r": float(nu[0]), "v_r": float(nu[1])}

@@ -20,8 +20,12 @@ one noisy sample throws the parameters away. Two guards keep ``P`` bounded:
   forgetting when the covariance is small and none as its trace approaches ``tr_max``
   (Fortescue-type, in trace form);
 * exponential resetting (EFRA, Salgado, Goodwin & Middleton 1988): after the update
-  ``P <- P + beta I - delta P^2`` with small ``beta, delta``, which keeps
-  ``p_min I <= P <= p_max I`` without any excitation assumption.
+  ``P <- P + beta I - delta P^2``, which keeps ``P`` between about ``p_min`` and ``p_max``
+  without any excitation assumption. The defaults scale with ``p0``:
+  ``delta = (1/lambda - 1) / p_max`` (the equilibrium of an unexcited direction is then
+  ``p_max``) and ``beta = (1 - lambda) p_min``. A fixed ``delta`` ignores the scale: with
+  ``p0 = 1e6`` (needed when regressors are ~0.01), ``delta = 1e-6`` pulled ``P`` to ~1 and
+  froze the parameters at their initial values (measured, spheroid yaw channel).
 
 The residual variance ``sigma2`` is tracked with the same forgetting, so that the caller can
 use the model error as process noise (the current pipeline does, for honest uncertainty).
@@ -54,8 +58,10 @@ class RecursiveLeastSquares:
         forgetting: float = 0.995,
         p0: float = 1e3,
         tr_max: float | None = None,
-        beta: float = 1e-6,
-        delta: float = 1e-6,
+        p_min: float | None = None,
+        p_max: float | None = None,
+        beta: float | None = None,
+        delta: float | None = None,
         sigma2_0: float = 1e-2,
         theta0: Sequence[float] | None = None,
         names: Sequence[str] | None = None,
@@ -65,7 +71,8 @@ class RecursiveLeastSquares:
             forgetting: lambda in (0, 1]; 0.995 at 10 Hz is a 20 s memory.
             p0: initial covariance ``p0 * I`` (regressors should be normalized to O(1)).
             tr_max: covariance trace at which forgetting stops (default ``n * p0``).
-            beta, delta: EFRA resetting terms (0 disables).
+            p_min, p_max: EFRA bounds (default ``1e-6 p0`` and ``p0``).
+            beta, delta: explicit EFRA terms (override p_min / p_max; 0 disables).
             sigma2_0: initial residual variance.
             theta0: initial parameters (zeros by default).
             names: optional parameter names, for :meth:`as_dict` and the saved state.
@@ -76,8 +83,10 @@ class RecursiveLeastSquares:
         self.forgetting = forgetting
         self.p0 = p0
         self.tr_max = tr_max if tr_max is not None else n * p0
-        self.beta = beta
-        self.delta = delta
+        p_min = p0 * 1e-6 if p_min is None else p_min
+        p_max = p0 if p_max is None else p_max
+        self.beta = (1.0 - forgetting) * p_min if beta is None else beta
+        self.delta = (1.0 / forgetting - 1.0) / p_max if delta is None else delta
         self.names = tuple(names) if names is not None else tuple(f"p{i}" for i in range(n))
         self.theta = np.zeros(n) if theta0 is None else np.asarray(theta0, float).copy()
         self.P = np.eye(n) * p0

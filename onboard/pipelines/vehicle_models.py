@@ -105,8 +105,10 @@ class RegressionModel:
         self.nd = len(self.dofs)
 
     # ------------------------------------------------------------------ regressors
-    def regressors(self, nu: Sequence[float], x: ModelInputs) -> list[np.ndarray]:
-        """phi_i for every channel (``dofs`` then ``aux``), at through-water velocity ``nu``."""
+    def regressors(self, nu: Sequence[float], x: ModelInputs,
+                   dofs_only: bool = False) -> list[np.ndarray]:
+        """phi_i for every channel (``dofs`` then ``aux``), at through-water velocity ``nu``;
+        with ``dofs_only`` the state DOFs only (cheaper, for the filter's prediction)."""
         u = nu[0]
         v = nu[1]
         w = nu[2] if len(nu) > 2 else 0.0
@@ -114,27 +116,30 @@ class RegressionModel:
         if self.kind == "torpedo":
             ct, st = math.cos(x.pitch), math.sin(x.pitch)
             cp, sp = math.cos(x.roll), math.sin(x.roll)
-            uu = _sq(u)
-            return [
-                np.array([uu, w * q, q * q, v * r, r * r, st, _sq(x.n)]),
-                np.array([_sq(v), _sq(r), u * v, u * r, w * p, p * q, ct * sp, uu * x.dr]),
-                np.array([_sq(w), _sq(q), u * w, u * q, v * p, r * p, ct * cp, uu * x.ds]),
-                np.array([r, _sq(r), u * v, uu * x.dr]),
+            uu = u * abs(u)
+            rr = r * abs(r)
+            out = [
+                np.array([uu, w * q, q * q, v * r, r * r, st, x.n * abs(x.n)]),
+                np.array([v * abs(v), rr, u * v, u * r, w * p, p * q, ct * sp, uu * x.dr]),
+                np.array([w * abs(w), q * abs(q), u * w, u * q, v * p, r * p, ct * cp,
+                          uu * x.ds]),
             ]
+            if not dofs_only:
+                out.append(np.array([r, rr, u * v, uu * x.dr]))
+            return out
         if self.kind == "surface-rudder":
             tau = _sq(x.n)
-            return [
-                np.array([_sq(u), u, v * r, tau]),
-                np.array([v, _sq(v), u * r, r]),
-                np.array([r, _sq(r), u * v, _sq(u) * x.dr, tau * x.dr]),
-            ]
+            uu = u * abs(u)
+            out = [np.array([uu, u, v * r, tau]), np.array([v, v * abs(v), u * r, r])]
+            if not dofs_only:
+                out.append(np.array([r, r * abs(r), u * v, uu * x.dr, tau * x.dr]))
+            return out
         if self.kind == "surface-twin":
             tl, tr = _sq(x.left), _sq(x.right)
-            return [
-                np.array([_sq(u), u, v * r, tl + tr]),
-                np.array([v, _sq(v), u * r, r]),
-                np.array([r, _sq(r), u * v, tl - tr]),
-            ]
+            out = [np.array([u * abs(u), u, v * r, tl + tr]), np.array([v, v * abs(v), u * r, r])]
+            if not dofs_only:
+                out.append(np.array([r, r * abs(r), u * v, tl - tr]))
+            return out
         thr = [_sq(t) for t in (tuple(x.thrusters) + (0.0,) * 6)[:6]]
         ct, cp = math.cos(x.pitch), math.cos(x.roll)
         return [
@@ -145,7 +150,7 @@ class RegressionModel:
 
     def accel(self, nu: Sequence[float], x: ModelInputs, thetas: Sequence[np.ndarray]) -> np.ndarray:
         """Through-water acceleration of the state DOFs, ``nu_r'`` (m/s^2)."""
-        phis = self.regressors(nu, x)
+        phis = self.regressors(nu, x, dofs_only=True)
         return np.array([phis[i] @ thetas[i] for i in range(self.nd)])
 
     def jacobian(self, nu: np.ndarray, x: ModelInputs, thetas: Sequence[np.ndarray],
