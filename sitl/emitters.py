@@ -190,7 +190,9 @@ class MavlinkEncoder:
                         self._throttle, -self._depth, self._climb)))
             elif isinstance(s, Depth):
                 self._depth = s.depth_m
-                p = s.pressure_pa if s.pressure_pa is not None else 101325.0 + 1025.0 * GRAVITY_MSS * s.depth_m
+                p = s.pressure_pa
+                if p is None:
+                    p = 101325.0 + 1025.0 * GRAVITY_MSS * s.depth_m
                 out.append(self._pack(m.scaled_pressure2_encode(
                     ms, p / 100.0, (p - 101325.0) / 100.0,
                     _i16((s.temperature_c if s.temperature_c is not None else 15.0) * 100.0))))

@@ -158,7 +158,8 @@ class BoatAutopilot:
         left, right = base + s, base - s
         over = max(abs(left), abs(right))
         if over > 1.0:  # keep the turn, give up speed
-            left, right = left - math.copysign(over - 1.0, left), right - math.copysign(over - 1.0, right)
+            left -= math.copysign(over - 1.0, left)
+            right -= math.copysign(over - 1.0, right)
         return Command(left=_clip(left, 1.0), right=_clip(right, 1.0))
 
 
@@ -179,9 +180,10 @@ class AuvAutopilot:
     """Depth and heading autopilot of a torpedo-shaped AUV at constant propeller speed.
 
     Depth: ``theta_ref = clip(-kz (z_ref - z) - kiz int(z_ref - z) + kw w_down, theta_max)``
-    (nose down to go deeper; the integral takes up the net buoyancy), stern plane ``ds = k_theta (theta - theta_ref) + kq q`` (positive pitches the
-    nose down), clipped. Heading: rudder ``dr = kpsi e + ki int(e) - kr r``. All on the
-    true state (an INS-grade AUV navigation solution).
+    (nose down to go deeper; the integral takes up the net buoyancy), stern plane
+    ``ds = k_theta (theta - theta_ref) + kq q`` (positive pitches the nose down), clipped.
+    Heading: rudder ``dr = kpsi e + ki int(e) - kr r``. All on the true state (an
+    INS-grade AUV navigation solution).
     """
 
     def __init__(self, *, rpm: float, depth_m: float, schedule: HeadingSchedule,
@@ -268,7 +270,8 @@ class RovCirclePid:
 
     def __init__(self, reference: CircleReference, allocate: Callable[[np.ndarray], tuple],
                  *, mass_eff: tuple[float, float, float] = (13.0, 11.3, 16.7),
-                 inertia_eff: float = 0.98, drag_lin: tuple[float, float, float] = (11.74, 20.0, 31.87),
+                 inertia_eff: float = 0.98,
+                 drag_lin: tuple[float, float, float] = (11.74, 20.0, 31.87),
                  drag_quad: tuple[float, float, float] = (18.18, 21.66, 36.99),
                  net_weight_n: float = -2.0, kp: float = 4.0, kd: float = 4.0, ki: float = 0.6,
                  kpsi: float = 6.0, kr: float = 4.0, rate_hz: float = 20.0) -> None:

@@ -25,8 +25,10 @@ One tick of the loop at time ``t`` (state x(t)):
 The tick rate is the least common multiple of the integer sensor, control and truth rates
 when that is at most 200 Hz, so sample times are exact multiples of the sensor periods;
 otherwise it is the fastest rate (at least 100 Hz) and the other periods are rounded to
-whole ticks (a 7 Hz GNSS beside a 200 Hz IMU reports at 200/29 = 6.9 Hz). Same scenario, duration and seed: the same
-samples and, through the emitters, the same bytes.
+whole ticks (a 7 Hz GNSS beside a 200 Hz IMU reports at 200/29 = 6.9 Hz).
+
+Same scenario, duration and seed: the same samples and, through the emitters, the same
+bytes.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from typing import Any, Iterator, Sequence
 
 import msgspec
 
-from onboard.messages import Parameter, Sample, VehicleInfo
+from onboard.messages import Sample, VehicleInfo
 from sitl.effects import (
     FORCE_EFFECTS,
     apply_to_environment,
@@ -165,7 +167,7 @@ class Simulation:
         bottom = sc.bottom_depth_m
         reference = sc.reference
         for k in range(n_ticks + 1):
-            t = k * dt
+            t = k / self.tick_hz  # exact for whole-number rates (0.3, not 0.30000000000000004)
             truth: TruthRecord | None = None
             if k % self.control_period == 0:
                 truth = self._truth(t)

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -46,7 +46,6 @@ from sitl.plants.base import Command, Plant
 from sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
 from sitl.plants.twin_thruster import TwinThrusterBoat, TwinThrusterParams
 from sitl.sensors import (
-    ActuatorConfig,
     CompassConfig,
     DepthConfig,
     DvlConfig,

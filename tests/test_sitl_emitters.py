@@ -16,7 +16,7 @@ from drivers.nmea import NmeaParser
 from drivers.pd6 import Pd6Parser
 from onboard.messages import DvlVelocity, GnssFix, Heading
 from sitl.emitters import PtySink, TcpServerSink, UdpSink
-from sitl.runner import Simulation, run
+from sitl.runner import run
 
 
 class _PtyReader(threading.Thread):
