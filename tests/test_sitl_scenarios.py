@@ -182,3 +182,22 @@ def test_cli_bad_usage_exits_2_with_one_line(argv, message, capsys):
     assert onboard_main(["sitl", *argv]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+def test_docs_list_every_scenario_and_effect():
+    from pathlib import Path
+
+    from sitl.effects import VOCABULARY
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "sitl.md").read_text()
+    for name in scenarios.SCENARIOS:
+        assert f"`{name}`" in doc
+    for effect in VOCABULARY:
+        assert f"`{effect}`" in doc
+
+
+def test_realtime_mode_paces_to_the_wall_clock():
+    from sitl.runner import run
+
+    s = run("clean", 1.0, seed=0, realtime=True)
+    assert s.wall_s >= 0.95  # never faster than real time (slower only on a loaded machine)
