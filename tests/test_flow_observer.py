@@ -25,7 +25,7 @@ def test_ackermann_places_the_poles():
 
 def test_flow_observer_current_on_synthetic_torpedo_with_known_model():
     pipe = make("torpedo-auv", model=TORPEDO_TRUE, identify=False, observer="flow")
-    rms, cover, e, s = run(pipe, simulate_torpedo(400.0), after=150.0)
+    rms, cover, e, s = run(pipe, simulate_torpedo(300.0), after=120.0)
     print("flow rms", rms, "cover", cover, "sigma", s.mean(0))
     # measured: rms [0.016, 0.018] m/s, sigma [0.028, 0.036], 2-sigma coverage [0.99, 1.0]
     assert np.all(rms < 0.05)
