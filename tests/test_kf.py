@@ -207,3 +207,23 @@ def test_attitude_yaw_serves_when_no_compass_and_heading_wins_when_present() -> 
                          Heading(t=t, heading_rad=0.5, reference="magnetic",
                                  declination_rad=0.1)])
     assert out["heading"] == pytest.approx(0.6, abs=0.01)
+
+
+def test_gnss_only_log_gives_speed_and_track_along_the_course() -> None:
+    """No compass, no attitude (e.g. the DDBoat log): chord lengths along the course."""
+    sim = simulate(SimConfig(duration=200.0, seed=5, gps_hz=1.0))
+    samples = [s for s in sim.samples if type(s).__name__ != "Heading"]
+    pk = _kf()
+    from onboard.pipelines import aie as aie_mod
+    pa = aie_mod.build(AieConfig(), 1.5, 0.03)
+    ok, oa = run_pipelines(samples, [pk, pa], sim.t)
+    for out in (ok, oa):
+        assert "heading" not in {c for c in out if np.isfinite(out[c]).any()}
+        m = sim.t > 40
+        err = np.sqrt(np.nanmean((out["speed"][m] - sim.sog[m]) ** 2))
+        pos = np.sqrt(np.nanmean((out["north"][m] - sim.north[m]) ** 2
+                                 + (out["east"][m] - sim.east[m]) ** 2))
+        # measured: speed KF 0.088, AIE 0.152 m/s; position 3.55, 3.56 m (1 Hz, 1.5 m
+        # GNSS; the course over a 3-fix baseline lags in turns)
+        assert err < 0.2
+        assert pos < 4.5

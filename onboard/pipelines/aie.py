@@ -402,7 +402,7 @@ class AiePipeline(SurgeHeadingPipeline):
         input of the newest command (m/s^2, rad/s^2)."""
         if self.surge.kf.initialized:
             out["surge_input"] = self.surge.input_ahead(self._latest_command(1))
-        if self.yaw.kf.initialized:
+        if self.yaw.kf.initialized and "heading" in out:
             out["yaw_input"] = self.yaw.input_ahead(self._latest_command(2))
 
     def health(self) -> Mapping[str, float]:

@@ -297,6 +297,8 @@ class SurgeHeadingPipeline:
         self._psi: float | None = None
         self._have_pos = False
         self._prev_nfix = 1
+        self._course: float | None = None     # course over ground (GNSS-only logs)
+        self._course_pts: list[tuple[float, float]] = []
         self._R_h_prev = self.sigma_h ** 2
         self._disc_cache: dict[tuple[float, float], Discrete] = {}
 
@@ -464,11 +466,16 @@ class SurgeHeadingPipeline:
     def _close_surge_window(self) -> None:
         w = self._w
         self._w = _Window()
-        if w.n_fix == 0 or w.n_h == 0:
+        if w.n_fix == 0:
+            return
+        # Without any heading source (a GNSS-only log) the surge axis runs on the chord
+        # length along the course over ground; reversing is then not detectable.
+        course_mode = self._psi_last is None
+        if w.n_h == 0 and not course_mode:
             return
         tp = w.st_fix / w.n_fix
         n, e = w.sn / w.n_fix, w.se / w.n_fix
-        psi = w.sh / w.n_h
+        psi = w.sh / w.n_h if w.n_h else math.nan
         pp = self._pt_prev
         if pp is not None and tp - pp[0] <= 1e-3:
             return
@@ -489,19 +496,33 @@ class SurgeHeadingPipeline:
         R_s = self.sigma_p ** 2 / w.n_fix
         R_s_prev = self.sigma_p ** 2 / max(self._prev_nfix, 1)
         self._prev_nfix = w.n_fix
-        dpsi = wrap_pi(psi - pp[3])
-        y = path_increment(n - pp[1], e - pp[2], pp[3], dpsi)
+        if course_mode:   # project on the course over a ~5-point baseline (unbiased)
+            dpsi = 0.0
+            hist = self._course_pts
+            hist.append((n, e))
+            if len(hist) > 4:
+                del hist[0]
+            n0, e0 = hist[0]
+            course = math.atan2(e - e0, n - n0) if len(hist) > 1 else 0.0
+            y = math.cos(course) * (n - pp[1]) + math.sin(course) * (e - pp[2])
+        else:
+            dpsi = wrap_pi(psi - pp[3])
+            y = path_increment(n - pp[1], e - pp[2], pp[3], dpsi)
         cmd = self._mean_command(pp[0], tp, 1)
         self.surge.step(self._disc(self.surge.damping(cmd), dt), y, R_s, R_s_prev, cmd)
         # §3.3 position from the estimated increment along the mid-chord heading
         ys = self.surge.kf.d
-        if self._psi is not None and self._t_h is not None:
+        if course_mode:
+            mid = self._course = course
+        elif self._psi is not None and self._t_h is not None:
             mid = 0.5 * (self._heading_at(pp[0]) + self._heading_at(tp))
         else:
             mid = pp[3] + 0.5 * dpsi
         self._n += ys * math.cos(mid)
         self._e += ys * math.sin(mid)
-        ka = self.cfg.position_anchor
+        # the course lags the track by half its baseline: anchor harder without a compass
+        ka = self.cfg.position_anchor if not course_mode else max(self.cfg.position_anchor,
+                                                                   0.3)
         self._n += ka * (n - self._n)
         self._e += ka * (e - self._e)
         self._t_s = tp
@@ -511,9 +532,18 @@ class SurgeHeadingPipeline:
 
     def _output(self, t: float) -> dict[str, float]:
         out: dict[str, float] = {}
-        if self._psi is None or self._t_h is None:
-            return out
         yaw, surge = self.yaw, self.surge
+        if self._psi is None or self._t_h is None:   # no heading source (yet)
+            if self._course is not None and surge.kf.initialized and self._t_s is not None:
+                tau = min(max(t - self._t_s, 0.0), self.cfg.max_gap_s)
+                ds, v = surge.kf.predict_ahead(
+                    self._disc(surge.damping(surge.last_command), max(tau, 1e-6)),
+                    surge.input_ahead(self._latest_command(1)))
+                out["speed"] = v
+                out["north"] = self._n + ds * math.cos(self._course)
+                out["east"] = self._e + ds * math.sin(self._course)
+                self._extra_outputs(out)
+            return out
         psi = self._heading_at(t)
         out["heading"] = wrap_2pi(psi)
         if yaw.kf.initialized:
