@@ -536,7 +536,7 @@ class Dvl(_Base):
         n = self.rng.standard_normal(7).tolist()
         dropped = self._outages.active(t, dt)
         valid = (alt is not None and c.min_altitude_m <= alt <= c.max_altitude_m
-                 and not dropped and tr.down > 0.1)
+                 and not dropped)
         if self.locked and not valid:
             self.lock_losses += 1
         self.locked = valid
@@ -557,7 +557,7 @@ class Dvl(_Base):
                                    track="bottom", valid=False, fom_mps=c.invalid_fom_mps,
                                    altitude_m=None))
         if c.water_track:
-            if tr.down > 0.1 and not dropped:
+            if not dropped:
                 std = c.velocity_std_mps * 2.0
                 out.append(DvlVelocity(
                     t=t, source=self.name, vx=tr.u_r + std * n[3], vy=tr.v_r + std * n[4],
