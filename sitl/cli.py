@@ -20,7 +20,8 @@ goes to ``udp:127.0.0.1:14550`` (where a ground station listens).
 
 ``--controller pid|nmpc|ampc`` flies ``bluerov2-circle`` with a controller of
 :mod:`sitl.controllers`; ``--report FILE`` writes the run summary (with the tracking
-error for reference-tracking scenarios) as JSON.
+error for reference-tracking scenarios, and the controller's own closed-loop figures under
+``controller_report`` when it has a ``report()``) as JSON.
 """
 
 from __future__ import annotations
@@ -178,5 +179,23 @@ def main(args: argparse.Namespace) -> int:
           + (f", tracking RMS {summary.tracking['rms_position_error_m']:.2f} m"
              if summary.tracking else ""), flush=True)
     if args.report:
-        Path(args.report).write_text(json.dumps(summary.as_dict(), indent=2) + "\n")
+        report = summary.as_dict()
+        if controller is not None and hasattr(controller, "report"):
+            # the closed-loop figures of the controller under test (sitl.closed_loop)
+            report["controller_report"] = controller.report()
+        Path(args.report).write_text(json.dumps(_jsonable(report), indent=2,
+                                                allow_nan=False) + "\n")
     return 0
+
+
+def _jsonable(obj: Any) -> Any:
+    """A report as strict JSON: numpy values as Python ones, NaN and infinities as null."""
+    if hasattr(obj, "tolist"):
+        obj = obj.tolist()
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

@@ -201,3 +201,18 @@ def test_realtime_mode_paces_to_the_wall_clock():
 
     s = run("clean", 1.0, seed=0, realtime=True)
     assert s.wall_s >= 0.95  # never faster than real time (slower only on a loaded machine)
+
+
+def test_cli_controller_report_is_merged_and_strict_json(tmp_path):
+    pytest.importorskip("sitl.controllers")
+    report = tmp_path / "r.json"
+    rc = onboard_main(["sitl", "--scenario", "bluerov2-circle", "--controller", "pid",
+                       "--duration", "3", "--tlog", str(tmp_path / "c.tlog"),
+                       "--report", str(report)])
+    assert rc == 0
+    text = report.read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    d = json.loads(text)
+    assert d["tracking"]["rms_position_error_m"] > 0
+    if "controller_report" in d:  # the controllers package's policy has a report()
+        assert d["controller_report"]["controller"] == "pid"
