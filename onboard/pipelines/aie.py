@@ -429,6 +429,9 @@ class AiePipeline(SurgeHeadingPipeline):
             sub = state.get(nm)
             if isinstance(sub, dict) and isinstance(sub.get("rcie"), dict):
                 ax.rcie.set_state(sub["rcie"])
+            v = sub.get("V_d") if isinstance(sub, dict) else None
+            if isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0:
+                ax.V_u = float(v)
 
 
 def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03
