@@ -399,7 +399,8 @@ class SurgeHeadingPipeline:
                 w.se += e
             elif isinstance(s, Heading):
                 self._heading_source_seen = True
-                self._add_heading(s.t, s.heading_rad + (s.declination_rad or 0.0))
+                dec = (s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0
+                self._add_heading(s.t, s.heading_rad + dec)
             elif isinstance(s, Attitude):
                 if not self._heading_source_seen:
                     self._add_heading(s.t, s.yaw_rad)
