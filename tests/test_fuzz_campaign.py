@@ -53,7 +53,11 @@ UNGUARDED = {
 """The targets without the known-bug guard: the campaign classifies every exception itself."""
 
 
-KNOWN_VIOLATIONS: dict[str, str] = {}
+KNOWN_VIOLATIONS: dict[str, str] = {
+    "AssertionError in test_fuzz_parsers.py:check_sample: "
+    "assert isinstance(s.t, float) and math.isfinite(s.t), s":
+        "finding 10: SampleParser passes NaN/inf (a 'sample' record decoded with t = -inf)",
+}
 """Property violations already reported (docs/fuzzing.md), by signature."""
 
 
