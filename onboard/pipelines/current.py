@@ -617,8 +617,9 @@ class CurrentPipeline:
         i = self.model.channels.index("yaw")
         phi = self.model.regressors(self.x[: self.nd], self.inp)[i]
         self._svf.update(dt, np.concatenate([[self.inp.r], phi]))
-        if not self.cfg.identify or self.x[0] < self.cfg.identify_min_speed:
-            return
+        if (not self.cfg.identify or "yaw" in self.cfg.model
+                or self.x[0] < self.cfg.identify_min_speed):
+            return  # a configured yaw model is kept (the flow observer's gain rests on it)
         if self._last_vg is None or (self._t or 0.0) - self._last_vg[0] > 1.0:
             return
         self.yaw_rls.update(self._svf.y[1:], float(self._svf.dy[0]))

@@ -33,9 +33,12 @@ import numpy as np
 from onboard.pipelines.geo import wrap_pi
 from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel
 
-DEFAULT_POLES = (-0.6, -0.8, -1.0)
-"""Observer poles (1/s): faster than the sway mode of a small AUV (~0.5 1/s), slow enough
-for a 0.005 rad compass at 10 Hz."""
+POLE_FACTORS = (1.5, 1.7, 1.9)
+"""Default pole placement: the open-loop eigenvalues' real parts (floored at -0.5 1/s for the
+heading integrator) times these factors, re-placed at each step. Fixed poles slower than the
+vehicle's own sway/yaw modes (e.g. -0.6, -0.8, -1.0 against -1.9 and -1.4 for the spheroid)
+need large gains of the wrong sign to slow the dynamics down; measured on
+spheroid-sawtooth, they made the observer diverge after the third heading switch."""
 
 
 def ackermann_observer_gain(A: np.ndarray, C: np.ndarray, poles: Sequence[float]) -> np.ndarray:
@@ -63,7 +66,7 @@ class FlowObserver:
         if "yaw" not in model.channels:
             raise ValueError("the flow observer needs a model with a yaw channel")
         self.model = model
-        self.poles = tuple(poles) if poles else DEFAULT_POLES
+        self.poles = tuple(poles) if poles else None
         self.psi_std = psi_std
         self.accel_std = accel_std
         self.z = np.zeros(3)
@@ -75,6 +78,8 @@ class FlowObserver:
         self.e = 0.0
         self.ready = False
         self.unobservable = 0
+        self.diverged = 0
+        self.max_gain = 50.0
         self._iyaw = model.channels.index("yaw")
 
     def _f(self, z: np.ndarray, u: float, x: ModelInputs, thetas: Sequence[np.ndarray]) -> np.ndarray:
@@ -111,8 +116,13 @@ class FlowObserver:
             A[:, j] = (self._f(self.z + dz, self.u_r, x, thetas) - f0) / 1e-4
         C = np.array([[1.0, 0.0, 0.0]])
         try:
-            L = ackermann_observer_gain(A, C, self.poles)
-            if not np.all(np.isfinite(L)) or np.max(np.abs(L)) > 1e3:
+            if self.poles is not None:
+                poles = self.poles
+            else:
+                re = np.sort(np.minimum(np.linalg.eigvals(A).real, -0.5))
+                poles = tuple(re * np.array(POLE_FACTORS))
+            L = ackermann_observer_gain(A, C, poles)
+            if not np.all(np.isfinite(L)) or np.max(np.abs(L)) > self.max_gain:
                 raise np.linalg.LinAlgError
             self.L = L
         except np.linalg.LinAlgError:
@@ -128,6 +138,14 @@ class FlowObserver:
             self.z[0] = wrap_pi(self.z[0])
         x.r = r_meas
         self.u_r += dt * fu
+        if not (np.all(np.isfinite(self.z)) and abs(self.z[2]) < 3.0
+                and math.isfinite(self.u_r) and abs(self.u_r) < 10.0):
+            # diverged: restart from the caller's through-water velocity
+            self.diverged += 1
+            self.ready = False
+            self.Pz = np.diag([0.01, 0.01, 0.25])
+            self.var_u = 0.25
+            return
         # covariance of this gain: z' = (A - L C) z + w - L n
         Acl = A - np.outer(self.L, C[0])
         F = np.eye(3) + dt * Acl
