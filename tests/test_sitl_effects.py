@@ -130,11 +130,11 @@ def test_quadratic_drag_and_sideslip():
 def test_waves_move_the_boat_at_the_wave_period():
     truth, _ = _collect("effect-waves", 40.0)
     z = np.array([tr.down for t, tr in sorted(truth.items()) if t >= 10.0])
-    assert z.std() > 0.1  # 0.2 m amplitude: std 0.14 m
+    assert z.std() > 0.07  # 0.15 m amplitude: std 0.11 m
     crossings = np.sum(np.diff(np.sign(z - z.mean())) != 0)
-    # 2 zero crossings per encounter period (5 s, Doppler-shifted by the boat's speed)
-    assert 6 < crossings < 20
-    assert truth[20.0].effects["wave_oscillation.period"] == 5.0
+    # 2 zero crossings per encounter period (2.5 s, Doppler-shifted by the boat's speed)
+    assert 10 < crossings < 40
+    assert truth[20.0].effects["wave_oscillation.period"] == 2.5
 
 
 def test_two_effects_at_once():
