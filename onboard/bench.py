@@ -104,7 +104,7 @@ class Settings:
     def from_env(cls) -> "Settings":
         fast = os.environ.get("ONBOARD_BENCH_FAST", "") not in ("", "0")
         s = cls(fast=True, minutes=20 / 60, repeats=1, aie_steps=500, aie_repeats=1,
-                mpc_solves=5, service_s=2.0, pipeline_sim_s=5.0) if fast else cls()
+                mpc_solves=5, service_s=1.0, pipeline_sim_s=3.0) if fast else cls()
         if os.environ.get("ONBOARD_BENCH_MINUTES"):
             s.minutes = float(os.environ["ONBOARD_BENCH_MINUTES"])
         if os.environ.get("ONBOARD_BENCH_REPEATS"):

@@ -313,9 +313,10 @@ SIM_NIS_CASES = [
                                          "for the simulated INS)", strict=False),
                  id="eseso-vog-bluerov2-circle"),
 ]
-"""Measured mean NIS (seed 1, 2026-11-22): kf surge 0.49, heading 0.85; aie surge 0.53,
-heading 0.99; current on effect-current 1.62 (dim 2), on gavia-tidal 4.0 (dim 3); eseso
-thrust 0.51 (3), attitude 4.7 (3), dvl 4.0 (3), depth 1.09 (1), vog 0.12 (2)."""
+"""Measured mean NIS (seed 1, 2026-11-22 08:20 UTC, working tree of that time): kf surge
+0.49, heading 0.85; aie surge 0.76, heading 0.99; current on effect-current 0.29 (dim 2;
+1.62 an hour earlier), on gavia-tidal 3.1 (dim 3, median 0.11: heavy tails); eseso thrust
+0.51 (3), attitude 4.7 (3), dvl 4.0 (3), depth 1.09 (1), vog 0.12 (2)."""
 
 
 def sim_nis(module: str, cfg_name: str, scenario: str, seconds: float, seed: int = 1
