@@ -57,6 +57,10 @@ KNOWN_VIOLATIONS: dict[str, str] = {
     "AssertionError in test_fuzz_parsers.py:check_sample: "
     "assert isinstance(s.t, float) and math.isfinite(s.t), s":
         "finding 10: SampleParser passes NaN/inf (a 'sample' record decoded with t = -inf)",
+    "AssertionError in test_fuzz_parsers.py:_run_mavlink: "
+    "assert whole.stats.records >= intact, (whole.stats.records, intact)":
+        "finding 11: an unknown-id frame whose claimed end lands on a start byte swallows "
+        "the intact frames inside it",
 }
 """Property violations already reported (docs/fuzzing.md), by signature."""
 
