@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from onboard.config import CONFIG_DIR, Config, ConfigError, decode_section, load, resolve
+from onboard.config import CONFIG_DIR, Config, decode_section, load, resolve
 from onboard.errors import UsageError
 from onboard.pipelines.hgo import chain_matrices, gamma_star
 from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel, kind_for_class
@@ -166,11 +166,13 @@ def main(args: argparse.Namespace) -> int:
     out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     k = np.asarray(data["K"])
     print(f"{out}: K chain = [{k[0, 0]:.4f}, {k[1, 0]:.4f}], lambda = {data['lambda']:.4f}, "
-          f"||P|| = {np.linalg.norm(np.asarray(data['P']), 2):.3f}, L_f = {data['lipschitz']:.3f} 1/s, "
-          f"gamma* = {data['gamma_star']:.3f}, gamma = {data['gamma']:.3f}")
+          f"||P|| = {np.linalg.norm(np.asarray(data['P']), 2):.3f}, "
+          f"L_f = {data['lipschitz']:.3f} 1/s, "
+          f"gamma* = {data['gamma_star']:.3f}, gamma = {data['gamma']:.3f}, "
+          f"increasing gain {data['gamma_0']:.2f} -> {data['gamma_max']:.3f}")
     if out.parent.resolve() != GAIN_DIR.resolve():
         print(f"set [pipelines.current] gain_file = \"{out}\" and observer = \"hgo\"")
     return 0
 
 
-__all__ = ["solve_lmi", "design", "main", "ConfigError"]
+__all__ = ["solve_lmi", "design", "model_lipschitz", "main"]

@@ -62,13 +62,15 @@ def simulate_boat(duration: float = 600.0, current=(0.3, -0.2), seed: int = 0,
             psi = psi + h * r
             t += h
             c = np.array(current_fn(t) if current_fn else current)
-            vg = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]]) @ nu + c
+            rot = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
+            vg = rot @ nu + c
             north += h * vg[0]
             east += h * vg[1]
         k += 1
         samples.append(ActuatorCommand(t=t, throttle=x.n, rudder_rad=x.dr))
         samples.append(Heading(t=t, heading_rad=wrap(psi + rng.normal(0, 0.01))))
-        samples.append(Attitude(t=t, roll_rad=0.0, pitch_rad=0.0, yaw_rad=wrap(psi + rng.normal(0, 0.01)),
+        samples.append(Attitude(t=t, roll_rad=0.0, pitch_rad=0.0,
+                                yaw_rad=wrap(psi + rng.normal(0, 0.01)),
                                 yaw_rate_rps=r + rng.normal(0, 0.005)))
         if k % 2 == 0:
             vgn = vg + rng.normal(0, 0.05, 2)
@@ -97,7 +99,8 @@ def simulate_torpedo(duration: float = 600.0, current=(-0.6, 0.3, 0.02), seed: i
         samples = []
         for _ in range(n_sub):
             ref = headings[int(t // leg_s) % len(headings)]
-            x.dr = float(np.clip(-0.5 * math.remainder(ref - psi, 2 * math.pi) + 0.3 * r, -0.3, 0.3))
+            err = math.remainder(ref - psi, 2 * math.pi)
+            x.dr = float(np.clip(-0.5 * err + 0.3 * r, -0.3, 0.3))
             x.r = r
             x.pitch = 0.05 * math.sin(0.05 * t)
             x.q = 0.0025 * math.cos(0.05 * t)

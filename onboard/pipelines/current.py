@@ -777,7 +777,8 @@ class CurrentPipeline:
 def _gain_for(cfg: Config, ccfg: CurrentConfig) -> GainDesign | None:
     if ccfg.observer != "hgo":
         return None
-    path = Path(ccfg.gain_file) if ccfg.gain_file else GAIN_DIR / f"{cfg.vehicle.vehicle_class}.json"
+    default = GAIN_DIR / f"{cfg.vehicle.vehicle_class}.json"
+    path = Path(ccfg.gain_file) if ccfg.gain_file else default
     if path.exists():
         try:
             return GainDesign.load(path)

@@ -82,7 +82,8 @@ class FlowObserver:
         self.max_gain = 50.0
         self._iyaw = model.channels.index("yaw")
 
-    def _f(self, z: np.ndarray, u: float, x: ModelInputs, thetas: Sequence[np.ndarray]) -> np.ndarray:
+    def _f(self, z: np.ndarray, u: float, x: ModelInputs,
+           thetas: Sequence[np.ndarray]) -> np.ndarray:
         nd = self.model.nd
         nu = [u, z[2], self.w_r][:nd]
         x.r = z[1]

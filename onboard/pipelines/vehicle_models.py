@@ -148,7 +148,8 @@ class RegressionModel:
             np.array([w, _sq(w), ct * cp] + thr),
         ]
 
-    def accel(self, nu: Sequence[float], x: ModelInputs, thetas: Sequence[np.ndarray]) -> np.ndarray:
+    def accel(self, nu: Sequence[float], x: ModelInputs,
+              thetas: Sequence[np.ndarray]) -> np.ndarray:
         """Through-water acceleration of the state DOFs, ``nu_r'`` (m/s^2)."""
         phis = self.regressors(nu, x, dofs_only=True)
         return np.array([phis[i] @ thetas[i] for i in range(self.nd)])
