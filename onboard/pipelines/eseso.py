@@ -309,6 +309,8 @@ class Eseso:
         self.wdot = np.zeros(3)  # angular acceleration from differenced gyro (rad/s^2)
         self.tau: Array | None = None  # last commanded body force (N)
         self.t_tau = -math.inf
+        self._tau_hist: list[tuple[float, Array]] = []  # (t, body force) of held commands
+        self._imu_hist: list[tuple[float, Array, Array]] = []  # last IMU (t, f, w), <= 2
         self.t_sensor: float | None = None
         self._pending_depth: float | None = None
         self._pending_att: Array | None = None
@@ -464,10 +466,44 @@ class Eseso:
         H[:, XI] = -np.eye(3)
         return h, H
 
-    def _thrust_update(self) -> None:
-        assert self.f_m is not None and self.w_m is not None and self.tau is not None
-        h, H = self.h_tau(self.f_m, self.w_m, self.wdot)
-        y = self.tau - h
+    def _tau_mean(self, t0: float, t1: float) -> Array | None:
+        """Time average (N, body) over [t0, t1] of the held thruster commands."""
+        hist = self._tau_hist
+        if not hist or t1 - hist[-1][0] > self.cfg.command_timeout_s:
+            return None
+        if t1 <= t0:
+            return hist[-1][1]
+        acc = np.zeros(3)
+        covered = 0.0
+        for i, (tc, tau) in enumerate(hist):
+            start = max(tc, t0)
+            end = min(hist[i + 1][0], t1) if i + 1 < len(hist) else t1
+            if end > start:
+                acc += tau * (end - start)
+                covered += end - start
+        if covered <= 0.0:
+            return hist[-1][1]
+        return acc / covered
+
+    def _thrust_update_at_imu(self) -> None:
+        """The thrust update for the IMU sample just received: its mean specific force and
+        rate, the angular acceleration from the last two gyro samples, and the thruster
+        force averaged over the sample's interval (commands are held between updates and
+        may change within an IMU interval)."""
+        hist = self._imu_hist
+        if len(hist) < 2:
+            return
+        (t0, _, w0), (t1, f1, w1) = hist[-2:]
+        tau = self._tau_mean(t0, t1)
+        if tau is None:
+            return
+        self._thrust_update(f1, w1, (w1 - w0) / (t1 - t0), tau)
+
+    def _thrust_update(self, f_m: Array, w_m: Array, wdot: Array, tau: Array) -> None:
+        """Update on ``tau`` (N, body) = h_tau at specific force ``f_m``, rate ``w_m`` and
+        angular acceleration ``wdot``."""
+        h, H = self.h_tau(f_m, w_m, wdot)
+        y = tau - h
         Rm = self.R_tau
         if self.cfg.thrust_states == "disturbance":
             Ho = H.copy()
@@ -525,8 +561,10 @@ class Eseso:
         if self.w_m is not None:
             self.wdot = (w_m - self.w_m) / dt
         self.f_m, self.w_m = f_m, w_m
-        if self.tau is not None and s.t - self.t_tau <= self.cfg.command_timeout_s:
-            self._thrust_update()
+        self._imu_hist.append((s.t, f_m, w_m))
+        if len(self._imu_hist) > 2:
+            del self._imu_hist[0]
+        self._thrust_update_at_imu()
 
     def _on_command(self, s: ActuatorCommand) -> None:
         if s.thrusters is None:
@@ -541,6 +579,12 @@ class Eseso:
             return
         self.tau = self.K_alloc @ forces
         self.t_tau = s.t
+        self._tau_hist.append((s.t, self.tau))
+        # keep what the last IMU intervals can still need
+        while len(self._tau_hist) > 2 and self._tau_hist[1][0] <= s.t - 1.0:
+            del self._tau_hist[0]
+        if len(self._tau_hist) > 50:
+            del self._tau_hist[0]
 
     def _on_gnss(self, s: GnssFix) -> None:
         if s.fix_quality <= 0:
