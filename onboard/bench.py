@@ -392,6 +392,7 @@ def bench_pipelines(s: Settings, rep: Report) -> None:
         simulate = None
     costs: dict[str, float] = {}
     where: dict[str, str] = {}
+    errors: dict[str, str] = {}
     for cfg_name, scenario in CLASS_SCENARIOS:
         try:
             cfg = configmod.load(configmod.resolve(cfg_name))
@@ -404,7 +405,10 @@ def bench_pipelines(s: Settings, rep: Report) -> None:
         engine = Engine(cfg, pipelines=timed)  # type: ignore[arg-type]
         stream = (x for _, samples, _ in simulate(scenario, s.pipeline_sim_s, seed=0)
                   for x in samples)
-        run(engine, stream, lambda t, recs: None)
+        try:
+            run(engine, stream, lambda t, recs: None)
+        except Exception as err:  # noqa: BLE001 - a crashing pipeline is reported, not fatal
+            errors[cfg_name] = f"{type(err).__name__}: {err}"
         for p in timed:
             if p.calls:
                 costs[p.name] = round(p.seconds / p.calls * 1e6, 1)
@@ -421,7 +425,7 @@ def bench_pipelines(s: Settings, rep: Report) -> None:
         raise NotAvailable("no pipeline applies to the bundled configs, or no simulator")
     rep.values["pipeline_step_us"] = dict(sorted(costs.items()))
     rep.detail["pipelines"] = {"measured_on": where, "sim_s": s.pipeline_sim_s,
-                               "engine_rate_hz": "from each config"}
+                               "errors": errors}
 
 
 def collect(s: Settings | None = None, progress: Callable[[str], None] | None = None) -> Report:
