@@ -103,6 +103,14 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     accel_std: float = 0.02
     """Model acceleration error (process noise) per DOF, m/s^2 over ``model_error_time_s``."""
     model_error_time_s: float = 1.0
+    heading_diversity: float = 0.85
+    heading_memory_s: float = 300.0
+    """Without a surge model the along-track sigma is floored at the prior unless the
+    mean heading unit vector over ``heading_memory_s`` is shorter than
+    ``heading_diversity`` (0.85: e.g. two headings 60 deg apart; a +-15 deg zig-zag gives
+    0.97 and keeps the floor)."""
+    turn_accel_gain: float = 2.0
+    """Extra model acceleration error in turns, m/s^2 per (m/s * rad/s) of ``u_r r``."""
     prior_accel_std: float = 0.3
     """Model acceleration error of a DOF that has only the generic prior (mode (b), not yet
     identified), m/s^2: the prior says "no crabbing", not how much."""
@@ -264,6 +272,7 @@ class CurrentPipeline:
         self.depth: float | None = None
         self._t: float | None = None
         self._last_turn_t = -math.inf
+        self._hvec = (1.0, 0.0)
         self._identifying = False
         self._started = False
         self._last_vg: tuple[float, np.ndarray, str] | None = None  # (t, body nu_g, kind)
@@ -416,7 +425,10 @@ class CurrentPipeline:
                     F[i, o:o + k] = dt * phis[i]
                 o += k
         self.x[:nd] = nu + dt * f
-        q_nu = self.cfg.accel_std ** 2 * self.cfg.model_error_time_s * self.q_scale
+        # model error grows in manoeuvres (couplings the regression gets only roughly):
+        # a turn-rate term, so that the sigma widens at heading changes (the paper's burrs)
+        turn = self.cfg.turn_accel_gain * abs(self.inp.r * nu[0])
+        q_nu = (self.cfg.accel_std ** 2 + turn * turn) * self.cfg.model_error_time_s * self.q_scale
         q = np.zeros(n)
         q[:nd] = q_nu * dt
         if self._prior_mask is not None:
@@ -570,6 +582,7 @@ class CurrentPipeline:
         zz[: len(z)] = z
         nu = R.T @ zz if kind == "earth" else zz
         self.x[:nd] = nu
+        self._hvec = (math.cos(self.yaw or 0.0), math.sin(self.yaw or 0.0))
         if self._law is not None:
             self.hx = self.x[:2 * nd].copy()
             self.hP = self.P[:2 * nd, :2 * nd].copy()
@@ -642,6 +655,10 @@ class CurrentPipeline:
         dt = t - (self._t if self._t is not None else t)
         if abs(self.inp.r) > self.cfg.identify_min_rate:
             self._last_turn_t = t
+        if dt > 0 and self.yaw is not None:
+            a = min(1.0, dt / self.cfg.heading_memory_s)
+            self._hvec = ((1 - a) * self._hvec[0] + a * math.cos(self.yaw),
+                          (1 - a) * self._hvec[1] + a * math.sin(self.yaw))
         self._identifying = self._is_identifying(t)
         self._update_prior_mask()
         if dt > 0:
@@ -683,11 +700,14 @@ class CurrentPipeline:
             c, nu = self.hx[nd:], self.hx[:nd]
             std = np.sqrt(np.maximum(np.diag(self.hP)[nd:], 0.0))
         if (self._prior_mask is not None and self._prior_dof[0]
-                and self._prior_mask[0].sum() < nd):
+                and self._prior_mask[0].sum() < nd
+                and math.hypot(*self._hvec) > self.cfg.heading_diversity):
             # No surge model yet (mode (b), not identified): the current along the track is
             # not observable on a straight line; weak couplings (pitch, heave prior) make
             # the filter's own variance shrink anyway (measured: 1.2 m/s error at 3.3
-            # sigma after 270 s, Gavia straight run). Report at least the prior along track.
+            # sigma after 270 s, Gavia straight run). Report at least the prior along track,
+            # unless the headings of the last minutes are diverse enough for the sway
+            # constraint alone (|mean heading vector| below ``heading_diversity``).
             yaw = self.yaw or 0.0
             along = np.array([math.cos(yaw), math.sin(yaw)])
             var = std[:2] ** 2 + (self.cfg.init_current_std * along) ** 2
