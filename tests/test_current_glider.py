@@ -27,9 +27,11 @@ def test_glider_log_runs_and_reports_its_ignorance(shared_data):
     e = r["est"][m] - r["truth"][m]
     rms = np.sqrt(np.mean(e ** 2, axis=0))
     cover = np.mean(np.abs(e) <= 2 * r["std"][m], axis=0)
-    # measured: rms N/E 0.11 / 0.77 m/s against the DVL water-profile current (whose own
-    # rms is 0.06 / 0.27: estimating zero would do better); 2-sigma coverage 1.00 / 0.28;
-    # correlation with the DVL current 0.08 / 0.13. An honest bound on a misspecified model.
-    assert rms[0] < 0.3
-    assert rms[1] < 1.5
-    assert cover[0] > 0.9
+    # measured: rms N/E 0.675 / 0.071 m/s against the DVL water-profile current (whose own
+    # rms is 0.265 / 0.059: estimating zero would do better in north); 2-sigma coverage
+    # 0.20 / 0.99; correlation 0.28 / 0.11. The north estimate carries a +0.5 m/s bias from
+    # a surge model identified on a buoyancy-driven vehicle the regression cannot describe;
+    # its sigma is NOT honest there (docs/current.md, "Real data"). Bounds pin the figures.
+    assert rms[0] < 1.0
+    assert rms[1] < 0.15
+    assert cover[1] > 0.9

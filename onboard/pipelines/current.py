@@ -106,9 +106,11 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     heading_diversity: float = 0.85
     heading_memory_s: float = 300.0
     """Without a surge model the along-track sigma is floored at the prior unless the
-    mean heading unit vector over ``heading_memory_s`` is shorter than
-    ``heading_diversity`` (0.85: e.g. two headings 60 deg apart; a +-15 deg zig-zag gives
-    0.97 and keeps the floor)."""
+    headings of the last ``heading_memory_s`` are diverse: the mean of the doubled-angle
+    unit vector (cos 2psi, sin 2psi) shorter than ``heading_diversity``. Doubled, because
+    reversing course (a glider's back-and-forth, a lawnmower survey) keeps the same lateral
+    axis and adds nothing to the sway constraint. 0.85: e.g. two headings 35 deg apart; a
+    +-15 deg zig-zag gives 0.87 and keeps the floor."""
     turn_accel_gain: float = 2.0
     """Extra model acceleration error in turns, m/s^2 per (m/s * rad/s) of ``u_r r``."""
     prior_accel_std: float = 0.3
@@ -582,7 +584,7 @@ class CurrentPipeline:
         zz[: len(z)] = z
         nu = R.T @ zz if kind == "earth" else zz
         self.x[:nd] = nu
-        self._hvec = (math.cos(self.yaw or 0.0), math.sin(self.yaw or 0.0))
+        self._hvec = (math.cos(2.0 * (self.yaw or 0.0)), math.sin(2.0 * (self.yaw or 0.0)))
         if self._law is not None:
             self.hx = self.x[:2 * nd].copy()
             self.hP = self.P[:2 * nd, :2 * nd].copy()
@@ -657,8 +659,8 @@ class CurrentPipeline:
             self._last_turn_t = t
         if dt > 0 and self.yaw is not None:
             a = min(1.0, dt / self.cfg.heading_memory_s)
-            self._hvec = ((1 - a) * self._hvec[0] + a * math.cos(self.yaw),
-                          (1 - a) * self._hvec[1] + a * math.sin(self.yaw))
+            self._hvec = ((1 - a) * self._hvec[0] + a * math.cos(2.0 * self.yaw),
+                          (1 - a) * self._hvec[1] + a * math.sin(2.0 * self.yaw))
         self._identifying = self._is_identifying(t)
         self._update_prior_mask()
         if dt > 0:
