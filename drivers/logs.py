@@ -18,9 +18,11 @@ def sniff(path: str | Path) -> str:
     """The format of ``path``: tlog, dataflash, recording, csv, csv-dir or text."""
     p = Path(path)
     if p.is_dir():
+        if any(p.glob("*.onbrec")):
+            return "recording"
         if any(p.glob("*.csv")):
             return "csv-dir"
-        raise UnreadableLog(f"{p}: a directory with no .csv files")
+        raise UnreadableLog(f"{p}: a directory with no .csv or .onbrec files")
     try:
         with open(p, "rb") as f:
             head = f.read(4096)
@@ -58,6 +60,9 @@ def open_log(path: str | Path, csv_format=None) -> tuple[str, LogReader]:
     if fmt == "recording":
         from drivers.recording import RecordingReader
 
+        if Path(path).is_dir():
+            files = sorted(Path(path).glob("*.onbrec"))
+            return fmt, RecordingReader(files[0])
         return fmt, RecordingReader(path)
     if fmt in ("csv", "csv-dir"):
         if csv_format is None or not (csv_format.lat_deg or csv_format.north_m):

@@ -54,6 +54,7 @@ class Engine:
         accepted: samples accepted, by ``(type, source)``.
         rejected: samples rejected, by ``<type>:<reason>``.
         mode: ``"surface"`` or ``"submerged"`` (from the newest depth).
+        pipeline_errors: exceptions raised by each pipeline (it is then restarted).
         latest: the newest record of each pipeline.
     """
 
@@ -72,6 +73,10 @@ class Engine:
         self._last_t: dict[tuple[str, str], float] = {}
         self._pending: list[Sample] = []
         self._ticks = 0
+        self.pipeline_errors: Counter[str] = Counter()
+        self.events: list[str] = []
+        """Human-readable events (pipeline restarts) for the health channel; the owner
+        drains it."""
         depth_cfg = cfg.sensors.depth
         self._rho_g = depth_cfg.water_density_kgm3 * GRAVITY
         self._p_surface = depth_cfg.surface_pressure_pa
@@ -139,8 +144,11 @@ class Engine:
         t_sensor = batch[-1].t if batch else None
         vehicle = self.cfg.vehicle.id
         records = []
-        for p in self.pipelines:
-            values = p.step(t, batch)
+        for i, p in enumerate(self.pipelines):
+            try:
+                values = p.step(t, batch)
+            except Exception as err:  # a pipeline bug must not stop the others
+                values = self._recover(i, p, err)
             if not values:
                 continue
             std = {k[4:]: v for k, v in values.items() if k.startswith("std_")}
@@ -151,6 +159,16 @@ class Engine:
         self._ticks += 1
         return records
 
+    def _recover(self, i: int, p: Pipeline, err: Exception) -> None:
+        """Count a pipeline's failure, report it, and restart it from its configuration
+        (its adaptive state is lost; the other pipelines carry on)."""
+        self.pipeline_errors[p.name] += 1
+        self.events.append(f"{p.name}: {type(err).__name__}: {err}; restarted")
+        fresh = build(self.cfg, only={p.name})
+        if fresh:
+            self.pipelines[i] = fresh[0]
+        return None
+
     def health(self, t: float, rates_hz: dict[str, float] | None = None,
                events: list[str] | None = None) -> HealthRecord:
         """Innovations and NIS of every pipeline plus rejection counts."""
@@ -160,9 +178,11 @@ class Engine:
             for k, v in p.health().items():
                 target = nis if k.endswith("nis") else innovations
                 target[f"{p.name}.{k}"] = float(v)
+        rejected = dict(self.rejected)
+        rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
         return HealthRecord(vehicle=self.cfg.vehicle.id, t=t, rates_hz=rates_hz or {},
-                            rejected=dict(self.rejected), innovations=innovations, nis=nis,
-                            events=events or [], mode=self.mode)
+                            rejected=rejected, innovations=innovations, nis=nis,
+                            events=(events or []) + self.events[-10:], mode=self.mode)
 
     def get_state(self) -> dict:
         """Adaptive state of every pipeline, for persistence across restarts."""

@@ -33,7 +33,7 @@ class EstimatesCsv:
     """Streams ticks into estimates.csv: ``t`` since the first sample, then a column per
     ``<pipeline>.<quantity>``, empty where a pipeline has no estimate."""
 
-    def __init__(self, path: Path, columns: Sequence[str], t0: float) -> None:
+    def __init__(self, path: Path, columns: Sequence[str], t0: float | None) -> None:
         self.columns = list(columns)
         self.index = {c: i for i, c in enumerate(self.columns)}
         self.t0 = t0
@@ -42,6 +42,8 @@ class EstimatesCsv:
         self._f.write(",".join(self.columns) + "\n")
 
     def write(self, t: float, records: Sequence[EstimateRecord]) -> None:
+        if self.t0 is None:
+            self.t0 = t
         row = [""] * len(self.columns)
         row[0] = f"{t - self.t0:.6f}"
         index = self.index
@@ -87,6 +89,12 @@ def choose_config(log: str, config_path: str | None) -> tuple[Config, str]:
     if config_path:
         return configmod.load(config_path), f"from {config_path}"
     fmt, reader = open_log(log)
+    if fmt == "recording":
+        from onboard.recorder import recording_config
+
+        cfg = recording_config(log)
+        if cfg is not None:
+            return cfg, "the configuration the service recorded with"
     if fmt == "tlog":
         from drivers.tlog import scan_header
 
@@ -113,7 +121,9 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     first = next(samples, None)
     if first is None:
         raise UnreadableLog(f"{log}: no usable samples ({reader.stats.as_dict()['rejected']})")
-    csv = EstimatesCsv(out_dir / "estimates.csv", engine.columns, first.t)
+    # A live recording starts ticking before its first sample: count from the first tick.
+    csv = EstimatesCsv(out_dir / "estimates.csv", engine.columns,
+                       None if fmt == "recording" else first.t)
     meter = _Progress(progress)
 
     def stream() -> Iterator[Sample]:
@@ -122,10 +132,17 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
 
     source = meter.wrap(stream()) if progress else stream()
     if fmt == "recording":
-        # The live tick times are recorded beside the inputs; read them all first.
-        buffered = list(source)
-        ticks = run(engine, buffered, csv.write,
-                    tick_times=reader.tick_times or None)  # type: ignore[attr-defined]
+        # The service's own recording: re-parse every raw chunk in the order it arrived,
+        # through the same intake as live, ticking at the recorded tick times, so the
+        # estimates are exactly the live ones (onboard.recorder.replay_recording).
+        from onboard.recorder import replay_recording
+
+        result = replay_recording(log, engine, csv.write)
+        ticks = result.ticks
+        reader.stats = result.stats
+        for reason, n in result.rejected.items():
+            reader.stats.rejected[reason] += n
+        reader.stats.samples = sum(engine.accepted.values()) + sum(engine.rejected.values())
     else:
         ticks = run(engine, source, csv.write)
     csv.close()

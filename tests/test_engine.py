@@ -155,3 +155,27 @@ def test_state_round_trip():
     state = eng.get_state()
     eng.set_state(state)
     assert rec.restored == {"k": 1}
+
+
+class Broken(Recorder):
+    name = "broken"
+
+    def step(self, t, samples):
+        if samples:
+            raise ValueError("shapes (3,) and (26,) not aligned")
+        return {"n": 0.0}
+
+
+def test_a_failing_pipeline_is_counted_restarted_and_the_others_carry_on(monkeypatch):
+    import onboard.engine as engine_mod
+
+    monkeypatch.setattr(engine_mod, "build", lambda cfg, only=None: [Broken()])
+    rec = Recorder()
+    eng = Engine(Config(), [Broken(), rec])
+    eng.push(imu(1.0))
+    records = eng.tick(1.0)
+    assert [r.pipeline for r in records] == ["rec"]
+    assert eng.pipeline_errors["broken"] == 1
+    h = eng.health(1.0)
+    assert h.rejected["pipeline:broken:error"] == 1
+    assert any("broken: ValueError" in e for e in h.events)

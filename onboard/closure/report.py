@@ -69,6 +69,10 @@ def diagnosis(sel: Selection, log: str) -> dict:
                 "held_out_headline": cand.headline})
             if not cand.physical:
                 entry["evidence"]["unphysical_fit"] = True
+            accepted = next((c for rnd in sel.rounds for c in rnd
+                             if c.name == name and c.accepted), None)
+            if accepted is not None and accepted.alternatives:
+                entry["evidence"]["ambiguous_with"] = list(accepted.alternatives)
         elif not ALL[name].applies(sel.split.fit, f.ctx):
             entry["evidence"]["not_testable"] = _why_not(name, sel)
         effects.append(entry)

@@ -60,6 +60,9 @@ class Candidate:
     physical: bool = True
     accepted: bool = False
     value: tuple[float, float] | None = None
+    alternatives: tuple[str, ...] = ()
+    """Other candidates of the same round that explained nearly as much (>= 80 % of the
+    gain): effects this data cannot tell apart from the chosen one."""
 
 
 @dataclass
@@ -182,6 +185,7 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
         top = usable[0]
         if top.gain >= min_gain and top.t_max >= min_t:
             top.accepted = True
+            top.alternatives = tuple(c.name for c in usable[1:] if c.gain >= 0.8 * top.gain)
             chosen.append(top.name)
             pool.remove(top.name)
             if top.name in trials:
