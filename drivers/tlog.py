@@ -13,7 +13,9 @@ Rejections (``stats.rejected``): ``"crc"`` bad checksum; ``"garbage"`` bytes tha
 record (the reader resynchronizes on the next plausible record: time stamp within
 [-1 s, +1 day] of the last good one, start byte, fitting frame, valid CRC); ``"truncated"``
 an incomplete record at the end of the file; ``"incompat"`` unknown MAVLink 2
-incompatibility flags; ``"time_backwards"`` a record older than the last sample emitted
+incompatibility flags; ``"timestamp"`` a record whose time stamp (which the CRC does not
+cover) jumps more than a second ahead of both its neighbours; ``"time_backwards"`` a
+record older than the last sample emitted
 (dropped, so samples come out in time order); plus the content rejections of the
 handlers (``"no_fix"``, ``"empty"``, ``"nan"``, ``"invalid"``, ...).
 """
@@ -87,6 +89,11 @@ def _crc_ok(data: bytes, p: int, msgid: int, plen: int, v2: bool) -> bool | None
         return None
     ce = p + 8 + (10 if v2 else 6) + plen
     return x25crc(data[p + 9:ce], extra) == (data[ce] | (data[ce + 1] << 8))
+
+
+_JUMP_US = 1_000_000
+"""A record more than this far (us) ahead of the previous one, while the next record is
+back nearer the previous one than to it, has a damaged time stamp."""
 
 
 def _plausible(data: bytes, p: int, n: int, lo: int, hi: int) -> int:
@@ -228,6 +235,12 @@ class TlogReader:
                             ts = ts_unpack(data, pos)[0]
                             if ts < last_us:
                                 stats.reject("time_backwards")
+                            elif (last_us and ts > last_us + _JUMP_US and end + 8 <= n
+                                  and ts_unpack(data, end)[0] < (ts + last_us) // 2):
+                                # The time stamp is outside the CRC: a damaged one jumps far
+                                # ahead of both its neighbours. Trusting it would drop every
+                                # later record as "backwards".
+                                stats.reject("timestamp")
                             else:
                                 last_us = ts
                                 ps = pos + 8 + hdr
