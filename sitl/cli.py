@@ -183,6 +183,10 @@ def main(args: argparse.Namespace) -> int:
         if controller is not None and hasattr(controller, "report"):
             # the closed-loop figures of the controller under test (sitl.closed_loop)
             report["controller_report"] = controller.report()
+            # The contract's headline figures (issue 6) at the top level.
+            for key in ("tracking_rmse_m", "disturbance_error_n"):
+                if key in report["controller_report"]:
+                    report[key] = report["controller_report"][key]
         Path(args.report).write_text(json.dumps(_jsonable(report), indent=2,
                                                 allow_nan=False) + "\n")
     return 0

@@ -121,13 +121,13 @@ def test_no_gnss_fix_from_a_submerged_auv():
 
 
 def test_bluerov2_circle_flies_the_circle_under_the_push(tmp_path):
-    """The spec's circle (r = 2 m, 1.5 m/s) under 56.6 N of push needs up to ~115 N of
-    thrust where the six T200s give ~99 N; the PID keeps within metres of it."""
+    """The circle (r = 2 m, 0.5 m/s: the spec's 1.5 m/s needs ~115 N of thrust where the six
+    T200s give ~99 N) under 56.6 N of push; the scenario's own PID keeps on it."""
     from sitl.runner import run
 
     s = run("bluerov2-circle", 30.0, seed=0, truth_path=tmp_path / "t.jsonl")
-    # measured 1.29 m RMS over 30 s from rest (thrusters saturate for part of each lap)
-    assert s.tracking["rms_position_error_m"] < 1.6
+    # measured 0.41 m RMS over 30 s from rest (the start-up transient dominates)
+    assert s.tracking["rms_position_error_m"] < 0.6
     truth = read_truth(tmp_path / "t.jsonl")
     assert truth[-1].disturbance_x is not None
     assert abs(truth[-1].down - 20.0) < 0.5

@@ -164,20 +164,30 @@ def figures(sel: Selection) -> dict[str, str]:
     rows = 2 if "along" in pb else 1
     fig, axes = plt.subplots(rows, 1, figsize=(10, 3.0 * rows), sharex=True, squeeze=False)
     t = hold.t - hold.t[0]
+    # Break the lines between held-out segments instead of joining them across the gap.
+    gap = np.r_[False, hold.run[1:] != hold.run[:-1]]
+
+    def brk(x):
+        x = np.asarray(x, float).copy()
+        x[gap] = np.nan
+        return x
+
+    pb = {k: brk(v) for k, v in pb.items()}
+    pa = {k: brk(v) for k, v in pa.items()}
     ax = axes[0][0]
-    ax.plot(t, hold.lateral, lw=0.6, color="k", label="measured")
+    ax.plot(t, brk(hold.lateral), lw=0.6, color="k", label="measured")
     ax.plot(t, pb["lateral"], lw=0.8, label="base model")
     ax.plot(t, pa["lateral"], lw=0.8, label="with effects")
     ax.set_ylabel("lateral (m/s)")
     ax.legend(loc="upper right")
     if rows == 2:
         ax = axes[1][0]
-        ax.plot(t, hold.along, lw=0.6, color="k", label="measured")
+        ax.plot(t, brk(hold.along), lw=0.6, color="k", label="measured")
         ax.plot(t, pb["along"], lw=0.8, label="base model (open loop)")
         ax.plot(t, pa["along"], lw=0.8, label="with effects (open loop)")
         ax.set_ylabel("along-track speed (m/s)")
         ax.legend(loc="upper right")
-    axes[-1][0].set_xlabel("held-out time (s, concatenated)")
+    axes[-1][0].set_xlabel("time (s) of the held-out segments")
     fig.tight_layout()
     out["before_after"] = _fig_png(fig)
     plt.close(fig)
@@ -185,7 +195,8 @@ def figures(sel: Selection) -> dict[str, str]:
 
 
 def write(sel: Selection, log: str, out_dir: Path) -> dict:
-    """Write diagnosis.json and report.html into ``out_dir``; return the diagnosis."""
+    """Write diagnosis.json, report.html and its figures (PNG) into ``out_dir``; return
+    the diagnosis."""
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = diagnosis(sel, log)
     (out_dir / "diagnosis.json").write_text(json.dumps(doc, indent=2) + "\n")
@@ -193,6 +204,8 @@ def write(sel: Selection, log: str, out_dir: Path) -> dict:
         figs = figures(sel)
     except ImportError:
         figs = {}
+    for name, png in figs.items():
+        (out_dir / f"{name}.png").write_bytes(base64.b64decode(png))
     (out_dir / "report.html").write_text(_html(doc, figs))
     return doc
 

@@ -123,7 +123,9 @@ class CircleReference:
     """
 
     radius: float = 2.0
-    speed: float = 1.5
+    speed: float = 0.5
+    """m/s along the arc. The paper's 1.5 m/s needs up to 117 N of thrust against the 99 N
+    the simulated thrusters give (docs/eseso-mpc.md); 0.5 m/s is feasible all round."""
     depth: float = 20.0
     center_north: float = 0.0
     center_east: float = 0.0
