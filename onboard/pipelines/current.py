@@ -111,7 +111,7 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     reversing course (a glider's back-and-forth, a lawnmower survey) keeps the same lateral
     axis and adds nothing to the sway constraint. 0.85: e.g. two headings 35 deg apart; a
     +-15 deg zig-zag gives 0.87 and keeps the floor."""
-    turn_accel_gain: float = 2.0
+    turn_accel_gain: float = 1.0
     """Extra model acceleration error in turns, m/s^2 per (m/s * rad/s) of ``u_r r``."""
     prior_accel_std: float = 0.3
     """Model acceleration error of a DOF that has only the generic prior (mode (b), not yet
@@ -681,7 +681,7 @@ class CurrentPipeline:
                 zz = np.zeros(self.nd)
                 zz[: len(z)] = z
                 if len(z) < self.nd:  # no vertical: take the filter's own
-                    zz[2:] = (R @ self.x[: self.nd] + self.x[self.nd:])[2:]
+                    zz[2:] = (R @ self.x[: self.nd] + self.x[self.nd:2 * self.nd])[2:]
                 self._last_vg = (tm, R.T @ zz, kind)
             else:
                 self._last_vg = (tm, z.copy(), kind)
