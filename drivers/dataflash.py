@@ -446,7 +446,14 @@ class DataflashReader:
                 t = v[0] / 1e6 if f.timed else latest_t
                 if t == -math.inf:
                     t = 0.0
-                s = h(v, t, st)
+                try:
+                    s = h(v, t, st)
+                except (TypeError, ValueError, OverflowError):
+                    # a FMT that types a column other than its message's layout (text
+                    # where a number belongs): the record is unusable, not the log
+                    stats.reject("format")
+                    pos = end
+                    continue
                 if s is not None and (want is None or isinstance(s, want)):
                     if t < emitted_t:
                         stats.reject("time_backwards")

@@ -92,6 +92,28 @@ _REV_BYTE = [bytes((_REV[i],)) for i in range(256)]
 _REV16_LO = [_REV[i] << 8 for i in range(256)]
 
 
+def _valid_frame_inside(buf: bytes | bytearray, start: int, stop: int) -> bool:
+    """True if a complete, CRC-valid frame of a known id starts in ``buf[start:stop]``:
+    then the unknown-id "frame" spanning it is line noise, not a frame."""
+    for k in range(start, stop):
+        b = buf[k]
+        if b == 0xFD and k + 10 <= len(buf):
+            plen, hdr = buf[k + 1], 10
+            msgid = buf[k + 7] | (buf[k + 8] << 8) | (buf[k + 9] << 16)
+        elif b == 0xFE and k + 6 <= len(buf):
+            plen, hdr = buf[k + 1], 6
+            msgid = buf[k + 5]
+        else:
+            continue
+        extra = CRC_EXTRA.get(msgid)
+        ce = k + hdr + plen
+        if extra is None or ce + 2 > len(buf):
+            continue
+        if x25crc(buf[k + 1:ce], extra) == (buf[ce] | (buf[ce + 1] << 8)):
+            return True
+    return False
+
+
 def x25crc(data: bytes, crc_extra: int | None = None) -> int:
     """MAVLink checksum (CRC-16/MCRF4XX) of ``data``, then of ``crc_extra`` when given."""
     c = binascii.crc_hqx(data.translate(_REV), 0xFFFF)
@@ -624,7 +646,7 @@ class MavlinkParser:
                 # start byte in line noise cannot swallow the intact frames behind it.
                 if end >= n:
                     break
-                if buf[end] not in (0xFD, 0xFE):
+                if buf[end] not in (0xFD, 0xFE) or _valid_frame_inside(buf, j + 1, end):
                     stats.reject("garbage")
                     self._in_garbage = True
                     i = j + 1

@@ -21,6 +21,7 @@ only when a source of that kind exists.
 from __future__ import annotations
 
 import importlib
+import math
 from typing import Callable
 
 import msgspec
@@ -47,10 +48,21 @@ class UnknownProtocol(KeyError, ValueError):
         return str(self.args[0]) if self.args else "unknown protocol"
 
 
+def _finite(sample: Sample) -> bool:
+    """True if every number of ``sample`` (tuples included) is finite."""
+    for v in msgspec.structs.astuple(sample):
+        if isinstance(v, float) and not math.isfinite(v):
+            return False
+        if isinstance(v, tuple) and not all(math.isfinite(x) for x in v if isinstance(x, float)):
+            return False
+    return True
+
+
 class SampleParser:
     """Typed samples encoded as msgpack (one sample per chunk), e.g. from the simulator.
 
-    A chunk that does not decode is counted as ``"decode"``. The sample's own ``t`` is
+    A chunk that does not decode is counted as ``"decode"``, one with a NaN or infinite
+    number as ``"nan"``. The sample's own ``t`` is
     kept (the producer stamped it); ``source`` is kept when set, else this parser's.
     """
 
@@ -67,6 +79,9 @@ class SampleParser:
             self.stats.reject("decode")
             return []
         self.stats.by_type[type(s).__name__] += 1
+        if not _finite(s):
+            self.stats.reject("nan")
+            return []
         if not s.source:
             s = msgspec.structs.replace(s, source=self.source)
         self.stats.samples += 1

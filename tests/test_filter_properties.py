@@ -287,8 +287,6 @@ def test_current_covariance_stays_psd_on_a_boat(seed):
     _check_over_stream("current", "rudder-boat", seed, dvl=False, depth=False)
 
 
-@pytest.mark.xfail(reason="finding 6 (current: ValueError on a 2-D GNSS velocity with a 3-D "
-                   "model with identification); see the reproducer below", strict=False)
 @settings(PROPS, max_examples=5, phases=[Phase.explicit, Phase.reuse, Phase.generate])
 @given(seed=st.integers(0, 2**32 - 1))
 def test_current_covariance_stays_psd_on_a_torpedo_auv(seed):
@@ -301,9 +299,6 @@ def test_eseso_covariance_stays_psd(seed):
     _check_over_stream("eseso", "bluerov2", seed, dvl=True, depth=True)
 
 
-@pytest.mark.xfail(reason="finding 6: current.py step, 'zz[2:] = (R @ x[:nd] + x[nd:])[2:]' "
-                   "adds the whole tail of x (current and coefficients) when n_theta > 0",
-                   strict=False)
 def test_current_torpedo_auv_takes_a_surface_gnss_velocity():
     cfg, p = _pipeline("current", "torpedo-auv")
     p.step(1.0, [Attitude(t=1.0, source="a", roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0)])

@@ -60,14 +60,7 @@ _TMP = Path(tempfile.mkdtemp(prefix="onboard-fuzz-"))
 
 # --------------------------------------------------------------------------- known bugs
 
-KNOWN_BUGS: dict[tuple[str, str, str], str] = {
-    ("TypeError", "dataflash.py", "_finite"):
-        "finding 9: a FMT that types a numeric column as text (n/N/Z) makes the DataFlash "
-        "handlers raise TypeError (abs() of bytes)",
-    ("TypeError", "dataflash.py", "h"):
-        "finding 9: a FMT that types a numeric column as text (n/N/Z) makes the DataFlash "
-        "handlers raise TypeError (abs() of bytes)",
-}
+KNOWN_BUGS: dict[tuple[str, str, str], str] = {}
 """Exceptions found by fuzzing in code outside this test's owner's area, reported in
 docs/fuzzing.md with reproducers (and pinned by the xfail tests below). The fuzz targets
 count them in :data:`KNOWN_HITS` instead of failing, so the suite stays green while they
@@ -903,8 +896,6 @@ def test_recording_damaged_length_does_not_cost_the_rest_of_the_file(tmp_path):
     assert len(list(read_records(p, stats))) == 2
 
 
-@pytest.mark.xfail(reason="finding 9 (drivers/dataflash.py: handlers assume the FMT types "
-                   "their columns as numbers)", strict=False)
 def test_dataflash_fmt_typing_a_number_as_text_is_a_counted_rejection(tmp_path):
     import struct
 
@@ -923,8 +914,6 @@ def test_dataflash_fmt_typing_a_number_as_text_is_a_counted_rejection(tmp_path):
     assert list(r) == [] and r.stats.rejected
 
 
-@pytest.mark.xfail(reason="finding 10 (drivers/protocols.py SampleParser passes NaN/inf "
-                   "through; the other drivers reject them as 'nan')", strict=False)
 def test_sample_records_with_non_finite_values_are_rejected():
     from drivers.protocols import SampleParser, encode_sample
     from onboard.messages import Imu
@@ -935,9 +924,6 @@ def test_sample_records_with_non_finite_values_are_rejected():
     assert p.feed(encode_sample(bad), 1.0) == [] and p.stats.rejected
 
 
-@pytest.mark.xfail(reason="finding 11 (drivers/mavlink.py: an unknown-id frame is accepted "
-                   "when its claimed end lands on any start byte; the frames inside it are "
-                   "lost uncounted)", strict=False)
 def test_mavlink_noise_spanning_intact_frames_does_not_swallow_them():
     frames = [mav_frame(30, bytes(28), seq=i) for i in range(3)]      # ATTITUDE, 40 bytes
     # line noise that reads as a v1 header of unknown id 189 whose length ends exactly at
