@@ -50,6 +50,56 @@ class ReadStats:
         }
 
 
+class LineAssembler:
+    """Cuts a byte stream into lines for the text protocols (NMEA, PD6, DVL JSON).
+
+    Lines end at LF (and at CR too with ``split_cr``); a partial line waits for the next
+    chunk; a line longer than ``max_line`` bytes is dropped and counted once in ``stats``
+    as ``"too_long"`` (with the rest of it, up to the next line end), so garbage without
+    line ends cannot grow the buffer. Blank lines are skipped with ``skip_blank``.
+    """
+
+    def __init__(self, stats: "ReadStats", max_line: int, *, split_cr: bool = True,
+                 skip_blank: bool = True) -> None:
+        self.stats = stats
+        self.max_line = max_line
+        self.split_cr = split_cr
+        self.skip_blank = skip_blank
+        self._buf = bytearray()
+        self._discarding = False
+
+    def push(self, data: bytes) -> list[bytes]:
+        """The complete lines in the stream so far, without their line ends."""
+        out: list[bytes] = []
+        buf = self._buf
+        buf.extend(data)
+        while True:
+            nl = buf.find(b"\n")
+            if self.split_cr:
+                cr = buf.find(b"\r")
+                nl = cr if nl < 0 else (nl if cr < 0 else min(nl, cr))
+            if nl < 0:
+                if len(buf) > self.max_line:
+                    if not self._discarding:
+                        self.stats.records += 1
+                        self.stats.reject("too_long")
+                    self._discarding = True
+                    buf.clear()
+                return out
+            line = bytes(buf[:nl])
+            del buf[: nl + 1]
+            if self._discarding:
+                self._discarding = False
+                continue
+            if self.skip_blank and not line.strip():
+                continue
+            if len(line) > self.max_line:
+                self.stats.records += 1
+                self.stats.reject("too_long")
+                continue
+            out.append(line)
+
+
 class StreamParser(Protocol):
     """Incremental bytes-to-samples parser for one protocol."""
 

@@ -45,7 +45,7 @@ from typing import Any, Iterator
 
 import msgspec
 
-from drivers.base import ReadStats, UnreadableLog
+from drivers.base import LineAssembler, ReadStats, UnreadableLog
 from onboard.messages import DvlPosition, DvlVelocity, Sample
 
 MAX_LINE = 16384
@@ -163,34 +163,13 @@ class DvlJsonParser:
         self.source = source
         self.max_line = max_line
         self.stats = ReadStats()
-        self._buf = bytearray()
-        self._discarding = False
+        self._lines = LineAssembler(self.stats, max_line, split_cr=False, skip_blank=False)
         self._last_line: bytes | None = None
 
     def feed(self, data: bytes, t_rx: float) -> list[Sample]:
         """Consume bytes received at ``t_rx`` (s); return the complete samples."""
         out: list[Sample] = []
-        buf = self._buf
-        buf.extend(data)
-        while True:
-            nl = buf.find(b"\n")
-            if nl < 0:
-                if len(buf) > self.max_line:
-                    if not self._discarding:
-                        self.stats.records += 1
-                        self.stats.reject("too_long")
-                    self._discarding = True
-                    buf.clear()
-                break
-            line = bytes(buf[:nl])
-            del buf[: nl + 1]
-            if self._discarding:
-                self._discarding = False
-                continue
-            if len(line) > self.max_line:
-                self.stats.records += 1
-                self.stats.reject("too_long")
-                continue
+        for line in self._lines.push(data):
             s = self.feed_line(line, t_rx)
             if s is not None:
                 out.append(s)

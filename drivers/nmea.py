@@ -70,7 +70,7 @@ import time as _time
 from dataclasses import dataclass, field
 from typing import Literal
 
-from drivers.base import ReadStats
+from drivers.base import LineAssembler, ReadStats
 from onboard.messages import GnssFix, Heading, Sample
 
 KNOT_MPS = 1852.0 / 3600.0
@@ -411,8 +411,7 @@ class NmeaParser:
         self._pending_headings: list[tuple[float, str, float | None]] = []
         self._last_t: float | None = None
         self._last_fix_key: float | None = None
-        self._buf = bytearray()
-        self._discarding = False
+        self._lines = LineAssembler(self.stats, max_line, split_cr=True, skip_blank=True)
 
     # -- byte stream
 
@@ -424,30 +423,7 @@ class NmeaParser:
         next call.
         """
         out = self._expire(t_rx)
-        buf = self._buf
-        buf.extend(data)
-        while True:
-            lf, cr = buf.find(b"\n"), buf.find(b"\r")
-            nl = lf if cr < 0 else (cr if lf < 0 else min(lf, cr))
-            if nl < 0:
-                if len(buf) > self.max_line:
-                    if not self._discarding:
-                        self.stats.records += 1
-                        self.stats.reject("too_long")
-                    self._discarding = True
-                    buf.clear()
-                break
-            line = bytes(buf[:nl])
-            del buf[: nl + 1]
-            if self._discarding:
-                self._discarding = False
-                continue
-            if not line.strip():
-                continue
-            if len(line) > self.max_line:
-                self.stats.records += 1
-                self.stats.reject("too_long")
-                continue
+        for line in self._lines.push(data):
             out.extend(self.feed_line(line, t_rx))
         return out
 

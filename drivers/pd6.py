@@ -54,7 +54,7 @@ from typing import Iterator, Literal
 
 import msgspec
 
-from drivers.base import ReadStats, UnreadableLog
+from drivers.base import LineAssembler, ReadStats, UnreadableLog
 from onboard.messages import (
     Altitude,
     Attitude,
@@ -136,38 +136,14 @@ class Pd6Parser:
         self.stats = ReadStats()
         self.instrument_time: float | None = None
         """POSIX time of the last TS line."""
-        self._buf = bytearray()
-        self._discarding = False
+        self._lines = LineAssembler(self.stats, max_line, split_cr=True, skip_blank=True)
         self._last_t: float | None = None
         self._pending_sa: Attitude | None = None
 
     def feed(self, data: bytes, t_rx: float) -> list[Sample]:
         """Consume bytes received at ``t_rx`` (s); return the complete samples."""
         out: list[Sample] = []
-        buf = self._buf
-        buf.extend(data)
-        while True:
-            lf, cr = buf.find(b"\n"), buf.find(b"\r")
-            nl = lf if cr < 0 else (cr if lf < 0 else min(lf, cr))
-            if nl < 0:
-                if len(buf) > self.max_line:
-                    if not self._discarding:
-                        self.stats.records += 1
-                        self.stats.reject("too_long")
-                    self._discarding = True
-                    buf.clear()
-                break
-            line = bytes(buf[:nl])
-            del buf[: nl + 1]
-            if self._discarding:
-                self._discarding = False
-                continue
-            if not line.strip():
-                continue
-            if len(line) > self.max_line:
-                self.stats.records += 1
-                self.stats.reject("too_long")
-                continue
+        for line in self._lines.push(data):
             out.extend(self.feed_line(line, t_rx))
         return out
 
