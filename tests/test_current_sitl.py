@@ -8,7 +8,6 @@ the comments; the bounds leave margin for other seeds. Long runs are marked slow
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 cv = pytest.importorskip("onboard.reports.current_validation")

@@ -43,7 +43,6 @@ from __future__ import annotations
 import hashlib
 import logging
 import math
-import os
 import socket
 import stat
 import time
