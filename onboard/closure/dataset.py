@@ -231,6 +231,24 @@ def from_arrays(t, psi, v_n, v_e, *, r=None, cmd_surge=None, cmd_yaw=None,
         has_gyro=has_gyro, has_commands=bool(np.isfinite(cmd_surge).any()), source=source)
 
 
+def remeasured(ds: Dataset, *, psi: np.ndarray | None = None, v_n: np.ndarray | None = None,
+               v_e: np.ndarray | None = None, keep: np.ndarray | None = None) -> Dataset:
+    """``ds`` with another measured heading or velocity over ground, its derived channels
+    (along, lateral, derivatives) recomputed; ``keep`` selects the ticks to keep."""
+    k = slice(None) if keep is None else keep
+    psi = ds.psi if psi is None else psi
+    v_n = ds.v_n if v_n is None else v_n
+    v_e = ds.v_e if v_e is None else v_e
+    out = from_arrays(ds.t[k], psi[k], v_n[k], v_e[k], r=ds.r[k] if ds.has_gyro else None,
+                      cmd_surge=ds.cmd_surge[k], cmd_yaw=ds.cmd_yaw[k],
+                      thrust_quadratic=ds.thrust_quadratic[k],
+                      thrust_reverse=ds.thrust_reverse[k], run=ds.run[k], north=ds.north[k],
+                      east=ds.east[k], source=ds.source)
+    if not ds.has_gyro:
+        out.r = ds.r[k]  # the heading-derived rate, kept as it was
+    return out
+
+
 def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     """Read ``path`` through the engine and collect its channels at ``rate_hz``."""
     import msgspec

@@ -39,7 +39,33 @@ from sitl.environment import Environment
 from sitl.integrate import GRAVITY, rk4_step_list, rotation_body_to_ned, wrap_pi
 from sitl.truth import TruthRecord
 
-__all__ = ["Command", "Plant", "PlantBase", "PropulsionWrench"]
+__all__ = ["Command", "ManoeuvringMasses", "Plant", "PlantBase", "PropulsionWrench"]
+
+
+class ManoeuvringMasses:
+    """Effective masses of a 3-DOF (surge, sway, yaw) manoeuvring model, for parameter
+    dataclasses with ``m``, ``x_udot``, ``y_vdot`` (kg), ``i_z``, ``n_rdot`` (kg m^2)."""
+
+    m: float
+    x_udot: float
+    y_vdot: float
+    i_z: float
+    n_rdot: float
+
+    @property
+    def m11(self) -> float:
+        """Effective surge mass m - X_udot (kg)."""
+        return self.m - self.x_udot
+
+    @property
+    def m22(self) -> float:
+        """Effective sway mass m - Y_vdot (kg)."""
+        return self.m - self.y_vdot
+
+    @property
+    def m33(self) -> float:
+        """Effective yaw inertia I_z - N_rdot (kg m^2)."""
+        return self.i_z - self.n_rdot
 
 
 @dataclass(frozen=True)

@@ -37,13 +37,13 @@ import math
 from dataclasses import dataclass
 
 
-from sitl.plants.base import Command, PlantBase, PropulsionWrench
+from sitl.plants.base import Command, ManoeuvringMasses, PlantBase, PropulsionWrench
 
 __all__ = ["RudderBoatParams", "RudderBoat"]
 
 
 @dataclass(frozen=True)
-class RudderBoatParams:
+class RudderBoatParams(ManoeuvringMasses):
     """Physical parameters (SI). All are our documented choice for a 1 m, 3 kg hull."""
 
     m: float = 3.0
@@ -84,21 +84,6 @@ class RudderBoatParams:
     """Quadratic yaw damping (N m s^2/rad^2)."""
     rudder_max: float = 0.6
     """Rudder deflection limit (rad)."""
-
-    @property
-    def m11(self) -> float:
-        """Effective surge mass m - X_udot (kg)."""
-        return self.m - self.x_udot
-
-    @property
-    def m22(self) -> float:
-        """Effective sway mass m - Y_vdot (kg)."""
-        return self.m - self.y_vdot
-
-    @property
-    def m33(self) -> float:
-        """Effective yaw inertia I_z - N_rdot (kg m^2)."""
-        return self.i_z - self.n_rdot
 
     @property
     def n_d(self) -> float:

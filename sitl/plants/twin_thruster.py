@@ -32,13 +32,13 @@ import math
 from dataclasses import dataclass
 
 
-from sitl.plants.base import Command, PlantBase, PropulsionWrench
+from sitl.plants.base import Command, ManoeuvringMasses, PlantBase, PropulsionWrench
 
 __all__ = ["TwinThrusterParams", "TwinThrusterBoat"]
 
 
 @dataclass(frozen=True)
-class TwinThrusterParams:
+class TwinThrusterParams(ManoeuvringMasses):
     """BlueBoat-like parameters (SI); damping values are our documented choice."""
 
     m: float = 15.0
@@ -73,21 +73,6 @@ class TwinThrusterParams:
     """Linear yaw damping (N m s/rad)."""
     d_rr: float = 8.0
     """Quadratic yaw damping (N m s^2/rad^2)."""
-
-    @property
-    def m11(self) -> float:
-        """m - X_udot (kg)."""
-        return self.m - self.x_udot
-
-    @property
-    def m22(self) -> float:
-        """m - Y_vdot (kg)."""
-        return self.m - self.y_vdot
-
-    @property
-    def m33(self) -> float:
-        """I_z - N_rdot (kg m^2)."""
-        return self.i_z - self.n_rdot
 
     @property
     def k_f(self) -> float:

@@ -17,13 +17,13 @@ import math
 
 import numpy as np
 
-from onboard.closure.dataset import Dataset, from_arrays
+from onboard.closure.dataset import Dataset, remeasured
 from onboard.closure.effects.base import Effect
 
 
 def advance_velocity(ds: Dataset, tau: float) -> Dataset:
     """``ds`` with the velocity over ground taken ``tau`` seconds later, within each
-    segment (the last ``tau`` seconds of a segment lose their velocity, NaN)."""
+    segment (the last ``tau`` seconds of each segment, which have none, are dropped)."""
     k = int(round(tau / ds.dt))
     if k <= 0:
         return ds
@@ -34,15 +34,7 @@ def advance_velocity(ds: Dataset, tau: float) -> Dataset:
         if b - a > k:
             vn[a:b - k] = ds.v_n[a + k:b]
             ve[a:b - k] = ds.v_e[a + k:b]
-    m = np.isfinite(vn)
-    out = from_arrays(ds.t[m], ds.psi[m], vn[m], ve[m], r=ds.r[m] if ds.has_gyro else None,
-                      cmd_surge=ds.cmd_surge[m], cmd_yaw=ds.cmd_yaw[m],
-                      thrust_quadratic=ds.thrust_quadratic[m],
-                      thrust_reverse=ds.thrust_reverse[m], run=ds.run[m], north=ds.north[m],
-                      east=ds.east[m], source=ds.source)
-    if not ds.has_gyro:
-        out.r = ds.r[m]
-    return out
+    return remeasured(ds, v_n=vn, v_e=ve, keep=np.isfinite(vn))
 
 
 class GpsLatency(Effect):

@@ -16,19 +16,13 @@ import math
 
 import numpy as np
 
-from onboard.closure.dataset import Dataset, from_arrays
+from onboard.closure.dataset import Dataset, remeasured
 from onboard.closure.effects.base import Effect
 
 
 def rotate_heading(ds: Dataset, bias: float) -> Dataset:
     """``ds`` with ``bias`` (rad) removed from the measured heading."""
-    out = from_arrays(ds.t, ds.psi - bias, ds.v_n, ds.v_e, r=ds.r if ds.has_gyro else None,
-                      cmd_surge=ds.cmd_surge, cmd_yaw=ds.cmd_yaw,
-                      thrust_quadratic=ds.thrust_quadratic, thrust_reverse=ds.thrust_reverse,
-                      run=ds.run, north=ds.north, east=ds.east, source=ds.source)
-    if not ds.has_gyro:
-        out.r = ds.r
-    return out
+    return remeasured(ds, psi=ds.psi - bias)
 
 
 class HeadingBias(Effect):
