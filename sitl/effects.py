@@ -32,7 +32,20 @@ name                     params (units)                    what it does
                          ``direction`` (rad)
 ``external_force``       ``north``, ``east``, ``down``     constant world-frame force (the
                          (N)                               ESESO paper's disturbance)
+``gnss_outage``          ``start``, ``duration`` (s)       sensor fault: no GNSS fix at all
+                                                           in the window
+``dvl_lock_loss``        ``start``, ``duration`` (s)       sensor fault: the DVL loses bottom
+                                                           lock (reports ``valid=False``,
+                                                           zeros) in the window
+``compass_step``         ``start``, ``duration`` (s),      sensor fault: the heading reads
+                         ``radians``                       ``radians`` more in the window
+                                                           (duration inf: permanent)
 =======================  ================================  ===================================
+
+The three sensor faults are meant to be **declared** (the fault scenarios of
+:mod:`sitl.scenarios` declare them): they are test material for the service's fault
+handling, not for model closure. The truth records the fault's parameters and its
+state (``sensor.gnss_outage``, ``sensor.dvl_locked``, ``sensor.heading_error``).
 
 How they act: sea effects change the :class:`~sitl.environment.Environment`; sensor
 effects change the sensor configuration (:func:`apply_to_sensors`); force effects are
@@ -74,6 +87,9 @@ VOCABULARY: dict[str, tuple[str, ...]] = {
     "sideslip": ("coefficient",),
     "wave_oscillation": ("period", "height", "direction"),
     "external_force": ("north", "east", "down"),
+    "gnss_outage": ("start", "duration"),
+    "dvl_lock_loss": ("start", "duration"),
+    "compass_step": ("start", "duration", "radians"),
 }
 """Effect name -> its parameter names (all floats, SI units, see the module table)."""
 
@@ -83,6 +99,7 @@ _DEFAULTS: dict[str, dict[str, float]] = {
     "gyro_bias": {"x": 0.0, "y": 0.0, "z": 0.0},
     "wave_oscillation": {"height": 0.3, "direction": 0.0},
     "external_force": {"north": 0.0, "east": 0.0, "down": 0.0},
+    "compass_step": {"duration": math.inf},
 }
 
 
@@ -140,7 +157,8 @@ def apply_to_environment(effects: tuple[Effect, ...], env: Environment) -> Envir
 
 
 def apply_to_sensors(effects: tuple[Effect, ...], cfg: SensorSuiteConfig) -> SensorSuiteConfig:
-    """The sensor suite with the sensor effects (compass, gyro, GNSS latency) applied."""
+    """The sensor suite with the sensor effects (compass, gyro, GNSS latency) and the
+    sensor faults (GNSS outage, DVL lock loss, compass step) applied."""
     for e in effects:
         p = e.params
         if e.name == "compass_deviation" and cfg.compass is not None:
@@ -155,6 +173,17 @@ def apply_to_sensors(effects: tuple[Effect, ...], cfg: SensorSuiteConfig) -> Sen
         elif e.name == "gps_latency" and cfg.gnss is not None:
             cfg = dataclasses.replace(cfg, gnss=dataclasses.replace(
                 cfg.gnss, latency_s=cfg.gnss.latency_s + p["seconds"]))
+        elif e.name == "gnss_outage" and cfg.gnss is not None:
+            cfg = dataclasses.replace(cfg, gnss=dataclasses.replace(
+                cfg.gnss, outage_windows=cfg.gnss.outage_windows + ((p["start"], p["duration"]),)))
+        elif e.name == "dvl_lock_loss" and cfg.dvl is not None:
+            cfg = dataclasses.replace(cfg, dvl=dataclasses.replace(
+                cfg.dvl, lock_loss_windows=cfg.dvl.lock_loss_windows
+                + ((p["start"], p["duration"]),)))
+        elif e.name == "compass_step" and cfg.compass is not None:
+            cfg = dataclasses.replace(cfg, compass=dataclasses.replace(
+                cfg.compass, steps=cfg.compass.steps
+                + ((p["start"], p["duration"], p["radians"]),)))
     return cfg
 
 

@@ -12,7 +12,12 @@
   ``effect-gyro-bias``, ``effect-gps-latency``, ``effect-thrust-nonlinearity``,
   ``effect-quadratic-drag``, ``effect-surge-yaw-coupling``, ``effect-sideslip``,
   ``effect-waves``, ``effect-two`` (current and compass deviation at once) and ``clean``
-  (the same boat and mission, nothing injected).
+  (the same boat and mission, nothing injected);
+* the fault-injection material, a paper scenario with one *declared* sensor fault
+  (:mod:`sitl.effects`): ``fault-gnss-outage`` (no GNSS for 120 s), ``fault-gnss-submerged``
+  (a torpedo AUV diving from the surface with a receiver that keeps reporting fixes under
+  water), ``fault-dvl-lock-loss`` and ``fault-dvl-lock-loss-rov`` (30 s without bottom
+  lock), ``fault-compass-step`` (the compass reads 30 deg off for 5 s).
 
 What the estimator may know of a scenario is :meth:`Scenario.metadata` (vehicle class,
 sensor rates and noise figures, the *declared* effects); the injected effects'
@@ -627,7 +632,42 @@ def _build() -> dict[str, Scenario]:
                          (Effect("water_current", {"north": 0.2, "east": 0.1}),
                           Effect("compass_deviation", {"amplitude": 0.1, "phase": -1.0}))),
     ]
-    return {sc.name: sc for sc in s}
+    by_name = {sc.name: sc for sc in s}
+    faults = [
+        _fault(by_name["jaiabot-turns"], "fault-gnss-outage",
+               "jaiabot-turns with no GNSS fix from 40 s to 160 s",
+               (Effect("gnss_outage", {"start": 40.0, "duration": 120.0}),)),
+        _fault(by_name["gavia-tidal"], "fault-gnss-submerged",
+               "gavia-tidal starting at the surface and diving to 5 m, its GNSS receiver "
+               "reporting (wrong) fixes under water",
+               (), sensors=dataclasses.replace(
+                   by_name["gavia-tidal"].sensors,
+                   gnss=dataclasses.replace(by_name["gavia-tidal"].sensors.gnss,  # type: ignore[arg-type]
+                                            max_depth_m=math.inf)),
+               initial=Initial(down=0.0, yaw=0.0, u=1.5)),
+        _fault(by_name["gavia-tidal"], "fault-dvl-lock-loss",
+               "gavia-tidal with the DVL out of bottom lock from 60 s to 90 s",
+               (Effect("dvl_lock_loss", {"start": 60.0, "duration": 30.0}),)),
+        _fault(by_name["bluerov2-circle"], "fault-dvl-lock-loss-rov",
+               "bluerov2-circle with the DVL out of bottom lock from 60 s to 90 s",
+               (Effect("dvl_lock_loss", {"start": 60.0, "duration": 30.0}),)),
+        _fault(by_name["jaiabot-turns"], "fault-compass-step",
+               "jaiabot-turns with the compass reading 30 deg too much from 60 s to 65 s",
+               (Effect("compass_step", {"start": 60.0, "duration": 5.0,
+                                        "radians": 30 * DEG}),)),
+    ]
+    by_name.update((sc.name, sc) for sc in faults)
+    return by_name
+
+
+def _fault(base: Scenario, name: str, description: str, effects: tuple[Effect, ...],
+           **changes: Any) -> Scenario:
+    """``base`` with the sensor faults ``effects`` injected and declared."""
+    return dataclasses.replace(
+        base, name=name, description=description,
+        reproduces=f"fault injection on {base.name}: the service's handling of a sensor fault",
+        injected=base.injected + effects,
+        declared=base.declared + tuple(e.name for e in effects), **changes)
 
 
 SCENARIOS: dict[str, Scenario] = _build()

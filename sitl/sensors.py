@@ -13,18 +13,21 @@ Error models (all one-sigma figures, per axis unless said otherwise):
   ``drift_tau_s``); SOG/COG from the true velocity over ground plus white noise
   ``velocity_std_mps``; a fixed ``latency_s`` between the instant measured and the instant
   reported; outages (Poisson onset ``outage_rate_hz``, exponential length of mean
-  ``outage_mean_s``); no fix at all deeper than ``max_depth_m`` (0.3 m).
+  ``outage_mean_s``); scheduled outages ``outage_windows`` (the ``gnss_outage`` fault);
+  no fix at all deeper than ``max_depth_m`` (0.3 m).
 * **IMU** (:class:`Imu`): specific force and angular rate (body FRD) + turn-on bias +
   random-walk bias + white noise; an injected constant gyro bias on top.
 * **Compass/AHRS** (:class:`Compass`): heading error
   ``c + A1 sin(psi + phi1) + A2 sin(2 psi + phi2) + k_motor * thrust`` (hard iron, soft iron,
-  constant offset, motor interference) plus white noise; the AHRS attitude carries the same
+  constant offset, motor interference) plus white noise, plus scheduled steps ``steps``
+  (the ``compass_step`` fault: a magnetic disturbance); the AHRS attitude carries the same
   yaw, roll and pitch with small noise, and the gyro rates.
 * **DVL** (:class:`Dvl`): bottom-track velocity over ground and (optionally) water-track
   velocity through water, in the instrument = body frame; white noise growing with
   altitude; a figure of merit; lock lost above ``max_altitude_m``, below
-  ``min_altitude_m`` and in random dropouts. A lost lock is reported the way a Water Linked
-  A50 reports it: ``valid=False``, zero velocity, a large figure of merit, no altitude.
+  ``min_altitude_m``, in random dropouts and in scheduled ``lock_loss_windows`` (the
+  ``dvl_lock_loss`` fault). A lost lock is reported the way a Water Linked A50 reports it:
+  ``valid=False``, zero velocity, a large figure of merit, no altitude.
 * **Depth** (:class:`DepthSensor`): pressure = p0 + rho g (depth + white noise).
 * **Actuators** (:class:`ActuatorModel`, :class:`RpmSensor`): commanded normalized values
   to PWM pulse widths (integer us, saturated at the end points), the ESC deadband applied
@@ -209,6 +212,15 @@ class _Base:
         return {}
 
 
+def in_windows(t: float, windows: Sequence[tuple[float, float]]) -> bool:
+    """Whether ``t`` falls in one of the ``(start, duration)`` windows (s): start <= t <
+    start + duration."""
+    for start, dur in windows:
+        if start <= t < start + dur:
+            return True
+    return False
+
+
 def _gauss_markov(x: np.ndarray, dt: float, tau: float, std: float,
                   rng: np.random.Generator) -> np.ndarray:
     """Exact discrete step of a first-order Gauss-Markov process of stationary ``std``."""
@@ -270,6 +282,9 @@ class GnssConfig:
     outage_mean_s: float = 10.0
     max_depth_m: float = 0.3
     """No fix when the antenna is deeper than this (m)."""
+    outage_windows: tuple[tuple[float, float], ...] = ()
+    """Scheduled outages ``(start_s, duration_s)``: no fix at all in them (the
+    ``gnss_outage`` fault: antenna cable, jamming, a bridge)."""
     num_sats: int = 12
     hdop: float = 0.9
 
@@ -288,6 +303,7 @@ class Gnss(_Base):
         self._t_last: float | None = None
         self._queue: deque[tuple[float, GnssFix]] = deque()
         self._outages = _Outages(cfg.outage_rate_hz, cfg.outage_mean_s, rng)
+        self._out = False
 
     def measure(self, world: WorldView) -> list[Sample]:
         c = self.cfg
@@ -297,7 +313,8 @@ class Gnss(_Base):
         self.drift = _gauss_markov(self.drift, dt, c.drift_tau_s, c.drift_std_m, self.rng)
         n = self.rng.standard_normal(5).tolist()
         drift = self.drift.tolist()
-        out = self._outages.active(t, dt)
+        out = self._outages.active(t, dt) or in_windows(t, c.outage_windows)
+        self._out = out
         tr = world.truth
         if out or tr.down > c.max_depth_m:
             return self.due(t)
@@ -328,8 +345,7 @@ class Gnss(_Base):
     def error_state(self) -> dict[str, float]:
         return {"sensor.gnss_drift_north": float(self.drift[0]),
                 "sensor.gnss_drift_east": float(self.drift[1]),
-                "sensor.gnss_outage": 1.0 if self._t_last is not None
-                and self._t_last < self._outages.until else 0.0}
+                "sensor.gnss_outage": 1.0 if self._out else 0.0}
 
 
 # --------------------------------------------------------------------------- IMU
@@ -430,6 +446,10 @@ class CompassConfig:
     """White noise on the AHRS roll and pitch (rad)."""
     emit_attitude: bool = True
     """Also emit :class:`Attitude` (roll, pitch, the same yaw, gyro rates)."""
+    steps: tuple[tuple[float, float, float], ...] = ()
+    """Scheduled heading steps ``(start_s, duration_s, radians)``: the heading reads
+    ``radians`` more while in the window (the ``compass_step`` fault: a magnetic
+    disturbance, a steel hull alongside; ``duration_s`` inf = permanent)."""
 
 
 class Compass(_Base):
@@ -460,6 +480,9 @@ class Compass(_Base):
         tr = world.truth
         n = self.rng.standard_normal(6).tolist()
         err = self.deviation(tr.yaw, world.thrust) + c.noise_std_rad * n[0]
+        for start, dur, rad in c.steps:
+            if start <= world.t < start + dur:
+                err += rad
         self.last_error = err
         psi = wrap_2pi(tr.yaw + err)
         out: list[Sample] = [Heading(t=world.t, source=self.name, heading_rad=psi)]
@@ -510,6 +533,9 @@ class DvlConfig:
     """Also report the DVL's own dead-reckoned position (:class:`DvlPosition`)."""
     invalid_fom_mps: float = 2.0
     """Figure of merit reported without lock (the A50 reports a large value)."""
+    lock_loss_windows: tuple[tuple[float, float], ...] = ()
+    """Scheduled bottom-lock losses ``(start_s, duration_s)`` (the ``dvl_lock_loss``
+    fault: soft mud, a steep slope, aeration)."""
 
 
 class Dvl(_Base):
@@ -534,7 +560,7 @@ class Dvl(_Base):
         tr = world.truth
         alt = world.altitude
         n = self.rng.standard_normal(7).tolist()
-        dropped = self._outages.active(t, dt)
+        dropped = self._outages.active(t, dt) or in_windows(t, c.lock_loss_windows)
         valid = (alt is not None and c.min_altitude_m <= alt <= c.max_altitude_m
                  and not dropped)
         if self.locked and not valid:
