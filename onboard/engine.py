@@ -39,6 +39,12 @@ from onboard.validate import check_values, sample_type
 
 GRAVITY = 9.80665
 """Standard gravity, m/s^2 (used for pressure -> depth)."""
+STALE_AFTER_S = 3.0
+"""A sample stream (type, source) with no accepted sample for this long is reported
+stale in the health events (e.g. GNSS lost while the same serial line still carries the
+compass, or a DVL that only reports ``valid=False``), and again when it comes back."""
+_NEVER_STALE = {"parameter"}
+"""Streams sent once, not periodically."""
 
 _SPECIAL = {Pressure, Depth, GnssFix}
 _RAW_ACTUATORS = {ActuatorOutputs, RcChannels, PropellerRpm}
@@ -75,8 +81,11 @@ class Engine:
         self._ticks = 0
         self.pipeline_errors: Counter[str] = Counter()
         self.events: list[str] = []
-        """Human-readable events (pipeline restarts) for the health channel; the owner
-        drains it."""
+        """Human-readable events (pipeline restarts, stale streams) for the health
+        channel; each is in one :meth:`health` record (the next after it happened)."""
+        self._events_reported = 0
+        self.stale: set[tuple[str, str]] = set()
+        """The sample streams now stale (see :data:`STALE_AFTER_S`)."""
         depth_cfg = cfg.sensors.depth
         self._rho_g = depth_cfg.water_density_kgm3 * GRAVITY
         self._p_surface = depth_cfg.surface_pressure_pa
@@ -171,7 +180,9 @@ class Engine:
 
     def health(self, t: float, rates_hz: dict[str, float] | None = None,
                events: list[str] | None = None) -> HealthRecord:
-        """Innovations and NIS of every pipeline plus rejection counts."""
+        """Innovations and NIS of every pipeline plus rejection counts; the events since
+        the previous call (``events`` first), stale streams among them."""
+        self._check_stale(t)
         innovations: dict[str, float] = {}
         nis: dict[str, float] = {}
         for p in self.pipelines:
@@ -182,7 +193,28 @@ class Engine:
         rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
         return HealthRecord(vehicle=self.cfg.vehicle.id, t=t, rates_hz=rates_hz or {},
                             rejected=rejected, innovations=innovations, nis=nis,
-                            events=(events or []) + self.events[-10:], mode=self.mode)
+                            events=(events or []) + self._new_events(), mode=self.mode)
+
+    def _new_events(self) -> list[str]:
+        new = self.events[self._events_reported:][-10:]
+        if len(self.events) > 100:
+            del self.events[:-50]
+        self._events_reported = len(self.events)
+        return new
+
+    def _check_stale(self, t: float) -> None:
+        for key, last in self._last_t.items():
+            if key[0] in _NEVER_STALE:
+                continue
+            quiet = t - last
+            if quiet > STALE_AFTER_S:
+                if key not in self.stale:
+                    self.stale.add(key)
+                    self.events.append(f"{key[0]}:{key[1]}: stale, no sample accepted "
+                                       f"for {quiet:.0f} s")
+            elif key in self.stale:
+                self.stale.discard(key)
+                self.events.append(f"{key[0]}:{key[1]}: samples again")
 
     def get_state(self) -> dict:
         """Adaptive state of every pipeline, for persistence across restarts."""
