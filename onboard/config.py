@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 import tomllib
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 import msgspec
 
@@ -230,6 +230,10 @@ class Service(_Strict):
     state_save_interval_s: float = 30.0
     queue_size: int = 4096
     watchdog: bool = True
+    tick_wait_s: Annotated[float, msgspec.Meta(ge=0.0)] = 0.05
+    """After its grid time a tick waits up to this long (s, capped at half the tick
+    period) for the next sample, so that it carries the freshest data (the sensor-to-shore
+    latency is then the step, not the wait for the grid); 0 ticks exactly on the grid."""
 
 
 class Config(_Strict):

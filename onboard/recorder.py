@@ -251,6 +251,9 @@ class Intake:
     dropped: Counter[str] = field(default_factory=Counter)
     pending: deque[Sample] = field(default_factory=deque)
     ticks: int = 0
+    on_queued: Callable[[], None] | None = None
+    """Called after a chunk queued at least one sample (the service wakes a tick that
+    waits for fresh data with it)."""
 
     def add_source(self, name: str, kind: str) -> SourceState:
         """Register an input named ``name`` speaking protocol ``kind``."""
@@ -292,6 +295,8 @@ class Intake:
             pending.append(s)
             queued += 1
         st.samples += queued
+        if queued and self.on_queued is not None:
+            self.on_queued()
         return queued
 
     def tick(self, t: float) -> list[EstimateRecord]:

@@ -179,6 +179,8 @@ class Service:
                              else rec_base / svc.recorder.directory)
         self.recorder: Recorder | None = None
         self.intake = Intake(self.engine, queue_size=svc.queue_size)
+        self._sample_arrived = asyncio.Event()
+        self.intake.on_queued = self._sample_arrived.set
         self.inputs: list[_Input] = []
         self.zenoh = None
         self.mavlink = None
@@ -371,6 +373,7 @@ class Service:
         next_save = clock.now() + save_every if save_every > 0 else math.inf
         perf = time.perf_counter
         watchdog = self.cfg.service.watchdog
+        wait = min(self.cfg.service.tick_wait_s, 0.5 * period)
         while True:
             t = k * period
             await clock.sleep_until(t)
@@ -381,6 +384,9 @@ class Service:
                 self.event(f"estimator loop stalled {now - t:.1f} s: skipped {k_new - k} ticks")
                 k = k_new
                 t = k * period
+            elif wait > 0:
+                now = await self._await_sample(t + wait)
+                t = max(t, now)
             w0 = perf()
             try:
                 self._tick(t, now)
@@ -405,6 +411,22 @@ class Service:
             if watchdog:
                 self.notifier.watchdog()
             k += 1
+
+    async def _await_sample(self, deadline: float) -> float:
+        """Wait until a chunk queues a sample or service time ``deadline``; return the
+        service time then. Ticking on the arrival of a sample (normally the IMU's, the
+        fastest stream) instead of on the bare grid makes the newest sample of a tick
+        milliseconds old rather than up to one sample period."""
+        arrived = self._sample_arrived
+        arrived.clear()
+        delay = self.clock.wall_delay(deadline)
+        if delay > 0:
+            try:
+                async with asyncio.timeout(delay):
+                    await arrived.wait()
+            except TimeoutError:
+                pass
+        return self.clock.now()
 
     def _tick(self, t: float, now: float) -> None:
         records = self.intake.tick(t)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import os
 import signal
 import socket
@@ -245,6 +246,53 @@ def test_adaptive_state_is_saved_on_stop_and_restored_on_start_corrupt_is_ignore
     third = asyncio.run(asyncio.wait_for(once(), TIMEOUT))
     assert any("corrupt" in e for e in third.events)
     assert third.stats.ticks > 0  # and it ran anyway
+
+
+@pytest.mark.parametrize("wait_s", [0.0, 0.05])
+def test_ticks_fire_on_the_grid_or_on_the_first_sample_after_it(tmp_path, wait_s):
+    """``service.tick_wait_s = 0``: every tick on the grid ``k / rate_hz``, its newest
+    sample older than the grid time. ``> 0``: a tick waits for the first sample after its
+    grid time and carries it (this is what makes sensor-to-shore latency the step, not the
+    wait for the grid); a tick with no such sample in time fires at the deadline."""
+    port, nmea_port = free_udp_port(), free_udp_port()
+    cfg = _config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}"},
+                           {"kind": "nmea", "url": f"udp:127.0.0.1:{nmea_port}"}],
+                  zenoh={"enabled": False}, mavlink={"enabled": False},
+                  recorder={"enabled": False}, tick_wait_s=wait_s)
+    ticks: list[tuple[float, float | None]] = []
+    gen = TrafficGenerator(system_id=1)
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    async def main() -> Service:
+        svc = Service(cfg, state_dir=tmp_path, on_tick=lambda t, recs: ticks.append(
+            (t, recs[0].t_sensor if recs else None)))
+        await svc.start()
+        t0 = time.monotonic()
+        for k in range(100):  # 2 s of 50 Hz MAVLink and 5-10 Hz NMEA
+            await asyncio.sleep(max(0.0, t0 + k / 50.0 - time.monotonic()))
+            for f in gen.mavlink(k / 50.0):
+                udp.sendto(f, ("127.0.0.1", port))
+            for f in gen.nmea(k / 50.0):
+                udp.sendto(f, ("127.0.0.1", nmea_port))
+        svc.request_stop()
+        await svc.shutdown()
+        return svc
+
+    try:
+        asyncio.run(asyncio.wait_for(main(), TIMEOUT))
+    finally:
+        udp.close()
+    fed = [(t, ts) for t, ts in ticks if ts is not None]
+    assert len(fed) > 10
+    grid = [math.floor(t * 10.0 + 1e-9) / 10.0 for t, _ in fed]
+    assert all(0.0 <= t - g <= 0.05 + 1e-9 for (t, _), g in zip(fed, grid))
+    assert all(ts <= t for t, ts in fed)  # never a sample from the tick's future
+    after_grid = sum(ts > g for (_, ts), g in zip(fed, grid)) / len(fed)
+    if wait_s == 0.0:
+        assert all(t == g or abs(t - g) < 1e-9 for (t, _), g in zip(fed, grid))
+        assert after_grid == 0.0
+    else:  # the 50 Hz IMU arrives within 20 ms of every grid time: nearly all triggered
+        assert after_grid > 0.8, after_grid
 
 
 def _write_config(path: Path, udp_port: int) -> None:
