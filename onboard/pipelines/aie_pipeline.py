@@ -284,6 +284,8 @@ class SurgeHeadingPipeline:
         self._w = _Window()          # surge window: fixes and the headings among them
         self._hw = _Window()         # heading-axis window
         self._w_end = self._hw_end = math.inf
+        self._next_end = math.inf    # min(_w_end, _hw_end): the next window to close
+        self._handlers: dict[type, Callable[[Any], None] | None] = {}
         self._heading_source_seen = False
         self._psi_last: float | None = None       # last raw heading (unwrapped, rad)
         self._cmds: list[tuple[float, float | None, float | None]] = []
@@ -295,6 +297,9 @@ class SurgeHeadingPipeline:
         self._t_s: float | None = None
         self._n = self._e = 0.0
         self._psi: float | None = None
+        self._psi_s: float | None = None
+        """Cache of ``_heading_at(_t_s)`` (rad) for the output; None when stale (reset
+        whenever a window closes, a command arrives or the model changes)."""
         self._have_pos = False
         self._prev_nfix = 1
         self._course: float | None = None     # course over ground (GNSS-only logs)
@@ -377,43 +382,83 @@ class SurgeHeadingPipeline:
                 self._hw_end = end
             else:
                 self._w_end = end
+        self._next_end = min(self._hw_end, self._w_end)
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
-        """Consume samples (time-ordered) and return the estimates at time ``t``."""
+        """Consume samples (time-ordered) and return the estimates at time ``t``.
+
+        Every sample, whatever its type, first closes the windows ending at or before its
+        time (``_next_end`` caches the earlier of the two ends, so a sample inside both
+        windows costs one comparison); its handler (:meth:`_handler`) then adds it.
+        """
+        handlers = self._handlers
         for s in samples:
-            if self._t0 is None and isinstance(s, (GnssFix, Heading, Attitude)):
-                self._t0 = s.t
-                self._w_end = s.t + self.cfg.step_s
-                self._hw_end = s.t + self._step_h
-            self._advance(s.t)
-            if isinstance(s, GnssFix):
-                if s.fix_quality <= 0:
-                    continue
-                if self.frame is None:
-                    self.frame = LocalFrame(s.lat_deg, s.lon_deg)
-                n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
-                w = self._w
-                w.n_fix += 1
-                w.st_fix += s.t
-                w.sn += n
-                w.se += e
-            elif isinstance(s, Heading):
-                self._heading_source_seen = True
-                dec = (s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0
-                self._add_heading(s.t, s.heading_rad + dec)
-            elif isinstance(s, Attitude):
-                if not self._heading_source_seen:
-                    self._add_heading(s.t, s.yaw_rad)
-            elif isinstance(s, ActuatorCommand):
-                sc, yc = axis_commands(s, self.cfg.input_mode)
-                self._cmds.append((s.t, sc, yc))
-                if len(self._cmds) > 4096:   # no measurements for a long time
-                    del self._cmds[:2048]
+            st = s.t
+            if st >= self._next_end:
+                self._advance(st)
+            cls = type(s)
+            h = handlers[cls] if cls in handlers else self._handler(cls)
+            if h is not None:
+                h(s)
         return self._output(t)
+
+    def _handler(self, cls: type) -> Callable[[Any], None] | None:
+        """The intake method for a sample class (None: not an input), cached per class;
+        subclasses of the input messages get their base's handler."""
+        h = None
+        for base, fn in ((GnssFix, self._on_fix), (Heading, self._on_heading),
+                         (Attitude, self._on_attitude), (ActuatorCommand, self._on_command)):
+            if issubclass(cls, base):
+                h = fn
+                break
+        self._handlers[cls] = h
+        return h
+
+    def _start(self, t: float) -> None:
+        """The first measurement (fix, heading or attitude, at ``t`` s) starts both windows."""
+        self._t0 = t
+        self._w_end = t + self.cfg.step_s
+        self._hw_end = t + self._step_h
+        self._next_end = min(self._hw_end, self._w_end)
+
+    def _on_fix(self, s: GnssFix) -> None:
+        if self._t0 is None:
+            self._start(s.t)
+        if s.fix_quality <= 0:
+            return
+        if self.frame is None:
+            self.frame = LocalFrame(s.lat_deg, s.lon_deg)
+        n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
+        w = self._w
+        w.n_fix += 1
+        w.st_fix += s.t
+        w.sn += n
+        w.se += e
+
+    def _on_heading(self, s: Heading) -> None:
+        if self._t0 is None:
+            self._start(s.t)
+        self._heading_source_seen = True
+        dec = (s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0
+        self._add_heading(s.t, s.heading_rad + dec)
+
+    def _on_attitude(self, s: Attitude) -> None:
+        if self._t0 is None:
+            self._start(s.t)
+        if not self._heading_source_seen:
+            self._add_heading(s.t, s.yaw_rad)
+
+    def _on_command(self, s: ActuatorCommand) -> None:
+        sc, yc = axis_commands(s, self.cfg.input_mode)
+        self._cmds.append((s.t, sc, yc))
+        self._psi_s = None
+        if len(self._cmds) > 4096:   # no measurements for a long time
+            del self._cmds[:2048]
 
     # -- one step per window -----------------------------------------------------------
 
     def _close_heading_window(self) -> None:
+        self._psi_s = None
         w = self._hw
         self._hw = _Window()
         if w.n_h == 0:
@@ -465,6 +510,7 @@ class SurgeHeadingPipeline:
         return self._cmds[-1][j] if self._cmds else None
 
     def _close_surge_window(self) -> None:
+        self._psi_s = None
         w = self._w
         self._w = _Window()
         if w.n_fix == 0:
@@ -545,16 +591,20 @@ class SurgeHeadingPipeline:
                 out["east"] = self._e + ds * math.sin(self._course)
                 self._extra_outputs(out)
             return out
-        psi = self._heading_at(t)
-        out["heading"] = wrap_2pi(psi)
+        # the heading and the yaw rate predicted to t (as _heading_at, one prediction)
+        psi = self._psi
         if yaw.kf.initialized:
             tau = min(max(t - self._t_h, 0.0), self.cfg.max_gap_s)
             r = yaw.kf.v
             if tau > 1e-6:
-                _, r = yaw.kf.predict_ahead(
+                dpsi, r = yaw.kf.predict_ahead(
                     self._disc(yaw.damping(yaw.last_command), tau),
                     yaw.input_ahead(self._latest_command(2)))
+                psi = psi + dpsi
+            out["heading"] = wrap_2pi(psi)
             out["yaw_rate"] = r
+        else:
+            out["heading"] = wrap_2pi(psi)
         if surge.kf.initialized and self._t_s is not None:
             tau = min(max(t - self._t_s, 0.0), self.cfg.max_gap_s)
             ds, v = surge.kf.v * tau, surge.kf.v
@@ -563,7 +613,10 @@ class SurgeHeadingPipeline:
                     self._disc(surge.damping(surge.last_command), tau),
                     surge.input_ahead(self._latest_command(1)))
             out["speed"] = v
-            mid = 0.5 * (self._heading_at(self._t_s) + psi)
+            psi_s = self._psi_s
+            if psi_s is None:   # changes only when a window closes or a command arrives
+                psi_s = self._psi_s = self._heading_at(self._t_s)
+            mid = 0.5 * (psi_s + psi)
             out["north"] = self._n + ds * math.cos(mid)
             out["east"] = self._e + ds * math.sin(mid)
         elif self._have_pos:
@@ -599,6 +652,7 @@ class SurgeHeadingPipeline:
                 "heading": {"model": model(self.yaw.model)}}
 
     def set_state(self, state: Mapping[str, Any]) -> None:
+        self._psi_s = None
         for nm, ax in (("surge", self.surge), ("heading", self.yaw)):
             m = state.get(nm, {}).get("model") if isinstance(state.get(nm), dict) else None
             if isinstance(m, dict):
@@ -611,6 +665,7 @@ class SurgeHeadingPipeline:
 
     def set_model(self, axis: Literal["surge", "heading"], model: AxisModel) -> None:
         """Use an identified model (e.g. from surge_heading.identify_surge)."""
+        self._psi_s = None
         (self.surge if axis == "surge" else self.yaw).model = model
 
 
