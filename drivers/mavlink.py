@@ -35,11 +35,14 @@ import math
 import re
 import struct
 from collections import Counter
-from typing import Callable, Iterable
+from typing import TYPE_CHECKING, Callable, Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as _dialect
 
 from drivers.base import ReadStats
+
+if TYPE_CHECKING:
+    from drivers.mavlink_signing import SignatureVerifier
 from onboard.messages import (
     ActuatorOutputs,
     Altitude,
@@ -579,14 +582,20 @@ class MavlinkParser:
     between frames count as one ``"garbage"`` rejection per run; a frame with unknown
     incompatibility flags is ``"incompat"``. Frames of ids outside the dialect cannot be
     checked and are skipped by their length (counted in ``by_type`` as ``UNKNOWN_<id>``).
-    Signed MAVLink 2 frames are accepted; the 13-byte signature is skipped, not verified.
+    Without a ``verifier``, signed MAVLink 2 frames are accepted and their 13-byte
+    signature is skipped, not verified. With one (signing required, see
+    :mod:`drivers.mavlink_signing`), every frame must be signed with the key and fresh:
+    otherwise it is counted under the verifier's reason (``"unsigned"``, ``"signature"``,
+    ``"sig_replay"``, ``"sig_stale"``, ``"sig_future"``) and produces nothing.
     The result does not depend on how the stream is cut into chunks.
 
     ``types`` restricts the samples produced (Sample classes or tags); ``include_gcs``
     keeps ground-station heartbeats.
     """
 
-    def __init__(self, *, types: Iterable[type | str] | None = None, include_gcs: bool = False) -> None:
+    def __init__(self, *, types: Iterable[type | str] | None = None, include_gcs: bool = False,
+                 verifier: "SignatureVerifier | None" = None) -> None:
+        self.verifier = verifier
         self.stats = ReadStats()
         self._ctx = DecodeContext(self.stats, include_gcs)
         self._specs = select(types)
@@ -604,6 +613,7 @@ class MavlinkParser:
         i = 0
         specs, ctx, stats = self._specs, self._ctx, self.stats
         find = _MAGIC_RE.search
+        verify = self.verifier.check if self.verifier is not None else None
         while i < n:
             m = find(buf, i)
             if m is None:
@@ -655,6 +665,10 @@ class MavlinkParser:
                 stats.records += 1
                 self._in_garbage = False
                 i = end
+                if verify is not None:
+                    reason = verify(buf, j, j + hdr + plen + 2, sysid, compid, inc)
+                    if reason is not None:
+                        stats.reject(reason)
                 continue
             ce = j + hdr + plen
             if x25crc(buf[j + 1:ce], extra) != (buf[ce] | (buf[ce + 1] << 8)):
@@ -666,6 +680,11 @@ class MavlinkParser:
             stats.records += 1
             self._counts[msgid] += 1
             i = end
+            if verify is not None:
+                reason = verify(buf, j, ce + 2, sysid, compid, inc)
+                if reason is not None:
+                    stats.reject(reason)
+                    continue
             spec = specs.get(msgid)
             if spec is None:
                 continue

@@ -22,12 +22,15 @@ from __future__ import annotations
 
 import importlib
 import math
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import msgspec
 
 from drivers.base import ReadStats, StreamParser
 from onboard.messages import AnySample, Sample
+
+if TYPE_CHECKING:
+    from drivers.mavlink_signing import SignatureVerifier
 
 KINDS: tuple[str, ...] = ("mavlink", "nmea", "dvl-json", "pd6", "sample")
 """Protocols a source (or a raw record of a recording) may have."""
@@ -93,9 +96,11 @@ def encode_sample(sample: Sample) -> bytes:
     return msgspec.msgpack.encode(sample)
 
 
-def parser_for(kind: str, source: str = "") -> StreamParser:
+def parser_for(kind: str, source: str = "", *, verifier: "SignatureVerifier | None" = None) -> StreamParser:
     """A new stream parser for ``kind``; ``source`` names its samples where the protocol
     lets the parser choose (MAVLink names sources by system id and message itself).
+    ``verifier`` (MAVLink only) makes the parser require signed, fresh frames
+    (:mod:`drivers.mavlink_signing`); other protocols have no signatures and ignore it.
 
     Raises :class:`UnknownProtocol` for an unknown kind.
     """
@@ -107,5 +112,5 @@ def parser_for(kind: str, source: str = "") -> StreamParser:
         raise UnknownProtocol(f"unknown protocol {kind!r}; known: {', '.join(KINDS)}") from None
     cls: Callable[..., StreamParser] = getattr(importlib.import_module(module_name), class_name)
     if kind == "mavlink":
-        return cls()
+        return cls(verifier=verifier)
     return cls(source=source or kind)

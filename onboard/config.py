@@ -190,12 +190,24 @@ class ZenohOut(_Strict):
 
 
 class MavlinkOut(_Strict):
+    """``[service.mavlink]``: MAVLink out, and MAVLink 2 signing of the whole service
+    (outgoing frames and the MAVLink inputs; docs/security.md)."""
+
     enabled: bool = True
     url: str = "udpout:127.0.0.1:14550"
     component_id: int = 191
     rate_hz: float = 5.0
     signing_key_file: str = ""
+    """The 32-byte secret (raw, 64 hex digits or a passphrase), mode 0600 or stricter:
+    every outgoing frame is signed with it."""
     require_signing: bool = False
+    """Needs ``signing_key_file``; then every frame on the MAVLink inputs must be signed
+    with that key and fresh, or it is rejected and counted (``parse:<input>:<reason>``)."""
+    signing_state_file: str = "state/mavlink-signing.json"
+    """Signing timestamps kept across restarts (relative to the service state directory)."""
+    signing_max_future_s: float = 0.0
+    """Reject incoming timestamps more than this far (s) ahead of the local timestamp;
+    0 = no bound (the MAVLink spec sets none; a vehicle computer without a clock lags)."""
     odometry: bool = False
 
 

@@ -41,6 +41,7 @@ from typing import Any, Callable, Iterable, Sequence
 import msgspec
 
 from drivers.base import ReadStats, StreamParser
+from drivers.mavlink_signing import SignatureVerifier
 from drivers.protocols import parser_for
 from drivers.recording import RawRecord, RecordingWriter, read_records
 from onboard.config import Config
@@ -255,11 +256,15 @@ class Intake:
     """Called after a chunk queued at least one sample (the service wakes a tick that
     waits for fresh data with it)."""
 
+    verifier: SignatureVerifier | None = None
+    """Set (before the sources are added) when MAVLink signing is required: every MAVLink
+    input then rejects unsigned, forged and replayed frames (docs/security.md)."""
+
     def add_source(self, name: str, kind: str) -> SourceState:
         """Register an input named ``name`` speaking protocol ``kind``."""
         st = self.sources.get(name)
         if st is None or st.kind != kind:
-            st = self.sources[name] = SourceState(kind, parser_for(kind, name))
+            st = self.sources[name] = SourceState(kind, parser_for(kind, name, verifier=self.verifier))
         return st
 
     def chunk(self, name: str, kind: str, data: bytes, t_rx: float) -> int:

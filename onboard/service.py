@@ -51,6 +51,7 @@ from onboard.messages import EstimateRecord, HealthRecord
 from onboard.persistence import StateFile, plain
 from onboard.recorder import Intake, Recorder, config_to_dict
 from onboard.sdnotify import Notifier
+from onboard.signing import open_signing
 
 log = logging.getLogger("onboard.service")
 
@@ -179,6 +180,8 @@ class Service:
                              else rec_base / svc.recorder.directory)
         self.recorder: Recorder | None = None
         self.intake = Intake(self.engine, queue_size=svc.queue_size)
+        self.signing = open_signing(svc.mavlink, self._path)  # MAVLink 2 signing: docs/security.md
+        self.intake.verifier = self.signing.verifier if self.signing and svc.mavlink.require_signing else None
         self._sample_arrived = asyncio.Event()
         self.intake.on_queued = self._sample_arrived.set
         self.inputs: list[_Input] = []
@@ -275,7 +278,7 @@ class Service:
         from onboard.publishers.mavlink_pub import MavlinkPublisher
 
         pub = MavlinkPublisher(self.cfg.service.mavlink, self.cfg.vehicle.system_id,
-                               clock=self.clock.now)
+                               clock=self.clock.now, signing=self.signing)
         try:
             pub.start()
         except ConfigError:
@@ -298,7 +301,7 @@ class Service:
     async def _open_zenoh(self) -> bool:
         from onboard.publishers.zenoh_pub import ZenohPublisher
 
-        pub = ZenohPublisher(self.cfg.service.zenoh, self.cfg.vehicle.id)
+        pub = ZenohPublisher(self.cfg.service.zenoh, self.cfg.vehicle.id, on_event=self.event)
         try:
             await asyncio.get_running_loop().run_in_executor(None, pub.start)
         except Exception as err:  # noqa: BLE001 - zenoh raises its own ZError
@@ -358,6 +361,8 @@ class Service:
             self.zenoh.close()
         if self.mavlink is not None:
             self.mavlink.close()
+        if self.signing is not None:
+            self.signing.close()
         self.notifier.close()
 
     # ------------------------------------------------------------------ the loop
@@ -544,7 +549,7 @@ def main(args: argparse.Namespace) -> int:
         except TransportUrlError as err:
             raise ConfigError(f"{args.config}: service.sources[{i}].url: {err}") from None
     mav = cfg.service.mavlink
-    if mav.enabled and (mav.require_signing or mav.signing_key_file):
+    if mav.require_signing or mav.signing_key_file:
         from onboard.publishers.mavlink_pub import check_signing
 
         check_signing(mav)  # fail before anything starts, with one line

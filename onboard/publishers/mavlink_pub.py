@@ -31,28 +31,36 @@ ODOMETRY           only with ``odometry = true``: position NED (m, from the     
                    first fix), heading, body-frame surge speed
 =================  ===========================================================  =========
 
-Signing: with ``signing_key_file`` every frame is signed (MAVLink 2 signing, link id 0,
-timestamp from the wall clock). The file holds the 32-byte secret as raw bytes or 64 hex
-digits, or a passphrase whose SHA-256 is the key (MAVProxy's ``signing setup``). It must
-be readable by its owner only (mode 0600 or stricter); otherwise the service refuses to
-start. ``require_signing = true`` without a key file is a configuration error.
+Signing: with ``signing_key_file`` every frame is signed (MAVLink 2 signing, link id 0).
+The file holds the 32-byte secret as raw bytes or 64 hex digits, or a passphrase whose
+SHA-256 is the key (MAVProxy's ``signing setup``). It must be readable by its owner only
+(mode 0600 or stricter); otherwise the service refuses to start. ``require_signing =
+true`` without a key file is a configuration error. Given the service's
+:class:`onboard.signing.SigningState`, the timestamp of every frame comes from it: above
+every timestamp sent before, across restarts, even when the wall clock went back
+(docs/security.md); without one, from the wall clock at start.
 """
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import math
 import socket
-import stat
 import time
-from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from onboard.config import ConfigError, MavlinkOut
+from drivers.mavlink_signing import SIGNING_EPOCH, signing_timestamp
+from onboard.config import MavlinkOut
 from onboard.messages import EstimateRecord, HealthRecord
+from onboard.signing import check_signing, load_signing_key
+
+if TYPE_CHECKING:
+    from onboard.signing import SigningState
+
+__all__ = ["COMPONENT_ID", "MavlinkPublisher", "SIGNING_EPOCH", "check_signing",
+           "load_signing_key"]
 
 log = logging.getLogger(__name__)
 
@@ -72,46 +80,6 @@ DEBUG_VECTORS: dict[str, tuple[str, tuple[str, str, str]]] = {
     "DIST_NED": ("eseso", ("dist_north", "dist_east", "dist_down")),
 }
 """DEBUG_VECT name -> (pipeline, (x, y, z) quantities)."""
-SIGNING_EPOCH = 1420070400
-"""MAVLink 2 signing timestamps count 10 us units from 2015-01-01T00:00:00Z."""
-
-
-def load_signing_key(path: str | Path) -> bytes:
-    """The 32-byte signing key from ``path`` (see the module docstring).
-
-    Raises ConfigError when the file is missing, empty or readable by group or others.
-    """
-    p = Path(path)
-    try:
-        st = p.stat()
-        raw = p.read_bytes()
-    except OSError as err:
-        raise ConfigError(f"service.mavlink.signing_key_file: {p}: {err.strerror}") from None
-    if st.st_mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise ConfigError(f"service.mavlink.signing_key_file: {p} is accessible by group or "
-                          f"others (mode {stat.S_IMODE(st.st_mode):04o}); chmod 600 it")
-    if len(raw) == 32:
-        return raw
-    text = raw.decode("utf-8", "replace").strip()
-    if not text:
-        raise ConfigError(f"service.mavlink.signing_key_file: {p} is empty")
-    if len(text) == 64:
-        try:
-            return bytes.fromhex(text)
-        except ValueError:
-            pass
-    return hashlib.sha256(text.encode()).digest()
-
-
-def check_signing(cfg: MavlinkOut) -> bytes | None:
-    """The signing key the configuration asks for (None: unsigned); ConfigError when
-    ``require_signing`` has no key file or the key file is unusable."""
-    if cfg.require_signing and not cfg.signing_key_file:
-        raise ConfigError("service.mavlink.require_signing is true but no "
-                          "signing_key_file is configured")
-    return load_signing_key(cfg.signing_key_file) if cfg.signing_key_file else None
-
-
 class _UdpOut:
     """A non-blocking UDP sender (``udpout:HOST:PORT``); send errors are counted."""
 
@@ -149,11 +117,15 @@ class MavlinkPublisher:
         cfg: the ``[service.mavlink]`` table.
         system_id: the vehicle's MAVLink system id.
         clock: the service clock (s) used for pacing.
+        signing: the service's signing state (key and persisted timestamps); None: the key
+            is read from ``cfg`` and timestamps start at the wall clock.
     """
 
     def __init__(self, cfg: MavlinkOut, system_id: int,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 signing: "SigningState | None" = None) -> None:
         self.cfg = cfg
+        self.signing_state = signing
         self.system_id = system_id
         self.clock = clock
         self.t_start = clock()
@@ -173,7 +145,7 @@ class MavlinkPublisher:
     def start(self) -> None:
         """Open the link; set up signing when a key file is configured."""
         cfg = self.cfg
-        key = check_signing(cfg)
+        key = self.signing_state.key if self.signing_state is not None else check_signing(cfg)
         self.link = _open_link(cfg.url)
         self.mav = mavlink2.MAVLink(self.link, srcSystem=self.system_id,
                                     srcComponent=cfg.component_id or COMPONENT_ID)
@@ -182,7 +154,7 @@ class MavlinkPublisher:
             sg = self.mav.signing
             sg.secret_key = key
             sg.link_id = 0
-            sg.timestamp = int((time.time() - SIGNING_EPOCH) * 1e5)
+            sg.timestamp = signing_timestamp(time.time())
             sg.sign_outgoing = True
             self.signing = True
 
@@ -192,6 +164,9 @@ class MavlinkPublisher:
     def _send(self, msg: object) -> None:
         if self.mav is None:
             return
+        if self.signing and self.signing_state is not None:
+            sg = self.mav.signing
+            sg.timestamp = self.signing_state.next_tx(sg.timestamp)
         try:
             self.mav.send(msg)
             self.sent += 1

@@ -1,0 +1,122 @@
+"""MAVLink 2 message signing: verification of incoming frames.
+
+Reference: the MAVLink signing specification, https://mavlink.io/en/guide/message_signing.html
+(and pymavlink's ``MAVLink.check_signature``, which it refines: the stream timestamp is
+updated only after the signature is found valid, so a forged frame cannot poison it).
+
+A signed frame (incompatibility flag ``0x01``) carries 13 bytes after its CRC::
+
+    link_id (1 B) | timestamp (6 B, little-endian, 10 us units since 2015-01-01 UTC) | signature (6 B)
+
+    signature = first 48 bits of SHA-256(secret_key + header + payload + CRC + link_id + timestamp)
+
+where ``header`` starts at the start byte ``0xFD``. Timestamps must increase on every
+*stream*, the tuple (link id, system id, component id). :class:`SignatureVerifier` keeps the
+last accepted timestamp of each stream and rejects, with a reason the parser counts:
+
+===============  =============================================================================
+``unsigned``     a MAVLink 1 frame or a MAVLink 2 frame without the signed flag
+``signature``    the 48-bit signature does not match (wrong key, or bytes altered)
+``sig_replay``   the timestamp is not newer than the last accepted one of its stream (a replay)
+``sig_stale``    the first frame of a stream is more than one minute (6,000,000 units) behind
+                 the local timestamp (the spec's rule for new streams)
+``sig_future``   the timestamp is more than ``max_future_s`` ahead of the local timestamp
+                 (only when ``max_future_s > 0``; the spec sets no bound)
+===============  =============================================================================
+
+The *local timestamp* is the largest of the wall clock, every accepted incoming timestamp
+and :attr:`SignatureVerifier.high` (which the owner raises to the persisted and sent
+timestamps), as the spec asks for systems without a reliable clock.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import time
+from typing import Callable
+
+SIGNING_EPOCH = 1420070400
+"""MAVLink signing timestamps count 10 us units from 2015-01-01T00:00:00Z (POSIX s)."""
+TIMESTAMP_UNITS_PER_S = 100_000
+"""Signing timestamp units (10 us) per second."""
+NEW_STREAM_MAX_AGE = 6_000_000
+"""A new stream's first timestamp may lag the local timestamp by at most one minute."""
+SIGNATURE_LEN = 13
+"""link id (1) + timestamp (6) + signature (6)."""
+
+StreamKey = tuple[int, int, int]
+"""(link id, system id, component id)."""
+
+
+def signing_timestamp(unix_s: float) -> int:
+    """The signing timestamp (10 us units since 2015-01-01 UTC) of a POSIX time (s)."""
+    return int((unix_s - SIGNING_EPOCH) * TIMESTAMP_UNITS_PER_S)
+
+
+class SignatureVerifier:
+    """Checks the signature and timestamp of every frame (see the module docstring).
+
+    Parameters:
+        key: the 32-byte shared secret.
+        streams: last accepted timestamp per (link id, system id, component id), e.g.
+            restored from disk; kept and updated in place.
+        high: a floor for the local timestamp (persisted or sent timestamps).
+        max_future_s: reject timestamps more than this far ahead of the local timestamp
+            (s); 0 disables the check.
+        wall: the wall clock (POSIX s).
+        on_accept: called after every accepted frame (the owner persists the streams).
+    """
+
+    __slots__ = ("_h0", "streams", "high", "max_future", "wall", "on_accept", "accepted")
+
+    def __init__(self, key: bytes, *, streams: dict[StreamKey, int] | None = None,
+                 high: int = 0, max_future_s: float = 0.0,
+                 wall: Callable[[], float] = time.time,
+                 on_accept: Callable[[], None] | None = None) -> None:
+        if len(key) != 32:
+            raise ValueError(f"a MAVLink signing key has 32 bytes, not {len(key)}")
+        self._h0 = hashlib.sha256(key)
+        self.streams: dict[StreamKey, int] = {} if streams is None else streams
+        self.high = high
+        self.max_future = int(max_future_s * TIMESTAMP_UNITS_PER_S)
+        self.wall = wall
+        self.on_accept = on_accept
+        self.accepted = 0
+
+    def local_timestamp(self) -> int:
+        """max(wall clock, every accepted or persisted timestamp), in signing units."""
+        return max(signing_timestamp(self.wall()), self.high)
+
+    def check(self, buf: bytes | bytearray, start: int, crc_end: int, sysid: int,
+              compid: int, inc_flags: int) -> str | None:
+        """None if the CRC-valid frame ``buf[start:crc_end + 13]`` is correctly signed and
+        fresh (its stream timestamp is then advanced); else the rejection reason.
+
+        ``crc_end`` is the index just past the frame's CRC; ``inc_flags`` its
+        incompatibility flags (0 for MAVLink 1).
+        """
+        if not inc_flags & 0x01:
+            return "unsigned"
+        h = self._h0.copy()
+        h.update(buf[start:crc_end + 7])
+        if not hmac.compare_digest(h.digest()[:6], bytes(buf[crc_end + 7:crc_end + 13])):
+            return "signature"
+        link = buf[crc_end]
+        ts = int.from_bytes(buf[crc_end + 1:crc_end + 7], "little")
+        key = (link, sysid, compid)
+        last = self.streams.get(key)
+        if last is not None:
+            if ts <= last:
+                return "sig_replay"
+        elif ts + NEW_STREAM_MAX_AGE < self.local_timestamp():
+            return "sig_stale"
+        if self.max_future and ts > self.local_timestamp() + self.max_future:
+            return "sig_future"
+        self.streams[key] = ts
+        if ts > self.high:
+            self.high = ts
+        self.accepted += 1
+        if self.on_accept is not None:
+            self.on_accept()
+        return None
