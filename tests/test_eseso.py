@@ -30,13 +30,15 @@ def _filter_in_motion() -> eseso.Eseso:
     f.b_a = np.array([0.01, -0.02, 0.03])
     f.b_g = np.array([1e-3, -2e-3, 5e-4])
     f.xi = np.array([30.0, -20.0, 8.0])
+    f.b_ins = np.array([0.01, -0.008])
     return f
 
 
 def _error(a: eseso.Eseso, b: eseso.Eseso) -> np.ndarray:
-    """``b ⊟ a``: the 21-vector error of state b about nominal a (right perturbation)."""
+    """``b ⊟ a``: the error-state vector (21 + the 2 INS bias states) of state b about
+    nominal a (right perturbation)."""
     return np.concatenate([b.p - a.p, b.v - a.v, log_so3(a.R.T @ b.R), b.b_a - a.b_a,
-                           b.b_g - a.b_g, b.g - a.g, b.xi - a.xi])
+                           b.b_g - a.b_g, b.g - a.g, b.xi - a.xi, b.b_ins - a.b_ins])
 
 
 def test_create_applies_to_bluerov2_and_to_configs_that_enable_it() -> None:
@@ -77,10 +79,11 @@ def test_propagation_jacobian_matches_finite_differences() -> None:
     nom = copy.deepcopy(f)
     nom.propagate(f_m, w_m, dt)
     eps = 1e-6
-    num = np.zeros((21, 21))
-    for i in range(21):
+    n = eseso.N_ERR
+    num = np.zeros((n, n))
+    for i in range(n):
         g = copy.deepcopy(f)
-        dx = np.zeros(21)
+        dx = np.zeros(n)
         dx[i] = eps
         g._inject(dx)
         g.propagate(f_m, w_m, dt)
@@ -207,8 +210,8 @@ def test_adaptive_state_round_trips() -> None:
 
 def test_reset_jacobian_keeps_attitude_covariance_consistent() -> None:
     f = _filter_in_motion()
-    f.P = np.eye(21) * 0.01
-    H = np.zeros((3, 21))
+    f.P = np.eye(eseso.N_ERR) * 0.01
+    H = np.zeros((3, eseso.N_ERR))
     H[:, 6:9] = np.eye(3)
     f._update("attitude", np.array([0.05, -0.02, 0.1]), H, np.eye(3) * 1e-4)
     # after the reset the attitude block is G P G^T with G = I - [dtheta/2]x: symmetric,
@@ -240,3 +243,54 @@ def test_heading_alone_fixes_the_yaw_when_there_is_no_attitude_stream() -> None:
     assert abs(est["yaw"] - 1.0) < 0.02
     assert abs(est["roll"]) < 0.01 and abs(est["pitch"]) < 0.01
     assert f.health()["fused.heading"] > 30
+
+
+def test_ins_velocity_bias_is_a_state_and_only_the_white_noise_is_r() -> None:
+    """Finding 8 (docs/fuzzing.md): the INS velocity over ground is v + b + n with b a
+    Gauss-Markov bias. Hovering with a DVL and an INS biased by (0.03, -0.02) m/s, the
+    filter attributes the offset to the INS bias, not to the velocity (the DVL holds it),
+    and the vog NIS is about its dimension, not ~0.1 as with the GNSS velocity R."""
+    from onboard.messages import VelocityOverGround
+
+    f = eseso.create(config.load("bluerov2"))
+    assert f.r_ins == pytest.approx(0.02 ** 2)
+    rng = np.random.default_rng(7)
+    samples = _hover_samples(np.zeros(3), 60.0, seed=7)
+    dvl_only = _run(eseso.create(config.load("bluerov2")), list(samples))
+    bias = np.array([0.03, -0.02])
+    for k in range(600):
+        t = k / 10.0 + 0.001
+        n = rng.normal(0, 0.02, 2)
+        samples.append(VelocityOverGround(t=t, v_north_mps=bias[0] + n[0],
+                                          v_east_mps=bias[1] + n[1]))
+    samples.sort(key=lambda s: s.t)
+    nis: list[float] = []
+    orig = f._update
+
+    def spy(ch, y, H, Rm, gate=None):
+        if ch == "vog":
+            S = H @ f.P @ H.T + Rm
+            nis.append(float(y @ np.linalg.solve(S, y)))
+        return orig(ch, y, H, Rm, gate)
+
+    f._update = spy  # type: ignore[method-assign]
+    est = _run(f, samples)
+    assert np.allclose(f.b_ins, bias, atol=0.006)
+    # the velocity is where the DVL alone puts it (within its 0.007 m/s std), not pulled
+    # towards the INS bias (measured: 0.6 and 1.3 mm/s apart)
+    assert abs(est["vel_north"] - dvl_only["vel_north"]) < 0.004
+    assert abs(est["vel_east"] - dvl_only["vel_east"]) < 0.004
+    # the bias is 3 sigma of its 0.01 m/s prior: the first seconds are large
+    assert 1.6 < np.mean(nis[100:]) < 2.4
+
+
+def test_attitude_noise_is_roll_pitch_and_compass_yaw() -> None:
+    """The AHRS yaw is the compass heading: its noise is the heading's (0.02 rad from
+    [sensors.compass]); roll and pitch are [pipelines.eseso] attitude_std_rad."""
+    f = eseso.create(config.load("bluerov2"))
+    assert f.r_att == pytest.approx(0.005 ** 2)
+    assert f.r_att_yaw == pytest.approx(0.02 ** 2)
+    f.initialized = True
+    f.P = np.zeros((eseso.N_ERR, eseso.N_ERR))
+    f._on_attitude(Attitude(t=0.0, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0))
+    assert np.allclose(f.last["attitude"]["S"], [0.005 ** 2, 0.005 ** 2, 0.02 ** 2])

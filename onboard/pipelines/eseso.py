@@ -115,9 +115,10 @@ from onboard.pipelines.so3 import (
 
 Array = NDArray[np.float64]
 
-# error-state blocks (paper eq. 11)
+# error-state blocks (paper eq. 11), then the INS velocity bias (north, east)
 P_, V_, TH, BA, BG, G_, XI = (slice(3 * i, 3 * i + 3) for i in range(7))
-N_ERR = 21
+BI = slice(21, 23)
+N_ERR = 23
 
 E3 = np.array([0.0, 0.0, 1.0])
 
@@ -185,11 +186,25 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     position_walk: float = 1e-3
     """Extra position random walk (m/sqrt(s)), keeps P well conditioned."""
     # measurement noise; None = from [sensors]
+    ins_velocity_std_mps: float = 0.02
+    """White noise of the INS velocity over ground per horizontal axis (m/s) [DEFAULT: the
+    simulated DVL-aided INS of ``bluerov2-circle``, ``sitl.sensors.InsConfig``]."""
+    ins_bias_std_mps: float = 0.01
+    """Stationary std of the INS velocity bias (m/s), a first-order Gauss-Markov process
+    carried as two error states (north, east): an aided INS's velocity error is correlated
+    over minutes, so it is not white measurement noise."""
+    ins_bias_tau_s: float = 300.0
+    """Correlation time of the INS velocity bias (s)."""
     gnss_position_std_m: float | None = None
     gnss_velocity_std_mps: float | None = None
     depth_std_m: float | None = None
     dvl_velocity_std_mps: float | None = None
     attitude_std_rad: float = 0.01
+    """Roll and pitch noise of the AHRS attitude (rad)."""
+    attitude_yaw_std_rad: float | None = None
+    """Yaw noise of the AHRS attitude (rad); None = the compass heading noise
+    (``heading_std_rad``, else ``[sensors.compass]``): an AHRS reports the compass heading
+    as its yaw."""
     heading_std_rad: float | None = None
     thrust_std_n: float = 3.0
     """Thrust-model error besides accelerometer noise (thruster lag, model error), N."""
@@ -285,6 +300,8 @@ class Eseso:
         self.r_dvl = pick(c.dvl_velocity_std_mps, s.dvl.velocity_std_mps if s else 0.01) ** 2
         self.r_head = pick(c.heading_std_rad, s.compass.heading_std_rad if s else 0.02) ** 2
         self.r_att = c.attitude_std_rad ** 2
+        self.r_att_yaw = pick(c.attitude_yaw_std_rad, math.sqrt(self.r_head)) ** 2
+        self.r_ins = c.ins_velocity_std_mps ** 2
         self.dvl_max_fom = s.dvl.max_fom_mps if s else 0.05
         self.gnss_max_depth = pick(c.gnss_max_depth_m, s.depth.surface_depth_m if s else 0.3)
         # thrust-update noise: accelerometer noise through M plus model error (N^2)
@@ -298,6 +315,7 @@ class Eseso:
         self.b_g = np.zeros(3)
         self.g = np.array([0.0, 0.0, c.gravity_mps2])
         self.xi = np.zeros(3)
+        self.b_ins = np.zeros(2)  # INS velocity bias, north/east (m/s)
         self.P = np.eye(N_ERR)
         self.F = np.eye(N_ERR)
         """The last propagation's error-state transition (for inspection and tests)."""
@@ -335,7 +353,7 @@ class Eseso:
         sd = [c.initial_position_std_m] * 3 + [c.initial_velocity_std_mps] * 3
         sd += [c.initial_attitude_std_rad] * 3 + [c.initial_accel_bias_std] * 3
         sd += [c.initial_gyro_bias_std] * 3 + [c.initial_gravity_std] * 3
-        sd += [c.initial_disturbance_std_n] * 3
+        sd += [c.initial_disturbance_std_n] * 3 + [c.ins_bias_std_mps] * 2
         self.P = np.diag(np.square(sd))
         self.initialized = True
 
@@ -364,6 +382,9 @@ class Eseso:
         if c.disturbance_model == "earth_fixed":
             F[XI, XI] = dRt
             F[XI, BG] = -(dRt @ skew(self.xi) @ right_jacobian(-w * dt)) * dt
+        # INS velocity bias: first-order Gauss-Markov, exact discretization
+        phi_ins = math.exp(-dt / c.ins_bias_tau_s) if c.ins_bias_tau_s > 0 else 0.0
+        F[BI, BI] = np.eye(2) * phi_ins
         q = np.empty(N_ERR)
         q[P_] = c.position_walk ** 2 * dt
         q[V_] = (self.sig_a * dt) ** 2
@@ -372,12 +393,14 @@ class Eseso:
         q[BG] = c.gyro_bias_walk ** 2 * dt
         q[G_] = c.gravity_walk ** 2 * dt
         q[XI] = c.disturbance_walk ** 2 * dt
+        q[BI] = c.ins_bias_std_mps ** 2 * (1.0 - phi_ins * phi_ins)
         # nominal state (10b)
         self.p = self.p + self.v * dt + 0.5 * acc * dt * dt
         self.v = self.v + acc * dt
         self.R = self.R @ dR
         if c.disturbance_model == "earth_fixed":
             self.xi = dRt @ self.xi
+        self.b_ins = self.b_ins * phi_ins
         self.P = F @ self.P @ F.T
         self.P[np.diag_indices(N_ERR)] += q
         self.F = F
@@ -434,6 +457,7 @@ class Eseso:
         self.b_g = self.b_g + dx[BG]
         self.g = self.g + dx[G_]
         self.xi = self.xi + dx[XI]
+        self.b_ins = self.b_ins + dx[BI]
 
     # ------------------------------------------------------------------ thrust model
     def h_tau(self, f_m: Array, w_m: Array, wdot: Array | None = None) -> tuple[Array, Array]:
@@ -609,10 +633,16 @@ class Eseso:
             self._update("gnss_vel", vz - self.v[:2], Hv, np.eye(2) * self.r_gnss_v)
 
     def _on_vog(self, s: VelocityOverGround) -> None:
+        # z = v_NE + b_ins + white noise: the INS's correlated error is a state (BI), only
+        # its white part is R (docs/eseso-mpc.md, "Velocity over ground")
         vz = np.array([s.v_north_mps, s.v_east_mps])
+        if not np.all(np.isfinite(vz)):
+            self._count("rejected.vog.nonfinite")
+            return
         H = np.zeros((2, N_ERR))
         H[:, 3:5] = np.eye(2)
-        self._update("vog", vz - self.v[:2], H, np.eye(2) * self.r_gnss_v)
+        H[:, BI] = np.eye(2)
+        self._update("vog", vz - self.v[:2] - self.b_ins, H, np.eye(2) * self.r_ins)
 
     def _on_depth(self, s: Depth) -> None:
         H = np.zeros((1, N_ERR))
@@ -640,7 +670,13 @@ class Eseso:
         R_meas = euler_to_matrix(s.roll_rad, s.pitch_rad, s.yaw_rad)
         H = np.zeros((3, N_ERR))
         H[:, TH] = np.eye(3)
-        self._update("attitude", log_so3(self.R.T @ R_meas), H, np.eye(3) * self.r_att)
+        # independent roll, pitch, yaw noise into the body-frame rotation vector: the
+        # Euler-rate-to-body-rate matrix (Fossen eq. 2.41 inverted)
+        sr, cr = math.sin(s.roll_rad), math.cos(s.roll_rad)
+        sp, cp = math.sin(s.pitch_rad), math.cos(s.pitch_rad)
+        J = np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
+        Rm = J @ np.diag([self.r_att, self.r_att, self.r_att_yaw]) @ J.T
+        self._update("attitude", log_so3(self.R.T @ R_meas), H, Rm)
 
     def _on_heading(self, s: Heading) -> None:
         roll, pitch, yaw = matrix_to_euler(self.R)
