@@ -94,12 +94,16 @@ class ServiceClock:
         """Wall seconds until service time ``t`` (<= 0 when past)."""
         return (t - self.now()) / self.speed
 
-    async def sleep_until(self, t: float) -> None:
-        """Sleep until service time ``t``: on the event loop until ~1 ms before, then the
-        last fraction of a millisecond in ``time.sleep`` (epoll, under asyncio, only
-        wakes with millisecond granularity, rounded up; this removes ~0.5 ms of average
-        lateness at the cost of blocking the loop for < 1.2 ms per tick)."""
+    async def sleep_until(self, t: float, precise: bool = True) -> None:
+        """Sleep until service time ``t``: on the event loop until ~1 ms before, then, if
+        ``precise``, the last fraction of a millisecond in ``time.sleep`` (epoll, under
+        asyncio, only wakes with millisecond granularity, rounded up; this removes ~0.5 ms
+        of average lateness at the cost of blocking the loop for < 1.2 ms per tick)."""
         d = self.wall_delay(t)
+        if not precise:
+            if d > 0:
+                await asyncio.sleep(d)
+            return
         if d > FINE_SLEEP_S:
             await asyncio.sleep(d - FINE_SLEEP_S)
             d = self.wall_delay(t)
@@ -381,7 +385,7 @@ class Service:
         wait = min(self.cfg.service.tick_wait_s, 0.5 * period)
         while True:
             t = k * period
-            await clock.sleep_until(t)
+            await clock.sleep_until(t, precise=wait == 0)  # a waiting tick needs no precision
             now = clock.now()
             if -clock.wall_delay(t) > MAX_TICK_LAG_S:
                 k_new = math.floor(now / period)
