@@ -1,0 +1,301 @@
+"""Security (issue 9): MAVLink 2 signing in and out, Zenoh authentication and access
+control, the systemd unit's hardening. See docs/security.md."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import re
+import shutil
+import socket
+import stat
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from drivers.mavlink import MavlinkParser
+from drivers.mavlink_signing import NEW_STREAM_MAX_AGE, SignatureVerifier, signing_timestamp
+from onboard.config import ConfigError, MavlinkOut, from_dict
+from onboard.messages import Attitude
+from onboard.publishers.mavlink_pub import MavlinkPublisher
+from onboard.signing import SigningState, load_signing_key
+from onboard.service_bench import free_udp_port
+
+REPO = Path(__file__).resolve().parent.parent
+KEY = bytes(range(32))
+OTHER_KEY = bytes(range(1, 33))
+
+
+# --------------------------------------------------------------------------- helpers
+
+class _Frames:
+    """A pymavlink "file" that keeps every frame written."""
+
+    def __init__(self) -> None:
+        self.frames: list[bytes] = []
+
+    def write(self, b: bytes) -> None:
+        self.frames.append(bytes(b))
+
+
+def frames(n: int, key: bytes | None = KEY, *, sysid: int = 1, compid: int = 1,
+           link_id: int = 0, ts: int | None = None, v1: bool = False) -> list[bytes]:
+    """``n`` ATTITUDE frames from pymavlink, signed with ``key`` (None: unsigned), the
+    first with signing timestamp ``ts`` (default: now)."""
+    out = _Frames()
+    mav = mavlink2.MAVLink(out, srcSystem=sysid, srcComponent=compid)
+    if v1:
+        mav.WIRE_PROTOCOL_VERSION = "1.0"
+    if key is not None:
+        mav.signing.secret_key = key
+        mav.signing.link_id = link_id
+        mav.signing.timestamp = signing_timestamp(time.time()) if ts is None else ts
+        mav.signing.sign_outgoing = True
+    for k in range(n):
+        mav.send(mavlink2.MAVLink_attitude_message(k, 0.1, 0.2, 0.3, 0.0, 0.0, 0.01),
+                 force_mavlink1=v1)
+    return out.frames
+
+
+def parser(**kw) -> MavlinkParser:
+    return MavlinkParser(verifier=SignatureVerifier(KEY, **kw))
+
+
+def attitudes(samples) -> int:
+    return sum(isinstance(s, Attitude) for s in samples)
+
+
+# --------------------------------------------------------------------------- verification
+
+def test_frames_signed_by_pymavlink_with_the_key_are_accepted():
+    p = parser()
+    out = p.feed(b"".join(frames(20)), 0.0)
+    assert attitudes(out) == 20
+    assert not p.stats.rejected
+    assert p.verifier.streams == {(0, 1, 1): p.verifier.high}
+
+
+@pytest.mark.parametrize("bad, reason", [
+    (lambda: frames(5, OTHER_KEY), "signature"),
+    (lambda: frames(5, None), "unsigned"),
+    (lambda: frames(5, None, v1=True), "unsigned"),
+])
+def test_wrong_key_and_unsigned_frames_are_rejected_and_counted(bad, reason):
+    p = parser()
+    good = frames(3)
+    out = p.feed(b"".join(bad()) + b"".join(good), 0.0)
+    assert attitudes(out) == 3  # the good frames behind them still pass
+    assert p.stats.rejected == {reason: 5}
+
+
+def test_replayed_frames_are_rejected_and_a_forged_frame_does_not_poison_the_stream():
+    p = parser()
+    first = frames(4)
+    assert attitudes(p.feed(b"".join(first), 0.0)) == 4
+    assert attitudes(p.feed(b"".join(first), 1.0)) == 0  # the same frames again
+    assert p.stats.rejected == {"sig_replay": 4}
+    # a forged frame far in the future (wrong key) must not move the stream's timestamp
+    far = signing_timestamp(time.time()) + 10**10
+    p.feed(b"".join(frames(1, OTHER_KEY, ts=far)), 2.0)
+    assert p.stats.rejected["signature"] == 1
+    later = frames(2, ts=p.verifier.streams[(0, 1, 1)] + 1)
+    assert attitudes(p.feed(b"".join(later), 3.0)) == 2
+
+
+def test_each_link_system_component_is_its_own_stream():
+    p = parser()
+    now = signing_timestamp(time.time())
+    a = frames(2, ts=now + 100)
+    b = frames(2, ts=now, link_id=1)  # older timestamps, but another link: accepted
+    c = frames(2, ts=now, compid=191)
+    assert attitudes(p.feed(b"".join(a + b + c), 0.0)) == 6
+    assert set(p.verifier.streams) == {(0, 1, 1), (1, 1, 1), (0, 1, 191)}
+
+
+def test_a_new_stream_more_than_a_minute_old_is_stale_and_far_future_is_refused_when_bounded():
+    now = signing_timestamp(time.time())
+    p = parser()
+    p.feed(b"".join(frames(2, ts=now - NEW_STREAM_MAX_AGE - 200_000)), 0.0)  # 62 s old
+    assert p.stats.rejected == {"sig_stale": 2}
+    assert attitudes(p.feed(b"".join(frames(2, ts=now - 3_000_000)), 0.0)) == 2  # 30 s: ok
+    q = parser(max_future_s=600.0)
+    q.feed(b"".join(frames(1, ts=now + 3600 * 100_000)), 0.0)
+    assert q.stats.rejected == {"sig_future": 1}
+    assert attitudes(parser().feed(b"".join(frames(1, ts=now + 3600 * 100_000)), 0.0)) == 1
+
+
+def test_verification_does_not_depend_on_how_the_stream_is_cut():
+    data = b"".join(frames(3) + frames(2, None) + frames(2, OTHER_KEY) + frames(3))
+    whole = parser()
+    n_whole = attitudes(whole.feed(data, 0.0))
+    byte = parser()
+    n_byte = sum(attitudes(byte.feed(data[i:i + 1], 0.0)) for i in range(len(data)))
+    assert n_whole == n_byte == 6
+    assert whole.stats.rejected == byte.stats.rejected == {"unsigned": 2, "signature": 2}
+
+
+def test_without_a_verifier_signed_frames_still_parse_unchecked():
+    p = MavlinkParser()
+    assert attitudes(p.feed(b"".join(frames(3, OTHER_KEY) + frames(2, None)), 0.0)) == 5
+
+
+# --------------------------------------------------------------------------- key file
+
+def test_a_key_file_readable_by_group_or_others_is_refused_with_a_clear_error(tmp_path):
+    key_file = tmp_path / "mavlink.key"
+    key_file.write_bytes(KEY)
+    for mode in (0o640, 0o604, 0o660):
+        key_file.chmod(mode)
+        with pytest.raises(ConfigError, match=r"accessible by group or others .*chmod 600"):
+            load_signing_key(key_file)
+    key_file.chmod(0o600)
+    assert load_signing_key(key_file) == KEY
+    key_file.chmod(0o644)
+    cfg = _service_config(tmp_path, key_file, free_udp_port())
+    from onboard.service import Service
+
+    with pytest.raises(ConfigError, match="chmod 600"):
+        Service(cfg, state_dir=tmp_path)
+
+
+# --------------------------------------------------------------------------- timestamps
+
+def test_outgoing_timestamps_keep_increasing_across_a_restart_even_with_the_clock_back(tmp_path):
+    path = tmp_path / "state" / "mavlink-signing.json"
+    t_wall = [1.8e9]
+    st = SigningState(KEY, path, wall=lambda: t_wall[0])
+    sent = [st.next_tx() for _ in range(1000)]
+    assert sent == sorted(set(sent))
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600
+    # no close(): a crash. The wall clock then goes back an hour.
+    t_wall[0] -= 3600.0
+    st2 = SigningState(KEY, path, wall=lambda: t_wall[0])
+    assert "restored" in st2.message
+    assert st2.next_tx() > sent[-1]
+    # and the clock going forward again is followed
+    t_wall[0] += 7200.0
+    assert st2.next_tx() >= signing_timestamp(t_wall[0])
+
+
+def test_incoming_stream_timestamps_survive_a_restart(tmp_path):
+    path = tmp_path / "signing.json"
+    old = frames(3)
+    st = SigningState(KEY, path)
+    p = MavlinkParser(verifier=st.verifier)
+    assert attitudes(p.feed(b"".join(old), 0.0)) == 3
+    st.close()
+    st2 = SigningState(KEY, path)
+    assert st2.verifier.streams == st.verifier.streams
+    p2 = MavlinkParser(verifier=st2.verifier)
+    assert attitudes(p2.feed(b"".join(old), 0.0)) == 0  # captured before the restart
+    assert p2.stats.rejected == {"sig_replay": 3}
+
+
+def test_a_corrupt_timestamp_file_is_reported_and_signing_starts_from_the_clock(tmp_path):
+    path = tmp_path / "signing.json"
+    path.write_text("{ not json")
+    st = SigningState(KEY, path)
+    assert "unusable" in st.message
+    assert st.next_tx() >= signing_timestamp(time.time()) - 100
+    assert json.loads(path.read_text())["format"] == "onboard-mavlink-signing"
+
+
+def _signed_timestamps(sock: socket.socket) -> list[int]:
+    """Signing timestamps of the signed frames waiting on ``sock`` (checked with KEY)."""
+    mav = mavlink2.MAVLink(None)
+    mav.signing.secret_key = KEY
+    mav.signing.allow_unsigned_callback = lambda *a: False
+    out = []
+    sock.settimeout(0.3)
+    while True:
+        try:
+            data = sock.recv(65536)
+        except socket.timeout:
+            return out
+        for m in mav.parse_buffer(data) or []:
+            if m.get_type() != "BAD_DATA" and m._signed:
+                buf = m.get_msgbuf()
+                out.append(int.from_bytes(buf[-12:-6], "little"))
+
+
+def test_mavlink_out_timestamps_continue_after_a_restart_with_the_wall_clock_back(tmp_path):
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    cfg = MavlinkOut(url=f"udpout:127.0.0.1:{gcs.getsockname()[1]}")
+    path = tmp_path / "signing.json"
+    try:
+        runs = []
+        for wall in (1.8e9, 1.8e9 - 86400.0):  # second start: the clock is a day behind
+            st = SigningState(KEY, path, wall=lambda w=wall: w)
+            pub = MavlinkPublisher(cfg, 3, clock=lambda: 0.0, signing=st)
+            pub.start()
+            for k in range(5):
+                pub.event(f"event {k}", now=float(k))
+            pub.close()
+            st.close()
+            runs.append(_signed_timestamps(gcs))
+    finally:
+        gcs.close()
+    first, second = runs
+    assert len(first) >= 5 and len(second) >= 5
+    assert first == sorted(set(first)) and second == sorted(set(second))
+    assert min(second) > max(first)
+
+
+# --------------------------------------------------------------------------- end to end
+
+def _service_config(tmp_path: Path, key_file: Path, port: int):
+    return from_dict({
+        "vehicle": {"id": "secboat", "class": "rudder-boat", "system_id": 3},
+        "service": {"sources": [{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}",
+                                 "name": "autopilot"}],
+                    "zenoh": {"enabled": False}, "recorder": {"enabled": False},
+                    "mavlink": {"enabled": False, "signing_key_file": str(key_file),
+                                "require_signing": True}}})
+
+
+def test_signed_udp_input_into_the_service_counts_every_rejection_and_survives_a_restart(tmp_path):
+    """Real UDP into the running service: signed frames give samples; unsigned, wrong-key
+    and replayed frames are counted ``parse:autopilot:<reason>`` in the health record;
+    after a restart the frames accepted before are replays."""
+    from onboard.service import Service
+
+    key_file = tmp_path / "mavlink.key"
+    key_file.write_bytes(KEY.hex().encode())
+    key_file.chmod(0o600)
+    port = free_udp_port()
+    cfg = _service_config(tmp_path, key_file, port)
+    good = frames(10)
+    health: list = []
+
+    async def run(batches: list[list[bytes]]):
+        svc = Service(cfg, state_dir=tmp_path, on_health=health.append)
+        await svc.start()
+        udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            for batch in batches:
+                for f in batch:
+                    udp.sendto(f, ("127.0.0.1", port))
+                await asyncio.sleep(0.05)
+            await asyncio.sleep(1.2)  # one health record
+        finally:
+            udp.close()
+        svc.request_stop()
+        await svc.shutdown()
+        return svc
+
+    svc = asyncio.run(asyncio.wait_for(run([good, frames(4, None), frames(3, OTHER_KEY),
+                                             good[:2]]), 60.0))
+    assert svc.intake.sources["autopilot"].samples == 10
+    rej = svc.intake.parse_rejections()
+    assert rej == {"parse:autopilot:unsigned": 4, "parse:autopilot:signature": 3,
+                   "parse:autopilot:sig_replay": 2}
+    assert {k: v for k, v in health[-1].rejected.items() if k.startswith("parse:")} == rej
+    assert (tmp_path / "state" / "mavlink-signing.json").exists()
+    svc2 = asyncio.run(asyncio.wait_for(run([good, frames(2)]), 60.0))
+    assert svc2.intake.sources["autopilot"].samples == 2
+    assert svc2.intake.parse_rejections() == {"parse:autopilot:sig_replay": 10}
