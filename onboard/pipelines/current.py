@@ -57,7 +57,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Literal, Mapping, Sequence
+from typing import Any, Callable, Literal, Mapping, Sequence
 
 import msgspec
 import numpy as np
@@ -165,29 +165,62 @@ def _rot(roll: float, pitch: float, yaw: float) -> np.ndarray:
     ])
 
 
+def _inv_small(S: np.ndarray) -> np.ndarray | None:
+    """Inverse of a 2x2 or 3x3 matrix (the innovation covariance) by the adjugate, or
+    None if it is singular; larger sizes by numpy. ``np.linalg.inv`` costs several µs of
+    call overhead at these sizes."""
+    m = len(S)
+    if m == 2:
+        (a, b), (c, d) = S.tolist()
+        det = a * d - b * c
+        if det == 0.0:
+            return None
+        return np.array([[d / det, -b / det], [-c / det, a / det]])
+    if m == 3:
+        (a, b, c), (d, e, f), (g, h, i) = S.tolist()
+        A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
+        det = a * A + b * B + c * C
+        if det == 0.0:
+            return None
+        return np.array([[A / det, (c * h - b * i) / det, (b * f - c * e) / det],
+                         [B / det, (a * i - c * g) / det, (c * d - a * f) / det],
+                         [C / det, (b * g - a * h) / det, (a * e - b * d) / det]])
+    try:
+        return np.linalg.inv(S)
+    except np.linalg.LinAlgError:
+        return None
+
+
 class StateVariableFilter:
     """``H(s) = w^2 / (s^2 + 2 zeta w s + w^2)`` on a vector; gives the filtered value and
-    its derivative, so ``d/dt (H y) = (H phi)^T theta`` holds exactly for constant theta."""
+    its derivative, so ``d/dt (H y) = (H phi)^T theta`` holds exactly for constant theta.
+
+    ``y`` and ``dy`` are lists of floats (a handful of channels: cheaper than numpy).
+    """
 
     def __init__(self, n: int, cutoff_hz: float, zeta: float = 0.8) -> None:
         self.w = 2.0 * math.pi * cutoff_hz
         self.zeta = zeta
-        self.y = np.zeros(n)
-        self.dy = np.zeros(n)
+        self.y = [0.0] * n
+        self.dy = [0.0] * n
         self.primed = False
 
-    def update(self, dt: float, u: np.ndarray) -> None:
+    def update(self, dt: float, u: Sequence[float]) -> None:
+        """Advance by ``dt`` (s) with input ``u`` held over the step."""
         if not self.primed:
-            self.y = u.copy()
-            self.dy[:] = 0.0
+            self.y = [float(a) for a in u]
+            self.dy = [0.0] * len(self.y)
             self.primed = True
             return
         w, z = self.w, self.zeta
         n_sub = max(1, math.ceil(dt * w / 0.3))
         h = dt / n_sub
+        ww, zw = w * w, 2.0 * z * w
+        y, dy = self.y, self.dy
         for _ in range(n_sub):  # semi-implicit Euler, stable for w h < 2
-            self.dy = self.dy + h * (w * w * (u - self.y) - 2.0 * z * w * self.dy)
-            self.y = self.y + h * self.dy
+            dy = [d + h * (ww * (a - b) - zw * d) for a, b, d in zip(u, y, dy)]
+            y = [b + h * d for b, d in zip(y, dy)]
+        self.y, self.dy = y, dy
 
 
 class CurrentPipeline:
@@ -225,14 +258,9 @@ class CurrentPipeline:
         # (u v, u w, ...) would otherwise "measure" the surge speed from made-up
         # coefficients (measured: 1.3 m/s along-track error claimed at 0.06, Gavia, mode b).
         # The mask is lifted once the DOF's coefficients are identified (trace of their
-        # covariance below a quarter of the prior's).
-        self._prior_mask: np.ndarray | None = None
-        if any(self._prior_dof):
-            self._prior_mask = np.ones((nd, nd))
-            for i, pr in enumerate(self._prior_dof):
-                if pr:
-                    self._prior_mask[i] = 0.0
-                    self._prior_mask[i, i] = 1.0
+        # covariance below a quarter of the prior's). ``_masked[i]``: DOF i is still the
+        # generic prior, its row of the model Jacobian keeps only the diagonal.
+        self._masked: list[bool] = list(self._prior_dof)
         self.n_theta = sum(self._sizes) if cfg.identify else 0
         n = 2 * nd + self.n_theta
         self.x = np.zeros(n)
@@ -263,8 +291,17 @@ class CurrentPipeline:
         self._blk_y = np.zeros(nd)
         self._blk_S = np.zeros((nd, nd))
         self._blk_n = 0
-        self._J = -np.eye(nd)
         self._eye_n = np.eye(2 * nd + self.n_theta)
+        # measurement matrices without the rotation, per (kind, dimension): earth
+        # z = R nu_r + V_c, bottom track z = nu_r + R^T V_c, water track z = nu_r
+        self._H0: dict[tuple[str, int], np.ndarray] = {}
+        for kind in ("earth", "bottom", "water"):
+            for m in {2, nd}:
+                H = np.zeros((m, 2 * nd + self.n_theta))
+                H[:, :nd] = 0.0 if kind == "earth" else np.eye(nd)[:m]
+                H[:, nd:2 * nd] = np.eye(nd)[:m] if kind == "earth" else 0.0
+                self._H0[(kind, m)] = H
+        self._i_yaw = self.model.channels.index("yaw") if "yaw" in self.model.channels else -1
         # vehicle state from samples
         self.inp = ModelInputs()
         self.roll = self.pitch = 0.0
@@ -308,75 +345,89 @@ class CurrentPipeline:
         self.counters: dict[str, float] = {"rejected_invalid_dvl": 0, "rejected_gate": 0,
                                            "rejected_nonfinite": 0, "updates": 0,
                                            "rls_updates": 0}
+        # sample handlers by exact class (the sample classes have no subclasses): one dict
+        # look-up per sample instead of a chain of isinstance tests
+        self._handlers: dict[type, Callable[[Any, list], None]] = {
+            Attitude: self._on_attitude, Heading: self._on_heading, Imu: self._on_imu,
+            ActuatorCommand: self._on_command, Depth: self._on_depth,
+            VelocityOverGround: self._on_vog, DvlVelocity: self._on_dvl,
+            GnssFix: self._on_gnss}
 
     # ------------------------------------------------------------------ samples
-    def _ingest(self, s: Sample, meas: list) -> None:
-        if isinstance(s, Attitude):
-            if not all(math.isfinite(v) for v in (s.roll_rad, s.pitch_rad, s.yaw_rad)):
-                self.counters["rejected_nonfinite"] += 1
-                return
-            self.roll, self.pitch = s.roll_rad, s.pitch_rad
-            self._set_yaw(s.t, s.yaw_rad)
-            if s.yaw_rate_rps is not None:
-                self.inp.p = s.roll_rate_rps or 0.0
-                self.inp.q = s.pitch_rate_rps or 0.0
-                self.inp.r = s.yaw_rate_rps
-                self._have_rates = True
-        elif isinstance(s, Heading):
-            if not math.isfinite(s.heading_rad):
-                self.counters["rejected_nonfinite"] += 1
-                return
-            h = s.heading_rad + ((s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0)
-            self._set_yaw(s.t, h)
-        elif isinstance(s, Imu):
-            if math.isfinite(s.gyro_z):
-                self.inp.p, self.inp.q, self.inp.r = s.gyro_x, s.gyro_y, s.gyro_z
-                self._have_rates = True
-        elif isinstance(s, ActuatorCommand):
-            x = self.inp
-            if s.propeller_rpm is not None:
-                x.n = s.propeller_rpm / self.cfg.rpm_scale
-            elif s.throttle is not None:
-                x.n = s.throttle
-            if s.rudder_rad is not None:
-                x.dr = s.rudder_rad
-            if s.stern_plane_rad is not None:
-                x.ds = s.stern_plane_rad
-            if s.left is not None:
-                x.left = s.left
-            if s.right is not None:
-                x.right = s.right
-            if s.thrusters is not None:
-                x.thrusters = s.thrusters
-        elif isinstance(s, Depth):
-            self.depth = s.depth_m
-        elif isinstance(s, VelocityOverGround):
-            z = [s.v_north_mps, s.v_east_mps] + ([s.v_down_mps] if (
-                self.nd == 3 and s.v_down_mps is not None) else [])
-            if not all(math.isfinite(v) for v in z):
-                self.counters["rejected_nonfinite"] += 1
-                return
-            meas.append(("earth", s.t, np.array(z), self.dvl_std))
-        elif isinstance(s, DvlVelocity):
-            if not s.valid or (s.fom_mps is not None and s.fom_mps > self.dvl_max_fom):
-                self.counters["rejected_invalid_dvl"] += 1
-                return
-            z = np.array([s.vx, s.vy, s.vz][: self.nd])
-            if not np.all(np.isfinite(z)):
-                self.counters["rejected_nonfinite"] += 1
-                return
-            std = max(self.dvl_std, s.fom_mps or 0.0)
-            meas.append(("bottom" if s.track == "bottom" else "water", s.t, z, std))
-        elif isinstance(s, GnssFix):
-            if s.sog_mps is None or s.cog_rad is None or s.fix_quality == 0:
-                return
-            if self.depth is not None and self.depth > self.surface_depth:
-                return
-            if not (math.isfinite(s.sog_mps) and math.isfinite(s.cog_rad)):
-                self.counters["rejected_nonfinite"] += 1
-                return
-            z = np.array([s.sog_mps * math.cos(s.cog_rad), s.sog_mps * math.sin(s.cog_rad)])
-            meas.append(("earth", s.t, z, self.gnss_std))
+    def _on_attitude(self, s: Attitude, meas: list) -> None:
+        if not (math.isfinite(s.roll_rad) and math.isfinite(s.pitch_rad)
+                and math.isfinite(s.yaw_rad)):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        self.roll, self.pitch = s.roll_rad, s.pitch_rad
+        self._set_yaw(s.t, s.yaw_rad)
+        if s.yaw_rate_rps is not None:
+            self.inp.p = s.roll_rate_rps or 0.0
+            self.inp.q = s.pitch_rate_rps or 0.0
+            self.inp.r = s.yaw_rate_rps
+            self._have_rates = True
+
+    def _on_heading(self, s: Heading, meas: list) -> None:
+        if not math.isfinite(s.heading_rad):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        h = s.heading_rad + ((s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0)
+        self._set_yaw(s.t, h)
+
+    def _on_imu(self, s: Imu, meas: list) -> None:
+        if math.isfinite(s.gyro_z):
+            self.inp.p, self.inp.q, self.inp.r = s.gyro_x, s.gyro_y, s.gyro_z
+            self._have_rates = True
+
+    def _on_command(self, s: ActuatorCommand, meas: list) -> None:
+        x = self.inp
+        if s.propeller_rpm is not None:
+            x.n = s.propeller_rpm / self.cfg.rpm_scale
+        elif s.throttle is not None:
+            x.n = s.throttle
+        if s.rudder_rad is not None:
+            x.dr = s.rudder_rad
+        if s.stern_plane_rad is not None:
+            x.ds = s.stern_plane_rad
+        if s.left is not None:
+            x.left = s.left
+        if s.right is not None:
+            x.right = s.right
+        if s.thrusters is not None:
+            x.thrusters = s.thrusters
+
+    def _on_depth(self, s: Depth, meas: list) -> None:
+        self.depth = s.depth_m
+
+    def _on_vog(self, s: VelocityOverGround, meas: list) -> None:
+        z = [s.v_north_mps, s.v_east_mps] + ([s.v_down_mps] if (
+            self.nd == 3 and s.v_down_mps is not None) else [])
+        if not all(math.isfinite(v) for v in z):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        meas.append(("earth", s.t, np.array(z), self.dvl_std))
+
+    def _on_dvl(self, s: DvlVelocity, meas: list) -> None:
+        if not s.valid or (s.fom_mps is not None and s.fom_mps > self.dvl_max_fom):
+            self.counters["rejected_invalid_dvl"] += 1
+            return
+        z = [s.vx, s.vy, s.vz][: self.nd]
+        if not all(math.isfinite(v) for v in z):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        std = max(self.dvl_std, s.fom_mps or 0.0)
+        meas.append(("bottom" if s.track == "bottom" else "water", s.t, np.array(z), std))
+
+    def _on_gnss(self, s: GnssFix, meas: list) -> None:
+        if s.sog_mps is None or s.cog_rad is None or s.fix_quality == 0:
+            return
+        if self.depth is not None and self.depth > self.surface_depth:
+            return
+        if not (math.isfinite(s.sog_mps) and math.isfinite(s.cog_rad)):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        z = np.array([s.sog_mps * math.cos(s.cog_rad), s.sog_mps * math.sin(s.cog_rad)])
+        meas.append(("earth", s.t, z, self.gnss_std))
 
     def _set_yaw(self, t: float, yaw: float) -> None:
         if not self._have_rates and self._yaw_prev is not None:
@@ -404,74 +455,81 @@ class CurrentPipeline:
             o += k
 
     def _predict(self, dt: float) -> None:
-        """x <- x + dt f(x); P <- F P F^T + Q, then coefficient forgetting (rls.py rule)."""
+        """x <- x + dt f(x); P <- F P F^T + Q, then coefficient forgetting (rls.py rule).
+
+        The regressors, ``f`` and its Jacobian are plain floats
+        (:meth:`RegressionModel.linearize`); numpy does only the covariance product.
+        """
         nd, nt = self.nd, self.n_theta
-        nu = self.x[:nd]
-        phis = self.model.regressors(nu, self.inp, dofs_only=True)
-        f = np.array([phis[i] @ self.thetas[i] for i in range(nd)])
-        J = self.model.jacobian(nu, self.inp, self.thetas, f)
-        if self._prior_mask is not None:
-            J = J * self._prior_mask
-        self._J = J
         n = 2 * nd + nt
+        o = 2 * nd
+        nu = self.x[:nd].tolist()
+        phis, f, J = self.model.linearize(nu, self.inp, [t.tolist() for t in self.thetas[:nd]])
+        # F = I + dt [[J, 0, Phi], 0, 0]: only the first nd rows differ from I
+        rows = []
+        col = o
+        for i, k in enumerate(self._sizes):
+            row = [0.0] * n
+            if self._masked[i]:  # generic prior: no cross-coupling (see __init__)
+                row[i] = dt * J[i][i]
+            else:
+                row[:nd] = [dt * a for a in J[i]]
+            row[i] += 1.0
+            if nt and (self._identifying or self._prior_dof[i]):
+                # coefficient uncertainty flows into nu_r while identifying, and always for
+                # a DOF whose model is only the generic prior (mode (b)): an assumed sway
+                # damping must not pin the sideslip in a turn (measured without this:
+                # 0.28 m/s error at 4 sigma after the first circle, effect-current)
+                row[col:col + k] = [dt * a for a in phis[i]]
+            col += k
+            rows.append(row)
         F = self._eye_n.copy()
-        F[:nd, :nd] += dt * J
-        if nt:
-            # coefficient uncertainty flows into nu_r while identifying, and always for
-            # a DOF whose model is only the generic prior (mode (b)): an assumed sway
-            # damping must not pin the sideslip in a turn (measured without this: 0.28 m/s
-            # error at 4 sigma after the first circle, effect-current)
-            o = 2 * nd
-            for i, k in enumerate(self._sizes):
-                if self._identifying or self._prior_dof[i]:
-                    F[i, o:o + k] = dt * phis[i]
-                o += k
-        self.x[:nd] = nu + dt * f
+        F[:nd] = rows
+        nu = [a + dt * b for a, b in zip(nu, f)]
+        self.x[:nd] = nu
         # model error grows in manoeuvres (couplings the regression gets only roughly):
         # a turn-rate term, so that the sigma widens at heading changes (the paper's burrs)
-        turn = self.cfg.turn_accel_gain * abs(self.inp.r * nu[0])
-        q_nu = (self.cfg.accel_std ** 2 + turn * turn) * self.cfg.model_error_time_s * self.q_scale
-        q = np.zeros(n)
-        q[:nd] = q_nu * dt
-        if self._prior_mask is not None:
-            for i in range(nd):
-                if self._prior_mask[i].sum() < nd:  # still the generic prior
-                    q[i] = max(q[i], self.cfg.prior_accel_std ** 2
-                               * self.cfg.model_error_time_s * dt)
-        q[nd:2 * nd] = self.cfg.current_walk ** 2 * dt * self.q_scale
-        self.P = F @ self.P @ F.T
-        self.P[np.diag_indices(n)] += q
+        cfg = self.cfg
+        turn = cfg.turn_accel_gain * abs(self.inp.r * nu[0])
+        q_nu = (cfg.accel_std ** 2 + turn * turn) * cfg.model_error_time_s * self.q_scale
+        q = [q_nu * dt] * nd
+        for i in range(nd):
+            if self._masked[i]:  # still the generic prior
+                q[i] = max(q[i], cfg.prior_accel_std ** 2 * cfg.model_error_time_s * dt)
+        q += [cfg.current_walk ** 2 * dt * self.q_scale] * nd
+        P = F @ self.P @ F.T
+        diag = P.ravel()  # a view: the product is C-contiguous
+        diag[:o * (n + 1):n + 1] += q
         if nt and self._identifying:
-            # variable-rate forgetting on the coefficient block, bounded by its prior trace
-            o = 2 * nd
-            tr = float(np.trace(self.P[o:, o:]))
-            lam = 1.0 - (1.0 - self.cfg.forgetting) * max(0.0, 1.0 - tr / self._tr_theta_max)
+            # variable-rate forgetting on the coefficient block, bounded by its prior
+            # trace: the block by 1/lam, its cross-covariances by 1/sqrt(lam)
+            tr = float(diag[o * (n + 1)::n + 1].sum())
+            lam = 1.0 - (1.0 - cfg.forgetting) * max(0.0, 1.0 - tr / self._tr_theta_max)
             lam = lam ** (dt / 0.1)
             if lam < 1.0:
-                d = np.ones(n)
-                d[o:] = 1.0 / math.sqrt(lam)
-                self.P = self.P * np.outer(d, d)
+                d = 1.0 / math.sqrt(lam)
+                P[o:, o:] *= d * d
+                P[:o, o:] *= d
+                P[o:, :o] *= d
+        self.P = P
 
-    def _update(self, kind: str, t: float, z: np.ndarray, std: float, dt_meas: float) -> None:
-        nd, n = self.nd, len(self.x)
-        R = self._R()
+    def _update(self, kind: str, t: float, z: np.ndarray, std: float, R: np.ndarray) -> None:
+        """Kalman update with one velocity measurement (table in the module docstring),
+        NIS gate, Joseph-form covariance for the gain actually used, calibration."""
+        nd = self.nd
         m = len(z)
-        H = np.zeros((m, n))
+        H = self._H0[(kind, m)].copy()
         if kind == "earth":
             H[:, :nd] = R[:m]
-            H[:, nd:2 * nd] = np.eye(nd)[:m]
         elif kind == "bottom":
-            H[:, :nd] = np.eye(nd)[:m]
             H[:, nd:2 * nd] = R.T[:m]
-        else:
-            H[:, :nd] = np.eye(nd)[:m]
-        Rm = np.eye(m) * std * std
+        var = std * std
         y = z - H @ self.x
         PHt = self.P @ H.T
-        S = H @ PHt + Rm
-        try:
-            Sinv = np.linalg.inv(S)
-        except np.linalg.LinAlgError:
+        S = H @ PHt
+        S.ravel()[::m + 1] += var
+        Sinv = _inv_small(S)
+        if Sinv is None:
             self._reset("diverged")
             return
         nis = float(y @ Sinv @ y)
@@ -482,8 +540,8 @@ class CurrentPipeline:
         if self.n_theta and not self._identifying:
             K[2 * nd:] = 0.0
         x_new = self.x + K @ y
-        IKH = np.eye(n) - K @ H
-        P_new = IKH @ self.P @ IKH.T + K @ Rm @ K.T
+        IKH = self._eye_n - K @ H
+        P_new = IKH @ self.P @ IKH.T + (K * var) @ K.T
         if not (np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))
                 and float(np.max(np.abs(x_new[:2 * nd]))) < 50.0):
             self._reset("diverged")
@@ -519,10 +577,10 @@ class CurrentPipeline:
         """The HGO's own copy of ``[nu_r, V_c]`` runs the same model (Kim eq. 11, model part)."""
         nd = self.nd
         nu = self.hx[:nd]
-        f = self.model.accel(nu, self.inp, self.thetas)
-        J = self.model.jacobian(nu, self.inp, self.thetas, f)
-        self._hJ = J
-        self.hx[:nd] = nu + dt * f
+        _, f, J = self.model.linearize(nu.tolist(), self.inp,
+                                       [t.tolist() for t in self.thetas[:nd]])
+        self._hJ = J = np.array(J)
+        self.hx[:nd] = nu + dt * np.array(f)
         F = np.eye(2 * nd)
         F[:nd, :nd] += dt * J
         q = np.concatenate([np.full(nd, self.cfg.accel_std ** 2 * self.cfg.model_error_time_s
@@ -593,14 +651,14 @@ class CurrentPipeline:
     # ------------------------------------------------------------------ identification
     def _update_prior_mask(self) -> None:
         """Lift the cross-coupling mask of DOFs whose coefficients have been learned."""
-        if self._prior_mask is None or not self.n_theta:
+        if not self.n_theta or not any(self._masked):
             return
         o = 2 * self.nd
+        var = self.P.diagonal()[o:].tolist()
+        o = 0
         for i, k in enumerate(self._sizes):
-            if self._prior_dof[i] and self._prior_mask[i].sum() < self.nd:
-                tr = float(np.trace(self.P[o:o + k, o:o + k]))
-                if tr < 0.25 * k * self.cfg.theta_std ** 2:
-                    self._prior_mask[i] = 1.0
+            if self._masked[i] and sum(var[o:o + k]) < 0.25 * k * self.cfg.theta_std ** 2:
+                self._masked[i] = False
             o += k
 
     def _is_identifying(self, t: float) -> bool:
@@ -629,24 +687,27 @@ class CurrentPipeline:
         sides through the same state-variable filter (algorithms.md §3.4)."""
         if self.yaw_rls is None or self._svf is None:
             return
-        i = self.model.channels.index("yaw")
-        phi = self.model.regressors(self.x[: self.nd], self.inp)[i]
-        self._svf.update(dt, np.concatenate([[self.inp.r], phi]))
+        i = self._i_yaw
+        phi = self.model.regressor_rows(self.x[: self.nd].tolist(), self.inp)[i]
+        self._svf.update(dt, (self.inp.r,) + phi)
         if (not self.cfg.identify or "yaw" in self.cfg.model
                 or self.x[0] < self.cfg.identify_min_speed):
             return  # a configured yaw model is kept (the flow observer's gain rests on it)
         if self._last_vg is None or (self._t or 0.0) - self._last_vg[0] > 1.0:
             return
-        self.yaw_rls.update(self._svf.y[1:], float(self._svf.dy[0]))
-        self.thetas[i] = self.yaw_rls.theta.copy()
+        self.yaw_rls.update(self._svf.y[1:], self._svf.dy[0])
+        self.thetas[i] = self.yaw_rls.theta
         self.counters["rls_updates"] += 1
 
     # ------------------------------------------------------------------ protocol
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         """Advance to tick ``t`` (s) with the new samples; returns the estimates."""
         meas: list = []
+        handlers = self._handlers
         for s in samples:
-            self._ingest(s, meas)
+            h = handlers.get(type(s))
+            if h is not None:
+                h(s, meas)
         if self.yaw is None:
             return {}
         if not self._started:
@@ -670,13 +731,13 @@ class CurrentPipeline:
                 if self._law is not None:
                     self._hgo_predict(dt / n_sub)
         self._t = t if dt >= 0 else self._t
+        R = self._R() if meas else None  # the attitude is fixed within the tick
         for kind, tm, z, std in meas:
             dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else 0.1
             dt_meas = min(max(dt_meas, 1e-3), 1.0)
             self._last_meas_t = tm
-            self._update(kind, tm, z, std, dt_meas)
+            self._update(kind, tm, z, std, R)
             self._hgo_update(kind, z, std, dt_meas)
-            R = self._R()
             if kind == "earth":
                 zz = np.zeros(self.nd)
                 zz[: len(z)] = z
@@ -695,15 +756,14 @@ class CurrentPipeline:
 
     def _outputs(self) -> dict[str, float]:
         nd = self.nd
-        c = self.x[nd:2 * nd]
-        nu = self.x[:nd]
-        std = np.sqrt(np.diag(self.P)[nd:2 * nd])
-        if self._law is not None:
-            c, nu = self.hx[nd:], self.hx[:nd]
-            std = np.sqrt(np.maximum(np.diag(self.hP)[nd:], 0.0))
-        if (self._prior_mask is not None and self._prior_dof[0]
-                and self._prior_mask[0].sum() < nd
-                and math.hypot(*self._hvec) > self.cfg.heading_diversity):
+        if self._law is None:
+            c = self.x[nd:2 * nd].tolist()
+            nu = self.x[:nd].tolist()
+            std = np.sqrt(self.P.diagonal()[nd:2 * nd]).tolist()
+        else:
+            c, nu = self.hx[nd:].tolist(), self.hx[:nd].tolist()
+            std = np.sqrt(np.maximum(self.hP.diagonal()[nd:], 0.0)).tolist()
+        if self._masked[0] and math.hypot(*self._hvec) > self.cfg.heading_diversity:
             # No surge model yet (mode (b), not identified): the current along the track is
             # not observable on a straight line; weak couplings (pitch, heave prior) make
             # the filter's own variance shrink anyway (measured: 1.2 m/s error at 3.3
@@ -711,10 +771,9 @@ class CurrentPipeline:
             # unless the headings of the last minutes are diverse enough for the sway
             # constraint alone (|mean heading vector| below ``heading_diversity``).
             yaw = self.yaw or 0.0
-            along = np.array([math.cos(yaw), math.sin(yaw)])
-            var = std[:2] ** 2 + (self.cfg.init_current_std * along) ** 2
-            std = std.copy()
-            std[:2] = np.sqrt(var)
+            for i, a in enumerate((math.cos(yaw), math.sin(yaw))):
+                a *= self.cfg.init_current_std
+                std[i] = math.sqrt(std[i] * std[i] + a * a)
         if self.flow is not None and self.flow.ready and self._last_vg is not None:
             # Fan et al.: V_c = R (v - v_r); v from the last over-ground velocity.
             R = self._R()

@@ -29,21 +29,85 @@ one noisy sample throws the parameters away. Two guards keep ``P`` bounded:
 
 The residual variance ``sigma2`` is tracked with the same forgetting, so that the caller can
 use the model error as process noise (the current pipeline does, for honest uncertainty).
+
+The update runs as straight-line float code generated per size (:func:`rls_kernel`, as
+:func:`onboard.pipelines.aie.rls_kernel`) on the packed upper triangle of ``P``: at the
+4-5 parameters of the current pipeline's yaw channel that is ~5x faster than numpy, whose
+per-call overhead dominates at this size. ``P`` is symmetric by construction (the update
+is written in the symmetric form ``P - P phi phi^T P / S``), so no symmetrization is needed.
 """
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from functools import lru_cache
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
+
+RlsKernel = Callable[..., "tuple[list[float], list[float], float, float, float]"]
+
+
+def _packed_index(n: int) -> dict[tuple[int, int], int]:
+    """Position of ``P[i][j]`` in the packed upper triangle (row-major)."""
+    idx: dict[tuple[int, int], int] = {}
+    m = 0
+    for i in range(n):
+        for j in range(i, n):
+            idx[(i, j)] = idx[(j, i)] = m
+            m += 1
+    return idx
+
+
+@lru_cache(maxsize=None)
+def rls_kernel(n: int) -> RlsKernel:
+    """The update of :class:`RecursiveLeastSquares` for ``n`` parameters, as straight-line
+    float code (the module docstring's equations, then EFRA):
+
+    ``kernel(P, theta, phi, a, weight, forgetting, tr_max, beta, delta)
+    -> (P+, theta+, e, lam, s)`` with ``P`` the packed upper triangle (``n (n+1)/2``
+    floats), ``e`` the a priori residual, ``lam`` the variable forgetting factor and
+    ``s = lam / weight + phi^T P phi``. With ``beta = delta = 0`` the EFRA step adds zero.
+    """
+    idx = _packed_index(n)
+    r = range(n)
+    p = {(i, j): f"p{idx[(i, j)]}" for i in r for j in r}
+    q = {(i, j): f"q{idx[(i, j)]}" for i in r for j in r}
+    m = n * (n + 1) // 2
+    src = ["def kernel(P, th, phi, a, weight, forgetting, tr_max, beta, delta):",
+           f"    {', '.join(f'p{k}' for k in range(m))}, = P",
+           f"    {', '.join(f't{i}' for i in r)}, = th",
+           f"    {', '.join(f'f{i}' for i in r)}, = phi"]
+    add = src.append
+    for i in r:  # P phi
+        add(f"    g{i} = " + " + ".join(f"{p[(i, j)]}*f{j}" for j in r))
+    add("    e = a - (" + " + ".join(f"f{i}*t{i}" for i in r) + ")")
+    add("    tr = " + " + ".join(p[(i, i)] for i in r))
+    add("    lam = 1.0 - (1.0 - forgetting) * max(0.0, 1.0 - tr / tr_max)")
+    add("    s = lam / weight + (" + " + ".join(f"f{i}*g{i}" for i in r) + ")")
+    for i in r:
+        add(f"    k{i} = g{i} / s")
+    for i in r:  # (P - K (P phi)^T) / lam, upper triangle
+        for j in range(i, n):
+            add(f"    {q[(i, j)]} = ({p[(i, j)]} - k{i}*g{j}) / lam")
+    terms = []
+    for i in r:  # + beta I - delta P^2 (EFRA)
+        for j in range(i, n):
+            pp = " + ".join(f"{q[(i, k)]}*{q[(k, j)]}" for k in r)
+            terms.append(f"{q[(i, j)]}" + (" + beta" if i == j else "") + f" - delta*({pp})")
+    add("    return [" + ", ".join(terms) + "], [" + ", ".join(
+        f"t{i} + k{i}*e" for i in r) + "], e, lam, s")
+    ns: dict[str, Any] = {}
+    exec("\n".join(src), ns)  # noqa: S102 - source generated above from integers only
+    return ns["kernel"]
 
 
 class RecursiveLeastSquares:
     """RLS with forgetting, bounded covariance and a residual-variance estimate.
 
-    Attributes (read them, do not assign):
-        theta: parameter estimate, shape (n,).
-        P: parameter covariance (in units of ``sigma2``), shape (n, n).
+    Attributes (read them, do not assign, except ``P`` to set a prior):
+        theta: parameter estimate, shape (n,) (a new array on each read).
+        P: parameter covariance (in units of ``sigma2``), shape (n, n) (a new array on
+            each read; kept as a packed upper triangle of floats).
         e: last a priori residual ``a - phi^T theta`` (units of ``a``).
         S: last residual variance predicted from ``P`` and ``sigma2``.
         nis: last normalized residual ``e^2 / S`` (about 1 when consistent).
@@ -88,7 +152,10 @@ class RecursiveLeastSquares:
         self.beta = (1.0 - forgetting) * p_min if beta is None else beta
         self.delta = (1.0 / forgetting - 1.0) / p_max if delta is None else delta
         self.names = tuple(names) if names is not None else tuple(f"p{i}" for i in range(n))
-        self.theta = np.zeros(n) if theta0 is None else np.asarray(theta0, float).copy()
+        self._kernel = rls_kernel(n)
+        self._theta: list[float] = [0.0] * n if theta0 is None else [
+            float(v) for v in theta0]
+        self._P: list[float] = []
         self.P = np.eye(n) * p0
         self.sigma2 = sigma2_0
         self.e = 0.0
@@ -96,32 +163,41 @@ class RecursiveLeastSquares:
         self.nis = 0.0
         self.n_updates = 0
 
-    def predict(self, phi: np.ndarray) -> float:
-        """Model output ``phi^T theta``."""
-        return float(phi @ self.theta)
+    @property
+    def theta(self) -> np.ndarray:
+        return np.array(self._theta)
 
-    def prediction_variance(self, phi: np.ndarray) -> float:
+    @property
+    def P(self) -> np.ndarray:
+        idx = _packed_index(self.n)
+        return np.array([[self._P[idx[(i, j)]] for j in range(self.n)]
+                         for i in range(self.n)])
+
+    @P.setter
+    def P(self, P: np.ndarray) -> None:
+        """Set the covariance (its symmetric part)."""
+        P = np.asarray(P, float)
+        self._P = [0.5 * (float(P[i, j]) + float(P[j, i]))
+                   for i in range(self.n) for j in range(i, self.n)]
+
+    def predict(self, phi: Sequence[float]) -> float:
+        """Model output ``phi^T theta``."""
+        return float(np.asarray(phi, float) @ self.theta)
+
+    def prediction_variance(self, phi: Sequence[float]) -> float:
         """Variance of ``a`` about ``phi^T theta``: ``sigma2 (1 + phi^T P phi)``."""
+        phi = np.asarray(phi, float)
         return float(self.sigma2 * (1.0 + phi @ self.P @ phi))
 
-    def update(self, phi: np.ndarray, a: float, weight: float = 1.0) -> float:
+    def update(self, phi: Sequence[float], a: float, weight: float = 1.0) -> float:
         """Fold in one sample ``a = phi^T theta + e``; returns the a priori residual.
 
         ``weight`` in (0, 1] scales the sample's information (1 / relative variance), so a
         sample taken while the inputs are uncertain counts less.
         """
-        P = self.P
-        Pphi = P @ phi
-        e = float(a - phi @ self.theta)
-        tr = float(np.trace(P))
-        lam = 1.0 - (1.0 - self.forgetting) * max(0.0, 1.0 - tr / self.tr_max)
-        s = lam / max(weight, 1e-9) + float(phi @ Pphi)
-        K = Pphi / s
-        self.theta = self.theta + K * e
-        P = (P - np.outer(K, Pphi)) / lam
-        if self.beta or self.delta:
-            P = P + self.beta * np.eye(self.n) - self.delta * (P @ P)
-        self.P = 0.5 * (P + P.T)
+        self._P, self._theta, e, lam, s = self._kernel(
+            self._P, self._theta, [float(v) for v in phi], float(a),
+            max(weight, 1e-9), self.forgetting, self.tr_max, self.beta, self.delta)
         self.S = self.sigma2 * s / lam
         self.e = e
         self.nis = e * e / self.S if self.S > 0 else 0.0
@@ -156,7 +232,8 @@ class RecursiveLeastSquares:
                 return
             if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(P))):
                 return
-            self.theta, self.P = theta, P
+            self._theta = theta.tolist()
+            self.P = P
             self.sigma2 = float(state.get("sigma2", self.sigma2))
             self.n_updates = int(state.get("n_updates", 0))
         except (KeyError, TypeError, ValueError):

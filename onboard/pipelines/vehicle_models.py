@@ -22,6 +22,7 @@ Symbols: ``u, v, w`` (m/s) through-water velocity, ``p, q, r`` (rad/s) body rate
 from __future__ import annotations
 
 import math
+import operator
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -49,6 +50,11 @@ class ModelInputs:
 def _sq(x: float) -> float:
     """Signed square ``x |x|``."""
     return x * abs(x)
+
+
+def _dot(a: Sequence[float], b: Sequence[float]) -> float:
+    """``a . b`` summed left to right in plain floats."""
+    return sum(map(operator.mul, a, b))
 
 
 class RegressionModel:
@@ -105,10 +111,15 @@ class RegressionModel:
         self.nd = len(self.dofs)
 
     # ------------------------------------------------------------------ regressors
-    def regressors(self, nu: Sequence[float], x: ModelInputs,
-                   dofs_only: bool = False) -> list[np.ndarray]:
-        """phi_i for every channel (``dofs`` then ``aux``), at through-water velocity ``nu``;
-        with ``dofs_only`` the state DOFs only (cheaper, for the filter's prediction)."""
+    def regressor_rows(self, nu: Sequence[float], x: ModelInputs,
+                       dofs_only: bool = False) -> list[tuple[float, ...]]:
+        """phi_i for every channel (``dofs`` then ``aux``) as tuples of plain floats, at
+        through-water velocity ``nu`` (m/s); with ``dofs_only`` the state DOFs only.
+
+        The filter evaluates these several times per tick (the Jacobian's forward
+        differences): at 4-9 terms per channel, float arithmetic is several times cheaper
+        than building numpy arrays (numpy's per-call overhead dominates at this size).
+        """
         u = nu[0]
         v = nu[1]
         w = nu[2] if len(nu) > 2 else 0.0
@@ -119,52 +130,75 @@ class RegressionModel:
             uu = u * abs(u)
             rr = r * abs(r)
             out = [
-                np.array([uu, w * q, q * q, v * r, r * r, st, x.n * abs(x.n)]),
-                np.array([v * abs(v), rr, u * v, u * r, w * p, p * q, ct * sp, uu * x.dr]),
-                np.array([w * abs(w), q * abs(q), u * w, u * q, v * p, r * p, ct * cp,
-                          uu * x.ds]),
+                (uu, w * q, q * q, v * r, r * r, st, x.n * abs(x.n)),
+                (v * abs(v), rr, u * v, u * r, w * p, p * q, ct * sp, uu * x.dr),
+                (w * abs(w), q * abs(q), u * w, u * q, v * p, r * p, ct * cp, uu * x.ds),
             ]
             if not dofs_only:
-                out.append(np.array([r, rr, u * v, uu * x.dr]))
+                out.append((r, rr, u * v, uu * x.dr))
             return out
         if self.kind == "surface-rudder":
             tau = _sq(x.n)
             uu = u * abs(u)
-            out = [np.array([uu, u, v * r, tau]), np.array([v, v * abs(v), u * r, r])]
+            out = [(uu, u, v * r, tau), (v, v * abs(v), u * r, r)]
             if not dofs_only:
-                out.append(np.array([r, r * abs(r), u * v, uu * x.dr, tau * x.dr]))
+                out.append((r, r * abs(r), u * v, uu * x.dr, tau * x.dr))
             return out
         if self.kind == "surface-twin":
             tl, tr = _sq(x.left), _sq(x.right)
-            out = [np.array([u * abs(u), u, v * r, tl + tr]), np.array([v, v * abs(v), u * r, r])]
+            out = [(u * abs(u), u, v * r, tl + tr), (v, v * abs(v), u * r, r)]
             if not dofs_only:
-                out.append(np.array([r, r * abs(r), u * v, tl - tr]))
+                out.append((r, r * abs(r), u * v, tl - tr))
             return out
-        thr = [_sq(t) for t in (tuple(x.thrusters) + (0.0,) * 6)[:6]]
+        thr = tuple(_sq(t) for t in (tuple(x.thrusters) + (0.0,) * 6)[:6])
         ct, cp = math.cos(x.pitch), math.cos(x.roll)
         return [
-            np.array([u, _sq(u), v * r] + thr),
-            np.array([v, _sq(v), u * r] + thr),
-            np.array([w, _sq(w), ct * cp] + thr),
+            (u, _sq(u), v * r) + thr,
+            (v, _sq(v), u * r) + thr,
+            (w, _sq(w), ct * cp) + thr,
         ]
+
+    def regressors(self, nu: Sequence[float], x: ModelInputs,
+                   dofs_only: bool = False) -> list[np.ndarray]:
+        """:meth:`regressor_rows` as numpy arrays."""
+        return [np.array(row) for row in self.regressor_rows(nu, x, dofs_only)]
+
+    def linearize(self, nu: Sequence[float], x: ModelInputs,
+                  thetas: Sequence[Sequence[float]], h: float = 1e-4,
+                  ) -> tuple[list[tuple[float, ...]], list[float], list[list[float]]]:
+        """Regressors, acceleration and Jacobian of the state DOFs at ``nu``, in floats.
+
+        Returns ``(phis, f, J)``: ``phis[i]`` the regressor of DOF ``i``, ``f[i] =
+        phi_i^T theta_i`` the through-water acceleration ``nu_r'`` (m/s^2) and ``J[i][j] =
+        d nu_r'_i / d nu_r_j`` (1/s) by forward differences with step ``h`` (m/s), the
+        same numbers as :meth:`accel` and :meth:`jacobian` (up to rounding). ``thetas``
+        are best given as lists of floats (indexing numpy arrays element-wise is slow).
+        """
+        nd = self.nd
+        phis = self.regressor_rows(nu, x, dofs_only=True)
+        f = [_dot(phis[i], thetas[i]) for i in range(nd)]
+        J = [[0.0] * nd for _ in range(nd)]
+        for j in range(nd):
+            nu2 = list(nu[:nd])
+            nu2[j] += h
+            phis2 = self.regressor_rows(nu2, x, dofs_only=True)
+            for i in range(nd):
+                J[i][j] = (_dot(phis2[i], thetas[i]) - f[i]) / h
+        return phis, f, J
 
     def accel(self, nu: Sequence[float], x: ModelInputs,
               thetas: Sequence[np.ndarray]) -> np.ndarray:
         """Through-water acceleration of the state DOFs, ``nu_r'`` (m/s^2)."""
-        phis = self.regressors(nu, x, dofs_only=True)
-        return np.array([phis[i] @ thetas[i] for i in range(self.nd)])
+        phis = self.regressor_rows(nu, x, dofs_only=True)
+        return np.array([_dot(phis[i], thetas[i]) for i in range(self.nd)])
 
-    def jacobian(self, nu: np.ndarray, x: ModelInputs, thetas: Sequence[np.ndarray],
-                 f0: np.ndarray | None = None, h: float = 1e-4) -> np.ndarray:
-        """``d nu_r' / d nu_r`` (1/s) by forward differences, shape (nd, nd)."""
-        if f0 is None:
-            f0 = self.accel(nu, x, thetas)
-        J = np.empty((self.nd, self.nd))
-        for j in range(self.nd):
-            nu2 = np.array(nu, float)
-            nu2[j] += h
-            J[:, j] = (self.accel(nu2, x, thetas) - f0) / h
-        return J
+    def jacobian(self, nu: Sequence[float], x: ModelInputs, thetas: Sequence[np.ndarray],
+                 h: float = 1e-4) -> np.ndarray:
+        """``d nu_r' / d nu_r`` (1/s) by forward differences (:meth:`linearize`), shape
+        (nd, nd)."""
+        _, _, J = self.linearize([float(a) for a in nu],
+                                 x, [np.asarray(t, float).tolist() for t in thetas], h)
+        return np.array(J)
 
     # ------------------------------------------------------------------ parameters
     def default_thetas(self) -> list[np.ndarray]:
