@@ -635,8 +635,8 @@ def _build() -> dict[str, Scenario]:
     by_name = {sc.name: sc for sc in s}
     faults = [
         _fault(by_name["jaiabot-turns"], "fault-gnss-outage",
-               "jaiabot-turns with no GNSS fix from 40 s to 160 s",
-               (Effect("gnss_outage", {"start": 40.0, "duration": 120.0}),)),
+               "jaiabot-turns with no GNSS fix from 30 s to 150 s",
+               (Effect("gnss_outage", {"start": 30.0, "duration": 120.0}),)),
         _fault(by_name["gavia-tidal"], "fault-gnss-submerged",
                "gavia-tidal starting at the surface and diving to 5 m, its GNSS receiver "
                "reporting (wrong) fixes under water",
@@ -646,14 +646,14 @@ def _build() -> dict[str, Scenario]:
                                             max_depth_m=math.inf)),
                initial=Initial(down=0.0, yaw=0.0, u=1.5)),
         _fault(by_name["gavia-tidal"], "fault-dvl-lock-loss",
-               "gavia-tidal with the DVL out of bottom lock from 60 s to 90 s",
-               (Effect("dvl_lock_loss", {"start": 60.0, "duration": 30.0}),)),
+               "gavia-tidal with the DVL out of bottom lock from 40 s to 70 s",
+               (Effect("dvl_lock_loss", {"start": 40.0, "duration": 30.0}),)),
         _fault(by_name["bluerov2-circle"], "fault-dvl-lock-loss-rov",
-               "bluerov2-circle with the DVL out of bottom lock from 60 s to 90 s",
-               (Effect("dvl_lock_loss", {"start": 60.0, "duration": 30.0}),)),
+               "bluerov2-circle with the DVL out of bottom lock from 40 s to 70 s",
+               (Effect("dvl_lock_loss", {"start": 40.0, "duration": 30.0}),)),
         _fault(by_name["jaiabot-turns"], "fault-compass-step",
-               "jaiabot-turns with the compass reading 30 deg too much from 60 s to 65 s",
-               (Effect("compass_step", {"start": 60.0, "duration": 5.0,
+               "jaiabot-turns with the compass reading 30 deg too much from 40 s to 45 s",
+               (Effect("compass_step", {"start": 40.0, "duration": 5.0,
                                         "radians": 30 * DEG}),)),
     ]
     by_name.update((sc.name, sc) for sc in faults)

@@ -12,6 +12,13 @@ Payloads are the msgspec structs of :mod:`onboard.messages` as JSON (encoding
 or client with multicast scouting off: it connects to the endpoints configured (a router
 on the vehicle or on shore) and listens where configured. :func:`open_router` starts an
 in-process router session for the demo and the tests (no zenohd binary).
+
+A router that goes away (restarted, link down) is reconnected by Zenoh itself: a client or
+peer retries its ``connect`` endpoints (zenoh 1.x ``connect/retry``: 1 s doubling to
+4 s, the defaults, measured 0.5-1.5 s after a restarted router is back). The publisher
+watches the session's routers/peers at every health record and reports the loss and
+the return as events (``on_event``); puts while disconnected are dropped by Zenoh, so
+the estimator loop never waits for the network.
 """
 
 from __future__ import annotations
@@ -20,7 +27,7 @@ import json
 import logging
 import threading
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import msgspec
 
@@ -73,8 +80,14 @@ class ZenohPublisher:
         vehicle: the vehicle id (the second key segment).
     """
 
-    def __init__(self, cfg: ZenohOut, vehicle: str) -> None:
+    def __init__(self, cfg: ZenohOut, vehicle: str,
+                 on_event: "Callable[[str], None] | None" = None) -> None:
         self.cfg = cfg
+        self.on_event = on_event
+        self.connected: bool | None = None
+        """Whether the session reaches a router or peer (None: not checked yet, or no
+        ``connect`` endpoints to watch)."""
+        self.disconnects = 0
         self.vehicle = vehicle
         self.base = f"{cfg.key_prefix}/{vehicle}"
         self.session = None
@@ -132,6 +145,27 @@ class ZenohPublisher:
 
     def publish_health(self, health: HealthRecord) -> None:
         self._put("health", self._enc.encode(health))
+        self.check_connection()
+
+    def check_connection(self) -> bool | None:
+        """Look whether the session reaches any router or peer (only with ``connect``
+        endpoints); report a change as an event. Called at 1 Hz with the health record."""
+        if self.session is None or not self.cfg.connect:
+            return None
+        try:
+            info = self.session.info
+            up = bool(list(info.routers_zid())) or bool(list(info.peers_zid()))
+        except Exception:  # noqa: BLE001 - a closed session
+            up = False
+        if up != self.connected:
+            if self.connected is not None and self.on_event is not None:
+                ends = ", ".join(self.cfg.connect)
+                self.on_event(f"zenoh: connected again to {ends}" if up else
+                              f"zenoh: lost {ends}; reconnecting (estimates not delivered)")
+            if not up and self.connected is not None:
+                self.disconnects += 1
+            self.connected = up
+        return up
 
     def _on_query(self, query: object) -> None:
         """Reply with the latest value of every key the query's selector matches."""
