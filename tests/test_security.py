@@ -299,3 +299,117 @@ def test_signed_udp_input_into_the_service_counts_every_rejection_and_survives_a
     svc2 = asyncio.run(asyncio.wait_for(run([good, frames(2)]), 60.0))
     assert svc2.intake.sources["autopilot"].samples == 2
     assert svc2.intake.parse_rejections() == {"parse:autopilot:sig_replay": 10}
+
+
+# --------------------------------------------------------------------------- Zenoh
+
+ZENOH_DIR = REPO / "config" / "zenoh"
+
+
+def _wait(cond, timeout: float = 5.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.05)
+    return cond()
+
+
+@pytest.fixture
+def acl_router():
+    """An in-process router opened with config/zenoh/router-acl.json5 as shipped, on a
+    free port, with the example credentials file."""
+    zenoh = pytest.importorskip("zenoh")
+    from onboard.publishers.zenoh_pub import session_config
+    from onboard.service_bench import free_tcp_port
+
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    conf = session_config("router", listen=[ep], config_file=str(ZENOH_DIR / "router-acl.json5"))
+    conf.insert_json5("transport/auth/usrpwd/dictionary_file",
+                      json.dumps(str(ZENOH_DIR / "credentials.example.txt")))
+    router = zenoh.open(conf)
+    yield ep
+    router.close()
+
+
+def _session(ep: str, config_file: str, user: str | None = None, password: str | None = None):
+    import zenoh
+
+    from onboard.publishers.zenoh_pub import session_config
+
+    conf = session_config("client", connect=[ep], config_file=config_file)
+    if user is not None:
+        conf.insert_json5("transport/auth/usrpwd", json.dumps({"user": user, "password": password}))
+    return zenoh.open(conf)
+
+
+def _credentials() -> dict[str, str]:
+    lines = (ZENOH_DIR / "credentials.example.txt").read_text().split()
+    return dict(line.split(":", 1) for line in lines)
+
+
+def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receives_them(acl_router):
+    from onboard.config import ZenohOut
+    from onboard.messages import EstimateRecord
+    from onboard.publishers.zenoh_pub import ZenohPublisher
+
+    shore = _session(acl_router, str(ZENOH_DIR / "shore.json5"))
+    got: list[str] = []
+    sub = shore.declare_subscriber("onboard/**", lambda s: got.append(str(s.key_expr)))
+    pub = ZenohPublisher(ZenohOut(mode="client", connect=[acl_router],
+                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5")), "boat1")
+    pub.start()
+    try:
+        rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.2})
+        assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1])
+        replies = [r.ok for r in shore.get("onboard/boat1/**", timeout=2.0) if r.ok is not None]
+        assert any(str(r.key_expr) == "onboard/boat1/est/kf" for r in replies)
+        alive = [str(r.ok.key_expr) for r in shore.liveliness().get("onboard/**", timeout=2.0)
+                 if r.ok is not None]
+        assert alive == ["onboard/boat1/alive"]
+    finally:
+        pub.close()
+        sub.undeclare()
+        shore.close()
+
+
+def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
+    creds = _credentials()
+    shore = _session(acl_router, str(ZENOH_DIR / "shore.json5"))
+    got: list[tuple[str, bytes]] = []
+    sub = shore.declare_subscriber("onboard/**",
+                                   lambda s: got.append((str(s.key_expr), s.payload.to_bytes())))
+    boat1 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"))
+    boat2 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"), "boat2", creds["boat2"])
+    try:
+        def sent() -> bool:
+            boat1.put("onboard/boat2/est/kf", b"forged by boat1")
+            boat1.put("onboard/boat1/est/kf", b"own")
+            boat2.put("onboard/boat2/est/kf", b"genuine")  # control: the key is deliverable
+            return ("onboard/boat2/est/kf", b"genuine") in got and ("onboard/boat1/est/kf", b"own") in got
+        assert _wait(sent)
+        time.sleep(0.3)
+        assert ("onboard/boat2/est/kf", b"forged by boat1") not in got
+        boat1.put("elsewhere/anything", b"x")  # outside onboard/**: denied too
+        time.sleep(0.2)
+        assert all(k.startswith("onboard/") for k, _ in got)
+    finally:
+        sub.undeclare()
+        for s in (boat1, boat2, shore):
+            s.close()
+
+
+@pytest.mark.parametrize("user, password", [("boat1", "wrong-password"), ("intruder", "x"),
+                                            (None, None)])
+def test_a_wrong_password_or_no_credentials_cannot_open_a_session(acl_router, tmp_path, user, password):
+    from onboard.config import ZenohOut
+    from onboard.publishers.zenoh_pub import ZenohPublisher
+
+    conf = tmp_path / "vehicle.json5"
+    auth = "" if user is None else (f'transport: {{ auth: {{ usrpwd: {{ user: "{user}", '
+                                    f'password: "{password}" }} }} }},')
+    conf.write_text(f"{{ mode: \"client\", {auth} }}")
+    pub = ZenohPublisher(ZenohOut(mode="client", connect=[acl_router], config_file=str(conf)), "boat1")
+    with pytest.raises(Exception, match="(?i)unable to connect|connect"):
+        pub.start()
+    pub.close()
