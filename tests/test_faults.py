@@ -205,3 +205,179 @@ def test_zenoh_router_restarted_the_service_keeps_ticking_and_delivers_again(tmp
     assert min(r.t for r in after) > max(r.t for r in before)
     # first estimate at the shore 0.6-1.1 s (wall) after the router was back (measured);
     # not asserted: Zenoh's own retry (1 s doubling to 4 s) sets it
+
+
+# --------------------------------------------------------------------------- SITL faults
+
+
+def _position_errors(series):
+    """[(t, horizontal position error m)]: positions compared as displacements from the
+    pipeline's first estimate (they are reported from the first fix)."""
+    out = []
+    base = None
+    for t, v, tr in series:
+        if "north" not in v:
+            continue
+        if base is None:
+            base = (v["north"] - tr.north, v["east"] - tr.east)
+        out.append((t, math.hypot(v["north"] - tr.north - base[0],
+                                  v["east"] - tr.east - base[1])))
+    return out
+
+
+def _heading_errors_deg(series):
+    return [(t, abs(math.degrees(_wrap(v["heading"] - tr.yaw)))) for t, v, tr in series
+            if "heading" in v]
+
+
+def _in(pairs, a, b):
+    return [x for t, x in pairs if a <= t < b]
+
+
+def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_path):
+    """fault-gnss-outage: no fix from 30 s to 150 s. The AIE and KF keep estimating from
+    the model and the compass; health shows the GNSS stream at 0 Hz and a stale event;
+    after the return the position comes back toward the truth."""
+    res, truth = _fly("fault-gnss-outage", 170.0, tmp_path, speed=15.0)
+    aie = _series(res, truth, "aie")
+    # estimates kept coming through the outage, one per tick
+    n_out = sum(1 for t, _, _ in aie if 32.0 <= t < 148.0)
+    print("aie records in the outage per tick:", n_out / 1160)
+    assert n_out / 1160 > 0.9  # measured 1.00
+    # health: the GNSS stream at 0 Hz during the outage, stale then back as events
+    during = [h for h in res.healths if 35.0 <= h.t < 149.0]
+    assert during and all(h.rates_hz.get("gnss:gps", 0.0) == 0.0 for h in during)
+    evs = [(h.t, e) for h in res.healths for e in h.events]
+    assert any(30.0 < t < 36.0 and e.startswith("gnss:gps: stale") for t, e in evs), evs
+    assert any(t > 150.0 and e.startswith("gnss:gps: samples again") for t, e in evs), evs
+    assert all(h.rates_hz.get("heading:gps", 0.0) > 0 for h in during)  # same pty, alive
+    # position: drifts during the outage, bounded; recovers after
+    pe = _position_errors(aie)
+    before, late_out = _max(_in(pe, 20.0, 30.0)), _max(_in(pe, 130.0, 150.0))
+    after = _median(_in(pe, 160.0, 170.0))
+    he_after = _median(_in(_heading_errors_deg(aie), 152.0, 170.0))
+    print(f"aie position error: before {before:.1f} m, end of outage {late_out:.1f} m, "
+          f"10-20 s after {after:.1f} m; heading error after {he_after:.2f} deg")
+    assert late_out > before  # it drifts without fixes (measured 3.5 -> 37 m)
+    assert late_out < 80.0  # measured 37-39 m after 120 s (jaiabot-turns speeds 0.6-2.2 m/s)
+    assert after < 20.0  # measured 10-13 m (the position anchor is a slow pull)
+    assert he_after < 5.0  # measured 1-3 deg
+
+
+@pytest.mark.xfail(strict=True, reason="aie/kf publish no uncertainty (no std_north/std_east): "
+                   "growing uncertainty during a GNSS outage is not reported")
+def test_gnss_outage_uncertainty_grows(tmp_path):
+    res, truth = _fly("fault-gnss-outage", 60.0, tmp_path, speed=15.0)
+    aie = [r for r in res.estimates if r.pipeline == "aie"]
+    early = [r.std.get("north") for r in aie if 20.0 <= r.t < 30.0]
+    late = [r.std.get("north") for r in aie if 50.0 <= r.t < 60.0]
+    assert early and late and None not in early + late
+    assert _median(late) > 2 * _median(early)
+
+
+def test_gnss_under_water_is_rejected_and_counted_estimates_continue(tmp_path):
+    """fault-gnss-submerged: a torpedo AUV dives from the surface; its receiver keeps
+    reporting (wrong) fixes at 1 Hz. Every fix below the surface depth is rejected as
+    ``gnss:submerged``; the current and nav pipelines carry on on DVL/INS/depth."""
+    res, truth = _fly("fault-gnss-submerged", 40.0, tmp_path)
+    from onboard.config import load
+
+    surface = load("torpedo-auv").sensors.depth.surface_depth_m
+    deep = sum(1 for k, tr in truth.items() if k % 10 == 0 and 1.0 <= tr.t < 40.0
+               and tr.down > surface + 0.1)
+    shallow = sum(1 for k, tr in truth.items() if k % 10 == 0 and 1.0 <= tr.t < 40.0
+                  and tr.down < surface - 0.1)
+    rejected = res.health.rejected.get("gnss:submerged", 0)
+    print(f"fixes under water {deep}, rejected {rejected}; at the surface {shallow}")
+    assert deep > 20 and shallow >= 3
+    assert deep * 0.9 <= rejected <= deep + (40 - deep - shallow) + 1  # measured = deep
+    assert res.health.mode == "submerged"
+    assert any(h.rates_hz.get("gnss:gps", 0.0) > 0 for h in res.healths if h.t < 8.0)
+    cur = _series(res, truth, "current")
+    n = sum(1 for t, _, _ in cur if 15.0 <= t < 38.0)
+    assert n / 230 > 0.9  # measured 1.00
+    nav = _series(res, truth, "nav")
+    depth_err = _max(abs(v["depth"] - tr.down) for t, v, tr in nav if t > 15.0 and "depth" in v)
+    print(f"nav depth error under water {depth_err:.3f} m")
+    assert depth_err < 0.2  # measured 0.07 m (depth sensor 0.02 m noise, 10 Hz)
+
+
+@pytest.fixture(scope="module")
+def rov_dvl_lock_loss(tmp_path_factory):
+    """fault-dvl-lock-loss-rov flown once for the tests below."""
+    return _fly("fault-dvl-lock-loss-rov", 80.0, tmp_path_factory.mktemp("rov"))
+
+
+def _v_ned(tr) -> tuple[float, float]:
+    c, s = math.cos(tr.yaw), math.sin(tr.yaw)
+    return c * tr.u - s * tr.v, s * tr.u + c * tr.v
+
+
+def test_dvl_lock_loss_is_rejected_never_fused_as_zero_velocity(rov_dvl_lock_loss):
+    """fault-dvl-lock-loss-rov: the BlueROV2's DVL reports no bottom lock (valid=False,
+    zeros) from 40 s to 70 s while the vehicle circles at 0.5 m/s. Every such report is
+    counted ``dvl:invalid``; the stream is reported stale and back; the current estimate
+    does not go to minus the vehicle's velocity over ground, which is where fusing the
+    zeros as a bottom-track velocity would take it (the truth current is zero here)."""
+    res, truth = rov_dvl_lock_loss
+    invalid = res.health.rejected.get("dvl:invalid", 0)
+    print("dvl:invalid", invalid)
+    assert invalid >= 0.95 * 150  # 30 s at 5 Hz; measured 150
+    during = [h for h in res.healths if 43.0 <= h.t < 69.0]
+    assert during and all(h.rates_hz.get("dvl:dvl", 0.0) == 0.0 for h in during)
+    evs = [(h.t, e) for h in res.healths for e in h.events]
+    assert any(40.0 < t < 48.0 and e.startswith("dvl:dvl: stale") for t, e in evs), evs
+    assert any(70.0 < t and e.startswith("dvl:dvl: samples again") for t, e in evs), evs
+    cur = _series(res, truth, "current")
+    to_minus_v, err = [], []
+    for t, v, tr in cur:
+        if 42.0 <= t < 70.0:
+            vn, ve = _v_ned(tr)
+            to_minus_v.append(math.hypot(v["north"] + vn, v["east"] + ve))
+            err.append(math.hypot(v["north"] - tr.current_north, v["east"] - tr.current_east))
+    speed = _median(math.hypot(tr.u, tr.v) for t, v, tr in cur if 40.0 <= t < 70.0)
+    print(f"current in the lock loss: median distance to -v {_median(to_minus_v):.3f} m/s, "
+          f"error median {_median(err):.3f} max {_max(err):.3f} m/s (speed {speed:.2f})")
+    assert speed > 0.3
+    assert _median(to_minus_v) > 0.25  # measured 0.48-0.58; fused zeros would give ~0
+    assert _max(err) < 0.5  # measured 0.35 (truth 0: the ROV current is not converged)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "eseso.py: the ESESO's velocity covariance stays ~0.01 m/s while the DVL is out, its "
+    "velocity drifts to 0.5 m/s error, then the INS (vog) and the returning DVL are gated "
+    "as outliers: no recovery after the lock returns (error 0.9 m/s 5-10 s after)"))
+def test_eseso_velocity_recovers_after_the_dvl_lock_returns(rov_dvl_lock_loss):
+    res, truth = rov_dvl_lock_loss
+    es = _series(res, truth, "eseso")
+    verr = [(t, math.hypot(v["u"] - tr.u, v["v"] - tr.v)) for t, v, tr in es if "u" in v]
+    before, after = _median(_in(verr, 30.0, 40.0)), _median(_in(verr, 75.0, 80.0))
+    print(f"eseso velocity error: before {before:.3f}, 5-10 s after the lock returns "
+          f"{after:.3f} m/s")
+    assert after < 0.1  # measured 0.03 before; 0.9 after (the bug)
+
+
+def test_compass_step_30_deg_for_5_s_is_followed_then_recovered_nis_reported(tmp_path):
+    """fault-compass-step: the compass reads 30 deg too much from 40 s to 45 s. A
+    heading-only filter cannot tell that from a turn (the outlier gate is 20 sigma =
+    34 deg at 0.03 rad noise): the AIE/KF follow it, the heading NIS shows it in health,
+    and within seconds of the step's end the heading is back within a few degrees."""
+    res, truth = _fly("fault-compass-step", 70.0, tmp_path)
+    for name in ("aie", "kf"):
+        he = _heading_errors_deg(_series(res, truth, name))
+        before = _median(_in(he, 25.0, 40.0))
+        in_step = _max(_in(he, 40.0, 45.5))
+        after = _max(_in(he, 48.0, 70.0))
+        print(f"{name} heading error: before {before:.2f}, max in the step {in_step:.1f}, "
+              f"max from 3 s after {after:.2f} deg")
+        assert in_step < 50.0  # measured 31-42 deg: follows the 30 deg step
+        assert after < 6.0  # measured 2.7 deg (aie)
+        assert before < 3.0
+    nis = {h.t: h.nis for h in res.healths}
+    keys = sorted({k for v in nis.values() for k in v if k.startswith("aie.") and "heading" in k})
+    print("aie heading nis keys", keys)
+    key = next(k for k in keys if k.endswith(".nis"))
+    quiet = _median(v.get(key, 0.0) for t, v in nis.items() if 25.0 <= t < 40.0)
+    peak = _max(v.get(key, 0.0) for t, v in nis.items() if 40.0 <= t < 47.0)
+    print(f"{key}: quiet median {quiet:.2f}, peak in the step {peak:.1f}")
+    assert peak > 10 * max(quiet, 0.1)  # measured
