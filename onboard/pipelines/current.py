@@ -314,7 +314,9 @@ class CurrentPipeline:
         self._hvec = (1.0, 0.0)
         self._identifying = False
         self._started = False
-        self._last_vg: tuple[float, np.ndarray, str] | None = None  # (t, body nu_g, kind)
+        # (t, body-frame over-ground velocity (the measurement itself without the flow
+        # observer), kind)
+        self._last_vg: tuple[float, np.ndarray, str] | None = None
         self._last_meas_t: float | None = None
         self._last_vg_std = 0.0
         self._svf = (StateVariableFilter(1 + len(self.model.terms["yaw"]), cfg.svf_cutoff_hz)
@@ -542,8 +544,8 @@ class CurrentPipeline:
         x_new = self.x + K @ y
         IKH = self._eye_n - K @ H
         P_new = IKH @ self.P @ IKH.T + (K * var) @ K.T
-        if not (np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))
-                and float(np.max(np.abs(x_new[:2 * nd]))) < 50.0):
+        if not (np.isfinite(x_new).all() and np.isfinite(P_new).all()
+                and float(np.abs(x_new[:2 * nd]).max()) < 50.0):
             self._reset("diverged")
             return
         self.x, self.P = x_new, P_new
@@ -738,7 +740,9 @@ class CurrentPipeline:
             self._last_meas_t = tm
             self._update(kind, tm, z, std, R)
             self._hgo_update(kind, z, std, dt_meas)
-            if kind == "earth":
+            if self.flow is None:  # the body-frame velocity is for the flow observer only
+                self._last_vg = (tm, z, kind)
+            elif kind == "earth":
                 zz = np.zeros(self.nd)
                 zz[: len(z)] = z
                 if len(z) < self.nd:  # no vertical: take the filter's own
