@@ -35,7 +35,7 @@ from onboard.messages import (
 )
 from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline
-from onboard.validate import check_values, sample_type
+from onboard.validate import checker_for, sample_type
 
 GRAVITY = 9.80665
 """Standard gravity, m/s^2 (used for pressure -> depth)."""
@@ -77,6 +77,11 @@ class Engine:
         self.t_first: float | None = None
         self.t_newest = -math.inf
         self._last_t: dict[tuple[str, str], float] = {}
+        self._kinds: dict[type, tuple[str, Callable[[Sample], str | None]]] = {}
+        """Per sample class: its tag and its value checker (onboard.validate)."""
+        self._std_names: dict[int, tuple[Pipeline, dict[str, str]]] = {}
+        """Per pipeline (by id, with the pipeline itself so that the id stays its own):
+        ``std_<q>`` column -> ``<q>``, from its columns."""
         self._pending: list[Sample] = []
         self._ticks = 0
         self.pipeline_errors: Counter[str] = Counter()
@@ -106,8 +111,12 @@ class Engine:
         ``now`` is the receive clock in live operation, used to reject stamps from the
         future; replay passes None.
         """
-        kind = sample_type(sample)
-        reason = check_values(sample)
+        cls = type(sample)
+        k = self._kinds.get(cls)
+        if k is None:
+            k = self._kinds[cls] = (sample_type(sample), checker_for(cls))
+        kind, check = k
+        reason = check(sample)
         if reason is not None:
             return self._reject(kind, reason)
         t = sample.t
@@ -119,7 +128,6 @@ class Engine:
             return self._reject(kind, "backwards")
         if t < self.t_newest - self.max_age:
             return self._reject(kind, "late")
-        cls = type(sample)
         if cls in _SPECIAL:
             if cls is Pressure:
                 sample = Depth(t=t, source=sample.source,
@@ -160,13 +168,27 @@ class Engine:
                 values = self._recover(i, p, err)
             if not values:
                 continue
-            std = {k[4:]: v for k, v in values.items() if k.startswith("std_")}
+            entry = self._std_names.get(id(p))
+            std_names = entry[1] if entry is not None else self._std_columns(p)
+            # the std_ entries in the order of values ({} for a pipeline without std_
+            # columns: values only holds its columns)
+            std = {std_names[k]: v for k, v in values.items() if k in std_names} \
+                if std_names else {}
             rec = EstimateRecord(vehicle=vehicle, pipeline=p.name, t=t,
                                  values=dict(values), std=std, t_sensor=t_sensor)
             self.latest[p.name] = rec
             records.append(rec)
         self._ticks += 1
         return records
+
+    def _std_columns(self, p: Pipeline) -> dict[str, str]:
+        """``std_<q>`` -> ``<q>`` for the columns of ``p`` (fixed at its construction),
+        cached for the pipelines in use (a restarted one gets a fresh entry)."""
+        if len(self._std_names) > 4 * len(self.pipelines):
+            self._std_names.clear()
+        names = {c: c[4:] for c in p.columns if c.startswith("std_")}
+        self._std_names[id(p)] = (p, names)
+        return names
 
     def _recover(self, i: int, p: Pipeline, err: Exception) -> None:
         """Count a pipeline's failure, report it, and restart it from its configuration
