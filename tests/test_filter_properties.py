@@ -309,17 +309,14 @@ SIM_NIS_CASES = [
     ("current", "rudder-boat", "effect-current", 300.0, {"velocity.nis": 2}),
     ("current", "torpedo-auv", "gavia-tidal", 300.0, {"velocity.nis": 3}),
     ("eseso", "bluerov2", "bluerov2-circle", 120.0,
-     {"thrust.nis": 3, "attitude.nis": 3, "dvl.nis": 3, "depth.nis": 1}),
-    pytest.param("eseso", "bluerov2", "bluerov2-circle", 120.0, {"vog.nis": 2},
-                 marks=pytest.mark.xfail(reason="finding 8: ESESO's velocity-over-ground NIS "
-                                         "averages 0.12 for dimension 2 (R ~17x too large "
-                                         "for the simulated INS)", strict=False),
-                 id="eseso-vog-bluerov2-circle"),
+     {"thrust.nis": 3, "attitude.nis": 3, "dvl.nis": 3, "depth.nis": 1, "vog.nis": 2}),
 ]
 """Measured mean NIS (seed 1, 2026-11-22 08:20 UTC, working tree of that time): kf surge
 0.49, heading 0.85; aie surge 0.76, heading 0.99; current on effect-current 0.29 (dim 2;
 1.62 an hour earlier), on gavia-tidal 3.1 (dim 3, median 0.11: heavy tails); eseso thrust
-0.51 (3), attitude 4.7 (3), dvl 4.0 (3), depth 1.09 (1), vog 0.12 (2)."""
+0.51 (3), attitude 4.7 (3), dvl 4.0 (3), depth 1.09 (1), vog 0.12 (2). ESESO after finding 8's
+fix (INS bias states, per-axis AHRS noise; 10:20 UTC): thrust 0.31, attitude 3.12, dvl 2.96,
+depth 1.10, vog 1.88."""
 
 
 def sim_nis(module: str, cfg_name: str, scenario: str, seconds: float, seed: int = 1
@@ -353,3 +350,56 @@ def test_nis_on_the_simulator_within_a_factor_of_ten(module, cfg_name, scenario,
     for ch, dim in dims.items():
         assert ch in means, f"{module}: no {ch} updates ({sorted(means)})"
         assert dim / 10 <= means[ch] <= dim * 10, (ch, means[ch], dim)
+
+
+def chi2_mean_band(n: int, dim: int, z: float = 1.959964) -> tuple[float, float]:
+    """Two-sided 95 % band of the mean of ``n`` independent chi-square(``dim``) NIS values:
+    ``n * mean`` is chi-square with ``n * dim`` degrees of freedom (Wilson-Hilferty
+    quantiles, exact to < 0.1 % at these sizes)."""
+    k = n * dim
+
+    def q(zz: float) -> float:
+        return k * (1.0 - 2.0 / (9.0 * k) + zz * math.sqrt(2.0 / (9.0 * k))) ** 3
+
+    return q(-z) / n, q(z) / n
+
+
+def eseso_nis_every_update(seed: int, seconds: float = 120.0) -> dict[str, list[float]]:
+    """Every NIS the ESESO computes on ``bluerov2-circle`` (gated updates included), per
+    channel."""
+    from sitl.runner import simulate
+
+    cfg, p = _pipeline("eseso", "bluerov2")
+    out: dict[str, list[float]] = {}
+    update = p._update
+
+    def spy(ch, y, H, Rm, gate=None):
+        S = H @ p.P @ H.T + Rm
+        out.setdefault(ch, []).append(float(y @ np.linalg.solve(0.5 * (S + S.T), y)))
+        return update(ch, y, H, Rm, gate)
+
+    p._update = spy
+    eng = Engine(cfg, pipelines=[p])
+    stream = (s for _, samples, _ in simulate("bluerov2-circle", seconds, seed=seed)
+              for s in samples)
+    run(eng, stream, lambda t, recs: None)
+    return out
+
+
+@pytest.mark.slow
+def test_eseso_sensor_nis_in_the_chi_square_band():
+    """Finding 8 and issue 9: the ESESO's sensor channels are consistent on the simulator.
+    Pooled over seeds 1-3 (120 s each, every update), the mean NIS of the INS velocity
+    over ground (2), the AHRS attitude (3) and the DVL (3) is inside the 95 % chi-square
+    band of its mean. Measured (2026-11-22): vog 1.957 in [1.935, 2.066], attitude 3.061
+    in [2.920, 3.081], dvl 2.948 in [2.888, 3.114]. Depth (1.055 against [0.954, 1.047])
+    and the thrust pseudo-measurement (0.32 for 3) are not asserted: docs/eseso-mpc.md,
+    "Consistency"."""
+    pooled: dict[str, list[float]] = {}
+    for seed in (1, 2, 3):
+        for ch, v in eseso_nis_every_update(seed).items():
+            pooled.setdefault(ch, []).extend(v)
+    for ch, dim in (("vog", 2), ("attitude", 3), ("dvl", 3)):
+        v = pooled[ch]
+        lo, hi = chi2_mean_band(len(v), dim)
+        assert lo <= float(np.mean(v)) <= hi, (ch, float(np.mean(v)), (lo, hi), len(v))
