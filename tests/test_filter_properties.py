@@ -315,7 +315,7 @@ SIM_NIS_CASES = [
 0.49, heading 0.85; aie surge 0.76, heading 0.99; current on effect-current 0.29 (dim 2;
 1.62 an hour earlier), on gavia-tidal 3.1 (dim 3, median 0.11: heavy tails); eseso thrust
 0.51 (3), attitude 4.7 (3), dvl 4.0 (3), depth 1.09 (1), vog 0.12 (2). ESESO after finding 8's
-fix (INS bias states, per-axis AHRS noise; 10:20 UTC): thrust 0.31, attitude 3.12, dvl 2.96,
+fix (INS bias states, per-axis AHRS noise; 09:40 UTC): thrust 0.31, attitude 3.12, dvl 2.96,
 depth 1.10, vog 1.88."""
 
 
