@@ -652,7 +652,10 @@ class CurrentPipeline:
 
     # ------------------------------------------------------------------ identification
     def _update_prior_mask(self) -> None:
-        """Lift the cross-coupling mask of DOFs whose coefficients have been learned."""
+        """Lift the cross-coupling mask of DOFs whose coefficients have been learned.
+
+        Their covariance block changes only while identifying (forgetting, gain) or on a
+        restored state, so the step calls this only after an identifying tick."""
         if not self.n_theta or not any(self._masked):
             return
         o = 2 * self.nd
@@ -724,8 +727,9 @@ class CurrentPipeline:
             a = min(1.0, dt / self.cfg.heading_memory_s)
             self._hvec = ((1 - a) * self._hvec[0] + a * math.cos(2.0 * self.yaw),
                           (1 - a) * self._hvec[1] + a * math.sin(2.0 * self.yaw))
+        if self._identifying:  # the coefficient covariance moves only while identifying
+            self._update_prior_mask()
         self._identifying = self._is_identifying(t)
-        self._update_prior_mask()
         if dt > 0:
             n_sub = max(1, math.ceil(dt / 0.2))
             for _ in range(n_sub):
@@ -845,6 +849,7 @@ class CurrentPipeline:
                     self.P[o:, :] = 0.0
                     self.P[:, o:] = 0.0
                     self.P[o:, o:] = cov
+                    self._update_prior_mask()
             if self.yaw_rls is not None and "yaw_rls" in state:
                 self.yaw_rls.set_state(state["yaw_rls"])
                 self.thetas[self.model.channels.index("yaw")] = self.yaw_rls.theta.copy()
