@@ -38,21 +38,36 @@ class EstimatesCsv:
         self.index = {c: i for i, c in enumerate(self.columns)}
         self.t0 = t0
         self.rows = 0
+        self._by_pipeline: dict[str, dict[str, int]] = {}
+        """Per pipeline: quantity -> column index (the quantities it has written)."""
         self._f = open(path, "w", encoding="utf-8", newline="\n")
         self._f.write(",".join(self.columns) + "\n")
 
+    def _column(self, pipeline: str, quantity: str) -> int | None:
+        """Index of ``<pipeline>.<quantity>``, None if that is not a column (cached)."""
+        i = self.index.get(pipeline + "." + quantity)
+        if i is not None:
+            self._by_pipeline.setdefault(pipeline, {})[quantity] = i
+        return i
+
     def write(self, t: float, records: Sequence[EstimateRecord]) -> None:
+        """One row at tick time ``t`` (s); values as :func:`_fmt` writes them."""
         if self.t0 is None:
             self.t0 = t
         row = [""] * len(self.columns)
         row[0] = f"{t - self.t0:.6f}"
-        index = self.index
+        by_pipeline = self._by_pipeline
         for rec in records:
-            prefix = rec.pipeline + "."
+            index = by_pipeline.get(rec.pipeline)
+            if index is None:
+                index = by_pipeline[rec.pipeline] = {}
             for k, v in rec.values.items():
-                i = index.get(prefix + k)
-                if i is not None:
-                    row[i] = _fmt(v)
+                i = index.get(k)
+                if i is None:
+                    i = self._column(rec.pipeline, k)
+                    if i is None:
+                        continue
+                row[i] = "" if v != v else f"{v:.10g}"   # _fmt, inline
         self._f.write(",".join(row) + "\n")
         self.rows += 1
 
