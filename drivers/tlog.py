@@ -38,10 +38,12 @@ from drivers.mavlink import (
     MAVLINK_IFLAG_SIGNED,
     SIGNATURE_LEN,
     DecodeContext,
+    Spec,
     _MAGIC_RE,
     _REV,
     _REV16_LO,
     _REV_BYTE,
+    _layout,
     select,
     type_name,
     wanted_types,
@@ -291,6 +293,12 @@ class TlogReader:
                 stats.by_type[type_name(k)] += c
 
 
+_PARAM_VALUE = "PARAM_VALUE"
+_GCS_MAV_TYPES = frozenset({6, 18, 26})
+"""HEARTBEAT MAV_TYPEs of ground stations, companion computers, gimbals: not the vehicle
+(as in :mod:`onboard.autodetect`)."""
+
+
 def scan_header(path: str | os.PathLike) -> tuple[list[VehicleInfo], list[Parameter]]:
     """Quick pass over a tlog decoding only HEARTBEAT and PARAM_VALUE.
 
@@ -298,15 +306,39 @@ def scan_header(path: str | os.PathLike) -> tuple[list[VehicleInfo], list[Parame
     MAV_TYPE, MAV_AUTOPILOT); ground stations excluded) and the parameters, the last value
     of each (source, name), in order of first appearance. Used to detect the vehicle class
     and the ``SERVOn_FUNCTION`` mapping. Raises :class:`UnreadableLog` like the reader.
+
+    The pass stops early once the parameter set is complete (every sender of PARAM_VALUE
+    has sent every index up to its ``param_count``) and a vehicle HEARTBEAT was seen:
+    the usual log, whose parameter download comes at its start, is not read to the end.
+    A parameter changed later in such a log keeps its downloaded value.
     """
     reader = TlogReader(path, types=(VehicleInfo, Parameter), verify="needed")
+    # Parameter samples carry no index: count PARAM_VALUE's param_count/param_index on
+    # the way, per sender, by wrapping the handler of this reader's own table.
+    msgid, _, idx = _layout(_PARAM_VALUE)
+    i_count, i_index = idx["param_count"], idx["param_index"]
+    missing: dict[tuple[int, int], set[int]] = {}   # (system, component) -> indices to go
+    inner = reader._specs[msgid].handler
+
+    def counting(v, t, sysid, compid, mid, v2, ctx):  # type: ignore[no-untyped-def]
+        todo = missing.get((sysid, compid))
+        if todo is None:
+            todo = missing[(sysid, compid)] = set(range(v[i_count]))
+        todo.discard(v[i_index])
+        return inner(v, t, sysid, compid, mid, v2, ctx)
+
+    reader._specs[msgid] = Spec(_PARAM_VALUE, counting, (Parameter,))
     vehicles: dict[tuple[int, int, int, int], VehicleInfo] = {}
     params: dict[tuple[str, str], Parameter] = {}
+    vehicle_seen = False
     for s in reader:
         if isinstance(s, VehicleInfo):
             vehicles.setdefault((s.system_id, s.component_id, s.mav_type, s.autopilot), s)
+            vehicle_seen = vehicle_seen or s.mav_type not in _GCS_MAV_TYPES
         else:
             params[(s.source, s.name)] = s  # type: ignore[union-attr]
+        if vehicle_seen and missing and not any(missing.values()):
+            break
     return list(vehicles.values()), list(params.values())
 
 
