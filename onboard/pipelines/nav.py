@@ -10,7 +10,7 @@ sensor has been silent for ``stale_s`` seconds is dropped rather than repeated.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from onboard.config import Config
 from onboard.messages import Attitude, Depth, GnssFix, Heading, Sample, VelocityOverGround
@@ -28,35 +28,62 @@ class NavTrack:
         self.frame: LocalFrame | None = None
         self._values: dict[str, tuple[float, float]] = {}  # quantity -> (t, value)
         self._heading_from_attitude_only = True
-
-    def _set(self, t: float, **values: float) -> None:
-        for k, v in values.items():
-            self._values[k] = (t, v)
+        self._handlers: dict[type, Callable[[Any], None] | None] = {}
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
+        """Take the newest measurements from ``samples``; return those at most
+        ``stale_s`` seconds older than the tick time ``t`` (s)."""
+        handlers = self._handlers
         for s in samples:
-            if isinstance(s, GnssFix):
-                if self.frame is None:
-                    self.frame = LocalFrame(s.lat_deg, s.lon_deg)
-                n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
-                self._set(s.t, north=n, east=e)
-                if s.sog_mps is not None:
-                    self._set(s.t, speed=s.sog_mps)
-                if s.cog_rad is not None:
-                    self._set(s.t, course=wrap_2pi(s.cog_rad))
-            elif isinstance(s, Heading):
-                self._heading_from_attitude_only = False
-                self._set(s.t, heading=wrap_2pi(s.heading_rad + (s.declination_rad or 0.0)))
-            elif isinstance(s, Attitude) and self._heading_from_attitude_only:
-                self._set(s.t, heading=wrap_2pi(s.yaw_rad))
-            elif isinstance(s, VelocityOverGround):
-                self._set(s.t, v_north=s.v_north_mps, v_east=s.v_east_mps)
-            elif isinstance(s, Depth):
-                self._set(s.t, depth=s.depth_m)
-        out = {k: v for k, (ts, v) in self._values.items() if t - ts <= self.stale_s}
+            cls = type(s)
+            h = handlers[cls] if cls in handlers else self._handler(cls)
+            if h is not None:
+                h(s)
+        stale = self.stale_s
+        out = {k: v for k, (ts, v) in self._values.items() if t - ts <= stale}
         if "speed" not in out and "v_north" in out:
             out["speed"] = math.hypot(out["v_north"], out["v_east"])
         return out
+
+    def _handler(self, cls: type) -> Callable[[Any], None] | None:
+        """The intake method for a sample class (None: not used), cached per class;
+        subclasses get their base's handler."""
+        h = None
+        for base, fn in ((GnssFix, self._on_fix), (Heading, self._on_heading),
+                         (Attitude, self._on_attitude), (VelocityOverGround, self._on_vog),
+                         (Depth, self._on_depth)):
+            if issubclass(cls, base):
+                h = fn
+                break
+        self._handlers[cls] = h
+        return h
+
+    def _on_fix(self, s: GnssFix) -> None:
+        if self.frame is None:
+            self.frame = LocalFrame(s.lat_deg, s.lon_deg)
+        n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
+        values, t = self._values, s.t
+        values["north"] = (t, n)
+        values["east"] = (t, e)
+        if s.sog_mps is not None:
+            values["speed"] = (t, s.sog_mps)
+        if s.cog_rad is not None:
+            values["course"] = (t, wrap_2pi(s.cog_rad))
+
+    def _on_heading(self, s: Heading) -> None:
+        self._heading_from_attitude_only = False
+        self._values["heading"] = (s.t, wrap_2pi(s.heading_rad + (s.declination_rad or 0.0)))
+
+    def _on_attitude(self, s: Attitude) -> None:
+        if self._heading_from_attitude_only:
+            self._values["heading"] = (s.t, wrap_2pi(s.yaw_rad))
+
+    def _on_vog(self, s: VelocityOverGround) -> None:
+        self._values["v_north"] = (s.t, s.v_north_mps)
+        self._values["v_east"] = (s.t, s.v_east_mps)
+
+    def _on_depth(self, s: Depth) -> None:
+        self._values["depth"] = (s.t, s.depth_m)
 
     def health(self) -> Mapping[str, float]:
         return {}
