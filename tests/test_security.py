@@ -416,6 +416,77 @@ def test_a_wrong_password_or_no_credentials_cannot_open_a_session(acl_router, tm
     pub.close()
 
 
+def _test_certificates(d: Path) -> dict[str, Path]:
+    """A throw-away CA and a router certificate for localhost/127.0.0.1, made now with the
+    openssl command (TEST ONLY: the keys live in the test's temporary directory)."""
+    exe = shutil.which("openssl")
+    if exe is None:
+        pytest.skip("openssl is not installed: cannot make test certificates")
+    ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
+    (d / "ext.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n"
+                               "basicConstraints=CA:FALSE\nkeyUsage=digitalSignature\n"
+                               "extendedKeyUsage=serverAuth\n")
+    for cmd in (
+        ["req", "-x509", *ec, "-keyout", "ca.key", "-out", "ca.pem", "-days", "1",
+         "-subj", "/CN=onboard-test-ca", "-addext", "basicConstraints=critical,CA:TRUE",
+         "-addext", "keyUsage=critical,keyCertSign,cRLSign"],
+        ["req", *ec, "-keyout", "router.key", "-out", "router.csr", "-subj", "/CN=localhost"],
+        ["x509", "-req", "-in", "router.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+         "-CAcreateserial", "-out", "router.pem", "-days", "1", "-extfile", "ext.cnf"],
+    ):
+        subprocess.run([exe, *cmd], cwd=d, check=True, capture_output=True, timeout=30)
+    return {k: d / f"{k.replace('_', '.')}" for k in ("ca_pem", "router_key", "router_pem")}
+
+
+def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_connect(tmp_path):
+    """The example configs as shipped, only the certificate paths replaced: the router
+    listens on tls/, the vehicle's ZenohPublisher and the shore connect with the CA."""
+    zenoh = pytest.importorskip("zenoh")
+    from onboard.config import ZenohOut
+    from onboard.messages import EstimateRecord
+    from onboard.publishers.zenoh_pub import ZenohPublisher, session_config
+    from onboard.service_bench import free_tcp_port
+
+    certs = _test_certificates(tmp_path)
+    ep = f"tls/localhost:{free_tcp_port()}"
+    conf = session_config("router", listen=[ep], config_file=str(ZENOH_DIR / "router-acl.json5"))
+    conf.insert_json5("transport/auth/usrpwd/dictionary_file",
+                      json.dumps(str(ZENOH_DIR / "credentials.example.txt")))
+    conf.insert_json5("transport/link/tls/listen_private_key", json.dumps(str(certs["router_key"])))
+    conf.insert_json5("transport/link/tls/listen_certificate", json.dumps(str(certs["router_pem"])))
+    router = zenoh.open(conf)
+
+    def local(name: str, ca: Path | None) -> str:
+        text = (ZENOH_DIR / name).read_text()
+        assert '"/etc/onboard/zenoh-tls/ca.pem"' in text
+        out = tmp_path / name
+        out.write_text(text.replace('"/etc/onboard/zenoh-tls/ca.pem"',
+                                    json.dumps(str(ca)) if ca else "null"))
+        return str(out)
+
+    shore = None
+    pub = ZenohPublisher(ZenohOut(mode="client", connect=[ep],
+                                  config_file=local("vehicle-boat1.json5", certs["ca_pem"])), "boat1")
+    try:
+        shore = zenoh.open(session_config("client", connect=[ep],
+                                          config_file=local("shore.json5", certs["ca_pem"])))
+        got: list[str] = []
+        shore.declare_subscriber("onboard/**", lambda s: got.append(str(s.key_expr)))
+        pub.start()
+        rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.2})
+        assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1])
+        untrusting = ZenohPublisher(ZenohOut(mode="client", connect=[ep],
+                                             config_file=local("vehicle-boat1.json5", None)), "boat1")
+        with pytest.raises(Exception, match="(?i)unable to connect"):
+            untrusting.start()
+        untrusting.close()
+    finally:
+        pub.close()
+        if shore is not None:
+            shore.close()
+        router.close()
+
+
 # --------------------------------------------------------------------------- systemd
 
 UNIT = REPO / "systemd" / "onboard.service"
