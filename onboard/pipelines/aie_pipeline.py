@@ -591,27 +591,36 @@ class SurgeHeadingPipeline:
                 out["east"] = self._e + ds * math.sin(self._course)
                 self._extra_outputs(out)
             return out
-        # the heading and the yaw rate predicted to t (as _heading_at, one prediction)
+        # The heading and yaw rate (as _heading_at: one prediction for both), then the
+        # speed and position, predicted from the last steps to t with the newest command.
+        # Inline min/max and cache look-ups: this runs every tick.
+        gap = self.cfg.max_gap_s
+        cmds = self._cmds
+        last = cmds[-1] if cmds else None
         psi = self._psi
-        if yaw.kf.initialized:
-            tau = min(max(t - self._t_h, 0.0), self.cfg.max_gap_s)
-            r = yaw.kf.v
+        ykf = yaw.kf
+        if ykf.initialized:
+            tau = t - self._t_h
+            tau = 0.0 if tau < 0.0 else gap if tau > gap else tau
+            r = ykf.v
             if tau > 1e-6:
-                dpsi, r = yaw.kf.predict_ahead(
+                dpsi, r = ykf.predict_ahead(
                     self._disc(yaw.damping(yaw.last_command), tau),
-                    yaw.input_ahead(self._latest_command(2)))
+                    yaw.input_ahead(last[2] if last is not None else None))
                 psi = psi + dpsi
             out["heading"] = wrap_2pi(psi)
             out["yaw_rate"] = r
         else:
             out["heading"] = wrap_2pi(psi)
-        if surge.kf.initialized and self._t_s is not None:
-            tau = min(max(t - self._t_s, 0.0), self.cfg.max_gap_s)
-            ds, v = surge.kf.v * tau, surge.kf.v
+        skf = surge.kf
+        if skf.initialized and self._t_s is not None:
+            tau = t - self._t_s
+            tau = 0.0 if tau < 0.0 else gap if tau > gap else tau
+            ds, v = skf.v * tau, skf.v
             if tau > 1e-6:
-                ds, v = surge.kf.predict_ahead(
+                ds, v = skf.predict_ahead(
                     self._disc(surge.damping(surge.last_command), tau),
-                    surge.input_ahead(self._latest_command(1)))
+                    surge.input_ahead(last[1] if last is not None else None))
             out["speed"] = v
             psi_s = self._psi_s
             if psi_s is None:   # changes only when a window closes or a command arrives
