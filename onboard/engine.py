@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from operator import attrgetter
 from typing import Callable, Iterable, Sequence
 
 from onboard.config import Config
@@ -248,8 +249,8 @@ class Engine:
                 p.set_state(state[p.name])
 
 
-def _sample_time(s: Sample) -> float:
-    return s.t
+_sample_time: Callable[[Sample], float] = attrgetter("t")
+"""The sort key of a tick's batch: the sample time (s)."""
 
 
 def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
