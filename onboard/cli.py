@@ -28,6 +28,8 @@ def _add_zenoh_flags(p: argparse.ArgumentParser) -> None:
                    help="Zenoh endpoint to listen on (repeatable)")
     p.add_argument("--mode", choices=("peer", "client"), default=None,
                    help="Zenoh session mode")
+    p.add_argument("--zenoh-config", default="", metavar="FILE",
+                   help="Zenoh JSON5 config: TLS, user/password (config/zenoh/shore.json5)")
 
 
 def build_parser() -> argparse.ArgumentParser:

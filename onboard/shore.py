@@ -23,6 +23,7 @@ import sys
 import threading
 import time
 from collections import Counter, deque
+from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -160,15 +161,20 @@ class ShoreView:
         return "\n".join(out) if out else "no vehicle seen yet"
 
 
-def open_session(connect: list[str] | None, listen: list[str] | None, mode: str | None) -> Any:
-    """A shore Zenoh session (client by default, multicast scouting off)."""
+def open_session(connect: list[str] | None, listen: list[str] | None, mode: str | None,
+                 config_file: str = "") -> Any:
+    """A shore Zenoh session (client by default, multicast scouting off); ``config_file``
+    (JSON5) carries TLS and credentials for a router with access control
+    (docs/security.md)."""
     import zenoh
 
     from onboard.publishers.zenoh_pub import session_config
 
     m = mode or "client"
+    if config_file and not Path(config_file).is_file():
+        raise UsageError(f"--zenoh-config {config_file}: no such file")
     try:
-        return zenoh.open(session_config(m, connect or [DEFAULT_CONNECT], listen or []))
+        return zenoh.open(session_config(m, connect or [DEFAULT_CONNECT], listen or [], config_file))
     except Exception as err:  # noqa: BLE001 - zenoh.ZError
         raise UsageError(f"cannot reach Zenoh at {', '.join(connect or [DEFAULT_CONNECT])}: "
                          f"{str(err).split(' at ')[0]}") from None
@@ -186,11 +192,13 @@ def snapshot(session: Any, view: ShoreView, vehicle: str = "*", timeout_s: float
 
 
 def main(args: argparse.Namespace) -> int:
-    """``onboard shore [--connect E] [--listen E] [--mode M] [--vehicle ID] [--once]``."""
+    """``onboard shore [--connect E] [--listen E] [--mode M] [--zenoh-config FILE]
+    [--vehicle ID] [--once]``."""
     vehicle = args.vehicle or "*"
     if "/" in vehicle:
         raise UsageError(f"--vehicle {vehicle!r}: a vehicle id has no '/'")
-    session = open_session(args.connect, args.listen, args.mode)
+    session = open_session(args.connect, args.listen, args.mode,
+                           getattr(args, "zenoh_config", "") or "")
     view = ShoreView()
     sub = None
     token_sub = None

@@ -363,8 +363,9 @@ def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receiv
     try:
         rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.2})
         assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1])
-        replies = [r.ok for r in shore.get("onboard/boat1/**", timeout=2.0) if r.ok is not None]
-        assert any(str(r.key_expr) == "onboard/boat1/est/kf" for r in replies)
+        for query in ("onboard/boat1/**", "onboard/*/**", "onboard/**"):  # shore may ask wide
+            replies = [r.ok for r in shore.get(query, timeout=2.0) if r.ok is not None]
+            assert any(str(r.key_expr) == "onboard/boat1/est/kf" for r in replies), query
         alive = [str(r.ok.key_expr) for r in shore.liveliness().get("onboard/**", timeout=2.0)
                  if r.ok is not None]
         assert alive == ["onboard/boat1/alive"]
@@ -394,10 +395,51 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
         boat1.put("elsewhere/anything", b"x")  # outside onboard/**: denied too
         time.sleep(0.2)
         assert all(k.startswith("onboard/") for k, _ in got)
+        # nor can a vehicle read another one: its subscription and queries are not let in
+        spied: list[str] = []
+        spy = boat1.declare_subscriber("onboard/boat2/**", lambda s: spied.append(str(s.key_expr)))
+        n = len(got)
+        assert _wait(lambda: (boat2.put("onboard/boat2/est/kf", b"again"), len(got) > n)[1])
+        time.sleep(0.3)
+        assert spied == []
+        boat2.declare_queryable("onboard/boat2/**", lambda q: q.reply("onboard/boat2/est/kf", b"x"))
+        assert _wait(lambda: bool([r for r in shore.get("onboard/boat2/**", timeout=1.0) if r.ok]))
+        assert [r for r in boat1.get("onboard/boat2/**", timeout=1.0) if r.ok is not None] == []
+        spy.undeclare()
     finally:
         sub.undeclare()
         for s in (boat1, boat2, shore):
             s.close()
+
+
+def test_onboard_shore_reads_through_the_access_controlled_router_with_its_config(acl_router, capsys):
+    import argparse
+
+    from onboard import shore
+    from onboard.config import ZenohOut
+    from onboard.messages import EstimateRecord
+    from onboard.publishers.zenoh_pub import ZenohPublisher
+
+    pub = ZenohPublisher(ZenohOut(mode="client", connect=[acl_router],
+                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5")), "boat1")
+    pub.start()
+    try:
+        pub.publish_estimates([EstimateRecord(vehicle="boat1", pipeline="aie", t=5.0,
+                                              values={"heading": 1.5708, "speed": 1.25})])
+        args = argparse.Namespace(connect=[acl_router], listen=None, mode=None, vehicle="*",
+                                  once=True, zenoh_config=str(ZENOH_DIR / "shore.json5"))
+        rc = shore.main(args)
+        out = capsys.readouterr().out
+        no_creds = argparse.Namespace(connect=[acl_router], listen=None, mode=None,
+                                      vehicle="*", once=True, zenoh_config="")
+        from onboard.errors import UsageError
+
+        with pytest.raises(UsageError, match="cannot reach Zenoh"):
+            shore.main(no_creds)
+    finally:
+        pub.close()
+    assert rc == 0, out
+    assert "== boat1 (alive)" in out and "speed=+1.25" in out
 
 
 @pytest.mark.parametrize("user, password", [("boat1", "wrong-password"), ("intruder", "x"),
