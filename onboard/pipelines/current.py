@@ -292,6 +292,7 @@ class CurrentPipeline:
         self._blk_S = np.zeros((nd, nd))
         self._blk_n = 0
         self._eye_n = np.eye(2 * nd + self.n_theta)
+        self._is_theta = np.arange(2 * nd + self.n_theta) >= 2 * nd
         # measurement matrices without the rotation, per (kind, dimension): earth
         # z = R nu_r + V_c, bottom track z = nu_r + R^T V_c, water track z = nu_r
         self._H0: dict[tuple[str, int], np.ndarray] = {}
@@ -504,15 +505,15 @@ class CurrentPipeline:
         diag[:o * (n + 1):n + 1] += q
         if nt and self._identifying:
             # variable-rate forgetting on the coefficient block, bounded by its prior
-            # trace: the block by 1/lam, its cross-covariances by 1/sqrt(lam)
-            tr = float(diag[o * (n + 1)::n + 1].sum())
+            # trace: P <- D P D with D = diag(1 (nu_r, V_c), 1/sqrt(lam) (theta)), i.e. the
+            # block by 1/lam and its cross-covariances by 1/sqrt(lam)
+            tr = sum(P.diagonal()[o:].tolist())
             lam = 1.0 - (1.0 - cfg.forgetting) * max(0.0, 1.0 - tr / self._tr_theta_max)
             lam = lam ** (dt / 0.1)
             if lam < 1.0:
-                d = 1.0 / math.sqrt(lam)
-                P[o:, o:] *= d * d
-                P[:o, o:] *= d
-                P[o:, :o] *= d
+                d = np.where(self._is_theta, 1.0 / math.sqrt(lam), 1.0)
+                P *= d
+                P *= d[:, None]
         self.P = P
 
     def _update(self, kind: str, t: float, z: np.ndarray, std: float, R: np.ndarray) -> None:
@@ -544,8 +545,10 @@ class CurrentPipeline:
         x_new = self.x + K @ y
         IKH = self._eye_n - K @ H
         P_new = IKH @ self.P @ IKH.T + (K * var) @ K.T
-        if not (np.isfinite(x_new).all() and np.isfinite(P_new).all()
-                and float(np.abs(x_new[:2 * nd]).max()) < 50.0):
+        # a NaN or inf anywhere makes the sums non-finite (a sum overflowing from finite
+        # entries would need |P| ~ 1e308: a divergence too)
+        if not (math.isfinite(float(x_new.sum()) + float(P_new.sum()))
+                and max(map(abs, x_new[:2 * nd].tolist())) < 50.0):
             self._reset("diverged")
             return
         self.x, self.P = x_new, P_new
