@@ -40,9 +40,6 @@ from typing import TYPE_CHECKING, Callable, Iterable
 from pymavlink.dialects.v20 import ardupilotmega as _dialect
 
 from drivers.base import ReadStats
-
-if TYPE_CHECKING:
-    from drivers.mavlink_signing import SignatureVerifier
 from onboard.messages import (
     ActuatorOutputs,
     Altitude,
@@ -59,6 +56,9 @@ from onboard.messages import (
     VehicleInfo,
     VelocityOverGround,
 )
+
+if TYPE_CHECKING:
+    from drivers.mavlink_signing import SignatureVerifier
 
 MAGIC_V1 = 0xFE
 """Start byte of a MAVLink 1 frame (6-byte header, 2-byte CRC)."""
