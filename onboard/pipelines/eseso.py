@@ -15,8 +15,14 @@ An error-state Kalman filter on ``R^6 x SO(3) x R^12`` (paper eq. 5). Nominal st
             starts from [0, 0, -9.81])
     xi  (3) lumped disturbance force, body FRD, N
 
-Error state (21): ``dx = [dp, dv, dtheta, db_a, db_g, dg, dxi]`` with the right (local)
-perturbation ``R_true = R Exp(dtheta)`` (paper eqs. 6, 9).
+Error state (21 + 2): ``dx = [dp, dv, dtheta, db_a, db_g, dg, dxi, db_ins]`` with the right
+(local) perturbation ``R_true = R Exp(dtheta)`` (paper eqs. 6, 9). ``b_ins`` (north, east,
+m/s) is the bias of the INS velocity over ground, not in the paper: an aided INS's velocity
+error is correlated over minutes (a first-order Gauss-Markov process, ``ins_bias_std_mps``,
+``ins_bias_tau_s``), so as white measurement noise it is wrong whatever R is: too small
+and the filter follows the INS bias, too large (the GNSS velocity R of 0.1 m/s it had
+before, 17x the variance) and the innovations are far smaller than S (NIS 0.1 for 2;
+docs/fuzzing.md finding 8).
 
 * **Propagation** at every IMU sample (paper eqs. 10-13; Sola, "Quaternion kinematics for
   the error-state Kalman filter", 2017, §5), over the real interval since the previous
@@ -33,11 +39,13 @@ perturbation ``R_true = R Exp(dtheta)`` (paper eqs. 6, 9).
   and a chi-square gate (99.9 %; after ``max_consecutive_rejects`` gated samples in a row
   the channel is fused again, down-weighted, so a sensor cannot be locked out for good):
   GNSS horizontal position and velocity (only at the surface: a fix while the filter is
-  deeper than ``gnss_max_depth_m`` is rejected), velocity over ground (INS), depth, DVL
-  bottom-track velocity (body frame, its figure of merit as sigma), attitude
-  (``Log(R^T R_meas)``), heading (only without an attitude stream, which carries the same
-  yaw), and the thrust model ``h_tau`` below at every IMU sample while a thruster command
-  is fresh.
+  deeper than ``gnss_max_depth_m`` is rejected), velocity over ground (INS: ``v + b_ins``,
+  R its white noise ``ins_velocity_std_mps``), depth, DVL bottom-track velocity (body
+  frame, its figure of merit as sigma), attitude (``Log(R^T R_meas)``, R the roll, pitch
+  and yaw noise turned into body axes: roll/pitch ``attitude_std_rad``, yaw the compass
+  heading's, which an AHRS reports as its yaw), heading (only without an attitude stream,
+  which carries the same yaw), and the thrust model ``h_tau`` below at every IMU sample
+  while a thruster command is fresh.
 * **Injection and reset** (paper eqs. 16d, 17, 18): every component of ``dx`` is injected
   (``v`` once, biases and gravity too, unlike the public code), then ``P <- G P G^T``
   with the reset Jacobian ``G = blockdiag(I, I, I - [dtheta/2]x, I, I, I, I)``
