@@ -56,8 +56,9 @@ configured in ``[pipelines.current.model.<dof>]`` (tight prior, refined unless
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Callable, Literal, Mapping, Sequence
+from typing import Any, Literal
 
 import msgspec
 import numpy as np
@@ -296,12 +297,12 @@ class CurrentPipeline:
         # measurement matrices without the rotation, per (kind, dimension): earth
         # z = R nu_r + V_c, bottom track z = nu_r + R^T V_c, water track z = nu_r
         self._H0: dict[tuple[str, int], np.ndarray] = {}
-        for kind in ("earth", "bottom", "water"):
+        for meas_kind in ("earth", "bottom", "water"):
             for m in {2, nd}:
                 H = np.zeros((m, 2 * nd + self.n_theta))
-                H[:, :nd] = 0.0 if kind == "earth" else np.eye(nd)[:m]
-                H[:, nd:2 * nd] = np.eye(nd)[:m] if kind == "earth" else 0.0
-                self._H0[(kind, m)] = H
+                H[:, :nd] = 0.0 if meas_kind == "earth" else np.eye(nd)[:m]
+                H[:, nd:2 * nd] = np.eye(nd)[:m] if meas_kind == "earth" else 0.0
+                self._H0[(meas_kind, m)] = H
         self._i_yaw = self.model.channels.index("yaw") if "yaw" in self.model.channels else -1
         # vehicle state from samples
         self.inp = ModelInputs()

@@ -39,8 +39,9 @@ is written in the symmetric form ``P - P phi phi^T P / S``), so no symmetrizatio
 
 from __future__ import annotations
 
-from functools import lru_cache
-from typing import Any, Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from functools import cache
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +59,7 @@ def _packed_index(n: int) -> dict[tuple[int, int], int]:
     return idx
 
 
-@lru_cache(maxsize=None)
+@cache
 def rls_kernel(n: int) -> RlsKernel:
     """The update of :class:`RecursiveLeastSquares` for ``n`` parameters, as straight-line
     float code (the module docstring's equations, then EFRA):
