@@ -293,7 +293,6 @@ class CurrentPipeline:
         self._blk_S = np.zeros((nd, nd))
         self._blk_n = 0
         self._eye_n = np.eye(2 * nd + self.n_theta)
-        self._is_theta = np.arange(2 * nd + self.n_theta) >= 2 * nd
         # measurement matrices without the rotation, per (kind, dimension): earth
         # z = R nu_r + V_c, bottom track z = nu_r + R^T V_c, water track z = nu_r
         self._H0: dict[tuple[str, int], np.ndarray] = {}
@@ -459,9 +458,11 @@ class CurrentPipeline:
             o += k
 
     def _predict(self, dt: float) -> None:
-        """x <- x + dt f(x); P <- F P F^T + Q, then coefficient forgetting (rls.py rule).
+        """x <- x + dt f(x); P <- D (F P F^T + Q) D with the coefficient forgetting
+        ``D = diag(1 (nu_r, V_c), 1/sqrt(lam) (theta))`` (rls.py rule).
 
-        The regressors, ``f`` and its Jacobian are plain floats
+        ``Q`` has no coefficient part, so this is ``(D F) P (D F)^T + Q``: the forgetting
+        rides on the transition. The regressors, ``f`` and its Jacobian are plain floats
         (:meth:`RegressionModel.linearize`); numpy does only the covariance product.
         """
         nd, nt = self.nd, self.n_theta
@@ -489,11 +490,20 @@ class CurrentPipeline:
             rows.append(row)
         F = self._eye_n.copy()
         F[:nd] = rows
+        cfg = self.cfg
+        if nt and self._identifying:
+            # variable-rate forgetting on the coefficient block, bounded by its prior
+            # trace (F leaves that block of P as it is): the block by 1/lam, its
+            # cross-covariances by 1/sqrt(lam)
+            tr = sum(self.P.diagonal()[o:].tolist())
+            lam = 1.0 - (1.0 - cfg.forgetting) * max(0.0, 1.0 - tr / self._tr_theta_max)
+            lam = lam ** (dt / 0.1)
+            if lam < 1.0:
+                F.ravel()[o * (n + 1)::n + 1] = 1.0 / math.sqrt(lam)
         nu = [a + dt * b for a, b in zip(nu, f)]
         self.x[:nd] = nu
         # model error grows in manoeuvres (couplings the regression gets only roughly):
         # a turn-rate term, so that the sigma widens at heading changes (the paper's burrs)
-        cfg = self.cfg
         turn = cfg.turn_accel_gain * abs(self.inp.r * nu[0])
         q_nu = (cfg.accel_std ** 2 + turn * turn) * cfg.model_error_time_s * self.q_scale
         q = [q_nu * dt] * nd
@@ -502,19 +512,7 @@ class CurrentPipeline:
                 q[i] = max(q[i], cfg.prior_accel_std ** 2 * cfg.model_error_time_s * dt)
         q += [cfg.current_walk ** 2 * dt * self.q_scale] * nd
         P = F @ self.P @ F.T
-        diag = P.ravel()  # a view: the product is C-contiguous
-        diag[:o * (n + 1):n + 1] += q
-        if nt and self._identifying:
-            # variable-rate forgetting on the coefficient block, bounded by its prior
-            # trace: P <- D P D with D = diag(1 (nu_r, V_c), 1/sqrt(lam) (theta)), i.e. the
-            # block by 1/lam and its cross-covariances by 1/sqrt(lam)
-            tr = sum(P.diagonal()[o:].tolist())
-            lam = 1.0 - (1.0 - cfg.forgetting) * max(0.0, 1.0 - tr / self._tr_theta_max)
-            lam = lam ** (dt / 0.1)
-            if lam < 1.0:
-                d = np.where(self._is_theta, 1.0 / math.sqrt(lam), 1.0)
-                P *= d
-                P *= d[:, None]
+        P.ravel()[:o * (n + 1):n + 1] += q  # a view: the product is C-contiguous
         self.P = P
 
     def _update(self, kind: str, t: float, z: np.ndarray, std: float, R: np.ndarray) -> None:
