@@ -155,10 +155,10 @@ def test_zenoh_router_restarted_the_service_keeps_ticking_and_delivers_again(tmp
                 k += 1
                 await asyncio.sleep(max(0.0, t0 + k / 50.0 - time.monotonic()))
 
-        await feed(time.monotonic() + 2.0)
+        await feed(time.monotonic() + 1.5)
         ticks["closed"], marks["closed"] = svc.stats.ticks, time.monotonic()
         router.close()
-        await feed(time.monotonic() + 3.0)
+        await feed(time.monotonic() + 2.5)
         ticks["reopened"], marks["reopened"] = svc.stats.ticks, time.monotonic()
         router = open_router(endpoint)
         deadline = time.monotonic() + 30.0  # a hung test, not a performance bound
@@ -237,7 +237,7 @@ def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_p
     """fault-gnss-outage: no fix from 30 s to 150 s. The AIE and KF keep estimating from
     the model and the compass; health shows the GNSS stream at 0 Hz and a stale event;
     after the return the position comes back toward the truth."""
-    res, truth = _fly("fault-gnss-outage", 170.0, tmp_path, speed=15.0)
+    res, truth = _fly("fault-gnss-outage", 170.0, tmp_path, speed=20.0)
     aie = _series(res, truth, "aie")
     # estimates kept coming through the outage, one per tick
     n_out = sum(1 for t, _, _ in aie if 32.0 <= t < 148.0)
@@ -249,7 +249,8 @@ def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_p
     evs = [(h.t, e) for h in res.healths for e in h.events]
     assert any(30.0 < t < 36.0 and e.startswith("gnss:gps: stale") for t, e in evs), evs
     assert any(t > 150.0 and e.startswith("gnss:gps: samples again") for t, e in evs), evs
-    assert all(h.rates_hz.get("heading:gps", 0.0) > 0 for h in during)  # same pty, alive
+    alive = sum(h.rates_hz.get("heading:gps", 0.0) > 0 for h in during) / len(during)
+    assert alive > 0.9  # the compass on the same pty carries on (measured 1.00)
     # position: drifts during the outage, bounded; recovers after
     pe = _position_errors(aie)
     before, late_out = _max(_in(pe, 20.0, 30.0)), _max(_in(pe, 130.0, 150.0))
@@ -266,12 +267,12 @@ def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_p
 @pytest.mark.xfail(strict=True, reason="aie/kf publish no uncertainty (no std_north/std_east): "
                    "growing uncertainty during a GNSS outage is not reported")
 def test_gnss_outage_uncertainty_grows(tmp_path):
-    res, _ = _fly("fault-gnss-outage", 60.0, tmp_path, speed=15.0)
+    res, _ = _fly("fault-gnss-outage", 42.0, tmp_path, speed=20.0)
     aie = [r for r in res.estimates if r.pipeline == "aie"]
     early = [r.std.get("north") for r in aie if 20.0 <= r.t < 30.0]
-    late = [r.std.get("north") for r in aie if 50.0 <= r.t < 60.0]
+    late = [r.std.get("north") for r in aie if 37.0 <= r.t < 42.0]
     assert early and late and None not in early + late
-    assert _median(late) > 2 * _median(early)
+    assert _median(late) > 1.5 * _median(early)  # 7-12 s without a fix
 
 
 def test_gnss_under_water_is_rejected_and_counted_estimates_continue(tmp_path):
@@ -315,9 +316,8 @@ def _v_ned(tr) -> tuple[float, float]:
 def test_dvl_lock_loss_is_rejected_never_fused_as_zero_velocity(rov_dvl_lock_loss):
     """fault-dvl-lock-loss-rov: the BlueROV2's DVL reports no bottom lock (valid=False,
     zeros) from 40 s to 70 s while the vehicle circles at 0.5 m/s. Every such report is
-    counted ``dvl:invalid``; the stream is reported stale and back; the current estimate
-    does not go to minus the vehicle's velocity over ground, which is where fusing the
-    zeros as a bottom-track velocity would take it (the truth current is zero here)."""
+    counted ``dvl:invalid`` and none reaches a pipeline (the stream's accepted rate is 0,
+    reported stale and back); the current estimate stays near the truth."""
     res, truth = rov_dvl_lock_loss
     invalid = res.health.rejected.get("dvl:invalid", 0)
     print("dvl:invalid", invalid)
@@ -327,33 +327,34 @@ def test_dvl_lock_loss_is_rejected_never_fused_as_zero_velocity(rov_dvl_lock_los
     evs = [(h.t, e) for h in res.healths for e in h.events]
     assert any(40.0 < t < 48.0 and e.startswith("dvl:dvl: stale") for t, e in evs), evs
     assert any(70.0 < t and e.startswith("dvl:dvl: samples again") for t, e in evs), evs
+    # the engine handed no DVL velocity to any pipeline during the loss (the rates above);
+    # the current stays near the truth (zero here). A negative control (the parser turning
+    # lock-loss reports into valid zeros) fails the count and rate checks above; the
+    # current's error alone would not tell (0.38-0.86 m/s max with the zeros passed on,
+    # 0.08-0.40 without)
     cur = _series(res, truth, "current")
-    to_minus_v, err = [], []
-    for t, v, tr in cur:
-        if 42.0 <= t < 70.0:
-            vn, ve = _v_ned(tr)
-            to_minus_v.append(math.hypot(v["north"] + vn, v["east"] + ve))
-            err.append(math.hypot(v["north"] - tr.current_north, v["east"] - tr.current_east))
+    err = [math.hypot(v["north"] - tr.current_north, v["east"] - tr.current_east)
+           for t, v, tr in cur if 42.0 <= t < 75.0]
     speed = _median(math.hypot(tr.u, tr.v) for t, v, tr in cur if 40.0 <= t < 70.0)
-    print(f"current in the lock loss: median distance to -v {_median(to_minus_v):.3f} m/s, "
-          f"error median {_median(err):.3f} max {_max(err):.3f} m/s (speed {speed:.2f})")
+    print(f"current error in the lock loss: median {_median(err):.3f}, max {_max(err):.3f} m/s "
+          f"(vehicle speed {speed:.2f} m/s)")
     assert speed > 0.3
-    assert _median(to_minus_v) > 0.25  # measured 0.48-0.58; fused zeros would give ~0
-    assert _max(err) < 0.5  # measured 0.35 (truth 0: the ROV current is not converged)
+    assert _max(err) < 0.6  # measured 0.08-0.40 (the ROV's current is not converged yet)
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "eseso.py: the ESESO's velocity covariance stays ~0.01 m/s while the DVL is out, its "
-    "velocity drifts to 0.5 m/s error, then the INS (vog) and the returning DVL are gated "
-    "as outliers: no recovery after the lock returns (error 0.9 m/s 5-10 s after)"))
-def test_eseso_velocity_recovers_after_the_dvl_lock_returns(rov_dvl_lock_loss):
+    "eseso.py: the ESESO's velocity sigma stays ~0.01 m/s while the DVL is out and its "
+    "velocity error grows to 0.2-0.5 m/s (2-4 % of estimates within 3 sigma; 45 % before "
+    "the fault); the INS (vog) and the returning DVL are then gated as outliers, so the "
+    "error 5-10 s after the lock returns is 0.15-0.9 m/s (0.01-0.03 before)"))
+def test_eseso_velocity_covariance_covers_its_error_through_a_dvl_lock_loss(
+        rov_dvl_lock_loss):
     res, truth = rov_dvl_lock_loss
-    es = _series(res, truth, "eseso")
-    verr = [(t, math.hypot(v["u"] - tr.u, v["v"] - tr.v)) for t, v, tr in es if "u" in v]
-    before, after = _median(_in(verr, 30.0, 40.0)), _median(_in(verr, 75.0, 80.0))
-    print(f"eseso velocity error: before {before:.3f}, 5-10 s after the lock returns "
-          f"{after:.3f} m/s")
-    assert after < 0.1  # measured 0.03 before; 0.9 after (the bug)
+    z = [abs(v[q] - getattr(tr, q)) / v[f"std_{q}"] for t, v, tr in
+         _series(res, truth, "eseso") if 40.0 <= t < 70.0 and "u" in v for q in ("u", "v")]
+    within = sum(x <= 3.0 for x in z) / max(1, len(z))
+    print(f"eseso velocity within 3 sigma during the lock loss: {within:.2f}")
+    assert within > 0.9  # measured 0.02-0.04
 
 
 def test_compass_step_30_deg_for_5_s_is_followed_then_recovered_nis_reported(tmp_path):
@@ -361,12 +362,12 @@ def test_compass_step_30_deg_for_5_s_is_followed_then_recovered_nis_reported(tmp
     heading-only filter cannot tell that from a turn (the outlier gate is 20 sigma =
     34 deg at 0.03 rad noise): the AIE/KF follow it, the heading NIS shows it in health,
     and within seconds of the step's end the heading is back within a few degrees."""
-    res, truth = _fly("fault-compass-step", 70.0, tmp_path)
+    res, truth = _fly("fault-compass-step", 62.0, tmp_path)
     for name in ("aie", "kf"):
         he = _heading_errors_deg(_series(res, truth, name))
         before = _median(_in(he, 25.0, 40.0))
         in_step = _max(_in(he, 40.0, 45.5))
-        after = _max(_in(he, 48.0, 70.0))
+        after = _max(_in(he, 48.0, 62.0))
         print(f"{name} heading error: before {before:.2f}, max in the step {in_step:.1f}, "
               f"max from 3 s after {after:.2f} deg")
         assert in_step < 50.0  # measured 31-42 deg: follows the 30 deg step
@@ -449,7 +450,7 @@ url = "udpout:127.0.0.1:{free_udp_port()}"
             pass
         t0 = time.monotonic()
         k = 0
-        while k < 300:  # 6 s at 50 Hz, killed mid-stream
+        while k < 200:  # 4 s at 50 Hz, killed mid-stream
             for f in gen.mavlink(k / 50.0):
                 tx.sendto(f, ("127.0.0.1", mav_port))
                 sent.append(time.monotonic())
@@ -480,7 +481,7 @@ url = "udpout:127.0.0.1:{free_udp_port()}"
     saved = json.loads((state_dir / "state" / "adaptive.json").read_text())["pipelines"]
     cfg = load(str(cfg_path))
     cold = plain(Engine(cfg).get_state())
-    assert saved.get("aie") and saved["aie"] != cold["aie"], "nothing learned in 6 s"
+    assert saved.get("aie") and saved["aie"] != cold["aie"], "nothing learned in 4 s"
 
     async def restart() -> tuple[dict | None, dict, list[str]]:
         svc = Service(cfg, state_dir=state_dir)
