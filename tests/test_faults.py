@@ -250,7 +250,7 @@ def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_p
     assert any(30.0 < t < 36.0 and e.startswith("gnss:gps: stale") for t, e in evs), evs
     assert any(t > 150.0 and e.startswith("gnss:gps: samples again") for t, e in evs), evs
     alive = sum(h.rates_hz.get("heading:gps", 0.0) > 0 for h in during) / len(during)
-    assert alive > 0.9  # the compass on the same pty carries on (measured 1.00)
+    assert alive > 0.8  # the compass on the same pty carries on (measured 1.00)
     # position: drifts during the outage, bounded; recovers after
     pe = _position_errors(aie)
     before, late_out = _max(_in(pe, 20.0, 30.0)), _max(_in(pe, 130.0, 150.0))
