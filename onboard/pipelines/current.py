@@ -64,8 +64,8 @@ import msgspec
 import numpy as np
 
 from onboard.config import Config, ConfigError, decode_section
-from onboard.messages import (ActuatorCommand, Attitude, Depth, DvlVelocity, GnssFix,
-                              Heading, Imu, Sample, VelocityOverGround)
+from onboard.messages import (ActuatorCommand, Attitude, Depth, DvlPosition, DvlVelocity,
+                              GnssFix, Heading, Imu, Sample, VelocityOverGround)
 from onboard.pipelines.geo import wrap_pi
 from onboard.pipelines.hgo import GainDesign, IncreasingGain, current_hgo_gain
 from onboard.pipelines.rls import RecursiveLeastSquares
@@ -305,7 +305,14 @@ class CurrentPipeline:
         self._i_yaw = self.model.channels.index("yaw") if "yaw" in self.model.channels else -1
         # vehicle state from samples
         self.inp = ModelInputs()
+        # roll and pitch (rad) for the rotation R and the model's gravity/buoyancy
+        # regressors (``inp.roll``, ``inp.pitch``): the newest attitude stamped at or
+        # before the step time (:meth:`_set_attitude`)
         self.roll = self.pitch = 0.0
+        self._att_t = -math.inf  # stamp of the attitude in use
+        self._ahrs_t = -math.inf  # stamp of the newest Attitude sample
+        self._att_later: list[tuple[float, float, float, bool]] = []  # stamped after a tick
+        self._step_t = math.inf
         self.yaw: float | None = None
         self._have_rates = False
         self._yaw_prev: tuple[float, float] | None = None
@@ -354,7 +361,7 @@ class CurrentPipeline:
             Attitude: self._on_attitude, Heading: self._on_heading, Imu: self._on_imu,
             ActuatorCommand: self._on_command, Depth: self._on_depth,
             VelocityOverGround: self._on_vog, DvlVelocity: self._on_dvl,
-            GnssFix: self._on_gnss}
+            DvlPosition: self._on_dvl_position, GnssFix: self._on_gnss}
 
     # ------------------------------------------------------------------ samples
     def _on_attitude(self, s: Attitude, meas: list) -> None:
@@ -362,13 +369,47 @@ class CurrentPipeline:
                 and math.isfinite(s.yaw_rad)):
             self.counters["rejected_nonfinite"] += 1
             return
-        self.roll, self.pitch = s.roll_rad, s.pitch_rad
+        self._set_attitude(s.t, s.roll_rad, s.pitch_rad, True)
         self._set_yaw(s.t, s.yaw_rad)
         if s.yaw_rate_rps is not None:
             self.inp.p = s.roll_rate_rps or 0.0
             self.inp.q = s.pitch_rate_rps or 0.0
             self.inp.r = s.yaw_rate_rps
             self._have_rates = True
+
+    def _on_dvl_position(self, s: DvlPosition, meas: list) -> None:
+        """The DVL's own roll and pitch: a fallback when no ``Attitude`` sample came
+        within ``ATTITUDE_FALLBACK_S`` (its yaw is not used: heading sources are
+        ``Attitude`` and ``Heading``)."""
+        if s.roll_rad is None or s.pitch_rad is None:
+            return
+        if not (math.isfinite(s.roll_rad) and math.isfinite(s.pitch_rad)):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        self._set_attitude(s.t, s.roll_rad, s.pitch_rad, False)
+
+    ATTITUDE_FALLBACK_S = 1.0
+    """A ``DvlPosition`` roll/pitch is used only this long (s) after the last
+    ``Attitude`` sample: the vehicle's attitude reference comes first."""
+
+    def _set_attitude(self, t: float, roll: float, pitch: float, primary: bool) -> None:
+        """Take roll and pitch (rad, ZYX Euler, FRD/NED: pitch positive nose up, roll
+        positive starboard down) stamped ``t`` if it is the newest at or before the step
+        time; a sample stamped after the step time is held until a step reaches it."""
+        if t > self._step_t:
+            if len(self._att_later) >= 64:  # stamps far ahead of the ticks: keep the newest
+                del self._att_later[0]
+            self._att_later.append((t, roll, pitch, primary))
+            return
+        if primary:
+            self._ahrs_t = max(self._ahrs_t, t)
+        elif t - self._ahrs_t <= self.ATTITUDE_FALLBACK_S:
+            return
+        if t < self._att_t:
+            return
+        self._att_t = t
+        self.roll = self.inp.roll = roll
+        self.pitch = self.inp.pitch = pitch
 
     def _on_heading(self, s: Heading, meas: list) -> None:
         if not math.isfinite(s.heading_rad):
@@ -711,6 +752,13 @@ class CurrentPipeline:
         """Advance to tick ``t`` (s) with the new samples; returns the estimates."""
         meas: list = []
         handlers = self._handlers
+        self._step_t = t
+        if self._att_later:  # attitude stamped after an earlier tick, now due
+            due = sorted(a for a in self._att_later if a[0] <= t)
+            if due:
+                self._att_later = [a for a in self._att_later if a[0] > t]
+                for a in due:
+                    self._set_attitude(*a)
         for s in samples:
             h = handlers.get(type(s))
             if h is not None:
