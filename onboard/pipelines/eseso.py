@@ -21,7 +21,7 @@ m/s) is the bias of the INS velocity over ground, not in the paper: an aided INS
 error is correlated over minutes (a first-order Gauss-Markov process, ``ins_bias_std_mps``,
 ``ins_bias_tau_s``), so as white measurement noise it is wrong whatever R is: too small
 and the filter follows the INS bias, too large (the GNSS velocity R of 0.1 m/s it had
-before, 17x the variance) and the innovations are far smaller than S (NIS 0.1 for 2;
+before, 20x its total variance) and the innovations are far smaller than S (NIS 0.1 for 2;
 docs/fuzzing.md finding 8).
 
 * **Propagation** at every IMU sample (paper eqs. 10-13; Sola, "Quaternion kinematics for
@@ -642,7 +642,7 @@ class Eseso:
 
     def _on_vog(self, s: VelocityOverGround) -> None:
         # z = v_NE + b_ins + white noise: the INS's correlated error is a state (BI), only
-        # its white part is R (docs/eseso-mpc.md, "Velocity over ground")
+        # its white part is R (docs/eseso-mpc.md, "Measurement noise and consistency")
         vz = np.array([s.v_north_mps, s.v_east_mps])
         if not np.all(np.isfinite(vz)):
             self._count("rejected.vog.nonfinite")
