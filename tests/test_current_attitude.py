@@ -40,7 +40,7 @@ def simulate_pitching_torpedo(duration: float, pitch_amp: float, roll_amp: float
     nu = np.array([1.5, 0.0, 0.0])
     psi, r = 0.0, 0.0
     h = 0.01
-    n_sub = int(round(tick / h))
+    n_sub = round(tick / h)
     headings = [0.0, 2.0, -2.0, 1.0, 3.0, -1.0]
     wq, wp = 2 * math.pi / 60.0, 2 * math.pi / 23.0
     t = 0.0

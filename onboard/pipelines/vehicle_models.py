@@ -11,7 +11,10 @@ measured inputs) and a surge/sway(/yaw) manoeuvring model for surface boats.
 
 No regressor is a constant (except the heave net-weight term, which is physics): a constant
 would soak up the water current, which the current pipeline estimates as a separate,
-slowly varying state. The current is thus never absorbed into the parameters.
+slowly varying state. The current is thus never absorbed into the parameters. The
+gravity/buoyancy terms are nearly constant when the attitude is (a steady propeller-torque
+roll makes ``cos(theta)sin(phi)`` one): with an unknown net weight (mode (b)) they trade
+against the current on a straight line until a turn separates them (docs/current.md).
 
 Symbols: ``u, v, w`` (m/s) through-water velocity, ``p, q, r`` (rad/s) body rates,
 ``phi, theta`` (rad) roll and pitch, ``n`` normalized propulsion (propeller rpm divided by
@@ -29,7 +32,12 @@ import numpy as np
 
 
 class ModelInputs:
-    """Everything a regressor needs besides ``nu_r``; units in the module docstring."""
+    """Everything a regressor needs besides ``nu_r``; units in the module docstring.
+
+    ``roll`` and ``pitch`` are ZYX Euler angles (rad, NED/FRD: pitch positive nose up, roll
+    positive starboard side down), the signs of Kim et al. eq. (3)-(5) and of the SITL
+    plants' restoring forces; the current pipeline sets them from its attitude samples.
+    """
 
     __slots__ = ("p", "q", "r", "roll", "pitch", "n", "dr", "ds", "left", "right", "thrusters")
 
