@@ -139,7 +139,7 @@ def test_pipeline_columns_health_and_state_roundtrip() -> None:
     pa, _ = _pipes()
     out = run_pipelines(sim.samples, [pa], sim.t)[0]
     assert pa.columns == ("north", "east", "heading", "speed", "yaw_rate", "surge_input",
-                          "yaw_input")
+                          "yaw_input", "std_north", "std_east", "std_speed", "std_heading")
     for c in pa.columns:
         assert np.isfinite(out[c][-1])
     h = pa.health()

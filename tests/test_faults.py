@@ -264,15 +264,17 @@ def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_p
     assert he_after < 5.0  # measured 1-3 deg
 
 
-@pytest.mark.xfail(strict=True, reason="aie/kf publish no uncertainty (no std_north/std_east): "
-                   "growing uncertainty during a GNSS outage is not reported")
 def test_gnss_outage_uncertainty_grows(tmp_path):
+    """fault-gnss-outage: the aie position's published one sigma (``std_north``, through
+    the service and Zenoh into ``EstimateRecord.std``) grows once the fixes stop at 30 s
+    (docs/aie.md, "Published uncertainty")."""
     res, _ = _fly("fault-gnss-outage", 42.0, tmp_path, speed=20.0)
     aie = [r for r in res.estimates if r.pipeline == "aie"]
     early = [r.std.get("north") for r in aie if 20.0 <= r.t < 30.0]
     late = [r.std.get("north") for r in aie if 37.0 <= r.t < 42.0]
     assert early and late and None not in early + late
-    assert _median(late) > 1.5 * _median(early)  # 7-12 s without a fix
+    print(f"aie std_north median: 20-30 s {_median(early):.2f} m, 37-42 s {_median(late):.2f} m")
+    assert _median(late) > 1.5 * _median(early)  # 7-12 s without a fix (measured 2.4 -> 7.0 m)
 
 
 def test_gnss_under_water_is_rejected_and_counted_estimates_continue(tmp_path):

@@ -48,7 +48,8 @@ from onboard.pipelines.aie_pipeline import (
 )
 from onboard.pipelines.surge_heading import AxisModel, Discrete, discretize
 
-COLUMNS = ("north", "east", "heading", "speed", "yaw_rate", "surge_input", "yaw_input")
+COLUMNS = ("north", "east", "heading", "speed", "yaw_rate", "surge_input", "yaw_input",
+           "std_north", "std_east", "std_speed", "std_heading")
 
 RlsKernel = Callable[..., "tuple[list[float], list[float], float] | None"]
 

@@ -28,6 +28,7 @@ runs with zero input).
 from __future__ import annotations
 
 import math
+from math import sqrt
 from typing import Any, Callable, Literal, Mapping, Sequence
 
 import msgspec
@@ -254,6 +255,9 @@ class _Window:
         self.st_h = self.sh = 0.0
 
 
+_RESIDUAL_GAIN = 0.05
+"""Weight of the newest anchor residual in its running mean square (~20 surge steps)."""
+
 AxisFactory = Callable[[AxisModel, AxisConfig, AieConfig], AxisFilter]
 
 
@@ -305,6 +309,12 @@ class SurgeHeadingPipeline:
         self._course: float | None = None     # course over ground (GNSS-only logs)
         self._course_pts: list[tuple[float, float]] = []
         self._R_h_prev = self.sigma_h ** 2
+        # one-sigma figures (see _output): variances of the reconstruction
+        self._var_n = self._var_e = 0.0     # position at _t_s (m^2)
+        self._var_psi = self.sigma_h ** 2   # heading at _t_h (rad^2)
+        self._var_course = 0.0              # course of the GNSS-only mode (rad^2)
+        self._r2n = self._r2e = 0.0         # mean square anchor residual (m^2)
+        self._var_fix = self.sigma_p ** 2   # slowly varying fix error (m^2), see _std_outputs
         self._disc_cache: dict[tuple[float, float], Discrete] = {}
 
     # -- helpers -----------------------------------------------------------------------
@@ -477,6 +487,7 @@ class SurgeHeadingPipeline:
         if hp is None:   # (re)start the reconstruction from the measurement
             self._psi = psi
             self._t_h = th
+            self._var_psi = R_h
             return
         dt = th - hp[0]
         cmd = self._mean_command(hp[0], th, 2)
@@ -490,8 +501,14 @@ class SurgeHeadingPipeline:
             # ... which with the MA(1) noise model equals the measured point minus its
             # estimated noise (the e-state makes the absolute heading observable)
             self._psi = pred + wrap_pi(psi - n_hat - pred)
+            # its error is that of n_hat = y - d + e: Var = P_dd - 2 P_de + P_ee (rad^2)
+            P = kfy.P
+            self._var_psi = P[0] - 2.0 * P[2] + P[5]
         else:   # white-noise increments: pull toward the measurement
-            self._psi = pred + self.cfg.heading_anchor * wrap_pi(psi - pred)
+            kh = self.cfg.heading_anchor
+            self._psi = pred + kh * wrap_pi(psi - pred)
+            self._var_psi = ((1.0 - kh) ** 2 * (self._var_psi + kfy.P[0])
+                             + kh * kh * R_h)
         self._t_h = th
         self._trim_commands()
 
@@ -528,13 +545,18 @@ class SurgeHeadingPipeline:
             return
         self._pt_prev = (tp, n, e, psi)
         if pp is None or tp - pp[0] > self.cfg.max_gap_s:
+            R_fix = self.sigma_p ** 2 / w.n_fix
             if pp is not None:
                 self.surge.restart()
             if not self._have_pos or pp is None:
                 self._n, self._e = n, e
-            else:  # across a gap: follow the measured displacement
+                self._var_n = self._var_e = R_fix
+            else:  # across a gap: follow the measured displacement (noise of both fixes)
                 self._n += n - pp[1]
                 self._e += e - pp[2]
+                dv = R_fix + self.sigma_p ** 2 / max(self._prev_nfix, 1)
+                self._var_n += dv
+                self._var_e += dv
             self._have_pos = True
             self._t_s = tp
             self._prev_nfix = w.n_fix
@@ -552,6 +574,9 @@ class SurgeHeadingPipeline:
             n0, e0 = hist[0]
             course = math.atan2(e - e0, n - n0) if len(hist) > 1 else 0.0
             y = math.cos(course) * (n - pp[1]) + math.sin(course) * (e - pp[2])
+            # course from two points of variance R_s over the baseline L: 2 R_s / L^2
+            base2 = (n - n0) ** 2 + (e - e0) ** 2
+            self._var_course = min(2.0 * R_s / base2, 1.0) if base2 > 0.0 else 1.0
         else:
             dpsi = wrap_pi(psi - pp[3])
             y = path_increment(n - pp[1], e - pp[2], pp[3], dpsi)
@@ -570,8 +595,24 @@ class SurgeHeadingPipeline:
         # the course lags the track by half its baseline: anchor harder without a compass
         ka = self.cfg.position_anchor if not course_mode else max(self.cfg.position_anchor,
                                                                    0.3)
-        self._n += ka * (n - self._n)
-        self._e += ka * (e - self._e)
+        rn, re = n - self._n, e - self._e
+        self._n += ka * rn
+        self._e += ka * re
+        # its variance (see _std_outputs): increment along track, heading across, or
+        # what the anchor residuals show if more, then the anchor's fixed-gain blend
+        var_a = self.surge.kf.P[0]
+        var_x = ys * ys * (self._var_course if course_mode else self._var_psi)
+        c, s_ = math.cos(mid), math.sin(mid)
+        g = _RESIDUAL_GAIN
+        self._r2n += g * (rn * rn - self._r2n)
+        self._r2e += g * (re * re - self._r2e)
+        vn = self._var_n + c * c * var_a + s_ * s_ * var_x
+        ve = self._var_e + s_ * s_ * var_a + c * c * var_x
+        rn2, re2 = self._r2n - R_s, self._r2e - R_s
+        f = (1.0 - ka) ** 2
+        fr = ka * ka * R_s
+        self._var_n = f * (vn if vn > rn2 else rn2) + fr
+        self._var_e = f * (ve if ve > re2 else re2) + fr
         self._t_s = tp
         self._trim_commands()
 
@@ -589,6 +630,13 @@ class SurgeHeadingPipeline:
                 out["speed"] = v
                 out["north"] = self._n + ds * math.cos(self._course)
                 out["east"] = self._e + ds * math.sin(self._course)
+                k = self._disc(surge.damping(surge.last_command), max(tau, 1e-6))
+                P, V_u = surge.kf.P, surge.V_u
+                var_v = k.alpha * k.alpha * P[3] + k.c1 * k.c1 * V_u
+                self._std_outputs(out, t, math.cos(self._course), math.sin(self._course),
+                                  ds, v,
+                                  k.c1 * k.c1 * P[3] + k.c2 * k.c2 * V_u, var_v,
+                                  self._var_course)
                 self._extra_outputs(out)
             return out
         # The heading and yaw rate (as _heading_at: one prediction for both), then the
@@ -599,39 +647,114 @@ class SurgeHeadingPipeline:
         last = cmds[-1] if cmds else None
         psi = self._psi
         ykf = yaw.kf
+        var_h = self._var_psi
         if ykf.initialized:
             tau = t - self._t_h
             tau = 0.0 if tau < 0.0 else gap if tau > gap else tau
             r = ykf.v
             if tau > 1e-6:
+                k = self._disc(yaw.damping(yaw.last_command), tau)
                 dpsi, r = ykf.predict_ahead(
-                    self._disc(yaw.damping(yaw.last_command), tau),
-                    yaw.input_ahead(last[2] if last is not None else None))
+                    k, yaw.input_ahead(last[2] if last is not None else None))
                 psi = psi + dpsi
+                var_h += k.c1 * k.c1 * ykf.P[3] + k.c2 * k.c2 * yaw.V_u
             out["heading"] = wrap_2pi(psi)
             out["yaw_rate"] = r
         else:
             out["heading"] = wrap_2pi(psi)
+        out["std_heading"] = sqrt(var_h)
         skf = surge.kf
         if skf.initialized and self._t_s is not None:
-            tau = t - self._t_s
+            tau_raw = tau = t - self._t_s
             tau = 0.0 if tau < 0.0 else gap if tau > gap else tau
             ds, v = skf.v * tau, skf.v
+            P = skf.P
+            var_ds, var_v = P[3] * tau * tau, P[3]
             if tau > 1e-6:
+                k = self._disc(surge.damping(surge.last_command), tau)
                 ds, v = skf.predict_ahead(
-                    self._disc(surge.damping(surge.last_command), tau),
-                    surge.input_ahead(last[1] if last is not None else None))
+                    k, surge.input_ahead(last[1] if last is not None else None))
+                V_u = surge.V_u
+                var_ds = k.c1 * k.c1 * P[3] + k.c2 * k.c2 * V_u
+                var_v = k.alpha * k.alpha * P[3] + k.c1 * k.c1 * V_u
             out["speed"] = v
             psi_s = self._psi_s
             if psi_s is None:   # changes only when a window closes or a command arrives
                 psi_s = self._psi_s = self._heading_at(self._t_s)
             mid = 0.5 * (psi_s + psi)
-            out["north"] = self._n + ds * math.cos(mid)
-            out["east"] = self._e + ds * math.sin(mid)
+            c, s = math.cos(mid), math.sin(mid)
+            out["north"] = self._n + ds * c
+            out["east"] = self._e + ds * s
+            # _std_outputs inlined (this runs every tick)
+            ex = tau_raw - gap
+            var_p = self._var_fix + (0.5 * (v * v + var_v) * ex * ex if ex > 0.0 else 0.0)
+            var_x = ds * ds * var_h
+            cc, ss = c * c, s * s
+            out["std_north"] = sqrt(self._var_n + cc * var_ds + ss * var_x + var_p)
+            out["std_east"] = sqrt(self._var_e + ss * var_ds + cc * var_x + var_p)
+            out["std_speed"] = sqrt(var_v)
         elif self._have_pos:
             out["north"], out["east"] = self._n, self._e
+            out["std_north"] = math.sqrt(self._var_n + self._var_fix)
+            out["std_east"] = math.sqrt(self._var_e + self._var_fix)
         self._extra_outputs(out)
         return out
+
+    def _std_outputs(self, out: dict[str, float], t: float, c: float, s: float,
+                     ds: float, v: float, var_ds: float, var_v: float, var_x: float
+                     ) -> None:
+        """``std_north``, ``std_east`` (m) and ``std_speed`` (m/s): one sigma of the
+        published position and speed at ``t`` (``c, s``: cos and sin of the heading the
+        path ``ds`` (m) since the last surge step is laid along; ``var_x``: that
+        heading's variance, rad^2).
+
+        Position variance per axis (m^2), first order, cross-covariances between steps
+        and between north and east neglected. Kept at the last surge step ``t_s``
+        (:meth:`_close_surge_window`), for the dead-reckoned part of the error:
+
+        * the step's increment adds ``P_dd`` (m^2, the surge filter's increment variance
+          after its update) along the mid-chord heading and ``y_s^2 var(psi)`` across it
+          (``var(psi)`` the heading filter's variance of the reconstructed heading,
+          ``P_dd - 2 P_de + P_ee`` of its point-noise estimate), rotated into north/east;
+        * model error (sideslip in turns, a wrong thrust map: errors correlated over many
+          steps) is not in those covariances, so the predicted variance is raised to what
+          the anchor residuals show when larger: ``mean(r^2) - R`` (``r`` = window's mean
+          fix minus the dead-reckoned position, per axis, running mean over ~20 steps,
+          ``R = gnss_std_m^2 / n_fix`` the white part of ``r``);
+        * the anchor's fixed-gain blend with that fix: ``var <- (1 - k)^2 var + k^2 R``;
+          it starts at ``R`` with the first fix and adds both fixes' ``R`` across a gap,
+          where the position follows the measured displacement.
+
+        Published at ``t``:
+
+        * plus the prediction from ``t_s`` (``tau <= max_gap_s``): ``c1^2 P_vv + c2^2 V_u``
+          along (the surge filter's forecast variance of the increment over ``tau``;
+          ``V_u`` its input-error variance, (m/s^2)^2) and ``ds^2 var(psi)`` across;
+        * plus, beyond ``max_gap_s`` without a surge step (a GNSS outage), where the
+          published position is held while the vehicle moves on, ``(v^2 + var(v))
+          (t - t_s - max_gap_s)^2 / 2`` on each axis: the displacement not followed,
+          direction unknown, so the sigma grows about linearly with the time without
+          fixes (conservative for a vehicle that turns back) and drops when they return;
+        * plus ``gnss_std_m^2``: the fix error is mostly slowly varying (receiver drift),
+          which the anchor passes unaveraged; the whole configured one-fix sigma is taken
+          (conservative where part of it is white).
+
+        ``std_speed`` is the surge filter's rate sigma forecast over ``tau``
+        (``alpha^2 P_vv + c1^2 V_u``), with no model-error term. Coverage against SITL
+        truth: docs/aie.md, "Published uncertainty".
+        """
+        var_x = ds * ds * var_x
+        cc, ss = c * c, s * s
+        vn = self._var_n + cc * var_ds + ss * var_x
+        ve = self._var_e + ss * var_ds + cc * var_x
+        ex = t - self._t_s - self.cfg.max_gap_s if self._t_s is not None else 0.0
+        if ex > 0.0:
+            held = 0.5 * (v * v + var_v) * ex * ex
+            vn += held
+            ve += held
+        out["std_north"] = math.sqrt(vn + self._var_fix)
+        out["std_east"] = math.sqrt(ve + self._var_fix)
+        out["std_speed"] = math.sqrt(var_v)
 
     def _extra_outputs(self, out: dict[str, float]) -> None:
         """Hook for subclasses (AIE adds the input estimates)."""

@@ -22,7 +22,8 @@ from onboard.pipelines.aie_pipeline import (
 )
 from onboard.pipelines.surge_heading import AxisModel
 
-COLUMNS = ("north", "east", "heading", "speed", "yaw_rate")
+COLUMNS = ("north", "east", "heading", "speed", "yaw_rate",
+           "std_north", "std_east", "std_speed", "std_heading")
 
 
 class AxisKf(AxisFilter):
