@@ -46,6 +46,7 @@ from onboard.pipelines.aie_pipeline import (
     load_config,
     sensor_noise,
 )
+from onboard.pipelines.rls import packed_index, unpack  # noqa: F401 - unpack re-exported
 from onboard.pipelines.surge_heading import AxisModel, Discrete, discretize
 
 COLUMNS = ("north", "east", "heading", "speed", "yaw_rate", "surge_input", "yaw_input",
@@ -56,22 +57,6 @@ RlsKernel = Callable[..., "tuple[list[float], list[float], float] | None"]
 
 # ---------------------------------------------------------------------------------------
 # RLS kernel (§2.6)
-
-
-def _packed_index(n: int) -> dict[tuple[int, int], int]:
-    idx: dict[tuple[int, int], int] = {}
-    m = 0
-    for i in range(n):
-        for j in range(i, n):
-            idx[(i, j)] = idx[(j, i)] = m
-            m += 1
-    return idx
-
-
-def unpack(P: list[float], n: int) -> list[list[float]]:
-    """Packed upper triangle (row-major) -> full symmetric matrix (list of rows)."""
-    idx = _packed_index(n)
-    return [[P[idx[(i, j)]] for j in range(n)] for i in range(n)]
 
 
 def _generate(n: int, fused: str | None) -> RlsKernel:
@@ -86,7 +71,7 @@ def _generate(n: int, fused: str | None) -> RlsKernel:
     from the regressors, ``a = h * s`` and ``b = g - f`` (rate penalty) or ``b = g``
     (size penalty); ``d = g . theta+`` is returned too (§2.7 step 5).
     """
-    idx = _packed_index(n)
+    idx = packed_index(n)
     r = range(n)
     p = {(i, j): f"p{idx[(i, j)]}" for i in r for j in r}
     src: list[str] = []

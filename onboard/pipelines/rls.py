@@ -48,8 +48,9 @@ import numpy as np
 RlsKernel = Callable[..., "tuple[list[float], list[float], float, float, float]"]
 
 
-def _packed_index(n: int) -> dict[tuple[int, int], int]:
-    """Position of ``P[i][j]`` in the packed upper triangle (row-major)."""
+def packed_index(n: int) -> dict[tuple[int, int], int]:
+    """Position of ``P[i][j]`` in the packed upper triangle (row-major) of an ``n x n``
+    symmetric matrix (the storage of the generated float kernels here and in ``aie``)."""
     idx: dict[tuple[int, int], int] = {}
     m = 0
     for i in range(n):
@@ -57,6 +58,12 @@ def _packed_index(n: int) -> dict[tuple[int, int], int]:
             idx[(i, j)] = idx[(j, i)] = m
             m += 1
     return idx
+
+
+def unpack(P: Sequence[float], n: int) -> list[list[float]]:
+    """Packed upper triangle (row-major) -> full symmetric matrix (list of rows)."""
+    idx = packed_index(n)
+    return [[P[idx[(i, j)]] for j in range(n)] for i in range(n)]
 
 
 @cache
@@ -69,7 +76,7 @@ def rls_kernel(n: int) -> RlsKernel:
     floats), ``e`` the a priori residual, ``lam`` the variable forgetting factor and
     ``s = lam / weight + phi^T P phi``. With ``beta = delta = 0`` the EFRA step adds zero.
     """
-    idx = _packed_index(n)
+    idx = packed_index(n)
     r = range(n)
     p = {(i, j): f"p{idx[(i, j)]}" for i in r for j in r}
     q = {(i, j): f"q{idx[(i, j)]}" for i in r for j in r}
@@ -170,9 +177,7 @@ class RecursiveLeastSquares:
 
     @property
     def P(self) -> np.ndarray:
-        idx = _packed_index(self.n)
-        return np.array([[self._P[idx[(i, j)]] for j in range(self.n)]
-                         for i in range(self.n)])
+        return np.array(unpack(self._P, self.n))
 
     @P.setter
     def P(self, P: np.ndarray) -> None:
