@@ -30,9 +30,9 @@ def sniff(path: str | Path) -> str:
         raise UnreadableLog(f"{p}: {err.strerror or err}") from None
     if not head:
         raise UnreadableLog(f"{p}: empty file")
-    from drivers.recording import FILE_MAGIC
+    from drivers.recording import file_version
 
-    if head.startswith(FILE_MAGIC):
+    if file_version(head) is not None:
         return "recording"
     if head.startswith(DATAFLASH_MAGIC):
         return "dataflash"

@@ -27,6 +27,13 @@ last accepted timestamp of each stream and rejects, with a reason the parser cou
 The *local timestamp* is the largest of the wall clock, every accepted incoming timestamp
 and :attr:`SignatureVerifier.high` (which the owner raises to the persisted and sent
 timestamps), as the spec asks for systems without a reliable clock.
+
+Exact replay. The verdicts depend on the key, the wall clock and the streams table, none
+of which a replay has. So the service records them instead: :class:`VerdictLog` wraps the
+live verifier of one input and notes which frames of each chunk it rejected and why; the
+recorder writes that as a ``verdicts`` record right after the chunk
+(:class:`drivers.recording.Verdicts`); on replay :class:`VerdictPlayer` stands in for the
+verifier and rejects exactly those frames under the same reasons, without the key.
 """
 
 from __future__ import annotations
@@ -34,7 +41,12 @@ from __future__ import annotations
 import hashlib
 import hmac
 import time
-from typing import Callable
+import zlib
+from typing import TYPE_CHECKING, Callable
+
+if TYPE_CHECKING:
+    from drivers.base import ReadStats
+    from drivers.recording import Verdicts
 
 SIGNING_EPOCH = 1420070400
 """MAVLink signing timestamps count 10 us units from 2015-01-01T00:00:00Z (POSIX s)."""
@@ -120,3 +132,88 @@ class SignatureVerifier:
         if self.on_accept is not None:
             self.on_accept()
         return None
+
+
+def _frame_crc(buf: bytes | bytearray, crc_end: int) -> int:
+    """The CRC-16 field of the frame whose CRC ends at ``crc_end``."""
+    return buf[crc_end - 2] | (buf[crc_end - 1] << 8)
+
+
+class VerdictLog:
+    """Wraps the live verifier of one input and notes its rejections, chunk by chunk.
+
+    Used as the parser's verifier (same ``check``); :meth:`take` after each chunk returns
+    its :class:`~drivers.recording.Verdicts` (None when every frame was accepted) and starts
+    the next chunk.
+    """
+
+    __slots__ = ("verifier", "checks", "rejected")
+
+    def __init__(self, verifier: SignatureVerifier) -> None:
+        self.verifier = verifier
+        self.checks = 0
+        self.rejected: list[tuple[int, str, int]] = []
+
+    def check(self, buf: bytes | bytearray, start: int, crc_end: int, sysid: int,
+              compid: int, inc_flags: int) -> str | None:
+        reason = self.verifier.check(buf, start, crc_end, sysid, compid, inc_flags)
+        if reason is not None:
+            self.rejected.append((self.checks, reason, _frame_crc(buf, crc_end)))
+        self.checks += 1
+        return reason
+
+    def take(self, chunk: bytes) -> "Verdicts | None":
+        """The verdicts of the chunk ``chunk`` just parsed (None: nothing rejected)."""
+        from drivers.recording import Verdicts
+
+        out = None
+        if self.rejected:
+            out = Verdicts(zlib.crc32(chunk), self.checks, self.rejected)
+            self.rejected = []
+        self.checks = 0
+        return out
+
+
+class VerdictPlayer:
+    """The verifier of a replay: rejects the frames the live verifier rejected.
+
+    :meth:`load` before each chunk with the chunk's recorded verdicts (None: every frame
+    was accepted live). A frame whose CRC-16 is not the recorded one, or a chunk whose
+    number of frames differs from the recorded one, means the replay no longer follows the
+    recording (a damaged recording): the frame is rejected as ``verdict_mismatch`` rather
+    than accepted, and :meth:`done` counts a chunk mismatch the same way.
+    """
+
+    __slots__ = ("checks", "expected", "rejected")
+
+    def __init__(self) -> None:
+        self.checks = 0
+        self.expected: int | None = None
+        self.rejected: dict[int, tuple[str, int]] | None = None
+
+    def load(self, verdicts: "Verdicts | None") -> None:
+        self.checks = 0
+        if verdicts is None:
+            self.expected = self.rejected = None
+        else:
+            self.expected = verdicts.checks
+            self.rejected = {int(i): (reason, int(crc)) for i, reason, crc in verdicts.rejected}
+
+    def check(self, buf: bytes | bytearray, start: int, crc_end: int, sysid: int,
+              compid: int, inc_flags: int) -> str | None:
+        k = self.checks
+        self.checks = k + 1
+        if self.rejected is None:
+            return None
+        r = self.rejected.get(k)
+        if r is None:
+            return None
+        return r[0] if r[1] == _frame_crc(buf, crc_end) else "verdict_mismatch"
+
+    def done(self, stats: "ReadStats") -> None:
+        """After the chunk: count ``verdict_mismatch`` in ``stats`` if it held a different
+        number of frames than live."""
+        if self.expected is not None and self.checks != self.expected:
+            stats.reject("verdict_mismatch")
+        self.expected = self.rejected = None
+        self.checks = 0

@@ -1,6 +1,6 @@
 """The service's own recording: every raw input with its receive time, crash-safe.
 
-Layout: an 8-byte file magic ``ONBREC01`` followed by frames::
+Layout: an 8-byte file magic ``ONBREC0<version>`` followed by frames::
 
     0xA5 0x5A | u32 length | u32 crc32(payload) | payload (msgpack RawRecord)
 
@@ -13,7 +13,22 @@ A :class:`RawRecord` holds the bytes exactly as received on one input (``kind`` 
 protocol: ``mavlink``, ``nmea``, ``dvl-json``, ``pd6``; ``sample`` is an already typed
 sample encoded as msgpack, used by the simulator; ``tick`` marks a live engine tick, so a
 replay reproduces the live estimates exactly; ``meta`` carries JSON metadata such as the
-config used).
+config used; ``verdicts`` (version 2) lists the frames of the chunk just before it that the
+input's signature verifier rejected live, see :class:`Verdicts`).
+
+Versions and compatibility. The file magic carries the format version:
+
+* ``ONBREC01``: the record kinds above except ``verdicts``.
+* ``ONBREC02``: version 1 plus ``verdicts`` records. Written only by a service that verifies
+  MAVLink signatures (``require_signing``); every other recording stays version 1, readable
+  by older readers.
+
+A reader refuses a version it does not know (``UnreadableLog``: bad magic) rather than
+misread it. Within a version it knows, a reader skips and counts (``unknown_kind:<kind>``)
+a record kind it does not know. The rule for writers: a new record kind that a reader may
+skip without changing what the other records mean keeps the version; one that a reader
+must understand to reproduce the live results (as ``verdicts``: skipping it would accept
+frames that live rejected) bumps it, and is written only where it is needed.
 """
 
 from __future__ import annotations
@@ -22,13 +37,19 @@ import os
 import struct
 import zlib
 from pathlib import Path
-from typing import BinaryIO, Iterator
+from typing import BinaryIO, Iterable, Iterator
 
 import msgspec
 
 from drivers.base import ReadStats, UnreadableLog
 
 FILE_MAGIC = b"ONBREC01"
+"""The magic of version 1 (see the module docstring for the versions)."""
+VERSIONS = {b"ONBREC01": 1, b"ONBREC02": 2}
+"""File magic -> format version, for every version this reader knows."""
+VERDICTS_VERSION = 2
+"""The first version with ``verdicts`` records."""
+VERDICTS_KIND = "verdicts"
 FRAME_MARK = b"\xa5\x5a"
 _HEAD = struct.Struct("<2sII")
 MAX_FRAME = 1 << 20
@@ -44,8 +65,50 @@ class RawRecord(msgspec.Struct, array_like=True):
     data: bytes
 
 
+class Verdicts(msgspec.Struct, array_like=True):
+    """What an input's signature verifier decided while the chunk before this record was
+    parsed live (the ``data`` of a ``verdicts`` record; its ``t`` and ``source`` are the
+    chunk's). Written only when it rejected at least one frame of the chunk; a chunk with
+    no ``verdicts`` record had every frame accepted.
+
+    ``chunk_crc`` (CRC-32 of the chunk's bytes) binds the verdicts to their chunk;
+    ``checks`` counts the frames the verifier saw while the chunk was parsed (frames
+    completed by it, in parser order); ``rejected`` lists ``(index among those checks,
+    reason, the frame's CRC-16)``, the CRC-16 being a check that replay is looking at the
+    same frame.
+    """
+
+    chunk_crc: int
+    checks: int
+    rejected: list[tuple[int, str, int]]
+
+
+def file_magic(version: int) -> bytes:
+    """The magic of format ``version``."""
+    for magic, v in VERSIONS.items():
+        if v == version:
+            return magic
+    raise ValueError(f"unknown recording format version {version}")
+
+
+def file_version(head: bytes) -> int | None:
+    """The format version of a file starting with ``head`` (None: not a recording this
+    reader knows)."""
+    return VERSIONS.get(bytes(head[:len(FILE_MAGIC)]))
+
+
 _enc = msgspec.msgpack.Encoder()
 _dec = msgspec.msgpack.Decoder(RawRecord)
+_vdec = msgspec.msgpack.Decoder(Verdicts)
+
+
+def encode_verdicts(v: Verdicts) -> bytes:
+    return _enc.encode(v)
+
+
+def decode_verdicts(data: bytes) -> Verdicts:
+    """Raises msgspec.DecodeError on bad data."""
+    return _vdec.decode(data)
 
 
 def encode_frame(rec: RawRecord) -> bytes:
@@ -59,22 +122,42 @@ class RecordingWriter:
 
     ``fsync`` on flush makes the data durable against power loss, not only a crash of
     the process. Rotation and size caps are the recorder's job (onboard.recorder); this
-    class writes one file.
+    class writes one file. ``version`` is the format version of a new file; appending to
+    an existing file keeps its version, and raises ValueError when it is older than
+    ``version`` (its readers would not know the newer records).
     """
 
-    def __init__(self, path: str | Path, *, fsync: bool = True) -> None:
+    def __init__(self, path: str | Path, *, fsync: bool = True, version: int = 1) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        magic = file_magic(version)
         new = not self.path.exists() or self.path.stat().st_size == 0
+        if not new:
+            with open(self.path, "rb") as f:
+                have = file_version(f.read(len(magic)))
+            if have is None or have < version:
+                raise ValueError(f"{self.path}: cannot append format version {version} "
+                                 f"records to a file of version {have}")
+            version = have
+        self.version = version
         self._f: BinaryIO = open(self.path, "ab", buffering=1 << 16)
         self._fsync = fsync
         self.bytes_written = 0 if new else self.path.stat().st_size
         if new:
-            self._f.write(FILE_MAGIC)
-            self.bytes_written = len(FILE_MAGIC)
+            self._f.write(magic)
+            self.bytes_written = len(magic)
 
-    def write(self, rec: RawRecord) -> None:
+    def write(self, rec: RawRecord, *more: RawRecord) -> None:
+        """Append ``rec`` (and ``more``) in one write: records that belong together
+        (a chunk and its verdicts) reach the OS together, never one without the other
+        because a flush ran in between."""
         frame = encode_frame(rec)
+        if more:
+            frame += b"".join(encode_frame(r) for r in more)
+        if more and self.version < VERDICTS_VERSION and any(
+                r.kind == VERDICTS_KIND for r in more):
+            raise ValueError(f"{self.path}: verdicts records need format version "
+                             f"{VERDICTS_VERSION}, the file has {self.version}")
         self._f.write(frame)
         self.bytes_written += len(frame)
 
@@ -98,7 +181,7 @@ class RecordingWriter:
 def is_recording(path: str | Path) -> bool:
     try:
         with open(path, "rb") as f:
-            return f.read(len(FILE_MAGIC)) == FILE_MAGIC
+            return file_version(f.read(len(FILE_MAGIC))) is not None
     except OSError:
         return False
 
@@ -110,8 +193,10 @@ def read_records(path: str | Path, stats: ReadStats | None = None) -> Iterator[R
         data = Path(path).read_bytes()
     except OSError as err:
         raise UnreadableLog(f"{path}: {err.strerror}") from None
-    if not data.startswith(FILE_MAGIC):
-        raise UnreadableLog(f"{path}: not an onboard recording (bad magic)")
+    if file_version(data) is None:
+        raise UnreadableLog(f"{path}: not an onboard recording (bad magic)"
+                            + (f": format {data[:8]!r} is newer than this reader"
+                               if data.startswith(b"ONBREC") else ""))
     pos = len(FILE_MAGIC)
     n = len(data)
     while pos < n:
@@ -158,6 +243,39 @@ def read_records(path: str | Path, stats: ReadStats | None = None) -> Iterator[R
         yield rec
 
 
+def with_verdicts(records: Iterable[RawRecord],
+                  stats: ReadStats) -> Iterator[tuple[RawRecord, Verdicts | None]]:
+    """Every record but the ``verdicts`` ones, each with the verdicts recorded for it
+    (None: every frame of it was accepted live, or signing was not verified).
+
+    A chunk and its verdicts are written in one write, so the verdicts follow their chunk
+    directly; one that does not (its chunk lost to damage, or not its chunk's CRC) is
+    counted ``verdicts_orphan`` and ignored.
+    """
+    held: RawRecord | None = None
+    for rec in records:
+        if rec.kind == VERDICTS_KIND:
+            v = None
+            if held is not None and held.source == rec.source and held.t == rec.t:
+                try:
+                    v = decode_verdicts(rec.data)
+                except (msgspec.DecodeError, UnicodeDecodeError):
+                    v = None
+                if v is not None and v.chunk_crc != zlib.crc32(held.data):
+                    v = None
+            if v is None:
+                stats.reject("verdicts_orphan")
+            else:
+                yield held, v  # type: ignore[misc]
+                held = None
+            continue
+        if held is not None:
+            yield held, None
+        held = rec
+    if held is not None:
+        yield held, None
+
+
 _sample_dec = None
 
 
@@ -175,7 +293,9 @@ class RecordingReader:
     """A recording as a log: re-parses every raw record with its protocol's parser.
 
     Each (source, kind) gets its own stream parser, fed the recorded bytes with the
-    recorded receive time, exactly as the service fed it live. ``tick_times`` collects the
+    recorded receive time, exactly as the service fed it live; MAVLink frames that the
+    live service rejected on signing grounds (``verdicts`` records) are rejected again,
+    under the same reason. ``tick_times`` collects the
     live engine's tick times (``tick`` records) while iterating, for exact reproduction.
     """
 
@@ -188,10 +308,12 @@ class RecordingReader:
         self.meta: list[bytes] = []
 
     def __iter__(self):
+        from drivers.mavlink_signing import VerdictPlayer
         from drivers.protocols import parser_for
 
         parsers: dict[tuple[str, str], object] = {}
-        for rec in read_records(self.path, self.stats):
+        players: dict[tuple[str, str], VerdictPlayer] = {}
+        for rec, verdicts in with_verdicts(read_records(self.path, self.stats), self.stats):
             if rec.kind == "tick":
                 self.tick_times.append(rec.t)
                 continue
@@ -208,12 +330,17 @@ class RecordingReader:
                 key = (rec.source, rec.kind)
                 parser = parsers.get(key)
                 if parser is None:
+                    player = VerdictPlayer()
                     try:
-                        parser = parsers[key] = parser_for(rec.kind, rec.source)
+                        parser = parsers[key] = parser_for(rec.kind, rec.source, verifier=player)
                     except (KeyError, ValueError):
                         self.stats.reject(f"unknown_kind:{rec.kind}")
                         continue
+                    players[key] = player
+                player = players[key]
+                player.load(verdicts)
                 out = parser.feed(rec.data, rec.t)  # type: ignore[attr-defined]
+                player.done(parser.stats)  # type: ignore[attr-defined]
             for s in out:
                 self.stats.samples += 1
                 yield s

@@ -16,11 +16,15 @@ Two pieces that belong together because replay must take exactly the path live d
   queued samples stamped ``t <= T`` (later ones wait for the next tick, so a pipeline
   never sees a sample from its future) and steps the engine. Parsers with a
   ``poll(t)`` (NMEA: an epoch held past its hold time) are polled at every tick, so
-  that too is replayed exactly.
+  that too is replayed exactly. When MAVLink signing is verified (``verifier``), each
+  MAVLink chunk is recorded after it was parsed, in one write with a ``verdicts`` record
+  listing the frames the verifier rejected in it (only when it rejected any), in a
+  format-version-2 file (:mod:`drivers.recording`).
 
 :func:`replay_recording` feeds a recording through a fresh :class:`Intake` in file order,
 which reproduces the live estimates exactly: same bytes, same parsers, same ticks, same
-order of pushes. (Replaying with :func:`onboard.engine.run` and the tick times alone is
+order of pushes, and the same frames rejected on signing grounds (the recorded verdicts,
+:class:`drivers.mavlink_signing.VerdictPlayer`; the replay needs no key). (Replaying with :func:`onboard.engine.run` and the tick times alone is
 exact only when no sample arrives after a tick that its time stamp precedes: an NMEA fix
 stamped at its first sentence but completed by a later one, or a chunk stamped just
 before a tick and processed just after it, would land one tick earlier.)
@@ -41,9 +45,18 @@ from typing import Any, Callable, Iterable, Sequence
 import msgspec
 
 from drivers.base import ReadStats, StreamParser
-from drivers.mavlink_signing import SignatureVerifier
-from drivers.protocols import parser_for
-from drivers.recording import RawRecord, RecordingWriter, read_records
+from drivers.mavlink_signing import SignatureVerifier, VerdictLog, VerdictPlayer
+from drivers.protocols import UnknownProtocol, parser_for
+from drivers.recording import (
+    VERDICTS_KIND,
+    VERDICTS_VERSION,
+    RawRecord,
+    RecordingWriter,
+    Verdicts,
+    encode_verdicts,
+    read_records,
+    with_verdicts,
+)
 from onboard.config import Config
 from onboard.engine import Engine
 from onboard.messages import EstimateRecord, Sample
@@ -69,12 +82,17 @@ class Recorder:
         meta: JSON-ready metadata written as the first record of every file.
         clock: receive-time clock (s), used for the flush interval.
         fsync: make flushed data durable (off only in tests of throughput).
+        version: format version of the files (:mod:`drivers.recording`): 2 when MAVLink
+            signatures are verified (``verdicts`` records), else 1, which older readers
+            read too. :meth:`write` moves to a version-2 file by itself (a new part) if
+            given ``verdicts`` with a lower version.
     """
 
     def __init__(self, directory: str | Path, *, flush_interval_s: float = 0.5,
                  rotate_mb: float = 64.0, max_total_mb: float = 2048.0,
                  meta: dict[str, Any] | None = None,
-                 clock: Callable[[], float] = time.monotonic, fsync: bool = True) -> None:
+                 clock: Callable[[], float] = time.monotonic, fsync: bool = True,
+                 version: int = 1) -> None:
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.flush_interval_s = max(0.0, flush_interval_s)
@@ -83,6 +101,7 @@ class Recorder:
         self.meta = dict(meta or {})
         self.clock = clock
         self.fsync = fsync
+        self.version = version
         self.run_id = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime()) + "-" + os.urandom(2).hex()
         """Names this service start: UTC start time and a random suffix."""
         self.part = 0
@@ -108,7 +127,7 @@ class Recorder:
         while path.exists():  # two starts within one second
             n += 1
             path = self.directory / f"onboard-{self.run_id}-{self.part:04d}.{n}{SUFFIX}"
-        self._writer = RecordingWriter(path, fsync=self.fsync)
+        self._writer = RecordingWriter(path, fsync=self.fsync, version=self.version)
         self.files.append(path)
         meta = dict(self.meta, format=META_FORMAT, part=self.part, run=self.run_id,
                     wall_time=time.time(), clock=self.clock())
@@ -119,23 +138,28 @@ class Recorder:
         self._dirty = True
         self._enforce_cap()
 
-    def write(self, rec: RawRecord) -> None:
-        """Append one record; flush when the interval is due; rotate when the file is full.
+    def write(self, rec: RawRecord, *more: RawRecord) -> None:
+        """Append one record (and ``more``, in the same write: never split by a flush or
+        a rotation); flush when the interval is due; rotate when the file is full.
 
         A disk error (full, read-only) is counted in ``write_errors`` and logged once per
         file; it never reaches the caller.
         """
+        if (more and self.version < VERDICTS_VERSION
+                and any(r.kind == VERDICTS_KIND for r in more)):
+            self.version = VERDICTS_VERSION
+            self.rotate()
         w = self._writer
         if w is None:
             return
         try:
-            w.write(rec)
+            w.write(rec, *more)
         except OSError as err:
             self.write_errors += 1
             if self.write_errors == 1:
                 log.error("recorder: cannot write %s: %s", w.path, err)
             return
-        self.records += 1
+        self.records += 1 + len(more)
         self._dirty = True
         if w.bytes_written >= self.rotate_bytes:
             self.rotate()
@@ -235,6 +259,9 @@ class SourceState:
     samples: int = 0
     t_last: float | None = None
     parser_errors: int = 0
+    verdicts: VerdictLog | VerdictPlayer | None = None
+    """The parser's verifier when signing is verified live (a log of its rejections, for
+    the recording) or when replaying (the recorded rejections)."""
 
 
 @dataclass
@@ -258,23 +285,42 @@ class Intake:
 
     verifier: SignatureVerifier | None = None
     """Set (before the sources are added) when MAVLink signing is required: every MAVLink
-    input then rejects unsigned, forged and replayed frames (docs/security.md)."""
+    input then rejects unsigned, forged and replayed frames (docs/security.md), and the
+    rejections are recorded with the chunks."""
+
+    replay: bool = False
+    """A replay: MAVLink inputs reject the frames whose recorded verdicts say so
+    (:func:`replay_recording` passes them to :meth:`chunk`)."""
 
     def add_source(self, name: str, kind: str) -> SourceState:
         """Register an input named ``name`` speaking protocol ``kind``."""
         st = self.sources.get(name)
         if st is None or st.kind != kind:
-            st = self.sources[name] = SourceState(kind, parser_for(kind, name, verifier=self.verifier))
+            v: VerdictLog | VerdictPlayer | None = None
+            if kind == "mavlink":
+                if self.replay:
+                    v = VerdictPlayer()
+                elif self.verifier is not None:
+                    v = VerdictLog(self.verifier)
+            st = self.sources[name] = SourceState(kind, parser_for(kind, name, verifier=v),
+                                                  verdicts=v)
         return st
 
-    def chunk(self, name: str, kind: str, data: bytes, t_rx: float) -> int:
+    def chunk(self, name: str, kind: str, data: bytes, t_rx: float,
+              verdicts: Verdicts | None = None) -> int:
         """Record, parse and queue one raw chunk received at ``t_rx`` (s) on input
-        ``name``; return the number of samples queued. Never raises on bad bytes."""
-        if self.recorder is not None:
-            self.recorder.write(RawRecord(t=t_rx, source=name, kind=kind, data=bytes(data)))
+        ``name``; return the number of samples queued. Never raises on bad bytes.
+
+        ``verdicts``: in a replay, the chunk's recorded signature verdicts."""
         st = self.sources.get(name)
         if st is None or st.kind != kind:
             st = self.add_source(name, kind)
+        rec = self.recorder
+        vlog = st.verdicts if type(st.verdicts) is VerdictLog else None
+        if rec is not None and vlog is None:
+            rec.write(RawRecord(t=t_rx, source=name, kind=kind, data=bytes(data)))
+        elif type(st.verdicts) is VerdictPlayer:
+            st.verdicts.load(verdicts)
         st.chunks += 1
         st.bytes += len(data)
         st.t_last = t_rx
@@ -284,6 +330,21 @@ class Intake:
             st.parser_errors += 1
             st.parser.stats.reject("parser_error")
             log.exception("parser for %s failed on a %d-byte chunk", name, len(data))
+            samples = None
+        finally:
+            if vlog is not None:
+                # Signing verified: the chunk, then its verdicts, in one write.
+                v = vlog.take(data)
+                if rec is not None:
+                    raw = RawRecord(t=t_rx, source=name, kind=kind, data=bytes(data))
+                    if v is None:
+                        rec.write(raw)
+                    else:
+                        rec.write(raw, RawRecord(t=t_rx, source=name, kind=VERDICTS_KIND,
+                                                 data=encode_verdicts(v)))
+            elif type(st.verdicts) is VerdictPlayer:
+                st.verdicts.done(st.parser.stats)
+        if samples is None:
             return 0
         return self._queue(name, st, samples, t_rx)
 
@@ -418,11 +479,11 @@ def replay_recording(paths: str | Path | Iterable[str | Path], engine: Engine,
     else:
         files = [Path(p) for p in paths]
     qs = queue_size if queue_size is not None else engine.cfg.service.queue_size
-    intake = Intake(engine, queue_size=qs)
+    intake = Intake(engine, queue_size=qs, replay=True)
     result = ReplayResult()
     first = True
     for f in files:
-        for rec in read_records(f, result.stats):
+        for rec, verdicts in with_verdicts(read_records(f, result.stats), result.stats):
             result.records += 1
             kind = rec.kind
             if kind == "tick":
@@ -439,7 +500,10 @@ def replay_recording(paths: str | Path | Iterable[str | Path], engine: Engine,
                 if isinstance(meta.get("queue_size"), int) and queue_size is None:
                     intake.queue_size = meta["queue_size"]
             else:
-                intake.chunk(rec.source, kind, rec.data, rec.t)
+                try:
+                    intake.chunk(rec.source, kind, rec.data, rec.t, verdicts)
+                except UnknownProtocol:  # a newer kind this reader does not know
+                    result.stats.reject(f"unknown_kind:{kind}")
             first = False if kind != "meta" else first
     result.rejected = intake.parse_rejections()
     result.dropped = dict(intake.dropped)

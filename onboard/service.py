@@ -230,7 +230,8 @@ class Service:
                 self.recorder = Recorder(self.recorder_dir, flush_interval_s=svc.recorder.flush_interval_s,
                                          rotate_mb=svc.recorder.rotate_mb,
                                          max_total_mb=svc.recorder.max_total_mb, meta=meta,
-                                         clock=self.clock.now)
+                                         clock=self.clock.now,
+                                         version=2 if self.intake.verifier is not None else 1)
                 self.intake.recorder = self.recorder
             except OSError as err:
                 self.event(f"recorder disabled: cannot write {self.recorder_dir}: {err.strerror}")

@@ -349,6 +349,272 @@ def test_signed_udp_input_into_the_service_counts_every_rejection_and_survives_a
     assert svc2.intake.parse_rejections() == {"parse:autopilot:sig_replay": 10}
 
 
+# --------------------------------------------------------------------------- exact replay
+
+def _strip_verdicts(files, out_dir: Path) -> list[Path]:
+    """Copies of a recording without its ``verdicts`` records (what a replay that ignored
+    them would see)."""
+    from drivers.recording import RecordingWriter, read_records
+
+    out_dir.mkdir()
+    copies = []
+    for f in files:
+        c = out_dir / f.name
+        with RecordingWriter(c, fsync=False, version=2) as w:
+            for r in read_records(f):
+                if r.kind != "verdicts":
+                    w.write(r)
+        copies.append(c)
+    return copies
+
+
+class _SignedLink:
+    """MAVLink from one autopilot (system 1): signed with KEY; also unsigned, forged
+    (OTHER_KEY) and replayed frames, each carrying a different position, velocity or
+    heading than the genuine ones, so accepting any of them would change the estimates."""
+
+    def __init__(self) -> None:
+        self.out = _Frames()
+        self.mav = mavlink2.MAVLink(self.out, srcSystem=1, srcComponent=1)
+        self.mav.signing.secret_key = KEY
+        self.mav.signing.timestamp = signing_timestamp(time.time())
+        self.mav.signing.sign_outgoing = True
+        self.bad_out = _Frames()
+        self.unsigned = mavlink2.MAVLink(self.bad_out, srcSystem=1, srcComponent=1)
+        self.forger = mavlink2.MAVLink(self.bad_out, srcSystem=1, srcComponent=1)
+        self.forger.signing.secret_key = OTHER_KEY
+        self.forger.signing.timestamp = signing_timestamp(time.time()) + 10**9
+        self.forger.signing.sign_outgoing = True
+        self.sent: list[bytes] = []  # genuine GPS frames, for replays
+
+    def _one(self, mav, msg) -> bytes:
+        out = self.out if mav is self.mav else self.bad_out
+        mav.send(msg)
+        return out.frames.pop()
+
+    @staticmethod
+    def _gps(t: float, north: float) -> object:
+        lat = int((59.9 + north / 111_320.0) * 1e7)
+        return mavlink2.MAVLink_gps_raw_int_message(int(t * 1e6), 3, lat, int(10.7e7), 0,
+                                                    80, 120, 150, 9000, 12)
+
+    def datagrams(self, t: float, k: int) -> list[bytes]:
+        """The datagrams due at ``t`` (s), ``k``-th step of a 50 Hz grid."""
+        ms = int(t * 1000)
+        north = 1.5 * t
+        good = [self._one(self.mav, mavlink2.MAVLink_scaled_imu_message(
+            ms, 0, 10, -1000, 0, 0, 20, 0, 0, 0))]
+        if k % 50 == 0:
+            good.append(self._one(self.mav, mavlink2.MAVLink_heartbeat_message(
+                11, 3, 0, 0, mavlink2.MAV_STATE_ACTIVE, 3)))
+        if k % 5 == 0:
+            good.append(self._one(self.mav, mavlink2.MAVLink_attitude_message(
+                ms, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0)))
+            good.append(self._one(self.mav, mavlink2.MAVLink_servo_output_raw_message(
+                ms * 1000, 0, 1600, 1500, 1700, 1500, 1500, 1500, 1500, 1500)))
+        if k % 10 == 0:
+            g = self._one(self.mav, self._gps(t, north))
+            self.sent.append(g)
+            good.append(g)
+            good.append(self._one(self.mav, mavlink2.MAVLink_global_position_int_message(
+                ms, int((59.9 + north / 111_320.0) * 1e7), int(10.7e7), 0, 0, 150, 0, 0, 100)))
+        dgrams = [b"".join(good)]
+        if k % 10 == 3:  # unsigned: a fix 300 m off, alone in its datagram
+            dgrams.append(self._one(self.unsigned, self._gps(t, north + 300.0)))
+        if k % 10 == 6:  # forged: wrong velocity and heading, between two genuine frames
+            forged = self._one(self.forger, mavlink2.MAVLink_global_position_int_message(
+                ms, int((59.9 + (north - 200.0) / 111_320.0) * 1e7), int(10.7e7), 0, 0,
+                -400, 300, 0, 27000))
+            dgrams[0] = good[0] + forged + b"".join(good[1:])
+        if k % 25 == 12 and len(self.sent) > 3:  # a genuine fix captured 1 s ago, again
+            dgrams.append(self.sent[-3] + self.sent[-2])
+        return dgrams
+
+
+def _signed_recording_config(tmp_path: Path, key_file: Path, port: int):
+    return from_dict({
+        "vehicle": {"id": "secboat", "class": "rudder-boat", "system_id": 3},
+        "engine": {"rate_hz": 10.0},
+        "inputs": {"rudder": {"source": "servo", "channel": 1, "half_range_us": 500,
+                              "full_scale": 0.5236},
+                   "throttle": {"source": "servo", "channel": 3, "half_range_us": 500}},
+        "service": {"sources": [{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}",
+                                 "name": "autopilot"}],
+                    "zenoh": {"enabled": False},
+                    "recorder": {"directory": str(tmp_path / "rec"), "flush_interval_s": 0.2},
+                    "mavlink": {"enabled": False, "signing_key_file": str(key_file),
+                                "require_signing": True}}})
+
+
+def test_replay_of_a_signed_service_recording_is_exact_with_the_same_rejections(tmp_path):
+    """The service live with require_signing, fed signed frames plus unsigned, forged and
+    replayed ones over UDP; the replay of its recording (no key needed) gives exactly the
+    live ticks' records and the same rejection counts; ``onboard replay DIR`` reads it."""
+    import msgspec
+
+    from drivers.recording import VERSIONS, RecordingReader, read_records
+    from onboard.engine import Engine
+    from onboard.recorder import replay_recording
+    from onboard.service import Service
+
+    key_file = tmp_path / "mavlink.key"
+    key_file.write_bytes(KEY.hex().encode())
+    key_file.chmod(0o600)
+    port = free_udp_port()
+    cfg = _signed_recording_config(tmp_path, key_file, port)
+    enc = msgspec.json.Encoder()
+    live: list[tuple[float, list[bytes]]] = []
+    link = _SignedLink()
+
+    async def main():
+        svc = Service(cfg, state_dir=tmp_path / "state",
+                      on_tick=lambda t, recs: live.append((t, [enc.encode(r) for r in recs])))
+        await svc.start()
+        udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            t0 = time.monotonic()
+            k = 0
+            while k < 150:  # 3 s at 50 Hz
+                delay = t0 + k / 50.0 - time.monotonic()
+                if delay > 0:
+                    await asyncio.sleep(delay)
+                for d in link.datagrams(k / 50.0, k):
+                    udp.sendto(d, ("127.0.0.1", port))
+                k += 1
+            await asyncio.sleep(0.5)
+        finally:
+            udp.close()
+        svc.request_stop()
+        await svc.shutdown()
+        return svc
+
+    svc = asyncio.run(asyncio.wait_for(main(), 60.0))
+    live_rej = svc.intake.parse_rejections()
+    assert {"parse:autopilot:unsigned", "parse:autopilot:signature",
+            "parse:autopilot:sig_replay"} <= set(live_rej)
+    assert live_rej["parse:autopilot:unsigned"] >= 10
+    assert live_rej["parse:autopilot:signature"] >= 10
+    assert live_rej["parse:autopilot:sig_replay"] >= 8
+    files = svc.recorder.files
+    assert len(files) == 1 and VERSIONS[files[0].read_bytes()[:8]] == 2
+    kinds = [r.kind for r in read_records(files[0])]
+    assert kinds.count("verdicts") >= 20 and kinds.count("tick") == len(live) > 20
+
+    # the replay: exactly the live records, the same rejections, no key
+    key_file.unlink()
+    replayed: list[tuple[float, list[bytes]]] = []
+    res = replay_recording(files, Engine(cfg),
+                           lambda t, recs: replayed.append((t, [enc.encode(r) for r in recs])))
+    assert not res.stats.rejected  # an intact recording
+    assert res.ticks == len(live)
+    assert replayed == live
+    assert res.rejected == live_rej
+    n_values = sum(len(msgspec.json.decode(b)["values"]) for _, recs in live for b in recs)
+    assert n_values > 100
+
+    # the test has teeth: without the verdicts the rejected frames change the estimates
+    blind: list[tuple[float, list[bytes]]] = []
+    res2 = replay_recording(_strip_verdicts(files, tmp_path / "blind"), Engine(cfg),
+                            lambda t, recs: blind.append((t, [enc.encode(r) for r in recs])))
+    assert blind != live
+    assert not any(k.endswith(("unsigned", "signature", "sig_replay")) for k in res2.rejected)
+
+    # the recording as a log (RecordingReader) drops the same frames
+    reader = RecordingReader(files[0])
+    n_samples = sum(1 for _ in reader)
+    assert n_samples == sum(st.samples for st in svc.intake.sources.values())
+    for reason in ("unsigned", "signature", "sig_replay"):
+        assert reader.stats.rejected[reason] == live_rej[f"parse:autopilot:{reason}"]
+
+    # onboard replay DIR, in a child process, without the key
+    out = tmp_path / "out"
+    proc = subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-m", "onboard", "replay",
+                           str(tmp_path / "rec"), "--out", str(out), "--no-plot"],
+                          cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["format"] == "recording" and summary["ticks"] == len(live)
+    assert summary["rows"] == len(live)
+    for k, n in live_rej.items():
+        assert summary["read"]["rejected"][k] == n
+
+
+def test_verdicts_follow_frames_split_across_chunks_and_many_frames_per_chunk(tmp_path):
+    """A byte stream (serial/TCP: frames cut anywhere, several per chunk) through an Intake
+    with a verifier and a recorder; the replay rejects the same frames for the same
+    reasons, stale and future ones included, and produces the same samples."""
+    import random
+
+    from drivers.recording import RecordingReader, read_records
+    from onboard.config import Config
+    from onboard.engine import Engine
+    from onboard.recorder import Intake, Recorder, replay_recording
+
+    now = signing_timestamp(time.time())
+    first = frames(3)
+    stream = b"".join(first + frames(2, None) + frames(2, OTHER_KEY) + frames(3)
+                      + frames(2, ts=now - NEW_STREAM_MAX_AGE - 200_000, link_id=2)
+                      + frames(2, ts=now + 3600 * 100_000, link_id=3)
+                      + first[:2] + frames(2, None, v1=True) + frames(4, compid=5))
+    rng = random.Random(7)
+    cuts = sorted(rng.sample(range(1, len(stream)), 40))
+    chunks = [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)])]
+
+    class _Sink:
+        def __init__(self):
+            self.samples = []
+            self.cfg = Config()
+
+        def push(self, s, now=None):
+            self.samples.append(s)
+
+        def tick(self, t):
+            return []
+
+    live = _Sink()
+    rec = Recorder(tmp_path / "rec", fsync=False, version=2)
+    intake = Intake(live, recorder=rec, verifier=SignatureVerifier(KEY, max_future_s=600.0))
+    for i, c in enumerate(chunks):
+        intake.chunk("ap", "mavlink", c, float(i))
+        intake.tick(float(i) + 0.5)
+    rec.close()
+    live_rej = intake.parse_rejections()
+    assert {k.split(":")[-1] for k in live_rej} == {
+        "unsigned", "signature", "sig_replay", "sig_stale", "sig_future"}
+    assert [r.kind for r in read_records(rec.files[0])].count("verdicts") >= 5
+
+    again = _Sink()
+    res = replay_recording(rec.files, again, lambda t, r: None, queue_size=4096)  # type: ignore[arg-type]
+    assert res.rejected == live_rej
+    assert again.samples == live.samples and len(live.samples) == 10
+    r = RecordingReader(rec.files[0])
+    assert list(r) == live.samples
+
+
+def test_recording_versions_old_files_still_read_and_unknown_newer_ones_refused(tmp_path):
+    from drivers.base import UnreadableLog
+    from drivers.logs import sniff
+    from drivers.recording import RawRecord, read_records
+    from onboard.recorder import Recorder
+
+    r1 = Recorder(tmp_path / "a", fsync=False)  # no signing: version 1, as before
+    r1.write(RawRecord(t=1.0, source="ap", kind="mavlink", data=b"x"))
+    r1.close()
+    assert r1.files[0].read_bytes()[:8] == b"ONBREC01"
+    # verdicts given to a version-1 recorder move it to a new, version-2 part
+    r2 = Recorder(tmp_path / "b", fsync=False)
+    r2.write(RawRecord(t=1.0, source="ap", kind="mavlink", data=b"x"),
+             RawRecord(t=1.0, source="ap", kind="verdicts", data=b"\x93\x00\x00\x90"))
+    r2.close()
+    assert [f.read_bytes()[:8] for f in r2.files] == [b"ONBREC01", b"ONBREC02"]
+    assert [r.kind for r in read_records(r2.files[1])] == ["meta", "mavlink", "verdicts"]
+    assert sniff(r2.files[1]) == "recording"
+    future = tmp_path / "future.onbrec"
+    future.write_bytes(b"ONBREC03" + r2.files[1].read_bytes()[8:])
+    with pytest.raises(UnreadableLog, match="newer than this reader"):
+        list(read_records(future))
+
+
 # --------------------------------------------------------------------------- Zenoh
 
 ZENOH_DIR = REPO / "config" / "zenoh"
