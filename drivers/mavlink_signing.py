@@ -147,7 +147,7 @@ class VerdictLog:
     the next chunk.
     """
 
-    __slots__ = ("verifier", "checks", "rejected")
+    __slots__ = ("checks", "rejected", "verifier")
 
     def __init__(self, verifier: SignatureVerifier) -> None:
         self.verifier = verifier
@@ -162,7 +162,7 @@ class VerdictLog:
         self.checks += 1
         return reason
 
-    def take(self, chunk: bytes) -> "Verdicts | None":
+    def take(self, chunk: bytes) -> Verdicts | None:
         """The verdicts of the chunk ``chunk`` just parsed (None: nothing rejected)."""
         from drivers.recording import Verdicts
 
@@ -191,7 +191,7 @@ class VerdictPlayer:
         self.expected: int | None = None
         self.rejected: dict[int, tuple[str, int]] | None = None
 
-    def load(self, verdicts: "Verdicts | None") -> None:
+    def load(self, verdicts: Verdicts | None) -> None:
         self.checks = 0
         if verdicts is None:
             self.expected = self.rejected = None
@@ -210,7 +210,7 @@ class VerdictPlayer:
             return None
         return r[0] if r[1] == _frame_crc(buf, crc_end) else "verdict_mismatch"
 
-    def done(self, stats: "ReadStats") -> None:
+    def done(self, stats: ReadStats) -> None:
         """After the chunk: count ``verdict_mismatch`` in ``stats`` if it held a different
         number of frames than live."""
         if self.expected is not None and self.checks != self.expected:

@@ -319,7 +319,7 @@ class Intake:
         vlog = st.verdicts if type(st.verdicts) is VerdictLog else None
         if rec is not None and vlog is None:
             rec.write(RawRecord(t=t_rx, source=name, kind=kind, data=bytes(data)))
-        elif type(st.verdicts) is VerdictPlayer:
+        if type(st.verdicts) is VerdictPlayer:
             st.verdicts.load(verdicts)
         st.chunks += 1
         st.bytes += len(data)

@@ -547,7 +547,6 @@ def test_verdicts_follow_frames_split_across_chunks_and_many_frames_per_chunk(tm
 
     from drivers.recording import RecordingReader, read_records
     from onboard.config import Config
-    from onboard.engine import Engine
     from onboard.recorder import Intake, Recorder, replay_recording
 
     now = signing_timestamp(time.time())
@@ -589,6 +588,49 @@ def test_verdicts_follow_frames_split_across_chunks_and_many_frames_per_chunk(tm
     assert again.samples == live.samples and len(live.samples) == 10
     r = RecordingReader(rec.files[0])
     assert list(r) == live.samples
+
+
+def test_verdicts_that_no_longer_match_reject_rather_than_accept_and_orphans_are_counted():
+    """A damaged recording: verdicts bound to another chunk are ignored and counted; a
+    recorded rejection whose frame differs in the replay rejects it as
+    ``verdict_mismatch`` (never accepts it); a different number of frames is counted."""
+    import zlib
+
+    from drivers.base import ReadStats
+    from drivers.mavlink_signing import VerdictLog, VerdictPlayer
+    from drivers.recording import RawRecord, Verdicts, encode_verdicts, with_verdicts
+
+    bad, good = frames(1, None)[0], frames(1)[0]
+    chunk = bad + good
+    vlog = VerdictLog(SignatureVerifier(KEY))
+    p = MavlinkParser(verifier=vlog)
+    assert attitudes(p.feed(chunk, 0.0)) == 1
+    v = vlog.take(chunk)
+    assert v == Verdicts(zlib.crc32(chunk), 2, [(0, "unsigned", bad[-2] | bad[-1] << 8)])
+    assert vlog.take(b"") is None  # the next chunk starts clean
+
+    player = VerdictPlayer()
+    q = MavlinkParser(verifier=player)
+    player.load(v)
+    assert attitudes(q.feed(chunk, 0.0)) == 1 and q.stats.rejected == {"unsigned": 1}
+    player.done(q.stats)
+    # replay out of step (say, the bytes before were lost): `good` alone at index 0, where
+    # the recording has a rejected frame with another CRC: rejected, not accepted; and one
+    # frame checked where the recording has two: counted too
+    player.load(v)
+    assert attitudes(q.feed(frames(1)[0], 1.0)) == 0
+    player.done(q.stats)
+    assert q.stats.rejected["verdict_mismatch"] == 2
+
+    stats = ReadStats()
+    recs = [RawRecord(0.0, "ap", "mavlink", chunk),
+            RawRecord(0.0, "ap", "verdicts", encode_verdicts(v)),
+            RawRecord(1.0, "ap", "mavlink", good),
+            RawRecord(1.0, "ap", "verdicts", encode_verdicts(v)),  # not its chunk's CRC
+            RawRecord(2.0, "ap", "verdicts", b"\xc1")]
+    paired = list(with_verdicts(recs, stats))
+    assert paired == [(recs[0], v), (recs[2], None)]
+    assert stats.rejected == {"verdicts_orphan": 2}
 
 
 def test_recording_versions_old_files_still_read_and_unknown_newer_ones_refused(tmp_path):
