@@ -633,6 +633,60 @@ def test_verdicts_that_no_longer_match_reject_rather_than_accept_and_orphans_are
     assert stats.rejected == {"verdicts_orphan": 2}
 
 
+def test_damaged_verdicts_never_stop_a_replay(tmp_path):
+    """Records dropped, verdicts moved, verdict payloads mutated (with a valid frame CRC,
+    so they reach the decoder): replay and RecordingReader count, never raise."""
+    import random
+    import zlib
+
+    from drivers.recording import (
+        VERDICTS_KIND,
+        RawRecord,
+        RecordingReader,
+        RecordingWriter,
+        Verdicts,
+        decode_verdicts,
+        encode_verdicts,
+    )
+    from onboard.config import Config
+    from onboard.engine import Engine
+    from onboard.recorder import replay_recording
+
+    rng = random.Random(11)
+    base = frames(4) + frames(2, None) + frames(2, OTHER_KEY)
+    for n in range(60):
+        recs = []
+        for i in range(rng.randint(1, 8)):
+            chunk = b"".join(rng.sample(base, rng.randint(1, 4)))
+            cut = rng.randrange(len(chunk) + 1)
+            chunk = chunk[:cut] if rng.random() < 0.2 else chunk
+            t = float(i)
+            recs.append(RawRecord(t, "ap", "mavlink", chunk))
+            if rng.random() < 0.7:
+                v = Verdicts(zlib.crc32(chunk) if rng.random() < 0.8 else rng.randrange(2**32),
+                             rng.randint(-1, 5),
+                             [(rng.randint(-1, 5), rng.choice(("unsigned", "signature", "")),
+                               rng.randrange(2**16)) for _ in range(rng.randint(0, 3))])
+                data = encode_verdicts(v)
+                if rng.random() < 0.2:
+                    data = bytes(b ^ (1 << rng.randrange(8)) if rng.random() < 0.2 else b
+                                 for b in data)
+                recs.append(RawRecord(t if rng.random() < 0.9 else t + 1, "ap", VERDICTS_KIND, data))
+            recs.append(RawRecord(t + 0.5, "engine", "tick", b""))
+        if rng.random() < 0.3:
+            rng.shuffle(recs)
+        p = tmp_path / f"r{n}.onbrec"
+        with RecordingWriter(p, fsync=False, version=2) as w:
+            for r in recs:
+                w.write(r)
+        replay_recording(p, Engine(Config()), lambda t, r: None)
+        list(RecordingReader(p))
+    import msgspec
+
+    with pytest.raises(msgspec.DecodeError):  # the error with_verdicts catches
+        decode_verdicts(b"\xc1")
+
+
 def test_recording_versions_old_files_still_read_and_unknown_newer_ones_refused(tmp_path):
     from drivers.base import UnreadableLog
     from drivers.logs import sniff
