@@ -58,7 +58,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import msgspec
 import numpy as np
@@ -70,6 +70,9 @@ from onboard.pipelines.geo import wrap_pi
 from onboard.pipelines.hgo import GainDesign, IncreasingGain, current_hgo_gain
 from onboard.pipelines.rls import RecursiveLeastSquares
 from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel, kind_for_class
+
+GRAVITY = 9.81
+"""m/s^2, for the net-weight prior (``CurrentConfig.net_weight_std``)."""
 
 GAIN_DIR = Path(__file__).resolve().parent.parent.parent / "config" / "gains"
 """Precomputed LMI gains for the bundled configs (``onboard design-gain``)."""
@@ -89,7 +92,18 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     model_rel_std: float = 0.2
     """Prior one-sigma of configured coefficients, relative (plus ``theta_std_floor``)."""
     theta_std: float = 1.0
-    """Prior one-sigma of unconfigured coefficients (mode (b))."""
+    """Prior one-sigma of unconfigured coefficients (mode (b)), except the net-weight ones."""
+    net_weight_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.02
+    """Prior one-sigma of the net weight ``(W - B) / W`` of the vehicle (fraction of its
+    weight), for the unconfigured surge and sway net-weight coefficients (``sin(theta)``,
+    ``cos(theta)sin(phi)``: ``+-(W - B) / (m - X_idot)``, vehicle_models.
+    NET_WEIGHT_REGRESSORS; not the heave constant ``cos(theta)cos(phi)``, which keeps
+    ``theta_std``): their prior one-sigma is ``g * net_weight_std`` (m/s^2), an upper
+    bound on every DOF since its mass term is at least ``m``. 0.02: an underwater vehicle
+    is trimmed within a few percent of neutral (the SITL REMUS, Prestero 2001: 7 N positive
+    on 299 N, 2.3 %; the BlueROV2 of algorithms.md §5.4: 0.66 N, 0.6 %). Without it
+    (``theta_std``, 1 m/s^2 ~ 10 %) a steady roll makes the sway term an unknown side force
+    that trades against a cross-track current (docs/current.md, "Net-weight prior")."""
     theta_std_floor: float = 0.02
     forgetting: float = 0.9995
     """Forgetting of the coefficient covariance per tick (0.9995 at 10 Hz: 200 s memory),
@@ -246,12 +260,16 @@ class CurrentPipeline:
         self.configured = configured
         base = self.model.default_thetas()
         self.thetas = (self.model.thetas_from_mapping(cfg.model, base) if cfg.model else base)
-        # coefficient prior: configured terms tight, the others loose
+        # coefficient prior: configured terms tight, the others loose, except the net-weight
+        # terms, whose scale is physics (net_weight_std)
         prior_sd: list[np.ndarray] = []
+        sd_nw = GRAVITY * cfg.net_weight_std
         for ch, th in zip(self.model.channels, self.thetas):
             given = cfg.model.get(ch, {})
+            nw = self.model.net_weight_terms[ch]
             sd = np.array([cfg.model_rel_std * abs(v) + cfg.theta_std_floor if k in given
-                           else cfg.theta_std for k, v in zip(self.model.terms[ch], th)])
+                           else sd_nw if k in nw else cfg.theta_std
+                           for k, v in zip(self.model.terms[ch], th)])
             prior_sd.append(sd)
         self._sizes = [len(self.model.terms[c]) for c in self.model.dofs]
         self._prior_dof = [c not in cfg.model for c in self.model.dofs]
@@ -271,6 +289,12 @@ class CurrentPipeline:
         if self.n_theta:
             p_diag += list(np.concatenate(prior_sd[:nd]) ** 2)
         self.P = np.diag(p_diag)
+        # prior trace of each DOF's coefficients (the mask is lifted below a quarter of it);
+        # the generic prior's variances (a reset without finite coefficients)
+        self._tr_theta0 = [float(np.sum(sd ** 2)) for sd in prior_sd[:nd]]
+        self._theta_var_generic = np.concatenate([
+            [sd_nw ** 2 if k in self.model.net_weight_terms[c] else cfg.theta_std ** 2
+             for k in self.model.terms[c]] for c in self.model.dofs])
         self._tr_theta_max = float(np.sum(p_diag[2 * nd:])) if self.n_theta else 0.0
         self.yaw_rls = None
         if "yaw" in self.model.aux:
@@ -672,7 +696,7 @@ class CurrentPipeline:
                 P[o:, o:] = self.P[o:, o:]
             else:
                 self.x[o:] = np.concatenate(self.model.default_thetas()[:nd])
-                P[o:, o:] = np.eye(self.n_theta) * self.cfg.theta_std ** 2
+                P[o:, o:] = np.diag(self._theta_var_generic)
         self.P = P
         self._unpack_thetas()
         if self._law is not None:
@@ -705,7 +729,7 @@ class CurrentPipeline:
         var = self.P.diagonal()[o:].tolist()
         o = 0
         for i, k in enumerate(self._sizes):
-            if self._masked[i] and sum(var[o:o + k]) < 0.25 * k * self.cfg.theta_std ** 2:
+            if self._masked[i] and sum(var[o:o + k]) < 0.25 * self._tr_theta0[i]:
                 self._masked[i] = False
             o += k
 

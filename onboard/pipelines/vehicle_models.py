@@ -65,6 +65,17 @@ def _dot(a: Sequence[float], b: Sequence[float]) -> float:
     return sum(map(operator.mul, a, b))
 
 
+NET_WEIGHT_REGRESSORS = ("sin(theta)", "cos(theta)sin(phi)")
+"""Regressors whose coefficient is the net weight ``W - B`` over the DOF's mass term
+(Kim et al. eq. (3)-(4)) and nothing else: physics with a known scale, their prior is
+``CurrentConfig.net_weight_std``. Not the heave term ``cos(theta)cos(phi)`` (eq. (5), the
+ROV's heave): near level flight it is ~1, the heave equation's constant, whose coefficient
+carries every steady vertical force a generic (mode (b)) model lacks, not only the net
+weight (vertical thrust against a push or a tether, lift at a trim angle); a net-weight
+prior on it made the unidentified spheroid and BlueROV2 runs worse (docs/current.md,
+"Net-weight prior")."""
+
+
 class RegressionModel:
     """A per-DOF linear-in-parameters model.
 
@@ -73,6 +84,8 @@ class RegressionModel:
         dofs: the state channels, in order (``"surge", "sway"[, "heave"]``).
         aux: channels identified but not part of the velocity state (``"yaw"``).
         terms: regressor names per channel.
+        net_weight_terms: per channel, the terms among ``terms`` whose coefficient is the
+            net weight over the DOF's mass term (:data:`NET_WEIGHT_REGRESSORS`).
     """
 
     KINDS = ("torpedo", "surface-rudder", "surface-twin", "rov")
@@ -117,6 +130,11 @@ class RegressionModel:
             }
         self.channels: tuple[str, ...] = self.dofs + self.aux
         self.nd = len(self.dofs)
+        # the attitude-borne net-weight terms: coefficient +-(W - B) / (m - X_idot) of the
+        # DOF, bounded by g |W - B| / W because the DOF's mass term is at least m
+        self.net_weight_terms: dict[str, tuple[str, ...]] = {
+            ch: tuple(k for k in self.terms[ch] if k in NET_WEIGHT_REGRESSORS)
+            for ch in self.channels}
 
     # ------------------------------------------------------------------ regressors
     def regressor_rows(self, nu: Sequence[float], x: ModelInputs,
