@@ -124,7 +124,8 @@ class RecordingWriter:
     the process. Rotation and size caps are the recorder's job (onboard.recorder); this
     class writes one file. ``version`` is the format version of a new file; appending to
     an existing file keeps its version, and raises ValueError when it is older than
-    ``version`` (its readers would not know the newer records).
+    ``version`` (its readers would not know the newer records); so does writing a
+    ``verdicts`` record into a version-1 file.
     """
 
     def __init__(self, path: str | Path, *, fsync: bool = True, version: int = 1) -> None:
@@ -135,10 +136,10 @@ class RecordingWriter:
         if not new:
             with open(self.path, "rb") as f:
                 have = file_version(f.read(len(magic)))
-            if have is None or have < version:
+            if have is not None and have < version:
                 raise ValueError(f"{self.path}: cannot append format version {version} "
                                  f"records to a file of version {have}")
-            version = have
+            version = have or version
         self.version = version
         self._f: BinaryIO = open(self.path, "ab", buffering=1 << 16)
         self._fsync = fsync
@@ -154,8 +155,8 @@ class RecordingWriter:
         frame = encode_frame(rec)
         if more:
             frame += b"".join(encode_frame(r) for r in more)
-        if more and self.version < VERDICTS_VERSION and any(
-                r.kind == VERDICTS_KIND for r in more):
+        if self.version < VERDICTS_VERSION and (
+                rec.kind == VERDICTS_KIND or any(r.kind == VERDICTS_KIND for r in more)):
             raise ValueError(f"{self.path}: verdicts records need format version "
                              f"{VERDICTS_VERSION}, the file has {self.version}")
         self._f.write(frame)

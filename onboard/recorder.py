@@ -145,8 +145,8 @@ class Recorder:
         A disk error (full, read-only) is counted in ``write_errors`` and logged once per
         file; it never reaches the caller.
         """
-        if (more and self.version < VERDICTS_VERSION
-                and any(r.kind == VERDICTS_KIND for r in more)):
+        if self.version < VERDICTS_VERSION and (
+                rec.kind == VERDICTS_KIND or any(r.kind == VERDICTS_KIND for r in more)):
             self.version = VERDICTS_VERSION
             self.rotate()
         w = self._writer
