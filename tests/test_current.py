@@ -247,3 +247,30 @@ def test_bad_model_config_names_the_key():
     from onboard.config import ConfigError
     with pytest.raises(ConfigError, match="pipelines.current.model.surge: unknown term"):
         make("rudder-boat", model={"surge": {"bogus": 1.0}})
+
+
+def test_net_weight_prior_is_physically_scaled_and_configurable():
+    """Unconfigured surge/sway net-weight coefficients start at g * net_weight_std (a trimmed
+    vehicle is within a few percent of neutral), not at theta_std; the heave constant
+    cos(theta)cos(phi) keeps theta_std (docs/current.md, "Net-weight prior")."""
+    from onboard.config import ConfigError
+
+    def prior_sd(p, ch, term):
+        o = 2 * p.nd + sum(len(p.model.terms[c]) for c in p.model.dofs[:p.model.dofs.index(ch)])
+        i = o + p.model.terms[ch].index(term)
+        return math.sqrt(p.P[i, i])
+
+    p = make("torpedo-auv")
+    assert prior_sd(p, "surge", "sin(theta)") == pytest.approx(9.81 * 0.02)
+    assert prior_sd(p, "sway", "cos(theta)sin(phi)") == pytest.approx(9.81 * 0.02)
+    assert prior_sd(p, "heave", "cos(theta)cos(phi)") == pytest.approx(1.0)
+    assert prior_sd(p, "sway", "uv") == pytest.approx(1.0)
+    p = make("torpedo-auv", net_weight_std=0.005)
+    assert prior_sd(p, "sway", "cos(theta)sin(phi)") == pytest.approx(9.81 * 0.005)
+    # a configured coefficient keeps its relative prior
+    p = make("torpedo-auv", model={"sway": {"cos(theta)sin(phi)": -0.1}})
+    assert prior_sd(p, "sway", "cos(theta)sin(phi)") == pytest.approx(0.2 * 0.1 + 0.02)
+    p = make("bluerov2")
+    assert prior_sd(p, "heave", "cos(theta)cos(phi)") == pytest.approx(1.0)
+    with pytest.raises(ConfigError, match="net_weight_std"):
+        make("torpedo-auv", net_weight_std=0.0)

@@ -27,9 +27,9 @@ def test_glider_log_runs_and_reports_its_ignorance(shared_data):
     e = r["est"][m] - r["truth"][m]
     rms = np.sqrt(np.mean(e ** 2, axis=0))
     cover = np.mean(np.abs(e) <= 2 * r["std"][m], axis=0)
-    # measured: rms N/E 0.675 / 0.071 m/s against the DVL water-profile current (whose own
+    # measured: rms N/E 0.678 / 0.074 m/s against the DVL water-profile current (whose own
     # rms is 0.265 / 0.059: estimating zero would do better in north); 2-sigma coverage
-    # 0.20 / 0.99; correlation 0.28 / 0.11. The north estimate carries a +0.5 m/s bias from
+    # 0.20 / 1.00; correlation 0.27 / 0.09. The north estimate carries a +0.5 m/s bias from
     # a surge model identified on a buoyancy-driven vehicle the regression cannot describe;
     # its sigma is NOT honest there (docs/current.md, "Real data"). Bounds pin the figures.
     assert rms[0] < 1.0

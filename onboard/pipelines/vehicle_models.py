@@ -14,7 +14,8 @@ would soak up the water current, which the current pipeline estimates as a separ
 slowly varying state. The current is thus never absorbed into the parameters. The
 gravity/buoyancy terms are nearly constant when the attitude is (a steady propeller-torque
 roll makes ``cos(theta)sin(phi)`` one): with an unknown net weight (mode (b)) they trade
-against the current on a straight line until a turn separates them (docs/current.md).
+against the current on a straight line until a turn separates them, within the net-weight
+prior of the surge and sway terms (:data:`NET_WEIGHT_REGRESSORS`, docs/current.md).
 
 Symbols: ``u, v, w`` (m/s) through-water velocity, ``p, q, r`` (rad/s) body rates,
 ``phi, theta`` (rad) roll and pitch, ``n`` normalized propulsion (propeller rpm divided by
