@@ -316,11 +316,13 @@ class Intake:
         if st is None or st.kind != kind:
             st = self.add_source(name, kind)
         rec = self.recorder
+        raw = RawRecord(t=t_rx, source=name, kind=kind, data=bytes(data)) if rec else None
         vlog = st.verdicts if type(st.verdicts) is VerdictLog else None
-        if rec is not None and vlog is None:
-            rec.write(RawRecord(t=t_rx, source=name, kind=kind, data=bytes(data)))
-        if type(st.verdicts) is VerdictPlayer:
-            st.verdicts.load(verdicts)
+        player = st.verdicts if type(st.verdicts) is VerdictPlayer else None
+        if raw is not None and vlog is None:
+            rec.write(raw)  # before parsing: nothing a parser does can lose it
+        if player is not None:
+            player.load(verdicts)
         st.chunks += 1
         st.bytes += len(data)
         st.t_last = t_rx
@@ -330,23 +332,17 @@ class Intake:
             st.parser_errors += 1
             st.parser.stats.reject("parser_error")
             log.exception("parser for %s failed on a %d-byte chunk", name, len(data))
-            samples = None
-        finally:
-            if vlog is not None:
-                # Signing verified: the chunk, then its verdicts, in one write.
-                v = vlog.take(data)
-                if rec is not None:
-                    raw = RawRecord(t=t_rx, source=name, kind=kind, data=bytes(data))
-                    if v is None:
-                        rec.write(raw)
-                    else:
-                        rec.write(raw, RawRecord(t=t_rx, source=name, kind=VERDICTS_KIND,
-                                                 data=encode_verdicts(v)))
-            elif type(st.verdicts) is VerdictPlayer:
-                st.verdicts.done(st.parser.stats)
-        if samples is None:
-            return 0
-        return self._queue(name, st, samples, t_rx)
+            samples = []
+        if vlog is not None:  # signing verified: the chunk and its verdicts in one write
+            v = vlog.take(data)
+            if raw is not None and v is None:
+                rec.write(raw)
+            elif raw is not None:
+                rec.write(raw, RawRecord(t=t_rx, source=name, kind=VERDICTS_KIND,
+                                         data=encode_verdicts(v)))
+        elif player is not None:
+            player.done(st.parser.stats)
+        return self._queue(name, st, samples, t_rx) if samples else 0
 
     def _queue(self, name: str, st: SourceState, samples: list[Sample], t_rx: float) -> int:
         queued = 0
