@@ -57,6 +57,9 @@ NEW_STREAM_MAX_AGE = 6_000_000
 SIGNATURE_LEN = 13
 """link id (1) + timestamp (6) + signature (6)."""
 
+REASONS = frozenset(("unsigned", "signature", "sig_replay", "sig_stale", "sig_future"))
+"""Every reason :meth:`SignatureVerifier.check` gives."""
+
 StreamKey = tuple[int, int, int]
 """(link id, system id, component id)."""
 
@@ -181,23 +184,31 @@ class VerdictPlayer:
     was accepted live). A frame whose CRC-16 is not the recorded one, or a chunk whose
     number of frames differs from the recorded one, means the replay no longer follows the
     recording (a damaged recording): the frame is rejected as ``verdict_mismatch`` rather
-    than accepted, and :meth:`done` counts a chunk mismatch the same way.
+    than accepted, and :meth:`done` counts a chunk mismatch the same way. Verdicts that no
+    live verifier writes are damaged too: a reason not in :data:`REASONS` rejects its frame
+    as ``verdict_mismatch``; an index listed twice or outside the recorded number of frames
+    is a chunk mismatch.
     """
 
-    __slots__ = ("checks", "expected", "rejected")
+    __slots__ = ("checks", "expected", "rejected", "bad")
 
     def __init__(self) -> None:
         self.checks = 0
         self.expected: int | None = None
         self.rejected: dict[int, tuple[str, int]] | None = None
+        self.bad = False
 
     def load(self, verdicts: Verdicts | None) -> None:
         self.checks = 0
         if verdicts is None:
             self.expected = self.rejected = None
+            self.bad = False
         else:
-            self.expected = verdicts.checks
-            self.rejected = {int(i): (reason, int(crc)) for i, reason, crc in verdicts.rejected}
+            self.expected = n = verdicts.checks
+            self.rejected = {int(i): (reason if reason in REASONS else "verdict_mismatch",
+                                      int(crc)) for i, reason, crc in verdicts.rejected}
+            self.bad = (len(self.rejected) != len(verdicts.rejected)
+                        or any(not 0 <= i < n for i in self.rejected))
 
     def check(self, buf: bytes | bytearray, start: int, crc_end: int, sysid: int,
               compid: int, inc_flags: int) -> str | None:
@@ -212,8 +223,9 @@ class VerdictPlayer:
 
     def done(self, stats: ReadStats) -> None:
         """After the chunk: count ``verdict_mismatch`` in ``stats`` if it held a different
-        number of frames than live."""
-        if self.expected is not None and self.checks != self.expected:
+        number of frames than live, or its verdicts were inconsistent (see the class)."""
+        if self.expected is not None and (self.checks != self.expected or self.bad):
             stats.reject("verdict_mismatch")
         self.expected = self.rejected = None
+        self.bad = False
         self.checks = 0

@@ -250,14 +250,15 @@ def with_verdicts(records: Iterable[RawRecord],
     (None: every frame of it was accepted live, or signing was not verified).
 
     A chunk and its verdicts are written in one write, so the verdicts follow their chunk
-    directly; one that does not (its chunk lost to damage, or not its chunk's CRC) is
-    counted ``verdicts_orphan`` and ignored.
+    directly; one that does not (its chunk lost to damage, or not its chunk's CRC, or
+    the record before it not a MAVLink chunk) is counted ``verdicts_orphan`` and ignored.
     """
     held: RawRecord | None = None
     for rec in records:
         if rec.kind == VERDICTS_KIND:
             v = None
-            if held is not None and held.source == rec.source and held.t == rec.t:
+            if (held is not None and held.kind == "mavlink" and held.source == rec.source
+                    and held.t == rec.t):
                 try:
                     v = decode_verdicts(rec.data)
                 except (msgspec.DecodeError, UnicodeDecodeError):

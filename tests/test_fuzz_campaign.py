@@ -48,6 +48,7 @@ UNGUARDED = {
     "tlog": lambda d, r: fz._run_tlog(d, "c.tlog"),
     "dataflash": lambda d, r: fz._run_dataflash(d, "c.bin"),
     "recording": lambda d, r: fz._run_recording(d[0], d[1], "c.onbrec"),
+    "recording_v2": lambda d, r: fz._run_recording_v2(d[0], d[1], "c2.onbrec"),
     "text": lambda d, r: fz._run_text(d, "c.txt"),
 }
 """The targets without the known-bug guard: the campaign classifies every exception itself."""

@@ -753,6 +753,327 @@ def test_recording_clean_frames_all_read(seed):
     assert list(read_records(p, stats)) == recs and not stats.rejected
 
 
+# ---- the recording, format version 2: verdicts records after MAVLink chunks
+
+SIGN_KEY = bytes(range(32))
+SIGN_WALL = 1420070400 + 3.0e8
+"""A fixed wall clock (POSIX s) for the live verifier of the corpus: deterministic verdicts."""
+SIGNING_REASONS = ("unsigned", "signature", "sig_replay", "sig_stale", "sig_future")
+HOSTILE_REASONS = ("", "evil", "UNSIGNED", "parse:ap:x", "x" * 300)
+"""Reasons no verifier gives; a verdicts record naming one is damaged."""
+
+
+def signed_frame(msgid: int, payload: bytes, ts: int, *, key: bytes = SIGN_KEY, link: int = 0,
+                 seq: int = 0, sysid: int = 1, compid: int = 1) -> bytes:
+    """A signed MAVLink 2 frame (drivers.mavlink_signing module docstring)."""
+    import hashlib
+
+    payload = payload[:255]
+    hdr = bytes([0xFD, len(payload), 0x01, 0, seq & 255, sysid, compid,
+                 msgid & 255, (msgid >> 8) & 255, (msgid >> 16) & 255])
+    crc = x25crc(hdr[1:] + payload, CRC_EXTRA.get(msgid, 0))
+    body = hdr + payload + bytes([crc & 255, crc >> 8, link]) + ts.to_bytes(6, "little")
+    return body + hashlib.sha256(key + body).digest()[:6]
+
+
+def _signed_stream(rng: random.Random) -> bytes:
+    """MAVLink bytes as a signing autopilot sends them, with what a verifier rejects:
+    unsigned, forged (other key), replayed, stale, far-future frames; some garbage."""
+    from drivers.mavlink_signing import NEW_STREAM_MAX_AGE, signing_timestamp
+
+    now = signing_timestamp(SIGN_WALL)
+    ts = now - rng.randint(0, 1000)
+    parts = []
+    for i in range(rng.randint(1, 8)):
+        mid = rng.choice(DECODED_IDS)
+        payload = _payload(rng, mid)
+        r = rng.random()
+        ts += rng.randint(1, 500)
+        if r < 0.55:
+            parts.append(signed_frame(mid, payload, ts, seq=i, link=rng.choice((0, 0, 1))))
+        elif r < 0.65:
+            parts.append(mav_frame(mid, payload, v2=rng.random() < 0.7, seq=i))
+        elif r < 0.72:
+            parts.append(signed_frame(mid, payload, ts, key=bytes(32), seq=i))
+        elif r < 0.8:
+            parts.append(signed_frame(mid, payload, ts - rng.randint(500, 10_000), seq=i))
+        elif r < 0.86:
+            parts.append(signed_frame(mid, payload, now - NEW_STREAM_MAX_AGE - 1000, seq=i,
+                                      link=rng.randint(2, 200)))
+        elif r < 0.9:
+            parts.append(signed_frame(mid, payload, now + 10**9, seq=i, link=rng.randint(2, 200)))
+        elif r < 0.95:
+            parts.append(mutate(signed_frame(mid, payload, ts, seq=i), rng, 1))
+        else:
+            parts.append(rng.randbytes(rng.randint(1, 30)))
+    return b"".join(parts)
+
+
+def _hostile_verdicts(v, chunk: bytes, rng: random.Random):
+    """``v`` (a chunk's live verdicts, or None) damaged in one way a bad disk, a bug or
+    an attacker could: wrong count, indices out of range or repeated, wrong chunk or frame
+    CRC, a reason no verifier gives; or a made-up record for a chunk without verdicts."""
+    import zlib
+
+    from drivers.recording import Verdicts
+
+    if v is None:
+        v = Verdicts(zlib.crc32(chunk), rng.randint(0, 4), [])
+    rej = [tuple(e) for e in v.rejected]
+    r = rng.randrange(8)
+    checks, crc = v.checks, v.chunk_crc
+    if r == 0:
+        checks = rng.choice((checks + rng.randint(1, 3), max(0, checks - rng.randint(1, 3)),
+                             -1, 2**63 - 1))
+    elif r == 1:
+        rej.append((rng.choice((checks, checks + 5, -1, 2**63 - 1, -2**63)),
+                    rng.choice(SIGNING_REASONS), rng.randrange(2**16)))
+    elif r == 2:
+        crc = rng.randrange(2**32)
+    elif r == 3 and rej:
+        k = rng.randrange(len(rej))
+        rej[k] = (rej[k][0], rng.choice(HOSTILE_REASONS), rej[k][2])
+    elif r == 3:
+        rej.append((0, rng.choice(HOSTILE_REASONS), rng.randrange(2**16)))
+    elif r == 4 and rej:
+        k = rng.randrange(len(rej))
+        rej[k] = (rej[k][0], rej[k][1], rej[k][2] ^ (1 << rng.randrange(16)))
+    elif r == 5 and rej:
+        rej.append(rej[rng.randrange(len(rej))])  # the same frame twice
+    elif r == 6:
+        rej = [(i, rng.choice(SIGNING_REASONS + HOSTILE_REASONS[:2]), rng.randrange(2**16))
+               for i in range(rng.randint(0, 4))]
+    else:
+        rej.reverse()
+    return Verdicts(crc, checks, rej)
+
+
+def recording_v2_input(rng: random.Random) -> tuple[bytes, int]:
+    """(file bytes, number of intact frames) of a version-2 recording as a service that
+    verifies MAVLink signatures writes it: MAVLink chunks parsed live by a verifying parser
+    (:class:`drivers.mavlink_signing.VerdictLog`) and written with their ``verdicts`` by
+    :class:`drivers.recording.RecordingWriter` (one write), with NMEA, DVL, sample, tick and
+    meta records between; then verdicts damaged (:func:`_hostile_verdicts`), truncated,
+    orphaned, duplicated, put before their chunk or given another time or source, frames
+    damaged, and sometimes the file's bytes mutated."""
+    import zlib
+
+    from drivers.mavlink_signing import SignatureVerifier, VerdictLog
+    from drivers.protocols import encode_sample
+    from drivers.recording import (_HEAD, FRAME_MARK, VERDICTS_KIND, RawRecord,
+                                   RecordingWriter, Verdicts, encode_frame, encode_verdicts,
+                                   file_magic)
+    from onboard.messages import Imu
+
+    logs = {src: VerdictLog(SignatureVerifier(SIGN_KEY, wall=lambda: SIGN_WALL,
+                                              max_future_s=600.0)) for src in ("ap", "ap2")}
+    parsers = {src: MavlinkParser(verifier=logs[src]) for src in logs}
+    p = _TMP / "v2-writer.onbrec"
+    p.unlink(missing_ok=True)
+    groups: list[list[RawRecord]] = []
+    with RecordingWriter(p, fsync=False, version=2) as w:
+        w.write(RawRecord(0.0, "engine", "meta", b'{"format": 1}'))
+        stream = {src: _signed_stream(rng) for src in logs}
+        for i in range(rng.randint(1, 10)):
+            t = 1.0 + i * 0.1
+            kind = rng.choice(("mavlink", "mavlink", "mavlink", "nmea", "dvl-json", "sample",
+                               "tick"))
+            if kind == "mavlink":
+                src = rng.choice(("ap", "ap", "ap2"))
+                s = stream[src] or _signed_stream(rng)
+                cut = rng.randint(1, len(s))
+                chunk, stream[src] = s[:cut], s[cut:]
+                parsers[src].feed(chunk, t)
+                v = logs[src].take(chunk)  # as Intake.chunk does live
+                recs = [RawRecord(t, src, "mavlink", chunk)]
+                if v is not None:
+                    recs.append(RawRecord(t, src, VERDICTS_KIND, encode_verdicts(v)))
+                if rng.random() < 0.35:
+                    v2 = _hostile_verdicts(v, chunk, rng)
+                    rv = RawRecord(t, src, VERDICTS_KIND, encode_verdicts(v2))
+                    recs[1:] = [rv]
+                groups.append(recs)
+                w.write(*recs)
+                continue
+            if kind == "nmea":
+                rec = RawRecord(t, "gps", kind, nmea_input(rng))
+            elif kind == "dvl-json":
+                rec = RawRecord(t, "dvl", kind, dvl_input(rng))
+            elif kind == "sample":
+                rec = RawRecord(t, "sim", kind, encode_sample(
+                    Imu(t=t, source="sim", accel_x=0.0, accel_y=0.0, accel_z=-9.8,
+                        gyro_x=0.0, gyro_y=0.0, gyro_z=0.0)))
+            else:
+                rec = RawRecord(t + 0.05, "engine", "tick", b"")
+            groups.append([rec])
+            w.write(rec)
+    data = p.read_bytes()
+    if rng.random() < 0.6:
+        return data, len(groups) + 1  # as written (the writer's own bytes), meta included
+    # damage record by record
+    recs = [r for g in groups for r in g]
+    vs = [k for k, r in enumerate(recs) if r.kind == VERDICTS_KIND]
+    out = [RawRecord(0.0, "engine", "meta", b'{"format": 1}')]
+    for k, r in enumerate(recs):
+        if r.kind == VERDICTS_KIND:
+            m = rng.random()
+            if m < 0.15:
+                r = RawRecord(r.t, r.source, r.kind, r.data[:rng.randrange(len(r.data))])
+            elif m < 0.25:
+                r = RawRecord(r.t, r.source, r.kind, mutate(r.data, rng, 1))
+            elif m < 0.35:
+                out.append(r)  # duplicated
+            elif m < 0.45 and out:
+                out.insert(len(out) - 1, r)  # before its chunk
+                continue
+            elif m < 0.5:
+                continue  # lost
+            elif m < 0.6:
+                r = RawRecord(rng.choice((r.t + 1.0, -r.t, float("nan"))), r.source, r.kind, r.data)
+            elif m < 0.65:
+                r = RawRecord(r.t, rng.choice(("gps", "engine", "ap2" if r.source == "ap" else "ap")),
+                              r.kind, r.data)
+        elif vs and rng.random() < 0.1:
+            # an orphan: some chunk's verdicts after a record that is not that chunk
+            out.append(r)
+            r = recs[rng.choice(vs)]
+        elif r.kind != "mavlink" and rng.random() < 0.1:
+            # verdicts bound (time, source, CRC) to a record that is not a MAVLink chunk
+            out.append(r)
+            r = RawRecord(r.t, r.source, VERDICTS_KIND, encode_verdicts(Verdicts(
+                zlib.crc32(r.data), rng.randint(0, 2), [(0, "unsigned", 0)])))
+        out.append(r)
+    if rng.random() < 0.1:
+        rng.shuffle(out)
+    frames, intact = [file_magic(rng.choice((2, 2, 2, 1)))], 0
+    for r in out:
+        frame = encode_frame(r)
+        m = rng.random()
+        if m < 0.07:
+            frames.append(mutate(frame, rng, rng.randint(1, 3)))
+        elif m < 0.12:
+            payload = mutate(frame[_HEAD.size:], rng, rng.randint(1, 2))
+            frames.append(_HEAD.pack(FRAME_MARK, len(payload), zlib.crc32(payload)) + payload)
+        else:
+            frames.append(frame)
+            intact += 1
+    data = b"".join(frames)
+    if rng.random() < 0.15:
+        return mutate(data, rng, rng.randint(1, 4)), None
+    return data, intact
+
+
+class _SpyChecks:
+    """A verifier that accepts every frame and notes each one's CRC-16 per chunk: the
+    oracle of what a replay's :class:`VerdictPlayer` sees."""
+
+    def __init__(self) -> None:
+        self.crcs: list[int] = []
+
+    def check(self, buf, start, crc_end, sysid, compid, inc_flags):
+        self.crcs.append(buf[crc_end - 2] | (buf[crc_end - 1] << 8))
+        return None
+
+
+def verdicts_oracle(recs: list) -> tuple[Counter, Counter, int, int]:
+    """What a replay of ``recs`` (the intact records) must count: (signing rejections of
+    the verdicts that match their chunk, at most that plus the ones of damaged verdicts,
+    number of chunks with damaged verdicts, verdicts orphaned). Checks the pairing's own
+    accounting: every verdicts record is paired with the MAVLink chunk just before it or
+    counted ``verdicts_orphan``."""
+    from drivers.recording import VERDICTS_KIND, with_verdicts
+
+    exact, loose, bad, paired = Counter(), Counter(), 0, 0
+    spies: dict[str, tuple[MavlinkParser, _SpyChecks]] = {}
+    pstats = ReadStats()
+    for rec, v in with_verdicts(recs, pstats):
+        if v is not None:
+            paired += 1
+            assert rec.kind == "mavlink", ("verdicts paired with a non-MAVLink record", rec.kind)
+        if rec.kind != "mavlink":
+            continue
+        if rec.source not in spies:
+            spy = _SpyChecks()
+            spies[rec.source] = (MavlinkParser(verifier=spy), spy)
+        parser, spy = spies[rec.source]
+        spy.crcs = []
+        parser.feed(rec.data, rec.t)
+        if v is None:
+            continue
+        crcs = spy.crcs
+        idx = [int(i) for i, _, _ in v.rejected]
+        ok = (v.checks == len(crcs) and len(set(idx)) == len(idx)
+              and all(0 <= i < len(crcs) and crcs[i] == c and reason in SIGNING_REASONS
+                      for i, reason, c in v.rejected))
+        for i, reason, c in v.rejected:
+            (exact if ok else loose)[reason] += 1
+        bad += not ok
+    n_verdicts = sum(r.kind == VERDICTS_KIND for r in recs)
+    assert n_verdicts == paired + pstats.rejected["verdicts_orphan"], (n_verdicts, paired, pstats)
+    return exact, loose, bad, pstats.rejected["verdicts_orphan"]
+
+
+def _run_recording_v2(data: bytes, intact: int | None, name: str = "f2.onbrec") -> None:
+    """read_records, RecordingReader and replay_recording (an engine without pipelines:
+    the intake and the engine's sample checks, fast) never raise; every damaged verdicts
+    record is counted (orphan or ``verdict_mismatch``), matching ones give exactly the
+    recorded rejections, and no reason a verdicts record names other than a verifier's
+    reaches the counters."""
+    from drivers.recording import RecordingReader, read_records
+    from onboard.config import Config
+    from onboard.engine import Engine
+    from onboard.recorder import replay_recording
+
+    p = _TMP / name
+    p.write_bytes(data)
+    stats = ReadStats()
+    try:
+        recs = list(read_records(p, stats))
+    except UnreadableLog:
+        return
+    check_stats(stats)
+    if intact is not None:
+        assert len(recs) >= intact, (len(recs), intact, stats)
+    exact, loose, bad, orphans = verdicts_oracle(recs)
+
+    got = read_file_reader(RecordingReader, p, ordered=False)
+    assert got is not None
+    reader = got[0]
+    rej = reader.stats.rejected
+    for reason in SIGNING_REASONS:
+        # every frame a matching verdicts record rejects is rejected, under its reason;
+        # damaged verdicts never add more than they name
+        assert exact[reason] <= rej[reason] <= exact[reason] + loose[reason], (reason, rej, exact, loose)
+    assert rej["verdict_mismatch"] >= bad, (rej, bad)
+    if not bad:
+        assert "verdict_mismatch" not in rej, rej
+    assert not set(HOSTILE_REASONS) & set(rej), rej
+    assert rej["verdicts_orphan"] == orphans, (rej, orphans)
+
+    ticks: list[float] = []
+    res = replay_recording(p, Engine(Config(), []), lambda t, r: ticks.append(t))
+    check_stats(res.stats)
+    assert res.ticks == len(ticks)
+    by_reason: Counter[str] = Counter()
+    for key, n in res.rejected.items():
+        assert n > 0, (key, n)
+        by_reason[key.split(":", 2)[2]] += n
+    if len({(r.source, r.kind) for r in recs if r.kind != "verdicts"}) == len(
+            {r.source for r in recs if r.kind != "verdicts"}):
+        # one protocol per input name (as live): the replay rejects what the reader does
+        for reason in (*SIGNING_REASONS, "verdict_mismatch"):
+            assert by_reason[reason] == rej[reason], (reason, res.rejected, rej)
+    assert res.stats.rejected["verdicts_orphan"] == rej["verdicts_orphan"]
+    assert not set(HOSTILE_REASONS) & set(by_reason), res.rejected
+
+
+@FUZZ
+@given(seed=st.integers(0, 2**32 - 1))
+def test_recording_v2_verdicts_never_raise_and_are_counted(seed):
+    data, intact = recording_v2_input(random.Random(seed))
+    run_recording_v2(data, intact)
+
+
 # ---- text captures (sniffed)
 
 
@@ -812,6 +1133,7 @@ run_tlog = _guarded(_run_tlog)
 run_dataflash = _guarded(_run_dataflash)
 run_csv = _guarded(_run_csv)
 run_recording = _guarded(_run_recording)
+run_recording_v2 = _guarded(_run_recording_v2)
 run_text = _guarded(_run_text)
 
 
@@ -830,6 +1152,7 @@ TARGETS: dict[str, tuple[Callable[[random.Random], Any], Callable[[Any, random.R
     "dataflash": (lambda r: mutate(dataflash_bytes(), r, r.randint(1, 12)),
                   lambda d, r: run_dataflash(d, "c.bin")),
     "recording": (recording_input, lambda d, r: run_recording(d[0], d[1], "c.onbrec")),
+    "recording_v2": (recording_v2_input, lambda d, r: run_recording_v2(d[0], d[1], "c2.onbrec")),
     "text": (text_capture_input, lambda d, r: run_text(d, "c.txt")),
 }
 """name -> (make an input from an RNG, run the parser on it and check the properties);
@@ -931,3 +1254,81 @@ def test_mavlink_noise_spanning_intact_frames_does_not_swallow_them():
     noise = bytes([0xFE, len(frames[0]) + len(frames[1]) - 2, 0, 1, 1, 189])
     p = MavlinkParser()
     assert len(p.feed(noise + b"".join(frames), 1.0)) == 3
+
+
+def _signed_chunk_and_verdicts():
+    """A chunk of one accepted and one unsigned ATTITUDE frame and its live verdicts."""
+    from drivers.mavlink_signing import SignatureVerifier, VerdictLog
+    from drivers.mavlink_signing import signing_timestamp
+
+    good = signed_frame(30, bytes(28), signing_timestamp(SIGN_WALL))
+    bad = mav_frame(30, bytes(28))
+    vlog = VerdictLog(SignatureVerifier(SIGN_KEY, wall=lambda: SIGN_WALL))
+    chunk = good + bad
+    assert len(MavlinkParser(verifier=vlog).feed(chunk, 1.0)) == 1
+    v = vlog.take(chunk)
+    assert v is not None and v.checks == 2 and [r[:2] for r in v.rejected] == [(1, "unsigned")]
+    return chunk, v
+
+
+def _replay_player(chunk: bytes, v) -> ReadStats:
+    from drivers.mavlink_signing import VerdictPlayer
+
+    player = VerdictPlayer()
+    p = MavlinkParser(verifier=player)
+    player.load(v)
+    p.feed(chunk, 1.0)
+    player.done(p.stats)
+    return p.stats
+
+
+def test_verdicts_bound_to_a_record_that_is_not_a_mavlink_chunk_are_an_orphan(tmp_path):
+    """Finding 12: a verdicts record with the time, source and CRC of a tick (or NMEA, DVL,
+    sample) record was paired with it and then silently dropped by the reader and the
+    replay: neither used nor counted."""
+    import zlib
+
+    from drivers.recording import RawRecord, RecordingWriter, Verdicts, encode_verdicts
+    from onboard.config import Config
+    from onboard.engine import Engine
+    from onboard.recorder import replay_recording
+
+    from drivers.recording import RecordingReader
+
+    tick = RawRecord(1.0, "engine", "tick", b"")
+    p = tmp_path / "r.onbrec"
+    with RecordingWriter(p, fsync=False, version=2) as w:
+        w.write(tick, RawRecord(1.0, "engine", "verdicts",
+                                encode_verdicts(Verdicts(zlib.crc32(b""), 1, [(0, "unsigned", 0)]))))
+    r = RecordingReader(p)
+    assert list(r) == [] and r.stats.rejected == {"verdicts_orphan": 1}
+    res = replay_recording(p, Engine(Config(), []), lambda t, x: None)
+    assert res.ticks == 1 and res.stats.rejected == {"verdicts_orphan": 1}
+
+
+def test_verdicts_naming_a_reason_no_verifier_gives_reject_as_a_mismatch():
+    """Finding 13: the reason of a recorded rejection was counted as given: a damaged or
+    forged verdicts record put any name into the counters (``parse:<input>:<name>``,
+    an empty one included) instead of counting the damage."""
+    from drivers.recording import Verdicts
+
+    chunk, v = _signed_chunk_and_verdicts()
+    (i, _, crc), = v.rejected
+    for reason in ("", "evil", "x" * 300):
+        stats = _replay_player(chunk, Verdicts(v.chunk_crc, v.checks, [(i, reason, crc)]))
+        assert stats.rejected == {"verdict_mismatch": 1}  # still rejected, never accepted
+    assert _replay_player(chunk, v).rejected == {"unsigned": 1}
+
+
+def test_verdicts_with_an_index_out_of_range_or_listed_twice_are_a_mismatch():
+    """Finding 14: a recorded rejection whose index is outside the chunk's recorded number
+    of frames (negative, or >= checks), or the same frame listed twice, was silently
+    ignored when the chunk held the recorded number of frames."""
+    from drivers.recording import Verdicts
+
+    chunk, v = _signed_chunk_and_verdicts()
+    (i, reason, crc), = v.rejected
+    for extra in ((2, "unsigned", 0), (-1, "signature", 0), (2**63 - 1, "unsigned", crc),
+                  (i, reason, crc)):
+        stats = _replay_player(chunk, Verdicts(v.chunk_crc, v.checks, [(i, reason, crc), extra]))
+        assert stats.rejected == {"unsigned": 1, "verdict_mismatch": 1}, extra
