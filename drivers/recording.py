@@ -7,7 +7,8 @@ Layout: an 8-byte file magic ``ONBREC0<version>`` followed by frames::
 all little-endian. Frames are only ever appended. A crash can leave at most a torn last
 frame, which the reader detects (length or CRC) and counts as ``truncated``; a damaged
 frame in the middle is counted as ``crc`` and the reader resynchronizes on the next frame
-marker, so one bad sector never costs the rest of the file.
+marker, so one bad sector never costs the rest of the file. A record whose receive time
+is not finite (no clock gives one) is damaged too, counted as ``time``.
 
 A :class:`RawRecord` holds the bytes exactly as received on one input (``kind`` names the
 protocol: ``mavlink``, ``nmea``, ``dvl-json``, ``pd6``; ``sample`` is an already typed
@@ -33,6 +34,7 @@ frames that live rejected) bumps it, and is written only where it is needed.
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 import zlib
@@ -238,9 +240,12 @@ def read_records(path: str | Path, stats: ReadStats | None = None) -> Iterator[R
             stats.reject("decode")
             pos = end
             continue
+        pos = end
+        if not math.isfinite(rec.t):  # a service clock never gives it: damage
+            stats.reject("time")
+            continue
         stats.records += 1
         stats.by_type[rec.kind] += 1
-        pos = end
         yield rec
 
 
@@ -311,7 +316,7 @@ class RecordingReader:
 
     def __iter__(self):
         from drivers.mavlink_signing import VerdictPlayer
-        from drivers.protocols import parser_for
+        from drivers.protocols import _finite, parser_for
 
         parsers: dict[tuple[str, str], object] = {}
         players: dict[tuple[str, str], VerdictPlayer] = {}
@@ -327,6 +332,9 @@ class RecordingReader:
                     out = [decode_sample(rec.data)]
                 except (msgspec.DecodeError, UnicodeDecodeError):
                     self.stats.reject("sample_decode")
+                    continue
+                if not _finite(out[0]):  # as SampleParser: NaN or infinity is damage
+                    self.stats.reject("nan")
                     continue
             else:
                 key = (rec.source, rec.kind)

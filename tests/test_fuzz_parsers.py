@@ -5,8 +5,9 @@ stream (:class:`drivers.mavlink.MavlinkParser`), Water Linked DVL JSON
 (:class:`drivers.dvl_json.DvlJsonParser`), Teledyne PD6 (:class:`drivers.pd6.Pd6Parser`),
 CSV (:class:`drivers.csvlog.CsvReader`), tlog (:class:`drivers.tlog.TlogReader`), DataFlash
 (:class:`drivers.dataflash.DataflashReader`), the service's own recording
-(:func:`drivers.recording.read_records`, :class:`drivers.recording.RecordingReader`) and the
-sniffed text captures (:func:`drivers.textlog.open_text_log`).
+(:func:`drivers.recording.read_records`, :class:`drivers.recording.RecordingReader`; in format
+version 2 with signing ``verdicts`` records, also :func:`onboard.recorder.replay_recording`)
+and the sniffed text captures (:func:`drivers.textlog.open_text_log`).
 
 Inputs are valid records (from the project's own encoders) mutated by hypothesis: bytes
 flipped, cut, inserted, duplicated, fields replaced by hostile tokens (``nan``, ``inf``,
@@ -956,7 +957,7 @@ def recording_v2_input(rng: random.Random) -> tuple[bytes, int]:
             frames.append(_HEAD.pack(FRAME_MARK, len(payload), zlib.crc32(payload)) + payload)
         else:
             frames.append(frame)
-            intact += 1
+            intact += math.isfinite(r.t)  # a NaN receive time is damage (finding 16)
     data = b"".join(frames)
     if rng.random() < 0.15:
         return mutate(data, rng, rng.randint(1, 4)), None
@@ -1332,3 +1333,36 @@ def test_verdicts_with_an_index_out_of_range_or_listed_twice_are_a_mismatch():
                   (i, reason, crc)):
         stats = _replay_player(chunk, Verdicts(v.chunk_crc, v.checks, [(i, reason, crc), extra]))
         assert stats.rejected == {"unsigned": 1, "verdict_mismatch": 1}, extra
+
+
+def test_recording_reader_rejects_a_sample_record_with_non_finite_values(tmp_path):
+    """Finding 15: RecordingReader decodes ``sample`` records itself and passed a sample
+    with ``t = -inf`` (a mutated payload with a recomputed frame CRC), the case finding 10
+    fixed in SampleParser only (campaign ``recording``, input 95398)."""
+    from drivers.protocols import encode_sample
+    from drivers.recording import RawRecord, RecordingReader, encode_frame
+    from onboard.messages import Imu
+
+    bad = Imu(t=float("-inf"), source="sim", accel_x=0.0, accel_y=0.0, accel_z=-9.8,
+              gyro_x=0.0, gyro_y=0.0, gyro_z=0.0)
+    p = _recording(tmp_path, encode_frame(RawRecord(1.0, "", "sample", encode_sample(bad))))
+    r = RecordingReader(p)
+    assert list(r) == [] and r.stats.rejected == {"nan": 1}
+
+
+def test_a_record_with_a_non_finite_receive_time_is_a_counted_rejection(tmp_path):
+    """Finding 16: a CRC-valid record whose receive time decodes to NaN or infinity (a
+    mutated payload) was read as any other: its parser stamped every sample with that
+    time (a MAVLink PARAM_VALUE at ``t = nan``, campaign ``recording_v2``, input 77106)
+    and a ``tick`` at NaN went to the engine. No clock gives such a time: damage."""
+    from drivers.recording import RawRecord, RecordingReader, encode_frame, read_records
+
+    att = encode_frame(RawRecord(float("nan"), "ap", "mavlink", mav_frame(30, bytes(28))))
+    tick = encode_frame(RawRecord(float("inf"), "engine", "tick", b""))
+    ok = encode_frame(RawRecord(2.0, "ap", "mavlink", mav_frame(30, bytes(28))))
+    p = _recording(tmp_path, att, tick, ok)
+    stats = ReadStats()
+    assert [r.t for r in read_records(p, stats)] == [2.0]
+    assert stats.rejected == {"time": 2} and stats.records == 1
+    r = RecordingReader(p)
+    assert [s.t for s in r] == [2.0] and r.tick_times == []
