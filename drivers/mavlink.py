@@ -95,26 +95,40 @@ _REV_BYTE = [bytes((_REV[i],)) for i in range(256)]
 _REV16_LO = [_REV[i] << 8 for i in range(256)]
 
 
-def _valid_frame_inside(buf: bytes | bytearray, start: int, stop: int) -> bool:
+def _valid_frame_inside(buf: bytes | bytearray, start: int, stop: int) -> bool | None:
     """True if a complete, CRC-valid frame of a known id starts in ``buf[start:stop]``:
-    then the unknown-id "frame" spanning it is line noise, not a frame."""
+    then the unknown-id "frame" spanning it is line noise, not a frame. None when that
+    cannot be told yet: a start byte there whose header or frame has not fully arrived
+    (the caller waits for more bytes, so the answer does not depend on how the stream
+    was cut into chunks)."""
+    n = len(buf)
+    undecided = False
     for k in range(start, stop):
         b = buf[k]
-        if b == 0xFD and k + 10 <= len(buf):
+        if b == 0xFD:
+            if k + 10 > n:
+                undecided = True
+                continue
             plen, hdr = buf[k + 1], 10
             msgid = buf[k + 7] | (buf[k + 8] << 8) | (buf[k + 9] << 16)
-        elif b == 0xFE and k + 6 <= len(buf):
+        elif b == 0xFE:
+            if k + 6 > n:
+                undecided = True
+                continue
             plen, hdr = buf[k + 1], 6
             msgid = buf[k + 5]
         else:
             continue
         extra = CRC_EXTRA.get(msgid)
+        if extra is None:
+            continue
         ce = k + hdr + plen
-        if extra is None or ce + 2 > len(buf):
+        if ce + 2 > n:
+            undecided = True
             continue
         if x25crc(buf[k + 1:ce], extra) == (buf[ce] | (buf[ce + 1] << 8)):
             return True
-    return False
+    return None if undecided else False
 
 
 def x25crc(data: bytes, crc_extra: int | None = None) -> int:
@@ -656,7 +670,10 @@ class MavlinkParser:
                 # start byte in line noise cannot swallow the intact frames behind it.
                 if end >= n:
                     break
-                if buf[end] not in (0xFD, 0xFE) or _valid_frame_inside(buf, j + 1, end):
+                inside = _valid_frame_inside(buf, j + 1, end) if buf[end] in (0xFD, 0xFE) else True
+                if inside is None:
+                    break  # a frame inside it is still arriving: decide with its bytes
+                if inside:
                     stats.reject("garbage")
                     self._in_garbage = True
                     i = j + 1

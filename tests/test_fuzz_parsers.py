@@ -374,6 +374,21 @@ def _unknown_id_header(plen: int = 32) -> bytes:
     return bytes([0xFD, plen, 0, 0, 0, 1, 1, 0x11, 0x22, 0x33])
 
 
+def test_mavlink_noise_is_judged_the_same_whatever_the_chunking():
+    """Campaign finding 17 (inputs mavlink:54865 and :89765): line noise reading as a
+    51-byte unknown-id frame, with a PARAM_VALUE starting inside it. Cut so that the noise
+    was complete but the frame inside not yet, the parser took the noise as a frame and
+    lost the PARAM_VALUE; whole, it found the frame. It now waits for the inner frame's
+    bytes before deciding."""
+    data = bytes.fromhex(
+        "fd110000000101160000b6df175f45e89dc4b3ec513f6176f90b094cacfd33000001fff374567bc1"
+        "6c0fa41d382c04b931aea4e758975a21cb190345f97e82d884fa5aa517763279cba2cad8c1ae1c1a"
+        "f268fd190000020101160000fec5d78d8300aeb42181948379c5d154a798068a2956d745a202cafd"
+        "25000003ff01240000029ac9fd96f2d6b69c1b3d0729dc82a80ee9b4a7a6be4384ad431dc35e655c"
+        "692fca61d4eab3ab")
+    _run_mavlink(data, [92, 103])
+
+
 def test_mavlink_noise_with_a_start_byte_does_not_swallow_the_next_frame():
     good = mav_frame(30, bytes(28))  # ATTITUDE, all zeros: a valid sample
     p = MavlinkParser()
