@@ -80,11 +80,18 @@ def simulate_boat(duration: float = 600.0, current=(0.3, -0.2), seed: int = 0,
 
 
 def simulate_torpedo(duration: float = 600.0, current=(-0.6, 0.3, 0.02), seed: int = 0,
-                     tick: float = 0.1, leg_s: float = 100.0, water_track: bool = False):
-    """Torpedo AUV at constant depth, heading legs; DVL bottom track at 5 Hz."""
+                     tick: float = 0.1, leg_s: float = 100.0, water_track: bool = False,
+                     truth: dict = TORPEDO_TRUE, pitch: tuple[float, float] = (0.05, 0.05),
+                     roll: tuple[float, float] = (0.0, 0.0)):
+    """Torpedo AUV at constant depth, heading legs; DVL bottom track at 5 Hz.
+
+    ``pitch``, ``roll``: (amplitude rad, angular frequency rad/s) of an attitude
+    oscillation the stern plane does not cause (a depth-keeping autopilot on a wavy
+    profile); ``truth``: the model coefficients of the plant."""
     rng = np.random.default_rng(seed)
     m = RegressionModel("torpedo")
-    th = m.thetas_from_mapping(TORPEDO_TRUE)
+    th = m.thetas_from_mapping(truth)
+    (pa, wq), (ra, wp) = pitch, roll
     x = ModelInputs()
     x.n = 1.5 * 0.7  # 1500 rpm / rpm_scale 1000 ~ cruise
     nu = np.array([1.5, 0.0, 0.0])
@@ -102,8 +109,10 @@ def simulate_torpedo(duration: float = 600.0, current=(-0.6, 0.3, 0.02), seed: i
             err = math.remainder(ref - psi, 2 * math.pi)
             x.dr = float(np.clip(-0.5 * err + 0.3 * r, -0.3, 0.3))
             x.r = r
-            x.pitch = 0.05 * math.sin(0.05 * t)
-            x.q = 0.0025 * math.cos(0.05 * t)
+            x.pitch = pa * math.sin(wq * t)
+            x.q = pa * wq * math.cos(wq * t)
+            x.roll = ra * math.sin(wp * t)
+            x.p = ra * wp * math.cos(wp * t)
             phis = m.regressors(nu, x)
             acc = np.array([phis[i] @ th[i] for i in range(4)])
             nu = nu + h * acc[:3]
@@ -111,11 +120,11 @@ def simulate_torpedo(duration: float = 600.0, current=(-0.6, 0.3, 0.02), seed: i
             psi = psi + h * r
             t += h
         k += 1
-        R = current_mod._rot(0.0, x.pitch, psi)
+        R = current_mod._rot(x.roll, x.pitch, psi)
         samples.append(ActuatorCommand(t=t, propeller_rpm=x.n * 1000.0, rudder_rad=x.dr,
                                        stern_plane_rad=0.0))
-        samples.append(Attitude(t=t, roll_rad=0.0, pitch_rad=x.pitch, yaw_rad=wrap(psi),
-                                roll_rate_rps=0.0, pitch_rate_rps=x.q, yaw_rate_rps=r))
+        samples.append(Attitude(t=t, roll_rad=x.roll, pitch_rad=x.pitch, yaw_rad=wrap(psi),
+                                roll_rate_rps=x.p, pitch_rate_rps=x.q, yaw_rate_rps=r))
         if k % 2 == 0:
             if water_track:
                 z = nu + rng.normal(0, 0.01, 3)

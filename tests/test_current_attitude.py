@@ -11,11 +11,9 @@ import math
 
 import numpy as np
 
-from onboard.config import from_dict
-from onboard.messages import ActuatorCommand, Attitude, DvlPosition, DvlVelocity, Heading
+from onboard.messages import Attitude, DvlPosition, Heading
 from onboard.pipelines import current as current_mod
-from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel
-from tests.test_current import TORPEDO_TRUE, run, wrap
+from tests.test_current import TORPEDO_TRUE, make, run, simulate_torpedo
 
 # TORPEDO_TRUE with net buoyancy: 7 N up on a ~30 kg (surge) / ~65 kg (sway, heave)
 # mass term, as the REMUS plant (sitl/plants/torpedo_auv.py): -(W - B) / (m - X_udot) > 0,
@@ -24,60 +22,6 @@ BUOYANT_TRUE = {k: dict(v) for k, v in TORPEDO_TRUE.items()}
 BUOYANT_TRUE["surge"]["sin(theta)"] = 0.23
 BUOYANT_TRUE["sway"]["cos(theta)sin(phi)"] = -0.1
 BUOYANT_TRUE["heave"]["cos(theta)cos(phi)"] = -0.1
-
-
-def simulate_pitching_torpedo(duration: float, pitch_amp: float, roll_amp: float,
-                              current=(-0.6, 0.3, 0.02), seed: int = 0, tick: float = 0.1,
-                              leg_s: float = 100.0):
-    """tests/test_current.py's torpedo (heading legs, DVL bottom track at 5 Hz) with
-    ``BUOYANT_TRUE`` and a pitch (period 60 s) and roll (period 23 s) oscillation that the
-    stern plane does not cause (a depth-keeping autopilot on a wavy profile)."""
-    rng = np.random.default_rng(seed)
-    m = RegressionModel("torpedo")
-    th = m.thetas_from_mapping(BUOYANT_TRUE)
-    x = ModelInputs()
-    x.n = 1.5 * 0.7
-    nu = np.array([1.5, 0.0, 0.0])
-    psi, r = 0.0, 0.0
-    h = 0.01
-    n_sub = round(tick / h)
-    headings = [0.0, 2.0, -2.0, 1.0, 3.0, -1.0]
-    wq, wp = 2 * math.pi / 60.0, 2 * math.pi / 23.0
-    t = 0.0
-    k = 0
-    c = np.array(current, float)
-    while t < duration - 1e-9:
-        samples = []
-        for _ in range(n_sub):
-            ref = headings[int(t // leg_s) % len(headings)]
-            err = math.remainder(ref - psi, 2 * math.pi)
-            x.dr = float(np.clip(-0.5 * err + 0.3 * r, -0.3, 0.3))
-            x.r = r
-            x.pitch = pitch_amp * math.sin(wq * t)
-            x.q = pitch_amp * wq * math.cos(wq * t)
-            x.roll = roll_amp * math.sin(wp * t)
-            x.p = roll_amp * wp * math.cos(wp * t)
-            phis = m.regressors(nu, x)
-            acc = np.array([phis[i] @ th[i] for i in range(4)])
-            nu = nu + h * acc[:3]
-            r = r + h * acc[3]
-            psi = psi + h * r
-            t += h
-        k += 1
-        R = current_mod._rot(x.roll, x.pitch, psi)
-        samples.append(ActuatorCommand(t=t, propeller_rpm=x.n * 1000.0, rudder_rad=x.dr,
-                                       stern_plane_rad=0.0))
-        samples.append(Attitude(t=t, roll_rad=x.roll, pitch_rad=x.pitch, yaw_rad=wrap(psi),
-                                roll_rate_rps=x.p, pitch_rate_rps=x.q, yaw_rate_rps=r))
-        if k % 2 == 0:
-            z = nu + R.T @ c + rng.normal(0, 0.01, 3)
-            samples.append(DvlVelocity(t=t, vx=z[0], vy=z[1], vz=z[2], track="bottom"))
-        yield t, samples, c
-
-
-def make(vclass: str, **section):
-    cfg = from_dict({"vehicle": {"class": vclass}, "pipelines": {"current": section}})
-    return current_mod.create(cfg)
 
 
 def _att(t: float, roll: float, pitch: float, yaw: float = 0.3) -> Attitude:
@@ -137,7 +81,9 @@ def test_pitching_buoyant_torpedo_known_model():
     through the attitude. At zero attitude (the bug) the model is wrong by that and the
     current takes the blame."""
     pipe = make("torpedo-auv", model=BUOYANT_TRUE, identify=False)
-    rms, cover, _, _ = run(pipe, simulate_pitching_torpedo(300.0, 0.25, 0.1), after=100.0)
+    gen = simulate_torpedo(300.0, truth=BUOYANT_TRUE, pitch=(0.25, 2 * math.pi / 60.0),
+                           roll=(0.1, 2 * math.pi / 23.0))
+    rms, cover, _, _ = run(pipe, gen, after=100.0)
     # measured: rms N/E 0.004 / 0.004 m/s, coverage 1.00 / 1.00; at zero attitude (before
     # the fix) 0.058 / 0.126 m/s, coverage 0.90 / 0.76
     assert np.all(rms < 0.02)
