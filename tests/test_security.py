@@ -23,6 +23,7 @@ from onboard.messages import Attitude
 from onboard.publishers.mavlink_pub import MavlinkPublisher
 from onboard.signing import SigningState, load_signing_key
 from onboard.service_bench import free_udp_port
+from tests.test_mavlink_out import receive
 
 REPO = Path(__file__).resolve().parent.parent
 KEY = bytes(range(32))
@@ -253,20 +254,8 @@ def test_a_corrupt_timestamp_file_is_reported_and_signing_starts_from_the_clock(
 
 def _signed_timestamps(sock: socket.socket) -> list[int]:
     """Signing timestamps of the signed frames waiting on ``sock`` (checked with KEY)."""
-    mav = mavlink2.MAVLink(None)
-    mav.signing.secret_key = KEY
-    mav.signing.allow_unsigned_callback = lambda *a: False
-    out = []
-    sock.settimeout(0.3)
-    while True:
-        try:
-            data = sock.recv(65536)
-        except socket.timeout:
-            return out
-        for m in mav.parse_buffer(data) or []:
-            if m.get_type() != "BAD_DATA" and m._signed:
-                buf = m.get_msgbuf()
-                out.append(int.from_bytes(buf[-12:-6], "little"))
+    return [int.from_bytes(m.get_msgbuf()[-12:-6], "little")
+            for m in receive(sock, KEY) if m._signed]
 
 
 def test_mavlink_out_timestamps_continue_after_a_restart_with_the_wall_clock_back(tmp_path):
