@@ -39,6 +39,7 @@ import pytest
 from drivers.recording import read_records
 from onboard.messages import EstimateRecord, HealthRecord
 from onboard.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
+from tests.test_service import _config
 
 REPO = Path(__file__).resolve().parent.parent
 SPEED = 10.0
@@ -94,18 +95,6 @@ def _median(xs) -> float:
 # --------------------------------------------------------------------------- Zenoh router
 
 
-def _boat_config(**service):
-    from onboard.config import from_dict
-
-    data = {"vehicle": {"id": "faultboat", "class": "rudder-boat", "system_id": 3},
-            "engine": {"rate_hz": 10.0},
-            "inputs": {"rudder": {"source": "servo", "channel": 1, "half_range_us": 500,
-                                  "full_scale": 0.5236},
-                       "throttle": {"source": "servo", "channel": 3, "half_range_us": 500}},
-            "service": service}
-    return from_dict(data)
-
-
 def test_zenoh_router_restarted_the_service_keeps_ticking_and_delivers_again(tmp_path):
     """Close the router under a running service, reopen it on the same port: no tick is
     missed, the shore subscriber gets estimates again, the loss and the return are
@@ -125,9 +114,9 @@ def test_zenoh_router_restarted_the_service_keeps_ticking_and_delivers_again(tmp
         with lock:
             got.append((time.monotonic(), str(sample.key_expr), sample.payload.to_bytes()))
 
-    sub = shore.declare_subscriber("onboard/faultboat/**", on)
+    sub = shore.declare_subscriber("onboard/testboat/**", on)
     port, nmea_port = free_udp_port(), free_udp_port()
-    cfg = _boat_config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}",
+    cfg = _config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}",
                                  "name": "autopilot"},
                                 {"kind": "nmea", "url": f"udp:127.0.0.1:{nmea_port}",
                                  "name": "gps"}],
@@ -166,7 +155,7 @@ def test_zenoh_router_restarted_the_service_keeps_ticking_and_delivers_again(tmp
             await feed(time.monotonic() + 0.2)
             with lock:
                 back = [k_ for t, k_, _ in got if t > marks["reopened"]]
-            if "onboard/faultboat/est/nav" in back and any(
+            if "onboard/testboat/est/nav" in back and any(
                     "connected again" in e for t, key, p in got if t > marks["reopened"]
                     and key.endswith("/health")
                     for e in msgspec.json.decode(p, type=HealthRecord).events):
