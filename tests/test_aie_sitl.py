@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import pytest
 
-pytest.importorskip("sitl.runner")
-
 from onboard.reports.aie_validation import convergence_step, run_sitl, sitl_metrics  # noqa
 
 

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-cv = pytest.importorskip("onboard.reports.current_validation")
-pytest.importorskip("sitl.runner")
+import onboard.reports.current_validation as cv
 
 
 def _mode_a(scenario: str, config: str, duration: float, **extra):

@@ -14,7 +14,7 @@ from onboard.pipelines.hgo import GainDesign, chain_matrices
 
 
 def test_lmi_solution_is_verified_and_well_scaled():
-    pytest.importorskip("cvxpy")
+    pytest.importorskip("cvxpy", reason="the LMI design needs the 'design' extra (cvxpy)")
     from onboard.design_gain import solve_lmi
     sol = solve_lmi(2, 3)
     A, C = chain_matrices(2, 3)
@@ -28,7 +28,7 @@ def test_lmi_solution_is_verified_and_well_scaled():
 
 
 def test_command_writes_a_gain_the_pipeline_loads(tmp_path):
-    pytest.importorskip("cvxpy")
+    pytest.importorskip("cvxpy", reason="the LMI design needs the 'design' extra (cvxpy)")
     from onboard.design_gain import main
     out = tmp_path / "gain.json"
     assert main(argparse.Namespace(config="torpedo-auv", out=str(out))) == 0

@@ -717,7 +717,7 @@ def _wait(cond, timeout: float = 5.0) -> bool:
 def acl_router():
     """An in-process router opened with config/zenoh/router-acl.json5 as shipped, on a
     free port, with the example credentials file."""
-    zenoh = pytest.importorskip("zenoh")
+    import zenoh
     from onboard.publishers.zenoh_pub import session_config
     from onboard.service_bench import free_tcp_port
 
@@ -880,7 +880,7 @@ def _test_certificates(d: Path) -> dict[str, Path]:
 def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_connect(tmp_path):
     """The example configs as shipped, only the certificate paths replaced: the router
     listens on tls/, the vehicle's ZenohPublisher and the shore connect with the CA."""
-    zenoh = pytest.importorskip("zenoh")
+    import zenoh
     from onboard.config import ZenohOut
     from onboard.messages import EstimateRecord
     from onboard.publishers.zenoh_pub import ZenohPublisher, session_config

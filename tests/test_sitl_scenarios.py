@@ -204,7 +204,6 @@ def test_realtime_mode_paces_to_the_wall_clock():
 
 
 def test_cli_controller_report_is_merged_and_strict_json(tmp_path):
-    pytest.importorskip("sitl.controllers")
     report = tmp_path / "r.json"
     rc = onboard_main(["sitl", "--scenario", "bluerov2-circle", "--controller", "pid",
                        "--duration", "3", "--tlog", str(tmp_path / "c.tlog"),
