@@ -18,7 +18,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Iterator, Protocol
 
-from onboard.messages import Sample
+from onboard.core.messages import Sample
 
 
 class UnreadableLog(Exception):

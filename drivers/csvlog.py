@@ -1,4 +1,4 @@
-"""Generic CSV log reader driven by the ``[csv]`` mapping (:class:`onboard.config.CsvFormat`).
+"""Generic CSV log reader driven by the ``[csv]`` mapping (:class:`onboard.core.config.CsvFormat`).
 
 Input: one CSV file with a header row, or a directory of such files (one *run* per file,
 read in file-name order). A single file can also hold several runs told apart by
@@ -49,8 +49,8 @@ from pathlib import Path
 from typing import Iterator
 
 from drivers.base import ReadStats, UnreadableLog
-from onboard.config import CsvFormat
-from onboard.messages import (
+from onboard.core.config import CsvFormat
+from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
     Depth,

@@ -59,14 +59,14 @@ from typing import Callable, Iterable, Iterator
 
 from drivers.base import ReadStats, UnreadableLog
 from drivers.mavlink import GPS_FIX_TO_QUALITY, wanted_types
-from onboard.messages import (
+from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
     GnssFix,
     Imu,
     Parameter,
-    PropellerRpm,
     Pressure,
+    PropellerRpm,
     RcChannels,
     Sample,
     VehicleInfo,

@@ -17,12 +17,12 @@ for the A50. A report whose ``type`` is ``"velocity_water"`` (or any ``velocity*
 containing ``"water"``), or which carries ``"track": "water"``, is read exactly like a
 velocity report but with ``track="water"``.
 
-Samples: a velocity report gives :class:`~onboard.messages.DvlVelocity` in the DVL
+Samples: a velocity report gives :class:`~onboard.core.messages.DvlVelocity` in the DVL
 instrument frame (x forward along the LED, y right, z down; the mounting rotation is
 configuration, applied by the engine). ``valid`` is ``velocity_valid``: on lock loss the
 DVL sends zeros with ``velocity_valid: false``, which stays ``valid=False`` -- never a
 valid zero velocity. ``altitude <= 0`` (the -1 "unknown") becomes ``None``.
-``position_local`` gives :class:`~onboard.messages.DvlPosition` (angles in rad).
+``position_local`` gives :class:`~onboard.core.messages.DvlPosition` (angles in rad).
 
 Time: live (``feed(data, t_rx)``), ``t`` is the receive time, minus the DVL's own
 processing delay ``time_of_transmission - time_of_validity`` when present and within
@@ -46,7 +46,7 @@ from typing import Any, Iterator
 import msgspec
 
 from drivers.base import LineAssembler, ReadStats, UnreadableLog
-from onboard.messages import DvlPosition, DvlVelocity, Sample
+from onboard.core.messages import DvlPosition, DvlVelocity, Sample
 
 MAX_LINE = 16384
 """Longest accepted line (bytes); a velocity report with covariance is ~1.5 kB."""

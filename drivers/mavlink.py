@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Callable, Iterable
 from pymavlink.dialects.v20 import ardupilotmega as _dialect
 
 from drivers.base import ReadStats
-from onboard.messages import (
+from onboard.core.messages import (
     ActuatorOutputs,
     Altitude,
     Attitude,
@@ -49,8 +49,8 @@ from onboard.messages import (
     Heading,
     Imu,
     Parameter,
-    PropellerRpm,
     Pressure,
+    PropellerRpm,
     RcChannels,
     Sample,
     VehicleInfo,

@@ -24,7 +24,7 @@ bytes) and on text captures (``feed_line(line, t_rx)``, see :mod:`drivers.textlo
 Epochs: one GnssFix per receiver epoch
 --------------------------------------
 A receiver sends several sentences per epoch (here GGA and RMC share the UTC time; VTG
-has no time). They are merged into one :class:`~onboard.messages.GnssFix`:
+has no time). They are merged into one :class:`~onboard.core.messages.GnssFix`:
 
 * GGA gives position, MSL altitude, fix quality, satellites and HDOP; RMC gives the
   speed and course over ground (SOG/COG); VTG gives SOG/COG too (RMC wins when both).
@@ -39,7 +39,7 @@ has no time). They are merged into one :class:`~onboard.messages.GnssFix`:
   RMC order shows).
 
 Headings (HDT true; HDM magnetic; HDG magnetic = sensor + deviation, with the variation
-as ``declination_rad``, east positive) are :class:`~onboard.messages.Heading` samples.
+as ``declination_rad``, east positive) are :class:`~onboard.core.messages.Heading` samples.
 
 Time
 ----
@@ -71,7 +71,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from drivers.base import LineAssembler, ReadStats
-from onboard.messages import GnssFix, Heading, Sample
+from onboard.core.messages import GnssFix, Heading, Sample
 
 KNOT_MPS = 1852.0 / 3600.0
 """One knot in m/s."""

@@ -55,7 +55,7 @@ from typing import Iterator, Literal
 import msgspec
 
 from drivers.base import LineAssembler, ReadStats, UnreadableLog
-from onboard.messages import (
+from onboard.core.messages import (
     Altitude,
     Attitude,
     Depth,

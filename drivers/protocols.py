@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Callable
 import msgspec
 
 from drivers.base import ReadStats, StreamParser
-from onboard.messages import AnySample, Sample
+from onboard.core.messages import AnySample, Sample
 
 if TYPE_CHECKING:
     from drivers.mavlink_signing import SignatureVerifier

@@ -123,7 +123,7 @@ class RecordingWriter:
     """Appends frames to a recording; the caller decides when to :meth:`flush`.
 
     ``fsync`` on flush makes the data durable against power loss, not only a crash of
-    the process. Rotation and size caps are the recorder's job (onboard.recorder); this
+    the process. Rotation and size caps are the recorder's job (onboard.service.recorder); this
     class writes one file. ``version`` is the format version of a new file; appending to
     an existing file keeps its version, and raises ValueError when it is older than
     ``version`` (its readers would not know the newer records); so does writing a
@@ -290,7 +290,7 @@ def decode_sample(data: bytes):
     """Decode a ``kind == "sample"`` payload (a msgpack-encoded typed sample)."""
     global _sample_dec
     if _sample_dec is None:
-        from onboard.messages import AnySample
+        from onboard.core.messages import AnySample
 
         _sample_dec = msgspec.msgpack.Decoder(AnySample)
     return _sample_dec.decode(data)

@@ -41,12 +41,12 @@ and yields all samples sorted by time.
 
 Row -> samples (source ``"arduino"``; the NMEA samples have source ``"nmea"``):
 
-* :class:`~onboard.messages.Imu`: the sensor reads +9.8 m/s^2 on ``az`` when level, so
+* :class:`~onboard.core.messages.Imu`: the sensor reads +9.8 m/s^2 on ``az`` when level, so
   its axes are taken as x forward, y left, z up and turned to FRD by negating y and z
   (accelerations m/s^2; gyro deg/s -> rad/s). The gyro sign was not verified against the
   yaw column (their correlation in ``Test2_clockwise`` is ~0).
-* :class:`~onboard.messages.Heading`: ``yaw`` (deg, compass) as a magnetic heading.
-* :class:`~onboard.messages.RcChannels`: ``(throttle, rudder)`` pulse widths (us),
+* :class:`~onboard.core.messages.Heading`: ``yaw`` (deg, compass) as a magnetic heading.
+* :class:`~onboard.core.messages.RcChannels`: ``(throttle, rudder)`` pulse widths (us),
   channel 1 = throttle, channel 2 = rudder.
 
 Row rejections: ``"truncated"`` (fewer fields, or a row cut by a following sentence or
@@ -69,7 +69,7 @@ import msgspec
 
 from drivers.base import LogReader, ReadStats, UnreadableLog
 from drivers.nmea import NmeaError, NmeaParser, parse_gga, parse_rmc, split_sentence
-from onboard.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
+from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
 
 SNIFF_BYTES = 65536
 _PREFIX = re.compile(rb"^(\d{4})-(\d{2})-(\d{2})[ T](\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,6}))?")

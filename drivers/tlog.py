@@ -32,6 +32,10 @@ from typing import BinaryIO, Iterable, Iterator
 
 from drivers.base import ReadStats, UnreadableLog
 from drivers.mavlink import (
+    _MAGIC_RE,
+    _REV,
+    _REV16_LO,
+    _REV_BYTE,
     CRC_EXTRA,
     MAGIC_V1,
     MAGIC_V2,
@@ -39,17 +43,13 @@ from drivers.mavlink import (
     SIGNATURE_LEN,
     DecodeContext,
     Spec,
-    _MAGIC_RE,
-    _REV,
-    _REV16_LO,
-    _REV_BYTE,
     _layout,
     select,
     type_name,
     wanted_types,
     x25crc,
 )
-from onboard.messages import Parameter, Sample, VehicleInfo
+from onboard.core.messages import Parameter, Sample, VehicleInfo
 
 _TS = struct.Struct(">Q")
 _PROBE_BYTES = 1 << 16

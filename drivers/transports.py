@@ -5,7 +5,7 @@ received and its receive time ``t_rx`` in seconds on the caller's clock (default
 :func:`time.monotonic`). Transports know nothing of protocols; a stream parser
 (:mod:`drivers.protocols`) turns the chunks into samples.
 
-URLs (:class:`onboard.config.SourceConfig`)::
+URLs (:class:`onboard.core.config.SourceConfig`)::
 
     serial:/dev/ttyUSB0:115200    a serial port at 115200 baud (8N1, raw; default 115200)
     pty:/tmp/gps                  a pseudo-terminal (or any tty) by path; baud ignored

@@ -21,9 +21,9 @@ from typing import Iterable
 
 import msgspec
 
-from onboard import config as configmod
-from onboard.config import ChannelMap, Config, Inputs
-from onboard.messages import Parameter, Sample, VehicleInfo
+from onboard.core import config as configmod
+from onboard.core.config import ChannelMap, Config, Inputs
+from onboard.core.messages import Parameter, Sample, VehicleInfo
 
 MAV_TYPE_GROUND_ROVER = 10
 MAV_TYPE_SURFACE_BOAT = 11

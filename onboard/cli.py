@@ -17,7 +17,7 @@ import sys
 from typing import Sequence
 
 from onboard import __version__
-from onboard.errors import UsageError
+from onboard.core.errors import UsageError
 
 
 def _add_zenoh_flags(p: argparse.ArgumentParser) -> None:
@@ -45,13 +45,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", required=True, help="vehicle/deployment TOML file")
     p.add_argument("--state-dir", default=None, help="directory for recordings and state "
                    "(default: $STATE_DIRECTORY or the current directory)")
-    p.set_defaults(handler="onboard.service:main")
+    p.set_defaults(handler="onboard.service.daemon:main")
 
     p = sub.add_parser("demo", help="simulated vehicle + service + shore view on loopback")
     p.add_argument("--duration", type=float, default=60.0, help="simulated seconds (default 60)")
     p.add_argument("--scenario", default=None, help="SITL scenario (default: jaiabot-turns)")
     p.add_argument("--realtime", action="store_true", help="run at wall-clock speed")
-    p.set_defaults(handler="onboard.demo:main")
+    p.set_defaults(handler="onboard.tools.demo:main")
 
     p = sub.add_parser("sitl", help="the simulator alone, emitting real protocols")
     p.add_argument("--list", action="store_true", help="list the scenarios")
@@ -87,16 +87,16 @@ def build_parser() -> argparse.ArgumentParser:
     _add_zenoh_flags(p)
     p.add_argument("--vehicle", default="*", help="vehicle id (default: all)")
     p.add_argument("--once", action="store_true", help="print one snapshot and exit")
-    p.set_defaults(handler="onboard.shore:main")
+    p.set_defaults(handler="onboard.tools.shore:main")
 
     p = sub.add_parser("bench", help="performance figures")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.set_defaults(handler="onboard.bench:main")
+    p.set_defaults(handler="onboard.tools.bench:main")
 
     p = sub.add_parser("design-gain", help="solve the high-gain observer LMI offline")
     p.add_argument("--config", required=True)
     p.add_argument("--out", help="write the gain here (default: beside the config)")
-    p.set_defaults(handler="onboard.design_gain:main")
+    p.set_defaults(handler="onboard.tools.design_gain:main")
     return parser
 
 

@@ -17,8 +17,8 @@ from drivers.base import UnreadableLog
 from onboard.closure import dataset, report
 from onboard.closure.effects import ALL
 from onboard.closure.select import select
-from onboard.config import decode_section
-from onboard.errors import UsageError
+from onboard.core.config import decode_section
+from onboard.core.errors import UsageError
 from onboard.replay import choose_config
 
 

@@ -7,7 +7,7 @@ One engine serves live operation and replay (architecture.md §3):
   only at the surface), maps raw actuator outputs to a normalized command
   (:mod:`onboard.inputs`) and queues the sample for the next tick;
 * :meth:`Engine.tick` hands each pipeline the samples queued since the previous tick and
-  collects its estimates as :class:`~onboard.messages.EstimateRecord`.
+  collects its estimates as :class:`~onboard.core.messages.EstimateRecord`.
 
 :func:`run` drives an engine from any time-ordered iterable of samples on a fixed tick grid
 ``t0 + k / rate_hz``; the live service calls ``push``/``tick`` from its own monotonic
@@ -21,19 +21,19 @@ from collections import Counter
 from operator import attrgetter
 from typing import Callable, Iterable, Sequence
 
-from onboard.config import Config
-from onboard.inputs import InputMapper
-from onboard.messages import (
+from onboard.core.config import Config
+from onboard.core.messages import (
     ActuatorOutputs,
-    PropellerRpm,
-    RcChannels,
     Depth,
     EstimateRecord,
     GnssFix,
     HealthRecord,
     Pressure,
+    PropellerRpm,
+    RcChannels,
     Sample,
 )
+from onboard.inputs import InputMapper
 from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline
 from onboard.validate import checker_for, sample_type
@@ -65,9 +65,12 @@ class Engine:
         latest: the newest record of each pipeline.
     """
 
-    def __init__(self, cfg: Config, pipelines: list[Pipeline] | None = None) -> None:
+    def __init__(self, cfg: Config, pipelines: list[Pipeline] | None = None,
+                 only: set[str] | None = None) -> None:
+        """Run ``pipelines``, by default those :func:`onboard.pipelines.build` makes for
+        ``cfg`` (restricted to the pipeline names in ``only`` when given)."""
         self.cfg = cfg
-        self.pipelines = build(cfg) if pipelines is None else pipelines
+        self.pipelines = build(cfg, only) if pipelines is None else pipelines
         self.mapper = InputMapper(cfg.inputs)
         self.max_age = cfg.engine.max_sample_age_s
         self.accepted: Counter[tuple[str, str]] = Counter()

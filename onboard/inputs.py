@@ -1,14 +1,14 @@
 """The input mapping: raw actuator outputs -> normalized :class:`ActuatorCommand`.
 
 Which servo channel is which actuator, and how a pulse width scales, is configuration
-(``[inputs]`` in the vehicle TOML, :class:`onboard.config.Inputs`). Pipelines only ever see
+(``[inputs]`` in the vehicle TOML, :class:`onboard.core.config.Inputs`). Pipelines only ever see
 the normalized command, so the same estimator serves a Jaiabot, a BlueBoat or a Gavia.
 """
 
 from __future__ import annotations
 
-from onboard.config import ChannelMap, Inputs
-from onboard.messages import ActuatorCommand, ActuatorOutputs, PropellerRpm, RcChannels, Sample
+from onboard.core.config import ChannelMap, Inputs
+from onboard.core.messages import ActuatorCommand, ActuatorOutputs, PropellerRpm, RcChannels, Sample
 
 _ROLES = ("throttle", "rudder", "left", "right", "propeller_rpm", "stern_plane")
 _FIELD = {"rudder": "rudder_rad", "stern_plane": "stern_plane_rad"}

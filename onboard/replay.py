@@ -16,12 +16,12 @@ from typing import Iterable, Iterator, Sequence
 
 from drivers.base import UnreadableLog
 from drivers.logs import open_log
-from onboard import config as configmod
 from onboard.autodetect import detect
-from onboard.config import Config
+from onboard.core import config as configmod
+from onboard.core.config import Config
+from onboard.core.errors import UsageError
+from onboard.core.messages import EstimateRecord, Sample
 from onboard.engine import Engine, run
-from onboard.errors import UsageError
-from onboard.messages import EstimateRecord, Sample
 
 
 def _fmt(v: float) -> str:
@@ -105,7 +105,7 @@ def choose_config(log: str, config_path: str | None) -> tuple[Config, str]:
         return configmod.load(config_path), f"from {config_path}"
     fmt, reader = open_log(log)
     if fmt == "recording":
-        from onboard.recorder import recording_config
+        from onboard.service.recorder import recording_config
 
         cfg = recording_config(log)
         if cfg is not None:
@@ -116,7 +116,7 @@ def choose_config(log: str, config_path: str | None) -> tuple[Config, str]:
         infos, params = scan_header(log)
         cfg, why = detect([*infos, *params])
     elif fmt in ("dataflash", "recording"):
-        from onboard.messages import Parameter, VehicleInfo
+        from onboard.core.messages import Parameter, VehicleInfo
 
         header = [s for s in reader if isinstance(s, (Parameter, VehicleInfo))]
         cfg, why = detect(header)
@@ -149,8 +149,8 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     if fmt == "recording":
         # The service's own recording: re-parse every raw chunk in the order it arrived,
         # through the same intake as live, ticking at the recorded tick times, so the
-        # estimates are exactly the live ones (onboard.recorder.replay_recording).
-        from onboard.recorder import replay_recording
+        # estimates are exactly the live ones (onboard.service.recorder.replay_recording).
+        from onboard.service.recorder import replay_recording
 
         result = replay_recording(log, engine, csv.write)
         ticks = result.ticks

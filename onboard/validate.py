@@ -15,7 +15,7 @@ import math
 from operator import attrgetter
 from typing import Callable
 
-from onboard.messages import (
+from onboard.core.messages import (
     ActuatorOutputs,
     Altitude,
     Attitude,

@@ -32,7 +32,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from onboard.errors import UsageError
+from onboard.core.errors import UsageError
 from sitl.emitters import PtySink, Sink, TcpServerSink, TlogSink, open_link
 from sitl.guidance import ControlInput, Controller
 from sitl.plants.base import Command
@@ -61,7 +61,7 @@ class EstimateController:
         self.last_output: Any = None
 
     def __call__(self, inp: ControlInput) -> Command:
-        from onboard.messages import EstimateRecord
+        from onboard.core.messages import EstimateRecord
 
         tr = inp.truth
         rec = EstimateRecord(vehicle="sitl", pipeline="eseso", t=inp.t, values={

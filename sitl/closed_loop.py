@@ -44,10 +44,9 @@ from typing import Any, Mapping, Sequence
 import msgspec
 import numpy as np
 
-from onboard import config as onboard_config
+from onboard.core import config as onboard_config
+from onboard.core.messages import ActuatorCommand, ActuatorOutputs, EstimateRecord
 from onboard.engine import Engine
-from onboard.messages import ActuatorCommand, ActuatorOutputs, EstimateRecord
-from onboard.pipelines import eseso as eseso_mod
 from sitl.controllers import CircleReference, ControlOutput, make_controller
 from sitl.environment import Environment
 from sitl.plants.base import Command
@@ -134,10 +133,10 @@ def eseso_engine(start_north: float, start_east: float, plant: BlueROV2,
     data = msgspec.to_builtins(cfg)
     data["pipelines"] = pipelines
     cfg = onboard_config.from_dict(data)
-    pipe = eseso_mod.create(cfg)
-    if pipe is None:
+    engine = Engine(cfg, only={"eseso"})
+    if not engine.pipelines:
         raise RuntimeError("the eseso pipeline does not apply to config/bluerov2.toml")
-    return Engine(cfg, pipelines=[pipe])
+    return engine
 
 
 def simulate(controller: str, duration: float = 240.0, seed: int = 0,

@@ -59,7 +59,7 @@ from typing import Protocol, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from onboard.messages import (
+from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
     Depth,

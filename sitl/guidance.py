@@ -30,7 +30,7 @@ from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 
-from onboard.messages import Heading, Imu, Sample
+from onboard.core.messages import Heading, Imu, Sample
 from sitl.plants.base import Command
 from sitl.truth import TruthRecord
 

@@ -5,7 +5,7 @@ Python API (what estimator tests use)::
     from sitl.runner import simulate, run_to_tlog
 
     for t, samples, truth in simulate("jaiabot-turns", duration=60, seed=1):
-        ...   # samples: list of onboard.messages samples measured at t (may be empty)
+        ...   # samples: list of onboard.core.messages samples measured at t (may be empty)
               # truth: a TruthRecord every 1/truth_rate_hz seconds, else None
 
     summary = run_to_tlog("effect-current", "run.tlog", "truth.jsonl", duration=300, seed=1)
@@ -44,7 +44,7 @@ from typing import Any, Iterator, Sequence
 
 import msgspec
 
-from onboard.messages import Sample, VehicleInfo
+from onboard.core.messages import Sample, VehicleInfo
 from sitl.effects import (
     FORCE_EFFECTS,
     apply_to_environment,
@@ -237,7 +237,7 @@ def simulate(scenario: Scenario | str, duration: float | None = None, seed: int 
     (default: the scenario's) with the sensor errors of ``seed``.
 
     Yields ``(t, samples, truth)``: ``t`` in seconds since the start; ``samples`` the
-    :mod:`onboard.messages` samples measured at ``t`` (HEARTBEAT-like VehicleInfo and the
+    :mod:`onboard.core.messages` samples measured at ``t`` (HEARTBEAT-like VehicleInfo and the
     SERVOn_FUNCTION Parameters included); ``truth`` a :class:`~sitl.truth.TruthRecord`
     every ``1/truth_rate_hz`` s (with the injected effects' parameters and the sensors'
     hidden error states in ``truth.effects``), else None. ``controller`` replaces the

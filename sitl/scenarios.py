@@ -33,8 +33,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from onboard.errors import UsageError
-from onboard.messages import Parameter
+from onboard.core.errors import UsageError
+from onboard.core.messages import Parameter
 from sitl.effects import Effect
 from sitl.emitters import MAV_TYPE_SUBMARINE, MAV_TYPE_SURFACE_BOAT
 from sitl.environment import CurrentField, Environment
@@ -680,7 +680,7 @@ def names() -> list[str]:
 
 
 def get(name: str) -> Scenario:
-    """The scenario called ``name``; :class:`~onboard.errors.UsageError` if there is none."""
+    """The scenario called ``name``; :class:`~onboard.core.errors.UsageError` if there is none."""
     try:
         return SCENARIOS[name]
     except KeyError:

@@ -49,18 +49,20 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
-from onboard.messages import (
+from onboard.core.messages import (
+    ActuatorOutputs,
     Attitude,
     Depth,
     DvlPosition,
     DvlVelocity,
     GnssFix,
     Heading,
-    Imu as ImuSample,
     PropellerRpm,
     Sample,
     VelocityOverGround,
-    ActuatorOutputs,
+)
+from onboard.core.messages import (
+    Imu as ImuSample,
 )
 from sitl.truth import TruthRecord
 
@@ -376,7 +378,7 @@ class ImuConfig:
 
 
 class Imu(_Base):
-    """IMU: :class:`onboard.messages.Imu` samples of specific force and angular rate."""
+    """IMU: :class:`onboard.core.messages.Imu` samples of specific force and angular rate."""
 
     name = "imu"
 

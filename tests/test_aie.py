@@ -9,12 +9,12 @@ import msgspec
 import numpy as np
 import pytest
 
-from onboard.config import ConfigError, from_dict
+from onboard.core.config import ConfigError, from_dict
+from onboard.estimators.axis_model import AxisModel, discretize
 from onboard.pipelines import aie as aie_mod
 from onboard.pipelines.aie import AxisAie, Rcie, bench_step_ratio, rls_kernel, unpack
-from onboard.pipelines.aie_pipeline import AieConfig
-from onboard.pipelines.surge_heading import AxisModel, discretize
-from onboard.reports.aie_sim import SimConfig, run_pipelines, score, simulate
+from onboard.pipelines.surge_heading import AieConfig
+from onboard.tools.reports.aie_sim import SimConfig, run_pipelines, score, simulate
 
 
 def _textbook_rls(P, th, a, b, e1, rz, rd, lam):

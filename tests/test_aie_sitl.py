@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from onboard.reports.aie_validation import convergence_step, run_sitl, sitl_metrics  # noqa
+from onboard.tools.reports.aie_validation import convergence_step, run_sitl, sitl_metrics  # noqa
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 """Vehicle class and input mapping are detected from HEARTBEAT and SERVOn_FUNCTION."""
 
 from onboard.autodetect import detect
-from onboard.messages import Parameter, VehicleInfo
+from onboard.core.messages import Parameter, VehicleInfo
 
 
 def p(name, value):

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from onboard import config
-from onboard.config import ConfigError
-from onboard.errors import UsageError
+from onboard.core import config
+from onboard.core.config import ConfigError
+from onboard.core.errors import UsageError
 
 
 @pytest.mark.parametrize("name", config.bundled())

@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
 
-from onboard.messages import EstimateRecord  # noqa: E402
+from onboard.core.messages import EstimateRecord  # noqa: E402
 from sitl.controllers import (  # noqa: E402
     Bluerov2Params,
     CircleReference,

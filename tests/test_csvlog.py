@@ -12,9 +12,8 @@ from hypothesis import strategies as st
 
 from drivers.base import UnreadableLog
 from drivers.csvlog import CsvReader
-from onboard.config import CONFIG_DIR, CsvFormat, load
-from onboard.inputs import InputMapper
-from onboard.messages import (
+from onboard.core.config import CONFIG_DIR, CsvFormat, load
+from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
     Depth,
@@ -22,6 +21,7 @@ from onboard.messages import (
     Heading,
     VelocityOverGround,
 )
+from onboard.inputs import InputMapper
 
 FMT = CsvFormat(time="ms", time_scale=0.001, lat_deg="lat", lon_deg="lon", heading="hdg",
                 heading_unit="deg", yaw_rate="r", surge_mps="u", sway_mps="v", depth_m="d",

@@ -12,10 +12,10 @@ import math
 import numpy as np
 import pytest
 
-from onboard.config import from_dict
-from onboard.messages import (ActuatorCommand, Attitude, DvlVelocity, GnssFix, Heading)
+from onboard.core.config import from_dict
+from onboard.core.messages import ActuatorCommand, Attitude, DvlVelocity, GnssFix, Heading
+from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
 from onboard.pipelines import current as current_mod
-from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel
 
 BOAT_TRUE = {
     "surge": {"u|u|": -0.08, "u": -0.05, "vr": 0.3, "tau_u": 0.3},
@@ -253,7 +253,7 @@ def test_identified_model_survives_a_restart():
 
 
 def test_bad_model_config_names_the_key():
-    from onboard.config import ConfigError
+    from onboard.core.config import ConfigError
     with pytest.raises(ConfigError, match="pipelines.current.model.surge: unknown term"):
         make("rudder-boat", model={"surge": {"bogus": 1.0}})
 
@@ -262,7 +262,7 @@ def test_net_weight_prior_is_physically_scaled_and_configurable():
     """Unconfigured surge/sway net-weight coefficients start at g * net_weight_std (a trimmed
     vehicle is within a few percent of neutral), not at theta_std; the heave constant
     cos(theta)cos(phi) keeps theta_std (docs/current.md, "Net-weight prior")."""
-    from onboard.config import ConfigError
+    from onboard.core.config import ConfigError
 
     def prior_sd(p, ch, term):
         o = 2 * p.nd + sum(len(p.model.terms[c]) for c in p.model.dofs[:p.model.dofs.index(ch)])

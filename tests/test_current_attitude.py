@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from onboard.messages import Attitude, DvlPosition, Heading
+from onboard.core.messages import Attitude, DvlPosition, Heading
 from onboard.pipelines import current as current_mod
 from tests.test_current import TORPEDO_TRUE, make, run, simulate_torpedo
 

@@ -2,7 +2,7 @@
 
 Mode (a) "configured model" uses coefficients identified by the pipeline itself in a
 calm-water run of the same vehicle and mission (WVAM step 1), see
-onboard/reports/current_validation.py. Measured figures (seed 1, full durations) are in
+onboard/tools/reports/current_validation.py. Measured figures (seed 1, full durations) are in
 the comments; the bounds leave margin for other seeds. Long runs are marked slow.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-import onboard.reports.current_validation as cv
+import onboard.tools.reports.current_validation as cv
 
 
 def _mode_a(scenario: str, config: str, duration: float, **extra):

@@ -17,7 +17,7 @@ import pytest
 
 from drivers.base import UnreadableLog
 from drivers.dataflash import DataflashReader
-from onboard.messages import (
+from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
     GnssFix,

@@ -9,9 +9,9 @@ import socket
 
 import pytest
 
-from onboard.demo import main, run_demo, score
-from onboard.messages import EstimateRecord
-from onboard.service_bench import free_tcp_port
+from onboard.core.messages import EstimateRecord
+from onboard.tools.demo import main, run_demo, score
+from onboard.tools.service_bench import free_tcp_port
 from sitl.truth import TruthRecord
 
 
@@ -43,7 +43,7 @@ def test_demo_runs_end_to_end_and_prints_the_truth_comparison(tmp_path):
 
 
 def test_demo_rejects_a_bad_duration_with_a_usage_error():
-    from onboard.errors import UsageError
+    from onboard.core.errors import UsageError
 
     with pytest.raises(UsageError):
         main(argparse.Namespace(duration=-1.0, scenario=None, realtime=False))

@@ -10,12 +10,12 @@ import sys
 import numpy as np
 import pytest
 
-from onboard.pipelines.hgo import GainDesign, chain_matrices
+from onboard.estimators.hgo import GainDesign, chain_matrices
 
 
 def test_lmi_solution_is_verified_and_well_scaled():
     pytest.importorskip("cvxpy", reason="the LMI design needs the 'design' extra (cvxpy)")
-    from onboard.design_gain import solve_lmi
+    from onboard.tools.design_gain import solve_lmi
     sol = solve_lmi(2, 3)
     A, C = chain_matrices(2, 3)
     Acl = A - sol["K"] @ C
@@ -29,7 +29,7 @@ def test_lmi_solution_is_verified_and_well_scaled():
 
 def test_command_writes_a_gain_the_pipeline_loads(tmp_path):
     pytest.importorskip("cvxpy", reason="the LMI design needs the 'design' extra (cvxpy)")
-    from onboard.design_gain import main
+    from onboard.tools.design_gain import main
     out = tmp_path / "gain.json"
     assert main(argparse.Namespace(config="torpedo-auv", out=str(out))) == 0
     data = json.loads(out.read_text())
@@ -39,7 +39,7 @@ def test_command_writes_a_gain_the_pipeline_loads(tmp_path):
     assert data["gamma_star"] == pytest.approx(
         max(1.0, 2 * np.linalg.norm(d.P, 2) * data["lipschitz"] / d.lam), rel=1e-6)
     assert d.gamma_max <= data["gamma_discrete_limit"] + 1e-12
-    from onboard.config import from_dict
+    from onboard.core.config import from_dict
     from onboard.pipelines.current import create
     cfg = from_dict({"vehicle": {"class": "torpedo-auv"},
                      "pipelines": {"current": {"observer": "hgo", "gain_file": str(out)}}})
@@ -48,9 +48,9 @@ def test_command_writes_a_gain_the_pipeline_loads(tmp_path):
 
 
 def test_the_service_side_never_imports_cvxpy():
-    code = ("import sys; import onboard.pipelines.current, onboard.pipelines.hgo, "
-            "onboard.pipelines.flow_observer, onboard.engine; "
-            "from onboard.config import from_dict; from onboard.pipelines.current import create; "
+    code = ("import sys; import onboard.pipelines.current, onboard.estimators.hgo, "
+            "onboard.estimators.flow_observer, onboard.engine; "
+            "from onboard.core.config import from_dict; from onboard.pipelines.current import create; "
             "create(from_dict({'vehicle': {'class': 'rudder-boat'}, 'pipelines': {'current': "
             "{'observer': 'hgo'}}})); assert 'cvxpy' not in sys.modules, 'cvxpy imported'")
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from onboard import config
+from onboard.core import config
 from onboard.diagnose import diagnose
 from sitl.runner import run_to_tlog
 

@@ -20,7 +20,7 @@ from drivers.dvl_json import (
     encode_velocity_report,
 )
 from drivers.textlog import open_text_log
-from onboard.messages import DvlPosition, DvlVelocity
+from onboard.core.messages import DvlPosition, DvlVelocity
 
 V1 = ('{"time":120.7,"vx":0.0027,"vy":0.0137,"vz":-0.0097,"fom":0.0002,"altitude":1.5167,'
       '"transducers":[],"velocity_valid":true,"status":0,"format":"json_v1"}')

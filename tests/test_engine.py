@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import math
 
-from onboard.config import Config, from_dict
-from onboard.engine import Engine, run
-from onboard.messages import (
+from onboard.core.config import Config, from_dict
+from onboard.core.messages import (
     ActuatorCommand,
     ActuatorOutputs,
     Depth,
@@ -16,6 +15,7 @@ from onboard.messages import (
     Pressure,
     Sample,
 )
+from onboard.engine import Engine, run
 
 
 class Recorder:

@@ -13,11 +13,11 @@ import msgspec
 import numpy as np
 import pytest
 
-from onboard import config
-from onboard.messages import ActuatorCommand, Attitude, Depth, DvlVelocity, GnssFix, Imu
+from onboard.core import config
+from onboard.core.messages import ActuatorCommand, Attitude, Depth, DvlVelocity, GnssFix, Imu
+from onboard.core.so3 import euler_to_matrix, log_so3
 from onboard.pipelines import eseso
 from onboard.pipelines.base import Pipeline
-from onboard.pipelines.so3 import euler_to_matrix, log_so3
 
 RNG = np.random.default_rng(3)
 
@@ -228,7 +228,7 @@ def test_bench_step_cost_reports_per_tick_figures() -> None:
 
 
 def test_heading_alone_fixes_the_yaw_when_there_is_no_attitude_stream() -> None:
-    from onboard.messages import Heading
+    from onboard.core.messages import Heading
 
     f = eseso.create(config.load("bluerov2"))
     samples = []
@@ -250,7 +250,7 @@ def test_ins_velocity_bias_is_a_state_and_only_the_white_noise_is_r() -> None:
     Gauss-Markov bias. Hovering with a DVL and an INS biased by (0.03, -0.02) m/s, the
     filter attributes the offset to the INS bias, not to the velocity (the DVL holds it),
     and the vog NIS is about its dimension, not ~0.1 as with the GNSS velocity R."""
-    from onboard.messages import VelocityOverGround
+    from onboard.core.messages import VelocityOverGround
 
     f = eseso.create(config.load("bluerov2"))
     assert f.r_ins == pytest.approx(0.02 ** 2)

@@ -16,8 +16,8 @@ import json
 import numpy as np
 import pytest
 
-from onboard import config
 from onboard import pipelines as pipelines_pkg
+from onboard.core import config
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ hidden truth or the service's own counters:
 * SITL faults (``sitl.scenarios`` ``fault-*``, declared sensor faults of
   :mod:`sitl.effects`): the SITL child emits MAVLink over UDP, NMEA on a pty and DVL JSON
   over TCP; the in-process service runs on a clock shared with the simulator, scaled
-  ``SPEED`` times faster than the wall clock (``onboard.demo.run_demo``); estimates are
+  ``SPEED`` times faster than the wall clock (``onboard.tools.demo.run_demo``); estimates are
   taken from an independent Zenoh subscriber behind an in-process router;
 * the Zenoh router restarted under a running service (wall clock: Zenoh's reconnection
   runs on it);
@@ -37,8 +37,8 @@ import msgspec
 import pytest
 
 from drivers.recording import read_records
-from onboard.messages import EstimateRecord, HealthRecord
-from onboard.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
+from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.tools.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
 from tests.test_service import _config
 
 REPO = Path(__file__).resolve().parent.parent
@@ -56,7 +56,7 @@ def _wrap(a: float) -> float:
 
 def _fly(scenario: str, duration_s: float, tmp_path: Path, speed: float = SPEED):
     """Fly ``scenario`` through the service; (DemoResult, truth by round(10 t))."""
-    from onboard.demo import run_demo
+    from onboard.tools.demo import run_demo
     from sitl.runner import read_truth
 
     res = asyncio.run(asyncio.wait_for(run_demo(
@@ -101,8 +101,8 @@ def test_zenoh_router_restarted_the_service_keeps_ticking_and_delivers_again(tmp
     events (the return one reaches the shore in a health record)."""
     import zenoh
 
-    from onboard.publishers.zenoh_pub import open_router, session_config
-    from onboard.service import Service
+    from onboard.service.daemon import Service
+    from onboard.service.publishers.zenoh_pub import open_router, session_config
 
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     router = open_router(endpoint)
@@ -271,7 +271,7 @@ def test_gnss_under_water_is_rejected_and_counted_estimates_continue(tmp_path):
     reporting (wrong) fixes at 1 Hz. Every fix below the surface depth is rejected as
     ``gnss:submerged``; the current and nav pipelines carry on on DVL/INS/depth."""
     res, truth = _fly("fault-gnss-submerged", 40.0, tmp_path)
-    from onboard.config import load
+    from onboard.core.config import load
 
     surface = load("torpedo-auv").sensors.depth.surface_depth_m
     deep = sum(1 for k, tr in truth.items() if k % 10 == 0 and 1.0 <= tr.t < 40.0
@@ -385,10 +385,10 @@ def test_sigkill_mid_traffic_loses_under_1_s_of_recording_and_restart_restores_s
     one torn frame; a restart restores exactly the adaptive state saved last (every
     1 s here), which is not the cold-start state."""
     from drivers.base import ReadStats
-    from onboard.config import load
+    from onboard.core.config import load
     from onboard.engine import Engine
-    from onboard.persistence import plain
-    from onboard.service import Service
+    from onboard.service.daemon import Service
+    from onboard.service.persistence import plain
 
     mav_port, nmea_port = free_udp_port(), free_udp_port()
     cfg_path = tmp_path / "boat.toml"

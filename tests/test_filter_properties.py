@@ -8,7 +8,7 @@ sparse -- go through the engine into each pipeline (``aie``, ``kf``, ``current``
 (``|P - P^T| <= 1e-9 max(1, |P|)``) and has no eigenvalue below ``-1e-9 max(1, |P|)``
 (positive semi-definite to rounding; the filters hold a few directions at ~1e-9 on
 purpose, e.g. ESESO's unobservable yaw before a heading arrives). The cores are tested
-directly too: :class:`~onboard.pipelines.kalman.IncrementKF` over random model steps and
+directly too: :class:`~onboard.estimators.kalman.IncrementKF` over random model steps and
 :class:`~onboard.pipelines.aie.Rcie`'s RLS covariance (positive definite: the RLS
 covariance only shrinks from ``I / R_theta``, never to a singular matrix).
 
@@ -31,9 +31,8 @@ import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from onboard import config as configmod
-from onboard.engine import Engine, run
-from onboard.messages import (
+from onboard.core import config as configmod
+from onboard.core.messages import (
     ActuatorCommand,
     Attitude,
     Depth,
@@ -43,6 +42,7 @@ from onboard.messages import (
     Imu,
     VelocityOverGround,
 )
+from onboard.engine import Engine, run
 
 PROPS = settings(max_examples=40, deadline=None, derandomize=True,
                  suppress_health_check=[HealthCheck.too_slow])
@@ -74,8 +74,8 @@ def _packed3(P: list[float]) -> np.ndarray:
 @PROPS
 @given(seed=st.integers(0, 2**32 - 1), correlated=st.booleans())
 def test_increment_kf_covariance_stays_psd(seed, correlated):
-    from onboard.pipelines.kalman import IncrementKF
-    from onboard.pipelines.surge_heading import discretize
+    from onboard.estimators.axis_model import discretize
+    from onboard.estimators.kalman import IncrementKF
 
     rng = random.Random(seed)
     kf = IncrementKF(R=10 ** rng.uniform(-4, 2), q_v=rng.choice((0.0, 1e-4, 1e-1)),
@@ -98,8 +98,8 @@ def test_increment_kf_covariance_stays_psd(seed, correlated):
 def test_increment_kf_nis_is_consistent_on_its_own_model():
     """Exact §1.2 model, input error of variance V_u, point noise R: mean NIS = 1.
     Measured 1.00 (seeds 0-4: 0.98-1.02) over 5,000 steps."""
-    from onboard.pipelines.kalman import IncrementKF
-    from onboard.pipelines.surge_heading import discretize
+    from onboard.estimators.axis_model import discretize
+    from onboard.estimators.kalman import IncrementKF
 
     rng = np.random.default_rng(0)
     a, dt, R, V_u = 0.3, 1.0, 2.0, 0.05

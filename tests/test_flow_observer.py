@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from onboard.pipelines.flow_observer import ackermann_observer_gain
+from onboard.estimators.flow_observer import ackermann_observer_gain
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_current import TORPEDO_TRUE, make, run, simulate_torpedo  # noqa: E402

@@ -30,7 +30,6 @@ import traceback
 from pathlib import Path
 
 import pytest
-
 import test_fuzz_parsers as fz
 
 N = int(os.environ.get("ONBOARD_FUZZ_N", "100000"))

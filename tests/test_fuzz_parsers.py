@@ -6,7 +6,7 @@ stream (:class:`drivers.mavlink.MavlinkParser`), Water Linked DVL JSON
 CSV (:class:`drivers.csvlog.CsvReader`), tlog (:class:`drivers.tlog.TlogReader`), DataFlash
 (:class:`drivers.dataflash.DataflashReader`), the service's own recording
 (:func:`drivers.recording.read_records`, :class:`drivers.recording.RecordingReader`; in format
-version 2 with signing ``verdicts`` records, also :func:`onboard.recorder.replay_recording`)
+version 2 with signing ``verdicts`` records, also :func:`onboard.service.recorder.replay_recording`)
 and the sniffed text captures (:func:`drivers.textlog.open_text_log`).
 
 Inputs are valid records (from the project's own encoders) mutated by hypothesis: bytes
@@ -46,7 +46,7 @@ from hypothesis import strategies as st
 from drivers import dvl_json, nmea, pd6
 from drivers.base import ReadStats, UnreadableLog
 from drivers.mavlink import CRC_EXTRA, MavlinkParser, select, x25crc
-from onboard.messages import Sample
+from onboard.core.messages import Sample
 
 FUZZ = settings(max_examples=120, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
@@ -555,7 +555,7 @@ def read_file_reader(make: Callable[[Path], Any], path: Path, *, ordered: bool =
 
 
 def tlog_bytes(seconds: float = 2.0) -> bytes:
-    from onboard.bench import synthesize_tlog
+    from onboard.tools.bench import synthesize_tlog
 
     p = _TMP / f"base-{seconds}.tlog"
     if not p.exists():
@@ -627,7 +627,7 @@ def test_dataflash_random_bytes_after_a_fmt(data):
 
 
 def csv_format():
-    from onboard import config as configmod
+    from onboard.core import config as configmod
 
     return configmod.load(configmod.resolve("blueboat-ntnu-csv")).csv
 
@@ -687,7 +687,7 @@ def recording_input(rng: random.Random) -> tuple[bytes, int]:
 
     from drivers.protocols import encode_sample
     from drivers.recording import _HEAD, FILE_MAGIC, FRAME_MARK, RawRecord, encode_frame
-    from onboard.messages import Imu
+    from onboard.core.messages import Imu
 
     frames, intact = [FILE_MAGIC], 0
     for i in range(rng.randint(1, 10)):
@@ -876,10 +876,18 @@ def recording_v2_input(rng: random.Random) -> tuple[bytes, int]:
 
     from drivers.mavlink_signing import SignatureVerifier, VerdictLog
     from drivers.protocols import encode_sample
-    from drivers.recording import (_HEAD, FRAME_MARK, VERDICTS_KIND, RawRecord,
-                                   RecordingWriter, Verdicts, encode_frame, encode_verdicts,
-                                   file_magic)
-    from onboard.messages import Imu
+    from drivers.recording import (
+        _HEAD,
+        FRAME_MARK,
+        VERDICTS_KIND,
+        RawRecord,
+        RecordingWriter,
+        Verdicts,
+        encode_frame,
+        encode_verdicts,
+        file_magic,
+    )
+    from onboard.core.messages import Imu
 
     logs = {src: VerdictLog(SignatureVerifier(SIGN_KEY, wall=lambda: SIGN_WALL,
                                               max_future_s=600.0)) for src in ("ap", "ap2")}
@@ -1036,9 +1044,9 @@ def _run_recording_v2(data: bytes, intact: int | None, name: str = "f2.onbrec") 
     recorded rejections, and no reason a verdicts record names other than a verifier's
     reaches the counters."""
     from drivers.recording import RecordingReader, read_records
-    from onboard.config import Config
+    from onboard.core.config import Config
     from onboard.engine import Engine
-    from onboard.recorder import replay_recording
+    from onboard.service.recorder import replay_recording
 
     p = _TMP / name
     p.write_bytes(data)
@@ -1255,7 +1263,7 @@ def test_dataflash_fmt_typing_a_number_as_text_is_a_counted_rejection(tmp_path):
 
 def test_sample_records_with_non_finite_values_are_rejected():
     from drivers.protocols import SampleParser, encode_sample
-    from onboard.messages import Imu
+    from onboard.core.messages import Imu
 
     p = SampleParser()
     bad = Imu(t=float("nan"), source="sim", accel_x=float("inf"), accel_y=0.0, accel_z=-9.8,
@@ -1274,8 +1282,7 @@ def test_mavlink_noise_spanning_intact_frames_does_not_swallow_them():
 
 def _signed_chunk_and_verdicts():
     """A chunk of one accepted and one unsigned ATTITUDE frame and its live verdicts."""
-    from drivers.mavlink_signing import SignatureVerifier, VerdictLog
-    from drivers.mavlink_signing import signing_timestamp
+    from drivers.mavlink_signing import SignatureVerifier, VerdictLog, signing_timestamp
 
     good = signed_frame(30, bytes(28), signing_timestamp(SIGN_WALL))
     bad = mav_frame(30, bytes(28))
@@ -1304,12 +1311,16 @@ def test_verdicts_bound_to_a_record_that_is_not_a_mavlink_chunk_are_an_orphan(tm
     replay: neither used nor counted."""
     import zlib
 
-    from drivers.recording import RawRecord, RecordingWriter, Verdicts, encode_verdicts
-    from onboard.config import Config
+    from drivers.recording import (
+        RawRecord,
+        RecordingReader,
+        RecordingWriter,
+        Verdicts,
+        encode_verdicts,
+    )
+    from onboard.core.config import Config
     from onboard.engine import Engine
-    from onboard.recorder import replay_recording
-
-    from drivers.recording import RecordingReader
+    from onboard.service.recorder import replay_recording
 
     tick = RawRecord(1.0, "engine", "tick", b"")
     p = tmp_path / "r.onbrec"
@@ -1356,7 +1367,7 @@ def test_recording_reader_rejects_a_sample_record_with_non_finite_values(tmp_pat
     fixed in SampleParser only (campaign ``recording``, input 95398)."""
     from drivers.protocols import encode_sample
     from drivers.recording import RawRecord, RecordingReader, encode_frame
-    from onboard.messages import Imu
+    from onboard.core.messages import Imu
 
     bad = Imu(t=float("-inf"), source="sim", accel_x=0.0, accel_y=0.0, accel_z=-9.8,
               gyro_x=0.0, gyro_y=0.0, gyro_z=0.0)

@@ -7,8 +7,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from onboard.pipelines.hgo import (ChainHGO, GainDesign, IncreasingGain, chain_matrices,
-                                   current_hgo_gain, gamma_star, theta_scaling)
+from onboard.estimators.hgo import (
+    ChainHGO,
+    GainDesign,
+    IncreasingGain,
+    chain_matrices,
+    current_hgo_gain,
+    gamma_star,
+    theta_scaling,
+)
 
 GAINS = Path(__file__).resolve().parent.parent / "config" / "gains"
 

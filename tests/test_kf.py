@@ -8,14 +8,14 @@ import msgspec
 import numpy as np
 import pytest
 
-from onboard.config import from_dict
-from onboard.messages import GnssFix, Heading
+from onboard.core.config import from_dict
+from onboard.core.geo import LocalFrame
+from onboard.core.messages import GnssFix, Heading
+from onboard.estimators.axis_model import augmented_matrices, discretize
+from onboard.estimators.kalman import IncrementKF
 from onboard.pipelines import kf as kf_mod
-from onboard.pipelines.aie_pipeline import AieConfig
-from onboard.pipelines.geo import LocalFrame
-from onboard.pipelines.kalman import IncrementKF
-from onboard.pipelines.surge_heading import augmented_matrices, discretize
-from onboard.reports.aie_sim import SimConfig, run_pipelines, score, simulate
+from onboard.pipelines.surge_heading import AieConfig
+from onboard.tools.reports.aie_sim import SimConfig, run_pipelines, score, simulate
 
 
 def test_white_noise_filter_equals_the_papers_three_state_filter() -> None:
@@ -191,7 +191,7 @@ def test_gnss_gap_restarts_the_chain_without_jumping() -> None:
 
 
 def test_attitude_yaw_serves_when_no_compass_and_heading_wins_when_present() -> None:
-    from onboard.messages import Attitude
+    from onboard.core.messages import Attitude
 
     p = _kf()
     out = {}

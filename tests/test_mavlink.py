@@ -15,7 +15,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from drivers.mavlink import GRAVITY_MSS, HANDLERS, MavlinkParser, x25crc
-from onboard.messages import (
+from onboard.core.messages import (
     ActuatorOutputs,
     Altitude,
     Attitude,
@@ -24,8 +24,8 @@ from onboard.messages import (
     Heading,
     Imu,
     Parameter,
-    PropellerRpm,
     Pressure,
+    PropellerRpm,
     RcChannels,
     VehicleInfo,
     VelocityOverGround,

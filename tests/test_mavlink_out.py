@@ -8,9 +8,9 @@ import socket
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from onboard.config import ConfigError, MavlinkOut
-from onboard.messages import EstimateRecord, HealthRecord
-from onboard.publishers.mavlink_pub import MavlinkPublisher, load_signing_key
+from onboard.core.config import ConfigError, MavlinkOut
+from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.service.publishers.mavlink_pub import MavlinkPublisher, load_signing_key
 
 
 @pytest.fixture

@@ -32,7 +32,7 @@ from drivers.textlog import (
     open_text_log,
     sniff_text,
 )
-from onboard.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels
+from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels
 
 GGA = "$GPGGA,094155.20,2234.33145313,N,11431.87220478,E,4,21,0.7,1.2097,M,-1.3523,M,02,0000*73"
 RMC = "$GPRMC,094155.20,A,2234.33145313,N,11431.87220478,E,1.141,231.1,051224,3.4,W,D*2B"
@@ -467,7 +467,7 @@ def test_notes_file_is_unreadable(shared_data):
 
 @pytest.mark.data
 def test_survey_boat_config_maps_rc_channels(shared_data):
-    from onboard.config import CONFIG_DIR, load
+    from onboard.core.config import CONFIG_DIR, load
     from onboard.inputs import InputMapper
 
     cfg = load(CONFIG_DIR / "survey-boat-csv.toml")

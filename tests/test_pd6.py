@@ -25,7 +25,7 @@ from drivers.pd6 import (
     parse_ts_time,
 )
 from drivers.textlog import open_text_log
-from onboard.messages import Altitude, Attitude, Depth, DvlVelocity, VelocityOverGround
+from onboard.core.messages import Altitude, Attitude, Depth, DvlVelocity, VelocityOverGround
 
 T0 = float(calendar.timegm((2024, 6, 1, 12, 30, 15))) + 0.25
 

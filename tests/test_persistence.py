@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import math
 
-from onboard.persistence import STATE_VERSION, StateFile
+from onboard.service.persistence import STATE_VERSION, StateFile
 
 
 def test_state_round_trips_and_no_temporary_file_is_left(tmp_path):

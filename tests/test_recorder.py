@@ -6,12 +6,12 @@ import json
 
 from drivers.base import ReadStats
 from drivers.nmea import encode_gga, encode_hdt, encode_rmc
-from drivers.recording import RawRecord, read_records
-from onboard.config import Config
-from onboard.engine import Engine
-from onboard.messages import Imu
-from onboard.recorder import Intake, Recorder, recording_files, recording_meta
 from drivers.protocols import encode_sample
+from drivers.recording import RawRecord, read_records
+from onboard.core.config import Config
+from onboard.core.messages import Imu
+from onboard.engine import Engine
+from onboard.service.recorder import Intake, Recorder, recording_files, recording_meta
 
 
 class FakeClock:
@@ -176,7 +176,7 @@ def test_protocol_registry_gives_a_fresh_parser_per_kind_and_refuses_unknown_kin
 
 
 def test_recordings_are_grouped_by_run_with_parts_in_order(tmp_path):
-    from onboard.recorder import recording_runs
+    from onboard.service.recorder import recording_runs
 
     clock = FakeClock()
     a = Recorder(tmp_path, rotate_mb=0.004, clock=clock, fsync=False)

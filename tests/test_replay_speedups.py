@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from drivers.tlog import TlogWriter, scan_header
 from onboard import validate
-from onboard.messages import (
+from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
     GnssFix,

@@ -1,10 +1,10 @@
-"""RLS with forgetting and bounded covariance (onboard.pipelines.rls)."""
+"""RLS with forgetting and bounded covariance (onboard.estimators.rls)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from onboard.pipelines.rls import RecursiveLeastSquares
+from onboard.estimators.rls import RecursiveLeastSquares
 
 
 def test_converges_to_true_parameters_with_noise():

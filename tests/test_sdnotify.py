@@ -8,7 +8,7 @@ import socket
 
 import pytest
 
-from onboard.sdnotify import Notifier
+from onboard.service.sdnotify import Notifier
 
 
 @pytest.fixture
@@ -78,9 +78,9 @@ def test_a_vanished_socket_is_counted_not_raised(tmp_path):
 
 def test_the_service_sends_ready_then_watchdog_from_its_tick_loop(notify_socket, tmp_path):
     """READY=1 after start-up; WATCHDOG=1 keeps coming while the loop ticks."""
-    from onboard.config import from_dict
-    from onboard.service import Service
-    from onboard.service_bench import free_udp_port
+    from onboard.core.config import from_dict
+    from onboard.service.daemon import Service
+    from onboard.tools.service_bench import free_udp_port
 
     path, sock = notify_socket
     cfg = from_dict({"vehicle": {"id": "wd"}, "engine": {"rate_hz": 20.0}, "service": {

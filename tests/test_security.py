@@ -18,11 +18,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from drivers.mavlink import MavlinkParser
 from drivers.mavlink_signing import NEW_STREAM_MAX_AGE, SignatureVerifier, signing_timestamp
-from onboard.config import ConfigError, MavlinkOut, from_dict
-from onboard.messages import Attitude
-from onboard.publishers.mavlink_pub import MavlinkPublisher
-from onboard.signing import SigningState, load_signing_key
-from onboard.service_bench import free_udp_port
+from onboard.core.config import ConfigError, MavlinkOut, from_dict
+from onboard.core.messages import Attitude
+from onboard.service.publishers.mavlink_pub import MavlinkPublisher
+from onboard.service.signing import SigningState, load_signing_key
+from onboard.tools.service_bench import free_udp_port
 from tests.test_mavlink_out import receive
 
 REPO = Path(__file__).resolve().parent.parent
@@ -203,7 +203,7 @@ def test_a_key_file_readable_by_group_or_others_is_refused_with_a_clear_error(tm
     assert load_signing_key(key_file) == KEY
     key_file.chmod(0o644)
     cfg = _service_config(tmp_path, key_file, free_udp_port())
-    from onboard.service import Service
+    from onboard.service.daemon import Service
 
     with pytest.raises(ConfigError, match="chmod 600"):
         Service(cfg, state_dir=tmp_path)
@@ -298,7 +298,7 @@ def test_signed_udp_input_into_the_service_counts_every_rejection_and_survives_a
     """Real UDP into the running service: signed frames give samples; unsigned, wrong-key
     and replayed frames are counted ``parse:autopilot:<reason>`` in the health record;
     after a restart the frames accepted before are replays."""
-    from onboard.service import Service
+    from onboard.service.daemon import Service
 
     key_file = tmp_path / "mavlink.key"
     key_file.write_bytes(KEY.hex().encode())
@@ -442,8 +442,8 @@ def test_replay_of_a_signed_service_recording_is_exact_with_the_same_rejections(
 
     from drivers.recording import VERSIONS, RecordingReader, read_records
     from onboard.engine import Engine
-    from onboard.recorder import replay_recording
-    from onboard.service import Service
+    from onboard.service.daemon import Service
+    from onboard.service.recorder import replay_recording
 
     key_file = tmp_path / "mavlink.key"
     key_file.write_bytes(KEY.hex().encode())
@@ -534,8 +534,8 @@ def test_verdicts_follow_frames_split_across_chunks_and_many_frames_per_chunk(tm
     import random
 
     from drivers.recording import RecordingReader, read_records
-    from onboard.config import Config
-    from onboard.recorder import Intake, Recorder, replay_recording
+    from onboard.core.config import Config
+    from onboard.service.recorder import Intake, Recorder, replay_recording
 
     now = signing_timestamp(time.time())
     first = frames(3)
@@ -636,9 +636,9 @@ def test_damaged_verdicts_never_stop_a_replay(tmp_path):
         decode_verdicts,
         encode_verdicts,
     )
-    from onboard.config import Config
+    from onboard.core.config import Config
     from onboard.engine import Engine
-    from onboard.recorder import replay_recording
+    from onboard.service.recorder import replay_recording
 
     rng = random.Random(11)
     base = frames(4) + frames(2, None) + frames(2, OTHER_KEY)
@@ -679,7 +679,7 @@ def test_recording_versions_old_files_still_read_and_unknown_newer_ones_refused(
     from drivers.base import UnreadableLog
     from drivers.logs import sniff
     from drivers.recording import RawRecord, read_records
-    from onboard.recorder import Recorder
+    from onboard.service.recorder import Recorder
 
     r1 = Recorder(tmp_path / "a", fsync=False)  # no signing: version 1, as before
     r1.write(RawRecord(t=1.0, source="ap", kind="mavlink", data=b"x"))
@@ -718,8 +718,9 @@ def acl_router():
     """An in-process router opened with config/zenoh/router-acl.json5 as shipped, on a
     free port, with the example credentials file."""
     import zenoh
-    from onboard.publishers.zenoh_pub import session_config
-    from onboard.service_bench import free_tcp_port
+
+    from onboard.service.publishers.zenoh_pub import session_config
+    from onboard.tools.service_bench import free_tcp_port
 
     ep = f"tcp/127.0.0.1:{free_tcp_port()}"
     conf = session_config("router", listen=[ep], config_file=str(ZENOH_DIR / "router-acl.json5"))
@@ -733,7 +734,7 @@ def acl_router():
 def _session(ep: str, config_file: str, user: str | None = None, password: str | None = None):
     import zenoh
 
-    from onboard.publishers.zenoh_pub import session_config
+    from onboard.service.publishers.zenoh_pub import session_config
 
     conf = session_config("client", connect=[ep], config_file=config_file)
     if user is not None:
@@ -747,9 +748,9 @@ def _credentials() -> dict[str, str]:
 
 
 def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receives_them(acl_router):
-    from onboard.config import ZenohOut
-    from onboard.messages import EstimateRecord
-    from onboard.publishers.zenoh_pub import ZenohPublisher
+    from onboard.core.config import ZenohOut
+    from onboard.core.messages import EstimateRecord
+    from onboard.service.publishers.zenoh_pub import ZenohPublisher
 
     shore = _session(acl_router, str(ZENOH_DIR / "shore.json5"))
     got: list[str] = []
@@ -812,10 +813,10 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
 def test_onboard_shore_reads_through_the_access_controlled_router_with_its_config(acl_router, capsys):
     import argparse
 
-    from onboard import shore
-    from onboard.config import ZenohOut
-    from onboard.messages import EstimateRecord
-    from onboard.publishers.zenoh_pub import ZenohPublisher
+    from onboard.core.config import ZenohOut
+    from onboard.core.messages import EstimateRecord
+    from onboard.service.publishers.zenoh_pub import ZenohPublisher
+    from onboard.tools import shore
 
     pub = ZenohPublisher(ZenohOut(mode="client", connect=[acl_router],
                                   config_file=str(ZENOH_DIR / "vehicle-boat1.json5")), "boat1")
@@ -829,7 +830,7 @@ def test_onboard_shore_reads_through_the_access_controlled_router_with_its_confi
         out = capsys.readouterr().out
         no_creds = argparse.Namespace(connect=[acl_router], listen=None, mode=None,
                                       vehicle="*", once=True, zenoh_config="")
-        from onboard.errors import UsageError
+        from onboard.core.errors import UsageError
 
         with pytest.raises(UsageError, match="cannot reach Zenoh"):
             shore.main(no_creds)
@@ -842,8 +843,8 @@ def test_onboard_shore_reads_through_the_access_controlled_router_with_its_confi
 @pytest.mark.parametrize("user, password", [("boat1", "wrong-password"), ("intruder", "x"),
                                             (None, None)])
 def test_a_wrong_password_or_no_credentials_cannot_open_a_session(acl_router, tmp_path, user, password):
-    from onboard.config import ZenohOut
-    from onboard.publishers.zenoh_pub import ZenohPublisher
+    from onboard.core.config import ZenohOut
+    from onboard.service.publishers.zenoh_pub import ZenohPublisher
 
     conf = tmp_path / "vehicle.json5"
     auth = "" if user is None else (f'transport: {{ auth: {{ usrpwd: {{ user: "{user}", '
@@ -881,10 +882,11 @@ def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_
     """The example configs as shipped, only the certificate paths replaced: the router
     listens on tls/, the vehicle's ZenohPublisher and the shore connect with the CA."""
     import zenoh
-    from onboard.config import ZenohOut
-    from onboard.messages import EstimateRecord
-    from onboard.publishers.zenoh_pub import ZenohPublisher, session_config
-    from onboard.service_bench import free_tcp_port
+
+    from onboard.core.config import ZenohOut
+    from onboard.core.messages import EstimateRecord
+    from onboard.service.publishers.zenoh_pub import ZenohPublisher, session_config
+    from onboard.tools.service_bench import free_tcp_port
 
     certs = _test_certificates(tmp_path)
     ep = f"tls/localhost:{free_tcp_port()}"

@@ -24,13 +24,13 @@ from pymavlink.dialects.v20 import common as mavlink2
 import onboard.pipelines as pipelines_pkg
 from drivers.dvl_json import encode_velocity_report
 from drivers.recording import read_records
-from onboard.config import from_dict
+from onboard.core.config import from_dict
+from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.engine import Engine
-from onboard.messages import EstimateRecord, HealthRecord
-from onboard.publishers.zenoh_pub import open_router
-from onboard.recorder import replay_recording
-from onboard.service import Service
-from onboard.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
+from onboard.service.daemon import Service
+from onboard.service.publishers.zenoh_pub import open_router
+from onboard.service.recorder import replay_recording
+from onboard.tools.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
 
 REPO = Path(__file__).resolve().parent.parent
 TIMEOUT = 60.0
@@ -115,7 +115,7 @@ def test_service_end_to_end_over_udp_pty_tcp_to_zenoh_and_mavlink_and_exact_repl
     router = open_router(endpoint)
     import zenoh
 
-    from onboard.publishers.zenoh_pub import session_config
+    from onboard.service.publishers.zenoh_pub import session_config
 
     shore = zenoh.open(session_config("client", connect=[endpoint]))
     got: dict[str, list[bytes]] = {}

@@ -11,8 +11,8 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
 import onboard.pipelines as pipelines_pkg
-from onboard.demo import run_demo
-from onboard.service_bench import free_tcp_port
+from onboard.tools.demo import run_demo
+from onboard.tools.service_bench import free_tcp_port
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from onboard.messages import GnssFix, Heading, Imu
+from onboard.core.messages import GnssFix, Heading, Imu
 from sitl.effects import Effect, external_force_ned
-from sitl.plants.base import Command
 from sitl.environment import Environment
+from sitl.plants.base import Command
 from sitl.runner import simulate
 from sitl.scenarios import NOMINAL_BOAT, ForcedRudderBoat, get
 from sitl.sensors import GeoOrigin

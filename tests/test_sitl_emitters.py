@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from drivers.dvl_json import DvlJsonParser
 from drivers.nmea import NmeaParser
 from drivers.pd6 import Pd6Parser
-from onboard.messages import DvlVelocity, GnssFix, Heading
+from onboard.core.messages import DvlVelocity, GnssFix, Heading
 from sitl.emitters import PtySink, TcpServerSink, UdpSink
 from sitl.runner import run
 

@@ -10,7 +10,7 @@ import pytest
 from pymavlink import mavutil
 
 from onboard.cli import main as onboard_main
-from onboard.errors import UsageError
+from onboard.core.errors import UsageError
 from sitl import scenarios
 from sitl.runner import read_truth, run_to_tlog, simulate
 

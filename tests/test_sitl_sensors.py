@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from onboard.messages import Attitude, DvlPosition, DvlVelocity, GnssFix, Heading, Imu
+from onboard.core.messages import Attitude, DvlPosition, DvlVelocity, GnssFix, Heading, Imu
 from sitl.sensors import (
     ActuatorConfig,
     ActuatorModel,
@@ -20,11 +20,13 @@ from sitl.sensors import (
     GeoOrigin,
     Gnss,
     GnssConfig,
-    Imu as ImuSensor,
     ImuConfig,
     PwmChannel,
     WorldView,
     sensor_rng,
+)
+from sitl.sensors import (
+    Imu as ImuSensor,
 )
 from sitl.truth import TruthRecord
 

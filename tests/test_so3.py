@@ -1,4 +1,4 @@
-"""SO(3) helpers: Exp/Log, skew, Euler angles, right Jacobian (onboard.pipelines.so3)."""
+"""SO(3) helpers: Exp/Log, skew, Euler angles, right Jacobian (onboard.core.so3)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from onboard.pipelines.so3 import (
+from onboard.core.so3 import (
     euler_to_matrix,
     exp_so3,
     log_so3,

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from onboard.messages import ActuatorCommand
-from onboard.pipelines.surge_heading import (
+from onboard.core.messages import ActuatorCommand
+from onboard.estimators.axis_model import (
     arx_coefficients,
     augmented_matrices,
     axis_commands,

@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from drivers.base import UnreadableLog
 from drivers.tlog import TlogReader, TlogWriter, pymavlink_parse_seconds, scan_header
-from onboard.messages import ActuatorOutputs, Attitude, GnssFix, Imu, Parameter, VehicleInfo
+from onboard.core.messages import ActuatorOutputs, Attitude, GnssFix, Imu, Parameter, VehicleInfo
 
 T0 = 1_700_000_000.0
 

@@ -16,7 +16,7 @@ from drivers.transports import (
     open_transport,
     parse_url,
 )
-from onboard.service_bench import free_tcp_port, free_udp_port
+from onboard.tools.service_bench import free_tcp_port, free_udp_port
 
 TIMEOUT = 20.0  # generous: a loaded 2-core CI machine
 

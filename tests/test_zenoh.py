@@ -8,10 +8,10 @@ import time
 import msgspec
 import pytest
 
-from onboard.config import ZenohOut
-from onboard.messages import SCHEMA_VERSION, EstimateRecord, HealthRecord
-from onboard.publishers.zenoh_pub import ZenohPublisher, open_router, session_config
-from onboard.service_bench import free_tcp_port
+from onboard.core.config import ZenohOut
+from onboard.core.messages import SCHEMA_VERSION, EstimateRecord, HealthRecord
+from onboard.service.publishers.zenoh_pub import ZenohPublisher, open_router, session_config
+from onboard.tools.service_bench import free_tcp_port
 
 TIMEOUT = 20.0
 
@@ -101,7 +101,7 @@ def test_client_mode_without_a_router_fails_at_start_with_a_reason():
 def test_onboard_shore_once_prints_a_snapshot_from_the_queryables(router, capsys):
     import argparse
 
-    from onboard import shore
+    from onboard.tools import shore
 
     endpoint, _ = router
     pub = ZenohPublisher(ZenohOut(mode="client", connect=[endpoint]), "boat9")

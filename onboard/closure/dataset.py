@@ -28,9 +28,9 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from drivers.logs import open_log
-from onboard.config import Config
-from onboard.engine import Engine, run
-from onboard.messages import (
+from onboard.core.config import Config
+from onboard.core.geo import LocalFrame
+from onboard.core.messages import (
     ActuatorCommand,
     Attitude,
     GnssFix,
@@ -39,7 +39,7 @@ from onboard.messages import (
     Sample,
     VelocityOverGround,
 )
-from onboard.pipelines.geo import LocalFrame
+from onboard.engine import Engine, run
 
 
 class _Collector:

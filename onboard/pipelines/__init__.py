@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 
-from onboard.config import Config
+from onboard.core.config import Config
 from onboard.pipelines.base import Pipeline
 
 MODULES: tuple[str, ...] = ("nav", "aie", "kf", "current", "eseso")

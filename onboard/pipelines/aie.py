@@ -17,7 +17,7 @@ IJC 2024). Equations restated in algorithms.md §2, scalar case ``l_d = l_y = 1`
       P+     = (P - P Phi~^T Gamma^-1 Phi~ P) / lambda
       theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)
 
-* the Kalman filter of :mod:`onboard.pipelines.kalman` forecast with ``d_hat`` (§2.2).
+* the Kalman filter of :mod:`onboard.estimators.kalman` forecast with ``d_hat`` (§2.2).
 
 Signals are normalized before RLS (§2.10): ``z`` by ``sqrt(R)`` and ``d_hat`` by
 ``u_scale``. The RLS update is generated once per regressor length as straight-line code
@@ -37,8 +37,10 @@ import time
 from functools import lru_cache
 from typing import Any, Callable, Mapping
 
-from onboard.config import Config
-from onboard.pipelines.aie_pipeline import (
+from onboard.core.config import Config
+from onboard.estimators.axis_model import AxisModel, Discrete, discretize
+from onboard.estimators.rls import packed_index, unpack  # noqa: F401 - unpack re-exported
+from onboard.pipelines.surge_heading import (
     AieConfig,
     AxisConfig,
     AxisFilter,
@@ -46,8 +48,6 @@ from onboard.pipelines.aie_pipeline import (
     load_config,
     sensor_noise,
 )
-from onboard.pipelines.rls import packed_index, unpack  # noqa: F401 - unpack re-exported
-from onboard.pipelines.surge_heading import AxisModel, Discrete, discretize
 
 COLUMNS = ("north", "east", "heading", "speed", "yaw_rate", "surge_input", "yaw_input",
            "std_north", "std_east", "std_speed", "std_heading")
@@ -451,7 +451,7 @@ def bench_step_ratio(n: int = 5000, repeats: int = 5) -> dict[str, float]:
     import numpy as np
     from filterpy.kalman import KalmanFilter
 
-    from onboard.pipelines.surge_heading import augmented_matrices
+    from onboard.estimators.axis_model import augmented_matrices
 
     top = AieConfig()
     ax = AxisAie(AxisModel(1.0, 3.0), top.surge, top)

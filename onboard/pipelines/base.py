@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
 
-from onboard.config import Config
-from onboard.messages import Sample
+from onboard.core.config import Config
+from onboard.core.messages import Sample
 
 
 @runtime_checkable

@@ -63,18 +63,28 @@ from typing import Annotated, Any, Literal
 import msgspec
 import numpy as np
 
-from onboard.config import Config, ConfigError, decode_section
-from onboard.messages import (ActuatorCommand, Attitude, Depth, DvlPosition, DvlVelocity,
-                              GnssFix, Heading, Imu, Sample, VelocityOverGround)
-from onboard.pipelines.geo import wrap_pi
-from onboard.pipelines.hgo import GainDesign, IncreasingGain, current_hgo_gain
-from onboard.pipelines.rls import RecursiveLeastSquares
-from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel, kind_for_class
+from onboard.core.config import CONFIG_DIR, Config, ConfigError, decode_section
+from onboard.core.geo import wrap_pi
+from onboard.core.messages import (
+    ActuatorCommand,
+    Attitude,
+    Depth,
+    DvlPosition,
+    DvlVelocity,
+    GnssFix,
+    Heading,
+    Imu,
+    Sample,
+    VelocityOverGround,
+)
+from onboard.estimators.hgo import GainDesign, IncreasingGain, current_hgo_gain
+from onboard.estimators.rls import RecursiveLeastSquares
+from onboard.estimators.vehicle_models import ModelInputs, RegressionModel, kind_for_class
 
 GRAVITY = 9.81
 """m/s^2, for the net-weight prior (``CurrentConfig.net_weight_std``)."""
 
-GAIN_DIR = Path(__file__).resolve().parent.parent.parent / "config" / "gains"
+GAIN_DIR = CONFIG_DIR / "gains"
 """Precomputed LMI gains for the bundled configs (``onboard design-gain``)."""
 
 
@@ -373,7 +383,7 @@ class CurrentPipeline:
             self._hJ = -np.eye(nd)
         self.flow = None
         if cfg.observer == "flow":
-            from onboard.pipelines.flow_observer import FlowObserver
+            from onboard.estimators.flow_observer import FlowObserver
             self.flow = FlowObserver(self.model, poles=cfg.flow_poles or None,
                                      psi_std=sensors.compass.heading_std_rad)
         self.counters: dict[str, float] = {"rejected_invalid_dvl": 0, "rejected_gate": 0,

@@ -96,8 +96,9 @@ import msgspec
 import numpy as np
 from numpy.typing import NDArray
 
-from onboard.config import Config, decode_section
-from onboard.messages import (
+from onboard.core.config import Config, decode_section
+from onboard.core.geo import LocalFrame, wrap_pi
+from onboard.core.messages import (
     ActuatorCommand,
     Attitude,
     Depth,
@@ -109,8 +110,7 @@ from onboard.messages import (
     Sample,
     VelocityOverGround,
 )
-from onboard.pipelines.geo import LocalFrame, wrap_pi
-from onboard.pipelines.so3 import (
+from onboard.core.so3 import (
     cross,
     euler_to_matrix,
     exp_so3,

@@ -11,8 +11,9 @@ the input is zero (a random-walk-driven filter).
 
 from __future__ import annotations
 
-from onboard.config import Config
-from onboard.pipelines.aie_pipeline import (
+from onboard.core.config import Config
+from onboard.estimators.axis_model import AxisModel
+from onboard.pipelines.surge_heading import (
     AieConfig,
     AxisConfig,
     AxisFilter,
@@ -20,7 +21,6 @@ from onboard.pipelines.aie_pipeline import (
     load_config,
     sensor_noise,
 )
-from onboard.pipelines.surge_heading import AxisModel
 
 COLUMNS = ("north", "east", "heading", "speed", "yaw_rate",
            "std_north", "std_east", "std_speed", "std_heading")

@@ -12,9 +12,9 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Mapping, Sequence
 
-from onboard.config import Config
-from onboard.messages import Attitude, Depth, GnssFix, Heading, Sample, VelocityOverGround
-from onboard.pipelines.geo import LocalFrame, wrap_2pi
+from onboard.core.config import Config
+from onboard.core.geo import LocalFrame, wrap_2pi
+from onboard.core.messages import Attitude, Depth, GnssFix, Heading, Sample, VelocityOverGround
 
 
 class NavTrack:

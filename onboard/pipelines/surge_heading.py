@@ -1,372 +1,806 @@
-"""Surge and heading models of a small boat, their measurements, and their identification.
+"""The surge/heading estimation pipeline shared by ``aie`` and its ``kf`` baseline.
 
-Faros & Tanner, "System Identification and Adaptive Input Estimation on the Jaiabot",
-arXiv 2504.02005 (2025), restated in algorithms.md §1:
+Everything except the input of the Kalman filter is common to the two pipelines, so the
+comparison of the seed paper (Faros & Tanner 2025, §3) is like for like:
 
-* continuous model (§1.1), per axis, with mass/inertia normalized to 1::
+* measurement windows: ``step_s`` seconds for surge (the AIE step Ts, algorithms.md
+  §1.2), ``heading_step_s`` for heading. All GNSS fixes (headings) in a window are
+  averaged to one point at the window's mean time (a 1 Hz receiver gives the plain fix; a
+  5 Hz one five times less variance). Consecutive points give the heading increment
+  (§1.2, wrapped) and the path increment (§1.3, with the circular-arc correction). Steps
+  are as long as the actual time between points, so irregular and missing fixes only
+  change ``dt``; past ``max_gap_s`` the chain restarts;
+* two independent axis filters (surge, heading) of :mod:`onboard.estimators.kalman`, fed
+  by an :class:`AxisFilter` subclass that chooses the input (AIE: estimated; KF: command);
+* trajectory reconstruction of the paper's §3.3: ``N += y_s cos(psi)``, ``E += y_s
+  sin(psi)`` from the estimated increments (``psi`` at the chord's mid heading), and
+  ``psi += y_psi``. The common mode of increments is unobservable, so the position is
+  pulled toward the GNSS point by a small gain (``position_anchor``); the heading comes
+  out exactly as the measured point minus its estimated noise when the MA(1) noise is
+  modelled (``correlated_noise``), else it is pulled with ``heading_anchor``;
+* estimates between steps are predicted with the model and the current input.
 
-      v' = -a v + u        (surge: v path speed m/s, u = tau/m in m/s^2)
-      r' = -a_psi r + u    (heading: r yaw rate rad/s, u = tau_psi/I in rad/s^2)
-
-* exact zero-order-hold discretization (§1.2) and the increment output
-  ``y_k = s_k - s_{k-1}`` (path length, m) or ``wrap(psi_k - psi_{k-1})`` (rad);
-* the measured increments from GPS and compass (§1.3), with the circular-arc correction;
-* identification of ``a`` and of the input scaling ``u = gain * command + offset`` from a
-  log by least squares, in the ARX form of §1.2 or as a separable output-error fit.
-
-The input is an acceleration (the §1.1 recommendation m := 1). The command is the
-normalized actuator command of :class:`onboard.messages.ActuatorCommand` reduced to one
-number per axis by :func:`axis_commands` (throttle/rudder, or sum/difference of the two
-thrusters of a skid-steered boat).
-
-Pure functions of numbers; only :func:`identify_axis` and friends use numpy.
+Inputs: :class:`GnssFix`, :class:`Heading` (preferred) or :class:`Attitude` yaw, and
+:class:`ActuatorCommand` (optional: without it AIE runs unchanged and the KF baseline
+runs with zero input).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Literal, Sequence
+from math import sqrt
+from typing import Any, Callable, Literal, Mapping, Sequence
 
-import numpy as np
+import msgspec
 
-from onboard.messages import ActuatorCommand
-from onboard.pipelines.geo import wrap_pi
+from onboard.core.config import Config
+from onboard.core.geo import LocalFrame, wrap_2pi, wrap_pi
+from onboard.core.messages import ActuatorCommand, Attitude, GnssFix, Heading, Sample
+from onboard.estimators.axis_model import (
+    AxisModel,
+    Discrete,
+    axis_commands,
+    discretize,
+    path_increment,
+)
+from onboard.estimators.kalman import IncrementKF
 
-_A_SMALL = 1e-6
-"""Below this |a*Ts| the ZOH coefficients use their series limits (§1.2)."""
-
-InputMode = Literal["auto", "throttle-rudder", "differential"]
+# ---------------------------------------------------------------------------------------
+# Configuration: [pipelines.aie] (the kf baseline reads the same table, see kf.py)
 
 
-@dataclass(frozen=True, slots=True)
-class AxisModel:
-    """One axis of the §1.1 model: ``x' = -a x + u``, ``u = gain * command + offset``.
+class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """One axis: its model (§1.2), the RCIE hyperparameters (§2.10), the KF noise.
 
-    Attributes:
-        a: damping rate (1/s); ``a = d/m`` (surge) or ``d_psi/I`` (heading).
-        gain: input per unit normalized command (m/s^2 or rad/s^2 per unit).
-        offset: input at zero command (same unit as ``u``).
-        rmse: fit residual (unit of the fitted signal), NaN when not identified.
-        fit_ratio: explained fraction of the fitted signal's variance, NaN when unknown.
+    Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized. The
+    defaults were tuned by the §2.10 procedure on SITL ``jaiabot-turns`` and
+    ``twin-thruster-turns`` (seed 10, held out from the reported seeds); see docs/aie.md.
     """
 
-    a: float
-    gain: float
+    a: float = 1.0
+    """Damping rate a (1/s), identified (§1.2) or the §1.4 default."""
+    gain: float = 1.0
+    """Nominal input per unit command (the KF baseline's input scaling)."""
     offset: float = 0.0
-    rmse: float = math.nan
-    fit_ratio: float = math.nan
+    """Nominal input at zero command."""
+    u_max: float = 5.0
+    """Saturation of the input estimate |d_hat| (physical bound)."""
+    u_scale: float = 1.0
+    """Typical input magnitude: the normalization of d_hat for RLS (§2.10)."""
+    n_c: int = 3
+    """Input-estimator order (§2.3); l_theta = 2 n_c + 1 (7, the paper's heading count;
+    its surge used 9, n_c = 4, which measured within 1 % here at twice the cost)."""
+    n_f: int = 1
+    """Taps of G_f (§2.4); 1 suffices for the relative-degree-1 increment model."""
+    r_z: float = 1.0
+    """Retrospective weight R_z (§2.5)."""
+    r_d: float = 1.0
+    """Input penalty R_d (normalized, §2.5), on the size or the change of d_hat."""
+    rate_penalty: bool = True
+    """Apply R_d to the change of the input estimate (d_hat_k - d_hat_{k-1}) instead of
+    its size: penalizes noise amplification without biasing a nonzero mean input."""
+    r_theta: float = 0.01
+    """Regularization R_theta; P_0 = I / r_theta (normalized, §2.5)."""
+    lam: float = 0.999
+    """RLS forgetting factor lambda (§2.6); memory ~ 1/(1 - lambda) steps."""
+    v_d: float = 0.3
+    """AIE: variance of the input-estimation error V_d (u^2), §2.2."""
+    kf_v_d: float = 1.0
+    """KF baseline: variance of the commanded input's error (u^2)."""
+    q_v: float = 0.0
+    """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
+    known_input: bool = True
+    """AIE: forecast with the nominal commanded input plus the RCIE estimate, so RCIE
+    estimates what the nominal map misses (§2.1 "known input"). Without commands, and
+    with ``false``, the whole input is unknown, as in the paper."""
 
-    def input(self, command: float) -> float:
-        """The modelled input ``u`` (m/s^2 or rad/s^2) for a normalized command."""
-        return self.gain * command + self.offset
 
-    def to_dict(self) -> dict[str, float]:
-        return {"a": self.a, "gain": self.gain, "offset": self.offset,
-                "rmse": self.rmse, "fit_ratio": self.fit_ratio}
+class SurgeAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.aie.surge]`` (m/s^2)."""
+
+    a: float = 1.0
+    gain: float = 3.0
+    u_max: float = 5.0
+    u_scale: float = 1.0
+    r_d: float = 10.0
+    v_d: float = 0.1
 
 
-@dataclass(frozen=True, slots=True)
-class Discrete:
-    """ZOH coefficients of one axis over a step ``dt`` (§1.2).
+class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
+                        frozen=True):
+    """``[pipelines.aie.heading]`` (rad/s^2)."""
 
-    ``alpha = exp(-a dt)``, ``c1 = (1 - alpha)/a`` (-> dt), ``c2 = (dt - c1)/a``
-    (-> dt^2/2). Then ``v+ = alpha v + c1 u`` and ``s+ = s + c1 v + c2 u``.
+    a: float = 2.0
+    gain: float = 2.0
+    u_max: float = 5.0
+    u_scale: float = 2.0
+    r_d: float = 1.0
+
+
+class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.aie]``: measurement handling, reconstruction, both axes."""
+
+    enabled: bool = True
+    step_s: float = 1.0
+    """The AIE step Ts (s) of the surge axis: GNSS window length (§1.2)."""
+    heading_step_s: float = 0.1
+    """The step of the heading axis (compass windows); <= 0: same as step_s."""
+    max_gap_s: float = 5.0
+    """Longer without a measurement point restarts the increment chain."""
+    input_mode: Literal["auto", "throttle-rudder", "differential"] = "auto"
+    """How commands map to the two axes (see surge_heading.axis_commands)."""
+    gnss_std_m: float | None = None
+    """GNSS position noise, one sigma (m); default [sensors.gnss] position_std_m."""
+    heading_std_rad: float | None = None
+    """Compass noise, one sigma (rad); default [sensors.compass] heading_std_rad."""
+    correlated_noise: bool = True
+    """Model the MA(1) noise of increments formed from noisy points (kalman.py)."""
+    heading_anchor: float = 0.05
+    """With ``correlated_noise = false`` only: gain pulling the reconstructed heading
+    toward the measured one per step (0: the paper's pure integration of increments)."""
+    position_anchor: float = 0.05
+    """Gain pulling the reconstructed position toward the GNSS point per surge step
+    (0: pure dead reckoning from the estimates, paper §3.3)."""
+    nis_gate: float = 400.0
+    """An innovation with z^2/S above this is rejected as an outlier (20 sigma)."""
+    adaptive: bool = False
+    """Adapt V_d to the innovation statistics (ASE, §2.8)."""
+    adaptive_window: int = 50
+    """Window N_w of the innovation sample variance (steps)."""
+    divergence_input: float = 3.0
+    """Input estimate beyond this multiple of u_max (before saturation) is divergence."""
+    divergence_nis: float = 25.0
+    """Mean NIS over ~20 steps above this is divergence (expected value ~1)."""
+    surge: SurgeAxisConfig = SurgeAxisConfig()
+    heading: HeadingAxisConfig = HeadingAxisConfig()
+
+
+def load_config(cfg: Config) -> AieConfig:
+    """Decode ``[pipelines.aie]`` (shared by the aie and kf pipelines)."""
+    from onboard.core.config import decode_section
+
+    return decode_section(cfg, "aie", AieConfig)
+
+
+# ---------------------------------------------------------------------------------------
+# One axis: Kalman filter plus the choice of its input
+
+
+class AxisFilter:
+    """One axis (surge or heading): the §2.2 filter, outlier gate, counters.
+
+    Subclasses define :meth:`forecast_input` (the input over the step just ended) and
+    :meth:`after_innovation` (AIE: the RCIE step). Units: ``y`` in m or rad per step.
     """
 
-    dt: float
-    alpha: float
-    c1: float
-    c2: float
+    def __init__(self, model: AxisModel, cfg: AxisConfig, top: AieConfig, V_u: float) -> None:
+        self.model = model
+        self.cfg = cfg
+        self.top = top
+        self.V_u = V_u
+        self.kf = IncrementKF(R=1.0, q_v=cfg.q_v, correlated=top.correlated_noise)
+        self.u = 0.0
+        """Input applied over the coming step (m/s^2 or rad/s^2)."""
+        self.last_command: float | None = None
+        self.steps = 0
+        self.rejected = 0
+        self.diverged = 0
+        self.restarts = 0
+        self._consecutive_rejects = 0
+        self.nis_avg = 1.0
+
+    def restart(self) -> None:
+        """Forget the state (a gap in the measurements); keep adaptive coefficients."""
+        self.kf.initialized = False
+        self.restarts += 1
+
+    def damping(self, command: float | None) -> float:
+        """The damping rate ``a`` (1/s) of the model used over a step."""
+        return self.model.a
+
+    def forecast_input(self, command: float | None) -> float:
+        raise NotImplementedError
+
+    def input_ahead(self, command: float | None) -> float:
+        """The input to predict with beyond the last step, given the newest command."""
+        return self.u
+
+    def after_innovation(self, k: Discrete, command: float | None) -> None:
+        """Hook between innovation and update (AIE computes d_hat here, §2.7)."""
+
+    def step(self, k: Discrete, y: float, R: float, R_prev: float,
+             command: float | None) -> None:
+        """One step: forecast over ``k.dt`` with the input, innovation, update (§2.7).
+
+        ``y``: increment (m or rad); ``R``, ``R_prev``: noise variances of the two
+        points it was formed from; ``command``: mean normalized command over the step
+        (None if unknown).
+        """
+        kf = self.kf
+        self.last_command = command
+        kf.R = R if kf.correlated else R + R_prev
+        if not kf.initialized:
+            var_v = (self.cfg.u_max * k.dt) ** 2
+            kf.init(y, k.dt, R_prev, var_v)
+            if self.cfg.known_input and command is not None:
+                self.u = self.model.input(command)
+            return
+        kf.forecast(k, self.forecast_input(command), self.V_u)
+        kf.innovation(y)
+        if kf.nis > self.top.nis_gate and self._consecutive_rejects < 5:
+            self.rejected += 1
+            self._consecutive_rejects += 1
+            kf.skip()
+            return
+        self._consecutive_rejects = 0
+        self.nis_avg += 0.05 * (min(kf.nis, 1e6) - self.nis_avg)
+        self.after_innovation(k, command)
+        kf.update()
+        self.steps += 1
 
 
-def discretize(a: float, dt: float) -> Discrete:
-    """Exact ZOH discretization of ``x' = -a x + u`` over ``dt`` seconds (§1.2)."""
-    if dt <= 0.0:
-        raise ValueError(f"step must be positive, got {dt}")
-    x = a * dt
-    alpha = math.exp(-x)
-    if abs(x) < _A_SMALL:
-        c1 = dt * (1.0 - x / 2.0)
-        c2 = dt * dt * (0.5 - x / 6.0)
-    else:
-        c1 = -math.expm1(-x) / a
-        c2 = (dt - c1) / a
-    return Discrete(dt, alpha, c1, c2)
+# ---------------------------------------------------------------------------------------
+# The pipeline
 
 
-def augmented_matrices(a: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The §1.2 augmented model ``X = [s, v, s_prev]``: ``(A, B, C)``, ``y = C X``.
+class _Window:
+    """Running sums of one measurement window."""
 
-    Provided for reference and tests; the filters run the equivalent two-state increment
-    form (see :mod:`onboard.pipelines.kalman`).
-    """
-    d = discretize(a, dt)
-    A = np.array([[1.0, d.c1, 0.0], [0.0, d.alpha, 0.0], [1.0, 0.0, 0.0]])
-    B = np.array([d.c2, d.c1, 0.0])
-    C = np.array([1.0, 0.0, -1.0])
-    return A, B, C
+    __slots__ = ("n_fix", "st_fix", "sn", "se", "n_h", "st_h", "sh")
 
-
-def arx_coefficients(a: float, dt: float) -> tuple[float, float, float]:
-    """``(alpha, beta0, beta1)`` of ``y_{k+1} = alpha y_k + beta0 u_k + beta1 u_{k-1}``.
-
-    §1.2: ``beta0 = c2`` (the first Markov parameter C B) and
-    ``beta1 = c1^2 - alpha beta0`` (unit input gain).
-    """
-    d = discretize(a, dt)
-    return d.alpha, d.c2, d.c1 * d.c1 - d.alpha * d.c2
+    def __init__(self) -> None:
+        self.n_fix = 0
+        self.st_fix = self.sn = self.se = 0.0
+        self.n_h = 0
+        self.st_h = self.sh = 0.0
 
 
-# --------------------------------------------------------------------------------------
-# Measurements (§1.3)
+_RESIDUAL_GAIN = 0.05
+"""Weight of the newest anchor residual in its running mean square (~20 surge steps)."""
+
+AxisFactory = Callable[[AxisModel, AxisConfig, AieConfig], AxisFilter]
 
 
-def heading_increment(psi_prev: float, psi: float) -> float:
-    """Heading change (rad) from ``psi_prev`` to ``psi``, wrapped to (-pi, pi] (§1.2)."""
-    return wrap_pi(psi - psi_prev)
+class SurgeHeadingPipeline:
+    """Surge and heading filters with trajectory reconstruction (``aie`` or ``kf``).
 
+    ``columns``: north, east (m from the first fix), heading (rad, [0, 2 pi)), speed
+    (m/s), yaw_rate (rad/s), and for AIE surge_input (m/s^2), yaw_input (rad/s^2).
 
-def path_increment(dn: float, de: float, psi_prev: float, dpsi: float,
-                   arc: bool = True) -> float:
-    """Path length (m) travelled over one step, from the GPS displacement (§1.3).
-
-    Args:
-        dn, de: displacement north/east (m) between consecutive fixes.
-        psi_prev: heading (rad, clockwise from north) at the first fix.
-        dpsi: wrapped heading change (rad) over the step.
-        arc: apply the circular-arc correction; otherwise the plain projection of the
-            displacement on the body x-axis at the first fix (the fallback of §1.3).
-
-    Returns:
-        The signed arc length: negative when the boat moved backwards.
-    """
-    if not arc:
-        return math.cos(psi_prev) * dn + math.sin(psi_prev) * de
-    mid = psi_prev + 0.5 * dpsi
-    along = math.cos(mid) * dn + math.sin(mid) * de
-    chord = math.hypot(dn, de)
-    h = 0.5 * dpsi
-    factor = 1.0 if abs(h) < 5e-4 else h / math.sin(h)
-    return math.copysign(chord * factor, along)
-
-
-def axis_commands(cmd: ActuatorCommand, mode: InputMode = "auto") -> tuple[float | None,
-                                                                         float | None]:
-    """Reduce an actuator command to ``(surge_command, yaw_command)`` (normalized).
-
-    * ``throttle-rudder`` (Jaiabot-type): surge from ``throttle``, yaw from ``rudder_rad``
-      (positive turns the bow to starboard).
-    * ``differential`` (BlueBoat-type): surge from the mean ``(left + right)/2``, yaw from
-      the half difference ``(left - right)/2`` (left ahead of right turns to starboard).
-    * ``auto``: differential when both thruster fields are present, else throttle-rudder.
-
-    A missing field gives None for that axis.
-    """
-    diff = cmd.left is not None and cmd.right is not None
-    if mode == "differential" or (mode == "auto" and diff):
-        if not diff:
-            return None, None
-        return 0.5 * (cmd.left + cmd.right), 0.5 * (cmd.left - cmd.right)  # type: ignore
-    return cmd.throttle, cmd.rudder_rad
-
-
-# --------------------------------------------------------------------------------------
-# Identification (§1.2 ARX form, and the separable output-error refinement)
-
-Signal = Literal["increment", "rate"]
-
-
-def resample(t: Sequence[float], x: Sequence[float], dt: float) -> tuple[np.ndarray,
-                                                                         np.ndarray]:
-    """Linear interpolation of ``x(t)`` onto the grid ``t0 + k dt`` (s)."""
-    t = np.asarray(t, float)
-    x = np.asarray(x, float)
-    grid = np.arange(t[0], t[-1] + 1e-9, dt)
-    return grid, np.interp(grid, t, x)
-
-
-def _regress(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
-    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-    res = y - X @ coef
-    return coef, float(np.sqrt(np.mean(res * res)))
-
-
-def _fit_arx(segs: list[tuple[np.ndarray, np.ndarray]], dt: float, signal: Signal,
-             offset: bool) -> AxisModel:
-    """Unconstrained least squares in the ARX form, then a, gain, offset (§1.2)."""
-    rows, rhs = [], []
-    for y, c in segs:
-        if signal == "rate":  # x_{k+1} = alpha x_k + c1 (g c_k + o)
-            X = [y[:-1], c[:-1]] + ([np.ones(len(y) - 1)] if offset else [])
-            rows.append(np.column_stack(X))
-            rhs.append(y[1:])
-        else:  # y_{k+1} = alpha y_k + beta0 u_k + beta1 u_{k-1}, u_k feeds y_{k+1}
-            # indices: y[k+1] ~ y[k], c[k], c[k-1]  (c[k] is the command over (k, k+1])
-            X = [y[1:-1], c[1:-1], c[:-2]] + ([np.ones(len(y) - 2)] if offset else [])
-            rows.append(np.column_stack(X))
-            rhs.append(y[2:])
-    X = np.vstack(rows)
-    yy = np.concatenate(rhs)
-    coef, rmse = _regress(X, yy)
-    alpha = float(min(max(coef[0], 1e-6), 0.999999))
-    a = -math.log(alpha) / dt
-    d = discretize(a, dt)
-    if signal == "rate":
-        gain = coef[1] / d.c1
-        off = coef[2] / d.c1 if offset else 0.0
-    else:
-        gain = coef[1] / d.c2
-        off = coef[3] / (d.c2 + d.c1 * d.c1 - d.alpha * d.c2) if offset else 0.0
-    var = float(np.var(yy)) or 1.0
-    return AxisModel(a, float(gain), float(off), rmse, 1.0 - rmse * rmse / var)
-
-
-def _simulate_basis(c: np.ndarray, a: float, dt: float, signal: Signal) -> np.ndarray:
-    """Columns: the output of the model for unit gain, unit offset, unit initial state."""
-    d = discretize(a, dt)
-    n = len(c)
-    out = np.zeros((n, 3))
-    # state responses x_k for inputs: command (gain 1), constant 1 (offset), x0 = 1
-    xs = np.zeros((n + 1, 3))
-    xs[0] = (0.0, 0.0, 1.0)
-    for k in range(n):
-        xs[k + 1, 0] = d.alpha * xs[k, 0] + d.c1 * c[k]
-        xs[k + 1, 1] = d.alpha * xs[k, 1] + d.c1
-        xs[k + 1, 2] = d.alpha * xs[k, 2]
-    if signal == "rate":
-        out[:] = xs[:n]
-    else:  # y_k = s_k - s_{k-1} = c1 x_{k-1} + c2 u_{k-1}
-        out[1:, 0] = d.c1 * xs[: n - 1, 0] + d.c2 * c[: n - 1]
-        out[1:, 1] = d.c1 * xs[: n - 1, 1] + d.c2
-        out[1:, 2] = d.c1 * xs[: n - 1, 2]
-    return out
-
-
-def _fit_oe(segs: list[tuple[np.ndarray, np.ndarray]], dt: float, signal: Signal,
-            offset: bool, a0: float) -> AxisModel:
-    """Output-error fit: 1-D search over ``a``, linear least squares for the rest.
-
-    For fixed ``a`` the simulated output is linear in (gain, offset, one initial state
-    per segment), so the fit is separable; it is unbiased under white measurement noise
-    where the ARX form is not (GPS increments have MA(1) noise, §1.3).
+    The surge axis steps every ``step_s`` (GNSS windows), the heading axis every
+    ``heading_step_s`` (compass windows); each window's points are averaged.
     """
 
-    def solve(a: float) -> tuple[float, np.ndarray, float]:
-        blocks, rhs = [], []
-        nseg = len(segs)
-        for i, (y, c) in enumerate(segs):
-            basis = _simulate_basis(c, a, dt, signal)
-            cols = [basis[:, 0]] + ([basis[:, 1]] if offset else [])
-            x0 = np.zeros((len(y), nseg))
-            x0[:, i] = basis[:, 2]
-            blocks.append(np.column_stack(cols + [x0]))
-            rhs.append(y)
-            if signal == "increment":  # y_0 has no model value: drop it
-                blocks[-1] = blocks[-1][1:]
-                rhs[-1] = rhs[-1][1:]
-        X = np.vstack(blocks)
-        yy = np.concatenate(rhs)
-        coef, rmse = _regress(X, yy)
-        return rmse, coef, float(np.var(yy)) or 1.0
+    def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig,
+                 gnss_std_m: float, heading_std_rad: float, factory: AxisFactory) -> None:
+        self.name = name
+        self.columns = columns
+        self.cfg = cfg
+        self.sigma_p = cfg.gnss_std_m if cfg.gnss_std_m is not None else gnss_std_m
+        self.sigma_h = (cfg.heading_std_rad if cfg.heading_std_rad is not None
+                        else heading_std_rad)
+        s, h = cfg.surge, cfg.heading
+        self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg)
+        self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg)
+        self.frame: LocalFrame | None = None
+        self._t0: float | None = None
+        self._step_h = cfg.heading_step_s if cfg.heading_step_s > 0 else cfg.step_s
+        self._w = _Window()          # surge window: fixes and the headings among them
+        self._hw = _Window()         # heading-axis window
+        self._w_end = self._hw_end = math.inf
+        self._next_end = math.inf    # min(_w_end, _hw_end): the next window to close
+        self._handlers: dict[type, Callable[[Any], None] | None] = {}
+        self._heading_source_seen = False
+        self._psi_last: float | None = None       # last raw heading (unwrapped, rad)
+        self._cmds: list[tuple[float, float | None, float | None]] = []
+        # previous points
+        self._pt_prev: tuple[float, float, float, float] | None = None  # t, N, E, psi
+        self._h_prev: tuple[float, float] | None = None                 # t, psi
+        # reconstruction: heading at _t_h, position at _t_s
+        self._t_h: float | None = None
+        self._t_s: float | None = None
+        self._n = self._e = 0.0
+        self._psi: float | None = None
+        self._psi_s: float | None = None
+        """Cache of ``_heading_at(_t_s)`` (rad) for the output; None when stale (reset
+        whenever a window closes, a command arrives or the model changes)."""
+        self._have_pos = False
+        self._prev_nfix = 1
+        self._course: float | None = None     # course over ground (GNSS-only logs)
+        self._course_pts: list[tuple[float, float]] = []
+        self._R_h_prev = self.sigma_h ** 2
+        # one-sigma figures (see _output): variances of the reconstruction
+        self._var_n = self._var_e = 0.0     # position at _t_s (m^2)
+        self._var_psi = self.sigma_h ** 2   # heading at _t_h (rad^2)
+        self._var_course = 0.0              # course of the GNSS-only mode (rad^2)
+        self._r2n = self._r2e = 0.0         # mean square anchor residual (m^2)
+        self._var_fix = self.sigma_p ** 2   # slowly varying fix error (m^2), see _std_outputs
+        self._disc_cache: dict[tuple[float, float], Discrete] = {}
 
-    lo, hi = math.log(max(a0, 1e-3) / 30.0), math.log(max(a0, 1e-3) * 30.0)
-    grid = np.linspace(lo, hi, 25)
-    costs = [solve(math.exp(g))[0] for g in grid]
-    i = int(np.argmin(costs))
-    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-    phi = (math.sqrt(5.0) - 1.0) / 2.0
-    x1, x2 = hi - phi * (hi - lo), lo + phi * (hi - lo)
-    f1, f2 = solve(math.exp(x1))[0], solve(math.exp(x2))[0]
-    for _ in range(40):
-        if f1 < f2:
-            hi, x2, f2 = x2, x1, f1
-            x1 = hi - phi * (hi - lo)
-            f1 = solve(math.exp(x1))[0]
+    # -- helpers -----------------------------------------------------------------------
+
+    def _disc(self, a: float, dt: float) -> Discrete:
+        key = (a, round(dt, 4))
+        d = self._disc_cache.get(key)
+        if d is None:
+            if len(self._disc_cache) > 64:
+                self._disc_cache.clear()
+            d = self._disc_cache[key] = discretize(a, key[1])
+        return d
+
+    def _mean_command(self, t_a: float, t_b: float, j: int) -> float | None:
+        """Time-weighted mean of command ``j`` (1 surge, 2 yaw) over [t_a, t_b] (ZOH)."""
+        cmds = self._cmds
+        if not cmds:
+            return None
+        if t_b <= t_a:
+            return cmds[-1][j]
+        acc = tot = 0.0
+        for i, c in enumerate(cmds):
+            t_s = max(c[0], t_a)
+            t_e = min(cmds[i + 1][0] if i + 1 < len(cmds) else t_b, t_b)
+            v = c[j]
+            if t_e <= t_s or v is None:
+                continue
+            acc += v * (t_e - t_s)
+            tot += t_e - t_s
+        return acc / tot if tot > 0.0 else None
+
+    def _trim_commands(self) -> None:
+        """Drop commands no future step needs (keep the one in force at the oldest
+        previous point)."""
+        ts = [p[0] for p in (self._pt_prev, self._h_prev) if p is not None]
+        if not ts or not self._cmds:
+            return
+        t_keep = min(ts)
+        keep = 0
+        for i, c in enumerate(self._cmds):
+            if c[0] <= t_keep:
+                keep = i
+            else:
+                break
+        if keep:
+            del self._cmds[:keep]
+
+    # -- sample intake -----------------------------------------------------------------
+
+    def _add_heading(self, t: float, psi: float) -> None:
+        u = psi if self._psi_last is None else self._psi_last + wrap_pi(psi - self._psi_last)
+        self._psi_last = u
+        for w in (self._w, self._hw):
+            w.n_h += 1
+            w.st_h += t
+            w.sh += u
+
+    def _advance(self, t: float) -> None:
+        """Close every window that ends at or before ``t`` (heading first)."""
+        if self._t0 is None:
+            return
+        gap = self.cfg.max_gap_s
+        for which in ("h", "s"):
+            step = self._step_h if which == "h" else self.cfg.step_s
+            end = self._hw_end if which == "h" else self._w_end
+            while t >= end:
+                if which == "h":
+                    self._close_heading_window()
+                else:
+                    self._close_surge_window()
+                end += step
+                if t - end > gap:   # jump across a long silence
+                    end = self._t0 + step * (math.floor((t - self._t0) / step) + 1)
+            if which == "h":
+                self._hw_end = end
+            else:
+                self._w_end = end
+        self._next_end = min(self._hw_end, self._w_end)
+
+    def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
+        """Consume samples (time-ordered) and return the estimates at time ``t``.
+
+        Every sample, whatever its type, first closes the windows ending at or before its
+        time (``_next_end`` caches the earlier of the two ends, so a sample inside both
+        windows costs one comparison); its handler (:meth:`_handler`) then adds it.
+        """
+        handlers = self._handlers
+        for s in samples:
+            st = s.t
+            if st >= self._next_end:
+                self._advance(st)
+            cls = type(s)
+            h = handlers[cls] if cls in handlers else self._handler(cls)
+            if h is not None:
+                h(s)
+        return self._output(t)
+
+    def _handler(self, cls: type) -> Callable[[Any], None] | None:
+        """The intake method for a sample class (None: not an input), cached per class;
+        subclasses of the input messages get their base's handler."""
+        h = None
+        for base, fn in ((GnssFix, self._on_fix), (Heading, self._on_heading),
+                         (Attitude, self._on_attitude), (ActuatorCommand, self._on_command)):
+            if issubclass(cls, base):
+                h = fn
+                break
+        self._handlers[cls] = h
+        return h
+
+    def _start(self, t: float) -> None:
+        """The first measurement (fix, heading or attitude, at ``t`` s) starts both windows."""
+        self._t0 = t
+        self._w_end = t + self.cfg.step_s
+        self._hw_end = t + self._step_h
+        self._next_end = min(self._hw_end, self._w_end)
+
+    def _on_fix(self, s: GnssFix) -> None:
+        if self._t0 is None:
+            self._start(s.t)
+        if s.fix_quality <= 0:
+            return
+        if self.frame is None:
+            self.frame = LocalFrame(s.lat_deg, s.lon_deg)
+        n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
+        w = self._w
+        w.n_fix += 1
+        w.st_fix += s.t
+        w.sn += n
+        w.se += e
+
+    def _on_heading(self, s: Heading) -> None:
+        if self._t0 is None:
+            self._start(s.t)
+        self._heading_source_seen = True
+        dec = (s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0
+        self._add_heading(s.t, s.heading_rad + dec)
+
+    def _on_attitude(self, s: Attitude) -> None:
+        if self._t0 is None:
+            self._start(s.t)
+        if not self._heading_source_seen:
+            self._add_heading(s.t, s.yaw_rad)
+
+    def _on_command(self, s: ActuatorCommand) -> None:
+        sc, yc = axis_commands(s, self.cfg.input_mode)
+        self._cmds.append((s.t, sc, yc))
+        self._psi_s = None
+        if len(self._cmds) > 4096:   # no measurements for a long time
+            del self._cmds[:2048]
+
+    # -- one step per window -----------------------------------------------------------
+
+    def _close_heading_window(self) -> None:
+        self._psi_s = None
+        w = self._hw
+        self._hw = _Window()
+        if w.n_h == 0:
+            return
+        th = w.st_h / w.n_h
+        psi = w.sh / w.n_h
+        R_h = self.sigma_h ** 2 / w.n_h
+        R_h_prev, self._R_h_prev = self._R_h_prev, R_h
+        hp = self._h_prev
+        if hp is not None and th - hp[0] <= 1e-3:
+            return
+        self._h_prev = (th, psi)
+        if hp is not None and th - hp[0] > self.cfg.max_gap_s:
+            self.yaw.restart()
+            hp = None
+        if hp is None:   # (re)start the reconstruction from the measurement
+            self._psi = psi
+            self._t_h = th
+            self._var_psi = R_h
+            return
+        dt = th - hp[0]
+        cmd = self._mean_command(hp[0], th, 2)
+        self.yaw.step(self._disc(self.yaw.damping(cmd), dt), wrap_pi(psi - hp[1]), R_h,
+                      R_h_prev, cmd)
+        # §3.3 heading: integrate the estimated increment ...
+        kfy = self.yaw.kf
+        pred = (self._psi if self._psi is not None else hp[1]) + kfy.d
+        n_hat = kfy.point_noise()
+        if n_hat is not None:
+            # ... which with the MA(1) noise model equals the measured point minus its
+            # estimated noise (the e-state makes the absolute heading observable)
+            self._psi = pred + wrap_pi(psi - n_hat - pred)
+            # its error is that of n_hat = y - d + e: Var = P_dd - 2 P_de + P_ee (rad^2)
+            P = kfy.P
+            self._var_psi = P[0] - 2.0 * P[2] + P[5]
+        else:   # white-noise increments: pull toward the measurement
+            kh = self.cfg.heading_anchor
+            self._psi = pred + kh * wrap_pi(psi - pred)
+            self._var_psi = ((1.0 - kh) ** 2 * (self._var_psi + kfy.P[0])
+                             + kh * kh * R_h)
+        self._t_h = th
+        self._trim_commands()
+
+    def _heading_at(self, t: float) -> float:
+        """The reconstructed heading (rad, unwrapped) predicted to time ``t``."""
+        assert self._psi is not None and self._t_h is not None
+        tau = min(max(t - self._t_h, 0.0), self.cfg.max_gap_s)
+        yaw = self.yaw
+        if not yaw.kf.initialized or tau <= 1e-6:
+            return self._psi
+        dpsi, _ = yaw.kf.predict_ahead(self._disc(yaw.damping(yaw.last_command), tau),
+                                       yaw.input_ahead(self._latest_command(2)))
+        return self._psi + dpsi
+
+    def _latest_command(self, j: int) -> float | None:
+        return self._cmds[-1][j] if self._cmds else None
+
+    def _close_surge_window(self) -> None:
+        self._psi_s = None
+        w = self._w
+        self._w = _Window()
+        if w.n_fix == 0:
+            return
+        # Without any heading source (a GNSS-only log) the surge axis runs on the chord
+        # length along the course over ground; reversing is then not detectable.
+        course_mode = self._psi_last is None
+        if w.n_h == 0 and not course_mode:
+            return
+        tp = w.st_fix / w.n_fix
+        n, e = w.sn / w.n_fix, w.se / w.n_fix
+        psi = w.sh / w.n_h if w.n_h else math.nan
+        pp = self._pt_prev
+        if pp is not None and tp - pp[0] <= 1e-3:
+            return
+        self._pt_prev = (tp, n, e, psi)
+        if pp is None or tp - pp[0] > self.cfg.max_gap_s:
+            R_fix = self.sigma_p ** 2 / w.n_fix
+            if pp is not None:
+                self.surge.restart()
+            if not self._have_pos or pp is None:
+                self._n, self._e = n, e
+                self._var_n = self._var_e = R_fix
+            else:  # across a gap: follow the measured displacement (noise of both fixes)
+                self._n += n - pp[1]
+                self._e += e - pp[2]
+                dv = R_fix + self.sigma_p ** 2 / max(self._prev_nfix, 1)
+                self._var_n += dv
+                self._var_e += dv
+            self._have_pos = True
+            self._t_s = tp
+            self._prev_nfix = w.n_fix
+            return
+        dt = tp - pp[0]
+        R_s = self.sigma_p ** 2 / w.n_fix
+        R_s_prev = self.sigma_p ** 2 / max(self._prev_nfix, 1)
+        self._prev_nfix = w.n_fix
+        if course_mode:   # project on the course over a ~5-point baseline (unbiased)
+            dpsi = 0.0
+            hist = self._course_pts
+            hist.append((n, e))
+            if len(hist) > 4:
+                del hist[0]
+            n0, e0 = hist[0]
+            course = math.atan2(e - e0, n - n0) if len(hist) > 1 else 0.0
+            y = math.cos(course) * (n - pp[1]) + math.sin(course) * (e - pp[2])
+            # course from two points of variance R_s over the baseline L: 2 R_s / L^2
+            base2 = (n - n0) ** 2 + (e - e0) ** 2
+            self._var_course = min(2.0 * R_s / base2, 1.0) if base2 > 0.0 else 1.0
         else:
-            lo, x1, f1 = x1, x2, f2
-            x2 = lo + phi * (hi - lo)
-            f2 = solve(math.exp(x2))[0]
-    a = math.exp(0.5 * (lo + hi))
-    rmse, coef, var = solve(a)
-    gain = float(coef[0])
-    off = float(coef[1]) if offset else 0.0
-    return AxisModel(a, gain, off, rmse, 1.0 - rmse * rmse / var)
+            dpsi = wrap_pi(psi - pp[3])
+            y = path_increment(n - pp[1], e - pp[2], pp[3], dpsi)
+        cmd = self._mean_command(pp[0], tp, 1)
+        self.surge.step(self._disc(self.surge.damping(cmd), dt), y, R_s, R_s_prev, cmd)
+        # §3.3 position from the estimated increment along the mid-chord heading
+        ys = self.surge.kf.d
+        if course_mode:
+            mid = self._course = course
+        elif self._psi is not None and self._t_h is not None:
+            mid = 0.5 * (self._heading_at(pp[0]) + self._heading_at(tp))
+        else:
+            mid = pp[3] + 0.5 * dpsi
+        self._n += ys * math.cos(mid)
+        self._e += ys * math.sin(mid)
+        # the course lags the track by half its baseline: anchor harder without a compass
+        ka = self.cfg.position_anchor if not course_mode else max(self.cfg.position_anchor,
+                                                                   0.3)
+        rn, re = n - self._n, e - self._e
+        self._n += ka * rn
+        self._e += ka * re
+        # its variance (see _std_outputs): increment along track, heading across, or
+        # what the anchor residuals show if more, then the anchor's fixed-gain blend
+        var_a = self.surge.kf.P[0]
+        var_x = ys * ys * (self._var_course if course_mode else self._var_psi)
+        c, s_ = math.cos(mid), math.sin(mid)
+        g = _RESIDUAL_GAIN
+        self._r2n += g * (rn * rn - self._r2n)
+        self._r2e += g * (re * re - self._r2e)
+        vn = self._var_n + c * c * var_a + s_ * s_ * var_x
+        ve = self._var_e + s_ * s_ * var_a + c * c * var_x
+        rn2, re2 = self._r2n - R_s, self._r2e - R_s
+        f = (1.0 - ka) ** 2
+        fr = ka * ka * R_s
+        self._var_n = f * (vn if vn > rn2 else rn2) + fr
+        self._var_e = f * (ve if ve > re2 else re2) + fr
+        self._t_s = tp
+        self._trim_commands()
+
+    # -- output ------------------------------------------------------------------------
+
+    def _output(self, t: float) -> dict[str, float]:
+        out: dict[str, float] = {}
+        yaw, surge = self.yaw, self.surge
+        if self._psi is None or self._t_h is None:   # no heading source (yet)
+            if self._course is not None and surge.kf.initialized and self._t_s is not None:
+                tau = min(max(t - self._t_s, 0.0), self.cfg.max_gap_s)
+                ds, v = surge.kf.predict_ahead(
+                    self._disc(surge.damping(surge.last_command), max(tau, 1e-6)),
+                    surge.input_ahead(self._latest_command(1)))
+                out["speed"] = v
+                out["north"] = self._n + ds * math.cos(self._course)
+                out["east"] = self._e + ds * math.sin(self._course)
+                k = self._disc(surge.damping(surge.last_command), max(tau, 1e-6))
+                P, V_u = surge.kf.P, surge.V_u
+                var_v = k.alpha * k.alpha * P[3] + k.c1 * k.c1 * V_u
+                self._std_outputs(out, t, math.cos(self._course), math.sin(self._course),
+                                  ds, v,
+                                  k.c1 * k.c1 * P[3] + k.c2 * k.c2 * V_u, var_v,
+                                  self._var_course)
+                self._extra_outputs(out)
+            return out
+        # The heading and yaw rate (as _heading_at: one prediction for both), then the
+        # speed and position, predicted from the last steps to t with the newest command.
+        # Inline min/max and cache look-ups: this runs every tick.
+        gap = self.cfg.max_gap_s
+        cmds = self._cmds
+        last = cmds[-1] if cmds else None
+        psi = self._psi
+        ykf = yaw.kf
+        var_h = self._var_psi
+        if ykf.initialized:
+            tau = t - self._t_h
+            tau = 0.0 if tau < 0.0 else gap if tau > gap else tau
+            r = ykf.v
+            if tau > 1e-6:
+                k = self._disc(yaw.damping(yaw.last_command), tau)
+                dpsi, r = ykf.predict_ahead(
+                    k, yaw.input_ahead(last[2] if last is not None else None))
+                psi = psi + dpsi
+                var_h += k.c1 * k.c1 * ykf.P[3] + k.c2 * k.c2 * yaw.V_u
+            out["heading"] = wrap_2pi(psi)
+            out["yaw_rate"] = r
+        else:
+            out["heading"] = wrap_2pi(psi)
+        out["std_heading"] = sqrt(var_h)
+        skf = surge.kf
+        if skf.initialized and self._t_s is not None:
+            tau_raw = tau = t - self._t_s
+            tau = 0.0 if tau < 0.0 else gap if tau > gap else tau
+            ds, v = skf.v * tau, skf.v
+            P = skf.P
+            var_ds, var_v = P[3] * tau * tau, P[3]
+            if tau > 1e-6:
+                k = self._disc(surge.damping(surge.last_command), tau)
+                ds, v = skf.predict_ahead(
+                    k, surge.input_ahead(last[1] if last is not None else None))
+                V_u = surge.V_u
+                var_ds = k.c1 * k.c1 * P[3] + k.c2 * k.c2 * V_u
+                var_v = k.alpha * k.alpha * P[3] + k.c1 * k.c1 * V_u
+            out["speed"] = v
+            psi_s = self._psi_s
+            if psi_s is None:   # changes only when a window closes or a command arrives
+                psi_s = self._psi_s = self._heading_at(self._t_s)
+            mid = 0.5 * (psi_s + psi)
+            c, s = math.cos(mid), math.sin(mid)
+            out["north"] = self._n + ds * c
+            out["east"] = self._e + ds * s
+            # _std_outputs inlined (this runs every tick)
+            ex = tau_raw - gap
+            var_p = self._var_fix + (0.5 * (v * v + var_v) * ex * ex if ex > 0.0 else 0.0)
+            var_x = ds * ds * var_h
+            cc, ss = c * c, s * s
+            out["std_north"] = sqrt(self._var_n + cc * var_ds + ss * var_x + var_p)
+            out["std_east"] = sqrt(self._var_e + ss * var_ds + cc * var_x + var_p)
+            out["std_speed"] = sqrt(var_v)
+        elif self._have_pos:
+            out["north"], out["east"] = self._n, self._e
+            out["std_north"] = math.sqrt(self._var_n + self._var_fix)
+            out["std_east"] = math.sqrt(self._var_e + self._var_fix)
+        self._extra_outputs(out)
+        return out
+
+    def _std_outputs(self, out: dict[str, float], t: float, c: float, s: float,
+                     ds: float, v: float, var_ds: float, var_v: float, var_x: float
+                     ) -> None:
+        """``std_north``, ``std_east`` (m) and ``std_speed`` (m/s): one sigma of the
+        published position and speed at ``t`` (``c, s``: cos and sin of the heading the
+        path ``ds`` (m) since the last surge step is laid along; ``var_x``: that
+        heading's variance, rad^2).
+
+        Position variance per axis (m^2), first order, cross-covariances between steps
+        and between north and east neglected. Kept at the last surge step ``t_s``
+        (:meth:`_close_surge_window`), for the dead-reckoned part of the error:
+
+        * the step's increment adds ``P_dd`` (m^2, the surge filter's increment variance
+          after its update) along the mid-chord heading and ``y_s^2 var(psi)`` across it
+          (``var(psi)`` the heading filter's variance of the reconstructed heading,
+          ``P_dd - 2 P_de + P_ee`` of its point-noise estimate), rotated into north/east;
+        * model error (sideslip in turns, a wrong thrust map: errors correlated over many
+          steps) is not in those covariances, so the predicted variance is raised to what
+          the anchor residuals show when larger: ``mean(r^2) - R`` (``r`` = window's mean
+          fix minus the dead-reckoned position, per axis, running mean over ~20 steps,
+          ``R = gnss_std_m^2 / n_fix`` the white part of ``r``);
+        * the anchor's fixed-gain blend with that fix: ``var <- (1 - k)^2 var + k^2 R``;
+          it starts at ``R`` with the first fix and adds both fixes' ``R`` across a gap,
+          where the position follows the measured displacement.
+
+        Published at ``t``:
+
+        * plus the prediction from ``t_s`` (``tau <= max_gap_s``): ``c1^2 P_vv + c2^2 V_u``
+          along (the surge filter's forecast variance of the increment over ``tau``;
+          ``V_u`` its input-error variance, (m/s^2)^2) and ``ds^2 var(psi)`` across;
+        * plus, beyond ``max_gap_s`` without a surge step (a GNSS outage), where the
+          published position is held while the vehicle moves on, ``(v^2 + var(v))
+          (t - t_s - max_gap_s)^2 / 2`` on each axis: the displacement not followed,
+          direction unknown, so the sigma grows about linearly with the time without
+          fixes (conservative for a vehicle that turns back) and drops when they return;
+        * plus ``gnss_std_m^2``: the fix error is mostly slowly varying (receiver drift),
+          which the anchor passes unaveraged; the whole configured one-fix sigma is taken
+          (conservative where part of it is white).
+
+        ``std_speed`` is the surge filter's rate sigma forecast over ``tau``
+        (``alpha^2 P_vv + c1^2 V_u``), with no model-error term. Coverage against SITL
+        truth: docs/aie.md, "Published uncertainty".
+        """
+        var_x = ds * ds * var_x
+        cc, ss = c * c, s * s
+        vn = self._var_n + cc * var_ds + ss * var_x
+        ve = self._var_e + ss * var_ds + cc * var_x
+        ex = t - self._t_s - self.cfg.max_gap_s if self._t_s is not None else 0.0
+        if ex > 0.0:
+            held = 0.5 * (v * v + var_v) * ex * ex
+            vn += held
+            ve += held
+        out["std_north"] = math.sqrt(vn + self._var_fix)
+        out["std_east"] = math.sqrt(ve + self._var_fix)
+        out["std_speed"] = math.sqrt(var_v)
+
+    def _extra_outputs(self, out: dict[str, float]) -> None:
+        """Hook for subclasses (AIE adds the input estimates)."""
+
+    # -- health and state --------------------------------------------------------------
+
+    def health(self) -> Mapping[str, float]:
+        """Innovation ``z = C x_fc - y``, its variance S and NIS per axis, counters."""
+        h: dict[str, float] = {}
+        for nm, ax in (("surge", self.surge), ("heading", self.yaw)):
+            kf = ax.kf
+            h[f"{nm}.innovation"] = kf.z
+            h[f"{nm}.S"] = kf.S
+            h[f"{nm}.nis"] = kf.nis
+            h[f"{nm}.nis_mean"] = ax.nis_avg
+            h[f"{nm}.steps"] = float(ax.steps)
+            h[f"{nm}.rejected"] = float(ax.rejected)
+            h[f"{nm}.diverged"] = float(ax.diverged)
+            h[f"{nm}.restarts"] = float(ax.restarts)
+        return h
+
+    def get_state(self) -> dict[str, Any]:
+        """The models in use (JSON-safe: finite floats only)."""
+        def model(m: AxisModel) -> dict[str, float]:
+            return {"a": m.a, "gain": m.gain, "offset": m.offset}
+        return {"surge": {"model": model(self.surge.model)},
+                "heading": {"model": model(self.yaw.model)}}
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        self._psi_s = None
+        for nm, ax in (("surge", self.surge), ("heading", self.yaw)):
+            m = state.get(nm, {}).get("model") if isinstance(state.get(nm), dict) else None
+            if isinstance(m, dict):
+                try:
+                    a, g, o = float(m["a"]), float(m["gain"]), float(m.get("offset", 0.0))
+                except (KeyError, TypeError, ValueError):
+                    continue
+                if math.isfinite(a) and a > 0 and math.isfinite(g) and math.isfinite(o):
+                    ax.model = AxisModel(a, g, o)
+
+    def set_model(self, axis: Literal["surge", "heading"], model: AxisModel) -> None:
+        """Use an identified model (e.g. from surge_heading.identify_surge)."""
+        self._psi_s = None
+        (self.surge if axis == "surge" else self.yaw).model = model
 
 
-def fit_axis(segments: Sequence[tuple[Sequence[float], Sequence[float]]], dt: float,
-             signal: Signal = "increment", method: Literal["arx", "oe"] = "oe",
-             offset: bool = False) -> AxisModel:
-    """Identify one axis from uniformly sampled segments (one per run).
-
-    Args:
-        segments: ``(y, command)`` pairs on a uniform grid of step ``dt``. ``y`` is the
-            increment (m or rad per step, ``signal="increment"``) or the rate (m/s or
-            rad/s, ``signal="rate"``); ``command[k]`` is the normalized command held over
-            ``(k, k+1]``.
-        dt: grid step (s).
-        method: ``"arx"``: ordinary least squares in the ARX form of §1.2 (fast, biased
-            toward small ``a`` by measurement noise); ``"oe"``: separable output-error
-            least squares initialised by the ARX fit (default).
-        offset: also fit a constant input ``offset`` (e.g. a thruster dead-band bias).
-
-    Returns:
-        The identified :class:`AxisModel` (``rmse`` in the unit of ``y``).
-    """
-    segs = []
-    for y, c in segments:
-        y = np.asarray(y, float)
-        c = np.asarray(c, float)
-        ok = np.isfinite(y) & np.isfinite(c)
-        if not ok.all():  # split at gaps
-            idx = np.flatnonzero(~ok)
-            starts = np.concatenate(([0], idx + 1))
-            ends = np.concatenate((idx, [len(y)]))
-            segs += [(y[s:e], c[s:e]) for s, e in zip(starts, ends) if e - s > 4]
-        elif len(y) > 4:
-            segs.append((y, c))
-    if not segs:
-        raise ValueError("no segment long enough to identify a model")
-    arx = _fit_arx(segs, dt, signal, offset)
-    if method == "arx":
-        return arx
-    return _fit_oe(segs, dt, signal, offset, arx.a if math.isfinite(arx.a) else 1.0)
-
-
-def identify_axis(t: Sequence[float], y: Sequence[float], command: Sequence[float],
-                  dt: float | None = None, signal: Signal = "rate",
-                  method: Literal["arx", "oe"] = "oe", offset: bool = False) -> AxisModel:
-    """Identify ``a`` and the input scaling of one axis from one log (§1.2).
-
-    ``t`` (s) may be irregular; ``y`` and ``command`` are interpolated onto a uniform grid
-    of step ``dt`` (default: the median sample interval). For ``signal="increment"`` the
-    increments are re-formed on the grid from the cumulative sum (so pass increments of
-    consecutive samples). See :func:`fit_axis`.
-    """
-    t = np.asarray(t, float)
-    y = np.asarray(y, float)
-    c = np.asarray(command, float)
-    if dt is None:
-        dt = float(np.median(np.diff(t)))
-    if signal == "increment":
-        s = np.concatenate(([0.0], np.cumsum(y[1:])))
-        _, sg = resample(t, s, dt)
-        yg = np.concatenate(([0.0], np.diff(sg)))
-    else:
-        _, yg = resample(t, y, dt)
-    _, cg = resample(t, c, dt)
-    return fit_axis([(yg, cg)], dt, signal, method, offset)
-
-
-def identify_surge(t: Sequence[float], y: Sequence[float], command: Sequence[float],
-                   dt: float | None = None, signal: Signal = "rate",
-                   **kw: object) -> AxisModel:
-    """Surge model from a log: speed (m/s, ``signal="rate"``) or path increments (m)."""
-    return identify_axis(t, y, command, dt, signal, **kw)  # type: ignore[arg-type]
-
-
-def identify_heading(t: Sequence[float], y: Sequence[float], command: Sequence[float],
-                     dt: float | None = None, signal: Signal = "rate",
-                     **kw: object) -> AxisModel:
-    """Heading model from a log: yaw rate (rad/s) or wrapped heading increments (rad)."""
-    return identify_axis(t, y, command, dt, signal, **kw)  # type: ignore[arg-type]
+def sensor_noise(cfg: Config) -> tuple[float, float]:
+    """``(gnss_std_m, heading_std_rad)`` from ``[sensors]``."""
+    return cfg.sensors.gnss.position_std_m, cfg.sensors.compass.heading_std_rad

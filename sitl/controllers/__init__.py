@@ -21,7 +21,7 @@ from typing import Protocol
 
 import numpy as np
 
-from onboard.messages import EstimateRecord
+from onboard.core.messages import EstimateRecord
 
 __all__ = [
     "Bluerov2Params",

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from onboard.messages import EstimateRecord
+from onboard.core.messages import EstimateRecord
 from sitl.controllers import Bluerov2Params
 from sitl.controllers.nmpc import Nmpc, NmpcTuning
 

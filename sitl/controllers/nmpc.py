@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from onboard.messages import EstimateRecord
+from onboard.core.messages import EstimateRecord
 from sitl.controllers import (
     Bluerov2Params,
     CircleReference,

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.messages import EstimateRecord
+from onboard.core.messages import EstimateRecord
 from sitl.controllers import Bluerov2Params, CircleReference, ControlOutput, state_from_record
 
 

@@ -34,7 +34,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from onboard.messages import ActuatorCommand
+from onboard.core.messages import ActuatorCommand
 from sitl.environment import Environment
 from sitl.integrate import GRAVITY, rk4_step_list, rotation_body_to_ned, wrap_pi
 from sitl.truth import TruthRecord
@@ -71,7 +71,7 @@ class ManoeuvringMasses:
 @dataclass(frozen=True)
 class Command:
     """The *true* actuator values applied to a plant (same fields as
-    :class:`onboard.messages.ActuatorCommand`; ``None`` is read as 0 / not fitted).
+    :class:`onboard.core.messages.ActuatorCommand`; ``None`` is read as 0 / not fitted).
 
     * ``throttle``: single propulsor, [-1, 1];
     * ``rudder_rad``: rudder deflection (rad), positive turns the bow to starboard;

@@ -5,7 +5,6 @@ measured heading drifts against the integrated gyro by ``-bias (t - t0)``. Needs
 
 from __future__ import annotations
 
-
 from onboard.closure.dataset import segment_starts
 from onboard.closure.effects.base import Effect
 

@@ -30,8 +30,8 @@ from typing import Sequence
 
 import numpy as np
 
-from onboard.pipelines.geo import wrap_pi
-from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel
+from onboard.core.geo import wrap_pi
+from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
 
 POLE_FACTORS = (1.5, 1.7, 1.9)
 """Default pole placement: the open-loop eigenvalues' real parts (floored at -0.5 1/s for the

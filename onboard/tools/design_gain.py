@@ -16,7 +16,7 @@ configured or default model over a range of speeds) and
 
     gamma* = max(1, 2 ||P||_2 L_f / lambda)          (algorithms.md §3.1)
 
-and writes a JSON file read by :class:`onboard.pipelines.hgo.GainDesign`. cvxpy is imported
+and writes a JSON file read by :class:`onboard.estimators.hgo.GainDesign`. cvxpy is imported
 here only; the service and the pipelines never import it.
 """
 
@@ -30,10 +30,10 @@ from typing import Any
 
 import numpy as np
 
-from onboard.config import CONFIG_DIR, Config, decode_section, load, resolve
-from onboard.errors import UsageError
-from onboard.pipelines.hgo import chain_matrices, gamma_star
-from onboard.pipelines.vehicle_models import ModelInputs, RegressionModel, kind_for_class
+from onboard.core.config import CONFIG_DIR, Config, decode_section, load, resolve
+from onboard.core.errors import UsageError
+from onboard.estimators.hgo import chain_matrices, gamma_star
+from onboard.estimators.vehicle_models import ModelInputs, RegressionModel, kind_for_class
 
 GAIN_DIR = CONFIG_DIR / "gains"
 

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from onboard.messages import ActuatorCommand, GnssFix, Heading, Sample
-from onboard.pipelines.geo import LocalFrame
+from onboard.core.geo import LocalFrame
+from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Sample
 
 
 @dataclass

@@ -116,7 +116,7 @@ def free_tcp_port() -> int:
 def bench_config_toml(mav_port: int, nmea_port: int, zenoh_endpoint: str, mav_out_port: int,
                       vehicle: str = "bench") -> str:
     """A rudder-boat configuration reading the generator over UDP, all pipelines on."""
-    from onboard.config import resolve
+    from onboard.core.config import resolve
 
     base = resolve("rudder-boat").read_text()
     base = base.replace('id = "rudder-boat"', f'id = "{vehicle}"', 1)
@@ -205,7 +205,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
     ``nice`` is applied to the child as systemd/onboard.service does (``Nice=-5``) when
     permitted (root or CAP_SYS_NICE), else ignored; ``nice_applied`` says which.
     """
-    from onboard.publishers.zenoh_pub import open_router
+    from onboard.service.publishers.zenoh_pub import open_router
 
     zport = free_tcp_port()
     endpoint = f"tcp/127.0.0.1:{zport}"
@@ -223,7 +223,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
     measuring = threading.Event()
     import msgspec
 
-    from onboard.messages import EstimateRecord
+    from onboard.core.messages import EstimateRecord
 
     dec = msgspec.json.Decoder(EstimateRecord)
 
@@ -239,7 +239,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
         if rec.t_sensor is not None:
             lat_sensor.append((t_rx - rec.t_sensor) * 1000.0)
 
-    sub = router.declare_subscriber("onboard/bench/est/**", on_sample)
+    sub = router.declare_subscriber("onboard/tools/bench/est/**", on_sample)
     env = dict(os.environ, NOTIFY_SOCKET=notify_path, ONBOARD_LOG_LEVEL="WARNING")
     env.pop("WATCHDOG_USEC", None)
     t_spawn = time.monotonic()

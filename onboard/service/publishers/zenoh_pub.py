@@ -7,7 +7,7 @@ Keys (``<prefix>`` is ``onboard`` unless configured)::
     <prefix>/<vehicle_id>/alive            liveliness token (present while running)
     <prefix>/<vehicle_id>/**               queryable: the latest value of every key above
 
-Payloads are the msgspec structs of :mod:`onboard.messages` as JSON (encoding
+Payloads are the msgspec structs of :mod:`onboard.core.messages` as JSON (encoding
 ``application/json``), each with its ``schema`` version. The vehicle's session is a peer
 or client with multicast scouting off: it connects to the endpoints configured (a router
 on the vehicle or on shore) and listens where configured. :func:`open_router` starts an
@@ -31,8 +31,8 @@ from typing import Callable, Iterable, Sequence
 
 import msgspec
 
-from onboard.config import ZenohOut
-from onboard.messages import EstimateRecord, HealthRecord
+from onboard.core.config import ZenohOut
+from onboard.core.messages import EstimateRecord, HealthRecord
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """Validation of the AIE and KF pipelines: SITL truth, BlueBoat field data, sensitivity.
 
-Run ``python -m onboard.reports.aie_validation [--quick] [--no-figures]``: prints the
+Run ``python -m onboard.tools.reports.aie_validation [--quick] [--no-figures]``: prints the
 tables of docs/aie.md and writes docs/figures/aie_*.png. Same settings everywhere (the
 ``[pipelines.aie]`` defaults, or a model identified from training runs where stated).
 
@@ -26,15 +26,15 @@ from typing import Any, Iterable, Sequence
 import msgspec
 import numpy as np
 
-from onboard.config import Config
-from onboard.messages import ActuatorCommand, GnssFix, Heading, Sample
+from onboard.core.config import Config
+from onboard.core.geo import LocalFrame
+from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Sample
+from onboard.estimators.axis_model import AxisModel, fit_axis
 from onboard.pipelines import aie as aie_mod
 from onboard.pipelines import kf as kf_mod
-from onboard.pipelines.aie_pipeline import AieConfig, SurgeHeadingPipeline
-from onboard.pipelines.geo import LocalFrame
-from onboard.pipelines.surge_heading import AxisModel, fit_axis
+from onboard.pipelines.surge_heading import AieConfig, SurgeHeadingPipeline
 
-REPO = Path(__file__).resolve().parent.parent.parent
+REPO = Path(__file__).resolve().parents[3]
 FIG_DIR = REPO / "docs" / "figures"
 
 
@@ -67,7 +67,7 @@ SCENARIO_CONFIG = {"jaiabot-turns": "rudder-boat", "twin-thruster-turns": "twin-
 
 def pipeline_config(vehicle_cfg: str, aie_table: dict[str, Any] | None = None) -> Config:
     """A bundled vehicle config with an optional ``[pipelines.aie]`` table."""
-    from onboard import config as config_mod
+    from onboard.core import config as config_mod
 
     cfg = config_mod.load(vehicle_cfg)
     if aie_table:
@@ -146,8 +146,8 @@ def identify_sitl(scenario: str, seed: int = 10, dt: float = 1.0
     """Identify the surge and heading models from one SITL log as a user would from a
     field log: GNSS speed over ground and compass heading against the mapped commands
     (§1.2; surge in rate form, heading from its increments, output-error fit)."""
+    from onboard.estimators.axis_model import axis_commands
     from onboard.inputs import InputMapper
-    from onboard.pipelines.surge_heading import axis_commands
     from sitl.runner import simulate
 
     cfg = pipeline_config(SCENARIO_CONFIG.get(scenario, "rudder-boat"))

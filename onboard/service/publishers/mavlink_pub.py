@@ -36,7 +36,7 @@ The file holds the 32-byte secret as raw bytes or 64 hex digits, or a passphrase
 SHA-256 is the key (MAVProxy's ``signing setup``). It must be readable by its owner only
 (mode 0600 or stricter); otherwise the service refuses to start. ``require_signing =
 true`` without a key file is a configuration error. Given the service's
-:class:`onboard.signing.SigningState`, the timestamp of every frame comes from it: above
+:class:`onboard.service.signing.SigningState`, the timestamp of every frame comes from it: above
 every timestamp sent before, across restarts, even when the wall clock went back
 (docs/security.md); without one, from the wall clock at start.
 """
@@ -52,12 +52,12 @@ from typing import TYPE_CHECKING, Callable, Sequence
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from drivers.mavlink_signing import SIGNING_EPOCH, signing_timestamp
-from onboard.config import MavlinkOut
-from onboard.messages import EstimateRecord, HealthRecord
-from onboard.signing import check_signing, load_signing_key
+from onboard.core.config import MavlinkOut
+from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.service.signing import check_signing, load_signing_key
 
 if TYPE_CHECKING:
-    from onboard.signing import SigningState
+    from onboard.service.signing import SigningState
 
 __all__ = ["COMPONENT_ID", "MavlinkPublisher", "SIGNING_EPOCH", "check_signing",
            "load_signing_key"]

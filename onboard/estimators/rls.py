@@ -1,7 +1,7 @@
 """Recursive least squares with forgetting and a bounded covariance (algorithms.md §3.4).
 
 One regression ``a_k = phi_k^T theta + e_k`` per instance; the current pipeline runs one
-per degree of freedom of its vehicle model (:mod:`onboard.pipelines.vehicle_models`), and
+per degree of freedom of its vehicle model (:mod:`onboard.estimators.vehicle_models`), and
 any other pipeline may reuse it.
 
 Update (algorithms.md §3.4)::

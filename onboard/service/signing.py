@@ -42,7 +42,7 @@ from drivers.mavlink_signing import (
     StreamKey,
     signing_timestamp,
 )
-from onboard.config import ConfigError, MavlinkOut
+from onboard.core.config import ConfigError, MavlinkOut
 
 log = logging.getLogger(__name__)
 

@@ -19,7 +19,7 @@ from typing import Annotated, Any, Literal, TypeVar
 
 import msgspec
 
-from onboard.errors import UsageError
+from onboard.core.errors import UsageError
 
 VehicleClass = Literal[
     "rudder-boat", "twin-thruster-boat", "bluerov2", "torpedo-auv", "spheroid", "unknown"
@@ -27,7 +27,7 @@ VehicleClass = Literal[
 
 T = TypeVar("T")
 
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 """Where the bundled vehicle configs live in a source checkout."""
 
 
@@ -48,7 +48,7 @@ class Vehicle(_Strict):
     description: str = ""
 
 
-class Engine(_Strict):
+class EngineConfig(_Strict):
     """``[engine]``: the fixed-rate tick that drives the pipelines."""
 
     rate_hz: float = 10.0
@@ -223,7 +223,7 @@ class SourceConfig(_Strict):
     name: str = ""
 
 
-class Recorder(_Strict):
+class RecorderConfig(_Strict):
     enabled: bool = True
     directory: str = "recordings"
     flush_interval_s: float = 0.5
@@ -231,13 +231,13 @@ class Recorder(_Strict):
     max_total_mb: float = 2048.0
 
 
-class Service(_Strict):
+class ServiceConfig(_Strict):
     """``[service]``: live inputs, publishers, recorder and persistence."""
 
     sources: list[SourceConfig] = []
     zenoh: ZenohOut = ZenohOut()
     mavlink: MavlinkOut = MavlinkOut()
-    recorder: Recorder = Recorder()
+    recorder: RecorderConfig = RecorderConfig()
     state_file: str = "state/adaptive.json"
     state_save_interval_s: float = 30.0
     queue_size: int = 4096
@@ -252,11 +252,11 @@ class Config(_Strict):
     """A whole configuration file."""
 
     vehicle: Vehicle = Vehicle()
-    engine: Engine = Engine()
+    engine: EngineConfig = EngineConfig()
     inputs: Inputs = Inputs()
     sensors: Sensors = Sensors()
     csv: CsvFormat = CsvFormat()
-    service: Service = Service()
+    service: ServiceConfig = ServiceConfig()
     pipelines: dict[str, dict[str, Any]] = {}
     """Per-pipeline tables, decoded by each pipeline (see :func:`decode_section`)."""
 

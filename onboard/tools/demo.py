@@ -2,7 +2,7 @@
 
 What runs (all on 127.0.0.1, nothing to install beyond the package)::
 
-    SITL child process (python -m onboard.demo --sitl-child: sitl.runner.Simulation,
+    SITL child process (python -m onboard.tools.demo --sitl-child: sitl.runner.Simulation,
     paced to the shared clock)
        MAVLink 2 over UDP  (IMU, attitude, servo outputs, heartbeat, pressure ...)  --+
        NMEA over a pty     (GGA/RMC/VTG fixes, HDT headings: a serial GPS/compass)    +--> service
@@ -10,7 +10,7 @@ What runs (all on 127.0.0.1, nothing to install beyond the package)::
     service  -> in-process Zenoh router (tcp/127.0.0.1:7447, or a free port when taken)
              -> MAVLink out (udpout:127.0.0.1:14550: a ground station there sees it)
              -> recording + adaptive state in ./demo-out/
-    shore subscriber (onboard.shore.ShoreView) on the router: the live line every
+    shore subscriber (onboard.tools.shore.ShoreView) on the router: the live line every
     second, and at the end the estimates it received scored against the simulator's
     hidden truth (RMSE per quantity).
 
@@ -27,12 +27,12 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import json
 import math
-import subprocess
-import dataclasses
 import shutil
 import socket
+import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
@@ -41,9 +41,9 @@ from typing import Any, Callable, TextIO
 
 import msgspec
 
-from onboard.config import Config, SourceConfig, load
-from onboard.errors import UsageError
-from onboard.messages import EstimateRecord
+from onboard.core.config import Config, SourceConfig, load
+from onboard.core.errors import UsageError
+from onboard.core.messages import EstimateRecord
 
 DEFAULT_SCENARIO = "jaiabot-turns"
 SPEED = 10.0
@@ -76,7 +76,7 @@ class LinkPlan:
 
 
 def _route(sample: Any, dvl: bool, nmea: bool) -> str:
-    from onboard.messages import DvlPosition, DvlVelocity, GnssFix, Heading
+    from onboard.core.messages import DvlPosition, DvlVelocity, GnssFix, Heading
 
     if nmea and isinstance(sample, (GnssFix, Heading)):
         return "nmea"
@@ -329,9 +329,9 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
                    config: Config | None = None) -> DemoResult:
     """Run the whole demo; print the live line every wall second and the scores to
     ``out`` (None: silent). ``router_endpoint`` None: 7447, or a free port when taken."""
-    from onboard.publishers.zenoh_pub import open_router
-    from onboard.service import Service, ServiceClock
-    from onboard.shore import ShoreView, open_session
+    from onboard.service.daemon import Service, ServiceClock
+    from onboard.service.publishers.zenoh_pub import open_router
+    from onboard.tools.shore import ShoreView, open_session
     from sitl.runner import read_truth
     from sitl.scenarios import get
 
@@ -366,7 +366,7 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
     try:
         shore = open_session([endpoint], None, "client")
         proc = subprocess.Popen(
-            [sys.executable, "-m", "onboard.demo", "--sitl-child",
+            [sys.executable, "-m", "onboard.tools.demo", "--sitl-child",
              json.dumps(dataclasses.asdict(plan))],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1)
         hello = await _read_json(proc, 60.0)

@@ -1,6 +1,6 @@
 """Validation of the current pipeline against SITL truth and the papers' figures.
 
-Run ``python -m onboard.reports.current_validation [--quick] [--out docs/figures]``: runs
+Run ``python -m onboard.tools.reports.current_validation [--quick] [--out docs/figures]``: runs
 the SITL scenarios through the engine with the ``current`` pipeline (observers ``kf``,
 ``hgo``, ``flow``; with a configured model and with none), prints the table of
 docs/current.md and writes ``docs/figures/current_*.png``.
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from onboard.config import from_dict, load
+from onboard.core.config import from_dict, load
 from onboard.engine import Engine
 from onboard.pipelines import current as current_mod
 
@@ -348,7 +348,7 @@ def glider_samples(path: str | Path) -> tuple[list[Any], np.ndarray]:
     """
     import csv
 
-    from onboard.messages import ActuatorCommand, Attitude, Depth, VelocityOverGround
+    from onboard.core.messages import ActuatorCommand, Attitude, Depth, VelocityOverGround
     samples: list[Any] = []
     truth = []
     t0 = None

@@ -337,10 +337,10 @@ _SERVICE_ALIASES: dict[str, tuple[str, ...]] = {
 
 
 def bench_service(s: Settings, rep: Report) -> None:
-    """The service figures from :func:`onboard.service_bench.measure`."""
+    """The service figures from :func:`onboard.tools.service_bench.measure`."""
     import inspect
 
-    fn = _import("onboard.service_bench", "measure")
+    fn = _import("onboard.tools.service_bench", "measure")
     kw = {"warmup_s": 0.5} if s.fast and "warmup_s" in inspect.signature(fn).parameters else {}
     res = _quiet(lambda: fn(s.service_s, **kw))
     rep.detail["service"] = {k: v for k, v in res.items() if _jsonable(v)}
@@ -382,7 +382,7 @@ class _Timed:
 def bench_pipelines(s: Settings, rep: Report) -> None:
     """``pipeline_step_us``: mean step cost per engine tick of every pipeline, on the SITL
     stream of a vehicle it applies to (each pipeline timed once, on its first vehicle)."""
-    from onboard import config as configmod
+    from onboard.core import config as configmod
     from onboard.engine import Engine, run
     from onboard.pipelines import build
 

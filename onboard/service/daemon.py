@@ -3,15 +3,15 @@
 One asyncio loop, one thread doing estimation::
 
     transports (serial/pty, UDP, TCP; reconnect with backoff)      drivers.transports
-      -> Intake.chunk: record raw bytes + receive time, parse,      onboard.recorder
+      -> Intake.chunk: record raw bytes + receive time, parse,      onboard.service.recorder
          bounded queue (drops counted per input)
       -> every 1/rate_hz s on the monotonic clock: Intake.tick:      onboard.engine
          push queued samples (checked, rejections counted with their reason, GNSS only
          at the surface), step the pipelines
-      -> Zenoh (every tick), MAVLink (rate_hz), health at 1 Hz      onboard.publishers
-      -> adaptive state saved atomically every state_save_interval_s onboard.persistence
+      -> Zenoh (every tick), MAVLink (rate_hz), health at 1 Hz      onboard.service.publishers
+      -> adaptive state saved atomically every state_save_interval_s onboard.service.persistence
       -> systemd: READY=1 once inputs and publishers are up, STATUS every 5 s,
-         WATCHDOG=1 from the tick loop itself                        onboard.sdnotify
+         WATCHDOG=1 from the tick loop itself                        onboard.service.sdnotify
 
 SIGTERM or SIGINT stops it gracefully: STOPPING=1, the last state saved, the recording
 flushed and closed, the Zenoh liveliness token withdrawn.
@@ -45,13 +45,13 @@ from typing import Callable, Sequence
 import msgspec
 
 from drivers.transports import Transport, TransportUrlError, open_transport, parse_url
-from onboard.config import Config, ConfigError, SourceConfig, load
+from onboard.core.config import Config, ConfigError, SourceConfig, load
+from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.engine import Engine
-from onboard.messages import EstimateRecord, HealthRecord
-from onboard.persistence import StateFile, plain
-from onboard.recorder import Intake, Recorder, config_to_dict
-from onboard.sdnotify import Notifier
-from onboard.signing import open_signing
+from onboard.service.persistence import StateFile, plain
+from onboard.service.recorder import Intake, Recorder, config_to_dict
+from onboard.service.sdnotify import Notifier
+from onboard.service.signing import open_signing
 
 log = logging.getLogger("onboard.service")
 
@@ -280,7 +280,7 @@ class Service:
         """Open MAVLink out; a bad key file or signing setup is a configuration error
         (raised: the service must not run unsigned by mistake); a link that cannot be
         opened (serial port missing) is an event and retried."""
-        from onboard.publishers.mavlink_pub import MavlinkPublisher
+        from onboard.service.publishers.mavlink_pub import MavlinkPublisher
 
         pub = MavlinkPublisher(self.cfg.service.mavlink, self.cfg.vehicle.system_id,
                                clock=self.clock.now, signing=self.signing)
@@ -304,7 +304,7 @@ class Service:
                 self.event("mavlink out: open")
 
     async def _open_zenoh(self) -> bool:
-        from onboard.publishers.zenoh_pub import ZenohPublisher
+        from onboard.service.publishers.zenoh_pub import ZenohPublisher
 
         pub = ZenohPublisher(self.cfg.service.zenoh, self.cfg.vehicle.id, on_event=self.event)
         try:
@@ -555,7 +555,7 @@ def main(args: argparse.Namespace) -> int:
             raise ConfigError(f"{args.config}: service.sources[{i}].url: {err}") from None
     mav = cfg.service.mavlink
     if mav.require_signing or mav.signing_key_file:
-        from onboard.publishers.mavlink_pub import check_signing
+        from onboard.service.publishers.mavlink_pub import check_signing
 
         check_signing(mav)  # fail before anything starts, with one line
     state_dir, logs_dir = resolve_dirs(getattr(args, "state_dir", None))

@@ -28,8 +28,8 @@ from typing import Any
 
 import msgspec
 
-from onboard.errors import UsageError
-from onboard.messages import EstimateRecord, HealthRecord
+from onboard.core.errors import UsageError
+from onboard.core.messages import EstimateRecord, HealthRecord
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 ANGLES = {"heading", "course", "yaw", "roll", "pitch"}
@@ -168,7 +168,7 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
     (docs/security.md)."""
     import zenoh
 
-    from onboard.publishers.zenoh_pub import session_config
+    from onboard.service.publishers.zenoh_pub import session_config
 
     m = mode or "client"
     if config_file and not Path(config_file).is_file():

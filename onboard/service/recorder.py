@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import concurrent.futures
 import json
-import os
 import logging
+import os
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field
@@ -57,9 +57,9 @@ from drivers.recording import (
     read_records,
     with_verdicts,
 )
-from onboard.config import Config
+from onboard.core.config import Config
+from onboard.core.messages import EstimateRecord, Sample
 from onboard.engine import Engine
-from onboard.messages import EstimateRecord, Sample
 
 log = logging.getLogger(__name__)
 
@@ -449,7 +449,7 @@ def recording_meta(path: str | Path) -> dict[str, Any]:
 
 def recording_config(path: str | Path) -> Config | None:
     """The configuration the service ran with, from the recording's meta record."""
-    from onboard.config import from_dict
+    from onboard.core.config import from_dict
 
     files = recording_files(path)
     if not files:

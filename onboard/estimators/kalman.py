@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 
-from onboard.pipelines.surge_heading import Discrete
+from onboard.estimators.axis_model import Discrete
 
 
 class IncrementKF:

@@ -1,0 +1,185 @@
+"""The layering of the code, enforced from its imports.
+
+Every module belongs to a room (its longest matching prefix in :data:`ROOMS`); a room may
+import only the rooms listed for it. Imports are read from the source with :mod:`ast`,
+inside functions too (a lazy import is still a dependency at run time), and so are the
+module names given to ``importlib.import_module`` as string literals. Imports under
+``if TYPE_CHECKING:`` are type hints only and do not count.
+
+The rooms, from the bottom up (docs/architecture.md has the picture):
+
+* ``onboard.core``: messages, configuration, errors, geometry. Imports nothing of ours.
+* ``onboard.estimators``: the estimation mathematics, pure; only the core.
+* ``onboard.pipelines``: the registered pipelines, thin adapters over the estimators.
+* ``drivers``: bytes to samples; only the core.
+* ``sitl``: the simulator; the core and the drivers' encoders. Its closed-loop runner
+  (``sitl.closed_loop``) also runs the onboard engine, because the closed loop is the
+  experiment.
+* ``onboard.engine``, ``onboard.validate``, ``onboard.inputs``: time-ordered feeding of
+  validated samples into the pipelines.
+* ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
+* ``onboard.closure``: model closure on recorded logs.
+* ``onboard.replay``, ``onboard.diagnose``, ``onboard.autodetect``, ``onboard.plots``:
+  the offline commands.
+* ``onboard.cli``: parses arguments, dispatches by module name.
+* ``onboard.tools``: demo, shore view, benchmarks, validation reports, gain design; may
+  use everything, the simulator included.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+
+CORE = {"onboard.core"}
+MATH = CORE | {"onboard.estimators"}
+PIPELINES = MATH | {"onboard.pipelines"}
+ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs"}
+SERVICE = ENGINE | {"drivers", "onboard.service"}
+CLOSURE = ENGINE | {"drivers", "onboard.closure", "onboard.replay", "onboard.plots",
+                    "onboard.autodetect", "onboard.service.recorder"}
+OFFLINE = CLOSURE | {"onboard.diagnose"}
+
+ROOMS: dict[str, set[str]] = {
+    "onboard.core": CORE,
+    "onboard.estimators": MATH,
+    "onboard.pipelines": PIPELINES,
+    "drivers": CORE | {"drivers"},
+    "sitl": CORE | {"drivers", "sitl"},
+    "sitl.closed_loop": CORE | {"drivers", "sitl", "onboard.engine"},
+    "onboard.engine": ENGINE,
+    "onboard.validate": CORE,
+    "onboard.inputs": CORE,
+    "onboard.service": SERVICE,
+    "onboard.closure": CLOSURE,
+    "onboard.replay": OFFLINE,
+    "onboard.diagnose": OFFLINE,
+    "onboard.autodetect": CORE,
+    "onboard.plots": set(),
+    "onboard.cli": CORE | {"onboard"},
+    "onboard.tools": OFFLINE | SERVICE | {"onboard.tools", "onboard.cli", "sitl"},
+    "onboard": {"onboard"},  # the package's __init__ and __main__
+}
+"""Room -> the rooms it may import. Keys and values are module-name prefixes."""
+
+COMMANDS_INTO_SITL = {"sitl": "sitl.cli:main"}
+"""The only command the CLI dispatches into the simulator."""
+
+
+def _room(module: str, rooms: dict[str, set[str]] = ROOMS) -> str:
+    """The longest prefix of ``module`` in ``rooms``."""
+    best = ""
+    for name in rooms:
+        if (module == name or module.startswith(name + ".")) and len(name) > len(best):
+            best = name
+    if not best:
+        raise AssertionError(f"{module} is in no room: add it to ROOMS")
+    return best
+
+
+def _allowed(target: str, allowed: set[str]) -> bool:
+    return any(target == a or target.startswith(a + ".") for a in allowed)
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _is_type_checking(node: ast.If) -> bool:
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def imports_of(path: Path, module: str | None = None) -> list[tuple[int, str]]:
+    """(line, module) for every import of ours in ``path`` (named ``module``, by default
+    from its place in the repository), lazy ones included."""
+    module = module or _module_name(path)
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    tree = ast.parse(path.read_text(), str(path))
+    skip: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and _is_type_checking(node):
+            skip.update(id(n) for child in node.body for n in ast.walk(child))
+    found: list[tuple[int, str]] = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([base] if base else []))
+            # ``from pkg import mod`` names the submodule when there is one
+            for a in node.names:
+                sub = f"{base}.{a.name}"
+                is_module = (REPO / Path(*sub.split("."))).with_suffix(".py").exists() or (
+                    REPO / Path(*sub.split(".")) / "__init__.py").exists()
+                found.append((node.lineno, sub if is_module else base))
+        elif (isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "import_module"
+              and node.args and isinstance(node.args[0], ast.Constant)
+              and isinstance(node.args[0].value, str)):
+            found.append((node.lineno, node.args[0].value))
+    return [(line, m) for line, m in found if m.split(".")[0] in {"onboard", "drivers", "sitl"}]
+
+
+def _sources() -> list[Path]:
+    return sorted(p for top in ("onboard", "drivers", "sitl") for p in (REPO / top).rglob("*.py"))
+
+
+@pytest.mark.parametrize("path", _sources(), ids=lambda p: str(p.relative_to(REPO)))
+def test_each_module_imports_only_the_rooms_below_it(path: Path) -> None:
+    module = _module_name(path)
+    allowed = ROOMS[_room(module)]
+    own_room = _room(module)
+    wrong = [f"line {line}: {target}" for line, target in imports_of(path)
+             if not _allowed(target, allowed | {own_room})]
+    assert not wrong, f"{module} (room {own_room}) imports outside {sorted(allowed)}: {wrong}"
+
+
+def test_only_the_tools_and_the_closed_loop_runner_import_the_simulator() -> None:
+    importers = {_module_name(p) for p in _sources()
+                 if any(t.split(".")[0] == "sitl" for _, t in imports_of(p))}
+    outside = {m for m in importers
+               if not m.startswith(("sitl", "onboard.tools"))}
+    assert not outside, f"modules outside the tools importing sitl: {sorted(outside)}"
+
+
+def test_the_cli_dispatches_only_the_sitl_command_into_the_simulator() -> None:
+    from onboard.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    handlers = {name: p.get_default("handler") for name, p in sub.choices.items()}
+    into_sitl = {name: h for name, h in handlers.items() if h.startswith("sitl")}
+    assert into_sitl == COMMANDS_INTO_SITL
+    for name, handler in handlers.items():
+        module = handler.partition(":")[0]
+        if name not in COMMANDS_INTO_SITL:
+            assert _room(module) in {"onboard.service", "onboard.tools", "onboard.replay",
+                                     "onboard.diagnose"}, (name, handler)
+
+
+def test_the_layering_check_sees_a_violation(tmp_path: Path) -> None:
+    """A negative control: the parser finds plain, lazy, relative and importlib imports."""
+    fake = tmp_path / "probe.py"
+    fake.write_text(
+        "import importlib\n"
+        "from onboard.core import geo\n"
+        "def f():\n"
+        "    from onboard.service import daemon\n"
+        "    return importlib.import_module('sitl.runner')\n"
+        "from ..engine import Engine\n")
+    found = {t for _, t in imports_of(fake, "onboard.estimators.probe")}
+    assert found == {"onboard.core.geo", "onboard.service.daemon", "sitl.runner",
+                     "onboard.engine"}
+    assert not any(_allowed(t, ROOMS["onboard.estimators"]) for t in found - {"onboard.core.geo"})
