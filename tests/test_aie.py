@@ -14,7 +14,7 @@ from onboard.estimators.axis_model import AxisModel, discretize
 from onboard.pipelines import aie as aie_mod
 from onboard.pipelines.aie import AxisAie, Rcie, bench_step_ratio, rls_kernel, unpack
 from onboard.pipelines.surge_heading import AieConfig
-from onboard.tools.reports.aie_sim import SimConfig, run_pipelines, score, simulate
+from tests.helpers.first_order_boat import SimConfig, run_pipelines, score, simulate
 
 
 def _textbook_rls(P, th, a, b, e1, rz, rd, lam):

@@ -13,7 +13,12 @@ import numpy as np
 
 from onboard.core.messages import Attitude, DvlPosition, Heading
 from onboard.pipelines import current as current_mod
-from tests.test_current import TORPEDO_TRUE, make, run, simulate_torpedo
+from tests.helpers.current_plants import (
+    TORPEDO_TRUE,
+    current_errors,
+    current_pipeline,
+    simulate_torpedo,
+)
 
 # TORPEDO_TRUE with net buoyancy: 7 N up on a ~30 kg (surge) / ~65 kg (sway, heave)
 # mass term, as the REMUS plant (sitl/plants/torpedo_auv.py): -(W - B) / (m - X_udot) > 0,
@@ -30,7 +35,7 @@ def _att(t: float, roll: float, pitch: float, yaw: float = 0.3) -> Attitude:
 
 
 def test_pitched_attitude_sample_changes_the_gravity_regressors():
-    pipe = make("torpedo-auv")
+    pipe = current_pipeline("torpedo-auv")
     pipe.step(1.0, [_att(0.9, 0.1, 0.3)])
     assert (pipe.inp.roll, pipe.inp.pitch) == (0.1, 0.3)
     surge, sway, heave = pipe.model.regressor_rows([1.0, 0.0, 0.0], pipe.inp, dofs_only=True)
@@ -38,7 +43,7 @@ def test_pitched_attitude_sample_changes_the_gravity_regressors():
     assert surge[terms["surge"].index("sin(theta)")] == math.sin(0.3)
     assert sway[terms["sway"].index("cos(theta)sin(phi)")] == math.cos(0.3) * math.sin(0.1)
     assert heave[terms["heave"].index("cos(theta)cos(phi)")] == math.cos(0.3) * math.cos(0.1)
-    rov = make("bluerov2")
+    rov = current_pipeline("bluerov2")
     rov.step(1.0, [_att(1.0, -0.2, 0.25)])
     h = rov.model.regressor_rows([0.0, 0.0, 0.0], rov.inp)[2]
     assert h[rov.model.terms["heave"].index("cos(theta)cos(phi)")] == (
@@ -46,7 +51,7 @@ def test_pitched_attitude_sample_changes_the_gravity_regressors():
 
 
 def test_newest_attitude_at_or_before_the_step_time():
-    pipe = make("torpedo-auv")
+    pipe = current_pipeline("torpedo-auv")
     # time-ordered batch: the newest sample at or before the tick wins
     pipe.step(1.0, [_att(0.8, 0.0, 0.1), _att(0.9, 0.0, 0.2)])
     assert pipe.inp.pitch == 0.2 and pipe.pitch == 0.2
@@ -63,7 +68,7 @@ def test_newest_attitude_at_or_before_the_step_time():
 
 
 def test_dvl_attitude_is_a_fallback_only():
-    pipe = make("torpedo-auv")
+    pipe = current_pipeline("torpedo-auv")
     dvl = DvlPosition(t=0.5, north_m=0.0, east_m=0.0, down_m=5.0, roll_rad=0.02,
                       pitch_rad=-0.1, yaw_rad=0.0)
     pipe.step(1.0, [Heading(t=0.4, heading_rad=0.0), dvl])
@@ -80,10 +85,10 @@ def test_pitching_buoyant_torpedo_known_model():
     terms change surge, sway and heave accelerations by up to 0.06 / 0.01 / 0.003 m/s^2
     through the attitude. At zero attitude (the bug) the model is wrong by that and the
     current takes the blame."""
-    pipe = make("torpedo-auv", model=BUOYANT_TRUE, identify=False)
+    pipe = current_pipeline("torpedo-auv", model=BUOYANT_TRUE, identify=False)
     gen = simulate_torpedo(300.0, truth=BUOYANT_TRUE, pitch=(0.25, 2 * math.pi / 60.0),
                            roll=(0.1, 2 * math.pi / 23.0))
-    rms, cover, _, _ = run(pipe, gen, after=100.0)
+    rms, cover, _, _ = current_errors(pipe, gen, after=100.0)
     # measured: rms N/E 0.004 / 0.004 m/s, coverage 1.00 / 1.00; at zero attitude (before
     # the fix) 0.058 / 0.126 m/s, coverage 0.90 / 0.76
     assert np.all(rms < 0.02)

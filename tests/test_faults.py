@@ -39,7 +39,7 @@ import pytest
 from drivers.recording import read_records
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.tools.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
-from tests.test_service import _config
+from tests.helpers.service_config import service_config
 
 REPO = Path(__file__).resolve().parent.parent
 SPEED = 10.0
@@ -116,7 +116,7 @@ def test_zenoh_router_restarted_the_service_keeps_ticking_and_delivers_again(tmp
 
     sub = shore.declare_subscriber("onboard/testboat/**", on)
     port, nmea_port = free_udp_port(), free_udp_port()
-    cfg = _config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}",
+    cfg = service_config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}",
                                  "name": "autopilot"},
                                 {"kind": "nmea", "url": f"udp:127.0.0.1:{nmea_port}",
                                  "name": "gps"}],

@@ -3,15 +3,15 @@ heading, current from over-ground minus through-water velocity."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 
 from onboard.estimators.flow_observer import ackermann_observer_gain
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_current import TORPEDO_TRUE, make, run, simulate_torpedo  # noqa: E402
+from tests.helpers.current_plants import (
+    TORPEDO_TRUE,
+    current_errors,
+    current_pipeline,
+    simulate_torpedo,
+)
 
 
 def test_ackermann_places_the_poles():
@@ -24,8 +24,8 @@ def test_ackermann_places_the_poles():
 
 
 def test_flow_observer_current_on_synthetic_torpedo_with_known_model():
-    pipe = make("torpedo-auv", model=TORPEDO_TRUE, identify=False, observer="flow")
-    rms, cover, e, s = run(pipe, simulate_torpedo(300.0), after=120.0)
+    pipe = current_pipeline("torpedo-auv", model=TORPEDO_TRUE, identify=False, observer="flow")
+    rms, cover, e, s = current_errors(pipe, simulate_torpedo(300.0), after=120.0)
     print("flow rms", rms, "cover", cover, "sigma", s.mean(0))
     # measured: rms [0.016, 0.018] m/s, sigma [0.028, 0.036], 2-sigma coverage [0.99, 1.0]
     assert np.all(rms < 0.05)

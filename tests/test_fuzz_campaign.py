@@ -30,7 +30,8 @@ import traceback
 from pathlib import Path
 
 import pytest
-import test_fuzz_parsers as fz
+
+from tests import test_fuzz_parsers as fz
 
 N = int(os.environ.get("ONBOARD_FUZZ_N", "100000"))
 REPORT = Path(os.environ.get("ONBOARD_FUZZ_REPORT",

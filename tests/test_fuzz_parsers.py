@@ -597,7 +597,7 @@ def test_tlog_clean_file_has_no_rejection():
 
 
 def dataflash_bytes() -> bytes:
-    from test_dataflash import synthetic_log  # the DataFlash tests' record builder
+    from tests.helpers.dataflash_log import synthetic_log
 
     return synthetic_log()
 

@@ -15,7 +15,7 @@ from onboard.estimators.axis_model import augmented_matrices, discretize
 from onboard.estimators.kalman import IncrementKF
 from onboard.pipelines import kf as kf_mod
 from onboard.pipelines.surge_heading import AieConfig
-from onboard.tools.reports.aie_sim import SimConfig, run_pipelines, score, simulate
+from tests.helpers.first_order_boat import SimConfig, run_pipelines, score, simulate
 
 
 def test_white_noise_filter_equals_the_papers_three_state_filter() -> None:

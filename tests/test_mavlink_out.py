@@ -11,6 +11,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from onboard.core.config import ConfigError, MavlinkOut
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.service.publishers.mavlink_pub import MavlinkPublisher, load_signing_key
+from tests.helpers.mavlink_listener import receive_mavlink
 
 
 @pytest.fixture
@@ -20,24 +21,6 @@ def listener():
     s.settimeout(5.0)
     yield s
     s.close()
-
-
-def receive(sock, key: bytes | None = None) -> list:
-    mav = mavlink2.MAVLink(None)
-    mav.robust_parsing = True
-    if key is not None:
-        mav.signing.secret_key = key
-        mav.signing.allow_unsigned_callback = lambda *a: False
-    out = []
-    sock.settimeout(0.5)
-    while True:
-        try:
-            data = sock.recv(65536)
-        except socket.timeout:
-            return out
-        for m in mav.parse_buffer(data) or []:
-            if m.get_type() != "BAD_DATA":
-                out.append(m)
 
 
 def _records():
@@ -65,7 +48,7 @@ def test_heartbeat_estimates_and_health_from_component_191(listener):
                                     rejected={"gnss:submerged": 3}, events=["gps: lost (EIO)"]),
                        now=10.0)
     pub.close()
-    msgs = receive(listener)
+    msgs = receive_mavlink(listener)
     assert {(m.get_srcSystem(), m.get_srcComponent()) for m in msgs} == {(7, 191)}
     by = {}
     for m in msgs:
@@ -96,7 +79,7 @@ def test_odometry_only_when_configured(listener):
     pub.start()
     pub.publish_estimates(_records(), now=1.0)
     pub.close()
-    odo = [m for m in receive(listener) if m.get_type() == "ODOMETRY"]
+    odo = [m for m in receive_mavlink(listener) if m.get_type() == "ODOMETRY"]
     assert odo and (odo[0].x, odo[0].y) == (3.0, 4.0)
 
 
@@ -108,7 +91,7 @@ def test_statustext_is_rate_limited_and_suppressions_are_reported(listener):
     assert sum(sent) == 5 and pub.suppressed == 15  # burst of 5
     assert pub.event("later", now=10.0)
     pub.close()
-    texts = [m.text for m in receive(listener) if m.get_type() == "STATUSTEXT"]
+    texts = [m.text for m in receive_mavlink(listener) if m.get_type() == "STATUSTEXT"]
     assert "onboard: 15 msgs suppressed" in texts and texts[-1] == "later"
 
 
@@ -124,7 +107,7 @@ def test_frames_are_signed_when_a_key_file_is_configured(listener, tmp_path):
     pub.start()
     pub.publish_estimates(_records(), now=0.0)
     pub.close()
-    good = receive(listener, key)
+    good = receive_mavlink(listener, key)
     assert good and all(m._signed for m in good)
     # a receiver with another key rejects every frame
     pub2 = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}",
@@ -132,7 +115,7 @@ def test_frames_are_signed_when_a_key_file_is_configured(listener, tmp_path):
     pub2.start()
     pub2.publish_estimates(_records(), now=0.0)
     pub2.close()
-    assert receive(listener, b"\x00" * 32) == []
+    assert receive_mavlink(listener, b"\x00" * 32) == []
 
 
 def test_a_key_file_readable_by_others_or_a_missing_required_key_is_a_config_error(tmp_path):

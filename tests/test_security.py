@@ -23,7 +23,7 @@ from onboard.core.messages import Attitude
 from onboard.service.publishers.mavlink_pub import MavlinkPublisher
 from onboard.service.signing import SigningState, load_signing_key
 from onboard.tools.service_bench import free_udp_port
-from tests.test_mavlink_out import receive
+from tests.helpers.mavlink_listener import receive_mavlink
 
 REPO = Path(__file__).resolve().parent.parent
 KEY = bytes(range(32))
@@ -255,7 +255,7 @@ def test_a_corrupt_timestamp_file_is_reported_and_signing_starts_from_the_clock(
 def _signed_timestamps(sock: socket.socket) -> list[int]:
     """Signing timestamps of the signed frames waiting on ``sock`` (checked with KEY)."""
     return [int.from_bytes(m.get_msgbuf()[-12:-6], "little")
-            for m in receive(sock, KEY) if m._signed]
+            for m in receive_mavlink(sock, KEY) if m._signed]
 
 
 def test_mavlink_out_timestamps_continue_after_a_restart_with_the_wall_clock_back(tmp_path):

@@ -24,13 +24,13 @@ from pymavlink.dialects.v20 import common as mavlink2
 import onboard.pipelines as pipelines_pkg
 from drivers.dvl_json import encode_velocity_report
 from drivers.recording import read_records
-from onboard.core.config import from_dict
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.engine import Engine
 from onboard.service.daemon import Service
 from onboard.service.publishers.zenoh_pub import open_router
 from onboard.service.recorder import replay_recording
 from onboard.tools.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
+from tests.helpers.service_config import service_config
 
 REPO = Path(__file__).resolve().parent.parent
 TIMEOUT = 60.0
@@ -41,16 +41,6 @@ def _all_pipelines(monkeypatch) -> None:
     mods = [m for m in ("nav", "aie", "kf", "current", "eseso")
             if (REPO / "onboard" / "pipelines" / f"{m}.py").exists()]
     monkeypatch.setattr(pipelines_pkg, "MODULES", tuple(mods))
-
-
-def _config(**service) -> object:
-    data = {"vehicle": {"id": "testboat", "class": "rudder-boat", "system_id": 3},
-            "engine": {"rate_hz": 10.0},
-            "inputs": {"rudder": {"source": "servo", "channel": 1, "half_range_us": 500,
-                                  "full_scale": 0.5236},
-                       "throttle": {"source": "servo", "channel": 3, "half_range_us": 500}},
-            "service": service}
-    return from_dict(data)
 
 
 def _new_pty() -> tuple[int, str]:
@@ -135,7 +125,7 @@ def test_service_end_to_end_over_udp_pty_tcp_to_zenoh_and_mavlink_and_exact_repl
     dvl_server.bind(("127.0.0.1", 0))
     dvl_server.listen(1)
     mav_port = free_udp_port()
-    cfg = _config(
+    cfg = service_config(
         sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{mav_port}", "name": "autopilot"},
                  {"kind": "nmea", "url": f"pty:{pty_path}", "name": "gps"},
                  {"kind": "dvl-json", "url": f"tcp:127.0.0.1:{dvl_server.getsockname()[1]}",
@@ -224,7 +214,7 @@ def test_service_end_to_end_over_udp_pty_tcp_to_zenoh_and_mavlink_and_exact_repl
 
 
 def test_adaptive_state_is_saved_on_stop_and_restored_on_start_corrupt_is_ignored(tmp_path):
-    cfg = _config(sources=[{"kind": "nmea", "url": f"udp:127.0.0.1:{free_udp_port()}"}],
+    cfg = service_config(sources=[{"kind": "nmea", "url": f"udp:127.0.0.1:{free_udp_port()}"}],
                   zenoh={"enabled": False}, mavlink={"enabled": False},
                   recorder={"enabled": False}, state_file="st/adaptive.json")
 
@@ -255,7 +245,7 @@ def test_ticks_fire_on_the_grid_or_on_the_first_sample_after_it(tmp_path, wait_s
     grid time and carries it (this is what makes sensor-to-shore latency the step, not the
     wait for the grid); a tick with no such sample in time fires at the deadline."""
     port, nmea_port = free_udp_port(), free_udp_port()
-    cfg = _config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}"},
+    cfg = service_config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}"},
                            {"kind": "nmea", "url": f"udp:127.0.0.1:{nmea_port}"}],
                   zenoh={"enabled": False}, mavlink={"enabled": False},
                   recorder={"enabled": False}, tick_wait_s=wait_s)
@@ -385,7 +375,7 @@ def test_an_unplugged_input_is_reported_and_picked_up_again_while_the_service_ru
         os.replace(str(link) + ".new", link)
         return master
 
-    cfg = _config(sources=[{"kind": "nmea", "url": f"pty:{link}", "name": "gps"}],
+    cfg = service_config(sources=[{"kind": "nmea", "url": f"pty:{link}", "name": "gps"}],
                   zenoh={"enabled": False}, mavlink={"enabled": False},
                   recorder={"enabled": False})
     from drivers.nmea import encode_hdt
@@ -442,7 +432,7 @@ def test_random_and_mutated_bytes_on_every_protocol_never_stop_the_service(tmp_p
 
     rng = random.Random(7)
     ports = {k: free_udp_port() for k in ("mavlink", "nmea", "dvl-json", "pd6")}
-    cfg = _config(sources=[{"kind": k, "url": f"udp:127.0.0.1:{p}", "name": k}
+    cfg = service_config(sources=[{"kind": k, "url": f"udp:127.0.0.1:{p}", "name": k}
                            for k, p in ports.items()],
                   zenoh={"enabled": False}, mavlink={"enabled": False},
                   recorder={"enabled": False})

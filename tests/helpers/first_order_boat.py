@@ -1,10 +1,15 @@
-"""A small self-contained boat simulator for testing the AIE/KF pipelines against truth.
+"""A first-order boat: the AIE and KF pipelines' own plant model, simulated, for testing
+them against truth.
 
-Not the project's SITL (``sitl/``): a few dozen lines that the AIE tests can own. Surge and
-yaw are the §1.1 first-order models of algorithms.md with optional richer effects the
-pipelines do not model: quadratic surge drag, a thrust map quadratic in throttle, a yaw
-moment proportional to speed squared (rudder boats), and a constant water current.
-Sensors: GNSS at ``gps_hz`` with white noise, compass at ``compass_hz``, commands at 10 Hz.
+Surge and yaw are the first-order models of algorithms.md §1.1, ``v' = -a v + u`` and
+``r' = -a_psi r + u_psi``: the very model the AIE and KF pipelines assume. On this plant
+the estimators' model is exact, so a test here checks that the estimators implement their
+equations and reach their own noise floor; it is not a validation against a different
+vehicle (the SITL plants in ``sitl/plants`` are that, tests/test_aie_sitl.py). Optional
+effects the pipelines do not model can be switched on: quadratic surge drag, a thrust map
+quadratic in throttle, a yaw moment proportional to speed squared (rudder boats), and a
+constant water current. Sensors: GNSS at ``gps_hz`` with white noise, compass at
+``compass_hz``, commands at 10 Hz.
 
 The "true input" is what the AIE normalization calls the input: everything in the
 acceleration except the model's linear damping, ``u = v' + a v`` (m/s^2, rad/s^2).
@@ -59,6 +64,8 @@ def default_schedule(duration: float, seed: int) -> list[tuple[float, float, flo
 
 @dataclass
 class SimResult:
+    """The samples the pipelines read (time-ordered) and the truth on a 10 Hz grid."""
+
     samples: list[Sample]
     t: np.ndarray                      # truth times (s), 10 Hz
     north: np.ndarray
@@ -154,10 +161,12 @@ def run_pipelines(samples: list[Sample], pipelines: list, t_ticks: np.ndarray
 
 
 def wrap(x: np.ndarray) -> np.ndarray:
+    """Angles (rad) wrapped to [-pi, pi)."""
     return (x + np.pi) % (2 * np.pi) - np.pi
 
 
 def rmse(x: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """Root mean square of the finite entries of ``x`` (where ``mask``); NaN if none."""
     m = np.isfinite(x) if mask is None else (np.isfinite(x) & mask)
     return float(np.sqrt(np.mean(x[m] ** 2))) if m.any() else math.nan
 
