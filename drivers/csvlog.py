@@ -50,6 +50,7 @@ from typing import Iterator
 
 from drivers.base import ReadStats, UnreadableLog
 from onboard.core.config import CsvFormat
+from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -297,7 +298,7 @@ class CsvReader:
         heading: float | None = None
         if f.heading:
             try:
-                heading = ang(num(f.heading)) % (2.0 * math.pi)
+                heading = wrap_2pi(ang(num(f.heading)))
                 out.append(Heading(t=t, source=src, heading_rad=heading,
                                    reference=f.heading_reference))
             except _Bad as b:

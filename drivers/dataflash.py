@@ -59,6 +59,7 @@ from typing import Callable, Iterable, Iterator
 
 from drivers.base import ReadStats, UnreadableLog
 from drivers.mavlink import GPS_FIX_TO_QUALITY, wanted_types
+from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -194,7 +195,7 @@ def _att(f: _Format, base: str) -> _Handler | None:
             st.stats.reject("nan")
             return None
         return Attitude(t=t, source="dataflash/ATT", roll_rad=roll * d2r, pitch_rad=pitch * d2r,
-                        yaw_rad=(yaw * d2r) % (2 * math.pi))
+                        yaw_rad=wrap_2pi(yaw * d2r))
     return h
 
 
@@ -223,7 +224,7 @@ def _gps(f: _Format, base: str) -> _Handler | None:
         return GnssFix(t=t, source="dataflash/GPS[0]", lat_deg=g["Lat"](v), lon_deg=g["Lng"](v),
                        alt_m=alt if status >= 3 else None, fix_quality=q, num_sats=ns,
                        hdop=hdop, sog_mps=spd,
-                       cog_rad=(crs * d2r) % (2 * math.pi) if crs is not None else None)
+                       cog_rad=wrap_2pi(crs * d2r) if crs is not None else None)
     return h
 
 

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Callable, Iterable
 from pymavlink.dialects.v20 import ardupilotmega as _dialect
 
 from drivers.base import ReadStats
+from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
     ActuatorOutputs,
     Altitude,
@@ -249,7 +250,7 @@ def _gps(idx: dict[str, int], msgid: int) -> Handler:
             num_sats=sat if sat != 255 else None,
             hdop=eph * 0.01 if eph != UINT16_MAX else None,
             sog_mps=vel * 0.01 if vel != UINT16_MAX else None,
-            cog_rad=(cog * rad) % (2 * math.pi) if cog != UINT16_MAX else None,
+            cog_rad=wrap_2pi(cog * rad) if cog != UINT16_MAX else None,
             h_acc_m=hacc * 1e-3 if hacc else None,
             v_acc_m=vacc * 1e-3 if vacc else None,
         )
@@ -272,7 +273,7 @@ def _global_position_int(idx, msgid):
         hdg = v[i_hdg]
         if hdg == UINT16_MAX:
             return vel
-        return [vel, Heading(t=t, source=src, heading_rad=(hdg * rad) % (2 * math.pi))]
+        return [vel, Heading(t=t, source=src, heading_rad=wrap_2pi(hdg * rad))]
     return h
 
 
@@ -356,7 +357,7 @@ def _vfr_hud(idx, msgid):
 
     def h(v, t, sysid, compid, mid, v2, ctx):
         return Heading(t=t, source=ctx.source(sysid, compid, mid),
-                       heading_rad=(v[i] * rad) % (2 * math.pi), reference="true")
+                       heading_rad=wrap_2pi(v[i] * rad), reference="true")
     return h
 
 

@@ -71,11 +71,11 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from drivers.base import LineAssembler, ReadStats
+from onboard.core.geo import wrap_2pi
 from onboard.core.messages import GnssFix, Heading, Sample
 
 KNOT_MPS = 1852.0 / 3600.0
 """One knot in m/s."""
-TWO_PI = 2.0 * math.pi
 SUPPORTED = ("GGA", "RMC", "VTG", "HDT", "HDG", "HDM")
 """Sentence types that produce samples."""
 
@@ -221,7 +221,7 @@ def _angle(deg: float | None) -> float | None:
     """Degrees to radians wrapped to [0, 2*pi)."""
     if deg is None:
         return None
-    return math.radians(deg) % TWO_PI
+    return wrap_2pi(math.radians(deg))
 
 
 def _ew(value: float | None, hemi: str) -> float | None:
@@ -337,13 +337,13 @@ def parse_heading(kind: str, f: list[str]) -> tuple[float, Literal["true", "magn
     if h is None:
         raise NmeaError("empty")
     if kind == "HDT":
-        return math.radians(h) % TWO_PI, "true", None
+        return wrap_2pi(math.radians(h)), "true", None
     if kind == "HDM":
-        return math.radians(h) % TWO_PI, "magnetic", None
+        return wrap_2pi(math.radians(h)), "magnetic", None
     dev = _ew(_num(_field(f, 1)), _field(f, 2))
     var = _ew(_num(_field(f, 3)), _field(f, 4))
     mag = h + (dev or 0.0)
-    return math.radians(mag) % TWO_PI, "magnetic", None if var is None else math.radians(var)
+    return wrap_2pi(math.radians(mag)), "magnetic", None if var is None else math.radians(var)
 
 
 # ---------------------------------------------------------------------------- the parser

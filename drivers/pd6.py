@@ -55,6 +55,7 @@ from typing import Iterator, Literal
 import msgspec
 
 from drivers.base import LineAssembler, ReadStats, UnreadableLog
+from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
     Altitude,
     Attitude,
@@ -214,7 +215,7 @@ class Pd6Parser:
             pitch, roll, hdg = _dec(f[0]), _dec(f[1]), _dec(f[2])
             att = Attitude(t=t_rx or 0.0, source=src, roll_rad=math.radians(roll),
                            pitch_rad=math.radians(pitch),
-                           yaw_rad=math.radians(hdg) % (2 * math.pi))
+                           yaw_rad=wrap_2pi(math.radians(hdg)))
             if self.time_base == "instrument":
                 self._pending_sa = att  # stamped by the TS line that follows
                 return []

@@ -69,6 +69,7 @@ import msgspec
 
 from drivers.base import LogReader, ReadStats, UnreadableLog
 from drivers.nmea import NmeaError, NmeaParser, parse_gga, parse_rmc, split_sentence
+from onboard.core.geo import wrap_2pi
 from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
 
 SNIFF_BYTES = 65536
@@ -379,7 +380,7 @@ class MixedCaptureReader:
         return [
             Imu(t=t, source=src, accel_x=ax, accel_y=-ay, accel_z=-az,
                 gyro_x=rx * d2r, gyro_y=-ry * d2r, gyro_z=-rz * d2r),
-            Heading(t=t, source=src, heading_rad=(yaw * d2r) % (2.0 * math.pi),
+            Heading(t=t, source=src, heading_rad=wrap_2pi(yaw * d2r),
                     reference="magnetic"),
             RcChannels(t=t, source=src, pwm_us=(thr, rud)),
         ]

@@ -30,13 +30,10 @@ from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 
+from onboard.core.geo import wrap_pi
 from onboard.core.messages import Heading, Imu, Sample
 from sitl.plants.base import Command
 from sitl.truth import TruthRecord
-
-
-def _wrap_pi(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _clip(x: float, lim: float) -> float:
@@ -146,7 +143,7 @@ class BoatAutopilot:
         psi = inp.truth.yaw if self._psi is None else self._psi
         r = inp.truth.r if self._r is None else self._r
         psi_ref, r_ref, speed = self.mission.reference(inp.t)
-        e = _wrap_pi(psi_ref - psi)
+        e = wrap_pi(psi_ref - psi)
         dt = 1.0 / self.rate_hz
         s = self.kp * e + self.ki * self._int - self.kd * (r - r_ref)
         if abs(s) < self.limit or s * e < 0:  # conditional integration (anti-windup)
@@ -211,7 +208,7 @@ class AuvAutopilot:
         if self._psi_ref is None:
             self._psi_ref = target
         else:
-            self._psi_ref += _wrap_pi(target - self._psi_ref) * (1.0 - math.exp(-dt / sch.tau_s))
+            self._psi_ref += wrap_pi(target - self._psi_ref) * (1.0 - math.exp(-dt / sch.tau_s))
         return self._psi_ref
 
     def __call__(self, inp: ControlInput) -> Command:
@@ -226,7 +223,7 @@ class AuvAutopilot:
             self._int_z = _clip(self._int_z + ez * dt, 20.0)
         theta_ref = _clip(theta_ref, self.theta_max)
         ds = _clip(self.k_theta * (tr.pitch - theta_ref) + self.kq * tr.q, self.limit)
-        e = _wrap_pi(psi_ref - tr.yaw)
+        e = wrap_pi(psi_ref - tr.yaw)
         dr = self.kpsi * e + self.ki * self._int - self.kr * tr.r
         if abs(dr) < self.limit:
             self._int = _clip(self._int + e * dt, 2.0)
@@ -303,7 +300,7 @@ class RovCirclePid:
         v_rb = np.array([c * vel_r[0] + s * vel_r[1], -s * vel_r[0] + c * vel_r[1], vel_r[2]])
         f_b = self.m * a_b + (self.dl + self.dq * np.abs(v_rb)) * v_rb
         f_b[2] -= self.net_weight  # W - B = -2 N: push down 2 N
-        e_psi = _wrap_pi(psi_r - tr.yaw)
+        e_psi = wrap_pi(psi_r - tr.yaw)
         n_z = self.iz * (self.kpsi * e_psi + self.kr * (r_r - tr.r)) + (5.0 + 1.55 * abs(r_r)) * r_r
         wrench = np.array([f_b[0], f_b[1], f_b[2], 0.0, 0.0, n_z])
         return Command(thrusters=tuple(self.allocate(wrench)))

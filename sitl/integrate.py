@@ -16,8 +16,6 @@ __all__ = [
     "rk4_step",
     "rk4_step_list",
     "integrate_rk4",
-    "wrap_pi",
-    "wrap_2pi",
     "rotation_body_to_ned",
     "euler_rate_matrix",
     "GRAVITY",
@@ -72,16 +70,6 @@ def integrate_rk4(
     for i in range(n):
         x = rk4_step(f, t + i * h, x, h)
     return x
-
-
-def wrap_pi(angle: float) -> float:
-    """Wrap an angle (rad) to [-pi, pi)."""
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def wrap_2pi(angle: float) -> float:
-    """Wrap an angle (rad) to [0, 2*pi)."""
-    return angle % (2.0 * math.pi)
 
 
 def rotation_body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:

@@ -49,6 +49,7 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
+from onboard.core.geo import wrap_2pi, wrap_pi
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -66,7 +67,6 @@ from onboard.core.messages import (
 )
 from sitl.truth import TruthRecord
 
-TWO_PI = 2.0 * math.pi
 GRAVITY = 9.80665
 """Standard gravity (m/s^2)."""
 
@@ -75,20 +75,6 @@ def sensor_rng(seed: int, name: str) -> np.random.Generator:
     """The random generator of sensor ``name`` for run ``seed``: independent, reproducible."""
     return np.random.default_rng(np.random.SeedSequence([int(seed) & 0xFFFFFFFF,
                                                          zlib.crc32(name.encode())]))
-
-
-def wrap_2pi(a: float) -> float:
-    """Wrap an angle (rad) to [0, 2 pi)."""
-    a = math.fmod(a, TWO_PI)
-    return a + TWO_PI if a < 0.0 else a
-
-
-def wrap_pi(a: float) -> float:
-    """Wrap an angle (rad) to (-pi, pi]."""
-    a = math.fmod(a + math.pi, TWO_PI)
-    if a <= 0.0:
-        a += TWO_PI
-    return a - math.pi
 
 
 class GeoOrigin:

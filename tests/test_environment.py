@@ -17,13 +17,12 @@ from sitl.environment import (
     UniformCurrent,
     WaveField,
 )
+from onboard.core.geo import wrap_2pi, wrap_pi
 from sitl.integrate import (
     euler_rate_matrix,
     integrate_rk4,
     rk4_step,
     rotation_body_to_ned,
-    wrap_2pi,
-    wrap_pi,
 )
 
 P0 = np.zeros(3)

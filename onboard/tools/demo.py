@@ -43,6 +43,7 @@ import msgspec
 
 from onboard.core.config import Config, SourceConfig, load
 from onboard.core.errors import UsageError
+from onboard.core.geo import wrap_pi
 from onboard.core.messages import EstimateRecord
 
 DEFAULT_SCENARIO = "jaiabot-turns"
@@ -145,10 +146,6 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
 # --------------------------------------------------------------------------- scoring
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
 _TRUTH: dict[str, Callable[[Any], float | None]] = {
     "heading": lambda tr: tr.yaw, "yaw": lambda tr: tr.yaw,
     "roll": lambda tr: tr.roll, "pitch": lambda tr: tr.pitch,
@@ -236,7 +233,7 @@ def score(history: list[EstimateRecord], truth: list[Any]) -> list[ScoreRow]:
                 continue
             if ref is None or not math.isfinite(ref):
                 continue
-            e = _wrap(v - ref) if q in _ANGLES else v - ref
+            e = wrap_pi(v - ref) if q in _ANGLES else v - ref
             col = f"{rec.pipeline}.{q}"
             errs.setdefault(col, []).append(e)
             refs.setdefault(col, []).append(ref)

@@ -34,9 +34,10 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from onboard.core.geo import wrap_pi
 from onboard.core.messages import ActuatorCommand
 from sitl.environment import Environment
-from sitl.integrate import GRAVITY, rk4_step_list, rotation_body_to_ned, wrap_pi
+from sitl.integrate import GRAVITY, rk4_step_list, rotation_body_to_ned
 from sitl.truth import TruthRecord
 
 __all__ = ["Command", "ManoeuvringMasses", "Plant", "PlantBase", "PropulsionWrench"]

@@ -27,7 +27,7 @@ import msgspec
 import numpy as np
 
 from onboard.core.config import Config
-from onboard.core.geo import LocalFrame
+from onboard.core.geo import LocalFrame, wrap_pi_array
 from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Sample
 from onboard.estimators.axis_model import AxisModel, fit_axis
 from onboard.pipelines import aie as aie_mod
@@ -36,10 +36,6 @@ from onboard.pipelines.surge_heading import AieConfig, SurgeHeadingPipeline
 
 REPO = Path(__file__).resolve().parents[3]
 FIG_DIR = REPO / "docs" / "figures"
-
-
-def _wrap(x: np.ndarray) -> np.ndarray:
-    return (x + np.pi) % (2 * np.pi) - np.pi
 
 
 def _rmse(x: np.ndarray) -> float:
@@ -198,7 +194,7 @@ def sitl_metrics(run: SitlRun, t_min: float = 30.0) -> dict[str, dict[str, float
         e = run.est
         d = {
             "speed": _rmse((e[f"{p}.speed"] - run.truth["speed"])[m]),
-            "heading": _rmse(_wrap(e[f"{p}.heading"] - run.truth["heading"])[m]),
+            "heading": _rmse(wrap_pi_array(e[f"{p}.heading"] - run.truth["heading"])[m]),
             "yaw_rate": _rmse((e[f"{p}.yaw_rate"] - run.truth["yaw_rate"])[m]),
             "position": _rmse(np.hypot(e[f"{p}.north"] - run.truth["north"],
                                        e[f"{p}.east"] - run.truth["east"])[m]),
@@ -333,7 +329,7 @@ def blueboat_metrics(run: BlueBoatRun, res: dict[str, np.ndarray], surge: AxisMo
     out = {}
     for p in ("aie", "kf"):
         out[f"{p}.speed"] = _rmse((res[f"{p}.speed"] - run.surge)[m])
-        out[f"{p}.heading"] = _rmse(_wrap(res[f"{p}.heading"] - run.yaw)[m])
+        out[f"{p}.heading"] = _rmse(wrap_pi_array(res[f"{p}.heading"] - run.yaw)[m])
         out[f"{p}.yaw_rate"] = _rmse((res[f"{p}.yaw_rate"] - run.yaw_rate)[m])
         out[f"{p}.position"] = _rmse(np.hypot(res[f"{p}.north"] - res["gps.north"],
                                               res[f"{p}.east"] - res["gps.east"])[m])
@@ -482,9 +478,9 @@ def _figure_blueboat(run: BlueBoatRun, ms: AxisModel, my: AxisModel) -> None:
     a.set_ylabel("speed (m/s)")
     a.legend()
     a = ax[1, 0]
-    a.plot(run.t, np.degrees(_wrap(run.yaw)), color="0.6", label="compass")
-    a.plot(run.t, np.degrees(_wrap(res["kf.heading"])), lw=1, label="KF")
-    a.plot(run.t, np.degrees(_wrap(res["aie.heading"])), lw=1, label="AIE")
+    a.plot(run.t, np.degrees(wrap_pi_array(run.yaw)), color="0.6", label="compass")
+    a.plot(run.t, np.degrees(wrap_pi_array(res["kf.heading"])), lw=1, label="KF")
+    a.plot(run.t, np.degrees(wrap_pi_array(res["aie.heading"])), lw=1, label="AIE")
     a.set_xlabel("t (s)")
     a.set_ylabel("heading (deg)")
     a.legend()
