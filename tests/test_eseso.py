@@ -16,14 +16,15 @@ import pytest
 from onboard.core import config
 from onboard.core.messages import ActuatorCommand, Attitude, Depth, DvlVelocity, GnssFix, Imu
 from onboard.core.so3 import euler_to_matrix, log_so3
+from onboard.estimators.eseso_filter import N_ERR, EsesoFilter
 from onboard.pipelines import eseso
 from onboard.pipelines.base import Pipeline
 
 RNG = np.random.default_rng(3)
 
 
-def _filter_in_motion() -> eseso.Eseso:
-    f = eseso.Eseso(eseso.EsesoConfig(thrust_states="all"))
+def _filter_in_motion() -> EsesoFilter:
+    f = eseso.Eseso(eseso.EsesoConfig(thrust_states="all")).filter
     f.initialized = True
     f.R = euler_to_matrix(0.05, -0.08, 2.0)
     f.v = np.array([0.6, -0.4, 0.1])
@@ -34,7 +35,7 @@ def _filter_in_motion() -> eseso.Eseso:
     return f
 
 
-def _error(a: eseso.Eseso, b: eseso.Eseso) -> np.ndarray:
+def _error(a: EsesoFilter, b: EsesoFilter) -> np.ndarray:
     """``b ⊟ a``: the error-state vector (21 + the 2 INS bias states) of state b about
     nominal a (right perturbation)."""
     return np.concatenate([b.p - a.p, b.v - a.v, log_so3(a.R.T @ b.R), b.b_a - a.b_a,
@@ -62,11 +63,11 @@ def test_thrust_model_jacobian_matches_finite_differences() -> None:
     h0, H = f.h_tau(f_m, w_m)
     num = np.zeros_like(H)
     eps = 1e-6
-    for i in range(eseso.N_ERR):
+    for i in range(N_ERR):
         g = copy.deepcopy(f)
-        dx = np.zeros(eseso.N_ERR)
+        dx = np.zeros(N_ERR)
         dx[i] = eps
-        g._inject(dx)
+        g.inject(dx)
         num[:, i] = (g.h_tau(f_m, w_m)[0] - h0) / eps
     assert np.allclose(H, num, atol=2e-4 * max(1.0, np.abs(num).max()))
 
@@ -79,13 +80,13 @@ def test_propagation_jacobian_matches_finite_differences() -> None:
     nom = copy.deepcopy(f)
     nom.propagate(f_m, w_m, dt)
     eps = 1e-6
-    n = eseso.N_ERR
+    n = N_ERR
     num = np.zeros((n, n))
     for i in range(n):
         g = copy.deepcopy(f)
         dx = np.zeros(n)
         dx[i] = eps
-        g._inject(dx)
+        g.inject(dx)
         g.propagate(f_m, w_m, dt)
         num[:, i] = _error(nom, g) / eps
     assert np.allclose(nom.F, num, atol=1e-5)
@@ -154,8 +155,8 @@ def test_a_constant_push_is_estimated_in_newtons_body_frame() -> None:
 def test_covariance_stays_symmetric_positive_definite_and_health_reports_nis() -> None:
     f = eseso.create(config.load("bluerov2"))
     _run(f, _hover_samples(np.array([10.0, 5.0, 0.0]), 3.0, seed=1))
-    assert np.allclose(f.P, f.P.T)
-    assert np.linalg.eigvalsh(f.P).min() > 0
+    assert np.allclose(f.filter.P, f.filter.P.T)
+    assert np.linalg.eigvalsh(f.filter.P).min() > 0
     h = f.health()
     for ch in ("thrust", "attitude", "depth", "dvl"):
         assert f"{ch}.nis" in h and f"{ch}.innovation_0" in h and f"{ch}.S_0" in h
@@ -205,15 +206,15 @@ def test_adaptive_state_round_trips() -> None:
     g = eseso.create(config.load("bluerov2"))
     g.set_state(st)
     g.set_state({"b_a": ["x", 1, 2], "xi": None})  # ignored
-    assert np.allclose(g.b_a, f.b_a) and np.allclose(g.xi, f.xi)
+    assert np.allclose(g.filter.b_a, f.filter.b_a) and np.allclose(g.filter.xi, f.filter.xi)
 
 
 def test_reset_jacobian_keeps_attitude_covariance_consistent() -> None:
     f = _filter_in_motion()
-    f.P = np.eye(eseso.N_ERR) * 0.01
-    H = np.zeros((3, eseso.N_ERR))
+    f.P = np.eye(N_ERR) * 0.01
+    H = np.zeros((3, N_ERR))
     H[:, 6:9] = np.eye(3)
-    f._update("attitude", np.array([0.05, -0.02, 0.1]), H, np.eye(3) * 1e-4)
+    f.update("attitude", np.array([0.05, -0.02, 0.1]), H, np.eye(3) * 1e-4)
     # after the reset the attitude block is G P G^T with G = I - [dtheta/2]x: symmetric,
     # positive, and smaller than before the update
     Pth = f.P[6:9, 6:9]
@@ -222,7 +223,9 @@ def test_reset_jacobian_keeps_attitude_covariance_consistent() -> None:
 
 
 def test_bench_step_cost_reports_per_tick_figures() -> None:
-    res = eseso.bench_step_cost(2.0)
+    from onboard.tools.bench import eseso_step_cost
+
+    res = eseso_step_cost(2.0)
     assert {"per_tick_us_p50", "per_tick_us_p99", "per_imu_sample_us"} <= set(res)
     assert res["ticks"] == 40
 
@@ -265,17 +268,17 @@ def test_ins_velocity_bias_is_a_state_and_only_the_white_noise_is_r() -> None:
                                           v_east_mps=bias[1] + n[1]))
     samples.sort(key=lambda s: s.t)
     nis: list[float] = []
-    orig = f._update
+    orig = f.filter.update
 
     def spy(ch, y, H, Rm, gate=None):
         if ch == "vog":
-            S = H @ f.P @ H.T + Rm
+            S = H @ f.filter.P @ H.T + Rm
             nis.append(float(y @ np.linalg.solve(S, y)))
         return orig(ch, y, H, Rm, gate)
 
-    f._update = spy  # type: ignore[method-assign]
+    f.filter.update = spy  # type: ignore[method-assign]
     est = _run(f, samples)
-    assert np.allclose(f.b_ins, bias, atol=0.006)
+    assert np.allclose(f.filter.b_ins, bias, atol=0.006)
     # the velocity is where the DVL alone puts it (within its 0.007 m/s std), not pulled
     # towards the INS bias (measured: 0.6 and 1.3 mm/s apart)
     assert abs(est["vel_north"] - dvl_only["vel_north"]) < 0.004
@@ -290,7 +293,7 @@ def test_attitude_noise_is_roll_pitch_and_compass_yaw() -> None:
     f = eseso.create(config.load("bluerov2"))
     assert f.r_att == pytest.approx(0.005 ** 2)
     assert f.r_att_yaw == pytest.approx(0.02 ** 2)
-    f.initialized = True
-    f.P = np.zeros((eseso.N_ERR, eseso.N_ERR))
+    f.filter.initialized = True
+    f.filter.P = np.zeros((N_ERR, N_ERR))
     f._on_attitude(Attitude(t=0.0, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0))
-    assert np.allclose(f.last["attitude"]["S"], [0.005 ** 2, 0.005 ** 2, 0.02 ** 2])
+    assert np.allclose(f.filter.last["attitude"]["S"], [0.005 ** 2, 0.005 ** 2, 0.02 ** 2])

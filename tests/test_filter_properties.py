@@ -226,7 +226,7 @@ def _covariances(p) -> dict[str, np.ndarray]:
                 from onboard.pipelines.aie import unpack
 
                 out[f"{ax}.rcie.P"] = np.array(unpack(rcie.P, rcie.n))
-    P = getattr(p, "P", None)
+    P = getattr(getattr(p, "filter", p), "P", None)  # eseso: its EsesoFilter's
     if P is not None:
         out["P"] = np.asarray(P, dtype=float)
     hP = getattr(p, "hP", None)
@@ -371,14 +371,14 @@ def eseso_nis_every_update(seed: int, seconds: float = 120.0) -> dict[str, list[
 
     cfg, p = _pipeline("eseso", "bluerov2")
     out: dict[str, list[float]] = {}
-    update = p._update
+    update = p.filter.update
 
     def spy(ch, y, H, Rm, gate=None):
-        S = H @ p.P @ H.T + Rm
+        S = H @ p.filter.P @ H.T + Rm
         out.setdefault(ch, []).append(float(y @ np.linalg.solve(0.5 * (S + S.T), y)))
         return update(ch, y, H, Rm, gate)
 
-    p._update = spy
+    p.filter.update = spy
     eng = Engine(cfg, pipelines=[p])
     stream = (s for _, samples, _ in simulate("bluerov2-circle", seconds, seed=seed)
               for s in samples)

@@ -1,0 +1,456 @@
+"""Error-state extended state observer (ESESO): the filter of a BlueROV2-class vehicle.
+
+Paper: L.-Y. Lo, Y. Hu, B. Li, C.-Y. Wen, Y. Yang, "An adaptive model predictive control for
+unmanned underwater vehicles subject to external disturbances and measurement noise"
+(``../shared/papers/eseso-ampc-bluerov2.txt``), section III; spec: ``algorithms.md`` §5.1.
+The pipeline that feeds it samples is :mod:`onboard.pipelines.eseso`.
+
+An error-state Kalman filter on ``R^6 x SO(3) x R^12`` (paper eq. 5). Nominal state::
+
+    p   (3) position, NED earth frame, m
+    v   (3) velocity over ground, NED, m/s
+    R   SO(3) body(FRD)-to-earth(NED) rotation
+    b_a (3) accelerometer bias, body, m/s^2
+    b_g (3) gyro bias, body, rad/s
+    g   (3) gravity, NED, m/s^2 (nominal [0, 0, +9.81]; the paper's code is z-up and
+            starts from [0, 0, -9.81])
+    xi  (3) lumped disturbance force, body FRD, N
+
+Error state (21 + 2): ``dx = [dp, dv, dtheta, db_a, db_g, dg, dxi, db_ins]`` with the right
+(local) perturbation ``R_true = R Exp(dtheta)`` (paper eqs. 6, 9). ``b_ins`` (north, east,
+m/s) is the bias of the INS velocity over ground, not in the paper: an aided INS's velocity
+error is correlated over minutes (a first-order Gauss-Markov process, ``ins_bias_std_mps``,
+``ins_bias_tau_s``), so as white measurement noise it is wrong whatever its variance: too
+small and the filter follows the INS bias, too large and the innovations are far smaller
+than S (docs/eseso-mpc.md, "Measurement noise and consistency").
+
+* **Propagation** (:meth:`EsesoFilter.propagate`; paper eqs. 10-13; Sola, "Quaternion
+  kinematics for the error-state Kalman filter", 2017, §5) over an interval that the
+  interval's mean specific force and rate drive. ``F[dtheta, db_g]`` is the exact
+  ``-Jr(w dt) dt``. ``xi`` is propagated either as a constant in the body frame (the
+  paper's random walk, ``disturbance_model = "body_fixed"``) or as a force fixed in the
+  earth frame whose body components turn with the vehicle (``xi <- Exp(-w dt) xi``,
+  ``"earth_fixed"``): a push, a tether or a current drag is earth-fixed, and on the paper's
+  2 m circle the body components turn at up to 0.75 rad/s, which a random walk cannot
+  follow.
+* **Updates** (paper eqs. 14, 16), each through :meth:`EsesoFilter.update`, Joseph form,
+  with the innovation ``y``, its covariance ``S`` and the NIS kept per channel in
+  :attr:`EsesoFilter.last`, and a chi-square gate (99.9 %; after
+  ``max_consecutive_rejects`` gated updates in a row the channel is fused again,
+  down-weighted, so a sensor cannot be locked out for good). The measurement models:
+  horizontal position and velocity, INS velocity over ground (``v + b_ins``), depth, DVL
+  velocity (body frame), attitude (``Log(R^T R_meas)``, its noise given as roll, pitch and
+  yaw variances turned into body axes), heading, and the thrust model ``h_tau`` below.
+* **Injection and reset** (paper eqs. 16d, 17, 18): every component of ``dx`` is injected
+  (``v`` once, biases and gravity too, unlike the public code), then ``P <- G P G^T``
+  with the reset Jacobian ``G = blockdiag(I, I, I - [dtheta/2]x, I, I, I, I)``
+  (Sola 2017, §6.3).
+
+Thrust model (paper eq. 14b, re-derived in NED/FRD with the Coriolis terms the paper
+drops, because on a 2 m circle at 1.5 m/s they are 2-15 N, more than the 4 N target).
+With ``f = a_m - b_a`` (specific force), ``w = w_m - b_g``, ``nu = R^T v``,
+``g_B = R^T g`` and the translational rigid-body law ``m (nu' + w x nu) = m R^T a_earth
+= m (f + g_B)``::
+
+    tau = h_tau(x) = M (f + g_B) - A (w x nu) + w x (A nu) + D(nu) nu - (W - B) R^T e3 - xi
+                     + m (w' x r_g + w x (w x r_g))
+
+with ``M = m I + A``, ``A = diag(X_udot, Y_vdot, Z_wdot)`` (positive added masses),
+``D(nu) = diag(d_l + d_nl |nu|)`` (positive damping), ``W - B`` the weight minus the
+buoyancy (a positively buoyant vehicle has ``W - B < 0``), ``r_g = (0, 0, z_G)`` the centre
+of gravity and ``w'`` the angular acceleration (with z_G = 0.2 m the ``m w' x r_g`` term
+reaches 50 N when a thruster step rolls the vehicle; its Jacobian is neglected). ``tau`` is
+the thruster force in body axes. The paper's ``M_RB (u_a - b_a)`` misses the ``m g_B``
+term, which only cancels against the weight if the restoring term is written with ``B``
+alone; here both are explicit.
+
+With ``thrust_states = "disturbance"`` (the paper's H with -I on ``dxi`` only) the thrust
+update corrects the disturbance alone and carries the other states' uncertainty in its
+noise (``R + H_o P_oo H_o^T``): through the damping slope (up to 66 N per m/s) the full
+Jacobian (``"all"``) makes it a velocity sensor too, which thruster lag or model errors
+would drag away from the DVL. Its residual is down-weighted Huber-style above
+``thrust_huber``: thruster steps excite roll and pitch accelerations faster than the IMU
+rate resolves.
+
+Numbers in, numbers out: no samples, no clock, no configuration file.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from onboard.core.geo import wrap_pi
+from onboard.core.so3 import (
+    cross,
+    exp_so3,
+    log_so3,
+    matrix_to_euler,
+    orthonormalize,
+    right_jacobian,
+    skew,
+)
+
+Array = NDArray[np.float64]
+
+P_, V_, TH, BA, BG, G_, XI = (slice(3 * i, 3 * i + 3) for i in range(7))
+"""Error-state blocks (paper eq. 11): position, velocity, attitude, accelerometer bias,
+gyro bias, gravity, disturbance."""
+BI = slice(21, 23)
+"""Error-state block of the INS velocity bias (north, east)."""
+N_ERR = 23
+"""Dimension of the error state."""
+
+E3 = np.array([0.0, 0.0, 1.0])
+
+CHI2_999 = {1: 10.83, 2: 13.82, 3: 16.27}
+"""Chi-square 99.9 % quantiles for 1, 2, 3 degrees of freedom."""
+
+
+@dataclass(frozen=True)
+class EsesoParams:
+    """Vehicle model, noise and gating of :class:`EsesoFilter` (SI units, NED/FRD).
+
+    Built from ``[pipelines.eseso]`` and ``[sensors]`` by
+    :func:`onboard.pipelines.eseso.filter_params`; the meaning of each number is in
+    :class:`onboard.pipelines.eseso.EsesoConfig`.
+    """
+
+    mass_kg: float
+    added_mass: tuple[float, float, float]
+    """X_udot, Y_vdot, Z_wdot as positive added masses (kg)."""
+    damping_linear: tuple[float, float, float]
+    """Positive linear damping d_l (N s/m)."""
+    damping_quadratic: tuple[float, float, float]
+    """Positive quadratic damping d_nl (N s^2/m^2)."""
+    cg_z_m: float
+    """Centre of gravity below the body origin (m)."""
+    weight_n: float
+    buoyancy_n: float
+    gravity_mps2: float
+    disturbance_model: Literal["earth_fixed", "body_fixed"]
+    accel_std_mps2: float
+    """Accelerometer white noise (m/s^2), also the thrust update's noise through M."""
+    gyro_std_rps: float
+    """Gyro white noise (rad/s)."""
+    accel_bias_walk: float
+    gyro_bias_walk: float
+    gravity_walk: float
+    disturbance_walk: float
+    position_walk: float
+    ins_bias_std_mps: float
+    ins_bias_tau_s: float
+    thrust_std_n: float
+    thrust_states: Literal["disturbance", "all"]
+    thrust_huber: float
+    gate_sigma: float
+    """0 = chi-square 99.9 % gates; else the NIS gate is ``gate_sigma**2 * dof``."""
+    max_consecutive_rejects: int
+    initial_position_std_m: float
+    initial_velocity_std_mps: float
+    initial_attitude_std_rad: float
+    initial_accel_bias_std: float
+    initial_gyro_bias_std: float
+    initial_gravity_std: float
+    initial_disturbance_std_n: float
+
+
+class EsesoFilter:
+    """The ESESO error-state Kalman filter (module docstring).
+
+    Attributes (filterpy-style, read them to debug):
+        p, v, R, b_a, b_g, g, xi, b_ins: the nominal state (see the module docstring).
+        P: the 23 x 23 error covariance, ordered as :data:`P_` ... :data:`BI`.
+        F: the last propagation's error-state transition.
+        y, S, nis: innovation, its covariance and the NIS of the last update (any channel).
+        last: per channel, the last innovation ``"y"``, the diagonal of ``"S"`` and
+            ``"nis"``.
+        counters: event counts (``fused.<channel>``, ``rejected.<channel>.gate``,
+            ``recovered.<channel>``, ``thrust.downweighted``), in order of first
+            occurrence; the owner may count its own events in the same dictionary.
+        initialized: False until :meth:`initialize`.
+    """
+
+    def __init__(self, params: EsesoParams) -> None:
+        self.params = c = params
+        self.m_vec = c.mass_kg + np.asarray(c.added_mass, float)  # diag of M, kg
+        self.A = np.diag(np.asarray(c.added_mass, float))
+        self.d_l = np.asarray(c.damping_linear, float)
+        self.d_nl = np.asarray(c.damping_quadratic, float)
+        # thrust-update noise: accelerometer noise through M plus model error (N^2)
+        self.R_tau = np.diag((self.m_vec * c.accel_std_mps2) ** 2 + c.thrust_std_n ** 2)
+        self.initialized = False
+        self.p = np.zeros(3)
+        self.v = np.zeros(3)
+        self.R = np.eye(3)
+        self.b_a = np.zeros(3)
+        self.b_g = np.zeros(3)
+        self.g = np.array([0.0, 0.0, c.gravity_mps2])
+        self.xi = np.zeros(3)
+        self.b_ins = np.zeros(2)
+        self.P = np.eye(N_ERR)
+        self.F = np.eye(N_ERR)
+        self.y: Array | None = None
+        self.S: Array | None = None
+        self.nis: float | None = None
+        self.last: dict[str, dict[str, Array | float]] = {}
+        self.counters: dict[str, int] = {}
+        self._consecutive: dict[str, int] = {}
+
+    def count(self, key: str) -> None:
+        """Add one to the event counter ``key``."""
+        self.counters[key] = self.counters.get(key, 0) + 1
+
+    def initialize(self, R0: Array, position: Array, yaw_std_rad: float | None = None) -> None:
+        """Start at attitude ``R0`` (projected onto SO(3)) and NED ``position`` (m), at rest,
+        with the configured initial standard deviations; ``yaw_std_rad`` replaces the
+        attitude std about the body z axis (an attitude levelled from gravity alone)."""
+        c = self.params
+        self.R = orthonormalize(R0)
+        self.p[:] = position
+        sd = [c.initial_position_std_m] * 3 + [c.initial_velocity_std_mps] * 3
+        sd += [c.initial_attitude_std_rad] * 3 + [c.initial_accel_bias_std] * 3
+        sd += [c.initial_gyro_bias_std] * 3 + [c.initial_gravity_std] * 3
+        sd += [c.initial_disturbance_std_n] * 3 + [c.ins_bias_std_mps] * 2
+        self.P = np.diag(np.square(sd))
+        if yaw_std_rad is not None:
+            self.P[8, 8] = yaw_std_rad ** 2
+        self.initialized = True
+
+    # ------------------------------------------------------------------ propagation
+    def propagate(self, f_m: Array, w_m: Array, dt: float) -> None:
+        """Propagate over ``dt`` (s) driven by the interval's mean specific force ``f_m``
+        (m/s^2) and rate ``w_m`` (rad/s), body axes: nominal state by paper eq. (10b),
+        covariance by eqs. (11)-(13) with the Jacobian F of algorithms.md §5.1."""
+        c = self.params
+        f = f_m - self.b_a
+        w = w_m - self.b_g
+        Rf = self.R @ f
+        acc = Rf + self.g
+        dR = exp_so3(w * dt)
+        dRt = dR.T
+        F = np.eye(N_ERR)
+        F[P_, V_] = np.eye(3) * dt
+        F[P_, TH] = -0.5 * (self.R @ skew(f)) * dt * dt
+        F[P_, BA] = -0.5 * self.R * dt * dt
+        F[P_, G_] = 0.5 * np.eye(3) * dt * dt
+        F[V_, TH] = -(self.R @ skew(f)) * dt
+        F[V_, BA] = -self.R * dt
+        F[V_, G_] = np.eye(3) * dt
+        F[TH, TH] = dRt
+        # exact in the gyro-bias error: Exp((w - db) dt) = Exp(w dt) Exp(-Jr(w dt) db dt)
+        F[TH, BG] = -right_jacobian(w * dt) * dt
+        if c.disturbance_model == "earth_fixed":
+            F[XI, XI] = dRt
+            F[XI, BG] = -(dRt @ skew(self.xi) @ right_jacobian(-w * dt)) * dt
+        # INS velocity bias: first-order Gauss-Markov, exact discretization
+        phi_ins = math.exp(-dt / c.ins_bias_tau_s) if c.ins_bias_tau_s > 0 else 0.0
+        F[BI, BI] = np.eye(2) * phi_ins
+        q = np.empty(N_ERR)
+        q[P_] = c.position_walk ** 2 * dt
+        q[V_] = (c.accel_std_mps2 * dt) ** 2
+        q[TH] = (c.gyro_std_rps * dt) ** 2
+        q[BA] = c.accel_bias_walk ** 2 * dt
+        q[BG] = c.gyro_bias_walk ** 2 * dt
+        q[G_] = c.gravity_walk ** 2 * dt
+        q[XI] = c.disturbance_walk ** 2 * dt
+        q[BI] = c.ins_bias_std_mps ** 2 * (1.0 - phi_ins * phi_ins)
+        # nominal state (10b)
+        self.p = self.p + self.v * dt + 0.5 * acc * dt * dt
+        self.v = self.v + acc * dt
+        self.R = self.R @ dR
+        if c.disturbance_model == "earth_fixed":
+            self.xi = dRt @ self.xi
+        self.b_ins = self.b_ins * phi_ins
+        self.P = F @ self.P @ F.T
+        self.P[np.diag_indices(N_ERR)] += q
+        self.F = F
+
+    # ------------------------------------------------------------------ update
+    def update(self, channel: str, y: Array, H: Array, Rm: Array,
+               gate: float | None = None) -> bool:
+        """One Kalman update on the error state (paper eq. 16), Joseph form, then error
+        injection (16d) and reset with its Jacobian (17, 18).
+
+        Args:
+            channel: the measurement's name in :attr:`last` and the counters.
+            y: the innovation (measurement minus prediction).
+            H: its Jacobian with respect to the error state (``len(y)`` x 23).
+            Rm: its noise covariance.
+            gate: the NIS above which the update is rejected; None = the configured gate
+                (``gate_sigma`` or chi-square 99.9 %), 0 = no gate.
+
+        Returns:
+            False when the gate rejects the update.
+        """
+        PHt = self.P @ H.T
+        S = H @ PHt + Rm
+        S = 0.5 * (S + S.T)
+        Sinv = np.linalg.inv(S)
+        nis = float(y @ Sinv @ y)
+        self.y, self.S, self.nis = y, S, nis
+        self.last[channel] = {"y": y.copy(), "S": np.diag(S).copy(), "nis": nis}
+        if gate is None:
+            if self.params.gate_sigma > 0:
+                gate = self.params.gate_sigma ** 2 * len(y)
+            else:
+                gate = CHI2_999.get(len(y), 3.0 * len(y) + 8.0)
+        if gate > 0 and nis > gate:
+            self.count(f"rejected.{channel}.gate")
+            n_rej = self._consecutive.get(channel, 0) + 1
+            self._consecutive[channel] = n_rej
+            if n_rej <= self.params.max_consecutive_rejects:
+                return False
+            # recover: fuse, down-weighted so that the NIS equals the gate
+            self.count(f"recovered.{channel}")
+            Rm = Rm * (nis / gate)
+            S = H @ PHt + Rm
+            Sinv = np.linalg.inv(0.5 * (S + S.T))
+        self._consecutive[channel] = 0
+        K = PHt @ Sinv
+        dx = K @ y
+        IKH = np.eye(N_ERR) - K @ H
+        P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
+        self.inject(dx)
+        # reset (17b): G = I except the attitude block, I - [dtheta/2]x (Sola eq. 287)
+        G = np.eye(N_ERR)
+        G[TH, TH] -= skew(0.5 * dx[TH])
+        P = G @ P @ G.T
+        self.P = 0.5 * (P + P.T)
+        self.count(f"fused.{channel}")
+        return True
+
+    def inject(self, dx: Array) -> None:
+        """Error injection (paper eq. 16d), ``x <- x [+] dx``: every component, velocity
+        once, the attitude by right multiplication with ``Exp(dtheta)``."""
+        self.p = self.p + dx[P_]
+        self.v = self.v + dx[V_]
+        self.R = self.R @ exp_so3(dx[TH])
+        self.b_a = self.b_a + dx[BA]
+        self.b_g = self.b_g + dx[BG]
+        self.g = self.g + dx[G_]
+        self.xi = self.xi + dx[XI]
+        self.b_ins = self.b_ins + dx[BI]
+
+    # ------------------------------------------------------------------ measurement models
+    def update_position_ne(self, z: Array, var: float) -> bool:
+        """Horizontal position ``z`` (north, east; m) with variance ``var`` (m^2) per axis;
+        channel ``gnss_pos``."""
+        H = np.zeros((2, N_ERR))
+        H[:, 0:2] = np.eye(2)
+        return self.update("gnss_pos", z - self.p[:2], H, np.eye(2) * var)
+
+    def update_velocity_ne(self, z: Array, var: float) -> bool:
+        """Horizontal velocity over ground ``z`` (north, east; m/s) with variance ``var``
+        (m^2/s^2) per axis; channel ``gnss_vel``."""
+        H = np.zeros((2, N_ERR))
+        H[:, 3:5] = np.eye(2)
+        return self.update("gnss_vel", z - self.v[:2], H, np.eye(2) * var)
+
+    def update_ins_velocity(self, z: Array, var: float) -> bool:
+        """INS velocity over ground ``z`` (north, east; m/s) = ``v + b_ins`` + white noise
+        of variance ``var`` (m^2/s^2) per axis; channel ``vog``."""
+        H = np.zeros((2, N_ERR))
+        H[:, 3:5] = np.eye(2)
+        H[:, BI] = np.eye(2)
+        return self.update("vog", z - self.v[:2] - self.b_ins, H, np.eye(2) * var)
+
+    def update_depth(self, depth_m: float, var: float) -> bool:
+        """Depth (m, positive down) with variance ``var`` (m^2); channel ``depth``."""
+        H = np.zeros((1, N_ERR))
+        H[0, 2] = 1.0
+        return self.update("depth", np.array([depth_m - self.p[2]]), H, np.array([[var]]))
+
+    def update_body_velocity(self, z: Array, var: float) -> bool:
+        """Velocity over ground in body axes ``z`` (m/s, a DVL's bottom track) with variance
+        ``var`` (m^2/s^2) per axis; channel ``dvl``."""
+        nu = self.R.T @ self.v
+        H = np.zeros((3, N_ERR))
+        H[:, V_] = self.R.T
+        H[:, TH] = skew(nu)
+        return self.update("dvl", z - nu, H, np.eye(3) * var)
+
+    def update_attitude(self, R_meas: Array, roll: float, pitch: float,
+                        var_roll_pitch: float, var_yaw: float) -> bool:
+        """Attitude ``R_meas`` (body to NED; from ``roll``, ``pitch`` in rad) with
+        independent roll and pitch noise ``var_roll_pitch`` and yaw noise ``var_yaw``
+        (rad^2), turned into the body-frame rotation vector; channel ``attitude``."""
+        H = np.zeros((3, N_ERR))
+        H[:, TH] = np.eye(3)
+        # the Euler-rate-to-body-rate matrix (Fossen eq. 2.41 inverted)
+        sr, cr = math.sin(roll), math.cos(roll)
+        sp, cp = math.sin(pitch), math.cos(pitch)
+        J = np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
+        Rm = J @ np.diag([var_roll_pitch, var_roll_pitch, var_yaw]) @ J.T
+        return self.update("attitude", log_so3(self.R.T @ R_meas), H, Rm)
+
+    def update_heading(self, heading_rad: float, var: float) -> bool:
+        """True heading (rad from north) with variance ``var`` (rad^2); channel
+        ``heading``."""
+        roll, pitch, yaw = matrix_to_euler(self.R)
+        H = np.zeros((1, N_ERR))
+        # yaw rate from body rates: last row of T_Theta (Fossen eq. 2.41)
+        cp = max(math.cos(pitch), 1e-3)
+        H[0, TH] = [0.0, math.sin(roll) / cp, math.cos(roll) / cp]
+        return self.update("heading", np.array([wrap_pi(heading_rad - yaw)]), H,
+                           np.array([[var]]))
+
+    # ------------------------------------------------------------------ thrust model
+    def h_tau(self, f_m: Array, w_m: Array, wdot: Array | None = None) -> tuple[Array, Array]:
+        """Predicted thruster force (N, body) at specific force ``f_m`` (m/s^2) and rate
+        ``w_m`` (rad/s), and its 3 x 23 Jacobian (paper eq. 14b as re-derived in the
+        module docstring). ``wdot`` is the angular acceleration (rad/s^2); without it the
+        centre-of-gravity terms are left out."""
+        c = self.params
+        f = f_m - self.b_a
+        w = w_m - self.b_g
+        RT = self.R.T
+        nu = RT @ self.v
+        gB = RT @ self.g
+        zB = RT @ E3
+        Anu = self.A @ nu
+        W_B = c.weight_n - c.buoyancy_n
+        damp = (self.d_l + self.d_nl * np.abs(nu)) * nu
+        h = (self.m_vec * (f + gB) - self.A @ cross(w, nu) + cross(w, Anu)
+             + damp - W_B * zB - self.xi)
+        r_g = np.array([0.0, 0.0, c.cg_z_m])
+        if wdot is not None:
+            h = h + c.mass_kg * (cross(wdot, r_g) + cross(w, cross(w, r_g)))
+        J_nu = (-self.A @ skew(w) + skew(w) @ self.A
+                + np.diag(self.d_l + 2.0 * self.d_nl * np.abs(nu)))
+        J_w = self.A @ skew(nu) - skew(Anu)
+        M = np.diag(self.m_vec)
+        H = np.zeros((3, N_ERR))
+        H[:, V_] = J_nu @ RT
+        H[:, TH] = J_nu @ skew(nu) + M @ skew(gB) - W_B * skew(zB)
+        H[:, BA] = -M
+        H[:, BG] = -J_w
+        H[:, G_] = M @ RT
+        H[:, XI] = -np.eye(3)
+        return h, H
+
+    def update_thrust(self, f_m: Array, w_m: Array, wdot: Array, tau: Array) -> bool:
+        """Update on the thruster force ``tau`` (N, body) = :meth:`h_tau` at specific force
+        ``f_m``, rate ``w_m`` and angular acceleration ``wdot``; channel ``thrust``, never
+        gated, down-weighted above ``thrust_huber``."""
+        h, H = self.h_tau(f_m, w_m, wdot)
+        y = tau - h
+        Rm = self.R_tau
+        if self.params.thrust_states == "disturbance":
+            Ho = H.copy()
+            Ho[:, XI] = 0.0
+            Rm = Rm + Ho @ self.P @ Ho.T
+            H = np.zeros_like(H)
+            H[:, XI] = -np.eye(3)
+        k = self.params.thrust_huber
+        if k > 0:
+            S = H @ self.P @ H.T + Rm
+            nis = float(y @ np.linalg.solve(S, y))
+            if nis > k:
+                Rm = Rm * (nis / k)
+                self.count("thrust.downweighted")
+        return self.update("thrust", y, H, Rm, gate=0.0)
