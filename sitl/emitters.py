@@ -59,6 +59,7 @@ from typing import Protocol, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from onboard.core.geo import metres_per_degree
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -74,6 +75,7 @@ from onboard.core.messages import (
     VehicleInfo,
     VelocityOverGround,
 )
+from onboard.core.so3 import ned_to_body
 
 DEFAULT_EPOCH_S = 1_767_225_600.0
 """Unix time of simulation t = 0 in logs: 2026-01-01T00:00:00Z (fixed, for determinism)."""
@@ -117,9 +119,7 @@ class MavlinkEncoder:
         self.mav = mavlink2.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.mav_type = mav_type
         self.custom_mode = custom_mode
-        lat0 = math.radians(origin[0])
-        self.m_lat = 111132.954 - 559.822 * math.cos(2 * lat0) + 1.175 * math.cos(4 * lat0)
-        self.m_lon = math.pi / 180.0 * 6367449.0 * math.cos(lat0)
+        self.m_lat, self.m_lon = metres_per_degree(origin[0])
         self.origin = origin
         self.ins_ne = list(start_ne)
         self.epoch_s = epoch_s
@@ -231,15 +231,8 @@ class MavlinkEncoder:
         psi = self._heading
         phi = self._att.roll_rad if self._att else 0.0
         th = self._att.pitch_rad if self._att else 0.0
-        bn, be, bd = EARTH_FIELD_GAUSS
-        cp, sp = math.cos(psi), math.sin(psi)
-        # earth -> yaw frame
-        x1, y1, z1 = cp * bn + sp * be, -sp * bn + cp * be, bd
-        ct, st = math.cos(th), math.sin(th)
-        x2, z2 = ct * x1 - st * z1, st * x1 + ct * z1
-        cf, sf = math.cos(phi), math.sin(phi)
-        y3, z3 = cf * y1 + sf * z2, -sf * y1 + cf * z2
-        return _i16(x2 * 1000.0), _i16(y3 * 1000.0), _i16(z3 * 1000.0)
+        x, y, z = ned_to_body(phi, th, psi, EARTH_FIELD_GAUSS)
+        return _i16(x * 1000.0), _i16(y * 1000.0), _i16(z * 1000.0)
 
     def _global_position(self, s: VelocityOverGround, ms: int) -> bytes:
         t = s.t

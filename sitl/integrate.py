@@ -1,8 +1,8 @@
-"""Numerical helpers shared by the plants: fixed-step RK4, angle wrapping, rotations.
+"""Fixed-step RK4 integration shared by the plants, and the plants' gravity.
 
-Conventions: NED earth frame, FRD body frame, ZYX (yaw-pitch-roll) Euler angles
-``(phi, theta, psi)`` in rad, as in Fossen, *Handbook of Marine Craft Hydrodynamics and
-Motion Control* (2nd ed., 2021), eqs. (2.18) and (2.41).
+Angles are wrapped by :mod:`onboard.core.geo` and rotated by :mod:`onboard.core.so3` (ZYX
+Euler angles, NED earth frame, FRD body frame, as in Fossen, *Handbook of Marine Craft
+Hydrodynamics and Motion Control*, 2nd ed., 2021).
 """
 
 from __future__ import annotations
@@ -16,8 +16,6 @@ __all__ = [
     "rk4_step",
     "rk4_step_list",
     "integrate_rk4",
-    "rotation_body_to_ned",
-    "euler_rate_matrix",
     "GRAVITY",
 ]
 
@@ -70,36 +68,3 @@ def integrate_rk4(
     for i in range(n):
         x = rk4_step(f, t + i * h, x, h)
     return x
-
-
-def rotation_body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:
-    """Rotation matrix R(Theta) from body FRD to NED, ZYX Euler angles (Fossen eq. 2.18).
-
-    A body-frame vector ``v_b`` is ``R @ v_b`` in NED; ``R.T`` maps NED to body.
-    """
-    cphi, sphi = math.cos(phi), math.sin(phi)
-    cth, sth = math.cos(theta), math.sin(theta)
-    cpsi, spsi = math.cos(psi), math.sin(psi)
-    return np.array(
-        [
-            [cpsi * cth, -spsi * cphi + cpsi * sth * sphi, spsi * sphi + cpsi * cphi * sth],
-            [spsi * cth, cpsi * cphi + sphi * sth * spsi, -cpsi * sphi + sth * spsi * cphi],
-            [-sth, cth * sphi, cth * cphi],
-        ]
-    )
-
-
-def euler_rate_matrix(phi: float, theta: float) -> np.ndarray:
-    """T(Theta) with ``[phi', theta', psi'] = T @ [p, q, r]`` (Fossen eq. 2.41).
-
-    Singular at theta = +-pi/2, which none of our vehicles reaches.
-    """
-    cphi, sphi = math.cos(phi), math.sin(phi)
-    cth, tth = math.cos(theta), math.tan(theta)
-    return np.array(
-        [
-            [1.0, sphi * tth, cphi * tth],
-            [0.0, cphi, -sphi],
-            [0.0, sphi / cth, cphi / cth],
-        ]
-    )

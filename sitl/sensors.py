@@ -49,7 +49,7 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
-from onboard.core.geo import wrap_2pi, wrap_pi
+from onboard.core.geo import LocalFrame, wrap_2pi, wrap_pi
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -65,6 +65,7 @@ from onboard.core.messages import (
 from onboard.core.messages import (
     Imu as ImuSample,
 )
+from onboard.core.so3 import body_to_ned
 from sitl.truth import TruthRecord
 
 GRAVITY = 9.80665
@@ -77,25 +78,10 @@ def sensor_rng(seed: int, name: str) -> np.random.Generator:
                                                          zlib.crc32(name.encode())]))
 
 
-class GeoOrigin:
-    """Equirectangular local tangent plane about ``(lat0, lon0)`` (deg), algorithms.md §1.3.
-
-    The same formulas the pipelines use, so the projection contributes no error to a
-    comparison of estimates with truth.
-    """
-
-    __slots__ = ("lat0", "lon0", "m_lat", "m_lon")
-
-    def __init__(self, lat0_deg: float, lon0_deg: float) -> None:
-        self.lat0 = lat0_deg
-        self.lon0 = lon0_deg
-        lat = math.radians(lat0_deg)
-        self.m_lat = 111132.954 - 559.822 * math.cos(2 * lat) + 1.175 * math.cos(4 * lat)
-        self.m_lon = math.pi / 180.0 * 6367449.0 * math.cos(lat)
-
-    def to_latlon(self, north_m: float, east_m: float) -> tuple[float, float]:
-        """(lat, lon) in degrees of a local point (m)."""
-        return self.lat0 + north_m / self.m_lat, self.lon0 + east_m / self.m_lon
+GeoOrigin = LocalFrame
+"""The sensors' local tangent plane about ``(lat0, lon0)`` (deg): the pipelines' own
+projection (algorithms.md §1.3), so the projection contributes no error to a comparison
+of estimates with truth."""
 
 
 class WorldView:
@@ -150,8 +136,7 @@ class WorldView:
     def v_ned(self) -> tuple[float, float, float]:
         if self._v_ned is None:
             tr = self.truth
-            v = _body_to_ned(tr.roll, tr.pitch, tr.yaw, (tr.u, tr.v, tr.w)).tolist()
-            self._v_ned = (v[0], v[1], v[2])
+            self._v_ned = body_to_ned(tr.roll, tr.pitch, tr.yaw, (tr.u, tr.v, tr.w))
         return self._v_ned
 
     @property
@@ -565,7 +550,7 @@ class Dvl(_Base):
                 altitude_m=max(0.0, alt + c.altitude_std_m * n[6]),
             ))
             if c.dead_reckoning:
-                self.pos += dt * _body_to_ned(tr.roll, tr.pitch, tr.yaw, (vx, vy, vz))
+                self.pos += dt * np.array(body_to_ned(tr.roll, tr.pitch, tr.yaw, (vx, vy, vz)))
         else:
             out.append(DvlVelocity(t=t, source=self.name, vx=0.0, vy=0.0, vz=0.0,
                                    track="bottom", valid=False, fom_mps=c.invalid_fom_mps,
@@ -588,20 +573,6 @@ class Dvl(_Base):
 
     def error_state(self) -> dict[str, float]:
         return {"sensor.dvl_locked": 1.0 if self.locked else 0.0}
-
-
-def _body_to_ned(phi: float, theta: float, psi: float,
-                 v: Sequence[float]) -> np.ndarray:
-    """Rotate a body-frame vector into NED with ZYX Euler angles (rad)."""
-    cf, sf = math.cos(phi), math.sin(phi)
-    ct, st = math.cos(theta), math.sin(theta)
-    cp, sp = math.cos(psi), math.sin(psi)
-    x, y, z = v
-    return np.array([
-        cp * ct * x + (cp * st * sf - sp * cf) * y + (cp * st * cf + sp * sf) * z,
-        sp * ct * x + (sp * st * sf + cp * cf) * y + (sp * st * cf - cp * sf) * z,
-        -st * x + ct * sf * y + ct * cf * z,
-    ])
 
 
 # --------------------------------------------------------------------------- depth

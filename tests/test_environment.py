@@ -18,12 +18,9 @@ from sitl.environment import (
     WaveField,
 )
 from onboard.core.geo import wrap_2pi, wrap_pi
-from sitl.integrate import (
-    euler_rate_matrix,
-    integrate_rk4,
-    rk4_step,
-    rotation_body_to_ned,
-)
+from onboard.core.so3 import euler_rate_matrix
+from onboard.core.so3 import euler_to_matrix as rotation_body_to_ned
+from sitl.integrate import integrate_rk4, rk4_step
 
 P0 = np.zeros(3)
 

@@ -1,14 +1,24 @@
-"""Rotation-group helpers for the error-state filters (Sola, "Quaternion kinematics for the
-error-state Kalman filter", 2017; the ESESO paper eqs. (6)-(8)).
+"""Rotations: the rotation group for the error-state filters (Sola, "Quaternion kinematics
+for the error-state Kalman filter", 2017; the ESESO paper eqs. (6)-(8)) and the ZYX Euler
+angles of every vehicle (Fossen, *Handbook of Marine Craft Hydrodynamics and Motion
+Control*, 2nd ed., 2021, eqs. 2.18, 2.40, 2.41).
 
 Conventions: a rotation matrix ``R`` maps body (FRD) vectors into the earth (NED) frame,
 ``x_ned = R @ x_frd``. Perturbations are *right* (local, body-frame) ones,
 ``R_true = R @ Exp(dtheta)``, as in the ESESO paper eq. (6). Angles in radians.
+
+The ZYX rotation lives here, beside its inverse :func:`matrix_to_euler` and the other
+maps between rotation representations, and not in :mod:`onboard.core.geo`, which is about
+positions on the earth. Its formula is written once (:func:`_zyx_entries`); the reference
+:func:`euler_to_matrix` returns a numpy matrix, and the plain-float fast paths for the
+simulator's integrator (:func:`body_to_ned`, :func:`ned_to_body`,
+:func:`euler_kinematics`) use the same entries, computed in the same order.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -78,19 +88,77 @@ def right_jacobian(theta: Array) -> Array:
     )
 
 
+def _zyx_entries(cr: float, sr: float, cp: float, sp: float, cy: float,
+                 sy: float) -> tuple[float, float, float, float, float, float, float, float,
+                                     float]:
+    """The nine entries, row by row, of the body-to-earth rotation ``R(Theta)`` from the
+    cosines and sines of roll, pitch and yaw (Fossen eq. 2.18)."""
+    return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+            sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
+            -sp, cp * sr, cp * cr)
+
+
 def euler_to_matrix(roll: float, pitch: float, yaw: float) -> Array:
-    """Body-to-earth rotation from ZYX Euler angles (rad), Fossen (2011) eq. 2.18 (the
-    paper's ``R_Theta``)."""
+    """Body-to-earth rotation from ZYX Euler angles (rad), Fossen eq. 2.18 (the ESESO
+    paper's ``R_Theta``): the reference the plain-float functions below are tested
+    against."""
+    e = _zyx_entries(math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
+                     math.cos(yaw), math.sin(yaw))
+    return np.array((e[0:3], e[3:6], e[6:9]))
+
+
+def body_to_ned(roll: float, pitch: float, yaw: float,
+                v: Sequence[float]) -> tuple[float, float, float]:
+    """``R(Theta) v``: a body (FRD) vector in the earth (NED) frame, on plain floats
+    (several times faster than a numpy product for one vector)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _zyx_entries(
+        math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
+        math.sin(yaw))
+    x, y, z = v
+    return (r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z,
+            r20 * x + r21 * y + r22 * z)
+
+
+def ned_to_body(roll: float, pitch: float, yaw: float,
+                v: Sequence[float]) -> tuple[float, float, float]:
+    """``R(Theta)^T v``: an earth (NED) vector in the body (FRD) frame, on plain floats."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _zyx_entries(
+        math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
+        math.sin(yaw))
+    n, e, d = v
+    return (r00 * n + r10 * e + r20 * d, r01 * n + r11 * e + r21 * d,
+            r02 * n + r12 * e + r22 * d)
+
+
+def euler_rate_matrix(roll: float, pitch: float) -> Array:
+    """``T(Theta)`` with ``[roll', pitch', yaw'] = T @ [p, q, r]`` (Fossen eq. 2.41); the
+    reference for :func:`euler_kinematics`. Singular at pitch = +-pi/2, which none of our
+    vehicles reaches."""
     cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
+    cp, tp = math.cos(pitch), math.tan(pitch)
     return np.array(
         [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
+            [1.0, sr * tp, cr * tp],
+            [0.0, cr, -sr],
+            [0.0, sr / cp, cr / cp],
         ]
     )
+
+
+def euler_kinematics(roll: float, pitch: float, yaw: float,
+                     nu: Sequence[float]) -> tuple[float, float, float, float, float, float]:
+    """``J(Theta) nu`` (Fossen eq. 2.40) on plain floats: ``(N', E', D', roll', pitch',
+    yaw')`` from the body velocity and rates ``nu = [u, v, w, p, q, r]`` (m/s, rad/s),
+    i.e. ``R(Theta) [u, v, w]`` and ``T(Theta) [p, q, r]`` with the trigonometric functions
+    evaluated once (the simulator's RK4 derivative)."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _zyx_entries(
+        cr, sr, cp, sp, math.cos(yaw), math.sin(yaw))
+    u, v, w, p, q, r = nu
+    a = sr * q + cr * r
+    return (r00 * u + r01 * v + r02 * w, r10 * u + r11 * v + r12 * w,
+            r20 * u + r21 * v + r22 * w, p + a * sp / cp, cr * q - sr * r, a / cp)
 
 
 def matrix_to_euler(R: Array) -> tuple[float, float, float]:

@@ -46,6 +46,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from onboard.core.so3 import skew
+
 
 def chain_matrices(n_c: int, p: int) -> tuple[np.ndarray, np.ndarray]:
     """Block-diagonal shift matrix ``A`` (n x n) and output matrix ``C`` (p x n)."""
@@ -184,11 +186,6 @@ class ChainHGO:
             x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
         self.x = x
         return x
-
-
-def skew(w: np.ndarray) -> np.ndarray:
-    """``S(w)`` with ``S(w) a = w x a``."""
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
 def current_hgo_gain(k1: float, k2: float, gamma: float, J_b: np.ndarray, R: np.ndarray,

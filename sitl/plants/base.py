@@ -36,8 +36,9 @@ import numpy as np
 
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import ActuatorCommand
+from onboard.core.so3 import euler_kinematics, euler_to_matrix
 from sitl.environment import Environment
-from sitl.integrate import GRAVITY, rk4_step_list, rotation_body_to_ned
+from sitl.integrate import GRAVITY, rk4_step_list
 from sitl.truth import TruthRecord
 
 __all__ = ["Command", "ManoeuvringMasses", "Plant", "PlantBase", "PropulsionWrench"]
@@ -235,13 +236,13 @@ class PlantBase:
         x = self.x
         phi, theta, psi = float(x[3]), float(x[4]), float(x[5])
         vc = env.current_ned(t, x[0:3])
-        rot = rotation_body_to_ned(phi, theta, psi)
+        rot = euler_to_matrix(phi, theta, psi)
         v_r = x[6:9]
         v_ned = rot @ v_r + vc
         wm = env.wave_motion(t, x[0:3], v_ned, psi)
         pos = x[0:3] + wm.displacement
         roll, pitch = phi + wm.roll, theta + wm.pitch
-        rot_t = rotation_body_to_ned(roll, pitch, psi) if env.waves is not None else rot
+        rot_t = euler_to_matrix(roll, pitch, psi) if env.waves is not None else rot
         v_body = rot_t.T @ (v_ned + wm.velocity)
         w_body = self.angular_rate_body()
         wr = self.propulsion(self._command)
@@ -291,7 +292,7 @@ class PlantBase:
         """
         x = self.x
         phi, theta, psi = float(x[3]), float(x[4]), float(x[5])
-        rot = rotation_body_to_ned(phi, theta, psi)
+        rot = euler_to_matrix(phi, theta, psi)
         xdot = self._derivative_now()
         v_r = x[6:9]
         omega = x[9:12]
@@ -303,7 +304,7 @@ class PlantBase:
             if env.waves is not None:
                 wm = env.wave_motion(self._t, x[0:3], v_ned, psi)
                 a_ned = a_ned + wm.acceleration
-                rot = rotation_body_to_ned(phi + wm.roll, theta + wm.pitch, psi)
+                rot = euler_to_matrix(phi + wm.roll, theta + wm.pitch, psi)
         g = GRAVITY if env is None else env.gravity
         return rot.T @ (a_ned - np.array([0.0, 0.0, g]))
 
@@ -313,7 +314,7 @@ class PlantBase:
         env = self._env
         if env is not None and env.waves is not None:
             x = self.x
-            rot = rotation_body_to_ned(float(x[3]), float(x[4]), float(x[5]))
+            rot = euler_to_matrix(float(x[3]), float(x[4]), float(x[5]))
             v_ned = rot @ x[6:9] + np.asarray(self._vc)
             wm = env.wave_motion(self._t, x[0:3], v_ned, float(x[5]))
             w[0] += wm.p
@@ -339,7 +340,7 @@ class PlantBase:
     def velocity_ned(self) -> np.ndarray:
         """Low-frequency over-ground velocity (m/s, NED)."""
         x = self.x
-        rot = rotation_body_to_ned(float(x[3]), float(x[4]), float(x[5]))
+        rot = euler_to_matrix(float(x[3]), float(x[4]), float(x[5]))
         return rot @ x[6:9] + np.asarray(self._vc)
 
     # --------------------------------------------------------- for subclasses
@@ -353,23 +354,11 @@ class PlantBase:
 
     def _kinematics(self, x: list[float]) -> list[float]:
         """``[N', E', D', phi', theta', psi']`` for the state ``x`` and the held current:
-        ``R(Theta) nu_r[0:3] + V_c`` and ``T(Theta) omega`` written out in scalars (the
-        same matrices as :func:`rotation_body_to_ned` and :func:`euler_rate_matrix`)."""
-        phi, theta, psi, u, v, w, p, q, r = x[3:12]
-        cphi, sphi = math.cos(phi), math.sin(phi)
-        cth, sth = math.cos(theta), math.sin(theta)
-        cpsi, spsi = math.cos(psi), math.sin(psi)
+        ``R(Theta) nu_r[0:3] + V_c`` and ``T(Theta) omega``
+        (:func:`onboard.core.so3.euler_kinematics`)."""
+        dn, de, dd, dphi, dtheta, dpsi = euler_kinematics(x[3], x[4], x[5], x[6:12])
         vc = self._vc
-        return [
-            cpsi * cth * u + (-spsi * cphi + cpsi * sth * sphi) * v
-            + (spsi * sphi + cpsi * cphi * sth) * w + vc[0],
-            spsi * cth * u + (cpsi * cphi + sphi * sth * spsi) * v
-            + (-cpsi * sphi + sth * spsi * cphi) * w + vc[1],
-            -sth * u + cth * sphi * v + cth * cphi * w + vc[2],
-            p + (sphi * q + cphi * r) * sth / cth,
-            cphi * q - sphi * r,
-            (sphi * q + cphi * r) / cth,
-        ]
+        return [dn + vc[0], de + vc[1], dd + vc[2], dphi, dtheta, dpsi]
 
     def _prepare(self, command: Command) -> None:
         """Precompute what depends only on the command (called once per :meth:`step`)."""

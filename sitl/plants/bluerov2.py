@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from onboard.core.so3 import ned_to_body
 from sitl.plants.base import Command, PlantBase, PropulsionWrench
 from sitl.plants.fossen import (
     SparseMatrix,
@@ -173,17 +174,7 @@ class BlueROV2(PlantBase):
         """R^T F_ext (N, body) for the held external force (zeros without one)."""
         if self._ext is None:
             return 0.0, 0.0, 0.0
-        fn, fe, fd = self._ext
-        cphi, sphi = math.cos(phi), math.sin(phi)
-        cth, sth = math.cos(theta), math.sin(theta)
-        cpsi, spsi = math.cos(psi), math.sin(psi)
-        return (
-            cpsi * cth * fn + spsi * cth * fe - sth * fd,
-            (-spsi * cphi + cpsi * sth * sphi) * fn + (cpsi * cphi + sphi * sth * spsi) * fe
-            + cth * sphi * fd,
-            (spsi * sphi + cpsi * cphi * sth) * fn + (-cpsi * sphi + sth * spsi * cphi) * fe
-            + cth * cphi * fd,
-        )
+        return ned_to_body(phi, theta, psi, self._ext)
 
     def _rhs(self, t: float, x: list[float], command: Command) -> list[float]:
         p = self.params

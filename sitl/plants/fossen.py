@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from onboard.core.so3 import skew
+
 __all__ = [
     "SparseMatrix",
     "rigid_body_mass",
@@ -50,8 +52,7 @@ def rigid_body_mass(
     the CG (``about_cg=True``, then ``I_o = I_g - m S(r_g)^2``, parallel-axis theorem) or
     about the origin.
     """
-    x, y, z = r_g
-    s = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    s = skew(r_g)
     i_o = np.asarray(inertia, dtype=float) - (m * s @ s if about_cg else 0.0)
     mrb = np.zeros((6, 6))
     mrb[0:3, 0:3] = m * np.eye(3)
