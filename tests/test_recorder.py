@@ -11,7 +11,8 @@ from drivers.recording import RawRecord, read_records
 from onboard.core.config import Config
 from onboard.core.messages import Imu
 from onboard.engine import Engine
-from onboard.service.recorder import Intake, Recorder, recording_files, recording_meta
+from onboard.service.intake import Intake
+from onboard.service.recorder import Recorder, recording_files, recording_meta
 
 
 class FakeClock:

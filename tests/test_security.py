@@ -535,7 +535,8 @@ def test_verdicts_follow_frames_split_across_chunks_and_many_frames_per_chunk(tm
 
     from drivers.recording import RecordingReader, read_records
     from onboard.core.config import Config
-    from onboard.service.recorder import Intake, Recorder, replay_recording
+    from onboard.service.intake import Intake
+    from onboard.service.recorder import Recorder, replay_recording
 
     now = signing_timestamp(time.time())
     first = frames(3)

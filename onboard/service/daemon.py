@@ -3,7 +3,7 @@
 One asyncio loop, one thread doing estimation::
 
     transports (serial/pty, UDP, TCP; reconnect with backoff)      drivers.transports
-      -> Intake.chunk: record raw bytes + receive time, parse,      onboard.service.recorder
+      -> Intake.chunk: record raw bytes + receive time, parse,      onboard.service.intake
          bounded queue (drops counted per input)
       -> every 1/rate_hz s on the monotonic clock: Intake.tick:      onboard.engine
          push queued samples (checked, rejections counted with their reason, GNSS only
@@ -48,8 +48,9 @@ from drivers.transports import Transport, TransportUrlError, open_transport, par
 from onboard.core.config import Config, ConfigError, SourceConfig, load
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.engine import Engine
+from onboard.service.intake import Intake
 from onboard.service.persistence import StateFile, plain
-from onboard.service.recorder import Intake, Recorder, config_to_dict
+from onboard.service.recorder import Recorder, config_to_dict
 from onboard.service.sdnotify import Notifier
 from onboard.service.signing import open_signing
 
@@ -350,6 +351,7 @@ class Service:
             await self.shutdown()
 
     def request_stop(self) -> None:
+        """Ask :meth:`run` to shut down (safe to call from a signal handler)."""
         self._stop.set()
 
     async def shutdown(self) -> None:
@@ -497,6 +499,8 @@ class Service:
         return msgspec.structs.replace(h, rejected=rejected, dropped=dropped)
 
     def status_line(self) -> str:
+        """The one-line systemd STATUS: tick rate, live inputs, pipelines estimating,
+        samples rejected and dropped."""
         up = sum(i.transport.stats.connected and not i.silent for i in self.inputs)
         est = ",".join(sorted(self.engine.latest)) or "none yet"
         rej = sum(self.engine.rejected.values())

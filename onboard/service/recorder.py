@@ -1,6 +1,5 @@
-"""The recorder and the intake: every raw input, recorded as the engine consumed it.
-
-Two pieces that belong together because replay must take exactly the path live did:
+"""The service's recordings: every raw input, recorded as the engine consumed it, and their
+exact replay.
 
 * :class:`Recorder` writes the service's recording (format: :mod:`drivers.recording`):
   every raw chunk of every input with its receive time, a ``tick`` record at each engine
@@ -9,25 +8,16 @@ Two pieces that belong together because replay must take exactly the path live d
   ``max_total_mb``; data reaches the disk (``fsync``, in a worker thread so the estimator
   loop never waits on the disk) at most ``flush_interval_s`` after it was received. A
   crash loses at most that interval and leaves at most one torn frame, which the reader
-  skips.
-* :class:`Intake` is the one gate from raw bytes to the engine: ``chunk()`` records a
-  chunk, parses it (:func:`drivers.protocols.parser_for`) and queues its samples in a
-  bounded queue (drops counted per source); ``tick(T)`` records the tick, pushes the
-  queued samples stamped ``t <= T`` (later ones wait for the next tick, so a pipeline
-  never sees a sample from its future) and steps the engine. Parsers with a
-  ``poll(t)`` (NMEA: an epoch held past its hold time) are polled at every tick, so
-  that too is replayed exactly. When MAVLink signing is verified (``verifier``), each
-  MAVLink chunk is recorded after it was parsed, in one write with a ``verdicts`` record
-  listing the frames the verifier rejected in it (only when it rejected any), in a
-  format-version-2 file (:mod:`drivers.recording`).
-
-:func:`replay_recording` feeds a recording through a fresh :class:`Intake` in file order,
-which reproduces the live estimates exactly: same bytes, same parsers, same ticks, same
-order of pushes, and the same frames rejected on signing grounds (the recorded verdicts,
-:class:`drivers.mavlink_signing.VerdictPlayer`; the replay needs no key). (Replaying with :func:`onboard.engine.run` and the tick times alone is
-exact only when no sample arrives after a tick that its time stamp precedes: an NMEA fix
-stamped at its first sentence but completed by a later one, or a chunk stamped just
-before a tick and processed just after it, would land one tick earlier.)
+  skips. The :class:`onboard.service.intake.Intake` writes the records.
+* :func:`replay_recording` feeds a recording through a fresh
+  :class:`~onboard.service.intake.Intake` in file order, which reproduces the live
+  estimates exactly: same bytes, same parsers, same ticks, same order of pushes, and the
+  same frames rejected on signing grounds (the recorded verdicts,
+  :class:`drivers.mavlink_signing.VerdictPlayer`; the replay needs no key). (Replaying
+  with :func:`onboard.engine.run` and the tick times alone is exact only when no sample
+  arrives after a tick that its time stamp precedes: an NMEA fix stamped at its first
+  sentence but completed by a later one, or a chunk stamped just before a tick and
+  processed just after it, would land one tick earlier.)
 """
 
 from __future__ import annotations
@@ -37,29 +27,26 @@ import json
 import logging
 import os
 import time
-from collections import Counter, deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 import msgspec
 
-from drivers.base import ReadStats, StreamParser
-from drivers.mavlink_signing import SignatureVerifier, VerdictLog, VerdictPlayer
-from drivers.protocols import UnknownProtocol, parser_for
+from drivers.base import ReadStats
+from drivers.protocols import UnknownProtocol
 from drivers.recording import (
     VERDICTS_KIND,
     VERDICTS_VERSION,
     RawRecord,
     RecordingWriter,
-    Verdicts,
-    encode_verdicts,
     read_records,
     with_verdicts,
 )
 from onboard.core.config import Config
-from onboard.core.messages import EstimateRecord, Sample
+from onboard.core.messages import EstimateRecord
 from onboard.engine import Engine
+from onboard.service.intake import Intake
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +54,6 @@ SUFFIX = ".onbrec"
 """File name suffix of recordings."""
 META_FORMAT = 1
 """Version of the JSON in ``meta`` records."""
-TICK_SOURCE = "engine"
 
 
 class Recorder:
@@ -243,157 +229,6 @@ class Recorder:
         """Flush, fsync and close; idempotent."""
         self._close_writer()
         self._pool.shutdown(wait=True)
-
-
-# --------------------------------------------------------------------------- the intake
-
-
-@dataclass
-class SourceState:
-    """Per-input counters the intake keeps for health."""
-
-    kind: str
-    parser: StreamParser
-    chunks: int = 0
-    bytes: int = 0
-    samples: int = 0
-    t_last: float | None = None
-    parser_errors: int = 0
-    verdicts: VerdictLog | VerdictPlayer | None = None
-    """The parser's verifier when signing is verified live (a log of its rejections, for
-    the recording) or when replaying (the recorded rejections)."""
-
-
-@dataclass
-class Intake:
-    """Raw chunks in, samples to the engine at ticks (see the module docstring).
-
-    ``queue_size`` bounds the samples waiting for the next tick; beyond it new samples are
-    dropped and counted in ``dropped[source]``.
-    """
-
-    engine: Engine
-    queue_size: int = 4096
-    recorder: Recorder | None = None
-    sources: dict[str, SourceState] = field(default_factory=dict)
-    dropped: Counter[str] = field(default_factory=Counter)
-    pending: deque[Sample] = field(default_factory=deque)
-    ticks: int = 0
-    on_queued: Callable[[], None] | None = None
-    """Called after a chunk queued at least one sample (the service wakes a tick that
-    waits for fresh data with it)."""
-
-    verifier: SignatureVerifier | None = None
-    """Set (before the sources are added) when MAVLink signing is required: every MAVLink
-    input then rejects unsigned, forged and replayed frames (docs/security.md), and the
-    rejections are recorded with the chunks."""
-
-    replay: bool = False
-    """A replay: MAVLink inputs reject the frames whose recorded verdicts say so
-    (:func:`replay_recording` passes them to :meth:`chunk`)."""
-
-    def add_source(self, name: str, kind: str) -> SourceState:
-        """Register an input named ``name`` speaking protocol ``kind``."""
-        st = self.sources.get(name)
-        if st is None or st.kind != kind:
-            v: VerdictLog | VerdictPlayer | None = None
-            if kind == "mavlink":
-                if self.replay:
-                    v = VerdictPlayer()
-                elif self.verifier is not None:
-                    v = VerdictLog(self.verifier)
-            st = self.sources[name] = SourceState(kind, parser_for(kind, name, verifier=v),
-                                                  verdicts=v)
-        return st
-
-    def chunk(self, name: str, kind: str, data: bytes, t_rx: float,
-              verdicts: Verdicts | None = None) -> int:
-        """Record, parse and queue one raw chunk received at ``t_rx`` (s) on input
-        ``name``; return the number of samples queued. Never raises on bad bytes.
-
-        ``verdicts``: in a replay, the chunk's recorded signature verdicts."""
-        st = self.sources.get(name)
-        if st is None or st.kind != kind:
-            st = self.add_source(name, kind)
-        rec = self.recorder
-        raw = RawRecord(t=t_rx, source=name, kind=kind, data=bytes(data)) if rec else None
-        vlog = st.verdicts if type(st.verdicts) is VerdictLog else None
-        player = st.verdicts if type(st.verdicts) is VerdictPlayer else None
-        if raw is not None and vlog is None:
-            rec.write(raw)  # before parsing: nothing a parser does can lose it
-        if player is not None:
-            player.load(verdicts)
-        st.chunks += 1
-        st.bytes += len(data)
-        st.t_last = t_rx
-        try:
-            samples = st.parser.feed(data, t_rx)
-        except Exception:  # noqa: BLE001 - a parser bug must not stop the service
-            st.parser_errors += 1
-            st.parser.stats.reject("parser_error")
-            log.exception("parser for %s failed on a %d-byte chunk", name, len(data))
-            samples = []
-        if vlog is not None:  # signing verified: the chunk and its verdicts in one write
-            v = vlog.take(data)
-            if raw is not None and v is None:
-                rec.write(raw)
-            elif raw is not None:
-                rec.write(raw, RawRecord(t=t_rx, source=name, kind=VERDICTS_KIND,
-                                         data=encode_verdicts(v)))
-        elif player is not None:
-            player.done(st.parser.stats)
-        return self._queue(name, st, samples, t_rx) if samples else 0
-
-    def _queue(self, name: str, st: SourceState, samples: list[Sample], t_rx: float) -> int:
-        queued = 0
-        pending = self.pending
-        for s in samples:
-            if s.t > t_rx + 1.0:
-                self.engine.push(s, now=t_rx)  # counted as "future" by the engine
-                continue
-            if len(pending) >= self.queue_size:
-                self.dropped[name] += 1
-                continue
-            pending.append(s)
-            queued += 1
-        st.samples += queued
-        if queued and self.on_queued is not None:
-            self.on_queued()
-        return queued
-
-    def tick(self, t: float) -> list[EstimateRecord]:
-        """Record a tick at ``t`` (s), push the queued samples with ``sample.t <= t`` and
-        step the engine; return its estimates."""
-        if self.recorder is not None:
-            self.recorder.write(RawRecord(t=t, source=TICK_SOURCE, kind="tick", data=b""))
-        for name, st in self.sources.items():
-            poll = getattr(st.parser, "poll", None)
-            if poll is not None:  # e.g. an NMEA epoch held past its hold time
-                try:
-                    self._queue(name, st, poll(t), t)
-                except Exception:  # noqa: BLE001
-                    st.parser_errors += 1
-                    st.parser.stats.reject("parser_error")
-        pending = self.pending
-        push = self.engine.push
-        if pending:
-            keep: deque[Sample] = deque()
-            for s in pending:
-                if s.t <= t:
-                    push(s, now=t)
-                else:
-                    keep.append(s)
-            self.pending = keep
-        self.ticks += 1
-        return self.engine.tick(t)
-
-    def parse_rejections(self) -> dict[str, int]:
-        """Parser rejections by ``parse:<source>:<reason>``."""
-        out: dict[str, int] = {}
-        for name, st in self.sources.items():
-            for reason, n in st.parser.stats.rejected.items():
-                out[f"parse:{name}:{reason}"] = n
-        return out
 
 
 # --------------------------------------------------------------------------- replay

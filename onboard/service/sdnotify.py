@@ -91,6 +91,7 @@ class Notifier:
         return self.send(READY=1)
 
     def status(self, text: str) -> bool:
+        """``STATUS=text``: the line ``systemctl status`` shows."""
         return self.send(STATUS=text)
 
     def watchdog(self, now: float | None = None) -> bool:
@@ -104,11 +105,13 @@ class Notifier:
         return self.send(WATCHDOG=1)
 
     def stopping(self, status: str = "") -> bool:
+        """``STOPPING=1`` (with a STATUS line when given): the service is shutting down."""
         if status:
             return self.send(STOPPING=1, STATUS=status)
         return self.send(STOPPING=1)
 
     def close(self) -> None:
+        """Close the notification socket; later messages are not sent."""
         if self._sock is not None:
             self._sock.close()
             self._sock = None

@@ -290,6 +290,7 @@ class MavlinkPublisher:
         return True
 
     def close(self) -> None:
+        """Close the link; publishing afterwards sends nothing."""
         link = self.link
         self.link = None
         self.mav = None

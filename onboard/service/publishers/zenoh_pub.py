@@ -144,6 +144,7 @@ class ZenohPublisher:
             self._put(f"est/{rec.pipeline}", enc(rec))
 
     def publish_health(self, health: HealthRecord) -> None:
+        """Put the health record on ``<base>/health``, then :meth:`check_connection`."""
         self._put("health", self._enc.encode(health))
         self.check_connection()
 
