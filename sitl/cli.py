@@ -19,9 +19,10 @@ paths and server ports are printed before the run starts. With no output at all,
 goes to ``udp:127.0.0.1:14550`` (where a ground station listens).
 
 ``--controller pid|nmpc|ampc`` flies ``bluerov2-circle`` with a controller of
-:mod:`sitl.controllers`; ``--report FILE`` writes the run summary (with the tracking
-error for reference-tracking scenarios, and the controller's own closed-loop figures under
-``controller_report`` when it has a ``report()``) as JSON.
+:mod:`sitl.controllers` fed by the ESESO (:class:`sitl.closed_loop.EsesoPolicy`);
+``--report FILE`` writes the run summary (with the tracking error for reference-tracking
+scenarios, and the controller's closed-loop figures under ``controller_report``, its
+``tracking_rmse_m`` and ``disturbance_error_n`` also at the top level) as JSON.
 """
 
 from __future__ import annotations
@@ -34,8 +35,7 @@ from typing import Any
 
 from onboard.core.errors import UsageError
 from sitl.emitters import PtySink, Sink, TcpServerSink, TlogSink, open_link
-from sitl.guidance import ControlInput, Controller
-from sitl.plants.base import Command
+from sitl.guidance import Controller
 from sitl.runner import run
 from sitl.scenarios import SCENARIOS, Scenario, get
 
@@ -49,49 +49,17 @@ def list_scenarios() -> str:
                      f"{sc.description}" for sc in SCENARIOS.values())
 
 
-class EstimateController:
-    """Adapts a :mod:`sitl.controllers` controller (``update(t, estimate, reference)``) to
-    the simulator's :class:`~sitl.guidance.Controller` hook. The estimate record is built
-    from the true state (perfect navigation), as in the paper's Gazebo runs."""
-
-    def __init__(self, inner: Any, reference: Any, rate_hz: float = 20.0) -> None:
-        self.inner = inner
-        self.reference = reference
-        self.rate_hz = rate_hz
-        self.last_output: Any = None
-
-    def __call__(self, inp: ControlInput) -> Command:
-        from onboard.core.messages import EstimateRecord
-
-        tr = inp.truth
-        rec = EstimateRecord(vehicle="sitl", pipeline="eseso", t=inp.t, values={
-            "north": tr.north, "east": tr.east, "down": tr.down, "yaw": tr.yaw,
-            "u": tr.u, "v": tr.v, "w": tr.w, "rate_r": tr.r})
-        out = self.inner.update(inp.t, rec, self.reference)
-        self.last_output = out
-        return Command(thrusters=tuple(float(c) for c in out.thrusters))
-
-
 def make_controller(name: str, sc: Scenario) -> Controller:
-    """The closed-loop controller ``name`` for scenario ``sc`` (UsageError if unavailable).
-
-    Uses ``sitl.controllers.make_policy(name, scenario)`` when the controllers package
-    provides it (a policy on the simulator's hook, e.g. with the ESESO in the loop), else
-    wraps ``sitl.controllers.make_controller(name)`` with :class:`EstimateController`.
-    """
+    """The closed-loop controller ``name`` (``pid``, ``nmpc``, ``ampc``) for scenario ``sc``:
+    :class:`sitl.closed_loop.EsesoPolicy`, the controller fed by the ESESO running on the
+    scenario's samples. UsageError for another scenario or when the controller cannot be
+    built (the MPCs need the ``mpc`` extra)."""
     if sc.name != "bluerov2-circle":
         raise UsageError(f"--controller applies to bluerov2-circle, not {sc.name}")
+    from sitl.closed_loop import EsesoPolicy
+
     try:
-        import sitl.controllers as controllers
-    except ImportError as err:
-        raise UsageError(f"controllers not available: {err}") from None
-    try:
-        if hasattr(controllers, "make_policy"):
-            return controllers.make_policy(name, sc)
-        ref = sc.reference
-        reference = controllers.CircleReference(radius=ref.radius, speed=ref.speed,
-                                                depth=ref.depth)
-        return EstimateController(controllers.make_controller(name), reference)
+        return EsesoPolicy(name, sc)
     except (ImportError, ValueError) as err:
         raise UsageError(f"controller {name!r} not available: {err}") from None
 
@@ -181,9 +149,8 @@ def main(args: argparse.Namespace) -> int:
     if args.report:
         report = summary.as_dict()
         if controller is not None and hasattr(controller, "report"):
-            # the closed-loop figures of the controller under test (sitl.closed_loop)
             report["controller_report"] = controller.report()
-            # The contract's headline figures (issue 6) at the top level.
+            # the headline figures also at the top level
             for key in ("tracking_rmse_m", "disturbance_error_n"):
                 if key in report["controller_report"]:
                     report[key] = report["controller_report"][key]

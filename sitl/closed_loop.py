@@ -80,8 +80,8 @@ class CircleScenario:
     circle is feasible everywhere (worst case ~67 N); ``--speed 1.5`` runs the paper's."""
     depth: float = 20.0
     disturbance_ned: tuple[float, float, float] = (40.0, 40.0, 10.0)
-    """The push (N, NED). The paper's [40, 40, 10] N, taken as given in the project's
-    earth frame (issue 3's scenario definition)."""
+    """The push (N): the paper's [40, 40, 10] N, applied as north, east and down
+    components."""
     bottom_depth: float = 30.0
     control_hz: float = 20.0
     sim_dt: float = 0.01
@@ -91,6 +91,7 @@ class CircleScenario:
     """The disturbance bound is checked after this time."""
 
     def reference(self) -> CircleReference:
+        """The circle to fly, as a function of time."""
         return CircleReference(radius=self.radius, speed=self.speed, depth=self.depth)
 
 
@@ -217,8 +218,9 @@ def simulate(controller: str, duration: float = 240.0, seed: int = 0,
 
 
 class EsesoPolicy:
-    """The ESESO-in-the-loop controller on the simulator's hook (:mod:`sitl.guidance`), for
-    ``sitl.runner`` / ``onboard sitl --scenario bluerov2-circle --controller NAME``.
+    """The ESESO-in-the-loop controller ``name`` (``pid``, ``nmpc``, ``ampc``) on the
+    simulator's hook (:mod:`sitl.guidance`), for ``sitl.runner`` and
+    ``onboard sitl --scenario bluerov2-circle --controller NAME``.
 
     Each call pushes the runner's samples into an onboard engine running the ESESO, ticks
     it, hands the published record to the controller (:mod:`sitl.controllers`) and returns
@@ -413,6 +415,8 @@ def figure(logs: dict[str, RunLog], path: str, sc: CircleScenario | None = None)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m sitl.closed_loop``: fly the controllers, print their figures, write the
+    JSON report and the figure (module docstring)."""
     ap = argparse.ArgumentParser(prog="python -m sitl.closed_loop", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--controller", choices=CONTROLLERS, action="append",

@@ -66,13 +66,13 @@ def test_report_has_the_contract_fields(runs, tmp_path: Path) -> None:
 def test_policy_flies_the_simulator_scenario_through_its_controller_hook() -> None:
     import dataclasses
 
-    from sitl.controllers import make_policy
+    from sitl.closed_loop import EsesoPolicy
     from sitl.runner import simulate
     from sitl.scenarios import get
 
     sc = get("bluerov2-circle")
     sc = dataclasses.replace(sc, reference=dataclasses.replace(sc.reference, speed=0.5))
-    policy = make_policy("ampc", sc)
+    policy = EsesoPolicy("ampc", sc)
     for _ in simulate(sc, 12.0, controller=policy):
         pass
     rep = policy.report()

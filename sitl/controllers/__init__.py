@@ -10,6 +10,10 @@ uses, never the pipeline's internals) and the reference, and returns a
 :class:`ControlOutput`: the generalized wrench ``[X, Y, Z, N]`` (N, N, N, N m; body FRD)
 and the normalized thruster commands that produce it.
 
+The controllers see only the record: running the ESESO that publishes it is the
+closed-loop runner's job (:mod:`sitl.closed_loop`, which imports this package, never the
+other way round).
+
 Frames: NED earth, FRD body, ZYX Euler angles, SI units.
 """
 
@@ -30,7 +34,6 @@ __all__ = [
     "Controller",
     "ReferencePoint",
     "make_controller",
-    "make_policy",
     "state_from_record",
 ]
 
@@ -132,6 +135,7 @@ class CircleReference:
 
     @property
     def omega(self) -> float:
+        """Angular rate along the circle, ``speed / radius`` (rad/s)."""
         return self.speed / self.radius
 
     def __call__(self, t: float) -> ReferencePoint:
@@ -196,12 +200,3 @@ def make_controller(name: str, params: Bluerov2Params | None = None, **kw: objec
 
         return Ampc(params, **kw)  # type: ignore[arg-type]
     raise ValueError(f"unknown controller {name!r} (pid, nmpc, ampc)")
-
-
-def make_policy(name: str, scenario: object) -> object:
-    """The ESESO-in-the-loop policy for the simulator's controller hook (used by
-    ``onboard sitl --scenario bluerov2-circle --controller NAME``): see
-    :class:`sitl.closed_loop.EsesoPolicy`."""
-    from sitl.closed_loop import EsesoPolicy
-
-    return EsesoPolicy(name, scenario)

@@ -55,6 +55,8 @@ class PidController:
 
     def update(self, t: float, estimate: EstimateRecord,
                reference: CircleReference) -> ControlOutput:
+        """The PID wrench (module docstring) for time ``t`` (s) from the published
+        estimate and the reference, and the thruster commands that produce it."""
         x = state_from_record(estimate)
         rp = reference(t)
         g = self.g
