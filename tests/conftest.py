@@ -1,4 +1,9 @@
-"""Shared fixtures. Real field logs are looked up in $ONBOARD_DATA or ../shared/data."""
+"""Shared fixtures and the ``unit`` marker.
+
+Real field logs are looked up in $ONBOARD_DATA or ../shared/data. Every test not marked
+``integration`` is marked ``unit``, so ``-m unit`` and ``-m integration`` split the suite
+(markers in pyproject.toml).
+"""
 
 from __future__ import annotations
 
@@ -26,3 +31,11 @@ def shared_data() -> Path:
     if d is None:
         pytest.skip("real field logs not found: set ONBOARD_DATA or place shared/data beside the repo")
     return d
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark every test that is not an integration test as a unit test."""
+    for item in items:
+        if item.get_closest_marker("integration") is None:
+            item.add_marker(pytest.mark.unit)

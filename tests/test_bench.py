@@ -24,6 +24,7 @@ def _env() -> dict[str, str]:
     return env
 
 
+@pytest.mark.integration
 def test_bench_json_prints_exactly_the_contract_keys():
     proc = subprocess.run([sys.executable, "-m", "onboard", "bench", "--json"], env=_env(),
                           capture_output=True, text=True, timeout=120)

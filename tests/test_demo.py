@@ -15,6 +15,7 @@ from onboard.tools.service_bench import free_tcp_port
 from sitl.truth import TruthRecord
 
 
+@pytest.mark.integration
 def test_demo_runs_end_to_end_and_prints_the_truth_comparison(tmp_path):
     listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     listener.bind(("127.0.0.1", 0))

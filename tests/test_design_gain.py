@@ -47,6 +47,7 @@ def test_command_writes_a_gain_the_pipeline_loads(tmp_path):
     assert pipe.gain is not None and pipe.gain.gamma_star == pytest.approx(data["gamma_star"])
 
 
+@pytest.mark.integration
 def test_the_service_side_never_imports_cvxpy():
     code = ("import sys; import onboard.pipelines.current, onboard.estimators.hgo, "
             "onboard.estimators.flow_observer, onboard.engine; "

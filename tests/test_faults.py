@@ -41,6 +41,8 @@ from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.tools.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
 from tests.helpers.service_config import service_config
 
+pytestmark = pytest.mark.integration
+
 REPO = Path(__file__).resolve().parent.parent
 SPEED = 10.0
 """Simulated seconds per wall second in the SITL fault tests."""

@@ -37,6 +37,7 @@ def _records():
     return [cur, aie, eseso]
 
 
+@pytest.mark.integration
 def test_heartbeat_estimates_and_health_from_component_191(listener):
     port = listener.getsockname()[1]
     pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), system_id=7,
@@ -73,6 +74,7 @@ def test_heartbeat_estimates_and_health_from_component_191(listener):
     assert "ODOMETRY" not in by  # only when configured
 
 
+@pytest.mark.integration
 def test_odometry_only_when_configured(listener):
     port = listener.getsockname()[1]
     pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}", odometry=True), 1)
@@ -83,6 +85,7 @@ def test_odometry_only_when_configured(listener):
     assert odo and (odo[0].x, odo[0].y) == (3.0, 4.0)
 
 
+@pytest.mark.integration
 def test_statustext_is_rate_limited_and_suppressions_are_reported(listener):
     port = listener.getsockname()[1]
     pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), 1)
@@ -95,6 +98,7 @@ def test_statustext_is_rate_limited_and_suppressions_are_reported(listener):
     assert "onboard: 15 msgs suppressed" in texts and texts[-1] == "later"
 
 
+@pytest.mark.integration
 def test_frames_are_signed_when_a_key_file_is_configured(listener, tmp_path):
     port = listener.getsockname()[1]
     key_file = tmp_path / "mav.key"

@@ -11,6 +11,8 @@ import pytest
 
 from sitl.runner import run_to_tlog
 
+pytestmark = pytest.mark.integration
+
 
 def onboard(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "onboard", *args], capture_output=True,

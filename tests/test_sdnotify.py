@@ -21,6 +21,7 @@ def notify_socket(tmp_path):
     s.close()
 
 
+@pytest.mark.integration
 def test_ready_status_and_stopping_are_sent_as_datagrams(notify_socket):
     path, sock = notify_socket
     n = Notifier({"NOTIFY_SOCKET": path})
@@ -34,6 +35,7 @@ def test_ready_status_and_stopping_are_sent_as_datagrams(notify_socket):
     n.close()
 
 
+@pytest.mark.integration
 def test_watchdog_pings_at_half_the_interval(notify_socket):
     path, sock = notify_socket
     t = [0.0]
@@ -48,12 +50,14 @@ def test_watchdog_pings_at_half_the_interval(notify_socket):
     assert sock.recv(4096) == b"WATCHDOG=1"
 
 
+@pytest.mark.integration
 def test_watchdog_for_another_pid_is_ignored(notify_socket):
     path, _ = notify_socket
     n = Notifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "1000000", "WATCHDOG_PID": "1"})
     assert n.watchdog_interval_s is None and not n.watchdog()
 
 
+@pytest.mark.integration
 def test_abstract_socket_names_are_supported():
     name = f"onboard-test-{os.getpid()}"
     s = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
@@ -71,11 +75,13 @@ def test_without_systemd_every_call_is_a_no_op():
     assert not n.enabled and not n.ready() and not n.watchdog() and not n.status("x")
 
 
+@pytest.mark.integration
 def test_a_vanished_socket_is_counted_not_raised(tmp_path):
     n = Notifier({"NOTIFY_SOCKET": str(tmp_path / "gone")})
     assert not n.ready() and n.errors == 1
 
 
+@pytest.mark.integration
 def test_the_service_sends_ready_then_watchdog_from_its_tick_loop(notify_socket, tmp_path):
     """READY=1 after start-up; WATCHDOG=1 keeps coming while the loop ticks."""
     from onboard.core.config import from_dict

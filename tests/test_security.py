@@ -258,6 +258,7 @@ def _signed_timestamps(sock: socket.socket) -> list[int]:
             for m in receive_mavlink(sock, KEY) if m._signed]
 
 
+@pytest.mark.integration
 def test_mavlink_out_timestamps_continue_after_a_restart_with_the_wall_clock_back(tmp_path):
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     gcs.bind(("127.0.0.1", 0))
@@ -294,6 +295,7 @@ def _service_config(tmp_path: Path, key_file: Path, port: int):
                                 "require_signing": True}}})
 
 
+@pytest.mark.integration
 def test_signed_udp_input_into_the_service_counts_every_rejection_and_survives_a_restart(tmp_path):
     """Real UDP into the running service: signed frames give samples; unsigned, wrong-key
     and replayed frames are counted ``parse:autopilot:<reason>`` in the health record;
@@ -434,6 +436,7 @@ def _signed_recording_config(tmp_path: Path, key_file: Path, port: int):
                                 "require_signing": True}}})
 
 
+@pytest.mark.integration
 def test_replay_of_a_signed_service_recording_is_exact_with_the_same_rejections(tmp_path):
     """The service live with require_signing, fed signed frames plus unsigned, forged and
     replayed ones over UDP; the replay of its recording (no key needed) gives exactly the
@@ -748,6 +751,7 @@ def _credentials() -> dict[str, str]:
     return dict(line.split(":", 1) for line in lines)
 
 
+@pytest.mark.integration
 def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receives_them(acl_router):
     from onboard.core.config import ZenohOut
     from onboard.core.messages import EstimateRecord
@@ -774,6 +778,7 @@ def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receiv
         shore.close()
 
 
+@pytest.mark.integration
 def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
     creds = _credentials()
     shore = _session(acl_router, str(ZENOH_DIR / "shore.json5"))
@@ -811,6 +816,7 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
             s.close()
 
 
+@pytest.mark.integration
 def test_onboard_shore_reads_through_the_access_controlled_router_with_its_config(acl_router, capsys):
     import argparse
 
@@ -841,6 +847,7 @@ def test_onboard_shore_reads_through_the_access_controlled_router_with_its_confi
     assert "== boat1 (alive)" in out and "speed=+1.25" in out
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("user, password", [("boat1", "wrong-password"), ("intruder", "x"),
                                             (None, None)])
 def test_a_wrong_password_or_no_credentials_cannot_open_a_session(acl_router, tmp_path, user, password):
@@ -879,6 +886,7 @@ def _test_certificates(d: Path) -> dict[str, Path]:
     return {k: d / f"{k.replace('_', '.')}" for k in ("ca_pem", "router_key", "router_pem")}
 
 
+@pytest.mark.integration
 def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_connect(tmp_path):
     """The example configs as shipped, only the certificate paths replaced: the router
     listens on tls/, the vehicle's ZenohPublisher and the shore connect with the CA."""
@@ -943,6 +951,7 @@ def _systemd_analyze() -> str:
     return exe
 
 
+@pytest.mark.integration
 def test_systemd_unit_exposure_does_not_rise_above_the_documented_level():
     exe = _systemd_analyze()
     r = subprocess.run([exe, "security", "--offline=true", str(UNIT)], capture_output=True,
@@ -959,6 +968,7 @@ def test_systemd_unit_exposure_does_not_rise_above_the_documented_level():
     assert all(f.split("=")[0] in documented for f in flagged), flagged
 
 
+@pytest.mark.integration
 def test_systemd_unit_verifies(tmp_path):
     """``systemd-analyze verify`` on the unit, with ExecStart pointed at an executable that
     exists here (the installed path /opt/onboard/... does not)."""

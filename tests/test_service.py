@@ -98,6 +98,7 @@ async def _drive(svc: Service, traffic: Traffic, seconds: float) -> None:
         k += 1
 
 
+@pytest.mark.integration
 def test_service_end_to_end_over_udp_pty_tcp_to_zenoh_and_mavlink_and_exact_replay(
         tmp_path, monkeypatch):
     _all_pipelines(monkeypatch)
@@ -213,6 +214,7 @@ def test_service_end_to_end_over_udp_pty_tcp_to_zenoh_and_mavlink_and_exact_repl
     assert n_values > 100
 
 
+@pytest.mark.integration
 def test_adaptive_state_is_saved_on_stop_and_restored_on_start_corrupt_is_ignored(tmp_path):
     cfg = service_config(sources=[{"kind": "nmea", "url": f"udp:127.0.0.1:{free_udp_port()}"}],
                   zenoh={"enabled": False}, mavlink={"enabled": False},
@@ -238,6 +240,7 @@ def test_adaptive_state_is_saved_on_stop_and_restored_on_start_corrupt_is_ignore
     assert third.stats.ticks > 0  # and it ran anyway
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("wait_s", [0.0, 0.05])
 def test_ticks_fire_on_the_grid_or_on_the_first_sample_after_it(tmp_path, wait_s):
     """``service.tick_wait_s = 0``: every tick on the grid ``k / rate_hz``, its newest
@@ -303,6 +306,7 @@ url = "udpout:127.0.0.1:{free_udp_port()}"
 """)
 
 
+@pytest.mark.integration
 def test_onboard_run_notifies_ready_and_stops_cleanly_on_sigterm(tmp_path):
     cfg_path = tmp_path / "boat.toml"
     port = free_udp_port()
@@ -347,6 +351,7 @@ def test_onboard_run_notifies_ready_and_stops_cleanly_on_sigterm(tmp_path):
     assert (tmp_path / "state" / "state" / "adaptive.json").exists()
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("text, reason", [
     ("[vehicle]\nid = 3\n", "vehicle.id"),
     ("[vehicle]\nid = \"x\"\n", "sources is empty"),
@@ -363,6 +368,7 @@ def test_onboard_run_with_a_bad_config_exits_2_with_a_one_line_reason(tmp_path, 
     assert r.returncode == 2 and reason in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.integration
 def test_an_unplugged_input_is_reported_and_picked_up_again_while_the_service_runs(tmp_path):
     link = tmp_path / "gps"
 
@@ -426,6 +432,7 @@ def test_the_bench_traffic_is_real_protocol_at_the_nominal_rates():
     assert kinds["VehicleInfo"] == 10
 
 
+@pytest.mark.integration
 def test_random_and_mutated_bytes_on_every_protocol_never_stop_the_service(tmp_path):
     """Fuzz the live path: valid frames with flipped bytes, truncations and pure noise."""
     import random
@@ -481,6 +488,7 @@ def test_random_and_mutated_bytes_on_every_protocol_never_stop_the_service(tmp_p
         k: v for k, v in rej.items() if "parser_error" in k}
 
 
+@pytest.mark.integration
 def test_a_killed_service_leaves_a_readable_recording_missing_at_most_the_flush_interval(
         tmp_path):
     """SIGKILL (no chance to flush): everything received up to ~flush_interval_s before the

@@ -14,6 +14,8 @@ import onboard.pipelines as pipelines_pkg
 from onboard.tools.demo import run_demo
 from onboard.tools.service_bench import free_tcp_port
 
+pytestmark = pytest.mark.integration
+
 REPO = Path(__file__).resolve().parent.parent
 
 CASES = [

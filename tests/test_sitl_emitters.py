@@ -9,6 +9,7 @@ import socket
 import threading
 import time
 
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from drivers.dvl_json import DvlJsonParser
@@ -17,6 +18,8 @@ from drivers.pd6 import Pd6Parser
 from onboard.core.messages import DvlVelocity, GnssFix, Heading
 from sitl.emitters import PtySink, TcpServerSink, UdpSink
 from sitl.runner import run
+
+pytestmark = pytest.mark.integration
 
 
 class _PtyReader(threading.Thread):

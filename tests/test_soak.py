@@ -35,6 +35,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.integration
+
 REPO = Path(__file__).resolve().parent.parent
 SOAK_S = float(os.environ.get("ONBOARD_SOAK_S", "600"))
 

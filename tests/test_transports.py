@@ -54,6 +54,7 @@ async def _take(tr, n, timeout=TIMEOUT):
     return out
 
 
+@pytest.mark.integration
 def test_udp_transport_yields_each_datagram_with_its_receive_time():
     port = free_udp_port()
     clock_values = iter(range(100, 200))
@@ -81,6 +82,7 @@ def test_udp_transport_yields_each_datagram_with_its_receive_time():
     assert stats.chunks == 3 and stats.bytes == 12
 
 
+@pytest.mark.integration
 def test_tcp_transport_reconnects_after_the_server_goes_away():
     port = free_tcp_port()
 
@@ -128,6 +130,7 @@ def _new_pty(link: str) -> int:
     return master
 
 
+@pytest.mark.integration
 def test_pty_transport_reads_and_reopens_a_pseudo_terminal_that_disappears(tmp_path):
     link = str(tmp_path / "gps")
     events: list[str] = []
@@ -161,6 +164,7 @@ def test_pty_transport_reads_and_reopens_a_pseudo_terminal_that_disappears(tmp_p
     assert any("lost" in e for e in events)
 
 
+@pytest.mark.integration
 def test_a_missing_serial_port_is_retried_not_fatal(tmp_path):
     events: list[str] = []
 

@@ -13,6 +13,8 @@ from onboard.core.messages import SCHEMA_VERSION, EstimateRecord, HealthRecord
 from onboard.service.publishers.zenoh_pub import ZenohPublisher, open_router, session_config
 from onboard.tools.service_bench import free_tcp_port
 
+pytestmark = pytest.mark.integration
+
 TIMEOUT = 20.0
 
 
