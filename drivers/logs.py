@@ -36,8 +36,10 @@ def sniff(path: str | Path) -> str:
         return "recording"
     if head.startswith(DATAFLASH_MAGIC):
         return "dataflash"
+    from drivers.mavlink_frame import MAGIC_V1, MAGIC_V2
+
     suffix = p.suffix.lower()
-    if suffix == ".tlog" or (len(head) > 9 and head[8] in (0xFD, 0xFE)):
+    if suffix == ".tlog" or (len(head) > 9 and head[8] in (MAGIC_V1, MAGIC_V2)):
         return "tlog"
     if suffix == ".csv":
         return "csv"

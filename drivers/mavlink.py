@@ -1,18 +1,12 @@
 """MAVLink v1/v2 frames -> typed samples: a fast, selective decoder.
 
 Only the messages the estimators need are decoded (table :data:`HANDLERS`); every other
-frame is framed by its length byte, CRC-checked when its id is in the dialect (cheap, see
-below) and skipped. Field layouts and ``CRC_EXTRA`` bytes come from pymavlink's
+frame is framed by its length byte, CRC-checked when its id is in the dialect (about
+0.6 us, :func:`drivers.mavlink_frame.x25crc`) and skipped. The frame layout is
+:mod:`drivers.mavlink_frame`'s. Field layouts and ``CRC_EXTRA`` bytes come from pymavlink's
 ``ardupilotmega`` dialect at import time, so they always match the installed pymavlink.
-
-Speed
------
-The MAVLink checksum is CRC-16/MCRF4XX ("x25": reflected polynomial 0x8408, init 0xFFFF,
-no final xor). It is computed in C as the non-reflected CRC-CCITT of
-:func:`binascii.crc_hqx` over the bit-reversed bytes (``bytes.translate``), then
-bit-reversed: about 0.6 us per frame in CPython 3.11, against ~15 us for a table-driven
-pure-Python loop. Payloads are decoded with one precompiled :class:`struct.Struct` per
-message id; v2 zero-truncated payloads are padded with zeros to the full length.
+Payloads are decoded with one precompiled :class:`struct.Struct` per message id; v2
+zero-truncated payloads are padded with zeros to the full length.
 
 Mapping (units and frames in ``docs/formats-mavlink.md``)
 ---------------------------------------------------------
@@ -30,7 +24,6 @@ two IMUs (SCALED_IMU vs SCALED_IMU2) or two barometers never mix.
 
 from __future__ import annotations
 
-import binascii
 import math
 import re
 import struct
@@ -40,6 +33,17 @@ from typing import TYPE_CHECKING, Callable, Iterable
 from pymavlink.dialects.v20 import ardupilotmega as _dialect
 
 from drivers.base import ReadStats
+from drivers.mavlink_frame import (
+    CRC_EXTRA,
+    CRC_LEN,
+    HEADER_LEN_V2,
+    IFLAG_SIGNED,
+    MAGIC_V1,
+    MAGIC_V2,
+    START_BYTES,
+    crc_matches,
+    header_at,
+)
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
     ActuatorOutputs,
@@ -61,14 +65,6 @@ from onboard.core.messages import (
 if TYPE_CHECKING:
     from drivers.mavlink_signing import SignatureVerifier
 
-MAGIC_V1 = 0xFE
-"""Start byte of a MAVLink 1 frame (6-byte header, 2-byte CRC)."""
-MAGIC_V2 = 0xFD
-"""Start byte of a MAVLink 2 frame (10-byte header, 2-byte CRC, optional 13-byte signature)."""
-MAVLINK_IFLAG_SIGNED = 0x01
-"""The only incompatibility flag defined by MAVLink 2: a 13-byte signature follows the CRC."""
-SIGNATURE_LEN = 13
-
 GRAVITY_MSS = 9.80665
 """Standard gravity (m/s^2); ArduPilot scales mg with this constant (``GRAVITY_MSS``)."""
 UINT16_MAX = 0xFFFF
@@ -88,14 +84,6 @@ GPS_FIX_TO_QUALITY: dict[int, int] = {2: 1, 3: 1, 4: 2, 5: 5, 6: 4, 7: 1, 8: 2}
 NO_GPS (0) and NO_FIX (1) have no position: the frame is skipped and counted as the
 rejection ``"no_fix"``."""
 
-# --------------------------------------------------------------------------- CRC
-
-_REV = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
-"""Bit-reversal of every byte value."""
-_REV_BYTE = [bytes((_REV[i],)) for i in range(256)]
-_REV16_LO = [_REV[i] << 8 for i in range(256)]
-
-
 def _valid_frame_inside(buf: bytes | bytearray, start: int, stop: int) -> bool | None:
     """True if a complete, CRC-valid frame of a known id starts in ``buf[start:stop]``:
     then the unknown-id "frame" spanning it is line noise, not a frame. None when that
@@ -106,44 +94,26 @@ def _valid_frame_inside(buf: bytes | bytearray, start: int, stop: int) -> bool |
     undecided = False
     for k in range(start, stop):
         b = buf[k]
-        if b == 0xFD:
-            if k + 10 > n:
-                undecided = True
-                continue
-            plen, hdr = buf[k + 1], 10
-            msgid = buf[k + 7] | (buf[k + 8] << 8) | (buf[k + 9] << 16)
-        elif b == 0xFE:
-            if k + 6 > n:
-                undecided = True
-                continue
-            plen, hdr = buf[k + 1], 6
-            msgid = buf[k + 5]
-        else:
+        if b != MAGIC_V2 and b != MAGIC_V1:
             continue
+        h = header_at(buf, k, n)
+        if h is None:
+            undecided = True
+            continue
+        hdr, plen, _, _, _, msgid, _ = h
         extra = CRC_EXTRA.get(msgid)
         if extra is None:
             continue
-        ce = k + hdr + plen
-        if ce + 2 > n:
+        if k + hdr + plen + CRC_LEN > n:
             undecided = True
             continue
-        if x25crc(buf[k + 1:ce], extra) == (buf[ce] | (buf[ce + 1] << 8)):
+        if crc_matches(buf, k, hdr, plen, extra):
             return True
     return None if undecided else False
 
 
-def x25crc(data: bytes, crc_extra: int | None = None) -> int:
-    """MAVLink checksum (CRC-16/MCRF4XX) of ``data``, then of ``crc_extra`` when given."""
-    c = binascii.crc_hqx(data.translate(_REV), 0xFFFF)
-    if crc_extra is not None:
-        c = binascii.crc_hqx(_REV_BYTE[crc_extra], c)
-    return _REV16_LO[c & 0xFF] | _REV[c >> 8]
-
-
 # --------------------------------------------------------------------------- dialect tables
 
-CRC_EXTRA: dict[int, int] = {mid: cls.crc_extra for mid, cls in _dialect.mavlink_map.items()}
-"""CRC_EXTRA byte per message id, from pymavlink's ardupilotmega dialect."""
 MSG_NAMES: dict[int, str] = {mid: cls.msgname for mid, cls in _dialect.mavlink_map.items()}
 """Message name per id."""
 
@@ -585,9 +555,6 @@ def decode_payload(spec: Spec, buf, start: int, plen: int, t: float, sysid: int,
     return spec.handler(values, t, sysid, compid, spec.msgid, v2, ctx)
 
 
-_MAGIC_RE = re.compile(rb"[\xfd\xfe]")
-
-
 class MavlinkParser:
     """Incremental MAVLink 1/2 parser for a live byte stream (serial, UDP, TCP).
 
@@ -627,7 +594,7 @@ class MavlinkParser:
         n = len(buf)
         i = 0
         specs, ctx, stats = self._specs, self._ctx, self.stats
-        find = _MAGIC_RE.search
+        find = START_BYTES.search
         verify = self.verifier.check if self.verifier is not None else None
         while i < n:
             m = find(buf, i)
@@ -642,24 +609,14 @@ class MavlinkParser:
                 stats.reject("garbage")
                 self._in_garbage = True
             i = j
-            if buf[j] == MAGIC_V2:
-                if j + 10 > n:
-                    break
-                plen = buf[j + 1]
-                inc = buf[j + 2]
-                end = j + 12 + plen + (SIGNATURE_LEN if inc & MAVLINK_IFLAG_SIGNED else 0)
-                msgid = buf[j + 7] | (buf[j + 8] << 8) | (buf[j + 9] << 16)
-                sysid, compid, hdr, v2 = buf[j + 5], buf[j + 6], 10, True
-            else:
-                if j + 6 > n:
-                    break
-                plen = buf[j + 1]
-                end = j + 8 + plen
-                msgid = buf[j + 5]
-                sysid, compid, hdr, v2, inc = buf[j + 3], buf[j + 4], 6, False, 0
+            h = header_at(buf, j, n)
+            if h is None:
+                break
+            hdr, plen, inc, sysid, compid, msgid, end = h
             if end > n:
                 break
-            if inc & ~MAVLINK_IFLAG_SIGNED:
+            v2 = hdr == HEADER_LEN_V2
+            if inc & ~IFLAG_SIGNED:
                 stats.reject("incompat")
                 self._in_garbage = True
                 i = j + 1
@@ -671,7 +628,8 @@ class MavlinkParser:
                 # start byte in line noise cannot swallow the intact frames behind it.
                 if end >= n:
                     break
-                inside = _valid_frame_inside(buf, j + 1, end) if buf[end] in (0xFD, 0xFE) else True
+                inside = (_valid_frame_inside(buf, j + 1, end) if buf[end] in (MAGIC_V1, MAGIC_V2)
+                          else True)
                 if inside is None:
                     break  # a frame inside it is still arriving: decide with its bytes
                 if inside:
@@ -689,7 +647,7 @@ class MavlinkParser:
                         stats.reject(reason)
                 continue
             ce = j + hdr + plen
-            if x25crc(buf[j + 1:ce], extra) != (buf[ce] | (buf[ce + 1] << 8)):
+            if not crc_matches(buf, j, hdr, plen, extra):
                 stats.reject("crc")
                 self._in_garbage = True
                 i = j + 1

@@ -44,6 +44,8 @@ import time
 import zlib
 from typing import TYPE_CHECKING, Callable
 
+from drivers.mavlink_frame import IFLAG_SIGNED, SIGNATURE_LEN
+
 if TYPE_CHECKING:
     from drivers.base import ReadStats
     from drivers.recording import Verdicts
@@ -54,8 +56,9 @@ TIMESTAMP_UNITS_PER_S = 100_000
 """Signing timestamp units (10 us) per second."""
 NEW_STREAM_MAX_AGE = 6_000_000
 """A new stream's first timestamp may lag the local timestamp by at most one minute."""
-SIGNATURE_LEN = 13
-"""link id (1) + timestamp (6) + signature (6)."""
+_SIGNATURE_AT = 7
+"""Offset of the 6-byte signature in the signature block, after the link id and the
+6-byte timestamp."""
 
 REASONS = frozenset(("unsigned", "signature", "sig_replay", "sig_stale", "sig_future"))
 """Every reason :meth:`SignatureVerifier.check` gives."""
@@ -105,20 +108,21 @@ class SignatureVerifier:
 
     def check(self, buf: bytes | bytearray, start: int, crc_end: int, sysid: int,
               compid: int, inc_flags: int) -> str | None:
-        """None if the CRC-valid frame ``buf[start:crc_end + 13]`` is correctly signed and
-        fresh (its stream timestamp is then advanced); else the rejection reason.
+        """None if the CRC-valid frame ``buf[start:crc_end + SIGNATURE_LEN]`` is correctly
+        signed and fresh (its stream timestamp is then advanced); else the rejection reason.
 
         ``crc_end`` is the index just past the frame's CRC; ``inc_flags`` its
         incompatibility flags (0 for MAVLink 1).
         """
-        if not inc_flags & 0x01:
+        if not inc_flags & IFLAG_SIGNED:
             return "unsigned"
         h = self._h0.copy()
-        h.update(buf[start:crc_end + 7])
-        if not hmac.compare_digest(h.digest()[:6], bytes(buf[crc_end + 7:crc_end + 13])):
+        sig = crc_end + _SIGNATURE_AT
+        h.update(buf[start:sig])
+        if not hmac.compare_digest(h.digest()[:6], bytes(buf[sig:crc_end + SIGNATURE_LEN])):
             return "signature"
         link = buf[crc_end]
-        ts = int.from_bytes(buf[crc_end + 1:crc_end + 7], "little")
+        ts = int.from_bytes(buf[crc_end + 1:sig], "little")
         key = (link, sysid, compid)
         last = self.streams.get(key)
         if last is not None:

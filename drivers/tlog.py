@@ -32,26 +32,34 @@ from typing import BinaryIO, Iterable, Iterator
 
 from drivers.base import ReadStats, UnreadableLog
 from drivers.mavlink import (
-    _MAGIC_RE,
-    _REV,
-    _REV16_LO,
-    _REV_BYTE,
-    CRC_EXTRA,
-    MAGIC_V1,
-    MAGIC_V2,
-    MAVLINK_IFLAG_SIGNED,
-    SIGNATURE_LEN,
     DecodeContext,
     Spec,
     _layout,
     select,
     type_name,
     wanted_types,
-    x25crc,
+)
+from drivers.mavlink_frame import (
+    BIT_REVERSED,
+    BIT_REVERSED_BYTE,
+    BIT_REVERSED_HIGH,
+    CRC_EXTRA,
+    CRC_LEN,
+    HEADER_LEN_V1,
+    HEADER_LEN_V2,
+    IFLAG_SIGNED,
+    MAGIC_V1,
+    MAGIC_V2,
+    SIGNATURE_LEN,
+    START_BYTES,
+    crc_matches,
+    header_at,
 )
 from onboard.core.messages import Parameter, Sample, VehicleInfo
 
 _TS = struct.Struct(">Q")
+TIMESTAMP_LEN = _TS.size
+"""Bytes of a record's receive time, before its frame."""
 _PROBE_BYTES = 1 << 16
 """How far into the file :class:`TlogReader` looks for a first valid record."""
 _RESYNC_BACK_US = 1_000_000
@@ -60,28 +68,17 @@ _RESYNC_AHEAD_US = 86_400_000_000
 
 def _frame_at(data: bytes, p: int, n: int) -> tuple[int, int, int, int, int, bool] | None:
     """Framing of the record starting at ``p``: (end, msgid, payload start, payload length,
-    incompat flags, v2), or None when the bytes there cannot be a complete record."""
-    if p < 0 or p + 9 > n or data[p] != 0:
+    incompat flags, v2), or None when the bytes there cannot be a complete record (a time
+    stamp of 2^56 us or more, no start byte, a frame running past ``n``)."""
+    if p < 0 or p + TIMESTAMP_LEN + 1 > n or data[p] != 0:
         return None
-    m = data[p + 8]
-    if m == MAGIC_V2:
-        if p + 18 > n:
-            return None
-        plen, inc = data[p + 9], data[p + 10]
-        end = p + 20 + plen + (SIGNATURE_LEN if inc & MAVLINK_IFLAG_SIGNED else 0)
-        msgid = data[p + 15] | (data[p + 16] << 8) | (data[p + 17] << 16)
-        if end > n:
-            return None
-        return end, msgid, p + 18, plen, inc, True
-    if m == MAGIC_V1:
-        if p + 14 > n:
-            return None
-        plen = data[p + 9]
-        end = p + 16 + plen
-        if end > n:
-            return None
-        return end, data[p + 13], p + 14, plen, 0, False
-    return None
+    h = header_at(data, p + TIMESTAMP_LEN, n)
+    if h is None:
+        return None
+    hdr, plen, inc, _, _, msgid, end = h
+    if end > n:
+        return None
+    return end, msgid, p + TIMESTAMP_LEN + hdr, plen, inc, hdr == HEADER_LEN_V2
 
 
 def _crc_ok(data: bytes, p: int, msgid: int, plen: int, v2: bool) -> bool | None:
@@ -89,8 +86,8 @@ def _crc_ok(data: bytes, p: int, msgid: int, plen: int, v2: bool) -> bool | None
     extra = CRC_EXTRA.get(msgid)
     if extra is None:
         return None
-    ce = p + 8 + (10 if v2 else 6) + plen
-    return x25crc(data[p + 9:ce], extra) == (data[ce] | (data[ce + 1] << 8))
+    hdr = HEADER_LEN_V2 if v2 else HEADER_LEN_V1
+    return crc_matches(data, p + TIMESTAMP_LEN, hdr, plen, extra)
 
 
 _JUMP_US = 1_000_000
@@ -105,21 +102,22 @@ def _plausible(data: bytes, p: int, n: int, lo: int, hi: int) -> int:
     if f is None:
         return -1
     end, msgid, _, plen, inc, v2 = f
-    if inc & ~MAVLINK_IFLAG_SIGNED:
+    if inc & ~IFLAG_SIGNED:
         return -1
     ts = _TS.unpack_from(data, p)[0]
     if not lo <= ts <= hi:
         return -1
     ok = _crc_ok(data, p, msgid, plen, v2)
     if ok is None:
-        ok = end == n or (end + 9 <= n and data[end] == 0 and data[end + 8] in (MAGIC_V1, MAGIC_V2))
+        ok = end == n or (end + TIMESTAMP_LEN + 1 <= n and data[end] == 0
+                          and data[end + TIMESTAMP_LEN] in (MAGIC_V1, MAGIC_V2))
     return end if ok else -1
 
 
 def _resync(data: bytes, start: int, n: int, lo: int, hi: int) -> int:
     """Start of the first believable record at or after ``start``, or -1."""
-    for m in _MAGIC_RE.finditer(data, start + 8):
-        p = m.start() - 8
+    for m in START_BYTES.finditer(data, start + TIMESTAMP_LEN):
+        p = m.start() - TIMESTAMP_LEN
         if _plausible(data, p, n, lo, hi) >= 0:
             return p
     return -1
@@ -179,8 +177,11 @@ class TlogReader:
         want = self._want
         ts_unpack = _TS.unpack_from
         crc_hqx = binascii.crc_hqx
-        rev, rev_byte, rev16_lo = _REV, _REV_BYTE, _REV16_LO
+        rev, rev_byte, rev_high = BIT_REVERSED, BIT_REVERSED_BYTE, BIT_REVERSED_HIGH
         V2, V1 = MAGIC_V2, MAGIC_V1
+        TS, SIGNED, SIG = TIMESTAMP_LEN, IFLAG_SIGNED, SIGNATURE_LEN
+        HDR2, HDR1 = HEADER_LEN_V2, HEADER_LEN_V1
+        TAIL2, TAIL1 = HEADER_LEN_V2 + CRC_LEN, HEADER_LEN_V1 + CRC_LEN
         pos = self._first
         if pos > 0:
             stats.reject("garbage")
@@ -190,33 +191,36 @@ class TlogReader:
         n_samples = 0
         try:
             while pos < n:
-                # ---- framing (inline copy of _frame_at, for speed)
+                # ---- framing: _frame_at and drivers.mavlink_frame.header_at inlined, for
+                # speed (offsets from the frame's start byte f as in mavlink_frame)
                 reason = None
                 end = -1
-                if pos + 9 <= n and data[pos] == 0:
-                    m = data[pos + 8]
+                f = pos + TS
+                if f < n and data[pos] == 0:
+                    m = data[f]
                     if m == V2:
-                        if pos + 18 <= n:
-                            plen = data[pos + 9]
-                            inc = data[pos + 10]
-                            end = pos + 20 + plen + (SIGNATURE_LEN if inc & 1 else 0)
-                            msgid = data[pos + 15] | (data[pos + 16] << 8) | (data[pos + 17] << 16)
-                            hdr, v2 = 10, True
+                        if f + HDR2 <= n:
+                            plen = data[f + 1]
+                            inc = data[f + 2]
+                            end = f + TAIL2 + plen + (SIG if inc & SIGNED else 0)
+                            msgid = data[f + 7] | (data[f + 8] << 8) | (data[f + 9] << 16)
+                            hdr, v2 = HDR2, True
                     elif m == V1:
-                        if pos + 14 <= n:
-                            plen = data[pos + 9]
-                            end = pos + 16 + plen
-                            msgid = data[pos + 13]
-                            hdr, v2, inc = 6, False, 0
+                        if f + HDR1 <= n:
+                            plen = data[f + 1]
+                            end = f + TAIL1 + plen
+                            msgid = data[f + 5]
+                            hdr, v2, inc = HDR1, False, 0
                     else:
                         reason = "garbage"
                     if reason is None and (end < 0 or end > n):
                         reason = "truncated"
                 else:
-                    reason = "garbage" if pos + 9 <= n else "truncated"
+                    reason = "garbage" if f < n else "truncated"
                 if reason is None:
-                    next_ok = end == n or (end + 9 <= n and data[end] == 0 and data[end + 8] in (V1, V2))
-                    if inc & 0xFE:
+                    next_ok = end == n or (end + TS < n and data[end] == 0
+                                           and data[end + TS] in (V1, V2))
+                    if inc & ~SIGNED:
                         reason = "incompat"
                     else:
                         extra = crc_get(msgid)
@@ -225,9 +229,11 @@ class TlogReader:
                             if not next_ok:
                                 reason = "garbage"
                         elif spec is not None or verify_all:
-                            ce = pos + 8 + hdr + plen
-                            c = crc_hqx(rev_byte[extra], crc_hqx(data[pos + 9:ce].translate(rev), 0xFFFF))
-                            if (rev16_lo[c & 0xFF] | rev[c >> 8]) != (data[ce] | (data[ce + 1] << 8)):
+                            # drivers.mavlink_frame.crc_matches inlined
+                            ce = f + hdr + plen
+                            c = crc_hqx(data[f + 1:ce].translate(rev), 0xFFFF)
+                            c = crc_hqx(rev_byte[extra], c)
+                            if (rev_high[c & 0xFF] | rev[c >> 8]) != data[ce] | (data[ce + 1] << 8):
                                 reason = "crc"
                     if reason is None:
                         records += 1
@@ -237,7 +243,7 @@ class TlogReader:
                             ts = ts_unpack(data, pos)[0]
                             if ts < last_us:
                                 stats.reject("time_backwards")
-                            elif (last_us and ts > last_us + _JUMP_US and end + 8 <= n
+                            elif (last_us and ts > last_us + _JUMP_US and end + TS <= n
                                   and ts_unpack(data, end)[0] < (ts + last_us) // 2):
                                 # The time stamp is outside the CRC: a damaged one jumps far
                                 # ahead of both its neighbours. Trusting it would drop every
@@ -245,15 +251,18 @@ class TlogReader:
                                 stats.reject("timestamp")
                             else:
                                 last_us = ts
-                                ps = pos + 8 + hdr
+                                ps = f + hdr
                                 if plen >= spec.size:
                                     values = spec.struct.unpack_from(data, ps)
                                 else:  # v2 zero-truncated payload (or v1 without extensions)
-                                    values = spec.struct.unpack(data[ps:ps + plen] + bytes(spec.size - plen))
+                                    values = spec.struct.unpack(data[ps:ps + plen]
+                                                                + bytes(spec.size - plen))
                                 if v2:
-                                    res = spec.handler(values, ts / 1e6, data[pos + 13], data[pos + 14], msgid, True, ctx)
+                                    res = spec.handler(values, ts / 1e6, data[f + 5], data[f + 6],
+                                                       msgid, True, ctx)
                                 else:
-                                    res = spec.handler(values, ts / 1e6, data[pos + 11], data[pos + 12], msgid, False, ctx)
+                                    res = spec.handler(values, ts / 1e6, data[f + 3], data[f + 4],
+                                                       msgid, False, ctx)
                                 if res is not None:
                                     if type(res) is list:
                                         for s in res:
@@ -268,7 +277,7 @@ class TlogReader:
                             continue
                         # the frame was fine but what follows is not a record
                         pos = end - 1
-                        reason = "garbage" if end + 9 <= n else "truncated"
+                        reason = "garbage" if end + TS < n else "truncated"
                     elif next_ok and reason in ("crc", "incompat"):
                         # a corrupt frame inside intact framing: skip just this record
                         records += 1

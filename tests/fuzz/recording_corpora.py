@@ -8,7 +8,8 @@ import math
 import random
 import zlib
 
-from drivers.mavlink import CRC_EXTRA, MavlinkParser, x25crc
+from drivers.mavlink import MavlinkParser
+from drivers.mavlink_frame import CRC_EXTRA, x25crc
 from drivers.mavlink_signing import (
     NEW_STREAM_MAX_AGE,
     SignatureVerifier,
