@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from onboard.core.messages import Attitude, DvlPosition, Heading
-from onboard.pipelines import current as current_mod
+from onboard.core.so3 import euler_to_matrix
 from tests.helpers.current_plants import (
     TORPEDO_TRUE,
     current_errors,
@@ -64,7 +64,7 @@ def test_newest_attitude_at_or_before_the_step_time():
     pipe.step(1.3, [])
     assert (pipe.inp.roll, pipe.inp.pitch) == (0.05, 0.4)
     # the rotation uses the same attitude
-    assert np.allclose(pipe._R(), current_mod._rot(0.05, 0.4, pipe.yaw))
+    assert np.allclose(pipe._R(), euler_to_matrix(0.05, 0.4, pipe.yaw))
 
 
 def test_dvl_attitude_is_a_fallback_only():

@@ -293,13 +293,6 @@ def test_eseso_covariance_stays_psd(seed):
     _check_over_stream("eseso", "bluerov2", seed, dvl=True, depth=True)
 
 
-def test_current_torpedo_auv_takes_a_surface_gnss_velocity():
-    cfg, p = _pipeline("current", "torpedo-auv")
-    p.step(1.0, [Attitude(t=1.0, source="a", roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0)])
-    p.step(1.05, [GnssFix(t=1.05, source="g", lat_deg=50.0, lon_deg=-4.0, sog_mps=1.5,
-                          cog_rad=0.0)])
-
-
 # --------------------------------------------------------------------------- NIS on the simulator
 
 SIM_NIS_CASES = [

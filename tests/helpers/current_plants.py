@@ -16,6 +16,7 @@ import numpy as np
 
 from onboard.core.config import from_dict
 from onboard.core.messages import ActuatorCommand, Attitude, DvlVelocity, GnssFix, Heading, Sample
+from onboard.core.so3 import euler_to_matrix
 from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
 from onboard.pipelines import current as current_mod
 
@@ -142,7 +143,7 @@ def simulate_torpedo(duration: float = 600.0,
             psi = psi + h * r
             t += h
         k += 1
-        R = current_mod._rot(x.roll, x.pitch, psi)
+        R = euler_to_matrix(x.roll, x.pitch, psi)
         samples.append(ActuatorCommand(t=t, propeller_rpm=x.n * 1000.0, rudder_rad=x.dr,
                                        stern_plane_rad=0.0))
         samples.append(Attitude(t=t, roll_rad=x.roll, pitch_rad=x.pitch, yaw_rad=_wrap(psi),
