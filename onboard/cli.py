@@ -33,6 +33,8 @@ def _add_zenoh_flags(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``onboard`` argument parser: one subcommand per row of architecture.md §4.1,
+    each with a ``handler`` default naming ``module:function`` to run."""
     parser = argparse.ArgumentParser(
         prog="onboard",
         description="Onboard estimation for small marine vehicles: thrust, current, "
@@ -101,6 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Parse ``argv`` (default ``sys.argv[1:]``), import the command's module and run it;
+    return the exit status (a :class:`UsageError` prints one line and gives 2, Ctrl-C
+    gives 130)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     module_name, func_name = args.handler.split(":")

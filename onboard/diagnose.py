@@ -39,6 +39,13 @@ class DiagnoseConfig(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
 
 
 def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = ()) -> dict:
+    """Model closure of ``log`` under configuration ``cfg``: fit, select the effects,
+    write ``diagnosis.json`` and ``report.html`` into ``out_dir``; return the diagnosis.
+
+    ``declared`` effects (default: the config's ``[pipelines.diagnose] declared``) are
+    taken as part of the model and not searched; an unknown name is a
+    :class:`UsageError`.
+    """
     opts = decode_section(cfg, "diagnose", DiagnoseConfig)
     declared = tuple(declared) or tuple(opts.declared)
     unknown = [d for d in (*declared, *opts.known) if d not in ALL]
@@ -53,6 +60,8 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = ()) -> di
 
 
 def main(args) -> int:
+    """``onboard diagnose``: run :func:`diagnose` and print the effects found and the
+    held-out error before and after."""
     if not Path(args.log).exists():
         raise UsageError(f"{args.log}: no such file or directory")
     try:

@@ -247,6 +247,8 @@ class Engine:
         return {p.name: p.get_state() for p in self.pipelines}
 
     def set_state(self, state: dict) -> None:
+        """Restore what :meth:`get_state` returned, pipeline by pipeline (a pipeline
+        missing from ``state`` keeps its fresh state)."""
         for p in self.pipelines:
             if isinstance(state.get(p.name), dict):
                 p.set_state(state[p.name])

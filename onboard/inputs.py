@@ -42,6 +42,7 @@ class InputMapper:
 
     @property
     def active(self) -> bool:
+        """Whether the configuration maps any actuator channel to a command."""
         return bool(self._roles or self.inputs.thrusters)
 
     def _value(self, m: ChannelMap, sample: Sample) -> float | None:

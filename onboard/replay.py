@@ -72,6 +72,7 @@ class EstimatesCsv:
         self.rows += 1
 
     def close(self) -> None:
+        """Close the file (rows already written are complete lines)."""
         self._f.close()
 
 
@@ -208,6 +209,8 @@ def _plot_track(out_dir: Path) -> str | None:
 
 
 def main(args) -> int:
+    """``onboard replay``: choose the configuration, replay, print a one-line summary;
+    a missing or unreadable log is a :class:`UsageError` (exit status 2)."""
     log = args.log
     if not Path(log).exists():
         raise UsageError(f"{log}: no such file or directory")

@@ -266,6 +266,7 @@ class RunSummary:
     tracking: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
+        """The summary as JSON-ready values (the ``--report`` file of ``onboard sitl``)."""
         return {"scenario": self.scenario, "seed": self.seed, "duration_s": self.duration_s,
                 "wall_s": round(self.wall_s, 3), "samples": dict(sorted(self.samples.items())),
                 "frames": self.frames, "truth_records": self.truth_records,

@@ -35,6 +35,8 @@ def calibrate(log: str, cfg, effects: tuple[str, ...], rate_hz: float = 10.0) ->
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m onboard.closure.calibrate LOG [--config FILE] --effects NAME...``:
+    print the ``[pipelines.diagnose] known`` line that fixes those effects' parameters."""
     p = argparse.ArgumentParser(prog="python -m onboard.closure.calibrate",
                                 description=__doc__.split("\n\n")[0])
     p.add_argument("log")

@@ -160,6 +160,8 @@ class Dataset:
         return len(self.t)
 
     def subset(self, mask: np.ndarray) -> "Dataset":
+        """The ticks where the boolean ``mask`` (one entry per tick) is true; per-tick
+        arrays are indexed, everything else is kept as it is."""
         kw = {}
         for name in self.__dataclass_fields__:
             v = getattr(self, name)

@@ -60,6 +60,7 @@ class Fit:
             (ALL[n], self.theta[n]) for n in self.effects]
 
     def effect(self, name: str) -> Effect:
+        """The effect of the vocabulary called ``name``."""
         return ALL[name]
 
 
@@ -314,6 +315,7 @@ def residuals(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
 
 
 def rms(x: np.ndarray) -> float:
+    """Root mean square of the finite entries of ``x``; NaN when there are none."""
     x = x[np.isfinite(x)]
     return float(math.sqrt(np.mean(x**2))) if len(x) else float("nan")
 

@@ -29,12 +29,16 @@ from onboard.closure.effects import ALL, Context
 
 @dataclass
 class Split:
+    """Data to fit on, data to score on (held out), and how they were split."""
+
     fit: Dataset
     holdout: Dataset
     how: str
 
 
 def split(ds: Dataset, block_s: float = 60.0) -> Split:
+    """Fit and held-out data: by run when there are at least three runs (every third
+    held out), else interleaved blocks of ``block_s`` seconds (every third held out)."""
     runs = [r.split("#")[0] for r in ds.run]
     names = sorted(set(runs))
     if len(names) >= 3:
@@ -52,6 +56,11 @@ def split(ds: Dataset, block_s: float = 60.0) -> Split:
 
 @dataclass
 class Candidate:
+    """One effect tried in one selection round: its relative held-out ``score`` (lower is
+    better), ``gain`` over the model before the round, largest parameter ``t_max`` in
+    standard errors, held-out ``headline`` error, whether its fit is ``physical`` and was
+    ``accepted``, and for a data transform its ``value`` and one sigma."""
+
     name: str
     score: float
     gain: float
@@ -67,6 +76,11 @@ class Candidate:
 
 @dataclass
 class Selection:
+    """The outcome of :func:`select`: the split, the metric, the declared and chosen
+    effects, the base and final fits with their held-out scores, every round's
+    candidates, an ``unexplained`` residual structure, the wave found in the residual,
+    and the values of the effects applied to the data (``transformed``)."""
+
     split: Split
     metric: str
     declared: tuple[str, ...]

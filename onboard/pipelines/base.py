@@ -50,6 +50,9 @@ class Pipeline(Protocol):
 
 
 class PipelineFactory(Protocol):
+    """The ``create(cfg)`` function every pipeline module exposes
+    (:func:`onboard.pipelines.build` calls it)."""
+
     def __call__(self, cfg: Config) -> Pipeline | None:
         """Build the pipeline for this configuration, or None if it does not apply."""
         ...

@@ -251,6 +251,7 @@ def score(history: list[EstimateRecord], truth: list[Any]) -> list[ScoreRow]:
 
 
 def format_scores(rows: list[ScoreRow]) -> str:
+    """The truth comparison as a text table: estimate, samples, RMSE, truth std, unit."""
     if not rows:
         return "no estimates matched the truth (nothing to score)"
     w = max(len(r.column) for r in rows)

@@ -102,12 +102,14 @@ class TrafficGenerator:
 
 
 def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that was free a moment ago (bound, then released)."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 
 
 def free_tcp_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago (bound, then released)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]

@@ -98,6 +98,7 @@ class ShoreView:
         self.feed(str(sample.key_expr), sample.payload.to_bytes())
 
     def vehicles(self) -> list[str]:
+        """Ids of the vehicles seen so far (estimates, health or liveliness), sorted."""
         with self.lock:
             return sorted({v for v, _ in self.estimates} | set(self.health) | self.alive)
 

@@ -46,6 +46,7 @@ class Effect:
     needs_commands: bool = False
 
     def applies(self, ds: Dataset, ctx: Context) -> bool:
+        """Whether the data can show the effect at all (a gyro, commands where needed)."""
         if self.needs_gyro and not ds.has_gyro:
             return False
         if self.needs_commands and not ds.has_commands:
@@ -80,10 +81,12 @@ class Effect:
         return 0.0
 
     def lateral_output(self, theta: np.ndarray, ds: Dataset, ctx: Context) -> np.ndarray:
+        """Additive term of the lateral channel (m/s) for parameters ``theta``."""
         cols = self.columns(ds, ctx).get("lateral")
         return np.zeros(len(ds)) if cols is None else cols @ theta
 
     def heading_output(self, theta: np.ndarray, ds: Dataset, ctx: Context) -> np.ndarray:
+        """Additive term of the heading channel (rad) for parameters ``theta``."""
         cols = self.columns(ds, ctx).get("heading")
         return np.zeros(len(ds)) if cols is None else cols @ theta
 

@@ -20,6 +20,9 @@ from onboard.closure.effects.base import Context, Effect, speed
 
 
 class CompassDeviation(Effect):
+    """The compass deviation ``a sin(psi) + b cos(psi)`` (module docstring); reported as
+    ``amplitude`` and ``phase``."""
+
     name = "compass_deviation"
     params = ("a", "b")
 

@@ -38,6 +38,8 @@ def advance_velocity(ds: Dataset, tau: float) -> Dataset:
 
 
 class GpsLatency(Effect):
+    """The GNSS latency, found by a delay search and applied to the data (module docstring)."""
+
     name = "gps_latency"
     params = ("seconds",)
     transforms_data = True
@@ -49,6 +51,7 @@ class GpsLatency(Effect):
         return bool(theta[0] > 0.0)
 
     def transform(self, ds: Dataset, tau: float) -> Dataset:
+        """The data with the GNSS position and velocity advanced by ``tau`` seconds."""
         return advance_velocity(ds, tau)
 
     def search(self, ds: Dataset, max_s: float = 2.0) -> tuple[float, float] | None:

@@ -10,6 +10,8 @@ from onboard.closure.effects.base import Effect
 
 
 class GyroBias(Effect):
+    """The gyro yaw-rate bias, a drift of the heading against the integrated gyro."""
+
     name = "gyro_bias"
     params = ("bias",)
     needs_gyro = True

@@ -26,6 +26,9 @@ def rotate_heading(ds: Dataset, bias: float) -> Dataset:
 
 
 class HeadingBias(Effect):
+    """The constant heading error, measured as the crab angle and applied to the data
+    (module docstring)."""
+
     name = "heading_bias"
     params = ("bias",)
     transforms_data = True
@@ -34,6 +37,7 @@ class HeadingBias(Effect):
         return {}
 
     def transform(self, ds: Dataset, bias: float) -> Dataset:
+        """The data with the measured heading corrected by ``bias`` (rad)."""
         return rotate_heading(ds, bias)
 
     def search(self, ds: Dataset, min_speed: float = 0.3) -> tuple[float, float] | None:

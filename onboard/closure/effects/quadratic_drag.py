@@ -8,6 +8,8 @@ from onboard.closure.effects.base import Effect
 
 
 class QuadraticDrag(Effect):
+    """The surge term ``-d U|U|`` (``d`` in 1/m)."""
+
     name = "quadratic_drag"
     params = ("d",)
     needs_commands = True

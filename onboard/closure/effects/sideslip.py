@@ -16,6 +16,8 @@ from onboard.closure.effects.base import Effect, speed
 
 
 class Sideslip(Effect):
+    """The crab ``v = k U|U|`` from a side force growing with speed (``k`` in s/m)."""
+
     name = "sideslip"
     params = ("k",)
 

@@ -8,6 +8,8 @@ from onboard.closure.effects.base import Effect
 
 
 class SurgeYawCoupling(Effect):
+    """The surge term ``-k r^2 U``: slowing down in turns (``k`` in s)."""
+
     name = "surge_yaw_coupling"
     params = ("k",)
     needs_commands = True

@@ -16,6 +16,8 @@ from onboard.closure.effects.base import Effect
 
 
 class ThrustNonlinearity(Effect):
+    """The surge input terms ``b2 c|c| + b_rev min(c, 0)`` (module docstring)."""
+
     name = "thrust_nonlinearity"
     params = ("quadratic_gain", "reverse_gain")
     needs_commands = True

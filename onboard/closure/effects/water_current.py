@@ -16,6 +16,8 @@ from onboard.closure.effects.base import Context, Effect
 
 
 class WaterCurrent(Effect):
+    """A uniform current ``(north, east)`` (m/s) in the lateral and along-track channels."""
+
     name = "water_current"
     params = ("north", "east")
 

@@ -34,10 +34,14 @@ def wave_phase(ds, period_s: float, direction_rad: float) -> np.ndarray:
 
 
 class WaveOscillation(Effect):
+    """The orbital velocity of a regular sea at the encounter phase (module docstring);
+    the period and direction come from the residual's spectrum."""
+
     name = "wave_oscillation"
     params = ("n_sin", "n_cos", "e_sin", "e_cos")
 
     def applies(self, ds, ctx: Context):
+        """Only when the residual's spectrum showed a wave period (``ctx.wave_period_s``)."""
         return ctx.wave_period_s is not None
 
     def _basis(self, ds, ctx):

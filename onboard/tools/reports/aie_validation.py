@@ -211,6 +211,8 @@ def sitl_metrics(run: SitlRun, t_min: float = 30.0) -> dict[str, dict[str, float
 
 @dataclass
 class BlueBoatRun:
+    """One run of the NTNU BlueBoat data set, as arrays over its samples."""
+
     name: str
     t: np.ndarray          # s from the run start
     lat: np.ndarray
@@ -342,6 +344,7 @@ def blueboat_metrics(run: BlueBoatRun, res: dict[str, np.ndarray], surge: AxisMo
 
 
 def blueboat_runs(data_dir: Path) -> list[BlueBoatRun]:
+    """Every ``fixed_*.csv`` run under ``data_dir/blueboat_sysid_ntnu``, in name order."""
     return [read_blueboat(p) for p in sorted((data_dir / "blueboat_sysid_ntnu")
                                              .glob("fixed_*.csv"))]
 
@@ -359,6 +362,8 @@ def _fmt_table(rows: Iterable[Sequence[Any]], header: Sequence[str]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the SITL and BlueBoat validations; print docs/aie.md's tables and, unless
+    ``--no-figures``, draw its figure."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="shorter SITL runs, one seed")
     ap.add_argument("--no-figures", action="store_true")
