@@ -20,13 +20,14 @@ the attitude on a straight line; it is the surge model run open loop, as in the 
 (Randeni et al. 2017). The current is then ``V_c = R (v_g - nu_r)`` (Fan, §III.A).
 
 The covariance of ``z`` is propagated for this gain (Joseph form, heading noise
-``psi_std``), so the reported one-sigma belongs to this observer.
+``psi_std``), so the reported one-sigma belongs to this observer. The current's one-sigma
+adds the over-ground velocity's measurement noise.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -58,11 +59,35 @@ def ackermann_observer_gain(A: np.ndarray, C: np.ndarray, poles: Sequence[float]
 
 
 class FlowObserver:
-    """Fan et al.'s observer; attributes ``z`` (``[psi, r, v_r]``), ``u_r``, ``Pz``, ``L``,
-    ``e`` (heading innovation), ``ready``."""
+    """Fan et al.'s observer of the flow-relative velocity, and the current from it.
+
+    Attributes (filterpy style):
+        z: state ``[psi (rad), r (rad/s), v_r (m/s)]``.
+        u_r: surge speed through water (m/s), the surge model run open loop.
+        w_r: heave speed through water (m/s), taken from the caller.
+        Pz: covariance of ``z`` under the gain ``L``.
+        var_u: variance of ``u_r`` (m^2/s^2).
+        L: the observer gain (pole placement).
+        e: last heading innovation (rad).
+        S: its variance ``Pz[0, 0] + psi_std^2`` before the correction (rad^2).
+        nis: its normalized innovation squared ``e^2 / S``.
+        ready: False until the first step (and after a divergence).
+        v_g: newest velocity over ground in body axes (m/s; None before the first).
+        v_g_kind: its measurement kind (``earth``, ``bottom`` or ``water``).
+        v_g_std: its one-sigma per component (m/s).
+        unobservable: steps whose pole placement failed (the previous gain was kept).
+        diverged: divergences (each restarts the observer from the caller's velocity).
+    """
 
     def __init__(self, model: RegressionModel, poles: Sequence[float] | None = None,
                  psi_std: float = 0.005, accel_std: float = 0.02) -> None:
+        """Args:
+            model: the regression model (it needs a yaw channel).
+            poles: fixed observer poles (1/s, negative); None: placed from the open-loop
+                eigenvalues times :data:`POLE_FACTORS` at each step.
+            psi_std: heading measurement one-sigma (rad).
+            accel_std: model acceleration error (m/s^2) of the yaw rate and sway channels.
+        """
         if "yaw" not in model.channels:
             raise ValueError("the flow observer needs a model with a yaw channel")
         self.model = model
@@ -76,7 +101,12 @@ class FlowObserver:
         self.var_u = 0.25
         self.L = np.zeros(3)
         self.e = 0.0
+        self.S = psi_std * psi_std
+        self.nis = 0.0
         self.ready = False
+        self.v_g: np.ndarray | None = None
+        self.v_g_kind = ""
+        self.v_g_std = 0.0
         self.unobservable = 0
         self.diverged = 0
         self.max_gain = 50.0
@@ -133,6 +163,8 @@ class FlowObserver:
         n_sub = max(1, math.ceil(dt / 0.05))
         h = dt / n_sub
         self.e = wrap_pi(psi_meas - self.z[0])
+        self.S = float(self.Pz[0, 0]) + self.psi_std * self.psi_std
+        self.nis = self.e * self.e / self.S if self.S > 0.0 else 0.0
         for _ in range(n_sub):
             e = wrap_pi(psi_meas - self.z[0])
             self.z = self.z + h * (self._f(self.z, self.u_r, x, thetas) + self.L * e)
@@ -169,3 +201,34 @@ class FlowObserver:
         if nd == 3:
             C[2, 2] = 0.01 ** 2
         return C
+
+    def observe_velocity(self, kind: str, z: np.ndarray, std: float, R: np.ndarray,
+                         v_g_estimate: np.ndarray | None = None) -> None:
+        """Keep the newest velocity measurement ``z`` (m/s, one-sigma ``std``) in body axes
+        for :meth:`current`; ``R`` the body-to-earth rotation. An earth-axes measurement
+        without the vertical (GNSS at the surface) takes its vertical from ``v_g_estimate``
+        (m/s, earth axes: the joint filter's velocity over ground)."""
+        if kind == "earth":
+            nd = self.model.nd
+            zz = np.zeros(nd)
+            zz[: len(z)] = z
+            if len(z) < nd and v_g_estimate is not None:
+                zz[2:] = v_g_estimate[2:]
+            self.v_g = R.T @ zz
+        else:
+            self.v_g = z.copy()
+        self.v_g_kind = kind
+        self.v_g_std = std
+
+    def current(self, R: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
+        """(current, its one-sigma, ``nu_r``), Fan et al.: ``V_c = R (v_g - nu_r)`` (m/s,
+        earth) from the newest velocity over ground; the current is None after a water-track
+        measurement (through water: no current in it). ``R`` the body-to-earth rotation.
+        Raises ValueError before the first :meth:`observe_velocity`."""
+        nd = self.model.nd
+        if self.v_g is None:
+            raise ValueError("no velocity over ground observed yet")
+        nu = self.nu_r(nd)
+        c = R @ (self.v_g - nu) if self.v_g_kind != "water" else None
+        std = np.sqrt(np.maximum(np.diag(R @ self.nu_cov(nd) @ R.T), 0.0) + self.v_g_std ** 2)
+        return c, std, nu

@@ -1,0 +1,366 @@
+"""Joint Kalman filter of through-water velocity, water current and model coefficients
+(algorithms.md §3).
+
+Kim, Fan & Bose, IEEE Access 6 (2018) compute ``V_c = v_OG - R nu_r`` (their eq. 1) with
+``nu_r`` from a model-based observer. Here the current is a state of its own, estimated
+jointly with the through-water velocity and the coefficients of the vehicle model::
+
+    x = [nu_r (body, nd), V_c (earth, nd), theta]     nd = 3 submerged, 2 surface vehicles
+    nu_r'  = f(nu_r, omega, attitude, u; theta)       regression model, vehicle_models.py
+    V_c'   = w_c                                      slowly varying (random walk)
+    theta' = 0                                        forgetting on its covariance (rls.py)
+
+Velocity measurements (each with its own noise), ``R`` the body-to-earth rotation:
+
+* velocity over ground, earth axes (GNSS SOG/COG, an INS): ``z = R nu_r + V_c`` (Kim eq. 1);
+* DVL bottom track, body axes: ``z = nu_r + R^T V_c``;
+* DVL water track, body axes: ``z = nu_r``.
+
+A straight line at constant thrust cannot separate a current along the track from a thrust
+error; a turn can, because the current is fixed in the earth frame while the model acts in
+the body frame (notably: the sway equation says a hull does not crab through water in steady
+flight). The covariance says so: the current's one-sigma stays large until the vehicle has
+turned. For a known regressor the coefficient part *is* RLS with forgetting; here the
+regressor depends on ``nu_r = R^T (v_g - V_c)`` and the joint filter keeps the correlation
+between ``theta`` and ``V_c`` (:mod:`.model_identification`).
+
+Innovation-based calibration: a consistent filter has white innovations, so the mean of
+``N`` of them has covariance ``~ mean(S) / N``. Model and current errors are slow and survive
+the averaging, white sensor noise does not: a running mean of the block-mean NIS inflates the
+process noise (``q_scale``, never below 1).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+
+from onboard.estimators.model_identification import ModelIdentification
+from onboard.estimators.vehicle_models import ModelInputs
+
+MeasurementKind = Literal["earth", "bottom", "water"]
+"""``earth``: velocity over ground in earth axes; ``bottom``: DVL bottom track (over ground,
+body axes); ``water``: DVL water track (through water, body axes)."""
+
+UpdateOutcome = Literal["accepted", "gated", "reset"]
+"""What :meth:`CurrentKalmanFilter.update` did with a measurement."""
+
+
+def inv_small(S: np.ndarray) -> np.ndarray | None:
+    """Inverse of a 2x2 or 3x3 matrix (an innovation covariance) by the adjugate, or None
+    if it is singular; larger sizes by numpy. ``np.linalg.inv`` costs several µs of call
+    overhead at these sizes."""
+    m = len(S)
+    if m == 2:
+        (a, b), (c, d) = S.tolist()
+        det = a * d - b * c
+        if det == 0.0:
+            return None
+        return np.array([[d / det, -b / det], [-c / det, a / det]])
+    if m == 3:
+        (a, b, c), (d, e, f), (g, h, i) = S.tolist()
+        A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
+        det = a * A + b * B + c * C
+        if det == 0.0:
+            return None
+        return np.array([[A / det, (c * h - b * i) / det, (b * f - c * e) / det],
+                         [B / det, (a * i - c * g) / det, (c * d - a * f) / det],
+                         [C / det, (b * g - a * h) / det, (a * e - b * d) / det]])
+    try:
+        return np.linalg.inv(S)
+    except np.linalg.LinAlgError:
+        return None
+
+
+class CurrentKalmanFilter:
+    """The joint extended Kalman filter of the module docstring.
+
+    Attributes (filterpy style, read them; the owner may assign ``x`` and ``P``):
+        x: state ``[nu_r (m/s, body), V_c (m/s, earth), theta]``.
+        P: its covariance.
+        y: last accepted velocity innovation (m/s, the measurement's axes).
+        S: its covariance (m^2/s^2).
+        nis: its normalized innovation squared ``y^T S^-1 y``.
+        nis_avg: running mean of the block-mean NIS per dimension (calibration).
+        q_scale: process-noise scale from the calibration (1 to 100).
+        started: False until the first velocity measurement (and after a reset).
+        identification: the :class:`.ModelIdentification` of the coefficients.
+        counters: event counts (``updates``, ``rejected_gate``, ``diverged``), shared with
+            the owner's health.
+    """
+
+    def __init__(self, identification: ModelIdentification, *, init_current_std: float,
+                 current_walk: float, accel_std: float, model_error_time_s: float,
+                 turn_accel_gain: float, prior_accel_std: float, gate_nis: float,
+                 calibrate: bool, calibrate_block: int,
+                 counters: dict[str, float] | None = None) -> None:
+        """Args:
+            identification: prior and schedule of the coefficients (and the model).
+            init_current_std: prior one-sigma of the current (m/s).
+            current_walk: random walk of the current (m/s per sqrt(s)).
+            accel_std: model acceleration error per DOF (m/s^2 over ``model_error_time_s``).
+            model_error_time_s: correlation time of the model error (s).
+            turn_accel_gain: extra model acceleration error in turns (m/s^2 per m/s rad/s
+                of ``u_r r``).
+            prior_accel_std: model acceleration error of a DOF with only the generic prior
+                (m/s^2).
+            gate_nis: innovations with a larger NIS are rejected (after 50 updates).
+            calibrate: inflate the process noise when the block-mean NIS says so.
+            calibrate_block: innovations per calibration block.
+            counters: event counts to add to (a new dict by default).
+        """
+        self.identification = ident = identification
+        self.model = ident.model
+        self.nd = nd = ident.model.nd
+        self.init_current_std = init_current_std
+        self.current_walk = current_walk
+        self.accel_std = accel_std
+        self.model_error_time_s = model_error_time_s
+        self.turn_accel_gain = turn_accel_gain
+        self.prior_accel_std = prior_accel_std
+        self.gate_nis = gate_nis
+        self.calibrate = calibrate
+        self.calibrate_block = calibrate_block
+        self.counters: dict[str, float] = counters if counters is not None else {
+            "rejected_gate": 0, "updates": 0}
+        nt = ident.n_theta
+        self.x = np.zeros(2 * nd + nt)
+        if nt:
+            self.x[2 * nd:] = np.concatenate(ident.thetas[:nd])
+        self.P = np.diag([1.0] * nd + [init_current_std ** 2] * nd + ident.theta_var0)
+        self.y = np.zeros(nd)
+        self.S = np.eye(nd)
+        self.nis = 0.0
+        self.q_scale = 1.0
+        self.nis_avg = 1.0
+        self.started = False
+        self._blk_y = np.zeros(nd)
+        self._blk_S = np.zeros((nd, nd))
+        self._blk_n = 0
+        self._eye_n = np.eye(2 * nd + nt)
+        # measurement matrices without the rotation, per (kind, dimension)
+        self._H0: dict[tuple[str, int], np.ndarray] = {}
+        for kind in ("earth", "bottom", "water"):
+            for m in {2, nd}:
+                H = np.zeros((m, 2 * nd + nt))
+                H[:, :nd] = 0.0 if kind == "earth" else np.eye(nd)[:m]
+                H[:, nd:2 * nd] = np.eye(nd)[:m] if kind == "earth" else 0.0
+                self._H0[(kind, m)] = H
+
+    # ------------------------------------------------------------------ state
+    def start(self, kind: MeasurementKind, z: np.ndarray, R: np.ndarray) -> None:
+        """Initialize ``nu_r`` from the first velocity ``z`` (m/s) assuming no current (the
+        covariance says so); ``R`` the body-to-earth rotation."""
+        nd = self.nd
+        zz = np.zeros(nd)
+        zz[: len(z)] = z
+        self.x[:nd] = R.T @ zz if kind == "earth" else zz
+        self.started = True
+
+    def reset(self, reason: str) -> None:
+        """Back to the prior, counted as ``reason``; the identified coefficients are kept
+        if they and their covariance are finite."""
+        self.counters[reason] = self.counters.get(reason, 0) + 1
+        nd, o = self.nd, 2 * self.nd
+        nt = self.identification.n_theta
+        self.x[:o] = 0.0
+        keep = np.all(np.isfinite(self.x[o:])) and np.all(np.isfinite(self.P[o:, o:]))
+        P = np.diag([1.0] * nd + [self.init_current_std ** 2] * nd + [0.0] * nt)
+        if nt:
+            if keep:
+                P[o:, o:] = self.P[o:, o:]
+            else:
+                self.x[o:] = np.concatenate(self.model.default_thetas()[:nd])
+                P[o:, o:] = np.diag(self.identification.theta_var_generic)
+        self.P = P
+        self._unpack_coefficients()
+        self.started = False
+
+    def _unpack_coefficients(self) -> None:
+        """Point the identification's coefficients of the velocity DOFs at the state."""
+        ident = self.identification
+        if not ident.n_theta:
+            return
+        o = 2 * self.nd
+        for i, k in enumerate(ident.sizes):
+            ident.thetas[i] = self.x[o:o + k]
+            o += k
+
+    def restore_coefficients(self, thetas: list[np.ndarray], cov: object) -> None:
+        """Put the velocity DOFs' coefficients ``thetas`` into the state and, if ``cov`` is
+        a finite matrix of the right shape, their covariance (uncorrelated with the rest);
+        raises ValueError or TypeError if ``cov`` is not a matrix of numbers."""
+        o = 2 * self.nd
+        nt = self.identification.n_theta
+        self.x[o:] = np.concatenate(thetas)
+        cov = np.asarray(cov, float)
+        if cov.shape == (nt, nt) and np.all(np.isfinite(cov)):
+            self.P[o:, :] = 0.0
+            self.P[:, o:] = 0.0
+            self.P[o:, o:] = cov
+            self.identification.lift_masks(self.P.diagonal()[o:])
+
+    def restore_current(self, current: object, std: object) -> None:
+        """Restart the current (m/s) from a saved value with its saved one-sigma ``std``
+        (m/s) floored at 0.2 (it may have changed meanwhile); ignored unless finite and of
+        the state's dimension. Raises ValueError or TypeError on non-numbers."""
+        nd, o = self.nd, 2 * self.nd
+        c = np.asarray(current, float)
+        if c.shape == (nd,) and np.all(np.isfinite(c)):
+            self.x[nd:o] = c
+            sd = np.asarray(std, float)
+            self.P[nd:o, :] = 0.0
+            self.P[:, nd:o] = 0.0
+            self.P[nd:o, nd:o] = np.diag(np.maximum(sd, 0.2) ** 2)
+
+    def current_estimate(self) -> tuple[list[float], list[float], list[float]]:
+        """(current (m/s, earth), its one-sigma (m/s), ``nu_r`` (m/s, body)) as lists."""
+        nd = self.nd
+        return (self.x[nd:2 * nd].tolist(), np.sqrt(self.P.diagonal()[nd:2 * nd]).tolist(),
+                self.x[:nd].tolist())
+
+    def velocity_over_ground(self, R: np.ndarray) -> np.ndarray:
+        """The filter's velocity over ground ``R nu_r + V_c`` (m/s, earth)."""
+        nd = self.nd
+        return R @ self.x[:nd] + self.x[nd:2 * nd]
+
+    # ------------------------------------------------------------------ filter
+    def predict(self, dt: float, inputs: ModelInputs) -> None:
+        """``x <- x + dt f(x)``; ``P <- D (F P F^T + Q) D`` with the coefficient forgetting
+        ``D = diag(1 (nu_r, V_c), 1/sqrt(lam) (theta))`` (rls.py rule).
+
+        ``Q`` has no coefficient part, so this is ``(D F) P (D F)^T + Q``: the forgetting
+        rides on the transition. The regressors, ``f`` and its Jacobian are plain floats
+        (:meth:`.RegressionModel.linearize`); numpy does only the covariance product.
+        """
+        ident = self.identification
+        nd, nt = self.nd, ident.n_theta
+        n = 2 * nd + nt
+        o = 2 * nd
+        nu = self.x[:nd].tolist()
+        phis, f, J = self.model.linearize(nu, inputs,
+                                          [t.tolist() for t in ident.thetas[:nd]])
+        # F = I + dt [[J, 0, Phi], 0, 0]: only the first nd rows differ from I
+        rows = []
+        col = o
+        for i, k in enumerate(ident.sizes):
+            row = [0.0] * n
+            if ident.masked[i]:  # generic prior: no cross-coupling
+                row[i] = dt * J[i][i]
+            else:
+                row[:nd] = [dt * a for a in J[i]]
+            row[i] += 1.0
+            if nt and (ident.identifying or ident.prior_dof[i]):
+                # coefficient uncertainty flows into nu_r while identifying, and always for
+                # a DOF whose model is only the generic prior (mode (b)): an assumed sway
+                # damping must not pin the sideslip in a turn (measured without this:
+                # 0.28 m/s error at 4 sigma after the first circle, effect-current)
+                row[col:col + k] = [dt * a for a in phis[i]]
+            col += k
+            rows.append(row)
+        F = self._eye_n.copy()
+        F[:nd] = rows
+        if nt and ident.identifying:
+            # variable-rate forgetting on the coefficient block, bounded by its prior trace
+            # (F leaves that block of P as it is): the block by 1/lam, its cross-covariances
+            # by 1/sqrt(lam)
+            lam = ident.forgetting_factor(sum(self.P.diagonal()[o:].tolist()), dt)
+            if lam < 1.0:
+                F.ravel()[o * (n + 1)::n + 1] = 1.0 / math.sqrt(lam)
+        nu = [a + dt * b for a, b in zip(nu, f)]
+        self.x[:nd] = nu
+        # model error grows in manoeuvres (couplings the regression gets only roughly): a
+        # turn-rate term, so that the one-sigma widens at heading changes (the paper's burrs)
+        turn = self.turn_accel_gain * abs(inputs.r * nu[0])
+        q_nu = (self.accel_std ** 2 + turn * turn) * self.model_error_time_s * self.q_scale
+        q = [q_nu * dt] * nd
+        for i in range(nd):
+            if ident.masked[i]:  # still the generic prior
+                q[i] = max(q[i], self.prior_accel_std ** 2 * self.model_error_time_s * dt)
+        q += [self.current_walk ** 2 * dt * self.q_scale] * nd
+        P = F @ self.P @ F.T
+        P.ravel()[:o * (n + 1):n + 1] += q  # a view: the product is C-contiguous
+        self.P = P
+
+    def update(self, kind: MeasurementKind, z: np.ndarray, std: float,
+               R: np.ndarray) -> UpdateOutcome:
+        """Kalman update with one velocity measurement ``z`` (m/s, one-sigma ``std`` per
+        component; the module docstring's table), ``R`` the body-to-earth rotation.
+
+        A NIS above ``gate_nis`` rejects the measurement (after 50 updates, ``gated``); the
+        covariance is in Joseph form for the gain actually used (the coefficient rows of
+        the gain are zero while not identifying); a singular innovation covariance or a
+        non-finite or runaway state resets the filter (``reset``).
+        """
+        nd = self.nd
+        m = len(z)
+        H = self._H0[(kind, m)].copy()
+        if kind == "earth":
+            H[:, :nd] = R[:m]
+        elif kind == "bottom":
+            H[:, nd:2 * nd] = R.T[:m]
+        var = std * std
+        y = z - H @ self.x
+        PHt = self.P @ H.T
+        S = H @ PHt
+        S.ravel()[::m + 1] += var
+        Sinv = inv_small(S)
+        if Sinv is None:
+            self.reset("diverged")
+            return "reset"
+        nis = float(y @ Sinv @ y)
+        if nis > self.gate_nis and self.started and self.counters["updates"] > 50:
+            self.counters["rejected_gate"] += 1
+            return "gated"
+        K = PHt @ Sinv
+        if self.identification.n_theta and not self.identification.identifying:
+            K[2 * nd:] = 0.0
+        x_new = self.x + K @ y
+        IKH = self._eye_n - K @ H
+        P_new = IKH @ self.P @ IKH.T + (K * var) @ K.T
+        # a NaN or inf anywhere makes the sums non-finite (a sum overflowing from finite
+        # entries would need |P| ~ 1e308: a divergence too)
+        if not (math.isfinite(float(x_new.sum()) + float(P_new.sum()))
+                and max(map(abs, x_new[:2 * nd].tolist())) < 50.0):
+            self.reset("diverged")
+            return "reset"
+        self.x, self.P = x_new, P_new
+        self._unpack_coefficients()
+        self.y, self.S, self.nis = y, S, nis
+        self.counters["updates"] += 1
+        if self.calibrate and self.started and m == nd:
+            self._calibrate(y, S)
+        return "accepted"
+
+    def _calibrate(self, y: np.ndarray, S: np.ndarray) -> None:
+        """Fold one full-dimension innovation into the calibration block; at the end of a
+        block, move ``nis_avg`` towards the block-mean NIS and rescale ``q_scale``.
+
+        The per-sample NIS is blind to slow model and current errors (measured: NIS 0.95
+        while the current's 2-sigma coverage was 0.5, Gavia); the block mean is not."""
+        m = len(y)
+        self._blk_y += y
+        self._blk_S += S
+        self._blk_n += 1
+        if self._blk_n >= self.calibrate_block:
+            nb = self._blk_n
+            yb = self._blk_y / nb
+            Sb = self._blk_S / (nb * nb)
+            nis_b = float(yb @ np.linalg.solve(Sb, yb)) / m
+            self.nis_avg += 0.1 * (min(nis_b, 10.0) - self.nis_avg)
+            self.q_scale = float(np.clip(
+                self.q_scale * math.exp(0.1 * (self.nis_avg - 1.0)), 1.0, 100.0))
+            self._blk_y[:] = 0.0
+            self._blk_S[:] = 0.0
+            self._blk_n = 0
+
+    def current_var_horizontal(self) -> tuple[float, float]:
+        """Variances of the current's north and east components (m^2/s^2)."""
+        nd = self.nd
+        return self.P[nd, nd], self.P[nd + 1, nd + 1]
+
+    def theta_std_max(self) -> float:
+        """Largest one-sigma among the coefficients in the state."""
+        return float(np.sqrt(np.max(np.diag(self.P)[2 * self.nd:])))
