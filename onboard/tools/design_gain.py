@@ -33,9 +33,8 @@ import numpy as np
 from onboard.core.config import CONFIG_DIR, Config, decode_section, load, resolve
 from onboard.core.errors import UsageError
 from onboard.estimators.hgo import chain_matrices, gamma_star
-from onboard.estimators.vehicle_models import ModelInputs, RegressionModel, kind_for_class
-
-GAIN_DIR = CONFIG_DIR / "gains"
+from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
+from onboard.pipelines.current import GAIN_DIR, CurrentConfig, model_kind
 
 
 def solve_lmi(n_c: int = 2, p: int = 1, y_max: float = 10.0, eps: float = 1e-6,
@@ -90,11 +89,8 @@ def solve_lmi(n_c: int = 2, p: int = 1, y_max: float = 10.0, eps: float = 1e-6,
 def model_lipschitz(cfg: Config, speeds: tuple[float, ...] = (0.3, 1.0, 2.0)) -> float:
     """``max ||d nu_r'/d nu_r||_2`` of the configured (or default) model over ``speeds``
     (m/s, surge) with small sway/heave and the nominal rates of a turn (0.1 rad/s)."""
-    from onboard.pipelines.current import CurrentConfig
     ccfg = decode_section(cfg, "current", CurrentConfig)
-    has_twin = cfg.inputs.left is not None and cfg.inputs.right is not None
-    model = RegressionModel(ccfg.model_kind or kind_for_class(cfg.vehicle.vehicle_class,
-                                                             has_twin))
+    model = RegressionModel(model_kind(cfg, ccfg))
     th = model.thetas_from_mapping(ccfg.model)
     x = ModelInputs()
     x.r = 0.1
@@ -109,11 +105,8 @@ def model_lipschitz(cfg: Config, speeds: tuple[float, ...] = (0.3, 1.0, 2.0)) ->
 
 def design(cfg: Config, margin: float = 2.0) -> dict[str, Any]:
     """The gain file's content for ``cfg`` (a JSON-serializable dict)."""
-    from onboard.pipelines.current import CurrentConfig
     ccfg = decode_section(cfg, "current", CurrentConfig)
-    has_twin = cfg.inputs.left is not None and cfg.inputs.right is not None
-    nd = RegressionModel(ccfg.model_kind or kind_for_class(cfg.vehicle.vehicle_class,
-                                                          has_twin)).nd
+    nd = RegressionModel(model_kind(cfg, ccfg)).nd
     sol = solve_lmi(2, nd)
     lf = model_lipschitz(cfg)
     gs = gamma_star(sol["P"], sol["lambda"], lf)
@@ -175,4 +168,4 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["solve_lmi", "design", "model_lipschitz", "main"]
+__all__ = ["design", "main", "model_lipschitz", "solve_lmi"]

@@ -19,7 +19,7 @@ import argparse
 import dataclasses
 import math
 import time
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -172,7 +172,7 @@ def body_axis_std(r: dict[str, Any], after: float) -> tuple[float, float, float]
     return tuple(float(np.std(e[:, i])) for i in range(3))  # type: ignore[return-value]
 
 
-@lru_cache(maxsize=None)
+@cache
 def _calm(scenario: str, duration: float, seed: int) -> Any:
     from sitl import scenarios
     from sitl.environment import Environment
@@ -199,6 +199,8 @@ def _fmt(x: float) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the validation plan (``--only`` labels), print the table of docs/current.md and
+    draw the figures; with ``--glider`` also the Slocum glider log. Returns 0."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="shorter runs")
     ap.add_argument("--out", default="docs/figures")
@@ -245,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             r = run(boat_tidal_scenario() if sc == "boat-tidal" else sc, section, cfgname,
                     duration=dur)
-        except Exception as err:  # a scenario still under construction elsewhere
+        except Exception as err:  # noqa: BLE001 - one failing run must not lose the table
             print(f"{label}: failed: {err!r}")
             continue
         runs[label] = r
