@@ -1,8 +1,8 @@
 """AIE and KF against SITL truth (sitl.runner), through the real engine and input mapping.
 
 Bounds are the measured figures (seed 1, 300 s, RMSE after 30 s) with a margin; where the
-issue's goal is not met the honest bound is kept and the goal is named in the comment.
-Goal of issue 4: AIE speed RMSE <= 0.8 x KF and < 0.10 m/s; AIE heading below the KF.
+goal is not met the honest bound is kept and the goal is named in the comment.
+The goal: AIE speed RMSE <= 0.8 x KF and < 0.10 m/s; AIE heading below the KF.
 """
 
 from __future__ import annotations

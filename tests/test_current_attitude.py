@@ -1,8 +1,9 @@
 """The current pipeline feeds roll and pitch to the model (gravity/buoyancy regressors).
 
-Regression test for a bug found in review: ``inp.roll``/``inp.pitch`` were never set, so the
-torpedo model's ``sin(theta)``, ``cos(theta)sin(phi)``, ``cos(theta)cos(phi)`` (Kim et al.
-2018 eq. 3-5) and the ROV's heave term were always evaluated at zero attitude.
+The torpedo model's ``sin(theta)``, ``cos(theta)sin(phi)``, ``cos(theta)cos(phi)`` (Kim et
+al. 2018 eq. 3-5) and the ROV's heave term are evaluated at the roll and pitch of the
+newest Attitude sample at or before the step (the DVL's own as a fallback), through
+``inp.roll`` / ``inp.pitch``.
 """
 
 from __future__ import annotations
@@ -83,13 +84,13 @@ def test_dvl_attitude_is_a_fallback_only():
 def test_pitching_buoyant_torpedo_known_model():
     """A positively buoyant torpedo pitching +-0.25 rad and rolling +-0.1 rad: the gravity
     terms change surge, sway and heave accelerations by up to 0.06 / 0.01 / 0.003 m/s^2
-    through the attitude. At zero attitude (the bug) the model is wrong by that and the
-    current takes the blame."""
+    through the attitude. A model evaluated at zero attitude would be wrong by that and the
+    current would take the blame."""
     pipe = current_pipeline("torpedo-auv", model=BUOYANT_TRUE, identify=False)
     gen = simulate_torpedo(300.0, truth=BUOYANT_TRUE, pitch=(0.25, 2 * math.pi / 60.0),
                            roll=(0.1, 2 * math.pi / 23.0))
     rms, cover, _, _ = current_errors(pipe, gen, after=100.0)
-    # measured: rms N/E 0.004 / 0.004 m/s, coverage 1.00 / 1.00; at zero attitude (before
-    # the fix) 0.058 / 0.126 m/s, coverage 0.90 / 0.76
+    # measured: rms N/E 0.004 / 0.004 m/s, coverage 1.00 / 1.00; with the model's attitude
+    # held at zero the same run gives 0.058 / 0.126 m/s, coverage 0.90 / 0.76
     assert np.all(rms < 0.02)
     assert np.all(cover > 0.9)

@@ -249,8 +249,8 @@ def test_heading_alone_fixes_the_yaw_when_there_is_no_attitude_stream() -> None:
 
 
 def test_ins_velocity_bias_is_a_state_and_only_the_white_noise_is_r() -> None:
-    """Finding 8 (docs/fuzzing.md): the INS velocity over ground is v + b + n with b a
-    Gauss-Markov bias. Hovering with a DVL and an INS biased by (0.03, -0.02) m/s, the
+    """The INS velocity over ground is v + b + n with b a Gauss-Markov bias, and b is a
+    state of the filter. Hovering with a DVL and an INS biased by (0.03, -0.02) m/s, the
     filter attributes the offset to the INS bias, not to the velocity (the DVL holds it),
     and the vog NIS is about its dimension, not ~0.1 as with the GNSS velocity R."""
     from onboard.core.messages import VelocityOverGround

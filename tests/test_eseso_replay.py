@@ -69,8 +69,8 @@ def test_replayed_disturbance_and_velocity_match_truth(replayed) -> None:
     derr_a, verr_a = np.array(derr), np.array(verr)
     print(f"replay: disturbance RMS {np.sqrt(np.mean(derr_a ** 2)):.2f} N, max "
           f"{derr_a.max():.2f} N; velocity RMS {np.sqrt(np.mean(verr_a ** 2)):.4f} m/s")
-    # measured (30 s, seed 1, 2026-11-22 after finding 8's fix): disturbance RMS 0.56 N,
-    # max 1.11 N; velocity RMS 0.010 m/s (before it: 0.54 N, 1.08 N, 0.012 m/s)
+    # measured (30 s, seed 1, INS bias states and per-axis AHRS noise): disturbance RMS
+    # 0.56 N, max 1.11 N; velocity RMS 0.010 m/s
     assert np.sqrt(np.mean(derr_a ** 2)) < 2.5
     assert derr_a.max() < 5.0
     assert np.sqrt(np.mean(verr_a ** 2)) < 0.05

@@ -1,4 +1,4 @@
-"""Fault injection through the real service (issue 9).
+"""Fault injection through the real service.
 
 Each test drives the service over the real protocols and asserts against the simulator's
 hidden truth or the service's own counters:

@@ -304,12 +304,10 @@ SIM_NIS_CASES = [
     ("eseso", "bluerov2", "bluerov2-circle", 120.0,
      {"thrust.nis": 3, "attitude.nis": 3, "dvl.nis": 3, "depth.nis": 1, "vog.nis": 2}),
 ]
-"""Measured mean NIS (seed 1, 2026-11-22 08:20 UTC, working tree of that time): kf surge
-0.49, heading 0.85; aie surge 0.76, heading 0.99; current on effect-current 0.29 (dim 2;
-1.62 an hour earlier), on gavia-tidal 3.1 (dim 3, median 0.11: heavy tails); eseso thrust
-0.51 (3), attitude 4.7 (3), dvl 4.0 (3), depth 1.09 (1), vog 0.12 (2). ESESO after finding 8's
-fix (INS bias states, per-axis AHRS noise; 09:40 UTC): thrust 0.31, attitude 3.12, dvl 2.96,
-depth 1.10, vog 1.88."""
+"""Measured mean NIS (seed 1, 2026-11-22): kf surge 0.49, heading 0.85; aie surge 0.76,
+heading 0.99; current on effect-current 0.29 (dim 2), on gavia-tidal 3.1 (dim 3, median
+0.11: heavy tails); eseso (INS bias states, per-axis AHRS noise) thrust 0.31 (3), attitude
+3.12 (3), dvl 2.96 (3), depth 1.10 (1), vog 1.88 (2)."""
 
 
 def sim_nis(module: str, cfg_name: str, scenario: str, seconds: float, seed: int = 1
@@ -381,7 +379,7 @@ def eseso_nis_every_update(seed: int, seconds: float = 120.0) -> dict[str, list[
 
 @pytest.mark.slow
 def test_eseso_sensor_nis_in_the_chi_square_band():
-    """Finding 8 and issue 9: the ESESO's sensor channels are consistent on the simulator.
+    """The ESESO's sensor channels are consistent on the simulator.
     Pooled over seeds 1-3 (120 s each, every update), the mean NIS of the INS velocity
     over ground (2), the AHRS attitude (3) and the DVL (3) is inside the 95 % chi-square
     band of its mean. Measured (2026-11-22): vog 1.957 in [1.935, 2.066], attitude 3.061

@@ -1,4 +1,4 @@
-"""Security (issue 9): MAVLink 2 signing in and out, Zenoh authentication and access
+"""Security: MAVLink 2 signing in and out, Zenoh authentication and access
 control, the systemd unit's hardening. See docs/security.md."""
 
 from __future__ import annotations

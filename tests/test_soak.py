@@ -1,4 +1,4 @@
-"""Soak: the service for 10 minutes at 10x the nominal sensor rates (issue 9), slow.
+"""Soak: the service for 10 minutes at 10x the nominal sensor rates, slow.
 
     ONBOARD_SOAK_S=60 .venv/bin/python -m pytest -m slow tests/test_soak.py -s   # quick
     .venv/bin/python -m pytest -m slow tests/test_soak.py -s                     # 600 s
