@@ -64,7 +64,7 @@ def test_missing_module_gives_null_with_reason(monkeypatch):
     monkeypatch.setattr(bench, "_import", unavailable)
     rep = bench.Report()
     s = bench.Settings(fast=True)
-    for fn in (bench.bench_aie, bench.bench_service, bench.bench_mpc):
+    for fn in (bench.bench_service, bench.bench_mpc):
         with pytest.raises(bench.NotAvailable):
             fn(s, rep)
 

@@ -9,7 +9,7 @@ sparse -- go through the engine into each pipeline (``aie``, ``kf``, ``current``
 (positive semi-definite to rounding; the filters hold a few directions at ~1e-9 on
 purpose, e.g. ESESO's unobservable yaw before a heading arrives). The cores are tested
 directly too: :class:`~onboard.estimators.kalman.IncrementKF` over random model steps and
-:class:`~onboard.pipelines.aie.Rcie`'s RLS covariance (positive definite: the RLS
+:class:`~onboard.estimators.rcie.Rcie`'s RLS covariance (positive definite: the RLS
 covariance only shrinks from ``I / R_theta``, never to a singular matrix).
 
 NIS (consistency): on data drawn from the filter's own model the mean NIS must equal the
@@ -135,7 +135,8 @@ def test_increment_kf_nis_is_consistent_on_its_own_model():
 @PROPS
 @given(seed=st.integers(0, 2**32 - 1))
 def test_rcie_rls_covariance_stays_positive_definite(seed):
-    from onboard.pipelines.aie import Rcie, unpack
+    from onboard.estimators.rcie import Rcie
+    from onboard.estimators.rls import unpack
 
     rng = random.Random(seed)
     n_c = rng.randint(0, 4)
@@ -223,7 +224,7 @@ def _covariances(p) -> dict[str, np.ndarray]:
                 out[f"{ax}.kf.P"] = _packed3(f.kf.P)
             rcie = getattr(f, "rcie", None)
             if rcie is not None:
-                from onboard.pipelines.aie import unpack
+                from onboard.estimators.rls import unpack
 
                 out[f"{ax}.rcie.P"] = np.array(unpack(rcie.P, rcie.n))
     P = getattr(getattr(p, "filter", p), "P", None)  # eseso: its EsesoFilter's

@@ -295,3 +295,181 @@ def test_stream_parser_and_tlog_reader_decode_intact_frames_alike(tmp_path, seed
     assert _packed(list(reader), timeless=True) == _packed(streamed, timeless=True)
     assert reader.stats.by_type == parser.stats.by_type
     assert reader.stats.records == parser.stats.records
+
+
+# --------------------------------------------------------------------------- RLS kernels
+
+
+def _spd(rng: np.random.Generator, n: int, scale: float = 1.0) -> np.ndarray:
+    M = rng.standard_normal((n, n))
+    return scale * (M @ M.T / n + 0.5 * np.eye(n))
+
+
+def _pack(P: np.ndarray) -> list[float]:
+    n = len(P)
+    return [float(P[i, j]) for i in range(n) for j in range(i, n)]
+
+
+def _close(fast, ref, *inputs, rel: float = 1e-12) -> bool:
+    """Equal to ``rel`` relative to the largest magnitude of the reference and of the
+    ``inputs`` it was computed from (a covariance update subtracts nearly equal numbers
+    when the data is informative: both forms then lose the same digits)."""
+    fast, ref = np.asarray(fast, dtype=float), np.asarray(ref, dtype=float)
+    scale = max([np.max(np.abs(ref), initial=0.0)]
+                + [np.max(np.abs(np.asarray(x, dtype=float)), initial=0.0) for x in inputs])
+    return bool(np.max(np.abs(fast - ref), initial=0.0) <= rel * max(scale, 1e-300))
+
+
+def _forgetting_rls_reference(P, th, phi, a, weight, forgetting, tr_max, beta, delta):
+    """algorithms.md §3.4 in numpy: variable-rate forgetting, the update, then EFRA."""
+    e = a - phi @ th
+    lam = 1.0 - (1.0 - forgetting) * max(0.0, 1.0 - np.trace(P) / tr_max)
+    s = lam / weight + phi @ P @ phi
+    K = P @ phi / s
+    P1 = (P - np.outer(K, phi @ P)) / lam
+    return P1 + beta * np.eye(len(P)) - delta * P1 @ P1, th + K * e, e, lam, s
+
+
+def _two_row_reference(P, th, a, b, e1, r_a, r_b, lam):
+    """algorithms.md §2.6 in numpy: Gamma, P+, theta+."""
+    Phi = np.vstack([a, b])
+    R = np.diag([r_a, r_b])
+    G = lam * np.linalg.inv(R) + Phi @ P @ Phi.T
+    P1 = (P - P @ Phi.T @ np.linalg.solve(G, Phi @ P)) / lam
+    th1 = th - P @ Phi.T @ np.linalg.solve(G, np.array([e1, 0.0]) + Phi @ th)
+    return P1, th1
+
+
+@pytest.mark.parametrize("n", [1, 2, 4, 5, 9])
+def test_generated_rls_kernel_is_the_numpy_update(n: int) -> None:
+    from onboard.estimators.rls import rls_kernel, unpack
+
+    rng = np.random.default_rng(n)
+    kernel = rls_kernel(n)
+    for _ in range(50):
+        P = _spd(rng, n, 10.0 ** rng.uniform(-2, 3))
+        th, phi = rng.standard_normal(n), rng.standard_normal(n) * 10.0 ** rng.uniform(-2, 1)
+        a, weight = float(rng.standard_normal()), float(rng.uniform(0.05, 1.0))
+        forgetting, tr_max = float(rng.uniform(0.95, 1.0)), float(np.trace(P) * rng.uniform(0.5, 3))
+        beta, delta = float(rng.uniform(0, 1e-3)), float(rng.uniform(0, 1e-3)) / np.trace(P)
+        got = kernel(_pack(P), th.tolist(), phi.tolist(), a, weight, forgetting, tr_max,
+                     beta, delta)
+        want = _forgetting_rls_reference(P, th, phi, a, weight, forgetting, tr_max, beta, delta)
+        assert _close(unpack(got[0], n), want[0], P / want[3])
+        assert _close(got[1], want[1], th)
+        for g, w in zip(got[2:], want[2:]):
+            assert g == pytest.approx(w, rel=1e-12, abs=1e-300)
+
+
+@pytest.mark.parametrize("n", [1, 3, 7, 9])
+def test_generated_two_row_kernel_is_the_numpy_update(n: int) -> None:
+    from onboard.estimators.rls import two_row_rls_kernel, unpack
+
+    rng = np.random.default_rng(10 + n)
+    kernel = two_row_rls_kernel(n)
+    for _ in range(50):
+        P = _spd(rng, n, 10.0 ** rng.uniform(-1, 2))
+        th, a, b = (rng.standard_normal(n) for _ in range(3))
+        e1, lam = float(rng.standard_normal()), float(rng.uniform(0.9, 1.0))
+        r_a, r_b = 10.0 ** rng.uniform(-1, 1), 10.0 ** rng.uniform(-2, 1)
+        Pn, thn, tr = kernel(_pack(P), th.tolist(), a.tolist(), b.tolist(), e1, lam / r_a,
+                             lam / r_b, lam)
+        P_ref, th_ref = _two_row_reference(P, th, a, b, e1, r_a, r_b, lam)
+        assert _close(unpack(Pn, n), P_ref, P / lam)
+        assert _close(thn, th_ref, th)
+        assert _close(tr, np.trace(P_ref), n * P / lam)
+    assert kernel(_pack(-np.eye(n)), [0.0] * n, [1.0] * n, [1.0] * n, 0.0, 0.5, 0.5,
+                  1.0) is None  # Gamma not positive definite
+
+
+@pytest.mark.parametrize("rate_penalty", [False, True])
+@pytest.mark.parametrize("n", [1, 5, 9])
+def test_generated_rcie_kernel_is_the_numpy_update(n: int, rate_penalty: bool) -> None:
+    """The kernel with its rows built inside and ``P = sc Q``: rows ``a = h s`` and
+    ``b = g - f`` (rate penalty) or ``b = g``, then §2.6, then ``d = g . theta+``."""
+    from onboard.estimators.rcie import rcie_kernel
+    from onboard.estimators.rls import unpack
+
+    rng = np.random.default_rng(20 + n + rate_penalty)
+    kernel = rcie_kernel(n, rate_penalty)
+    for _ in range(50):
+        Q, sc = _spd(rng, n), float(10.0 ** rng.uniform(-2, 2))
+        th, s, f, g = (rng.standard_normal(n) for _ in range(4))
+        h, e1 = float(rng.uniform(0.2, 2.0)), float(rng.standard_normal())
+        lam = float(rng.uniform(0.9, 1.0))
+        r_z, r_d = 10.0 ** rng.uniform(-1, 1), 10.0 ** rng.uniform(-2, 1)
+        Qn, scn, thn, tr, d = kernel(_pack(Q), sc, th.tolist(), s.tolist(), h, f.tolist(),
+                                     g.tolist(), e1, lam / r_z, lam / r_d, lam)
+        b = g - f if rate_penalty else g
+        P_ref, th_ref = _two_row_reference(sc * Q, th, h * s, b, e1, r_z, r_d, lam)
+        assert _close(scn * np.array(unpack(Qn, n)), P_ref, sc * Q / lam)
+        assert _close(thn, th_ref, th)
+        assert _close(tr, np.trace(P_ref), n * sc * Q / lam)
+        assert _close(d, g @ th_ref, np.abs(g).sum() * np.abs(np.concatenate([th, th_ref])))
+
+
+class _RcieReference:
+    """One RCIE step of algorithms.md §2.3-§2.7 (scalar case) in numpy, from the
+    definitions: ``phi_k = [d_hat_{k-1..k-nc}; z_{k..k-nc}]``, ``phi_f,k = sum_i H_i
+    phi_{k-i}`` and ``d_hat_f,k = sum_i H_i d_hat_{k-i}`` (normalized units), the §2.6
+    update with rows ``[phi_f; phi_k - phi_{k-1}]`` or ``[phi_f; phi_k]``, the trace bound,
+    ``d_hat_k = phi_k . theta_{k+1}`` saturated."""
+
+    def __init__(self, est) -> None:
+        self.est = est
+        self.dh = [0.0] * est.n_c
+        self.z = [0.0] * (est.n_c + 1)
+        self.phis = [np.zeros(est.n) for _ in range(est.n_f)]
+        self.dhf = [0.0] * est.n_f
+
+    def step(self, z: float, H: list[float], theta: list[float], P: np.ndarray):
+        est = self.est
+        zs, us = est.z_scale, est.u_scale
+        self.z = [z / zs] + self.z[:-1]
+        phi = np.array(self.dh + self.z)
+        Hn = [x * us / zs for x in H]
+        phi_f = sum(hi * p for hi, p in zip(Hn, self.phis))
+        e1 = self.z[0] - sum(hi * d for hi, d in zip(Hn, self.dhf))
+        b = phi - self.phis[0] if est.rate_penalty else phi
+        r_d = est.lam / est.wb
+        P1, th1 = _two_row_reference(P, np.array(theta), phi_f, b, e1, est.lam / est.wa,
+                                     r_d, est.lam)
+        tr = np.trace(P1)
+        if not tr < est.trace_max:
+            P1 = P1 * (est.trace_max / tr)
+        raw = float(phi @ th1) * us
+        return phi, P1, th1, raw
+
+    def push(self, phi: np.ndarray, d_hat: float) -> None:
+        dn = d_hat / self.est.u_scale
+        if self.dh:
+            self.dh = [dn] + self.dh[:-1]
+        self.phis = [phi] + self.phis[:-1]
+        self.dhf = [dn] + self.dhf[:-1]
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_rcie_steps_are_the_numpy_reference_steps(seed: int) -> None:
+    """Rcie.step (generated kernel, buffers as lists) against :class:`_RcieReference`,
+    step by step from the same theta and P: theta, P and the raw estimate to 1e-12."""
+    from onboard.estimators.rcie import Rcie
+    from onboard.estimators.rls import unpack
+
+    rng = random.Random(seed)
+    est = Rcie(n_c=rng.randint(0, 4), n_f=rng.randint(1, 4), r_z=10 ** rng.uniform(-1, 1),
+               r_d=rng.choice((0.1, 1.0, 10.0)), r_theta=10 ** rng.uniform(-1, 1),
+               lam=rng.uniform(0.95, 1.0), u_scale=rng.uniform(0.5, 3.0),
+               z_scale=rng.uniform(0.5, 3.0), u_max=50.0,
+               rate_penalty=rng.random() < 0.5)
+    ref = _RcieReference(est)
+    for k in range(200):
+        H = [rng.uniform(0.5, 1.5)] + [rng.uniform(-0.5, 0.5) for _ in range(est.n_f - 1)]
+        z = rng.gauss(0.0, 1.0)
+        theta, P = list(est.theta), np.array(unpack(est.P, est.n))
+        phi, P_ref, th_ref, raw_ref = ref.step(z, H, theta, P)
+        d = est.step(z, H)
+        assert d is not None, k
+        assert _close(est.theta, th_ref, theta), k
+        assert _close(unpack(est.P, est.n), P_ref, P / est.lam), k
+        assert est.d_hat_raw == pytest.approx(raw_ref, rel=1e-9, abs=1e-12), k
+        ref.push(phi, est.d_hat)

@@ -30,11 +30,21 @@ one noisy sample throws the parameters away. Two guards keep ``P`` bounded:
 The residual variance ``sigma2`` is tracked with the same forgetting, so that the caller can
 use the model error as process noise (the current pipeline does, for honest uncertainty).
 
-The update runs as straight-line float code generated per size (:func:`rls_kernel`, as
-:func:`onboard.pipelines.aie.rls_kernel`) on the packed upper triangle of ``P``: at the
-4-5 parameters of the current pipeline's yaw channel that is ~5x faster than numpy, whose
-per-call overhead dominates at this size. ``P`` is symmetric by construction (the update
-is written in the symmetric form ``P - P phi phi^T P / S``), so no symmetrization is needed.
+Generated kernels
+-----------------
+This module is the one generator of straight-line RLS updates: Python source written per
+number of parameters, on local floats and the packed upper triangle of ``P``
+(:func:`packed_index`), compiled once and cached. At the 4-9 parameters of the pipelines
+that is ~5x faster than numpy, whose per-call overhead dominates at this size. It makes
+
+* :func:`rls_kernel`: the update above, one regression row (:class:`RecursiveLeastSquares`);
+* :func:`two_row_rls_kernel`: the exact minimizer of a two-row weighted cost with
+  forgetting (algorithms.md §2.6, the RLS of retrospective-cost input estimation); its
+  lines (:func:`two_row_update_lines`) also make the kernel of
+  :mod:`onboard.estimators.rcie`, which builds its rows inside the kernel.
+
+``P`` is symmetric by construction (both updates are written in the symmetric form
+``P - P Phi^T Gamma^-1 Phi P``, upper triangle only), so no symmetrization is needed.
 """
 
 from __future__ import annotations
@@ -46,11 +56,16 @@ from typing import Any
 import numpy as np
 
 RlsKernel = Callable[..., "tuple[list[float], list[float], float, float, float]"]
+"""``kernel(P, theta, phi, a, weight, forgetting, tr_max, beta, delta) -> (P+, theta+, e,
+lam, s)``: see :func:`rls_kernel`."""
+TwoRowKernel = Callable[..., "tuple[list[float], list[float], float] | None"]
+"""``kernel(P, theta, a, b, e1, w_a, w_b, lam) -> (P+, theta+, trace(P+))`` or None: see
+:func:`two_row_rls_kernel`."""
 
 
 def packed_index(n: int) -> dict[tuple[int, int], int]:
     """Position of ``P[i][j]`` in the packed upper triangle (row-major) of an ``n x n``
-    symmetric matrix (the storage of the generated float kernels here and in ``aie``)."""
+    symmetric matrix (the storage of the generated float kernels)."""
     idx: dict[tuple[int, int], int] = {}
     m = 0
     for i in range(n):
@@ -64,6 +79,20 @@ def unpack(P: Sequence[float], n: int) -> list[list[float]]:
     """Packed upper triangle (row-major) -> full symmetric matrix (list of rows)."""
     idx = packed_index(n)
     return [[P[idx[(i, j)]] for j in range(n)] for i in range(n)]
+
+
+def unpack_line(names: str, count: int, value: str) -> str:
+    """The kernel line unpacking the sequence ``value`` into ``names0 .. names<count-1>``."""
+    return f"    {', '.join(f'{names}{i}' for i in range(count))}, = {value}"
+
+
+def compile_kernel(lines: Sequence[str], name: str) -> Callable[..., Any]:
+    """The function ``kernel`` defined by the generated ``lines`` (its first line is the
+    ``def``); ``name`` labels it in tracebacks."""
+    ns: dict[str, Any] = {}
+    code = compile("\n".join(lines), f"<generated {name}>", "exec")
+    exec(code, ns)  # noqa: S102 - source generated here from integers only
+    return ns["kernel"]
 
 
 @cache
@@ -80,11 +109,9 @@ def rls_kernel(n: int) -> RlsKernel:
     r = range(n)
     p = {(i, j): f"p{idx[(i, j)]}" for i in r for j in r}
     q = {(i, j): f"q{idx[(i, j)]}" for i in r for j in r}
-    m = n * (n + 1) // 2
     src = ["def kernel(P, th, phi, a, weight, forgetting, tr_max, beta, delta):",
-           f"    {', '.join(f'p{k}' for k in range(m))}, = P",
-           f"    {', '.join(f't{i}' for i in r)}, = th",
-           f"    {', '.join(f'f{i}' for i in r)}, = phi"]
+           unpack_line("p", n * (n + 1) // 2, "P"), unpack_line("t", n, "th"),
+           unpack_line("f", n, "phi")]
     add = src.append
     for i in r:  # P phi
         add(f"    g{i} = " + " + ".join(f"{p[(i, j)]}*f{j}" for j in r))
@@ -104,9 +131,87 @@ def rls_kernel(n: int) -> RlsKernel:
             terms.append(f"{q[(i, j)]}" + (" + beta" if i == j else "") + f" - delta*({pp})")
     add("    return [" + ", ".join(terms) + "], [" + ", ".join(
         f"t{i} + k{i}*e" for i in r) + "], e, lam, s")
-    ns: dict[str, Any] = {}
-    exec("\n".join(src), ns)  # noqa: S102 - source generated above from integers only
-    return ns["kernel"]
+    return compile_kernel(src, f"rls_kernel({n})")
+
+
+def two_row_update_lines(n: int) -> list[str]:
+    """Kernel lines of the two-row update (algorithms.md §2.6) for ``n`` parameters.
+
+    In scope before them: the packed covariance ``p0 ..``, with ``P = sc * p``; the
+    parameters ``t0 ..``; the rows ``a0 ..`` (weight ``R_a``) and ``b0 ..`` (weight
+    ``R_b``, target 0); ``e1``, the first row's residual before the parameters;
+    ``wa = lam / R_a``, ``wb = lam / R_b``; ``lam``. With ``Phi~ = [a; b]``,
+    ``z~ = [e1; 0]``, they compute::
+
+        Gamma  = diag(wa, wb) + Phi~ P Phi~^T                 (LDL^T-factored, 2 x 2)
+        theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)   -> n0 ..
+        P+     = sn * Q,  sn = sc / lam,
+        Q      = p - sc p Phi~^T Gamma^-1 Phi~ p               -> Q (packed list)
+        tr     = trace(P+)
+
+    and ``return None`` when a pivot of ``Gamma`` is not positive (impossible in exact
+    arithmetic: a divergence). Keeping ``P = sc Q`` makes the forgetting one
+    multiplication of ``sc`` rather than one per entry.
+    """
+    idx = packed_index(n)
+    r = range(n)
+    p = {(i, j): f"p{idx[(i, j)]}" for i in r for j in r}
+    src: list[str] = []
+    add = src.append
+    for i in r:
+        add(f"    pa{i} = " + " + ".join(f"{p[(i, j)]}*a{j}" for j in r))
+        add(f"    pb{i} = " + " + ".join(f"{p[(i, j)]}*b{j}" for j in r))
+    add("    g11 = wa + sc*(" + " + ".join(f"a{i}*pa{i}" for i in r) + ")")
+    add("    g12 = sc*(" + " + ".join(f"a{i}*pb{i}" for i in r) + ")")
+    add("    g22 = wb + sc*(" + " + ".join(f"b{i}*pb{i}" for i in r) + ")")
+    add("    e1 = e1 + " + " + ".join(f"a{i}*t{i}" for i in r))
+    add("    e2 = " + " + ".join(f"b{i}*t{i}" for i in r))
+    # Gamma = L D L^T (2 x 2 Cholesky without square roots), pivots must be positive
+    add("    if not g11 > 0.0:")
+    add("        return None")
+    add("    l = g12 / g11")
+    add("    d2 = g22 - l * g12")
+    add("    if not d2 > 0.0:")
+    add("        return None")
+    add("    i22 = sc / d2")
+    add("    i12 = -l * i22")
+    add("    i11 = sc / g11 + l * l * i22")
+    add("    w1 = i11 * e1 + i12 * e2")
+    add("    w2 = i12 * e1 + i22 * e2")
+    for i in r:
+        add(f"    ka{i} = i11*pa{i} + i12*pb{i}")
+        add(f"    kb{i} = i12*pa{i} + i22*pb{i}")
+    for i in r:
+        add(f"    n{i} = t{i} - pa{i}*w1 - pb{i}*w2")
+    terms = [f"{p[(i, j)]} - ka{i}*pa{j} - kb{i}*pb{j}" for i in r for j in range(i, n)]
+    add("    Q = [" + ", ".join(terms) + "]")
+    add("    sn = sc / lam")
+    add("    tr = sn * (" + " + ".join(f"Q[{idx[(i, i)]}]" for i in r) + ")")
+    return src
+
+
+@cache
+def two_row_rls_kernel(n: int) -> TwoRowKernel:
+    """The two-row RLS update (algorithms.md §2.6, :func:`two_row_update_lines`) for ``n``
+    parameters, as straight-line float code.
+
+    ``kernel(P, theta, a, b, e1, w_a, w_b, lam) -> (P+, theta+, trace(P+))``, or None when
+    ``Gamma`` is not positive definite:
+
+    * ``P``: packed upper triangle of the covariance (``n (n+1)/2`` floats);
+    * ``a``: first row (weight ``R_a``), ``e1`` its residual ``z~_1``;
+    * ``b``: second row (weight ``R_b``, target 0);
+    * ``w_a = lambda / R_a``, ``w_b = lambda / R_b``: the diagonal of ``lambda R~^-1``;
+    * ``lam``: forgetting factor lambda.
+    """
+    src = ["def kernel(P, th, a, b, e1, wa, wb, lam):",
+           "    sc = 1.0",
+           unpack_line("p", n * (n + 1) // 2, "P"), unpack_line("t", n, "th"),
+           unpack_line("a", n, "a"), unpack_line("b", n, "b")]
+    src += two_row_update_lines(n)
+    src.append("    return [x * sn for x in Q], [" + ", ".join(f"n{i}" for i in range(n))
+               + "], tr")
+    return compile_kernel(src, f"two_row_rls_kernel({n})")
 
 
 class RecursiveLeastSquares:

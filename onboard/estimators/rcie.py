@@ -1,0 +1,213 @@
+"""Retrospective-cost input estimation (RCIE) of one scalar axis: the input-estimation
+half of adaptive input estimation (AIE).
+
+Ansari & Bernstein, "Input estimation for nonminimum-phase systems with application to
+acceleration estimation for a maneuvering vehicle", IEEE TCST 2019, as used by Faros &
+Tanner, "System Identification and Adaptive Input Estimation on the Jaiabot", arXiv
+2504.02005 (2025). Equations restated in algorithms.md §2, scalar case ``l_d = l_y = 1``:
+
+* input-estimation subsystem (§2.3), IIR of order ``n_c`` in the innovation ``z``::
+
+      d_hat_k = sum_{i=1..n_c} P_i d_hat_{k-i} + sum_{i=0..n_c} Q_i z_{k-i} = phi_k . theta
+
+* filter ``G_f(q) = sum_{i=1..n_f} H_i q^-i`` (§2.4), the retrospective variable
+  ``z_hat(theta) = z_k - d_hat_f,k + phi_f,k . theta`` (§2.5), and the exact RLS
+  minimizer (§2.6) with rows ``[phi_f; phi]`` (or ``[phi_f; phi_k - phi_{k-1}]`` with the
+  rate penalty) weighted ``diag(R_z, R_d)``::
+
+      Gamma  = lambda R~^-1 + Phi~ P Phi~^T          (2 x 2, LDL^T-factored)
+      P+     = (P - P Phi~^T Gamma^-1 Phi~ P) / lambda
+      theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)
+
+Signals are normalized before RLS (§2.10): ``z`` by ``z_scale`` and ``d_hat`` by
+``u_scale``. The update is the generated two-row kernel of :mod:`onboard.estimators.rls`
+with the rows built inside it (:func:`rcie_kernel`).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import cache
+from typing import Any, Callable, Mapping
+
+from onboard.estimators.rls import compile_kernel, two_row_update_lines, unpack_line
+
+RcieKernel = Callable[..., "tuple[list[float], float, list[float], float, float] | None"]
+"""``kernel(Q, sc, theta, s, h, f, g, e1, w_a, w_b, lam) -> (Q+, sc+, theta+, trace(P+),
+g . theta+)`` or None: see :func:`rcie_kernel`."""
+
+
+@cache
+def rcie_kernel(n: int, rate_penalty: bool) -> RcieKernel:
+    """The RCIE update (§2.6-§2.7 step 5) for ``l_theta = n``, as straight-line float code:
+    the two-row RLS of :func:`onboard.estimators.rls.two_row_update_lines` with its rows
+    built inside (fewer Python list operations) and the covariance scaled, ``P = sc Q``.
+
+    ``kernel(Q, sc, theta, s, h, f, g, e1, w_a, w_b, lam) -> (Q+, sc+, theta+,
+    trace(P+), g . theta+)``, or None when ``Gamma`` is not positive definite, with the
+    rows ``a = h s`` (``phi_f``, weight ``R_z``; ``e1 = z_k - d_hat_f,k``) and ``b = g - f``
+    (rate penalty) or ``b = g`` (size penalty; weight ``R_d``), ``g = phi_k`` and
+    ``f = phi_{k-1}``; ``w_a = lambda / R_z``, ``w_b = lambda / R_d``.
+    """
+    r = range(n)
+    src = ["def kernel(P, sc, th, s, h, f, g, e1, wa, wb, lam):",
+           unpack_line("p", n * (n + 1) // 2, "P"), unpack_line("t", n, "th"),
+           unpack_line("s", n, "s"), unpack_line("g", n, "g")]
+    src += [f"    a{i} = h*s{i}" for i in r]
+    if rate_penalty:
+        src.append(unpack_line("f", n, "f"))
+        src += [f"    b{i} = g{i} - f{i}" for i in r]
+    else:
+        src += [f"    b{i} = g{i}" for i in r]
+    src += two_row_update_lines(n)
+    src.append("    d = " + " + ".join(f"g{i}*n{i}" for i in r))
+    src.append("    return Q, sn, [" + ", ".join(f"n{i}" for i in r) + "], tr, d")
+    return compile_kernel(src, f"rcie_kernel({n}, {rate_penalty})")
+
+
+class Rcie:
+    """RCIE input estimator of one scalar axis (§2.7 steps 2-5 and 8).
+
+    Attributes:
+        theta: coefficients ``[P_1..P_nc, Q_0..Q_nc]`` (normalized units, §2.3).
+        P: packed RLS covariance (§2.6).
+        d_hat: last input estimate after saturation (unit of the input);
+        d_hat_raw: the same before saturation.
+        steps: RLS updates since the last reset.
+    """
+
+    def __init__(self, n_c: int, n_f: int, r_z: float, r_d: float, r_theta: float,
+                 lam: float, u_scale: float, z_scale: float, u_max: float,
+                 trace_max: float | None = None, rate_penalty: bool = False) -> None:
+        """Args:
+            n_c: order of the input-estimation subsystem (§2.3); ``l_theta = 2 n_c + 1``.
+            n_f: number of taps of the filter ``G_f`` (§2.4).
+            r_z: weight of the retrospective variable (§2.5).
+            r_d: weight of the input penalty (§2.5); 0 drops its row.
+            r_theta: regularization, ``P_0 = I / r_theta``.
+            lam: forgetting factor in (0, 1].
+            u_scale: normalization of the input estimate (§2.10, unit of the input).
+            z_scale: normalization of the innovation (§2.10, unit of y).
+            u_max: saturation of the input estimate (unit of the input).
+            trace_max: bound of ``trace(P)``, the wind-up guard (default
+                ``10 l_theta / r_theta``).
+            rate_penalty: penalize the change of the estimate between steps rather than
+                its size (§2.5).
+        """
+        if n_c < 0 or n_f < 1:
+            raise ValueError("need n_c >= 0 and n_f >= 1")
+        if not (0.0 < lam <= 1.0 and r_z > 0.0 and r_theta > 0.0 and r_d >= 0.0):
+            raise ValueError("need 0 < lam <= 1, r_z > 0, r_theta > 0, r_d >= 0")
+        self.n_c, self.n_f = n_c, n_f
+        self.n = 2 * n_c + 1
+        self.lam = lam
+        self.wa = lam / r_z
+        self.wb = lam / r_d if r_d > 0.0 else 1e300   # R_d = 0: the row drops out
+        self.r_theta = r_theta
+        self.rate_penalty = rate_penalty
+        self.u_scale, self.z_scale, self.u_max = u_scale, z_scale, u_max
+        self.trace_max = trace_max if trace_max is not None else 10.0 * self.n / r_theta
+        self._kernel = rcie_kernel(self.n, rate_penalty)
+        self.reset()
+
+    def reset(self) -> None:
+        """theta <- 0, P <- I / R_theta, buffers <- 0 (the start-up of §2.7)."""
+        n = self.n
+        p0 = 1.0 / self.r_theta
+        self.theta = [0.0] * n
+        self._Q = [p0 if i == j else 0.0 for i in range(n) for j in range(i, n)]
+        self._sc = 1.0
+        self._dh = [0.0] * self.n_c                   # d_hat_{k-1..k-nc}, normalized
+        self._z = [0.0] * (self.n_c + 1)              # z_{k..k-nc}, normalized
+        self._phis = [[0.0] * n for _ in range(self.n_f)]   # phi_{k-1..k-nf}
+        self._dhf = [0.0] * self.n_f                  # d_hat_{k-1..k-nf}, normalized
+        self.d_hat = 0.0
+        self.d_hat_raw = 0.0
+        self.steps = 0
+
+    def step(self, z: float, H: list[float]) -> float | None:
+        """One RCIE step for innovation ``z`` (unit of y) and ``H = [H_1..H_nf]``
+        (unit of y per unit input). Returns ``d_hat_k`` saturated to ``+-u_max``, or None
+        when the update failed (the caller resets)."""
+        zs, us = self.z_scale, self.u_scale
+        zn = z / zs
+        zb = self._z = [zn] + self._z[:-1]
+        phi = self._dh + zb                                        # §2.3 phi_k
+        phis, dhf = self._phis, self._dhf
+        g = us / zs                                                # H in normalized units
+        h = H[0] * g
+        prev = phis[0]
+        e1 = zn - h * dhf[0]                                       # z_k - d_hat_f,k
+        if self.n_f == 1:                                          # §2.4 phi_f = h phi_k-1
+            src = prev
+        else:
+            src = list(prev)
+            for i in range(1, self.n_f):
+                c = H[i] * g
+                src = [x + (c / h) * y for x, y in zip(src, phis[i])]
+                e1 -= c * dhf[i]
+        res = self._kernel(self._Q, self._sc, self.theta, src, h, prev, phi, e1, self.wa,
+                           self.wb, self.lam)
+        if res is None:
+            return None
+        Q, sc, theta, tr, dn = res
+        if not (tr < self.trace_max):                              # windup guard (§2.6)
+            if not math.isfinite(tr):
+                return None
+            sc *= self.trace_max / tr
+        if not 1e-3 < sc < 1e3:                                    # keep Q well scaled
+            Q = [x * sc for x in Q]
+            sc = 1.0
+        self._Q, self._sc, self.theta = Q, sc, theta
+        raw = dn * us                                              # §2.7 step 5
+        if not math.isfinite(raw):
+            return None
+        m = self.u_max
+        d = m if raw > m else -m if raw < -m else raw
+        self.d_hat_raw, self.d_hat = raw, d
+        dn = d / us
+        if self.n_c:                                               # §2.7 step 8
+            self._dh = [dn] + self._dh[:-1]
+        if self.n_f == 1:
+            phis[0] = phi
+            dhf[0] = dn
+        else:
+            phis.insert(0, phi)
+            phis.pop()
+            dhf.insert(0, dn)
+            dhf.pop()
+        self.steps += 1
+        return d
+
+    @property
+    def P(self) -> list[float]:
+        """The RLS covariance, packed upper triangle (a copy)."""
+        return [x * self._sc for x in self._Q]
+
+    @P.setter
+    def P(self, value: list[float]) -> None:
+        if len(value) != len(self._Q):
+            raise ValueError(f"P needs {len(self._Q)} packed entries")
+        self._Q = [float(x) for x in value]
+        self._sc = 1.0
+
+    def get_state(self) -> dict[str, list[float]]:
+        """theta and the packed covariance, JSON-serializable (:meth:`set_state`)."""
+        return {"theta": list(self.theta), "P": self.P}
+
+    def set_state(self, state: Mapping[str, Any]) -> bool:
+        """Restore theta and P if they fit this estimator; True when restored."""
+        th, P = state.get("theta"), state.get("P")
+        if not (isinstance(th, list) and isinstance(P, list)):
+            return False
+        if len(th) != self.n or len(P) != len(self.P):
+            return False
+        try:
+            th_f = [float(x) for x in th]
+            P_f = [float(x) for x in P]
+        except (TypeError, ValueError):
+            return False
+        if not all(math.isfinite(x) for x in th_f + P_f):
+            return False
+        self.theta, self.P = th_f, P_f
+        return True
