@@ -19,7 +19,7 @@ from onboard.core.messages import Attitude, Depth, Imu
 from onboard.core.so3 import euler_to_matrix
 from onboard.estimators.eseso_filter import BI, CHI2_999, TH, V_, XI, EsesoFilter
 from onboard.pipelines.eseso import Eseso, EsesoConfig, filter_params, thruster_force
-from tests.test_layering import REPO, imports_of
+from tests.helpers.imports import REPO, imports_of
 
 GRAVITY_ONLY = np.array([0.0, 0.0, -9.81])
 """Specific force (m/s^2, FRD) of a level vehicle at rest."""

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
+from tests.helpers.imports import REPO, imports_of, module_name
 
 CORE = {"onboard.core"}
 MATH = CORE | {"onboard.estimators"}
@@ -85,60 +85,13 @@ def _allowed(target: str, allowed: set[str]) -> bool:
     return any(target == a or target.startswith(a + ".") for a in allowed)
 
 
-def _module_name(path: Path) -> str:
-    parts = list(path.relative_to(REPO).with_suffix("").parts)
-    if parts[-1] == "__init__":
-        parts.pop()
-    return ".".join(parts)
-
-
-def _is_type_checking(node: ast.If) -> bool:
-    test = node.test
-    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
-
-
-def imports_of(path: Path, module: str | None = None) -> list[tuple[int, str]]:
-    """(line, module) for every import of ours in ``path`` (named ``module``, by default
-    from its place in the repository), lazy ones included."""
-    module = module or _module_name(path)
-    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
-    tree = ast.parse(path.read_text(), str(path))
-    skip: set[int] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and _is_type_checking(node):
-            skip.update(id(n) for child in node.body for n in ast.walk(child))
-    found: list[tuple[int, str]] = []
-    for node in ast.walk(tree):
-        if id(node) in skip:
-            continue
-        if isinstance(node, ast.Import):
-            found += [(node.lineno, a.name) for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join(anchor + ([base] if base else []))
-            # ``from pkg import mod`` names the submodule when there is one
-            for a in node.names:
-                sub = f"{base}.{a.name}"
-                is_module = (REPO / Path(*sub.split("."))).with_suffix(".py").exists() or (
-                    REPO / Path(*sub.split(".")) / "__init__.py").exists()
-                found.append((node.lineno, sub if is_module else base))
-        elif (isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "import_module"
-              and node.args and isinstance(node.args[0], ast.Constant)
-              and isinstance(node.args[0].value, str)):
-            found.append((node.lineno, node.args[0].value))
-    return [(line, m) for line, m in found if m.split(".")[0] in {"onboard", "drivers", "sitl"}]
-
-
 def _sources() -> list[Path]:
     return sorted(p for top in ("onboard", "drivers", "sitl") for p in (REPO / top).rglob("*.py"))
 
 
 @pytest.mark.parametrize("path", _sources(), ids=lambda p: str(p.relative_to(REPO)))
 def test_each_module_imports_only_the_rooms_below_it(path: Path) -> None:
-    module = _module_name(path)
+    module = module_name(path)
     allowed = ROOMS[_room(module)]
     own_room = _room(module)
     wrong = [f"line {line}: {target}" for line, target in imports_of(path)
@@ -147,7 +100,7 @@ def test_each_module_imports_only_the_rooms_below_it(path: Path) -> None:
 
 
 def test_only_the_tools_and_the_closed_loop_runner_import_the_simulator() -> None:
-    importers = {_module_name(p) for p in _sources()
+    importers = {module_name(p) for p in _sources()
                  if any(t.split(".")[0] == "sitl" for _, t in imports_of(p))}
     outside = {m for m in importers
                if not m.startswith(("sitl", "onboard.tools"))}
@@ -183,3 +136,16 @@ def test_the_layering_check_sees_a_violation(tmp_path: Path) -> None:
     assert found == {"onboard.core.geo", "onboard.service.daemon", "sitl.runner",
                      "onboard.engine"}
     assert not any(_allowed(t, ROOMS["onboard.estimators"]) for t in found - {"onboard.core.geo"})
+
+
+def test_test_modules_share_helpers_only_through_tests_helpers() -> None:
+    """A test module never imports another test module: what tests share is in
+    ``tests/helpers`` (or ``tests/fuzz``'s corpora and targets)."""
+    wrong = []
+    for path in sorted((REPO / "tests").rglob("test_*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            wrong += [f"{path.relative_to(REPO)}: {n}" for n in names
+                      if n.split(".")[-1].startswith("test_")]
+    assert not wrong, wrong

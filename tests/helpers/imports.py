@@ -1,0 +1,62 @@
+"""Reading the project's own imports from its source, for the layering tests.
+
+Imports are read with :mod:`ast`, inside functions too (a lazy import is still a dependency
+at run time), and so are module names given to ``importlib.import_module`` as string
+literals. Imports under ``if TYPE_CHECKING:`` are type hints only and do not count.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+OURS = {"onboard", "drivers", "sitl"}
+"""The top-level packages of this repository."""
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _is_type_checking(node: ast.If) -> bool:
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def imports_of(path: Path, module: str | None = None) -> list[tuple[int, str]]:
+    """(line, module) for every import of ours in ``path`` (named ``module``, by default
+    from its place in the repository), lazy ones included."""
+    module = module or module_name(path)
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    tree = ast.parse(path.read_text(), str(path))
+    skip: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and _is_type_checking(node):
+            skip.update(id(n) for child in node.body for n in ast.walk(child))
+    found: list[tuple[int, str]] = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([base] if base else []))
+            # ``from pkg import mod`` names the submodule when there is one
+            for a in node.names:
+                sub = f"{base}.{a.name}"
+                is_module = (REPO / Path(*sub.split("."))).with_suffix(".py").exists() or (
+                    REPO / Path(*sub.split(".")) / "__init__.py").exists()
+                found.append((node.lineno, sub if is_module else base))
+        elif (isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "import_module"
+              and node.args and isinstance(node.args[0], ast.Constant)
+              and isinstance(node.args[0].value, str)):
+            found.append((node.lineno, node.args[0].value))
+    return [(line, m) for line, m in found if m.split(".")[0] in OURS]
