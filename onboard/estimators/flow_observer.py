@@ -38,8 +38,8 @@ POLE_FACTORS = (1.5, 1.7, 1.9)
 """Default pole placement: the open-loop eigenvalues' real parts (floored at -0.5 1/s for the
 heading integrator) times these factors, re-placed at each step. Fixed poles slower than the
 vehicle's own sway/yaw modes (e.g. -0.6, -0.8, -1.0 against -1.9 and -1.4 for the spheroid)
-need large gains of the wrong sign to slow the dynamics down; measured on
-spheroid-sawtooth, they made the observer diverge after the third heading switch."""
+need large gains of the wrong sign to slow the dynamics down: on spheroid-sawtooth such
+fixed poles make the observer diverge after the third heading switch (measured)."""
 
 
 def ackermann_observer_gain(A: np.ndarray, C: np.ndarray, poles: Sequence[float]) -> np.ndarray:

@@ -73,7 +73,7 @@ NET_WEIGHT_REGRESSORS = ("sin(theta)", "cos(theta)sin(phi)")
 ROV's heave): near level flight it is ~1, the heave equation's constant, whose coefficient
 carries every steady vertical force a generic (mode (b)) model lacks, not only the net
 weight (vertical thrust against a push or a tether, lift at a trim angle); a net-weight
-prior on it made the unidentified spheroid and BlueROV2 runs worse (docs/current.md,
+prior on it makes the unidentified spheroid and BlueROV2 runs worse (docs/current.md,
 "Net-weight prior")."""
 
 
