@@ -39,9 +39,12 @@ class ReadStats:
     """Records by message type (MAVLink name, NMEA sentence, ...), for summaries."""
 
     def reject(self, reason: str) -> None:
+        """Count one rejection for ``reason``."""
         self.rejected[reason] += 1
 
     def as_dict(self) -> dict:
+        """The counts as a JSON-serializable dict (``records``, ``samples``, ``rejected`` and
+        ``by_type``, keys sorted)."""
         return {
             "records": self.records,
             "samples": self.samples,

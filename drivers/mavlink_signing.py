@@ -163,6 +163,8 @@ class VerdictLog:
 
     def check(self, buf: bytes | bytearray, start: int, crc_end: int, sysid: int,
               compid: int, inc_flags: int) -> str | None:
+        """The live verifier's verdict (:meth:`SignatureVerifier.check`), noting a rejection
+        with the frame's index in the chunk and its CRC-16."""
         reason = self.verifier.check(buf, start, crc_end, sysid, compid, inc_flags)
         if reason is not None:
             self.rejected.append((self.checks, reason, _frame_crc(buf, crc_end)))
@@ -203,6 +205,8 @@ class VerdictPlayer:
         self.bad = False
 
     def load(self, verdicts: Verdicts | None) -> None:
+        """Take the recorded verdicts of the chunk about to be parsed (None: every frame was
+        accepted live)."""
         self.checks = 0
         if verdicts is None:
             self.expected = self.rejected = None
@@ -216,6 +220,8 @@ class VerdictPlayer:
 
     def check(self, buf: bytes | bytearray, start: int, crc_end: int, sysid: int,
               compid: int, inc_flags: int) -> str | None:
+        """The recorded verdict of the next frame of the chunk: None (accepted), its recorded
+        reason, or ``verdict_mismatch`` when the frame's CRC-16 is not the recorded one."""
         k = self.checks
         self.checks = k + 1
         if self.rejected is None:

@@ -75,6 +75,9 @@ class SampleParser:
         self._dec = msgspec.msgpack.Decoder(AnySample)
 
     def feed(self, data: bytes, t_rx: float) -> list[Sample]:
+        """The sample encoded in ``data`` (one per chunk), with the parser's ``source`` when it
+        has none; nothing for undecodable data (rejection ``decode``) or a non-finite value
+        (``nan``). ``t_rx`` is unused: the sample carries its own time."""
         self.stats.records += 1
         try:
             s = self._dec.decode(data)

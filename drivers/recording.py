@@ -105,6 +105,7 @@ _vdec = msgspec.msgpack.Decoder(Verdicts)
 
 
 def encode_verdicts(v: Verdicts) -> bytes:
+    """The payload of a ``verdicts`` record (:func:`decode_verdicts` reads it back)."""
     return _enc.encode(v)
 
 
@@ -165,11 +166,13 @@ class RecordingWriter:
         self.bytes_written += len(frame)
 
     def flush(self) -> None:
+        """Write the buffered frames to the file (and to the disk when ``fsync``)."""
         self._f.flush()
         if self._fsync:
             os.fsync(self._f.fileno())
 
     def close(self) -> None:
+        """Flush and close the file; closing it again does nothing."""
         if not self._f.closed:
             self.flush()
             self._f.close()
@@ -182,6 +185,8 @@ class RecordingWriter:
 
 
 def is_recording(path: str | Path) -> bool:
+    """Whether ``path`` starts with the file magic of a known recording version (False when it
+    cannot be read)."""
     try:
         with open(path, "rb") as f:
             return file_version(f.read(len(FILE_MAGIC))) is not None

@@ -368,9 +368,11 @@ class TlogWriter:
         self._f.write(_TS.pack(round(t * 1e6)) + bytes(mav_msg_bytes))
 
     def flush(self) -> None:
+        """Write the buffered records to the file."""
         self._f.flush()
 
     def close(self) -> None:
+        """Close the file."""
         self._f.close()
 
     def __enter__(self) -> "TlogWriter":

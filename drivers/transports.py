@@ -308,6 +308,7 @@ class UdpTransport(Transport):
 
     @property
     def local_port(self) -> int:
+        """The UDP port listened on."""
         return self.spec.port
 
 

@@ -287,6 +287,8 @@ class NmeaEncoder:
         self.epoch_s = epoch_s
 
     def encode(self, samples: Sequence[Sample]) -> list[bytes]:
+        """The frames for ``samples`` (one instant, in order); samples this encoder has no
+        sentence or report for give none."""
         from drivers import nmea
 
         out: list[bytes] = []
@@ -313,6 +315,8 @@ class DvlJsonEncoder:
         self._t_last: dict[str, float] = {}
 
     def encode(self, samples: Sequence[Sample]) -> list[bytes]:
+        """The report lines for ``samples`` (one instant, in order); other sample types give
+        none."""
         from drivers import dvl_json
 
         out: list[bytes] = []
@@ -346,6 +350,8 @@ class Pd6Encoder:
         self._depth = 0.0
 
     def encode(self, samples: Sequence[Sample]) -> list[bytes]:
+        """The PD6 lines for ``samples`` (one instant, in order); Attitude and Depth are kept
+        for the next ensemble and give none."""
         from drivers import pd6
 
         out: list[bytes] = []
@@ -375,9 +381,13 @@ class Pd6Encoder:
 class Sink(Protocol):
     """Where frames go. ``t`` is the simulation time of the frame (s)."""
 
-    def write(self, t: float, frame: bytes) -> None: ...
+    def write(self, t: float, frame: bytes) -> None:
+        """Send or store one frame of simulation time ``t`` (s); never blocks for long."""
+        ...
 
-    def close(self) -> None: ...
+    def close(self) -> None:
+        """Release the file or socket."""
+        ...
 
 
 class TlogSink:
@@ -392,9 +402,11 @@ class TlogSink:
         self._w = TlogWriter(self.path)
 
     def write(self, t: float, frame: bytes) -> None:
+        """Append the record ``[epoch_s + t as big-endian us][frame]``."""
         self._w.write(self.epoch_s + t, frame)
 
     def close(self) -> None:
+        """Close the log."""
         self._w.close()
 
 
@@ -405,9 +417,11 @@ class FileSink:
         self._f = open(path, "wb", buffering=1 << 16)
 
     def write(self, t: float, frame: bytes) -> None:
+        """Append ``frame`` (``t`` is not stored)."""
         self._f.write(frame)
 
     def close(self) -> None:
+        """Close the file."""
         self._f.close()
 
 
@@ -421,12 +435,14 @@ class UdpSink:
         self.dropped = 0
 
     def write(self, t: float, frame: bytes) -> None:
+        """Send ``frame`` as one datagram (a failed send is dropped and counted)."""
         try:
             self.sock.sendto(frame, self.addr)
         except OSError:  # nobody listening (ICMP refused) or buffer full: a lost datagram
             self.dropped += 1
 
     def close(self) -> None:
+        """Close the socket."""
         self.sock.close()
 
 
@@ -465,6 +481,8 @@ class TcpServerSink:
         return bool(self.clients)
 
     def write(self, t: float, frame: bytes) -> None:
+        """Send ``frame`` to every connected client, accepting new ones first; a client whose
+        send fails is dropped and counted."""
         self.accept()
         for c in list(self.clients):
             try:
@@ -475,6 +493,7 @@ class TcpServerSink:
                 c.close()
 
     def close(self) -> None:
+        """Close every client and the listening socket."""
         for c in self.clients:
             c.close()
         self.server.close()
@@ -521,6 +540,8 @@ class PtySink:
             q.popleft()
 
     def write(self, t: float, frame: bytes) -> None:
+        """Queue ``frame`` for the terminal and write what it takes now; a frame that does not
+        fit within ``max_pending`` is dropped whole and counted."""
         if self._pending_bytes + len(frame) > self.max_pending:
             self.flush()
             if self._pending_bytes + len(frame) > self.max_pending:
@@ -572,6 +593,8 @@ class Channel:
     sinks: list[Sink]
 
     def emit(self, t: float, samples: Sequence[Sample]) -> int:
+        """Encode one instant's ``samples`` and write every frame to every sink; returns the
+        number of frames."""
         frames = self.encoder.encode(samples)
         for f in frames:
             for s in self.sinks:
@@ -579,5 +602,6 @@ class Channel:
         return len(frames)
 
     def close(self) -> None:
+        """Close every sink."""
         for s in self.sinks:
             s.close()

@@ -122,18 +122,23 @@ class WorldView:
 
     @property
     def truth(self) -> TruthRecord:
+        """The true state at ``t`` (built on first use)."""
         if self._truth is None:
             self._truth = self._truth_fn()
         return self._truth
 
     @property
     def specific_force(self) -> tuple[float, float, float]:
+        """What an ideal accelerometer measures at ``t`` (m/s^2, body FRD; level and at rest
+        without a plant)."""
         if self._sf is None:
             self._sf = self._sf_fn() if self._sf_fn is not None else (0.0, 0.0, -GRAVITY)
         return self._sf
 
     @property
     def v_ned(self) -> tuple[float, float, float]:
+        """The true velocity over ground (m/s, NED), from the truth's body velocity when not
+        given."""
         if self._v_ned is None:
             tr = self.truth
             self._v_ned = body_to_ned(tr.roll, tr.pitch, tr.yaw, (tr.u, tr.v, tr.w))
@@ -141,6 +146,7 @@ class WorldView:
 
     @property
     def altitude(self) -> float | None:
+        """The true range to the bottom (m), None without a bottom."""
         if self._altitude is None and self._bottom is not None:
             self._altitude = self._bottom - self.truth.down
         return self._altitude
@@ -178,10 +184,16 @@ class _Base:
         if name:
             self.name = name
 
+    def measure(self, world: WorldView) -> list[Sample]:
+        """Samples measured at ``world.t`` (may be empty: outage, underwater, latency)."""
+        raise NotImplementedError
+
     def due(self, t: float) -> list[Sample]:
+        """Samples measured earlier whose report time has come (latency); usually []."""
         return []
 
     def error_state(self) -> dict[str, float]:
+        """The sensor's current hidden error states, for the truth file (``sensor.*``)."""
         return {}
 
 

@@ -90,23 +90,33 @@ class Inputs(_Strict):
 
 
 class GnssNoise(_Strict):
+    """``[sensors.gnss]``: position (m) and velocity (m/s) noise, one sigma; rate (Hz)."""
+
     position_std_m: float = 2.0
     velocity_std_mps: float = 0.1
     rate_hz: float = 5.0
 
 
 class ImuNoise(_Strict):
+    """``[sensors.imu]``: accelerometer (m/s^2) and gyro (rad/s) noise, one sigma; rate
+    (Hz)."""
+
     accel_std_mps2: float = 0.05
     gyro_std_rps: float = 0.005
     rate_hz: float = 50.0
 
 
 class CompassNoise(_Strict):
+    """``[sensors.compass]``: heading noise (rad, one sigma); rate (Hz)."""
+
     heading_std_rad: float = 0.02
     rate_hz: float = 10.0
 
 
 class DvlNoise(_Strict):
+    """``[sensors.dvl]``: velocity noise (m/s, one sigma), the figure of merit and the
+    altitude (m) above which a report is not fused; rate (Hz)."""
+
     velocity_std_mps: float = 0.01
     max_fom_mps: float = 0.05
     """Reports with a larger figure of merit are not fused."""
@@ -115,6 +125,10 @@ class DvlNoise(_Strict):
 
 
 class DepthNoise(_Strict):
+    """``[sensors.depth]``: depth noise (m, one sigma), the depth taken as the surface,
+    and the water density (kg/m^3) and surface pressure (Pa) that turn a pressure into a
+    depth."""
+
     depth_std_m: float = 0.02
     surface_depth_m: float = 0.3
     """Shallower than this the vehicle is at the surface and GNSS is accepted."""
@@ -158,7 +172,6 @@ class CsvFormat(_Strict):
     """Columns that form ActuatorOutputs.pwm_us, channel 1 first."""
     run_column: str = ""
     """Optional column naming the run; a directory of CSV files uses the file name."""
-    # Added for drivers/csvlog.py (all optional; defaults keep older files valid):
     alt_m: str = ""
     """Column of the GNSS altitude (m), put into GnssFix.alt_m."""
     heading_reference: Literal["true", "magnetic"] = "true"
@@ -180,6 +193,9 @@ class CsvFormat(_Strict):
 
 
 class ZenohOut(_Strict):
+    """``[service.zenoh]``: estimates published over Zenoh: the session mode, the
+    endpoints to connect to and listen on, the key prefix."""
+
     enabled: bool = True
     mode: Literal["peer", "client", "router"] = "peer"
     connect: list[str] = []
@@ -224,6 +240,9 @@ class SourceConfig(_Strict):
 
 
 class RecorderConfig(_Strict):
+    """``[service.recorder]``: the recording of every input (directory, flush interval
+    in s, file rotation size and total size kept, in MB)."""
+
     enabled: bool = True
     directory: str = "recordings"
     flush_interval_s: float = 0.5

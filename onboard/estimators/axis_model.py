@@ -62,6 +62,8 @@ class AxisModel:
         return self.gain * command + self.offset
 
     def to_dict(self) -> dict[str, float]:
+        """The model as a JSON-serializable dict (``a``, ``gain``, ``offset``, ``rmse``,
+        ``fit_ratio``)."""
         return {"a": self.a, "gain": self.gain, "offset": self.offset,
                 "rmse": self.rmse, "fit_ratio": self.fit_ratio}
 

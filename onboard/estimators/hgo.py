@@ -163,6 +163,7 @@ class ChainHGO:
 
     @property
     def gamma(self) -> float:
+        """The current high gain ``gamma`` of the gain law."""
         return self.law.gamma
 
     def _rhs(self, x: np.ndarray, y: np.ndarray, u: Any, G: np.ndarray) -> np.ndarray:

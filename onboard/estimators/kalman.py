@@ -177,4 +177,5 @@ class IncrementKF:
 
     @property
     def std_v(self) -> float:
+        """One-sigma uncertainty of the rate ``v`` (m/s or rad/s), ``sqrt(P_vv)``."""
         return math.sqrt(self.P[3])

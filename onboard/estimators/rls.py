@@ -24,8 +24,8 @@ one noisy sample throws the parameters away. Two guards keep ``P`` bounded:
   without any excitation assumption. The defaults scale with ``p0``:
   ``delta = (1/lambda - 1) / p_max`` (the equilibrium of an unexcited direction is then
   ``p_max``) and ``beta = (1 - lambda) p_min``. A fixed ``delta`` ignores the scale: with
-  ``p0 = 1e6`` (needed when regressors are ~0.01), ``delta = 1e-6`` pulled ``P`` to ~1 and
-  froze the parameters at their initial values (measured, spheroid yaw channel).
+  ``p0 = 1e6`` (needed when regressors are ~0.01), ``delta = 1e-6`` pulls ``P`` to ~1 and
+  freezes the parameters at their initial values (the spheroid's yaw channel).
 
 The residual variance ``sigma2`` is tracked with the same forgetting, so that the caller can
 use the model error as process noise (the current pipeline does, for honest uncertainty).
@@ -278,10 +278,12 @@ class RecursiveLeastSquares:
 
     @property
     def theta(self) -> np.ndarray:
+        """The parameter estimate, shape (n,) (a new array)."""
         return np.array(self._theta)
 
     @property
     def P(self) -> np.ndarray:
+        """The parameter covariance in units of ``sigma2``, shape (n, n) (a new array)."""
         return np.array(unpack(self._P, self.n))
 
     @P.setter

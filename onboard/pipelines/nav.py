@@ -86,14 +86,18 @@ class NavTrack:
         self._values["depth"] = (s.t, s.depth_m)
 
     def health(self) -> Mapping[str, float]:
+        """Nothing: the measured track has no filter to report on."""
         return {}
 
     def get_state(self) -> dict[str, Any]:
+        """Nothing: the measured track keeps no adaptive state."""
         return {}
 
     def set_state(self, state: Mapping[str, Any]) -> None:
+        """Nothing to restore (see :meth:`get_state`)."""
         return None
 
 
 def create(cfg: Config) -> NavTrack:
+    """Pipeline ``nav`` (every vehicle class)."""
     return NavTrack()

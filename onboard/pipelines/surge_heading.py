@@ -199,6 +199,8 @@ class AxisFilter:
         return self.model.a
 
     def forecast_input(self, command: float | None) -> float:
+        """The input ``u`` (m/s^2 or rad/s^2) of the forecast over the step just ended, given
+        the mean normalized command over it (None without one); also kept as ``self.u``."""
         raise NotImplementedError
 
     def input_ahead(self, command: float | None) -> float:
@@ -784,6 +786,8 @@ class SurgeHeadingPipeline:
                 "heading": {"model": model(self.yaw.model)}}
 
     def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore the axis models of :meth:`get_state`; a model that is missing, malformed,
+        not finite or not damped (``a <= 0``) is ignored."""
         self._psi_s = None
         for nm, ax in (("surge", self.surge), ("heading", self.yaw)):
             m = state.get(nm, {}).get("model") if isinstance(state.get(nm), dict) else None

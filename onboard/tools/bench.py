@@ -61,7 +61,8 @@ KEYS: tuple[str, ...] = (
     "mpc_solve_p99_ms",
     "pipeline_step_us",
 )
-"""The JSON keys of ``onboard bench --json``, in table order (a contract: issue 9)."""
+"""The JSON keys of ``onboard bench --json``, in table order (a contract: tools
+reading the JSON rely on these names)."""
 
 GOALS: dict[str, tuple[str, float | None]] = {
     "replay_vs_pymavlink_parse": ("<=", 0.5),
@@ -104,6 +105,8 @@ class Settings:
 
     @classmethod
     def from_env(cls) -> "Settings":
+        """The settings from the environment: ``ONBOARD_BENCH_FAST`` (a short run),
+        ``ONBOARD_BENCH_MINUTES`` and ``ONBOARD_BENCH_REPEATS`` (see the module docstring)."""
         fast = os.environ.get("ONBOARD_BENCH_FAST", "") not in ("", "0")
         s = cls(fast=True, minutes=20 / 60, repeats=1, aie_steps=500, aie_repeats=1,
                 mpc_solves=5, service_s=1.0, pipeline_sim_s=3.0) if fast else cls()
@@ -123,6 +126,7 @@ class Report:
     detail: dict[str, Any] = field(default_factory=dict)
 
     def missing(self, keys: Iterable[str], reason: str) -> None:
+        """Report ``keys`` as not measured (null in the JSON), with ``reason``."""
         for k in keys:
             self.values[k] = None
             self.reasons[k] = reason
