@@ -98,12 +98,17 @@ def _zyx_entries(cr: float, sr: float, cp: float, sp: float, cy: float,
             -sp, cp * sr, cp * cr)
 
 
+def _zyx(roll: float, pitch: float, yaw: float) -> tuple[float, ...]:
+    """:func:`_zyx_entries` of the angles (rad)."""
+    return _zyx_entries(math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
+                        math.cos(yaw), math.sin(yaw))
+
+
 def euler_to_matrix(roll: float, pitch: float, yaw: float) -> Array:
     """Body-to-earth rotation from ZYX Euler angles (rad), Fossen eq. 2.18 (the ESESO
     paper's ``R_Theta``): the reference the plain-float functions below are tested
     against."""
-    e = _zyx_entries(math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
-                     math.cos(yaw), math.sin(yaw))
+    e = _zyx(roll, pitch, yaw)
     return np.array((e[0:3], e[3:6], e[6:9]))
 
 
@@ -111,9 +116,7 @@ def body_to_ned(roll: float, pitch: float, yaw: float,
                 v: Sequence[float]) -> tuple[float, float, float]:
     """``R(Theta) v``: a body (FRD) vector in the earth (NED) frame, on plain floats
     (several times faster than a numpy product for one vector)."""
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _zyx_entries(
-        math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
-        math.sin(yaw))
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _zyx(roll, pitch, yaw)
     x, y, z = v
     return (r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z,
             r20 * x + r21 * y + r22 * z)
@@ -122,9 +125,7 @@ def body_to_ned(roll: float, pitch: float, yaw: float,
 def ned_to_body(roll: float, pitch: float, yaw: float,
                 v: Sequence[float]) -> tuple[float, float, float]:
     """``R(Theta)^T v``: an earth (NED) vector in the body (FRD) frame, on plain floats."""
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _zyx_entries(
-        math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
-        math.sin(yaw))
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _zyx(roll, pitch, yaw)
     n, e, d = v
     return (r00 * n + r10 * e + r20 * d, r01 * n + r11 * e + r21 * d,
             r02 * n + r12 * e + r22 * d)
