@@ -45,6 +45,7 @@ import msgspec
 import numpy as np
 
 from onboard.core import config as onboard_config
+from onboard.core.geo import wrap_pi_array
 from onboard.core.messages import ActuatorCommand, ActuatorOutputs, EstimateRecord
 from onboard.engine import Engine
 from sitl.controllers import CircleReference, ControlOutput, make_controller
@@ -317,7 +318,7 @@ def _report(controller: str, duration: float, seed: int, sc: CircleScenario, log
     perr = np.linalg.norm(np.asarray(log.est_pos) - pos, axis=1)
     verr = np.linalg.norm(np.asarray(log.vel_est) - np.asarray(log.vel_true), axis=1)
     att = np.asarray(log.att_est) - np.asarray(log.att_true)
-    att = (att + np.pi) % (2 * np.pi) - np.pi
+    att = wrap_pi_array(att)
     bias = np.asarray(log.bias_est) - np.asarray(log.bias_true)
     solve_ms = np.asarray(log.solve) * 1e3
     solve_ms = solve_ms[np.isfinite(solve_ms)]

@@ -37,6 +37,7 @@ import msgspec
 import pytest
 
 from drivers.recording import read_records
+from onboard.core.geo import wrap_pi
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.tools.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
 from tests.helpers.service_config import service_config
@@ -50,10 +51,6 @@ TIMEOUT = 180.0
 
 
 # --------------------------------------------------------------------------- helpers
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _fly(scenario: str, duration_s: float, tmp_path: Path, speed: float = SPEED):
@@ -216,7 +213,7 @@ def _position_errors(series):
 
 
 def _heading_errors_deg(series):
-    return [(t, abs(math.degrees(_wrap(v["heading"] - tr.yaw)))) for t, v, tr in series
+    return [(t, abs(math.degrees(wrap_pi(v["heading"] - tr.yaw)))) for t, v, tr in series
             if "heading" in v]
 
 

@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from onboard.core.config import from_dict
+from onboard.core.geo import wrap_pi
 from onboard.core.messages import ActuatorCommand, Attitude, DvlVelocity, GnssFix, Heading, Sample
 from onboard.core.so3 import euler_to_matrix
 from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
@@ -84,9 +85,9 @@ def simulate_boat(duration: float = 600.0, current: tuple[float, float] = (0.3, 
             east += h * vg[1]
         k += 1
         samples.append(ActuatorCommand(t=t, throttle=x.n, rudder_rad=x.dr))
-        samples.append(Heading(t=t, heading_rad=_wrap(psi + rng.normal(0, 0.01))))
+        samples.append(Heading(t=t, heading_rad=wrap_pi(psi + rng.normal(0, 0.01))))
         samples.append(Attitude(t=t, roll_rad=0.0, pitch_rad=0.0,
-                                yaw_rad=_wrap(psi + rng.normal(0, 0.01)),
+                                yaw_rad=wrap_pi(psi + rng.normal(0, 0.01)),
                                 yaw_rate_rps=r + rng.normal(0, 0.005)))
         if k % 2 == 0:
             vgn = vg + rng.normal(0, 0.05, 2)
@@ -146,7 +147,7 @@ def simulate_torpedo(duration: float = 600.0,
         R = euler_to_matrix(x.roll, x.pitch, psi)
         samples.append(ActuatorCommand(t=t, propeller_rpm=x.n * 1000.0, rudder_rad=x.dr,
                                        stern_plane_rad=0.0))
-        samples.append(Attitude(t=t, roll_rad=x.roll, pitch_rad=x.pitch, yaw_rad=_wrap(psi),
+        samples.append(Attitude(t=t, roll_rad=x.roll, pitch_rad=x.pitch, yaw_rad=wrap_pi(psi),
                                 roll_rate_rps=x.p, pitch_rate_rps=x.q, yaw_rate_rps=r))
         if k % 2 == 0:
             if water_track:
@@ -156,10 +157,6 @@ def simulate_torpedo(duration: float = 600.0,
             samples.append(DvlVelocity(t=t, vx=z[0], vy=z[1], vz=z[2],
                                        track="water" if water_track else "bottom"))
         yield t, samples, c
-
-
-def _wrap(a: float) -> float:
-    return math.remainder(a, 2 * math.pi)
 
 
 def current_errors(pipe, gen: Iterator[tuple[float, list[Sample], np.ndarray]],

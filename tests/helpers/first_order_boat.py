@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from onboard.core.geo import LocalFrame
+from onboard.core.geo import LocalFrame, wrap_pi_array
 from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Sample
 
 
@@ -160,11 +160,6 @@ def run_pipelines(samples: list[Sample], pipelines: list, t_ticks: np.ndarray
     return [{c: np.asarray(v) for c, v in o.items()} for o in outs]
 
 
-def wrap(x: np.ndarray) -> np.ndarray:
-    """Angles (rad) wrapped to [-pi, pi)."""
-    return (x + np.pi) % (2 * np.pi) - np.pi
-
-
 def rmse(x: np.ndarray, mask: np.ndarray | None = None) -> float:
     """Root mean square of the finite entries of ``x`` (where ``mask``); NaN if none."""
     m = np.isfinite(x) if mask is None else (np.isfinite(x) & mask)
@@ -178,7 +173,7 @@ def score(sim: SimResult, est: dict[str, np.ndarray], t_min: float = 60.0,
     truth_v = sim.sog if speed_truth == "sog" else sim.speed
     out = {
         "speed": rmse(est["speed"] - truth_v, m),
-        "heading": rmse(wrap(est["heading"] - sim.heading), m),
+        "heading": rmse(wrap_pi_array(est["heading"] - sim.heading), m),
         "yaw_rate": rmse(est["yaw_rate"] - sim.yaw_rate, m),
         "position": rmse(np.hypot(est["north"] - sim.north, est["east"] - sim.east), m),
     }
