@@ -245,3 +245,18 @@ def test_the_real_gpsd_fed_by_gpsfake_gives_the_logged_fixes():
     assert sum(1 for f in fixes if f.h_acc_m is not None) >= 20
     assert all(f.h_acc_m is None or 0.5 < f.h_acc_m < 20.0 for f in fixes)
     assert parser.stats.rejected["no_fix"] >= 1  # the three lost epochs (gpsd: mode 1)
+
+
+def test_a_gpsd_url_needs_the_gpsd_kind(tmp_path):
+    """``onboard run`` refuses a gpsd:// URL with another kind (and kind gpsd without
+    one) in one line, before anything starts."""
+    import argparse
+
+    from onboard.core.config import ConfigError
+    from onboard.service.daemon import main
+
+    for kind, url in (("nmea", "gpsd://127.0.0.1:2947"), ("gpsd", "tcp:127.0.0.1:2947")):
+        cfg = tmp_path / f"{kind}.toml"
+        cfg.write_text(f'[[service.sources]]\nkind = "{kind}"\nurl = "{url}"\n')
+        with pytest.raises(ConfigError, match=r'service.sources\[0\]: kind "gpsd" goes with'):
+            main(argparse.Namespace(config=str(cfg), state_dir=str(tmp_path / "state")))
