@@ -10,7 +10,9 @@ The selector lets exactly one source through per quantity:
   :class:`onboard.core.config.SourcePriorities`); a source's rank is the index of the
   first pattern its name matches, unmatched sources rank after all listed ones (for the
   heading an ``Attitude`` source before a ``Heading`` source: an AHRS yaw before a bare
-  compass), then in the order they first appear, and a pattern starting with ``!``
+  compass; for the velocity a navigation solution's ``VelocityOverGround`` before a
+  receiver's speed and course), then in the order they first appear, and a pattern
+  starting with ``!``
   excludes the sources it matches from the quantity;
 * the first usable sample of a quantity makes its source active, and within ``stale_s``
   of it a better-ranked source that appears takes over at once (the start-up choice);
@@ -26,7 +28,11 @@ The selector lets exactly one source through per quantity:
 ``heading`` with the ``Heading`` samples: one that is the active attitude source but not
 the active heading source passes with ``yaw_selected = False`` (its yaw is not to be used
 as the heading); one that is the active heading source but not the attitude source
-passes as a ``Heading`` sample.
+passes as a ``Heading`` sample. Likewise a ``GnssFix`` with speed and course over ground
+is selected as ``position`` and competes for ``velocity`` with the
+``VelocityOverGround`` samples: the position source's fix loses its ``sog_mps`` and
+``cog_rad`` when another source is the velocity, and a fix whose source is the velocity
+but not the position passes as a ``VelocityOverGround``.
 
 The selector is a pure function of the samples and their times, in the order they are
 pushed: live operation and the replay of its recording make the same choices.
@@ -67,6 +73,9 @@ QUANTITY_OF: dict[type, str] = {
 }
 """The quantity each selected sample class gives (``Pressure`` is selected as the
 ``Depth`` it becomes); other classes (actuators, parameters, ...) pass unselected."""
+
+_PREFERRED = (Attitude, VelocityOverGround)
+"""Sample classes ranked first among the unlisted sources of a quantity."""
 
 QUANTITIES: tuple[str, ...] = ("position", "velocity", "heading", "attitude", "imu",
                                "depth", "dvl", "altitude")
@@ -111,9 +120,10 @@ class _Quantity:
     t_start: float = math.inf
     """Time (s) of the quantity's first choice (its start-up window is ``stale_s``)."""
 
-    def rank_of(self, source: str, ahrs: bool = False) -> float:
-        """The rank of ``source`` (see the module docstring), cached; ``ahrs``: the
-        source sends ``Attitude`` (ranked first among the unlisted heading sources)."""
+    def rank_of(self, source: str, preferred: bool = False) -> float:
+        """The rank of ``source`` (see the module docstring), cached; ``preferred``: the
+        source sends ``Attitude`` or ``VelocityOverGround`` (ranked first among the
+        unlisted sources of the heading or the velocity)."""
         r = self.rank.get(source)
         if r is None:
             r = math.inf if any(p.startswith("!") and pattern_matches(p[1:], source)
@@ -123,7 +133,7 @@ class _Quantity:
                 r = next((float(i) for i, p in enumerate(listed) if pattern_matches(p, source)),
                          None)
                 if r is None:
-                    r = len(listed) + (0.0 if ahrs else 0.5) + 1e-6 * self.order
+                    r = len(listed) + (0.0 if preferred else 0.5) + 1e-6 * self.order
                     self.order += 1
             self.rank[source] = r
         return r
@@ -159,7 +169,22 @@ class SourceSelector:
             return sample
         if cls is Attitude:
             return self._admit_attitude(sample)  # type: ignore[arg-type]
+        if cls is GnssFix:
+            return self._admit_fix(sample)  # type: ignore[arg-type]
         return sample if self._select(self._q[q], sample) else None
+
+    def _admit_fix(self, s: GnssFix) -> Sample | None:
+        pos = self._select(self._q["position"], s)
+        if s.sog_mps is None or s.cog_rad is None:
+            return s if pos else None
+        vel = self._select(self._q["velocity"], s)
+        if pos:
+            return s if vel else msgspec.structs.replace(s, sog_mps=None, cog_rad=None)
+        if vel:
+            return VelocityOverGround(t=s.t, source=s.source,
+                                      v_north_mps=s.sog_mps * math.cos(s.cog_rad),
+                                      v_east_mps=s.sog_mps * math.sin(s.cog_rad))
+        return None
 
     def _admit_attitude(self, s: Attitude) -> Sample | None:
         att = self._select(self._q["attitude"], s)
@@ -174,7 +199,7 @@ class SourceSelector:
     def _select(self, q: _Quantity, s: Sample) -> bool:
         """Update quantity ``q`` with sample ``s``; True if ``s``'s source is active."""
         src, t = s.source, s.t
-        rank = q.rank_of(src, type(s) is Attitude)
+        rank = q.rank_of(src, type(s) in _PREFERRED)
         if rank == math.inf:
             self.standby[(q.name, src)] += 1
             return False

@@ -292,3 +292,33 @@ def test_a_recording_replays_the_live_choices_exactly(tmp_path):
     assert [e for e in again.events if e.startswith("position:")] == events_live
     assert again.selector.standby == live.selector.standby
     assert live.selector.standby[("position", "gnss")] > 10  # the gpsd fixes, held back
+
+
+def test_receiver_speed_and_ekf_velocity_are_one_quantity():
+    """GPS_RAW_INT's speed and course and GLOBAL_POSITION_INT's velocity are two sources
+    of the velocity: with the defaults the fix keeps its position but loses its speed and
+    course while the EKF velocity is fresh; when that stops, the receiver's speed and
+    course are the velocity again (a failover with its event)."""
+    from onboard.core.messages import VelocityOverGround
+
+    sel = SourceSelector(SourcePriorities(stale_s=1.0))
+    gps, ekf = "mavlink:1/GPS_RAW_INT", "mavlink:1/GLOBAL_POSITION_INT"
+
+    def fix(t):
+        return GnssFix(t=t, source=gps, lat_deg=LAT0, lon_deg=LON0, sog_mps=1.0, cog_rad=0.5)
+
+    assert sel.admit(VelocityOverGround(t=1.0, source=ekf, v_north_mps=1.0,
+                                        v_east_mps=0.0)) is not None
+    f = sel.admit(fix(1.1))
+    assert isinstance(f, GnssFix) and f.sog_mps is None and f.cog_rad is None
+    assert f.lat_deg == LAT0  # the position still passes
+    f = sel.admit(fix(2.5))  # the EKF velocity silent for 1.5 s
+    assert isinstance(f, GnssFix) and f.sog_mps == 1.0 and f.cog_rad == 0.5
+    assert sel.active == {"velocity": gps, "position": gps}
+    assert any(e.startswith(f"velocity: {ekf} -> {gps}") for e in sel.events)
+    # a second receiver that is the velocity but not the position gives a velocity sample
+    sel2 = SourceSelector(SourcePriorities(position=["a"], velocity=["b"]))
+    sel2.admit(GnssFix(t=1.0, source="a", lat_deg=LAT0, lon_deg=LON0))
+    v = sel2.admit(GnssFix(t=1.0, source="b", lat_deg=LAT0, lon_deg=LON0, sog_mps=2.0,
+                           cog_rad=math.pi / 2))
+    assert isinstance(v, VelocityOverGround) and abs(v.v_east_mps - 2.0) < 1e-12

@@ -269,6 +269,8 @@ class SourcePriorities(_Strict):
         default_factory=lambda: ["mavlink:GPS_RAW_INT", "mavlink:GPS2_RAW"])
     velocity: list[str] = msgspec.field(
         default_factory=lambda: ["mavlink:GLOBAL_POSITION_INT", "mavlink:LOCAL_POSITION_NED"])
+    """Velocity over ground: ``VelocityOverGround`` samples and the speed and course of
+    ``GnssFix`` samples compete here."""
     heading: list[str] = msgspec.field(
         default_factory=lambda: ["mavlink:ATTITUDE", "mavlink:GLOBAL_POSITION_INT",
                                  "mavlink:VFR_HUD"])
