@@ -10,6 +10,7 @@ mavlink    :class:`drivers.mavlink.MavlinkParser`      MAVLink 1/2 frames (autop
 nmea       :class:`drivers.nmea.NmeaParser`            NMEA 0183 GNSS and heading lines
 dvl-json   :class:`drivers.dvl_json.DvlJsonParser`     Water Linked DVL TCP JSON lines
 pd6        :class:`drivers.pd6.Pd6Parser`              Teledyne RDI PD6 ensembles
+gpsd       :class:`drivers.gpsd.GpsdParser`            gpsd's JSON reports (TPV, ATT, SKY)
 sample     :class:`SampleParser`                       typed samples as msgpack (simulator)
 =========  ==========================================  ===================================
 
@@ -32,7 +33,7 @@ from onboard.core.messages import AnySample, Sample
 if TYPE_CHECKING:
     from drivers.mavlink_signing import SignatureVerifier
 
-KINDS: tuple[str, ...] = ("mavlink", "nmea", "dvl-json", "pd6", "sample")
+KINDS: tuple[str, ...] = ("mavlink", "nmea", "dvl-json", "pd6", "gpsd", "sample")
 """Protocols a source (or a raw record of a recording) may have."""
 
 _CLASSES: dict[str, tuple[str, str]] = {
@@ -40,6 +41,7 @@ _CLASSES: dict[str, tuple[str, str]] = {
     "nmea": ("drivers.nmea", "NmeaParser"),
     "dvl-json": ("drivers.dvl_json", "DvlJsonParser"),
     "pd6": ("drivers.pd6", "Pd6Parser"),
+    "gpsd": ("drivers.gpsd", "GpsdParser"),
 }
 
 

@@ -11,12 +11,27 @@ URLs (:class:`onboard.core.config.SourceConfig`)::
     pty:/tmp/gps                  a pseudo-terminal (or any tty) by path; baud ignored
     udp:0.0.0.0:14551             listen for datagrams on this address
     tcp:192.168.2.95:16171        connect as a TCP client
+    gpsd://127.0.0.1:2947         a TCP client of gpsd that sends ?WATCH on every connection
+                                  (port 2947 when omitted; also gpsd:HOST:PORT)
 
 A port that disappears (USB serial unplugged, the pty's other end closed, TCP peer gone,
 UDP bind failing) never ends the iteration: the transport counts the loss, waits with
 exponential backoff (``backoff_initial_s`` doubling up to ``backoff_max_s``, reset after a
 connection that lasted ``backoff_reset_s``) and opens it again. The only way out is
 cancelling the task that iterates.
+
+Faults that give no error are found too:
+
+* ``idle_timeout_s``: a connection that delivers no byte for this long is closed and
+  opened again (``lost (idle: no data for N s)``): a TCP instrument that power-cycled
+  (its old connection is never closed), a peer that vanished without a FIN (half-open),
+  a serial device re-enumerated behind a ``/dev/serial/by-id`` link that left the old
+  descriptor silent;
+* TCP keepalive (idle :data:`KEEPALIVE_IDLE_S`, then :data:`KEEPALIVE_COUNT` probes every
+  :data:`KEEPALIVE_INTERVAL_S`) and ``TCP_USER_TIMEOUT`` make the kernel drop a half-open
+  connection even without an idle timeout;
+* a serial port is always reopened by the path given, so a ``/dev/serial/by-id/...``
+  link re-pointed to a new device node after a USB re-enumeration is followed.
 
 Serial and pty reads use pyserial to configure the port (raw, non-blocking) and
 ``loop.add_reader`` on its file descriptor, so no thread and no serial_asyncio.
@@ -32,13 +47,34 @@ import socket
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import AsyncIterator, Callable, Literal
+from typing import AsyncIterator, Awaitable, Callable, Literal, TypeVar
 
+from drivers.gpsd import DEFAULT_PORT, WATCH
+
+T = TypeVar("T")
 Clock = Callable[[], float]
 Chunk = tuple[bytes, float]
 
 READ_SIZE = 65536
 """Largest read per wake-up (bytes)."""
+GPSD_PORT = DEFAULT_PORT
+"""gpsd's TCP port, when a gpsd URL gives none."""
+GPSD_WATCH = WATCH
+"""What a gpsd client sends to receive JSON reports (gpsd_json(5); drivers/gpsd.py)."""
+KEEPALIVE_IDLE_S = 5
+"""TCP keepalive: seconds of silence before the first probe."""
+KEEPALIVE_INTERVAL_S = 2
+"""TCP keepalive: seconds between probes."""
+KEEPALIVE_COUNT = 3
+"""TCP keepalive: unanswered probes before the kernel drops the connection."""
+USER_TIMEOUT_MS = 10000
+"""TCP_USER_TIMEOUT: how long sent data may stay unacknowledged (ms)."""
+DEFAULT_IDLE_TIMEOUT_S = {"tcp": 10.0, "gpsd": 10.0}
+"""The idle timeout when the configuration gives none, per scheme (others: never)."""
+
+
+class IdleTimeout(OSError):
+    """A connection delivered nothing for its idle timeout."""
 
 
 class TransportUrlError(ValueError):
@@ -49,7 +85,7 @@ class TransportUrlError(ValueError):
 class TransportSpec:
     """A parsed source URL."""
 
-    scheme: Literal["serial", "pty", "udp", "tcp"]
+    scheme: Literal["serial", "pty", "udp", "tcp", "gpsd"]
     path: str = ""
     host: str = ""
     port: int = 0
@@ -60,6 +96,8 @@ class TransportSpec:
             return f"serial:{self.path}:{self.baud}"
         if self.scheme == "pty":
             return f"pty:{self.path}"
+        if self.scheme == "gpsd":
+            return f"gpsd://{self.host}:{self.port}"
         return f"{self.scheme}:{self.host}:{self.port}"
 
 
@@ -78,7 +116,11 @@ def parse_url(url: str) -> TransportSpec:
         return TransportSpec("serial", path=path, baud=b)
     if scheme == "pty":
         return TransportSpec("pty", path=rest)
-    if scheme in ("udp", "tcp"):
+    if scheme == "gpsd":
+        rest = rest.removeprefix("//")
+        if not rest.rpartition(":")[2].isdigit():  # no port given
+            rest = f"{rest or 'localhost'}:{GPSD_PORT}"
+    if scheme in ("udp", "tcp", "gpsd"):
         host, _, port = rest.rpartition(":")
         try:
             p = int(port)
@@ -87,7 +129,7 @@ def parse_url(url: str) -> TransportSpec:
         if not host or not 0 <= p <= 65535:
             raise TransportUrlError(f"{url!r}: expected {scheme}:HOST:PORT")
         return TransportSpec(scheme, host=host.strip("[]"), port=p)  # type: ignore[arg-type]
-    raise TransportUrlError(f"{url!r}: unknown scheme {scheme!r} (serial, pty, udp, tcp)")
+    raise TransportUrlError(f"{url!r}: unknown scheme {scheme!r} (serial, pty, udp, tcp, gpsd)")
 
 
 @dataclass
@@ -116,8 +158,14 @@ class Transport:
     def __init__(self, spec: TransportSpec, *, clock: Clock = time.monotonic,
                  backoff_initial_s: float = 0.1, backoff_max_s: float = 5.0,
                  backoff_reset_s: float = 5.0, queue_size: int = 1024,
-                 on_event: Callable[[str], None] | None = None) -> None:
+                 on_event: Callable[[str], None] | None = None,
+                 idle_timeout_s: float | None = None) -> None:
+        """``idle_timeout_s``: close and reopen a connection silent this long (s); None:
+        :data:`DEFAULT_IDLE_TIMEOUT_S` of the scheme; 0: never."""
         self.spec = spec
+        if idle_timeout_s is None:
+            idle_timeout_s = DEFAULT_IDLE_TIMEOUT_S.get(spec.scheme, 0.0)
+        self.idle_timeout_s = idle_timeout_s
         self.clock = clock
         self.backoff_initial_s = backoff_initial_s
         self.backoff_max_s = backoff_max_s
@@ -157,6 +205,16 @@ class Transport:
             await asyncio.sleep(delay)
             delay = min(delay * 2.0, self.backoff_max_s)
 
+    async def _idle(self, aw: Awaitable[T]) -> T:
+        """Await ``aw`` for at most ``idle_timeout_s`` (when set); raise IdleTimeout."""
+        if self.idle_timeout_s > 0:
+            try:
+                return await asyncio.wait_for(aw, self.idle_timeout_s)
+            except asyncio.TimeoutError:
+                raise IdleTimeout(errno.ETIMEDOUT,
+                                  f"idle: no data for {self.idle_timeout_s:g} s") from None
+        return await aw
+
     def _connected(self) -> None:
         self.stats.connected = True
         self.stats.connects += 1
@@ -174,6 +232,8 @@ class Transport:
 
 
 def _describe(err: BaseException) -> str:
+    if isinstance(err, IdleTimeout):
+        return err.strerror
     if isinstance(err, OSError) and err.errno is not None:
         return f"{errno.errorcode.get(err.errno, err.errno)}: {err.strerror}"
     return str(err) or type(err).__name__
@@ -256,7 +316,7 @@ class SerialTransport(Transport):
         self._connected()
         try:
             while True:
-                data, t_rx = await box.get()
+                data, t_rx = await self._idle(box.get())
                 yield self._count(data, t_rx)
         finally:
             loop.remove_reader(fd)
@@ -312,25 +372,44 @@ class UdpTransport(Transport):
         return self.spec.port
 
 
+def set_keepalive(sock: socket.socket) -> None:
+    """TCP_NODELAY, keepalive probes (:data:`KEEPALIVE_IDLE_S`, :data:`KEEPALIVE_INTERVAL_S`,
+    :data:`KEEPALIVE_COUNT`) and ``TCP_USER_TIMEOUT`` (:data:`USER_TIMEOUT_MS`) where the
+    platform has them, so that the kernel drops a half-open connection."""
+    opts = [(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1),
+            (socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)]
+    for name, value in (("TCP_KEEPIDLE", KEEPALIVE_IDLE_S), ("TCP_KEEPINTVL", KEEPALIVE_INTERVAL_S),
+                        ("TCP_KEEPCNT", KEEPALIVE_COUNT), ("TCP_USER_TIMEOUT", USER_TIMEOUT_MS)):
+        if hasattr(socket, name):
+            opts.append((socket.IPPROTO_TCP, getattr(socket, name), value))
+    for level, opt, value in opts:
+        try:
+            sock.setsockopt(level, opt, value)
+        except OSError:
+            pass
+
+
 class TcpTransport(Transport):
-    """A TCP client; reconnects when the server goes away."""
+    """A TCP client; reconnects when the server goes away, goes silent for
+    ``idle_timeout_s`` or stops answering keepalive probes (:func:`set_keepalive`)."""
 
     connect_timeout_s = 5.0
+    greeting = b""
+    """Bytes sent on every new connection (the gpsd transport's WATCH request)."""
 
     async def _session(self) -> AsyncIterator[Chunk]:
         reader, writer = await asyncio.wait_for(
             asyncio.open_connection(self.spec.host, self.spec.port), self.connect_timeout_s)
+        sock = writer.get_extra_info("socket")
+        if sock is not None:
+            set_keepalive(sock)
         try:
-            sock = writer.get_extra_info("socket")
-            if sock is not None:
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
-        except OSError:
-            pass
-        self._connected()
-        try:
+            if self.greeting:
+                writer.write(self.greeting)
+                await asyncio.wait_for(writer.drain(), self.connect_timeout_s)
+            self._connected()
             while True:
-                data = await reader.read(READ_SIZE)
+                data = await self._idle(reader.read(READ_SIZE))
                 if not data:
                     return
                 yield self._count(data, self.clock())
@@ -342,9 +421,16 @@ class TcpTransport(Transport):
                 pass
 
 
+class GpsdTransport(TcpTransport):
+    """A client of gpsd: a TCP connection that asks for JSON reports (:data:`GPSD_WATCH`)
+    on every (re)connection; the reports are parsed by :mod:`drivers.gpsd`."""
+
+    greeting = GPSD_WATCH
+
+
 def open_transport(url: str, **kwargs: object) -> Transport:
     """The transport for a source URL; ``kwargs`` go to :class:`Transport`."""
     spec = parse_url(url)
     cls = {"serial": SerialTransport, "pty": SerialTransport, "udp": UdpTransport,
-           "tcp": TcpTransport}[spec.scheme]
+           "tcp": TcpTransport, "gpsd": GpsdTransport}[spec.scheme]
     return cls(spec, **kwargs)  # type: ignore[arg-type]

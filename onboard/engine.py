@@ -5,7 +5,8 @@ One engine serves live operation and replay (architecture.md §3):
 * :meth:`Engine.push` checks a sample (:mod:`onboard.validate`), counts a rejection with
   its reason, converts pressure to depth, tracks surface/submerged mode (GNSS is accepted
   only at the surface), maps raw actuator outputs to a normalized command
-  (:mod:`onboard.inputs`) and queues the sample for the next tick;
+  (:mod:`onboard.inputs`), lets through only the active source of each quantity
+  (:mod:`onboard.sources`) and queues the sample for the next tick;
 * :meth:`Engine.tick` hands each pipeline the samples queued since the previous tick and
   collects its estimates as :class:`~onboard.core.messages.EstimateRecord`.
 
@@ -36,6 +37,7 @@ from onboard.core.messages import (
 from onboard.inputs import InputMapper
 from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline
+from onboard.sources import SourceSelector
 from onboard.validate import checker_for, sample_type
 
 GRAVITY = 9.80665
@@ -93,6 +95,8 @@ class Engine:
         """Human-readable events (pipeline restarts, stale streams) for the health
         channel; each is in one :meth:`health` record (the next after it happened)."""
         self._events_reported = 0
+        self.selector = SourceSelector(cfg.sources, self.events)
+        """One source per quantity (``[sources]``); its switches are events."""
         self.stale: set[tuple[str, str]] = set()
         """The sample streams now stale (see :data:`STALE_AFTER_S`)."""
         depth_cfg = cfg.sensors.depth
@@ -149,7 +153,10 @@ class Engine:
         if self.t_first is None:
             self.t_first = t
         self.accepted[key] += 1
-        self._pending.append(sample)
+        chosen = self.selector.admit(sample)
+        if chosen is None:  # another source of its quantity is active
+            return True
+        self._pending.append(chosen)
         if cls in _RAW_ACTUATORS and self.mapper.active:
             cmd = self.mapper.map(sample)
             if cmd is not None:
@@ -164,6 +171,7 @@ class Engine:
             batch.sort(key=_sample_time)  # stable: arrival order breaks ties
         t_sensor = batch[-1].t if batch else None
         vehicle = self.cfg.vehicle.id
+        sources = self.selector.active  # replaced, never mutated, on a switch
         records = []
         for i, p in enumerate(self.pipelines):
             try:
@@ -179,7 +187,8 @@ class Engine:
             std = {std_names[k]: v for k, v in values.items() if k in std_names} \
                 if std_names else {}
             rec = EstimateRecord(vehicle=vehicle, pipeline=p.name, t=t,
-                                 values=dict(values), std=std, t_sensor=t_sensor)
+                                 values=dict(values), std=std, t_sensor=t_sensor,
+                                 sources=sources)
             self.latest[p.name] = rec
             records.append(rec)
         self._ticks += 1
@@ -219,7 +228,8 @@ class Engine:
         rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
         return HealthRecord(vehicle=self.cfg.vehicle.id, t=t, rates_hz=rates_hz or {},
                             rejected=rejected, innovations=innovations, nis=nis,
-                            events=(events or []) + self._new_events(), mode=self.mode)
+                            events=(events or []) + self._new_events(), mode=self.mode,
+                            sources=self.selector.active)
 
     def _new_events(self) -> list[str]:
         new = self.events[self._events_reported:][-10:]

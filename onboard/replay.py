@@ -22,6 +22,7 @@ from onboard.core.config import Config
 from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord, Sample
 from onboard.engine import Engine, run
+from onboard.sources import QUANTITIES
 
 
 def _fmt(v: float) -> str:
@@ -182,6 +183,11 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "rates_hz": {k: (n / span if span > 0 else None) for k, n in sorted(kinds.items())},
         "accepted": {f"{k}:{src}": n for (k, src), n in sorted(engine.accepted.items())},
         "rejected": dict(sorted(engine.rejected.items())),
+        "sources": {"active": dict(engine.selector.active),
+                    "switches": engine.selector.switches,
+                    "events": [e for e in engine.events if e.split(":", 1)[0] in QUANTITIES],
+                    "standby": {f"{q}:{src}": n for (q, src), n
+                                in sorted(engine.selector.standby.items())}},
         "ticks": ticks,
         "rows": csv.rows,
         "rate_hz": cfg.engine.rate_hz,

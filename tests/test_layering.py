@@ -15,8 +15,8 @@ The rooms, from the bottom up (docs/architecture.md has the picture):
 * ``sitl``: the simulator; the core and the drivers' encoders. Its closed-loop runner
   (``sitl.closed_loop``) also runs the onboard engine, because the closed loop is the
   experiment.
-* ``onboard.engine``, ``onboard.validate``, ``onboard.inputs``: time-ordered feeding of
-  validated samples into the pipelines.
+* ``onboard.engine``, ``onboard.validate``, ``onboard.inputs``, ``onboard.sources``:
+  time-ordered feeding of validated samples, one source per quantity, into the pipelines.
 * ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
 * ``onboard.closure``: model closure on recorded logs.
 * ``onboard.replay``, ``onboard.diagnose``, ``onboard.autodetect``, ``onboard.plots``:
@@ -38,7 +38,8 @@ from tests.helpers.imports import REPO, imports_of, module_name
 CORE = {"onboard.core"}
 MATH = CORE | {"onboard.estimators"}
 PIPELINES = MATH | {"onboard.pipelines"}
-ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs"}
+ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs",
+                      "onboard.sources"}
 SERVICE = ENGINE | {"drivers", "onboard.service"}
 CLOSURE = ENGINE | {"drivers", "onboard.closure", "onboard.replay", "onboard.plots",
                     "onboard.autodetect", "onboard.service.recorder"}
@@ -54,6 +55,7 @@ ROOMS: dict[str, set[str]] = {
     "onboard.engine": ENGINE,
     "onboard.validate": CORE,
     "onboard.inputs": CORE,
+    "onboard.sources": CORE,
     "onboard.service": SERVICE,
     "onboard.closure": CLOSURE,
     "onboard.replay": OFFLINE,

@@ -231,12 +231,16 @@ class SourceConfig(_Strict):
     """One live input: ``kind`` is the protocol, ``url`` the transport.
 
     URLs: ``serial:/dev/ttyUSB0:115200``, ``udp:0.0.0.0:14551``, ``tcp:192.168.2.95:16171``,
-    ``pty:/tmp/gps`` (a pseudo-terminal path).
+    ``pty:/tmp/gps`` (a pseudo-terminal path), ``gpsd://127.0.0.1:2947`` (kind ``gpsd``).
     """
 
-    kind: Literal["mavlink", "nmea", "dvl-json", "pd6"]
+    kind: Literal["mavlink", "nmea", "dvl-json", "pd6", "gpsd"]
     url: str
     name: str = ""
+    idle_timeout_s: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
+    """A connection that delivers no byte for this long (s) is closed and opened again
+    (a TCP DVL that power-cycled, a half-open peer, a serial device re-enumerated
+    silently); 0 never. Default: 10 s for TCP and gpsd, never for serial, pty and UDP."""
 
 
 class RecorderConfig(_Strict):
@@ -267,11 +271,54 @@ class ServiceConfig(_Strict):
     latency is then the step, not the wait for the grid); 0 ticks exactly on the grid."""
 
 
+class SourcePriorities(_Strict):
+    """``[sources]``: which source gives each quantity (onboard/sources.py).
+
+    Each list is a priority, best first, of glob patterns on a sample's ``source``
+    (``mavlink:1/ATTITUDE``, an NMEA or gpsd input's name, ``mavlink:*/GPS*``); a pattern
+    ``mavlink:NAME`` without a ``/`` means that message from any system, and ``!PATTERN``
+    excludes the sources it matches. Sources no pattern matches rank after every listed
+    one, in the order they first appear. Of the fresh sources of a quantity the
+    best-ranked one is used, and only it: a source that has been silent for ``stale_s``
+    is replaced by the best fresh one (failover), and a better source that has been fresh
+    again for ``failback_s`` takes over (failback).
+    """
+
+    position: list[str] = msgspec.field(
+        default_factory=lambda: ["mavlink:GPS_RAW_INT", "mavlink:GPS2_RAW"])
+    velocity: list[str] = msgspec.field(
+        default_factory=lambda: ["mavlink:GLOBAL_POSITION_INT", "mavlink:LOCAL_POSITION_NED"])
+    """Velocity over ground: ``VelocityOverGround`` samples and the speed and course of
+    ``GnssFix`` samples compete here."""
+    heading: list[str] = msgspec.field(
+        default_factory=lambda: ["mavlink:ATTITUDE", "mavlink:GLOBAL_POSITION_INT",
+                                 "mavlink:VFR_HUD"])
+    """Heading sources: ``Attitude`` (its yaw) and ``Heading`` samples compete here;
+    VFR_HUD's whole-degree heading comes last."""
+    attitude: list[str] = msgspec.field(default_factory=lambda: ["mavlink:ATTITUDE"])
+    imu: list[str] = msgspec.field(
+        default_factory=lambda: ["mavlink:SCALED_IMU", "mavlink:RAW_IMU",
+                                 "mavlink:SCALED_IMU2", "mavlink:SCALED_IMU3"])
+    depth: list[str] = msgspec.field(
+        default_factory=lambda: ["mavlink:SCALED_PRESSURE2", "mavlink:SCALED_PRESSURE3",
+                                 "!mavlink:SCALED_PRESSURE"])
+    """ArduSub's SCALED_PRESSURE is the autopilot's own barometer (the enclosure's air),
+    never a depth."""
+    dvl: list[str] = []
+    altitude: list[str] = []
+    stale_s: Annotated[float, msgspec.Meta(gt=0.0)] = 2.0
+    """A source silent this long (s, sample time) is replaced by the best fresh one."""
+    failback_s: Annotated[float, msgspec.Meta(ge=0.0)] = 3.0
+    """A better source must deliver for this long (s) without a gap of ``stale_s``
+    before it takes over again (no flapping on a source that comes and goes)."""
+
+
 class Config(_Strict):
     """A whole configuration file."""
 
     vehicle: Vehicle = Vehicle()
     engine: EngineConfig = EngineConfig()
+    sources: SourcePriorities = SourcePriorities()
     inputs: Inputs = Inputs()
     sensors: Sensors = Sensors()
     csv: CsvFormat = CsvFormat()

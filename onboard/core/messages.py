@@ -93,7 +93,11 @@ class Heading(Sample, frozen=True, tag="heading"):
 
 
 class Attitude(Sample, frozen=True, tag="attitude"):
-    """Attitude as ZYX Euler angles (rad) and optionally the body rates (rad/s)."""
+    """Attitude as ZYX Euler angles (rad) and optionally the body rates (rad/s).
+
+    ``yaw_selected`` is False when the source selector (onboard/sources.py) chose another
+    source for the heading: roll, pitch and the rates are to be used, the yaw is not.
+    """
 
     roll_rad: float
     pitch_rad: float
@@ -101,6 +105,7 @@ class Attitude(Sample, frozen=True, tag="attitude"):
     roll_rate_rps: float | None = None
     pitch_rate_rps: float | None = None
     yaw_rate_rps: float | None = None
+    yaw_selected: bool = True
 
 
 class DvlVelocity(Sample, frozen=True, tag="dvl"):
@@ -248,7 +253,8 @@ class EstimateRecord(msgspec.Struct, frozen=True, kw_only=True):
     ``values`` maps quantity name (the part after ``<pipeline>.`` in estimates.csv) to its
     value in SI units; ``std`` gives one-sigma uncertainties where the pipeline has them.
     ``t_sensor`` is the time of the newest input sample that contributed, so consumers can
-    measure latency.
+    measure latency. ``sources`` maps each selected quantity (``position``, ``heading``,
+    ...) to the source in use at this tick (onboard/sources.py).
     """
 
     schema: int = SCHEMA_VERSION
@@ -258,13 +264,15 @@ class EstimateRecord(msgspec.Struct, frozen=True, kw_only=True):
     values: dict[str, float]
     std: dict[str, float] = {}
     t_sensor: float | None = None
+    sources: dict[str, str] = {}
 
 
 class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
     """Service health, published on ``onboard/<id>/health``.
 
     ``rates_hz`` per source, ``rejected`` counts per reason, ``innovations`` and ``nis``
-    per pipeline channel, ``events`` recent human-readable events.
+    per pipeline channel, ``events`` recent human-readable events, ``sources`` the active
+    source of each selected quantity (onboard/sources.py).
     """
 
     schema: int = SCHEMA_VERSION
@@ -277,3 +285,4 @@ class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
     nis: dict[str, float] = {}
     events: list[str] = []
     mode: str = ""
+    sources: dict[str, str] = {}

@@ -281,7 +281,8 @@ class CurrentPipeline:
             self.counters["rejected_nonfinite"] += 1
             return
         self._set_attitude(s.t, s.roll_rad, s.pitch_rad, True)
-        self._set_yaw(s.t, s.yaw_rad)
+        if s.yaw_selected:  # else the source selector chose another heading source
+            self._set_yaw(s.t, s.yaw_rad)
         if s.yaw_rate_rps is not None:
             self.inp.p = s.roll_rate_rps or 0.0
             self.inp.q = s.pitch_rate_rps or 0.0

@@ -74,6 +74,13 @@ BLUEROV2_FORCE_ALLOCATION: tuple[tuple[float, ...], ...] = (
 LEVELLING_SAMPLES = 50
 """IMU samples averaged to level the filter from gravity when no attitude arrives."""
 
+HEADING_HOLD_S = 1.0
+"""A ``Heading`` sample within this long (s) after an ``Attitude`` with its yaw is not
+used (an AHRS reports the same yaw); the engine's source selector lets one through."""
+YAW_UNSELECTED_VAR = 1.0e4
+"""Yaw variance (rad^2) of an ``Attitude`` whose yaw the source selector did not choose:
+its roll and pitch are used, its yaw carries no information."""
+
 
 class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """``[pipelines.eseso]``: model, thrusters and noise of the ESESO.
@@ -292,7 +299,7 @@ class Eseso:
         self._pending_att: Array | None = None
         self._accel_sum = np.zeros(3)
         self._accel_n = 0
-        self._have_attitude = False
+        self._t_att_yaw = -math.inf  # time (s) of the newest Attitude with its yaw
 
     @property
     def initialized(self) -> bool:
@@ -447,9 +454,11 @@ class Eseso:
         self.filter.update_body_velocity(np.array([s.vx, s.vy, s.vz]), r)
 
     def _on_attitude(self, s: Attitude) -> None:
+        """Roll, pitch and yaw; the yaw with the variance ``YAW_UNSELECTED_VAR`` (no
+        information) when the source selector chose another heading source."""
         R_meas = euler_to_matrix(s.roll_rad, s.pitch_rad, s.yaw_rad)
         self.filter.update_attitude(R_meas, s.roll_rad, s.pitch_rad, self.r_att,
-                                    self.r_att_yaw)
+                                    self.r_att_yaw if s.yaw_selected else YAW_UNSELECTED_VAR)
 
     def _on_heading(self, s: Heading) -> None:
         meas = s.heading_rad + (s.declination_rad or 0.0)
@@ -482,10 +491,11 @@ class Eseso:
             elif isinstance(s, DvlVelocity):
                 self._on_dvl(s)
             elif isinstance(s, Attitude):
-                self._have_attitude = True
+                if s.yaw_selected:
+                    self._t_att_yaw = s.t
                 self._on_attitude(s)
             elif isinstance(s, Heading):
-                if self._have_attitude:
+                if s.t - self._t_att_yaw <= HEADING_HOLD_S:
                     continue  # an AHRS reports the same yaw: do not count it twice
                 self._on_heading(s)
             else:

@@ -16,6 +16,11 @@ from onboard.core.config import Config
 from onboard.core.geo import LocalFrame, wrap_2pi
 from onboard.core.messages import Attitude, Depth, GnssFix, Heading, Sample, VelocityOverGround
 
+HEADING_HOLD_S = 1.0
+"""An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used; the
+engine's source selector lets one heading source through, and an ``Attitude`` whose yaw
+it did not select (``yaw_selected`` False) gives no heading."""
+
 
 class NavTrack:
     """Latest measured position, heading, speed and depth (pipeline ``nav``)."""
@@ -27,7 +32,7 @@ class NavTrack:
         self.stale_s = stale_s
         self.frame: LocalFrame | None = None
         self._values: dict[str, tuple[float, float]] = {}  # quantity -> (t, value)
-        self._heading_from_attitude_only = True
+        self._t_heading = -math.inf  # time (s) of the newest Heading sample
         self._handlers: dict[type, Callable[[Any], None] | None] = {}
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
@@ -71,11 +76,11 @@ class NavTrack:
             values["course"] = (t, wrap_2pi(s.cog_rad))
 
     def _on_heading(self, s: Heading) -> None:
-        self._heading_from_attitude_only = False
+        self._t_heading = s.t
         self._values["heading"] = (s.t, wrap_2pi(s.heading_rad + (s.declination_rad or 0.0)))
 
     def _on_attitude(self, s: Attitude) -> None:
-        if self._heading_from_attitude_only:
+        if s.yaw_selected and s.t - self._t_heading > HEADING_HOLD_S:
             self._values["heading"] = (s.t, wrap_2pi(s.yaw_rad))
 
     def _on_vog(self, s: VelocityOverGround) -> None:

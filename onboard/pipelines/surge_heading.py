@@ -20,9 +20,11 @@ comparison of the seed paper (Faros & Tanner 2025, §3) is like for like:
   modelled (``correlated_noise``), else it is pulled with ``heading_anchor``;
 * estimates between steps are predicted with the model and the current input.
 
-Inputs: :class:`GnssFix`, :class:`Heading` (preferred) or :class:`Attitude` yaw, and
+Inputs: :class:`GnssFix`, :class:`Heading` or :class:`Attitude` yaw, and
 :class:`ActuatorCommand` (optional: without it AIE runs unchanged and the KF baseline
-runs with zero input).
+runs with zero input). The engine's source selector lets one heading source through; an
+``Attitude`` whose yaw it did not select (``yaw_selected`` False) gives no heading, and
+without the selector a ``Heading`` sample within ``HEADING_HOLD_S`` wins over the yaw.
 """
 
 from __future__ import annotations
@@ -44,6 +46,9 @@ from onboard.estimators.axis_model import (
     path_increment,
 )
 from onboard.estimators.kalman import IncrementKF
+
+HEADING_HOLD_S = 1.0
+"""An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used."""
 
 # ---------------------------------------------------------------------------------------
 # Configuration: [pipelines.aie] (the kf baseline reads the same table, see kf.py)
@@ -292,7 +297,7 @@ class SurgeHeadingPipeline:
         self._w_end = self._hw_end = math.inf
         self._next_end = math.inf    # min(_w_end, _hw_end): the next window to close
         self._handlers: dict[type, Callable[[Any], None] | None] = {}
-        self._heading_source_seen = False
+        self._t_heading = -math.inf  # time (s) of the newest Heading sample
         self._psi_last: float | None = None       # last raw heading (unwrapped, rad)
         self._cmds: list[tuple[float, float | None, float | None]] = []
         # previous points
@@ -450,14 +455,14 @@ class SurgeHeadingPipeline:
     def _on_heading(self, s: Heading) -> None:
         if self._t0 is None:
             self._start(s.t)
-        self._heading_source_seen = True
+        self._t_heading = s.t
         dec = (s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0
         self._add_heading(s.t, s.heading_rad + dec)
 
     def _on_attitude(self, s: Attitude) -> None:
         if self._t0 is None:
             self._start(s.t)
-        if not self._heading_source_seen:
+        if s.yaw_selected and s.t - self._t_heading > HEADING_HOLD_S:
             self._add_heading(s.t, s.yaw_rad)
 
     def _on_command(self, s: ActuatorCommand) -> None:

@@ -240,7 +240,8 @@ class Service:
             name = self._name(i, src)
             self.intake.add_source(name, src.kind)
             tr = open_transport(src.url, clock=self.clock.now, queue_size=svc.queue_size,
-                                on_event=lambda text, n=name: self.event(f"{n}: {text.split(': ', 1)[-1]}"))
+                                on_event=lambda text, n=name: self.event(f"{n}: {text.split(': ', 1)[-1]}"),
+                                idle_timeout_s=src.idle_timeout_s)
             self.inputs.append(_Input(src, name, tr, t_started=self.clock.now()))
         for inp in self.inputs:  # inputs open while the publishers start
             inp.task = asyncio.create_task(self._read(inp), name=f"input:{inp.name}")
@@ -554,9 +555,12 @@ def main(args: argparse.Namespace) -> int:
         raise ConfigError(f"{args.config}: service.sources is empty: nothing to read")
     for i, src in enumerate(cfg.service.sources):
         try:
-            parse_url(src.url)
+            spec = parse_url(src.url)
         except TransportUrlError as err:
             raise ConfigError(f"{args.config}: service.sources[{i}].url: {err}") from None
+        if (spec.scheme == "gpsd") != (src.kind == "gpsd"):
+            raise ConfigError(f"{args.config}: service.sources[{i}]: kind \"gpsd\" goes with "
+                              f"a gpsd://HOST:PORT url and only with it")
     mav = cfg.service.mavlink
     if mav.require_signing or mav.signing_key_file:
         from onboard.service.publishers.mavlink_pub import check_signing
