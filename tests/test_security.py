@@ -751,8 +751,16 @@ def _credentials() -> dict[str, str]:
     return dict(line.split(":", 1) for line in lines)
 
 
+def _user_file(d: Path, user: str = "boat1", password: str | None = None) -> str:
+    """A private ``user:password`` file (the vehicle's ``user_password_file``)."""
+    p = d / f"{user}.user"
+    p.write_text(f"{user}:{password if password is not None else _credentials()[user]}\n")
+    p.chmod(0o600)
+    return str(p)
+
+
 @pytest.mark.integration
-def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receives_them(acl_router):
+def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receives_them(acl_router, tmp_path):
     from onboard.core.config import ZenohOut
     from onboard.core.messages import EstimateRecord
     from onboard.service.publishers.zenoh_pub import ZenohPublisher
@@ -761,7 +769,8 @@ def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receiv
     got: list[str] = []
     sub = shore.declare_subscriber("onboard/**", lambda s: got.append(str(s.key_expr)))
     pub = ZenohPublisher(ZenohOut(mode="client", connect=[acl_router],
-                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5")), "boat1")
+                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5"),
+                                  user_password_file=_user_file(tmp_path)), "boat1")
     pub.start()
     try:
         rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.2})
@@ -785,7 +794,7 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
     got: list[tuple[str, bytes]] = []
     sub = shore.declare_subscriber("onboard/**",
                                    lambda s: got.append((str(s.key_expr), s.payload.to_bytes())))
-    boat1 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"))
+    boat1 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"), "boat1", creds["boat1"])
     boat2 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"), "boat2", creds["boat2"])
     try:
         def sent() -> bool:
@@ -817,7 +826,8 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
 
 
 @pytest.mark.integration
-def test_onboard_shore_reads_through_the_access_controlled_router_with_its_config(acl_router, capsys):
+def test_onboard_shore_reads_through_the_access_controlled_router_with_its_config(acl_router, capsys,
+                                                                                 tmp_path):
     import argparse
 
     from onboard.core.config import ZenohOut
@@ -826,7 +836,8 @@ def test_onboard_shore_reads_through_the_access_controlled_router_with_its_confi
     from onboard.tools import shore
 
     pub = ZenohPublisher(ZenohOut(mode="client", connect=[acl_router],
-                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5")), "boat1")
+                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5"),
+                                  user_password_file=_user_file(tmp_path)), "boat1")
     pub.start()
     try:
         pub.publish_estimates([EstimateRecord(vehicle="boat1", pipeline="aie", t=5.0,
@@ -915,8 +926,9 @@ def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_
         return str(out)
 
     shore = None
-    pub = ZenohPublisher(ZenohOut(mode="client", connect=[ep],
-                                  config_file=local("vehicle-boat1.json5", certs["ca_pem"])), "boat1")
+    vehicle = dict(mode="client", connect=[ep], config_file=str(ZENOH_DIR / "vehicle-boat1.json5"),
+                   user_password_file=_user_file(tmp_path))
+    pub = ZenohPublisher(ZenohOut(**vehicle, tls_root_ca_certificate=str(certs["ca_pem"])), "boat1")
     try:
         shore = zenoh.open(session_config("client", connect=[ep],
                                           config_file=local("shore.json5", certs["ca_pem"])))
@@ -925,8 +937,7 @@ def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_
         pub.start()
         rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.2})
         assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1])
-        untrusting = ZenohPublisher(ZenohOut(mode="client", connect=[ep],
-                                             config_file=local("vehicle-boat1.json5", None)), "boat1")
+        untrusting = ZenohPublisher(ZenohOut(**vehicle), "boat1")
         with pytest.raises(Exception, match="(?i)unable to connect"):
             untrusting.start()
         untrusting.close()
@@ -974,9 +985,9 @@ def test_systemd_unit_verifies(tmp_path):
     exists here (the installed path /opt/onboard/... does not)."""
     exe = _systemd_analyze()
     text = UNIT.read_text()
-    assert "\nExecStart=/opt/onboard/.venv/bin/onboard run " in text
+    assert "\nExecStart=/opt/onboard/venv/bin/python -m onboard run " in text
     unit = tmp_path / "onboard.service"
-    unit.write_text(text.replace("ExecStart=/opt/onboard/.venv/bin/onboard", "ExecStart=/bin/true"))
+    unit.write_text(text.replace("ExecStart=/opt/onboard/venv/bin/python", "ExecStart=/bin/true"))
     r = subprocess.run([exe, "verify", str(unit)], capture_output=True, text=True, timeout=60)
     if r.returncode != 0 and ("Failed to" in r.stderr and "bus" in r.stderr.lower()):
         pytest.skip(f"systemd-analyze verify needs a running systemd here: {r.stderr.strip()}")

@@ -186,6 +186,10 @@ class Service:
         self.recorder: Recorder | None = None
         self.intake = Intake(self.engine, queue_size=svc.queue_size)
         self.signing = open_signing(svc.mavlink, self._path)  # MAVLink 2 signing: docs/security.md
+        if svc.zenoh.enabled:  # a missing or readable-by-others secret stops the start
+            from onboard.service.publishers.zenoh_pub import secret_settings
+
+            secret_settings(svc.zenoh)
         self.intake.verifier = self.signing.verifier if self.signing and svc.mavlink.require_signing else None
         self._sample_arrived = asyncio.Event()
         self.intake.on_queued = self._sample_arrived.set

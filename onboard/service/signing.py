@@ -22,7 +22,8 @@ MAVLink signing specification asks (https://mavlink.io/en/guide/message_signing.
 
 The key file (``service.mavlink.signing_key_file``) holds the 32-byte secret as raw bytes
 or 64 hex digits, or a passphrase whose SHA-256 is the key (MAVProxy's ``signing setup``);
-it must be accessible by its owner only (mode 0600 or stricter).
+it must be accessible by its owner only (mode 0600 or stricter), or be a systemd credential
+(``credential:NAME``, :mod:`onboard.service.credentials`).
 """
 
 from __future__ import annotations
@@ -31,7 +32,6 @@ import hashlib
 import json
 import logging
 import os
-import stat
 import time
 from pathlib import Path
 from typing import Callable
@@ -43,6 +43,7 @@ from drivers.mavlink_signing import (
     signing_timestamp,
 )
 from onboard.core.config import ConfigError, MavlinkOut
+from onboard.service.credentials import read_secret
 
 log = logging.getLogger(__name__)
 
@@ -51,24 +52,18 @@ STATE_VERSION = 1
 
 
 def load_signing_key(path: str | Path) -> bytes:
-    """The 32-byte signing key from ``path`` (see the module docstring).
+    """The 32-byte signing key from ``path`` (see the module docstring); ``path`` may name
+    a systemd credential, ``credential:NAME`` (:mod:`onboard.service.credentials`).
 
-    Raises ConfigError when the file is missing, empty or accessible by group or others.
+    Raises ConfigError when the file is missing, empty or accessible by group or others
+    (a credential's ACL entry for the service's own user is accepted).
     """
-    p = Path(path)
-    try:
-        st = p.stat()
-        raw = p.read_bytes()
-    except OSError as err:
-        raise ConfigError(f"service.mavlink.signing_key_file: {p}: {err.strerror}") from None
-    if st.st_mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise ConfigError(f"service.mavlink.signing_key_file: {p} is accessible by group or "
-                          f"others (mode {stat.S_IMODE(st.st_mode):04o}); chmod 600 it")
+    _, raw = read_secret(str(path), "service.mavlink.signing_key_file")
     if len(raw) == 32:
         return raw
     text = raw.decode("utf-8", "replace").strip()
     if not text:
-        raise ConfigError(f"service.mavlink.signing_key_file: {p} is empty")
+        raise ConfigError(f"service.mavlink.signing_key_file: {path} is empty")
     if len(text) == 64:
         try:
             return bytes.fromhex(text)
