@@ -24,6 +24,7 @@ from onboard.service.publishers.mavlink_pub import MavlinkPublisher
 from onboard.service.signing import SigningState, load_signing_key
 from onboard.tools.service_bench import free_udp_port
 from tests.helpers.mavlink_listener import receive_mavlink
+from tests.helpers.tls import make_test_certificates
 
 REPO = Path(__file__).resolve().parent.parent
 KEY = bytes(range(32))
@@ -875,28 +876,6 @@ def test_a_wrong_password_or_no_credentials_cannot_open_a_session(acl_router, tm
     pub.close()
 
 
-def _test_certificates(d: Path) -> dict[str, Path]:
-    """A throw-away CA and a router certificate for localhost/127.0.0.1, made now with the
-    openssl command (TEST ONLY: the keys live in the test's temporary directory)."""
-    exe = shutil.which("openssl")
-    if exe is None:
-        pytest.skip("openssl is not installed: cannot make test certificates")
-    ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
-    (d / "ext.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n"
-                               "basicConstraints=CA:FALSE\nkeyUsage=digitalSignature\n"
-                               "extendedKeyUsage=serverAuth\n")
-    for cmd in (
-        ["req", "-x509", *ec, "-keyout", "ca.key", "-out", "ca.pem", "-days", "1",
-         "-subj", "/CN=onboard-test-ca", "-addext", "basicConstraints=critical,CA:TRUE",
-         "-addext", "keyUsage=critical,keyCertSign,cRLSign"],
-        ["req", *ec, "-keyout", "router.key", "-out", "router.csr", "-subj", "/CN=localhost"],
-        ["x509", "-req", "-in", "router.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
-         "-CAcreateserial", "-out", "router.pem", "-days", "1", "-extfile", "ext.cnf"],
-    ):
-        subprocess.run([exe, *cmd], cwd=d, check=True, capture_output=True, timeout=30)
-    return {k: d / f"{k.replace('_', '.')}" for k in ("ca_pem", "router_key", "router_pem")}
-
-
 @pytest.mark.integration
 def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_connect(tmp_path):
     """The example configs as shipped, only the certificate paths replaced: the router
@@ -908,7 +887,7 @@ def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_
     from onboard.service.publishers.zenoh_pub import ZenohPublisher, session_config
     from onboard.tools.service_bench import free_tcp_port
 
-    certs = _test_certificates(tmp_path)
+    certs = make_test_certificates(tmp_path)
     ep = f"tls/localhost:{free_tcp_port()}"
     conf = session_config("router", listen=[ep], config_file=str(ZENOH_DIR / "router-acl.json5"))
     conf.insert_json5("transport/auth/usrpwd/dictionary_file",
