@@ -259,6 +259,10 @@ class RecorderConfig(_Strict):
     flush_interval_s: float = 0.5
     rotate_mb: float = 64.0
     max_total_mb: float = 2048.0
+    min_free_mb: float = 200.0
+    """Free space (MB) left on the recordings' file system: below it the oldest
+    recordings are deleted, then recording pauses (an event; records counted in the
+    health record's ``dropped["recorder"]``); 0 = no check."""
 
 
 class ServiceConfig(_Strict):

@@ -28,6 +28,7 @@ it must be accessible by its owner only (mode 0600 or stricter), or be a systemd
 
 from __future__ import annotations
 
+import concurrent.futures
 import hashlib
 import json
 import logging
@@ -117,6 +118,8 @@ class SigningState:
                                           on_accept=self._on_accept)
         self._dirty = False
         self._next_save = mono() + save_interval_s
+        self._pool: concurrent.futures.ThreadPoolExecutor | None = None
+        self._saving: concurrent.futures.Future[bool] | None = None
 
     # ------------------------------------------------------------------ outgoing
 
@@ -126,8 +129,13 @@ class SigningState:
         timestamp; a new reservation is saved first when it would pass the old one."""
         t = max(current, self.tx_last + 1, self.verifier.local_timestamp())
         if t > self.tx_reserved:
-            self.tx_reserved = t + self.reserve
-            self.save()
+            if self._saving is not None:
+                self._saving.result()  # a renewal under way: it may cover t
+            if t > self.tx_reserved:  # the first frame without reserve(), or a stalled disk
+                self.tx_reserved = t + self.reserve
+                self.save()
+        elif t > self.tx_reserved - self.reserve // 2:
+            self.save_async(t + self.reserve)  # renewed in the background, well ahead
         self.tx_last = t
         if t > self.verifier.high:
             self.verifier.high = t
@@ -138,7 +146,27 @@ class SigningState:
     def _on_accept(self) -> None:
         self._dirty = True
         if self.mono() >= self._next_save:
+            self._next_save = self.mono() + self.save_interval_s
+            self.save_async()
+
+    def reserve_now(self) -> None:
+        """Save a reservation from the local timestamp now (blocking: call it off the event
+        loop at start), so that the frames that follow need no save before they leave."""
+        t = max(self.tx_last + 1, self.verifier.local_timestamp())
+        if t + self.reserve // 2 > self.tx_reserved:
+            self.tx_reserved = t + self.reserve
             self.save()
+
+    def save_async(self, tx_reserved: int | None = None) -> None:
+        """Save in a worker thread (no fsync on the caller's thread), the reservation
+        raised to ``tx_reserved`` once it is on disk; nothing when a save is under way."""
+        if self._saving is not None and not self._saving.done():
+            return
+        if self._pool is None:
+            self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="signing")
+        doc = self._doc(max(self.tx_reserved, tx_reserved or 0))
+        self._dirty = False
+        self._saving = self._pool.submit(self._write, doc)
 
     # ------------------------------------------------------------------ file
 
@@ -161,9 +189,18 @@ class SigningState:
     def save(self) -> bool:
         """Write the timestamps atomically (mode 0600); False (counted, logged) on a disk
         error: signing goes on, only the restart guarantee is weakened."""
-        doc = {"format": STATE_FORMAT, "version": STATE_VERSION,
-               "tx_reserved": self.tx_reserved,
-               "streams": [[*k, v] for k, v in sorted(self.verifier.streams.items())]}
+        doc = self._doc(self.tx_reserved)
+        self._dirty = False
+        if not self._write(doc):
+            self._dirty = True
+            return False
+        return True
+
+    def _doc(self, tx_reserved: int) -> dict:
+        return {"format": STATE_FORMAT, "version": STATE_VERSION, "tx_reserved": tx_reserved,
+                "streams": [[*k, v] for k, v in sorted(self.verifier.streams.items())]}
+
+    def _write(self, doc: dict) -> bool:
         data = json.dumps(doc, separators=(",", ":")).encode()
         d = self.path.parent
         tmp = d / f".{self.path.name}.tmp-{os.getpid()}"
@@ -181,12 +218,19 @@ class SigningState:
             log.warning("cannot save signing timestamps to %s: %s", self.path, err.strerror)
             return False
         self.saves += 1
-        self._dirty = False
         self._next_save = self.mono() + self.save_interval_s
+        if doc["tx_reserved"] > self.tx_reserved:
+            self.tx_reserved = doc["tx_reserved"]
         return True
 
     def close(self) -> None:
-        """Save the incoming stream timestamps if they changed since the last save."""
+        """Wait for a background save; save the incoming stream timestamps if they changed
+        since the last save."""
+        if self._saving is not None:
+            self._saving.result()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
         if self._dirty:
             self.save()
 
