@@ -193,3 +193,183 @@ def test_the_service_refuses_to_start_with_a_missing_or_readable_zenoh_secret(tm
     with pytest.raises(ConfigError, match="tls_private_key and tls_certificate go together"):
         Service(cfg, state_dir=tmp_path)
     assert ZenohOut().user_password_file == ""  # nothing asked, nothing read
+
+
+# --------------------------------------------------------------------------- disk faults
+
+def _records(n: int, t0: float = 0.0):
+    from drivers.recording import RawRecord
+
+    return [RawRecord(t=t0 + i * 0.01, source="gps", kind="nmea", data=b"$GPGGA,%d\r\n" % i)
+            for i in range(n)]
+
+
+def test_a_disk_that_refuses_every_write_is_counted_reported_and_never_raises(tmp_path):
+    """/dev/full: the kernel answers ENOSPC to every write."""
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full here")
+    from drivers.recording import RecordingWriter
+    from onboard.service.recorder import Recorder
+
+    events: list[str] = []
+    rec = Recorder(tmp_path, clock=lambda: 0.0, on_event=events.append, fsync=False,
+                   open_writer=lambda path, v: RecordingWriter("/dev/full", fsync=False, version=v))
+    for r in _records(50):
+        rec.write(r)
+    rec.flush(wait=True)
+    rec.close()
+    assert rec.write_errors >= 1 and rec.lost_records == 50 and rec.dropped == 50
+    assert any("No space left on device" in e and "records lost" in e for e in events), events
+
+
+class _FlakyDisk:
+    """A writer factory whose files fail with ``errno`` while ``failing`` is set."""
+
+    def __init__(self, err: int) -> None:
+        self.err = err
+        self.failing = True
+
+    def __call__(self, path: Path, version: int):
+        from drivers.recording import RecordingWriter
+
+        disk = self
+
+        class Writer(RecordingWriter):
+            def flush(self) -> None:
+                if disk.failing:
+                    raise OSError(disk.err, os.strerror(disk.err))
+                super().flush()
+
+        return Writer(path, fsync=False, version=version)
+
+
+def test_eio_loses_only_the_batches_it_hits_and_recording_resumes(tmp_path):
+    import errno
+
+    from drivers.recording import read_records
+    from onboard.service.recorder import Recorder
+
+    disk = _FlakyDisk(errno.EIO)
+    events: list[str] = []
+    rec = Recorder(tmp_path, clock=lambda: 0.0, on_event=events.append, open_writer=disk)
+    for r in _records(10):
+        rec.write(r)
+    rec.flush(wait=True)
+    disk.failing = False
+    later = _records(5, t0=10.0)
+    for r in later:
+        rec.write(r)
+    rec.flush(wait=True)
+    rec.close()
+    assert rec.lost_records == 10 and rec.write_errors >= 1
+    assert any("Input/output error" in e for e in events), events
+    got = [r.data for f in rec.files for r in read_records(f)]
+    assert [r.data for r in later] == [d for d in got if d.startswith(b"$GPGGA")][-5:]
+
+
+def test_low_free_space_deletes_the_oldest_recordings_then_pauses_and_resumes(tmp_path):
+    from onboard.service.recorder import Recorder
+
+    old = [tmp_path / f"onboard-2020010{i}T000000Z-abcd-0000.onbrec" for i in range(3)]
+    for i, p in enumerate(old):
+        p.write_bytes(b"ONBREC01" + bytes(100_000))
+        os.utime(p, (1e9 + i, 1e9 + i))
+    free = {"bytes": 10_000_000}
+    events: list[str] = []
+    rec = Recorder(tmp_path, clock=lambda: 0.0, on_event=events.append, min_free_mb=1.0,
+                   free_space=lambda d: free["bytes"] + sum(100_000 for p in old if not p.exists()))
+    rec.DISK_CHECK_S = 0.0
+    free["bytes"] = 950_000  # 50 kB short: the oldest file (100 kB) goes
+    rec.write(_records(1)[0])
+    rec.flush(wait=True)
+    rec.poll(0.0)
+    assert [p.exists() for p in old] == [False, True, True] and not rec.paused
+    assert any("low disk space" in e and "deleted the oldest" in e for e in events), events
+    free["bytes"] = 0  # nothing left to delete would be enough: pause
+    rec.write(_records(1)[0])
+    rec.flush(wait=True)
+    rec.poll(0.0)
+    assert rec.paused and any("disk full" in e and "paused" in e for e in events), events
+    for r in _records(7):
+        rec.write(r)
+    assert rec.dropped_records == 7
+    free["bytes"] = 5_000_000
+    rec.flush(wait=True)  # an empty flush still lets the worker look at the disk
+    rec._submit(rec._append_job, b"", 0).result()
+    rec.poll(0.0)
+    assert not rec.paused and any("recording again" in e and "7 records" in e for e in events)
+    rec.close()
+
+
+@pytest.mark.integration
+def test_recorder_errors_reach_health_and_statustext_and_no_fsync_runs_on_the_loop(tmp_path, monkeypatch):
+    """The whole service over UDP (MAVLink in, MAVLink out signed, recorder rotating every
+    few kB, state saved every 0.2 s): os.fsync never runs on the event loop's thread; then
+    the recorder's disk fails (EIO) and the loss reaches the health record
+    (``dropped["recorder"]``, an event) and a STATUSTEXT, while ticks go on."""
+    import asyncio
+    import errno
+    import socket
+    import threading
+
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+    from onboard.service.daemon import Service
+    from onboard.tools.service_bench import free_udp_port
+    from tests.helpers.mavlink_listener import receive_mavlink
+    from tests.helpers.service_config import service_config
+
+    fsync_threads: list[int] = []
+    real_fsync = os.fsync
+
+    def spy(fd: int) -> None:
+        fsync_threads.append(threading.get_ident())
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", spy)
+    key = tmp_path / "mavlink.key"
+    key.write_bytes(KEY)
+    key.chmod(0o600)
+    port_in, port_out = free_udp_port(), free_udp_port()
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", port_out))
+    cfg = service_config(sources=[{"name": "ap", "kind": "mavlink", "url": f"udp:127.0.0.1:{port_in}"}],
+                         zenoh={"enabled": False}, state_save_interval_s=0.2,
+                         mavlink={"url": f"udpout:127.0.0.1:{port_out}", "signing_key_file": str(key)},
+                         recorder={"rotate_mb": 0.004, "flush_interval_s": 0.05})
+    healths = []
+    svc = Service(cfg, state_dir=tmp_path, on_health=healths.append)
+    disk = _FlakyDisk(errno.EIO)
+    disk.failing = False
+    loop_thread: list[int] = []
+
+    async def main() -> None:
+        loop_thread.append(threading.get_ident())
+        await svc.start()
+        svc.recorder._open_writer = disk  # the next files are on the flaky disk
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        mav = mavlink2.MAVLink(None, srcSystem=3, srcComponent=1)
+        for i in range(60):  # 3 s of a 20 Hz attitude stream
+            tx.sendto(mav.attitude_encode(i * 50, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0).pack(mav),
+                      ("127.0.0.1", port_in))
+            if i == 30:
+                disk.failing = True
+            await asyncio.sleep(0.05)
+        await asyncio.sleep(1.2)  # one more health record
+        svc.request_stop()
+        await svc.run()
+        tx.close()
+
+    asyncio.run(main())
+    msgs = receive_mavlink(gcs)
+    gcs.close()
+    assert len(fsync_threads) >= 5, "the recorder, state and signing files were fsync'ed"
+    assert loop_thread[0] not in fsync_threads
+    assert svc.recorder.files and len(svc.recorder.files) >= 3  # it rotated
+    assert svc.recorder.lost_records > 0
+    assert healths[-1].dropped.get("recorder", 0) > 0
+    events = [e for h in healths for e in h.events]
+    assert any(e.startswith("recorder: write error") for e in events), events
+    texts = [m.text for m in msgs if m.get_type() == "STATUSTEXT"]
+    assert any(t.startswith("recorder: write error") for t in texts), texts
+    assert svc.stats.ticks > 30 and svc.stats.tick_errors == 0
