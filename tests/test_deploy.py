@@ -373,3 +373,61 @@ def test_recorder_errors_reach_health_and_statustext_and_no_fsync_runs_on_the_lo
     texts = [m.text for m in msgs if m.get_type() == "STATUSTEXT"]
     assert any(t.startswith("recorder: write error") for t in texts), texts
     assert svc.stats.ticks > 30 and svc.stats.tick_errors == 0
+
+
+# --------------------------------------------------------------------------- make install
+
+def test_a_staged_install_puts_config_unit_and_credential_store_in_place_and_keeps_local_edits(tmp_path):
+    from onboard.tools.install import main
+
+    stage = tmp_path / "stage"
+    assert main(["--destdir", str(stage), "--no-venv"]) == 0
+    etc = stage / "etc" / "onboard"
+    unit = (stage / "etc" / "systemd" / "system" / "onboard.service").read_text()
+    assert unit == (REPO / "systemd" / "onboard.service").read_text()  # default paths
+    assert (etc / "onboard.toml").read_text() == (REPO / "config" / "deploy-example.toml").read_text()
+    assert (etc / "zenoh-vehicle.json5").read_text() == (ZENOH_DIR / "vehicle-boat1.json5").read_text()
+    assert (stage / "etc" / "credstore").stat().st_mode & 0o777 == 0o700
+    for f in ("onboard.toml", "onboard.env", "zenoh-vehicle.json5"):
+        assert (etc / f).stat().st_mode & 0o777 == 0o644
+    (etc / "onboard.toml").write_text("# my boat\n")
+    assert main(["--destdir", str(stage), "--no-venv"]) == 0
+    assert (etc / "onboard.toml").read_text() == "# my boat\n"  # never overwritten
+    assert (etc / "onboard.toml.dist").read_text().startswith("# A deployment")
+    with pytest.raises(SystemExit):
+        main(["--prefix", "relative/path", "--no-venv"])
+
+
+@pytest.mark.integration
+def test_make_install_into_a_prefix_gives_a_venv_and_a_unit_that_systemd_analyze_verifies(tmp_path):
+    """``make install`` with every directory under a temporary prefix (no root): a venv with
+    the package (dependencies left out to stay offline and quick: --no-deps), the config,
+    the unit pointing at that venv; systemd-analyze verify passes on the installed unit."""
+    if shutil.which("make") is None:
+        pytest.skip("make is not installed (Debian: apt-get install make)")
+    p = {k: str(tmp_path / k) for k in ("opt", "etc", "unit", "credstore")}
+    r = subprocess.run(["make", "-s", "install", f"PREFIX={p['opt']}", f"SYSCONFDIR={p['etc']}",
+                        f"UNITDIR={p['unit']}", f"CREDSTORE={p['credstore']}", "PIP_ARGS=--no-deps"],
+                       cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    venv_python = Path(p["opt"]) / "venv" / "bin" / "python"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    where = subprocess.run([str(venv_python), "-c", "import onboard.tools.install as m; print(m.__file__)"],
+                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
+    assert where.stdout.strip().startswith(p["opt"] + "/venv/lib/"), where.stdout + where.stderr
+    unit = Path(p["unit"]) / "onboard.service"
+    text = unit.read_text()
+    assert f"\nExecStart={venv_python} -m onboard run --config ${{ONBOARD_CONFIG}}\n" in text
+    assert f"\nEnvironment=ONBOARD_CONFIG={p['etc']}/onboard.toml\n" in text
+    assert "\nLoadCredential=onboard.zenoh-user\n" in text and "\nDynamicUser=yes\n" in text
+    assert load(Path(p["etc"]) / "onboard.toml").service.zenoh.config_file == f"{p['etc']}/zenoh-vehicle.json5"
+    exe = shutil.which("systemd-analyze")
+    if exe is None:
+        pytest.skip("systemd-analyze is not installed (Debian: apt-get install systemd); "
+                    "the install itself passed")
+    v = subprocess.run([exe, "verify", str(unit)], capture_output=True, text=True, timeout=120)
+    assert v.returncode == 0 and not v.stderr.strip(), v.stderr
+    broken = tmp_path / "broken.service"  # the check can fail: a missing ExecStart binary
+    broken.write_text(text.replace(str(venv_python), str(tmp_path / "nothing" / "python")))
+    v = subprocess.run([exe, "verify", str(broken)], capture_output=True, text=True, timeout=120)
+    assert v.returncode != 0 or v.stderr.strip()
