@@ -431,3 +431,59 @@ def test_make_install_into_a_prefix_gives_a_venv_and_a_unit_that_systemd_analyze
     broken.write_text(text.replace(str(venv_python), str(tmp_path / "nothing" / "python")))
     v = subprocess.run([exe, "verify", str(broken)], capture_output=True, text=True, timeout=120)
     assert v.returncode != 0 or v.stderr.strip()
+
+
+# --------------------------------------------------------------------------- MAVLink out
+
+@pytest.mark.integration
+def test_mavlink_out_on_a_serial_port_nobody_reads_never_blocks_and_counts_its_drops():
+    """A pseudo-terminal whose other end is not read fills up after a few kB, and then a
+    serial write blocks: the publisher's calls still return (the writer thread waits), the
+    overflow is counted, and once the port is read the frames are whole MAVLink."""
+    import pty
+    import threading
+
+    from onboard.core.config import MavlinkOut
+    from onboard.core.messages import EstimateRecord
+    from onboard.service.publishers.mavlink_pub import MavlinkPublisher, WriterThread
+
+    master, slave = pty.openpty()
+    pub = MavlinkPublisher(MavlinkOut(url=os.ttyname(slave) + ",115200", rate_hz=1000.0), 3,
+                           clock=lambda: 0.0)
+    pub.start()
+    link = pub.link
+    assert isinstance(link, WriterThread)
+    caller = threading.get_ident()
+    rec = EstimateRecord(vehicle="v", pipeline="current", t=0.0,
+                         values={"north": 0.1, "east": -0.2, "down": 0.0},
+                         std={"north": 0.01, "east": 0.01, "down": 0.01})
+    for i in range(3000):  # ~100 kB: far more than a pty holds
+        pub._next_est = -1.0
+        pub.publish_estimates([rec], now=float(i))
+    assert link.dropped > 0  # the queue filled while the port was full: counted, not waited for
+    assert link._thread.ident != caller
+    os.set_blocking(master, False)
+    mav = _mavlink2_parser()
+    msgs = []
+    for _ in range(200):
+        try:
+            data = os.read(master, 65536)
+        except BlockingIOError:
+            time.sleep(0.01)
+            continue
+        msgs.extend(m for m in (mav.parse_buffer(data) or []) if m.get_type() != "BAD_DATA")
+        if len(msgs) > 100:
+            break
+    pub.close()
+    os.close(master)
+    os.close(slave)
+    assert {"NAMED_VALUE_FLOAT", "WIND_COV"} <= {m.get_type() for m in msgs}
+
+
+def _mavlink2_parser():
+    """A pymavlink parser of the ardupilotmega dialect."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+    mav = mavlink2.MAVLink(None)
+    mav.robust_parsing = True
+    return mav
