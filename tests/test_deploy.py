@@ -58,7 +58,7 @@ def test_a_credential_as_systemd_hands_it_over_is_read_and_acls_to_others_are_re
     ACL entry, which shows as group bits (the mask) in the mode: accepted. An ACL that lets
     another user or a group read the key is refused, as are plain group/other bits."""
     monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(tmp_path))
-    key = tmp_path / "onboard.mavlink.key"
+    key = tmp_path / "onboard-mavlink.key"
     key.write_bytes(KEY)
     key.chmod(0o400)
     me = os.geteuid()
@@ -66,15 +66,15 @@ def test_a_credential_as_systemd_hands_it_over_is_read_and_acls_to_others_are_re
              (OTHER, 0, NO_ID))
     assert key.stat().st_mode & 0o777 == 0o440  # what the old mode-bits check refused
     assert private_file_problem(key) is None
-    assert load_signing_key("credential:onboard.mavlink.key") == KEY
+    assert load_signing_key("credential:onboard-mavlink.key") == KEY
     _set_acl(key, (USER_OBJ, 4, NO_ID), (USER, 4, me + 4242), (GROUP_OBJ, 0, NO_ID),
              (MASK, 4, NO_ID), (OTHER, 0, NO_ID))
     with pytest.raises(ConfigError, match=f"accessible by user {me + 4242}.*chmod 600"):
-        load_signing_key("credential:onboard.mavlink.key")
+        load_signing_key("credential:onboard-mavlink.key")
     _set_acl(key, (USER_OBJ, 4, NO_ID), (GROUP_OBJ, 4, NO_ID), (GROUP, 4, 20), (MASK, 4, NO_ID),
              (OTHER, 0, NO_ID))
     with pytest.raises(ConfigError, match="accessible by its group"):
-        load_signing_key("credential:onboard.mavlink.key")
+        load_signing_key("credential:onboard-mavlink.key")
     # a named entry masked to nothing grants nothing
     _set_acl(key, (USER_OBJ, 4, NO_ID), (USER, 4, me + 1), (GROUP_OBJ, 0, NO_ID), (MASK, 0, NO_ID),
              (OTHER, 0, NO_ID))
@@ -82,27 +82,27 @@ def test_a_credential_as_systemd_hands_it_over_is_read_and_acls_to_others_are_re
     os.removexattr(key, "system.posix_acl_access")
     key.chmod(0o604)
     with pytest.raises(ConfigError, match=r"accessible by group or others \(mode 0604\)"):
-        load_signing_key("credential:onboard.mavlink.key")
+        load_signing_key("credential:onboard-mavlink.key")
 
 
 def test_the_user_password_file_holds_one_user_colon_password_line(tmp_path, monkeypatch):
     monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(tmp_path))
-    f = tmp_path / "onboard.zenoh-user"
+    f = tmp_path / "onboard-zenoh-user"
     for text, ok in (("boat1:s3cr:et\n", ("boat1", "s3cr:et")), ("boat1\n", None),
                      ("boat1:\n", None), ("a:b\nc:d\n", None), (":pw\n", None)):
         f.write_text(text)
         f.chmod(0o600)
         if ok:
-            assert read_user_password("credential:onboard.zenoh-user", "k") == ok
+            assert read_user_password("credential:onboard-zenoh-user", "k") == ok
         else:
             with pytest.raises(ConfigError, match="k: "):
-                read_user_password("credential:onboard.zenoh-user", "k")
+                read_user_password("credential:onboard-zenoh-user", "k")
     f.chmod(0o644)
     with pytest.raises(ConfigError, match="chmod 600"):
-        read_user_password("credential:onboard.zenoh-user", "k")
+        read_user_password("credential:onboard-zenoh-user", "k")
     monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(tmp_path / "missing"))
     with pytest.raises(ConfigError, match="No such file"):
-        read_user_password("credential:onboard.zenoh-user", "k")
+        read_user_password("credential:onboard-zenoh-user", "k")
 
 
 def _wait(cond, timeout: float = 8.0) -> bool:
@@ -141,8 +141,8 @@ def test_the_deploy_example_publishes_over_tls_with_its_credentials_to_the_acl_r
     router = zenoh.open(conf)
     creds = tmp_path / "credentials"
     creds.mkdir(mode=0o700)
-    shutil.copy(certs["ca_pem"], creds / "onboard.zenoh-ca.pem")
-    (creds / "onboard.zenoh-user").write_text(f"boat1:{_credentials()['boat1']}\n")
+    shutil.copy(certs["ca_pem"], creds / "onboard-zenoh-ca.pem")
+    (creds / "onboard-zenoh-user").write_text(f"boat1:{_credentials()['boat1']}\n")
     for f in creds.iterdir():
         f.chmod(0o400)
     monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(creds))
@@ -163,8 +163,8 @@ def test_the_deploy_example_publishes_over_tls_with_its_credentials_to_the_acl_r
         pub.start()
         rec = EstimateRecord(vehicle="boat1", pipeline="current", t=1.0, values={"north": 0.2})
         assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/current" in got)[1])
-        (creds / "onboard.zenoh-user").chmod(0o600)
-        (creds / "onboard.zenoh-user").write_text("boat1:not-the-password\n")
+        (creds / "onboard-zenoh-user").chmod(0o600)
+        (creds / "onboard-zenoh-user").write_text("boat1:not-the-password\n")
         wrong = ZenohPublisher(zcfg, "boat1")
         with pytest.raises(Exception, match="(?i)unable to connect"):
             wrong.start()
@@ -180,12 +180,12 @@ def test_the_service_refuses_to_start_with_a_missing_or_readable_zenoh_secret(tm
     from tests.helpers.service_config import service_config
 
     monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(tmp_path))
-    cfg = service_config(zenoh={"user_password_file": "credential:onboard.zenoh-user"},
+    cfg = service_config(zenoh={"user_password_file": "credential:onboard-zenoh-user"},
                          mavlink={"enabled": False}, recorder={"enabled": False})
     with pytest.raises(ConfigError, match="service.zenoh.user_password_file: .*No such file"):
         Service(cfg, state_dir=tmp_path)
-    (tmp_path / "onboard.zenoh-user").write_text("boat1:pw\n")
-    (tmp_path / "onboard.zenoh-user").chmod(0o640)
+    (tmp_path / "onboard-zenoh-user").write_text("boat1:pw\n")
+    (tmp_path / "onboard-zenoh-user").chmod(0o640)
     with pytest.raises(ConfigError, match="accessible by group or others.*chmod 600"):
         Service(cfg, state_dir=tmp_path)
     cfg = service_config(zenoh={"tls_private_key": str(tmp_path / "k")},
@@ -419,7 +419,7 @@ def test_make_install_into_a_prefix_gives_a_venv_and_a_unit_that_systemd_analyze
     text = unit.read_text()
     assert f"\nExecStart={venv_python} -m onboard run --config ${{ONBOARD_CONFIG}}\n" in text
     assert f"\nEnvironment=ONBOARD_CONFIG={p['etc']}/onboard.toml\n" in text
-    assert "\nLoadCredential=onboard.zenoh-user\n" in text and "\nDynamicUser=yes\n" in text
+    assert "\nLoadCredential=onboard-zenoh-user\n" in text and "\nDynamicUser=yes\n" in text
     assert load(Path(p["etc"]) / "onboard.toml").service.zenoh.config_file == f"{p['etc']}/zenoh-vehicle.json5"
     exe = shutil.which("systemd-analyze")
     if exe is None:

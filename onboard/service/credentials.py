@@ -2,13 +2,13 @@
 
 Under the unit's ``DynamicUser=yes`` the service has no fixed uid, so it cannot own a
 secret file in ``/etc``. systemd's credentials solve that (systemd.exec(5),
-"Credentials"): ``LoadCredential=onboard.mavlink.key`` in ``systemd/onboard.service``
-makes systemd read ``/etc/credstore/onboard.mavlink.key`` (root only) at each start and
+"Credentials"): ``LoadCredential=onboard-mavlink.key`` in ``systemd/onboard.service``
+makes systemd read ``/etc/credstore/onboard-mavlink.key`` (root only) at each start and
 place a copy in ``$CREDENTIALS_DIRECTORY`` that only the unit's user can read; a missing
 one is skipped. In the configuration a secret is named ``credential:NAME``::
 
     [service.mavlink]
-    signing_key_file = "credential:onboard.mavlink.key"
+    signing_key_file = "credential:onboard-mavlink.key"
 
 which :func:`resolve_secret` turns into ``$CREDENTIALS_DIRECTORY/NAME``. Run by hand
 (``sudo CREDENTIALS_DIRECTORY=/etc/credstore onboard run ...``) the same names work.

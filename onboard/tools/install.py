@@ -37,6 +37,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 SOURCE = Path(__file__).resolve().parents[2]
@@ -79,14 +80,26 @@ def unit_text(prefix: str, sysconfdir: str) -> str:
         UNIT_SYSCONFDIR + "/", sysconfdir.rstrip("/") + "/")
 
 
+PACKAGE_FILES = ("pyproject.toml", "README.md", "onboard", "drivers", "sitl")
+"""What the package is built from (copied to a temporary directory first, so the build
+leaves nothing in the source tree)."""
+
+
 def make_venv(venv: Path, python: str, pip_args: list[str], source: Path) -> None:
-    """Create (or update) ``venv`` and pip-install ``source`` into it."""
+    """Create (or update) ``venv`` and pip-install the package of ``source`` into it."""
     if not (venv / "bin" / "python").exists():
         subprocess.run([python, "-m", "venv", str(venv)], check=True)
         _say(f"{venv} created")
-    subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet",
-                    "--disable-pip-version-check", "--upgrade", *pip_args, str(source)],
-                   check=True)
+    with tempfile.TemporaryDirectory(prefix="onboard-build-") as tmp:
+        for name in PACKAGE_FILES:
+            src = source / name
+            if src.is_dir():
+                shutil.copytree(src, Path(tmp) / name,
+                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+            else:
+                shutil.copy2(src, Path(tmp) / name)
+        subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet",
+                        "--disable-pip-version-check", "--upgrade", *pip_args, tmp], check=True)
     _say(f"{source} installed into {venv}")
 
 

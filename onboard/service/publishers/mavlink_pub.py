@@ -336,7 +336,8 @@ class MavlinkPublisher:
         self._tokens -= 1.0
         if severity is None:
             low = text.lower()
-            bad = any(w in low for w in ("lost", "silent", "corrupt", "error", "fail", "drop"))
+            bad = any(w in low for w in ("lost", "silent", "corrupt", "error", "fail", "drop",
+                                         "disk full", "low disk"))
             severity = mavlink2.MAV_SEVERITY_WARNING if bad else mavlink2.MAV_SEVERITY_INFO
         if self.suppressed and self._tokens >= 1.0:
             self._tokens -= 1.0
