@@ -182,7 +182,8 @@ def test_the_service_refuses_to_start_with_a_missing_or_readable_zenoh_secret(tm
     monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(tmp_path))
     cfg = service_config(zenoh={"user_password_file": "credential:onboard-zenoh-user"},
                          mavlink={"enabled": False}, recorder={"enabled": False})
-    with pytest.raises(ConfigError, match="service.zenoh.user_password_file: .*No such file"):
+    with pytest.raises(ConfigError, match="service.zenoh.user_password_file: .*No such file.*"
+                                          "/etc/credstore/onboard-zenoh-user"):
         Service(cfg, state_dir=tmp_path)
     (tmp_path / "onboard-zenoh-user").write_text("boat1:pw\n")
     (tmp_path / "onboard-zenoh-user").chmod(0o640)

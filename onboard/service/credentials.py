@@ -58,6 +58,15 @@ def resolve_secret(value: str, key: str) -> Path:
     return Path(base) / name
 
 
+def missing_hint(value: str) -> str:
+    """What to add to "no such file" for ``value``: where a credential comes from."""
+    if not value.startswith(CREDENTIAL_PREFIX):
+        return ""
+    name = value[len(CREDENTIAL_PREFIX):]
+    return (f" (systemd loads it from /etc/credstore/{name}, root-owned, mode 0600, and "
+            f"skips it when missing; the unit needs LoadCredential={name})")
+
+
 def _acl_entries(path: Path) -> list[tuple[int, int, int]] | None:
     """The file's access ACL as (tag, perm, id) entries (None: no ACL, or none readable)."""
     try:
@@ -104,7 +113,8 @@ def read_secret(value: str, key: str, *, max_bytes: int = 1 << 16) -> tuple[Path
         with open(p, "rb") as f:
             raw = f.read(max_bytes + 1)
     except OSError as err:
-        raise ConfigError(f"{key}: {p}: {err.strerror}") from None
+        hint = missing_hint(value) if isinstance(err, FileNotFoundError) else ""
+        raise ConfigError(f"{key}: {p}: {err.strerror}{hint}") from None
     problem = private_file_problem(p, st)
     if problem is not None:
         raise ConfigError(f"{key}: {p} {problem}; chmod 600 it")

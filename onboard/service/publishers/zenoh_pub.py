@@ -73,14 +73,19 @@ def secret_settings(cfg: ZenohOut) -> dict[str, str]:
     credential: :mod:`onboard.service.credentials`). Raises ConfigError, naming the key,
     for a missing or non-private secret, or a key without its certificate."""
     from onboard.core.config import ConfigError
-    from onboard.service.credentials import read_secret, read_user_password, resolve_secret
+    from onboard.service.credentials import (
+        missing_hint,
+        read_secret,
+        read_user_password,
+        resolve_secret,
+    )
 
     out: dict[str, str] = {}
 
     def public(value: str, key: str) -> str:
         p = resolve_secret(value, key)
         if not p.is_file():
-            raise ConfigError(f"{key}: {p}: no such file")
+            raise ConfigError(f"{key}: {p}: no such file{missing_hint(value)}")
         return json.dumps(str(p))
 
     if cfg.tls_root_ca_certificate:
