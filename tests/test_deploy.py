@@ -175,6 +175,46 @@ def test_the_deploy_example_publishes_over_tls_with_its_credentials_to_the_acl_r
         router.close()
 
 
+@pytest.mark.integration
+def test_a_vehicle_listening_on_tls_uses_its_key_and_certificate_from_credentials(tmp_path, monkeypatch):
+    """A vehicle that shore connects to (``listen = ["tls/..."]``): its private key and
+    certificate are credentials; a shore session trusting the CA receives its estimates."""
+    import zenoh
+
+    from onboard.core.messages import EstimateRecord
+    from onboard.service.publishers.zenoh_pub import ZenohPublisher, session_config
+    from onboard.tools.service_bench import free_tcp_port
+
+    certs = make_test_certificates(tmp_path)
+    creds = tmp_path / "credentials"
+    creds.mkdir(mode=0o700)
+    shutil.copy(certs["router_key"], creds / "onboard-zenoh-tls.key")
+    shutil.copy(certs["router_pem"], creds / "onboard-zenoh-tls.pem")
+    for f in creds.iterdir():
+        f.chmod(0o400)
+    monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(creds))
+    ep = f"tls/localhost:{free_tcp_port()}"
+    pub = ZenohPublisher(ZenohOut(mode="peer", listen=[ep],
+                                  tls_private_key="credential:onboard-zenoh-tls.key",
+                                  tls_certificate="credential:onboard-zenoh-tls.pem"), "boat1")
+    pub.start()
+    conf = session_config("client", connect=[ep])
+    conf.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(str(certs["ca_pem"])))
+    shore = zenoh.open(conf)
+    try:
+        got: list[str] = []
+        shore.declare_subscriber("onboard/**", lambda s: got.append(str(s.key_expr)))
+        rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.0})
+        assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1])
+    finally:
+        shore.close()
+        pub.close()
+    (creds / "onboard-zenoh-tls.key").chmod(0o644)
+    with pytest.raises(ConfigError, match="tls_private_key: .*accessible by group or others"):
+        ZenohPublisher(ZenohOut(listen=[ep], tls_private_key="credential:onboard-zenoh-tls.key",
+                                tls_certificate="credential:onboard-zenoh-tls.pem"), "b").start()
+
+
 def test_the_service_refuses_to_start_with_a_missing_or_readable_zenoh_secret(tmp_path, monkeypatch):
     from onboard.service.daemon import Service
     from tests.helpers.service_config import service_config
