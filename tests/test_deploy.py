@@ -528,3 +528,14 @@ def _mavlink2_parser():
     mav = mavlink2.MAVLink(None)
     mav.robust_parsing = True
     return mav
+
+
+def test_records_written_after_close_are_ignored(tmp_path):
+    from onboard.service.recorder import Recorder
+
+    rec = Recorder(tmp_path, clock=lambda: 0.0)
+    rec.close()
+    rec.write(_records(1)[0])
+    rec.flush(wait=True)
+    rec.close()
+    assert rec.records == 0

@@ -200,8 +200,11 @@ class Recorder:
         """Append one record (and ``more``, in the same write: never split by a flush or
         a rotation); flush when the interval is due; rotate when the file is full.
 
-        Never raises for the disk's sake and never waits for it (see the class docstring).
+        Never raises for the disk's sake and never waits for it (see the class docstring);
+        after :meth:`close` it does nothing.
         """
+        if self._pool is None:
+            return
         if self.version < VERDICTS_VERSION and (
                 rec.kind == VERDICTS_KIND or any(r.kind == VERDICTS_KIND for r in more)):
             self.version = VERDICTS_VERSION
@@ -242,6 +245,8 @@ class Recorder:
         (``wait`` blocks until they are on disk)."""
         self._last_flush = self.clock() if now is None else now
         self._dirty = False
+        if self._pool is None:
+            return
         if self._buf:
             data = b"".join(self._buf)
             self._submitted += len(data)
