@@ -1,12 +1,23 @@
 # Two commands on a fresh machine with Python >= 3.11:
 #   make demo   set up .venv and run `onboard demo` on the built-in simulated vehicle
 #   make test   set up .venv and run the test suite
+# On the vehicle computer (docs/service.md "Install"):
+#   sudo make install   venv in $(PREFIX)/venv, config in $(SYSCONFDIR), the systemd unit
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-all bench setup clean
+# make install: DESTDIR stages everything under a directory (packaging); PIP_ARGS adds pip
+# arguments (e.g. --no-index --find-links=wheels/ on a boat without internet).
+DESTDIR    ?=
+PREFIX     ?= /opt/onboard
+SYSCONFDIR ?= /etc/onboard
+UNITDIR    ?= /etc/systemd/system
+CREDSTORE  ?= /etc/credstore
+PIP_ARGS   ?=
+
+.PHONY: demo test test-all bench setup clean install
 
 setup: $(STAMP)
 
@@ -30,3 +41,8 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) replay-out diagnose-out .pytest_cache
+
+install:
+	$(PYTHON) -m onboard.tools.install --destdir "$(DESTDIR)" --prefix "$(PREFIX)" \
+	  --sysconfdir "$(SYSCONFDIR)" --unitdir "$(UNITDIR)" --credstore "$(CREDSTORE)" \
+	  --pip-args="$(PIP_ARGS)"

@@ -165,6 +165,13 @@ class RecordingWriter:
         self._f.write(frame)
         self.bytes_written += len(frame)
 
+    def write_encoded(self, frames: bytes) -> None:
+        """Append frames already encoded by :func:`encode_frame` (the service's recorder
+        encodes them on its event loop and writes them in a worker thread); the caller
+        keeps ``verdicts`` records out of a version-1 file."""
+        self._f.write(frames)
+        self.bytes_written += len(frames)
+
     def flush(self) -> None:
         """Write the buffered frames to the file (and to the disk when ``fsync``)."""
         self._f.flush()

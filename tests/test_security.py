@@ -24,6 +24,7 @@ from onboard.service.publishers.mavlink_pub import MavlinkPublisher
 from onboard.service.signing import SigningState, load_signing_key
 from onboard.tools.service_bench import free_udp_port
 from tests.helpers.mavlink_listener import receive_mavlink
+from tests.helpers.tls import make_test_certificates
 
 REPO = Path(__file__).resolve().parent.parent
 KEY = bytes(range(32))
@@ -751,8 +752,16 @@ def _credentials() -> dict[str, str]:
     return dict(line.split(":", 1) for line in lines)
 
 
+def _user_file(d: Path, user: str = "boat1", password: str | None = None) -> str:
+    """A private ``user:password`` file (the vehicle's ``user_password_file``)."""
+    p = d / f"{user}.user"
+    p.write_text(f"{user}:{password if password is not None else _credentials()[user]}\n")
+    p.chmod(0o600)
+    return str(p)
+
+
 @pytest.mark.integration
-def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receives_them(acl_router):
+def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receives_them(acl_router, tmp_path):
     from onboard.core.config import ZenohOut
     from onboard.core.messages import EstimateRecord
     from onboard.service.publishers.zenoh_pub import ZenohPublisher
@@ -761,7 +770,8 @@ def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receiv
     got: list[str] = []
     sub = shore.declare_subscriber("onboard/**", lambda s: got.append(str(s.key_expr)))
     pub = ZenohPublisher(ZenohOut(mode="client", connect=[acl_router],
-                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5")), "boat1")
+                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5"),
+                                  user_password_file=_user_file(tmp_path)), "boat1")
     pub.start()
     try:
         rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.2})
@@ -785,7 +795,7 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
     got: list[tuple[str, bytes]] = []
     sub = shore.declare_subscriber("onboard/**",
                                    lambda s: got.append((str(s.key_expr), s.payload.to_bytes())))
-    boat1 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"))
+    boat1 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"), "boat1", creds["boat1"])
     boat2 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"), "boat2", creds["boat2"])
     try:
         def sent() -> bool:
@@ -817,7 +827,8 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
 
 
 @pytest.mark.integration
-def test_onboard_shore_reads_through_the_access_controlled_router_with_its_config(acl_router, capsys):
+def test_onboard_shore_reads_through_the_access_controlled_router_with_its_config(acl_router, capsys,
+                                                                                 tmp_path):
     import argparse
 
     from onboard.core.config import ZenohOut
@@ -826,7 +837,8 @@ def test_onboard_shore_reads_through_the_access_controlled_router_with_its_confi
     from onboard.tools import shore
 
     pub = ZenohPublisher(ZenohOut(mode="client", connect=[acl_router],
-                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5")), "boat1")
+                                  config_file=str(ZENOH_DIR / "vehicle-boat1.json5"),
+                                  user_password_file=_user_file(tmp_path)), "boat1")
     pub.start()
     try:
         pub.publish_estimates([EstimateRecord(vehicle="boat1", pipeline="aie", t=5.0,
@@ -864,28 +876,6 @@ def test_a_wrong_password_or_no_credentials_cannot_open_a_session(acl_router, tm
     pub.close()
 
 
-def _test_certificates(d: Path) -> dict[str, Path]:
-    """A throw-away CA and a router certificate for localhost/127.0.0.1, made now with the
-    openssl command (TEST ONLY: the keys live in the test's temporary directory)."""
-    exe = shutil.which("openssl")
-    if exe is None:
-        pytest.skip("openssl is not installed: cannot make test certificates")
-    ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
-    (d / "ext.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n"
-                               "basicConstraints=CA:FALSE\nkeyUsage=digitalSignature\n"
-                               "extendedKeyUsage=serverAuth\n")
-    for cmd in (
-        ["req", "-x509", *ec, "-keyout", "ca.key", "-out", "ca.pem", "-days", "1",
-         "-subj", "/CN=onboard-test-ca", "-addext", "basicConstraints=critical,CA:TRUE",
-         "-addext", "keyUsage=critical,keyCertSign,cRLSign"],
-        ["req", *ec, "-keyout", "router.key", "-out", "router.csr", "-subj", "/CN=localhost"],
-        ["x509", "-req", "-in", "router.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
-         "-CAcreateserial", "-out", "router.pem", "-days", "1", "-extfile", "ext.cnf"],
-    ):
-        subprocess.run([exe, *cmd], cwd=d, check=True, capture_output=True, timeout=30)
-    return {k: d / f"{k.replace('_', '.')}" for k in ("ca_pem", "router_key", "router_pem")}
-
-
 @pytest.mark.integration
 def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_connect(tmp_path):
     """The example configs as shipped, only the certificate paths replaced: the router
@@ -897,7 +887,7 @@ def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_
     from onboard.service.publishers.zenoh_pub import ZenohPublisher, session_config
     from onboard.tools.service_bench import free_tcp_port
 
-    certs = _test_certificates(tmp_path)
+    certs = make_test_certificates(tmp_path)
     ep = f"tls/localhost:{free_tcp_port()}"
     conf = session_config("router", listen=[ep], config_file=str(ZENOH_DIR / "router-acl.json5"))
     conf.insert_json5("transport/auth/usrpwd/dictionary_file",
@@ -915,8 +905,9 @@ def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_
         return str(out)
 
     shore = None
-    pub = ZenohPublisher(ZenohOut(mode="client", connect=[ep],
-                                  config_file=local("vehicle-boat1.json5", certs["ca_pem"])), "boat1")
+    vehicle = dict(mode="client", connect=[ep], config_file=str(ZENOH_DIR / "vehicle-boat1.json5"),
+                   user_password_file=_user_file(tmp_path))
+    pub = ZenohPublisher(ZenohOut(**vehicle, tls_root_ca_certificate=str(certs["ca_pem"])), "boat1")
     try:
         shore = zenoh.open(session_config("client", connect=[ep],
                                           config_file=local("shore.json5", certs["ca_pem"])))
@@ -925,8 +916,7 @@ def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_
         pub.start()
         rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.2})
         assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1])
-        untrusting = ZenohPublisher(ZenohOut(mode="client", connect=[ep],
-                                             config_file=local("vehicle-boat1.json5", None)), "boat1")
+        untrusting = ZenohPublisher(ZenohOut(**vehicle), "boat1")
         with pytest.raises(Exception, match="(?i)unable to connect"):
             untrusting.start()
         untrusting.close()
@@ -974,9 +964,9 @@ def test_systemd_unit_verifies(tmp_path):
     exists here (the installed path /opt/onboard/... does not)."""
     exe = _systemd_analyze()
     text = UNIT.read_text()
-    assert "\nExecStart=/opt/onboard/.venv/bin/onboard run " in text
+    assert "\nExecStart=/opt/onboard/venv/bin/python -m onboard run " in text
     unit = tmp_path / "onboard.service"
-    unit.write_text(text.replace("ExecStart=/opt/onboard/.venv/bin/onboard", "ExecStart=/bin/true"))
+    unit.write_text(text.replace("ExecStart=/opt/onboard/venv/bin/python", "ExecStart=/bin/true"))
     r = subprocess.run([exe, "verify", str(unit)], capture_output=True, text=True, timeout=60)
     if r.returncode != 0 and ("Failed to" in r.stderr and "bus" in r.stderr.lower()):
         pytest.skip(f"systemd-analyze verify needs a running systemd here: {r.stderr.strip()}")

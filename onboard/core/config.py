@@ -203,6 +203,17 @@ class ZenohOut(_Strict):
     key_prefix: str = "onboard"
     config_file: str = ""
     """An optional Zenoh JSON5 config (TLS, user/password, access control)."""
+    tls_root_ca_certificate: str = ""
+    """The CA certificate that signed the router's (a path, or ``credential:NAME``: a
+    systemd credential, docs/security.md); applied on top of ``config_file``."""
+    tls_private_key: str = ""
+    """This vehicle's TLS private key (path or ``credential:NAME``, private): for ``tls/``
+    listen endpoints, and the client key when ``config_file`` enables mutual TLS."""
+    tls_certificate: str = ""
+    """The certificate that goes with ``tls_private_key``."""
+    user_password_file: str = ""
+    """One line ``user:password`` (path or ``credential:NAME``, private): the session's
+    Zenoh user/password authentication."""
 
 
 class MavlinkOut(_Strict):
@@ -252,6 +263,10 @@ class RecorderConfig(_Strict):
     flush_interval_s: float = 0.5
     rotate_mb: float = 64.0
     max_total_mb: float = 2048.0
+    min_free_mb: float = 200.0
+    """Free space (MB) left on the recordings' file system: below it the oldest
+    recordings are deleted, then recording pauses (an event; records counted in the
+    health record's ``dropped["recorder"]``); 0 = no check."""
 
 
 class ServiceConfig(_Strict):

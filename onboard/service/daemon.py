@@ -186,6 +186,10 @@ class Service:
         self.recorder: Recorder | None = None
         self.intake = Intake(self.engine, queue_size=svc.queue_size)
         self.signing = open_signing(svc.mavlink, self._path)  # MAVLink 2 signing: docs/security.md
+        if svc.zenoh.enabled:  # a missing or readable-by-others secret stops the start
+            from onboard.service.publishers.zenoh_pub import secret_settings
+
+            secret_settings(svc.zenoh)
         self.intake.verifier = self.signing.verifier if self.signing and svc.mavlink.require_signing else None
         self._sample_arrived = asyncio.Event()
         self.intake.on_queued = self._sample_arrived.set
@@ -215,6 +219,8 @@ class Service:
     async def start(self) -> None:
         """Restore state, open recorder, publishers and inputs; then READY=1."""
         cfg, svc = self.cfg, self.cfg.service
+        if self.signing is not None:  # the first signed frames then need no save on the loop
+            await asyncio.get_running_loop().run_in_executor(None, self.signing.reserve_now)
         loaded = self.state_file.load()
         if loaded.state is not None:
             self.engine.set_state(loaded.state)
@@ -231,7 +237,8 @@ class Service:
                 self.recorder = Recorder(self.recorder_dir, flush_interval_s=svc.recorder.flush_interval_s,
                                          rotate_mb=svc.recorder.rotate_mb,
                                          max_total_mb=svc.recorder.max_total_mb, meta=meta,
-                                         clock=self.clock.now,
+                                         clock=self.clock.now, on_event=self.event,
+                                         min_free_mb=svc.recorder.min_free_mb,
                                          version=2 if self.intake.verifier is not None else 1)
                 self.intake.recorder = self.recorder
             except OSError as err:
@@ -362,15 +369,16 @@ class Service:
             t.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         self._tasks.clear()
-        self._save_state_now()
+        loop = asyncio.get_running_loop()  # files are fsync'ed off the loop, even now
+        await loop.run_in_executor(None, self._save_state_now)
         if self.recorder is not None:
-            self.recorder.close()
+            await loop.run_in_executor(None, self.recorder.close)
         if self.zenoh is not None:
             self.zenoh.close()
         if self.mavlink is not None:
             self.mavlink.close()
         if self.signing is not None:
-            self.signing.close()
+            await loop.run_in_executor(None, self.signing.close)
         self.notifier.close()
 
     # ------------------------------------------------------------------ the loop
@@ -495,6 +503,8 @@ class Service:
                 dropped[f"{inp.name}:chunks"] = inp.transport.stats.dropped_chunks
         if self.stats.tick_skips:
             dropped["ticks"] = self.stats.tick_skips
+        if self.recorder is not None and self.recorder.dropped:
+            dropped["recorder"] = self.recorder.dropped  # records that missed the disk
         rejected = dict(h.rejected)
         rejected.update(self.intake.parse_rejections())
         return msgspec.structs.replace(h, rejected=rejected, dropped=dropped)

@@ -22,16 +22,17 @@ MAVLink signing specification asks (https://mavlink.io/en/guide/message_signing.
 
 The key file (``service.mavlink.signing_key_file``) holds the 32-byte secret as raw bytes
 or 64 hex digits, or a passphrase whose SHA-256 is the key (MAVProxy's ``signing setup``);
-it must be accessible by its owner only (mode 0600 or stricter).
+it must be accessible by its owner only (mode 0600 or stricter), or be a systemd credential
+(``credential:NAME``, :mod:`onboard.service.credentials`).
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import hashlib
 import json
 import logging
 import os
-import stat
 import time
 from pathlib import Path
 from typing import Callable
@@ -43,6 +44,7 @@ from drivers.mavlink_signing import (
     signing_timestamp,
 )
 from onboard.core.config import ConfigError, MavlinkOut
+from onboard.service.credentials import read_secret
 
 log = logging.getLogger(__name__)
 
@@ -51,24 +53,18 @@ STATE_VERSION = 1
 
 
 def load_signing_key(path: str | Path) -> bytes:
-    """The 32-byte signing key from ``path`` (see the module docstring).
+    """The 32-byte signing key from ``path`` (see the module docstring); ``path`` may name
+    a systemd credential, ``credential:NAME`` (:mod:`onboard.service.credentials`).
 
-    Raises ConfigError when the file is missing, empty or accessible by group or others.
+    Raises ConfigError when the file is missing, empty or accessible by group or others
+    (a credential's ACL entry for the service's own user is accepted).
     """
-    p = Path(path)
-    try:
-        st = p.stat()
-        raw = p.read_bytes()
-    except OSError as err:
-        raise ConfigError(f"service.mavlink.signing_key_file: {p}: {err.strerror}") from None
-    if st.st_mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise ConfigError(f"service.mavlink.signing_key_file: {p} is accessible by group or "
-                          f"others (mode {stat.S_IMODE(st.st_mode):04o}); chmod 600 it")
+    _, raw = read_secret(str(path), "service.mavlink.signing_key_file")
     if len(raw) == 32:
         return raw
     text = raw.decode("utf-8", "replace").strip()
     if not text:
-        raise ConfigError(f"service.mavlink.signing_key_file: {p} is empty")
+        raise ConfigError(f"service.mavlink.signing_key_file: {path} is empty")
     if len(text) == 64:
         try:
             return bytes.fromhex(text)
@@ -122,6 +118,8 @@ class SigningState:
                                           on_accept=self._on_accept)
         self._dirty = False
         self._next_save = mono() + save_interval_s
+        self._pool: concurrent.futures.ThreadPoolExecutor | None = None
+        self._saving: concurrent.futures.Future[bool] | None = None
 
     # ------------------------------------------------------------------ outgoing
 
@@ -131,8 +129,13 @@ class SigningState:
         timestamp; a new reservation is saved first when it would pass the old one."""
         t = max(current, self.tx_last + 1, self.verifier.local_timestamp())
         if t > self.tx_reserved:
-            self.tx_reserved = t + self.reserve
-            self.save()
+            if self._saving is not None:
+                self._saving.result()  # a renewal under way: it may cover t
+            if t > self.tx_reserved:  # the first frame without reserve(), or a stalled disk
+                self.tx_reserved = t + self.reserve
+                self.save()
+        elif t > self.tx_reserved - self.reserve // 2:
+            self.save_async(t + self.reserve)  # renewed in the background, well ahead
         self.tx_last = t
         if t > self.verifier.high:
             self.verifier.high = t
@@ -143,7 +146,27 @@ class SigningState:
     def _on_accept(self) -> None:
         self._dirty = True
         if self.mono() >= self._next_save:
+            self._next_save = self.mono() + self.save_interval_s
+            self.save_async()
+
+    def reserve_now(self) -> None:
+        """Save a reservation from the local timestamp now (blocking: call it off the event
+        loop at start), so that the frames that follow need no save before they leave."""
+        t = max(self.tx_last + 1, self.verifier.local_timestamp())
+        if t + self.reserve // 2 > self.tx_reserved:
+            self.tx_reserved = t + self.reserve
             self.save()
+
+    def save_async(self, tx_reserved: int | None = None) -> None:
+        """Save in a worker thread (no fsync on the caller's thread), the reservation
+        raised to ``tx_reserved`` once it is on disk; nothing when a save is under way."""
+        if self._saving is not None and not self._saving.done():
+            return
+        if self._pool is None:
+            self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="signing")
+        doc = self._doc(max(self.tx_reserved, tx_reserved or 0))
+        self._dirty = False
+        self._saving = self._pool.submit(self._write, doc)
 
     # ------------------------------------------------------------------ file
 
@@ -166,9 +189,18 @@ class SigningState:
     def save(self) -> bool:
         """Write the timestamps atomically (mode 0600); False (counted, logged) on a disk
         error: signing goes on, only the restart guarantee is weakened."""
-        doc = {"format": STATE_FORMAT, "version": STATE_VERSION,
-               "tx_reserved": self.tx_reserved,
-               "streams": [[*k, v] for k, v in sorted(self.verifier.streams.items())]}
+        doc = self._doc(self.tx_reserved)
+        self._dirty = False
+        if not self._write(doc):
+            self._dirty = True
+            return False
+        return True
+
+    def _doc(self, tx_reserved: int) -> dict:
+        return {"format": STATE_FORMAT, "version": STATE_VERSION, "tx_reserved": tx_reserved,
+                "streams": [[*k, v] for k, v in sorted(self.verifier.streams.items())]}
+
+    def _write(self, doc: dict) -> bool:
         data = json.dumps(doc, separators=(",", ":")).encode()
         d = self.path.parent
         tmp = d / f".{self.path.name}.tmp-{os.getpid()}"
@@ -186,12 +218,19 @@ class SigningState:
             log.warning("cannot save signing timestamps to %s: %s", self.path, err.strerror)
             return False
         self.saves += 1
-        self._dirty = False
         self._next_save = self.mono() + self.save_interval_s
+        if doc["tx_reserved"] > self.tx_reserved:
+            self.tx_reserved = doc["tx_reserved"]
         return True
 
     def close(self) -> None:
-        """Save the incoming stream timestamps if they changed since the last save."""
+        """Wait for a background save; save the incoming stream timestamps if they changed
+        since the last save."""
+        if self._saving is not None:
+            self._saving.result()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
         if self._dirty:
             self.save()
 

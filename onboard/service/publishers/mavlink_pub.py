@@ -31,6 +31,10 @@ ODOMETRY           only with ``odometry = true``: position NED (m, from the     
                    first fix), heading, body-frame surge speed
 =================  ===========================================================  =========
 
+Links: ``udpout:`` is a non-blocking socket; every other pymavlink URL (a serial port,
+``tcp:``) is written by a :class:`WriterThread`, so a full serial buffer or a stalled TCP
+peer never blocks the estimator loop (frames beyond its queue are dropped and counted).
+
 Signing: with ``signing_key_file`` every frame is signed (MAVLink 2 signing, link id 0).
 The file holds the 32-byte secret as raw bytes or 64 hex digits, or a passphrase whose
 SHA-256 is the key (MAVProxy's ``signing setup``). It must be readable by its owner only
@@ -45,7 +49,9 @@ from __future__ import annotations
 
 import logging
 import math
+import queue
 import socket
+import threading
 import time
 from typing import TYPE_CHECKING, Callable, Sequence
 
@@ -59,7 +65,7 @@ from onboard.service.signing import check_signing, load_signing_key
 if TYPE_CHECKING:
     from onboard.service.signing import SigningState
 
-__all__ = ["COMPONENT_ID", "MavlinkPublisher", "SIGNING_EPOCH", "check_signing",
+__all__ = ["COMPONENT_ID", "MavlinkPublisher", "SIGNING_EPOCH", "WriterThread", "check_signing",
            "load_signing_key"]
 
 log = logging.getLogger(__name__)
@@ -100,6 +106,58 @@ class _UdpOut:
         self.sock.close()
 
 
+class WriterThread:
+    """A link whose writes may block (a serial port, TCP) written from its own thread:
+    :meth:`write` only queues the frame, so the event loop never waits on a full serial
+    buffer or a stalled TCP peer; beyond ``max_frames`` waiting, frames are dropped and
+    counted (``dropped``); a write error is counted (``errors``) and writing goes on.
+
+    Parameters:
+        link: anything with ``write(bytes)`` and ``close()`` (a pymavlink connection).
+        max_frames: frames allowed to wait.
+    """
+
+    def __init__(self, link: object, max_frames: int = 512) -> None:
+        self.link = link
+        self.dropped = 0
+        self.errors = 0
+        self.written = 0
+        self._q: queue.Queue[bytes | None] = queue.Queue(max_frames)
+        self._thread = threading.Thread(target=self._run, name="mavlink-out", daemon=True)
+        self._thread.start()
+
+    def write(self, buf: bytes) -> None:
+        """Queue ``buf`` for the writer thread (dropped and counted when the queue is full)."""
+        try:
+            self._q.put_nowait(bytes(buf))
+        except queue.Full:
+            self.dropped += 1
+
+    def _run(self) -> None:
+        while True:
+            buf = self._q.get()
+            if buf is None:
+                return
+            try:
+                self.link.write(buf)  # type: ignore[attr-defined]
+                self.written += 1
+            except Exception as err:  # noqa: BLE001 - a serial hiccup never stops writing
+                self.errors += 1
+                log.debug("mavlink out write failed: %s", err)
+
+    def close(self, timeout: float = 2.0) -> None:
+        """Stop the thread (after the frames queued, or ``timeout`` s), close the link."""
+        try:
+            self._q.put(None, timeout=timeout)
+        except queue.Full:
+            pass
+        self._thread.join(timeout)
+        try:
+            self.link.close()  # type: ignore[attr-defined]
+        except Exception:  # noqa: BLE001
+            pass
+
+
 def _open_link(url: str) -> object:
     scheme, _, rest = url.partition(":")
     if scheme in ("udpout", "udp") and rest:
@@ -107,7 +165,7 @@ def _open_link(url: str) -> object:
         return _UdpOut(host or "127.0.0.1", int(port))
     from pymavlink import mavutil  # serial ports, tcp:, tcpin: ...
 
-    return mavutil.mavlink_connection(url, autoreconnect=True)
+    return WriterThread(mavutil.mavlink_connection(url, autoreconnect=True))
 
 
 class MavlinkPublisher:
@@ -278,7 +336,8 @@ class MavlinkPublisher:
         self._tokens -= 1.0
         if severity is None:
             low = text.lower()
-            bad = any(w in low for w in ("lost", "silent", "corrupt", "error", "fail", "drop"))
+            bad = any(w in low for w in ("lost", "silent", "corrupt", "error", "fail", "drop",
+                                         "disk full", "low disk"))
             severity = mavlink2.MAV_SEVERITY_WARNING if bad else mavlink2.MAV_SEVERITY_INFO
         if self.suppressed and self._tokens >= 1.0:
             self._tokens -= 1.0

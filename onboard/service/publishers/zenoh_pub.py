@@ -18,7 +18,12 @@ peer retries its ``connect`` endpoints (zenoh 1.x ``connect/retry``: 1 s doublin
 4 s, the defaults, measured 0.5-1.5 s after a restarted router is back). The publisher
 watches the session's routers/peers at every health record and reports the loss and
 the return as events (``on_event``); puts while disconnected are dropped by Zenoh, so
-the estimator loop never waits for the network.
+the estimator loop never waits for the network (``put`` drops under congestion,
+Zenoh's default for data, and never blocks).
+
+Secrets (the CA certificate, a TLS key and certificate, the user and password) come from
+``[service.zenoh]`` keys that name files or systemd credentials (:func:`secret_settings`),
+so the JSON5 ``config_file`` itself holds none and needs no protection.
 """
 
 from __future__ import annotations
@@ -59,6 +64,47 @@ def session_config(mode: str = "peer", connect: Iterable[str] = (), listen: Iter
     elif mode != "router":
         conf.insert_json5("listen/endpoints", "[]")  # a vehicle listens only where told
     return conf
+
+
+def secret_settings(cfg: ZenohOut) -> dict[str, str]:
+    """The Zenoh settings (key -> JSON value) that the secrets of ``[service.zenoh]``
+    add on top of ``config_file``: the CA certificate, this vehicle's TLS key and
+    certificate, the user and password (each a path or ``credential:NAME``, a systemd
+    credential: :mod:`onboard.service.credentials`). Raises ConfigError, naming the key,
+    for a missing or non-private secret, or a key without its certificate."""
+    from onboard.core.config import ConfigError
+    from onboard.service.credentials import (
+        missing_hint,
+        read_secret,
+        read_user_password,
+        resolve_secret,
+    )
+
+    out: dict[str, str] = {}
+
+    def public(value: str, key: str) -> str:
+        p = resolve_secret(value, key)
+        if not p.is_file():
+            raise ConfigError(f"{key}: {p}: no such file{missing_hint(value)}")
+        return json.dumps(str(p))
+
+    if cfg.tls_root_ca_certificate:
+        out["transport/link/tls/root_ca_certificate"] = public(
+            cfg.tls_root_ca_certificate, "service.zenoh.tls_root_ca_certificate")
+    if bool(cfg.tls_private_key) != bool(cfg.tls_certificate):
+        raise ConfigError("service.zenoh.tls_private_key and tls_certificate go together")
+    if cfg.tls_private_key:
+        key, _ = read_secret(cfg.tls_private_key, "service.zenoh.tls_private_key")
+        cert = public(cfg.tls_certificate, "service.zenoh.tls_certificate")
+        for side in ("listen", "connect"):
+            out[f"transport/link/tls/{side}_private_key"] = json.dumps(str(key))
+            out[f"transport/link/tls/{side}_certificate"] = cert
+    if cfg.user_password_file:
+        user, password = read_user_password(cfg.user_password_file,
+                                            "service.zenoh.user_password_file")
+        out["transport/auth/usrpwd/user"] = json.dumps(user)
+        out["transport/auth/usrpwd/password"] = json.dumps(password)
+    return out
 
 
 def open_router(listen: str | Sequence[str] = DEFAULT_ROUTER_ENDPOINT) -> "zenoh.Session":  # noqa: F821
@@ -108,8 +154,10 @@ class ZenohPublisher:
         if self.cfg.config_file and not Path(self.cfg.config_file).exists():
             raise FileNotFoundError(f"zenoh config file {self.cfg.config_file} not found")
         mode = self.cfg.mode if self.cfg.mode in ("peer", "client", "router") else "peer"
-        self.session = zenoh.open(session_config(mode, self.cfg.connect, self.cfg.listen,
-                                                 self.cfg.config_file))
+        conf = session_config(mode, self.cfg.connect, self.cfg.listen, self.cfg.config_file)
+        for key, value in secret_settings(self.cfg).items():
+            conf.insert_json5(key, value)
+        self.session = zenoh.open(conf)
         self._encoding = zenoh.Encoding.APPLICATION_JSON
         self._token = self.session.liveliness().declare_token(f"{self.base}/alive")
         self._queryable = self.session.declare_queryable(f"{self.base}/**", self._on_query)

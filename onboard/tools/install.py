@@ -1,0 +1,159 @@
+"""``make install``: the service on a vehicle computer, from this source tree.
+
+Run by the Makefile with the system Python (standard library only, nothing of ours
+installed yet)::
+
+    sudo make install                         # PREFIX=/opt/onboard SYSCONFDIR=/etc/onboard
+    make install DESTDIR=/tmp/stage           # staged, for a package
+    make install PREFIX=$HOME/o SYSCONFDIR=$HOME/o/etc UNITDIR=$HOME/o/unit CREDSTORE=$HOME/o/cred
+
+What goes where (each path under ``DESTDIR`` when given):
+
+==========================================  ==========================================
+``PREFIX/venv``                             a virtual environment with this package
+                                            (``pip install SOURCE``, not editable); the
+                                            unit runs ``PREFIX/venv/bin/python -m onboard``
+``SYSCONFDIR/onboard.toml``                 config/deploy-example.toml, only if absent
+``SYSCONFDIR/onboard.env``                  systemd/onboard.env.example, only if absent
+``SYSCONFDIR/zenoh-vehicle.json5``          config/zenoh/vehicle-boat1.json5 (no secret),
+                                            only if absent
+``UNITDIR/onboard.service``                 systemd/onboard.service with PREFIX and
+                                            SYSCONFDIR put in; always replaced
+``CREDSTORE/``                              created mode 0700 if absent: the secrets go
+                                            there (LoadCredential=, docs/security.md)
+==========================================  ==========================================
+
+A configuration already in place is never overwritten (the new example is written beside
+it as ``*.dist``). The state and log directories are not created here: systemd creates
+them at the first start (``StateDirectory=``, ``LogsDirectory=``), owned by the unit's
+dynamic user. Without ``DESTDIR``, and where ``systemd-analyze`` exists, the installed unit
+is checked with ``systemd-analyze verify``; a failure fails the install.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+SOURCE = Path(__file__).resolve().parents[2]
+"""The source tree this module belongs to."""
+UNIT_PREFIX = "/opt/onboard"
+UNIT_SYSCONFDIR = "/etc/onboard"
+"""The paths written in systemd/onboard.service, replaced by the ones installed to."""
+
+
+def _stage(destdir: str, path: str) -> Path:
+    """``path`` under ``destdir`` (both absolute paths)."""
+    return Path(destdir + path) if destdir else Path(path)
+
+
+def _say(text: str) -> None:
+    print(f"install: {text}", flush=True)
+
+
+def install_file(src: Path, dst: Path, mode: int, *, keep: bool, text: str | None = None) -> str:
+    """Copy ``src`` (or write ``text``) to ``dst`` with ``mode``; with ``keep`` an
+    existing ``dst`` stays and the new one goes to ``dst.dist``. Returns what was done."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    data = text.encode() if text is not None else src.read_bytes()
+    target = dst
+    if keep and dst.exists():
+        if dst.read_bytes() == data:
+            return f"{dst} unchanged"
+        target = dst.with_name(dst.name + ".dist")
+    tmp = target.with_name(f".{target.name}.tmp")
+    tmp.write_bytes(data)
+    tmp.chmod(mode)
+    os.replace(tmp, target)
+    return f"{dst} kept, new version in {target}" if target != dst else f"{dst} written"
+
+
+def unit_text(prefix: str, sysconfdir: str) -> str:
+    """systemd/onboard.service for an install at ``prefix`` and ``sysconfdir``."""
+    text = (SOURCE / "systemd" / "onboard.service").read_text()
+    return text.replace(UNIT_PREFIX + "/", prefix.rstrip("/") + "/").replace(
+        UNIT_SYSCONFDIR + "/", sysconfdir.rstrip("/") + "/")
+
+
+PACKAGE_FILES = ("pyproject.toml", "README.md", "onboard", "drivers", "sitl")
+"""What the package is built from (copied to a temporary directory first, so the build
+leaves nothing in the source tree)."""
+
+
+def make_venv(venv: Path, python: str, pip_args: list[str], source: Path) -> None:
+    """Create (or update) ``venv`` and pip-install the package of ``source`` into it."""
+    if not (venv / "bin" / "python").exists():
+        subprocess.run([python, "-m", "venv", str(venv)], check=True)
+        _say(f"{venv} created")
+    with tempfile.TemporaryDirectory(prefix="onboard-build-") as tmp:
+        for name in PACKAGE_FILES:
+            src = source / name
+            if src.is_dir():
+                shutil.copytree(src, Path(tmp) / name,
+                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+            else:
+                shutil.copy2(src, Path(tmp) / name)
+        subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet",
+                        "--disable-pip-version-check", "--upgrade", *pip_args, tmp], check=True)
+    _say(f"{source} installed into {venv}")
+
+
+def verify_unit(unit: Path) -> str | None:
+    """``systemd-analyze verify`` of ``unit`` (None: passed, or no systemd-analyze here);
+    else its complaint."""
+    exe = shutil.which("systemd-analyze")
+    if exe is None:
+        return None
+    r = subprocess.run([exe, "verify", str(unit)], capture_output=True, text=True, timeout=120)
+    complaint = (r.stderr + r.stdout).strip()
+    return complaint if r.returncode != 0 or complaint else None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Install (see the module docstring); 0 on success, 1 when the unit does not verify."""
+    ap = argparse.ArgumentParser(prog="make install", description=__doc__.split("\n")[0])
+    ap.add_argument("--destdir", default="")
+    ap.add_argument("--prefix", default="/opt/onboard")
+    ap.add_argument("--sysconfdir", default="/etc/onboard")
+    ap.add_argument("--unitdir", default="/etc/systemd/system")
+    ap.add_argument("--credstore", default="/etc/credstore")
+    ap.add_argument("--python", default=sys.executable, help="the Python that makes the venv")
+    ap.add_argument("--pip-args", default="", help="extra pip arguments (a wheelhouse ...)")
+    ap.add_argument("--no-venv", action="store_true", help="install files only")
+    a = ap.parse_args(argv)
+    for name in ("prefix", "sysconfdir", "unitdir", "credstore"):
+        if not os.path.isabs(getattr(a, name)):
+            ap.error(f"--{name} must be an absolute path")
+    d = a.destdir
+    if not a.no_venv:
+        make_venv(_stage(d, a.prefix) / "venv", a.python, a.pip_args.split(), SOURCE)
+    etc = _stage(d, a.sysconfdir)
+    for src, name in ((SOURCE / "config" / "deploy-example.toml", "onboard.toml"),
+                      (SOURCE / "systemd" / "onboard.env.example", "onboard.env"),
+                      (SOURCE / "config" / "zenoh" / "vehicle-boat1.json5", "zenoh-vehicle.json5")):
+        text = src.read_text().replace(UNIT_SYSCONFDIR + "/", a.sysconfdir.rstrip("/") + "/")
+        _say(install_file(src, etc / name, 0o644, keep=True, text=text))
+    unit = _stage(d, a.unitdir) / "onboard.service"
+    _say(install_file(unit, unit, 0o644, keep=False, text=unit_text(a.prefix, a.sysconfdir)))
+    cred = _stage(d, a.credstore)
+    if not cred.exists():
+        cred.mkdir(parents=True, mode=0o700)
+        cred.chmod(0o700)
+        _say(f"{cred} created (mode 0700): put the secrets there, chmod 600")
+    if not d:
+        complaint = verify_unit(unit)
+        if complaint:
+            print(f"install: systemd-analyze verify {unit}:\n{complaint}", file=sys.stderr)
+            return 1
+    _say("done. Next: the secrets in the credential store (docs/security.md), then "
+         "systemctl daemon-reload && systemctl enable --now onboard")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
