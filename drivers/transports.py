@@ -20,6 +20,12 @@ cancelling the task that iterates.
 
 Serial and pty reads use pyserial to configure the port (raw, non-blocking) and
 ``loop.add_reader`` on its file descriptor, so no thread and no serial_asyncio.
+
+:meth:`Transport.send` writes back on the open connection (the service asks the autopilot
+for its streams): to the serial port, to the TCP server, or to the address the last
+datagram came from on UDP (as a ground station answers an autopilot). It never blocks: what
+the connection cannot take now is queued up to ``TX_QUEUE_BYTES`` and the rest dropped and
+counted (``stats.tx_dropped``).
 """
 
 from __future__ import annotations
@@ -39,6 +45,8 @@ Chunk = tuple[bytes, float]
 
 READ_SIZE = 65536
 """Largest read per wake-up (bytes)."""
+TX_QUEUE_BYTES = 65536
+"""Most bytes queued for sending on one connection; beyond it a send is dropped."""
 
 
 class TransportUrlError(ValueError):
@@ -104,6 +112,10 @@ class TransportStats:
     connected: bool = False
     t_last_rx: float | None = None
     errors: list[str] = field(default_factory=list)
+    tx_bytes: int = 0
+    """Bytes handed to the connection by :meth:`Transport.send`."""
+    tx_dropped: int = 0
+    """Sends refused: no connection (or no UDP peer yet), or the queue full."""
 
 
 class Transport:
@@ -125,6 +137,23 @@ class Transport:
         self.queue_size = queue_size
         self.stats = TransportStats()
         self._on_event = on_event
+        self._tx: Callable[[bytes], bool] | None = None
+
+    def send(self, data: bytes) -> bool:
+        """Write ``data`` on the open connection without blocking; False (counted in
+        ``stats.tx_dropped``) when there is none or it cannot take it."""
+        tx = self._tx
+        ok = False
+        if tx is not None:
+            try:
+                ok = tx(data)
+            except OSError:
+                ok = False
+        if ok:
+            self.stats.tx_bytes += len(data)
+        else:
+            self.stats.tx_dropped += 1
+        return ok
 
     def _event(self, text: str) -> None:
         if self._on_event is not None:
@@ -253,13 +282,42 @@ class SerialTransport(Transport):
             box.put((data, self.clock()))
 
         loop.add_reader(fd, readable)
+        pending = bytearray()
+
+        def flush() -> None:
+            try:
+                n = os.write(fd, pending)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                pending.clear()
+                loop.remove_writer(fd)
+                return
+            del pending[:n]
+            if not pending:
+                loop.remove_writer(fd)
+
+        def tx(data: bytes) -> bool:
+            if len(pending) + len(data) > TX_QUEUE_BYTES:
+                return False
+            idle = not pending
+            pending.extend(data)
+            if idle:
+                flush()
+                if pending:
+                    loop.add_writer(fd, flush)
+            return True
+
+        self._tx = tx
         self._connected()
         try:
             while True:
                 data, t_rx = await box.get()
                 yield self._count(data, t_rx)
         finally:
+            self._tx = None
             loop.remove_reader(fd)
+            loop.remove_writer(fd)
             try:
                 port.close()
             except Exception:  # noqa: BLE001 - closing a vanished device may fail
@@ -270,8 +328,11 @@ class _UdpProtocol(asyncio.DatagramProtocol):
     def __init__(self, box: _Mailbox, clock: Clock) -> None:
         self.box = box
         self.clock = clock
+        self.peer: object | None = None
+        """Where the last datagram came from: where :meth:`Transport.send` answers."""
 
     def datagram_received(self, data: bytes, addr: object) -> None:
+        self.peer = addr
         self.box.put((data, self.clock()))
 
     def error_received(self, exc: Exception) -> None:  # ICMP errors: not fatal for a listener
@@ -296,14 +357,23 @@ class UdpTransport(Transport):
         except OSError:
             sock.close()
             raise
-        transport, _ = await loop.create_datagram_endpoint(
-            lambda: _UdpProtocol(box, self.clock), sock=sock)
+        proto = _UdpProtocol(box, self.clock)
+        transport, _ = await loop.create_datagram_endpoint(lambda: proto, sock=sock)
+
+        def tx(data: bytes) -> bool:
+            if proto.peer is None or transport.get_write_buffer_size() > TX_QUEUE_BYTES:
+                return False
+            transport.sendto(data, proto.peer)
+            return True
+
+        self._tx = tx
         self._connected()
         try:
             while True:
                 data, t_rx = await box.get()
                 yield self._count(data, t_rx)
         finally:
+            self._tx = None
             transport.close()
 
     @property
@@ -326,6 +396,14 @@ class TcpTransport(Transport):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
         except OSError:
             pass
+
+        def tx(data: bytes) -> bool:
+            if writer.is_closing() or writer.transport.get_write_buffer_size() > TX_QUEUE_BYTES:
+                return False
+            writer.write(data)
+            return True
+
+        self._tx = tx
         self._connected()
         try:
             while True:
@@ -334,6 +412,7 @@ class TcpTransport(Transport):
                     return
                 yield self._count(data, self.clock())
         finally:
+            self._tx = None
             writer.close()
             try:
                 await asyncio.wait_for(writer.wait_closed(), 1.0)

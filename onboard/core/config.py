@@ -221,6 +221,19 @@ class SourceConfig(_Strict):
     kind: Literal["mavlink", "nmea", "dvl-json", "pd6"]
     url: str
     name: str = ""
+    # MAVLink sources only (docs/service.md, "The autopilot link"):
+    target_system: Annotated[int, msgspec.Meta(ge=0, le=255)] = 0
+    """The autopilot's system id; 0: the first autopilot whose HEARTBEAT is heard."""
+    target_component: Annotated[int, msgspec.Meta(ge=0, le=255)] = 0
+    """The autopilot's component id; 0: component 1 (MAV_COMP_ID_AUTOPILOT1)."""
+    request_streams: bool = True
+    """Ask the autopilot for the messages the pipelines need (SET_MESSAGE_INTERVAL, else
+    REQUEST_DATA_STREAM); false: take what it sends (a router or a GCS already asked)."""
+    streams: dict[str, float] = {}
+    """Rates (Hz) per MAVLink message name that replace the derived ones; 0 drops one."""
+    autopilot_time: bool = True
+    """Stamp samples with the autopilot's boot time mapped to the service clock (else
+    with their receive time)."""
 
 
 class RecorderConfig(_Strict):
