@@ -129,6 +129,8 @@ class StreamState:
     t_sent: float = -math.inf
     t_accepted: float | None = None
     received_hz: float = 0.0
+    t_window: float = -math.inf
+    """Start of the window :attr:`received_hz` was measured over (s)."""
     warned: bool = False
 
 
@@ -248,7 +250,8 @@ class MavlinkSession:
                 self._ask(st, now)
                 return
             if st.state in ("accepted", "legacy") and st.t_accepted is not None \
-                    and now - st.t_accepted > CHECK_AFTER_S and st.received_hz < 0.5 * st.rate_hz:
+                    and now - st.t_accepted > CHECK_AFTER_S and st.t_window >= st.t_accepted \
+                    and st.received_hz < 0.5 * st.rate_hz:
                 if not st.warned:
                     st.warned = True
                     self.on_event(f"{self.name}: {st.name} requested at {st.rate_hz:g} Hz, "
@@ -308,8 +311,10 @@ class MavlinkSession:
             return
         counts = self.link.counts
         for st in self.streams.values():
-            n = counts.get(st.msgid, 0) - self._counts_prev.get(st.msgid, 0)
+            ids = (st.msgid, _IDS["RAW_IMU"]) if st.name == "SCALED_IMU" else (st.msgid,)
+            n = sum(counts.get(i, 0) - self._counts_prev.get(i, 0) for i in ids)
             st.received_hz = n / dt
+            st.t_window = self._t_rate
         self._counts_prev = dict(counts)
         self._t_rate = now
 

@@ -74,6 +74,12 @@ class LinkPlan:
     truth_path: str
     nmea: bool = True
     routes: dict[str, str] = field(default_factory=dict)
+    stream_unasked: bool = False
+    """The simulated autopilot streams everything unasked (no stream negotiation)."""
+    others: bool = False
+    """A ground station and a camera share the MAVLink link (sitl.autopilot)."""
+    reboot_at: list[float] = field(default_factory=list)
+    """Simulated times (s) at which the autopilot reboots."""
 
 
 def _route(sample: Any, dvl: bool, nmea: bool) -> str:
@@ -96,15 +102,17 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
     import select
 
     from sitl.emitters import Channel, DvlJsonEncoder, NmeaEncoder, PtySink, TcpServerSink, UdpSink
-    from sitl.runner import Simulation, mavlink_encoder
+    from sitl.runner import Simulation, autopilot_for
 
     def send(obj: dict) -> None:
         outp.write(json.dumps(obj) + "\n")
         outp.flush()
 
     sim = Simulation(plan.scenario, plan.seed)
-    channels: dict[str, Channel] = {
-        "mavlink": Channel(mavlink_encoder(sim), [UdpSink("127.0.0.1", plan.mavlink_udp_port)])}
+    channels: dict[str, Any] = {
+        "mavlink": autopilot_for(sim, [UdpSink("127.0.0.1", plan.mavlink_udp_port)],
+                                 stream_unasked=plan.stream_unasked, others=plan.others,
+                                 reboot_at=plan.reboot_at)}
     pty = None
     if plan.nmea:
         pty = PtySink()
