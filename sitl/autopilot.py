@@ -22,9 +22,9 @@ module reproduces:
 * **PARAM_REQUEST_READ / PARAM_REQUEST_LIST** answered with PARAM_VALUE (``SERVOn_FUNCTION``
   of the vehicle's outputs, ``FRAME_CLASS``, the ``SR0_*`` stream rates); an unknown name
   gets no answer.
-* A message is sent at most at its interval, from the samples the simulated sensors
-  produce (a 50 Hz IMU asked at 20 Hz goes out every other sample at 25 Hz; asked faster
-  than the sensor, at the sensor's rate).
+* A message goes out on the first sensor sample at or after its next due time, due times
+  spaced by its interval, from the samples the simulated sensors produce (a 50 Hz IMU asked
+  at 20 Hz averages 20 Hz; asked faster than the sensor, at the sensor's rate).
 * **Reboot** (:meth:`SimAutopilot.reboot`): silent for ``REBOOT_S``, then heartbeats
   again with ``time_boot_ms`` counting from the reboot and every stream off until asked
   again.
@@ -119,6 +119,8 @@ class SimAutopilot:
             self.params[name] = (0.0, MAV_PARAM_TYPE_INT16)
         self.intervals: dict[int, float] = {}
         """Message id -> interval (s) asked for."""
+        self._last: dict[int, float] = {}
+        """Message id -> when it is next due (s)."""
         self._last: dict[int, float] = {}
         self._down_until = -math.inf
         self._rx = mavlink2.MAVLink(None)
@@ -243,10 +245,12 @@ class SimAutopilot:
         iv = self.intervals.get(msgid)
         if iv is None:
             return False
-        last = self._last.get(msgid)
-        if last is not None and t - last < iv - TOLERANCE_S:
+        due = self._last.get(msgid)
+        if due is not None and t < due - TOLERANCE_S:
             return False
-        self._last[msgid] = t
+        # keep the phase, so the average rate is the asked one when the interval is not a
+        # multiple of the sensor period; start afresh after a gap longer than an interval
+        self._last[msgid] = due + iv if due is not None and t - due < iv else t + iv
         return True
 
     def _frames(self, t: float, frames: list[bytes]) -> int:
