@@ -332,9 +332,12 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
                    speed: float = SPEED, seed: int = 1, out_dir: Path = OUT_DIR,
                    router_endpoint: str | None = None, mavlink_out: str = "udpout:127.0.0.1:14550",
                    out: TextIO | None = sys.stdout, keep_state: bool = True,
-                   config: Config | None = None) -> DemoResult:
+                   config: Config | None = None, nmea: bool = True,
+                   autopilot: dict[str, Any] | None = None) -> DemoResult:
     """Run the whole demo; print the live line every wall second and the scores to
-    ``out`` (None: silent). ``router_endpoint`` None: 7447, or a free port when taken."""
+    ``out`` (None: silent). ``router_endpoint`` None: 7447, or a free port when taken.
+    ``nmea`` False sends the GNSS fixes and headings over MAVLink too; ``autopilot``
+    sets :class:`LinkPlan`'s ``stream_unasked``, ``others`` and ``reboot_at``."""
     from onboard.service.daemon import Service, ServiceClock
     from onboard.service.publishers.zenoh_pub import open_router
     from onboard.tools.shore import ShoreView, open_session
@@ -367,7 +370,7 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
     plan = LinkPlan(scenario=sc.name, duration_s=duration_s, seed=seed, speed=speed,
                     mavlink_udp_port=_free_port(socket.SOCK_DGRAM),
                     dvl_tcp_port=_free_port(socket.SOCK_STREAM) if sc.sensors.dvl else None,
-                    truth_path=str(out_dir / "truth.jsonl"))
+                    truth_path=str(out_dir / "truth.jsonl"), nmea=nmea, **(autopilot or {}))
     frames: dict[str, int] = {}
     try:
         shore = open_session([endpoint], None, "client")
