@@ -8,8 +8,8 @@ on USB and most TELEM ports) until a ground station asks. For each MAVLink input
    it: not a GCS, not MAV_AUTOPILOT_INVALID, component 1 unless configured; other systems,
    components and our own component's echoes are ignored);
 2. asks for every message the enabled pipelines need at its rate (:func:`needed_streams`)
-   with COMMAND_LONG MAV_CMD_SET_MESSAGE_INTERVAL (511), one message at a time, each
-   confirmed by its COMMAND_ACK; a message not ACCEPTED within ``ACK_TIMEOUT_S`` after
+   with COMMAND_LONG MAV_CMD_SET_MESSAGE_INTERVAL (511), one command per message, all at
+   once, each confirmed by its COMMAND_ACK (matched in order); a message not ACCEPTED within ``ACK_TIMEOUT_S`` after
    ``ACK_TRIES`` sends is asked for with the legacy REQUEST_DATA_STREAM of the ArduPilot
    stream group that carries it (:data:`STREAM_GROUPS`), at the fastest rate any message
    of that group needs;
@@ -33,6 +33,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -159,7 +160,9 @@ class MavlinkSession:
     _lost: bool = True
     _t_rate: float | None = None
     _counts_prev: dict[int, int] = field(default_factory=dict)
-    _awaiting: str | None = None
+    _awaiting: deque[str] = field(default_factory=deque)
+    """Messages asked for whose COMMAND_ACK has not come yet, in the order asked
+    (ArduPilot handles and acknowledges commands in order)."""
     _legacy_sent: dict[int, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -204,7 +207,7 @@ class MavlinkSession:
         link.reset_streams()
         self.sessions += 1
         self.streams = {n: StreamState(n, _IDS[n], hz) for n, hz in self.wanted.items() if n in _IDS}
-        self._awaiting = None
+        self._awaiting.clear()
         self._legacy_sent.clear()
         link.acks.clear()
         self.on_event(f"{self.name}: autopilot {why}: system {link.system_id} component "
@@ -222,11 +225,10 @@ class MavlinkSession:
         acks = self.link.acks
         while acks:
             cmd, result = acks.popleft()
-            if cmd != MAV_CMD_SET_MESSAGE_INTERVAL or self._awaiting is None:
+            if cmd != MAV_CMD_SET_MESSAGE_INTERVAL or not self._awaiting:
                 continue
-            st = self.streams.get(self._awaiting)
-            self._awaiting = None
-            if st is None:
+            st = self.streams.get(self._awaiting.popleft())
+            if st is None or st.state != "asked":
                 continue
             if result == MAV_RESULT_ACCEPTED:
                 st.state, st.t_accepted = "accepted", self.clock()
@@ -236,19 +238,25 @@ class MavlinkSession:
     def _send_due(self, now: float) -> None:
         if not self.src.request_streams:
             return
-        if self._awaiting is not None:
-            st = self.streams[self._awaiting]
+        if self._awaiting:
+            st = self.streams[self._awaiting[0]]
             if now - st.t_sent < ACK_TIMEOUT_S:
                 return
-            self._awaiting = None
-            if st.tries >= ACK_TRIES:
-                self._legacy(st, "no COMMAND_ACK")
-            else:
-                st.state = "pending"
+            for name in self._awaiting:  # none of them acknowledged in time
+                st = self.streams[name]
+                if st.tries >= ACK_TRIES:
+                    self._legacy(st, "no COMMAND_ACK")
+                else:
+                    st.state = "pending"
+            self._awaiting.clear()
+        asked = False
         for st in self.streams.values():
             if st.state == "pending":
                 self._ask(st, now)
-                return
+                asked = True
+        if asked:
+            return
+        for st in self.streams.values():
             if st.state in ("accepted", "legacy") and st.t_accepted is not None \
                     and now - st.t_accepted > CHECK_AFTER_S and st.t_window >= st.t_accepted \
                     and st.received_hz < 0.5 * st.rate_hz:
@@ -270,7 +278,7 @@ class MavlinkSession:
         st.tries += 1
         st.t_sent = now
         st.state = "asked"
-        self._awaiting = st.name
+        self._awaiting.append(st.name)
         self._send(self._mav.command_long_encode(  # type: ignore[union-attr]
             link.system_id, link.component_id, MAV_CMD_SET_MESSAGE_INTERVAL, 0,
             float(st.msgid), 1e6 / st.rate_hz, 0, 0, 0, 0, 0))
