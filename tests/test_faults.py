@@ -64,10 +64,7 @@ def _fly(scenario: str, duration_s: float, tmp_path: Path, speed: float = SPEED)
     res = asyncio.run(asyncio.wait_for(run_demo(
         scenario, duration_s, speed=speed, out_dir=tmp_path, out=None, keep_state=False,
         router_endpoint=f"tcp/127.0.0.1:{free_tcp_port()}",
-        mavlink_out=f"udpout:127.0.0.1:{free_udp_port()}",
-        # the sensor-fault figures and event times below were measured with the autopilot
-        # streaming unasked; stream negotiation is tested in tests/test_autopilot_streams.py
-        autopilot={"stream_unasked": True}), TIMEOUT))
+        mavlink_out=f"udpout:127.0.0.1:{free_udp_port()}"), TIMEOUT))
     truth = {round(tr.t * 10): tr for tr in read_truth(tmp_path / "truth.jsonl")}
     return res, truth
 

@@ -168,3 +168,29 @@ def test_boot_clock_reboot_and_jump():
     assert c.reboots == 1 and c.offset == pytest.approx(1010.0)
     c.update(5.0, 1012.0)  # 3.5 s of boot time in 1.5 s: the boot clock jumped ahead
     assert c.jumps == 1 and c.offset == pytest.approx(1007.0)
+
+
+def test_servo_function_parameters_move_the_input_mapping():
+    """The config says rudder on SERVO2; the autopilot's SERVO1_FUNCTION=26 (GroundSteering)
+    moves it to SERVO1 (an event says so); with ``from_autopilot = false`` it stays."""
+    from onboard.core.config import from_dict
+    from onboard.core.messages import ActuatorCommand, ActuatorOutputs, Parameter
+    from onboard.engine import Engine
+
+    def cfg(from_autopilot: bool):
+        return from_dict({"vehicle": {"class": "rudder-boat"}, "inputs": {
+            "rudder": {"source": "servo", "channel": 2, "half_range_us": 500, "full_scale": 0.5},
+            "throttle": {"source": "servo", "channel": 3, "half_range_us": 500},
+            "from_autopilot": from_autopilot}})
+
+    for follow, want in ((True, 0.5), (False, 0.0)):
+        eng = Engine(cfg(follow), pipelines=[])
+        eng.push(Parameter(t=1.0, source="mavlink:1/PARAM_VALUE", name="SERVO1_FUNCTION", value=26.0))
+        eng.push(Parameter(t=1.0, source="mavlink:1/PARAM_VALUE", name="SERVO2_FUNCTION", value=0.0))
+        eng.push(ActuatorOutputs(t=1.1, source="mavlink:1/SERVO_OUTPUT_RAW",
+                                 pwm_us=(2000.0, 1500.0, 1600.0)))
+        cmds = [s for s in eng._pending if isinstance(s, ActuatorCommand)]
+        assert cmds and cmds[-1].rudder_rad == pytest.approx(want)
+        assert cmds[-1].throttle == pytest.approx(0.2)
+        moved = [e for e in eng.events if e.startswith("inputs: rudder on SERVO1")]
+        assert bool(moved) is follow, eng.events

@@ -87,6 +87,9 @@ class Inputs(_Strict):
     propeller_rpm: ChannelMap | None = None
     stern_plane: ChannelMap | None = None
     thrusters: list[ChannelMap] = []
+    from_autopilot: bool = True
+    """Move a servo-mapped role to the output the autopilot's ``SERVOn_FUNCTION``
+    parameters name for it (in a log or read live), as ``onboard.autodetect`` does."""
 
 
 class GnssNoise(_Strict):
