@@ -14,7 +14,8 @@ CRC-checked frame before decoding it. The link
 * **maps the autopilot's boot clock to the receiver's clock**: ``time_boot_ms`` (or the
   microseconds since boot of SERVO_OUTPUT_RAW / RAW_IMU / HIGHRES_IMU) plus a filtered
   offset, which stamps the samples with the time they were measured instead of the time
-  they arrived (:class:`BootClock`);
+  they arrived (:class:`BootClock`); TIMESYNC answers to the session's requests remove
+  the remaining one-way delay;
 * **detects reboots** (the boot clock going back by more than ``REBOOT_BACK_S``) and boot
   clock jumps, counted in :attr:`reboots` and :attr:`clock_jumps` for the service's
   MAVLink session, which re-requests its streams after a reboot;
@@ -41,6 +42,9 @@ GCS_SYSTEM_ID = 255
 HEARTBEAT_ID = 0
 COMMAND_ACK_ID = 77
 PARAM_VALUE_ID = 22
+TIMESYNC_ID = 111
+MAX_SYNC_RTT_S = 0.5
+"""A TIMESYNC round trip longer than this (s) is not used."""
 
 REBOOT_BACK_S = 1.0
 """The boot clock going back by more than this (s) is a reboot."""
@@ -48,6 +52,8 @@ JUMP_S = 1.0
 """A receive-minus-boot offset this far (s) below the filtered one is a clock jump; this far
 above it for longer than ``JUMP_PERSIST_S`` too (a link delay never lasts that long)."""
 JUMP_PERSIST_S = 3.0
+SYNC_KEEP_S = 30.0
+"""How long (s) the best TIMESYNC exchange is kept before a worse one replaces it."""
 DRIFT_PPM = 200.0
 """How fast (parts per million) the filtered offset may grow: crystal drift of the two
 clocks (ArduPilot boards: < 50 ppm) with margin; a smaller transport delay lowers it at
@@ -104,6 +110,8 @@ class BootClock:
 
     def __init__(self) -> None:
         self.offset: float | None = None
+        self.sync: tuple[float, float, float] | None = None
+        """(offset, round trip, receive time) of the best recent TIMESYNC exchange (s)."""
         self.t_update: float = 0.0
         self.last_boot: float | None = None
         self.reboots = 0
@@ -118,6 +126,7 @@ class BootClock:
         if last is not None and boot_s < last - REBOOT_BACK_S:
             self.reboots += 1
             off = None
+            self.sync = None
         self.last_boot = boot_s if last is None or off is None else max(last, boot_s)
         if off is None:
             off = raw
@@ -139,7 +148,26 @@ class BootClock:
                 off = min(raw, grown)
         self.offset = off
         self.t_update = t_rx
+        sync = self.sync
+        if sync is not None and off is not None and sync[0] <= off + 1e-3:
+            return boot_s + sync[0]
         return boot_s + off
+
+    def timesync(self, tc1_s: float, ts1_s: float, t_rx: float) -> None:
+        """A TIMESYNC answer: the autopilot's boot time ``tc1_s`` when it answered our
+        request sent at ``ts1_s`` (our clock), received at ``t_rx``. With a symmetric
+        link, the offset is ``ts1 + rtt/2 - tc1``: the least-delay estimate without the
+        one-way delay. The exchange with the shortest round trip of the last ``SYNC_KEEP_S``
+        is used; a reboot forgets it."""
+        rtt = t_rx - ts1_s
+        if not 0.0 <= rtt <= MAX_SYNC_RTT_S:
+            return
+        if self.last_boot is not None and tc1_s < self.last_boot - REBOOT_BACK_S:
+            return  # an answer from before a reboot
+        est = ts1_s + 0.5 * rtt - tc1_s
+        old = self.sync
+        if old is None or rtt <= old[1] or t_rx - old[2] > SYNC_KEEP_S:
+            self.sync = (est, rtt, t_rx)
 
 
 @dataclass
@@ -148,11 +176,15 @@ class AutopilotLink:
 
     ``target_system`` / ``target_component``: 0 = the first autopilot heard.
     ``stamp_boot_time``: stamp samples with the mapped boot time (else their receive time).
+    ``filter_components``: drop the frames of other systems and components.
     """
 
     target_system: int = 0
     target_component: int = 0
     stamp_boot_time: bool = True
+    filter_components: bool = True
+    """False: every component's frames are decoded (the autopilot is still found and
+    counted)."""
     system_id: int | None = None
     """The autopilot's system id, once found."""
     component_id: int | None = None
@@ -198,6 +230,8 @@ class AutopilotLink:
         else:
             mine = sysid != GCS_SYSTEM_ID and compid == MAV_COMP_ID_AUTOPILOT1
         if not mine:
+            if not self.filter_components:
+                return t_rx
             self.ignored[f"{sysid}.{compid}"] += 1
             return None
         self.counts[msgid] += 1
@@ -205,6 +239,11 @@ class AutopilotLink:
         if msgid == HEARTBEAT_ID:
             self.t_heartbeat = t_rx
             self.heartbeats += 1
+        elif msgid == TIMESYNC_ID and plen >= 8:
+            raw = bytes(buf[start:start + plen]) + bytes(max(0, 16 - plen))
+            tc1, ts1 = struct.unpack_from("<qq", raw)
+            if tc1 > 0:
+                self.clock.timesync(tc1 * 1e-9, ts1 * 1e-9, t_rx)
         elif msgid == COMMAND_ACK_ID and plen >= 3:
             cmd = buf[start] | (buf[start + 1] << 8)
             self.acks.append((cmd, buf[start + 2]))

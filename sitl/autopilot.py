@@ -19,6 +19,8 @@ module reproduces:
   ATTITUDE, RPM; EXTRA2 (11) VFR_HUD; EXTRA3 (12) DISTANCE_SENSOR, SYSTEM_TIME. ArduPilot's
   first IMU goes out as RAW_IMU in RAW_SENSORS (same mg / mrad/s scaling as SCALED_IMU);
   SCALED_IMU is sent only when asked for by id.
+* **TIMESYNC** with ``tc1`` 0 answered with ``tc1`` = the boot time in ns and the request's
+  ``ts1``.
 * **PARAM_REQUEST_READ / PARAM_REQUEST_LIST** answered with PARAM_VALUE (``SERVOn_FUNCTION``
   of the vehicle's outputs, ``FRAME_CLASS``, the ``SR0_*`` stream rates); an unknown name
   gets no answer.
@@ -180,6 +182,9 @@ class SimAutopilot:
         elif typ == "PARAM_REQUEST_LIST":
             for name in self.params:
                 self._param(t, name)
+        elif typ == "TIMESYNC" and msg.tc1 == 0:  # answered with our boot time in ns
+            self._write(t, self._pack(self.enc.mav.timesync_encode(
+                int(round((t - self.enc.boot_t0) * 1e9)), msg.ts1)))
 
     def _set_interval(self, msgid: int, interval_us: int) -> int:
         if msgid not in STREAMABLE:

@@ -237,6 +237,9 @@ class SourceConfig(_Strict):
     autopilot_time: bool = True
     """Stamp samples with the autopilot's boot time mapped to the service clock (else
     with their receive time)."""
+    filter_components: bool = True
+    """Decode only the autopilot's frames (other systems and components are counted and
+    ignored); false decodes every component's."""
 
 
 class RecorderConfig(_Strict):

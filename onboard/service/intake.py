@@ -109,7 +109,8 @@ class Intake:
             if (src.name or f"{src.kind}{i}") == name and src.kind == "mavlink":
                 return AutopilotLink(target_system=src.target_system,
                                      target_component=src.target_component,
-                                     stamp_boot_time=src.autopilot_time)
+                                     stamp_boot_time=src.autopilot_time,
+                                     filter_components=src.filter_components)
         return AutopilotLink()
 
     def chunk(self, name: str, kind: str, data: bytes, t_rx: float,

@@ -19,7 +19,10 @@ on USB and most TELEM ports) until a ground station asks. For each MAVLink input
 4. confirms that the streams arrive: every ``RATE_WINDOW_S`` the rate received per
    message; a message below half its requested rate ``CHECK_AFTER_S`` after it was
    accepted is asked for again (and reported once);
-5. starts over after a reboot (the boot clock went back) or a lost link (no HEARTBEAT
+5. sends TIMESYNC requests (``tc1`` 0, ``ts1`` the service clock in ns); the autopilot's
+   answers let :class:`drivers.mavlink_link.BootClock` map its boot clock without the
+   one-way link delay;
+6. starts over after a reboot (the boot clock went back) or a lost link (no HEARTBEAT
    for ``LINK_LOST_S``).
 
 Health (``rates_hz``) carries ``<input>/<MSG>:requested`` and ``<input>/<MSG>:received`` per
@@ -42,6 +45,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from drivers.mavlink_link import AutopilotLink
 from drivers.transports import Transport
 from onboard.core.config import Config, SourceConfig
+from onboard.service.signing import SigningState
 
 log = logging.getLogger(__name__)
 
@@ -53,6 +57,9 @@ CHECK_AFTER_S = 5.0
 RATE_WINDOW_S = 2.0
 LINK_LOST_S = 5.0
 POLL_S = 0.1
+SYNC_FIRST_S = 1.0
+SYNC_PERIOD_S = 10.0
+"""TIMESYNC requests: three 1 s apart after (re)connecting, then every 10 s."""
 ACTUATOR_RATE_HZ = 10.0
 """Requested rate of the actuator outputs, depth and INS velocity (Hz)."""
 UNDERWATER = {"bluerov2", "torpedo-auv", "spheroid", "glider"}
@@ -151,6 +158,9 @@ class MavlinkSession:
     transport: Transport
     clock: Callable[[], float]
     on_event: Callable[[str], None]
+    signing: SigningState | None = None
+    """The service's MAVLink signing state: requests are signed with its key and
+    timestamps (link id 1; MAVLink out uses 0) when it is set."""
     streams: dict[str, StreamState] = field(default_factory=dict)
     sent: int = 0
     sessions: int = 0
@@ -164,10 +174,18 @@ class MavlinkSession:
     """Messages asked for whose COMMAND_ACK has not come yet, in the order asked
     (ArduPilot handles and acknowledges commands in order)."""
     _legacy_sent: dict[int, float] = field(default_factory=dict)
+    _next_sync: float = -math.inf
+    _syncs: int = 0
 
     def __post_init__(self) -> None:
         self._mav = mavlink2.MAVLink(None, srcSystem=self.cfg.vehicle.system_id,
                                      srcComponent=self.cfg.service.mavlink.component_id or 191)
+        if self.signing is not None:
+            sg = self._mav.signing
+            sg.secret_key = self.signing.key
+            sg.link_id = 1
+            sg.timestamp = self.signing.next_tx()
+            sg.sign_outgoing = True
         self.wanted = needed_streams(self.cfg, self.src)
 
     async def run(self) -> None:
@@ -200,6 +218,10 @@ class MavlinkSession:
         self._acks()
         self._rates(now)
         self._send_due(now)
+        if now >= self._next_sync:
+            self._syncs += 1
+            self._next_sync = now + (SYNC_FIRST_S if self._syncs < 3 else SYNC_PERIOD_S)
+            self._send(self._mav.timesync_encode(0, int(now * 1e9)))  # type: ignore[union-attr]
 
     def _start(self, now: float, why: str) -> None:
         link = self.link
@@ -209,6 +231,8 @@ class MavlinkSession:
         self.streams = {n: StreamState(n, _IDS[n], hz) for n, hz in self.wanted.items() if n in _IDS}
         self._awaiting.clear()
         self._legacy_sent.clear()
+        self._syncs = 0
+        self._next_sync = now
         link.acks.clear()
         self.on_event(f"{self.name}: autopilot {why}: system {link.system_id} component "
                       f"{link.component_id}, type {link.mav_type}, autopilot {link.autopilot}"
@@ -304,6 +328,9 @@ class MavlinkSession:
             link.system_id, link.component_id, group, hz, 1))
 
     def _send(self, msg: object) -> None:
+        if self.signing is not None:
+            sg = self._mav.signing  # type: ignore[union-attr]
+            sg.timestamp = self.signing.next_tx(sg.timestamp)
         buf = msg.pack(self._mav)  # type: ignore[attr-defined]
         self._mav.seq = (self._mav.seq + 1) % 256  # type: ignore[union-attr]
         if self.transport.send(buf):
