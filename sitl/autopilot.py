@@ -54,6 +54,7 @@ REBOOT_S = 2.0
 """How long (s) the autopilot is silent while it reboots."""
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_UNSUPPORTED = 3
 MAV_RESULT_FAILED = 4
 MAV_TYPE_GCS = 6
 MAV_TYPE_CAMERA = 30
@@ -107,8 +108,12 @@ class SimAutopilot:
     def __init__(self, encoder: MavlinkEncoder, sinks: Sequence[Sink], *,
                  params: Sequence[Parameter] = (), frame_class: int = 2,
                  stream_unasked: bool = False, others: bool = False,
-                 reboot_at: Sequence[float] = (), epoch_s: float | None = None) -> None:
+                 reboot_at: Sequence[float] = (), epoch_s: float | None = None,
+                 message_interval: bool = True) -> None:
         self.enc = encoder
+        self.message_interval = message_interval
+        """False: firmware without SET_MESSAGE_INTERVAL (answered MAV_RESULT_UNSUPPORTED;
+        only REQUEST_DATA_STREAM works)."""
         self.sinks = list(sinks)
         self.stream_unasked = stream_unasked
         self.others = others
@@ -159,7 +164,8 @@ class SimAutopilot:
         if target[0] not in (0, me_sys) or target[1] not in (0, me_comp):
             return
         if typ == "COMMAND_LONG" and msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = self._set_interval(int(msg.param1), int(msg.param2))
+            result = (self._set_interval(int(msg.param1), int(msg.param2))
+                      if self.message_interval else MAV_RESULT_UNSUPPORTED)
             self._write(t, self._pack(self.enc.mav.command_ack_encode(
                 MAV_CMD_SET_MESSAGE_INTERVAL, result, 0, 0, msg.get_srcSystem(),
                 msg.get_srcComponent())))

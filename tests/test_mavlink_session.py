@@ -1,0 +1,108 @@
+"""The service's MAVLink session (onboard/service/mavlink_session.py) against the simulated
+autopilot (sitl/autopilot.py), in simulated time without sockets: requests go from the
+session's transport straight to the autopilot, its frames through the parser with the
+autopilot link, as the service wires them."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import pytest
+
+from drivers.mavlink import MavlinkParser
+from drivers.mavlink_link import AutopilotLink
+from onboard.core.config import SourceConfig, load
+from onboard.service.mavlink_session import MavlinkSession
+from sitl.runner import Simulation, autopilot_for
+
+
+class Loop:
+    """Sink for the autopilot (keeps its frames) and transport for the session (its
+    requests land in the autopilot's inbox)."""
+
+    def __init__(self) -> None:
+        self.out: list[bytes] = []
+        self.inbox = bytearray()
+        self.up = True
+
+    def write(self, t: float, frame: bytes) -> None:
+        if self.up:
+            self.out.append(frame)
+
+    def read(self) -> bytes:
+        data, self.inbox = bytes(self.inbox), bytearray()
+        return data
+
+    def close(self) -> None:
+        pass
+
+    def send(self, data: bytes) -> bool:
+        self.inbox += data
+        return True
+
+
+def run(duration: float, *, down: tuple[float, float] | None = None, **options):
+    """Fly jaiabot-turns with the session asking; returns (session, link, events,
+    samples per source in the last 10 s)."""
+    sim = Simulation("jaiabot-turns", 1)
+    loop = Loop()
+    ap = autopilot_for(sim, [loop], **options)
+    cfg = load("rudder-boat")
+    link = AutopilotLink()
+    parser = MavlinkParser(link=link)
+    events: list[str] = []
+    now = [0.0]
+    sess = MavlinkSession("autopilot", cfg, SourceConfig(kind="mavlink", url="udp:x:1"),
+                          link, loop, lambda: now[0], events.append)  # type: ignore[arg-type]
+    late: Counter[str] = Counter()
+    for t, samples, _ in sim.steps(duration):
+        now[0] = t
+        loop.up = down is None or not down[0] <= t < down[1]
+        ap.emit(t, samples)
+        for f in loop.out:
+            for s in parser.feed(f, t + 0.01):
+                if s.t >= duration - 10.0:
+                    late[s.source] += 1
+        loop.out.clear()
+        sess.poll(t)
+    return sess, link, events, late
+
+
+def test_streams_requested_by_message_interval_arrive_at_their_rates():
+    sess, link, events, late = run(20.0)
+    assert {k: st.state for k, st in sess.streams.items()} == {
+        "SCALED_IMU": "accepted", "ATTITUDE": "accepted", "GPS_RAW_INT": "accepted",
+        "SYSTEM_TIME": "accepted", "SERVO_OUTPUT_RAW": "accepted"}
+    rates = sess.rates()
+    for name, hz in (("SCALED_IMU", 50), ("ATTITUDE", 10), ("GPS_RAW_INT", 5),
+                     ("SERVO_OUTPUT_RAW", 10), ("SYSTEM_TIME", 1)):
+        assert rates[f"autopilot/{name}:requested"] == hz
+        assert abs(rates[f"autopilot/{name}:received"] - hz) <= 0.1 * hz, (name, rates)
+    assert late["mavlink:1/SCALED_IMU"] == pytest.approx(500, abs=2)  # 10 s at 50 Hz
+    assert link.params["SERVO1_FUNCTION"] == 26.0 and link.params["FRAME_CLASS"] == 2.0
+    assert link.clock.sync is not None  # TIMESYNC answered
+    assert not [e for e in events if "asking again" in e], events
+
+
+def test_firmware_without_message_interval_falls_back_to_request_data_stream():
+    sess, link, events, late = run(20.0, message_interval=False)
+    assert {st.state for st in sess.streams.values()} == {"legacy"}
+    assert any("REQUEST_DATA_STREAM 1 at 50 Hz" in e for e in events), events
+    rates = sess.rates()
+    for name, hz in (("SCALED_IMU", 50), ("ATTITUDE", 10), ("GPS_RAW_INT", 5),
+                     ("SERVO_OUTPUT_RAW", 10), ("SYSTEM_TIME", 1)):
+        assert abs(rates[f"autopilot/{name}:received"] - hz) <= 0.1 * hz, (name, rates)
+    # ArduPilot's RAW_SENSORS group carries the IMU as RAW_IMU (decoded for ArduPilot)
+    assert late["mavlink:1/RAW_IMU"] == pytest.approx(500, abs=2)
+
+
+def test_reboot_and_lost_link_restart_the_requests():
+    sess, link, events, late = run(40.0, reboot_at=[10.0], down=(20.0, 27.0))
+    assert link.reboots == 1
+    assert any("autopilot rebooted" in e for e in events), events
+    assert any("autopilot link lost" in e for e in events), events
+    assert any("autopilot back" in e for e in events), events
+    assert sess.sessions == 3  # found, rebooted, back
+    rates = sess.rates()
+    assert abs(rates["autopilot/SCALED_IMU:received"] - 50) <= 5, rates
+    assert late["mavlink:1/ATTITUDE"] == pytest.approx(100, abs=2)
