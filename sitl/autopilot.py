@@ -195,9 +195,7 @@ class SimAutopilot:
     def _set_interval(self, msgid: int, interval_us: int) -> int:
         if msgid not in STREAMABLE:
             return MAV_RESULT_FAILED
-        if interval_us == -1:
-            self.intervals.pop(msgid, None)
-        elif interval_us == 0:  # the group's SR0_* default: 0 Hz on this board
+        if interval_us in (-1, 0):  # -1 stops; 0 is the group's SR0_* default, 0 Hz here
             self.intervals.pop(msgid, None)
         else:
             self.intervals[msgid] = max(interval_us, 1000) * 1e-6

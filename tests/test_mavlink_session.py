@@ -85,7 +85,7 @@ def test_streams_requested_by_message_interval_arrive_at_their_rates():
 
 
 def test_firmware_without_message_interval_falls_back_to_request_data_stream():
-    sess, link, events, late = run(20.0, message_interval=False)
+    sess, _, events, late = run(20.0, message_interval=False)
     assert {st.state for st in sess.streams.values()} == {"legacy"}
     assert any("REQUEST_DATA_STREAM 1 at 50 Hz" in e for e in events), events
     rates = sess.rates()
@@ -106,3 +106,45 @@ def test_reboot_and_lost_link_restart_the_requests():
     rates = sess.rates()
     assert abs(rates["autopilot/SCALED_IMU:received"] - 50) <= 5, rates
     assert late["mavlink:1/ATTITUDE"] == pytest.approx(100, abs=2)
+
+
+def test_requests_are_signed_with_the_service_key(tmp_path):
+    """With the service's signing state the session's requests carry valid signatures (an
+    autopilot requiring signing accepts them); without it they are unsigned."""
+    from drivers.mavlink_signing import SignatureVerifier
+    from onboard.service.signing import SigningState
+
+    key = bytes(range(32))
+    for signing in (SigningState(key, tmp_path / "sig.json"), None):
+        loop = Loop()
+        link = AutopilotLink(system_id=1, component_id=1, mav_type=11, autopilot=3,
+                             t_heartbeat=0.0)
+        sess = MavlinkSession("autopilot", load("rudder-boat"),
+                              SourceConfig(kind="mavlink", url="udp:x:1"), link, loop,  # type: ignore[arg-type]
+                              lambda: 0.0, lambda e: None, signing=signing)
+        sess.poll(0.0)
+        checker = MavlinkParser(verifier=SignatureVerifier(key))
+        checker.feed(bytes(loop.inbox), 0.0)
+        assert checker.stats.records >= 20  # 17 parameter reads, 5 intervals, TIMESYNC
+        if signing is not None:
+            assert not checker.stats.rejected, checker.stats.rejected
+        else:
+            assert checker.stats.rejected == {"unsigned": checker.stats.records}
+
+
+def test_own_component_echoes_and_ground_stations_are_not_the_autopilot():
+    """Our own heartbeat (component 191, MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID)
+    echoed by a router and a GCS heartbeat do not lock the link; ArduPilot's does."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+    def hb(sysid, compid, typ, ap):
+        mav = mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        return mav.heartbeat_encode(typ, ap, 0, 0, 4, 3).pack(mav)
+
+    link = AutopilotLink()
+    p = MavlinkParser(link=link)
+    p.feed(hb(1, 191, 18, 8) + hb(255, 190, 6, 8) + hb(1, 100, 30, 8), 1.0)
+    assert not link.found
+    assert link.ignored == {"1.191": 1, "255.190": 1, "1.100": 1}
+    p.feed(hb(1, 1, 11, 3), 2.0)
+    assert (link.system_id, link.component_id, link.mav_type, link.autopilot) == (1, 1, 11, 3)
