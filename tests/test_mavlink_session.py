@@ -148,3 +148,36 @@ def test_own_component_echoes_and_ground_stations_are_not_the_autopilot():
     assert link.ignored == {"1.191": 1, "255.190": 1, "1.100": 1}
     p.feed(hb(1, 1, 11, 3), 2.0)
     assert (link.system_id, link.component_id, link.mav_type, link.autopilot) == (1, 1, 11, 3)
+
+
+def test_a_message_the_autopilot_never_sends_is_reported_absent():
+    """The BlueROV2 has no GNSS: its autopilot never sends GPS_RAW_INT. The session asks
+    again three times, then reports it absent and stops asking; the others flow."""
+    sim = Simulation("bluerov2-circle", 1)
+    loop = Loop()
+    ap = autopilot_for(sim, [loop])
+    cfg = load("bluerov2")
+    link = AutopilotLink()
+    parser = MavlinkParser(link=link)
+    events: list[str] = []
+    now = [0.0]
+    sess = MavlinkSession("autopilot", cfg, SourceConfig(kind="mavlink", url="udp:x:1"),
+                          link, loop, lambda: now[0], events.append)  # type: ignore[arg-type]
+    asked = 0
+    for t, samples, _ in sim.steps(60.0):
+        now[0] = t
+        ap.emit(t, samples)
+        for f in loop.out:
+            parser.feed(f, t + 0.01)
+        loop.out.clear()
+        n0 = len(ap.received)
+        sess.poll(t)
+        ap.poll(t)
+        asked += sum(1 for m in ap.received[n0:] if m == "COMMAND_LONG") if t > 40.0 else 0
+    assert sess.streams["GPS_RAW_INT"].state == "absent"
+    assert any("GPS_RAW_INT not sent by the autopilot" in e for e in events), events
+    assert asked == 0  # nothing asked again in the last 20 s
+    rates = sess.rates()
+    for name, hz in (("SCALED_IMU", 50), ("ATTITUDE", 10), ("SCALED_PRESSURE2", 10),
+                     ("GLOBAL_POSITION_INT", 10), ("SERVO_OUTPUT_RAW", 10)):
+        assert abs(rates[f"autopilot/{name}:received"] - hz) <= 0.1 * hz, (name, rates)

@@ -18,7 +18,8 @@ on USB and most TELEM ports) until a ground station asks. For each MAVLink input
    Parameter samples, in the recording too;
 4. confirms that the streams arrive: every ``RATE_WINDOW_S`` the rate received per
    message; a message below half its requested rate ``CHECK_AFTER_S`` after it was
-   accepted is asked for again (and reported once);
+   accepted is asked for again (and reported once), up to ``MAX_REASKS`` times, then
+   reported absent (a GNSS-less ROV's GPS_RAW_INT);
 5. sends TIMESYNC requests (``tc1`` 0, ``ts1`` the service clock in ns); the autopilot's
    answers let :class:`drivers.mavlink_link.BootClock` map its boot clock without the
    one-way link delay;
@@ -56,6 +57,9 @@ ACK_TRIES = 3
 CHECK_AFTER_S = 5.0
 RATE_WINDOW_S = 2.0
 LINK_LOST_S = 5.0
+MAX_REASKS = 3
+"""A message still missing after this many repeated requests is reported absent and no
+longer asked for (until the next reboot or reconnection)."""
 POLL_S = 0.1
 SYNC_FIRST_S = 1.0
 SYNC_PERIOD_S = 10.0
@@ -132,7 +136,7 @@ class StreamState:
     rate_hz: float
     state: str = "pending"
     """``pending`` (not asked yet), ``asked`` (waiting for the ACK), ``accepted``,
-    ``legacy`` (asked with REQUEST_DATA_STREAM)."""
+    ``legacy`` (asked with REQUEST_DATA_STREAM), ``absent`` (never arrived: given up)."""
     tries: int = 0
     t_sent: float = -math.inf
     t_accepted: float | None = None
@@ -140,6 +144,8 @@ class StreamState:
     t_window: float = -math.inf
     """Start of the window :attr:`received_hz` was measured over (s)."""
     warned: bool = False
+    reasks: int = 0
+    """Times it was asked for again because it did not arrive."""
 
 
 @dataclass
@@ -284,10 +290,16 @@ class MavlinkSession:
             if st.state in ("accepted", "legacy") and st.t_accepted is not None \
                     and now - st.t_accepted > CHECK_AFTER_S and st.t_window >= st.t_accepted \
                     and st.received_hz < 0.5 * st.rate_hz:
+                if st.reasks >= MAX_REASKS:
+                    st.state = "absent"
+                    self.on_event(f"{self.name}: {st.name} not sent by the autopilot "
+                                  f"(asked {st.reasks + 1} times); no longer asked")
+                    continue
                 if not st.warned:
                     st.warned = True
                     self.on_event(f"{self.name}: {st.name} requested at {st.rate_hz:g} Hz, "
                                   f"receiving {st.received_hz:.1f} Hz; asking again")
+                st.reasks += 1
                 st.tries = 0
                 if st.state == "legacy":
                     self._legacy_sent.pop(STREAM_GROUPS.get(st.name, -1), None)
