@@ -181,3 +181,18 @@ def test_a_message_the_autopilot_never_sends_is_reported_absent():
     for name, hz in (("SCALED_IMU", 50), ("ATTITUDE", 10), ("SCALED_PRESSURE2", 10),
                      ("GLOBAL_POSITION_INT", 10), ("SERVO_OUTPUT_RAW", 10)):
         assert abs(rates[f"autopilot/{name}:received"] - hz) <= 0.1 * hz, (name, rates)
+
+
+def test_a_vehicle_type_that_does_not_match_the_class_is_reported():
+    """A BlueROV2 configuration (class bluerov2) on the rudder boat's autopilot
+    (MAV_TYPE_SURFACE_BOAT 11): an event names both."""
+    link = AutopilotLink(system_id=1, component_id=1, mav_type=11, autopilot=3, t_heartbeat=0.0)
+    events: list[str] = []
+    sess = MavlinkSession("autopilot", load("bluerov2"), SourceConfig(kind="mavlink", url="udp:x:1"),
+                          link, Loop(), lambda: 0.0, events.append)  # type: ignore[arg-type]
+    sess.poll(0.0)
+    assert any("MAV_TYPE 11" in e and "bluerov2" in e for e in events), events
+    ok: list[str] = []
+    MavlinkSession("autopilot", load("rudder-boat"), SourceConfig(kind="mavlink", url="udp:x:1"),
+                   link, Loop(), lambda: 0.0, ok.append).poll(0.0)  # type: ignore[arg-type]
+    assert not any("MAV_TYPE" in e for e in ok), ok

@@ -243,6 +243,11 @@ class MavlinkSession:
         self.on_event(f"{self.name}: autopilot {why}: system {link.system_id} component "
                       f"{link.component_id}, type {link.mav_type}, autopilot {link.autopilot}"
                       + ("; requesting streams" if self.src.request_streams else ""))
+        vclass = self.cfg.vehicle.vehicle_class
+        expect = {12} if vclass in UNDERWATER else {10, 11} if vclass != "unknown" else None
+        if expect is not None and link.mav_type not in expect and why == "found":
+            self.on_event(f"{self.name}: the autopilot says MAV_TYPE {link.mav_type}, "
+                          f"the configuration class {vclass} (expected {sorted(expect)})")
         if self.src.request_streams:
             for p in PARAMETERS:
                 self._send(self._mav.param_request_read_encode(  # type: ignore[union-attr]
