@@ -252,7 +252,8 @@ class Service:
                 from onboard.service.mavlink_session import MavlinkSession
 
                 sess = MavlinkSession(inp.name, cfg, inp.cfg, link, inp.transport,
-                                      self.clock.now, self.event, signing=self.signing)
+                                      self.clock.now, self.event, signing=self.signing,
+                                      poll_s=0.1 / self.clock.speed)
                 self.sessions.append(sess)
                 self._tasks.append(asyncio.create_task(sess.run(), name=f"session:{inp.name}"))
         try:

@@ -167,6 +167,8 @@ class MavlinkSession:
     signing: SigningState | None = None
     """The service's MAVLink signing state: requests are signed with its key and
     timestamps (link id 1; MAVLink out uses 0) when it is set."""
+    poll_s: float = POLL_S
+    """Wall seconds between polls (the demo's sped-up clock polls as often in its time)."""
     streams: dict[str, StreamState] = field(default_factory=dict)
     sent: int = 0
     sessions: int = 0
@@ -201,7 +203,7 @@ class MavlinkSession:
                 self.poll(self.clock())
             except Exception:  # noqa: BLE001 - a session bug must not stop the service
                 log.exception("mavlink session %s failed", self.name)
-            await asyncio.sleep(POLL_S)
+            await asyncio.sleep(self.poll_s)
 
     # ------------------------------------------------------------------ the state machine
 
