@@ -63,6 +63,7 @@ from onboard.core.messages import (
 )
 
 if TYPE_CHECKING:
+    from drivers.mavlink_link import AutopilotLink
     from drivers.mavlink_signing import SignatureVerifier
 
 GRAVITY_MSS = 9.80665
@@ -502,6 +503,7 @@ def _param_value(idx, msgid):
 
 
 HEARTBEAT_ID = 0
+PARAM_VALUE_ID = _layout("PARAM_VALUE")[0]
 
 
 def select(types: Iterable[type | str] | None) -> dict[int, Spec]:
@@ -572,12 +574,16 @@ class MavlinkParser:
     The result does not depend on how the stream is cut into chunks.
 
     ``types`` restricts the samples produced (Sample classes or tags); ``include_gcs``
-    keeps ground-station heartbeats.
+    keeps ground-station heartbeats. With a ``link`` (:class:`drivers.mavlink_link.AutopilotLink`)
+    only the autopilot's frames are decoded, stamped with its boot time mapped to the
+    receive clock (other systems' and components' frames are counted in ``link.ignored``).
     """
 
     def __init__(self, *, types: Iterable[type | str] | None = None, include_gcs: bool = False,
-                 verifier: "SignatureVerifier | None" = None) -> None:
+                 verifier: "SignatureVerifier | None" = None,
+                 link: "AutopilotLink | None" = None) -> None:
         self.verifier = verifier
+        self.link = link
         self.stats = ReadStats()
         self._ctx = DecodeContext(self.stats, include_gcs)
         self._specs = select(types)
@@ -596,6 +602,7 @@ class MavlinkParser:
         specs, ctx, stats = self._specs, self._ctx, self.stats
         find = START_BYTES.search
         verify = self.verifier.check if self.verifier is not None else None
+        link = self.link
         while i < n:
             m = find(buf, i)
             if m is None:
@@ -661,11 +668,19 @@ class MavlinkParser:
                 if reason is not None:
                     stats.reject(reason)
                     continue
+            t = t_rx
+            if link is not None:
+                ts = link.accept(sysid, compid, msgid, buf, j + hdr, plen, t_rx)
+                if ts is None:
+                    continue
+                t = ts
             spec = specs.get(msgid)
             if spec is None:
                 continue
-            res = decode_payload(spec, buf, j + hdr, plen, t_rx, sysid, compid, v2, ctx)
+            res = decode_payload(spec, buf, j + hdr, plen, t, sysid, compid, v2, ctx)
             if res is not None:
+                if link is not None and msgid == PARAM_VALUE_ID and type(res) is Parameter:
+                    link.note_param(res.name, res.value)
                 _emit(res, out, self._want)
         del buf[:i]
         stats.samples += len(out)

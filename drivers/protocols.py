@@ -31,6 +31,7 @@ from drivers.base import ReadStats, StreamParser
 from onboard.core.messages import AnySample, Sample
 
 if TYPE_CHECKING:
+    from drivers.mavlink_link import AutopilotLink
     from drivers.mavlink_signing import SignatureVerifier
 
 KINDS: tuple[str, ...] = ("mavlink", "nmea", "dvl-json", "pd6", "gpsd", "sample")
@@ -101,11 +102,14 @@ def encode_sample(sample: Sample) -> bytes:
     return msgspec.msgpack.encode(sample)
 
 
-def parser_for(kind: str, source: str = "", *, verifier: "SignatureVerifier | None" = None) -> StreamParser:
+def parser_for(kind: str, source: str = "", *, verifier: "SignatureVerifier | None" = None,
+               link: "AutopilotLink | None" = None) -> StreamParser:
     """A new stream parser for ``kind``; ``source`` names its samples where the protocol
     lets the parser choose (MAVLink names sources by system id and message itself).
     ``verifier`` (MAVLink only) makes the parser require signed, fresh frames
     (:mod:`drivers.mavlink_signing`); other protocols have no signatures and ignore it.
+    ``link`` (MAVLink only): decode only the autopilot's frames, stamped with its mapped
+    boot time (:mod:`drivers.mavlink_link`).
 
     Raises :class:`UnknownProtocol` for an unknown kind.
     """
@@ -117,5 +121,5 @@ def parser_for(kind: str, source: str = "", *, verifier: "SignatureVerifier | No
         raise UnknownProtocol(f"unknown protocol {kind!r}; known: {', '.join(KINDS)}") from None
     cls: Callable[..., StreamParser] = getattr(importlib.import_module(module_name), class_name)
     if kind == "mavlink":
-        return cls(verifier=verifier)
+        return cls(verifier=verifier, link=link)
     return cls(source=source or kind)

@@ -308,6 +308,34 @@ def decode_sample(data: bytes):
     return _sample_dec.decode(data)
 
 
+def _link_for(meta: list[bytes], source: str):
+    """The autopilot link the service gave MAVLink input ``source``, from the newest
+    ``meta`` record's configuration (as :class:`onboard.service.intake.Intake` builds it):
+    its ``[[service.sources]]`` options; a recording made before the link existed (no
+    ``autopilot_time`` key) decodes every component with receive-time stamps."""
+    import json
+
+    from drivers.mavlink_link import AutopilotLink
+
+    try:
+        cfg = json.loads(meta[-1]).get("config") if meta else None
+    except (ValueError, AttributeError):
+        cfg = None
+    sources = ((cfg or {}).get("service") or {}).get("sources") or [] if isinstance(cfg, dict) else []
+    for i, src in enumerate(sources):
+        if not isinstance(src, dict) or src.get("kind") != "mavlink":
+            continue
+        if (src.get("name") or f"mavlink{i}") != source:
+            continue
+        if "autopilot_time" not in src:
+            return AutopilotLink(stamp_boot_time=False, filter_components=False)
+        return AutopilotLink(target_system=int(src.get("target_system", 0)),
+                             target_component=int(src.get("target_component", 0)),
+                             stamp_boot_time=bool(src.get("autopilot_time", True)),
+                             filter_components=bool(src.get("filter_components", True)))
+    return AutopilotLink()
+
+
 class RecordingReader:
     """A recording as a log: re-parses every raw record with its protocol's parser.
 
@@ -353,8 +381,10 @@ class RecordingReader:
                 parser = parsers.get(key)
                 if parser is None:
                     player = VerdictPlayer()
+                    link = _link_for(self.meta, rec.source) if rec.kind == "mavlink" else None
                     try:
-                        parser = parsers[key] = parser_for(rec.kind, rec.source, verifier=player)
+                        parser = parsers[key] = parser_for(rec.kind, rec.source, verifier=player,
+                                                           link=link)
                     except (KeyError, ValueError):
                         self.stats.reject(f"unknown_kind:{rec.kind}")
                         continue

@@ -35,6 +35,12 @@ Faults that give no error are found too:
 
 Serial and pty reads use pyserial to configure the port (raw, non-blocking) and
 ``loop.add_reader`` on its file descriptor, so no thread and no serial_asyncio.
+
+:meth:`Transport.send` writes back on the open connection (the service asks the autopilot
+for its streams): to the serial port, to the TCP server, or to the address the last
+datagram came from on UDP (as a ground station answers an autopilot). It never blocks: what
+the connection cannot take now is queued up to ``TX_QUEUE_BYTES`` and the rest dropped and
+counted (``stats.tx_dropped``).
 """
 
 from __future__ import annotations
@@ -71,6 +77,8 @@ USER_TIMEOUT_MS = 10000
 """TCP_USER_TIMEOUT: how long sent data may stay unacknowledged (ms)."""
 DEFAULT_IDLE_TIMEOUT_S = {"tcp": 10.0, "gpsd": 10.0}
 """The idle timeout when the configuration gives none, per scheme (others: never)."""
+TX_QUEUE_BYTES = 65536
+"""Most bytes queued for sending on one connection; beyond it a send is dropped."""
 
 
 class IdleTimeout(OSError):
@@ -146,6 +154,10 @@ class TransportStats:
     connected: bool = False
     t_last_rx: float | None = None
     errors: list[str] = field(default_factory=list)
+    tx_bytes: int = 0
+    """Bytes handed to the connection by :meth:`Transport.send`."""
+    tx_dropped: int = 0
+    """Sends refused: no connection (or no UDP peer yet), or the queue full."""
 
 
 class Transport:
@@ -173,6 +185,23 @@ class Transport:
         self.queue_size = queue_size
         self.stats = TransportStats()
         self._on_event = on_event
+        self._tx: Callable[[bytes], bool] | None = None
+
+    def send(self, data: bytes) -> bool:
+        """Write ``data`` on the open connection without blocking; False (counted in
+        ``stats.tx_dropped``) when there is none or it cannot take it."""
+        tx = self._tx
+        ok = False
+        if tx is not None:
+            try:
+                ok = tx(data)
+            except OSError:
+                ok = False
+        if ok:
+            self.stats.tx_bytes += len(data)
+        else:
+            self.stats.tx_dropped += 1
+        return ok
 
     def _event(self, text: str) -> None:
         if self._on_event is not None:
@@ -313,13 +342,42 @@ class SerialTransport(Transport):
             box.put((data, self.clock()))
 
         loop.add_reader(fd, readable)
+        pending = bytearray()
+
+        def flush() -> None:
+            try:
+                n = os.write(fd, pending)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                pending.clear()
+                loop.remove_writer(fd)
+                return
+            del pending[:n]
+            if not pending:
+                loop.remove_writer(fd)
+
+        def tx(data: bytes) -> bool:
+            if len(pending) + len(data) > TX_QUEUE_BYTES:
+                return False
+            idle = not pending
+            pending.extend(data)
+            if idle:
+                flush()
+                if pending:
+                    loop.add_writer(fd, flush)
+            return True
+
+        self._tx = tx
         self._connected()
         try:
             while True:
                 data, t_rx = await self._idle(box.get())
                 yield self._count(data, t_rx)
         finally:
+            self._tx = None
             loop.remove_reader(fd)
+            loop.remove_writer(fd)
             try:
                 port.close()
             except Exception:  # noqa: BLE001 - closing a vanished device may fail
@@ -330,8 +388,11 @@ class _UdpProtocol(asyncio.DatagramProtocol):
     def __init__(self, box: _Mailbox, clock: Clock) -> None:
         self.box = box
         self.clock = clock
+        self.peer: object | None = None
+        """Where the last datagram came from: where :meth:`Transport.send` answers."""
 
     def datagram_received(self, data: bytes, addr: object) -> None:
+        self.peer = addr
         self.box.put((data, self.clock()))
 
     def error_received(self, exc: Exception) -> None:  # ICMP errors: not fatal for a listener
@@ -356,14 +417,23 @@ class UdpTransport(Transport):
         except OSError:
             sock.close()
             raise
-        transport, _ = await loop.create_datagram_endpoint(
-            lambda: _UdpProtocol(box, self.clock), sock=sock)
+        proto = _UdpProtocol(box, self.clock)
+        transport, _ = await loop.create_datagram_endpoint(lambda: proto, sock=sock)
+
+        def tx(data: bytes) -> bool:
+            if proto.peer is None or transport.get_write_buffer_size() > TX_QUEUE_BYTES:
+                return False
+            transport.sendto(data, proto.peer)
+            return True
+
+        self._tx = tx
         self._connected()
         try:
             while True:
                 data, t_rx = await box.get()
                 yield self._count(data, t_rx)
         finally:
+            self._tx = None
             transport.close()
 
     @property
@@ -403,10 +473,18 @@ class TcpTransport(Transport):
         sock = writer.get_extra_info("socket")
         if sock is not None:
             set_keepalive(sock)
+
+        def tx(data: bytes) -> bool:
+            if writer.is_closing() or writer.transport.get_write_buffer_size() > TX_QUEUE_BYTES:
+                return False
+            writer.write(data)
+            return True
+
         try:
             if self.greeting:
                 writer.write(self.greeting)
                 await asyncio.wait_for(writer.drain(), self.connect_timeout_s)
+            self._tx = tx
             self._connected()
             while True:
                 data = await self._idle(reader.read(READ_SIZE))
@@ -414,6 +492,7 @@ class TcpTransport(Transport):
                     return
                 yield self._count(data, self.clock())
         finally:
+            self._tx = None
             writer.close()
             try:
                 await asyncio.wait_for(writer.wait_closed(), 1.0)

@@ -69,6 +69,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--controller", choices=("pid", "nmpc", "ampc"), default=None,
                    help="closed-loop controller (bluerov2-circle)")
     p.add_argument("--report", help="write a JSON report of the closed-loop run")
+    p.add_argument("--stream-unasked", action="store_true",
+                   help="the --link streams every message unasked (no stream negotiation)")
+    p.add_argument("--reboot-at", type=float, action="append", metavar="S",
+                   help="reboot the simulated autopilot at S seconds (repeatable)")
+    p.add_argument("--other-components", action="store_true",
+                   help="a ground station and a camera share the --link")
     p.set_defaults(handler="sitl.cli:main")
 
     p = sub.add_parser("replay", help="run the pipelines over a recorded log")

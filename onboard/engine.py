@@ -29,6 +29,7 @@ from onboard.core.messages import (
     EstimateRecord,
     GnssFix,
     HealthRecord,
+    Parameter,
     Pressure,
     PropellerRpm,
     RcChannels,
@@ -161,6 +162,9 @@ class Engine:
             cmd = self.mapper.map(sample)
             if cmd is not None:
                 self._pending.append(cmd)
+        elif cls is Parameter:
+            for change in self.mapper.parameter(sample.name, sample.value):
+                self.events.append(f"inputs: {change}")
         return True
 
     def tick(self, t: float) -> list[EstimateRecord]:

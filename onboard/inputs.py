@@ -7,11 +7,50 @@ the normalized command, so the same estimator serves a Jaiabot, a BlueBoat or a 
 
 from __future__ import annotations
 
+import msgspec
+
 from onboard.core.config import ChannelMap, Inputs
 from onboard.core.messages import ActuatorCommand, ActuatorOutputs, PropellerRpm, RcChannels, Sample
 
 _ROLES = ("throttle", "rudder", "left", "right", "propeller_rpm", "stern_plane")
 _FIELD = {"rudder": "rudder_rad", "stern_plane": "stern_plane_rad"}
+
+
+ROLE_FUNCTIONS: dict[str, tuple[int, ...]] = {
+    "rudder": (26, 21), "throttle": (70,), "left": (73,), "right": (74,), "stern_plane": (19,),
+}
+"""Role -> ArduPilot ``SERVOn_FUNCTION`` values that drive it: 26 GroundSteering, 21 Rudder,
+70 Throttle, 73/74 ThrottleLeft/Right, 19 Elevator; thruster ``i`` is Motor ``i+1`` (33+i)."""
+MOTOR1 = 33
+
+
+def remap(inputs: Inputs, functions: dict[int, int]) -> tuple[Inputs, list[str]]:
+    """``inputs`` with every servo-mapped role on the output whose function drives it
+    (``functions``: output channel -> SERVOn_FUNCTION; the lowest channel when several);
+    roles whose function no output has keep their channel. Also the changes, as text."""
+    by_function: dict[int, int] = {}
+    for ch in sorted(functions, reverse=True):
+        by_function[functions[ch]] = ch
+    changes: list[str] = []
+    kw: dict = {}
+    for role, funcs in ROLE_FUNCTIONS.items():
+        m = getattr(inputs, role)
+        ch = next((by_function[f] for f in funcs if f in by_function), None)
+        if m is None or m.source != "servo" or ch is None or ch == m.channel:
+            continue
+        kw[role] = msgspec.structs.replace(m, channel=ch)
+        changes.append(f"{role} on SERVO{ch} (SERVO{ch}_FUNCTION={functions[ch]}), "
+                       f"configured SERVO{m.channel}")
+    thr = list(inputs.thrusters)
+    for i, m in enumerate(thr):
+        ch = by_function.get(MOTOR1 + i)
+        if m.source == "servo" and ch is not None and ch != m.channel:
+            thr[i] = msgspec.structs.replace(m, channel=ch)
+            changes.append(f"thruster {i + 1} on SERVO{ch} (SERVO{ch}_FUNCTION={MOTOR1 + i}), "
+                           f"configured SERVO{m.channel}")
+    if thr != list(inputs.thrusters):
+        kw["thrusters"] = thr
+    return (msgspec.structs.replace(inputs, **kw) if kw else inputs), changes
 
 
 def normalize_pwm(pwm_us: float, m: ChannelMap) -> float:
@@ -34,11 +73,37 @@ class InputMapper:
     """
 
     def __init__(self, inputs: Inputs) -> None:
+        self.configured = inputs
+        self.functions: dict[int, int] = {}
+        """Output channel -> SERVOn_FUNCTION, from the parameters seen."""
+        self._setup(inputs)
+
+    def _setup(self, inputs: Inputs) -> None:
         self.inputs = inputs
         self._roles = [(r, getattr(inputs, r)) for r in _ROLES if getattr(inputs, r) is not None]
         self._latest: dict[str, float] = {}
         self._thrusters: list[float] = [0.0] * len(inputs.thrusters)
         self.sources = {m.source for _, m in self._roles} | {m.source for m in inputs.thrusters}
+
+    def parameter(self, name: str, value: float) -> list[str]:
+        """Take an autopilot parameter; a ``SERVOn_FUNCTION`` re-targets the roles when
+        ``inputs.from_autopilot`` (see :func:`remap`). Returns the mapping changes."""
+        if not (self.configured.from_autopilot and name.startswith("SERVO")
+                and name.endswith("_FUNCTION")):
+            return []
+        try:
+            ch = int(name[5:-9])
+        except ValueError:
+            return []
+        if self.functions.get(ch) == int(value):
+            return []
+        self.functions[ch] = int(value)
+        inputs, _ = remap(self.configured, self.functions)
+        if inputs == self.inputs:
+            return []
+        _, changes = remap(self.inputs, self.functions)
+        self._setup(inputs)
+        return changes
 
     @property
     def active(self) -> bool:

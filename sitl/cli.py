@@ -10,6 +10,13 @@ Examples::
         --dvl tcp:0.0.0.0:16171                           # Water Linked DVL JSON server
     onboard sitl --scenario gavia-tidal --realtime --link pty --nmea-pty --dvl pty
 
+On ``--link`` the simulated autopilot behaves as ArduPilot's MAVLink side
+(:mod:`sitl.autopilot`): HEARTBEAT only until the receiver asks for streams
+(SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM), parameters on request. ``--stream-unasked``
+streams everything unasked instead; ``--reboot-at S`` reboots the autopilot at S seconds
+(repeatable); ``--other-components`` adds a ground station (system 255) and a camera
+(component 100) sending look-alike messages on the same link.
+
 Outputs: ``--tlog`` (MAVLink telemetry log; the scenario metadata an estimator may read is
 written beside it as ``<name>.scenario.json``), ``--truth`` (hidden truth, JSON lines),
 ``--link`` (MAVLink over ``udp:HOST:PORT``, a ``tcp:HOST:PORT`` server, or ``pty``),
@@ -86,6 +93,7 @@ def main(args: argparse.Namespace) -> int:
     controller = make_controller(args.controller, sc) if args.controller else None
 
     mavlink: list[Sink] = []
+    live: list[Sink] = []
     nmea: list[Sink] = []
     dvl_json: list[Sink] = []
     pd6: list[Sink] = []
@@ -104,7 +112,7 @@ def main(args: argparse.Namespace) -> int:
                 sink = open_link(link)
             except (ValueError, OSError) as err:
                 raise UsageError(f"--link: {err}") from None
-            mavlink.append(sink)
+            live.append(sink)
             if isinstance(sink, PtySink):
                 ptys.append(sink)
                 print(f"MAVLink on {sink.path}", flush=True)
@@ -133,9 +141,13 @@ def main(args: argparse.Namespace) -> int:
                     raise UsageError(f"--dvl: cannot listen on {args.dvl}: {err}") from None
                 dvl_json.append(srv)
                 print(f"DVL JSON TCP server on port {srv.port}", flush=True)
+        options = {"stream_unasked": bool(getattr(args, "stream_unasked", False)),
+                   "others": bool(getattr(args, "other_components", False)),
+                   "reboot_at": list(getattr(args, "reboot_at", None) or [])}
         summary = run(sc, duration, args.seed, mavlink=mavlink, nmea=nmea, dvl_json=dvl_json,
                       pd6=pd6, truth_path=args.truth, meta_path=meta,
-                      realtime=bool(args.realtime), controller=controller)
+                      realtime=bool(args.realtime), controller=controller,
+                      live_mavlink=live, autopilot=options)
     except OSError as err:
         raise UsageError(f"cannot write output: {err}") from None
     if args.tlog:

@@ -137,6 +137,11 @@ class MavlinkEncoder:
         self._heading = 0.0
         self._params: list[Parameter] = []
         self.frames = 0
+        self.boot_t0 = 0.0
+        """Simulation time (s) at which the autopilot booted: ``time_boot_ms`` counts from
+        it (:class:`sitl.autopilot.SimAutopilot` moves it on a reboot)."""
+        self.raw_imu = False
+        """Send Imu samples as RAW_IMU (ArduPilot's RAW_SENSORS stream) instead of SCALED_IMU."""
 
     def _pack(self, msg) -> bytes:
         buf = msg.pack(self.mav)
@@ -154,8 +159,14 @@ class MavlinkEncoder:
         m = self.mav
         for s in samples:
             t = s.t
-            ms = int(round(t * 1000.0)) & 0xFFFFFFFF
-            if isinstance(s, Imu):
+            ms = int(round((t - self.boot_t0) * 1000.0)) & 0xFFFFFFFF
+            if isinstance(s, Imu) and self.raw_imu:
+                out.append(self._pack(m.raw_imu_encode(
+                    int(round((t - self.boot_t0) * 1e6)),
+                    _i16(s.accel_x / GRAVITY_MSS * 1000.0), _i16(s.accel_y / GRAVITY_MSS * 1000.0),
+                    _i16(s.accel_z / GRAVITY_MSS * 1000.0), _i16(s.gyro_x * 1000.0),
+                    _i16(s.gyro_y * 1000.0), _i16(s.gyro_z * 1000.0), *self._mag_mgauss(), 0, 2000)))
+            elif isinstance(s, Imu):
                 out.append(self._pack(m.scaled_imu_encode(
                     ms, _i16(s.accel_x / GRAVITY_MSS * 1000.0),
                     _i16(s.accel_y / GRAVITY_MSS * 1000.0),
@@ -200,7 +211,7 @@ class MavlinkEncoder:
                 pwm = [_u16(x) for x in s.pwm_us[:16]] + [0] * max(0, 16 - len(s.pwm_us))
                 self._throttle = self._throttle_percent(pwm)
                 out.append(self._pack(m.servo_output_raw_encode(
-                    int(round(t * 1e6)) & 0xFFFFFFFF, 0, *pwm)))
+                    int(round((t - self.boot_t0) * 1e6)) & 0xFFFFFFFF, 0, *pwm)))
             elif isinstance(s, PropellerRpm):
                 r = list(s.rpm) + [-1.0]
                 out.append(self._pack(m.rpm_encode(float(r[0]), float(r[1]))))
@@ -432,7 +443,18 @@ class UdpSink:
     def __init__(self, host: str, port: int) -> None:
         self.addr = (host, port)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
         self.dropped = 0
+
+    def read(self) -> bytes:
+        """What the receiver sent back to this socket's port (never blocks)."""
+        out = bytearray()
+        while True:
+            try:
+                data = self.sock.recv(65536)
+            except (BlockingIOError, InterruptedError, OSError):
+                return bytes(out)
+            out += data
 
     def write(self, t: float, frame: bytes) -> None:
         """Send ``frame`` as one datagram (a failed send is dropped and counted)."""
@@ -479,6 +501,19 @@ class TcpServerSink:
             if r:
                 self.accept()
         return bool(self.clients)
+
+    def read(self) -> bytes:
+        """What the connected clients sent (never blocks)."""
+        self.accept()
+        out = bytearray()
+        for c in list(self.clients):
+            try:
+                out += c.recv(65536, socket.MSG_DONTWAIT)
+            except (BlockingIOError, InterruptedError):
+                continue
+            except OSError:
+                continue
+        return bytes(out)
 
     def write(self, t: float, frame: bytes) -> None:
         """Send ``frame`` to every connected client, accepting new ones first; a client whose
@@ -550,6 +585,18 @@ class PtySink:
         self._pending.append(frame)
         self._pending_bytes += len(frame)
         self.flush()
+
+    def read(self) -> bytes:
+        """What the reader wrote to the terminal (never blocks)."""
+        out = bytearray()
+        while True:
+            try:
+                data = os.read(self.master, 65536)
+            except (BlockingIOError, InterruptedError, OSError):
+                return bytes(out)
+            if not data:
+                return bytes(out)
+            out += data
 
     def unread(self) -> int:
         """Bytes written but not yet read by the other side (in the terminal's queue)."""

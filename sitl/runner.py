@@ -64,6 +64,8 @@ from sitl.emitters import (
     Sink,
     TlogSink,
 )
+from sitl.autopilot import SimAutopilot
+from sitl.emitters import MAV_TYPE_SURFACE_BOAT
 from sitl.guidance import ControlInput, Controller
 from sitl.plants.base import Command
 from sitl.scenarios import Scenario, get
@@ -287,16 +289,31 @@ def mavlink_encoder(sim: Simulation, epoch_s: float = DEFAULT_EPOCH_S) -> Mavlin
     return enc
 
 
+def autopilot_for(sim: Simulation, sinks: Sequence[Sink], epoch_s: float = DEFAULT_EPOCH_S,
+                  **options: Any) -> SimAutopilot:
+    """The simulated autopilot (:class:`sitl.autopilot.SimAutopilot`) of a simulation's
+    vehicle on the live MAVLink ``sinks``; ``options`` go to it (``stream_unasked``,
+    ``others``, ``reboot_at``)."""
+    sc = sim.scenario
+    frame_class = 2 if sc.vehicle.mav_type == MAV_TYPE_SURFACE_BOAT else 1
+    return SimAutopilot(mavlink_encoder(sim, epoch_s), sinks, params=sim.heartbeat.params,
+                        frame_class=frame_class, **options)
+
+
 def run(scenario: Scenario | str, duration: float | None = None, seed: int = 0, *,
         mavlink: Sequence[Sink] = (), nmea: Sequence[Sink] = (), dvl_json: Sequence[Sink] = (),
         pd6: Sequence[Sink] = (), truth_path: str | Path | None = None,
         meta_path: str | Path | None = None, realtime: bool = False,
         controller: Controller | None = None, epoch_s: float = DEFAULT_EPOCH_S,
-        truth_rate_hz: float = 10.0) -> RunSummary:
+        truth_rate_hz: float = 10.0, live_mavlink: Sequence[Sink] = (),
+        autopilot: dict[str, Any] | None = None) -> RunSummary:
     """Run a scenario and push its samples through the protocol encoders to the sinks.
 
     ``mavlink``, ``nmea``, ``dvl_json`` and ``pd6`` are lists of sinks per protocol
-    (:mod:`sitl.emitters`); ``truth_path`` gets the truth as JSON lines;
+    (:mod:`sitl.emitters`); ``mavlink`` gets every message (a telemetry log).
+    ``live_mavlink`` sinks are live links behind the simulated autopilot
+    (:func:`autopilot_for`, options ``autopilot``): heartbeats only until asked.
+    ``truth_path`` gets the truth as JSON lines;
     ``meta_path`` the scenario metadata (:meth:`Scenario.metadata`, what the estimator may
     read); ``realtime`` paces the loop to the wall clock. Sinks are closed at the end.
     """
@@ -304,9 +321,11 @@ def run(scenario: Scenario | str, duration: float | None = None, seed: int = 0, 
     sc = sim.scenario
     dur = sc.duration_s if duration is None else float(duration)
     summary = RunSummary(scenario=sc.name, seed=seed, duration_s=dur)
-    channels: dict[str, Channel] = {}
+    channels: dict[str, Channel | SimAutopilot] = {}
     if mavlink:
         channels["mavlink"] = Channel(mavlink_encoder(sim, epoch_s), list(mavlink))
+    if live_mavlink:
+        channels["mavlink_live"] = autopilot_for(sim, live_mavlink, epoch_s, **(autopilot or {}))
     if nmea:
         channels["nmea"] = Channel(NmeaEncoder(epoch_s), list(nmea))
     if dvl_json:

@@ -87,6 +87,9 @@ class Inputs(_Strict):
     propeller_rpm: ChannelMap | None = None
     stern_plane: ChannelMap | None = None
     thrusters: list[ChannelMap] = []
+    from_autopilot: bool = True
+    """Move a servo-mapped role to the output the autopilot's ``SERVOn_FUNCTION``
+    parameters name for it (in a log or read live), as ``onboard.autodetect`` does."""
 
 
 class GnssNoise(_Strict):
@@ -252,6 +255,22 @@ class SourceConfig(_Strict):
     """A connection that delivers no byte for this long (s) is closed and opened again
     (a TCP DVL that power-cycled, a half-open peer, a serial device re-enumerated
     silently); 0 never. Default: 10 s for TCP and gpsd, never for serial, pty and UDP."""
+    # MAVLink sources only (docs/service.md, "The autopilot link"):
+    target_system: Annotated[int, msgspec.Meta(ge=0, le=255)] = 0
+    """The autopilot's system id; 0: the first autopilot whose HEARTBEAT is heard."""
+    target_component: Annotated[int, msgspec.Meta(ge=0, le=255)] = 0
+    """The autopilot's component id; 0: component 1 (MAV_COMP_ID_AUTOPILOT1)."""
+    request_streams: bool = True
+    """Ask the autopilot for the messages the pipelines need (SET_MESSAGE_INTERVAL, else
+    REQUEST_DATA_STREAM); false: take what it sends (a router or a GCS already asked)."""
+    streams: dict[str, float] = {}
+    """Rates (Hz) per MAVLink message name that replace the derived ones; 0 drops one."""
+    autopilot_time: bool = True
+    """Stamp samples with the autopilot's boot time mapped to the service clock (else
+    with their receive time)."""
+    filter_components: bool = True
+    """Decode only the autopilot's frames (other systems and components are counted and
+    ignored); false decodes every component's."""
 
 
 class RecorderConfig(_Strict):

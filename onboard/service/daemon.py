@@ -194,6 +194,8 @@ class Service:
         self._sample_arrived = asyncio.Event()
         self.intake.on_queued = self._sample_arrived.set
         self.inputs: list[_Input] = []
+        self.sessions: list = []
+        """The MAVLink sessions with the autopilot (onboard.service.mavlink_session)."""
         self.zenoh = None
         self.mavlink = None
         self._tasks: list[asyncio.Task] = []
@@ -253,6 +255,15 @@ class Service:
         for inp in self.inputs:  # inputs open while the publishers start
             inp.task = asyncio.create_task(self._read(inp), name=f"input:{inp.name}")
             self._tasks.append(inp.task)
+            link = self.intake.sources[inp.name].link
+            if inp.cfg.kind == "mavlink" and link is not None:
+                from onboard.service.mavlink_session import MavlinkSession
+
+                sess = MavlinkSession(inp.name, cfg, inp.cfg, link, inp.transport,
+                                      self.clock.now, self.event, signing=self.signing,
+                                      poll_s=0.1 / self.clock.speed)
+                self.sessions.append(sess)
+                self._tasks.append(asyncio.create_task(sess.run(), name=f"session:{inp.name}"))
         try:
             await self._start_publishers()
         except BaseException:
@@ -495,6 +506,8 @@ class Service:
             rates[k] = (n - prev) / dt if dt else 0.0
             self._accepted_prev[k] = n
         self._t_rate_prev = now
+        for sess in self.sessions:
+            rates.update(sess.rates())
         events, self._health_events = self._health_events[-20:], []
         h = self.engine.health(now, rates, events)
         dropped = dict(self.intake.dropped)
@@ -507,6 +520,10 @@ class Service:
             dropped["recorder"] = self.recorder.dropped  # records that missed the disk
         rejected = dict(h.rejected)
         rejected.update(self.intake.parse_rejections())
+        for name, st in self.intake.sources.items():
+            if st.link is not None:
+                for who, n in st.link.ignored.items():
+                    rejected[f"parse:{name}:ignored:{who}"] = n
         return msgspec.structs.replace(h, rejected=rejected, dropped=dropped)
 
     def status_line(self) -> str:

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable
 
 from drivers.base import StreamParser
+from drivers.mavlink_link import AutopilotLink
 from drivers.mavlink_signing import SignatureVerifier, VerdictLog, VerdictPlayer
 from drivers.protocols import parser_for
 from drivers.recording import VERDICTS_KIND, RawRecord, Verdicts, encode_verdicts
@@ -52,6 +53,9 @@ class SourceState:
     verdicts: VerdictLog | VerdictPlayer | None = None
     """The parser's verifier when signing is verified live (a log of its rejections, for
     the recording) or when replaying (the recorded rejections)."""
+    link: AutopilotLink | None = None
+    """MAVLink inputs: the autopilot on the link (its identity, boot clock, what it sent),
+    shared with the service's MAVLink session."""
 
 
 @dataclass
@@ -92,9 +96,22 @@ class Intake:
                     v = VerdictPlayer()
                 elif self.verifier is not None:
                     v = VerdictLog(self.verifier)
-            st = self.sources[name] = SourceState(kind, parser_for(kind, name, verifier=v),
-                                                  verdicts=v)
+            link = self._link(name) if kind == "mavlink" else None
+            st = self.sources[name] = SourceState(
+                kind, parser_for(kind, name, verifier=v, link=link), verdicts=v, link=link)
         return st
+
+    def _link(self, name: str) -> AutopilotLink:
+        """The autopilot link of MAVLink input ``name``, set up from its ``[[service.sources]]``
+        entry (the configuration a recording carries, so a replay filters and stamps the
+        frames as the live service did)."""
+        for i, src in enumerate(self.engine.cfg.service.sources):
+            if (src.name or f"{src.kind}{i}") == name and src.kind == "mavlink":
+                return AutopilotLink(target_system=src.target_system,
+                                     target_component=src.target_component,
+                                     stamp_boot_time=src.autopilot_time,
+                                     filter_components=src.filter_components)
+        return AutopilotLink()
 
     def chunk(self, name: str, kind: str, data: bytes, t_rx: float,
               verdicts: Verdicts | None = None) -> int:

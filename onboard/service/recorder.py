@@ -453,7 +453,14 @@ def recording_config(path: str | Path) -> Config | None:
     if not files:
         return None
     cfg = recording_meta(files[0]).get("config")
-    return from_dict(cfg, str(path)) if isinstance(cfg, dict) else None
+    if not isinstance(cfg, dict):
+        return None
+    for src in (cfg.get("service") or {}).get("sources") or []:
+        if isinstance(src, dict) and src.get("kind") == "mavlink" and "autopilot_time" not in src:
+            # made before the autopilot link existed: every frame was decoded and stamped
+            # with its receive time; replay it so
+            src.update(autopilot_time=False, filter_components=False)
+    return from_dict(cfg, str(path))
 
 
 def replay_recording(paths: str | Path | Iterable[str | Path], engine: Engine,

@@ -74,6 +74,12 @@ class LinkPlan:
     truth_path: str
     nmea: bool = True
     routes: dict[str, str] = field(default_factory=dict)
+    stream_unasked: bool = False
+    """The simulated autopilot streams everything unasked (no stream negotiation)."""
+    others: bool = False
+    """A ground station and a camera share the MAVLink link (sitl.autopilot)."""
+    reboot_at: list[float] = field(default_factory=list)
+    """Simulated times (s) at which the autopilot reboots."""
 
 
 def _route(sample: Any, dvl: bool, nmea: bool) -> str:
@@ -96,15 +102,17 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
     import select
 
     from sitl.emitters import Channel, DvlJsonEncoder, NmeaEncoder, PtySink, TcpServerSink, UdpSink
-    from sitl.runner import Simulation, mavlink_encoder
+    from sitl.runner import Simulation, autopilot_for
 
     def send(obj: dict) -> None:
         outp.write(json.dumps(obj) + "\n")
         outp.flush()
 
     sim = Simulation(plan.scenario, plan.seed)
-    channels: dict[str, Channel] = {
-        "mavlink": Channel(mavlink_encoder(sim), [UdpSink("127.0.0.1", plan.mavlink_udp_port)])}
+    channels: dict[str, Any] = {
+        "mavlink": autopilot_for(sim, [UdpSink("127.0.0.1", plan.mavlink_udp_port)],
+                                 stream_unasked=plan.stream_unasked, others=plan.others,
+                                 reboot_at=plan.reboot_at)}
     pty = None
     if plan.nmea:
         pty = PtySink()
@@ -324,9 +332,12 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
                    speed: float = SPEED, seed: int = 1, out_dir: Path = OUT_DIR,
                    router_endpoint: str | None = None, mavlink_out: str = "udpout:127.0.0.1:14550",
                    out: TextIO | None = sys.stdout, keep_state: bool = True,
-                   config: Config | None = None) -> DemoResult:
+                   config: Config | None = None, nmea: bool = True,
+                   autopilot: dict[str, Any] | None = None) -> DemoResult:
     """Run the whole demo; print the live line every wall second and the scores to
-    ``out`` (None: silent). ``router_endpoint`` None: 7447, or a free port when taken."""
+    ``out`` (None: silent). ``router_endpoint`` None: 7447, or a free port when taken.
+    ``nmea`` False sends the GNSS fixes and headings over MAVLink too; ``autopilot``
+    sets :class:`LinkPlan`'s ``stream_unasked``, ``others`` and ``reboot_at``."""
     from onboard.service.daemon import Service, ServiceClock
     from onboard.service.publishers.zenoh_pub import open_router
     from onboard.tools.shore import ShoreView, open_session
@@ -359,7 +370,7 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
     plan = LinkPlan(scenario=sc.name, duration_s=duration_s, seed=seed, speed=speed,
                     mavlink_udp_port=_free_port(socket.SOCK_DGRAM),
                     dvl_tcp_port=_free_port(socket.SOCK_STREAM) if sc.sensors.dvl else None,
-                    truth_path=str(out_dir / "truth.jsonl"))
+                    truth_path=str(out_dir / "truth.jsonl"), nmea=nmea, **(autopilot or {}))
     frames: dict[str, int] = {}
     try:
         shore = open_session([endpoint], None, "client")
