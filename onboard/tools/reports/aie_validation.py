@@ -90,9 +90,13 @@ def run_sitl(scenario: str, duration: float | None = None, seed: int = 1,
                                                   "yaw_rate", "surge_input", "yaw_input")}
     next_tick = None
     theta: dict[str, list[list[float]]] = {"surge": [], "heading": []}
+    est["nav.speed"] = []    # the raw GNSS speed over ground, newest fix (< 1 s old)
+    sog, t_sog = math.nan, -math.inf
     for t, samples, truth in simulate(scenario, duration=duration, seed=seed):
         for s in samples:
             eng.push(s)
+            if isinstance(s, GnssFix) and s.sog_mps is not None:
+                sog, t_sog = s.sog_mps, s.t
         for nm, ax in (("surge", pa.surge), ("heading", pa.yaw)):
             rc = ax.rcie  # type: ignore[attr-defined]
             if rc.steps and (not theta[nm] or len(theta[nm]) < ax.steps):
@@ -107,6 +111,7 @@ def run_sitl(scenario: str, duration: float | None = None, seed: int = 1,
         for c in cols:
             p, q = c.split(".", 1)
             est[c].append(recs.get(p, {}).get(q, math.nan))
+        est["nav.speed"].append(sog if t - t_sog < 1.0 else math.nan)
         tr["lat"].append(truth.lat_deg if truth.lat_deg is not None else math.nan)
         tr["lon"].append(truth.lon_deg if truth.lon_deg is not None else math.nan)
         tr["heading"].append(truth.yaw)
@@ -187,7 +192,8 @@ def identify_sitl(scenario: str, seed: int = 10, dt: float = 1.0
 
 def sitl_metrics(run: SitlRun, t_min: float = 30.0) -> dict[str, dict[str, float]]:
     """RMSE per pipeline after ``t_min`` seconds (speed m/s, heading rad, position m,
-    yaw rate rad/s; AIE also input errors in m/s^2 and rad/s^2)."""
+    yaw rate rad/s; AIE also input errors in m/s^2 and rad/s^2); ``nav``: the raw GNSS
+    speed over ground's."""
     m = run.t >= run.t[0] + t_min
     out: dict[str, dict[str, float]] = {}
     for p in ("aie", "kf"):
@@ -203,6 +209,7 @@ def sitl_metrics(run: SitlRun, t_min: float = 30.0) -> dict[str, dict[str, float
             d["surge_input"] = _rmse((e["aie.surge_input"] - run.truth["surge_input"])[m])
             d["yaw_input"] = _rmse((e["aie.yaw_input"] - run.truth["yaw_input"])[m])
         out[p] = d
+    out["nav"] = {"speed": _rmse((run.est["nav.speed"] - run.truth["speed"])[m])}
     return out
 
 
