@@ -204,6 +204,7 @@ class AxisFilter:
         self._rate_ms = 0.0     # running mean of rate_z^2 ((m/s)^2, ~20 steps)
         self._rate_pred = 0.0   # running mean of rate_S
         self._c1 = 0.0          # c1 of the last step (s)
+        self._rate_rejects = 0  # consecutive rejected rates (the 6th is taken)
         self._rate_mean = 0.0   # running mean of rate_z (m/s, ~10 steps)
         self._rate_bias2 = 0.0  # running mean of its square ((m/s)^2, ~100 steps)
 
@@ -245,10 +246,14 @@ class AxisFilter:
     def _rate_update(self, y_v: float, R_v: float) -> None:
         """Assimilate the measured rate ``y_v`` (``IncrementKF.update_rate``); an outlier
         beyond ``nis_gate`` is left out and counted in ``rate_rejected``."""
-        self.rate_nis = self.kf.update_rate(y_v, R_v, self.top.nis_gate)
+        gate = self.top.nis_gate if self._rate_rejects < 5 else math.inf
+        self.rate_nis = self.kf.update_rate(y_v, R_v, gate)
         self.rate_steps += 1
-        if not self.rate_nis <= self.top.nis_gate:
+        if not self.rate_nis <= gate:
             self.rate_rejected += 1
+            self._rate_rejects += 1
+        else:
+            self._rate_rejects = 0
 
     def step(self, k: Discrete, y: float, R: float, R_prev: float,
              command: float | None, y_v: float | None = None, R_v: float = 0.0) -> None:
@@ -266,7 +271,8 @@ class AxisFilter:
         self.last_command = command
         kf.R = R if kf.correlated else R + R_prev
         if not kf.initialized:
-            var_v = (self.cfg.u_max * k.dt) ** 2
+            # the first rate is y / dt: its variance includes both points' noise
+            var_v = (self.cfg.u_max * k.dt) ** 2 + (R + R_prev) / (k.dt * k.dt)
             kf.init(y, k.dt, R_prev, var_v)
             if self.cfg.known_input and command is not None:
                 self.u = self.model.input(command)
