@@ -298,7 +298,7 @@ def identify_blueboat(runs: Sequence[BlueBoatRun], dt: float = 1.0
 
 
 def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | None,
-                 gnss_std_m: float = 0.3, heading_std_rad: float = 0.01,
+                 gnss_std_m: float = 0.1, heading_std_rad: float = 0.01,
                  aie_table: dict[str, Any] | None = None) -> dict[str, np.ndarray]:
     """AIE and KF on one run; estimates on the 10 Hz rows (NaN before the first)."""
     table = dict(aie_table or {})
@@ -330,10 +330,31 @@ def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | Non
     return res
 
 
+def gps_speed(run: BlueBoatRun) -> np.ndarray:
+    """The raw GNSS speed of a run without Doppler speed: the distance between
+    consecutive distinct fixes over their interval (m/s), signed by its projection on
+    the heading, held until the next fix (NaN before the second fix)."""
+    frame = LocalFrame(float(run.lat[0]), float(run.lon[0]))
+    out = np.full(len(run.t), math.nan)
+    last: tuple[float, float, float] | None = None
+    val = math.nan
+    for i, t in enumerate(run.t):
+        n, e = frame.to_ne(float(run.lat[i]), float(run.lon[i]))
+        if last is None or (n, e) != last[1:]:
+            if last is not None and t > last[0]:
+                dn, de = n - last[1], e - last[2]
+                along = math.cos(run.yaw[i]) * dn + math.sin(run.yaw[i]) * de
+                val = math.copysign(math.hypot(dn, de), along) / (t - last[0])
+            last = (float(t), n, e)
+        out[i] = val
+    return out
+
+
 def blueboat_metrics(run: BlueBoatRun, res: dict[str, np.ndarray], surge: AxisModel,
                      yaw: AxisModel, t_min: float = 10.0) -> dict[str, float]:
     """Errors against the log's own surge speed and yaw (reference, not truth), and the
-    estimated input against the logged command mapped by the identified model."""
+    estimated input against the logged command mapped by the identified model;
+    ``gps.speed``: the raw speed from consecutive fixes (:func:`gps_speed`)."""
     m = run.t >= t_min
     out = {}
     for p in ("aie", "kf"):
@@ -342,6 +363,7 @@ def blueboat_metrics(run: BlueBoatRun, res: dict[str, np.ndarray], surge: AxisMo
         out[f"{p}.yaw_rate"] = _rmse((res[f"{p}.yaw_rate"] - run.yaw_rate)[m])
         out[f"{p}.position"] = _rmse(np.hypot(res[f"{p}.north"] - res["gps.north"],
                                               res[f"{p}.east"] - res["gps.east"])[m])
+    out["gps.speed"] = _rmse((gps_speed(run) - run.surge)[m])
     u_cmd = surge.gain * 0.5 * (run.left + run.right) + surge.offset
     r_cmd = yaw.gain * 0.5 * (run.left - run.right) + yaw.offset
     ok = m & np.isfinite(res["aie.surge_input"])
