@@ -226,8 +226,8 @@ def _in(pairs, a, b):
 
 def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_path):
     """fault-gnss-outage: no fix from 30 s to 150 s. The AIE and KF keep estimating from
-    the model and the compass; health shows the GNSS stream at 0 Hz and a stale event;
-    after the return the position comes back toward the truth."""
+    the model and the compass (the position dead reckoned); health shows the GNSS stream
+    at 0 Hz and a stale event; after the return the position follows the fixes again."""
     res, truth = _fly("fault-gnss-outage", 170.0, tmp_path, speed=20.0)
     aie = _series(res, truth, "aie")
     # estimates kept coming through the outage, one per tick
@@ -249,8 +249,9 @@ def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_p
     he_after = _median(_in(_heading_errors_deg(aie), 152.0, 170.0))
     print(f"aie position error: before {before:.1f} m, end of outage {late_out:.1f} m, "
           f"10-20 s after {after:.1f} m; heading error after {he_after:.2f} deg")
-    assert late_out > before  # it drifts without fixes (measured 3.5 -> 37 m)
-    assert late_out < 80.0  # measured 37-39 m after 120 s (jaiabot-turns speeds 0.6-2.2 m/s)
+    # dead reckoned with the speed and heading estimates: it stays within a few metres
+    # (held, it drifted to 37-39 m); SITL alone: max 3.7 m in the outage (test_aie_sitl)
+    assert late_out < 15.0
     assert after < 20.0  # measured 10-13 m (the position anchor is a slow pull)
     assert he_after < 5.0  # measured 1-3 deg
 
