@@ -515,6 +515,10 @@ class SurgeHeadingPipeline:
             return
         if self.frame is None:
             self.frame = LocalFrame(s.lat_deg, s.lon_deg)
+            # surge windows end a quarter step after the fixes (a regular receiver):
+            # each closes with the first sample after its fix, not a step later
+            self._w_end = s.t + 0.25 * self.cfg.step_s
+            self._next_end = min(self._hw_end, self._w_end)
         n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
         w = self._w
         w.n_fix += 1
