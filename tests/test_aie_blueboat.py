@@ -49,13 +49,16 @@ def test_aie_on_held_out_runs(runs, models) -> None:
         for k, v in blueboat_metrics(r, res, surge, yaw).items():
             acc.setdefault(k, []).append(v)
     m = {k: float(np.mean(v)) for k, v in acc.items()}
-    # measured (mean of the 8 test runs): speed AIE 0.188 vs KF 0.203 m/s against the
-    # logged surge (on runs 218-225 alone the KF is ahead, 0.184 vs 0.234); yaw rate 0.023
-    # vs 0.026 rad/s against the gyro; position 1.20 vs 1.17 m from GNSS; the AIE inputs
-    # follow the identified command maps with correlation 0.91 (surge), 0.60 (yaw)
-    assert m["aie.speed"] < m["kf.speed"]
-    assert m["aie.speed"] < 0.22
+    # measured (mean of the 8 test runs, gnss_std_m = 0.1: the logged positions are the
+    # autopilot's smoothed track): speed AIE 0.102 vs KF 0.118 m/s against the logged
+    # surge, raw speed from consecutive fixes 0.134 (it is better on 6 of 8 runs,
+    # 0.03-0.08 m/s, where the logged surge is itself derived from those positions;
+    # 0.23 and 0.56 m/s on runs 223 and 234); yaw rate 0.023 vs 0.026 rad/s against the
+    # gyro; position 0.38 vs 0.40 m from GNSS; the AIE inputs follow the identified command
+    # maps with correlation 0.93 (surge), 0.60 (yaw)
+    assert m["aie.speed"] < m["kf.speed"] < m["gps.speed"]
+    assert m["aie.speed"] < 0.12
     assert m["aie.yaw_rate"] < m["kf.yaw_rate"]
-    assert m["aie.position"] < 1.4
+    assert m["aie.position"] < 0.5
     assert m["input.surge_corr"] > 0.85
     assert m["input.yaw_corr"] > 0.5

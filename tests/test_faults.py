@@ -223,8 +223,8 @@ def _in(pairs, a, b):
 
 def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_path):
     """fault-gnss-outage: no fix from 30 s to 150 s. The AIE and KF keep estimating from
-    the model and the compass; health shows the GNSS stream at 0 Hz and a stale event;
-    after the return the position comes back toward the truth."""
+    the model and the compass (the position dead reckoned); health shows the GNSS stream
+    at 0 Hz and a stale event; after the return the position follows the fixes again."""
     res, truth = _fly("fault-gnss-outage", 170.0, tmp_path, speed=20.0)
     aie = _series(res, truth, "aie")
     # estimates kept coming through the outage, one per tick
@@ -246,9 +246,11 @@ def test_gnss_lost_for_120_s_estimates_continue_reported_stale_and_recover(tmp_p
     he_after = _median(_in(_heading_errors_deg(aie), 152.0, 170.0))
     print(f"aie position error: before {before:.1f} m, end of outage {late_out:.1f} m, "
           f"10-20 s after {after:.1f} m; heading error after {he_after:.2f} deg")
-    assert late_out > before  # it drifts without fixes (measured 3.5 -> 37 m)
-    assert late_out < 80.0  # measured 37-39 m after 120 s (jaiabot-turns speeds 0.6-2.2 m/s)
-    assert after < 20.0  # measured 10-13 m (the position anchor is a slow pull)
+    # dead reckoned with the speed and heading estimates: it stays within a few metres
+    # (measured 4.8 m at the end of the outage; held, it drifted to 37-39 m)
+    assert late_out < 15.0
+    assert after < 10.0  # measured 0.4 m (held: 10-13 m, then a slow pull); margin for
+    # the live timing under load
     assert he_after < 5.0  # measured 1-3 deg
 
 
@@ -262,7 +264,9 @@ def test_gnss_outage_uncertainty_grows(tmp_path):
     late = [r.std.get("north") for r in aie if 37.0 <= r.t < 42.0]
     assert early and late and None not in early + late
     print(f"aie std_north median: 20-30 s {_median(early):.2f} m, 37-42 s {_median(late):.2f} m")
-    assert _median(late) > 1.5 * _median(early)  # 7-12 s without a fix (measured 2.4 -> 7.0 m)
+    # 7-12 s without a fix: dead reckoned with a well-known speed and heading, the sigma
+    # grows a little and stays small (measured 1.91 -> 1.92 m; held, it reached 7 m)
+    assert _median(early) < _median(late) < 10.0
 
 
 def test_gnss_under_water_is_rejected_and_counted_estimates_continue(tmp_path):

@@ -133,6 +133,15 @@ def path_increment(dn: float, de: float, psi_prev: float, dpsi: float,
                    arc: bool = True) -> float:
     """Path length (m) travelled over one step, from the GPS displacement (§1.3).
 
+    The displacement is projected on the mid-step heading ``psi_prev + dpsi/2`` (the
+    direction of the chord of a circular arc) and scaled by the arc-to-chord ratio
+    ``h / sin(h)``, ``h = dpsi/2``. The projection is linear in the displacement, so
+    zero-mean GNSS noise leaves it unbiased; the chord's *magnitude* ``hypot(dn, de)``
+    is not: the cross-track noise adds ``sigma_x^2 / (2 |d|)`` on average (+0.13 m per
+    step at 0.63 m increment noise and 1.5 m steps, tests/test_surge_heading.py).
+    A crab angle ``beta`` between heading and track shortens the projection by
+    ``1 - cos(beta)`` (0.4 % at 5 deg).
+
     Args:
         dn, de: displacement north/east (m) between consecutive fixes.
         psi_prev: heading (rad, clockwise from north) at the first fix.
@@ -147,10 +156,9 @@ def path_increment(dn: float, de: float, psi_prev: float, dpsi: float,
         return math.cos(psi_prev) * dn + math.sin(psi_prev) * de
     mid = psi_prev + 0.5 * dpsi
     along = math.cos(mid) * dn + math.sin(mid) * de
-    chord = math.hypot(dn, de)
     h = 0.5 * dpsi
     factor = 1.0 if abs(h) < 5e-4 else h / math.sin(h)
-    return math.copysign(chord * factor, along)
+    return along * factor
 
 
 def axis_commands(cmd: ActuatorCommand, mode: InputMode = "auto") -> tuple[float | None,

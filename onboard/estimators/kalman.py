@@ -158,6 +158,28 @@ class IncrementKF:
                   vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ce, ee - Le * ce]
         self.Ld, self.Lv = Ld, Lv
 
+    def update_rate(self, y_v: float, R_v: float, gate: float = math.inf) -> float:
+        """Assimilate a direct measurement of the rate, ``y_v = v + n_v``,
+        ``Var(n_v) = R_v`` (GNSS Doppler speed over ground, m/s), after :meth:`update`
+        at the same step: a second scalar row ``C_v = [0, 1, 0]`` applied sequentially
+        (exact for independent noises). Returns the NIS ``z_v^2 / S_v``; above ``gate``
+        the measurement is not used (an outlier) and the state is unchanged.
+        """
+        dd, dv, de, vv, ve, ee = self.P
+        S = vv + R_v
+        z = self.v - y_v
+        nis = z * z / S
+        if not nis <= gate:
+            return nis
+        Ld, Lv, Le = dv / S, vv / S, ve / S
+        self.d -= Ld * z
+        self.v -= Lv * z
+        self.e -= Le * z
+        vv_n = vv - Lv * vv
+        self.P = [dd - Ld * dv, dv - Ld * vv, de - Ld * ve,
+                  vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ve, ee - Le * ve]
+        return nis
+
     def predict_ahead(self, k: Discrete, u: float) -> tuple[float, float]:
         """``(increment, rate)`` ``k.dt`` seconds after the last update with input ``u``
         held (estimates between measurement steps). The state is unchanged."""

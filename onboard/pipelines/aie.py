@@ -67,16 +67,22 @@ class AxisAie(AxisFilter):
         return self.u
 
     def step(self, k: Discrete, y: float, R: float, R_prev: float,
-             command: float | None) -> None:
+             command: float | None, y_v: float | None = None, R_v: float = 0.0) -> None:
         if not self._z_scale_set:            # normalize z by the measurement std (§2.10)
             self.rcie.z_scale = math.sqrt(R + R_prev)
             self._z_scale_set = True
-        super().step(k, y, R, R_prev, command)
+        super().step(k, y, R, R_prev, command, y_v, R_v)
 
     def after_innovation(self, k: Discrete, command: float | None) -> None:
         kf, rc, top = self.kf, self.rcie, self.top
-        H = [k.c2] if self.cfg.n_f == 1 else kf.markov(k, self.cfg.n_f)
-        d = rc.step(kf.z, H)
+        if self.rate_z is not None:
+            # a measured rate (GNSS Doppler speed): its innovation is the informative
+            # one, Markov parameter C_v B = c1, normalized by its predicted std (§2.10)
+            rc.z_scale = math.sqrt(self.rate_S)
+            d = rc.step(self.rate_z, [k.c1])
+        else:
+            H = [k.c2] if self.cfg.n_f == 1 else kf.markov(k, self.cfg.n_f)
+            d = rc.step(kf.z, H)
         if (d is None or abs(rc.d_hat_raw) > top.divergence_input * self.cfg.u_max
                 or (rc.steps > 30 and self.nis_avg > top.divergence_nis)):
             self._recover(k)
@@ -156,10 +162,11 @@ class AiePipeline(SurgeHeadingPipeline):
                 ax.V_u = float(v)
 
 
-def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03
-          ) -> AiePipeline:
+def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,
+          gnss_velocity_std_mps: float = 0.1) -> AiePipeline:
     """An AIE pipeline from an :class:`AieConfig` (for code and tests)."""
-    return AiePipeline("aie", COLUMNS, cfg, gnss_std_m, heading_std_rad, AxisAie)
+    return AiePipeline("aie", COLUMNS, cfg, gnss_std_m, heading_std_rad, AxisAie,
+                       gnss_velocity_std_mps)
 
 
 def create(cfg: Config) -> AiePipeline | None:

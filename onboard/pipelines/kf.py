@@ -48,10 +48,11 @@ class AxisKf(AxisFilter):
             self.model.input(command)
 
 
-def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03
-          ) -> SurgeHeadingPipeline:
+def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,
+          gnss_velocity_std_mps: float = 0.1) -> SurgeHeadingPipeline:
     """A KF baseline pipeline from an :class:`AieConfig` (for code and tests)."""
-    return SurgeHeadingPipeline("kf", COLUMNS, cfg, gnss_std_m, heading_std_rad, AxisKf)
+    return SurgeHeadingPipeline("kf", COLUMNS, cfg, gnss_std_m, heading_std_rad, AxisKf,
+                                gnss_velocity_std_mps)
 
 
 def create(cfg: Config) -> SurgeHeadingPipeline | None:

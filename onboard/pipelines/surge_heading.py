@@ -45,6 +45,7 @@ from onboard.estimators.axis_model import (
     discretize,
     path_increment,
 )
+from onboard.estimators.dead_reckoning import DeadReckoner
 from onboard.estimators.kalman import IncrementKF
 
 HEADING_HOLD_S = 1.0
@@ -126,8 +127,9 @@ class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     """``[pipelines.aie]``: measurement handling, reconstruction, both axes."""
 
     enabled: bool = True
-    step_s: float = 1.0
-    """The AIE step Ts (s) of the surge axis: GNSS window length (§1.2)."""
+    step_s: float = 0.2
+    """The AIE step Ts (s) of the surge axis: GNSS window length (§1.2). A window
+    without a fix is no step, so a slower receiver gives longer steps."""
     heading_step_s: float = 0.1
     """The step of the heading axis (compass windows); <= 0: same as step_s."""
     max_gap_s: float = 5.0
@@ -136,6 +138,11 @@ class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     """How commands map to the two axes (see surge_heading.axis_commands)."""
     gnss_std_m: float | None = None
     """GNSS position noise, one sigma (m); default [sensors.gnss] position_std_m."""
+    gnss_velocity: bool = True
+    """Also measure the surge rate with the receiver's speed over ground (Doppler),
+    signed by the course against the heading, where the fixes carry it."""
+    gnss_velocity_std_mps: float | None = None
+    """Speed-over-ground noise, one sigma (m/s); default [sensors.gnss] velocity_std_mps."""
     heading_std_rad: float | None = None
     """Compass noise, one sigma (rad); default [sensors.compass] heading_std_rad."""
     correlated_noise: bool = True
@@ -193,11 +200,39 @@ class AxisFilter:
         self.restarts = 0
         self._consecutive_rejects = 0
         self.nis_avg = 1.0
+        self.rate_nis = 0.0
+        self.rate_steps = 0
+        self.rate_rejected = 0
+        self.rate_z: float | None = None
+        """Forecast innovation of the measured rate at this step (m/s), None without."""
+        self.rate_S = 0.0
+        self._rate_ms = 0.0     # running mean of rate_z^2 ((m/s)^2, ~20 steps)
+        self._rate_pred = 0.0   # running mean of rate_S
+        self._c1 = 0.0          # c1 of the last step (s)
+        self._rate_rejects = 0  # consecutive rejected rates (the 6th is taken)
+        self._rate_mean = 0.0   # running mean of rate_z (m/s, ~10 steps)
+        self._rate_bias2 = 0.0  # running mean of its square ((m/s)^2, ~100 steps)
 
     def restart(self) -> None:
         """Forget the state (a gap in the measurements); keep adaptive coefficients."""
         self.kf.initialized = False
         self.restarts += 1
+
+    def speed_bias_var(self) -> float:
+        """Variance ((m/s)^2) of a speed error that persists while no measurement
+        comes (dead reckoning): the rate's variance now, plus the input error the
+        rate innovations show beyond what the filter predicts (their mean square
+        minus the mean predicted ``S``, divided by ``c1^2``) held as a constant bias,
+        which a first-order model turns into a speed error ``du / a``. Without
+        measured rates, the input-error variance ``V_u`` is taken as that bias."""
+        a = max(self.model.a, 0.05)
+        if self._c1 > 0.0:
+            excess = self._rate_ms - self._rate_pred
+            var_u = ((excess if excess > 0.0 else 0.0) + self._rate_bias2) / (
+                self._c1 * self._c1)
+        else:
+            var_u = self.V_u
+        return self.kf.P[3] + var_u / (a * a)
 
     def damping(self, command: float | None) -> float:
         """The damping rate ``a`` (1/s) of the model used over a step."""
@@ -215,35 +250,68 @@ class AxisFilter:
     def after_innovation(self, k: Discrete, command: float | None) -> None:
         """Hook between innovation and update (AIE computes d_hat here, §2.7)."""
 
+    def _rate_update(self, y_v: float, R_v: float) -> None:
+        """Assimilate the measured rate ``y_v`` (``IncrementKF.update_rate``); an outlier
+        beyond ``nis_gate`` is left out and counted in ``rate_rejected``."""
+        gate = self.top.nis_gate if self._rate_rejects < 5 else math.inf
+        self.rate_nis = self.kf.update_rate(y_v, R_v, gate)
+        self.rate_steps += 1
+        if not self.rate_nis <= gate:
+            self.rate_rejected += 1
+            self._rate_rejects += 1
+        else:
+            self._rate_rejects = 0
+
     def step(self, k: Discrete, y: float, R: float, R_prev: float,
-             command: float | None) -> None:
+             command: float | None, y_v: float | None = None, R_v: float = 0.0) -> None:
         """One step: forecast over ``k.dt`` with the input, innovation, update (§2.7).
 
         ``y``: increment (m or rad); ``R``, ``R_prev``: noise variances of the two
         points it was formed from; ``command``: mean normalized command over the step
-        (None if unknown).
+        (None if unknown); ``y_v``: the rate measured at the newer point (m/s, the
+        window's mean GNSS Doppler speed; None without one) of noise variance ``R_v``.
+        With ``y_v`` its forecast innovation ``rate_z = v_fc - y_v`` (variance
+        ``rate_S``) is set before :meth:`after_innovation`, and the rate is assimilated
+        after the increment.
         """
         kf = self.kf
         self.last_command = command
         kf.R = R if kf.correlated else R + R_prev
         if not kf.initialized:
-            var_v = (self.cfg.u_max * k.dt) ** 2
+            # the first rate is y / dt: its variance includes both points' noise
+            var_v = (self.cfg.u_max * k.dt) ** 2 + (R + R_prev) / (k.dt * k.dt)
             kf.init(y, k.dt, R_prev, var_v)
             if self.cfg.known_input and command is not None:
                 self.u = self.model.input(command)
+            if y_v is not None:
+                self._rate_update(y_v, R_v)
             return
         kf.forecast(k, self.forecast_input(command), self.V_u)
+        if y_v is not None:
+            z_v = self.rate_z = kf.v - y_v
+            S_v = self.rate_S = kf.P[3] + R_v
+            if z_v * z_v <= self.top.nis_gate * S_v:
+                self._rate_ms += _RESIDUAL_GAIN * (z_v * z_v - self._rate_ms)
+                self._rate_pred += _RESIDUAL_GAIN * (S_v - self._rate_pred)
+                self._rate_mean += 0.1 * (z_v - self._rate_mean)
+                m2 = self._rate_mean * self._rate_mean
+                self._rate_bias2 += 0.01 * (m2 - self._rate_bias2)
+                self._c1 = k.c1
+        else:
+            self.rate_z = None
         kf.innovation(y)
         if kf.nis > self.top.nis_gate and self._consecutive_rejects < 5:
             self.rejected += 1
             self._consecutive_rejects += 1
             kf.skip()
-            return
-        self._consecutive_rejects = 0
-        self.nis_avg += 0.05 * (min(kf.nis, 1e6) - self.nis_avg)
-        self.after_innovation(k, command)
-        kf.update()
-        self.steps += 1
+        else:
+            self._consecutive_rejects = 0
+            self.nis_avg += 0.05 * (min(kf.nis, 1e6) - self.nis_avg)
+            self.after_innovation(k, command)
+            kf.update()
+            self.steps += 1
+        if y_v is not None:
+            self._rate_update(y_v, R_v)
 
 
 # ---------------------------------------------------------------------------------------
@@ -253,11 +321,13 @@ class AxisFilter:
 class _Window:
     """Running sums of one measurement window."""
 
-    __slots__ = ("n_fix", "st_fix", "sn", "se", "n_h", "st_h", "sh")
+    __slots__ = ("n_fix", "st_fix", "sn", "se", "n_v", "sv", "n_h", "st_h", "sh")
 
     def __init__(self) -> None:
         self.n_fix = 0
         self.st_fix = self.sn = self.se = 0.0
+        self.n_v = 0
+        self.sv = 0.0
         self.n_h = 0
         self.st_h = self.sh = 0.0
 
@@ -279,11 +349,15 @@ class SurgeHeadingPipeline:
     """
 
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig,
-                 gnss_std_m: float, heading_std_rad: float, factory: AxisFactory) -> None:
+                 gnss_std_m: float, heading_std_rad: float, factory: AxisFactory,
+                 gnss_velocity_std_mps: float = 0.1) -> None:
         self.name = name
         self.columns = columns
         self.cfg = cfg
         self.sigma_p = cfg.gnss_std_m if cfg.gnss_std_m is not None else gnss_std_m
+        self.sigma_v = (cfg.gnss_velocity_std_mps if cfg.gnss_velocity_std_mps is not None
+                        else gnss_velocity_std_mps)
+        """Speed-over-ground noise of one fix (m/s)."""
         self.sigma_h = (cfg.heading_std_rad if cfg.heading_std_rad is not None
                         else heading_std_rad)
         s, h = cfg.surge, cfg.heading
@@ -323,6 +397,9 @@ class SurgeHeadingPipeline:
         self._r2n = self._r2e = 0.0         # mean square anchor residual (m^2)
         self._var_fix = self.sigma_p ** 2   # slowly varying fix error (m^2), see _std_outputs
         self._disc_cache: dict[tuple[float, float], Discrete] = {}
+        self._dr: DeadReckoner | None = None
+        """Dead reckoning since the last surge step, while windows pass without a fix."""
+        self._psi_dr = 0.0  # heading (rad, unwrapped) at the dead reckoning's time
 
     # -- helpers -----------------------------------------------------------------------
 
@@ -391,7 +468,7 @@ class SurgeHeadingPipeline:
                 if which == "h":
                     self._close_heading_window()
                 else:
-                    self._close_surge_window()
+                    self._close_surge_window(end)
                 end += step
                 if t - end > gap:   # jump across a long silence
                     end = self._t0 + step * (math.floor((t - self._t0) / step) + 1)
@@ -445,12 +522,25 @@ class SurgeHeadingPipeline:
             return
         if self.frame is None:
             self.frame = LocalFrame(s.lat_deg, s.lon_deg)
+            # surge windows end a quarter step after the fixes (a regular receiver):
+            # each closes with the first sample after its fix, not a step later
+            self._w_end = s.t + 0.25 * self.cfg.step_s
+            self._next_end = min(self._hw_end, self._w_end)
         n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
         w = self._w
         w.n_fix += 1
         w.st_fix += s.t
         w.sn += n
         w.se += e
+        sog = s.sog_mps
+        if sog is not None and self.cfg.gnss_velocity and math.isfinite(sog):
+            # signed path speed: astern when the course is more than 90 deg off the
+            # heading (the newest compass reading; GNSS-only logs: always ahead)
+            cog, psi = s.cog_rad, self._psi_last
+            if cog is not None and psi is not None and math.cos(cog - psi) < 0.0:
+                sog = -sog
+            w.n_v += 1
+            w.sv += sog
 
     def _on_heading(self, s: Heading) -> None:
         if self._t0 is None:
@@ -533,12 +623,16 @@ class SurgeHeadingPipeline:
     def _latest_command(self, j: int) -> float | None:
         return self._cmds[-1][j] if self._cmds else None
 
-    def _close_surge_window(self) -> None:
+    def _close_surge_window(self, t_end: float) -> None:
+        """One surge step with the window ending at ``t_end`` (s): its fixes averaged to
+        one point; a window without a fix advances the dead reckoning instead."""
         self._psi_s = None
         w = self._w
         self._w = _Window()
         if w.n_fix == 0:
+            self._dead_reckon(t_end)
             return
+        self._dr = None
         # Without any heading source (a GNSS-only log) the surge axis runs on the chord
         # length along the course over ground; reversing is then not detectable.
         course_mode = self._psi_last is None
@@ -588,13 +682,17 @@ class SurgeHeadingPipeline:
             dpsi = wrap_pi(psi - pp[3])
             y = path_increment(n - pp[1], e - pp[2], pp[3], dpsi)
         cmd = self._mean_command(pp[0], tp, 1)
-        self.surge.step(self._disc(self.surge.damping(cmd), dt), y, R_s, R_s_prev, cmd)
+        # the window's mean Doppler speed: the rate at the point's time tp
+        y_v = w.sv / w.n_v if w.n_v else None
+        self.surge.step(self._disc(self.surge.damping(cmd), dt), y, R_s, R_s_prev, cmd,
+                        y_v, self.sigma_v ** 2 / w.n_v if w.n_v else 0.0)
         # §3.3 position from the estimated increment along the mid-chord heading
         ys = self.surge.kf.d
         if course_mode:
             mid = self._course = course
         elif self._psi is not None and self._t_h is not None:
-            mid = 0.5 * (self._heading_at(pp[0]) + self._heading_at(tp))
+            self._psi_dr = self._heading_at(tp)
+            mid = 0.5 * (self._heading_at(pp[0]) + self._psi_dr)
         else:
             mid = pp[3] + 0.5 * dpsi
         self._n += ys * math.cos(mid)
@@ -622,6 +720,31 @@ class SurgeHeadingPipeline:
         self._var_e = f * (ve if ve > re2 else re2) + fr
         self._t_s = tp
         self._trim_commands()
+
+    def _dead_reckon(self, t_end: float) -> None:
+        """Advance the dead reckoning to ``t_end`` (s) through a window without a fix
+        (:class:`DeadReckoner`): the surge filter's speed and input along the heading
+        filter's heading. Started at the last surge step; used for the published
+        position once the gap exceeds ``max_gap_s``; dropped at the next fix (within
+        ``max_gap_s`` the increment over the longer step then replaces it)."""
+        surge = self.surge
+        if (not surge.kf.initialized or self._t_s is None or self._psi is None
+                or self._t_h is None or self._psi_last is None):
+            return
+        dr = self._dr
+        if dr is None:
+            var_psi = self._var_psi
+            dr = self._dr = DeadReckoner(
+                self._t_s, self._n, self._e, surge.kf.v, surge.kf.P[3], self._var_n,
+                self._var_e, math.sqrt(surge.speed_bias_var()), math.sqrt(var_psi))
+        dt = t_end - dr.t
+        if dt <= 1e-6:
+            return
+        cmd = self._mean_command(dr.t, t_end, 1)
+        k = self._disc(surge.damping(cmd), dt)
+        psi1 = self._heading_at(t_end)
+        dr.advance(k, surge.input_ahead(cmd), 0.5 * (self._psi_dr + psi1), surge.V_u)
+        self._psi_dr = psi1
 
     # -- output ------------------------------------------------------------------------
 
@@ -671,7 +794,10 @@ class SurgeHeadingPipeline:
             out["heading"] = wrap_2pi(psi)
         out["std_heading"] = sqrt(var_h)
         skf = surge.kf
-        if skf.initialized and self._t_s is not None:
+        dr = self._dr
+        if dr is not None and self._t_s is not None and t - self._t_s > gap:
+            self._dr_output(out, t, psi, var_h, last)
+        elif skf.initialized and self._t_s is not None:
             tau_raw = tau = t - self._t_s
             tau = 0.0 if tau < 0.0 else gap if tau > gap else tau
             ds, v = skf.v * tau, skf.v
@@ -706,6 +832,32 @@ class SurgeHeadingPipeline:
             out["std_east"] = math.sqrt(self._var_e + self._var_fix)
         self._extra_outputs(out)
         return out
+
+    def _dr_output(self, out: dict[str, float], t: float, psi: float, var_h: float,
+                   last: tuple[float, float | None, float | None] | None) -> None:
+        """Speed, position and their sigmas from the dead reckoning (a GNSS gap longer
+        than ``max_gap_s``), predicted from its time to ``t`` with the newest command."""
+        dr, surge = self._dr, self.surge
+        assert dr is not None
+        tau = t - dr.t
+        u = surge.input_ahead(last[1] if last is not None else None)
+        ds, v, var_ds = 0.0, dr.v, 0.0
+        var_v = dr.p_vv
+        if tau > 1e-6:
+            k = self._disc(surge.damping(surge.last_command), tau)
+            ds, v = k.c1 * dr.v + k.c2 * u, k.alpha * dr.v + k.c1 * u
+            var_ds = k.c1 * k.c1 * dr.p_vv + k.c2 * k.c2 * surge.V_u
+            var_v = k.alpha * k.alpha * dr.p_vv + k.c1 * k.c1 * surge.V_u
+        mid = 0.5 * (self._psi_dr + psi)
+        c, s = math.cos(mid), math.sin(mid)
+        vn, ve = dr.variances()
+        var_x = ds * ds * var_h
+        out["speed"] = v
+        out["north"] = dr.n + ds * c
+        out["east"] = dr.e + ds * s
+        out["std_north"] = sqrt(vn + c * c * var_ds + s * s * var_x + self._var_fix)
+        out["std_east"] = sqrt(ve + s * s * var_ds + c * c * var_x + self._var_fix)
+        out["std_speed"] = sqrt(var_v)
 
     def _std_outputs(self, out: dict[str, float], t: float, c: float, s: float,
                      ds: float, v: float, var_ds: float, var_v: float, var_x: float
@@ -781,6 +933,9 @@ class SurgeHeadingPipeline:
             h[f"{nm}.rejected"] = float(ax.rejected)
             h[f"{nm}.diverged"] = float(ax.diverged)
             h[f"{nm}.restarts"] = float(ax.restarts)
+        h["surge.rate_nis"] = self.surge.rate_nis
+        h["surge.rate_steps"] = float(self.surge.rate_steps)
+        h["surge.rate_rejected"] = float(self.surge.rate_rejected)
         return h
 
     def get_state(self) -> dict[str, Any]:
@@ -810,6 +965,7 @@ class SurgeHeadingPipeline:
         (self.surge if axis == "surge" else self.yaw).model = model
 
 
-def sensor_noise(cfg: Config) -> tuple[float, float]:
-    """``(gnss_std_m, heading_std_rad)`` from ``[sensors]``."""
-    return cfg.sensors.gnss.position_std_m, cfg.sensors.compass.heading_std_rad
+def sensor_noise(cfg: Config) -> tuple[float, float, float]:
+    """``(gnss_std_m, heading_std_rad, gnss_velocity_std_mps)`` from ``[sensors]``."""
+    g = cfg.sensors.gnss
+    return g.position_std_m, cfg.sensors.compass.heading_std_rad, g.velocity_std_mps

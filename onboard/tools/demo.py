@@ -19,8 +19,16 @@ times faster than the wall clock, so the default 60 simulated seconds take about
 plus start-up. Everything else is real: the bytes on the links, the fixed-rate ticks
 (on the scaled clock), Zenoh, the recorder. ``--realtime`` runs at wall-clock speed.
 
-The recording (``demo-out/recordings``) replays exactly with ``onboard replay``; the
-adaptive state (``demo-out/state``) is restored by the next demo run of the same vehicle.
+The recording (``demo-out/recordings``) replays exactly with ``onboard replay``. The
+adaptive state goes to a fresh temporary directory, deleted at the end, so every demo
+starts from the configuration alone; ``--keep-state`` keeps it in ``demo-out/state`` and
+restores it in the next run.
+
+The truth table puts each estimate beside the raw measurement it improves on (``aie.speed``
+and ``kf.speed`` beside the GNSS ``nav.speed``, positions beside the fix, heading beside the
+compass). A quantity the estimator cannot know yet (the water current before its sigma is
+small: the along-track current on a straight run without a model) is printed as unknown,
+from the pipeline's own published sigma, never as a number.
 """
 
 from __future__ import annotations
@@ -34,6 +42,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,11 +60,17 @@ SPEED = 10.0
 """Default clock speed-up of the demo (simulated seconds per wall second)."""
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 OUT_DIR = Path("demo-out")
+SCENARIO_CONFIGS = {"jaiabot-turns": "sitl-jaiabot"}
+"""Scenarios with a calibrated config (models identified from a held-out seed)."""
+CURRENT_KNOWN_STD = 0.1
+"""A current estimate is shown as known when its published one-sigma (the larger of
+``std_north`` and ``std_east``, m/s) has been at most this for ``CURRENT_SETTLE_S``."""
+CURRENT_SETTLE_S = 10.0
 
 
-def config_for(vehicle_class: str) -> str:
-    """The bundled config name of a vehicle class."""
-    return vehicle_class
+def config_for(vehicle_class: str, scenario: str | None = None) -> str:
+    """The bundled config name of a scenario (its calibrated config) or vehicle class."""
+    return SCENARIO_CONFIGS.get(scenario or "", vehicle_class)
 
 
 # --------------------------------------------------------------------------- SITL child
@@ -168,17 +183,53 @@ _TRUTH: dict[str, Callable[[Any], float | None]] = {
 _ANGLES = {"heading", "yaw", "roll", "pitch"}
 _POSITIONS = {"north": "north", "east": "east", "down": "down"}
 _CURRENT = {"north": "current_north", "east": "current_east", "down": "current_down"}
+_RAW = {"speed": "nav.speed", "north": "nav.north", "east": "nav.east",
+        "heading": "nav.heading"}
+"""The raw measurement each estimated quantity improves on (pipelines other than nav)."""
 
 
 @dataclass
 class ScoreRow:
-    """RMSE of one estimated quantity against the truth."""
+    """RMSE of one estimated quantity against the truth.
+
+    ``n`` counts the samples scored; ``total`` the samples received. For the current
+    pipeline only the samples it knows (:func:`current_known`) are scored, so ``n``
+    may be below ``total`` and zero (``rmse`` NaN: printed as unknown). ``raw`` names the
+    raw measurement the quantity improves on, ``raw_rmse`` is that one's RMSE.
+    """
 
     column: str
     n: int
     rmse: float
     truth_std: float
     unit: str
+    total: int = 0
+    raw: str | None = None
+    raw_rmse: float = math.nan
+    max_std: float = math.nan
+    """The largest published sigma among the unscored samples (current only)."""
+
+
+def current_known(history: list[EstimateRecord]) -> dict[float, bool]:
+    """For each ``current`` record time (s): whether its estimate is known, i.e. its
+    horizontal one-sigma (``max(std_north, std_east)``, m/s) has stayed at most
+    ``CURRENT_KNOWN_STD`` for ``CURRENT_SETTLE_S`` seconds. A record without sigmas is
+    unknown."""
+    out: dict[float, bool] = {}
+    since: float | None = None
+    for rec in history:
+        if rec.pipeline != "current":
+            continue
+        sn, se = rec.std.get("north", math.inf), rec.std.get("east", math.inf)
+        sd = max(sn, se)
+        if math.isfinite(sd) and sd <= CURRENT_KNOWN_STD:
+            if since is None:
+                since = rec.t
+            out[rec.t] = rec.t - since >= CURRENT_SETTLE_S
+        else:
+            since = None
+            out[rec.t] = False
+    return out
 
 
 def _unit(pipeline: str, q: str) -> str:
@@ -205,7 +256,8 @@ def score(history: list[EstimateRecord], truth: list[Any]) -> list[ScoreRow]:
     Estimates are matched to the truth record nearest in time (within 60 ms). Positions
     (``north``/``east``/``down`` of pipelines other than ``current``) are compared as
     displacements from the pipeline's first estimate, as the estimators report them from
-    their first fix.
+    their first fix. Current samples are scored only where :func:`current_known`; each
+    row names the raw measurement it improves on (``_RAW``) with that one's RMSE.
     """
     if not truth:
         return []
@@ -221,7 +273,10 @@ def score(history: list[EstimateRecord], truth: list[Any]) -> list[ScoreRow]:
 
     errs: dict[str, list[float]] = {}
     refs: dict[str, list[float]] = {}
+    totals: dict[str, int] = {}
+    max_std: dict[str, float] = {}
     first: dict[tuple[str, str], tuple[float, float]] = {}
+    known = current_known(history)
     for rec in history:
         tr = at(rec.t)
         if tr is None:
@@ -229,6 +284,15 @@ def score(history: list[EstimateRecord], truth: list[Any]) -> list[ScoreRow]:
         for q, v in rec.values.items():
             if q.startswith("std_") or not math.isfinite(v):
                 continue
+            if rec.pipeline == "current":
+                col = f"current.{q}"
+                totals[col] = totals.get(col, 0) + 1
+                if not known.get(rec.t, False):
+                    sd = max(rec.std.get("north", math.inf), rec.std.get("east", math.inf))
+                    max_std[col] = max(max_std.get(col, 0.0), sd)
+                    errs.setdefault(col, [])
+                    refs.setdefault(col, [])
+                    continue
             if rec.pipeline == "current" and q in _CURRENT:
                 ref = getattr(tr, _CURRENT[q])
             elif q in _POSITIONS:
@@ -247,25 +311,47 @@ def score(history: list[EstimateRecord], truth: list[Any]) -> list[ScoreRow]:
             refs.setdefault(col, []).append(ref)
     rows = []
     for col, es in errs.items():
-        q = col.split(".", 1)[1]
-        rmse = math.sqrt(sum(e * e for e in es) / len(es))
+        pipe, q = col.split(".", 1)
         r = refs[col]
-        mean = sum(r) / len(r)
-        std = math.sqrt(sum((x - mean) ** 2 for x in r) / len(r))
+        rmse = math.sqrt(sum(e * e for e in es) / len(es)) if es else math.nan
+        mean = sum(r) / len(r) if r else math.nan
+        std = math.sqrt(sum((x - mean) ** 2 for x in r) / len(r)) if r else math.nan
         if q in _ANGLES or q in ("yaw_rate", "rate_p", "rate_q", "rate_r"):
             rmse, std = math.degrees(rmse), math.degrees(std)
-        rows.append(ScoreRow(col, len(es), rmse, std, _unit(col.split(".", 1)[0], q)))
+        rows.append(ScoreRow(col, len(es), rmse, std, _unit(pipe, q),
+                             total=totals.get(col, len(es)),
+                             raw=_RAW.get(q) if pipe not in ("nav", "current") else None,
+                             max_std=max_std.get(col, math.nan)))
+    by_col = {row.column: row for row in rows}
+    for row in rows:
+        if row.raw in by_col:
+            row.raw_rmse = by_col[row.raw].rmse
     return sorted(rows, key=lambda r: r.column)
 
 
 def format_scores(rows: list[ScoreRow]) -> str:
-    """The truth comparison as a text table: estimate, samples, RMSE, truth std, unit."""
+    """The truth comparison as a text table: estimate, samples, RMSE, the raw
+    measurement it improves on and that one's RMSE, truth std, unit. An estimate with
+    no known sample reads ``unknown`` with the largest sigma it published."""
     if not rows:
         return "no estimates matched the truth (nothing to score)"
     w = max(len(r.column) for r in rows)
-    out = [f"{'estimate':<{w}}  {'n':>5}  {'RMSE':>9}  {'truth std':>9}  unit"]
+    out = [f"{'estimate':<{w}}  {'n':>5}  {'RMSE':>9}  {'raw':<{w}}  {'raw RMSE':>9}  "
+           f"{'truth std':>9}  unit"]
     for r in rows:
-        out.append(f"{r.column:<{w}}  {r.n:>5}  {r.rmse:9.3f}  {r.truth_std:9.3f}  {r.unit}")
+        raw = r.raw if r.raw is not None and math.isfinite(r.raw_rmse) else "-"
+        raw_rmse = f"{r.raw_rmse:9.3f}" if raw != "-" else f"{'':9}"
+        if r.n == 0:
+            note = (f"unknown: sigma up to {r.max_std:.2f} {r.unit}"
+                    if math.isfinite(r.max_std) else "unknown")
+            out.append(f"{r.column:<{w}}  {0:>5}  {'unknown':>9}  {'-':<{w}}  {'':9}  "
+                       f"{'':9}  {r.unit}  ({note}, {r.total} samples)")
+            continue
+        line = (f"{r.column:<{w}}  {r.n:>5}  {r.rmse:9.3f}  {raw:<{w}}  {raw_rmse}  "
+                f"{r.truth_std:9.3f}  {r.unit}")
+        if r.total > r.n:
+            line += f"  (known in {r.n} of {r.total} samples)"
+        out.append(line)
     return "\n".join(out)
 
 
@@ -288,9 +374,11 @@ def _port_free(port: int) -> bool:
 
 
 def demo_config(base: Config, *, mav_port: int, nmea_pty: str | None, dvl_port: int | None,
-                zenoh_endpoint: str, mavlink_out: str = "udpout:127.0.0.1:14550") -> Config:
+                zenoh_endpoint: str, mavlink_out: str = "udpout:127.0.0.1:14550",
+                state_file: str = "state/adaptive.json") -> Config:
     """The vehicle's config with the demo's inputs, a Zenoh client to the demo router,
-    MAVLink out and the recorder/state under the demo directory."""
+    MAVLink out, the recorder under the demo directory and the adaptive state in
+    ``state_file`` (relative: under the demo directory)."""
     srcs = [SourceConfig(kind="mavlink", url=f"udp:127.0.0.1:{mav_port}", name="autopilot")]
     if nmea_pty:
         srcs.append(SourceConfig(kind="nmea", url=f"pty:{nmea_pty}", name="gps"))
@@ -303,7 +391,7 @@ def demo_config(base: Config, *, mav_port: int, nmea_pty: str | None, dvl_port: 
                                       connect=[zenoh_endpoint], listen=[]),
         mavlink=msgspec.structs.replace(s.mavlink, enabled=True, url=mavlink_out),
         recorder=msgspec.structs.replace(s.recorder, enabled=True, directory="recordings"),
-        state_file="state/adaptive.json", state_save_interval_s=10.0)
+        state_file=state_file, state_save_interval_s=10.0)
     return msgspec.structs.replace(base, service=service)
 
 
@@ -326,18 +414,24 @@ class DemoResult:
     events: list[str]
     mavlink_sent: int
     sources: dict[str, str]
+    state_file: str = ""
+    """Where the adaptive state was saved (a deleted temporary file unless kept)."""
+    state_saved: bool = False
+    """Whether the service saved its adaptive state there during the run."""
 
 
 async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *,
                    speed: float = SPEED, seed: int = 1, out_dir: Path = OUT_DIR,
                    router_endpoint: str | None = None, mavlink_out: str = "udpout:127.0.0.1:14550",
-                   out: TextIO | None = sys.stdout, keep_state: bool = True,
+                   out: TextIO | None = sys.stdout, keep_state: bool = False,
                    config: Config | None = None, nmea: bool = True,
                    autopilot: dict[str, Any] | None = None) -> DemoResult:
     """Run the whole demo; print the live line every wall second and the scores to
     ``out`` (None: silent). ``router_endpoint`` None: 7447, or a free port when taken.
-    ``nmea`` False sends the GNSS fixes and headings over MAVLink too; ``autopilot``
-    sets :class:`LinkPlan`'s ``stream_unasked``, ``others`` and ``reboot_at``."""
+    ``keep_state``: the adaptive state in ``out_dir/state``, restored from the previous
+    run; otherwise a fresh temporary directory, deleted at the end. ``nmea`` False sends
+    the GNSS fixes and headings over MAVLink too; ``autopilot`` sets :class:`LinkPlan`'s
+    ``stream_unasked``, ``others`` and ``reboot_at``."""
     from onboard.service.daemon import Service, ServiceClock
     from onboard.service.publishers.zenoh_pub import open_router
     from onboard.tools.shore import ShoreView, open_session
@@ -354,9 +448,10 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
         raise UsageError(f"unknown scenario {scenario!r}: {err}") from None
     out_dir = Path(out_dir)
     shutil.rmtree(out_dir / "recordings", ignore_errors=True)
-    if not keep_state:
-        shutil.rmtree(out_dir / "state", ignore_errors=True)
     out_dir.mkdir(parents=True, exist_ok=True)
+    state_tmp = None if keep_state else Path(tempfile.mkdtemp(prefix="onboard-demo-state-"))
+    state_file = (out_dir / "state" / "adaptive.json" if state_tmp is None
+                  else state_tmp / "adaptive.json").resolve()
     endpoint = router_endpoint
     if endpoint is None:
         endpoint = DEFAULT_ROUTER if _port_free(7447) else f"tcp/127.0.0.1:{_free_port(socket.SOCK_STREAM)}"
@@ -381,10 +476,12 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
         hello = await _read_json(proc, 60.0)
         if hello is None:
             raise RuntimeError(f"the simulator did not start (exit status {proc.poll()})")
-        base = config if config is not None else load(config_for(hello["vehicle_class"]))
+        base = config if config is not None else load(config_for(hello["vehicle_class"],
+                                                                 sc.name))
         cfg = demo_config(base, mav_port=plan.mavlink_udp_port, nmea_pty=hello["nmea_pty"],
                           dvl_port=plan.dvl_tcp_port if hello["dvl"] else None,
-                          zenoh_endpoint=endpoint, mavlink_out=mavlink_out)
+                          zenoh_endpoint=endpoint, mavlink_out=mavlink_out,
+                          state_file=str(state_file))
         vid = cfg.vehicle.id
         sub = shore.declare_subscriber(f"onboard/{vid}/**", view.on_sample)
         start = time.monotonic() + 1.0  # simulated t = 0, one wall second from now
@@ -397,6 +494,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
         say("  inputs: " + ", ".join(f"{s.name}={s.kind} over {s.url}" for s in cfg.service.sources))
         say(f"  Zenoh router {endpoint}; MAVLink out {cfg.service.mavlink.url}; "
             f"recording in {svc.recorder_dir}")
+        say(f"  adaptive state: {state_file}" + (" (kept between runs)" if keep_state else
+                                                  " (fresh, deleted at the end)"))
         for e in list(svc.events):
             say(f"  {e}")
         assert proc.stdin is not None
@@ -444,6 +543,9 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
         if shore is not None:
             shore.close()
         router.close()
+        state_saved = state_file.exists()
+        if state_tmp is not None:
+            shutil.rmtree(state_tmp, ignore_errors=True)
     truth = read_truth(plan.truth_path) if Path(plan.truth_path).exists() else []
     with view.lock:
         history = list(view.history)
@@ -461,7 +563,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
     return DemoResult(scenario=sc.name, vehicle=vid, duration_s=duration_s, wall_s=wall,
                       estimates=history, health=health, healths=healths, scores=rows, frames=frames,
                       recording=rec_files, events=events, mavlink_sent=mav_sent,
-                      sources={s.name: s.kind for s in cfg.service.sources})
+                      sources={s.name: s.kind for s in cfg.service.sources},
+                      state_file=str(state_file), state_saved=state_saved)
 
 
 async def _read_json(proc: subprocess.Popen, timeout_s: float) -> dict | None:
@@ -480,13 +583,14 @@ async def _read_json(proc: subprocess.Popen, timeout_s: float) -> dict | None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """``onboard demo [--duration S] [--scenario NAME] [--realtime]``."""
+    """``onboard demo [--duration S] [--scenario NAME] [--realtime] [--keep-state]``."""
     duration = float(args.duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
     scenario = args.scenario or DEFAULT_SCENARIO
     speed = 1.0 if args.realtime else SPEED
-    res = asyncio.run(run_demo(scenario, duration, speed=speed))
+    res = asyncio.run(run_demo(scenario, duration, speed=speed,
+                               keep_state=bool(getattr(args, "keep_state", False))))
     return 0 if res.estimates else 1
 
 
@@ -494,5 +598,6 @@ if __name__ == "__main__":  # pragma: no cover - the simulator child of run_demo
     if len(sys.argv) == 3 and sys.argv[1] == "--sitl-child":
         sitl_child(LinkPlan(**json.loads(sys.argv[2])))
     else:
-        print("usage: onboard demo [--duration S] [--scenario NAME] [--realtime]", file=sys.stderr)
+        print("usage: onboard demo [--duration S] [--scenario NAME] [--realtime] [--keep-state]",
+              file=sys.stderr)
         sys.exit(2)

@@ -90,9 +90,13 @@ def run_sitl(scenario: str, duration: float | None = None, seed: int = 1,
                                                   "yaw_rate", "surge_input", "yaw_input")}
     next_tick = None
     theta: dict[str, list[list[float]]] = {"surge": [], "heading": []}
+    est["nav.speed"] = []    # the raw GNSS speed over ground, newest fix (< 1 s old)
+    sog, t_sog = math.nan, -math.inf
     for t, samples, truth in simulate(scenario, duration=duration, seed=seed):
         for s in samples:
             eng.push(s)
+            if isinstance(s, GnssFix) and s.sog_mps is not None:
+                sog, t_sog = s.sog_mps, s.t
         for nm, ax in (("surge", pa.surge), ("heading", pa.yaw)):
             rc = ax.rcie  # type: ignore[attr-defined]
             if rc.steps and (not theta[nm] or len(theta[nm]) < ax.steps):
@@ -107,6 +111,7 @@ def run_sitl(scenario: str, duration: float | None = None, seed: int = 1,
         for c in cols:
             p, q = c.split(".", 1)
             est[c].append(recs.get(p, {}).get(q, math.nan))
+        est["nav.speed"].append(sog if t - t_sog < 1.0 else math.nan)
         tr["lat"].append(truth.lat_deg if truth.lat_deg is not None else math.nan)
         tr["lon"].append(truth.lon_deg if truth.lon_deg is not None else math.nan)
         tr["heading"].append(truth.yaw)
@@ -187,7 +192,8 @@ def identify_sitl(scenario: str, seed: int = 10, dt: float = 1.0
 
 def sitl_metrics(run: SitlRun, t_min: float = 30.0) -> dict[str, dict[str, float]]:
     """RMSE per pipeline after ``t_min`` seconds (speed m/s, heading rad, position m,
-    yaw rate rad/s; AIE also input errors in m/s^2 and rad/s^2)."""
+    yaw rate rad/s; AIE also input errors in m/s^2 and rad/s^2); ``nav``: the raw GNSS
+    speed over ground's."""
     m = run.t >= run.t[0] + t_min
     out: dict[str, dict[str, float]] = {}
     for p in ("aie", "kf"):
@@ -203,6 +209,7 @@ def sitl_metrics(run: SitlRun, t_min: float = 30.0) -> dict[str, dict[str, float
             d["surge_input"] = _rmse((e["aie.surge_input"] - run.truth["surge_input"])[m])
             d["yaw_input"] = _rmse((e["aie.yaw_input"] - run.truth["yaw_input"])[m])
         out[p] = d
+    out["nav"] = {"speed": _rmse((run.est["nav.speed"] - run.truth["speed"])[m])}
     return out
 
 
@@ -291,7 +298,7 @@ def identify_blueboat(runs: Sequence[BlueBoatRun], dt: float = 1.0
 
 
 def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | None,
-                 gnss_std_m: float = 0.3, heading_std_rad: float = 0.01,
+                 gnss_std_m: float = 0.1, heading_std_rad: float = 0.01,
                  aie_table: dict[str, Any] | None = None) -> dict[str, np.ndarray]:
     """AIE and KF on one run; estimates on the 10 Hz rows (NaN before the first)."""
     table = dict(aie_table or {})
@@ -323,10 +330,31 @@ def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | Non
     return res
 
 
+def gps_speed(run: BlueBoatRun) -> np.ndarray:
+    """The raw GNSS speed of a run without Doppler speed: the distance between
+    consecutive distinct fixes over their interval (m/s), signed by its projection on
+    the heading, held until the next fix (NaN before the second fix)."""
+    frame = LocalFrame(float(run.lat[0]), float(run.lon[0]))
+    out = np.full(len(run.t), math.nan)
+    last: tuple[float, float, float] | None = None
+    val = math.nan
+    for i, t in enumerate(run.t):
+        n, e = frame.to_ne(float(run.lat[i]), float(run.lon[i]))
+        if last is None or (n, e) != last[1:]:
+            if last is not None and t > last[0]:
+                dn, de = n - last[1], e - last[2]
+                along = math.cos(run.yaw[i]) * dn + math.sin(run.yaw[i]) * de
+                val = math.copysign(math.hypot(dn, de), along) / (t - last[0])
+            last = (float(t), n, e)
+        out[i] = val
+    return out
+
+
 def blueboat_metrics(run: BlueBoatRun, res: dict[str, np.ndarray], surge: AxisModel,
                      yaw: AxisModel, t_min: float = 10.0) -> dict[str, float]:
     """Errors against the log's own surge speed and yaw (reference, not truth), and the
-    estimated input against the logged command mapped by the identified model."""
+    estimated input against the logged command mapped by the identified model;
+    ``gps.speed``: the raw speed from consecutive fixes (:func:`gps_speed`)."""
     m = run.t >= t_min
     out = {}
     for p in ("aie", "kf"):
@@ -335,6 +363,7 @@ def blueboat_metrics(run: BlueBoatRun, res: dict[str, np.ndarray], surge: AxisMo
         out[f"{p}.yaw_rate"] = _rmse((res[f"{p}.yaw_rate"] - run.yaw_rate)[m])
         out[f"{p}.position"] = _rmse(np.hypot(res[f"{p}.north"] - res["gps.north"],
                                               res[f"{p}.east"] - res["gps.east"])[m])
+    out["gps.speed"] = _rmse((gps_speed(run) - run.surge)[m])
     u_cmd = surge.gain * 0.5 * (run.left + run.right) + surge.offset
     r_cmd = yaw.gain * 0.5 * (run.left - run.right) + yaw.offset
     ok = m & np.isfinite(res["aie.surge_input"])
