@@ -137,6 +137,11 @@ class CurrentHighGainObserver:
         self.x, self.P = x_new, P_new
         return True
 
+    def current_cov(self) -> np.ndarray:
+        """Covariance of the current (m^2/s^2, earth axes), a copy."""
+        nd = self.nd
+        return self.P[nd:, nd:].copy()
+
     def current_estimate(self) -> tuple[list[float], list[float], list[float]]:
         """(current (m/s, earth), its one-sigma (m/s), ``nu_r`` (m/s, body)) as lists."""
         nd = self.nd
