@@ -68,8 +68,9 @@ def run(scenario: Any, section: dict[str, Any], config_name: str,
         state: dict | None = None) -> dict[str, Any]:
     """Run one scenario through the engine with the current pipeline only.
 
-    Returns arrays ``t``, ``est`` (n x 3: north, east, down), ``std`` (n x 3),
-    ``truth`` (n x 3 true current at the same ticks), the pipeline, and ``us_per_step``.
+    Returns arrays ``t``, ``est`` (n x 3: north, east, down; NaN where unknown), ``std``
+    (n x 3), ``truth`` (n x 3 true current at the same ticks), the pipeline, the engine and
+    ``us_per_step``.
     """
     from sitl.runner import simulate
 
@@ -107,7 +108,7 @@ def run(scenario: Any, section: dict[str, Any], config_name: str,
         for s in samples:
             eng.push(s)
     return {"t": np.array(T), "est": np.array(E), "std": np.array(S), "truth": np.array(C),
-            "pipe": pipe, "us_per_step": 1e6 * cpu / max(n_steps, 1)}
+            "pipe": pipe, "engine": eng, "us_per_step": 1e6 * cpu / max(n_steps, 1)}
 
 
 def metrics(r: dict[str, Any], after: float) -> dict[str, Any]:
