@@ -99,7 +99,9 @@ class CurrentHighGainObserver:
                R: np.ndarray, inputs: ModelInputs) -> bool:
         """Output injection ``G(gamma) (y - C x_hat)`` (Kim eq. 11) for one velocity sample
         over ``dt_meas`` (s), with the increasing-gain law; the covariance of this gain in
-        Joseph form. Water track and partial (horizontal-only) measurements are skipped.
+        Joseph form. Water track is skipped (no current in it); an over-ground velocity
+        with fewer components than the state (GNSS SOG/COG at the surface: north and east)
+        corrects through those components only.
 
         Args:
             kind: ``earth`` (over ground, earth axes) or ``bottom`` (over ground, body axes).
@@ -112,22 +114,22 @@ class CurrentHighGainObserver:
         Returns False if the state diverged (it is left as it was; restart it).
         """
         nd = self.nd
-        if kind == "water" or len(z) != nd:
+        m = len(z)
+        if kind == "water" or (kind == "bottom" and m != nd):
             return True
-        H = np.hstack([R, np.eye(nd)]) if kind == "earth" else np.hstack([np.eye(nd), R.T])
+        H = (np.hstack([R, np.eye(nd)]) if kind == "earth"
+             else np.hstack([np.eye(nd), R.T]))[:m]
         y = z - H @ self.x
         self.y = y
-        self.S = S = H @ self.P @ H.T + std * std * np.eye(nd)
+        self.S = S = H @ self.P @ H.T + std * std * np.eye(m)
         Sinv = inv_small(S)
         self.nis = float(y @ Sinv @ y) if Sinv is not None else math.nan
         e_earth = y if kind == "earth" else R @ y
-        gamma = self.law.update(dt_meas, float(e_earth @ e_earth) / (std * std) / nd)
+        gamma = self.law.update(dt_meas, float(e_earth @ e_earth) / (std * std) / m)
         self.gamma = gamma
         G = current_hgo_gain(float(self._k[0]), float(self._k[1]), gamma, self._J, R,
                              np.array([inputs.p, inputs.q, inputs.r]))
-        K = G * dt_meas
-        if kind == "bottom":
-            K = K @ R
+        K = G[:, :m] * dt_meas if kind == "earth" else (G * dt_meas) @ R
         x_new = self.x + K @ y
         IKH = np.eye(2 * nd) - K @ H
         P_new = IKH @ self.P @ IKH.T + (K * std * std) @ K.T
