@@ -159,3 +159,20 @@ def test_a_right_restored_current_is_confirmed(jaiabot_state):
     assert pipe.counters.get("restore_discarded", 0) == 0
     assert pipe.counters["restore_confirmed"] == 1
     assert any("restored current confirmed" in e for e in r["engine"].events)
+
+
+def test_gavia_tidal_hgo_runs_at_gamma_star():
+    """The high-gain observer at the gain its LMI analysis requires, gamma = gamma* (6.4,
+    config/gains/torpedo-auv.json), fixed, with a calm-water identified model (mode (a)):
+    the output injection is integrated between samples, so the gain is not capped by the
+    sample rate, and the one-sigma is that of the running gain."""
+    r = _mode_a("gavia-tidal", "torpedo-auv", 150.0, observer="hgo")
+    assert r["pipe"].gamma >= r["pipe"].gain.gamma_star == pytest.approx(6.4, abs=0.01)
+    m = cv.metrics(r, after=60.0)
+    # measured (200 s, seed 1): rms N/E/D 0.022 / 0.016 / 0.015 m/s, 2-sigma coverage
+    # 1.00 / 1.00 / 1.00, no peaking (the paper vs ADCP: std 0.094 / 0.066 / 0.032); at
+    # gamma 1.29 (the former cap): 0.018 / 0.010 / 0.007, coverage 0.90 / 1.00 / 1.00
+    for ax, paper in zip(("north", "east", "down"), cv.PAPER_GAVIA_STD):
+        assert m[ax]["published"] == 1.0
+        assert m[ax]["std"] < paper
+        assert m[ax]["cover2"] > 0.9

@@ -452,7 +452,9 @@ class CurrentPipeline:
         if dt > 0 and hgo is not None:
             n_sub = max(1, math.ceil(dt / 0.2))
             for _ in range(n_sub):
-                hgo.predict(dt / n_sub, self.inp, ident.thetas, kf.q_scale)
+                if not hgo.predict(dt / n_sub, self.inp, ident.thetas, kf.q_scale):
+                    hgo.restart(kf.x, kf.P)
+                    hgo.reset_gain()
         self._t = t if dt >= 0 else self._t
         R = self._R() if meas else None  # the attitude is fixed within the tick
         if twin is not None and twin[1].started:

@@ -233,9 +233,9 @@ def main(argv: list[str] | None = None) -> int:
         # (label, scenario, config, section, duration, after)
         ("gavia kf model(a)", "gavia-tidal", "torpedo-auv", "calm", 600 * q, 60.0),
         ("gavia kf no-model(b)", "gavia-tidal", "torpedo-auv", {}, 600 * q, 60.0),
-        ("gavia hgo model(a)", "gavia-tidal", "torpedo-auv", ("calm", {"observer": "hgo"}),
-         600 * q, 60.0),
-        ("gavia hgo-fixed model(a)", "gavia-tidal", "torpedo-auv",
+        ("gavia hgo gamma* model(a)", "gavia-tidal", "torpedo-auv",
+         ("calm", {"observer": "hgo"}), 600 * q, 60.0),
+        ("gavia hgo-below gamma=1.29 model(a)", "gavia-tidal", "torpedo-auv",
          ("calm", {"observer": "hgo", "gamma": 1.29}), 200 * q, 60.0),
         ("spheroid kf model(a)", "spheroid-sawtooth", "spheroid", "calm", 600 * q, 100.0),
         ("spheroid kf no-model(b)", "spheroid-sawtooth", "spheroid", {}, 600 * q, 100.0),
