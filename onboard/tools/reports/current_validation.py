@@ -272,6 +272,7 @@ def main(argv: list[str] | None = None) -> int:
                      _fmt(mt["down"]["rms"]), _fmt(mt["north"]["std"]),
                      _fmt(mt["east"]["std"]), _fmt(mt["down"]["std"]),
                      f"{mt['north']['cover2']:.2f}/{mt['east']['cover2']:.2f}",
+                     f"{mt['north']['published']:.2f}/{mt['east']['published']:.2f}",
                      _fmt(peak), _fmt(over), f"{settle:.0f}", f"{r['us_per_step']:.0f}"])
         print(" | ".join(rows[-1]), flush=True)
         if sc == "spheroid-sawtooth":
@@ -282,6 +283,7 @@ def main(argv: list[str] | None = None) -> int:
         if "hgo" in label:
             burrs.append(f"{label}: final gamma {r['pipe'].gamma:.3f}")
     hdr = ["run", "rms N", "rms E", "rms D", "std N", "std E", "std D", "2σ cover N/E",
+           "published N/E",
            "peak 60s", "peaking", "settle<0.1 (s)", "µs/step"]
     print()
     print("| " + " | ".join(hdr) + " |")
