@@ -628,8 +628,8 @@ class CurrentPipeline:
         nd, o = self.nd, 2 * self.nd
         kf = self.kf
         std = floor_along_track(  # as published: unknown along track without a model
-            kf.current_cov(), self.yaw or 0.0,
-            self.cfg.init_current_std if self.identification.surge_unobservable() else 0.0)
+            kf.current_cov(), self.yaw or 0.0, self.cfg.init_current_std if (
+                self.yaw is not None and self.identification.surge_unobservable()) else 0.0)
         st: dict[str, Any] = {"model_kind": self.model.kind,
                               "thetas": self.model.thetas_to_mapping(self.thetas),
                               "current": kf.x[nd:o].tolist(), "current_std": std}
