@@ -182,6 +182,10 @@ class Engine:
                 values = p.step(t, batch)
             except Exception as err:  # a pipeline bug must not stop the others
                 values = self._recover(i, p, err)
+            pev = getattr(p, "events", None)
+            if pev:  # a pipeline's own events (e.g. restored state discarded)
+                self.events.extend(f"{p.name}: {e}" for e in pev)
+                pev.clear()
             if not values:
                 continue
             entry = self._std_names.get(id(p))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -63,14 +64,19 @@ def test_torpedo_known_model_bottom_track():
 
 
 def test_torpedo_hgo_observer_with_increasing_gain():
-    pipe = current_pipeline("torpedo-auv", model=TORPEDO_TRUE, identify=False, observer="hgo")
+    """The increasing-gain law (Alessandri & Rossi), configured: gamma grows from 0.05
+    with the output error up to 1.29. (The bundled gain files run a fixed gamma* instead,
+    test_current_sitl.py.)"""
+    pipe = current_pipeline("torpedo-auv", model=TORPEDO_TRUE, identify=False, observer="hgo",
+                            gamma_0=0.05, rho=0.01, gamma_max=1.29)
     rms, cover, _, _ = current_errors(pipe, simulate_torpedo(300.0), after=100.0)
-    # measured: rms [0.019, 0.036] m/s, sigma [0.06, 0.12], coverage 1.0; gamma rose from
-    # 0.05 to 1.19 (gamma_max 1.29, config/gains/torpedo-auv.json). The higher the gain, the
-    # noisier: a fixed gamma = 0.3 gives rms [0.003, 0.005] (the KF: 0.002)
+    # measured: rms [0.019, 0.036] m/s, coverage 1.0; gamma rose from 0.05 to 1.2. The
+    # higher the gain, the noisier on this synthetic run: fixed gamma 1.29 gives rms
+    # [0.020, 0.038], 3.0 [0.060, 0.124]; at gamma* = 6.4 the east component's one-sigma
+    # exceeds 0.3 m/s (unpublished)
     assert np.all(rms < 0.06)
     assert np.all(cover > 0.9)
-    assert 0.05 < pipe.gamma <= pipe.gain.gamma_max + 1e-9
+    assert 0.05 < pipe.gamma <= 1.29 + 1e-9
 
 
 def test_water_track_dvl_is_a_direct_through_water_measurement():
@@ -158,14 +164,18 @@ SURFACE_CURRENT = (0.2, -0.3)
 """True current (north, east, m/s) of :func:`_surface_run`."""
 
 
-def _surface_run(depth_m: float, seed: int = 0):
+def _surface_run(depth_m: float, seed: int = 0, observer: str = "kf", **section):
     """The torpedo AUV (config/torpedo-auv.toml, surface depth 0.5 m) at ``depth_m`` for
     120 s at 1.5 m/s through water in :data:`SURFACE_CURRENT`: heading 0 rad, then 1 rad
     from 60 s; a GNSS SOG/COG at 1 Hz with 0.05 m/s noise per axis, depth and attitude
     just before each fix. Returns the pipeline, its first output (attitude and depth only),
     its last output and the error (north, east, m/s) of its over-ground velocity
     ``R nu_r + V_c`` against the true one after 10 s."""
-    pipe = current_mod.create(configmod.load(configmod.resolve("torpedo-auv")))
+    cfg = configmod.load(configmod.resolve("torpedo-auv"))
+    if observer != "kf":
+        cfg = configmod.from_dict({**msgspec.to_builtins(cfg), "pipelines": {
+            "current": {"observer": observer, **section}}})
+    pipe = current_mod.create(cfg)
     rng = np.random.default_rng(seed)
     first = pipe.step(0.5, [Depth(t=0.4, depth_m=depth_m),
                             Attitude(t=0.5, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0)])
@@ -182,9 +192,11 @@ def _surface_run(depth_m: float, seed: int = 0):
                             GnssFix(t=t, lat_deg=50.0, lon_deg=-4.0,
                                     sog_mps=float(np.hypot(*z)),
                                     cog_rad=float(math.atan2(z[1], z[0])))])
-        if out and k > 10:
-            u, v = out["u_r"], out["v_r"]
-            estimate = np.array([c * u - s * v + out["north"], s * u + c * v + out["east"]])
+        if out and k > 10:  # the filter's state: the along-track current is unpublished
+            u, v = out["u_r"], out["v_r"]  # before the turn (unknown)
+            x = pipe.hgo.x if pipe.hgo is not None else pipe.kf.x
+            u, v, cn, ce = x[0], x[1], x[3], x[4]
+            estimate = np.array([c * u - s * v + cn, s * u + c * v + ce])
             errors.append(estimate - v_og)
     return pipe, first, out, np.array(errors)
 
@@ -197,7 +209,10 @@ def test_current_torpedo_auv_takes_a_surface_gnss_velocity():
     pipe, first, out, errors = _surface_run(depth_m=0.1)
     assert first == {}  # no velocity yet: the filter waits for one to start
     assert pipe.counters["updates"] == 120 and pipe.counters["rejected_gate"] == 0
-    assert {"down", "std_down", "w_r"} <= set(out) and all(math.isfinite(v) for v in out.values())
+    assert {"north", "east", "std_down", "w_r"} <= set(out)
+    assert all(math.isfinite(v) for v in out.values())
+    # the vertical current is never measured at the surface (GNSS is horizontal): unknown
+    assert "down" not in out and out["std_down"] > 0.3
     # measured (seed 0): over-ground velocity RMS error 0.046 / 0.045 m/s (seeds 0-5:
     # 0.040-0.048, the fixes' own noise is 0.05); current error after the turn -0.014 /
     # +0.010 m/s (seeds 0-5: at most 0.014) at one sigma 0.076 / 0.090
@@ -208,3 +223,16 @@ def test_current_torpedo_auv_takes_a_surface_gnss_velocity():
 
     deep, _, out, _ = _surface_run(depth_m=5.0)
     assert deep.counters["updates"] == 0 and out == {}  # under water: no GNSS velocity
+
+
+def test_the_hgo_variant_fuses_a_surface_gnss_velocity():
+    """The HGO corrects with a horizontal-only over-ground velocity (GNSS at the surface,
+    2 components for a 3-D state) through those components; it used to skip every such fix
+    and report its initial (zero) current while its over-ground velocity drifted."""
+    pipe, _, out, errors = _surface_run(depth_m=0.1, observer="hgo", gamma=0.05)
+    # measured (seed 0, fixed gamma 0.05): over-ground RMS error 0.051 / 0.061 m/s (the
+    # fixes' noise is 0.05); before: 0.44 / 0.41 m/s with the current stuck at 0. At the
+    # bundled gamma* = 6.4 with these 1 Hz fixes and no identified model (mode (b)) the
+    # observer does not hold: 0.45 / 1.02 m/s (docs/current.md, HGO)
+    assert np.all(np.sqrt(np.mean(errors ** 2, axis=0)) < 0.1)
+    assert np.any(pipe.hgo.x[3:5] != 0.0)

@@ -327,8 +327,12 @@ def test_dvl_lock_loss_is_rejected_never_fused_as_zero_velocity(rov_dvl_lock_los
     # current's error alone would not tell (0.38-0.86 m/s max with the zeros passed on,
     # 0.08-0.40 without)
     cur = _series(res, truth, "current")
+    window = [(v, tr) for t, v, tr in cur if 42.0 <= t < 75.0]
+    # a component is published only while known (one-sigma <= 0.3 m/s), else absent
+    assert window and all(("north" in v) == (v["std_north"] <= 0.3)
+                          and ("east" in v) == (v["std_east"] <= 0.3) for v, _ in window)
     err = [math.hypot(v["north"] - tr.current_north, v["east"] - tr.current_east)
-           for t, v, tr in cur if 42.0 <= t < 75.0]
+           for v, tr in window if "north" in v and "east" in v] or [0.0]
     speed = _median(math.hypot(tr.u, tr.v) for t, v, tr in cur if 40.0 <= t < 70.0)
     print(f"current error in the lock loss: median {_median(err):.3f}, max {_max(err):.3f} m/s "
           f"(vehicle speed {speed:.2f} m/s)")

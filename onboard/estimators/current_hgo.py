@@ -22,6 +22,10 @@ from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
 DIVERGED_ABOVE = 50.0
 """m/s: a state component above this (or a non-finite one) is a divergence."""
 
+HOLD_MAX_S = 1.0
+"""s: a velocity sample is injected (held) for at most this long; without a newer one the
+observer then runs on the model alone (a GNSS or DVL gap)."""
+
 
 class CurrentHighGainObserver:
     """Kim et al.'s model-based high-gain observer of ``[nu_r, V_c]``.
@@ -40,7 +44,8 @@ class CurrentHighGainObserver:
 
     def __init__(self, model: RegressionModel, design: GainDesign, law: IncreasingGain,
                  P0: np.ndarray, *, accel_std: float, model_error_time_s: float,
-                 current_walk: float, counters: dict[str, float] | None = None) -> None:
+                 current_walk: float, innovation_max: float = 1.0,
+                 counters: dict[str, float] | None = None) -> None:
         """Args:
             model: the regression model.
             design: the LMI gain (its first channel's chain gain ``k1, k2`` is used on each
@@ -51,6 +56,8 @@ class CurrentHighGainObserver:
                 ``model_error_time_s``).
             model_error_time_s: correlation time of the model error (s).
             current_walk: random walk of the current (m/s per sqrt(s)).
+            innovation_max: saturation of the injected innovation (m/s per component,
+                anti-peaking).
             counters: event counts to add to (a new dict by default).
         """
         self.model = model
@@ -67,7 +74,13 @@ class CurrentHighGainObserver:
         self.y = np.zeros(nd)
         self.S = np.eye(nd)
         self.nis = 0.0
+        self.innovation_max = innovation_max
         self._J = -np.eye(nd)
+        # the held sample (z, H, G, noise variance), its age (s), and the sensitivity of
+        # the state to the held sample's noise
+        self._hold: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
+        self._hold_age = 0.0
+        self._psi = np.zeros((2 * nd, nd))
 
     def restart(self, x: np.ndarray, P: np.ndarray) -> None:
         """Take ``[nu_r, V_c]`` and its covariance from the leading block of ``x`` and ``P``
@@ -75,31 +88,84 @@ class CurrentHighGainObserver:
         o = 2 * self.nd
         self.x = x[:o].copy()
         self.P = P[:o, :o].copy()
+        self._hold = None
+        self._hold_age = 0.0
+        self._psi = np.zeros((o, self.nd))
 
     def reset_gain(self) -> None:
         """Restart the increasing-gain law from ``gamma_init``."""
         self.law.gamma = self.gamma_init
 
     def predict(self, dt: float, inputs: ModelInputs, thetas: list[np.ndarray],
-                q_scale: float) -> None:
-        """Run the model over ``dt`` (s) (Kim eq. 11, model part) with coefficients
-        ``thetas``; the covariance with process noise scaled by ``q_scale``."""
+                q_scale: float) -> bool:
+        """Integrate Kim eq. (11) over ``dt`` (s): the model with coefficients ``thetas``
+        (linearized at the start of the step) plus the output injection ``G(gamma) (y -
+        H x_hat)`` of the newest velocity sample, held (zero-order hold) for at most
+        ``HOLD_MAX_S``. Sub-steps keep ``h |eig| <= 0.2`` whatever ``gamma``: a high gain is
+        integrated, never applied as one discrete jump (``G dt`` is unstable once
+        ``gamma k1 dt > 2``). The covariance follows the same linear dynamics; the held
+        sample's noise enters every sub-step with the same value, so its contribution is
+        carried as ``Psi`` (``x_err += Psi v``) and added as ``Psi r Psi^T``. Process
+        noise scaled by ``q_scale``. Returns False (state left as it was, counted) on a
+        divergence."""
         nd = self.nd
+        n = 2 * nd
         nu = self.x[:nd]
         _, f, J = self.model.linearize(nu.tolist(), inputs, [t.tolist() for t in thetas[:nd]])
-        self._J = J = np.array(J)
-        self.x[:nd] = nu + dt * np.array(f)
-        F = np.eye(2 * nd)
-        F[:nd, :nd] += dt * J
+        self._J = Jm = np.array(J)
+        A = np.zeros((n, n))
+        A[:nd, :nd] = Jm
+        b = np.zeros(n)
+        b[:nd] = np.array(f) - Jm @ nu
+        hold = self._hold
+        if hold is not None and self._hold_age > HOLD_MAX_S:
+            self._fold_hold()
+            hold = None
+        G = None
+        if hold is not None:
+            z, H, G, _var = hold
+            A = A - G @ H
+            b = b + G @ z
+            self._hold_age += dt
+        rate = float(np.max(np.sum(np.abs(A), axis=1)))  # >= every |eigenvalue|
+        n_sub = max(1, math.ceil(dt * rate / 0.2))
+        h = dt / n_sub
+        F = np.eye(n) + h * A
         q = np.concatenate([np.full(nd, self.accel_std ** 2 * self.model_error_time_s
-                                    * q_scale), np.full(nd, self.current_walk ** 2)])
-        self.P = F @ self.P @ F.T + np.diag(q * dt)
+                                    * q_scale), np.full(nd, self.current_walk ** 2)]) * h
+        x, P, Psi = self.x.copy(), self.P, self._psi
+        for _ in range(n_sub):
+            x = x + h * (A @ x + b)
+            P = F @ P @ F.T
+            P.ravel()[::n + 1] += q
+            if G is not None:
+                Psi = F @ Psi + h * G
+        if not (np.all(np.isfinite(x)) and float(np.max(np.abs(x))) < DIVERGED_ABOVE):
+            self.counters["hgo_diverged"] = self.counters.get("hgo_diverged", 0) + 1
+            return False
+        self.x, self.P, self._psi = x, P, Psi
+        return True
+
+    def _fold_hold(self) -> None:
+        """End the held sample: its noise contribution joins ``P``."""
+        if self._hold is not None:
+            var = self._hold[3]
+            self.P = self.P + var * (self._psi @ self._psi.T)
+            self._psi = np.zeros_like(self._psi)
+        self._hold = None
+        self._hold_age = 0.0
 
     def update(self, kind: MeasurementKind, z: np.ndarray, std: float, dt_meas: float,
                R: np.ndarray, inputs: ModelInputs) -> bool:
-        """Output injection ``G(gamma) (y - C x_hat)`` (Kim eq. 11) for one velocity sample
-        over ``dt_meas`` (s), with the increasing-gain law; the covariance of this gain in
-        Joseph form. Water track and partial (horizontal-only) measurements are skipped.
+        """A new velocity sample: its innovation, NIS and the increasing-gain law; the
+        output injection ``G(gamma) (y - H x_hat)`` (Kim eq. 11) is then held and
+        integrated by :meth:`predict`. Water track is skipped (no current in it); an
+        over-ground velocity of fewer components than the state (GNSS at the surface:
+        north and east) injects on those components only.
+
+        Anti-peaking by saturation (Khalil): the held sample is moved to within
+        ``innovation_max`` (m/s per component) of the estimate, so a large initial or
+        outlier error meets a bounded injection whatever ``gamma``.
 
         Args:
             kind: ``earth`` (over ground, earth axes) or ``bottom`` (over ground, body axes).
@@ -109,36 +175,50 @@ class CurrentHighGainObserver:
             R: body-to-earth rotation.
             inputs: the model inputs (body rates for the gain).
 
-        Returns False if the state diverged (it is left as it was; restart it).
+        Returns False if the innovation is not finite (nothing is changed; restart).
         """
         nd = self.nd
-        if kind == "water" or len(z) != nd:
+        m = len(z)
+        if kind == "water" or (kind == "bottom" and m != nd):
             return True
-        H = np.hstack([R, np.eye(nd)]) if kind == "earth" else np.hstack([np.eye(nd), R.T])
+        H = (np.hstack([R, np.eye(nd)]) if kind == "earth"
+             else np.hstack([np.eye(nd), R.T]))[:m]
         y = z - H @ self.x
+        if not np.all(np.isfinite(y)) or float(np.max(np.abs(y))) > DIVERGED_ABOVE:
+            self.counters["hgo_diverged"] = self.counters.get("hgo_diverged", 0) + 1
+            return False
+        self._fold_hold()
         self.y = y
-        self.S = S = H @ self.P @ H.T + std * std * np.eye(nd)
+        var = std * std
+        self.S = S = H @ self.P @ H.T + var * np.eye(m)
         Sinv = inv_small(S)
         self.nis = float(y @ Sinv @ y) if Sinv is not None else math.nan
         e_earth = y if kind == "earth" else R @ y
-        gamma = self.law.update(dt_meas, float(e_earth @ e_earth) / (std * std) / nd)
+        gamma = self.law.update(dt_meas, float(e_earth @ e_earth) / var / m)
         self.gamma = gamma
         G = current_hgo_gain(float(self._k[0]), float(self._k[1]), gamma, self._J, R,
                              np.array([inputs.p, inputs.q, inputs.r]))
-        K = G * dt_meas
-        if kind == "bottom":
-            K = K @ R
-        x_new = self.x + K @ y
-        IKH = np.eye(2 * nd) - K @ H
-        P_new = IKH @ self.P @ IKH.T + (K * std * std) @ K.T
-        if not (np.all(np.isfinite(x_new)) and float(np.max(np.abs(x_new))) < DIVERGED_ABOVE):
-            self.counters["hgo_diverged"] = self.counters.get("hgo_diverged", 0) + 1
-            return False
-        self.x, self.P = x_new, P_new
+        G = G[:, :m] if kind == "earth" else G @ R
+        z_held = H @ self.x + np.clip(y, -self.innovation_max, self.innovation_max)
+        self._hold = (z_held, H, G, var)
+        self._hold_age = 0.0
+        self._psi = np.zeros((2 * nd, m))
         return True
+
+    def covariance(self) -> np.ndarray:
+        """Covariance of ``x`` including the held sample's noise (m^2/s^2)."""
+        if self._hold is None:
+            return self.P
+        return self.P + self._hold[3] * (self._psi @ self._psi.T)
+
+    def current_cov(self) -> np.ndarray:
+        """Covariance of the current (m^2/s^2, earth axes), a copy."""
+        nd = self.nd
+        return self.covariance()[nd:, nd:].copy()
 
     def current_estimate(self) -> tuple[list[float], list[float], list[float]]:
         """(current (m/s, earth), its one-sigma (m/s), ``nu_r`` (m/s, body)) as lists."""
         nd = self.nd
-        return (self.x[nd:].tolist(), np.sqrt(np.maximum(self.P.diagonal()[nd:], 0.0)).tolist(),
+        return (self.x[nd:].tolist(),
+                np.sqrt(np.maximum(self.covariance().diagonal()[nd:], 0.0)).tolist(),
                 self.x[:nd].tolist())

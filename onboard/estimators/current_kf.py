@@ -74,6 +74,33 @@ def inv_small(S: np.ndarray) -> np.ndarray | None:
         return None
 
 
+def chi2_sf(x: float, k: int) -> float:
+    """Survival function ``P(X > x)`` of a chi-square variable with ``k`` = 1, 2 or 3
+    degrees of freedom (closed forms; raises ValueError for other ``k``)."""
+    if x <= 0.0:
+        return 1.0
+    if k == 1:
+        return math.erfc(math.sqrt(0.5 * x))
+    if k == 2:
+        return math.exp(-0.5 * x)
+    if k == 3:
+        return math.erfc(math.sqrt(0.5 * x)) + math.sqrt(2.0 * x / math.pi) * math.exp(-0.5 * x)
+    raise ValueError(f"chi2_sf: {k} degrees of freedom (1 to 3 supported)")
+
+
+def chi2_quantile(p: float, k: int) -> float:
+    """The ``x`` with ``P(X > x) = p`` for a chi-square variable with ``k`` = 1 to 3 degrees
+    of freedom (bisection on :func:`chi2_sf`; 10.83 / 13.82 / 16.27 at p = 0.001)."""
+    lo, hi = 0.0, 200.0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if chi2_sf(mid, k) > p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
 class CurrentKalmanFilter:
     """The joint extended Kalman filter of the module docstring.
 
@@ -151,12 +178,20 @@ class CurrentKalmanFilter:
 
     # ------------------------------------------------------------------ state
     def start(self, kind: MeasurementKind, z: np.ndarray, R: np.ndarray) -> None:
-        """Initialize ``nu_r`` from the first velocity ``z`` (m/s) assuming no current (the
-        covariance says so); ``R`` the body-to-earth rotation."""
+        """Initialize ``nu_r`` from the first velocity ``z`` (m/s) given the current in the
+        state (zero unless restored; the covariance says how well it is known); ``R`` the
+        body-to-earth rotation."""
         nd = self.nd
         zz = np.zeros(nd)
         zz[: len(z)] = z
-        self.x[:nd] = R.T @ zz if kind == "earth" else zz
+        c = self.x[nd:2 * nd]
+        if kind == "earth":
+            zz[len(z):] = c[len(z):]  # an unmeasured vertical: no relative vertical motion
+            self.x[:nd] = R.T @ (zz - c)
+        elif kind == "bottom":
+            self.x[:nd] = zz - R.T @ c
+        else:
+            self.x[:nd] = zz
         self.started = True
 
     def reset(self, reason: str) -> None:
@@ -214,6 +249,26 @@ class CurrentKalmanFilter:
             self.P[nd:o, :] = 0.0
             self.P[:, nd:o] = 0.0
             self.P[nd:o, nd:o] = np.diag(np.maximum(sd, 0.2) ** 2)
+
+    def inflate_current_along(self, direction: list[float], var_min: float) -> None:
+        """Raise the current's variance along the unit vector ``direction`` (earth axes) to
+        at least ``var_min`` (m^2/s^2): ``P_cc <- P_cc + d a a^T``, ``d = max(0, var_min -
+        a^T P_cc a)``. For a direction the data cannot observe (the along-track current
+        without a surge model, :meth:`.ModelIdentification.surge_unobservable`): the
+        linearized filter would otherwise let weak couplings shrink it and drift along it
+        with a small variance, and carry that false confidence into the next turn."""
+        nd = self.nd
+        a = np.zeros(nd)
+        a[: len(direction)] = direction
+        blk = self.P[nd:2 * nd, nd:2 * nd]
+        d = var_min - float(a @ blk @ a)
+        if d > 0.0:
+            self.P[nd:2 * nd, nd:2 * nd] = blk + d * np.outer(a, a)
+
+    def current_cov(self) -> np.ndarray:
+        """Covariance of the current (m^2/s^2, earth axes), a copy."""
+        nd = self.nd
+        return self.P[nd:2 * nd, nd:2 * nd].copy()
 
     def current_estimate(self) -> tuple[list[float], list[float], list[float]]:
         """(current (m/s, earth), its one-sigma (m/s), ``nu_r`` (m/s, body)) as lists."""

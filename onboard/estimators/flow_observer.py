@@ -14,8 +14,15 @@ with ``psi' = r``, ``r' = phi_yaw^T theta_yaw`` and ``v_r' = phi_sway^T theta_sw
 :mod:`.vehicle_models` (the yaw equation carries the Munk and fin moments ``N_uv u v``,
 which is what makes ``v_r`` visible in the heading). The gain ``L`` places the poles of the
 linearization ``A - L C`` (Fan: "optimized by pole placement") by Ackermann's formula,
-recomputed each step at the current through-water speed. Only the heading is measured, as
-in the paper (``C = [1 0 0]``). The surge speed through water ``u_r`` is not observable from
+recomputed each step at the current through-water speed.
+
+Measurement: the paper's observer has the 9-state ``x = [phi, theta, psi, u_r, v_r, w_r, p,
+q, r]`` and measures the three Euler angles, roll, pitch and yaw (Fan eq. 7 with ``C = [I_3
+0]``, §III). This implementation is reduced to the horizontal plane, ``z = [psi, r, v_r]``,
+and measures the heading only (``C = [1 0 0]``); the heave and pitch/roll channels, which in
+the paper make ``w_r`` (and through the pitch moment ``u_r``) visible, are not observed here.
+The reduction is not justified by a full-versus-reduced comparison (not built). The surge
+speed through water ``u_r`` is not observable from
 the attitude on a straight line; it is the surge model run open loop, as in the WVAM
 (Randeni et al. 2017). The current is then ``V_c = R (v_g - nu_r)`` (Fan, §III.A).
 

@@ -117,13 +117,15 @@ class HeadingDiversity:
         return math.hypot(*self.vector)
 
 
-def floor_along_track(std: list[float], yaw: float, sigma: float) -> None:
-    """Add ``sigma`` (m/s) along the heading ``yaw`` (rad) to the north/east one-sigma
-    ``std`` (m/s, in place): ``std_i <- sqrt(std_i^2 + (sigma * a_i)^2)`` with ``a =
-    (cos yaw, sin yaw)``."""
-    for i, a in enumerate((math.cos(yaw), math.sin(yaw))):
-        a *= sigma
-        std[i] = math.sqrt(std[i] * std[i] + a * a)
+def floor_along_track(cov: np.ndarray, yaw: float, sigma: float) -> list[float]:
+    """One-sigma (m/s) of the current whose covariance ``cov`` (m^2/s^2, earth axes, 2x2 or
+    3x3) has its variance along the heading ``yaw`` (rad) raised to at least ``sigma^2``:
+    ``cov + d a a^T`` with ``a = (cos yaw, sin yaw[, 0])``, ``d = max(0, sigma^2 -
+    a^T cov a)`` (the rule of :meth:`.CurrentKalmanFilter.inflate_current_along`)."""
+    a = np.zeros(len(cov))
+    a[0], a[1] = math.cos(yaw), math.sin(yaw)
+    d = max(0.0, sigma * sigma - float(a @ cov @ a))
+    return np.sqrt(np.maximum(np.diagonal(cov) + d * a * a, 0.0)).tolist()
 
 
 class ModelIdentification:

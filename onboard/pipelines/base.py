@@ -23,6 +23,10 @@ class Pipeline(Protocol):
             Zenoh key ``onboard/<id>/est/<name>``.
         columns: the quantities it can estimate (without the prefix), in the order they
             appear in estimates.csv. Fixed at construction.
+
+    Optional: ``events``, a list of human-readable event strings; after each step the
+    engine moves them into its health events (prefixed with the pipeline name) and
+    empties the list.
     """
 
     name: str
