@@ -69,9 +69,11 @@ class Engine:
     """
 
     def __init__(self, cfg: Config, pipelines: list[Pipeline] | None = None,
-                 only: set[str] | None = None) -> None:
+                 only: set[str] | None = None, select_sources: bool = True) -> None:
         """Run ``pipelines``, by default those :func:`onboard.pipelines.build` makes for
-        ``cfg`` (restricted to the pipeline names in ``only`` when given)."""
+        ``cfg`` (restricted to the pipeline names in ``only`` when given).
+        ``select_sources`` False passes every source of every quantity through (model
+        closure looks at each sensor's own measurements, not at the one chosen)."""
         self.cfg = cfg
         self.pipelines = build(cfg, only) if pipelines is None else pipelines
         self.mapper = InputMapper(cfg.inputs)
@@ -97,6 +99,7 @@ class Engine:
         channel; each is in one :meth:`health` record (the next after it happened)."""
         self._events_reported = 0
         self.selector = SourceSelector(cfg.sources, self.events)
+        self.select_sources = select_sources
         """One source per quantity (``[sources]``); its switches are events."""
         self.stale: set[tuple[str, str]] = set()
         """The sample streams now stale (see :data:`STALE_AFTER_S`)."""
@@ -154,7 +157,7 @@ class Engine:
         if self.t_first is None:
             self.t_first = t
         self.accepted[key] += 1
-        chosen = self.selector.admit(sample)
+        chosen = self.selector.admit(sample) if self.select_sources else sample
         if chosen is None:  # another source of its quantity is active
             return True
         self._pending.append(chosen)
