@@ -169,6 +169,20 @@ class Dataset:
         return Dataset(**kw)
 
 
+def concat(parts: Sequence["Dataset"]) -> "Dataset":
+    """The datasets one after the other (per-tick arrays joined, the rest from the first).
+    Their run labels keep the parts' segments apart: give adjacent parts different labels."""
+    first = parts[0]
+    kw = {}
+    for name in first.__dataclass_fields__:
+        v = getattr(first, name)
+        if isinstance(v, np.ndarray) and v.shape[:1] == first.t.shape:
+            kw[name] = np.concatenate([getattr(p, name) for p in parts])
+        else:
+            kw[name] = v
+    return Dataset(**kw)
+
+
 def segment_starts(ds: "Dataset") -> np.ndarray:
     """For each tick, the index of the first tick of its contiguous segment (run label)."""
     n = len(ds)

@@ -87,15 +87,19 @@ def diagnosis(sel: Selection, log: str) -> dict:
         "base_params": {**({"a": a, "b": b, "c0": c0} if sel.split.fit.has_commands else {}),
                         "x_p": float(f.x_p)},
         "known": {k: v.tolist() for k, v in f.known.items()},
-        "residuals_before": _residual_stats(sel.split.holdout, sel.base_fit),
+        "split_parts": sel.split.parts,
+        "residuals_before": _residual_stats(sel.base_test, sel.base_fit),
         "effects": effects,
-        "residuals_after": _residual_stats(sel.final_split.holdout, f),
+        "residuals_after": _residual_stats(sel.final_split.test, f),
         "holdout_error_before": sel.before.headline,
         "holdout_error_after": sel.after.headline,
         "holdout_metric": sel.metric,
         "holdout_channels_before": sel.before.channels,
         "holdout_channels_after": sel.after.channels,
         "wave_search": sel.wave,
+        "selection_error_before": sel.select_before.headline,
+        "selection_error_after": sel.select_after.headline,
+        "drift": sel.drift,
     })
 
 
@@ -123,12 +127,13 @@ def figures(sel: Selection) -> dict[str, str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    hold = sel.split.holdout
+    hold = sel.base_test
+    after_data = sel.final_split.test
     rb = M.residuals(hold, sel.base_fit)
-    ra_full = M.residuals(sel.final_split.holdout, sel.final_fit)
+    ra_full = M.residuals(after_data, sel.final_fit)
     # After a latency re-alignment the final data are shorter; compare on common ticks.
-    idx = np.searchsorted(sel.final_split.holdout.t, hold.t).clip(0, len(sel.final_split.holdout) - 1)
-    same = sel.final_split.holdout.t[idx] == hold.t
+    idx = np.searchsorted(after_data.t, hold.t).clip(0, len(after_data) - 1)
+    same = after_data.t[idx] == hold.t
     ra = {k: np.where(same, v[idx], np.nan) for k, v in ra_full.items()}
     out = {}
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
@@ -159,7 +164,7 @@ def figures(sel: Selection) -> dict[str, str]:
     plt.close(fig)
 
     pb = M.predict(hold, sel.base_fit)
-    pa_full = M.predict(sel.final_split.holdout, sel.final_fit)
+    pa_full = M.predict(after_data, sel.final_fit)
     pa = {k: np.where(same, v[idx], np.nan) for k, v in pa_full.items()}
     rows = 2 if "along" in pb else 1
     fig, axes = plt.subplots(rows, 1, figsize=(10, 3.0 * rows), sharex=True, squeeze=False)
@@ -187,7 +192,7 @@ def figures(sel: Selection) -> dict[str, str]:
         ax.plot(t, pa["along"], lw=0.8, label="with effects (open loop)")
         ax.set_ylabel("along-track speed (m/s)")
         ax.legend(loc="upper right")
-    axes[-1][0].set_xlabel("time (s) of the held-out segments")
+    axes[-1][0].set_xlabel("time (s) of the test part")
     fig.tight_layout()
     out["before_after"] = _fig_png(fig)
     plt.close(fig)
