@@ -63,6 +63,10 @@ def diagnosis(sel: Selection, log: str) -> dict:
                 params["direction"] = f.ctx.extra.get("wave_direction")
             entry["params"] = params
             entry["evidence"]["std"] = std
+        changing = {k.split(".", 1)[1]: v for k, v in sel.drift.get("params", {}).items()
+                    if k.startswith(name + ".") and v["changing"]}
+        if detected and changing:
+            entry["evidence"]["drift"] = changing
         if cand is not None:
             entry["evidence"].update({
                 "held_out_gain": round(cand.gain, 4), "t_max": round(cand.t_max, 2),

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from onboard.closure import drift
 from onboard.closure import model as M
 from onboard.closure.dataset import Dataset, concat, segment_starts
 from onboard.closure.effects import ALL, Context
@@ -300,6 +301,7 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
                     select_before=sel_before, select_after=sel_after,
                     selection_fit=current_fit, base_test=test)
     sel.unexplained = structure_left(final_split, current_fit)
+    sel.drift = drift.per_window(both, current_fit)
     return sel
 
 
@@ -374,7 +376,7 @@ def generic_basis(ds: Dataset, channel: str) -> list[tuple[str, np.ndarray]]:
         for name, h in _harmonics(ds.psi):
             groups.append((name, h - h[s0]))
         # a rate bias that changes over the log: its drift grows as since * (time of day)
-        groups.append(("time", np.column_stack([since, since**2, since * tau])))
+        groups.append(("time", np.column_stack([since * tau])))
         groups.append(("time x heading harmonic 1",
                        np.column_stack([tau * np.cos(ds.psi) - (tau * np.cos(ds.psi))[s0],
                                         tau * np.sin(ds.psi) - (tau * np.sin(ds.psi))[s0]])))
@@ -394,6 +396,14 @@ def generic_basis(ds: Dataset, channel: str) -> list[tuple[str, np.ndarray]]:
     return groups
 
 
+def _increments(ds: Dataset, x: np.ndarray, seconds: float = 5.0) -> np.ndarray:
+    """Non-overlapping increments of ``x`` over ``seconds`` within each segment."""
+    k = max(1, int(round(seconds / ds.dt)))
+    i = np.arange(0, len(ds) - k, k)
+    i = i[ds.run[i] == ds.run[i + k]]
+    return np.asarray(x)[i + k] - np.asarray(x)[i]
+
+
 def _held_out_gain(Xf, yf, Xh, yh) -> float:
     """Share of the held-out mean square that a least-squares fit of ``Xf`` (plus a
     constant) to ``yf`` removes from ``yh``."""
@@ -405,37 +415,62 @@ def _held_out_gain(Xf, yf, Xh, yh) -> float:
     return 1.0 - after / before if before > 0 else 0.0
 
 
-def structure_left(sp: Split, f: M.Fit, min_gain: float = 0.15) -> dict | None:
+def structure_left(sp: Split, f: M.Fit, min_gain: float = 0.15,
+                   min_step: float = 0.03) -> dict | None:
     """Evidence of structure the chosen effects do not explain, or None.
 
-    In every residual channel (lateral, heading, along), a generic basis
-    (:func:`generic_basis`) is fitted to the fit part's residual and must lower the
-    selection part's residual mean square by ``min_gain`` to count. For each channel that
-    counts: its ``held_out_gain``, the regressor group that carries the structure (the one
-    with the largest held-out gain alone, ``regressor``, ``regressor_gain``) and the three
-    strongest groups (``correlates_with``). The top-level ``channel``, ``regressor`` and
-    ``held_out_gain`` name the strongest channel.
+    In every residual channel (lateral, heading, along), groups of a generic basis
+    (:func:`generic_basis`) are fitted to the fit part's residual and added one at a time,
+    each time the group that most lowers the selection part's residual mean square, while
+    a group lowers it by ``min_step`` more (so many weak regressors cannot add up to a
+    false alarm by overfitting); the channel counts when the groups kept lower it by
+    ``min_gain``. For each channel that counts: its ``held_out_gain``, the group that
+    carries the structure (the first kept, ``regressor``, with its gain alone,
+    ``regressor_gain``) and the groups kept (``correlates_with``). The top-level
+    ``channel``, ``regressor`` and ``held_out_gain`` name the strongest channel.
     """
     res_fit = M.residuals(sp.fit, f)
     res_hold = M.residuals(sp.holdout, f)
     found = {}
     for ch in res_fit:
         gf, gh = generic_basis(sp.fit, ch), generic_basis(sp.holdout, ch)
+        yf, yh = res_fit[ch], res_hold[ch]
+        if ch == "heading":
+            # The integrated channel is a random walk of the gyro noise: compare its
+            # increments over 5 s (rate errors, independent) instead of its values.
+            gf = [(n, _increments(sp.fit, g)) for n, g in gf]
+            gh = [(n, _increments(sp.holdout, g)) for n, g in gh]
+            yf, yh = _increments(sp.fit, yf), _increments(sp.holdout, yh)
         Xf = np.column_stack([g for _, g in gf])
         Xh = np.column_stack([g for _, g in gh])
-        yf, yh = res_fit[ch], res_hold[ch]
         okf = np.isfinite(yf) & np.isfinite(Xf).all(1)
         okh = np.isfinite(yh) & np.isfinite(Xh).all(1)
-        if okf.sum() < 50 or okh.sum() < 50:
+        if okf.sum() < 20 or okh.sum() < 20:
             continue
-        gain = _held_out_gain(Xf[okf], yf[okf], Xh[okh], yh[okh])
+        kept: list[int] = []
+        gain = 0.0
+        first_gain = 0.0
+        while len(kept) < len(gf):
+            best = (gain, -1)
+            for i in range(len(gf)):
+                if i in kept:
+                    continue
+                cols = kept + [i]
+                g = _held_out_gain(np.column_stack([gf[j][1] for j in cols])[okf], yf[okf],
+                                   np.column_stack([gh[j][1] for j in cols])[okh], yh[okh])
+                if g > best[0]:
+                    best = (g, i)
+            if best[1] < 0 or best[0] - gain < min_step:
+                break
+            kept.append(best[1])
+            if len(kept) == 1:
+                first_gain = best[0]
+            gain = best[0]
         if gain < min_gain:
             continue
-        alone = sorted(((_held_out_gain(a[okf], yf[okf], b[okh], yh[okh]), name)
-                        for (name, a), (_, b) in zip(gf, gh)), reverse=True)
-        found[ch] = {"held_out_gain": round(gain, 3), "regressor": alone[0][1],
-                     "regressor_gain": round(alone[0][0], 3),
-                     "correlates_with": [n for g, n in alone[:3] if g > 0.0]}
+        found[ch] = {"held_out_gain": round(gain, 3), "regressor": gf[kept[0]][0],
+                     "regressor_gain": round(first_gain, 3),
+                     "correlates_with": [gf[i][0] for i in kept]}
     if not found:
         return None
     top = max(found, key=lambda c: found[c]["held_out_gain"])
