@@ -17,7 +17,11 @@ name                     params (units)                    what it does
                          ``mean`` (m/s), ``phase`` (rad)   cos(2 pi t / period + phase)
 ``nonuniform_current``   ``amplitude`` (m/s), ``length``   Fan et al.'s V = [0, -a sqrt((L+N)/L), 0]
                          (m)
+``rotating_current``     ``speed`` (m/s), ``direction``    uniform current of constant speed whose
+                         (rad), ``rate`` (rad/s)           direction turns: direction + rate t
 ``compass_deviation``    ``amplitude``, ``phase`` (rad)    heading error amplitude sin(psi+phase)
+``soft_iron``            ``amplitude``, ``phase`` (rad)    heading error amplitude
+                                                           sin(2 psi + phase) (second harmonic)
 ``heading_bias``         ``radians``                       constant heading error
 ``gyro_bias``            ``x``, ``y``, ``z`` (rad/s)       constant gyro bias
 ``gps_latency``          ``seconds``                       GNSS fixes reported late
@@ -77,7 +81,9 @@ VOCABULARY: dict[str, tuple[str, ...]] = {
     "water_current": ("north", "east"),
     "tidal_current": ("amplitude", "period", "direction", "mean", "phase"),
     "nonuniform_current": ("amplitude", "length"),
+    "rotating_current": ("speed", "direction", "rate"),
     "compass_deviation": ("amplitude", "phase"),
+    "soft_iron": ("amplitude", "phase"),
     "heading_bias": ("radians",),
     "gyro_bias": ("x", "y", "z"),
     "gps_latency": ("seconds",),
@@ -130,6 +136,20 @@ class Effect:
         return {f"{self.name}.{k}": v for k, v in self.params.items()}
 
 
+@dataclass(frozen=True)
+class RotatingCurrent(CurrentField):
+    """A uniform current of ``speed`` (m/s) flowing toward ``direction + rate t`` (rad,
+    clockwise from north; ``t`` in s): a tidal stream turning over a survey."""
+
+    speed: float
+    direction: float
+    rate: float
+
+    def velocity_ned(self, t: float, position_ned: np.ndarray) -> np.ndarray:
+        a = self.direction + self.rate * t
+        return np.array([self.speed * math.cos(a), self.speed * math.sin(a), 0.0])
+
+
 def effect_params(effects: tuple[Effect, ...]) -> dict[str, float]:
     """All injected effects' parameters, keyed ``"<name>.<param>"``."""
     out: dict[str, float] = {}
@@ -149,6 +169,8 @@ def apply_to_environment(effects: tuple[Effect, ...], env: Environment) -> Envir
         elif e.name == "tidal_current":
             cur = cur + TidalCurrent(amplitude=p["amplitude"], direction=p["direction"],
                                      period=p["period"], phase=p["phase"], mean=p["mean"])
+        elif e.name == "rotating_current":
+            cur = cur + RotatingCurrent(p["speed"], p["direction"], p["rate"])
         elif e.name == "nonuniform_current":
             cur = cur + NonuniformCurrent(amplitude=p["amplitude"], length=p["length"])
         elif e.name == "wave_oscillation":
@@ -164,6 +186,9 @@ def apply_to_sensors(effects: tuple[Effect, ...], cfg: SensorSuiteConfig) -> Sen
         if e.name == "compass_deviation" and cfg.compass is not None:
             cfg = dataclasses.replace(cfg, compass=dataclasses.replace(
                 cfg.compass, hard_iron_rad=p["amplitude"], hard_iron_phase_rad=p["phase"]))
+        elif e.name == "soft_iron" and cfg.compass is not None:
+            cfg = dataclasses.replace(cfg, compass=dataclasses.replace(
+                cfg.compass, soft_iron_rad=p["amplitude"], soft_iron_phase_rad=p["phase"]))
         elif e.name == "heading_bias" and cfg.compass is not None:
             cfg = dataclasses.replace(cfg, compass=dataclasses.replace(
                 cfg.compass, offset_rad=cfg.compass.offset_rad + p["radians"]))

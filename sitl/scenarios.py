@@ -631,6 +631,16 @@ def _build() -> dict[str, Scenario]:
                          "two undeclared effects: current 0.22 m/s and compass deviation",
                          (Effect("water_current", {"north": 0.2, "east": 0.1}),
                           Effect("compass_deviation", {"amplitude": 0.1, "phase": -1.0}))),
+        # Effects outside the diagnosis catalog (tests/test_diagnose_unknown.py).
+        _effect_scenario("effect-rotating-current",
+                         "undeclared current of 0.3 m/s whose direction turns 60 deg over "
+                         "the run",
+                         (Effect("rotating_current", {"speed": 0.3, "direction": 0.3,
+                                                      "rate": math.radians(60.0) / 600.0}),)),
+        _effect_scenario("effect-soft-iron",
+                         "undeclared second-harmonic (soft-iron) compass error "
+                         "0.08 sin(2 psi + 0.4) rad",
+                         (Effect("soft_iron", {"amplitude": 0.08, "phase": 0.4}),)),
     ]
     by_name = {sc.name: sc for sc in s}
     faults = [

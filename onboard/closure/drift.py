@@ -6,8 +6,9 @@ warming up: one parameter value for the whole log hides them. After selection th
 data it was selected on (never the test part); for each parameter the per-window values,
 a weighted straight line through them (slope per hour, with its one sigma) and a
 chi-square test of "the same value in every window" are reported. A parameter is
-``changing`` when that test rejects constancy at ``p < 1e-3`` and the values spread by
-more than ``min_spread`` of their mean magnitude.
+``changing`` when that test rejects constancy at ``p < 1e-3`` or the slope is three of its
+standard errors from zero, and the values spread by more than ``min_spread`` of their mean
+magnitude.
 """
 
 from __future__ import annotations
@@ -104,5 +105,7 @@ def per_window(ds: Dataset, f: M.Fit, window_s: float | None = None,
             "mean": mean, "slope_per_hour": float(coef[1]),
             "slope_std": float(math.sqrt(max(cov[1, 1], 0.0))),
             "first": float(v[0]), "last": float(v[-1]),
-            "constancy_p": p, "changing": bool(p < 1e-3 and spread > min_spread)}
+            "constancy_p": p,
+            "changing": bool((p < 1e-3 or abs(coef[1]) >= 3.0 * math.sqrt(max(cov[1, 1], 0.0)))
+                             and spread > min_spread)}
     return out
