@@ -51,11 +51,16 @@ def diagnosis(sel: Selection, log: str) -> dict:
         entry = {"name": name, "detected": detected, "params": {}, "evidence": {}}
         if detected and name in sel.transformed:
             value, sd = sel.transformed[name]
-            entry["params"] = {ALL[name].params[0]: value}
-            entry["evidence"]["std"] = {ALL[name].params[0]: sd}
+            if hasattr(ALL[name], "describe_value"):
+                entry["params"] = ALL[name].describe_value(value)
+            else:
+                entry["params"] = {ALL[name].params[0]: value}
+                entry["evidence"]["std"] = {ALL[name].params[0]: sd}
         elif detected:
             if name == "thrust_nonlinearity":
                 params, std = ALL[name].describe(f.theta[name], f.std[name], float(f.base[1]))
+            elif name == "wind_force":
+                params, std = ALL[name].describe(f.theta[name], f.std[name], float(f.base[0]))
             else:
                 params, std = ALL[name].describe(f.theta[name], f.std[name])
             if name == "wave_oscillation":
@@ -115,6 +120,8 @@ def _why_not(name: str, sel: Selection) -> str:
         return "needs actuator commands"
     if name == "wave_oscillation":
         return "no significant spectral peak in the residual"
+    if name == "actuator_mapping":
+        return "needs two thruster commands (a skid-steered boat)"
     return "not applicable"
 
 

@@ -26,6 +26,7 @@ from onboard.closure import drift
 from onboard.closure import model as M
 from onboard.closure.dataset import Dataset, concat, segment_starts
 from onboard.closure.effects import ALL, Context
+from onboard.closure.effects import actuator_mapping as am
 
 
 @dataclass
@@ -235,6 +236,27 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
     current_fit, current_rel = base, 1.0
     rounds: list[list[Candidate]] = []
 
+    if "actuator_mapping" in pool:
+        # First: every surge and yaw effect depends on which command drives which thruster.
+        pool.remove("actuator_mapping")
+        e = ALL["actuator_mapping"]
+        found = e.search(fit_data)
+        if found is not None:
+            code = found[0]
+            fd, hd = e.transform(fit_data, code), e.transform(hold_data, code)
+            f = M.fit(fd, _model_effects(declared), sigma, ctx, known=known)
+            s = M.score(hd, f, metric)
+            gain = am.held_out_gain(fit_data, hold_data, int(code))
+            cand = Candidate("actuator_mapping", _relative(s, sel_before), gain, math.inf,
+                             s.headline, value=(code, 0.0))
+            rounds.append([cand])
+            if gain >= min_gain:
+                cand.accepted = True
+                chosen.append(cand.name)
+                transformed[cand.name] = cand.value
+                fit_data, hold_data = fd, hd
+                current_fit, current_rel = f, cand.score
+
     while pool:
         round_: list[Candidate] = []
         trials: dict[str, tuple[Dataset, Dataset]] = {}
@@ -384,13 +406,17 @@ def generic_basis(ds: Dataset, channel: str) -> list[tuple[str, np.ndarray]]:
     groups += _harmonics(ds.psi)
     groups.append(("speed x heading harmonic 1", u[:, None] * _harmonics(ds.psi, (1,))[0][1]))
     groups.append(("speed x heading harmonic 2", u[:, None] * _harmonics(ds.psi, (2,))[0][1]))
-    groups.append(("speed", np.column_stack([u, u * np.abs(u)])))
+    if channel != "along":
+        # in the along channel speed and command are the surge model's own terms (and
+        # those of its catalog effects): a correction there is a refit, not a new effect
+        groups.append(("speed", np.column_stack([u, u * np.abs(u)])))
     groups.append(("yaw rate", np.column_stack([ds.r, ds.r**2])))
     groups.append(("time", np.column_stack([tau, tau**2])))
     groups.append(("time x heading harmonic 1", tau[:, None] * _harmonics(ds.psi, (1,))[0][1]))
     if ds.has_commands:
         c = np.nan_to_num(ds.cmd_surge)
-        groups.append(("surge command", np.column_stack([c, c * np.abs(c)])))
+        if channel != "along":
+            groups.append(("surge command", np.column_stack([c, c * np.abs(c)])))
         groups.append(("time x surge command", np.column_stack([tau * c])))
         groups.append(("yaw command", np.column_stack([np.nan_to_num(ds.cmd_yaw)])))
     return groups
