@@ -52,17 +52,17 @@ def test_current_is_found(diagnosed):
     doc = diagnosed("effect-current")
     f = found(doc)
     assert set(f) == {"water_current"}
-    # truth 0.25 / -0.15 m/s; measured 0.237 / -0.137
+    # truth 0.25 / -0.15 m/s; measured 0.252 / -0.145
     assert f["water_current"]["params"]["north"] == pytest.approx(0.25, abs=0.03)
     assert f["water_current"]["params"]["east"] == pytest.approx(-0.15, abs=0.03)
-    # held-out ground velocity 0.30 -> 0.09 m/s
+    # test part (the last 120 s) ground velocity 0.303 -> 0.094 m/s
     assert doc["holdout_error_after"] < 0.4 * doc["holdout_error_before"]
 
 
 def test_compass_deviation_is_found_not_a_false_current(diagnosed):
     f = found(diagnosed("effect-compass-deviation"))
     assert set(f) == {"compass_deviation"}
-    # truth 0.12 sin(psi + 0.7); measured 0.116, 0.726
+    # truth 0.12 sin(psi + 0.7); measured 0.118, 0.751
     assert f["compass_deviation"]["params"]["amplitude"] == pytest.approx(0.12, abs=0.015)
     assert f["compass_deviation"]["params"]["phase"] == pytest.approx(0.7, abs=0.1)
 
@@ -70,8 +70,8 @@ def test_compass_deviation_is_found_not_a_false_current(diagnosed):
 def test_two_effects_at_once(diagnosed):
     f = found(diagnosed("effect-two"))
     assert set(f) == {"water_current", "compass_deviation"}
-    # truth current 0.2 / 0.1 m/s, deviation 0.1 sin(psi - 1.0); measured 0.205 / 0.112,
-    # 0.079 / -0.90
+    # truth current 0.2 / 0.1 m/s, deviation 0.1 sin(psi - 1.0); measured 0.202 / 0.109,
+    # 0.084 / -1.01
     assert f["water_current"]["params"]["north"] == pytest.approx(0.2, abs=0.03)
     assert f["water_current"]["params"]["east"] == pytest.approx(0.1, abs=0.03)
     assert f["compass_deviation"]["params"]["amplitude"] == pytest.approx(0.1, abs=0.03)
@@ -128,3 +128,19 @@ def test_sideslip_is_named_or_reported_ambiguous_with_a_heading_bias(diagnosed):
     # with a compass and GNSS alone; the diagnosis must then say so, not pick silently.
     f = found(diagnosed("effect-sideslip"))
     assert "sideslip" in f or "sideslip" in f["heading_bias"]["evidence"].get("ambiguous_with", [])
+
+
+@pytest.mark.slow
+def test_clean_false_alarm_rate_over_ten_seeds(tmp_path):
+    # Ten clean logs (seeds 1-10) of the effect scenarios' boat: anything named, or an
+    # unexplained residual, is a false alarm. Issue 16 asks for <= 10 %.
+    alarms = {}
+    for seed in range(1, 11):
+        d = tmp_path / f"s{seed}"
+        d.mkdir()
+        run_to_tlog("clean", d / "log.tlog", d / "truth.jsonl", seed=seed)
+        doc = diagnose(str(d / "log.tlog"), config.load(CFG), d / "out")
+        if found(doc):
+            alarms[seed] = sorted(found(doc))
+    # measured: see docs/diagnose.md ("False alarms")
+    assert len(alarms) <= 1, alarms

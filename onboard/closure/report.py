@@ -235,6 +235,12 @@ def _html(doc: dict, figs: dict[str, str]) -> str:
                            for k, v in eff["params"].items())
         ev = eff["evidence"]
         gain = ev.get("held_out_gain")
+        if eff["name"] == "unexplained":
+            params = "; ".join(f"{ch}: {v['regressor']} (gain alone {v['regressor_gain']:.2f})"
+                               for ch, v in ev.items() if isinstance(v, dict))
+        elif ev.get("drift"):
+            params += " (changing: " + ", ".join(
+                f"{k} {v['first']:.3g} -> {v['last']:.3g}" for k, v in ev["drift"].items()) + ")"
         rows.append(f"<tr><td>{e(eff['name'])}</td><td>{mark}</td><td>{e(params)}</td>"
                     f"<td>{'' if gain is None else f'{gain:.3f}'}</td>"
                     f"<td>{e(str(ev.get('t_max', ev.get('not_testable', ''))))}</td></tr>")
