@@ -23,7 +23,8 @@ from onboard.closure.dataset import Dataset
 from onboard.closure.effects import ALL
 
 SURGE = ("a", "b")
-"""Base surge parameters followed per window: pole a (1/s) and command gain b (m/s^2)."""
+"""Base surge parameters followed per window (``surge.a``, pole, 1/s; ``surge.b``, command
+gain, m/s^2) when no chosen effect shares the surge equation."""
 
 
 def _window_params(ds: Dataset, f: M.Fit) -> tuple[dict[str, float], dict[str, float]]:
@@ -31,7 +32,9 @@ def _window_params(ds: Dataset, f: M.Fit) -> tuple[dict[str, float], dict[str, f
     wf = M.fit(ds, f.effects, f.sigma, f.ctx, output_error=False, known=f.known)
     vals: dict[str, float] = {}
     sds: dict[str, float] = {}
-    if ds.has_commands:
+    if ds.has_commands and not any(ALL[n].dynamic for n in f.effects):
+        # with a dynamic effect in the surge equation (a thrust curve, drag) the base gain
+        # trades off against it window by window: followed only in the base model
         vals["surge.a"], vals["surge.b"] = float(wf.base[0]), float(wf.base[1])
         sds["surge.a"] = sds["surge.b"] = math.nan
     for name in f.effects:
@@ -78,7 +81,7 @@ def per_window(ds: Dataset, f: M.Fit, window_s: float | None = None,
             vals, sds = _window_params(w, f)
         except (np.linalg.LinAlgError, ValueError):
             continue
-        if w.has_commands:
+        if "surge.a" in vals:
             sds["surge.a"], sds["surge.b"] = _surge_sigma(w, f)
         windows.append({"t0": float(lo - ds.t[0]), "t1": float(lo - ds.t[0] + window_s),
                         "params": vals, "std": sds})
