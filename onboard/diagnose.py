@@ -61,7 +61,7 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = ()) -> di
 
 def main(args) -> int:
     """``onboard diagnose``: run :func:`diagnose` and print the effects found and the
-    held-out error before and after."""
+    error on the test part (never used to fit or to choose) before and after."""
     if not Path(args.log).exists():
         raise UsageError(f"{args.log}: no such file or directory")
     try:
@@ -71,7 +71,7 @@ def main(args) -> int:
         raise UsageError(str(err)) from None
     found = [e for e in doc["effects"] if e["detected"]]
     names = ", ".join(e["name"] for e in found) or "none"
-    print(f"effects: {names}; held-out {doc['holdout_metric']}: "
+    print(f"effects: {names}; test-part {doc['holdout_metric']}: "
           f"{doc['holdout_error_before']:.4g} -> {doc['holdout_error_after']:.4g} "
           f"({Path(args.out) / 'diagnosis.json'})")
     return 0

@@ -17,7 +17,11 @@ name                     params (units)                    what it does
                          ``mean`` (m/s), ``phase`` (rad)   cos(2 pi t / period + phase)
 ``nonuniform_current``   ``amplitude`` (m/s), ``length``   Fan et al.'s V = [0, -a sqrt((L+N)/L), 0]
                          (m)
+``rotating_current``     ``speed`` (m/s), ``direction``    uniform current of constant speed whose
+                         (rad), ``rate`` (rad/s)           direction turns: direction + rate t
 ``compass_deviation``    ``amplitude``, ``phase`` (rad)    heading error amplitude sin(psi+phase)
+``soft_iron``            ``amplitude``, ``phase`` (rad)    heading error amplitude
+                                                           sin(2 psi + phase) (second harmonic)
 ``heading_bias``         ``radians``                       constant heading error
 ``gyro_bias``            ``x``, ``y``, ``z`` (rad/s)       constant gyro bias
 ``gps_latency``          ``seconds``                       GNSS fixes reported late
@@ -30,6 +34,16 @@ name                     params (units)                    what it does
                                                            crab angle
 ``wave_oscillation``     ``period`` (s), ``height`` (m),   regular first-order waves
                          ``direction`` (rad)
+``wind``                 ``speed`` (m/s), ``direction``    steady wind blowing toward
+                         (rad), ``frontal_area``,          ``direction``: drag 0.5 rho_air
+                         ``side_area`` (m^2)               A |V_rel| V_rel on the hull and
+                                                           superstructure (surge: frontal area,
+                                                           sway: side area)
+``thrust_loss``          ``start`` (s), ``fraction``       a fouled propeller: from ``start``
+                                                           the thrust is ``1 - fraction`` of
+                                                           what it was
+``gnss_jitter``          ``std_s`` (s)                     each fix's time tag off by a normal
+                                                           error of ``std_s`` (no mean latency)
 ``external_force``       ``north``, ``east``, ``down``     constant world-frame force (the
                          (N)                               ESESO paper's disturbance)
 ``gnss_outage``          ``start``, ``duration`` (s)       sensor fault: no GNSS fix at all
@@ -77,7 +91,9 @@ VOCABULARY: dict[str, tuple[str, ...]] = {
     "water_current": ("north", "east"),
     "tidal_current": ("amplitude", "period", "direction", "mean", "phase"),
     "nonuniform_current": ("amplitude", "length"),
+    "rotating_current": ("speed", "direction", "rate"),
     "compass_deviation": ("amplitude", "phase"),
+    "soft_iron": ("amplitude", "phase"),
     "heading_bias": ("radians",),
     "gyro_bias": ("x", "y", "z"),
     "gps_latency": ("seconds",),
@@ -86,6 +102,9 @@ VOCABULARY: dict[str, tuple[str, ...]] = {
     "surge_yaw_coupling": ("coefficient",),
     "sideslip": ("coefficient",),
     "wave_oscillation": ("period", "height", "direction"),
+    "wind": ("speed", "direction", "frontal_area", "side_area"),
+    "thrust_loss": ("start", "fraction"),
+    "gnss_jitter": ("std_s",),
     "external_force": ("north", "east", "down"),
     "gnss_outage": ("start", "duration"),
     "dvl_lock_loss": ("start", "duration"),
@@ -99,6 +118,7 @@ _DEFAULTS: dict[str, dict[str, float]] = {
     "gyro_bias": {"x": 0.0, "y": 0.0, "z": 0.0},
     "wave_oscillation": {"height": 0.3, "direction": 0.0},
     "external_force": {"north": 0.0, "east": 0.0, "down": 0.0},
+    "wind": {"frontal_area": 0.15, "side_area": 0.3},
     "compass_step": {"duration": math.inf},
 }
 
@@ -130,6 +150,20 @@ class Effect:
         return {f"{self.name}.{k}": v for k, v in self.params.items()}
 
 
+@dataclass(frozen=True)
+class RotatingCurrent(CurrentField):
+    """A uniform current of ``speed`` (m/s) flowing toward ``direction + rate t`` (rad,
+    clockwise from north; ``t`` in s): a tidal stream turning over a survey."""
+
+    speed: float
+    direction: float
+    rate: float
+
+    def velocity_ned(self, t: float, position_ned: np.ndarray) -> np.ndarray:
+        a = self.direction + self.rate * t
+        return np.array([self.speed * math.cos(a), self.speed * math.sin(a), 0.0])
+
+
 def effect_params(effects: tuple[Effect, ...]) -> dict[str, float]:
     """All injected effects' parameters, keyed ``"<name>.<param>"``."""
     out: dict[str, float] = {}
@@ -149,6 +183,8 @@ def apply_to_environment(effects: tuple[Effect, ...], env: Environment) -> Envir
         elif e.name == "tidal_current":
             cur = cur + TidalCurrent(amplitude=p["amplitude"], direction=p["direction"],
                                      period=p["period"], phase=p["phase"], mean=p["mean"])
+        elif e.name == "rotating_current":
+            cur = cur + RotatingCurrent(p["speed"], p["direction"], p["rate"])
         elif e.name == "nonuniform_current":
             cur = cur + NonuniformCurrent(amplitude=p["amplitude"], length=p["length"])
         elif e.name == "wave_oscillation":
@@ -164,6 +200,9 @@ def apply_to_sensors(effects: tuple[Effect, ...], cfg: SensorSuiteConfig) -> Sen
         if e.name == "compass_deviation" and cfg.compass is not None:
             cfg = dataclasses.replace(cfg, compass=dataclasses.replace(
                 cfg.compass, hard_iron_rad=p["amplitude"], hard_iron_phase_rad=p["phase"]))
+        elif e.name == "soft_iron" and cfg.compass is not None:
+            cfg = dataclasses.replace(cfg, compass=dataclasses.replace(
+                cfg.compass, soft_iron_rad=p["amplitude"], soft_iron_phase_rad=p["phase"]))
         elif e.name == "heading_bias" and cfg.compass is not None:
             cfg = dataclasses.replace(cfg, compass=dataclasses.replace(
                 cfg.compass, offset_rad=cfg.compass.offset_rad + p["radians"]))
@@ -173,6 +212,9 @@ def apply_to_sensors(effects: tuple[Effect, ...], cfg: SensorSuiteConfig) -> Sen
         elif e.name == "gps_latency" and cfg.gnss is not None:
             cfg = dataclasses.replace(cfg, gnss=dataclasses.replace(
                 cfg.gnss, latency_s=cfg.gnss.latency_s + p["seconds"]))
+        elif e.name == "gnss_jitter" and cfg.gnss is not None:
+            cfg = dataclasses.replace(cfg, gnss=dataclasses.replace(
+                cfg.gnss, time_jitter_std_s=p["std_s"]))
         elif e.name == "gnss_outage" and cfg.gnss is not None:
             cfg = dataclasses.replace(cfg, gnss=dataclasses.replace(
                 cfg.gnss, outage_windows=cfg.gnss.outage_windows + ((p["start"], p["duration"]),)))
@@ -189,8 +231,13 @@ def apply_to_sensors(effects: tuple[Effect, ...], cfg: SensorSuiteConfig) -> Sen
 
 def apply_to_plant(effects: tuple[Effect, ...], plant: object) -> None:
     """Plant-parameter effects: ``thrust_nonlinearity`` sets ``params.thrust_exponent``
-    on plants whose parameters have one (see :mod:`sitl.scenarios`)."""
+    on plants whose parameters have one (see :mod:`sitl.scenarios`); ``thrust_loss`` sets
+    the plant's ``thrust_loss`` = (start, fraction) where it has that attribute."""
     for e in effects:
+        if e.name == "thrust_loss":
+            if not hasattr(plant, "thrust_loss"):
+                raise ValueError(f"plant {getattr(plant, 'name', plant)!r} has no thrust_loss")
+            plant.thrust_loss = (e.params["start"], e.params["fraction"])
         if e.name == "thrust_nonlinearity":
             params = getattr(plant, "params", None)
             if params is None or not hasattr(params, "thrust_exponent"):
@@ -199,7 +246,9 @@ def apply_to_plant(effects: tuple[Effect, ...], plant: object) -> None:
             plant.params = dataclasses.replace(params, thrust_exponent=e.params["exponent"])
 
 
-FORCE_EFFECTS = ("quadratic_drag", "surge_yaw_coupling", "sideslip", "external_force")
+FORCE_EFFECTS = ("quadratic_drag", "surge_yaw_coupling", "sideslip", "external_force", "wind")
+AIR_DENSITY = 1.225
+"""kg/m^3 at sea level, 15 deg C."""
 
 
 def external_force_ned(effects: tuple[Effect, ...], u_r: float, r: float, yaw: float,
@@ -223,6 +272,14 @@ def external_force_ned(effects: tuple[Effect, ...], u_r: float, r: float, yaw: f
             fy += p["coefficient"] * u * abs(u)
         elif e.name == "external_force":
             f_ned += (p["north"], p["east"], p["down"])
+        elif e.name == "wind":
+            # apparent wind in body axes (the boat's sway is small against its surge)
+            rel = p["direction"] - yaw
+            wx = p["speed"] * math.cos(rel) - u
+            wy = p["speed"] * math.sin(rel)
+            w = math.hypot(wx, wy)
+            fx += 0.5 * AIR_DENSITY * p["frontal_area"] * w * wx
+            fy += 0.5 * AIR_DENSITY * p["side_area"] * w * wy
         else:
             continue
         any_force = True

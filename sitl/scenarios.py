@@ -151,10 +151,16 @@ effect."""
 
 class ForcedRudderBoat(RudderBoat):
     """The rudder boat with ``command.external_force_world`` (N, NED) applied at the origin
-    (used by the force effects; the base plant reports but does not apply it)."""
+    (used by the force effects; the base plant reports but does not apply it), and with
+    ``thrust_loss`` = (start s, fraction): from ``start`` the propeller gives ``1 -
+    fraction`` of its thrust (the ``thrust_loss`` effect; None: never)."""
+
+    thrust_loss: tuple[float, float] | None = None
 
     def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
         xd = super()._rhs(t, x, command)
+        if self.thrust_loss is not None and t >= self.thrust_loss[0]:
+            xd[6] -= self.thrust_loss[1] * self._inputs(command)[0] / self.params.m11
         f = command.external_force_world
         if f is not None:
             p = self.params
@@ -210,6 +216,19 @@ def _twin_thruster() -> VehicleSpec:
         shaft_rpm=lambda plant, c: tuple(n * 60.0 for n in plant.shaft_speeds),
         surge_mass=lambda plant: plant.params.m11,
     )
+
+
+def _twin_thruster_miswired() -> VehicleSpec:
+    """The twin-thruster boat with its ESCs miswired against the autopilot's outputs:
+    output 1 (SERVO1, ``ThrottleLeft``) drives the starboard thruster reversed, output 3
+    (``ThrottleRight``) the port one. The autopilot compensates (it learned the wiring),
+    so the boat flies its mission; a log read with the nominal channel map sees the
+    wrong thrusters."""
+    spec = _twin_thruster()
+    return dataclasses.replace(
+        spec,
+        to_channels=lambda c: (-(c.right or 0.0), c.left or 0.0),
+        from_channels=lambda v, c: Command(left=v[1], right=-v[0]))
 
 
 def _bluerov2() -> VehicleSpec:
@@ -631,7 +650,37 @@ def _build() -> dict[str, Scenario]:
                          "two undeclared effects: current 0.22 m/s and compass deviation",
                          (Effect("water_current", {"north": 0.2, "east": 0.1}),
                           Effect("compass_deviation", {"amplitude": 0.1, "phase": -1.0}))),
+        # Effects outside the diagnosis catalog (tests/test_diagnose_unknown.py).
+        _effect_scenario("effect-rotating-current",
+                         "undeclared current of 0.3 m/s whose direction turns 60 deg over "
+                         "the run",
+                         (Effect("rotating_current", {"speed": 0.3, "direction": 0.3,
+                                                      "rate": math.radians(60.0) / 600.0}),)),
+        _effect_scenario("effect-soft-iron",
+                         "undeclared second-harmonic (soft-iron) compass error "
+                         "0.08 sin(2 psi + 0.4) rad",
+                         (Effect("soft_iron", {"amplitude": 0.08, "phase": 0.4}),)),
+        _effect_scenario("effect-wind",
+                         "undeclared steady 5 m/s wind toward 2.0 rad on the hull",
+                         (Effect("wind", {"speed": 5.0, "direction": 2.0}),)),
+        _effect_scenario("effect-thrust-loss",
+                         "undeclared fouled propeller: 35 % of the thrust lost from 240 s",
+                         (Effect("thrust_loss", {"start": 240.0, "fraction": 0.35}),)),
+        _effect_scenario("effect-gnss-jitter",
+                         "undeclared GNSS time-tag jitter, 0.15 s std, no mean latency",
+                         (Effect("gnss_jitter", {"std_s": 0.15}),)),
     ]
+    s.append(Scenario(
+        name="effect-thruster-swap",
+        description="twin-thruster-turns for 600 s with SERVO1 driving the starboard "
+                    "thruster reversed and SERVO3 the port one (undeclared)",
+        reproduces="model closure: thruster channels swapped and reversed",
+        vehicle=_twin_thruster_miswired(),
+        sensors=_effect_sensors(),
+        controller=_blueboat_autopilot,
+        duration_s=600.0,
+        origin=(63.4390, 10.3990),
+    ))
     by_name = {sc.name: sc for sc in s}
     faults = [
         _fault(by_name["jaiabot-turns"], "fault-gnss-outage",

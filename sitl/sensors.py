@@ -272,6 +272,9 @@ class GnssConfig:
     ``gnss_outage`` fault: antenna cable, jamming, a bridge)."""
     num_sats: int = 12
     hdop: float = 0.9
+    time_jitter_std_s: float = 0.0
+    """Std of a normal error of each fix's time tag (s), zero mean: a receiver whose time
+    tags are not locked to its measurement epochs (the ``gnss_jitter`` effect)."""
 
 
 class Gnss(_Base):
@@ -309,6 +312,8 @@ class Gnss(_Base):
         vn = world.v_ned[0] + c.velocity_std_mps * n[2]
         ve = world.v_ned[1] + c.velocity_std_mps * n[3]
         t_report = t + c.latency_s
+        if c.time_jitter_std_s > 0.0:
+            t_report += c.time_jitter_std_s * float(self.rng.standard_normal())
         fix = GnssFix(
             t=t_report, source=self.name, lat_deg=lat, lon_deg=lon,
             alt_m=-tr.down + c.altitude_std_m * n[4], fix_quality=1,
@@ -317,7 +322,9 @@ class Gnss(_Base):
             h_acc_m=math.hypot(c.position_std_m, c.drift_std_m),
             v_acc_m=c.altitude_std_m,
         )
-        self._queue.append((t_report, fix))
+        # delivered in order, and never before the instant measured
+        due = max(t_report, t, self._queue[-1][0] if self._queue else -math.inf)
+        self._queue.append((due, fix))
         return self.due(t)
 
     def due(self, t: float) -> list[Sample]:

@@ -15,7 +15,8 @@ import pytest
 
 from onboard.closure import report
 from onboard.closure.dataset import from_arrays
-from onboard.closure.select import select
+from onboard.closure import model as M
+from onboard.closure.select import select, split
 
 
 def synth(seed=0, T=900.0, dt=0.1, current=(0.0, 0.0), dev=(0.0, 0.0), gyro_bias=0.0,
@@ -143,3 +144,83 @@ def test_structure_no_effect_explains_is_reported_unexplained():
     doc, found = detected(synth(harmonic2=0.15))
     assert "unexplained" in found
     assert "compass_deviation" not in found and "water_current" not in found
+    ev = found["unexplained"]["evidence"]
+    # measured: lateral, "heading harmonic 2", held-out gain 0.81 (alone 0.81)
+    assert ev["channel"] == "lateral" and ev["regressor"] == "heading harmonic 2"
+    assert ev["held_out_gain"] > 0.5
+
+
+def test_unexplained_looks_at_every_channel():
+    # A gyro whose bias grows with time (a warming sensor): the heading channel drifts as
+    # t^2, which no constant gyro bias fits on the test part; the evidence must name the
+    # heading channel and time.
+    ds = synth()
+    ramp = 2e-5 * (ds.t - ds.t[0])  # rad/s per s: 0 -> 0.018 rad/s over 900 s
+    ds2 = from_arrays(ds.t, ds.psi, ds.v_n, ds.v_e, r=ds.r + ramp, cmd_surge=ds.cmd_surge,
+                      cmd_yaw=ds.cmd_yaw)
+    sel = select(ds2)
+    assert sel.unexplained is not None and "heading" in sel.unexplained
+    assert sel.unexplained["heading"]["regressor"] == "time"
+
+
+def test_three_way_split_scores_on_a_test_part_it_never_used():
+    ds = synth(current=(0.3, -0.2))
+    sel = select(ds)
+    doc = report.diagnosis(sel, "synthetic")
+    parts = doc["split_parts"]
+    assert parts["method"] == "forward_in_time"
+    last_seen = max(b for k in ("fit", "select") for _, b in parts[k]["time_ranges_s"])
+    (t0, t1), = parts["test"]["time_ranges_s"]
+    assert t0 > last_seen and t1 == pytest.approx(ds.t[-1] - ds.t[0], abs=0.2)
+    assert sum(parts[k]["samples"] for k in ("fit", "select", "test")) == len(ds)
+    # the test part is disjoint from what was fitted and selected on
+    seen = set(np.round(np.r_[sel.split.fit.t, sel.split.holdout.t], 3))
+    assert not seen & set(np.round(sel.split.test.t, 3))
+    # the headline figures are the test part's; the selection part's are separate
+    assert doc["holdout_error_after"] == pytest.approx(
+        M.score(sel.final_split.test, sel.final_fit, doc["holdout_metric"]).headline)
+    assert doc["selection_error_after"] != doc["holdout_error_after"]
+    # measured: test part 0.367 -> 0.072 m/s
+    assert doc["holdout_error_after"] < 0.3 * doc["holdout_error_before"]
+
+
+def test_split_by_run_keeps_whole_runs_in_one_part():
+    ds = synth()
+    runs = np.array([f"run{int(k)}" for k in (ds.t - ds.t[0]) // 150], dtype=object)  # 6 runs
+    ds.run = runs
+    sp = split(ds)
+    assert sp.parts["test"]["runs"] == ["run2", "run5"]
+    assert sp.parts["select"]["runs"] == ["run1"]
+    assert sp.parts["fit"]["runs"] == ["run0", "run3", "run4"]
+    assert set(sp.test.run) == {"run2", "run5"}
+
+
+@pytest.mark.parametrize("logged, expected", [
+    # (logged left, logged right) from (port, starboard); expected mapping
+    (lambda p, s: (s, p), {"swapped": True, "reversed_left": False, "reversed_right": False}),
+    (lambda p, s: (-s, p), {"swapped": True, "reversed_left": True, "reversed_right": False}),
+    (lambda p, s: (p, -s), {"swapped": False, "reversed_left": False, "reversed_right": True}),
+])
+def test_actuator_mapping_finds_swapped_and_reversed_thrusters(logged, expected):
+    # A skid-steered boat: surge from the mean of the two thrusts, yaw rate from half the
+    # difference (port ahead turns to starboard). The synthetic rudder plays that part.
+    ds = synth()
+    port, stbd = ds.cmd_surge + ds.cmd_yaw, ds.cmd_surge - ds.cmd_yaw
+    left, right = logged(port, stbd)
+    ds2 = from_arrays(ds.t, ds.psi, ds.v_n, ds.v_e, r=ds.r, cmd_surge=0.5 * (left + right),
+                      cmd_yaw=0.5 * (left - right), cmd_left=left, cmd_right=right)
+    doc, found = detected(ds2)
+    assert found["actuator_mapping"]["params"] == expected
+    ev = found["actuator_mapping"]["evidence"]
+    # measured held-out gains (surge + yaw-rate variance left): 0.84, 0.92, 0.92; the test
+    # part's ground velocity error with a reversed thruster 0.439 -> 0.072 m/s
+    assert ev["held_out_gain"] > 0.3
+
+
+def test_actuator_mapping_is_not_named_when_the_channels_are_right():
+    ds = synth()
+    port, stbd = ds.cmd_surge + ds.cmd_yaw, ds.cmd_surge - ds.cmd_yaw
+    ds2 = from_arrays(ds.t, ds.psi, ds.v_n, ds.v_e, r=ds.r, cmd_surge=ds.cmd_surge,
+                      cmd_yaw=ds.cmd_yaw, cmd_left=port, cmd_right=stbd)
+    _, found = detected(ds2)
+    assert found == {}

@@ -6,6 +6,7 @@ on data the fit did not see (architecture.md §4.3).
 
 Modules: :mod:`.dataset` (a log -> aligned measured channels), :mod:`.channels` (the base
 model and its residual channels), :mod:`.effects` (one module per effect in the vocabulary),
-:mod:`.stats` (whiteness, spectra), :mod:`.select` (held-out selection), :mod:`.report`
+:mod:`.stats` (whiteness, spectra), :mod:`.select` (three-way split, selection,
+unexplained structure), :mod:`.drift` (parameters per time window), :mod:`.report`
 (diagnosis.json and report.html).
 """

@@ -62,6 +62,7 @@ class _Collector:
         self.north = self.east = math.nan
         self.fix_t = -math.inf
         self.cmd_surge = self.cmd_yaw = self.cmd_quad = self.cmd_rev = math.nan
+        self.cmd_left = self.cmd_right = math.nan
         self.run = ""
         self.has_gyro = False
 
@@ -104,6 +105,7 @@ class _Collector:
                     self.cmd_yaw = 0.5 * (s.left - s.right)
                     self.cmd_quad = 0.5 * (s.left * abs(s.left) + s.right * abs(s.right))
                     self.cmd_rev = 0.5 * (min(s.left, 0.0) + min(s.right, 0.0))
+                    self.cmd_left, self.cmd_right = s.left, s.right
         if self.gyro_n:
             self.gyro_last = self.gyro_sum / self.gyro_n
             self.gyro_sum, self.gyro_n = 0.0, 0
@@ -112,7 +114,7 @@ class _Collector:
             t, self.heading, self.gyro_last,
             self.vn if vog_fresh else self.gnss_vn, self.ve if vog_fresh else self.gnss_ve,
             self.north, self.east, self.fix_t, self.cmd_surge, self.cmd_yaw, self.cmd_quad,
-            self.cmd_rev, self.run,
+            self.cmd_rev, self.run, self.cmd_left, self.cmd_right,
         ))
         return {}
 
@@ -154,6 +156,9 @@ class Dataset:
     has_gyro: bool
     has_commands: bool
     source: str = ""
+    cmd_left: np.ndarray | None = None
+    """A skid-steered boat's two thruster commands as logged (normalized), else None."""
+    cmd_right: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
@@ -167,6 +172,20 @@ class Dataset:
             v = getattr(self, name)
             kw[name] = v[mask] if isinstance(v, np.ndarray) and v.shape[:1] == self.t.shape else v
         return Dataset(**kw)
+
+
+def concat(parts: Sequence["Dataset"]) -> "Dataset":
+    """The datasets one after the other (per-tick arrays joined, the rest from the first).
+    Their run labels keep the parts' segments apart: give adjacent parts different labels."""
+    first = parts[0]
+    kw = {}
+    for name in first.__dataclass_fields__:
+        v = getattr(first, name)
+        if isinstance(v, np.ndarray) and v.shape[:1] == first.t.shape:
+            kw[name] = np.concatenate([getattr(p, name) for p in parts])
+        else:
+            kw[name] = v
+    return Dataset(**kw)
 
 
 def segment_starts(ds: "Dataset") -> np.ndarray:
@@ -198,7 +217,8 @@ def _smooth(x: np.ndarray, window: int, deriv: int = 0, dt: float = 1.0) -> np.n
 
 def from_arrays(t, psi, v_n, v_e, *, r=None, cmd_surge=None, cmd_yaw=None,
                 thrust_quadratic=None, thrust_reverse=None, run=None,
-                north=None, east=None, smooth_s: float = 1.0, source: str = "") -> Dataset:
+                north=None, east=None, smooth_s: float = 1.0, source: str = "",
+                cmd_left=None, cmd_right=None) -> Dataset:
     """Build a dataset from uniformly sampled arrays (SI units, heading in rad)."""
     t = np.asarray(t, float)
     n = len(t)
@@ -230,7 +250,9 @@ def from_arrays(t, psi, v_n, v_e, *, r=None, cmd_surge=None, cmd_yaw=None,
         run=np.asarray(run if run is not None else [""] * n, dtype=object),
         north=nan if north is None else np.asarray(north, float),
         east=nan if east is None else np.asarray(east, float),
-        has_gyro=has_gyro, has_commands=bool(np.isfinite(cmd_surge).any()), source=source)
+        has_gyro=has_gyro, has_commands=bool(np.isfinite(cmd_surge).any()), source=source,
+        cmd_left=None if cmd_left is None else np.asarray(cmd_left, float),
+        cmd_right=None if cmd_right is None else np.asarray(cmd_right, float))
 
 
 def remeasured(ds: Dataset, *, psi: np.ndarray | None = None, v_n: np.ndarray | None = None,
@@ -245,7 +267,9 @@ def remeasured(ds: Dataset, *, psi: np.ndarray | None = None, v_n: np.ndarray | 
                       cmd_surge=ds.cmd_surge[k], cmd_yaw=ds.cmd_yaw[k],
                       thrust_quadratic=ds.thrust_quadratic[k],
                       thrust_reverse=ds.thrust_reverse[k], run=ds.run[k], north=ds.north[k],
-                      east=ds.east[k], source=ds.source)
+                      east=ds.east[k], source=ds.source,
+                      cmd_left=None if ds.cmd_left is None else ds.cmd_left[k],
+                      cmd_right=None if ds.cmd_right is None else ds.cmd_right[k])
     if not ds.has_gyro:
         out.r = ds.r[k]  # the heading-derived rate, kept as it was
     return out
@@ -263,7 +287,7 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     if not col.rows:
         raise ValueError(f"{path}: no samples")
     cols = list(zip(*col.rows))
-    t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs = (
+    t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs, cl, cr = (
         np.array(c) for c in cols)
     t = t.astype(float)
     ok = np.isfinite(psi.astype(float)) & np.isfinite(v_n.astype(float)) & np.isfinite(
@@ -284,5 +308,7 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
         cmd_surge=cmd_s[idx].astype(float), cmd_yaw=cmd_y[idx].astype(float),
         thrust_quadratic=cmd_q[idx].astype(float), thrust_reverse=cmd_r[idx].astype(float),
         run=labels,
-        north=north[idx].astype(float), east=east[idx].astype(float), source=str(path))
+        north=north[idx].astype(float), east=east[idx].astype(float), source=str(path),
+        cmd_left=cl[idx].astype(float) if np.isfinite(cl.astype(float)).any() else None,
+        cmd_right=cr[idx].astype(float) if np.isfinite(cr.astype(float)).any() else None)
     return ds

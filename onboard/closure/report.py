@@ -51,11 +51,16 @@ def diagnosis(sel: Selection, log: str) -> dict:
         entry = {"name": name, "detected": detected, "params": {}, "evidence": {}}
         if detected and name in sel.transformed:
             value, sd = sel.transformed[name]
-            entry["params"] = {ALL[name].params[0]: value}
-            entry["evidence"]["std"] = {ALL[name].params[0]: sd}
+            if hasattr(ALL[name], "describe_value"):
+                entry["params"] = ALL[name].describe_value(value)
+            else:
+                entry["params"] = {ALL[name].params[0]: value}
+                entry["evidence"]["std"] = {ALL[name].params[0]: sd}
         elif detected:
             if name == "thrust_nonlinearity":
                 params, std = ALL[name].describe(f.theta[name], f.std[name], float(f.base[1]))
+            elif name == "wind_force":
+                params, std = ALL[name].describe(f.theta[name], f.std[name], float(f.base[0]))
             else:
                 params, std = ALL[name].describe(f.theta[name], f.std[name])
             if name == "wave_oscillation":
@@ -63,6 +68,10 @@ def diagnosis(sel: Selection, log: str) -> dict:
                 params["direction"] = f.ctx.extra.get("wave_direction")
             entry["params"] = params
             entry["evidence"]["std"] = std
+        changing = {k.split(".", 1)[1]: v for k, v in sel.drift.get("params", {}).items()
+                    if k.startswith(name + ".") and v["changing"]}
+        if detected and changing:
+            entry["evidence"]["drift"] = changing
         if cand is not None:
             entry["evidence"].update({
                 "held_out_gain": round(cand.gain, 4), "t_max": round(cand.t_max, 2),
@@ -87,15 +96,19 @@ def diagnosis(sel: Selection, log: str) -> dict:
         "base_params": {**({"a": a, "b": b, "c0": c0} if sel.split.fit.has_commands else {}),
                         "x_p": float(f.x_p)},
         "known": {k: v.tolist() for k, v in f.known.items()},
-        "residuals_before": _residual_stats(sel.split.holdout, sel.base_fit),
+        "split_parts": sel.split.parts,
+        "residuals_before": _residual_stats(sel.base_test, sel.base_fit),
         "effects": effects,
-        "residuals_after": _residual_stats(sel.final_split.holdout, f),
+        "residuals_after": _residual_stats(sel.final_split.test, f),
         "holdout_error_before": sel.before.headline,
         "holdout_error_after": sel.after.headline,
         "holdout_metric": sel.metric,
         "holdout_channels_before": sel.before.channels,
         "holdout_channels_after": sel.after.channels,
         "wave_search": sel.wave,
+        "selection_error_before": sel.select_before.headline,
+        "selection_error_after": sel.select_after.headline,
+        "drift": sel.drift,
     })
 
 
@@ -107,6 +120,8 @@ def _why_not(name: str, sel: Selection) -> str:
         return "needs actuator commands"
     if name == "wave_oscillation":
         return "no significant spectral peak in the residual"
+    if name == "actuator_mapping":
+        return "needs two thruster commands (a skid-steered boat)"
     return "not applicable"
 
 
@@ -123,12 +138,13 @@ def figures(sel: Selection) -> dict[str, str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    hold = sel.split.holdout
+    hold = sel.base_test
+    after_data = sel.final_split.test
     rb = M.residuals(hold, sel.base_fit)
-    ra_full = M.residuals(sel.final_split.holdout, sel.final_fit)
+    ra_full = M.residuals(after_data, sel.final_fit)
     # After a latency re-alignment the final data are shorter; compare on common ticks.
-    idx = np.searchsorted(sel.final_split.holdout.t, hold.t).clip(0, len(sel.final_split.holdout) - 1)
-    same = sel.final_split.holdout.t[idx] == hold.t
+    idx = np.searchsorted(after_data.t, hold.t).clip(0, len(after_data) - 1)
+    same = after_data.t[idx] == hold.t
     ra = {k: np.where(same, v[idx], np.nan) for k, v in ra_full.items()}
     out = {}
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
@@ -159,7 +175,7 @@ def figures(sel: Selection) -> dict[str, str]:
     plt.close(fig)
 
     pb = M.predict(hold, sel.base_fit)
-    pa_full = M.predict(sel.final_split.holdout, sel.final_fit)
+    pa_full = M.predict(after_data, sel.final_fit)
     pa = {k: np.where(same, v[idx], np.nan) for k, v in pa_full.items()}
     rows = 2 if "along" in pb else 1
     fig, axes = plt.subplots(rows, 1, figsize=(10, 3.0 * rows), sharex=True, squeeze=False)
@@ -187,7 +203,7 @@ def figures(sel: Selection) -> dict[str, str]:
         ax.plot(t, pa["along"], lw=0.8, label="with effects (open loop)")
         ax.set_ylabel("along-track speed (m/s)")
         ax.legend(loc="upper right")
-    axes[-1][0].set_xlabel("time (s) of the held-out segments")
+    axes[-1][0].set_xlabel("time (s) of the test part")
     fig.tight_layout()
     out["before_after"] = _fig_png(fig)
     plt.close(fig)
@@ -219,6 +235,12 @@ def _html(doc: dict, figs: dict[str, str]) -> str:
                            for k, v in eff["params"].items())
         ev = eff["evidence"]
         gain = ev.get("held_out_gain")
+        if eff["name"] == "unexplained":
+            params = "; ".join(f"{ch}: {v['regressor']} (gain alone {v['regressor_gain']:.2f})"
+                               for ch, v in ev.items() if isinstance(v, dict))
+        elif ev.get("drift"):
+            params += " (changing: " + ", ".join(
+                f"{k} {v['first']:.3g} -> {v['last']:.3g}" for k, v in ev["drift"].items()) + ")"
         rows.append(f"<tr><td>{e(eff['name'])}</td><td>{mark}</td><td>{e(params)}</td>"
                     f"<td>{'' if gain is None else f'{gain:.3f}'}</td>"
                     f"<td>{e(str(ev.get('t_max', ev.get('not_testable', ''))))}</td></tr>")

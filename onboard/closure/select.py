@@ -22,36 +22,98 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from onboard.closure import drift
 from onboard.closure import model as M
-from onboard.closure.dataset import Dataset
+from onboard.closure.dataset import Dataset, concat, segment_starts
 from onboard.closure.effects import ALL, Context
+from onboard.closure.effects import actuator_mapping as am
 
 
 @dataclass
 class Split:
-    """Data to fit on, data to score on (held out), and how they were split."""
+    """The three parts of the data: ``fit`` (parameters are estimated on it), ``holdout``
+    (the selection part: effects are chosen by their error on it) and ``test`` (the final
+    score only: never used to fit or to choose), with ``how`` in words and ``parts``, which
+    runs or time ranges went where (for diagnosis.json)."""
 
     fit: Dataset
     holdout: Dataset
     how: str
+    test: Dataset | None = None
+    parts: dict = field(default_factory=dict)
 
 
-def split(ds: Dataset, block_s: float = 60.0) -> Split:
-    """Fit and held-out data: by run when there are at least three runs (every third
-    held out), else interleaved blocks of ``block_s`` seconds (every third held out)."""
+def _time_ranges(ds: Dataset) -> list[list[float]]:
+    """[start, end] (s since the log's first tick) of each contiguous segment of ``ds``."""
+    out = []
+    if len(ds) == 0:
+        return out
+    change = np.flatnonzero(ds.run[1:] != ds.run[:-1]) + 1
+    for a, b in zip(np.r_[0, change], np.r_[change, len(ds)]):
+        out.append([float(ds.t[a]), float(ds.t[b - 1])])
+    return out
+
+
+def _part_summary(ds: Dataset, t0: float, runs: list[str] | None = None) -> dict:
+    ranges = [[round(a - t0, 2), round(b - t0, 2)] for a, b in _time_ranges(ds)]
+    merged: list[list[float]] = []
+    for a, b in ranges:  # adjacent blocks of one part read as one range
+        if merged and a - merged[-1][1] <= 2.5 * ds.dt:
+            merged[-1][1] = b
+        else:
+            merged.append([a, b])
+    out = {"samples": len(ds), "seconds": round(len(ds) * ds.dt, 1), "time_ranges_s": merged}
+    if runs is not None:
+        out["runs"] = runs
+    return out
+
+
+def split(ds: Dataset, block_s: float = 60.0, test_share: float = 0.2) -> Split:
+    """Fit, selection and test parts.
+
+    * At least three runs (a directory of runs): every third run, from the third, is the
+      test part; of the others every third, from the second, the selection part; the rest
+      are fitted on.
+    * One run: the last ``test_share`` of the time span is the test part (forward in time:
+      the model is scored on what came after everything it saw); before it, interleaved
+      ``block_s`` blocks, every third for selection, the others fitted on.
+
+    Blocks get their own run labels, so open-loop predictions restart at each.
+    """
     runs = [r.split("#")[0] for r in ds.run]
     names = sorted(set(runs))
+    t0 = float(ds.t[0]) if len(ds) else 0.0
     if len(names) >= 3:
-        held = set(names[1::3])
-        mask = np.array([r in held for r in runs])
-        return Split(ds.subset(~mask), ds.subset(mask),
-                     f"by run: {len(names) - len(held)} fit, {len(held)} held out ({', '.join(sorted(held))})")
-    block = np.floor((ds.t - ds.t[0]) / block_s).astype(int)
-    mask = block % 3 == 2
+        test_runs = names[2::3]
+        rest = [n for n in names if n not in test_runs]
+        sel_runs = rest[1::3]
+        fit_runs = [n for n in rest if n not in sel_runs]
+        where = np.array(runs, dtype=object)
+        parts = {"fit": ds.subset(np.isin(where, fit_runs)),
+                 "select": ds.subset(np.isin(where, sel_runs)),
+                 "test": ds.subset(np.isin(where, test_runs))}
+        summary = {k: _part_summary(v, t0, r) for (k, v), r in zip(
+            parts.items(), (fit_runs, sel_runs, test_runs))}
+        return Split(parts["fit"], parts["select"],
+                     f"by run: {len(fit_runs)} fit, {len(sel_runs)} select "
+                     f"({', '.join(sel_runs)}), {len(test_runs)} test ({', '.join(test_runs)})",
+                     parts["test"], {"method": "by_run", **summary})
+    t_rel = ds.t - t0
+    span = float(t_rel[-1]) if len(ds) else 0.0
+    t_test = (1.0 - test_share) * span
+    block = np.floor(t_rel / block_s).astype(int)
+    is_test = t_rel >= t_test
+    block = np.where(is_test, block.max(initial=0) + 1 + np.floor((t_rel - t_test) / block_s).astype(int), block)
     labels = np.array([f"{r}@{b}" for r, b in zip(ds.run, block)], dtype=object)
     ds2 = Dataset(**{**vars(ds), "run": labels})
-    return Split(ds2.subset(~mask), ds2.subset(mask),
-                 f"interleaved {block_s:.0f} s blocks, every third held out")
+    is_sel = ~is_test & (block % 3 == 2)
+    fit, sel, test = ds2.subset(~is_test & ~is_sel), ds2.subset(is_sel), ds2.subset(is_test)
+    return Split(fit, sel,
+                 f"forward in time: the last {100 * test_share:.0f} % (from {t_test:.0f} s) is "
+                 f"the test part; before it, interleaved {block_s:.0f} s blocks, every third "
+                 "for selection, the others fitted on",
+                 test, {"method": "forward_in_time", "fit": _part_summary(fit, t0),
+                        "select": _part_summary(sel, t0), "test": _part_summary(test, t0)})
 
 
 @dataclass
@@ -77,9 +139,11 @@ class Candidate:
 @dataclass
 class Selection:
     """The outcome of :func:`select`: the split, the metric, the declared and chosen
-    effects, the base and final fits with their held-out scores, every round's
-    candidates, an ``unexplained`` residual structure, the wave found in the residual,
-    and the values of the effects applied to the data (``transformed``)."""
+    effects, the base and final fits (refitted on the fit and selection parts together)
+    with their scores on the test part (``before``, ``after``) and on the selection part
+    (``select_before``, ``select_after``), every round's candidates, an ``unexplained``
+    residual structure, the wave found in the residual, and the values of the effects
+    applied to the data (``transformed``)."""
 
     split: Split
     metric: str
@@ -93,9 +157,17 @@ class Selection:
     unexplained: dict | None = None
     wave: dict | None = None
     final_split: Split | None = None
-    """The data the final model was fitted and scored on (re-aligned by a latency)."""
+    """The parts the final model was fitted and scored on (re-aligned by a latency)."""
     transformed: dict[str, tuple[float, float]] = field(default_factory=dict)
     """Data-transforming effects chosen: name -> (value, one-sigma)."""
+    select_before: M.Score | None = None
+    select_after: M.Score | None = None
+    selection_fit: M.Fit | None = None
+    """The final effects fitted on the fit part alone (the fit the selection scored)."""
+    base_test: Dataset | None = None
+    """The test part as the base model sees it (no transform applied)."""
+    drift: dict = field(default_factory=dict)
+    """Per-window re-estimates of the chosen effects and the surge gain (:mod:`.drift`)."""
 
 
 def _sigma(ds: Dataset, f: M.Fit) -> dict[str, float]:
@@ -131,9 +203,12 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
            known: dict[str, np.ndarray] | None = None) -> Selection:
     """Choose the effects that explain the base model's held-out residuals (module doc).
 
-    ``declared`` effects are fitted as part of the model from the start; ``known`` effects
-    are part of it with fixed parameters (a calm-water calibration) and may still be found
-    again as candidates, for the part the calibration does not cover.
+    Effects are fitted on the fit part and chosen by their error on the selection part;
+    the chosen model and the base model are then refitted on both parts and scored on the
+    test part, which neither step saw. ``declared`` effects are fitted as part of the
+    model from the start; ``known`` effects are part of it with fixed parameters (a
+    calm-water calibration) and may still be found again as candidates, for the part the
+    calibration does not cover.
     """
     sp = split(ds)
     known = {k: np.asarray(v, float) for k, v in (known or {}).items()}
@@ -150,7 +225,7 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
         ctx.wave_period_s = wave["period"]
         ctx.extra["wave_direction"] = wave["direction"]
     base = M.fit(sp.fit, declared, sigma, ctx, known=known)
-    before = M.score(sp.holdout, base, metric)
+    sel_before = M.score(sp.holdout, base, metric)
     n_eff = max(10.0, len(sp.holdout) * ds.dt / 2.0)
 
     pool = [n for n in (candidates or tuple(ALL)) if n not in declared
@@ -161,8 +236,26 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
     current_fit, current_rel = base, 1.0
     rounds: list[list[Candidate]] = []
 
-    def model_effects(names):
-        return tuple(n for n in names if not ALL[n].transforms_data)
+    if "actuator_mapping" in pool:
+        # First: every surge and yaw effect depends on which command drives which thruster.
+        pool.remove("actuator_mapping")
+        e = ALL["actuator_mapping"]
+        found = e.search(fit_data)
+        if found is not None:
+            code = found[0]
+            fd, hd = e.transform(fit_data, code), e.transform(hold_data, code)
+            f = M.fit(fd, _model_effects(declared), sigma, ctx, known=known)
+            s = M.score(hd, f, metric)
+            gain = am.held_out_gain(fit_data, hold_data, int(code))
+            cand = Candidate("actuator_mapping", _relative(s, sel_before), gain, math.inf,
+                             s.headline, value=(code, 0.0))
+            rounds.append([cand])
+            if gain >= min_gain:
+                cand.accepted = True
+                chosen.append(cand.name)
+                transformed[cand.name] = cand.value
+                fit_data, hold_data = fd, hd
+                current_fit, current_rel = f, cand.score
 
     while pool:
         round_: list[Candidate] = []
@@ -178,13 +271,13 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
                 fd, hd = e.transform(fit_data, value), e.transform(hold_data, value)
                 trials[name] = (fd, hd)
                 theta, std = np.array([value]), np.array([value_std])
-                f = M.fit(fd, model_effects((*declared, *chosen)), sigma, ctx, known=known)
+                f = M.fit(fd, _model_effects((*declared, *chosen)), sigma, ctx, known=known)
             else:
-                f = M.fit(fd, model_effects((*declared, *chosen, name)), sigma, ctx, known=known)
+                f = M.fit(fd, _model_effects((*declared, *chosen, name)), sigma, ctx, known=known)
                 theta, std = f.theta[name], f.std[name]
             s = M.score(hd, f, metric)
             k = sum(len(ALL[x].params) for x in (*chosen, name))
-            rel = _relative(s, before) * math.exp(penalty * k / n_eff)
+            rel = _relative(s, sel_before) * math.exp(penalty * k / n_eff)
             t = theta / np.where(std > 0, std, np.inf)
             cand = Candidate(name, rel, 1.0 - rel / current_rel, float(np.max(np.abs(t))),
                              s.headline, physical=e.physical(theta))
@@ -205,18 +298,38 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
             if top.name in trials:
                 fit_data, hold_data = trials[top.name]
                 transformed[top.name] = top.value
-            current_fit = M.fit(fit_data, model_effects((*declared, *chosen)), sigma, ctx,
+            current_fit = M.fit(fit_data, _model_effects((*declared, *chosen)), sigma, ctx,
                                 known=known)
             current_rel = top.score
         else:
             break
-    final_split = Split(fit_data, hold_data, sp.how)
-    after = M.score(hold_data, current_fit, metric)
+    sel_after = M.score(hold_data, current_fit, metric)
+
+    # The final score: both models refitted on fit + selection, scored on the test part.
+    test = sp.test if sp.test is not None and len(sp.test) else sp.holdout
+    test_data = test
+    for name, (value, _) in transformed.items():
+        test_data = ALL[name].transform(test_data, value)
+    both_base = concat([sp.fit, sp.holdout])
+    both = concat([fit_data, hold_data])
+    base_final = M.fit(both_base, declared, sigma, ctx, known=known)
+    final = M.fit(both, _model_effects((*declared, *chosen)), sigma, ctx, known=known)
+    before = M.score(test, base_final, metric)
+    after = M.score(test_data, final, metric)
+    final_split = Split(fit_data, hold_data, sp.how, test_data, sp.parts)
     sel = Selection(split=sp, metric=metric, declared=tuple(declared), chosen=tuple(chosen),
-                    base_fit=base, final_fit=current_fit, before=before, after=after,
-                    rounds=rounds, wave=wave, final_split=final_split, transformed=transformed)
+                    base_fit=base_final, final_fit=final, before=before, after=after,
+                    rounds=rounds, wave=wave, final_split=final_split, transformed=transformed,
+                    select_before=sel_before, select_after=sel_after,
+                    selection_fit=current_fit, base_test=test)
     sel.unexplained = structure_left(final_split, current_fit)
+    sel.drift = drift.per_window(both, current_fit)
     return sel
+
+
+def _model_effects(names) -> tuple[str, ...]:
+    """The effects among ``names`` that are model terms (not data transforms)."""
+    return tuple(n for n in names if not ALL[n].transforms_data)
 
 
 def find_wave(ds: Dataset, residual: np.ndarray, min_period_s: float = 2.0,
@@ -266,46 +379,126 @@ def find_wave(ds: Dataset, residual: np.ndarray, min_period_s: float = 2.0,
     return {"period": period, "direction": direction, "share": sh, "false_alarm_p": fap}
 
 
-def _generic_basis(ds: Dataset) -> tuple[np.ndarray, list[str]]:
-    cols, names = [], []
-    for k in (1, 2, 3):
-        cols += [np.cos(k * ds.psi), np.sin(k * ds.psi)]
-        names += [f"cos({k} heading)", f"sin({k} heading)"]
-    cols += [ds.along, ds.r, ds.r**2, (ds.t - ds.t.mean()) / max(1.0, np.ptp(ds.t))]
-    names += ["speed", "yaw rate", "yaw rate^2", "time"]
+def _harmonics(psi: np.ndarray, orders=(1, 2, 3)) -> list[tuple[str, np.ndarray]]:
+    return [(f"heading harmonic {k}", np.column_stack([np.cos(k * psi), np.sin(k * psi)]))
+            for k in orders]
+
+
+def generic_basis(ds: Dataset, channel: str) -> list[tuple[str, np.ndarray]]:
+    """Groups of generic regressors for ``channel``'s residual, by name: what a missing
+    effect of any kind would correlate with (heading harmonics, speed, turn rate,
+    commands, time and their products), in the channel's own form (the heading channel
+    is integrated from each segment's start, so its regressors are too)."""
+    tau = (ds.t - ds.t.mean()) / max(1.0, float(np.ptp(ds.t)))
+    u = np.nan_to_num(ds.along)
+    groups: list[tuple[str, np.ndarray]] = []
+    if channel == "heading":
+        s0 = segment_starts(ds)
+        since = ds.t - ds.t[s0]
+        for name, h in _harmonics(ds.psi):
+            groups.append((name, h - h[s0]))
+        # a rate bias that changes over the log: its drift grows as since * (time of day)
+        groups.append(("time", np.column_stack([since * tau])))
+        groups.append(("time x heading harmonic 1",
+                       np.column_stack([tau * np.cos(ds.psi) - (tau * np.cos(ds.psi))[s0],
+                                        tau * np.sin(ds.psi) - (tau * np.sin(ds.psi))[s0]])))
+        return groups
+    groups += _harmonics(ds.psi)
+    groups.append(("speed x heading harmonic 1", u[:, None] * _harmonics(ds.psi, (1,))[0][1]))
+    groups.append(("speed x heading harmonic 2", u[:, None] * _harmonics(ds.psi, (2,))[0][1]))
+    if channel != "along":
+        # in the along channel speed and command are the surge model's own terms (and
+        # those of its catalog effects): a correction there is a refit, not a new effect
+        groups.append(("speed", np.column_stack([u, u * np.abs(u)])))
+    groups.append(("yaw rate", np.column_stack([ds.r, ds.r**2])))
+    groups.append(("time", np.column_stack([tau, tau**2])))
+    groups.append(("time x heading harmonic 1", tau[:, None] * _harmonics(ds.psi, (1,))[0][1]))
     if ds.has_commands:
-        cols += [np.nan_to_num(ds.cmd_surge), np.nan_to_num(ds.cmd_yaw)]
-        names += ["surge command", "yaw command"]
-    cols.append(np.ones(len(ds)))
-    names.append("constant")
-    return np.column_stack(cols), names
+        c = np.nan_to_num(ds.cmd_surge)
+        if channel != "along":
+            groups.append(("surge command", np.column_stack([c, c * np.abs(c)])))
+        groups.append(("time x surge command", np.column_stack([tau * c])))
+        groups.append(("yaw command", np.column_stack([np.nan_to_num(ds.cmd_yaw)])))
+    return groups
 
 
-def structure_left(sp: Split, f: M.Fit, min_gain: float = 0.15) -> dict | None:
+def _increments(ds: Dataset, x: np.ndarray, seconds: float = 5.0) -> np.ndarray:
+    """Non-overlapping increments of ``x`` over ``seconds`` within each segment."""
+    k = max(1, int(round(seconds / ds.dt)))
+    i = np.arange(0, len(ds) - k, k)
+    i = i[ds.run[i] == ds.run[i + k]]
+    return np.asarray(x)[i + k] - np.asarray(x)[i]
+
+
+def _held_out_gain(Xf, yf, Xh, yh) -> float:
+    """Share of the held-out mean square that a least-squares fit of ``Xf`` (plus a
+    constant) to ``yf`` removes from ``yh``."""
+    Xf = np.column_stack([Xf, np.ones(len(Xf))])
+    Xh = np.column_stack([Xh, np.ones(len(Xh))])
+    coef, *_ = np.linalg.lstsq(Xf, yf, rcond=None)
+    before = float(np.mean(yh**2))
+    after = float(np.mean((yh - Xh @ coef) ** 2))
+    return 1.0 - after / before if before > 0 else 0.0
+
+
+def structure_left(sp: Split, f: M.Fit, min_gain: float = 0.15,
+                   min_step: float = 0.03) -> dict | None:
     """Evidence of structure the chosen effects do not explain, or None.
 
-    A generic basis fitted to the fit-part residual must lower the held-out residual's
-    mean square by ``min_gain`` in some channel to count.
+    In every residual channel (lateral, heading, along), groups of a generic basis
+    (:func:`generic_basis`) are fitted to the fit part's residual and added one at a time,
+    each time the group that most lowers the selection part's residual mean square, while
+    a group lowers it by ``min_step`` more (so many weak regressors cannot add up to a
+    false alarm by overfitting); the channel counts when the groups kept lower it by
+    ``min_gain``. For each channel that counts: its ``held_out_gain``, the group that
+    carries the structure (the first kept, ``regressor``, with its gain alone,
+    ``regressor_gain``) and the groups kept (``correlates_with``). The top-level
+    ``channel``, ``regressor`` and ``held_out_gain`` name the strongest channel.
     """
     res_fit = M.residuals(sp.fit, f)
     res_hold = M.residuals(sp.holdout, f)
-    Xf, names = _generic_basis(sp.fit)
-    Xh, _ = _generic_basis(sp.holdout)
     found = {}
     for ch in res_fit:
-        if ch != "lateral":
-            continue  # along: open-loop drift, judged by the metric; heading: integrated
+        gf, gh = generic_basis(sp.fit, ch), generic_basis(sp.holdout, ch)
         yf, yh = res_fit[ch], res_hold[ch]
+        if ch == "heading":
+            # The integrated channel is a random walk of the gyro noise: compare its
+            # increments over 5 s (rate errors, independent) instead of its values.
+            gf = [(n, _increments(sp.fit, g)) for n, g in gf]
+            gh = [(n, _increments(sp.holdout, g)) for n, g in gh]
+            yf, yh = _increments(sp.fit, yf), _increments(sp.holdout, yh)
+        Xf = np.column_stack([g for _, g in gf])
+        Xh = np.column_stack([g for _, g in gh])
         okf = np.isfinite(yf) & np.isfinite(Xf).all(1)
         okh = np.isfinite(yh) & np.isfinite(Xh).all(1)
-        if okf.sum() < 50 or okh.sum() < 50:
+        if okf.sum() < 20 or okh.sum() < 20:
             continue
-        coef, *_ = np.linalg.lstsq(Xf[okf], yf[okf], rcond=None)
-        before = float(np.mean(yh[okh] ** 2))
-        after = float(np.mean((yh[okh] - Xh[okh] @ coef) ** 2))
-        gain = 1.0 - after / before if before > 0 else 0.0
-        if gain >= min_gain:
-            scale = np.std(Xf[okf], axis=0) * np.abs(coef)
-            top = [names[i] for i in np.argsort(scale)[::-1][:3] if names[i] != "constant"]
-            found[ch] = {"held_out_gain": round(gain, 3), "correlates_with": top}
-    return found or None
+        kept: list[int] = []
+        gain = 0.0
+        first_gain = 0.0
+        while len(kept) < len(gf):
+            best = (gain, -1)
+            for i in range(len(gf)):
+                if i in kept:
+                    continue
+                cols = kept + [i]
+                g = _held_out_gain(np.column_stack([gf[j][1] for j in cols])[okf], yf[okf],
+                                   np.column_stack([gh[j][1] for j in cols])[okh], yh[okh])
+                if g > best[0]:
+                    best = (g, i)
+            if best[1] < 0 or best[0] - gain < min_step:
+                break
+            kept.append(best[1])
+            if len(kept) == 1:
+                first_gain = best[0]
+            gain = best[0]
+        if gain < min_gain:
+            continue
+        found[ch] = {"held_out_gain": round(gain, 3), "regressor": gf[kept[0]][0],
+                     "regressor_gain": round(first_gain, 3),
+                     "correlates_with": [gf[i][0] for i in kept]}
+    if not found:
+        return None
+    top = max(found, key=lambda c: found[c]["held_out_gain"])
+    return {**found, "channel": top, "regressor": found[top]["regressor"],
+            "held_out_gain": found[top]["held_out_gain"]}

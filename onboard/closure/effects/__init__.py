@@ -7,6 +7,7 @@ considers them.
 from __future__ import annotations
 
 from onboard.closure.effects import (
+    actuator_mapping,
     compass_deviation,
     gps_latency,
     gyro_bias,
@@ -17,11 +18,13 @@ from onboard.closure.effects import (
     thrust_nonlinearity,
     water_current,
     wave_oscillation,
+    wind_force,
 )
 from onboard.closure.effects.base import Context, Effect
 
 ALL: dict[str, Effect] = {m.EFFECT.name: m.EFFECT for m in (
     water_current, compass_deviation, heading_bias, gyro_bias, gps_latency,
-    thrust_nonlinearity, quadratic_drag, surge_yaw_coupling, sideslip, wave_oscillation)}
+    thrust_nonlinearity, quadratic_drag, surge_yaw_coupling, sideslip, wave_oscillation,
+    actuator_mapping, wind_force)}
 
 __all__ = ["ALL", "Context", "Effect"]
