@@ -18,7 +18,7 @@ import pytest
 from onboard.core.config import ConfigError, ZenohOut, load
 from onboard.service.credentials import private_file_problem, read_user_password, resolve_secret
 from onboard.service.signing import load_signing_key
-from tests.helpers.tls import make_test_certificates
+from tests.helpers.tls import make_test_certificates, open_tls_acl_router
 
 REPO = Path(__file__).resolve().parents[1]
 ZENOH_DIR = REPO / "config" / "zenoh"
@@ -129,16 +129,8 @@ def test_the_deploy_example_publishes_over_tls_with_its_credentials_to_the_acl_r
 
     from onboard.core.messages import EstimateRecord
     from onboard.service.publishers.zenoh_pub import ZenohPublisher, session_config
-    from onboard.tools.service_bench import free_tcp_port
 
-    certs = make_test_certificates(tmp_path)
-    ep = f"tls/localhost:{free_tcp_port()}"
-    conf = session_config("router", listen=[ep], config_file=str(ZENOH_DIR / "router-acl.json5"))
-    conf.insert_json5("transport/auth/usrpwd/dictionary_file",
-                      json.dumps(str(ZENOH_DIR / "credentials.example.txt")))
-    conf.insert_json5("transport/link/tls/listen_private_key", json.dumps(str(certs["router_key"])))
-    conf.insert_json5("transport/link/tls/listen_certificate", json.dumps(str(certs["router_pem"])))
-    router = zenoh.open(conf)
+    router, ep, certs = open_tls_acl_router(tmp_path)
     creds = tmp_path / "credentials"
     creds.mkdir(mode=0o700)
     shutil.copy(certs["ca_pem"], creds / "onboard-zenoh-ca.pem")

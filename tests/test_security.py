@@ -24,7 +24,7 @@ from onboard.service.publishers.mavlink_pub import MavlinkPublisher
 from onboard.service.signing import SigningState, load_signing_key
 from onboard.tools.service_bench import free_udp_port
 from tests.helpers.mavlink_listener import receive_mavlink
-from tests.helpers.tls import make_test_certificates
+from tests.helpers.tls import open_tls_acl_router
 
 REPO = Path(__file__).resolve().parent.parent
 KEY = bytes(range(32))
@@ -888,16 +888,8 @@ def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_
     from onboard.core.config import ZenohOut
     from onboard.core.messages import EstimateRecord
     from onboard.service.publishers.zenoh_pub import ZenohPublisher, session_config
-    from onboard.tools.service_bench import free_tcp_port
 
-    certs = make_test_certificates(tmp_path)
-    ep = f"tls/localhost:{free_tcp_port()}"
-    conf = session_config("router", listen=[ep], config_file=str(ZENOH_DIR / "router-acl.json5"))
-    conf.insert_json5("transport/auth/usrpwd/dictionary_file",
-                      json.dumps(str(ZENOH_DIR / "credentials.example.txt")))
-    conf.insert_json5("transport/link/tls/listen_private_key", json.dumps(str(certs["router_key"])))
-    conf.insert_json5("transport/link/tls/listen_certificate", json.dumps(str(certs["router_pem"])))
-    router = zenoh.open(conf)
+    router, ep, certs = open_tls_acl_router(tmp_path)
 
     def local(name: str, ca: Path | None) -> str:
         text = (ZENOH_DIR / name).read_text()

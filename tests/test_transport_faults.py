@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import os
 import socket
-import tty
 
 import pytest
 
@@ -22,6 +21,7 @@ from drivers.transports import (
 )
 from onboard.core.config import from_dict
 from onboard.tools.service_bench import free_tcp_port
+from tests.helpers.ptys import pty_behind
 
 TIMEOUT = 20.0  # generous: a loaded 2-core CI machine
 
@@ -133,19 +133,6 @@ def test_a_peer_that_vanishes_without_fin_is_detected_and_the_socket_probes_it()
                     "count": KEEPALIVE_COUNT, "user_timeout": USER_TIMEOUT_MS}
 
 
-def _pty_behind(link: str) -> int:
-    """A new pseudo-terminal; ``link`` (a by-id style symlink) is re-pointed at it
-    atomically, as udev does; returns the master."""
-    master, slave = os.openpty()
-    tty.setraw(master)
-    name = os.ttyname(slave)
-    os.close(slave)
-    tmp = link + ".new"
-    os.symlink(name, tmp)
-    os.replace(tmp, link)
-    return master
-
-
 @pytest.mark.integration
 def test_a_serial_device_re_enumerated_behind_its_by_id_link_is_followed(tmp_path):
     """USB re-enumeration: /dev/serial/by-id/usb-... is re-pointed to a new device node
@@ -159,7 +146,7 @@ def test_a_serial_device_re_enumerated_behind_its_by_id_link_is_followed(tmp_pat
     events: list[str] = []
 
     async def main():
-        old = _pty_behind(link)
+        old = pty_behind(link)
         tr = open_transport(f"serial:{link}:115200", idle_timeout_s=0.3,
                             backoff_initial_s=0.05, on_event=events.append)
         agen = tr.__aiter__()
@@ -168,7 +155,7 @@ def test_a_serial_device_re_enumerated_behind_its_by_id_link_is_followed(tmp_pat
             await asyncio.sleep(0.01)
         os.write(old, b"$GPGGA,first\r\n")
         first = await asyncio.wait_for(task, TIMEOUT)
-        new = _pty_behind(link)  # re-enumerated: the old node still open, silent
+        new = pty_behind(link)  # re-enumerated: the old node still open, silent
         task = asyncio.ensure_future(agen.__anext__())
         while tr.stats.connects < 2:
             await asyncio.sleep(0.01)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import os
 import socket
-import tty
 
 import pytest
 
@@ -17,6 +16,7 @@ from drivers.transports import (
     parse_url,
 )
 from onboard.tools.service_bench import free_tcp_port, free_udp_port
+from tests.helpers.ptys import pty_behind
 
 TIMEOUT = 20.0  # generous: a loaded 2-core CI machine
 
@@ -119,24 +119,13 @@ def test_tcp_transport_reconnects_after_the_server_goes_away():
     assert stats.connects >= 2 and stats.disconnects >= 1
 
 
-def _new_pty(link: str) -> int:
-    master, slave = os.openpty()
-    tty.setraw(master)
-    name = os.ttyname(slave)
-    os.close(slave)
-    tmp = link + ".new"
-    os.symlink(name, tmp)
-    os.replace(tmp, link)
-    return master
-
-
 @pytest.mark.integration
 def test_pty_transport_reads_and_reopens_a_pseudo_terminal_that_disappears(tmp_path):
     link = str(tmp_path / "gps")
     events: list[str] = []
 
     async def main():
-        master = _new_pty(link)
+        master = pty_behind(link)
         tr = open_transport(f"pty:{link}", on_event=events.append, backoff_initial_s=0.05,
                             backoff_max_s=0.2)
         agen = tr.__aiter__()
@@ -147,7 +136,7 @@ def test_pty_transport_reads_and_reopens_a_pseudo_terminal_that_disappears(tmp_p
         first = await asyncio.wait_for(task, TIMEOUT)
         os.close(master)  # the device is unplugged: the reader sees EIO/EOF
         await asyncio.sleep(0.2)
-        master2 = _new_pty(link)  # and comes back (udev recreates the symlink)
+        master2 = pty_behind(link)  # and comes back (udev recreates the symlink)
         task = asyncio.ensure_future(agen.__anext__())
         while tr.stats.connects < 2:
             await asyncio.sleep(0.01)

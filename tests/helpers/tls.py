@@ -30,3 +30,25 @@ def make_test_certificates(d: Path) -> dict[str, Path]:
     ):
         subprocess.run([exe, *cmd], cwd=d, check=True, capture_output=True, timeout=30)
     return {k: d / f"{k.replace('_', '.')}" for k in ("ca_pem", "router_key", "router_pem")}
+
+
+def open_tls_acl_router(tmp_path: Path):
+    """An in-process Zenoh router as the shipped ``config/zenoh/router-acl.json5`` makes it,
+    listening on ``tls/`` with fresh test certificates and the example user/password
+    dictionary. Returns ``(router, endpoint, certificates)``; the caller closes the router."""
+    import json
+
+    import zenoh
+
+    from onboard.service.publishers.zenoh_pub import session_config
+    from onboard.tools.service_bench import free_tcp_port
+
+    zenoh_dir = Path(__file__).resolve().parents[2] / "config" / "zenoh"
+    certs = make_test_certificates(tmp_path)
+    ep = f"tls/localhost:{free_tcp_port()}"
+    conf = session_config("router", listen=[ep], config_file=str(zenoh_dir / "router-acl.json5"))
+    conf.insert_json5("transport/auth/usrpwd/dictionary_file",
+                      json.dumps(str(zenoh_dir / "credentials.example.txt")))
+    conf.insert_json5("transport/link/tls/listen_private_key", json.dumps(str(certs["router_key"])))
+    conf.insert_json5("transport/link/tls/listen_certificate", json.dumps(str(certs["router_pem"])))
+    return zenoh.open(conf), ep, certs
