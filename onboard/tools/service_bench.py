@@ -115,8 +115,12 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
+BENCH_VEHICLE = "bench"
+"""The vehicle id of the benchmarked service (its Zenoh keys are ``onboard/bench/...``)."""
+
+
 def bench_config_toml(mav_port: int, nmea_port: int, zenoh_endpoint: str, mav_out_port: int,
-                      vehicle: str = "bench") -> str:
+                      vehicle: str = BENCH_VEHICLE) -> str:
     """A rudder-boat configuration reading the generator over UDP, all pipelines on."""
     from onboard.core.config import resolve
 
@@ -241,7 +245,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
         if rec.t_sensor is not None:
             lat_sensor.append((t_rx - rec.t_sensor) * 1000.0)
 
-    sub = router.declare_subscriber("onboard/tools/bench/est/**", on_sample)
+    sub = router.declare_subscriber(f"onboard/{BENCH_VEHICLE}/est/**", on_sample)
     env = dict(os.environ, NOTIFY_SOCKET=notify_path, ONBOARD_LOG_LEVEL="WARNING")
     env.pop("WATCHDOG_USEC", None)
     t_spawn = time.monotonic()
