@@ -932,7 +932,7 @@ EXPOSURE_MAX = 1.5
 def _systemd_analyze() -> str:
     exe = shutil.which("systemd-analyze")
     if exe is None:
-        pytest.skip("systemd-analyze is not installed")
+        pytest.skip("systemd-analyze is not installed (Debian: apt-get install systemd; see README)")
     return exe
 
 

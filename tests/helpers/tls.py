@@ -15,7 +15,7 @@ def make_test_certificates(d: Path) -> dict[str, Path]:
     Skips the test when openssl is not installed."""
     exe = shutil.which("openssl")
     if exe is None:
-        pytest.skip("openssl is not installed: cannot make test certificates")
+        pytest.skip("openssl is not installed, so no test certificates (Debian: apt-get install openssl; see README)")
     ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
     (d / "ext.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n"
                                "basicConstraints=CA:FALSE\nkeyUsage=digitalSignature\n"
