@@ -19,6 +19,7 @@ from onboard.core.config import ConfigError, ZenohOut, load
 from onboard.service.credentials import private_file_problem, read_user_password, resolve_secret
 from onboard.service.signing import load_signing_key
 from tests.helpers.tls import make_test_certificates, open_tls_acl_router
+from tests.helpers.waiting import wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 ZENOH_DIR = REPO / "config" / "zenoh"
@@ -105,13 +106,6 @@ def test_the_user_password_file_holds_one_user_colon_password_line(tmp_path, mon
         read_user_password("credential:onboard-zenoh-user", "k")
 
 
-def _wait(cond, timeout: float = 8.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return cond()
 
 
 def _credentials() -> dict[str, str]:
@@ -154,7 +148,7 @@ def test_the_deploy_example_publishes_over_tls_with_its_credentials_to_the_acl_r
         shore.declare_subscriber("onboard/**", lambda s: got.append(str(s.key_expr)))
         pub.start()
         rec = EstimateRecord(vehicle="boat1", pipeline="current", t=1.0, values={"north": 0.2})
-        assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/current" in got)[1])
+        assert wait_until(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/current" in got)[1], 8.0)
         (creds / "onboard-zenoh-user").chmod(0o600)
         (creds / "onboard-zenoh-user").write_text("boat1:not-the-password\n")
         wrong = ZenohPublisher(zcfg, "boat1")
@@ -197,7 +191,7 @@ def test_a_vehicle_listening_on_tls_uses_its_key_and_certificate_from_credential
         got: list[str] = []
         shore.declare_subscriber("onboard/**", lambda s: got.append(str(s.key_expr)))
         rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.0})
-        assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1])
+        assert wait_until(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1], 8.0)
     finally:
         shore.close()
         pub.close()

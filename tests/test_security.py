@@ -25,6 +25,7 @@ from onboard.service.signing import SigningState, load_signing_key
 from onboard.tools.service_bench import free_udp_port
 from tests.helpers.mavlink_listener import receive_mavlink
 from tests.helpers.tls import open_tls_acl_router
+from tests.helpers.waiting import wait_until
 
 REPO = Path(__file__).resolve().parent.parent
 KEY = bytes(range(32))
@@ -712,13 +713,6 @@ def test_recording_versions_old_files_still_read_and_unknown_newer_ones_refused(
 ZENOH_DIR = REPO / "config" / "zenoh"
 
 
-def _wait(cond, timeout: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return cond()
 
 
 @pytest.fixture
@@ -778,7 +772,7 @@ def test_a_vehicle_with_its_credentials_publishes_its_estimates_and_shore_receiv
     pub.start()
     try:
         rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.2})
-        assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1])
+        assert wait_until(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1], 5.0)
         for query in ("onboard/boat1/**", "onboard/*/**", "onboard/**"):  # shore may ask wide
             replies = [r.ok for r in shore.get(query, timeout=2.0) if r.ok is not None]
             assert any(str(r.key_expr) == "onboard/boat1/est/kf" for r in replies), query
@@ -806,7 +800,7 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
             boat1.put("onboard/boat1/est/kf", b"own")
             boat2.put("onboard/boat2/est/kf", b"genuine")  # control: the key is deliverable
             return ("onboard/boat2/est/kf", b"genuine") in got and ("onboard/boat1/est/kf", b"own") in got
-        assert _wait(sent)
+        assert wait_until(sent, 5.0)
         time.sleep(0.3)
         assert ("onboard/boat2/est/kf", b"forged by boat1") not in got
         boat1.put("elsewhere/anything", b"x")  # outside onboard/**: denied too
@@ -816,11 +810,11 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
         spied: list[str] = []
         spy = boat1.declare_subscriber("onboard/boat2/**", lambda s: spied.append(str(s.key_expr)))
         n = len(got)
-        assert _wait(lambda: (boat2.put("onboard/boat2/est/kf", b"again"), len(got) > n)[1])
+        assert wait_until(lambda: (boat2.put("onboard/boat2/est/kf", b"again"), len(got) > n)[1], 5.0)
         time.sleep(0.3)
         assert spied == []
         boat2.declare_queryable("onboard/boat2/**", lambda q: q.reply("onboard/boat2/est/kf", b"x"))
-        assert _wait(lambda: bool([r for r in shore.get("onboard/boat2/**", timeout=1.0) if r.ok]))
+        assert wait_until(lambda: bool([r for r in shore.get("onboard/boat2/**", timeout=1.0) if r.ok]), 5.0)
         assert [r for r in boat1.get("onboard/boat2/**", timeout=1.0) if r.ok is not None] == []
         spy.undeclare()
     finally:
@@ -910,7 +904,7 @@ def test_over_tls_the_vehicle_reaches_shore_and_a_session_without_the_ca_cannot_
         shore.declare_subscriber("onboard/**", lambda s: got.append(str(s.key_expr)))
         pub.start()
         rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=1.0, values={"speed": 1.2})
-        assert _wait(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1])
+        assert wait_until(lambda: (pub.publish_estimates([rec]), "onboard/boat1/est/kf" in got)[1], 5.0)
         untrusting = ZenohPublisher(ZenohOut(**vehicle), "boat1")
         with pytest.raises(Exception, match="(?i)unable to connect"):
             untrusting.start()

@@ -17,7 +17,6 @@ import signal
 import subprocess
 import sys
 import sysconfig
-import time
 from pathlib import Path
 
 import pytest
@@ -25,6 +24,7 @@ import pytest
 from onboard.tools.service_bench import free_udp_port
 from tests.helpers.systemd_boot import booted_systemd, skip_unless_available
 from tests.helpers.tls import open_tls_acl_router
+from tests.helpers.waiting import wait_until
 
 pytestmark = pytest.mark.integration
 
@@ -101,13 +101,6 @@ def _shore(endpoint: str, ca_pem: Path, got: dict[str, int]):
     return shore
 
 
-def _wait(cond, timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.2)
-    return cond()
 
 
 def test_the_installed_unit_runs_under_systemd_with_credentials_watchdog_and_state(tmp_path):
@@ -143,7 +136,7 @@ def test_the_installed_unit_runs_under_systemd_with_credentials_watchdog_and_sta
             assert uid in DYNAMIC_UIDS, status
 
             # the estimates reach the ACL router over TLS with the credential's password
-            assert _wait(lambda: got.get("onboard/boat1/est/aie", 0) > 10, 30.0), \
+            assert wait_until(lambda: got.get("onboard/boat1/est/aie", 0) > 10, 30.0), \
                 (got, sd.journal("onboard.service"))
             assert got.get("onboard/boat1/health", 0) > 0, got
             assert sd.show("onboard.service", "StatusText")["StatusText"], "no STATUS= line"
@@ -156,7 +149,7 @@ def test_the_installed_unit_runs_under_systemd_with_credentials_watchdog_and_sta
             assert "Watchdog timeout" in sd.journal("onboard.service") or \
                 sd.show("onboard.service", "Result")["Result"] in ("watchdog", "success")
             seen = got.get("onboard/boat1/est/aie", 0)
-            assert _wait(lambda: got.get("onboard/boat1/est/aie", 0) > seen + 3, 30.0), got
+            assert wait_until(lambda: got.get("onboard/boat1/est/aie", 0) > seen + 3, 30.0), got
 
             # a clean stop saves the adaptive state in the unit's state directory
             stop = sd.run("systemctl", "stop", "onboard.service", timeout=60)
