@@ -363,6 +363,8 @@ class VelocityRls:
         noise_std: one-sigma of the filtered equation error (m/s^2).
         n_updates: RLS updates applied (all DOFs at one tick count once).
         n_rejected: per-DOF updates undone by the damping projection (:meth:`step`).
+
+    Cost: one RLS update per DOF and two model linearizations per learning tick.
     """
 
     def __init__(self, ident: ModelIdentification, *, noise_std: float, forgetting: float,
@@ -416,18 +418,21 @@ class VelocityRls:
             return
         y, dy = self.svf.y, self.svf.dy
         saved = [est.get_state() for est in self.rls]
+        nu_f = [float(a) for a in nu[:nd]]
+        _, _, J0 = self.model.linearize(nu_f, inputs, [t.tolist() for t in self.thetas])
         o = nd
         for i, (est, k) in enumerate(zip(self.rls, self._sizes)):
             est.update(y[o:o + k], dy[i])
             self.thetas[i] = est.theta
             o += k
-        # projection onto damped models: a DOF whose own damping d nu_i' / d nu_i turns
-        # non-negative at this velocity (or non-finite) keeps its previous coefficients;
-        # the observer integrates this model, an undamped one makes it run away
-        _, _, J = self.model.linearize([float(a) for a in nu[:nd]], inputs,
-                                       [t.tolist() for t in self.thetas])
+        # projection onto damped models: an update that leaves a DOF's own damping
+        # d nu_i' / d nu_i non-negative at this velocity and less damped than before (or
+        # non-finite coefficients) is undone; the observer integrates this model, and an
+        # undamped one makes it run away (a generic surge prior starts at zero damping)
+        _, _, J = self.model.linearize(nu_f, inputs, [t.tolist() for t in self.thetas])
         for i, est in enumerate(self.rls):
-            if not (J[i][i] < 0.0 and np.all(np.isfinite(self.thetas[i]))):
+            if not (np.all(np.isfinite(self.thetas[i]))
+                    and (J[i][i] < 0.0 or J[i][i] <= J0[i][i])):
                 est.set_state(saved[i])
                 self.thetas[i] = est.theta
                 self.n_rejected += 1
