@@ -10,7 +10,8 @@ samples and estimates:
 
 * samples to the model inputs (rates, attitude, commands) and to velocity measurements
   (GNSS SOG/COG and ``VelocityOverGround`` in earth axes, DVL bottom and water track in
-  body axes), with their one-sigma from ``[sensors]``;
+  body axes), with their one-sigma from ``[sensors]`` (a GNSS fix's reported horizontal
+  accuracy scales its velocity one-sigma, ``gnss_nominal_accuracy_m``);
 * the joint Kalman filter of ``[nu_r, V_c, theta]``
   (:class:`~onboard.estimators.current_kf.CurrentKalmanFilter`), which always runs: it
   identifies the vehicle model online
@@ -22,7 +23,9 @@ samples and estimates:
   - ``"kf"`` (default): the joint Kalman filter itself;
   - ``"hgo"``: the high-gain observer of Kim et al. with the LMI gain and the increasing-gain
     law of Alessandri & Rossi
-    (:class:`~onboard.estimators.current_hgo.CurrentHighGainObserver`);
+    (:class:`~onboard.estimators.current_hgo.CurrentHighGainObserver`), on a model it
+    identifies itself by RLS from its own through-water velocity
+    (:class:`~onboard.estimators.model_identification.VelocityRls`), from the same prior;
   - ``"flow"``: the nonlinear observer of Fan et al.
     (:class:`~onboard.estimators.flow_observer.FlowObserver`), which observes ``nu_r``
     from the attitude through the yaw dynamics; the current is then ``V_g - R nu_r``;
@@ -186,8 +189,10 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """One-sigma (m/s^2) of the equation error of the high-gain observer's RLS, against
     which the coefficient prior is weighed. 0.2: the observer's velocity at ``gamma*``
     carries the sensor noise through the injection (measured on spheroid-sawtooth, mode
-    (a), 300 s: 0.02 let a heave coefficient run to +17 and the observer diverge 1733
-    times; 0.05 rms N/E 0.021 / 0.034 m/s; 0.2 0.020 / 0.030)."""
+    (a), 300 s, seed 1, rms N/E/D: 0.02 drags the sway ``uv`` coefficient from -2.44 to
+    -0.40, 0.045 / 0.139 / 0.049 m/s (before the damping projection a heave coefficient
+    ran to +17 and the observer diverged 1733 times); 0.05: 0.021 / 0.034 / 0.031; 0.2:
+    0.020 / 0.030 / 0.027, the configured model unrefined 0.020 / 0.030 / 0.026)."""
     flow_poles: list[float] = []
     """Flow-observer poles (1/s, negative); empty: the defaults of flow_observer.py."""
     unknown_above_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.3
@@ -212,7 +217,8 @@ class CurrentPipeline:
 
     Inspectable attributes (filterpy style): ``kf`` (the joint Kalman filter: ``x``, ``P``,
     ``y``, ``S``, ``nis``), ``identification`` (prior, schedule, yaw RLS), ``hgo`` and
-    ``flow`` (the observer of that variant, or None), ``inp`` (model inputs), ``roll``,
+    ``flow`` (the observer of that variant, or None), ``hgo_rls`` (the high-gain observer's
+    own model identification, or None), ``inp`` (model inputs), ``roll``,
     ``pitch``, ``yaw`` (rad), ``counters``; shortcuts ``x``, ``P``, ``thetas`` (model
     coefficients in use, per channel), ``yaw_rls`` and ``gamma`` (HGO gain, 0 without).
     """
