@@ -193,6 +193,11 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     -0.40, 0.045 / 0.139 / 0.049 m/s (before the damping projection a heave coefficient
     ran to +17 and the observer diverged 1733 times); 0.05: 0.021 / 0.034 / 0.031; 0.2:
     0.020 / 0.030 / 0.027, the configured model unrefined 0.020 / 0.030 / 0.026)."""
+    flow_pitch: bool = False
+    """Flow observer (``observer = "flow"``, 3-D models): add the vertical block ``[theta,
+    q, w_r]`` observed from the measured pitch, its pitch channel identified online by RLS
+    (flow_observer.py, ``PITCH_TERMS``); False: Fan et al.'s observer reduced to the heading
+    output, ``w_r`` from the joint filter (docs/current.md, "Flow observer")."""
     flow_poles: list[float] = []
     """Flow-observer poles (1/s, negative); empty: the defaults of flow_observer.py."""
     unknown_above_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.3
@@ -279,7 +284,8 @@ class CurrentPipeline:
         self.flow: FlowObserver | None = None
         if cfg.observer == "flow":
             self.flow = FlowObserver(self.model, poles=cfg.flow_poles or None,
-                                     psi_std=sensors.compass.heading_std_rad)
+                                     psi_std=sensors.compass.heading_std_rad,
+                                     pitch=cfg.flow_pitch, svf_cutoff_hz=cfg.svf_cutoff_hz)
         self.gnss_std = cfg.gnss_velocity_std or sensors.gnss.velocity_std_mps
         self.gnss_nominal_acc = (cfg.gnss_nominal_accuracy_m
                                  if cfg.gnss_nominal_accuracy_m is not None
@@ -526,9 +532,13 @@ class CurrentPipeline:
                     kind == "earth" and len(z) < self.nd) else None)
             self._last_velocity_t = tm
         if dt > 0:
-            ident.identify_yaw(dt, kf.x[: self.nd].tolist(), self.inp, velocity_fresh=(
-                self._last_velocity_t is not None
-                and not (self._t or 0.0) - self._last_velocity_t > 1.0))
+            fresh = (self._last_velocity_t is not None
+                     and not (self._t or 0.0) - self._last_velocity_t > 1.0)
+            ident.identify_yaw(dt, kf.x[: self.nd].tolist(), self.inp, velocity_fresh=fresh)
+            if flow is not None:
+                flow.identify_pitch(dt, kf.x[: self.nd].tolist(), self.inp, learn=(
+                    fresh and self.cfg.identify
+                    and float(kf.x[0]) >= self.cfg.identify_min_speed))
         if flow is not None and flow.v_g is not None:
             flow.step(dt if dt > 0 else 0.0, self.yaw, self.inp, ident.thetas,
                       kf.x[: self.nd])
