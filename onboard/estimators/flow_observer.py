@@ -21,7 +21,13 @@ q, r]`` and measures the three Euler angles, roll, pitch and yaw (Fan eq. 7 with
 0]``, §III). This implementation is reduced to the horizontal plane, ``z = [psi, r, v_r]``,
 and measures the heading only (``C = [1 0 0]``); the heave and pitch/roll channels, which in
 the paper make ``w_r`` (and through the pitch moment ``u_r``) visible, are not observed here.
-The reduction is not justified by a full-versus-reduced comparison (not built). The surge
+With ``pitch = True`` (``[pipelines.current] flow_pitch``) the vertical block ``zv = [theta,
+q, w_r]`` is added with the measured pitch as a second output (its own Ackermann gain), its
+pitch channel (:data:`PITCH_TERMS`) identified by RLS (:meth:`FlowObserver.identify_pitch`);
+roll is not observed. Compared on spheroid-sawtooth (docs/current.md, "Flow observer"): the
+north and east current are unchanged to four decimals, down is worse than with the joint
+filter's ``w_r`` (0.012 against 0.007 m/s rms), so the heading-only reduction is the
+default. The surge
 speed through water ``u_r`` is not observable from
 the attitude on a straight line; it is the surge model run open loop, as in the WVAM
 (Randeni et al. 2017). The current is then ``V_c = R (v_g - nu_r)`` (Fan, §III.A).
@@ -99,7 +105,13 @@ class FlowObserver:
         v_g: newest velocity over ground in body axes (m/s; None before the first).
         v_g_kind: its measurement kind (``earth``, ``bottom`` or ``water``).
         v_g_std: its one-sigma per component (m/s).
-        unobservable: steps whose pole placement failed (the previous gain was kept).
+        unobservable: steps whose pole placement failed (the previous gain was kept), both
+            blocks.
+        pitch: whether the vertical block runs.
+        zv: its state ``[theta (rad), q (rad/s), w_r (m/s)]``; ``Pv`` its covariance,
+            ``Lv`` its gain.
+        pitch_rls: the pitch channel's :class:`.rls.RecursiveLeastSquares`
+            (:data:`PITCH_TERMS`).
         diverged: divergences (each restarts the observer from the caller's velocity).
     """
 
