@@ -127,6 +127,25 @@ def test_identified_model_survives_a_restart():
     assert np.allclose(other.thetas[0], other.model.default_thetas()[0])
 
 
+def test_the_hgo_model_survives_a_restart():
+    """The high-gain observer's own coefficients are saved (``hgo_thetas``) and restored
+    into its RLS, apart from the joint filter's; a state without them restores the joint
+    filter's into both."""
+    import json
+    pipe = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
+    pipe.hgo_rls.thetas[0] = pipe.hgo_rls.thetas[0] + 0.01  # as if learned
+    state = json.loads(json.dumps(pipe.get_state()))
+    fresh = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
+    fresh.set_state(state)
+    assert np.allclose(fresh.hgo_rls.thetas[0], pipe.hgo_rls.thetas[0])
+    assert np.allclose(fresh.hgo_rls.rls[0].theta, pipe.hgo_rls.thetas[0])
+    assert not np.allclose(fresh.thetas[0], fresh.hgo_rls.thetas[0])
+    del state["hgo_thetas"]
+    older = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
+    older.set_state(state)
+    assert np.allclose(older.hgo_rls.thetas[0], older.thetas[0])
+
+
 def test_bad_model_config_names_the_key():
     from onboard.core.config import ConfigError
     with pytest.raises(ConfigError, match="pipelines.current.model.surge: unknown term"):
