@@ -3,7 +3,9 @@
 Kim, Fan & Bose, IEEE Access 6 (2018), eq. (10)-(16), with the increasing-gain law of
 Alessandri & Rossi, Automatica 49 (2013) (:mod:`.hgo`). The observer runs the same vehicle
 model as the joint Kalman filter (:mod:`.current_kf`) on its own copy of ``x = [nu_r (body),
-V_c (earth)]``, with the model coefficients the filter identifies, and corrects it with the
+V_c (earth)]``, with the coefficients its caller passes to :meth:`predict` (in the pipeline
+those of the observer's own RLS, :class:`.model_identification.VelocityRls`, not the joint
+filter's), and corrects it with the
 output injection ``G(gamma) (y - C x_hat)`` (Kim eq. 11) written in that state
 (:func:`.hgo.current_hgo_gain`). The covariance is propagated for this gain (Joseph form),
 so the one-sigma is that of the observer actually running.

@@ -21,7 +21,13 @@ q, r]`` and measures the three Euler angles, roll, pitch and yaw (Fan eq. 7 with
 0]``, §III). This implementation is reduced to the horizontal plane, ``z = [psi, r, v_r]``,
 and measures the heading only (``C = [1 0 0]``); the heave and pitch/roll channels, which in
 the paper make ``w_r`` (and through the pitch moment ``u_r``) visible, are not observed here.
-The reduction is not justified by a full-versus-reduced comparison (not built). The surge
+With ``pitch = True`` (``[pipelines.current] flow_pitch``) the vertical block ``zv = [theta,
+q, w_r]`` is added with the measured pitch as a second output (its own Ackermann gain), its
+pitch channel (:data:`PITCH_TERMS`) identified by RLS (:meth:`FlowObserver.identify_pitch`);
+roll is not observed. Compared on spheroid-sawtooth (docs/current.md, "Flow observer"): the
+north and east current are unchanged to four decimals, down is worse than with the joint
+filter's ``w_r`` (0.012 against 0.007 m/s rms), so the heading-only reduction is the
+default. The surge
 speed through water ``u_r`` is not observable from
 the attitude on a straight line; it is the surge model run open loop, as in the WVAM
 (Randeni et al. 2017). The current is then ``V_c = R (v_g - nu_r)`` (Fan, §III.A).
@@ -39,7 +45,24 @@ from collections.abc import Sequence
 import numpy as np
 
 from onboard.core.geo import wrap_pi
+from onboard.estimators.model_identification import StateVariableFilter
+from onboard.estimators.rls import RecursiveLeastSquares
 from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
+
+PITCH_TERMS = ("q", "q|q|", "uw", "uq", "u|u|ds", "sin(theta)")
+"""Regressors of the pitch channel of the vertical block (``pitch = True``):
+``q' = phi_pitch^T theta_pitch`` with linear and quadratic pitch damping, the Munk moment
+``M_uw u w``, the fins' damping ``u q`` and lift ``u|u| ds``, and the restoring moment
+``sin(theta)`` (centre of gravity below the centre of buoyancy), all over ``I_yy - M_qdot``
+(the torpedo model of :mod:`.vehicle_models` has no pitch channel: pitch is an input to
+Kim et al.'s 3-DOF model)."""
+
+
+def pitch_regressors(u: float, w: float, x: ModelInputs) -> tuple[float, ...]:
+    """:data:`PITCH_TERMS` at surge and heave speed through water ``u``, ``w`` (m/s), pitch
+    rate ``x.q`` (rad/s), pitch ``x.pitch`` (rad) and stern plane ``x.ds`` (rad)."""
+    q = x.q
+    return (q, q * abs(q), u * w, u * q, u * abs(u) * x.ds, math.sin(x.pitch))
 
 POLE_FACTORS = (1.5, 1.7, 1.9)
 """Default pole placement: the open-loop eigenvalues' real parts (floored at -0.5 1/s for the
@@ -82,18 +105,29 @@ class FlowObserver:
         v_g: newest velocity over ground in body axes (m/s; None before the first).
         v_g_kind: its measurement kind (``earth``, ``bottom`` or ``water``).
         v_g_std: its one-sigma per component (m/s).
-        unobservable: steps whose pole placement failed (the previous gain was kept).
+        unobservable: steps whose pole placement failed (the previous gain was kept), both
+            blocks.
+        pitch: whether the vertical block runs.
+        zv: its state ``[theta (rad), q (rad/s), w_r (m/s)]``; ``Pv`` its covariance,
+            ``Lv`` its gain.
+        pitch_rls: the pitch channel's :class:`.rls.RecursiveLeastSquares`
+            (:data:`PITCH_TERMS`).
         diverged: divergences (each restarts the observer from the caller's velocity).
     """
 
     def __init__(self, model: RegressionModel, poles: Sequence[float] | None = None,
-                 psi_std: float = 0.005, accel_std: float = 0.02) -> None:
+                 psi_std: float = 0.005, accel_std: float = 0.02, pitch: bool = False,
+                 svf_cutoff_hz: float = 0.3) -> None:
         """Args:
             model: the regression model (it needs a yaw channel).
             poles: fixed observer poles (1/s, negative); None: placed from the open-loop
                 eigenvalues times :data:`POLE_FACTORS` at each step.
-            psi_std: heading measurement one-sigma (rad).
+            psi_std: heading (and pitch) measurement one-sigma (rad).
             accel_std: model acceleration error (m/s^2) of the yaw rate and sway channels.
+            pitch: add the vertical block ``[theta, q, w_r]`` observed from the measured
+                pitch (3-D models only; :meth:`identify_pitch` identifies its pitch
+                channel); False: ``w_r`` from the caller.
+            svf_cutoff_hz: cut-off of the pitch channel's state-variable filter (Hz).
         """
         if "yaw" not in model.channels:
             raise ValueError("the flow observer needs a model with a yaw channel")
@@ -118,6 +152,68 @@ class FlowObserver:
         self.diverged = 0
         self.max_gain = 50.0
         self._iyaw = model.channels.index("yaw")
+        self.pitch = pitch and model.nd == 3
+        self.zv = np.zeros(3)
+        self.Pv = np.diag([0.01, 0.01, 0.25])
+        self.Lv = np.zeros(3)
+        self.pitch_rls = RecursiveLeastSquares(
+            len(PITCH_TERMS), forgetting=0.9995, p0=1e6, names=PITCH_TERMS, sigma2_0=1e-3)
+        self.pitch_svf = StateVariableFilter(1 + len(PITCH_TERMS), svf_cutoff_hz)
+
+    def identify_pitch(self, dt: float, nu: Sequence[float], x: ModelInputs,
+                       learn: bool) -> None:
+        """One RLS step of the pitch channel, ``q' = phi_pitch^T theta_pitch``, both sides
+        through the state-variable filter (as the yaw channel, algorithms.md §3.4), at the
+        through-water velocity ``nu`` (m/s, the caller's) and the measured pitch rate
+        ``x.q``; ``learn`` False: filter only."""
+        if not self.pitch or dt <= 0:
+            return
+        phi = pitch_regressors(float(nu[0]), float(nu[2]), x)
+        self.pitch_svf.update(dt, (x.q,) + phi)
+        if learn:
+            self.pitch_rls.update(self.pitch_svf.y[1:], self.pitch_svf.dy[0])
+
+    def _fv(self, zv: np.ndarray, u: float, v: float, x: ModelInputs,
+            thetas: Sequence[np.ndarray], th_pitch: np.ndarray) -> np.ndarray:
+        """Vertical block ``[theta' = q cos(phi) - r sin(phi), q', w_r']`` at ``zv``."""
+        q_meas, pitch_meas = x.q, x.pitch
+        x.q, x.pitch = float(zv[1]), float(zv[0])
+        wdot = self.model.accel([u, v, float(zv[2])], x, thetas)[2]
+        qdot = float(np.dot(pitch_regressors(u, float(zv[2]), x), th_pitch))
+        x.q, x.pitch = q_meas, pitch_meas
+        return np.array([zv[1] * math.cos(x.roll) - self.z[1] * math.sin(x.roll), qdot, wdot])
+
+    def _step_vertical(self, dt: float, x: ModelInputs, thetas: Sequence[np.ndarray]) -> None:
+        """The vertical block's pole placement, integration with the pitch innovation held,
+        and covariance (as the horizontal block in :meth:`step`)."""
+        th = self.pitch_rls.theta
+        u, v = self.u_r, float(self.z[2])
+        f0 = self._fv(self.zv, u, v, x, thetas, th)
+        A = np.empty((3, 3))
+        for j in range(3):
+            dz = np.zeros(3)
+            dz[j] = 1e-4
+            A[:, j] = (self._fv(self.zv + dz, u, v, x, thetas, th) - f0) / 1e-4
+        C = np.array([[1.0, 0.0, 0.0]])
+        try:
+            re = np.sort(np.minimum(np.linalg.eigvals(A).real, -0.5))
+            L = ackermann_observer_gain(A, C, tuple(re * np.array(POLE_FACTORS)))
+            if not np.all(np.isfinite(L)) or np.max(np.abs(L)) > self.max_gain:
+                raise np.linalg.LinAlgError
+            self.Lv = L
+        except np.linalg.LinAlgError:
+            self.unobservable += 1
+        n_sub = max(1, math.ceil(dt / 0.05))
+        h = dt / n_sub
+        for _ in range(n_sub):
+            e = x.pitch - self.zv[0]
+            self.zv = self.zv + h * (self._fv(self.zv, u, v, x, thetas, th) + self.Lv * e)
+        Acl = A - np.outer(self.Lv, C[0])
+        F = np.eye(3) + dt * Acl
+        q = self.accel_std ** 2 * dt
+        Q = np.diag([0.0, q, q]) + np.outer(self.Lv, self.Lv) * (self.psi_std * dt) ** 2
+        self.Pv = F @ self.Pv @ F.T + Q
+        self.w_r = float(self.zv[2])
 
     def _f(self, z: np.ndarray, u: float, x: ModelInputs,
            thetas: Sequence[np.ndarray]) -> np.ndarray:
@@ -136,14 +232,18 @@ class FlowObserver:
             self.z = np.array([psi_meas, x.r, float(nu_init[1])])
             self.u_r = float(nu_init[0])
             self.w_r = float(nu_init[2]) if len(nu_init) > 2 else 0.0
+            self.zv = np.array([x.pitch, x.q, self.w_r])
+            self.Pv = np.diag([0.01, 0.01, 0.25])
             self.ready = True
             return
         if dt <= 0:
             return
         r_meas = x.r
         nd = self.model.nd
-        # surge open loop (WVAM), heave from the caller (not observed by the heading)
-        self.w_r = float(nu_init[2]) if len(nu_init) > 2 else 0.0
+        # surge open loop (WVAM); heave from the caller (not observed by the heading) or
+        # from the vertical block
+        if not self.pitch:
+            self.w_r = float(nu_init[2]) if len(nu_init) > 2 else 0.0
         fu = self.model.accel([self.u_r, self.z[2], self.w_r][:nd], x, thetas)[0]
         # linearization and pole placement
         f0 = self._f(self.z, self.u_r, x, thetas)
@@ -177,8 +277,11 @@ class FlowObserver:
             self.z = self.z + h * (self._f(self.z, self.u_r, x, thetas) + self.L * e)
             self.z[0] = wrap_pi(self.z[0])
         x.r = r_meas
+        if self.pitch:
+            self._step_vertical(dt, x, thetas)
         self.u_r += dt * fu
         if not (np.all(np.isfinite(self.z)) and abs(self.z[2]) < 3.0
+                and np.all(np.isfinite(self.zv)) and abs(self.zv[2]) < 3.0
                 and math.isfinite(self.u_r) and abs(self.u_r) < 10.0):
             # diverged: restart from the caller's through-water velocity
             self.diverged += 1
@@ -206,7 +309,7 @@ class FlowObserver:
         C[0, 0] = self.var_u
         C[1, 1] = self.Pz[2, 2]
         if nd == 3:
-            C[2, 2] = 0.01 ** 2
+            C[2, 2] = self.Pv[2, 2] if self.pitch else 0.01 ** 2
         return C
 
     def observe_velocity(self, kind: str, z: np.ndarray, std: float, R: np.ndarray,

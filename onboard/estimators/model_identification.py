@@ -335,3 +335,107 @@ class ModelIdentification:
             return
         self.yaw_rls.set_state(state)
         self.thetas[self.model.channels.index("yaw")] = self.yaw_rls.theta.copy()
+
+
+class VelocityRls:
+    """The velocity DOFs' coefficients identified by recursive least squares from an
+    observer's own through-water velocity (Kim et al. §II.B, eq. 6-9; algorithms.md §3.4):
+    the identification the paper pairs with its high-gain observer, independent of the joint
+    filter's coefficient states.
+
+    Per DOF ``i``, ``nu_r,i' = phi_i(nu_r, omega, attitude, u)^T theta_i`` with both sides
+    through one state-variable filter (:class:`StateVariableFilter`), so ``d/dt (H nu_r,i) =
+    (H phi_i)^T theta_i`` holds for constant coefficients without differentiating the
+    observer's velocity; one :class:`.rls.RecursiveLeastSquares` per DOF. The prior is the
+    identification's (:class:`ModelIdentification`: configured coefficients tight, the
+    generic ones loose, the net-weight ones physically scaled), as a covariance in units of
+    the equation error's variance ``noise_std^2``. Forgetting is the trace-bounded rule of
+    :mod:`.rls` (none once the covariance is back at the prior trace) and EFRA.
+
+    Attributes:
+        thetas: coefficients in use, one array per velocity DOF (a new array after each
+            update of that DOF).
+        rls: the per-DOF estimators.
+        prior_dof: per DOF, True if none of its coefficients is configured (mode (b)).
+        masked: per DOF, True while its coefficients are still the generic prior (the sum
+            of their variances above a quarter of the prior's; as
+            :meth:`ModelIdentification.lift_masks`).
+        noise_std: one-sigma of the filtered equation error (m/s^2).
+        n_updates: RLS updates applied (all DOFs at one tick count once).
+        n_rejected: per-DOF updates undone by the damping projection (:meth:`step`).
+
+    Cost: one RLS update per DOF and two model linearizations per learning tick.
+    """
+
+    def __init__(self, ident: ModelIdentification, *, noise_std: float, forgetting: float,
+                 svf_cutoff_hz: float) -> None:
+        """Args:
+            ident: the prior (its coefficients at construction, ``prior_sd``,
+                ``prior_dof``); nothing else of it is used.
+            noise_std: one-sigma of the equation error (m/s^2) the prior is weighed
+                against.
+            forgetting: forgetting factor per update (0.1 s).
+            svf_cutoff_hz: cut-off of the state-variable filter (Hz).
+        """
+        model = ident.model
+        self.model = model
+        self.nd = nd = model.nd
+        self.noise_std = noise_std
+        v = noise_std * noise_std
+        self.thetas: list[np.ndarray] = [np.array(t, float) for t in ident.thetas[:nd]]
+        self.rls: list[RecursiveLeastSquares] = []
+        self._tr0: list[float] = []
+        for ch, th, sd in zip(model.dofs, self.thetas, ident.prior_sd[:nd]):
+            var = sd * sd / v
+            est = RecursiveLeastSquares(
+                len(th), forgetting=forgetting, p0=float(np.max(var)),
+                tr_max=float(np.sum(var)), theta0=th, names=model.terms[ch], sigma2_0=v)
+            est.P = np.diag(var)
+            self.rls.append(est)
+            self._tr0.append(float(np.sum(var)))
+        self.prior_dof = list(ident.prior_dof)
+        self.masked = list(ident.prior_dof)
+        self._sizes = [len(t) for t in self.thetas]
+        self.svf = StateVariableFilter(nd + sum(self._sizes), svf_cutoff_hz)
+        self.n_updates = 0
+        self.n_rejected = 0
+
+    def restart(self, thetas: Sequence[np.ndarray]) -> None:
+        """Continue from the coefficients ``thetas`` (a restored model), covariance kept."""
+        for i, (est, th) in enumerate(zip(self.rls, thetas)):
+            if len(th) == est.n and np.all(np.isfinite(th)):
+                est.set_state({**est.get_state(), "theta": np.asarray(th, float).tolist()})
+                self.thetas[i] = est.theta
+
+    def step(self, dt: float, nu: Sequence[float], inputs: ModelInputs,
+             learn: bool) -> None:
+        """Filter the observer's velocity ``nu`` (m/s, body) and the regressors at it over
+        ``dt`` (s); with ``learn``, one RLS update per DOF."""
+        nd = self.nd
+        rows = self.model.regressor_rows(nu, inputs, dofs_only=True)
+        self.svf.update(dt, [float(a) for a in nu[:nd]] + [a for r in rows for a in r])
+        if not learn:
+            return
+        y, dy = self.svf.y, self.svf.dy
+        saved = [est.get_state() for est in self.rls]
+        nu_f = [float(a) for a in nu[:nd]]
+        _, _, J0 = self.model.linearize(nu_f, inputs, [t.tolist() for t in self.thetas])
+        o = nd
+        for i, (est, k) in enumerate(zip(self.rls, self._sizes)):
+            est.update(y[o:o + k], dy[i])
+            self.thetas[i] = est.theta
+            o += k
+        # projection onto damped models: an update that leaves a DOF's own damping
+        # d nu_i' / d nu_i non-negative at this velocity and less damped than before (or
+        # non-finite coefficients) is undone; the observer integrates this model, and an
+        # undamped one makes it run away (a generic surge prior starts at zero damping)
+        _, _, J = self.model.linearize(nu_f, inputs, [t.tolist() for t in self.thetas])
+        for i, est in enumerate(self.rls):
+            if not (np.all(np.isfinite(self.thetas[i]))
+                    and (J[i][i] < 0.0 or J[i][i] <= J0[i][i])):
+                est.set_state(saved[i])
+                self.thetas[i] = est.theta
+                self.n_rejected += 1
+            elif self.masked[i] and float(np.trace(est.P)) < 0.25 * self._tr0[i]:
+                self.masked[i] = False
+        self.n_updates += 1

@@ -10,7 +10,8 @@ samples and estimates:
 
 * samples to the model inputs (rates, attitude, commands) and to velocity measurements
   (GNSS SOG/COG and ``VelocityOverGround`` in earth axes, DVL bottom and water track in
-  body axes), with their one-sigma from ``[sensors]``;
+  body axes), with their one-sigma from ``[sensors]`` (a GNSS fix's reported horizontal
+  accuracy scales its velocity one-sigma, ``gnss_nominal_accuracy_m``);
 * the joint Kalman filter of ``[nu_r, V_c, theta]``
   (:class:`~onboard.estimators.current_kf.CurrentKalmanFilter`), which always runs: it
   identifies the vehicle model online
@@ -22,7 +23,9 @@ samples and estimates:
   - ``"kf"`` (default): the joint Kalman filter itself;
   - ``"hgo"``: the high-gain observer of Kim et al. with the LMI gain and the increasing-gain
     law of Alessandri & Rossi
-    (:class:`~onboard.estimators.current_hgo.CurrentHighGainObserver`);
+    (:class:`~onboard.estimators.current_hgo.CurrentHighGainObserver`), on a model it
+    identifies itself by RLS from its own through-water velocity
+    (:class:`~onboard.estimators.model_identification.VelocityRls`), from the same prior;
   - ``"flow"``: the nonlinear observer of Fan et al.
     (:class:`~onboard.estimators.flow_observer.FlowObserver`), which observes ``nu_r``
     from the attitude through the yaw dynamics; the current is then ``V_g - R nu_r``;
@@ -67,7 +70,11 @@ from onboard.estimators.current_hgo import CurrentHighGainObserver
 from onboard.estimators.current_kf import CurrentKalmanFilter, chi2_quantile
 from onboard.estimators.flow_observer import FlowObserver
 from onboard.estimators.hgo import GainDesign, IncreasingGain
-from onboard.estimators.model_identification import ModelIdentification, floor_along_track
+from onboard.estimators.model_identification import (
+    ModelIdentification,
+    VelocityRls,
+    floor_along_track,
+)
 from onboard.estimators.vehicle_models import ModelInputs, RegressionModel, kind_for_class
 
 GAIN_DIR = CONFIG_DIR / "gains"
@@ -146,7 +153,17 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     identify_min_speed: float = 0.2
     """Below this through-water speed the yaw RLS does not learn."""
     gnss_velocity_std: float | None = None
-    """One-sigma of GNSS velocity components (m/s); default from ``[sensors.gnss]``."""
+    """One-sigma of GNSS velocity components (m/s) at the receiver's nominal accuracy;
+    default from ``[sensors.gnss]``."""
+    gnss_nominal_accuracy_m: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
+    """Receiver accuracy as noise: a fix reporting a horizontal accuracy ``h_acc_m`` (m, one
+    sigma) worse than this has its velocity one-sigma scaled by ``h_acc_m / nominal``;
+    never below ``gnss_velocity_std`` (a fix claiming better than nominal, RTK say, does
+    not make its Doppler velocity better). Default ``[sensors.gnss] position_std_m``; 0:
+    the configured one-sigma for every fix. A fix without a finite positive ``h_acc_m``
+    takes the configured one-sigma. (``GnssFix`` carries no speed accuracy: the position
+    accuracy is the receiver's own error estimate closest to it, both scale with the
+    satellite geometry and signal quality.)"""
     dvl_velocity_std: float | None = None
     gate_nis: float = 30.0
     """Innovations with a larger NIS are rejected (counted in health)."""
@@ -160,6 +177,27 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     gamma_0: float | None = None
     rho: float | None = None
     gamma_max: float | None = None
+    hgo_identify: Literal["turns", "always"] = "turns"
+    """When the high-gain observer's own RLS (``observer = "hgo"``,
+    :class:`~onboard.estimators.model_identification.VelocityRls`) learns: ``"turns"``
+    under the joint filter's schedule (the observer's current one-sigma at most
+    ``identify_max_current_std``, within ``identify_after_turn_s`` of a turn, or always with
+    ``identify_straight``), ``"always"`` at every tick with a fresh velocity, as in Kim et
+    al. (on a straight line the along-track current then trades against the thrust
+    coefficient, docs/current.md, HGO). ``identify = false`` disables it."""
+    hgo_rls_noise_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.2
+    """One-sigma (m/s^2) of the equation error of the high-gain observer's RLS, against
+    which the coefficient prior is weighed. 0.2: the observer's velocity at ``gamma*``
+    carries the sensor noise through the injection (measured on spheroid-sawtooth, mode
+    (a), 300 s, seed 1, rms N/E/D: 0.02 drags the sway ``uv`` coefficient from -2.44 to
+    -0.40, 0.045 / 0.139 / 0.049 m/s (before the damping projection a heave coefficient
+    ran to +17 and the observer diverged 1733 times); 0.05: 0.021 / 0.034 / 0.031; 0.2:
+    0.020 / 0.030 / 0.027, the configured model unrefined 0.020 / 0.030 / 0.026)."""
+    flow_pitch: bool = False
+    """Flow observer (``observer = "flow"``, 3-D models): add the vertical block ``[theta,
+    q, w_r]`` observed from the measured pitch, its pitch channel identified online by RLS
+    (flow_observer.py, ``PITCH_TERMS``); False: Fan et al.'s observer reduced to the heading
+    output, ``w_r`` from the joint filter (docs/current.md, "Flow observer")."""
     flow_poles: list[float] = []
     """Flow-observer poles (1/s, negative); empty: the defaults of flow_observer.py."""
     unknown_above_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.3
@@ -184,7 +222,8 @@ class CurrentPipeline:
 
     Inspectable attributes (filterpy style): ``kf`` (the joint Kalman filter: ``x``, ``P``,
     ``y``, ``S``, ``nis``), ``identification`` (prior, schedule, yaw RLS), ``hgo`` and
-    ``flow`` (the observer of that variant, or None), ``inp`` (model inputs), ``roll``,
+    ``flow`` (the observer of that variant, or None), ``hgo_rls`` (the high-gain observer's
+    own model identification, or None), ``inp`` (model inputs), ``roll``,
     ``pitch``, ``yaw`` (rad), ``counters``; shortcuts ``x``, ``P``, ``thetas`` (model
     coefficients in use, per channel), ``yaw_rls`` and ``gamma`` (HGO gain, 0 without).
     """
@@ -231,7 +270,12 @@ class CurrentPipeline:
         self._restore_d2 = 0.0
         self.gain = gain
         self.hgo: CurrentHighGainObserver | None = None
+        self.hgo_rls: VelocityRls | None = None
         if cfg.observer == "hgo":
+            # the observer's own model: RLS from its own velocity, from the same prior
+            self.hgo_rls = VelocityRls(self.identification, noise_std=cfg.hgo_rls_noise_std,
+                                       forgetting=cfg.forgetting,
+                                       svf_cutoff_hz=cfg.svf_cutoff_hz)
             self.gain = gain or GainDesign.analytic()
             self.hgo = CurrentHighGainObserver(
                 self.model, self.gain, _gain_law(cfg, self.gain), self.kf.P[:2 * nd, :2 * nd],
@@ -240,8 +284,14 @@ class CurrentPipeline:
         self.flow: FlowObserver | None = None
         if cfg.observer == "flow":
             self.flow = FlowObserver(self.model, poles=cfg.flow_poles or None,
-                                     psi_std=sensors.compass.heading_std_rad)
+                                     psi_std=sensors.compass.heading_std_rad,
+                                     pitch=cfg.flow_pitch, svf_cutoff_hz=cfg.svf_cutoff_hz)
         self.gnss_std = cfg.gnss_velocity_std or sensors.gnss.velocity_std_mps
+        self.gnss_nominal_acc = (cfg.gnss_nominal_accuracy_m
+                                 if cfg.gnss_nominal_accuracy_m is not None
+                                 else sensors.gnss.position_std_m)
+        self.gnss_std_used = self.gnss_std
+        """The velocity one-sigma (m/s) of the newest fused GNSS fix."""
         self.dvl_std = cfg.dvl_velocity_std or sensors.dvl.velocity_std_mps
         self.dvl_max_fom = sensors.dvl.max_fom_mps
         self.surface_depth = sensors.depth.surface_depth_m
@@ -400,7 +450,12 @@ class CurrentPipeline:
             self.counters["rejected_nonfinite"] += 1
             return
         z = np.array([s.sog_mps * math.cos(s.cog_rad), s.sog_mps * math.sin(s.cog_rad)])
-        meas.append(("earth", s.t, z, self.gnss_std))
+        std = self.gnss_std
+        acc, nominal = s.h_acc_m, self.gnss_nominal_acc
+        if nominal > 0 and acc is not None and math.isfinite(acc) and acc > 0:
+            std *= max(1.0, acc / nominal)  # the receiver's own accuracy, down-weighting only
+        self.gnss_std_used = std
+        meas.append(("earth", s.t, z, std))
 
     def _set_yaw(self, t: float, yaw: float) -> None:
         """Take the heading (rad); without measured rates, the yaw rate follows its
@@ -451,11 +506,13 @@ class CurrentPipeline:
         if twin is not None:
             self._advance(twin[0], twin[1], t, dt)
         if dt > 0 and hgo is not None:
+            assert self.hgo_rls is not None
             n_sub = max(1, math.ceil(dt / 0.2))
             for _ in range(n_sub):
-                if not hgo.predict(dt / n_sub, self.inp, ident.thetas, kf.q_scale):
+                if not hgo.predict(dt / n_sub, self.inp, self.hgo_rls.thetas, kf.q_scale):
                     hgo.restart(kf.x, kf.P)
                     hgo.reset_gain()
+            self._identify_hgo(t, dt)
         self._t = t if dt >= 0 else self._t
         R = self._R() if meas else None  # the attitude is fixed within the tick
         if twin is not None and twin[1].started:
@@ -475,15 +532,51 @@ class CurrentPipeline:
                     kind == "earth" and len(z) < self.nd) else None)
             self._last_velocity_t = tm
         if dt > 0:
-            ident.identify_yaw(dt, kf.x[: self.nd].tolist(), self.inp, velocity_fresh=(
-                self._last_velocity_t is not None
-                and not (self._t or 0.0) - self._last_velocity_t > 1.0))
+            fresh = (self._last_velocity_t is not None
+                     and not (self._t or 0.0) - self._last_velocity_t > 1.0)
+            ident.identify_yaw(dt, kf.x[: self.nd].tolist(), self.inp, velocity_fresh=fresh)
+            if flow is not None:
+                flow.identify_pitch(dt, kf.x[: self.nd].tolist(), self.inp, learn=(
+                    fresh and self.cfg.identify
+                    and float(kf.x[0]) >= self.cfg.identify_min_speed))
         if flow is not None and flow.v_g is not None:
             flow.step(dt if dt > 0 else 0.0, self.yaw, self.inp, ident.thetas,
                       kf.x[: self.nd])
         if twin is not None and twin[1].started and dt > 0:
             self._check_restored(dt)
         return self._outputs()
+
+    def _identify_hgo(self, t: float, dt: float) -> None:
+        """One step of the high-gain observer's own RLS (``hgo_identify``) on its velocity
+        ``nu_r``: learning while a velocity was measured within the last second, the
+        through-water speed is above ``identify_min_speed`` and, with ``"turns"``, the
+        observer's horizontal current one-sigma is at most ``identify_max_current_std``
+        within ``identify_after_turn_s`` of a turn (``identify_straight``: anywhere)."""
+        hgo, rls, cfg = self.hgo, self.hgo_rls, self.cfg
+        assert hgo is not None and rls is not None
+        nu = hgo.x[: self.nd].tolist()
+        learn = (cfg.identify and self._last_velocity_t is not None
+                 and t - self._last_velocity_t <= 1.0 and nu[0] >= cfg.identify_min_speed)
+        if learn and cfg.hgo_identify == "turns":
+            c_var = hgo.current_cov().diagonal()
+            learn = (math.sqrt(max(float(c_var[0]), float(c_var[1])))
+                     <= cfg.identify_max_current_std
+                     and (cfg.identify_straight or t - self.identification.last_turn_t
+                          <= cfg.identify_after_turn_s))
+        before = rls.n_updates
+        rls.step(dt, nu, self.inp, learn)
+        self.counters["hgo_rls_updates"] = self.counters.get("hgo_rls_updates", 0) + (
+            rls.n_updates - before)
+        self.counters["hgo_rls_rejected"] = rls.n_rejected
+
+    def _surge_unobservable(self) -> bool:
+        """The along-track current is unobservable for the reported observer: its surge
+        model is still the generic prior (the high-gain observer's own RLS, else the joint
+        filter's) and the recent headings are not diverse."""
+        ident = self.identification
+        if self.hgo_rls is None:
+            return ident.surge_unobservable()
+        return self.hgo_rls.masked[0] and ident.headings.length() > ident.heading_diversity
 
     def _advance(self, ident: ModelIdentification, kf: CurrentKalmanFilter, t: float,
                  dt: float) -> None:
@@ -573,7 +666,7 @@ class CurrentPipeline:
         nd = self.nd
         obs_src = self.hgo if self.hgo is not None else self.kf
         c, std, nu = obs_src.current_estimate()
-        if self.identification.surge_unobservable():
+        if self._surge_unobservable():
             std = floor_along_track(obs_src.current_cov(), self.yaw or 0.0,
                                     self.cfg.init_current_std)
         flow = self.flow
@@ -605,6 +698,7 @@ class CurrentPipeline:
         h["velocity.nis"] = kf.nis
         h["velocity.nis_avg"] = kf.nis_avg
         h["q_scale"] = kf.q_scale
+        h["velocity.gnss_std"] = self.gnss_std_used
         if self.identification.n_theta:
             h["theta.std_max"] = kf.theta_std_max()
         rls = self.identification.yaw_rls
@@ -617,7 +711,7 @@ class CurrentPipeline:
         for i, ax in enumerate(("north", "east", "down")[: self.nd]):
             h[f"observable.{ax}"] = float(self.observable[i])
         h["observable"] = float(all(self.observable[:2]))
-        h["along_track_unobservable"] = float(self.identification.surge_unobservable())
+        h["along_track_unobservable"] = float(self._surge_unobservable())
         h["heading_diversity"] = self.identification.headings.length()
         if self._twin is not None:
             h["restore_probation_s"] = self._probation_s
@@ -638,6 +732,9 @@ class CurrentPipeline:
             st["theta_cov"] = kf.P[o:, o:].tolist()
         if self.identification.yaw_rls is not None:
             st["yaw_rls"] = self.identification.yaw_rls.get_state()
+        if self.hgo_rls is not None:
+            st["hgo_thetas"] = self.model.thetas_to_mapping(
+                self.hgo_rls.thetas + self.thetas[self.nd:])
         return st
 
     def set_state(self, state: Mapping[str, Any]) -> None:
@@ -659,6 +756,9 @@ class CurrentPipeline:
                 self.kf.restore_coefficients(thetas[:nd], state.get("theta_cov", []))
             if ident.yaw_rls is not None and "yaw_rls" in state:
                 ident.restore_yaw(state["yaw_rls"])
+            if self.hgo_rls is not None:
+                self.hgo_rls.restart(self.model.thetas_from_mapping(
+                    state.get("hgo_thetas", state.get("thetas", {})), thetas)[:nd])
             before = self.kf.x[nd:2 * nd].copy()
             self.kf.restore_current(state["current"], state.get("current_std", [0.3] * nd))
         except (KeyError, TypeError, ValueError):
