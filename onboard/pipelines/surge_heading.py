@@ -137,7 +137,16 @@ class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     input_mode: Literal["auto", "throttle-rudder", "differential"] = "auto"
     """How commands map to the two axes (see surge_heading.axis_commands)."""
     gnss_std_m: float | None = None
-    """GNSS position noise, one sigma (m); default [sensors.gnss] position_std_m."""
+    """GNSS position noise, one sigma (m); default [sensors.gnss] position_std_m. The
+    noise of fixes without their own accuracy (and of all with ``gnss_accuracy = false``)."""
+    gnss_accuracy: bool = True
+    """Take each fix's own accuracy (``h_acc_m``: GPS_RAW_INT h_acc, gpsd eph/epx/epy) as
+    its position noise, clamped to [``gnss_accuracy_min_m``, ``gnss_accuracy_max_m``],
+    and scale the position anchor by ``gnss_std_m^2`` over it."""
+    gnss_accuracy_min_m: float = 0.05
+    """Floor of a fix's reported accuracy (m): receivers report centimetres in RTK."""
+    gnss_accuracy_max_m: float = 50.0
+    """Ceiling of a fix's reported accuracy (m)."""
     gnss_velocity: bool = True
     """Also measure the surge rate with the receiver's speed over ground (Doppler),
     signed by the course against the heading, where the fixes carry it."""
@@ -321,11 +330,12 @@ class AxisFilter:
 class _Window:
     """Running sums of one measurement window."""
 
-    __slots__ = ("n_fix", "st_fix", "sn", "se", "n_v", "sv", "n_h", "st_h", "sh")
+    __slots__ = ("n_fix", "st_fix", "sn", "se", "sr", "n_v", "sv", "n_h", "st_h", "sh")
 
     def __init__(self) -> None:
         self.n_fix = 0
         self.st_fix = self.sn = self.se = 0.0
+        self.sr = 0.0   # sum of the fixes' position noise variances (m^2)
         self.n_v = 0
         self.sv = 0.0
         self.n_h = 0
@@ -386,7 +396,11 @@ class SurgeHeadingPipeline:
         """Cache of ``_heading_at(_t_s)`` (rad) for the output; None when stale (reset
         whenever a window closes, a command arrives or the model changes)."""
         self._have_pos = False
-        self._prev_nfix = 1
+        self._R_prev = self.sigma_p ** 2   # noise variance of the previous point (m^2)
+        self._acc_lo, self._acc_hi = cfg.gnss_accuracy_min_m, cfg.gnss_accuracy_max_m
+        if not 0.0 < self._acc_lo <= self._acc_hi:
+            raise ValueError("[pipelines.aie] needs 0 < gnss_accuracy_min_m <= "
+                             f"gnss_accuracy_max_m, got {self._acc_lo}, {self._acc_hi}")
         self._course: float | None = None     # course over ground (GNSS-only logs)
         self._course_pts: list[tuple[float, float]] = []
         self._R_h_prev = self.sigma_h ** 2
@@ -394,7 +408,7 @@ class SurgeHeadingPipeline:
         self._var_n = self._var_e = 0.0     # position at _t_s (m^2)
         self._var_psi = self.sigma_h ** 2   # heading at _t_h (rad^2)
         self._var_course = 0.0              # course of the GNSS-only mode (rad^2)
-        self._r2n = self._r2e = 0.0         # mean square anchor residual (m^2)
+        self._r2n = self._r2e = 0.0         # mean square anchor residual less R (m^2)
         self._var_fix = self.sigma_p ** 2   # slowly varying fix error (m^2), see _std_outputs
         self._disc_cache: dict[tuple[float, float], Discrete] = {}
         self._dr: DeadReckoner | None = None
@@ -532,6 +546,13 @@ class SurgeHeadingPipeline:
         w.st_fix += s.t
         w.sn += n
         w.se += e
+        acc = s.h_acc_m
+        if acc is not None and self.cfg.gnss_accuracy and math.isfinite(acc):
+            acc = self._acc_lo if acc < self._acc_lo else (
+                self._acc_hi if acc > self._acc_hi else acc)
+            w.sr += acc * acc
+        else:
+            w.sr += self.sigma_p ** 2
         sog = s.sog_mps
         if sog is not None and self.cfg.gnss_velocity and math.isfinite(sog):
             # signed path speed: astern when the course is more than 90 deg off the
@@ -645,8 +666,12 @@ class SurgeHeadingPipeline:
         if pp is not None and tp - pp[0] <= 1e-3:
             return
         self._pt_prev = (tp, n, e, psi)
+        # the point's noise variance: the mean of independent fixes' (each its own
+        # accuracy, or the configured sigma)
+        R_s = w.sr / (w.n_fix * w.n_fix)
+        R_s_prev, self._R_prev = self._R_prev, R_s
         if pp is None or tp - pp[0] > self.cfg.max_gap_s:
-            R_fix = self.sigma_p ** 2 / w.n_fix
+            R_fix = R_s
             if pp is not None:
                 self.surge.restart()
             if not self._have_pos or pp is None:
@@ -655,17 +680,13 @@ class SurgeHeadingPipeline:
             else:  # across a gap: follow the measured displacement (noise of both fixes)
                 self._n += n - pp[1]
                 self._e += e - pp[2]
-                dv = R_fix + self.sigma_p ** 2 / max(self._prev_nfix, 1)
+                dv = R_fix + R_s_prev
                 self._var_n += dv
                 self._var_e += dv
             self._have_pos = True
             self._t_s = tp
-            self._prev_nfix = w.n_fix
             return
         dt = tp - pp[0]
-        R_s = self.sigma_p ** 2 / w.n_fix
-        R_s_prev = self.sigma_p ** 2 / max(self._prev_nfix, 1)
-        self._prev_nfix = w.n_fix
         if course_mode:   # project on the course over a ~5-point baseline (unbiased)
             dpsi = 0.0
             hist = self._course_pts
@@ -700,7 +721,19 @@ class SurgeHeadingPipeline:
         # the course lags the track by half its baseline: anchor harder without a compass
         ka = self.cfg.position_anchor if not course_mode else max(self.cfg.position_anchor,
                                                                    0.3)
+        # A small fixed gain is ~ P / R: with the fixes' own accuracy it is scaled by the
+        # configured over the point's noise variance (the anchor was tuned at the
+        # configured sigma), at most 0.5. Only where the window has a Doppler speed: the
+        # dead reckoning between anchors is then good; without it the track rests on the
+        # fixes (a smaller gain measured 4x worse, docs/aie.md).
         rn, re = n - self._n, e - self._e
+        g = _RESIDUAL_GAIN
+        self._r2n += g * (rn * rn - R_s - self._r2n)
+        self._r2e += g * (re * re - R_s - self._r2e)
+        rn2, re2 = self._r2n, self._r2e
+        if self.cfg.gnss_accuracy and w.n_v:
+            ka *= self.sigma_p ** 2 / (w.n_fix * R_s)
+            ka = 0.5 if ka > 0.5 else ka
         self._n += ka * rn
         self._e += ka * re
         # its variance (see _std_outputs): increment along track, heading across, or
@@ -708,12 +741,8 @@ class SurgeHeadingPipeline:
         var_a = self.surge.kf.P[0]
         var_x = ys * ys * (self._var_course if course_mode else self._var_psi)
         c, s_ = math.cos(mid), math.sin(mid)
-        g = _RESIDUAL_GAIN
-        self._r2n += g * (rn * rn - self._r2n)
-        self._r2e += g * (re * re - self._r2e)
         vn = self._var_n + c * c * var_a + s_ * s_ * var_x
         ve = self._var_e + s_ * s_ * var_a + c * c * var_x
-        rn2, re2 = self._r2n - R_s, self._r2e - R_s
         f = (1.0 - ka) ** 2
         fr = ka * ka * R_s
         self._var_n = f * (vn if vn > rn2 else rn2) + fr
