@@ -256,7 +256,11 @@ def test_a_fix_reporting_a_large_error_is_weighted_accordingly(mod) -> None:
     assert east_after({}, 0.3, 0.3) == pytest.approx(fixed, rel=1e-6)
 
 
-def test_fix_accuracy_bounds_are_checked() -> None:
+def test_fix_accuracy_bounds_are_checked_and_bad_reports_counted() -> None:
+    p = aie_mod.build(AieConfig(), 1.5, 0.03, 0.1)
+    seen = iter((0.0, -1.0, math.nan))
+    _straight_run(p, lambda t: next(seen, 1.0), duration=2.0)
+    assert p.health()["surge.accuracy_rejected"] == 3
     with pytest.raises(ValueError, match="gnss_accuracy_min_m"):
         aie_mod.build(msgspec.convert({"gnss_accuracy_min_m": 2.0,
                                        "gnss_accuracy_max_m": 1.0}, AieConfig))

@@ -422,6 +422,7 @@ class SurgeHeadingPipeline:
         self._have_pos = False
         self._R_prev = self.sigma_p ** 2   # noise variance of the previous point (m^2)
         self._acc_lo, self._acc_hi = cfg.gnss_accuracy_min_m, cfg.gnss_accuracy_max_m
+        self._acc_bad = 0   # fixes whose h_acc_m was not a positive number
         if not 0.0 < self._acc_lo <= self._acc_hi:
             raise ValueError("[pipelines.aie] needs 0 < gnss_accuracy_min_m <= "
                              f"gnss_accuracy_max_m, got {self._acc_lo}, {self._acc_hi}")
@@ -575,11 +576,13 @@ class SurgeHeadingPipeline:
         w.sn += n
         w.se += e
         acc = s.h_acc_m
-        if acc is not None and self.cfg.gnss_accuracy and math.isfinite(acc):
+        if acc is not None and self.cfg.gnss_accuracy and acc > 0.0 and math.isfinite(acc):
             acc = self._acc_lo if acc < self._acc_lo else (
                 self._acc_hi if acc > self._acc_hi else acc)
             w.sr += acc * acc
         else:
+            if acc is not None and self.cfg.gnss_accuracy:   # NaN, 0 or negative
+                self._acc_bad += 1
             w.sr += self.sigma_p ** 2
         sog = s.sog_mps
         if sog is not None and self.cfg.gnss_velocity and math.isfinite(sog):
@@ -997,6 +1000,7 @@ class SurgeHeadingPipeline:
         h["surge.rate_nis"] = self.surge.rate_nis
         h["surge.rate_steps"] = float(self.surge.rate_steps)
         h["surge.rate_rejected"] = float(self.surge.rate_rejected)
+        h["surge.accuracy_rejected"] = float(self._acc_bad)
         return h
 
     def get_state(self) -> dict[str, Any]:
