@@ -270,6 +270,11 @@ class GnssConfig:
     outage_windows: tuple[tuple[float, float], ...] = ()
     """Scheduled outages ``(start_s, duration_s)``: no fix at all in them (the
     ``gnss_outage`` fault: antenna cable, jamming, a bridge)."""
+    degraded_windows: tuple[tuple[float, float, float], ...] = ()
+    """Scheduled degraded accuracy ``(start_s, duration_s, factor)``: the white position
+    noise is ``factor`` times ``position_std_m`` in them and the reported ``h_acc_m`` says
+    so (code multipath near a harbour wall or under trees; the Doppler velocity, from the
+    carrier, keeps its noise)."""
     num_sats: int = 12
     hdop: float = 0.9
     time_jitter_std_s: float = 0.0
@@ -306,8 +311,13 @@ class Gnss(_Base):
         tr = world.truth
         if out or tr.down > c.max_depth_m:
             return self.due(t)
-        north = tr.north + drift[0] + c.position_std_m * n[0]
-        east = tr.east + drift[1] + c.position_std_m * n[1]
+        pos_std = c.position_std_m
+        for start, dur, factor in c.degraded_windows:
+            if start <= t < start + dur:
+                pos_std *= factor
+                break
+        north = tr.north + drift[0] + pos_std * n[0]
+        east = tr.east + drift[1] + pos_std * n[1]
         lat, lon = self.origin.to_latlon(north, east)
         vn = world.v_ned[0] + c.velocity_std_mps * n[2]
         ve = world.v_ned[1] + c.velocity_std_mps * n[3]
@@ -319,7 +329,7 @@ class Gnss(_Base):
             alt_m=-tr.down + c.altitude_std_m * n[4], fix_quality=1,
             num_sats=c.num_sats, hdop=c.hdop,
             sog_mps=math.hypot(vn, ve), cog_rad=wrap_2pi(math.atan2(ve, vn)),
-            h_acc_m=math.hypot(c.position_std_m, c.drift_std_m),
+            h_acc_m=math.hypot(pos_std, c.drift_std_m),
             v_acc_m=c.altitude_std_m,
         )
         # delivered in order, and never before the instant measured

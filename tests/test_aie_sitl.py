@@ -26,15 +26,16 @@ def test_jaiabot_turns_aie_beats_the_kf_and_the_raw_gnss_speed(jaiabot) -> None:
     m = sitl_metrics(jaiabot)
     a, k, nav = m["aie"], m["kf"], m["nav"]
     print(m)
-    # measured seed 1: speed AIE 0.053, KF 0.124, raw GNSS speed over ground 0.100 m/s
-    # (seeds 2-3: AIE 0.052 / 0.053, KF 0.122 / 0.121): AIE meets the < 0.10 m/s goal
-    # and beats the raw speed; the KF with the default (wrong) thrust map does not
-    # (0.065 m/s with the identified model of config/sitl-jaiabot.toml, docs/aie.md).
-    # Heading 0.0223 vs 0.0239 rad; position 0.97 vs 0.96 m (a tie: both follow the
+    # measured seed 1: speed AIE 0.052, KF 0.097, raw GNSS speed over ground 0.100 m/s
+    # (seeds 2-3: AIE 0.051 / 0.053, KF 0.095 / 0.094, raw 0.100 / 0.101): both beat the
+    # raw speed; the KF only by 3-6 %: its default thrust map is wrong for this boat
+    # and biases its forecast between fixes (mean error +0.05 m/s; docs/aie.md).
+    # Heading 0.0223 vs 0.0239 rad; position 0.96 vs 0.96 m (a tie: both follow the
     # Doppler speed)
     assert a["speed"] < 0.08
     assert a["speed"] < 0.8 * nav["speed"]
-    assert a["speed"] < 0.5 * k["speed"]
+    assert a["speed"] < 0.6 * k["speed"]
+    assert k["speed"] < nav["speed"]
     assert a["heading"] < k["heading"]
     assert a["position"] < 1.3 and a["position"] < 1.1 * k["position"]
     # input estimates against truth.surge_input / yaw_input (the truth is thrust/m11
@@ -47,8 +48,8 @@ def test_twin_thruster_turns_aie_beats_the_kf_and_the_raw_gnss_speed(twin) -> No
     m = sitl_metrics(twin)
     a, k, nav = m["aie"], m["kf"], m["nav"]
     print(m)
-    # measured seed 1: speed AIE 0.064, KF 0.077, raw GNSS 0.099 m/s; heading 0.0313 vs
-    # 0.0313 rad (a tie); position 1.00 vs 0.99 m
+    # measured seed 1: speed AIE 0.056, KF 0.078, raw GNSS 0.099 m/s; heading 0.0313 vs
+    # 0.0313 rad (a tie); position 0.99 vs 0.99 m
     assert a["speed"] < 0.8 * nav["speed"] and k["speed"] < nav["speed"]
     assert a["speed"] < k["speed"]
     assert a["heading"] < 1.01 * k["heading"]
@@ -108,8 +109,8 @@ def test_position_sigma_grows_in_a_gnss_outage_and_covers_the_truth() -> None:
         c1, c2 = _position_coverage(run, p)
         o1, o2 = _position_coverage(run, p, 30.0, 150.0)
         print(f"{p}: coverage {c1:.3f}/{c2:.3f}, in the outage {o1:.3f}/{o2:.3f}")
-        # measured seed 1: aie 0.80 / 1.00 (outage 0.62 / 1.00), kf 0.87 / 1.00
-        # (outage 0.79 / 1.00)
+        # measured seed 1: aie 0.83 / 1.00 (outage 0.70 / 1.00), kf 0.87 / 1.00
+        # (outage 0.78 / 1.00)
         assert c2 >= 0.85
         assert o2 >= 0.9 and o1 >= 0.5
         sd = run.est[f"{p}.std_north"]
@@ -120,9 +121,50 @@ def test_position_sigma_grows_in_a_gnss_outage_and_covers_the_truth() -> None:
         print(p, "std_north", at, "max error in the outage", np.nanmax(err[out]))
         # dead reckoning through the 120 s outage: the position follows the speed and
         # heading estimates, so neither the error nor the sigma balloons (it was held,
-        # with a sigma of 130-150 m, before). Measured: max horizontal error 6.6 m (aie),
+        # with a sigma of 130-150 m, before). Measured: max horizontal error 5.2 m (aie),
         # 15.1 m (kf: its thrust map is wrong); std_north aie 1.5 m at 25 s, 1.6 at 40 s,
-        # 1.7 at 140 s, 1.5 at 175 s (max 2.8 m); kf 1.5, 1.9, 2.9, 1.5 (max 8.7 m)
+        # 1.7 at 140 s, 1.5 at 175 s (max 2.7 m); kf 1.5, 1.9, 2.9, 1.5 (max 8.6 m)
         assert np.nanmax(err[out]) < (10.0 if p == "aie" else 25.0)
         assert at[25.0] < 4.0 and at[40.0] >= at[25.0] and at[140.0] < 15.0
         assert at[175.0] < 1.5 * at[25.0]
+
+
+def _degraded(name: str, start: float, duration: float, factor: float):
+    """Scenario ``name`` with the receiver's white position noise ``factor`` times larger
+    from ``start`` for ``duration`` s, and its reported ``h_acc_m`` saying so."""
+    import dataclasses
+
+    from sitl.scenarios import get
+
+    sc = get(name)
+    g = dataclasses.replace(sc.sensors.gnss,
+                            degraded_windows=((start, duration, factor),))
+    return dataclasses.replace(sc, sensors=dataclasses.replace(sc.sensors, gnss=g))
+
+
+def test_receiver_accuracy_as_noise_through_a_multipath_period() -> None:
+    """jaiabot-turns for 90 s with 5x the position noise from 30 s on (reported in
+    h_acc_m): taking each fix's own accuracy (gnss_accuracy, default) against the
+    configured 1.5 m always, RMSE 40-90 s. Full 300 s runs on seeds 1-3: docs/aie.md."""
+    import numpy as np
+
+    from onboard.tools.reports.aie_validation import _rmse
+
+    sc = _degraded("jaiabot-turns", 30.0, 60.0, 5.0)
+    res = {}
+    for acc in (True, False):
+        run = run_sitl(sc, duration=90.0, seed=1, aie_table={"gnss_accuracy": acc})
+        w = run.t >= 40.0
+        for p in ("aie", "kf"):
+            e = run.est
+            res[acc, p] = (
+                _rmse((e[f"{p}.speed"] - run.truth["speed"])[w]),
+                _rmse(np.hypot(e[f"{p}.north"] - run.truth["north"],
+                               e[f"{p}.east"] - run.truth["east"])[w]))
+    print(res)
+    # measured seed 1: position AIE 1.13 vs 1.51 m, KF 1.16 vs 1.50 m; speed AIE 0.0465
+    # vs 0.0465, KF 0.0994 vs 0.0991 m/s (a tie: the Doppler speed carries the speed,
+    # and its noise is not degraded by code multipath)
+    for p in ("aie", "kf"):
+        assert res[True, p][1] < 0.85 * res[False, p][1]
+        assert res[True, p][0] < 1.02 * res[False, p][0]

@@ -73,13 +73,15 @@ def pipeline_config(vehicle_cfg: str, aie_table: dict[str, Any] | None = None) -
     return cfg
 
 
-def run_sitl(scenario: str, duration: float | None = None, seed: int = 1,
+def run_sitl(scenario: Any, duration: float | None = None, seed: int = 1,
              aie_table: dict[str, Any] | None = None) -> SitlRun:
-    """Run a SITL scenario through the engine with the aie and kf pipelines."""
+    """Run a SITL scenario (a name or a ``sitl.scenarios.Scenario``) through the engine
+    with the aie and kf pipelines."""
     from onboard.engine import Engine
     from sitl.runner import simulate
 
-    cfg = pipeline_config(SCENARIO_CONFIG.get(scenario, "rudder-boat"), aie_table)
+    name = scenario if isinstance(scenario, str) else scenario.name
+    cfg = pipeline_config(SCENARIO_CONFIG.get(name, "rudder-boat"), aie_table)
     pa, pk = aie_mod.create(cfg), kf_mod.create(cfg)
     assert pa is not None and pk is not None
     eng = Engine(cfg, pipelines=[pa, pk])
@@ -127,7 +129,7 @@ def run_sitl(scenario: str, duration: float | None = None, seed: int = 1,
         ne = [frame.to_ne(a, b) for a, b in zip(truth_a["lat"], truth_a["lon"])]
         truth_a["north"] = np.array([x[0] for x in ne])
         truth_a["east"] = np.array([x[1] for x in ne])
-    return SitlRun(scenario, np.asarray(ts), {k: np.asarray(v, float) for k, v in est.items()},
+    return SitlRun(name, np.asarray(ts), {k: np.asarray(v, float) for k, v in est.items()},
                    truth_a, [pa, pk], theta)
 
 
