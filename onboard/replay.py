@@ -101,10 +101,14 @@ class _Progress:
             print(file=sys.stderr)
 
 
-def choose_config(log: str, config_path: str | None) -> tuple[Config, str]:
-    """The config to use: the given file, or one detected from the log's header."""
+def choose_config(log: str, config_path: str | Sequence[str] | None
+                  ) -> tuple[Config, str]:
+    """The config to use: the given file, or several applied in order
+    (:func:`onboard.core.config.load_all`), or one detected from the log's header."""
+    if isinstance(config_path, str):
+        config_path = [config_path]
     if config_path:
-        return configmod.load(config_path), f"from {config_path}"
+        return configmod.load_all(config_path), f"from {' + '.join(config_path)}"
     fmt, reader = open_log(log)
     if fmt == "recording":
         from onboard.service.recorder import recording_config
