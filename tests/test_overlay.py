@@ -192,6 +192,11 @@ class _Recorder:
             self.newest = max(self.newest, s.t)
         return {"newest": self.newest}
 
+    def __deepcopy__(self, memo):
+        twin = _Recorder()
+        twin.newest = self.newest
+        return twin
+
     def health(self):
         return {}
 
