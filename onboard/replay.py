@@ -211,11 +211,12 @@ def _json_num(v: float) -> float | None:
 
 def _plot_track(out_dir: Path) -> str | None:
     """track.png: the measured track and every reconstructed one; None without matplotlib."""
+    from onboard.plots import plot_track
+
     try:
-        from onboard.plots import plot_track
+        return plot_track(out_dir / "estimates.csv", out_dir / "track.png")
     except ImportError:
         return None
-    return plot_track(out_dir / "estimates.csv", out_dir / "track.png")
 
 
 def main(args) -> int:

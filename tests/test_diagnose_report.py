@@ -14,12 +14,36 @@ import numpy as np
 import pytest
 
 from onboard.closure import report
+from onboard.closure.dataset import from_arrays
 from onboard.closure.effects import ALL
 from onboard.closure.select import select
-from tests.test_closure_synthetic import synth
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "diagnose.md"
 BEGIN, END = "<!-- effect-table:begin -->", "<!-- effect-table:end -->"
+
+
+def synth(seed: int, T: float, dev=(0.0, 0.0), gyro_bias=0.0, dt=0.1):
+    """A first-order boat in turns with a compass deviation ``a sin psi + b cos psi``
+    (rad) and a gyro bias (rad/s): the kinematics of tests/test_closure_synthetic.py."""
+    rng = np.random.default_rng(seed)
+    n = int(T / dt)
+    t = np.arange(n) * dt
+    thr = np.repeat(rng.uniform(0.3, 1.0, n // 400 + 1), 400)[:n]
+    rud = np.sign(np.sin(2 * np.pi * t / 60)) * 0.3 * np.repeat(
+        rng.uniform(0.5, 1, n // 300 + 1), 300)[:n]
+    u = r = psi = 0.0
+    U, PSI, R = np.empty(n), np.empty(n), np.empty(n)
+    for i in range(n):
+        u += dt * (-0.5 * u + thr[i])
+        r += dt * (-1.0 * r + 0.6 * rud[i] * u)
+        psi += dt * r
+        U[i], PSI[i], R[i] = u, psi, r
+    vlat = -0.3 * R
+    vn = U * np.cos(PSI) - vlat * np.sin(PSI) + rng.normal(0, 0.05, n)
+    ve = U * np.sin(PSI) + vlat * np.cos(PSI) + rng.normal(0, 0.05, n)
+    psi_m = PSI + dev[0] * np.sin(PSI) + dev[1] * np.cos(PSI) + rng.normal(0, 0.01, n)
+    gyro = R + gyro_bias + rng.normal(0, 0.005, n)
+    return from_arrays(t, psi_m, vn, ve, r=gyro, cmd_surge=thr, cmd_yaw=rud)
 
 
 def _doc() -> dict:
@@ -134,7 +158,7 @@ def test_break_gaps_breaks_lines_at_gaps_and_run_changes():
 
 
 def test_report_figures_per_channel_from_a_selection(tmp_path):
-    """A small synthetic log (240 s, compass deviation and gyro bias) through the whole
+    """A small synthetic log (300 s, compass deviation and gyro bias) through the whole
     report: per-channel residual figure and the gaps in it broken."""
     ds = synth(seed=3, T=300.0, dev=(0.08, 0.05), gyro_bias=0.01)
     sel = select(ds)

@@ -1,4 +1,11 @@
-"""diagnosis.json (architecture.md §4.3) and report.html with figures."""
+"""diagnosis.json (architecture.md §4.3) and report.html with figures.
+
+The report is written for the engineer who maintains the boat: a plain-language summary
+first, parameters in the units they use (degrees, m/s, s) with their one-sigma, which
+effects explain the same residual (ambiguity), the structure no effect explains, and the
+residual of each channel before and after, lines broken across data gaps
+(:func:`onboard.plots.break_gaps`).
+"""
 
 from __future__ import annotations
 
@@ -15,6 +22,7 @@ from onboard.closure import model as M
 from onboard.closure import stats
 from onboard.closure.effects import ALL
 from onboard.closure.select import Selection
+from onboard.plots import break_gaps
 
 BASE_MODEL = ("velocity over ground along the measured heading but for the hull's sway in "
               "turns (v = x_p r); heading rate equal to the gyro's; first-order surge model "
@@ -55,10 +63,6 @@ METRIC_WORDS: dict[str, str] = {
     "lateral_velocity_rmse_mps": "lateral velocity RMS error",
 }
 
-GAP_FACTOR = 3.0
-"""A time step longer than this many median steps is a gap: plotted lines break there."""
-
-
 def effect_table_markdown() -> str:
     """The docs/diagnose.md table of the effects, their parameters and units, made from
     :data:`PARAM_UNITS` in catalog order (tests/test_diagnose_report.py keeps the doc
@@ -89,26 +93,6 @@ def format_param(effect: str, param: str, value, std=None) -> str:
     if isinstance(std, (int, float)) and math.isfinite(std):
         text += f" ± {std * scale:.2g}"
     return f"{text} {unit}".strip()
-
-
-def break_gaps(t: np.ndarray, *ys: np.ndarray, gap_s: float | None = None,
-               run: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
-    """``t`` and ``ys`` with a NaN inserted wherever a time step exceeds ``gap_s`` (default
-    :data:`GAP_FACTOR` median steps) or ``run`` changes, so that a plotted line breaks
-    there instead of joining the two sides of a gap."""
-    t = np.asarray(t, float)
-    if len(t) < 2:
-        return (t, *(np.asarray(y, float) for y in ys))
-    dt = np.diff(t)
-    if gap_s is None:
-        pos = dt[dt > 0]
-        gap_s = GAP_FACTOR * float(np.median(pos)) if len(pos) else np.inf
-    cut = dt > gap_s
-    if run is not None:
-        cut |= np.asarray(run)[1:] != np.asarray(run)[:-1]
-    idx = np.flatnonzero(cut) + 1
-    out_t = np.insert(t, idx, np.nan)
-    return (out_t, *(np.insert(np.asarray(y, float), idx, np.nan) for y in ys))
 
 
 def summary_text(doc: dict) -> str:
