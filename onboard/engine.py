@@ -211,6 +211,12 @@ class Engine:
         """Per pipeline (by id, with the pipeline itself so that the id stays its own):
         ``std_<q>`` column -> ``<q>``, from its columns."""
         self._pending: list[Sample] = []
+        self._fresh: list[Sample] = []
+        """With a GNSS latency: the samples queued since the previous tick."""
+        self._shadows: list[Pipeline] | None = None
+        """With a GNSS latency: per pipeline, a copy fed every sample up to
+        ``_shadow_t`` in time order, whose estimates are published (see :meth:`tick`)."""
+        self._shadow_t = -math.inf
         self._ticks = 0
         self.pipeline_errors: Counter[str] = Counter()
         self.events: list[str] = []
@@ -282,10 +288,14 @@ class Engine:
         if chosen is None:  # another source of its quantity is active
             return True
         self._pending.append(chosen)
+        if self.hold_s > 0.0:
+            self._fresh.append(chosen)
         if cls in _RAW_ACTUATORS and self.mapper.active:
             cmd = self.mapper.map(sample)
             if cmd is not None:
                 self._pending.append(cmd)
+                if self.hold_s > 0.0:
+                    self._fresh.append(cmd)
         elif cls is Parameter:
             for change in self.mapper.parameter(sample.name, sample.value):
                 self.events.append(f"inputs: {change}")
@@ -297,15 +307,18 @@ class Engine:
         With a GNSS latency correction (``hold_s`` > 0) the pipelines are stepped to the
         fusion horizon ``t - hold_s`` with the samples up to it, in time order; the newer
         ones wait for a later tick, so that a fix stamped ``hold_s`` earlier than it
-        arrives still comes before them. The estimates at ``t`` then come from a copy of
-        each pipeline fed the waiting samples (fresh compass and commands) and thrown
-        away: the output is as fresh as without the correction and the state is never
-        fed out of order. That copy costs about 5 ms per tick for the surface-boat
-        pipelines (docs/diagnose.md)."""
+        arrives still comes before them. The estimates at ``t`` come from a copy of each
+        pipeline (a shadow) that has every sample up to the newest, in time order: the
+        output is as fresh as without the correction and no state is fed out of order.
+        A shadow takes the new samples as they come while they are in order; a sample
+        older than its newest (a re-stamped fix) makes it a new copy of the pipeline,
+        fed the waiting samples. The copies cost CPU (docs/diagnose.md, "Round trip")."""
         batch = self._pending
         if len(batch) > 1:
             batch.sort(key=_sample_time)  # stable: arrival order breaks ties
         held: list[Sample] | None = None
+        fresh: list[Sample] = []
+        refork = False
         t_step = t
         if self.hold_s > 0.0:
             t_step = t - self.hold_s
@@ -313,19 +326,31 @@ class Engine:
             held = batch[cut:]
             self._pending = list(held)
             batch = batch[:cut]
+            fresh = self._fresh
+            self._fresh = []
+            fresh.sort(key=_sample_time)
+            refork = (self._shadows is None or len(self._shadows) != len(self.pipelines)
+                      or (bool(fresh) and fresh[0].t < self._shadow_t))
+            if refork:
+                self._shadows = list(self.pipelines)
         else:
             self._pending = []
         t_sensor = batch[-1].t if batch else None
         vehicle = self.cfg.vehicle.id
         sources = self.selector.active  # replaced, never mutated, on a switch
         records = []
+        refork_next = False
         for i, p in enumerate(self.pipelines):
             try:
                 values = p.step(t_step, batch)
                 if held is not None:
-                    values = copy.deepcopy(p).step(t, held)
+                    shadows = self._shadows
+                    if refork:
+                        shadows[i] = copy.deepcopy(p)  # type: ignore[index]
+                    values = shadows[i].step(t, held if refork else fresh)  # type: ignore
             except Exception as err:  # a pipeline bug must not stop the others
                 values = self._recover(i, p, err)
+                refork_next = True
             pev = getattr(p, "events", None)
             if pev:  # a pipeline's own events (e.g. restored state discarded)
                 self.events.extend(f"{p.name}: {e}" for e in pev)
@@ -343,6 +368,14 @@ class Engine:
                                  sources=sources)
             self.latest[p.name] = rec
             records.append(rec)
+        if held is not None:
+            newest = held[-1].t if (refork and held) else fresh[-1].t if fresh else None
+            if refork:
+                self._shadow_t = t_step if newest is None else max(newest, t_step)
+            elif newest is not None:
+                self._shadow_t = max(self._shadow_t, newest)
+            if refork_next:  # a restarted pipeline: its shadow is copied again
+                self._shadows = None
         self._ticks += 1
         return records
 
@@ -411,6 +444,7 @@ class Engine:
     def set_state(self, state: dict) -> None:
         """Restore what :meth:`get_state` returned, pipeline by pipeline (a pipeline
         missing from ``state`` keeps its fresh state)."""
+        self._shadows = None
         for p in self.pipelines:
             if isinstance(state.get(p.name), dict):
                 p.set_state(state[p.name])
