@@ -6,7 +6,6 @@ table kept equal to the code's catalog."""
 from __future__ import annotations
 
 import base64
-import math
 import re
 from pathlib import Path
 
@@ -141,7 +140,7 @@ def test_docs_effect_table_is_the_generated_one():
 def test_docs_physics_table_names_every_catalog_effect():
     text = DOC.read_text()
     names = set(re.findall(r"^\s*\| `(\w+)` \|", text.split("## Method")[1].split("\n4.")[0],
-                           re.M))
+                           re.MULTILINE))
     assert names == set(ALL)
 
 

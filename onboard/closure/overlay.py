@@ -196,8 +196,8 @@ def surge_model(doc: dict, sel: Any) -> tuple[dict[str, Any], list[str]]:
     if not {"a", "b", "c0"} <= set(bp) or sel is None:
         return {}, []
     a, b, c0 = float(bp["a"]), float(bp["b"]), float(bp["c0"])
-    notes = [f"surge model U' = -a U + gain c + offset (fit + selection parts): "
-             f"a = {a:.3g} 1/s, gain = {b:.3g} m/s^2, offset = {c0:.3g} m/s^2"]
+    notes = [(f"surge model U' = -a U + gain c + offset (fit + selection parts): "
+              f"a = {a:.3g} 1/s, gain = {b:.3g} m/s^2, offset = {c0:.3g} m/s^2")]
     f = _found(doc)
     fit = sel.final_fit
     if "thrust_nonlinearity" in f and "thrust_nonlinearity" in fit.theta:
@@ -226,9 +226,10 @@ def current_prior(doc: dict) -> tuple[dict[str, Any], list[str]]:
     sn, se = _std(e, "north") or 0.0, _std(e, "east") or 0.0
     speed = math.hypot(n, east)
     scale = max(0.05, speed + 3.0 * math.hypot(sn, se))
+    toward = math.degrees(math.atan2(east, n)) % 360
     return ({"init_current_std": round(scale, 3)},
-            [f"water_current: {speed:.3f} m/s toward {math.degrees(math.atan2(east, n)) % 360:.0f} "
-             f"deg in this log; its size is the prior's scale"])
+            [f"water_current: {speed:.3f} m/s toward {toward:.0f} deg in this log; "
+             + "its size is the prior's scale"])
 
 
 def overlay_text(doc: dict, cfg: Config, sel: Any = None, *, detected: bool = False,

@@ -86,8 +86,10 @@ def format_param(effect: str, param: str, value, std=None) -> str:
     """``value +- std unit`` in the report's units (degrees for angles)."""
     if isinstance(value, bool):
         return "yes" if value else "no"
-    if not isinstance(value, (int, float)) or value != value:
-        return "n/a" if value is None or value != value else str(value)
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "n/a"
+    if not isinstance(value, (int, float)):
+        return str(value)
     unit, scale = _unit_of(effect, param)
     text = f"{value * scale:.3g}"
     if isinstance(std, (int, float)) and math.isfinite(std):

@@ -354,8 +354,8 @@ class SourcePriorities(_Strict):
 
 class Corrections(_Strict):
     """``[corrections]``: known sensor errors taken out of every validated sample before
-    the pipelines see it (live and replay alike; :mod:`onboard.corrections`). The values
-    ``onboard diagnose --write-config`` measures go here.
+    the pipelines see it (live and replay alike; ``onboard.engine.SampleCorrector``).
+    The values ``onboard diagnose --write-config`` measures go here.
 
     Heading: the sensor reads ``true + offset + sum_k (sin_k sin(k psi) + cos_k cos(k
     psi))`` (``psi`` the true heading, ``k = 1, 2, ...``: the compass deviation card as
