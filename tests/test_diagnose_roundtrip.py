@@ -154,3 +154,31 @@ def test_diagnose_overlay_replay_round_trip(tmp_path):
         assert a["aie.heading"] < 0.3 * b["aie.heading"]
         assert a["kf.heading"] < 0.3 * b["kf.heading"]
         assert a["current"] < 0.3 * b["current"]
+
+
+@pytest.mark.slow
+def test_thruster_swap_round_trip(tmp_path):
+    """``effect-thruster-swap`` (SERVO1 drives the starboard thruster reversed, SERVO3 the
+    port one), seed 1, diagnosed with config/twin-thruster-boat.toml; the overlay's
+    re-mapped inputs and surge model scored on the test part (480-600 s). Measured: aie
+    speed 0.092 -> 0.048 m/s, kf speed 0.278 -> 0.049 m/s, kf heading 0.049 -> 0.019 rad."""
+    base = str(Path(BASE).with_name("twin-thruster-boat.toml"))
+    log, truth = tmp_path / "log.tlog", tmp_path / "truth.jsonl"
+    run_to_tlog("effect-thruster-swap", log, truth, seed=1)
+    overlay = tmp_path / "overlay.toml"
+    assert main(["diagnose", str(log), "--config", base, "--out", str(tmp_path / "diag"),
+                 "--write-config", str(overlay)]) == 0
+    cfg, plain = config.load_all([base, overlay]), config.load(base)
+    assert (cfg.inputs.left.channel, cfg.inputs.right.channel) == (
+        plain.inputs.right.channel, plain.inputs.left.channel)
+    assert cfg.inputs.right.reverse is not plain.inputs.left.reverse
+    res = {}
+    for name, layers in (("before", [base]), ("after", [base, str(overlay)])):
+        flags = [f for x in layers for f in ("--config", x)]
+        assert main(["replay", str(log), *flags, "--out", str(tmp_path / name),
+                     "--no-plot"]) == 0
+        res[name] = errors(read_columns(tmp_path / name / "estimates.csv"), truth, 480.0)
+    b, a = res["before"], res["after"]
+    assert a["aie.speed"] < 0.7 * b["aie.speed"]
+    assert a["kf.speed"] < 0.3 * b["kf.speed"]
+    assert a["kf.heading"] < 0.6 * b["kf.heading"]
