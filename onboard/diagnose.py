@@ -91,6 +91,7 @@ def main(args) -> int:
           f"{doc['holdout_error_before']:.4g} -> {doc['holdout_error_after']:.4g} "
           f"({Path(args.out) / 'diagnosis.json'})")
     if getattr(args, "write_config", None):
-        print(f"config overlay: {args.write_config} (apply with --config BASE --config "
-              f"{args.write_config})")
+        base = " ".join(f"--config {c}" for c in args.config or [])
+        print(f"config overlay: {args.write_config} (use: {base + ' ' if base else ''}"
+              f"--config {args.write_config})")
     return 0

@@ -237,9 +237,10 @@ def overlay_text(doc: dict, cfg: Config, sel: Any = None, *, detected: bool = Fa
     """The overlay TOML for diagnosis ``doc`` of a log read with ``cfg`` (the Selection
     ``sel`` gives the commands flown, for a thrust curve)."""
     out = _Doc()
-    out.comment(f"Written by `onboard diagnose --write-config` from {doc['log']}.\n"
-                f"Apply after the config it ran with: --config {base_note or 'BASE'} "
-                f"--config THIS_FILE\n"
+    how = ("Self-contained (the config was detected from the log): --config THIS_FILE"
+           if detected else f"Apply after the config it ran with: --config "
+           f"{base_note or 'BASE'} --config THIS_FILE")
+    out.comment(f"Written by `onboard diagnose --write-config` from {doc['log']}.\n{how}\n"
                 f"Test part {doc['holdout_metric']}: {doc['holdout_error_before']:.4g} -> "
                 f"{doc['holdout_error_after']:.4g}")
     if detected:
