@@ -182,11 +182,15 @@ class Engine:
     """
 
     def __init__(self, cfg: Config, pipelines: list[Pipeline] | None = None,
-                 only: set[str] | None = None, select_sources: bool = True) -> None:
+                 only: set[str] | None = None, select_sources: bool = True,
+                 fresh_estimates: bool = True) -> None:
         """Run ``pipelines``, by default those :func:`onboard.pipelines.build` makes for
         ``cfg`` (restricted to the pipeline names in ``only`` when given).
         ``select_sources`` False passes every source of every quantity through (model
-        closure looks at each sensor's own measurements, not at the one chosen)."""
+        closure looks at each sensor's own measurements, not at the one chosen).
+        ``fresh_estimates`` False: with a GNSS latency correction, return the estimates
+        at the fusion horizon ``tick - gnss_latency_s`` (no shadow copies, see
+        :meth:`tick`; for collectors that record what was fused)."""
         self.cfg = cfg
         self.pipelines = build(cfg, only) if pipelines is None else pipelines
         corrector = SampleCorrector(cfg.corrections)
@@ -217,6 +221,7 @@ class Engine:
         """With a GNSS latency: per pipeline, a copy fed every sample up to
         ``_shadow_t`` in time order, whose estimates are published (see :meth:`tick`)."""
         self._shadow_t = -math.inf
+        self.fresh_estimates = fresh_estimates
         self._ticks = 0
         self.pipeline_errors: Counter[str] = Counter()
         self.events: list[str] = []
@@ -288,13 +293,13 @@ class Engine:
         if chosen is None:  # another source of its quantity is active
             return True
         self._pending.append(chosen)
-        if self.hold_s > 0.0:
+        if self.hold_s > 0.0 and self.fresh_estimates:
             self._fresh.append(chosen)
         if cls in _RAW_ACTUATORS and self.mapper.active:
             cmd = self.mapper.map(sample)
             if cmd is not None:
                 self._pending.append(cmd)
-                if self.hold_s > 0.0:
+                if self.hold_s > 0.0 and self.fresh_estimates:
                     self._fresh.append(cmd)
         elif cls is Parameter:
             for change in self.mapper.parameter(sample.name, sample.value):
@@ -326,6 +331,11 @@ class Engine:
             held = batch[cut:]
             self._pending = list(held)
             batch = batch[:cut]
+            if not self.fresh_estimates:
+                held = None
+        else:
+            self._pending = []
+        if held is not None:
             fresh = self._fresh
             self._fresh = []
             fresh.sort(key=_sample_time)
@@ -333,8 +343,6 @@ class Engine:
                       or (bool(fresh) and fresh[0].t < self._shadow_t))
             if refork:
                 self._shadows = list(self.pipelines)
-        else:
-            self._pending = []
         t_sensor = batch[-1].t if batch else None
         vehicle = self.cfg.vehicle.id
         sources = self.selector.active  # replaced, never mutated, on a switch

@@ -257,6 +257,25 @@ def test_live_engine_fuses_restamped_fixes_in_time_order():
     assert not eng.rejected
 
 
+def test_collector_engine_without_fresh_estimates_keeps_order_and_copies_nothing():
+    """Model closure's collector: fed at the fusion horizon, no shadow copies."""
+    cfg = config.from_dict({"corrections": {"gnss_latency_s": 0.6}})
+    rec = _Recorder()
+    eng = Engine(cfg, pipelines=[rec], fresh_estimates=False)
+    stream = _live_stream(0.6)
+    i = 0
+    outputs = []
+    for k in range(1, 201):
+        while i < len(stream) and stream[i][0] <= 0.1 * k:
+            eng.push(stream[i][1], now=stream[i][0])
+            i += 1
+        outputs.append(eng.tick(0.1 * k)[0].values["newest"])
+    times = [s.t for _, batch in rec.fed for s in batch]
+    assert times == sorted(times) and len(times) > 290
+    assert eng._shadows is None
+    assert outputs[-1] <= 20.0 - 0.6 + 1e-9
+
+
 def test_without_latency_a_late_fix_would_break_the_order():
     """What the hold-back prevents: the same stream re-stamped without holding back."""
     cfg = config.from_dict({"corrections": {"gnss_latency_s": 0.6}})
