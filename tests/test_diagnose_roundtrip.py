@@ -13,6 +13,7 @@ Figures (seed 1 diagnosed, seed 2 the second log) are in docs/diagnose.md.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -182,3 +183,26 @@ def test_thruster_swap_round_trip(tmp_path):
     assert a["aie.speed"] < 0.7 * b["aie.speed"]
     assert a["kf.speed"] < 0.3 * b["kf.speed"]
     assert a["kf.heading"] < 0.6 * b["kf.heading"]
+
+
+@pytest.mark.data
+def test_real_usv_overlay_leaves_nothing_to_find(shared_data, tmp_path):
+    """The Shenzhen USV (dual-antenna heading 73.5 deg off the bow, GNSS 1.2 s late; no
+    --config: detected): the self-contained overlay, diagnosed again, leaves nothing to
+    name, and the test-part lateral velocity starts where the first diagnosis ended.
+    Measured: 0.325 -> 0.066 m/s, then 0.062 -> 0.062 m/s with the overlay."""
+    log = shared_data / "usv_rtk_gnss_heading_nmea_shenzhen" / "202412051751.txt"
+    if not log.exists():
+        pytest.skip(f"{log} not in the shared data")
+    overlay = tmp_path / "overlay.toml"
+    assert main(["diagnose", str(log), "--out", str(tmp_path / "one"),
+                 "--write-config", str(overlay)]) == 0
+    c = config.load_all([overlay]).corrections
+    assert math.degrees(c.heading_offset_rad) == pytest.approx(-73.5, abs=2.0)
+    assert c.gnss_latency_s == pytest.approx(1.2, abs=0.3)
+    assert main(["diagnose", str(log), "--config", str(overlay), "--out",
+                 str(tmp_path / "two")]) == 0
+    one = json.loads((tmp_path / "one" / "diagnosis.json").read_text())
+    two = json.loads((tmp_path / "two" / "diagnosis.json").read_text())
+    assert not [e for e in two["effects"] if e["detected"]]
+    assert two["holdout_error_before"] < 1.1 * one["holdout_error_after"]
