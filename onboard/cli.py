@@ -44,7 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     p = sub.add_parser("run", help="the onboard service (systemd ExecStart)")
-    p.add_argument("--config", required=True, help="vehicle/deployment TOML file")
+    p.add_argument("--config", required=True, action="append", metavar="FILE",
+                   help="vehicle/deployment TOML file; repeat to apply overlays in order "
+                        "(later keys win)")
     p.add_argument("--state-dir", default=None, help="directory for recordings and state "
                    "(default: $STATE_DIRECTORY or the current directory)")
     p.set_defaults(handler="onboard.service.daemon:main")
@@ -83,15 +85,22 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="run the pipelines over a recorded log")
     p.add_argument("log", metavar="LOG", help=".tlog, .bin, NMEA/DVL capture, CSV (file or "
                    "directory), or an onboard recording")
-    p.add_argument("--config", help="vehicle config (default: detect from the log)")
+    p.add_argument("--config", action="append", metavar="FILE",
+                   help="vehicle config (default: detect from the log); repeat to apply "
+                        "overlays in order, e.g. one written by diagnose --write-config")
     p.add_argument("--out", default="replay-out", help="output directory (default replay-out)")
     p.add_argument("--no-plot", action="store_true", help="skip the track figure")
     p.set_defaults(handler="onboard.replay:main")
 
     p = sub.add_parser("diagnose", help="residuals, the missing effect, before/after")
     p.add_argument("log", metavar="LOG")
-    p.add_argument("--config", help="vehicle config (default: detect from the log)")
+    p.add_argument("--config", action="append", metavar="FILE",
+                   help="vehicle config (default: detect from the log); repeatable, "
+                        "applied in order")
     p.add_argument("--out", default="diagnose-out", help="output directory")
+    p.add_argument("--write-config", metavar="FILE",
+                   help="write what the diagnosis found as a TOML config overlay, to pass "
+                        "after the config: --config BASE --config FILE")
     p.set_defaults(handler="onboard.diagnose:main")
 
     p = sub.add_parser("shore", help="live view of a vehicle's estimates from Zenoh")

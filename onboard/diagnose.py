@@ -1,8 +1,10 @@
-"""``onboard diagnose LOG [--config FILE] [--out DIR]``: model closure on measured data.
+"""``onboard diagnose LOG [--config FILE ...] [--out DIR] [--write-config FILE]``: model
+closure on measured data.
 
 Reads the log with the same readers and engine as ``onboard replay``, fits the base model,
 selects the effects that explain its structured residuals on held-out data, and writes
-``DIR/diagnosis.json`` and ``DIR/report.html`` (architecture.md §4.3). Options in the
+``DIR/diagnosis.json`` and ``DIR/report.html`` (architecture.md §4.3); with
+``--write-config`` also a config overlay of what it found (:mod:`onboard.closure.overlay`). Options in the
 config's ``[pipelines.diagnose]`` table: ``declared`` (effects already in the model),
 ``holdout_metric``.
 """
@@ -14,7 +16,7 @@ from pathlib import Path
 import msgspec
 
 from drivers.base import UnreadableLog
-from onboard.closure import dataset, report
+from onboard.closure import dataset, overlay, report
 from onboard.closure.effects import ALL
 from onboard.closure.select import select
 from onboard.core.config import decode_section
@@ -38,13 +40,17 @@ class DiagnoseConfig(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     rate_hz: float = 10.0
 
 
-def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = ()) -> dict:
+def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
+             write_config: Path | None = None, config_note: str = "",
+             detected: bool = False) -> dict:
     """Model closure of ``log`` under configuration ``cfg``: fit, select the effects,
     write ``diagnosis.json`` and ``report.html`` into ``out_dir``; return the diagnosis.
 
     ``declared`` effects (default: the config's ``[pipelines.diagnose] declared``) are
     taken as part of the model and not searched; an unknown name is a
-    :class:`UsageError`.
+    :class:`UsageError`. ``write_config``: also write the config overlay there
+    (``config_note`` names the base config in its header; ``detected``: ``cfg`` was
+    detected from the log, so the overlay carries its vehicle and inputs).
     """
     opts = decode_section(cfg, "diagnose", DiagnoseConfig)
     declared = tuple(declared) or tuple(opts.declared)
@@ -56,7 +62,14 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = ()) -> di
     except ValueError as err:
         raise UsageError(str(err)) from None
     sel = select(ds, declared=declared, metric=opts.holdout_metric or None, known=opts.known)
-    return report.write(sel, log, out_dir)
+    doc = report.write(sel, log, out_dir)
+    if write_config is not None:
+        text = overlay.overlay_text(doc, cfg, sel, detected=detected, base_note=config_note)
+        try:
+            Path(write_config).write_text(text, encoding="utf-8")
+        except OSError as err:
+            raise UsageError(f"{write_config}: cannot write: {err.strerror}") from None
+    return doc
 
 
 def main(args) -> int:
@@ -66,7 +79,10 @@ def main(args) -> int:
         raise UsageError(f"{args.log}: no such file or directory")
     try:
         cfg, _ = choose_config(args.log, args.config)
-        doc = diagnose(args.log, cfg, Path(args.out))
+        doc = diagnose(args.log, cfg, Path(args.out),
+                       write_config=getattr(args, "write_config", None),
+                       config_note=" --config ".join(args.config or []),
+                       detected=not args.config)
     except UnreadableLog as err:
         raise UsageError(str(err)) from None
     found = [e for e in doc["effects"] if e["detected"]]
@@ -74,4 +90,8 @@ def main(args) -> int:
     print(f"effects: {names}; test-part {doc['holdout_metric']}: "
           f"{doc['holdout_error_before']:.4g} -> {doc['holdout_error_after']:.4g} "
           f"({Path(args.out) / 'diagnosis.json'})")
+    if getattr(args, "write_config", None):
+        base = " ".join(f"--config {c}" for c in args.config or [])
+        print(f"config overlay: {args.write_config} (use: {base + ' ' if base else ''}"
+              f"--config {args.write_config})")
     return 0

@@ -3,12 +3,15 @@
 One engine serves live operation and replay (architecture.md §3):
 
 * :meth:`Engine.push` checks a sample (:mod:`onboard.validate`), counts a rejection with
-  its reason, converts pressure to depth, tracks surface/submerged mode (GNSS is accepted
+  its reason, takes the configured sensor errors out of it (``[corrections]``,
+  :class:`SampleCorrector`), converts pressure to depth, tracks surface/submerged mode (GNSS is accepted
   only at the surface), maps raw actuator outputs to a normalized command
   (:mod:`onboard.inputs`), lets through only the active source of each quantity
   (:mod:`onboard.sources`) and queues the sample for the next tick;
-* :meth:`Engine.tick` hands each pipeline the samples queued since the previous tick and
-  collects its estimates as :class:`~onboard.core.messages.EstimateRecord`.
+* :meth:`Engine.tick` hands each pipeline the samples queued since the previous tick, in
+  time order, and collects its estimates as :class:`~onboard.core.messages.EstimateRecord`.
+  With a GNSS latency correction the samples of the last ``gnss_latency_s`` seconds are
+  held back to the next tick: a fix re-stamped earlier still comes in time order.
 
 :func:`run` drives an engine from any time-ordered iterable of samples on a fixed tick grid
 ``t0 + k / rate_hz``; the live service calls ``push``/``tick`` from its own monotonic
@@ -17,18 +20,26 @@ timer instead. Given the same samples and tick times, the output is identical.
 
 from __future__ import annotations
 
+import bisect
+import copy
 import math
 from collections import Counter
 from operator import attrgetter
 from typing import Callable, Iterable, Sequence
 
-from onboard.core.config import Config
+import msgspec
+
+from onboard.core.config import Config, Corrections
+from onboard.core.geo import wrap_2pi, wrap_pi
 from onboard.core.messages import (
     ActuatorOutputs,
+    Attitude,
     Depth,
     EstimateRecord,
     GnssFix,
+    Heading,
     HealthRecord,
+    Imu,
     Parameter,
     Pressure,
     PropellerRpm,
@@ -38,7 +49,7 @@ from onboard.core.messages import (
 from onboard.inputs import InputMapper
 from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline
-from onboard.sources import SourceSelector
+from onboard.sources import SourceSelector, pattern_matches
 from onboard.validate import checker_for, sample_type
 
 GRAVITY = 9.80665
@@ -56,6 +67,108 @@ _RAW_ACTUATORS = {ActuatorOutputs, RcChannels, PropellerRpm}
 TickCallback = Callable[[float, Sequence[EstimateRecord]], None]
 
 
+class SampleCorrector:
+    """The ``[corrections]`` of a configuration applied to one validated sample.
+
+    * ``GnssFix``: time stamp minus ``gnss_latency_s`` (the instant it measured);
+    * ``Heading`` and ``Attitude`` yaw (of the ``heading_sources``, default all): the
+      heading error ``e(psi) = offset + sum_k (s_k sin k psi + c_k cos k psi)`` (or the
+      deviation card interpolated) is a function of the true heading ``psi``; the
+      measured ``m = psi + e(psi)`` is inverted by fixed-point iteration
+      ``psi <- m - e(psi)`` from ``psi = m`` (three rounds: the error of a deviation
+      ``A`` shrinks as ``A^4``, below 1e-5 rad for ``A`` = 0.1 rad);
+    * ``Imu`` gyro rates and ``Attitude`` body rates: minus ``gyro_bias_rps``.
+
+    Other samples pass unchanged.
+    """
+
+    ITERATIONS = 3
+
+    def __init__(self, c: Corrections) -> None:
+        """Precompute what ``c`` asks for (:attr:`active` False when nothing)."""
+        self.latency_s = float(c.gnss_latency_s)
+        self.gyro = tuple(float(x) for x in c.gyro_bias_rps)
+        self.offset = float(c.heading_offset_rad)
+        self.sin = tuple(float(x) for x in c.heading_harmonics_sin)
+        self.cos = tuple(float(x) for x in c.heading_harmonics_cos)
+        table = sorted((math.radians(h) % (2 * math.pi), math.radians(e))
+                       for h, e in c.heading_deviation_table)
+        if table:  # periodic: repeat the first point one turn on
+            table.append((table[0][0] + 2 * math.pi, table[0][1]))
+        self.table = table
+        self.sources = list(c.heading_sources)
+        self.has_gyro = any(g != 0.0 for g in self.gyro)
+        self.has_heading = bool(self.offset != 0.0 or any(self.sin) or any(self.cos)
+                                or self.table)
+        self.active = self.latency_s > 0.0 or self.has_gyro or self.has_heading
+        self._for_source: dict[str, bool] = {}
+
+    def heading_error(self, psi: float) -> float:
+        """The heading error (rad) at true heading ``psi`` (rad)."""
+        e = self.offset
+        for k, a in enumerate(self.sin, 1):
+            e += a * math.sin(k * psi)
+        for k, b in enumerate(self.cos, 1):
+            e += b * math.cos(k * psi)
+        if self.table:
+            x = psi % (2 * math.pi)
+            xs = [h for h, _ in self.table]
+            i = bisect.bisect_right(xs, x)
+            if i == 0:  # before the first point: between the last and the first
+                (h0, e0), (h1, e1) = self.table[-2], self.table[-1]
+                x += 2 * math.pi
+            elif i >= len(self.table):
+                (h0, e0), (h1, e1) = self.table[-2], self.table[-1]
+            else:
+                (h0, e0), (h1, e1) = self.table[i - 1], self.table[i]
+            e += e0 + (e1 - e0) * (x - h0) / (h1 - h0) if h1 > h0 else e0
+        return e
+
+    def true_heading(self, measured: float) -> float:
+        """The true heading (rad, unwrapped) whose reading is ``measured`` (rad)."""
+        psi = measured
+        for _ in range(self.ITERATIONS):
+            psi = measured - self.heading_error(psi)
+        return psi
+
+    def _heading_source(self, source: str) -> bool:
+        ok = self._for_source.get(source)
+        if ok is None:
+            ok = self._for_source[source] = not self.sources or any(
+                pattern_matches(p, source) for p in self.sources)
+        return ok
+
+    def __call__(self, sample: Sample) -> Sample:
+        """``sample`` with the corrections applied (a new sample, or itself)."""
+        cls = type(sample)
+        if cls is GnssFix:
+            if self.latency_s > 0.0:
+                return msgspec.structs.replace(sample, t=sample.t - self.latency_s)
+        elif cls is Heading:
+            if self.has_heading and self._heading_source(sample.source):
+                return msgspec.structs.replace(
+                    sample, heading_rad=wrap_2pi(self.true_heading(sample.heading_rad)))
+        elif cls is Imu:
+            if self.has_gyro:
+                gx, gy, gz = self.gyro
+                return msgspec.structs.replace(sample, gyro_x=sample.gyro_x - gx,
+                                               gyro_y=sample.gyro_y - gy,
+                                               gyro_z=sample.gyro_z - gz)
+        elif cls is Attitude:
+            changes: dict[str, float] = {}
+            if self.has_heading and self._heading_source(sample.source):
+                changes["yaw_rad"] = wrap_pi(self.true_heading(sample.yaw_rad))
+            if self.has_gyro:
+                for name, g in zip(("roll_rate_rps", "pitch_rate_rps", "yaw_rate_rps"),
+                                   self.gyro):
+                    v = getattr(sample, name)
+                    if v is not None and g != 0.0:
+                        changes[name] = v - g
+            if changes:
+                return msgspec.structs.replace(sample, **changes)
+        return sample
+
+
 class Engine:
     """Feeds validated samples into pipelines on ticks. Not thread-safe; one owner.
 
@@ -69,13 +182,23 @@ class Engine:
     """
 
     def __init__(self, cfg: Config, pipelines: list[Pipeline] | None = None,
-                 only: set[str] | None = None, select_sources: bool = True) -> None:
+                 only: set[str] | None = None, select_sources: bool = True,
+                 fresh_estimates: bool = True) -> None:
         """Run ``pipelines``, by default those :func:`onboard.pipelines.build` makes for
         ``cfg`` (restricted to the pipeline names in ``only`` when given).
         ``select_sources`` False passes every source of every quantity through (model
-        closure looks at each sensor's own measurements, not at the one chosen)."""
+        closure looks at each sensor's own measurements, not at the one chosen).
+        ``fresh_estimates`` False: with a GNSS latency correction, return the estimates
+        at the fusion horizon ``tick - gnss_latency_s`` (no shadow copies, see
+        :meth:`tick`; for collectors that record what was fused)."""
         self.cfg = cfg
         self.pipelines = build(cfg, only) if pipelines is None else pipelines
+        corrector = SampleCorrector(cfg.corrections)
+        self.correct: Callable[[Sample], Sample] | None = \
+            corrector if corrector.active else None
+        """``[corrections]`` applied to each validated sample (None: none configured)."""
+        self.hold_s = corrector.latency_s
+        """Samples newer than ``tick - hold_s`` wait for a later tick (GNSS latency)."""
         self.mapper = InputMapper(cfg.inputs)
         self.max_age = cfg.engine.max_sample_age_s
         self.accepted: Counter[tuple[str, str]] = Counter()
@@ -92,6 +215,13 @@ class Engine:
         """Per pipeline (by id, with the pipeline itself so that the id stays its own):
         ``std_<q>`` column -> ``<q>``, from its columns."""
         self._pending: list[Sample] = []
+        self._fresh: list[Sample] = []
+        """With a GNSS latency: the samples queued since the previous tick."""
+        self._shadows: list[Pipeline] | None = None
+        """With a GNSS latency: per pipeline, a copy fed every sample up to
+        ``_shadow_t`` in time order, whose estimates are published (see :meth:`tick`)."""
+        self._shadow_t = -math.inf
+        self.fresh_estimates = fresh_estimates
         self._ticks = 0
         self.pipeline_errors: Counter[str] = Counter()
         self.events: list[str] = []
@@ -131,9 +261,11 @@ class Engine:
         reason = check(sample)
         if reason is not None:
             return self._reject(kind, reason)
-        t = sample.t
-        if now is not None and t > now + 1.0:
+        if now is not None and sample.t > now + 1.0:
             return self._reject(kind, "future")
+        if self.correct is not None:
+            sample = self.correct(sample)
+        t = sample.t
         key = (kind, sample.source)
         last = self._last_t.get(key)
         if last is not None and t < last:
@@ -161,30 +293,72 @@ class Engine:
         if chosen is None:  # another source of its quantity is active
             return True
         self._pending.append(chosen)
+        if self.hold_s > 0.0 and self.fresh_estimates:
+            self._fresh.append(chosen)
         if cls in _RAW_ACTUATORS and self.mapper.active:
             cmd = self.mapper.map(sample)
             if cmd is not None:
                 self._pending.append(cmd)
+                if self.hold_s > 0.0 and self.fresh_estimates:
+                    self._fresh.append(cmd)
         elif cls is Parameter:
             for change in self.mapper.parameter(sample.name, sample.value):
                 self.events.append(f"inputs: {change}")
         return True
 
     def tick(self, t: float) -> list[EstimateRecord]:
-        """Step every pipeline to time ``t`` (s) with the samples queued so far."""
+        """Step every pipeline to time ``t`` (s) with the samples queued so far.
+
+        With a GNSS latency correction (``hold_s`` > 0) the pipelines are stepped to the
+        fusion horizon ``t - hold_s`` with the samples up to it, in time order; the newer
+        ones wait for a later tick, so that a fix stamped ``hold_s`` earlier than it
+        arrives still comes before them. The estimates at ``t`` come from a copy of each
+        pipeline (a shadow) that has every sample up to the newest, in time order: the
+        output is as fresh as without the correction and no state is fed out of order.
+        A shadow takes the new samples as they come while they are in order; a sample
+        older than its newest (a re-stamped fix) makes it a new copy of the pipeline,
+        fed the waiting samples. The copies cost CPU (docs/diagnose.md, "Round trip")."""
         batch = self._pending
-        self._pending = []
         if len(batch) > 1:
             batch.sort(key=_sample_time)  # stable: arrival order breaks ties
+        held: list[Sample] | None = None
+        fresh: list[Sample] = []
+        refork = False
+        t_step = t
+        if self.hold_s > 0.0:
+            t_step = t - self.hold_s
+            cut = bisect.bisect_right(batch, t_step, key=_sample_time)
+            held = batch[cut:]
+            self._pending = list(held)
+            batch = batch[:cut]
+            if not self.fresh_estimates:
+                held = None
+        else:
+            self._pending = []
+        if held is not None:
+            fresh = self._fresh
+            self._fresh = []
+            fresh.sort(key=_sample_time)
+            refork = (self._shadows is None or len(self._shadows) != len(self.pipelines)
+                      or (bool(fresh) and fresh[0].t < self._shadow_t))
+            if refork:
+                self._shadows = list(self.pipelines)
         t_sensor = batch[-1].t if batch else None
         vehicle = self.cfg.vehicle.id
         sources = self.selector.active  # replaced, never mutated, on a switch
         records = []
+        refork_next = False
         for i, p in enumerate(self.pipelines):
             try:
-                values = p.step(t, batch)
+                values = p.step(t_step, batch)
+                if held is not None:
+                    shadows = self._shadows
+                    if refork:
+                        shadows[i] = copy.deepcopy(p)  # type: ignore[index]
+                    values = shadows[i].step(t, held if refork else fresh)  # type: ignore
             except Exception as err:  # a pipeline bug must not stop the others
                 values = self._recover(i, p, err)
+                refork_next = True
             pev = getattr(p, "events", None)
             if pev:  # a pipeline's own events (e.g. restored state discarded)
                 self.events.extend(f"{p.name}: {e}" for e in pev)
@@ -202,6 +376,14 @@ class Engine:
                                  sources=sources)
             self.latest[p.name] = rec
             records.append(rec)
+        if held is not None:
+            newest = held[-1].t if (refork and held) else fresh[-1].t if fresh else None
+            if refork:
+                self._shadow_t = t_step if newest is None else max(newest, t_step)
+            elif newest is not None:
+                self._shadow_t = max(self._shadow_t, newest)
+            if refork_next:  # a restarted pipeline: its shadow is copied again
+                self._shadows = None
         self._ticks += 1
         return records
 
@@ -270,6 +452,7 @@ class Engine:
     def set_state(self, state: dict) -> None:
         """Restore what :meth:`get_state` returned, pipeline by pipeline (a pipeline
         missing from ``state`` keeps its fresh state)."""
+        self._shadows = None
         for p in self.pipelines:
             if isinstance(state.get(p.name), dict):
                 p.set_state(state[p.name])

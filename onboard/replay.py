@@ -101,10 +101,14 @@ class _Progress:
             print(file=sys.stderr)
 
 
-def choose_config(log: str, config_path: str | None) -> tuple[Config, str]:
-    """The config to use: the given file, or one detected from the log's header."""
+def choose_config(log: str, config_path: str | Sequence[str] | None
+                  ) -> tuple[Config, str]:
+    """The config to use: the given file, or several applied in order
+    (:func:`onboard.core.config.load_all`), or one detected from the log's header."""
+    if isinstance(config_path, str):
+        config_path = [config_path]
     if config_path:
-        return configmod.load(config_path), f"from {config_path}"
+        return configmod.load_all(config_path), f"from {' + '.join(config_path)}"
     fmt, reader = open_log(log)
     if fmt == "recording":
         from onboard.service.recorder import recording_config
@@ -207,11 +211,12 @@ def _json_num(v: float) -> float | None:
 
 def _plot_track(out_dir: Path) -> str | None:
     """track.png: the measured track and every reconstructed one; None without matplotlib."""
+    from onboard.plots import plot_track
+
     try:
-        from onboard.plots import plot_track
+        return plot_track(out_dir / "estimates.csv", out_dir / "track.png")
     except ImportError:
         return None
-    return plot_track(out_dir / "estimates.csv", out_dir / "track.png")
 
 
 def main(args) -> int:

@@ -282,7 +282,7 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     cfg = msgspec.structs.replace(cfg, engine=msgspec.structs.replace(cfg.engine, rate_hz=rate_hz))
     _, reader = open_log(path, cfg.csv)
     col = _Collector()
-    engine = Engine(cfg, [col], select_sources=False)
+    engine = Engine(cfg, [col], select_sources=False, fresh_estimates=False)
     run(engine, reader, lambda t, r: None, gap_s=2.0)
     if not col.rows:
         raise ValueError(f"{path}: no samples")

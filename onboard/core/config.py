@@ -8,6 +8,11 @@ with the dotted key and what was expected, e.g.::
 
 Pipelines own their hyperparameters: ``[pipelines.<name>]`` is kept as a table here and
 decoded by the pipeline with :func:`decode_section`, so the error still names the key.
+
+Several files make one configuration with :func:`load_all` (``--config base.toml
+--config overlay.toml``): later files win key by key, tables are merged recursively,
+lists and values are replaced whole (:func:`merge`). ``onboard diagnose --write-config``
+writes such an overlay (:mod:`onboard.closure.overlay`).
 """
 
 from __future__ import annotations
@@ -15,7 +20,7 @@ from __future__ import annotations
 import re
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any, Literal, TypeVar
+from typing import Annotated, Any, Literal, Sequence, TypeVar
 
 import msgspec
 
@@ -347,6 +352,42 @@ class SourcePriorities(_Strict):
     before it takes over again (no flapping on a source that comes and goes)."""
 
 
+class Corrections(_Strict):
+    """``[corrections]``: known sensor errors taken out of every validated sample before
+    the pipelines see it (live and replay alike; ``onboard.engine.SampleCorrector``).
+    The values ``onboard diagnose --write-config`` measures go here.
+
+    Heading: the sensor reads ``true + offset + sum_k (sin_k sin(k psi) + cos_k cos(k
+    psi))`` (``psi`` the true heading, ``k = 1, 2, ...``: the compass deviation card as
+    harmonics), or the same error interpolated in ``heading_deviation_table``; one of the
+    two, not both.
+    """
+
+    gnss_latency_s: Annotated[float, msgspec.Meta(ge=0.0, le=5.0)] = 0.0
+    """Time (s) between the instant a GNSS fix measures and its time stamp: every
+    ``GnssFix`` is re-stamped this much earlier. The engine then fuses the samples up to
+    ``tick - gnss_latency_s`` at each tick, so that a fix arriving late is still fused in
+    time order with the compass and the commands (the estimates are predicted to the
+    tick)."""
+    gyro_bias_rps: Annotated[list[float], msgspec.Meta(min_length=3, max_length=3)] = \
+        msgspec.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    """Gyro bias (rad/s, body x, y, z), subtracted from ``Imu`` gyro rates and
+    ``Attitude`` body rates."""
+    heading_offset_rad: float = 0.0
+    """Constant heading error (rad): a misaligned compass or GNSS-compass baseline."""
+    heading_harmonics_sin: list[float] = []
+    """Coefficients (rad) of ``sin(k psi)``, ``k = 1, 2, ...`` of the heading error."""
+    heading_harmonics_cos: list[float] = []
+    """Coefficients (rad) of ``cos(k psi)``, ``k = 1, 2, ...`` of the heading error."""
+    heading_deviation_table: list[
+        Annotated[list[float], msgspec.Meta(min_length=2, max_length=2)]] = []
+    """Deviation card: ``[heading_deg, error_deg]`` pairs, interpolated linearly and
+    periodically over the true heading (degrees, as the card is written)."""
+    heading_sources: list[str] = []
+    """Glob patterns of the sample ``source`` the heading corrections apply to (the
+    compass; ``[sources]`` syntax); empty: every heading and attitude source."""
+
+
 class Config(_Strict):
     """A whole configuration file."""
 
@@ -359,6 +400,19 @@ class Config(_Strict):
     service: ServiceConfig = ServiceConfig()
     pipelines: dict[str, dict[str, Any]] = {}
     """Per-pipeline tables, decoded by each pipeline (see :func:`decode_section`)."""
+    corrections: Corrections = Corrections()
+
+    def __post_init__(self) -> None:
+        c = self.corrections
+        if c.heading_deviation_table and (c.heading_harmonics_sin or c.heading_harmonics_cos):
+            raise msgspec.ValidationError(
+                "heading_deviation_table and heading_harmonics_* both given: one deviation "
+                "model only - at `$.corrections`")
+        if c.gnss_latency_s >= self.engine.max_sample_age_s:
+            raise msgspec.ValidationError(
+                f"gnss_latency_s {c.gnss_latency_s} s must be below engine.max_sample_age_s "
+                f"({self.engine.max_sample_age_s} s), else every re-stamped fix is late - "
+                "at `$.corrections`")
 
 
 _PATH_RE = re.compile(r" - at `\$(?P<path>[^`]*)`")
@@ -419,15 +473,62 @@ def load(path: str | Path) -> Config:
     A bare name such as ``rudder-boat`` is looked up in the bundled ``config/`` directory.
     """
     p = resolve(path)
+    return from_dict(_read_toml(p), str(p))
+
+
+def _read_toml(p: Path) -> dict[str, Any]:
+    """The TOML table of file ``p``; :class:`ConfigError` naming it when unreadable."""
     try:
         text = p.read_text(encoding="utf-8")
     except OSError as err:
         raise ConfigError(f"{p}: cannot read: {err.strerror}") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{p}: not valid TOML: {err}") from None
-    return from_dict(data, str(p))
+
+
+def merge(base: dict[str, Any], overlay: dict[str, Any]) -> dict[str, Any]:
+    """``overlay`` on top of ``base`` (neither is changed): a key in both whose values are
+    both tables is merged recursively; otherwise the overlay's value (a list, a number,
+    a string, a table over a value) replaces the base's whole."""
+    out = dict(base)
+    for k, v in overlay.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = merge(out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def load_all(paths: str | Path | Sequence[str | Path],
+             base: Config | None = None) -> Config:
+    """One configuration from several files applied in order (:func:`merge`; later keys
+    win). Each file must be valid on its own (an unknown key is an error naming that
+    file), and so must the result. One path behaves exactly as :func:`load`.
+
+    ``base``: a configuration to apply the files on (e.g. one detected from a log);
+    default: the defaults."""
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    if not paths:
+        raise ConfigError("no configuration file given")
+    if len(paths) == 1 and base is None:
+        return load(paths[0])
+    data: dict[str, Any] = to_dict(base) if base is not None else {}
+    names = []
+    for path in paths:
+        p = resolve(path)
+        layer = _read_toml(p)
+        from_dict(layer, str(p))
+        data = merge(data, layer)
+        names.append(str(p))
+    return from_dict(data, " + ".join(names))
+
+
+def to_dict(cfg: Config) -> dict[str, Any]:
+    """``cfg`` as the plain tables a TOML file would hold (keys as spelled in files)."""
+    return msgspec.to_builtins(cfg)
 
 
 def resolve(path: str | Path) -> Path:

@@ -45,7 +45,7 @@ from typing import Callable, Sequence
 import msgspec
 
 from drivers.transports import Transport, TransportUrlError, open_transport, parse_url
-from onboard.core.config import Config, ConfigError, SourceConfig, load
+from onboard.core.config import Config, ConfigError, SourceConfig, load_all
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.engine import Engine
 from onboard.service.intake import Intake
@@ -574,19 +574,22 @@ async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None
 
 
 def main(args: argparse.Namespace) -> int:
-    """``onboard run --config FILE [--state-dir DIR]``."""
+    """``onboard run --config FILE [--config OVERLAY ...] [--state-dir DIR]``: the
+    files are applied in order (:func:`onboard.core.config.load_all`)."""
     logging.basicConfig(level=os.environ.get("ONBOARD_LOG_LEVEL", "INFO"),
                         format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
-    cfg = load(args.config)
+    paths = [args.config] if isinstance(args.config, str) else list(args.config)
+    cfg = load_all(paths)
+    origin = " + ".join(paths)
     if not cfg.service.sources:
-        raise ConfigError(f"{args.config}: service.sources is empty: nothing to read")
+        raise ConfigError(f"{origin}: service.sources is empty: nothing to read")
     for i, src in enumerate(cfg.service.sources):
         try:
             spec = parse_url(src.url)
         except TransportUrlError as err:
-            raise ConfigError(f"{args.config}: service.sources[{i}].url: {err}") from None
+            raise ConfigError(f"{origin}: service.sources[{i}].url: {err}") from None
         if (spec.scheme == "gpsd") != (src.kind == "gpsd"):
-            raise ConfigError(f"{args.config}: service.sources[{i}]: kind \"gpsd\" goes with "
+            raise ConfigError(f"{origin}: service.sources[{i}]: kind \"gpsd\" goes with "
                               f"a gpsd://HOST:PORT url and only with it")
     mav = cfg.service.mavlink
     if mav.require_signing or mav.signing_key_file:

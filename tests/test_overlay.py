@@ -1,0 +1,381 @@
+"""Config overlays (``--config base --config overlay``), the ``[corrections]`` the engine
+applies to validated samples, and the overlay ``onboard diagnose --write-config`` writes.
+
+The diagnose -> overlay -> replay round trip on a simulated log is in
+tests/test_diagnose_roundtrip.py.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from onboard.cli import build_parser, main
+from onboard.closure import overlay
+from onboard.core import config
+from onboard.core.config import ConfigError
+from onboard.core.messages import Attitude, GnssFix, Heading, Imu, Sample
+from onboard.engine import Engine, SampleCorrector
+
+# ----------------------------------------------------------------------------- merging
+
+
+def _write(tmp_path, name: str, text: str):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_merge_tables_recursively_lists_replaced_later_wins():
+    base = {"a": {"x": 1, "y": {"p": 1, "q": 2}}, "l": [1, 2, 3], "s": "base"}
+    over = {"a": {"y": {"q": 20}}, "l": [9], "s": "over"}
+    assert config.merge(base, over) == {"a": {"x": 1, "y": {"p": 1, "q": 20}},
+                                        "l": [9], "s": "over"}
+    assert base["a"]["y"]["q"] == 2  # inputs untouched
+
+
+def test_single_config_is_exactly_load(tmp_path):
+    assert config.load_all(["rudder-boat"]) == config.load("rudder-boat")
+    assert config.load_all("rudder-boat") == config.load("rudder-boat")
+
+
+def test_overlay_changes_only_its_keys(tmp_path):
+    over = _write(tmp_path, "o.toml", "[inputs.throttle]\nchannel = 4\n"
+                  "[corrections]\ngnss_latency_s = 0.5\n[pipelines.aie.surge]\ngain = 2.5\n")
+    base = config.load("rudder-boat")
+    cfg = config.load_all(["rudder-boat", str(over)])
+    assert cfg.inputs.throttle.channel == 4
+    # the rest of the inline table [inputs.throttle] kept from the base
+    assert cfg.inputs.throttle.half_range_us == base.inputs.throttle.half_range_us
+    assert cfg.inputs.rudder == base.inputs.rudder
+    assert cfg.corrections.gnss_latency_s == 0.5
+    assert cfg.pipelines["aie"]["surge"] == {"gain": 2.5}
+    assert cfg.vehicle == base.vehicle and cfg.sensors == base.sensors
+
+
+def test_three_layers_apply_in_order(tmp_path):
+    a = _write(tmp_path, "a.toml", "[corrections]\nheading_offset_rad = 0.1\n")
+    b = _write(tmp_path, "b.toml", "[corrections]\nheading_offset_rad = 0.2\n")
+    assert config.load_all(["rudder-boat", a, b]).corrections.heading_offset_rad == 0.2
+    assert config.load_all(["rudder-boat", b, a]).corrections.heading_offset_rad == 0.1
+
+
+def test_unknown_key_in_an_overlay_names_that_file(tmp_path):
+    bad = _write(tmp_path, "bad.toml", "[corrections]\ngnss_latency = 0.5\n")
+    with pytest.raises(ConfigError) as err:
+        config.load_all(["rudder-boat", bad])
+    assert str(bad) in str(err.value)
+    assert "corrections.gnss_latency: unknown key" in str(err.value)
+
+
+def test_conflict_only_visible_after_merging_is_named(tmp_path):
+    a = _write(tmp_path, "a.toml", "[corrections]\nheading_harmonics_sin = [0.1]\n")
+    b = _write(tmp_path, "b.toml", "[corrections]\nheading_deviation_table = [[0, 1], [180, -1]]\n")
+    with pytest.raises(ConfigError, match="one deviation model only") as err:
+        config.load_all(["rudder-boat", a, b])
+    assert "a.toml + " in str(err.value)
+
+
+def test_latency_beyond_the_sample_age_is_a_clear_error():
+    with pytest.raises(ConfigError, match="must be below engine.max_sample_age_s"):
+        config.from_dict({"corrections": {"gnss_latency_s": 2.5}})
+
+
+def test_cli_config_is_repeatable_and_single_config_unchanged():
+    p = build_parser()
+    for cmd in ("replay", "diagnose"):
+        args = p.parse_args([cmd, "log.tlog", "--config", "a.toml", "--config", "b.toml"])
+        assert args.config == ["a.toml", "b.toml"]
+        assert p.parse_args([cmd, "log.tlog", "--config", "a.toml"]).config == ["a.toml"]
+        assert p.parse_args([cmd, "log.tlog"]).config is None
+    assert p.parse_args(["run", "--config", "a", "--config", "b"]).config == ["a", "b"]
+    args = p.parse_args(["diagnose", "x.tlog", "--write-config", "o.toml"])
+    assert args.write_config == "o.toml"
+
+
+def test_cli_bad_overlay_exits_2_with_one_line(tmp_path, capsys):
+    log = tmp_path / "x.csv"
+    log.write_text("t,heading\n0,1\n")
+    bad = _write(tmp_path, "bad.toml", "[corrections]\nnope = 1\n")
+    assert main(["replay", str(log), "--config", "rudder-boat", "--config", str(bad),
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "corrections.nope: unknown key" in err
+
+
+def test_run_reports_the_overlay_chain_in_its_errors(tmp_path):
+    from onboard.service import daemon
+
+    over = _write(tmp_path, "o.toml", "[corrections]\ngnss_latency_s = 0.2\n")
+    with pytest.raises(ConfigError, match=r"rudder-boat \+ .*o.toml: service.sources is empty"):
+        daemon.main(SimpleNamespace(config=["rudder-boat", str(over)], state_dir=None))
+
+
+# ------------------------------------------------------------------------- corrections
+
+
+def _corrector(**kw) -> SampleCorrector:
+    return SampleCorrector(config.from_dict({"corrections": kw}).corrections)
+
+
+def test_no_corrections_no_corrector_in_the_engine():
+    assert Engine(config.load("rudder-boat")).correct is None
+    assert Engine(config.load("rudder-boat")).hold_s == 0.0
+
+
+def test_gnss_fix_restamped_earlier():
+    c = _corrector(gnss_latency_s=0.6)
+    fix = GnssFix(t=10.0, lat_deg=1.0, lon_deg=2.0)
+    assert c(fix).t == pytest.approx(9.4)
+    h = Heading(t=10.0, heading_rad=1.0)
+    assert c(h) is h  # nothing else changes
+
+
+def test_gyro_bias_subtracted_from_imu_and_attitude_rates():
+    c = _corrector(gyro_bias_rps=[0.001, -0.002, 0.01])
+    imu = c(Imu(t=0, accel_x=0, accel_y=0, accel_z=-9.8, gyro_x=0.1, gyro_y=0.2, gyro_z=0.3))
+    assert (imu.gyro_x, imu.gyro_y, imu.gyro_z) == pytest.approx((0.099, 0.202, 0.29))
+    att = c(Attitude(t=0, roll_rad=0, pitch_rad=0, yaw_rad=1.0, yaw_rate_rps=0.3))
+    assert att.yaw_rate_rps == pytest.approx(0.29) and att.yaw_rad == 1.0
+    assert att.roll_rate_rps is None
+
+
+@pytest.mark.parametrize("amp, phase", [(0.12, 0.7), (0.1, -1.0), (0.2, 2.5)])
+def test_compass_deviation_inverted_at_every_heading(amp, phase):
+    c = _corrector(heading_harmonics_sin=[amp * math.cos(phase)],
+                   heading_harmonics_cos=[amp * math.sin(phase)], heading_offset_rad=0.05)
+    for true in np.linspace(0.0, 2 * math.pi, 73)[:-1]:
+        measured = (true + 0.05 + amp * math.sin(true + phase)) % (2 * math.pi)
+        got = c(Heading(t=0, heading_rad=measured)).heading_rad
+        # three fixed-point rounds: error ~ amp^4
+        assert abs(math.remainder(got - true, 2 * math.pi)) < 4 * amp ** 4 + 1e-9
+        yaw = c(Attitude(t=0, roll_rad=0, pitch_rad=0,
+                         yaw_rad=math.remainder(measured, 2 * math.pi))).yaw_rad
+        assert -math.pi <= yaw < math.pi
+        assert abs(math.remainder(yaw - true, 2 * math.pi)) < 4 * amp ** 4 + 1e-9
+
+
+def test_deviation_card_interpolated_periodically():
+    c = _corrector(heading_deviation_table=[[0, 2.0], [90, 4.0], [180, -2.0], [270, -4.0]])
+    assert math.degrees(c.heading_error(math.radians(45))) == pytest.approx(3.0)
+    assert math.degrees(c.heading_error(math.radians(315))) == pytest.approx(-1.0)
+    assert math.degrees(c.heading_error(math.radians(-45))) == pytest.approx(-1.0)
+    assert math.degrees(c.heading_error(math.radians(0))) == pytest.approx(2.0)
+
+
+def test_heading_sources_limit_the_heading_correction():
+    c = _corrector(heading_offset_rad=0.1, heading_sources=["compass"])
+    assert c(Heading(t=0, source="compass", heading_rad=1.0)).heading_rad == pytest.approx(0.9)
+    assert c(Heading(t=0, source="gnss-hdt", heading_rad=1.0)).heading_rad == 1.0
+
+
+# ------------------------------------------- the engine keeps time order with a latency
+
+
+class _Recorder:
+    """A pipeline that records what it is fed and answers the newest sample time."""
+
+    name = "rec"
+    columns = ("newest",)
+
+    def __init__(self) -> None:
+        self.fed: list[tuple[float, list[Sample]]] = []
+        self.newest = -math.inf
+
+    def step(self, t, samples):
+        self.fed.append((t, list(samples)))
+        for s in samples:
+            assert s.t <= t
+            self.newest = max(self.newest, s.t)
+        return {"newest": self.newest}
+
+    def __deepcopy__(self, memo):
+        twin = _Recorder()
+        twin.newest = self.newest
+        return twin
+
+    def health(self):
+        return {}
+
+    def get_state(self):
+        return {}
+
+    def set_state(self, state):
+        pass
+
+
+def _live_stream(latency: float, seconds: float = 20.0):
+    """(receive time, sample) as a service receives them: compass at 10 Hz on time, GNSS
+    at 5 Hz measured ``latency`` s before it arrives and stamped on arrival."""
+    out = []
+    for k in range(int(seconds * 10)):
+        t = 0.1 * k + 0.003
+        out.append((t, Heading(t=t, source="compass", heading_rad=0.01 * k)))
+        if k % 2 == 0:
+            out.append((t + latency, GnssFix(t=t + latency, source="gnss", lat_deg=60.0,
+                                             lon_deg=10.0)))
+    out.sort(key=lambda x: x[0])
+    return out
+
+
+def test_live_engine_fuses_restamped_fixes_in_time_order():
+    """The engine fed like the service (push with the receive clock, ticks on a fixed
+    grid): every sample reaches the pipeline once, in global time order, the fixes at
+    the instant they measured; the estimate at each tick still has the newest compass."""
+    cfg = config.from_dict({"corrections": {"gnss_latency_s": 0.6}})
+    rec = _Recorder()
+    eng = Engine(cfg, pipelines=[rec])
+    stream = _live_stream(0.6)
+    outputs = []
+    i = 0
+    for k in range(1, 201):
+        tick = 0.1 * k
+        while i < len(stream) and stream[i][0] <= tick:
+            assert eng.push(stream[i][1], now=stream[i][0])
+            i += 1
+        recs = eng.tick(tick)
+        outputs.append((tick, recs[0].values["newest"]))
+    fed = [s for _, batch in rec.fed for s in batch]
+    times = [s.t for s in fed]
+    assert times == sorted(times)
+    fixes = [s for s in fed if isinstance(s, GnssFix)]
+    assert len(fixes) >= 95
+    # each fix at the instant it measured (the even compass instants), not its arrival
+    for s in fixes:
+        k = (s.t - 0.003) / 0.2
+        assert k == pytest.approx(round(k), abs=1e-6)
+    # the pipeline's own state is fed up to the fusion horizon only
+    assert [t for t, _ in rec.fed] == pytest.approx([0.1 * k - 0.6 for k in range(1, 201)])
+    for t, batch in rec.fed:
+        assert all(s.t <= t + 1e-9 for s in batch)
+    # published estimate: the newest compass sample before the tick (from the copy)
+    for tick, newest in outputs[10:]:
+        assert tick - 0.1 < newest <= tick
+    assert not eng.rejected
+
+
+def test_collector_engine_without_fresh_estimates_keeps_order_and_copies_nothing():
+    """Model closure's collector: fed at the fusion horizon, no shadow copies."""
+    cfg = config.from_dict({"corrections": {"gnss_latency_s": 0.6}})
+    rec = _Recorder()
+    eng = Engine(cfg, pipelines=[rec], fresh_estimates=False)
+    stream = _live_stream(0.6)
+    i = 0
+    outputs = []
+    for k in range(1, 201):
+        while i < len(stream) and stream[i][0] <= 0.1 * k:
+            eng.push(stream[i][1], now=stream[i][0])
+            i += 1
+        outputs.append(eng.tick(0.1 * k)[0].values["newest"])
+    times = [s.t for _, batch in rec.fed for s in batch]
+    assert times == sorted(times) and len(times) > 290
+    assert eng._shadows is None
+    assert outputs[-1] <= 20.0 - 0.6 + 1e-9
+
+
+def test_without_latency_a_late_fix_would_break_the_order():
+    """What the hold-back prevents: the same stream re-stamped without holding back."""
+    cfg = config.from_dict({"corrections": {"gnss_latency_s": 0.6}})
+    rec = _Recorder()
+    eng = Engine(cfg, pipelines=[rec])
+    eng.hold_s = 0.0  # re-stamp, but feed at once
+    i = 0
+    stream = _live_stream(0.6)
+    for k in range(1, 101):
+        while i < len(stream) and stream[i][0] <= 0.1 * k:
+            eng.push(stream[i][1], now=stream[i][0])
+            i += 1
+        eng.tick(0.1 * k)
+    times = [s.t for _, batch in rec.fed for s in batch]
+    assert times != sorted(times)
+
+
+# ----------------------------------------------------------------------- the overlay
+
+
+def _doc(*effects, base_params=None):
+    return {"log": "x.tlog", "holdout_metric": "ground_velocity_rmse_mps",
+            "holdout_error_before": 0.2, "holdout_error_after": 0.1,
+            "base_params": base_params or {"x_p": 0.1},
+            "effects": [{"name": n, "detected": True, "params": p,
+                         "evidence": {"std": s}} for n, p, s in effects]}
+
+
+def test_overlay_corrections_from_the_vocabulary(tmp_path):
+    doc = _doc(("gps_latency", {"seconds": 0.57}, {"seconds": 0.06}),
+               ("gyro_bias", {"bias": 0.0104}, {"bias": 0.0005}),
+               ("heading_bias", {"bias": -0.05}, {"bias": 0.001}),
+               ("compass_deviation", {"amplitude": 0.12, "phase": 0.7},
+                {"amplitude": 0.007, "phase": 0.05}))
+    base = config.from_dict({"corrections": {"gnss_latency_s": 0.1,
+                                             "gyro_bias_rps": [0.0, 0.0, 0.001]}})
+    text = overlay.overlay_text(doc, base)
+    p = _write(tmp_path, "o.toml", text)
+    c = config.load_all([_write(tmp_path, "b.toml", "[corrections]\ngnss_latency_s = 0.1\n"
+                               "gyro_bias_rps = [0.0, 0.0, 0.001]\n"), p]).corrections
+    assert c.gnss_latency_s == pytest.approx(0.67)          # added to the base's
+    assert c.gyro_bias_rps == pytest.approx([0, 0, 0.0114])
+    assert c.heading_offset_rad == pytest.approx(-0.05)
+    # amplitude sin(psi + phase) as harmonics, the error the corrector then removes
+    corr = SampleCorrector(c)
+    for psi in (0.0, 1.0, 4.0):
+        assert corr.heading_error(psi) == pytest.approx(-0.05 + 0.12 * math.sin(psi + 0.7),
+                                                        abs=1e-5)
+    assert "deviation card" in text and "+- 0.06 s" in text
+    assert "deg" in text
+
+
+def test_overlay_swaps_and_reverses_the_thruster_channels(tmp_path):
+    base = config.load("twin-thruster-boat")
+    doc = _doc(("actuator_mapping", {"swapped": True, "reversed_left": True,
+                                     "reversed_right": False}, {}))
+    p = _write(tmp_path, "o.toml", overlay.overlay_text(doc, base))
+    cfg = config.load_all(["twin-thruster-boat", p])
+    assert cfg.inputs.from_autopilot is False
+    assert cfg.inputs.left.channel == base.inputs.right.channel
+    assert cfg.inputs.left.reverse == base.inputs.right.reverse
+    assert cfg.inputs.right.channel == base.inputs.left.channel
+    assert cfg.inputs.right.reverse is (not base.inputs.left.reverse)
+
+
+def test_overlay_surge_model_and_thrust_curve(tmp_path):
+    doc = _doc(("thrust_nonlinearity", {"quadratic_gain": 1.0, "reverse_gain": 0.0}, {}),
+               base_params={"a": 1.0, "b": 2.0, "c0": 0.1, "x_p": 0.1})
+    c = np.linspace(0.0, 1.0, 101)
+    sel = SimpleNamespace(final_fit=SimpleNamespace(theta={"thrust_nonlinearity":
+                                                           np.array([1.0, 0.0])}),
+                          final_split=SimpleNamespace(fit=SimpleNamespace(cmd_surge=c)))
+    p = _write(tmp_path, "o.toml", overlay.overlay_text(doc, config.load("rudder-boat"), sel))
+    surge = config.load_all(["rudder-boat", p]).pipelines["aie"]["surge"]
+    # the least-squares line of 2c + c^2 + 0.1 over the commands flown (c in [0, 1]:
+    # slope 3, intercept near 0.1 - 1/6)
+    slope, icpt = np.polyfit(c, 2 * c + c * c + 0.1, 1)
+    assert surge["a"] == pytest.approx(1.0)
+    assert surge["gain"] == pytest.approx(slope, rel=1e-5) and slope == pytest.approx(3.0)
+    assert surge["offset"] == pytest.approx(icpt, rel=1e-5)
+    assert icpt == pytest.approx(0.1 - 1 / 6, abs=3e-3)
+    assert "thrust curve" in p.read_text()
+
+
+def test_overlay_current_prior_and_what_it_cannot_write(tmp_path):
+    doc = _doc(("water_current", {"north": 0.25, "east": -0.15}, {"north": 0.01, "east": 0.01}),
+               ("sideslip", {"k": 0.05}, {"k": 0.01}))
+    doc["effects"].append({"name": "unexplained", "detected": True, "params": {},
+                           "evidence": {"heading": {"regressor": "heading harmonic 2"}}})
+    text = overlay.overlay_text(doc, config.load("rudder-boat"))
+    cfg = config.load_all(["rudder-boat", _write(tmp_path, "o.toml", text)])
+    assert cfg.pipelines["current"]["init_current_std"] == pytest.approx(
+        math.hypot(0.25, 0.15) + 3 * math.hypot(0.01, 0.01), abs=1e-3)
+    assert "no config key the pipelines read: sideslip" in text
+    assert "heading: heading harmonic 2" in text
+
+
+def test_overlay_of_a_detected_config_stands_alone(tmp_path):
+    det = config.load("twin-thruster-boat")
+    text = overlay.overlay_text(_doc(), det, detected=True)
+    cfg = config.load_all([_write(tmp_path, "o.toml", text)])
+    assert cfg.vehicle == det.vehicle
+    assert cfg.inputs == det.inputs
