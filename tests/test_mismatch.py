@@ -131,16 +131,20 @@ def test_perturbed_scenario_runs_with_the_perturbed_plant() -> None:
 
 
 def test_boat_aie_and_kf_under_the_worst_case() -> None:
-    """jaiabot-turns, 90 s, seed 1, plant ``worst`` (mass +20 %, damping -30 %, thrust
-    -15 %, lag 0.15 s, noise x2) against the nominal config. Measured: speed RMSE AIE 0.080,
-    KF 0.142 m/s (nominal 0.051 / 0.124 over 300 s, docs/mismatch.md); bound 0.15 / 0.25 m/s.
-    The mean NIS leaves [0.5, 2] for 1 (the filters are told the nominal noise)."""
+    """jaiabot-turns, 90 s (errors after 30 s), seed 1, plant ``worst`` (mass +20 %,
+    damping -30 %, thrust -15 %, lag 0.15 s, noise x2) against the nominal config.
+    Measured: speed RMSE AIE 0.115, KF 0.171 m/s (nominal 0.048 / 0.129); bounds 0.2 /
+    0.3 m/s, and the AIE stays better than the KF. Mean NIS surge 2.02, heading 3.79 for a
+    dimension of 1 (nominal 0.46 / 0.98): the filters are told the nominal noise and model,
+    and their NIS says so (bound: above 1.5, i.e. outside the 95 % band)."""
     from onboard.tools.reports.mismatch import boat_run
 
     r = boat_run("worst", seed=1, duration=90.0)
-    assert r["speed_rmse_mps"]["aie"] < 0.15
-    assert r["speed_rmse_mps"]["kf"] < 0.25
-    assert r["nis"]["aie.surge.nis"]["mean"] > 1.0
+    assert r["speed_rmse_mps"]["aie"] < 0.2
+    assert r["speed_rmse_mps"]["kf"] < 0.3
+    assert r["speed_rmse_mps"]["aie"] < r["speed_rmse_mps"]["kf"]
+    assert r["nis"]["aie.surge.nis"]["mean"] > 1.5
+    assert r["nis"]["aie.heading.nis"]["mean"] > 1.5
 
 
 # --------------------------------------------------------------------------- controllers
@@ -148,13 +152,16 @@ def test_boat_aie_and_kf_under_the_worst_case() -> None:
 casadi = pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
 
 
-def test_offset_free_nmpc_and_ampc_beat_the_plain_nmpc_under_mismatch() -> None:
-    """The circle under the push, 25 s (metrics after 10 s), seed 1, plant ``mass+20``.
-    Measured: AMPC 0.022 m, NMPC-OF 0.022 m, NMPC 0.146 m. Bound: both carry a
-    disturbance and stay under half the plain NMPC's error."""
+def test_ampc_and_offset_free_nmpc_hold_the_circle_under_the_worst_case() -> None:
+    """The circle under the push, 20 s (metrics after 10 s), seed 1, plant ``worst`` (mass
+    +20 %, damping -30 %, thrust -15 %, lag 0.15 s, noise x2), the ESESO and the MPCs on
+    the nominal model. Measured: AMPC 0.059 m, offset-free NMPC 0.061 m; the plain NMPC
+    with no mismatch at all does 0.14-0.17 m (tests/test_closed_loop.py, docs/mismatch.md).
+    Bound 0.1 m each. The ESESO's disturbance error against the push is 12.5 N: its xi is
+    the lumped force (push + model error), not the push (docs/mismatch.md)."""
     from sitl.closed_loop import simulate
 
-    res = {c: simulate(c, duration=25.0, seed=1, mismatch="mass+20")[0]["tracking_rmse_m"]
-           for c in ("nmpc", "nmpc-of", "ampc")}
-    assert res["ampc"] < 0.5 * res["nmpc"], res
-    assert res["nmpc-of"] < 0.5 * res["nmpc"], res
+    for c in ("ampc", "nmpc-of"):
+        rep = simulate(c, duration=20.0, seed=1, mismatch="worst")[0]
+        assert rep["mismatch"] == "worst"
+        assert rep["tracking_rmse_m"] < 0.1, (c, rep["tracking_rmse_m"])
