@@ -165,3 +165,61 @@ def test_ampc_and_offset_free_nmpc_hold_the_circle_under_the_worst_case() -> Non
         rep = simulate(c, duration=20.0, seed=1, mismatch="worst")[0]
         assert rep["mismatch"] == "worst"
         assert rep["tracking_rmse_m"] < 0.1, (c, rep["tracking_rmse_m"])
+
+
+# --------------------------------------------------------------------------- the campaign
+
+CAMPAIGN_SEEDS = (1, 2, 3)
+"""The seeds of docs/mismatch.md's table (durations: circle 30 s, gavia-tidal and
+jaiabot-turns 200 s)."""
+
+
+@pytest.fixture(scope="module")
+def campaign_rov() -> dict:
+    from onboard.tools.reports.mismatch import run_campaign
+
+    return run_campaign(list(mm.CASES), CAMPAIGN_SEEDS, 30.0, 200.0, 200.0, ("rov",))["rov"]
+
+
+@pytest.mark.slow
+def test_campaign_circle_claims(campaign_rov) -> None:
+    """docs/mismatch.md, "What holds": in every case and seed both disturbance-carrying MPCs
+    track below 0.6 times the plain NMPC's error (measured at most 0.53, worst case seed 3)
+    and below the PID's; the AMPC beats the offset-free NMPC in the seed counts the docs
+    give, and loses on every seed under a thruster lag."""
+    for case, per in campaign_rov.items():
+        for i, seed in enumerate(CAMPAIGN_SEEDS):
+            tr = {c: per[c][i]["tracking_rmse_m"] for c in per}
+            for c in ("ampc", "nmpc-of"):
+                assert tr[c] < 0.6 * tr["nmpc"], (case, seed, tr)
+                assert tr[c] < tr["pid"], (case, seed, tr)
+    from onboard.tools.reports.mismatch import ampc_against_offset_free
+
+    score = {case: ampc_against_offset_free(per) for case, per in campaign_rov.items()}
+    # measured (seeds better / worse by > 2 %): nominal 3/0, mass+20 2/0, mass-20 1/0,
+    # damping+30 0/0, damping-30 3/0, thrust-15 0/0, lag0.15 0/3, noise2x 0/1, worst 2/1:
+    # better in 11 of 27 case-seeds, worse in 5
+    assert score["nominal"] == (3, 0), score
+    assert score["lag0.15"][1] == 3, score
+    assert sum(b for b, _ in score.values()) >= 11, score
+    assert sum(w for _, w in score.values()) <= 5, score
+
+
+@pytest.mark.slow
+def test_campaign_estimator_claims() -> None:
+    """docs/mismatch.md: the current KF's model (a) error grows tenfold with a damping
+    mismatch, sevenfold with the thrust curve 15 % off, and stays within 0.03 m/s under
+    mass, lag and noise; the AIE's
+    speed is better than the KF's in every case."""
+    from onboard.tools.reports.mismatch import run_campaign
+
+    res = run_campaign(list(mm.CASES), CAMPAIGN_SEEDS, 30.0, 200.0, 200.0, ("gavia", "boat"))
+    for case, runs in res["gavia"].items():
+        rms = float(np.mean([r["current_rms_mps"] for r in runs]))
+        if case.startswith(("damping", "thrust")) or case == "worst":
+            assert rms > 0.1, (case, rms)
+        else:
+            assert rms < 0.03, (case, rms)
+    for case, runs in res["boat"].items():
+        for r in runs:
+            assert r["speed_rmse_mps"]["aie"] < r["speed_rmse_mps"]["kf"], (case, r)
