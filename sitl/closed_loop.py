@@ -2,7 +2,10 @@
 
 The ESESO paper's experiment (§V, figs. 4-5; algorithms.md §5.3): a BlueROV2 flies a
 circle of radius 2 m at 20 m depth under a constant earth-frame push, with a PID, a plain
-NMPC, or the AMPC that feeds the ESESO's disturbance estimate to its prediction model.
+NMPC, the offset-free NMPC (``nmpc-of``, its own disturbance estimate from its prediction
+error), or the AMPC that feeds the ESESO's disturbance estimate to its prediction model.
+``mismatch`` (``--mismatch``) perturbs the plant and the sensors with a
+:mod:`sitl.mismatch` case; the ESESO and the controllers keep the nominal model.
 
 Per simulation step (``dt`` = 0.01 s):
 
@@ -29,7 +32,8 @@ the ESESO's state errors against truth, and the solver's wall-clock and CPU p50/
 Command line::
 
     python -m sitl.closed_loop --controller ampc --duration 60 --report out.json
-    python -m sitl.closed_loop --figure docs/figures/bluerov2_circle.png   # all three
+    python -m sitl.closed_loop --figure docs/figures/bluerov2_circle.png   # all four
+    python -m sitl.closed_loop --controller ampc --mismatch lag0.15 --duration 60
 """
 
 from __future__ import annotations
