@@ -2,7 +2,10 @@
 
 The ESESO paper's experiment (§V, figs. 4-5; algorithms.md §5.3): a BlueROV2 flies a
 circle of radius 2 m at 20 m depth under a constant earth-frame push, with a PID, a plain
-NMPC, or the AMPC that feeds the ESESO's disturbance estimate to its prediction model.
+NMPC, the offset-free NMPC (``nmpc-of``, its own disturbance estimate from its prediction
+error), or the AMPC that feeds the ESESO's disturbance estimate to its prediction model.
+``mismatch`` (``--mismatch``) perturbs the plant and the sensors with a
+:mod:`sitl.mismatch` case; the ESESO and the controllers keep the nominal model.
 
 Per simulation step (``dt`` = 0.01 s):
 
@@ -29,7 +32,8 @@ the ESESO's state errors against truth, and the solver's wall-clock and CPU p50/
 Command line::
 
     python -m sitl.closed_loop --controller ampc --duration 60 --report out.json
-    python -m sitl.closed_loop --figure docs/figures/bluerov2_circle.png   # all three
+    python -m sitl.closed_loop --figure docs/figures/bluerov2_circle.png   # all four
+    python -m sitl.closed_loop --controller ampc --mismatch lag0.15 --duration 60
 """
 
 from __future__ import annotations
@@ -51,7 +55,9 @@ from onboard.engine import Engine
 from sitl.controllers import CircleReference, ControlOutput, make_controller
 from sitl.environment import Environment
 from sitl.plants.base import Command
-from sitl.plants.bluerov2 import BlueROV2
+from sitl.mismatch import MismatchCase, perturb_plant, scale_noise
+from sitl.mismatch import get as mismatch_case
+from sitl.plants.bluerov2 import BlueROV2, BlueROV2Params
 from sitl.sensors import (
     Compass,
     CompassConfig,
@@ -65,7 +71,7 @@ from sitl.sensors import (
     sensor_rng,
 )
 
-CONTROLLERS = ("pid", "nmpc", "ampc")
+CONTROLLERS = ("pid", "nmpc", "nmpc-of", "ampc")
 
 
 @dataclass(frozen=True)
@@ -116,15 +122,17 @@ class RunLog:
     wrench: list[np.ndarray] = field(default_factory=list)
 
 
-def eseso_engine(start_north: float, start_east: float, plant: BlueROV2,
+def eseso_engine(start_north: float, start_east: float, plant: BlueROV2 | BlueROV2Params,
                  overrides: Mapping[str, Any] | None = None) -> Engine:
     """An engine running the ESESO as the service builds it for ``config/bluerov2.toml``,
-    told the surveyed start position (no GNSS at 20 m) and the vehicle's parameters (those
-    of the simulated plant, as they would be those identified for the real vehicle)."""
+    told the surveyed start position (no GNSS at 20 m) and the vehicle's parameters
+    (``plant``: a plant or its parameters; the nominal vehicle's, as they would be those
+    identified for the real vehicle, also when the simulated plant is perturbed by
+    :mod:`sitl.mismatch`)."""
     cfg = onboard_config.load("bluerov2")
     pipelines = dict(cfg.pipelines)
     section = dict(pipelines.get("eseso", {}))
-    pp = plant.params
+    pp = plant if isinstance(plant, BlueROV2Params) else plant.params
     section.update(initial_north_m=start_north, initial_east_m=start_east,
                    mass_kg=pp.m, added_mass=list(pp.added_mass[:3]),
                    damping_linear=[-d for d in pp.d_lin[:3]],
@@ -144,27 +152,37 @@ def eseso_engine(start_north: float, start_east: float, plant: BlueROV2,
 def simulate(controller: str, duration: float = 240.0, seed: int = 0,
              scenario: CircleScenario | None = None,
              eseso_overrides: Mapping[str, Any] | None = None,
+             mismatch: MismatchCase | str = "nominal", collect_nis: bool = False,
              **controller_kw: Any) -> tuple[dict[str, Any], RunLog]:
-    """Fly the circle with ``controller`` (``pid``, ``nmpc``, ``ampc``) for ``duration``
-    simulated seconds; returns (report, time series). ``eseso_overrides`` are
-    ``[pipelines.eseso]`` keys; ``controller_kw`` go to the controller's constructor."""
+    """Fly the circle with ``controller`` (``pid``, ``nmpc``, ``nmpc-of``, ``ampc``) for
+    ``duration`` simulated seconds; returns (report, time series). ``eseso_overrides`` are
+    ``[pipelines.eseso]`` keys; ``mismatch`` a :mod:`sitl.mismatch` case applied to the
+    plant and the sensors (the ESESO and the controller keep the nominal model and noise);
+    ``collect_nis`` adds the mean NIS of every ESESO update per channel to the report
+    (``nis``); ``controller_kw`` go to the controller's constructor."""
     sc = scenario or CircleScenario()
+    case = mismatch_case(mismatch)
     ref = sc.reference()
     ctl = make_controller(controller, **controller_kw)
     env = Environment()
-    plant = BlueROV2(dt=sc.sim_dt)
+    plant = perturb_plant(BlueROV2(dt=sc.sim_dt), case)
     r0 = ref(0.0)
     plant.reset(north=float(r0.position[0]), east=float(r0.position[1]),
                 down=float(r0.position[2]), yaw=r0.yaw)
-    engine = eseso_engine(float(r0.position[0]), float(r0.position[1]), plant,
+    engine = eseso_engine(float(r0.position[0]), float(r0.position[1]), BlueROV2Params(),
                           eseso_overrides)
     pipe = engine.pipelines[0]
-    imu = Imu(ImuConfig(rate_hz=50.0), sensor_rng(seed, "imu"))
+    nis = _spy_nis(pipe) if collect_nis else None
+    k_noise = case.noise_scale
+    imu = Imu(scale_noise(ImuConfig(rate_hz=50.0), k_noise), sensor_rng(seed, "imu"))
     sensors: list[tuple[int, Any]] = [
         (2, imu),  # every 2 steps of 0.01 s = 50 Hz
-        (10, Compass(CompassConfig(rate_hz=10.0), sensor_rng(seed, "compass"), imu=imu)),
-        (20, Dvl(DvlConfig(rate_hz=5.0, dead_reckoning=False), sensor_rng(seed, "dvl"))),
-        (10, DepthSensor(DepthConfig(rate_hz=10.0), sensor_rng(seed, "depth"))),
+        (10, Compass(scale_noise(CompassConfig(rate_hz=10.0), k_noise),
+                     sensor_rng(seed, "compass"), imu=imu)),
+        (20, Dvl(scale_noise(DvlConfig(rate_hz=5.0, dead_reckoning=False), k_noise),
+                 sensor_rng(seed, "dvl"))),
+        (10, DepthSensor(scale_noise(DepthConfig(rate_hz=10.0), k_noise),
+                         sensor_rng(seed, "depth"))),
     ]
     f_ext = np.asarray(sc.disturbance_ned, dtype=float)
     steps_per_ctl = int(round(1.0 / (sc.control_hz * sc.sim_dt)))
@@ -214,8 +232,33 @@ def simulate(controller: str, duration: float = 240.0, seed: int = 0,
                 for sample in sensor.measure(world):
                     engine.push(sample)
     report = _report(controller, duration, seed, sc, log, pipe, ctl)
+    report["mismatch"] = case.name
+    if nis is not None:
+        report["nis"] = {ch: {"mean": float(np.mean(v)), "n": len(v), "dim": NIS_DIMS[ch]}
+                         for ch, v in nis.items() if v and ch in NIS_DIMS}
     report["wall_time_s"] = time.perf_counter() - t_wall
     return report, log
+
+
+NIS_DIMS = {"thrust": 3, "dvl": 3, "depth": 1, "attitude": 3, "heading": 1, "vog": 2,
+            "gnss_pos": 3, "gnss_vel": 3}
+"""Dimension of each ESESO update channel (for the chi-square band of its mean NIS)."""
+
+
+def _spy_nis(pipe: Any) -> dict[str, list[float]]:
+    """Record the NIS of every ESESO update (gated ones included) per channel, by wrapping
+    the filter's ``update``; the update itself is unchanged."""
+    out: dict[str, list[float]] = {}
+    flt = pipe.filter
+    update = flt.update
+
+    def spy(ch: str, y: np.ndarray, H: np.ndarray, Rm: np.ndarray, gate: Any = None) -> Any:
+        S = H @ flt.P @ H.T + Rm
+        out.setdefault(ch, []).append(float(y @ np.linalg.solve(0.5 * (S + S.T), y)))
+        return update(ch, y, H, Rm, gate)
+
+    flt.update = spy
+    return out
 
 
 class EsesoPolicy:
@@ -233,9 +276,9 @@ class EsesoPolicy:
     def __init__(self, name: str, scenario: Any, rate_hz: float = 20.0) -> None:
         r = scenario.reference
         self.reference = CircleReference(radius=r.radius, speed=r.speed, depth=r.depth)
-        plant = scenario.vehicle.make_plant()
         i = scenario.initial
-        self.engine = eseso_engine(float(i.north), float(i.east), plant)
+        # the published vehicle parameters, also when the scenario's plant is perturbed
+        self.engine = eseso_engine(float(i.north), float(i.east), BlueROV2Params())
         self.ctl = make_controller(name)
         self.name = name
         self.rate_hz = rate_hz
@@ -373,7 +416,8 @@ def figure(logs: dict[str, RunLog], path: str, sc: CircleScenario | None = None)
     import matplotlib.pyplot as plt
 
     sc = sc or CircleScenario()
-    colors = {"ampc": "tab:blue", "nmpc": "tab:orange", "pid": "tab:green"}
+    colors = {"ampc": "tab:blue", "nmpc": "tab:orange", "pid": "tab:green",
+              "nmpc-of": "tab:red"}
     fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(17, 5.2))
     first = next(iter(logs.values()))
     ref = np.asarray(first.ref)
@@ -421,10 +465,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sitl.closed_loop", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--controller", choices=CONTROLLERS, action="append",
-                    help="controller(s) to fly (default: all three)")
+                    help="controller(s) to fly (default: all four)")
     ap.add_argument("--duration", type=float, default=None,
                     help="simulated seconds (default 240, the paper's run)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--mismatch", default="nominal",
+                    help="a sitl.mismatch case applied to the plant and sensors")
     ap.add_argument("--speed", type=float, default=None, help="speed along the circle (m/s)")
     ap.add_argument("--report", help="write the JSON report here")
     ap.add_argument("--figure", help="write the paths/tracking-error figure (PNG) here")
@@ -435,7 +481,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     reports: dict[str, Any] = {}
     logs: dict[str, RunLog] = {}
     for name in names:
-        rep, log = simulate(name, duration=duration, seed=args.seed, scenario=sc)
+        rep, log = simulate(name, duration=duration, seed=args.seed, scenario=sc,
+                            mismatch=args.mismatch)
         reports[name] = rep
         logs[name] = log
         sol = rep.get("solve_time_ms", {})

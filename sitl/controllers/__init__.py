@@ -185,7 +185,7 @@ def state_from_record(rec: EstimateRecord) -> np.ndarray:
 
 
 def make_controller(name: str, params: Bluerov2Params | None = None, **kw: object) -> Controller:
-    """``pid``, ``nmpc`` or ``ampc`` with default tuning (keyword overrides passed on)."""
+    """``pid``, ``nmpc``, ``nmpc-of`` (offset-free) or ``ampc`` with default tuning (keyword overrides passed on)."""
     params = params or Bluerov2Params()
     if name == "pid":
         from sitl.controllers.pid import PidController
@@ -199,4 +199,8 @@ def make_controller(name: str, params: Bluerov2Params | None = None, **kw: objec
         from sitl.controllers.ampc import Ampc
 
         return Ampc(params, **kw)  # type: ignore[arg-type]
-    raise ValueError(f"unknown controller {name!r} (pid, nmpc, ampc)")
+    if name == "nmpc-of":
+        from sitl.controllers.nmpc import OffsetFreeNmpc
+
+        return OffsetFreeNmpc(params, **kw)  # type: ignore[arg-type]
+    raise ValueError(f"unknown controller {name!r} (pid, nmpc, nmpc-of, ampc)")
