@@ -71,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--nmea-pty", action="store_true", help="emit NMEA on a pseudo-terminal")
     p.add_argument("--dvl", metavar="tcp:HOST:PORT", help="serve Water Linked DVL JSON")
     p.add_argument("--realtime", action="store_true", help="run at wall-clock speed")
-    p.add_argument("--controller", choices=("pid", "nmpc", "ampc"), default=None,
+    p.add_argument("--controller", choices=("pid", "nmpc", "nmpc-of", "ampc"), default=None,
                    help="closed-loop controller (bluerov2-circle)")
     p.add_argument("--report", help="write a JSON report of the closed-loop run")
     p.add_argument("--stream-unasked", action="store_true",

@@ -25,7 +25,7 @@ Linked A50 JSON server) or ``--dvl pty`` (PD6 on a pseudo-terminal). Pseudo-term
 paths and server ports are printed before the run starts. With no output at all, MAVLink
 goes to ``udp:127.0.0.1:14550`` (where a ground station listens).
 
-``--controller pid|nmpc|ampc`` flies ``bluerov2-circle`` with a controller of
+``--controller pid|nmpc|nmpc-of|ampc`` flies ``bluerov2-circle`` with a controller of
 :mod:`sitl.controllers` fed by the ESESO (:class:`sitl.closed_loop.EsesoPolicy`);
 ``--report FILE`` writes the run summary (with the tracking error for reference-tracking
 scenarios, and the controller's closed-loop figures under ``controller_report``, its
@@ -57,7 +57,7 @@ def list_scenarios() -> str:
 
 
 def make_controller(name: str, sc: Scenario) -> Controller:
-    """The closed-loop controller ``name`` (``pid``, ``nmpc``, ``ampc``) for scenario ``sc``:
+    """The closed-loop controller ``name`` (``pid``, ``nmpc``, ``nmpc-of``, ``ampc``) for scenario ``sc``:
     :class:`sitl.closed_loop.EsesoPolicy`, the controller fed by the ESESO running on the
     scenario's samples. UsageError for another scenario or when the controller cannot be
     built (the MPCs need the ``mpc`` extra)."""
