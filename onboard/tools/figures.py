@@ -337,8 +337,8 @@ README_ROWS: tuple[tuple[str, str, str], ...] = (
      "down: joint KF {current.gavia_tidal.kf.north_rms} / {current.gavia_tidal.kf.east_rms} / "
      "{current.gavia_tidal.kf.down_rms} m/s; HGO at the LMI's gamma* = 6.4: "
      "{current.gavia_tidal.hgo.north_rms} / {current.gavia_tidal.hgo.east_rms} / "
-     "{current.gavia_tidal.hgo.down_rms} m/s, 2-sigma coverage >= "
-     "{current.gavia_tidal.hgo.cover2_min} (the paper's HGO vs ADCP, error std: 0.094 / "
+     "{current.gavia_tidal.hgo.down_rms} m/s, 2-sigma coverage "
+     "{current.gavia_tidal.hgo.cover2_min} (the lowest of the three axes; the paper's HGO vs ADCP, error std: 0.094 / "
      "0.066 / 0.032). A component whose sigma is above 0.3 m/s is published as unknown",
      "[docs/current.md](docs/current.md)"),
     ("Nonlinear flow observer in nonuniform flow (Fan et al.)",
@@ -435,9 +435,13 @@ def update_readme(path: Path, doc: dict[str, Any]) -> bool:
 
 def versions() -> dict[str, str]:
     """Python, numpy, scipy, casadi, onboard and the git commit the figures came from."""
-    from onboard import __version__
+    from importlib import metadata
 
-    out = {"python": platform.python_version(), "onboard": __version__,
+    try:
+        own = metadata.version("onboard")
+    except metadata.PackageNotFoundError:
+        own = "not installed"
+    out = {"python": platform.python_version(), "onboard": own,
            "platform": f"{platform.system()} {platform.machine()}"}
     for mod in ("numpy", "scipy", "casadi"):
         try:
