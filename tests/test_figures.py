@@ -15,6 +15,7 @@ docs/figures.json and README.md with the change.
 from __future__ import annotations
 
 import copy
+import math
 
 import pytest
 
@@ -119,7 +120,7 @@ def _check(name: str, key: str, committed: dict) -> None:
         if err.name != "casadi":
             raise
         pytest.skip("the MPCs need the 'mpc' extra (casadi)")
-    ok, why = F.compare(fig, key, None if value != value else value, committed)
+    ok, why = F.compare(fig, key, None if math.isnan(value) else value, committed)
     assert ok, f"{name} [{key}] = {value:.6g} {fig.unit}: {why} ({fig.what})"
 
 
@@ -133,3 +134,32 @@ def test_figure_reproduces(name: str, key: str, committed: dict) -> None:
 def test_figure_reproduces_slow(name: str, key: str, committed: dict) -> None:
     """Every other figure and seed (``-m slow``)."""
     _check(name, key, committed)
+
+
+def test_validate_checks_writes_and_exits_1_on_a_figure_outside_its_tolerance(
+        committed, tmp_path, capsys) -> None:
+    """``onboard validate --only ... --check ... --write ...`` on one cheap figure (its run
+    is the default suite's 30 s closed loop, shared): against the committed file it passes;
+    against a file whose value is moved by twice the tolerance it exits 1 and says which;
+    the written file holds the figure with its unit, tolerance and versions."""
+    import argparse
+    import json
+
+    pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
+    name = "eseso.circle_30s.disturbance_rms.ampc"
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps(committed))
+    args = argparse.Namespace(only=[name], write=str(tmp_path / "out.json"), check=str(good),
+                              readme=None)
+    assert F.main(args) == 0
+    written = json.loads((tmp_path / "out.json").read_text())
+    assert set(written["figures"]) == {name}
+    assert written["figures"][name]["unit"] == "N" and "numpy" in written["versions"]
+    bad_doc = copy.deepcopy(committed)
+    rec = bad_doc["figures"][name]
+    rec["values"]["0"] += 2 * REGISTRY[name].tolerance.allowed(rec["values"]["0"])
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(bad_doc))
+    args.check, args.write = str(bad), None
+    assert F.main(args) == 1
+    assert name in capsys.readouterr().err
