@@ -30,10 +30,10 @@ def test_jaiabot_turns_aie_beats_the_kf_and_the_raw_gnss_speed(jaiabot) -> None:
     m = sitl_metrics(jaiabot)
     a, k, nav = m["aie"], m["kf"], m["nav"]
     print(m)
-    # measured seed 1: speed AIE 0.053, KF 0.124, raw GNSS speed over ground 0.100 m/s
-    # (seeds 2-3: AIE 0.052 / 0.053, KF 0.122 / 0.121): AIE meets the < 0.10 m/s goal
-    # and beats the raw speed; the KF with the default (wrong) thrust map does not
-    # (0.065 m/s with the identified model of config/sitl-jaiabot.toml, docs/aie.md).
+    # measured (docs/figures.json, aie.jaiabot_turns.*, seeds 1-3): speed AIE 0.051-0.053,
+    # KF 0.121-0.124, raw GNSS speed over ground 0.100-0.101 m/s: AIE meets the
+    # < 0.10 m/s goal and beats the raw speed; the KF with the default (wrong) thrust map
+    # does not (0.066-0.067 m/s with the identified model of config/sitl-jaiabot.toml).
     # Heading 0.0223 vs 0.0239 rad; position 0.97 vs 0.96 m (a tie: both follow the
     # Doppler speed)
     assert a["speed"] < 0.08
@@ -111,8 +111,9 @@ def test_position_sigma_grows_in_a_gnss_outage_and_covers_the_truth() -> None:
         print(p, "std_north", at, "max error in the outage", np.nanmax(err[out]))
         # dead reckoning through the 120 s outage: the position follows the speed and
         # heading estimates, so neither the error nor the sigma balloons (it was held,
-        # with a sigma of 130-150 m, before). Measured: max horizontal error 6.6 m (aie),
-        # 15.1 m (kf: its thrust map is wrong); std_north aie 1.5 m at 25 s, 1.6 at 40 s,
+        # with a sigma of 130-150 m, before). Measured: max horizontal error 3.8 m (aie),
+        # 15.1 m (kf: its thrust map is wrong; seeds 1-3: aie.gnss_outage.* of
+        # docs/figures.json); std_north aie 1.5 m at 25 s, 1.6 at 40 s,
         # 1.7 at 140 s, 1.5 at 175 s (max 2.8 m); kf 1.5, 1.9, 2.9, 1.5 (max 8.7 m)
         assert np.nanmax(err[out]) < (10.0 if p == "aie" else 25.0)
         assert at[25.0] < 4.0 and at[40.0] >= at[25.0] and at[140.0] < 15.0
