@@ -1,6 +1,7 @@
 # Two commands on a fresh machine with Python >= 3.11:
 #   make demo   set up .venv and run `onboard demo` on the built-in simulated vehicle
 #   make test   set up .venv and run the test suite
+#   make figures  recompute the README's estimator figures (docs/figures.json, README.md)
 # On the vehicle computer (docs/service.md "Install"):
 #   sudo make install   venv in $(PREFIX)/venv, config in $(SYSCONFDIR), the systemd unit
 PYTHON ?= python3
@@ -17,7 +18,7 @@ UNITDIR    ?= /etc/systemd/system
 CREDSTORE  ?= /etc/credstore
 PIP_ARGS   ?=
 
-.PHONY: demo test test-all bench setup clean install
+.PHONY: demo test test-all bench figures setup clean install
 
 setup: $(STAMP)
 
@@ -38,6 +39,11 @@ test-all: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/onboard bench
+
+# Recompute every figure of the README's "What it estimates" table into docs/figures.json
+# and regenerate the table from it (about 15 min on 2 cores; commit both files).
+figures: $(STAMP)
+	$(BIN)/onboard validate --write docs/figures.json --readme README.md
 
 clean:
 	rm -rf $(VENV) replay-out diagnose-out .pytest_cache

@@ -113,6 +113,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(handler="onboard.tools.bench:main")
 
+    p = sub.add_parser("validate", help="recompute the README's figures; write or check "
+                       "docs/figures.json")
+    p.add_argument("--only", action="append", default=None, metavar="PATTERN",
+                   help="figures whose name matches this glob or prefix (repeatable), "
+                        "e.g. 'aie.*' or current.gavia_tidal")
+    p.add_argument("--write", metavar="FILE", help="write the figures to FILE (merged into "
+                   "it when it exists), e.g. docs/figures.json")
+    p.add_argument("--check", metavar="FILE", help="compare with FILE; exit 1 when a "
+                   "figure is outside its tolerance")
+    p.add_argument("--readme", metavar="FILE", help="rewrite FILE's figures block from the "
+                   "file written (alone: from docs/figures.json, nothing recomputed)")
+    p.set_defaults(handler="onboard.tools.figures:main")
+
     p = sub.add_parser("design-gain", help="solve the high-gain observer LMI offline")
     p.add_argument("--config", required=True)
     p.add_argument("--out", help="write the gain here (default: beside the config)")

@@ -3,6 +3,8 @@
 30 s of the circle (radius 2 m, 0.5 m/s, 20 m deep, [40, 40, 10] N push, NED) per
 controller, the ESESO in the loop through the onboard engine; metrics after 10 s. The
 full 240 s figures are in docs/eseso-mpc.md. Solve times are reported, never asserted.
+These 30 s runs are also figures of docs/figures.json (``eseso.circle_30s.*``), checked by
+tests/test_figures.py on the same runs (``onboard/tools/reports/runs.py``).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import pytest
 
 pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
 
+from onboard.tools.reports import runs as figure_runs  # noqa: E402
 from sitl import closed_loop  # noqa: E402
 
 DURATION = 30.0
@@ -21,8 +24,7 @@ DURATION = 30.0
 
 @pytest.fixture(scope="module")
 def runs() -> dict[str, dict]:
-    return {name: closed_loop.simulate(name, duration=DURATION)[0]
-            for name in ("pid", "nmpc", "ampc")}
+    return {name: figure_runs.closed_loop(name, 0, DURATION) for name in ("pid", "nmpc", "ampc")}
 
 
 def test_ampc_tracks_at_least_twice_as_well_as_the_nmpc_and_better_than_the_pid(runs) -> None:

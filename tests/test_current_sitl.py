@@ -4,6 +4,8 @@ Mode (a) "configured model" uses coefficients identified by the pipeline itself 
 calm-water run of the same vehicle and mission (WVAM step 1), see
 onboard/tools/reports/current_validation.py. Measured figures (seed 1, full durations) are in
 the comments; the bounds leave margin for other seeds. Long runs are marked slow.
+The runs that are also README figures (``current.*`` in docs/figures.json, checked by
+tests/test_figures.py) come from ``onboard/tools/reports/runs.py``, flown once per session.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import numpy as np
 import pytest
 
 import onboard.tools.reports.current_validation as cv
+from onboard.tools.reports import runs
 
 
 def _mode_a(scenario: str, config: str, duration: float, **extra):
@@ -55,8 +58,7 @@ def test_gavia_tidal_without_model_reports_along_track_as_unknown():
 
 @pytest.mark.slow
 def test_spheroid_sawtooth_configured_model_rms_below_3cm():
-    r = _mode_a("spheroid-sawtooth", "spheroid", 600.0)
-    m = cv.metrics(r, after=100.0)
+    m = runs.current_metrics("spheroid-sawtooth", "kf", 1)  # 600 s, after 100 s
     # measured: rms N/E 0.006 / 0.010 m/s, 2-sigma coverage 0.96 / 0.84 (the heading
     # switches: peak 0.029 m/s just after each switch, 0.008 rms between them)
     assert m["north"]["rms"] <= 0.03 and m["east"]["rms"] <= 0.03
@@ -65,8 +67,7 @@ def test_spheroid_sawtooth_configured_model_rms_below_3cm():
 
 @pytest.mark.slow
 def test_spheroid_sawtooth_flow_observer():
-    r = _mode_a("spheroid-sawtooth", "spheroid", 600.0, observer="flow")
-    m = cv.metrics(r, after=100.0)
+    m = runs.current_metrics("spheroid-sawtooth", "flow", 1)  # 600 s, after 100 s
     # measured: rms N/E 0.012 / 0.023 m/s, coverage 0.99 / 0.99 (the KF: 0.006 / 0.010);
     # with the pitch as a second output (flow_pitch = true) N/E the same to 4 decimals, D
     # 0.012 against 0.007 (docs/current.md, "Flow observer")
@@ -75,8 +76,7 @@ def test_spheroid_sawtooth_flow_observer():
 
 @pytest.mark.slow
 def test_surface_boat_constant_current_without_model():
-    r = cv.run("effect-current", {}, "rudder-boat", duration=600.0, seed=1)
-    m = cv.metrics(r, after=120.0)
+    m = runs.current_metrics("effect-current", "kf", 1)  # 600 s, after 120 s
     # measured: rms N/E 0.007 / 0.007 m/s after 120 s, 2-sigma coverage 1.00 / 1.00
     assert m["north"]["rms"] <= 0.05 and m["east"]["rms"] <= 0.05
     assert m["north"]["cover2"] > 0.9 and m["east"]["cover2"] > 0.9
@@ -84,8 +84,7 @@ def test_surface_boat_constant_current_without_model():
 
 @pytest.mark.slow
 def test_surface_boat_tracks_a_current_changing_over_minutes():
-    r = cv.run(cv.boat_tidal_scenario(), {}, "rudder-boat", duration=900.0, seed=1)
-    m = cv.metrics(r, after=120.0)
+    m = runs.current_metrics("boat-tidal", "kf", 1)  # 900 s, after 120 s
     # measured: rms N/E 0.022 / 0.033 m/s, coverage 1.00 / 1.00 (0.3 m/s amplitude, 10 min)
     assert m["north"]["rms"] <= 0.05 and m["east"]["rms"] <= 0.05
     assert m["north"]["cover2"] > 0.85 and m["east"]["cover2"] > 0.85
@@ -168,12 +167,12 @@ def test_gavia_tidal_hgo_runs_at_gamma_star():
     config/gains/torpedo-auv.json), fixed, with a calm-water identified model (mode (a)):
     the output injection is integrated between samples, so the gain is not capped by the
     sample rate, and the one-sigma is that of the running gain."""
-    r = _mode_a("gavia-tidal", "torpedo-auv", 150.0, observer="hgo")
+    r = runs.current_run("gavia-tidal", "hgo", 1)  # 200 s, the README's figure run
     pipe = r["pipe"]
     assert pipe.gamma >= pipe.gain.gamma_star == pytest.approx(6.4, abs=0.01)
     # the observer's model is its own RLS's, not the joint filter's coefficient states
     assert all(a is not b for a, b in zip(pipe.hgo_rls.thetas, pipe.thetas))
-    m = cv.metrics(r, after=60.0)
+    m = runs.current_metrics("gavia-tidal", "hgo", 1)  # after 60 s
     # measured (200 s, own RLS, which does not learn on this straight run), seeds 1 / 2 / 3:
     # rms N/E/D 0.022 / 0.016 / 0.015, 0.021 / 0.016 / 0.016, 0.020 / 0.015 / 0.017 m/s,
     # 2-sigma coverage 1.00 throughout, no peaking (the paper vs ADCP: std 0.094 / 0.066 /

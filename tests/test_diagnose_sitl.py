@@ -11,30 +11,28 @@ the rest are marked slow (``pytest -m slow``), about 15 s of CPU each.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
 
 from onboard.core import config
 from onboard.diagnose import diagnose
+from onboard.tools.reports import runs
 from sitl.runner import run_to_tlog
 
 CFG = Path(__file__).resolve().parent.parent / "config" / "sitl-rudder-boat.toml"
 
 
 @pytest.fixture(scope="module")
-def diagnosed(tmp_path_factory):
-    cache: dict[str, dict] = {}
+def diagnosed():
+    """The diagnosis of a scenario's seed-1 log; the run is shared with the figures of
+    tests/test_figures.py (``diagnose.<scenario>.effects_named``)."""
 
     def run(name: str) -> dict:
-        if name not in cache:
-            d = tmp_path_factory.mktemp(name)
-            run_to_tlog(name, d / "log.tlog", d / "truth.jsonl", seed=1)
-            cache[name] = diagnose(str(d / "log.tlog"), config.load(CFG), d / "out")
-            assert json.loads((d / "out" / "diagnosis.json").read_text())["effects"]
-            assert (d / "out" / "report.html").stat().st_size > 10_000  # with figures
-        return cache[name]
+        doc = runs.diagnose_sitl(name, 1)
+        assert doc["effects"]
+        assert doc["report_bytes"] > 10_000  # report.html with its figures
+        return doc
 
     return run
 

@@ -1,0 +1,165 @@
+"""The README's figures against docs/figures.json, and docs/figures.json against a rerun.
+
+* The README's "What it estimates" table is the one ``onboard validate --readme`` renders
+  from docs/figures.json (so every number in it is the file's), and the file holds every
+  registered figure with the registry's unit, seeds and tolerance.
+* Each figure is recomputed (``onboard/tools/figures.py``, runs shared with the other SITL
+  tests through ``onboard/tools/reports/runs.py``) and compared with the file within its
+  stated tolerance: the figures' ``default_suite_seeds`` here, every other seed and figure
+  with ``-m slow`` (real-log figures also skip without ../shared/data).
+
+After an intended change of an estimator's figures: ``make figures`` and commit
+docs/figures.json and README.md with the change.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import pytest
+
+from onboard.core.errors import UsageError
+from onboard.tools import figures as F
+from onboard.tools.reports import runs
+
+REGISTRY = F.registry()
+
+
+@pytest.fixture(scope="module")
+def committed() -> dict:
+    return F.load(F.FIGURES_FILE)
+
+
+def test_the_readme_table_is_rendered_from_the_figures_file(committed) -> None:
+    block = F.readme_block(F.README.read_text(encoding="utf-8"))
+    assert block == F.render_table(committed), (
+        "README.md's figures block differs from docs/figures.json: run "
+        "`onboard validate --readme README.md` (or `make figures` to recompute)")
+
+
+def test_the_figures_file_holds_every_figure_as_the_registry_states_it(committed) -> None:
+    figs = committed["figures"]
+    assert set(figs) == set(REGISTRY), ("file and registry differ: "
+                                        f"{sorted(set(figs) ^ set(REGISTRY))}")
+    for name, fig in REGISTRY.items():
+        rec = figs[name]
+        assert rec["unit"] == fig.unit, name
+        assert rec["seeds"] == list(fig.seeds), name
+        assert set(rec["values"]) == set(fig.keys()), name
+        assert rec["digits"] == fig.digits, name
+        assert rec["tolerance"] == {"rel": fig.tolerance.rel, "abs": fig.tolerance.abs}, name
+        assert all(isinstance(v, float) for v in rec["values"].values()), name
+    for key in ("versions", "written_utc", "command"):
+        assert key in committed
+
+
+def test_every_readme_placeholder_names_a_registered_figure() -> None:
+    used = {m for _, text, _ in F.README_ROWS for m in F.PLACEHOLDER.findall(text)}
+    assert used <= set(REGISTRY), sorted(used - set(REGISTRY))
+    # every row names at least one figure: no row of hand-copied numbers only
+    assert all(F.PLACEHOLDER.search(text) for _, text, _ in F.README_ROWS)
+
+
+def test_a_stale_readme_number_is_caught(committed) -> None:
+    """Negative control: one figure moved in the file changes the rendered table."""
+    doc = copy.deepcopy(committed)
+    rec = doc["figures"]["aie.jaiabot_turns.speed_rmse.aie"]
+    rec["values"] = {k: v + 0.01 for k, v in rec["values"].items()}
+    assert F.render_table(doc) != F.render_table(committed)
+    del doc["figures"]["aie.jaiabot_turns.speed_rmse.aie"]
+    with pytest.raises(UsageError):
+        F.render_table(doc)
+
+
+def test_compare_applies_the_tolerance(committed) -> None:
+    """Negative control: a value just outside the tolerance fails, just inside passes."""
+    fig = REGISTRY["aie.jaiabot_turns.speed_rmse.aie"]
+    ref = committed["figures"][fig.name]["values"]["1"]
+    allowed = fig.tolerance.allowed(ref)
+    assert F.compare(fig, "1", ref + 0.99 * allowed, committed)[0]
+    assert not F.compare(fig, "1", ref + 1.01 * allowed, committed)[0]
+    assert not F.compare(fig, "9", ref, committed)[0]  # a seed the file lacks
+
+
+def test_format_gives_a_range_over_seeds_only_when_they_differ() -> None:
+    assert F.format_entry({"values": {"1": 0.0521, "2": 0.0524}}, 3) == "0.052"
+    assert F.format_entry({"values": {"1": 0.0521, "2": 0.0536}}, 3) == "0.052-0.054"
+    assert F.format_entry({"values": {"-": 10.0}}, 0) == "10"
+
+
+def test_select_matches_globs_and_prefixes() -> None:
+    names = ["aie.a.x", "aie.b.x", "current.a.y"]
+    assert F.select(names, ["aie.*"]) == ["aie.a.x", "aie.b.x"]
+    assert F.select(names, ["current"]) == ["current.a.y"]
+    assert F.select(names, ["*.a.*"]) == ["aie.a.x", "current.a.y"]
+    assert F.select(names, None) == names
+
+
+def _cases(default: bool) -> list:
+    out = []
+    for name, fig in REGISTRY.items():
+        dk = fig.default_keys()
+        for key in fig.keys():
+            if (key in dk) != default:
+                continue
+            marks = [] if default else [pytest.mark.slow]
+            if fig.data:
+                marks.append(pytest.mark.data)
+            out.append(pytest.param(name, key, marks=marks, id=f"{name}[{key}]"))
+    return out
+
+
+def _check(name: str, key: str, committed: dict) -> None:
+    fig = REGISTRY[name]
+    try:
+        value = fig.value(key)
+    except runs.MissingData as err:
+        pytest.skip(str(err))
+    except ModuleNotFoundError as err:
+        if err.name != "casadi":
+            raise
+        pytest.skip("the MPCs need the 'mpc' extra (casadi)")
+    ok, why = F.compare(fig, key, None if math.isnan(value) else value, committed)
+    assert ok, f"{name} [{key}] = {value:.6g} {fig.unit}: {why} ({fig.what})"
+
+
+@pytest.mark.parametrize("name, key", _cases(default=True))
+def test_figure_reproduces(name: str, key: str, committed: dict) -> None:
+    """The default suite's subset: recomputed, within tolerance of docs/figures.json."""
+    _check(name, key, committed)
+
+
+@pytest.mark.parametrize("name, key", _cases(default=False))
+def test_figure_reproduces_slow(name: str, key: str, committed: dict) -> None:
+    """Every other figure and seed (``-m slow``)."""
+    _check(name, key, committed)
+
+
+def test_validate_checks_writes_and_exits_1_on_a_figure_outside_its_tolerance(
+        committed, tmp_path, capsys) -> None:
+    """``onboard validate --only ... --check ... --write ...`` on one cheap figure (its run
+    is the default suite's 30 s closed loop, shared): against the committed file it passes;
+    against a file whose value is moved by twice the tolerance it exits 1 and says which;
+    the written file holds the figure with its unit, tolerance and versions."""
+    import argparse
+    import json
+
+    pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
+    name = "eseso.circle_30s.disturbance_rms.ampc"
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps(committed))
+    args = argparse.Namespace(only=[name], write=str(tmp_path / "out.json"), check=str(good),
+                              readme=None)
+    assert F.main(args) == 0
+    written = json.loads((tmp_path / "out.json").read_text())
+    assert set(written["figures"]) == {name}
+    assert written["figures"][name]["unit"] == "N" and "numpy" in written["versions"]
+    bad_doc = copy.deepcopy(committed)
+    rec = bad_doc["figures"][name]
+    rec["values"]["0"] += 2 * REGISTRY[name].tolerance.allowed(rec["values"]["0"])
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(bad_doc))
+    args.check, args.write = str(bad), None
+    assert F.main(args) == 1
+    assert name in capsys.readouterr().err
