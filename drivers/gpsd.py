@@ -23,9 +23,9 @@ others   (VERSION, DEVICES, WATCH, DEVICE, GST, PPS, TOFF, ...) counted by class
 gpsd gives its error estimates at 95 % confidence (gpsd_json(5)). The fix's one-sigma
 accuracies are ``h_acc_m = max(epx, epy) / 1.96`` (per axis), else ``eph / 2.45`` (a
 2-D radius: 2.45 sigma holds 95 % of a circular normal), and ``v_acc_m = epv / 1.96``;
-the ESESO takes ``h_acc_m`` as its position noise, the other pipelines their configured
-``[sensors.gnss]`` noise. ``speed_acc_mps`` (``eps / 1.96``) and ``t_acc_s``
-(``ept / 1.96``) are reported in :attr:`GpsdParser.last_errors` for health.
+``speed_acc_mps = eps / 1.96``; the pipelines take them as the fix's noise
+(``[sensors.gnss]`` where a fix has none). ``t_acc_s`` (``ept / 1.96``) and the others are
+reported in :attr:`GpsdParser.last_errors` for health.
 
 Rejected and counted: a line that is not JSON (``json``), a TPV with ``mode`` below 2
 (``no_fix``: gpsd reports no position), a TPV without ``lat``/``lon`` or with a number out
@@ -157,6 +157,7 @@ class GpsdParser:
             e = _num(o, key)
             errors[name] = e / SIGMA_95_1D if e is not None else None
         self.last_errors = {k: v for k, v in errors.items() if v is not None}
+        s_acc = errors["speed"]
         speed, track = _num(o, "speed"), _num(o, "track")
         status = o.get("status")
         quality = _STATUS_QUALITY.get(status, 1) if isinstance(status, int) else 1
@@ -167,6 +168,7 @@ class GpsdParser:
             sog_mps=speed, cog_rad=wrap_2pi(math.radians(track)) if track is not None else None,
             h_acc_m=h_acc if h_acc is not None and h_acc > 0.0 else None,
             v_acc_m=v_acc if v_acc is not None and v_acc > 0.0 else None,
+            speed_acc_mps=s_acc if s_acc is not None and s_acc > 0.0 else None,
         )]
 
     def _att(self, o: dict[str, Any], t: float) -> list[Sample]:

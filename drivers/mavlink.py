@@ -204,6 +204,7 @@ def _gps(idx: dict[str, int], msgid: int) -> Handler:
     i_lat, i_lon, i_alt = idx["lat"], idx["lon"], idx["alt"]
     i_eph, i_vel, i_cog = idx["eph"], idx["vel"], idx["cog"]
     i_fix, i_sat, i_hacc, i_vacc = idx["fix_type"], idx["satellites_visible"], idx["h_acc"], idx["v_acc"]
+    i_sacc = idx["vel_acc"]
     fixmap = GPS_FIX_TO_QUALITY
     rad = math.pi / 18000.0
 
@@ -224,6 +225,7 @@ def _gps(idx: dict[str, int], msgid: int) -> Handler:
             cog_rad=wrap_2pi(cog * rad) if cog != UINT16_MAX else None,
             h_acc_m=hacc * 1e-3 if hacc else None,
             v_acc_m=vacc * 1e-3 if vacc else None,
+            speed_acc_mps=v[i_sacc] * 1e-3 if v[i_sacc] else None,
         )
     return h
 

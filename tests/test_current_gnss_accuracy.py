@@ -1,6 +1,6 @@
-"""Receiver accuracy as noise (issue 14): a GNSS fix's own horizontal accuracy scales the
-velocity one-sigma the current pipeline fuses it with (``gnss_nominal_accuracy_m``,
-docs/current.md, "Receiver accuracy as noise")."""
+"""Receiver accuracy as noise: a GNSS fix's own speed accuracy, else its horizontal
+accuracy, sets the velocity one-sigma the current pipeline fuses it with
+(``gnss_nominal_accuracy_m``, docs/current.md, "Receiver accuracy as noise")."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import math
 
 import msgspec
 import numpy as np
+import pytest
 
 from onboard.core.messages import GnssFix
 from tests.helpers.current_plants import current_errors, current_pipeline, simulate_boat
@@ -16,11 +17,13 @@ BAD = (120.0, 200.0)
 """s: the window in which the receiver is degraded (multipath, few satellites)."""
 
 
-def degraded_boat(report_accuracy: bool, seed: int = 0, duration: float = 240.0):
+def degraded_boat(report_accuracy: bool, seed: int = 0, duration: float = 240.0,
+                  speed_accuracy: bool = False):
     """simulate_boat (GNSS velocity noise 0.05 m/s per axis, 2.5 Hz) whose fixes carry
     ``h_acc_m = 1.5`` m, except in :data:`BAD`, where their velocity has 0.5 m/s of extra
-    noise per axis and the receiver says so (``h_acc_m = 15`` m). Without
-    ``report_accuracy`` no fix carries an accuracy (the configured noise throughout)."""
+    noise per axis and the receiver says so (``h_acc_m = 15`` m; with ``speed_accuracy``
+    also ``speed_acc_mps`` 0.05 outside, 0.5 inside). Without ``report_accuracy`` no fix
+    carries an accuracy (the configured noise throughout)."""
     rng = np.random.default_rng(100 + seed)
     for t, samples, c in simulate_boat(duration, seed=seed):
         out = []
@@ -32,17 +35,19 @@ def degraded_boat(report_accuracy: bool, seed: int = 0, duration: float = 240.0)
                     vn, ve = vn + rng.normal(0, 0.5), ve + rng.normal(0, 0.5)
                 s = msgspec.structs.replace(
                     s, sog_mps=math.hypot(vn, ve), cog_rad=math.atan2(ve, vn),
-                    h_acc_m=(15.0 if bad else 1.5) if report_accuracy else None)
+                    h_acc_m=(15.0 if bad else 1.5) if report_accuracy else None,
+                    speed_acc_mps=(0.5 if bad else 0.05)
+                    if report_accuracy and speed_accuracy else None)
             out.append(s)
         yield t, out, c
 
 
-def _run(report_accuracy: bool, seed: int = 0):
+def _run(report_accuracy: bool, seed: int = 0, speed_accuracy: bool = False):
     pipe = current_pipeline("rudder-boat", gnss_velocity_std=0.05,
                             gnss_nominal_accuracy_m=1.5)
     errs = []
     nis = []
-    for t, samples, c in degraded_boat(report_accuracy, seed):
+    for t, samples, c in degraded_boat(report_accuracy, seed, speed_accuracy=speed_accuracy):
         out = pipe.step(t, samples)
         if BAD[0] <= t and "north" in out and "east" in out:
             errs.append([out["north"] - c[0], out["east"] - c[1]])
@@ -51,12 +56,14 @@ def _run(report_accuracy: bool, seed: int = 0):
     return pipe, np.sqrt(np.mean(np.array(errs) ** 2, axis=0)), float(np.mean(nis))
 
 
-def test_fixes_reporting_a_poor_accuracy_are_down_weighted():
+@pytest.mark.parametrize("speed_accuracy", [False, True], ids=["h_acc", "speed_acc"])
+def test_fixes_reporting_a_poor_accuracy_are_down_weighted(speed_accuracy):
     """80 s of fixes ten times noisier than configured, reported as such by the receiver:
     with the accuracy as noise the current error from the degradation on is smaller than
     with the fixed configured noise, and the velocity NIS in the window stays in its band
-    (about 2 for two components) instead of blowing up."""
-    aware, rms_aware, nis_aware = _run(True)
+    (about 2 for two components) instead of blowing up; the same whether the receiver
+    reports its speed accuracy or only its position accuracy."""
+    aware, rms_aware, nis_aware = _run(True, speed_accuracy=speed_accuracy)
     fixed, rms_fixed, nis_fixed = _run(False)
     # measured (seed 0, rms N/E from 120 s to 240 s): accuracy as noise 0.022 / 0.017 m/s,
     # fixed noise 0.058 / 0.045 (176 fixes gated out, q_scale raised to 1.47); mean NIS in
@@ -77,6 +84,10 @@ def test_accuracy_scaling_never_tightens_and_falls_back_to_the_configured_noise(
         pipe._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
                               h_acc_m=acc), meas)
         assert meas[-1][3] == expect
+    for sacc, expect in ((0.02, 0.1), (0.4, 0.4), (math.nan, 0.2)):  # NaN: h_acc_m instead
+        pipe._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
+                              h_acc_m=3.0, speed_acc_mps=sacc), meas)
+        assert meas[-1][3] == pytest.approx(expect)
     off = current_pipeline("rudder-boat", gnss_velocity_std=0.1, gnss_nominal_accuracy_m=0.0)
     off._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
                          h_acc_m=30.0), meas)

@@ -70,7 +70,7 @@ def _check_fixes(fixes: list[GnssFix], parser: GpsdParser) -> None:
         assert f.fix_quality == 1 and f.alt_m == 12.0
     kept = [o for i, o in enumerate(with_fix)
             if not (i and o.get("time") and with_fix[i - 1].get("time") == o.get("time"))]
-    checked = 0
+    checked = with_speed_acc = 0
     for f, o in zip(fixes, kept):  # the first report of each epoch is the one kept
         assert (f.lat_deg, f.lon_deg) == (o["lat"], o["lon"])
         if "epx" in o and "epy" in o:
@@ -80,9 +80,12 @@ def _check_fixes(fixes: list[GnssFix], parser: GpsdParser) -> None:
             assert f.h_acc_m == pytest.approx(o["eph"] / SIGMA_95_2D)
         if "epv" in o:
             assert f.v_acc_m == pytest.approx(o["epv"] / SIGMA_95_1D)
+        if o.get("eps"):
+            assert f.speed_acc_mps == pytest.approx(o["eps"] / SIGMA_95_1D)
+            with_speed_acc += 1
         assert f.num_sats in (None, 0, 9) and f.sog_mps == o.get("speed")
     assert fixes[-1].num_sats == 9 and fixes[-1].hdop == 0.9
-    assert checked >= 20
+    assert checked >= 20 and with_speed_acc >= 20
 
 
 async def _fake_gpsd(port: int, lines: list[bytes], watches: list[bytes],

@@ -77,6 +77,10 @@ def test_gps_raw_int_units_and_unknowns():
     assert s.hdop == pytest.approx(1.6) and s.num_sats == 21
     assert s.sog_mps == pytest.approx(2.5) and s.cog_rad == pytest.approx(math.pi / 2)
     assert s.h_acc_m == pytest.approx(1.5) and s.v_acc_m is None  # 0 = not given
+    assert s.speed_acc_mps is None
+    f = m.gps_raw_int_encode(0, 3, 1, 2, 0, 160, 65535, 250, 9000, 12, 0, 1500, 0, 300).pack(m)
+    (s,), _ = parse(f)
+    assert s.speed_acc_mps == pytest.approx(0.3)  # vel_acc mm/s
     assert s.source == "mavlink:1/GPS_RAW_INT" and s.t == 10.0
     # unknown velocity/course/sats and no-fix frames
     f = m.gps_raw_int_encode(0, 3, 1, 2, 0, 65535, 65535, 65535, 65535, 255).pack(m)

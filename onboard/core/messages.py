@@ -43,7 +43,8 @@ class GnssFix(Sample, frozen=True, tag="gnss"):
     ``fix_quality`` follows NMEA GGA: 0 none, 1 GPS, 2 DGPS, 4 RTK fixed, 5 RTK float;
     MAVLink ``fix_type`` is mapped onto it by the drivers (3D fix -> 1, DGPS -> 2, RTK
     fixed -> 4, RTK float -> 5). ``sog_mps`` and ``cog_rad`` are speed and course over
-    ground; ``h_acc_m`` and ``v_acc_m`` are one-sigma horizontal and vertical accuracies.
+    ground; ``h_acc_m`` and ``v_acc_m`` are one-sigma horizontal and vertical accuracies,
+    ``speed_acc_mps`` the one-sigma accuracy of ``sog_mps``, as the receiver reports them.
     """
 
     lat_deg: float
@@ -56,6 +57,7 @@ class GnssFix(Sample, frozen=True, tag="gnss"):
     cog_rad: float | None = None
     h_acc_m: float | None = None
     v_acc_m: float | None = None
+    speed_acc_mps: float | None = None
 
 
 class VelocityOverGround(Sample, frozen=True, tag="vog"):

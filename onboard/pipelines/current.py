@@ -156,14 +156,14 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """One-sigma of GNSS velocity components (m/s) at the receiver's nominal accuracy;
     default from ``[sensors.gnss]``."""
     gnss_nominal_accuracy_m: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
-    """Receiver accuracy as noise: a fix reporting a horizontal accuracy ``h_acc_m`` (m, one
-    sigma) worse than this has its velocity one-sigma scaled by ``h_acc_m / nominal``;
-    never below ``gnss_velocity_std`` (a fix claiming better than nominal, RTK say, does
-    not make its Doppler velocity better). Default ``[sensors.gnss] position_std_m``; 0:
-    the configured one-sigma for every fix. A fix without a finite positive ``h_acc_m``
-    takes the configured one-sigma. (``GnssFix`` carries no speed accuracy: the position
-    accuracy is the receiver's own error estimate closest to it, both scale with the
-    satellite geometry and signal quality.)"""
+    """Receiver accuracy as noise: a fix reporting its speed accuracy ``speed_acc_mps``
+    (m/s, one sigma) has that as its velocity one-sigma; one reporting only a horizontal
+    accuracy ``h_acc_m`` (m, one sigma) worse than this has its velocity one-sigma scaled
+    by ``h_acc_m / nominal`` (both scale with the satellite geometry and signal quality).
+    Never below ``gnss_velocity_std`` (a fix claiming better, RTK say, does not make its
+    Doppler velocity better). Default ``[sensors.gnss] position_std_m``; 0: the configured
+    one-sigma for every fix. A fix without a finite positive accuracy takes the
+    configured one-sigma."""
     dvl_velocity_std: float | None = None
     gate_nis: float = 30.0
     """Innovations with a larger NIS are rejected (counted in health)."""
@@ -451,9 +451,11 @@ class CurrentPipeline:
             return
         z = np.array([s.sog_mps * math.cos(s.cog_rad), s.sog_mps * math.sin(s.cog_rad)])
         std = self.gnss_std
-        acc, nominal = s.h_acc_m, self.gnss_nominal_acc
-        if nominal > 0 and acc is not None and math.isfinite(acc) and acc > 0:
-            std *= max(1.0, acc / nominal)  # the receiver's own accuracy, down-weighting only
+        sacc, acc, nominal = s.speed_acc_mps, s.h_acc_m, self.gnss_nominal_acc
+        if nominal > 0 and sacc is not None and math.isfinite(sacc) and sacc > 0:
+            std = max(std, sacc)  # the receiver's speed accuracy, down-weighting only
+        elif nominal > 0 and acc is not None and math.isfinite(acc) and acc > 0:
+            std *= max(1.0, acc / nominal)  # its position accuracy as a proxy
         self.gnss_std_used = std
         meas.append(("earth", s.t, z, std))
 

@@ -146,7 +146,9 @@ class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     gnss_accuracy: bool = True
     """Take each fix's own accuracy (``h_acc_m``: GPS_RAW_INT h_acc, gpsd eph/epx/epy) as
     its position noise, clamped to [``gnss_accuracy_min_m``, ``gnss_accuracy_max_m``],
-    and scale the position anchor by ``gnss_std_m^2`` over it."""
+    and scale the position anchor by ``gnss_std_m^2`` over it; and its speed accuracy
+    (``speed_acc_mps``: GPS_RAW_INT vel_acc, gpsd eps) as the Doppler speed's noise where
+    it is worse than ``gnss_velocity_std_mps`` (down-weighting only, at most 5 m/s)."""
     gnss_accuracy_min_m: float = 0.05
     """Floor of a fix's reported accuracy (m): receivers report centimetres in RTK."""
     gnss_accuracy_max_m: float = 50.0
@@ -346,6 +348,10 @@ class AxisFilter:
             self._rate_update(y_v, R_v)
 
 
+SPEED_ACCURACY_MAX_MPS = 5.0
+"""Ceiling of a fix's reported speed accuracy (m/s)."""
+
+
 # ---------------------------------------------------------------------------------------
 # The pipeline
 
@@ -353,7 +359,8 @@ class AxisFilter:
 class _Window:
     """Running sums of one measurement window."""
 
-    __slots__ = ("n_fix", "st_fix", "sn", "se", "sr", "n_v", "sv", "n_h", "st_h", "sh")
+    __slots__ = ("n_fix", "st_fix", "sn", "se", "sr", "n_v", "sv", "svx", "n_h", "st_h",
+                 "sh")
 
     def __init__(self) -> None:
         self.n_fix = 0
@@ -361,6 +368,7 @@ class _Window:
         self.sr = 0.0   # sum of the fixes' position noise variances (m^2)
         self.n_v = 0
         self.sv = 0.0
+        self.svx = 0.0  # sum of the Doppler speeds' noise variances above the configured
         self.n_h = 0
         self.st_h = self.sh = 0.0
 
@@ -593,6 +601,13 @@ class SurgeHeadingPipeline:
                 sog = -sog
             w.n_v += 1
             w.sv += sog
+            sacc = s.speed_acc_mps
+            if sacc is not None and self.cfg.gnss_accuracy:
+                if not (sacc > 0.0 and math.isfinite(sacc)):
+                    self._acc_bad += 1
+                elif sacc > self.sigma_v:
+                    sacc = sacc if sacc < SPEED_ACCURACY_MAX_MPS else SPEED_ACCURACY_MAX_MPS
+                    w.svx += sacc * sacc - self.sigma_v ** 2
 
     def _on_heading(self, s: Heading) -> None:
         if self._t0 is None:
@@ -739,7 +754,8 @@ class SurgeHeadingPipeline:
         # the window's mean Doppler speed: the rate at the point's time tp
         y_v = w.sv / w.n_v if w.n_v else None
         self.surge.step(self._disc(self.surge.damping(cmd), dt), y, R_s, R_s_prev, cmd,
-                        y_v, self.sigma_v ** 2 / w.n_v if w.n_v else 0.0)
+                        y_v, self.sigma_v ** 2 / w.n_v + w.svx / (w.n_v * w.n_v)
+                        if w.n_v else 0.0)
         # §3.3 position from the estimated increment along the mid-chord heading
         ys = self.surge.kf.d
         if course_mode:
