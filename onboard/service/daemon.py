@@ -3,8 +3,9 @@
 One asyncio loop, one thread doing estimation::
 
     transports (serial/pty, UDP, TCP; reconnect with backoff)      drivers.transports
-      -> Intake.chunk: record raw bytes + receive time, parse,      onboard.service.intake
-         bounded queue (drops counted per input)
+      -> Intake.receive: record raw bytes + receive time;            onboard.service.intake
+         Intake.parse (at the tick, or while it waits for a sample):
+         parse, bounded queue (drops counted per input)
       -> every 1/rate_hz s on the monotonic clock: Intake.tick:      onboard.engine
          push queued samples (checked, rejections counted with their reason, GNSS only
          at the surface), step the pipelines
@@ -44,7 +45,13 @@ from typing import Callable, Sequence
 
 import msgspec
 
-from drivers.transports import Transport, TransportUrlError, open_transport, parse_url
+from drivers.transports import (
+    SinkError,
+    Transport,
+    TransportUrlError,
+    open_transport,
+    parse_url,
+)
 from onboard.core.config import Config, ConfigError, SourceConfig, load
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.engine import Engine
@@ -191,8 +198,8 @@ class Service:
 
             secret_settings(svc.zenoh)
         self.intake.verifier = self.signing.verifier if self.signing and svc.mavlink.require_signing else None
-        self._sample_arrived = asyncio.Event()
-        self.intake.on_queued = self._sample_arrived.set
+        self._chunk_arrived = asyncio.Event()
+        """Set by every chunk received (wakes a tick waiting for a fresh sample)."""
         self.inputs: list[_Input] = []
         self.sessions: list = []
         """The MAVLink sessions with the autopilot (onboard.service.mavlink_session)."""
@@ -345,19 +352,28 @@ class Service:
                 self.event("zenoh: session open")
 
     async def _read(self, inp: _Input) -> None:
-        """Feed one input's chunks to the intake, forever. The transport reconnects by
-        itself; an unexpected error (a bug) is logged and the input restarted after 1 s."""
-        chunk = self.intake.chunk
+        """Feed one input's chunks to the intake, forever: the transport hands each chunk
+        to :meth:`Intake.receive` as it is read (:meth:`drivers.transports.Transport.pump`;
+        the intake parses the chunks kept at the tick or when the tick waits for a sample)
+        and reconnects by itself; an unexpected error (a bug) is logged and the input
+        restarted after 1 s."""
+        receive = self.intake.receive
+        arrived = self._chunk_arrived
         name, kind = inp.name, inp.cfg.kind
+
+        def sink(data: bytes, t_rx: float) -> None:
+            receive(name, kind, data, t_rx)
+            arrived.set()
+
         while True:
             try:
-                async for data, t_rx in inp.transport:
-                    chunk(name, kind, data, t_rx)
+                await inp.transport.pump(sink)
             except asyncio.CancelledError:
                 raise
             except Exception as err:  # noqa: BLE001
-                log.exception("input %s failed", name)
-                self.event(f"{name}: input failed ({type(err).__name__}), restarting")
+                cause = err.__cause__ if isinstance(err, SinkError) and err.__cause__ else err
+                log.error("input %s failed", name, exc_info=cause)
+                self.event(f"{name}: input failed ({type(cause).__name__}), restarting")
             await asyncio.sleep(1.0)
 
     async def run(self) -> None:
@@ -448,16 +464,25 @@ class Service:
         """Wait until a chunk queues a sample or service time ``deadline``; return the
         service time then. Ticking on the arrival of a sample (normally the IMU's, the
         fastest stream) instead of on the bare grid makes the newest sample of a tick
-        milliseconds old rather than up to one sample period."""
-        arrived = self._sample_arrived
-        arrived.clear()
-        delay = self.clock.wall_delay(deadline)
-        if delay > 0:
+        milliseconds old rather than up to one sample period.
+
+        The chunks received since the last tick are parsed first (their samples do not
+        count as fresh), then each chunk as it arrives, until one queues a sample."""
+        arrived = self._chunk_arrived
+        parse = self.intake.parse
+        parse()
+        while True:
+            arrived.clear()
+            delay = self.clock.wall_delay(deadline)
+            if delay <= 0:
+                break
             try:
                 async with asyncio.timeout(delay):
                     await arrived.wait()
             except TimeoutError:
-                pass
+                break
+            if parse():
+                break
         return self.clock.now()
 
     def _tick(self, t: float, now: float) -> None:
