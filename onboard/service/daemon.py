@@ -10,6 +10,7 @@ One asyncio loop, one thread doing estimation::
          push queued samples (checked, rejections counted with their reason, GNSS only
          at the surface), step the pipelines
       -> Zenoh (every tick), MAVLink (rate_hz), health at 1 Hz      onboard.service.publishers
+      -> the MAVLink sessions with the autopilots, every 0.1 s      onboard.service.mavlink_session
       -> adaptive state saved atomically every state_save_interval_s onboard.service.persistence
       -> systemd: READY=1 once inputs and publishers are up, STATUS every 5 s,
          WATCHDOG=1 from the tick loop itself                        onboard.service.sdnotify
@@ -73,6 +74,9 @@ hold the service back: it becomes READY degraded and keeps reconnecting)."""
 FINE_SLEEP_S = 0.0012
 """The last part (wall s) of the wait for a tick is slept precisely (see sleep_until)."""
 MAX_TICK_LAG_S = 1.0
+SESSION_POLL_S = 0.1
+"""The MAVLink sessions are polled by the tick loop, after the tick, every this many
+service seconds (every tick at rate_hz <= 10)."""
 """A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 
 
@@ -268,9 +272,8 @@ class Service:
 
                 sess = MavlinkSession(inp.name, cfg, inp.cfg, link, inp.transport,
                                       self.clock.now, self.event, signing=self.signing,
-                                      poll_s=0.1 / self.clock.speed)
-                self.sessions.append(sess)
-                self._tasks.append(asyncio.create_task(sess.run(), name=f"session:{inp.name}"))
+                                      poll_s=SESSION_POLL_S / self.clock.speed)
+                self.sessions.append(sess)  # polled by the tick loop (no task of its own)
         try:
             await self._start_publishers()
         except BaseException:
@@ -422,6 +425,7 @@ class Service:
         perf = time.perf_counter
         watchdog = self.cfg.service.watchdog
         wait = min(self.cfg.service.tick_wait_s, 0.5 * period)
+        next_poll = -math.inf
         while True:
             t = k * period
             await clock.sleep_until(t, precise=wait == 0)  # a waiting tick needs no precision
@@ -449,6 +453,9 @@ class Service:
                     self._save_state_async()
                 if self.recorder is not None:
                     self.recorder.poll(now)
+                if self.sessions and k * period >= next_poll:
+                    next_poll = k * period + SESSION_POLL_S - 0.5 * period
+                    self._poll_sessions(now)
             except Exception as err:  # noqa: BLE001 - a pipeline bug must not stop the loop
                 self.stats.tick_errors += 1
                 if self.stats.tick_errors == 1 or self.stats.tick_errors % 600 == 0:
@@ -459,6 +466,14 @@ class Service:
             if watchdog:
                 self.notifier.watchdog()
             k += 1
+
+    def _poll_sessions(self, now: float) -> None:
+        """One step of every MAVLink session (a session bug is logged, never raised)."""
+        for sess in self.sessions:
+            try:
+                sess.poll(now)
+            except Exception:  # noqa: BLE001 - a session bug must not stop the ticks
+                log.exception("mavlink session %s failed", sess.name)
 
     async def _await_sample(self, deadline: float) -> float:
         """Wait until a chunk queues a sample or service time ``deadline``; return the

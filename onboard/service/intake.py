@@ -5,8 +5,8 @@ parses it (:func:`drivers.protocols.parser_for`) and queues its samples in a bou
 (drops counted per source); ``tick(T)`` records the tick, pushes the queued samples
 stamped ``t <= T`` (later ones wait for the next tick, so a pipeline never sees a sample
 from its future) and steps the engine. The live service splits ``chunk()`` in two:
-``receive()`` records the chunk and keeps it, ``parse()`` (called by ``tick()`` and by the
-service while it waits for a sample) parses the chunks kept, in order. Parsing a handful
+``receive()`` keeps the chunk, ``parse()`` (called by ``tick()`` and by the service while
+it waits for a sample) records and parses the chunks kept, in order. Parsing a handful
 of chunks together costs about half the CPU time of parsing each as it arrives (the
 parsers' code and data stay in the processor's caches), and gives the same samples: a
 parser's output is a function of the bytes and their receive times only. Parsers with a ``poll(t)`` (NMEA: an epoch held
@@ -136,9 +136,9 @@ class Intake:
         return self._parse(name, st, data, t_rx, verdicts)
 
     def receive(self, name: str, kind: str, data: bytes, t_rx: float) -> None:
-        """Record one raw chunk received at ``t_rx`` (s) on input ``name`` and keep it for
-        :meth:`parse` (the next :meth:`tick` parses it at the latest). Never raises on bad
-        bytes."""
+        """Keep one raw chunk received at ``t_rx`` (s) on input ``name`` for :meth:`parse`,
+        which records and parses it (the next :meth:`tick` at the latest). Never raises on
+        bad bytes."""
         st = self._received(name, kind, data, t_rx)
         backlog = self.backlog
         backlog.append((name, st, data, t_rx))
@@ -146,8 +146,8 @@ class Intake:
             self.parse()
 
     def parse(self) -> int:
-        """Parse and queue the chunks kept by :meth:`receive`, in the order received;
-        return the number of samples queued."""
+        """Record, parse and queue the chunks kept by :meth:`receive`, in the order
+        received; return the number of samples queued."""
         backlog = self.backlog
         queued = 0
         parse = self._parse
@@ -157,15 +157,10 @@ class Intake:
         return queued
 
     def _received(self, name: str, kind: str, data: bytes, t_rx: float) -> SourceState:
-        """Count a chunk; record it unless its input verifies signatures (it is then
-        recorded with its verdicts once parsed). Returns its input's state."""
+        """Count a chunk; return its input's state."""
         st = self.sources.get(name)
         if st is None or st.kind != kind:
             st = self.add_source(name, kind)
-        rec = self.recorder
-        if rec is not None and type(st.verdicts) is not VerdictLog:
-            # before parsing: nothing a parser does can lose it
-            rec.write(RawRecord(t=t_rx, source=name, kind=kind, data=bytes(data)))
         st.chunks += 1
         st.bytes += len(data)
         st.t_last = t_rx
@@ -173,10 +168,15 @@ class Intake:
 
     def _parse(self, name: str, st: SourceState, data: bytes, t_rx: float,
                verdicts: Verdicts | None) -> int:
-        """Parse one chunk of input ``name`` (counted and recorded by :meth:`_received`)
-        and queue its samples; return the number queued."""
+        """Record (unless its input verifies signatures: it is then recorded with its
+        verdicts once parsed) and parse one chunk of input ``name`` (counted by
+        :meth:`_received`); queue its samples; return the number queued."""
         vlog = st.verdicts if type(st.verdicts) is VerdictLog else None
         player = st.verdicts if type(st.verdicts) is VerdictPlayer else None
+        rec = self.recorder
+        if rec is not None and vlog is None:
+            # before parsing: nothing a parser does can lose it
+            rec.write(RawRecord(t=t_rx, source=name, kind=st.kind, data=bytes(data)))
         if player is not None:
             player.load(verdicts)
         try:
@@ -186,7 +186,6 @@ class Intake:
             st.parser.stats.reject("parser_error")
             log.exception("parser for %s failed on a %d-byte chunk", name, len(data))
             samples = []
-        rec = self.recorder
         if vlog is not None:  # signing verified: the chunk and its verdicts in one write
             v = vlog.take(data)
             if rec is not None:
