@@ -148,6 +148,9 @@ class ServiceStats:
     """Wall-clock (time.monotonic) seconds from construction to READY."""
     tick_compute_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
     """Wall time of each tick's work (s): push, pipelines, publishing."""
+    tick_late_max_s: float = 0.0
+    """The largest delay (service s) between a tick's grid time and the end of its wait
+    for the grid (the loop busy or starved of CPU), skipped stalls included."""
 
 
 def resolve_dirs(args_state_dir: str | None) -> tuple[Path, Path | None]:
@@ -430,6 +433,8 @@ class Service:
             t = k * period
             await clock.sleep_until(t, precise=wait == 0)  # a waiting tick needs no precision
             now = clock.now()
+            if now - t > self.stats.tick_late_max_s:
+                self.stats.tick_late_max_s = now - t
             if -clock.wall_delay(t) > MAX_TICK_LAG_S:
                 k_new = math.floor(now / period)
                 self.stats.tick_skips += k_new - k
