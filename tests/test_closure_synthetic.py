@@ -8,6 +8,7 @@ identification math. Bounds carry the measured figure in a comment.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -60,6 +61,14 @@ def detected(ds):
     return doc, {e["name"]: e for e in doc["effects"] if e["detected"]}
 
 
+@functools.lru_cache(maxsize=None)
+def _current_run():
+    """(dataset, selection) of the 0.3/-0.2 m/s current, selected once for the tests that
+    read it (a selection is the expensive part of these tests)."""
+    ds = synth(current=(0.3, -0.2))
+    return ds, select(ds)
+
+
 def test_clean_data_detects_nothing():
     doc, found = detected(synth())
     assert found == {}
@@ -67,7 +76,8 @@ def test_clean_data_detects_nothing():
 
 
 def test_current_is_found_with_its_components():
-    doc, found = detected(synth(current=(0.3, -0.2)))
+    doc = report.diagnosis(_current_run()[1], "synthetic")
+    found = {e["name"]: e for e in doc["effects"] if e["detected"]}
     assert set(found) == {"water_current"}
     p = found["water_current"]["params"]
     # measured: north 0.315, east -0.207
@@ -164,8 +174,7 @@ def test_unexplained_looks_at_every_channel():
 
 
 def test_three_way_split_scores_on_a_test_part_it_never_used():
-    ds = synth(current=(0.3, -0.2))
-    sel = select(ds)
+    ds, sel = _current_run()
     doc = report.diagnosis(sel, "synthetic")
     parts = doc["split_parts"]
     assert parts["method"] == "forward_in_time"
