@@ -75,7 +75,7 @@ def _fly(scenario: str, duration_s: float, tmp_path: Path, speed: float = SPEED)
         res = asyncio.run(asyncio.wait_for(run_demo(
             scenario, duration_s, speed=speed, out_dir=tmp_path, out=None, keep_state=False,
             router_endpoint=f"tcp/127.0.0.1:{free_tcp_port()}",
-            mavlink_out=f"udpout:127.0.0.1:{free_udp_port()}"), TIMEOUT * SPEED / speed))
+            mavlink_out=f"udpout:127.0.0.1:{free_udp_port()}"), TIMEOUT * max(1.0, SPEED / speed)))
         late = max(res.sim_late_s, res.service_late_s)
         print(f"{scenario} at {speed:g}x: simulator {res.sim_late_s:.2f} s, service "
               f"{res.service_late_s:.2f} s behind the clock at worst")
