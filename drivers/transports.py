@@ -36,6 +36,11 @@ Faults that give no error are found too:
 Serial and pty reads use pyserial to configure the port (raw, non-blocking) and
 ``loop.add_reader`` on its file descriptor, so no thread and no serial_asyncio.
 
+Besides iterating, a consumer can have the chunks delivered: :meth:`Transport.pump` calls
+``sink(data, t_rx)`` for every chunk, with the same reconnection. UDP and serial ports call
+the sink from the read callback itself, without waking a task per chunk (the service's
+intake runs so, at a fraction of the CPU time of the iteration); TCP iterates.
+
 :meth:`Transport.send` writes back on the open connection (the service asks the autopilot
 for its streams): to the serial port, to the TCP server, or to the address the last
 datagram came from on UDP (as a ground station answers an autopilot). It never blocks: what
@@ -83,6 +88,11 @@ TX_QUEUE_BYTES = 65536
 
 class IdleTimeout(OSError):
     """A connection delivered nothing for its idle timeout."""
+
+
+class SinkError(Exception):
+    """An exception raised by the sink of :meth:`Transport.pump` (a bug in the consumer,
+    not a lost connection): ends the pump with the original as ``__cause__``."""
 
 
 class TransportUrlError(ValueError):
@@ -186,6 +196,7 @@ class Transport:
         self.stats = TransportStats()
         self._on_event = on_event
         self._tx: Callable[[bytes], bool] | None = None
+        self._t_wall_rx = 0.0
 
     def send(self, data: bytes) -> bool:
         """Write ``data`` on the open connection without blocking; False (counted in
@@ -221,18 +232,101 @@ class Transport:
             except (asyncio.CancelledError, GeneratorExit):
                 self.stats.connected = False
                 raise
-            was_connected = self.stats.connected
-            self.stats.connected = False
-            if was_connected:
-                self.stats.disconnects += 1
-                self._event(f"{self.spec}: lost ({reason})")
-            elif reason != self.stats.last_error:  # first failure, or a different one
-                self._event(f"{self.spec}: cannot open ({reason}); retrying")
-            self.stats.last_error = reason
-            if time.monotonic() - t_open >= self.backoff_reset_s:
-                delay = self.backoff_initial_s
-            await asyncio.sleep(delay)
-            delay = min(delay * 2.0, self.backoff_max_s)
+            delay = await self._retry(reason, t_open, delay)
+
+    async def pump(self, sink: Callable[[bytes, float], None]) -> None:
+        """Call ``sink(data, t_rx)`` for every chunk, in order, forever: the chunks and the
+        reconnection of the iteration, delivered by the read callback itself where the
+        transport has one (UDP, serial), so that no task wakes per chunk.
+
+        The sink runs on the event loop and must not block. An exception it raises ends
+        the pump with :class:`SinkError` (from the original). Only cancelling the task
+        stops it otherwise.
+        """
+        delay = self.backoff_initial_s
+        while True:
+            t_open = time.monotonic()
+            try:
+                await self._pump_session(sink)
+                reason = "closed by peer"
+            except SinkError:
+                self.stats.connected = False
+                raise
+            except (OSError, EOFError, ValueError) as err:
+                reason = _describe(err)
+            except asyncio.CancelledError:
+                self.stats.connected = False
+                raise
+            delay = await self._retry(reason, t_open, delay)
+
+    async def _pump_session(self, sink: Callable[[bytes, float], None]) -> None:
+        """One connection of :meth:`pump`; by default the iteration of :meth:`_session`."""
+        async with contextlib.aclosing(self._session()) as session:
+            async for data, t_rx in session:
+                try:
+                    sink(data, t_rx)
+                except Exception as err:  # noqa: BLE001 - the consumer's bug, not the link's
+                    raise SinkError(f"sink failed: {err!r}") from err
+
+    def _deliverer(self, sink: Callable[[bytes, float], None],
+                   fail: Callable[[BaseException], None]) -> Callable[[bytes, float], None]:
+        """``(data, t_rx) ->`` count the chunk and hand it to ``sink``; a sink exception
+        goes to ``fail`` as a :class:`SinkError`."""
+        stats = self.stats
+        failed = False
+        watch = self.idle_timeout_s > 0
+        self._t_wall_rx = time.monotonic()
+
+        def deliver(data: bytes, t_rx: float) -> None:
+            nonlocal failed
+            if failed:
+                return
+            stats.chunks += 1
+            stats.bytes += len(data)
+            stats.t_last_rx = t_rx
+            if watch:
+                self._t_wall_rx = time.monotonic()
+            try:
+                sink(data, t_rx)
+            except Exception as err:  # noqa: BLE001 - the consumer's bug, not the link's
+                failed = True
+                e = SinkError(f"sink failed: {err!r}")
+                e.__cause__ = err
+                fail(e)
+        return deliver
+
+    async def _until_lost(self, lost: asyncio.Future[None]) -> None:
+        """Wait for ``lost`` (raises what ended the connection); with an idle timeout,
+        raise :class:`IdleTimeout` once no chunk came for ``idle_timeout_s`` wall seconds
+        (as the iteration does)."""
+        idle = self.idle_timeout_s
+        if idle <= 0:
+            await lost
+            return
+        while True:
+            remaining = self._t_wall_rx + idle - time.monotonic()
+            if remaining <= 0:
+                raise IdleTimeout(errno.ETIMEDOUT, f"idle: no data for {idle:g} s")
+            await asyncio.wait((lost,), timeout=remaining)
+            if lost.done():
+                lost.result()
+                return
+
+    async def _retry(self, reason: str, t_open: float, delay: float) -> float:
+        """After a session ended for ``reason``: count and report it, wait ``delay``;
+        return the next delay (exponential backoff, reset after a long session)."""
+        was_connected = self.stats.connected
+        self.stats.connected = False
+        if was_connected:
+            self.stats.disconnects += 1
+            self._event(f"{self.spec}: lost ({reason})")
+        elif reason != self.stats.last_error:  # first failure, or a different one
+            self._event(f"{self.spec}: cannot open ({reason}); retrying")
+        self.stats.last_error = reason
+        if time.monotonic() - t_open >= self.backoff_reset_s:
+            delay = self.backoff_initial_s
+        await asyncio.sleep(delay)
+        return min(delay * 2.0, self.backoff_max_s)
 
     async def _idle(self, aw: Awaitable[T]) -> T:
         """Await ``aw`` for at most ``idle_timeout_s`` (when set); raise IdleTimeout."""
@@ -308,6 +402,32 @@ class SerialTransport(Transport):
     """
 
     async def _session(self) -> AsyncIterator[Chunk]:
+        box = _Mailbox(self.queue_size, self.stats)
+        port, fd = self._open_port(lambda data, t_rx: box.put((data, t_rx)), box.put)
+        try:
+            while True:
+                data, t_rx = await self._idle(box.get())
+                yield self._count(data, t_rx)
+        finally:
+            self._close_port(port, fd)
+
+    async def _pump_session(self, sink: Callable[[bytes, float], None]) -> None:
+        lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+        def fail(err: BaseException) -> None:
+            if not lost.done():
+                lost.set_exception(err)
+
+        port, fd = self._open_port(self._deliverer(sink, fail), fail)
+        try:
+            await self._until_lost(lost)
+        finally:
+            self._close_port(port, fd)
+
+    def _open_port(self, deliver: Callable[[bytes, float], None],
+                   fail: Callable[[BaseException], None]) -> tuple[object, int]:
+        """Open the port; read it with ``loop.add_reader``: chunks to ``deliver``, the
+        end (EOF, I/O error) to ``fail``. Returns (pyserial port, fd)."""
         import serial  # pyserial
 
         spec = self.spec
@@ -324,7 +444,7 @@ class SerialTransport(Transport):
             raise OSError(errno.EIO, str(err)) from None
         fd = port.fileno()
         loop = asyncio.get_running_loop()
-        box = _Mailbox(self.queue_size, self.stats)
+        clock = self.clock
 
         def readable() -> None:
             try:
@@ -333,13 +453,13 @@ class SerialTransport(Transport):
                 return
             except OSError as err:
                 loop.remove_reader(fd)
-                box.put(err)
+                fail(err)
                 return
             if not data:
                 loop.remove_reader(fd)
-                box.put(EOFError("end of file"))
+                fail(EOFError("end of file"))
                 return
-            box.put((data, self.clock()))
+            deliver(data, clock())
 
         loop.add_reader(fd, readable)
         pending = bytearray()
@@ -370,44 +490,71 @@ class SerialTransport(Transport):
 
         self._tx = tx
         self._connected()
+        return port, fd
+
+    def _close_port(self, port: object, fd: int) -> None:
+        self._tx = None
+        loop = asyncio.get_running_loop()
+        loop.remove_reader(fd)
+        loop.remove_writer(fd)
         try:
-            while True:
-                data, t_rx = await self._idle(box.get())
-                yield self._count(data, t_rx)
-        finally:
-            self._tx = None
-            loop.remove_reader(fd)
-            loop.remove_writer(fd)
-            try:
-                port.close()
-            except Exception:  # noqa: BLE001 - closing a vanished device may fail
-                pass
+            port.close()  # type: ignore[attr-defined]
+        except Exception:  # noqa: BLE001 - closing a vanished device may fail
+            pass
 
 
 class _UdpProtocol(asyncio.DatagramProtocol):
-    def __init__(self, box: _Mailbox, clock: Clock) -> None:
-        self.box = box
+    def __init__(self, deliver: Callable[[bytes, float], None],
+                 fail: Callable[[BaseException], None], clock: Clock) -> None:
+        self.deliver = deliver
+        self.fail = fail
         self.clock = clock
         self.peer: object | None = None
         """Where the last datagram came from: where :meth:`Transport.send` answers."""
 
     def datagram_received(self, data: bytes, addr: object) -> None:
         self.peer = addr
-        self.box.put((data, self.clock()))
+        self.deliver(data, self.clock())
 
     def error_received(self, exc: Exception) -> None:  # ICMP errors: not fatal for a listener
         pass
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self.box.put(exc if exc is not None else EOFError("socket closed"))
+        self.fail(exc if exc is not None else EOFError("socket closed"))
 
 
 class UdpTransport(Transport):
     """Listens for datagrams on ``host:port``; each datagram is one chunk."""
 
     async def _session(self) -> AsyncIterator[Chunk]:
-        loop = asyncio.get_running_loop()
         box = _Mailbox(self.queue_size, self.stats)
+        transport = await self._bind(lambda data, t_rx: box.put((data, t_rx)), box.put)
+        try:
+            while True:
+                data, t_rx = await box.get()
+                yield self._count(data, t_rx)
+        finally:
+            self._tx = None
+            transport.close()
+
+    async def _pump_session(self, sink: Callable[[bytes, float], None]) -> None:
+        lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+        def fail(err: BaseException) -> None:
+            if not lost.done():
+                lost.set_exception(err)
+
+        transport = await self._bind(self._deliverer(sink, fail), fail)
+        try:
+            await self._until_lost(lost)
+        finally:
+            self._tx = None
+            transport.close()
+
+    async def _bind(self, deliver: Callable[[bytes, float], None],
+                    fail: Callable[[BaseException], None]) -> asyncio.DatagramTransport:
+        """Bind the socket: datagrams to ``deliver``, its loss to ``fail``."""
+        loop = asyncio.get_running_loop()
         family = socket.AF_INET6 if ":" in self.spec.host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_DGRAM)
         try:
@@ -417,7 +564,7 @@ class UdpTransport(Transport):
         except OSError:
             sock.close()
             raise
-        proto = _UdpProtocol(box, self.clock)
+        proto = _UdpProtocol(deliver, fail, self.clock)
         transport, _ = await loop.create_datagram_endpoint(lambda: proto, sock=sock)
 
         def tx(data: bytes) -> bool:
@@ -428,13 +575,7 @@ class UdpTransport(Transport):
 
         self._tx = tx
         self._connected()
-        try:
-            while True:
-                data, t_rx = await box.get()
-                yield self._count(data, t_rx)
-        finally:
-            self._tx = None
-            transport.close()
+        return transport
 
     @property
     def local_port(self) -> int:

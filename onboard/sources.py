@@ -94,7 +94,8 @@ def pattern_matches(pattern: str, source: str) -> bool:
 
 def usable(sample: Sample) -> bool:
     """Whether ``sample`` shows its source working (refreshes it): a GNSS fix with a fix,
-    a DVL report the instrument marked valid; any other accepted sample."""
+    a DVL report the instrument marked valid; any other accepted sample (inlined in
+    :meth:`SourceSelector._select` for the active source)."""
     cls = type(sample)
     if cls is GnssFix:
         return sample.fix_quality > 0  # type: ignore[attr-defined]
@@ -199,6 +200,15 @@ class SourceSelector:
     def _select(self, q: _Quantity, s: Sample) -> bool:
         """Update quantity ``q`` with sample ``s``; True if ``s``'s source is active."""
         src, t = s.source, s.t
+        if src == q.active:  # the common case, in short (an active source is never excluded)
+            cls = type(s)
+            if (cls is not GnssFix or s.fix_quality > 0) and (  # type: ignore[attr-defined]
+                    cls is not DvlVelocity or s.valid):  # type: ignore[attr-defined]
+                last = q.last.get(src)
+                if last is None or t - last > self.stale_s:
+                    q.since[src] = t
+                q.last[src] = t
+            return True
         rank = q.rank_of(src, type(s) in _PREFERRED)
         if rank == math.inf:
             self.standby[(q.name, src)] += 1

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import socket
 import statistics
 import subprocess
 import sys
@@ -33,7 +34,9 @@ from onboard.tools.service_bench import free_tcp_port, free_udp_port
 pytestmark = pytest.mark.integration
 
 REPO = Path(__file__).resolve().parent.parent
-SIM_S = 22.0
+SIM_S = 18.0
+"""Real-time simulated seconds: the streams settle ~2 s after the first heartbeat, the
+rates are checked over the 11 health records before the last two."""
 
 
 def _config(mav_port: int, endpoint: str) -> str:
@@ -86,13 +89,23 @@ def test_fresh_autopilot_streams_nothing_unasked_yet_onboard_run_estimates_every
     with tempfile.TemporaryDirectory(prefix="onboard-streams-") as tmp:
         cfg = Path(tmp) / "boat.toml"
         cfg.write_text(_config(mav_port, endpoint))
+        notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        notify.bind(str(Path(tmp) / "notify"))
+        notify.settimeout(0.5)
         svc = subprocess.Popen([sys.executable, "-m", "onboard", "run", "--config", str(cfg),
-                                "--state-dir", tmp], env=env, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE)
+                                "--state-dir", tmp], env=dict(env, NOTIFY_SOCKET=str(Path(tmp) / "notify")),
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         sim = None
         try:
-            time.sleep(2.0)  # the service is listening
-            assert svc.poll() is None, svc.stderr.read().decode() if svc.stderr else ""
+            deadline = time.monotonic() + 60.0  # a hung start, not a performance bound
+            ready = False
+            while not ready and svc.poll() is None and time.monotonic() < deadline:
+                try:
+                    ready = notify.recv(4096).startswith(b"READY=1")  # listening
+                except socket.timeout:
+                    pass
+            notify.close()
+            assert svc.poll() is None and ready, svc.stderr.read().decode() if svc.stderr else ""
             sim = subprocess.run(
                 [sys.executable, "-m", "onboard", "sitl", "--scenario", "jaiabot-turns",
                  "--realtime", "--duration", str(SIM_S), "--seed", "1",

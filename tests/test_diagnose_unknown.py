@@ -70,6 +70,9 @@ def test_soft_iron_is_unexplained_not_a_first_harmonic_deviation(tmp_path):
     assert ev["lateral"]["regressor"] == "speed x heading harmonic 2"
 
 
+@pytest.mark.slow  # ~25-70 s; the default suite keeps the same mapping (swapped, left
+# reversed) found on synthetic data: test_closure_synthetic.py::
+# test_actuator_mapping_finds_swapped_and_reversed_thrusters
 def test_swapped_and_reversed_thrusters_are_found(tmp_path):
     # truth: SERVO1 (ThrottleLeft in the config) drives the starboard thruster reversed,
     # SERVO3 the port one; read with config/twin-thruster-boat.toml as it stands.

@@ -17,7 +17,10 @@ test_an_unplugged_input_is_reported_and_picked_up_again_while_the_service_runs``
 
 Every bound is set from a measured figure, written beside it (measured on the 2-core
 development VM with other jobs running; SITL seed 1). Timing is never asserted: the
-deadlines below only stop a hung test.
+deadlines below only stop a hung test. A SITL run on a machine too busy for its speed
+(the simulator or the service more than ``MAX_LATE_S`` behind the shared clock, as the
+demo reports it) is flown again slower: at load 18-19 on 2 cores the runs needed 2.5-5x
+instead of 10-20x, and passed.
 """
 
 from __future__ import annotations
@@ -48,20 +51,37 @@ REPO = Path(__file__).resolve().parent.parent
 SPEED = 10.0
 """Simulated seconds per wall second in the SITL fault tests."""
 TIMEOUT = 180.0
+MAX_LATE_S = 1.0
+"""A SITL run whose simulator or service fell further behind the shared clock than this
+(simulated s) could not keep up with its speed (a loaded machine): it is flown again at
+half the speed (down to ``MIN_SPEED``); the checks always look at a run that kept up,
+or at the slowest one flown."""
+MIN_SPEED = 2.5
 
 
 # --------------------------------------------------------------------------- helpers
 
 
 def _fly(scenario: str, duration_s: float, tmp_path: Path, speed: float = SPEED):
-    """Fly ``scenario`` through the service; (DemoResult, truth by round(10 t))."""
+    """Fly ``scenario`` through the service; (DemoResult, truth by round(10 t)).
+
+    A run that fell behind the shared clock by more than ``MAX_LATE_S`` (the simulator's
+    emission or the service's ticks: the machine was too busy for ``speed``) is flown
+    again at half the speed, down to ``MIN_SPEED``."""
     from onboard.tools.demo import run_demo
     from sitl.runner import read_truth
 
-    res = asyncio.run(asyncio.wait_for(run_demo(
-        scenario, duration_s, speed=speed, out_dir=tmp_path, out=None, keep_state=False,
-        router_endpoint=f"tcp/127.0.0.1:{free_tcp_port()}",
-        mavlink_out=f"udpout:127.0.0.1:{free_udp_port()}"), TIMEOUT))
+    while True:
+        res = asyncio.run(asyncio.wait_for(run_demo(
+            scenario, duration_s, speed=speed, out_dir=tmp_path, out=None, keep_state=False,
+            router_endpoint=f"tcp/127.0.0.1:{free_tcp_port()}",
+            mavlink_out=f"udpout:127.0.0.1:{free_udp_port()}"), TIMEOUT * max(1.0, SPEED / speed)))
+        late = max(res.sim_late_s, res.service_late_s)
+        print(f"{scenario} at {speed:g}x: simulator {res.sim_late_s:.2f} s, service "
+              f"{res.service_late_s:.2f} s behind the clock at worst")
+        if not late > MAX_LATE_S or speed / 2 < MIN_SPEED:
+            break
+        speed /= 2
     truth = {round(tr.t * 10): tr for tr in read_truth(tmp_path / "truth.jsonl")}
     return res, truth
 

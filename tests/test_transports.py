@@ -178,3 +178,85 @@ def test_serial_paths_with_colons_keep_the_default_baud():
     u = parse_url("serial:/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0")
     assert u.path == "/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0"
     assert u.baud == 115200
+
+
+@pytest.mark.integration
+def test_pump_delivers_udp_datagrams_in_order_and_ends_on_a_sink_error():
+    """``pump``: each datagram handed to the sink from the read callback, with its receive
+    time and counted; an exception of the sink ends the pump as a SinkError (a consumer's
+    bug is not a lost link: no reconnection)."""
+    from drivers.transports import SinkError
+
+    port = free_udp_port()
+    clock_values = iter(range(100, 200))
+    got: list[tuple[bytes, float]] = []
+
+    def sink(data: bytes, t_rx: float) -> None:
+        if data == b"bad":
+            raise KeyError("consumer bug")
+        got.append((data, t_rx))
+
+    async def main():
+        tr = open_transport(f"udp:127.0.0.1:{port}", clock=lambda: float(next(clock_values)))
+        pump = asyncio.create_task(tr.pump(sink))
+        while not tr.stats.connected:
+            await asyncio.sleep(0.01)
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for i in range(3):
+            s.sendto(b"msg%d" % i, ("127.0.0.1", port))
+        while len(got) < 3:
+            await asyncio.sleep(0.01)
+        s.sendto(b"bad", ("127.0.0.1", port))
+        s.close()
+        with pytest.raises(SinkError) as info:
+            await asyncio.wait_for(pump, TIMEOUT)
+        assert isinstance(info.value.__cause__, KeyError)
+        return tr.stats
+
+    stats = run(main())
+    assert got == [(b"msg0", 100.0), (b"msg1", 101.0), (b"msg2", 102.0)]
+    assert stats.chunks == 4 and stats.connects == 1 and stats.disconnects == 0
+    assert not stats.connected
+
+
+@pytest.mark.integration
+def test_pump_reopens_a_pty_that_disappears_and_times_out_an_idle_one(tmp_path):
+    """``pump`` on a serial port: the chunks delivered, the device unplugged and back is
+    reopened, and with an idle timeout a silent port is closed and reopened."""
+    link = str(tmp_path / "gps")
+    events: list[str] = []
+    got: list[bytes] = []
+
+    async def main():
+        master = pty_behind(link)
+        tr = open_transport(f"pty:{link}", on_event=events.append, backoff_initial_s=0.05,
+                            backoff_max_s=0.2, idle_timeout_s=1.0)
+        pump = asyncio.create_task(tr.pump(lambda data, t_rx: got.append(data)))
+        deadline = asyncio.get_running_loop().time() + TIMEOUT
+
+        async def until(cond):
+            while not cond():
+                assert asyncio.get_running_loop().time() < deadline, (events, got)
+                await asyncio.sleep(0.01)
+
+        await until(lambda: tr.stats.connected)
+        os.write(master, b"$GPHDT,1.0,T*00\r\n")
+        await until(lambda: got)
+        os.close(master)  # unplugged
+        await until(lambda: tr.stats.disconnects >= 1)
+        master2 = pty_behind(link)
+        await until(lambda: tr.stats.connects >= 2)
+        os.write(master2, b"again\r\n")
+        await until(lambda: len(got) >= 2)
+        await until(lambda: any("idle" in e for e in events))  # 1 s without a byte
+        await until(lambda: tr.stats.connects >= 3)
+        pump.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await pump
+        os.close(master2)
+        return tr.stats
+
+    stats = run(main())
+    assert got[0].startswith(b"$GPHDT") and b"".join(got[1:]).startswith(b"again")
+    assert any("lost (EIO" in e or "lost (end of file" in e or "lost" in e for e in events)
+    assert stats.disconnects >= 2 and not stats.connected

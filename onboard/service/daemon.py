@@ -3,12 +3,14 @@
 One asyncio loop, one thread doing estimation::
 
     transports (serial/pty, UDP, TCP; reconnect with backoff)      drivers.transports
-      -> Intake.chunk: record raw bytes + receive time, parse,      onboard.service.intake
-         bounded queue (drops counted per input)
+      -> Intake.receive: record raw bytes + receive time;            onboard.service.intake
+         Intake.parse (at the tick, or while it waits for a sample):
+         parse, bounded queue (drops counted per input)
       -> every 1/rate_hz s on the monotonic clock: Intake.tick:      onboard.engine
          push queued samples (checked, rejections counted with their reason, GNSS only
          at the surface), step the pipelines
       -> Zenoh (every tick), MAVLink (rate_hz), health at 1 Hz      onboard.service.publishers
+      -> the MAVLink sessions with the autopilots, every 0.1 s      onboard.service.mavlink_session
       -> adaptive state saved atomically every state_save_interval_s onboard.service.persistence
       -> systemd: READY=1 once inputs and publishers are up, STATUS every 5 s,
          WATCHDOG=1 from the tick loop itself                        onboard.service.sdnotify
@@ -44,7 +46,13 @@ from typing import Callable, Sequence
 
 import msgspec
 
-from drivers.transports import Transport, TransportUrlError, open_transport, parse_url
+from drivers.transports import (
+    SinkError,
+    Transport,
+    TransportUrlError,
+    open_transport,
+    parse_url,
+)
 from onboard.core.config import Config, ConfigError, SourceConfig, load_all
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.engine import Engine
@@ -66,6 +74,9 @@ hold the service back: it becomes READY degraded and keeps reconnecting)."""
 FINE_SLEEP_S = 0.0012
 """The last part (wall s) of the wait for a tick is slept precisely (see sleep_until)."""
 MAX_TICK_LAG_S = 1.0
+SESSION_POLL_S = 0.1
+"""The MAVLink sessions are polled by the tick loop, after the tick, every this many
+service seconds (every tick at rate_hz <= 10)."""
 """A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 
 
@@ -137,6 +148,9 @@ class ServiceStats:
     """Wall-clock (time.monotonic) seconds from construction to READY."""
     tick_compute_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
     """Wall time of each tick's work (s): push, pipelines, publishing."""
+    tick_late_max_s: float = 0.0
+    """The largest delay (service s) between a tick's grid time and the end of its wait
+    for the grid (the loop busy or starved of CPU), skipped stalls included."""
 
 
 def resolve_dirs(args_state_dir: str | None) -> tuple[Path, Path | None]:
@@ -191,8 +205,8 @@ class Service:
 
             secret_settings(svc.zenoh)
         self.intake.verifier = self.signing.verifier if self.signing and svc.mavlink.require_signing else None
-        self._sample_arrived = asyncio.Event()
-        self.intake.on_queued = self._sample_arrived.set
+        self._chunk_arrived = asyncio.Event()
+        """Set by every chunk received (wakes a tick waiting for a fresh sample)."""
         self.inputs: list[_Input] = []
         self.sessions: list = []
         """The MAVLink sessions with the autopilot (onboard.service.mavlink_session)."""
@@ -261,9 +275,8 @@ class Service:
 
                 sess = MavlinkSession(inp.name, cfg, inp.cfg, link, inp.transport,
                                       self.clock.now, self.event, signing=self.signing,
-                                      poll_s=0.1 / self.clock.speed)
-                self.sessions.append(sess)
-                self._tasks.append(asyncio.create_task(sess.run(), name=f"session:{inp.name}"))
+                                      poll_s=SESSION_POLL_S / self.clock.speed)
+                self.sessions.append(sess)  # polled by the tick loop (no task of its own)
         try:
             await self._start_publishers()
         except BaseException:
@@ -345,19 +358,28 @@ class Service:
                 self.event("zenoh: session open")
 
     async def _read(self, inp: _Input) -> None:
-        """Feed one input's chunks to the intake, forever. The transport reconnects by
-        itself; an unexpected error (a bug) is logged and the input restarted after 1 s."""
-        chunk = self.intake.chunk
+        """Feed one input's chunks to the intake, forever: the transport hands each chunk
+        to :meth:`Intake.receive` as it is read (:meth:`drivers.transports.Transport.pump`;
+        the intake parses the chunks kept at the tick or when the tick waits for a sample)
+        and reconnects by itself; an unexpected error (a bug) is logged and the input
+        restarted after 1 s."""
+        receive = self.intake.receive
+        arrived = self._chunk_arrived
         name, kind = inp.name, inp.cfg.kind
+
+        def sink(data: bytes, t_rx: float) -> None:
+            receive(name, kind, data, t_rx)
+            arrived.set()
+
         while True:
             try:
-                async for data, t_rx in inp.transport:
-                    chunk(name, kind, data, t_rx)
+                await inp.transport.pump(sink)
             except asyncio.CancelledError:
                 raise
             except Exception as err:  # noqa: BLE001
-                log.exception("input %s failed", name)
-                self.event(f"{name}: input failed ({type(err).__name__}), restarting")
+                cause = err.__cause__ if isinstance(err, SinkError) and err.__cause__ else err
+                log.error("input %s failed", name, exc_info=cause)
+                self.event(f"{name}: input failed ({type(cause).__name__}), restarting")
             await asyncio.sleep(1.0)
 
     async def run(self) -> None:
@@ -406,10 +428,13 @@ class Service:
         perf = time.perf_counter
         watchdog = self.cfg.service.watchdog
         wait = min(self.cfg.service.tick_wait_s, 0.5 * period)
+        next_poll = -math.inf
         while True:
             t = k * period
             await clock.sleep_until(t, precise=wait == 0)  # a waiting tick needs no precision
             now = clock.now()
+            if now - t > self.stats.tick_late_max_s:
+                self.stats.tick_late_max_s = now - t
             if -clock.wall_delay(t) > MAX_TICK_LAG_S:
                 k_new = math.floor(now / period)
                 self.stats.tick_skips += k_new - k
@@ -433,6 +458,9 @@ class Service:
                     self._save_state_async()
                 if self.recorder is not None:
                     self.recorder.poll(now)
+                if self.sessions and k * period >= next_poll:
+                    next_poll = k * period + SESSION_POLL_S - 0.5 * period
+                    self._poll_sessions(now)
             except Exception as err:  # noqa: BLE001 - a pipeline bug must not stop the loop
                 self.stats.tick_errors += 1
                 if self.stats.tick_errors == 1 or self.stats.tick_errors % 600 == 0:
@@ -444,20 +472,37 @@ class Service:
                 self.notifier.watchdog()
             k += 1
 
+    def _poll_sessions(self, now: float) -> None:
+        """One step of every MAVLink session (a session bug is logged, never raised)."""
+        for sess in self.sessions:
+            try:
+                sess.poll(now)
+            except Exception:  # noqa: BLE001 - a session bug must not stop the ticks
+                log.exception("mavlink session %s failed", sess.name)
+
     async def _await_sample(self, deadline: float) -> float:
         """Wait until a chunk queues a sample or service time ``deadline``; return the
         service time then. Ticking on the arrival of a sample (normally the IMU's, the
         fastest stream) instead of on the bare grid makes the newest sample of a tick
-        milliseconds old rather than up to one sample period."""
-        arrived = self._sample_arrived
-        arrived.clear()
-        delay = self.clock.wall_delay(deadline)
-        if delay > 0:
+        milliseconds old rather than up to one sample period.
+
+        The chunks received since the last tick are parsed first (their samples do not
+        count as fresh), then each chunk as it arrives, until one queues a sample."""
+        arrived = self._chunk_arrived
+        parse = self.intake.parse
+        parse()
+        while True:
+            arrived.clear()
+            delay = self.clock.wall_delay(deadline)
+            if delay <= 0:
+                break
             try:
                 async with asyncio.timeout(delay):
                     await arrived.wait()
             except TimeoutError:
-                pass
+                break
+            if parse():
+                break
         return self.clock.now()
 
     def _tick(self, t: float, now: float) -> None:

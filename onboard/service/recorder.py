@@ -6,9 +6,11 @@ exact replay.
   tick and a ``meta`` record (JSON: config, sources, restored adaptive state) at the start
   of each file. Files rotate at ``rotate_mb``; the oldest are deleted beyond
   ``max_total_mb``; data reaches the disk (``fsync``, in a worker thread so the estimator
-  loop never waits on the disk) at most ``flush_interval_s`` after it was received. A
-  crash loses at most that interval and leaves at most one torn frame, which the reader
-  skips. The :class:`onboard.service.intake.Intake` writes the records.
+  loop never waits on the disk) at most ``flush_interval_s`` after it was recorded. The
+  :class:`onboard.service.intake.Intake` writes the records: in the live service a chunk
+  when it is parsed, at the latest at the next tick (``1/rate_hz`` after it was received).
+  A crash loses at most these two intervals and leaves at most one torn frame, which the
+  reader skips.
 * :func:`replay_recording` feeds a recording through a fresh
   :class:`~onboard.service.intake.Intake` in file order, which reproduces the live
   estimates exactly: same bytes, same parsers, same ticks, same order of pushes, and the

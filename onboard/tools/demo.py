@@ -112,7 +112,9 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
     shared clock. Protocol on stdin/stdout, one JSON object per line: the child writes
     ``{"nmea_pty": path, "dvl": bool, "vehicle_class": str}``; the parent answers
     ``{"start": s}`` (the time.monotonic() instant of simulated t = 0); the child writes
-    ``{"done": frames}`` at the end. Closing stdin stops it early."""
+    ``{"done": frames, "late_s": s}`` at the end (``late_s``: how far, in simulated seconds,
+    its emission fell behind the shared clock at worst: a loaded machine). Closing stdin
+    stops it early."""
     import os
     import select
 
@@ -146,9 +148,12 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
     enc = msgspec.json.Encoder()
     frames = {k: 0 for k in channels}
     fd = inp.fileno()
+    late = 0.0
     with open(plan.truth_path, "wb") as truth_f:
         for t, samples, truth in sim.steps(plan.duration_s):
             delay = start + t / plan.speed - time.monotonic()
+            if -delay > late:
+                late = -delay
             if delay > 0:
                 r, _, _ = select.select([fd], [], [], delay)
                 if r and not os.read(fd, 4096):
@@ -163,7 +168,7 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
                 truth_f.write(enc.encode(truth) + b"\n")
     for ch in channels.values():
         ch.close()
-    send({"done": frames})
+    send({"done": frames, "late_s": late * plan.speed})
 
 
 # --------------------------------------------------------------------------- scoring
@@ -418,6 +423,12 @@ class DemoResult:
     """Where the adaptive state was saved (a deleted temporary file unless kept)."""
     state_saved: bool = False
     """Whether the service saved its adaptive state there during the run."""
+    sim_late_s: float = math.nan
+    """How far (simulated s) the simulator's emission fell behind the shared clock at
+    worst (NaN: not reported). Above a fraction of a second the machine could not keep
+    up with ``speed``: the samples reached the service late."""
+    service_late_s: float = math.nan
+    """The service's largest tick lateness (service s; ``ServiceStats.tick_late_max_s``)."""
 
 
 async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *,
@@ -467,6 +478,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
                     dvl_tcp_port=_free_port(socket.SOCK_STREAM) if sc.sensors.dvl else None,
                     truth_path=str(out_dir / "truth.jsonl"), nmea=nmea, **(autopilot or {}))
     frames: dict[str, int] = {}
+    sim_late = math.nan
+    service_late = math.nan
     try:
         shore = open_session([endpoint], None, "client")
         proc = subprocess.Popen(
@@ -508,6 +521,7 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
             if done_task.done():
                 msg = done_task.result()
                 frames = msg.get("done", {}) if isinstance(msg, dict) else {}
+                sim_late = float(msg.get("late_s", math.nan)) if isinstance(msg, dict) else math.nan
                 break
             if time.monotonic() >= next_print:
                 next_print += 1.0
@@ -520,6 +534,7 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
         events = list(svc.events)
         rec_files = [str(p) for p in (svc.recorder.files if svc.recorder else [])]
         mav_sent = svc.mavlink.sent if svc.mavlink else 0
+        service_late = svc.stats.tick_late_max_s
         svc = None
     finally:
         if svc is not None:
@@ -564,7 +579,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
                       estimates=history, health=health, healths=healths, scores=rows, frames=frames,
                       recording=rec_files, events=events, mavlink_sent=mav_sent,
                       sources={s.name: s.kind for s in cfg.service.sources},
-                      state_file=str(state_file), state_saved=state_saved)
+                      state_file=str(state_file), state_saved=state_saved,
+                      sim_late_s=sim_late, service_late_s=service_late)
 
 
 async def _read_json(proc: subprocess.Popen, timeout_s: float) -> dict | None:
