@@ -13,7 +13,7 @@ from __future__ import annotations
 import pytest
 
 from onboard.tools.reports import runs
-from onboard.tools.reports.aie_validation import convergence_step, sitl_metrics
+from onboard.tools.reports.aie_validation import convergence_step, run_sitl, sitl_metrics
 
 
 @pytest.fixture(scope="module")
