@@ -2,11 +2,16 @@
 
 Each scenario flies the same rudder boat and mission (sitl/scenarios.py) with one injected
 effect the diagnosis is not told about; the simulator's truth gives the right answer. The
-boat's own physics (speed lost in turns) comes from a calm-water calibration on other
-seeds (config/sitl-rudder-boat.toml). Bounds carry the measured figure (seed 1).
+boat is the realistic hull (square-law thrust behind a 0.3 s shaft lag, quadratic and
+rudder drag, a shallow keel, a biased IMU); the diagnosis's base model carries the shaft
+lag and the course lag in turns, and the boat's speed lost in turns comes from a
+calm-water calibration on other seeds (config/sitl-rudder-boat.toml). Bounds carry the
+measured figure (seed 1).
 
-Four scenarios run in the default suite (clean, current, compass deviation, two effects);
-the rest are marked slow (``pytest -m slow``), about 15 s of CPU each.
+Five scenarios run in the default suite (both boats' clean logs, current, compass
+deviation, two effects); the rest, and the campaigns over seeds 1-10
+(:mod:`onboard.tools.diagnose_campaign`), are marked slow (``pytest -m slow``), about
+30 s of CPU per log.
 """
 
 from __future__ import annotations
@@ -18,20 +23,22 @@ import pytest
 
 from onboard.core import config
 from onboard.diagnose import diagnose
+from onboard.tools import diagnose_campaign as campaign
 from sitl.runner import run_to_tlog
 
 CFG = Path(__file__).resolve().parent.parent / "config" / "sitl-rudder-boat.toml"
+TWIN_CFG = Path(__file__).resolve().parent.parent / "config" / "sitl-twin-thruster.toml"
 
 
 @pytest.fixture(scope="module")
 def diagnosed(tmp_path_factory):
     cache: dict[str, dict] = {}
 
-    def run(name: str) -> dict:
+    def run(name: str, cfg: Path = CFG) -> dict:
         if name not in cache:
             d = tmp_path_factory.mktemp(name)
             run_to_tlog(name, d / "log.tlog", d / "truth.jsonl", seed=1)
-            cache[name] = diagnose(str(d / "log.tlog"), config.load(CFG), d / "out")
+            cache[name] = diagnose(str(d / "log.tlog"), config.load(cfg), d / "out")
             assert json.loads((d / "out" / "diagnosis.json").read_text())["effects"]
             assert (d / "out" / "report.html").stat().st_size > 10_000  # with figures
         return cache[name]
@@ -46,6 +53,15 @@ def found(doc: dict) -> dict:
 def test_clean_scenario_detects_no_effect(diagnosed):
     doc = diagnosed("clean")
     assert found(doc) == {}
+    assert not doc.get("unexplained")
+
+
+def test_clean_twin_thruster_detects_no_effect(diagnosed):
+    # square-law thrust behind a 0.3 s shaft lag on both thrusters: no latency, no lag
+    # posing as anything else
+    doc = diagnosed("clean-twin-thruster", TWIN_CFG)
+    assert found(doc) == {}
+    assert not doc.get("unexplained")
 
 
 def test_current_is_found(diagnosed):
@@ -134,17 +150,27 @@ def test_sideslip_is_named_or_reported_ambiguous_with_a_heading_bias(diagnosed):
     assert "sideslip" in f or "sideslip" in f["heading_bias"]["evidence"].get("ambiguous_with", [])
 
 
+SEEDS = range(1, 11)
+
+
 @pytest.mark.slow
-def test_clean_false_alarm_rate_over_ten_seeds(tmp_path):
-    # Ten clean logs (seeds 1-10) of the effect scenarios' boat: anything named, or an
-    # unexplained residual, is a false alarm. Issue 16 asks for <= 10 %.
-    alarms = {}
-    for seed in range(1, 11):
-        d = tmp_path / f"s{seed}"
-        d.mkdir()
-        run_to_tlog("clean", d / "log.tlog", d / "truth.jsonl", seed=seed)
-        doc = diagnose(str(d / "log.tlog"), config.load(CFG), d / "out")
-        if found(doc):
-            alarms[seed] = sorted(found(doc))
-    # measured: 0 of 10 (nothing named, nothing unexplained on seeds 1-10)
+@pytest.mark.parametrize("boat", sorted(campaign.BOATS))
+def test_clean_false_alarm_rate_over_ten_seeds(boat, tmp_path):
+    # Ten clean logs (seeds 1-10) of each boat: anything named, or an unexplained
+    # residual, is a false alarm. Issue 16 asks for <= 10 %. Measured: docs/diagnose.md.
+    spec = campaign.BOATS[boat]
+    outs = [campaign.diagnose_seed(spec["clean"], s, spec["config"], tmp_path) for s in SEEDS]
+    alarms = {o.seed: (o.named, o.unexplained) for o in outs if campaign.is_false_alarm(o)}
     assert len(alarms) <= 1, alarms
+
+
+@pytest.mark.slow
+def test_gps_latency_over_ten_seeds(tmp_path):
+    # A true 0.6 s latency on the realistic hull: named on every seed, 0.6 +- 0.15 s.
+    # Measured: docs/diagnose.md.
+    spec = campaign.BOATS["rudder-boat"]
+    outs = [campaign.diagnose_seed("effect-gps-latency", s, spec["config"], tmp_path)
+            for s in SEEDS]
+    for o in outs:
+        assert "gps_latency" in o.named, (o.seed, o.named)
+        assert o.params["gps_latency"]["seconds"] == pytest.approx(0.6, abs=0.15), o.seed
