@@ -12,7 +12,8 @@
   ``effect-gyro-bias``, ``effect-gps-latency``, ``effect-thrust-nonlinearity``,
   ``effect-quadratic-drag``, ``effect-surge-yaw-coupling``, ``effect-sideslip``,
   ``effect-waves``, ``effect-two`` (current and compass deviation at once) and ``clean``
-  (the same boat and mission, nothing injected);
+  (the same boat and mission, nothing injected); ``clean-twin-thruster`` is the
+  twin-thruster boat's clean log (effect sensors, 600 s);
 * the fault-injection material, a paper scenario with one *declared* sensor fault
   (:mod:`sitl.effects`): ``fault-gnss-outage`` (no GNSS for 120 s), ``fault-gnss-submerged``
   (a torpedo AUV diving from the surface with a receiver that keeps reporting fixes under
@@ -139,14 +140,13 @@ class NominalRudderBoatParams(RudderBoatParams):
         return (-self.d_u + math.sqrt(self.d_u**2 + 4.0 * self.d_uu * t)) / (2.0 * self.d_uu)
 
 
-NOMINAL_BOAT = NominalRudderBoatParams(thrust_exponent=1.0, d_u=4.0, d_uu=0.0, x_dd=0.0,
-                                       y_v0=40.0, y_vu=0.0)
-"""The effect scenarios' boat: linear thrust (12.5 N at full throttle), linear surge drag
-(4 N s/m: time constant 0.79 s, 3.1 m/s at full throttle), no rudder drag, and a deep keel
-(linear sway damping 40 N s/m: drift angle ~1.3 deg in a 0.3 rad/s turn at 1.5 m/s), so
-that its surge obeys algorithms.md §1's v' = -a v + b tau, its velocity stays along its
-heading, and every nonlinearity, crab angle or coupling in the data is an injected
-effect."""
+NOMINAL_BOAT = NominalRudderBoatParams()
+"""The effect scenarios' boat: the Jaiabot-class hull as it is (sitl/plants/rudder_boat.py):
+thrust quadratic in a shaft speed that lags the throttle by 0.3 s, linear plus quadratic
+surge drag, rudder drag, a shallow keel (sway damping 2 + 6 |u| N s/m, so the boat crabs
+and its course lags its heading in turns) and the sway-yaw Coriolis coupling that slows
+it in turns. ``onboard diagnose`` must tell an injected effect from this hull's own
+physics, as it must on a real boat."""
 
 
 class ForcedRudderBoat(RudderBoat):
@@ -160,7 +160,7 @@ class ForcedRudderBoat(RudderBoat):
     def _rhs(self, t: float, x: np.ndarray, command: Command) -> np.ndarray:
         xd = super()._rhs(t, x, command)
         if self.thrust_loss is not None and t >= self.thrust_loss[0]:
-            xd[6] -= self.thrust_loss[1] * self._inputs(command)[0] / self.params.m11
+            xd[6] -= self.thrust_loss[1] * self._inputs(command, x[12])[0] / self.params.m11
         f = command.external_force_world
         if f is not None:
             p = self.params
@@ -405,15 +405,14 @@ def _boat_sensors(gnss_hz: float = 5.0) -> SensorSuiteConfig:
 
 
 def _effect_sensors() -> SensorSuiteConfig:
-    """The effect scenarios' sensors: a good GNSS at 5 Hz, a quiet compass and an IMU with
-    white noise only (no turn-on or random-walk bias), so that the only systematic error
-    in ``clean`` is none and one effect at a time stands out of the noise."""
+    """The effect scenarios' sensors: a good GNSS at 5 Hz, a quiet compass and a MEMS IMU
+    with the bias every one has (turn-on bias left after calibration, drawn per seed, and
+    a random walk: ImuConfig's defaults), so that one injected effect at a time stands out
+    of what every log carries."""
     return SensorSuiteConfig(
         gnss=GnssConfig(rate_hz=5.0, position_std_m=0.5, drift_std_m=0.3, drift_tau_s=120.0,
                         velocity_std_mps=0.05),
-        imu=ImuConfig(rate_hz=50.0, accel_noise_std=0.03, gyro_noise_std=0.003,
-                      accel_bias_std=0.0, accel_bias_walk=0.0, gyro_bias_std=0.0,
-                      gyro_bias_walk=0.0),
+        imu=ImuConfig(rate_hz=50.0, accel_noise_std=0.03, gyro_noise_std=0.003),
         compass=CompassConfig(rate_hz=10.0, noise_std_rad=0.015),
     )
 
@@ -631,9 +630,8 @@ def _build() -> dict[str, Scenario]:
         _effect_scenario("effect-gps-latency", "undeclared GNSS latency 0.6 s",
                          (Effect("gps_latency", {"seconds": 0.6}),)),
         _effect_scenario("effect-thrust-nonlinearity",
-                         "undeclared propeller law thrust ~ throttle|throttle| "
-                         "(model: linear)",
-                         (Effect("thrust_nonlinearity", {"exponent": 2.0}),)),
+                         "undeclared propeller law thrust ~ |s|^3 (the hull's own: s|s|)",
+                         (Effect("thrust_nonlinearity", {"exponent": 3.0}),)),
         _effect_scenario("effect-quadratic-drag",
                          "undeclared quadratic surge drag 1.5 N s^2/m^2",
                          (Effect("quadratic_drag", {"coefficient": 1.5}),)),
@@ -670,6 +668,17 @@ def _build() -> dict[str, Scenario]:
                          "undeclared GNSS time-tag jitter, 0.15 s std, no mean latency",
                          (Effect("gnss_jitter", {"std_s": 0.15}),)),
     ]
+    s.append(Scenario(
+        name="clean-twin-thruster",
+        description="twin-thruster-turns for 600 s with the effect scenarios' sensors, "
+                    "nothing injected",
+        reproduces="model closure: the twin-thruster boat's clean log (false alarms)",
+        vehicle=_twin_thruster(),
+        sensors=_effect_sensors(),
+        controller=_blueboat_autopilot,
+        duration_s=600.0,
+        origin=(63.4390, 10.3990),
+    ))
     s.append(Scenario(
         name="effect-thruster-swap",
         description="twin-thruster-turns for 600 s with SERVO1 driving the starboard "

@@ -30,12 +30,12 @@ def test_jaiabot_turns_aie_beats_the_kf_and_the_raw_gnss_speed(jaiabot) -> None:
     m = sitl_metrics(jaiabot)
     a, k, nav = m["aie"], m["kf"], m["nav"]
     print(m)
-    # measured (docs/figures.json, aie.jaiabot_turns.*, seeds 1-3): speed AIE 0.051-0.053,
-    # KF 0.094-0.097, raw GNSS speed over ground 0.100-0.101 m/s: both beat the raw speed;
-    # the KF only by 3-6 %: its default thrust map is wrong for this boat and biases its
-    # forecast between fixes (mean error +0.05 m/s; docs/aie.md; 0.066-0.067 m/s with the
-    # identified model of config/sitl-jaiabot.toml).
-    # Heading 0.0223 vs 0.0239 rad; position 0.96 vs 0.96 m (a tie: both follow the
+    # measured (docs/figures.json, aie.jaiabot_turns.*, seeds 1-3, the hull with its 0.3 s
+    # shaft lag): speed AIE ~0.05, KF ~0.10 against the raw GNSS speed over ground
+    # 0.100-0.101 m/s: the KF beats it only narrowly, its default thrust map is wrong for
+    # this boat and biases its forecast between fixes (docs/aie.md; the identified model of
+    # config/sitl-jaiabot.toml: aie.jaiabot_turns.speed_rmse.kf_identified).
+    # Heading 0.0228 vs 0.0242 rad; position 0.96 vs 0.96 m (a tie: both follow the
     # Doppler speed)
     assert a["speed"] < 0.08
     assert a["speed"] < 0.8 * nav["speed"]
@@ -45,22 +45,25 @@ def test_jaiabot_turns_aie_beats_the_kf_and_the_raw_gnss_speed(jaiabot) -> None:
     assert a["position"] < 1.3 and a["position"] < 1.1 * k["position"]
     # input estimates against truth.surge_input / yaw_input (the truth is thrust/m11
     # alone; AIE's input also carries the nonlinear drag)
-    assert a["surge_input"] < 0.5     # measured 0.425 m/s^2
-    assert a["yaw_input"] < 0.31      # measured 0.257 rad/s^2
+    assert a["surge_input"] < 0.5     # measured 0.433 m/s^2 (0.425 without the shaft lag)
+    assert a["yaw_input"] < 0.31      # measured 0.253 rad/s^2 (0.257)
 
 
 def test_twin_thruster_turns_aie_beats_the_kf_and_the_raw_gnss_speed(twin) -> None:
     m = sitl_metrics(twin)
     a, k, nav = m["aie"], m["kf"], m["nav"]
     print(m)
-    # measured seed 1: speed AIE 0.056, KF 0.078, raw GNSS 0.099 m/s; heading 0.0313 vs
-    # 0.0313 rad (a tie); position 0.99 vs 0.99 m
+    # measured seed 1 (0.3 s motor lag): see docs/figures.json aie.twin_thruster_turns.*;
+    # heading 0.0361 vs 0.0389 rad (0.0313 each with the former 0.15 s lag); position
+    # 0.99 vs 0.99 m; surge input 0.429 m/s^2
     assert a["speed"] < 0.8 * nav["speed"] and k["speed"] < nav["speed"]
     assert a["speed"] < k["speed"]
     assert a["heading"] < 1.01 * k["heading"]
     assert a["position"] < 1.3 and a["position"] < 1.05 * k["position"]
     assert a["surge_input"] < 0.6
-    assert a["yaw_input"] < 1.0
+    # measured 1.061 rad/s^2 with the 0.3 s motor lag (the former bound, 1.0, held with
+    # a 0.15 s lag)
+    assert a["yaw_input"] < 1.15
 
 
 def test_no_divergence_and_surge_coefficients_converge(jaiabot, twin) -> None:

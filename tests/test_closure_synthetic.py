@@ -25,22 +25,29 @@ from onboard.closure.select import select, split
 
 def synth(seed=0, T=600.0, dt=0.1, current=(0.0, 0.0), dev=(0.0, 0.0), gyro_bias=0.0,
           latency=0.0, slip=0.0, thrust_q=0.0, coupling=0.0, wave=None, heading_bias=0.0,
-          harmonic2=0.0):
+          harmonic2=0.0, shaft_lag=0.0, sway_lag=0.0, pivot=0.3):
     rng = np.random.default_rng(seed)
     n = int(T / dt)
     t = np.arange(n) * dt
     thr = np.repeat(rng.uniform(0.3, 1.0, n // 400 + 1), 400)[:n]
     rud = np.sign(np.sin(2 * np.pi * t / 60)) * 0.3 * np.repeat(rng.uniform(0.5, 1, n // 300 + 1), 300)[:n]
     u = r = psi = 0.0
+    s = thr[0]
     U, PSI, R = np.empty(n), np.empty(n), np.empty(n)
     for i in range(n):
-        thrust = (1 - thrust_q) * thr[i] + thrust_q * thr[i] * abs(thr[i])
+        s = s + (1.0 - math.exp(-dt / shaft_lag)) * (thr[i] - s) if shaft_lag else thr[i]
+        thrust = (1 - thrust_q) * s + thrust_q * s * abs(s)
         u += dt * (-0.5 * u + thrust - coupling * r * r * u)
         r += dt * (-1.0 * r + 0.6 * rud[i] * u)
         psi += dt * r
         U[i], PSI[i], R[i] = u, psi, r
-    # Every hull sways in turns (pivot point 0.3 m ahead of the CG): in the base model.
-    vlat = -0.3 * R + slip * U * np.abs(U) + harmonic2 * np.sin(2 * PSI)
+    # Every hull sways in turns (pivot point 0.3 m ahead of the CG), the sway building up
+    # behind the turn rate with time constant sway_lag: in the base model.
+    rs = R.copy()
+    if sway_lag:
+        for i in range(1, n):
+            rs[i] = rs[i - 1] + (1.0 - math.exp(-dt / sway_lag)) * (R[i] - rs[i - 1])
+    vlat = -pivot * rs + slip * U * np.abs(U) + harmonic2 * np.sin(2 * PSI)
     vn = U * np.cos(PSI) - vlat * np.sin(PSI) + current[0]
     ve = U * np.sin(PSI) + vlat * np.cos(PSI) + current[1]
     if wave:
@@ -76,6 +83,19 @@ def test_clean_data_detects_nothing():
     doc, found = detected(synth())
     assert found == {}
     assert doc["holdout_error_after"] == doc["holdout_error_before"]
+
+
+def test_shaft_lag_and_course_lag_are_the_base_model_s_not_a_latency():
+    # Every boat's propeller spins up behind its command and its sway builds up behind
+    # the turn rate: neither is an effect, and neither may pose as a GNSS latency.
+    ds = synth(shaft_lag=0.4, sway_lag=0.8, pivot=0.6)
+    assert M.estimate_actuator_lag(ds) == pytest.approx(0.4, abs=0.1)  # measured 0.353
+    _, found = detected(ds)
+    assert found == {}
+    # the same hull with a true 0.6 s latency: found as itself (measured 0.600 s)
+    _, found = detected(synth(latency=0.6, shaft_lag=0.4, sway_lag=0.8, pivot=0.6))
+    assert set(found) == {"gps_latency"}
+    assert found["gps_latency"]["params"]["seconds"] == pytest.approx(0.6, abs=0.1)
 
 
 def test_current_is_found_with_its_components():

@@ -158,7 +158,8 @@ def test_with_zero_thrust_the_over_ground_velocity_tends_to_the_current(name):
 
 def test_rudder_boat_surge_step_matches_the_quadratic_drag_solution():
     # m11 u' = T - d u - d2 u^2 from rest: (u - u1)/(u - u2) = (u1/u2) exp(-d2 (u1 - u2) t / m11)
-    p = RudderBoatParams()
+    # (closed form for a shaft without lag; the lag is tested below)
+    p = RudderBoatParams(tau_shaft=0.0)
     boat = RudderBoat(p)
     log: list = []
     run(boat, Command(throttle=0.8), 8.0, log=log)
@@ -170,6 +171,25 @@ def test_rudder_boat_surge_step_matches_the_quadratic_drag_solution():
         e = c * math.exp(-k * t)
         assert x[6] == pytest.approx((u1 - u2 * e) / (1 - e), abs=1e-8)
     assert u1 == pytest.approx(p.steady_speed(0.8))
+
+
+def test_rudder_boat_shaft_speed_lags_the_throttle_and_thrust_is_its_square():
+    p = RudderBoatParams()
+    boat = RudderBoat(p)
+    run(boat, Command(throttle=0.8), p.tau_shaft, dt=p.tau_shaft / 15)
+    s = 0.8 * (1 - math.exp(-1))  # first order: 63 % of the step after one time constant
+    assert boat.shaft_speed == pytest.approx(s, rel=1e-6)
+    assert boat.truth(p.tau_shaft, STILL).force_x == pytest.approx(p.t_max * s * s, rel=1e-6)
+    # the lag slows the surge response against the lag-free shaft
+    fast = RudderBoat(RudderBoatParams(tau_shaft=0.0))
+    run(fast, Command(throttle=0.8), p.tau_shaft, dt=p.tau_shaft / 15)
+    assert boat.x[6] < 0.6 * fast.x[6]
+    # a boat reset at speed has its shaft turning at the speed that holds it
+    cruise = RudderBoat(p)
+    cruise.reset(u=1.5)
+    th = cruise.shaft_speed
+    run(cruise, Command(throttle=th), 5.0)
+    assert cruise.x[6] == pytest.approx(1.5, abs=1e-6)
 
 
 def test_rudder_boat_top_speed_and_throttle_map():

@@ -3,6 +3,7 @@ the clean scenario carries none."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -99,12 +100,21 @@ def test_gps_latency_delays_the_fixes():
     assert err(0.6) < err(0.0) and err(0.6) < err(1.2)
 
 
+def _throttle_for(speed: float) -> float:
+    """The effect boat's straight-line throttle for ``speed`` (m/s)."""
+    return math.sqrt((NOMINAL_BOAT.d_u * speed + NOMINAL_BOAT.d_uu * speed**2)
+                     / NOMINAL_BOAT.t_max)
+
+
 def test_thrust_nonlinearity_changes_the_speed_for_the_same_command():
     clean, _ = _collect("clean", 30.0)
     eff, _ = _collect("effect-thrust-nonlinearity", 30.0)
     assert _speed(clean, 15, 30) == pytest.approx(1.5, abs=0.01)
-    th = 1.5 * 4.0 / 12.5  # the linear feed-forward's throttle for 1.5 m/s
-    assert _speed(eff, 15, 30) == pytest.approx(12.5 * th**2 / 4.0, abs=0.01)  # 0.72 m/s
+    th = _throttle_for(1.5)  # the hull's feed-forward throttle for 1.5 m/s
+    cubic = dataclasses.replace(NOMINAL_BOAT, thrust_exponent=3.0)
+    # thrust 12.5 th^3 instead of 12.5 th^2: 1.24 m/s
+    assert _speed(eff, 15, 30) == pytest.approx(cubic.steady_speed(th), abs=0.01)
+    assert _speed(eff, 15, 30) < 1.4
 
 
 def test_surge_yaw_coupling_slows_the_boat_in_turns_only():
@@ -119,11 +129,15 @@ def test_quadratic_drag_and_sideslip():
     clean, _ = _collect("clean", 30.0)
     drag, _ = _collect("effect-quadratic-drag", 30.0)
     slip, _ = _collect("effect-sideslip", 30.0)
+    p = NOMINAL_BOAT
     u = _speed(drag, 15, 30)
-    th = 1.5 * 4.0 / 12.5
-    assert 4.0 * u + 1.5 * u * u == pytest.approx(12.5 * th, abs=0.05)  # force balance
+    # force balance with the hull's own drag plus the injected 1.5 u^2
+    assert (p.d_u + p.d_uu * u) * u + 1.5 * u * u == pytest.approx(
+        p.thrust(_throttle_for(1.5)), abs=0.05)
     v = np.mean([tr.v_r for t, tr in slip.items() if 15 <= t <= 30])
-    assert v == pytest.approx(2.0 * 1.5**2 / 40.0, abs=0.005)  # side force / sway damping
+    # side force 2 u^2 against the sway damping (y_v0 + y_vu u) v + y_vv v^2, u = 1.5
+    a, b, c = p.y_vv, p.y_v0 + p.y_vu * 1.5, -2.0 * 1.5**2
+    assert v == pytest.approx((-b + math.sqrt(b * b - 4 * a * c)) / (2 * a), abs=0.005)
     assert abs(np.mean([tr.v_r for t, tr in clean.items() if 15 <= t <= 30])) < 0.002
 
 
@@ -144,13 +158,15 @@ def test_two_effects_at_once():
 
 
 def test_force_effects_are_applied_to_a_surface_plant_exactly_once():
-    plant = ForcedRudderBoat(NOMINAL_BOAT)
+    p = NOMINAL_BOAT
+    plant = ForcedRudderBoat(p)
     plant.reset(u=1.0)
     env = Environment()
     f = np.array([-2.0, 0.0, 0.0])  # 2 N pushing south, boat heading north
+    th = math.sqrt((p.d_u * 1.5 + p.d_uu * 1.5**2 + 2.0) / p.t_max)
     for k in range(3000):
-        plant.step(0.01, Command(throttle=0.64, external_force_world=f), env, k * 0.01)
-    # steady: 4 u = 12.5 * 0.64 - 2  ->  u = 1.5 m/s
+        plant.step(0.01, Command(throttle=th, external_force_world=f), env, k * 0.01)
+    # steady: d_u u + d_uu u^2 = T(th) - 2 N  ->  u = 1.5 m/s (twice applied: 1.26 m/s)
     assert plant.x[6] == pytest.approx(1.5, abs=1e-3)
 
 

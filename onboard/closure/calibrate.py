@@ -27,8 +27,10 @@ from onboard.replay import choose_config
 
 
 def calibrate(log: str, cfg, effects: tuple[str, ...], rate_hz: float = 10.0) -> dict[str, list[float]]:
-    """Fit ``effects`` on the whole of ``log``; their parameters, by effect name."""
+    """Fit ``effects`` on the whole of ``log`` (with the base model's shaft lag, as
+    ``onboard diagnose`` fits them); their parameters, by effect name."""
     ds = dataset.from_log(log, cfg, rate_hz=rate_hz)
+    ds = dataset.lag_commands(ds, M.estimate_actuator_lag(ds))
     base0 = M.fit(ds, effects, {}, output_error=False)
     f = M.fit(ds, effects, _sigma(ds, base0), base0.ctx)
     return {name: [float(x) for x in np.asarray(f.theta[name])] for name in effects}

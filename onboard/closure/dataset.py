@@ -160,6 +160,9 @@ class Dataset:
     """A skid-steered boat's two thruster commands as logged (normalized), else None."""
     cmd_right: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    actuator_lag_s: float = 0.0
+    """Time constant (s) of the first-order lag already applied to the command channels
+    (:func:`lag_commands`); 0 for the commands as logged."""
 
     def __len__(self) -> int:
         return len(self.t)
@@ -207,6 +210,57 @@ def heading_drift(ds: "Dataset") -> np.ndarray:
     inc = np.r_[0.0, 0.5 * (ds.r[1:] + ds.r[:-1]) * np.diff(ds.t)]
     cum = np.cumsum(inc)
     return (ds.psi - ds.psi[s0]) - (cum - cum[s0])
+
+
+LAGGED_COMMANDS = ("cmd_surge", "cmd_yaw", "thrust_quadratic", "thrust_reverse", "cmd_left",
+                   "cmd_right")
+"""The command channels :func:`lag_commands` filters."""
+
+
+def first_order_lag(ds: "Dataset", x: np.ndarray, tau: float) -> np.ndarray:
+    """``x`` through the first-order lag ``y' = (x - y) / tau`` (s), exact for a held
+    input over each tick and restarted at ``x`` at the start of each segment (the
+    actuator is taken as settled there). NaN inputs hold the filter."""
+    x = np.asarray(x, float)
+    if tau <= 0.0 or len(x) == 0:
+        return x.copy()
+    alpha = 1.0 - math.exp(-ds.dt / tau)
+    s0 = segment_starts(ds)
+    out = np.empty_like(x)
+    xs, starts = x.tolist(), (s0 == np.arange(len(x))).tolist()
+    y = math.nan
+    for i, xi in enumerate(xs):
+        if starts[i] or not math.isfinite(y):
+            y = xi
+        elif math.isfinite(xi):
+            y += alpha * (xi - y)
+        out[i] = y
+    return out
+
+
+def lag_commands(ds: "Dataset", tau: float) -> "Dataset":
+    """``ds`` with every command channel through a first-order lag of ``tau`` seconds
+    (:func:`first_order_lag`): the propeller's shaft speed, hence its thrust, follows the
+    command with the motor's spin-up lag (algorithms.md §1.1 reads the surge input as the
+    applied thrust). Lagging the commanded thrust terms ``c``, ``c|c|`` and ``min(c, 0)``
+    one by one equals lagging any linear thrust law made of them."""
+    if tau <= 0.0:
+        return ds
+    kw = dict(vars(ds))
+    for name in LAGGED_COMMANDS:
+        v = kw[name]
+        if v is not None:
+            kw[name] = first_order_lag(ds, v, tau)
+    kw["actuator_lag_s"] = ds.actuator_lag_s + tau
+    return Dataset(**kw)
+
+
+def yaw_accel(ds: "Dataset", smooth_s: float = 1.0) -> np.ndarray:
+    """Yaw acceleration r' (rad/s^2): the smoothed derivative of the yaw rate."""
+    if len(ds) < 3:
+        return np.zeros(len(ds))
+    win = max(5, int(round(smooth_s / ds.dt)) | 1)
+    return _smooth(np.asarray(ds.r, float), win, 1, ds.dt)
 
 
 def _smooth(x: np.ndarray, window: int, deriv: int = 0, dt: float = 1.0) -> np.ndarray:
@@ -270,6 +324,7 @@ def remeasured(ds: Dataset, *, psi: np.ndarray | None = None, v_n: np.ndarray | 
                       east=ds.east[k], source=ds.source,
                       cmd_left=None if ds.cmd_left is None else ds.cmd_left[k],
                       cmd_right=None if ds.cmd_right is None else ds.cmd_right[k])
+    out.actuator_lag_s = ds.actuator_lag_s
     if not ds.has_gyro:
         out.r = ds.r[k]  # the heading-derived rate, kept as it was
     return out

@@ -1,12 +1,18 @@
 """The base vehicle model, its augmentation by effects, fitting and open-loop prediction.
 
-Base model (what the AIE and current pipelines assume): the vehicle moves along its
-measured heading but for the hull's sway in turns (lateral velocity ``x_p r``), the
-measured heading turns with the gyro (heading change minus integrated gyro 0), and its through-water speed follows the first-order
-surge model of algorithms.md §1.1, ``U' = -a U + b c + c0``, from the normalized command
-``c``. Effects add linear regressors to those channels (:mod:`.effects`). All parameters
-enter linearly once ``a`` and ``b`` are fixed, so a fit is a weighted least-squares problem
-over the stacked channels, iterated twice to refresh ``a`` and ``b``.
+Base model (what the AIE and current pipelines assume, plus what every hull does): the
+vehicle moves along its measured heading but for the hull's sway in turns, which builds up
+behind the turn rate (lateral velocity ``x_p r + x_pd r'``: ``x_p`` the sway per yaw rate,
+``x_pd = -x_p T_v`` the course lag of a sway that follows ``x_p r`` with time constant
+``T_v``); the measured heading turns with the gyro (heading change minus integrated gyro
+0); and its through-water speed follows the first-order surge model of algorithms.md
+§1.1, ``U' = -a U + b c + c0``, from the normalized command ``c`` as the propeller applies
+it: through the shaft's first-order lag, whose time constant is found once per log
+(:func:`estimate_actuator_lag`, applied to the data by
+:func:`onboard.closure.dataset.lag_commands`). Effects add linear regressors to those
+channels (:mod:`.effects`). All parameters enter linearly once ``a`` and ``b`` are fixed,
+so a fit is a weighted least-squares problem over the stacked channels, iterated to
+refresh ``a`` and ``b``.
 """
 
 from __future__ import annotations
@@ -16,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from onboard.closure.dataset import Dataset, heading_drift
+from onboard.closure.dataset import Dataset, heading_drift, lag_commands, yaw_accel
 from onboard.closure.effects import ALL, Context, Effect
 
 CHANNELS = ("lateral", "heading", "along")
@@ -31,6 +37,43 @@ def channel_targets(ds: Dataset) -> dict[str, np.ndarray]:
     if ds.has_commands:
         out["along"] = ds.speed_dot
     return out
+
+
+def lateral_base_columns(ds: Dataset) -> np.ndarray:
+    """The base model's lateral regressors ``[r, r']`` (hull sway and its lag in turns)."""
+    return np.column_stack([ds.r, yaw_accel(ds)])
+
+
+def estimate_actuator_lag(ds: Dataset, max_s: float = 1.5) -> float:
+    """The shaft lag (s) that best explains the surge channel: for each candidate time
+    constant on a grid of the tick interval up to ``max_s``, the commands are lagged
+    (:func:`lag_commands`) and the along-track acceleration regressed on
+    ``[-U, -U|U|, c, c|c|, min(c, 0), 1]`` (the surge model with the catalog's drag and
+    thrust-law terms, so that an unmodelled nonlinearity does not pose as a lag); the
+    least residual wins, refined by a parabola through its neighbours. 0 without
+    commands."""
+    if not ds.has_commands or len(ds) < 100:
+        return 0.0
+    taus = np.arange(0.0, max_s + 1e-9, max(ds.dt, 0.05))
+    u = ds.along_s
+    y = ds.speed_dot
+    cost = []
+    for tau in taus:
+        d = lag_commands(ds, float(tau))
+        c = np.nan_to_num(d.cmd_surge)
+        X = np.column_stack([-u, -u * np.abs(u), c, np.nan_to_num(d.thrust_quadratic),
+                             np.nan_to_num(d.thrust_reverse), np.ones(len(ds))])
+        ok = np.isfinite(y) & np.isfinite(X).all(axis=1)
+        coef, *_ = np.linalg.lstsq(X[ok], y[ok], rcond=None)
+        cost.append(float(np.mean((y[ok] - X[ok] @ coef) ** 2)))
+    cost = np.asarray(cost)
+    i = int(np.argmin(cost))
+    tau = float(taus[i])
+    if 0 < i < len(taus) - 1:
+        c2, c1, _ = np.polyfit(taus[i - 1:i + 2], cost[i - 1:i + 2], 2)
+        if c2 > 0:
+            tau = float(np.clip(-c1 / (2 * c2), taus[i - 1], taus[i + 1]))
+    return tau
 
 
 def _base_columns(ds: Dataset) -> np.ndarray:
@@ -51,6 +94,8 @@ class Fit:
     n: int = 0
     x_p: float = 0.0
     """Hull sway per yaw rate (m): the base model's lateral velocity ``x_p r`` in turns."""
+    x_pd: float = 0.0
+    """Course lag of the sway (m s): the base model's lateral term ``x_pd r'``."""
     known: dict[str, np.ndarray] = field(default_factory=dict)
     """Effects with known, fixed parameters (from a calm-water calibration, say)."""
 
@@ -83,7 +128,7 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
     targets = channel_targets(ds)
     n = len(ds)
     base = np.array([ctx.a, ctx.b, 0.0])
-    x_p = 0.0
+    x_p = x_pd = 0.0
     theta: dict[str, np.ndarray] = {}
     std: dict[str, np.ndarray] = {}
     for _ in range(8 if ds.has_commands else 1):
@@ -92,12 +137,13 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
         layout: list[tuple[str, int]] = []
         if ds.has_commands:
             layout.append(("__base__", 3))
-        layout.append(("__pivot__", 1))
+        layout.append(("__pivot__", 2))
         for name in effects:
             layout.append((name, len(ALL[name].params)))
         n_par = sum(k for _, k in layout)
         cols_cache = {name: ALL[name].columns(ds, ctx) for name in effects}
         known_cols = {name: ALL[name].columns(ds, ctx) for name in known}
+        pivot = lateral_base_columns(ds)
         for ch, y in targets.items():
             for name, th in known.items():
                 c = known_cols[name].get(ch)
@@ -111,7 +157,7 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
                         X[:, j:j + k] = _base_columns(ds)
                 elif name == "__pivot__":
                     if ch == "lateral":
-                        X[:, j] = ds.r
+                        X[:, j:j + k] = pivot
                 else:
                     c = cols_cache[name].get(ch)
                     if c is not None:
@@ -146,7 +192,7 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
                 ctx.a = a if 0.01 < a < 20.0 else ctx.a
                 ctx.b = float(base[1])
             elif name == "__pivot__":
-                x_p = float(sol[j])
+                x_p, x_pd = float(sol[j]), float(sol[j + 1])
             else:
                 theta[name] = sol[j:j + k].copy()
                 std[name] = sd[j:j + k].copy()
@@ -154,7 +200,7 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
         if abs(ctx.a - a_prev) < 1e-4 * max(1.0, abs(ctx.a)):
             break
     f = Fit(effects=tuple(effects), base=base, theta=theta, std=std, ctx=ctx,
-            sigma=dict(sigma), n=n, x_p=x_p, known=known)
+            sigma=dict(sigma), n=n, x_p=x_p, x_pd=x_pd, known=known)
     if output_error and ds.has_commands:
         f = refine_output_error(ds, f)
     return f
@@ -220,7 +266,7 @@ def predict(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
     """
     n = len(ds)
     ctx = f.ctx
-    lat = f.x_p * ds.r
+    lat = lateral_base_columns(ds) @ np.array([f.x_p, f.x_pd])
     hr = np.zeros(n)
     out_along = np.zeros(n)
     dyn = []
@@ -300,7 +346,7 @@ def refine_output_error(ds: Dataset, f: Fit, max_nfev: int = 30) -> Fit:
         j += k
     ctx = Context(**vars(f.ctx))
     return Fit(effects=f.effects, base=np.asarray(base, float).copy(), theta=theta, std=std,
-               ctx=ctx, sigma=f.sigma, n=f.n, x_p=f.x_p, known=f.known)
+               ctx=ctx, sigma=f.sigma, n=f.n, x_p=f.x_p, x_pd=f.x_pd, known=f.known)
 
 
 def residuals(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:

@@ -24,7 +24,7 @@ import numpy as np
 
 from onboard.closure import drift
 from onboard.closure import model as M
-from onboard.closure.dataset import Dataset, concat, segment_starts
+from onboard.closure.dataset import Dataset, concat, lag_commands, segment_starts
 from onboard.closure.effects import ALL, Context
 from onboard.closure.effects import actuator_mapping as am
 
@@ -166,6 +166,9 @@ class Selection:
     """The final effects fitted on the fit part alone (the fit the selection scored)."""
     base_test: Dataset | None = None
     """The test part as the base model sees it (no transform applied)."""
+    actuator_lag_s: float = 0.0
+    """The base model's shaft lag (s), estimated on the fit part and applied to every
+    part's commands (:func:`onboard.closure.model.estimate_actuator_lag`)."""
     drift: dict = field(default_factory=dict)
     """Per-window re-estimates of the chosen effects and the surge gain (:mod:`.drift`)."""
 
@@ -179,7 +182,7 @@ def _sigma(ds: Dataset, f: M.Fit) -> dict[str, float]:
         if ch == "along":
             pred = M._base_columns(ds) @ f.base
         elif ch == "lateral":
-            pred = f.x_p * ds.r
+            pred = M.lateral_base_columns(ds) @ np.array([f.x_p, f.x_pd])
         r = y - pred
         r = r[np.isfinite(r)]
         mad = float(np.median(np.abs(r - np.median(r)))) * 1.4826 if len(r) else 1.0
@@ -211,6 +214,11 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
     calibration does not cover.
     """
     sp = split(ds)
+    # The base model's shaft lag, from the fit part, applied to every part's commands.
+    lag = M.estimate_actuator_lag(sp.fit)
+    if lag > 0.0:
+        sp = Split(lag_commands(sp.fit, lag), lag_commands(sp.holdout, lag), sp.how,
+                   None if sp.test is None else lag_commands(sp.test, lag), sp.parts)
     known = {k: np.asarray(v, float) for k, v in (known or {}).items()}
     metric = M.metric_name(ds, metric)
     ctx = Context()
@@ -321,7 +329,7 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
                     base_fit=base_final, final_fit=final, before=before, after=after,
                     rounds=rounds, wave=wave, final_split=final_split, transformed=transformed,
                     select_before=sel_before, select_after=sel_after,
-                    selection_fit=current_fit, base_test=test)
+                    selection_fit=current_fit, base_test=test, actuator_lag_s=lag)
     sel.unexplained = structure_left(final_split, current_fit)
     sel.drift = drift.per_window(both, current_fit)
     return sel

@@ -4,13 +4,17 @@
 (2021) eq. 6.26 structure with diagonal mass matrix ``M = diag(m11, m22, m33)``,
 ``m11 = m - X_udot``, ``m22 = m - Y_vdot``, ``m33 = I_z - N_rdot``:
 
-    m11 u' =  T(throttle) + m22 v r - (d_u + d_uu |u|) u - X_dd u^2 delta^2
+    m11 u' =  T(s) + m22 v r - (d_u + d_uu |u|) u - X_dd u^2 delta^2
     m22 v' = -m11 u r - (Y_v0 + Y_vu |u|) v - Y_vv v|v| + Y_d u|u| delta
     m33 r' =  N_d u|u| delta - (N_r0 + N_ru |u|) r - N_rr r|r|
+    s'     = (th - s) / tau_shaft
 
-* Thrust map (nonlinear, quadratic in throttle as a fixed-pitch propeller whose shaft
-  speed is proportional to throttle): ``T = T_max th|th|`` ahead, ``T = k_rev T_max th|th|``
-  astern, ``th`` clipped to [-1, 1].
+* Shaft: ``s`` is the propeller shaft speed as a fraction of full speed; it follows the
+  throttle ``th`` (clipped to [-1, 1]) with the motor's first-order lag ``tau_shaft``
+  (0.3 s; ``tau_shaft = 0`` makes the shaft follow the throttle at once). The extra state
+  ``x[12]`` is ``s``.
+* Thrust map (a fixed-pitch propeller, quadratic in shaft speed): ``T = T_max s|s|``
+  ahead, ``T = k_rev T_max s|s|`` astern.
 * Rudder at ``x_r`` aft: side force ``Y_d u|u| delta`` (Y_d < 0: the stern is pushed to
   port) and yaw moment ``N_d = x_r Y_d > 0`` (positive rudder turns the bow to starboard);
   both scale with u^2, so the boat cannot turn at rest (surge-yaw coupling). Rudder drag
@@ -27,7 +31,7 @@ Jaiabot table's 5 m/s at 100 % is a feed-forward map, not physics), surge time c
 m11 / (d_u + 2 d_uu u) ~ 0.7 s at 1 m/s (algorithms.md suggests a ~ 1 1/s), turning
 diameter ~ 4 m (4 boat lengths) at 0.3 rad of rudder.
 
-Truth: ``force_x = T``, ``force_y`` = rudder side force, ``moment_z`` = rudder moment,
+Truth: ``force_x = T`` (at the lagged shaft speed), ``force_y`` = rudder side force, ``moment_z`` = rudder moment,
 ``surge_input = T / m11`` (m/s^2), ``yaw_input = N_rudder / m33`` (rad/s^2).
 """
 
@@ -83,6 +87,8 @@ class RudderBoatParams(ManoeuvringMasses):
     """Quadratic yaw damping (N m s^2/rad^2)."""
     rudder_max: float = 0.6
     """Rudder deflection limit (rad)."""
+    tau_shaft: float = 0.3
+    """Shaft-speed time constant (s): motor and propeller spin-up; 0 for none."""
 
     @property
     def n_d(self) -> float:
@@ -90,7 +96,8 @@ class RudderBoatParams(ManoeuvringMasses):
         return self.x_r * self.y_d
 
     def thrust(self, throttle: float) -> float:
-        """Propeller thrust (N) for a throttle in [-1, 1] (clipped)."""
+        """Propeller thrust (N) at a shaft speed of ``throttle`` (fraction of full speed,
+        clipped to [-1, 1]); in steady state the shaft speed equals the throttle."""
         th = min(1.0, max(-1.0, throttle))
         k = self.t_max if th >= 0.0 else self.k_rev * self.t_max
         return k * th * abs(th)
@@ -110,21 +117,44 @@ class RudderBoat(PlantBase):
     """
 
     name = "rudder_boat"
-    n_extra = 0
+    n_extra = 1
 
     def __init__(self, params: RudderBoatParams | None = None, dt: float = 0.01) -> None:
         super().__init__(dt)
         self.params = params or RudderBoatParams()
 
-    def _inputs(self, command: Command) -> tuple[float, float]:
+    def reset(
+        self, *, north: float = 0.0, east: float = 0.0, down: float = 0.0, yaw: float = 0.0,
+        u: float = 0.0,
+    ) -> None:
+        """Pose (m, rad) and surge speed through water ``u`` (m/s); the shaft turns at the
+        speed that holds ``u`` in a straight line."""
+        super().reset(north=north, east=east, down=down, yaw=yaw, u=u)
         p = self.params
-        th = command.throttle or 0.0
+        if u > 0.0:
+            drag = (p.d_u + p.d_uu * u) * u
+            self.x[12] = math.sqrt(min(1.0, drag / p.t_max))
+
+    @property
+    def shaft_speed(self) -> float:
+        """Propeller shaft speed as a fraction of full speed (signed)."""
+        return float(self.x[12])
+
+    def _inputs(self, command: Command, s: float | None = None) -> tuple[float, float]:
+        """(thrust N, clipped rudder rad) at shaft speed ``s`` (default: the state's)."""
+        p = self.params
+        if p.tau_shaft <= 0.0:
+            s = command.throttle or 0.0
+        elif s is None:
+            s = float(self.x[12])
         d = command.rudder_rad or 0.0
-        return p.thrust(th), min(p.rudder_max, max(-p.rudder_max, d))
+        return p.thrust(s), min(p.rudder_max, max(-p.rudder_max, d))
 
     def _rhs(self, t: float, x: list[float], command: Command) -> list[float]:
         p = self.params
-        thrust, d = self._inputs(command)
+        thrust, d = self._inputs(command, x[12])
+        th = min(1.0, max(-1.0, command.throttle or 0.0))
+        sdot = (th - x[12]) / p.tau_shaft if p.tau_shaft > 0.0 else 0.0
         psi, u, v, r = x[5], x[6], x[7], x[11]
         au = abs(u)
         cpsi, spsi = math.cos(psi), math.sin(psi)
@@ -137,7 +167,7 @@ class RudderBoat(PlantBase):
         return [
             cpsi * u - spsi * v + vc[0], spsi * u + cpsi * v + vc[1], 0.0,
             0.0, 0.0, r,
-            udot, vdot, 0.0, 0.0, 0.0, rdot,
+            udot, vdot, 0.0, 0.0, 0.0, rdot, sdot,
         ]
 
     def propulsion(self, command: Command) -> PropulsionWrench:

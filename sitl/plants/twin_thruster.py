@@ -58,8 +58,8 @@ class TwinThrusterParams(ManoeuvringMasses):
     """Thrust at full ahead command (N), T200."""
     t_rev: float = 30.0
     """Thrust at full astern command (N), T200."""
-    tau_m: float = 0.15
-    """Motor time constant (s)."""
+    tau_m: float = 0.3
+    """Shaft-speed time constant (s): motor spin-up plus the ESC's ramp."""
     d_u: float = 5.0
     """Linear surge damping (N s/m)."""
     d_uu: float = 7.2

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from onboard.closure.dataset import Dataset, remeasured
+from onboard.closure.dataset import Dataset, remeasured, yaw_accel
 from onboard.closure.effects.base import Effect
 
 
@@ -55,8 +55,9 @@ class GpsLatency(Effect):
         return advance_velocity(ds, tau)
 
     def search(self, ds: Dataset, max_s: float = 2.0) -> tuple[float, float] | None:
-        """(tau, one-sigma) minimising the lateral velocity left after the hull's sway,
-        a constant crab and a current; None when the data cannot say."""
+        """(tau, one-sigma) minimising the lateral velocity left after the hull's sway and
+        its course lag (the base model's ``x_p r + x_pd r'``), a constant crab and a
+        current; None when the data cannot say."""
         taus = np.arange(0.0, max_s + 1e-9, max(ds.dt, 0.05))
         cost = []
         for tau in taus:
@@ -64,7 +65,7 @@ class GpsLatency(Effect):
             if len(d) < 100:
                 cost.append(np.inf)
                 continue
-            X = np.column_stack([d.r, d.along, -np.sin(d.psi), np.cos(d.psi)])
+            X = np.column_stack([d.r, yaw_accel(d), d.along, -np.sin(d.psi), np.cos(d.psi)])
             coef, *_ = np.linalg.lstsq(X, d.lateral, rcond=None)
             cost.append(float(np.mean((d.lateral - X @ coef) ** 2)))
         cost = np.asarray(cost)

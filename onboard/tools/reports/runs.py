@@ -270,10 +270,11 @@ def chi2_mean_band(n: int, dim: int, z: float = 1.959964) -> tuple[float, float]
 
 
 @cache
-def diagnose_sitl(scenario: str, seed: int = 1) -> dict[str, Any]:
+def diagnose_sitl(scenario: str, seed: int = 1,
+                  config_path: Path = SITL_DIAGNOSE_CONFIG) -> dict[str, Any]:
     """``onboard diagnose`` of a ``scenario`` log (``sitl.runner.run_to_tlog``) with
-    ``config/sitl-rudder-boat.toml`` and nothing declared: ``diagnosis.json`` plus
-    ``report_bytes``, the size of ``report.html``."""
+    ``config_path`` (default ``config/sitl-rudder-boat.toml``) and nothing declared:
+    ``diagnosis.json`` plus ``report_bytes``, the size of ``report.html``."""
     from onboard.core import config as config_mod
     from onboard.diagnose import diagnose
     from sitl.runner import run_to_tlog
@@ -281,7 +282,7 @@ def diagnose_sitl(scenario: str, seed: int = 1) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="onboard-figures-") as tmp:
         d = Path(tmp)
         run_to_tlog(scenario, d / "log.tlog", d / "truth.jsonl", seed=seed)
-        doc = diagnose(str(d / "log.tlog"), config_mod.load(SITL_DIAGNOSE_CONFIG), d / "out")
+        doc = diagnose(str(d / "log.tlog"), config_mod.load(config_path), d / "out")
         doc = {**doc, "report_bytes": (d / "out" / "report.html").stat().st_size}
     return doc
 
