@@ -49,6 +49,10 @@ def test_clean_scenario_detects_no_effect(diagnosed):
     doc = diagnosed("clean")
     assert found(doc) == {}
     assert not doc.get("unexplained")
+    # the base model's own lag terms are reported (the plant's shaft time constant is
+    # 0.3 s through a square law; measured 0.19 s on seed 1)
+    assert 0.1 < doc["base_params"]["actuator_lag_s"] < 0.5
+    assert "x_pd" in doc["base_params"]
 
 
 def test_clean_twin_thruster_detects_no_effect(diagnosed):

@@ -202,8 +202,10 @@ def diagnosis(sel: Selection, log: str) -> dict:
         "log": log,
         "model": BASE_MODEL + (f"; declared: {', '.join(sel.declared)}" if sel.declared else ""),
         "split": sel.split.how,
-        "base_params": {**({"a": a, "b": b, "c0": c0} if sel.split.fit.has_commands else {}),
-                        "x_p": float(f.x_p)},
+        "base_params": {**({"a": a, "b": b, "c0": c0,
+                            "actuator_lag_s": float(sel.actuator_lag_s)}
+                           if sel.split.fit.has_commands else {}),
+                        "x_p": float(f.x_p), "x_pd": float(f.x_pd)},
         "known": {k: v.tolist() for k, v in f.known.items()},
         "split_parts": sel.split.parts,
         "residuals_before": _residual_stats(sel.base_test, sel.base_fit),
