@@ -22,25 +22,13 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
+from onboard.tools.reports.runs import DIAGNOSE_SCENARIOS, REPO, SITL_DIAGNOSE_CONFIG
 
 BOATS: dict[str, dict] = {
     "rudder-boat": {
-        "config": REPO / "config" / "sitl-rudder-boat.toml",
+        "config": SITL_DIAGNOSE_CONFIG,
         "clean": "clean",
-        "effects": {
-            "effect-current": ("water_current",),
-            "effect-compass-deviation": ("compass_deviation",),
-            "effect-heading-bias": ("heading_bias",),
-            "effect-gyro-bias": ("gyro_bias",),
-            "effect-gps-latency": ("gps_latency",),
-            "effect-thrust-nonlinearity": ("thrust_nonlinearity",),
-            "effect-quadratic-drag": ("quadratic_drag",),
-            "effect-surge-yaw-coupling": ("surge_yaw_coupling",),
-            "effect-sideslip": ("sideslip",),
-            "effect-waves": ("wave_oscillation",),
-            "effect-two": ("water_current", "compass_deviation"),
-        },
+        "effects": DIAGNOSE_SCENARIOS,
     },
     "twin-thruster": {
         "config": REPO / "config" / "sitl-twin-thruster.toml",
