@@ -31,6 +31,9 @@ def test_flow_observer_current_on_synthetic_torpedo_with_known_model():
     assert np.all(rms < 0.05)
     assert np.all(cover > 0.9)
     assert pipe.flow.unobservable == 0
+    health = pipe.health()  # the observer's own state reaches the health record
+    assert health["flow.gain_kept"] == 0 and health["flow.diverged"] == 0
+    assert 0.0 <= health["flow.nis"] < 100.0
 
 
 def test_the_vertical_block_observes_heave_from_the_pitch():

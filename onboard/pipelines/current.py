@@ -710,6 +710,10 @@ class CurrentPipeline:
             h["rls.yaw.nis"] = rls.nis
         if self.hgo is not None:
             h["gamma"] = self.hgo.gamma
+        if self.flow is not None:
+            h["flow.gain_kept"] = float(self.flow.unobservable)
+            h["flow.diverged"] = float(self.flow.diverged)
+            h["flow.nis"] = self.flow.nis
         for i, ax in enumerate(("north", "east", "down")[: self.nd]):
             h[f"observable.{ax}"] = float(self.observable[i])
         h["observable"] = float(all(self.observable[:2]))
