@@ -124,6 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "figure is outside its tolerance")
     p.add_argument("--readme", metavar="FILE", help="rewrite FILE's figures block from the "
                    "file written (alone: from docs/figures.json, nothing recomputed)")
+    p.add_argument("--docs", metavar="DIR", help="rewrite the generated tables of the pages "
+                   "in DIR (e.g. docs) from the file written (alone: from "
+                   "docs/figures.json, nothing recomputed)")
     p.set_defaults(handler="onboard.tools.figures:main")
 
     p = sub.add_parser("design-gain", help="solve the high-gain observer LMI offline")

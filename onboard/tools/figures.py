@@ -140,6 +140,12 @@ def _aie_figures() -> list[Figure]:
                 "pipeline",
                 lambda s, sc=sc, who=who: runs.aie_metrics(sc, s)[who]["heading"],
                 SEEDS_1_3, Tolerance(rel=0.03, abs=0.0005), default_seeds=(1,)))
+            out.append(Figure(
+                f"aie.{key}.position_rmse.{who}", "m",
+                f"{sc}, 300 s, horizontal position RMSE against truth after 30 s, the "
+                f"{who.upper()} pipeline",
+                lambda s, sc=sc, who=who: runs.aie_metrics(sc, s)[who]["position"],
+                SEEDS_1_3, Tolerance(rel=0.03, abs=0.01), default_seeds=(1,), digits=2))
     out.append(Figure(
         "aie.jaiabot_turns.speed_rmse.kf_identified", "m/s",
         "jaiabot-turns, 300 s, speed RMSE after 30 s, the KF pipeline with the surge/heading "
@@ -167,6 +173,84 @@ def _aie_figures() -> list[Figure]:
         "published 2 sigma during the outage",
         lambda s: runs.outage_metrics(s)["aie.cover2"],
         SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
+    for sc, seeds in runs.AIE_EFFECT_SCENARIOS.items():
+        for who, (p, label) in (("aie", ("aie", "the AIE pipeline")),
+                                ("kf", ("kf", "the KF pipeline (default thrust map)")),
+                                ("gnss", ("nav", "the raw GNSS speed over ground at the "
+                                                 "ticks (newest fix)"))):
+            out.append(Figure(
+                f"aie.{sc.replace('-', '_')}.speed_rmse.{who}", "m/s",
+                f"{sc} (rudder-boat config, the scenario's duration), speed RMSE against "
+                f"truth after 30 s: {label}",
+                lambda s, sc=sc, p=p: runs.aie_metrics(sc, s)[p]["speed"],
+                seeds, SITL))
+    return out
+
+
+CURRENT_TABLE: tuple[tuple[str, str, bool, tuple[str, ...]], ...] = (
+    # (run key, observer, calm-water model, axes): docs/current.md's validation table
+    ("gavia-tidal", "kf", True, ("north", "east", "down")),
+    ("gavia-tidal", "kf", False, ("north", "east", "down")),
+    ("gavia-tidal", "hgo", True, ("north", "east", "down")),
+    ("spheroid-sawtooth", "kf", True, ("north", "east", "down")),
+    ("spheroid-sawtooth", "kf", False, ("north", "east", "down")),
+    ("spheroid-sawtooth", "hgo", True, ("north", "east", "down")),
+    ("spheroid-sawtooth", "flow", True, ("north", "east", "down")),
+    ("effect-current", "kf", False, ("north", "east")),
+    ("effect-current", "kf", True, ("north", "east")),
+    ("boat-tidal", "kf", False, ("north", "east")),
+    ("jaiabot-turns", "kf", False, ("north", "east")),
+    ("twin-thruster-turns", "kf", False, ("north", "east")),
+)
+"""The runs of docs/current.md's validation table. A run with its key's default mode
+(``runs.CURRENT_RUNS``) is named ``current.<key>.<observer>.*`` (the README's names); the
+other mode adds ``_model`` (mode (a)) or ``_nomodel`` (mode (b)) to the observer."""
+
+
+def current_token(key: str, observer: str, model: bool) -> str:
+    """``<key>.<observer>[_model|_nomodel]`` of a :data:`CURRENT_TABLE` run in its
+    figure names."""
+    k = key.replace("-", "_")
+    if model == runs.CURRENT_RUNS[key][2]:
+        return f"{k}.{observer}"
+    return f"{k}.{observer}_{'model' if model else 'nomodel'}"
+
+
+def _current_table_figures(have: set[str]) -> list[Figure]:
+    out: list[Figure] = []
+    stats = (("rms", "RMS", SITL, 3), ("std", "standard deviation of the", SITL, 3),
+             ("cover2", "fraction within the published 2 sigma of the", FRACTION, 2),
+             ("published", "fraction of ticks with a published (not unknown)", FRACTION, 2))
+    for key, obs, model, axes in CURRENT_TABLE:
+        scenario, cfg, _, duration, after = runs.CURRENT_RUNS[key]
+        tok = current_token(key, obs, model)
+        what = (f"{scenario} ({cfg}, {duration:.0f} s, seed 1), "
+                + ("model identified in calm water (mode (a))" if model
+                   else "no model (mode (b))") + f", the {obs} observer")
+        for ax in axes:
+            for stat, label, tol, digits in stats:
+                name = f"current.{tok}.{ax}_{stat}"
+                if name in have:
+                    continue
+                out.append(Figure(
+                    name, "1" if tol is FRACTION else "m/s",
+                    f"{what}: {label} {ax} current error after {after:.0f} s"
+                    + (" (over the published ticks)" if stat != "published" else ""),
+                    lambda s, key=key, obs=obs, model=model, ax=ax, stat=stat:
+                        runs.current_metrics(key, obs, s, model)[ax][stat],
+                    (1,), tol, digits=digits))
+        for stat, unit, label, tol, digits in (
+                ("peak", "m/s", "largest horizontal error in the first 60 s it is "
+                 "published", SITL, 2),
+                ("peaking", "m/s", "that peak less the first published error (> 0: "
+                 "overshoot)", SITL, 2),
+                ("settle", "s", "time after which the horizontal error stays below "
+                 "0.1 m/s", Tolerance(rel=0.1, abs=2.0), 0)):
+            out.append(Figure(
+                f"current.{tok}.{stat}", unit, f"{what}: {label}",
+                lambda s, key=key, obs=obs, model=model, stat=stat:
+                    runs.current_metrics(key, obs, s, model)["transient"][stat],
+                (1,), tol, digits=digits))
     return out
 
 
@@ -206,7 +290,7 @@ def _current_figures() -> list[Figure]:
             lambda s, key=key, obs=obs, axes=axes: min(
                 runs.current_metrics(key, obs, s)[a]["cover2"] for a in axes),
             (1,), FRACTION, default_seeds=dflt, digits=2))
-    return out
+    return out + _current_table_figures({f.name for f in out})
 
 
 def _nis_pooled(channel: str) -> float:
@@ -244,6 +328,32 @@ def _eseso_figures() -> list[Figure]:
             "estimate after 10 s",
             lambda s, dur=dur: runs.closed_loop("ampc", s, dur)["disturbance_error_n"],
             (0,), CLOSED_LOOP, default_seeds=dflt, digits=2))
+    for c in ("pid", "nmpc", "nmpc-of", "ampc"):
+        tok = c.replace("-", "_")
+        for speed, key in ((None, "circle"), (1.5, "circle_1p5")):
+            if speed is not None and c == "nmpc-of":
+                continue
+            where = ("bluerov2-circle closed loop, 240 s" if speed is None else
+                     "bluerov2-circle at the paper's 1.5 m/s (thrusters saturate), 240 s")
+            stats = (("tracking_rmse", "tracking_rmse_m", "m", "true tracking RMSE after 10 s",
+                      3),
+                     ("control_rmse", "control_rmse_m", "m", "RMS distance of the ESESO's "
+                      "estimated position from the reference after 10 s (what the "
+                      "controller sees)", 3),
+                     ("disturbance_rms", "disturbance_error_n", "N", "RMS error of the "
+                      "ESESO's disturbance estimate after 10 s", 2),
+                     ("disturbance_max", "disturbance_error_max_after_5s_n", "N", "largest "
+                      "error of the ESESO's disturbance estimate after 5 s", 2))
+            for stat, rkey, unit, label, digits in stats:
+                name = f"eseso.{key}.{stat}.{tok}"
+                if any(f.name == name for f in out):
+                    continue
+                out.append(Figure(
+                    name, unit, f"{where}, seed 0, {c.upper()} with the ESESO in the "
+                    f"loop: {label}",
+                    lambda s, c=c, speed=speed, rkey=rkey:
+                        runs.closed_loop(c, s, 240.0, speed)[rkey],
+                    (0,), CLOSED_LOOP, digits=digits))
     out.append(Figure(
         "eseso.circle_1p5.ampc_over_nmpc", "1",
         "bluerov2-circle at the paper's 1.5 m/s (thrusters saturate), 240 s: tracking RMSE "
@@ -553,23 +663,38 @@ def run_figures(names: Sequence[str], figs: dict[str, Figure], log: Any = sys.st
     return out, skipped
 
 
+def render_pages(readme: str | None, docs: str | None, doc: dict[str, Any]) -> None:
+    """Rewrite the README's figures block (``readme``) and the generated tables of the
+    pages in ``docs`` (``onboard/tools/doc_tables.py``) from ``doc``, saying what
+    changed."""
+    from onboard.tools import doc_tables
+
+    if readme:
+        changed = update_readme(Path(readme), doc)
+        print(f"{readme}: figures block {'rewritten' if changed else 'unchanged'}")
+    if docs:
+        keys = doc_tables.update_docs(Path(docs), doc)
+        print(f"{docs}: {len(doc_tables.tables())} generated tables, "
+              + (f"rewritten: {', '.join(keys)}" if keys else "all unchanged"))
+
+
 def main(args: argparse.Namespace) -> int:
     """``onboard validate [--only PATTERN]... [--write FILE] [--check FILE]
-    [--readme FILE]``: compute the figures, print them as a table, write them, check them
-    against a file (exit 1 when one is outside its tolerance), rewrite the README's
-    figures block. ``--readme`` alone (no ``--write``/``--check``) only re-renders the
-    README from docs/figures.json."""
+    [--readme FILE] [--docs DIR]``: compute the figures, print them as a table, write
+    them, check them against a file (exit 1 when one is outside its tolerance), rewrite
+    the README's figures block and the docs pages' generated tables. ``--readme`` /
+    ``--docs`` without ``--write``/``--check`` only re-render from docs/figures.json."""
     figs = registry()
     names = select(figs, args.only)
+    docs = getattr(args, "docs", None)
     if args.only and not names:
         raise UsageError(f"no figure matches {' '.join(args.only)} (see docs/figures.json)")
-    if args.readme and not args.write and not args.check:
-        changed = update_readme(Path(args.readme), load(FIGURES_FILE))
-        print(f"{args.readme}: figures block {'rewritten' if changed else 'unchanged'}")
+    if (args.readme or docs) and not args.write and not args.check:
+        render_pages(args.readme, docs, load(FIGURES_FILE))
         return 0
-    if args.readme and not args.write:
-        raise UsageError("--readme with --check needs --write (the README is rendered "
-                         "from the file written)")
+    if (args.readme or docs) and not args.write:
+        raise UsageError("--readme/--docs with --check needs --write (the pages are "
+                         "rendered from the file written)")
     ref = load(Path(args.check)) if args.check else None
     values, skipped = run_figures(names, figs)
     bad: list[str] = []
@@ -597,7 +722,8 @@ def main(args: argparse.Namespace) -> int:
         now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
         doc["about"] = ("The README's figures (onboard validate; onboard/tools/figures.py "
                         "says how each is computed and why its tolerance).")
-        doc["command"] = "onboard validate --write docs/figures.json --readme README.md"
+        doc["command"] = ("onboard validate --write docs/figures.json --readme README.md "
+                          "--docs docs")
         doc["written_utc"] = now
         doc["versions"] = versions()
         for n, vals in values.items():
@@ -608,9 +734,7 @@ def main(args: argparse.Namespace) -> int:
                                      else len(order)))
         path.write_text(json.dumps(doc, indent=1, sort_keys=False) + "\n", encoding="utf-8")
         print(f"wrote {len(values)} figures to {path}")
-        if args.readme:
-            changed = update_readme(Path(args.readme), doc)
-            print(f"{args.readme}: figures block {'rewritten' if changed else 'unchanged'}")
+        render_pages(args.readme, docs, doc)
     if bad:
         print(f"{len(bad)} figure(s) outside their tolerance: {', '.join(bad)}",
               file=sys.stderr)
