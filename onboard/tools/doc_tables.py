@@ -211,7 +211,7 @@ class DocTable:
     def begin(self) -> str:
         """The opening marker."""
         return (f"<!-- figures:begin {self.key}: generated from docs/figures.json by "
-                f"`onboard validate --docs docs`; the rows are DOC_TABLES in "
+                f"`onboard validate --docs docs`; the rows are tables() in "
                 f"onboard/tools/doc_tables.py -->")
 
     def end(self) -> str:
