@@ -313,10 +313,11 @@ def _eseso_results(key: str, controllers: Sequence[str]) -> DocTable:
         p = f"eseso.{key}"
         rows.append((_CONTROLLER[c], f"{{{p}.tracking_rmse.{c}}}", f"{{{p}.control_rmse.{c}}}",
                      f"{{{p}.disturbance_rms.{c}}} / {{{p}.disturbance_max.{c}}}"))
-    rows.append(("AMPC / NMPC", Ratio(f"eseso.{key}.tracking_rmse.ampc",
-                                      f"eseso.{key}.tracking_rmse.nmpc"),
-                 Ratio(f"eseso.{key}.control_rmse.ampc", f"eseso.{key}.control_rmse.nmpc"),
-                 ""))
+    for base in [c for c in ("nmpc", "nmpc_of") if c in controllers]:
+        rows.append((f"AMPC / {_CONTROLLER[base]}",
+                     Ratio(f"eseso.{key}.tracking_rmse.ampc", f"eseso.{key}.tracking_rmse.{base}"),
+                     Ratio(f"eseso.{key}.control_rmse.ampc", f"eseso.{key}.control_rmse.{base}"),
+                     ""))
     return DocTable(f"eseso.{key}", "eseso-mpc.md",
                     ("controller", "tracking RMSE (true, m)", "control RMSE (estimate, m)",
                      "disturbance error RMS / max after 5 s (N)"), tuple(rows))

@@ -5,10 +5,12 @@ Each figure has a name (``aie.jaiabot_turns.speed_rmse.aie``: estimator, scenari
 quantity, which filter), the function computing it from a run
 (``onboard/tools/reports/runs.py``, each run flown once per process), its unit, the seeds it
 is measured on and a tolerance. The README's "What it estimates" table is generated from
-the file (:data:`README_ROWS`, between the ``figures:begin`` / ``figures:end`` markers), so
-its numbers are the file's; ``tests/test_figures.py`` checks the README block against the
-file and recomputes the figures (a subset in the default suite, every one with
-``-m slow``) against it within each figure's tolerance.
+the file (:data:`README_ROWS`, between the ``figures:begin`` / ``figures:end`` markers), and
+so are the docs pages' results tables (``onboard/tools/doc_tables.py``, ``--docs docs``), so
+their numbers are the file's; ``tests/test_figures.py`` checks every generated block against
+the file and recomputes the figures (a subset in the default suite, every one with
+``-m slow``) against it within each figure's tolerance. docs/reproducing.md says how to
+re-measure after a change.
 
 Tolerances. A run is deterministic per seed on one machine (same seed, same bytes), so a
 tolerance only has to absorb what differs between machines: numpy/scipy/BLAS rounding,
@@ -26,8 +28,9 @@ from above: the AIE speed RMSE is 0.051-0.053 m/s over seeds 1-3 (4 %), the KF's
 * real-log figures: 2 % (:data:`DATA`; no simulator randomness, only rounding).
 
 A figure that moves by more than its tolerance is a change of the estimator, to be
-re-measured with ``onboard validate --write docs/figures.json --readme README.md``
-(``make figures``) and committed with the change that moved it.
+re-measured with ``onboard validate --only 'PREFIX.*' --write docs/figures.json --readme
+README.md --docs docs`` (all of them: ``make figures``) and committed with the change that
+moved it.
 """
 
 from __future__ import annotations
