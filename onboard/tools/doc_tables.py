@@ -276,6 +276,28 @@ def _aie_effects() -> DocTable:
                      "below raw on every seed?"), tuple(rows))
 
 
+def _aie_coverage() -> DocTable:
+    rows: list[Row] = []
+    for seed in (1, 2, 3):
+        k = "aie.jaiabot_turns"
+        rows.append(("jaiabot-turns", str(seed),
+                     *(f"{{{k}.cover1.{w}@{seed}}} / {{{k}.cover2.{w}@{seed}}}"
+                       for w in ("aie", "kf")), "", "", "", ""))
+    for seed in (1, 2, 3):
+        k = "aie.gnss_outage"
+        rows.append((
+            "fault-gnss-outage", str(seed),
+            *(f"{{{k}.run_cover1.{w}@{seed}}} / {{{k}.run_cover2.{w}@{seed}}}"
+              for w in ("aie", "kf")),
+            *(f"{{{k}.cover1.{w}@{seed}}} / {{{k}.cover2.{w}@{seed}}}" for w in ("aie", "kf")),
+            f"{{{k}.max_error.aie@{seed}}} / {{{k}.max_error.kf@{seed}}} m",
+            f"{{{k}.max_sigma.aie@{seed}}} / {{{k}.max_sigma.kf@{seed}}} m"))
+    return DocTable("aie.coverage", "aie.md",
+                    ("scenario", "seed", "AIE 1 / 2 sigma", "KF 1 / 2 sigma", "AIE outage",
+                     "KF outage", "max error in the outage AIE / KF",
+                     "max sigma in the outage AIE / KF"), tuple(rows))
+
+
 _OBSERVER = {"kf": "KF", "hgo": "HGO (γ = γ*)", "flow": "flow observer (Fan)"}
 _SCENARIO_LABEL = {"effect-current": "effect-current (rudder boat, 0.29 m/s)",
                    "boat-tidal": "boat-tidal (0.1 + 0.3 cos(2πt/600) m/s)",
@@ -325,7 +347,7 @@ def _eseso_results(key: str, controllers: Sequence[str]) -> DocTable:
 
 def tables() -> tuple[DocTable, ...]:
     """Every generated docs table."""
-    return (_aie_sitl(), _aie_effects(), _current_validation(),
+    return (_aie_coverage(), _aie_sitl(), _aie_effects(), _current_validation(),
             _eseso_results("circle", ("pid", "nmpc", "nmpc_of", "ampc")),
             _eseso_results("circle_1p5", ("pid", "nmpc", "ampc")))
 

@@ -176,6 +176,36 @@ def _aie_figures() -> list[Figure]:
         "published 2 sigma during the outage",
         lambda s: runs.outage_metrics(s)["aie.cover2"],
         SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
+    for who in ("aie", "kf"):
+        out.append(Figure(
+            f"aie.gnss_outage.max_sigma.{who}", "m",
+            f"fault-gnss-outage: the largest per-axis position sigma the {who.upper()} "
+            "pipeline publishes in the outage",
+            lambda s, who=who: runs.outage_metrics(s)[f"{who}.max_sigma"],
+            SEEDS_1_3, SITL_DEG, default_seeds=(1,), digits=1))
+        for k in ("1", "2"):
+            if who == "aie" and k == "2":
+                continue
+            out.append(Figure(
+                f"aie.gnss_outage.cover{k}.{who}", "1",
+                f"fault-gnss-outage: fraction of the {who.upper()}'s per-axis position "
+                f"errors within its published {k} sigma during the outage",
+                lambda s, who=who, k=k: runs.outage_metrics(s)[f"{who}.cover{k}"],
+                SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
+        for k in ("1", "2"):
+            out.append(Figure(
+                f"aie.gnss_outage.run_cover{k}.{who}", "1",
+                f"fault-gnss-outage, the whole run after 10 s: fraction of the "
+                f"{who.upper()}'s per-axis position errors within its published {k} sigma",
+                lambda s, who=who, k=k: runs.outage_metrics(s)[f"{who}.run_cover{k}"],
+                SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
+            out.append(Figure(
+                f"aie.jaiabot_turns.cover{k}.{who}", "1",
+                f"jaiabot-turns, 300 s, after 10 s: fraction of the {who.upper()}'s per-axis "
+                f"position errors within its published {k} sigma",
+                lambda s, who=who, k=int(k): runs.position_coverage(
+                    runs.aie_run("jaiabot-turns", s), who)[k - 1],
+                SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
     for sc, seeds in runs.AIE_EFFECT_SCENARIOS.items():
         for who, (p, label) in (("aie", ("aie", "the AIE pipeline")),
                                 ("kf", ("kf", "the KF pipeline (default thrust map)")),
