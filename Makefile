@@ -45,7 +45,7 @@ bench: $(STAMP)
 
 # Recompute every figure into docs/figures.json and regenerate the README's "What it
 # estimates" table and the docs pages' generated tables from it (docs/reproducing.md;
-# about 30 min on 2 cores; commit docs/figures.json, README.md and docs/). One estimator
+# of the order of 40 min on 2 cores; commit docs/figures.json, README.md and docs/). One estimator
 # only: $(BIN)/onboard validate --only 'aie.*' --write docs/figures.json --readme README.md --docs docs
 figures: $(STAMP)
 	$(BIN)/onboard validate --write docs/figures.json --readme README.md --docs docs
