@@ -753,8 +753,9 @@ def main(args: argparse.Namespace) -> int:
         path = Path(args.write)
         doc = load(path) if path.exists() else {"figures": {}}
         now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-        doc["about"] = ("The README's figures (onboard validate; onboard/tools/figures.py "
-                        "says how each is computed and why its tolerance).")
+        doc["about"] = ("The README's and the docs tables' figures (onboard validate; "
+                        "onboard/tools/figures.py says how each is computed and why its "
+                        "tolerance; docs/reproducing.md how to re-measure).")
         doc["command"] = ("onboard validate --write docs/figures.json --readme README.md "
                           "--docs docs")
         doc["written_utc"] = now
