@@ -113,8 +113,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(handler="onboard.tools.bench:main")
 
-    p = sub.add_parser("validate", help="recompute the README's figures; write or check "
-                       "docs/figures.json")
+    p = sub.add_parser("validate", help="recompute the README's and the docs tables' "
+                       "figures; write or check docs/figures.json, regenerate the tables")
     p.add_argument("--only", action="append", default=None, metavar="PATTERN",
                    help="figures whose name matches this glob or prefix (repeatable), "
                         "e.g. 'aie.*' or current.gavia_tidal")
