@@ -172,7 +172,31 @@ class Axes:
         return " / ".join(out)
 
 
-Cell = Union[str, Seeds, BelowRaw, Ratio, Axes]
+@dataclass(frozen=True)
+class ChiSquareBand:
+    """The two-sided 95 % band of the mean of ``n`` chi-square(``dim``) values, ``n`` the
+    sum of the count figures ``counts`` over ``seeds`` (``runs.chi2_mean_band``), as
+    ``[lo, hi]``."""
+
+    counts: str
+    dim: int
+    seeds: tuple[str, ...]
+
+    def names(self) -> tuple[str, ...]:
+        """The figures the cell reads."""
+        return (self.counts,)
+
+    def render(self, figs: dict[str, Any]) -> str:
+        """The cell's text from the figures file's ``figures`` object."""
+        vals = _record(figs, self.counts)["values"]
+        missing = [s for s in self.seeds if vals.get(s) is None]
+        if missing:
+            raise UsageError(f"{self.counts} lacks seed(s) {', '.join(missing)}")
+        lo, hi = runs.chi2_mean_band(int(sum(vals[s] for s in self.seeds)), self.dim)
+        return f"[{lo:.3f}, {hi:.3f}]"
+
+
+Cell = Union[str, Seeds, BelowRaw, Ratio, Axes, ChiSquareBand]
 
 
 @dataclass(frozen=True)
@@ -345,11 +369,26 @@ def _eseso_results(key: str, controllers: Sequence[str]) -> DocTable:
                      "disturbance error RMS / max after 5 s (N)"), tuple(rows))
 
 
+def _eseso_nis() -> DocTable:
+    from onboard.tools.figures import NIS_TABLE_CHANNELS
+
+    rows: list[Row] = []
+    for ch, dim in NIS_TABLE_CHANNELS.items():
+        rows.append((f"{ch} ({dim})",
+                     " / ".join(f"{{eseso.nis_seed.{ch}@{s}}}" for s in (1, 2, 3)),
+                     f"{{eseso.nis.{ch}}}",
+                     ChiSquareBand(f"eseso.nis_count.{ch}", dim, ("1",)),
+                     ChiSquareBand(f"eseso.nis_count.{ch}", dim, ("1", "2", "3"))))
+    return DocTable("eseso.nis", "eseso-mpc.md",
+                    ("channel (dim)", "seeds 1 / 2 / 3", "pooled", "95 % band, one seed (1)",
+                     "95 % band, pooled"), tuple(rows))
+
+
 def tables() -> tuple[DocTable, ...]:
     """Every generated docs table."""
     return (_aie_coverage(), _aie_sitl(), _aie_effects(), _current_validation(),
             _eseso_results("circle", ("pid", "nmpc", "nmpc_of", "ampc")),
-            _eseso_results("circle_1p5", ("pid", "nmpc", "ampc")))
+            _eseso_results("circle_1p5", ("pid", "nmpc", "ampc")), _eseso_nis())
 
 
 # ----------------------------------------------------------------------------- pages

@@ -333,6 +333,10 @@ def _nis_pooled(channel: str) -> float:
 
 
 NIS_CHANNELS = {"vog": 2, "attitude": 3, "dvl": 3}
+NIS_TABLE_CHANNELS = {"vog": 2, "attitude": 3, "dvl": 3, "depth": 1, "thrust": 3}
+"""The ESESO's update channels of docs/eseso-mpc.md's NIS table and their dimensions
+(depth and thrust are outside the band for reasons the page gives, so
+``eseso.nis.channels_in_band`` counts the first three)."""
 
 
 def _nis_in_band(_: int | None) -> float:
@@ -401,6 +405,24 @@ def _eseso_figures() -> list[Figure]:
             f"NIS of the ESESO's {ch} updates (every update, gated ones included; "
             f"dimension {NIS_CHANNELS[ch]})",
             lambda s, ch=ch: _nis_pooled(ch), (), NIS))
+    for ch, dim in NIS_TABLE_CHANNELS.items():
+        if ch not in NIS_CHANNELS:
+            out.append(Figure(
+                f"eseso.nis.{ch}", "1",
+                f"bluerov2-circle through sitl.runner (its PID), 120 s, seeds 1-3 pooled: mean "
+                f"NIS of the ESESO's {ch} updates (every update, gated ones included; "
+                f"dimension {dim})",
+                lambda s, ch=ch: _nis_pooled(ch), (), NIS))
+        out.append(Figure(
+            f"eseso.nis_seed.{ch}", "1",
+            f"bluerov2-circle through sitl.runner (its PID), 120 s: mean NIS of the ESESO's "
+            f"{ch} updates on one seed (dimension {dim})",
+            lambda s, ch=ch: runs.eseso_nis(s)[ch][0], SEEDS_1_3, NIS))
+        out.append(Figure(
+            f"eseso.nis_count.{ch}", "count",
+            f"bluerov2-circle through sitl.runner, 120 s: the number of the ESESO's {ch} "
+            "updates on one seed (the n of the chi-square band of the mean)",
+            lambda s, ch=ch: float(runs.eseso_nis(s)[ch][1]), SEEDS_1_3, COUNT, digits=0))
     out.append(Figure(
         "eseso.nis.channels_in_band", "count",
         "of the vog, attitude and DVL channels, how many have their pooled mean NIS inside "
