@@ -15,9 +15,9 @@ gives (within each figure's tolerance, ``onboard/tools/figures.py``).
 A cell is a string in which ``{name}`` prints figure ``name`` at its own digits (its range
 ``lo-hi`` over its seeds when they differ), ``{name@2}`` its value on seed 2 and
 ``{name:4}`` / ``{name@2:4}`` with 4 decimals; or a computed cell (:class:`Seeds`,
-:class:`BelowRaw`, :class:`Ratio`, :class:`Axes`). A value the file holds as ``null`` (an
-estimate never published) prints ``n/a``. Rows of numbers quoted from a paper are
-:class:`Quoted`, the only rows allowed without a figure.
+:class:`BelowRaw`, :class:`Ratio`, :class:`Axes`, :class:`ChiSquareBand`). A value the file
+holds as ``null`` (an estimate never published) prints ``n/a``. Rows of numbers quoted
+from a paper are :class:`Quoted`, the only rows allowed without a figure.
 """
 
 from __future__ import annotations
