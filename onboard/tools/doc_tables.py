@@ -322,6 +322,29 @@ def _aie_coverage() -> DocTable:
                      "max sigma in the outage AIE / KF"), tuple(rows))
 
 
+def _aie_models() -> tuple[DocTable, DocTable]:
+    sens: list[Row] = []
+    ident: list[Row] = []
+    for sc in ("jaiabot-turns", "twin-thruster-turns"):
+        k = f"aie.{sc.replace('-', '_')}"
+        for v, (what, f) in runs.AIE_MODEL_VARIANTS.items():
+            m = f"{k}.model_{v}"
+            sens.append((sc, f"{what} x {f}", f"{{{m}.speed_rmse.aie}}",
+                         f"{{{m}.speed_rmse.kf}}", f"{{{m}.heading_rmse.aie}}",
+                         f"{{{m}.heading_rmse.kf}}"))
+        m = f"{k}.model_identified"
+        ident.append((sc, f"a={{{k}.identified.surge_a}} g={{{k}.identified.surge_gain}} / "
+                          f"a={{{k}.identified.heading_a}} g={{{k}.identified.heading_gain}}",
+                      *(f"{{{m}.{q}_rmse.{w}}}" for q in ("speed", "heading", "position")
+                        for w in ("aie", "kf"))))
+    return (DocTable("aie.sensitivity", "aie.md",
+                     ("scenario", "model", "AIE speed", "KF speed", "AIE heading",
+                      "KF heading"), tuple(sens)),
+            DocTable("aie.identified", "aie.md",
+                     ("scenario", "model (surge / heading)", "AIE speed", "KF speed",
+                      "AIE heading", "KF heading", "AIE pos", "KF pos"), tuple(ident)))
+
+
 _OBSERVER = {"kf": "KF", "hgo": "HGO (γ = γ*)", "flow": "flow observer (Fan)"}
 _SCENARIO_LABEL = {"effect-current": "effect-current (rudder boat, 0.29 m/s)",
                    "boat-tidal": "boat-tidal (0.1 + 0.3 cos(2πt/600) m/s)",
@@ -386,7 +409,8 @@ def _eseso_nis() -> DocTable:
 
 def tables() -> tuple[DocTable, ...]:
     """Every generated docs table."""
-    return (_aie_coverage(), _aie_sitl(), _aie_effects(), _current_validation(),
+    return (_aie_coverage(), _aie_sitl(), _aie_effects(), *_aie_models(),
+            _current_validation(),
             _eseso_results("circle", ("pid", "nmpc", "nmpc_of", "ampc")),
             _eseso_results("circle_1p5", ("pid", "nmpc", "ampc")), _eseso_nis())
 

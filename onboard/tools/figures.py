@@ -206,6 +206,32 @@ def _aie_figures() -> list[Figure]:
                 lambda s, who=who, k=int(k): runs.position_coverage(
                     runs.aie_run("jaiabot-turns", s), who)[k - 1],
                 SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
+    for sc in ("jaiabot-turns", "twin-thruster-turns"):
+        k = sc.replace("-", "_")
+        for ax in ("surge", "heading"):
+            for par in ("a", "gain"):
+                out.append(Figure(
+                    f"aie.{k}.identified.{ax}_{par}", "1/s" if par == "a" else
+                    ("m/s^2" if ax == "surge" else "rad/s^2"),
+                    f"{sc} seed 10: the {ax} model's {par} identified by identify_sitl "
+                    "(GNSS speed over ground and compass against the commands)",
+                    lambda s, sc=sc, ax=ax, par=par: runs.aie_identified_models(sc)[ax][par],
+                    (), Tolerance(rel=0.02, abs=0.01), digits=2))
+        for variant, seeds in (("identified", SEEDS_1_3),
+                               *((v, (1,)) for v in runs.AIE_MODEL_VARIANTS)):
+            label = ("the models identified on seed 10" if variant == "identified" else
+                     "the default model's {} x {}".format(*runs.AIE_MODEL_VARIANTS[variant]))
+            for q, unit, tol, digits in (("speed", "m/s", SITL, 3),
+                                         ("heading", "rad", Tolerance(rel=0.03, abs=0.0005), 4),
+                                         ("position", "m", Tolerance(rel=0.03, abs=0.01), 2)):
+                for who in ("aie", "kf"):
+                    out.append(Figure(
+                        f"aie.{k}.model_{variant}.{q}_rmse.{who}", unit,
+                        f"{sc}, 300 s, both filters with {label}: {q} RMSE after 30 s, the "
+                        f"{who.upper()} pipeline",
+                        lambda s, sc=sc, variant=variant, q=q, who=who:
+                            runs.aie_model_metrics(sc, s, variant)[who][q],
+                        seeds, tol, digits=digits))
     for sc, seeds in runs.AIE_EFFECT_SCENARIOS.items():
         for who, (p, label) in (("aie", ("aie", "the AIE pipeline")),
                                 ("kf", ("kf", "the KF pipeline (default thrust map)")),

@@ -128,6 +128,43 @@ def aie_metrics(scenario: str, seed: int, identified: bool = False
     return sitl_metrics(aie_run(scenario, seed, identified))
 
 
+AIE_MODEL_VARIANTS: dict[str, tuple[str, float]] = {
+    "a_0p7": ("a", 0.7), "a_1p3": ("a", 1.3), "gain_0p7": ("gain", 0.7),
+    "gain_1p3": ("gain", 1.3),
+}
+"""docs/aie.md 3.2's sensitivity: the default model's ``a`` or ``gain`` (surge 1 / 3,
+heading 2 / 2) scaled on both axes, for both filters."""
+
+
+@cache
+def aie_identified_models(scenario: str) -> dict[str, dict[str, float]]:
+    """``aie_validation.identify_sitl`` on ``scenario`` seed 10 (GNSS speed over ground and
+    compass against the mapped commands, output-error fit), as a ``[pipelines.aie]``
+    table: ``{"surge": {a, gain, offset}, "heading": {a, gain, offset}}``."""
+    from onboard.tools.reports.aie_validation import identify_sitl
+
+    ms, mh = identify_sitl(scenario, seed=10)
+    return {"surge": {"a": ms.a, "gain": ms.gain, "offset": ms.offset},
+            "heading": {"a": mh.a, "gain": mh.gain, "offset": mh.offset}}
+
+
+@cache
+def aie_model_metrics(scenario: str, seed: int, variant: str
+                      ) -> dict[str, dict[str, float]]:
+    """:func:`aie_metrics` of ``scenario`` with both filters' model replaced:
+    ``variant`` a key of :data:`AIE_MODEL_VARIANTS` or ``identified``
+    (:func:`aie_identified_models`)."""
+    from onboard.tools.reports.aie_validation import run_sitl, sitl_metrics
+
+    if variant == "identified":
+        table: dict[str, Any] = aie_identified_models(scenario)
+    else:
+        what, f = AIE_MODEL_VARIANTS[variant]
+        table = {"surge": {what: f * (1.0 if what == "a" else 3.0)},
+                 "heading": {what: f * 2.0}}
+    return sitl_metrics(run_sitl(scenario, seed=seed, aie_table=table))
+
+
 def position_coverage(run: Any, p: str, t_from: float = 10.0, t_to: float = 1e9
                       ) -> tuple[float, float]:
     """Fraction of the per-axis position errors of pipeline ``p`` (north and east pooled,
