@@ -232,3 +232,27 @@ def test_validate_checks_writes_and_exits_1_on_a_figure_outside_its_tolerance(
     args.check, args.write = str(bad), None
     assert F.main(args) == 1
     assert name in capsys.readouterr().err
+
+
+def test_validate_docs_alone_rerenders_without_recomputing(committed, tmp_path, capsys) -> None:
+    """``onboard validate --docs DIR`` alone re-renders the pages from docs/figures.json
+    (a stale block is rewritten, nothing is recomputed); with ``--check`` and no
+    ``--write`` it is a usage error."""
+    import argparse
+
+    table = D.tables()[0]
+    for page in {t.page for t in D.tables()}:
+        (tmp_path / page).write_text((F.REPO / "docs" / page).read_text(encoding="utf-8"),
+                                     encoding="utf-8")
+    path = tmp_path / table.page
+    stale = path.read_text(encoding="utf-8").replace(table.render(committed),
+                                                     f"{table.begin()}\n| old |\n{table.end()}")
+    path.write_text(stale, encoding="utf-8")
+    args = argparse.Namespace(only=None, write=None, check=None, readme=None,
+                              docs=str(tmp_path))
+    assert F.main(args) == 0
+    assert table.block(path.read_text(encoding="utf-8")) == table.render(committed)
+    assert table.key in capsys.readouterr().out
+    args.check = str(F.FIGURES_FILE)
+    with pytest.raises(UsageError):
+        F.main(args)
