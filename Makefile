@@ -1,7 +1,10 @@
 # Two commands on a fresh machine with Python >= 3.11:
 #   make demo   set up .venv and run `onboard demo` on the built-in simulated vehicle
 #   make test   set up .venv and run the test suite
-#   make figures  recompute the README's estimator figures (docs/figures.json, README.md)
+#   make figures  recompute every figure (docs/figures.json) and regenerate the README's
+#                 table and the docs pages' results tables from it
+#   make docs     regenerate the README's and the docs pages' tables from docs/figures.json
+#                 (nothing recomputed: seconds)
 # On the vehicle computer (docs/service.md "Install"):
 #   sudo make install   venv in $(PREFIX)/venv, config in $(SYSCONFDIR), the systemd unit
 PYTHON ?= python3
@@ -18,7 +21,7 @@ UNITDIR    ?= /etc/systemd/system
 CREDSTORE  ?= /etc/credstore
 PIP_ARGS   ?=
 
-.PHONY: demo test test-all bench figures setup clean install
+.PHONY: demo test test-all bench figures docs setup clean install
 
 setup: $(STAMP)
 
@@ -40,10 +43,15 @@ test-all: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/onboard bench
 
-# Recompute every figure of the README's "What it estimates" table into docs/figures.json
-# and regenerate the table from it (about 15 min on 2 cores; commit both files).
+# Recompute every figure into docs/figures.json and regenerate the README's "What it
+# estimates" table and the docs pages' generated tables from it (docs/reproducing.md;
+# of the order of 40 min on 2 cores; commit docs/figures.json, README.md and docs/). One estimator
+# only: $(BIN)/onboard validate --only 'aie.*' --write docs/figures.json --readme README.md --docs docs
 figures: $(STAMP)
-	$(BIN)/onboard validate --write docs/figures.json --readme README.md
+	$(BIN)/onboard validate --write docs/figures.json --readme README.md --docs docs
+
+docs: $(STAMP)
+	$(BIN)/onboard validate --readme README.md --docs docs
 
 clean:
 	rm -rf $(VENV) replay-out diagnose-out .pytest_cache

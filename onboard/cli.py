@@ -113,8 +113,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(handler="onboard.tools.bench:main")
 
-    p = sub.add_parser("validate", help="recompute the README's figures; write or check "
-                       "docs/figures.json")
+    p = sub.add_parser("validate", help="recompute the README's and the docs tables' "
+                       "figures; write or check docs/figures.json, regenerate the tables")
     p.add_argument("--only", action="append", default=None, metavar="PATTERN",
                    help="figures whose name matches this glob or prefix (repeatable), "
                         "e.g. 'aie.*' or current.gavia_tidal")
@@ -124,6 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "figure is outside its tolerance")
     p.add_argument("--readme", metavar="FILE", help="rewrite FILE's figures block from the "
                    "file written (alone: from docs/figures.json, nothing recomputed)")
+    p.add_argument("--docs", metavar="DIR", help="rewrite the generated tables of the pages "
+                   "in DIR (e.g. docs) from the file written (alone: from "
+                   "docs/figures.json, nothing recomputed)")
     p.set_defaults(handler="onboard.tools.figures:main")
 
     p = sub.add_parser("design-gain", help="solve the high-gain observer LMI offline")

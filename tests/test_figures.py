@@ -3,13 +3,17 @@
 * The README's "What it estimates" table is the one ``onboard validate --readme`` renders
   from docs/figures.json (so every number in it is the file's), and the file holds every
   registered figure with the registry's unit, seeds and tolerance.
+* Likewise every generated table of the docs pages (``onboard/tools/doc_tables.py``,
+  ``onboard validate --docs docs``): each block between its markers is the rendering of
+  the file (no simulation: cheap).
 * Each figure is recomputed (``onboard/tools/figures.py``, runs shared with the other SITL
   tests through ``onboard/tools/reports/runs.py``) and compared with the file within its
   stated tolerance: the figures' ``default_suite_seeds`` here, every other seed and figure
   with ``-m slow`` (real-log figures also skip without ../shared/data).
 
-After an intended change of an estimator's figures: ``make figures`` and commit
-docs/figures.json and README.md with the change.
+After an intended change of an estimator's figures: ``make figures`` (or ``onboard validate
+--only 'aie.*' --write docs/figures.json --readme README.md --docs docs`` for the figures
+it moved) and commit docs/figures.json, README.md and docs/ with the change.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import math
 import pytest
 
 from onboard.core.errors import UsageError
+from onboard.tools import doc_tables as D
 from onboard.tools import figures as F
 from onboard.tools.reports import runs
 
@@ -49,7 +54,8 @@ def test_the_figures_file_holds_every_figure_as_the_registry_states_it(committed
         assert set(rec["values"]) == set(fig.keys()), name
         assert rec["digits"] == fig.digits, name
         assert rec["tolerance"] == {"rel": fig.tolerance.rel, "abs": fig.tolerance.abs}, name
-        assert all(isinstance(v, float) for v in rec["values"].values()), name
+        # null: an estimate never published in the run (a current component unknown)
+        assert all(v is None or isinstance(v, float) for v in rec["values"].values()), name
     for key in ("versions", "written_utc", "command"):
         assert key in committed
 
@@ -70,6 +76,69 @@ def test_a_stale_readme_number_is_caught(committed) -> None:
     del doc["figures"]["aie.jaiabot_turns.speed_rmse.aie"]
     with pytest.raises(UsageError):
         F.render_table(doc)
+
+
+@pytest.mark.parametrize("table", D.tables(), ids=lambda t: t.key)
+def test_every_docs_table_is_rendered_from_the_figures_file(table, committed) -> None:
+    page = F.REPO / "docs" / table.page
+    assert table.block(page.read_text(encoding="utf-8")) == table.render(committed), (
+        f"docs/{table.page}'s generated table {table.key} differs from docs/figures.json: "
+        "run `onboard validate --docs docs` (or `make figures` to recompute)")
+
+
+def test_every_docs_table_names_registered_figures_only() -> None:
+    keys = [t.key for t in D.tables()]
+    assert len(keys) == len(set(keys))
+    for table in D.tables():
+        assert table.names() <= set(REGISTRY), (table.key, sorted(table.names() - set(REGISTRY)))
+        for row in table.rows:
+            # a row without a figure of ours must be a quoted paper row
+            if not isinstance(row, D.Quoted):
+                sub = D.DocTable("x", table.page, table.header, (row,))
+                assert sub.names(), (table.key, row)
+
+
+def test_a_stale_docs_table_is_caught_and_rewritten(committed, tmp_path) -> None:
+    """Negative control: a figure moved in the file changes its table; ``update_docs``
+    rewrites exactly the stale block, keeps the text around it, and a page without the
+    markers is a UsageError."""
+    table = next(t for t in D.tables() if t.key == "aie.effects")
+    doc = copy.deepcopy(committed)
+    rec = doc["figures"]["aie.effect_waves.speed_rmse.aie"]
+    rec["values"] = {k: v + 0.01 for k, v in rec["values"].items()}
+    assert table.render(doc) != table.render(committed)
+    for page in {t.page for t in D.tables()}:
+        (tmp_path / page).write_text((F.REPO / "docs" / page).read_text(encoding="utf-8"),
+                                     encoding="utf-8")
+    assert D.update_docs(tmp_path, committed) == []
+    before = (tmp_path / table.page).read_text(encoding="utf-8")
+    assert D.update_docs(tmp_path, doc) == ["aie.effects"]
+    after = (tmp_path / table.page).read_text(encoding="utf-8")
+    assert after.replace(table.render(doc), table.render(committed)) == before
+    (tmp_path / table.page).write_text("no markers here\n", encoding="utf-8")
+    with pytest.raises(UsageError):
+        D.update_docs(tmp_path, committed)
+    del doc["figures"]["aie.effect_waves.speed_rmse.aie"]
+    with pytest.raises(UsageError):
+        table.render(doc)
+
+
+def test_docs_cells() -> None:
+    figs = {"a": {"values": {"1": 0.05, "2": 0.09}, "digits": 3},
+            "b": {"values": {"1": 0.06, "2": 0.06}, "digits": 3},
+            "r": {"values": {"1": 0.07, "2": 0.08}, "digits": 3},
+            "n": {"values": {"1": None}, "digits": 3},
+            "one": {"values": {"3": 1.23456}, "digits": 2}}
+    assert D.fill("{a@1} {a} {a@2:1} {one} {n}", figs) == "0.050 0.050-0.090 0.1 1.23 n/a"
+    assert D.Seeds("a").render(figs) == "1-2" and D.Seeds("one").render(figs) == "3"
+    assert D.BelowRaw("a", "b", "r").render(figs) == "KF only"  # a is above r on seed 2
+    assert D.BelowRaw("b", "b", "r").render(figs) == "both"
+    assert D.BelowRaw("r", "n", "b").render(figs) == "**neither**"
+    assert D.Ratio("b", "a").render(figs) == "0.67-1.20"
+    assert D.Axes("x", "rms", ("north", "east"), bold=("east",)).render(
+        {"x.north_rms": figs["a"], "x.east_rms": figs["b"]}) == "0.050-0.090 / **0.060**"
+    with pytest.raises(UsageError):
+        D.fill("{a@7}", figs)
 
 
 def test_compare_applies_the_tolerance(committed) -> None:
@@ -150,7 +219,7 @@ def test_validate_checks_writes_and_exits_1_on_a_figure_outside_its_tolerance(
     good = tmp_path / "good.json"
     good.write_text(json.dumps(committed))
     args = argparse.Namespace(only=[name], write=str(tmp_path / "out.json"), check=str(good),
-                              readme=None)
+                              readme=None, docs=None)
     assert F.main(args) == 0
     written = json.loads((tmp_path / "out.json").read_text())
     assert set(written["figures"]) == {name}
@@ -163,3 +232,27 @@ def test_validate_checks_writes_and_exits_1_on_a_figure_outside_its_tolerance(
     args.check, args.write = str(bad), None
     assert F.main(args) == 1
     assert name in capsys.readouterr().err
+
+
+def test_validate_docs_alone_rerenders_without_recomputing(committed, tmp_path, capsys) -> None:
+    """``onboard validate --docs DIR`` alone re-renders the pages from docs/figures.json
+    (a stale block is rewritten, nothing is recomputed); with ``--check`` and no
+    ``--write`` it is a usage error."""
+    import argparse
+
+    table = D.tables()[0]
+    for page in {t.page for t in D.tables()}:
+        (tmp_path / page).write_text((F.REPO / "docs" / page).read_text(encoding="utf-8"),
+                                     encoding="utf-8")
+    path = tmp_path / table.page
+    stale = path.read_text(encoding="utf-8").replace(table.render(committed),
+                                                     f"{table.begin()}\n| old |\n{table.end()}")
+    path.write_text(stale, encoding="utf-8")
+    args = argparse.Namespace(only=None, write=None, check=None, readme=None,
+                              docs=str(tmp_path))
+    assert F.main(args) == 0
+    assert table.block(path.read_text(encoding="utf-8")) == table.render(committed)
+    assert table.key in capsys.readouterr().out
+    args.check = str(F.FIGURES_FILE)
+    with pytest.raises(UsageError):
+        F.main(args)

@@ -5,10 +5,12 @@ Each figure has a name (``aie.jaiabot_turns.speed_rmse.aie``: estimator, scenari
 quantity, which filter), the function computing it from a run
 (``onboard/tools/reports/runs.py``, each run flown once per process), its unit, the seeds it
 is measured on and a tolerance. The README's "What it estimates" table is generated from
-the file (:data:`README_ROWS`, between the ``figures:begin`` / ``figures:end`` markers), so
-its numbers are the file's; ``tests/test_figures.py`` checks the README block against the
-file and recomputes the figures (a subset in the default suite, every one with
-``-m slow``) against it within each figure's tolerance.
+the file (:data:`README_ROWS`, between the ``figures:begin`` / ``figures:end`` markers), and
+so are the docs pages' results tables (``onboard/tools/doc_tables.py``, ``--docs docs``), so
+their numbers are the file's; ``tests/test_figures.py`` checks every generated block against
+the file and recomputes the figures (a subset in the default suite, every one with
+``-m slow``) against it within each figure's tolerance. docs/reproducing.md says how to
+re-measure after a change.
 
 Tolerances. A run is deterministic per seed on one machine (same seed, same bytes), so a
 tolerance only has to absorb what differs between machines: numpy/scipy/BLAS rounding,
@@ -26,8 +28,9 @@ from above: the AIE speed RMSE is 0.051-0.053 m/s over seeds 1-3 (4 %), the KF's
 * real-log figures: 2 % (:data:`DATA`; no simulator randomness, only rounding).
 
 A figure that moves by more than its tolerance is a change of the estimator, to be
-re-measured with ``onboard validate --write docs/figures.json --readme README.md``
-(``make figures``) and committed with the change that moved it.
+re-measured with ``onboard validate --only 'PREFIX.*' --write docs/figures.json --readme
+README.md --docs docs`` (all of them: ``make figures``) and committed with the change that
+moved it.
 """
 
 from __future__ import annotations
@@ -140,6 +143,12 @@ def _aie_figures() -> list[Figure]:
                 "pipeline",
                 lambda s, sc=sc, who=who: runs.aie_metrics(sc, s)[who]["heading"],
                 SEEDS_1_3, Tolerance(rel=0.03, abs=0.0005), default_seeds=(1,)))
+            out.append(Figure(
+                f"aie.{key}.position_rmse.{who}", "m",
+                f"{sc}, 300 s, horizontal position RMSE against truth after 30 s, the "
+                f"{who.upper()} pipeline",
+                lambda s, sc=sc, who=who: runs.aie_metrics(sc, s)[who]["position"],
+                SEEDS_1_3, Tolerance(rel=0.03, abs=0.01), default_seeds=(1,), digits=2))
     out.append(Figure(
         "aie.jaiabot_turns.speed_rmse.kf_identified", "m/s",
         "jaiabot-turns, 300 s, speed RMSE after 30 s, the KF pipeline with the surge/heading "
@@ -167,6 +176,140 @@ def _aie_figures() -> list[Figure]:
         "published 2 sigma during the outage",
         lambda s: runs.outage_metrics(s)["aie.cover2"],
         SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
+    for who in ("aie", "kf"):
+        out.append(Figure(
+            f"aie.gnss_outage.max_sigma.{who}", "m",
+            f"fault-gnss-outage: the largest per-axis position sigma the {who.upper()} "
+            "pipeline publishes in the outage",
+            lambda s, who=who: runs.outage_metrics(s)[f"{who}.max_sigma"],
+            SEEDS_1_3, SITL_DEG, default_seeds=(1,), digits=1))
+        for k in ("1", "2"):
+            if who == "aie" and k == "2":
+                continue
+            out.append(Figure(
+                f"aie.gnss_outage.cover{k}.{who}", "1",
+                f"fault-gnss-outage: fraction of the {who.upper()}'s per-axis position "
+                f"errors within its published {k} sigma during the outage",
+                lambda s, who=who, k=k: runs.outage_metrics(s)[f"{who}.cover{k}"],
+                SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
+        for k in ("1", "2"):
+            out.append(Figure(
+                f"aie.gnss_outage.run_cover{k}.{who}", "1",
+                f"fault-gnss-outage, the whole run after 10 s: fraction of the "
+                f"{who.upper()}'s per-axis position errors within its published {k} sigma",
+                lambda s, who=who, k=k: runs.outage_metrics(s)[f"{who}.run_cover{k}"],
+                SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
+            out.append(Figure(
+                f"aie.jaiabot_turns.cover{k}.{who}", "1",
+                f"jaiabot-turns, 300 s, after 10 s: fraction of the {who.upper()}'s per-axis "
+                f"position errors within its published {k} sigma",
+                lambda s, who=who, k=int(k): runs.position_coverage(
+                    runs.aie_run("jaiabot-turns", s), who)[k - 1],
+                SEEDS_1_3, FRACTION, default_seeds=(1,), digits=2))
+    for sc in ("jaiabot-turns", "twin-thruster-turns"):
+        k = sc.replace("-", "_")
+        for ax in ("surge", "heading"):
+            for par in ("a", "gain"):
+                out.append(Figure(
+                    f"aie.{k}.identified.{ax}_{par}", "1/s" if par == "a" else
+                    ("m/s^2" if ax == "surge" else "rad/s^2"),
+                    f"{sc} seed 10: the {ax} model's {par} identified by identify_sitl "
+                    "(GNSS speed over ground and compass against the commands)",
+                    lambda s, sc=sc, ax=ax, par=par: runs.aie_identified_models(sc)[ax][par],
+                    (), Tolerance(rel=0.02, abs=0.01), digits=2))
+        for variant, seeds in (("identified", SEEDS_1_3),
+                               *((v, (1,)) for v in runs.AIE_MODEL_VARIANTS)):
+            label = ("the models identified on seed 10" if variant == "identified" else
+                     "the default model's {} x {}".format(*runs.AIE_MODEL_VARIANTS[variant]))
+            for q, unit, tol, digits in (("speed", "m/s", SITL, 3),
+                                         ("heading", "rad", Tolerance(rel=0.03, abs=0.0005), 4),
+                                         ("position", "m", Tolerance(rel=0.03, abs=0.01), 2)):
+                for who in ("aie", "kf"):
+                    out.append(Figure(
+                        f"aie.{k}.model_{variant}.{q}_rmse.{who}", unit,
+                        f"{sc}, 300 s, both filters with {label}: {q} RMSE after 30 s, the "
+                        f"{who.upper()} pipeline",
+                        lambda s, sc=sc, variant=variant, q=q, who=who:
+                            runs.aie_model_metrics(sc, s, variant)[who][q],
+                        seeds, tol, digits=digits))
+    for sc, seeds in runs.AIE_EFFECT_SCENARIOS.items():
+        for who, (p, label) in (("aie", ("aie", "the AIE pipeline")),
+                                ("kf", ("kf", "the KF pipeline (default thrust map)")),
+                                ("gnss", ("nav", "the raw GNSS speed over ground at the "
+                                                 "ticks (newest fix)"))):
+            out.append(Figure(
+                f"aie.{sc.replace('-', '_')}.speed_rmse.{who}", "m/s",
+                f"{sc} (rudder-boat config, the scenario's duration), speed RMSE against "
+                f"truth after 30 s: {label}",
+                lambda s, sc=sc, p=p: runs.aie_metrics(sc, s)[p]["speed"],
+                seeds, SITL))
+    return out
+
+
+CURRENT_TABLE: tuple[tuple[str, str, bool, tuple[str, ...]], ...] = (
+    # (run key, observer, calm-water model, axes): docs/current.md's validation table
+    ("gavia-tidal", "kf", True, ("north", "east", "down")),
+    ("gavia-tidal", "kf", False, ("north", "east", "down")),
+    ("gavia-tidal", "hgo", True, ("north", "east", "down")),
+    ("spheroid-sawtooth", "kf", True, ("north", "east", "down")),
+    ("spheroid-sawtooth", "kf", False, ("north", "east", "down")),
+    ("spheroid-sawtooth", "hgo", True, ("north", "east", "down")),
+    ("spheroid-sawtooth", "flow", True, ("north", "east", "down")),
+    ("effect-current", "kf", False, ("north", "east")),
+    ("effect-current", "kf", True, ("north", "east")),
+    ("boat-tidal", "kf", False, ("north", "east")),
+    ("jaiabot-turns", "kf", False, ("north", "east")),
+    ("twin-thruster-turns", "kf", False, ("north", "east")),
+)
+"""The runs of docs/current.md's validation table. A run with its key's default mode
+(``runs.CURRENT_RUNS``) is named ``current.<key>.<observer>.*`` (the README's names); the
+other mode adds ``_model`` (mode (a)) or ``_nomodel`` (mode (b)) to the observer."""
+
+
+def current_token(key: str, observer: str, model: bool) -> str:
+    """``<key>.<observer>[_model|_nomodel]`` of a :data:`CURRENT_TABLE` run in its
+    figure names."""
+    k = key.replace("-", "_")
+    if model == runs.CURRENT_RUNS[key][2]:
+        return f"{k}.{observer}"
+    return f"{k}.{observer}_{'model' if model else 'nomodel'}"
+
+
+def _current_table_figures(have: set[str]) -> list[Figure]:
+    out: list[Figure] = []
+    stats = (("rms", "RMS", SITL, 3), ("std", "standard deviation of the", SITL, 3),
+             ("cover2", "fraction within the published 2 sigma of the", FRACTION, 2),
+             ("published", "fraction of ticks with a published (not unknown)", FRACTION, 2))
+    for key, obs, model, axes in CURRENT_TABLE:
+        scenario, cfg, _, duration, after = runs.CURRENT_RUNS[key]
+        tok = current_token(key, obs, model)
+        what = (f"{scenario} ({cfg}, {duration:.0f} s, seed 1), "
+                + ("model identified in calm water (mode (a))" if model
+                   else "no model (mode (b))") + f", the {obs} observer")
+        for ax in axes:
+            for stat, label, tol, digits in stats:
+                name = f"current.{tok}.{ax}_{stat}"
+                if name in have:
+                    continue
+                out.append(Figure(
+                    name, "1" if tol is FRACTION else "m/s",
+                    f"{what}: {label} {ax} current error after {after:.0f} s"
+                    + (" (over the published ticks)" if stat != "published" else ""),
+                    lambda s, key=key, obs=obs, model=model, ax=ax, stat=stat:
+                        runs.current_metrics(key, obs, s, model)[ax][stat],
+                    (1,), tol, digits=digits))
+        for stat, unit, label, tol, digits in (
+                ("peak", "m/s", "largest horizontal error in the first 60 s it is "
+                 "published", SITL, 2),
+                ("peaking", "m/s", "that peak less the first published error (> 0: "
+                 "overshoot)", SITL, 2),
+                ("settle", "s", "time after which the horizontal error stays below "
+                 "0.1 m/s", Tolerance(rel=0.1, abs=2.0), 0)):
+            out.append(Figure(
+                f"current.{tok}.{stat}", unit, f"{what}: {label}",
+                lambda s, key=key, obs=obs, model=model, stat=stat:
+                    runs.current_metrics(key, obs, s, model)["transient"][stat],
+                (1,), tol, digits=digits))
     return out
 
 
@@ -206,7 +349,7 @@ def _current_figures() -> list[Figure]:
             lambda s, key=key, obs=obs, axes=axes: min(
                 runs.current_metrics(key, obs, s)[a]["cover2"] for a in axes),
             (1,), FRACTION, default_seeds=dflt, digits=2))
-    return out
+    return out + _current_table_figures({f.name for f in out})
 
 
 def _nis_pooled(channel: str) -> float:
@@ -216,6 +359,10 @@ def _nis_pooled(channel: str) -> float:
 
 
 NIS_CHANNELS = {"vog": 2, "attitude": 3, "dvl": 3}
+NIS_TABLE_CHANNELS = {"vog": 2, "attitude": 3, "dvl": 3, "depth": 1, "thrust": 3}
+"""The ESESO's update channels of docs/eseso-mpc.md's NIS table and their dimensions
+(depth and thrust are outside the band for reasons the page gives, so
+``eseso.nis.channels_in_band`` counts the first three)."""
 
 
 def _nis_in_band(_: int | None) -> float:
@@ -244,6 +391,32 @@ def _eseso_figures() -> list[Figure]:
             "estimate after 10 s",
             lambda s, dur=dur: runs.closed_loop("ampc", s, dur)["disturbance_error_n"],
             (0,), CLOSED_LOOP, default_seeds=dflt, digits=2))
+    for c in ("pid", "nmpc", "nmpc-of", "ampc"):
+        tok = c.replace("-", "_")
+        for speed, key in ((None, "circle"), (1.5, "circle_1p5")):
+            if speed is not None and c == "nmpc-of":
+                continue
+            where = ("bluerov2-circle closed loop, 240 s" if speed is None else
+                     "bluerov2-circle at the paper's 1.5 m/s (thrusters saturate), 240 s")
+            stats = (("tracking_rmse", "tracking_rmse_m", "m", "true tracking RMSE after 10 s",
+                      3),
+                     ("control_rmse", "control_rmse_m", "m", "RMS distance of the ESESO's "
+                      "estimated position from the reference after 10 s (what the "
+                      "controller sees)", 3),
+                     ("disturbance_rms", "disturbance_error_n", "N", "RMS error of the "
+                      "ESESO's disturbance estimate after 10 s", 2),
+                     ("disturbance_max", "disturbance_error_max_after_5s_n", "N", "largest "
+                      "error of the ESESO's disturbance estimate after 5 s", 2))
+            for stat, rkey, unit, label, digits in stats:
+                name = f"eseso.{key}.{stat}.{tok}"
+                if any(f.name == name for f in out):
+                    continue
+                out.append(Figure(
+                    name, unit, f"{where}, seed 0, {c.upper()} with the ESESO in the "
+                    f"loop: {label}",
+                    lambda s, c=c, speed=speed, rkey=rkey:
+                        runs.closed_loop(c, s, 240.0, speed)[rkey],
+                    (0,), CLOSED_LOOP, digits=digits))
     out.append(Figure(
         "eseso.circle_1p5.ampc_over_nmpc", "1",
         "bluerov2-circle at the paper's 1.5 m/s (thrusters saturate), 240 s: tracking RMSE "
@@ -258,6 +431,24 @@ def _eseso_figures() -> list[Figure]:
             f"NIS of the ESESO's {ch} updates (every update, gated ones included; "
             f"dimension {NIS_CHANNELS[ch]})",
             lambda s, ch=ch: _nis_pooled(ch), (), NIS))
+    for ch, dim in NIS_TABLE_CHANNELS.items():
+        if ch not in NIS_CHANNELS:
+            out.append(Figure(
+                f"eseso.nis.{ch}", "1",
+                f"bluerov2-circle through sitl.runner (its PID), 120 s, seeds 1-3 pooled: mean "
+                f"NIS of the ESESO's {ch} updates (every update, gated ones included; "
+                f"dimension {dim})",
+                lambda s, ch=ch: _nis_pooled(ch), (), NIS))
+        out.append(Figure(
+            f"eseso.nis_seed.{ch}", "1",
+            f"bluerov2-circle through sitl.runner (its PID), 120 s: mean NIS of the ESESO's "
+            f"{ch} updates on one seed (dimension {dim})",
+            lambda s, ch=ch: runs.eseso_nis(s)[ch][0], SEEDS_1_3, NIS))
+        out.append(Figure(
+            f"eseso.nis_count.{ch}", "count",
+            f"bluerov2-circle through sitl.runner, 120 s: the number of the ESESO's {ch} "
+            "updates on one seed (the n of the chi-square band of the mean)",
+            lambda s, ch=ch: float(runs.eseso_nis(s)[ch][1]), SEEDS_1_3, COUNT, digits=0))
     out.append(Figure(
         "eseso.nis.channels_in_band", "count",
         "of the vog, attitude and DVL channels, how many have their pooled mean NIS inside "
@@ -553,23 +744,38 @@ def run_figures(names: Sequence[str], figs: dict[str, Figure], log: Any = sys.st
     return out, skipped
 
 
+def render_pages(readme: str | None, docs: str | None, doc: dict[str, Any]) -> None:
+    """Rewrite the README's figures block (``readme``) and the generated tables of the
+    pages in ``docs`` (``onboard/tools/doc_tables.py``) from ``doc``, saying what
+    changed."""
+    from onboard.tools import doc_tables
+
+    if readme:
+        changed = update_readme(Path(readme), doc)
+        print(f"{readme}: figures block {'rewritten' if changed else 'unchanged'}")
+    if docs:
+        keys = doc_tables.update_docs(Path(docs), doc)
+        print(f"{docs}: {len(doc_tables.tables())} generated tables, "
+              + (f"rewritten: {', '.join(keys)}" if keys else "all unchanged"))
+
+
 def main(args: argparse.Namespace) -> int:
     """``onboard validate [--only PATTERN]... [--write FILE] [--check FILE]
-    [--readme FILE]``: compute the figures, print them as a table, write them, check them
-    against a file (exit 1 when one is outside its tolerance), rewrite the README's
-    figures block. ``--readme`` alone (no ``--write``/``--check``) only re-renders the
-    README from docs/figures.json."""
+    [--readme FILE] [--docs DIR]``: compute the figures, print them as a table, write
+    them, check them against a file (exit 1 when one is outside its tolerance), rewrite
+    the README's figures block and the docs pages' generated tables. ``--readme`` /
+    ``--docs`` without ``--write``/``--check`` only re-render from docs/figures.json."""
     figs = registry()
     names = select(figs, args.only)
+    docs = getattr(args, "docs", None)
     if args.only and not names:
         raise UsageError(f"no figure matches {' '.join(args.only)} (see docs/figures.json)")
-    if args.readme and not args.write and not args.check:
-        changed = update_readme(Path(args.readme), load(FIGURES_FILE))
-        print(f"{args.readme}: figures block {'rewritten' if changed else 'unchanged'}")
+    if (args.readme or docs) and not args.write and not args.check:
+        render_pages(args.readme, docs, load(FIGURES_FILE))
         return 0
-    if args.readme and not args.write:
-        raise UsageError("--readme with --check needs --write (the README is rendered "
-                         "from the file written)")
+    if (args.readme or docs) and not args.write:
+        raise UsageError("--readme/--docs with --check needs --write (the pages are "
+                         "rendered from the file written)")
     ref = load(Path(args.check)) if args.check else None
     values, skipped = run_figures(names, figs)
     bad: list[str] = []
@@ -595,9 +801,11 @@ def main(args: argparse.Namespace) -> int:
         path = Path(args.write)
         doc = load(path) if path.exists() else {"figures": {}}
         now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-        doc["about"] = ("The README's figures (onboard validate; onboard/tools/figures.py "
-                        "says how each is computed and why its tolerance).")
-        doc["command"] = "onboard validate --write docs/figures.json --readme README.md"
+        doc["about"] = ("The README's and the docs tables' figures (onboard validate; "
+                        "onboard/tools/figures.py says how each is computed and why its "
+                        "tolerance; docs/reproducing.md how to re-measure).")
+        doc["command"] = ("onboard validate --write docs/figures.json --readme README.md "
+                          "--docs docs")
         doc["written_utc"] = now
         doc["versions"] = versions()
         for n, vals in values.items():
@@ -608,9 +816,7 @@ def main(args: argparse.Namespace) -> int:
                                      else len(order)))
         path.write_text(json.dumps(doc, indent=1, sort_keys=False) + "\n", encoding="utf-8")
         print(f"wrote {len(values)} figures to {path}")
-        if args.readme:
-            changed = update_readme(Path(args.readme), doc)
-            print(f"{args.readme}: figures block {'rewritten' if changed else 'unchanged'}")
+        render_pages(args.readme, docs, doc)
     if bad:
         print(f"{len(bad)} figure(s) outside their tolerance: {', '.join(bad)}",
               file=sys.stderr)

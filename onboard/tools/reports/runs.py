@@ -85,6 +85,25 @@ def data_dir() -> Path:
 
 # ----------------------------------------------------------------------------- AIE / KF
 
+AIE_EFFECT_SCENARIOS: dict[str, tuple[int, ...]] = {
+    "clean": (1,),
+    "effect-current": (1,),
+    "effect-sideslip": (1,),
+    "effect-waves": (1, 2, 3),
+    "effect-gps-latency": (1,),
+    "effect-thrust-nonlinearity": (1,),
+    "effect-quadratic-drag": (1,),
+    "effect-surge-yaw-coupling": (1, 2, 3),
+    "effect-compass-deviation": (1,),
+    "effect-heading-bias": (1,),
+    "effect-gyro-bias": (1,),
+    "effect-two": (1,),
+    "fault-compass-step": (1,),
+}
+"""The surface-boat scenarios beyond ``jaiabot-turns`` / ``twin-thruster-turns`` the AIE
+and KF are measured on (docs/aie.md 3.1.1; ``rudder-boat`` config, the scenario's own
+duration) and their seeds: 1-3 where seed 1 is a miss or near one, 1 elsewhere."""
+
 
 @cache
 def aie_run(scenario: str, seed: int, identified: bool = False) -> Any:
@@ -109,6 +128,43 @@ def aie_metrics(scenario: str, seed: int, identified: bool = False
     return sitl_metrics(aie_run(scenario, seed, identified))
 
 
+AIE_MODEL_VARIANTS: dict[str, tuple[str, float]] = {
+    "a_0p7": ("a", 0.7), "a_1p3": ("a", 1.3), "gain_0p7": ("gain", 0.7),
+    "gain_1p3": ("gain", 1.3),
+}
+"""docs/aie.md 3.2's sensitivity: the default model's ``a`` or ``gain`` (surge 1 / 3,
+heading 2 / 2) scaled on both axes, for both filters."""
+
+
+@cache
+def aie_identified_models(scenario: str) -> dict[str, dict[str, float]]:
+    """``aie_validation.identify_sitl`` on ``scenario`` seed 10 (GNSS speed over ground and
+    compass against the mapped commands, output-error fit), as a ``[pipelines.aie]``
+    table: ``{"surge": {a, gain, offset}, "heading": {a, gain, offset}}``."""
+    from onboard.tools.reports.aie_validation import identify_sitl
+
+    ms, mh = identify_sitl(scenario, seed=10)
+    return {"surge": {"a": ms.a, "gain": ms.gain, "offset": ms.offset},
+            "heading": {"a": mh.a, "gain": mh.gain, "offset": mh.offset}}
+
+
+@cache
+def aie_model_metrics(scenario: str, seed: int, variant: str
+                      ) -> dict[str, dict[str, float]]:
+    """:func:`aie_metrics` of ``scenario`` with both filters' model replaced:
+    ``variant`` a key of :data:`AIE_MODEL_VARIANTS` or ``identified``
+    (:func:`aie_identified_models`)."""
+    from onboard.tools.reports.aie_validation import run_sitl, sitl_metrics
+
+    if variant == "identified":
+        table: dict[str, Any] = aie_identified_models(scenario)
+    else:
+        what, f = AIE_MODEL_VARIANTS[variant]
+        table = {"surge": {what: f * (1.0 if what == "a" else 3.0)},
+                 "heading": {what: f * 2.0}}
+    return sitl_metrics(run_sitl(scenario, seed=seed, aie_table=table))
+
+
 def position_coverage(run: Any, p: str, t_from: float = 10.0, t_to: float = 1e9
                       ) -> tuple[float, float]:
     """Fraction of the per-axis position errors of pipeline ``p`` (north and east pooled,
@@ -130,8 +186,11 @@ OUTAGE = (30.0, 150.0)
 
 @cache
 def outage_metrics(seed: int) -> dict[str, float]:
-    """``fault-gnss-outage``: per pipeline (``aie``, ``kf``) the maximum horizontal
-    position error in the outage (m) and the 2-sigma coverage of the position there."""
+    """``fault-gnss-outage``: per pipeline (``aie``, ``kf``) in the outage the maximum
+    horizontal position error (``max_error``, m), the largest published per-axis position
+    sigma (``max_sigma``, m), the 1- and 2-sigma coverage of the position (``cover1``,
+    ``cover2``); over the whole run after 10 s the coverage (``run_cover1``,
+    ``run_cover2``)."""
     run = aie_run("fault-gnss-outage", seed)
     out: dict[str, float] = {}
     inside = (run.t >= OUTAGE[0]) & (run.t < OUTAGE[1])
@@ -139,7 +198,10 @@ def outage_metrics(seed: int) -> dict[str, float]:
         err = np.hypot(run.est[f"{p}.north"] - run.truth["north"],
                        run.est[f"{p}.east"] - run.truth["east"])
         out[f"{p}.max_error"] = float(np.nanmax(err[inside]))
-        out[f"{p}.cover2"] = position_coverage(run, p, *OUTAGE)[1]
+        out[f"{p}.max_sigma"] = float(np.nanmax(np.maximum(run.est[f"{p}.std_north"][inside],
+                                                           run.est[f"{p}.std_east"][inside])))
+        out[f"{p}.cover1"], out[f"{p}.cover2"] = position_coverage(run, p, *OUTAGE)
+        out[f"{p}.run_cover1"], out[f"{p}.run_cover2"] = position_coverage(run, p)
     return out
 
 
@@ -178,23 +240,33 @@ def calm_model(scenario: str, config_name: str) -> dict[str, dict[str, float]]:
 
 
 CURRENT_RUNS: dict[str, tuple[str, str, bool, float, float]] = {
-    # key: (scenario, config, configured model, duration s, metrics after s)
+    # key: (scenario, config, configured model by default, duration s, metrics after s)
     "gavia-tidal": ("gavia-tidal", "torpedo-auv", True, 200.0, 60.0),
     "spheroid-sawtooth": ("spheroid-sawtooth", "spheroid", True, 600.0, 100.0),
     "effect-current": ("effect-current", "rudder-boat", False, 600.0, 120.0),
     "boat-tidal": ("boat-tidal", "rudder-boat", False, 900.0, 120.0),
+    "jaiabot-turns": ("jaiabot-turns", "rudder-boat", False, 300.0, 120.0),
+    "twin-thruster-turns": ("twin-thruster-turns", "twin-thruster-boat", False, 300.0, 120.0),
 }
 """The current pipeline's figure runs: a configured model identified in calm water
-(mode (a)) or none (mode (b), the surface boat identifies its own online)."""
+(mode (a)) or none (mode (b), the surface boat identifies its own online). The two
+current-free boat runs measure what the pipeline makes of no current at all."""
+
+
+def current_run(key: str, observer: str, seed: int, model: bool | None = None
+                ) -> dict[str, Any]:
+    """``current_validation.run`` of ``CURRENT_RUNS[key]`` with ``observer`` (``kf``,
+    ``hgo`` at its configured gamma*, ``flow``); ``model``: with the calm-water identified
+    model (mode (a)) or without (mode (b)), ``None`` the run's default."""
+    return _current_run(key, observer, seed,
+                        CURRENT_RUNS[key][2] if model is None else bool(model))
 
 
 @cache
-def current_run(key: str, observer: str, seed: int) -> dict[str, Any]:
-    """``current_validation.run`` of ``CURRENT_RUNS[key]`` with ``observer`` (``kf``,
-    ``hgo`` at its configured gamma*, ``flow``)."""
+def _current_run(key: str, observer: str, seed: int, model: bool) -> dict[str, Any]:
     from onboard.tools.reports import current_validation as cv
 
-    scenario, cfg, model, duration, _ = CURRENT_RUNS[key]
+    scenario, cfg, _, duration, _ = CURRENT_RUNS[key]
     section: dict[str, Any] = {"model": calm_model(scenario, cfg)} if model else {}
     if observer != "kf":
         section["observer"] = observer
@@ -202,13 +274,24 @@ def current_run(key: str, observer: str, seed: int) -> dict[str, Any]:
     return cv.run(sc, section, cfg, duration=duration, seed=seed)
 
 
-@cache
-def current_metrics(key: str, observer: str, seed: int) -> dict[str, Any]:
+def current_metrics(key: str, observer: str, seed: int, model: bool | None = None
+                    ) -> dict[str, Any]:
     """``current_validation.metrics`` of :func:`current_run` after the run's window:
-    per axis rms, std, 2-sigma coverage, published fraction."""
+    per axis rms, std, 2-sigma coverage, published fraction; and ``transient``: the
+    start-up peak (m/s), peaking (m/s) and the time the error takes to stay below
+    0.1 m/s (s; NaN when the horizontal current is never published)."""
+    return _current_metrics(key, observer, seed,
+                            CURRENT_RUNS[key][2] if model is None else bool(model))
+
+
+@cache
+def _current_metrics(key: str, observer: str, seed: int, model: bool) -> dict[str, Any]:
     from onboard.tools.reports import current_validation as cv
 
-    return cv.metrics(current_run(key, observer, seed), after=CURRENT_RUNS[key][4])
+    r = _current_run(key, observer, seed, model)
+    peak, peaking, settle = cv.transient(r)
+    return cv.metrics(r, after=CURRENT_RUNS[key][4]) | {
+        "transient": {"peak": peak, "peaking": peaking, "settle": settle}}
 
 
 # ----------------------------------------------------------------------------- ESESO
