@@ -25,7 +25,7 @@ import copy
 import math
 from collections import Counter
 from operator import attrgetter
-from typing import Callable, Iterable, Sequence
+from typing import Callable, Iterable, Mapping, Sequence
 
 import msgspec
 
@@ -178,6 +178,8 @@ class Engine:
         rejected: samples rejected, by ``<type>:<reason>``.
         mode: ``"surface"`` or ``"submerged"`` (from the newest depth).
         pipeline_errors: exceptions raised by each pipeline (it is then restarted).
+        nonfinite: estimates left out of the records because they were not finite, per
+            pipeline (a NaN or infinite value is an unknown quantity, published absent).
         latest: the newest record of each pipeline.
     """
 
@@ -224,6 +226,7 @@ class Engine:
         self.fresh_estimates = fresh_estimates
         self._ticks = 0
         self.pipeline_errors: Counter[str] = Counter()
+        self.nonfinite: Counter[str] = Counter()
         self.events: list[str] = []
         """Human-readable events (pipeline restarts, stale streams) for the health
         channel; each is in one :meth:`health` record (the next after it happened)."""
@@ -365,6 +368,10 @@ class Engine:
                 pev.clear()
             if not values:
                 continue
+            for v in values.values():
+                if v - v != 0.0:  # NaN or +-inf: drop every such entry (rare path)
+                    values = self._finite(p.name, values)
+                    break
             entry = self._std_names.get(id(p))
             std_names = entry[1] if entry is not None else self._std_columns(p)
             # the std_ entries in the order of values ({} for a pipeline without std_
@@ -386,6 +393,20 @@ class Engine:
                 self._shadows = None
         self._ticks += 1
         return records
+
+    def _finite(self, name: str, values: Mapping[str, float]) -> dict[str, float]:
+        """``values`` without its non-finite entries, each counted in :attr:`nonfinite`.
+        A record must not carry NaN or infinity: JSON has neither (msgspec writes
+        ``null``, which a subscriber decoding ``EstimateRecord`` rejects whole, losing
+        the finite estimates beside it), and architecture.md §5 publishes an unknown
+        quantity as absent."""
+        out = {}
+        for k, v in values.items():
+            if v - v == 0.0:
+                out[k] = v
+            else:
+                self.nonfinite[name] += 1
+        return out
 
     def _std_columns(self, p: Pipeline) -> dict[str, str]:
         """``std_<q>`` -> ``<q>`` for the columns of ``p`` (fixed at its construction),
@@ -419,6 +440,7 @@ class Engine:
                 target[f"{p.name}.{k}"] = float(v)
         rejected = dict(self.rejected)
         rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
+        rejected.update({f"pipeline:{k}:nonfinite": n for k, n in self.nonfinite.items()})
         return HealthRecord(vehicle=self.cfg.vehicle.id, t=t, rates_hz=rates_hz or {},
                             rejected=rejected, innovations=innovations, nis=nis,
                             events=(events or []) + self._new_events(), mode=self.mode,

@@ -179,3 +179,32 @@ def test_a_failing_pipeline_is_counted_restarted_and_the_others_carry_on(monkeyp
     h = eng.health(1.0)
     assert h.rejected["pipeline:broken:error"] == 1
     assert any("broken: ValueError" in e for e in h.events)
+
+
+class HalfKnown(Recorder):
+    """A pipeline whose position is not known (NaN) while its heading is."""
+
+    name = "half"
+    columns = ("heading", "north", "std_north", "speed")
+
+    def step(self, t, samples):
+        return {"heading": 1.0, "north": math.nan, "std_north": math.inf, "speed": -math.inf}
+
+
+def test_non_finite_estimates_are_left_out_of_the_record_and_counted():
+    """A record carries only finite values: JSON has no NaN (msgspec writes null, and a
+    subscriber decoding EstimateRecord drops the whole record, the finite heading with
+    it); the unknown quantities are absent, counted per pipeline in health."""
+    import msgspec
+
+    from onboard.core.messages import EstimateRecord
+
+    eng = Engine(Config(), [HalfKnown(), Recorder()])
+    eng.push(imu(1.0))
+    (half, rec) = eng.tick(1.0)
+    assert half.values == {"heading": 1.0} and half.std == {}
+    assert rec.values == {"n": 1.0}
+    decoded = msgspec.json.decode(msgspec.json.encode(half), type=EstimateRecord)
+    assert decoded.values == {"heading": 1.0}
+    assert eng.health(1.0).rejected["pipeline:half:nonfinite"] == 3
+    assert "pipeline:rec:nonfinite" not in eng.health(1.0).rejected
