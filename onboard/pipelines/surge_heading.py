@@ -94,6 +94,10 @@ class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, froze
     """AIE: variance of the input-estimation error V_d (u^2), §2.2."""
     kf_v_d: float = 1.0
     """KF baseline: variance of the commanded input's error (u^2)."""
+    kf_bias_q: float = 0.0
+    """KF baseline: random walk of its input-bias state ((u^2)/s; 0: no bias state).
+    The forecast input is the nominal one plus a bias the filter estimates with the
+    rest of its state (kalman.BiasIncrementKF)."""
     q_v: float = 0.0
     """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
     known_input: bool = True
@@ -111,6 +115,7 @@ class SurgeAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, froz
     u_scale: float = 1.0
     r_d: float = 10.0
     v_d: float = 0.1
+    kf_bias_q: float = 0.01
 
 
 class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
