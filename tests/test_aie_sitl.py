@@ -164,3 +164,37 @@ def test_receiver_accuracy_as_noise_through_a_multipath_period() -> None:
     for p in ("aie", "kf"):
         assert res[True, p][1] < 0.85 * res[False, p][1]
         assert res[True, p][0] < 1.02 * res[False, p][0]
+
+
+def test_effect_waves_aie_and_kf_below_the_raw_speed() -> None:
+    """effect-waves (undeclared 2.5 s regular waves moving the boat +-0.38 m/s), first
+    120 s: between fixes the published speed follows the accelerometer (imu_aiding), so
+    the wave's acceleration the first-order model lacks is in it. Full 600 s runs, seeds
+    1-3: docs/aie.md 3.1.1."""
+    m = sitl_metrics(run_sitl("effect-waves", duration=120.0, seed=1))
+    a, k, nav = m["aie"]["speed"], m["kf"]["speed"], m["nav"]["speed"]
+    print(f"effect-waves 120 s: aie {a:.4f} kf {k:.4f} raw {nav:.4f}")
+    # measured seed 1: AIE 0.066, KF 0.053 against the raw 0.085 m/s (without the
+    # accelerometer, 600 s: AIE 0.088, KF 0.091 against 0.073)
+    assert a < 0.9 * nav
+    assert k < 0.8 * nav
+
+
+EFFECT_ROWS = ("clean", "effect-current", "effect-sideslip", "effect-waves",
+               "effect-gps-latency", "effect-thrust-nonlinearity", "effect-quadratic-drag",
+               "effect-surge-yaw-coupling", "effect-compass-deviation", "effect-heading-bias",
+               "effect-gyro-bias", "effect-two")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", EFFECT_ROWS)
+def test_every_rudder_boat_effect_scenario_aie_and_kf_below_the_raw_speed(scenario) -> None:
+    """docs/aie.md 3.1.1, seed 1, 600 s: the AIE and the KF speed below the raw receiver
+    speed at the ticks on every surface-boat effect scenario."""
+    m = runs.aie_metrics(scenario, 1)
+    a, k, nav = m["aie"]["speed"], m["kf"]["speed"], m["nav"]["speed"]
+    print(f"{scenario}: aie {a:.4f} kf {k:.4f} raw {nav:.4f}")
+    # measured: AIE 0.027-0.096 (0.53-0.86x raw, the largest on effect-waves and
+    # effect-gps-latency), KF 0.041-0.104 (0.67-0.91x)
+    assert a < 0.95 * nav
+    assert k < 0.95 * nav
