@@ -611,15 +611,15 @@ class SurgeHeadingPipeline:
                 self._acc_bad += 1
             w.sr += self.sigma_p ** 2
         sog = s.sog_mps
+        cog, psi = s.cog_rad, self._psi_last
+        if (self._imu is not None and sog is not None and cog is not None
+                and psi is not None and abs(sog) > _CRAB_MIN_SPEED):
+            self._imu.crab(cog - psi)   # course over ground minus heading
         if sog is not None and self.cfg.gnss_velocity and math.isfinite(sog):
             # signed path speed: astern when the course is more than 90 deg off the
             # heading (the newest compass reading; GNSS-only logs: always ahead)
-            cog, psi = s.cog_rad, self._psi_last
-            if cog is not None and psi is not None:
-                if math.cos(cog - psi) < 0.0:
-                    sog = -sog
-                if self._imu is not None and abs(sog) > _CRAB_MIN_SPEED:
-                    self._imu.crab(cog - psi)
+            if cog is not None and psi is not None and math.cos(cog - psi) < 0.0:
+                sog = -sog
             w.n_v += 1
             w.sv += sog
             sacc = s.speed_acc_mps
