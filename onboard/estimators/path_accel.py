@@ -29,6 +29,7 @@ None and the caller falls back to its model.
 from __future__ import annotations
 
 import math
+from array import array
 from bisect import bisect_right
 
 GRAVITY = 9.80665
@@ -51,7 +52,7 @@ class PathAccelerometer:
                  "bias_var", "bias_gain", "n_samples", "n_breaks", "_t", "_V", "_S", "_a",
                  "_roll", "_pitch", "_t_att", "_beta", "_t_last", "_bias_n")
 
-    def __init__(self, keep_s: float = 10.0, max_gap_s: float = 0.5,
+    def __init__(self, keep_s: float = 6.0, max_gap_s: float = 0.5,
                  max_attitude_age_s: float = 0.5, bias_gain: float = 0.005,
                  gravity: float = GRAVITY) -> None:
         """Args:
@@ -71,10 +72,12 @@ class PathAccelerometer:
         self._bias_n = 0
         self.n_samples = 0
         self.n_breaks = 0
-        self._t: list[float] = []
-        self._V: list[float] = []
-        self._S: list[float] = []
-        self._a: list[float] = []
+        # flat arrays of doubles: a copy of the pipeline (the engine's latency
+        # shadows) copies them as memory blocks
+        self._t = array("d")
+        self._V = array("d")
+        self._S = array("d")
+        self._a = array("d")
         self._roll = self._pitch = 0.0
         self._t_att = -math.inf
         self._beta = 0.0
@@ -128,7 +131,7 @@ class PathAccelerometer:
             self._V.append(V0 + a0 * dt)
             self._S.append(self._S[-1] + V0 * dt + 0.5 * a0 * dt * dt)
             self._a.append(a)
-            if t - ts[0] > 2.0 * self.keep_s:
+            if t - ts[0] > self.keep_s + 2.0:
                 cut = bisect_right(ts, t - self.keep_s)
                 del ts[:cut], self._V[:cut], self._S[:cut], self._a[:cut]
         else:   # same time stamp: the newer reading
@@ -140,10 +143,7 @@ class PathAccelerometer:
     def _break(self) -> None:
         if self._t:
             self.n_breaks += 1
-        self._t.clear()
-        self._V.clear()
-        self._S.clear()
-        self._a.clear()
+        del self._t[:], self._V[:], self._S[:], self._a[:]
 
     def _at(self, t: float) -> tuple[float, float] | None:
         """Cumulative ``(V, S)`` at ``t`` (acceleration held after each sample, up to
