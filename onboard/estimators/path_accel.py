@@ -185,3 +185,54 @@ class PathAccelerometer:
         g = max(self.bias_gain, 1.0 / self._bias_n)
         self.bias += g * e
         self.bias_var += g * (e * e - self.bias_var)
+
+
+class ForecastBlend:
+    """The weight of two forecasts of one quantity that minimises the mean square error
+    of their combination ``w f_imu + (1 - w) f_model``, learned from their misses of the
+    same measurements.
+
+    With misses ``e_m``, ``e_i`` (forecast minus measurement; the measurement's noise and
+    the common starting error are in both) the optimal weight of the second is
+    ``w = (E[e_m^2] - E[e_m e_i]) / (E[e_m^2] + E[e_i^2] - 2 E[e_m e_i])``: the common
+    parts cancel, so only the forecasts' own errors and their correlation count. The
+    moments are running means (weight ``gain``, faster over the first ``1 / gain``
+    misses); before ``min_n`` misses the weight is ``w0``.
+
+    Attributes:
+        w: the current weight of the second forecast, in [0, 1].
+        n: misses seen.
+    """
+
+    __slots__ = ("gain", "min_n", "w0", "w", "n", "_mm", "_ii", "_mi")
+
+    def __init__(self, gain: float = 0.01, min_n: int = 20, w0: float = 1.0) -> None:
+        """Args:
+            gain: weight of the newest miss in the running moments.
+            min_n: misses before the weight is learned.
+            w0: the weight until then.
+        """
+        self.gain = gain
+        self.min_n = min_n
+        self.w0 = w0
+        self.w = w0
+        self.n = 0
+        self._mm = self._ii = self._mi = 0.0
+
+    def add(self, e_model: float, e_imu: float) -> None:
+        """One pair of misses (same unit, e.g. m/s) of the same measurement."""
+        if not (math.isfinite(e_model) and math.isfinite(e_imu)):
+            return
+        self.n += 1
+        g = max(self.gain, 1.0 / self.n)
+        self._mm += g * (e_model * e_model - self._mm)
+        self._ii += g * (e_imu * e_imu - self._ii)
+        self._mi += g * (e_model * e_imu - self._mi)
+        if self.n < self.min_n:
+            return
+        den = self._mm + self._ii - 2.0 * self._mi
+        if den <= 1e-12:
+            self.w = self.w0
+            return
+        w = (self._mm - self._mi) / den
+        self.w = 0.0 if w < 0.0 else 1.0 if w > 1.0 else w

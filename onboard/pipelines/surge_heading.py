@@ -47,7 +47,7 @@ from onboard.estimators.axis_model import (
 )
 from onboard.estimators.dead_reckoning import DeadReckoner
 from onboard.estimators.kalman import IncrementKF
-from onboard.estimators.path_accel import PathAccelerometer
+from onboard.estimators.path_accel import ForecastBlend, PathAccelerometer
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used."""
@@ -464,6 +464,9 @@ class SurgeHeadingPipeline:
         self._psi_dr = 0.0  # heading (rad, unwrapped) at the dead reckoning's time
         self._imu: PathAccelerometer | None = PathAccelerometer() if cfg.imu_aiding else None
         """The accelerometer's path acceleration, integrated (``imu_aiding``)."""
+        self._blend = ForecastBlend()
+        """Weight of the accelerometer's speed forecast against the model's, from their
+        misses of the Doppler speed at each surge step."""
 
     # -- helpers -----------------------------------------------------------------------
 
@@ -785,8 +788,15 @@ class SurgeHeadingPipeline:
         self.surge.step(self._disc(self.surge.damping(cmd), dt), y, R_s, R_s_prev, cmd,
                         y_v, self.sigma_v ** 2 / w.n_v + w.svx / (w.n_v * w.n_v)
                         if w.n_v else 0.0)
-        if self._imu is not None and v_prev is not None and w.n_v:
-            self._imu.update_bias(pp[0], tp, self.surge.kf.v - v_prev)
+        imu = self._imu
+        if imu is not None and v_prev is not None and y_v is not None:
+            # both forecasts of the speed at tp against the measured one: the model's
+            # (the filter's forecast) and the accelerometer's from the last estimate
+            acc = imu.delta(pp[0], tp)
+            rz = self.surge.rate_z
+            if acc is not None and rz is not None:
+                self._blend.add(rz, v_prev + acc[0] - y_v)
+            imu.update_bias(pp[0], tp, self.surge.kf.v - v_prev)
         # §3.3 position from the estimated increment along the mid-chord heading
         ys = self.surge.kf.d
         if course_mode:
@@ -917,18 +927,23 @@ class SurgeHeadingPipeline:
             imu = self._imu
             acc = (imu.delta(self._t_s, t) if imu is not None and 1e-6 < tau
                    and tau_raw <= self.cfg.imu_horizon_s else None)
-            if acc is not None:   # the measured acceleration (path_accel.py)
-                ds, v = skf.v * tau + acc[1], skf.v + acc[0]
-                V_a = imu.bias_var  # type: ignore[union-attr]
-                var_ds = tau * tau * (P[3] + 0.25 * tau * tau * V_a)
-                var_v = P[3] + tau * tau * V_a
-            elif tau > 1e-6:
+            if tau > 1e-6:
                 k = self._disc(surge.damping(surge.last_command), tau)
                 ds, v = skf.predict_ahead(
                     k, surge.input_ahead(last[1] if last is not None else None))
                 V_u = surge.V_u
                 var_ds = k.c1 * k.c1 * P[3] + k.c2 * k.c2 * V_u
                 var_v = k.alpha * k.alpha * P[3] + k.c1 * k.c1 * V_u
+                if acc is not None:
+                    # the accelerometer's forecast (path_accel.py), blended with the
+                    # model's by the weight their misses of the Doppler speed give
+                    wi = self._blend.w
+                    wm = 1.0 - wi
+                    V_a = imu.bias_var  # type: ignore[union-attr]
+                    ds = wm * ds + wi * (skf.v * tau + acc[1])
+                    v = wm * v + wi * (skf.v + acc[0])
+                    var_ds = wm * var_ds + wi * tau * tau * (P[3] + 0.25 * tau * tau * V_a)
+                    var_v = wm * var_v + wi * (P[3] + tau * tau * V_a)
             out["speed"] = v
             psi_s = self._psi_s
             if psi_s is None:   # changes only when a window closes or a command arrives
