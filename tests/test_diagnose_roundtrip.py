@@ -165,8 +165,11 @@ def test_thruster_swap_round_trip(tmp_path):
     """``effect-thruster-swap`` (SERVO1 drives the starboard thruster reversed, SERVO3 the
     port one), seed 1, diagnosed with config/twin-thruster-boat.toml; the overlay's
     re-mapped inputs and surge model scored on the test part (480-600 s). Measured on the
-    realistic hull: aie speed 0.070 -> 0.037, kf speed 0.131 -> 0.043 m/s (0.278 -> 0.049
-    on the lag-free boat), kf heading 0.052 -> 0.024 rad."""
+    realistic hull: aie speed 0.053 -> 0.034, kf speed 0.045 -> 0.041 m/s, kf heading
+    0.052 -> 0.024 rad. The KF's speed hardly depends on the mapping since its forecast
+    carries an estimated input bias and follows the accelerometer between fixes
+    (docs/aie.md, section 1); without those it went 0.131 -> 0.043 (0.278 -> 0.049 on the
+    lag-free boat)."""
     base = str(Path(BASE).with_name("twin-thruster-boat.toml"))
     log, truth = tmp_path / "log.tlog", tmp_path / "truth.jsonl"
     run_to_tlog("effect-thruster-swap", log, truth, seed=1)
@@ -186,7 +189,7 @@ def test_thruster_swap_round_trip(tmp_path):
     print(res)
     b, a = res["before"], res["after"]
     assert a["aie.speed"] < 0.7 * b["aie.speed"]
-    assert a["kf.speed"] < 0.4 * b["kf.speed"]  # 0.33
+    assert a["kf.speed"] < b["kf.speed"]  # 0.91
     assert a["kf.heading"] < 0.6 * b["kf.heading"]
 
 
