@@ -30,16 +30,17 @@ def test_jaiabot_turns_aie_beats_the_kf_and_the_raw_gnss_speed(jaiabot) -> None:
     m = sitl_metrics(jaiabot)
     a, k, nav = m["aie"], m["kf"], m["nav"]
     print(m)
-    # measured (docs/figures.json, aie.jaiabot_turns.*, seeds 1-3, the hull with its 0.3 s
-    # shaft lag): speed AIE ~0.05, KF ~0.10 against the raw GNSS speed over ground
-    # 0.100-0.101 m/s: the KF beats it only narrowly, its default thrust map is wrong for
-    # this boat and biases its forecast between fixes (docs/aie.md; the identified model of
-    # config/sitl-jaiabot.toml: aie.jaiabot_turns.speed_rmse.kf_identified).
+    # measured (docs/aie.md 3.1, seeds 1-3, the hull with its 0.3 s shaft lag): speed AIE
+    # 0.050-0.052, KF 0.078-0.079 against the raw GNSS speed over ground 0.100-0.101 m/s
+    # (AIE 0.65x the KF, the goal 0.8x). The KF's default thrust map is wrong for this
+    # boat; its input-bias state takes most of that out (without it: KF 0.094-0.097, AIE
+    # 0.53x; the identified model of config/sitl-jaiabot.toml:
+    # aie.jaiabot_turns.speed_rmse.kf_identified).
     # Heading 0.0228 vs 0.0242 rad; position 0.96 vs 0.96 m (a tie: both follow the
     # Doppler speed)
     assert a["speed"] < 0.08
     assert a["speed"] < 0.8 * nav["speed"]
-    assert a["speed"] < 0.6 * k["speed"]
+    assert a["speed"] < 0.8 * k["speed"]
     assert k["speed"] < nav["speed"]
     assert a["heading"] < k["heading"]
     assert a["position"] < 1.3 and a["position"] < 1.1 * k["position"]
