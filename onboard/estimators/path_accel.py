@@ -24,6 +24,9 @@ Per IMU sample (body FRD, specific force ``f`` in m/s^2, rates in rad/s):
 A sample without a recent attitude (older than ``max_attitude_age_s``) or after a silence
 longer than ``max_gap_s`` starts the integral afresh: queries across the break return
 None and the caller falls back to its model.
+
+:class:`ForecastBlend` weighs this forecast against the model's by their misses of the
+same measurements (the GNSS Doppler speed at each filter step).
 """
 
 from __future__ import annotations

@@ -192,7 +192,8 @@ class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     imu_aiding: bool = True
     """Where the log has an IMU and an attitude (roll, pitch), predict the speed and
     path from the last surge step to the output with the measured path acceleration
-    (gravity removed, bias estimated: estimators/path_accel.py) instead of the model."""
+    (gravity removed, bias estimated: estimators/path_accel.py) as well as the model,
+    blended by the weight that minimises their misses of the Doppler speed."""
     imu_horizon_s: float = 1.0
     """Longest prediction (s) made with the accelerometer; beyond it, the model."""
     surge: SurgeAxisConfig = SurgeAxisConfig()
