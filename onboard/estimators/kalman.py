@@ -201,3 +201,107 @@ class IncrementKF:
     def std_v(self) -> float:
         """One-sigma uncertainty of the rate ``v`` (m/s or rad/s), ``sqrt(P_vv)``."""
         return math.sqrt(self.P[3])
+
+
+class BiasIncrementKF(IncrementKF):
+    """:class:`IncrementKF` with a random-walk input bias ``b`` as a fourth state.
+
+    The classical remedy for a known input that is systematically wrong (the KF
+    baseline's nominal thrust map on a boat it does not fit): the forecast input is
+    ``u + b``, ``b`` constant but for a random walk of ``q_b`` (m/s^2)^2 per second, and
+    the measurements (increment and rate rows) estimate it with the rest of the state::
+
+        d+ = c1 v + c2 (u + b),   v+ = alpha v + c1 (u + b),   e+ = n,   b+ = b + w_b
+
+    ``P`` keeps the packed ``(d, v, e)`` block of the base class; the covariances with
+    ``b`` are ``Pb = [P_db, P_vb, P_eb]`` and ``pbb``. Bar the bias this is the base
+    filter (tests/test_kf.py checks it reduces to it with ``q_b = 0`` and ``pbb = 0``).
+
+    Attributes (beyond the base class's):
+        b: the input bias (m/s^2 or rad/s^2); Pb, pbb: its covariances.
+        q_b: its random-walk variance per second ((m/s^2)^2 / s).
+    """
+
+    __slots__ = ("b", "Pb", "pbb", "q_b", "pbb0")
+
+    def __init__(self, R: float, q_v: float = 0.0, correlated: bool = True,
+                 q_b: float = 0.01, pbb0: float = 1.0) -> None:
+        """``R``, ``q_v``, ``correlated``: as :class:`IncrementKF`; ``q_b``: the bias's
+        random walk ((m/s^2)^2 per second); ``pbb0``: its variance at the start."""
+        super().__init__(R, q_v, correlated)
+        self.q_b = q_b
+        self.pbb0 = pbb0
+        self.b = 0.0
+        self.Pb = [0.0, 0.0, 0.0]
+        self.pbb = pbb0
+
+    def init(self, y: float, dt: float, R_prev: float, var_v: float) -> None:
+        """As :meth:`IncrementKF.init`; the bias restarts at 0 with variance ``pbb0``
+        only on the first start (a restart after a gap keeps what was learned)."""
+        self.Pb = [0.0, 0.0, 0.0]
+        super().init(y, dt, R_prev, var_v)
+
+    def forecast(self, k: Discrete, u: float, V_u: float) -> None:
+        """Forecast over one step with input ``u + b`` (see the class doc)."""
+        c1, c2, al = k.c1, k.c2, k.alpha
+        dd, dv, de, vv, ve, ee = self.P
+        db, vb, eb = self.Pb
+        bb = self.pbb
+        v = self.v
+        if self.correlated and self._skipped:
+            self.e, vn, nn, bn = 0.0, 0.0, self.R, 0.0
+        elif self.correlated:
+            self.e = self._y - self.d + self.e
+            vn = ve - dv
+            nn = dd - 2.0 * de + ee
+            bn = eb - db
+        else:
+            self.e = 0.0
+            vn = nn = bn = 0.0
+        self._skipped = False
+        ub = u + self.b
+        self.d = c1 * v + c2 * ub
+        self.v = al * v + c1 * ub
+        self.P = [c1 * c1 * vv + 2.0 * c1 * c2 * vb + c2 * c2 * (bb + V_u),
+                  c1 * al * vv + (c1 * c1 + c2 * al) * vb + c2 * c1 * (bb + V_u),
+                  c1 * vn + c2 * bn,
+                  al * al * vv + 2.0 * al * c1 * vb + c1 * c1 * (bb + V_u) + self.q_v,
+                  al * vn + c1 * bn,
+                  nn]
+        self.Pb = [c1 * vb + c2 * bb, al * vb + c1 * bb, bn]
+        self.pbb = bb + self.q_b * k.dt
+
+    def _apply(self, pc: tuple[float, float, float, float], S: float, z: float) -> None:
+        """``x -= K z``, ``P -= K (P C')^T`` with ``K = P C' / S`` (``pc = P C'``)."""
+        cd, cv, ce, cb = pc
+        Ld, Lv, Le, Lb = cd / S, cv / S, ce / S, cb / S
+        self.d -= Ld * z
+        self.v -= Lv * z
+        self.e -= Le * z
+        self.b -= Lb * z
+        dd, dv, de, vv, ve, ee = self.P
+        db, vb, eb = self.Pb
+        vv_n = vv - Lv * cv
+        self.P = [dd - Ld * cd, dv - Ld * cv, de - Ld * ce,
+                  vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ce, ee - Le * ce]
+        self.Pb = [db - Ld * cb, vb - Lv * cb, eb - Le * cb]
+        bb_n = self.pbb - Lb * cb
+        self.pbb = bb_n if bb_n > 1e-300 else 1e-300
+        self.Ld, self.Lv = Ld, Lv
+
+    def update(self) -> None:
+        """Data assimilation of the increment row ``C = [1, 0, -1, 0]`` (§2.2)."""
+        dd, dv, de, vv, ve, ee = self.P
+        db, vb, eb = self.Pb
+        self._apply((dd - de, dv - ve, de - ee, db - eb), self.S, self.z)
+
+    def update_rate(self, y_v: float, R_v: float, gate: float = math.inf) -> float:
+        """The measured rate, row ``C_v = [0, 1, 0, 0]`` (as the base class)."""
+        dd, dv, de, vv, ve, ee = self.P
+        S = vv + R_v
+        z = self.v - y_v
+        nis = z * z / S
+        if not nis <= gate:
+            return nis
+        self._apply((dv, vv, ve, self.Pb[1]), S, z)
+        return nis

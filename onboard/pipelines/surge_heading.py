@@ -37,7 +37,7 @@ import msgspec
 
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame, wrap_2pi, wrap_pi
-from onboard.core.messages import ActuatorCommand, Attitude, GnssFix, Heading, Sample
+from onboard.core.messages import ActuatorCommand, Attitude, GnssFix, Heading, Imu, Sample
 from onboard.estimators.axis_model import (
     AxisModel,
     Discrete,
@@ -47,6 +47,7 @@ from onboard.estimators.axis_model import (
 )
 from onboard.estimators.dead_reckoning import DeadReckoner
 from onboard.estimators.kalman import IncrementKF
+from onboard.estimators.path_accel import ForecastBlend, PathAccelerometer
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used."""
@@ -93,6 +94,10 @@ class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, froze
     """AIE: variance of the input-estimation error V_d (u^2), §2.2."""
     kf_v_d: float = 1.0
     """KF baseline: variance of the commanded input's error (u^2)."""
+    kf_bias_q: float = 0.0
+    """KF baseline: random walk of its input-bias state ((u^2)/s; 0: no bias state).
+    The forecast input is the nominal one plus a bias the filter estimates with the
+    rest of its state (kalman.BiasIncrementKF)."""
     q_v: float = 0.0
     """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
     known_input: bool = True
@@ -110,6 +115,7 @@ class SurgeAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, froz
     u_scale: float = 1.0
     r_d: float = 10.0
     v_d: float = 0.1
+    kf_bias_q: float = 0.01
 
 
 class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
@@ -183,6 +189,13 @@ class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     """Input estimate beyond this multiple of u_max (before saturation) is divergence."""
     divergence_nis: float = 25.0
     """Mean NIS over ~20 steps above this is divergence (expected value ~1)."""
+    imu_aiding: bool = True
+    """Where the log has an IMU and an attitude (roll, pitch), predict the speed and
+    path from the last surge step to the output with the measured path acceleration
+    (gravity removed, bias estimated: estimators/path_accel.py) as well as the model,
+    blended by the weight that minimises their misses of the Doppler speed."""
+    imu_horizon_s: float = 1.0
+    """Longest prediction (s) made with the accelerometer; beyond it, the model."""
     surge: SurgeAxisConfig = SurgeAxisConfig()
     heading: HeadingAxisConfig = HeadingAxisConfig()
 
@@ -376,6 +389,9 @@ class _Window:
 _RESIDUAL_GAIN = 0.05
 """Weight of the newest anchor residual in its running mean square (~20 surge steps)."""
 
+_CRAB_MIN_SPEED = 0.5
+"""Below this speed over ground (m/s) the course is too noisy for the crab angle."""
+
 AxisFactory = Callable[[AxisModel, AxisConfig, AieConfig], AxisFilter]
 
 
@@ -447,6 +463,11 @@ class SurgeHeadingPipeline:
         self._dr: DeadReckoner | None = None
         """Dead reckoning since the last surge step, while windows pass without a fix."""
         self._psi_dr = 0.0  # heading (rad, unwrapped) at the dead reckoning's time
+        self._imu: PathAccelerometer | None = PathAccelerometer() if cfg.imu_aiding else None
+        """The accelerometer's path acceleration, integrated (``imu_aiding``)."""
+        self._blend = ForecastBlend()
+        """Weight of the accelerometer's speed forecast against the model's, from their
+        misses of the Doppler speed at each surge step."""
 
     # -- helpers -----------------------------------------------------------------------
 
@@ -552,7 +573,8 @@ class SurgeHeadingPipeline:
         subclasses of the input messages get their base's handler."""
         h = None
         for base, fn in ((GnssFix, self._on_fix), (Heading, self._on_heading),
-                         (Attitude, self._on_attitude), (ActuatorCommand, self._on_command)):
+                         (Attitude, self._on_attitude), (ActuatorCommand, self._on_command),
+                         (Imu, self._on_imu)):
             if issubclass(cls, base):
                 h = fn
                 break
@@ -593,10 +615,13 @@ class SurgeHeadingPipeline:
                 self._acc_bad += 1
             w.sr += self.sigma_p ** 2
         sog = s.sog_mps
+        cog, psi = s.cog_rad, self._psi_last
+        if (self._imu is not None and sog is not None and cog is not None
+                and psi is not None and abs(sog) > _CRAB_MIN_SPEED):
+            self._imu.crab(cog - psi)   # course over ground minus heading
         if sog is not None and self.cfg.gnss_velocity and math.isfinite(sog):
             # signed path speed: astern when the course is more than 90 deg off the
             # heading (the newest compass reading; GNSS-only logs: always ahead)
-            cog, psi = s.cog_rad, self._psi_last
             if cog is not None and psi is not None and math.cos(cog - psi) < 0.0:
                 sog = -sog
             w.n_v += 1
@@ -617,10 +642,17 @@ class SurgeHeadingPipeline:
         self._add_heading(s.t, s.heading_rad + dec)
 
     def _on_attitude(self, s: Attitude) -> None:
+        if self._imu is not None:
+            self._imu.attitude(s.t, s.roll_rad, s.pitch_rad)
         if self._t0 is None:
             self._start(s.t)
         if s.yaw_selected and s.t - self._t_heading > HEADING_HOLD_S:
             self._add_heading(s.t, s.yaw_rad)
+
+    def _on_imu(self, s: Imu) -> None:
+        imu = self._imu
+        if imu is not None:
+            imu.add(s.t, s.accel_x, s.accel_y, s.gyro_x, s.gyro_y, s.gyro_z)
 
     def _on_command(self, s: ActuatorCommand) -> None:
         sc, yc = axis_commands(s, self.cfg.input_mode)
@@ -753,9 +785,19 @@ class SurgeHeadingPipeline:
         cmd = self._mean_command(pp[0], tp, 1)
         # the window's mean Doppler speed: the rate at the point's time tp
         y_v = w.sv / w.n_v if w.n_v else None
+        v_prev = self.surge.kf.v if self.surge.kf.initialized else None
         self.surge.step(self._disc(self.surge.damping(cmd), dt), y, R_s, R_s_prev, cmd,
                         y_v, self.sigma_v ** 2 / w.n_v + w.svx / (w.n_v * w.n_v)
                         if w.n_v else 0.0)
+        imu = self._imu
+        if imu is not None and v_prev is not None and y_v is not None:
+            # both forecasts of the speed at tp against the measured one: the model's
+            # (the filter's forecast) and the accelerometer's from the last estimate
+            acc = imu.delta(pp[0], tp)
+            rz = self.surge.rate_z
+            if acc is not None and rz is not None:
+                self._blend.add(rz, v_prev + acc[0] - y_v)
+            imu.update_bias(pp[0], tp, self.surge.kf.v - v_prev)
         # §3.3 position from the estimated increment along the mid-chord heading
         ys = self.surge.kf.d
         if course_mode:
@@ -883,6 +925,9 @@ class SurgeHeadingPipeline:
             ds, v = skf.v * tau, skf.v
             P = skf.P
             var_ds, var_v = P[3] * tau * tau, P[3]
+            imu = self._imu
+            acc = (imu.delta(self._t_s, t) if imu is not None and 1e-6 < tau
+                   and tau_raw <= self.cfg.imu_horizon_s else None)
             if tau > 1e-6:
                 k = self._disc(surge.damping(surge.last_command), tau)
                 ds, v = skf.predict_ahead(
@@ -890,6 +935,16 @@ class SurgeHeadingPipeline:
                 V_u = surge.V_u
                 var_ds = k.c1 * k.c1 * P[3] + k.c2 * k.c2 * V_u
                 var_v = k.alpha * k.alpha * P[3] + k.c1 * k.c1 * V_u
+                if acc is not None:
+                    # the accelerometer's forecast (path_accel.py), blended with the
+                    # model's by the weight their misses of the Doppler speed give
+                    wi = self._blend.w
+                    wm = 1.0 - wi
+                    V_a = imu.bias_var  # type: ignore[union-attr]
+                    ds = wm * ds + wi * (skf.v * tau + acc[1])
+                    v = wm * v + wi * (skf.v + acc[0])
+                    var_ds = wm * var_ds + wi * tau * tau * (P[3] + 0.25 * tau * tau * V_a)
+                    var_v = wm * var_v + wi * (P[3] + tau * tau * V_a)
             out["speed"] = v
             psi_s = self._psi_s
             if psi_s is None:   # changes only when a window closes or a command arrives

@@ -91,8 +91,8 @@ AIE_EFFECT_SCENARIOS: dict[str, tuple[int, ...]] = {
     "effect-sideslip": (1,),
     "effect-waves": (1, 2, 3),
     "effect-gps-latency": (1,),
-    "effect-thrust-nonlinearity": (1,),
-    "effect-quadratic-drag": (1,),
+    "effect-thrust-nonlinearity": (1, 2, 3),
+    "effect-quadratic-drag": (1, 2, 3),
     "effect-surge-yaw-coupling": (1, 2, 3),
     "effect-compass-deviation": (1,),
     "effect-heading-bias": (1,),
@@ -102,7 +102,7 @@ AIE_EFFECT_SCENARIOS: dict[str, tuple[int, ...]] = {
 }
 """The surface-boat scenarios beyond ``jaiabot-turns`` / ``twin-thruster-turns`` the AIE
 and KF are measured on (docs/aie.md 3.1.1; ``rudder-boat`` config, the scenario's own
-duration) and their seeds: 1-3 where seed 1 is a miss or near one, 1 elsewhere."""
+duration) and their seeds: 1-3 where seed 1 is, or was, a miss or near one, 1 elsewhere."""
 
 
 @cache
