@@ -158,6 +158,22 @@ def test_pipeline_columns_health_and_state_roundtrip() -> None:
     assert fresh.surge.rcie.theta == pa.surge.rcie.theta
 
 
+@pytest.mark.parametrize("mod", [aie_mod, kf_mod])
+def test_fixes_before_the_first_heading_do_not_poison_the_surge_axis(mod) -> None:
+    """The first surge windows close on fixes alone (no heading source yet: the chord
+    along the course); when the compass then starts, the next increment has no previous
+    heading to turn from and must not turn the speed and position into NaN for good."""
+    sim = simulate(SimConfig(duration=60.0, seed=1))
+    late = [s for s in sim.samples
+            if not (type(s).__name__ in ("Heading", "Attitude", "ImuSample") and s.t < 3.0)]
+    assert len(late) < len(sim.samples)
+    p = mod.build(msgspec.convert({}, AieConfig), 1.5, 0.03)
+    out = run_pipelines(late, [p], sim.t)[0]
+    for c in ("north", "east", "speed", "heading"):
+        assert np.isfinite(out[c][-1]), c
+    assert score(sim, out)["speed"] < 0.3
+
+
 def test_aie_runs_without_commands_and_with_1hz_irregular_gps() -> None:
     rng = np.random.default_rng(7)
     sim = simulate(SimConfig(duration=300.0, seed=2, gps_hz=1.0))

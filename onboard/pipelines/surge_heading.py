@@ -779,9 +779,10 @@ class SurgeHeadingPipeline:
             # course from two points of variance R_s over the baseline L: 2 R_s / L^2
             base2 = (n - n0) ** 2 + (e - e0) ** 2
             self._var_course = min(2.0 * R_s / base2, 1.0) if base2 > 0.0 else 1.0
-        else:
-            dpsi = wrap_pi(psi - pp[3])
-            y = path_increment(n - pp[1], e - pp[2], pp[3], dpsi)
+        else:  # a previous point from before the first heading has none: no turn
+            psi_prev = psi if math.isnan(pp[3]) else pp[3]
+            dpsi = wrap_pi(psi - psi_prev)
+            y = path_increment(n - pp[1], e - pp[2], psi_prev, dpsi)
         cmd = self._mean_command(pp[0], tp, 1)
         # the window's mean Doppler speed: the rate at the point's time tp
         y_v = w.sv / w.n_v if w.n_v else None
