@@ -80,3 +80,68 @@ class WaveOscillation(Effect):
 
 
 EFFECT = WaveOscillation()
+
+
+def lateral_shares(t: np.ndarray, north: np.ndarray, east: np.ndarray, psi: np.ndarray,
+                   y: np.ndarray, periods: np.ndarray, directions: np.ndarray,
+                   block_starts: np.ndarray | None = None, chunk: int = 500) -> np.ndarray:
+    """Share of the variance of the lateral residual ``y`` (m/s, zero mean) that the wave's
+    lateral regressors (:meth:`WaveOscillation.columns`) explain, for each cell
+    ``(periods[i], directions[i])`` (s, rad), by least squares.
+
+    With ``block_starts`` (indices where blocks begin) the four coefficients are fitted
+    per block: each block is explained by a wave of its own amplitude and phase, so only
+    the *encounter frequency* within a block has to match (the phase rate ``w - k V . d``
+    at the block's velocity over ground ``V``), not the phase carried over the whole
+    record. Without it one set of coefficients holds for all samples (the coherent fit
+    that :class:`WaveOscillation` makes). The normal equations of all cells are built at
+    once from block sums of the products of ``sin``/``cos`` of the phase and the heading.
+
+    Args:
+        t: time (s) of each sample.
+        north: north position (m; zeros without positions).
+        east: east position (m).
+        psi: measured heading (rad).
+        y: the residual to explain (m/s), zero mean.
+        periods: wave period (s) of each cell.
+        directions: direction the waves travel toward (rad) of each cell.
+        block_starts: first index of each block, starting with 0; None for one block.
+        chunk: cells evaluated per batch (memory: about 10 arrays of ``len(t) x chunk``).
+    """
+    y = np.asarray(y, float)
+    n = len(y)
+    sp, cp = np.sin(psi), np.cos(psi)
+    starts = np.array([0]) if block_starts is None else np.asarray(block_starts, int)
+    nb = len(starts)
+    bid = np.zeros(n, int)
+    bid[starts[1:]] = 1
+    ind = np.zeros((nb, n))
+    ind[np.cumsum(bid), np.arange(n)] = 1.0
+    weights = np.concatenate([ind * (sp * sp), ind * (sp * cp), ind * (cp * cp)])
+    proj = np.concatenate([ind * (sp * y), ind * (cp * y)])
+    total = float(y @ y)
+    out = np.zeros(len(periods))
+    if total <= 0.0:
+        return out
+    for a in range(0, len(periods), chunk):
+        w = 2.0 * math.pi / np.asarray(periods[a:a + chunk], float)
+        d = np.asarray(directions[a:a + chunk], float)
+        k = w * w / GRAVITY
+        ph = np.outer(t, w) - np.outer(north, k * np.cos(d)) - np.outer(east, k * np.sin(d))
+        s, c = np.sin(ph), np.cos(ph)
+        m = len(w)
+        ss, sc, cc = ((weights @ x).reshape(3, nb, m) for x in (s * s, s * c, c * c))
+        ys, yc = (proj @ s).reshape(2, nb, m), (proj @ c).reshape(2, nb, m)
+        # columns [-sp s, -sp c, cp s, cp c]; ss[0] = sum sp^2 s^2, ss[1] = sum sp cp s^2 ...
+        A = np.empty((nb, m, 4, 4))
+        A[..., 0, 0], A[..., 0, 1], A[..., 0, 2], A[..., 0, 3] = ss[0], sc[0], -ss[1], -sc[1]
+        A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = cc[0], -sc[1], -cc[1]
+        A[..., 2, 2], A[..., 2, 3], A[..., 3, 3] = ss[2], sc[2], cc[2]
+        for i in range(4):
+            for j in range(i):
+                A[..., i, j] = A[..., j, i]
+        b = np.stack([-ys[0], -yc[0], ys[1], yc[1]], axis=-1)
+        A += (1e-9 * np.trace(A, axis1=-2, axis2=-1)[..., None, None] + 1e-12) * np.eye(4)
+        x = np.linalg.solve(A, b[..., None])[..., 0]
+        out[a:a + chunk] = np.sum(x * b, axis=-1).sum(axis=0) / total
+    return out
