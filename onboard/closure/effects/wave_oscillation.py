@@ -33,6 +33,18 @@ def wave_phase(ds, period_s: float, direction_rad: float) -> np.ndarray:
     return w * ds.t - k * (north * math.cos(direction_rad) + east * math.sin(direction_rad))
 
 
+def encounter_rate(ds, period_s: float, direction_rad: float) -> np.ndarray:
+    """Rate (rad/s) of the wave phase of :func:`wave_phase` at the vehicle: the encounter
+    frequency ``w - k V . d`` at its measured velocity over ground ``V`` (``w`` alone
+    without positions)."""
+    w = 2.0 * math.pi / period_s
+    if not np.isfinite(ds.north).any():
+        return np.full(len(ds), w)
+    k = w * w / GRAVITY
+    v_d = np.nan_to_num(ds.v_n) * math.cos(direction_rad) + np.nan_to_num(ds.v_e) * math.sin(direction_rad)
+    return w - k * v_d
+
+
 class WaveOscillation(Effect):
     """The orbital velocity of a regular sea at the encounter phase (module docstring);
     the period and direction come from the residual's spectrum."""
@@ -54,10 +66,11 @@ class WaveOscillation(Effect):
         cols = {"lateral": np.column_stack([-sp * s, -sp * c, cp * s, cp * c])}
         if ds.has_commands:
             # along = U + out, out = cos(psi) w_n + sin(psi) w_e; in the derivative-form
-            # channel the effect adds out' + a out (phase rate taken as 2 pi / T).
-            w = 2.0 * math.pi / ctx.wave_period_s
+            # channel the effect adds out' + a out, at the encounter phase rate
+            # w - k (v_n cos(direction) + v_e sin(direction)) of the boat's velocity.
+            rate = encounter_rate(ds, ctx.wave_period_s, ctx.extra.get("wave_direction", 0.0))
             r = ds.r
-            ds_, dc = w * c, -w * s
+            ds_, dc = rate * c, -rate * s
             cols["along"] = np.column_stack([
                 cp * ds_ - r * sp * s + ctx.a * cp * s,
                 cp * dc - r * sp * c + ctx.a * cp * c,
