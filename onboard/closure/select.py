@@ -378,14 +378,13 @@ def find_wave(ds: Dataset, residual: np.ndarray, min_period_s: float = 2.0,
     grid's median share, so a coloured residual is not taken for a wave.
     """
     from onboard.closure.effects.wave_oscillation import lateral_shares
+    from onboard.closure.effects.wave_oscillation import track as wave_track
 
     y = np.asarray(residual, float)
     ok = np.isfinite(y)
     if ok.sum() < 200 or np.ptp(ds.t) < 10 * max_period_s:
         return None
     has_pos = bool(np.isfinite(ds.north).any())
-    if has_pos:
-        ok &= np.isfinite(ds.north) & np.isfinite(ds.east)
     step = max(1, int(0.2 / ds.dt + 1e-9))
     idx = np.flatnonzero(ok)[::step]
     if len(idx) < 100:
@@ -394,15 +393,17 @@ def find_wave(ds: Dataset, residual: np.ndarray, min_period_s: float = 2.0,
     if float(y @ y) <= 0:
         return None
     t = ds.t[idx]
-    north = ds.north[idx] if has_pos else np.zeros(len(idx))
-    east = ds.east[idx] if has_pos else np.zeros(len(idx))
+    north, east = wave_track(ds)
+    north, east = north[idx], east[idx]
     psi = ds.psi[idx]
+    v_n = np.nan_to_num(ds.v_n[idx]) if has_pos else None
+    v_e = np.nan_to_num(ds.v_e[idx]) if has_pos else None
     starts = _blocks(t, ds.run[idx], block_s)
 
     def scores(periods, directions, blocks):
         pp, dd = np.meshgrid(periods, directions, indexing="ij")
-        return lateral_shares(t, north, east, psi, y, pp.ravel(), dd.ravel(),
-                              blocks).reshape(pp.shape)
+        return lateral_shares(t, north, east, psi, y, pp.ravel(), dd.ravel(), blocks,
+                              v_north=v_n, v_east=v_e).reshape(pp.shape)
 
     periods = np.geomspace(min_period_s, max_period_s, 60)
     directions = np.linspace(0.0, 2 * np.pi, 24, endpoint=False) if has_pos else np.zeros(1)
