@@ -374,8 +374,11 @@ def find_wave(ds: Dataset, residual: np.ndarray, min_period_s: float = 2.0,
 
     Samples are taken at 5 Hz at most (encounter periods stay above a second). The
     false-alarm probability counts one independent sample per second of data and every
-    cell of both stages; the encounter-stage peak must also stand 20 times above that
-    grid's median share, so a coloured residual is not taken for a wave.
+    cell of both stages; the coherent share must also stand 20 times above the median
+    coherent share over the first stage's grid, so a coloured residual is not taken for
+    a wave. (The median of the block-wise shares is no guard: with a few cycles of a long
+    period per block its lobes are broad, and a strong 6 s wave with no positions raises
+    it to a fifth of its peak.)
     """
     from onboard.closure.effects.wave_oscillation import lateral_shares
     from onboard.closure.effects.wave_oscillation import track as wave_track
@@ -408,6 +411,7 @@ def find_wave(ds: Dataset, residual: np.ndarray, min_period_s: float = 2.0,
     periods = np.geomspace(min_period_s, max_period_s, 60)
     directions = np.linspace(0.0, 2 * np.pi, 24, endpoint=False) if has_pos else np.zeros(1)
     coarse = scores(periods, directions, starts)
+    coarse_coherent = scores(periods, directions, None)
     i, j = np.unravel_index(int(np.argmax(coarse)), coarse.shape)
     ratio = float(periods[1] / periods[0])
     fine_p = periods[i] * ratio ** np.linspace(-1.0, 1.0, 9)
@@ -422,7 +426,7 @@ def find_wave(ds: Dataset, residual: np.ndarray, min_period_s: float = 2.0,
     n_eff = max(8.0, len(idx) * step * ds.dt)
     cells = coarse.size * coh.size
     fap = min(1.0, cells * (1.0 - sh) ** ((n_eff - 5) / 2))
-    if float(np.max(coarse)) < 20.0 * float(np.median(coarse)) or fap > max_p:
+    if sh < 20.0 * float(np.median(coarse_coherent)) or fap > max_p:
         return None
     return {"period": float(coh_p[k]), "direction": float(coh_d[m] % (2 * np.pi)),
             "share": sh, "false_alarm_p": fap,
