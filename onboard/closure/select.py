@@ -340,51 +340,97 @@ def _model_effects(names) -> tuple[str, ...]:
     return tuple(n for n in names if not ALL[n].transforms_data)
 
 
+def _blocks(t: np.ndarray, run: np.ndarray, block_s: float) -> np.ndarray:
+    """First index of each block of at most ``block_s`` seconds, blocks never spanning a
+    change of run label or a gap in time."""
+    new_seg = np.r_[True, run[1:] != run[:-1]] | np.r_[True, np.diff(t) > 1.0]
+    seg = np.cumsum(new_seg)
+    since = t - t[np.flatnonzero(new_seg)][seg - 1]
+    blk = np.floor(since / block_s)
+    return np.flatnonzero(np.r_[True, (seg[1:] != seg[:-1]) | (blk[1:] != blk[:-1])])
+
+
 def find_wave(ds: Dataset, residual: np.ndarray, min_period_s: float = 2.0,
-              max_period_s: float = 15.0, max_p: float = 1e-6) -> dict | None:
+              max_period_s: float = 15.0, max_p: float = 1e-6,
+              block_s: float = 30.0) -> dict | None:
     """The regular wave (period, direction) that best explains a lateral residual, or
     None if no wave is significant.
 
-    A grid search: for each period (log-spaced) and direction, the earth-frame wave
-    regressors of :mod:`.effects.wave_oscillation` are fitted to the residual and the
-    explained share of variance kept; the best cell is refined on a finer grid. The
-    false-alarm probability uses one effective sample per second and the number of
-    cells searched, and the share must be 20 times the median share, so a coloured
-    residual is not taken for a wave.
+    A moving boat meets the crests at the encounter frequency ``w - k V . d``, which
+    changes with its velocity over ground ``V``; over the whole record the phase
+    ``w t - k (N cos d + E sin d)`` winds through hundreds of radians, so the coherent fit
+    of :mod:`.effects.wave_oscillation` peaks in a cell far narrower than any grid over
+    2-15 s and all directions. The search therefore runs in two stages:
+
+    1. **Encounter frequency, block by block.** On ``block_s`` blocks (within each
+       contiguous part) the wave regressors get their own amplitude and phase per block
+       (:func:`.effects.wave_oscillation.lateral_shares` with blocks), so a cell scores
+       when its encounter frequency matches every block's at that block's speed and
+       heading. This score is smooth in period and direction: a grid of 60 log-spaced
+       periods and 24 directions finds the peak, refined on a 9 x 9 grid around it.
+    2. **Coherent phase.** Around that estimate (periods within 1.5 %, directions within
+       0.12 rad, 31 x 25 cells) one wave of fixed amplitude and phase is fitted to the
+       whole residual, as the effect's regressors will be.
+
+    Samples are taken at 5 Hz at most (encounter periods stay above a second). The
+    false-alarm probability counts one independent sample per second of data and every
+    cell of both stages; the coherent share must also stand 20 times above the median
+    coherent share over the first stage's grid, so a coloured residual is not taken for
+    a wave. (The median of the block-wise shares is no guard: with a few cycles of a long
+    period per block its lobes are broad, and a strong 6 s wave with no positions raises
+    it to a fifth of its peak.)
     """
-    wave = ALL["wave_oscillation"]
+    from onboard.closure.effects.wave_oscillation import lateral_shares
+    from onboard.closure.effects.wave_oscillation import track as wave_track
+
     y = np.asarray(residual, float)
     ok = np.isfinite(y)
     if ok.sum() < 200 or np.ptp(ds.t) < 10 * max_period_s:
         return None
-    y = y[ok] - y[ok].mean()
-    total = float(y @ y)
-    if total <= 0:
-        return None
     has_pos = bool(np.isfinite(ds.north).any())
-    directions = np.linspace(0.0, 2 * np.pi, 24, endpoint=False) if has_pos else [0.0]
-
-    def share(period: float, direction: float) -> float:
-        ctx = Context(wave_period_s=float(period), extra={"wave_direction": float(direction)})
-        X = wave.columns(ds, ctx)["lateral"][ok]
-        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-        return 1.0 - float(np.sum((y - X @ coef) ** 2)) / total
-
-    periods = np.geomspace(min_period_s, max_period_s, 120)
-    grid = np.array([[share(p, d) for d in directions] for p in periods])
-    i, j = np.unravel_index(int(np.argmax(grid)), grid.shape)
-    best = (float(grid[i, j]), float(periods[i]), float(directions[j]))
-    for p in periods[i] * np.linspace(0.97, 1.03, 25):
-        for d in directions[j] + np.linspace(-0.15, 0.15, 7 if has_pos else 1):
-            sh = share(p, d)
-            if sh > best[0]:
-                best = (sh, float(p), float(d % (2 * np.pi)))
-    sh, period, direction = best
-    n_eff = max(8.0, float(np.ptp(ds.t)))
-    fap = min(1.0, grid.size * (1.0 - sh) ** ((n_eff - 5) / 2))
-    if sh < 20.0 * float(np.median(grid)) or fap > max_p:
+    step = max(1, int(0.2 / ds.dt + 1e-9))
+    idx = np.flatnonzero(ok)[::step]
+    if len(idx) < 100:
         return None
-    return {"period": period, "direction": direction, "share": sh, "false_alarm_p": fap}
+    y = y[idx] - y[idx].mean()
+    if float(y @ y) <= 0:
+        return None
+    t = ds.t[idx]
+    north, east = wave_track(ds)
+    north, east = north[idx], east[idx]
+    psi = ds.psi[idx]
+    v_n = np.nan_to_num(ds.v_n[idx]) if has_pos else None
+    v_e = np.nan_to_num(ds.v_e[idx]) if has_pos else None
+    starts = _blocks(t, ds.run[idx], block_s)
+
+    def scores(periods, directions, blocks):
+        pp, dd = np.meshgrid(periods, directions, indexing="ij")
+        return lateral_shares(t, north, east, psi, y, pp.ravel(), dd.ravel(), blocks,
+                              v_north=v_n, v_east=v_e).reshape(pp.shape)
+
+    periods = np.geomspace(min_period_s, max_period_s, 60)
+    directions = np.linspace(0.0, 2 * np.pi, 24, endpoint=False) if has_pos else np.zeros(1)
+    coarse = scores(periods, directions, starts)
+    coarse_coherent = scores(periods, directions, None)
+    i, j = np.unravel_index(int(np.argmax(coarse)), coarse.shape)
+    ratio = float(periods[1] / periods[0])
+    fine_p = periods[i] * ratio ** np.linspace(-1.0, 1.0, 9)
+    fine_d = directions[j] + (np.linspace(-0.13, 0.13, 9) if has_pos else np.zeros(1))
+    fine = scores(fine_p, fine_d, starts)
+    i, j = np.unravel_index(int(np.argmax(fine)), fine.shape)
+    coh_p = fine_p[i] * np.linspace(0.985, 1.015, 31)
+    coh_d = fine_d[j] + (np.linspace(-0.12, 0.12, 25) if has_pos else np.zeros(1))
+    coh = scores(coh_p, coh_d, None)
+    k, m = np.unravel_index(int(np.argmax(coh)), coh.shape)
+    sh = float(coh[k, m])
+    n_eff = max(8.0, len(idx) * step * ds.dt)
+    cells = coarse.size * coh.size
+    fap = min(1.0, cells * (1.0 - sh) ** ((n_eff - 5) / 2))
+    if sh < 20.0 * float(np.median(coarse_coherent)) or fap > max_p:
+        return None
+    return {"period": float(coh_p[k]), "direction": float(coh_d[m] % (2 * np.pi)),
+            "share": sh, "false_alarm_p": fap,
+            "encounter_share": float(np.max(fine))}
 
 
 def _harmonics(psi: np.ndarray, orders=(1, 2, 3)) -> list[tuple[str, np.ndarray]]:
