@@ -98,7 +98,7 @@ def work(tmp_path_factory):
 def test_cat_clean_false_alarm_rate_over_ten_seeds(work):
     outs = [campaign.diagnose_seed("cat-clean", s, CFG, work) for s in range(1, 11)]
     alarms = [o for o in outs if campaign.is_false_alarm(o)]
-    # measured 2026-11-25: TODO
+    # measured 2026-11-25: 0/10 (nothing named, nothing unexplained); limit 10 %
     assert len(alarms) <= 1
 
 
@@ -106,6 +106,20 @@ def test_cat_clean_false_alarm_rate_over_ten_seeds(work):
 def test_cat_gps_latency_over_ten_seeds(work):
     outs = [campaign.diagnose_seed("cat-gps-latency", s, CFG, work) for s in range(1, 11)]
     found = [o.params["gps_latency"]["seconds"] for o in outs if "gps_latency" in o.named]
-    # measured 2026-11-25: TODO
+    # measured 2026-11-25: 10/10, 0.576-0.606 s (mean 0.593); seeds 5 and 6 also report
+    # the heading channel unexplained, seed 6 a gyro_bias of 0.0007 rad/s (extras, not
+    # counted here: docs/diagnose.md)
     assert len(found) >= 9
     assert all(abs(tau - 0.6) <= 0.15 for tau in found)
+
+
+@pytest.mark.slow
+def test_cat_seed_1_with_the_base_terms_off(work):
+    # The base model's shaft lag and course lag switched off: the accelerometer still
+    # finds no latency on the clean log and the true one on the latency log (measured:
+    # nothing named; 0.586 s, as with the terms on)
+    off = D.NO_BASE_TERMS
+    clean = campaign.diagnose_seed("cat-clean", 1, CFG, work, off)
+    assert not campaign.is_false_alarm(clean)
+    late_log = campaign.diagnose_seed("cat-gps-latency", 1, CFG, work, off)
+    assert late_log.params["gps_latency"]["seconds"] == pytest.approx(0.6, abs=0.15)
