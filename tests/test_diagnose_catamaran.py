@@ -34,7 +34,7 @@ CFG = Path(__file__).resolve().parent.parent / "config" / "sitl-catamaran.toml"
 LATENCY = ALL["gps_latency"]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def short_clean_run() -> D.Dataset:
     """The fit part of `cat-clean`, seed 1, flown for 240 s (one mission loop of 215 s),
     read as `onboard diagnose` reads it."""
@@ -50,7 +50,7 @@ def short_clean_run() -> D.Dataset:
 def late(ds: D.Dataset, seconds: float) -> D.Dataset:
     """``ds`` with its GNSS velocity ``seconds`` late (whole ticks, within each segment;
     the first ticks of each segment, which have none, are dropped)."""
-    k = int(round(seconds / ds.dt))
+    k = round(seconds / ds.dt)
     vn, ve = np.full(len(ds), np.nan), np.full(len(ds), np.nan)
     starts = np.flatnonzero(D.segment_starts(ds) == np.arange(len(ds)))
     for a, b in zip(starts, np.r_[starts[1:], len(ds)]):

@@ -4,19 +4,19 @@ Base model (what the AIE and current pipelines assume, plus what every hull does
 vehicle moves along its measured heading but for the hull's sway in turns, which builds up
 behind the turn rate (lateral velocity ``x_p r + x_pd r' + k_ur U r + k_urd (U r)'``:
 ``x_p`` the sway per yaw rate, ``x_pd = -x_p T_v`` the course lag of a sway that follows
-``x_p r`` with time constant ``T_v``, ``k_ur`` the drift out of a turn that scales with
-speed times yaw rate on a hull whose sway damping does not grow with speed, ``k_urd``
-its lag; :func:`onboard.closure.dataset.lateral_base_columns`); the measured heading
-turns with the gyro (heading change minus integrated gyro 0); and its through-water
-speed follows the first-order surge model of algorithms.md §1.1, ``U' = -a U + b c +
+``x_p r`` with time constant ``T_v``, and, switched on where wanted, ``k_ur`` the drift
+out of a turn that scales with speed times yaw rate on a hull whose sway damping does
+not grow with speed and ``k_urd`` its lag;
+:func:`onboard.closure.dataset.lateral_base_columns`); the measured heading turns with
+the gyro (heading change minus integrated gyro 0); and its through-water speed follows the first-order surge model of algorithms.md §1.1, ``U' = -a U + b c +
 c0``, from the normalized command ``c`` as the propeller applies it: through the shaft's
 first-order lag, whose time constant is found once per log (:func:`estimate_actuator_lag`,
 applied to the data by :func:`onboard.closure.dataset.lag_commands`). The shaft lag, the
-course lag and the speed drift can be switched off
-(:func:`onboard.closure.dataset.with_base_terms`) to show what each does. Effects add
-linear regressors to those channels (:mod:`.effects`). All parameters enter linearly once ``a`` and ``b`` are fixed,
-so a fit is a weighted least-squares problem over the stacked channels, iterated to
-refresh ``a`` and ``b``.
+course lag and the speed drift are switched by
+:func:`onboard.closure.dataset.with_base_terms` (default: shaft lag and course lag).
+Effects add linear regressors to those channels (:mod:`.effects`). All parameters enter
+linearly once ``a`` and ``b`` are fixed, so a fit is a weighted least-squares problem over
+the stacked channels, iterated to refresh ``a`` and ``b``.
 """
 
 from __future__ import annotations

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 
 from sitl.plants.base import Command, ManoeuvringMasses, PlantBase, PropulsionWrench
 
-__all__ = ["CatamaranParams", "Catamaran"]
+__all__ = ["Catamaran", "CatamaranParams"]
 
 G = 9.81
 """Acceleration of gravity (m/s^2), as in otter.m."""
