@@ -63,9 +63,18 @@ def estimate_actuator_lag(ds: Dataset, max_s: float = 1.5) -> float:
     ``[-U, -U|U|, c, c|c|, min(c, 0), 1]`` (the surge model with the catalog's drag and
     thrust-law terms, so that an unmodelled nonlinearity does not pose as a lag); the
     least residual wins, refined by a parabola through its neighbours. 0 without
-    commands, or when ``ds`` is to be fitted without the ``actuator_lag`` term."""
+    commands, or when ``ds`` is to be fitted without the ``actuator_lag`` term.
+
+    The speed is measured by the GNSS, so a GNSS latency would pose as shaft lag: where
+    the log has an accelerometer, the GNSS delay it shows (:meth:`GpsLatency.search
+    <onboard.closure.effects.gps_latency.GpsLatency.search>`, no hull model) is taken out
+    of the velocity first."""
     if not ds.has_commands or len(ds) < 100 or "actuator_lag" not in ds.base_terms:
         return 0.0
+    if ds.acc_x is not None:
+        late = ALL["gps_latency"].search(ds)
+        if late is not None:
+            ds = ALL["gps_latency"].transform(ds, late[0])
     taus = np.arange(0.0, max_s + 1e-9, max(ds.dt, 0.05))
     u = ds.along_s
     y = ds.speed_dot
