@@ -6,7 +6,7 @@ selects the effects that explain its structured residuals on held-out data, and 
 ``DIR/diagnosis.json`` and ``DIR/report.html`` (architecture.md §4.3); with
 ``--write-config`` also a config overlay of what it found (:mod:`onboard.closure.overlay`). Options in the
 config's ``[pipelines.diagnose]`` table: ``declared`` (effects already in the model),
-``holdout_metric``.
+``known``, ``holdout_metric``, ``base_terms``.
 """
 
 from __future__ import annotations
@@ -38,11 +38,16 @@ class DiagnoseConfig(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     """``surge_speed_open_loop_rmse_mps``, ``ground_velocity_rmse_mps`` or
     ``lateral_velocity_rmse_mps``; default: the ground velocity when commands exist."""
     rate_hz: float = 10.0
+    base_terms: list[str] = []
+    """The base model's optional terms to use (onboard.closure.dataset.BASE_TERMS:
+    ``actuator_lag``, ``course_lag``, ``speed_drift``; ``["none"]`` for none); default
+    ``actuator_lag`` and ``course_lag``. Switching them off shows what each one keeps
+    from being named an effect."""
 
 
 def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
              write_config: Path | None = None, config_note: str = "",
-             detected: bool = False) -> dict:
+             detected: bool = False, base_terms: tuple[str, ...] | None = None) -> dict:
     """Model closure of ``log`` under configuration ``cfg``: fit, select the effects,
     write ``diagnosis.json`` and ``report.html`` into ``out_dir``; return the diagnosis.
 
@@ -51,6 +56,9 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     :class:`UsageError`. ``write_config``: also write the config overlay there
     (``config_note`` names the base config in its header; ``detected``: ``cfg`` was
     detected from the log, so the overlay carries its vehicle and inputs).
+    ``base_terms``: the base model's optional terms to fit (default: the config's
+    ``base_terms``, else :data:`onboard.closure.dataset.DEFAULT_BASE_TERMS`;
+    :func:`onboard.closure.dataset.with_base_terms`).
     """
     opts = decode_section(cfg, "diagnose", DiagnoseConfig)
     declared = tuple(declared) or tuple(opts.declared)
@@ -59,6 +67,11 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
         raise UsageError(f"unknown declared effect(s) {unknown}; known: {', '.join(ALL)}")
     try:
         ds = dataset.from_log(log, cfg, rate_hz=opts.rate_hz)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    try:
+        ds = dataset.with_base_terms(ds, base_terms if base_terms is not None
+                                     else opts.base_terms)
     except ValueError as err:
         raise UsageError(str(err)) from None
     sel = select(ds, declared=declared, metric=opts.holdout_metric or None, known=opts.known)

@@ -13,7 +13,10 @@
   ``effect-quadratic-drag``, ``effect-surge-yaw-coupling``, ``effect-sideslip``,
   ``effect-waves``, ``effect-two`` (current and compass deviation at once) and ``clean``
   (the same boat and mission, nothing injected); ``clean-twin-thruster`` is the
-  twin-thruster boat's clean log (effect sensors, 600 s);
+  twin-thruster boat's clean log (effect sensors, 600 s); ``cat-clean`` is an Otter-class
+  catamaran's (speed-independent sway damping: it drifts out of its turns by ~0.5 s times
+  speed times yaw rate) and ``cat-gps-latency`` the same with an undeclared 0.6 s GNSS
+  latency;
 * the fault-injection material, a paper scenario with one *declared* sensor fault
   (:mod:`sitl.effects`): ``fault-gnss-outage`` (no GNSS for 120 s), ``fault-gnss-submerged``
   (a torpedo AUV diving from the surface with a receiver that keeps reporting fixes under
@@ -49,6 +52,7 @@ from sitl.guidance import (
     RovCirclePid,
 )
 from sitl.plants.base import Command, Plant
+from sitl.plants.catamaran import Catamaran, CatamaranParams
 from sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
 from sitl.plants.twin_thruster import TwinThrusterBoat, TwinThrusterParams
 from sitl.sensors import (
@@ -229,6 +233,24 @@ def _twin_thruster_miswired() -> VehicleSpec:
         spec,
         to_channels=lambda c: (-(c.right or 0.0), c.left or 0.0),
         from_channels=lambda v, c: Command(left=v[1], right=-v[0]))
+
+
+def _catamaran() -> VehicleSpec:
+    """The Otter-class catamaran (sitl/plants/catamaran.py): two thrusters on ArduPilot's
+    ThrottleLeft/ThrottleRight outputs, like the twin-thruster boat."""
+    return VehicleSpec(
+        vehicle_class="twin-thruster-boat",
+        mav_type=MAV_TYPE_SURFACE_BOAT,
+        custom_mode=ROVER_MODE_AUTO,
+        make_plant=lambda: Catamaran(),
+        channels=(PwmChannel(channel=1, function=FN_THROTTLE_LEFT, deadband_us=25),
+                  PwmChannel(channel=3, function=FN_THROTTLE_RIGHT, deadband_us=25)),
+        to_channels=lambda c: (c.left or 0.0, c.right or 0.0),
+        from_channels=lambda v, c: Command(left=v[0], right=v[1]),
+        thrust_level=lambda c: 0.5 * ((c.left or 0.0) + (c.right or 0.0)),
+        shaft_rpm=lambda plant, c: tuple(n * 60.0 / (2.0 * math.pi) for n in plant.shaft_speeds),
+        surge_mass=lambda plant: plant.params.m11,
+    )
 
 
 def _bluerov2() -> VehicleSpec:
@@ -458,6 +480,21 @@ BLUEBOAT_LEGS = (
     Leg(20.0, 150 * DEG, speed_mps=1.2),
 )
 
+CATAMARAN_LEGS = (
+    Leg(30.0, 0.0, speed_mps=1.5),
+    Leg(25.0, None, 0.2, speed_mps=1.5),           # a circle to starboard
+    Leg(25.0, 90 * DEG, speed_mps=0.8),
+    Leg(25.0, 200 * DEG, speed_mps=2.5),
+    Leg(25.0, None, -0.12, speed_mps=2.2),         # a wide circle to port at speed
+    Leg(25.0, 300 * DEG, speed_mps=1.2),
+    Leg(20.0, None, 0.25, speed_mps=1.0),          # a tight circle to starboard
+    Leg(20.0, 45 * DEG, speed_mps=2.0),
+    Leg(20.0, 160 * DEG, speed_mps=0.8),
+)
+"""The catamaran's mission: step turns and circles both ways at speeds from 0.8 to
+2.5 m/s, so that the drift in turns (speed times yaw rate) is seen at many speeds (215 s,
+repeated)."""
+
 
 def _nominal_boat_autopilot() -> Controller:
     p = NOMINAL_BOAT
@@ -475,6 +512,12 @@ def _blueboat_autopilot() -> Controller:
         BLUEBOAT_LEGS,
         _speed_to_command(lambda c: p.steady_speed(2.0 * p.thrust(c * p.n_max))),
         steering="skid", kp=0.8, ki=0.02, kd=0.3, steer_limit=0.6)
+
+
+def _catamaran_autopilot() -> Controller:
+    p = CatamaranParams()
+    return BoatAutopilot(CATAMARAN_LEGS, _speed_to_command(p.steady_speed),
+                         steering="skid", kp=0.8, ki=0.02, kd=0.3, steer_limit=0.6)
 
 
 def _gavia_autopilot() -> Controller:
@@ -690,6 +733,25 @@ def _build() -> dict[str, Scenario]:
         duration_s=600.0,
         origin=(63.4390, 10.3990),
     ))
+    cat = Scenario(
+        name="cat-clean",
+        description="Otter-class catamaran (speed-independent sway damping, thrust ~ n|n| "
+                    "behind a 0.4 s shaft lag) flying turns for 600 s with the effect "
+                    "scenarios' sensors, nothing injected",
+        reproduces="model closure: a catamaran's clean log (false latency from its drift "
+                   "in turns)",
+        vehicle=_catamaran(),
+        sensors=_effect_sensors(),
+        controller=_catamaran_autopilot,
+        duration_s=600.0,
+        origin=(63.4390, 10.3990),
+    )
+    s.append(cat)
+    s.append(dataclasses.replace(
+        cat, name="cat-gps-latency",
+        description="cat-clean with an undeclared GNSS latency of 0.6 s",
+        reproduces="model closure: a true latency on a hull that drifts in turns",
+        injected=(Effect("gps_latency", {"seconds": 0.6}),)))
     by_name = {sc.name: sc for sc in s}
     faults = [
         _fault(by_name["jaiabot-turns"], "fault-gnss-outage",

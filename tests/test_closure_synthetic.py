@@ -11,6 +11,7 @@ time-ramp and the by-run split keep 900 s.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 
@@ -20,12 +21,13 @@ import pytest
 from onboard.closure import report
 from onboard.closure.dataset import from_arrays
 from onboard.closure import model as M
+from onboard.closure.effects import ALL
 from onboard.closure.select import select, split
 
 
 def synth(seed=0, T=600.0, dt=0.1, current=(0.0, 0.0), dev=(0.0, 0.0), gyro_bias=0.0,
           latency=0.0, slip=0.0, thrust_q=0.0, coupling=0.0, wave=None, heading_bias=0.0,
-          harmonic2=0.0, shaft_lag=0.0, sway_lag=0.0, pivot=0.3):
+          harmonic2=0.0, shaft_lag=0.0, sway_lag=0.0, pivot=0.3, imu=False):
     rng = np.random.default_rng(seed)
     n = int(T / dt)
     t = np.arange(n) * dt
@@ -54,6 +56,12 @@ def synth(seed=0, T=600.0, dt=0.1, current=(0.0, 0.0), dev=(0.0, 0.0), gyro_bias
         period, amp = wave
         vn = vn + 0.8 * amp * np.sin(2 * np.pi * t / period)
         ve = ve + 0.6 * amp * np.sin(2 * np.pi * t / period)
+    acc = {}
+    if imu:  # a prompt accelerometer: the true acceleration over ground in body axes
+        a_n, a_e = np.gradient(vn, dt), np.gradient(ve, dt)
+        noise = np.random.default_rng(seed + 1000).normal(0, 0.03, (2, n))
+        acc = {"acc_x": np.cos(PSI) * a_n + np.sin(PSI) * a_e + noise[0],
+               "acc_y": -np.sin(PSI) * a_n + np.cos(PSI) * a_e + noise[1]}
     if latency:
         k = int(round(latency / dt))
         vn = np.r_[np.full(k, vn[0]), vn[:-k]]
@@ -63,7 +71,7 @@ def synth(seed=0, T=600.0, dt=0.1, current=(0.0, 0.0), dev=(0.0, 0.0), gyro_bias
     a, b = dev
     psi_m = PSI + a * np.sin(PSI) + b * np.cos(PSI) + heading_bias + rng.normal(0, 0.01, n)
     gyro = R + gyro_bias + rng.normal(0, 0.005, n)
-    return from_arrays(t, psi_m, vn, ve, r=gyro, cmd_surge=thr, cmd_yaw=rud)
+    return from_arrays(t, psi_m, vn, ve, r=gyro, cmd_surge=thr, cmd_yaw=rud, **acc)
 
 
 def detected(ds):
@@ -92,10 +100,19 @@ def test_shaft_lag_and_course_lag_are_the_base_model_s_not_a_latency():
     assert M.estimate_actuator_lag(ds) == pytest.approx(0.4, abs=0.1)  # measured 0.353
     _, found = detected(ds)
     assert found == {}
-    # the same hull with a true 0.6 s latency: found as itself (measured 0.600 s)
-    _, found = detected(synth(latency=0.6, shaft_lag=0.4, sway_lag=0.8, pivot=0.6))
+    # the same hull with a true 0.6 s latency: found as itself (measured 0.600 s by the
+    # lateral delay search, the data having no accelerometer)
+    lat = synth(latency=0.6, shaft_lag=0.4, sway_lag=0.8, pivot=0.6, imu=True)
+    _, found = detected(dataclasses.replace(lat, acc_x=None, acc_y=None))
     assert set(found) == {"gps_latency"}
     assert found["gps_latency"]["params"]["seconds"] == pytest.approx(0.6, abs=0.1)
+    # with an accelerometer it is measured by aligning the GNSS acceleration with the
+    # IMU's, with no hull model (measured 0.607 +- 0.038 s); on the hull without a
+    # latency that alignment finds no delay at all (None: the best delay is 0)
+    tau, _ = ALL["gps_latency"].search(lat)
+    assert tau == pytest.approx(0.6, abs=0.1)
+    assert ALL["gps_latency"].search(synth(shaft_lag=0.4, sway_lag=0.8, pivot=0.6,
+                                           imu=True)) is None
 
 
 def test_current_is_found_with_its_components():

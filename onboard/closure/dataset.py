@@ -56,6 +56,8 @@ class _Collector:
         self.gyro_sum = 0.0
         self.gyro_n = 0
         self.gyro_last = math.nan
+        self.acc_sum = [0.0, 0.0]
+        self.acc_last = (math.nan, math.nan)
         self.vn = self.ve = math.nan
         self.vog_t = -math.inf
         self.gnss_vn = self.gnss_ve = math.nan
@@ -80,6 +82,8 @@ class _Collector:
                 self.has_gyro = True
                 self.gyro_sum += s.gyro_z
                 self.gyro_n += 1
+                self.acc_sum[0] += s.accel_x
+                self.acc_sum[1] += s.accel_y
             elif isinstance(s, GnssFix):
                 if self.frame is None:
                     self.frame = LocalFrame(s.lat_deg, s.lon_deg)
@@ -108,13 +112,15 @@ class _Collector:
                     self.cmd_left, self.cmd_right = s.left, s.right
         if self.gyro_n:
             self.gyro_last = self.gyro_sum / self.gyro_n
+            self.acc_last = (self.acc_sum[0] / self.gyro_n, self.acc_sum[1] / self.gyro_n)
             self.gyro_sum, self.gyro_n = 0.0, 0
+            self.acc_sum = [0.0, 0.0]
         vog_fresh = t - self.vog_t < 1.0
         self.rows.append((
             t, self.heading, self.gyro_last,
             self.vn if vog_fresh else self.gnss_vn, self.ve if vog_fresh else self.gnss_ve,
             self.north, self.east, self.fix_t, self.cmd_surge, self.cmd_yaw, self.cmd_quad,
-            self.cmd_rev, self.run, self.cmd_left, self.cmd_right,
+            self.cmd_rev, self.run, self.cmd_left, self.cmd_right, *self.acc_last,
         ))
         return {}
 
@@ -163,6 +169,18 @@ class Dataset:
     actuator_lag_s: float = 0.0
     """Time constant (s) of the first-order lag already applied to the command channels
     (:func:`lag_commands`); 0 for the commands as logged."""
+    base_terms: tuple[str, ...] = ()
+    """The optional terms of the base model in use (:data:`BASE_TERMS`); set by
+    :func:`with_base_terms`, :data:`DEFAULT_BASE_TERMS` unless set."""
+    acc_x: np.ndarray | None = None
+    """The IMU's forward specific force (m/s^2, body frame, mean over each tick), else
+    None."""
+    acc_y: np.ndarray | None = None
+    """The IMU's starboard specific force (m/s^2), else None."""
+
+    def __post_init__(self) -> None:
+        if not self.base_terms:
+            self.base_terms = DEFAULT_BASE_TERMS
 
     def __len__(self) -> int:
         return len(self.t)
@@ -175,6 +193,112 @@ class Dataset:
             v = getattr(self, name)
             kw[name] = v[mask] if isinstance(v, np.ndarray) and v.shape[:1] == self.t.shape else v
         return Dataset(**kw)
+
+
+BASE_TERMS = ("actuator_lag", "course_lag", "speed_drift")
+"""The base model's optional terms: ``actuator_lag``, the shaft lag of the commands
+(:func:`onboard.closure.model.estimate_actuator_lag`); ``course_lag``, the sway's lag
+behind the turn rate (``x_pd r'``); ``speed_drift``, the sway that scales with speed times
+yaw rate and its lag (``k_ur U r + k_urd (U r)'``, a hull whose sway damping does not grow
+with speed). The hull's sway per yaw rate ``x_p r`` is always in. Default:
+:data:`DEFAULT_BASE_TERMS`."""
+
+DEFAULT_BASE_TERMS = ("actuator_lag", "course_lag")
+"""The terms used unless asked otherwise. ``speed_drift`` is not among them: to first
+order it is what a GNSS latency does in turns (``-tau U r``), so with it a latency shows
+only in transients; on a hull without such drift (the synthetic hull, the BlueBoat runs)
+it costs a true latency its held-out gain and weakens other findings
+(docs/diagnose.md)."""
+
+NO_BASE_TERMS = ("none",)
+"""The value of :func:`with_base_terms` for none of :data:`BASE_TERMS` (an empty tuple
+means all)."""
+
+
+def with_base_terms(ds: "Dataset", terms: Sequence[str]) -> "Dataset":
+    """``ds`` marked to be fitted with the base model's optional ``terms`` only (names from
+    :data:`BASE_TERMS`; empty for :data:`DEFAULT_BASE_TERMS`; ``NO_BASE_TERMS``,
+    ``["none"]``, for none, to show what the terms do). An unknown name is a
+    ValueError."""
+    terms = tuple(terms)
+    unknown = [t for t in terms if t not in BASE_TERMS + NO_BASE_TERMS]
+    if unknown or (NO_BASE_TERMS[0] in terms and len(terms) > 1):
+        raise ValueError(f"unknown base model term(s) {unknown or list(terms)}; known: "
+                         f"{', '.join(BASE_TERMS)} (or 'none' alone)")
+    return Dataset(**{**vars(ds), "base_terms": terms or DEFAULT_BASE_TERMS})
+
+
+def lateral_base_names(ds: "Dataset") -> tuple[str, ...]:
+    """The base model's lateral coefficients in use on ``ds``: ``x_p`` (m, sway per yaw
+    rate), ``x_pd`` (m s, its course lag), ``k_ur`` (s, sway per speed times yaw rate) and
+    ``k_urd`` (s^2, its lag), as :data:`BASE_TERMS` switches them."""
+    names = ["x_p"]
+    if "course_lag" in ds.base_terms:
+        names.append("x_pd")
+    if "speed_drift" in ds.base_terms:
+        names += ["k_ur", "k_urd"]
+    return tuple(names)
+
+
+def lateral_base_columns(ds: "Dataset") -> np.ndarray:
+    """The base model's lateral regressors (m/s per coefficient of
+    :func:`lateral_base_names`): ``r``, ``r'``, ``U r``, ``(U r)'``.
+
+    A hull's sway in turns follows ``T_v v' + v = x_p r - k U r`` (a sway damping
+    ``Y_v`` that does not grow with speed: ``k = m11 / Y_v``, ``T_v = m22 / Y_v``,
+    Fossen 2021 eq. 6.26 linearized); to first order in ``T_v`` the sway is
+    ``x_p r - T_v x_p r' - k U r + k T_v (U r)'``, the four columns."""
+    names = lateral_base_names(ds)
+    cols = [ds.r]
+    if "x_pd" in names:
+        cols.append(yaw_accel(ds))
+    if "k_ur" in names:
+        ur = np.nan_to_num(ds.along_s) * ds.r
+        cols += [ur, _smooth(ur, max(5, int(round(1.0 / ds.dt)) | 1), 1, ds.dt)]
+    return np.column_stack(cols)
+
+
+def acceleration_delay_cost(ds: "Dataset", taus: np.ndarray,
+                            smooth_s: float = 1.0) -> np.ndarray | None:
+    """For each candidate GNSS delay in ``taus`` (s), the mean square (m^2/s^4) of the
+    acceleration over ground from the GNSS velocity taken that much later, minus the
+    IMU's horizontal specific force rotated to north/east by the measured heading (a
+    constant body-frame accelerometer bias fitted out); None without an accelerometer.
+
+    The accelerometer and the compass are prompt and need no model of the hull: in turns
+    the centripetal acceleration turns with the heading and a late GNSS velocity turns
+    behind it, in speed changes it answers late. Both accelerations are smoothed alike
+    (Savitzky-Golay over ``smooth_s``, within each segment); a level vehicle is assumed
+    (roll and pitch leak gravity into the horizontal axes)."""
+    if ds.acc_x is None or ds.acc_y is None or len(ds) < 100:
+        return None
+    win = max(5, int(round(smooth_s / ds.dt)) | 1)
+    s0 = segment_starts(ds)
+    starts = np.flatnonzero(s0 == np.arange(len(ds)))
+    ends = np.r_[starts[1:], len(ds)]
+    gn, ge = np.empty(len(ds)), np.empty(len(ds))
+    fx, fy = np.empty(len(ds)), np.empty(len(ds))
+    for a, b in zip(starts, ends):
+        gn[a:b] = _smooth(ds.v_n[a:b], win, 1, ds.dt)
+        ge[a:b] = _smooth(ds.v_e[a:b], win, 1, ds.dt)
+        fx[a:b] = _smooth(ds.acc_x[a:b], win, 0, ds.dt)
+        fy[a:b] = _smooth(ds.acc_y[a:b], win, 0, ds.dt)
+    c, s = np.cos(ds.psi), np.sin(ds.psi)
+    imu_n, imu_e = c * fx - s * fy, s * fx + c * fy
+    out = []
+    for tau in taus:
+        k = int(round(float(tau) / ds.dt))
+        i = np.concatenate([np.arange(a, b - k) for a, b in zip(starts, ends) if b - a > k]
+                           or [np.zeros(0, int)])
+        if len(i) < 50:
+            out.append(np.inf)
+            continue
+        y = np.r_[gn[i + k] - imu_n[i], ge[i + k] - imu_e[i]]
+        X = np.r_[np.column_stack([c[i], -s[i]]), np.column_stack([s[i], c[i]])]
+        ok = np.isfinite(y) & np.isfinite(X).all(axis=1)
+        coef, *_ = np.linalg.lstsq(X[ok], y[ok], rcond=None)
+        out.append(float(np.mean((y[ok] - X[ok] @ coef) ** 2)))
+    return np.asarray(out)
 
 
 def concat(parts: Sequence["Dataset"]) -> "Dataset":
@@ -272,8 +396,9 @@ def _smooth(x: np.ndarray, window: int, deriv: int = 0, dt: float = 1.0) -> np.n
 def from_arrays(t, psi, v_n, v_e, *, r=None, cmd_surge=None, cmd_yaw=None,
                 thrust_quadratic=None, thrust_reverse=None, run=None,
                 north=None, east=None, smooth_s: float = 1.0, source: str = "",
-                cmd_left=None, cmd_right=None) -> Dataset:
-    """Build a dataset from uniformly sampled arrays (SI units, heading in rad)."""
+                cmd_left=None, cmd_right=None, acc_x=None, acc_y=None) -> Dataset:
+    """Build a dataset from uniformly sampled arrays (SI units, heading in rad);
+    ``acc_x``, ``acc_y`` the IMU's horizontal specific force (body frame), if any."""
     t = np.asarray(t, float)
     n = len(t)
     dt = float(np.median(np.diff(t))) if n > 1 else 0.1
@@ -306,7 +431,9 @@ def from_arrays(t, psi, v_n, v_e, *, r=None, cmd_surge=None, cmd_yaw=None,
         east=nan if east is None else np.asarray(east, float),
         has_gyro=has_gyro, has_commands=bool(np.isfinite(cmd_surge).any()), source=source,
         cmd_left=None if cmd_left is None else np.asarray(cmd_left, float),
-        cmd_right=None if cmd_right is None else np.asarray(cmd_right, float))
+        cmd_right=None if cmd_right is None else np.asarray(cmd_right, float),
+        acc_x=None if acc_x is None else np.asarray(acc_x, float),
+        acc_y=None if acc_y is None else np.asarray(acc_y, float))
 
 
 def remeasured(ds: Dataset, *, psi: np.ndarray | None = None, v_n: np.ndarray | None = None,
@@ -323,8 +450,11 @@ def remeasured(ds: Dataset, *, psi: np.ndarray | None = None, v_n: np.ndarray | 
                       thrust_reverse=ds.thrust_reverse[k], run=ds.run[k], north=ds.north[k],
                       east=ds.east[k], source=ds.source,
                       cmd_left=None if ds.cmd_left is None else ds.cmd_left[k],
-                      cmd_right=None if ds.cmd_right is None else ds.cmd_right[k])
+                      cmd_right=None if ds.cmd_right is None else ds.cmd_right[k],
+                      acc_x=None if ds.acc_x is None else ds.acc_x[k],
+                      acc_y=None if ds.acc_y is None else ds.acc_y[k])
     out.actuator_lag_s = ds.actuator_lag_s
+    out.base_terms = ds.base_terms
     if not ds.has_gyro:
         out.r = ds.r[k]  # the heading-derived rate, kept as it was
     return out
@@ -342,8 +472,8 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     if not col.rows:
         raise ValueError(f"{path}: no samples")
     cols = list(zip(*col.rows))
-    t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs, cl, cr = (
-        np.array(c) for c in cols)
+    (t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs, cl, cr,
+     ax, ay) = (np.array(c) for c in cols)
     t = t.astype(float)
     ok = np.isfinite(psi.astype(float)) & np.isfinite(v_n.astype(float)) & np.isfinite(
         v_e.astype(float))
@@ -357,6 +487,8 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     seg = np.cumsum(gap)
     labels = np.array([f"{r}#{k}" for r, k in zip(runs, seg)], dtype=object)
     gyro = gyro[idx].astype(float)
+    ax, ay = ax[idx].astype(float), ay[idx].astype(float)
+    has_acc = bool(np.isfinite(ax).all() and np.isfinite(ay).all())
     ds = from_arrays(
         t, psi[idx].astype(float), v_n[idx].astype(float), v_e[idx].astype(float),
         r=gyro if col.has_gyro and np.isfinite(gyro).all() else None,
@@ -365,5 +497,6 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
         run=labels,
         north=north[idx].astype(float), east=east[idx].astype(float), source=str(path),
         cmd_left=cl[idx].astype(float) if np.isfinite(cl.astype(float)).any() else None,
-        cmd_right=cr[idx].astype(float) if np.isfinite(cr.astype(float)).any() else None)
+        cmd_right=cr[idx].astype(float) if np.isfinite(cr.astype(float)).any() else None,
+        acc_x=ax if has_acc else None, acc_y=ay if has_acc else None)
     return ds

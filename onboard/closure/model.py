@@ -2,17 +2,21 @@
 
 Base model (what the AIE and current pipelines assume, plus what every hull does): the
 vehicle moves along its measured heading but for the hull's sway in turns, which builds up
-behind the turn rate (lateral velocity ``x_p r + x_pd r'``: ``x_p`` the sway per yaw rate,
-``x_pd = -x_p T_v`` the course lag of a sway that follows ``x_p r`` with time constant
-``T_v``); the measured heading turns with the gyro (heading change minus integrated gyro
-0); and its through-water speed follows the first-order surge model of algorithms.md
-§1.1, ``U' = -a U + b c + c0``, from the normalized command ``c`` as the propeller applies
-it: through the shaft's first-order lag, whose time constant is found once per log
-(:func:`estimate_actuator_lag`, applied to the data by
-:func:`onboard.closure.dataset.lag_commands`). Effects add linear regressors to those
-channels (:mod:`.effects`). All parameters enter linearly once ``a`` and ``b`` are fixed,
-so a fit is a weighted least-squares problem over the stacked channels, iterated to
-refresh ``a`` and ``b``.
+behind the turn rate (lateral velocity ``x_p r + x_pd r' + k_ur U r + k_urd (U r)'``:
+``x_p`` the sway per yaw rate, ``x_pd = -x_p T_v`` the course lag of a sway that follows
+``x_p r`` with time constant ``T_v``, and, switched on where wanted, ``k_ur`` the drift
+out of a turn that scales with speed times yaw rate on a hull whose sway damping does
+not grow with speed and ``k_urd`` its lag;
+:func:`onboard.closure.dataset.lateral_base_columns`); the measured heading turns with
+the gyro (heading change minus integrated gyro 0); and its through-water speed follows the first-order surge model of algorithms.md §1.1, ``U' = -a U + b c +
+c0``, from the normalized command ``c`` as the propeller applies it: through the shaft's
+first-order lag, whose time constant is found once per log (:func:`estimate_actuator_lag`,
+applied to the data by :func:`onboard.closure.dataset.lag_commands`). The shaft lag, the
+course lag and the speed drift are switched by
+:func:`onboard.closure.dataset.with_base_terms` (default: shaft lag and course lag).
+Effects add linear regressors to those channels (:mod:`.effects`). All parameters enter
+linearly once ``a`` and ``b`` are fixed, so a fit is a weighted least-squares problem over
+the stacked channels, iterated to refresh ``a`` and ``b``.
 """
 
 from __future__ import annotations
@@ -22,7 +26,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from onboard.closure.dataset import Dataset, heading_drift, lag_commands, yaw_accel
+from onboard.closure.dataset import (
+    Dataset,
+    heading_drift,
+    lag_commands,
+    lateral_base_columns,
+    lateral_base_names,
+)
 from onboard.closure.effects import ALL, Context, Effect
 
 CHANNELS = ("lateral", "heading", "along")
@@ -39,9 +49,11 @@ def channel_targets(ds: Dataset) -> dict[str, np.ndarray]:
     return out
 
 
-def lateral_base_columns(ds: Dataset) -> np.ndarray:
-    """The base model's lateral regressors ``[r, r']`` (hull sway and its lag in turns)."""
-    return np.column_stack([ds.r, yaw_accel(ds)])
+def lateral_base_output(ds: Dataset, f: "Fit") -> np.ndarray:
+    """The base model's lateral velocity (m/s) on ``ds`` for the fit ``f``: the hull's
+    sway in turns (:func:`onboard.closure.dataset.lateral_base_columns`)."""
+    names = lateral_base_names(ds)
+    return lateral_base_columns(ds) @ np.array([f.lateral_params.get(n, 0.0) for n in names])
 
 
 def estimate_actuator_lag(ds: Dataset, max_s: float = 1.5) -> float:
@@ -51,9 +63,18 @@ def estimate_actuator_lag(ds: Dataset, max_s: float = 1.5) -> float:
     ``[-U, -U|U|, c, c|c|, min(c, 0), 1]`` (the surge model with the catalog's drag and
     thrust-law terms, so that an unmodelled nonlinearity does not pose as a lag); the
     least residual wins, refined by a parabola through its neighbours. 0 without
-    commands."""
-    if not ds.has_commands or len(ds) < 100:
+    commands, or when ``ds`` is to be fitted without the ``actuator_lag`` term.
+
+    The speed is measured by the GNSS, so a GNSS latency would pose as shaft lag: where
+    the log has an accelerometer, the GNSS delay it shows (:meth:`GpsLatency.search
+    <onboard.closure.effects.gps_latency.GpsLatency.search>`, no hull model) is taken out
+    of the velocity first."""
+    if not ds.has_commands or len(ds) < 100 or "actuator_lag" not in ds.base_terms:
         return 0.0
+    if ds.acc_x is not None:
+        late = ALL["gps_latency"].search(ds)
+        if late is not None:
+            ds = ALL["gps_latency"].transform(ds, late[0])
     taus = np.arange(0.0, max_s + 1e-9, max(ds.dt, 0.05))
     u = ds.along_s
     y = ds.speed_dot
@@ -92,12 +113,22 @@ class Fit:
     ctx: Context
     sigma: dict[str, float]
     n: int = 0
-    x_p: float = 0.0
-    """Hull sway per yaw rate (m): the base model's lateral velocity ``x_p r`` in turns."""
-    x_pd: float = 0.0
-    """Course lag of the sway (m s): the base model's lateral term ``x_pd r'``."""
+    lateral_params: dict[str, float] = field(default_factory=dict)
+    """The base model's lateral coefficients by name
+    (:func:`onboard.closure.dataset.lateral_base_names`: ``x_p`` m, ``x_pd`` m s, ``k_ur``
+    s, ``k_urd`` s^2); the terms switched off are absent."""
     known: dict[str, np.ndarray] = field(default_factory=dict)
     """Effects with known, fixed parameters (from a calm-water calibration, say)."""
+
+    @property
+    def x_p(self) -> float:
+        """Hull sway per yaw rate (m): the base model's lateral velocity ``x_p r`` in turns."""
+        return self.lateral_params.get("x_p", 0.0)
+
+    @property
+    def x_pd(self) -> float:
+        """Course lag of the sway (m s): the base model's lateral term ``x_pd r'``."""
+        return self.lateral_params.get("x_pd", 0.0)
 
     def all_effects(self) -> list[tuple[Effect, np.ndarray]]:
         """Known and fitted effects with their parameters."""
@@ -128,7 +159,8 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
     targets = channel_targets(ds)
     n = len(ds)
     base = np.array([ctx.a, ctx.b, 0.0])
-    x_p = x_pd = 0.0
+    lat_names = lateral_base_names(ds)
+    lat_params: dict[str, float] = {}
     theta: dict[str, np.ndarray] = {}
     std: dict[str, np.ndarray] = {}
     for _ in range(8 if ds.has_commands else 1):
@@ -137,7 +169,7 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
         layout: list[tuple[str, int]] = []
         if ds.has_commands:
             layout.append(("__base__", 3))
-        layout.append(("__pivot__", 2))
+        layout.append(("__pivot__", len(lat_names)))
         for name in effects:
             layout.append((name, len(ALL[name].params)))
         n_par = sum(k for _, k in layout)
@@ -192,7 +224,7 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
                 ctx.a = a if 0.01 < a < 20.0 else ctx.a
                 ctx.b = float(base[1])
             elif name == "__pivot__":
-                x_p, x_pd = float(sol[j]), float(sol[j + 1])
+                lat_params = {nm: float(v) for nm, v in zip(lat_names, sol[j:j + k])}
             else:
                 theta[name] = sol[j:j + k].copy()
                 std[name] = sd[j:j + k].copy()
@@ -200,7 +232,7 @@ def fit(ds: Dataset, effects: tuple[str, ...], sigma: dict[str, float],
         if abs(ctx.a - a_prev) < 1e-4 * max(1.0, abs(ctx.a)):
             break
     f = Fit(effects=tuple(effects), base=base, theta=theta, std=std, ctx=ctx,
-            sigma=dict(sigma), n=n, x_p=x_p, x_pd=x_pd, known=known)
+            sigma=dict(sigma), n=n, lateral_params=lat_params, known=known)
     if output_error and ds.has_commands:
         f = refine_output_error(ds, f)
     return f
@@ -266,7 +298,7 @@ def predict(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
     """
     n = len(ds)
     ctx = f.ctx
-    lat = lateral_base_columns(ds) @ np.array([f.x_p, f.x_pd])
+    lat = lateral_base_output(ds, f)
     hr = np.zeros(n)
     out_along = np.zeros(n)
     dyn = []
@@ -346,7 +378,8 @@ def refine_output_error(ds: Dataset, f: Fit, max_nfev: int = 30) -> Fit:
         j += k
     ctx = Context(**vars(f.ctx))
     return Fit(effects=f.effects, base=np.asarray(base, float).copy(), theta=theta, std=std,
-               ctx=ctx, sigma=f.sigma, n=f.n, x_p=f.x_p, x_pd=f.x_pd, known=f.known)
+               ctx=ctx, sigma=f.sigma, n=f.n, lateral_params=dict(f.lateral_params),
+               known=f.known)
 
 
 def residuals(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:

@@ -25,8 +25,8 @@ from onboard.closure.select import Selection
 from onboard.plots import break_gaps
 
 BASE_MODEL = ("velocity over ground along the measured heading but for the hull's sway in "
-              "turns (v = x_p r); heading rate equal to the gyro's; first-order surge model "
-              "U' = -a U + b c + c0 from the normalized command")
+              "turns (v = x_p r + x_pd r' + k_ur U r + k_urd (U r)'); heading rate equal to the gyro's; first-order surge model "
+              "U' = -a U + b c + c0 from the normalized command through the shaft lag")
 
 
 PARAM_UNITS: dict[str, tuple[tuple[str, str, str, float], ...]] = {
@@ -205,7 +205,8 @@ def diagnosis(sel: Selection, log: str) -> dict:
         "base_params": {**({"a": a, "b": b, "c0": c0,
                             "actuator_lag_s": float(sel.actuator_lag_s)}
                            if sel.split.fit.has_commands else {}),
-                        "x_p": float(f.x_p), "x_pd": float(f.x_pd)},
+                        **{k: float(v) for k, v in f.lateral_params.items()}},
+        "base_terms": list(sel.split.fit.base_terms),
         "known": {k: v.tolist() for k, v in f.known.items()},
         "split_parts": sel.split.parts,
         "residuals_before": _residual_stats(sel.base_test, sel.base_fit),

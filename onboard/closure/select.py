@@ -182,7 +182,7 @@ def _sigma(ds: Dataset, f: M.Fit) -> dict[str, float]:
         if ch == "along":
             pred = M._base_columns(ds) @ f.base
         elif ch == "lateral":
-            pred = M.lateral_base_columns(ds) @ np.array([f.x_p, f.x_pd])
+            pred = M.lateral_base_output(ds, f)
         r = y - pred
         r = r[np.isfinite(r)]
         mad = float(np.median(np.abs(r - np.median(r)))) * 1.4826 if len(r) else 1.0

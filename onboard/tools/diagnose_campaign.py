@@ -35,6 +35,11 @@ BOATS: dict[str, dict] = {
         "clean": "clean-twin-thruster",
         "effects": {"effect-thruster-swap": ("actuator_mapping",)},
     },
+    "catamaran": {
+        "config": REPO / "config" / "sitl-catamaran.toml",
+        "clean": "cat-clean",
+        "effects": {"cat-gps-latency": ("gps_latency",)},
+    },
 }
 """Each boat's calm-water configuration, clean scenario and effect scenarios (with the
 effects that must be named)."""
@@ -51,9 +56,11 @@ class Outcome:
     params: dict = field(default_factory=dict)
 
 
-def diagnose_seed(scenario: str, seed: int, config_path: Path, work: Path) -> Outcome:
+def diagnose_seed(scenario: str, seed: int, config_path: Path, work: Path,
+                  base_terms: tuple[str, ...] | None = None) -> Outcome:
     """Fly ``scenario`` with ``seed`` (cached in ``work``) and diagnose it with the
-    configuration at ``config_path``."""
+    configuration at ``config_path`` (and the base model's ``base_terms``, default the
+    configuration's: :func:`onboard.diagnose.diagnose`)."""
     from onboard.core import config
     from onboard.diagnose import diagnose
     from sitl.runner import run_to_tlog
@@ -65,7 +72,8 @@ def diagnose_seed(scenario: str, seed: int, config_path: Path, work: Path) -> Ou
         tmp = d / "log.tlog.part"
         run_to_tlog(scenario, tmp, d / "truth.jsonl", seed=seed)
         tmp.rename(log)
-    doc = diagnose(str(log), config.load(config_path), d / "out")
+    out = d / ("out" if base_terms is None else "out-" + "-".join(base_terms))
+    doc = diagnose(str(log), config.load(config_path), out, base_terms=base_terms)
     named = tuple(e["name"] for e in doc["effects"] if e["detected"])
     params = {e["name"]: e["params"] for e in doc["effects"] if e["detected"]}
     return Outcome(scenario, seed, named, bool(doc.get("unexplained")), params)
@@ -103,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-effects", action="store_true", help="clean logs only")
     p.add_argument("--only", nargs="*", help="these scenarios only")
     p.add_argument("--json", help="also write every outcome to this file")
+    p.add_argument("--base-terms", nargs="*", help="the base model's optional terms "
+                   "(actuator_lag course_lag speed_drift, or none); default the config's")
     args = p.parse_args(argv)
     seeds = parse_seeds(args.seeds)
     work = Path(args.work)
@@ -115,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
         for scenario, expected in todo:
             if args.only and scenario not in args.only:
                 continue
-            outs = [diagnose_seed(scenario, s, spec["config"], work) for s in seeds]
+            terms = None if args.base_terms is None else tuple(args.base_terms)
+            outs = [diagnose_seed(scenario, s, spec["config"], work, terms) for s in seeds]
             if expected is None:
                 bad = [o for o in outs if is_false_alarm(o)]
                 what = "false alarms"

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from sitl.plants.base import Command, Plant, PlantBase, PropulsionWrench
 from sitl.plants.bluerov2 import BlueROV2
+from sitl.plants.catamaran import Catamaran
 from sitl.plants.rudder_boat import RudderBoat
 from sitl.plants.spheroid import SpheroidAUV
 from sitl.plants.torpedo_auv import TorpedoAUV
@@ -16,11 +17,13 @@ from sitl.plants.twin_thruster import TwinThrusterBoat
 PLANTS: dict[str, type[PlantBase]] = {
     RudderBoat.name: RudderBoat,
     TwinThrusterBoat.name: TwinThrusterBoat,
+    Catamaran.name: Catamaran,
     BlueROV2.name: BlueROV2,
     TorpedoAUV.name: TorpedoAUV,
     SpheroidAUV.name: SpheroidAUV,
 }
-"""Plant classes by name: rudder_boat, twin_thruster, bluerov2, torpedo_auv, spheroid."""
+"""Plant classes by name: rudder_boat, twin_thruster, catamaran, bluerov2, torpedo_auv,
+spheroid."""
 
 
 def make_plant(name: str, dt: float = 0.01) -> PlantBase:
@@ -40,6 +43,7 @@ __all__ = [
     "PLANTS",
     "make_plant",
     "BlueROV2",
+    "Catamaran",
     "RudderBoat",
     "SpheroidAUV",
     "TorpedoAUV",

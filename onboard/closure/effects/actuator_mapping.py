@@ -144,7 +144,8 @@ class ActuatorMapping(Effect):
             cmd_left=port, cmd_right=stbd)
         # from_arrays re-derives psi_dot, along... from the same measurements: identical;
         # keep the measured derived channels exactly as they were.
-        for k in ("psi", "psi_dot", "along", "lateral", "speed_dot", "along_s", "r"):
+        for k in ("psi", "psi_dot", "along", "lateral", "speed_dot", "along_s", "r",
+                  "actuator_lag_s", "base_terms", "acc_x", "acc_y"):
             setattr(out, k, getattr(ds, k))
         return out
 

@@ -5,10 +5,13 @@ and gyro are prompt. In a turn that rotates the measured velocity back by ``r ta
 against the heading (``-tau U r`` across it, which alone looks like the hull's sway in
 turns or like sideslip); during speed changes the measured speed answers the command
 ``tau`` late, which neither does. Because the linearized form is collinear with the hull's
-own sway at steady speed, the latency is found as what it is, a delay: the GNSS velocity
-is advanced by each candidate ``tau`` and the one that best aligns it with the heading
-wins (:meth:`GpsLatency.search`); the data are then re-aligned (:meth:`transform`) and
-the rest of the model fitted on them.
+own sway at steady speed, the latency is found as what it is, a delay
+(:meth:`GpsLatency.search`): with an accelerometer, the delay that aligns the GNSS
+acceleration over ground with the IMU's, rotated by the compass (no hull model: a hull
+that drifts out of its turns by ``-k U r``, a catamaran, cannot pose as a latency ``k``);
+without one, the GNSS velocity advanced by each candidate ``tau`` and the one that best
+aligns it with the heading. The data are then re-aligned (:meth:`transform`) and the rest
+of the model fitted on them.
 """
 
 from __future__ import annotations
@@ -17,7 +20,13 @@ import math
 
 import numpy as np
 
-from onboard.closure.dataset import Dataset, remeasured, yaw_accel
+from onboard.closure.dataset import (
+    Dataset,
+    acceleration_delay_cost,
+    lateral_base_columns,
+    lateral_base_names,
+    remeasured,
+)
 from onboard.closure.effects.base import Effect
 
 
@@ -54,21 +63,41 @@ class GpsLatency(Effect):
         """The data with the GNSS position and velocity advanced by ``tau`` seconds."""
         return advance_velocity(ds, tau)
 
-    def search(self, ds: Dataset, max_s: float = 2.0) -> tuple[float, float] | None:
-        """(tau, one-sigma) minimising the lateral velocity left after the hull's sway and
-        its course lag (the base model's ``x_p r + x_pd r'``), a constant crab and a
-        current; None when the data cannot say."""
-        taus = np.arange(0.0, max_s + 1e-9, max(ds.dt, 0.05))
+    def lateral_cost(self, ds: Dataset, taus: np.ndarray) -> np.ndarray:
+        """For each delay in ``taus`` (s), the mean square (m^2/s^2) of the lateral
+        velocity advanced by it, after the hull's sway per yaw rate and its course lag
+        (``x_p r + x_pd r'``), a constant crab and a current are fitted out. The base
+        model's speed drift ``k_ur U r`` is left out: to first order it is what a delay
+        does in turns (``-tau U r``), so with it no delay could be told from the lateral
+        channel alone."""
         cost = []
         for tau in taus:
             d = self.transform(ds, float(tau))
             if len(d) < 100:
                 cost.append(np.inf)
                 continue
-            X = np.column_stack([d.r, yaw_accel(d), d.along, -np.sin(d.psi), np.cos(d.psi)])
+            turn = [i for i, n in enumerate(lateral_base_names(d)) if n in ("x_p", "x_pd")]
+            X = np.column_stack([lateral_base_columns(d)[:, turn], d.along, -np.sin(d.psi),
+                                 np.cos(d.psi)])
             coef, *_ = np.linalg.lstsq(X, d.lateral, rcond=None)
             cost.append(float(np.mean((d.lateral - X @ coef) ** 2)))
-        cost = np.asarray(cost)
+        return np.asarray(cost)
+
+    def search(self, ds: Dataset, max_s: float = 2.0) -> tuple[float, float] | None:
+        """(tau, one-sigma) of the GNSS delay; None when the data cannot say.
+
+        With an accelerometer, the delay that best aligns the GNSS acceleration over
+        ground with the IMU's, rotated by the compass
+        (:func:`onboard.closure.dataset.acceleration_delay_cost`): no hull model enters,
+        so a hull's drift in turns cannot pose as a delay. Without one, the delay that
+        minimises the lateral velocity left after the hull's sway in turns (the base
+        model's turn terms, :meth:`lateral_cost`), a constant crab and a current: there a
+        hull whose drift out of a turn grows with speed times yaw rate (speed-independent
+        sway damping, a catamaran) shows a delay about its ``k_ur``."""
+        taus = np.arange(0.0, max_s + 1e-9, max(ds.dt, 0.05))
+        cost = acceleration_delay_cost(ds, taus)
+        if cost is None:
+            cost = self.lateral_cost(ds, taus)
         i = int(np.argmin(cost))
         if not np.isfinite(cost[i]) or i == 0:
             return None

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from onboard.closure.dataset import Dataset, remeasured, yaw_accel
+from onboard.closure.dataset import Dataset, lateral_base_columns, remeasured
 from onboard.closure.effects.base import Effect
 
 
@@ -42,16 +42,17 @@ class HeadingBias(Effect):
 
     def search(self, ds: Dataset, min_speed: float = 0.3) -> tuple[float, float] | None:
         """(bias, one-sigma): minus the circular mean of the crab angle where the vehicle
-        moves (> ``min_speed`` m/s), after the hull's sway in turns (``x_p r + x_pd r'``, fitted
-        with the speed term by least squares) is taken out of the lateral velocity."""
+        moves (> ``min_speed`` m/s), after the hull's sway in turns (the base model's lateral
+        terms, :func:`onboard.closure.dataset.lateral_base_columns`, fitted with the speed
+        term by least squares) is taken out of the lateral velocity."""
         speed = np.hypot(ds.v_n, ds.v_e)
         m = (speed > min_speed) & np.isfinite(ds.lateral) & np.isfinite(ds.r)
         if m.sum() < 50:
             return None
-        rd = yaw_accel(ds)[m]
-        X = np.column_stack([ds.r[m], rd, ds.along[m]])
+        sway = lateral_base_columns(ds)[m]
+        X = np.column_stack([sway, ds.along[m]])
         coef, *_ = np.linalg.lstsq(X, ds.lateral[m], rcond=None)
-        crab = np.arctan2(ds.lateral[m] - coef[0] * ds.r[m] - coef[1] * rd, ds.along[m])
+        crab = np.arctan2(ds.lateral[m] - sway @ coef[:-1], ds.along[m])
         c, s = float(np.mean(np.cos(crab))), float(np.mean(np.sin(crab)))
         bias = -math.atan2(s, c)
         spread = math.sqrt(max(0.0, -2.0 * math.log(max(1e-12, math.hypot(c, s)))))
