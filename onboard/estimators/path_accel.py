@@ -53,7 +53,7 @@ class PathAccelerometer:
 
     __slots__ = ("gravity", "keep_s", "max_gap_s", "max_attitude_age_s", "bias",
                  "bias_var", "bias_gain", "n_samples", "n_breaks", "_t", "_V", "_S", "_a",
-                 "_roll", "_pitch", "_t_att", "_beta", "_t_last", "_bias_n")
+                 "_roll", "_pitch", "_t_att", "_cb", "_sb", "_t_last", "_bias_n")
 
     def __init__(self, keep_s: float = 6.0, max_gap_s: float = 0.5,
                  max_attitude_age_s: float = 0.5, bias_gain: float = 0.005,
@@ -83,7 +83,7 @@ class PathAccelerometer:
         self._a = array("d")
         self._roll = self._pitch = 0.0
         self._t_att = -math.inf
-        self._beta = 0.0
+        self._cb, self._sb = 1.0, 0.0  # cos, sin of the crab angle
         self._t_last = -math.inf
 
     def attitude(self, t: float, roll: float, pitch: float) -> None:
@@ -94,7 +94,8 @@ class PathAccelerometer:
         """The crab angle (rad): course over ground minus heading, any value; folded
         into (-pi/2, pi/2] (astern: the path speed is negative)."""
         b = math.remainder(beta, math.pi)
-        self._beta = b if math.isfinite(b) else 0.0
+        b = b if math.isfinite(b) else 0.0
+        self._cb, self._sb = math.cos(b), math.sin(b)
 
     def add(self, t: float, fx: float, fy: float, p: float, q: float, r: float) -> bool:
         """One IMU sample at ``t`` (s): specific force ``fx``, ``fy`` (m/s^2) and body
@@ -118,7 +119,7 @@ class PathAccelerometer:
         g = self.gravity
         ax = fx - g * math.sin(th)
         ay = fy + g * math.sin(phi) * math.cos(th)
-        a = ax * math.cos(self._beta) + ay * math.sin(self._beta)
+        a = ax * self._cb + ay * self._sb
         ts = self._t
         if not ts or t - self._t_last > self.max_gap_s:
             if ts:
