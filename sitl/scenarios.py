@@ -237,20 +237,12 @@ def _twin_thruster_miswired() -> VehicleSpec:
 
 def _catamaran() -> VehicleSpec:
     """The Otter-class catamaran (sitl/plants/catamaran.py): two thrusters on ArduPilot's
-    ThrottleLeft/ThrottleRight outputs, like the twin-thruster boat."""
-    return VehicleSpec(
-        vehicle_class="twin-thruster-boat",
-        mav_type=MAV_TYPE_SURFACE_BOAT,
-        custom_mode=ROVER_MODE_AUTO,
+    ThrottleLeft/ThrottleRight outputs, wired as the twin-thruster boat's; its shafts
+    turn in rad/s (the twin's in rev/s)."""
+    return dataclasses.replace(
+        _twin_thruster(),
         make_plant=lambda: Catamaran(),
-        channels=(PwmChannel(channel=1, function=FN_THROTTLE_LEFT, deadband_us=25),
-                  PwmChannel(channel=3, function=FN_THROTTLE_RIGHT, deadband_us=25)),
-        to_channels=lambda c: (c.left or 0.0, c.right or 0.0),
-        from_channels=lambda v, c: Command(left=v[0], right=v[1]),
-        thrust_level=lambda c: 0.5 * ((c.left or 0.0) + (c.right or 0.0)),
-        shaft_rpm=lambda plant, c: tuple(n * 60.0 / (2.0 * math.pi) for n in plant.shaft_speeds),
-        surge_mass=lambda plant: plant.params.m11,
-    )
+        shaft_rpm=lambda plant, c: tuple(n * 60.0 / (2.0 * math.pi) for n in plant.shaft_speeds))
 
 
 def _bluerov2() -> VehicleSpec:

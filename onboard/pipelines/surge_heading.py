@@ -926,9 +926,6 @@ class SurgeHeadingPipeline:
             ds, v = skf.v * tau, skf.v
             P = skf.P
             var_ds, var_v = P[3] * tau * tau, P[3]
-            imu = self._imu
-            acc = (imu.delta(self._t_s, t) if imu is not None and 1e-6 < tau
-                   and tau_raw <= self.cfg.imu_horizon_s else None)
             if tau > 1e-6:
                 k = self._disc(surge.damping(surge.last_command), tau)
                 ds, v = skf.predict_ahead(
@@ -936,10 +933,12 @@ class SurgeHeadingPipeline:
                 V_u = surge.V_u
                 var_ds = k.c1 * k.c1 * P[3] + k.c2 * k.c2 * V_u
                 var_v = k.alpha * k.alpha * P[3] + k.c1 * k.c1 * V_u
+                # the accelerometer's forecast (path_accel.py), blended with the model's
+                # by the weight their misses of the Doppler speed give (none at weight 0)
+                imu, wi = self._imu, self._blend.w
+                acc = (imu.delta(self._t_s, t) if imu is not None and wi > 0.0
+                       and tau_raw <= self.cfg.imu_horizon_s else None)
                 if acc is not None:
-                    # the accelerometer's forecast (path_accel.py), blended with the
-                    # model's by the weight their misses of the Doppler speed give
-                    wi = self._blend.w
                     wm = 1.0 - wi
                     V_a = imu.bias_var  # type: ignore[union-attr]
                     ds = wm * ds + wi * (skf.v * tau + acc[1])

@@ -173,6 +173,17 @@ class PropulsionWrench:
     yaw_input: float | None = None
 
 
+def twin_thruster_wrench(t_left: float, t_right: float, half_spacing: float,
+                         masses: ManoeuvringMasses) -> PropulsionWrench:
+    """The wrench of two parallel thrusters ``half_spacing`` (m) either side of the
+    centre line pushing ``t_left`` and ``t_right`` (N): surge force ``X = T_l + T_r`` and
+    yaw moment ``N = half_spacing (T_l - T_r)`` (FRD: port ahead turns to starboard),
+    with their AIE-normalized inputs ``X / m11`` and ``N / m33``."""
+    x_f, n_z = t_left + t_right, half_spacing * (t_left - t_right)
+    return PropulsionWrench(force=(x_f, 0.0, 0.0), moment=(0.0, 0.0, n_z),
+                            surge_input=x_f / masses.m11, yaw_input=n_z / masses.m33)
+
+
 class PlantBase:
     """Common machinery: state, RK4 sub-stepping, truth, ideal IMU.
 

@@ -48,7 +48,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from sitl.plants.base import Command, ManoeuvringMasses, PlantBase, PropulsionWrench
+from sitl.plants.base import (
+    Command,
+    ManoeuvringMasses,
+    PlantBase,
+    PropulsionWrench,
+    twin_thruster_wrench,
+)
 
 __all__ = ["Catamaran", "CatamaranParams"]
 
@@ -193,11 +199,5 @@ class Catamaran(PlantBase):
 
     def propulsion(self, command: Command) -> PropulsionWrench:
         p = self.params
-        tl, tr = p.thrust(float(self.x[12])), p.thrust(float(self.x[13]))
-        x_f, n_z = tl + tr, p.y_pont * (tl - tr)
-        return PropulsionWrench(
-            force=(x_f, 0.0, 0.0),
-            moment=(0.0, 0.0, n_z),
-            surge_input=x_f / p.m11,
-            yaw_input=n_z / p.m33,
-        )
+        return twin_thruster_wrench(p.thrust(float(self.x[12])), p.thrust(float(self.x[13])),
+                                    p.y_pont, p)
