@@ -2,22 +2,23 @@
 
 Faros & Tanner (arXiv 2504.02005, §3): "a standard Kalman filter is also implemented with
 the assumption that the nominal operator control input is the one that is implemented".
-Here: the same surge/heading filters as :mod:`onboard.pipelines.aie` (same model, same
-measurements, same reconstruction, same ``[pipelines.aie]`` table) with the input taken
-as the commanded one at nominal scaling, ``u = gain * command + offset``
-(algorithms.md §2.12), and input-error variance ``kf_v_d``. Without commands in the log
+Here: the same measurement points, filters, track and outputs as
+:mod:`onboard.pipelines.aie`, with the input model
+:class:`~onboard.estimators.input_models.CommandedInput`: the commanded input at nominal
+scaling, ``u = gain * command + offset`` (algorithms.md §2.12), of error variance
+``kf_v_d``, plus an input-bias state where ``kf_bias_q > 0``. Without commands in the log
 the input is zero (a random-walk-driven filter).
 """
 
 from __future__ import annotations
 
 from onboard.core.config import Config
-from onboard.estimators.axis_model import AxisModel, Discrete
-from onboard.estimators.kalman import BiasIncrementKF
+from onboard.estimators.axis_model import AxisModel
+from onboard.estimators.increment_filter import IncrementFilter
+from onboard.estimators.input_models import CommandedInput
 from onboard.pipelines.surge_heading import (
     AieConfig,
     AxisConfig,
-    AxisFilter,
     SurgeHeadingPipeline,
     load_config,
     sensor_noise,
@@ -25,53 +26,22 @@ from onboard.pipelines.surge_heading import (
 
 COLUMNS = ("north", "east", "heading", "speed", "yaw_rate",
            "std_north", "std_east", "std_speed", "std_heading")
+"""The estimates of pipeline ``kf`` (units in docs/architecture.md §4.2)."""
 
 
-class AxisKf(AxisFilter):
-    """One axis forecast with the nominal commanded input (§2.2 with known input)."""
-
-    def __init__(self, model: AxisModel, cfg: AxisConfig, top: AieConfig) -> None:
-        super().__init__(model, cfg, top, cfg.kf_v_d)
-        if cfg.kf_bias_q > 0.0:
-            self.kf = BiasIncrementKF(R=1.0, q_v=cfg.q_v, correlated=top.correlated_noise,
-                                      q_b=0.0, pbb0=0.0)
-
-    def step(self, k: Discrete, y: float, R: float, R_prev: float,
-             command: float | None, y_v: float | None = None, R_v: float = 0.0) -> None:
-        """:meth:`AxisFilter.step`; the input bias's random walk runs only over steps
-        with a measured rate (increments alone observe it too weakly: 0.09 -> 0.33 m/s
-        on a 1 Hz GNSS-only log, tests/test_kf.py), so without a Doppler speed the
-        filter is the plain baseline."""
-        kf = self.kf
-        if isinstance(kf, BiasIncrementKF):
-            kf.q_b = self.cfg.kf_bias_q if y_v is not None else 0.0
-        super().step(k, y, R, R_prev, command, y_v, R_v)
-
-    def damping(self, command: float | None) -> float:
-        """Without a command the damped model with zero input would pull the rate to 0
-        (and bias it by ``dt / c1``): use the constant-rate model (a -> 0) instead."""
-        return self.model.a if command is not None else 1e-9
-
-    def forecast_input(self, command: float | None) -> float:
-        """Nominal input ``gain * command + offset``; without a command zero (with the
-        constant-rate model of :meth:`damping`, the random-walk form of §2.12)."""
-        self.u = 0.0 if command is None else self.model.input(command)
-        return self.u
-
-    def input_ahead(self, command: float | None) -> float:
-        """The nominal input of the newest command (the last step's without one), plus
-        the estimated input bias where the filter has one."""
-        u = self.u if command is None or self.last_command is None else \
-            self.model.input(command)
-        kf = self.kf
-        return u + kf.b if isinstance(kf, BiasIncrementKF) else u
+def axis_filter(model: AxisModel, c: AxisConfig, top: AieConfig) -> IncrementFilter:
+    """One baseline axis: the increment filter with the commanded input of ``c``."""
+    return IncrementFilter(model, CommandedInput(c.kf_bias_q), input_error_var=c.kf_v_d,
+                           u_max=c.u_max, q_v=c.q_v, correlated=top.correlated_noise,
+                           nis_gate=top.nis_gate,
+                           adaptive_rate_noise=top.adaptive_rate_noise)
 
 
 def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,
           gnss_velocity_std_mps: float = 0.1) -> SurgeHeadingPipeline:
     """A KF baseline pipeline from an :class:`AieConfig` (for code and tests)."""
-    return SurgeHeadingPipeline("kf", COLUMNS, cfg, gnss_std_m, heading_std_rad, AxisKf,
-                                gnss_velocity_std_mps)
+    return SurgeHeadingPipeline("kf", COLUMNS, cfg, gnss_std_m, heading_std_rad,
+                                axis_filter, gnss_velocity_std_mps)
 
 
 def create(cfg: Config) -> SurgeHeadingPipeline | None:
