@@ -15,7 +15,7 @@ from onboard.estimators.rcie import Rcie
 from onboard.estimators.rls import two_row_rls_kernel, unpack
 from onboard.pipelines import aie as aie_mod
 from onboard.pipelines import kf as kf_mod
-from onboard.pipelines.aie import AxisAie
+from onboard.pipelines.aie import axis_filter
 from onboard.pipelines.surge_heading import AieConfig
 from tests.helpers.first_order_boat import SimConfig, run_pipelines, score, simulate
 
@@ -61,7 +61,7 @@ def _axis_run(sig: float, n: int = 400, seed: int = 0, **over):
     rng = np.random.default_rng(seed)
     top = msgspec.convert({"nis_gate": 1e9, "divergence_nis": 1e9}, AieConfig)
     ac = msgspec.structs.replace(top.surge, **over)
-    ax = AxisAie(AxisModel(1.0, 3.0), ac, top)
+    ax = axis_filter(AxisModel(1.0, 3.0), ac, top)
     k = discretize(1.0, 1.0)
     v = 0.0
     n_prev = sig * rng.standard_normal()
@@ -75,7 +75,7 @@ def _axis_run(sig: float, n: int = 400, seed: int = 0, **over):
         n_prev = n_k
         if i > 100:
             ev.append(ax.kf.v - v)
-            eu.append(ax.d_hat - u)
+            eu.append(ax.input.d_hat - u)
     return float(np.sqrt(np.mean(np.square(ev)))), float(np.sqrt(np.mean(np.square(eu)))), ax
 
 
@@ -99,20 +99,20 @@ def test_aie_axis_under_gps_noise() -> None:
 
 def test_divergence_is_detected_counted_and_recovered() -> None:
     top = AieConfig()
-    ax = AxisAie(AxisModel(1.0, 3.0), top.surge, top)
+    ax = axis_filter(AxisModel(1.0, 3.0), top.surge, top)
     k = discretize(1.0, 1.0)
     for _ in range(5):
         ax.step(k, 1.0, 0.3, 0.3, None)
-    ax.rcie.theta = [1e6] * ax.rcie.n          # a blown-up estimator (paper remark 3)
+    ax.input.rcie.theta = [1e6] * ax.input.rcie.n          # a blown-up estimator (paper remark 3)
     ax.step(k, 5.0, 0.3, 0.3, None)
     assert ax.diverged == 1
-    assert ax.rcie.theta == [0.0] * ax.rcie.n and ax.d_hat == 0.0
+    assert ax.input.rcie.theta == [0.0] * ax.input.rcie.n and ax.input.d_hat == 0.0
     for _ in range(50):
         ax.step(k, 1.0, 0.3, 0.3, None)
     assert math.isfinite(ax.kf.v) and ax.kf.v == pytest.approx(1.0, abs=0.2)
-    P = ax.rcie.P
+    P = ax.input.rcie.P
     P[0] = math.nan                             # non-finite numbers
-    ax.rcie.P = P
+    ax.input.rcie.P = P
     ax.step(k, 1.0, 0.3, 0.3, None)
     assert ax.diverged == 2
 
@@ -152,10 +152,10 @@ def test_pipeline_columns_health_and_state_roundtrip() -> None:
     st = json.loads(json.dumps(pa.get_state()))
     fresh = _pipes()[0]
     fresh.set_state(st)
-    assert fresh.surge.rcie.theta == pa.surge.rcie.theta
+    assert fresh.surge.input.rcie.theta == pa.surge.input.rcie.theta
     assert fresh.surge.model.a == pa.surge.model.a
     fresh.set_state({"surge": {"rcie": {"theta": [1.0]}, "model": {"a": "x"}}})  # ignored
-    assert fresh.surge.rcie.theta == pa.surge.rcie.theta
+    assert fresh.surge.input.rcie.theta == pa.surge.input.rcie.theta
 
 
 @pytest.mark.parametrize("mod", [aie_mod, kf_mod])
@@ -193,7 +193,7 @@ def test_aie_runs_without_commands_and_with_1hz_irregular_gps() -> None:
 def test_create_decodes_the_config_and_names_bad_keys() -> None:
     p = aie_mod.create(from_dict({"pipelines": {"aie": {"heading": {"n_c": 3}}}}))
     assert p is not None and p.name == "aie"
-    assert p.yaw.rcie.n == 7
+    assert p.yaw.input.rcie.n == 7
     with pytest.raises(ConfigError, match="pipelines.aie"):
         aie_mod.create(from_dict({"pipelines": {"aie": {"surge": {"lamda": 1.0}}}}))
     assert aie_mod.create(from_dict({"vehicle": {"class": "bluerov2"}})) is None
