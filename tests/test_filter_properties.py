@@ -222,7 +222,7 @@ def _covariances(p) -> dict[str, np.ndarray]:
             f = getattr(p, ax)
             if f.kf.initialized:
                 out[f"{ax}.kf.P"] = _packed3(f.kf.P)
-            rcie = getattr(f, "rcie", None)
+            rcie = getattr(f.input, "rcie", None)   # AIE only
             if rcie is not None:
                 from onboard.estimators.rls import unpack
 
