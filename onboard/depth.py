@@ -4,8 +4,8 @@ A pressure sensor's reading becomes a depth by hydrostatics,
 ``d = (p - p_surface) / (rho g)``, with the water density ``rho`` and the surface
 pressure ``p_surface`` of ``[sensors.depth]`` (:class:`onboard.core.config.DepthNoise`).
 The newest depth decides the mode: deeper than ``surface_depth_m`` the vehicle is
-submerged, and a GNSS fix then is a reflection or a stale position, not a measurement
-(the engine rejects it as ``gnss:submerged``).
+submerged: no satellite signal reaches the antenna, and the engine rejects a GNSS fix
+then as ``gnss:submerged``.
 """
 
 from __future__ import annotations

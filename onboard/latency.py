@@ -21,13 +21,13 @@ arrived, so a pipeline fed each sample as it comes would get the fix out of time
 
 The cost is the copies: one ``copy.deepcopy`` of every pipeline per re-stamped fix, the
 fork's ``step`` on top of the delayed one each tick, and the samples of the last ``tau``
-seconds stepped twice (docs/service.md "corrections" gives the measured CPU). The copy
-is the one way to branch a pipeline's full state through the pipeline contract
-(:class:`onboard.pipelines.base.Pipeline` has ``step`` and the adaptive
-``get_state``/``set_state``, no snapshot and no prediction without an update), and a
-fix re-stamped into the past must not be fused out of order. A copy-free design (the
-delayed filter plus an output predictor, as in PX4's EKF2) needs a pipeline method that
-predicts its estimates to ``t`` from the delayed state without changing it; the
+seconds stepped once more by each new fork (docs/diagnose.md "Round trip" gives the
+measured CPU). The copy is needed because a fix re-stamped into the past must not be
+fused out of order, and the pipeline contract (:class:`onboard.pipelines.base.Pipeline`:
+``step`` and the adaptive ``get_state``/``set_state``) has no other way to branch a
+pipeline's full state: no snapshot, no prediction without an update. A copy-free design
+(the delayed filter plus an output predictor, as in PX4's EKF2) needs a pipeline method
+that predicts its estimates to ``t`` from the delayed state without changing it; the
 published estimates would then carry the inputs of the last ``tau`` seconds but none of
 their measurement updates (docs/architecture.md §3).
 
