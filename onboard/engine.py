@@ -1,17 +1,22 @@
 """The engine: time-ordered samples in, fixed-rate pipeline ticks out.
 
-One engine serves live operation and replay (architecture.md §3):
+One engine serves live operation and replay (architecture.md §3). It queues and ticks;
+each step of the way is a named module:
 
-* :meth:`Engine.push` checks a sample (:mod:`onboard.validate`), counts a rejection with
-  its reason, takes the configured sensor errors out of it (``[corrections]``,
-  :class:`SampleCorrector`), converts pressure to depth, tracks surface/submerged mode (GNSS is accepted
-  only at the surface), maps raw actuator outputs to a normalized command
-  (:mod:`onboard.inputs`), lets through only the active source of each quantity
-  (:mod:`onboard.sources`) and queues the sample for the next tick;
+* :meth:`Engine.push` takes one sample through
+  1. the value checks of :mod:`onboard.validate` (a rejection is counted with its reason),
+  2. the ``[corrections]`` (:class:`onboard.corrections.SampleCorrector`),
+  3. the time checks (backwards in its stream, older than ``max_sample_age_s``),
+  4. pressure to depth and the surface/submerged mode (:mod:`onboard.depth`; GNSS is
+     accepted only at the surface),
+  5. one source per quantity (:mod:`onboard.sources`),
+  6. the queue, with the normalized command of a raw actuator output
+     (:mod:`onboard.inputs`);
 * :meth:`Engine.tick` hands each pipeline the samples queued since the previous tick, in
   time order, and collects its estimates as :class:`~onboard.core.messages.EstimateRecord`.
-  With a GNSS latency correction the samples of the last ``gnss_latency_s`` seconds are
-  held back to the next tick: a fix re-stamped earlier still comes in time order.
+  With a GNSS latency correction the queue is a :class:`onboard.latency.FixedLagQueue`:
+  the pipelines fuse at ``tick - gnss_latency_s`` and the estimates are forecast to the
+  tick.
 
 :func:`run` drives an engine from any time-ordered iterable of samples on a fixed tick grid
 ``t0 + k / rate_hz``; the live service calls ``push``/``tick`` from its own monotonic
@@ -20,153 +25,125 @@ timer instead. Given the same samples and tick times, the output is identical.
 
 from __future__ import annotations
 
-import bisect
-import copy
 import math
 from collections import Counter
-from operator import attrgetter
-from typing import Callable, Iterable, Mapping, Sequence
+from typing import Callable, Iterable, Mapping, Protocol, Sequence
 
-import msgspec
-
-from onboard.core.config import Config, Corrections
-from onboard.core.geo import wrap_2pi, wrap_pi
+from onboard.core.config import Config
 from onboard.core.messages import (
     ActuatorOutputs,
-    Attitude,
     Depth,
     EstimateRecord,
     GnssFix,
-    Heading,
     HealthRecord,
-    Imu,
     Parameter,
     Pressure,
     PropellerRpm,
     RcChannels,
     Sample,
 )
+from onboard.corrections import SampleCorrector
+from onboard.depth import DepthMode
 from onboard.inputs import InputMapper
+from onboard.latency import FixedLagQueue, sample_time
 from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline
-from onboard.sources import SourceSelector, pattern_matches
+from onboard.sources import SourceSelector
 from onboard.validate import checker_for, sample_type
 
-GRAVITY = 9.80665
-"""Standard gravity, m/s^2 (used for pressure -> depth)."""
+__all__ = ["Engine", "SampleCorrector", "TickQueue", "run"]
+
 STALE_AFTER_S = 3.0
 """A sample stream (type, source) with no accepted sample for this long is reported
 stale in the health events (e.g. GNSS lost while the same serial line still carries the
 compass, or a DVL that only reports ``valid=False``), and again when it comes back."""
+FUTURE_TOLERANCE_S = 1.0
+"""Live, a sample stamped more than this after the receive clock is rejected as
+``future``."""
 _NEVER_STALE = {"parameter"}
 """Streams sent once, not periodically."""
 
-_SPECIAL = {Pressure, Depth, GnssFix}
+_DEPTH_OR_GNSS = {Pressure, Depth, GnssFix}
 _RAW_ACTUATORS = {ActuatorOutputs, RcChannels, PropellerRpm}
 
 TickCallback = Callable[[float, Sequence[EstimateRecord]], None]
 
 
-class SampleCorrector:
-    """The ``[corrections]`` of a configuration applied to one validated sample.
+class SampleQueue(Protocol):
+    """What :meth:`Engine.tick` needs of its queue (:class:`TickQueue` without a GNSS
+    latency, :class:`onboard.latency.FixedLagQueue` with one)."""
 
-    * ``GnssFix``: time stamp minus ``gnss_latency_s`` (the instant it measured);
-    * ``Heading`` and ``Attitude`` yaw (of the ``heading_sources``, default all): the
-      heading error ``e(psi) = offset + sum_k (s_k sin k psi + c_k cos k psi)`` (or the
-      deviation card interpolated) is a function of the true heading ``psi``; the
-      measured ``m = psi + e(psi)`` is inverted by fixed-point iteration
-      ``psi <- m - e(psi)`` from ``psi = m`` (three rounds: the error of a deviation
-      ``A`` shrinks as ``A^4``, below 1e-5 rad for ``A`` = 0.1 rad);
-    * ``Imu`` gyro rates and ``Attitude`` body rates: minus ``gyro_bias_rps``.
+    pending: list[Sample]
+    t_sensor: float | None
 
-    Other samples pass unchanged.
+    def put(self, sample: Sample) -> None:
+        """Queue one sample for the pipelines."""
+
+    def open_tick(self, t: float, n_pipelines: int) -> None:
+        """Take the samples of the tick at ``t`` (s)."""
+
+    def step(self, i: int, pipeline: Pipeline) -> Mapping[str, float]:
+        """Step the ``i``-th pipeline; return the estimates to publish."""
+        ...
+
+    def restarted(self, i: int) -> None:
+        """The ``i``-th pipeline was replaced by a fresh one."""
+
+    def close_tick(self) -> None:
+        """End the tick."""
+
+    def reset(self) -> None:
+        """The pipelines' state was replaced."""
+
+
+class TickQueue:
+    """The samples queued since the previous tick, handed to every pipeline at the next
+    tick in time order (stable: arrival order breaks ties).
+
+    Attributes:
+        pending: the samples waiting for the next tick, in arrival order.
+        t_sensor: the newest sample time (s) of the last tick, None if it had none.
     """
 
-    ITERATIONS = 3
+    def __init__(self) -> None:
+        """An empty queue."""
+        self.pending: list[Sample] = []
+        self.t_sensor: float | None = None
+        self._t = 0.0
+        self._batch: list[Sample] = []
 
-    def __init__(self, c: Corrections) -> None:
-        """Precompute what ``c`` asks for (:attr:`active` False when nothing)."""
-        self.latency_s = float(c.gnss_latency_s)
-        self.gyro = tuple(float(x) for x in c.gyro_bias_rps)
-        self.offset = float(c.heading_offset_rad)
-        self.sin = tuple(float(x) for x in c.heading_harmonics_sin)
-        self.cos = tuple(float(x) for x in c.heading_harmonics_cos)
-        table = sorted((math.radians(h) % (2 * math.pi), math.radians(e))
-                       for h, e in c.heading_deviation_table)
-        if table:  # periodic: repeat the first point one turn on
-            table.append((table[0][0] + 2 * math.pi, table[0][1]))
-        self.table = table
-        self.sources = list(c.heading_sources)
-        self.has_gyro = any(g != 0.0 for g in self.gyro)
-        self.has_heading = bool(self.offset != 0.0 or any(self.sin) or any(self.cos)
-                                or self.table)
-        self.active = self.latency_s > 0.0 or self.has_gyro or self.has_heading
-        self._for_source: dict[str, bool] = {}
+    def put(self, sample: Sample) -> None:
+        """Queue ``sample`` for the next tick."""
+        self.pending.append(sample)
 
-    def heading_error(self, psi: float) -> float:
-        """The heading error (rad) at true heading ``psi`` (rad)."""
-        e = self.offset
-        for k, a in enumerate(self.sin, 1):
-            e += a * math.sin(k * psi)
-        for k, b in enumerate(self.cos, 1):
-            e += b * math.cos(k * psi)
-        if self.table:
-            x = psi % (2 * math.pi)
-            xs = [h for h, _ in self.table]
-            i = bisect.bisect_right(xs, x)
-            if i == 0:  # before the first point: between the last and the first
-                (h0, e0), (h1, e1) = self.table[-2], self.table[-1]
-                x += 2 * math.pi
-            elif i >= len(self.table):
-                (h0, e0), (h1, e1) = self.table[-2], self.table[-1]
-            else:
-                (h0, e0), (h1, e1) = self.table[i - 1], self.table[i]
-            e += e0 + (e1 - e0) * (x - h0) / (h1 - h0) if h1 > h0 else e0
-        return e
+    def open_tick(self, t: float, n_pipelines: int) -> None:
+        """Take every queued sample, sorted by time, for the tick at ``t`` (s)."""
+        batch = self.pending
+        if len(batch) > 1:
+            batch.sort(key=sample_time)
+        self.pending = []
+        self._t = t
+        self._batch = batch
+        self.t_sensor = batch[-1].t if batch else None
 
-    def true_heading(self, measured: float) -> float:
-        """The true heading (rad, unwrapped) whose reading is ``measured`` (rad)."""
-        psi = measured
-        for _ in range(self.ITERATIONS):
-            psi = measured - self.heading_error(psi)
-        return psi
+    def step(self, i: int, pipeline: Pipeline) -> Mapping[str, float]:
+        """Step ``pipeline`` to the tick with the tick's samples."""
+        return pipeline.step(self._t, self._batch)
 
-    def _heading_source(self, source: str) -> bool:
-        ok = self._for_source.get(source)
-        if ok is None:
-            ok = self._for_source[source] = not self.sources or any(
-                pattern_matches(p, source) for p in self.sources)
-        return ok
+    def restarted(self, i: int) -> None:
+        """Nothing to do: the queue holds no pipeline state."""
 
-    def __call__(self, sample: Sample) -> Sample:
-        """``sample`` with the corrections applied (a new sample, or itself)."""
-        cls = type(sample)
-        if cls is GnssFix:
-            if self.latency_s > 0.0:
-                return msgspec.structs.replace(sample, t=sample.t - self.latency_s)
-        elif cls is Heading:
-            if self.has_heading and self._heading_source(sample.source):
-                return msgspec.structs.replace(
-                    sample, heading_rad=wrap_2pi(self.true_heading(sample.heading_rad)))
-        elif cls is Imu:
-            if self.has_gyro:
-                gx, gy, gz = self.gyro
-                return msgspec.structs.replace(sample, gyro_x=sample.gyro_x - gx,
-                                               gyro_y=sample.gyro_y - gy,
-                                               gyro_z=sample.gyro_z - gz)
-        elif cls is Attitude:
-            changes: dict[str, float] = {}
-            if self.has_heading and self._heading_source(sample.source):
-                changes["yaw_rad"] = wrap_pi(self.true_heading(sample.yaw_rad))
-            if self.has_gyro:
-                for name, g in zip(("roll_rate_rps", "pitch_rate_rps", "yaw_rate_rps"),
-                                   self.gyro):
-                    v = getattr(sample, name)
-                    if v is not None and g != 0.0:
-                        changes[name] = v - g
-            if changes:
-                return msgspec.structs.replace(sample, **changes)
-        return sample
+    def close_tick(self) -> None:
+        """Let the tick's samples go."""
+        self._batch = []
+
+    def reset(self) -> None:
+        """Nothing to do: the queue holds no pipeline state."""
+
+
+def std_columns(pipeline: Pipeline) -> dict[str, str]:
+    """``std_<q>`` -> ``<q>`` for the columns of ``pipeline`` (fixed at its construction)."""
+    return {c: c[4:] for c in pipeline.columns if c.startswith("std_")}
 
 
 class Engine:
@@ -174,9 +151,11 @@ class Engine:
 
     Attributes:
         pipelines: the pipelines, in column order.
+        queue: the samples waiting for the pipelines (:class:`TickQueue`, or a
+            :class:`onboard.latency.FixedLagQueue` with a GNSS latency correction).
         accepted: samples accepted, by ``(type, source)``.
         rejected: samples rejected, by ``<type>:<reason>``.
-        mode: ``"surface"`` or ``"submerged"`` (from the newest depth).
+        depth_mode: pressure to depth and the surface/submerged mode.
         pipeline_errors: exceptions raised by each pipeline (it is then restarted).
         nonfinite: estimates left out of the records because they were not finite, per
             pipeline (a NaN or infinite value is an unknown quantity, published absent).
@@ -191,40 +170,30 @@ class Engine:
         ``select_sources`` False passes every source of every quantity through (model
         closure looks at each sensor's own measurements, not at the one chosen).
         ``fresh_estimates`` False: with a GNSS latency correction, return the estimates
-        at the fusion horizon ``tick - gnss_latency_s`` (no shadow copies, see
-        :meth:`tick`; for collectors that record what was fused)."""
+        at the fusion horizon ``tick - gnss_latency_s`` (no forecast, no copies of the
+        pipelines; for collectors that record what was fused)."""
         self.cfg = cfg
         self.pipelines = build(cfg, only) if pipelines is None else pipelines
         corrector = SampleCorrector(cfg.corrections)
         self.correct: Callable[[Sample], Sample] | None = \
             corrector if corrector.active else None
         """``[corrections]`` applied to each validated sample (None: none configured)."""
-        self.hold_s = corrector.latency_s
-        """Samples newer than ``tick - hold_s`` wait for a later tick (GNSS latency)."""
+        self.queue: SampleQueue = (
+            FixedLagQueue(corrector.latency_s, forecast=fresh_estimates)
+            if corrector.latency_s > 0.0 else TickQueue())
         self.mapper = InputMapper(cfg.inputs)
         self.max_age = cfg.engine.max_sample_age_s
         self.accepted: Counter[tuple[str, str]] = Counter()
         self.rejected: Counter[str] = Counter()
-        self.mode = "surface"
-        self.depth_m: float | None = None
+        self.depth_mode = DepthMode(cfg.sensors.depth)
         self.latest: dict[str, EstimateRecord] = {}
         self.t_first: float | None = None
         self.t_newest = -math.inf
         self._last_t: dict[tuple[str, str], float] = {}
         self._kinds: dict[type, tuple[str, Callable[[Sample], str | None]]] = {}
         """Per sample class: its tag and its value checker (onboard.validate)."""
-        self._std_names: dict[int, tuple[Pipeline, dict[str, str]]] = {}
-        """Per pipeline (by id, with the pipeline itself so that the id stays its own):
-        ``std_<q>`` column -> ``<q>``, from its columns."""
-        self._pending: list[Sample] = []
-        self._fresh: list[Sample] = []
-        """With a GNSS latency: the samples queued since the previous tick."""
-        self._shadows: list[Pipeline] | None = None
-        """With a GNSS latency: per pipeline, a copy fed every sample up to
-        ``_shadow_t`` in time order, whose estimates are published (see :meth:`tick`)."""
-        self._shadow_t = -math.inf
-        self.fresh_estimates = fresh_estimates
-        self._ticks = 0
+        self._std_names = {p.name: std_columns(p) for p in self.pipelines}
+        """Per pipeline name: its ``std_<q>`` columns -> ``<q>`` (:func:`std_columns`)."""
         self.pipeline_errors: Counter[str] = Counter()
         self.nonfinite: Counter[str] = Counter()
         self.events: list[str] = []
@@ -236,163 +205,152 @@ class Engine:
         """One source per quantity (``[sources]``); its switches are events."""
         self.stale: set[tuple[str, str]] = set()
         """The sample streams now stale (see :data:`STALE_AFTER_S`)."""
-        depth_cfg = cfg.sensors.depth
-        self._rho_g = depth_cfg.water_density_kgm3 * GRAVITY
-        self._p_surface = depth_cfg.surface_pressure_pa
-        self._surface_depth = depth_cfg.surface_depth_m
 
     @property
     def columns(self) -> list[str]:
         """``t`` then ``<pipeline>.<quantity>`` for every pipeline, in order."""
         return ["t"] + [f"{p.name}.{c}" for p in self.pipelines for c in p.columns]
 
-    def _reject(self, kind: str, reason: str) -> bool:
-        self.rejected[f"{kind}:{reason}"] += 1
-        return False
+    @property
+    def mode(self) -> str:
+        """``"surface"`` or ``"submerged"``, from the newest depth."""
+        return self.depth_mode.mode
+
+    @property
+    def depth_m(self) -> float | None:
+        """The newest depth (m), None before the first."""
+        return self.depth_mode.depth_m
+
+    # ------------------------------------------------------------------------- push
 
     def push(self, sample: Sample, now: float | None = None) -> bool:
-        """Check and queue one sample; return False (and count why) if rejected.
+        """Check, correct and queue one sample; return False (and count why) if rejected.
 
         ``now`` is the receive clock in live operation, used to reject stamps from the
         future; replay passes None.
         """
+        kind, check = self._checker(sample)
+        reason = check(sample)
+        if reason is None and now is not None and sample.t > now + FUTURE_TOLERANCE_S:
+            reason = "future"
+        if reason is None:
+            if self.correct is not None:
+                sample = self.correct(sample)
+            reason = self._out_of_order(kind, sample)
+        if reason is None and type(sample) in _DEPTH_OR_GNSS:
+            sample, reason = self._depth_and_mode(sample)
+        if reason is not None:
+            return self._reject(kind, reason)
+        self._accept(kind, sample)
+        chosen = self.selector.admit(sample) if self.select_sources else sample
+        if chosen is not None:  # None: another source of its quantity is active
+            self._enqueue(chosen, sample)
+        return True
+
+    def _checker(self, sample: Sample) -> tuple[str, Callable[[Sample], str | None]]:
+        """The tag and the value checker of the sample's class (:mod:`onboard.validate`)."""
         cls = type(sample)
         k = self._kinds.get(cls)
         if k is None:
             k = self._kinds[cls] = (sample_type(sample), checker_for(cls))
-        kind, check = k
-        reason = check(sample)
-        if reason is not None:
-            return self._reject(kind, reason)
-        if now is not None and sample.t > now + 1.0:
-            return self._reject(kind, "future")
-        if self.correct is not None:
-            sample = self.correct(sample)
+        return k
+
+    def _reject(self, kind: str, reason: str) -> bool:
+        self.rejected[f"{kind}:{reason}"] += 1
+        return False
+
+    def _out_of_order(self, kind: str, sample: Sample) -> str | None:
+        """``backwards`` if older than the newest accepted of its stream, ``late`` if
+        older than ``max_sample_age_s`` behind the newest accepted sample; else None."""
+        last = self._last_t.get((kind, sample.source))
+        if last is not None and sample.t < last:
+            return "backwards"
+        if sample.t < self.t_newest - self.max_age:
+            return "late"
+        return None
+
+    def _depth_and_mode(self, sample: Sample) -> tuple[Sample, str | None]:
+        """A pressure as its depth; a depth sets the mode; a GNSS fix while submerged is
+        rejected (``submerged``)."""
+        if type(sample) is Pressure:
+            sample = self.depth_mode.depth(sample)  # type: ignore[arg-type]
+        if type(sample) is Depth:
+            self.depth_mode.observe(sample)  # type: ignore[arg-type]
+            return sample, None
+        return sample, "submerged" if self.depth_mode.submerged else None
+
+    def _accept(self, kind: str, sample: Sample) -> None:
+        """Count ``sample`` accepted and note its time."""
         t = sample.t
         key = (kind, sample.source)
-        last = self._last_t.get(key)
-        if last is not None and t < last:
-            return self._reject(kind, "backwards")
-        if t < self.t_newest - self.max_age:
-            return self._reject(kind, "late")
-        if cls in _SPECIAL:
-            if cls is Pressure:
-                sample = Depth(t=t, source=sample.source,
-                               depth_m=(sample.pressure_pa - self._p_surface) / self._rho_g,
-                               pressure_pa=sample.pressure_pa, temperature_c=sample.temperature_c)
-                cls = Depth
-            if cls is Depth:
-                self.depth_m = sample.depth_m
-                self.mode = "submerged" if sample.depth_m > self._surface_depth else "surface"
-            elif cls is GnssFix and self.mode == "submerged":
-                return self._reject(kind, "submerged")
         self._last_t[key] = t
         if t > self.t_newest:
             self.t_newest = t
         if self.t_first is None:
             self.t_first = t
         self.accepted[key] += 1
-        chosen = self.selector.admit(sample) if self.select_sources else sample
-        if chosen is None:  # another source of its quantity is active
-            return True
-        self._pending.append(chosen)
-        if self.hold_s > 0.0 and self.fresh_estimates:
-            self._fresh.append(chosen)
+
+    def _enqueue(self, chosen: Sample, raw: Sample) -> None:
+        """Queue ``chosen`` (``raw`` as the source selector passed it), and with a raw
+        actuator output its normalized command; a parameter may move an input channel
+        (an event)."""
+        self.queue.put(chosen)
+        cls = type(raw)
         if cls in _RAW_ACTUATORS and self.mapper.active:
-            cmd = self.mapper.map(sample)
+            cmd = self.mapper.map(raw)
             if cmd is not None:
-                self._pending.append(cmd)
-                if self.hold_s > 0.0 and self.fresh_estimates:
-                    self._fresh.append(cmd)
+                self.queue.put(cmd)
         elif cls is Parameter:
-            for change in self.mapper.parameter(sample.name, sample.value):
+            for change in self.mapper.parameter(raw.name, raw.value):  # type: ignore[attr-defined]
                 self.events.append(f"inputs: {change}")
-        return True
+
+    # ------------------------------------------------------------------------- tick
 
     def tick(self, t: float) -> list[EstimateRecord]:
-        """Step every pipeline to time ``t`` (s) with the samples queued so far.
-
-        With a GNSS latency correction (``hold_s`` > 0) the pipelines are stepped to the
-        fusion horizon ``t - hold_s`` with the samples up to it, in time order; the newer
-        ones wait for a later tick, so that a fix stamped ``hold_s`` earlier than it
-        arrives still comes before them. The estimates at ``t`` come from a copy of each
-        pipeline (a shadow) that has every sample up to the newest, in time order: the
-        output is as fresh as without the correction and no state is fed out of order.
-        A shadow takes the new samples as they come while they are in order; a sample
-        older than its newest (a re-stamped fix) makes it a new copy of the pipeline,
-        fed the waiting samples. The copies cost CPU (docs/diagnose.md, "Round trip")."""
-        batch = self._pending
-        if len(batch) > 1:
-            batch.sort(key=_sample_time)  # stable: arrival order breaks ties
-        held: list[Sample] | None = None
-        fresh: list[Sample] = []
-        refork = False
-        t_step = t
-        if self.hold_s > 0.0:
-            t_step = t - self.hold_s
-            cut = bisect.bisect_right(batch, t_step, key=_sample_time)
-            held = batch[cut:]
-            self._pending = list(held)
-            batch = batch[:cut]
-            if not self.fresh_estimates:
-                held = None
-        else:
-            self._pending = []
-        if held is not None:
-            fresh = self._fresh
-            self._fresh = []
-            fresh.sort(key=_sample_time)
-            refork = (self._shadows is None or len(self._shadows) != len(self.pipelines)
-                      or (bool(fresh) and fresh[0].t < self._shadow_t))
-            if refork:
-                self._shadows = list(self.pipelines)
-        t_sensor = batch[-1].t if batch else None
-        vehicle = self.cfg.vehicle.id
-        sources = self.selector.active  # replaced, never mutated, on a switch
+        """Step every pipeline to time ``t`` (s) with the samples queued so far (with a
+        GNSS latency, see :class:`onboard.latency.FixedLagQueue`); return the records of
+        the pipelines that have estimates. A pipeline that raises is restarted and the
+        others carry on."""
+        queue = self.queue
+        queue.open_tick(t, len(self.pipelines))
         records = []
-        refork_next = False
         for i, p in enumerate(self.pipelines):
             try:
-                values = p.step(t_step, batch)
-                if held is not None:
-                    shadows = self._shadows
-                    if refork:
-                        shadows[i] = copy.deepcopy(p)  # type: ignore[index]
-                    values = shadows[i].step(t, held if refork else fresh)  # type: ignore
+                values = queue.step(i, p)
             except Exception as err:  # a pipeline bug must not stop the others
                 values = self._recover(i, p, err)
-                refork_next = True
-            pev = getattr(p, "events", None)
-            if pev:  # a pipeline's own events (e.g. restored state discarded)
-                self.events.extend(f"{p.name}: {e}" for e in pev)
-                pev.clear()
-            if not values:
-                continue
-            for v in values.values():
-                if v - v != 0.0:  # NaN or +-inf: drop every such entry (rare path)
-                    values = self._finite(p.name, values)
-                    break
-            entry = self._std_names.get(id(p))
-            std_names = entry[1] if entry is not None else self._std_columns(p)
-            # the std_ entries in the order of values ({} for a pipeline without std_
-            # columns: values only holds its columns)
-            std = {std_names[k]: v for k, v in values.items() if k in std_names} \
-                if std_names else {}
-            rec = EstimateRecord(vehicle=vehicle, pipeline=p.name, t=t,
-                                 values=dict(values), std=std, t_sensor=t_sensor,
-                                 sources=sources)
-            self.latest[p.name] = rec
-            records.append(rec)
-        if held is not None:
-            newest = held[-1].t if (refork and held) else fresh[-1].t if fresh else None
-            if refork:
-                self._shadow_t = t_step if newest is None else max(newest, t_step)
-            elif newest is not None:
-                self._shadow_t = max(self._shadow_t, newest)
-            if refork_next:  # a restarted pipeline: its shadow is copied again
-                self._shadows = None
-        self._ticks += 1
+                queue.restarted(i)
+            self._take_events(p)
+            if values:
+                records.append(self._record(p, t, values, queue.t_sensor))
+        queue.close_tick()
         return records
+
+    def _take_events(self, p: Pipeline) -> None:
+        """Move a pipeline's own events (e.g. restored state discarded) into the health
+        events, prefixed with its name."""
+        pev = getattr(p, "events", None)
+        if pev:
+            self.events.extend(f"{p.name}: {e}" for e in pev)
+            pev.clear()
+
+    def _record(self, p: Pipeline, t: float, values: Mapping[str, float],
+                t_sensor: float | None) -> EstimateRecord:
+        """The record of ``p``'s estimates at ``t`` (non-finite values left out), also
+        kept as :attr:`latest`."""
+        if not all(map(math.isfinite, values.values())):
+            values = self._finite(p.name, values)
+        std_names = self._std_names.get(p.name)
+        if std_names is None:  # a pipeline put in after construction
+            std_names = self._std_names[p.name] = std_columns(p)
+        # the std_ entries in the order of values
+        std = {std_names[k]: v for k, v in values.items() if k in std_names} \
+            if std_names else {}
+        rec = EstimateRecord(vehicle=self.cfg.vehicle.id, pipeline=p.name, t=t,
+                             values=dict(values), std=std, t_sensor=t_sensor,
+                             sources=self.selector.active)
+        self.latest[p.name] = rec
+        return rec
 
     def _finite(self, name: str, values: Mapping[str, float]) -> dict[str, float]:
         """``values`` without its non-finite entries, each counted in :attr:`nonfinite`.
@@ -402,20 +360,11 @@ class Engine:
         quantity as absent."""
         out = {}
         for k, v in values.items():
-            if v - v == 0.0:
+            if math.isfinite(v):
                 out[k] = v
             else:
                 self.nonfinite[name] += 1
         return out
-
-    def _std_columns(self, p: Pipeline) -> dict[str, str]:
-        """``std_<q>`` -> ``<q>`` for the columns of ``p`` (fixed at its construction),
-        cached for the pipelines in use (a restarted one gets a fresh entry)."""
-        if len(self._std_names) > 4 * len(self.pipelines):
-            self._std_names.clear()
-        names = {c: c[4:] for c in p.columns if c.startswith("std_")}
-        self._std_names[id(p)] = (p, names)
-        return names
 
     def _recover(self, i: int, p: Pipeline, err: Exception) -> None:
         """Count a pipeline's failure, report it, and restart it from its configuration
@@ -425,6 +374,7 @@ class Engine:
         fresh = build(self.cfg, only={p.name})
         if fresh:
             self.pipelines[i] = fresh[0]
+            self._std_names[fresh[0].name] = std_columns(fresh[0])
         return None
 
     def health(self, t: float, rates_hz: dict[str, float] | None = None,
@@ -474,14 +424,11 @@ class Engine:
     def set_state(self, state: dict) -> None:
         """Restore what :meth:`get_state` returned, pipeline by pipeline (a pipeline
         missing from ``state`` keeps its fresh state)."""
-        self._shadows = None
+        self.queue.reset()
         for p in self.pipelines:
             if isinstance(state.get(p.name), dict):
                 p.set_state(state[p.name])
 
-
-_sample_time: Callable[[Sample], float] = attrgetter("t")
-"""The sort key of a tick's batch: the sample time (s)."""
 
 
 def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,

@@ -208,3 +208,30 @@ def test_non_finite_estimates_are_left_out_of_the_record_and_counted():
     assert decoded.values == {"heading": 1.0}
     assert eng.health(1.0).rejected["pipeline:half:nonfinite"] == 3
     assert "pipeline:rec:nonfinite" not in eng.health(1.0).rejected
+
+
+class WithStd(Recorder):
+    """A pipeline with a standard deviation column."""
+
+    name = "withstd"
+    columns = ("north", "std_north")
+
+    def step(self, t, samples):
+        if samples and samples[0].t == 2.0:
+            raise ValueError("restart me")
+        return {"north": 1.0, "std_north": 0.5}
+
+
+def test_std_columns_follow_the_pipeline_also_after_a_restart(monkeypatch):
+    """The ``std_<q>`` columns are read from each pipeline's columns when it is built or
+    restarted, by its name."""
+    import onboard.engine as engine_mod
+
+    monkeypatch.setattr(engine_mod, "build", lambda cfg, only=None: [WithStd()])
+    eng = Engine(Config(), [WithStd(), Recorder()])
+    (rec_a, _) = eng.tick(1.0)
+    eng.push(imu(2.0))
+    eng.tick(2.0)  # WithStd raises and is restarted
+    (rec_b, _) = eng.tick(3.0)
+    assert rec_a.std == rec_b.std == {"north": 0.5}
+    assert eng.pipeline_errors["withstd"] == 1

@@ -15,8 +15,9 @@ The rooms, from the bottom up (docs/architecture.md has the picture):
 * ``sitl``: the simulator; the core and the drivers' encoders. Its closed-loop runner
   (``sitl.closed_loop``) also runs the onboard engine, because the closed loop is the
   experiment.
-* ``onboard.engine``, ``onboard.validate``, ``onboard.inputs``, ``onboard.sources``:
-  time-ordered feeding of validated samples, one source per quantity, into the pipelines.
+* ``onboard.engine``, ``onboard.validate``, ``onboard.corrections``, ``onboard.depth``,
+  ``onboard.inputs``, ``onboard.sources``, ``onboard.latency``: time-ordered feeding of
+  validated, corrected samples, one source per quantity, into the pipelines.
 * ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
 * ``onboard.closure``: model closure on recorded logs.
 * ``onboard.replay``, ``onboard.diagnose``, ``onboard.autodetect``, ``onboard.plots``:
@@ -40,6 +41,8 @@ MATH = CORE | {"onboard.estimators"}
 PIPELINES = MATH | {"onboard.pipelines"}
 ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs",
                       "onboard.sources"}
+ENGINE_PARTS = {"onboard.corrections", "onboard.depth", "onboard.latency"}
+"""The engine's own modules: only the engine imports them."""
 SERVICE = ENGINE | {"drivers", "onboard.service"}
 CLOSURE = ENGINE | {"drivers", "onboard.closure", "onboard.replay", "onboard.plots",
                     "onboard.autodetect", "onboard.service.recorder"}
@@ -52,8 +55,11 @@ ROOMS: dict[str, set[str]] = {
     "drivers": CORE | {"drivers"},
     "sitl": CORE | {"drivers", "sitl"},
     "sitl.closed_loop": CORE | {"drivers", "sitl", "onboard.engine"},
-    "onboard.engine": ENGINE,
+    "onboard.engine": ENGINE | ENGINE_PARTS,
     "onboard.validate": CORE,
+    "onboard.corrections": CORE | {"onboard.sources"},
+    "onboard.depth": CORE,
+    "onboard.latency": PIPELINES,
     "onboard.inputs": CORE,
     "onboard.sources": CORE,
     "onboard.service": SERVICE,

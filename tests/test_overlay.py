@@ -17,8 +17,9 @@ from onboard.cli import build_parser, main
 from onboard.closure import overlay
 from onboard.core import config
 from onboard.core.config import ConfigError
-from onboard.core.messages import Attitude, GnssFix, Heading, Imu, Sample
-from onboard.engine import Engine, SampleCorrector
+from onboard.core.messages import Attitude, GnssFix, Heading, Imu
+from onboard.corrections import SampleCorrector
+from onboard.engine import Engine, TickQueue
 
 # ----------------------------------------------------------------------------- merging
 
@@ -123,7 +124,7 @@ def _corrector(**kw) -> SampleCorrector:
 
 def test_no_corrections_no_corrector_in_the_engine():
     assert Engine(config.load("rudder-boat")).correct is None
-    assert Engine(config.load("rudder-boat")).hold_s == 0.0
+    assert isinstance(Engine(config.load("rudder-boat")).queue, TickQueue)
 
 
 def test_gnss_fix_restamped_earlier():
@@ -170,129 +171,6 @@ def test_heading_sources_limit_the_heading_correction():
     c = _corrector(heading_offset_rad=0.1, heading_sources=["compass"])
     assert c(Heading(t=0, source="compass", heading_rad=1.0)).heading_rad == pytest.approx(0.9)
     assert c(Heading(t=0, source="gnss-hdt", heading_rad=1.0)).heading_rad == 1.0
-
-
-# ------------------------------------------- the engine keeps time order with a latency
-
-
-class _Recorder:
-    """A pipeline that records what it is fed and answers the newest sample time."""
-
-    name = "rec"
-    columns = ("newest",)
-
-    def __init__(self) -> None:
-        self.fed: list[tuple[float, list[Sample]]] = []
-        self.newest = -math.inf
-
-    def step(self, t, samples):
-        self.fed.append((t, list(samples)))
-        for s in samples:
-            assert s.t <= t
-            self.newest = max(self.newest, s.t)
-        return {"newest": self.newest}
-
-    def __deepcopy__(self, memo):
-        twin = _Recorder()
-        twin.newest = self.newest
-        return twin
-
-    def health(self):
-        return {}
-
-    def get_state(self):
-        return {}
-
-    def set_state(self, state):
-        pass
-
-
-def _live_stream(latency: float, seconds: float = 20.0):
-    """(receive time, sample) as a service receives them: compass at 10 Hz on time, GNSS
-    at 5 Hz measured ``latency`` s before it arrives and stamped on arrival."""
-    out = []
-    for k in range(int(seconds * 10)):
-        t = 0.1 * k + 0.003
-        out.append((t, Heading(t=t, source="compass", heading_rad=0.01 * k)))
-        if k % 2 == 0:
-            out.append((t + latency, GnssFix(t=t + latency, source="gnss", lat_deg=60.0,
-                                             lon_deg=10.0)))
-    out.sort(key=lambda x: x[0])
-    return out
-
-
-def test_live_engine_fuses_restamped_fixes_in_time_order():
-    """The engine fed like the service (push with the receive clock, ticks on a fixed
-    grid): every sample reaches the pipeline once, in global time order, the fixes at
-    the instant they measured; the estimate at each tick still has the newest compass."""
-    cfg = config.from_dict({"corrections": {"gnss_latency_s": 0.6}})
-    rec = _Recorder()
-    eng = Engine(cfg, pipelines=[rec])
-    stream = _live_stream(0.6)
-    outputs = []
-    i = 0
-    for k in range(1, 201):
-        tick = 0.1 * k
-        while i < len(stream) and stream[i][0] <= tick:
-            assert eng.push(stream[i][1], now=stream[i][0])
-            i += 1
-        recs = eng.tick(tick)
-        outputs.append((tick, recs[0].values["newest"]))
-    fed = [s for _, batch in rec.fed for s in batch]
-    times = [s.t for s in fed]
-    assert times == sorted(times)
-    fixes = [s for s in fed if isinstance(s, GnssFix)]
-    assert len(fixes) >= 95
-    # each fix at the instant it measured (the even compass instants), not its arrival
-    for s in fixes:
-        k = (s.t - 0.003) / 0.2
-        assert k == pytest.approx(round(k), abs=1e-6)
-    # the pipeline's own state is fed up to the fusion horizon only
-    assert [t for t, _ in rec.fed] == pytest.approx([0.1 * k - 0.6 for k in range(1, 201)])
-    for t, batch in rec.fed:
-        assert all(s.t <= t + 1e-9 for s in batch)
-    # published estimate: the newest compass sample before the tick (from the copy)
-    for tick, newest in outputs[10:]:
-        assert tick - 0.1 < newest <= tick
-    assert not eng.rejected
-
-
-def test_collector_engine_without_fresh_estimates_keeps_order_and_copies_nothing():
-    """Model closure's collector: fed at the fusion horizon, no shadow copies."""
-    cfg = config.from_dict({"corrections": {"gnss_latency_s": 0.6}})
-    rec = _Recorder()
-    eng = Engine(cfg, pipelines=[rec], fresh_estimates=False)
-    stream = _live_stream(0.6)
-    i = 0
-    outputs = []
-    for k in range(1, 201):
-        while i < len(stream) and stream[i][0] <= 0.1 * k:
-            eng.push(stream[i][1], now=stream[i][0])
-            i += 1
-        # nothing fed yet at the horizon: -inf, which a record leaves out
-        outputs.append(eng.tick(0.1 * k)[0].values.get("newest", -math.inf))
-    assert outputs[0] == -math.inf and math.isfinite(outputs[10])
-    times = [s.t for _, batch in rec.fed for s in batch]
-    assert times == sorted(times) and len(times) > 290
-    assert eng._shadows is None
-    assert outputs[-1] <= 20.0 - 0.6 + 1e-9
-
-
-def test_without_latency_a_late_fix_would_break_the_order():
-    """What the hold-back prevents: the same stream re-stamped without holding back."""
-    cfg = config.from_dict({"corrections": {"gnss_latency_s": 0.6}})
-    rec = _Recorder()
-    eng = Engine(cfg, pipelines=[rec])
-    eng.hold_s = 0.0  # re-stamp, but feed at once
-    i = 0
-    stream = _live_stream(0.6)
-    for k in range(1, 101):
-        while i < len(stream) and stream[i][0] <= 0.1 * k:
-            eng.push(stream[i][1], now=stream[i][0])
-            i += 1
-        eng.tick(0.1 * k)
-    times = [s.t for _, batch in rec.fed for s in batch]
-    assert times != sorted(times)
 
 
 # ----------------------------------------------------------------------- the overlay

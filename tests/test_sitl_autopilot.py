@@ -189,7 +189,7 @@ def test_servo_function_parameters_move_the_input_mapping():
         eng.push(Parameter(t=1.0, source="mavlink:1/PARAM_VALUE", name="SERVO2_FUNCTION", value=0.0))
         eng.push(ActuatorOutputs(t=1.1, source="mavlink:1/SERVO_OUTPUT_RAW",
                                  pwm_us=(2000.0, 1500.0, 1600.0)))
-        cmds = [s for s in eng._pending if isinstance(s, ActuatorCommand)]
+        cmds = [s for s in eng.queue.pending if isinstance(s, ActuatorCommand)]
         assert cmds and cmds[-1].rudder_rad == pytest.approx(want)
         assert cmds[-1].throttle == pytest.approx(0.2)
         moved = [e for e in eng.events if e.startswith("inputs: rudder on SERVO1")]
