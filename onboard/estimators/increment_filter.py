@@ -22,8 +22,10 @@ V_u + R_v`` affine in ``V_u``.
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import TYPE_CHECKING
 
+from onboard.core.messages import Innovation
 from onboard.estimators.axis_model import AxisModel, Discrete
 
 if TYPE_CHECKING:
@@ -40,6 +42,8 @@ MAX_CONSECUTIVE_REJECTS = 5
 """Outliers skipped in a row; the next one is taken (a real jump, not an outlier)."""
 NIS_CLIP = 1e6
 """A single NIS enters the running mean at most this large."""
+PENDING_INNOVATIONS = 1024
+"""Innovation records kept until the pipeline's owner takes them; older ones are dropped."""
 DAMPING_FLOOR_PER_S = 0.05
 """Smallest damping rate a (1/s) taken when a persistent input error is turned into a
 speed error ``du / a`` (an undamped model would make it unbounded)."""
@@ -63,11 +67,13 @@ class IncrementFilter:
         steps, rejected, diverged, restarts: updates, skipped outliers, input-model
             divergences, restarts after a gap; rate_steps, rate_rejected: the same for the
             rate row.
+        innovations: the records of the updates not yet taken (channels
+            ``<name>.increment`` and ``<name>.rate``; innovation = measured - forecast).
     """
 
     def __init__(self, model: AxisModel, input_model: InputModel, *, input_error_var: float,
                  u_max: float, q_v: float, correlated: bool, nis_gate: float,
-                 adaptive_rate_noise: bool) -> None:
+                 adaptive_rate_noise: bool, name: str = "axis") -> None:
         """Args:
             model: the axis model (§1.1).
             input_model: supplies the forecast's input (§2.12).
@@ -78,7 +84,9 @@ class IncrementFilter:
             correlated: model the MA(1) noise of increments (§2.2).
             nis_gate: NIS beyond which a measurement is an outlier.
             adaptive_rate_noise: covariance matching of ``V_u`` on the rate row.
+            name: the axis (``surge``, ``heading``): the prefix of its channels.
         """
+        self.name = name
         self.model = model
         self.input = input_model
         self.u_max = u_max
@@ -100,28 +108,38 @@ class IncrementFilter:
         self._rate_mean = 0.0   # running mean of z_v (m/s)
         self._rate_bias2 = 0.0  # running mean of its square ((m/s)^2)
         self._c1 = 0.0          # c1 (s) of the last step with a rate
+        self.innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
 
     # -- §2.7, one step ------------------------------------------------------------------
 
     def step(self, k: Discrete, y: float, R: float, R_prev: float,
-             command: float | None, y_v: float | None = None, R_v: float = 0.0) -> None:
+             command: float | None, y_v: float | None = None, R_v: float = 0.0, *,
+             t: float = math.nan, source: str = "") -> None:
         """One step over ``k.dt`` (§2.7).
 
         ``y``: the increment (m or rad) between two points of noise variances ``R`` and
         ``R_prev``; ``command``: the mean normalized command over the step (None if
         unknown); ``y_v``: the rate measured at the newer point (m/s, the window's mean
-        Doppler speed; None without one), of noise variance ``R_v``.
+        Doppler speed; None without one), of noise variance ``R_v``; ``t``, ``source``:
+        the newer point's time (s) and sample source, for the innovation records.
         """
         kf = self.kf
         self.last_command = command
         kf.R = R if kf.correlated else R + R_prev
         if not kf.initialized:
-            self._start(k, y, R, R_prev, command, y_v, R_v)
+            self._start(k, y, R, R_prev, command, y_v, R_v, t, source)
             return
         kf.forecast(k, self.input.forecast_input(self, command, y_v is not None), self.V_u)
         self.rate_z = None if y_v is None else self._rate_innovation(k, y_v, R_v)
         kf.innovation(y)
-        if kf.nis > self.nis_gate and self._consecutive_rejects < MAX_CONSECUTIVE_REJECTS:
+        gate = (self.nis_gate if self._consecutive_rejects < MAX_CONSECUTIVE_REJECTS
+                else math.inf)
+        accepted = not kf.nis > gate
+        self.innovations.append(Innovation(
+            channel=f"{self.name}.increment", t=t, z=(-kf.z,), S=(kf.S,), nis=kf.nis,
+            dof=1, gate=self.nis_gate, accepted=accepted,
+            reason="" if accepted else "gate", source=source))
+        if not accepted:
             self.rejected += 1
             self._consecutive_rejects += 1
             kf.skip()
@@ -132,18 +150,20 @@ class IncrementFilter:
             kf.update()
             self.steps += 1
         if y_v is not None:
-            self._rate_update(y_v, R_v)
+            self._rate_update(y_v, R_v, t, source)
 
     def _start(self, k: Discrete, y: float, R: float, R_prev: float,
-               command: float | None, y_v: float | None, R_v: float) -> None:
+               command: float | None, y_v: float | None, R_v: float, t: float,
+               source: str) -> None:
         """The first increment starts the filter: ``v = y / dt``, its variance the
         input's bound over the step plus both points' noise, ``(u_max dt)^2 + (R +
-        R_prev) / dt^2`` (§2.2)."""
+        R_prev) / dt^2`` (§2.2). That first update is no test of the filter: it makes
+        no innovation record."""
         var_v = (self.u_max * k.dt) ** 2 + (R + R_prev) / (k.dt * k.dt)
         self.kf.init(y, k.dt, R_prev, var_v)
         self.input.start(self, command, R + R_prev)
         if y_v is not None:
-            self._rate_update(y_v, R_v)
+            self._rate_update(y_v, R_v, t, source)
 
     def restart(self) -> None:
         """Forget the state (a gap in the measurements); keep what the input model and
@@ -179,14 +199,21 @@ class IncrementFilter:
         hi = 4.0 * self.u_max * self.u_max
         self.V_u = self.V_u0 if v < self.V_u0 else hi if v > hi else v
 
-    def _rate_update(self, y_v: float, R_v: float) -> None:
-        """Assimilate the measured rate (``IncrementKF.update_rate``); an outlier beyond
-        ``nis_gate`` is left out and counted, at most MAX_CONSECUTIVE_REJECTS in a row."""
+    def _rate_update(self, y_v: float, R_v: float, t: float, source: str) -> None:
+        """Assimilate the measured rate (``IncrementKF.update_rate``, after the increment:
+        ``z_v = y_v - v``, ``S_v = P_vv + R_v``); an outlier beyond ``nis_gate`` is left
+        out and counted, at most MAX_CONSECUTIVE_REJECTS in a row."""
         gate = (self.nis_gate if self._rate_consecutive_rejects < MAX_CONSECUTIVE_REJECTS
                 else math.inf)
+        z, S = y_v - self.kf.v, self.kf.P[3] + R_v
         self.rate_nis = self.kf.update_rate(y_v, R_v, gate)
         self.rate_steps += 1
-        if not self.rate_nis <= gate:
+        accepted = self.rate_nis <= gate
+        self.innovations.append(Innovation(
+            channel=f"{self.name}.rate", t=t, z=(z,), S=(S,), nis=self.rate_nis, dof=1,
+            gate=self.nis_gate, accepted=accepted, reason="" if accepted else "gate",
+            source=source))
+        if not accepted:
             self.rate_rejected += 1
             self._rate_consecutive_rejects += 1
         else:

@@ -27,10 +27,11 @@ class Window:
         n_v: Doppler speeds; sv: their sum (m/s); svx: sum of their noise variances
             above the configured one ((m/s)^2).
         n_h: headings; st_h, sh: sums of their times (s) and unwrapped values (rad).
+        fix_source, heading_source: the sample source of the newest fix and heading.
     """
 
     __slots__ = ("n_fix", "st_fix", "sn", "se", "sr", "n_v", "sv", "svx", "n_h", "st_h",
-                 "sh")
+                 "sh", "fix_source", "heading_source")
 
     def __init__(self) -> None:
         self.n_fix = 0
@@ -41,9 +42,11 @@ class Window:
         self.svx = 0.0
         self.n_h = 0
         self.st_h = self.sh = 0.0
+        self.fix_source = self.heading_source = ""
 
-    def add_fix(self, t: float, n: float, e: float, var: float) -> None:
+    def add_fix(self, t: float, n: float, e: float, var: float, source: str = "") -> None:
         """A fix at ``t`` (s), position ``(n, e)`` (m), noise variance ``var`` (m^2)."""
+        self.fix_source = source
         self.n_fix += 1
         self.st_fix += t
         self.sn += n
@@ -57,8 +60,9 @@ class Window:
         self.sv += v
         self.svx += extra_var
 
-    def add_heading(self, t: float, psi: float) -> None:
+    def add_heading(self, t: float, psi: float, source: str = "") -> None:
         """A heading ``psi`` (rad, unwrapped against the previous one) at ``t`` (s)."""
+        self.heading_source = source
         self.n_h += 1
         self.st_h += t
         self.sh += psi

@@ -32,7 +32,8 @@ COLUMNS = ("north", "east", "heading", "speed", "yaw_rate", "surge_input", "yaw_
 """The estimates of pipeline ``aie`` (units in docs/architecture.md §4.2)."""
 
 
-def axis_filter(model: AxisModel, c: AxisConfig, top: AieConfig) -> IncrementFilter:
+def axis_filter(model: AxisModel, c: AxisConfig, top: AieConfig,
+                name: str = "surge") -> IncrementFilter:
     """One AIE axis: the increment filter with the RCIE input of ``c`` (§2.10)."""
     rcie = Rcie(c.n_c, c.n_f, c.r_z, c.r_d, c.r_theta, c.lam, c.u_scale, 1.0, c.u_max,
                 rate_penalty=c.rate_penalty)
@@ -42,7 +43,7 @@ def axis_filter(model: AxisModel, c: AxisConfig, top: AieConfig) -> IncrementFil
                          adaptive_window=top.adaptive_window)
     return IncrementFilter(model, estimate, input_error_var=c.v_d, u_max=c.u_max, q_v=c.q_v,
                            correlated=top.correlated_noise, nis_gate=top.nis_gate,
-                           adaptive_rate_noise=top.adaptive_rate_noise)
+                           adaptive_rate_noise=top.adaptive_rate_noise, name=name)
 
 
 def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,

@@ -29,12 +29,13 @@ COLUMNS = ("north", "east", "heading", "speed", "yaw_rate",
 """The estimates of pipeline ``kf`` (units in docs/architecture.md §4.2)."""
 
 
-def axis_filter(model: AxisModel, c: AxisConfig, top: AieConfig) -> IncrementFilter:
+def axis_filter(model: AxisModel, c: AxisConfig, top: AieConfig,
+                name: str = "surge") -> IncrementFilter:
     """One baseline axis: the increment filter with the commanded input of ``c``."""
     return IncrementFilter(model, CommandedInput(c.kf_bias_q), input_error_var=c.kf_v_d,
                            u_max=c.u_max, q_v=c.q_v, correlated=top.correlated_noise,
                            nis_gate=top.nis_gate,
-                           adaptive_rate_noise=top.adaptive_rate_noise)
+                           adaptive_rate_noise=top.adaptive_rate_noise, name=name)
 
 
 def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,

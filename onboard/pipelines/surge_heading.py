@@ -35,7 +35,15 @@ import msgspec
 
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame, wrap_2pi, wrap_pi
-from onboard.core.messages import ActuatorCommand, Attitude, GnssFix, Heading, Imu, Sample
+from onboard.core.messages import (
+    ActuatorCommand,
+    Attitude,
+    GnssFix,
+    Heading,
+    Imu,
+    Innovation,
+    Sample,
+)
 from onboard.estimators.axis_model import AxisModel, Discretization, axis_commands, path_increment
 from onboard.estimators.dead_reckoning import DeadReckoner
 from onboard.estimators.increment_filter import IncrementFilter
@@ -227,8 +235,9 @@ COURSE_POINTS = 4
 COURSE_MODE_ANCHOR = 0.3
 """Least anchor gain in course mode: the course lags the track by half its baseline."""
 
-AxisFactory = Callable[[AxisModel, Any, Any], IncrementFilter]
-"""``factory(model, axis_config, pipeline_config)``: one axis filter with its input."""
+AxisFactory = Callable[[AxisModel, Any, Any, str], IncrementFilter]
+"""``factory(model, axis_config, pipeline_config, name)``: one axis filter with its
+input, named ``surge`` or ``heading``."""
 
 
 class SurgeHeadingPipeline:
@@ -265,8 +274,8 @@ class SurgeHeadingPipeline:
                         else heading_std_rad)
         """Noise of one heading (rad)."""
         s, h = cfg.surge, cfg.heading
-        self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg)
-        self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg)
+        self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg, "surge")
+        self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg, "heading")
         self.heading = HeadingTrack(self.sigma_h ** 2)
         self.position = PositionTrack()
         self.commands = CommandHistory()
@@ -387,7 +396,7 @@ class SurgeHeadingPipeline:
             self._w_end = s.t + WINDOW_END_AFTER_FIX * self.cfg.step_s
             self._next_end = min(self._hw_end, self._w_end)
         n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
-        self._w.add_fix(s.t, n, e, self._fix_variance(s.h_acc_m))
+        self._w.add_fix(s.t, n, e, self._fix_variance(s.h_acc_m), s.source)
         self._add_speed(s)
 
     def _fix_variance(self, acc: float | None) -> float:
@@ -430,7 +439,7 @@ class SurgeHeadingPipeline:
             self._start(s.t)
         self._t_heading = s.t
         dec = (s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0
-        self._add_heading(s.t, s.heading_rad + dec)
+        self._add_heading(s.t, s.heading_rad + dec, s.source)
 
     def _on_attitude(self, s: Attitude) -> None:
         if self._imu is not None:
@@ -438,12 +447,12 @@ class SurgeHeadingPipeline:
         if self._t0 is None:
             self._start(s.t)
         if s.yaw_selected and s.t - self._t_heading > HEADING_HOLD_S:
-            self._add_heading(s.t, s.yaw_rad)
+            self._add_heading(s.t, s.yaw_rad, s.source)
 
-    def _add_heading(self, t: float, psi: float) -> None:
+    def _add_heading(self, t: float, psi: float, source: str) -> None:
         u = self._unwrap(psi)
-        self._w.add_heading(t, u)
-        self._hw.add_heading(t, u)
+        self._w.add_heading(t, u, source)
+        self._hw.add_heading(t, u, source)
 
     def _on_imu(self, s: Imu) -> None:
         if self._imu is not None:
@@ -483,7 +492,7 @@ class SurgeHeadingPipeline:
             return
         cmd = self.commands.mean(hp[0], th, 2)
         self.yaw.step(self._disc(self.yaw.damping(cmd), th - hp[0]), wrap_pi(psi - hp[1]),
-                      R_h, R_h_prev, cmd)
+                      R_h, R_h_prev, cmd, t=th, source=w.heading_source)
         self.heading.step(th, psi, R_h, self.yaw.kf, self.cfg.heading_anchor, hp[1])
         self._trim_commands()
 
@@ -556,7 +565,7 @@ class SurgeHeadingPipeline:
         surge = self.surge
         v_prev = surge.kf.v if surge.kf.initialized else None
         surge.step(self._disc(surge.damping(cmd), tp - pp[0]), y, R_s, R_s_prev, cmd,
-                   y_v, R_v)
+                   y_v, R_v, t=tp, source=w.fix_source)
         if self._imu is not None and v_prev is not None and y_v is not None:
             self._learn_imu_forecast(pp[0], tp, v_prev, y_v)
         if course_mode:
@@ -809,21 +818,25 @@ class SurgeHeadingPipeline:
     def _axes(self) -> tuple[tuple[str, IncrementFilter], ...]:
         return (("surge", self.surge), ("heading", self.yaw))
 
+    def innovations(self) -> list[Innovation]:
+        """The innovation records of both axes' updates since the last call (channels
+        ``surge.increment``, ``surge.rate`` (the Doppler speed) and
+        ``heading.increment``)."""
+        out: list[Innovation] = []
+        for _, ax in self._axes():
+            out.extend(ax.innovations)
+            ax.innovations.clear()
+        return out
+
     def health(self) -> Mapping[str, float]:
-        """Per axis the innovation ``z = C x_fc - y``, its variance S, NIS, mean NIS and
-        the counters; the Doppler row's; then what the input model reports."""
+        """Per axis its counters (updates, skipped outliers, input-model divergences,
+        restarts) and the Doppler row's; then what the input model reports."""
         h: dict[str, float] = {}
         for nm, ax in self._axes():
-            kf = ax.kf
-            h[f"{nm}.innovation"] = kf.z
-            h[f"{nm}.S"] = kf.S
-            h[f"{nm}.nis"] = kf.nis
-            h[f"{nm}.nis_mean"] = ax.nis_avg
             h[f"{nm}.steps"] = float(ax.steps)
             h[f"{nm}.rejected"] = float(ax.rejected)
             h[f"{nm}.diverged"] = float(ax.diverged)
             h[f"{nm}.restarts"] = float(ax.restarts)
-        h["surge.rate_nis"] = self.surge.rate_nis
         h["surge.rate_steps"] = float(self.surge.rate_steps)
         h["surge.rate_rejected"] = float(self.surge.rate_rejected)
         h["surge.accuracy_rejected"] = float(self._acc_bad)
