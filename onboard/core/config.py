@@ -6,8 +6,9 @@ with the dotted key and what was expected, e.g.::
 
     config/mine.toml: inputs.throttle.channel: expected int, got str
 
-Pipelines own their hyperparameters: ``[pipelines.<name>]`` is kept as a table here and
-decoded by the pipeline with :func:`decode_section`, so the error still names the key.
+Every ``[pipelines.<name>]`` table is decoded here too, into its struct of
+:mod:`onboard.core.pipeline_config`: an unknown pipeline name or key is an error naming the
+file and the key, e.g. ``overlay.toml: pipelines.aei: unknown key (misspelt?)``.
 
 Several files make one configuration with :func:`load_all` (``--config base.toml
 --config overlay.toml``): later files win key by key, tables are merged recursively,
@@ -20,17 +21,16 @@ from __future__ import annotations
 import re
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any, Literal, Sequence, TypeVar
+from typing import Annotated, Any, Literal, Sequence
 
 import msgspec
 
 from onboard.core.errors import UsageError
+from onboard.core.pipeline_config import Pipelines
 
 VehicleClass = Literal[
     "rudder-boat", "twin-thruster-boat", "bluerov2", "torpedo-auv", "spheroid", "unknown"
 ]
-
-T = TypeVar("T")
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 """Where the bundled vehicle configs live in a source checkout."""
@@ -388,6 +388,27 @@ class Corrections(_Strict):
     compass; ``[sources]`` syntax); empty: every heading and attitude source."""
 
 
+class DiagnoseConfig(_Strict):
+    """``[diagnose]``: options of ``onboard diagnose`` (model closure on a log)."""
+
+    declared: list[str] = []
+    """Effects the model already contains (e.g. a known sideslip), not to be searched."""
+    known: dict[str, list[float]] = {}
+    """Effects that are part of this vehicle's model with fixed parameters (internal
+    parameter order of each effect module), e.g. from a calm-water calibration run:
+    ``known = { surge_yaw_coupling = [0.3] }``."""
+    holdout_metric: str = ""
+    """``surge_speed_open_loop_rmse_mps``, ``ground_velocity_rmse_mps`` or
+    ``lateral_velocity_rmse_mps``; default: the ground velocity when commands exist."""
+    rate_hz: float = 10.0
+    """Rate (Hz) of the grid the log is resampled on for the fits."""
+    base_terms: list[str] = []
+    """The base model's optional terms to use (onboard.closure.dataset.BASE_TERMS:
+    ``actuator_lag``, ``course_lag``, ``speed_drift``; ``["none"]`` for none); default
+    ``actuator_lag`` and ``course_lag``. Switching them off shows what each one keeps
+    from being named an effect."""
+
+
 class Config(_Strict):
     """A whole configuration file."""
 
@@ -398,9 +419,10 @@ class Config(_Strict):
     sensors: Sensors = Sensors()
     csv: CsvFormat = CsvFormat()
     service: ServiceConfig = ServiceConfig()
-    pipelines: dict[str, dict[str, Any]] = {}
-    """Per-pipeline tables, decoded by each pipeline (see :func:`decode_section`)."""
+    pipelines: Pipelines = msgspec.field(default_factory=Pipelines)
+    """``[pipelines.<name>]``: each pipeline's table (:mod:`onboard.core.pipeline_config`)."""
     corrections: Corrections = Corrections()
+    diagnose: DiagnoseConfig = DiagnoseConfig()
 
     def __post_init__(self) -> None:
         c = self.corrections
@@ -546,11 +568,3 @@ def bundled() -> list[str]:
     """Names of the configs shipped in ``config/``."""
     return sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
 
-
-def decode_section(cfg: Config, pipeline: str, schema: type[T]) -> T:
-    """Decode ``[pipelines.<pipeline>]`` into ``schema`` (defaults when absent)."""
-    raw = cfg.pipelines.get(pipeline, {})
-    try:
-        return msgspec.convert(raw, schema)
-    except msgspec.ValidationError as err:
-        raise ConfigError(_explain(err, f"pipelines.{pipeline}")) from None
