@@ -32,6 +32,7 @@ import msgspec
 from onboard.core.config import Config, Corrections
 from onboard.core.geo import wrap_2pi, wrap_pi
 from onboard.core.messages import (
+    ActuatorColumn,
     ActuatorOutputs,
     Attitude,
     Depth,
@@ -62,7 +63,7 @@ _NEVER_STALE = {"parameter"}
 """Streams sent once, not periodically."""
 
 _SPECIAL = {Pressure, Depth, GnssFix}
-_RAW_ACTUATORS = {ActuatorOutputs, RcChannels, PropellerRpm}
+_RAW_ACTUATORS = {ActuatorOutputs, RcChannels, PropellerRpm, ActuatorColumn}
 
 TickCallback = Callable[[float, Sequence[EstimateRecord]], None]
 

@@ -239,6 +239,8 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     enabled: bool = True
     """False: the pipeline is not built."""
     observer: Literal["kf", "hgo", "flow"] = "kf"
+    """Whose current is reported: the joint Kalman filter, the high-gain observer or the
+    flow observer."""
     model_kind: Literal["", "torpedo", "surface-rudder", "surface-twin", "rov"] = ""
     """Regression model; empty: from ``vehicle.class``."""
     model: dict[str, dict[str, float]] = {}
@@ -261,6 +263,7 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     (``theta_std``, 1 m/s^2 ~ 10 %) a steady roll makes the sway term an unknown side force
     that trades against a cross-track current (docs/current.md, "Net-weight prior")."""
     theta_std_floor: float = 0.02
+    """Absolute floor added to the relative prior one-sigma of configured coefficients."""
     forgetting: float = 0.9995
     """Forgetting of the coefficient covariance per tick (0.9995 at 10 Hz: 200 s memory),
     variable-rate: none once the covariance is back at its prior (bounded, rls.py)."""
@@ -274,7 +277,9 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     accel_std: float = 0.02
     """Model acceleration error (process noise) per DOF, m/s^2 over ``model_error_time_s``."""
     model_error_time_s: float = 1.0
+    """Time (s) over which ``accel_std`` is the model's velocity error."""
     heading_diversity: float = 0.85
+    """See ``heading_memory_s``."""
     heading_memory_s: float = 300.0
     """Without a surge model the along-track sigma is floored at the prior unless the
     headings of the last ``heading_memory_s`` are diverse: the mean of the doubled-angle
@@ -300,6 +305,7 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     u^2 dr at small rates) are O(0.001-0.01) and ``lambda + phi^T P phi`` must be ruled by
     the data (with p0 = 100 the spheroid's coefficients stay 6x too small)."""
     yaw_forgetting: float = 0.9995
+    """Forgetting factor of the yaw-channel RLS per update."""
     identify_straight: bool = False
     """Identify on straight lines too: only where the current is known (a calm-water
     identification run with ``init_current_std`` ~ 0 and ``current_walk`` ~ 0)."""
@@ -318,6 +324,7 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     one-sigma for every fix. A fix without a finite positive accuracy takes the
     configured one-sigma."""
     dvl_velocity_std: float | None = None
+    """One-sigma of DVL velocity components (m/s); default from ``[sensors.dvl]``."""
     gate_nis: float = 30.0
     """Innovations with a larger NIS are rejected (counted in health)."""
     calibrate: bool = True
@@ -327,9 +334,13 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     gain_file: str = ""
     """HGO gain JSON (``onboard design-gain``); default ``config/gains/<class>.json``."""
     gamma: float | None = None
+    """A fixed high gain (``rho = 0``); default: the gain file's law."""
     gamma_0: float | None = None
+    """Initial gain of the increasing-gain law; default the gain file's."""
     rho: float | None = None
+    """Growth rate (1/s) of the increasing-gain law; default the gain file's."""
     gamma_max: float | None = None
+    """Ceiling of the increasing gain; default the gain file's."""
     hgo_identify: Literal["turns", "always"] = "turns"
     """When the high-gain observer's own RLS (``observer = "hgo"``,
     :class:`~onboard.estimators.model_identification.VelocityRls`) learns: ``"turns"``
@@ -400,6 +411,7 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     vehicle_classes: list[str] = msgspec.field(default_factory=lambda: ["bluerov2"])
     """Vehicle classes the pipeline is built for (any class with ``enabled = true``)."""
     mass_kg: float = 11.26
+    """Vehicle mass (kg)."""
     added_mass: list[float] = msgspec.field(default_factory=lambda: [1.7182, 0.0, 5.468])
     """X_udot, Y_vdot, Z_wdot as positive added masses (kg)."""
     damping_linear: list[float] = msgspec.field(default_factory=lambda: [11.7391, 20.0, 31.8678])
@@ -410,8 +422,11 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Centre of gravity below the body origin (m), paper Table I (the public code has
     0.02); the IMU is taken at the origin."""
     weight_n: float = 112.8
+    """Weight (N)."""
     buoyancy_n: float = 114.8
+    """Buoyancy (N)."""
     gravity_mps2: float = 9.81
+    """Nominal gravity (m/s^2)."""
     force_allocation: list[list[float]] = msgspec.field(
         default_factory=lambda: [list(r) for r in BLUEROV2_FORCE_ALLOCATION])
     """3 x n_thrusters: body force (N, FRD) per newton of each thruster."""
@@ -424,6 +439,7 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     thruster_deadband: float = 0.0
     """Normalized commands with |c| below this give no thrust."""
     disturbance_model: Literal["earth_fixed", "body_fixed"] = "earth_fixed"
+    """Axes in which the disturbance force is a random walk."""
     # process noise [DEFAULT]
     accel_bias_walk: float = 1e-4
     """Accelerometer bias random walk (m/s^2/sqrt(s))."""
@@ -446,9 +462,14 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     ins_bias_tau_s: float = 300.0
     """Correlation time of the INS velocity bias (s)."""
     gnss_position_std_m: float | None = None
+    """GNSS position noise (m); default ``[sensors.gnss]``."""
     gnss_velocity_std_mps: float | None = None
+    """GNSS velocity noise (m/s); default ``[sensors.gnss]``."""
     depth_std_m: float | None = None
+    """Depth noise (m); default ``[sensors.depth]``."""
     dvl_velocity_std_mps: float | None = None
+    """DVL velocity noise (m/s) when a report has no figure of merit; default
+    ``[sensors.dvl]``."""
     attitude_std_rad: float = 0.01
     """Roll and pitch noise of the AHRS attitude (rad)."""
     attitude_yaw_std_rad: float | None = None
@@ -456,10 +477,13 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     (``heading_std_rad``, else ``[sensors.compass]``): an AHRS reports the compass heading
     as its yaw."""
     heading_std_rad: float | None = None
+    """Compass heading noise (rad); default ``[sensors.compass]``."""
     thrust_std_n: float = 3.0
     """Thrust-model error besides accelerometer noise (thruster lag, model error), N."""
     accel_std_mps2: float | None = None
+    """Accelerometer noise (m/s^2); default ``[sensors.imu]``."""
     gyro_std_rps: float | None = None
+    """Gyro noise (rad/s); default ``[sensors.imu]``."""
     gnss_max_depth_m: float | None = None
     """Fixes received deeper than this are rejected (default sensors.depth.surface_depth_m)."""
     command_timeout_s: float = 0.5
@@ -480,17 +504,25 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     accelerations faster than the IMU rate resolves, while a new push must still get in.
     0 = plain update."""
     initial_north_m: float = 0.0
+    """See ``initial_east_m``."""
     initial_east_m: float = 0.0
     """Start position (m) when no GNSS fix precedes the start (a surveyed launch point);
     positions are then relative to this point until a fix arrives."""
     # initial uncertainty
     initial_position_std_m: float = 1.0
+    """Initial one-sigma of the position (m)."""
     initial_velocity_std_mps: float = 0.3
+    """Initial one-sigma of the velocity (m/s)."""
     initial_attitude_std_rad: float = 0.05
+    """Initial one-sigma of the attitude (rad)."""
     initial_accel_bias_std: float = 0.05
+    """Initial one-sigma of the accelerometer bias (m/s^2)."""
     initial_gyro_bias_std: float = 0.005
+    """Initial one-sigma of the gyro bias (rad/s)."""
     initial_gravity_std: float = 0.01
+    """Initial one-sigma of gravity (m/s^2)."""
     initial_disturbance_std_n: float = 40.0
+    """Initial one-sigma of the disturbance force (N)."""
     max_imu_gap_s: float = 0.5
     """A longer gap between IMU samples restarts the propagation clock (counted)."""
 
