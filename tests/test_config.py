@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import msgspec
 import pytest
 
 from onboard.core import config
@@ -153,3 +154,42 @@ def test_eseso_enabled_true_builds_it_for_any_class_and_false_never():
                               "pipelines": {"eseso": {"enabled": False}}})
     assert "eseso" not in {p.name for p in build(never)}
 
+
+
+def test_every_key_of_the_key_catalogue_reaches_its_field():
+    """tests/data/config/every-key.toml sets the keys no behavioural test sets, each to a
+    value other than its default: every one is decoded into its field with that value."""
+    import tomllib
+    from pathlib import Path
+
+    path = Path(__file__).parent / "data" / "config" / "every-key.toml"
+    data = tomllib.loads(path.read_text())
+    cfg, default = config.load(path), config.Config()
+
+    def leaves(table, prefix=()):
+        for k, v in table.items():
+            if isinstance(v, dict):
+                yield from leaves(v, (*prefix, k))
+            elif isinstance(v, list) and v and isinstance(v[0], dict):
+                for i, item in enumerate(v):
+                    yield from leaves(item, (*prefix, k, i))
+            else:
+                yield (*prefix, k), v
+
+    def get(node, key):
+        if isinstance(key, int):
+            return node[key] if node is not None else None
+        field = next(f.name for f in msgspec.structs.fields(node) if f.encode_name == key)
+        return getattr(node, field)
+
+    n = 0
+    for key, value in leaves(data):
+        node, base = cfg, default
+        for part in key:
+            node = get(node, part)
+            base = get(base, part) if base is not None and not (
+                isinstance(part, int) and part >= len(base)) else None
+        assert node == value, key
+        assert node != base, key
+        n += 1
+    assert n > 80
