@@ -70,7 +70,8 @@ class ChannelMap(_Strict):
     """How one actuator role is read from a log or telemetry field.
 
     ``source`` is ``servo`` (SERVO_OUTPUT_RAW / RCOU), ``rc`` (RC_CHANNELS / RCIN),
-    ``rpm`` (RPM message) or ``column`` (a CSV column named by ``column``).
+    ``rpm`` (RPM message) or ``column`` (the CSV column named by ``column``, in the log's
+    own units: the ``*_us`` keys are then in that unit; docs/formats-text.md).
     PWM is normalized as ``(pwm - neutral_us) / half_range_us`` with ``deadband_us``
     around neutral set to zero, clipped to [-1, 1], negated when ``reverse``; then
     multiplied by ``full_scale`` (e.g. 0.2618 rad for a +-15 deg rudder, or the rpm at
