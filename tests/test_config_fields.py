@@ -90,7 +90,7 @@ def undocumented_fields(cls: type) -> list[str]:
 
 
 @cache
-def tests_text() -> str:
+def corpus_of_tests() -> str:
     """The text of every test module and test TOML file."""
     files = [*TESTS.rglob("*.py"), *TESTS.rglob("*.toml")]
     return "\n".join(p.read_text(encoding="utf-8", errors="replace") for p in sorted(files))
@@ -123,7 +123,7 @@ def test_every_config_field_is_documented(cls):
 
 @pytest.mark.parametrize("cls", STRUCTS, ids=lambda c: c.__name__)
 def test_every_config_field_is_exercised_by_a_test(cls):
-    missing = [n for n in unexercised_fields(cls, tests_text())
+    missing = [n for n in unexercised_fields(cls, corpus_of_tests())
                if f"{cls.__name__}.{n}" not in NOT_EXERCISED]
     assert missing == []
 
