@@ -24,15 +24,9 @@ from typing import Any, Mapping
 
 from onboard.core.config import Config
 from onboard.estimators.axis_model import AxisModel, Discrete
+from onboard.core.pipeline_config import AieConfig, AxisConfig
 from onboard.estimators.rcie import Rcie
-from onboard.pipelines.surge_heading import (
-    AieConfig,
-    AxisConfig,
-    AxisFilter,
-    SurgeHeadingPipeline,
-    load_config,
-    sensor_noise,
-)
+from onboard.pipelines.surge_heading import AxisFilter, SurgeHeadingPipeline, sensor_noise
 
 COLUMNS = ("north", "east", "heading", "speed", "yaw_rate", "surge_input", "yaw_input",
            "std_north", "std_east", "std_speed", "std_heading")
@@ -173,4 +167,4 @@ def create(cfg: Config) -> AiePipeline | None:
     """Pipeline ``aie`` for surface vehicles (None for the BlueROV2 and the spheroid)."""
     if cfg.vehicle.vehicle_class in ("bluerov2", "spheroid"):
         return None
-    return build(load_config(cfg), *sensor_noise(cfg))
+    return build(cfg.pipelines.aie, *sensor_noise(cfg))

@@ -330,7 +330,7 @@ def aie_step_ratio(n: int = 5000, repeats: int = 5) -> dict[str, float]:
 
     from onboard.estimators.axis_model import AxisModel, augmented_matrices, discretize
     from onboard.pipelines.aie import AxisAie
-    from onboard.pipelines.surge_heading import AieConfig
+    from onboard.core.pipeline_config import AieConfig
 
     top = AieConfig()
     ax = AxisAie(AxisModel(1.0, 3.0), top.surge, top)
