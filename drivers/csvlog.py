@@ -20,6 +20,8 @@ VelocityOverGround  ``surge_mps``, ``sway_mps`` + ``heading``                   
                                                                                 NED
 Depth               ``depth_m``                                                 m, down +
 ActuatorOutputs     ``pwm_columns`` (channel 1 first)                           us
+ActuatorColumn      each of ``actuator_columns`` (the ``[inputs]`` roles with    the log's
+                    ``source = "column"``), one sample per column               units
 ==================  ==========================================================  ==========
 
 Surge and sway are taken as velocity *over ground* in body axes (as in the BlueBoat NTNU
@@ -46,12 +48,13 @@ import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 from drivers.base import ReadStats, UnreadableLog
 from onboard.core.config import CsvFormat
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
+    ActuatorColumn,
     ActuatorOutputs,
     Attitude,
     Depth,
@@ -91,9 +94,12 @@ class CsvReader:
     or lacks a mapped column. Iterating yields samples in time order; ``stats`` counts.
     """
 
-    def __init__(self, path: str | Path, fmt: CsvFormat, source_prefix: str = "csv") -> None:
+    def __init__(self, path: str | Path, fmt: CsvFormat, source_prefix: str = "csv",
+                 actuator_columns: Sequence[str] = ()) -> None:
         self.path = Path(path)
         self.fmt = fmt
+        self.actuator_columns = tuple(dict.fromkeys(actuator_columns))
+        """Columns read as :class:`ActuatorColumn` samples (each once)."""
         self.prefix = source_prefix
         self.stats = ReadStats()
         if self.path.is_dir():
@@ -131,7 +137,7 @@ class CsvReader:
         f = self.fmt
         cols = [f.time, f.lat_deg, f.lon_deg, f.alt_m, f.north_m, f.east_m, f.heading,
                 f.yaw_rate, f.surge_mps, f.sway_mps, f.sog_mps, f.depth_m, f.roll, f.pitch,
-                f.run_column, *f.pwm_columns]
+                f.run_column, *f.pwm_columns, *self.actuator_columns]
         return [c for c in cols if c]
 
     def _index(self, header: list[str], path: Path) -> dict[str, int]:
@@ -333,6 +339,12 @@ class CsvReader:
             try:
                 out.append(ActuatorOutputs(t=t, source=src,
                                            pwm_us=tuple(num(c) for c in f.pwm_columns)))
+            except _Bad as b:
+                st.reject(b.reason)
+
+        for col in self.actuator_columns:
+            try:
+                out.append(ActuatorColumn(t=t, source=src, column=col, value=num(col)))
             except _Bad as b:
                 st.reject(b.reason)
         return out

@@ -8,6 +8,7 @@ file or a directory of runs, which needs a ``[csv]`` mapping in the config).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Sequence
 
 from drivers.base import LogReader, UnreadableLog
 
@@ -48,9 +49,17 @@ def sniff(path: str | Path) -> str:
     return "text"
 
 
-def open_log(path: str | Path, csv_format=None) -> tuple[str, LogReader]:
-    """(format, reader) for ``path``. ``csv_format`` is the config's [csv] section."""
+def open_log(path: str | Path, csv_format=None,
+             actuator_columns: Sequence[str] = ()) -> tuple[str, LogReader]:
+    """(format, reader) for ``path``. ``csv_format`` is the config's [csv] section;
+    ``actuator_columns`` the columns ``[inputs]`` maps with ``source = "column"``, read
+    by the CSV reader as ``ActuatorColumn`` samples (other formats have no columns:
+    :class:`UnreadableLog`)."""
     fmt = sniff(path)
+    if actuator_columns and fmt not in ("csv", "csv-dir"):
+        raise UnreadableLog(
+            f"{path}: [inputs] reads column(s) {', '.join(map(repr, actuator_columns))} "
+            f'(source = "column"), but a {fmt} log has no columns')
     if fmt == "tlog":
         from drivers.tlog import TlogReader
 
@@ -73,7 +82,7 @@ def open_log(path: str | Path, csv_format=None) -> tuple[str, LogReader]:
                 "(e.g. config/blueboat-ntnu-csv.toml)")
         from drivers.csvlog import CsvReader
 
-        return fmt, CsvReader(path, csv_format)
+        return fmt, CsvReader(path, csv_format, actuator_columns=actuator_columns)
     from drivers.textlog import open_text_log
 
     return fmt, open_text_log(path)

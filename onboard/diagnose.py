@@ -4,45 +4,22 @@ closure on measured data.
 Reads the log with the same readers and engine as ``onboard replay``, fits the base model,
 selects the effects that explain its structured residuals on held-out data, and writes
 ``DIR/diagnosis.json`` and ``DIR/report.html`` (architecture.md §4.3); with
-``--write-config`` also a config overlay of what it found (:mod:`onboard.closure.overlay`). Options in the
-config's ``[pipelines.diagnose]`` table: ``declared`` (effects already in the model),
-``known``, ``holdout_metric``, ``base_terms``.
+``--write-config`` also a config overlay of what it found (:mod:`onboard.closure.overlay`).
+Options in the config's ``[diagnose]`` table (:class:`onboard.core.config.DiagnoseConfig`):
+``declared`` (effects already in the model), ``known``, ``holdout_metric``, ``rate_hz``,
+``base_terms``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import msgspec
-
 from drivers.base import UnreadableLog
 from onboard.closure import dataset, overlay, report
 from onboard.closure.effects import ALL
 from onboard.closure.select import select
-from onboard.core.config import decode_section
 from onboard.core.errors import UsageError
 from onboard.replay import choose_config
-
-
-class DiagnoseConfig(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    """``[pipelines.diagnose]``."""
-
-    enabled: bool = True
-    declared: list[str] = []
-    """Effects the model already contains (e.g. a known sideslip), not to be searched."""
-    known: dict[str, list[float]] = {}
-    """Effects that are part of this vehicle's model with fixed parameters (internal
-    parameter order of each effect module), e.g. from a calm-water calibration run:
-    ``known = { surge_yaw_coupling = [0.3] }``."""
-    holdout_metric: str = ""
-    """``surge_speed_open_loop_rmse_mps``, ``ground_velocity_rmse_mps`` or
-    ``lateral_velocity_rmse_mps``; default: the ground velocity when commands exist."""
-    rate_hz: float = 10.0
-    base_terms: list[str] = []
-    """The base model's optional terms to use (onboard.closure.dataset.BASE_TERMS:
-    ``actuator_lag``, ``course_lag``, ``speed_drift``; ``["none"]`` for none); default
-    ``actuator_lag`` and ``course_lag``. Switching them off shows what each one keeps
-    from being named an effect."""
 
 
 def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
@@ -51,7 +28,7 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     """Model closure of ``log`` under configuration ``cfg``: fit, select the effects,
     write ``diagnosis.json`` and ``report.html`` into ``out_dir``; return the diagnosis.
 
-    ``declared`` effects (default: the config's ``[pipelines.diagnose] declared``) are
+    ``declared`` effects (default: the config's ``[diagnose] declared``) are
     taken as part of the model and not searched; an unknown name is a
     :class:`UsageError`. ``write_config``: also write the config overlay there
     (``config_note`` names the base config in its header; ``detected``: ``cfg`` was
@@ -60,7 +37,7 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     ``base_terms``, else :data:`onboard.closure.dataset.DEFAULT_BASE_TERMS`;
     :func:`onboard.closure.dataset.with_base_terms`).
     """
-    opts = decode_section(cfg, "diagnose", DiagnoseConfig)
+    opts = cfg.diagnose
     declared = tuple(declared) or tuple(opts.declared)
     unknown = [d for d in (*declared, *opts.known) if d not in ALL]
     if unknown:

@@ -31,6 +31,7 @@ from typing import Callable, Iterable, Mapping, Protocol, Sequence
 
 from onboard.core.config import Config
 from onboard.core.messages import (
+    ActuatorColumn,
     ActuatorOutputs,
     Depth,
     EstimateRecord,
@@ -65,7 +66,7 @@ _NEVER_STALE = {"parameter"}
 """Streams sent once, not periodically."""
 
 _DEPTH_OR_GNSS = {Pressure, Depth, GnssFix}
-_RAW_ACTUATORS = {ActuatorOutputs, RcChannels, PropellerRpm}
+_RAW_ACTUATORS = {ActuatorOutputs, RcChannels, PropellerRpm, ActuatorColumn}
 
 TickCallback = Callable[[float, Sequence[EstimateRecord]], None]
 

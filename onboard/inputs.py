@@ -10,7 +10,14 @@ from __future__ import annotations
 import msgspec
 
 from onboard.core.config import ChannelMap, Inputs
-from onboard.core.messages import ActuatorCommand, ActuatorOutputs, PropellerRpm, RcChannels, Sample
+from onboard.core.messages import (
+    ActuatorColumn,
+    ActuatorCommand,
+    ActuatorOutputs,
+    PropellerRpm,
+    RcChannels,
+    Sample,
+)
 
 _ROLES = ("throttle", "rudder", "left", "right", "propeller_rpm", "stern_plane")
 _FIELD = {"rudder": "rudder_rad", "stern_plane": "stern_plane_rad"}
@@ -53,8 +60,15 @@ def remap(inputs: Inputs, functions: dict[int, int]) -> tuple[Inputs, list[str]]
     return (msgspec.structs.replace(inputs, **kw) if kw else inputs), changes
 
 
+def column_names(inputs: Inputs) -> list[str]:
+    """The log columns the roles with ``source = "column"`` read, in role order."""
+    maps = [getattr(inputs, r) for r in _ROLES] + list(inputs.thrusters)
+    return [m.column for m in maps if m is not None and m.source == "column"]
+
+
 def normalize_pwm(pwm_us: float, m: ChannelMap) -> float:
-    """Pulse width (us) -> value in [-1, 1] times ``full_scale`` (see ChannelMap)."""
+    """Pulse width (us), or a column's value in its own units -> value in [-1, 1] times
+    ``full_scale`` (see ChannelMap)."""
     x = pwm_us - m.neutral_us
     if abs(x) <= m.deadband_us:
         return 0.0
@@ -65,7 +79,8 @@ def normalize_pwm(pwm_us: float, m: ChannelMap) -> float:
 
 
 class InputMapper:
-    """Turns ActuatorOutputs / RcChannels / PropellerRpm samples into ActuatorCommand.
+    """Turns ActuatorOutputs / RcChannels / PropellerRpm / ActuatorColumn samples into
+    ActuatorCommand.
 
     A command is emitted whenever a source that feeds a mapped role arrives; roles fed by
     other sources keep their latest value, so a vehicle with PWM outputs and a separate
@@ -111,6 +126,10 @@ class InputMapper:
         return bool(self._roles or self.inputs.thrusters)
 
     def _value(self, m: ChannelMap, sample: Sample) -> float | None:
+        if isinstance(sample, ActuatorColumn):
+            if m.source != "column" or m.column != sample.column:
+                return None
+            return normalize_pwm(sample.value, m)
         if isinstance(sample, PropellerRpm):
             if m.source != "rpm" or m.channel > len(sample.rpm):
                 return None
@@ -125,7 +144,8 @@ class InputMapper:
 
     def map(self, sample: Sample) -> ActuatorCommand | None:
         """The command implied by ``sample``, or None if it feeds no mapped role."""
-        if not isinstance(sample, (ActuatorOutputs, RcChannels, PropellerRpm)):
+        if not isinstance(sample, (ActuatorOutputs, RcChannels, PropellerRpm,
+                                   ActuatorColumn)):
             return None
         changed = False
         for role, m in self._roles:

@@ -24,6 +24,7 @@ from onboard.core.config import Config
 from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord, Sample
 from onboard.engine import Engine, run
+from onboard.inputs import column_names
 from onboard.sources import QUANTITIES
 
 
@@ -138,7 +139,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     """Run the pipelines over ``log``; write the outputs into ``out_dir``; return the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
     wall0 = time.perf_counter()
-    fmt, reader = open_log(log, cfg.csv)
+    fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
     engine = Engine(cfg)
     samples = iter(reader)
     first = next(samples, None)

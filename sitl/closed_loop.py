@@ -129,9 +129,8 @@ def eseso_engine(start_north: float, start_east: float, plant: BlueROV2 | BlueRO
     (``plant``: a plant or its parameters; the nominal vehicle's, as they would be those
     identified for the real vehicle, also when the simulated plant is perturbed by
     :mod:`sitl.mismatch`)."""
-    cfg = onboard_config.load("bluerov2")
-    pipelines = dict(cfg.pipelines)
-    section = dict(pipelines.get("eseso", {}))
+    data = msgspec.to_builtins(onboard_config.load("bluerov2"))
+    section = data["pipelines"]["eseso"]
     pp = plant if isinstance(plant, BlueROV2Params) else plant.params
     section.update(initial_north_m=start_north, initial_east_m=start_east,
                    mass_kg=pp.m, added_mass=list(pp.added_mass[:3]),
@@ -139,9 +138,6 @@ def eseso_engine(start_north: float, start_east: float, plant: BlueROV2 | BlueRO
                    damping_quadratic=[-d for d in pp.d_quad[:3]],
                    weight_n=pp.weight, buoyancy_n=pp.buoyancy, cg_z_m=pp.z_g)
     section.update(overrides or {})
-    pipelines["eseso"] = section
-    data = msgspec.to_builtins(cfg)
-    data["pipelines"] = pipelines
     cfg = onboard_config.from_dict(data)
     engine = Engine(cfg, only={"eseso"})
     if not engine.pipelines:

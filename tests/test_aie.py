@@ -15,8 +15,8 @@ from onboard.estimators.rcie import Rcie
 from onboard.estimators.rls import two_row_rls_kernel, unpack
 from onboard.pipelines import aie as aie_mod
 from onboard.pipelines import kf as kf_mod
+from onboard.core.pipeline_config import AieConfig, KfConfig
 from onboard.pipelines.aie import axis_filter
-from onboard.pipelines.surge_heading import AieConfig
 from tests.helpers.first_order_boat import SimConfig, run_pipelines, score, simulate
 
 
@@ -117,10 +117,13 @@ def test_divergence_is_detected_counted_and_recovered() -> None:
     assert ax.diverged == 2
 
 
+CONFIG = {aie_mod: AieConfig, kf_mod: KfConfig}
+"""Each pipeline module's configuration struct (``[pipelines.aie]``, ``[pipelines.kf]``)."""
+
+
 def _pipes(cfg: dict | None = None):
-    c = msgspec.convert(cfg or {}, AieConfig)
-    from onboard.pipelines import kf as kf_mod
-    return [aie_mod.build(c, 1.5, 0.03), kf_mod.build(c, 1.5, 0.03)]
+    return [mod.build(msgspec.convert(cfg or {}, CONFIG[mod]), 1.5, 0.03)
+            for mod in (aie_mod, kf_mod)]
 
 
 def test_aie_beats_a_kf_with_wrong_input_scaling() -> None:
@@ -167,7 +170,7 @@ def test_fixes_before_the_first_heading_do_not_poison_the_surge_axis(mod) -> Non
     late = [s for s in sim.samples
             if not (type(s).__name__ in ("Heading", "Attitude", "ImuSample") and s.t < 3.0)]
     assert len(late) < len(sim.samples)
-    p = mod.build(msgspec.convert({}, AieConfig), 1.5, 0.03)
+    p = mod.build(CONFIG[mod](), 1.5, 0.03)
     out = run_pipelines(late, [p], sim.t)[0]
     for c in ("north", "east", "speed", "heading"):
         assert np.isfinite(out[c][-1]), c
@@ -258,7 +261,7 @@ def test_a_fix_reporting_a_large_error_is_weighted_accordingly(mod) -> None:
     configured 1.5 m noise; a fix reporting better than configured does not stiffen the
     anchor (the published track is the same as without the report)."""
     def east_after(cfg, acc_jump, acc):
-        p = mod.build(msgspec.convert(cfg, AieConfig), 1.5, 0.03, 0.1)
+        p = mod.build(msgspec.convert(cfg, CONFIG[mod]), 1.5, 0.03, 0.1)
         outs = _straight_run(p, lambda t: acc_jump if abs(t - 20.0) < 1e-6 else acc,
                              jump_at=20.0)
         return max(abs(o.get("east", 0.0)) for t, o in outs if 20.0 <= t < 21.0)
@@ -290,7 +293,7 @@ def test_the_newest_fix_is_in_the_estimate_at_the_next_tick(close: bool) -> None
     from onboard.core.geo import LocalFrame
     from onboard.core.messages import GnssFix, Heading
 
-    p = kf_mod.build(msgspec.convert({"close_at_output": close}, AieConfig), 1.5, 0.03,
+    p = kf_mod.build(msgspec.convert({"close_at_output": close}, KfConfig), 1.5, 0.03,
                      0.01)
     fr = LocalFrame(47.0, 8.0)
     north, speed = 0.0, {}
@@ -320,7 +323,7 @@ def test_a_doppler_speed_reporting_a_poor_accuracy_is_down_weighted(mod) -> None
     from onboard.core.messages import GnssFix, Heading
 
     def speed_rms(cfg) -> float:
-        p = mod.build(msgspec.convert(cfg, AieConfig), 1.5, 0.03, 0.1)
+        p = mod.build(msgspec.convert(cfg, CONFIG[mod]), 1.5, 0.03, 0.1)
         rng = np.random.default_rng(7)
         fr = LocalFrame(47.0, 8.0)
         err = []

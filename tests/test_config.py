@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import msgspec
 import pytest
 
 from onboard.core import config
@@ -63,13 +64,132 @@ def test_missing_file_is_reported():
         config.load("/nonexistent/x.toml")
 
 
-def test_pipeline_section_errors_name_the_pipeline_key():
-    import msgspec
+def test_pipeline_tables_are_decoded_when_the_config_loads():
+    with pytest.raises(ConfigError, match=r"pipelines\.aie\.surge\.n_c: expected int"):
+        config.from_dict({"pipelines": {"aie": {"surge": {"n_c": "four"}}}})
+    cfg = config.from_dict({"pipelines": {"current": {"observer": "hgo"}}})
+    assert cfg.pipelines.current.observer == "hgo"
+    assert cfg.pipelines.aie == config.Config().pipelines.aie
 
-    class Section(msgspec.Struct, forbid_unknown_fields=True):
-        order: int = 4
 
-    cfg = config.from_dict({"pipelines": {"aie": {"order": "four"}}})
-    with pytest.raises(ConfigError, match=r"pipelines\.aie\.order: expected int"):
-        config.decode_section(cfg, "aie", Section)
-    assert config.decode_section(config.Config(), "aie", Section).order == 4
+@pytest.mark.parametrize("table, key", [
+    ({"aei": {}}, "pipelines.aei"),
+    ({"diagnose": {"known": {}}}, "pipelines.diagnose"),
+    ({"aie": {"surge": {"kf_v_d": 1.0}}}, "pipelines.aie.surge.kf_v_d"),
+    ({"aie": {"heading": {"kf_bias_q": 0.0}}}, "pipelines.aie.heading.kf_bias_q"),
+    ({"kf": {"adaptive": True}}, "pipelines.kf.adaptive"),
+    ({"nav": {"stale_s": 2.0}}, "pipelines.nav.stale_s"),
+    ({"eseso": {"mass_kgg": 3.0}}, "pipelines.eseso.mass_kgg"),
+])
+def test_unknown_pipeline_name_or_key_is_an_error_naming_the_file_and_key(tmp_path, table,
+                                                                           key):
+    import tomllib
+
+    f = tmp_path / "overlay.toml"
+    f.write_text(_toml({"pipelines": table}))
+    assert tomllib.loads(f.read_text()) == {"pipelines": table}
+    with pytest.raises(ConfigError) as err:
+        config.load(f)
+    assert str(err.value) == f"{f}: {key}: unknown key (misspelt?)"
+
+
+def _toml(data: dict, prefix: str = "") -> str:
+    """A small TOML writer for nested tables of numbers, booleans and empty tables."""
+    scalars = {k: v for k, v in data.items() if not isinstance(v, dict)}
+    out = [f"[{prefix}]"] if prefix and (scalars or not data) else []
+    out += [f"{k} = {str(v).lower() if isinstance(v, bool) else v}" for k, v in scalars.items()]
+    for k, v in data.items():
+        if isinstance(v, dict):
+            out.append(_toml(v, f"{prefix}.{k}" if prefix else k))
+    return "\n".join(out)
+
+
+def test_kf_defaults_are_the_models_and_settings_it_read_from_the_aie_table():
+    """``[pipelines.kf]`` was split off ``[pipelines.aie]``: its defaults are the values the
+    KF used before (the axis models, the shared measurement handling, ``v_d`` 1.0 on both
+    axes, ``bias_q`` 0.01 on surge and 0 on heading), so the estimates are unchanged."""
+    from onboard.core.pipeline_config import AieConfig, KfConfig, SurgeHeadingConfig
+
+    aie, kf = AieConfig(), KfConfig()
+    for name in SurgeHeadingConfig.__struct_fields__:
+        assert getattr(kf, name) == getattr(aie, name), name
+    for axis in ("surge", "heading"):
+        a, k = getattr(aie, axis), getattr(kf, axis)
+        assert (k.a, k.gain, k.offset, k.u_max, k.q_v) == (a.a, a.gain, a.offset, a.u_max,
+                                                           a.q_v), axis
+        assert k.v_d == 1.0
+    assert (kf.surge.bias_q, kf.heading.bias_q) == (0.01, 0.0)
+
+
+def test_diagnose_settings_are_a_top_level_table():
+    cfg = config.from_dict({"diagnose": {"known": {"surge_yaw_coupling": [0.2]},
+                                         "holdout_metric": "ground_velocity_rmse_mps",
+                                         "rate_hz": 5.0, "declared": ["sideslip"],
+                                         "base_terms": ["none"]}})
+    assert cfg.diagnose.known == {"surge_yaw_coupling": [0.2]}
+    assert cfg.diagnose.rate_hz == 5.0 and cfg.diagnose.declared == ["sideslip"]
+    assert config.Config().diagnose.base_terms == []
+
+
+@pytest.mark.parametrize("name", ["nav", "aie", "kf", "current"])
+def test_enabled_false_leaves_a_pipeline_out(name):
+    from onboard.pipelines import build
+
+    on = {p.name for p in build(config.load("rudder-boat"))}
+    assert name in on
+    off = config.from_dict({"vehicle": {"class": "rudder-boat"},
+                            "pipelines": {name: {"enabled": False}}})
+    assert {p.name for p in build(off)} == on - {name}
+
+
+def test_eseso_enabled_true_builds_it_for_any_class_and_false_never():
+    from onboard.pipelines import build
+
+    assert "eseso" not in {p.name for p in build(config.load("rudder-boat"))}
+    assert "eseso" in {p.name for p in build(config.load("bluerov2"))}
+    anyclass = config.from_dict({"vehicle": {"class": "rudder-boat"},
+                                 "pipelines": {"eseso": {"enabled": True}}})
+    assert "eseso" in {p.name for p in build(anyclass)}
+    never = config.from_dict({"vehicle": {"class": "bluerov2"},
+                              "pipelines": {"eseso": {"enabled": False}}})
+    assert "eseso" not in {p.name for p in build(never)}
+
+
+
+def test_every_key_of_the_key_catalogue_reaches_its_field():
+    """tests/data/config/every-key.toml sets the keys no behavioural test sets, each to a
+    value other than its default: every one is decoded into its field with that value."""
+    import tomllib
+    from pathlib import Path
+
+    path = Path(__file__).parent / "data" / "config" / "every-key.toml"
+    data = tomllib.loads(path.read_text())
+    cfg, default = config.load(path), config.Config()
+
+    def leaves(table, prefix=()):
+        for k, v in table.items():
+            if isinstance(v, dict):
+                yield from leaves(v, (*prefix, k))
+            elif isinstance(v, list) and v and isinstance(v[0], dict):
+                for i, item in enumerate(v):
+                    yield from leaves(item, (*prefix, k, i))
+            else:
+                yield (*prefix, k), v
+
+    def get(node, key):
+        if isinstance(key, int):
+            return node[key] if node is not None else None
+        field = next(f.name for f in msgspec.structs.fields(node) if f.encode_name == key)
+        return getattr(node, field)
+
+    n = 0
+    for key, value in leaves(data):
+        node, base = cfg, default
+        for part in key:
+            node = get(node, part)
+            base = get(base, part) if base is not None and not (
+                isinstance(part, int) and part >= len(base)) else None
+        assert node == value, key
+        assert node != base, key
+        n += 1
+    assert n > 80

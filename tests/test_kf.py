@@ -14,7 +14,7 @@ from onboard.core.messages import GnssFix, Heading
 from onboard.estimators.axis_model import augmented_matrices, discretize
 from onboard.estimators.kalman import IncrementKF
 from onboard.pipelines import kf as kf_mod
-from onboard.pipelines.surge_heading import AieConfig
+from onboard.core.pipeline_config import AieConfig, KfConfig
 from tests.helpers.first_order_boat import SimConfig, run_pipelines, score, simulate
 
 
@@ -120,7 +120,7 @@ def test_covariance_stays_symmetric_positive() -> None:
 
 
 def _kf(cfg: dict | None = None):
-    return kf_mod.build(msgspec.convert(cfg or {}, AieConfig), 1.5, 0.03)
+    return kf_mod.build(msgspec.convert(cfg or {}, KfConfig), 1.5, 0.03)
 
 
 def test_kf_baseline_without_commands_runs_with_zero_input() -> None:
@@ -130,7 +130,7 @@ def test_kf_baseline_without_commands_runs_with_zero_input() -> None:
     out = run_pipelines(samples, [p], sim.t)[0]
     sc = score(sim, out, t_min=40.0)
     # measured: speed 0.68 m/s, heading 0.027 rad (constant-rate model, random
-    # acceleration of variance kf_v_d: the classical filter without inputs)
+    # acceleration of variance v_d: the classical filter without inputs)
     assert sc["speed"] < 0.8
     assert sc["heading"] < 0.04
     assert p.surge.input.u == 0.0
@@ -146,12 +146,16 @@ def test_kf_baseline_with_the_true_model_tracks_the_synthetic_boat() -> None:
     assert sc["position"] < 3.0
 
 
-def test_kf_create_reads_the_aie_table_and_skips_rovs() -> None:
+def test_kf_create_reads_its_own_table_and_skips_rovs() -> None:
     cfg = from_dict({"vehicle": {"class": "rudder-boat"},
-                     "pipelines": {"aie": {"surge": {"gain": 4.0}}}})
+                     "pipelines": {"kf": {"surge": {"gain": 4.0, "v_d": 2.0, "bias_q": 0.0},
+                                          "heading": {"q_v": 1e-4}},
+                                   "aie": {"surge": {"gain": 5.0}}}})
     p = kf_mod.create(cfg)
     assert p is not None and p.name == "kf"
-    assert p.surge.model.gain == 4.0
+    assert p.surge.model.gain == 4.0 and p.surge.V_u == 2.0
+    assert type(p.surge.kf).__name__ == "IncrementKF"   # bias_q = 0: no bias state
+    assert p.yaw.kf.q_v == 1e-4
     assert "north" in p.columns and "speed" in p.columns
     assert kf_mod.create(from_dict({"vehicle": {"class": "bluerov2"}})) is None
 

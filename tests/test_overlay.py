@@ -53,7 +53,8 @@ def test_overlay_changes_only_its_keys(tmp_path):
     assert cfg.inputs.throttle.half_range_us == base.inputs.throttle.half_range_us
     assert cfg.inputs.rudder == base.inputs.rudder
     assert cfg.corrections.gnss_latency_s == 0.5
-    assert cfg.pipelines["aie"]["surge"] == {"gain": 2.5}
+    assert cfg.pipelines.aie.surge.gain == 2.5
+    assert cfg.pipelines.aie.surge.a == base.pipelines.aie.surge.a
     assert cfg.vehicle == base.vehicle and cfg.sensors == base.sensors
 
 
@@ -105,6 +106,27 @@ def test_cli_bad_overlay_exits_2_with_one_line(tmp_path, capsys):
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "corrections.nope: unknown key" in err
+
+
+@pytest.mark.parametrize("command", ["replay", "run", "diagnose"])
+@pytest.mark.parametrize("table, key", [
+    ("[pipelines.aei]\nstep_s = 0.1\n", "pipelines.aei"),             # a misspelt pipeline
+    ("[pipelines.kf.surge]\ngian = 2.0\n", "pipelines.kf.surge.gian"),  # a misspelt key
+    ("[pipelines.aie.surge]\nkf_v_d = 2.0\n", "pipelines.aie.surge.kf_v_d"),  # moved key
+    ("[pipelines.diagnose]\nrate_hz = 5.0\n", "pipelines.diagnose"),  # now [diagnose]
+])
+def test_cli_bad_pipeline_table_in_an_overlay_exits_2_naming_file_and_key(
+        tmp_path, capsys, command, table, key):
+    log = tmp_path / "x.csv"
+    log.write_text("t,heading\n0,1\n")
+    bad = _write(tmp_path, "overlay.toml", table)
+    stack = ["--config", "rudder-boat", "--config", str(bad)]
+    argv = [command, *stack] if command == "run" else \
+        [command, str(log), *stack, "--out", str(tmp_path / "o")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err
+    assert f"{bad}: {key}: unknown key (misspelt?)" in err
 
 
 def test_run_reports_the_overlay_chain_in_its_errors(tmp_path):
@@ -229,13 +251,17 @@ def test_overlay_surge_model_and_thrust_curve(tmp_path):
                                                            np.array([1.0, 0.0])}),
                           final_split=SimpleNamespace(fit=SimpleNamespace(cmd_surge=c)))
     p = _write(tmp_path, "o.toml", overlay.overlay_text(doc, config.load("rudder-boat"), sel))
-    surge = config.load_all(["rudder-boat", p]).pipelines["aie"]["surge"]
+    pipelines = config.load_all(["rudder-boat", p]).pipelines
+    surge = pipelines.aie.surge
     # the least-squares line of 2c + c^2 + 0.1 over the commands flown (c in [0, 1]:
     # slope 3, intercept near 0.1 - 1/6)
     slope, icpt = np.polyfit(c, 2 * c + c * c + 0.1, 1)
-    assert surge["a"] == pytest.approx(1.0)
-    assert surge["gain"] == pytest.approx(slope, rel=1e-5) and slope == pytest.approx(3.0)
-    assert surge["offset"] == pytest.approx(icpt, rel=1e-5)
+    assert surge.a == pytest.approx(1.0)
+    assert surge.gain == pytest.approx(slope, rel=1e-5) and slope == pytest.approx(3.0)
+    assert surge.offset == pytest.approx(icpt, rel=1e-5)
+    # the KF baseline gets the same model
+    kf = pipelines.kf.surge
+    assert (kf.a, kf.gain, kf.offset) == (surge.a, surge.gain, surge.offset)
     assert icpt == pytest.approx(0.1 - 1 / 6, abs=3e-3)
     assert "thrust curve" in p.read_text()
 
@@ -247,7 +273,7 @@ def test_overlay_current_prior_and_what_it_cannot_write(tmp_path):
                            "evidence": {"heading": {"regressor": "heading harmonic 2"}}})
     text = overlay.overlay_text(doc, config.load("rudder-boat"))
     cfg = config.load_all(["rudder-boat", _write(tmp_path, "o.toml", text)])
-    assert cfg.pipelines["current"]["init_current_std"] == pytest.approx(
+    assert cfg.pipelines.current.init_current_std == pytest.approx(
         math.hypot(0.25, 0.15) + 3 * math.hypot(0.01, 0.01), abs=1e-3)
     assert "no config key the pipelines read: sideslip" in text
     assert "heading: heading harmonic 2" in text

@@ -507,6 +507,7 @@ def _example_samples() -> list:
         m.ActuatorOutputs(t=_T0, pwm_us=(1500.0, 1600.0, 1400.0)),
         m.RcChannels(t=_T0, pwm_us=(1500.0, 1100.0)),
         m.PropellerRpm(t=_T0, rpm=(1200.0, -1100.0)),
+        m.ActuatorColumn(t=_T0, column="rudder_deg", value=-15.0),
         m.ActuatorCommand(t=_T0, throttle=0.5, rudder_rad=0.1, left=0.4, right=0.6,
                           propeller_rpm=1200.0, stern_plane_rad=0.0,
                           thrusters=(0.1, -0.1, 0.0, 0.0, 0.2, 0.2)),

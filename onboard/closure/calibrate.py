@@ -3,7 +3,7 @@
 Every hull slows down in turns and has more than linear drag; a small propeller's thrust
 is not linear in its command. Those are the vehicle's own physics, not faults: measure them
 once on a log in calm water with no known disturbance, and give them to ``onboard
-diagnose`` as ``known`` (``[pipelines.diagnose] known = {...}``), so that later logs are
+diagnose`` as ``known`` (``[diagnose] known = {...}``), so that later logs are
 diagnosed for what *changed* (a current, a fouled propeller, a bent compass)::
 
     python -m onboard.closure.calibrate calm.tlog --config config/rudder-boat.toml \\
@@ -38,7 +38,7 @@ def calibrate(log: str, cfg, effects: tuple[str, ...], rate_hz: float = 10.0) ->
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m onboard.closure.calibrate LOG [--config FILE] --effects NAME...``:
-    print the ``[pipelines.diagnose] known`` line that fixes those effects' parameters."""
+    print the ``[diagnose] known`` line that fixes those effects' parameters."""
     p = argparse.ArgumentParser(prog="python -m onboard.closure.calibrate",
                                 description=__doc__.split("\n\n")[0])
     p.add_argument("log")
@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     cfg, _ = choose_config(args.log, args.config)
     known = calibrate(args.log, cfg, tuple(args.effects))
     items = ", ".join(f"{k} = [{', '.join(f'{v:.6g}' for v in vals)}]" for k, vals in known.items())
-    print(f"[pipelines.diagnose]\nknown = {{ {items} }}")
+    print(f"[diagnose]\nknown = {{ {items} }}")
     return 0
 
 

@@ -40,6 +40,7 @@ from onboard.core.messages import (
     VelocityOverGround,
 )
 from onboard.engine import Engine, run
+from onboard.inputs import column_names
 
 
 class _Collector:
@@ -465,7 +466,7 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     import msgspec
 
     cfg = msgspec.structs.replace(cfg, engine=msgspec.structs.replace(cfg.engine, rate_hz=rate_hz))
-    _, reader = open_log(path, cfg.csv)
+    _, reader = open_log(path, cfg.csv, column_names(cfg.inputs))
     col = _Collector()
     engine = Engine(cfg, [col], select_sources=False, fresh_estimates=False)
     run(engine, reader, lambda t, r: None, gap_s=2.0)

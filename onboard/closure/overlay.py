@@ -14,9 +14,9 @@ only holds the keys it changes:
 * ``[inputs.left]``/``[inputs.right]`` from ``actuator_mapping`` (channels swapped,
   ``reverse`` toggled), with ``from_autopilot = false`` so that the autopilot's
   ``SERVOn_FUNCTION`` parameters do not map them back;
-* ``[pipelines.aie.surge]`` ``a``, ``gain``, ``offset`` (the surge model both ``aie`` and
-  its ``kf`` baseline read, algorithms.md §1.1) from the diagnosis's surge fit when the
-  log has commands; with a ``thrust_nonlinearity`` the pipelines' linear map is the least
+* ``[pipelines.aie.surge]`` and ``[pipelines.kf.surge]`` ``a``, ``gain``, ``offset`` (the
+  surge model of ``aie`` and of its ``kf`` baseline, algorithms.md §1.1; the same in both
+  tables) from the diagnosis's surge fit when the log has commands; with a ``thrust_nonlinearity`` the pipelines' linear map is the least
   squares line through the fitted thrust curve over the commands the log flew (the
   curve itself is written as a comment);
 * ``[pipelines.current] init_current_std`` from ``water_current``: the size of the
@@ -190,8 +190,9 @@ def actuator_inputs(doc: dict, cfg: Config) -> tuple[dict[str, Any], list[str]]:
 
 
 def surge_model(doc: dict, sel: Any) -> tuple[dict[str, Any], list[str]]:
-    """``[pipelines.aie.surge]`` ``a``, ``gain``, ``offset`` from the final surge fit, or
-    empty without commands (see the module docstring for a thrust nonlinearity)."""
+    """``[pipelines.aie.surge]`` (and ``[pipelines.kf.surge]``) ``a``, ``gain``, ``offset``
+    from the final surge fit, or empty without commands (see the module docstring for a
+    thrust nonlinearity)."""
     bp = doc.get("base_params", {})
     if not {"a", "b", "c0"} <= set(bp) or sel is None:
         return {}, []
@@ -267,6 +268,7 @@ def overlay_text(doc: dict, cfg: Config, sel: Any = None, *, detected: bool = Fa
     surge, notes = surge_model(doc, sel)
     if surge or notes:
         out.table("pipelines.aie.surge", surge, "\n".join(notes))
+        out.table("pipelines.kf.surge", surge, "the same surge model for the KF baseline")
         if not surge:
             out.comment("\n".join(notes))
     prior, notes = current_prior(doc)

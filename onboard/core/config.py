@@ -6,8 +6,9 @@ with the dotted key and what was expected, e.g.::
 
     config/mine.toml: inputs.throttle.channel: expected int, got str
 
-Pipelines own their hyperparameters: ``[pipelines.<name>]`` is kept as a table here and
-decoded by the pipeline with :func:`decode_section`, so the error still names the key.
+Every ``[pipelines.<name>]`` table is decoded here too, into its struct of
+:mod:`onboard.core.pipeline_config`: an unknown pipeline name or key is an error naming the
+file and the key, e.g. ``overlay.toml: pipelines.aei: unknown key (misspelt?)``.
 
 Several files make one configuration with :func:`load_all` (``--config base.toml
 --config overlay.toml``): later files win key by key, tables are merged recursively,
@@ -20,17 +21,16 @@ from __future__ import annotations
 import re
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any, Literal, Sequence, TypeVar
+from typing import Annotated, Any, Literal, Sequence
 
 import msgspec
 
 from onboard.core.errors import UsageError
+from onboard.core.pipeline_config import Pipelines
 
 VehicleClass = Literal[
     "rudder-boat", "twin-thruster-boat", "bluerov2", "torpedo-auv", "spheroid", "unknown"
 ]
-
-T = TypeVar("T")
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 """Where the bundled vehicle configs live in a source checkout."""
@@ -48,15 +48,20 @@ class Vehicle(_Strict):
     """``[vehicle]``: identity and class."""
 
     id: str = "vehicle"
+    """Vehicle name: in the Zenoh keys and the saved adaptive state."""
     vehicle_class: VehicleClass = msgspec.field(default="unknown", name="class")
+    """Vehicle class (``class`` in the file): chooses the pipelines and their models."""
     system_id: int = 1
+    """MAVLink system id the estimates are sent as."""
     description: str = ""
+    """Free text."""
 
 
 class EngineConfig(_Strict):
     """``[engine]``: the fixed-rate tick that drives the pipelines."""
 
     rate_hz: float = 10.0
+    """Rate (Hz) of the tick at which the pipelines give estimates."""
     max_sample_age_s: float = 2.0
     """Samples older than this relative to the newest one are rejected as late."""
 
@@ -65,7 +70,8 @@ class ChannelMap(_Strict):
     """How one actuator role is read from a log or telemetry field.
 
     ``source`` is ``servo`` (SERVO_OUTPUT_RAW / RCOU), ``rc`` (RC_CHANNELS / RCIN),
-    ``rpm`` (RPM message) or ``column`` (a CSV column named by ``column``).
+    ``rpm`` (RPM message) or ``column`` (the CSV column named by ``column``, in the log's
+    own units: the ``*_us`` keys are then in that unit; docs/formats-text.md).
     PWM is normalized as ``(pwm - neutral_us) / half_range_us`` with ``deadband_us``
     around neutral set to zero, clipped to [-1, 1], negated when ``reverse``; then
     multiplied by ``full_scale`` (e.g. 0.2618 rad for a +-15 deg rudder, or the rpm at
@@ -74,24 +80,38 @@ class ChannelMap(_Strict):
 
     source: Literal["servo", "rc", "rpm", "column"] = "servo"
     channel: int = 1
+    """Output, RC or RPM channel (1 = the first); not used by ``column``."""
     column: str = ""
+    """The log column a ``column`` source reads."""
     neutral_us: float = 1500.0
+    """Value read at zero command (us for PWM; the column's unit for ``column``)."""
     half_range_us: float = 400.0
+    """Distance from neutral to full command, same unit."""
     deadband_us: float = 0.0
+    """Values within this of neutral read as zero, same unit."""
     reverse: bool = False
+    """Negate the normalized value."""
     full_scale: float = 1.0
+    """The command at full deflection (rad, rpm, or 1 for a normalized one)."""
 
 
 class Inputs(_Strict):
     """``[inputs]``: which field is which actuator. Roles match ActuatorCommand."""
 
     throttle: ChannelMap | None = None
+    """A single propulsor (rudder boats, torpedo AUVs)."""
     rudder: ChannelMap | None = None
+    """Rudder (``full_scale`` in rad)."""
     left: ChannelMap | None = None
+    """Port thruster of a differential-drive boat."""
     right: ChannelMap | None = None
+    """Starboard thruster of a differential-drive boat."""
     propeller_rpm: ChannelMap | None = None
+    """Measured or commanded propeller speed (rpm)."""
     stern_plane: ChannelMap | None = None
+    """Stern plane of a torpedo AUV (``full_scale`` in rad)."""
     thrusters: list[ChannelMap] = []
+    """Thrusters of an ROV, in the order of the allocation matrix."""
     from_autopilot: bool = True
     """Move a servo-mapped role to the output the autopilot's ``SERVOn_FUNCTION``
     parameters name for it (in a log or read live), as ``onboard.autodetect`` does."""
@@ -101,8 +121,11 @@ class GnssNoise(_Strict):
     """``[sensors.gnss]``: position (m) and velocity (m/s) noise, one sigma; rate (Hz)."""
 
     position_std_m: float = 2.0
+    """Position noise, one sigma (m)."""
     velocity_std_mps: float = 0.1
+    """Velocity noise, one sigma (m/s)."""
     rate_hz: float = 5.0
+    """Fix rate (Hz)."""
 
 
 class ImuNoise(_Strict):
@@ -110,15 +133,20 @@ class ImuNoise(_Strict):
     (Hz)."""
 
     accel_std_mps2: float = 0.05
+    """Accelerometer noise, one sigma (m/s^2)."""
     gyro_std_rps: float = 0.005
+    """Gyro noise, one sigma (rad/s)."""
     rate_hz: float = 50.0
+    """Sample rate (Hz)."""
 
 
 class CompassNoise(_Strict):
     """``[sensors.compass]``: heading noise (rad, one sigma); rate (Hz)."""
 
     heading_std_rad: float = 0.02
+    """Heading noise, one sigma (rad)."""
     rate_hz: float = 10.0
+    """Sample rate (Hz)."""
 
 
 class DvlNoise(_Strict):
@@ -126,10 +154,13 @@ class DvlNoise(_Strict):
     altitude (m) above which a report is not fused; rate (Hz)."""
 
     velocity_std_mps: float = 0.01
+    """Velocity noise, one sigma (m/s)."""
     max_fom_mps: float = 0.05
     """Reports with a larger figure of merit are not fused."""
     max_altitude_m: float = 50.0
+    """Reports from higher above the bottom (m) are not fused."""
     rate_hz: float = 5.0
+    """Report rate (Hz)."""
 
 
 class DepthNoise(_Strict):
@@ -138,20 +169,28 @@ class DepthNoise(_Strict):
     depth."""
 
     depth_std_m: float = 0.02
+    """Depth noise, one sigma (m)."""
     surface_depth_m: float = 0.3
     """Shallower than this the vehicle is at the surface and GNSS is accepted."""
     water_density_kgm3: float = 1025.0
+    """Water density (kg/m^3) for pressure to depth."""
     surface_pressure_pa: float = 101325.0
+    """Air pressure at the surface (Pa) for pressure to depth."""
 
 
 class Sensors(_Strict):
     """``[sensors]``: noise figures the pipelines use for their R matrices."""
 
     gnss: GnssNoise = GnssNoise()
+    """``[sensors.gnss]``."""
     imu: ImuNoise = ImuNoise()
+    """``[sensors.imu]``."""
     compass: CompassNoise = CompassNoise()
+    """``[sensors.compass]``."""
     dvl: DvlNoise = DvlNoise()
+    """``[sensors.dvl]``."""
     depth: DepthNoise = DepthNoise()
+    """``[sensors.depth]``."""
 
 
 class CsvFormat(_Strict):
@@ -165,17 +204,29 @@ class CsvFormat(_Strict):
     time: str = "t"
     time_scale: float = 1.0
     lat_deg: str = ""
+    """Column of the latitude (deg)."""
     lon_deg: str = ""
+    """Column of the longitude (deg)."""
     north_m: str = ""
+    """Column of the north position (m from ``origin_lat_deg``/``origin_lon_deg``)."""
     east_m: str = ""
+    """Column of the east position (m)."""
     heading: str = ""
+    """Column of the heading (``heading_unit``)."""
     heading_unit: Literal["rad", "deg"] = "rad"
+    """Unit of the ``heading``, ``roll`` and ``pitch`` columns."""
     yaw_rate: str = ""
+    """Column of the yaw rate (``yaw_rate_unit``)."""
     yaw_rate_unit: Literal["rad/s", "deg/s"] = "rad/s"
+    """Unit of the ``yaw_rate`` column."""
     surge_mps: str = ""
+    """Column of the surge velocity over ground (m/s, body axes)."""
     sway_mps: str = ""
+    """Column of the sway velocity over ground (m/s, body axes)."""
     sog_mps: str = ""
+    """Column of the GNSS speed over ground (m/s)."""
     depth_m: str = ""
+    """Column of the depth (m, down positive)."""
     pwm_columns: list[str] = []
     """Columns that form ActuatorOutputs.pwm_us, channel 1 first."""
     run_column: str = ""
@@ -205,10 +256,15 @@ class ZenohOut(_Strict):
     endpoints to connect to and listen on, the key prefix."""
 
     enabled: bool = True
+    """Publish over Zenoh."""
     mode: Literal["peer", "client", "router"] = "peer"
+    """Zenoh session mode."""
     connect: list[str] = []
+    """Endpoints to connect to (``tcp/host:7447``)."""
     listen: list[str] = []
+    """Endpoints to listen on."""
     key_prefix: str = "onboard"
+    """First part of every key the estimates are published on."""
     config_file: str = ""
     """An optional Zenoh JSON5 config (TLS, user/password, access control)."""
     tls_root_ca_certificate: str = ""
@@ -229,9 +285,13 @@ class MavlinkOut(_Strict):
     (outgoing frames and the MAVLink inputs; docs/security.md)."""
 
     enabled: bool = True
+    """Send MAVLink."""
     url: str = "udpout:127.0.0.1:14550"
+    """Where to send it (pymavlink URL)."""
     component_id: int = 191
+    """Our MAVLink component id."""
     rate_hz: float = 5.0
+    """Rate (Hz) of the MAVLink estimate messages."""
     signing_key_file: str = ""
     """The 32-byte secret (raw, 64 hex digits or a passphrase), mode 0600 or stricter:
     every outgoing frame is signed with it."""
@@ -244,6 +304,7 @@ class MavlinkOut(_Strict):
     """Reject incoming timestamps more than this far (s) ahead of the local timestamp;
     0 = no bound (the MAVLink spec sets none; a vehicle computer without a clock lags)."""
     odometry: bool = False
+    """Also send ODOMETRY."""
 
 
 class SourceConfig(_Strict):
@@ -256,6 +317,7 @@ class SourceConfig(_Strict):
     kind: Literal["mavlink", "nmea", "dvl-json", "pd6", "gpsd"]
     url: str
     name: str = ""
+    """Name of the input in sources, counters and events; default from the URL."""
     idle_timeout_s: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
     """A connection that delivers no byte for this long (s) is closed and opened again
     (a TCP DVL that power-cycled, a half-open peer, a serial device re-enumerated
@@ -283,10 +345,15 @@ class RecorderConfig(_Strict):
     in s, file rotation size and total size kept, in MB)."""
 
     enabled: bool = True
+    """Record every input."""
     directory: str = "recordings"
+    """Where (relative to the state directory)."""
     flush_interval_s: float = 0.5
+    """Flush interval (s)."""
     rotate_mb: float = 64.0
+    """A new file after this size (MB)."""
     max_total_mb: float = 2048.0
+    """The oldest recordings are deleted beyond this total (MB)."""
     min_free_mb: float = 200.0
     """Free space (MB) left on the recordings' file system: below it the oldest
     recordings are deleted, then recording pauses (an event; records counted in the
@@ -297,13 +364,23 @@ class ServiceConfig(_Strict):
     """``[service]``: live inputs, publishers, recorder and persistence."""
 
     sources: list[SourceConfig] = []
+    """The live inputs (``[[service.sources]]``)."""
     zenoh: ZenohOut = ZenohOut()
+    """``[service.zenoh]``."""
     mavlink: MavlinkOut = MavlinkOut()
+    """``[service.mavlink]``."""
     recorder: RecorderConfig = RecorderConfig()
+    """``[service.recorder]``."""
     state_file: str = "state/adaptive.json"
+    """Where the adaptive state is kept across restarts (relative to the state
+    directory)."""
     state_save_interval_s: float = 30.0
+    """Interval (s) between saves of the adaptive state."""
     queue_size: int = 4096
+    """Bound of the samples waiting for the next tick (and of each input's queue);
+    beyond it new samples are dropped and counted."""
     watchdog: bool = True
+    """Notify the systemd watchdog."""
     tick_wait_s: Annotated[float, msgspec.Meta(ge=0.0)] = 0.05
     """After its grid time a tick waits up to this long (s, capped at half the tick
     period) for the next sample, so that it carries the freshest data (the sensor-to-shore
@@ -325,6 +402,7 @@ class SourcePriorities(_Strict):
 
     position: list[str] = msgspec.field(
         default_factory=lambda: ["mavlink:GPS_RAW_INT", "mavlink:GPS2_RAW"])
+    """Position sources."""
     velocity: list[str] = msgspec.field(
         default_factory=lambda: ["mavlink:GLOBAL_POSITION_INT", "mavlink:LOCAL_POSITION_NED"])
     """Velocity over ground: ``VelocityOverGround`` samples and the speed and course of
@@ -335,16 +413,20 @@ class SourcePriorities(_Strict):
     """Heading sources: ``Attitude`` (its yaw) and ``Heading`` samples compete here;
     VFR_HUD's whole-degree heading comes last."""
     attitude: list[str] = msgspec.field(default_factory=lambda: ["mavlink:ATTITUDE"])
+    """Attitude (roll, pitch) sources."""
     imu: list[str] = msgspec.field(
         default_factory=lambda: ["mavlink:SCALED_IMU", "mavlink:RAW_IMU",
                                  "mavlink:SCALED_IMU2", "mavlink:SCALED_IMU3"])
+    """IMU sources."""
     depth: list[str] = msgspec.field(
         default_factory=lambda: ["mavlink:SCALED_PRESSURE2", "mavlink:SCALED_PRESSURE3",
                                  "!mavlink:SCALED_PRESSURE"])
     """ArduSub's SCALED_PRESSURE is the autopilot's own barometer (the enclosure's air),
     never a depth."""
     dvl: list[str] = []
+    """DVL sources."""
     altitude: list[str] = []
+    """Altitude (above the bottom) sources."""
     stale_s: Annotated[float, msgspec.Meta(gt=0.0)] = 2.0
     """A source silent this long (s, sample time) is replaced by the best fresh one."""
     failback_s: Annotated[float, msgspec.Meta(ge=0.0)] = 3.0
@@ -388,19 +470,50 @@ class Corrections(_Strict):
     compass; ``[sources]`` syntax); empty: every heading and attitude source."""
 
 
+class DiagnoseConfig(_Strict):
+    """``[diagnose]``: options of ``onboard diagnose`` (model closure on a log)."""
+
+    declared: list[str] = []
+    """Effects the model already contains (e.g. a known sideslip), not to be searched."""
+    known: dict[str, list[float]] = {}
+    """Effects that are part of this vehicle's model with fixed parameters (internal
+    parameter order of each effect module), e.g. from a calm-water calibration run:
+    ``known = { surge_yaw_coupling = [0.3] }``."""
+    holdout_metric: str = ""
+    """``surge_speed_open_loop_rmse_mps``, ``ground_velocity_rmse_mps`` or
+    ``lateral_velocity_rmse_mps``; default: the ground velocity when commands exist."""
+    rate_hz: float = 10.0
+    """Rate (Hz) of the grid the log is resampled on for the fits."""
+    base_terms: list[str] = []
+    """The base model's optional terms to use (onboard.closure.dataset.BASE_TERMS:
+    ``actuator_lag``, ``course_lag``, ``speed_drift``; ``["none"]`` for none); default
+    ``actuator_lag`` and ``course_lag``. Switching them off shows what each one keeps
+    from being named an effect."""
+
+
 class Config(_Strict):
     """A whole configuration file."""
 
     vehicle: Vehicle = Vehicle()
+    """``[vehicle]``."""
     engine: EngineConfig = EngineConfig()
+    """``[engine]``."""
     sources: SourcePriorities = SourcePriorities()
+    """``[sources]``."""
     inputs: Inputs = Inputs()
+    """``[inputs]``."""
     sensors: Sensors = Sensors()
+    """``[sensors]``."""
     csv: CsvFormat = CsvFormat()
+    """``[csv]``."""
     service: ServiceConfig = ServiceConfig()
-    pipelines: dict[str, dict[str, Any]] = {}
-    """Per-pipeline tables, decoded by each pipeline (see :func:`decode_section`)."""
+    """``[service]``."""
+    pipelines: Pipelines = msgspec.field(default_factory=Pipelines)
+    """``[pipelines.<name>]``: each pipeline's table (:mod:`onboard.core.pipeline_config`)."""
     corrections: Corrections = Corrections()
+    """``[corrections]``."""
+    diagnose: DiagnoseConfig = DiagnoseConfig()
+    """``[diagnose]``."""
 
     def __post_init__(self) -> None:
         c = self.corrections
@@ -546,11 +659,3 @@ def bundled() -> list[str]:
     """Names of the configs shipped in ``config/``."""
     return sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
 
-
-def decode_section(cfg: Config, pipeline: str, schema: type[T]) -> T:
-    """Decode ``[pipelines.<pipeline>]`` into ``schema`` (defaults when absent)."""
-    raw = cfg.pipelines.get(pipeline, {})
-    try:
-        return msgspec.convert(raw, schema)
-    except msgspec.ValidationError as err:
-        raise ConfigError(_explain(err, f"pipelines.{pipeline}")) from None

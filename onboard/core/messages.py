@@ -189,6 +189,16 @@ class PropellerRpm(Sample, frozen=True, tag="rpm"):
     rpm: tuple[float, ...]
 
 
+class ActuatorColumn(Sample, frozen=True, tag="column"):
+    """One actuator value read from a named column of a log (a CSV or glider-style log),
+    in the log's own units (a rudder angle in degrees, a normalized command, a power
+    level). The ``[inputs]`` roles with ``source = "column"`` and this ``column`` map it to
+    a command with the same normalization as a pulse width (``ChannelMap``)."""
+
+    column: str
+    value: float
+
+
 class ActuatorCommand(Sample, frozen=True, tag="command"):
     """Normalized actuator command, the vehicle-independent input to the pipelines.
 
@@ -243,6 +253,7 @@ AnySample = Union[
     ActuatorOutputs,
     RcChannels,
     PropellerRpm,
+    ActuatorColumn,
     ActuatorCommand,
     Parameter,
     VehicleInfo,

@@ -117,7 +117,7 @@ class EsesoParams:
 
     Built from ``[pipelines.eseso]`` and ``[sensors]`` by
     :func:`onboard.pipelines.eseso.filter_params`; the meaning of each number is in
-    :class:`onboard.pipelines.eseso.EsesoConfig`.
+    :class:`onboard.core.pipeline_config.EsesoConfig`.
     """
 
     mass_kg: float

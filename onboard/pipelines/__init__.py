@@ -19,8 +19,7 @@ def build(cfg: Config, only: set[str] | None = None) -> list[Pipeline]:
     """Instantiate every applicable, enabled pipeline for ``cfg``."""
     out: list[Pipeline] = []
     for mod_name in MODULES:
-        section = cfg.pipelines.get(mod_name, {})
-        if section.get("enabled", True) is False:
+        if getattr(cfg.pipelines, mod_name).enabled is False:
             continue
         if only is not None and mod_name not in only:
             continue

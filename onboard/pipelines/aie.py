@@ -15,17 +15,12 @@ Markov parameters of its model go to RCIE, whose input estimate drives the next 
 from __future__ import annotations
 
 from onboard.core.config import Config
+from onboard.core.pipeline_config import AieConfig, AxisConfig
 from onboard.estimators.axis_model import AxisModel
 from onboard.estimators.increment_filter import IncrementFilter
 from onboard.estimators.input_models import RcieInput
 from onboard.estimators.rcie import Rcie
-from onboard.pipelines.surge_heading import (
-    AieConfig,
-    AxisConfig,
-    SurgeHeadingPipeline,
-    load_config,
-    sensor_noise,
-)
+from onboard.pipelines.surge_heading import SurgeHeadingPipeline, sensor_noise
 
 COLUMNS = ("north", "east", "heading", "speed", "yaw_rate", "surge_input", "yaw_input",
            "std_north", "std_east", "std_speed", "std_heading")
@@ -57,4 +52,4 @@ def create(cfg: Config) -> SurgeHeadingPipeline | None:
     """Pipeline ``aie`` for surface vehicles (None for the BlueROV2 and the spheroid)."""
     if cfg.vehicle.vehicle_class in ("bluerov2", "spheroid"):
         return None
-    return build(load_config(cfg), *sensor_noise(cfg))
+    return build(cfg.pipelines.aie, *sensor_noise(cfg))

@@ -46,12 +46,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any
 
-import msgspec
 import numpy as np
 
-from onboard.core.config import CONFIG_DIR, Config, ConfigError, decode_section
+from onboard.core.config import CONFIG_DIR, Config, ConfigError
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import (
     ActuatorCommand,
@@ -65,6 +64,7 @@ from onboard.core.messages import (
     Sample,
     VelocityOverGround,
 )
+from onboard.core.pipeline_config import CurrentConfig
 from onboard.core.so3 import euler_to_matrix
 from onboard.estimators.current_hgo import CurrentHighGainObserver
 from onboard.estimators.current_kf import CurrentKalmanFilter, chi2_quantile
@@ -79,142 +79,6 @@ from onboard.estimators.vehicle_models import ModelInputs, RegressionModel, kind
 
 GAIN_DIR = CONFIG_DIR / "gains"
 """Precomputed LMI gains for the bundled configs (``onboard design-gain``)."""
-
-
-class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    """``[pipelines.current]``: hyperparameters of the current pipeline (SI units)."""
-
-    enabled: bool = True
-    observer: Literal["kf", "hgo", "flow"] = "kf"
-    model_kind: Literal["", "torpedo", "surface-rudder", "surface-twin", "rov"] = ""
-    """Regression model; empty: from ``vehicle.class``."""
-    model: dict[str, dict[str, float]] = {}
-    """Configured coefficients by DOF and term (vehicle_models.py names), mode (a)."""
-    identify: bool = True
-    """Identify the model online (joint state). False: keep the configured model fixed."""
-    model_rel_std: float = 0.2
-    """Prior one-sigma of configured coefficients, relative (plus ``theta_std_floor``)."""
-    theta_std: float = 1.0
-    """Prior one-sigma of unconfigured coefficients (mode (b)), except the net-weight ones."""
-    net_weight_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.02
-    """Prior one-sigma of the net weight ``(W - B) / W`` of the vehicle (fraction of its
-    weight), for the unconfigured surge and sway net-weight coefficients (``sin(theta)``,
-    ``cos(theta)sin(phi)``: ``+-(W - B) / (m - X_idot)``, vehicle_models.
-    NET_WEIGHT_REGRESSORS; not the heave constant ``cos(theta)cos(phi)``, which keeps
-    ``theta_std``): their prior one-sigma is ``g * net_weight_std`` (m/s^2), an upper
-    bound on every DOF since its mass term is at least ``m``. 0.02: an underwater vehicle
-    is trimmed within a few percent of neutral (the SITL REMUS, Prestero 2001: 7 N positive
-    on 299 N, 2.3 %; the BlueROV2 of algorithms.md §5.4: 0.66 N, 0.6 %). Without it
-    (``theta_std``, 1 m/s^2 ~ 10 %) a steady roll makes the sway term an unknown side force
-    that trades against a cross-track current (docs/current.md, "Net-weight prior")."""
-    theta_std_floor: float = 0.02
-    forgetting: float = 0.9995
-    """Forgetting of the coefficient covariance per tick (0.9995 at 10 Hz: 200 s memory),
-    variable-rate: none once the covariance is back at its prior (bounded, rls.py)."""
-    rpm_scale: float = 1000.0
-    """Propeller rpm divided by this gives the normalized propulsion ``n``."""
-    svf_cutoff_hz: float = 0.3
-    """State-variable filter cut-off for the yaw-channel RLS (algorithms.md §3.4)."""
-    current_walk: float = 0.01
-    """Random walk of the current, m/s per sqrt(s), before calibration (0.01: 0.08 m/s in a
-    minute, 1 sigma; turbulence and tides; the innovation calibration raises it)."""
-    accel_std: float = 0.02
-    """Model acceleration error (process noise) per DOF, m/s^2 over ``model_error_time_s``."""
-    model_error_time_s: float = 1.0
-    heading_diversity: float = 0.85
-    heading_memory_s: float = 300.0
-    """Without a surge model the along-track sigma is floored at the prior unless the
-    headings of the last ``heading_memory_s`` are diverse: the mean of the doubled-angle
-    unit vector (cos 2psi, sin 2psi) shorter than ``heading_diversity``. Doubled, because
-    reversing course (a glider's back-and-forth, a lawnmower survey) keeps the same lateral
-    axis and adds nothing to the sway constraint. 0.85: e.g. two headings 35 deg apart; a
-    +-15 deg zig-zag gives 0.87 and keeps the floor."""
-    turn_accel_gain: float = 1.0
-    """Extra model acceleration error in turns, m/s^2 per (m/s * rad/s) of ``u_r r``."""
-    prior_accel_std: float = 0.3
-    """Model acceleration error of a DOF that has only the generic prior (mode (b), not yet
-    identified), m/s^2: the prior says "no crabbing", not how much."""
-    init_current_std: float = 1.0
-    """Prior one-sigma of the current (m/s) before any turn has made it observable."""
-    identify_max_current_std: float = 0.1
-    """The coefficients are updated only once the current's one-sigma is below this (m/s)."""
-    identify_min_rate: float = 0.03
-    """A yaw rate (rad/s) above this marks a turn, which makes the model identifiable."""
-    identify_after_turn_s: float = 30.0
-    """Coefficients are updated during turns and this long after them (s)."""
-    yaw_rls_p0: float = 1e6
-    """Initial covariance of the yaw-channel RLS: large, because its regressors (u v,
-    u^2 dr at small rates) are O(0.001-0.01) and ``lambda + phi^T P phi`` must be ruled by
-    the data (with p0 = 100 the spheroid's coefficients stay 6x too small)."""
-    yaw_forgetting: float = 0.9995
-    identify_straight: bool = False
-    """Identify on straight lines too: only where the current is known (a calm-water
-    identification run with ``init_current_std`` ~ 0 and ``current_walk`` ~ 0)."""
-    identify_min_speed: float = 0.2
-    """Below this through-water speed the yaw RLS does not learn."""
-    gnss_velocity_std: float | None = None
-    """One-sigma of GNSS velocity components (m/s) at the receiver's nominal accuracy;
-    default from ``[sensors.gnss]``."""
-    gnss_nominal_accuracy_m: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
-    """Receiver accuracy as noise: a fix reporting its speed accuracy ``speed_acc_mps``
-    (m/s, one sigma) has that as its velocity one-sigma; one reporting only a horizontal
-    accuracy ``h_acc_m`` (m, one sigma) worse than this has its velocity one-sigma scaled
-    by ``h_acc_m / nominal`` (both scale with the satellite geometry and signal quality).
-    Never below ``gnss_velocity_std`` (a fix claiming better, RTK say, does not make its
-    Doppler velocity better). Default ``[sensors.gnss] position_std_m``; 0: the configured
-    one-sigma for every fix. A fix without a finite positive accuracy takes the
-    configured one-sigma."""
-    dvl_velocity_std: float | None = None
-    gate_nis: float = 30.0
-    """Innovations with a larger NIS are rejected (counted in health)."""
-    calibrate: bool = True
-    """Inflate the process noise when the innovation NIS says it is too small."""
-    calibrate_block: int = 50
-    """Innovations averaged per calibration block (whiteness test)."""
-    gain_file: str = ""
-    """HGO gain JSON (``onboard design-gain``); default ``config/gains/<class>.json``."""
-    gamma: float | None = None
-    gamma_0: float | None = None
-    rho: float | None = None
-    gamma_max: float | None = None
-    hgo_identify: Literal["turns", "always"] = "turns"
-    """When the high-gain observer's own RLS (``observer = "hgo"``,
-    :class:`~onboard.estimators.model_identification.VelocityRls`) learns: ``"turns"``
-    under the joint filter's schedule (the observer's current one-sigma at most
-    ``identify_max_current_std``, within ``identify_after_turn_s`` of a turn, or always with
-    ``identify_straight``), ``"always"`` at every tick with a fresh velocity, as in Kim et
-    al. (on a straight line the along-track current then trades against the thrust
-    coefficient, docs/current.md, HGO). ``identify = false`` disables it."""
-    hgo_rls_noise_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.2
-    """One-sigma (m/s^2) of the equation error of the high-gain observer's RLS, against
-    which the coefficient prior is weighed. 0.2: the observer's velocity at ``gamma*``
-    carries the sensor noise through the injection (measured on spheroid-sawtooth, mode
-    (a), 300 s, seed 1, rms N/E/D: 0.02 drags the sway ``uv`` coefficient from -2.44 to
-    -0.40, 0.045 / 0.139 / 0.049 m/s (before the damping projection a heave coefficient
-    ran to +17 and the observer diverged 1733 times); 0.05: 0.021 / 0.034 / 0.031; 0.2:
-    0.020 / 0.030 / 0.027, the configured model unrefined 0.020 / 0.030 / 0.026)."""
-    flow_pitch: bool = False
-    """Flow observer (``observer = "flow"``, 3-D models): add the vertical block ``[theta,
-    q, w_r]`` observed from the measured pitch, its pitch channel identified online by RLS
-    (flow_observer.py, ``PITCH_TERMS``); False: Fan et al.'s observer reduced to the heading
-    output, ``w_r`` from the joint filter (docs/current.md, "Flow observer")."""
-    flow_poles: list[float] = []
-    """Flow-observer poles (1/s, negative); empty: the defaults of flow_observer.py."""
-    unknown_above_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.3
-    """A component of the current whose one-sigma exceeds this (m/s) is published as
-    unknown: absent from the estimates (an empty cell in estimates.csv, no ``CUR_N`` or
-    ``WIND_COV`` on MAVLink), its ``std_`` still published, ``observable.<axis> = 0`` in
-    health. 0.3: a 2-sigma band of +-0.6 m/s says nothing about a small vehicle's current
-    (the along-track current without a surge model has a one-sigma of at least
-    ``init_current_std``, 1 m/s, and is never published)."""
-    restore_check_s: Annotated[float, msgspec.Meta(ge=0.0)] = 120.0
-    """A restored current is on probation: a twin filter runs beside the pipeline from the
-    restored model with the current at its prior, and the restored current must agree with
-    the twin's (chi-square at ``restore_check_p`` on the components the twin observes) for
-    this long (s of data) while the twin observes every horizontal component; a
-    disagreement discards the restored current (an event, ``restore_discarded``)."""
-    restore_check_p: Annotated[float, msgspec.Meta(gt=0.0, lt=0.5)] = 0.001
-    """False-alarm probability of the restored-current test per evaluation."""
 
 
 class CurrentPipeline:
@@ -856,7 +720,7 @@ def _gain_for(cfg: Config, ccfg: CurrentConfig) -> GainDesign | None:
 
 def create(cfg: Config) -> CurrentPipeline | None:
     """The ``current`` pipeline for this configuration (every vehicle class)."""
-    ccfg = decode_section(cfg, "current", CurrentConfig)
+    ccfg = cfg.pipelines.current
     if not ccfg.enabled:
         return None
     kind = model_kind(cfg, ccfg)

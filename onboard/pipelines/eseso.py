@@ -37,13 +37,12 @@ All numbers in, numbers out; no I/O and no clock.
 from __future__ import annotations
 
 import math
-from typing import Any, Literal, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
-import msgspec
 import numpy as np
 from numpy.typing import NDArray
 
-from onboard.core.config import Config, decode_section
+from onboard.core.config import Config
 from onboard.core.geo import LocalFrame
 from onboard.core.messages import (
     ActuatorCommand,
@@ -57,19 +56,11 @@ from onboard.core.messages import (
     Sample,
     VelocityOverGround,
 )
+from onboard.core.pipeline_config import EsesoConfig
 from onboard.core.so3 import euler_to_matrix, matrix_to_euler
 from onboard.estimators.eseso_filter import P_, V_, XI, EsesoFilter, EsesoParams
 
 Array = NDArray[np.float64]
-
-# BlueROV2 (standard, vectored frame) force rows of the allocation matrix, FRD body axes,
-# per unit thruster force; thrusters 1-4 horizontal at 45 deg, 5-6 vertical. Matches the
-# paper's K_alloc (algorithms.md §5.2) turned from its z-up body frame into FRD.
-BLUEROV2_FORCE_ALLOCATION: tuple[tuple[float, ...], ...] = (
-    (0.7071, 0.7071, -0.7071, -0.7071, 0.0, 0.0),
-    (-0.7071, 0.7071, -0.7071, 0.7071, 0.0, 0.0),
-    (0.0, 0.0, 0.0, 0.0, -1.0, -1.0),
-)
 
 LEVELLING_SAMPLES = 50
 """IMU samples averaged to level the filter from gravity when no attitude arrives."""
@@ -80,116 +71,6 @@ used (an AHRS reports the same yaw); the engine's source selector lets one throu
 YAW_UNSELECTED_VAR = 1.0e4
 """Yaw variance (rad^2) of an ``Attitude`` whose yaw the source selector did not choose:
 its roll and pitch are used, its yaw carries no information."""
-
-
-class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    """``[pipelines.eseso]``: model, thrusters and noise of the ESESO.
-
-    Vehicle parameters default to the paper's Table I (BlueROV2). Noise figures not given
-    here come from ``[sensors]``. Defaults marked [DEFAULT] are ours (tuned on the
-    ``bluerov2-circle`` scenario), not the paper's Q = 1e-3 I and
-    R = diag(0.01 I, 0.02 I, 0.0006 I, 0.012 I), which are per-step numbers of a 50 Hz
-    loop in unstated units.
-    """
-
-    enabled: bool = True
-    vehicle_classes: list[str] = msgspec.field(default_factory=lambda: ["bluerov2"])
-    """Vehicle classes the pipeline is built for (any class when ``enabled`` is set
-    explicitly in the config)."""
-    mass_kg: float = 11.26
-    added_mass: list[float] = msgspec.field(default_factory=lambda: [1.7182, 0.0, 5.468])
-    """X_udot, Y_vdot, Z_wdot as positive added masses (kg)."""
-    damping_linear: list[float] = msgspec.field(default_factory=lambda: [11.7391, 20.0, 31.8678])
-    """Positive linear damping d_l (N s/m); the paper lists them negated."""
-    damping_quadratic: list[float] = msgspec.field(default_factory=lambda: [18.18, 21.66, 36.99])
-    """Positive quadratic damping d_nl (N s^2/m^2)."""
-    cg_z_m: float = 0.2
-    """Centre of gravity below the body origin (m), paper Table I (the public code has
-    0.02); the IMU is taken at the origin."""
-    weight_n: float = 112.8
-    buoyancy_n: float = 114.8
-    gravity_mps2: float = 9.81
-    force_allocation: list[list[float]] = msgspec.field(
-        default_factory=lambda: [list(r) for r in BLUEROV2_FORCE_ALLOCATION])
-    """3 x n_thrusters: body force (N, FRD) per newton of each thruster."""
-    thruster_max_forward_n: float = 40.0
-    """Thrust (N) at normalized command +1 (T200 at ~14.8 V, as the SITL plant)."""
-    thruster_max_reverse_n: float = 30.0
-    """Thrust magnitude (N) at normalized command -1."""
-    thruster_exponent: float = 2.0
-    """Thrust = max * sign(c) |c|^exponent (1 = linear map, 2 = quadratic in command)."""
-    thruster_deadband: float = 0.0
-    """Normalized commands with |c| below this give no thrust."""
-    disturbance_model: Literal["earth_fixed", "body_fixed"] = "earth_fixed"
-    # process noise [DEFAULT]
-    accel_bias_walk: float = 1e-4
-    """Accelerometer bias random walk (m/s^2/sqrt(s))."""
-    gyro_bias_walk: float = 1e-5
-    """Gyro bias random walk (rad/s/sqrt(s))."""
-    gravity_walk: float = 1e-6
-    """Gravity random walk (m/s^2/sqrt(s)); it only absorbs a wrong nominal g."""
-    disturbance_walk: float = 1.0
-    """Disturbance random walk (N/sqrt(s))."""
-    position_walk: float = 1e-3
-    """Extra position random walk (m/sqrt(s)), keeps P well conditioned."""
-    # measurement noise; None = from [sensors]
-    ins_velocity_std_mps: float = 0.02
-    """White noise of the INS velocity over ground per horizontal axis (m/s) [DEFAULT: the
-    simulated DVL-aided INS of ``bluerov2-circle``, ``sitl.sensors.InsConfig``]."""
-    ins_bias_std_mps: float = 0.01
-    """Stationary std of the INS velocity bias (m/s), a first-order Gauss-Markov process
-    carried as two error states (north, east): an aided INS's velocity error is correlated
-    over minutes, so it is not white measurement noise."""
-    ins_bias_tau_s: float = 300.0
-    """Correlation time of the INS velocity bias (s)."""
-    gnss_position_std_m: float | None = None
-    gnss_velocity_std_mps: float | None = None
-    depth_std_m: float | None = None
-    dvl_velocity_std_mps: float | None = None
-    attitude_std_rad: float = 0.01
-    """Roll and pitch noise of the AHRS attitude (rad)."""
-    attitude_yaw_std_rad: float | None = None
-    """Yaw noise of the AHRS attitude (rad); None = the compass heading noise
-    (``heading_std_rad``, else ``[sensors.compass]``): an AHRS reports the compass heading
-    as its yaw."""
-    heading_std_rad: float | None = None
-    thrust_std_n: float = 3.0
-    """Thrust-model error besides accelerometer noise (thruster lag, model error), N."""
-    accel_std_mps2: float | None = None
-    gyro_std_rps: float | None = None
-    gnss_max_depth_m: float | None = None
-    """Fixes received deeper than this are rejected (default sensors.depth.surface_depth_m)."""
-    command_timeout_s: float = 0.5
-    """A thruster command older than this is not used by the thrust update."""
-    gate_sigma: float = 0.0
-    """0 = chi-square 99.9 % gates; else the NIS gate is ``gate_sigma**2 * dof``."""
-    thrust_states: Literal["disturbance", "all"] = "disturbance"
-    """Which error states the thrust update corrects. ``"disturbance"`` (the paper's H,
-    -I on dxi only): the other states' uncertainty is added to the update's noise
-    instead (``R + H_o P_oo H_o^T``), so thruster and model errors cannot move the
-    velocity. ``"all"``: the full Jacobian."""
-    max_consecutive_rejects: int = 5
-    """After this many gated samples in a row a channel is fused again, down-weighted by
-    NIS / gate, so one bad spell cannot lock a sensor out for good."""
-    thrust_huber: float = 16.0
-    """Above this NIS the thrust update is down-weighted (R scaled by NIS / thrust_huber,
-    a Huber-type robust update) instead of rejected: thruster steps excite roll and pitch
-    accelerations faster than the IMU rate resolves, while a new push must still get in.
-    0 = plain update."""
-    initial_north_m: float = 0.0
-    initial_east_m: float = 0.0
-    """Start position (m) when no GNSS fix precedes the start (a surveyed launch point);
-    positions are then relative to this point until a fix arrives."""
-    # initial uncertainty
-    initial_position_std_m: float = 1.0
-    initial_velocity_std_mps: float = 0.3
-    initial_attitude_std_rad: float = 0.05
-    initial_accel_bias_std: float = 0.05
-    initial_gyro_bias_std: float = 0.005
-    initial_gravity_std: float = 0.01
-    initial_disturbance_std_n: float = 40.0
-    max_imu_gap_s: float = 0.5
-    """A longer gap between IMU samples restarts the propagation clock (counted)."""
 
 
 def _or(value: float | None, default: float) -> float:
@@ -577,10 +458,9 @@ class Eseso:
 def create(cfg: Config) -> Eseso | None:
     """The ESESO for a BlueROV2-class vehicle, or for any vehicle whose config sets
     ``[pipelines.eseso] enabled = true``."""
-    section = cfg.pipelines.get("eseso", {})
-    c = decode_section(cfg, "eseso", EsesoConfig)
-    if not c.enabled:
+    c = cfg.pipelines.eseso
+    if c.enabled is False:
         return None
-    if cfg.vehicle.vehicle_class not in c.vehicle_classes and section.get("enabled") is not True:
+    if cfg.vehicle.vehicle_class not in c.vehicle_classes and c.enabled is not True:
         return None
     return Eseso(c, cfg.sensors)

@@ -31,8 +31,6 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Literal, Mapping, Sequence
 
-import msgspec
-
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame, wrap_2pi, wrap_pi
 from onboard.core.messages import (
@@ -44,7 +42,13 @@ from onboard.core.messages import (
     Innovation,
     Sample,
 )
-from onboard.estimators.axis_model import AxisModel, Discretization, axis_commands, path_increment
+from onboard.core.pipeline_config import AieConfig, KfConfig
+from onboard.estimators.axis_model import (
+    AxisModel,
+    Discretization,
+    axis_commands,
+    path_increment,
+)
 from onboard.estimators.dead_reckoning import DeadReckoner
 from onboard.estimators.increment_filter import IncrementFilter
 from onboard.estimators.measurement_points import (
@@ -59,162 +63,6 @@ from onboard.estimators.track import HeadingTrack, PositionTrack, position_std
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used."""
-
-# ---------------------------------------------------------------------------------------
-# Configuration: [pipelines.aie] (the kf baseline reads the same table, see kf.py)
-
-
-class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
-    """One axis: its model (§1.2), the RCIE hyperparameters (§2.10), the KF noise.
-
-    Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized. The
-    defaults were tuned by the §2.10 procedure on SITL ``jaiabot-turns`` and
-    ``twin-thruster-turns`` (seed 10, held out from the reported seeds); see docs/aie.md.
-    """
-
-    a: float = 1.0
-    """Damping rate a (1/s), identified (§1.2) or the §1.4 default."""
-    gain: float = 1.0
-    """Nominal input per unit command (the KF baseline's input scaling)."""
-    offset: float = 0.0
-    """Nominal input at zero command."""
-    u_max: float = 5.0
-    """Saturation of the input estimate |d_hat| (physical bound)."""
-    u_scale: float = 1.0
-    """Typical input magnitude: the normalization of d_hat for RLS (§2.10)."""
-    n_c: int = 3
-    """Input-estimator order (§2.3); l_theta = 2 n_c + 1 (7, the paper's heading count;
-    its surge used 9, n_c = 4, which measured within 1 % here at twice the cost)."""
-    n_f: int = 1
-    """Taps of G_f (§2.4); 1 suffices for the relative-degree-1 increment model."""
-    r_z: float = 1.0
-    """Retrospective weight R_z (§2.5)."""
-    r_d: float = 1.0
-    """Input penalty R_d (normalized, §2.5), on the size or the change of d_hat."""
-    rate_penalty: bool = True
-    """Apply R_d to the change of the input estimate (d_hat_k - d_hat_{k-1}) instead of
-    its size: penalizes noise amplification without biasing a nonzero mean input."""
-    r_theta: float = 0.01
-    """Regularization R_theta; P_0 = I / r_theta (normalized, §2.5)."""
-    lam: float = 0.999
-    """RLS forgetting factor lambda (§2.6); memory ~ 1/(1 - lambda) steps."""
-    v_d: float = 0.3
-    """AIE: variance of the input-estimation error V_d (u^2), §2.2."""
-    kf_v_d: float = 1.0
-    """KF baseline: variance of the commanded input's error (u^2)."""
-    kf_bias_q: float = 0.0
-    """KF baseline: random walk of its input-bias state ((u^2)/s; 0: no bias state).
-    The forecast input is the nominal one plus a bias the filter estimates with the
-    rest of its state (kalman.BiasIncrementKF)."""
-    q_v: float = 0.0
-    """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
-    known_input: bool = True
-    """AIE: forecast with the nominal commanded input plus the RCIE estimate, so RCIE
-    estimates what the nominal map misses (§2.1 "known input"). Without commands, and
-    with ``false``, the whole input is unknown, as in the paper."""
-
-
-class SurgeAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
-    """``[pipelines.aie.surge]`` (m/s^2)."""
-
-    a: float = 1.0
-    gain: float = 3.0
-    u_max: float = 5.0
-    u_scale: float = 1.0
-    r_d: float = 10.0
-    v_d: float = 0.1
-    kf_bias_q: float = 0.01
-
-
-class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
-                        frozen=True):
-    """``[pipelines.aie.heading]`` (rad/s^2)."""
-
-    a: float = 2.0
-    gain: float = 2.0
-    u_max: float = 5.0
-    u_scale: float = 2.0
-    r_d: float = 1.0
-
-
-class AieConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
-    """``[pipelines.aie]``: measurement handling, reconstruction, both axes."""
-
-    enabled: bool = True
-    step_s: float = 0.2
-    """The AIE step Ts (s) of the surge axis: GNSS window length (§1.2). A window
-    without a fix is no step, so a slower receiver gives longer steps."""
-    heading_step_s: float = 0.1
-    """The step of the heading axis (compass windows); <= 0: same as step_s."""
-    close_at_output: bool = True
-    """A surge window holding a fix (and a heading) closes when estimates are asked for
-    (the engine's tick) instead of at its end: the newest fix is in the published
-    estimate at once (0.1 s less mean latency at 5 Hz fixes and 10 Hz ticks)."""
-    max_gap_s: float = 5.0
-    """Longer without a measurement point restarts the increment chain."""
-    input_mode: Literal["auto", "throttle-rudder", "differential"] = "auto"
-    """How commands map to the two axes (see surge_heading.axis_commands)."""
-    gnss_std_m: float | None = None
-    """GNSS position noise, one sigma (m); default [sensors.gnss] position_std_m. The
-    noise of fixes without their own accuracy (and of all with ``gnss_accuracy = false``)."""
-    gnss_accuracy: bool = True
-    """Take each fix's own accuracy (``h_acc_m``: GPS_RAW_INT h_acc, gpsd eph/epx/epy) as
-    its position noise, clamped to [``gnss_accuracy_min_m``, ``gnss_accuracy_max_m``],
-    and scale the position anchor by ``gnss_std_m^2`` over it; and its speed accuracy
-    (``speed_acc_mps``: GPS_RAW_INT vel_acc, gpsd eps) as the Doppler speed's noise where
-    it is worse than ``gnss_velocity_std_mps`` (down-weighting only, at most 5 m/s)."""
-    gnss_accuracy_min_m: float = 0.05
-    """Floor of a fix's reported accuracy (m): receivers report centimetres in RTK."""
-    gnss_accuracy_max_m: float = 50.0
-    """Ceiling of a fix's reported accuracy (m)."""
-    gnss_velocity: bool = True
-    """Also measure the surge rate with the receiver's speed over ground (Doppler),
-    signed by the course against the heading, where the fixes carry it."""
-    gnss_velocity_std_mps: float | None = None
-    """Speed-over-ground noise, one sigma (m/s); default [sensors.gnss] velocity_std_mps."""
-    heading_std_rad: float | None = None
-    """Compass noise, one sigma (rad); default [sensors.compass] heading_std_rad."""
-    correlated_noise: bool = True
-    """Model the MA(1) noise of increments formed from noisy points (kalman.py)."""
-    heading_anchor: float = 0.05
-    """With ``correlated_noise = false`` only: gain pulling the reconstructed heading
-    toward the measured one per step (0: the paper's pure integration of increments)."""
-    position_anchor: float = 0.05
-    """Gain pulling the reconstructed position toward the GNSS point per surge step
-    (0: pure dead reckoning from the estimates, paper §3.3)."""
-    nis_gate: float = 400.0
-    """An innovation with z^2/S above this is rejected as an outlier (20 sigma)."""
-    adaptive: bool = False
-    """Adapt V_d to the innovation statistics (ASE, §2.8)."""
-    adaptive_rate_noise: bool = True
-    """Raise the input-error variance (AIE ``v_d``, KF ``kf_v_d``) to what the measured
-    rate's innovations show (covariance matching on the Doppler speed row, never below
-    the configured value), so a model that predicts the speed worse than it claims gives
-    way to the measurement."""
-    adaptive_window: int = 50
-    """Window N_w of the innovation sample variance (steps)."""
-    divergence_input: float = 3.0
-    """Input estimate beyond this multiple of u_max (before saturation) is divergence."""
-    divergence_nis: float = 25.0
-    """Mean NIS over ~20 steps above this is divergence (expected value ~1)."""
-    imu_aiding: bool = True
-    """Where the log has an IMU and an attitude (roll, pitch), predict the speed and
-    path from the last surge step to the output with the measured path acceleration
-    (gravity removed, bias estimated: estimators/path_accel.py) as well as the model,
-    blended by the weight that minimises their misses of the Doppler speed."""
-    imu_horizon_s: float = 1.0
-    """Longest prediction (s) made with the accelerometer; beyond it, the model."""
-    surge: SurgeAxisConfig = SurgeAxisConfig()
-    heading: HeadingAxisConfig = HeadingAxisConfig()
-
-
-def load_config(cfg: Config) -> AieConfig:
-    """Decode ``[pipelines.aie]`` (shared by the aie and kf pipelines)."""
-    from onboard.core.config import decode_section
-
-    return decode_section(cfg, "aie", AieConfig)
-
-
 
 # ---------------------------------------------------------------------------------------
 # The pipeline
@@ -254,10 +102,10 @@ class SurgeHeadingPipeline:
         frame: the local frame about the first fix (None before it).
     """
 
-    def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig,
+    def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
                  gnss_std_m: float, heading_std_rad: float, factory: AxisFactory,
                  gnss_velocity_std_mps: float = 0.1) -> None:
-        """``cfg``: the pipeline's table; ``gnss_std_m``, ``heading_std_rad`` and
+        """``cfg``: the pipeline's table (``[pipelines.aie]`` or ``[pipelines.kf]``); ``gnss_std_m``, ``heading_std_rad`` and
         ``gnss_velocity_std_mps``: the ``[sensors]`` noise, unless ``cfg`` sets its own;
         ``factory`` builds each axis filter with its input model."""
         if not 0.0 < cfg.gnss_accuracy_min_m <= cfg.gnss_accuracy_max_m:

@@ -329,8 +329,8 @@ def aie_step_ratio(n: int = 5000, repeats: int = 5) -> dict[str, float]:
     from filterpy.kalman import KalmanFilter
 
     from onboard.estimators.axis_model import AxisModel, augmented_matrices, discretize
+    from onboard.core.pipeline_config import AieConfig
     from onboard.pipelines.aie import axis_filter
-    from onboard.pipelines.surge_heading import AieConfig
 
     top = AieConfig()
     ax = axis_filter(AxisModel(1.0, 3.0), top.surge, top)

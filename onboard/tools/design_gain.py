@@ -30,11 +30,11 @@ from typing import Any
 
 import numpy as np
 
-from onboard.core.config import CONFIG_DIR, Config, decode_section, load, resolve
+from onboard.core.config import CONFIG_DIR, Config, load, resolve
 from onboard.core.errors import UsageError
 from onboard.estimators.hgo import chain_matrices, gamma_star
 from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
-from onboard.pipelines.current import GAIN_DIR, CurrentConfig, model_kind
+from onboard.pipelines.current import GAIN_DIR, model_kind
 
 
 def solve_lmi(n_c: int = 2, p: int = 1, y_max: float = 10.0, eps: float = 1e-6,
@@ -89,7 +89,7 @@ def solve_lmi(n_c: int = 2, p: int = 1, y_max: float = 10.0, eps: float = 1e-6,
 def model_lipschitz(cfg: Config, speeds: tuple[float, ...] = (0.3, 1.0, 2.0)) -> float:
     """``max ||d nu_r'/d nu_r||_2`` of the configured (or default) model over ``speeds``
     (m/s, surge) with small sway/heave and the nominal rates of a turn (0.1 rad/s)."""
-    ccfg = decode_section(cfg, "current", CurrentConfig)
+    ccfg = cfg.pipelines.current
     model = RegressionModel(model_kind(cfg, ccfg))
     th = model.thetas_from_mapping(ccfg.model)
     x = ModelInputs()
@@ -108,7 +108,7 @@ def design(cfg: Config, margin: float = 1.0) -> dict[str, Any]:
     ``gamma* = max(1, 2 ||P|| L_f / lambda)`` and the gain the observer runs at, ``gamma =
     margin * gamma*`` (fixed: ``gamma_0 = gamma_max = gamma``, ``rho = 0``; anti-peaking by
     saturating the injected innovation, :class:`.CurrentHighGainObserver`)."""
-    ccfg = decode_section(cfg, "current", CurrentConfig)
+    ccfg = cfg.pipelines.current
     nd = RegressionModel(model_kind(cfg, ccfg)).nd
     sol = solve_lmi(2, nd)
     lf = model_lipschitz(cfg)

@@ -32,7 +32,8 @@ from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Sample
 from onboard.estimators.axis_model import AxisModel, fit_axis
 from onboard.pipelines import aie as aie_mod
 from onboard.pipelines import kf as kf_mod
-from onboard.pipelines.surge_heading import AieConfig, SurgeHeadingPipeline
+from onboard.core.pipeline_config import AieConfig, KfAxisConfig, KfConfig, SurgeHeadingConfig
+from onboard.pipelines.surge_heading import SurgeHeadingPipeline
 
 REPO = Path(__file__).resolve().parents[3]
 FIG_DIR = REPO / "docs" / "figures"
@@ -61,14 +62,32 @@ class SitlRun:
 SCENARIO_CONFIG = {"jaiabot-turns": "rudder-boat", "twin-thruster-turns": "twin-thruster-boat"}
 
 
+KF_AXIS_MODEL = ("a", "gain", "offset", "u_max", "q_v")
+"""The keys of an AIE axis table that are the KF baseline's model too."""
+
+
+def kf_table(aie_table: dict[str, Any]) -> dict[str, Any]:
+    """The part of an ``[pipelines.aie]`` table the KF baseline shares, as a
+    ``[pipelines.kf]`` table: the measurement-handling keys and each axis's model
+    (:data:`KF_AXIS_MODEL`), so that both filters run on the same model."""
+    out = {k: v for k, v in aie_table.items() if k in SurgeHeadingConfig.__struct_fields__}
+    for axis in ("surge", "heading"):
+        if axis in aie_table:
+            out[axis] = {k: v for k, v in aie_table[axis].items()
+                         if k in KF_AXIS_MODEL and k in KfAxisConfig.__struct_fields__}
+    return out
+
+
 def pipeline_config(vehicle_cfg: str, aie_table: dict[str, Any] | None = None) -> Config:
-    """A bundled vehicle config with an optional ``[pipelines.aie]`` table."""
+    """A bundled vehicle config with an optional ``[pipelines.aie]`` table, whose
+    measurement handling and axis models also replace the KF's (:func:`kf_table`)."""
     from onboard.core import config as config_mod
 
     cfg = config_mod.load(vehicle_cfg)
     if aie_table:
         data = msgspec.to_builtins(cfg)
-        data.setdefault("pipelines", {})["aie"] = aie_table
+        data["pipelines"]["aie"] = aie_table
+        data["pipelines"]["kf"] = kf_table(aie_table)
         cfg = config_mod.from_dict(data)
     return cfg
 
@@ -308,9 +327,9 @@ def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | Non
         table.setdefault("surge", {}).update(a=surge.a, gain=surge.gain, offset=surge.offset)
     if yaw is not None:
         table.setdefault("heading", {}).update(a=yaw.a, gain=yaw.gain, offset=yaw.offset)
-    cfg = msgspec.convert(table, AieConfig)
-    pa = aie_mod.build(cfg, gnss_std_m, heading_std_rad)
-    pk = kf_mod.build(cfg, gnss_std_m, heading_std_rad)
+    pa = aie_mod.build(msgspec.convert(table, AieConfig), gnss_std_m, heading_std_rad)
+    pk = kf_mod.build(msgspec.convert(kf_table(table), KfConfig), gnss_std_m,
+                      heading_std_rad)
     samples = blueboat_samples(run)
     out: dict[str, list[float]] = {f"{p.name}.{c}": [] for p in (pa, pk) for c in p.columns}
     j = 0

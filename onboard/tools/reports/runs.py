@@ -111,10 +111,13 @@ def aie_run(scenario: str, seed: int, identified: bool = False) -> Any:
     through the engine); ``identified``: both with the surge/heading models of
     ``config/sitl-jaiabot.toml`` (identified on ``jaiabot-turns`` seed 10) instead of the
     vehicle config's defaults."""
+    import msgspec
+
     from onboard.core import config as config_mod
     from onboard.tools.reports.aie_validation import run_sitl
 
-    table = dict(config_mod.load("sitl-jaiabot").pipelines["aie"]) if identified else None
+    table = msgspec.to_builtins(config_mod.load("sitl-jaiabot").pipelines.aie) \
+        if identified else None
     return run_sitl(scenario, seed=seed, aie_table=table)
 
 

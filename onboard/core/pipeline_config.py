@@ -1,0 +1,543 @@
+"""The pipelines' configuration: the typed tables of ``[pipelines.<name>]``.
+
+Every pipeline table is decoded with the rest of the configuration
+(:class:`onboard.core.config.Config`), so an unknown pipeline name (``[pipelines.aei]``)
+or an unknown key inside a pipeline table is an error naming the file and the dotted key.
+The structs live here, in the core, because the configuration is loaded before any
+pipeline is imported; each pipeline module reads ``cfg.pipelines.<name>``.
+
+* ``[pipelines.nav]``: :class:`NavConfig`;
+* ``[pipelines.aie]``, ``[pipelines.aie.surge]``, ``[pipelines.aie.heading]``:
+  :class:`AieConfig` (algorithms.md §1-§2);
+* ``[pipelines.kf]``, ``[pipelines.kf.surge]``, ``[pipelines.kf.heading]``:
+  :class:`KfConfig`, the same measurement handling with the KF baseline's model and noise
+  (algorithms.md §2.12);
+* ``[pipelines.current]``: :class:`CurrentConfig` (algorithms.md §3-§4);
+* ``[pipelines.eseso]``: :class:`EsesoConfig` (algorithms.md §5).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import msgspec
+
+
+class NavConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.nav]``: the measured navigation track (no settings of its own)."""
+
+    enabled: bool = True
+    """False: the pipeline is not built."""
+
+
+# ---------------------------------------------------------------------------------------
+# [pipelines.aie] and [pipelines.kf]: the surge/heading pipelines
+
+
+class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """One AIE axis: its model (§1.2), the RCIE hyperparameters (§2.10), the AIE noise.
+
+    Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized. The
+    defaults were tuned by the §2.10 procedure on SITL ``jaiabot-turns`` and
+    ``twin-thruster-turns`` (seed 10, held out from the reported seeds); see docs/aie.md.
+    """
+
+    a: float = 1.0
+    """Damping rate a (1/s), identified (§1.2) or the §1.4 default."""
+    gain: float = 1.0
+    """Nominal input per unit command (the KF baseline's input scaling)."""
+    offset: float = 0.0
+    """Nominal input at zero command."""
+    u_max: float = 5.0
+    """Saturation of the input estimate |d_hat| (physical bound)."""
+    u_scale: float = 1.0
+    """Typical input magnitude: the normalization of d_hat for RLS (§2.10)."""
+    n_c: int = 3
+    """Input-estimator order (§2.3); l_theta = 2 n_c + 1 (7, the paper's heading count;
+    its surge used 9, n_c = 4, which measured within 1 % here at twice the cost)."""
+    n_f: int = 1
+    """Taps of G_f (§2.4); 1 suffices for the relative-degree-1 increment model."""
+    r_z: float = 1.0
+    """Retrospective weight R_z (§2.5)."""
+    r_d: float = 1.0
+    """Input penalty R_d (normalized, §2.5), on the size or the change of d_hat."""
+    rate_penalty: bool = True
+    """Apply R_d to the change of the input estimate (d_hat_k - d_hat_{k-1}) instead of
+    its size: penalizes noise amplification without biasing a nonzero mean input."""
+    r_theta: float = 0.01
+    """Regularization R_theta; P_0 = I / r_theta (normalized, §2.5)."""
+    lam: float = 0.999
+    """RLS forgetting factor lambda (§2.6); memory ~ 1/(1 - lambda) steps."""
+    v_d: float = 0.3
+    """AIE: variance of the input-estimation error V_d (u^2), §2.2."""
+    q_v: float = 0.0
+    """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
+    known_input: bool = True
+    """AIE: forecast with the nominal commanded input plus the RCIE estimate, so RCIE
+    estimates what the nominal map misses (§2.1 "known input"). Without commands, and
+    with ``false``, the whole input is unknown, as in the paper."""
+
+
+class SurgeAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.aie.surge]`` (m/s^2)."""
+
+    a: float = 1.0
+    gain: float = 3.0
+    u_max: float = 5.0
+    u_scale: float = 1.0
+    r_d: float = 10.0
+    v_d: float = 0.1
+
+
+class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
+                        frozen=True):
+    """``[pipelines.aie.heading]`` (rad/s^2)."""
+
+    a: float = 2.0
+    gain: float = 2.0
+    u_max: float = 5.0
+    u_scale: float = 2.0
+    r_d: float = 1.0
+
+
+class SurgeHeadingConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
+                         frozen=True):
+    """Measurement handling and reconstruction, the same keys in ``[pipelines.aie]`` and
+    ``[pipelines.kf]`` (each pipeline reads its own table)."""
+
+    enabled: bool = True
+    """False: the pipeline is not built (:func:`onboard.pipelines.build`)."""
+    step_s: float = 0.2
+    """The AIE step Ts (s) of the surge axis: GNSS window length (§1.2). A window
+    without a fix is no step, so a slower receiver gives longer steps."""
+    heading_step_s: float = 0.1
+    """The step of the heading axis (compass windows); <= 0: same as step_s."""
+    close_at_output: bool = True
+    """A surge window holding a fix (and a heading) closes when estimates are asked for
+    (the engine's tick) instead of at its end: the newest fix is in the published
+    estimate at once (0.1 s less mean latency at 5 Hz fixes and 10 Hz ticks)."""
+    max_gap_s: float = 5.0
+    """Longer without a measurement point restarts the increment chain."""
+    input_mode: Literal["auto", "throttle-rudder", "differential"] = "auto"
+    """How commands map to the two axes (see surge_heading.axis_commands)."""
+    gnss_std_m: float | None = None
+    """GNSS position noise, one sigma (m); default [sensors.gnss] position_std_m. The
+    noise of fixes without their own accuracy (and of all with ``gnss_accuracy = false``)."""
+    gnss_accuracy: bool = True
+    """Take each fix's own accuracy (``h_acc_m``: GPS_RAW_INT h_acc, gpsd eph/epx/epy) as
+    its position noise, clamped to [``gnss_accuracy_min_m``, ``gnss_accuracy_max_m``],
+    and scale the position anchor by ``gnss_std_m^2`` over it; and its speed accuracy
+    (``speed_acc_mps``: GPS_RAW_INT vel_acc, gpsd eps) as the Doppler speed's noise where
+    it is worse than ``gnss_velocity_std_mps`` (down-weighting only, at most 5 m/s)."""
+    gnss_accuracy_min_m: float = 0.05
+    """Floor of a fix's reported accuracy (m): receivers report centimetres in RTK."""
+    gnss_accuracy_max_m: float = 50.0
+    """Ceiling of a fix's reported accuracy (m)."""
+    gnss_velocity: bool = True
+    """Also measure the surge rate with the receiver's speed over ground (Doppler),
+    signed by the course against the heading, where the fixes carry it."""
+    gnss_velocity_std_mps: float | None = None
+    """Speed-over-ground noise, one sigma (m/s); default [sensors.gnss] velocity_std_mps."""
+    heading_std_rad: float | None = None
+    """Compass noise, one sigma (rad); default [sensors.compass] heading_std_rad."""
+    correlated_noise: bool = True
+    """Model the MA(1) noise of increments formed from noisy points (kalman.py)."""
+    heading_anchor: float = 0.05
+    """With ``correlated_noise = false`` only: gain pulling the reconstructed heading
+    toward the measured one per step (0: the paper's pure integration of increments)."""
+    position_anchor: float = 0.05
+    """Gain pulling the reconstructed position toward the GNSS point per surge step
+    (0: pure dead reckoning from the estimates, paper §3.3)."""
+    nis_gate: float = 400.0
+    """An innovation with z^2/S above this is rejected as an outlier (20 sigma)."""
+    adaptive_rate_noise: bool = True
+    """Raise the input-error variance (the axis's ``v_d``) to what the measured
+    rate's innovations show (covariance matching on the Doppler speed row, never below
+    the configured value), so a model that predicts the speed worse than it claims gives
+    way to the measurement."""
+    imu_aiding: bool = True
+    """Where the log has an IMU and an attitude (roll, pitch), predict the speed and
+    path from the last surge step to the output with the measured path acceleration
+    (gravity removed, bias estimated: estimators/path_accel.py) as well as the model,
+    blended by the weight that minimises their misses of the Doppler speed."""
+    imu_horizon_s: float = 1.0
+    """Longest prediction (s) made with the accelerometer; beyond it, the model."""
+
+
+class AieConfig(SurgeHeadingConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.aie]``: measurement handling, reconstruction, both axes."""
+
+    adaptive: bool = False
+    """Adapt V_d to the innovation statistics (ASE, §2.8)."""
+    adaptive_window: int = 50
+    """Window N_w of the innovation sample variance (steps)."""
+    divergence_input: float = 3.0
+    """Input estimate beyond this multiple of u_max (before saturation) is divergence."""
+    divergence_nis: float = 25.0
+    """Mean NIS over ~20 steps above this is divergence (expected value ~1)."""
+    surge: SurgeAxisConfig = SurgeAxisConfig()
+    """``[pipelines.aie.surge]``."""
+    heading: HeadingAxisConfig = HeadingAxisConfig()
+    """``[pipelines.aie.heading]``."""
+
+
+class KfAxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """One axis of the KF baseline: its model (§1.2) and the noise of its commanded input
+    (§2.12). Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized."""
+
+    a: float = 1.0
+    """Damping rate a (1/s), identified (§1.2) or the §1.4 default."""
+    gain: float = 1.0
+    """Nominal input per unit command: the forecast input is ``gain * command + offset``."""
+    offset: float = 0.0
+    """Nominal input at zero command."""
+    u_max: float = 5.0
+    """Physical bound of the input (u): the first rate's variance ``(u_max dt)^2`` and
+    the ceiling ``(2 u_max)^2`` of the adapted input-error variance."""
+    q_v: float = 0.0
+    """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
+    v_d: float = 1.0
+    """Variance of the commanded input's error (u^2)."""
+    bias_q: float = 0.0
+    """Random walk of the input-bias state ((u^2)/s; 0: no bias state). The forecast
+    input is the nominal one plus a bias the filter estimates with the rest of its state
+    (kalman.BiasIncrementKF)."""
+
+
+class KfSurgeConfig(KfAxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.kf.surge]`` (m/s^2)."""
+
+    a: float = 1.0
+    gain: float = 3.0
+    bias_q: float = 0.01
+
+
+class KfHeadingConfig(KfAxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.kf.heading]`` (rad/s^2)."""
+
+    a: float = 2.0
+    gain: float = 2.0
+
+
+class KfConfig(SurgeHeadingConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.kf]``: the KF baseline's measurement handling (the keys of
+    ``[pipelines.aie]`` without the AIE's own), reconstruction, both axes."""
+
+    surge: KfSurgeConfig = KfSurgeConfig()
+    """``[pipelines.kf.surge]``."""
+    heading: KfHeadingConfig = KfHeadingConfig()
+    """``[pipelines.kf.heading]``."""
+
+
+# ---------------------------------------------------------------------------------------
+# [pipelines.current]
+
+
+class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """``[pipelines.current]``: hyperparameters of the current pipeline (SI units)."""
+
+    enabled: bool = True
+    """False: the pipeline is not built."""
+    observer: Literal["kf", "hgo", "flow"] = "kf"
+    """Whose current is reported: the joint Kalman filter, the high-gain observer or the
+    flow observer."""
+    model_kind: Literal["", "torpedo", "surface-rudder", "surface-twin", "rov"] = ""
+    """Regression model; empty: from ``vehicle.class``."""
+    model: dict[str, dict[str, float]] = {}
+    """Configured coefficients by DOF and term (vehicle_models.py names), mode (a)."""
+    identify: bool = True
+    """Identify the model online (joint state). False: keep the configured model fixed."""
+    model_rel_std: float = 0.2
+    """Prior one-sigma of configured coefficients, relative (plus ``theta_std_floor``)."""
+    theta_std: float = 1.0
+    """Prior one-sigma of unconfigured coefficients (mode (b)), except the net-weight ones."""
+    net_weight_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.02
+    """Prior one-sigma of the net weight ``(W - B) / W`` of the vehicle (fraction of its
+    weight), for the unconfigured surge and sway net-weight coefficients (``sin(theta)``,
+    ``cos(theta)sin(phi)``: ``+-(W - B) / (m - X_idot)``, vehicle_models.
+    NET_WEIGHT_REGRESSORS; not the heave constant ``cos(theta)cos(phi)``, which keeps
+    ``theta_std``): their prior one-sigma is ``g * net_weight_std`` (m/s^2), an upper
+    bound on every DOF since its mass term is at least ``m``. 0.02: an underwater vehicle
+    is trimmed within a few percent of neutral (the SITL REMUS, Prestero 2001: 7 N positive
+    on 299 N, 2.3 %; the BlueROV2 of algorithms.md §5.4: 0.66 N, 0.6 %). Without it
+    (``theta_std``, 1 m/s^2 ~ 10 %) a steady roll makes the sway term an unknown side force
+    that trades against a cross-track current (docs/current.md, "Net-weight prior")."""
+    theta_std_floor: float = 0.02
+    """Absolute floor added to the relative prior one-sigma of configured coefficients."""
+    forgetting: float = 0.9995
+    """Forgetting of the coefficient covariance per tick (0.9995 at 10 Hz: 200 s memory),
+    variable-rate: none once the covariance is back at its prior (bounded, rls.py)."""
+    rpm_scale: float = 1000.0
+    """Propeller rpm divided by this gives the normalized propulsion ``n``."""
+    svf_cutoff_hz: float = 0.3
+    """State-variable filter cut-off for the yaw-channel RLS (algorithms.md §3.4)."""
+    current_walk: float = 0.01
+    """Random walk of the current, m/s per sqrt(s), before calibration (0.01: 0.08 m/s in a
+    minute, 1 sigma; turbulence and tides; the innovation calibration raises it)."""
+    accel_std: float = 0.02
+    """Model acceleration error (process noise) per DOF, m/s^2 over ``model_error_time_s``."""
+    model_error_time_s: float = 1.0
+    """Time (s) over which ``accel_std`` is the model's velocity error."""
+    heading_diversity: float = 0.85
+    """See ``heading_memory_s``."""
+    heading_memory_s: float = 300.0
+    """Without a surge model the along-track sigma is floored at the prior unless the
+    headings of the last ``heading_memory_s`` are diverse: the mean of the doubled-angle
+    unit vector (cos 2psi, sin 2psi) shorter than ``heading_diversity``. Doubled, because
+    reversing course (a glider's back-and-forth, a lawnmower survey) keeps the same lateral
+    axis and adds nothing to the sway constraint. 0.85: e.g. two headings 35 deg apart; a
+    +-15 deg zig-zag gives 0.87 and keeps the floor."""
+    turn_accel_gain: float = 1.0
+    """Extra model acceleration error in turns, m/s^2 per (m/s * rad/s) of ``u_r r``."""
+    prior_accel_std: float = 0.3
+    """Model acceleration error of a DOF that has only the generic prior (mode (b), not yet
+    identified), m/s^2: the prior says "no crabbing", not how much."""
+    init_current_std: float = 1.0
+    """Prior one-sigma of the current (m/s) before any turn has made it observable."""
+    identify_max_current_std: float = 0.1
+    """The coefficients are updated only once the current's one-sigma is below this (m/s)."""
+    identify_min_rate: float = 0.03
+    """A yaw rate (rad/s) above this marks a turn, which makes the model identifiable."""
+    identify_after_turn_s: float = 30.0
+    """Coefficients are updated during turns and this long after them (s)."""
+    yaw_rls_p0: float = 1e6
+    """Initial covariance of the yaw-channel RLS: large, because its regressors (u v,
+    u^2 dr at small rates) are O(0.001-0.01) and ``lambda + phi^T P phi`` must be ruled by
+    the data (with p0 = 100 the spheroid's coefficients stay 6x too small)."""
+    yaw_forgetting: float = 0.9995
+    """Forgetting factor of the yaw-channel RLS per update."""
+    identify_straight: bool = False
+    """Identify on straight lines too: only where the current is known (a calm-water
+    identification run with ``init_current_std`` ~ 0 and ``current_walk`` ~ 0)."""
+    identify_min_speed: float = 0.2
+    """Below this through-water speed the yaw RLS does not learn."""
+    gnss_velocity_std: float | None = None
+    """One-sigma of GNSS velocity components (m/s) at the receiver's nominal accuracy;
+    default from ``[sensors.gnss]``."""
+    gnss_nominal_accuracy_m: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
+    """Receiver accuracy as noise: a fix reporting its speed accuracy ``speed_acc_mps``
+    (m/s, one sigma) has that as its velocity one-sigma; one reporting only a horizontal
+    accuracy ``h_acc_m`` (m, one sigma) worse than this has its velocity one-sigma scaled
+    by ``h_acc_m / nominal`` (both scale with the satellite geometry and signal quality).
+    Never below ``gnss_velocity_std`` (a fix claiming better, RTK say, does not make its
+    Doppler velocity better). Default ``[sensors.gnss] position_std_m``; 0: the configured
+    one-sigma for every fix. A fix without a finite positive accuracy takes the
+    configured one-sigma."""
+    dvl_velocity_std: float | None = None
+    """One-sigma of DVL velocity components (m/s); default from ``[sensors.dvl]``."""
+    gate_nis: float = 30.0
+    """Innovations with a larger NIS are rejected (counted in health)."""
+    calibrate: bool = True
+    """Inflate the process noise when the innovation NIS says it is too small."""
+    calibrate_block: int = 50
+    """Innovations averaged per calibration block (whiteness test)."""
+    gain_file: str = ""
+    """HGO gain JSON (``onboard design-gain``); default ``config/gains/<class>.json``."""
+    gamma: float | None = None
+    """A fixed high gain (``rho = 0``); default: the gain file's law."""
+    gamma_0: float | None = None
+    """Initial gain of the increasing-gain law; default the gain file's."""
+    rho: float | None = None
+    """Growth rate (1/s) of the increasing-gain law; default the gain file's."""
+    gamma_max: float | None = None
+    """Ceiling of the increasing gain; default the gain file's."""
+    hgo_identify: Literal["turns", "always"] = "turns"
+    """When the high-gain observer's own RLS (``observer = "hgo"``,
+    :class:`~onboard.estimators.model_identification.VelocityRls`) learns: ``"turns"``
+    under the joint filter's schedule (the observer's current one-sigma at most
+    ``identify_max_current_std``, within ``identify_after_turn_s`` of a turn, or always with
+    ``identify_straight``), ``"always"`` at every tick with a fresh velocity, as in Kim et
+    al. (on a straight line the along-track current then trades against the thrust
+    coefficient, docs/current.md, HGO). ``identify = false`` disables it."""
+    hgo_rls_noise_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.2
+    """One-sigma (m/s^2) of the equation error of the high-gain observer's RLS, against
+    which the coefficient prior is weighed. 0.2: the observer's velocity at ``gamma*``
+    carries the sensor noise through the injection (measured on spheroid-sawtooth, mode
+    (a), 300 s, seed 1, rms N/E/D: 0.02 drags the sway ``uv`` coefficient from -2.44 to
+    -0.40, 0.045 / 0.139 / 0.049 m/s (before the damping projection a heave coefficient
+    ran to +17 and the observer diverged 1733 times); 0.05: 0.021 / 0.034 / 0.031; 0.2:
+    0.020 / 0.030 / 0.027, the configured model unrefined 0.020 / 0.030 / 0.026)."""
+    flow_pitch: bool = False
+    """Flow observer (``observer = "flow"``, 3-D models): add the vertical block ``[theta,
+    q, w_r]`` observed from the measured pitch, its pitch channel identified online by RLS
+    (flow_observer.py, ``PITCH_TERMS``); False: Fan et al.'s observer reduced to the heading
+    output, ``w_r`` from the joint filter (docs/current.md, "Flow observer")."""
+    flow_poles: list[float] = []
+    """Flow-observer poles (1/s, negative); empty: the defaults of flow_observer.py."""
+    unknown_above_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.3
+    """A component of the current whose one-sigma exceeds this (m/s) is published as
+    unknown: absent from the estimates (an empty cell in estimates.csv, no ``CUR_N`` or
+    ``WIND_COV`` on MAVLink), its ``std_`` still published, ``observable.<axis> = 0`` in
+    health. 0.3: a 2-sigma band of +-0.6 m/s says nothing about a small vehicle's current
+    (the along-track current without a surge model has a one-sigma of at least
+    ``init_current_std``, 1 m/s, and is never published)."""
+    restore_check_s: Annotated[float, msgspec.Meta(ge=0.0)] = 120.0
+    """A restored current is on probation: a twin filter runs beside the pipeline from the
+    restored model with the current at its prior, and the restored current must agree with
+    the twin's (chi-square at ``restore_check_p`` on the components the twin observes) for
+    this long (s of data) while the twin observes every horizontal component; a
+    disagreement discards the restored current (an event, ``restore_discarded``)."""
+    restore_check_p: Annotated[float, msgspec.Meta(gt=0.0, lt=0.5)] = 0.001
+    """False-alarm probability of the restored-current test per evaluation."""
+
+
+
+# ---------------------------------------------------------------------------------------
+# [pipelines.eseso]
+
+# BlueROV2 (standard, vectored frame) force rows of the allocation matrix, FRD body axes,
+# per unit thruster force; thrusters 1-4 horizontal at 45 deg, 5-6 vertical. Matches the
+# paper's K_alloc (algorithms.md §5.2) turned from its z-up body frame into FRD.
+BLUEROV2_FORCE_ALLOCATION: tuple[tuple[float, ...], ...] = (
+    (0.7071, 0.7071, -0.7071, -0.7071, 0.0, 0.0),
+    (-0.7071, 0.7071, -0.7071, 0.7071, 0.0, 0.0),
+    (0.0, 0.0, 0.0, 0.0, -1.0, -1.0),
+)
+
+
+class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """``[pipelines.eseso]``: model, thrusters and noise of the ESESO.
+
+    Vehicle parameters default to the paper's Table I (BlueROV2). Noise figures not given
+    here come from ``[sensors]``. Defaults marked [DEFAULT] are ours (tuned on the
+    ``bluerov2-circle`` scenario), not the paper's Q = 1e-3 I and
+    R = diag(0.01 I, 0.02 I, 0.0006 I, 0.012 I), which are per-step numbers of a 50 Hz
+    loop in unstated units.
+    """
+
+    enabled: bool | None = None
+    """Unset: built for ``vehicle_classes``; true: built for any vehicle class; false:
+    never built."""
+    vehicle_classes: list[str] = msgspec.field(default_factory=lambda: ["bluerov2"])
+    """Vehicle classes the pipeline is built for (any class with ``enabled = true``)."""
+    mass_kg: float = 11.26
+    """Vehicle mass (kg)."""
+    added_mass: list[float] = msgspec.field(default_factory=lambda: [1.7182, 0.0, 5.468])
+    """X_udot, Y_vdot, Z_wdot as positive added masses (kg)."""
+    damping_linear: list[float] = msgspec.field(default_factory=lambda: [11.7391, 20.0, 31.8678])
+    """Positive linear damping d_l (N s/m); the paper lists them negated."""
+    damping_quadratic: list[float] = msgspec.field(default_factory=lambda: [18.18, 21.66, 36.99])
+    """Positive quadratic damping d_nl (N s^2/m^2)."""
+    cg_z_m: float = 0.2
+    """Centre of gravity below the body origin (m), paper Table I (the public code has
+    0.02); the IMU is taken at the origin."""
+    weight_n: float = 112.8
+    """Weight (N)."""
+    buoyancy_n: float = 114.8
+    """Buoyancy (N)."""
+    gravity_mps2: float = 9.81
+    """Nominal gravity (m/s^2)."""
+    force_allocation: list[list[float]] = msgspec.field(
+        default_factory=lambda: [list(r) for r in BLUEROV2_FORCE_ALLOCATION])
+    """3 x n_thrusters: body force (N, FRD) per newton of each thruster."""
+    thruster_max_forward_n: float = 40.0
+    """Thrust (N) at normalized command +1 (T200 at ~14.8 V, as the SITL plant)."""
+    thruster_max_reverse_n: float = 30.0
+    """Thrust magnitude (N) at normalized command -1."""
+    thruster_exponent: float = 2.0
+    """Thrust = max * sign(c) |c|^exponent (1 = linear map, 2 = quadratic in command)."""
+    thruster_deadband: float = 0.0
+    """Normalized commands with |c| below this give no thrust."""
+    disturbance_model: Literal["earth_fixed", "body_fixed"] = "earth_fixed"
+    """Axes in which the disturbance force is a random walk."""
+    # process noise [DEFAULT]
+    accel_bias_walk: float = 1e-4
+    """Accelerometer bias random walk (m/s^2/sqrt(s))."""
+    gyro_bias_walk: float = 1e-5
+    """Gyro bias random walk (rad/s/sqrt(s))."""
+    gravity_walk: float = 1e-6
+    """Gravity random walk (m/s^2/sqrt(s)); it only absorbs a wrong nominal g."""
+    disturbance_walk: float = 1.0
+    """Disturbance random walk (N/sqrt(s))."""
+    position_walk: float = 1e-3
+    """Extra position random walk (m/sqrt(s)), keeps P well conditioned."""
+    # measurement noise; None = from [sensors]
+    ins_velocity_std_mps: float = 0.02
+    """White noise of the INS velocity over ground per horizontal axis (m/s) [DEFAULT: the
+    simulated DVL-aided INS of ``bluerov2-circle``, ``sitl.sensors.InsConfig``]."""
+    ins_bias_std_mps: float = 0.01
+    """Stationary std of the INS velocity bias (m/s), a first-order Gauss-Markov process
+    carried as two error states (north, east): an aided INS's velocity error is correlated
+    over minutes, so it is not white measurement noise."""
+    ins_bias_tau_s: float = 300.0
+    """Correlation time of the INS velocity bias (s)."""
+    gnss_position_std_m: float | None = None
+    """GNSS position noise (m); default ``[sensors.gnss]``."""
+    gnss_velocity_std_mps: float | None = None
+    """GNSS velocity noise (m/s); default ``[sensors.gnss]``."""
+    depth_std_m: float | None = None
+    """Depth noise (m); default ``[sensors.depth]``."""
+    dvl_velocity_std_mps: float | None = None
+    """DVL velocity noise (m/s) when a report has no figure of merit; default
+    ``[sensors.dvl]``."""
+    attitude_std_rad: float = 0.01
+    """Roll and pitch noise of the AHRS attitude (rad)."""
+    attitude_yaw_std_rad: float | None = None
+    """Yaw noise of the AHRS attitude (rad); None = the compass heading noise
+    (``heading_std_rad``, else ``[sensors.compass]``): an AHRS reports the compass heading
+    as its yaw."""
+    heading_std_rad: float | None = None
+    """Compass heading noise (rad); default ``[sensors.compass]``."""
+    thrust_std_n: float = 3.0
+    """Thrust-model error besides accelerometer noise (thruster lag, model error), N."""
+    accel_std_mps2: float | None = None
+    """Accelerometer noise (m/s^2); default ``[sensors.imu]``."""
+    gyro_std_rps: float | None = None
+    """Gyro noise (rad/s); default ``[sensors.imu]``."""
+    gnss_max_depth_m: float | None = None
+    """Fixes received deeper than this are rejected (default sensors.depth.surface_depth_m)."""
+    command_timeout_s: float = 0.5
+    """A thruster command older than this is not used by the thrust update."""
+    gate_sigma: float = 0.0
+    """0 = chi-square 99.9 % gates; else the NIS gate is ``gate_sigma**2 * dof``."""
+    thrust_states: Literal["disturbance", "all"] = "disturbance"
+    """Which error states the thrust update corrects. ``"disturbance"`` (the paper's H,
+    -I on dxi only): the other states' uncertainty is added to the update's noise
+    instead (``R + H_o P_oo H_o^T``), so thruster and model errors cannot move the
+    velocity. ``"all"``: the full Jacobian."""
+    max_consecutive_rejects: int = 5
+    """After this many gated samples in a row a channel is fused again, down-weighted by
+    NIS / gate, so one bad spell cannot lock a sensor out for good."""
+    thrust_huber: float = 16.0
+    """Above this NIS the thrust update is down-weighted (R scaled by NIS / thrust_huber,
+    a Huber-type robust update) instead of rejected: thruster steps excite roll and pitch
+    accelerations faster than the IMU rate resolves, while a new push must still get in.
+    0 = plain update."""
+    initial_north_m: float = 0.0
+    """See ``initial_east_m``."""
+    initial_east_m: float = 0.0
+    """Start position (m) when no GNSS fix precedes the start (a surveyed launch point);
+    positions are then relative to this point until a fix arrives."""
+    # initial uncertainty
+    initial_position_std_m: float = 1.0
+    """Initial one-sigma of the position (m)."""
+    initial_velocity_std_mps: float = 0.3
+    """Initial one-sigma of the velocity (m/s)."""
+    initial_attitude_std_rad: float = 0.05
+    """Initial one-sigma of the attitude (rad)."""
+    initial_accel_bias_std: float = 0.05
+    """Initial one-sigma of the accelerometer bias (m/s^2)."""
+    initial_gyro_bias_std: float = 0.005
+    """Initial one-sigma of the gyro bias (rad/s)."""
+    initial_gravity_std: float = 0.01
+    """Initial one-sigma of gravity (m/s^2)."""
+    initial_disturbance_std_n: float = 40.0
+    """Initial one-sigma of the disturbance force (N)."""
+    max_imu_gap_s: float = 0.5
+    """A longer gap between IMU samples restarts the propagation clock (counted)."""
+
+
+
+class Pipelines(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines]``: one table per pipeline of :data:`onboard.pipelines.MODULES`."""
+
+    nav: NavConfig = msgspec.field(default_factory=NavConfig)
+    """``[pipelines.nav]``."""
+    aie: AieConfig = msgspec.field(default_factory=AieConfig)
+    """``[pipelines.aie]``."""
+    kf: KfConfig = msgspec.field(default_factory=KfConfig)
+    """``[pipelines.kf]``."""
+    current: CurrentConfig = msgspec.field(default_factory=CurrentConfig)
+    """``[pipelines.current]``."""
+    eseso: EsesoConfig = msgspec.field(default_factory=EsesoConfig)
+    """``[pipelines.eseso]``."""
