@@ -4,9 +4,8 @@ Angle wrapping (:mod:`onboard.core.geo`): the scalar functions and their numpy t
 bit for bit, and the closed ends are the documented ones. ZYX rotation
 (:mod:`onboard.core.so3`): the plain-float fast paths against the numpy reference. MAVLink
 framing (:mod:`drivers.mavlink_frame`): the tlog reader's inlined framing against the
-reference functions and the stream parser. RLS (:mod:`onboard.estimators.rls`,
-:mod:`onboard.estimators.rcie`): the generated kernels against numpy implementations of
-the same updates.
+reference functions and the stream parser. RCIE (:mod:`onboard.estimators.rcie`): the generated kernel
+against a numpy implementation of the same update.
 """
 
 from __future__ import annotations
@@ -299,7 +298,7 @@ def test_stream_parser_and_tlog_reader_decode_intact_frames_alike(tmp_path, seed
     assert reader.stats.records == parser.stats.records
 
 
-# --------------------------------------------------------------------------- RLS kernels
+# --------------------------------------------------------------------------- RCIE kernel
 
 
 def _spd(rng: np.random.Generator, n: int, scale: float = 1.0) -> np.ndarray:
@@ -322,16 +321,6 @@ def _close(fast, ref, *inputs, rel: float = 1e-12) -> bool:
     return bool(np.max(np.abs(fast - ref), initial=0.0) <= rel * max(scale, 1e-300))
 
 
-def _forgetting_rls_reference(P, th, phi, a, weight, forgetting, tr_max, beta, delta):
-    """algorithms.md §3.4 in numpy: variable-rate forgetting, the update, then EFRA."""
-    e = a - phi @ th
-    lam = 1.0 - (1.0 - forgetting) * max(0.0, 1.0 - np.trace(P) / tr_max)
-    s = lam / weight + phi @ P @ phi
-    K = P @ phi / s
-    P1 = (P - np.outer(K, phi @ P)) / lam
-    return P1 + beta * np.eye(len(P)) - delta * P1 @ P1, th + K * e, e, lam, s
-
-
 def _two_row_reference(P, th, a, b, e1, r_a, r_b, lam):
     """algorithms.md §2.6 in numpy: Gamma, P+, theta+."""
     Phi = np.vstack([a, b])
@@ -342,55 +331,12 @@ def _two_row_reference(P, th, a, b, e1, r_a, r_b, lam):
     return P1, th1
 
 
-@pytest.mark.parametrize("n", [1, 2, 4, 5, 9])
-def test_generated_rls_kernel_is_the_numpy_update(n: int) -> None:
-    from onboard.estimators.rls import rls_kernel, unpack
-
-    rng = np.random.default_rng(n)
-    kernel = rls_kernel(n)
-    for _ in range(50):
-        P = _spd(rng, n, 10.0 ** rng.uniform(-2, 3))
-        th, phi = rng.standard_normal(n), rng.standard_normal(n) * 10.0 ** rng.uniform(-2, 1)
-        a, weight = float(rng.standard_normal()), float(rng.uniform(0.05, 1.0))
-        forgetting, tr_max = float(rng.uniform(0.95, 1.0)), float(np.trace(P) * rng.uniform(0.5, 3))
-        beta, delta = float(rng.uniform(0, 1e-3)), float(rng.uniform(0, 1e-3)) / np.trace(P)
-        got = kernel(_pack(P), th.tolist(), phi.tolist(), a, weight, forgetting, tr_max,
-                     beta, delta)
-        want = _forgetting_rls_reference(P, th, phi, a, weight, forgetting, tr_max, beta, delta)
-        assert _close(unpack(got[0], n), want[0], P / want[3])
-        assert _close(got[1], want[1], th)
-        for g, w in zip(got[2:], want[2:]):
-            assert g == pytest.approx(w, rel=1e-12, abs=1e-300)
-
-
-@pytest.mark.parametrize("n", [1, 3, 7, 9])
-def test_generated_two_row_kernel_is_the_numpy_update(n: int) -> None:
-    from onboard.estimators.rls import two_row_rls_kernel, unpack
-
-    rng = np.random.default_rng(10 + n)
-    kernel = two_row_rls_kernel(n)
-    for _ in range(50):
-        P = _spd(rng, n, 10.0 ** rng.uniform(-1, 2))
-        th, a, b = (rng.standard_normal(n) for _ in range(3))
-        e1, lam = float(rng.standard_normal()), float(rng.uniform(0.9, 1.0))
-        r_a, r_b = 10.0 ** rng.uniform(-1, 1), 10.0 ** rng.uniform(-2, 1)
-        Pn, thn, tr = kernel(_pack(P), th.tolist(), a.tolist(), b.tolist(), e1, lam / r_a,
-                             lam / r_b, lam)
-        P_ref, th_ref = _two_row_reference(P, th, a, b, e1, r_a, r_b, lam)
-        assert _close(unpack(Pn, n), P_ref, P / lam)
-        assert _close(thn, th_ref, th)
-        assert _close(tr, np.trace(P_ref), n * P / lam)
-    assert kernel(_pack(-np.eye(n)), [0.0] * n, [1.0] * n, [1.0] * n, 0.0, 0.5, 0.5,
-                  1.0) is None  # Gamma not positive definite
-
-
 @pytest.mark.parametrize("rate_penalty", [False, True])
 @pytest.mark.parametrize("n", [1, 5, 9])
 def test_generated_rcie_kernel_is_the_numpy_update(n: int, rate_penalty: bool) -> None:
     """The kernel with its rows built inside and ``P = sc Q``: rows ``a = h s`` and
     ``b = g - f`` (rate penalty) or ``b = g``, then §2.6, then ``d = g . theta+``."""
-    from onboard.estimators.rcie import rcie_kernel
-    from onboard.estimators.rls import unpack
+    from onboard.estimators.rcie import rcie_kernel, unpack
 
     rng = np.random.default_rng(20 + n + rate_penalty)
     kernel = rcie_kernel(n, rate_penalty)
@@ -454,8 +400,7 @@ class _RcieReference:
 def test_rcie_steps_are_the_numpy_reference_steps(seed: int) -> None:
     """Rcie.step (generated kernel, buffers as lists) against :class:`_RcieReference`,
     step by step from the same theta and P: theta, P and the raw estimate to 1e-12."""
-    from onboard.estimators.rcie import Rcie
-    from onboard.estimators.rls import unpack
+    from onboard.estimators.rcie import Rcie, unpack
 
     rng = random.Random(seed)
     est = Rcie(n_c=rng.randint(0, 4), n_f=rng.randint(1, 4), r_z=10 ** rng.uniform(-1, 1),

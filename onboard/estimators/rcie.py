@@ -27,10 +27,98 @@ with the rows built inside it (:func:`rcie_kernel`).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import cache
 from typing import Any, Callable, Mapping
 
-from onboard.estimators.rls import compile_kernel, two_row_update_lines, unpack_line
+
+def packed_index(n: int) -> dict[tuple[int, int], int]:
+    """Position of ``P[i][j]`` in the packed upper triangle (row-major) of an ``n x n``
+    symmetric matrix (the storage of :attr:`Rcie.P`)."""
+    idx: dict[tuple[int, int], int] = {}
+    m = 0
+    for i in range(n):
+        for j in range(i, n):
+            idx[(i, j)] = idx[(j, i)] = m
+            m += 1
+    return idx
+
+
+def unpack(P: Sequence[float], n: int) -> list[list[float]]:
+    """Packed upper triangle (row-major) -> full symmetric matrix (list of rows)."""
+    idx = packed_index(n)
+    return [[P[idx[(i, j)]] for j in range(n)] for i in range(n)]
+
+
+def unpack_line(names: str, count: int, value: str) -> str:
+    """The kernel line unpacking the sequence ``value`` into ``names0 .. names<count-1>``."""
+    return f"    {', '.join(f'{names}{i}' for i in range(count))}, = {value}"
+
+
+def compile_kernel(lines: Sequence[str], name: str) -> Callable[..., Any]:
+    """The function ``kernel`` defined by the generated ``lines`` (its first line is the
+    ``def``); ``name`` labels it in tracebacks."""
+    ns: dict[str, Any] = {}
+    code = compile("\n".join(lines), f"<generated {name}>", "exec")
+    exec(code, ns)  # noqa: S102 - source generated here from integers only
+    return ns["kernel"]
+
+
+def two_row_update_lines(n: int) -> list[str]:
+    """Kernel lines of the two-row update (algorithms.md §2.6) for ``n`` parameters.
+
+    In scope before them: the packed covariance ``p0 ..``, with ``P = sc * p``; the
+    parameters ``t0 ..``; the rows ``a0 ..`` (weight ``R_a``) and ``b0 ..`` (weight
+    ``R_b``, target 0); ``e1``, the first row's residual before the parameters;
+    ``wa = lam / R_a``, ``wb = lam / R_b``; ``lam``. With ``Phi~ = [a; b]``,
+    ``z~ = [e1; 0]``, they compute::
+
+        Gamma  = diag(wa, wb) + Phi~ P Phi~^T                 (LDL^T-factored, 2 x 2)
+        theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)   -> n0 ..
+        P+     = sn * Q,  sn = sc / lam,
+        Q      = p - sc p Phi~^T Gamma^-1 Phi~ p               -> Q (packed list)
+        tr     = trace(P+)
+
+    and ``return None`` when a pivot of ``Gamma`` is not positive (impossible in exact
+    arithmetic: a divergence). Keeping ``P = sc Q`` makes the forgetting one
+    multiplication of ``sc`` rather than one per entry.
+    """
+    idx = packed_index(n)
+    r = range(n)
+    p = {(i, j): f"p{idx[(i, j)]}" for i in r for j in r}
+    src: list[str] = []
+    add = src.append
+    for i in r:
+        add(f"    pa{i} = " + " + ".join(f"{p[(i, j)]}*a{j}" for j in r))
+        add(f"    pb{i} = " + " + ".join(f"{p[(i, j)]}*b{j}" for j in r))
+    add("    g11 = wa + sc*(" + " + ".join(f"a{i}*pa{i}" for i in r) + ")")
+    add("    g12 = sc*(" + " + ".join(f"a{i}*pb{i}" for i in r) + ")")
+    add("    g22 = wb + sc*(" + " + ".join(f"b{i}*pb{i}" for i in r) + ")")
+    add("    e1 = e1 + " + " + ".join(f"a{i}*t{i}" for i in r))
+    add("    e2 = " + " + ".join(f"b{i}*t{i}" for i in r))
+    # Gamma = L D L^T (2 x 2 Cholesky without square roots), pivots must be positive
+    add("    if not g11 > 0.0:")
+    add("        return None")
+    add("    l = g12 / g11")
+    add("    d2 = g22 - l * g12")
+    add("    if not d2 > 0.0:")
+    add("        return None")
+    add("    i22 = sc / d2")
+    add("    i12 = -l * i22")
+    add("    i11 = sc / g11 + l * l * i22")
+    add("    w1 = i11 * e1 + i12 * e2")
+    add("    w2 = i12 * e1 + i22 * e2")
+    for i in r:
+        add(f"    ka{i} = i11*pa{i} + i12*pb{i}")
+        add(f"    kb{i} = i12*pa{i} + i22*pb{i}")
+    for i in r:
+        add(f"    n{i} = t{i} - pa{i}*w1 - pb{i}*w2")
+    terms = [f"{p[(i, j)]} - ka{i}*pa{j} - kb{i}*pb{j}" for i in r for j in range(i, n)]
+    add("    Q = [" + ", ".join(terms) + "]")
+    add("    sn = sc / lam")
+    add("    tr = sn * (" + " + ".join(f"Q[{idx[(i, i)]}]" for i in r) + ")")
+    return src
+
 
 RcieKernel = Callable[..., "tuple[list[float], float, list[float], float, float] | None"]
 """``kernel(Q, sc, theta, s, h, f, g, e1, w_a, w_b, lam) -> (Q+, sc+, theta+, trace(P+),
