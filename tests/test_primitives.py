@@ -321,22 +321,13 @@ def _close(fast, ref, *inputs, rel: float = 1e-12) -> bool:
     return bool(np.max(np.abs(fast - ref), initial=0.0) <= rel * max(scale, 1e-300))
 
 
-def _two_row_reference(P, th, a, b, e1, r_a, r_b, lam):
-    """algorithms.md §2.6 in numpy: Gamma, P+, theta+."""
-    Phi = np.vstack([a, b])
-    R = np.diag([r_a, r_b])
-    G = lam * np.linalg.inv(R) + Phi @ P @ Phi.T
-    P1 = (P - P @ Phi.T @ np.linalg.solve(G, Phi @ P)) / lam
-    th1 = th - P @ Phi.T @ np.linalg.solve(G, np.array([e1, 0.0]) + Phi @ th)
-    return P1, th1
-
-
 @pytest.mark.parametrize("rate_penalty", [False, True])
 @pytest.mark.parametrize("n", [1, 5, 9])
 def test_generated_rcie_kernel_is_the_numpy_update(n: int, rate_penalty: bool) -> None:
     """The kernel with its rows built inside and ``P = sc Q``: rows ``a = h s`` and
-    ``b = g - f`` (rate penalty) or ``b = g``, then §2.6, then ``d = g . theta+``."""
-    from onboard.estimators.rcie import rcie_kernel, unpack
+    ``b = g - f`` (rate penalty) or ``b = g``, then §2.6 (rcie.reference_rls_update),
+    then ``d = g . theta+``; and None when ``Gamma`` is not positive definite."""
+    from onboard.estimators.rcie import rcie_kernel, reference_rls_update, unpack
 
     rng = np.random.default_rng(20 + n + rate_penalty)
     kernel = rcie_kernel(n, rate_penalty)
@@ -349,11 +340,14 @@ def test_generated_rcie_kernel_is_the_numpy_update(n: int, rate_penalty: bool) -
         Qn, scn, thn, tr, d = kernel(_pack(Q), sc, th.tolist(), s.tolist(), h, f.tolist(),
                                      g.tolist(), e1, lam / r_z, lam / r_d, lam)
         b = g - f if rate_penalty else g
-        P_ref, th_ref = _two_row_reference(sc * Q, th, h * s, b, e1, r_z, r_d, lam)
+        P_ref, th_ref = reference_rls_update(sc * Q, th, h * s, b, e1, r_z, r_d, lam)
         assert _close(scn * np.array(unpack(Qn, n)), P_ref, sc * Q / lam)
         assert _close(thn, th_ref, th)
         assert _close(tr, np.trace(P_ref), n * sc * Q / lam)
         assert _close(d, g @ th_ref, np.abs(g).sum() * np.abs(np.concatenate([th, th_ref])))
+    ones = [1.0] * n
+    assert kernel(_pack(-np.eye(n)), 1.0, [0.0] * n, ones, 1.0, ones, ones, 0.0, 0.5, 0.5,
+                  1.0) is None  # Gamma not positive definite
 
 
 class _RcieReference:
@@ -380,7 +374,9 @@ class _RcieReference:
         e1 = self.z[0] - sum(hi * d for hi, d in zip(Hn, self.dhf))
         b = phi - self.phis[0] if est.rate_penalty else phi
         r_d = est.lam / est.wb
-        P1, th1 = _two_row_reference(P, np.array(theta), phi_f, b, e1, est.lam / est.wa,
+        from onboard.estimators.rcie import reference_rls_update
+
+        P1, th1 = reference_rls_update(P, np.array(theta), phi_f, b, e1, est.lam / est.wa,
                                      r_d, est.lam)
         tr = np.trace(P1)
         if not tr < est.trace_max:

@@ -20,8 +20,18 @@ Tanner, "System Identification and Adaptive Input Estimation on the Jaiabot", ar
       theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)
 
 Signals are normalized before RLS (§2.10): ``z`` by ``z_scale`` and ``d_hat`` by
-``u_scale``. The update is the generated two-row kernel of :mod:`onboard.estimators.rls`
-with the rows built inside it (:func:`rcie_kernel`).
+``u_scale``.
+
+Two forms of the update
+-----------------------
+:func:`reference_rls_update` is §2.6 in numpy, line for line. :func:`rcie_kernel`, which
+:class:`Rcie` runs, is the same update as straight-line float code generated once per
+``l_theta`` (the rows built inside it, ``Gamma`` factored ``L D L^T``, the covariance kept
+as its packed upper triangle times a scalar, ``P = sc Q``, so that forgetting is one
+multiplication). It is the one generated kernel left: an AIE axis step stays within half
+of a textbook Kalman filter step (``onboard bench``, ``aie_step_vs_filterpy_kf``) only with
+it; docs/performance.md, "Fast paths", has the figures. The tests compare the two forms
+on random inputs (tests/test_primitives.py).
 """
 
 from __future__ import annotations
@@ -30,6 +40,29 @@ import math
 from collections.abc import Sequence
 from functools import cache
 from typing import Any, Callable, Mapping
+
+import numpy as np
+
+
+def reference_rls_update(
+    P: np.ndarray, theta: np.ndarray, phi_f: np.ndarray, b: np.ndarray, e1: float,
+    r_z: float, r_d: float, lam: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The RLS update of §2.6 in numpy: ``(P+, theta+)`` from the rows ``phi_f`` (weight
+    ``r_z``, residual ``e1 = z_k - d_hat_f,k``) and ``b`` (weight ``r_d``, target 0; the
+    row drops out when ``r_d = 0``)."""
+    if r_d > 0.0:
+        Phi = np.vstack([phi_f, b])                       # Phi~ = [phi_f^T; b^T]
+        z = np.array([e1, 0.0])                           # z~ = [z_k - d_hat_f,k; 0]
+        R = np.diag([r_z, r_d])                           # R~ = diag(R_z, R_d)
+    else:
+        Phi, z, R = np.atleast_2d(phi_f), np.array([e1]), np.array([[r_z]])
+    Gamma = lam * np.linalg.inv(R) + Phi @ P @ Phi.T      # Gamma = lambda R~^-1 + Phi~ P Phi~^T
+    theta = theta - P @ Phi.T @ np.linalg.solve(Gamma, z + Phi @ theta)
+    #                                        theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)
+    P = (P - P @ Phi.T @ np.linalg.solve(Gamma, Phi @ P)) / lam
+    #                                        P+ = (P - P Phi~^T Gamma^-1 Phi~ P) / lambda
+    return P, theta
 
 
 def packed_index(n: int) -> dict[tuple[int, int], int]:
@@ -128,7 +161,7 @@ g . theta+)`` or None: see :func:`rcie_kernel`."""
 @cache
 def rcie_kernel(n: int, rate_penalty: bool) -> RcieKernel:
     """The RCIE update (§2.6-§2.7 step 5) for ``l_theta = n``, as straight-line float code:
-    the two-row RLS of :func:`onboard.estimators.rls.two_row_update_lines` with its rows
+    the two-row RLS of :func:`two_row_update_lines` with its rows
     built inside (fewer Python list operations) and the covariance scaled, ``P = sc Q``.
 
     ``kernel(Q, sc, theta, s, h, f, g, e1, w_a, w_b, lam) -> (Q+, sc+, theta+,
