@@ -283,3 +283,60 @@ def test_bias_state_learns_a_constant_input_error() -> None:
     # measured: b = 1.00 (sigma 0.05) after 300 s
     assert f.b == pytest.approx(1.0, abs=0.15)
     assert math.sqrt(f.pbb) < 0.2
+
+
+def test_an_exact_increment_on_a_rank_one_covariance_leaves_the_rate_variance_at_the_floor():
+    """No input noise, no rate noise and an exact increment (R = 0): the increment then
+    determines the rate, ``P_vv+ = P_vv - P_dv^2 / P_dd`` is zero in exact arithmetic and
+    -4.3e-19 after rounding here. The floor keeps it positive, so ``std_v`` is defined
+    (``sqrt`` of the rounded value would raise)."""
+    from onboard.estimators.kalman import VARIANCE_FLOOR
+
+    k = discretize(2.5488233694226397, 1.0)
+    f = IncrementKF(R=0.0, correlated=False)
+    f.initialized = True
+    f.P = [0.0, 0.0, 0.0, 0.4144389380259677, 0.0, 0.0]
+    f.forecast(k, 0.0, 0.0)
+    dd, dv, de, vv, ve, ee = f.P
+    assert vv - (dv / dd) * dv < 0.0          # what the update computes before the floor
+    f.innovation(0.1)
+    f.update()
+    assert f.P[3] == VARIANCE_FLOOR
+    assert f.std_v == math.sqrt(VARIANCE_FLOOR)
+
+
+def test_a_rate_measured_exactly_twice_without_process_noise_has_a_defined_nis():
+    """``R_v = 0`` makes the rate variance exactly 0 after the first rate update; without
+    process noise the forecast keeps it 0, and the second update's ``S = P_vv + R_v``
+    would be 0 (a division by zero). With the floor: a finite state and a (huge) NIS."""
+    for f in (IncrementKF(0.3), _bias_kf()):
+        k = discretize(0.7, 0.2)
+        f.init(1.0, 0.2, 0.3, 4.0)
+        f.update_rate(1.0, 0.0)
+        f.forecast(k, 0.5, 0.0)
+        nis = f.update_rate(1.5, 0.0)
+        assert nis > 1e100 and math.isfinite(f.v) and f.P[3] > 0.0
+
+
+def _bias_kf():
+    from onboard.estimators.kalman import BiasIncrementKF
+
+    return BiasIncrementKF(0.3, q_b=0.0, pbb0=0.0)
+
+
+def test_a_bias_state_switched_off_keeps_its_variance_at_the_floor():
+    """``q_b = pbb0 = 0`` (the kf pipeline's bias row present but not learning): the bias
+    variance stays at the floor, never 0 or below, and the bias at 0."""
+    from onboard.estimators.kalman import VARIANCE_FLOOR
+
+    f = _bias_kf()
+    k = discretize(0.9, 0.2)
+    f.init(0.3, 0.2, 0.4, 1.0)
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        f.forecast(k, 1.0, 0.2)
+        f.innovation(0.3 + rng.standard_normal())
+        f.update()
+        f.update_rate(1.5 + rng.standard_normal(), 0.01)
+        assert f.pbb == VARIANCE_FLOOR
+    assert abs(f.b) < 1e-200

@@ -26,6 +26,14 @@ import math
 
 from onboard.estimators.axis_model import Discrete
 
+VARIANCE_FLOOR = 1e-300
+"""The smallest variance of the rate (and of the input bias) an update leaves, in the
+state's squared unit. An update that determines the rate all but exactly (an exact
+increment on a rank-one forecast covariance, or a rate measured with ``R_v = 0``)
+subtracts two nearly equal numbers, and rounding can leave zero or a tiny negative
+variance; the floor keeps ``std_v = sqrt(P_vv)`` defined and the next rate innovation
+variance ``P_vv + R_v`` positive. Any variance the filter carries in use is far above it."""
+
 
 class IncrementKF:
     """Kalman filter of ``x = (d, v, e)`` for one axis (§2.2), scalar-specialised.
@@ -155,7 +163,7 @@ class IncrementKF:
         self.e -= Le * z
         vv_n = vv - Lv * cv
         self.P = [dd - Ld * cd, dv - Ld * cv, de - Ld * ce,
-                  vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ce, ee - Le * ce]
+                  vv_n if vv_n > VARIANCE_FLOOR else VARIANCE_FLOOR, ve - Lv * ce, ee - Le * ce]
         self.Ld, self.Lv = Ld, Lv
 
     def update_rate(self, y_v: float, R_v: float, gate: float = math.inf) -> float:
@@ -177,7 +185,7 @@ class IncrementKF:
         self.e -= Le * z
         vv_n = vv - Lv * vv
         self.P = [dd - Ld * dv, dv - Ld * vv, de - Ld * ve,
-                  vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ve, ee - Le * ve]
+                  vv_n if vv_n > VARIANCE_FLOOR else VARIANCE_FLOOR, ve - Lv * ve, ee - Le * ve]
         return nis
 
     def predict_ahead(self, k: Discrete, u: float) -> tuple[float, float]:
@@ -283,10 +291,10 @@ class BiasIncrementKF(IncrementKF):
         db, vb, eb = self.Pb
         vv_n = vv - Lv * cv
         self.P = [dd - Ld * cd, dv - Ld * cv, de - Ld * ce,
-                  vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ce, ee - Le * ce]
+                  vv_n if vv_n > VARIANCE_FLOOR else VARIANCE_FLOOR, ve - Lv * ce, ee - Le * ce]
         self.Pb = [db - Ld * cb, vb - Lv * cb, eb - Le * cb]
         bb_n = self.pbb - Lb * cb
-        self.pbb = bb_n if bb_n > 1e-300 else 1e-300
+        self.pbb = bb_n if bb_n > VARIANCE_FLOOR else VARIANCE_FLOOR
         self.Ld, self.Lv = Ld, Lv
 
     def update(self) -> None:
