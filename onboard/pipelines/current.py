@@ -67,7 +67,7 @@ from onboard.core.messages import (
 )
 from onboard.core.so3 import euler_to_matrix
 from onboard.estimators.current_hgo import CurrentHighGainObserver
-from onboard.estimators.current_kf import CurrentKalmanFilter, chi2_quantile
+from onboard.estimators.current_kf import PREDICT_STEP_S, CurrentKalmanFilter
 from onboard.estimators.flow_observer import FlowObserver
 from onboard.estimators.hgo import GainDesign, IncreasingGain
 from onboard.estimators.model_identification import (
@@ -75,6 +75,7 @@ from onboard.estimators.model_identification import (
     VelocityRls,
     floor_along_track,
 )
+from onboard.estimators.restored_current import RestoredCurrentCheck
 from onboard.estimators.vehicle_models import ModelInputs, RegressionModel, kind_for_class
 
 GAIN_DIR = CONFIG_DIR / "gains"
@@ -217,15 +218,31 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """False-alarm probability of the restored-current test per evaluation."""
 
 
+VELOCITY_FRESH_S = 1.0
+"""The model identifications learn only while a velocity was measured within this long (s)."""
+MEAS_INTERVAL_S = (1e-3, 0.1, 1.0)
+"""Interval (s) between velocity measurements as the high-gain observer's increasing-gain
+law sees it: (floor, the first measurement's, ceiling)."""
+YAW_RATE_LOWPASS_S = 0.3
+"""Without measured rates, the yaw rate is the heading's difference quotient through a
+first-order low-pass of this time constant (s)."""
+YAW_RATE_MIN_INTERVAL_S = 1e-3
+"""Headings closer than this (s) give no difference quotient."""
+ATTITUDE_HELD_MAX = 64
+"""Attitude samples stamped after the step time that are held for later ticks (the newest
+are kept)."""
+
+
 class CurrentPipeline:
     """Pipeline ``current``: water current with one-sigma, any vehicle class.
 
     Inspectable attributes (filterpy style): ``kf`` (the joint Kalman filter: ``x``, ``P``,
     ``y``, ``S``, ``nis``), ``identification`` (prior, schedule, yaw RLS), ``hgo`` and
     ``flow`` (the observer of that variant, or None), ``hgo_rls`` (the high-gain observer's
-    own model identification, or None), ``inp`` (model inputs), ``roll``,
-    ``pitch``, ``yaw`` (rad), ``counters``; shortcuts ``x``, ``P``, ``thetas`` (model
-    coefficients in use, per channel), ``yaw_rls`` and ``gamma`` (HGO gain, 0 without).
+    own model identification, or None), ``restore_check`` (the probation of a restored
+    current), ``inp`` (model inputs), ``roll``, ``pitch``, ``yaw`` (rad), ``counters``;
+    shortcuts ``x``, ``P``, ``thetas`` (model coefficients in use, per channel),
+    ``yaw_rls`` and ``gamma`` (HGO gain, 0 without).
     """
 
     name = "current"
@@ -262,12 +279,17 @@ class CurrentPipeline:
         self.observable: list[bool] = [False] * nd
         """Per earth axis: whether the last published component was known (one-sigma at
         most ``unknown_above_std``)."""
-        # restored-current probation (set_state): the twin filter (restored model, current
-        # at its prior), the restored current and covariance, data time it has held
-        self._twin: tuple[ModelIdentification, CurrentKalmanFilter] | None = None
-        self._restored: tuple[np.ndarray, np.ndarray] | None = None
-        self._probation_s = 0.0
-        self._restore_d2 = 0.0
+        self.restore_check = RestoredCurrentCheck(
+            hold_s=cfg.restore_check_s, false_alarm_p=cfg.restore_check_p,
+            unknown_above_std=cfg.unknown_above_std, init_current_std=cfg.init_current_std)
+        self._init_observers(cfg, sensors, gain)
+        self._init_sample_state(cfg, sensors)
+
+    def _init_observers(self, cfg: CurrentConfig, sensors: Any,
+                        gain: GainDesign | None) -> None:
+        """The reported observer beside the joint filter (``observer``): the high-gain
+        observer with its own RLS, or the flow observer."""
+        nd = self.nd
         self.gain = gain
         self.hgo: CurrentHighGainObserver | None = None
         self.hgo_rls: VelocityRls | None = None
@@ -286,6 +308,10 @@ class CurrentPipeline:
             self.flow = FlowObserver(self.model, poles=cfg.flow_poles or None,
                                      psi_std=sensors.compass.heading_std_rad,
                                      pitch=cfg.flow_pitch, svf_cutoff_hz=cfg.svf_cutoff_hz)
+
+    def _init_sample_state(self, cfg: CurrentConfig, sensors: Any) -> None:
+        """Measurement one-sigmas, the model inputs, the attitude in use and the sample
+        handlers."""
         self.gnss_std = cfg.gnss_velocity_std or sensors.gnss.velocity_std_mps
         self.gnss_nominal_acc = (cfg.gnss_nominal_accuracy_m
                                  if cfg.gnss_nominal_accuracy_m is not None
@@ -311,8 +337,7 @@ class CurrentPipeline:
         self._t: float | None = None
         self._last_meas_t: float | None = None
         self._last_velocity_t: float | None = None
-        # sample handlers by exact class (the sample classes have no subclasses): one dict
-        # look-up per sample instead of a chain of isinstance tests
+        # sample handlers by exact class (the sample classes have no subclasses)
         self._handlers: dict[type, Callable[[Any, list], None]] = {
             Attitude: self._on_attitude, Heading: self._on_heading, Imu: self._on_imu,
             ActuatorCommand: self._on_command, Depth: self._on_depth,
@@ -376,7 +401,7 @@ class CurrentPipeline:
         positive starboard down) stamped ``t`` if it is the newest at or before the step
         time; a sample stamped after the step time is held until a step reaches it."""
         if t > self._step_t:
-            if len(self._att_later) >= 64:  # stamps far ahead of the ticks: keep the newest
+            if len(self._att_later) >= ATTITUDE_HELD_MAX:  # far ahead of the ticks
                 del self._att_later[0]
             self._att_later.append((t, roll, pitch, primary))
             return
@@ -464,9 +489,9 @@ class CurrentPipeline:
         difference quotient (a 0.3 s low-pass)."""
         if not self._have_rates and self._yaw_prev is not None:
             t0, y0 = self._yaw_prev
-            if t - t0 > 1e-3:
+            if t - t0 > YAW_RATE_MIN_INTERVAL_S:
                 r = wrap_pi(yaw - y0) / (t - t0)
-                self.inp.r += min(1.0, (t - t0) / 0.3) * (r - self.inp.r)
+                self.inp.r += min(1.0, (t - t0) / YAW_RATE_LOWPASS_S) * (r - self.inp.r)
         self._yaw_prev = (t, yaw)
         self.yaw = yaw
 
@@ -481,6 +506,36 @@ class CurrentPipeline:
     # ------------------------------------------------------------------ protocol
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         """Advance to tick ``t`` (s) with the new samples; returns the estimates."""
+        meas = self._measurements(t, samples)
+        if self.yaw is None:
+            return {}
+        kf, check = self.kf, self.restore_check
+        if not kf.started:
+            if not meas:
+                return {}
+            self._start(meas[-1][0], meas[-1][2])
+            self._t = t
+        dt = t - (self._t if self._t is not None else t)
+        probation = check.active
+        self._predict(t, dt, probation)
+        self._t = t if dt >= 0 else self._t
+        R = self._R() if meas else None  # the attitude is fixed within the tick
+        if probation:
+            check.update(meas, R)
+        self._correct(meas, R)
+        if dt > 0:
+            self._identify(dt)
+        flow = self.flow
+        if flow is not None and flow.v_g is not None:
+            flow.step(dt if dt > 0 else 0.0, self.yaw, self.inp, self.identification.thetas,
+                      kf.x[: self.nd])
+        if probation and check.twin is not None and check.twin.started and dt > 0:
+            self._check_restored(dt)
+        return self._outputs()
+
+    def _measurements(self, t: float, samples: Sequence[Sample]) -> list:
+        """Take the tick's samples into the model inputs and the attitude; returns the
+        velocity measurements ``(kind, t, z, std)`` among them, in time order."""
         meas: list = []
         handlers = self._handlers
         self._step_t = t
@@ -494,35 +549,34 @@ class CurrentPipeline:
             h = handlers.get(type(s))
             if h is not None:
                 h(s, meas)
-        if self.yaw is None:
-            return {}
-        kf, ident, hgo, flow = self.kf, self.identification, self.hgo, self.flow
-        if not kf.started:
-            if not meas:
-                return {}
-            self._start(meas[-1][0], meas[-1][2])
-            self._t = t
-        dt = t - (self._t if self._t is not None else t)
-        twin = self._twin
-        self._advance(ident, kf, t, dt)
-        if twin is not None:
-            self._advance(twin[0], twin[1], t, dt)
+        return meas
+
+    def _predict(self, t: float, dt: float, probation: bool) -> None:
+        """The joint filter's (and the twin's) schedule and prediction to tick ``t`` (s);
+        the high-gain observer's prediction and its own RLS step."""
+        kf, hgo = self.kf, self.hgo
+        yaw = self.yaw
+        assert yaw is not None
+        kf.advance(t, dt, self.inp, yaw)
+        if probation:
+            self.restore_check.advance(t, dt, self.inp, yaw)
         if dt > 0 and hgo is not None:
             assert self.hgo_rls is not None
-            n_sub = max(1, math.ceil(dt / 0.2))
+            n_sub = max(1, math.ceil(dt / PREDICT_STEP_S))
             for _ in range(n_sub):
                 if not hgo.predict(dt / n_sub, self.inp, self.hgo_rls.thetas, kf.q_scale):
                     hgo.restart(kf.x, kf.P)
                     hgo.reset_gain()
             self._identify_hgo(t, dt)
-        self._t = t if dt >= 0 else self._t
-        R = self._R() if meas else None  # the attitude is fixed within the tick
-        if twin is not None and twin[1].started:
-            for kind, _tm, z, std in meas:
-                twin[1].update(kind, z, std, R)
+
+    def _correct(self, meas: list, R: np.ndarray | None) -> None:
+        """Every velocity measurement ``(kind, t, z, std)`` into the joint filter and the
+        reported observer; ``R`` the body-to-earth rotation."""
+        kf, hgo, flow = self.kf, self.hgo, self.flow
+        t_min, t_first, t_max = MEAS_INTERVAL_S
         for kind, tm, z, std in meas:
-            dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else 0.1
-            dt_meas = min(max(dt_meas, 1e-3), 1.0)
+            dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else t_first
+            dt_meas = min(max(dt_meas, t_min), t_max)
             self._last_meas_t = tm
             if kf.update(kind, z, std, R) == "reset" and hgo is not None:
                 hgo.reset_gain()
@@ -533,20 +587,18 @@ class CurrentPipeline:
                 flow.observe_velocity(kind, z, std, R, kf.velocity_over_ground(R) if (
                     kind == "earth" and len(z) < self.nd) else None)
             self._last_velocity_t = tm
-        if dt > 0:
-            fresh = (self._last_velocity_t is not None
-                     and not (self._t or 0.0) - self._last_velocity_t > 1.0)
-            ident.identify_yaw(dt, kf.x[: self.nd].tolist(), self.inp, velocity_fresh=fresh)
-            if flow is not None:
-                flow.identify_pitch(dt, kf.x[: self.nd].tolist(), self.inp, learn=(
-                    fresh and self.cfg.identify
-                    and float(kf.x[0]) >= self.cfg.identify_min_speed))
-        if flow is not None and flow.v_g is not None:
-            flow.step(dt if dt > 0 else 0.0, self.yaw, self.inp, ident.thetas,
-                      kf.x[: self.nd])
-        if twin is not None and twin[1].started and dt > 0:
-            self._check_restored(dt)
-        return self._outputs()
+
+    def _identify(self, dt: float) -> None:
+        """The yaw channel's RLS and, with the flow observer's vertical block, its pitch
+        channel's, on the joint filter's through-water velocity."""
+        kf, flow, cfg = self.kf, self.flow, self.cfg
+        fresh = (self._last_velocity_t is not None
+                 and not (self._t or 0.0) - self._last_velocity_t > VELOCITY_FRESH_S)
+        self.identification.identify_yaw(dt, kf.x[: self.nd].tolist(), self.inp,
+                                          velocity_fresh=fresh)
+        if flow is not None:
+            flow.identify_pitch(dt, kf.x[: self.nd].tolist(), self.inp, learn=(
+                fresh and cfg.identify and float(kf.x[0]) >= cfg.identify_min_speed))
 
     def _identify_hgo(self, t: float, dt: float) -> None:
         """One step of the high-gain observer's own RLS (``hgo_identify``) on its velocity
@@ -558,7 +610,8 @@ class CurrentPipeline:
         assert hgo is not None and rls is not None
         nu = hgo.x[: self.nd].tolist()
         learn = (cfg.identify and self._last_velocity_t is not None
-                 and t - self._last_velocity_t <= 1.0 and nu[0] >= cfg.identify_min_speed)
+                 and t - self._last_velocity_t <= VELOCITY_FRESH_S
+                 and nu[0] >= cfg.identify_min_speed)
         if learn and cfg.hgo_identify == "turns":
             c_var = hgo.current_cov().diagonal()
             learn = (math.sqrt(max(float(c_var[0]), float(c_var[1])))
@@ -580,87 +633,38 @@ class CurrentPipeline:
             return ident.surge_unobservable()
         return self.hgo_rls.masked[0] and ident.headings.length() > ident.heading_diversity
 
-    def _advance(self, ident: ModelIdentification, kf: CurrentKalmanFilter, t: float,
-                 dt: float) -> None:
-        """One joint filter's schedule and prediction to tick ``t`` (s), ``dt`` (s) after
-        the previous one. On the first leg (no turn yet) without a surge model, the
-        along-track current is unobservable and its variance along the heading is kept at
-        the prior (:meth:`.CurrentKalmanFilter.inflate_current_along`): otherwise the filter
-        drifts there with a shrinking variance and meets the first turn overconfident
-        (measured on jaiabot-turns: 0.8 m/s north error at one sigma 0.31 after the turn).
-        Later straight legs are not inflated: that would erase what the earlier headings'
-        sway constraint says about the cross-track part of the new heading (the published
-        one-sigma is floored instead, :meth:`_outputs`)."""
-        ident.observe_motion(t, dt, self.inp.r, self.yaw)
-        if ident.identifying:  # the coefficient covariance moves only while identifying
-            ident.lift_masks(kf.P.diagonal()[2 * self.nd:])
-        ident.identifying = ident.should_identify(t, kf.started, *kf.current_var_horizontal())
-        if dt > 0:
-            n_sub = max(1, math.ceil(dt / 0.2))
-            for _ in range(n_sub):
-                kf.predict(dt / n_sub, self.inp)
-        if kf.started and ident.surge_unobservable() and ident.last_turn_t == -math.inf:
-            yaw = self.yaw or 0.0
-            kf.inflate_current_along([math.cos(yaw), math.sin(yaw)],
-                                     self.cfg.init_current_std ** 2)
-
     def _check_restored(self, dt: float) -> None:
-        """The restored current against the twin filter's (module docstring of
-        ``restore_check_s``): on the components the twin observes, ``d^T (P_r + P_t)^-1 d``
-        against the chi-square quantile; discard (the twin's current replaces it) or, after
-        ``restore_check_s`` of agreement on every horizontal component, confirm."""
-        assert self._twin is not None and self._restored is not None
-        ident_t, kf_t = self._twin
-        c_r, P_r = self._restored
-        nd = self.nd
-        std_t = floor_along_track(kf_t.current_cov(), self.yaw or 0.0, self.cfg.init_current_std
-                                  if ident_t.surge_unobservable() else 0.0)
-        axes = [i for i in range(nd) if std_t[i] <= self.cfg.unknown_above_std]
-        if not axes:
-            return
-        d = (c_r - kf_t.x[nd:2 * nd])[axes]
-        S = (P_r + kf_t.current_cov())[np.ix_(axes, axes)]
-        d2 = float(d @ np.linalg.solve(S, d))
-        self._restore_d2 = d2
-        c_t = kf_t.x[nd:2 * nd]
-        if d2 > chi2_quantile(self.cfg.restore_check_p, len(axes)):
-            kf = self.kf
-            kf.x[:] = kf_t.x
-            kf.P = kf_t.P.copy()
-            kf.q_scale, kf.nis_avg = kf_t.q_scale, kf_t.nis_avg
-            kf._unpack_coefficients()
-            self.identification.masked = list(ident_t.masked)
+        """The restored current against the twin filter (``restore_check_s``,
+        :class:`.RestoredCurrentCheck`): a discard puts the twin's state in the joint
+        filter (and restarts the high-gain observer from it); both end the probation with
+        an event."""
+        check = self.restore_check
+        verdict = check.evaluate(dt, self.yaw or 0.0)
+        if verdict == "discard":
+            assert check.twin is not None and check.current is not None
+            c_twin = check.twin.x[self.nd:2 * self.nd]
+            self.kf.adopt(check.twin)
             if self.hgo is not None:
-                self.hgo.restart(kf.x, kf.P)
+                self.hgo.restart(self.kf.x, self.kf.P)
                 self.hgo.reset_gain()
             self.counters["restore_discarded"] = self.counters.get("restore_discarded", 0) + 1
             self.events.append(
-                "restored current (" + ", ".join(f"{v:.2f}" for v in c_r) + ") m/s "
-                "contradicts the data (" + ", ".join(f"{v:.2f}" for v in c_t) + f"; "
-                f"chi2 {d2:.1f} on {len(axes)} axes): discarded")
-            self._end_probation()
-            return
-        if all(i in axes for i in range(2)):
-            self._probation_s += dt
-            if self._probation_s >= self.cfg.restore_check_s:
-                self.counters["restore_confirmed"] = self.counters.get(
-                    "restore_confirmed", 0) + 1
-                self.events.append(f"restored current confirmed by {self._probation_s:.0f} s "
-                                   f"of data (chi2 {d2:.1f})")
-                self._end_probation()
-
-    def _end_probation(self) -> None:
-        self._twin = None
-        self._restored = None
-        self._probation_s = 0.0
+                "restored current (" + ", ".join(f"{v:.2f}" for v in check.current) + ") m/s "
+                "contradicts the data (" + ", ".join(f"{v:.2f}" for v in c_twin) + f"; "
+                f"chi2 {check.chi2:.1f} on {check.n_axes} axes): discarded")
+            check.end()
+        elif verdict == "confirm":
+            self.counters["restore_confirmed"] = self.counters.get("restore_confirmed", 0) + 1
+            self.events.append(f"restored current confirmed by {check.held_s:.0f} s "
+                               f"of data (chi2 {check.chi2:.1f})")
+            check.end()
 
     def _start(self, kind: str, z: np.ndarray) -> None:
         """Start the filters from the first velocity measurement."""
         self.kf.start(kind, z, self._R())  # type: ignore[arg-type]
         self.identification.headings.restart(self.yaw or 0.0)
-        if self._twin is not None:
-            self._twin[1].start(kind, z, self._R())  # type: ignore[arg-type]
-            self._twin[0].headings.restart(self.yaw or 0.0)
+        if self.restore_check.active:
+            self.restore_check.start(kind, z, self._R(), self.yaw or 0.0)  # type: ignore[arg-type]
         if self.hgo is not None:
             self.hgo.restart(self.kf.x, self.kf.P)
 
@@ -719,9 +723,9 @@ class CurrentPipeline:
         h["observable"] = float(all(self.observable[:2]))
         h["along_track_unobservable"] = float(self._surge_unobservable())
         h["heading_diversity"] = self.identification.headings.length()
-        if self._twin is not None:
-            h["restore_probation_s"] = self._probation_s
-            h["restore_chi2"] = self._restore_d2
+        if self.restore_check.active:
+            h["restore_probation_s"] = self.restore_check.held_s
+            h["restore_chi2"] = self.restore_check.chi2
         return h
 
     def get_state(self) -> dict[str, Any]:
@@ -750,7 +754,7 @@ class CurrentPipeline:
         the current at its prior checks it against the first minutes of data."""
         if state.get("model_kind") != self.model.kind:
             return
-        self._end_probation()
+        self.restore_check.end()
         nd = self.nd
         ident = self.identification
         try:
@@ -786,8 +790,7 @@ class CurrentPipeline:
                 kf.restore_coefficients(ident.thetas[:nd], theta_cov)
             except (TypeError, ValueError):
                 pass
-        self._twin = (ident, kf)
-        self._restored = (self.kf.x[nd:2 * nd].copy(), self.kf.current_cov())
+        self.restore_check.begin(kf, self.kf.x[nd:2 * nd].copy(), self.kf.current_cov())
 
 
 def _identification(cfg: CurrentConfig, model: RegressionModel,
