@@ -348,8 +348,7 @@ class CurrentKalmanFilter:
             if nt and (ident.identifying or ident.prior_dof[i]):
                 # coefficient uncertainty flows into nu_r while identifying, and always for
                 # a DOF whose model is only the generic prior (mode (b)): an assumed sway
-                # damping must not pin the sideslip in a turn (measured without this:
-                # 0.28 m/s error at 4 sigma after the first circle, effect-current)
+                # damping must not pin the sideslip in a turn
                 row[col:col + k] = [dt * a for a in phis[i]]
             col += k
             rows.append(row)
@@ -431,8 +430,8 @@ class CurrentKalmanFilter:
         """Fold one full-dimension innovation into the calibration block; at the end of a
         block, move ``nis_avg`` towards the block-mean NIS and rescale ``q_scale``.
 
-        The per-sample NIS is blind to slow model and current errors (measured: NIS 0.95
-        while the current's 2-sigma coverage was 0.5, Gavia); the block mean is not."""
+        The per-sample NIS is blind to slow model and current errors (docs/current.md,
+        "Honest sigma"); the block mean is not."""
         m = len(y)
         self._blk_y += y
         self._blk_S += S

@@ -36,7 +36,7 @@ samples and estimates:
 
 Without an identified surge model the along-track current is not observable on a straight
 line; weak couplings (pitch, heave prior) make the filter's own variance shrink anyway
-(measured: 1.2 m/s error at 3.3 sigma after 270 s, Gavia straight run). The reported
+(docs/current.md, "Why the current is observable"). The reported
 one-sigma is then at least the prior along the track, unless the headings of the last
 minutes are diverse enough for the sway constraint alone (``heading_diversity``).
 """
