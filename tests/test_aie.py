@@ -11,8 +11,7 @@ import pytest
 
 from onboard.core.config import ConfigError, from_dict
 from onboard.estimators.axis_model import AxisModel, discretize
-from onboard.estimators.rcie import Rcie
-from onboard.estimators.rls import two_row_rls_kernel, unpack
+from onboard.estimators.rcie import Rcie, rcie_kernel, unpack
 from onboard.pipelines import aie as aie_mod
 from onboard.pipelines import kf as kf_mod
 from onboard.core.pipeline_config import AieConfig, KfConfig
@@ -40,8 +39,10 @@ def test_rls_kernel_matches_the_textbook_update_and_information_form(n: int) -> 
     a, b = rng.standard_normal(n), rng.standard_normal(n)
     e1, rz, rd, lam = 0.7, 1.0, 0.3, 0.98
     packed = [P[i, j] for i in range(n) for j in range(i, n)]
-    Pn, thn, tr = two_row_rls_kernel(n)(packed, th.tolist(), a.tolist(), b.tolist(), e1,
-                                        lam / rz, lam / rd, lam)
+    # rows a = h s with h = 1 and b = g (the size penalty)
+    Qn, sn, thn, tr, _ = rcie_kernel(n, False)(packed, 1.0, th.tolist(), a.tolist(), 1.0,
+                                               [], b.tolist(), e1, lam / rz, lam / rd, lam)
+    Pn = [sn * x for x in Qn]
     Pr, thr = _textbook_rls(P, th, a, b, e1, rz, rd, lam)
     assert np.allclose(unpack(Pn, n), Pr, atol=1e-10)
     assert np.allclose(thn, thr, atol=1e-10)
@@ -52,8 +53,8 @@ def test_rls_kernel_matches_the_textbook_update_and_information_form(n: int) -> 
 
 
 def test_rls_kernel_reports_a_non_positive_gamma() -> None:
-    k = two_row_rls_kernel(1)
-    assert k([-10.0], [0.0], [1.0], [1.0], 0.0, 1.0, 1.0, 1.0) is None
+    k = rcie_kernel(1, False)
+    assert k([-10.0], 1.0, [0.0], [1.0], 1.0, [], [1.0], 0.0, 1.0, 1.0, 1.0) is None
 
 
 def _axis_run(sig: float, n: int = 400, seed: int = 0, **over):

@@ -81,14 +81,14 @@ def test_accuracy_scaling_never_tightens_and_falls_back_to_the_configured_noise(
                             gnss_nominal_accuracy_m=1.5)
     meas: list = []
     for acc, expect in ((0.02, 0.1), (3.0, 0.2), (None, 0.1), (math.nan, 0.1), (-1.0, 0.1)):
-        pipe._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
+        pipe.samples._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
                               h_acc_m=acc), meas)
         assert meas[-1][3] == expect
     for sacc, expect in ((0.02, 0.1), (0.4, 0.4), (math.nan, 0.2)):  # NaN: h_acc_m instead
-        pipe._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
+        pipe.samples._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
                               h_acc_m=3.0, speed_acc_mps=sacc), meas)
         assert meas[-1][3] == pytest.approx(expect)
     off = current_pipeline("rudder-boat", gnss_velocity_std=0.1, gnss_nominal_accuracy_m=0.0)
-    off._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
+    off.samples._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
                          h_acc_m=30.0), meas)
     assert meas[-1][3] == 0.1

@@ -135,8 +135,7 @@ def test_increment_kf_nis_is_consistent_on_its_own_model():
 @PROPS
 @given(seed=st.integers(0, 2**32 - 1))
 def test_rcie_rls_covariance_stays_positive_definite(seed):
-    from onboard.estimators.rcie import Rcie
-    from onboard.estimators.rls import unpack
+    from onboard.estimators.rcie import Rcie, unpack
 
     rng = random.Random(seed)
     n_c = rng.randint(0, 4)
@@ -224,7 +223,7 @@ def _covariances(p) -> dict[str, np.ndarray]:
                 out[f"{ax}.kf.P"] = _packed3(f.kf.P)
             rcie = getattr(f.input, "rcie", None)   # AIE only
             if rcie is not None:
-                from onboard.estimators.rls import unpack
+                from onboard.estimators.rcie import unpack
 
                 out[f"{ax}.rcie.P"] = np.array(unpack(rcie.P, rcie.n))
     P = getattr(getattr(p, "filter", p), "P", None)  # eseso: its EsesoFilter's

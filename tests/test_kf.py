@@ -7,6 +7,8 @@ import math
 import msgspec
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from onboard.core.config import from_dict
 from onboard.core.geo import LocalFrame
@@ -287,3 +289,109 @@ def test_bias_state_learns_a_constant_input_error() -> None:
     # measured: b = 1.00 (sigma 0.05) after 300 s
     assert f.b == pytest.approx(1.0, abs=0.15)
     assert math.sqrt(f.pbb) < 0.2
+
+
+def test_an_exact_increment_on_a_rank_one_covariance_leaves_the_rate_variance_at_the_floor():
+    """No input noise, no rate noise and an exact increment (R = 0): the increment then
+    determines the rate, ``P_vv+ = P_vv - P_dv^2 / P_dd`` is zero in exact arithmetic and
+    -4.3e-19 after rounding here. The floor keeps it positive, so ``std_v`` is defined
+    (``sqrt`` of the rounded value would raise)."""
+    from onboard.estimators.kalman import VARIANCE_FLOOR
+
+    k = discretize(2.5488233694226397, 1.0)
+    f = IncrementKF(R=0.0, correlated=False)
+    f.initialized = True
+    f.P = [0.0, 0.0, 0.0, 0.4144389380259677, 0.0, 0.0]
+    f.forecast(k, 0.0, 0.0)
+    dd, dv, de, vv, ve, ee = f.P
+    assert vv - (dv / dd) * dv < 0.0          # what the update computes before the floor
+    f.innovation(0.1)
+    f.update()
+    assert f.P[3] == VARIANCE_FLOOR
+    assert f.std_v == math.sqrt(VARIANCE_FLOOR)
+
+
+def test_a_rate_measured_exactly_twice_without_process_noise_has_a_defined_nis():
+    """``R_v = 0`` makes the rate variance exactly 0 after the first rate update; without
+    process noise the forecast keeps it 0, and the second update's ``S = P_vv + R_v``
+    would be 0 (a division by zero). With the floor: a finite state and a (huge) NIS."""
+    for f in (IncrementKF(0.3), _bias_kf()):
+        k = discretize(0.7, 0.2)
+        f.init(1.0, 0.2, 0.3, 4.0)
+        f.update_rate(1.0, 0.0)
+        f.forecast(k, 0.5, 0.0)
+        nis = f.update_rate(1.5, 0.0)
+        assert nis > 1e100 and math.isfinite(f.v) and f.P[3] > 0.0
+
+
+def _bias_kf():
+    from onboard.estimators.kalman import BiasIncrementKF
+
+    return BiasIncrementKF(0.3, q_b=0.0, pbb0=0.0)
+
+
+def test_a_bias_state_switched_off_keeps_its_variance_at_the_floor():
+    """``q_b = pbb0 = 0`` (the kf pipeline's bias row present but not learning): the bias
+    variance stays at the floor, never 0 or below, and the bias at 0."""
+    from onboard.estimators.kalman import VARIANCE_FLOOR
+
+    f = _bias_kf()
+    k = discretize(0.9, 0.2)
+    f.init(0.3, 0.2, 0.4, 1.0)
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        f.forecast(k, 1.0, 0.2)
+        f.innovation(0.3 + rng.standard_normal())
+        f.update()
+        f.update_rate(1.5 + rng.standard_normal(), 0.01)
+        assert f.pbb == VARIANCE_FLOOR
+    assert abs(f.b) < 1e-200
+
+
+def _full(f) -> np.ndarray:
+    """The scalar filter's covariance as a matrix on (d, v, e(, b))."""
+    dd, dv, de, vv, ve, ee = f.P
+    rows = [[dd, dv, de], [dv, vv, ve], [de, ve, ee]]
+    if not hasattr(f, "Pb"):
+        return np.array(rows)
+    db, vb, eb = f.Pb
+    return np.array([r + [c] for r, c in zip(rows, (db, vb, eb))] + [[db, vb, eb, f.pbb]])
+
+
+def _state(f) -> np.ndarray:
+    return np.array([f.d, f.v, f.e] + ([f.b] if hasattr(f, "b") else []))
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**32 - 1), bias=st.booleans(), correlated=st.booleans())
+def test_scalar_filters_are_the_numpy_reference_step_by_step(seed, bias, correlated):
+    """IncrementKF / BiasIncrementKF against kalman.ReferenceIncrementKF (matrices):
+    from the same state, one forecast, innovation, update or skip, and rate update give
+    the same x, P, z, S and NIS to 1e-12 relative (60 random runs of 40 steps)."""
+    from onboard.estimators.kalman import BiasIncrementKF, ReferenceIncrementKF
+
+    rng = np.random.default_rng(seed)
+    R, q_v, q_b = 10.0 ** rng.uniform(-2, 1), 10.0 ** rng.uniform(-4, -1), 0.01
+    f = (BiasIncrementKF(R, q_v, correlated, q_b=q_b) if bias
+         else IncrementKF(R, q_v, correlated))
+    ref = ReferenceIncrementKF(R, q_v, correlated, bias=bias, q_b=q_b)
+    k = discretize(rng.uniform(0.2, 3.0), rng.choice([0.1, 0.2, 1.0]))
+    f.init(rng.standard_normal(), k.dt, R, 4.0)
+    y = f._y
+    for _ in range(40):
+        ref.x, ref.P, ref.y, ref.skipped = _state(f), _full(f), y, f._skipped
+        u, V_u, y = rng.uniform(-1, 2), rng.uniform(0, 0.3), rng.standard_normal()
+        for g in (f, ref):
+            g.forecast(k, u, V_u)
+            g.innovation(y)
+        assert (f.z, f.S, f.nis) == pytest.approx((ref.z, ref.S, ref.nis), rel=1e-12)
+        skip, rate = rng.random() < 0.2, rng.random() < 0.5
+        y_v, R_v = rng.uniform(0, 2), 10.0 ** rng.uniform(-3, 0)
+        nis_v = []
+        for g in (f, ref):
+            g.skip() if skip else g.update()
+            nis_v.append(g.update_rate(y_v, R_v) if rate else 0.0)
+        assert nis_v[0] == pytest.approx(nis_v[1], rel=1e-12)
+        scale = np.abs(ref.P).max()
+        assert np.abs(_full(f) - ref.P).max() <= 1e-12 * scale
+        assert np.abs(_state(f) - ref.x).max() <= 1e-12 * max(np.abs(ref.x).max(), 1.0)

@@ -47,6 +47,9 @@ body axes); ``water``: DVL water track (through water, body axes)."""
 UpdateOutcome = Literal["accepted", "gated", "reset"]
 """What :meth:`CurrentKalmanFilter.update` did with a measurement."""
 
+PREDICT_STEP_S = 0.2
+"""Longest prediction sub-step (s): a tick longer than this is predicted in equal steps."""
+
 
 def inv_small(S: np.ndarray) -> np.ndarray | None:
     """Inverse of a 2x2 or 3x3 matrix (an innovation covariance) by the adjugate, or None
@@ -265,6 +268,15 @@ class CurrentKalmanFilter:
         if d > 0.0:
             self.P[nd:2 * nd, nd:2 * nd] = blk + d * np.outer(a, a)
 
+    def adopt(self, other: CurrentKalmanFilter) -> None:
+        """Take ``other``'s state, covariance, calibration and coefficient masks (a twin
+        filter on the same model whose current replaces this one's)."""
+        self.x[:] = other.x
+        self.P = other.P.copy()
+        self.q_scale, self.nis_avg = other.q_scale, other.nis_avg
+        self._unpack_coefficients()
+        self.identification.masked = list(other.identification.masked)
+
     def current_cov(self) -> np.ndarray:
         """Covariance of the current (m^2/s^2, earth axes), a copy."""
         nd = self.nd
@@ -282,6 +294,32 @@ class CurrentKalmanFilter:
         return R @ self.x[:nd] + self.x[nd:2 * nd]
 
     # ------------------------------------------------------------------ filter
+    def advance(self, t: float, dt: float, inputs: ModelInputs, yaw: float) -> None:
+        """The identification's schedule and the prediction to tick ``t`` (s), ``dt`` (s)
+        after the previous one, at heading ``yaw`` (rad).
+
+        On the first leg (no turn yet) without a surge model the along-track current is
+        unobservable and its variance along the heading is kept at the prior
+        (:meth:`inflate_current_along`): otherwise the filter drifts there with a shrinking
+        variance and meets the first turn overconfident (docs/current.md). Later straight
+        legs are not inflated: that would erase what the earlier headings' sway constraint
+        says about the cross-track part of the new heading (the published one-sigma is
+        floored instead, :func:`.model_identification.floor_along_track`)."""
+        ident = self.identification
+        ident.observe_motion(t, dt, inputs.r, yaw)
+        if ident.identifying:  # the coefficient covariance moves only while identifying
+            ident.lift_masks(self.P.diagonal()[2 * self.nd:])
+        ident.identifying = ident.should_identify(t, self.started,
+                                                  *self.current_var_horizontal())
+        if dt > 0:
+            n_sub = max(1, math.ceil(dt / PREDICT_STEP_S))
+            for _ in range(n_sub):
+                self.predict(dt / n_sub, inputs)
+        if self.started and ident.surge_unobservable() and ident.last_turn_t == -math.inf:
+            psi = yaw or 0.0
+            self.inflate_current_along([math.cos(psi), math.sin(psi)],
+                                       self.init_current_std ** 2)
+
     def predict(self, dt: float, inputs: ModelInputs) -> None:
         """``x <- x + dt f(x)``; ``P <- D (F P F^T + Q) D`` with the coefficient forgetting
         ``D = diag(1 (nu_r, V_c), 1/sqrt(lam) (theta))`` (rls.py rule).
@@ -310,8 +348,7 @@ class CurrentKalmanFilter:
             if nt and (ident.identifying or ident.prior_dof[i]):
                 # coefficient uncertainty flows into nu_r while identifying, and always for
                 # a DOF whose model is only the generic prior (mode (b)): an assumed sway
-                # damping must not pin the sideslip in a turn (measured without this:
-                # 0.28 m/s error at 4 sigma after the first circle, effect-current)
+                # damping must not pin the sideslip in a turn
                 row[col:col + k] = [dt * a for a in phis[i]]
             col += k
             rows.append(row)
@@ -393,8 +430,8 @@ class CurrentKalmanFilter:
         """Fold one full-dimension innovation into the calibration block; at the end of a
         block, move ``nis_avg`` towards the block-mean NIS and rescale ``q_scale``.
 
-        The per-sample NIS is blind to slow model and current errors (measured: NIS 0.95
-        while the current's 2-sigma coverage was 0.5, Gavia); the block mean is not."""
+        The per-sample NIS is blind to slow model and current errors (docs/current.md,
+        "Honest sigma"); the block mean is not."""
         m = len(y)
         self._blk_y += y
         self._blk_S += S

@@ -24,12 +24,10 @@ the paper make ``w_r`` (and through the pitch moment ``u_r``) visible, are not o
 With ``pitch = True`` (``[pipelines.current] flow_pitch``) the vertical block ``zv = [theta,
 q, w_r]`` is added with the measured pitch as a second output (its own Ackermann gain), its
 pitch channel (:data:`PITCH_TERMS`) identified by RLS (:meth:`FlowObserver.identify_pitch`);
-roll is not observed. Compared on spheroid-sawtooth (docs/current.md, "Flow observer"): the
-north and east current are unchanged to four decimals, down is worse than with the joint
-filter's ``w_r`` (0.012 against 0.007 m/s rms), so the heading-only reduction is the
-default. The surge
-speed through water ``u_r`` is not observable from
-the attitude on a straight line; it is the surge model run open loop, as in the WVAM
+roll is not observed. The vertical block leaves the north and east current as they are
+and makes down worse than the joint filter's ``w_r`` (docs/current.md, "Flow observer"), so
+the heading-only reduction is the default. The surge speed through water ``u_r`` is not
+observable from the attitude on a straight line; it is the surge model run open loop, as in the WVAM
 (Randeni et al. 2017). The current is then ``V_c = R (v_g - nu_r)`` (Fan, §III.A).
 
 The covariance of ``z`` is propagated for this gain (Joseph form, heading noise
@@ -40,7 +38,7 @@ adds the over-ground velocity's measurement noise.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -68,8 +66,8 @@ POLE_FACTORS = (1.5, 1.7, 1.9)
 """Default pole placement: the open-loop eigenvalues' real parts (floored at -0.5 1/s for the
 heading integrator) times these factors, re-placed at each step. Fixed poles slower than the
 vehicle's own sway/yaw modes (e.g. -0.6, -0.8, -1.0 against -1.9 and -1.4 for the spheroid)
-need large gains of the wrong sign to slow the dynamics down: on spheroid-sawtooth such
-fixed poles make the observer diverge after the third heading switch (measured)."""
+need large gains of the wrong sign to slow the dynamics down, and the observer diverges at
+the heading switches of a zig-zag (docs/current.md, "Flow observer")."""
 
 
 def ackermann_observer_gain(A: np.ndarray, C: np.ndarray, poles: Sequence[float]) -> np.ndarray:
@@ -86,6 +84,76 @@ def ackermann_observer_gain(A: np.ndarray, C: np.ndarray, poles: Sequence[float]
     e_n = np.zeros(n)
     e_n[-1] = 1.0
     return phi @ np.linalg.solve(O, e_n)
+
+
+OUTPUT_ROW = np.array([[1.0, 0.0, 0.0]])
+"""``C``: each block measures its first state (the heading, or the pitch)."""
+POLE_FLOOR = -0.5
+"""1/s: the open-loop eigenvalues' real parts are floored here before :data:`POLE_FACTORS`
+scales them (the heading and pitch integrators have eigenvalue 0)."""
+DIFF_STEP = 1e-4
+"""Step of the forward differences of the linearization (state units)."""
+INTEGRATION_STEP_S = 0.05
+"""Longest explicit-Euler sub-step (s) of the observer's integration."""
+Z_COV0 = (0.01, 0.01, 0.25)
+"""Initial covariance diagonal of each block: (rad^2, rad^2/s^2, m^2/s^2)."""
+U_VAR0 = 0.25
+"""Initial variance of ``u_r`` (m^2/s^2)."""
+MAX_GAIN = 50.0
+"""A placed gain above this (per entry) is refused and the previous gain kept."""
+PITCH_RLS_FORGETTING = 0.9995
+"""Forgetting factor of the pitch channel's RLS per update."""
+PITCH_RLS_P0 = 1e6
+"""Initial covariance of the pitch channel's RLS (its regressors are small, the data must
+rule)."""
+PITCH_RLS_SIGMA2_0 = 1e-3
+"""Initial equation-error variance of the pitch channel's RLS ((rad/s^2)^2)."""
+RUNAWAY_SPEED = (3.0, 10.0)
+"""A block's relative velocity (sway or heave) above the first, or ``u_r`` above the
+second (m/s), is a divergence."""
+
+
+def forward_difference_jacobian(f: Callable[[np.ndarray], np.ndarray],
+                                z: np.ndarray) -> np.ndarray:
+    """``A = df/dz`` at ``z`` by forward differences of step :data:`DIFF_STEP`; ``f`` is
+    called at ``z`` first, then at each perturbed state in turn."""
+    f0 = f(z)
+    A = np.empty((len(z), len(z)))
+    for j in range(len(z)):
+        dz = np.zeros(len(z))
+        dz[j] = DIFF_STEP
+        A[:, j] = (f(z + dz) - f0) / DIFF_STEP
+    return A
+
+
+def placed_gain(A: np.ndarray, poles: Sequence[float] | None,
+                max_gain: float) -> np.ndarray | None:
+    """The observer gain ``L`` with ``eig(A - L C) = poles`` (:func:`ackermann_observer_gain`,
+    ``C`` = :data:`OUTPUT_ROW`); ``poles`` None: the real parts of ``eig(A)`` floored at
+    :data:`POLE_FLOOR`, times :data:`POLE_FACTORS`. None when ``(A, C)`` is not observable
+    or a gain is not finite or above ``max_gain``."""
+    try:
+        if poles is None:
+            re = np.sort(np.minimum(np.linalg.eigvals(A).real, POLE_FLOOR))
+            poles = tuple(re * np.array(POLE_FACTORS))
+        L = ackermann_observer_gain(A, OUTPUT_ROW, poles)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(L)) or np.max(np.abs(L)) > max_gain:
+        return None
+    return L
+
+
+def propagate_gain_covariance(P: np.ndarray, A: np.ndarray, L: np.ndarray, dt: float,
+                              accel_std: float, meas_std: float) -> np.ndarray:
+    """Covariance of a block under its gain over ``dt`` (s): ``z' = (A - L C) z + w - L n``,
+    so ``P <- F P F^T + Q`` with ``F = I + dt (A - L C)``, ``Q = diag(0, q, q) +
+    L L^T (meas_std dt)^2`` and ``q = accel_std^2 dt``."""
+    Acl = A - np.outer(L, OUTPUT_ROW[0])
+    F = np.eye(3) + dt * Acl
+    q = accel_std ** 2 * dt
+    Q = np.diag([0.0, q, q]) + np.outer(L, L) * (meas_std * dt) ** 2
+    return F @ P @ F.T + Q
 
 
 class FlowObserver:
@@ -138,8 +206,8 @@ class FlowObserver:
         self.z = np.zeros(3)
         self.u_r = 0.0
         self.w_r = 0.0
-        self.Pz = np.diag([0.01, 0.01, 0.25])
-        self.var_u = 0.25
+        self.Pz = np.diag(Z_COV0)
+        self.var_u = U_VAR0
         self.L = np.zeros(3)
         self.e = 0.0
         self.S = psi_std * psi_std
@@ -150,14 +218,15 @@ class FlowObserver:
         self.v_g_std = 0.0
         self.unobservable = 0
         self.diverged = 0
-        self.max_gain = 50.0
+        self.max_gain = MAX_GAIN
         self._iyaw = model.channels.index("yaw")
         self.pitch = pitch and model.nd == 3
         self.zv = np.zeros(3)
-        self.Pv = np.diag([0.01, 0.01, 0.25])
+        self.Pv = np.diag(Z_COV0)
         self.Lv = np.zeros(3)
         self.pitch_rls = RecursiveLeastSquares(
-            len(PITCH_TERMS), forgetting=0.9995, p0=1e6, names=PITCH_TERMS, sigma2_0=1e-3)
+            len(PITCH_TERMS), forgetting=PITCH_RLS_FORGETTING, p0=PITCH_RLS_P0,
+            names=PITCH_TERMS, sigma2_0=PITCH_RLS_SIGMA2_0)
         self.pitch_svf = StateVariableFilter(1 + len(PITCH_TERMS), svf_cutoff_hz)
 
     def identify_pitch(self, dt: float, nu: Sequence[float], x: ModelInputs,
@@ -188,31 +257,19 @@ class FlowObserver:
         and covariance (as the horizontal block in :meth:`step`)."""
         th = self.pitch_rls.theta
         u, v = self.u_r, float(self.z[2])
-        f0 = self._fv(self.zv, u, v, x, thetas, th)
-        A = np.empty((3, 3))
-        for j in range(3):
-            dz = np.zeros(3)
-            dz[j] = 1e-4
-            A[:, j] = (self._fv(self.zv + dz, u, v, x, thetas, th) - f0) / 1e-4
-        C = np.array([[1.0, 0.0, 0.0]])
-        try:
-            re = np.sort(np.minimum(np.linalg.eigvals(A).real, -0.5))
-            L = ackermann_observer_gain(A, C, tuple(re * np.array(POLE_FACTORS)))
-            if not np.all(np.isfinite(L)) or np.max(np.abs(L)) > self.max_gain:
-                raise np.linalg.LinAlgError
-            self.Lv = L
-        except np.linalg.LinAlgError:
+        A = forward_difference_jacobian(lambda zv: self._fv(zv, u, v, x, thetas, th), self.zv)
+        L = placed_gain(A, None, self.max_gain)
+        if L is None:
             self.unobservable += 1
-        n_sub = max(1, math.ceil(dt / 0.05))
+        else:
+            self.Lv = L
+        n_sub = max(1, math.ceil(dt / INTEGRATION_STEP_S))
         h = dt / n_sub
         for _ in range(n_sub):
             e = x.pitch - self.zv[0]
             self.zv = self.zv + h * (self._fv(self.zv, u, v, x, thetas, th) + self.Lv * e)
-        Acl = A - np.outer(self.Lv, C[0])
-        F = np.eye(3) + dt * Acl
-        q = self.accel_std ** 2 * dt
-        Q = np.diag([0.0, q, q]) + np.outer(self.Lv, self.Lv) * (self.psi_std * dt) ** 2
-        self.Pv = F @ self.Pv @ F.T + Q
+        self.Pv = propagate_gain_covariance(self.Pv, A, self.Lv, dt, self.accel_std,
+                                            self.psi_std)
         self.w_r = float(self.zv[2])
 
     def _f(self, z: np.ndarray, u: float, x: ModelInputs,
@@ -225,16 +282,16 @@ class FlowObserver:
 
     def step(self, dt: float, psi_meas: float | None, x: ModelInputs,
              thetas: Sequence[np.ndarray], nu_init: np.ndarray) -> None:
-        """Advance by ``dt`` (s) and correct with the measured heading (rad)."""
+        """Advance by ``dt`` (s) and correct with the measured heading ``psi_meas`` (rad):
+        pole placement at the linearization, Fan eq. (7) integrated, the surge model open
+        loop, the covariance under the gain. ``x`` the model inputs (``x.r`` the measured
+        yaw rate, restored on return), ``thetas`` the model coefficients, ``nu_init`` the
+        caller's through-water velocity (m/s: the start, and ``w_r`` without the vertical
+        block)."""
         if psi_meas is None:
             return
         if not self.ready:
-            self.z = np.array([psi_meas, x.r, float(nu_init[1])])
-            self.u_r = float(nu_init[0])
-            self.w_r = float(nu_init[2]) if len(nu_init) > 2 else 0.0
-            self.zv = np.array([x.pitch, x.q, self.w_r])
-            self.Pv = np.diag([0.01, 0.01, 0.25])
-            self.ready = True
+            self._start(psi_meas, x, nu_init)
             return
         if dt <= 0:
             return
@@ -246,28 +303,44 @@ class FlowObserver:
             self.w_r = float(nu_init[2]) if len(nu_init) > 2 else 0.0
         fu = self.model.accel([self.u_r, self.z[2], self.w_r][:nd], x, thetas)[0]
         # linearization and pole placement
-        f0 = self._f(self.z, self.u_r, x, thetas)
-        A = np.empty((3, 3))
-        for j in range(3):
-            dz = np.zeros(3)
-            dz[j] = 1e-4
-            A[:, j] = (self._f(self.z + dz, self.u_r, x, thetas) - f0) / 1e-4
-        C = np.array([[1.0, 0.0, 0.0]])
-        try:
-            if self.poles is not None:
-                poles = self.poles
-            else:
-                re = np.sort(np.minimum(np.linalg.eigvals(A).real, -0.5))
-                poles = tuple(re * np.array(POLE_FACTORS))
-            L = ackermann_observer_gain(A, C, poles)
-            if not np.all(np.isfinite(L)) or np.max(np.abs(L)) > self.max_gain:
-                raise np.linalg.LinAlgError
-            self.L = L
-        except np.linalg.LinAlgError:
+        A = forward_difference_jacobian(lambda z: self._f(z, self.u_r, x, thetas), self.z)
+        L = placed_gain(A, self.poles, self.max_gain)
+        if L is None:
             self.unobservable += 1  # keep the previous gain
+        else:
+            self.L = L
         x.r = r_meas
-        # Fan eq. (7), explicit Euler at the tick with the heading innovation held
-        n_sub = max(1, math.ceil(dt / 0.05))
+        self._integrate(dt, psi_meas, x, thetas)
+        x.r = r_meas
+        if self.pitch:
+            self._step_vertical(dt, x, thetas)
+        self.u_r += dt * fu
+        if self._runaway():
+            self._restart_after_divergence()
+            return
+        self.Pz = propagate_gain_covariance(self.Pz, A, self.L, dt, self.accel_std,
+                                            self.psi_std)
+        # var(u_r) <- (1 + dt df_u/du)^2 var(u_r) + q, the surge model open loop
+        J = self.model.jacobian(np.array([self.u_r, self.z[2], self.w_r][:nd]), x, thetas)
+        a = 1.0 + dt * J[0, 0]
+        self.var_u = a * a * self.var_u + self.accel_std ** 2 * dt
+
+    def _start(self, psi_meas: float, x: ModelInputs, nu_init: np.ndarray) -> None:
+        """Start at the measured heading (rad) and yaw rate, the caller's through-water
+        velocity ``nu_init`` (m/s) and the measured pitch and pitch rate."""
+        self.z = np.array([psi_meas, x.r, float(nu_init[1])])
+        self.u_r = float(nu_init[0])
+        self.w_r = float(nu_init[2]) if len(nu_init) > 2 else 0.0
+        self.zv = np.array([x.pitch, x.q, self.w_r])
+        self.Pv = np.diag(Z_COV0)
+        self.ready = True
+
+    def _integrate(self, dt: float, psi_meas: float, x: ModelInputs,
+                   thetas: Sequence[np.ndarray]) -> None:
+        """Fan eq. (7), ``z' = f(z, u_r, u) + L (psi_meas - psi)``, by explicit Euler over
+        ``dt`` (s) with the heading measurement held; the innovation, its variance and NIS
+        at the start of the step."""
+        n_sub = max(1, math.ceil(dt / INTEGRATION_STEP_S))
         h = dt / n_sub
         self.e = wrap_pi(psi_meas - self.z[0])
         self.S = float(self.Pz[0, 0]) + self.psi_std * self.psi_std
@@ -276,28 +349,20 @@ class FlowObserver:
             e = wrap_pi(psi_meas - self.z[0])
             self.z = self.z + h * (self._f(self.z, self.u_r, x, thetas) + self.L * e)
             self.z[0] = wrap_pi(self.z[0])
-        x.r = r_meas
-        if self.pitch:
-            self._step_vertical(dt, x, thetas)
-        self.u_r += dt * fu
-        if not (np.all(np.isfinite(self.z)) and abs(self.z[2]) < 3.0
-                and np.all(np.isfinite(self.zv)) and abs(self.zv[2]) < 3.0
-                and math.isfinite(self.u_r) and abs(self.u_r) < 10.0):
-            # diverged: restart from the caller's through-water velocity
-            self.diverged += 1
-            self.ready = False
-            self.Pz = np.diag([0.01, 0.01, 0.25])
-            self.var_u = 0.25
-            return
-        # covariance of this gain: z' = (A - L C) z + w - L n
-        Acl = A - np.outer(self.L, C[0])
-        F = np.eye(3) + dt * Acl
-        q = self.accel_std ** 2 * dt
-        Q = np.diag([0.0, q, q]) + np.outer(self.L, self.L) * (self.psi_std * dt) ** 2
-        self.Pz = F @ self.Pz @ F.T + Q
-        J = self.model.jacobian(np.array([self.u_r, self.z[2], self.w_r][:nd]), x, thetas)
-        a = 1.0 + dt * J[0, 0]
-        self.var_u = a * a * self.var_u + q
+
+    def _runaway(self) -> bool:
+        """A non-finite state or a relative velocity beyond :data:`RUNAWAY_SPEED`."""
+        v_max, u_max = RUNAWAY_SPEED
+        return not (np.all(np.isfinite(self.z)) and abs(self.z[2]) < v_max
+                    and np.all(np.isfinite(self.zv)) and abs(self.zv[2]) < v_max
+                    and math.isfinite(self.u_r) and abs(self.u_r) < u_max)
+
+    def _restart_after_divergence(self) -> None:
+        """Count a divergence; the next step restarts from the caller's velocity."""
+        self.diverged += 1
+        self.ready = False
+        self.Pz = np.diag(Z_COV0)
+        self.var_u = U_VAR0
 
     def nu_r(self, nd: int) -> np.ndarray:
         """Through-water velocity ``[u_r, v_r(, w_r)]`` (m/s, body)."""

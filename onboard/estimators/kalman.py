@@ -14,8 +14,10 @@ own::
 and the measurement sees only that block, so the Kalman filter of ``(d, v)`` gives
 exactly the same innovations, gains and ``(d, v)`` estimates as the 3-state filter of the
 paper (tests/test_kf.py checks this against the 3-state numpy filter) without the
-unbounded direction. This module runs that 2-state filter with plain floats: at n = 2 a
-numpy call costs more than the whole arithmetic.
+unbounded direction. This module runs that filter with plain floats, its covariance packed
+as ``P = [dd, dv, de, vv, ve, ee]``: at 3-4 states a numpy call costs more than the whole
+arithmetic. :class:`ReferenceIncrementKF` is the same filter with matrices in numpy, which
+the tests compare the scalar filters with.
 
 Sign convention of §2.2: innovation ``z = C x_fc - y``; ``x_da = x_fc - L z``.
 """
@@ -24,7 +26,17 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from onboard.estimators.axis_model import Discrete
+
+VARIANCE_FLOOR = 1e-300
+"""The smallest variance of the rate (and of the input bias) an update leaves, in the
+state's squared unit. An update that determines the rate all but exactly (an exact
+increment on a rank-one forecast covariance, or a rate measured with ``R_v = 0``)
+subtracts two nearly equal numbers, and rounding can leave zero or a tiny negative
+variance; the floor keeps ``std_v = sqrt(P_vv)`` defined and the next rate innovation
+variance ``P_vv + R_v`` positive. Any variance the filter carries in use is far above it."""
 
 
 class IncrementKF:
@@ -155,7 +167,7 @@ class IncrementKF:
         self.e -= Le * z
         vv_n = vv - Lv * cv
         self.P = [dd - Ld * cd, dv - Ld * cv, de - Ld * ce,
-                  vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ce, ee - Le * ce]
+                  vv_n if vv_n > VARIANCE_FLOOR else VARIANCE_FLOOR, ve - Lv * ce, ee - Le * ce]
         self.Ld, self.Lv = Ld, Lv
 
     def update_rate(self, y_v: float, R_v: float, gate: float = math.inf) -> float:
@@ -177,7 +189,7 @@ class IncrementKF:
         self.e -= Le * z
         vv_n = vv - Lv * vv
         self.P = [dd - Ld * dv, dv - Ld * vv, de - Ld * ve,
-                  vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ve, ee - Le * ve]
+                  vv_n if vv_n > VARIANCE_FLOOR else VARIANCE_FLOOR, ve - Lv * ve, ee - Le * ve]
         return nis
 
     def predict_ahead(self, k: Discrete, u: float) -> tuple[float, float]:
@@ -283,10 +295,10 @@ class BiasIncrementKF(IncrementKF):
         db, vb, eb = self.Pb
         vv_n = vv - Lv * cv
         self.P = [dd - Ld * cd, dv - Ld * cv, de - Ld * ce,
-                  vv_n if vv_n > 1e-300 else 1e-300, ve - Lv * ce, ee - Le * ce]
+                  vv_n if vv_n > VARIANCE_FLOOR else VARIANCE_FLOOR, ve - Lv * ce, ee - Le * ce]
         self.Pb = [db - Ld * cb, vb - Lv * cb, eb - Le * cb]
         bb_n = self.pbb - Lb * cb
-        self.pbb = bb_n if bb_n > 1e-300 else 1e-300
+        self.pbb = bb_n if bb_n > VARIANCE_FLOOR else VARIANCE_FLOOR
         self.Ld, self.Lv = Ld, Lv
 
     def update(self) -> None:
@@ -305,3 +317,86 @@ class BiasIncrementKF(IncrementKF):
             return nis
         self._apply((dv, vv, ve, self.Pb[1]), S, z)
         return nis
+
+
+class ReferenceIncrementKF:
+    """:class:`IncrementKF` (``bias=False``) and :class:`BiasIncrementKF` (``bias=True``)
+    in numpy, the class docs' equations as matrices on ``x = [d, v, e(, b)]``; the scalar
+    filters are this one unrolled (tests/test_kf.py compares them step by step).
+
+    Attributes: ``x``, ``P`` (full matrix), ``z``, ``S``, ``nis`` as the scalar filters';
+    ``y`` the last increment and ``skipped`` whether it was used.
+    """
+
+    def __init__(self, R: float, q_v: float = 0.0, correlated: bool = True,
+                 bias: bool = False, q_b: float = 0.0) -> None:
+        """As :class:`BiasIncrementKF` (``q_b`` unused without ``bias``)."""
+        self.n = 4 if bias else 3
+        self.R, self.q_v, self.q_b, self.correlated = R, q_v, q_b, correlated
+        self.x, self.P = np.zeros(self.n), np.zeros((self.n, self.n))
+        self.y, self.skipped = 0.0, False
+        self.z = self.S = self.nis = 0.0
+
+    def forecast(self, k: Discrete, u: float, V_u: float) -> None:
+        """``e <- n = y - d + e`` (map ``M``), then ``x+ = F x + G u``,
+        ``P+ = F M P M^T F^T + V_u G G^T + Q``."""
+        n, E = self.n, 2
+        M = np.eye(n)
+        x, P = self.x.copy(), self.P.copy()
+        if self.correlated and not self.skipped:
+            M[E, 0] = -1.0                                # err(n) = err(e) - err(d)
+            x[E] = self.y - x[0] + x[E]                   # n = y - d + e
+            P = M @ P @ M.T
+        else:                                             # the point's noise is prior
+            x[E] = 0.0
+            P[E, :] = P[:, E] = 0.0
+            P[E, E] = self.R if self.correlated else 0.0
+        F = np.zeros((n, n))
+        F[0, 1], F[1, 1], F[E, E] = k.c1, k.alpha, 1.0    # d+ = c1 v, v+ = alpha v, e+ = n
+        G = np.zeros(n)
+        G[0], G[1] = k.c2, k.c1                           # + (c2, c1) (u + b)
+        Q = np.zeros((n, n))
+        Q[1, 1] = self.q_v
+        if n == 4:
+            F[0, 3], F[1, 3], F[3, 3] = k.c2, k.c1, 1.0   # b+ = b
+            Q[3, 3] = self.q_b * k.dt
+        self.x = F @ x + G * u
+        self.P = F @ P @ F.T + V_u * np.outer(G, G) + Q
+        self.skipped = False
+
+    def innovation(self, y: float) -> float:
+        """``z = C x - y``, ``S = C P C^T + R`` with ``C = [1, 0, -1(, 0)]``."""
+        C = np.zeros(self.n)
+        C[0], C[2] = 1.0, -1.0
+        self.y = y
+        self.z = float(C @ self.x - y)
+        self.S = float(C @ self.P @ C + self.R)
+        self.nis = self.z * self.z / self.S
+        return self.z
+
+    def update(self) -> None:
+        """``K = P C^T / S``, ``x -= K z``, ``P -= K (P C^T)^T``."""
+        C = np.zeros(self.n)
+        C[0], C[2] = 1.0, -1.0
+        self._apply(C, self.z, self.S)
+
+    def skip(self) -> None:
+        """Keep the forecast; the last point's noise is then prior at the next step."""
+        self.skipped = True
+
+    def update_rate(self, y_v: float, R_v: float) -> float:
+        """The rate row ``C_v = [0, 1, 0(, 0)]``, ``Var = R_v``; returns the NIS."""
+        C = np.zeros(self.n)
+        C[1] = 1.0
+        z, S = float(C @ self.x - y_v), float(C @ self.P @ C + R_v)
+        self._apply(C, z, S)
+        return z * z / S
+
+    def _apply(self, C: np.ndarray, z: float, S: float) -> None:
+        """The scalar-row update, then the rate (and bias) variance floored."""
+        PC = self.P @ C                                   # P C^T
+        K = PC / S                                        # K = P C^T / S
+        self.x = self.x - K * z                           # x_da = x_fc - K z
+        self.P = self.P - np.outer(K, PC)                 # P_da = P - K C P
+        for i in (1, 3) if self.n == 4 else (1,):
+            self.P[i, i] = max(self.P[i, i], VARIANCE_FLOOR)

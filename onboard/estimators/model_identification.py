@@ -24,8 +24,8 @@ theta]`` with ``theta' = 0``; this module holds what the filter needs to know ab
 Estimating ``theta`` jointly with the current, rather than by RLS on ``v_g - V_c_hat`` in a
 separate identify-then-observe loop, keeps the correlation between ``theta`` and ``V_c``: the
 separate loop locks in its own errors (on a straight leg after a turn a biased current makes
-the sway regressor constant, RLS forgets the sway damping and the bias stays; measured on a
-synthetic boat: 0.14 m/s bias at a claimed 0.03 m/s one-sigma).
+the sway regressor constant, RLS forgets the sway damping and the bias stays;
+docs/current.md).
 """
 
 from __future__ import annotations
@@ -41,6 +41,13 @@ from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
 
 GRAVITY = 9.81
 """m/s^2, the scale of the net-weight prior (``net_weight_std``)."""
+YAW_RLS_SIGMA2_0 = 1e-3
+"""Initial equation-error variance of the yaw channel's RLS ((rad/s^2)^2)."""
+MASK_LIFT_FRACTION = 0.25
+"""A DOF's prior mask is lifted once the trace of its coefficient covariance is below this
+fraction of its prior trace."""
+FORGETTING_PERIOD_S = 0.1
+"""The forgetting factors are per this period (s): one 10 Hz tick."""
 
 
 class StateVariableFilter:
@@ -199,11 +206,23 @@ class ModelIdentification:
         self.heading_diversity = heading_diversity
         self.counters: dict[str, float] = counters if counters is not None else {
             "rls_updates": 0}
+        self._init_prior(configured, identify, model_rel_std, theta_std, theta_std_floor,
+                         net_weight_std)
+        self.identifying = False
+        self.last_turn_t = -math.inf
+        self.headings = HeadingDiversity(heading_memory_s)
+        self._init_yaw_channel(configured, yaw_rls_p0, yaw_forgetting, svf_cutoff_hz)
+
+    def _init_prior(self, configured: Mapping[str, Mapping[str, float]], identify: bool,
+                    model_rel_std: float, theta_std: float, theta_std_floor: float,
+                    net_weight_std: float) -> None:
+        """The coefficients' prior: configured terms tight (``model_rel_std |theta| +
+        theta_std_floor``), the others loose (``theta_std``), except the net-weight terms,
+        whose scale is physics (``GRAVITY * net_weight_std``); the prior masks and traces."""
+        model = self.model
         nd = model.nd
         base = model.default_thetas()
         self.thetas = model.thetas_from_mapping(configured, base) if configured else base
-        # configured terms tight, the others loose, except the net-weight terms, whose scale
-        # is physics
         sd_nw = GRAVITY * net_weight_std
         self.prior_sd: list[np.ndarray] = []
         for ch, th in zip(model.channels, self.thetas):
@@ -216,10 +235,9 @@ class ModelIdentification:
         self.sizes = [len(model.terms[c]) for c in model.dofs]
         self.prior_dof = [c not in configured for c in model.dofs]
         # an assumed (prior) model constrains its own DOF only: its cross-coupling terms
-        # (u v, u w, ...) would otherwise "measure" the surge speed from made-up coefficients
-        # (measured: 1.3 m/s along-track error claimed at 0.06, Gavia, mode (b)). The mask is
-        # lifted once the DOF's coefficients are identified (trace of their covariance below
-        # a quarter of the prior's).
+        # (u v, u w, ...) would otherwise "measure" the surge speed from made-up
+        # coefficients (docs/current.md). The mask is lifted once the DOF's coefficients
+        # are identified (:meth:`lift_masks`).
         self.masked: list[bool] = list(self.prior_dof)
         self.n_theta = sum(self.sizes) if identify else 0
         self.theta_var0: list[Any] = (list(np.concatenate(self.prior_sd[:nd]) ** 2)
@@ -229,9 +247,13 @@ class ModelIdentification:
             [sd_nw ** 2 if k in model.net_weight_terms[c] else theta_std ** 2
              for k in model.terms[c]] for c in model.dofs])
         self.tr_theta_max = float(np.sum(self.theta_var0)) if self.n_theta else 0.0
-        self.identifying = False
-        self.last_turn_t = -math.inf
-        self.headings = HeadingDiversity(heading_memory_s)
+
+    def _init_yaw_channel(self, configured: Mapping[str, Mapping[str, float]],
+                          yaw_rls_p0: float, yaw_forgetting: float,
+                          svf_cutoff_hz: float) -> None:
+        """The yaw channel's RLS and state-variable filter (models with an auxiliary yaw
+        channel); a configured yaw model starts with its prior covariance."""
+        model = self.model
         self.yaw_rls: RecursiveLeastSquares | None = None
         self.svf: StateVariableFilter | None = None
         self._i_yaw = model.channels.index("yaw") if "yaw" in model.channels else -1
@@ -239,7 +261,7 @@ class ModelIdentification:
             i = self._i_yaw
             self.yaw_rls = RecursiveLeastSquares(
                 len(self.thetas[i]), forgetting=yaw_forgetting, p0=yaw_rls_p0,
-                theta0=self.thetas[i], names=model.terms["yaw"], sigma2_0=1e-3)
+                theta0=self.thetas[i], names=model.terms["yaw"], sigma2_0=YAW_RLS_SIGMA2_0)
             if "yaw" in configured:
                 self.yaw_rls.P = np.diag(self.prior_sd[i] ** 2)
             self.svf = StateVariableFilter(1 + len(model.terms["yaw"]), svf_cutoff_hz)
@@ -259,14 +281,13 @@ class ModelIdentification:
         horizontal variances (m^2/s^2) in a ``started`` filter.
 
         Only once the current is known (``identify_max_current_std``): before that the
-        innovation says "model or current wrong" and the coefficients would take the blame
-        (measured: u_r 1.47 -> 0.17 m/s in the first second, Gavia). And only around turns
-        (``identify_after_turn_s``): on a straight line a current along the track and a
-        thrust coefficient are the same thing to the data, and the linearized joint filter
-        drifts along that direction while its covariance shrinks (measured: -0.75 vs
-        -0.93 m/s with sigma 0.033, Gavia straight run). While not identifying, the
-        coefficients are held as known (their uncertainty is not propagated into ``nu_r``,
-        which otherwise makes the model worthless and the current drift: +0.2 vs -0.93 m/s).
+        innovation says "model or current wrong" and the coefficients would take the blame.
+        And only around turns (``identify_after_turn_s``): on a straight line a current
+        along the track and a thrust coefficient are the same thing to the data, and the
+        linearized joint filter drifts along that direction while its covariance shrinks.
+        While not identifying, the coefficients are held as known (their uncertainty is not
+        propagated into ``nu_r``, which would make the model worthless and the current
+        drift). Figures: docs/current.md, "Why the current is observable".
         """
         if not self.n_theta or not started:
             return False
@@ -280,7 +301,7 @@ class ModelIdentification:
         ``trace``: ``lambda = 1 - (1 - forgetting) max(0, 1 - trace / tr_theta_max)`` per
         0.1 s, none once the trace is back at the prior's (the bounded rule of :mod:`.rls`)."""
         lam = 1.0 - (1.0 - self.forgetting) * max(0.0, 1.0 - trace / self.tr_theta_max)
-        return lam ** (dt / 0.1)
+        return lam ** (dt / FORGETTING_PERIOD_S)
 
     def lift_masks(self, theta_var: np.ndarray) -> None:
         """Lift the cross-coupling mask of the DOFs whose coefficients have been learned:
@@ -291,7 +312,7 @@ class ModelIdentification:
         var = theta_var.tolist()
         o = 0
         for i, k in enumerate(self.sizes):
-            if self.masked[i] and sum(var[o:o + k]) < 0.25 * self.tr_theta0[i]:
+            if self.masked[i] and sum(var[o:o + k]) < MASK_LIFT_FRACTION * self.tr_theta0[i]:
                 self.masked[i] = False
             o += k
 
@@ -436,6 +457,6 @@ class VelocityRls:
                 est.set_state(saved[i])
                 self.thetas[i] = est.theta
                 self.n_rejected += 1
-            elif self.masked[i] and float(np.trace(est.P)) < 0.25 * self._tr0[i]:
+            elif self.masked[i] and float(np.trace(est.P)) < MASK_LIFT_FRACTION * self._tr0[i]:
                 self.masked[i] = False
         self.n_updates += 1

@@ -20,17 +20,138 @@ Tanner, "System Identification and Adaptive Input Estimation on the Jaiabot", ar
       theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)
 
 Signals are normalized before RLS (§2.10): ``z`` by ``z_scale`` and ``d_hat`` by
-``u_scale``. The update is the generated two-row kernel of :mod:`onboard.estimators.rls`
-with the rows built inside it (:func:`rcie_kernel`).
+``u_scale``.
+
+Two forms of the update
+-----------------------
+:func:`reference_rls_update` is §2.6 in numpy, line for line. :func:`rcie_kernel`, which
+:class:`Rcie` runs, is the same update as straight-line float code generated once per
+``l_theta`` (the rows built inside it, ``Gamma`` factored ``L D L^T``, the covariance kept
+as its packed upper triangle times a scalar, ``P = sc Q``, so that forgetting is one
+multiplication). It is the one generated kernel left: an AIE axis step stays within half
+of a textbook Kalman filter step (``onboard bench``, ``aie_step_vs_filterpy_kf``) only with
+it; docs/performance.md, "Fast paths", has the figures. The tests compare the two forms
+on random inputs (tests/test_primitives.py).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import cache
 from typing import Any, Callable, Mapping
 
-from onboard.estimators.rls import compile_kernel, two_row_update_lines, unpack_line
+import numpy as np
+
+
+def reference_rls_update(
+    P: np.ndarray, theta: np.ndarray, phi_f: np.ndarray, b: np.ndarray, e1: float,
+    r_z: float, r_d: float, lam: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The RLS update of §2.6 in numpy: ``(P+, theta+)`` from the rows ``phi_f`` (weight
+    ``r_z``, residual ``e1 = z_k - d_hat_f,k``) and ``b`` (weight ``r_d``, target 0; the
+    row drops out when ``r_d = 0``)."""
+    if r_d > 0.0:
+        Phi = np.vstack([phi_f, b])                       # Phi~ = [phi_f^T; b^T]
+        z = np.array([e1, 0.0])                           # z~ = [z_k - d_hat_f,k; 0]
+        R = np.diag([r_z, r_d])                           # R~ = diag(R_z, R_d)
+    else:
+        Phi, z, R = np.atleast_2d(phi_f), np.array([e1]), np.array([[r_z]])
+    Gamma = lam * np.linalg.inv(R) + Phi @ P @ Phi.T      # Gamma = lambda R~^-1 + Phi~ P Phi~^T
+    theta = theta - P @ Phi.T @ np.linalg.solve(Gamma, z + Phi @ theta)
+    #                                        theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)
+    P = (P - P @ Phi.T @ np.linalg.solve(Gamma, Phi @ P)) / lam
+    #                                        P+ = (P - P Phi~^T Gamma^-1 Phi~ P) / lambda
+    return P, theta
+
+
+def packed_index(n: int) -> dict[tuple[int, int], int]:
+    """Position of ``P[i][j]`` in the packed upper triangle (row-major) of an ``n x n``
+    symmetric matrix (the storage of :attr:`Rcie.P`)."""
+    idx: dict[tuple[int, int], int] = {}
+    m = 0
+    for i in range(n):
+        for j in range(i, n):
+            idx[(i, j)] = idx[(j, i)] = m
+            m += 1
+    return idx
+
+
+def unpack(P: Sequence[float], n: int) -> list[list[float]]:
+    """Packed upper triangle (row-major) -> full symmetric matrix (list of rows)."""
+    idx = packed_index(n)
+    return [[P[idx[(i, j)]] for j in range(n)] for i in range(n)]
+
+
+def unpack_line(names: str, count: int, value: str) -> str:
+    """The kernel line unpacking the sequence ``value`` into ``names0 .. names<count-1>``."""
+    return f"    {', '.join(f'{names}{i}' for i in range(count))}, = {value}"
+
+
+def compile_kernel(lines: Sequence[str], name: str) -> Callable[..., Any]:
+    """The function ``kernel`` defined by the generated ``lines`` (its first line is the
+    ``def``); ``name`` labels it in tracebacks."""
+    ns: dict[str, Any] = {}
+    code = compile("\n".join(lines), f"<generated {name}>", "exec")
+    exec(code, ns)  # noqa: S102 - source generated here from integers only
+    return ns["kernel"]
+
+
+def two_row_update_lines(n: int) -> list[str]:
+    """Kernel lines of the two-row update (algorithms.md §2.6) for ``n`` parameters.
+
+    In scope before them: the packed covariance ``p0 ..``, with ``P = sc * p``; the
+    parameters ``t0 ..``; the rows ``a0 ..`` (weight ``R_a``) and ``b0 ..`` (weight
+    ``R_b``, target 0); ``e1``, the first row's residual before the parameters;
+    ``wa = lam / R_a``, ``wb = lam / R_b``; ``lam``. With ``Phi~ = [a; b]``,
+    ``z~ = [e1; 0]``, they compute::
+
+        Gamma  = diag(wa, wb) + Phi~ P Phi~^T                 (LDL^T-factored, 2 x 2)
+        theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)   -> n0 ..
+        P+     = sn * Q,  sn = sc / lam,
+        Q      = p - sc p Phi~^T Gamma^-1 Phi~ p               -> Q (packed list)
+        tr     = trace(P+)
+
+    and ``return None`` when a pivot of ``Gamma`` is not positive (impossible in exact
+    arithmetic: a divergence). Keeping ``P = sc Q`` makes the forgetting one
+    multiplication of ``sc`` rather than one per entry.
+    """
+    idx = packed_index(n)
+    r = range(n)
+    p = {(i, j): f"p{idx[(i, j)]}" for i in r for j in r}
+    src: list[str] = []
+    add = src.append
+    for i in r:
+        add(f"    pa{i} = " + " + ".join(f"{p[(i, j)]}*a{j}" for j in r))
+        add(f"    pb{i} = " + " + ".join(f"{p[(i, j)]}*b{j}" for j in r))
+    add("    g11 = wa + sc*(" + " + ".join(f"a{i}*pa{i}" for i in r) + ")")
+    add("    g12 = sc*(" + " + ".join(f"a{i}*pb{i}" for i in r) + ")")
+    add("    g22 = wb + sc*(" + " + ".join(f"b{i}*pb{i}" for i in r) + ")")
+    add("    e1 = e1 + " + " + ".join(f"a{i}*t{i}" for i in r))
+    add("    e2 = " + " + ".join(f"b{i}*t{i}" for i in r))
+    # Gamma = L D L^T (2 x 2 Cholesky without square roots), pivots must be positive
+    add("    if not g11 > 0.0:")
+    add("        return None")
+    add("    l = g12 / g11")
+    add("    d2 = g22 - l * g12")
+    add("    if not d2 > 0.0:")
+    add("        return None")
+    add("    i22 = sc / d2")
+    add("    i12 = -l * i22")
+    add("    i11 = sc / g11 + l * l * i22")
+    add("    w1 = i11 * e1 + i12 * e2")
+    add("    w2 = i12 * e1 + i22 * e2")
+    for i in r:
+        add(f"    ka{i} = i11*pa{i} + i12*pb{i}")
+        add(f"    kb{i} = i12*pa{i} + i22*pb{i}")
+    for i in r:
+        add(f"    n{i} = t{i} - pa{i}*w1 - pb{i}*w2")
+    terms = [f"{p[(i, j)]} - ka{i}*pa{j} - kb{i}*pb{j}" for i in r for j in range(i, n)]
+    add("    Q = [" + ", ".join(terms) + "]")
+    add("    sn = sc / lam")
+    add("    tr = sn * (" + " + ".join(f"Q[{idx[(i, i)]}]" for i in r) + ")")
+    return src
+
 
 RcieKernel = Callable[..., "tuple[list[float], float, list[float], float, float] | None"]
 """``kernel(Q, sc, theta, s, h, f, g, e1, w_a, w_b, lam) -> (Q+, sc+, theta+, trace(P+),
@@ -40,7 +161,7 @@ g . theta+)`` or None: see :func:`rcie_kernel`."""
 @cache
 def rcie_kernel(n: int, rate_penalty: bool) -> RcieKernel:
     """The RCIE update (§2.6-§2.7 step 5) for ``l_theta = n``, as straight-line float code:
-    the two-row RLS of :func:`onboard.estimators.rls.two_row_update_lines` with its rows
+    the two-row RLS of :func:`two_row_update_lines` with its rows
     built inside (fewer Python list operations) and the covariance scaled, ``P = sc Q``.
 
     ``kernel(Q, sc, theta, s, h, f, g, e1, w_a, w_b, lam) -> (Q+, sc+, theta+,

@@ -4,11 +4,11 @@ One regression ``a_k = phi_k^T theta + e_k`` per instance; the current pipeline 
 per degree of freedom of its vehicle model (:mod:`onboard.estimators.vehicle_models`), and
 any other pipeline may reuse it.
 
-Update (algorithms.md §3.4)::
+Update (algorithms.md §3.4), sample weight ``w`` in (0, 1]::
 
     e_k     = a_k - phi_k^T theta_{k-1}                      (a priori residual)
-    S_k     = lambda_k + phi_k^T P_{k-1} phi_k
-    K_k     = P_{k-1} phi_k / S_k
+    s_k     = lambda_k / w + phi_k^T P_{k-1} phi_k
+    K_k     = P_{k-1} phi_k / s_k
     theta_k = theta_{k-1} + K_k e_k
     P_k     = (P_{k-1} - K_k phi_k^T P_{k-1}) / lambda_k
 
@@ -30,188 +30,86 @@ one noisy sample throws the parameters away. Two guards keep ``P`` bounded:
 The residual variance ``sigma2`` is tracked with the same forgetting, so that the caller can
 use the model error as process noise (the current pipeline does, for honest uncertainty).
 
-Generated kernels
------------------
-This module is the one generator of straight-line RLS updates: Python source written per
-number of parameters, on local floats and the packed upper triangle of ``P``
-(:func:`packed_index`), compiled once and cached. At the 4-9 parameters of the pipelines
-that is ~5x faster than numpy, whose per-call overhead dominates at this size. It makes
-
-* :func:`rls_kernel`: the update above, one regression row (:class:`RecursiveLeastSquares`);
-* :func:`two_row_rls_kernel`: the exact minimizer of a two-row weighted cost with
-  forgetting (algorithms.md §2.6, the RLS of retrospective-cost input estimation); its
-  lines (:func:`two_row_update_lines`) also make the kernel of
-  :mod:`onboard.estimators.rcie`, which builds its rows inside the kernel.
-
-``P`` is symmetric by construction (both updates are written in the symmetric form
-``P - P Phi^T Gamma^-1 Phi P``, upper triangle only), so no symmetrization is needed.
+Two forms of the update
+-----------------------
+:func:`reference_rls_update` is the update above in numpy, line for line.
+:func:`rls_update`, which :class:`RecursiveLeastSquares` runs, is the same arithmetic on
+Python floats: at the 4-9 parameters of the pipelines numpy's per-call overhead costs more
+than the arithmetic, and numpy's summation order changes the last bits of the estimates
+that the golden replays record. It computes the upper triangle of each symmetric product
+and mirrors it, so ``P`` is symmetric by construction. The tests compare the two on random
+inputs.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from functools import cache
+from collections.abc import Mapping, Sequence
+from operator import mul
 from typing import Any
 
 import numpy as np
 
-RlsKernel = Callable[..., "tuple[list[float], list[float], float, float, float]"]
-"""``kernel(P, theta, phi, a, weight, forgetting, tr_max, beta, delta) -> (P+, theta+, e,
-lam, s)``: see :func:`rls_kernel`."""
-TwoRowKernel = Callable[..., "tuple[list[float], list[float], float] | None"]
-"""``kernel(P, theta, a, b, e1, w_a, w_b, lam) -> (P+, theta+, trace(P+))`` or None: see
-:func:`two_row_rls_kernel`."""
+Rows = list[list[float]]
+"""A matrix as a list of rows of floats."""
 
 
-def packed_index(n: int) -> dict[tuple[int, int], int]:
-    """Position of ``P[i][j]`` in the packed upper triangle (row-major) of an ``n x n``
-    symmetric matrix (the storage of the generated float kernels)."""
-    idx: dict[tuple[int, int], int] = {}
-    m = 0
+def reference_rls_update(
+    P: np.ndarray, theta: np.ndarray, phi: np.ndarray, a: float, weight: float,
+    forgetting: float, tr_max: float, beta: float, delta: float,
+) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """One update of algorithms.md §3.4 in numpy: ``(P, theta, e, lam, s)`` after the
+    sample ``a = phi^T theta + e`` of weight ``weight`` (see the module docstring)."""
+    e = a - phi @ theta                                   # e_k = a_k - phi_k^T theta_k-1
+    lam = 1.0 - (1.0 - forgetting) * max(0.0, 1.0 - np.trace(P) / tr_max)   # lambda_k
+    s = lam / weight + phi @ P @ phi                      # s_k = lambda_k / w + phi^T P phi
+    K = P @ phi / s                                       # K_k = P phi / s_k
+    theta = theta + K * e                                 # theta_k = theta_k-1 + K_k e_k
+    P = (P - np.outer(K, phi @ P)) / lam                  # P_k = (P - K phi^T P) / lambda_k
+    P = P + beta * np.eye(len(P)) - delta * P @ P         # EFRA: P + beta I - delta P^2
+    return P, theta, float(e), float(lam), float(s)
+
+
+def dot(x: Sequence[float], y: Sequence[float]) -> float:
+    """``x . y`` summed left to right from the first product. (``sum`` starts from the
+    integer 0, which turns a product of -0.0 into 0.0, and from Python 3.12 on it
+    compensates the rounding of float sums: both change the last bits.)"""
+    products = map(mul, x, y)
+    total = next(products)
+    for p in products:
+        total += p
+    return total
+
+
+def trace(P: Rows) -> float:
+    """``tr(P)``, summed from the first diagonal entry."""
+    total = P[0][0]
+    for i in range(1, len(P)):
+        total += P[i][i]
+    return total
+
+
+def rls_update(
+    P: Rows, theta: list[float], phi: list[float], a: float, weight: float,
+    forgetting: float, tr_max: float, beta: float, delta: float,
+) -> tuple[Rows, list[float], float, float, float]:
+    """:func:`reference_rls_update` on floats: ``P`` a symmetric matrix as rows; returns
+    ``(P+, theta+, e, lam, s)`` with ``P+`` symmetric (new lists, inputs unchanged)."""
+    n = len(theta)
+    g = [dot(row, phi) for row in P]                      # P phi
+    e = a - dot(phi, theta)                               # e_k
+    lam = 1.0 - (1.0 - forgetting) * max(0.0, 1.0 - trace(P) / tr_max)   # lambda_k
+    s = lam / weight + dot(phi, g)                        # s_k
+    K = [gi / s for gi in g]                              # K_k = P phi / s_k
+    Q = [[0.0] * n for _ in range(n)]                     # (P - K (P phi)^T) / lambda_k
     for i in range(n):
         for j in range(i, n):
-            idx[(i, j)] = idx[(j, i)] = m
-            m += 1
-    return idx
-
-
-def unpack(P: Sequence[float], n: int) -> list[list[float]]:
-    """Packed upper triangle (row-major) -> full symmetric matrix (list of rows)."""
-    idx = packed_index(n)
-    return [[P[idx[(i, j)]] for j in range(n)] for i in range(n)]
-
-
-def unpack_line(names: str, count: int, value: str) -> str:
-    """The kernel line unpacking the sequence ``value`` into ``names0 .. names<count-1>``."""
-    return f"    {', '.join(f'{names}{i}' for i in range(count))}, = {value}"
-
-
-def compile_kernel(lines: Sequence[str], name: str) -> Callable[..., Any]:
-    """The function ``kernel`` defined by the generated ``lines`` (its first line is the
-    ``def``); ``name`` labels it in tracebacks."""
-    ns: dict[str, Any] = {}
-    code = compile("\n".join(lines), f"<generated {name}>", "exec")
-    exec(code, ns)  # noqa: S102 - source generated here from integers only
-    return ns["kernel"]
-
-
-@cache
-def rls_kernel(n: int) -> RlsKernel:
-    """The update of :class:`RecursiveLeastSquares` for ``n`` parameters, as straight-line
-    float code (the module docstring's equations, then EFRA):
-
-    ``kernel(P, theta, phi, a, weight, forgetting, tr_max, beta, delta)
-    -> (P+, theta+, e, lam, s)`` with ``P`` the packed upper triangle (``n (n+1)/2``
-    floats), ``e`` the a priori residual, ``lam`` the variable forgetting factor and
-    ``s = lam / weight + phi^T P phi``. With ``beta = delta = 0`` the EFRA step adds zero.
-    """
-    idx = packed_index(n)
-    r = range(n)
-    p = {(i, j): f"p{idx[(i, j)]}" for i in r for j in r}
-    q = {(i, j): f"q{idx[(i, j)]}" for i in r for j in r}
-    src = ["def kernel(P, th, phi, a, weight, forgetting, tr_max, beta, delta):",
-           unpack_line("p", n * (n + 1) // 2, "P"), unpack_line("t", n, "th"),
-           unpack_line("f", n, "phi")]
-    add = src.append
-    for i in r:  # P phi
-        add(f"    g{i} = " + " + ".join(f"{p[(i, j)]}*f{j}" for j in r))
-    add("    e = a - (" + " + ".join(f"f{i}*t{i}" for i in r) + ")")
-    add("    tr = " + " + ".join(p[(i, i)] for i in r))
-    add("    lam = 1.0 - (1.0 - forgetting) * max(0.0, 1.0 - tr / tr_max)")
-    add("    s = lam / weight + (" + " + ".join(f"f{i}*g{i}" for i in r) + ")")
-    for i in r:
-        add(f"    k{i} = g{i} / s")
-    for i in r:  # (P - K (P phi)^T) / lam, upper triangle
+            Q[i][j] = Q[j][i] = (P[i][j] - K[i] * g[j]) / lam
+    P_new = [[0.0] * n for _ in range(n)]                 # EFRA: Q + beta I - delta Q^2
+    for i in range(n):
         for j in range(i, n):
-            add(f"    {q[(i, j)]} = ({p[(i, j)]} - k{i}*g{j}) / lam")
-    terms = []
-    for i in r:  # + beta I - delta P^2 (EFRA)
-        for j in range(i, n):
-            pp = " + ".join(f"{q[(i, k)]}*{q[(k, j)]}" for k in r)
-            terms.append(f"{q[(i, j)]}" + (" + beta" if i == j else "") + f" - delta*({pp})")
-    add("    return [" + ", ".join(terms) + "], [" + ", ".join(
-        f"t{i} + k{i}*e" for i in r) + "], e, lam, s")
-    return compile_kernel(src, f"rls_kernel({n})")
-
-
-def two_row_update_lines(n: int) -> list[str]:
-    """Kernel lines of the two-row update (algorithms.md §2.6) for ``n`` parameters.
-
-    In scope before them: the packed covariance ``p0 ..``, with ``P = sc * p``; the
-    parameters ``t0 ..``; the rows ``a0 ..`` (weight ``R_a``) and ``b0 ..`` (weight
-    ``R_b``, target 0); ``e1``, the first row's residual before the parameters;
-    ``wa = lam / R_a``, ``wb = lam / R_b``; ``lam``. With ``Phi~ = [a; b]``,
-    ``z~ = [e1; 0]``, they compute::
-
-        Gamma  = diag(wa, wb) + Phi~ P Phi~^T                 (LDL^T-factored, 2 x 2)
-        theta+ = theta - P Phi~^T Gamma^-1 (z~ + Phi~ theta)   -> n0 ..
-        P+     = sn * Q,  sn = sc / lam,
-        Q      = p - sc p Phi~^T Gamma^-1 Phi~ p               -> Q (packed list)
-        tr     = trace(P+)
-
-    and ``return None`` when a pivot of ``Gamma`` is not positive (impossible in exact
-    arithmetic: a divergence). Keeping ``P = sc Q`` makes the forgetting one
-    multiplication of ``sc`` rather than one per entry.
-    """
-    idx = packed_index(n)
-    r = range(n)
-    p = {(i, j): f"p{idx[(i, j)]}" for i in r for j in r}
-    src: list[str] = []
-    add = src.append
-    for i in r:
-        add(f"    pa{i} = " + " + ".join(f"{p[(i, j)]}*a{j}" for j in r))
-        add(f"    pb{i} = " + " + ".join(f"{p[(i, j)]}*b{j}" for j in r))
-    add("    g11 = wa + sc*(" + " + ".join(f"a{i}*pa{i}" for i in r) + ")")
-    add("    g12 = sc*(" + " + ".join(f"a{i}*pb{i}" for i in r) + ")")
-    add("    g22 = wb + sc*(" + " + ".join(f"b{i}*pb{i}" for i in r) + ")")
-    add("    e1 = e1 + " + " + ".join(f"a{i}*t{i}" for i in r))
-    add("    e2 = " + " + ".join(f"b{i}*t{i}" for i in r))
-    # Gamma = L D L^T (2 x 2 Cholesky without square roots), pivots must be positive
-    add("    if not g11 > 0.0:")
-    add("        return None")
-    add("    l = g12 / g11")
-    add("    d2 = g22 - l * g12")
-    add("    if not d2 > 0.0:")
-    add("        return None")
-    add("    i22 = sc / d2")
-    add("    i12 = -l * i22")
-    add("    i11 = sc / g11 + l * l * i22")
-    add("    w1 = i11 * e1 + i12 * e2")
-    add("    w2 = i12 * e1 + i22 * e2")
-    for i in r:
-        add(f"    ka{i} = i11*pa{i} + i12*pb{i}")
-        add(f"    kb{i} = i12*pa{i} + i22*pb{i}")
-    for i in r:
-        add(f"    n{i} = t{i} - pa{i}*w1 - pb{i}*w2")
-    terms = [f"{p[(i, j)]} - ka{i}*pa{j} - kb{i}*pb{j}" for i in r for j in range(i, n)]
-    add("    Q = [" + ", ".join(terms) + "]")
-    add("    sn = sc / lam")
-    add("    tr = sn * (" + " + ".join(f"Q[{idx[(i, i)]}]" for i in r) + ")")
-    return src
-
-
-@cache
-def two_row_rls_kernel(n: int) -> TwoRowKernel:
-    """The two-row RLS update (algorithms.md §2.6, :func:`two_row_update_lines`) for ``n``
-    parameters, as straight-line float code.
-
-    ``kernel(P, theta, a, b, e1, w_a, w_b, lam) -> (P+, theta+, trace(P+))``, or None when
-    ``Gamma`` is not positive definite:
-
-    * ``P``: packed upper triangle of the covariance (``n (n+1)/2`` floats);
-    * ``a``: first row (weight ``R_a``), ``e1`` its residual ``z~_1``;
-    * ``b``: second row (weight ``R_b``, target 0);
-    * ``w_a = lambda / R_a``, ``w_b = lambda / R_b``: the diagonal of ``lambda R~^-1``;
-    * ``lam``: forgetting factor lambda.
-    """
-    src = ["def kernel(P, th, a, b, e1, wa, wb, lam):",
-           "    sc = 1.0",
-           unpack_line("p", n * (n + 1) // 2, "P"), unpack_line("t", n, "th"),
-           unpack_line("a", n, "a"), unpack_line("b", n, "b")]
-    src += two_row_update_lines(n)
-    src.append("    return [x * sn for x in Q], [" + ", ".join(f"n{i}" for i in range(n))
-               + "], tr")
-    return compile_kernel(src, f"two_row_rls_kernel({n})")
+            q = Q[i][j] + beta if i == j else Q[i][j]
+            P_new[i][j] = P_new[j][i] = q - delta * dot(Q[i], Q[j])
+    return P_new, [t + k * e for t, k in zip(theta, K)], e, lam, s
 
 
 class RecursiveLeastSquares:
@@ -220,7 +118,7 @@ class RecursiveLeastSquares:
     Attributes (read them, do not assign, except ``P`` to set a prior):
         theta: parameter estimate, shape (n,) (a new array on each read).
         P: parameter covariance (in units of ``sigma2``), shape (n, n) (a new array on
-            each read; kept as a packed upper triangle of floats).
+            each read; kept as rows of floats).
         e: last a priori residual ``a - phi^T theta`` (units of ``a``).
         S: last residual variance predicted from ``P`` and ``sigma2``.
         nis: last normalized residual ``e^2 / S`` (about 1 when consistent).
@@ -265,10 +163,9 @@ class RecursiveLeastSquares:
         self.beta = (1.0 - forgetting) * p_min if beta is None else beta
         self.delta = (1.0 / forgetting - 1.0) / p_max if delta is None else delta
         self.names = tuple(names) if names is not None else tuple(f"p{i}" for i in range(n))
-        self._kernel = rls_kernel(n)
         self._theta: list[float] = [0.0] * n if theta0 is None else [
             float(v) for v in theta0]
-        self._P: list[float] = []
+        self._P: Rows = []
         self.P = np.eye(n) * p0
         self.sigma2 = sigma2_0
         self.e = 0.0
@@ -284,14 +181,14 @@ class RecursiveLeastSquares:
     @property
     def P(self) -> np.ndarray:
         """The parameter covariance in units of ``sigma2``, shape (n, n) (a new array)."""
-        return np.array(unpack(self._P, self.n))
+        return np.array(self._P)
 
     @P.setter
     def P(self, P: np.ndarray) -> None:
         """Set the covariance (its symmetric part)."""
         P = np.asarray(P, float)
-        self._P = [0.5 * (float(P[i, j]) + float(P[j, i]))
-                   for i in range(self.n) for j in range(i, self.n)]
+        self._P = [[0.5 * (float(P[i, j]) + float(P[j, i])) for j in range(self.n)]
+                   for i in range(self.n)]
 
     def predict(self, phi: Sequence[float]) -> float:
         """Model output ``phi^T theta``."""
@@ -308,7 +205,7 @@ class RecursiveLeastSquares:
         ``weight`` in (0, 1] scales the sample's information (1 / relative variance), so a
         sample taken while the inputs are uncertain counts less.
         """
-        self._P, self._theta, e, lam, s = self._kernel(
+        self._P, self._theta, e, lam, s = rls_update(
             self._P, self._theta, [float(v) for v in phi], float(a),
             max(weight, 1e-9), self.forgetting, self.tr_max, self.beta, self.delta)
         self.S = self.sigma2 * s / lam

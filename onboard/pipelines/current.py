@@ -36,7 +36,7 @@ samples and estimates:
 
 Without an identified surge model the along-track current is not observable on a straight
 line; weak couplings (pitch, heave prior) make the filter's own variance shrink anyway
-(measured: 1.2 m/s error at 3.3 sigma after 270 s, Gavia straight run). The reported
+(docs/current.md, "Why the current is observable"). The reported
 one-sigma is then at least the prior along the track, unless the headings of the last
 minutes are diverse enough for the sway constraint alone (``heading_diversity``).
 """
@@ -44,30 +44,17 @@ minutes are diverse enough for the sway constraint alone (``heading_diversity``)
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from onboard.core.config import CONFIG_DIR, Config, ConfigError
-from onboard.core.geo import wrap_pi
-from onboard.core.messages import (
-    ActuatorCommand,
-    Attitude,
-    Depth,
-    DvlPosition,
-    DvlVelocity,
-    GnssFix,
-    Heading,
-    Imu,
-    Sample,
-    VelocityOverGround,
-)
+from onboard.core.messages import Sample
 from onboard.core.pipeline_config import CurrentConfig
-from onboard.core.so3 import euler_to_matrix
 from onboard.estimators.current_hgo import CurrentHighGainObserver
-from onboard.estimators.current_kf import CurrentKalmanFilter, chi2_quantile
+from onboard.estimators.current_kf import PREDICT_STEP_S, CurrentKalmanFilter
 from onboard.estimators.flow_observer import FlowObserver
 from onboard.estimators.hgo import GainDesign, IncreasingGain
 from onboard.estimators.model_identification import (
@@ -75,10 +62,19 @@ from onboard.estimators.model_identification import (
     VelocityRls,
     floor_along_track,
 )
-from onboard.estimators.vehicle_models import ModelInputs, RegressionModel, kind_for_class
+from onboard.estimators.restored_current import RestoredCurrentCheck
+from onboard.estimators.vehicle_models import RegressionModel, kind_for_class
+from onboard.pipelines.current_samples import CurrentSamples
 
 GAIN_DIR = CONFIG_DIR / "gains"
 """Precomputed LMI gains for the bundled configs (``onboard design-gain``)."""
+
+
+VELOCITY_FRESH_S = 1.0
+"""The model identifications learn only while a velocity was measured within this long (s)."""
+MEAS_INTERVAL_S = (1e-3, 0.1, 1.0)
+"""Interval (s) between velocity measurements as the high-gain observer's increasing-gain
+law sees it: (floor, the first measurement's, ceiling)."""
 
 
 class CurrentPipeline:
@@ -87,16 +83,13 @@ class CurrentPipeline:
     Inspectable attributes (filterpy style): ``kf`` (the joint Kalman filter: ``x``, ``P``,
     ``y``, ``S``, ``nis``), ``identification`` (prior, schedule, yaw RLS), ``hgo`` and
     ``flow`` (the observer of that variant, or None), ``hgo_rls`` (the high-gain observer's
-    own model identification, or None), ``inp`` (model inputs), ``roll``,
-    ``pitch``, ``yaw`` (rad), ``counters``; shortcuts ``x``, ``P``, ``thetas`` (model
-    coefficients in use, per channel), ``yaw_rls`` and ``gamma`` (HGO gain, 0 without).
+    own model identification, or None), ``restore_check`` (the probation of a restored
+    current), ``inp`` (model inputs), ``roll``, ``pitch``, ``yaw`` (rad), ``counters``;
+    shortcuts ``x``, ``P``, ``thetas`` (model coefficients in use, per channel),
+    ``yaw_rls`` and ``gamma`` (HGO gain, 0 without).
     """
 
     name = "current"
-
-    ATTITUDE_FALLBACK_S = 1.0
-    """A ``DvlPosition`` roll/pitch is used only this long (s) after the last
-    ``Attitude`` sample: the vehicle's attitude reference comes first."""
 
     def __init__(self, cfg: CurrentConfig, kind: str, sensors: Any,
                  configured: bool, gain: GainDesign | None = None) -> None:
@@ -126,12 +119,17 @@ class CurrentPipeline:
         self.observable: list[bool] = [False] * nd
         """Per earth axis: whether the last published component was known (one-sigma at
         most ``unknown_above_std``)."""
-        # restored-current probation (set_state): the twin filter (restored model, current
-        # at its prior), the restored current and covariance, data time it has held
-        self._twin: tuple[ModelIdentification, CurrentKalmanFilter] | None = None
-        self._restored: tuple[np.ndarray, np.ndarray] | None = None
-        self._probation_s = 0.0
-        self._restore_d2 = 0.0
+        self.restore_check = RestoredCurrentCheck(
+            hold_s=cfg.restore_check_s, false_alarm_p=cfg.restore_check_p,
+            unknown_above_std=cfg.unknown_above_std, init_current_std=cfg.init_current_std)
+        self._init_observers(cfg, sensors, gain)
+        self._init_sample_state(cfg, sensors)
+
+    def _init_observers(self, cfg: CurrentConfig, sensors: Any,
+                        gain: GainDesign | None) -> None:
+        """The reported observer beside the joint filter (``observer``): the high-gain
+        observer with its own RLS, or the flow observer."""
+        nd = self.nd
         self.gain = gain
         self.hgo: CurrentHighGainObserver | None = None
         self.hgo_rls: VelocityRls | None = None
@@ -150,38 +148,15 @@ class CurrentPipeline:
             self.flow = FlowObserver(self.model, poles=cfg.flow_poles or None,
                                      psi_std=sensors.compass.heading_std_rad,
                                      pitch=cfg.flow_pitch, svf_cutoff_hz=cfg.svf_cutoff_hz)
-        self.gnss_std = cfg.gnss_velocity_std or sensors.gnss.velocity_std_mps
-        self.gnss_nominal_acc = (cfg.gnss_nominal_accuracy_m
-                                 if cfg.gnss_nominal_accuracy_m is not None
-                                 else sensors.gnss.position_std_m)
-        self.gnss_std_used = self.gnss_std
-        """The velocity one-sigma (m/s) of the newest fused GNSS fix."""
-        self.dvl_std = cfg.dvl_velocity_std or sensors.dvl.velocity_std_mps
-        self.dvl_max_fom = sensors.dvl.max_fom_mps
-        self.surface_depth = sensors.depth.surface_depth_m
-        self.inp = ModelInputs()
-        # roll and pitch (rad) for the rotation R and the model's gravity/buoyancy
-        # regressors (``inp.roll``, ``inp.pitch``): the newest attitude stamped at or
-        # before the step time (:meth:`_set_attitude`)
-        self.roll = self.pitch = 0.0
-        self._att_t = -math.inf  # stamp of the attitude in use
-        self._ahrs_t = -math.inf  # stamp of the newest Attitude sample
-        self._att_later: list[tuple[float, float, float, bool]] = []  # stamped after a tick
-        self._step_t = math.inf
-        self.yaw: float | None = None
-        self._have_rates = False
-        self._yaw_prev: tuple[float, float] | None = None
-        self.depth: float | None = None
+
+    def _init_sample_state(self, cfg: CurrentConfig, sensors: Any) -> None:
+        """The sample adapter (model inputs, attitude, velocity measurements) and the
+        stamps of the fusion."""
+        self.samples = CurrentSamples(cfg, sensors, self.nd, self.counters)
+        self.inp = self.samples.inp
         self._t: float | None = None
         self._last_meas_t: float | None = None
         self._last_velocity_t: float | None = None
-        # sample handlers by exact class (the sample classes have no subclasses): one dict
-        # look-up per sample instead of a chain of isinstance tests
-        self._handlers: dict[type, Callable[[Any, list], None]] = {
-            Attitude: self._on_attitude, Heading: self._on_heading, Imu: self._on_imu,
-            ActuatorCommand: self._on_command, Depth: self._on_depth,
-            VelocityOverGround: self._on_vog, DvlVelocity: self._on_dvl,
-            DvlPosition: self._on_dvl_position, GnssFix: self._on_gnss}
 
     # ------------------------------------------------------------------ shortcuts
     @property
@@ -210,183 +185,81 @@ class CurrentPipeline:
         return self.hgo.gamma if self.hgo is not None else 0.0
 
     # ------------------------------------------------------------------ samples
-    def _on_attitude(self, s: Attitude, meas: list) -> None:
-        if not (math.isfinite(s.roll_rad) and math.isfinite(s.pitch_rad)
-                and math.isfinite(s.yaw_rad)):
-            self.counters["rejected_nonfinite"] += 1
-            return
-        self._set_attitude(s.t, s.roll_rad, s.pitch_rad, True)
-        if s.yaw_selected:  # else the source selector chose another heading source
-            self._set_yaw(s.t, s.yaw_rad)
-        if s.yaw_rate_rps is not None:
-            self.inp.p = s.roll_rate_rps or 0.0
-            self.inp.q = s.pitch_rate_rps or 0.0
-            self.inp.r = s.yaw_rate_rps
-            self._have_rates = True
+    @property
+    def roll(self) -> float:
+        """Roll in use (rad)."""
+        return self.samples.roll
 
-    def _on_dvl_position(self, s: DvlPosition, meas: list) -> None:
-        """The DVL's own roll and pitch: a fallback when no ``Attitude`` sample came
-        within ``ATTITUDE_FALLBACK_S`` (its yaw is not used: heading sources are
-        ``Attitude`` and ``Heading``)."""
-        if s.roll_rad is None or s.pitch_rad is None:
-            return
-        if not (math.isfinite(s.roll_rad) and math.isfinite(s.pitch_rad)):
-            self.counters["rejected_nonfinite"] += 1
-            return
-        self._set_attitude(s.t, s.roll_rad, s.pitch_rad, False)
+    @property
+    def pitch(self) -> float:
+        """Pitch in use (rad)."""
+        return self.samples.pitch
 
-    def _set_attitude(self, t: float, roll: float, pitch: float, primary: bool) -> None:
-        """Take roll and pitch (rad, ZYX Euler, FRD/NED: pitch positive nose up, roll
-        positive starboard down) stamped ``t`` if it is the newest at or before the step
-        time; a sample stamped after the step time is held until a step reaches it."""
-        if t > self._step_t:
-            if len(self._att_later) >= 64:  # stamps far ahead of the ticks: keep the newest
-                del self._att_later[0]
-            self._att_later.append((t, roll, pitch, primary))
-            return
-        if primary:
-            self._ahrs_t = max(self._ahrs_t, t)
-        elif t - self._ahrs_t <= self.ATTITUDE_FALLBACK_S:
-            return
-        if t < self._att_t:
-            return
-        self._att_t = t
-        self.roll = self.inp.roll = roll
-        self.pitch = self.inp.pitch = pitch
-
-    def _on_heading(self, s: Heading, meas: list) -> None:
-        if not math.isfinite(s.heading_rad):
-            self.counters["rejected_nonfinite"] += 1
-            return
-        h = s.heading_rad + ((s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0)
-        self._set_yaw(s.t, h)
-
-    def _on_imu(self, s: Imu, meas: list) -> None:
-        if math.isfinite(s.gyro_z):
-            self.inp.p, self.inp.q, self.inp.r = s.gyro_x, s.gyro_y, s.gyro_z
-            self._have_rates = True
-
-    def _on_command(self, s: ActuatorCommand, meas: list) -> None:
-        x = self.inp
-        if s.propeller_rpm is not None:
-            x.n = s.propeller_rpm / self.cfg.rpm_scale
-        elif s.throttle is not None:
-            x.n = s.throttle
-        if s.rudder_rad is not None:
-            x.dr = s.rudder_rad
-        if s.stern_plane_rad is not None:
-            x.ds = s.stern_plane_rad
-        if s.left is not None:
-            x.left = s.left
-        if s.right is not None:
-            x.right = s.right
-        if s.thrusters is not None:
-            x.thrusters = s.thrusters
-
-    def _on_depth(self, s: Depth, meas: list) -> None:
-        self.depth = s.depth_m
-
-    def _on_vog(self, s: VelocityOverGround, meas: list) -> None:
-        z = [s.v_north_mps, s.v_east_mps] + ([s.v_down_mps] if (
-            self.nd == 3 and s.v_down_mps is not None) else [])
-        if not all(math.isfinite(v) for v in z):
-            self.counters["rejected_nonfinite"] += 1
-            return
-        meas.append(("earth", s.t, np.array(z), self.dvl_std))
-
-    def _on_dvl(self, s: DvlVelocity, meas: list) -> None:
-        if not s.valid or (s.fom_mps is not None and s.fom_mps > self.dvl_max_fom):
-            self.counters["rejected_invalid_dvl"] += 1
-            return
-        z = [s.vx, s.vy, s.vz][: self.nd]
-        if not all(math.isfinite(v) for v in z):
-            self.counters["rejected_nonfinite"] += 1
-            return
-        std = max(self.dvl_std, s.fom_mps or 0.0)
-        meas.append(("bottom" if s.track == "bottom" else "water", s.t, np.array(z), std))
-
-    def _on_gnss(self, s: GnssFix, meas: list) -> None:
-        if s.sog_mps is None or s.cog_rad is None or s.fix_quality == 0:
-            return
-        if self.depth is not None and self.depth > self.surface_depth:
-            return
-        if not (math.isfinite(s.sog_mps) and math.isfinite(s.cog_rad)):
-            self.counters["rejected_nonfinite"] += 1
-            return
-        z = np.array([s.sog_mps * math.cos(s.cog_rad), s.sog_mps * math.sin(s.cog_rad)])
-        std = self.gnss_std
-        sacc, acc, nominal = s.speed_acc_mps, s.h_acc_m, self.gnss_nominal_acc
-        if nominal > 0 and sacc is not None and math.isfinite(sacc) and sacc > 0:
-            std = max(std, sacc)  # the receiver's speed accuracy, down-weighting only
-        elif nominal > 0 and acc is not None and math.isfinite(acc) and acc > 0:
-            std *= max(1.0, acc / nominal)  # its position accuracy as a proxy
-        self.gnss_std_used = std
-        meas.append(("earth", s.t, z, std))
-
-    def _set_yaw(self, t: float, yaw: float) -> None:
-        """Take the heading (rad); without measured rates, the yaw rate follows its
-        difference quotient (a 0.3 s low-pass)."""
-        if not self._have_rates and self._yaw_prev is not None:
-            t0, y0 = self._yaw_prev
-            if t - t0 > 1e-3:
-                r = wrap_pi(yaw - y0) / (t - t0)
-                self.inp.r += min(1.0, (t - t0) / 0.3) * (r - self.inp.r)
-        self._yaw_prev = (t, yaw)
-        self.yaw = yaw
+    @property
+    def yaw(self) -> float | None:
+        """Heading (rad; None before the first)."""
+        return self.samples.yaw
 
     def _R(self) -> np.ndarray:
-        """Body-to-earth rotation at the attitude in use (the yaw alone for a surface
-        vehicle's 2-D model)."""
-        if self.nd == 3:
-            return euler_to_matrix(self.roll, self.pitch, self.yaw or 0.0)
-        c, s = math.cos(self.yaw or 0.0), math.sin(self.yaw or 0.0)
-        return np.array([[c, -s], [s, c]])
+        """Body-to-earth rotation at the attitude in use."""
+        return self.samples.rotation()
 
     # ------------------------------------------------------------------ protocol
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         """Advance to tick ``t`` (s) with the new samples; returns the estimates."""
-        meas: list = []
-        handlers = self._handlers
-        self._step_t = t
-        if self._att_later:  # attitude stamped after an earlier tick, now due
-            due = sorted(a for a in self._att_later if a[0] <= t)
-            if due:
-                self._att_later = [a for a in self._att_later if a[0] > t]
-                for a in due:
-                    self._set_attitude(*a)
-        for s in samples:
-            h = handlers.get(type(s))
-            if h is not None:
-                h(s, meas)
+        meas = self.samples.take(t, samples)
         if self.yaw is None:
             return {}
-        kf, ident, hgo, flow = self.kf, self.identification, self.hgo, self.flow
+        kf, check = self.kf, self.restore_check
         if not kf.started:
             if not meas:
                 return {}
             self._start(meas[-1][0], meas[-1][2])
             self._t = t
         dt = t - (self._t if self._t is not None else t)
-        twin = self._twin
-        self._advance(ident, kf, t, dt)
-        if twin is not None:
-            self._advance(twin[0], twin[1], t, dt)
+        probation = check.active
+        self._predict(t, dt, probation)
+        self._t = t if dt >= 0 else self._t
+        R = self._R() if meas else None  # the attitude is fixed within the tick
+        if probation:
+            check.update(meas, R)
+        self._correct(meas, R)
+        if dt > 0:
+            self._identify(dt)
+        flow = self.flow
+        if flow is not None and flow.v_g is not None:
+            flow.step(dt if dt > 0 else 0.0, self.yaw, self.inp, self.identification.thetas,
+                      kf.x[: self.nd])
+        if probation and check.twin is not None and check.twin.started and dt > 0:
+            self._check_restored(dt)
+        return self._outputs()
+
+    def _predict(self, t: float, dt: float, probation: bool) -> None:
+        """The joint filter's (and the twin's) schedule and prediction to tick ``t`` (s);
+        the high-gain observer's prediction and its own RLS step."""
+        kf, hgo = self.kf, self.hgo
+        yaw = self.yaw
+        assert yaw is not None
+        kf.advance(t, dt, self.inp, yaw)
+        if probation:
+            self.restore_check.advance(t, dt, self.inp, yaw)
         if dt > 0 and hgo is not None:
             assert self.hgo_rls is not None
-            n_sub = max(1, math.ceil(dt / 0.2))
+            n_sub = max(1, math.ceil(dt / PREDICT_STEP_S))
             for _ in range(n_sub):
                 if not hgo.predict(dt / n_sub, self.inp, self.hgo_rls.thetas, kf.q_scale):
                     hgo.restart(kf.x, kf.P)
                     hgo.reset_gain()
             self._identify_hgo(t, dt)
-        self._t = t if dt >= 0 else self._t
-        R = self._R() if meas else None  # the attitude is fixed within the tick
-        if twin is not None and twin[1].started:
-            for kind, _tm, z, std in meas:
-                twin[1].update(kind, z, std, R)
+
+    def _correct(self, meas: list, R: np.ndarray | None) -> None:
+        """Every velocity measurement ``(kind, t, z, std)`` into the joint filter and the
+        reported observer; ``R`` the body-to-earth rotation."""
+        kf, hgo, flow = self.kf, self.hgo, self.flow
+        t_min, t_first, t_max = MEAS_INTERVAL_S
         for kind, tm, z, std in meas:
-            dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else 0.1
-            dt_meas = min(max(dt_meas, 1e-3), 1.0)
+            dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else t_first
+            dt_meas = min(max(dt_meas, t_min), t_max)
             self._last_meas_t = tm
             if kf.update(kind, z, std, R) == "reset" and hgo is not None:
                 hgo.reset_gain()
@@ -397,20 +270,18 @@ class CurrentPipeline:
                 flow.observe_velocity(kind, z, std, R, kf.velocity_over_ground(R) if (
                     kind == "earth" and len(z) < self.nd) else None)
             self._last_velocity_t = tm
-        if dt > 0:
-            fresh = (self._last_velocity_t is not None
-                     and not (self._t or 0.0) - self._last_velocity_t > 1.0)
-            ident.identify_yaw(dt, kf.x[: self.nd].tolist(), self.inp, velocity_fresh=fresh)
-            if flow is not None:
-                flow.identify_pitch(dt, kf.x[: self.nd].tolist(), self.inp, learn=(
-                    fresh and self.cfg.identify
-                    and float(kf.x[0]) >= self.cfg.identify_min_speed))
-        if flow is not None and flow.v_g is not None:
-            flow.step(dt if dt > 0 else 0.0, self.yaw, self.inp, ident.thetas,
-                      kf.x[: self.nd])
-        if twin is not None and twin[1].started and dt > 0:
-            self._check_restored(dt)
-        return self._outputs()
+
+    def _identify(self, dt: float) -> None:
+        """The yaw channel's RLS and, with the flow observer's vertical block, its pitch
+        channel's, on the joint filter's through-water velocity."""
+        kf, flow, cfg = self.kf, self.flow, self.cfg
+        fresh = (self._last_velocity_t is not None
+                 and not (self._t or 0.0) - self._last_velocity_t > VELOCITY_FRESH_S)
+        self.identification.identify_yaw(dt, kf.x[: self.nd].tolist(), self.inp,
+                                          velocity_fresh=fresh)
+        if flow is not None:
+            flow.identify_pitch(dt, kf.x[: self.nd].tolist(), self.inp, learn=(
+                fresh and cfg.identify and float(kf.x[0]) >= cfg.identify_min_speed))
 
     def _identify_hgo(self, t: float, dt: float) -> None:
         """One step of the high-gain observer's own RLS (``hgo_identify``) on its velocity
@@ -422,7 +293,8 @@ class CurrentPipeline:
         assert hgo is not None and rls is not None
         nu = hgo.x[: self.nd].tolist()
         learn = (cfg.identify and self._last_velocity_t is not None
-                 and t - self._last_velocity_t <= 1.0 and nu[0] >= cfg.identify_min_speed)
+                 and t - self._last_velocity_t <= VELOCITY_FRESH_S
+                 and nu[0] >= cfg.identify_min_speed)
         if learn and cfg.hgo_identify == "turns":
             c_var = hgo.current_cov().diagonal()
             learn = (math.sqrt(max(float(c_var[0]), float(c_var[1])))
@@ -444,87 +316,38 @@ class CurrentPipeline:
             return ident.surge_unobservable()
         return self.hgo_rls.masked[0] and ident.headings.length() > ident.heading_diversity
 
-    def _advance(self, ident: ModelIdentification, kf: CurrentKalmanFilter, t: float,
-                 dt: float) -> None:
-        """One joint filter's schedule and prediction to tick ``t`` (s), ``dt`` (s) after
-        the previous one. On the first leg (no turn yet) without a surge model, the
-        along-track current is unobservable and its variance along the heading is kept at
-        the prior (:meth:`.CurrentKalmanFilter.inflate_current_along`): otherwise the filter
-        drifts there with a shrinking variance and meets the first turn overconfident
-        (measured on jaiabot-turns: 0.8 m/s north error at one sigma 0.31 after the turn).
-        Later straight legs are not inflated: that would erase what the earlier headings'
-        sway constraint says about the cross-track part of the new heading (the published
-        one-sigma is floored instead, :meth:`_outputs`)."""
-        ident.observe_motion(t, dt, self.inp.r, self.yaw)
-        if ident.identifying:  # the coefficient covariance moves only while identifying
-            ident.lift_masks(kf.P.diagonal()[2 * self.nd:])
-        ident.identifying = ident.should_identify(t, kf.started, *kf.current_var_horizontal())
-        if dt > 0:
-            n_sub = max(1, math.ceil(dt / 0.2))
-            for _ in range(n_sub):
-                kf.predict(dt / n_sub, self.inp)
-        if kf.started and ident.surge_unobservable() and ident.last_turn_t == -math.inf:
-            yaw = self.yaw or 0.0
-            kf.inflate_current_along([math.cos(yaw), math.sin(yaw)],
-                                     self.cfg.init_current_std ** 2)
-
     def _check_restored(self, dt: float) -> None:
-        """The restored current against the twin filter's (module docstring of
-        ``restore_check_s``): on the components the twin observes, ``d^T (P_r + P_t)^-1 d``
-        against the chi-square quantile; discard (the twin's current replaces it) or, after
-        ``restore_check_s`` of agreement on every horizontal component, confirm."""
-        assert self._twin is not None and self._restored is not None
-        ident_t, kf_t = self._twin
-        c_r, P_r = self._restored
-        nd = self.nd
-        std_t = floor_along_track(kf_t.current_cov(), self.yaw or 0.0, self.cfg.init_current_std
-                                  if ident_t.surge_unobservable() else 0.0)
-        axes = [i for i in range(nd) if std_t[i] <= self.cfg.unknown_above_std]
-        if not axes:
-            return
-        d = (c_r - kf_t.x[nd:2 * nd])[axes]
-        S = (P_r + kf_t.current_cov())[np.ix_(axes, axes)]
-        d2 = float(d @ np.linalg.solve(S, d))
-        self._restore_d2 = d2
-        c_t = kf_t.x[nd:2 * nd]
-        if d2 > chi2_quantile(self.cfg.restore_check_p, len(axes)):
-            kf = self.kf
-            kf.x[:] = kf_t.x
-            kf.P = kf_t.P.copy()
-            kf.q_scale, kf.nis_avg = kf_t.q_scale, kf_t.nis_avg
-            kf._unpack_coefficients()
-            self.identification.masked = list(ident_t.masked)
+        """The restored current against the twin filter (``restore_check_s``,
+        :class:`.RestoredCurrentCheck`): a discard puts the twin's state in the joint
+        filter (and restarts the high-gain observer from it); both end the probation with
+        an event."""
+        check = self.restore_check
+        verdict = check.evaluate(dt, self.yaw or 0.0)
+        if verdict == "discard":
+            assert check.twin is not None and check.current is not None
+            c_twin = check.twin.x[self.nd:2 * self.nd]
+            self.kf.adopt(check.twin)
             if self.hgo is not None:
-                self.hgo.restart(kf.x, kf.P)
+                self.hgo.restart(self.kf.x, self.kf.P)
                 self.hgo.reset_gain()
             self.counters["restore_discarded"] = self.counters.get("restore_discarded", 0) + 1
             self.events.append(
-                "restored current (" + ", ".join(f"{v:.2f}" for v in c_r) + ") m/s "
-                "contradicts the data (" + ", ".join(f"{v:.2f}" for v in c_t) + f"; "
-                f"chi2 {d2:.1f} on {len(axes)} axes): discarded")
-            self._end_probation()
-            return
-        if all(i in axes for i in range(2)):
-            self._probation_s += dt
-            if self._probation_s >= self.cfg.restore_check_s:
-                self.counters["restore_confirmed"] = self.counters.get(
-                    "restore_confirmed", 0) + 1
-                self.events.append(f"restored current confirmed by {self._probation_s:.0f} s "
-                                   f"of data (chi2 {d2:.1f})")
-                self._end_probation()
-
-    def _end_probation(self) -> None:
-        self._twin = None
-        self._restored = None
-        self._probation_s = 0.0
+                "restored current (" + ", ".join(f"{v:.2f}" for v in check.current) + ") m/s "
+                "contradicts the data (" + ", ".join(f"{v:.2f}" for v in c_twin) + f"; "
+                f"chi2 {check.chi2:.1f} on {check.n_axes} axes): discarded")
+            check.end()
+        elif verdict == "confirm":
+            self.counters["restore_confirmed"] = self.counters.get("restore_confirmed", 0) + 1
+            self.events.append(f"restored current confirmed by {check.held_s:.0f} s "
+                               f"of data (chi2 {check.chi2:.1f})")
+            check.end()
 
     def _start(self, kind: str, z: np.ndarray) -> None:
         """Start the filters from the first velocity measurement."""
         self.kf.start(kind, z, self._R())  # type: ignore[arg-type]
         self.identification.headings.restart(self.yaw or 0.0)
-        if self._twin is not None:
-            self._twin[1].start(kind, z, self._R())  # type: ignore[arg-type]
-            self._twin[0].headings.restart(self.yaw or 0.0)
+        if self.restore_check.active:
+            self.restore_check.start(kind, z, self._R(), self.yaw or 0.0)  # type: ignore[arg-type]
         if self.hgo is not None:
             self.hgo.restart(self.kf.x, self.kf.P)
 
@@ -564,7 +387,7 @@ class CurrentPipeline:
         h["velocity.nis"] = kf.nis
         h["velocity.nis_avg"] = kf.nis_avg
         h["q_scale"] = kf.q_scale
-        h["velocity.gnss_std"] = self.gnss_std_used
+        h["velocity.gnss_std"] = self.samples.gnss_std_used
         if self.identification.n_theta:
             h["theta.std_max"] = kf.theta_std_max()
         rls = self.identification.yaw_rls
@@ -583,9 +406,9 @@ class CurrentPipeline:
         h["observable"] = float(all(self.observable[:2]))
         h["along_track_unobservable"] = float(self._surge_unobservable())
         h["heading_diversity"] = self.identification.headings.length()
-        if self._twin is not None:
-            h["restore_probation_s"] = self._probation_s
-            h["restore_chi2"] = self._restore_d2
+        if self.restore_check.active:
+            h["restore_probation_s"] = self.restore_check.held_s
+            h["restore_chi2"] = self.restore_check.chi2
         return h
 
     def get_state(self) -> dict[str, Any]:
@@ -614,7 +437,7 @@ class CurrentPipeline:
         the current at its prior checks it against the first minutes of data."""
         if state.get("model_kind") != self.model.kind:
             return
-        self._end_probation()
+        self.restore_check.end()
         nd = self.nd
         ident = self.identification
         try:
@@ -650,8 +473,7 @@ class CurrentPipeline:
                 kf.restore_coefficients(ident.thetas[:nd], theta_cov)
             except (TypeError, ValueError):
                 pass
-        self._twin = (ident, kf)
-        self._restored = (self.kf.x[nd:2 * nd].copy(), self.kf.current_cov())
+        self.restore_check.begin(kf, self.kf.x[nd:2 * nd].copy(), self.kf.current_cov())
 
 
 def _identification(cfg: CurrentConfig, model: RegressionModel,

@@ -64,6 +64,13 @@ Array = NDArray[np.float64]
 
 LEVELLING_SAMPLES = 50
 """IMU samples averaged to level the filter from gravity when no attitude arrives."""
+COMMAND_HISTORY_S = 1.0
+"""Thruster commands older than this (s) are dropped from the history the thrust update
+averages over (the one before it is kept: it holds at the interval's start)."""
+COMMAND_HISTORY_MAX = 50
+"""At most this many thruster commands are kept."""
+IMU_HISTORY = 2
+"""IMU samples kept (the last two: the angular acceleration's difference)."""
 
 HEADING_HOLD_S = 1.0
 """A ``Heading`` sample within this long (s) after an ``Attitude`` with its yaw is not
@@ -239,17 +246,9 @@ class Eseso:
         if not self.filter.initialized:
             if self._pending_att is not None:
                 self._initialize(self._pending_att)
-            else:
-                # level from gravity, yaw unknown
-                self._accel_sum += f_m
-                self._accel_n += 1
-                if self._accel_n < LEVELLING_SAMPLES:
-                    self.t_imu = s.t
-                    return
-                a = -self._accel_sum / self._accel_n  # points down in body axes
-                roll = math.atan2(a[1], a[2])
-                pitch = math.atan2(-a[0], math.hypot(a[1], a[2]))
-                self._initialize(euler_to_matrix(roll, pitch, 0.0), yaw_std_rad=math.pi)
+            elif not self._level_from_gravity(f_m):
+                self.t_imu = s.t
+                return
             self.t_imu = s.t
             self.f_m, self.w_m = f_m, w_m
             return
@@ -268,9 +267,24 @@ class Eseso:
             self.wdot = (w_m - self.w_m) / dt
         self.f_m, self.w_m = f_m, w_m
         self._imu_hist.append((s.t, f_m, w_m))
-        if len(self._imu_hist) > 2:
+        if len(self._imu_hist) > IMU_HISTORY:
             del self._imu_hist[0]
         self._thrust_update_at_imu()
+
+    def _level_from_gravity(self, f_m: Array) -> bool:
+        """Average the specific force ``f_m`` (m/s^2) of :data:`LEVELLING_SAMPLES` IMU
+        samples; then start the filter levelled from it (``g`` points down in body axes:
+        roll ``atan2(a_y, a_z)``, pitch ``atan2(-a_x, hypot(a_y, a_z))``), yaw unknown
+        (std pi). Returns whether the filter started."""
+        self._accel_sum += f_m
+        self._accel_n += 1
+        if self._accel_n < LEVELLING_SAMPLES:
+            return False
+        a = -self._accel_sum / self._accel_n  # points down in body axes
+        roll = math.atan2(a[1], a[2])
+        pitch = math.atan2(-a[0], math.hypot(a[1], a[2]))
+        self._initialize(euler_to_matrix(roll, pitch, 0.0), yaw_std_rad=math.pi)
+        return True
 
     def _on_command(self, s: ActuatorCommand) -> None:
         if s.thrusters is None:
@@ -287,9 +301,9 @@ class Eseso:
         self.t_tau = s.t
         self._tau_hist.append((s.t, self.tau))
         # keep what the last IMU intervals can still need
-        while len(self._tau_hist) > 2 and self._tau_hist[1][0] <= s.t - 1.0:
+        while len(self._tau_hist) > 2 and self._tau_hist[1][0] <= s.t - COMMAND_HISTORY_S:
             del self._tau_hist[0]
-        if len(self._tau_hist) > 50:
+        if len(self._tau_hist) > COMMAND_HISTORY_MAX:
             del self._tau_hist[0]
 
     def _on_gnss(self, s: GnssFix) -> None:

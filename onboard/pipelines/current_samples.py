@@ -1,0 +1,260 @@
+"""The current pipeline's samples: model inputs, attitude and velocity measurements
+(algorithms.md §3.5, the measurement table; docs/current.md, "Attitude").
+
+:class:`CurrentSamples` turns the samples of one tick into
+
+* the model inputs (:class:`.vehicle_models.ModelInputs`: rates, attitude, commands);
+* the attitude in use: roll and pitch from the newest ``Attitude`` sample stamped at or
+  before the step time (``DvlPosition``'s as a fallback), the heading from ``Attitude``
+  (when the source selector chose it) or ``Heading`` (true north);
+* the velocity measurements ``(kind, t, z, std)`` of :mod:`.current_kf`: GNSS SOG/COG and
+  ``VelocityOverGround`` in earth axes, DVL bottom and water track in body axes, each with
+  its one-sigma (m/s) from ``[sensors]`` (a GNSS fix's reported accuracy scales its own).
+
+Rejected samples are counted in the shared ``counters`` (``rejected_nonfinite``,
+``rejected_invalid_dvl``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from onboard.core.geo import wrap_pi
+from onboard.core.messages import (
+    ActuatorCommand,
+    Attitude,
+    Depth,
+    DvlPosition,
+    DvlVelocity,
+    GnssFix,
+    Heading,
+    Imu,
+    Sample,
+    VelocityOverGround,
+)
+from onboard.core.so3 import euler_to_matrix
+from onboard.estimators.vehicle_models import ModelInputs
+
+ATTITUDE_FALLBACK_S = 1.0
+"""A ``DvlPosition`` roll/pitch is used only this long (s) after the last ``Attitude``
+sample: the vehicle's attitude reference comes first."""
+YAW_RATE_LOWPASS_S = 0.3
+"""Without measured rates, the yaw rate is the heading's difference quotient through a
+first-order low-pass of this time constant (s)."""
+YAW_RATE_MIN_INTERVAL_S = 1e-3
+"""Headings closer than this (s) give no difference quotient."""
+ATTITUDE_HELD_MAX = 64
+"""Attitude samples stamped after the step time that are held for later ticks (the newest
+are kept)."""
+
+
+class CurrentSamples:
+    """Samples to model inputs, attitude and velocity measurements (module docstring).
+
+    Attributes:
+        inp: the model inputs (:class:`.ModelInputs`), updated in place.
+        roll, pitch: the attitude in use (rad, ZYX Euler, FRD/NED).
+        yaw: the heading (rad; None before the first).
+        depth: the newest depth (m; None before the first).
+        gnss_std: one-sigma of GNSS velocity (m/s) at the receiver's nominal accuracy
+            ``gnss_nominal_acc`` (m).
+        gnss_std_used: the velocity one-sigma (m/s) of the newest fused GNSS fix.
+        dvl_std: one-sigma of DVL velocity (m/s); ``dvl_max_fom`` the largest figure of
+            merit accepted (m/s).
+        surface_depth: GNSS is used only at most this deep (m).
+        counters: rejection counts, shared with the owner's health.
+    """
+
+    def __init__(self, cfg: Any, sensors: Any, nd: int, counters: dict[str, float]) -> None:
+        """Args:
+            cfg: the ``[pipelines.current]`` section (``rpm_scale`` and the one-sigmas
+                ``gnss_velocity_std``, ``gnss_nominal_accuracy_m``, ``dvl_velocity_std``).
+            sensors: the ``[sensors]`` section (defaults of those, DVL figure of merit,
+                surface depth).
+            nd: velocity dimension of the model (2 surface, 3 underwater).
+            counters: rejection counts to add to.
+        """
+        self.nd = nd
+        self.counters = counters
+        self.rpm_scale = cfg.rpm_scale
+        self.gnss_std = cfg.gnss_velocity_std or sensors.gnss.velocity_std_mps
+        self.gnss_nominal_acc = (cfg.gnss_nominal_accuracy_m
+                                 if cfg.gnss_nominal_accuracy_m is not None
+                                 else sensors.gnss.position_std_m)
+        self.gnss_std_used = self.gnss_std
+        self.dvl_std = cfg.dvl_velocity_std or sensors.dvl.velocity_std_mps
+        self.dvl_max_fom = sensors.dvl.max_fom_mps
+        self.surface_depth = sensors.depth.surface_depth_m
+        self.inp = ModelInputs()
+        # roll and pitch (rad) for the rotation R and the model's gravity/buoyancy
+        # regressors (``inp.roll``, ``inp.pitch``): the newest attitude stamped at or
+        # before the step time (:meth:`_set_attitude`)
+        self.roll = self.pitch = 0.0
+        self._att_t = -math.inf  # stamp of the attitude in use
+        self._ahrs_t = -math.inf  # stamp of the newest Attitude sample
+        self._att_later: list[tuple[float, float, float, bool]] = []  # stamped after a tick
+        self._step_t = math.inf
+        self.yaw: float | None = None
+        self._have_rates = False
+        self._yaw_prev: tuple[float, float] | None = None
+        self.depth: float | None = None
+        # sample handlers by exact class (the sample classes have no subclasses)
+        self._handlers: dict[type, Callable[[Any, list], None]] = {
+            Attitude: self._on_attitude, Heading: self._on_heading, Imu: self._on_imu,
+            ActuatorCommand: self._on_command, Depth: self._on_depth,
+            VelocityOverGround: self._on_vog, DvlVelocity: self._on_dvl,
+            DvlPosition: self._on_dvl_position, GnssFix: self._on_gnss}
+
+    def take(self, t: float, samples: Sequence[Sample]) -> list:
+        """Take the tick's samples into the model inputs and the attitude; returns the
+        velocity measurements ``(kind, t, z, std)`` among them, in time order."""
+        meas: list = []
+        handlers = self._handlers
+        self._step_t = t
+        if self._att_later:  # attitude stamped after an earlier tick, now due
+            due = sorted(a for a in self._att_later if a[0] <= t)
+            if due:
+                self._att_later = [a for a in self._att_later if a[0] > t]
+                for a in due:
+                    self._set_attitude(*a)
+        for s in samples:
+            h = handlers.get(type(s))
+            if h is not None:
+                h(s, meas)
+        return meas
+
+    def _on_attitude(self, s: Attitude, meas: list) -> None:
+        if not (math.isfinite(s.roll_rad) and math.isfinite(s.pitch_rad)
+                and math.isfinite(s.yaw_rad)):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        self._set_attitude(s.t, s.roll_rad, s.pitch_rad, True)
+        if s.yaw_selected:  # else the source selector chose another heading source
+            self._set_yaw(s.t, s.yaw_rad)
+        if s.yaw_rate_rps is not None:
+            self.inp.p = s.roll_rate_rps or 0.0
+            self.inp.q = s.pitch_rate_rps or 0.0
+            self.inp.r = s.yaw_rate_rps
+            self._have_rates = True
+
+    def _on_dvl_position(self, s: DvlPosition, meas: list) -> None:
+        """The DVL's own roll and pitch: a fallback when no ``Attitude`` sample came
+        within ``ATTITUDE_FALLBACK_S`` (its yaw is not used: heading sources are
+        ``Attitude`` and ``Heading``)."""
+        if s.roll_rad is None or s.pitch_rad is None:
+            return
+        if not (math.isfinite(s.roll_rad) and math.isfinite(s.pitch_rad)):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        self._set_attitude(s.t, s.roll_rad, s.pitch_rad, False)
+
+    def _set_attitude(self, t: float, roll: float, pitch: float, primary: bool) -> None:
+        """Take roll and pitch (rad, ZYX Euler, FRD/NED: pitch positive nose up, roll
+        positive starboard down) stamped ``t`` if it is the newest at or before the step
+        time; a sample stamped after the step time is held until a step reaches it."""
+        if t > self._step_t:
+            if len(self._att_later) >= ATTITUDE_HELD_MAX:  # far ahead of the ticks
+                del self._att_later[0]
+            self._att_later.append((t, roll, pitch, primary))
+            return
+        if primary:
+            self._ahrs_t = max(self._ahrs_t, t)
+        elif t - self._ahrs_t <= ATTITUDE_FALLBACK_S:
+            return
+        if t < self._att_t:
+            return
+        self._att_t = t
+        self.roll = self.inp.roll = roll
+        self.pitch = self.inp.pitch = pitch
+
+    def _on_heading(self, s: Heading, meas: list) -> None:
+        if not math.isfinite(s.heading_rad):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        h = s.heading_rad + ((s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0)
+        self._set_yaw(s.t, h)
+
+    def _on_imu(self, s: Imu, meas: list) -> None:
+        if math.isfinite(s.gyro_z):
+            self.inp.p, self.inp.q, self.inp.r = s.gyro_x, s.gyro_y, s.gyro_z
+            self._have_rates = True
+
+    def _on_command(self, s: ActuatorCommand, meas: list) -> None:
+        x = self.inp
+        if s.propeller_rpm is not None:
+            x.n = s.propeller_rpm / self.rpm_scale
+        elif s.throttle is not None:
+            x.n = s.throttle
+        if s.rudder_rad is not None:
+            x.dr = s.rudder_rad
+        if s.stern_plane_rad is not None:
+            x.ds = s.stern_plane_rad
+        if s.left is not None:
+            x.left = s.left
+        if s.right is not None:
+            x.right = s.right
+        if s.thrusters is not None:
+            x.thrusters = s.thrusters
+
+    def _on_depth(self, s: Depth, meas: list) -> None:
+        self.depth = s.depth_m
+
+    def _on_vog(self, s: VelocityOverGround, meas: list) -> None:
+        z = [s.v_north_mps, s.v_east_mps] + ([s.v_down_mps] if (
+            self.nd == 3 and s.v_down_mps is not None) else [])
+        if not all(math.isfinite(v) for v in z):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        meas.append(("earth", s.t, np.array(z), self.dvl_std))
+
+    def _on_dvl(self, s: DvlVelocity, meas: list) -> None:
+        if not s.valid or (s.fom_mps is not None and s.fom_mps > self.dvl_max_fom):
+            self.counters["rejected_invalid_dvl"] += 1
+            return
+        z = [s.vx, s.vy, s.vz][: self.nd]
+        if not all(math.isfinite(v) for v in z):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        std = max(self.dvl_std, s.fom_mps or 0.0)
+        meas.append(("bottom" if s.track == "bottom" else "water", s.t, np.array(z), std))
+
+    def _on_gnss(self, s: GnssFix, meas: list) -> None:
+        if s.sog_mps is None or s.cog_rad is None or s.fix_quality == 0:
+            return
+        if self.depth is not None and self.depth > self.surface_depth:
+            return
+        if not (math.isfinite(s.sog_mps) and math.isfinite(s.cog_rad)):
+            self.counters["rejected_nonfinite"] += 1
+            return
+        z = np.array([s.sog_mps * math.cos(s.cog_rad), s.sog_mps * math.sin(s.cog_rad)])
+        std = self.gnss_std
+        sacc, acc, nominal = s.speed_acc_mps, s.h_acc_m, self.gnss_nominal_acc
+        if nominal > 0 and sacc is not None and math.isfinite(sacc) and sacc > 0:
+            std = max(std, sacc)  # the receiver's speed accuracy, down-weighting only
+        elif nominal > 0 and acc is not None and math.isfinite(acc) and acc > 0:
+            std *= max(1.0, acc / nominal)  # its position accuracy as a proxy
+        self.gnss_std_used = std
+        meas.append(("earth", s.t, z, std))
+
+    def _set_yaw(self, t: float, yaw: float) -> None:
+        """Take the heading (rad); without measured rates, the yaw rate follows its
+        difference quotient (a 0.3 s low-pass)."""
+        if not self._have_rates and self._yaw_prev is not None:
+            t0, y0 = self._yaw_prev
+            if t - t0 > YAW_RATE_MIN_INTERVAL_S:
+                r = wrap_pi(yaw - y0) / (t - t0)
+                self.inp.r += min(1.0, (t - t0) / YAW_RATE_LOWPASS_S) * (r - self.inp.r)
+        self._yaw_prev = (t, yaw)
+        self.yaw = yaw
+
+    def rotation(self) -> np.ndarray:
+        """Body-to-earth rotation at the attitude in use (the yaw alone for a surface
+        vehicle's 2-D model)."""
+        if self.nd == 3:
+            return euler_to_matrix(self.roll, self.pitch, self.yaw or 0.0)
+        c, s = math.cos(self.yaw or 0.0), math.sin(self.yaw or 0.0)
+        return np.array([[c, -s], [s, c]])
