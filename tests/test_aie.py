@@ -150,9 +150,16 @@ def test_pipeline_columns_health_and_state_roundtrip() -> None:
     for c in pa.columns:
         assert np.isfinite(out[c][-1])
     h = pa.health()
-    for key in ("surge.innovation", "surge.S", "surge.nis", "surge.diverged",
-                "heading.innovation", "heading.S", "heading.nis", "heading.diverged"):
+    for key in ("surge.steps", "surge.diverged", "surge.V_d", "heading.steps",
+                "heading.diverged", "heading.theta_norm"):
         assert key in h and math.isfinite(h[key])
+    assert not any(k.endswith(("nis", "innovation", ".S")) for k in h)  # innovations apart
+    recs = pa.innovations()
+    channels = {r.channel for r in recs}
+    assert channels == {"surge.increment", "heading.increment"}   # no Doppler speed here
+    assert all(r.dof == 1 and len(r.z) == 1 and len(r.S) == 1 and r.S[0] > 0.0
+               and math.isclose(r.nis, r.z[0] ** 2 / r.S[0]) for r in recs)
+    assert pa.innovations() == []   # taken
     st = json.loads(json.dumps(pa.get_state()))
     fresh = _pipes()[0]
     fresh.set_state(st)
