@@ -12,10 +12,11 @@ comparison of the seed paper (Faros & Tanner 2025, §3) is like for like (algori
   as the time between points, and past ``max_gap_s`` the chain restarts;
 * two axis filters (:class:`~onboard.estimators.increment_filter.IncrementFilter`), each
   with the input model its pipeline gives it (AIE: RCIE; KF: the commanded input);
-* the trajectory reconstruction of §2.11 (:mod:`onboard.estimators.track`), dead
-  reckoning through a GNSS outage (:mod:`onboard.estimators.dead_reckoning`), and the
-  estimates at the tick, predicted from the last steps with the model and the newest
-  command, or with the accelerometer where the log has one (``imu_aiding``).
+* the trajectory reconstruction of §2.11 and the estimates at the tick
+  (:class:`~onboard.estimators.reconstruction.TrackReconstruction`): the heading and
+  position rebuilt from the increments, predicted from the last steps with the model and
+  the newest command (or the accelerometer, ``imu_aiding``), dead reckoned through a GNSS
+  outage.
 
 Inputs: :class:`GnssFix`, :class:`Heading` or :class:`Attitude` yaw, :class:`Imu`, and
 :class:`ActuatorCommand` (optional: without it AIE runs unchanged and the KF baseline
@@ -32,7 +33,7 @@ import math
 from typing import Any, Callable, Literal, Mapping, Sequence
 
 from onboard.core.config import Config
-from onboard.core.geo import LocalFrame, wrap_2pi, wrap_pi
+from onboard.core.geo import LocalFrame, wrap_pi
 from onboard.core.messages import (
     ActuatorCommand,
     Attitude,
@@ -49,7 +50,6 @@ from onboard.estimators.axis_model import (
     axis_commands,
     path_increment,
 )
-from onboard.estimators.dead_reckoning import DeadReckoner
 from onboard.estimators.increment_filter import IncrementFilter
 from onboard.estimators.measurement_points import (
     CommandHistory,
@@ -58,8 +58,7 @@ from onboard.estimators.measurement_points import (
     clamp,
     finite_positive,
 )
-from onboard.estimators.path_accel import ForecastBlend, PathAccelerometer
-from onboard.estimators.track import HeadingTrack, PositionTrack, position_std
+from onboard.estimators.reconstruction import Point, TrackReconstruction
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used."""
@@ -73,13 +72,9 @@ CRAB_MIN_SPEED_MPS = 0.5
 """Below this speed over ground (m/s) the course is too noisy for the crab angle."""
 SAME_POINT_S = 1e-3
 """Two points closer in time than this (s) are one point: the newer is not used."""
-SHORTEST_PREDICTION_S = 1e-6
-"""A prediction over less time than this (s) is none."""
 WINDOW_END_AFTER_FIX = 0.25
 """Surge windows end this fraction of a step after the fixes (a regular receiver): each
 closes with the first sample after its fix, not a step later."""
-COURSE_POINTS = 4
-"""Points whose baseline gives the course over ground in course mode (§1.3)."""
 COURSE_MODE_ANCHOR = 0.3
 """Least anchor gain in course mode: the course lags the track by half its baseline."""
 
@@ -97,7 +92,7 @@ class SurgeHeadingPipeline:
 
     Attributes:
         surge, yaw: the axis filters (:class:`IncrementFilter`).
-        heading, position: the reconstructed track (:mod:`onboard.estimators.track`).
+        track: the reconstructed track and its estimates (:class:`TrackReconstruction`).
         commands: the command history (:class:`CommandHistory`).
         frame: the local frame about the first fix (None before it).
     """
@@ -105,9 +100,10 @@ class SurgeHeadingPipeline:
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
                  gnss_std_m: float, heading_std_rad: float, factory: AxisFactory,
                  gnss_velocity_std_mps: float = 0.1) -> None:
-        """``cfg``: the pipeline's table (``[pipelines.aie]`` or ``[pipelines.kf]``); ``gnss_std_m``, ``heading_std_rad`` and
-        ``gnss_velocity_std_mps``: the ``[sensors]`` noise, unless ``cfg`` sets its own;
-        ``factory`` builds each axis filter with its input model."""
+        """``cfg``: the pipeline's table (``[pipelines.aie]`` or ``[pipelines.kf]``);
+        ``gnss_std_m``, ``heading_std_rad`` and ``gnss_velocity_std_mps``: the
+        ``[sensors]`` noise, unless ``cfg`` sets its own; ``factory`` builds each axis
+        filter with its input model."""
         if not 0.0 < cfg.gnss_accuracy_min_m <= cfg.gnss_accuracy_max_m:
             raise ValueError(f"[pipelines.{name}] needs 0 < gnss_accuracy_min_m <= "
                              f"gnss_accuracy_max_m, got {cfg.gnss_accuracy_min_m}, "
@@ -124,17 +120,17 @@ class SurgeHeadingPipeline:
         s, h = cfg.surge, cfg.heading
         self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg, "surge")
         self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg, "heading")
-        self.heading = HeadingTrack(self.sigma_h ** 2)
-        self.position = PositionTrack()
         self.commands = CommandHistory()
+        self.track = TrackReconstruction(
+            self.surge, self.yaw, self.commands, var_fix=self.sigma_p ** 2,
+            var_heading0=self.sigma_h ** 2, max_gap_s=cfg.max_gap_s,
+            imu_aiding=cfg.imu_aiding, imu_horizon_s=cfg.imu_horizon_s)
         self.frame: LocalFrame | None = None
         self._publish_inputs = "surge_input" in columns
         self._disc = Discretization()
         self._unwrap = HeadingUnwrapper()
-        self._var_fix = self.sigma_p ** 2    # the fix's slowly varying error (m^2)
         self._acc_bad = 0                    # fixes whose reported accuracy was not > 0
         self._init_windows()
-        self._init_reconstruction()
 
     def _init_windows(self) -> None:
         """The measurement windows and the previous points of both axes."""
@@ -152,22 +148,6 @@ class SurgeHeadingPipeline:
         self._h_prev: tuple[float, float] | None = None                 # t, psi
         self._R_prev = self.sigma_p ** 2     # noise variance of the previous point (m^2)
         self._R_h_prev = self.sigma_h ** 2   # of the previous heading point (rad^2)
-
-    def _init_reconstruction(self) -> None:
-        """Course mode, dead reckoning and the accelerometer's forecast."""
-        self._course: float | None = None    # course over ground in course mode (rad)
-        self._course_pts: list[tuple[float, float]] = []
-        self._var_course = 0.0               # its variance (rad^2)
-        self._psi_s: float | None = None
-        """Cache of the heading at the last surge step (rad) for the output; None when
-        stale (a window closed, a command arrived, the model changed)."""
-        self._dr: DeadReckoner | None = None
-        """Dead reckoning since the last surge step, while windows pass without a fix."""
-        self._psi_dr = 0.0                   # heading (rad) at the dead reckoning's time
-        self._imu = PathAccelerometer() if self.cfg.imu_aiding else None
-        """The accelerometer's path acceleration, integrated (``imu_aiding``)."""
-        self._blend = ForecastBlend()
-        """Weight of the accelerometer's speed forecast against the model's."""
 
     # -- samples in ------------------------------------------------------------------------
 
@@ -265,9 +245,10 @@ class SurgeHeadingPipeline:
         noise the configured ``sigma_v`` or the fix's worse reported accuracy; its course
         against the heading is the accelerometer's crab angle."""
         sog, cog, psi = s.sog_mps, s.cog_rad, self._unwrap.last
-        if (self._imu is not None and sog is not None and cog is not None
+        imu = self.track.imu
+        if (imu is not None and sog is not None and cog is not None
                 and psi is not None and abs(sog) > CRAB_MIN_SPEED_MPS):
-            self._imu.crab(cog - psi)
+            imu.crab(cog - psi)
         if sog is None or not self.cfg.gnss_velocity or not math.isfinite(sog):
             return
         if cog is not None and psi is not None and math.cos(cog - psi) < 0.0:
@@ -290,8 +271,8 @@ class SurgeHeadingPipeline:
         self._add_heading(s.t, s.heading_rad + dec, s.source)
 
     def _on_attitude(self, s: Attitude) -> None:
-        if self._imu is not None:
-            self._imu.attitude(s.t, s.roll_rad, s.pitch_rad)
+        if self.track.imu is not None:
+            self.track.imu.attitude(s.t, s.roll_rad, s.pitch_rad)
         if self._t0 is None:
             self._start(s.t)
         if s.yaw_selected and s.t - self._t_heading > HEADING_HOLD_S:
@@ -303,12 +284,12 @@ class SurgeHeadingPipeline:
         self._hw.add_heading(t, u, source)
 
     def _on_imu(self, s: Imu) -> None:
-        if self._imu is not None:
-            self._imu.add(s.t, s.accel_x, s.accel_y, s.gyro_x, s.gyro_y, s.gyro_z)
+        if self.track.imu is not None:
+            self.track.imu.add(s.t, s.accel_x, s.accel_y, s.gyro_x, s.gyro_y, s.gyro_z)
 
     def _on_command(self, s: ActuatorCommand) -> None:
         self.commands.add(s.t, *axis_commands(s, self.cfg.input_mode))
-        self._psi_s = None
+        self.track.invalidate()
 
     def _trim_commands(self) -> None:
         """Keep the commands from the one in force at the older previous point on."""
@@ -321,7 +302,7 @@ class SurgeHeadingPipeline:
     def _close_heading_window(self) -> None:
         """One heading step: the window's mean heading is the new point; its increment
         over the previous point goes to the heading filter, then the heading track."""
-        self._psi_s = None
+        self.track.invalidate()
         w, self._hw = self._hw, Window()
         if w.n_h == 0:
             return
@@ -336,38 +317,27 @@ class SurgeHeadingPipeline:
             self.yaw.restart()
             hp = None
         if hp is None:
-            self.heading.restart(th, psi, R_h)
+            self.track.heading.restart(th, psi, R_h)
             return
         cmd = self.commands.mean(hp[0], th, 2)
         self.yaw.step(self._disc(self.yaw.damping(cmd), th - hp[0]), wrap_pi(psi - hp[1]),
                       R_h, R_h_prev, cmd, t=th, source=w.heading_source)
-        self.heading.step(th, psi, R_h, self.yaw.kf, self.cfg.heading_anchor, hp[1])
+        self.track.heading.step(th, psi, R_h, self.yaw.kf, self.cfg.heading_anchor, hp[1])
         self._trim_commands()
-
-    def _heading_at(self, t: float) -> float:
-        """The reconstructed heading (rad, unwrapped) predicted to time ``t`` (s)."""
-        h, yaw = self.heading, self.yaw
-        assert h.psi is not None and h.t is not None
-        tau = min(max(t - h.t, 0.0), self.cfg.max_gap_s)
-        if not yaw.kf.initialized or tau <= SHORTEST_PREDICTION_S:
-            return h.psi
-        dpsi, _ = yaw.kf.predict_ahead(self._disc(yaw.damping(yaw.last_command), tau),
-                                       yaw.input_ahead(self.commands.latest(2)))
-        return h.psi + dpsi
 
     # -- the surge axis: one step per GNSS window --------------------------------------------
 
     def _close_surge_window(self, t_end: float) -> None:
         """One surge step with the window ending at ``t_end`` (s): its fixes averaged to
         one point; a window without a fix advances the dead reckoning instead."""
-        self._psi_s = None
+        self.track.invalidate()
         w, self._w = self._w, Window()
         early, self._w_early = self._w_early, False
         if w.n_fix == 0:
             if not early:   # the rest of a window closed at an output is no gap
-                self._dead_reckon(t_end)
+                self.track.dead_reckon(t_end)
             return
-        self._dr = None
+        self.track.fix_arrived()
         course_mode = self._unwrap.last is None
         if w.n_h == 0 and not course_mode:
             return
@@ -382,28 +352,25 @@ class SurgeHeadingPipeline:
         else:
             self._surge_step(w, pp, R_s, R_s_prev, course_mode)
 
-    def _restart_surge_chain(self, pp: tuple[float, float, float, float] | None,
-                             tp: float, n: float, e: float, R_s: float,
-                             R_s_prev: float) -> None:
-        """The first point, or the first after a gap: the filter restarts and the
-        position starts at the point, or follows the measured displacement across the
-        gap (with both points' noise)."""
+    def _restart_surge_chain(self, pp: Point | None, tp: float, n: float, e: float,
+                             R_s: float, R_s_prev: float) -> None:
+        """The first point, or the first after a gap: the filter restarts, the track
+        starts from the point (or follows the measured displacement across the gap)."""
         if pp is not None:
             self.surge.restart()
-        if not self.position.have or pp is None:
-            self.position.restart(tp, n, e, R_s)
-        else:
-            self.position.follow(tp, n - pp[1], e - pp[2], R_s + R_s_prev)
+        self.track.restart_position(pp, tp, n, e, R_s, R_s_prev)
 
-    def _surge_step(self, w: Window, pp: tuple[float, float, float, float], R_s: float,
-                    R_s_prev: float, course_mode: bool) -> None:
+    def _surge_step(self, w: Window, pp: Point, R_s: float, R_s_prev: float,
+                    course_mode: bool) -> None:
         """The path increment from the previous point to the new one (§1.3) through the
         surge filter (§2.7, with the window's mean Doppler speed as the rate), then the
-        position along the mid-step heading with the anchor (§2.11)."""
-        tp, n, e, psi = self._pt_prev  # type: ignore[misc]
+        track (§2.11)."""
+        point = self._pt_prev
+        assert point is not None
+        tp, n, e, psi = point
         dpsi = 0.0
         if course_mode:
-            y = self._course_increment(n, e, pp, R_s)
+            y = self.track.course_increment(n, e, pp, R_s)
         else:   # a previous point from before the first heading has none: no turn
             psi_prev = psi if math.isnan(pp[3]) else pp[3]
             dpsi = wrap_pi(psi - psi_prev)
@@ -414,41 +381,11 @@ class SurgeHeadingPipeline:
         v_prev = surge.kf.v if surge.kf.initialized else None
         surge.step(self._disc(surge.damping(cmd), tp - pp[0]), y, R_s, R_s_prev, cmd,
                    y_v, R_v, t=tp, source=w.fix_source)
-        if self._imu is not None and v_prev is not None and y_v is not None:
-            self._learn_imu_forecast(pp[0], tp, v_prev, y_v)
-        if course_mode:
-            mid, var_mid = self._course, self._var_course
-        else:
-            mid, var_mid = self._mid_heading(pp, tp, dpsi), self.heading.var
-        self.position.step(tp, surge.kf.d, mid, surge.kf.P[0], var_mid,  # type: ignore
-                           (n, e), R_s, self._anchor_gain(w, R_s, course_mode))
+        if self.track.imu is not None and v_prev is not None and y_v is not None:
+            self.track.learn_imu_forecast(pp[0], tp, v_prev, y_v)
+        self.track.surge_step(pp, point, R_s, self._anchor_gain(w, R_s, course_mode),
+                              course_mode, dpsi)
         self._trim_commands()
-
-    def _course_increment(self, n: float, e: float, pp: tuple[float, float, float, float],
-                          R_s: float) -> float:
-        """Course mode: the displacement projected on the course over ground of the last
-        :data:`COURSE_POINTS` points (unbiased; astern motion is not detectable), whose
-        variance from two points of variance ``R_s`` over the baseline ``L`` is ``2 R_s /
-        L^2``."""
-        hist = self._course_pts
-        hist.append((n, e))
-        if len(hist) > COURSE_POINTS:
-            del hist[0]
-        n0, e0 = hist[0]
-        course = math.atan2(e - e0, n - n0) if len(hist) > 1 else 0.0
-        base2 = (n - n0) ** 2 + (e - e0) ** 2
-        self._var_course = min(2.0 * R_s / base2, 1.0) if base2 > 0.0 else 1.0
-        self._course = course
-        return math.cos(course) * (n - pp[1]) + math.sin(course) * (e - pp[2])
-
-    def _mid_heading(self, pp: tuple[float, float, float, float], tp: float,
-                     dpsi: float) -> float:
-        """The reconstructed heading (rad) in the middle of the step from ``pp[0]`` to
-        ``tp``, the mean of its two ends (the measured one before any reconstruction)."""
-        if self.heading.psi is None or self.heading.t is None:
-            return pp[3] + 0.5 * dpsi
-        self._psi_dr = self._heading_at(tp)
-        return 0.5 * (self._heading_at(pp[0]) + self._psi_dr)
 
     def _anchor_gain(self, w: Window, R_s: float, course_mode: bool) -> float:
         """The position anchor (§2.11), at least :data:`COURSE_MODE_ANCHOR` in course
@@ -464,192 +401,15 @@ class SurgeHeadingPipeline:
                 ka *= ratio
         return ka
 
-    def _learn_imu_forecast(self, t_prev: float, tp: float, v_prev: float,
-                            y_v: float) -> None:
-        """The model's and the accelerometer's forecasts of the speed at ``tp`` against
-        the measured one (the blend's weight), and the accelerometer's bias from the
-        filter's speed change over the step."""
-        imu = self._imu
-        assert imu is not None
-        acc = imu.delta(t_prev, tp)
-        rz = self.surge.rate_z
-        if acc is not None and rz is not None:
-            self._blend.add(rz, v_prev + acc[0] - y_v)
-        imu.update_bias(t_prev, tp, self.surge.kf.v - v_prev)
-
-    def _dead_reckon(self, t_end: float) -> None:
-        """Advance the dead reckoning to ``t_end`` (s) through a window without a fix
-        (:class:`DeadReckoner`): the surge filter's speed and input along the heading
-        track. Started at the last surge step; published once the gap exceeds
-        ``max_gap_s``; dropped at the next fix."""
-        surge, pos, h = self.surge, self.position, self.heading
-        if (not surge.kf.initialized or pos.t is None or h.psi is None or h.t is None
-                or self._unwrap.last is None):
-            return
-        dr = self._dr
-        if dr is None:
-            dr = self._dr = DeadReckoner(
-                pos.t, pos.n, pos.e, surge.kf.v, surge.kf.P[3], pos.var_n, pos.var_e,
-                math.sqrt(surge.speed_bias_var()), math.sqrt(h.var))
-        dt = t_end - dr.t
-        if dt <= SHORTEST_PREDICTION_S:
-            return
-        cmd = self.commands.mean(dr.t, t_end, 1)
-        psi1 = self._heading_at(t_end)
-        dr.advance(self._disc(surge.damping(cmd), dt), surge.input_ahead(cmd),
-                   0.5 * (self._psi_dr + psi1), surge.V_u)
-        self._psi_dr = psi1
-
     # -- estimates at the tick ----------------------------------------------------------------
 
     def _output(self, t: float) -> dict[str, float]:
-        """The estimates at ``t`` (s), predicted from the last steps with the newest
-        command: heading first, then speed and position from the track, from the dead
-        reckoning through an outage, or the held position before the filter runs."""
-        out: dict[str, float] = {}
-        if self.heading.psi is None:   # no heading source (yet)
-            self._course_output(out, t)
-            return out
-        psi, var_h = self._heading_output(out, t)
-        pos = self.position
-        if self._dr is not None and pos.t is not None and t - pos.t > self.cfg.max_gap_s:
-            self._dr_output(out, t, psi, var_h)
-        elif self.surge.kf.initialized and pos.t is not None:
-            self._track_output(out, t, psi, var_h)
-        elif pos.have:
-            out["north"], out["east"] = pos.n, pos.e
-            out["std_north"] = math.sqrt(pos.var_n + self._var_fix)
-            out["std_east"] = math.sqrt(pos.var_e + self._var_fix)
-        self._input_outputs(out)
+        """The estimates at ``t`` (s): the track's (:meth:`TrackReconstruction.estimates`)
+        and, for AIE, the input estimates."""
+        out = self.track.estimates(t)
+        if out:
+            self._input_outputs(out)
         return out
-
-    def _heading_output(self, out: dict[str, float], t: float) -> tuple[float, float]:
-        """Heading, yaw rate and heading sigma predicted to ``t``; returns the heading
-        (rad, unwrapped) and its variance (rad^2)."""
-        h, yaw = self.heading, self.yaw
-        psi, var_h = h.psi, h.var
-        assert psi is not None and h.t is not None
-        if yaw.kf.initialized:
-            tau = clamp(t - h.t, 0.0, self.cfg.max_gap_s)
-            r = yaw.kf.v
-            if tau > SHORTEST_PREDICTION_S:
-                k = self._disc(yaw.damping(yaw.last_command), tau)
-                dpsi, r = yaw.kf.predict_ahead(k, yaw.input_ahead(self.commands.latest(2)))
-                psi = psi + dpsi
-                var_h += k.c1 * k.c1 * yaw.kf.P[3] + k.c2 * k.c2 * yaw.V_u
-            out["heading"] = wrap_2pi(psi)
-            out["yaw_rate"] = r
-        else:
-            out["heading"] = wrap_2pi(psi)
-        out["std_heading"] = math.sqrt(var_h)
-        return psi, var_h
-
-    def _track_output(self, out: dict[str, float], t: float, psi: float,
-                      var_h: float) -> None:
-        """Speed and position predicted from the last surge step to ``t`` along the mean
-        of the headings at both ends, with their sigmas (:func:`position_std`, plus the
-        displacement not followed beyond ``max_gap_s``)."""
-        surge, pos = self.surge, self.position
-        t_s = pos.t
-        assert t_s is not None
-        skf = surge.kf
-        tau_raw = t - t_s
-        tau = clamp(tau_raw, 0.0, self.cfg.max_gap_s)
-        ds, v = skf.v * tau, skf.v
-        var_ds, var_v = skf.P[3] * tau * tau, skf.P[3]
-        if tau > SHORTEST_PREDICTION_S:
-            k = self._disc(surge.damping(surge.last_command), tau)
-            ds, v = skf.predict_ahead(k, surge.input_ahead(self.commands.latest(1)))
-            var_ds = k.c1 * k.c1 * skf.P[3] + k.c2 * k.c2 * surge.V_u
-            var_v = k.alpha * k.alpha * skf.P[3] + k.c1 * k.c1 * surge.V_u
-            ds, v, var_ds, var_v = self._imu_forecast(t_s, t, tau, tau_raw, ds, v, var_ds,
-                                                      var_v)
-        out["speed"] = v
-        if self._psi_s is None:
-            self._psi_s = self._heading_at(t_s)
-        mid = 0.5 * (self._psi_s + psi)
-        c, s = math.cos(mid), math.sin(mid)
-        out["north"] = pos.n + ds * c
-        out["east"] = pos.e + ds * s
-        out["std_north"], out["std_east"] = position_std(
-            pos.var_n, pos.var_e, c, s, var_ds, ds * ds * var_h,
-            self._held_var(tau_raw, v, var_v))
-        out["std_speed"] = math.sqrt(var_v)
-
-    def _imu_forecast(self, t_s: float, t: float, tau: float, tau_raw: float, ds: float,
-                      v: float, var_ds: float, var_v: float
-                      ) -> tuple[float, float, float, float]:
-        """The model's forecast of path, speed and their variances over ``tau`` (s)
-        blended with the accelerometer's (``v_s tau + int int a``, ``v_s + int a``, its
-        bias variance integrated) by the learned weight, within ``imu_horizon_s``."""
-        imu, wi = self._imu, self._blend.w
-        if imu is None or wi <= 0.0 or tau_raw > self.cfg.imu_horizon_s:
-            return ds, v, var_ds, var_v
-        acc = imu.delta(t_s, t)
-        if acc is None:
-            return ds, v, var_ds, var_v
-        wm = 1.0 - wi
-        V_a = imu.bias_var
-        skf = self.surge.kf
-        P_vv = skf.P[3]
-        return (wm * ds + wi * (skf.v * tau + acc[1]),
-                wm * v + wi * (skf.v + acc[0]),
-                wm * var_ds + wi * tau * tau * (P_vv + 0.25 * tau * tau * V_a),
-                wm * var_v + wi * (P_vv + tau * tau * V_a))
-
-    def _held_var(self, tau_raw: float, v: float, var_v: float) -> float:
-        """The variance (m^2, per axis) added to a published position ``tau_raw`` (s)
-        after the last surge step: the fix's ``sigma_p^2``, and beyond ``max_gap_s``,
-        where the position is held while the vehicle moves on, ``(v^2 + var(v)) ex^2 /
-        2`` for the time ``ex`` past it (direction unknown: conservative for a vehicle
-        that turns back)."""
-        ex = tau_raw - self.cfg.max_gap_s
-        return self._var_fix + (0.5 * (v * v + var_v) * ex * ex if ex > 0.0 else 0.0)
-
-    def _dr_output(self, out: dict[str, float], t: float, psi: float, var_h: float) -> None:
-        """Speed, position and their sigmas from the dead reckoning (a GNSS gap longer
-        than ``max_gap_s``), predicted from its time to ``t`` with the newest command."""
-        dr, surge = self._dr, self.surge
-        assert dr is not None
-        tau = t - dr.t
-        u = surge.input_ahead(self.commands.latest(1))
-        ds, v, var_ds, var_v = 0.0, dr.v, 0.0, dr.p_vv
-        if tau > SHORTEST_PREDICTION_S:
-            k = self._disc(surge.damping(surge.last_command), tau)
-            ds, v = k.c1 * dr.v + k.c2 * u, k.alpha * dr.v + k.c1 * u
-            var_ds = k.c1 * k.c1 * dr.p_vv + k.c2 * k.c2 * surge.V_u
-            var_v = k.alpha * k.alpha * dr.p_vv + k.c1 * k.c1 * surge.V_u
-        mid = 0.5 * (self._psi_dr + psi)
-        c, s = math.cos(mid), math.sin(mid)
-        vn, ve = dr.variances()
-        out["speed"] = v
-        out["north"] = dr.n + ds * c
-        out["east"] = dr.e + ds * s
-        out["std_north"], out["std_east"] = position_std(vn, ve, c, s, var_ds,
-                                                         ds * ds * var_h, self._var_fix)
-        out["std_speed"] = math.sqrt(var_v)
-
-    def _course_output(self, out: dict[str, float], t: float) -> None:
-        """Course mode (no heading source): speed and position predicted along the
-        course over ground, with their sigmas."""
-        surge, pos, course = self.surge, self.position, self._course
-        if course is None or not surge.kf.initialized or pos.t is None:
-            return
-        tau_raw = t - pos.t
-        tau = max(clamp(tau_raw, 0.0, self.cfg.max_gap_s), SHORTEST_PREDICTION_S)
-        k = self._disc(surge.damping(surge.last_command), tau)
-        ds, v = surge.kf.predict_ahead(k, surge.input_ahead(self.commands.latest(1)))
-        c, s = math.cos(course), math.sin(course)
-        out["speed"] = v
-        out["north"] = pos.n + ds * c
-        out["east"] = pos.e + ds * s
-        P_vv, V_u = surge.kf.P[3], surge.V_u
-        var_v = k.alpha * k.alpha * P_vv + k.c1 * k.c1 * V_u
-        out["std_north"], out["std_east"] = position_std(
-            pos.var_n, pos.var_e, c, s, k.c1 * k.c1 * P_vv + k.c2 * k.c2 * V_u,
-            ds * ds * self._var_course, self._held_var(tau_raw, v, var_v))
-        out["std_speed"] = math.sqrt(var_v)
-        self._input_outputs(out)
 
     def _input_outputs(self, out: dict[str, float]) -> None:
         """AIE's input estimates now (``surge_input`` m/s^2, ``yaw_input`` rad/s^2): the
@@ -704,7 +464,7 @@ class SurgeHeadingPipeline:
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restore :meth:`get_state`; a model that is missing, malformed, not finite or
         not damped (``a <= 0``) is ignored, and so is what does not fit an input model."""
-        self._psi_s = None
+        self.track.invalidate()
         for nm, ax in self._axes():
             sub = state.get(nm)
             if not isinstance(sub, dict):
@@ -716,7 +476,7 @@ class SurgeHeadingPipeline:
 
     def set_model(self, axis: Literal["surge", "heading"], model: AxisModel) -> None:
         """Use an identified model (e.g. from :func:`axis_model.identify_surge`)."""
-        self._psi_s = None
+        self.track.invalidate()
         (self.surge if axis == "surge" else self.yaw).model = model
 
 
