@@ -391,14 +391,20 @@ class Engine:
         counts, and the events since the previous call (``events`` first), stale streams
         among them."""
         self._check_stale(t)
-        rejected = dict(self.rejected)
-        rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
-        rejected.update({f"pipeline:{k}:nonfinite": n for k, n in self.nonfinite.items()})
         return HealthRecord(vehicle=self.cfg.vehicle.id, t=t, rates_hz=rates_hz or {},
-                            rejected=rejected, innovations=self.monitor.snapshot(),
+                            rejected=self.rejections(), innovations=self.monitor.snapshot(),
                             counters=self.counters(),
                             events=(events or []) + self._new_events(), mode=self.mode,
                             sources=self.selector.active)
+
+    def rejections(self) -> dict[str, int]:
+        """Every count of what was not used: samples by ``<type>:<reason>``, and per
+        pipeline its failures (``pipeline:<name>:error``, each a restart) and the
+        estimates left out as not finite (``pipeline:<name>:nonfinite``)."""
+        rejected = dict(self.rejected)
+        rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
+        rejected.update({f"pipeline:{k}:nonfinite": n for k, n in self.nonfinite.items()})
+        return rejected
 
     def counters(self) -> dict[str, dict[str, float | None]]:
         """Every pipeline's :meth:`~onboard.pipelines.base.Pipeline.health` (a value that
