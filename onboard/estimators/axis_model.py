@@ -162,8 +162,8 @@ def path_increment(dn: float, de: float, psi_prev: float, dpsi: float,
     direction of the chord of a circular arc) and scaled by the arc-to-chord ratio
     ``h / sin(h)``, ``h = dpsi/2``. The projection is linear in the displacement, so
     zero-mean GNSS noise leaves it unbiased; the chord's *magnitude* ``hypot(dn, de)``
-    is not: the cross-track noise adds ``sigma_x^2 / (2 |d|)`` on average (+0.13 m per
-    step at 0.63 m increment noise and 1.5 m steps, tests/test_surge_heading.py).
+    is not: the cross-track noise adds ``sigma_x^2 / (2 |d|)`` on average
+    (docs/aie.md, "Unbiased increment").
     A crab angle ``beta`` between heading and track shortens the projection by
     ``1 - cos(beta)`` (0.4 % at 5 deg).
 
