@@ -1,7 +1,7 @@
 """The accelerometer's measure of the path acceleration, integrated for short forecasts.
 
-Between two GNSS fixes the track of :mod:`onboard.estimators.reconstruction`
-predict the path speed. A first-order model (algorithms.md §1.1) cannot follow what it
+Between two GNSS fixes the track of :mod:`onboard.estimators.reconstruction` predicts
+the path speed. A first-order model (algorithms.md §1.1) cannot follow what it
 does not contain (waves moving the boat at the wave period, a wrong thrust map); the
 IMU measures the acceleration itself. This module turns the body specific force into
 the derivative of the signed path speed and integrates it, so a forecast over ``tau``
