@@ -326,9 +326,7 @@ class Engine:
                 values = self._recover(i, p, err)
                 queue.restarted(i)
             self._take_events(p)
-            take = getattr(p, "innovations", None)  # TRANSITION: until current/eseso have it
-            if take is not None:
-                self.monitor.add(p.name, take())
+            self.monitor.add(p.name, p.innovations())
             if values:
                 records.append(self._record(p, t, values, queue.t_sensor))
         queue.close_tick()

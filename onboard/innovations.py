@@ -85,9 +85,19 @@ class InnovationMonitor:
 
     def __init__(self) -> None:
         self.channels: dict[str, dict[str, ChannelStats]] = {}
+        self._kept: dict[str, list[Innovation]] = {}
+
+    def keep(self, pipeline: str) -> list[Innovation]:
+        """From now on, also keep every record of ``pipeline`` as it arrives, in the list
+        returned (reports and tests that need each update, not the summary)."""
+        return self._kept.setdefault(pipeline, [])
 
     def add(self, pipeline: str, records: Iterable[Innovation]) -> None:
         """The records of one pipeline's updates, in order."""
+        kept = self._kept.get(pipeline)
+        if kept is not None:
+            records = list(records)
+            kept.extend(records)
         per = self.channels.get(pipeline)
         for rec in records:
             if per is None:

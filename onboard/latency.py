@@ -137,8 +137,7 @@ class FixedLagQueue:
         fork = forks[i]
         assert fork is not None
         values = fork.step(self._t, self._fork_input)
-        if hasattr(fork, "innovations"):  # TRANSITION
-            fork.innovations()  # the delayed pipeline's updates are the ones of record
+        fork.innovations()  # the delayed pipeline's updates are the ones of record
         return values
 
     def restarted(self, i: int) -> None:

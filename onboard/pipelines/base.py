@@ -8,6 +8,7 @@ pipeline sees only its inputs, live operation and replay give identical results.
 
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
 
 from onboard.core.config import Config
@@ -56,6 +57,15 @@ class Pipeline(Protocol):
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restore what :meth:`get_state` returned; ignore what does not fit."""
         ...
+
+
+def unused_measurement(channel: str, t: float, dof: int, reason: str,
+                       source: str = "") -> Innovation:
+    """The record of a measurement rejected before any update (invalid, not finite, ...):
+    without a forecast its innovation, covariance and NIS are not numbers."""
+    nan = math.nan
+    return Innovation(channel=channel, t=t, z=(nan,) * dof, S=(nan,) * (dof * dof),
+                      nis=nan, dof=dof, accepted=False, reason=reason, source=source)
 
 
 class PipelineFactory(Protocol):
