@@ -144,7 +144,8 @@ def test_a_key_file_readable_by_others_or_a_missing_required_key_is_a_config_err
     ("surge.increment", "position"), ("surge.rate", "velocity"),
     ("heading.increment", "heading"), ("velocity", "velocity"), ("dvl", "velocity"),
     ("vog", "velocity"), ("attitude", "heading"), ("depth", "depth"), ("thrust", None),
-    ("yaw_rls", "heading")])
+    ("yaw_rls", "heading"), ("gnss_pos", "position"), ("gnss_vel", "velocity"),
+    ("water_track", "velocity"), ("hgo.velocity", "velocity"), ("flow.heading", "heading")])
 def test_each_innovation_channel_feeds_the_estimator_status_ratio_of_its_kind(channel, kind):
     from onboard.service.publishers.mavlink_pub import ratio_kind
 

@@ -179,13 +179,13 @@ def ratio_kind(channel: str) -> str | None:
     velocities (Doppler speed, DVL, velocity over ground) the velocity, increments and
     positions the horizontal position."""
     c = channel.lower()
-    if c.startswith(("heading", "yaw")) or "attitude" in c:
+    if c.startswith(("heading", "yaw")) or c.endswith("heading") or "attitude" in c:
         return "heading"
     if "depth" in c:
         return "depth"
-    if any(w in c for w in ("rate", "velocity", "dvl", "vog", "water", "speed")):
+    if any(w in c for w in ("rate", "vel", "dvl", "vog", "water", "speed")):
         return "velocity"
-    if "increment" in c or "position" in c:
+    if "increment" in c or "pos" in c:
         return "position"
     return None
 
