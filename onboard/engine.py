@@ -45,6 +45,7 @@ from onboard.core.messages import (
 )
 from onboard.corrections import SampleCorrector
 from onboard.depth import DepthMode
+from onboard.innovations import InnovationMonitor
 from onboard.inputs import InputMapper
 from onboard.latency import FixedLagQueue, sample_time
 from onboard.pipelines import build
@@ -161,6 +162,8 @@ class Engine:
         nonfinite: estimates left out of the records because they were not finite, per
             pipeline (a NaN or infinite value is an unknown quantity, published absent).
         latest: the newest record of each pipeline.
+        monitor: the innovations of every pipeline's updates, per channel
+            (:class:`onboard.innovations.InnovationMonitor`).
     """
 
     def __init__(self, cfg: Config, pipelines: list[Pipeline] | None = None,
@@ -197,6 +200,7 @@ class Engine:
         """Per pipeline name: its ``std_<q>`` columns -> ``<q>`` (:func:`std_columns`)."""
         self.pipeline_errors: Counter[str] = Counter()
         self.nonfinite: Counter[str] = Counter()
+        self.monitor = InnovationMonitor()
         self.events: list[str] = []
         """Human-readable events (pipeline restarts, stale streams) for the health
         channel; each is in one :meth:`health` record (the next after it happened)."""
@@ -322,6 +326,7 @@ class Engine:
                 values = self._recover(i, p, err)
                 queue.restarted(i)
             self._take_events(p)
+            self.monitor.add(p.name, p.innovations())
             if values:
                 records.append(self._record(p, t, values, queue.t_sensor))
         queue.close_tick()
@@ -380,22 +385,30 @@ class Engine:
 
     def health(self, t: float, rates_hz: dict[str, float] | None = None,
                events: list[str] | None = None) -> HealthRecord:
-        """Innovations and NIS of every pipeline plus rejection counts; the events since
-        the previous call (``events`` first), stale streams among them."""
+        """The innovations of every pipeline per channel, their counters, the rejection
+        counts, and the events since the previous call (``events`` first), stale streams
+        among them."""
         self._check_stale(t)
-        innovations: dict[str, float] = {}
-        nis: dict[str, float] = {}
-        for p in self.pipelines:
-            for k, v in p.health().items():
-                target = nis if k.endswith("nis") else innovations
-                target[f"{p.name}.{k}"] = float(v)
+        return HealthRecord(vehicle=self.cfg.vehicle.id, t=t, rates_hz=rates_hz or {},
+                            rejected=self.rejections(), innovations=self.monitor.snapshot(),
+                            counters=self.counters(),
+                            events=(events or []) + self._new_events(), mode=self.mode,
+                            sources=self.selector.active)
+
+    def rejections(self) -> dict[str, int]:
+        """Every count of what was not used: samples by ``<type>:<reason>``, and per
+        pipeline its failures (``pipeline:<name>:error``, each a restart) and the
+        estimates left out as not finite (``pipeline:<name>:nonfinite``)."""
         rejected = dict(self.rejected)
         rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
         rejected.update({f"pipeline:{k}:nonfinite": n for k, n in self.nonfinite.items()})
-        return HealthRecord(vehicle=self.cfg.vehicle.id, t=t, rates_hz=rates_hz or {},
-                            rejected=rejected, innovations=innovations, nis=nis,
-                            events=(events or []) + self._new_events(), mode=self.mode,
-                            sources=self.selector.active)
+        return rejected
+
+    def counters(self) -> dict[str, dict[str, float | None]]:
+        """Every pipeline's :meth:`~onboard.pipelines.base.Pipeline.health` (a value that
+        is not finite as None: JSON has no NaN)."""
+        return {p.name: {k: (float(v) if math.isfinite(v) else None)
+                         for k, v in p.health().items()} for p in self.pipelines}
 
     def _new_events(self) -> list[str]:
         new = self.events[self._events_reported:][-10:]

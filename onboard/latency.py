@@ -136,7 +136,9 @@ class FixedLagQueue:
             self.copies += 1
         fork = forks[i]
         assert fork is not None
-        return fork.step(self._t, self._fork_input)
+        values = fork.step(self._t, self._fork_input)
+        fork.innovations()  # the delayed pipeline's updates are the ones of record
+        return values
 
     def restarted(self, i: int) -> None:
         """The ``i``-th pipeline was replaced: every fork is made again next tick."""

@@ -14,6 +14,8 @@ import time
 from pathlib import Path
 from typing import Iterable, Iterator, Sequence
 
+import msgspec
+
 from drivers.base import UnreadableLog
 from drivers.logs import open_log
 from onboard.autodetect import detect
@@ -187,7 +189,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "samples_accepted_by_type": dict(sorted(kinds.items())),
         "rates_hz": {k: (n / span if span > 0 else None) for k, n in sorted(kinds.items())},
         "accepted": {f"{k}:{src}": n for (k, src), n in sorted(engine.accepted.items())},
-        "rejected": dict(sorted(engine.rejected.items())),
+        "rejected": dict(sorted(engine.rejections().items())),
         "sources": {"active": dict(engine.selector.active),
                     "switches": engine.selector.switches,
                     "events": [e for e in engine.events if e.split(":", 1)[0] in QUANTITIES],
@@ -196,18 +198,14 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "ticks": ticks,
         "rows": csv.rows,
         "rate_hz": cfg.engine.rate_hz,
-        "pipeline_health": {p.name: {k: _json_num(v) for k, v in p.health().items()}
-                            for p in engine.pipelines},
+        "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
+        "pipeline_health": engine.counters(),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
     }
     if plot:
         summary["figure"] = _plot_track(out_dir)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
-
-
-def _json_num(v: float) -> float | None:
-    return float(v) if math.isfinite(v) else None
 
 
 def _plot_track(out_dir: Path) -> str | None:

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -50,7 +51,13 @@ import numpy as np
 
 from onboard.core import config as onboard_config
 from onboard.core.geo import wrap_pi_array
-from onboard.core.messages import ActuatorCommand, ActuatorOutputs, EstimateRecord
+from onboard.core.messages import (
+    ActuatorCommand,
+    ActuatorOutputs,
+    ChannelHealth,
+    EstimateRecord,
+    Innovation,
+)
 from onboard.engine import Engine
 from sitl.controllers import CircleReference, ControlOutput, make_controller
 from sitl.environment import Environment
@@ -154,8 +161,9 @@ def simulate(controller: str, duration: float = 240.0, seed: int = 0,
     ``duration`` simulated seconds; returns (report, time series). ``eseso_overrides`` are
     ``[pipelines.eseso]`` keys; ``mismatch`` a :mod:`sitl.mismatch` case applied to the
     plant and the sensors (the ESESO and the controller keep the nominal model and noise);
-    ``collect_nis`` adds the mean NIS of every ESESO update per channel to the report
-    (``nis``); ``controller_kw`` go to the controller's constructor."""
+    ``collect_nis`` adds the mean NIS of every ESESO update per channel (its innovation
+    records, gated updates included) to the report (``nis``: ``{channel: {"mean", "n",
+    "dim"}}``); ``controller_kw`` go to the controller's constructor."""
     sc = scenario or CircleScenario()
     case = mismatch_case(mismatch)
     ref = sc.reference()
@@ -168,7 +176,7 @@ def simulate(controller: str, duration: float = 240.0, seed: int = 0,
     engine = eseso_engine(float(r0.position[0]), float(r0.position[1]), BlueROV2Params(),
                           eseso_overrides)
     pipe = engine.pipelines[0]
-    nis = _spy_nis(pipe) if collect_nis else None
+    records = engine.monitor.keep(pipe.name) if collect_nis else None
     k_noise = case.noise_scale
     imu = Imu(scale_noise(ImuConfig(rate_hz=50.0), k_noise), sensor_rng(seed, "imu"))
     sensors: list[tuple[int, Any]] = [
@@ -227,34 +235,26 @@ def simulate(controller: str, duration: float = 240.0, seed: int = 0,
                         altitude=sc.bottom_depth - truth.down)
                 for sample in sensor.measure(world):
                     engine.push(sample)
-    report = _report(controller, duration, seed, sc, log, pipe, ctl)
+    report = _report(controller, duration, seed, sc, log, pipe, ctl,
+                     engine.monitor.snapshot(reset_max=False).get(pipe.name, {}))
     report["mismatch"] = case.name
-    if nis is not None:
-        report["nis"] = {ch: {"mean": float(np.mean(v)), "n": len(v), "dim": NIS_DIMS[ch]}
-                         for ch, v in nis.items() if v and ch in NIS_DIMS}
+    if records is not None:
+        report["nis"] = mean_nis(records)
     report["wall_time_s"] = time.perf_counter() - t_wall
     return report, log
 
 
-NIS_DIMS = {"thrust": 3, "dvl": 3, "depth": 1, "attitude": 3, "heading": 1, "vog": 2,
-            "gnss_pos": 3, "gnss_vel": 3}
-"""Dimension of each ESESO update channel (for the chi-square band of its mean NIS)."""
-
-
-def _spy_nis(pipe: Any) -> dict[str, list[float]]:
-    """Record the NIS of every ESESO update (gated ones included) per channel, by wrapping
-    the filter's ``update``; the update itself is unchanged."""
-    out: dict[str, list[float]] = {}
-    flt = pipe.filter
-    update = flt.update
-
-    def spy(ch: str, y: np.ndarray, H: np.ndarray, Rm: np.ndarray, gate: Any = None) -> Any:
-        S = H @ flt.P @ H.T + Rm
-        out.setdefault(ch, []).append(float(y @ np.linalg.solve(0.5 * (S + S.T), y)))
-        return update(ch, y, H, Rm, gate)
-
-    flt.update = spy
-    return out
+def mean_nis(records: Sequence[Innovation]) -> dict[str, dict[str, float]]:
+    """Per channel, the mean NIS of its updates (gated ones included; a sample rejected
+    before any update has no NIS and is left out), their number and the dimension."""
+    nis: dict[str, list[float]] = {}
+    dof: dict[str, int] = {}
+    for r in records:
+        if math.isfinite(r.nis):
+            nis.setdefault(r.channel, []).append(r.nis)
+            dof[r.channel] = r.dof
+    return {ch: {"mean": float(np.mean(v)), "n": len(v), "dim": dof[ch]}
+            for ch, v in nis.items()}
 
 
 class EsesoPolicy:
@@ -347,7 +347,8 @@ def _rms(x: np.ndarray) -> float:
 
 
 def _report(controller: str, duration: float, seed: int, sc: CircleScenario, log: RunLog,
-            pipe: Any, ctl: Any = None) -> dict[str, Any]:
+            pipe: Any, ctl: Any = None,
+            innovations: Mapping[str, ChannelHealth] | None = None) -> dict[str, Any]:
     t = np.asarray(log.t)
     after = t >= sc.warmup_s
     settle = t >= sc.disturbance_settle_s
@@ -363,6 +364,7 @@ def _report(controller: str, duration: float, seed: int, sc: CircleScenario, log
     solve_ms = solve_ms[np.isfinite(solve_ms)]
     cpu_ms = np.asarray(getattr(ctl, "cpu_times", [])) * 1e3
     health = dict(pipe.health())
+    thrust = (innovations or {}).get("thrust")
     rep: dict[str, Any] = {
         "scenario": "bluerov2-circle",
         "controller": controller,
@@ -387,7 +389,7 @@ def _report(controller: str, duration: float, seed: int, sc: CircleScenario, log
             "yaw_rmse_rad": _rms(att[after, 2]),
             "accel_bias_rmse_mps2": _rms(np.linalg.norm(bias[after, 0:3], axis=1)),
             "gyro_bias_rmse_rps": _rms(np.linalg.norm(bias[after, 3:6], axis=1)),
-            "thrust_nis_last": health.get("thrust.nis"),
+            "thrust_nis_last": thrust.nis if thrust is not None else None,
             "rejected": {k: v for k, v in health.items() if k.startswith("rejected.")},
         },
     }

@@ -14,8 +14,8 @@ from onboard.estimators.axis_model import AxisModel, discretize
 from onboard.estimators.rcie import Rcie, rcie_kernel, unpack
 from onboard.pipelines import aie as aie_mod
 from onboard.pipelines import kf as kf_mod
-from onboard.pipelines.aie import AxisAie
 from onboard.core.pipeline_config import AieConfig, KfConfig
+from onboard.pipelines.aie import axis_filter
 from tests.helpers.first_order_boat import SimConfig, run_pipelines, score, simulate
 
 
@@ -62,7 +62,7 @@ def _axis_run(sig: float, n: int = 400, seed: int = 0, **over):
     rng = np.random.default_rng(seed)
     top = msgspec.convert({"nis_gate": 1e9, "divergence_nis": 1e9}, AieConfig)
     ac = msgspec.structs.replace(top.surge, **over)
-    ax = AxisAie(AxisModel(1.0, 3.0), ac, top)
+    ax = axis_filter(AxisModel(1.0, 3.0), ac, top)
     k = discretize(1.0, 1.0)
     v = 0.0
     n_prev = sig * rng.standard_normal()
@@ -76,7 +76,7 @@ def _axis_run(sig: float, n: int = 400, seed: int = 0, **over):
         n_prev = n_k
         if i > 100:
             ev.append(ax.kf.v - v)
-            eu.append(ax.d_hat - u)
+            eu.append(ax.input.d_hat - u)
     return float(np.sqrt(np.mean(np.square(ev)))), float(np.sqrt(np.mean(np.square(eu)))), ax
 
 
@@ -100,20 +100,20 @@ def test_aie_axis_under_gps_noise() -> None:
 
 def test_divergence_is_detected_counted_and_recovered() -> None:
     top = AieConfig()
-    ax = AxisAie(AxisModel(1.0, 3.0), top.surge, top)
+    ax = axis_filter(AxisModel(1.0, 3.0), top.surge, top)
     k = discretize(1.0, 1.0)
     for _ in range(5):
         ax.step(k, 1.0, 0.3, 0.3, None)
-    ax.rcie.theta = [1e6] * ax.rcie.n          # a blown-up estimator (paper remark 3)
+    ax.input.rcie.theta = [1e6] * ax.input.rcie.n          # a blown-up estimator (paper remark 3)
     ax.step(k, 5.0, 0.3, 0.3, None)
     assert ax.diverged == 1
-    assert ax.rcie.theta == [0.0] * ax.rcie.n and ax.d_hat == 0.0
+    assert ax.input.rcie.theta == [0.0] * ax.input.rcie.n and ax.input.d_hat == 0.0
     for _ in range(50):
         ax.step(k, 1.0, 0.3, 0.3, None)
     assert math.isfinite(ax.kf.v) and ax.kf.v == pytest.approx(1.0, abs=0.2)
-    P = ax.rcie.P
+    P = ax.input.rcie.P
     P[0] = math.nan                             # non-finite numbers
-    ax.rcie.P = P
+    ax.input.rcie.P = P
     ax.step(k, 1.0, 0.3, 0.3, None)
     assert ax.diverged == 2
 
@@ -150,16 +150,23 @@ def test_pipeline_columns_health_and_state_roundtrip() -> None:
     for c in pa.columns:
         assert np.isfinite(out[c][-1])
     h = pa.health()
-    for key in ("surge.innovation", "surge.S", "surge.nis", "surge.diverged",
-                "heading.innovation", "heading.S", "heading.nis", "heading.diverged"):
+    for key in ("surge.steps", "surge.diverged", "surge.V_d", "heading.steps",
+                "heading.diverged", "heading.theta_norm"):
         assert key in h and math.isfinite(h[key])
+    assert not any(k.endswith(("nis", "innovation", ".S")) for k in h)  # innovations apart
+    recs = pa.innovations()
+    channels = {r.channel for r in recs}
+    assert channels == {"surge.increment", "heading.increment"}   # no Doppler speed here
+    assert all(r.dof == 1 and len(r.z) == 1 and len(r.S) == 1 and r.S[0] > 0.0
+               and math.isclose(r.nis, r.z[0] ** 2 / r.S[0]) for r in recs)
+    assert pa.innovations() == []   # taken
     st = json.loads(json.dumps(pa.get_state()))
     fresh = _pipes()[0]
     fresh.set_state(st)
-    assert fresh.surge.rcie.theta == pa.surge.rcie.theta
+    assert fresh.surge.input.rcie.theta == pa.surge.input.rcie.theta
     assert fresh.surge.model.a == pa.surge.model.a
     fresh.set_state({"surge": {"rcie": {"theta": [1.0]}, "model": {"a": "x"}}})  # ignored
-    assert fresh.surge.rcie.theta == pa.surge.rcie.theta
+    assert fresh.surge.input.rcie.theta == pa.surge.input.rcie.theta
 
 
 @pytest.mark.parametrize("mod", [aie_mod, kf_mod])
@@ -197,7 +204,7 @@ def test_aie_runs_without_commands_and_with_1hz_irregular_gps() -> None:
 def test_create_decodes_the_config_and_names_bad_keys() -> None:
     p = aie_mod.create(from_dict({"pipelines": {"aie": {"heading": {"n_c": 3}}}}))
     assert p is not None and p.name == "aie"
-    assert p.yaw.rcie.n == 7
+    assert p.yaw.input.rcie.n == 7
     with pytest.raises(ConfigError, match="pipelines.aie"):
         aie_mod.create(from_dict({"pipelines": {"aie": {"surge": {"lamda": 1.0}}}}))
     assert aie_mod.create(from_dict({"vehicle": {"class": "bluerov2"}})) is None

@@ -102,11 +102,37 @@ def test_invalid_and_nonfinite_inputs_are_counted_not_fused():
     bad = [DvlVelocity(t=30.05, vx=50.0, vy=50.0, vz=50.0, valid=False),
            DvlVelocity(t=30.06, vx=float("nan"), vy=0.0, vz=0.0),
            Heading(t=30.07, heading_rad=float("nan"))]
+    pipe.innovations()
     out = pipe.step(30.1, bad)
     assert pipe.counters["rejected_invalid_dvl"] == 1
     assert pipe.counters["rejected_nonfinite"] == 2
+    # the rejected velocities are records of their channel, without an innovation
+    unused = [(r.channel, r.reason, r.dof) for r in pipe.innovations() if not r.accepted]
+    assert unused == [("dvl", "invalid", 3), ("dvl", "nonfinite", 3)]
     assert abs(out["north"] - before["north"]) < 0.01
     assert all(math.isfinite(v) for v in out.values())
+
+
+def test_every_measurement_update_is_an_innovation_record():
+    """One record per update of the joint filter (``velocity``: GNSS over ground), gated
+    ones with reason ``gate``, ``z`` measured minus forecast with its full ``S``; one per
+    update of the yaw RLS (``yaw_rls``); health keeps the counters only."""
+    pipe = current_pipeline("rudder-boat")
+    records = []
+    for t, samples, _ in simulate_boat(120.0):
+        pipe.step(t, samples)
+        records += pipe.innovations()
+    vel = [r for r in records if r.channel == "velocity"]
+    assert sum(r.accepted for r in vel) == pipe.counters["updates"] > 100
+    assert sum(r.reason == "gate" for r in vel) == pipe.counters["rejected_gate"]
+    for r in vel:
+        S, z = np.reshape(r.S, (r.dof, r.dof)), np.array(r.z)
+        assert r.dof == 2 and np.allclose(S, S.T) and r.gate == pipe.cfg.gate_nis
+        assert r.nis == pytest.approx(float(z @ np.linalg.solve(S, z)), rel=1e-9)
+    rls = [r for r in records if r.channel == "yaw_rls"]
+    assert len(rls) == pipe.counters["rls_updates"] > 0 and rls[0].dof == 1
+    assert {r.channel for r in records} == {"velocity", "yaw_rls"}
+    assert not any("nis" in k or "innovation" in k for k in pipe.health())
 
 
 def test_identified_model_survives_a_restart():

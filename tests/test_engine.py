@@ -4,14 +4,18 @@ from __future__ import annotations
 
 import math
 
+import msgspec
+
 from onboard.core.config import Config, from_dict
 from onboard.core.messages import (
     ActuatorCommand,
     ActuatorOutputs,
     Depth,
     GnssFix,
+    HealthRecord,
     Heading,
     Imu,
+    Innovation,
     Pressure,
     Sample,
 )
@@ -31,8 +35,14 @@ class Recorder:
         self.calls.append((t, list(samples)))
         return {"n": float(len(samples))}
 
+    def innovations(self):
+        """One update per tick: accepted (NIS 1) on odd ticks, rejected on even ones."""
+        n = len(self.calls)
+        return [Innovation(channel="x", t=float(n), z=(2.0,), S=(4.0,), nis=1.0, dof=1,
+                           gate=4.0, accepted=n % 2 == 1, reason="" if n % 2 else "gate")]
+
     def health(self):
-        return {"x.nis": 1.0}
+        return {"x.steps": float(len(self.calls))}
 
     def get_state(self):
         return {"k": len(self.calls)}
@@ -140,12 +150,21 @@ def test_same_input_gives_the_same_output():
     assert once() == once()
 
 
-def test_health_collects_pipeline_nis_and_rejections():
+def test_health_collects_innovations_counters_and_rejections():
     eng = Engine(Config(), [Recorder()])
     eng.push(imu(float("nan")))
-    h = eng.health(1.0)
-    assert h.nis == {"rec.x.nis": 1.0}
+    for t in (1.0, 2.0, 3.0):
+        eng.tick(t)
+    h = eng.health(3.0)
+    x = h.innovations["rec"]["x"]
+    assert (x.n, x.rejected, x.reasons, x.dof) == (3, 1, {"gate": 1}, 1)
+    assert x.nis_mean == 1.0 and x.test_ratio == 0.25 and x.z == [2.0] and x.S == [4.0]
+    assert h.counters == {"rec": {"x.steps": 3.0}}
     assert h.rejected == {"imu:nan": 1}
+    again = eng.health(4.0).innovations["rec"]["x"]
+    assert again.n == 3 and again.test_ratio_max == 0.0   # the maximum starts afresh
+    decoded = msgspec.json.decode(msgspec.json.encode(h), type=HealthRecord)
+    assert decoded == h
 
 
 def test_state_round_trip():

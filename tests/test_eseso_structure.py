@@ -46,12 +46,15 @@ def test_a_level_filter_at_rest_stays_at_rest_and_its_covariance_grows() -> None
 def test_an_update_keeps_its_innovation_covariance_and_nis() -> None:
     f = _level_filter()
     prior = f.P[2, 2]
-    assert f.update_depth(20.3, 0.02 ** 2)
+    assert f.update_depth(20.3, 0.02 ** 2, t=1.5, source="bar30")
     S = prior + 0.02 ** 2
     assert f.y == pytest.approx([0.3])
     assert f.S.shape == (1, 1) and f.S[0, 0] == pytest.approx(S)
     assert f.nis == pytest.approx(0.3 ** 2 / S)
-    assert f.last["depth"]["nis"] == pytest.approx(f.nis)
+    (rec,) = f.innovations  # the update's record: measured minus predicted
+    assert (rec.channel, rec.t, rec.source, rec.dof) == ("depth", 1.5, "bar30", 1)
+    assert rec.z == pytest.approx((0.3,)) and rec.S == pytest.approx((S,))
+    assert rec.nis == f.nis and rec.gate == CHI2_999[1] and rec.accepted
     # scalar Kalman gain on the depth
     assert f.p[2] == pytest.approx(20.0 + prior / S * 0.3)
     assert f.counters == {"fused.depth": 1}
@@ -65,12 +68,14 @@ def test_the_gate_rejects_then_fuses_down_weighted_after_max_consecutive_rejects
     assert not f.update_depth(z, var)
     assert not f.update_depth(z, var)
     assert f.p[2] == 20.0 and f.counters["rejected.depth.gate"] == 2
+    assert [(r.accepted, r.reason) for r in f.innovations] == [(False, "gate")] * 2
     nis = 10.0 ** 2 / (f.P[2, 2] + var)
     r_recover = var * nis / CHI2_999[1]
     expected = 20.0 + f.P[2, 2] / (f.P[2, 2] + r_recover) * 10.0
     assert f.update_depth(z, var)
     assert f.counters["recovered.depth"] == 1
     assert f.p[2] == pytest.approx(expected)
+    assert f.innovations[-1].accepted and f.innovations[-1].nis > CHI2_999[1]
 
 
 def _thrust_filter(states: str) -> EsesoFilter:
@@ -106,9 +111,12 @@ def test_the_pipeline_hands_the_filter_its_configured_noise() -> None:
                          gyro_y=0.0, gyro_z=0.0)])
     assert pipe.initialized and pipe.filter.p[2] == 20.0
     prior = pipe.filter.P[2, 2]
-    pipe.step(0.04, [Depth(t=0.04, depth_m=20.1)])
-    assert pipe.filter.last["depth"]["S"] == pytest.approx([prior + 0.07 ** 2])
+    pipe.step(0.04, [Depth(t=0.04, depth_m=20.1, source="bar30")])
+    (rec,) = [r for r in pipe.innovations() if r.channel == "depth"]
+    assert rec.S == pytest.approx((prior + 0.07 ** 2,))
+    assert (rec.t, rec.source) == (0.04, "bar30")
     assert pipe.health()["fused.depth"] == 1.0
+    assert pipe.innovations() == []  # taken once
 
 
 def test_an_attitude_update_moves_the_attitude_by_the_measured_rotation() -> None:

@@ -4,6 +4,7 @@ heading, current from over-ground minus through-water velocity."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from onboard.estimators.flow_observer import ackermann_observer_gain
 from tests.helpers.current_plants import (
@@ -33,7 +34,9 @@ def test_flow_observer_current_on_synthetic_torpedo_with_known_model():
     assert pipe.flow.unobservable == 0
     health = pipe.health()  # the observer's own state reaches the health record
     assert health["flow.gain_kept"] == 0 and health["flow.diverged"] == 0
-    assert 0.0 <= health["flow.nis"] < 100.0
+    heading = [r for r in pipe.innovations() if r.channel == "flow.heading"][-1]
+    assert heading.dof == 1 and 0.0 <= heading.nis < 100.0
+    assert heading.nis == pytest.approx(heading.z[0] ** 2 / heading.S[0])
 
 
 def test_the_vertical_block_observes_heave_from_the_pitch():

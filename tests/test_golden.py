@@ -2,7 +2,14 @@
 
 The inputs and the expected outputs live in ``tests/data/replay`` (regenerated only by
 ``tests/data/make_golden.py``, when a change of the estimates is intended). A refactoring
-must leave every byte of every estimate unchanged.
+must leave every estimate unchanged: the same header, rows and empty cells, and every
+number the same to :data:`RTOL`. That tolerance is the last printed digit and no more:
+estimates.csv prints 10 significant digits, and OpenBLAS chooses its matrix kernels by
+CPU, so the last bit of a product in the current and ESESO filters, and with it sometimes
+the last printed digit, differs between machines (the committed files match byte for byte
+where OpenBLAS runs its Haswell kernels; on an AMD EPYC with AVX-512, up to 7.4e-10
+relative in bluerov2-circle and gavia-tidal). On one machine a refactoring is compared
+byte for byte, before against after.
 """
 
 from __future__ import annotations
@@ -23,25 +30,32 @@ make_golden = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(make_golden)
 
 
-def _largest_difference(got: str, want: str) -> str:
-    """Where two estimates.csv texts differ: the column and the largest numeric gap."""
+RTOL = 2e-9
+"""Largest relative difference of one number from the committed one (the last of 10
+printed significant digits; see the module docstring)."""
+
+
+def _largest_difference(got: str, want: str) -> tuple[float, str]:
+    """The largest relative difference between two estimates.csv texts and where it is
+    (infinite when the header, the row count or an empty cell differs)."""
     rows_got = list(csv.reader(io.StringIO(got)))
     rows_want = list(csv.reader(io.StringIO(want)))
     if rows_got[:1] != rows_want[:1]:
-        return f"header differs: {rows_got[:1]} != {rows_want[:1]}"
+        return math.inf, f"header differs: {rows_got[:1]} != {rows_want[:1]}"
     if len(rows_got) != len(rows_want):
-        return f"{len(rows_got) - 1} rows instead of {len(rows_want) - 1}"
+        return math.inf, f"{len(rows_got) - 1} rows instead of {len(rows_want) - 1}"
     worst = (0.0, "", 0)
     for i, (a, b) in enumerate(zip(rows_got[1:], rows_want[1:]), start=1):
         for name, x, y in zip(rows_want[0], a, b):
             if x == y:
                 continue
             if not x or not y:
-                return f"row {i} column {name}: {x!r} != {y!r}"
+                return math.inf, f"row {i} column {name}: {x!r} != {y!r}"
             gap = abs(float(x) - float(y)) / max(abs(float(y)), 1e-12)
             if gap > worst[0] or math.isnan(gap):
                 worst = (gap, name, i)
-    return f"largest relative difference {worst[0]:.3g} in column {worst[1]} at row {worst[2]}"
+    return worst[0], (f"largest relative difference {worst[0]:.3g} in column {worst[1]} "
+                      f"at row {worst[2]}")
 
 
 @pytest.mark.parametrize("case", sorted(make_golden.CASES))
@@ -51,4 +65,16 @@ def test_replay_of_a_committed_log_gives_the_committed_estimates(case: str, tmp_
     expected = (DATA / "replay" / f"{case}.estimates.csv").read_text()
     assert cli_main(["replay", str(log), "--out", str(tmp_path), "--no-plot"]) == 0
     got = (tmp_path / "estimates.csv").read_text()
-    assert got == expected, _largest_difference(got, expected)
+    if got != expected:
+        gap, where = _largest_difference(got, expected)
+        assert gap <= RTOL, where
+
+
+def test_the_comparison_sees_a_change_beyond_the_last_digit() -> None:
+    """A negative control: a changed digit before the last, a missing cell and a missing
+    row are each caught; a change of the last digit alone is within the tolerance."""
+    want = "t,a.x\n0.000000,1.234567891\n0.100000,2.5\n"
+    assert _largest_difference(want.replace("1.234567891", "1.234567892"), want)[0] <= RTOL
+    assert _largest_difference(want.replace("1.234567891", "1.234567991"), want)[0] > RTOL
+    assert _largest_difference(want.replace("1.234567891", ""), want)[0] == math.inf
+    assert _largest_difference(want.rsplit("0.1", 1)[0], want)[0] == math.inf

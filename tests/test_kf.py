@@ -135,7 +135,7 @@ def test_kf_baseline_without_commands_runs_with_zero_input() -> None:
     # acceleration of variance v_d: the classical filter without inputs)
     assert sc["speed"] < 0.8
     assert sc["heading"] < 0.04
-    assert p.surge.u == 0.0
+    assert p.surge.input.u == 0.0
 
 
 def test_kf_baseline_with_the_true_model_tracks_the_synthetic_boat() -> None:

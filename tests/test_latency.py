@@ -39,6 +39,9 @@ class _Recorder:
         twin.newest = self.newest
         return twin
 
+    def innovations(self):
+        return []
+
     def health(self):
         return {}
 

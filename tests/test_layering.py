@@ -16,8 +16,9 @@ The rooms, from the bottom up (docs/architecture.md has the picture):
   (``sitl.closed_loop``) also runs the onboard engine, because the closed loop is the
   experiment.
 * ``onboard.engine``, ``onboard.validate``, ``onboard.corrections``, ``onboard.depth``,
-  ``onboard.inputs``, ``onboard.sources``, ``onboard.latency``: time-ordered feeding of
-  validated, corrected samples, one source per quantity, into the pipelines.
+  ``onboard.inputs``, ``onboard.sources``, ``onboard.latency``, ``onboard.innovations``:
+  time-ordered feeding of validated, corrected samples, one source per quantity, into the
+  pipelines, and the summary of their innovations.
 * ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
 * ``onboard.closure``: model closure on recorded logs.
 * ``onboard.replay``, ``onboard.diagnose``, ``onboard.autodetect``, ``onboard.plots``:
@@ -41,7 +42,8 @@ MATH = CORE | {"onboard.estimators"}
 PIPELINES = MATH | {"onboard.pipelines"}
 ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs",
                       "onboard.sources"}
-ENGINE_PARTS = {"onboard.corrections", "onboard.depth", "onboard.latency"}
+ENGINE_PARTS = {"onboard.corrections", "onboard.depth", "onboard.latency",
+                "onboard.innovations"}
 """The engine's own modules: only the engine imports them."""
 SERVICE = ENGINE | {"drivers", "onboard.service"}
 CLOSURE = ENGINE | {"drivers", "onboard.closure", "onboard.replay", "onboard.plots",
@@ -60,6 +62,7 @@ ROOMS: dict[str, set[str]] = {
     "onboard.corrections": CORE | {"onboard.sources"},
     "onboard.depth": CORE,
     "onboard.latency": PIPELINES,
+    "onboard.innovations": CORE,
     "onboard.inputs": CORE,
     "onboard.sources": CORE,
     "onboard.service": SERVICE,

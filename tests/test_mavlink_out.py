@@ -9,7 +9,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
 from onboard.core.config import ConfigError, MavlinkOut
-from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.core.messages import ChannelHealth, EstimateRecord, HealthRecord
 from onboard.service.publishers.mavlink_pub import MavlinkPublisher, load_signing_key
 from tests.helpers.mavlink_listener import receive_mavlink
 
@@ -44,10 +44,13 @@ def test_heartbeat_estimates_and_health_from_component_191(listener):
                            clock=lambda: 10.0)
     pub.start()
     pub.publish_estimates(_records(), now=10.0)
-    pub.publish_health(HealthRecord(vehicle="b", t=10.0, nis={"current.velocity.nis": 9.0,
-                                                              "aie.heading.nis": 2.25},
-                                    rejected={"gnss:submerged": 3}, events=["gps: lost (EIO)"]),
-                       now=10.0)
+    pub.publish_health(HealthRecord(
+        vehicle="b", t=10.0, rejected={"gnss:submerged": 3}, events=["gps: lost (EIO)"],
+        innovations={"current": {"velocity": ChannelHealth(n=5, dof=2, test_ratio_max=1.0)},
+                     "aie": {"heading.increment": ChannelHealth(n=9, dof=1,
+                                                                test_ratio_max=0.5),
+                             "surge.rate": ChannelHealth(n=9, dof=1, test_ratio_max=0.25)}}),
+        now=10.0)
     pub.close()
     msgs = receive_mavlink(listener)
     assert {(m.get_srcSystem(), m.get_srcComponent()) for m in msgs} == {(7, 191)}
@@ -67,8 +70,9 @@ def test_heartbeat_estimates_and_health_from_component_191(listener):
     assert (w.wind_x, w.wind_y) == pytest.approx((0.3, -0.2))
     assert w.var_horiz == pytest.approx(0.05 ** 2 + 0.04 ** 2)
     st = by["ESTIMATOR_STATUS"][0]
-    assert st.vel_ratio == pytest.approx(1.0)  # sqrt(9)/3: a 3-sigma velocity innovation
+    assert st.vel_ratio == pytest.approx(1.0)  # the worst velocity channel: at its gate
     assert st.mag_ratio == pytest.approx(0.5)
+    assert st.pos_horiz_ratio == 0.0 and st.pos_vert_ratio == 0.0   # no such channel
     assert st.flags & mavlink2.ESTIMATOR_GPS_GLITCH
     assert by["STATUSTEXT"][0].text.startswith("gps: lost")
     assert "ODOMETRY" not in by  # only when configured
@@ -134,3 +138,15 @@ def test_a_key_file_readable_by_others_or_a_missing_required_key_is_a_config_err
     import hashlib
 
     assert load_signing_key(key_file) == hashlib.sha256(b"passphrase").digest()
+
+
+@pytest.mark.parametrize("channel,kind", [
+    ("surge.increment", "position"), ("surge.rate", "velocity"),
+    ("heading.increment", "heading"), ("velocity", "velocity"), ("dvl", "velocity"),
+    ("vog", "velocity"), ("attitude", "heading"), ("depth", "depth"), ("thrust", None),
+    ("yaw_rls", "heading"), ("gnss_pos", "position"), ("gnss_vel", "velocity"),
+    ("water_track", "velocity"), ("hgo.velocity", "velocity"), ("flow.heading", "heading")])
+def test_each_innovation_channel_feeds_the_estimator_status_ratio_of_its_kind(channel, kind):
+    from onboard.service.publishers.mavlink_pub import ratio_kind
+
+    assert ratio_kind(channel) == kind

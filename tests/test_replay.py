@@ -7,8 +7,11 @@ import json
 import subprocess
 import sys
 
+from pathlib import Path
+
 import pytest
 
+from onboard.cli import main as cli_main
 from sitl.runner import run_to_tlog
 
 pytestmark = pytest.mark.integration
@@ -99,3 +102,19 @@ def test_every_vehicle_class_is_detected_and_estimated(tmp_path, scenario, cls, 
     rows = list(csv.DictReader(open(tmp_path / "out" / "estimates.csv")))
     for col in columns:
         assert any(row[col] for row in rows[-50:]), col
+
+
+def test_a_pipeline_that_fails_is_counted_in_the_summary(tmp_path, monkeypatch) -> None:
+    """A pipeline that raises is restarted by the engine; the replay's summary counts it
+    (``pipeline:<name>:error``), so a crash never passes for a quiet run."""
+    from onboard.pipelines.surge_heading import SurgeHeadingPipeline
+
+    def broken(self, t):
+        raise RuntimeError("broken on purpose")
+
+    monkeypatch.setattr(SurgeHeadingPipeline, "_output", broken)
+    log = Path(__file__).resolve().parent / "data" / "replay" / "jaiabot-turns.tlog"
+    assert cli_main(["replay", str(log), "--out", str(tmp_path), "--no-plot"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["rejected"]["pipeline:aie:error"] > 100
+    assert summary["rejected"]["pipeline:kf:error"] > 100

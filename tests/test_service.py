@@ -24,7 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 import onboard.pipelines as pipelines_pkg
 from drivers.dvl_json import encode_velocity_report
 from drivers.recording import read_records
-from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.core.messages import HEALTH_SCHEMA_VERSION, EstimateRecord, HealthRecord
 from onboard.engine import Engine
 from onboard.service.daemon import Service
 from onboard.service.publishers.zenoh_pub import open_router
@@ -185,7 +185,7 @@ def test_service_end_to_end_over_udp_pty_tcp_to_zenoh_and_mavlink_and_exact_repl
     assert {"north", "east", "heading"} <= set(nav[-1].values)
     assert max(x.rates_hz.get("autopilot", 0) for x in healths) > 10  # ~60 samples/s
     assert max(x.rates_hz.get("gps", 0) for x in healths) > 3  # 5 fixes + 10 headings/s
-    assert healths[-1].schema == 1 and healths[-1].mode == "surface"
+    assert healths[-1].schema == HEALTH_SCHEMA_VERSION and healths[-1].mode == "surface"
     # MAVLink out: heartbeat from (3, 191) and ESTIMATOR_STATUS reached the "GCS"
     mav = mavlink2.MAVLink(None)
     types = set()

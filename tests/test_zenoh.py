@@ -9,7 +9,13 @@ import msgspec
 import pytest
 
 from onboard.core.config import ZenohOut
-from onboard.core.messages import SCHEMA_VERSION, EstimateRecord, HealthRecord
+from onboard.core.messages import (
+    HEALTH_SCHEMA_VERSION,
+    SCHEMA_VERSION,
+    ChannelHealth,
+    EstimateRecord,
+    HealthRecord,
+)
 from onboard.service.publishers.zenoh_pub import ZenohPublisher, open_router, session_config
 from onboard.tools.service_bench import free_tcp_port
 
@@ -58,7 +64,11 @@ def test_estimates_and_health_arrive_as_json_with_schema_on_the_contract_keys(ro
         rec = EstimateRecord(vehicle="boat7", pipeline="current", t=12.5,
                              values={"north": 0.2, "east": -0.1}, std={"north": 0.05}, t_sensor=12.49)
         health = HealthRecord(vehicle="boat7", t=12.5, rates_hz={"gps": 5.0},
-                              rejected={"gnss:nan": 2}, nis={"current.velocity.nis": 1.2},
+                              rejected={"gnss:nan": 2},
+                              innovations={"current": {"velocity": ChannelHealth(
+                                  n=3, dof=2, nis_mean=1.2, z=[0.1, -0.2],
+                                  S=[0.04, 0.0, 0.0, 0.04])}},
+                              counters={"current": {"updates": 3.0}},
                               events=["gps: connected"], mode="surface")
         assert wait_for(lambda: (pub.publish_estimates([rec]), pub.publish_health(health),
                                  len(got) >= 2)[-1])
@@ -71,7 +81,7 @@ def test_estimates_and_health_arrive_as_json_with_schema_on_the_contract_keys(ro
         back = msgspec.json.decode(payload, type=EstimateRecord)
         assert back == rec and back.schema == SCHEMA_VERSION
         h = msgspec.json.decode(by_key["onboard/boat7/health"][0], type=HealthRecord)
-        assert h.rejected == {"gnss:nan": 2} and h.schema == SCHEMA_VERSION
+        assert h == health and h.schema == HEALTH_SCHEMA_VERSION
 
         # the queryable answers the latest value of every key under onboard/boat7/**
         replies = {str(r.ok.key_expr): r.ok.payload.to_bytes()
@@ -111,8 +121,10 @@ def test_onboard_shore_once_prints_a_snapshot_from_the_queryables(router, capsys
     try:
         pub.publish_estimates([EstimateRecord(vehicle="boat9", pipeline="aie", t=5.0,
                                               values={"heading": 1.5708, "speed": 1.25})])
-        pub.publish_health(HealthRecord(vehicle="boat9", t=5.0, rates_hz={"gps": 5.0},
-                                        rejected={"gnss:nan": 1}, mode="surface"))
+        pub.publish_health(HealthRecord(
+            vehicle="boat9", t=5.0, rates_hz={"gps": 5.0}, rejected={"gnss:nan": 1},
+            mode="surface", innovations={"aie": {"surge.rate": ChannelHealth(
+                n=40, rejected=2, dof=1, nis_recent=0.85)}}))
         args = argparse.Namespace(connect=[endpoint], listen=None, mode=None, vehicle="boat9",
                                   once=True)
         rc = shore.main(args)
@@ -123,6 +135,7 @@ def test_onboard_shore_once_prints_a_snapshot_from_the_queryables(router, capsys
     assert "== boat9 (alive), mode surface" in out
     assert "heading=90.0°" in out and "speed=+1.25" in out
     assert "gnss:nan=1" in out and "gps=5.0" in out
+    assert "aie.surge.rate=0.85/1 (2 rejected)" in out
     args = argparse.Namespace(connect=[endpoint], listen=None, mode=None, vehicle="nobody",
                               once=True)
     assert shore.main(args) == 1  # nothing answered

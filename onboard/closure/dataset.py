@@ -125,6 +125,9 @@ class _Collector:
         ))
         return {}
 
+    def innovations(self) -> list:
+        return []
+
     def health(self) -> Mapping[str, float]:
         return {}
 

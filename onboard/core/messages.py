@@ -22,7 +22,8 @@ from typing import Literal, Union
 import msgspec
 
 SCHEMA_VERSION = 1
-"""Version of the wire schema of :class:`EstimateRecord` and :class:`HealthRecord`."""
+"""Version of the wire schema of :class:`EstimateRecord` (:class:`HealthRecord` has its
+own, :data:`HEALTH_SCHEMA_VERSION`)."""
 
 
 class Sample(msgspec.Struct, frozen=True, kw_only=True, tag_field="type"):
@@ -280,22 +281,99 @@ class EstimateRecord(msgspec.Struct, frozen=True, kw_only=True):
     sources: dict[str, str] = {}
 
 
+class Innovation(msgspec.Struct, frozen=True, kw_only=True):
+    """One measurement update of one estimator: what was measured against what was
+    forecast (filterpy's ``y`` and ``S``, statsmodels' ``forecasts_error`` and
+    ``forecasts_error_cov``).
+
+    Attributes:
+        channel: the measurement channel within its pipeline (``surge.increment``,
+            ``surge.speed``, ``velocity``, ``dvl`` ...; docs/architecture.md §4.4).
+        t: time of the measurement (s).
+        z: the innovation, measurement minus forecast (the measurement's unit).
+        S: its predicted covariance, row-major ``dof x dof``.
+        nis: normalized innovation squared ``z' S^-1 z`` (chi-square with ``dof`` degrees
+            of freedom for a consistent filter).
+        dof: the measurement's dimension.
+        gate: the NIS beyond which the measurement is rejected (infinite: no gate).
+        accepted: whether the update used it.
+        reason: why it was not used (``gate``, ...); empty when accepted.
+        source: the sample source it came from (empty when the pipeline does not know).
+    """
+
+    channel: str
+    t: float
+    z: tuple[float, ...]
+    S: tuple[float, ...]
+    nis: float
+    dof: int
+    gate: float = float("inf")
+    accepted: bool = True
+    reason: str = ""
+    source: str = ""
+
+    @property
+    def test_ratio(self) -> float:
+        """``nis / gate``, as MAVLink's ESTIMATOR_STATUS defines its test ratios: above 1
+        the measurement is rejected (0 without a gate)."""
+        return self.nis / self.gate
+
+
+class ChannelHealth(msgspec.Struct, frozen=True, kw_only=True):
+    """The innovations of one channel of one pipeline, summarized (HealthRecord,
+    summary.json). A quantity with no value yet is null.
+
+    Attributes:
+        n: measurements offered; rejected: of those, not used (by ``reasons``).
+        dof: the measurement's dimension.
+        nis_mean: mean NIS of the accepted ones since the start (expected ``dof``).
+        nis_recent: running mean of the accepted ones over about
+            ``onboard.innovations.RECENT_STEPS`` updates.
+        nis: the newest NIS; test_ratio: its ``nis / gate``; test_ratio_max: the largest
+            since the previous record.
+        z, S: the newest innovation and its covariance (row-major).
+        t: time (s) of the newest measurement.
+        source: its sample source.
+    """
+
+    n: int
+    rejected: int = 0
+    reasons: dict[str, int] = {}
+    dof: int
+    nis_mean: float | None = None
+    nis_recent: float | None = None
+    nis: float | None = None
+    test_ratio: float | None = None
+    test_ratio_max: float | None = None
+    z: list[float | None] = []
+    S: list[float | None] = []
+    t: float | None = None
+    source: str = ""
+
+
+HEALTH_SCHEMA_VERSION = 2
+"""Version of the wire schema of :class:`HealthRecord` (2: typed innovations and
+counters apart; 1 had flat ``innovations`` and ``nis`` dictionaries)."""
+
+
 class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
     """Service health, published on ``onboard/<id>/health``.
 
-    ``rates_hz`` per source, ``rejected`` counts per reason, ``innovations`` and ``nis``
-    per pipeline channel, ``events`` recent human-readable events, ``sources`` the active
-    source of each selected quantity (onboard/sources.py).
+    ``rates_hz`` per source, ``rejected`` counts per reason, ``innovations`` per pipeline
+    and channel (:class:`ChannelHealth`), ``counters`` per pipeline (its steps, restarts,
+    adaptive quantities: :meth:`onboard.pipelines.base.Pipeline.health`), ``events``
+    recent human-readable events, ``sources`` the active source of each selected quantity
+    (onboard/sources.py).
     """
 
-    schema: int = SCHEMA_VERSION
+    schema: int = HEALTH_SCHEMA_VERSION
     vehicle: str
     t: float
     rates_hz: dict[str, float] = {}
     rejected: dict[str, int] = {}
     dropped: dict[str, int] = {}
-    innovations: dict[str, float] = {}
-    nis: dict[str, float] = {}
+    innovations: dict[str, dict[str, ChannelHealth]] = {}
+    counters: dict[str, dict[str, float | None]] = {}
     events: list[str] = []
     mode: str = ""
     sources: dict[str, str] = {}

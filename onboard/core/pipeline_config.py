@@ -53,8 +53,8 @@ class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, froze
     u_scale: float = 1.0
     """Typical input magnitude: the normalization of d_hat for RLS (§2.10)."""
     n_c: int = 3
-    """Input-estimator order (§2.3); l_theta = 2 n_c + 1 (7, the paper's heading count;
-    its surge used 9, n_c = 4, which measured within 1 % here at twice the cost)."""
+    """Input-estimator order (§2.3); l_theta = 2 n_c + 1 coefficients (7, the paper's
+    heading count; algorithms.md §2.10 compares the orders)."""
     n_f: int = 1
     """Taps of G_f (§2.4); 1 suffices for the relative-degree-1 increment model."""
     r_z: float = 1.0
@@ -351,12 +351,9 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     coefficient, docs/current.md, HGO). ``identify = false`` disables it."""
     hgo_rls_noise_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.2
     """One-sigma (m/s^2) of the equation error of the high-gain observer's RLS, against
-    which the coefficient prior is weighed. 0.2: the observer's velocity at ``gamma*``
-    carries the sensor noise through the injection (measured on spheroid-sawtooth, mode
-    (a), 300 s, seed 1, rms N/E/D: 0.02 drags the sway ``uv`` coefficient from -2.44 to
-    -0.40, 0.045 / 0.139 / 0.049 m/s (before the damping projection a heave coefficient
-    ran to +17 and the observer diverged 1733 times); 0.05: 0.021 / 0.034 / 0.031; 0.2:
-    0.020 / 0.030 / 0.027, the configured model unrefined 0.020 / 0.030 / 0.026)."""
+    which the coefficient prior is weighed: the observer's velocity at ``gamma*`` carries
+    the sensor noise through the injection, so a small value lets that noise drag the
+    coefficients (docs/current.md, "The HGO's own model", compares 0.02, 0.05 and 0.2)."""
     flow_pitch: bool = False
     """Flow observer (``observer = "flow"``, 3-D models): add the vertical block ``[theta,
     q, w_r]`` observed from the measured pitch, its pitch channel identified online by RLS

@@ -181,7 +181,7 @@ class CurrentHighGainObserver:
         """
         nd = self.nd
         m = len(z)
-        if kind == "water" or (kind == "bottom" and m != nd):
+        if not self.takes(kind, m):
             return True
         H = (np.hstack([R, np.eye(nd)]) if kind == "earth"
              else np.hstack([np.eye(nd), R.T]))[:m]
@@ -206,6 +206,12 @@ class CurrentHighGainObserver:
         self._hold_age = 0.0
         self._psi = np.zeros((2 * nd, m))
         return True
+
+    def takes(self, kind: MeasurementKind, m: int) -> bool:
+        """Whether :meth:`update` uses a ``kind`` measurement of ``m`` components: neither
+        water track (no current in it) nor a bottom track of fewer components than the
+        state."""
+        return not (kind == "water" or (kind == "bottom" and m != self.nd))
 
     def covariance(self) -> np.ndarray:
         """Covariance of ``x`` including the held sample's noise (m^2/s^2)."""

@@ -33,7 +33,7 @@ process noise (``q_scale``, never below 1).
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 
@@ -46,6 +46,20 @@ body axes); ``water``: DVL water track (through water, body axes)."""
 
 UpdateOutcome = Literal["accepted", "gated", "reset"]
 """What :meth:`CurrentKalmanFilter.update` did with a measurement."""
+
+
+class VelocityMeasurement(NamedTuple):
+    """One velocity measurement of the table in the module docstring."""
+
+    kind: MeasurementKind
+    t: float
+    """Its time (s)."""
+    z: np.ndarray
+    """The velocity (m/s; earth axes for ``earth``, else body axes)."""
+    std: float
+    """Its one-sigma per component (m/s)."""
+    source: str = ""
+    """The sample source it came from."""
 
 PREDICT_STEP_S = 0.2
 """Longest prediction sub-step (s): a tick longer than this is predicted in equal steps."""
@@ -110,9 +124,10 @@ class CurrentKalmanFilter:
     Attributes (filterpy style, read them; the owner may assign ``x`` and ``P``):
         x: state ``[nu_r (m/s, body), V_c (m/s, earth), theta]``.
         P: its covariance.
-        y: last accepted velocity innovation (m/s, the measurement's axes).
+        y: last velocity innovation, measured minus forecast (m/s, the measurement's axes),
+            accepted or not (:meth:`update` returns which).
         S: its covariance (m^2/s^2).
-        nis: its normalized innovation squared ``y^T S^-1 y``.
+        nis: its normalized innovation squared ``y^T S^-1 y`` (NaN if ``S`` is singular).
         nis_avg: running mean of the block-mean NIS per dimension (calibration).
         q_scale: process-noise scale from the calibration (1 to 100).
         started: False until the first velocity measurement (and after a reset).
@@ -399,10 +414,12 @@ class CurrentKalmanFilter:
         S = H @ PHt
         S.ravel()[::m + 1] += var
         Sinv = inv_small(S)
+        self.y, self.S = y, S
         if Sinv is None:
+            self.nis = math.nan
             self.reset("diverged")
             return "reset"
-        nis = float(y @ Sinv @ y)
+        nis = self.nis = float(y @ Sinv @ y)
         if nis > self.gate_nis and self.started and self.counters["updates"] > 50:
             self.counters["rejected_gate"] += 1
             return "gated"
@@ -420,7 +437,6 @@ class CurrentKalmanFilter:
             return "reset"
         self.x, self.P = x_new, P_new
         self._unpack_coefficients()
-        self.y, self.S, self.nis = y, S, nis
         self.counters["updates"] += 1
         if self.calibrate and self.started and m == nd:
             self._calibrate(y, S)

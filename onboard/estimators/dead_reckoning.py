@@ -1,6 +1,6 @@
 """Dead reckoning of a surface vehicle's position through a GNSS gap, with its covariance.
 
-Used by :mod:`onboard.pipelines.surge_heading` when no fix has arrived for longer than
+Used by :mod:`onboard.estimators.reconstruction` when no fix has arrived for longer than
 ``max_gap_s``: the position is propagated with the surge filter's speed (model of
 algorithms.md §1.1, ZOH §1.2, input held at the filter's estimate) along the heading
 filter's heading (the compass keeps running), the paper's §3.3 reconstruction without

@@ -34,8 +34,9 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   2 m circle the body components turn at up to 0.75 rad/s, which a random walk cannot
   follow.
 * **Updates** (paper eqs. 14, 16), each through :meth:`EsesoFilter.update`, Joseph form,
-  with the innovation ``y``, its covariance ``S`` and the NIS kept per channel in
-  :attr:`EsesoFilter.last`, and a chi-square gate (99.9 %; after
+  with the innovation ``y``, its covariance ``S`` and the NIS of each update kept as an
+  :class:`~onboard.core.messages.Innovation` record in :attr:`EsesoFilter.innovations`
+  until the owner takes them, and a chi-square gate (99.9 %; after
   ``max_consecutive_rejects`` gated updates in a row the channel is fused again,
   down-weighted, so a sensor cannot be locked out for good). The measurement models:
   horizontal position and velocity, INS velocity over ground (``v + b_ins``), depth, DVL
@@ -78,6 +79,7 @@ Numbers in, numbers out: no samples, no clock, no configuration file.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import Literal
 
@@ -85,6 +87,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from onboard.core.geo import wrap_pi
+from onboard.core.messages import Innovation
 from onboard.core.so3 import (
     cross,
     exp_so3,
@@ -109,6 +112,8 @@ E3 = np.array([0.0, 0.0, 1.0])
 
 CHI2_999 = {1: 10.83, 2: 13.82, 3: 16.27}
 """Chi-square 99.9 % quantiles for 1, 2, 3 degrees of freedom."""
+PENDING_INNOVATIONS = 1024
+"""Innovation records kept until the owner takes them; older ones are dropped."""
 
 
 @dataclass(frozen=True)
@@ -166,9 +171,12 @@ class EsesoFilter:
         p, v, R, b_a, b_g, g, xi, b_ins: the nominal state (see the module docstring).
         P: the 23 x 23 error covariance, ordered as :data:`P_` ... :data:`BI`.
         F: the last propagation's error-state transition.
-        y, S, nis: innovation, its covariance and the NIS of the last update (any channel).
-        last: per channel, the last innovation ``"y"``, the diagonal of ``"S"`` and
-            ``"nis"``.
+        y, S, nis: innovation, its covariance and the NIS of the last update (any channel,
+            gated or not).
+        innovations: the records of the updates not yet taken, one per update (channels
+            ``thrust``, ``attitude``, ``heading``, ``dvl``, ``depth``, ``vog``,
+            ``gnss_pos``, ``gnss_vel``; innovation = measured - predicted; a gated update
+            has ``accepted`` False and reason ``gate``).
         counters: event counts (``fused.<channel>``, ``rejected.<channel>.gate``,
             ``recovered.<channel>``, ``thrust.downweighted``), in order of first
             occurrence; the owner may count its own events in the same dictionary.
@@ -197,7 +205,7 @@ class EsesoFilter:
         self.y: Array | None = None
         self.S: Array | None = None
         self.nis: float | None = None
-        self.last: dict[str, dict[str, Array | float]] = {}
+        self.innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
         self.counters: dict[str, int] = {}
         self._consecutive: dict[str, int] = {}
 
@@ -272,17 +280,18 @@ class EsesoFilter:
 
     # ------------------------------------------------------------------ update
     def update(self, channel: str, y: Array, H: Array, Rm: Array,
-               gate: float | None = None) -> bool:
+               gate: float | None = None, *, t: float = math.nan, source: str = "") -> bool:
         """One Kalman update on the error state (paper eq. 16), Joseph form, then error
         injection (16d) and reset with its Jacobian (17, 18).
 
         Args:
-            channel: the measurement's name in :attr:`last` and the counters.
+            channel: the measurement's name in the records and the counters.
             y: the innovation (measurement minus prediction).
             H: its Jacobian with respect to the error state (``len(y)`` x 23).
             Rm: its noise covariance.
             gate: the NIS above which the update is rejected; None = the configured gate
-                (``gate_sigma`` or chi-square 99.9 %), 0 = no gate.
+                (:meth:`gate`), 0 = no gate.
+            t, source: the measurement's time (s) and sample source, for its record.
 
         Returns:
             False when the gate rejects the update.
@@ -293,17 +302,14 @@ class EsesoFilter:
         Sinv = np.linalg.inv(S)
         nis = float(y @ Sinv @ y)
         self.y, self.S, self.nis = y, S, nis
-        self.last[channel] = {"y": y.copy(), "S": np.diag(S).copy(), "nis": nis}
         if gate is None:
-            if self.params.gate_sigma > 0:
-                gate = self.params.gate_sigma ** 2 * len(y)
-            else:
-                gate = CHI2_999.get(len(y), 3.0 * len(y) + 8.0)
+            gate = self.gate(len(y))
         if gate > 0 and nis > gate:
             self.count(f"rejected.{channel}.gate")
             n_rej = self._consecutive.get(channel, 0) + 1
             self._consecutive[channel] = n_rej
             if n_rej <= self.params.max_consecutive_rejects:
+                self._record(channel, t, source, gate, accepted=False)
                 return False
             # recover: fuse, down-weighted so that the NIS equals the gate
             self.count(f"recovered.{channel}")
@@ -311,6 +317,7 @@ class EsesoFilter:
             S = H @ PHt + Rm
             Sinv = np.linalg.inv(0.5 * (S + S.T))
         self._consecutive[channel] = 0
+        self._record(channel, t, source, gate, accepted=True)
         K = PHt @ Sinv
         dx = K @ y
         IKH = np.eye(N_ERR) - K @ H
@@ -323,6 +330,24 @@ class EsesoFilter:
         self.P = 0.5 * (P + P.T)
         self.count(f"fused.{channel}")
         return True
+
+    def gate(self, dof: int) -> float:
+        """The configured NIS gate of a ``dof``-dimensional update: ``gate_sigma**2 * dof``,
+        or without ``gate_sigma`` the chi-square 99.9 % quantile."""
+        if self.params.gate_sigma > 0:
+            return self.params.gate_sigma ** 2 * dof
+        return CHI2_999.get(dof, 3.0 * dof + 8.0)
+
+    def _record(self, channel: str, t: float, source: str, gate: float,
+                accepted: bool) -> None:
+        """The innovation record of the update just computed (``y``, ``S``, ``nis``); a
+        gate of 0 is no gate (infinite)."""
+        y, S = self.y, self.S
+        assert y is not None and S is not None and self.nis is not None
+        self.innovations.append(Innovation(
+            channel=channel, t=t, z=tuple(y.tolist()), S=tuple(S.ravel().tolist()),
+            nis=self.nis, dof=len(y), gate=gate if gate > 0 else math.inf,
+            accepted=accepted, reason="" if accepted else "gate", source=source))
 
     def inject(self, dx: Array) -> None:
         """Error injection (paper eq. 16d), ``x <- x [+] dx``: every component, velocity
@@ -337,45 +362,55 @@ class EsesoFilter:
         self.b_ins = self.b_ins + dx[BI]
 
     # ------------------------------------------------------------------ measurement models
-    def update_position_ne(self, z: Array, var: float) -> bool:
+    def update_position_ne(self, z: Array, var: float, *,
+                           t: float = math.nan, source: str = "") -> bool:
         """Horizontal position ``z`` (north, east; m) with variance ``var`` (m^2) per axis;
         channel ``gnss_pos``."""
         H = np.zeros((2, N_ERR))
         H[:, 0:2] = np.eye(2)
-        return self.update("gnss_pos", z - self.p[:2], H, np.eye(2) * var)
+        return self.update("gnss_pos", z - self.p[:2], H, np.eye(2) * var, t=t,
+                           source=source)
 
-    def update_velocity_ne(self, z: Array, var: float) -> bool:
+    def update_velocity_ne(self, z: Array, var: float, *,
+                           t: float = math.nan, source: str = "") -> bool:
         """Horizontal velocity over ground ``z`` (north, east; m/s) with variance ``var``
         (m^2/s^2) per axis; channel ``gnss_vel``."""
         H = np.zeros((2, N_ERR))
         H[:, 3:5] = np.eye(2)
-        return self.update("gnss_vel", z - self.v[:2], H, np.eye(2) * var)
+        return self.update("gnss_vel", z - self.v[:2], H, np.eye(2) * var, t=t,
+                           source=source)
 
-    def update_ins_velocity(self, z: Array, var: float) -> bool:
+    def update_ins_velocity(self, z: Array, var: float, *,
+                            t: float = math.nan, source: str = "") -> bool:
         """INS velocity over ground ``z`` (north, east; m/s) = ``v + b_ins`` + white noise
         of variance ``var`` (m^2/s^2) per axis; channel ``vog``."""
         H = np.zeros((2, N_ERR))
         H[:, 3:5] = np.eye(2)
         H[:, BI] = np.eye(2)
-        return self.update("vog", z - self.v[:2] - self.b_ins, H, np.eye(2) * var)
+        return self.update("vog", z - self.v[:2] - self.b_ins, H, np.eye(2) * var, t=t,
+                           source=source)
 
-    def update_depth(self, depth_m: float, var: float) -> bool:
+    def update_depth(self, depth_m: float, var: float, *,
+                     t: float = math.nan, source: str = "") -> bool:
         """Depth (m, positive down) with variance ``var`` (m^2); channel ``depth``."""
         H = np.zeros((1, N_ERR))
         H[0, 2] = 1.0
-        return self.update("depth", np.array([depth_m - self.p[2]]), H, np.array([[var]]))
+        return self.update("depth", np.array([depth_m - self.p[2]]), H, np.array([[var]]),
+                           t=t, source=source)
 
-    def update_body_velocity(self, z: Array, var: float) -> bool:
+    def update_body_velocity(self, z: Array, var: float, *,
+                             t: float = math.nan, source: str = "") -> bool:
         """Velocity over ground in body axes ``z`` (m/s, a DVL's bottom track) with variance
         ``var`` (m^2/s^2) per axis; channel ``dvl``."""
         nu = self.R.T @ self.v
         H = np.zeros((3, N_ERR))
         H[:, V_] = self.R.T
         H[:, TH] = skew(nu)
-        return self.update("dvl", z - nu, H, np.eye(3) * var)
+        return self.update("dvl", z - nu, H, np.eye(3) * var, t=t, source=source)
 
     def update_attitude(self, R_meas: Array, roll: float, pitch: float,
-                        var_roll_pitch: float, var_yaw: float) -> bool:
+                        var_roll_pitch: float, var_yaw: float, *,
+                        t: float = math.nan, source: str = "") -> bool:
         """Attitude ``R_meas`` (body to NED; from ``roll``, ``pitch`` in rad) with
         independent roll and pitch noise ``var_roll_pitch`` and yaw noise ``var_yaw``
         (rad^2), turned into the body-frame rotation vector; channel ``attitude``."""
@@ -386,9 +421,11 @@ class EsesoFilter:
         sp, cp = math.sin(pitch), math.cos(pitch)
         J = np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
         Rm = J @ np.diag([var_roll_pitch, var_roll_pitch, var_yaw]) @ J.T
-        return self.update("attitude", log_so3(self.R.T @ R_meas), H, Rm)
+        return self.update("attitude", log_so3(self.R.T @ R_meas), H, Rm, t=t,
+                           source=source)
 
-    def update_heading(self, heading_rad: float, var: float) -> bool:
+    def update_heading(self, heading_rad: float, var: float, *,
+                       t: float = math.nan, source: str = "") -> bool:
         """True heading (rad from north) with variance ``var`` (rad^2); channel
         ``heading``."""
         roll, pitch, yaw = matrix_to_euler(self.R)
@@ -397,7 +434,7 @@ class EsesoFilter:
         cp = max(math.cos(pitch), 1e-3)
         H[0, TH] = [0.0, math.sin(roll) / cp, math.cos(roll) / cp]
         return self.update("heading", np.array([wrap_pi(heading_rad - yaw)]), H,
-                           np.array([[var]]))
+                           np.array([[var]]), t=t, source=source)
 
     # ------------------------------------------------------------------ thrust model
     def h_tau(self, f_m: Array, w_m: Array, wdot: Array | None = None) -> tuple[Array, Array]:
@@ -433,7 +470,8 @@ class EsesoFilter:
         H[:, XI] = -np.eye(3)
         return h, H
 
-    def update_thrust(self, f_m: Array, w_m: Array, wdot: Array, tau: Array) -> bool:
+    def update_thrust(self, f_m: Array, w_m: Array, wdot: Array, tau: Array, *,
+                      t: float = math.nan, source: str = "") -> bool:
         """Update on the thruster force ``tau`` (N, body) = :meth:`h_tau` at specific force
         ``f_m``, rate ``w_m`` and angular acceleration ``wdot``; channel ``thrust``, never
         gated, down-weighted above ``thrust_huber``."""
@@ -453,4 +491,4 @@ class EsesoFilter:
             if nis > k:
                 Rm = Rm * (nis / k)
                 self.count("thrust.downweighted")
-        return self.update("thrust", y, H, Rm, gate=0.0)
+        return self.update("thrust", y, H, Rm, gate=0.0, t=t, source=source)

@@ -169,6 +169,8 @@ class FlowObserver:
         e: last heading innovation (rad).
         S: its variance ``Pz[0, 0] + psi_std^2`` before the correction (rad^2).
         nis: its normalized innovation squared ``e^2 / S``.
+        heading_updates: steps corrected by a measured heading (each one sets ``e``,
+            ``S`` and ``nis``).
         ready: False until the first step (and after a divergence).
         v_g: newest velocity over ground in body axes (m/s; None before the first).
         v_g_kind: its measurement kind (``earth``, ``bottom`` or ``water``).
@@ -212,6 +214,7 @@ class FlowObserver:
         self.e = 0.0
         self.S = psi_std * psi_std
         self.nis = 0.0
+        self.heading_updates = 0
         self.ready = False
         self.v_g: np.ndarray | None = None
         self.v_g_kind = ""
@@ -345,6 +348,7 @@ class FlowObserver:
         self.e = wrap_pi(psi_meas - self.z[0])
         self.S = float(self.Pz[0, 0]) + self.psi_std * self.psi_std
         self.nis = self.e * self.e / self.S if self.S > 0.0 else 0.0
+        self.heading_updates += 1
         for _ in range(n_sub):
             e = wrap_pi(psi_meas - self.z[0])
             self.z = self.z + h * (self._f(self.z, self.u_r, x, thetas) + self.L * e)

@@ -1,7 +1,7 @@
 """The accelerometer's measure of the path acceleration, integrated for short forecasts.
 
-Between two GNSS fixes the surge filters of :mod:`onboard.pipelines.surge_heading`
-predict the path speed. A first-order model (algorithms.md §1.1) cannot follow what it
+Between two GNSS fixes the track of :mod:`onboard.estimators.reconstruction` predicts
+the path speed. A first-order model (algorithms.md §1.1) cannot follow what it
 does not contain (waves moving the boat at the wave period, a wrong thrust map); the
 IMU measures the acceleration itself. This module turns the body specific force into
 the derivative of the signed path speed and integrates it, so a forecast over ``tau``
@@ -75,8 +75,8 @@ class PathAccelerometer:
         self._bias_n = 0
         self.n_samples = 0
         self.n_breaks = 0
-        # flat arrays of doubles: a copy of the pipeline (the engine's latency
-        # shadows) copies them as memory blocks
+        # flat arrays of doubles: a copy of the pipeline (the forks of
+        # onboard.latency.FixedLagQueue) copies them as memory blocks
         self._t = array("d")
         self._V = array("d")
         self._S = array("d")

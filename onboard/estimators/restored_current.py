@@ -23,7 +23,12 @@ from typing import Literal
 
 import numpy as np
 
-from onboard.estimators.current_kf import CurrentKalmanFilter, MeasurementKind, chi2_quantile
+from onboard.estimators.current_kf import (
+    CurrentKalmanFilter,
+    MeasurementKind,
+    VelocityMeasurement,
+    chi2_quantile,
+)
 from onboard.estimators.model_identification import floor_along_track
 from onboard.estimators.vehicle_models import ModelInputs
 
@@ -92,12 +97,12 @@ class RestoredCurrentCheck:
         self.twin.start(kind, z, R)
         self.twin.identification.headings.restart(yaw)
 
-    def update(self, meas: list, R: np.ndarray) -> None:
-        """The twin's updates with the tick's velocity measurements ``(kind, t, z, std)``."""
+    def update(self, meas: list[VelocityMeasurement], R: np.ndarray) -> None:
+        """The twin's updates with the tick's velocity measurements."""
         assert self.twin is not None
         if self.twin.started:
-            for kind, _t, z, std in meas:
-                self.twin.update(kind, z, std, R)
+            for m in meas:
+                self.twin.update(m.kind, m.z, m.std, R)
 
     def evaluate(self, dt: float, yaw: float) -> Verdict:
         """The test of the module docstring after ``dt`` (s) of data at heading ``yaw``

@@ -8,10 +8,11 @@ pipeline sees only its inputs, live operation and replay give identical results.
 
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
 
 from onboard.core.config import Config
-from onboard.core.messages import Sample
+from onboard.core.messages import Innovation, Sample
 
 
 @runtime_checkable
@@ -38,10 +39,15 @@ class Pipeline(Protocol):
         with no estimate yet is simply absent from the mapping."""
         ...
 
+    def innovations(self) -> list[Innovation]:
+        """The :class:`~onboard.core.messages.Innovation` records of the measurement
+        updates since the last call, one per update (accepted or rejected, with the
+        reason); the pipeline keeps none of them after the call."""
+        ...
+
     def health(self) -> Mapping[str, float]:
-        """Innovations, their variances and NIS by channel name, e.g.
-        ``{"surge.innovation": 0.1, "surge.S": 0.02, "surge.nis": 0.5}``; also
-        event counters such as ``"diverged": 1``."""
+        """Counters and diagnostics by name, e.g. ``{"surge.steps": 120, "surge.diverged":
+        0, "surge.V_d": 0.1}``: the pipeline's own numbers beside its innovations."""
         ...
 
     def get_state(self) -> dict[str, Any]:
@@ -51,6 +57,15 @@ class Pipeline(Protocol):
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restore what :meth:`get_state` returned; ignore what does not fit."""
         ...
+
+
+def unused_measurement(channel: str, t: float, dof: int, reason: str,
+                       source: str = "") -> Innovation:
+    """The record of a measurement rejected before any update (invalid, not finite, ...):
+    without a forecast its innovation, covariance and NIS are not numbers."""
+    nan = math.nan
+    return Innovation(channel=channel, t=t, z=(nan,) * dof, S=(nan,) * (dof * dof),
+                      nis=nan, dof=dof, accepted=False, reason=reason, source=source)
 
 
 class PipelineFactory(Protocol):

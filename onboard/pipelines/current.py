@@ -30,9 +30,26 @@ samples and estimates:
     (:class:`~onboard.estimators.flow_observer.FlowObserver`), which observes ``nu_r``
     from the attitude through the yaw dynamics; the current is then ``V_g - R nu_r``;
 
-* the records: current (north, east[, down]), its one-sigma and ``nu_r``; health (velocity
-  innovation, its variance, NIS, calibration, coefficient spread, yaw RLS, gain); the
-  identified model and the last current as persistent state.
+* the records: current (north, east[, down]), its one-sigma and ``nu_r``; the innovation
+  of every measurement update (below); health (counters, calibration, coefficient
+  spread, observability, yaw RLS spread, gain); the identified model and the last current
+  as persistent state.
+
+Innovation channels (:meth:`CurrentPipeline.innovations`; innovation = measured minus
+forecast):
+
+* the joint Kalman filter: ``velocity`` (velocity over ground in earth axes, GNSS SOG/COG
+  or ``VelocityOverGround``: 2 or 3 components, m/s), ``dvl`` (DVL bottom track, body
+  axes) and ``water_track`` (DVL water track, body axes), gated at ``gate_nis`` (reason
+  ``gate``; ``diverged`` when the update reset the filter); a DVL sample that is invalid
+  or beyond its figure of merit, or a velocity that is not finite, is a rejected record
+  without an innovation (``invalid``, ``nonfinite``);
+* with ``observer = "hgo"``: ``hgo.velocity`` and ``hgo.dvl``, the high-gain observer's
+  own innovations (no gate; ``diverged`` when it restarts);
+* with ``observer = "flow"``: ``flow.heading``, the heading innovation (rad) of each step
+  of the flow observer;
+* ``yaw_rls``: the a-priori residual of the yaw channel's RLS (rad/s^2, dimension 1) at
+  each of its updates.
 
 Without an identified surge model the along-track current is not observable on a straight
 line; weak couplings (pitch, heave prior) make the filter's own variance shrink anyway
@@ -44,6 +61,7 @@ minutes are diverse enough for the sway constraint alone (``heading_diversity``)
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -51,10 +69,15 @@ from typing import Any
 import numpy as np
 
 from onboard.core.config import CONFIG_DIR, Config, ConfigError
-from onboard.core.messages import Sample
+from onboard.core.messages import Innovation, Sample
 from onboard.core.pipeline_config import CurrentConfig
 from onboard.estimators.current_hgo import CurrentHighGainObserver
-from onboard.estimators.current_kf import PREDICT_STEP_S, CurrentKalmanFilter
+from onboard.estimators.current_kf import (
+    PREDICT_STEP_S,
+    CurrentKalmanFilter,
+    UpdateOutcome,
+    VelocityMeasurement,
+)
 from onboard.estimators.flow_observer import FlowObserver
 from onboard.estimators.hgo import GainDesign, IncreasingGain
 from onboard.estimators.model_identification import (
@@ -64,7 +87,8 @@ from onboard.estimators.model_identification import (
 )
 from onboard.estimators.restored_current import RestoredCurrentCheck
 from onboard.estimators.vehicle_models import RegressionModel, kind_for_class
-from onboard.pipelines.current_samples import CurrentSamples
+from onboard.pipelines.base import unused_measurement
+from onboard.pipelines.current_samples import CHANNELS, CurrentSamples
 
 GAIN_DIR = CONFIG_DIR / "gains"
 """Precomputed LMI gains for the bundled configs (``onboard design-gain``)."""
@@ -75,6 +99,10 @@ VELOCITY_FRESH_S = 1.0
 MEAS_INTERVAL_S = (1e-3, 0.1, 1.0)
 """Interval (s) between velocity measurements as the high-gain observer's increasing-gain
 law sees it: (floor, the first measurement's, ceiling)."""
+PENDING_INNOVATIONS = 1024
+"""Innovation records kept until the engine takes them; older ones are dropped."""
+REASONS: dict[str, str] = {"accepted": "", "gated": "gate", "reset": "diverged"}
+"""The record's reason for each outcome of the joint filter's update."""
 
 
 class CurrentPipeline:
@@ -111,6 +139,7 @@ class CurrentPipeline:
         self.counters: dict[str, float] = {"rejected_invalid_dvl": 0, "rejected_gate": 0,
                                            "rejected_nonfinite": 0, "updates": 0,
                                            "rls_updates": 0}
+        self._innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
         self.identification = _identification(cfg, self.model, self.counters)
         self.kf = _joint_filter(cfg, self.identification, self.counters)
         self.events: list[str] = []
@@ -152,7 +181,8 @@ class CurrentPipeline:
     def _init_sample_state(self, cfg: CurrentConfig, sensors: Any) -> None:
         """The sample adapter (model inputs, attitude, velocity measurements) and the
         stamps of the fusion."""
-        self.samples = CurrentSamples(cfg, sensors, self.nd, self.counters)
+        self.samples = CurrentSamples(cfg, sensors, self.nd, self.counters,
+                                      self._innovations)
         self.inp = self.samples.inp
         self._t: float | None = None
         self._last_meas_t: float | None = None
@@ -214,7 +244,7 @@ class CurrentPipeline:
         if not kf.started:
             if not meas:
                 return {}
-            self._start(meas[-1][0], meas[-1][2])
+            self._start(meas[-1].kind, meas[-1].z)
             self._t = t
         dt = t - (self._t if self._t is not None else t)
         probation = check.active
@@ -226,10 +256,7 @@ class CurrentPipeline:
         self._correct(meas, R)
         if dt > 0:
             self._identify(dt)
-        flow = self.flow
-        if flow is not None and flow.v_g is not None:
-            flow.step(dt if dt > 0 else 0.0, self.yaw, self.inp, self.identification.thetas,
-                      kf.x[: self.nd])
+        self._step_flow(dt)
         if probation and check.twin is not None and check.twin.started and dt > 0:
             self._check_restored(dt)
         return self._outputs()
@@ -252,18 +279,21 @@ class CurrentPipeline:
                     hgo.reset_gain()
             self._identify_hgo(t, dt)
 
-    def _correct(self, meas: list, R: np.ndarray | None) -> None:
-        """Every velocity measurement ``(kind, t, z, std)`` into the joint filter and the
-        reported observer; ``R`` the body-to-earth rotation."""
+    def _correct(self, meas: list[VelocityMeasurement], R: np.ndarray | None) -> None:
+        """Every velocity measurement into the joint filter and the reported observer;
+        ``R`` the body-to-earth rotation."""
         kf, hgo, flow = self.kf, self.hgo, self.flow
         t_min, t_first, t_max = MEAS_INTERVAL_S
-        for kind, tm, z, std in meas:
+        for m in meas:
+            kind, tm, z, std = m.kind, m.t, m.z, m.std
             dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else t_first
             dt_meas = min(max(dt_meas, t_min), t_max)
             self._last_meas_t = tm
-            if kf.update(kind, z, std, R) == "reset" and hgo is not None:
+            outcome = kf.update(kind, z, std, R)
+            self._record(CHANNELS[kind], m, kf.y, kf.S, kf.nis, kf.gate_nis, outcome)
+            if outcome == "reset" and hgo is not None:
                 hgo.reset_gain()
-            if hgo is not None and not hgo.update(kind, z, std, dt_meas, R, self.inp):
+            if hgo is not None and not self._update_hgo(m, dt_meas, R):
                 hgo.restart(kf.x, kf.P)
                 hgo.reset_gain()
             if flow is not None:
@@ -271,14 +301,62 @@ class CurrentPipeline:
                     kind == "earth" and len(z) < self.nd) else None)
             self._last_velocity_t = tm
 
+    def _update_hgo(self, m: VelocityMeasurement, dt_meas: float,
+                    R: np.ndarray | None) -> bool:
+        """The high-gain observer's update with ``m`` and its record (channel
+        ``hgo.<channel>``); returns False if it diverged (the caller restarts it)."""
+        hgo = self.hgo
+        assert hgo is not None
+        ok = hgo.update(m.kind, m.z, m.std, dt_meas, R, self.inp)
+        if hgo.takes(m.kind, len(m.z)):
+            channel = "hgo." + CHANNELS[m.kind]
+            if ok:
+                self._record(channel, m, hgo.y, hgo.S, hgo.nis)
+            else:
+                self._innovations.append(unused_measurement(channel, m.t, len(m.z),
+                                                            "diverged", m.source))
+        return ok
+
+    def _record(self, channel: str, m: VelocityMeasurement, y: np.ndarray, S: np.ndarray,
+                nis: float, gate: float = math.inf,
+                outcome: UpdateOutcome = "accepted") -> None:
+        """The innovation record of one velocity update: ``y`` (m/s) and its covariance
+        ``S``, NIS ``nis`` against ``gate``."""
+        self._innovations.append(Innovation(
+            channel=channel, t=m.t, z=tuple(y.tolist()), S=tuple(S.ravel().tolist()),
+            nis=nis, dof=len(y), gate=gate, accepted=outcome == "accepted",
+            reason=REASONS[outcome], source=m.source))
+
+    def _step_flow(self, dt: float) -> None:
+        """The flow observer's step over ``dt`` (s) with the heading in use, once it has a
+        velocity over ground; a step corrected by the heading is recorded
+        (``flow.heading``)."""
+        flow = self.flow
+        if flow is None or flow.v_g is None:
+            return
+        before = flow.heading_updates
+        flow.step(dt if dt > 0 else 0.0, self.yaw, self.inp, self.identification.thetas,
+                  self.kf.x[: self.nd])
+        if flow.heading_updates != before:
+            self._innovations.append(Innovation(
+                channel="flow.heading", t=self.samples.yaw_t, z=(float(flow.e),),
+                S=(float(flow.S),), nis=float(flow.nis), dof=1,
+                source=self.samples.yaw_source))
+
     def _identify(self, dt: float) -> None:
         """The yaw channel's RLS and, with the flow observer's vertical block, its pitch
         channel's, on the joint filter's through-water velocity."""
         kf, flow, cfg = self.kf, self.flow, self.cfg
         fresh = (self._last_velocity_t is not None
                  and not (self._t or 0.0) - self._last_velocity_t > VELOCITY_FRESH_S)
+        rls = self.identification.yaw_rls
+        before = rls.n_updates if rls is not None else 0
         self.identification.identify_yaw(dt, kf.x[: self.nd].tolist(), self.inp,
                                           velocity_fresh=fresh)
+        if rls is not None and rls.n_updates != before:
+            self._innovations.append(Innovation(
+                channel="yaw_rls", t=self._t if self._t is not None else math.nan,
+                z=(float(rls.e),), S=(float(rls.S),), nis=float(rls.nis), dof=1))
         if flow is not None:
             flow.identify_pitch(dt, kf.x[: self.nd].tolist(), self.inp, learn=(
                 fresh and cfg.identify and float(kf.x[0]) >= cfg.identify_min_speed))
@@ -377,30 +455,32 @@ class CurrentPipeline:
             out.update(std_down=float(std[2]), w_r=float(nu[2]))
         return out
 
+    def innovations(self) -> list[Innovation]:
+        """The records of the measurement updates since the last call (channels in the
+        module docstring), in the order they were made; a tick's rejected samples come
+        before its updates."""
+        out = list(self._innovations)
+        self._innovations.clear()
+        return out
+
     def health(self) -> Mapping[str, float]:
-        """Velocity innovation, its variance and NIS; RLS residuals; counters."""
+        """Counters (updates, rejections, RLS updates, restarts), the calibration's
+        ``q_scale``, the GNSS velocity one-sigma in use, coefficient and yaw-RLS spread,
+        observer diagnostics and observability."""
         h: dict[str, float] = dict(self.counters)
         kf = self.kf
-        for i, ax in enumerate(("n", "e", "d")[: len(kf.y)]):
-            h[f"velocity.innovation_{ax}"] = float(kf.y[i])
-            h[f"velocity.S_{ax}"] = float(kf.S[i, i])
-        h["velocity.nis"] = kf.nis
-        h["velocity.nis_avg"] = kf.nis_avg
         h["q_scale"] = kf.q_scale
         h["velocity.gnss_std"] = self.samples.gnss_std_used
         if self.identification.n_theta:
             h["theta.std_max"] = kf.theta_std_max()
         rls = self.identification.yaw_rls
         if rls is not None:
-            h["rls.yaw.residual"] = rls.e
             h["rls.yaw.sigma"] = math.sqrt(rls.sigma2)
-            h["rls.yaw.nis"] = rls.nis
         if self.hgo is not None:
             h["gamma"] = self.hgo.gamma
         if self.flow is not None:
             h["flow.gain_kept"] = float(self.flow.unobservable)
             h["flow.diverged"] = float(self.flow.diverged)
-            h["flow.nis"] = self.flow.nis
         for i, ax in enumerate(("north", "east", "down")[: self.nd]):
             h[f"observable.{ax}"] = float(self.observable[i])
         h["observable"] = float(all(self.observable[:2]))

@@ -7,17 +7,19 @@
 * the attitude in use: roll and pitch from the newest ``Attitude`` sample stamped at or
   before the step time (``DvlPosition``'s as a fallback), the heading from ``Attitude``
   (when the source selector chose it) or ``Heading`` (true north);
-* the velocity measurements ``(kind, t, z, std)`` of :mod:`.current_kf`: GNSS SOG/COG and
+* the velocity measurements (:class:`.current_kf.VelocityMeasurement`): GNSS SOG/COG and
   ``VelocityOverGround`` in earth axes, DVL bottom and water track in body axes, each with
   its one-sigma (m/s) from ``[sensors]`` (a GNSS fix's reported accuracy scales its own).
 
 Rejected samples are counted in the shared ``counters`` (``rejected_nonfinite``,
-``rejected_invalid_dvl``).
+``rejected_invalid_dvl``); a rejected velocity is also an innovation record of its
+channel (:data:`CHANNELS`) with reason ``nonfinite`` or ``invalid`` and no innovation.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -33,11 +35,14 @@ from onboard.core.messages import (
     GnssFix,
     Heading,
     Imu,
+    Innovation,
     Sample,
     VelocityOverGround,
 )
 from onboard.core.so3 import euler_to_matrix
+from onboard.estimators.current_kf import VelocityMeasurement
 from onboard.estimators.vehicle_models import ModelInputs
+from onboard.pipelines.base import unused_measurement
 
 ATTITUDE_FALLBACK_S = 1.0
 """A ``DvlPosition`` roll/pitch is used only this long (s) after the last ``Attitude``
@@ -50,6 +55,10 @@ YAW_RATE_MIN_INTERVAL_S = 1e-3
 ATTITUDE_HELD_MAX = 64
 """Attitude samples stamped after the step time that are held for later ticks (the newest
 are kept)."""
+CHANNELS = {"earth": "velocity", "bottom": "dvl", "water": "water_track"}
+"""The innovation channel of each velocity measurement kind: ``velocity`` over ground in
+earth axes (GNSS SOG/COG, ``VelocityOverGround``), ``dvl`` bottom track and
+``water_track`` (body axes)."""
 
 
 class CurrentSamples:
@@ -67,9 +76,12 @@ class CurrentSamples:
             merit accepted (m/s).
         surface_depth: GNSS is used only at most this deep (m).
         counters: rejection counts, shared with the owner's health.
+        innovations: the owner's pending innovation records (rejected velocities go in).
+        yaw_t, yaw_source: time (s) and sample source of the heading in use.
     """
 
-    def __init__(self, cfg: Any, sensors: Any, nd: int, counters: dict[str, float]) -> None:
+    def __init__(self, cfg: Any, sensors: Any, nd: int, counters: dict[str, float],
+                 innovations: deque[Innovation]) -> None:
         """Args:
             cfg: the ``[pipelines.current]`` section (``rpm_scale`` and the one-sigmas
                 ``gnss_velocity_std``, ``gnss_nominal_accuracy_m``, ``dvl_velocity_std``).
@@ -77,9 +89,11 @@ class CurrentSamples:
                 surface depth).
             nd: velocity dimension of the model (2 surface, 3 underwater).
             counters: rejection counts to add to.
+            innovations: the records of rejected velocities are appended here.
         """
         self.nd = nd
         self.counters = counters
+        self.innovations = innovations
         self.rpm_scale = cfg.rpm_scale
         self.gnss_std = cfg.gnss_velocity_std or sensors.gnss.velocity_std_mps
         self.gnss_nominal_acc = (cfg.gnss_nominal_accuracy_m
@@ -99,6 +113,8 @@ class CurrentSamples:
         self._att_later: list[tuple[float, float, float, bool]] = []  # stamped after a tick
         self._step_t = math.inf
         self.yaw: float | None = None
+        self.yaw_t = math.nan
+        self.yaw_source = ""
         self._have_rates = False
         self._yaw_prev: tuple[float, float] | None = None
         self.depth: float | None = None
@@ -109,9 +125,9 @@ class CurrentSamples:
             VelocityOverGround: self._on_vog, DvlVelocity: self._on_dvl,
             DvlPosition: self._on_dvl_position, GnssFix: self._on_gnss}
 
-    def take(self, t: float, samples: Sequence[Sample]) -> list:
+    def take(self, t: float, samples: Sequence[Sample]) -> list[VelocityMeasurement]:
         """Take the tick's samples into the model inputs and the attitude; returns the
-        velocity measurements ``(kind, t, z, std)`` among them, in time order."""
+        velocity measurements among them, in time order."""
         meas: list = []
         handlers = self._handlers
         self._step_t = t
@@ -134,7 +150,7 @@ class CurrentSamples:
             return
         self._set_attitude(s.t, s.roll_rad, s.pitch_rad, True)
         if s.yaw_selected:  # else the source selector chose another heading source
-            self._set_yaw(s.t, s.yaw_rad)
+            self._set_yaw(s.t, s.yaw_rad, s.source)
         if s.yaw_rate_rps is not None:
             self.inp.p = s.roll_rate_rps or 0.0
             self.inp.q = s.pitch_rate_rps or 0.0
@@ -176,7 +192,7 @@ class CurrentSamples:
             self.counters["rejected_nonfinite"] += 1
             return
         h = s.heading_rad + ((s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0)
-        self._set_yaw(s.t, h)
+        self._set_yaw(s.t, h, s.source)
 
     def _on_imu(self, s: Imu, meas: list) -> None:
         if math.isfinite(s.gyro_z):
@@ -207,20 +223,21 @@ class CurrentSamples:
         z = [s.v_north_mps, s.v_east_mps] + ([s.v_down_mps] if (
             self.nd == 3 and s.v_down_mps is not None) else [])
         if not all(math.isfinite(v) for v in z):
-            self.counters["rejected_nonfinite"] += 1
+            self._reject(s, "earth", len(z), "nonfinite")
             return
-        meas.append(("earth", s.t, np.array(z), self.dvl_std))
+        meas.append(VelocityMeasurement("earth", s.t, np.array(z), self.dvl_std, s.source))
 
     def _on_dvl(self, s: DvlVelocity, meas: list) -> None:
+        kind = "bottom" if s.track == "bottom" else "water"
         if not s.valid or (s.fom_mps is not None and s.fom_mps > self.dvl_max_fom):
-            self.counters["rejected_invalid_dvl"] += 1
+            self._reject(s, kind, self.nd, "invalid", "rejected_invalid_dvl")
             return
         z = [s.vx, s.vy, s.vz][: self.nd]
         if not all(math.isfinite(v) for v in z):
-            self.counters["rejected_nonfinite"] += 1
+            self._reject(s, kind, self.nd, "nonfinite")
             return
         std = max(self.dvl_std, s.fom_mps or 0.0)
-        meas.append(("bottom" if s.track == "bottom" else "water", s.t, np.array(z), std))
+        meas.append(VelocityMeasurement(kind, s.t, np.array(z), std, s.source))
 
     def _on_gnss(self, s: GnssFix, meas: list) -> None:
         if s.sog_mps is None or s.cog_rad is None or s.fix_quality == 0:
@@ -228,7 +245,7 @@ class CurrentSamples:
         if self.depth is not None and self.depth > self.surface_depth:
             return
         if not (math.isfinite(s.sog_mps) and math.isfinite(s.cog_rad)):
-            self.counters["rejected_nonfinite"] += 1
+            self._reject(s, "earth", 2, "nonfinite")
             return
         z = np.array([s.sog_mps * math.cos(s.cog_rad), s.sog_mps * math.sin(s.cog_rad)])
         std = self.gnss_std
@@ -238,11 +255,19 @@ class CurrentSamples:
         elif nominal > 0 and acc is not None and math.isfinite(acc) and acc > 0:
             std *= max(1.0, acc / nominal)  # its position accuracy as a proxy
         self.gnss_std_used = std
-        meas.append(("earth", s.t, z, std))
+        meas.append(VelocityMeasurement("earth", s.t, z, std, s.source))
 
-    def _set_yaw(self, t: float, yaw: float) -> None:
-        """Take the heading (rad); without measured rates, the yaw rate follows its
-        difference quotient (a 0.3 s low-pass)."""
+    def _reject(self, s: Sample, kind: str, dof: int, reason: str,
+                counter: str = "rejected_nonfinite") -> None:
+        """Count a velocity sample that cannot be used and record it as a rejected
+        measurement of its channel."""
+        self.counters[counter] += 1
+        self.innovations.append(unused_measurement(CHANNELS[kind], s.t, dof, reason,
+                                                   s.source))
+
+    def _set_yaw(self, t: float, yaw: float, source: str) -> None:
+        """Take the heading (rad) of time ``t`` (s) from ``source``; without measured
+        rates, the yaw rate follows its difference quotient (a 0.3 s low-pass)."""
         if not self._have_rates and self._yaw_prev is not None:
             t0, y0 = self._yaw_prev
             if t - t0 > YAW_RATE_MIN_INTERVAL_S:
@@ -250,6 +275,7 @@ class CurrentSamples:
                 self.inp.r += min(1.0, (t - t0) / YAW_RATE_LOWPASS_S) * (r - self.inp.r)
         self._yaw_prev = (t, yaw)
         self.yaw = yaw
+        self.yaw_t, self.yaw_source = t, source
 
     def rotation(self) -> np.ndarray:
         """Body-to-earth rotation at the attitude in use (the yaw alone for a surface

@@ -28,6 +28,14 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
   attitude (roll/pitch noise ``attitude_std_rad``, yaw the compass heading's, which an
   AHRS reports as its yaw), heading (only without an attitude stream, which carries the
   same yaw). Samples that cannot be used are counted ``rejected.<stream>.<reason>``.
+* **Innovations** (:meth:`Eseso.innovations`): one record per update, channels ``thrust``
+  (the thrust model, never gated), ``attitude`` (3, rad, body rotation vector),
+  ``heading`` (1, rad), ``dvl`` (3, m/s body, bottom track), ``depth`` (1, m), ``vog``
+  (2, m/s, INS velocity over ground), ``gnss_pos`` (2, m) and ``gnss_vel`` (2, m/s);
+  gated updates with reason ``gate``, and a DVL sample that is invalid or beyond the
+  figure of merit (``invalid``, ``fom``), a non-finite velocity over ground
+  (``nonfinite``) and a fix while submerged (``submerged``) as rejected records without
+  an innovation.
 * **Position**: from the first fused GNSS fix (the local origin), or without one from the
   configured start point, then dead-reckoned with the DVL; its std grows without GNSS.
 
@@ -53,12 +61,14 @@ from onboard.core.messages import (
     GnssFix,
     Heading,
     Imu,
+    Innovation,
     Sample,
     VelocityOverGround,
 )
 from onboard.core.pipeline_config import EsesoConfig
 from onboard.core.so3 import euler_to_matrix, matrix_to_euler
 from onboard.estimators.eseso_filter import P_, V_, XI, EsesoFilter, EsesoParams
+from onboard.pipelines.base import unused_measurement
 
 Array = NDArray[np.float64]
 
@@ -180,6 +190,7 @@ class Eseso:
         self.wdot = np.zeros(3)  # angular acceleration from differenced gyro (rad/s^2)
         self.tau: Array | None = None  # last commanded body force (N)
         self.t_tau = -math.inf
+        self._tau_source = ""  # source of the last thruster command
         self._tau_hist: list[tuple[float, Array]] = []  # (t, body force) of held commands
         self._imu_hist: list[tuple[float, Array, Array]] = []  # last IMU (t, f, w), <= 2
         self.t_sensor: float | None = None
@@ -196,6 +207,12 @@ class Eseso:
 
     def _count(self, key: str) -> None:
         self.counters[key] = self.counters.get(key, 0) + 1
+
+    def _unused(self, s: Sample, channel: str, dof: int, reason: str) -> None:
+        """Record the sample as a measurement of ``channel`` rejected for ``reason``
+        before any update (its innovation unknown)."""
+        self.filter.innovations.append(unused_measurement(channel, s.t, dof, reason,
+                                                          s.source))
 
     def _initialize(self, R0: Array, yaw_std_rad: float | None = None) -> None:
         """Start the filter at attitude ``R0``, at the configured start point and the last
@@ -234,7 +251,8 @@ class Eseso:
         tau = self._tau_mean(t0, t1)
         if tau is None:
             return
-        self.filter.update_thrust(f1, w1, (w1 - w0) / (t1 - t0), tau)
+        self.filter.update_thrust(f1, w1, (w1 - w0) / (t1 - t0), tau, t=t1,
+                                  source=self._tau_source)
 
     # ------------------------------------------------------------------ samples
     def _on_imu(self, s: Imu) -> None:
@@ -299,6 +317,7 @@ class Eseso:
             return
         self.tau = self.K_alloc @ forces
         self.t_tau = s.t
+        self._tau_source = s.source
         self._tau_hist.append((s.t, self.tau))
         # keep what the last IMU intervals can still need
         while len(self._tau_hist) > 2 and self._tau_hist[1][0] <= s.t - COMMAND_HISTORY_S:
@@ -313,6 +332,9 @@ class Eseso:
         f = self.filter
         if f.p[2] > self.gnss_max_depth and f.P[2, 2] < 1.0:
             self._count("rejected.gnss.submerged")
+            self._unused(s, "gnss_pos", 2, "submerged")
+            if s.sog_mps is not None and s.cog_rad is not None:
+                self._unused(s, "gnss_vel", 2, "submerged")
             return
         if self.frame is None:
             self.frame = LocalFrame(s.lat_deg, s.lon_deg)
@@ -320,44 +342,49 @@ class Eseso:
         n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
         z = np.array([n, e]) + self._gnss_offset
         r_p = (s.h_acc_m ** 2) if s.h_acc_m else self.r_gnss_p
-        f.update_position_ne(z, r_p)
+        f.update_position_ne(z, r_p, t=s.t, source=s.source)
         if s.sog_mps is not None and s.cog_rad is not None:
             vz = s.sog_mps * np.array([math.cos(s.cog_rad), math.sin(s.cog_rad)])
-            f.update_velocity_ne(vz, self.r_gnss_v)
+            f.update_velocity_ne(vz, self.r_gnss_v, t=s.t, source=s.source)
 
     def _on_vog(self, s: VelocityOverGround) -> None:
         vz = np.array([s.v_north_mps, s.v_east_mps])
         if not np.all(np.isfinite(vz)):
             self._count("rejected.vog.nonfinite")
+            self._unused(s, "vog", 2, "nonfinite")
             return
-        self.filter.update_ins_velocity(vz, self.r_ins)
+        self.filter.update_ins_velocity(vz, self.r_ins, t=s.t, source=s.source)
 
     def _on_depth(self, s: Depth) -> None:
-        self.filter.update_depth(s.depth_m, self.r_depth)
+        self.filter.update_depth(s.depth_m, self.r_depth, t=s.t, source=s.source)
 
     def _on_dvl(self, s: DvlVelocity) -> None:
         if not s.valid:
             self._count("rejected.dvl.invalid")
+            self._unused(s, "dvl", 3, "invalid")
             return
         if s.track != "bottom":
             self._count("rejected.dvl.water_track")
             return
         if s.fom_mps is not None and s.fom_mps > self.dvl_max_fom:
             self._count("rejected.dvl.fom")
+            self._unused(s, "dvl", 3, "fom")
             return
         r = (s.fom_mps ** 2) if s.fom_mps else self.r_dvl
-        self.filter.update_body_velocity(np.array([s.vx, s.vy, s.vz]), r)
+        self.filter.update_body_velocity(np.array([s.vx, s.vy, s.vz]), r, t=s.t,
+                                         source=s.source)
 
     def _on_attitude(self, s: Attitude) -> None:
         """Roll, pitch and yaw; the yaw with the variance ``YAW_UNSELECTED_VAR`` (no
         information) when the source selector chose another heading source."""
         R_meas = euler_to_matrix(s.roll_rad, s.pitch_rad, s.yaw_rad)
         self.filter.update_attitude(R_meas, s.roll_rad, s.pitch_rad, self.r_att,
-                                    self.r_att_yaw if s.yaw_selected else YAW_UNSELECTED_VAR)
+                                    self.r_att_yaw if s.yaw_selected else YAW_UNSELECTED_VAR,
+                                    t=s.t, source=s.source)
 
     def _on_heading(self, s: Heading) -> None:
         meas = s.heading_rad + (s.declination_rad or 0.0)
-        self.filter.update_heading(meas, self.r_head)
+        self.filter.update_heading(meas, self.r_head, t=s.t, source=s.source)
 
     # ------------------------------------------------------------------ Pipeline API
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
@@ -435,19 +462,19 @@ class Eseso:
                               std=self.std() if ready else {},
                               t_sensor=self.t_sensor)
 
-    def health(self) -> Mapping[str, float]:
-        """Innovations (``<channel>.innovation_<i>``), their variances (``.S_<i>``) and
-        ``<channel>.nis`` of the last update of each channel, plus event counters."""
-        out: dict[str, float] = {}
-        for ch, d in self.filter.last.items():
-            y = np.atleast_1d(d["y"])
-            S = np.atleast_1d(d["S"])
-            for i in range(len(y)):
-                out[f"{ch}.innovation_{i}"] = float(y[i])
-                out[f"{ch}.S_{i}"] = float(S[i])
-            out[f"{ch}.nis"] = float(d["nis"])  # type: ignore[arg-type]
-        out.update({k: float(v) for k, v in self.counters.items()})
+    def innovations(self) -> list[Innovation]:
+        """The records of the updates since the last call (module docstring,
+        "Innovations")."""
+        pending = self.filter.innovations
+        out = list(pending)
+        pending.clear()
         return out
+
+    def health(self) -> Mapping[str, float]:
+        """The event counters: ``fused.<channel>``, ``rejected.<channel>.gate``,
+        ``recovered.<channel>``, ``thrust.downweighted``, ``rejected.<stream>.<reason>``
+        of the sample handling, ``imu_gap``, ``diverged``."""
+        return {k: float(v) for k, v in self.counters.items()}
 
     def get_state(self) -> dict[str, Any]:
         """Sensor biases, gravity and the disturbance (worth keeping across a restart)."""

@@ -14,7 +14,15 @@ from typing import Any, Callable, Mapping, Sequence
 
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame, wrap_2pi
-from onboard.core.messages import Attitude, Depth, GnssFix, Heading, Sample, VelocityOverGround
+from onboard.core.messages import (
+    Attitude,
+    Depth,
+    GnssFix,
+    Heading,
+    Innovation,
+    Sample,
+    VelocityOverGround,
+)
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used; the
@@ -89,6 +97,10 @@ class NavTrack:
 
     def _on_depth(self, s: Depth) -> None:
         self._values["depth"] = (s.t, s.depth_m)
+
+    def innovations(self) -> list[Innovation]:
+        """None: the measured track makes no measurement update."""
+        return []
 
     def health(self) -> Mapping[str, float]:
         """Nothing: the measured track has no filter to report on."""

@@ -329,11 +329,11 @@ def aie_step_ratio(n: int = 5000, repeats: int = 5) -> dict[str, float]:
     from filterpy.kalman import KalmanFilter
 
     from onboard.estimators.axis_model import AxisModel, augmented_matrices, discretize
-    from onboard.pipelines.aie import AxisAie
     from onboard.core.pipeline_config import AieConfig
+    from onboard.pipelines.aie import axis_filter
 
     top = AieConfig()
-    ax = AxisAie(AxisModel(1.0, 3.0), top.surge, top)
+    ax = axis_filter(AxisModel(1.0, 3.0), top.surge, top)
     k = discretize(1.0, 1.0)
     rng = np.random.default_rng(0)
     ys = (1.0 + 2.0 * rng.standard_normal(n)).tolist()

@@ -9,8 +9,8 @@ for the chain of the current observer (per earth axis ``z1 = V_g``, ``z2 = V_g'`
 states, ``p = nd`` channels). The LMI is homogeneous, so it is normalized with ``lambda = 1``
 and ``P >= I``, and ``||P||_2`` is minimized (``P <= t I``, minimize ``t``), which minimizes
 ``||P|| / lambda`` and hence ``gamma*``. ``||Y||_F <= y_max`` keeps ``K`` finite: without it
-the optimum drives ``P`` towards singular and ``K`` to about 1e6 (measured, trace
-normalization with maximized ``lambda``). It then computes the Lipschitz
+the optimum drives ``P`` towards singular and ``K`` towards 1e6 (as with a trace
+normalization and maximized ``lambda``). It then computes the Lipschitz
 constant of the model nonlinearity ``L_f = ||J_e||`` (largest damping rate of the
 configured or default model over a range of speeds) and
 

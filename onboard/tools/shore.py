@@ -152,8 +152,12 @@ class ShoreView:
                 out.append(f"  rejected   {rej or '-'}")
                 if h.dropped:
                     out.append("  dropped    " + "  ".join(f"{k}={n}" for k, n in sorted(h.dropped.items())))
-                if h.nis:
-                    out.append("  NIS        " + "  ".join(f"{k}={x:.2f}" for k, x in sorted(h.nis.items())))
+                nis = [f"{p}.{c}={ch.nis_recent:.2f}/{ch.dof}"
+                       + (f" ({ch.rejected} rejected)" if ch.rejected else "")
+                       for p, chans in h.innovations.items() for c, ch in chans.items()
+                       if ch.nis_recent is not None]
+                if nis:
+                    out.append("  NIS/dof    " + "  ".join(nis))
         with self.lock:
             evs = [f"  {v}: {e}" for v, e in self.events if vehicle in ("*", v)]
         if evs:

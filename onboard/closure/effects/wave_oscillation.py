@@ -105,9 +105,9 @@ class WaveOscillation(Effect):
     def columns(self, ds, ctx):
         """The lateral channel's four columns. None in the derivative-form along channel:
         its target, a derivative smoothed over 1 s, attenuates an oscillation of a few
-        seconds (with it the fitted amplitude was 0.28 m/s against 0.36 without, for a
-        true 0.377, on ``effect-waves`` seed 1), so the coefficients come from the lateral channel alone and the along
-        channel carries the wave open loop (:meth:`along_output`)."""
+        seconds (docs/diagnose.md has the amplitudes with and without it), so the
+        coefficients come from the lateral channel alone and the along channel carries the
+        wave open loop (:meth:`along_output`)."""
         s, c = self._basis(ds, ctx)
         cp, sp = np.cos(ds.psi), np.sin(ds.psi)
         return {"lateral": np.column_stack([-sp * s, -sp * c, cp * s, cp * c])}

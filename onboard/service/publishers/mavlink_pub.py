@@ -168,6 +168,42 @@ def _open_link(url: str) -> object:
     return WriterThread(mavutil.mavlink_connection(url, autoreconnect=True))
 
 
+RATIO_KINDS = ("heading", "depth", "velocity", "position")
+"""ESTIMATOR_STATUS's test ratios: ``mag_ratio`` (heading), ``pos_vert_ratio`` (depth),
+``vel_ratio`` (velocity) and ``pos_horiz_ratio`` (position)."""
+
+
+def ratio_kind(channel: str) -> str | None:
+    """Which ESTIMATOR_STATUS ratio an innovation channel feeds (None: none): heading and
+    attitude channels the heading ratio, depth the vertical position, rates and
+    velocities (Doppler speed, DVL, velocity over ground) the velocity, increments and
+    positions the horizontal position."""
+    c = channel.lower()
+    if c.startswith(("heading", "yaw")) or c.endswith("heading") or "attitude" in c:
+        return "heading"
+    if "depth" in c:
+        return "depth"
+    if any(w in c for w in ("rate", "vel", "dvl", "vog", "water", "speed")):
+        return "velocity"
+    if "increment" in c or "pos" in c:
+        return "position"
+    return None
+
+
+def estimator_test_ratios(health: HealthRecord) -> dict[str, float]:
+    """Per ESTIMATOR_STATUS ratio, the largest test ratio (NIS over its gate; above 1 a
+    measurement is rejected) among the channels that feed it since the previous health
+    record; 0 where no channel does."""
+    out = dict.fromkeys(RATIO_KINDS, 0.0)
+    for channels in health.innovations.values():
+        for name, ch in channels.items():
+            kind = ratio_kind(name)
+            r = ch.test_ratio_max
+            if kind is not None and r is not None and r > out[kind]:
+                out[kind] = r
+    return out
+
+
 class MavlinkPublisher:
     """Sends estimates, health and events as MAVLink 2 (see the module docstring).
 
@@ -295,14 +331,10 @@ class MavlinkPublisher:
             mavlink2.MAV_ESTIMATOR_TYPE_NAIVE, 0))
 
     def publish_health(self, health: HealthRecord, now: float | None = None) -> None:
-        """ESTIMATOR_STATUS from the NIS of the pipelines; STATUSTEXT for its events."""
+        """ESTIMATOR_STATUS from the pipelines' innovation test ratios; STATUSTEXT for its
+        events."""
         now = self.clock() if now is None else now
-
-        def ratio(*words: str) -> float:
-            vals = [v for k, v in health.nis.items()
-                    if any(w in k for w in words) and "avg" not in k and math.isfinite(v)]
-            return math.sqrt(max(vals)) / 3.0 if vals else 0.0
-
+        ratios = estimator_test_ratios(health)
         flags = 0
         vals = {q for r in self._latest.values() for q in r.values}
         if {"speed", "north"} & vals or "current" in self._latest:
@@ -316,9 +348,8 @@ class MavlinkPublisher:
         acc = [r.std[q] for r in self._latest.values() for q in ("north", "east") if q in r.std]
         h_acc = max(acc) if acc else 0.0
         self._send(mavlink2.MAVLink_estimator_status_message(
-            int(now * 1e6), flags, ratio("velocity", "surge", "speed"),
-            ratio("position", "gnss", "north", "east"), ratio("depth", "down"),
-            ratio("heading", "yaw"), 0.0, 0.0, float(h_acc), 0.0))
+            int(now * 1e6), flags, ratios["velocity"], ratios["position"], ratios["depth"],
+            ratios["heading"], 0.0, 0.0, float(h_acc), 0.0))
         for ev in health.events:
             self.event(ev, now=now)
 

@@ -15,7 +15,7 @@ in-process router session for the demo and the tests (no zenohd binary).
 
 A router that goes away (restarted, link down) is reconnected by Zenoh itself: a client or
 peer retries its ``connect`` endpoints (zenoh 1.x ``connect/retry``: 1 s doubling to
-4 s, the defaults, measured 0.5-1.5 s after a restarted router is back). The publisher
+4 s, the defaults; docs/service.md gives the reconnection times). The publisher
 watches the session's routers/peers at every health record and reports the loss and
 the return as events (``on_event``); puts while disconnected are dropped by Zenoh, so
 the estimator loop never waits for the network (``put`` drops under congestion,

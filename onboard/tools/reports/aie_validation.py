@@ -119,7 +119,7 @@ def run_sitl(scenario: Any, duration: float | None = None, seed: int = 1,
             if isinstance(s, GnssFix) and s.sog_mps is not None:
                 sog, t_sog = s.sog_mps, s.t
         for nm, ax in (("surge", pa.surge), ("heading", pa.yaw)):
-            rc = ax.rcie  # type: ignore[attr-defined]
+            rc = ax.input.rcie  # type: ignore[attr-defined]
             if rc.steps and (not theta[nm] or len(theta[nm]) < ax.steps):
                 theta[nm].append(list(rc.theta))
         if next_tick is None:

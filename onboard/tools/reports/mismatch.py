@@ -12,14 +12,14 @@ the nominal vehicle and the nominal sensor noise) and each seed it runs
 * ``gavia-tidal`` through the engine with the ``current`` pipeline (KF, model (a): the
   model identified by the pipeline on the *nominal* plant in calm water, as
   :mod:`onboard.tools.reports.current_validation` does): horizontal current RMS error and
-  the mean NIS of the velocity update;
+  the mean NIS of the velocity updates (channels ``velocity`` and ``dvl``);
 * ``jaiabot-turns`` through the engine with the ``aie`` and ``kf`` pipelines: speed RMSE
-  against the true speed, and the mean NIS of the surge and heading updates.
+  against the true speed, and the mean NIS of the surge and heading increment updates.
 
 Mean NIS is compared with the two-sided 95 % band of the mean of ``n`` chi-square(dim)
-values (``n * mean ~ chi2(n dim)``). For the engine pipelines a channel's NIS is
-recorded at each tick where it changed (as ``tests/test_filter_properties.py`` does),
-for the ESESO at every update.
+values (``n * mean ~ chi2(n dim)``). Every pipeline's NIS is taken from its innovation
+records (the engine's :meth:`~onboard.innovations.InnovationMonitor.keep`), one value per
+update, gated updates included, keyed ``<pipeline>.<channel>``.
 
 The tables are written between the markers ``<!-- mismatch:begin -->`` and
 ``<!-- mismatch:end -->`` of ``--out`` (the rest of the file is kept), with the seeds, the
@@ -98,23 +98,14 @@ def rov_run(controller: str, case: str, seed: int, duration: float) -> dict[str,
 # --------------------------------------------------------------------------- engine runs
 
 
-def _nis_spy(pipes: Sequence[Any], keys: Sequence[str]) -> tuple[Callable[[], None],
-                                                                  dict[str, list[float]]]:
-    """A per-tick hook recording each ``<pipeline>.<key>`` NIS from ``health()`` when it
-    changed, and the lists it fills."""
-    out: dict[str, list[float]] = {}
-    prev: dict[str, float] = {}
+def _keep_innovations(engine: Any, pipes: Sequence[Any]) -> Callable[[], dict[str, Any]]:
+    """Keep every innovation record of ``pipes`` in ``engine``; returns the function that
+    gives their mean NIS per ``<pipeline>.<channel>`` (:func:`sitl.closed_loop.mean_nis`)."""
+    from sitl.closed_loop import mean_nis
 
-    def hook() -> None:
-        for p in pipes:
-            h = p.health()
-            for k in keys:
-                v = h.get(k)
-                name = f"{p.name}.{k}"
-                if v is not None and math.isfinite(float(v)) and prev.get(name) != v:
-                    out.setdefault(name, []).append(float(v))
-                    prev[name] = v
-    return hook, out
+    kept = {p.name: engine.monitor.keep(p.name) for p in pipes}
+    return lambda: {f"{name}.{ch}": v for name, records in kept.items()
+                    for ch, v in mean_nis(records).items()}
 
 
 @cache
@@ -148,7 +139,7 @@ def gavia_run(case: str, seed: int, duration: float, after: float = 60.0) -> dic
     cfg = make_config("torpedo-auv", {"model": model})
     pipe = current_mod.create(cfg)
     eng = Engine(cfg, pipelines=[pipe])
-    hook, nis = _nis_spy([pipe], ["velocity.nis"])
+    nis = _keep_innovations(eng, [pipe])
     rate = cfg.engine.rate_hz
     next_tick: float | None = None
     truth_now = None
@@ -161,7 +152,6 @@ def gavia_run(case: str, seed: int, duration: float, after: float = 60.0) -> dic
             next_tick = t
         while t >= next_tick - 1e-9:
             recs = eng.tick(next_tick)
-            hook()
             if recs and truth_now is not None and next_tick >= after:
                 v = recs[0].values
                 e = math.hypot(v.get("north", math.nan) - truth_now.current_north,
@@ -172,8 +162,7 @@ def gavia_run(case: str, seed: int, duration: float, after: float = 60.0) -> dic
             eng.push(s)
     return {"current_rms_mps": _rms(np.asarray(err)),
             "published": float(np.mean(np.isfinite(err))) if err else 0.0,
-            "nis": {k: {"mean": float(np.mean(v)), "n": len(v), "dim": 3}
-                    for k, v in nis.items()}}
+            "nis": nis()}
 
 
 def boat_run(case: str, seed: int, duration: float, after: float = 30.0) -> dict[str, Any]:
@@ -199,7 +188,7 @@ def boat_run(case: str, seed: int, duration: float, after: float = 30.0) -> dict
     if pa is None or pk is None:
         raise RuntimeError("the aie and kf pipelines do not apply to config/rudder-boat.toml")
     eng = Engine(cfg, pipelines=[pa, pk])
-    hook, nis = _nis_spy([pa, pk], ["surge.nis", "heading.nis"])
+    nis = _keep_innovations(eng, [pa, pk])
     speed: dict[str, list[float]] = {"aie": [], "kf": []}
     heading: dict[str, list[float]] = {"aie": [], "kf": []}
     next_tick: float | None = None
@@ -213,7 +202,6 @@ def boat_run(case: str, seed: int, duration: float, after: float = 30.0) -> dict
             continue
         next_tick = t + 0.1
         recs: dict[str, EstimateRecord] = {r.pipeline: r for r in eng.tick(t)}
-        hook()
         if t < after:
             continue
         true_speed = math.copysign(math.hypot(truth.u, truth.v), truth.u)
@@ -222,11 +210,9 @@ def boat_run(case: str, seed: int, duration: float, after: float = 30.0) -> dict
             speed[p].append(v.get("speed", math.nan) - true_speed)
             heading[p].append(float(wrap_pi_array(np.array([v.get("heading", math.nan)
                                                             - truth.yaw]))[0]))
-    dims = {"surge.nis": 1, "heading.nis": 1}
     return {"speed_rmse_mps": {p: _rms(np.asarray(v)) for p, v in speed.items()},
             "heading_rmse_rad": {p: _rms(np.asarray(v)) for p, v in heading.items()},
-            "nis": {k: {"mean": float(np.mean(v)), "n": len(v),
-                        "dim": dims[k.split(".", 1)[1]]} for k, v in nis.items()}}
+            "nis": nis()}
 
 
 # --------------------------------------------------------------------------- campaign
@@ -365,7 +351,7 @@ def tables(res: dict[str, Any], seeds: Sequence[int], durations: dict[str, float
                   "| case | plant | current RMS error (m/s) | per seed | velocity NIS (3) | "
                   "band |", "|---|---|---|---|---|---|"]
         for case, runs in gav.items():
-            p = pooled_nis(runs, "current.velocity.nis")
+            p = pooled_nis(runs, "current.velocity")
             lines.append("| " + " | ".join([
                 case, get(case).describe(), _f(_mean([r["current_rms_mps"] for r in runs])),
                 " / ".join(_f(r["current_rms_mps"]) for r in runs), _nis_cell(p),
@@ -381,8 +367,8 @@ def tables(res: dict[str, Any], seeds: Sequence[int], durations: dict[str, float
         for case, runs in boat.items():
             cells = []
             for p in ("aie", "kf"):
-                cells.append(_nis_cell(pooled_nis(runs, f"{p}.surge.nis")) + " / "
-                             + _nis_cell(pooled_nis(runs, f"{p}.heading.nis")))
+                cells.append(_nis_cell(pooled_nis(runs, f"{p}.surge.increment")) + " / "
+                             + _nis_cell(pooled_nis(runs, f"{p}.heading.increment")))
             lines.append("| " + " | ".join([
                 case, get(case).describe(),
                 _f(_mean([r["speed_rmse_mps"]["aie"] for r in runs])),
@@ -391,7 +377,7 @@ def tables(res: dict[str, Any], seeds: Sequence[int], durations: dict[str, float
                 + _f(_mean([r["heading_rmse_rad"]["kf"] for r in runs]), 4),
                 *cells]) + " |")
         first = next(iter(boat.values()))
-        b = pooled_nis(first, "aie.surge.nis")
+        b = pooled_nis(first, "aie.surge.increment")
         if b:
             lines.append("")
             lines.append(f"95 % band of a mean NIS of dimension 1 over ~{b['n']} values: "

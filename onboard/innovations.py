@@ -1,0 +1,113 @@
+"""The innovations of every pipeline, summarized per channel for health and summaries.
+
+Each pipeline hands the engine the :class:`~onboard.core.messages.Innovation` records of
+its measurement updates (:meth:`onboard.pipelines.base.Pipeline.innovations`); an
+:class:`InnovationMonitor` keeps, per pipeline and channel, the counts, the mean NIS since
+the start and over the recent updates, and the newest innovation with its test ratio.
+:meth:`InnovationMonitor.snapshot` gives them as :class:`ChannelHealth` records (the
+health record's ``innovations``, summary.json's ``innovations``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable
+
+from onboard.core.messages import ChannelHealth, Innovation
+
+RECENT_STEPS = 20
+"""Updates over which ``nis_recent`` averages (a running mean of weight 1/20)."""
+
+
+def _finite(x: float) -> float | None:
+    """``x``, or None when it is not finite (JSON has no NaN)."""
+    return x if math.isfinite(x) else None
+
+
+class ChannelStats:
+    """The running summary of one channel's innovations."""
+
+    __slots__ = ("n", "rejected", "reasons", "dof", "_nis_sum", "_accepted", "_recent",
+                 "last", "_ratio_max")
+
+    def __init__(self, dof: int) -> None:
+        self.n = 0
+        self.rejected = 0
+        self.reasons: dict[str, int] = {}
+        self.dof = dof
+        self._nis_sum = 0.0
+        self._accepted = 0
+        self._recent = 0.0
+        self.last: Innovation | None = None
+        self._ratio_max = 0.0
+
+    def add(self, rec: Innovation) -> None:
+        """One measurement update."""
+        self.n += 1
+        self.dof = rec.dof
+        self.last = rec
+        ratio = rec.test_ratio
+        if ratio > self._ratio_max:
+            self._ratio_max = ratio
+        if not rec.accepted:
+            self.rejected += 1
+            self.reasons[rec.reason] = self.reasons.get(rec.reason, 0) + 1
+            return
+        if not math.isfinite(rec.nis):
+            return
+        self._accepted += 1
+        self._nis_sum += rec.nis
+        self._recent += max(1.0 / RECENT_STEPS, 1.0 / self._accepted) * (
+            rec.nis - self._recent)
+
+    def snapshot(self, reset_max: bool = True) -> ChannelHealth:
+        """The summary now; the largest test ratio starts afresh unless ``reset_max`` is
+        False."""
+        last = self.last
+        ratio_max = self._ratio_max
+        if reset_max:
+            self._ratio_max = 0.0
+        return ChannelHealth(
+            n=self.n, rejected=self.rejected, reasons=dict(self.reasons), dof=self.dof,
+            nis_mean=_finite(self._nis_sum / self._accepted) if self._accepted else None,
+            nis_recent=_finite(self._recent) if self._accepted else None,
+            nis=_finite(last.nis) if last is not None else None,
+            test_ratio=_finite(last.test_ratio) if last is not None else None,
+            test_ratio_max=_finite(ratio_max) if last is not None else None,
+            z=[_finite(x) for x in last.z] if last is not None else [],
+            S=[_finite(x) for x in last.S] if last is not None else [],
+            t=last.t if last is not None else None,
+            source=last.source if last is not None else "")
+
+
+class InnovationMonitor:
+    """Per pipeline and channel, the :class:`ChannelStats` of its innovations."""
+
+    def __init__(self) -> None:
+        self.channels: dict[str, dict[str, ChannelStats]] = {}
+        self._kept: dict[str, list[Innovation]] = {}
+
+    def keep(self, pipeline: str) -> list[Innovation]:
+        """From now on, also keep every record of ``pipeline`` as it arrives, in the list
+        returned (reports and tests that need each update, not the summary)."""
+        return self._kept.setdefault(pipeline, [])
+
+    def add(self, pipeline: str, records: Iterable[Innovation]) -> None:
+        """The records of one pipeline's updates, in order."""
+        kept = self._kept.get(pipeline)
+        if kept is not None:
+            records = list(records)
+            kept.extend(records)
+        per = self.channels.get(pipeline)
+        for rec in records:
+            if per is None:
+                per = self.channels[pipeline] = {}
+            stats = per.get(rec.channel)
+            if stats is None:
+                stats = per[rec.channel] = ChannelStats(rec.dof)
+            stats.add(rec)
+
+    def snapshot(self, reset_max: bool = True) -> dict[str, dict[str, ChannelHealth]]:
+        """``pipeline -> channel -> ChannelHealth``, channels in first-seen order."""
+        return {p: {c: s.snapshot(reset_max) for c, s in per.items()}
+                for p, per in self.channels.items()}
