@@ -50,7 +50,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator, Sequence
 
-from drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.base import ReadStats, UnreadableLog
 from onboard.core.config import CsvFormat
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (

@@ -57,8 +57,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
-from drivers.base import ReadStats, UnreadableLog
-from drivers.mavlink import GPS_FIX_TO_QUALITY, wanted_types
+from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.mavlink import GPS_FIX_TO_QUALITY, wanted_types
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
     ActuatorOutputs,

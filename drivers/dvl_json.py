@@ -45,7 +45,7 @@ from typing import Any, Iterator
 
 import msgspec
 
-from drivers.base import LineAssembler, ReadStats, UnreadableLog
+from onboard.drivers.base import LineAssembler, ReadStats, UnreadableLog
 from onboard.core.messages import DvlPosition, DvlVelocity, Sample
 
 MAX_LINE = 16384

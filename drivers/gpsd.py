@@ -42,7 +42,7 @@ from typing import Any
 
 import msgspec
 
-from drivers.base import LineAssembler, ReadStats
+from onboard.drivers.base import LineAssembler, ReadStats
 from onboard.core.geo import wrap_2pi, wrap_pi
 from onboard.core.messages import Attitude, GnssFix, Heading, Sample
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-from drivers.base import LogReader, UnreadableLog
+from onboard.drivers.base import LogReader, UnreadableLog
 
 DATAFLASH_MAGIC = b"\xa3\x95"
 
@@ -31,13 +31,13 @@ def sniff(path: str | Path) -> str:
         raise UnreadableLog(f"{p}: {err.strerror or err}") from None
     if not head:
         raise UnreadableLog(f"{p}: empty file")
-    from drivers.recording import file_version
+    from onboard.drivers.recording import file_version
 
     if file_version(head) is not None:
         return "recording"
     if head.startswith(DATAFLASH_MAGIC):
         return "dataflash"
-    from drivers.mavlink_frame import MAGIC_V1, MAGIC_V2
+    from onboard.drivers.mavlink_frame import MAGIC_V1, MAGIC_V2
 
     suffix = p.suffix.lower()
     if suffix == ".tlog" or (len(head) > 9 and head[8] in (MAGIC_V1, MAGIC_V2)):
@@ -61,15 +61,15 @@ def open_log(path: str | Path, csv_format=None,
             f"{path}: [inputs] reads column(s) {', '.join(map(repr, actuator_columns))} "
             f'(source = "column"), but a {fmt} log has no columns')
     if fmt == "tlog":
-        from drivers.tlog import TlogReader
+        from onboard.drivers.tlog import TlogReader
 
         return fmt, TlogReader(path)
     if fmt == "dataflash":
-        from drivers.dataflash import DataflashReader
+        from onboard.drivers.dataflash import DataflashReader
 
         return fmt, DataflashReader(path)
     if fmt == "recording":
-        from drivers.recording import RecordingReader
+        from onboard.drivers.recording import RecordingReader
 
         if Path(path).is_dir():
             files = sorted(Path(path).glob("*.onbrec"))
@@ -80,9 +80,9 @@ def open_log(path: str | Path, csv_format=None,
             raise UnreadableLog(
                 f"{path}: CSV logs need --config with a [csv] column mapping "
                 "(e.g. config/blueboat-ntnu-csv.toml)")
-        from drivers.csvlog import CsvReader
+        from onboard.drivers.csvlog import CsvReader
 
         return fmt, CsvReader(path, csv_format, actuator_columns=actuator_columns)
-    from drivers.textlog import open_text_log
+    from onboard.drivers.textlog import open_text_log
 
     return fmt, open_text_log(path)

@@ -32,8 +32,8 @@ from typing import TYPE_CHECKING, Callable, Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as _dialect
 
-from drivers.base import ReadStats
-from drivers.mavlink_frame import (
+from onboard.drivers.base import ReadStats
+from onboard.drivers.mavlink_frame import (
     CRC_EXTRA,
     CRC_LEN,
     HEADER_LEN_V2,
@@ -63,8 +63,8 @@ from onboard.core.messages import (
 )
 
 if TYPE_CHECKING:
-    from drivers.mavlink_link import AutopilotLink
-    from drivers.mavlink_signing import SignatureVerifier
+    from onboard.drivers.mavlink_link import AutopilotLink
+    from onboard.drivers.mavlink_signing import SignatureVerifier
 
 GRAVITY_MSS = 9.80665
 """Standard gravity (m/s^2); ArduPilot scales mg with this constant (``GRAVITY_MSS``)."""

@@ -44,11 +44,11 @@ import time
 import zlib
 from typing import TYPE_CHECKING, Callable
 
-from drivers.mavlink_frame import IFLAG_SIGNED, SIGNATURE_LEN
+from onboard.drivers.mavlink_frame import IFLAG_SIGNED, SIGNATURE_LEN
 
 if TYPE_CHECKING:
-    from drivers.base import ReadStats
-    from drivers.recording import Verdicts
+    from onboard.drivers.base import ReadStats
+    from onboard.drivers.recording import Verdicts
 
 SIGNING_EPOCH = 1420070400
 """MAVLink signing timestamps count 10 us units from 2015-01-01T00:00:00Z (POSIX s)."""
@@ -173,7 +173,7 @@ class VerdictLog:
 
     def take(self, chunk: bytes) -> Verdicts | None:
         """The verdicts of the chunk ``chunk`` just parsed (None: nothing rejected)."""
-        from drivers.recording import Verdicts
+        from onboard.drivers.recording import Verdicts
 
         out = None
         if self.rejected:

@@ -70,7 +70,7 @@ import time as _time
 from dataclasses import dataclass, field
 from typing import Literal
 
-from drivers.base import LineAssembler, ReadStats
+from onboard.drivers.base import LineAssembler, ReadStats
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import GnssFix, Heading, Sample
 

@@ -54,7 +54,7 @@ from typing import Iterator, Literal
 
 import msgspec
 
-from drivers.base import LineAssembler, ReadStats, UnreadableLog
+from onboard.drivers.base import LineAssembler, ReadStats, UnreadableLog
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
     Altitude,

@@ -27,22 +27,22 @@ from typing import TYPE_CHECKING, Callable
 
 import msgspec
 
-from drivers.base import ReadStats, StreamParser
+from onboard.drivers.base import ReadStats, StreamParser
 from onboard.core.messages import AnySample, Sample
 
 if TYPE_CHECKING:
-    from drivers.mavlink_link import AutopilotLink
-    from drivers.mavlink_signing import SignatureVerifier
+    from onboard.drivers.mavlink_link import AutopilotLink
+    from onboard.drivers.mavlink_signing import SignatureVerifier
 
 KINDS: tuple[str, ...] = ("mavlink", "nmea", "dvl-json", "pd6", "gpsd", "sample")
 """Protocols a source (or a raw record of a recording) may have."""
 
 _CLASSES: dict[str, tuple[str, str]] = {
-    "mavlink": ("drivers.mavlink", "MavlinkParser"),
-    "nmea": ("drivers.nmea", "NmeaParser"),
-    "dvl-json": ("drivers.dvl_json", "DvlJsonParser"),
-    "pd6": ("drivers.pd6", "Pd6Parser"),
-    "gpsd": ("drivers.gpsd", "GpsdParser"),
+    "mavlink": ("onboard.drivers.mavlink", "MavlinkParser"),
+    "nmea": ("onboard.drivers.nmea", "NmeaParser"),
+    "dvl-json": ("onboard.drivers.dvl_json", "DvlJsonParser"),
+    "pd6": ("onboard.drivers.pd6", "Pd6Parser"),
+    "gpsd": ("onboard.drivers.gpsd", "GpsdParser"),
 }
 
 

@@ -43,7 +43,7 @@ from typing import BinaryIO, Iterable, Iterator
 
 import msgspec
 
-from drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.base import ReadStats, UnreadableLog
 
 FILE_MAGIC = b"ONBREC01"
 """The magic of version 1 (see the module docstring for the versions)."""
@@ -315,7 +315,7 @@ def _link_for(meta: list[bytes], source: str):
     ``autopilot_time`` key) decodes every component with receive-time stamps."""
     import json
 
-    from drivers.mavlink_link import AutopilotLink
+    from onboard.drivers.mavlink_link import AutopilotLink
 
     try:
         cfg = json.loads(meta[-1]).get("config") if meta else None
@@ -355,8 +355,8 @@ class RecordingReader:
         self.meta: list[bytes] = []
 
     def __iter__(self):
-        from drivers.mavlink_signing import VerdictPlayer
-        from drivers.protocols import _finite, parser_for
+        from onboard.drivers.mavlink_signing import VerdictPlayer
+        from onboard.drivers.protocols import _finite, parser_for
 
         parsers: dict[tuple[str, str], object] = {}
         players: dict[tuple[str, str], VerdictPlayer] = {}

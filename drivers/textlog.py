@@ -67,8 +67,8 @@ from typing import Iterator
 
 import msgspec
 
-from drivers.base import LogReader, ReadStats, UnreadableLog
-from drivers.nmea import NmeaError, NmeaParser, parse_gga, parse_rmc, split_sentence
+from onboard.drivers.base import LogReader, ReadStats, UnreadableLog
+from onboard.drivers.nmea import NmeaError, NmeaParser, parse_gga, parse_rmc, split_sentence
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
 
@@ -136,11 +136,11 @@ def open_text_log(path: str | Path) -> LogReader:
     if kind == "nmea":
         return NmeaCaptureReader(p)
     if kind == "dvl-json":
-        from drivers.dvl_json import DvlJsonLogReader
+        from onboard.drivers.dvl_json import DvlJsonLogReader
 
         return DvlJsonLogReader(p)
     if kind == "pd6":
-        from drivers.pd6 import Pd6LogReader
+        from onboard.drivers.pd6 import Pd6LogReader
 
         return Pd6LogReader(p)
     if kind == "mixed":

@@ -30,8 +30,8 @@ from collections import Counter
 from pathlib import Path
 from typing import BinaryIO, Iterable, Iterator
 
-from drivers.base import ReadStats, UnreadableLog
-from drivers.mavlink import (
+from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.mavlink import (
     DecodeContext,
     Spec,
     _layout,
@@ -39,7 +39,7 @@ from drivers.mavlink import (
     type_name,
     wanted_types,
 )
-from drivers.mavlink_frame import (
+from onboard.drivers.mavlink_frame import (
     BIT_REVERSED,
     BIT_REVERSED_BYTE,
     BIT_REVERSED_HIGH,

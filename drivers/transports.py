@@ -60,7 +60,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import AsyncIterator, Awaitable, Callable, Literal, TypeVar
 
-from drivers.gpsd import DEFAULT_PORT, WATCH
+from onboard.drivers.gpsd import DEFAULT_PORT, WATCH
 
 T = TypeVar("T")
 Clock = Callable[[], float]

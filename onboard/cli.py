@@ -80,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reboot the simulated autopilot at S seconds (repeatable)")
     p.add_argument("--other-components", action="store_true",
                    help="a ground station and a camera share the --link")
-    p.set_defaults(handler="sitl.cli:main")
+    p.set_defaults(handler="onboard.sitl.cli:main")
 
     p = sub.add_parser("replay", help="run the pipelines over a recorded log")
     p.add_argument("log", metavar="LOG", help=".tlog, .bin, NMEA/DVL capture, CSV (file or "

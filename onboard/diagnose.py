@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from drivers.base import UnreadableLog
+from onboard.drivers.base import UnreadableLog
 from onboard.closure import dataset, overlay, report
 from onboard.closure.effects import ALL
 from onboard.closure.select import select

@@ -16,8 +16,8 @@ from typing import Iterable, Iterator, Sequence
 
 import msgspec
 
-from drivers.base import UnreadableLog
-from drivers.logs import open_log
+from onboard.drivers.base import UnreadableLog
+from onboard.drivers.logs import open_log
 from onboard.autodetect import detect
 from onboard.core import config as configmod
 from onboard.core.config import Config
@@ -120,7 +120,7 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
         if cfg is not None:
             return cfg, "the configuration the service recorded with"
     if fmt == "tlog":
-        from drivers.tlog import scan_header
+        from onboard.drivers.tlog import scan_header
 
         infos, params = scan_header(log)
         cfg, why = detect([*infos, *params])

@@ -48,7 +48,7 @@ from typing import Sequence
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from onboard.core.messages import Imu, Parameter, Sample, VehicleInfo
-from sitl.emitters import MavlinkEncoder, Sink
+from onboard.sitl.emitters import MavlinkEncoder, Sink
 
 REBOOT_S = 2.0
 """How long (s) the autopilot is silent while it reboots."""

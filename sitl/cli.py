@@ -41,10 +41,10 @@ from pathlib import Path
 from typing import Any
 
 from onboard.core.errors import UsageError
-from sitl.emitters import PtySink, Sink, TcpServerSink, TlogSink, open_link
-from sitl.guidance import Controller
-from sitl.runner import run
-from sitl.scenarios import SCENARIOS, Scenario, get
+from onboard.sitl.emitters import PtySink, Sink, TcpServerSink, TlogSink, open_link
+from onboard.sitl.guidance import Controller
+from onboard.sitl.runner import run
+from onboard.sitl.scenarios import SCENARIOS, Scenario, get
 
 DEFAULT_LINK = "udp:127.0.0.1:14550"
 
@@ -63,7 +63,7 @@ def make_controller(name: str, sc: Scenario) -> Controller:
     built (the MPCs need the ``mpc`` extra)."""
     if sc.name != "bluerov2-circle":
         raise UsageError(f"--controller applies to bluerov2-circle, not {sc.name}")
-    from sitl.closed_loop import EsesoPolicy
+    from onboard.sitl.closed_loop import EsesoPolicy
 
     try:
         return EsesoPolicy(name, sc)

@@ -31,9 +31,9 @@ the ESESO's state errors against truth, and the solver's wall-clock and CPU p50/
 
 Command line::
 
-    python -m sitl.closed_loop --controller ampc --duration 60 --report out.json
-    python -m sitl.closed_loop --figure docs/figures/bluerov2_circle.png   # all four
-    python -m sitl.closed_loop --controller ampc --mismatch lag0.15 --duration 60
+    python -m onboard.sitl.closed_loop --controller ampc --duration 60 --report out.json
+    python -m onboard.sitl.closed_loop --figure docs/figures/bluerov2_circle.png   # all four
+    python -m onboard.sitl.closed_loop --controller ampc --mismatch lag0.15 --duration 60
 """
 
 from __future__ import annotations
@@ -59,13 +59,13 @@ from onboard.core.messages import (
     Innovation,
 )
 from onboard.engine import Engine
-from sitl.controllers import CircleReference, ControlOutput, make_controller
-from sitl.environment import Environment
-from sitl.plants.base import Command
-from sitl.mismatch import MismatchCase, perturb_plant, scale_noise
-from sitl.mismatch import get as mismatch_case
-from sitl.plants.bluerov2 import BlueROV2, BlueROV2Params
-from sitl.sensors import (
+from onboard.sitl.controllers import CircleReference, ControlOutput, make_controller
+from onboard.sitl.environment import Environment
+from onboard.sitl.plants.base import Command
+from onboard.sitl.mismatch import MismatchCase, perturb_plant, scale_noise
+from onboard.sitl.mismatch import get as mismatch_case
+from onboard.sitl.plants.bluerov2 import BlueROV2, BlueROV2Params
+from onboard.sitl.sensors import (
     Compass,
     CompassConfig,
     DepthConfig,
@@ -458,9 +458,9 @@ def figure(logs: dict[str, RunLog], path: str, sc: CircleScenario | None = None)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m sitl.closed_loop``: fly the controllers, print their figures, write the
+    """``python -m onboard.sitl.closed_loop``: fly the controllers, print their figures, write the
     JSON report and the figure (module docstring)."""
-    ap = argparse.ArgumentParser(prog="python -m sitl.closed_loop", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m onboard.sitl.closed_loop", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--controller", choices=CONTROLLERS, action="append",
                     help="controller(s) to fly (default: all four)")

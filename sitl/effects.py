@@ -77,7 +77,7 @@ from typing import Mapping
 
 import numpy as np
 
-from sitl.environment import (
+from onboard.sitl.environment import (
     CurrentField,
     Environment,
     NonuniformCurrent,
@@ -85,7 +85,7 @@ from sitl.environment import (
     UniformCurrent,
     WaveField,
 )
-from sitl.sensors import SensorSuiteConfig
+from onboard.sitl.sensors import SensorSuiteConfig
 
 VOCABULARY: dict[str, tuple[str, ...]] = {
     "water_current": ("north", "east"),

@@ -300,7 +300,7 @@ class NmeaEncoder:
     def encode(self, samples: Sequence[Sample]) -> list[bytes]:
         """The frames for ``samples`` (one instant, in order); samples this encoder has no
         sentence or report for give none."""
-        from drivers import nmea
+        from onboard.drivers import nmea
 
         out: list[bytes] = []
         for s in samples:
@@ -328,7 +328,7 @@ class DvlJsonEncoder:
     def encode(self, samples: Sequence[Sample]) -> list[bytes]:
         """The report lines for ``samples`` (one instant, in order); other sample types give
         none."""
-        from drivers import dvl_json
+        from onboard.drivers import dvl_json
 
         out: list[bytes] = []
         for s in samples:
@@ -363,7 +363,7 @@ class Pd6Encoder:
     def encode(self, samples: Sequence[Sample]) -> list[bytes]:
         """The PD6 lines for ``samples`` (one instant, in order); Attitude and Depth are kept
         for the next ensemble and give none."""
-        from drivers import pd6
+        from onboard.drivers import pd6
 
         out: list[bytes] = []
         for s in samples:
@@ -406,7 +406,7 @@ class TlogSink:
     time ``epoch_s + t`` as big-endian microseconds since the Unix epoch, then the frame."""
 
     def __init__(self, path: str | Path, epoch_s: float = DEFAULT_EPOCH_S) -> None:
-        from drivers.tlog import TlogWriter
+        from onboard.drivers.tlog import TlogWriter
 
         self.path = Path(path)
         self.epoch_s = epoch_s

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sitl.integrate import GRAVITY
+from onboard.sitl.integrate import GRAVITY
 
 __all__ = [
     "TIDAL_M2_PERIOD_S",

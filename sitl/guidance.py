@@ -32,8 +32,8 @@ import numpy as np
 
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import Heading, Imu, Sample
-from sitl.plants.base import Command
-from sitl.truth import TruthRecord
+from onboard.sitl.plants.base import Command
+from onboard.sitl.truth import TruthRecord
 
 
 def _clip(x: float, lim: float) -> float:

@@ -48,7 +48,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from sitl.plants.base import Command
+from onboard.sitl.plants.base import Command
 
 __all__ = [
     "CASES",
@@ -153,9 +153,9 @@ _RUDDER_BOAT = {"mass": ("m", "x_udot", "y_vdot", "i_z", "n_rdot"),
 
 
 def _table(params: Any) -> dict[str, tuple[str, ...]]:
-    from sitl.plants.bluerov2 import BlueROV2Params
-    from sitl.plants.rudder_boat import RudderBoatParams
-    from sitl.plants.torpedo_auv import TorpedoParams
+    from onboard.sitl.plants.bluerov2 import BlueROV2Params
+    from onboard.sitl.plants.rudder_boat import RudderBoatParams
+    from onboard.sitl.plants.torpedo_auv import TorpedoParams
 
     if isinstance(params, BlueROV2Params):
         return _BLUEROV2
@@ -170,8 +170,8 @@ def _table(params: Any) -> dict[str, tuple[str, ...]]:
 def _mass_scaled_torpedo(params: Any) -> Any:
     """``params`` as a :class:`TorpedoParams` subclass whose mass ``W/g`` is multiplied by
     a ``mass_scale`` field (the weight, hence the trim, unchanged)."""
-    from sitl.integrate import GRAVITY
-    from sitl.plants.torpedo_auv import TorpedoParams
+    from onboard.sitl.integrate import GRAVITY
+    from onboard.sitl.plants.torpedo_auv import TorpedoParams
 
     if hasattr(params, "mass_scale"):
         return params
@@ -206,7 +206,7 @@ def perturb_params(params: Any, case: MismatchCase | str) -> Any:
     """
     case = get(case)
     table = _table(params)
-    from sitl.plants.torpedo_auv import TorpedoParams
+    from onboard.sitl.plants.torpedo_auv import TorpedoParams
 
     if isinstance(params, TorpedoParams) and case.mass_scale != 1.0:
         params = _mass_scaled_torpedo(params)
@@ -281,7 +281,7 @@ def perturb_plant(plant: Any, case: MismatchCase | str) -> Any:
         plant: a BlueROV2, torpedo AUV or rudder-boat plant (subclasses included).
         case: the case or its name.
     """
-    from sitl.plants.bluerov2 import BlueROV2
+    from onboard.sitl.plants.bluerov2 import BlueROV2
 
     case = get(case)
     if (case.mass_scale == case.damping_scale == case.thrust_scale == 1.0
@@ -349,7 +349,7 @@ def perturb_scenario(scenario: Any, case: MismatchCase | str) -> Any:
         scenario: a scenario or its registered name.
         case: the case or its name.
     """
-    from sitl import scenarios as scenarios_mod
+    from onboard.sitl import scenarios as scenarios_mod
 
     case = get(case)
     sc = scenarios_mod.get(scenario) if isinstance(scenario, str) else scenario

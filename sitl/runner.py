@@ -2,7 +2,7 @@
 
 Python API (what estimator tests use)::
 
-    from sitl.runner import simulate, run_to_tlog
+    from onboard.sitl.runner import simulate, run_to_tlog
 
     for t, samples, truth in simulate("jaiabot-turns", duration=60, seed=1):
         ...   # samples: list of onboard.core.messages samples measured at t (may be empty)
@@ -45,7 +45,7 @@ from typing import Any, Iterator, Sequence
 import msgspec
 
 from onboard.core.messages import Sample, VehicleInfo
-from sitl.effects import (
+from onboard.sitl.effects import (
     FORCE_EFFECTS,
     apply_to_environment,
     apply_to_plant,
@@ -53,7 +53,7 @@ from sitl.effects import (
     effect_params,
     external_force_ned,
 )
-from sitl.emitters import (
+from onboard.sitl.emitters import (
     DEFAULT_EPOCH_S,
     Channel,
     DvlJsonEncoder,
@@ -64,13 +64,13 @@ from sitl.emitters import (
     Sink,
     TlogSink,
 )
-from sitl.autopilot import SimAutopilot
-from sitl.emitters import MAV_TYPE_SURFACE_BOAT
-from sitl.guidance import ControlInput, Controller
-from sitl.plants.base import Command
-from sitl.scenarios import Scenario, get
-from sitl.sensors import GeoOrigin, Sensor, WorldView, build_sensors
-from sitl.truth import TruthRecord
+from onboard.sitl.autopilot import SimAutopilot
+from onboard.sitl.emitters import MAV_TYPE_SURFACE_BOAT
+from onboard.sitl.guidance import ControlInput, Controller
+from onboard.sitl.plants.base import Command
+from onboard.sitl.scenarios import Scenario, get
+from onboard.sitl.sensors import GeoOrigin, Sensor, WorldView, build_sensors
+from onboard.sitl.truth import TruthRecord
 
 Step = tuple[float, list[Sample], "TruthRecord | None"]
 """What :func:`simulate` yields: (t in s, samples measured at t, truth or None)."""

@@ -39,10 +39,10 @@ import numpy as np
 
 from onboard.core.errors import UsageError
 from onboard.core.messages import Parameter
-from sitl.effects import Effect
-from sitl.emitters import MAV_TYPE_SUBMARINE, MAV_TYPE_SURFACE_BOAT
-from sitl.environment import CurrentField, Environment
-from sitl.guidance import (
+from onboard.sitl.effects import Effect
+from onboard.sitl.emitters import MAV_TYPE_SUBMARINE, MAV_TYPE_SURFACE_BOAT
+from onboard.sitl.environment import CurrentField, Environment
+from onboard.sitl.guidance import (
     AuvAutopilot,
     BoatAutopilot,
     CircleReference,
@@ -51,11 +51,11 @@ from sitl.guidance import (
     Leg,
     RovCirclePid,
 )
-from sitl.plants.base import Command, Plant
-from sitl.plants.catamaran import Catamaran, CatamaranParams
-from sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
-from sitl.plants.twin_thruster import TwinThrusterBoat, TwinThrusterParams
-from sitl.sensors import (
+from onboard.sitl.plants.base import Command, Plant
+from onboard.sitl.plants.catamaran import Catamaran, CatamaranParams
+from onboard.sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
+from onboard.sitl.plants.twin_thruster import TwinThrusterBoat, TwinThrusterParams
+from onboard.sitl.sensors import (
     CompassConfig,
     DepthConfig,
     DvlConfig,
@@ -246,7 +246,7 @@ def _catamaran() -> VehicleSpec:
 
 
 def _bluerov2() -> VehicleSpec:
-    from sitl.plants.bluerov2 import BlueROV2
+    from onboard.sitl.plants.bluerov2 import BlueROV2
 
     return VehicleSpec(
         vehicle_class="bluerov2",
@@ -267,11 +267,11 @@ def _auv(kind: str) -> VehicleSpec:
     plane on SERVO2 (1500 us neutral, +-500 us = +-15 deg), propeller speed on SERVO3
     (throttle, 1500 + 500 rpm / max_rpm us) and reported by RPM.rpm1."""
     if kind == "torpedo":
-        from sitl.plants.torpedo_auv import REMUS100, TorpedoAUV
+        from onboard.sitl.plants.torpedo_auv import REMUS100, TorpedoAUV
 
         max_rpm, make, cls = REMUS100.max_rpm, TorpedoAUV, "torpedo-auv"
     else:
-        from sitl.plants.spheroid import SpheroidAUV, SpheroidParams
+        from onboard.sitl.plants.spheroid import SpheroidAUV, SpheroidParams
 
         max_rpm, make, cls = SpheroidParams().max_rpm, SpheroidAUV, "spheroid"
     return VehicleSpec(
@@ -524,7 +524,7 @@ def _spheroid_autopilot() -> Controller:
 
 
 def _rov_pid() -> Controller:
-    from sitl.plants.bluerov2 import thruster_commands
+    from onboard.sitl.plants.bluerov2 import thruster_commands
 
     return RovCirclePid(CircleReference(), thruster_commands)
 

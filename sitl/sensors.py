@@ -66,7 +66,7 @@ from onboard.core.messages import (
     Imu as ImuSample,
 )
 from onboard.core.so3 import body_to_ned
-from sitl.truth import TruthRecord
+from onboard.sitl.truth import TruthRecord
 
 GRAVITY = 9.80665
 """Standard gravity (m/s^2)."""

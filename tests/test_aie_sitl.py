@@ -131,7 +131,7 @@ def _degraded(name: str, start: float, duration: float, factor: float):
     from ``start`` for ``duration`` s, and its reported ``h_acc_m`` saying so."""
     import dataclasses
 
-    from sitl.scenarios import get
+    from onboard.sitl.scenarios import get
 
     sc = get(name)
     g = dataclasses.replace(sc.sensors.gnss,

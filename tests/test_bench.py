@@ -75,7 +75,7 @@ def test_missing_module_gives_null_with_reason(monkeypatch):
 
 
 def test_synthetic_tlog_reads_back_at_the_stated_rates(tmp_path: Path):
-    from drivers.tlog import TlogReader
+    from onboard.drivers.tlog import TlogReader
 
     info = bench.synthesize_tlog(tmp_path / "s.tlog", 10.0)
     r = TlogReader(tmp_path / "s.tlog")

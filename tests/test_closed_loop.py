@@ -17,7 +17,7 @@ import pytest
 pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
 
 from onboard.tools.reports import runs as figure_runs  # noqa: E402
-from sitl import closed_loop  # noqa: E402
+from onboard.sitl import closed_loop  # noqa: E402
 
 DURATION = 30.0
 
@@ -68,9 +68,9 @@ def test_report_has_the_contract_fields(runs, tmp_path: Path) -> None:
 def test_policy_flies_the_simulator_scenario_through_its_controller_hook() -> None:
     import dataclasses
 
-    from sitl.closed_loop import EsesoPolicy
-    from sitl.runner import simulate
-    from sitl.scenarios import get
+    from onboard.sitl.closed_loop import EsesoPolicy
+    from onboard.sitl.runner import simulate
+    from onboard.sitl.scenarios import get
 
     sc = get("bluerov2-circle")
     sc = dataclasses.replace(sc, reference=dataclasses.replace(sc.reference, speed=0.5))

@@ -12,21 +12,21 @@ import pytest
 pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
 
 from onboard.core.messages import EstimateRecord  # noqa: E402
-from sitl.controllers import (  # noqa: E402
+from onboard.sitl.controllers import (  # noqa: E402
     Bluerov2Params,
     CircleReference,
     make_controller,
 )
-from sitl.controllers.ampc import Ampc  # noqa: E402
-from sitl.controllers.nmpc import (  # noqa: E402
+from onboard.sitl.controllers.ampc import Ampc  # noqa: E402
+from onboard.sitl.controllers.nmpc import (  # noqa: E402
     Nmpc,
     NmpcTuning,
     OffsetFreeNmpc,
     _dynamics,
     solve_time_stats,
 )
-from sitl.controllers.pid import PidController  # noqa: E402
-from sitl.plants import bluerov2 as plant_mod  # noqa: E402
+from onboard.sitl.controllers.pid import PidController  # noqa: E402
+from onboard.sitl.plants import bluerov2 as plant_mod  # noqa: E402
 
 
 def _record(values: dict[str, float]) -> EstimateRecord:
@@ -143,7 +143,7 @@ def test_circle_reference_is_the_paper_circle_in_ned() -> None:
     # 0.5 m/s by default: the paper's 1.5 m/s is beyond the simulated thrusters
     assert ref.speed == 0.5 and CircleReference(speed=1.5)(1.0).yaw_rate == pytest.approx(-0.75)
     # the same circle as the simulator's scenario reference
-    from sitl.guidance import CircleReference as SimCircle
+    from onboard.sitl.guidance import CircleReference as SimCircle
 
     pos, vel, _, yaw, r = SimCircle()(2.0)
     assert np.allclose(pos, ref(2.0).position) and yaw == pytest.approx(ref(2.0).yaw)

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.base import UnreadableLog
-from drivers.csvlog import CsvReader
+from onboard.drivers.base import UnreadableLog
+from onboard.drivers.csvlog import CsvReader
 from onboard.core.config import CONFIG_DIR, CsvFormat, load
 from onboard.core.messages import (
     ActuatorOutputs,
@@ -286,7 +286,7 @@ def test_replay_of_a_csv_with_actuator_columns_feeds_the_commands(tmp_path: Path
 
 
 def test_a_column_source_on_a_log_without_columns_is_an_error():
-    from drivers.logs import open_log
+    from onboard.drivers.logs import open_log
 
     log = Path(__file__).parent / "data" / "replay" / "jaiabot-turns.tlog"
     with pytest.raises(UnreadableLog, match="'rudder_deg'.*has no columns"):

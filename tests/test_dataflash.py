@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from drivers.base import UnreadableLog
-from drivers.dataflash import DataflashReader
+from onboard.drivers.base import UnreadableLog
+from onboard.drivers.dataflash import DataflashReader
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,

@@ -14,7 +14,7 @@ import pytest
 from onboard.core.messages import EstimateRecord
 from onboard.tools.demo import main, run_demo, score
 from onboard.tools.service_bench import free_tcp_port
-from sitl.truth import TruthRecord
+from onboard.sitl.truth import TruthRecord
 
 
 @pytest.mark.integration

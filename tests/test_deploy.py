@@ -225,7 +225,7 @@ def test_the_service_refuses_to_start_with_a_missing_or_readable_zenoh_secret(tm
 # --------------------------------------------------------------------------- disk faults
 
 def _records(n: int, t0: float = 0.0):
-    from drivers.recording import RawRecord
+    from onboard.drivers.recording import RawRecord
 
     return [RawRecord(t=t0 + i * 0.01, source="gps", kind="nmea", data=b"$GPGGA,%d\r\n" % i)
             for i in range(n)]
@@ -235,7 +235,7 @@ def test_a_disk_that_refuses_every_write_is_counted_reported_and_never_raises(tm
     """/dev/full: the kernel answers ENOSPC to every write."""
     if not os.path.exists("/dev/full"):
         pytest.skip("no /dev/full here")
-    from drivers.recording import RecordingWriter
+    from onboard.drivers.recording import RecordingWriter
     from onboard.service.recorder import Recorder
 
     events: list[str] = []
@@ -257,7 +257,7 @@ class _FlakyDisk:
         self.failing = True
 
     def __call__(self, path: Path, version: int):
-        from drivers.recording import RecordingWriter
+        from onboard.drivers.recording import RecordingWriter
 
         disk = self
 
@@ -273,7 +273,7 @@ class _FlakyDisk:
 def test_eio_loses_only_the_batches_it_hits_and_recording_resumes(tmp_path):
     import errno
 
-    from drivers.recording import read_records
+    from onboard.drivers.recording import read_records
     from onboard.service.recorder import Recorder
 
     disk = _FlakyDisk(errno.EIO)

@@ -38,7 +38,7 @@ LATENCY = ALL["gps_latency"]
 def short_clean_run() -> D.Dataset:
     """The fit part of `cat-clean`, seed 1, flown for 240 s (one mission loop of 215 s),
     read as `onboard diagnose` reads it."""
-    from sitl.runner import run_to_tlog
+    from onboard.sitl.runner import run_to_tlog
 
     with tempfile.TemporaryDirectory(prefix="onboard-cat-") as tmp:
         log = Path(tmp) / "log.tlog"

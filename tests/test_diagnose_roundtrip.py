@@ -20,14 +20,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.logs import open_log
+from onboard.drivers.logs import open_log
 from onboard.cli import main
 from onboard.core import config
 from onboard.engine import Engine
 from onboard.plots import read_columns
-from sitl.effects import Effect
-from sitl.runner import read_truth, run_to_tlog
-from sitl.scenarios import get
+from onboard.sitl.effects import Effect
+from onboard.sitl.runner import read_truth, run_to_tlog
+from onboard.sitl.scenarios import get
 
 BASE = str(Path(__file__).resolve().parent.parent / "config" / "sitl-rudder-boat.toml")
 TRUTH = {"compass_deviation": (0.12, 0.7), "gyro_bias": 0.01, "gps_latency": 0.6}

@@ -19,7 +19,7 @@ import pytest
 
 from onboard.core import config
 from onboard.diagnose import diagnose
-from sitl.runner import run_to_tlog
+from onboard.sitl.runner import run_to_tlog
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
 CFG = CONFIG / "sitl-rudder-boat.toml"

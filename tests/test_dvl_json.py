@@ -12,14 +12,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.base import UnreadableLog
-from drivers.dvl_json import (
+from onboard.drivers.base import UnreadableLog
+from onboard.drivers.dvl_json import (
     DvlJsonLogReader,
     DvlJsonParser,
     encode_position_local,
     encode_velocity_report,
 )
-from drivers.textlog import open_text_log
+from onboard.drivers.textlog import open_text_log
 from onboard.core.messages import DvlPosition, DvlVelocity
 
 V1 = ('{"time":120.7,"vx":0.0027,"vy":0.0137,"vz":-0.0097,"fom":0.0002,"altitude":1.5167,'

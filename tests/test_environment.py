@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from sitl.environment import (
+from onboard.sitl.environment import (
     TIDAL_M2_PERIOD_S,
     CombinedCurrent,
     Environment,
@@ -20,7 +20,7 @@ from sitl.environment import (
 from onboard.core.geo import wrap_2pi, wrap_pi
 from onboard.core.so3 import euler_rate_matrix
 from onboard.core.so3 import euler_to_matrix as rotation_body_to_ned
-from sitl.integrate import integrate_rk4, rk4_step
+from onboard.sitl.integrate import integrate_rk4, rk4_step
 
 P0 = np.zeros(3)
 

@@ -23,7 +23,7 @@ from onboard.core import config
 @pytest.fixture(scope="module")
 def replayed(tmp_path_factory) -> tuple[list[dict], list[dict], dict]:
     from onboard.replay import replay
-    from sitl.runner import run_to_tlog
+    from onboard.sitl.runner import run_to_tlog
 
     d = tmp_path_factory.mktemp("rov")
     run_to_tlog("bluerov2-circle", d / "run.tlog", d / "truth.jsonl", duration=30.0, seed=1)

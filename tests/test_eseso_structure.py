@@ -149,8 +149,8 @@ def test_the_intake_does_not_import_the_recorder_which_replays_through_it() -> N
 
 
 def test_the_controllers_do_not_import_the_closed_loop_runner_which_imports_them() -> None:
-    assert any(m.startswith("sitl.controllers")
+    assert any(m.startswith("onboard.sitl.controllers")
                for m in _runtime_imports("sitl/closed_loop.py"))
     for path in sorted((REPO / "sitl" / "controllers").glob("*.py")):
         found = _runtime_imports(str(Path(path).relative_to(REPO)))
-        assert not any(m.startswith("sitl.closed_loop") for m in found), path.name
+        assert not any(m.startswith("onboard.sitl.closed_loop") for m in found), path.name

@@ -39,7 +39,7 @@ from pathlib import Path
 import msgspec
 import pytest
 
-from drivers.recording import read_records
+from onboard.drivers.recording import read_records
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.tools.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
@@ -69,7 +69,7 @@ def _fly(scenario: str, duration_s: float, tmp_path: Path, speed: float = SPEED)
     emission or the service's ticks: the machine was too busy for ``speed``) is flown
     again at half the speed, down to ``MIN_SPEED``."""
     from onboard.tools.demo import run_demo
-    from sitl.runner import read_truth
+    from onboard.sitl.runner import read_truth
 
     while True:
         res = asyncio.run(asyncio.wait_for(run_demo(
@@ -450,7 +450,7 @@ def test_sigkill_mid_traffic_loses_under_1_s_of_recording_and_restart_restores_s
     back up to less than 1 s before the kill (flush_interval_s 0.5 + the fsync), at most
     one torn frame; a restart restores exactly the adaptive state saved last (every
     1 s here), which is not the cold-start state."""
-    from drivers.base import ReadStats
+    from onboard.drivers.base import ReadStats
     from onboard.core.config import load
     from onboard.engine import Engine
     from onboard.service.daemon import Service

@@ -319,7 +319,7 @@ def nis_every_update(module: str, cfg_name: str, scenario: str, seconds: float,
     """Every NIS of a pipeline's updates over a SITL run through the engine, per channel
     (its innovation records, gated updates included; a sample rejected before any update
     has no NIS)."""
-    from sitl.runner import simulate
+    from onboard.sitl.runner import simulate
 
     cfg, p = _pipeline(module, cfg_name)
     eng = Engine(cfg, pipelines=[p])

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pytest
 
-from drivers.gpsd import SIGMA_95_1D, SIGMA_95_2D, WATCH, GpsdParser
-from drivers.nmea import NmeaParser
-from drivers.protocols import parser_for
-from drivers.transports import GpsdTransport, open_transport, parse_url
+from onboard.drivers.gpsd import SIGMA_95_1D, SIGMA_95_2D, WATCH, GpsdParser
+from onboard.drivers.nmea import NmeaParser
+from onboard.drivers.protocols import parser_for
+from onboard.drivers.transports import GpsdTransport, open_transport, parse_url
 from onboard.core.config import from_dict
 from onboard.core.messages import Attitude, GnssFix, Heading
 from onboard.engine import Engine

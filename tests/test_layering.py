@@ -45,8 +45,8 @@ ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs",
 ENGINE_PARTS = {"onboard.corrections", "onboard.depth", "onboard.latency",
                 "onboard.innovations"}
 """The engine's own modules: only the engine imports them."""
-SERVICE = ENGINE | {"drivers", "onboard.service"}
-CLOSURE = ENGINE | {"drivers", "onboard.closure", "onboard.replay", "onboard.plots",
+SERVICE = ENGINE | {"onboard.drivers", "onboard.service"}
+CLOSURE = ENGINE | {"onboard.drivers", "onboard.closure", "onboard.replay", "onboard.plots",
                     "onboard.autodetect", "onboard.service.recorder"}
 OFFLINE = CLOSURE | {"onboard.diagnose"}
 
@@ -54,9 +54,9 @@ ROOMS: dict[str, set[str]] = {
     "onboard.core": CORE,
     "onboard.estimators": MATH,
     "onboard.pipelines": PIPELINES,
-    "drivers": CORE | {"drivers"},
-    "sitl": CORE | {"drivers", "sitl"},
-    "sitl.closed_loop": CORE | {"drivers", "sitl", "onboard.engine"},
+    "onboard.drivers": CORE | {"onboard.drivers"},
+    "onboard.sitl": CORE | {"onboard.drivers", "onboard.sitl"},
+    "onboard.sitl.closed_loop": CORE | {"onboard.drivers", "onboard.sitl", "onboard.engine"},
     "onboard.engine": ENGINE | ENGINE_PARTS,
     "onboard.validate": CORE,
     "onboard.corrections": CORE | {"onboard.sources"},
@@ -72,12 +72,12 @@ ROOMS: dict[str, set[str]] = {
     "onboard.autodetect": CORE,
     "onboard.plots": set(),
     "onboard.cli": CORE | {"onboard"},
-    "onboard.tools": OFFLINE | SERVICE | {"onboard.tools", "onboard.cli", "sitl"},
+    "onboard.tools": OFFLINE | SERVICE | {"onboard.tools", "onboard.cli", "onboard.sitl"},
     "onboard": {"onboard"},  # the package's __init__ and __main__
 }
 """Room -> the rooms it may import. Keys and values are module-name prefixes."""
 
-COMMANDS_INTO_SITL = {"sitl": "sitl.cli:main"}
+COMMANDS_INTO_SITL = {"sitl": "onboard.sitl.cli:main"}
 """The only command the CLI dispatches into the simulator."""
 
 
@@ -112,9 +112,9 @@ def test_each_module_imports_only_the_rooms_below_it(path: Path) -> None:
 
 def test_only_the_tools_and_the_closed_loop_runner_import_the_simulator() -> None:
     importers = {module_name(p) for p in _sources()
-                 if any(t.split(".")[0] == "sitl" for _, t in imports_of(p))}
+                 if any(_allowed(t, {"onboard.sitl"}) for _, t in imports_of(p))}
     outside = {m for m in importers
-               if not m.startswith(("sitl", "onboard.tools"))}
+               if not m.startswith(("onboard.sitl", "onboard.tools"))}
     assert not outside, f"modules outside the tools importing sitl: {sorted(outside)}"
 
 
@@ -124,7 +124,7 @@ def test_the_cli_dispatches_only_the_sitl_command_into_the_simulator() -> None:
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
     handlers = {name: p.get_default("handler") for name, p in sub.choices.items()}
-    into_sitl = {name: h for name, h in handlers.items() if h.startswith("sitl")}
+    into_sitl = {name: h for name, h in handlers.items() if h.startswith("onboard.sitl")}
     assert into_sitl == COMMANDS_INTO_SITL
     for name, handler in handlers.items():
         module = handler.partition(":")[0]
@@ -141,10 +141,10 @@ def test_the_layering_check_sees_a_violation(tmp_path: Path) -> None:
         "from onboard.core import geo\n"
         "def f():\n"
         "    from onboard.service import daemon\n"
-        "    return importlib.import_module('sitl.runner')\n"
+        "    return importlib.import_module('onboard.sitl.runner')\n"
         "from ..engine import Engine\n")
     found = {t for _, t in imports_of(fake, "onboard.estimators.probe")}
-    assert found == {"onboard.core.geo", "onboard.service.daemon", "sitl.runner",
+    assert found == {"onboard.core.geo", "onboard.service.daemon", "onboard.sitl.runner",
                      "onboard.engine"}
     assert not any(_allowed(t, ROOMS["onboard.estimators"]) for t in found - {"onboard.core.geo"})
 

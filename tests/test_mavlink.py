@@ -14,8 +14,8 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from drivers.mavlink import GRAVITY_MSS, HANDLERS, MavlinkParser
-from drivers.mavlink_frame import x25crc
+from onboard.drivers.mavlink import GRAVITY_MSS, HANDLERS, MavlinkParser
+from onboard.drivers.mavlink_frame import x25crc
 from onboard.core.messages import (
     ActuatorOutputs,
     Altitude,

@@ -9,11 +9,11 @@ from collections import Counter
 
 import pytest
 
-from drivers.mavlink import MavlinkParser
-from drivers.mavlink_link import AutopilotLink
+from onboard.drivers.mavlink import MavlinkParser
+from onboard.drivers.mavlink_link import AutopilotLink
 from onboard.core.config import SourceConfig, load
 from onboard.service.mavlink_session import MavlinkSession
-from sitl.runner import Simulation, autopilot_for
+from onboard.sitl.runner import Simulation, autopilot_for
 
 
 class Loop:
@@ -111,7 +111,7 @@ def test_reboot_and_lost_link_restart_the_requests():
 def test_requests_are_signed_with_the_service_key(tmp_path):
     """With the service's signing state the session's requests carry valid signatures (an
     autopilot requiring signing accepts them); without it they are unsigned."""
-    from drivers.mavlink_signing import SignatureVerifier
+    from onboard.drivers.mavlink_signing import SignatureVerifier
     from onboard.service.signing import SigningState
 
     key = bytes(range(32))

@@ -14,13 +14,13 @@ import math
 import numpy as np
 import pytest
 
-from sitl import mismatch as mm
-from sitl.environment import Environment
-from sitl.plants.base import Command
-from sitl.plants.bluerov2 import BlueROV2, BlueROV2Params
-from sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
-from sitl.plants.torpedo_auv import TorpedoAUV
-from sitl.sensors import DvlConfig, ImuConfig
+from onboard.sitl import mismatch as mm
+from onboard.sitl.environment import Environment
+from onboard.sitl.plants.base import Command
+from onboard.sitl.plants.bluerov2 import BlueROV2, BlueROV2Params
+from onboard.sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
+from onboard.sitl.plants.torpedo_auv import TorpedoAUV
+from onboard.sitl.sensors import DvlConfig, ImuConfig
 
 
 # --------------------------------------------------------------------------- perturbations
@@ -113,8 +113,8 @@ def test_sensor_noise_doubles_but_biases_stay() -> None:
 
 
 def test_perturbed_scenario_runs_with_the_perturbed_plant() -> None:
-    from sitl import scenarios
-    from sitl.runner import Simulation
+    from onboard.sitl import scenarios
+    from onboard.sitl.runner import Simulation
 
     sc = mm.perturb_scenario("jaiabot-turns", "worst")
     assert sc.name == "jaiabot-turns+worst"
@@ -164,7 +164,7 @@ def test_ampc_and_offset_free_nmpc_hold_the_circle_under_the_worst_case() -> Non
     with no mismatch at all does 0.14-0.17 m (tests/test_closed_loop.py, docs/mismatch.md).
     Bound 0.1 m each. The ESESO's disturbance error against the push is 12.5 N: its xi is
     the lumped force (push + model error), not the push (docs/mismatch.md)."""
-    from sitl.closed_loop import simulate
+    from onboard.sitl.closed_loop import simulate
 
     for c in ("ampc", "nmpc-of"):
         rep = simulate(c, duration=20.0, seed=1, mismatch="worst")[0]

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.base import UnreadableLog
-from drivers.nmea import (
+from onboard.drivers.base import UnreadableLog
+from onboard.drivers.nmea import (
     KNOT_MPS,
     NmeaParser,
     checksum,
@@ -25,7 +25,7 @@ from drivers.nmea import (
     encode_vtg,
     split_sentence,
 )
-from drivers.textlog import (
+from onboard.drivers.textlog import (
     DdboatLogReader,
     MixedCaptureReader,
     NmeaCaptureReader,

@@ -11,8 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.base import UnreadableLog
-from drivers.pd6 import (
+from onboard.drivers.base import UnreadableLog
+from onboard.drivers.pd6 import (
     Pd6LogReader,
     Pd6Parser,
     encode_bd,
@@ -24,7 +24,7 @@ from drivers.pd6 import (
     encode_ts,
     parse_ts_time,
 )
-from drivers.textlog import open_text_log
+from onboard.drivers.textlog import open_text_log
 from onboard.core.messages import Altitude, Attitude, Depth, DvlVelocity, VelocityOverGround
 
 T0 = float(calendar.timegm((2024, 6, 1, 12, 30, 15))) + 0.25

@@ -9,20 +9,20 @@ import msgspec
 import numpy as np
 import pytest
 
-from sitl.environment import Environment, NonuniformCurrent, UniformCurrent, WaveField
-from sitl.plants import PLANTS, Command, Plant, make_plant
-from sitl.plants.bluerov2 import (
+from onboard.sitl.environment import Environment, NonuniformCurrent, UniformCurrent, WaveField
+from onboard.sitl.plants import PLANTS, Command, Plant, make_plant
+from onboard.sitl.plants.bluerov2 import (
     ALLOCATION,
     BlueROV2,
     BlueROV2Params,
     thruster_commands,
     thruster_forces,
 )
-from sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
-from sitl.plants.spheroid import NOMINAL_RPM, NOMINAL_SPEED, SpheroidAUV, SpheroidParams
-from sitl.plants.torpedo_auv import REMUS100, TorpedoAUV
-from sitl.plants.twin_thruster import TwinThrusterBoat
-from sitl.truth import TruthRecord
+from onboard.sitl.plants.rudder_boat import RudderBoat, RudderBoatParams
+from onboard.sitl.plants.spheroid import NOMINAL_RPM, NOMINAL_SPEED, SpheroidAUV, SpheroidParams
+from onboard.sitl.plants.torpedo_auv import REMUS100, TorpedoAUV
+from onboard.sitl.plants.twin_thruster import TwinThrusterBoat
+from onboard.sitl.truth import TruthRecord
 
 STILL = Environment()
 
@@ -467,16 +467,16 @@ def test_random_bounded_commands_keep_the_state_finite_and_physical(name):
 def test_public_plant_and_environment_api_is_documented():
     import inspect
 
-    import sitl.environment
-    import sitl.integrate
-    import sitl.plants
-    import sitl.plants.base
-    import sitl.plants.bluerov2
-    import sitl.plants.fossen
-    import sitl.plants.rudder_boat
-    import sitl.plants.spheroid
-    import sitl.plants.torpedo_auv
-    import sitl.plants.twin_thruster
+    import onboard.sitl.environment
+    import onboard.sitl.integrate
+    import onboard.sitl.plants
+    import onboard.sitl.plants.base
+    import onboard.sitl.plants.bluerov2
+    import onboard.sitl.plants.fossen
+    import onboard.sitl.plants.rudder_boat
+    import onboard.sitl.plants.spheroid
+    import onboard.sitl.plants.torpedo_auv
+    import onboard.sitl.plants.twin_thruster
 
     mods = [sitl.environment, sitl.integrate, sitl.plants, sitl.plants.base,
             sitl.plants.bluerov2, sitl.plants.fossen, sitl.plants.rudder_boat,

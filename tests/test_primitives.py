@@ -172,8 +172,8 @@ def test_skew_is_the_cross_product() -> None:
 def _frame(rng: random.Random, kind: str) -> bytes:
     """One MAVLink frame of ``kind``, its header written out here from the specification
     (https://mavlink.io/en/guide/serialization.html), independently of the drivers."""
-    from drivers.mavlink import HANDLERS
-    from drivers.mavlink_frame import CRC_EXTRA, x25crc
+    from onboard.drivers.mavlink import HANDLERS
+    from onboard.drivers.mavlink_frame import CRC_EXTRA, x25crc
 
     v1 = kind == "v1"
     if kind == "unknown":
@@ -203,7 +203,7 @@ _KINDS = ("v2", "v2", "v2", "v1", "signed", "unknown", "bad_crc", "incompat")
 
 
 def _write_tlog(path, frames: list[bytes], t0: float = 1.7e9) -> list[float]:
-    from drivers.tlog import TlogWriter
+    from onboard.drivers.tlog import TlogWriter
 
     times = [t0 + 0.01 * k for k in range(len(frames))]
     with TlogWriter(path) as w:
@@ -230,10 +230,10 @@ def test_tlog_fast_path_frames_records_as_the_reference_framing(tmp_path, seed: 
     samples, records, message counts and rejections."""
     from collections import Counter
 
-    from drivers import tlog
-    from drivers.base import ReadStats
-    from drivers.mavlink import HANDLERS, DecodeContext, decode_payload, type_name
-    from drivers.mavlink_frame import CRC_EXTRA, IFLAG_SIGNED, header_at
+    from onboard.drivers import tlog
+    from onboard.drivers.base import ReadStats
+    from onboard.drivers.mavlink import HANDLERS, DecodeContext, decode_payload, type_name
+    from onboard.drivers.mavlink_frame import CRC_EXTRA, IFLAG_SIGNED, header_at
 
     rng = random.Random(seed)
     frames = [_frame(rng, "v2")] + [_frame(rng, rng.choice(_KINDS)) for _ in range(400)]
@@ -279,8 +279,8 @@ def test_stream_parser_and_tlog_reader_decode_intact_frames_alike(tmp_path, seed
     same intact frames (MAVLink 1 and 2, signed, zero-truncated, unknown ids): the same
     samples and the same message counts. (A start byte inside an unknown-id frame makes
     the parser wait for the bytes of the next chunk, so its times are not compared.)"""
-    from drivers.mavlink import MavlinkParser
-    from drivers.tlog import TlogReader
+    from onboard.drivers.mavlink import MavlinkParser
+    from onboard.drivers.tlog import TlogReader
 
     rng = random.Random(100 + seed)
     kinds = ("v2", "v2", "v1", "signed", "unknown")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import json
 
-from drivers.base import ReadStats
-from drivers.nmea import encode_gga, encode_hdt, encode_rmc
-from drivers.protocols import encode_sample
-from drivers.recording import RawRecord, read_records
+from onboard.drivers.base import ReadStats
+from onboard.drivers.nmea import encode_gga, encode_hdt, encode_rmc
+from onboard.drivers.protocols import encode_sample
+from onboard.drivers.recording import RawRecord, read_records
 from onboard.core.config import Config
 from onboard.core.messages import Imu
 from onboard.engine import Engine
@@ -160,7 +160,7 @@ def test_a_parser_that_raises_is_counted_and_the_intake_carries_on():
 def test_protocol_registry_gives_a_fresh_parser_per_kind_and_refuses_unknown_kinds():
     import pytest
 
-    from drivers.protocols import KINDS, SampleParser, UnknownProtocol, parser_for
+    from onboard.drivers.protocols import KINDS, SampleParser, UnknownProtocol, parser_for
 
     for kind in KINDS:
         a, b = parser_for(kind, "src"), parser_for(kind, "src")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from drivers.base import ReadStats, UnreadableLog
-from drivers.recording import RawRecord, RecordingWriter, encode_frame, read_records
+from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.recording import RawRecord, RecordingWriter, encode_frame, read_records
 
 
 def _write(path, n=100):

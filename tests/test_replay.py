@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from onboard.cli import main as cli_main
-from sitl.runner import run_to_tlog
+from onboard.sitl.runner import run_to_tlog
 
 pytestmark = pytest.mark.integration
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from drivers.tlog import TlogWriter, scan_header
+from onboard.drivers.tlog import TlogWriter, scan_header
 
 T0 = 1.7e9
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from drivers.mavlink import MavlinkParser
-from drivers.mavlink_signing import NEW_STREAM_MAX_AGE, SignatureVerifier, signing_timestamp
+from onboard.drivers.mavlink import MavlinkParser
+from onboard.drivers.mavlink_signing import NEW_STREAM_MAX_AGE, SignatureVerifier, signing_timestamp
 from onboard.core.config import ConfigError, MavlinkOut, from_dict
 from onboard.core.messages import Attitude
 from onboard.service.publishers.mavlink_pub import MavlinkPublisher
@@ -346,7 +346,7 @@ def test_signed_udp_input_into_the_service_counts_every_rejection_and_survives_a
 def _strip_verdicts(files, out_dir: Path) -> list[Path]:
     """Copies of a recording without its ``verdicts`` records (what a replay that ignored
     them would see)."""
-    from drivers.recording import RecordingWriter, read_records
+    from onboard.drivers.recording import RecordingWriter, read_records
 
     out_dir.mkdir()
     copies = []
@@ -445,7 +445,7 @@ def test_replay_of_a_signed_service_recording_is_exact_with_the_same_rejections(
     live ticks' records and the same rejection counts; ``onboard replay DIR`` reads it."""
     import msgspec
 
-    from drivers.recording import VERSIONS, RecordingReader, read_records
+    from onboard.drivers.recording import VERSIONS, RecordingReader, read_records
     from onboard.engine import Engine
     from onboard.service.daemon import Service
     from onboard.service.recorder import replay_recording
@@ -538,7 +538,7 @@ def test_verdicts_follow_frames_split_across_chunks_and_many_frames_per_chunk(tm
     reasons, stale and future ones included, and produces the same samples."""
     import random
 
-    from drivers.recording import RecordingReader, read_records
+    from onboard.drivers.recording import RecordingReader, read_records
     from onboard.core.config import Config
     from onboard.service.intake import Intake
     from onboard.service.recorder import Recorder, replay_recording
@@ -593,9 +593,9 @@ def test_verdicts_that_no_longer_match_reject_rather_than_accept_and_orphans_are
     ``verdict_mismatch`` (never accepts it); a different number of frames is counted."""
     import zlib
 
-    from drivers.base import ReadStats
-    from drivers.mavlink_signing import VerdictLog, VerdictPlayer
-    from drivers.recording import RawRecord, Verdicts, encode_verdicts, with_verdicts
+    from onboard.drivers.base import ReadStats
+    from onboard.drivers.mavlink_signing import VerdictLog, VerdictPlayer
+    from onboard.drivers.recording import RawRecord, Verdicts, encode_verdicts, with_verdicts
 
     bad, good = frames(1, None)[0], frames(1)[0]
     chunk = bad + good
@@ -636,7 +636,7 @@ def test_damaged_verdicts_never_stop_a_replay(tmp_path):
     import random
     import zlib
 
-    from drivers.recording import (
+    from onboard.drivers.recording import (
         VERDICTS_KIND,
         RawRecord,
         RecordingReader,
@@ -685,9 +685,9 @@ def test_damaged_verdicts_never_stop_a_replay(tmp_path):
 
 
 def test_recording_versions_old_files_still_read_and_unknown_newer_ones_refused(tmp_path):
-    from drivers.base import UnreadableLog
-    from drivers.logs import sniff
-    from drivers.recording import RawRecord, read_records
+    from onboard.drivers.base import UnreadableLog
+    from onboard.drivers.logs import sniff
+    from onboard.drivers.recording import RawRecord, read_records
     from onboard.service.recorder import Recorder
 
     r1 = Recorder(tmp_path / "a", fsync=False)  # no signing: version 1, as before

@@ -22,8 +22,8 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
 import onboard.pipelines as pipelines_pkg
-from drivers.dvl_json import encode_velocity_report
-from drivers.recording import read_records
+from onboard.drivers.dvl_json import encode_velocity_report
+from onboard.drivers.recording import read_records
 from onboard.core.messages import HEALTH_SCHEMA_VERSION, EstimateRecord, HealthRecord
 from onboard.engine import Engine
 from onboard.service.daemon import Service
@@ -384,7 +384,7 @@ def test_an_unplugged_input_is_reported_and_picked_up_again_while_the_service_ru
     cfg = service_config(sources=[{"kind": "nmea", "url": f"pty:{link}", "name": "gps"}],
                   zenoh={"enabled": False}, mavlink={"enabled": False},
                   recorder={"enabled": False})
-    from drivers.nmea import encode_hdt
+    from onboard.drivers.nmea import encode_hdt
 
     async def main() -> Service:
         master = plug()
@@ -415,7 +415,7 @@ def test_the_bench_traffic_is_real_protocol_at_the_nominal_rates():
     """50 Hz IMU, 5 Hz GNSS, 10 Hz heading, 10 Hz servo outputs, 1 Hz heartbeat."""
     from collections import Counter
 
-    from drivers.protocols import parser_for
+    from onboard.drivers.protocols import parser_for
 
     gen = TrafficGenerator()
     mav, nmea = parser_for("mavlink"), parser_for("nmea", "gps")
@@ -493,7 +493,7 @@ def test_a_killed_service_leaves_a_readable_recording_missing_at_most_the_flush_
         tmp_path):
     """SIGKILL (no chance to flush): everything received up to ~flush_interval_s before the
     kill is on disk and reads back; at most one torn frame at the end."""
-    from drivers.base import ReadStats
+    from onboard.drivers.base import ReadStats
 
     cfg_path = tmp_path / "boat.toml"
     port = free_udp_port()

@@ -10,10 +10,10 @@ from collections import Counter
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from drivers.mavlink import MavlinkParser
-from drivers.mavlink_link import AutopilotLink, BootClock
-from sitl.autopilot import REBOOT_S, SimAutopilot
-from sitl.runner import Simulation, autopilot_for
+from onboard.drivers.mavlink import MavlinkParser
+from onboard.drivers.mavlink_link import AutopilotLink, BootClock
+from onboard.sitl.autopilot import REBOOT_S, SimAutopilot
+from onboard.sitl.runner import Simulation, autopilot_for
 
 
 class LoopSink:

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from onboard.core.messages import GnssFix, Heading, Imu
-from sitl.effects import Effect, external_force_ned
-from sitl.environment import Environment
-from sitl.plants.base import Command
-from sitl.runner import simulate
-from sitl.scenarios import NOMINAL_BOAT, ForcedRudderBoat, get
-from sitl.sensors import GeoOrigin
+from onboard.sitl.effects import Effect, external_force_ned
+from onboard.sitl.environment import Environment
+from onboard.sitl.plants.base import Command
+from onboard.sitl.runner import simulate
+from onboard.sitl.scenarios import NOMINAL_BOAT, ForcedRudderBoat, get
+from onboard.sitl.sensors import GeoOrigin
 
 
 def _collect(name: str, duration: float, seed: int = 1):

@@ -12,12 +12,12 @@ import time
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from drivers.dvl_json import DvlJsonParser
-from drivers.nmea import NmeaParser
-from drivers.pd6 import Pd6Parser
+from onboard.drivers.dvl_json import DvlJsonParser
+from onboard.drivers.nmea import NmeaParser
+from onboard.drivers.pd6 import Pd6Parser
 from onboard.core.messages import DvlVelocity, GnssFix, Heading
-from sitl.emitters import PtySink, TcpServerSink, UdpSink
-from sitl.runner import run
+from onboard.sitl.emitters import PtySink, TcpServerSink, UdpSink
+from onboard.sitl.runner import run
 
 pytestmark = pytest.mark.integration
 

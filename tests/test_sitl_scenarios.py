@@ -11,8 +11,8 @@ from pymavlink import mavutil
 
 from onboard.cli import main as onboard_main
 from onboard.core.errors import UsageError
-from sitl import scenarios
-from sitl.runner import read_truth, run_to_tlog, simulate
+from onboard.sitl import scenarios
+from onboard.sitl.runner import read_truth, run_to_tlog, simulate
 
 PAPER_SCENARIOS = ["jaiabot-turns", "twin-thruster-turns", "bluerov2-circle", "gavia-tidal",
                    "spheroid-sawtooth"]
@@ -103,8 +103,8 @@ def test_same_seed_gives_identical_bytes_and_another_seed_does_not(tmp_path):
 
 
 def test_tlog_reads_back_with_the_project_reader(tmp_path):
-    from drivers.tlog import TlogReader
-    from sitl.emitters import DEFAULT_EPOCH_S
+    from onboard.drivers.tlog import TlogReader
+    from onboard.sitl.emitters import DEFAULT_EPOCH_S
 
     run_to_tlog("jaiabot-turns", tmp_path / "j.tlog", duration=5.0, seed=2)
     reader = TlogReader(tmp_path / "j.tlog")
@@ -123,7 +123,7 @@ def test_no_gnss_fix_from_a_submerged_auv():
 def test_bluerov2_circle_flies_the_circle_under_the_push(tmp_path):
     """The circle (r = 2 m, 0.5 m/s: the spec's 1.5 m/s needs ~115 N of thrust where the six
     T200s give ~99 N) under 56.6 N of push; the scenario's own PID keeps on it."""
-    from sitl.runner import run
+    from onboard.sitl.runner import run
 
     s = run("bluerov2-circle", 30.0, seed=0, truth_path=tmp_path / "t.jsonl")
     # measured 0.41 m RMS over 30 s from rest (the start-up transient dominates)
@@ -161,7 +161,7 @@ def test_cli_writes_tlog_truth_metadata_and_report(tmp_path, capsys):
 
 
 def test_tick_rate_keeps_every_sensor_rate():
-    from sitl.runner import _tick_rate
+    from onboard.sitl.runner import _tick_rate
 
     assert _tick_rate([50, 10, 5, 1, 10]) == 50
     assert _tick_rate([100, 20, 5, 1]) == 100
@@ -187,7 +187,7 @@ def test_cli_bad_usage_exits_2_with_one_line(argv, message, capsys):
 def test_docs_list_every_scenario_and_effect():
     from pathlib import Path
 
-    from sitl.effects import VOCABULARY
+    from onboard.sitl.effects import VOCABULARY
 
     doc = (Path(__file__).resolve().parent.parent / "docs" / "sitl.md").read_text()
     for name in scenarios.SCENARIOS:
@@ -197,7 +197,7 @@ def test_docs_list_every_scenario_and_effect():
 
 
 def test_realtime_mode_paces_to_the_wall_clock():
-    from sitl.runner import run
+    from onboard.sitl.runner import run
 
     s = run("clean", 1.0, seed=0, realtime=True)
     assert s.wall_s >= 0.95  # never faster than real time (slower only on a loaded machine)

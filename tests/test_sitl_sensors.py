@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from onboard.core.messages import Attitude, DvlPosition, DvlVelocity, GnssFix, Heading, Imu
-from sitl.sensors import (
+from onboard.sitl.sensors import (
     ActuatorConfig,
     ActuatorModel,
     Compass,
@@ -25,10 +25,10 @@ from sitl.sensors import (
     WorldView,
     sensor_rng,
 )
-from sitl.sensors import (
+from onboard.sitl.sensors import (
     Imu as ImuSensor,
 )
-from sitl.truth import TruthRecord
+from onboard.sitl.truth import TruthRecord
 
 ORIGIN = GeoOrigin(41.49, -71.42)
 

@@ -127,7 +127,7 @@ class _Traffic(threading.Thread):
     def frames(self, k: int) -> tuple[list[bytes], list[bytes]]:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-        from drivers.nmea import encode_gga, encode_hdt, encode_rmc
+        from onboard.drivers.nmea import encode_gga, encode_hdt, encode_rmc
         from onboard.tools.service_bench import EPOCH_S, ORIGIN
 
         g = self.gen

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from drivers.mavlink import MavlinkParser
+from onboard.drivers.mavlink import MavlinkParser
 from onboard.core.config import SourcePriorities, from_dict
 from onboard.core.messages import Attitude, GnssFix, Heading, Sample
 from onboard.engine import Engine
@@ -255,7 +255,7 @@ def test_a_recording_replays_the_live_choices_exactly(tmp_path):
     """Two receivers as real NMEA bytes (one drops out for 8 s) and a gpsd input through
     the intake with a recorder, as the service runs them; the replay of the recording
     gives the same estimates, the same active sources and the same switch events."""
-    from drivers.nmea import encode_gga, encode_rmc
+    from onboard.drivers.nmea import encode_gga, encode_rmc
     from onboard.service.intake import Intake
     from onboard.service.recorder import Recorder, replay_recording
 

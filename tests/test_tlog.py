@@ -16,8 +16,8 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from drivers.base import UnreadableLog
-from drivers.tlog import TlogReader, TlogWriter, pymavlink_parse_seconds, scan_header
+from onboard.drivers.base import UnreadableLog
+from onboard.drivers.tlog import TlogReader, TlogWriter, pymavlink_parse_seconds, scan_header
 from onboard.core.messages import ActuatorOutputs, Attitude, GnssFix, Imu, Parameter, VehicleInfo
 
 T0 = 1_700_000_000.0

@@ -9,7 +9,7 @@ import socket
 
 import pytest
 
-from drivers.transports import (
+from onboard.drivers.transports import (
     DEFAULT_IDLE_TIMEOUT_S,
     KEEPALIVE_COUNT,
     KEEPALIVE_IDLE_S,

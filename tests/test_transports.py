@@ -8,7 +8,7 @@ import socket
 
 import pytest
 
-from drivers.transports import (
+from onboard.drivers.transports import (
     TcpTransport,
     TransportUrlError,
     UdpTransport,
@@ -185,7 +185,7 @@ def test_pump_delivers_udp_datagrams_in_order_and_ends_on_a_sink_error():
     """``pump``: each datagram handed to the sink from the read callback, with its receive
     time and counted; an exception of the sink ends the pump as a SinkError (a consumer's
     bug is not a lost link: no reconnection)."""
-    from drivers.transports import SinkError
+    from onboard.drivers.transports import SinkError
 
     port = free_udp_port()
     clock_values = iter(range(100, 200))

@@ -27,7 +27,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from scipy.signal import savgol_filter
 
-from drivers.logs import open_log
+from onboard.drivers.logs import open_log
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame
 from onboard.core.messages import (

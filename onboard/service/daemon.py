@@ -46,7 +46,7 @@ from typing import Callable, Sequence
 
 import msgspec
 
-from drivers.transports import (
+from onboard.drivers.transports import (
     SinkError,
     Transport,
     TransportUrlError,

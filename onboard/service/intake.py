@@ -27,11 +27,11 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable
 
-from drivers.base import StreamParser
-from drivers.mavlink_link import AutopilotLink
-from drivers.mavlink_signing import SignatureVerifier, VerdictLog, VerdictPlayer
-from drivers.protocols import parser_for
-from drivers.recording import VERDICTS_KIND, RawRecord, Verdicts, encode_verdicts
+from onboard.drivers.base import StreamParser
+from onboard.drivers.mavlink_link import AutopilotLink
+from onboard.drivers.mavlink_signing import SignatureVerifier, VerdictLog, VerdictPlayer
+from onboard.drivers.protocols import parser_for
+from onboard.drivers.recording import VERDICTS_KIND, RawRecord, Verdicts, encode_verdicts
 from onboard.core.messages import EstimateRecord, Sample
 from onboard.engine import Engine
 

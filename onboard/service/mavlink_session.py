@@ -43,8 +43,8 @@ from typing import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from drivers.mavlink_link import AutopilotLink
-from drivers.transports import Transport
+from onboard.drivers.mavlink_link import AutopilotLink
+from onboard.drivers.transports import Transport
 from onboard.core.config import Config, SourceConfig
 from onboard.service.signing import SigningState
 

@@ -37,9 +37,9 @@ from typing import Any, Callable, Iterable, Sequence
 
 import msgspec
 
-from drivers.base import ReadStats
-from drivers.protocols import UnknownProtocol
-from drivers.recording import (
+from onboard.drivers.base import ReadStats
+from onboard.drivers.protocols import UnknownProtocol
+from onboard.drivers.recording import (
     VERDICTS_KIND,
     VERDICTS_VERSION,
     RawRecord,

@@ -37,7 +37,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from drivers.mavlink_signing import (
+from onboard.drivers.mavlink_signing import (
     TIMESTAMP_UNITS_PER_S,
     SignatureVerifier,
     StreamKey,

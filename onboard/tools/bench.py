@@ -165,7 +165,7 @@ def make_tlog(path: Path, duration_s: float, seed: int = 0) -> dict[str, Any]:
     when it is there, else :func:`synthesize_tlog`. Returns what was written.
     """
     try:
-        from sitl.runner import run_to_tlog
+        from onboard.sitl.runner import run_to_tlog
     except ImportError:
         run_to_tlog = None
     if run_to_tlog is not None:
@@ -183,7 +183,7 @@ def synthesize_tlog(path: Path, duration_s: float, seed: int = 0) -> dict[str, A
 
     from pymavlink.dialects.v20 import ardupilotmega as mav
 
-    from drivers.tlog import TlogWriter
+    from onboard.drivers.tlog import TlogWriter
 
     rng = random.Random(seed)
     m = mav.MAVLink(None, srcSystem=1, srcComponent=1)
@@ -237,7 +237,7 @@ def synthesize_tlog(path: Path, duration_s: float, seed: int = 0) -> dict[str, A
 
 def bench_replay(s: Settings, workdir: Path, rep: Report) -> None:
     """``replay_vs_pymavlink_parse``: interleaved pairs, median ratio."""
-    from drivers.tlog import pymavlink_parse_seconds
+    from onboard.drivers.tlog import pymavlink_parse_seconds
     from onboard.cli import main as cli_main
 
     log = workdir / "bench.tlog"
@@ -293,7 +293,7 @@ def bench_replay(s: Settings, workdir: Path, rep: Report) -> None:
 def replay_breakdown(log: Path) -> dict[str, float]:
     """Where the replay's CPU time goes: reading the tlog, the engine (validation, ticks),
     each pipeline's ``step``; one in-process pass (the CSV and summary are not included)."""
-    from drivers.tlog import TlogReader
+    from onboard.drivers.tlog import TlogReader
     from onboard.engine import Engine, run
     from onboard.replay import choose_config
 
@@ -408,7 +408,7 @@ def bench_service(s: Settings, rep: Report) -> None:
 
 def bench_mpc(s: Settings, rep: Report) -> None:
     """``mpc_solve_p99_ms`` from :func:`sitl.controllers.nmpc.solve_time_stats`."""
-    fn = _import("sitl.controllers.nmpc", "solve_time_stats")
+    fn = _import("onboard.sitl.controllers.nmpc", "solve_time_stats")
     res = _quiet(lambda: fn(s.mpc_solves))
     rep.values["mpc_solve_p99_ms"] = round(float(res["p99_ms"]), 2)
     rep.detail["mpc"] = res
@@ -486,7 +486,7 @@ def bench_pipelines(s: Settings, rep: Report) -> None:
     from onboard.pipelines import build
 
     try:
-        from sitl.runner import simulate
+        from onboard.sitl.runner import simulate
     except ImportError:
         simulate = None
     costs: dict[str, float] = {}

@@ -118,8 +118,8 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
     import os
     import select
 
-    from sitl.emitters import Channel, DvlJsonEncoder, NmeaEncoder, PtySink, TcpServerSink, UdpSink
-    from sitl.runner import Simulation, autopilot_for
+    from onboard.sitl.emitters import Channel, DvlJsonEncoder, NmeaEncoder, PtySink, TcpServerSink, UdpSink
+    from onboard.sitl.runner import Simulation, autopilot_for
 
     def send(obj: dict) -> None:
         outp.write(json.dumps(obj) + "\n")
@@ -446,8 +446,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
     from onboard.service.daemon import Service, ServiceClock
     from onboard.service.publishers.zenoh_pub import open_router
     from onboard.tools.shore import ShoreView, open_session
-    from sitl.runner import read_truth
-    from sitl.scenarios import get
+    from onboard.sitl.runner import read_truth
+    from onboard.sitl.scenarios import get
 
     def say(text: str) -> None:
         if out is not None:

@@ -63,7 +63,7 @@ def diagnose_seed(scenario: str, seed: int, config_path: Path, work: Path,
     configuration's: :func:`onboard.diagnose.diagnose`)."""
     from onboard.core import config
     from onboard.diagnose import diagnose
-    from sitl.runner import run_to_tlog
+    from onboard.sitl.runner import run_to_tlog
 
     d = work / f"{scenario}-s{seed}"
     d.mkdir(parents=True, exist_ok=True)

@@ -38,7 +38,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from drivers.nmea import encode_gga, encode_hdt, encode_rmc
+from onboard.drivers.nmea import encode_gga, encode_hdt, encode_rmc
 
 EPOCH_S = 1_767_225_600.0
 """UTC of t = 0 in the generated NMEA (2026-01-01)."""

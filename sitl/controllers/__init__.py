@@ -188,19 +188,19 @@ def make_controller(name: str, params: Bluerov2Params | None = None, **kw: objec
     """``pid``, ``nmpc``, ``nmpc-of`` (offset-free) or ``ampc`` with default tuning (keyword overrides passed on)."""
     params = params or Bluerov2Params()
     if name == "pid":
-        from sitl.controllers.pid import PidController
+        from onboard.sitl.controllers.pid import PidController
 
         return PidController(params, **kw)  # type: ignore[arg-type]
     if name == "nmpc":
-        from sitl.controllers.nmpc import Nmpc
+        from onboard.sitl.controllers.nmpc import Nmpc
 
         return Nmpc(params, **kw)  # type: ignore[arg-type]
     if name == "ampc":
-        from sitl.controllers.ampc import Ampc
+        from onboard.sitl.controllers.ampc import Ampc
 
         return Ampc(params, **kw)  # type: ignore[arg-type]
     if name == "nmpc-of":
-        from sitl.controllers.nmpc import OffsetFreeNmpc
+        from onboard.sitl.controllers.nmpc import OffsetFreeNmpc
 
         return OffsetFreeNmpc(params, **kw)  # type: ignore[arg-type]
     raise ValueError(f"unknown controller {name!r} (pid, nmpc, nmpc-of, ampc)")

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from onboard.core.messages import EstimateRecord
-from sitl.controllers import Bluerov2Params
-from sitl.controllers.nmpc import Nmpc, NmpcTuning
+from onboard.sitl.controllers import Bluerov2Params
+from onboard.sitl.controllers.nmpc import Nmpc, NmpcTuning
 
 
 class Ampc(Nmpc):

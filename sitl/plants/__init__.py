@@ -6,13 +6,13 @@ Use :func:`make_plant` to build one by name.
 
 from __future__ import annotations
 
-from sitl.plants.base import Command, Plant, PlantBase, PropulsionWrench
-from sitl.plants.bluerov2 import BlueROV2
-from sitl.plants.catamaran import Catamaran
-from sitl.plants.rudder_boat import RudderBoat
-from sitl.plants.spheroid import SpheroidAUV
-from sitl.plants.torpedo_auv import TorpedoAUV
-from sitl.plants.twin_thruster import TwinThrusterBoat
+from onboard.sitl.plants.base import Command, Plant, PlantBase, PropulsionWrench
+from onboard.sitl.plants.bluerov2 import BlueROV2
+from onboard.sitl.plants.catamaran import Catamaran
+from onboard.sitl.plants.rudder_boat import RudderBoat
+from onboard.sitl.plants.spheroid import SpheroidAUV
+from onboard.sitl.plants.torpedo_auv import TorpedoAUV
+from onboard.sitl.plants.twin_thruster import TwinThrusterBoat
 
 PLANTS: dict[str, type[PlantBase]] = {
     RudderBoat.name: RudderBoat,

@@ -37,9 +37,9 @@ import numpy as np
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import ActuatorCommand
 from onboard.core.so3 import euler_kinematics, euler_to_matrix
-from sitl.environment import Environment
-from sitl.integrate import GRAVITY, rk4_step_list
-from sitl.truth import TruthRecord
+from onboard.sitl.environment import Environment
+from onboard.sitl.integrate import GRAVITY, rk4_step_list
+from onboard.sitl.truth import TruthRecord
 
 __all__ = ["Command", "ManoeuvringMasses", "Plant", "PlantBase", "PropulsionWrench"]
 

@@ -51,8 +51,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from onboard.core.so3 import ned_to_body
-from sitl.plants.base import Command, PlantBase, PropulsionWrench
-from sitl.plants.fossen import (
+from onboard.sitl.plants.base import Command, PlantBase, PropulsionWrench
+from onboard.sitl.plants.fossen import (
     SparseMatrix,
     coriolis_times_nu,
     restoring_forces,

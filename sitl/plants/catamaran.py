@@ -48,7 +48,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from sitl.plants.base import (
+from onboard.sitl.plants.base import (
     Command,
     ManoeuvringMasses,
     PlantBase,

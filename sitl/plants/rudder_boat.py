@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from sitl.plants.base import Command, ManoeuvringMasses, PlantBase, PropulsionWrench
+from onboard.sitl.plants.base import Command, ManoeuvringMasses, PlantBase, PropulsionWrench
 
 __all__ = ["RudderBoatParams", "RudderBoat"]
 

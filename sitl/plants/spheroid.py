@@ -50,9 +50,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sitl.integrate import GRAVITY
-from sitl.plants.base import Command, PlantBase, PropulsionWrench
-from sitl.plants.fossen import (
+from onboard.sitl.integrate import GRAVITY
+from onboard.sitl.plants.base import Command, PlantBase, PropulsionWrench
+from onboard.sitl.plants.fossen import (
     SparseMatrix,
     coriolis_times_nu,
     restoring_forces,

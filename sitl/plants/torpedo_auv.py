@@ -62,9 +62,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sitl.integrate import GRAVITY
-from sitl.plants.base import Command, PlantBase, PropulsionWrench
-from sitl.plants.fossen import SparseMatrix, submerged_fraction
+from onboard.sitl.integrate import GRAVITY
+from onboard.sitl.plants.base import Command, PlantBase, PropulsionWrench
+from onboard.sitl.plants.fossen import SparseMatrix, submerged_fraction
 
 __all__ = ["TorpedoParams", "TorpedoAUV", "REMUS100"]
 

@@ -49,7 +49,7 @@ def expected_paths(capture: Path) -> tuple[Path, Path]:
 
 def render(capture: Path, config: str | None) -> tuple[str, str]:
     """Read ``capture`` as ``onboard replay`` would; (samples text, counts text)."""
-    from drivers.logs import open_log
+    from onboard.drivers.logs import open_log
     from onboard.core import config as configmod
 
     csv_format = configmod.load(configmod.resolve(config)).csv if config else None

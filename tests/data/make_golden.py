@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, (scenario, seconds, seed) in CASES.items():
         log = HERE / f"{name}.tlog"
         if args.inputs or not log.exists():
-            from sitl.runner import run_to_tlog
+            from onboard.sitl.runner import run_to_tlog
 
             run_to_tlog(scenario, log, duration=seconds, seed=seed)
         replay_to(log, HERE / f"{name}.estimates.csv")

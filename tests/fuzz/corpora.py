@@ -13,9 +13,9 @@ from typing import Any
 
 import msgspec
 
-from drivers import dvl_json, nmea, pd6
-from drivers.mavlink import select
-from drivers.mavlink_frame import CRC_EXTRA, x25crc
+from onboard.drivers import dvl_json, nmea, pd6
+from onboard.drivers.mavlink import select
+from onboard.drivers.mavlink_frame import CRC_EXTRA, x25crc
 from onboard.tools.bench import synthesize_tlog
 from tests.fuzz.mutation import mutate, mutate_fields
 from tests.fuzz.scratch import SCRATCH

@@ -9,7 +9,7 @@ from typing import Any
 
 import msgspec
 
-from drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.base import ReadStats, UnreadableLog
 from onboard.core.messages import Sample
 
 

@@ -8,16 +8,16 @@ import math
 import random
 import zlib
 
-from drivers.mavlink import MavlinkParser
-from drivers.mavlink_frame import CRC_EXTRA, x25crc
-from drivers.mavlink_signing import (
+from onboard.drivers.mavlink import MavlinkParser
+from onboard.drivers.mavlink_frame import CRC_EXTRA, x25crc
+from onboard.drivers.mavlink_signing import (
     NEW_STREAM_MAX_AGE,
     SignatureVerifier,
     VerdictLog,
     signing_timestamp,
 )
-from drivers.protocols import encode_sample
-from drivers.recording import (
+from onboard.drivers.protocols import encode_sample
+from onboard.drivers.recording import (
     _HEAD,
     FILE_MAGIC,
     FRAME_MARK,

@@ -19,14 +19,14 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-from drivers import dvl_json, nmea, pd6
-from drivers.base import ReadStats, UnreadableLog
-from drivers.csvlog import CsvReader
-from drivers.dataflash import DataflashReader
-from drivers.mavlink import MavlinkParser
-from drivers.recording import VERDICTS_KIND, RecordingReader, read_records, with_verdicts
-from drivers.textlog import open_text_log
-from drivers.tlog import TlogReader
+from onboard.drivers import dvl_json, nmea, pd6
+from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.csvlog import CsvReader
+from onboard.drivers.dataflash import DataflashReader
+from onboard.drivers.mavlink import MavlinkParser
+from onboard.drivers.recording import VERDICTS_KIND, RecordingReader, read_records, with_verdicts
+from onboard.drivers.textlog import open_text_log
+from onboard.drivers.tlog import TlogReader
 from onboard.core import config as configmod
 from onboard.core.config import Config
 from onboard.engine import Engine

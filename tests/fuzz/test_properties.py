@@ -14,10 +14,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from drivers import nmea
-from drivers.base import ReadStats
-from drivers.recording import FILE_MAGIC, RawRecord, encode_frame, read_records
-from drivers.tlog import TlogReader
+from onboard.drivers import nmea
+from onboard.drivers.base import ReadStats
+from onboard.drivers.recording import FILE_MAGIC, RawRecord, encode_frame, read_records
+from onboard.drivers.tlog import TlogReader
 from tests.fuzz import targets
 from tests.fuzz.corpora import (
     csv_input,

@@ -10,13 +10,13 @@ from pathlib import Path
 
 import msgspec
 
-from drivers import dvl_json
-from drivers.base import ReadStats
-from drivers.dataflash import DataflashReader
-from drivers.mavlink import MavlinkParser
-from drivers.mavlink_signing import SignatureVerifier, VerdictLog, VerdictPlayer, signing_timestamp
-from drivers.protocols import SampleParser, encode_sample
-from drivers.recording import (
+from onboard.drivers import dvl_json
+from onboard.drivers.base import ReadStats
+from onboard.drivers.dataflash import DataflashReader
+from onboard.drivers.mavlink import MavlinkParser
+from onboard.drivers.mavlink_signing import SignatureVerifier, VerdictLog, VerdictPlayer, signing_timestamp
+from onboard.drivers.protocols import SampleParser, encode_sample
+from onboard.drivers.recording import (
     _HEAD,
     FILE_MAGIC,
     FRAME_MARK,

@@ -11,15 +11,22 @@ import ast
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-OURS = {"onboard", "drivers", "sitl"}
-"""The top-level packages of this repository."""
+OURS = {"onboard"}
+"""The top-level package of this repository."""
+INSTALLED_AS = {"drivers": "onboard.drivers", "sitl": "onboard.sitl"}
+"""Top-level folders installed as subpackages of ``onboard`` (pyproject.toml)."""
 
 
 def module_name(path: Path) -> str:
+    """The module a source file is imported as (``drivers/nmea.py``: ``onboard.drivers.nmea``)."""
     parts = list(path.relative_to(REPO).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
-    return ".".join(parts)
+    name = ".".join(parts)
+    top, _, rest = name.partition(".")
+    if top in INSTALLED_AS:
+        return INSTALLED_AS[top] + (f".{rest}" if rest else "")
+    return name
 
 
 def _is_type_checking(node: ast.If) -> bool:

@@ -57,7 +57,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from drivers.mavlink_signing import SIGNING_EPOCH, signing_timestamp
+from onboard.drivers.mavlink_signing import SIGNING_EPOCH, signing_timestamp
 from onboard.core.config import MavlinkOut
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.service.signing import check_signing, load_signing_key

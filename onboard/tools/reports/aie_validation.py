@@ -97,7 +97,7 @@ def run_sitl(scenario: Any, duration: float | None = None, seed: int = 1,
     """Run a SITL scenario (a name or a ``sitl.scenarios.Scenario``) through the engine
     with the aie and kf pipelines."""
     from onboard.engine import Engine
-    from sitl.runner import simulate
+    from onboard.sitl.runner import simulate
 
     name = scenario if isinstance(scenario, str) else scenario.name
     cfg = pipeline_config(SCENARIO_CONFIG.get(name, "rudder-boat"), aie_table)
@@ -170,7 +170,7 @@ def identify_sitl(scenario: str, seed: int = 10, dt: float = 1.0
     (§1.2; surge in rate form, heading from its increments, output-error fit)."""
     from onboard.estimators.axis_model import axis_commands
     from onboard.inputs import InputMapper
-    from sitl.runner import simulate
+    from onboard.sitl.runner import simulate
 
     cfg = pipeline_config(SCENARIO_CONFIG.get(scenario, "rudder-boat"))
     mapper = InputMapper(cfg.inputs)

@@ -46,8 +46,8 @@ def boat_tidal_scenario(period_s: float = 600.0, amplitude: float = 0.3) -> Any:
     """effect-current's boat and mission in a current that changes over minutes: a
     rectilinear stream toward 60 deg, ``0.1 + amplitude cos(2 pi t / period)`` (m/s),
     i.e. reversing every ``period/2`` s."""
-    from sitl import scenarios
-    from sitl.effects import Effect
+    from onboard.sitl import scenarios
+    from onboard.sitl.effects import Effect
     sc = scenarios.get("effect-current")
     return dataclasses.replace(sc, name="boat-tidal", injected=(Effect(
         "tidal_current", {"amplitude": amplitude, "period": period_s,
@@ -72,7 +72,7 @@ def run(scenario: Any, section: dict[str, Any], config_name: str,
     (n x 3), ``truth`` (n x 3 true current at the same ticks), the pipeline, the engine and
     ``us_per_step``.
     """
-    from sitl.runner import simulate
+    from onboard.sitl.runner import simulate
 
     cfg = make_config(config_name, section)
     pipe = current_mod.create(cfg)
@@ -189,8 +189,8 @@ def body_axis_std(r: dict[str, Any], after: float) -> tuple[float, float, float]
 
 @cache
 def _calm(scenario: str, duration: float, seed: int) -> Any:
-    from sitl import scenarios
-    from sitl.environment import Environment
+    from onboard.sitl import scenarios
+    from onboard.sitl.environment import Environment
     sc = scenarios.get(scenario)
     calm = dataclasses.replace(sc, injected=(), environment=lambda: Environment(),
                                name=sc.name + "-calm")

@@ -305,7 +305,7 @@ def closed_loop(controller: str, seed: int = 0, duration: float = 240.0,
                 speed: float | None = None) -> dict[str, Any]:
     """``sitl.closed_loop.simulate``: the ``bluerov2-circle`` closed loop with the ESESO
     in it; the report (tracking RMSE m, disturbance error N, ESESO state errors)."""
-    from sitl import closed_loop as cl
+    from onboard.sitl import closed_loop as cl
 
     sc = cl.CircleScenario() if speed is None else cl.CircleScenario(speed=speed)
     return cl.simulate(controller, duration=duration, seed=seed, scenario=sc)[0]
@@ -319,7 +319,7 @@ def eseso_nis(seed: int, seconds: float = 120.0) -> dict[str, tuple[float, int]]
     from onboard.core import config as config_mod
     from onboard.engine import Engine, run
     from onboard.pipelines import eseso as eseso_mod
-    from sitl.runner import simulate
+    from onboard.sitl.runner import simulate
 
     cfg = config_mod.load("bluerov2")
     p = eseso_mod.create(cfg)
@@ -359,7 +359,7 @@ def diagnose_sitl(scenario: str, seed: int = 1,
     ``diagnosis.json`` plus ``report_bytes``, the size of ``report.html``."""
     from onboard.core import config as config_mod
     from onboard.diagnose import diagnose
-    from sitl.runner import run_to_tlog
+    from onboard.sitl.runner import run_to_tlog
 
     with tempfile.TemporaryDirectory(prefix="onboard-figures-") as tmp:
         d = Path(tmp)

@@ -31,10 +31,10 @@ DATE = "010524"
 
 def nmea_lines() -> list[bytes]:
     """The NMEA log: three no-fix epochs, then 30 fixes at 1 Hz with GSA, GSV and HDT."""
-    from drivers.nmea import _wrap
+    from onboard.drivers.nmea import _wrap
     from onboard.core.messages import GnssFix, Heading
-    from sitl.emitters import NmeaEncoder
-    from sitl.runner import simulate
+    from onboard.sitl.emitters import NmeaEncoder
+    from onboard.sitl.runner import simulate
 
     fixes, headings = [], []
     for _, samples, _ in simulate("jaiabot-turns", 32.0, seed=5):
