@@ -478,9 +478,10 @@ def test_public_plant_and_environment_api_is_documented():
     import onboard.sitl.plants.torpedo_auv
     import onboard.sitl.plants.twin_thruster
 
-    mods = [sitl.environment, sitl.integrate, sitl.plants, sitl.plants.base,
-            sitl.plants.bluerov2, sitl.plants.fossen, sitl.plants.rudder_boat,
-            sitl.plants.spheroid, sitl.plants.torpedo_auv, sitl.plants.twin_thruster]
+    sim = onboard.sitl
+    mods = [sim.environment, sim.integrate, sim.plants, sim.plants.base,
+            sim.plants.bluerov2, sim.plants.fossen, sim.plants.rudder_boat,
+            sim.plants.spheroid, sim.plants.torpedo_auv, sim.plants.twin_thruster]
     missing = []
     for mod in mods:
         assert mod.__doc__, mod.__name__
