@@ -45,6 +45,7 @@ from onboard.core.messages import (
 )
 from onboard.corrections import SampleCorrector
 from onboard.depth import DepthMode
+from onboard.alerts import Alerts
 from onboard.innovations import InnovationMonitor
 from onboard.inputs import InputMapper
 from onboard.latency import FixedLagQueue, sample_time
@@ -201,6 +202,8 @@ class Engine:
         self.pipeline_errors: Counter[str] = Counter()
         self.nonfinite: Counter[str] = Counter()
         self.monitor = InnovationMonitor()
+        self.alerts = Alerts()
+        """Warnings for the user (pipeline restarts; the replay adds its own)."""
         self.events: list[str] = []
         """Human-readable events (pipeline restarts, stale streams) for the health
         channel; each is in one :meth:`health` record (the next after it happened)."""
@@ -323,7 +326,7 @@ class Engine:
             try:
                 values = queue.step(i, p)
             except Exception as err:  # a pipeline bug must not stop the others
-                values = self._recover(i, p, err)
+                values = self._recover(i, p, err, t)
                 queue.restarted(i)
             self._take_events(p)
             self.monitor.add(p.name, p.innovations())
@@ -372,11 +375,15 @@ class Engine:
                 self.nonfinite[name] += 1
         return out
 
-    def _recover(self, i: int, p: Pipeline, err: Exception) -> None:
+    def _recover(self, i: int, p: Pipeline, err: Exception, t: float) -> None:
         """Count a pipeline's failure, report it, and restart it from its configuration
         (its adaptive state is lost; the other pipelines carry on)."""
         self.pipeline_errors[p.name] += 1
         self.events.append(f"{p.name}: {type(err).__name__}: {err}; restarted")
+        self.alerts.warn("pipeline_restarted",
+                         f"{p.name} failed ({type(err).__name__}: {err}) and was restarted "
+                         "from its configuration; what it had learned is lost",
+                         t, pipeline=p.name)
         fresh = build(self.cfg, only={p.name})
         if fresh:
             self.pipelines[i] = fresh[0]

@@ -18,6 +18,7 @@ import msgspec
 
 from onboard.drivers.base import UnreadableLog
 from onboard.drivers.logs import open_log
+from onboard.alerts import Alerts
 from onboard.autodetect import detect
 from onboard.core import config as configmod
 from onboard.core.config import Config
@@ -198,6 +199,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "ticks": ticks,
         "rows": csv.rows,
         "rate_hz": cfg.engine.rate_hz,
+        "warnings": msgspec.to_builtins(list(run_warnings(engine, kinds))),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
@@ -206,6 +208,57 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         summary["figure"] = _plot_track(out_dir)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+POSITION_KINDS = {"gnss", "dvl_position"}
+"""Sample kinds that measure a position."""
+NEEDS: dict[str, tuple[str, tuple[frozenset[str], ...]]] = {
+    "nav": ("a GNSS fix, a heading, a velocity over ground or a depth",
+            (frozenset({"gnss", "heading", "attitude", "vog", "depth"}),)),
+    "aie": ("a heading (compass or AHRS yaw) or a GNSS fix",
+            (frozenset({"heading", "attitude", "gnss"}),)),
+    "kf": ("a heading (compass or AHRS yaw) or a GNSS fix",
+           (frozenset({"heading", "attitude", "gnss"}),)),
+    "current": ("a heading (compass or AHRS yaw) to put velocities in the earth frame, and a "
+                "velocity over ground (GNSS speed and course, INS velocity, DVL bottom track)",
+                (frozenset({"heading", "attitude"}), frozenset({"gnss", "vog", "dvl"}))),
+    "eseso": ("the IMU and the attitude", (frozenset({"imu"}), frozenset({"attitude"}))),
+}
+"""Per pipeline: what it needs to give any estimate, in words, and as groups of sample
+kinds of which the log must have one each."""
+
+
+def run_warnings(engine: Engine, kinds: dict[str, int]) -> Alerts:
+    """The engine's warnings and those of the whole run: no position source, and every
+    pipeline that gave no estimate with what it lacked (``kinds``: accepted samples by
+    kind)."""
+    alerts = engine.alerts
+    have = {k for k, n in kinds.items() if n > 0}
+    if not have & POSITION_KINDS:
+        alerts.warn("no_position_source", "no position source in the log (no GNSS fix, no "
+                    "DVL position): positions are dead reckoned from velocities, or absent")
+    log_has = ", ".join(f"{k} ({kinds[k]})" for k in sorted(have)) or "no usable sample"
+    for p in engine.pipelines:
+        if p.name in engine.latest:
+            continue
+        needs, groups = NEEDS.get(p.name, ("inputs this log lacks", ()))
+        missing = [g for g in groups if not g & have]
+        why = f"it needs {needs}" if missing or not groups else "its inputs never lined up"
+        alerts.warn("no_estimate", f"{p.name} gave no estimate: {why}; the log has {log_has}",
+                    pipeline=p.name)
+    return alerts
+
+
+def print_warnings(warnings: list[dict], t0: float) -> None:
+    """The warnings, one line each, times from the start of the log (s)."""
+    if not warnings:
+        return
+    print(f"{len(warnings)} warning{'s' if len(warnings) > 1 else ''}:")
+    for w in warnings:
+        span = ""
+        if w["t_start"] is not None:
+            span = f" [{w['t_start'] - t0:.1f}-{w['t_end'] - t0:.1f} s]"
+        print(f"  {w['code']}{span}: {w['message']}")
 
 
 def _plot_track(out_dir: Path) -> str | None:
@@ -235,4 +288,5 @@ def main(args) -> int:
     print(f"{summary['format']} log, {summary['time_span']['duration_s']:.1f} s, "
           f"{read['samples']:,} samples, {rejected:,} rejected; {summary['rows']:,} rows "
           f"-> {Path(args.out) / 'estimates.csv'} ({summary['config']})")
+    print_warnings(summary["warnings"], summary["time_span"]["start"])
     return 0

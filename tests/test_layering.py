@@ -41,7 +41,7 @@ CORE = {"onboard.core"}
 MATH = CORE | {"onboard.estimators"}
 PIPELINES = MATH | {"onboard.pipelines"}
 ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs",
-                      "onboard.sources"}
+                      "onboard.sources", "onboard.alerts"}
 ENGINE_PARTS = {"onboard.corrections", "onboard.depth", "onboard.latency",
                 "onboard.innovations"}
 """The engine's own modules: only the engine imports them."""
@@ -63,6 +63,7 @@ ROOMS: dict[str, set[str]] = {
     "onboard.depth": CORE,
     "onboard.latency": PIPELINES,
     "onboard.innovations": CORE,
+    "onboard.alerts": CORE,
     "onboard.inputs": CORE,
     "onboard.sources": CORE,
     "onboard.service": SERVICE,

@@ -118,3 +118,22 @@ def test_a_pipeline_that_fails_is_counted_in_the_summary(tmp_path, monkeypatch) 
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["rejected"]["pipeline:aie:error"] > 100
     assert summary["rejected"]["pipeline:kf:error"] > 100
+    restarted = {w["pipeline"]: w for w in summary["warnings"]
+                 if w["code"] == "pipeline_restarted"}
+    assert set(restarted) == {"aie", "kf"}
+    assert "broken on purpose" in restarted["aie"]["message"]
+    assert restarted["aie"]["t_end"] - restarted["aie"]["t_start"] > 30.0  # one line, 40 s
+
+
+def test_a_log_without_a_heading_says_why_it_gives_no_estimate(tmp_path, capsys) -> None:
+    """A DVL-only capture (body velocities, no compass, no GNSS): each pipeline that gives
+    nothing says what it lacks, in summary.json and at the end of the output."""
+    log = Path(__file__).resolve().parent / "data" / "dvl_json" / "a50.jsonl"
+    assert cli_main(["replay", str(log), "--out", str(tmp_path), "--no-plot"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    none = {w["pipeline"]: w["message"] for w in summary["warnings"]
+            if w["code"] == "no_estimate"}
+    assert set(none) == {"nav", "aie", "kf", "current"}
+    assert "needs a heading" in none["current"] and "dvl (8)" in none["current"]
+    out = capsys.readouterr().out
+    assert "4 warnings:" in out and "current gave no estimate" in out

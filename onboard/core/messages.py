@@ -351,6 +351,20 @@ class ChannelHealth(msgspec.Struct, frozen=True, kw_only=True):
     source: str = ""
 
 
+class Alert(msgspec.Struct, frozen=True, kw_only=True):
+    """A warning a user reads first (summary.json's ``warnings``; docs/architecture.md
+    §4.2): ``code`` for programs, ``message`` for people, about ``pipeline`` (empty: the
+    log or the engine), from ``t_start`` to ``t_end`` (s; null: the whole run), raised
+    ``n`` times in that span."""
+
+    code: str
+    pipeline: str = ""
+    message: str
+    t_start: float | None = None
+    t_end: float | None = None
+    n: int = 1
+
+
 HEALTH_SCHEMA_VERSION = 2
 """Version of the wire schema of :class:`HealthRecord` (2: typed innovations and
 counters apart; 1 had flat ``innovations`` and ``nis`` dictionaries)."""

@@ -1,0 +1,32 @@
+"""Warnings: a lasting condition is one warning with its span, a new one after a pause is
+another, and the list is bounded."""
+
+from __future__ import annotations
+
+from onboard import alerts as alerts_mod
+from onboard.alerts import Alerts
+
+
+def test_a_repeated_warning_extends_its_span_and_counts() -> None:
+    a = Alerts()
+    for t in (10.0, 11.0, 15.0):
+        a.warn("heading_course", f"off by {t:.0f} deg", t, pipeline="aie")
+    (w,) = list(a)
+    assert (w.t_start, w.t_end, w.n, w.message) == (10.0, 15.0, 3, "off by 15 deg")
+
+
+def test_the_same_warning_after_a_pause_is_a_new_one_and_pipelines_are_apart() -> None:
+    a = Alerts()
+    a.warn("heading_course", "x", 10.0, pipeline="aie")
+    a.warn("heading_course", "x", 10.0 + alerts_mod.MERGE_GAP_S + 1.0, pipeline="aie")
+    a.warn("heading_course", "x", 10.0, pipeline="kf")
+    assert [(w.pipeline, w.t_start) for w in a] == [("aie", 10.0), ("aie", 21.0), ("kf", 10.0)]
+
+
+def test_a_whole_run_warning_has_no_times_and_the_list_is_bounded() -> None:
+    a = Alerts()
+    a.warn("no_position_source", "none")
+    assert [(w.t_start, w.t_end) for w in a] == [(None, None)]
+    for i in range(alerts_mod.MAX_ALERTS + 5):
+        a.warn(f"code{i}", "x", float(i))
+    assert len(a) == alerts_mod.MAX_ALERTS and a.dropped == 6
