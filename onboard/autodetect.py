@@ -126,6 +126,47 @@ def detect(samples: Iterable[Sample]) -> tuple[Config, str]:
     return msgspec.structs.replace(base, inputs=inputs), why
 
 
+UNDERWATER_CLASSES = {"bluerov2", "torpedo-auv", "spheroid"}
+"""Vehicle classes that dive (HEARTBEAT MAV_TYPE_SUBMARINE)."""
+SURFACE_CLASSES = {"rudder-boat", "twin-thruster-boat"}
+"""Vehicle classes that stay at the surface (HEARTBEAT rover or boat)."""
+BLUEROV2_MOTORS = 6
+"""Thrusters of the BlueROV2 class (SERVOn_FUNCTION Motor1-6)."""
+
+
+def consistency(cfg: Config, samples: Iterable[Sample]) -> list[tuple[str, str]]:
+    """What in a log's HEARTBEAT and SERVOn_FUNCTION samples disagrees with ``cfg``:
+    ``(code, message)`` pairs, ``class_mismatch`` (the configured class dives and the
+    autopilot is a boat or rover, or the other way round) and
+    ``actuator_mapping_incomplete`` (motor functions for fewer than the class's
+    thrusters: the missing ones keep the defaults' channels)."""
+    params: dict[str, float] = {}
+    mav_types: list[int] = []
+    for s in samples:
+        if isinstance(s, Parameter):
+            params[s.name] = s.value
+        elif isinstance(s, VehicleInfo) and s.mav_type not in _GCS_TYPES:
+            mav_types.append(s.mav_type)
+    out: list[tuple[str, str]] = []
+    cls = cfg.vehicle.vehicle_class
+    if mav_types:
+        mav_type = max(set(mav_types), key=mav_types.count)
+        boat = mav_type in (MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT)
+        if (mav_type == MAV_TYPE_SUBMARINE and cls in SURFACE_CLASSES) or (
+                boat and cls in UNDERWATER_CLASSES):
+            out.append(("class_mismatch",
+                        f"the configuration is for a {cls} but the autopilot's HEARTBEAT "
+                        f"says MAV_TYPE {mav_type}: the models and inputs may not fit"))
+    motors = {f for f in _servo_functions(params).values()
+              if SERVO_MOTOR1 <= f < SERVO_MOTOR1 + BLUEROV2_MOTORS}
+    if cls == "bluerov2" and motors and len(motors) < BLUEROV2_MOTORS:
+        lost = sorted(i + 1 for i in range(BLUEROV2_MOTORS) if SERVO_MOTOR1 + i not in motors)
+        out.append(("actuator_mapping_incomplete",
+                    f"SERVOn_FUNCTION names {len(motors)} of the {BLUEROV2_MOTORS} motors; "
+                    f"motor(s) {lost} keep the default channels"))
+    return out
+
+
 def with_inputs(cfg: Config, inputs: Inputs) -> Config:
     """A copy of ``cfg`` with another input mapping."""
     return msgspec.structs.replace(cfg, inputs=inputs)

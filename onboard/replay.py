@@ -7,8 +7,8 @@ The same engine and pipelines as the live service, so a replay is the live resul
 
 from __future__ import annotations
 
+import itertools
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -19,11 +19,11 @@ import msgspec
 from onboard.drivers.base import UnreadableLog
 from onboard.drivers.logs import open_log
 from onboard.alerts import Alerts
-from onboard.autodetect import detect
+from onboard.autodetect import consistency, detect
 from onboard.core import config as configmod
 from onboard.core.config import Config
 from onboard.core.errors import UsageError
-from onboard.core.messages import EstimateRecord, Sample
+from onboard.core.messages import EstimateRecord, Parameter, Sample, VehicleInfo
 from onboard.engine import Engine, run
 from onboard.inputs import column_names
 from onboard.sources import QUANTITIES
@@ -126,8 +126,6 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
         infos, params = scan_header(log)
         cfg, why = detect([*infos, *params])
     elif fmt in ("dataflash", "recording"):
-        from onboard.core.messages import Parameter, VehicleInfo
-
         header = [s for s in reader if isinstance(s, (Parameter, VehicleInfo))]
         cfg, why = detect(header)
     else:
@@ -151,9 +149,13 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
                        None if fmt == "recording" else first.t)
     meter = _Progress(progress)
 
+    header: list[Sample] = []   # HEARTBEAT and parameters, checked against cfg at the end
+
     def stream() -> Iterator[Sample]:
-        yield first
-        yield from samples
+        for s in itertools.chain((first,), samples):
+            if isinstance(s, (VehicleInfo, Parameter)):
+                header.append(s)
+            yield s
 
     source = meter.wrap(stream()) if progress else stream()
     if fmt == "recording":
@@ -199,7 +201,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "ticks": ticks,
         "rows": csv.rows,
         "rate_hz": cfg.engine.rate_hz,
-        "warnings": msgspec.to_builtins(list(run_warnings(engine, kinds))),
+        "warnings": msgspec.to_builtins(list(run_warnings(engine, kinds, cfg, header))),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
@@ -228,11 +230,15 @@ NEEDS: dict[str, tuple[str, tuple[frozenset[str], ...]]] = {
 kinds of which the log must have one each."""
 
 
-def run_warnings(engine: Engine, kinds: dict[str, int]) -> Alerts:
-    """The engine's warnings and those of the whole run: no position source, and every
-    pipeline that gave no estimate with what it lacked (``kinds``: accepted samples by
-    kind)."""
+def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
+                 header: Sequence[Sample] = ()) -> Alerts:
+    """The engine's warnings and those of the whole run: the log's HEARTBEAT and servo
+    functions against ``cfg`` (:func:`onboard.autodetect.consistency`), no position
+    source, and every pipeline that gave no estimate with what it lacked (``kinds``:
+    accepted samples by kind)."""
     alerts = engine.alerts
+    for code, message in consistency(cfg, header):
+        alerts.warn(code, message)
     have = {k for k, n in kinds.items() if n > 0}
     if not have & POSITION_KINDS:
         alerts.warn("no_position_source", "no position source in the log (no GNSS fix, no "

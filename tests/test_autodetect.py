@@ -41,3 +41,24 @@ def test_submarine_with_rudder_and_elevator_is_a_torpedo_auv():
     assert cfg.vehicle.vehicle_class == "torpedo-auv"
     assert (cfg.inputs.rudder.channel, cfg.inputs.stern_plane.channel) == (1, 2)
     assert cfg.inputs.propeller_rpm.source == "rpm"
+
+
+def test_a_boat_configuration_on_a_submarine_log_is_a_class_mismatch():
+    from onboard.autodetect import consistency
+    from onboard.core import config
+
+    sub = VehicleInfo(t=1, system_id=1, component_id=1, mav_type=12, autopilot=3)
+    codes = [c for c, _ in consistency(config.load("rudder-boat"), [sub])]
+    assert codes == ["class_mismatch"]
+    assert consistency(config.load("bluerov2"), [sub]) == []
+
+
+def test_five_of_six_rov_motors_is_an_incomplete_mapping():
+    from onboard.autodetect import consistency
+    from onboard.core import config
+
+    five = [p(f"SERVO{i}_FUNCTION", 32 + i) for i in range(1, 6)]   # Motor1-5
+    (code, message), = consistency(config.load("bluerov2"), five)
+    assert code == "actuator_mapping_incomplete" and "[6]" in message
+    six = five + [p("SERVO6_FUNCTION", 38)]
+    assert consistency(config.load("bluerov2"), six) == []

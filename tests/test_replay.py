@@ -137,3 +137,17 @@ def test_a_log_without_a_heading_says_why_it_gives_no_estimate(tmp_path, capsys)
     assert "needs a heading" in none["current"] and "dvl (8)" in none["current"]
     out = capsys.readouterr().out
     assert "4 warnings:" in out and "current gave no estimate" in out
+
+
+@pytest.mark.data
+def test_an_ardusub_log_replayed_as_a_boat_says_so(shared_data, tmp_path) -> None:
+    """small.BIN (a disarmed BlueROV2 on a bench, HEARTBEAT MAV_TYPE_SUBMARINE) forced to
+    the rudder-boat configuration: the run says the class disagrees, and that the log has
+    no position source."""
+    log = shared_data / "ardusub_small_logs" / "small.BIN"
+    if not log.exists():
+        pytest.skip(f"{log} not present")
+    assert cli_main(["replay", str(log), "--out", str(tmp_path), "--no-plot",
+                     "--config", "rudder-boat"]) == 0
+    codes = {w["code"] for w in json.loads((tmp_path / "summary.json").read_text())["warnings"]}
+    assert {"class_mismatch", "no_position_source"} <= codes
