@@ -134,10 +134,28 @@ def _within(samples: Iterable[Sample], ranges: Sequence[tuple[float, float]]
             yield s
 
 
+def signed_ground_speed(nav: dict[str, float]) -> float | None:
+    """The measured speed over ground (m/s, ``nav.speed``), negative when the track runs
+    more than 90 deg from the heading (going astern), so that it compares with the
+    filters' signed surge speed; unsigned without a heading or a direction of travel;
+    None without a speed."""
+    speed = nav.get("speed")
+    if speed is None or not math.isfinite(speed):
+        return None
+    if "v_north" in nav and "v_east" in nav:
+        track = math.atan2(nav["v_east"], nav["v_north"])
+    else:
+        track = nav.get("course", math.nan)
+    heading = nav.get("heading", math.nan)
+    if not (math.isfinite(track) and math.isfinite(heading)):
+        return speed
+    return speed if math.cos(heading - track) >= 0.0 else -speed
+
+
 def speed_errors(log: str, cfg: Config, ranges: Sequence[tuple[float, float]]
                  ) -> dict[str, float | None]:
-    """RMS (m/s) of ``aie.speed`` and ``kf.speed`` minus ``nav.speed`` (the measured speed
-    over ground) over the ticks within ``ranges``, replaying only those ranges (plus
+    """RMS (m/s) of ``aie.speed`` and ``kf.speed`` minus the measured speed over ground
+    (:func:`signed_ground_speed` of the same replay's ``nav``) over the ticks within ``ranges``, replaying only those ranges (plus
     :data:`WARMUP_S` before each) through the onboard engine under ``cfg``."""
     _, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
     engine = Engine(cfg)
@@ -147,8 +165,8 @@ def speed_errors(log: str, cfg: Config, ranges: Sequence[tuple[float, float]]
         if not any(a <= t <= b for a, b in ranges):
             return
         vals = {r.pipeline: r.values for r in records}
-        ref = vals.get("nav", {}).get("speed")
-        if ref is None or not math.isfinite(ref):
+        ref = signed_ground_speed(vals.get("nav", {}))
+        if ref is None:
             return
         for k in FILTERS:
             v = vals.get(k, {}).get("speed")
