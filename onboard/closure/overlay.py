@@ -26,6 +26,10 @@ only holds the keys it changes:
 When the diagnosis ran on a config detected from the log (no ``--config``), the overlay
 also holds the detected ``[vehicle]`` and ``[inputs]``, so that ``--config overlay.toml``
 alone reproduces it.
+Each of these is a :class:`Section`, checked before it is written
+(:mod:`onboard.closure.overlay_check`: plausible parameters, and a replay of the test part
+through ``aie`` and ``kf`` that it must not make worse); a refused section is written as
+comments only, with why.
 """
 
 from __future__ import annotations
