@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from onboard.drivers.base import UnreadableLog
-from onboard.closure import dataset, overlay, report
+from onboard.closure import dataset, overlay, overlay_check, report
 from onboard.closure.effects import ALL
 from onboard.closure.select import select
 from onboard.core.errors import UsageError
@@ -54,7 +54,11 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     sel = select(ds, declared=declared, metric=opts.holdout_metric or None, known=opts.known)
     doc = report.write(sel, log, out_dir)
     if write_config is not None:
-        text = overlay.overlay_text(doc, cfg, sel, detected=detected, base_note=config_note)
+        verdicts = overlay_check.check(overlay.sections(doc, cfg, sel), log, cfg, sel)
+        doc = overlay_check.record(doc, verdicts, out_dir)
+        text = overlay.overlay_text(doc, cfg, sel, detected=detected, base_note=config_note,
+                                    refused={v.section: v.reason for v in verdicts
+                                             if not v.written})
         try:
             Path(write_config).write_text(text, encoding="utf-8")
         except OSError as err:
@@ -80,6 +84,9 @@ def main(args) -> int:
     print(f"effects: {names}; test-part {doc['holdout_metric']}: "
           f"{doc['holdout_error_before']:.4g} -> {doc['holdout_error_after']:.4g} "
           f"({Path(args.out) / 'diagnosis.json'})")
+    for v in doc.get("overlay_check", []):
+        print(overlay_check.Verdict(v["section"], v["written"], v["reason"],
+                                    v["speed_rmse_before_mps"], v["speed_rmse_after_mps"]).line())
     if getattr(args, "write_config", None):
         base = " ".join(f"--config {c}" for c in args.config or [])
         print(f"config overlay: {args.write_config} (use: {base + ' ' if base else ''}"

@@ -285,3 +285,98 @@ def test_overlay_of_a_detected_config_stands_alone(tmp_path):
     cfg = config.load_all([_write(tmp_path, "o.toml", text)])
     assert cfg.vehicle == det.vehicle
     assert cfg.inputs == det.inputs
+
+
+# ------------------------------------------------------------------ checking the overlay
+
+from pathlib import Path  # noqa: E402
+
+from onboard.closure import overlay_check  # noqa: E402
+from onboard.replay import choose_config  # noqa: E402
+
+GOLDEN_LOG = str(Path(__file__).parent / "data" / "replay" / "jaiabot-turns.tlog")
+
+
+class _Part:
+    """The test part of a fake selection: ticks ``t`` (s) with run labels."""
+
+    def __init__(self, t, run, dt=0.1):
+        self.t, self.run, self.dt = np.asarray(t, float), np.asarray(run, dtype=object), dt
+
+    def __len__(self):
+        return len(self.t)
+
+
+def _whole_log_selection():
+    """A selection whose test part is the whole golden log (its ticks are all scored)."""
+    t = np.array([-1.0e12, 0.0, 1.0e12])
+    return SimpleNamespace(split=SimpleNamespace(test=_Part(t, ["x"] * 3, dt=1.0e12)))
+
+
+def test_held_out_ranges_merge_adjacent_blocks_and_keep_runs_apart():
+    t = np.r_[np.arange(0.0, 10.0, 0.1), np.arange(10.0, 20.0, 0.1), np.arange(50.0, 60.0, 0.1)]
+    run = ["a@1"] * 100 + ["a@2"] * 100 + ["b"] * 100
+    sel = SimpleNamespace(split=SimpleNamespace(test=_Part(t, run)))
+    ranges = overlay_check.held_out_ranges(sel)
+    assert [(round(a, 1), round(b, 1)) for a, b in ranges] == [(0.0, 19.9), (50.0, 59.9)]
+
+
+def test_implausible_surge_model_is_refused_with_the_parameter_named():
+    # The BlueBoat folder's surge fit (issue 22): a 17 s time constant, but a top speed
+    # of 51.9 m/s at full command.
+    why = overlay_check.implausible("pipelines.aie.surge",
+                                    {"a": 0.0582, "gain": 2.9652, "offset": 0.0572})
+    assert why is not None and "51.9 m/s" in why and "10 m/s" in why
+    why = overlay_check.implausible("pipelines.kf.surge", {"a": 0.01, "gain": 0.01})
+    assert why is not None and "pipelines.kf.surge.a" in why and "100 s" in why
+    assert overlay_check.implausible("pipelines.aie.heading", {"a": 2.0, "gain": 20.0})
+    assert overlay_check.implausible("pipelines.aie.surge", {"a": 1.0, "gain": 3.0}) is None
+    assert overlay_check.implausible("corrections", {"gnss_latency_s": 0.5}) is None
+
+
+def test_a_section_that_lowers_the_held_out_error_is_written_one_that_raises_it_is_not():
+    # Base: the golden Jaiabot log read with a planted 1 s GNSS latency (wrong: the
+    # simulator has none). Good section: latency 0; bad section: latency 1 s again;
+    # implausible section: a 100 s surge time constant.
+    base, _ = choose_config(GOLDEN_LOG, None)
+    base = overlay_check.with_layer(base, {"corrections": {"gnss_latency_s": 1.0}})
+    sections = [
+        overlay.Section("good", {"corrections": {"gnss_latency_s": 0.0}}),
+        overlay.Section("bad", {"corrections": {"gnss_latency_s": 1.0}}),
+        overlay.Section("implausible", {"pipelines.aie.surge": {"a": 0.01, "gain": 0.05}}),
+        overlay.Section("needs bad", {"pipelines.kf.surge": {"a": 1.0, "gain": 3.0}},
+                        needs=("bad",)),
+    ]
+    v = {x.section: x for x in overlay_check.check(sections, GOLDEN_LOG, base,
+                                                   _whole_log_selection())}
+    # measured: aie 0.168 -> 0.071 m/s, kf 0.124 -> 0.027 m/s
+    assert v["good"].written
+    assert v["good"].after["aie"] < v["good"].before["aie"] - 0.05
+    assert v["good"].after["kf"] < v["good"].before["kf"] - 0.05
+    # judged on top of the good one: aie 0.071 -> 0.168 m/s
+    assert not v["bad"].written and "raises" in v["bad"].reason
+    assert v["bad"].before == v["good"].after
+    assert not v["implausible"].written and "time constant" in v["implausible"].reason
+    assert not v["needs bad"].written and "bad" in v["needs bad"].reason
+    entry = v["bad"].as_dict()
+    assert set(entry) == {"section", "written", "reason", "speed_rmse_before_mps",
+                          "speed_rmse_after_mps"}
+
+
+def test_overlay_text_writes_a_refused_section_as_a_comment_only():
+    doc = _doc(("heading_bias", {"bias": -0.05}, {"bias": 0.001}))
+    cfg = config.load("rudder-boat")
+    names = [s.name for s in overlay.sections(doc, cfg) if s.tables]
+    assert "corrections" in names
+    text = overlay.overlay_text(doc, cfg, refused={"corrections": "raises it"})
+    assert "[corrections]" not in text and "# NOT WRITTEN: raises it" in text
+    assert "[corrections]" in overlay.overlay_text(doc, cfg)
+
+
+def test_signed_ground_speed_is_negative_going_astern():
+    ahead = {"speed": 1.0, "v_north": 1.0, "v_east": 0.0, "heading": 0.1}
+    astern = {"speed": 1.0, "v_north": -1.0, "v_east": 0.0, "heading": 0.1}
+    assert overlay_check.signed_ground_speed(ahead) == 1.0
+    assert overlay_check.signed_ground_speed(astern) == -1.0
+    assert overlay_check.signed_ground_speed({"speed": 0.5}) == 0.5
+    assert overlay_check.signed_ground_speed({"heading": 0.0}) is None

@@ -26,11 +26,16 @@ only holds the keys it changes:
 When the diagnosis ran on a config detected from the log (no ``--config``), the overlay
 also holds the detected ``[vehicle]`` and ``[inputs]``, so that ``--config overlay.toml``
 alone reproduces it.
+Each of these is a :class:`Section`, checked before it is written
+(:mod:`onboard.closure.overlay_check`: plausible parameters, and a replay of the test part
+through ``aie`` and ``kf`` that it must not make worse); a refused section is written as
+comments only, with why.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -233,10 +238,87 @@ def current_prior(doc: dict) -> tuple[dict[str, Any], list[str]]:
              + "its size is the prior's scale"])
 
 
+@dataclass
+class Section:
+    """One checked part of the overlay (:mod:`onboard.closure.overlay_check`): its
+    ``name``, the TOML ``tables`` it writes (table name -> keys), the comment ``notes``
+    and the sections it ``needs`` (it was fitted with them)."""
+
+    name: str
+    tables: dict[str, dict[str, Any]]
+    notes: list[str] = field(default_factory=list)
+    needs: tuple[str, ...] = ()
+
+    def layer(self) -> dict[str, Any]:
+        """The tables as nested TOML tables, ready for :func:`onboard.core.config.merge`."""
+        out: dict[str, Any] = {}
+        for name, keys in self.tables.items():
+            node = out
+            for part in name.split("."):
+                node = node.setdefault(part, {})
+            node.update(keys)
+        return out
+
+
+def sections(doc: dict, cfg: Config, sel: Any = None) -> list[Section]:
+    """The overlay's sections in the order they are checked and written:
+    ``corrections``, ``inputs`` (the re-mapping only), ``surge model`` (aie and kf),
+    ``current prior``."""
+    corr, c_notes = corrections(doc, cfg)
+    inputs, i_notes = actuator_inputs(doc, cfg)
+    surge, s_notes = surge_model(doc, sel)
+    prior, p_notes = current_prior(doc)
+    out = [Section("corrections", {"corrections": corr} if corr else {}, c_notes),
+           Section("inputs", {"inputs": inputs} if inputs else {}, i_notes)]
+    tables = {"pipelines.aie.surge": surge, "pipelines.kf.surge": surge} if surge else {}
+    out.append(Section("surge model", tables, s_notes, ("inputs",) if inputs else ()))
+    out.append(Section("current prior", {"pipelines.current": prior} if prior else {},
+                       p_notes))
+    return out
+
+
+def _render_inputs(out: _Doc, inputs: dict[str, Any], notes: list[str]) -> None:
+    out.lines.append("")
+    out.comment("\n".join(notes) or "the input mapping detected from the log")
+    out.lines.append("[inputs]")
+    for k, v in inputs.items():
+        if isinstance(v, dict):
+            out.lines.append(f"{k} = {_inline(v)}")
+        elif isinstance(v, list):
+            out.lines.append(f"{k} = [" + ", ".join(_inline(x) for x in v) + "]")
+        else:
+            out.lines.append(f"{k} = {_toml_value(v)}")
+
+
+def _render(out: _Doc, sec: Section, cfg: Config, detected: bool, refused: str) -> None:
+    """One section's tables with its notes, or its notes and why it was refused."""
+    notes = list(sec.notes) + ([f"NOT WRITTEN: {refused}"] if refused else [])
+    if sec.name == "inputs" and detected:
+        det = {k: v for k, v in to_dict(cfg)["inputs"].items() if v is not None and v != []}
+        tables = sec.tables.get("inputs", {}) if not refused else {}
+        if det or tables:
+            _render_inputs(out, {**det, **tables}, notes)
+        return
+    if refused or not sec.tables:
+        if notes:
+            out.lines.append("")
+            out.comment("\n".join(notes))
+        return
+    for i, (name, keys) in enumerate(sec.tables.items()):
+        if name == "inputs":
+            _render_inputs(out, keys, notes)
+        else:
+            out.table(name, keys, "\n".join(notes) if i == 0 else
+                      "the same surge model for the KF baseline")
+
+
 def overlay_text(doc: dict, cfg: Config, sel: Any = None, *, detected: bool = False,
-                 base_note: str = "") -> str:
+                 base_note: str = "", refused: dict[str, str] | None = None) -> str:
     """The overlay TOML for diagnosis ``doc`` of a log read with ``cfg`` (the Selection
-    ``sel`` gives the commands flown, for a thrust curve)."""
+    ``sel`` gives the commands flown, for a thrust curve). ``refused``: section name ->
+    why it is not written (:func:`onboard.closure.overlay_check.check`); those sections
+    appear as comments only."""
+    refused = refused or {}
     out = _Doc()
     how = ("Self-contained (the config was detected from the log): --config THIS_FILE"
            if detected else f"Apply after the config it ran with: --config "
@@ -245,34 +327,9 @@ def overlay_text(doc: dict, cfg: Config, sel: Any = None, *, detected: bool = Fa
                 f"Test part {doc['holdout_metric']}: {doc['holdout_error_before']:.4g} -> "
                 f"{doc['holdout_error_after']:.4g}")
     if detected:
-        full = to_dict(cfg)
-        out.table("vehicle", full["vehicle"], "the config detected from the log")
-    corr, notes = corrections(doc, cfg)
-    out.table("corrections", corr, "\n".join(notes))
-    inputs, notes = actuator_inputs(doc, cfg)
-    if detected:
-        det = to_dict(cfg)["inputs"]
-        det = {k: v for k, v in det.items() if v is not None and v != []}
-        inputs = {**det, **inputs}
-    if inputs:
-        out.lines.append("")
-        out.comment("\n".join(notes) or "the input mapping detected from the log")
-        out.lines.append("[inputs]")
-        for k, v in inputs.items():
-            if isinstance(v, dict):
-                out.lines.append(f"{k} = {_inline(v)}")
-            elif isinstance(v, list):
-                out.lines.append(f"{k} = [" + ", ".join(_inline(x) for x in v) + "]")
-            else:
-                out.lines.append(f"{k} = {_toml_value(v)}")
-    surge, notes = surge_model(doc, sel)
-    if surge or notes:
-        out.table("pipelines.aie.surge", surge, "\n".join(notes))
-        out.table("pipelines.kf.surge", surge, "the same surge model for the KF baseline")
-        if not surge:
-            out.comment("\n".join(notes))
-    prior, notes = current_prior(doc)
-    out.table("pipelines.current", prior, "\n".join(notes))
+        out.table("vehicle", to_dict(cfg)["vehicle"], "the config detected from the log")
+    for sec in sections(doc, cfg, sel):
+        _render(out, sec, cfg, detected, refused.get(sec.name, ""))
     unexplained = next((e for e in doc["effects"] if e["name"] == "unexplained"), None)
     ignored = [n for n in _found(doc) if n not in (
         "gps_latency", "gyro_bias", "heading_bias", "compass_deviation",

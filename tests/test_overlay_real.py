@@ -1,0 +1,45 @@
+"""The BlueBoat folder's overlay round trip (issue 22, item 5): ``diagnose --write-config``
+on ``blueboat_sysid_ntnu`` must not raise the onboard filters' speed error.
+
+Before the check the overlay held ``[pipelines.aie.surge] a = 0.0582, gain = 2.9652`` (a
+top speed of 51.9 m/s at full command) and, replayed over the whole folder, took the
+aie speed error against the GNSS speed over ground from 0.227 to 1.391 m/s and kf's from
+0.316 to 1.103 m/s.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from onboard.closure import overlay_check
+from onboard.core import config
+from onboard.diagnose import diagnose
+
+pytestmark = [pytest.mark.data, pytest.mark.slow]
+
+
+def test_blueboat_overlay_does_not_raise_the_aie_kf_speed_error(shared_data, tmp_path):
+    log = str(shared_data / "blueboat_sysid_ntnu")
+    base = config.load("blueboat-ntnu-csv")
+    ov = tmp_path / "overlay.toml"
+    doc = diagnose(log, base, tmp_path / "out", write_config=ov,
+                   config_note="blueboat-ntnu-csv")
+    verdicts = {v["section"]: v for v in doc["overlay_check"]}
+    assert json.loads((tmp_path / "out" / "diagnosis.json").read_text())["overlay_check"]
+    # the surge model is refused by its implausible top speed (51.9 m/s > 10 m/s)
+    surge = verdicts["surge model"]
+    assert not surge["written"] and "51.9 m/s" in surge["reason"]
+    assert "[pipelines.aie.surge]" not in ov.read_text()
+    # the compass deviation is written: test part aie 0.300 -> 0.298, kf 0.418 -> 0.418 m/s
+    assert verdicts["corrections"]["written"]
+    # the whole folder replayed without and with the overlay: aie 0.227 -> 0.225 m/s,
+    # kf 0.316 -> 0.316 m/s (signed surge speed against the signed GNSS speed)
+    whole = [(-1.0e12, 1.0e12)]
+    before = overlay_check.speed_errors(log, base, whole)
+    after = overlay_check.speed_errors(log, config.load_all(["blueboat-ntnu-csv", ov]), whole)
+    for k in ("aie", "kf"):
+        assert after[k] <= before[k] + overlay_check.TIE_MPS, (k, before, after)
+    assert before["aie"] == pytest.approx(0.227, abs=0.01)
+    assert before["kf"] == pytest.approx(0.316, abs=0.01)
