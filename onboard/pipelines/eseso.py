@@ -201,6 +201,12 @@ class Eseso:
         self._t_att_yaw = -math.inf  # time (s) of the newest Attitude with its yaw
 
     @property
+    def frame_offset(self) -> tuple[float, float]:
+        """Where the local frame's origin (the first fused fix) lies in the published
+        position (north, east; m): the position the filter had reached then."""
+        return float(self._gnss_offset[0]), float(self._gnss_offset[1])
+
+    @property
     def initialized(self) -> bool:
         """True once the filter has started (it has an attitude)."""
         return self.filter.initialized
