@@ -88,6 +88,8 @@ NIS_BAND = 0.95
 NIS_SUSTAIN_UPDATES = 2 * RECENT_STEPS
 """Updates in a row outside the band that raise ``nis_out_of_band``: the running mean is
 correlated over about ``RECENT_STEPS`` updates, so one excursion is not evidence."""
+NIS_EXEMPT_CHANNELS = frozenset({"zupt"})
+"""Pseudo-measurements whose sigma is a bound, not a noise: their NIS is not chi-square."""
 NIS_EFFECTIVE_N = 2 * RECENT_STEPS - 1
 """Independent updates with the same variance of the mean as the running mean of weight
 ``1/RECENT_STEPS`` (``(2 - a) / a``)."""
@@ -397,7 +399,8 @@ class IntegrityMonitor:
         per = self.nis.get(pipeline)
         for rec in records:
             nis = rec.nis
-            if not rec.accepted or not math.isfinite(nis):
+            if not rec.accepted or not math.isfinite(nis) \
+                    or rec.channel in NIS_EXEMPT_CHANNELS:
                 continue
             if per is None:
                 per = self.nis[pipeline] = {}
