@@ -238,6 +238,9 @@ class NisCheck:
         self._n = 0
         self.outside = 0
         """Updates in a row with the running mean outside the band."""
+        self.first_failed: float | None = None
+        """When (s) the check first failed: one warning per pipeline spans the run's
+        failures, not one per excursion."""
 
     def add(self, nis: float) -> bool:
         """One accepted update's NIS; True when the running mean has been outside the
@@ -410,6 +413,8 @@ class IntegrityMonitor:
             was = check.outside >= NIS_SUSTAIN_UPDATES
             now = check.add(nis)
             if now:
+                if check.first_failed is None:
+                    check.first_failed = rec.t
                 self._nis_warning(pipeline, rec.channel, check, rec.t)
             if now != was:
                 self._flag(pipeline, "nis_out_of_band",
@@ -423,7 +428,7 @@ class IntegrityMonitor:
         self._warn("nis_out_of_band", pipeline, t, (
             f"{pipeline} {channel}: recent NIS {check.mean:.2f} outside its 95 % band "
             f"[{lo:.2f}, {hi:.2f}] (dof {check.dof}) for {check.outside} updates: the "
-            f"innovations are {how}"), key=channel)
+            f"innovations are {how}"), key=channel, t_start=check.first_failed)
 
     # ------------------------------------------------------------------ flags
     def _flag(self, pipeline: str, code: str, on: bool) -> None:
@@ -437,11 +442,14 @@ class IntegrityMonitor:
         """pipeline -> the codes it fails now (sorted; pipelines with none left out)."""
         return {p: sorted(f) for p, f in self.flags.items() if f}
 
-    def _warn(self, code: str, pipeline: str, t: float, message: str, key: str = "") -> None:
-        """Raise ``code`` at most every :data:`WARN_EVERY_S` per (code, pipeline, key)."""
+    def _warn(self, code: str, pipeline: str, t: float, message: str, key: str = "",
+              t_start: float | None = None) -> None:
+        """Raise ``code`` at ``t`` (s) at most every :data:`WARN_EVERY_S` per (code,
+        pipeline, key), spanning from ``t_start`` (default ``t``)."""
         k = (code, pipeline + ":" + key)
         last = self._last_warn.get(k)
         if last is not None and 0.0 <= t - last < WARN_EVERY_S:
             return
         self._last_warn[k] = t
-        self.alerts.warn(code, message, t, pipeline=pipeline)
+        self.alerts.warn(code, message, t if t_start is None else t_start,
+                         pipeline=pipeline, t_end=t)
