@@ -47,6 +47,7 @@ from onboard.corrections import SampleCorrector
 from onboard.depth import DepthMode
 from onboard.alerts import Alerts
 from onboard.innovations import InnovationMonitor
+from onboard.integrity import WATCHED, IntegrityMonitor
 from onboard.inputs import InputMapper
 from onboard.latency import FixedLagQueue, sample_time
 from onboard.pipelines import build
@@ -204,6 +205,10 @@ class Engine:
         self.monitor = InnovationMonitor()
         self.alerts = Alerts()
         """Warnings for the user (pipeline restarts; the replay adds its own)."""
+        self.integrity = IntegrityMonitor(self.alerts, cfg.vehicle.vehicle_class,
+                                          cfg.sensors.gnss.position_std_m)
+        """Each estimate against the independent measurements (:mod:`onboard.integrity`):
+        warnings, flags, and the values it withholds."""
         self.events: list[str] = []
         """Human-readable events (pipeline restarts, stale streams) for the health
         channel; each is in one :meth:`health` record (the next after it happened)."""
@@ -303,6 +308,8 @@ class Engine:
         actuator output its normalized command; a parameter may move an input channel
         (an event)."""
         self.queue.put(chosen)
+        if type(chosen) in WATCHED:
+            self.integrity.observe(chosen)
         cls = type(raw)
         if cls in _RAW_ACTUATORS and self.mapper.active:
             cmd = self.mapper.map(raw)
@@ -329,10 +336,13 @@ class Engine:
                 values = self._recover(i, p, err, t)
                 queue.restarted(i)
             self._take_events(p)
-            self.monitor.add(p.name, p.innovations())
+            innovations = p.innovations()
+            self.monitor.add(p.name, innovations)
+            self.integrity.innovations(p.name, innovations)
             if values:
                 records.append(self._record(p, t, values, queue.t_sensor))
         queue.close_tick()
+        self.integrity.positions_at(t, records, {p.name: p for p in self.pipelines})
         return records
 
     def _take_events(self, p: Pipeline) -> None:
@@ -349,6 +359,9 @@ class Engine:
         kept as :attr:`latest`."""
         if not all(map(math.isfinite, values.values())):
             values = self._finite(p.name, values)
+        withheld = self.integrity.withheld(p.name)
+        if withheld:
+            values = self._withhold(p.name, values, withheld)
         std_names = self._std_names.get(p.name)
         if std_names is None:  # a pipeline put in after construction
             std_names = self._std_names[p.name] = std_columns(p)
@@ -373,6 +386,14 @@ class Engine:
                 out[k] = v
             else:
                 self.nonfinite[name] += 1
+        return out
+
+    def _withhold(self, name: str, values: Mapping[str, float],
+                  withheld: tuple[str, ...]) -> dict[str, float]:
+        """``values`` without the quantities the integrity monitor withholds (published
+        as unknown while a check fails, :mod:`onboard.integrity`), each counted."""
+        out = {k: v for k, v in values.items() if k not in withheld}
+        self.integrity.count_withheld(name, len(values) - len(out))
         return out
 
     def _recover(self, i: int, p: Pipeline, err: Exception, t: float) -> None:
@@ -400,15 +421,18 @@ class Engine:
                             rejected=self.rejections(), innovations=self.monitor.snapshot(),
                             counters=self.counters(),
                             events=(events or []) + self._new_events(), mode=self.mode,
-                            sources=self.selector.active)
+                            sources=self.selector.active, flags=self.integrity.active())
 
     def rejections(self) -> dict[str, int]:
         """Every count of what was not used: samples by ``<type>:<reason>``, and per
         pipeline its failures (``pipeline:<name>:error``, each a restart) and the
-        estimates left out as not finite (``pipeline:<name>:nonfinite``)."""
+        estimates left out as not finite (``pipeline:<name>:nonfinite``) or withheld by
+        a failed integrity check (``pipeline:<name>:flagged``)."""
         rejected = dict(self.rejected)
         rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
         rejected.update({f"pipeline:{k}:nonfinite": n for k, n in self.nonfinite.items()})
+        rejected.update({f"pipeline:{k}:flagged": n
+                         for k, n in self.integrity.flagged.items()})
         return rejected
 
     def counters(self) -> dict[str, dict[str, float | None]]:

@@ -43,7 +43,7 @@ PIPELINES = MATH | {"onboard.pipelines"}
 ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs",
                       "onboard.sources", "onboard.alerts"}
 ENGINE_PARTS = {"onboard.corrections", "onboard.depth", "onboard.latency",
-                "onboard.innovations"}
+                "onboard.innovations", "onboard.integrity"}
 """The engine's own modules: only the engine imports them."""
 SERVICE = ENGINE | {"onboard.drivers", "onboard.service"}
 CLOSURE = ENGINE | {"onboard.drivers", "onboard.closure", "onboard.replay", "onboard.plots",
@@ -63,6 +63,7 @@ ROOMS: dict[str, set[str]] = {
     "onboard.depth": CORE,
     "onboard.latency": PIPELINES,
     "onboard.innovations": CORE,
+    "onboard.integrity": CORE | {"onboard.alerts", "onboard.innovations"},
     "onboard.alerts": CORE,
     "onboard.inputs": CORE,
     "onboard.sources": CORE,

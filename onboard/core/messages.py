@@ -391,3 +391,4 @@ class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
     events: list[str] = []
     mode: str = ""
     sources: dict[str, str] = {}
+    flags: dict[str, list[str]] = {}

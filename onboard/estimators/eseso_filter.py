@@ -380,6 +380,15 @@ class EsesoFilter:
         return self.update("gnss_vel", z - self.v[:2], H, np.eye(2) * var, t=t,
                            source=source)
 
+    def update_zero_velocity(self, var: float, *, t: float = math.nan,
+                             source: str = "") -> bool:
+        """Zero velocity over ground (north, east, down), each with variance ``var``
+        (m^2/s^2): the pseudo-measurement of a vehicle left idle with nothing else to
+        bound its velocity (a ZUPT, Foxlin 2005); channel ``zupt``."""
+        H = np.zeros((3, N_ERR))
+        H[:, V_] = np.eye(3)
+        return self.update("zupt", -self.v, H, np.eye(3) * var, t=t, source=source)
+
     def update_ins_velocity(self, z: Array, var: float, *,
                             t: float = math.nan, source: str = "") -> bool:
         """INS velocity over ground ``z`` (north, east; m/s) = ``v + b_ins`` + white noise

@@ -31,11 +31,18 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
 * **Innovations** (:meth:`Eseso.innovations`): one record per update, channels ``thrust``
   (the thrust model, never gated), ``attitude`` (3, rad, body rotation vector),
   ``heading`` (1, rad), ``dvl`` (3, m/s body, bottom track), ``depth`` (1, m), ``vog``
-  (2, m/s, INS velocity over ground), ``gnss_pos`` (2, m) and ``gnss_vel`` (2, m/s);
+  (2, m/s, INS velocity over ground), ``gnss_pos`` (2, m), ``gnss_vel`` (2, m/s) and
+  ``zupt`` (3, m/s, the zero-velocity update);
   gated updates with reason ``gate``, and a DVL sample that is invalid or beyond the
   figure of merit (``invalid``, ``fom``), a non-finite velocity over ground
   (``nonfinite``) and a fix while submerged (``submerged``) as rejected records without
   an innovation.
+* **Zero velocity**: dead reckoning with nothing to bound its velocity integrates the
+  accelerometer bias into a runaway (a disarmed ROV on a bench, ``small.BIN``: 100 m in
+  24 s, 6.2 m/s, a 97 N disturbance). With no position or velocity source for
+  ``ZUPT_AFTER_S`` and the thrusters idle (every command within ``ZUPT_IDLE_COMMAND`` of
+  neutral, or none fresh), the velocity over ground is measured as zero with
+  ``ZUPT_STD_MPS`` every ``ZUPT_INTERVAL_S`` (channel ``zupt``; a zero-velocity update).
 * **Position**: from the first fused GNSS fix (the local origin), or without one from the
   configured start point, then dead-reckoned with the DVL; its std grows without GNSS.
 
@@ -81,6 +88,20 @@ COMMAND_HISTORY_MAX = 50
 """At most this many thruster commands are kept."""
 IMU_HISTORY = 2
 """IMU samples kept (the last two: the angular acceleration's difference)."""
+
+ZUPT_AFTER_S = 2.0
+"""Without a position or velocity source (GNSS fix, INS velocity, valid DVL bottom track)
+for this long (s) and with the thrusters idle, the filter holds still (module docstring,
+"Zero velocity")."""
+ZUPT_STD_MPS = 0.1
+"""One sigma (m/s) of the zero-velocity pseudo-measurement, per axis: an idle vehicle
+drifts with the water, whose speed nothing here measures; 0.1 m/s bounds a still-water
+drift and lets a moving vehicle show in the gate."""
+ZUPT_INTERVAL_S = 0.2
+"""The zero-velocity pseudo-measurement is applied at most this often (s), whatever the
+IMU rate."""
+ZUPT_IDLE_COMMAND = 0.05
+"""Thrusters whose normalized commands are all within this of neutral are idle."""
 
 HEADING_HOLD_S = 1.0
 """A ``Heading`` sample within this long (s) after an ``Attitude`` with its yaw is not
@@ -199,6 +220,15 @@ class Eseso:
         self._accel_sum = np.zeros(3)
         self._accel_n = 0
         self._t_att_yaw = -math.inf  # time (s) of the newest Attitude with its yaw
+        self._t_aided: float | None = None  # newest position/velocity sample (s)
+        self._t_zupt = -math.inf  # newest zero-velocity update (s)
+        self._cmd_max = 0.0  # largest |command| of the newest thruster command
+
+    @property
+    def frame_offset(self) -> tuple[float, float]:
+        """Where the local frame's origin (the first fused fix) lies in the published
+        position (north, east; m): the position the filter had reached then."""
+        return float(self._gnss_offset[0]), float(self._gnss_offset[1])
 
     @property
     def initialized(self) -> bool:
@@ -288,6 +318,19 @@ class Eseso:
         if len(self._imu_hist) > IMU_HISTORY:
             del self._imu_hist[0]
         self._thrust_update_at_imu()
+        self._zero_velocity(s.t)
+
+    def _zero_velocity(self, t: float) -> None:
+        """The zero-velocity update at ``t`` (s) when due (module docstring)."""
+        if self._t_aided is None:
+            self._t_aided = t  # the filter's start: count the silence from here
+        if t - self._t_aided < ZUPT_AFTER_S or t - self._t_zupt < ZUPT_INTERVAL_S:
+            return
+        fresh = t - self.t_tau <= self.cfg.command_timeout_s
+        if fresh and self._cmd_max > ZUPT_IDLE_COMMAND:
+            return
+        self._t_zupt = t
+        self.filter.update_zero_velocity(ZUPT_STD_MPS ** 2, t=t)
 
     def _level_from_gravity(self, f_m: Array) -> bool:
         """Average the specific force ``f_m`` (m/s^2) of :data:`LEVELLING_SAMPLES` IMU
@@ -316,6 +359,7 @@ class Eseso:
             self._count("rejected.command.nonfinite")
             return
         self.tau = self.K_alloc @ forces
+        self._cmd_max = max((abs(float(c)) for c in s.thrusters), default=0.0)
         self.t_tau = s.t
         self._tau_source = s.source
         self._tau_hist.append((s.t, self.tau))
@@ -336,6 +380,7 @@ class Eseso:
             if s.sog_mps is not None and s.cog_rad is not None:
                 self._unused(s, "gnss_vel", 2, "submerged")
             return
+        self._t_aided = s.t
         if self.frame is None:
             self.frame = LocalFrame(s.lat_deg, s.lon_deg)
             self._gnss_offset = f.p[:2].copy()
@@ -353,6 +398,7 @@ class Eseso:
             self._count("rejected.vog.nonfinite")
             self._unused(s, "vog", 2, "nonfinite")
             return
+        self._t_aided = s.t
         self.filter.update_ins_velocity(vz, self.r_ins, t=s.t, source=s.source)
 
     def _on_depth(self, s: Depth) -> None:
@@ -370,6 +416,7 @@ class Eseso:
             self._count("rejected.dvl.fom")
             self._unused(s, "dvl", 3, "fom")
             return
+        self._t_aided = s.t
         r = (s.fom_mps ** 2) if s.fom_mps else self.r_dvl
         self.filter.update_body_velocity(np.array([s.vx, s.vy, s.vz]), r, t=s.t,
                                          source=s.source)

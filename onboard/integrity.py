@@ -1,0 +1,455 @@
+"""Integrity monitoring: each estimate checked against an independent measurement.
+
+The pipelines fuse what they are given; nothing inside a filter can see that a sensor is
+misaligned or that its own covariance has stopped meaning anything. This module watches
+from beside the engine, fed at every tick with the samples handed to the pipelines, the
+published records and the innovation records, and runs three checks:
+
+* **heading against course over ground** (:class:`HeadingCourseCheck`): while the vehicle
+  moves (GNSS speed above :data:`HEADING_MIN_SPEED_MPS`), the circular mean of
+  ``heading - course`` over :data:`HEADING_WINDOW_S` must stay within
+  :func:`crab_bound`. Beyond it ``heading_course_mismatch`` is raised naming the angle, and
+  the estimates that turn a velocity with the heading (the ``current`` pipeline's current
+  and through-water velocity, :data:`WITHHELD_ON_HEADING`) are published as unknown while
+  it lasts. Vehicles that move sideways by design (:data:`HOLONOMIC_CLASSES`) are not
+  checked.
+* **position against GNSS** (:class:`PositionCheck`): at the first tick after each fix,
+  the published position of :data:`POSITION_PIPELINES` against the fix (in the frame about
+  the first fix, as documented; the ESESO in its own frame and ``frame_offset``), normalized by the
+  published one-sigma and the fix's own; ``position_residual`` when more than
+  :data:`POSITION_FRACTION` of the comparisons of the last :data:`POSITION_WINDOW_S` are
+  beyond :data:`POSITION_SIGMA_BOUND`. The pipeline is flagged, its values kept.
+* **NIS against its chi-square band** (:class:`NisCheck`): per channel the running mean
+  NIS of :mod:`onboard.innovations` (weight ``1/RECENT_STEPS``) against the 95 % band of
+  such a mean for a consistent filter; ``nis_out_of_band`` after
+  :data:`NIS_SUSTAIN_UPDATES` updates in a row outside it. The pipeline is flagged.
+
+Why withhold rather than inflate the current's sigma under a heading mismatch: a heading
+offset ``d`` at speed ``s`` adds a bias of ``2 s sin(d/2)`` to the current (1.8 m/s for
+the Shenzhen log's 73.5 deg at 1.8 m/s), not noise; a wider sigma around that mean would
+still publish the wrong number as the best guess, and the pipeline already publishes a
+component it cannot determine as absent (``unknown_above_std``), which every consumer
+handles. The flag, the count ``pipeline:<name>:flagged`` and the warning say why.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any, Iterable, Mapping, Sequence
+
+from onboard.alerts import Alerts
+from onboard.core.geo import LocalFrame
+from onboard.core.messages import Attitude, EstimateRecord, GnssFix, Heading, Innovation, Sample
+from onboard.innovations import RECENT_STEPS
+
+HEADING_MIN_SPEED_MPS = 0.5
+"""Below this GNSS speed (m/s) the course over ground is too noisy to check a heading."""
+HEADING_WINDOW_S = 10.0
+"""The heading/course difference is averaged (circular mean) over this long (s): a turn's
+lag between heading and course averages out, a fixed offset does not."""
+HEADING_MIN_FIXES = 5
+"""Moving fixes needed in a window before it is judged."""
+HEADING_FRESH_S = 1.0
+"""A heading older than this (s) at a fix is not compared with its course."""
+HEADING_BOUND_RAD = math.radians(25.0)
+"""The least heading/course difference (rad) that is a mismatch: a boat's crab angle in a
+turn or a cross wind is a few degrees."""
+PLAUSIBLE_CURRENT_MPS = 0.5
+"""A current this strong (m/s) across the track makes a crab angle of ``asin(c / sog)``
+at speed over ground ``sog``: the bound widens with it at low speed."""
+HOLONOMIC_CLASSES = frozenset({"bluerov2", "spheroid"})
+"""Vehicle classes that move sideways by design: their heading says nothing of their
+course."""
+WITHHELD_ON_HEADING: dict[str, tuple[str, ...]] = {
+    "current": ("north", "east", "down", "u_r", "v_r", "w_r"),
+}
+"""Per pipeline, the estimates published as unknown during a heading/course mismatch:
+those that turn a velocity with the heading (module docstring)."""
+
+POSITION_PIPELINES = ("aie", "kf", "eseso")
+"""Pipelines whose ``north``/``east`` are a position (m) with ``std_north``/``std_east``."""
+POSITION_SIGMA_BOUND = 3.0
+"""Mahalanobis distance (2 dof) of the position residual beyond which a comparison fails:
+a consistent estimate exceeds it 1.1 % of the time."""
+POSITION_WINDOW_S = 30.0
+"""Comparisons judged together (s)."""
+POSITION_MIN_CHECKS = 5
+"""Comparisons needed in a window before it is judged."""
+POSITION_FRACTION = 0.5
+"""Share of failed comparisons in a window that raises ``position_residual``."""
+FIX_MAX_AGE_S = 1.0
+"""A fix older than this (s) at the tick is not compared."""
+DEFAULT_FIX_STD_M = 2.0
+"""One-sigma (m) of a fix that reports no accuracy and has no configured one."""
+
+NIS_BAND = 0.95
+"""Probability of the band the running mean NIS of a consistent filter stays in."""
+NIS_SUSTAIN_UPDATES = 2 * RECENT_STEPS
+"""Updates in a row outside the band that raise ``nis_out_of_band``: the running mean is
+correlated over about ``RECENT_STEPS`` updates, so one excursion is not evidence."""
+NIS_EXEMPT_CHANNELS = frozenset({"zupt"})
+"""Pseudo-measurements whose sigma is a bound, not a noise: their NIS is not chi-square."""
+NIS_EFFECTIVE_N = 2 * RECENT_STEPS - 1
+"""Independent updates with the same variance of the mean as the running mean of weight
+``1/RECENT_STEPS`` (``(2 - a) / a``)."""
+
+
+def circular_mean(angles: Iterable[float]) -> float:
+    """The circular mean (rad, in ``(-pi, pi]``) of ``angles`` (rad)."""
+    s = c = 0.0
+    for a in angles:
+        s += math.sin(a)
+        c += math.cos(a)
+    return math.atan2(s, c)
+
+
+def crab_bound(sog_mps: float) -> float:
+    """The largest heading/course difference (rad) that is not a mismatch at speed over
+    ground ``sog_mps``: :data:`HEADING_BOUND_RAD`, or the crab angle a
+    :data:`PLAUSIBLE_CURRENT_MPS` current across the track can make, if larger."""
+    ratio = min(1.0, PLAUSIBLE_CURRENT_MPS / max(sog_mps, 1e-9))
+    return max(HEADING_BOUND_RAD, math.asin(ratio))
+
+
+def _chi2_quantile(p: float, dof: float) -> float:
+    """The chi-square ``p`` quantile for ``dof`` degrees of freedom (Wilson-Hilferty; within
+    1 % of the exact value for ``dof >= 20``, which the window gives)."""
+    z = _normal_quantile(p)
+    h = 2.0 / (9.0 * dof)
+    return dof * (1.0 - h + z * math.sqrt(h)) ** 3
+
+
+def _normal_quantile(p: float) -> float:
+    """The standard normal ``p`` quantile (bisection on ``erf``; p in (0, 1))."""
+    lo, hi = -10.0, 10.0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if 0.5 * (1.0 + math.erf(mid / math.sqrt(2.0))) < p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def nis_band(dof: int, n: int = NIS_EFFECTIVE_N, p: float = NIS_BAND) -> tuple[float, float]:
+    """The two-sided ``p`` band of the mean of ``n`` independent chi-square(``dof``) NIS
+    values: ``chi2_q(dof n) / n`` at ``(1 -+ p) / 2``."""
+    k = dof * n
+    a = (1.0 - p) / 2.0
+    return _chi2_quantile(a, k) / n, _chi2_quantile(1.0 - a, k) / n
+
+
+class HeadingCourseCheck:
+    """Heading against course over ground while moving (module docstring).
+
+    Attributes:
+        offset_rad: the circular mean of ``heading - course`` (rad) of the newest judged
+            window, None before one.
+        mismatch: whether the newest judged window was beyond its bound; a window that
+            cannot be judged (the vehicle stopped) leaves it as it was: a misaligned
+            sensor stays misaligned when the vehicle stops.
+    """
+
+    def __init__(self) -> None:
+        self._heading: tuple[float, float] | None = None  # (t, heading rad)
+        self._window: deque[tuple[float, float, float]] = deque()  # (t, diff, sog)
+        self.offset_rad: float | None = None
+        self.mismatch = False
+        self.worst: tuple[float, float] | None = None
+        """(offset rad, mean speed m/s) of the fastest window of the present mismatch:
+        the course is the most precise there."""
+
+    def heading(self, t: float, heading_rad: float) -> None:
+        """The newest heading (rad, true) at ``t`` (s)."""
+        self._heading = (t, heading_rad)
+
+    def fix(self, s: GnssFix) -> bool | None:
+        """Compare the fix's course with the newest heading; return the window's verdict
+        (True: mismatch), or None when the window cannot be judged."""
+        h = self._heading
+        sog, cog = s.sog_mps, s.cog_rad
+        win = self._window
+        while win and win[0][0] < s.t - HEADING_WINDOW_S:
+            win.popleft()
+        if (h is None or sog is None or cog is None or s.t - h[0] > HEADING_FRESH_S
+                or not sog > HEADING_MIN_SPEED_MPS or not math.isfinite(cog)):
+            return None
+        win.append((s.t, h[1] - cog, sog))
+        if len(win) < HEADING_MIN_FIXES or s.t - win[0][0] < 0.8 * HEADING_WINDOW_S:
+            return None
+        self.offset_rad = circular_mean(d for _, d, _ in win)
+        sog_mean = sum(v for _, _, v in win) / len(win)
+        self.mismatch = abs(self.offset_rad) > crab_bound(sog_mean)
+        if not self.mismatch:
+            self.worst = None
+        elif self.worst is None or sog_mean > self.worst[1]:
+            self.worst = (self.offset_rad, sog_mean)
+        return self.mismatch
+
+    def speed(self) -> float:
+        """Mean speed over ground (m/s) of the window."""
+        win = self._window
+        return sum(v for _, _, v in win) / len(win) if win else math.nan
+
+
+class PositionCheck:
+    """One pipeline's published position against the GNSS fixes (module docstring)."""
+
+    def __init__(self) -> None:
+        self._window: deque[tuple[float, float, float]] = deque()  # (t, distance, metres)
+        self.failing = False
+
+    def add(self, t: float, residual_ne: tuple[float, float], var_ne: tuple[float, float]
+            ) -> bool | None:
+        """One comparison at ``t`` (s): the residual (m) and its variance per axis (m^2,
+        published plus fix). Returns the window's verdict (True: failing), None when it
+        cannot be judged yet."""
+        dn, de = residual_ne
+        d = math.sqrt(dn * dn / var_ne[0] + de * de / var_ne[1])
+        win = self._window
+        win.append((t, d, math.hypot(dn, de)))
+        while win[0][0] < t - POSITION_WINDOW_S:
+            win.popleft()
+        if len(win) < POSITION_MIN_CHECKS:
+            return None
+        beyond = sum(1 for _, x, _ in win if x > POSITION_SIGMA_BOUND)
+        self.failing = beyond > POSITION_FRACTION * len(win)
+        return self.failing
+
+    def median_m(self) -> float:
+        """Median distance (m) to the fixes in the window."""
+        xs = sorted(m for _, _, m in self._window)
+        return xs[len(xs) // 2] if xs else math.nan
+
+    def median_sigma(self) -> float:
+        """Median normalized distance in the window."""
+        xs = sorted(x for _, x, _ in self._window)
+        return xs[len(xs) // 2] if xs else math.nan
+
+
+class NisCheck:
+    """One channel's running mean NIS against its band (module docstring)."""
+
+    def __init__(self, dof: int) -> None:
+        self.dof = dof
+        self.band = nis_band(dof)
+        self.mean = 0.0
+        self._n = 0
+        self.outside = 0
+        """Updates in a row with the running mean outside the band."""
+        self.first_failed: float | None = None
+        """When (s) the check first failed: one warning per pipeline spans the run's
+        failures, not one per excursion."""
+
+    def add(self, nis: float) -> bool:
+        """One accepted update's NIS; True when the running mean has been outside the
+        band for :data:`NIS_SUSTAIN_UPDATES` updates in a row."""
+        self._n += 1
+        self.mean += max(1.0 / RECENT_STEPS, 1.0 / self._n) * (nis - self.mean)
+        lo, hi = self.band
+        if self._n >= RECENT_STEPS and not lo <= self.mean <= hi:
+            self.outside += 1
+        else:
+            self.outside = 0
+        return self.outside >= NIS_SUSTAIN_UPDATES
+
+
+REORIGINED = ("; its own local frame is no longer about the first fix (a restart "
+              "re-origins it at the next fix), so its published positions jumped")
+"""Added to ``position_residual`` when the pipeline's frame moved."""
+WARN_EVERY_S = 1.0
+"""A condition that lasts is re-raised at most this often (s) (one warning spans it)."""
+WATCHED = frozenset({GnssFix, Heading, Attitude})
+"""The sample types the monitor reads (the engine hands it only these)."""
+
+
+class IntegrityMonitor:
+    """The three checks of one run and their flags (module docstring).
+
+    Attributes:
+        flags: pipeline -> the codes of the checks it fails now.
+        flagged: per pipeline, the values withheld from its records (the health record's
+            ``pipeline:<name>:flagged``).
+        heading: the heading/course check, None for a holonomic vehicle.
+    """
+
+    def __init__(self, alerts: Alerts, vehicle_class: str = "unknown",
+                 fix_std_m: float = DEFAULT_FIX_STD_M) -> None:
+        """Raise warnings into ``alerts``; ``fix_std_m`` is the one-sigma (m) of a fix that
+        reports no accuracy (``[sensors.gnss] position_std_m``)."""
+        self.alerts = alerts
+        self.fix_std_m = fix_std_m
+        self.heading = None if vehicle_class in HOLONOMIC_CLASSES else HeadingCourseCheck()
+        self.positions: dict[str, PositionCheck] = {}
+        self.nis: dict[str, dict[str, NisCheck]] = {}
+        self.flags: dict[str, set[str]] = {}
+        self.flagged: dict[str, int] = {}
+        self._fix: GnssFix | None = None
+        self.frame: LocalFrame | None = None
+        """The local frame about the first fix handed to the pipelines: the frame of the
+        published ``aie``/``kf`` positions ("m from the first fix")."""
+        self._fix_new = False
+        self._last_warn: dict[tuple[str, str], float] = {}
+
+    # ------------------------------------------------------------------ samples
+    def observe(self, s: Sample) -> None:
+        """A sample handed to the pipelines (one of :data:`WATCHED`)."""
+        cls = type(s)
+        hc = self.heading
+        if cls is GnssFix:
+            if s.fix_quality > 0:  # type: ignore[attr-defined]
+                self._fix, self._fix_new = s, True  # type: ignore[assignment]
+                if self.frame is None:
+                    self.frame = LocalFrame(s.lat_deg, s.lon_deg)  # type: ignore
+                if hc is not None:
+                    self._heading_verdict(hc.fix(s), s.t)  # type: ignore[arg-type]
+        elif hc is None:
+            return
+        elif cls is Heading:
+            hc.heading(s.t, s.heading_rad + (s.declination_rad or 0.0))  # type: ignore
+        elif cls is Attitude and s.yaw_selected:  # type: ignore[attr-defined]
+            hc.heading(s.t, s.yaw_rad)  # type: ignore[attr-defined]
+
+    def _heading_verdict(self, verdict: bool | None, t: float) -> None:
+        """Set or clear the heading/course flag of :data:`WITHHELD_ON_HEADING`."""
+        if verdict is None:
+            return
+        code = "heading_course_mismatch"
+        for p in WITHHELD_ON_HEADING:
+            self._flag(p, code, verdict)
+        if verdict:
+            hc = self.heading
+            assert hc is not None and hc.worst is not None
+            offset, sog = hc.worst
+            self._warn(code, "", t, (
+                f"heading disagrees with course over ground by "
+                f"{math.degrees(offset):.1f} deg at {sog:.1f} m/s over "
+                f"{HEADING_WINDOW_S:.0f} s (bound {math.degrees(crab_bound(sog)):.0f} deg): a "
+                "misaligned compass or antenna baseline, or a heading from another vehicle; "
+                "the current is published as unknown while it lasts"))
+
+    # ------------------------------------------------------------------ records
+    def withheld(self, pipeline: str) -> tuple[str, ...]:
+        """The quantities of ``pipeline`` to publish as unknown now."""
+        flags = self.flags.get(pipeline)
+        if flags and "heading_course_mismatch" in flags:
+            return WITHHELD_ON_HEADING.get(pipeline, ())
+        return ()
+
+    def count_withheld(self, pipeline: str, n: int) -> None:
+        """``n`` values of ``pipeline`` were left out of its record."""
+        self.flagged[pipeline] = self.flagged.get(pipeline, 0) + n
+
+    def positions_at(self, t: float, records: Sequence[EstimateRecord],
+                     pipelines: Mapping[str, Any]) -> None:
+        """At the first tick after a fix, compare the published positions with it;
+        ``pipelines`` by name give their local frame (``frame``, a
+        :class:`~onboard.core.geo.LocalFrame`, and ``frame_offset``, the published
+        position of the frame's origin, (0, 0) when absent)."""
+        fix = self._fix
+        if not self._fix_new or fix is None or self.frame is None:
+            return
+        self._fix_new = False
+        dt = t - fix.t
+        if dt > FIX_MAX_AGE_S:
+            return
+        dn = de = 0.0
+        if fix.sog_mps is not None and fix.cog_rad is not None:
+            dn = fix.sog_mps * math.cos(fix.cog_rad) * dt
+            de = fix.sog_mps * math.sin(fix.cog_rad) * dt
+        acc = fix.h_acc_m
+        var_fix = (acc * acc if acc is not None and acc > 0 and math.isfinite(acc)
+                   else self.fix_std_m ** 2)
+        for rec in records:
+            if rec.pipeline in POSITION_PIPELINES:
+                self._position(rec, pipelines.get(rec.pipeline), fix, (dn, de), var_fix)
+
+    def _position(self, rec: EstimateRecord, p: Any, fix: GnssFix,
+                  moved: tuple[float, float], var_fix: float) -> None:
+        """One pipeline's comparison with ``fix``, moved by ``moved`` (m) to the tick."""
+        own = getattr(p, "frame", None)
+        v, sd = rec.values, rec.std
+        if own is None or "north" not in v or "east" not in v or "north" not in sd \
+                or "east" not in sd:
+            return
+        offset = getattr(p, "frame_offset", None)
+        frame = own if offset is not None else self.frame
+        off_n, off_e = offset if offset is not None else (0.0, 0.0)
+        fn, fe = frame.to_ne(fix.lat_deg, fix.lon_deg)
+        res = (v["north"] - (fn + off_n + moved[0]), v["east"] - (fe + off_e + moved[1]))
+        var = (sd["north"] ** 2 + var_fix, sd["east"] ** 2 + var_fix)
+        check = self.positions.get(rec.pipeline)
+        if check is None:
+            check = self.positions[rec.pipeline] = PositionCheck()
+        verdict = check.add(rec.t, res, var)
+        if verdict is None:
+            return
+        self._flag(rec.pipeline, "position_residual", verdict)
+        if verdict:
+            self._warn("position_residual", rec.pipeline, rec.t, (
+                f"{rec.pipeline} position is {check.median_m():.1f} m from GNSS (median over "
+                f"{POSITION_WINDOW_S:.0f} s), {check.median_sigma():.1f} sigma with its stated "
+                f"{math.sqrt(sd['north'] ** 2 + sd['east'] ** 2):.1f} m and the fix's "
+                f"{math.sqrt(var_fix):.1f} m: its position and sigma are not to be trusted"
+                + (REORIGINED if own is not frame and (own.lat0, own.lon0)
+                   != (frame.lat0, frame.lon0) else "")))
+
+    # ------------------------------------------------------------------ innovations
+    def innovations(self, pipeline: str, records: Iterable[Innovation]) -> None:
+        """The innovation records of one pipeline's tick: each accepted NIS into its
+        channel's :class:`NisCheck`."""
+        per = self.nis.get(pipeline)
+        for rec in records:
+            nis = rec.nis
+            if not rec.accepted or not math.isfinite(nis) \
+                    or rec.channel in NIS_EXEMPT_CHANNELS:
+                continue
+            if per is None:
+                per = self.nis[pipeline] = {}
+            check = per.get(rec.channel)
+            if check is None or check.dof != rec.dof:
+                check = per[rec.channel] = NisCheck(rec.dof)
+            was = check.outside >= NIS_SUSTAIN_UPDATES
+            now = check.add(nis)
+            if now:
+                if check.first_failed is None:
+                    check.first_failed = rec.t
+                self._nis_warning(pipeline, rec.channel, check, rec.t)
+            if now != was:
+                self._flag(pipeline, "nis_out_of_band",
+                           any(c.outside >= NIS_SUSTAIN_UPDATES for c in per.values()))
+
+    def _nis_warning(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
+        lo, hi = check.band
+        how = ("larger than the filter expects: its sigmas are too small"
+               if check.mean > hi else "smaller than the filter expects: its sigmas are "
+               "larger than its errors (or its measurement noise is set too high)")
+        self._warn("nis_out_of_band", pipeline, t, (
+            f"{pipeline} {channel}: recent NIS {check.mean:.2f} outside its 95 % band "
+            f"[{lo:.2f}, {hi:.2f}] (dof {check.dof}) for {check.outside} updates: the "
+            f"innovations are {how}"), key=channel, t_start=check.first_failed)
+
+    # ------------------------------------------------------------------ flags
+    def _flag(self, pipeline: str, code: str, on: bool) -> None:
+        flags = self.flags.setdefault(pipeline, set())
+        if on:
+            flags.add(code)
+        else:
+            flags.discard(code)
+
+    def active(self) -> dict[str, list[str]]:
+        """pipeline -> the codes it fails now (sorted; pipelines with none left out)."""
+        return {p: sorted(f) for p, f in self.flags.items() if f}
+
+    def _warn(self, code: str, pipeline: str, t: float, message: str, key: str = "",
+              t_start: float | None = None) -> None:
+        """Raise ``code`` at ``t`` (s) at most every :data:`WARN_EVERY_S` per (code,
+        pipeline, key), spanning from ``t_start`` (default ``t``)."""
+        k = (code, pipeline + ":" + key)
+        last = self._last_warn.get(k)
+        if last is not None and 0.0 <= t - last < WARN_EVERY_S:
+            return
+        self._last_warn[k] = t
+        self.alerts.warn(code, message, t if t_start is None else t_start,
+                         pipeline=pipeline, t_end=t)
