@@ -168,3 +168,13 @@ def test_identify_axis_resamples_irregular_logs() -> None:
     # measured: a 1.000, gain 2.500 (noise-free; the grid divides the log's step)
     assert m.a == pytest.approx(1.0, rel=0.01)
     assert m.gain == pytest.approx(2.5, rel=0.01)
+
+
+def test_a_prediction_shorter_than_the_step_resolution_does_not_fail() -> None:
+    """A tick 20 us after the last step (a DDBoat log: aie and kf restarted three times
+    with "step must be positive, got 0.0"): the step is discretized at the 0.1 ms
+    resolution instead of rounding to zero."""
+    from onboard.estimators.axis_model import DT_DIGITS, Discretization, discretize
+
+    d = Discretization()(1.0, 2e-5)
+    assert d == discretize(1.0, 10.0 ** -DT_DIGITS)

@@ -112,8 +112,9 @@ class Discretization:
         self._cache: dict[tuple[float, float], Discrete] = {}
 
     def __call__(self, a: float, dt: float) -> Discrete:
-        """The coefficients of ``x' = -a x + u`` over ``dt`` (s) rounded."""
-        key = (a, round(dt, DT_DIGITS))
+        """The coefficients of ``x' = -a x + u`` over ``dt`` (s) rounded; a positive
+        ``dt`` below the resolution takes the resolution (it must not round to zero)."""
+        key = (a, max(round(dt, DT_DIGITS), 10.0 ** -DT_DIGITS))
         d = self._cache.get(key)
         if d is None:
             if len(self._cache) > CACHE_SIZE:
