@@ -10,7 +10,8 @@ zero-truncated payloads are padded with zeros to the full length.
 
 Mapping (units and frames in ``docs/formats-mavlink.md``)
 ---------------------------------------------------------
-GPS_RAW_INT, GPS2_RAW -> GnssFix; GLOBAL_POSITION_INT -> VelocityOverGround + Heading;
+GPS_RAW_INT, GPS2_RAW -> GnssFix; GLOBAL_POSITION_INT -> VelocityOverGround (with its
+``hdg`` as ``heading_rad``) + Heading;
 ATTITUDE -> Attitude; SCALED_IMU/2/3, RAW_IMU (ArduPilot only), HIGHRES_IMU -> Imu;
 VFR_HUD -> Heading; SERVO_OUTPUT_RAW -> ActuatorOutputs; RC_CHANNELS -> RcChannels;
 RPM -> PropellerRpm; VISION_SPEED_ESTIMATE -> VelocityOverGround;
@@ -241,12 +242,15 @@ def _global_position_int(idx, msgid):
 
     def h(v, t, sysid, compid, mid, v2, ctx):
         src = ctx.source(sysid, compid, mid)
-        vel = VelocityOverGround(t=t, source=src, v_north_mps=v[i_vx] * 0.01,
-                                 v_east_mps=v[i_vy] * 0.01, v_down_mps=v[i_vz] * 0.01)
         hdg = v[i_hdg]
         if hdg == UINT16_MAX:
-            return vel
-        return [vel, Heading(t=t, source=src, heading_rad=wrap_2pi(hdg * rad))]
+            return VelocityOverGround(t=t, source=src, v_north_mps=v[i_vx] * 0.01,
+                                      v_east_mps=v[i_vy] * 0.01, v_down_mps=v[i_vz] * 0.01)
+        psi = wrap_2pi(hdg * rad)
+        vel = VelocityOverGround(t=t, source=src, v_north_mps=v[i_vx] * 0.01,
+                                 v_east_mps=v[i_vy] * 0.01, v_down_mps=v[i_vz] * 0.01,
+                                 heading_rad=psi)
+        return [vel, Heading(t=t, source=src, heading_rad=psi)]
     return h
 
 

@@ -24,7 +24,8 @@ VehicleInfo            HEARTBEAT (MAV_TYPE of the vehicle, MAV_AUTOPILOT_ARDUPIL
 Parameter              PARAM_VALUE (SERVOn_FUNCTION, as an ArduPilot INT16 parameter)
 GnssFix                GPS_RAW_INT (fix_type 3)
 VelocityOverGround     GLOBAL_POSITION_INT (vx, vy, vz; lat/lon dead-reckoned from them;
-                       hdg from the last attitude; alt from the last depth)
+                       hdg the sample's own heading, else the last attitude's yaw; alt
+                       from the last depth)
 Imu                    SCALED_IMU (mg, mrad/s; xmag..zmag from the last heading)
 Attitude               ATTITUDE
 Heading                VFR_HUD (groundspeed from the last fix/INS, throttle from the last
@@ -256,7 +257,9 @@ class MavlinkEncoder:
         self._climb = -(s.v_down_mps or 0.0)
         lat = self.origin[0] + self.ins_ne[0] / self.m_lat
         lon = self.origin[1] + self.ins_ne[1] / self.m_lon
-        yaw = self._att.yaw_rad if self._att is not None else self._heading
+        yaw = s.heading_rad
+        if yaw is None:
+            yaw = self._att.yaw_rad if self._att is not None else self._heading
         hdg = _u16(math.degrees(yaw) % 360.0 * 100.0) % 36000
         alt_mm = int(round(-self._depth * 1000.0))
         return self._pack(self.mav.global_position_int_encode(

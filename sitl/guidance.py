@@ -180,15 +180,19 @@ class AuvAutopilot:
     (nose down to go deeper; the integral takes up the net buoyancy), stern plane
     ``ds = k_theta (theta - theta_ref) + kq q`` (positive pitches the nose down), clipped.
     Heading: rudder ``dr = kpsi e + ki int(e) - kr r``. All on the true state (an
-    INS-grade AUV navigation solution).
+    INS-grade AUV navigation solution). Propeller: ``rpm``, or with ``rpm_steps`` the
+    steps' shaft speeds (rpm) in turn, each held for ``rpm_period_s`` (s).
     """
 
     def __init__(self, *, rpm: float, depth_m: float, schedule: HeadingSchedule,
+                 rpm_steps: tuple[float, ...] = (), rpm_period_s: float = 60.0,
                  kz: float = 0.15, kiz: float = 0.01, kw: float = 0.3,
                  theta_max: float = 0.35,
                  k_theta: float = 1.5, kq: float = 0.8, kpsi: float = 1.0, ki: float = 0.02,
                  kr: float = 2.0, fin_limit: float = 0.26, rate_hz: float = 10.0) -> None:
         self.rpm = rpm
+        self.rpm_steps = rpm_steps
+        self.rpm_period_s = rpm_period_s
         self.depth = depth_m
         self.schedule = schedule
         self.kz, self.kiz, self.kw, self.theta_max = kz, kiz, kw, theta_max
@@ -227,7 +231,10 @@ class AuvAutopilot:
         dr = self.kpsi * e + self.ki * self._int - self.kr * tr.r
         if abs(dr) < self.limit:
             self._int = _clip(self._int + e * dt, 2.0)
-        return Command(propeller_rpm=self.rpm, rudder_rad=_clip(dr, self.limit),
+        rpm = self.rpm
+        if self.rpm_steps:
+            rpm = self.rpm_steps[int(inp.t // self.rpm_period_s) % len(self.rpm_steps)]
+        return Command(propeller_rpm=rpm, rudder_rad=_clip(dr, self.limit),
                        stern_plane_rad=ds)
 
 

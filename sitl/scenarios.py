@@ -6,6 +6,9 @@
 * the four papers' experiments: ``jaiabot-turns`` (AIE paper), ``bluerov2-circle``
   (ESESO paper), ``gavia-tidal`` (HGO paper), ``spheroid-sawtooth`` (nonlinear-observer
   paper), and ``twin-thruster-turns`` (a BlueBoat doing skid-steering manoeuvres);
+* ``remus-ins-steps``: a REMUS 100 (Prestero's coefficients) logged as an ArduSub-like INS
+  (velocity and its own heading in GLOBAL_POSITION_INT, an AHRS yaw a few degrees off in
+  ATTITUDE) with propeller and heading steps in a 0.3 m/s current;
 * the model-closure material, one undeclared effect each on a rudder boat whose nominal
   dynamics are the linear surge model of algorithms.md §1 (linear thrust, linear drag):
   ``effect-current``, ``effect-compass-deviation``, ``effect-heading-bias``,
@@ -516,6 +519,17 @@ def _gavia_autopilot() -> Controller:
     return AuvAutopilot(rpm=1500.0, depth_m=5.0, schedule=HeadingSchedule((0.0,), 1e9))
 
 
+REMUS_RPM_STEPS = (1100.0, 1525.0, 1300.0, 1525.0, 1200.0)
+"""remus-ins-steps' propeller steps (rpm), 60 s each: 1.13 to 1.57 m/s through the water."""
+REMUS_HEADINGS = (0.0, 90 * DEG, 200 * DEG, 300 * DEG)
+"""remus-ins-steps' heading steps, 90 s each."""
+
+
+def _remus_steps_autopilot() -> Controller:
+    return AuvAutopilot(rpm=REMUS_RPM_STEPS[0], depth_m=5.0, rpm_steps=REMUS_RPM_STEPS,
+                        rpm_period_s=60.0, schedule=HeadingSchedule(REMUS_HEADINGS, 90.0))
+
+
 def _spheroid_autopilot() -> Controller:
     return AuvAutopilot(rpm=1000.0, depth_m=10.0,
                         schedule=HeadingSchedule((15 * DEG, -15 * DEG), 100.0, tau_s=5.0),
@@ -628,6 +642,34 @@ def _build() -> dict[str, Scenario]:
             initial=Initial(down=5.0, yaw=0.0, u=1.5),
             origin=(50.4030, -4.2010),
             bottom_depth_m=15.0,
+        ),
+        Scenario(
+            name="remus-ins-steps",
+            description="REMUS 100 (Prestero 2001) fed as an ArduSub-like INS: DVL-aided "
+                        "velocity and its own true heading in GLOBAL_POSITION_INT (10 Hz), "
+                        "the AHRS attitude in ATTITUDE (25 Hz, a magnetic yaw 4-9 deg off "
+                        "with heading and propeller load), IMU 50 Hz, RPM and fins 10 Hz, no "
+                        "GNSS or depth; propeller steps 1100-1525 rpm, heading steps every "
+                        "90 s, a 0.3 m/s current",
+            reproduces="issue 22: an independent torpedo-AUV log (velocity and heading from "
+                       "the INS, attitude from the AHRS)",
+            vehicle=_auv("torpedo"),
+            sensors=SensorSuiteConfig(
+                imu=ImuConfig(rate_hz=50.0, accel_noise_std=0.02, gyro_noise_std=0.001),
+                # the autopilot's AHRS: a magnetic heading with hard-iron deviation and the
+                # propeller motor's field (0.15 rad at full thrust: 3.8-5.2 deg at the steps)
+                compass=CompassConfig(rate_hz=25.0, noise_std_rad=0.003,
+                                      attitude_noise_std_rad=0.001, hard_iron_rad=0.06,
+                                      hard_iron_phase_rad=0.8, motor_rad_per_thrust=0.15),
+                ins=InsConfig(rate_hz=10.0, velocity_std_mps=0.01, bias_std_mps=0.003,
+                              heading_std_rad=0.001),
+                rpm=RpmConfig(rate_hz=10.0, noise_std_rpm=5.0),
+            ),
+            controller=_remus_steps_autopilot,
+            duration_s=360.0,
+            injected=(Effect("water_current", {"north": 0.18, "east": -0.24}),),
+            initial=Initial(down=5.0, yaw=0.0, u=1.1),
+            origin=(41.52, -70.67),
         ),
         Scenario(
             name="spheroid-sawtooth",

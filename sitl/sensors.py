@@ -646,6 +646,10 @@ class InsConfig:
     velocity_std_mps: float = 0.01
     bias_std_mps: float = 0.005
     bias_tau_s: float = 300.0
+    heading_std_rad: float | None = None
+    """With a value, the INS reports its own heading (true, white noise of this one-sigma,
+    rad) with each velocity (``VelocityOverGround.heading_rad``; GLOBAL_POSITION_INT
+    ``hdg``); None: no heading of its own (``hdg`` is then the AHRS yaw)."""
 
 
 class Ins(_Base):
@@ -666,11 +670,14 @@ class Ins(_Base):
         b = self.bias.tolist()
         v = world.v_ned
         s = c.velocity_std_mps
+        psi = None
+        if c.heading_std_rad is not None:
+            psi = wrap_2pi(world.truth.yaw + c.heading_std_rad * float(self.rng.standard_normal()))
         return [VelocityOverGround(
             t=world.t, source=self.name,
             v_north_mps=v[0] + b[0] + s * n[0],
             v_east_mps=v[1] + b[1] + s * n[1],
-            v_down_mps=v[2] + b[2] + s * n[2])]
+            v_down_mps=v[2] + b[2] + s * n[2], heading_rad=psi)]
 
     def error_state(self) -> dict[str, float]:
         return {"sensor.ins_bias_north": float(self.bias[0]),

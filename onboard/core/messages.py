@@ -65,11 +65,16 @@ class VelocityOverGround(Sample, frozen=True, tag="vog"):
     """Earth-frame velocity over ground from a navigation solution (INS, EKF, DVL-aided INS).
 
     MAVLink GLOBAL_POSITION_INT vx/vy/vz and LOCAL_POSITION_NED map here.
+    ``heading_rad`` is the heading (rad, true north, clockwise) of the same solution at the
+    same instant when the source gives one (GLOBAL_POSITION_INT ``hdg``): the heading in
+    whose frame this velocity was resolved (a DVL-aided INS rotates its body-frame DVL
+    velocity by it), None otherwise.
     """
 
     v_north_mps: float
     v_east_mps: float
     v_down_mps: float | None = None
+    heading_rad: float | None = None
 
 
 class Imu(Sample, frozen=True, tag="imu"):

@@ -5,8 +5,13 @@
 
 * the model inputs (:class:`.vehicle_models.ModelInputs`: rates, attitude, commands);
 * the attitude in use: roll and pitch from the newest ``Attitude`` sample stamped at or
-  before the step time (``DvlPosition``'s as a fallback), the heading from ``Attitude``
-  (when the source selector chose it) or ``Heading`` (true north);
+  before the step time (``DvlPosition``'s as a fallback); the heading of the velocity's
+  own navigation solution (``VelocityOverGround.heading_rad``, GLOBAL_POSITION_INT's
+  ``hdg``) while it comes, else from ``Attitude`` (when the source selector chose it) or
+  ``Heading`` (true north). A DVL-aided INS resolves its velocity in its own heading, so
+  rotating the through-water velocity by that heading keeps the two in one frame: another
+  heading (an AHRS's magnetic yaw a few degrees off) would put speed times the difference
+  into the current (docs/current.md, "Heading");
 * the velocity measurements (:class:`.current_kf.VelocityMeasurement`): GNSS SOG/COG and
   ``VelocityOverGround`` in earth axes, DVL bottom and water track in body axes, each with
   its one-sigma (m/s) from ``[sensors]`` (a GNSS fix's reported accuracy scales its own).
@@ -47,6 +52,10 @@ from onboard.pipelines.base import unused_measurement
 ATTITUDE_FALLBACK_S = 1.0
 """A ``DvlPosition`` roll/pitch is used only this long (s) after the last ``Attitude``
 sample: the vehicle's attitude reference comes first."""
+VELOCITY_HEADING_HOLD_S = 1.0
+"""While a velocity sample brought its solution's heading within this long (s), the yaws
+of ``Attitude`` and ``Heading`` samples are not used (ten periods of a 10 Hz INS; when it
+stops, the selected heading source takes over)."""
 YAW_RATE_LOWPASS_S = 0.3
 """Without measured rates, the yaw rate is the heading's difference quotient through a
 first-order low-pass of this time constant (s)."""
@@ -115,6 +124,7 @@ class CurrentSamples:
         self.yaw: float | None = None
         self.yaw_t = math.nan
         self.yaw_source = ""
+        self._vel_heading_t = -math.inf  # stamp of the newest velocity's own heading
         self._have_rates = False
         self._yaw_prev: tuple[float, float] | None = None
         self.depth: float | None = None
@@ -149,7 +159,8 @@ class CurrentSamples:
             self.counters["rejected_nonfinite"] += 1
             return
         self._set_attitude(s.t, s.roll_rad, s.pitch_rad, True)
-        if s.yaw_selected:  # else the source selector chose another heading source
+        # yaw_selected False: the source selector chose another heading source
+        if s.yaw_selected and not self._velocity_heading_fresh(s.t):
             self._set_yaw(s.t, s.yaw_rad, s.source)
         if s.yaw_rate_rps is not None:
             self.inp.p = s.roll_rate_rps or 0.0
@@ -191,8 +202,15 @@ class CurrentSamples:
         if not math.isfinite(s.heading_rad):
             self.counters["rejected_nonfinite"] += 1
             return
+        if self._velocity_heading_fresh(s.t):
+            return
         h = s.heading_rad + ((s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0)
         self._set_yaw(s.t, h, s.source)
+
+    def _velocity_heading_fresh(self, t: float) -> bool:
+        """Whether a velocity sample brought its own heading within
+        ``VELOCITY_HEADING_HOLD_S`` of time ``t`` (s): that heading is the one in use."""
+        return t - self._vel_heading_t <= VELOCITY_HEADING_HOLD_S
 
     def _on_imu(self, s: Imu, meas: list) -> None:
         if math.isfinite(s.gyro_z):
@@ -225,6 +243,10 @@ class CurrentSamples:
         if not all(math.isfinite(v) for v in z):
             self._reject(s, "earth", len(z), "nonfinite")
             return
+        psi = s.heading_rad
+        if psi is not None and math.isfinite(psi):  # the frame of this velocity
+            self._set_yaw(s.t, psi, s.source)
+            self._vel_heading_t = max(self._vel_heading_t, s.t)
         meas.append(VelocityMeasurement("earth", s.t, np.array(z), self.dvl_std, s.source))
 
     def _on_dvl(self, s: DvlVelocity, meas: list) -> None:
