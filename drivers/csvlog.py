@@ -38,7 +38,9 @@ so model-closure code can split train/test by run; each sample's ``source`` is
 
 Rejections (per row): ``"malformed"`` (wrong number of cells), ``"bad_time"`` (time not
 numeric or not finite), ``"time_backwards"`` (time earlier than the previous row of the
-run). Per sample type of a row: ``"nan"`` (empty or NaN cell), ``"non_numeric"``. A
+run, by up to :data:`BACKWARDS_WINDOW_S`; a row further back, or far ahead, is yielded for
+the engine's time line, which drops a single bad stamp as ``time_outlier`` and keeps the
+rows after it). Per sample type of a row: ``"nan"`` (empty or NaN cell), ``"non_numeric"``. A
 mapped column missing from a file's header raises :class:`UnreadableLog`.
 """
 
@@ -80,6 +82,13 @@ class RunInfo:
     t_offset: float
     """Added to ``time * time_scale`` to place the run on the joined time line."""
     rows: int
+
+
+BACKWARDS_WINDOW_S = 10.0
+"""A row earlier than the previous row of its run by up to this much (s) is rejected as
+``time_backwards``; a row further back is passed on, for the engine's time line to judge
+(a single bad stamp, or a clock jump that starts a new segment: ``onboard.timeline``,
+whose ``TIME_JUMP_S`` this equals). Either way one bad stamp costs one row."""
 
 
 class _Bad(Exception):
@@ -241,7 +250,7 @@ class CsvReader:
                         st.reject("bad_time")
                         continue
                     t += run.t_offset
-                    if last_t is not None and t < last_t:
+                    if last_t is not None and last_t - BACKWARDS_WINDOW_S <= t < last_t:
                         st.reject("time_backwards")
                         continue
                     last_t = t

@@ -172,8 +172,8 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         ticks = run(engine, source, csv.write)
     csv.close()
     meter.done()
-    t_end = max(engine.t_newest, first.t)
-    span = t_end - first.t
+    time_span = _time_span(engine, first.t)
+    span = time_span["duration_s"]
     kinds: dict[str, int] = {}
     for (kind, _), n in engine.accepted.items():
         kinds[kind] = kinds.get(kind, 0) + n
@@ -185,7 +185,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "vehicle_id": cfg.vehicle.id,
         "pipelines": [p.name for p in engine.pipelines],
         "columns": engine.columns,
-        "time_span": {"start": first.t, "end": t_end, "duration_s": span},
+        "time_span": time_span,
         "read": reader.stats.as_dict(),
         "samples_accepted_by_type": dict(sorted(kinds.items())),
         "rates_hz": {k: (n / span if span > 0 else None) for k, n in sorted(kinds.items())},
@@ -208,6 +208,18 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         summary["figure"] = _plot_track(out_dir)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def _time_span(engine: Engine, t_first: float) -> dict:
+    """``start`` and ``end`` (s, log clock) of the run, ``duration_s`` the sum of its
+    segments' durations (the time between segments is not counted), and ``segments``:
+    each segment's start, end and duration (:mod:`onboard.timeline`). A recording replayed
+    at its recorded ticks has one segment, from the first sample to the newest."""
+    segments = [(s.start, s.end) for s in engine.timeline.segments] or \
+        [(t_first, max(engine.t_newest, t_first))]
+    return {"start": segments[0][0], "end": segments[-1][1],
+            "duration_s": sum(b - a for a, b in segments),
+            "segments": [{"start": a, "end": b, "duration_s": b - a} for a, b in segments]}
 
 
 POSITION_KINDS = {"gnss", "dvl_position"}
