@@ -37,12 +37,16 @@ applied from the format, and the few columns read have fixed documented units.
 Time base: ``Sample.t`` = ``TimeUS`` * 1e-6, seconds since the autopilot booted.
 ArduPilot writes from several threads, so records are slightly out of time order; the
 reader re-orders them through a 2 s window. A record older than the last emitted sample
-(beyond that window, e.g. after a reboot inside the log) is ``"time_backwards"``.
+(beyond that window) is ``"time_backwards"``, and ``"time_outlier"`` when it is more than
+:data:`TIME_JUMP_S` older (ArduPilot starts a new log file at each boot, so inside one file
+that is a corrupted stamp). A single record stamped far ahead does not move the window
+(:class:`_Ahead`): it is emitted last, for the engine's time line to drop as an outlier.
 
 Rejections: ``"garbage"`` bytes that are not a record start (resync on the next
 ``A3 95`` whose type is known and which is followed by another record start or the end
 of the file); ``"unknown_format"`` a record type without FMT; ``"truncated"`` an
 incomplete record at the end; ``"bad_fmt"`` an FMT record that cannot be understood;
+``"time_backwards"``, ``"time_outlier"`` (above);
 handler rejections ``"no_fix"``, ``"nan"``, ``"invalid"``.
 """
 
@@ -90,6 +94,37 @@ FORMAT_CHARS: dict[str, tuple[str, float | None]] = {
 
 REORDER_WINDOW_S = 2.0
 """Samples are held this long (log time) to put slightly out-of-order records in order."""
+
+TIME_JUMP_S = 10.0
+"""A record stamped this far (s) ahead of the reader's clock does not move it (and so
+does not flush the re-ordering window) until :data:`CONFIRM_STAMPS` such records agree;
+one this far behind the last emitted sample is ``"time_outlier"`` (the engine's time line,
+``onboard.timeline``, uses the same figure)."""
+CONFIRM_STAMPS = 3
+"""Distinct stamps ahead of the reader's clock that move it there (a real gap)."""
+
+
+class _Ahead:
+    """The reader's clock against a single corrupted stamp far ahead: such a stamp would
+    empty the re-ordering window at once and make every later record ``time_backwards``."""
+
+    def __init__(self) -> None:
+        self.stamps: list[float] = []
+
+    def advance(self, clock: float, t: float) -> float:
+        """The reader's clock (s) after a record stamped ``t`` > ``clock``."""
+        if clock == -math.inf or t - clock <= TIME_JUMP_S:
+            self.stamps.clear()
+            return t
+        if self.stamps and abs(t - self.stamps[-1]) > TIME_JUMP_S:
+            self.stamps.clear()  # unrelated to the stamps ahead so far
+        if t not in self.stamps:
+            self.stamps.append(t)
+        if len(self.stamps) < CONFIRM_STAMPS:
+            return clock
+        self.stamps.clear()
+        return t
+
 
 _VEHICLES = {"ArduSub": 12, "ArduRover": 10, "ArduPlane": 1, "ArduCopter": 2}
 _BANNER = re.compile(r"\b(ArduSub|ArduRover|ArduPlane|ArduCopter)\b")
@@ -403,6 +438,7 @@ class DataflashReader:
         seq = 0
         emitted_t = -math.inf
         latest_t = -math.inf
+        ahead = _Ahead()
         n_samples = 0
         records = 0
         pos = self._first
@@ -457,10 +493,11 @@ class DataflashReader:
                     continue
                 if s is not None and (want is None or isinstance(s, want)):
                     if t < emitted_t:
-                        stats.reject("time_backwards")
+                        stats.reject("time_outlier" if t < emitted_t - TIME_JUMP_S
+                                     else "time_backwards")
                     else:
                         if t > latest_t:
-                            latest_t = t
+                            latest_t = ahead.advance(latest_t, t)
                         heapq.heappush(heap, (t, seq, s))
                         seq += 1
                         while heap and heap[0][0] <= latest_t - REORDER_WINDOW_S:

@@ -36,9 +36,11 @@ from onboard.core.messages import Sample
 TIME_JUMP_S = 10.0
 """A stamp this far (s) from the newest released one, either way, is held until the
 samples after it say whether it is an outlier or a jump (the engine's default ``gap_s``)."""
-CONFIRM_STAMPS = 3
+CONFIRM_STAMPS = 2
 """Distinct stamps that confirm a side: the held samples' side (a jump) or the current
-segment's (the held samples are outliers)."""
+segment's (the held samples are outliers). Two: a corrupted stamp is one stamp (all the
+samples of one CSV row or one record share it), and a real jump may be short (ArduSub's
+small.BIN ends with two parameter records 109 s after the rest)."""
 
 
 @dataclass

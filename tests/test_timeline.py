@@ -1,0 +1,183 @@
+"""Time that cannot be fooled (issue 22, item 6): a single stamp far in the future or the
+past is a counted ``time_outlier`` and the samples after it are kept; a real clock jump
+starts a new segment, durations count the segments; nothing spins.
+
+Before: one CSV stamp moved +1e12 ms made the replay spin for over ten minutes (the
+current filter predicted across 1e9 s in 0.1 s steps); +1e8 ms rejected every later row
+as ``time_backwards`` and reported a 100,150 s duration.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from onboard.cli import main as cli_main
+from onboard.core.messages import Imu
+from onboard.drivers.dataflash import DataflashReader
+from onboard.timeline import CONFIRM_STAMPS, TIME_JUMP_S, Timeline
+from tests.helpers import dataflash_log as df
+
+REPO = Path(__file__).resolve().parents[1]
+CSV = REPO / "tests/data/csv/blueboat-run.csv"
+CONFIG = REPO / "config/blueboat-ntnu-csv.toml"
+BAD_ROW = 7
+"""The row (1-based, after the header; every column filled) whose stamp the tests move.
+The file also has a row 0.3 s back (``time_backwards``), one short row (``malformed``)
+and an empty heading."""
+
+
+def imu(t: float) -> Imu:
+    return Imu(t=t, accel_x=0.0, accel_y=0.0, accel_z=-9.81, gyro_x=0.0, gyro_y=0.0,
+               gyro_z=0.0)
+
+
+def admit_all(tl: Timeline, times: list[float]) -> list[float]:
+    out = [s.t for t in times for s in tl.admit(imu(t))]
+    tl.flush()
+    return out
+
+
+# ------------------------------------------------------------------- the rule itself
+
+def test_a_single_stamp_far_ahead_is_an_outlier_and_the_later_samples_are_kept():
+    tl = Timeline()
+    assert admit_all(tl, [0.0, 0.1, 1e9, 0.2, 0.3, 0.4]) == [0.0, 0.1, 0.2, 0.3, 0.4]
+    assert [s.t for s in tl.outliers] == [1e9]
+    assert len(tl.segments) == 1 and tl.duration_s == pytest.approx(0.4)
+
+
+def test_a_single_stamp_far_back_is_an_outlier_too():
+    tl = Timeline()
+    assert admit_all(tl, [500.0, 500.1, 0.0, 500.2, 500.3]) == [500.0, 500.1, 500.2, 500.3]
+    assert [s.t for s in tl.outliers] == [0.0]
+
+
+def test_a_clock_that_goes_back_and_stays_there_is_a_jump_with_two_segments():
+    tl = Timeline()
+    released = []
+    for t in [500.0, 500.1, 500.2, 3.0, 3.1, 3.2]:
+        released += [s.t for s in tl.admit(imu(t))]
+        if tl.jump is not None:
+            jump = tl.jump
+    assert released == [500.0, 500.1, 500.2, 3.0, 3.1, 3.2]  # nothing lost
+    assert jump.t_before == 500.2 and jump.t_after == 3.0
+    assert [(s.start, s.end) for s in tl.segments] == [(500.0, 500.2), (3.0, 3.2)]
+    assert tl.duration_s == pytest.approx(0.4)
+
+
+def test_a_stamp_is_held_only_until_its_side_has_CONFIRM_STAMPS_stamps():
+    tl = Timeline()
+    tl.admit(imu(0.0))
+    far = 2 * TIME_JUMP_S
+    held = [tl.admit(imu(far + 0.1 * k)) for k in range(CONFIRM_STAMPS)]
+    assert all(r == [] for r in held[:-1]) and len(held[-1]) == CONFIRM_STAMPS
+
+
+def test_samples_still_held_when_the_run_ends_are_outliers():
+    tl = Timeline()
+    assert admit_all(tl, [0.0, 0.1, 1e6]) == [0.0, 0.1]
+    assert [s.t for s in tl.outliers] == [1e6]
+
+
+# --------------------------------------------------------------- replays of a CSV log
+
+def moved_csv(tmp_path: Path, shift_ms: float, rows: range = range(BAD_ROW, BAD_ROW + 1)) -> Path:
+    """The BlueBoat test CSV with the stamps of ``rows`` moved by ``shift_ms``."""
+    lines = CSV.read_text().splitlines()
+    for i in rows:
+        cells = lines[i].split(",")
+        cells[0] = repr(float(cells[0]) + shift_ms)
+        lines[i] = ",".join(cells)
+    path = tmp_path / "moved.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def replay(tmp_path: Path, log: Path, config: Path | None = CONFIG) -> dict:
+    out = tmp_path / "out"
+    args = ["--config", str(config)] if config else []
+    assert cli_main(["replay", str(log), *args, "--out", str(out), "--no-plot"]) == 0
+    return json.loads((out / "summary.json").read_text())
+
+
+def baseline(tmp_path: Path) -> dict:
+    return replay(tmp_path / "base", CSV)
+
+
+@pytest.mark.parametrize("shift_ms", [1e12, 1e8, -1e8])
+def test_one_csv_stamp_moved_far_is_an_outlier_and_the_rows_after_it_are_kept(
+        tmp_path, shift_ms):
+    base = baseline(tmp_path)
+    s = replay(tmp_path, moved_csv(tmp_path, shift_ms))
+    # the reader passes the moved row on, rejects what it rejected before, no more
+    assert s["read"]["by_type"]["row"] == base["read"]["by_type"]["row"]
+    assert s["read"]["rejected"] == base["read"]["rejected"]
+    # the engine drops the moved row's samples and nothing else: 5 outliers, 5 accepted less
+    outliers = {k: n for k, n in s["rejected"].items() if k.endswith(":time_outlier")}
+    assert outliers.get("gnss:time_outlier") == 1
+    assert sum(base["accepted"].values()) - sum(s["accepted"].values()) == \
+        sum(outliers.values())
+    # the duration of the unmoved file: 1.1 s (before: 100,150 s at +1e8 ms)
+    assert s["time_span"]["duration_s"] == pytest.approx(base["time_span"]["duration_s"])
+    assert len(s["time_span"]["segments"]) == 1
+    assert s["rows"] == base["rows"]
+    assert "time_outlier" in {w["code"] for w in s["warnings"]}
+
+
+def test_a_csv_clock_that_goes_back_makes_two_segments_and_a_time_jump_warning(tmp_path):
+    base = baseline(tmp_path)
+    lines = CSV.read_text().splitlines()
+    s = replay(tmp_path, moved_csv(tmp_path, -400_000.0, range(BAD_ROW, len(lines))))
+    assert s["read"]["rejected"] == base["read"]["rejected"]
+    assert not any(k.endswith(":time_outlier") for k in s["rejected"])
+    segments = s["time_span"]["segments"]
+    assert len(segments) == 2
+    assert segments[1]["start"] < segments[0]["end"]  # the clock went back 400 s
+    # the segments' durations add up: 1.1 s less the 0.05 s step between rows 6 and 7
+    assert s["time_span"]["duration_s"] == pytest.approx(
+        sum(g["duration_s"] for g in segments))
+    assert s["time_span"]["duration_s"] == pytest.approx(
+        base["time_span"]["duration_s"] - 0.05)
+    assert "time_jump" in {w["code"] for w in s["warnings"]}
+    assert s["rows"] > 0
+
+
+def test_a_clock_that_jumps_1e9_s_ahead_and_stays_makes_a_segment_without_spinning(tmp_path):
+    """The pipelines restart from their state at the new segment (beyond
+    onboard.engine.RESTART_AFTER_S): none of them predicts across 1e9 s (0.4 s here)."""
+    base = baseline(tmp_path)
+    lines = CSV.read_text().splitlines()
+    s = replay(tmp_path, moved_csv(tmp_path, 1e12, range(BAD_ROW, len(lines))))
+    assert len(s["time_span"]["segments"]) == 2
+    assert s["time_span"]["duration_s"] == pytest.approx(
+        base["time_span"]["duration_s"] - 0.05)
+    assert sum(s["accepted"].values()) == sum(base["accepted"].values())
+    assert "time_jump" in {w["code"] for w in s["warnings"]}
+    assert s["ticks"] < 2 * base["ticks"]
+
+
+# -------------------------------------------------------------------- DataFlash bytes
+
+def test_a_dataflash_record_stamped_far_ahead_does_not_make_the_duration(tmp_path):
+    """Before: flipped bytes in small.BIN gave a "14627691589702.8 s" duration and every
+    record after the bad one was ``time_backwards``."""
+    bad = df.record("IMU2", 2**62 + 700_000, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
+    log = tmp_path / "bad.bin"
+    log.write_bytes(df.synthetic_log() + bad)
+    good = tmp_path / "good.bin"
+    good.write_bytes(df.synthetic_log())
+    times = [s.t for s in DataflashReader(log)]
+    assert [t for t in times if t < 1e6] == [s.t for s in DataflashReader(good)]
+    mid = tmp_path / "mid.bin"
+    data = df.synthetic_log()
+    cut = data.index(df.record("ATT", 1_000_010, 0, 150, 0, -200, 0, 9000, 0, 0, 3))
+    mid.write_bytes(data[:cut] + bad + data[cut:])
+    reader = DataflashReader(mid)
+    assert [t for t in (s.t for s in reader) if t < 1e6] == [s.t for s in DataflashReader(good)]
+    assert "time_backwards" not in reader.stats.rejected
+    s = replay(tmp_path, mid, config=None)
+    assert s["rejected"].get("imu:time_outlier") == 1
+    assert s["time_span"]["duration_s"] < 3.0  # the log's 2 s, not 4.6e12 s
