@@ -12,7 +12,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Iterable, Iterator, Sequence
+from typing import Iterable, Iterator, Mapping, Sequence
 
 import msgspec
 
@@ -199,7 +199,8 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "ticks": ticks,
         "rows": csv.rows,
         "rate_hz": cfg.engine.rate_hz,
-        "warnings": msgspec.to_builtins(list(run_warnings(engine, kinds))),
+        "warnings": msgspec.to_builtins(list(run_warnings(engine, kinds,
+                                                          reader.stats.rejected))),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
@@ -240,11 +241,18 @@ NEEDS: dict[str, tuple[str, tuple[frozenset[str], ...]]] = {
 kinds of which the log must have one each."""
 
 
-def run_warnings(engine: Engine, kinds: dict[str, int]) -> Alerts:
-    """The engine's warnings and those of the whole run: no position source, and every
-    pipeline that gave no estimate with what it lacked (``kinds``: accepted samples by
-    kind)."""
+def run_warnings(engine: Engine, kinds: dict[str, int],
+                 read_rejected: Mapping[str, int] | None = None) -> Alerts:
+    """The engine's warnings and those of the whole run: records the reader dropped as
+    time outliers (``read_rejected``: its rejections by reason), no position source, and
+    every pipeline that gave no estimate with what it lacked (``kinds``: accepted samples
+    by kind)."""
     alerts = engine.alerts
+    n_out = (read_rejected or {}).get("time_outlier", 0)
+    if n_out:
+        alerts.warn("time_outlier", f"the reader dropped {n_out} record(s) stamped far from "
+                    "the records around them (a corrupted or mistyped time); the records "
+                    "after them were kept")
     have = {k for k, n in kinds.items() if n > 0}
     if not have & POSITION_KINDS:
         alerts.warn("no_position_source", "no position source in the log (no GNSS fix, no "
