@@ -112,13 +112,15 @@ class _RowClock:
         """The items to use, in order, after a row at ``t`` (s) carrying ``item``."""
         last = self.last
         if self._back is not None:
-            agrees = abs(t - self._back) <= TIME_JUMP_S and (last is None or t < last - TIME_JUMP_S)
+            agrees = abs(t - self._back) <= TIME_JUMP_S and (
+                last is None or t < last - TIME_JUMP_S)
             self._count("time_backwards" if agrees else "time_outlier")
             self._back = None
         if self._held is not None:
             ht, hitem = self._held
             self._held = None
-            if abs(t - ht) <= TIME_JUMP_S and not (last is not None and abs(t - last) <= TIME_JUMP_S):
+            near_old = last is not None and abs(t - last) <= TIME_JUMP_S
+            if abs(t - ht) <= TIME_JUMP_S and not near_old:
                 self.last = max(t, ht)
                 if t < ht:
                     self._count("time_backwards")
