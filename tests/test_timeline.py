@@ -158,23 +158,54 @@ def test_a_clock_that_jumps_1e9_s_ahead_and_stays_makes_a_segment_without_spinni
 
 # -------------------------------------------------------------------- DataFlash bytes
 
-def test_a_dataflash_record_stamped_far_ahead_does_not_make_the_duration(tmp_path):
-    """Before: flipped bytes in small.BIN gave a "14627691589702.8 s" duration and every
-    record after the bad one was ``time_backwards``."""
+def test_a_dataflash_record_stamped_far_ahead_is_an_outlier_and_costs_nothing_else(tmp_path):
+    """Before: flipped bytes in small.BIN gave a "14627691589702.8 s" duration, and one
+    record far ahead emptied the re-ordering window: later records were ``time_backwards``."""
     bad = df.record("IMU2", 2**62 + 700_000, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
-    log = tmp_path / "bad.bin"
-    log.write_bytes(df.synthetic_log() + bad)
-    good = tmp_path / "good.bin"
-    good.write_bytes(df.synthetic_log())
-    times = [s.t for s in DataflashReader(log)]
-    assert [t for t in times if t < 1e6] == [s.t for s in DataflashReader(good)]
-    mid = tmp_path / "mid.bin"
     data = df.synthetic_log()
+    good = tmp_path / "good.bin"
+    good.write_bytes(data)
+    expected = [s.t for s in DataflashReader(good)]
     cut = data.index(df.record("ATT", 1_000_010, 0, 150, 0, -200, 0, 9000, 0, 0, 3))
-    mid.write_bytes(data[:cut] + bad + data[cut:])
-    reader = DataflashReader(mid)
-    assert [t for t in (s.t for s in reader) if t < 1e6] == [s.t for s in DataflashReader(good)]
-    assert "time_backwards" not in reader.stats.rejected
-    s = replay(tmp_path, mid, config=None)
-    assert s["rejected"].get("imu:time_outlier") == 1
-    assert s["time_span"]["duration_s"] < 3.0  # the log's 2 s, not 4.6e12 s
+    for name, content in [("end.bin", data + bad), ("mid.bin", data[:cut] + bad + data[cut:])]:
+        log = tmp_path / name
+        log.write_bytes(content)
+        reader = DataflashReader(log)
+        assert [s.t for s in reader] == expected  # the late IMU2 record re-ordered too
+        assert reader.stats.rejected == {"time_outlier": 1}
+    s = replay(tmp_path, log, config=None)
+    assert s["read"]["rejected"] == {"time_outlier": 1}
+    assert s["time_span"]["duration_s"] == pytest.approx(2.0, abs=0.01)  # 1.9999 s
+    assert "time_outlier" in {w["code"] for w in s["warnings"]}
+
+
+@pytest.mark.data
+def test_small_bin_is_24_s_of_data_in_two_segments_not_135_s(tmp_path, shared_data):
+    """ArduSub's small.BIN: 26.6 s of samples, then two parameter records 109 s later.
+    Before: "135.6 s"; now the two segments' 26.6 s and a ``time_jump`` warning."""
+    s = replay(tmp_path, shared_data / "ardusub_small_logs/small.BIN", config=None)
+    segments = s["time_span"]["segments"]
+    assert len(segments) == 2
+    assert segments[1]["start"] - segments[0]["end"] == pytest.approx(109.0, abs=0.1)
+    assert s["time_span"]["duration_s"] == pytest.approx(26.6, abs=0.1)  # 26.61 s
+    assert "time_jump" in {w["code"] for w in s["warnings"]}
+
+
+@pytest.mark.data
+def test_500_flipped_bytes_in_small_bin_give_a_duration_within_the_log(tmp_path, shared_data):
+    """Before: a "14627691589702.8 s" duration. Three seeds of 500 random bit flips."""
+    import random
+
+    clean = (shared_data / "ardusub_small_logs/small.BIN").read_bytes()
+    for seed in range(3):
+        data = bytearray(clean)
+        rng = random.Random(seed)
+        for _ in range(500):
+            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+        log = tmp_path / f"flipped{seed}.BIN"
+        log.write_bytes(bytes(data))
+        s = replay(tmp_path / str(seed), log, config=None)
+        # measured 30.8, 26.8, 35.0 s (clean: 26.6 s; a flipped low byte of TimeUS moves
+        # a stamp by less than TIME_JUMP_S and stays); each seed's bad stamps are counted
+        assert 20.0 < s["time_span"]["duration_s"] < 40.0
+        assert s["read"]["rejected"]["time_outlier"] > 0  # measured 13-22
