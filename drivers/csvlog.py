@@ -38,7 +38,8 @@ so model-closure code can split train/test by run; each sample's ``source`` is
 
 Rejections (per row): ``"malformed"`` (wrong number of cells), ``"bad_time"`` (time not
 numeric or not finite), ``"time_backwards"`` (time earlier than the previous row of the
-run). Per sample type of a row: ``"nan"`` (empty or NaN cell), ``"non_numeric"``. A
+run), ``"time_outlier"`` (one row stamped more than :data:`TIME_JUMP_S` away from the rows
+before and after it; the rows after it are kept; :class:`_RowClock`). Per sample type of a row: ``"nan"`` (empty or NaN cell), ``"non_numeric"``. A
 mapped column missing from a file's header raises :class:`UnreadableLog`.
 """
 
@@ -80,6 +81,72 @@ class RunInfo:
     t_offset: float
     """Added to ``time * time_scale`` to place the run on the joined time line."""
     rows: int
+
+
+TIME_JUMP_S = 10.0
+"""Rows more than this (s) apart in time are judged by the rows after them
+(:class:`_RowClock`); the engine's time line (``onboard.timeline``) uses the same figure."""
+
+
+class _RowClock:
+    """The time order of one run's rows, proof against one bad stamp.
+
+    A row up to :data:`TIME_JUMP_S` before the newest used one is ``time_backwards``. A row
+    further ahead is held: the next row decides whether it was a jump (the next row agrees
+    with it: both are used) or a ``time_outlier`` (the next row continues the old times).
+    A row further back is rejected; the next row decides the count: ``time_outlier`` when
+    it continues the old times, ``time_backwards`` when it agrees with the rejected row
+    (a clock stepped back: rows are lost until it catches up, as in a tlog). A row held
+    or rejected last in its run is a ``time_outlier``. Rows come out in time order.
+    """
+
+    def __init__(self, stats: ReadStats | None) -> None:
+        """Count rejections in ``stats`` (None: count nothing, for the pre-scan)."""
+        self.stats = stats
+        self.last: float | None = None
+        """The newest time used (s)."""
+        self._held: tuple[float, object] | None = None
+        self._back: float | None = None
+
+    def admit(self, t: float, item: object) -> list:
+        """The items to use, in order, after a row at ``t`` (s) carrying ``item``."""
+        last = self.last
+        if self._back is not None:
+            agrees = abs(t - self._back) <= TIME_JUMP_S and (
+                last is None or t < last - TIME_JUMP_S)
+            self._count("time_backwards" if agrees else "time_outlier")
+            self._back = None
+        if self._held is not None:
+            ht, hitem = self._held
+            self._held = None
+            near_old = last is not None and abs(t - last) <= TIME_JUMP_S
+            if abs(t - ht) <= TIME_JUMP_S and not near_old:
+                self.last = max(t, ht)
+                if t < ht:
+                    self._count("time_backwards")
+                    return [hitem]
+                return [hitem, item]
+            self._count("time_outlier")
+        if last is None or last <= t <= last + TIME_JUMP_S:
+            self.last = t
+            return [item]
+        if t > last:
+            self._held = (t, item)
+        elif t >= last - TIME_JUMP_S:
+            self._count("time_backwards")
+        else:
+            self._back = t
+        return []
+
+    def end(self) -> None:
+        """The run ended: a row still held, or rejected far back, was an outlier."""
+        if self._held is not None or self._back is not None:
+            self._count("time_outlier")
+        self._held = self._back = None
+
+    def _count(self, reason: str) -> None:
+        if self.stats is not None:
+            self.stats.reject(reason)
 
 
 class _Bad(Exception):
@@ -175,6 +242,7 @@ class CsvReader:
                 cur: str | None = None
                 first = last = None
                 rows = 0
+                clock = _RowClock(None)  # the times the rows will be used at
                 try:
                     for row in rd:
                         if not row or not any(c.strip() for c in row):
@@ -185,12 +253,13 @@ class CsvReader:
                             prev_end = self._add_run(cur, path, first, last, rows, prev_end)
                             first = last = None
                             rows = 0
+                            clock = _RowClock(None)
                         cur = name
                         rows += 1
-                        if t is not None:
+                        for used in clock.admit(t, t) if t is not None else ():
                             if first is None:
-                                first = t
-                            last = t if last is None else max(last, t)
+                                first = used
+                            last = used if last is None else max(last, used)
                 except csv.Error as err:
                     raise UnreadableLog(f"{path}: not CSV: {err}") from None
                 if cur is not None:
@@ -220,7 +289,7 @@ class CsvReader:
             try:
                 idx = self._index(header, path)
                 ncol = len(header)
-                last_t: float | None = None
+                clock = _RowClock(st)
                 cur = None
                 for row in rd:
                     if not row or not any(c.strip() for c in row):
@@ -232,7 +301,8 @@ class CsvReader:
                         st.reject("malformed")
                         continue
                     if run is not cur:
-                        cur, last_t = run, None
+                        clock.end()
+                        cur, clock = run, _RowClock(st)
                     if len(row) != ncol:
                         st.reject("malformed")
                         continue
@@ -241,14 +311,12 @@ class CsvReader:
                         st.reject("bad_time")
                         continue
                     t += run.t_offset
-                    if last_t is not None and t < last_t:
-                        st.reject("time_backwards")
-                        continue
-                    last_t = t
-                    st.by_type["row"] += 1
-                    for s in self._samples(row, idx, t, run.source):
-                        st.samples += 1
-                        yield s
+                    for row_t, cells in clock.admit(t, (t, row)):
+                        st.by_type["row"] += 1
+                        for s in self._samples(cells, idx, row_t, run.source):
+                            st.samples += 1
+                            yield s
+                clock.end()
             except csv.Error:
                 st.reject("malformed")
             finally:

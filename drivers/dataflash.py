@@ -37,12 +37,17 @@ applied from the format, and the few columns read have fixed documented units.
 Time base: ``Sample.t`` = ``TimeUS`` * 1e-6, seconds since the autopilot booted.
 ArduPilot writes from several threads, so records are slightly out of time order; the
 reader re-orders them through a 2 s window. A record older than the last emitted sample
-(beyond that window, e.g. after a reboot inside the log) is ``"time_backwards"``.
+(beyond that window) is ``"time_backwards"``, and ``"time_outlier"`` when it is more than
+:data:`TIME_JUMP_S` older (ArduPilot starts a new log file at each boot, so inside one file
+that is a corrupted stamp). A record stamped more than :data:`TIME_JUMP_S` ahead is held
+(:class:`_Ahead`) until the next records in the file confirm a jump, or show it to be a
+``"time_outlier"``: one flipped byte of ``TimeUS`` costs one record.
 
 Rejections: ``"garbage"`` bytes that are not a record start (resync on the next
 ``A3 95`` whose type is known and which is followed by another record start or the end
 of the file); ``"unknown_format"`` a record type without FMT; ``"truncated"`` an
 incomplete record at the end; ``"bad_fmt"`` an FMT record that cannot be understood;
+``"time_backwards"``, ``"time_outlier"`` (above);
 handler rejections ``"no_fix"``, ``"nan"``, ``"invalid"``.
 """
 
@@ -90,6 +95,45 @@ FORMAT_CHARS: dict[str, tuple[str, float | None]] = {
 
 REORDER_WINDOW_S = 2.0
 """Samples are held this long (log time) to put slightly out-of-order records in order."""
+
+TIME_JUMP_S = 10.0
+"""A record stamped this far (s) ahead of the reader's clock is held (:class:`_Ahead`); one
+this far behind the last emitted sample is ``"time_outlier"`` (the engine's time line,
+``onboard.timeline``, uses the same figure)."""
+CONFIRM_STAMPS = 2
+"""Distinct stamps, one after another in the file and agreeing with each other, that
+confirm a jump ahead (a real gap: ArduSub's small.BIN ends with two parameter records
+109 s after the rest)."""
+
+
+class _Ahead:
+    """Records stamped far ahead of the reader's clock, held until the records after them
+    in the file say what they are: a jump (:data:`CONFIRM_STAMPS` agreeing stamps in a
+    row) or outliers (a record near the clock comes first: a corrupted stamp, counted
+    ``"time_outlier"``). Without it, one flipped byte of ``TimeUS`` would empty the
+    re-ordering window at once and every later record would be ``"time_backwards"``."""
+
+    def __init__(self, stats: ReadStats) -> None:
+        self.stats = stats
+        self.held: list[tuple[float, Sample]] = []
+
+    def hold(self, t: float, sample: Sample) -> list[tuple[float, Sample]]:
+        """Hold ``sample`` stamped ``t`` (s); return the held records once they are a jump."""
+        held = self.held
+        if held and abs(t - held[-1][0]) > TIME_JUMP_S:
+            self.drop()  # unrelated to the records held so far
+        held.append((t, sample))
+        if len({h[0] for h in held}) < CONFIRM_STAMPS:
+            return []
+        self.held = []
+        return held
+
+    def drop(self) -> None:
+        """The held records are outliers."""
+        for _ in self.held:
+            self.stats.reject("time_outlier")
+        self.held = []
+
 
 _VEHICLES = {"ArduSub": 12, "ArduRover": 10, "ArduPlane": 1, "ArduCopter": 2}
 _BANNER = re.compile(r"\b(ArduSub|ArduRover|ArduPlane|ArduCopter)\b")
@@ -403,6 +447,7 @@ class DataflashReader:
         seq = 0
         emitted_t = -math.inf
         latest_t = -math.inf
+        ahead = _Ahead(stats)
         n_samples = 0
         records = 0
         pos = self._first
@@ -457,17 +502,24 @@ class DataflashReader:
                     continue
                 if s is not None and (want is None or isinstance(s, want)):
                     if t < emitted_t:
-                        stats.reject("time_backwards")
+                        stats.reject("time_outlier" if t < emitted_t - TIME_JUMP_S
+                                     else "time_backwards")
                     else:
-                        if t > latest_t:
-                            latest_t = t
-                        heapq.heappush(heap, (t, seq, s))
-                        seq += 1
+                        if latest_t != -math.inf and t > latest_t + TIME_JUMP_S:
+                            batch = ahead.hold(t, s)
+                        else:
+                            ahead.drop()
+                            batch = [(t, s)]
+                        for bt, bs in batch:
+                            latest_t = max(latest_t, bt)
+                            heapq.heappush(heap, (bt, seq, bs))
+                            seq += 1
                         while heap and heap[0][0] <= latest_t - REORDER_WINDOW_S:
                             emitted_t, _, out = heapq.heappop(heap)
                             n_samples += 1
                             yield out
             pos = end
+        ahead.drop()
         while heap:
             emitted_t, _, out = heapq.heappop(heap)
             n_samples += 1

@@ -3,6 +3,9 @@
 One engine serves live operation and replay (architecture.md §3). It queues and ticks;
 each step of the way is a named module:
 
+* :meth:`Engine.admit` puts each sample on the time line first (:mod:`onboard.timeline`):
+  a single stamp far from its neighbours is dropped and counted (``<type>:time_outlier``),
+  a confirmed clock jump starts a new segment (:meth:`Engine.start_segment`);
 * :meth:`Engine.push` takes one sample through
   1. the value checks of :mod:`onboard.validate` (a rejection is counted with its reason),
   2. the ``[corrections]`` (:class:`onboard.corrections.SampleCorrector`),
@@ -53,6 +56,7 @@ from onboard.latency import FixedLagQueue, sample_time
 from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline
 from onboard.sources import SourceSelector
+from onboard.timeline import Jump, Timeline
 from onboard.validate import checker_for, sample_type
 
 __all__ = ["Engine", "SampleCorrector", "TickQueue", "run"]
@@ -64,6 +68,12 @@ compass, or a DVL that only reports ``valid=False``), and again when it comes ba
 FUTURE_TOLERANCE_S = 1.0
 """Live, a sample stamped more than this after the receive clock is rejected as
 ``future``."""
+RESTART_AFTER_S = 600.0
+"""A clock jump forward longer than this (s), or any jump back, restarts the pipelines
+with their adaptive state (:meth:`Engine.start_segment`): their state is not carried
+across that much unseen time, and none of them walks across it. Shorter forward jumps
+are gaps the pipelines bridge themselves (the aie/kf restart their chains past
+``max_gap_s``; the current filter predicts across them)."""
 _NEVER_STALE = {"parameter"}
 """Streams sent once, not periodically."""
 
@@ -218,6 +228,8 @@ class Engine:
         """One source per quantity (``[sources]``); its switches are events."""
         self.stale: set[tuple[str, str]] = set()
         """The sample streams now stale (see :data:`STALE_AFTER_S`)."""
+        self.timeline = Timeline()
+        """The segments of the run and its outliers (:meth:`admit`)."""
 
     @property
     def columns(self) -> list[str]:
@@ -233,6 +245,63 @@ class Engine:
     def depth_m(self) -> float | None:
         """The newest depth (m), None before the first."""
         return self.depth_mode.depth_m
+
+    # --------------------------------------------------------------------- time line
+
+    def admit(self, sample: Sample) -> list[Sample]:
+        """Put ``sample`` on the time line (:mod:`onboard.timeline`); return the samples
+        it releases, to :meth:`push` in order. Outliers are counted
+        (``<type>:time_outlier``) and warned of; after a release that confirmed a jump,
+        :attr:`timeline` ``.jump`` is set and the caller ticks what it has, then calls
+        :meth:`start_segment` before pushing the released samples."""
+        released = self.timeline.admit(sample)
+        if self.timeline.outliers:
+            self._count_outliers()
+        return released
+
+    def finish(self) -> None:
+        """The run ended: samples still held on the time line are outliers."""
+        self.timeline.flush()
+        self._count_outliers()
+
+    def _count_outliers(self) -> None:
+        """Count and warn of the time line's outliers, and clear its list."""
+        outliers = self.timeline.outliers
+        if not outliers:
+            return
+        ref = self.timeline.newest
+        for s in outliers:
+            kind, _ = self._checker(s)
+            self._reject(kind, "time_outlier")
+        n = sum(v for k, v in self.rejected.items() if k.endswith(":time_outlier"))
+        off = outliers[0].t - ref if ref is not None else math.nan
+        self.alerts.warn("time_outlier",
+                         f"{n} sample(s) stamped far from their neighbours were dropped "
+                         f"(the last {off:+.6g} s off the log's clock); the samples after "
+                         "them were kept", ref)
+        outliers.clear()
+
+    def start_segment(self, jump: Jump) -> None:
+        """A confirmed clock jump (:class:`onboard.timeline.Jump`): warn, and when it goes
+        back or forward more than :data:`RESTART_AFTER_S`, forget the stream times,
+        move the source selection's times with the clock, and restart the pipelines
+        from their own adaptive state (:meth:`get_state`)."""
+        step = jump.step_s
+        what = (f"the clock went back {-step:.6g} s (a reboot or a clock reset)" if step < 0
+                else f"no sample for {step:.6g} s (a gap in the log or a clock step)")
+        self.alerts.warn("time_jump", f"{what}: a new time segment starts; durations "
+                         "count each segment, not the time between them", jump.t_after)
+        self.events.append(f"time: {what}; new segment")
+        if 0.0 <= step <= RESTART_AFTER_S:
+            return
+        self._last_t.clear()
+        self.t_newest = -math.inf
+        self.stale.clear()
+        self.selector.shift(step)
+        state = self.get_state()
+        self.pipelines = [next(iter(build(self.cfg, {p.name})), p) for p in self.pipelines]
+        self._std_names = {p.name: std_columns(p) for p in self.pipelines}
+        self.set_state(state)
 
     # ------------------------------------------------------------------------- push
 
@@ -480,11 +549,15 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
         *, gap_s: float = 10.0, tick_times: Iterable[float] | None = None) -> int:
     """Replay ``samples`` (time-ordered) through ``engine``; return the number of ticks.
 
-    Ticks fall on the grid ``t0 + k / rate_hz`` from the first sample's time ``t0``; each
-    tick at time ``T`` sees exactly the samples with ``t <= T``. Across a gap in the log
-    longer than ``gap_s`` seconds the grid jumps forward instead of ticking through empty
-    time. With ``tick_times`` (a recording of live ticks) those times are used instead of
-    the grid, which reproduces a live run exactly.
+    Every sample goes through the time line first (:meth:`Engine.admit`): outliers are
+    dropped, and a clock jump back or beyond :data:`RESTART_AFTER_S` gets a last tick of
+    the old segment, then :meth:`Engine.start_segment` and a new grid from the new
+    segment's first stamp. Ticks fall on the grid ``t0 + k / rate_hz`` from the (segment's)
+    first sample's time ``t0``; each tick at time ``T`` sees exactly the samples with
+    ``t <= T``. Across a gap in the log longer than ``gap_s`` seconds the grid jumps
+    forward instead of ticking through empty time. With ``tick_times`` (a recording of
+    live ticks) those times are used instead of the grid and the time line, which
+    reproduces a live run exactly.
     """
     period = 1.0 / engine.cfg.engine.rate_hz
     ticks = 0
@@ -504,22 +577,36 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
     t0 = None
     k = 0
     next_t = math.inf
-    for s in samples:
-        if t0 is None:
-            t0 = s.t
-            next_t = t0
-        if s.t > next_t:
-            if s.t - next_t > gap_s:
-                on_tick(next_t, engine.tick(next_t))
-                ticks += 1
-                k = math.floor((s.t - t0) / period)
-                next_t = t0 + k * period
-            while s.t > next_t:
-                on_tick(next_t, engine.tick(next_t))
-                ticks += 1
-                k += 1
-                next_t = t0 + k * period
-        engine.push(s)
+    for s_in in samples:
+        released = engine.admit(s_in)
+        if not released:
+            continue
+        jump = engine.timeline.jump
+        if jump is not None and t0 is not None and not 0.0 <= jump.step_s <= RESTART_AFTER_S:
+            # a new segment: tick what the old one has, then a new grid from its first stamp
+            on_tick(next_t, engine.tick(next_t))
+            ticks += 1
+            t0 = None
+        if jump is not None:
+            engine.start_segment(jump)
+        for s in released:
+            if t0 is None:
+                t0 = s.t
+                next_t = t0
+                k = 0
+            if s.t > next_t:
+                if s.t - next_t > gap_s:
+                    on_tick(next_t, engine.tick(next_t))
+                    ticks += 1
+                    k = math.floor((s.t - t0) / period)
+                    next_t = t0 + k * period
+                while s.t > next_t:
+                    on_tick(next_t, engine.tick(next_t))
+                    ticks += 1
+                    k += 1
+                    next_t = t0 + k * period
+            engine.push(s)
+    engine.finish()
     if t0 is not None:
         on_tick(next_t, engine.tick(next_t))
         ticks += 1

@@ -12,7 +12,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Iterable, Iterator, Sequence
+from typing import Iterable, Iterator, Mapping, Sequence
 
 import msgspec
 
@@ -174,8 +174,8 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         ticks = run(engine, source, csv.write)
     csv.close()
     meter.done()
-    t_end = max(engine.t_newest, first.t)
-    span = t_end - first.t
+    time_span = _time_span(engine, first.t)
+    span = time_span["duration_s"]
     kinds: dict[str, int] = {}
     for (kind, _), n in engine.accepted.items():
         kinds[kind] = kinds.get(kind, 0) + n
@@ -187,7 +187,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "vehicle_id": cfg.vehicle.id,
         "pipelines": [p.name for p in engine.pipelines],
         "columns": engine.columns,
-        "time_span": {"start": first.t, "end": t_end, "duration_s": span},
+        "time_span": time_span,
         "read": reader.stats.as_dict(),
         "samples_accepted_by_type": dict(sorted(kinds.items())),
         "rates_hz": {k: (n / span if span > 0 else None) for k, n in sorted(kinds.items())},
@@ -201,7 +201,8 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "ticks": ticks,
         "rows": csv.rows,
         "rate_hz": cfg.engine.rate_hz,
-        "warnings": msgspec.to_builtins(list(run_warnings(engine, kinds, cfg, header))),
+        "warnings": msgspec.to_builtins(list(run_warnings(
+            engine, kinds, cfg, header, reader.stats.rejected))),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
@@ -210,6 +211,18 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         summary["figure"] = _plot_track(out_dir)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def _time_span(engine: Engine, t_first: float) -> dict:
+    """``start`` and ``end`` (s, log clock) of the run, ``duration_s`` the sum of its
+    segments' durations (the time between segments is not counted), and ``segments``:
+    each segment's start, end and duration (:mod:`onboard.timeline`). A recording replayed
+    at its recorded ticks has one segment, from the first sample to the newest."""
+    segments = [(s.start, s.end) for s in engine.timeline.segments] or \
+        [(t_first, max(engine.t_newest, t_first))]
+    return {"start": segments[0][0], "end": segments[-1][1],
+            "duration_s": sum(b - a for a, b in segments),
+            "segments": [{"start": a, "end": b, "duration_s": b - a} for a, b in segments]}
 
 
 POSITION_KINDS = {"gnss", "dvl_position"}
@@ -231,14 +244,21 @@ kinds of which the log must have one each."""
 
 
 def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
-                 header: Sequence[Sample] = ()) -> Alerts:
+                 header: Sequence[Sample] = (),
+                 read_rejected: Mapping[str, int] | None = None) -> Alerts:
     """The engine's warnings and those of the whole run: the log's HEARTBEAT and servo
-    functions against ``cfg`` (:func:`onboard.autodetect.consistency`), no position
-    source, and every pipeline that gave no estimate with what it lacked (``kinds``:
-    accepted samples by kind)."""
+    functions against ``cfg`` (:func:`onboard.autodetect.consistency`), records the
+    reader dropped as time outliers (``read_rejected``: its rejections by reason), no
+    position source, and every pipeline that gave no estimate with what it lacked
+    (``kinds``: accepted samples by kind)."""
     alerts = engine.alerts
     for code, message in consistency(cfg, header):
         alerts.warn(code, message)
+    n_out = (read_rejected or {}).get("time_outlier", 0)
+    if n_out:
+        alerts.warn("time_outlier", f"the reader dropped {n_out} record(s) stamped far from "
+                    "the records around them (a corrupted or mistyped time); the records "
+                    "after them were kept")
     have = {k for k, n in kinds.items() if n > 0}
     if not have & POSITION_KINDS:
         alerts.warn("no_position_source", "no position source in the log (no GNSS fix, no "

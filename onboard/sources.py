@@ -174,6 +174,14 @@ class SourceSelector:
             return self._admit_fix(sample)  # type: ignore[arg-type]
         return sample if self._select(self._q[q], sample) else None
 
+    def shift(self, dt_s: float) -> None:
+        """The clock jumped by ``dt_s`` (s; :mod:`onboard.timeline`): move every source's
+        times with it, so that each keeps its age and the active sources stay active."""
+        for q in self._q.values():
+            q.last = {k: v + dt_s for k, v in q.last.items()}
+            q.since = {k: v + dt_s for k, v in q.since.items()}
+            q.t_start += dt_s
+
     def _admit_fix(self, s: GnssFix) -> Sample | None:
         pos = self._select(self._q["position"], s)
         if s.sog_mps is None or s.cog_rad is None:

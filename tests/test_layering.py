@@ -16,8 +16,8 @@ The rooms, from the bottom up (docs/architecture.md has the picture):
   (``sitl.closed_loop``) also runs the onboard engine, because the closed loop is the
   experiment.
 * ``onboard.engine``, ``onboard.validate``, ``onboard.corrections``, ``onboard.depth``,
-  ``onboard.inputs``, ``onboard.sources``, ``onboard.latency``, ``onboard.innovations``:
-  time-ordered feeding of validated, corrected samples, one source per quantity, into the
+  ``onboard.inputs``, ``onboard.sources``, ``onboard.latency``, ``onboard.innovations``,
+  ``onboard.timeline``: time-ordered feeding of validated, corrected samples, one source per quantity, into the
   pipelines, and the summary of their innovations.
 * ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
 * ``onboard.closure``: model closure on recorded logs.
@@ -43,7 +43,7 @@ PIPELINES = MATH | {"onboard.pipelines"}
 ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs",
                       "onboard.sources", "onboard.alerts"}
 ENGINE_PARTS = {"onboard.corrections", "onboard.depth", "onboard.latency",
-                "onboard.innovations", "onboard.integrity"}
+                "onboard.innovations", "onboard.integrity", "onboard.timeline"}
 """The engine's own modules: only the engine imports them."""
 SERVICE = ENGINE | {"onboard.drivers", "onboard.service"}
 CLOSURE = ENGINE | {"onboard.drivers", "onboard.closure", "onboard.replay", "onboard.plots",
@@ -64,6 +64,7 @@ ROOMS: dict[str, set[str]] = {
     "onboard.latency": PIPELINES,
     "onboard.innovations": CORE,
     "onboard.integrity": CORE | {"onboard.alerts", "onboard.innovations"},
+    "onboard.timeline": CORE,
     "onboard.alerts": CORE,
     "onboard.inputs": CORE,
     "onboard.sources": CORE,

@@ -1,0 +1,211 @@
+"""Time that cannot be fooled (issue 22, item 6): a single stamp far in the future or the
+past is a counted ``time_outlier`` and the samples after it are kept; a real clock jump
+starts a new segment, durations count the segments; nothing spins.
+
+Before: one CSV stamp moved +1e12 ms made the replay spin for over ten minutes (the
+current filter predicted across 1e9 s in 0.1 s steps); +1e8 ms rejected every later row
+as ``time_backwards`` and reported a 100,150 s duration.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from onboard.cli import main as cli_main
+from onboard.core.messages import Imu
+from onboard.drivers.dataflash import DataflashReader
+from onboard.timeline import CONFIRM_STAMPS, TIME_JUMP_S, Timeline
+from tests.helpers import dataflash_log as df
+
+REPO = Path(__file__).resolve().parents[1]
+CSV = REPO / "tests/data/csv/blueboat-run.csv"
+CONFIG = REPO / "config/blueboat-ntnu-csv.toml"
+BAD_ROW = 7
+"""The row (1-based, after the header; every column filled) whose stamp the tests move.
+The file also has a row 0.3 s back (``time_backwards``), one short row (``malformed``)
+and an empty heading."""
+
+
+def imu(t: float) -> Imu:
+    return Imu(t=t, accel_x=0.0, accel_y=0.0, accel_z=-9.81, gyro_x=0.0, gyro_y=0.0,
+               gyro_z=0.0)
+
+
+def admit_all(tl: Timeline, times: list[float]) -> list[float]:
+    out = [s.t for t in times for s in tl.admit(imu(t))]
+    tl.flush()
+    return out
+
+
+# ------------------------------------------------------------------- the rule itself
+
+def test_a_single_stamp_far_ahead_is_an_outlier_and_the_later_samples_are_kept():
+    tl = Timeline()
+    assert admit_all(tl, [0.0, 0.1, 1e9, 0.2, 0.3, 0.4]) == [0.0, 0.1, 0.2, 0.3, 0.4]
+    assert [s.t for s in tl.outliers] == [1e9]
+    assert len(tl.segments) == 1 and tl.duration_s == pytest.approx(0.4)
+
+
+def test_a_single_stamp_far_back_is_an_outlier_too():
+    tl = Timeline()
+    assert admit_all(tl, [500.0, 500.1, 0.0, 500.2, 500.3]) == [500.0, 500.1, 500.2, 500.3]
+    assert [s.t for s in tl.outliers] == [0.0]
+
+
+def test_a_clock_that_goes_back_and_stays_there_is_a_jump_with_two_segments():
+    tl = Timeline()
+    released = []
+    for t in [500.0, 500.1, 500.2, 3.0, 3.1, 3.2]:
+        released += [s.t for s in tl.admit(imu(t))]
+        if tl.jump is not None:
+            jump = tl.jump
+    assert released == [500.0, 500.1, 500.2, 3.0, 3.1, 3.2]  # nothing lost
+    assert jump.t_before == 500.2 and jump.t_after == 3.0
+    assert [(s.start, s.end) for s in tl.segments] == [(500.0, 500.2), (3.0, 3.2)]
+    assert tl.duration_s == pytest.approx(0.4)
+
+
+def test_a_stamp_is_held_only_until_its_side_has_CONFIRM_STAMPS_stamps():
+    tl = Timeline()
+    tl.admit(imu(0.0))
+    far = 2 * TIME_JUMP_S
+    held = [tl.admit(imu(far + 0.1 * k)) for k in range(CONFIRM_STAMPS)]
+    assert all(r == [] for r in held[:-1]) and len(held[-1]) == CONFIRM_STAMPS
+
+
+def test_samples_still_held_when_the_run_ends_are_outliers():
+    tl = Timeline()
+    assert admit_all(tl, [0.0, 0.1, 1e6]) == [0.0, 0.1]
+    assert [s.t for s in tl.outliers] == [1e6]
+
+
+# --------------------------------------------------------------- replays of a CSV log
+
+def moved_csv(tmp_path: Path, shift_ms: float, rows: range = range(BAD_ROW, BAD_ROW + 1)) -> Path:
+    """The BlueBoat test CSV with the stamps of ``rows`` moved by ``shift_ms``."""
+    lines = CSV.read_text().splitlines()
+    for i in rows:
+        cells = lines[i].split(",")
+        cells[0] = repr(float(cells[0]) + shift_ms)
+        lines[i] = ",".join(cells)
+    path = tmp_path / "moved.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def replay(tmp_path: Path, log: Path, config: Path | None = CONFIG) -> dict:
+    out = tmp_path / "out"
+    args = ["--config", str(config)] if config else []
+    assert cli_main(["replay", str(log), *args, "--out", str(out), "--no-plot"]) == 0
+    return json.loads((out / "summary.json").read_text())
+
+
+def baseline(tmp_path: Path) -> dict:
+    return replay(tmp_path / "base", CSV)
+
+
+@pytest.mark.parametrize("shift_ms", [1e12, 1e8, -1e8])
+def test_one_csv_stamp_moved_far_is_an_outlier_and_the_rows_after_it_are_kept(
+        tmp_path, shift_ms):
+    base = baseline(tmp_path)
+    s = replay(tmp_path, moved_csv(tmp_path, shift_ms))
+    # the moved row is the only one lost, counted by the reader (drivers.csvlog._RowClock)
+    assert s["read"]["by_type"]["row"] == base["read"]["by_type"]["row"] - 1
+    assert s["read"]["rejected"] == {**base["read"]["rejected"], "time_outlier": 1}
+    # its 5 samples, no more (before: +1e8 ms lost every later row as time_backwards)
+    assert sum(base["accepted"].values()) - sum(s["accepted"].values()) == 5
+    # the duration of the unmoved file: 1.1 s (before: 100,150 s at +1e8 ms)
+    assert s["time_span"]["duration_s"] == pytest.approx(base["time_span"]["duration_s"])
+    assert len(s["time_span"]["segments"]) == 1
+    assert s["rows"] == base["rows"]
+    assert "time_outlier" in {w["code"] for w in s["warnings"]}
+
+
+def test_a_csv_clock_that_goes_back_loses_the_rows_until_it_catches_up(tmp_path):
+    """A clock stepped back inside one CSV run: the rows stay in time order (readers yield
+    samples in time order), so the rows behind are ``time_backwards``, as in a tlog.
+    The engine's time line makes segments of a clock that goes back when a reader passes
+    it on (test_a_clock_that_goes_back_and_stays_there_is_a_jump_with_two_segments)."""
+    base = baseline(tmp_path)
+    lines = CSV.read_text().splitlines()
+    s = replay(tmp_path, moved_csv(tmp_path, -400_000.0, range(BAD_ROW, len(lines))))
+    # rows 1-6 used; rows 7-15 rejected: 7 time_backwards (the 400 s step and the row
+    # 0.3 s back among them), the last row a time_outlier, one short row malformed; row 6
+    # has no heading (nan)
+    assert s["read"]["by_type"]["row"] == BAD_ROW - 1
+    assert s["read"]["rejected"] == {"malformed": 1, "nan": 1, "time_backwards": 7,
+                                     "time_outlier": 1}
+    assert len(s["time_span"]["segments"]) == 1
+
+
+def test_a_clock_that_jumps_1e9_s_ahead_and_stays_makes_a_segment_without_spinning(tmp_path):
+    """The pipelines restart from their state at the new segment (beyond
+    onboard.engine.RESTART_AFTER_S): none of them predicts across 1e9 s (0.4 s here)."""
+    base = baseline(tmp_path)
+    lines = CSV.read_text().splitlines()
+    s = replay(tmp_path, moved_csv(tmp_path, 1e12, range(BAD_ROW, len(lines))))
+    assert len(s["time_span"]["segments"]) == 2
+    assert s["time_span"]["duration_s"] == pytest.approx(
+        base["time_span"]["duration_s"] - 0.05)
+    assert s["read"]["rejected"] == base["read"]["rejected"]
+    assert sum(s["accepted"].values()) == sum(base["accepted"].values())
+    assert "time_jump" in {w["code"] for w in s["warnings"]}
+    assert s["ticks"] < 2 * base["ticks"]
+
+
+# -------------------------------------------------------------------- DataFlash bytes
+
+def test_a_dataflash_record_stamped_far_ahead_is_an_outlier_and_costs_nothing_else(tmp_path):
+    """Before: flipped bytes in small.BIN gave a "14627691589702.8 s" duration, and one
+    record far ahead emptied the re-ordering window: later records were ``time_backwards``."""
+    bad = df.record("IMU2", 2**62 + 700_000, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8)
+    data = df.synthetic_log()
+    good = tmp_path / "good.bin"
+    good.write_bytes(data)
+    expected = [s.t for s in DataflashReader(good)]
+    cut = data.index(df.record("ATT", 1_000_010, 0, 150, 0, -200, 0, 9000, 0, 0, 3))
+    for name, content in [("end.bin", data + bad), ("mid.bin", data[:cut] + bad + data[cut:])]:
+        log = tmp_path / name
+        log.write_bytes(content)
+        reader = DataflashReader(log)
+        assert [s.t for s in reader] == expected  # the late IMU2 record re-ordered too
+        assert reader.stats.rejected == {"time_outlier": 1}
+    s = replay(tmp_path, log, config=None)
+    assert s["read"]["rejected"] == {"time_outlier": 1}
+    assert s["time_span"]["duration_s"] == pytest.approx(2.0, abs=0.01)  # 1.9999 s
+    assert "time_outlier" in {w["code"] for w in s["warnings"]}
+
+
+@pytest.mark.data
+def test_small_bin_is_24_s_of_data_in_two_segments_not_135_s(tmp_path, shared_data):
+    """ArduSub's small.BIN: 26.6 s of samples, then two parameter records 109 s later.
+    Before: "135.6 s"; now the two segments' 26.6 s and a ``time_jump`` warning."""
+    s = replay(tmp_path, shared_data / "ardusub_small_logs/small.BIN", config=None)
+    segments = s["time_span"]["segments"]
+    assert len(segments) == 2
+    assert segments[1]["start"] - segments[0]["end"] == pytest.approx(109.0, abs=0.1)
+    assert s["time_span"]["duration_s"] == pytest.approx(26.6, abs=0.1)  # 26.61 s
+    assert "time_jump" in {w["code"] for w in s["warnings"]}
+
+
+@pytest.mark.data
+def test_500_flipped_bytes_in_small_bin_give_a_duration_within_the_log(tmp_path, shared_data):
+    """Before: a "14627691589702.8 s" duration. Three seeds of 500 random bit flips."""
+    import random
+
+    clean = (shared_data / "ardusub_small_logs/small.BIN").read_bytes()
+    for seed in range(3):
+        data = bytearray(clean)
+        rng = random.Random(seed)
+        for _ in range(500):
+            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+        log = tmp_path / f"flipped{seed}.BIN"
+        log.write_bytes(bytes(data))
+        s = replay(tmp_path / str(seed), log, config=None)
+        # measured 30.8, 26.8, 35.0 s (clean: 26.6 s; a flipped low byte of TimeUS moves
+        # a stamp by less than TIME_JUMP_S and stays); each seed's bad stamps are counted
+        assert 20.0 < s["time_span"]["duration_s"] < 40.0
+        assert s["read"]["rejected"]["time_outlier"] > 0  # measured 13-22
