@@ -51,7 +51,11 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
                                      else opts.base_terms)
     except ValueError as err:
         raise UsageError(str(err)) from None
-    sel = select(ds, declared=declared, metric=opts.holdout_metric or None, known=opts.known)
+    try:
+        sel = select(ds, declared=declared, metric=opts.holdout_metric or None,
+                     known=opts.known)
+    except dataset.NotEnoughData as err:
+        raise UsageError(str(err)) from None
     doc = report.write(sel, log, out_dir)
     if write_config is not None:
         text = overlay.overlay_text(doc, cfg, sel, detected=detected, base_note=config_note)
