@@ -491,7 +491,8 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     engine = Engine(cfg, [col], select_sources=False, fresh_estimates=False)
     run(engine, reader, lambda t, r: None, gap_s=2.0)
     if not col.rows:
-        raise NotEnoughData(f"{path}: no samples")
+        raise NotEnoughData(f"{path}: no samples in time (no time-stamped heading, "
+                            "position, velocity or command the engine could use)")
     cols = list(zip(*col.rows))
     (t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs, cl, cr,
      ax, ay) = (np.array(c) for c in cols)
