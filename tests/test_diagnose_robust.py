@@ -5,7 +5,7 @@ ground, a split part too short).
 
 Before the fix a single run of less than ~160 s left the selection part empty (60 s
 blocks, every third for selection) and the first effect or generic basis on it raised
-(numpy ``gradient`` or a zero-size ``max``): the survey boat's Test2-6, 14 of the 16
+(numpy ``gradient`` or a zero-size ``max``): the survey boat's Test2-6, 12 of the 16
 single BlueBoat runs, half of ``small.tlog``. Such runs now get shorter blocks; below
 :data:`onboard.closure.dataset.MIN_DATA_S` (50 s) they are refused (docs/diagnose.md,
 "What diagnose refuses").
