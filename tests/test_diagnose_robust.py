@@ -195,8 +195,8 @@ REAL_LOGS = [
     ("survey_boat_arduino_rc/Test5_acceleration.txt", SURVEY, "ok"),
     ("survey_boat_arduino_rc/Test6_slow.txt", SURVEY, "ok"),
     ("blueboat_sysid_ntnu/fixed_00000226.csv", BLUEBOAT, "ok"),
-    # tracebacks before the fix, now refused: 48.2 s of data
-    ("blueboat_sysid_ntnu/fixed_00000216.csv", BLUEBOAT, "too short: 48.2 s"),
+    # tracebacks before the fix, now refused: 483 ticks, 48.3 s of data
+    ("blueboat_sysid_ntnu/fixed_00000216.csv", BLUEBOAT, "too short: 48.3 s"),
     # refused before and after, now naming what is missing
     ("survey_boat_arduino_rc/Test1_counterclockwise.TXT", SURVEY, "no velocity over ground"),
     ("ardusub_small_logs/small.BIN", None, "no velocity over ground"),
