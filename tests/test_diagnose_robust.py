@@ -158,7 +158,8 @@ def test_a_gap_that_leaves_a_part_too_short_is_refused_naming_the_part():
     # selection part (the third block, 302-454 s) falls in the gap
     t = np.r_[np.arange(0.0, 60.0, 0.1), np.arange(560.0, 568.0, 0.1)]
     ds = from_arrays(t, 0.01 * t, np.ones_like(t), np.zeros_like(t), source="gappy")
-    with pytest.raises(NotEnoughData, match=r"gappy: too short: 68 s .* leave the selection part 0\.0 s"):
+    with pytest.raises(NotEnoughData,
+                       match=r"gappy: too short: 68 s .* leave the selection part 0\.0 s"):
         split(ds)
 
 
