@@ -35,7 +35,9 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     detected from the log, so the overlay carries its vehicle and inputs).
     ``base_terms``: the base model's optional terms to fit (default: the config's
     ``base_terms``, else :data:`onboard.closure.dataset.DEFAULT_BASE_TERMS`;
-    :func:`onboard.closure.dataset.with_base_terms`).
+    :func:`onboard.closure.dataset.with_base_terms`). A log without what model closure
+    needs (a heading, a velocity over ground, 50 s of both: docs/diagnose.md, "What
+    diagnose refuses") is a :class:`UsageError` naming it.
     """
     opts = cfg.diagnose
     declared = tuple(declared) or tuple(opts.declared)
@@ -44,14 +46,18 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
         raise UsageError(f"unknown declared effect(s) {unknown}; known: {', '.join(ALL)}")
     try:
         ds = dataset.from_log(log, cfg, rate_hz=opts.rate_hz)
-    except ValueError as err:
+    except dataset.NotEnoughData as err:  # what is missing; any other error is a bug
         raise UsageError(str(err)) from None
     try:
         ds = dataset.with_base_terms(ds, base_terms if base_terms is not None
                                      else opts.base_terms)
     except ValueError as err:
         raise UsageError(str(err)) from None
-    sel = select(ds, declared=declared, metric=opts.holdout_metric or None, known=opts.known)
+    try:
+        sel = select(ds, declared=declared, metric=opts.holdout_metric or None,
+                     known=opts.known)
+    except dataset.NotEnoughData as err:
+        raise UsageError(str(err)) from None
     doc = report.write(sel, log, out_dir)
     if write_config is not None:
         verdicts = overlay_check.check(overlay.sections(doc, cfg, sel), log, cfg, sel)

@@ -43,6 +43,23 @@ from onboard.engine import Engine, run
 from onboard.inputs import column_names
 
 
+class NotEnoughData(ValueError):
+    """The log lacks what model closure needs (a heading, a velocity over ground, enough
+    time with both): ``onboard diagnose`` refuses it with one line naming what is
+    missing (exit status 2)."""
+
+
+MIN_TICKS = 50
+"""Fewest ticks with both a heading and a velocity over ground :func:`from_log` builds a
+dataset of (5 s at the default 10 Hz: the smoothed derivatives need a window)."""
+
+MIN_DATA_S = 50.0
+"""Least data (s with both a heading and a velocity over ground) model closure works on:
+the test part is the last fifth, and each part needs
+:data:`onboard.closure.select.MIN_PART_S` (10 s). Shorter logs are refused with this
+figure, by :func:`from_log` below :data:`MIN_TICKS` and by the split above it."""
+
+
 class _Collector:
     """A pipeline that records the newest measured value of each channel per tick."""
 
@@ -474,15 +491,13 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     engine = Engine(cfg, [col], select_sources=False, fresh_estimates=False)
     run(engine, reader, lambda t, r: None, gap_s=2.0)
     if not col.rows:
-        raise ValueError(f"{path}: no samples")
+        raise NotEnoughData(f"{path}: no samples in time (no time-stamped heading, "
+                            "position, velocity or command the engine could use)")
     cols = list(zip(*col.rows))
     (t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs, cl, cr,
      ax, ay) = (np.array(c) for c in cols)
     t = t.astype(float)
-    ok = np.isfinite(psi.astype(float)) & np.isfinite(v_n.astype(float)) & np.isfinite(
-        v_e.astype(float))
-    if ok.sum() < 50:
-        raise ValueError(f"{path}: fewer than 50 ticks with both heading and velocity over ground")
+    ok = _usable_ticks(path, psi.astype(float), v_n.astype(float), v_e.astype(float), rate_hz)
     idx = np.flatnonzero(ok)
     # Keep the longest stretches; breaks in time become separate runs.
     t = t[idx]
@@ -504,3 +519,31 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
         cmd_right=cr[idx].astype(float) if np.isfinite(cr.astype(float)).any() else None,
         acc_x=ax if has_acc else None, acc_y=ay if has_acc else None)
     return ds
+
+
+def _usable_ticks(path: str, psi: np.ndarray, v_n: np.ndarray, v_e: np.ndarray,
+                  rate_hz: float) -> np.ndarray:
+    """The ticks with both a heading and a velocity over ground (a boolean mask); a
+    :class:`NotEnoughData` naming what is missing when the log has no heading, no
+    velocity over ground, or fewer than :data:`MIN_TICKS` ticks with both."""
+    has_psi = np.isfinite(psi)
+    has_v = np.isfinite(v_n) & np.isfinite(v_e)
+    if not has_psi.any():
+        raise NotEnoughData(f"{path}: no heading (no compass, attitude or true heading in "
+                            "the log); model closure needs one")
+    if not has_v.any():
+        raise NotEnoughData(f"{path}: no velocity over ground (no GNSS fix, Doppler or "
+                            "INS/DVL velocity in the log); model closure needs one")
+    ok = has_psi & has_v
+    if ok.sum() < MIN_TICKS:
+        raise NotEnoughData(too_short(path, ok.sum() / rate_hz,
+                                      f" (heading {has_psi.sum() / rate_hz:.0f} s, velocity "
+                                      f"{has_v.sum() / rate_hz:.0f} s)"))
+    return ok
+
+
+def too_short(path: str, seconds: float, detail: str = "") -> str:
+    """The one line that refuses ``path`` for holding only ``seconds`` of data with both
+    heading and velocity over ground (``detail`` follows the figure)."""
+    return (f"{path}: too short: {seconds:.1f} s with both heading and velocity over "
+            f"ground{detail}; model closure needs at least {MIN_DATA_S:.0f} s")

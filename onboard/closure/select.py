@@ -24,7 +24,8 @@ import numpy as np
 
 from onboard.closure import drift
 from onboard.closure import model as M
-from onboard.closure.dataset import Dataset, concat, lag_commands, segment_starts
+from onboard.closure.dataset import (MIN_DATA_S, Dataset, NotEnoughData, concat, lag_commands,
+                                     segment_starts, too_short)
 from onboard.closure.effects import ALL, Context
 from onboard.closure.effects import actuator_mapping as am
 
@@ -68,6 +69,12 @@ def _part_summary(ds: Dataset, t0: float, runs: list[str] | None = None) -> dict
     return out
 
 
+MIN_PART_S = 10.0
+"""Least data (s, ticks times the tick interval) in each of the fit, selection and test
+parts: at the default 10 Hz, 100 ticks. A shorter part is no test of anything:
+:func:`split` shrinks its blocks to reach it, and refuses the log when it cannot."""
+
+
 def split(ds: Dataset, block_s: float = 60.0, test_share: float = 0.2) -> Split:
     """Fit, selection and test parts.
 
@@ -76,10 +83,46 @@ def split(ds: Dataset, block_s: float = 60.0, test_share: float = 0.2) -> Split:
       are fitted on.
     * One run: the last ``test_share`` of the time span is the test part (forward in time:
       the model is scored on what came after everything it saw); before it, interleaved
-      ``block_s`` blocks, every third for selection, the others fitted on.
+      ``block_s`` blocks, every third for selection, the others fitted on. When that
+      leaves the selection part shorter than :data:`MIN_PART_S` (a log of less than
+      about 160 s at 60 s blocks) the blocks shrink to a third of the time before the
+      test part.
 
-    Blocks get their own run labels, so open-loop predictions restart at each.
+    Blocks get their own run labels, so open-loop predictions restart at each. A log
+    with less than :data:`onboard.closure.dataset.MIN_DATA_S` of data, or too gappy to
+    give every part :data:`MIN_PART_S`, is a :class:`onboard.closure.dataset.NotEnoughData`.
     """
+    if _seconds(ds) < MIN_DATA_S:
+        raise NotEnoughData(too_short(ds.source or "log", _seconds(ds)))
+    sp = _split(ds, block_s, test_share)
+    if sp.parts["method"] == "forward_in_time" and _seconds(sp.holdout) < MIN_PART_S:
+        before_test = (1.0 - test_share) * float(ds.t[-1] - ds.t[0])
+        sp = _split(ds, before_test / 3.0, test_share)
+    _require_parts(ds, sp)
+    return sp
+
+
+def _seconds(ds: Dataset) -> float:
+    """Data in ``ds`` (s): its ticks times the tick interval, gaps not counted."""
+    return len(ds) * ds.dt
+
+
+def _require_parts(ds: Dataset, sp: Split) -> None:
+    """A :class:`NotEnoughData` naming the log and the shortest part unless every part
+    of ``sp`` holds :data:`MIN_PART_S` of data."""
+    parts = {"fit": sp.fit, "selection": sp.holdout, "test": sp.test}
+    name, part = min(parts.items(), key=lambda kv: _seconds(kv[1]))
+    if _seconds(part) < MIN_PART_S:
+        short = math.floor(10.0 * _seconds(part)) / 10.0  # 9.98 s reads 9.9, not 10.0
+        raise NotEnoughData(
+            f"{ds.source or 'log'}: too short: {_seconds(ds):.0f} s with both heading and "
+            f"velocity over ground leave the {name} part {short:.1f} s "
+            f"({sp.parts['method'].replace('_', ' ')}); each part needs at least "
+            f"{MIN_PART_S:.0f} s")
+
+
+def _split(ds: Dataset, block_s: float, test_share: float) -> Split:
+    """:func:`split` with blocks of ``block_s`` seconds, the parts' lengths unchecked."""
     runs = [r.split("#")[0] for r in ds.run]
     names = sorted(set(runs))
     t0 = float(ds.t[0]) if len(ds) else 0.0
