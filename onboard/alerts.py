@@ -25,9 +25,13 @@ class Alerts:
         dropped: warnings not kept beyond :data:`MAX_ALERTS`.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, events: list[str] | None = None) -> None:
+        """``events``: a list each new warning (not the extension of one) is also told
+        to, as one line (the engine's health events: STATUSTEXT, the Zenoh health, the
+        shore view)."""
         self._items: list[Alert] = []
         self._open: dict[tuple[str, str], int] = {}
+        self._events = events
         self.dropped = 0
 
     def warn(self, code: str, message: str, t: float | None = None, *, pipeline: str = "",
@@ -51,6 +55,8 @@ class Alerts:
         self._open[key] = len(self._items)
         self._items.append(Alert(code=code, pipeline=pipeline, message=message,
                                  t_start=t, t_end=t_end))
+        if self._events is not None:
+            self._events.append(f"{code}: {message}")
 
     def __iter__(self):
         return iter(self._items)

@@ -213,15 +213,16 @@ class Engine:
         self.pipeline_errors: Counter[str] = Counter()
         self.nonfinite: Counter[str] = Counter()
         self.monitor = InnovationMonitor()
-        self.alerts = Alerts()
-        """Warnings for the user (pipeline restarts; the replay adds its own)."""
+        self.events: list[str] = []
+        """Human-readable events (pipeline restarts, stale streams) for the health
+        channel; each is in one :meth:`health` record (the next after it happened)."""
+        self.alerts = Alerts(self.events)
+        """Warnings for the user (pipeline restarts, integrity; the replay adds its own);
+        each new one is also an event."""
         self.integrity = IntegrityMonitor(self.alerts, cfg.vehicle.vehicle_class,
                                           cfg.sensors.gnss.position_std_m)
         """Each estimate against the independent measurements (:mod:`onboard.integrity`):
         warnings, flags, and the values it withholds."""
-        self.events: list[str] = []
-        """Human-readable events (pipeline restarts, stale streams) for the health
-        channel; each is in one :meth:`health` record (the next after it happened)."""
         self._events_reported = 0
         self.selector = SourceSelector(cfg.sources, self.events)
         self.select_sources = select_sources
@@ -469,7 +470,6 @@ class Engine:
         """Count a pipeline's failure, report it, and restart it from its configuration
         (its adaptive state is lost; the other pipelines carry on)."""
         self.pipeline_errors[p.name] += 1
-        self.events.append(f"{p.name}: {type(err).__name__}: {err}; restarted")
         self.alerts.warn("pipeline_restarted",
                          f"{p.name} failed ({type(err).__name__}: {err}) and was restarted "
                          "from its configuration; what it had learned is lost",

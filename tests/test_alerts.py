@@ -30,3 +30,11 @@ def test_a_whole_run_warning_has_no_times_and_the_list_is_bounded() -> None:
     for i in range(alerts_mod.MAX_ALERTS + 5):
         a.warn(f"code{i}", "x", float(i))
     assert len(a) == alerts_mod.MAX_ALERTS and a.dropped == 6
+
+
+def test_each_new_warning_is_also_an_event_once() -> None:
+    events: list[str] = []
+    a = Alerts(events)
+    a.warn("heading_course_mismatch", "off by 74 deg", 1.0, pipeline="aie")
+    a.warn("heading_course_mismatch", "off by 75 deg", 2.0, pipeline="aie")   # extends
+    assert events == ["heading_course_mismatch: off by 74 deg"]

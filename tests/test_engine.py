@@ -199,7 +199,7 @@ def test_a_failing_pipeline_is_counted_restarted_and_the_others_carry_on(monkeyp
     assert eng.pipeline_errors["broken"] == 1
     h = eng.health(1.0)
     assert h.rejected["pipeline:broken:error"] == 1
-    assert any("broken: ValueError" in e for e in h.events)
+    assert any("broken failed (ValueError" in e for e in h.events)
 
 
 class HalfKnown(Recorder):

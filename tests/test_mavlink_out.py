@@ -150,3 +150,21 @@ def test_each_innovation_channel_feeds_the_estimator_status_ratio_of_its_kind(ch
     from onboard.service.publishers.mavlink_pub import ratio_kind
 
     assert ratio_kind(channel) == kind
+
+
+@pytest.mark.integration
+def test_a_position_flagged_by_the_integrity_checks_is_not_claimed(listener):
+    """ESTIMATOR_STATUS claims a relative horizontal position only while no pipeline's
+    position disagrees with GNSS beyond its sigma (``position_residual``)."""
+    port = listener.getsockname()[1]
+    pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), system_id=7,
+                           clock=lambda: 10.0)
+    pub.start()
+    pub.publish_estimates(_records(), now=10.0)
+    pub.publish_health(HealthRecord(vehicle="b", t=10.0), now=10.0)
+    pub.publish_health(HealthRecord(vehicle="b", t=11.0,
+                                    flags={"aie": ["position_residual"]}), now=11.0)
+    pub.close()
+    st = [m for m in receive_mavlink(listener) if m.get_type() == "ESTIMATOR_STATUS"]
+    assert st[0].flags & mavlink2.ESTIMATOR_POS_HORIZ_REL
+    assert not st[1].flags & mavlink2.ESTIMATOR_POS_HORIZ_REL

@@ -339,7 +339,8 @@ class MavlinkPublisher:
         vals = {q for r in self._latest.values() for q in r.values}
         if {"speed", "north"} & vals or "current" in self._latest:
             flags |= mavlink2.ESTIMATOR_VELOCITY_HORIZ
-        if {"north", "east"} <= vals:
+        position_flagged = any("position_residual" in f for f in health.flags.values())
+        if {"north", "east"} <= vals and not position_flagged:
             flags |= mavlink2.ESTIMATOR_POS_HORIZ_REL
         gnss_rej = sum(n for k, n in health.rejected.items() if k.startswith("gnss:"))
         if gnss_rej > self._gnss_rejected:
