@@ -12,14 +12,17 @@ Options in the config's ``[diagnose]`` table (:class:`onboard.core.config.Diagno
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+
+import msgspec
 
 from onboard.drivers.base import UnreadableLog
 from onboard.closure import dataset, overlay, overlay_check, report
 from onboard.closure.effects import ALL
 from onboard.closure.select import select
 from onboard.core.errors import UsageError
-from onboard.replay import choose_config
+from onboard.replay import choose_config, print_warnings
 
 
 def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
@@ -59,6 +62,10 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     except dataset.NotEnoughData as err:
         raise UsageError(str(err)) from None
     doc = report.write(sel, log, out_dir)
+    if ds.warnings:   # what reading the log raised (time outliers, jumps), beside the fit
+        doc["warnings"] = msgspec.to_builtins(ds.warnings)
+        doc["log_start_s"] = float(ds.t[0])
+        (out_dir / "diagnosis.json").write_text(json.dumps(doc, indent=2) + "\n")
     if write_config is not None:
         verdicts = overlay_check.check(overlay.sections(doc, cfg, sel), log, cfg, sel)
         doc = overlay_check.record(doc, verdicts, out_dir)
@@ -93,6 +100,7 @@ def main(args) -> int:
     for v in doc.get("overlay_check", []):
         print(overlay_check.Verdict(v["section"], v["written"], v["reason"],
                                     v["speed_rmse_before_mps"], v["speed_rmse_after_mps"]).line())
+    print_warnings(doc.get("warnings", []), doc.get("log_start_s", 0.0))
     if getattr(args, "write_config", None):
         base = " ".join(f"--config {c}" for c in args.config or [])
         print(f"config overlay: {args.write_config} (use: {base + ' ' if base else ''}"

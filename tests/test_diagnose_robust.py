@@ -274,3 +274,21 @@ def test_campaign_cut_and_flipped_real_logs(shared_data, tmp_path, name, config)
 def test_minimum_parts_add_up():
     # the test part is the last fifth: MIN_DATA_S gives it MIN_PART_S
     assert math.isclose(0.2 * MIN_DATA_S, MIN_PART_S)
+
+
+def test_what_reading_the_log_raised_is_printed_with_the_diagnosis(sitl_log, tmp_path,
+                                                                  capsys):
+    """A frame stamped a year after the rest (a corrupted clock) is dropped as a time
+    outlier; the diagnosis says so in diagnosis.json and at the end of its output."""
+    data = sitl_log.read_bytes()
+    # a tlog record: 8-byte big-endian time (us), then the MAVLink frame (v2: 0xFD, its
+    # payload length, 10 more header bytes, the payload, 2 checksum bytes)
+    t_us = int.from_bytes(data[:8], "big")
+    assert data[8] == 0xFD
+    frame = data[8:8 + 12 + data[9]]
+    log = tmp_path / "outlier.tlog"
+    log.write_bytes(data + (t_us + int(3.2e13)).to_bytes(8, "big") + frame)
+    assert cli.main(["diagnose", str(log), "--out", str(tmp_path / "out")]) == 0
+    doc = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
+    assert "time_outlier" in {w["code"] for w in doc["warnings"]}
+    assert "time_outlier" in capsys.readouterr().out

@@ -187,6 +187,9 @@ class Dataset:
     """A skid-steered boat's two thruster commands as logged (normalized), else None."""
     cmd_right: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+    """The engine's warnings while reading the log (``onboard.core.messages.Alert``: time
+    outliers and jumps, ...)."""
     actuator_lag_s: float = 0.0
     """Time constant (s) of the first-order lag already applied to the command channels
     (:func:`lag_commands`); 0 for the commands as logged."""
@@ -518,6 +521,7 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
         cmd_left=cl[idx].astype(float) if np.isfinite(cl.astype(float)).any() else None,
         cmd_right=cr[idx].astype(float) if np.isfinite(cr.astype(float)).any() else None,
         acc_x=ax if has_acc else None, acc_y=ay if has_acc else None)
+    ds.warnings = list(engine.alerts)
     return ds
 
 
