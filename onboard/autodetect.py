@@ -65,11 +65,9 @@ def _refine(m: ChannelMap, channel: int, params: dict[str, float]) -> ChannelMap
     return msgspec.structs.replace(m, **kw)
 
 
-def detect(samples: Iterable[Sample]) -> tuple[Config, str]:
-    """The config implied by the HEARTBEAT and parameter samples of a log.
-
-    Returns the config and a one-line explanation of the evidence used.
-    """
+def _evidence(samples: Iterable[Sample]) -> tuple[dict[str, float], int | None]:
+    """The parameters by name and the vehicle's most frequent HEARTBEAT ``MAV_TYPE``
+    (ground stations' left out; None without one) among ``samples``."""
     params: dict[str, float] = {}
     mav_types: list[int] = []
     for s in samples:
@@ -77,9 +75,17 @@ def detect(samples: Iterable[Sample]) -> tuple[Config, str]:
             params[s.name] = s.value
         elif isinstance(s, VehicleInfo) and s.mav_type not in _GCS_TYPES:
             mav_types.append(s.mav_type)
+    return params, (max(set(mav_types), key=mav_types.count) if mav_types else None)
+
+
+def detect(samples: Iterable[Sample]) -> tuple[Config, str]:
+    """The config implied by the HEARTBEAT and parameter samples of a log.
+
+    Returns the config and a one-line explanation of the evidence used.
+    """
+    params, mav_type = _evidence(samples)
     functions = _servo_functions(params)
     by_function = {f: ch for ch, f in sorted(functions.items(), reverse=True)}
-    mav_type = max(set(mav_types), key=mav_types.count) if mav_types else None
 
     if SERVO_THROTTLE_LEFT in by_function and SERVO_THROTTLE_RIGHT in by_function:
         base = configmod.load("twin-thruster-boat")
@@ -140,17 +146,10 @@ def consistency(cfg: Config, samples: Iterable[Sample]) -> list[tuple[str, str]]
     autopilot is a boat or rover, or the other way round) and
     ``actuator_mapping_incomplete`` (motor functions for fewer than the class's
     thrusters: the missing ones keep the defaults' channels)."""
-    params: dict[str, float] = {}
-    mav_types: list[int] = []
-    for s in samples:
-        if isinstance(s, Parameter):
-            params[s.name] = s.value
-        elif isinstance(s, VehicleInfo) and s.mav_type not in _GCS_TYPES:
-            mav_types.append(s.mav_type)
+    params, mav_type = _evidence(samples)
     out: list[tuple[str, str]] = []
     cls = cfg.vehicle.vehicle_class
-    if mav_types:
-        mav_type = max(set(mav_types), key=mav_types.count)
+    if mav_type is not None:
         boat = mav_type in (MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT)
         if (mav_type == MAV_TYPE_SUBMARINE and cls in SURFACE_CLASSES) or (
                 boat and cls in UNDERWATER_CLASSES):
