@@ -19,6 +19,27 @@ RECENT_STEPS = 20
 """Updates over which ``nis_recent`` averages (a running mean of weight 1/20)."""
 
 
+class RecentMean:
+    """The running mean of the recent values: weight ``1/n`` for the first
+    :data:`RECENT_STEPS`, then ``1/RECENT_STEPS`` (about the last 20).
+
+    Attributes:
+        n: values seen; value: the mean (0 before any).
+    """
+
+    __slots__ = ("n", "value")
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.value = 0.0
+
+    def add(self, x: float) -> float:
+        """One value; returns the mean."""
+        self.n += 1
+        self.value += max(1.0 / RECENT_STEPS, 1.0 / self.n) * (x - self.value)
+        return self.value
+
+
 def _finite(x: float) -> float | None:
     """``x``, or None when it is not finite (JSON has no NaN)."""
     return x if math.isfinite(x) else None
@@ -27,7 +48,7 @@ def _finite(x: float) -> float | None:
 class ChannelStats:
     """The running summary of one channel's innovations."""
 
-    __slots__ = ("n", "rejected", "reasons", "dof", "_nis_sum", "_accepted", "_recent",
+    __slots__ = ("n", "rejected", "reasons", "dof", "_nis_sum", "_recent",
                  "last", "_ratio_max")
 
     def __init__(self, dof: int) -> None:
@@ -36,8 +57,7 @@ class ChannelStats:
         self.reasons: dict[str, int] = {}
         self.dof = dof
         self._nis_sum = 0.0
-        self._accepted = 0
-        self._recent = 0.0
+        self._recent = RecentMean()
         self.last: Innovation | None = None
         self._ratio_max = 0.0
 
@@ -55,10 +75,8 @@ class ChannelStats:
             return
         if not math.isfinite(rec.nis):
             return
-        self._accepted += 1
         self._nis_sum += rec.nis
-        self._recent += max(1.0 / RECENT_STEPS, 1.0 / self._accepted) * (
-            rec.nis - self._recent)
+        self._recent.add(rec.nis)
 
     def snapshot(self, reset_max: bool = True) -> ChannelHealth:
         """The summary now; the largest test ratio starts afresh unless ``reset_max`` is
@@ -69,8 +87,8 @@ class ChannelStats:
             self._ratio_max = 0.0
         return ChannelHealth(
             n=self.n, rejected=self.rejected, reasons=dict(self.reasons), dof=self.dof,
-            nis_mean=_finite(self._nis_sum / self._accepted) if self._accepted else None,
-            nis_recent=_finite(self._recent) if self._accepted else None,
+            nis_mean=_finite(self._nis_sum / self._recent.n) if self._recent.n else None,
+            nis_recent=_finite(self._recent.value) if self._recent.n else None,
             nis=_finite(last.nis) if last is not None else None,
             test_ratio=_finite(last.test_ratio) if last is not None else None,
             test_ratio_max=_finite(ratio_max) if last is not None else None,

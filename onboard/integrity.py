@@ -41,7 +41,7 @@ from typing import Any, Iterable, Mapping, Sequence
 from onboard.alerts import Alerts
 from onboard.core.geo import LocalFrame
 from onboard.core.messages import Attitude, EstimateRecord, GnssFix, Heading, Innovation, Sample
-from onboard.innovations import RECENT_STEPS
+from onboard.innovations import RECENT_STEPS, RecentMean
 
 HEADING_MIN_SPEED_MPS = 0.5
 """Below this GNSS speed (m/s) the course over ground is too noisy to check a heading."""
@@ -234,21 +234,24 @@ class NisCheck:
     def __init__(self, dof: int) -> None:
         self.dof = dof
         self.band = nis_band(dof)
-        self.mean = 0.0
-        self._n = 0
+        self._mean = RecentMean()
         self.outside = 0
         """Updates in a row with the running mean outside the band."""
         self.first_failed: float | None = None
         """When (s) the check first failed: one warning per pipeline spans the run's
         failures, not one per excursion."""
 
+    @property
+    def mean(self) -> float:
+        """The running mean NIS of the recent accepted updates."""
+        return self._mean.value
+
     def add(self, nis: float) -> bool:
         """One accepted update's NIS; True when the running mean has been outside the
         band for :data:`NIS_SUSTAIN_UPDATES` updates in a row."""
-        self._n += 1
-        self.mean += max(1.0 / RECENT_STEPS, 1.0 / self._n) * (nis - self.mean)
+        mean = self._mean.add(nis)
         lo, hi = self.band
-        if self._n >= RECENT_STEPS and not lo <= self.mean <= hi:
+        if self._mean.n >= RECENT_STEPS and not lo <= mean <= hi:
             self.outside += 1
         else:
             self.outside = 0
