@@ -1,0 +1,114 @@
+"""The web page in a real browser: headless Chromium (Debian ``chromium``) loads the page
+fed by a 120 s simulator replay, and its screenshot shows the track and the current's
+arrow; served behind a reverse proxy under ``/extensionv2/onboard/`` (as BlueOS serves
+extensions), every request the page makes goes through the prefix and succeeds.
+
+Set ``ONBOARD_WEB_SCREENSHOT=docs/figures/web-page.png`` to keep the capture (the figure
+of docs/service.md)."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from onboard.service.web.app import routes
+from onboard.service.web.config_edit import ConfigEditor
+from onboard.service.web.http import HttpServer
+from tests.helpers.web import CHROMIUM_INSTALL, ServerThread, chromium, dump_dom, replay_view, screenshot
+
+pytestmark = [pytest.mark.integration,
+              pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")]
+
+TRACK_RGB = (0x1F, 0x6F, 0xD0)
+ARROW_RGB = (0xE0, 0x30, 0x1E)
+"""The page's track and current colours (static/page.js)."""
+PREFIX = "/extensionv2/onboard"
+
+
+@pytest.fixture(scope="module")
+def view():
+    return replay_view()  # effect-current, 120 s: current 0.29 m/s towards 329 deg
+
+
+def pixels_near(img, rgb: tuple[int, int, int], tol: int = 12) -> int:
+    """Pixels of ``img`` (H x W x 3|4, floats 0-1) within ``tol`` of ``rgb`` per channel."""
+    import numpy as np
+
+    a = (img[..., :3] * 255.0).round()
+    return int(np.all(np.abs(a - np.array(rgb)) <= tol, axis=-1).sum())
+
+
+def test_the_page_shows_the_track_and_the_current_arrow(view, tmp_path):
+    mpimg = pytest.importorskip("matplotlib.image")
+    out = tmp_path / "page.png"
+    with ServerThread(view=view) as srv:
+        run = screenshot(srv.url + "/", out, tmp_path / "profile")
+    assert run.returncode == 0 and out.exists(), run.stderr[-2000:]
+    img = mpimg.imread(out)
+    assert img.shape[:2] == (640, 1000)
+    map_part = img[:, :700]  # the panel is the right-hand 290 px
+    # measured on the 120 s replay: 1,669 track pixels, 146 arrow pixels (a blank map: 0)
+    assert pixels_near(map_part, TRACK_RGB) > 800
+    assert pixels_near(map_part, ARROW_RGB) > 60
+    if os.environ.get("ONBOARD_WEB_SCREENSHOT"):
+        shutil.copyfile(out, os.environ["ONBOARD_WEB_SCREENSHOT"])
+
+
+class PrefixProxy:
+    """A reverse proxy serving ``backend`` under ``prefix`` (strips it, forwards the
+    request, relays the answer), logging each request's path and status; anything
+    outside the prefix is answered 404."""
+
+    def __init__(self, backend_port: int, prefix: str) -> None:
+        self.backend_port = backend_port
+        self.prefix = prefix
+        self.port = 0
+        self.log: list[tuple[str, int]] = []
+        self._server: asyncio.AbstractServer | None = None
+
+    async def start(self) -> None:
+        self._server = await asyncio.start_server(self._client, "127.0.0.1", 0)
+        self.port = self._server.sockets[0].getsockname()[1]
+
+    async def close(self) -> None:
+        assert self._server is not None
+        self._server.close()
+        await self._server.wait_closed()
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        head = await reader.readuntil(b"\r\n\r\n")
+        method, target, rest = head.decode("latin-1").split(" ", 2)
+        if not target.startswith(self.prefix + "/"):
+            self.log.append((target, 404))
+            writer.write(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
+        else:
+            up_r, up_w = await asyncio.open_connection("127.0.0.1", self.backend_port)
+            up_w.write(f"{method} {target[len(self.prefix):]} {rest}".encode("latin-1"))
+            answer = await up_r.read()  # the backend closes after each answer
+            up_w.close()
+            self.log.append((target, int(answer.split(b" ", 2)[1])))
+            writer.write(answer)
+        await writer.drain()
+        writer.close()
+
+
+def test_behind_a_proxy_under_a_relative_path_every_request_of_the_page_succeeds(view, tmp_path):
+    backend = HttpServer(routes(view, ConfigEditor(["sitl-jaiabot"], editable=False)),
+                         "127.0.0.1", 0)
+    with ServerThread(backend):
+        proxy = PrefixProxy(backend.port, PREFIX)
+        with ServerThread(proxy):
+            dom = dump_dom(f"http://127.0.0.1:{proxy.port}{PREFIX}/", tmp_path / "profile")
+    paths = [p for p, _ in proxy.log]
+    assert all(status == 200 for _, status in proxy.log), proxy.log
+    assert f"{PREFIX}/" in paths and f"{PREFIX}/page.js" in paths
+    assert f"{PREFIX}/api/config" in paths
+    polls = [p for p in paths if p.startswith(f"{PREFIX}/api/state?")]
+    assert len(polls) >= 2, paths  # polled every second of the 4 s of virtual time
+    speed = re.search(r'id="speed"[^>]*>([^<]*)<', dom)
+    assert speed and re.fullmatch(r"\d+\.\d\d ± \d\.\d\d m/s", speed.group(1)), dom[:2000]
