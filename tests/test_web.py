@@ -294,3 +294,24 @@ def test_onboard_shore_web_serves_the_page_from_zenoh_whatever_the_encodings_sch
         shore.wait(10)
         pub.close()
         router.close()
+
+
+@pytest.mark.integration
+def test_idle_connections_beyond_the_limit_are_closed_and_the_page_still_answers_after():
+    from onboard.service.web.http import MAX_CLIENTS
+
+    with ServerThread(view=LiveView()) as srv:
+        idle = [socket.create_connection(("127.0.0.1", srv.server.port)) for _ in range(MAX_CLIENTS)]
+        time.sleep(0.2)
+        with socket.create_connection(("127.0.0.1", srv.server.port)) as extra:
+            extra.sendall(b"GET / HTTP/1.1\r\n\r\n")
+            extra.settimeout(5)
+            try:
+                answer = extra.recv(100)
+            except ConnectionResetError:  # closed with the request unread
+                answer = b""
+            assert answer == b""  # closed unanswered
+        for s in idle:
+            s.close()
+        time.sleep(0.2)
+        assert get(srv.url + "/")[0] == 200 and srv.server.refused == 1

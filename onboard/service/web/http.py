@@ -4,7 +4,8 @@ GET, HEAD and POST; the request line and headers within :data:`MAX_HEAD_BYTES`, 
 of at most :data:`MAX_BODY_BYTES` (``Content-Length``, no chunked uploads); one request
 per connection (``Connection: close``), every response with its ``Content-Length`` and
 ``Cache-Control: no-store``. A client that sends nothing for :data:`READ_TIMEOUT_S` is
-dropped. Handlers are plain functions of :class:`Request` returning :class:`Response`;
+dropped, and beyond :data:`MAX_CLIENTS` connections at once a new one is closed unanswered
+(idle clients cannot pile up in the service's loop). Handlers are plain functions of :class:`Request` returning :class:`Response`;
 one that raises answers 500 (logged), so the page can never stop the process that serves
 it. No dependency beyond the standard library: the vehicle install stays lean.
 """
@@ -22,6 +23,7 @@ log = logging.getLogger(__name__)
 MAX_HEAD_BYTES = 16384
 MAX_BODY_BYTES = 262144
 READ_TIMEOUT_S = 10.0
+MAX_CLIENTS = 32
 REASONS = {200: "OK", 400: "Bad Request", 404: "Not Found", 405: "Method Not Allowed",
            413: "Payload Too Large", 422: "Unprocessable Content", 500: "Internal Server Error"}
 
@@ -100,6 +102,9 @@ class HttpServer:
         self.port = port
         self.served = 0
         """Requests answered."""
+        self.refused = 0
+        """Connections closed unanswered because :data:`MAX_CLIENTS` were open."""
+        self._active = 0
         self._server: asyncio.AbstractServer | None = None
 
     async def start(self) -> None:
@@ -116,6 +121,17 @@ class HttpServer:
             self._server = None
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        if self._active >= MAX_CLIENTS:
+            self.refused += 1
+            writer.close()
+            return
+        self._active += 1
+        try:
+            await self._serve(reader, writer)
+        finally:
+            self._active -= 1
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         head_only = False
         try:
             async with asyncio.timeout(READ_TIMEOUT_S):

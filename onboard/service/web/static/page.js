@@ -18,6 +18,7 @@ const MIN_SPAN_M = 60;         // the smallest extent shown
 const MAX_TRACK_POINTS = 7200;
 const TILE_URL = 'https://tile.openstreetmap.org/{z}/{x}/{y}.png';
 const EARTH_RES = 156543.03392;  // Web Mercator metres per pixel at zoom 0 on the equator
+const MAX_TILES = 400;           // tiles kept in memory (the oldest dropped)
 
 let track = [];          // [t, north_m, east_m]
 let epoch = -1;
@@ -165,6 +166,7 @@ function tile(z, x, y) {
     t.img.onerror = () => { if (tilesLoaded === 0) { tilesFailed = true; draw(); } };
     t.img.src = TILE_URL.replace('{z}', z).replace('{x}', x).replace('{y}', y);
     tiles.set(key, t);
+    if (tiles.size > MAX_TILES) tiles.delete(tiles.keys().next().value);
   }
   return t;
 }
