@@ -120,7 +120,8 @@ def test_the_extensions_configuration_is_valid_over_each_vehicle_class(vehicle):
 def test_the_entrypoint_runs_the_files_the_image_installs():
     entry = (REPO / "blueos" / "entrypoint.sh").read_text()
     docker = DOCKERFILE.read_text()
-    assert "/opt/onboard/config/$vehicle.toml" in entry and "COPY config /opt/onboard/config" in docker
+    assert "/opt/onboard/config/$vehicle.toml" in entry
+    assert "COPY config /opt/onboard/config" in docker
     assert "--state-dir \"$data\"" in entry and DATA_BIND.endswith(":/data")
 
 
@@ -134,7 +135,8 @@ def test_the_mavlink_router_drop_in_feeds_the_input_and_takes_the_estimates():
     ini = configparser.ConfigParser()
     ini.read_string(DROP_IN.read_text())
     to_service, from_service = ini["UdpEndpoint onboard"], ini["UdpEndpoint onboard-out"]
-    assert (to_service["Mode"], to_service["Address"], to_service["Port"]) == ("Normal", "127.0.0.1", "14551")
+    assert (to_service["Mode"], to_service["Address"]) == ("Normal", "127.0.0.1")
+    assert to_service["Port"] == "14551"
     assert (from_service["Mode"], from_service["Port"]) == ("Server", "14552")
     doc = (REPO / "docs" / "blueos.md").read_text()
     assert 'url = "udp:127.0.0.1:14551"' in doc and 'url = "udpout:127.0.0.1:14552"' in doc

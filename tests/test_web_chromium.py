@@ -19,7 +19,8 @@ import pytest
 from onboard.service.web.app import routes
 from onboard.service.web.config_edit import ConfigEditor
 from onboard.service.web.http import HttpServer
-from tests.helpers.web import CHROMIUM_INSTALL, ServerThread, chromium, dump_dom, replay_view, screenshot
+from tests.helpers.web import (CHROMIUM_INSTALL, ServerThread, chromium, dump_dom, replay_view,
+                               screenshot)
 
 pytestmark = [pytest.mark.integration,
               pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")]
@@ -52,7 +53,7 @@ def test_the_page_shows_the_track_and_the_current_arrow(view, tmp_path, query):
     assert run.returncode == 0 and out.exists(), run.stderr[-2000:]
     img = mpimg.imread(out)
     assert img.shape[:2] == (640, 1000)
-    map_part = img[:, :700]  # the panel is the right-hand 290 px (the widget's: 190 px over the map)
+    map_part = img[:, :700]  # the panel: the right-hand 290 px (the widget's: 190 px over the map)
     # measured on the 120 s replay: 1,669 track pixels, 146 arrow pixels (a blank map: 0)
     assert pixels_near(map_part, TRACK_RGB) > 800
     assert pixels_near(map_part, ARROW_RGB) > 60
@@ -86,7 +87,8 @@ class PrefixProxy:
         method, target, rest = head.decode("latin-1").split(" ", 2)
         if not target.startswith(self.prefix + "/"):
             self.log.append((target, 404))
-            writer.write(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
+            writer.write(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n"
+                         b"Connection: close\r\n\r\n")
         else:
             up_r, up_w = await asyncio.open_connection("127.0.0.1", self.backend_port)
             up_w.write(f"{method} {target[len(self.prefix):]} {rest}".encode("latin-1"))

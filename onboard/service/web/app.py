@@ -34,7 +34,8 @@ from onboard.service.web.http import Handler, HttpError, HttpServer, Request, Re
 from onboard.service.web.view import LiveView
 
 NAME = "onboard"
-DESCRIPTION = "Live map of the track, water current with its uncertainty, speed, heading, integrity and health"
+DESCRIPTION = ("Live map of the track, water current with its uncertainty, speed, heading, "
+               "integrity and health")
 ICON = "mdi-map-marker-path"
 """A Material Design icon name, as BlueOS expects."""
 COMPANY = "onboard"

@@ -4,10 +4,10 @@ GET, HEAD and POST; the request line and headers within :data:`MAX_HEAD_BYTES`, 
 of at most :data:`MAX_BODY_BYTES` (``Content-Length``, no chunked uploads); one request
 per connection (``Connection: close``), every response with its ``Content-Length`` and
 ``Cache-Control: no-store``. A client that sends nothing for :data:`READ_TIMEOUT_S` is
-dropped, and beyond :data:`MAX_CLIENTS` connections at once a new one is closed unanswered
-(idle clients cannot pile up in the service's loop). Handlers are plain functions of :class:`Request` returning :class:`Response`;
-one that raises answers 500 (logged), so the page can never stop the process that serves
-it. No dependency beyond the standard library: the vehicle install stays lean.
+dropped, and beyond :data:`MAX_CLIENTS` connections at once a new one is closed
+unanswered (idle clients cannot pile up in the service's loop). Handlers are plain
+functions of :class:`Request` returning :class:`Response`; one that raises answers 500
+(logged), so the page can never stop the process that serves it. No dependency beyond the standard library: the vehicle install stays lean.
 """
 
 from __future__ import annotations
