@@ -9,9 +9,12 @@ of docs/service.md)."""
 from __future__ import annotations
 
 import asyncio
+import math
 import os
 import re
 import shutil
+import struct
+import zlib
 from pathlib import Path
 
 import pytest
@@ -54,7 +57,7 @@ def test_the_page_shows_the_track_and_the_current_arrow(view, tmp_path, query):
     img = mpimg.imread(out)
     assert img.shape[:2] == (640, 1000)
     map_part = img[:, :700]  # the panel: the right-hand 290 px (the widget's: 190 px over the map)
-    # measured on the 120 s replay: 1,669 track pixels, 146 arrow pixels (a blank map: 0)
+    # measured on the 120 s replay: 2,380 track pixels, 142 arrow pixels (a blank map: 0)
     assert pixels_near(map_part, TRACK_RGB) > 800
     assert pixels_near(map_part, ARROW_RGB) > 60
     if os.environ.get("ONBOARD_WEB_SCREENSHOT") and not query:
@@ -115,3 +118,73 @@ def test_behind_a_proxy_under_a_relative_path_every_request_of_the_page_succeeds
     assert len(polls) >= 2, paths  # polled every second of the 4 s of virtual time
     speed = re.search(r'id="speed"[^>]*>([^<]*)<', dom)
     assert speed and re.fullmatch(r"\d+\.\d\d ± \d\.\d\d m/s", speed.group(1)), dom[:2000]
+
+
+TILE_RGB = (0xB4, 0xE6, 0xC8)
+
+
+def solid_png(rgb: tuple[int, int, int], size: int = 256) -> bytes:
+    """A ``size`` x ``size`` PNG of one colour (8-bit RGB, no filter)."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+    raw = (b"\x00" + bytes(rgb) * size) * size
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", size, size, 8, 2, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+class TileServer:
+    """Answers every ``/{z}/{x}/{y}.png`` with one solid tile and logs (z, x, y)."""
+
+    def __init__(self) -> None:
+        self.port = 0
+        self.requested: list[tuple[int, int, int]] = []
+        self._png = solid_png(TILE_RGB)
+        self._server: asyncio.AbstractServer | None = None
+
+    async def start(self) -> None:
+        self._server = await asyncio.start_server(self._client, "127.0.0.1", 0)
+        self.port = self._server.sockets[0].getsockname()[1]
+
+    async def close(self) -> None:
+        assert self._server is not None
+        self._server.close()
+        await self._server.wait_closed()
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        head = await reader.readuntil(b"\r\n\r\n")
+        z, x, y = map(int, re.match(rb"GET /(\d+)/(-?\d+)/(-?\d+)\.png", head).groups())
+        self.requested.append((z, x, y))
+        writer.write(b"HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nConnection: close\r\n"
+                     + f"Content-Length: {len(self._png)}\r\n\r\n".encode() + self._png)
+        await writer.drain()
+        writer.close()
+
+
+def tile_of(lat: float, lon: float, z: int) -> tuple[int, int]:
+    """The Web Mercator tile holding (lat, lon) at zoom ``z`` (the OSM wiki's formula)."""
+    n = 2 ** z
+    phi = math.radians(lat)
+    return (int((lon + 180.0) / 360.0 * n),
+            int((1.0 - math.asinh(math.tan(phi)) / math.pi) / 2.0 * n))
+
+
+def test_online_the_track_is_drawn_over_the_map_tiles_of_its_place(view, tmp_path):
+    mpimg = pytest.importorskip("matplotlib.image")
+    tiles = TileServer()
+    out = tmp_path / "tiles.png"
+    with ServerThread(view=view) as srv, ServerThread(tiles):
+        url = f"http://127.0.0.1:{tiles.port}/{{z}}/{{x}}/{{y}}.png"
+        run = screenshot(f"{srv.url}/?tile_url={url}", out, tmp_path / "profile")
+    assert run.returncode == 0, run.stderr[-2000:]
+    map_part = mpimg.imread(out)[:, :700]
+    # measured: the tiles cover 98 % of the map (the rest: track, arrow, labels)
+    assert pixels_near(map_part, TILE_RGB, tol=3) > 0.8 * 640 * 700
+    assert pixels_near(map_part, TRACK_RGB) > 800
+    origin = view.state()["origin"]
+    z = max(z for z, _, _ in tiles.requested)
+    assert 15 <= z <= 19  # measured 19: a track of ~100 m on ~600 px, 0.2-0.3 m per pixel
+    x0, y0 = tile_of(origin["lat_deg"], origin["lon_deg"], z)
+    xs = {x for zz, x, _ in tiles.requested if zz == z}
+    ys = {y for zz, _, y in tiles.requested if zz == z}
+    assert x0 in xs and y0 in ys  # the first fix's tile is among those drawn

@@ -1,7 +1,8 @@
 // The onboard page: polls api/state (relative URL: works behind a proxy under any path),
 // draws the track on OpenStreetMap tiles when they load and on a metric grid otherwise,
 // the current as an arrow from the vehicle with its one-sigma ellipse at the tip, and
-// fills the panel. ?widget=1: compact (Cockpit iframe); ?tiles=0: never ask for tiles.
+// fills the panel. ?widget=1: compact (Cockpit iframe); ?tiles=0: never ask for tiles;
+// ?tile_url=.../{z}/{x}/{y}.png: another tile server (a local one, offline).
 'use strict';
 
 const params = new URLSearchParams(location.search);
@@ -16,7 +17,7 @@ const GRID_COLOUR = '#d5dbe3';
 const ARROW_PX_PER_MPS = 120;  // screen length of 1 m/s of current
 const MIN_SPAN_M = 60;         // the smallest extent shown
 const MAX_TRACK_POINTS = 7200;
-const TILE_URL = 'https://tile.openstreetmap.org/{z}/{x}/{y}.png';
+const TILE_URL = params.get('tile_url') || 'https://tile.openstreetmap.org/{z}/{x}/{y}.png';
 const EARTH_RES = 156543.03392;  // Web Mercator metres per pixel at zoom 0 on the equator
 const MAX_TILES = 400;           // tiles kept in memory (the oldest dropped)
 
@@ -89,9 +90,13 @@ function view(w, h) {
   if (p) { n0 = Math.min(n0, p.north_m); n1 = Math.max(n1, p.north_m); e0 = Math.min(e0, p.east_m); e1 = Math.max(e1, p.east_m); }
   if (!isFinite(n0)) { n0 = e0 = -MIN_SPAN_M / 2; n1 = e1 = MIN_SPAN_M / 2; }
   const cn = (n0 + n1) / 2, ce = (e0 + e1) / 2;
-  const span = Math.max(n1 - n0, e1 - e0, MIN_SPAN_M);
-  const mpp = 1.25 * span / Math.max(40, Math.min(w, h) - 2 * 150);  // room for the arrow
-  return {cn, ce, mpp, w, h, px: (n, e) => [w / 2 + (e - ce) / mpp, h / 2 - (n - cn) / mpp]};
+  // the widget's panel lies over the map's right-hand side: centre on what is left
+  const free = WIDGET ? Math.max(w / 2, w - $('panel').offsetWidth) : w;
+  const margin = Math.min(150, 0.2 * Math.min(free, h));  // room for the arrow
+  const mpp = Math.max((n1 - n0) / (h - 2 * margin), (e1 - e0) / (free - 2 * margin),
+                       MIN_SPAN_M / Math.min(free, h));
+  const x0 = free / 2 - ce / mpp, y0 = h / 2 + cn / mpp;
+  return {cn, ce, mpp, w, h, x0, y0, px: (n, e) => [x0 + e / mpp, y0 - n / mpp]};
 }
 
 function draw() {
@@ -121,8 +126,8 @@ function niceStep(m) {
 function drawGrid(ctx, v) {
   const step = niceStep(100 * v.mpp);
   ctx.strokeStyle = GRID_COLOUR; ctx.lineWidth = 1; ctx.fillStyle = '#7a8594'; ctx.font = '11px sans-serif';
-  const eMin = v.ce - v.w / 2 * v.mpp, eMax = v.ce + v.w / 2 * v.mpp;
-  const nMin = v.cn - v.h / 2 * v.mpp, nMax = v.cn + v.h / 2 * v.mpp;
+  const eMin = -v.x0 * v.mpp, eMax = (v.w - v.x0) * v.mpp;
+  const nMin = (v.y0 - v.h) * v.mpp, nMax = v.y0 * v.mpp;
   for (let e = Math.ceil(eMin / step) * step; e <= eMax; e += step) {
     const [x] = v.px(0, e); ctx.beginPath(); ctx.moveTo(x, 0); ctx.lineTo(x, v.h); ctx.stroke();
     ctx.fillText(`${e.toFixed(0)} m E`, x + 2, v.h - 16);
@@ -141,7 +146,8 @@ function mercator(lat, lon, z) {
 function drawTiles(ctx, v, origin) {
   // OpenStreetMap tiles under the local metres: true when drawn (some loaded, none failed).
   const mLat = 111132.95, mLon = 111319.49 * Math.cos(origin.lat_deg * Math.PI / 180);
-  const lat = origin.lat_deg + v.cn / mLat, lon = origin.lon_deg + v.ce / mLon;
+  const nC = (v.y0 - v.h / 2) * v.mpp, eC = (v.w / 2 - v.x0) * v.mpp;  // the screen's centre
+  const lat = origin.lat_deg + nC / mLat, lon = origin.lon_deg + eC / mLon;
   const res0 = EARTH_RES * Math.cos(lat * Math.PI / 180);
   const z = Math.max(0, Math.min(19, Math.floor(Math.log2(res0 / v.mpp))));
   const k = res0 / Math.pow(2, z) / v.mpp;  // screen pixels per tile pixel (>= 1)
