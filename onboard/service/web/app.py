@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from importlib import resources
 
 import msgspec
@@ -39,7 +40,9 @@ DESCRIPTION = ("Live map of the track, water current with its uncertainty, speed
 ICON = "mdi-map-marker-path"
 """A Material Design icon name, as BlueOS expects."""
 COMPANY = "onboard"
-WEBPAGE = "https://github.com/onboard-estimation/onboard"
+WEBPAGE_ENV = "ONBOARD_WEBPAGE"
+"""The project's web page in ``/register_service`` comes from this environment variable
+(the BlueOS image sets it from the repository it is built from; empty otherwise)."""
 COCKPIT_EXTRAS = "/cockpit_extras.json"
 COCKPIT_API_VERSION = "1.0.0"
 
@@ -66,7 +69,7 @@ def static_file(name: str) -> bytes:
 def register_service() -> dict:
     """BlueOS's ServiceMetadata for this service."""
     return {"name": NAME, "description": DESCRIPTION, "icon": ICON, "company": COMPANY,
-            "version": VERSION, "webpage": WEBPAGE, "api": "/api/state",
+            "version": VERSION, "webpage": os.environ.get(WEBPAGE_ENV, ""), "api": "/api/state",
             "route": "/", "new_page": False, "works_in_relative_paths": True,
             "extras": {"cockpit": COCKPIT_EXTRAS}}
 
