@@ -107,6 +107,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_zenoh_flags(p)
     p.add_argument("--vehicle", default="*", help="vehicle id (default: all)")
     p.add_argument("--once", action="store_true", help="print one snapshot and exit")
+    p.add_argument("--web", default="", metavar="HOST:PORT",
+                   help="serve the live map page on HOST:PORT instead of printing the table")
     p.set_defaults(handler="onboard.tools.shore:main")
 
     p = sub.add_parser("bench", help="performance figures")

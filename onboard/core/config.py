@@ -360,6 +360,17 @@ class RecorderConfig(_Strict):
     health record's ``dropped["recorder"]``); 0 = no check."""
 
 
+class WebOut(_Strict):
+    """``[service.web]``: the web page (live map, estimates, health; docs/service.md,
+    "Web page") and BlueOS's discovery of it."""
+
+    listen: str = ""
+    """``HOST:PORT`` to serve the page on (``0.0.0.0:8110``); empty: no page."""
+    edit_config: bool = False
+    """Let the page edit the last ``--config`` file: the text is validated as the
+    service would load it before it is saved, and applies at the next start."""
+
+
 class ServiceConfig(_Strict):
     """``[service]``: live inputs, publishers, recorder and persistence."""
 
@@ -371,6 +382,8 @@ class ServiceConfig(_Strict):
     """``[service.mavlink]``."""
     recorder: RecorderConfig = RecorderConfig()
     """``[service.recorder]``."""
+    web: WebOut = WebOut()
+    """``[service.web]``."""
     state_file: str = "state/adaptive.json"
     """Where the adaptive state is kept across restarts (relative to the state
     directory)."""

@@ -173,13 +173,16 @@ class Service:
         notifier: systemd notifier (default: from the environment).
         on_tick: called ``(t, records)`` after every tick, on the loop (tests, demo).
         on_health: called with every HealthRecord.
+        config_paths: the ``--config`` files (the web page shows them and may edit the
+            last one).
     """
 
     def __init__(self, cfg: Config, *, state_dir: str | Path = ".",
                  logs_dir: str | Path | None = None, clock: ServiceClock | None = None,
                  notifier: Notifier | None = None,
                  on_tick: Callable[[float, Sequence[EstimateRecord]], None] | None = None,
-                 on_health: Callable[[HealthRecord], None] | None = None) -> None:
+                 on_health: Callable[[HealthRecord], None] | None = None,
+                 config_paths: Sequence[str | Path] = ()) -> None:
         self.t_construct = time.monotonic()
         self.cfg = cfg
         self.clock = clock or ServiceClock()
@@ -219,6 +222,11 @@ class Service:
         self._t_rate_prev: float | None = None
         self._health_events: list[str] = []
         self.latest_health: HealthRecord | None = None
+        self.config_paths = list(config_paths)
+        self.web = None
+        """The web page's server (``[service.web]``; onboard.service.web)."""
+        self.web_view = None
+        """The page's model, fed at every tick and health record."""
 
     def _path(self, p: str) -> Path:
         q = Path(p)
@@ -287,6 +295,8 @@ class Service:
             if self.recorder is not None:
                 self.recorder.close()
             raise
+        if svc.web.listen:
+            await self._start_web()
         deadline = time.monotonic() + READY_WAIT_S
         while time.monotonic() < deadline and not all(i.transport.stats.connected for i in self.inputs):
             await asyncio.sleep(0.01)
@@ -349,6 +359,32 @@ class Service:
         self.zenoh = pub
         return True
 
+    async def _start_web(self) -> None:
+        """Serve the web page; a port that cannot be bound is an event, not a stop."""
+        from onboard.service.web.app import make_server
+        from onboard.service.web.config_edit import ConfigEditor
+        from onboard.service.web.view import LiveView
+
+        web = self.cfg.service.web
+        self.web_view = LiveView(origin=self._origin, vehicle=self.cfg.vehicle.id)
+        editor = ConfigEditor(self.config_paths, web.edit_config) if self.config_paths else None
+        server = make_server(web.listen, self.web_view, editor)
+        try:
+            await server.start()
+        except OSError as err:
+            self.event(f"web: cannot listen on {web.listen}: {err.strerror}")
+            return
+        self.web = server
+        log.info("web page on http://%s:%d/", server.host, server.port)
+
+    def _origin(self, pipeline: str) -> tuple[float, float] | None:
+        """(lat, lon) in degrees of the local origin of ``pipeline``'s positions."""
+        for p in self.engine.pipelines:
+            frame = getattr(p, "frame", None) if p.name == pipeline else None
+            if frame is not None:
+                return frame.lat0, frame.lon0
+        return None
+
     async def _zenoh_retry(self) -> None:
         delay = 1.0
         while self.zenoh is None:
@@ -406,6 +442,8 @@ class Service:
         await loop.run_in_executor(None, self._save_state_now)
         if self.recorder is not None:
             await loop.run_in_executor(None, self.recorder.close)
+        if self.web is not None:
+            await self.web.close()
         if self.zenoh is not None:
             self.zenoh.close()
         if self.mavlink is not None:
@@ -512,6 +550,8 @@ class Service:
             self.zenoh.publish_estimates(records)
         if self.mavlink is not None:
             self.mavlink.publish_estimates(records, now)
+        if self.web_view is not None and records:
+            self.web_view.feed_estimates(records)
         if self.on_tick is not None:
             self.on_tick(t, records)
 
@@ -532,6 +572,8 @@ class Service:
             self.zenoh.publish_health(h)
         if self.mavlink is not None:
             self.mavlink.publish_health(h, now)
+        if self.web_view is not None:
+            self.web_view.feed_health(h)
         if self.on_health is not None:
             self.on_health(h)
 
@@ -605,9 +647,10 @@ class Service:
             log.error("state save failed: %s", err)
 
 
-async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None) -> int:
+async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None,
+                      config_paths: Sequence[str | Path] = ()) -> int:
     """Run until SIGTERM/SIGINT; return the exit status."""
-    svc = Service(cfg, state_dir=state_dir, logs_dir=logs_dir)
+    svc = Service(cfg, state_dir=state_dir, logs_dir=logs_dir, config_paths=config_paths)
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):
         try:
@@ -618,14 +661,10 @@ async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None
     return 0
 
 
-def main(args: argparse.Namespace) -> int:
-    """``onboard run --config FILE [--config OVERLAY ...] [--state-dir DIR]``: the
-    files are applied in order (:func:`onboard.core.config.load_all`)."""
-    logging.basicConfig(level=os.environ.get("ONBOARD_LOG_LEVEL", "INFO"),
-                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
-    paths = [args.config] if isinstance(args.config, str) else list(args.config)
-    cfg = load_all(paths)
-    origin = " + ".join(paths)
+def check_config(cfg: Config, origin: str) -> None:
+    """What ``onboard run`` requires of a configuration beyond its schema (at least one
+    source, parseable source URLs, gpsd URLs with kind gpsd only, a ``HOST:PORT`` web
+    listen address); ConfigError naming ``origin`` and the key otherwise."""
     if not cfg.service.sources:
         raise ConfigError(f"{origin}: service.sources is empty: nothing to read")
     for i, src in enumerate(cfg.service.sources):
@@ -636,6 +675,23 @@ def main(args: argparse.Namespace) -> int:
         if (spec.scheme == "gpsd") != (src.kind == "gpsd"):
             raise ConfigError(f"{origin}: service.sources[{i}]: kind \"gpsd\" goes with "
                               f"a gpsd://HOST:PORT url and only with it")
+    if cfg.service.web.listen:
+        from onboard.service.web.app import parse_listen
+
+        try:
+            parse_listen(cfg.service.web.listen)
+        except ValueError as err:
+            raise ConfigError(f"{origin}: service.web.listen: {err}") from None
+
+
+def main(args: argparse.Namespace) -> int:
+    """``onboard run --config FILE [--config OVERLAY ...] [--state-dir DIR]``: the
+    files are applied in order (:func:`onboard.core.config.load_all`)."""
+    logging.basicConfig(level=os.environ.get("ONBOARD_LOG_LEVEL", "INFO"),
+                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    paths = [args.config] if isinstance(args.config, str) else list(args.config)
+    cfg = load_all(paths)
+    check_config(cfg, " + ".join(paths))
     mav = cfg.service.mavlink
     if mav.require_signing or mav.signing_key_file:
         from onboard.service.publishers.mavlink_pub import check_signing
@@ -646,4 +702,4 @@ def main(args: argparse.Namespace) -> int:
         state_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise ConfigError(f"state directory {state_dir}: {err.strerror}") from None
-    return asyncio.run(run_service(cfg, state_dir, logs_dir))
+    return asyncio.run(run_service(cfg, state_dir, logs_dir, paths))

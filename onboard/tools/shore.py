@@ -4,13 +4,16 @@ Runs on any shore machine that reaches the vehicle's Zenoh network::
 
     onboard shore --connect tcp/192.168.2.2:7447              # all vehicles, live
     onboard shore --connect tcp/192.168.2.2:7447 --vehicle boat1 --once
+    onboard shore --connect tcp/192.168.2.2:7447 --web 0.0.0.0:8110   # the map page
 
 On start it asks the vehicles' queryables for their latest values (so ``--once`` prints a
 snapshot at once) and the liveliness tokens for who is alive, then follows
 ``onboard/<vehicle>/est/*`` and ``onboard/<vehicle>/health``. The table is redrawn every
 second: one row per pipeline with its newest values (angles in degrees, everything else
 in SI units), then the vehicle's mode, input rates, rejections with reasons, drops and
-recent events.
+recent events. With ``--web HOST:PORT`` it serves the service's web page instead
+(:mod:`onboard.service.web`: live map, current, speed, heading, flags, health), fed from
+the same subscription (:func:`serve_web`).
 
 :class:`ShoreView` (the subscriber and the formatting) is reused by ``onboard demo``.
 """
@@ -18,6 +21,7 @@ recent events.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import math
 import sys
 import threading
@@ -196,9 +200,46 @@ def snapshot(session: Any, view: ShoreView, vehicle: str = "*", timeout_s: float
             view.feed(str(rep.ok.key_expr), rep.ok.payload.to_bytes())
 
 
+def serve_web(session: Any, vehicle: str, listen: str) -> int:
+    """Serve the web page on ``listen`` (``HOST:PORT``) from the vehicles' samples until
+    Ctrl-C: the queryables' latest values first, then every sample."""
+    from onboard.service.web.app import make_server, parse_listen
+    from onboard.service.web.view import LiveView
+
+    try:
+        parse_listen(listen)
+    except ValueError as err:
+        raise UsageError(f"--web {err}") from None
+    view = LiveView(vehicle="" if vehicle == "*" else vehicle)
+    sub = session.declare_subscriber(f"onboard/{vehicle}/**", view.on_sample)
+    for rep in session.get(f"onboard/{vehicle}/**", timeout=3.0):
+        if rep.ok is not None:
+            view.feed_zenoh(str(rep.ok.key_expr), rep.ok.payload.to_bytes())
+    server = make_server(listen, view)
+
+    async def run() -> None:
+        try:
+            await server.start()
+        except OSError as err:
+            raise UsageError(f"--web {listen}: {err.strerror}") from None
+        print(f"onboard shore: the page is on http://{server.host}:{server.port}/", flush=True)
+        try:
+            await asyncio.Event().wait()
+        finally:
+            await server.close()
+
+    try:
+        asyncio.run(run())
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sub.undeclare()
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
     """``onboard shore [--connect E] [--listen E] [--mode M] [--zenoh-config FILE]
-    [--vehicle ID] [--once]``."""
+    [--vehicle ID] [--once] [--web HOST:PORT]``."""
     vehicle = args.vehicle or "*"
     if "/" in vehicle:
         raise UsageError(f"--vehicle {vehicle!r}: a vehicle id has no '/'")
@@ -208,6 +249,8 @@ def main(args: argparse.Namespace) -> int:
     sub = None
     token_sub = None
     try:
+        if getattr(args, "web", ""):
+            return serve_web(session, vehicle, args.web)
         if args.once:
             snapshot(session, view, vehicle)
             print(view.table(vehicle))

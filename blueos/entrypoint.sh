@@ -1,0 +1,12 @@
+#!/bin/sh
+# The extension's start: the bundled configuration of the vehicle class in ONBOARD_VEHICLE
+# (twin-thruster-boat for a BlueBoat, bluerov2, ...), then the extension's own file in the
+# data folder (copied there at the first start; the web page edits it). State and
+# recordings go to the data folder too (/usr/blueos/extensions/onboard on the vehicle).
+set -eu
+data=${ONBOARD_DATA:-/data}
+vehicle=${ONBOARD_VEHICLE:-twin-thruster-boat}
+mkdir -p "$data"
+[ -f "$data/onboard.toml" ] || cp /opt/onboard/blueos/onboard.toml "$data/onboard.toml"
+exec /opt/onboard/venv/bin/onboard run --config "/opt/onboard/config/$vehicle.toml" \
+    --config "$data/onboard.toml" --state-dir "$data"

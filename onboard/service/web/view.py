@@ -1,0 +1,244 @@
+"""The web page's model: what the page shows of each vehicle, fed from any thread.
+
+The service feeds it its own records (:meth:`LiveView.feed_estimates`,
+:meth:`LiveView.feed_health`), the shore feeds it Zenoh samples
+(:meth:`LiveView.feed_zenoh`: the key says what the JSON payload is, whatever its
+encoding's schema suffix). :meth:`LiveView.state` is the JSON the page polls
+(``api/state``): the track since a given time, the newest position, speed, heading and
+current with their one-sigma, the integrity flags and the health summary. Units are in the
+names: metres, m/s, degrees (angles are shown, not computed with).
+
+The track is one point per :data:`TRACK_PERIOD_S` of vehicle time, north/east metres of
+the first pipeline of :data:`TRACK_PIPELINES` that publishes a position, about its local
+origin (the vehicle's first GNSS fix). The origin (lat, lon) puts the track on map tiles:
+the service asks its pipeline for it (``origin`` callable); the shore derives it from any
+sample of the vehicle that carries ``latitude`` and ``longitude`` (Foxglove's
+LocationFix) and the track point of that moment. Without an origin the page draws a
+metric grid.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import msgspec
+
+from onboard.core.geo import metres_per_degree
+from onboard.core.messages import EstimateRecord, HealthRecord
+
+TRACK_PIPELINES = ("nav", "aie", "kf", "eseso")
+"""Pipelines whose ``north``/``east`` make the track, best first."""
+MOTION_PIPELINES = ("aie", "kf", "nav")
+"""Pipelines whose ``speed`` and ``heading`` are shown, best first."""
+CURRENT_PIPELINE = "current"
+TRACK_PERIOD_S = 1.0
+"""Vehicle seconds between two track points."""
+TRACK_MAX_POINTS = 7200
+"""Track points kept per vehicle (2 h at one a second)."""
+EVENTS_KEPT = 20
+"""Recent health events kept per vehicle."""
+
+OriginFn = Callable[[str], "tuple[float, float] | None"]
+"""(lat, lon) in degrees of the local origin of a pipeline's positions, or None."""
+
+
+@dataclass
+class _Vehicle:
+    """What the page knows of one vehicle."""
+
+    estimates: dict[str, EstimateRecord] = field(default_factory=dict)
+    health: HealthRecord | None = None
+    track: deque[tuple[float, float, float]] = field(
+        default_factory=lambda: deque(maxlen=TRACK_MAX_POINTS))
+    track_pipeline: str = ""
+    epoch: int = 0
+    """Incremented when the track starts again (time went back, another pipeline)."""
+    origin: tuple[float, float] | None = None
+    events: deque[str] = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))
+    wall_rx: float | None = None
+    """time.monotonic() of the newest record."""
+
+
+class LiveView:
+    """The vehicles' picture for the page, thread-safe.
+
+    Parameters:
+        origin: the service's callable giving a pipeline's origin (None on the shore).
+        vehicle: the vehicle :meth:`state` shows by default (empty: the first seen).
+    """
+
+    def __init__(self, origin: OriginFn | None = None, vehicle: str = "") -> None:
+        self.origin_fn = origin
+        self.default_vehicle = vehicle
+        self.lock = threading.Lock()
+        self.vehicles: dict[str, _Vehicle] = {}
+        self.bad = 0
+        """Zenoh payloads that could not be decoded (another schema, a foreign publisher)."""
+        self._dec_est = msgspec.json.Decoder(EstimateRecord)
+        self._dec_health = msgspec.json.Decoder(HealthRecord)
+
+    # ------------------------------------------------------------------ feeding
+
+    def feed_estimates(self, records: list[EstimateRecord]) -> None:
+        """One tick's records (the service calls this on its loop; cheap)."""
+        with self.lock:
+            for rec in records:
+                self._estimate(rec)
+
+    def feed_health(self, h: HealthRecord) -> None:
+        """One health record."""
+        with self.lock:
+            v = self._vehicle(h.vehicle)
+            v.health = h
+            v.events.extend(h.events)
+            v.wall_rx = time.monotonic()
+
+    def feed_zenoh(self, key: str, payload: bytes) -> None:
+        """One Zenoh sample on ``<prefix>/<vehicle>/...``: ``est/<pipeline>`` is an
+        EstimateRecord, ``health`` a HealthRecord; any other JSON object of the vehicle
+        with ``latitude`` and ``longitude`` (a LocationFix) places the track on the map."""
+        parts = key.split("/")
+        if len(parts) < 3:
+            return
+        try:
+            if parts[2] == "est" and len(parts) == 4:
+                self.feed_estimates([self._dec_est.decode(payload)])
+            elif parts[2] == "health" and len(parts) == 3:
+                self.feed_health(self._dec_health.decode(payload))
+            else:
+                self._location(parts[1], msgspec.json.decode(payload))
+        except (msgspec.DecodeError, msgspec.ValidationError):
+            self.bad += 1
+
+    def on_sample(self, sample: Any) -> None:
+        """Zenoh subscriber callback."""
+        self.feed_zenoh(str(sample.key_expr), sample.payload.to_bytes())
+
+    def _vehicle(self, vid: str) -> _Vehicle:
+        v = self.vehicles.get(vid)
+        if v is None:
+            v = self.vehicles[vid] = _Vehicle()
+        return v
+
+    def _estimate(self, rec: EstimateRecord) -> None:
+        v = self._vehicle(rec.vehicle)
+        v.estimates[rec.pipeline] = rec
+        v.wall_rx = time.monotonic()
+        if rec.pipeline not in TRACK_PIPELINES:
+            return
+        n, e = rec.values.get("north"), rec.values.get("east")
+        if n is None or e is None:
+            return
+        rank = TRACK_PIPELINES.index(rec.pipeline)
+        if v.track_pipeline and TRACK_PIPELINES.index(v.track_pipeline) < rank:
+            return  # a better pipeline makes the track
+        if rec.pipeline != v.track_pipeline or (v.track and rec.t < v.track[-1][0]):
+            v.track.clear()
+            v.epoch += 1
+            v.track_pipeline = rec.pipeline
+            v.origin = None
+        if not v.track or rec.t - v.track[-1][0] >= TRACK_PERIOD_S:
+            v.track.append((rec.t, n, e))
+        if v.origin is None and self.origin_fn is not None:
+            v.origin = self.origin_fn(rec.pipeline)
+
+    def _location(self, vid: str, obj: Any) -> None:
+        """Derive the origin from a sample with latitude/longitude (deg) and the newest
+        track point: origin = fix - (north, east) at the fix's latitude."""
+        if not isinstance(obj, dict):
+            return
+        lat, lon = obj.get("latitude"), obj.get("longitude")
+        if not all(isinstance(x, (int, float)) and math.isfinite(x) for x in (lat, lon)):
+            return
+        with self.lock:
+            v = self.vehicles.get(vid)
+            if v is None or not v.track or v.origin is not None:
+                return
+            _, n, e = v.track[-1]
+            m_lat, m_lon = metres_per_degree(lat)
+            v.origin = (lat - n / m_lat, lon - e / m_lon)
+
+    # ------------------------------------------------------------------ reading
+
+    def state(self, vehicle: str = "", since: float = -math.inf, epoch: int = -1) -> dict:
+        """The page's JSON: ``vehicle`` (default: the configured one, else the first
+        seen); track points newer than ``since`` unless ``epoch`` differs from the
+        track's (then the whole track)."""
+        with self.lock:
+            ids = sorted(self.vehicles)
+            vid = vehicle or self.default_vehicle or (ids[0] if ids else "")
+            v = self.vehicles.get(vid)
+            if v is None:
+                return {"vehicle": vid, "vehicles": ids, "t": None}
+            whole = epoch != v.epoch
+            points = [list(p) for p in v.track if whole or p[0] > since]
+            out = {"vehicle": vid, "vehicles": ids, "epoch": v.epoch,
+                   "t": max((r.t for r in v.estimates.values()), default=None),
+                   "age_s": None if v.wall_rx is None else time.monotonic() - v.wall_rx,
+                   "origin": None if v.origin is None else
+                   {"lat_deg": v.origin[0], "lon_deg": v.origin[1]},
+                   "track": {"pipeline": v.track_pipeline, "points": points},
+                   "position": _position(v), "speed": _motion(v, "speed", 1.0),
+                   "heading": _motion(v, "heading", math.degrees),
+                   "current": _current(v.estimates.get(CURRENT_PIPELINE)),
+                   "health": _health(v), "estimates": _estimates(v)}
+        return out
+
+
+def _position(v: _Vehicle) -> dict | None:
+    rec = v.estimates.get(v.track_pipeline)
+    if rec is None or "north" not in rec.values or "east" not in rec.values:
+        return None
+    return {"north_m": rec.values["north"], "east_m": rec.values["east"],
+            "std_north_m": rec.std.get("north"), "std_east_m": rec.std.get("east")}
+
+
+def _motion(v: _Vehicle, q: str, scale: float | Callable[[float], float]) -> dict | None:
+    """The newest ``q`` (speed m/s, heading deg) of the best motion pipeline."""
+    conv = scale if callable(scale) else (lambda x: x * scale)
+    for p in MOTION_PIPELINES:
+        rec = v.estimates.get(p)
+        if rec is not None and q in rec.values:
+            value = conv(rec.values[q])
+            std = rec.std.get(q)
+            if q == "heading":
+                value %= 360.0
+            return {"value": value, "std": None if std is None else conv(std), "pipeline": p}
+    return None
+
+
+def _current(rec: EstimateRecord | None) -> dict | None:
+    """The current (m/s, the direction it flows to); a component the data do not
+    determine is absent from the record: null here, with its sigma."""
+    if rec is None:
+        return None
+    n, e = rec.values.get("north"), rec.values.get("east")
+    out: dict[str, Any] = {"north_mps": n, "east_mps": e,
+                           "std_north_mps": rec.std.get("north"),
+                           "std_east_mps": rec.std.get("east"),
+                           "known": n is not None and e is not None}
+    if out["known"]:
+        out["speed_mps"] = math.hypot(n, e)
+        out["towards_deg"] = math.degrees(math.atan2(e, n)) % 360.0
+    return out
+
+
+def _health(v: _Vehicle) -> dict | None:
+    h = v.health
+    if h is None:
+        return None
+    nis = {f"{p}.{c}": [ch.nis_recent, ch.dof] for p, chans in h.innovations.items()
+           for c, ch in chans.items() if ch.nis_recent is not None}
+    return {"t": h.t, "mode": h.mode, "flags": {p: list(f) for p, f in h.flags.items() if f},
+            "rates_hz": h.rates_hz, "rejected": sum(h.rejected.values()),
+            "dropped": sum(h.dropped.values()), "nis": nis, "events": list(v.events)}
+
+
+def _estimates(v: _Vehicle) -> dict:
+    return {p: {"t": r.t, "values": r.values, "std": r.std}
+            for p, r in sorted(v.estimates.items())}
