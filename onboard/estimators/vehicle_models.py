@@ -301,7 +301,7 @@ the thermocline: ~1029)."""
 SLOCUM_LIFT_KL = 132.5
 """Lift coefficient ``K_L`` (kg/(m rad)): lift ``L = (K_L0 + K_L alpha) U^2`` (N), the
 Slocum glider's, identified by Graver (2005), "Underwater gliders: dynamics, control and
-design", PhD thesis, Princeton, ch. 7 (``K_L0 = 0``). Merckelbach et al. (2019, J. Atmos.
+design", PhD thesis, Princeton, Slocum model (``K_L0 = 0``). Merckelbach et al. (2019, J. Atmos.
 Oceanic Technol. 36: 281) give ``0.5 rho S (a_h + a_w)`` = 0.5 * 1027 * 0.1 * (3.8 + 3.73)
 = 387 kg/(m rad) for the same hull (S = 0.1 m^2, a_h = 3.8 /rad, a_w = 3.73 /rad from
 aspect ratio 7 and sweep 43 deg)."""
@@ -388,7 +388,7 @@ class GlideState(NamedTuple):
 
 
 class GliderModel:
-    """Steady wings-level glide of a buoyancy-driven glider (Graver 2005, ch. 5 and 7;
+    """Steady wings-level glide of a buoyancy-driven glider (Graver 2005;
     Fan & Woolsey 2014; Merckelbach et al. 2010, 2019).
 
     Forces on the glider in the vertical plane, with ``U`` the speed through water,
@@ -411,13 +411,13 @@ class GliderModel:
     The pitch itself follows from the battery position by the static moment balance
     (:meth:`pitch_from_battery`): ``tan(pitch) = (k_pump (V_pump - V_neutral) -
     k_batt (x_batt - x_batt0))``, the pump's buoyancy at the nose and the battery's
-    weight against the hull's righting moment (Graver 2005, §5.3).
+    weight against the hull's righting moment (Graver 2005).
 
     Attributes (SI unless stated): ``k_l``, ``k_l0``, ``k_d0``, ``k_d`` (lift and drag,
     above), ``density`` (kg/m^3), ``neutral_pump_cc`` (cm^3), ``vertical_water_std``
     (m/s: the vertical water velocity the depth rate cannot tell from the glider's),
     ``gamma_std`` (rad: glide-angle uncertainty, pitch sensor and angle of attack),
-    ``min_glide`` (rad: below this flight-path angle the depth rate says nothing about
+    ``min_glide`` (rad: below this pitch the depth rate says nothing usable about
     the horizontal speed), ``k_pump`` (1/cm^3), ``k_batt`` (1/m), ``batt0`` (m).
     """
 
@@ -489,8 +489,8 @@ class GliderModel:
 
     def glide_from_buoyancy(self, pitch: float, pump_cc: float) -> GlideState | None:
         """The unpowered steady glide at ``pitch`` (rad) with the pump at ``pump_cc``
-        (cm^3): the angle of attack from ``tan|gamma| = D / L`` (Merckelbach et al. 2010,
-        eq. 10), then the speed from the drag balance ``D = |B| sin|gamma|``. None when
+        (cm^3): the angle of attack from ``tan|gamma| = D / L`` (Merckelbach et al. 2010),
+        then the speed from the drag balance ``D = |B| sin|gamma|``. None when
         the buoyancy and the pitch disagree (nose down while buoyant) or the pitch is
         below ``min_glide``."""
         b = self.net_buoyancy(pump_cc)
