@@ -18,6 +18,7 @@ Attitude            ``heading`` + ``yaw_rate`` + (``roll``, ``pitch`` or        
                     ``assume_level = true``)
 VelocityOverGround  ``surge_mps``, ``sway_mps`` + ``heading``                    rotated to
                                                                                 NED
+VelocityOverGround  ``north_mps``, ``east_mps``                                earth axes
 Depth               ``depth_m``                                                 m, down +
 ActuatorOutputs     ``pwm_columns`` (channel 1 first)                           us
 ActuatorColumn      each of ``actuator_columns`` (the ``[inputs]`` roles with    the log's
@@ -35,6 +36,9 @@ start ``run_gap_s`` after the previous run's last row. :attr:`CsvReader.runs` li
 run (name, source, first/last ``t`` after the shift, the shift, rows) before iteration,
 so model-closure code can split train/test by run; each sample's ``source`` is
 ``"csv:<run>"`` (e.g. ``"csv:fixed_00000216"``).
+
+With ``heading_spike_deg``, each row is held until the next one is read, and a row whose
+heading is a spike loses its Heading and Attitude (``"heading_spike"``, :class:`_HeadingSpikes`).
 
 Rejections (per row): ``"malformed"`` (wrong number of cells), ``"bad_time"`` (time not
 numeric or not finite), ``"time_backwards"`` (time earlier than the previous row of the
@@ -149,6 +153,43 @@ class _RowClock:
             self.stats.reject(reason)
 
 
+class _HeadingSpikes:
+    """A one-row delay that drops a row's Heading and Attitude when its heading is a spike
+    (``heading_spike_deg``): more than the threshold from both the last accepted heading
+    and the next row's, while those two agree within it."""
+
+    def __init__(self, threshold_deg: float, stats: ReadStats) -> None:
+        self.thr = math.radians(threshold_deg)
+        self.stats = stats
+        self._held: list[Sample] | None = None
+        self._last: float | None = None  # the last accepted heading (rad)
+
+    @staticmethod
+    def _heading(row: list[Sample]) -> float | None:
+        return next((s.heading_rad for s in row if isinstance(s, Heading)), None)
+
+    def _far(self, a: float, b: float) -> bool:
+        return abs(math.remainder(a - b, 2 * math.pi)) > self.thr
+
+    def push(self, row: list[Sample] | None) -> list[Sample]:
+        """Hold ``row`` (None: the run ended) and return the held row before it, its
+        Heading and Attitude removed if they were a spike."""
+        held, self._held = self._held, row
+        if held is None:
+            return []
+        h = self._heading(held)
+        nxt = self._heading(row) if row is not None else None
+        if h is None:
+            return held
+        last = self._last
+        if (last is not None and nxt is not None and not self._far(last, nxt)
+                and self._far(h, last) and self._far(h, nxt)):
+            self.stats.reject("heading_spike")
+            return [s for s in held if not isinstance(s, (Heading, Attitude))]
+        self._last = h
+        return held
+
+
 class _Bad(Exception):
     def __init__(self, reason: str) -> None:
         self.reason = reason
@@ -204,6 +245,7 @@ class CsvReader:
         f = self.fmt
         cols = [f.time, f.lat_deg, f.lon_deg, f.alt_m, f.north_m, f.east_m, f.heading,
                 f.yaw_rate, f.surge_mps, f.sway_mps, f.sog_mps, f.depth_m, f.roll, f.pitch,
+                f.north_mps, f.east_mps,
                 f.run_column, *f.pwm_columns, *self.actuator_columns]
         return [c for c in cols if c]
 
@@ -290,6 +332,7 @@ class CsvReader:
                 idx = self._index(header, path)
                 ncol = len(header)
                 clock = _RowClock(st)
+                spikes = _HeadingSpikes(f.heading_spike_deg, st) if f.heading_spike_deg else None
                 cur = None
                 for row in rd:
                     if not row or not any(c.strip() for c in row):
@@ -303,6 +346,9 @@ class CsvReader:
                     if run is not cur:
                         clock.end()
                         cur, clock = run, _RowClock(st)
+                        if spikes is not None:  # the previous run's last row
+                            yield from self._count(spikes.push(None))
+                            spikes = _HeadingSpikes(f.heading_spike_deg, st)
                     if len(row) != ncol:
                         st.reject("malformed")
                         continue
@@ -313,14 +359,21 @@ class CsvReader:
                     t += run.t_offset
                     for row_t, cells in clock.admit(t, (t, row)):
                         st.by_type["row"] += 1
-                        for s in self._samples(cells, idx, row_t, run.source):
-                            st.samples += 1
-                            yield s
+                        out = self._samples(cells, idx, row_t, run.source)
+                        yield from self._count(spikes.push(out) if spikes is not None else out)
                 clock.end()
+                if spikes is not None:
+                    yield from self._count(spikes.push(None))
             except csv.Error:
                 st.reject("malformed")
             finally:
                 fh.close()  # type: ignore[attr-defined]
+
+    def _count(self, samples: list[Sample]) -> Iterator[Sample]:
+        """Yield ``samples``, counting them."""
+        for s in samples:
+            self.stats.samples += 1
+            yield s
 
     def _samples(self, row: list[str], idx: dict[str, int], t: float, src: str) -> list[Sample]:
         f = self.fmt
@@ -394,6 +447,13 @@ class CsvReader:
                 c, s = math.cos(heading), math.sin(heading)
                 out.append(VelocityOverGround(t=t, source=src, v_north_mps=u * c - v * s,
                                               v_east_mps=u * s + v * c))
+            except _Bad as b:
+                st.reject(b.reason)
+
+        if f.north_mps and f.east_mps:
+            try:
+                out.append(VelocityOverGround(t=t, source=src, v_north_mps=num(f.north_mps),
+                                              v_east_mps=num(f.east_mps)))
             except _Bad as b:
                 st.reject(b.reason)
 

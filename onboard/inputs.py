@@ -19,8 +19,10 @@ from onboard.core.messages import (
     Sample,
 )
 
-_ROLES = ("throttle", "rudder", "left", "right", "propeller_rpm", "stern_plane")
-_FIELD = {"rudder": "rudder_rad", "stern_plane": "stern_plane_rad"}
+_ROLES = ("throttle", "rudder", "left", "right", "propeller_rpm", "stern_plane", "pump",
+          "battery")
+_FIELD = {"rudder": "rudder_rad", "stern_plane": "stern_plane_rad", "pump": "pump_cc",
+          "battery": "battery_m"}
 
 
 ROLE_FUNCTIONS: dict[str, tuple[int, ...]] = {

@@ -3,7 +3,9 @@
 What the observers give there and why (docs/current.md, "Real data"): the log is at 8 s
 steps, the glider is driven by buoyancy (pump volume, battery position), which the torpedo
 regression model lacks, and the over-ground velocity comes from differenced, corrected
-navigation, not DVL bottom track. The test pins down honest behaviour, not accuracy.
+navigation, not DVL bottom track. The test pins down honest behaviour, not accuracy. With
+the glider model (config/slocum-glider-kolumbo.toml) the same log is
+tests/test_current_glider_kolumbo.py.
 """
 
 from __future__ import annotations

@@ -54,6 +54,10 @@ CASES: list[tuple[str, str, str | None, set[str], set[str]]] = [
      {"heading_course_mismatch"}, CONSISTENT),
     ("survey-test4", "survey_boat_arduino_rc/Test4_fast.txt", "survey-boat-csv",
      {"heading_course_mismatch"}, CONSISTENT),
+    # the glider model's current (docs/current.md, "Glider model on the Kolumbo log"); the
+    # track is the corrected underwater navigation, not GNSS: no fix-based check applies
+    ("glider-kolumbo", "slocum_glider_kolumbo_dvl/glider_data.csv", "slocum-glider-kolumbo",
+     set(), CONSISTENT | {"no_estimate:current", "heading_course_mismatch"}),
     ("dvl-circle", "waterlinked_dvl_a50_json_tank/out20210528_circle.txt", None,
      NO_ESTIMATE_ALL, CONSISTENT),
     ("dvl-still", "waterlinked_dvl_a50_json_tank/out_still_60s.txt", None,

@@ -112,6 +112,11 @@ class Inputs(_Strict):
     """Stern plane of a torpedo AUV (``full_scale`` in rad)."""
     thrusters: list[ChannelMap] = []
     """Thrusters of an ROV, in the order of the allocation matrix."""
+    pump: ChannelMap | None = None
+    """A glider's buoyancy-pump volume (``full_scale`` in cm^3: e.g. a ``column`` source
+    with ``neutral_us = 0``, ``half_range_us = full_scale = 1000`` reads cm^3 as logged)."""
+    battery: ChannelMap | None = None
+    """A glider's moving-battery position (``full_scale`` in m, forward positive)."""
     from_autopilot: bool = True
     """Move a servo-mapped role to the output the autopilot's ``SERVOn_FUNCTION``
     parameters name for it (in a log or read live), as ``onboard.autodetect`` does."""
@@ -225,6 +230,11 @@ class CsvFormat(_Strict):
     """Column of the sway velocity over ground (m/s, body axes)."""
     sog_mps: str = ""
     """Column of the GNSS speed over ground (m/s)."""
+    north_mps: str = ""
+    """Column of the velocity over ground north (m/s, earth axes); with ``east_mps`` a
+    VelocityOverGround (a navigation solution's, e.g. a glider's differenced track)."""
+    east_mps: str = ""
+    """Column of the velocity over ground east (m/s, earth axes)."""
     depth_m: str = ""
     """Column of the depth (m, down positive)."""
     pwm_columns: list[str] = []
@@ -240,6 +250,11 @@ class CsvFormat(_Strict):
     make an Attitude sample."""
     pitch: str = ""
     """Column of the pitch angle (``heading_unit``)."""
+    heading_spike_deg: Annotated[float, msgspec.Meta(ge=0.0)] = 0.0
+    """A row whose heading is more than this (deg) from both the last accepted heading and
+    the next row's, while those two agree within it, loses its Heading and Attitude
+    samples (rejected ``heading_spike``): an angle interpolated across 0/360 the long way
+    round (a resampled log). 0: off. The reader then holds each row until the next."""
     assume_level: bool = False
     """Emit Attitude (roll = pitch = 0, yaw = heading, yaw rate) when the log has heading
     and yaw rate but no roll/pitch: an explicit approximation for surface boats."""

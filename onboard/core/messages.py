@@ -216,7 +216,9 @@ class ActuatorCommand(Sample, frozen=True, tag="command"):
     * ``left``, ``right``: the two thrusters of a skid-steered boat;
     * ``propeller_rpm``: commanded or measured shaft speed;
     * ``stern_plane_rad``: stern/dive plane deflection, positive pitches the nose down;
-    * ``thrusters``: per-thruster commands of a multi-thruster vehicle (BlueROV2 order).
+    * ``thrusters``: per-thruster commands of a multi-thruster vehicle (BlueROV2 order);
+    * ``pump_cc``: a glider's buoyancy-pump (ballast) volume (cm^3, positive buoyant);
+    * ``battery_m``: a glider's moving-battery position (m, forward positive).
     """
 
     throttle: float | None = None
@@ -226,6 +228,8 @@ class ActuatorCommand(Sample, frozen=True, tag="command"):
     propeller_rpm: float | None = None
     stern_plane_rad: float | None = None
     thrusters: tuple[float, ...] | None = None
+    pump_cc: float | None = None
+    battery_m: float | None = None
 
 
 class Parameter(Sample, frozen=True, tag="param"):

@@ -233,6 +233,44 @@ class KfConfig(SurgeHeadingConfig, forbid_unknown_fields=True, kw_only=True, fro
 # [pipelines.current]
 
 
+class GliderModelConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """``[pipelines.current.glider]``: the steady-glide model of a buoyancy-driven glider
+    (:class:`onboard.estimators.vehicle_models.GliderModel`, docs/current.md, "Glider
+    model"). When present, the current pipeline takes the glider's through-water velocity
+    from its pitch, depth rate and pump volume (``[inputs] pump``) as a water-track
+    measurement at each new depth sample. Defaults: the Slocum's published coefficients
+    (Graver 2005: ``vehicle_models.SLOCUM_LIFT_KL``, ``SLOCUM_DRAG_KD0``, ``SLOCUM_DRAG_KD``,
+    the same numbers)."""
+
+    lift_kl: float = 132.5
+    """Lift per angle of attack ``K_L`` (kg/(m rad)): ``L = (K_L0 + K_L alpha) U^2``."""
+    lift_kl0: float = 0.0
+    """Lift at zero angle of attack ``K_L0`` (kg/m)."""
+    drag_kd0: float = 2.15
+    """Parasite drag ``K_D0`` (kg/m): ``D = (K_D0 + K_D alpha^2) U^2``."""
+    drag_kd: float = 25.0
+    """Induced drag ``K_D`` (kg/(m rad^2))."""
+    density: Annotated[float, msgspec.Meta(gt=0.0)] = 1027.0
+    """Sea-water density (kg/m^3)."""
+    neutral_pump_cc: float = 0.0
+    """Pump volume (cm^3) at which the glider is neutrally buoyant."""
+    vertical_water_std: Annotated[float, msgspec.Meta(ge=0.0)] = 0.02
+    """One-sigma (m/s) of the vertical water velocity (internal waves, convection) that
+    the depth rate cannot tell from the glider's own sinking or rising."""
+    glide_angle_std: Annotated[float, msgspec.Meta(ge=0.0)] = 0.035
+    """One-sigma (rad) of the flight-path angle: the pitch sensor's error and the angle
+    of attack's (0.035 rad = 2 deg)."""
+    min_glide_angle: Annotated[float, msgspec.Meta(gt=0.0)] = 0.21
+    """Below this pitch (rad; 0.21 = 12 deg) the depth rate says nothing usable about the
+    horizontal speed (``u_h = dz/dt / tan(gamma)``): no measurement."""
+    max_depth_interval_s: Annotated[float, msgspec.Meta(gt=0.0)] = 30.0
+    """Depth samples further apart than this (s) give no depth rate."""
+    hold_s: Annotated[float, msgspec.Meta(ge=0.0)] = 300.0
+    """The along-track current counts as observed for this long (s) after the model's
+    last measurement (through an inflection); afterwards it is floored at the prior like
+    any current without a surge model (``heading_memory_s``)."""
+
+
 class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """``[pipelines.current]``: hyperparameters of the current pipeline (SI units)."""
 
@@ -376,6 +414,9 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     disagreement discards the restored current (an event, ``restore_discarded``)."""
     restore_check_p: Annotated[float, msgspec.Meta(gt=0.0, lt=0.5)] = 0.001
     """False-alarm probability of the restored-current test per evaluation."""
+    glider: GliderModelConfig | None = None
+    """The steady-glide model of a glider (``[pipelines.current.glider]``); None (absent):
+    no glider model."""
 
 
 

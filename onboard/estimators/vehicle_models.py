@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import operator
 from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -283,3 +284,226 @@ def kind_for_class(vehicle_class: str, has_twin: bool = False) -> str:
     if vehicle_class == "twin-thruster-boat" or has_twin:
         return "surface-twin"
     return "surface-rudder"
+
+
+# ---------------------------------------------------------------------------- glider
+# A buoyancy-driven glider does not fit the regression family above: it is driven by its
+# net buoyancy (the pump's ballast volume) and trimmed in pitch by a moving battery, and
+# its wings turn the vertical motion into horizontal speed. What it offers instead is a
+# steady-glide relation between what the log carries (pitch, depth rate, pump volume) and
+# the velocity through water (docs/current.md, "Glider model").
+
+GRAVITY_MPS2 = 9.81
+"""Gravitational acceleration (m/s^2)."""
+SEAWATER_DENSITY_KGM3 = 1027.0
+"""Nominal sea-water density (kg/m^3); a configuration sets its area's (the Aegean below
+the thermocline: ~1029)."""
+SLOCUM_LIFT_KL = 132.5
+"""Lift coefficient ``K_L`` (kg/(m rad)): lift ``L = (K_L0 + K_L alpha) U^2`` (N), the
+Slocum glider's, identified by Graver (2005), "Underwater gliders: dynamics, control and
+design", PhD thesis, Princeton, Slocum model (``K_L0 = 0``). Merckelbach et al. (2019, J. Atmos.
+Oceanic Technol. 36: 281) give ``0.5 rho S (a_h + a_w)`` = 0.5 * 1027 * 0.1 * (3.8 + 3.73)
+= 387 kg/(m rad) for the same hull (S = 0.1 m^2, a_h = 3.8 /rad, a_w = 3.73 /rad from
+aspect ratio 7 and sweep 43 deg)."""
+SLOCUM_DRAG_KD0 = 2.15
+"""Parasite drag coefficient ``K_D0`` (kg/m): drag ``D = (K_D0 + K_D alpha^2) U^2`` (N);
+Graver (2005), Slocum. Merckelbach et al. (2019): ``0.5 rho S C_D0`` with C_D0 ~ 0.15,
+7.7 kg/m."""
+SLOCUM_DRAG_KD = 25.0
+"""Induced drag coefficient ``K_D`` (kg/(m rad^2)); Graver (2005), Slocum."""
+SLOCUM_WING_AREA_M2 = 0.10
+"""Reference (wing) area ``S`` of the Slocum (m^2); Merckelbach et al. (2019) and their
+``gliderflight`` package's default."""
+SLOCUM_HULL_LIFT_PER_RAD = 3.8
+"""Hull lift slope ``a_h`` (1/rad); Merckelbach et al. (2019), calibrated against a
+profiling DVL on a Slocum."""
+SLOCUM_WING_ASPECT_RATIO = 7.0
+"""Wing aspect ratio (-); Merckelbach et al. (2019)."""
+SLOCUM_WING_SWEEP_RAD = math.radians(43.0)
+"""Wing sweep angle (rad, 43 deg); Merckelbach et al. (2019)."""
+SLOCUM_OSWALD_EFFICIENCY = 0.8
+"""Oswald span efficiency of the wings (-); Merckelbach et al. (2019)."""
+SLOCUM_HULL_INDUCED_DRAG_PER_RAD2 = 9.7
+"""Hull induced-drag coefficient ``C_D1,hull`` (1/rad^2); Merckelbach et al. (2019)."""
+SLOCUM_PARASITE_DRAG_CD0 = 0.15
+"""Parasite drag coefficient ``C_D0`` (-); Merckelbach et al. (2010), 0.1-0.2 by
+deployment."""
+SLOCUM_MOVING_MASS_KG = 9.0
+"""Mass of the Slocum's moving battery pack (kg); Graver (2005), Slocum (``m_bar``)."""
+GLIDE_ITERATIONS = 8
+"""Fixed-point iterations of the angle of attack (converges to < 1e-6 rad in 4-5 at
+glide angles above 10 deg)."""
+MIN_SPEED_MPS = 0.05
+"""Speed (m/s) below which the lift cannot carry the net buoyancy: the angle of attack is
+bounded there (:data:`MAX_ALPHA_RAD`)."""
+MAX_ALPHA_RAD = 0.2
+"""Largest angle of attack the steady-glide solution returns (rad, ~11 deg: beyond it the
+linear lift model, and the steady glide, no longer hold)."""
+
+
+def merckelbach_coefficients(density: float = SEAWATER_DENSITY_KGM3,
+                              ) -> tuple[float, float, float]:
+    """``(K_L, K_D0, K_D)`` (kg/(m rad), kg/m, kg/(m rad^2)) of the Slocum from the
+    non-dimensional coefficients of Merckelbach et al. (2019) at ``density`` (kg/m^3):
+    ``K = 0.5 rho S C``, with the wing lift slope ``a_w = 2 pi A / (2 + sqrt(A^2 (1 +
+    tan^2 Lambda) + 4))`` (A aspect ratio, Lambda sweep) and the wing's induced drag
+    ``a_w^2 / (pi e A)``. At 1029 kg/m^3: 387.6, 7.72, 539.8."""
+    ar = SLOCUM_WING_ASPECT_RATIO
+    a_w = 2.0 * math.pi * ar / (
+        2.0 + math.sqrt(ar * ar * (1.0 + math.tan(SLOCUM_WING_SWEEP_RAD) ** 2) + 4.0))
+    cd1 = a_w * a_w / (math.pi * SLOCUM_OSWALD_EFFICIENCY * ar) + SLOCUM_HULL_INDUCED_DRAG_PER_RAD2
+    q = 0.5 * density * SLOCUM_WING_AREA_M2
+    return q * (SLOCUM_HULL_LIFT_PER_RAD + a_w), q * SLOCUM_PARASITE_DRAG_CD0, q * cd1
+
+
+class GlideState(NamedTuple):
+    """A steady glide: through-water velocity in the vertical plane of the heading.
+
+    Attributes:
+        u_h: horizontal speed through water along the heading (m/s).
+        w: vertical speed through water, down positive (m/s).
+        speed: speed through water along the flight path ``U`` (m/s).
+        gamma: flight-path angle (rad, positive climbing, NED: ``w = -U sin(gamma)``).
+        alpha: angle of attack (rad, ``gamma = pitch + alpha``; it steepens the path).
+        std_u_h: one-sigma of ``u_h`` (m/s) from the vertical-water and glide-angle
+            uncertainties (:meth:`GliderModel.glide_from_depth_rate`).
+        thrust: the along-path force the glide needs beyond the buoyancy's (N): drag
+            minus the net buoyancy's along-path share; ~0 for a pure glider, the
+            thruster's push on a hybrid one.
+    """
+
+    u_h: float
+    w: float
+    speed: float
+    gamma: float
+    alpha: float
+    std_u_h: float
+    thrust: float
+
+    def body_velocity(self, pitch: float) -> tuple[float, float, float]:
+        """The through-water velocity in body axes (FRD, m/s; no sideslip) at ``pitch``
+        (rad): the path is ``pitch - gamma`` below the body's x axis."""
+        a = pitch - self.gamma
+        return (self.speed * math.cos(a), 0.0, self.speed * math.sin(a))
+
+
+class GliderModel:
+    """Steady wings-level glide of a buoyancy-driven glider (Graver 2005;
+    Fan & Woolsey 2014; Merckelbach et al. 2010, 2019).
+
+    Forces on the glider in the vertical plane, with ``U`` the speed through water,
+    ``gamma`` the flight-path angle and ``alpha = gamma - pitch`` (signed so that the path
+    is steeper than the hull, as it is in a steady glide):
+
+    * net buoyancy ``B = rho g (V_pump - V_neutral)`` (N; upward positive), from the pump
+      volume ``V_pump`` (cm^3, the log's ``pump_vol``) about the neutral volume;
+    * lift ``L = (K_L0 + K_L |alpha|) U^2`` perpendicular to the path, drag
+      ``D = (K_D0 + K_D alpha^2) U^2`` along it;
+    * (hybrid gliders) a thrust ``T`` along the hull.
+
+    Steady flight balances them: across the path ``L = |B| cos(gamma)``; along it
+    ``D = |B| |sin(gamma)| + T``. A pure glider (``T = 0``) glides at an angle fixed by
+    the pitch (:meth:`glide_from_buoyancy`); with a thruster, or whatever the push, the
+    measured depth rate fixes the speed instead (:meth:`glide_from_depth_rate`): with no
+    vertical water velocity, ``U = dz/dt / sin|gamma|`` and ``u_h = dz/dt / tan|gamma|``,
+    and the lift balance gives ``alpha = |B| cos(gamma) / (K_L U^2)``, iterated.
+
+    The pitch itself follows from the battery position by the static moment balance
+    (:meth:`pitch_from_battery`): ``tan(pitch) = (k_pump (V_pump - V_neutral) -
+    k_batt (x_batt - x_batt0))``, the pump's buoyancy at the nose and the battery's
+    weight against the hull's righting moment (Graver 2005).
+
+    Attributes (SI unless stated): ``k_l``, ``k_l0``, ``k_d0``, ``k_d`` (lift and drag,
+    above), ``density`` (kg/m^3), ``neutral_pump_cc`` (cm^3), ``vertical_water_std``
+    (m/s: the vertical water velocity the depth rate cannot tell from the glider's),
+    ``gamma_std`` (rad: glide-angle uncertainty, pitch sensor and angle of attack),
+    ``min_glide`` (rad: below this pitch the depth rate says nothing usable about
+    the horizontal speed), ``k_pump`` (1/cm^3), ``k_batt`` (1/m), ``batt0`` (m).
+    """
+
+    def __init__(self, *, k_l: float = SLOCUM_LIFT_KL, k_l0: float = 0.0,
+                 k_d0: float = SLOCUM_DRAG_KD0, k_d: float = SLOCUM_DRAG_KD,
+                 density: float = SEAWATER_DENSITY_KGM3, neutral_pump_cc: float = 0.0,
+                 vertical_water_std: float = 0.02, gamma_std: float = math.radians(2.0),
+                 min_glide: float = math.radians(12.0), k_pump: float = 0.0,
+                 k_batt: float = 0.0, batt0: float = 0.0) -> None:
+        self.k_l, self.k_l0, self.k_d0, self.k_d = k_l, k_l0, k_d0, k_d
+        self.density = density
+        self.neutral_pump_cc = neutral_pump_cc
+        self.vertical_water_std = vertical_water_std
+        self.gamma_std = gamma_std
+        self.min_glide = min_glide
+        self.k_pump, self.k_batt, self.batt0 = k_pump, k_batt, batt0
+
+    def net_buoyancy(self, pump_cc: float) -> float:
+        """Net buoyancy (N, upward positive) at pump volume ``pump_cc`` (cm^3)."""
+        return self.density * GRAVITY_MPS2 * (pump_cc - self.neutral_pump_cc) * 1e-6
+
+    def lift(self, alpha: float, speed: float) -> float:
+        """Lift (N) at angle of attack ``alpha`` (rad) and speed ``speed`` (m/s)."""
+        return (self.k_l0 + self.k_l * alpha) * speed * speed
+
+    def drag(self, alpha: float, speed: float) -> float:
+        """Drag (N) at angle of attack ``alpha`` (rad) and speed ``speed`` (m/s)."""
+        return (self.k_d0 + self.k_d * alpha * alpha) * speed * speed
+
+    def pitch_from_battery(self, battery_m: float, pump_cc: float) -> float:
+        """Static trim pitch (rad, nose up positive) at battery position ``battery_m``
+        (m, forward positive) and pump volume ``pump_cc`` (cm^3): the moment balance of
+        the class docstring."""
+        return math.atan(self.k_pump * (pump_cc - self.neutral_pump_cc)
+                         - self.k_batt * (battery_m - self.batt0))
+
+    def glide_from_depth_rate(self, pitch: float, depth_rate: float,
+                              pump_cc: float) -> GlideState | None:
+        """The steady glide at ``pitch`` (rad) that descends at ``depth_rate`` (m/s, down
+        positive) with the pump at ``pump_cc`` (cm^3), or None where the depth rate cannot
+        give the horizontal speed: a flight-path angle below ``min_glide``, or a pitch
+        and a depth rate of opposite senses (an inflection, a stall).
+
+        ``std_u_h`` propagates ``vertical_water_std`` and ``gamma_std``:
+        ``(sigma_w / tan|gamma|)^2 + (u_h sigma_gamma / (sin|gamma| cos gamma))^2``.
+        """
+        if not (math.isfinite(pitch) and math.isfinite(depth_rate)
+                and math.isfinite(pump_cc)):
+            return None
+        if abs(pitch) < self.min_glide or depth_rate * pitch >= 0.0:
+            return None  # nose down while rising, or nose up while sinking
+        b = abs(self.net_buoyancy(pump_cc))
+        sgn = -1.0 if pitch < 0.0 else 1.0  # the path is steeper than the hull
+        gamma = pitch
+        speed = alpha = 0.0
+        for _ in range(GLIDE_ITERATIONS):
+            speed = abs(depth_rate) / math.sin(abs(gamma))
+            q = max(speed, MIN_SPEED_MPS) ** 2
+            a = (b * math.cos(gamma) / q - self.k_l0) / self.k_l
+            alpha = sgn * min(max(a, 0.0), MAX_ALPHA_RAD)
+            gamma = pitch + alpha
+        g = abs(gamma)
+        u_h = abs(depth_rate) / math.tan(g)
+        std = math.hypot(self.vertical_water_std / math.tan(g),
+                         u_h * self.gamma_std / (math.sin(g) * math.cos(g)))
+        thrust = self.drag(alpha, speed) - b * math.sin(g)
+        return GlideState(u_h=u_h, w=depth_rate, speed=speed, gamma=gamma, alpha=alpha,
+                          std_u_h=std, thrust=thrust)
+
+    def glide_from_buoyancy(self, pitch: float, pump_cc: float) -> GlideState | None:
+        """The unpowered steady glide at ``pitch`` (rad) with the pump at ``pump_cc``
+        (cm^3): the angle of attack from ``tan|gamma| = D / L`` (Merckelbach et al. 2010),
+        then the speed from the drag balance ``D = |B| sin|gamma|``. None when
+        the buoyancy and the pitch disagree (nose down while buoyant) or the pitch is
+        below ``min_glide``."""
+        b = self.net_buoyancy(pump_cc)
+        if abs(pitch) < self.min_glide or b * pitch <= 0.0:
+            return None
+        sgn = 1.0 if pitch > 0.0 else -1.0
+        a = 0.0
+        for _ in range(GLIDE_ITERATIONS * 2):
+            a = (self.k_d0 + self.k_d * a * a) / (self.k_l * math.tan(abs(pitch) + a))
+            a = min(a, MAX_ALPHA_RAD)
+        gamma = pitch + sgn * a
+        g = abs(gamma)
+        speed = math.sqrt(abs(b) * math.sin(g) / (self.k_d0 + self.k_d * a * a))
+        u_h = speed * math.cos(g)
+        return GlideState(u_h=u_h, w=-speed * math.sin(gamma), speed=speed, gamma=gamma,
+                          alpha=sgn * a, std_u_h=math.nan, thrust=0.0)

@@ -388,8 +388,12 @@ class CurrentPipeline:
     def _surge_unobservable(self) -> bool:
         """The along-track current is unobservable for the reported observer: its surge
         model is still the generic prior (the high-gain observer's own RLS, else the joint
-        filter's) and the recent headings are not diverse."""
+        filter's) and the recent headings are not diverse, and no glider model measured
+        the through-water speed within ``glider.hold_s``."""
         ident = self.identification
+        g = self.cfg.glider
+        if g is not None and (self._t or 0.0) - self.samples.glider_t <= g.hold_s:
+            return False
         if self.hgo_rls is None:
             return ident.surge_unobservable()
         return self.hgo_rls.masked[0] and ident.headings.length() > ident.heading_diversity

@@ -15,6 +15,12 @@
 * the velocity measurements (:class:`.current_kf.VelocityMeasurement`): GNSS SOG/COG and
   ``VelocityOverGround`` in earth axes, DVL bottom and water track in body axes, each with
   its one-sigma (m/s) from ``[sensors]`` (a GNSS fix's reported accuracy scales its own).
+* with a glider model (``[pipelines.current.glider]``), the glider's through-water
+  velocity from its pitch, depth rate (consecutive ``Depth`` samples) and pump volume
+  (``ActuatorCommand.pump_cc``), as a water-track measurement (body axes, source
+  :data:`GLIDER_SOURCE`) at each new depth rate, with the model's one-sigma of the
+  horizontal speed (:meth:`.vehicle_models.GliderModel.glide_from_depth_rate`); none
+  where the model cannot give the speed (an inflection, a shallow glide).
 
 Rejected samples are counted in the shared ``counters`` (``rejected_nonfinite``,
 ``rejected_invalid_dvl``); a rejected velocity is also an innovation record of its
@@ -46,7 +52,7 @@ from onboard.core.messages import (
 )
 from onboard.core.so3 import euler_to_matrix
 from onboard.estimators.current_kf import VelocityMeasurement
-from onboard.estimators.vehicle_models import ModelInputs
+from onboard.estimators.vehicle_models import GliderModel, ModelInputs
 from onboard.pipelines.base import unused_measurement
 
 ATTITUDE_FALLBACK_S = 1.0
@@ -64,6 +70,8 @@ YAW_RATE_MIN_INTERVAL_S = 1e-3
 ATTITUDE_HELD_MAX = 64
 """Attitude samples stamped after the step time that are held for later ticks (the newest
 are kept)."""
+GLIDER_SOURCE = "glider_model"
+"""The source of the glider model's water-track measurements."""
 CHANNELS = {"earth": "velocity", "bottom": "dvl", "water": "water_track"}
 """The innovation channel of each velocity measurement kind: ``velocity`` over ground in
 earth axes (GNSS SOG/COG, ``VelocityOverGround``), ``dvl`` bottom track and
@@ -128,12 +136,29 @@ class CurrentSamples:
         self._have_rates = False
         self._yaw_prev: tuple[float, float] | None = None
         self.depth: float | None = None
+        self._init_glider(cfg)
         # sample handlers by exact class (the sample classes have no subclasses)
         self._handlers: dict[type, Callable[[Any, list], None]] = {
             Attitude: self._on_attitude, Heading: self._on_heading, Imu: self._on_imu,
             ActuatorCommand: self._on_command, Depth: self._on_depth,
             VelocityOverGround: self._on_vog, DvlVelocity: self._on_dvl,
             DvlPosition: self._on_dvl_position, GnssFix: self._on_gnss}
+
+    def _init_glider(self, cfg: Any) -> None:
+        """The glider model of ``cfg.glider`` (None without) and its inputs: the pump
+        volume (cm^3), the previous depth sample, the pending depth rate, the time of the
+        model's last measurement (``glider_t``, s)."""
+        g = cfg.glider
+        self.glider: GliderModel | None = None if g is None else GliderModel(
+            k_l=g.lift_kl, k_l0=g.lift_kl0, k_d0=g.drag_kd0, k_d=g.drag_kd,
+            density=g.density, neutral_pump_cc=g.neutral_pump_cc,
+            vertical_water_std=g.vertical_water_std, gamma_std=g.glide_angle_std,
+            min_glide=g.min_glide_angle)
+        self.glider_max_dt = g.max_depth_interval_s if g is not None else 0.0
+        self.pump_cc: float | None = None
+        self._depth_prev: tuple[float, float] | None = None
+        self._depth_rate: tuple[float, float] | None = None  # (t, m/s) not yet used
+        self.glider_t = -math.inf
 
     def take(self, t: float, samples: Sequence[Sample]) -> list[VelocityMeasurement]:
         """Take the tick's samples into the model inputs and the attitude; returns the
@@ -151,7 +176,27 @@ class CurrentSamples:
             h = handlers.get(type(s))
             if h is not None:
                 h(s, meas)
+        if self._depth_rate is not None:
+            self._glide(meas)
         return meas
+
+    def _glide(self, meas: list) -> None:
+        """The glider model's through-water velocity at the pending depth rate, the pitch
+        in use and the newest pump volume (neutral if none came), as a water-track
+        measurement."""
+        glider = self.glider
+        assert glider is not None and self._depth_rate is not None
+        tr, rate = self._depth_rate
+        self._depth_rate = None
+        pump = self.pump_cc if self.pump_cc is not None else glider.neutral_pump_cc
+        g = glider.glide_from_depth_rate(self.pitch, rate, pump)
+        if g is None:
+            return
+        u, v, w = g.body_velocity(self.pitch)
+        z = [u, v, w] if self.nd == 3 else [g.u_h, 0.0]
+        self.glider_t = tr
+        self.counters["glider_measurements"] = self.counters.get("glider_measurements", 0) + 1
+        meas.append(VelocityMeasurement("water", tr, np.array(z), g.std_u_h, GLIDER_SOURCE))
 
     def _on_attitude(self, s: Attitude, meas: list) -> None:
         if not (math.isfinite(s.roll_rad) and math.isfinite(s.pitch_rad)
@@ -233,9 +278,16 @@ class CurrentSamples:
             x.right = s.right
         if s.thrusters is not None:
             x.thrusters = s.thrusters
+        if s.pump_cc is not None:
+            self.pump_cc = s.pump_cc
 
     def _on_depth(self, s: Depth, meas: list) -> None:
         self.depth = s.depth_m
+        if self.glider is None or not math.isfinite(s.depth_m):
+            return
+        prev, self._depth_prev = self._depth_prev, (s.t, s.depth_m)
+        if prev is not None and 0.0 < s.t - prev[0] <= self.glider_max_dt:
+            self._depth_rate = (s.t, (s.depth_m - prev[1]) / (s.t - prev[0]))
 
     def _on_vog(self, s: VelocityOverGround, meas: list) -> None:
         z = [s.v_north_mps, s.v_east_mps] + ([s.v_down_mps] if (

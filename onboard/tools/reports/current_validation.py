@@ -306,7 +306,19 @@ def main(argv: list[str] | None = None) -> int:
               f"{cover[0]:.2f}/{cover[1]:.2f}, correlation with the DVL current "
               f"{corr[0]:.2f}/{corr[1]:.2f}, DVL current rms "
               f"{np.sqrt(np.mean(g['truth'][m] ** 2, axis=0)).round(3)}")
+        import tempfile
+        with tempfile.TemporaryDirectory() as tmp:
+            gm = run_glider_model(args.glider, Path(tmp))
+        for ax, f in glider_figures(gm).items():
+            print(f"glider model ({GLIDER_CONFIG}, after {GLIDER_SKIP_S:.0f} s) {ax}: rms "
+                  f"{f['rms']:.3f} m/s (estimating zero {f['zero_rms']:.3f}), published "
+                  f"{f['published']:.3f}, coverage 1-sigma {f['cover1']:.2f} 2-sigma "
+                  f"{f['cover2']:.2f}, mean error {f['bias']:+.3f}")
         if not args.no_plot:
+            gm["est"] = np.c_[gm["est"], np.zeros(len(gm["t"]))]
+            gm["std"] = np.c_[gm["std"], np.zeros(len(gm["t"]))]
+            gm["truth"] = np.c_[gm["truth"], np.zeros(len(gm["t"]))]
+            plot({"glider-model kf glider model vs DVL current": gm}, out)
             g["est"] = np.c_[g["est"], np.zeros(len(g["t"]))]
             g["std"] = np.c_[g["std"], np.zeros(len(g["t"]))]
             g["truth"] = np.c_[g["truth"], np.zeros(len(g["t"]))]
@@ -340,7 +352,7 @@ def plot(runs: dict[str, dict[str, Any]], out: Path) -> None:
             ax.set_ylim(lo - 0.3, hi + 0.3)
         axes[0].legend(fontsize=7, loc="upper right")
         axes[-1].set_xlabel("t (s)")
-        ref = "the DVL-measured current" if g == "glider" else "SITL truth"
+        ref = "the DVL-measured current" if g.startswith("glider") else "SITL truth"
         fig.suptitle(f"current pipeline vs {ref}: {g} (dashed: reference)")
         fig.tight_layout()
         fig.savefig(out / f"current_{g}.png", dpi=90)
@@ -417,6 +429,53 @@ def run_glider(path: str | Path, section: dict[str, Any] | None = None) -> dict[
     T_ = np.array(T)
     C = np.c_[np.interp(T_, truth[:, 0], truth[:, 1]), np.interp(T_, truth[:, 0], truth[:, 2])]
     return {"t": T_, "est": np.array(E), "std": np.array(S), "truth": C, "pipe": pipe}
+
+
+GLIDER_CONFIG = "slocum-glider-kolumbo"
+"""The bundled configuration of the Kolumbo glider log with the glider model."""
+GLIDER_SKIP_S = 1200.0
+"""The Kolumbo figures are measured after this (s): the first 20 minutes are where the
+configuration's tuned values were chosen (config/slocum-glider-kolumbo.toml)."""
+
+
+def run_glider_model(path: str | Path, out_dir: Path,
+                     config: str = GLIDER_CONFIG) -> dict[str, Any]:
+    """``onboard replay`` of the glider log with ``config`` (the glider model) into
+    ``out_dir``; the current estimates (NaN where unknown) and one-sigmas at the ticks, the
+    DVL-measured current interpolated to them (``glider_samples``)."""
+    import csv as _csv
+
+    from onboard.replay import replay
+    replay(str(path), load(config), out_dir, plot=False)
+    _, truth = glider_samples(path)
+    with open(out_dir / "estimates.csv", newline="", encoding="utf-8") as fh:
+        rows = list(_csv.DictReader(fh))
+
+    def col(k: str) -> np.ndarray:
+        return np.array([float(r[k]) if r[k] else np.nan for r in rows])
+
+    T = col("t")
+    C = np.c_[np.interp(T, truth[:, 0], truth[:, 1]), np.interp(T, truth[:, 0], truth[:, 2])]
+    return {"t": T, "est": np.c_[col("current.north"), col("current.east")],
+            "std": np.c_[col("current.std_north"), col("current.std_east")], "truth": C}
+
+
+def glider_figures(r: dict[str, Any], t_min: float = GLIDER_SKIP_S) -> dict[str, dict]:
+    """Per axis (north, east), after ``t_min`` (s): the error's rms (m/s) over the
+    published ticks, their share, 1- and 2-sigma coverage, the mean error (m/s) and the
+    rms of the reference itself ("estimating zero")."""
+    m = r["t"] > t_min
+    out: dict[str, dict] = {}
+    for i, ax in enumerate(("north", "east")):
+        e = r["est"][m, i] - r["truth"][m, i]
+        s = r["std"][m, i]
+        p = np.isfinite(e)
+        out[ax] = {"rms": float(np.sqrt(np.mean(e[p] ** 2))), "published": float(p.mean()),
+                   "cover1": float(np.mean(np.abs(e[p]) <= s[p])),
+                   "cover2": float(np.mean(np.abs(e[p]) <= 2 * s[p])),
+                   "bias": float(np.mean(e[p])),
+                   "zero_rms": float(np.sqrt(np.mean(r["truth"][m, i] ** 2)))}
+    return out
 
 
 if __name__ == "__main__":
