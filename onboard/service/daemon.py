@@ -264,7 +264,8 @@ class Service:
             self.intake.add_source(name, src.kind)
             tr = open_transport(src.url, clock=self.clock.now, queue_size=svc.queue_size,
                                 on_event=lambda text, n=name: self.event(f"{n}: {text.split(': ', 1)[-1]}"),
-                                idle_timeout_s=src.idle_timeout_s)
+                                idle_timeout_s=src.idle_timeout_s,
+                                zenoh_session=self.zenoh_session)
             self.inputs.append(_Input(src, name, tr, t_started=self.clock.now()))
         for inp in self.inputs:  # inputs open while the publishers start
             inp.task = asyncio.create_task(self._read(inp), name=f"input:{inp.name}")
@@ -297,6 +298,11 @@ class Service:
                             f"{len(self.engine.pipelines)} pipelines at {cfg.engine.rate_hz:g} Hz")
         log.info("ready in %.2f s: %d/%d inputs up", self.stats.t_ready, up, len(self.inputs))
 
+    def zenoh_session(self) -> object | None:
+        """The session of ``[service.zenoh]`` once open (None before): the one session the
+        publisher, the ``zenoh:`` inputs and a ``zenoh:`` MAVLink out share."""
+        return self.zenoh.session if self.zenoh is not None else None
+
     @staticmethod
     def _name(i: int, src: SourceConfig) -> str:
         return src.name or f"{src.kind}{i}"
@@ -316,7 +322,8 @@ class Service:
         from onboard.service.publishers.mavlink_pub import MavlinkPublisher
 
         pub = MavlinkPublisher(self.cfg.service.mavlink, self.cfg.vehicle.system_id,
-                               clock=self.clock.now, signing=self.signing)
+                               clock=self.clock.now, signing=self.signing,
+                               zenoh_session=self.zenoh_session)
         try:
             pub.start()
         except ConfigError:
@@ -605,6 +612,18 @@ class Service:
             log.error("state save failed: %s", err)
 
 
+def check_zenoh_url(cfg: Config, url: str, where: str, kind: str) -> None:
+    """A ``zenoh:`` URL (MAVLink over Zenoh, on the session of ``[service.zenoh]``) needs
+    that session enabled and carries MAVLink only; ConfigError naming ``where``."""
+    if not url.startswith("zenoh:"):
+        return
+    if kind != "mavlink":
+        raise ConfigError(f"{where}: {url!r}: a zenoh: url carries MAVLink (kind \"mavlink\")")
+    if not cfg.service.zenoh.enabled:
+        raise ConfigError(f"{where}: {url!r} uses the Zenoh session of [service.zenoh], "
+                          "which is disabled (service.zenoh.enabled = false)")
+
+
 async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None) -> int:
     """Run until SIGTERM/SIGINT; return the exit status."""
     svc = Service(cfg, state_dir=state_dir, logs_dir=logs_dir)
@@ -636,6 +655,8 @@ def main(args: argparse.Namespace) -> int:
         if (spec.scheme == "gpsd") != (src.kind == "gpsd"):
             raise ConfigError(f"{origin}: service.sources[{i}]: kind \"gpsd\" goes with "
                               f"a gpsd://HOST:PORT url and only with it")
+        check_zenoh_url(cfg, src.url, f"{origin}: service.sources[{i}].url", src.kind)
+    check_zenoh_url(cfg, cfg.service.mavlink.url, f"{origin}: service.mavlink.url", "mavlink")
     mav = cfg.service.mavlink
     if mav.require_signing or mav.signing_key_file:
         from onboard.service.publishers.mavlink_pub import check_signing
