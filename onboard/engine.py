@@ -33,6 +33,7 @@ from collections import Counter
 from typing import Callable, Iterable, Mapping, Protocol, Sequence
 
 from onboard.core.config import Config
+from onboard.core.geo import LocalFrame
 from onboard.core.messages import (
     ActuatorColumn,
     ActuatorOutputs,
@@ -231,6 +232,18 @@ class Engine:
         """The sample streams now stale (see :data:`STALE_AFTER_S`)."""
         self.timeline = Timeline()
         """The segments of the run and its outliers (:meth:`admit`)."""
+
+    def local_frame(self, name: str) -> tuple[LocalFrame, tuple[float, float]] | None:
+        """The local frame of pipeline ``name``'s published north/east (about its first
+        fix) and the published position (north, east; m) of the frame's origin, or None
+        (no such pipeline, no position, no fix yet): what turns its estimates into
+        latitude and longitude (:func:`onboard.core.wire.location_fix`)."""
+        p = next((q for q in self.pipelines if q.name == name), None)
+        frame = getattr(p, "frame", None)
+        if not isinstance(frame, LocalFrame):
+            return None
+        offset = getattr(p, "frame_offset", None)
+        return frame, (offset if offset is not None else (0.0, 0.0))
 
     @property
     def columns(self) -> list[str]:

@@ -137,7 +137,12 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
     records: dict[str, EstimateRecord] = {}
     sent_in: list[bytes] = []
 
+    encodings: dict[str, str] = {}
+
     def on_est(sample) -> None:
+        encodings[str(sample.key_expr).split("/")[2]] = str(sample.encoding)
+        if "/fix/" in str(sample.key_expr):
+            return
         rec = msgspec.json.decode(sample.payload.to_bytes(), type=EstimateRecord)
         if rec.values:
             with lock:
@@ -148,6 +153,7 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
             sent_in.append(sample.payload.to_bytes())
 
     subs = [shore.declare_subscriber("onboard/*/est/*", on_est),
+            shore.declare_subscriber("onboard/*/fix/*", on_est),
             shore.declare_subscriber("mavlink_raw/in", on_in)]
     overlay = _overlay(tmp_path / "zenoh.toml", endpoint)
     service = subprocess.Popen(
@@ -187,6 +193,8 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
         router.close()
     assert estimating() == PIPELINES, (sorted(records), err[-2000:])
     assert service.returncode == 0, err[-2000:]
+    assert encodings == {"est": "application/json;onboard.Estimate.v1",
+                         "fix": "application/json;foxglove.LocationFix"}
     # what the service wrote on mavlink_raw/in: its stream requests, parameter reads and
     # TIMESYNC to the autopilot, and its estimates as component 191
     msgs = sent()

@@ -30,8 +30,11 @@ import msgspec
 
 from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.core.wire import ESTIMATE_SCHEMA, HEALTH_SCHEMA, LOCATION_FIX_SCHEMA
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+EXPECTED = {"est": ESTIMATE_SCHEMA, "health": HEALTH_SCHEMA, "fix": LOCATION_FIX_SCHEMA}
+"""Third key segment -> the schema name this version decodes there."""
 ANGLES = {"heading", "course", "yaw", "roll", "pitch"}
 """Quantities shown in degrees."""
 ANGLE_RATES = {"yaw_rate", "rate_p", "rate_q", "rate_r"}
@@ -72,9 +75,15 @@ class ShoreView:
         self._dec_est = msgspec.json.Decoder(EstimateRecord)
         self._dec_health = msgspec.json.Decoder(HealthRecord)
 
-    def feed(self, key: str, payload: bytes) -> None:
-        """One Zenoh sample or query reply on ``key``."""
+    def feed(self, key: str, payload: bytes, encoding: str = "") -> None:
+        """One Zenoh sample or query reply on ``key``; a schema name in its ``encoding``
+        (``application/json;<schema>``) other than the one this version reads for the
+        key (another schema version) is counted in ``bad`` and skipped."""
         parts = key.split("/")
+        schema = encoding.partition(";")[2]
+        if schema and len(parts) >= 3 and EXPECTED.get(parts[2], schema) != schema:
+            self.bad += 1
+            return
         try:
             if len(parts) >= 4 and parts[2] == "est":
                 rec = self._dec_est.decode(payload)
@@ -95,7 +104,7 @@ class ShoreView:
 
     def on_sample(self, sample: Any) -> None:
         """Zenoh subscriber callback."""
-        self.feed(str(sample.key_expr), sample.payload.to_bytes())
+        self.feed(str(sample.key_expr), sample.payload.to_bytes(), str(sample.encoding))
 
     def vehicles(self) -> list[str]:
         """Ids of the vehicles seen so far (estimates, health or liveliness), sorted."""
@@ -193,7 +202,7 @@ def snapshot(session: Any, view: ShoreView, vehicle: str = "*", timeout_s: float
                 view.alive.add(str(rep.ok.key_expr).split("/")[1])
     for rep in session.get(f"onboard/{vehicle}/**", timeout=timeout_s):
         if rep.ok is not None:
-            view.feed(str(rep.ok.key_expr), rep.ok.payload.to_bytes())
+            view.feed(str(rep.ok.key_expr), rep.ok.payload.to_bytes(), str(rep.ok.encoding))
 
 
 def main(args: argparse.Namespace) -> int:
