@@ -34,6 +34,7 @@ from typing import Callable, Iterable, Mapping, Protocol, Sequence
 
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame
+from onboard.core.wire import LocationFix, location_fix
 from onboard.core.messages import (
     ActuatorColumn,
     ActuatorOutputs,
@@ -244,6 +245,21 @@ class Engine:
             return None
         offset = getattr(p, "frame_offset", None)
         return frame, (offset if offset is not None else (0.0, 0.0))
+
+    def location_fixes(self, records: Sequence[EstimateRecord]) -> list[LocationFix]:
+        """The positions among ``records`` as Foxglove LocationFixes (latitude and
+        longitude from each pipeline's :meth:`local_frame`;
+        :func:`onboard.core.wire.location_fix`)."""
+        out: list[LocationFix] = []
+        for rec in records:
+            if "north" not in rec.values:
+                continue
+            frame = self.local_frame(rec.pipeline)
+            if frame is not None:
+                fix = location_fix(rec, *frame)
+                if fix is not None:
+                    out.append(fix)
+        return out
 
     @property
     def columns(self) -> list[str]:

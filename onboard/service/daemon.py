@@ -55,7 +55,6 @@ from onboard.drivers.transports import (
 )
 from onboard.core.config import Config, ConfigError, SourceConfig, load_all
 from onboard.core.messages import EstimateRecord, HealthRecord
-from onboard.core.wire import LocationFix, location_fix
 from onboard.engine import Engine
 from onboard.service.intake import Intake
 from onboard.service.persistence import StateFile, plain
@@ -152,21 +151,6 @@ class ServiceStats:
     tick_late_max_s: float = 0.0
     """The largest delay (service s) between a tick's grid time and the end of its wait
     for the grid (the loop busy or starved of CPU), skipped stalls included."""
-
-
-def location_fixes(engine: Engine, records: Sequence[EstimateRecord]) -> list[LocationFix]:
-    """The positions among ``records`` as Foxglove LocationFixes (latitude and longitude
-    from each pipeline's local frame; :func:`onboard.core.wire.location_fix`)."""
-    out: list[LocationFix] = []
-    for rec in records:
-        if "north" not in rec.values:
-            continue
-        frame = engine.local_frame(rec.pipeline)
-        if frame is not None:
-            fix = location_fix(rec, *frame)
-            if fix is not None:
-                out.append(fix)
-    return out
 
 
 def resolve_dirs(args_state_dir: str | None) -> tuple[Path, Path | None]:
@@ -532,7 +516,7 @@ class Service:
         records = self.intake.tick(t)
         self.stats.ticks += 1
         if self.zenoh is not None and records:
-            self.zenoh.publish_estimates(records, location_fixes(self.engine, records))
+            self.zenoh.publish_estimates(records, self.engine.location_fixes(records))
         if self.mavlink is not None:
             self.mavlink.publish_estimates(records, now)
         if self.on_tick is not None:
