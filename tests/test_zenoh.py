@@ -175,3 +175,18 @@ def test_positions_also_go_out_as_foxglove_location_fixes_with_their_schema_name
     # Foxglove's covariance is East-North-Up, row-major: east's variance first
     assert back.position_covariance == [9.0, 0, 0, 0, 4.0, 0, 0, 0, 0]
     assert back.position_covariance_type == 2
+
+
+def test_shore_decodes_its_schema_version_and_counts_another_as_bad():
+    from onboard.tools.shore import ShoreView
+
+    view = ShoreView()
+    rec = EstimateRecord(vehicle="b", pipeline="kf", t=1.0, values={"speed": 1.0})
+    payload = msgspec.json.encode(rec)
+    view.feed("onboard/b/est/kf", payload, "application/json;onboard.Estimate.v1")
+    view.feed("onboard/b/est/kf", payload, "application/json")  # before schema names
+    assert view.received["est"] == 2 and view.bad == 0
+    view.feed("onboard/b/est/kf", payload, "application/json;onboard.Estimate.v2")
+    assert view.received["est"] == 2 and view.bad == 1
+    view.feed("onboard/b/fix/kf", b"{}", "application/json;foxglove.LocationFix")
+    assert view.bad == 1  # a fix is not decoded by the table, and not bad

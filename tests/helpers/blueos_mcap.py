@@ -25,9 +25,11 @@ _TS = struct.Struct(">Q")
 
 
 def tlog_messages(path: Path) -> Iterator[tuple[int, Any]]:
-    """(receive time in us, pymavlink message) of every frame of a tlog."""
+    """(receive time in us, pymavlink message) of every frame of a tlog that pymavlink
+    decodes (a frame it refuses, e.g. a bad CRC, is not one mavlink-server would route)."""
     data = Path(path).read_bytes()
     mav = dialect.MAVLink(None)
+    mav.robust_parsing = True
     pos = 0
     while pos + 9 < len(data):
         t_us = _TS.unpack_from(data, pos)[0]
@@ -36,7 +38,11 @@ def tlog_messages(path: Path) -> Iterator[tuple[int, Any]]:
             end = f + 12 + data[f + 1] + (13 if data[f + 2] & 1 else 0)
         else:
             end = f + 8 + data[f + 1]
-        for msg in mav.parse_buffer(data[f:end]) or []:
+        try:
+            msgs = mav.parse_buffer(data[f:end]) or []
+        except dialect.MAVError:
+            msgs = []
+        for msg in msgs:
             if msg.get_type() != "BAD_DATA":
                 yield t_us, msg
         pos = end
