@@ -109,6 +109,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_zenoh_flags(p)
     p.add_argument("--vehicle", default="*", help="vehicle id (default: all)")
     p.add_argument("--once", action="store_true", help="print one snapshot and exit")
+    p.add_argument("--foxglove", metavar="[HOST:]PORT", help="also serve the records to "
+                   "Foxglove on a WebSocket server there (needs the foxglove extra; "
+                   "docs/foxglove.md)")
     p.set_defaults(handler="onboard.tools.shore:main")
 
     p = sub.add_parser("bench", help="performance figures")

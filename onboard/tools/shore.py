@@ -10,7 +10,8 @@ snapshot at once) and the liveliness tokens for who is alive, then follows
 ``onboard/<vehicle>/est/*`` and ``onboard/<vehicle>/health``. The table is redrawn every
 second: one row per pipeline with its newest values (angles in degrees, everything else
 in SI units), then the vehicle's mode, input rates, rejections with reasons, drops and
-recent events.
+recent events. ``--foxglove [HOST:]PORT`` also serves the records to Foxglove on a
+WebSocket server (:mod:`onboard.tools.foxglove_live`, docs/foxglove.md).
 
 :class:`ShoreView` (the subscriber and the formatting) is reused by ``onboard demo``.
 """
@@ -216,6 +217,7 @@ def main(args: argparse.Namespace) -> int:
     view = ShoreView()
     sub = None
     token_sub = None
+    extra: tuple[Any, ...] = ()
     try:
         if args.once:
             snapshot(session, view, vehicle)
@@ -233,6 +235,13 @@ def main(args: argparse.Namespace) -> int:
 
         token_sub = session.liveliness().declare_subscriber(f"onboard/{vehicle}/alive", on_token)
         sub = session.declare_subscriber(f"onboard/{vehicle}/**", view.on_sample)
+        if getattr(args, "foxglove", None):
+            from onboard.tools.foxglove_live import parse_listen, start
+
+            server, relay_sub, _ = start(session, vehicle, args.foxglove)
+            extra = (relay_sub, server)
+            host, port = parse_listen(args.foxglove)
+            print(f"Foxglove: open connection ws://{host}:{port}", flush=True)
         snapshot(session, view, vehicle)
         tty = sys.stdout.isatty()
         while True:
@@ -247,7 +256,9 @@ def main(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return 0
     finally:
-        for obj in (sub, token_sub):
+        for obj in (sub, token_sub, *extra[:1]):
             if obj is not None:
                 obj.undeclare()
+        for server in extra[1:]:
+            server.stop()
         session.close()
