@@ -16,7 +16,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from onboard.core.config import ConfigError, from_dict
-from onboard.core.messages import EstimateRecord
+from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.drivers.transports import (
     TransportUrlError,
     ZenohTransport,
@@ -152,9 +152,22 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
         with lock:
             sent_in.append(sample.payload.to_bytes())
 
+    from_autopilot: list[bytes] = []
+    healths: list[HealthRecord] = []
+
+    def on_out(sample) -> None:
+        with lock:
+            from_autopilot.append(sample.payload.to_bytes())
+
+    def on_health(sample) -> None:
+        with lock:
+            healths.append(msgspec.json.decode(sample.payload.to_bytes(), type=HealthRecord))
+
     subs = [shore.declare_subscriber("onboard/*/est/*", on_est),
             shore.declare_subscriber("onboard/*/fix/*", on_est),
-            shore.declare_subscriber("mavlink_raw/in", on_in)]
+            shore.declare_subscriber("mavlink_raw/in", on_in),
+            shore.declare_subscriber("mavlink_raw/out", on_out),
+            shore.declare_subscriber("onboard/*/health", on_health)]
     overlay = _overlay(tmp_path / "zenoh.toml", endpoint)
     service = subprocess.Popen(
         [sys.executable, "-m", "onboard", "run", "--config", str(REPO / "config" / "sitl-jaiabot.toml"),
@@ -169,6 +182,12 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
         with lock:
             return set(records)
 
+    def received() -> dict[str, float]:
+        """The streams the service's health says arrive (Hz, over its 2 s window)."""
+        with lock:
+            return {k: v for h in healths for k, v in h.rates_hz.items()
+                    if k.startswith("autopilot/") and k.endswith(":received") and v > 0}
+
     def sent() -> list:
         mav = mavlink2.MAVLink(None)
         with lock:
@@ -178,7 +197,7 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
     try:
         deadline = time.monotonic() + WAIT_S
         while time.monotonic() < deadline and (estimating() != PIPELINES or not SENT <= {
-                m.get_type() for m in sent()}):
+                m.get_type() for m in sent()} or not received()):
             assert service.poll() is None, service.stderr.read() if service.stderr else ""
             time.sleep(0.5)
     finally:
@@ -202,6 +221,14 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
     assert SENT <= names, sorted(names)
     assert any(m.get_type() == "COMMAND_LONG" and m.command == 511 for m in msgs)
     assert {m.get_srcComponent() for m in msgs} == {191}
+    # the autopilot's side, as it came back on mavlink_raw/out: the requests were answered
+    mav = mavlink2.MAVLink(None)
+    back = [m for chunk in from_autopilot for m in (mav.parse_buffer(chunk) or [])]
+    assert any(m.get_type() == "COMMAND_ACK" and m.command == 511 and m.result == 0 for m in back)
+    assert {m.param_id for m in back if m.get_type() == "PARAM_VALUE"} >= {"SERVO1_FUNCTION",
+                                                                           "SERVO3_FUNCTION"}
+    assert any(m.get_type() == "TIMESYNC" and m.tc1 != 0 for m in back)  # autopilot time
+    assert "autopilot/SCALED_IMU:received" in received(), sorted(received())
     cur = records["current"].values
     if "north" in cur and "east" in cur:
         assert "WIND_COV" in names
