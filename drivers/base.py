@@ -37,6 +37,9 @@ class ReadStats:
     """Rejected records by reason."""
     by_type: Counter[str] = field(default_factory=Counter)
     """Records by message type (MAVLink name, NMEA sentence, ...), for summaries."""
+    skipped: Counter[str] = field(default_factory=Counter)
+    """Records left out by design, not for a fault, by reason (an MCAP's channels that
+    are not the MAVLink read: :mod:`drivers.mcap_log`)."""
 
     def reject(self, reason: str) -> None:
         """Count one rejection for ``reason``."""
@@ -44,13 +47,16 @@ class ReadStats:
 
     def as_dict(self) -> dict:
         """The counts as a JSON-serializable dict (``records``, ``samples``, ``rejected`` and
-        ``by_type``, keys sorted)."""
-        return {
+        ``by_type``, keys sorted; ``skipped`` too when any)."""
+        out = {
             "records": self.records,
             "samples": self.samples,
             "rejected": dict(sorted(self.rejected.items())),
             "by_type": dict(sorted(self.by_type.items())),
         }
+        if self.skipped:
+            out["skipped"] = dict(sorted(self.skipped.items()))
+        return out
 
 
 class LineAssembler:

@@ -1,7 +1,7 @@
 """Open any supported log by sniffing its content, not trusting its name alone.
 
-Supported: MAVLink telemetry logs (``.tlog``), ArduPilot DataFlash (``.bin``), the
-service's own recordings, NMEA / Water Linked DVL JSON / PD6 text captures, and CSV (one
+Supported: MAVLink telemetry logs (``.tlog``), ArduPilot DataFlash (``.bin``), MCAP
+recordings of BlueOS's MAVLink (``.mcap``), the service's own recordings, NMEA / Water Linked DVL JSON / PD6 text captures, and CSV (one
 file or a directory of runs, which needs a ``[csv]`` mapping in the config).
 """
 
@@ -13,10 +13,12 @@ from typing import Sequence
 from onboard.drivers.base import LogReader, UnreadableLog
 
 DATAFLASH_MAGIC = b"\xa3\x95"
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+"""The first bytes of an MCAP file (a BlueOS 1.5 recording: :mod:`drivers.mcap_log`)."""
 
 
 def sniff(path: str | Path) -> str:
-    """The format of ``path``: tlog, dataflash, recording, csv, csv-dir or text."""
+    """The format of ``path``: tlog, dataflash, recording, mcap, csv, csv-dir or text."""
     p = Path(path)
     if p.is_dir():
         if any(p.glob("*.onbrec")):
@@ -37,6 +39,8 @@ def sniff(path: str | Path) -> str:
         return "recording"
     if head.startswith(DATAFLASH_MAGIC):
         return "dataflash"
+    if head.startswith(MCAP_MAGIC):
+        return "mcap"
     from onboard.drivers.mavlink_frame import MAGIC_V1, MAGIC_V2
 
     suffix = p.suffix.lower()
@@ -68,6 +72,10 @@ def open_log(path: str | Path, csv_format=None,
         from onboard.drivers.dataflash import DataflashReader
 
         return fmt, DataflashReader(path)
+    if fmt == "mcap":
+        from onboard.drivers.mcap_log import McapReader
+
+        return fmt, McapReader(path)
     if fmt == "recording":
         from onboard.drivers.recording import RecordingReader
 

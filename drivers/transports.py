@@ -1,4 +1,4 @@
-"""Async byte transports: serial ports (real and pseudo-terminals), UDP and TCP.
+"""Async byte transports: serial ports (real and pseudo-terminals), UDP, TCP and Zenoh.
 
 Every transport is an async iterator of ``(data, t_rx)``: a chunk of bytes exactly as
 received and its receive time ``t_rx`` in seconds on the caller's clock (default
@@ -13,6 +13,9 @@ URLs (:class:`onboard.core.config.SourceConfig`)::
     tcp:192.168.2.95:16171        connect as a TCP client
     gpsd://127.0.0.1:2947         a TCP client of gpsd that sends ?WATCH on every connection
                                   (port 2947 when omitted; also gpsd:HOST:PORT)
+    zenoh:mavlink_raw             MAVLink frames over Zenoh as BlueOS's mavlink-server carries
+                                  them: received on ``<prefix>/out``, sent on ``<prefix>/in``
+                                  (:class:`ZenohTransport`; the session is the caller's)
 
 A port that disappears (USB serial unplugged, the pty's other end closed, TCP peer gone,
 UDP bind failing) never ends the iteration: the transport counts the loss, waits with
@@ -84,6 +87,16 @@ DEFAULT_IDLE_TIMEOUT_S = {"tcp": 10.0, "gpsd": 10.0}
 """The idle timeout when the configuration gives none, per scheme (others: never)."""
 TX_QUEUE_BYTES = 65536
 """Most bytes queued for sending on one connection; beyond it a send is dropped."""
+ZENOH_KEY_WILDCARDS = "*$?#"
+"""Characters a Zenoh key prefix of a ``zenoh:`` URL may not contain."""
+ZENOH_RX_SUFFIX = "out"
+"""mavlink-server publishes every MAVLink frame it routes on ``<prefix>/out``."""
+ZENOH_TX_SUFFIX = "in"
+"""mavlink-server injects the bytes it receives on ``<prefix>/in`` into its router."""
+ZENOH_MAVLINK_ENCODING = "application/octet-stream;mavlink"
+"""The encoding of raw MAVLink frames (mavlink-server's ``mavlink_raw/out``)."""
+SESSION_POLL_S = 0.1
+"""How often (s) a Zenoh transport looks whether the caller's session is open yet."""
 
 
 class IdleTimeout(OSError):
@@ -103,7 +116,7 @@ class TransportUrlError(ValueError):
 class TransportSpec:
     """A parsed source URL."""
 
-    scheme: Literal["serial", "pty", "udp", "tcp", "gpsd"]
+    scheme: Literal["serial", "pty", "udp", "tcp", "gpsd", "zenoh"]
     path: str = ""
     host: str = ""
     port: int = 0
@@ -112,8 +125,8 @@ class TransportSpec:
     def __str__(self) -> str:
         if self.scheme == "serial":
             return f"serial:{self.path}:{self.baud}"
-        if self.scheme == "pty":
-            return f"pty:{self.path}"
+        if self.scheme in ("pty", "zenoh"):
+            return f"{self.scheme}:{self.path}"
         if self.scheme == "gpsd":
             return f"gpsd://{self.host}:{self.port}"
         return f"{self.scheme}:{self.host}:{self.port}"
@@ -134,6 +147,12 @@ def parse_url(url: str) -> TransportSpec:
         return TransportSpec("serial", path=path, baud=b)
     if scheme == "pty":
         return TransportSpec("pty", path=rest)
+    if scheme == "zenoh":
+        prefix = rest.strip("/")
+        if not prefix or any(c in prefix for c in ZENOH_KEY_WILDCARDS) or "//" in prefix:
+            raise TransportUrlError(f"{url!r}: expected zenoh:PREFIX, a Zenoh key without "
+                                    "wildcards (e.g. zenoh:mavlink_raw)")
+        return TransportSpec("zenoh", path=prefix)
     if scheme == "gpsd":
         rest = rest.removeprefix("//")
         if not rest.rpartition(":")[2].isdigit():  # no port given
@@ -147,7 +166,8 @@ def parse_url(url: str) -> TransportSpec:
         if not host or not 0 <= p <= 65535:
             raise TransportUrlError(f"{url!r}: expected {scheme}:HOST:PORT")
         return TransportSpec(scheme, host=host.strip("[]"), port=p)  # type: ignore[arg-type]
-    raise TransportUrlError(f"{url!r}: unknown scheme {scheme!r} (serial, pty, udp, tcp, gpsd)")
+    raise TransportUrlError(f"{url!r}: unknown scheme {scheme!r} (serial, pty, udp, tcp, gpsd, "
+                            "zenoh)")
 
 
 @dataclass
@@ -648,9 +668,140 @@ class GpsdTransport(TcpTransport):
     greeting = GPSD_WATCH
 
 
-def open_transport(url: str, **kwargs: object) -> Transport:
-    """The transport for a source URL; ``kwargs`` go to :class:`Transport`."""
+class ZenohWriter:
+    """Puts byte strings on one Zenoh key of a session that may not be open yet:
+    ``session()`` returns it or None. A write without a session is refused (False);
+    Zenoh's put drops under congestion and never blocks."""
+
+    def __init__(self, session: Callable[[], object | None], key: str) -> None:
+        self.session = session
+        self.key = key
+        self.errors = 0
+        self._pub: object | None = None
+        self._of: object | None = None
+
+    def write(self, data: bytes) -> bool:
+        """Put ``data`` on the key; False (counted in ``errors``) when it cannot."""
+        sess = self.session()
+        if sess is None:
+            self.errors += 1
+            return False
+        try:
+            if self._pub is None or self._of is not sess:
+                import zenoh
+
+                self._pub = sess.declare_publisher(  # type: ignore[attr-defined]
+                    self.key, encoding=zenoh.Encoding(ZENOH_MAVLINK_ENCODING), express=True)
+                self._of = sess
+            self._pub.put(bytes(data))  # type: ignore[attr-defined]
+        except Exception:  # noqa: BLE001 - a closed session: zenoh raises its ZError
+            self.errors += 1
+            self._pub = None
+            return False
+        return True
+
+    def close(self) -> None:
+        """Undeclare the publisher (the session stays the caller's)."""
+        pub, self._pub = self._pub, None
+        if pub is not None:
+            try:
+                pub.undeclare()  # type: ignore[attr-defined]
+            except Exception:  # noqa: BLE001 - the session may be closed already
+                pass
+
+
+class ZenohTransport(Transport):
+    """MAVLink over Zenoh the way BlueOS's mavlink-server carries it (its ``zenohraw``
+    driver): every frame arrives as one sample on ``<prefix>/out`` (encoding
+    ``application/octet-stream;mavlink``), and the bytes put on ``<prefix>/in`` are
+    parsed and routed to the autopilot. Each sample is one chunk, stamped by the clock
+    when Zenoh delivers it (on Zenoh's thread) and handed to the event loop in order.
+
+    The session is the caller's (``session()``: the service's ``[service.zenoh]``
+    session, or None while it is not open): the transport waits for it, subscribes, and
+    counts a closed session as a lost connection (then subscribes again).
+    """
+
+    def __init__(self, spec: TransportSpec, *, session: Callable[[], object | None],
+                 **kwargs: object) -> None:
+        super().__init__(spec, **kwargs)  # type: ignore[arg-type]
+        self.session = session
+        self.rx_key = f"{spec.path}/{ZENOH_RX_SUFFIX}"
+        self.tx_key = f"{spec.path}/{ZENOH_TX_SUFFIX}"
+
+    async def _wait_session(self) -> object:
+        while True:
+            sess = self.session()
+            if sess is not None:
+                return sess
+            await asyncio.sleep(SESSION_POLL_S)
+
+    async def _session(self) -> AsyncIterator[Chunk]:
+        box = _Mailbox(self.queue_size, self.stats)
+        sub, writer = await self._subscribe(lambda data, t_rx: box.put((data, t_rx)))
+        try:
+            while True:
+                data, t_rx = await self._idle(box.get())
+                yield self._count(data, t_rx)
+        finally:
+            self._unsubscribe(sub, writer)
+
+    async def _pump_session(self, sink: Callable[[bytes, float], None]) -> None:
+        lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+        def fail(err: BaseException) -> None:
+            if not lost.done():
+                lost.set_exception(err)
+
+        sub, writer = await self._subscribe(self._deliverer(sink, fail))
+        try:
+            await self._until_lost(lost)
+        finally:
+            self._unsubscribe(sub, writer)
+
+    async def _subscribe(self, deliver: Callable[[bytes, float], None]
+                         ) -> tuple[object, ZenohWriter]:
+        """Subscribe to ``<prefix>/out`` once the session is open: each sample's bytes to
+        ``deliver`` on the event loop; sends go to ``<prefix>/in``."""
+        sess = await self._wait_session()
+        loop = asyncio.get_running_loop()
+        clock = self.clock
+
+        def on_sample(sample: object) -> None:  # on a Zenoh thread
+            data = sample.payload.to_bytes()  # type: ignore[attr-defined]
+            t_rx = clock()
+            try:
+                loop.call_soon_threadsafe(deliver, data, t_rx)
+            except RuntimeError:  # the loop is closed: the service is stopping
+                pass
+
+        try:
+            sub = sess.declare_subscriber(self.rx_key, on_sample)  # type: ignore[attr-defined]
+        except Exception as err:  # noqa: BLE001 - a closed session raises ZError
+            raise OSError(errno.ENOTCONN, f"zenoh subscriber on {self.rx_key}: {err}") from None
+        writer = ZenohWriter(lambda: sess, self.tx_key)
+        self._tx = writer.write
+        self._connected()
+        return sub, writer
+
+    def _unsubscribe(self, sub: object, writer: ZenohWriter) -> None:
+        self._tx = None
+        writer.close()
+        try:
+            sub.undeclare()  # type: ignore[attr-defined]
+        except Exception:  # noqa: BLE001 - the session may be closed already
+            pass
+
+
+def open_transport(url: str, *, zenoh_session: Callable[[], object | None] | None = None,
+                   **kwargs: object) -> Transport:
+    """The transport for a source URL; ``kwargs`` go to :class:`Transport`;
+    ``zenoh_session`` gives a ``zenoh:`` URL its session (None while not open)."""
     spec = parse_url(url)
+    if spec.scheme == "zenoh":
+        if zenoh_session is None:
+            raise TransportUrlError(f"{url!r}: a zenoh: source needs a Zenoh session")
+        return ZenohTransport(spec, session=zenoh_session, **kwargs)
     cls = {"serial": SerialTransport, "pty": SerialTransport, "udp": UdpTransport,
            "tcp": TcpTransport, "gpsd": GpsdTransport}[spec.scheme]
     return cls(spec, **kwargs)  # type: ignore[arg-type]

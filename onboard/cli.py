@@ -83,13 +83,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler="onboard.sitl.cli:main")
 
     p = sub.add_parser("replay", help="run the pipelines over a recorded log")
-    p.add_argument("log", metavar="LOG", help=".tlog, .bin, NMEA/DVL capture, CSV (file or "
-                   "directory), or an onboard recording")
+    p.add_argument("log", metavar="LOG", help=".tlog, .bin, .mcap (a BlueOS recording), "
+                   "NMEA/DVL capture, CSV (file or directory), or an onboard recording")
     p.add_argument("--config", action="append", metavar="FILE",
                    help="vehicle config (default: detect from the log); repeat to apply "
                         "overlays in order, e.g. one written by diagnose --write-config")
     p.add_argument("--out", default="replay-out", help="output directory (default replay-out)")
     p.add_argument("--no-plot", action="store_true", help="skip the track figure")
+    p.add_argument("--mcap", metavar="FILE", help="also write the estimates as MCAP (the "
+                   "live Zenoh channels and schemas; needs the mcap extra)")
     p.set_defaults(handler="onboard.replay:main")
 
     p = sub.add_parser("diagnose", help="residuals, the missing effect, before/after")
@@ -109,6 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--once", action="store_true", help="print one snapshot and exit")
     p.add_argument("--web", default="", metavar="HOST:PORT",
                    help="serve the live map page on HOST:PORT instead of printing the table")
+    p.add_argument("--foxglove", metavar="[HOST:]PORT", help="also serve the records to "
+                   "Foxglove on a WebSocket server there (needs the foxglove extra; "
+                   "docs/foxglove.md)")
     p.set_defaults(handler="onboard.tools.shore:main")
 
     p = sub.add_parser("bench", help="performance figures")

@@ -33,6 +33,8 @@ from collections import Counter
 from typing import Callable, Iterable, Mapping, Protocol, Sequence
 
 from onboard.core.config import Config
+from onboard.core.geo import LocalFrame
+from onboard.core.wire import LocationFix, location_fix
 from onboard.core.messages import (
     ActuatorColumn,
     ActuatorOutputs,
@@ -231,6 +233,33 @@ class Engine:
         """The sample streams now stale (see :data:`STALE_AFTER_S`)."""
         self.timeline = Timeline()
         """The segments of the run and its outliers (:meth:`admit`)."""
+
+    def local_frame(self, name: str) -> tuple[LocalFrame, tuple[float, float]] | None:
+        """The local frame of pipeline ``name``'s published north/east (about its first
+        fix) and the published position (north, east; m) of the frame's origin, or None
+        (no such pipeline, no position, no fix yet): what turns its estimates into
+        latitude and longitude (:func:`onboard.core.wire.location_fix`)."""
+        p = next((q for q in self.pipelines if q.name == name), None)
+        frame = getattr(p, "frame", None)
+        if not isinstance(frame, LocalFrame):
+            return None
+        offset = getattr(p, "frame_offset", None)
+        return frame, (offset if offset is not None else (0.0, 0.0))
+
+    def location_fixes(self, records: Sequence[EstimateRecord]) -> list[LocationFix]:
+        """The positions among ``records`` as Foxglove LocationFixes (latitude and
+        longitude from each pipeline's :meth:`local_frame`;
+        :func:`onboard.core.wire.location_fix`)."""
+        out: list[LocationFix] = []
+        for rec in records:
+            if "north" not in rec.values:
+                continue
+            frame = self.local_frame(rec.pipeline)
+            if frame is not None:
+                fix = location_fix(rec, *frame)
+                if fix is not None:
+                    out.append(fix)
+        return out
 
     @property
     def columns(self) -> list[str]:

@@ -1,7 +1,10 @@
-"""``onboard replay LOG [--config FILE] [--out DIR]``: run the pipelines over a log.
+"""``onboard replay LOG [--config FILE] [--out DIR] [--mcap FILE]``: run the pipelines
+over a log.
 
 Writes ``DIR/estimates.csv`` (architecture.md §4.2), ``DIR/summary.json`` (what was read
-and rejected, rates, time span, the vehicle config used and why) and ``DIR/track.png``.
+and rejected, rates, time span, the vehicle config used and why) and ``DIR/track.png``;
+with ``--mcap`` also the estimates as MCAP, on the channels and with the schemas of the
+live Zenoh records (:mod:`drivers.mcap_out`, docs/foxglove.md).
 The same engine and pipelines as the live service, so a replay is the live result.
 """
 
@@ -125,7 +128,7 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
 
         infos, params = scan_header(log)
         cfg, why = detect([*infos, *params])
-    elif fmt in ("dataflash", "recording"):
+    elif fmt in ("dataflash", "recording", "mcap"):
         header = [s for s in reader if isinstance(s, (Parameter, VehicleInfo))]
         cfg, why = detect(header)
     else:
@@ -134,8 +137,9 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
 
 
 def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
-           plot: bool = True, progress: bool = False) -> dict:
-    """Run the pipelines over ``log``; write the outputs into ``out_dir``; return the summary."""
+           plot: bool = True, progress: bool = False, mcap: Path | None = None) -> dict:
+    """Run the pipelines over ``log``; write the outputs into ``out_dir`` (and the
+    estimates as MCAP into ``mcap`` when given); return the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
     wall0 = time.perf_counter()
     fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
@@ -147,6 +151,16 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     # A live recording starts ticking before its first sample: count from the first tick.
     csv = EstimatesCsv(out_dir / "estimates.csv", engine.columns,
                        None if fmt == "recording" else first.t)
+    on_tick = csv.write
+    mcap_out = None
+    if mcap is not None:
+        from onboard.drivers.mcap_out import McapRecordWriter
+
+        mcap_out = McapRecordWriter(mcap, cfg.service.zenoh.key_prefix, cfg.vehicle.id)
+
+        def on_tick(t: float, records: Sequence[EstimateRecord]) -> None:
+            csv.write(t, records)
+            mcap_out.write(t, records, engine.location_fixes(records))
     meter = _Progress(progress)
 
     header: list[Sample] = []   # HEARTBEAT and parameters, checked against cfg at the end
@@ -164,15 +178,17 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         # estimates are exactly the live ones (onboard.service.recorder.replay_recording).
         from onboard.service.recorder import replay_recording
 
-        result = replay_recording(log, engine, csv.write)
+        result = replay_recording(log, engine, on_tick)
         ticks = result.ticks
         reader.stats = result.stats
         for reason, n in result.rejected.items():
             reader.stats.rejected[reason] += n
         reader.stats.samples = sum(engine.accepted.values()) + sum(engine.rejected.values())
     else:
-        ticks = run(engine, source, csv.write)
+        ticks = run(engine, source, on_tick)
     csv.close()
+    if mcap_out is not None:
+        mcap_out.close()
     meter.done()
     time_span = _time_span(engine, first.t)
     span = time_span["duration_s"]
@@ -207,6 +223,8 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "pipeline_health": engine.counters(),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
     }
+    if mcap_out is not None:
+        summary["mcap"] = {"file": str(mcap), "messages": mcap_out.messages}
     if plot:
         summary["figure"] = _plot_track(out_dir)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -248,8 +266,8 @@ def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
                  read_rejected: Mapping[str, int] | None = None) -> Alerts:
     """The engine's warnings and those of the whole run: the log's HEARTBEAT and servo
     functions against ``cfg`` (:func:`onboard.autodetect.consistency`), records the
-    reader dropped as time outliers (``read_rejected``: its rejections by reason), no
-    position source, and every pipeline that gave no estimate with what it lacked
+    reader dropped as time outliers and MCAP messages it could not read
+    (``read_rejected``: its rejections by reason), no position source, and every pipeline that gave no estimate with what it lacked
     (``kinds``: accepted samples by kind)."""
     alerts = engine.alerts
     for code, message in consistency(cfg, header):
@@ -259,6 +277,13 @@ def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
         alerts.warn("time_outlier", f"the reader dropped {n_out} record(s) stamped far from "
                     "the records around them (a corrupted or mistyped time); the records "
                     "after them were kept")
+    unread = {k.split(":", 1)[1]: n for k, n in (read_rejected or {}).items()
+              if k.startswith("mcap:")}
+    if unread:
+        alerts.warn("mcap_unread", "the MCAP's MAVLink JSON had what this version does not "
+                    "read (counts: " + ", ".join(f"{k} {n}" for k, n in sorted(unread.items()))
+                    + "): those messages were skipped, unknown fields ignored, missing ones "
+                    "taken as 0 (summary.json read.rejected)")
     have = {k for k, n in kinds.items() if n > 0}
     if not have & POSITION_KINDS:
         alerts.warn("no_position_source", "no position source in the log (no GNSS fix, no "
@@ -303,10 +328,16 @@ def main(args) -> int:
     log = args.log
     if not Path(log).exists():
         raise UsageError(f"{log}: no such file or directory")
+    mcap = getattr(args, "mcap", None)
     try:
+        if mcap:
+            from onboard.drivers.mcap_log import mcap_module
+
+            mcap_module()  # a missing package is said before the replay, not after
         cfg, note = choose_config(log, args.config)
         summary = replay(log, cfg, Path(args.out), config_note=note,
-                         plot=not args.no_plot, progress=sys.stderr.isatty())
+                         plot=not args.no_plot, progress=sys.stderr.isatty(),
+                         mcap=Path(mcap) if mcap else None)
     except UnreadableLog as err:
         raise UsageError(str(err)) from None
     read = summary["read"]
@@ -314,5 +345,7 @@ def main(args) -> int:
     print(f"{summary['format']} log, {summary['time_span']['duration_s']:.1f} s, "
           f"{read['samples']:,} samples, {rejected:,} rejected; {summary['rows']:,} rows "
           f"-> {Path(args.out) / 'estimates.csv'} ({summary['config']})")
+    if mcap:
+        print(f"  {summary['mcap']['messages']:,} records -> {mcap} (MCAP; docs/foxglove.md)")
     print_warnings(summary["warnings"], summary["time_span"]["start"])
     return 0

@@ -414,6 +414,14 @@ def dotted_name_resolves(dotted: str) -> bool:
     return False
 
 
+def _is_schema_name(dotted: str) -> bool:
+    """A wire schema name (``onboard.Estimate.v1``, ``onboard.Health.v2``:
+    onboard/core/wire.py), not a module: its second part is capitalized, as no package
+    of ours is."""
+    parts = dotted.split(".")
+    return len(parts) >= 2 and parts[1][:1].isupper()
+
+
 def stale_references(page: Path) -> list[str]:
     """Links, repository paths and dotted module names of a Markdown page that do not
     exist (links relative to the page, paths to the repository root)."""
@@ -422,7 +430,8 @@ def stale_references(page: Path) -> list[str]:
            if "://" not in link and not (page.parent / link).exists()]
     bad += [p for p in _REPO_PATH.findall(text) if not (REPO / p).is_file()]
     bad += [d for d in _DOTTED.findall(text)
-            if d.rpartition(".")[2] not in _NOT_MODULES and not dotted_name_resolves(d)]
+            if d.rpartition(".")[2] not in _NOT_MODULES and not _is_schema_name(d)
+            and not dotted_name_resolves(d)]
     return sorted(set(bad))
 
 

@@ -77,7 +77,8 @@ def test_estimates_and_health_arrive_as_json_with_schema_on_the_contract_keys(ro
             by_key = {k: (p, e) for k, p, e in got}
         assert {"onboard/boat7/est/current", "onboard/boat7/health"} <= keys
         payload, enc = by_key["onboard/boat7/est/current"]
-        assert enc == "application/json"
+        assert enc == "application/json;onboard.Estimate.v1"  # the schema named, versioned
+        assert by_key["onboard/boat7/health"][1] == f"application/json;onboard.Health.v{HEALTH_SCHEMA_VERSION}"
         back = msgspec.json.decode(payload, type=EstimateRecord)
         assert back == rec and back.schema == SCHEMA_VERSION
         h = msgspec.json.decode(by_key["onboard/boat7/health"][0], type=HealthRecord)
@@ -139,3 +140,53 @@ def test_onboard_shore_once_prints_a_snapshot_from_the_queryables(router, capsys
     args = argparse.Namespace(connect=[endpoint], listen=None, mode=None, vehicle="nobody",
                               once=True)
     assert shore.main(args) == 1  # nothing answered
+
+
+def test_positions_also_go_out_as_foxglove_location_fixes_with_their_schema_name(router):
+    from onboard.core.geo import LocalFrame
+    from onboard.core.wire import LocationFix, location_fix
+
+    endpoint, _ = router
+    shore = _client(endpoint)
+    got: dict[str, tuple[bytes, str]] = {}
+    sub = shore.declare_subscriber(
+        "onboard/boat7/fix/*", lambda s: got.update({str(s.key_expr): (s.payload.to_bytes(),
+                                                                       str(s.encoding))}))
+    pub = ZenohPublisher(ZenohOut(mode="peer", connect=[endpoint]), "boat7")
+    pub.start()
+    frame = LocalFrame(63.44, 10.40)
+    rec = EstimateRecord(vehicle="boat7", pipeline="kf", t=1700000000.25,
+                         values={"north": 111.0, "east": -50.0, "heading": 0.5},
+                         std={"north": 2.0, "east": 3.0})
+    fix = location_fix(rec, frame)
+    try:
+        assert wait_for(lambda: (pub.publish_estimates([rec], [fix]), bool(got))[-1])
+    finally:
+        pub.close()
+        sub.undeclare()
+        shore.close()
+    payload, enc = got["onboard/boat7/fix/kf"]
+    assert enc == "application/json;foxglove.LocationFix"
+    back = msgspec.json.decode(payload, type=LocationFix)
+    assert back.timestamp.sec == 1700000000 and back.timestamp.nsec == 250_000_000
+    assert back.frame_id == "kf" and back.heading == 0.5
+    n, e = frame.to_ne(back.latitude, back.longitude)
+    assert abs(n - 111.0) < 1e-6 and abs(e + 50.0) < 1e-6  # the same point, round trip
+    # Foxglove's covariance is East-North-Up, row-major: east's variance first
+    assert back.position_covariance == [9.0, 0, 0, 0, 4.0, 0, 0, 0, 0]
+    assert back.position_covariance_type == 2
+
+
+def test_shore_decodes_its_schema_version_and_counts_another_as_bad():
+    from onboard.tools.shore import ShoreView
+
+    view = ShoreView()
+    rec = EstimateRecord(vehicle="b", pipeline="kf", t=1.0, values={"speed": 1.0})
+    payload = msgspec.json.encode(rec)
+    view.feed("onboard/b/est/kf", payload, "application/json;onboard.Estimate.v1")
+    view.feed("onboard/b/est/kf", payload, "application/json")  # before schema names
+    assert view.received["est"] == 2 and view.bad == 0
+    view.feed("onboard/b/est/kf", payload, "application/json;onboard.Estimate.v2")
+    assert view.received["est"] == 2 and view.bad == 1
+    view.feed("onboard/b/fix/kf", b"{}", "application/json;foxglove.LocationFix")
+    assert view.bad == 1  # a fix is not decoded by the table, and not bad

@@ -302,7 +302,8 @@ class MavlinkOut(_Strict):
     enabled: bool = True
     """Send MAVLink."""
     url: str = "udpout:127.0.0.1:14550"
-    """Where to send it (pymavlink URL)."""
+    """Where to send it (pymavlink URL, or ``zenoh:PREFIX``: on ``PREFIX/in`` of the
+    ``[service.zenoh]`` session, for BlueOS's mavlink-server)."""
     component_id: int = 191
     """Our MAVLink component id."""
     rate_hz: float = 5.0
@@ -326,7 +327,9 @@ class SourceConfig(_Strict):
     """One live input: ``kind`` is the protocol, ``url`` the transport.
 
     URLs: ``serial:/dev/ttyUSB0:115200``, ``udp:0.0.0.0:14551``, ``tcp:192.168.2.95:16171``,
-    ``pty:/tmp/gps`` (a pseudo-terminal path), ``gpsd://127.0.0.1:2947`` (kind ``gpsd``).
+    ``pty:/tmp/gps`` (a pseudo-terminal path), ``gpsd://127.0.0.1:2947`` (kind ``gpsd``),
+    ``zenoh:mavlink_raw`` (MAVLink over the ``[service.zenoh]`` session, as BlueOS's
+    mavlink-server publishes it; kind ``mavlink``).
     """
 
     kind: Literal["mavlink", "nmea", "dvl-json", "pd6", "gpsd"]

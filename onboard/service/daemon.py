@@ -272,7 +272,8 @@ class Service:
             self.intake.add_source(name, src.kind)
             tr = open_transport(src.url, clock=self.clock.now, queue_size=svc.queue_size,
                                 on_event=lambda text, n=name: self.event(f"{n}: {text.split(': ', 1)[-1]}"),
-                                idle_timeout_s=src.idle_timeout_s)
+                                idle_timeout_s=src.idle_timeout_s,
+                                zenoh_session=self.zenoh_session)
             self.inputs.append(_Input(src, name, tr, t_started=self.clock.now()))
         for inp in self.inputs:  # inputs open while the publishers start
             inp.task = asyncio.create_task(self._read(inp), name=f"input:{inp.name}")
@@ -307,6 +308,11 @@ class Service:
                             f"{len(self.engine.pipelines)} pipelines at {cfg.engine.rate_hz:g} Hz")
         log.info("ready in %.2f s: %d/%d inputs up", self.stats.t_ready, up, len(self.inputs))
 
+    def zenoh_session(self) -> object | None:
+        """The session of ``[service.zenoh]`` once open (None before): the one session the
+        publisher, the ``zenoh:`` inputs and a ``zenoh:`` MAVLink out share."""
+        return self.zenoh.session if self.zenoh is not None else None
+
     @staticmethod
     def _name(i: int, src: SourceConfig) -> str:
         return src.name or f"{src.kind}{i}"
@@ -326,7 +332,8 @@ class Service:
         from onboard.service.publishers.mavlink_pub import MavlinkPublisher
 
         pub = MavlinkPublisher(self.cfg.service.mavlink, self.cfg.vehicle.system_id,
-                               clock=self.clock.now, signing=self.signing)
+                               clock=self.clock.now, signing=self.signing,
+                               zenoh_session=self.zenoh_session)
         try:
             pub.start()
         except ConfigError:
@@ -547,7 +554,7 @@ class Service:
         records = self.intake.tick(t)
         self.stats.ticks += 1
         if self.zenoh is not None and records:
-            self.zenoh.publish_estimates(records)
+            self.zenoh.publish_estimates(records, self.engine.location_fixes(records))
         if self.mavlink is not None:
             self.mavlink.publish_estimates(records, now)
         if self.web_view is not None and records:
@@ -647,6 +654,18 @@ class Service:
             log.error("state save failed: %s", err)
 
 
+def check_zenoh_url(cfg: Config, url: str, where: str, kind: str) -> None:
+    """A ``zenoh:`` URL (MAVLink over Zenoh, on the session of ``[service.zenoh]``) needs
+    that session enabled and carries MAVLink only; ConfigError naming ``where``."""
+    if not url.startswith("zenoh:"):
+        return
+    if kind != "mavlink":
+        raise ConfigError(f"{where}: {url!r}: a zenoh: url carries MAVLink (kind \"mavlink\")")
+    if not cfg.service.zenoh.enabled:
+        raise ConfigError(f"{where}: {url!r} uses the Zenoh session of [service.zenoh], "
+                          "which is disabled (service.zenoh.enabled = false)")
+
+
 async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None,
                       config_paths: Sequence[str | Path] = ()) -> int:
     """Run until SIGTERM/SIGINT; return the exit status."""
@@ -675,6 +694,8 @@ def check_config(cfg: Config, origin: str) -> None:
         if (spec.scheme == "gpsd") != (src.kind == "gpsd"):
             raise ConfigError(f"{origin}: service.sources[{i}]: kind \"gpsd\" goes with "
                               f"a gpsd://HOST:PORT url and only with it")
+        check_zenoh_url(cfg, src.url, f"{origin}: service.sources[{i}].url", src.kind)
+    check_zenoh_url(cfg, cfg.service.mavlink.url, f"{origin}: service.mavlink.url", "mavlink")
     if cfg.service.web.listen:
         from onboard.service.web.app import parse_listen
 

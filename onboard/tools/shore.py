@@ -14,6 +14,8 @@ in SI units), then the vehicle's mode, input rates, rejections with reasons, dro
 recent events. With ``--web HOST:PORT`` it serves the service's web page instead
 (:mod:`onboard.service.web`: live map, current, speed, heading, flags, health), fed from
 the same subscription (:func:`serve_web`).
+``--foxglove [HOST:]PORT`` also serves the records to Foxglove on a
+WebSocket server (:mod:`onboard.tools.foxglove_live`, docs/foxglove.md).
 
 :class:`ShoreView` (the subscriber and the formatting) is reused by ``onboard demo``.
 """
@@ -34,8 +36,11 @@ import msgspec
 
 from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.core.wire import ESTIMATE_SCHEMA, HEALTH_SCHEMA, LOCATION_FIX_SCHEMA
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+EXPECTED = {"est": ESTIMATE_SCHEMA, "health": HEALTH_SCHEMA, "fix": LOCATION_FIX_SCHEMA}
+"""Third key segment -> the schema name this version decodes there."""
 ANGLES = {"heading", "course", "yaw", "roll", "pitch"}
 """Quantities shown in degrees."""
 ANGLE_RATES = {"yaw_rate", "rate_p", "rate_q", "rate_r"}
@@ -76,9 +81,15 @@ class ShoreView:
         self._dec_est = msgspec.json.Decoder(EstimateRecord)
         self._dec_health = msgspec.json.Decoder(HealthRecord)
 
-    def feed(self, key: str, payload: bytes) -> None:
-        """One Zenoh sample or query reply on ``key``."""
+    def feed(self, key: str, payload: bytes, encoding: str = "") -> None:
+        """One Zenoh sample or query reply on ``key``; a schema name in its ``encoding``
+        (``application/json;<schema>``) other than the one this version reads for the
+        key (another schema version) is counted in ``bad`` and skipped."""
         parts = key.split("/")
+        schema = encoding.partition(";")[2]
+        if schema and len(parts) >= 3 and EXPECTED.get(parts[2], schema) != schema:
+            self.bad += 1
+            return
         try:
             if len(parts) >= 4 and parts[2] == "est":
                 rec = self._dec_est.decode(payload)
@@ -99,7 +110,7 @@ class ShoreView:
 
     def on_sample(self, sample: Any) -> None:
         """Zenoh subscriber callback."""
-        self.feed(str(sample.key_expr), sample.payload.to_bytes())
+        self.feed(str(sample.key_expr), sample.payload.to_bytes(), str(sample.encoding))
 
     def vehicles(self) -> list[str]:
         """Ids of the vehicles seen so far (estimates, health or liveliness), sorted."""
@@ -197,7 +208,7 @@ def snapshot(session: Any, view: ShoreView, vehicle: str = "*", timeout_s: float
                 view.alive.add(str(rep.ok.key_expr).split("/")[1])
     for rep in session.get(f"onboard/{vehicle}/**", timeout=timeout_s):
         if rep.ok is not None:
-            view.feed(str(rep.ok.key_expr), rep.ok.payload.to_bytes())
+            view.feed(str(rep.ok.key_expr), rep.ok.payload.to_bytes(), str(rep.ok.encoding))
 
 
 def serve_web(session: Any, vehicle: str, listen: str) -> int:
@@ -239,7 +250,7 @@ def serve_web(session: Any, vehicle: str, listen: str) -> int:
 
 def main(args: argparse.Namespace) -> int:
     """``onboard shore [--connect E] [--listen E] [--mode M] [--zenoh-config FILE]
-    [--vehicle ID] [--once] [--web HOST:PORT]``."""
+    [--vehicle ID] [--once] [--web HOST:PORT] [--foxglove [HOST:]PORT]``."""
     vehicle = args.vehicle or "*"
     if "/" in vehicle:
         raise UsageError(f"--vehicle {vehicle!r}: a vehicle id has no '/'")
@@ -248,6 +259,7 @@ def main(args: argparse.Namespace) -> int:
     view = ShoreView()
     sub = None
     token_sub = None
+    extra: tuple[Any, ...] = ()
     try:
         if getattr(args, "web", ""):
             return serve_web(session, vehicle, args.web)
@@ -267,6 +279,13 @@ def main(args: argparse.Namespace) -> int:
 
         token_sub = session.liveliness().declare_subscriber(f"onboard/{vehicle}/alive", on_token)
         sub = session.declare_subscriber(f"onboard/{vehicle}/**", view.on_sample)
+        if getattr(args, "foxglove", None):
+            from onboard.tools.foxglove_live import parse_listen, start
+
+            server, relay_sub, _ = start(session, vehicle, args.foxglove)
+            extra = (relay_sub, server)
+            host, port = parse_listen(args.foxglove)
+            print(f"Foxglove: open connection ws://{host}:{port}", flush=True)
         snapshot(session, view, vehicle)
         tty = sys.stdout.isatty()
         while True:
@@ -281,7 +300,9 @@ def main(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return 0
     finally:
-        for obj in (sub, token_sub):
+        for obj in (sub, token_sub, *extra[:1]):
             if obj is not None:
                 obj.undeclare()
+        for server in extra[1:]:
+            server.stop()
         session.close()

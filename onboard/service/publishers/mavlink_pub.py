@@ -31,8 +31,10 @@ ODOMETRY           only with ``odometry = true``: position NED (m, from the     
                    first fix), heading, body-frame surge speed
 =================  ===========================================================  =========
 
-Links: ``udpout:`` is a non-blocking socket; every other pymavlink URL (a serial port,
-``tcp:``) is written by a :class:`WriterThread`, so a full serial buffer or a stalled TCP
+Links: ``udpout:`` is a non-blocking socket; ``zenoh:PREFIX`` puts every frame on
+``PREFIX/in`` of the service's Zenoh session (BlueOS's mavlink-server routes it to the
+autopilot and ground stations; :class:`onboard.drivers.transports.ZenohWriter`); every
+other pymavlink URL (a serial port, ``tcp:``) is written by a :class:`WriterThread`, so a full serial buffer or a stalled TCP
 peer never blocks the estimator loop (frames beyond its queue are dropped and counted).
 
 Signing: with ``signing_key_file`` every frame is signed (MAVLink 2 signing, link id 0).
@@ -158,8 +160,13 @@ class WriterThread:
             pass
 
 
-def _open_link(url: str) -> object:
+def _open_link(url: str, zenoh_session: Callable[[], object | None] | None = None) -> object:
     scheme, _, rest = url.partition(":")
+    if scheme == "zenoh":
+        from onboard.drivers.transports import ZENOH_TX_SUFFIX, ZenohWriter, parse_url
+
+        prefix = parse_url(url).path
+        return ZenohWriter(zenoh_session or (lambda: None), f"{prefix}/{ZENOH_TX_SUFFIX}")
     if scheme in ("udpout", "udp") and rest:
         host, _, port = rest.rpartition(":")
         return _UdpOut(host or "127.0.0.1", int(port))
@@ -213,13 +220,17 @@ class MavlinkPublisher:
         clock: the service clock (s) used for pacing.
         signing: the service's signing state (key and persisted timestamps); None: the key
             is read from ``cfg`` and timestamps start at the wall clock.
+        zenoh_session: the service's Zenoh session (None while not open), for a
+            ``zenoh:`` url.
     """
 
     def __init__(self, cfg: MavlinkOut, system_id: int,
                  clock: Callable[[], float] = time.monotonic,
-                 signing: "SigningState | None" = None) -> None:
+                 signing: "SigningState | None" = None,
+                 zenoh_session: Callable[[], object | None] | None = None) -> None:
         self.cfg = cfg
         self.signing_state = signing
+        self.zenoh_session = zenoh_session
         self.system_id = system_id
         self.clock = clock
         self.t_start = clock()
@@ -240,7 +251,7 @@ class MavlinkPublisher:
         """Open the link; set up signing when a key file is configured."""
         cfg = self.cfg
         key = self.signing_state.key if self.signing_state is not None else check_signing(cfg)
-        self.link = _open_link(cfg.url)
+        self.link = _open_link(cfg.url, self.zenoh_session)
         self.mav = mavlink2.MAVLink(self.link, srcSystem=self.system_id,
                                     srcComponent=cfg.component_id or COMPONENT_ID)
         self.mav.robust_parsing = True

@@ -3,12 +3,16 @@
 Keys (``<prefix>`` is ``onboard`` unless configured)::
 
     <prefix>/<vehicle_id>/est/<pipeline>   EstimateRecord, every tick
+    <prefix>/<vehicle_id>/fix/<pipeline>   its position as foxglove.LocationFix, every tick
     <prefix>/<vehicle_id>/health           HealthRecord, 1 Hz
     <prefix>/<vehicle_id>/alive            liveliness token (present while running)
     <prefix>/<vehicle_id>/**               queryable: the latest value of every key above
 
-Payloads are the msgspec structs of :mod:`onboard.core.messages` as JSON (encoding
-``application/json``), each with its ``schema`` version. The vehicle's session is a peer
+Payloads are JSON objects: the msgspec structs of :mod:`onboard.core.messages`, each with
+its ``schema`` version, and Foxglove's LocationFix; the Zenoh encoding names the schema
+(``application/json;onboard.Estimate.v1``, ``application/json;onboard.Health.v2``,
+``application/json;foxglove.LocationFix``: :mod:`onboard.core.wire`), so BlueOS's
+recorder writes them into its MCAP under that schema name and Foxglove maps the fixes. The vehicle's session is a peer
 or client with multicast scouting off: it connects to the endpoints configured (a router
 on the vehicle or on shore) and listens where configured. :func:`open_router` starts an
 in-process router session for the demo and the tests (no zenohd binary).
@@ -36,6 +40,7 @@ from typing import Callable, Iterable, Sequence
 
 import msgspec
 
+from onboard.core import wire
 from onboard.core.config import ZenohOut
 from onboard.core.messages import EstimateRecord, HealthRecord
 
@@ -43,7 +48,8 @@ log = logging.getLogger(__name__)
 
 DEFAULT_ROUTER_ENDPOINT = "tcp/127.0.0.1:7447"
 JSON_ENCODING = "application/json"
-"""Publishers are declared ``express`` (no batching: each record leaves at once)."""
+"""The MIME type of every payload; the encoding adds the schema name (``;<schema>``).
+Publishers are declared ``express`` (no batching: each record leaves at once)."""
 
 
 def session_config(mode: str = "peer", connect: Iterable[str] = (), listen: Iterable[str] = (),
@@ -141,7 +147,8 @@ class ZenohPublisher:
         self.errors = 0
         self.queries = 0
         self._pubs: dict[str, object] = {}
-        self._latest: dict[str, bytes] = {}
+        self._latest: dict[str, tuple[bytes, str]] = {}
+        """Key -> (payload, encoding) of the newest put (what the queryable answers)."""
         self._lock = threading.Lock()
         self._token = None
         self._queryable = None
@@ -158,26 +165,27 @@ class ZenohPublisher:
         for key, value in secret_settings(self.cfg).items():
             conf.insert_json5(key, value)
         self.session = zenoh.open(conf)
-        self._encoding = zenoh.Encoding.APPLICATION_JSON
         self._token = self.session.liveliness().declare_token(f"{self.base}/alive")
         self._queryable = self.session.declare_queryable(f"{self.base}/**", self._on_query)
-        self._pubs["health"] = self.session.declare_publisher(
-            f"{self.base}/health", encoding=self._encoding, express=True)
+        self._publisher("health", wire.HEALTH_SCHEMA)
 
-    def _publisher(self, suffix: str) -> object:
+    def _publisher(self, suffix: str, schema: str) -> object:
         pub = self._pubs.get(suffix)
         if pub is None:
+            import zenoh
+
             pub = self._pubs[suffix] = self.session.declare_publisher(  # type: ignore[union-attr]
-                f"{self.base}/{suffix}", encoding=self._encoding, express=True)
+                f"{self.base}/{suffix}", encoding=zenoh.Encoding(wire.encoding(schema)),
+                express=True)
         return pub
 
-    def _put(self, suffix: str, payload: bytes) -> None:
+    def _put(self, suffix: str, payload: bytes, schema: str) -> None:
         with self._lock:
-            self._latest[f"{self.base}/{suffix}"] = payload
+            self._latest[f"{self.base}/{suffix}"] = (payload, wire.encoding(schema))
         if self.session is None:
             return
         try:
-            self._publisher(suffix).put(payload)  # type: ignore[attr-defined]
+            self._publisher(suffix, schema).put(payload)  # type: ignore[attr-defined]
             self.published += 1
         except Exception as err:  # noqa: BLE001 - a network hiccup never stops the loop
             self.errors += 1
@@ -185,15 +193,19 @@ class ZenohPublisher:
                 log.warning("zenoh put on %s/%s failed (%d): %s", self.base, suffix,
                             self.errors, err)
 
-    def publish_estimates(self, records: Sequence[EstimateRecord]) -> None:
-        """Put each record on ``<base>/est/<pipeline>``."""
+    def publish_estimates(self, records: Sequence[EstimateRecord],
+                          fixes: Sequence[wire.LocationFix] = ()) -> None:
+        """Put each record on ``<base>/est/<pipeline>`` and each fix on
+        ``<base>/fix/<frame_id>`` (its pipeline)."""
         enc = self._enc.encode
         for rec in records:
-            self._put(f"est/{rec.pipeline}", enc(rec))
+            self._put(f"est/{rec.pipeline}", enc(rec), wire.ESTIMATE_SCHEMA)
+        for fix in fixes:
+            self._put(f"fix/{fix.frame_id}", enc(fix), wire.LOCATION_FIX_SCHEMA)
 
     def publish_health(self, health: HealthRecord) -> None:
         """Put the health record on ``<base>/health``, then :meth:`check_connection`."""
-        self._put("health", self._enc.encode(health))
+        self._put("health", self._enc.encode(health), wire.HEALTH_SCHEMA)
         self.check_connection()
 
     def check_connection(self) -> bool | None:
@@ -225,9 +237,9 @@ class ZenohPublisher:
             sel = query.key_expr  # type: ignore[attr-defined]
             with self._lock:
                 items = list(self._latest.items())
-            for key, payload in items:
+            for key, (payload, enc) in items:
                 if sel.intersects(zenoh.KeyExpr(key)):
-                    query.reply(key, payload, encoding=self._encoding)  # type: ignore[attr-defined]
+                    query.reply(key, payload, encoding=zenoh.Encoding(enc))  # type: ignore[attr-defined]
         except Exception as err:  # noqa: BLE001 - never let a query kill the session thread
             self.errors += 1
             log.warning("zenoh query failed: %s", err)

@@ -1,0 +1,158 @@
+"""The published records on the wire: schema names, JSON schemas, Foxglove's LocationFix.
+
+Every record the service publishes over Zenoh, and ``onboard replay --mcap`` writes, is a
+JSON object whose Zenoh encoding (and MCAP schema name) names its schema and version
+(architecture.md §4.4)::
+
+    application/json;onboard.Estimate.v1   EstimateRecord (SCHEMA_VERSION)
+    application/json;onboard.Health.v2     HealthRecord (HEALTH_SCHEMA_VERSION)
+    application/json;foxglove.LocationFix  a position as Foxglove's LocationFix
+
+BlueOS's recorder (bluerobotics/blueos-recorder ``src/channel_descriptor.rs``) records
+every sample whose encoding is ``application/json[;<schema>]`` and whose payload is a JSON
+object into its MCAP, with ``<schema>`` as the MCAP schema name; Foxglove draws a
+``foxglove.LocationFix`` channel on its Map panel.
+
+:func:`location_fix` turns an estimate's local position (north, east in m from the
+pipeline's first fix, :class:`~onboard.core.geo.LocalFrame`) into latitude and longitude.
+Foxglove's LocationFix (foxglove/foxglove-sdk ``schemas/jsonschema/LocationFix.json``):
+``timestamp`` {sec, nsec}, ``frame_id``, ``latitude``/``longitude`` (deg), ``altitude``
+(m), ``position_covariance`` (m^2, 3x3 row-major, East-North-Up),
+``position_covariance_type`` (0 unknown, 2 diagonal known), ``heading`` (rad, clockwise
+from north; optional).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import msgspec
+
+from onboard.core.geo import LocalFrame
+from onboard.core.messages import (
+    HEALTH_SCHEMA_VERSION,
+    SCHEMA_VERSION,
+    EstimateRecord,
+    HealthRecord,
+)
+
+JSON_MIME = "application/json"
+ESTIMATE_SCHEMA = f"onboard.Estimate.v{SCHEMA_VERSION}"
+"""Schema name of an :class:`EstimateRecord`."""
+HEALTH_SCHEMA = f"onboard.Health.v{HEALTH_SCHEMA_VERSION}"
+"""Schema name of a :class:`HealthRecord`."""
+LOCATION_FIX_SCHEMA = "foxglove.LocationFix"
+"""Schema name of Foxglove's LocationFix."""
+COVARIANCE_UNKNOWN = 0
+COVARIANCE_DIAGONAL_KNOWN = 2
+"""``position_covariance_type`` values of Foxglove's PositionCovarianceType."""
+NS_PER_S = 1_000_000_000
+
+
+def encoding(schema: str) -> str:
+    """The Zenoh encoding of a JSON record of ``schema``: ``application/json;<schema>``."""
+    return f"{JSON_MIME};{schema}"
+
+
+def estimate_key(prefix: str, vehicle: str, pipeline: str) -> str:
+    """``<prefix>/<vehicle>/est/<pipeline>``: where a pipeline's estimates go."""
+    return f"{prefix}/{vehicle}/est/{pipeline}"
+
+
+def health_key(prefix: str, vehicle: str) -> str:
+    """``<prefix>/<vehicle>/health``."""
+    return f"{prefix}/{vehicle}/health"
+
+
+def fix_key(prefix: str, vehicle: str, pipeline: str) -> str:
+    """``<prefix>/<vehicle>/fix/<pipeline>``: a pipeline's position as a LocationFix."""
+    return f"{prefix}/{vehicle}/fix/{pipeline}"
+
+
+class Time(msgspec.Struct, frozen=True):
+    """Foxglove's time: whole seconds and nanoseconds (0..999999999)."""
+
+    sec: int
+    nsec: int
+
+
+class LocationFix(msgspec.Struct, frozen=True, kw_only=True, omit_defaults=True):
+    """Foxglove's ``foxglove.LocationFix`` (see the module docstring); ``heading`` is left
+    out when unknown."""
+
+    timestamp: Time
+    frame_id: str
+    latitude: float
+    longitude: float
+    altitude: float
+    position_covariance: list[float]
+    position_covariance_type: int
+    heading: float | None = None
+
+
+def foxglove_time(t: float) -> Time:
+    """``t`` (s, >= 0) as Foxglove's {sec, nsec}, the fraction rounded to the nearest
+    nanosecond; a negative time is clipped to 0."""
+    if not t > 0.0:
+        return Time(0, 0)
+    sec = math.floor(t)
+    nsec = round((t - sec) * NS_PER_S)
+    if nsec >= NS_PER_S:
+        sec, nsec = sec + 1, nsec - NS_PER_S
+    return Time(int(sec), int(nsec))
+
+
+def location_fix(rec: EstimateRecord, frame: LocalFrame,
+                 offset: tuple[float, float] = (0.0, 0.0)) -> LocationFix | None:
+    """The position of ``rec`` as a LocationFix, or None when it has no finite north and
+    east. ``frame`` is the pipeline's local frame (its first fix) and ``offset`` the
+    published position (north, east; m) of the frame's origin (the ESESO's; (0, 0) for
+    the others). Altitude is ``-down`` where the pipeline estimates depth, else 0; the
+    covariance is diagonal (East, North, Up) from the ``std`` of north, east and down
+    when north's and east's are known, else unknown (zeros)."""
+    v, sd = rec.values, rec.std
+    n, e = v.get("north"), v.get("east")
+    if n is None or e is None or not (math.isfinite(n) and math.isfinite(e)):
+        return None
+    lat, lon = frame.to_latlon(n - offset[0], e - offset[1])
+    down = v.get("down")
+    alt = -down if down is not None and math.isfinite(down) else 0.0
+    cov = [0.0] * 9
+    kind = COVARIANCE_UNKNOWN
+    s_n, s_e = sd.get("north"), sd.get("east")
+    if s_n is not None and s_e is not None:
+        s_d = sd.get("down", 0.0)
+        cov[0], cov[4], cov[8] = s_e * s_e, s_n * s_n, s_d * s_d
+        kind = COVARIANCE_DIAGONAL_KNOWN
+    heading = v.get("heading", v.get("yaw"))
+    return LocationFix(timestamp=foxglove_time(rec.t), frame_id=rec.pipeline, latitude=lat,
+                       longitude=lon, altitude=alt, position_covariance=cov,
+                       position_covariance_type=kind,
+                       heading=heading if heading is not None and math.isfinite(heading) else None)
+
+
+def _inline(node: Any, defs: Mapping[str, Any]) -> Any:
+    """``node`` with every ``{"$ref": "#/$defs/X"}`` replaced by ``defs[X]`` (inlined)."""
+    if isinstance(node, dict):
+        ref = node.get("$ref")
+        if isinstance(ref, str) and ref.startswith("#/$defs/"):
+            return _inline(defs[ref.rsplit("/", 1)[1]], defs)
+        return {k: _inline(x, defs) for k, x in node.items() if k != "$defs"}
+    if isinstance(node, list):
+        return [_inline(x, defs) for x in node]
+    return node
+
+
+def json_schema(kind: type) -> dict[str, Any]:
+    """The JSON schema (draft 2020-12, references inlined, as Foxglove reads MCAP
+    ``jsonschema`` schemas) of one of the records above."""
+    raw = msgspec.json.schema(kind)
+    out = _inline(raw, raw.get("$defs", {}))
+    out.pop("$schema", None)
+    return out
+
+
+SCHEMAS: dict[str, type] = {ESTIMATE_SCHEMA: EstimateRecord, HEALTH_SCHEMA: HealthRecord,
+                            LOCATION_FIX_SCHEMA: LocationFix}
+"""Schema name -> the msgspec struct that is its single definition."""

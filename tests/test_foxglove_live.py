@@ -1,0 +1,72 @@
+"""``onboard shore --foxglove``: the Zenoh records relayed to Foxglove channels with their
+schema names and JSON schemas (checked through the SDK's MCAP sink, which records what a
+WebSocket client would be sent)."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+
+pytest.importorskip("foxglove", reason="needs foxglove-sdk: pip install -e '.[foxglove]'")
+pytest.importorskip("mcap", reason="needs the mcap package: pip install -e '.[mcap]'")
+
+from onboard.core.config import ZenohOut  # noqa: E402
+from onboard.core.errors import UsageError  # noqa: E402
+from onboard.core.geo import LocalFrame  # noqa: E402
+from onboard.core.messages import EstimateRecord, HealthRecord  # noqa: E402
+from onboard.core.wire import location_fix  # noqa: E402
+from onboard.service.publishers.zenoh_pub import ZenohPublisher, open_router, session_config  # noqa: E402
+from onboard.tools.foxglove_live import FoxgloveRelay, parse_listen  # noqa: E402
+from onboard.tools.service_bench import free_tcp_port  # noqa: E402
+
+
+def test_listen_address_parses():
+    assert parse_listen("8765") == ("127.0.0.1", 8765)
+    assert parse_listen("0.0.0.0:9000") == ("0.0.0.0", 9000)
+    with pytest.raises(UsageError):
+        parse_listen("host:")
+
+
+@pytest.mark.integration
+def test_records_reach_foxglove_channels_named_as_their_keys_with_their_schemas(tmp_path):
+    import foxglove
+    import zenoh
+    from mcap.reader import make_reader
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_router(endpoint)
+    shore = zenoh.open(session_config("client", connect=[endpoint]))
+    ctx = foxglove.Context()
+    out = tmp_path / "live.mcap"
+    writer = foxglove.open_mcap(out, context=ctx)
+    relay = FoxgloveRelay(context=ctx)
+    sub = shore.declare_subscriber("onboard/**", relay.on_sample)
+    pub = ZenohPublisher(ZenohOut(mode="client", connect=[endpoint]), "boat1")
+    pub.start()
+    rec = EstimateRecord(vehicle="boat1", pipeline="kf", t=10.0,
+                         values={"north": 5.0, "east": 1.0, "speed": 1.2},
+                         std={"north": 1.0, "east": 1.0})
+    fix = location_fix(rec, LocalFrame(63.4, 10.4))
+    try:
+        deadline = time.monotonic() + 20
+        while relay.relayed < 3 and time.monotonic() < deadline:
+            pub.publish_estimates([rec], [fix])
+            pub.publish_health(HealthRecord(vehicle="boat1", t=10.0))
+            time.sleep(0.1)
+    finally:
+        pub.close()
+        sub.undeclare()
+        shore.close()
+        router.close()
+    writer.close()
+    with open(out, "rb") as f:
+        seen = {c.topic: (s.name, s.encoding, c.message_encoding, json.loads(s.data))
+                for s, c, _ in make_reader(f).iter_messages()}
+    assert {k: v[:3] for k, v in seen.items()} == {
+        "onboard/boat1/est/kf": ("onboard.Estimate.v1", "jsonschema", "json"),
+        "onboard/boat1/fix/kf": ("foxglove.LocationFix", "jsonschema", "json"),
+        "onboard/boat1/health": ("onboard.Health.v2", "jsonschema", "json")}
+    assert "values" in seen["onboard/boat1/est/kf"][3]["properties"]
+    assert relay.skipped == 0
