@@ -220,7 +220,9 @@ class Engine:
         """Warnings for the user (pipeline restarts, integrity; the replay adds its own);
         each new one is also an event."""
         self.integrity = IntegrityMonitor(self.alerts, cfg.vehicle.vehicle_class,
-                                          cfg.sensors.gnss.position_std_m)
+                                          cfg.sensors.gnss.position_std_m,
+                                          cfg.sensors.gnss.velocity_std_mps,
+                                          cfg.sensors.dvl.velocity_std_mps)
         """Each estimate against the independent measurements (:mod:`onboard.integrity`):
         warnings, flags, and the values it withholds."""
         self._events_reported = 0
@@ -413,6 +415,7 @@ class Engine:
                 records.append(self._record(p, t, values, queue.t_sensor))
         queue.close_tick()
         self.integrity.positions_at(t, records, {p.name: p for p in self.pipelines})
+        self.integrity.speeds_at(t, records)
         return records
 
     def _take_events(self, p: Pipeline) -> None:
