@@ -251,15 +251,19 @@ class Engine:
 
     # --------------------------------------------------------------------- time line
 
-    def admit(self, sample: Sample) -> list[Sample]:
+    def admit(self, sample: Sample, now: float | None = None) -> list[Sample]:
         """Put ``sample`` on the time line (:mod:`onboard.timeline`); return the samples
         it releases, to :meth:`push` in order. Outliers are counted
         (``<type>:time_outlier``) and warned of; after a release that confirmed a jump,
         :attr:`timeline` ``.jump`` is set and the caller ticks what it has, then calls
-        :meth:`start_segment` before pushing the released samples."""
-        released = self.timeline.admit(sample)
-        if self.timeline.outliers:
-            self._count_outliers()
+        :meth:`start_segment` before pushing the released samples. Live, ``now`` is the
+        receive time (s): the receive clock is the time line
+        (:meth:`onboard.timeline.Timeline.admit_at`) and no jump is ever confirmed."""
+        timeline = self.timeline
+        released = (timeline.admit(sample) if now is None
+                    else timeline.admit_at(sample, now))
+        if timeline.outliers:
+            self._count_outliers(now)
         return released
 
     def finish(self) -> None:
@@ -267,20 +271,22 @@ class Engine:
         self.timeline.flush()
         self._count_outliers()
 
-    def _count_outliers(self) -> None:
-        """Count and warn of the time line's outliers, and clear its list."""
+    def _count_outliers(self, now: float | None = None) -> None:
+        """Count and warn of the time line's outliers, and clear its list; ``now``: the
+        receive time (s) they are judged against live."""
         outliers = self.timeline.outliers
         if not outliers:
             return
-        ref = self.timeline.newest
+        ref = self.timeline.newest if now is None else now
         for s in outliers:
             kind, _ = self._checker(s)
             self._reject(kind, "time_outlier")
         n = sum(v for k, v in self.rejected.items() if k.endswith(":time_outlier"))
+        clock = "log's clock" if now is None else "receive clock"
         off = outliers[0].t - ref if ref is not None else math.nan
         self.alerts.warn("time_outlier",
                          f"{n} sample(s) stamped far from their neighbours were dropped "
-                         f"(the last {off:+.6g} s off the log's clock); the samples after "
+                         f"(the last {off:+.6g} s off the {clock}); the samples after "
                          "them were kept", ref)
         outliers.clear()
 
