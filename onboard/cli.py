@@ -90,6 +90,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "overlays in order, e.g. one written by diagnose --write-config")
     p.add_argument("--out", default="replay-out", help="output directory (default replay-out)")
     p.add_argument("--no-plot", action="store_true", help="skip the track figure")
+    p.add_argument("--geojson", metavar="FILE",
+                   help="also write the tracks (one per pipeline and run) and current arrows "
+                        "as GeoJSON (lon/lat, RFC 7946) to FILE")
     p.set_defaults(handler="onboard.replay:main")
 
     p = sub.add_parser("diagnose", help="residuals, the missing effect, before/after")
