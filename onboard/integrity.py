@@ -361,6 +361,9 @@ class IntegrityMonitor:
         flagged: per pipeline, the values withheld from its records (the health record's
             ``pipeline:<name>:flagged``).
         heading: the heading/course check, None for a holonomic vehicle.
+        positions: pipeline -> its position check.
+        speeds: pipeline -> reference (``GNSS Doppler``, ``DVL``) -> its speed check.
+        nis: pipeline -> channel -> its NIS check.
     """
 
     def __init__(self, alerts: Alerts, vehicle_class: str = "unknown",
@@ -376,7 +379,6 @@ class IntegrityMonitor:
         self.speed_std_mps = speed_std_mps
         self.dvl_std_mps = dvl_std_mps
         self.speeds: dict[str, dict[str, SpeedCheck]] = {}
-        """pipeline -> reference (``GNSS Doppler``, ``DVL``) -> its speed check."""
         self._speed_refs: list[tuple[float, float, float, str]] = []
         """Measured speeds since the previous tick: (t, m/s, variance, reference)."""
         self.heading = None if vehicle_class in HOLONOMIC_CLASSES else HeadingCourseCheck()
