@@ -93,6 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--geojson", metavar="FILE",
                    help="also write the tracks (one per pipeline and run) and current arrows "
                         "as GeoJSON (lon/lat, RFC 7946) to FILE")
+    p.add_argument("--gpx", metavar="FILE",
+                   help="also write the tracks (one per pipeline and run) as GPX 1.1 to FILE")
     p.set_defaults(handler="onboard.replay:main")
 
     p = sub.add_parser("diagnose", help="residuals, the missing effect, before/after")

@@ -19,6 +19,10 @@
 The position of an arrow is the first track in :data:`ARROW_TRACKS` with a value at that
 row. Without an origin (no fix in the log) there is nothing to place: the collection is
 empty.
+
+:func:`to_gpx` gives the same tracks as GPX 1.1 for a handheld or a chart plotter: one
+``trk`` per pipeline and run (named ``<pipeline> run <n>``), without times (the log's
+clock need not be UTC); the current arrows are not in it.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import json
 import math
 from pathlib import Path
 from typing import Sequence
+from xml.sax.saxutils import quoteattr, escape
 
 from onboard.core.geo import LocalFrame
 
@@ -140,9 +145,31 @@ def feature_collection(cols: dict[str, list[float]], origin: dict | None,
     return fc
 
 
+def to_gpx(fc: dict) -> str:
+    """The tracks of :func:`feature_collection` ``fc`` as a GPX 1.1 document (module
+    docstring)."""
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           '<gpx version="1.1" creator="onboard" xmlns="http://www.topografix.com/GPX/1/1">',
+           f"  <metadata><name>{escape(fc.get('name', ''))}</name></metadata>"]
+    for f in fc["features"]:
+        p = f["properties"]
+        if p["kind"] != "track":
+            continue
+        out.append(f"  <trk><name>{escape(p['pipeline'])} run {p['run']}</name><trkseg>")
+        out.extend(f"    <trkpt lat={quoteattr(repr(lat))} lon={quoteattr(repr(lon))}/>"
+                   for lon, lat in f["geometry"]["coordinates"])
+        out.append("  </trkseg></trk>")
+    out.append("</gpx>")
+    return "\n".join(out) + "\n"
+
+
 def write(path: Path, cols: dict[str, list[float]], origin: dict | None,
-          runs: Sequence[dict] = (), title: str = "") -> int:
-    """Write :func:`feature_collection` to ``path``; return the number of features."""
+          runs: Sequence[dict] = (), title: str = "", gpx: Path | None = None) -> int:
+    """Write :func:`feature_collection` to ``path`` (None: not), and its tracks as GPX
+    (:func:`to_gpx`) to ``gpx``; return the number of features."""
     fc = feature_collection(cols, origin, runs, title)
-    Path(path).write_text(json.dumps(fc, allow_nan=False) + "\n")
+    if path is not None:
+        Path(path).write_text(json.dumps(fc, allow_nan=False) + "\n")
+    if gpx is not None:
+        Path(gpx).write_text(to_gpx(fc))
     return len(fc["features"])

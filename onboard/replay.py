@@ -205,10 +205,11 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
 
 
 def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
-           plot: bool = True, progress: bool = False, geojson: Path | None = None) -> dict:
+           plot: bool = True, progress: bool = False, geojson: Path | None = None,
+           gpx: Path | None = None) -> dict:
     """Run the pipelines over ``log``; write the outputs into ``out_dir`` (and with
-    ``geojson`` the tracks and current arrows there, :mod:`onboard.geojson`); return the
-    summary."""
+    ``geojson`` the tracks and current arrows there, with ``gpx`` the tracks,
+    :mod:`onboard.geojson`); return the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
     wall0 = time.perf_counter()
     fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
@@ -284,8 +285,8 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "pipeline_health": engine.counters(),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
     }
-    if geojson is not None:
-        summary["geojson"] = _write_geojson(out_dir, Path(geojson), summary)
+    if geojson is not None or gpx is not None:
+        summary["geojson"] = _write_geojson(out_dir, geojson, gpx, summary)
     if plot:
         summary["figure"] = _plot_track(out_dir, Path(log).name)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -375,15 +376,18 @@ def print_warnings(warnings: list[dict], t0: float) -> None:
         print(f"  {w['code']}{span}: {w['message']}")
 
 
-def _write_geojson(out_dir: Path, path: Path, summary: dict) -> dict:
-    """The replay's tracks and current arrows as GeoJSON in ``path``; what was written."""
+def _write_geojson(out_dir: Path, path: Path | None, gpx: Path | None,
+                   summary: dict) -> dict:
+    """The replay's tracks and current arrows as GeoJSON in ``path``, its tracks as GPX in
+    ``gpx`` (either may be None); what was written."""
     from onboard import geojson
     from onboard.plots import read_columns
 
     cols = read_columns(out_dir / "estimates.csv")
     n = geojson.write(path, cols, summary["origin"], summary["runs"],
-                      Path(summary["log"]).name)
-    return {"path": str(path), "features": n}
+                      Path(summary["log"]).name, gpx)
+    return {"path": str(path) if path else None, "gpx": str(gpx) if gpx else None,
+            "features": n}
 
 
 def _plot_track(out_dir: Path, title: str) -> str | None:
@@ -407,7 +411,8 @@ def main(args) -> int:
         cfg, note = choose_config(log, args.config)
         summary = replay(log, cfg, Path(args.out), config_note=note,
                          plot=not args.no_plot, progress=sys.stderr.isatty(),
-                         geojson=getattr(args, "geojson", None))
+                         geojson=getattr(args, "geojson", None),
+                         gpx=getattr(args, "gpx", None))
     except UnreadableLog as err:
         raise UsageError(str(err)) from None
     read = summary["read"]

@@ -139,3 +139,20 @@ def test_track_png_draws_positions_one_line_per_run_and_the_current_apart():
     assert north[:2] == [0.0, 1.0] and math.isnan(north[2]) and north[3:] == [50.0, 51.0]
     assert panel.collections and "Current" in panel.get_title()
     plt.close(fig)
+
+
+def test_gpx_has_a_track_per_pipeline_and_run_in_gpx_1_1(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    out = tmp_path / "out"
+    assert cli_main(["replay", str(JAIABOT), "--out", str(out), "--no-plot",
+                     "--gpx", str(tmp_path / "t.gpx")]) == 0
+    ns = {"g": "http://www.topografix.com/GPX/1/1"}
+    root = ET.parse(tmp_path / "t.gpx").getroot()
+    assert root.tag == "{http://www.topografix.com/GPX/1/1}gpx" and root.get("version") == "1.1"
+    names = [t.find("g:name", ns).text for t in root.findall("g:trk", ns)]
+    assert names == ["nav run 0", "aie run 0", "kf run 0"]
+    o = json.loads((out / "summary.json").read_text())["origin"]
+    first = root.find("g:trk/g:trkseg/g:trkpt", ns)
+    assert abs(float(first.get("lat")) - o["lat_deg"]) < 1e-4
+    assert abs(float(first.get("lon")) - o["lon_deg"]) < 1e-4
