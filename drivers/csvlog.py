@@ -55,7 +55,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator, Sequence
 
-from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.base import TIME_JUMP_S, ReadStats, UnreadableLog
 from onboard.core.config import CsvFormat
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
@@ -87,9 +87,6 @@ class RunInfo:
     rows: int
 
 
-TIME_JUMP_S = 10.0
-"""Rows more than this (s) apart in time are judged by the rows after them
-(:class:`_RowClock`); the engine's time line (``onboard.timeline``) uses the same figure."""
 
 
 class _RowClock:

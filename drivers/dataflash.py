@@ -62,7 +62,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
-from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.base import TIME_JUMP_S, ReadStats, UnreadableLog
 from onboard.drivers.mavlink import GPS_FIX_TO_QUALITY, wanted_types
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
@@ -96,10 +96,6 @@ FORMAT_CHARS: dict[str, tuple[str, float | None]] = {
 REORDER_WINDOW_S = 2.0
 """Samples are held this long (log time) to put slightly out-of-order records in order."""
 
-TIME_JUMP_S = 10.0
-"""A record stamped this far (s) ahead of the reader's clock is held (:class:`_Ahead`); one
-this far behind the last emitted sample is ``"time_outlier"`` (the engine's time line,
-``onboard.timeline``, uses the same figure)."""
 CONFIRM_STAMPS = 2
 """Distinct stamps, one after another in the file and agreeing with each other, that
 confirm a jump ahead (a real gap: ArduSub's small.BIN ends with two parameter records

@@ -32,7 +32,9 @@ present; for json_v1, ``t`` is the running sum of ``time`` (s since the first re
 
 Rejections: ``"json"`` (not JSON, or not an object), ``"malformed"`` (missing or wrongly
 typed field, non-finite number), ``"duplicate"`` (a line identical to the previous one --
-the tank captures repeat readings), ``"too_long"`` (a line over ``max_line`` bytes), ``"time_backwards"`` (reader).
+the tank captures repeat readings), ``"too_long"`` (a line over ``max_line`` bytes), ``"time_backwards"`` (reader: a report
+older than the last one by up to ``drivers.base.TIME_JUMP_S``; further back it is passed on
+for the engine's time line, a clock reset or an outlier).
 Well-formed reports of other types (command responses) are counted in ``stats.by_type``
 (by type and under ``"ignored"``), not rejected.
 """
@@ -45,7 +47,7 @@ from typing import Any, Iterator
 
 import msgspec
 
-from onboard.drivers.base import LineAssembler, ReadStats, UnreadableLog
+from onboard.drivers.base import TIME_JUMP_S, LineAssembler, ReadStats, UnreadableLog
 from onboard.core.messages import DvlPosition, DvlVelocity, Sample
 
 MAX_LINE = 16384
@@ -260,7 +262,7 @@ class DvlJsonLogReader:
                         t_rel += dt * 1e-3
                     first_rel = False
                     t = t_rel
-                if last_t is not None and t < last_t:
+                if last_t is not None and last_t - TIME_JUMP_S <= t < last_t:
                     p.stats.reject("time_backwards")
                     continue
                 s = p.to_sample(obj, t)

@@ -52,8 +52,10 @@ reader may pass ``date`` found by a pre-scan); without any date, ``t`` is second
 midnight UTC of the first day. A time of day more than 12 h earlier than the previous one
 is a midnight rollover (day + 1) even before the next RMC brings the new date. Headings
 have no time: they take the time of the epoch they belong to (the same rule as VTG), so
-they are emitted with that epoch. Samples older than the last emitted one are rejected as
-``"time_backwards"``; a repeated epoch as ``"duplicate"``.
+they are emitted with that epoch. Samples older than the last emitted one, by up to
+``drivers.base.TIME_JUMP_S``, are rejected as ``"time_backwards"``; further back they are
+passed on for the engine's time line (a clock reset, or a bad stamp it counts as an
+outlier); a repeated epoch is ``"duplicate"``.
 
 Encoders
 --------
@@ -70,7 +72,7 @@ import time as _time
 from dataclasses import dataclass, field
 from typing import Literal
 
-from onboard.drivers.base import LineAssembler, ReadStats
+from onboard.drivers.base import TIME_JUMP_S, LineAssembler, ReadStats
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import GnssFix, Heading, Sample
 
@@ -612,7 +614,7 @@ class NmeaParser:
         out = []
         for s in samples:
             if (self.monotonic and self.time_base == "utc" and self._last_t is not None
-                    and s.t < self._last_t):
+                    and self._last_t - TIME_JUMP_S <= s.t < self._last_t):
                 self.stats.reject("time_backwards")
                 continue
             self._last_t = s.t

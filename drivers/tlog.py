@@ -15,8 +15,9 @@ record (the reader resynchronizes on the next plausible record: time stamp withi
 an incomplete record at the end of the file; ``"incompat"`` unknown MAVLink 2
 incompatibility flags; ``"timestamp"`` a record whose time stamp (which the CRC does not
 cover) jumps more than a second ahead of both its neighbours; ``"time_backwards"`` a
-record older than the last sample emitted
-(dropped, so samples come out in time order); plus the content rejections of the
+record older than the last sample emitted by up to ``drivers.base.TIME_JUMP_S`` (dropped,
+so samples come out in time order; one further back is passed on for the engine's time
+line: a clock reset starts a segment, a single bad stamp is a counted outlier); plus the content rejections of the
 handlers (``"no_fix"``, ``"empty"``, ``"nan"``, ``"invalid"``, ...).
 """
 
@@ -30,7 +31,7 @@ from collections import Counter
 from pathlib import Path
 from typing import BinaryIO, Iterable, Iterator
 
-from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.base import TIME_JUMP_S, ReadStats, UnreadableLog
 from onboard.drivers.mavlink import (
     DecodeContext,
     Spec,
@@ -93,6 +94,8 @@ def _crc_ok(data: bytes, p: int, msgid: int, plen: int, v2: bool) -> bool | None
 _JUMP_US = 1_000_000
 """A record more than this far (us) ahead of the previous one, while the next record is
 back nearer the previous one than to it, has a damaged time stamp."""
+_BACK_US = int(TIME_JUMP_S * 1e6)
+"""A record further back than this (us) is passed on for the engine's time line."""
 
 
 def _plausible(data: bytes, p: int, n: int, lo: int, hi: int) -> int:
@@ -241,7 +244,7 @@ class TlogReader:
                         good = pos
                         if spec is not None:
                             ts = ts_unpack(data, pos)[0]
-                            if ts < last_us:
+                            if last_us - _BACK_US <= ts < last_us:
                                 stats.reject("time_backwards")
                             elif (last_us and ts > last_us + _JUMP_US and end + TS <= n
                                   and ts_unpack(data, end)[0] < (ts + last_us) // 2):

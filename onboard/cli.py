@@ -92,6 +92,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plot", action="store_true", help="skip the track figure")
     p.add_argument("--mcap", metavar="FILE", help="also write the estimates as MCAP (the "
                    "live Zenoh channels and schemas; needs the mcap extra)")
+    p.add_argument("--geojson", metavar="FILE",
+                   help="also write the tracks (one per pipeline and run) and current arrows "
+                        "as GeoJSON (lon/lat, RFC 7946) to FILE")
+    p.add_argument("--gpx", metavar="FILE",
+                   help="also write the tracks (one per pipeline and run) as GPX 1.1 to FILE")
     p.set_defaults(handler="onboard.replay:main")
 
     p = sub.add_parser("diagnose", help="residuals, the missing effect, before/after")

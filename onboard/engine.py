@@ -222,7 +222,9 @@ class Engine:
         """Warnings for the user (pipeline restarts, integrity; the replay adds its own);
         each new one is also an event."""
         self.integrity = IntegrityMonitor(self.alerts, cfg.vehicle.vehicle_class,
-                                          cfg.sensors.gnss.position_std_m)
+                                          cfg.sensors.gnss.position_std_m,
+                                          cfg.sensors.gnss.velocity_std_mps,
+                                          cfg.sensors.dvl.velocity_std_mps)
         """Each estimate against the independent measurements (:mod:`onboard.integrity`):
         warnings, flags, and the values it withholds."""
         self._events_reported = 0
@@ -278,15 +280,19 @@ class Engine:
 
     # --------------------------------------------------------------------- time line
 
-    def admit(self, sample: Sample) -> list[Sample]:
+    def admit(self, sample: Sample, now: float | None = None) -> list[Sample]:
         """Put ``sample`` on the time line (:mod:`onboard.timeline`); return the samples
         it releases, to :meth:`push` in order. Outliers are counted
         (``<type>:time_outlier``) and warned of; after a release that confirmed a jump,
         :attr:`timeline` ``.jump`` is set and the caller ticks what it has, then calls
-        :meth:`start_segment` before pushing the released samples."""
-        released = self.timeline.admit(sample)
-        if self.timeline.outliers:
-            self._count_outliers()
+        :meth:`start_segment` before pushing the released samples. Live, ``now`` is the
+        receive time (s): the receive clock is the time line
+        (:meth:`onboard.timeline.Timeline.admit_at`) and no jump is ever confirmed."""
+        timeline = self.timeline
+        released = (timeline.admit(sample) if now is None
+                    else timeline.admit_at(sample, now))
+        if timeline.outliers:
+            self._count_outliers(now)
         return released
 
     def finish(self) -> None:
@@ -294,20 +300,22 @@ class Engine:
         self.timeline.flush()
         self._count_outliers()
 
-    def _count_outliers(self) -> None:
-        """Count and warn of the time line's outliers, and clear its list."""
+    def _count_outliers(self, now: float | None = None) -> None:
+        """Count and warn of the time line's outliers, and clear its list; ``now``: the
+        receive time (s) they are judged against live."""
         outliers = self.timeline.outliers
         if not outliers:
             return
-        ref = self.timeline.newest
+        ref = self.timeline.newest if now is None else now
         for s in outliers:
             kind, _ = self._checker(s)
             self._reject(kind, "time_outlier")
         n = sum(v for k, v in self.rejected.items() if k.endswith(":time_outlier"))
+        clock = "log's clock" if now is None else "receive clock"
         off = outliers[0].t - ref if ref is not None else math.nan
         self.alerts.warn("time_outlier",
                          f"{n} sample(s) stamped far from their neighbours were dropped "
-                         f"(the last {off:+.6g} s off the log's clock); the samples after "
+                         f"(the last {off:+.6g} s off the {clock}); the samples after "
                          "them were kept", ref)
         outliers.clear()
 
@@ -442,6 +450,7 @@ class Engine:
                 records.append(self._record(p, t, values, queue.t_sensor))
         queue.close_tick()
         self.integrity.positions_at(t, records, {p.name: p for p in self.pipelines})
+        self.integrity.speeds_at(t, records)
         return records
 
     def _take_events(self, p: Pipeline) -> None:

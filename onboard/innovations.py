@@ -3,7 +3,8 @@
 Each pipeline hands the engine the :class:`~onboard.core.messages.Innovation` records of
 its measurement updates (:meth:`onboard.pipelines.base.Pipeline.innovations`); an
 :class:`InnovationMonitor` keeps, per pipeline and channel, the counts, the mean NIS since
-the start and over the recent updates, and the newest innovation with its test ratio.
+the start and over the recent updates, and the newest innovation with its test ratio;
+a channel fed by several sources (two GNSS receivers) is also summarized per source.
 :meth:`InnovationMonitor.snapshot` gives them as :class:`ChannelHealth` records (the
 health record's ``innovations``, summary.json's ``innovations``).
 """
@@ -46,12 +47,20 @@ def _finite(x: float) -> float | None:
 
 
 class ChannelStats:
-    """The running summary of one channel's innovations."""
+    """The running summary of one channel's innovations, and per source when
+    ``per_source``.
+
+    Attributes:
+        sources: source -> the summary of its innovations alone, from the second source
+            on (until then the channel's own summary is its one source's); None when not
+            ``per_source``.
+    """
 
     __slots__ = ("n", "rejected", "reasons", "dof", "_nis_sum", "_recent",
-                 "last", "_ratio_max")
+                 "last", "_ratio_max", "sources")
 
-    def __init__(self, dof: int) -> None:
+    def __init__(self, dof: int, per_source: bool = True) -> None:
+        self.sources: dict[str, ChannelStats] | None = {} if per_source else None
         self.n = 0
         self.rejected = 0
         self.reasons: dict[str, int] = {}
@@ -63,6 +72,10 @@ class ChannelStats:
 
     def add(self, rec: Innovation) -> None:
         """One measurement update."""
+        sources = self.sources
+        if sources is not None and (sources or (self.last is not None
+                                                and rec.source != self.last.source)):
+            self._add_by_source(sources, rec)
         self.n += 1
         self.dof = rec.dof
         self.last = rec
@@ -77,6 +90,24 @@ class ChannelStats:
             return
         self._nis_sum += rec.nis
         self._recent.add(rec.nis)
+
+    def _add_by_source(self, sources: dict[str, ChannelStats], rec: Innovation) -> None:
+        """``rec`` into its source's summary; at the second source, the summary so far
+        becomes the first source's."""
+        if not sources and self.last is not None:
+            sources[self.last.source] = self._clone()
+        sub = sources.get(rec.source)
+        if sub is None:
+            sub = sources[rec.source] = ChannelStats(rec.dof, per_source=False)
+        sub.add(rec)
+
+    def _clone(self) -> ChannelStats:
+        """A copy of this summary without its per-source summaries."""
+        c = ChannelStats(self.dof, per_source=False)
+        c.n, c.rejected, c.reasons = self.n, self.rejected, dict(self.reasons)
+        c._nis_sum, c.last, c._ratio_max = self._nis_sum, self.last, self._ratio_max
+        c._recent.n, c._recent.value = self._recent.n, self._recent.value
+        return c
 
     def snapshot(self, reset_max: bool = True) -> ChannelHealth:
         """The summary now; the largest test ratio starts afresh unless ``reset_max`` is
@@ -95,7 +126,14 @@ class ChannelStats:
             z=[_finite(x) for x in last.z] if last is not None else [],
             S=[_finite(x) for x in last.S] if last is not None else [],
             t=last.t if last is not None else None,
-            source=last.source if last is not None else "")
+            source=last.source if last is not None else "",
+            by_source=self._by_source(reset_max))
+
+    def _by_source(self, reset_max: bool) -> dict[str, ChannelHealth]:
+        """Each source's summary, when there has been more than one (else empty)."""
+        if not self.sources:
+            return {}
+        return {src: sub.snapshot(reset_max) for src, sub in self.sources.items()}
 
 
 class InnovationMonitor:

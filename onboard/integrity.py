@@ -3,7 +3,7 @@
 The pipelines fuse what they are given; nothing inside a filter can see that a sensor is
 misaligned or that its own covariance has stopped meaning anything. This module watches
 from beside the engine, fed at every tick with the samples handed to the pipelines, the
-published records and the innovation records, and runs three checks:
+published records and the innovation records, and runs four checks:
 
 * **heading against course over ground** (:class:`HeadingCourseCheck`): while the vehicle
   moves (GNSS speed above :data:`HEADING_MIN_SPEED_MPS`), the circular mean of
@@ -23,6 +23,16 @@ published records and the innovation records, and runs three checks:
   NIS of :mod:`onboard.innovations` (weight ``1/RECENT_STEPS``) against the 95 % band of
   such a mean for a consistent filter; ``nis_out_of_band`` after
   :data:`NIS_SUSTAIN_UPDATES` updates in a row outside it. The pipeline is flagged.
+* **speed against Doppler or DVL** (:class:`SpeedCheck`): at the first tick after each
+  GNSS fix with a speed over ground, or each valid DVL bottom-track report, the published
+  speed of :data:`SPEED_PIPELINES` against it: ``aie``/``kf`` ``speed`` (the path speed,
+  over ground: no current enters it) as its magnitude against the Doppler speed over
+  ground, signed against the DVL's forward ``vx``; ``eseso`` its horizontal body speed
+  ``hypot(u, v)`` against the speed over ground, ``u`` against the DVL's ``vx``. Normalized
+  by the published one-sigma and the measurement's own; ``speed_mismatch`` when more than
+  :data:`SPEED_FRACTION` of the comparisons of the last :data:`SPEED_WINDOW_S` are beyond
+  :data:`SPEED_SIGMA_BOUND` and :data:`SPEED_FLOOR_MPS`. The pipeline is flagged, its
+  values kept.
 
 Why withhold rather than inflate the current's sigma under a heading mismatch: a heading
 offset ``d`` at speed ``s`` adds a bias of ``2 s sin(d/2)`` to the current (1.8 m/s for
@@ -40,7 +50,15 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from onboard.alerts import Alerts
 from onboard.core.geo import LocalFrame
-from onboard.core.messages import Attitude, EstimateRecord, GnssFix, Heading, Innovation, Sample
+from onboard.core.messages import (
+    Attitude,
+    DvlVelocity,
+    EstimateRecord,
+    GnssFix,
+    Heading,
+    Innovation,
+    Sample,
+)
 from onboard.innovations import RECENT_STEPS, RecentMean
 
 HEADING_MIN_SPEED_MPS = 0.5
@@ -82,6 +100,28 @@ FIX_MAX_AGE_S = 1.0
 """A fix older than this (s) at the tick is not compared."""
 DEFAULT_FIX_STD_M = 2.0
 """One-sigma (m) of a fix that reports no accuracy and has no configured one."""
+
+SPEED_PIPELINES: dict[str, tuple[str, ...]] = {
+    "aie": ("speed",), "kf": ("speed",), "eseso": ("u", "v"),
+}
+"""Per pipeline, its forward speed (m/s, over ground) and, for a vehicle that moves
+sideways, its sideways speed: their one-sigma is ``std_<q>``."""
+SPEED_SIGMA_BOUND = 3.0
+"""Normalized speed residual beyond which a comparison fails: a consistent estimate
+exceeds it 0.27 % of the time."""
+SPEED_FLOOR_MPS = 0.25
+"""A speed residual (m/s) below this never fails: the Doppler speed over ground of a
+vehicle at rest is biased up by its noise (a magnitude; 0.13 m/s for a 0.1 m/s sigma)."""
+SPEED_WINDOW_S = 30.0
+"""Speed comparisons judged together (s)."""
+SPEED_MIN_CHECKS = 5
+"""Speed comparisons needed in a window before it is judged."""
+SPEED_FRACTION = 0.5
+"""Share of failed speed comparisons in a window that raises ``speed_mismatch``."""
+DEFAULT_SPEED_STD_MPS = 0.1
+"""One-sigma (m/s) of a Doppler speed over ground that reports no accuracy."""
+DEFAULT_DVL_STD_MPS = 0.01
+"""One-sigma (m/s) of a DVL velocity that reports no figure of merit."""
 
 NIS_BAND = 0.95
 """Probability of the band the running mean NIS of a consistent filter stays in."""
@@ -228,6 +268,52 @@ class PositionCheck:
         return xs[len(xs) // 2] if xs else math.nan
 
 
+class SpeedCheck:
+    """One pipeline's published speed against Doppler or DVL (module docstring).
+
+    Attributes:
+        failing: whether the newest judged window failed.
+    """
+
+    def __init__(self) -> None:
+        self._window: deque[tuple[float, float, bool]] = deque()  # (t, |residual|, failed)
+        self.failing = False
+
+    def add(self, t: float, residual_mps: float, var: float) -> bool | None:
+        """One comparison at ``t`` (s): the residual (m/s) and its variance (m^2/s^2,
+        published plus measured). Returns the window's verdict (True: failing), None when
+        it cannot be judged yet."""
+        r = abs(residual_mps)
+        failed = r > SPEED_FLOOR_MPS and r > SPEED_SIGMA_BOUND * math.sqrt(var)
+        win = self._window
+        win.append((t, r, failed))
+        while win[0][0] < t - SPEED_WINDOW_S:
+            win.popleft()
+        if len(win) < SPEED_MIN_CHECKS:
+            return None
+        self.failing = sum(1 for w in win if w[2]) > SPEED_FRACTION * len(win)
+        return self.failing
+
+    def median_mps(self) -> float:
+        """Median speed difference (m/s) in the window."""
+        xs = sorted(r for _, r, _ in self._window)
+        return xs[len(xs) // 2] if xs else math.nan
+
+
+def _published_speed(pipeline: str, rec: EstimateRecord, forward_only: bool
+                     ) -> tuple[float, float] | None:
+    """``rec``'s speed (m/s) and its variance (m^2/s^2) as compared with a measurement:
+    its forward speed (signed, ``forward_only``) or its horizontal speed (a magnitude);
+    None when it is not published with its sigma."""
+    qs = SPEED_PIPELINES[pipeline][:1] if forward_only else SPEED_PIPELINES[pipeline]
+    v, sd = rec.values, rec.std
+    if not all(q in v and q in sd for q in qs):
+        return None
+    if forward_only:
+        return v[qs[0]], sd[qs[0]] ** 2
+    return math.hypot(*(v[q] for q in qs)), sum(sd[q] ** 2 for q in qs)
+
+
 class NisCheck:
     """One channel's running mean NIS against its band (module docstring)."""
 
@@ -263,26 +349,38 @@ REORIGINED = ("; its own local frame is no longer about the first fix (a restart
 """Added to ``position_residual`` when the pipeline's frame moved."""
 WARN_EVERY_S = 1.0
 """A condition that lasts is re-raised at most this often (s) (one warning spans it)."""
-WATCHED = frozenset({GnssFix, Heading, Attitude})
+WATCHED = frozenset({GnssFix, Heading, Attitude, DvlVelocity})
 """The sample types the monitor reads (the engine hands it only these)."""
 
 
 class IntegrityMonitor:
-    """The three checks of one run and their flags (module docstring).
+    """The four checks of one run and their flags (module docstring).
 
     Attributes:
         flags: pipeline -> the codes of the checks it fails now.
         flagged: per pipeline, the values withheld from its records (the health record's
             ``pipeline:<name>:flagged``).
         heading: the heading/course check, None for a holonomic vehicle.
+        positions: pipeline -> its position check.
+        speeds: pipeline -> reference (``GNSS Doppler``, ``DVL``) -> its speed check.
+        nis: pipeline -> channel -> its NIS check.
     """
 
     def __init__(self, alerts: Alerts, vehicle_class: str = "unknown",
-                 fix_std_m: float = DEFAULT_FIX_STD_M) -> None:
+                 fix_std_m: float = DEFAULT_FIX_STD_M,
+                 speed_std_mps: float = DEFAULT_SPEED_STD_MPS,
+                 dvl_std_mps: float = DEFAULT_DVL_STD_MPS) -> None:
         """Raise warnings into ``alerts``; ``fix_std_m`` is the one-sigma (m) of a fix that
-        reports no accuracy (``[sensors.gnss] position_std_m``)."""
+        reports no accuracy (``[sensors.gnss] position_std_m``), ``speed_std_mps`` of its
+        speed over ground (``[sensors.gnss] velocity_std_mps``), ``dvl_std_mps`` of a DVL
+        velocity with no figure of merit (``[sensors.dvl] velocity_std_mps``)."""
         self.alerts = alerts
         self.fix_std_m = fix_std_m
+        self.speed_std_mps = speed_std_mps
+        self.dvl_std_mps = dvl_std_mps
+        self.speeds: dict[str, dict[str, SpeedCheck]] = {}
+        self._speed_refs: list[tuple[float, float, float, str]] = []
+        """Measured speeds since the previous tick: (t, m/s, variance, reference)."""
         self.heading = None if vehicle_class in HOLONOMIC_CLASSES else HeadingCourseCheck()
         self.positions: dict[str, PositionCheck] = {}
         self.nis: dict[str, dict[str, NisCheck]] = {}
@@ -303,10 +401,13 @@ class IntegrityMonitor:
         if cls is GnssFix:
             if s.fix_quality > 0:  # type: ignore[attr-defined]
                 self._fix, self._fix_new = s, True  # type: ignore[assignment]
+                self._doppler(s)  # type: ignore[arg-type]
                 if self.frame is None:
                     self.frame = LocalFrame(s.lat_deg, s.lon_deg)  # type: ignore
                 if hc is not None:
                     self._heading_verdict(hc.fix(s), s.t)  # type: ignore[arg-type]
+        elif cls is DvlVelocity:
+            self._dvl(s)  # type: ignore[arg-type]
         elif hc is None:
             return
         elif cls is Heading:
@@ -397,6 +498,61 @@ class IntegrityMonitor:
                 f"{math.sqrt(var_fix):.1f} m: its position and sigma are not to be trusted"
                 + (REORIGINED if own is not frame and (own.lat0, own.lon0)
                    != (frame.lat0, frame.lon0) else "")))
+
+    # ------------------------------------------------------------------ speeds
+    def _doppler(self, s: GnssFix) -> None:
+        """A fix's speed over ground, to compare at the next tick."""
+        sog = s.sog_mps
+        if sog is None or not math.isfinite(sog):
+            return
+        acc = s.speed_acc_mps
+        std = acc if acc is not None and acc > 0 and math.isfinite(acc) \
+            else self.speed_std_mps
+        self._speed_refs.append((s.t, sog, std * std, "GNSS Doppler"))
+
+    def _dvl(self, s: DvlVelocity) -> None:
+        """A valid bottom-track report's forward speed, to compare at the next tick."""
+        if s.track != "bottom" or not s.valid or not math.isfinite(s.vx):
+            return
+        fom = s.fom_mps
+        std = fom if fom is not None and fom > 0 and math.isfinite(fom) else self.dvl_std_mps
+        self._speed_refs.append((s.t, s.vx, std * std, "DVL"))
+
+    def speeds_at(self, t: float, records: Sequence[EstimateRecord]) -> None:
+        """Compare the published speeds with the newest measurement of each kind since
+        the previous tick (at most :data:`FIX_MAX_AGE_S` old)."""
+        refs = self._speed_refs
+        if not refs:
+            return
+        newest = {ref[3]: ref for ref in refs if t - ref[0] <= FIX_MAX_AGE_S}
+        refs.clear()
+        for rec in records:
+            if rec.pipeline in SPEED_PIPELINES:
+                for ref in newest.values():
+                    self._speed(rec, ref)
+
+    def _speed(self, rec: EstimateRecord, ref: tuple[float, float, float, str]) -> None:
+        """One pipeline's comparison with one measured speed."""
+        _, measured, var_ref, what = ref
+        dvl = what == "DVL"
+        pub = _published_speed(rec.pipeline, rec, forward_only=dvl)
+        if pub is None:
+            return
+        speed = pub[0] if dvl or rec.pipeline == "eseso" else abs(pub[0])
+        per = self.speeds.setdefault(rec.pipeline, {})
+        check = per.get(what)
+        if check is None:
+            check = per[what] = SpeedCheck()
+        verdict = check.add(rec.t, speed - measured, pub[1] + var_ref)
+        if verdict is None:
+            return
+        self._flag(rec.pipeline, "speed_mismatch", any(c.failing for c in per.values()))
+        if verdict:
+            self._warn("speed_mismatch", rec.pipeline, rec.t, (
+                f"{rec.pipeline} speed is {check.median_mps():.2f} m/s from the {what} speed "
+                f"(median over {SPEED_WINDOW_S:.0f} s) with its stated "
+                f"{math.sqrt(pub[1]):.2f} m/s and the measurement's "
+                f"{math.sqrt(var_ref):.2f} m/s: its speed and sigma are not to be trusted"))
 
     # ------------------------------------------------------------------ innovations
     def innovations(self, pipeline: str, records: Iterable[Innovation]) -> None:

@@ -42,33 +42,96 @@ def read_columns(path: Path) -> dict[str, list[float]]:
     return cols
 
 
-def plot_track(estimates_csv: Path, out_png: Path) -> str | None:
-    """North/east track of every pipeline that has one, the lines broken across gaps in
-    the log (:func:`break_gaps` on the ``t`` column); None if none has a track.
-    Raises ImportError without matplotlib."""
+VELOCITY_PIPELINES = frozenset({"current"})
+"""Pipelines whose ``north``/``east`` are a velocity (m/s), not a position: not a track."""
+CURRENT_ARROWS = 40
+"""Arrows drawn in the current's panel at most (evenly spaced in time)."""
+
+
+def position_pairs(cols: dict[str, list[float]]) -> list[tuple[str, str, str]]:
+    """(pipeline, its north column, its east column) of every pipeline with a position
+    (m) in ``cols`` (not :data:`VELOCITY_PIPELINES`), that has at least one value."""
+    pairs = [(c[:-6], c, c[:-6] + ".east") for c in cols if c.endswith(".north")
+             and c[:-6] + ".east" in cols and c[:-6] not in VELOCITY_PIPELINES]
+    return [p for p in pairs if any(v == v for v in cols[p[1]])]
+
+
+def plot_track(estimates_csv: Path, out_png: Path, title: str | None = None) -> str | None:
+    """track.png of :func:`track_figure` for ``estimates_csv``, titled ``title`` (the
+    log's name; default the folder's); None if no pipeline has a position. Raises
+    ImportError without matplotlib."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cols = read_columns(estimates_csv)
-    pairs = [(c[:-6], c, c[:-6] + ".east") for c in cols if c.endswith(".north")
-             and c[:-6] + ".east" in cols]
-    pairs = [p for p in pairs if any(v == v for v in cols[p[1]])]
+    fig = track_figure(read_columns(estimates_csv), title or estimates_csv.parent.name)
+    if fig is None:
+        return None
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+    return str(out_png)
+
+
+def track_figure(cols: dict[str, list[float]], title: str):
+    """The positions (m) of every pipeline that has one, one line per run (broken across
+    runs and gaps in the log, :func:`break_gaps`); and, when the ``current`` pipeline
+    published one, the current as arrows over time in a panel of its own. None if no
+    pipeline has a position."""
+    import matplotlib.pyplot as plt
+
+    pairs = position_pairs(cols)
     if not pairs:
         return None
-    fig, ax = plt.subplots(figsize=(7, 6))
+    current = _current_arrows(cols)
+    if current is None:
+        fig, ax = plt.subplots(figsize=(7, 6))
+    else:
+        fig, (ax, ax_c) = plt.subplots(2, 1, figsize=(7, 9),
+                                       gridspec_kw={"height_ratios": [3, 1]})
+        _plot_current(ax_c, *current)
+    run = cols.get("run")
     for name, n, e in pairs:
         style = {"lw": 0.8, "marker": ".", "ms": 2} if name == "nav" else {"lw": 1.2}
-        _, east, north = break_gaps(cols["t"], cols[e], cols[n])
+        _, east, north = break_gaps(cols["t"], cols[e], cols[n], run=run)
         ax.plot(east, north, label="GNSS" if name == "nav" else name, **style)
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
     ax.legend()
-    ax.set_title(f"Track: {estimates_csv.parent.name}")
+    runs = len(set(run)) if run else 1
+    ax.set_title(f"Track: {title}" + (f" ({runs} runs)" if runs > 1 else ""))
     fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
-    plt.close(fig)
-    return str(out_png)
+    return fig
+
+
+def _current_arrows(cols: dict[str, list[float]]
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(t, north, east) of at most :data:`CURRENT_ARROWS` published currents (m/s),
+    evenly spaced in time; None when none was published."""
+    if "current.north" not in cols or "current.east" not in cols:
+        return None
+    t = np.asarray(cols["t"], float)
+    n = np.asarray(cols["current.north"], float)
+    e = np.asarray(cols["current.east"], float)
+    ok = np.flatnonzero(np.isfinite(n) & np.isfinite(e))
+    if not len(ok):
+        return None
+    pick = ok[np.unique(np.linspace(0, len(ok) - 1, min(CURRENT_ARROWS, len(ok))).astype(int))]
+    return t[pick], n[pick], e[pick]
+
+
+def _plot_current(ax, t: np.ndarray, north: np.ndarray, east: np.ndarray) -> None:
+    """The current as arrows from the time axis (a stick plot: up is toward north, right
+    toward east, the length its speed), with a 0.5 m/s key."""
+    q = ax.quiver(t, np.zeros_like(t), east, north, angles="uv", scale_units="y",
+                  scale=1.0, width=0.004, color="tab:blue")
+    top = max(0.25, float(np.nanmax(np.hypot(north, east))) * 1.15)
+    ax.set_ylim(-top, top)
+    ax.axhline(0.0, color="0.6", lw=0.6)
+    ax.quiverkey(q, 0.9, 0.9, 0.5, "0.5 m/s", labelpos="W", coordinates="axes")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("current (m/s)\nup: toward north")
+    ax.set_title("Current: where the water flows to (arrows over time)")
+    ax.grid(True, alpha=0.3)

@@ -10,6 +10,7 @@ The same engine and pipelines as the live service, so a replay is the live resul
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import json
 import sys
@@ -38,14 +39,24 @@ def _fmt(v: float) -> str:
 
 
 class EstimatesCsv:
-    """Streams ticks into estimates.csv: ``t`` since the first sample, then a column per
-    ``<pipeline>.<quantity>``, empty where a pipeline has no estimate."""
+    """Streams ticks into estimates.csv: ``t`` since the first sample, ``run`` (the run
+    the tick belongs to, :class:`Runs`), then a column per ``<pipeline>.<quantity>``,
+    empty where a pipeline has no estimate.
 
-    def __init__(self, path: Path, columns: Sequence[str], t0: float | None) -> None:
-        self.columns = list(columns)
+    Attributes:
+        runs: per run, its number, name, first and last ``t`` and rows.
+    """
+
+    def __init__(self, path: Path, columns: Sequence[str], t0: float | None,
+                 runs: Runs | None = None) -> None:
+        """``columns``: ``t`` then the pipelines' columns (:attr:`Engine.columns`);
+        ``run`` is written after ``t``. ``runs`` tells each tick's run (default: one)."""
+        self.columns = [columns[0], RUN_COLUMN, *columns[1:]]
         self.index = {c: i for i, c in enumerate(self.columns)}
         self.t0 = t0
         self.rows = 0
+        self.run_of = runs if runs is not None else Runs()
+        self.runs: list[dict] = []
         self._by_pipeline: dict[str, dict[str, int]] = {}
         """Per pipeline: quantity -> column index (the quantities it has written)."""
         self._f = open(path, "w", encoding="utf-8", newline="\n")
@@ -63,7 +74,8 @@ class EstimatesCsv:
         if self.t0 is None:
             self.t0 = t
         row = [""] * len(self.columns)
-        row[0] = f"{t - self.t0:.6f}"
+        row[0] = tt = f"{t - self.t0:.6f}"
+        row[1] = self._run(t, float(tt))
         by_pipeline = self._by_pipeline
         for rec in records:
             index = by_pipeline.get(rec.pipeline)
@@ -79,10 +91,69 @@ class EstimatesCsv:
         self._f.write(",".join(row) + "\n")
         self.rows += 1
 
+    def _run(self, t: float, t_csv: float) -> str:
+        """The run of the tick at ``t`` (s, log clock; ``t_csv`` as written), counted in
+        :attr:`runs`."""
+        k, name = self.run_of.at(t)
+        runs = self.runs
+        if not runs or runs[-1]["run"] != k:
+            runs.append({"run": k, "name": name, "t_start": t_csv, "t_end": t_csv,
+                         "rows": 0})
+        last = runs[-1]
+        last["t_end"] = t_csv
+        last["rows"] += 1
+        return str(k)
+
     def close(self) -> None:
         """Close the file (rows already written are complete lines)."""
         self._f.close()
 
+
+RUN_COLUMN = "run"
+"""The column of estimates.csv after ``t``: the run (0, 1, ...) the row belongs to."""
+
+
+class Runs:
+    """The run of each tick: a new one at each time segment of the engine's time line
+    (a clock jump, :mod:`onboard.timeline`) and at each run of a CSV log (a file of a
+    directory, or a ``run_column`` value; :attr:`CsvReader.runs`). Runs are numbered
+    from 0 in the order they start; a name says which it is (the CSV run's name, or
+    ``segment <n>``; empty for a log of one run)."""
+
+    def __init__(self, engine: Engine | None = None, csv_runs: Sequence = ()) -> None:
+        """``engine``: its time line's segments; ``csv_runs``: the reader's runs (each
+        with ``name`` and ``t_start`` on the log clock), in order."""
+        self.engine = engine
+        self.starts = [r.t_start for r in csv_runs]
+        self.names = [r.name for r in csv_runs]
+        self._key: tuple[int, int] | None = None
+        self._k = -1
+
+    def at(self, t: float) -> tuple[int, str]:
+        """(run number, name) of the tick at ``t`` (s, log clock)."""
+        seg = _segment_of(self.engine.timeline.segments, t) if self.engine else 0
+        part = bisect.bisect_right(self.starts, t) - 1
+        key = (seg, max(part, 0))
+        if key != self._key:
+            self._key = key
+            self._k += 1
+        if self.names:
+            return self._k, self.names[key[1]]
+        return self._k, f"segment {seg + 1}" if seg > 0 else ""
+
+
+def _segment_of(segments: Sequence, t: float) -> int:
+    """The index of the segment the tick at ``t`` (s) belongs to: the newest that spans
+    ``t``, else the newest that started before it (a tick past its newest sample, or in a
+    gap), else 0. The time line adds a segment when its jump is confirmed, which is before
+    the last ticks of the old one (``onboard.engine.run``)."""
+    for k in range(len(segments) - 1, -1, -1):
+        if segments[k].start <= t <= segments[k].end:
+            return k
+    for k in range(len(segments) - 1, -1, -1):
+        if segments[k].start <= t:
+            return k
+    return 0
 
 class _Progress:
     """Progress on a terminal (stderr), at most twice a second; silent otherwise."""
@@ -137,9 +208,11 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
 
 
 def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
-           plot: bool = True, progress: bool = False, mcap: Path | None = None) -> dict:
+           plot: bool = True, progress: bool = False, mcap: Path | None = None,
+           geojson: Path | None = None, gpx: Path | None = None) -> dict:
     """Run the pipelines over ``log``; write the outputs into ``out_dir`` (and the
-    estimates as MCAP into ``mcap`` when given); return the summary."""
+    estimates as MCAP into ``mcap`` when given; with ``geojson`` the tracks and current
+    arrows there, with ``gpx`` the tracks, :mod:`onboard.geojson`); return the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
     wall0 = time.perf_counter()
     fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
@@ -150,7 +223,9 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         raise UnreadableLog(f"{log}: no usable samples ({reader.stats.as_dict()['rejected']})")
     # A live recording starts ticking before its first sample: count from the first tick.
     csv = EstimatesCsv(out_dir / "estimates.csv", engine.columns,
-                       None if fmt == "recording" else first.t)
+                       None if fmt == "recording" else first.t,
+                       Runs(engine, [r for r in getattr(reader, "runs", ())
+                                     if r.t_start == r.t_start]))
     on_tick = csv.write
     mcap_out = None
     if mcap is not None:
@@ -202,8 +277,10 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "vehicle_class": cfg.vehicle.vehicle_class,
         "vehicle_id": cfg.vehicle.id,
         "pipelines": [p.name for p in engine.pipelines],
-        "columns": engine.columns,
+        "columns": csv.columns,
         "time_span": time_span,
+        "origin": _origin(engine),
+        "runs": csv.runs,
         "read": reader.stats.as_dict(),
         "samples_accepted_by_type": dict(sorted(kinds.items())),
         "rates_hz": {k: (n / span if span > 0 else None) for k, n in sorted(kinds.items())},
@@ -225,10 +302,21 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     }
     if mcap_out is not None:
         summary["mcap"] = {"file": str(mcap), "messages": mcap_out.messages}
+    if geojson is not None or gpx is not None:
+        summary["geojson"] = _write_geojson(out_dir, geojson, gpx, summary)
     if plot:
-        summary["figure"] = _plot_track(out_dir)
+        summary["figure"] = _plot_track(out_dir, Path(log).name)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def _origin(engine: Engine) -> dict | None:
+    """The latitude and longitude (deg) of the first fix handed to the pipelines: the
+    origin of the published ``north``/``east`` (m); None without a fix."""
+    frame = engine.integrity.frame
+    if frame is None:
+        return None
+    return {"lat_deg": frame.lat0, "lon_deg": frame.lon0}
 
 
 def _time_span(engine: Engine, t_first: float) -> dict:
@@ -312,12 +400,27 @@ def print_warnings(warnings: list[dict], t0: float) -> None:
         print(f"  {w['code']}{span}: {w['message']}")
 
 
-def _plot_track(out_dir: Path) -> str | None:
-    """track.png: the measured track and every reconstructed one; None without matplotlib."""
+def _write_geojson(out_dir: Path, path: Path | None, gpx: Path | None,
+                   summary: dict) -> dict:
+    """The replay's tracks and current arrows as GeoJSON in ``path``, its tracks as GPX in
+    ``gpx`` (either may be None); what was written."""
+    from onboard import geojson
+    from onboard.plots import read_columns
+
+    cols = read_columns(out_dir / "estimates.csv")
+    n = geojson.write(path, cols, summary["origin"], summary["runs"],
+                      Path(summary["log"]).name, gpx)
+    return {"path": str(path) if path else None, "gpx": str(gpx) if gpx else None,
+            "features": n}
+
+
+def _plot_track(out_dir: Path, title: str) -> str | None:
+    """track.png: the measured track and every reconstructed one, the current in a panel
+    of its own, titled ``title``; None without matplotlib."""
     from onboard.plots import plot_track
 
     try:
-        return plot_track(out_dir / "estimates.csv", out_dir / "track.png")
+        return plot_track(out_dir / "estimates.csv", out_dir / "track.png", title)
     except ImportError:
         return None
 
@@ -337,7 +440,9 @@ def main(args) -> int:
         cfg, note = choose_config(log, args.config)
         summary = replay(log, cfg, Path(args.out), config_note=note,
                          plot=not args.no_plot, progress=sys.stderr.isatty(),
-                         mcap=Path(mcap) if mcap else None)
+                         mcap=Path(mcap) if mcap else None,
+                         geojson=getattr(args, "geojson", None),
+                         gpx=getattr(args, "gpx", None))
     except UnreadableLog as err:
         raise UsageError(str(err)) from None
     read = summary["read"]

@@ -22,9 +22,16 @@ A log's stamps are trusted only when they agree with each other. Every sample pa
   run (:meth:`Timeline.flush`) are outliers: fewer than :data:`CONFIRM_STAMPS` stamps
   never make a segment.
 
-The rule needs no look-ahead, so the live service and a replay apply it alike; it delays a
-jump's first samples by :data:`CONFIRM_STAMPS` stamps (a fraction of a second at the
-usual rates) and never walks across the time between two stamps, however far apart.
+The rule needs no look-ahead; it delays a jump's first samples by :data:`CONFIRM_STAMPS`
+stamps (a fraction of a second at the usual rates) and never walks across the time between
+two stamps, however far apart.
+
+Live (:meth:`Timeline.admit_at`), the receive clock is the time line: it is monotonic and
+every sample is stamped on it or mapped onto it, so nothing on it can confirm a jump. A
+stamp more than :data:`TIME_JUMP_S` from the receive time of its tick, either way, is an
+outlier at once (a source's clock that stepped: an autopilot that rebooted before its
+time was mapped again, a GNSS receiver's UTC before its first fix), counted and warned of
+like a log's.
 """
 
 from __future__ import annotations
@@ -122,6 +129,24 @@ class Timeline:
             return [sample]
         self._drop_held()
         return self._hold(sample)
+
+    def admit_at(self, sample: Sample, now: float) -> list[Sample]:
+        """Live: take one sample at the receive time ``now`` (s); return it, or nothing
+        when it is an outlier (more than :data:`TIME_JUMP_S` from ``now``; listed in
+        :attr:`outliers`). One segment, on the receive clock."""
+        t = sample.t
+        if abs(t - now) > TIME_JUMP_S:
+            self.outliers.append(sample)
+            return []
+        if not self.segments:
+            self.segments.append(Segment(t, t))
+        else:
+            seg = self.segments[-1]
+            if t > seg.end:
+                seg.end = t
+            elif t < seg.start:
+                seg.start = t
+        return [sample]
 
     def flush(self) -> None:
         """The run ended: samples still held are outliers."""

@@ -256,3 +256,36 @@ def test_std_columns_follow_the_pipeline_also_after_a_restart(monkeypatch):
     (rec_b, _) = eng.tick(3.0)
     assert rec_a.std == rec_b.std == {"north": 0.5}
     assert eng.pipeline_errors["withstd"] == 1
+
+
+class _FastAie:
+    """An ``aie`` that publishes 2.0 m/s (sigma 0.05) whatever it is given."""
+
+    name = "aie"
+    columns = ("speed", "std_speed")
+
+    def step(self, t, samples):
+        return {"speed": 2.0, "std_speed": 0.05}
+
+    def innovations(self):
+        return []
+
+    def health(self):
+        return {}
+
+    def get_state(self):
+        return {}
+
+    def set_state(self, state):
+        pass
+
+
+def test_a_speed_that_disagrees_with_the_doppler_speed_is_flagged_in_the_health_record():
+    """The integrity monitor's ``speed_mismatch`` (onboard/integrity.py) reaches the health
+    record's flags (and from there ESTIMATOR_STATUS) and the warnings, as the other
+    checks do: 2.0 m/s published against fixes at 1.2 m/s over ground."""
+    eng = Engine(Config(), pipelines=[_FastAie()])
+    samples = [fix(0.5 * k, sog_mps=1.2, cog_rad=0.0) for k in range(40)]
+    run(eng, samples, lambda t, recs: None)
+    assert eng.health(20.0).flags == {"aie": ["speed_mismatch"]}
+    assert "speed_mismatch" in eng.alerts.codes()

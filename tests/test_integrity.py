@@ -8,11 +8,12 @@ import numpy as np
 
 from onboard.alerts import Alerts
 from onboard.core.geo import LocalFrame
-from onboard.core.messages import EstimateRecord, GnssFix, Heading, Innovation
+from onboard.core.messages import DvlVelocity, EstimateRecord, GnssFix, Heading, Innovation
 from onboard.integrity import (
     HEADING_BOUND_RAD,
     IntegrityMonitor,
     NisCheck,
+    SPEED_FLOOR_MPS,
     crab_bound,
     nis_band,
 )
@@ -136,3 +137,54 @@ def test_nis_out_of_band_flags_the_pipeline_and_names_the_channel() -> None:
     m.innovations("current", recs)
     assert m.active() == {"current": ["nis_out_of_band"]}
     assert "velocity" in next(iter(alerts)).message
+
+
+def _speeds(pipeline: str, published: dict[str, float], sog: float | None = None,
+            dvl_vx: float | None = None, std: float = 0.05) -> tuple[Alerts, IntegrityMonitor]:
+    """40 s of one fix (speed over ground ``sog``) and/or one DVL report (forward
+    ``dvl_vx``) a second, and ``pipeline`` publishing ``published`` with sigma ``std``."""
+    alerts = Alerts()
+    m = IntegrityMonitor(alerts, "rudder-boat")
+    for k in range(40):
+        t = float(k)
+        if sog is not None:
+            m.observe(GnssFix(t=t, lat_deg=LAT0, lon_deg=LON0, sog_mps=sog, cog_rad=0.0))
+        if dvl_vx is not None:
+            m.observe(DvlVelocity(t=t, vx=dvl_vx, vy=0.0, vz=0.0, fom_mps=0.01))
+        rec = EstimateRecord(vehicle="v", pipeline=pipeline, t=t + 0.05,
+                             values=dict(published), std={q: std for q in published})
+        m.speeds_at(t + 0.05, [rec])
+    return alerts, m
+
+
+def test_a_speed_of_2_m_s_against_a_doppler_1_2_m_s_is_a_speed_mismatch() -> None:
+    # 0.8 m/s against sqrt(0.05^2 + 0.1^2) = 0.11 m/s: 7.2 sigma on every comparison
+    alerts, m = _speeds("aie", {"speed": 2.0}, sog=1.2)
+    assert "speed_mismatch" in alerts.codes()
+    assert m.active() == {"aie": ["speed_mismatch"]}
+    assert "0.80 m/s from the GNSS Doppler speed" in next(iter(alerts)).message
+
+
+def test_a_speed_within_its_sigma_of_the_doppler_speed_passes() -> None:
+    # 0.1 m/s against 0.11 m/s; astern (negative path speed) compares its magnitude
+    for speed in (1.3, -1.3):
+        alerts, m = _speeds("kf", {"speed": speed}, sog=1.2)
+        assert not alerts.codes() and not m.active()
+
+
+def test_a_doppler_speed_at_rest_is_not_judged_below_the_floor() -> None:
+    # a boat at rest: the speed over ground of its noise against a 0.01 m/s sigma
+    alerts, m = _speeds("aie", {"speed": 0.0}, sog=SPEED_FLOOR_MPS - 0.05, std=0.01)
+    assert not alerts.codes()
+
+
+def test_an_eseso_running_away_from_the_dvl_bottom_track_is_flagged() -> None:
+    # small.BIN before the zero-velocity update: u 6.2 m/s on a bench (DVL 0 m/s)
+    alerts, m = _speeds("eseso", {"u": 6.2, "v": 0.0}, dvl_vx=0.0, std=1.25)
+    assert m.active() == {"eseso": ["speed_mismatch"]}
+    assert "DVL" in next(iter(alerts)).message
+
+
+def test_an_eseso_following_the_dvl_passes() -> None:
+    alerts, m = _speeds("eseso", {"u": 0.52, "v": 0.1}, dvl_vx=0.5, std=0.03)
+    assert not alerts.codes() and not m.active()

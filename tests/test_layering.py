@@ -21,8 +21,8 @@ The rooms, from the bottom up (docs/architecture.md has the picture):
   pipelines, and the summary of their innovations.
 * ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
 * ``onboard.closure``: model closure on recorded logs.
-* ``onboard.replay``, ``onboard.diagnose``, ``onboard.autodetect``, ``onboard.plots``:
-  the offline commands.
+* ``onboard.replay``, ``onboard.diagnose``, ``onboard.autodetect``, ``onboard.plots``,
+  ``onboard.geojson``: the offline commands.
 * ``onboard.cli``: parses arguments, dispatches by module name.
 * ``onboard.tools``: demo, shore view, benchmarks, validation reports, gain design; may
   use everything, the simulator included.
@@ -70,10 +70,11 @@ ROOMS: dict[str, set[str]] = {
     "onboard.sources": CORE,
     "onboard.service": SERVICE,
     "onboard.closure": CLOSURE,
-    "onboard.replay": OFFLINE,
+    "onboard.replay": OFFLINE | {"onboard.geojson"},
     "onboard.diagnose": OFFLINE,
     "onboard.autodetect": CORE,
     "onboard.plots": set(),
+    "onboard.geojson": CORE,
     "onboard.cli": CORE | {"onboard"},
     "onboard.tools": OFFLINE | SERVICE | {"onboard.tools", "onboard.cli", "onboard.sitl"},
     "onboard": {"onboard"},  # the package's __init__ and __main__

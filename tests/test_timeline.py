@@ -209,3 +209,136 @@ def test_500_flipped_bytes_in_small_bin_give_a_duration_within_the_log(tmp_path,
         # a stamp by less than TIME_JUMP_S and stays); each seed's bad stamps are counted
         assert 20.0 < s["time_span"]["duration_s"] < 40.0
         assert s["read"]["rejected"]["time_outlier"] > 0  # measured 13-22
+
+
+# ------------------------------------------- the same time line live and in the readers
+
+def test_the_readers_and_the_time_line_judge_stamps_on_the_same_figure():
+    from onboard.drivers import base, csvlog, dataflash
+
+    assert base.TIME_JUMP_S == csvlog.TIME_JUMP_S == dataflash.TIME_JUMP_S == TIME_JUMP_S
+
+
+def test_live_a_stamp_far_behind_the_receive_clock_is_a_counted_and_warned_outlier():
+    """The live service puts its samples on the receive clock's time line: one stamped an
+    hour back (a source's clock that stepped) is a ``time_outlier``, counted and warned as
+    in a replay, and the samples after it are kept; nothing is held, nothing spins."""
+    from onboard.core.config import Config
+    from onboard.drivers.protocols import encode_sample
+    from onboard.engine import Engine
+    from onboard.service.intake import Intake
+
+    engine = Engine(Config())
+    intake = Intake(engine)
+    for k, t in enumerate([100.0, 100.1, 100.2 - 3600.0, 100.3, 100.4]):
+        intake.chunk("imu", "sample", encode_sample(imu(t)), 100.0 + 0.1 * k)
+        intake.tick(100.0 + 0.1 * k + 0.05)
+    assert engine.rejected["imu:time_outlier"] == 1
+    assert sum(engine.accepted.values()) == 4
+    (alert,) = [a for a in engine.alerts if a.code == "time_outlier"]
+    assert "-3600.05 s off the receive clock" in alert.message
+    assert any(e.startswith("time_outlier") for e in engine.events)  # health, STATUSTEXT
+    assert len(engine.timeline.segments) == 1
+
+
+def test_a_tlog_clock_reset_is_a_segment_not_every_later_record_lost(tmp_path):
+    """A tlog whose logger clock went back 1000 s: before, every later record was
+    ``time_backwards`` until the clock caught up; now the reader passes the step on and the
+    engine's time line makes it a second segment. A step back of 0.5 s stays
+    ``time_backwards``."""
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    from onboard.drivers.tlog import TlogReader, TlogWriter
+
+    p = tmp_path / "reset.tlog"
+    m = mav.MAVLink(None, 1, 1)
+    t0 = 1.7e9
+    times = [t0 + 0.1 * k for k in range(30)] + [t0 + 2.5] \
+        + [t0 - 1000.0 + 0.1 * k for k in range(30)]
+    with TlogWriter(p) as w:
+        for t in times:
+            w.write(t, m.attitude_encode(0, 0.1, 0, 0, 0, 0, 0).pack(m))
+    r = TlogReader(p)
+    out = list(r)
+    assert len(out) == 60 and r.stats.rejected == {"time_backwards": 1}
+    tl = Timeline()
+    released = [s for x in out for s in tl.admit(x)]
+    tl.flush()
+    assert len(released) == 60 and len(tl.segments) == 2
+    assert tl.segments[1].start == pytest.approx(t0 - 1000.0)
+
+
+def test_a_single_tlog_stamp_far_back_is_passed_on_and_is_the_time_lines_outlier(tmp_path):
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    from onboard.drivers.tlog import TlogReader, TlogWriter
+
+    p = tmp_path / "one.tlog"
+    m = mav.MAVLink(None, 1, 1)
+    t0 = 1.7e9
+    times = [t0 + 0.1 * k for k in range(30)]
+    times[10] -= 1e6
+    with TlogWriter(p) as w:
+        for t in times:
+            w.write(t, m.attitude_encode(0, 0.1, 0, 0, 0, 0, 0).pack(m))
+    r = TlogReader(p)
+    out = list(r)
+    assert len(out) == 30 and not r.stats.rejected
+    tl = Timeline()
+    released = [s for x in out for s in tl.admit(x)]
+    tl.flush()
+    assert len(released) == 29 and [s.t for s in tl.outliers] == [pytest.approx(times[10])]
+
+
+def test_an_nmea_utc_clock_reset_is_passed_on_a_small_step_back_is_not():
+    from onboard.drivers.nmea import NmeaParser, encode_gga
+
+    day = 1_733_011_200.0  # 2024-12-01 00:00 UTC
+    p = NmeaParser(time_base="utc", date=day)
+    out = []
+    for t in [day + 3600.0, day + 3601.0, day + 3600.5, day + 3000.0, day + 3001.0]:
+        out += p.feed_line(encode_gga(t, 48.0, -4.0))
+    out += p.poll(1e12)
+    assert [round(s.t - day, 1) for s in out] == [3600.0, 3601.0, 3000.0, 3001.0]
+    assert p.stats.rejected == {"time_backwards": 1}
+
+
+def test_a_dvl_json_capture_clock_reset_is_passed_on_a_small_step_back_is_not(tmp_path):
+    from onboard.drivers.dvl_json import DvlJsonLogReader
+
+    def report(t: float) -> str:
+        return json.dumps({"type": "velocity", "time": 100.0, "vx": 0.1, "vy": 0.0,
+                           "vz": 0.0, "fom": 0.01, "altitude": 1.0, "velocity_valid": True,
+                           "status": 0, "time_of_validity": int(t * 1e6),
+                           "time_of_transmission": int(t * 1e6)})
+
+    times = [1000.0, 1001.0, 1000.5, 500.0, 501.0]
+    path = tmp_path / "dvl.txt"
+    path.write_text("\n".join(report(t) for t in times) + "\n")
+    r = DvlJsonLogReader(path)
+    out = list(r)
+    assert [s.t for s in out] == [1000.0, 1001.0, 500.0, 501.0]
+    assert r.stats.rejected == {"time_backwards": 1}
+
+
+def test_a_tlog_clock_reset_replays_as_two_segments_with_a_time_jump(tmp_path):
+    """End to end: 10 s of data, the logger's clock back 1000 s, 10 s more (before: the
+    second half was lost as ``time_backwards``)."""
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    from onboard.drivers.tlog import TlogWriter
+
+    m = mav.MAVLink(None, 1, 1)
+    log = tmp_path / "reset.tlog"
+    with TlogWriter(log) as w:
+        for base in (1.7e9, 1.7e9 - 1000.0):
+            for i in range(100):
+                t = base + 0.1 * i
+                w.write(t, m.heartbeat_encode(10, 3, 0, 0, 4, 3).pack(m))
+                w.write(t, m.attitude_encode(0, 0.0, 0, 0.1 * i, 0, 0, 0.01).pack(m))
+                w.write(t, m.global_position_int_encode(
+                    0, int(48e7 + i * 10), int(-4e7), 0, 0, 100, 0, 0, 100).pack(m))
+    s = replay(tmp_path, log)
+    assert [seg["duration_s"] for seg in s["time_span"]["segments"]] == \
+        [pytest.approx(9.9), pytest.approx(9.9)]
+    assert "time_jump" in {w["code"] for w in s["warnings"]} and not s["read"]["rejected"]

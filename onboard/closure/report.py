@@ -177,10 +177,12 @@ def diagnosis(sel: Selection, log: str) -> dict:
                 params["direction"] = f.ctx.extra.get("wave_direction")
             entry["params"] = params
             entry["evidence"]["std"] = std
-        changing = {k.split(".", 1)[1]: v for k, v in sel.drift.get("params", {}).items()
-                    if k.startswith(name + ".") and v["changing"]}
-        if detected and changing:
-            entry["evidence"]["drift"] = changing
+        # every parameter of an effect with one changing: the components of one vector
+        # (a current's north and east) move together, and one may cross the bound alone
+        drift = {k.split(".", 1)[1]: v for k, v in sel.drift.get("params", {}).items()
+                 if k.startswith(name + ".")}
+        if detected and any(v["changing"] for v in drift.values()):
+            entry["evidence"]["drift"] = drift
         if cand is not None:
             entry["evidence"].update({
                 "held_out_gain": round(cand.gain, 4), "t_max": round(cand.t_max, 2),

@@ -343,6 +343,9 @@ class ChannelHealth(msgspec.Struct, frozen=True, kw_only=True):
         z, S: the newest innovation and its covariance (row-major).
         t: time (s) of the newest measurement.
         source: its sample source.
+        by_source: when the channel has had measurements from more than one source (two
+            GNSS receivers, two DVLs), the same summary per source (each with an empty
+            ``by_source``); empty otherwise.
     """
 
     n: int
@@ -358,6 +361,7 @@ class ChannelHealth(msgspec.Struct, frozen=True, kw_only=True):
     S: list[float | None] = []
     t: float | None = None
     source: str = ""
+    by_source: dict[str, ChannelHealth] = {}
 
 
 class Alert(msgspec.Struct, frozen=True, kw_only=True):
@@ -374,9 +378,11 @@ class Alert(msgspec.Struct, frozen=True, kw_only=True):
     n: int = 1
 
 
-HEALTH_SCHEMA_VERSION = 2
-"""Version of the wire schema of :class:`HealthRecord` (2: typed innovations and
-counters apart; 1 had flat ``innovations`` and ``nis`` dictionaries)."""
+HEALTH_SCHEMA_VERSION = 3
+"""Version of the wire schema of :class:`HealthRecord` (3: each channel's summary also per
+source, ``ChannelHealth.by_source``, a field a schema-2 reader that ignores unknown fields
+skips; 2: typed innovations and counters apart; 1 had flat ``innovations`` and ``nis``
+dictionaries)."""
 
 
 class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):

@@ -2,9 +2,11 @@
 
 :class:`Intake` ``chunk()`` records a chunk (:class:`onboard.service.recorder.Recorder`),
 parses it (:func:`drivers.protocols.parser_for`) and queues its samples in a bounded queue
-(drops counted per source); ``tick(T)`` records the tick, pushes the queued samples
-stamped ``t <= T`` (later ones wait for the next tick, so a pipeline never sees a sample
-from its future) and steps the engine. The live service splits ``chunk()`` in two:
+(drops counted per source); ``tick(T)`` records the tick, puts the queued samples
+stamped ``t <= T`` on the engine's time line (later ones wait for the next tick, so a
+pipeline never sees a sample from its future; one stamped more than
+``onboard.timeline.TIME_JUMP_S`` before ``T`` is a counted and warned ``time_outlier``, as
+in a replay of a log), pushes them and steps the engine. The live service splits ``chunk()`` in two:
 ``receive()`` keeps the chunk, ``parse()`` (called by ``tick()`` and by the service while
 it waits for a sample) records and parses the chunks kept, in order. Parsing a handful
 of chunks together costs about half the CPU time of parsing each as it arrives (the
@@ -233,11 +235,13 @@ class Intake:
                     st.parser.stats.reject("parser_error")
         pending = self.pending
         push = self.engine.push
+        admit = self.engine.admit
         if pending:
             keep: deque[Sample] = deque()
             for s in pending:
                 if s.t <= t:
-                    push(s, now=t)
+                    for r in admit(s, t):  # the receive clock's time line
+                        push(r, now=t)
                 else:
                     keep.append(s)
             self.pending = keep

@@ -22,7 +22,8 @@ WIND_COV           the **water current** (not wind): wind_x/y/z = current       
 ESTIMATOR_STATUS   health: test ratios sqrt(NIS)/3 (1 = a 3-sigma innovation) of    1 Hz
                    the velocity (vel_ratio), position (pos_horiz_ratio), depth
                    (pos_vert_ratio) and heading (mag_ratio) channels; flags
-                   VELOCITY_HORIZ / POS_HORIZ_REL when estimating, GPS_GLITCH when
+                   VELOCITY_HORIZ / POS_HORIZ_REL when estimating (not while a
+                   pipeline fails speed_mismatch / position_residual), GPS_GLITCH when
                    GNSS fixes were rejected since the last report
 STATUSTEXT         events (source lost or silent, state restored or corrupt),   <= 1 per
                    rate-limited by a token bucket (burst 5); the number           2 s avg
@@ -348,7 +349,8 @@ class MavlinkPublisher:
         ratios = estimator_test_ratios(health)
         flags = 0
         vals = {q for r in self._latest.values() for q in r.values}
-        if {"speed", "north"} & vals or "current" in self._latest:
+        speed_flagged = any("speed_mismatch" in f for f in health.flags.values())
+        if ({"speed", "north"} & vals or "current" in self._latest) and not speed_flagged:
             flags |= mavlink2.ESTIMATOR_VELOCITY_HORIZ
         position_flagged = any("position_residual" in f for f in health.flags.values())
         if {"north", "east"} <= vals and not position_flagged:
