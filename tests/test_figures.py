@@ -78,6 +78,22 @@ def test_a_stale_readme_number_is_caught(committed) -> None:
         F.render_table(doc)
 
 
+def test_the_results_file_is_rendered_from_the_figures_file(committed) -> None:
+    """docs/results.csv: one row per figure and seed, with its scenario and what it is
+    measured against (``onboard validate --results docs/results.csv``)."""
+    from onboard.tools import results as R
+
+    path = F.REPO / "docs" / "results.csv"
+    assert path.read_text(encoding="utf-8") == R.render(committed), (
+        "docs/results.csv differs from docs/figures.json: run "
+        "`onboard validate --results docs/results.csv`")
+    assert R.reference("aie.jaiabot_turns.speed_rmse.aie") == "simulator truth"
+    assert R.reference("aie.blueboat.speed_rmse.aie").startswith("field log")
+    assert R.scenario("aie.twin_thruster_turns.speed_rmse.kf") == "twin-thruster-turns"
+    n = sum(len(rec["values"]) for rec in committed["figures"].values())
+    assert len(R.rows(committed)) == n
+
+
 @pytest.mark.parametrize("table", D.tables(), ids=lambda t: t.key)
 def test_every_docs_table_is_rendered_from_the_figures_file(table, committed) -> None:
     page = F.REPO / "docs" / table.page
@@ -219,7 +235,7 @@ def test_validate_checks_writes_and_exits_1_on_a_figure_outside_its_tolerance(
     good = tmp_path / "good.json"
     good.write_text(json.dumps(committed))
     args = argparse.Namespace(only=[name], write=str(tmp_path / "out.json"), check=str(good),
-                              readme=None, docs=None)
+                              readme=None, docs=None, results=None)
     assert F.main(args) == 0
     written = json.loads((tmp_path / "out.json").read_text())
     assert set(written["figures"]) == {name}
@@ -249,7 +265,7 @@ def test_validate_docs_alone_rerenders_without_recomputing(committed, tmp_path, 
                                                      f"{table.begin()}\n| old |\n{table.end()}")
     path.write_text(stale, encoding="utf-8")
     args = argparse.Namespace(only=None, write=None, check=None, readme=None,
-                              docs=str(tmp_path))
+                              docs=str(tmp_path), results=None)
     assert F.main(args) == 0
     assert table.block(path.read_text(encoding="utf-8")) == table.render(committed)
     assert table.key in capsys.readouterr().out

@@ -746,11 +746,17 @@ def run_figures(names: Sequence[str], figs: dict[str, Figure], log: Any = sys.st
     return out, skipped
 
 
-def render_pages(readme: str | None, docs: str | None, doc: dict[str, Any]) -> None:
-    """Rewrite the README's figures block (``readme``) and the generated tables of the
-    pages in ``docs`` (``onboard/tools/doc_tables.py``) from ``doc``, saying what
-    changed."""
+def render_pages(readme: str | None, docs: str | None, doc: dict[str, Any],
+                 results: str | None = None) -> None:
+    """Rewrite the README's figures block (``readme``), the generated tables of the
+    pages in ``docs`` (``onboard/tools/doc_tables.py``) and the results file
+    (``results``, :mod:`onboard.tools.results`) from ``doc``, saying what changed."""
     from onboard.tools import doc_tables
+    from onboard.tools import results as results_mod
+
+    if results:
+        changed = results_mod.write(Path(results), doc)
+        print(f"{results}: {'rewritten' if changed else 'unchanged'}")
 
     if readme:
         changed = update_readme(Path(readme), doc)
@@ -763,21 +769,23 @@ def render_pages(readme: str | None, docs: str | None, doc: dict[str, Any]) -> N
 
 def main(args: argparse.Namespace) -> int:
     """``onboard validate [--only PATTERN]... [--write FILE] [--check FILE]
-    [--readme FILE] [--docs DIR]``: compute the figures, print them as a table, write
-    them, check them against a file (exit 1 when one is outside its tolerance), rewrite
-    the README's figures block and the docs pages' generated tables. ``--readme`` /
-    ``--docs`` without ``--write``/``--check`` only re-render from docs/figures.json."""
+    [--readme FILE] [--docs DIR] [--results FILE]``: compute the figures, print them as
+    a table, write them, check them against a file (exit 1 when one is outside its
+    tolerance), rewrite the README's figures block, the docs pages' generated tables and
+    the results file. ``--readme`` / ``--docs`` / ``--results`` without
+    ``--write``/``--check`` only re-render from docs/figures.json."""
     figs = registry()
     names = select(figs, args.only)
     docs = getattr(args, "docs", None)
+    res = getattr(args, "results", None)
     if args.only and not names:
         raise UsageError(f"no figure matches {' '.join(args.only)} (see docs/figures.json)")
-    if (args.readme or docs) and not args.write and not args.check:
-        render_pages(args.readme, docs, load(FIGURES_FILE))
+    if (args.readme or docs or res) and not args.write and not args.check:
+        render_pages(args.readme, docs, load(FIGURES_FILE), res)
         return 0
-    if (args.readme or docs) and not args.write:
-        raise UsageError("--readme/--docs with --check needs --write (the pages are "
-                         "rendered from the file written)")
+    if (args.readme or docs or res) and not args.write:
+        raise UsageError("--readme/--docs/--results with --check needs --write (the pages "
+                         "are rendered from the file written)")
     ref = load(Path(args.check)) if args.check else None
     values, skipped = run_figures(names, figs)
     bad: list[str] = []
@@ -818,7 +826,7 @@ def main(args: argparse.Namespace) -> int:
                                      else len(order)))
         path.write_text(json.dumps(doc, indent=1, sort_keys=False) + "\n", encoding="utf-8")
         print(f"wrote {len(values)} figures to {path}")
-        render_pages(args.readme, docs, doc)
+        render_pages(args.readme, docs, doc, res)
     if bad:
         print(f"{len(bad)} figure(s) outside their tolerance: {', '.join(bad)}",
               file=sys.stderr)

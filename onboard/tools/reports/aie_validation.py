@@ -96,29 +96,41 @@ def run_sitl(scenario: Any, duration: float | None = None, seed: int = 1,
              aie_table: dict[str, Any] | None = None) -> SitlRun:
     """Run a SITL scenario (a name or a ``sitl.scenarios.Scenario``) through the engine
     with the aie and kf pipelines."""
-    from onboard.engine import Engine
     from onboard.sitl.runner import simulate
 
     name = scenario if isinstance(scenario, str) else scenario.name
     cfg = pipeline_config(SCENARIO_CONFIG.get(name, "rudder-boat"), aie_table)
     pa, pk = aie_mod.create(cfg), kf_mod.create(cfg)
     assert pa is not None and pk is not None
-    eng = Engine(cfg, pipelines=[pa, pk])
+    return fly(name, cfg, [pa, pk], simulate(scenario, duration=duration, seed=seed))
+
+
+def fly(name: str, cfg: Config, pipelines: list[SurgeHeadingPipeline],
+        steps: Iterable[Any]) -> SitlRun:
+    """The simulator's ``steps`` (``(t, samples, truth)`` of ``sitl.runner.simulate``)
+    through an engine with ``pipelines``, estimates and truth at 10 Hz ticks; the RCIE
+    coefficients of the first pipeline when it is an AIE."""
+    from onboard.engine import Engine
+
+    pa = pipelines[0]
+    eng = Engine(cfg, pipelines=list(pipelines))
     ts: list[float] = []
-    cols = [f"{p.name}.{c}" for p in (pa, pk) for c in p.columns]
+    cols = [f"{p.name}.{c}" for p in pipelines for c in p.columns]
     est: dict[str, list[float]] = {c: [] for c in cols}
     tr: dict[str, list[float]] = {k: [] for k in ("lat", "lon", "heading", "speed", "u",
                                                   "yaw_rate", "surge_input", "yaw_input")}
     next_tick = None
     theta: dict[str, list[list[float]]] = {"surge": [], "heading": []}
+    rcie_axes = [(nm, ax) for nm, ax in (("surge", pa.surge), ("heading", pa.yaw))
+                 if hasattr(ax.input, "rcie")]
     est["nav.speed"] = []    # the raw GNSS speed over ground, newest fix (< 1 s old)
     sog, t_sog = math.nan, -math.inf
-    for t, samples, truth in simulate(scenario, duration=duration, seed=seed):
+    for t, samples, truth in steps:
         for s in samples:
             eng.push(s)
             if isinstance(s, GnssFix) and s.sog_mps is not None:
                 sog, t_sog = s.sog_mps, s.t
-        for nm, ax in (("surge", pa.surge), ("heading", pa.yaw)):
+        for nm, ax in rcie_axes:
             rc = ax.input.rcie  # type: ignore[attr-defined]
             if rc.steps and (not theta[nm] or len(theta[nm]) < ax.steps):
                 theta[nm].append(list(rc.theta))
@@ -149,7 +161,7 @@ def run_sitl(scenario: Any, duration: float | None = None, seed: int = 1,
         truth_a["north"] = np.array([x[0] for x in ne])
         truth_a["east"] = np.array([x[1] for x in ne])
     return SitlRun(name, np.asarray(ts), {k: np.asarray(v, float) for k, v in est.items()},
-                   truth_a, [pa, pk], theta)
+                   truth_a, list(pipelines), theta)
 
 
 def convergence_step(history: Sequence[Sequence[float]], tol: float = 0.2) -> int:
