@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 
 import pytest
 
@@ -61,10 +62,15 @@ def test_the_figures_file_holds_every_figure_as_the_registry_states_it(committed
 
 
 def test_every_readme_placeholder_names_a_registered_figure() -> None:
-    used = {m for _, text, _ in F.README_ROWS for m in F.PLACEHOLDER.findall(text)}
+    used = {m for row in F.README_ROWS for m in F.PLACEHOLDER.findall(row[3])}
     assert used <= set(REGISTRY), sorted(used - set(REGISTRY))
-    # every row names at least one figure: no row of hand-copied numbers only
-    assert all(F.PLACEHOLDER.search(text) for _, text, _ in F.README_ROWS)
+    for row in F.README_ROWS:
+        # every row names at least one figure, its "ours" cell holds figures and
+        # separators only (no prose template, no hand-copied number), and it says what
+        # the figure is measured against
+        assert F.PLACEHOLDER.search(row[3]), row
+        assert re.fullmatch(r"[\s/;,\->]*(of 3)?", F.PLACEHOLDER.sub("", row[3])), row
+        assert row[4], row
 
 
 def test_a_stale_readme_number_is_caught(committed) -> None:

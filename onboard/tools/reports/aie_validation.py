@@ -332,16 +332,22 @@ def identify_blueboat(runs: Sequence[BlueBoatRun], dt: float = 1.0
 
 def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | None,
                  gnss_std_m: float = 0.1, heading_std_rad: float = 0.01,
-                 aie_table: dict[str, Any] | None = None) -> dict[str, np.ndarray]:
-    """AIE and KF on one run; estimates on the 10 Hz rows (NaN before the first)."""
-    table = dict(aie_table or {})
+                 aie_table: dict[str, Any] | None = None,
+                 kf_noise: dict[str, dict[str, float]] | None = None
+                 ) -> dict[str, np.ndarray]:
+    """AIE and KF on one run; estimates on the 10 Hz rows (NaN before the first).
+    ``kf_noise``: per axis the KF's own keys (``v_d``, ``bias_q``) beyond the model it
+    shares with the AIE's table."""
+    table = {k: dict(v) if isinstance(v, dict) else v for k, v in (aie_table or {}).items()}
     if surge is not None:
         table.setdefault("surge", {}).update(a=surge.a, gain=surge.gain, offset=surge.offset)
     if yaw is not None:
         table.setdefault("heading", {}).update(a=yaw.a, gain=yaw.gain, offset=yaw.offset)
+    ktable = kf_table(table)
+    for axis, keys in (kf_noise or {}).items():
+        ktable.setdefault(axis, {}).update(keys)
     pa = aie_mod.build(msgspec.convert(table, AieConfig), gnss_std_m, heading_std_rad)
-    pk = kf_mod.build(msgspec.convert(kf_table(table), KfConfig), gnss_std_m,
-                      heading_std_rad)
+    pk = kf_mod.build(msgspec.convert(ktable, KfConfig), gnss_std_m, heading_std_rad)
     samples = blueboat_samples(run)
     out: dict[str, list[float]] = {f"{p.name}.{c}": [] for p in (pa, pk) for c in p.columns}
     j = 0
