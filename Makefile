@@ -2,7 +2,7 @@
 #   make demo   set up .venv and run `onboard demo` on the built-in simulated vehicle
 #   make test   set up .venv and run the test suite
 #   make figures  recompute every figure (docs/figures.json) and regenerate the README's
-#                 table and the docs pages' results tables from it
+#                 table, the docs pages' results tables and docs/results.csv from it
 #   make docs     regenerate the README's and the docs pages' tables from docs/figures.json
 #                 (nothing recomputed: seconds)
 # On the vehicle computer (docs/service.md "Install"):
@@ -48,10 +48,11 @@ bench: $(STAMP)
 # of the order of 40 min on 2 cores; commit docs/figures.json, README.md and docs/). One estimator
 # only: $(BIN)/onboard validate --only 'aie.*' --write docs/figures.json --readme README.md --docs docs
 figures: $(STAMP)
-	$(BIN)/onboard validate --write docs/figures.json --readme README.md --docs docs
+	$(BIN)/onboard validate --write docs/figures.json --readme README.md --docs docs \
+	  --results docs/results.csv
 
 docs: $(STAMP)
-	$(BIN)/onboard validate --readme README.md --docs docs
+	$(BIN)/onboard validate --readme README.md --docs docs --results docs/results.csv
 
 clean:
 	rm -rf $(VENV) replay-out diagnose-out .pytest_cache

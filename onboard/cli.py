@@ -139,7 +139,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--docs", metavar="DIR", help="rewrite the generated tables of the pages "
                    "in DIR (e.g. docs) from the file written (alone: from "
                    "docs/figures.json, nothing recomputed)")
+    p.add_argument("--results", metavar="FILE", help="write the results file (CSV: name, "
+                   "scenario, seed, value, unit, reference) from the file written (alone: "
+                   "from docs/figures.json), e.g. docs/results.csv")
     p.set_defaults(handler="onboard.tools.figures:main")
+
+    p = sub.add_parser("tune", help="tune a filter's noise parameters by the common "
+                       "protocol and evaluate it on held-out runs (onboard/tools/tuning.py)")
+    p.add_argument("variants", nargs="*", metavar="VARIANT",
+                   help="aie, kf or an ablation variant (see --list)")
+    p.add_argument("--list", action="store_true", help="list the variants")
+    p.add_argument("--budget", type=int, default=None,
+                   help="objective evaluations per variant (default: the protocol's)")
+    p.add_argument("--no-tune", action="store_true",
+                   help="evaluate the shipped defaults only")
+    p.add_argument("--out", metavar="FILE", help="merge the results into this JSON file")
+    p.add_argument("--page", metavar="FILE", help="rewrite the ablation table of this page "
+                   "(docs/aie.md) from --out (alone: from docs/tuning.json)")
+    p.set_defaults(handler="onboard.tools.tuning:main")
 
     p = sub.add_parser("design-gain", help="solve the high-gain observer LMI offline")
     p.add_argument("--config", required=True)

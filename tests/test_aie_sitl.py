@@ -5,7 +5,9 @@ outage) are recomputed and checked against docs/figures.json by tests/test_figur
 on the same runs (``onboard/tools/reports/runs.py`` flies each once per session). The
 tests here state the claims those figures support (orderings, goals, convergence,
 coverage), with the goal named where it is not met.
-The goal: AIE speed RMSE <= 0.8 x KF and < 0.10 m/s; AIE heading below the KF.
+Both filters run with the defaults of the common tuning protocol (docs/aie.md section
+2.1): tuned alike, AIE and KF tie on speed (the former goal "AIE <= 0.8 x KF" held only
+against a KF at an untuned ``v_d = 1``); the AIE stays ahead on heading.
 """
 
 from __future__ import annotations
@@ -26,45 +28,44 @@ def twin():
     return runs.aie_run("twin-thruster-turns", 1)
 
 
-def test_jaiabot_turns_aie_beats_the_kf_and_the_raw_gnss_speed(jaiabot) -> None:
+def test_jaiabot_turns_aie_and_kf_tuned_alike_tie_on_speed_below_the_raw_gnss_speed(
+        jaiabot) -> None:
     m = sitl_metrics(jaiabot)
     a, k, nav = m["aie"], m["kf"], m["nav"]
     print(m)
-    # measured (docs/aie.md 3.1, seeds 1-3, the hull with its 0.3 s shaft lag): speed AIE
-    # 0.050-0.052, KF 0.078-0.079 against the raw GNSS speed over ground 0.100-0.101 m/s
-    # (AIE 0.65x the KF, the goal 0.8x). The KF's default thrust map is wrong for this
-    # boat; its input-bias state takes most of that out (without it: KF 0.094-0.097, AIE
-    # 0.53x; the identified model of config/sitl-jaiabot.toml:
-    # aie.jaiabot_turns.speed_rmse.kf_identified).
-    # Heading 0.0228 vs 0.0242 rad; position 0.96 vs 0.96 m (a tie: both follow the
-    # Doppler speed)
-    assert a["speed"] < 0.08
-    assert a["speed"] < 0.8 * nav["speed"]
-    assert a["speed"] < 0.8 * k["speed"]
-    assert k["speed"] < nav["speed"]
+    # measured seed 1 (docs/figures.json aie.jaiabot_turns.*, seeds 1-3 in docs/aie.md
+    # 3.1), both filters at the tuned defaults: speed AIE 0.0458, KF 0.0403, raw GNSS
+    # 0.0998 m/s (seeds 1-3: AIE 0.043-0.046, KF 0.036-0.040): the KF is ahead, AIE
+    # 1.14x the KF. The former bound, AIE < 0.8 x KF, held only against the KF at its
+    # untuned v_d = 1 (0.079). Heading AIE 0.0251 vs KF 0.0275 rad; position 0.96 vs
+    # 0.96 m (a tie: both follow the Doppler speed)
+    assert a["speed"] < 0.05
+    assert a["speed"] < 0.5 * nav["speed"] and k["speed"] < 0.5 * nav["speed"]
+    assert a["speed"] < 1.25 * k["speed"]     # a tie within 25 %, the KF ahead
     assert a["heading"] < k["heading"]
     assert a["position"] < 1.3 and a["position"] < 1.1 * k["position"]
     # input estimates against truth.surge_input / yaw_input (the truth is thrust/m11
     # alone; AIE's input also carries the nonlinear drag)
-    assert a["surge_input"] < 0.5     # measured 0.433 m/s^2 (0.425 without the shaft lag)
-    assert a["yaw_input"] < 0.31      # measured 0.253 rad/s^2 (0.257)
+    assert a["surge_input"] < 0.5     # measured 0.431 m/s^2 (0.433 before the tuning)
+    # measured 0.445 rad/s^2: the tuned heading axis (r_d 0.29, v_d 1.7, for heading RMSE
+    # and an honest heading sigma) lets its input estimate move more (0.253 at r_d 1,
+    # v_d 0.3); the tuning's objective does not weigh the input estimates
+    assert a["yaw_input"] < 0.5
 
 
-def test_twin_thruster_turns_aie_beats_the_kf_and_the_raw_gnss_speed(twin) -> None:
+def test_twin_thruster_turns_aie_and_kf_tie_below_the_raw_gnss_speed(twin) -> None:
     m = sitl_metrics(twin)
     a, k, nav = m["aie"], m["kf"], m["nav"]
     print(m)
-    # measured seed 1 (0.3 s motor lag): see docs/figures.json aie.twin_thruster_turns.*;
-    # heading 0.0361 vs 0.0389 rad (0.0313 each with the former 0.15 s lag); position
-    # 0.99 vs 0.99 m; surge input 0.429 m/s^2
-    assert a["speed"] < 0.8 * nav["speed"] and k["speed"] < nav["speed"]
-    assert a["speed"] < k["speed"]
+    # measured seed 1 (0.3 s motor lag; docs/figures.json aie.twin_thruster_turns.*):
+    # speed AIE 0.0535, KF 0.0508, raw 0.0998 m/s (AIE 1.05x the KF: a tie); heading
+    # 0.0323 vs 0.0346 rad; position 0.99 vs 0.99 m
+    assert a["speed"] < 0.8 * nav["speed"] and k["speed"] < 0.8 * nav["speed"]
+    assert a["speed"] < 1.15 * k["speed"]
     assert a["heading"] < 1.01 * k["heading"]
     assert a["position"] < 1.3 and a["position"] < 1.05 * k["position"]
-    assert a["surge_input"] < 0.6
-    # measured 1.061 rad/s^2 with the 0.3 s motor lag (the former bound, 1.0, held with
-    # a 0.15 s lag)
-    assert a["yaw_input"] < 1.15
+    assert a["surge_input"] < 0.6     # measured 0.429 m/s^2
+    assert a["yaw_input"] < 1.15      # measured 1.069 rad/s^2 (1.061 before the tuning)
 
 
 def test_no_divergence_and_surge_coefficients_converge(jaiabot, twin) -> None:
@@ -105,8 +106,8 @@ def test_position_sigma_grows_in_a_gnss_outage_and_covers_the_truth() -> None:
         c1, c2 = _position_coverage(run, p)
         o1, o2 = _position_coverage(run, p, 30.0, 150.0)
         print(f"{p}: coverage {c1:.3f}/{c2:.3f}, in the outage {o1:.3f}/{o2:.3f}")
-        # measured seed 1: aie 0.83 / 1.00 (outage 0.70 / 1.00), kf 0.87 / 1.00
-        # (outage 0.78 / 1.00)
+        # measured seed 1 (tuned defaults): aie 0.93 / 1.00 (outage 0.93 / 1.00), kf
+        # 0.94 / 1.00 (outage 0.95 / 1.00)
         assert c2 >= 0.85
         assert o2 >= 0.9 and o1 >= 0.5
         sd = run.est[f"{p}.std_north"]
@@ -117,10 +118,10 @@ def test_position_sigma_grows_in_a_gnss_outage_and_covers_the_truth() -> None:
         print(p, "std_north", at, "max error in the outage", np.nanmax(err[out]))
         # dead reckoning through the 120 s outage: the position follows the speed and
         # heading estimates, so neither the error nor the sigma balloons (it was held,
-        # with a sigma of 130-150 m, before). Measured: max horizontal error 5.2 m (aie),
-        # 15.1 m (kf: its thrust map is wrong; seeds 1-3: aie.gnss_outage.* of
-        # docs/figures.json); std_north aie 1.5 m at 25 s, 1.6 at 40 s,
-        # 1.7 at 140 s, 1.5 at 175 s (max 2.7 m); kf 1.5, 1.9, 2.9, 1.5 (max 8.6 m)
+        # with a sigma of 130-150 m, before). Measured seed 1 at the tuned defaults: max
+        # horizontal error 3.8 m (aie), 3.8 m (kf) (seeds 1-3: aie.gnss_outage.* of
+        # docs/figures.json); std_north aie 1.5 m at 25 s, 1.6 at 40 s, 1.8 at 140 s,
+        # 1.5 at 175 s; kf 1.5, 1.7, 2.2, 1.5
         assert np.nanmax(err[out]) < (10.0 if p == "aie" else 25.0)
         assert at[25.0] < 4.0 and at[40.0] >= at[25.0] and at[140.0] < 15.0
         assert at[175.0] < 1.5 * at[25.0]
@@ -175,10 +176,12 @@ def test_effect_waves_aie_and_kf_below_the_raw_speed() -> None:
     m = sitl_metrics(run_sitl("effect-waves", duration=120.0, seed=1))
     a, k, nav = m["aie"]["speed"], m["kf"]["speed"], m["nav"]["speed"]
     print(f"effect-waves 120 s: aie {a:.4f} kf {k:.4f} raw {nav:.4f}")
-    # measured seed 1: AIE 0.066, KF 0.053 against the raw 0.085 m/s (without the
-    # accelerometer, 600 s: AIE 0.088, KF 0.091 against 0.073)
+    # measured seed 1 at the tuned defaults: AIE 0.068, KF 0.070 against the raw 0.085
+    # m/s (0.80x, 0.82x; before the common tuning AIE 0.066, KF 0.053: the tuning gave
+    # the KF's wave figure up for the turning runs, docs/aie.md 2.1; without the
+    # accelerometer, 600 s: AIE 0.081, KF 0.093 against 0.073)
     assert a < 0.9 * nav
-    assert k < 0.8 * nav
+    assert k < 0.9 * nav
 
 
 EFFECT_ROWS = ("clean", "effect-current", "effect-sideslip", "effect-waves",
@@ -195,7 +198,8 @@ def test_every_rudder_boat_effect_scenario_aie_and_kf_below_the_raw_speed(scenar
     m = runs.aie_metrics(scenario, 1)
     a, k, nav = m["aie"]["speed"], m["kf"]["speed"], m["nav"]["speed"]
     print(f"{scenario}: aie {a:.4f} kf {k:.4f} raw {nav:.4f}")
-    # measured: AIE 0.027-0.096 (0.52-0.86x raw, the largest on effect-waves and
-    # effect-gps-latency), KF 0.040-0.101 (0.67-0.89x)
+    # measured at the tuned defaults: AIE 0.026-0.097 (0.51-0.92x raw, the largest on
+    # effect-waves), KF 0.026-0.087 (0.51-0.96x, the largest on effect-waves: 0.070
+    # against 0.073; 0.049 before the common tuning, docs/aie.md 2.1)
     assert a < 0.95 * nav
-    assert k < 0.95 * nav
+    assert k < (0.99 if scenario == "effect-waves" else 0.95) * nav

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 
 import pytest
 
@@ -61,10 +62,15 @@ def test_the_figures_file_holds_every_figure_as_the_registry_states_it(committed
 
 
 def test_every_readme_placeholder_names_a_registered_figure() -> None:
-    used = {m for _, text, _ in F.README_ROWS for m in F.PLACEHOLDER.findall(text)}
+    used = {m for row in F.README_ROWS for m in F.PLACEHOLDER.findall(row[3])}
     assert used <= set(REGISTRY), sorted(used - set(REGISTRY))
-    # every row names at least one figure: no row of hand-copied numbers only
-    assert all(F.PLACEHOLDER.search(text) for _, text, _ in F.README_ROWS)
+    for row in F.README_ROWS:
+        # every row names at least one figure, its "ours" cell holds figures and
+        # separators only (no prose template, no hand-copied number), and it says what
+        # the figure is measured against
+        assert F.PLACEHOLDER.search(row[3]), row
+        assert re.fullmatch(r"[\s/;,\->]*(of 3)?", F.PLACEHOLDER.sub("", row[3])), row
+        assert row[4], row
 
 
 def test_a_stale_readme_number_is_caught(committed) -> None:
@@ -76,6 +82,22 @@ def test_a_stale_readme_number_is_caught(committed) -> None:
     del doc["figures"]["aie.jaiabot_turns.speed_rmse.aie"]
     with pytest.raises(UsageError):
         F.render_table(doc)
+
+
+def test_the_results_file_is_rendered_from_the_figures_file(committed) -> None:
+    """docs/results.csv: one row per figure and seed, with its scenario and what it is
+    measured against (``onboard validate --results docs/results.csv``)."""
+    from onboard.tools import results as R
+
+    path = F.REPO / "docs" / "results.csv"
+    assert path.read_text(encoding="utf-8") == R.render(committed), (
+        "docs/results.csv differs from docs/figures.json: run "
+        "`onboard validate --results docs/results.csv`")
+    assert R.reference("aie.jaiabot_turns.speed_rmse.aie") == "simulator truth"
+    assert R.reference("aie.blueboat.speed_rmse.aie").startswith("field log")
+    assert R.scenario("aie.twin_thruster_turns.speed_rmse.kf") == "twin-thruster-turns"
+    n = sum(len(rec["values"]) for rec in committed["figures"].values())
+    assert len(R.rows(committed)) == n
 
 
 @pytest.mark.parametrize("table", D.tables(), ids=lambda t: t.key)
@@ -219,7 +241,7 @@ def test_validate_checks_writes_and_exits_1_on_a_figure_outside_its_tolerance(
     good = tmp_path / "good.json"
     good.write_text(json.dumps(committed))
     args = argparse.Namespace(only=[name], write=str(tmp_path / "out.json"), check=str(good),
-                              readme=None, docs=None)
+                              readme=None, docs=None, results=None)
     assert F.main(args) == 0
     written = json.loads((tmp_path / "out.json").read_text())
     assert set(written["figures"]) == {name}
@@ -249,7 +271,7 @@ def test_validate_docs_alone_rerenders_without_recomputing(committed, tmp_path, 
                                                      f"{table.begin()}\n| old |\n{table.end()}")
     path.write_text(stale, encoding="utf-8")
     args = argparse.Namespace(only=None, write=None, check=None, readme=None,
-                              docs=str(tmp_path))
+                              docs=str(tmp_path), results=None)
     assert F.main(args) == 0
     assert table.block(path.read_text(encoding="utf-8")) == table.render(committed)
     assert table.key in capsys.readouterr().out

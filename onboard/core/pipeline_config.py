@@ -38,8 +38,10 @@ class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, froze
     """One AIE axis: its model (§1.2), the RCIE hyperparameters (§2.10), the AIE noise.
 
     Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized. The
-    defaults were tuned by the §2.10 procedure on SITL ``jaiabot-turns`` and
-    ``twin-thruster-turns`` (seed 10, held out from the reported seeds); see docs/aie.md.
+    axes' ``v_d`` and ``r_d`` defaults come from the common tuning protocol
+    (``onboard tune aie``, onboard/tools/tuning.py: Nelder-Mead on SITL
+    ``jaiabot-turns``, ``twin-thruster-turns`` and ``effect-waves`` seed 10, held out
+    from the reported seeds; docs/aie.md section 2.1), rounded to two digits.
     """
 
     a: float = 1.0
@@ -85,8 +87,8 @@ class SurgeAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, froz
     gain: float = 3.0
     u_max: float = 5.0
     u_scale: float = 1.0
-    r_d: float = 10.0
-    v_d: float = 0.1
+    r_d: float = 5.2
+    v_d: float = 0.04
 
 
 class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
@@ -97,7 +99,8 @@ class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
     gain: float = 2.0
     u_max: float = 5.0
     u_scale: float = 2.0
-    r_d: float = 1.0
+    r_d: float = 0.29
+    v_d: float = 1.7
 
 
 class SurgeHeadingConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
@@ -205,11 +208,14 @@ class KfAxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, fro
 
 
 class KfSurgeConfig(KfAxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
-    """``[pipelines.kf.surge]`` (m/s^2)."""
+    """``[pipelines.kf.surge]`` (m/s^2). ``v_d`` and ``bias_q`` of both axes: the common
+    tuning protocol (``onboard tune kf``, the same search, budget and runs as the AIE's;
+    docs/aie.md section 2.1), rounded to two digits."""
 
     a: float = 1.0
     gain: float = 3.0
-    bias_q: float = 0.01
+    v_d: float = 0.0067
+    bias_q: float = 0.00086
 
 
 class KfHeadingConfig(KfAxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
@@ -217,6 +223,8 @@ class KfHeadingConfig(KfAxisConfig, forbid_unknown_fields=True, kw_only=True, fr
 
     a: float = 2.0
     gain: float = 2.0
+    v_d: float = 2.6
+    bias_q: float = 7.4e-5
 
 
 class KfConfig(SurgeHeadingConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):

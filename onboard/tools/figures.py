@@ -159,7 +159,8 @@ def _aie_figures() -> list[Figure]:
                        ("gps", "the speed from consecutive fixes")):
         out.append(Figure(
             f"aie.blueboat.speed_rmse.{who}", "m/s",
-            "NTNU BlueBoat field runs (no Doppler): models identified on the even runs, "
+            "NTNU BlueBoat field runs (no Doppler): models identified on the even runs, the "
+            "no-Doppler tuned noise (docs/tuning.json), "
             f"mean over the 8 held-out runs of {label}'s speed RMSE against the logged surge",
             lambda s, who=who: runs.blueboat_heldout()[f"{who}.speed"],
             (), DATA, data=True))
@@ -504,79 +505,74 @@ def registry() -> dict[str, Figure]:
 
 # ----------------------------------------------------------------------------- README
 
-README_ROWS: tuple[tuple[str, str, str], ...] = (
-    ("Adaptive input estimation (AIE) vs Kalman filter (KF) (Faros & Tanner, Jaiabot)",
-     "with the GNSS Doppler speed as a second measurement and each fix's reported accuracy "
-     "as its noise, seeds 1-3, speed RMSE: "
-     "`jaiabot-turns` AIE {aie.jaiabot_turns.speed_rmse.aie} vs KF "
-     "{aie.jaiabot_turns.speed_rmse.kf} vs raw GNSS speed {aie.jaiabot_turns.speed_rmse.gnss} "
-     "m/s (the KF's default thrust map is wrong for this hull; an input-bias state learned "
-     "from the Doppler speed carries it; with the identified models of "
-     "`config/sitl-jaiabot.toml` the KF gives {aie.jaiabot_turns.speed_rmse.kf_identified}), "
-     "heading AIE {aie.jaiabot_turns.heading_rmse.aie} vs KF "
-     "{aie.jaiabot_turns.heading_rmse.kf} rad; `twin-thruster-turns` AIE "
-     "{aie.twin_thruster_turns.speed_rmse.aie} vs KF {aie.twin_thruster_turns.speed_rmse.kf} "
-     "vs GNSS {aie.twin_thruster_turns.speed_rmse.gnss} m/s; undeclared 2.5 s waves "
-     "(`effect-waves`, the accelerometer between fixes) AIE {aie.effect_waves.speed_rmse.aie} "
-     "vs KF {aie.effect_waves.speed_rmse.kf} vs GNSS {aie.effect_waves.speed_rmse.gnss} m/s; "
-     "both below the raw speed on every scenario of docs/aie.md 3.1.1; "
-     "real BlueBoat (no Doppler), "
-     "held-out mean: AIE {aie.blueboat.speed_rmse.aie} vs KF {aie.blueboat.speed_rmse.kf} vs "
-     "{aie.blueboat.speed_rmse.gps} m/s from consecutive fixes. Through a 120 s GNSS outage "
-     "the position is dead reckoned: max error AIE {aie.gnss_outage.max_error.aie} m, KF "
-     "{aie.gnss_outage.max_error.kf} m; the AIE's 2-sigma coverage in the outage "
-     "{aie.gnss_outage.cover2.aie}.",
-     "[docs/aie.md](docs/aie.md)"),
-    ("Water current: joint KF and high-gain observer (HGO) (Kim, Fan & Bose, Gavia)",
-     "`gavia-tidal` with a model identified in calm water, 200 s, seed 1, RMS north / east / "
-     "down: joint KF {current.gavia_tidal.kf.north_rms} / {current.gavia_tidal.kf.east_rms} / "
-     "{current.gavia_tidal.kf.down_rms} m/s; HGO at the LMI's gamma* = 6.4 with its own "
-     "RLS-identified model: "
+SIM = "simulator truth"
+FIELD_SURGE = "field log: the logged surge speed (an autopilot estimate)"
+
+README_ROWS: tuple[tuple[str, str, str, str, str, str], ...] = (
+    # (estimator (paper), scenario, figure, ours: placeholders only, measured against, doc)
+    ("AIE vs KF (Faros & Tanner), both tuned alike", "`jaiabot-turns`, seeds 1-3",
+     "speed RMSE AIE / KF / raw GNSS (m/s)",
+     "{aie.jaiabot_turns.speed_rmse.aie} / {aie.jaiabot_turns.speed_rmse.kf} / "
+     "{aie.jaiabot_turns.speed_rmse.gnss}", SIM, "[docs/aie.md](docs/aie.md)"),
+    ("", "`jaiabot-turns`, seeds 1-3", "heading RMSE AIE / KF (rad)",
+     "{aie.jaiabot_turns.heading_rmse.aie} / {aie.jaiabot_turns.heading_rmse.kf}", SIM, ""),
+    ("", "`twin-thruster-turns`, seeds 1-3", "speed RMSE AIE / KF / raw GNSS (m/s)",
+     "{aie.twin_thruster_turns.speed_rmse.aie} / {aie.twin_thruster_turns.speed_rmse.kf} / "
+     "{aie.twin_thruster_turns.speed_rmse.gnss}", SIM, ""),
+    ("", "`effect-waves` (undeclared waves), seeds 1-3",
+     "speed RMSE AIE / KF / raw GNSS (m/s)",
+     "{aie.effect_waves.speed_rmse.aie} / {aie.effect_waves.speed_rmse.kf} / "
+     "{aie.effect_waves.speed_rmse.gnss}", SIM, ""),
+    ("", "BlueBoat, 8 held-out field runs (no Doppler)",
+     "mean speed RMSE AIE / KF / consecutive fixes (m/s)",
+     "{aie.blueboat.speed_rmse.aie} / {aie.blueboat.speed_rmse.kf} / "
+     "{aie.blueboat.speed_rmse.gps}", FIELD_SURGE, ""),
+    ("", "`fault-gnss-outage` (120 s without a fix), seeds 1-3",
+     "max position error AIE / KF (m); AIE 2-sigma coverage",
+     "{aie.gnss_outage.max_error.aie} / {aie.gnss_outage.max_error.kf}; "
+     "{aie.gnss_outage.cover2.aie}", SIM, ""),
+    ("Water current: joint KF and HGO (Kim, Fan & Bose, Gavia)",
+     "`gavia-tidal`, calm-water model, seed 1", "KF RMS north / east / down (m/s)",
+     "{current.gavia_tidal.kf.north_rms} / {current.gavia_tidal.kf.east_rms} / "
+     "{current.gavia_tidal.kf.down_rms}", SIM, "[docs/current.md](docs/current.md)"),
+    ("", "`gavia-tidal`, calm-water model, seed 1",
+     "HGO RMS north / east / down (m/s); lowest 2-sigma coverage",
      "{current.gavia_tidal.hgo.north_rms} / {current.gavia_tidal.hgo.east_rms} / "
-     "{current.gavia_tidal.hgo.down_rms} m/s, 2-sigma coverage "
-     "{current.gavia_tidal.hgo.cover2_min} (the lowest of the three axes; the paper's HGO vs ADCP, error std: 0.094 / "
-     "0.066 / 0.032). A component whose sigma is above 0.3 m/s is published as unknown",
+     "{current.gavia_tidal.hgo.down_rms}; {current.gavia_tidal.hgo.cover2_min}", SIM, ""),
+    ("Nonlinear flow observer (Fan et al.)", "`spheroid-sawtooth`, seed 1",
+     "flow observer / joint KF RMS north, east (m/s)",
+     "{current.spheroid_sawtooth.flow.north_rms}, {current.spheroid_sawtooth.flow.east_rms} / "
+     "{current.spheroid_sawtooth.kf.north_rms}, {current.spheroid_sawtooth.kf.east_rms}",
+     SIM, "[docs/current.md](docs/current.md)"),
+    ("Current on a surface boat, no model (joint KF)",
+     "`effect-current` / `boat-tidal`, seed 1", "RMS north, east (m/s)",
+     "{current.effect_current.kf.north_rms}, {current.effect_current.kf.east_rms} / "
+     "{current.boat_tidal.kf.north_rms}, {current.boat_tidal.kf.east_rms}", SIM,
      "[docs/current.md](docs/current.md)"),
-    ("Nonlinear flow observer in nonuniform flow (Fan et al.)",
-     "`spheroid-sawtooth`, 600 s, seed 1, RMS north / east after 100 s (goal 0.03): the flow "
-     "observer (a heading-only reduction of the paper's 9-state observer; adding the pitch "
-     "output leaves north / east unchanged, docs/current.md) "
-     "{current.spheroid_sawtooth.flow.north_rms} / {current.spheroid_sawtooth.flow.east_rms} "
-     "m/s; the joint KF on the same run {current.spheroid_sawtooth.kf.north_rms} / "
-     "{current.spheroid_sawtooth.kf.east_rms} m/s",
-     "[docs/current.md](docs/current.md)"),
-    ("Current on a surface boat, no model (joint KF, model identified online)",
-     "seed 1, RMS north / east after 120 s: constant 0.29 m/s current (`effect-current`, "
-     "600 s) {current.effect_current.kf.north_rms} / {current.effect_current.kf.east_rms} m/s; "
-     "tidal current changing over minutes (900 s) {current.boat_tidal.kf.north_rms} / "
-     "{current.boat_tidal.kf.east_rms} m/s",
-     "[docs/current.md](docs/current.md)"),
-    ("ESESO + adaptive MPC (Lo, Hu et al., BlueROV2)",
-     "circle under a [40, 40, 10] N push, 240 s, seed 0: tracking RMSE AMPC "
-     "{eseso.circle.tracking_rmse.ampc} m, NMPC {eseso.circle.tracking_rmse.nmpc} m, PID "
-     "{eseso.circle.tracking_rmse.pid} m (each with the ESESO in the loop; these are "
-     "zero-model-error figures: against an offset-free NMPC and with the plant perturbed, "
-     "the AMPC's lead is small and it loses under thruster lag, docs/mismatch.md); the ESESO's "
-     "disturbance error {eseso.circle.disturbance_rms.ampc} N RMS (AMPC run); ESESO NIS "
-     "pooled over seeds 1-3, mean (dimension): velocity {eseso.nis.vog} (2), attitude "
-     "{eseso.nis.attitude} (3), DVL {eseso.nis.dvl} (3), "
-     "{eseso.nis.channels_in_band} of 3 inside their 95 % chi-square bands. At the paper's "
-     "1.5 m/s the thrusters saturate and AMPC/NMPC is {eseso.circle_1p5.ampc_over_nmpc}. MPC "
-     "solve time: Performance below",
-     "[docs/eseso-mpc.md](docs/eseso-mpc.md)"),
-    ("Model closure (`onboard diagnose`)",
-     "names {diagnose.effects_named} of 12 injected undeclared effects with their parameters "
-     "(seed 1; the misses are in the doc), {diagnose.clean.effects_named} on the clean run; "
-     "real BlueBoat: thruster swap/reversal found from the literal columns, open-loop surge "
-     "error on test runs {diagnose.blueboat_literal.holdout_before} -> "
-     "{diagnose.blueboat_literal.holdout_after} m/s; effects outside the catalog reported "
-     "`unexplained` (channel, regressor) or with their drift; a "
-     "{diagnose.usv_shenzhen.heading_offset_deg}° GNSS-compass offset found on a real USV",
-     "[docs/diagnose.md](docs/diagnose.md)"),
+    ("ESESO + adaptive MPC (Lo, Hu et al., BlueROV2)", "`bluerov2-circle`, seed 0",
+     "tracking RMSE AMPC / NMPC / PID (m)",
+     "{eseso.circle.tracking_rmse.ampc} / {eseso.circle.tracking_rmse.nmpc} / "
+     "{eseso.circle.tracking_rmse.pid}", SIM, "[docs/eseso-mpc.md](docs/eseso-mpc.md)"),
+    ("", "`bluerov2-circle`, seeds 1-3 pooled",
+     "ESESO mean NIS velocity (2) / attitude (3) / DVL (3); channels in band",
+     "{eseso.nis.vog} / {eseso.nis.attitude} / {eseso.nis.dvl}; "
+     "{eseso.nis.channels_in_band} of 3", "chi-square band of the mean NIS", ""),
+    ("Model closure (`onboard diagnose`)", "11 effect scenarios, seed 1",
+     "injected effects named (of 12); on `clean`",
+     "{diagnose.effects_named}; {diagnose.clean.effects_named}",
+     "the simulator's injected effects", "[docs/diagnose.md](docs/diagnose.md)"),
+    ("", "BlueBoat field runs, thruster columns literal",
+     "open-loop surge error on test runs before -> after (m/s)",
+     "{diagnose.blueboat_literal.holdout_before} -> {diagnose.blueboat_literal.holdout_after}",
+     "field log: the logged surge speed", ""),
 )
-"""The README's "What it estimates" table: estimator, result with ``{figure}``
-placeholders, doc. A placeholder prints the figure's value, or its range over the seeds
-(``lo-hi``) when they differ at the printed digits."""
+"""The README's "What it estimates" table: a few headline figures, each row (estimator
+and paper, scenario, what the figure is, ours, what it is measured against, doc). The
+"ours" cell holds ``{figure}`` placeholders and separators only; a placeholder prints
+the figure's value, or its range over the seeds (``lo-hi``) when they differ at the
+printed digits. The prose around the figures is the README's own text."""
+
+HEADER = ("estimator (paper)", "scenario", "figure", "ours", "measured against", "doc")
 
 PLACEHOLDER = re.compile(r"\{([a-z0-9_.]+)\}")
 
@@ -603,9 +599,10 @@ def render_table(doc: dict[str, Any]) -> str:
                              "(run onboard validate --write)")
         return format_entry(figs[name], int(figs[name]["digits"]))
 
-    lines = [BEGIN, "| estimator (paper) | result | doc |", "|---|---|---|"]
-    for est, result, link in README_ROWS:
-        lines.append(f"| {est} | {PLACEHOLDER.sub(sub, result)} | {link} |")
+    lines = [BEGIN, "| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
+    for est, scenario, what, ours, ref, link in README_ROWS:
+        lines.append(f"| {est} | {scenario} | {what} | {PLACEHOLDER.sub(sub, ours)} | {ref} "
+                     f"| {link} |")
     lines.append(END)
     return "\n".join(lines)
 
@@ -746,11 +743,17 @@ def run_figures(names: Sequence[str], figs: dict[str, Figure], log: Any = sys.st
     return out, skipped
 
 
-def render_pages(readme: str | None, docs: str | None, doc: dict[str, Any]) -> None:
-    """Rewrite the README's figures block (``readme``) and the generated tables of the
-    pages in ``docs`` (``onboard/tools/doc_tables.py``) from ``doc``, saying what
-    changed."""
+def render_pages(readme: str | None, docs: str | None, doc: dict[str, Any],
+                 results: str | None = None) -> None:
+    """Rewrite the README's figures block (``readme``), the generated tables of the
+    pages in ``docs`` (``onboard/tools/doc_tables.py``) and the results file
+    (``results``, :mod:`onboard.tools.results`) from ``doc``, saying what changed."""
     from onboard.tools import doc_tables
+    from onboard.tools import results as results_mod
+
+    if results:
+        changed = results_mod.write(Path(results), doc)
+        print(f"{results}: {'rewritten' if changed else 'unchanged'}")
 
     if readme:
         changed = update_readme(Path(readme), doc)
@@ -763,21 +766,23 @@ def render_pages(readme: str | None, docs: str | None, doc: dict[str, Any]) -> N
 
 def main(args: argparse.Namespace) -> int:
     """``onboard validate [--only PATTERN]... [--write FILE] [--check FILE]
-    [--readme FILE] [--docs DIR]``: compute the figures, print them as a table, write
-    them, check them against a file (exit 1 when one is outside its tolerance), rewrite
-    the README's figures block and the docs pages' generated tables. ``--readme`` /
-    ``--docs`` without ``--write``/``--check`` only re-render from docs/figures.json."""
+    [--readme FILE] [--docs DIR] [--results FILE]``: compute the figures, print them as
+    a table, write them, check them against a file (exit 1 when one is outside its
+    tolerance), rewrite the README's figures block, the docs pages' generated tables and
+    the results file. ``--readme`` / ``--docs`` / ``--results`` without
+    ``--write``/``--check`` only re-render from docs/figures.json."""
     figs = registry()
     names = select(figs, args.only)
     docs = getattr(args, "docs", None)
+    res = getattr(args, "results", None)
     if args.only and not names:
         raise UsageError(f"no figure matches {' '.join(args.only)} (see docs/figures.json)")
-    if (args.readme or docs) and not args.write and not args.check:
-        render_pages(args.readme, docs, load(FIGURES_FILE))
+    if (args.readme or docs or res) and not args.write and not args.check:
+        render_pages(args.readme, docs, load(FIGURES_FILE), res)
         return 0
-    if (args.readme or docs) and not args.write:
-        raise UsageError("--readme/--docs with --check needs --write (the pages are "
-                         "rendered from the file written)")
+    if (args.readme or docs or res) and not args.write:
+        raise UsageError("--readme/--docs/--results with --check needs --write (the pages "
+                         "are rendered from the file written)")
     ref = load(Path(args.check)) if args.check else None
     values, skipped = run_figures(names, figs)
     bad: list[str] = []
@@ -818,7 +823,7 @@ def main(args: argparse.Namespace) -> int:
                                      else len(order)))
         path.write_text(json.dumps(doc, indent=1, sort_keys=False) + "\n", encoding="utf-8")
         print(f"wrote {len(values)} figures to {path}")
-        render_pages(args.readme, docs, doc)
+        render_pages(args.readme, docs, doc, res)
     if bad:
         print(f"{len(bad)} figure(s) outside their tolerance: {', '.join(bad)}",
               file=sys.stderr)

@@ -96,29 +96,41 @@ def run_sitl(scenario: Any, duration: float | None = None, seed: int = 1,
              aie_table: dict[str, Any] | None = None) -> SitlRun:
     """Run a SITL scenario (a name or a ``sitl.scenarios.Scenario``) through the engine
     with the aie and kf pipelines."""
-    from onboard.engine import Engine
     from onboard.sitl.runner import simulate
 
     name = scenario if isinstance(scenario, str) else scenario.name
     cfg = pipeline_config(SCENARIO_CONFIG.get(name, "rudder-boat"), aie_table)
     pa, pk = aie_mod.create(cfg), kf_mod.create(cfg)
     assert pa is not None and pk is not None
-    eng = Engine(cfg, pipelines=[pa, pk])
+    return fly(name, cfg, [pa, pk], simulate(scenario, duration=duration, seed=seed))
+
+
+def fly(name: str, cfg: Config, pipelines: list[SurgeHeadingPipeline],
+        steps: Iterable[Any]) -> SitlRun:
+    """The simulator's ``steps`` (``(t, samples, truth)`` of ``sitl.runner.simulate``)
+    through an engine with ``pipelines``, estimates and truth at 10 Hz ticks; the RCIE
+    coefficients of the first pipeline when it is an AIE."""
+    from onboard.engine import Engine
+
+    pa = pipelines[0]
+    eng = Engine(cfg, pipelines=list(pipelines))
     ts: list[float] = []
-    cols = [f"{p.name}.{c}" for p in (pa, pk) for c in p.columns]
+    cols = [f"{p.name}.{c}" for p in pipelines for c in p.columns]
     est: dict[str, list[float]] = {c: [] for c in cols}
     tr: dict[str, list[float]] = {k: [] for k in ("lat", "lon", "heading", "speed", "u",
                                                   "yaw_rate", "surge_input", "yaw_input")}
     next_tick = None
     theta: dict[str, list[list[float]]] = {"surge": [], "heading": []}
+    rcie_axes = [(nm, ax) for nm, ax in (("surge", pa.surge), ("heading", pa.yaw))
+                 if hasattr(ax.input, "rcie")]
     est["nav.speed"] = []    # the raw GNSS speed over ground, newest fix (< 1 s old)
     sog, t_sog = math.nan, -math.inf
-    for t, samples, truth in simulate(scenario, duration=duration, seed=seed):
+    for t, samples, truth in steps:
         for s in samples:
             eng.push(s)
             if isinstance(s, GnssFix) and s.sog_mps is not None:
                 sog, t_sog = s.sog_mps, s.t
-        for nm, ax in (("surge", pa.surge), ("heading", pa.yaw)):
+        for nm, ax in rcie_axes:
             rc = ax.input.rcie  # type: ignore[attr-defined]
             if rc.steps and (not theta[nm] or len(theta[nm]) < ax.steps):
                 theta[nm].append(list(rc.theta))
@@ -149,7 +161,7 @@ def run_sitl(scenario: Any, duration: float | None = None, seed: int = 1,
         truth_a["north"] = np.array([x[0] for x in ne])
         truth_a["east"] = np.array([x[1] for x in ne])
     return SitlRun(name, np.asarray(ts), {k: np.asarray(v, float) for k, v in est.items()},
-                   truth_a, [pa, pk], theta)
+                   truth_a, list(pipelines), theta)
 
 
 def convergence_step(history: Sequence[Sequence[float]], tol: float = 0.2) -> int:
@@ -320,16 +332,22 @@ def identify_blueboat(runs: Sequence[BlueBoatRun], dt: float = 1.0
 
 def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | None,
                  gnss_std_m: float = 0.1, heading_std_rad: float = 0.01,
-                 aie_table: dict[str, Any] | None = None) -> dict[str, np.ndarray]:
-    """AIE and KF on one run; estimates on the 10 Hz rows (NaN before the first)."""
-    table = dict(aie_table or {})
+                 aie_table: dict[str, Any] | None = None,
+                 kf_noise: dict[str, dict[str, float]] | None = None
+                 ) -> dict[str, np.ndarray]:
+    """AIE and KF on one run; estimates on the 10 Hz rows (NaN before the first).
+    ``kf_noise``: per axis the KF's own keys (``v_d``, ``bias_q``) beyond the model it
+    shares with the AIE's table."""
+    table = {k: dict(v) if isinstance(v, dict) else v for k, v in (aie_table or {}).items()}
     if surge is not None:
         table.setdefault("surge", {}).update(a=surge.a, gain=surge.gain, offset=surge.offset)
     if yaw is not None:
         table.setdefault("heading", {}).update(a=yaw.a, gain=yaw.gain, offset=yaw.offset)
+    ktable = kf_table(table)
+    for axis, keys in (kf_noise or {}).items():
+        ktable.setdefault(axis, {}).update(keys)
     pa = aie_mod.build(msgspec.convert(table, AieConfig), gnss_std_m, heading_std_rad)
-    pk = kf_mod.build(msgspec.convert(kf_table(table), KfConfig), gnss_std_m,
-                      heading_std_rad)
+    pk = kf_mod.build(msgspec.convert(ktable, KfConfig), gnss_std_m, heading_std_rad)
     samples = blueboat_samples(run)
     out: dict[str, list[float]] = {f"{p.name}.{c}": [] for p in (pa, pk) for c in p.columns}
     j = 0
