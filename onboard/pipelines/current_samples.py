@@ -204,8 +204,7 @@ class CurrentSamples:
             return
         if self._velocity_heading_fresh(s.t):
             return
-        h = s.heading_rad + ((s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0)
-        self._set_yaw(s.t, h, s.source)
+        self._set_yaw(s.t, s.heading_rad, s.source)
 
     def _velocity_heading_fresh(self, t: float) -> bool:
         """Whether a velocity sample brought its own heading within
