@@ -248,10 +248,12 @@ class CurrentPipeline:
             self._fuse(m, probation)
         if self.yaw is None or not self.kf.started:
             return {}
-        dt = t - t_prev if t_prev is not None else 0.0
-        if t >= (self._t if self._t is not None else t):
-            self._predict(t, t - (self._t if self._t is not None else t), probation)
+        t_filter = self._t
+        assert t_filter is not None  # set when the filter started
+        if t >= t_filter:
+            self._predict(t, t - t_filter, probation)
             self._t = t
+        dt = t - t_prev if t_prev is not None else 0.0
         if dt > 0:
             self._identify(dt)
         self._step_flow(dt)
@@ -267,8 +269,8 @@ class CurrentPipeline:
             return
         if not self.kf.started:
             self._start(m)
-        elif m.t > self._t:  # type: ignore[operator]
-            self._predict(m.t, m.t - self._t, probation)  # type: ignore[operator]
+        elif self._t is not None and m.t > self._t:  # a late one is fused at the filter's time
+            self._predict(m.t, m.t - self._t, probation)
             self._t = m.t
         R = self.samples.rotation_at(m.t)
         if probation:
@@ -276,8 +278,9 @@ class CurrentPipeline:
         self._correct(m, R)
 
     def _predict(self, t: float, dt: float, probation: bool) -> None:
-        """The joint filter's (and the twin's) schedule and prediction to tick ``t`` (s);
-        the high-gain observer's prediction and its own RLS step."""
+        """The joint filter's (and the twin's) schedule and prediction over ``dt`` (s) to
+        time ``t`` (s: a measurement's or the tick's); the high-gain observer's prediction
+        and its own RLS step."""
         kf, hgo = self.kf, self.hgo
         yaw = self.yaw
         assert yaw is not None
