@@ -8,12 +8,14 @@ each step of the way is a named module:
   a confirmed clock jump starts a new segment (:meth:`Engine.start_segment`);
 * :meth:`Engine.push` takes one sample through
   1. the value checks of :mod:`onboard.validate` (a rejection is counted with its reason),
-  2. the ``[corrections]`` (:class:`onboard.corrections.SampleCorrector`),
-  3. the time checks (backwards in its stream, older than ``max_sample_age_s``),
-  4. pressure to depth and the surface/submerged mode (:mod:`onboard.depth`; GNSS is
+  2. magnetic headings made true (:mod:`onboard.declination`: the configured declination,
+     the sensor's own, or the World Magnetic Model at the first fix),
+  3. the ``[corrections]`` (:class:`onboard.corrections.SampleCorrector`),
+  4. the time checks (backwards in its stream, older than ``max_sample_age_s``),
+  5. pressure to depth and the surface/submerged mode (:mod:`onboard.depth`; GNSS is
      accepted only at the surface),
-  5. one source per quantity (:mod:`onboard.sources`),
-  6. the queue, with the normalized command of a raw actuator output
+  6. one source per quantity (:mod:`onboard.sources`),
+  7. the queue, with the normalized command of a raw actuator output
      (:mod:`onboard.inputs`);
 * :meth:`Engine.tick` hands each pipeline the samples queued since the previous tick, in
   time order, and collects its estimates as :class:`~onboard.core.messages.EstimateRecord`.
@@ -41,6 +43,7 @@ from onboard.core.messages import (
     Depth,
     EstimateRecord,
     GnssFix,
+    Heading,
     HealthRecord,
     Parameter,
     Pressure,
@@ -49,6 +52,7 @@ from onboard.core.messages import (
     Sample,
 )
 from onboard.corrections import SampleCorrector
+from onboard.declination import DeclinationCorrector
 from onboard.depth import DepthMode
 from onboard.alerts import Alerts
 from onboard.innovations import InnovationMonitor
@@ -178,6 +182,8 @@ class Engine:
         latest: the newest record of each pipeline.
         monitor: the innovations of every pipeline's updates, per channel
             (:class:`onboard.innovations.InnovationMonitor`).
+        declination: magnetic headings to true (:mod:`onboard.declination`); its
+            ``report`` is the declination in use.
     """
 
     def __init__(self, cfg: Config, pipelines: list[Pipeline] | None = None,
@@ -196,6 +202,7 @@ class Engine:
         self.correct: Callable[[Sample], Sample] | None = \
             corrector if corrector.active else None
         """``[corrections]`` applied to each validated sample (None: none configured)."""
+        self.declination = DeclinationCorrector(cfg.corrections.declination_deg)
         self.queue: SampleQueue = (
             FixedLagQueue(corrector.latency_s, forecast=fresh_estimates)
             if corrector.latency_s > 0.0 else TickQueue())
@@ -354,6 +361,12 @@ class Engine:
         if reason is None and now is not None and sample.t > now + FUTURE_TOLERANCE_S:
             reason = "future"
         if reason is None:
+            cls = type(sample)
+            if cls is Heading:
+                sample, reason = self._true_heading(sample)  # type: ignore[arg-type]
+            elif cls is GnssFix and self.declination.needs_fix:
+                self._observe_fix(sample)  # type: ignore[arg-type]
+        if reason is None:
             if self.correct is not None:
                 sample = self.correct(sample)
             reason = self._out_of_order(kind, sample)
@@ -366,6 +379,24 @@ class Engine:
         if chosen is not None:  # None: another source of its quantity is active
             self._enqueue(chosen, sample)
         return True
+
+    def _true_heading(self, s: Heading) -> tuple[Heading, str | None]:
+        """``s`` relative to true north (:mod:`onboard.declination`), or the rejection
+        reason ``no_declination`` while a magnetic heading waits for the first fix; a
+        magnetic heading used as it is raises the ``no_declination`` warning."""
+        s, outcome = self.declination.heading(s)
+        if outcome == "wait":
+            return s, "no_declination"
+        if outcome == "uncorrected":
+            self.alerts.warn("no_declination", self.declination.warning, s.t)
+        return s, None
+
+    def _observe_fix(self, fix: GnssFix) -> None:
+        """Show the first fix to the declination (the World Magnetic Model's position
+        and date); warn when its value is unreliable there."""
+        warning = self.declination.observe_fix(fix)
+        if warning:
+            self.alerts.warn("declination_unreliable", warning, fix.t)
 
     def _checker(self, sample: Sample) -> tuple[str, Callable[[Sample], str | None]]:
         """The tag and the value checker of the sample's class (:mod:`onboard.validate`)."""
@@ -528,7 +559,8 @@ class Engine:
                             rejected=self.rejections(), innovations=self.monitor.snapshot(),
                             counters=self.counters(),
                             events=(events or []) + self._new_events(), mode=self.mode,
-                            sources=self.selector.active, flags=self.integrity.active())
+                            sources=self.selector.active, flags=self.integrity.active(),
+                            declination=self.declination.report)
 
     def rejections(self) -> dict[str, int]:
         """Every count of what was not used: samples by ``<type>:<reason>``, and per

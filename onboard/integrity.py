@@ -411,7 +411,7 @@ class IntegrityMonitor:
         elif hc is None:
             return
         elif cls is Heading:
-            hc.heading(s.t, s.heading_rad + (s.declination_rad or 0.0))  # type: ignore
+            hc.heading(s.t, s.heading_rad)  # type: ignore
         elif cls is Attitude and s.yaw_selected:  # type: ignore[attr-defined]
             hc.heading(s.t, s.yaw_rad)  # type: ignore[attr-defined]
 

@@ -298,6 +298,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
             engine, kinds, cfg, header, reader.stats.rejected))),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
+        "declination": msgspec.to_builtins(engine.declination.report),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
     }
     if mcap_out is not None:

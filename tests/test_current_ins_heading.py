@@ -84,6 +84,11 @@ def _vog(t: float, heading: float | None) -> VelocityOverGround:
                               v_down_mps=0.0, heading_rad=heading)
 
 
+def _take(s, t: float, samples: list) -> list:
+    """All of a tick's samples into ``s``; the velocity measurements among them."""
+    return list(s.measurements(t, samples))
+
+
 def _att(t: float, yaw: float) -> Attitude:
     return Attitude(t=t, source="ahrs", roll_rad=0.0, pitch_rad=0.0, yaw_rad=yaw,
                     roll_rate_rps=0.0, pitch_rate_rps=0.0, yaw_rate_rps=0.0)
@@ -91,23 +96,23 @@ def _att(t: float, yaw: float) -> Attitude:
 
 def test_the_velocity_heading_wins_over_the_attitude_yaw_while_it_comes():
     s = _samples()
-    s.take(0.1, [_att(0.06, 0.2), _vog(0.1, 0.1)])
+    _take(s, 0.1, [_att(0.06, 0.2), _vog(0.1, 0.1)])
     assert s.yaw == pytest.approx(0.1)
-    s.take(0.2, [_vog(0.1 + 1e-3, 0.1), _att(0.18, 0.2),
+    _take(s, 0.2, [_vog(0.1 + 1e-3, 0.1), _att(0.18, 0.2),
                  Heading(t=0.19, source="compass", heading_rad=0.3)])
     assert s.yaw == pytest.approx(0.1)  # neither the AHRS yaw nor a compass
 
 
 def test_the_attitude_yaw_takes_over_when_the_velocity_heading_stops():
     s = _samples()
-    s.take(0.1, [_vog(0.1, 0.1)])
-    s.take(0.2 + VELOCITY_HEADING_HOLD_S, [_att(0.2 + VELOCITY_HEADING_HOLD_S, 0.2)])
+    _take(s, 0.1, [_vog(0.1, 0.1)])
+    _take(s, 0.2 + VELOCITY_HEADING_HOLD_S, [_att(0.2 + VELOCITY_HEADING_HOLD_S, 0.2)])
     assert s.yaw == pytest.approx(0.2)
 
 
 def test_a_velocity_without_heading_leaves_the_attitude_yaw_in_use():
     s = _samples()
-    s.take(0.1, [_att(0.06, 0.2), _vog(0.1, None)])
+    _take(s, 0.1, [_att(0.06, 0.2), _vog(0.1, None)])
     assert s.yaw == pytest.approx(0.2)
 
 

@@ -210,8 +210,7 @@ def test_attitude_yaw_serves_when_no_compass_and_heading_wins_when_present() -> 
     for i in range(40):
         t = i * 0.1
         out = q.step(t, [Attitude(t=t, roll_rad=0.0, pitch_rad=0.0, yaw_rad=1.0),
-                         Heading(t=t, heading_rad=0.5, reference="magnetic",
-                                 declination_rad=0.1)])
+                         Heading(t=t, heading_rad=0.6)])
     assert out["heading"] == pytest.approx(0.6, abs=0.01)
 
 

@@ -15,7 +15,8 @@ The rooms, from the bottom up (docs/architecture.md has the picture):
 * ``sitl``: the simulator; the core and the drivers' encoders. Its closed-loop runner
   (``sitl.closed_loop``) also runs the onboard engine, because the closed loop is the
   experiment.
-* ``onboard.engine``, ``onboard.validate``, ``onboard.corrections``, ``onboard.depth``,
+* ``onboard.engine``, ``onboard.validate``, ``onboard.corrections``,
+  ``onboard.declination``, ``onboard.depth``,
   ``onboard.inputs``, ``onboard.sources``, ``onboard.latency``, ``onboard.innovations``,
   ``onboard.timeline``: time-ordered feeding of validated, corrected samples, one source per quantity, into the
   pipelines, and the summary of their innovations.
@@ -43,7 +44,8 @@ PIPELINES = MATH | {"onboard.pipelines"}
 ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs",
                       "onboard.sources", "onboard.alerts"}
 ENGINE_PARTS = {"onboard.corrections", "onboard.depth", "onboard.latency",
-                "onboard.innovations", "onboard.integrity", "onboard.timeline"}
+                "onboard.innovations", "onboard.integrity", "onboard.timeline",
+                "onboard.declination"}
 """The engine's own modules: only the engine imports them."""
 SERVICE = ENGINE | {"onboard.drivers", "onboard.service"}
 CLOSURE = ENGINE | {"onboard.drivers", "onboard.closure", "onboard.replay", "onboard.plots",
@@ -60,6 +62,7 @@ ROOMS: dict[str, set[str]] = {
     "onboard.engine": ENGINE | ENGINE_PARTS,
     "onboard.validate": CORE,
     "onboard.corrections": CORE | {"onboard.sources"},
+    "onboard.declination": CORE,
     "onboard.depth": CORE,
     "onboard.latency": PIPELINES,
     "onboard.innovations": CORE,

@@ -90,7 +90,7 @@ class _Collector:
         for s in samples:
             if isinstance(s, Heading):
                 self.heading_src_compass = True
-                self.heading = s.heading_rad + (s.declination_rad or 0.0)
+                self.heading = s.heading_rad
             elif isinstance(s, Attitude):
                 if not self.heading_src_compass:
                     self.heading = s.yaw_rad

@@ -499,6 +499,12 @@ class Corrections(_Strict):
     heading_sources: list[str] = []
     """Glob patterns of the sample ``source`` the heading corrections apply to (the
     compass; ``[sources]`` syntax); empty: every heading and attitude source."""
+    declination_deg: float | Literal["auto"] = "auto"
+    """Magnetic declination (degrees, east positive: ``true = magnetic + declination``)
+    added to every heading marked magnetic (NMEA HDM/HDG, a compass-only log) before the
+    pipelines see it; ``"auto"``: the heading's own (HDG's variation), else the World
+    Magnetic Model at the first GNSS fix (:mod:`onboard.declination`). Headings marked
+    true pass unchanged."""
 
 
 class DiagnoseConfig(_Strict):

@@ -92,7 +92,9 @@ class Heading(Sample, frozen=True, tag="heading"):
     """A heading measurement (rad, clockwise from north).
 
     ``reference`` says whether it is relative to true or magnetic north; a magnetic
-    heading needs the declination (``declination_rad`` when the source gives it).
+    heading needs the declination (``declination_rad`` when the source gives it). The
+    engine makes every magnetic heading true before a pipeline sees it
+    (:mod:`onboard.declination`): a pipeline's headings are all true.
     """
 
     heading_rad: float
@@ -378,11 +380,32 @@ class Alert(msgspec.Struct, frozen=True, kw_only=True):
     n: int = 1
 
 
+class DeclinationReport(msgspec.Struct, frozen=True, kw_only=True):
+    """The magnetic declination the engine applies to magnetic headings
+    (:mod:`onboard.declination`; HealthRecord, summary.json's ``declination``).
+
+    ``deg`` east positive (``true = magnetic + deg``; null: none known); ``source``:
+    ``wmm`` (the World Magnetic Model at ``lat_deg``, ``lon_deg`` on the decimal
+    ``year``, taken from the log's UTC time stamps or today's date: ``date_from``
+    ``log`` or ``today``; ``model`` its name, e.g. ``WMM-2025``), ``config``
+    (``[corrections] declination_deg``), ``sensor`` (the heading's own, NMEA HDG's
+    variation) or ``none`` (magnetic headings used as they are).
+    """
+
+    deg: float | None = None
+    source: Literal["wmm", "config", "sensor", "none"] = "none"
+    model: str = ""
+    lat_deg: float | None = None
+    lon_deg: float | None = None
+    year: float | None = None
+    date_from: Literal["log", "today", ""] = ""
+
+
 HEALTH_SCHEMA_VERSION = 3
 """Version of the wire schema of :class:`HealthRecord` (3: each channel's summary also per
-source, ``ChannelHealth.by_source``, a field a schema-2 reader that ignores unknown fields
-skips; 2: typed innovations and counters apart; 1 had flat ``innovations`` and ``nis``
-dictionaries)."""
+source, ``ChannelHealth.by_source``, and the ``declination``: fields a schema-2 reader that
+ignores unknown fields skips; 2: typed innovations and counters apart; 1 had flat
+``innovations`` and ``nis`` dictionaries)."""
 
 
 class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
@@ -392,7 +415,8 @@ class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
     and channel (:class:`ChannelHealth`), ``counters`` per pipeline (its steps, restarts,
     adaptive quantities: :meth:`onboard.pipelines.base.Pipeline.health`), ``events``
     recent human-readable events, ``sources`` the active source of each selected quantity
-    (onboard/sources.py).
+    (onboard/sources.py), ``declination`` the one applied to magnetic headings
+    (:class:`DeclinationReport`).
     """
 
     schema: int = HEALTH_SCHEMA_VERSION
@@ -407,3 +431,4 @@ class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
     mode: str = ""
     sources: dict[str, str] = {}
     flags: dict[str, list[str]] = {}
+    declination: DeclinationReport = DeclinationReport()

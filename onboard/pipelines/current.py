@@ -236,24 +236,24 @@ class CurrentPipeline:
 
     # ------------------------------------------------------------------ protocol
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
-        """Advance to tick ``t`` (s) with the new samples; returns the estimates."""
-        meas = self.samples.take(t, samples)
-        if self.yaw is None:
-            return {}
-        kf, check = self.kf, self.restore_check
-        if not kf.started:
-            if not meas:
-                return {}
-            self._start(meas[-1].kind, meas[-1].z)
-            self._t = t
-        dt = t - (self._t if self._t is not None else t)
+        """Advance to tick ``t`` (s) with the new samples; returns the estimates.
+
+        Each velocity measurement is fused at its own time (algorithms.md §3.5): the
+        filters are predicted to it with the inputs of that time, updated with the
+        attitude of that time, and after the last one predicted to the tick."""
+        t_prev = self._t
+        check = self.restore_check
         probation = check.active
-        self._predict(t, dt, probation)
-        self._t = t if dt >= 0 else self._t
-        R = self._R() if meas else None  # the attitude is fixed within the tick
-        if probation:
-            check.update(meas, R)
-        self._correct(meas, R)
+        for m in self.samples.measurements(t, samples):
+            self._fuse(m, probation)
+        if self.yaw is None or not self.kf.started:
+            return {}
+        t_filter = self._t
+        assert t_filter is not None  # set when the filter started
+        if t >= t_filter:
+            self._predict(t, t - t_filter, probation)
+            self._t = t
+        dt = t - t_prev if t_prev is not None else 0.0
         if dt > 0:
             self._identify(dt)
         self._step_flow(dt)
@@ -261,9 +261,26 @@ class CurrentPipeline:
             self._check_restored(dt)
         return self._outputs()
 
+    def _fuse(self, m: VelocityMeasurement, probation: bool) -> None:
+        """Velocity measurement ``m`` at its own time ``m.t``: the filters predicted to
+        it (when it is newer than their time; the first one starts them), then updated
+        with the attitude of that time. Without a heading yet it is not used."""
+        if self.yaw is None:
+            return
+        if not self.kf.started:
+            self._start(m)
+        elif self._t is not None and m.t > self._t:  # a late one is fused at the filter's time
+            self._predict(m.t, m.t - self._t, probation)
+            self._t = m.t
+        R = self.samples.rotation_at(m.t)
+        if probation:
+            self.restore_check.update([m], R)
+        self._correct(m, R)
+
     def _predict(self, t: float, dt: float, probation: bool) -> None:
-        """The joint filter's (and the twin's) schedule and prediction to tick ``t`` (s);
-        the high-gain observer's prediction and its own RLS step."""
+        """The joint filter's (and the twin's) schedule and prediction over ``dt`` (s) to
+        time ``t`` (s: a measurement's or the tick's); the high-gain observer's prediction
+        and its own RLS step."""
         kf, hgo = self.kf, self.hgo
         yaw = self.yaw
         assert yaw is not None
@@ -279,27 +296,26 @@ class CurrentPipeline:
                     hgo.reset_gain()
             self._identify_hgo(t, dt)
 
-    def _correct(self, meas: list[VelocityMeasurement], R: np.ndarray | None) -> None:
-        """Every velocity measurement into the joint filter and the reported observer;
-        ``R`` the body-to-earth rotation."""
+    def _correct(self, m: VelocityMeasurement, R: np.ndarray) -> None:
+        """Velocity measurement ``m`` into the joint filter and the reported observer;
+        ``R`` the body-to-earth rotation at its time."""
         kf, hgo, flow = self.kf, self.hgo, self.flow
         t_min, t_first, t_max = MEAS_INTERVAL_S
-        for m in meas:
-            kind, tm, z, std = m.kind, m.t, m.z, m.std
-            dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else t_first
-            dt_meas = min(max(dt_meas, t_min), t_max)
-            self._last_meas_t = tm
-            outcome = kf.update(kind, z, std, R)
-            self._record(CHANNELS[kind], m, kf.y, kf.S, kf.nis, kf.gate_nis, outcome)
-            if outcome == "reset" and hgo is not None:
-                hgo.reset_gain()
-            if hgo is not None and not self._update_hgo(m, dt_meas, R):
-                hgo.restart(kf.x, kf.P)
-                hgo.reset_gain()
-            if flow is not None:
-                flow.observe_velocity(kind, z, std, R, kf.velocity_over_ground(R) if (
-                    kind == "earth" and len(z) < self.nd) else None)
-            self._last_velocity_t = tm
+        kind, tm, z, std = m.kind, m.t, m.z, m.std
+        dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else t_first
+        dt_meas = min(max(dt_meas, t_min), t_max)
+        self._last_meas_t = tm
+        outcome = kf.update(kind, z, std, R)
+        self._record(CHANNELS[kind], m, kf.y, kf.S, kf.nis, kf.gate_nis, outcome)
+        if outcome == "reset" and hgo is not None:
+            hgo.reset_gain()
+        if hgo is not None and not self._update_hgo(m, dt_meas, R):
+            hgo.restart(kf.x, kf.P)
+            hgo.reset_gain()
+        if flow is not None:
+            flow.observe_velocity(kind, z, std, R, kf.velocity_over_ground(R) if (
+                kind == "earth" and len(z) < self.nd) else None)
+        self._last_velocity_t = tm
 
     def _update_hgo(self, m: VelocityMeasurement, dt_meas: float,
                     R: np.ndarray | None) -> bool:
@@ -424,14 +440,16 @@ class CurrentPipeline:
                                f"of data (chi2 {check.chi2:.1f})")
             check.end()
 
-    def _start(self, kind: str, z: np.ndarray) -> None:
-        """Start the filters from the first velocity measurement."""
-        self.kf.start(kind, z, self._R())  # type: ignore[arg-type]
+    def _start(self, m: VelocityMeasurement) -> None:
+        """Start the filters from the first velocity measurement, at its time."""
+        R = self.samples.rotation_at(m.t)
+        self.kf.start(m.kind, m.z, R)
         self.identification.headings.restart(self.yaw or 0.0)
         if self.restore_check.active:
-            self.restore_check.start(kind, z, self._R(), self.yaw or 0.0)  # type: ignore[arg-type]
+            self.restore_check.start(m.kind, m.z, R, self.yaw or 0.0)
         if self.hgo is not None:
             self.hgo.restart(self.kf.x, self.kf.P)
+        self._t = m.t
 
     def _outputs(self) -> dict[str, float]:
         nd = self.nd

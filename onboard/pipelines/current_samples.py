@@ -3,6 +3,12 @@
 
 :class:`CurrentSamples` turns the samples of one tick into
 
+* the velocity measurements in time order, each handed over
+  (:meth:`CurrentSamples.measurements`) once every other sample stamped at or before it
+  has been taken in, so that the inputs and the attitude are those of the measurement's
+  own time, not the tick's (the heading carried to that time by the yaw rate,
+  :meth:`CurrentSamples.rotation_at`; algorithms.md §3.5, "Measurements at their own
+  time");
 * the model inputs (:class:`.vehicle_models.ModelInputs`: rates, attitude, commands);
 * the attitude in use: roll and pitch from the newest ``Attitude`` sample stamped at or
   before the step time (``DvlPosition``'s as a fallback); the heading of the velocity's
@@ -31,7 +37,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -67,6 +73,10 @@ YAW_RATE_LOWPASS_S = 0.3
 first-order low-pass of this time constant (s)."""
 YAW_RATE_MIN_INTERVAL_S = 1e-3
 """Headings closer than this (s) give no difference quotient."""
+YAW_CARRY_MAX_S = 0.2
+"""Longest time (s) the heading is carried forward by the yaw rate to a measurement's
+time (:meth:`CurrentSamples.rotation_at`): two periods of a 10 Hz compass; an older
+heading is used as it is."""
 ATTITUDE_HELD_MAX = 64
 """Attitude samples stamped after the step time that are held for later ticks (the newest
 are kept)."""
@@ -160,10 +170,13 @@ class CurrentSamples:
         self._depth_rate: tuple[float, float] | None = None  # (t, m/s) not yet used
         self.glider_t = -math.inf
 
-    def take(self, t: float, samples: Sequence[Sample]) -> list[VelocityMeasurement]:
-        """Take the tick's samples into the model inputs and the attitude; returns the
-        velocity measurements among them, in time order."""
-        meas: list = []
+    def measurements(self, t: float, samples: Sequence[Sample]
+                     ) -> Iterator[VelocityMeasurement]:
+        """Take the tick's samples (time-ordered, up to the step time ``t``, s) into the
+        model inputs and the attitude, yielding each velocity measurement among them when
+        every sample stamped at or before it has been taken and none after it: while the
+        caller holds a measurement, :attr:`inp`, the attitude and :meth:`rotation_at` are
+        those of its time. Run it to the end: then the tick's samples are all taken."""
         handlers = self._handlers
         self._step_t = t
         if self._att_later:  # attitude stamped after an earlier tick, now due
@@ -172,13 +185,17 @@ class CurrentSamples:
                 self._att_later = [a for a in self._att_later if a[0] > t]
                 for a in due:
                     self._set_attitude(*a)
+        pending: list[VelocityMeasurement] = []  # stamped at the newest time taken
         for s in samples:
+            if pending and s.t > pending[0].t:
+                yield from pending
+                pending.clear()
             h = handlers.get(type(s))
             if h is not None:
-                h(s, meas)
-        if self._depth_rate is not None:
-            self._glide(meas)
-        return meas
+                h(s, pending)
+        if self._depth_rate is not None:  # the glider model's measurement of this tick
+            self._glide(pending)
+        yield from pending
 
     def _glide(self, meas: list) -> None:
         """The glider model's through-water velocity at the pending depth rate, the pitch
@@ -249,8 +266,7 @@ class CurrentSamples:
             return
         if self._velocity_heading_fresh(s.t):
             return
-        h = s.heading_rad + ((s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0)
-        self._set_yaw(s.t, h, s.source)
+        self._set_yaw(s.t, s.heading_rad, s.source)
 
     def _velocity_heading_fresh(self, t: float) -> bool:
         """Whether a velocity sample brought its own heading within
@@ -354,7 +370,21 @@ class CurrentSamples:
     def rotation(self) -> np.ndarray:
         """Body-to-earth rotation at the attitude in use (the yaw alone for a surface
         vehicle's 2-D model)."""
+        return self._rotation(self.yaw or 0.0)
+
+    def rotation_at(self, t: float) -> np.ndarray:
+        """Body-to-earth rotation at time ``t`` (s, at or after the attitude in use): the
+        heading carried from its own time by the yaw rate in use, ``psi + r (t - t_psi)``
+        (at most ``YAW_CARRY_MAX_S``; roll and pitch as they are)."""
+        yaw = self.yaw or 0.0
+        lag = t - self.yaw_t
+        if 0.0 < lag <= YAW_CARRY_MAX_S:
+            yaw += self.inp.r * lag
+        return self._rotation(yaw)
+
+    def _rotation(self, yaw: float) -> np.ndarray:
+        """Body-to-earth rotation at the roll and pitch in use and heading ``yaw`` (rad)."""
         if self.nd == 3:
-            return euler_to_matrix(self.roll, self.pitch, self.yaw or 0.0)
-        c, s = math.cos(self.yaw or 0.0), math.sin(self.yaw or 0.0)
+            return euler_to_matrix(self.roll, self.pitch, yaw)
+        c, s = math.cos(yaw), math.sin(yaw)
         return np.array([[c, -s], [s, c]])

@@ -430,7 +430,7 @@ class Eseso:
                                     t=s.t, source=s.source)
 
     def _on_heading(self, s: Heading) -> None:
-        meas = s.heading_rad + (s.declination_rad or 0.0)
+        meas = s.heading_rad
         self.filter.update_heading(meas, self.r_head, t=s.t, source=s.source)
 
     # ------------------------------------------------------------------ Pipeline API

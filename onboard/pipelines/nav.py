@@ -85,7 +85,7 @@ class NavTrack:
 
     def _on_heading(self, s: Heading) -> None:
         self._t_heading = s.t
-        self._values["heading"] = (s.t, wrap_2pi(s.heading_rad + (s.declination_rad or 0.0)))
+        self._values["heading"] = (s.t, wrap_2pi(s.heading_rad))
 
     def _on_attitude(self, s: Attitude) -> None:
         if s.yaw_selected and s.t - self._t_heading > HEADING_HOLD_S:

@@ -267,8 +267,7 @@ class SurgeHeadingPipeline:
         if self._t0 is None:
             self._start(s.t)
         self._t_heading = s.t
-        dec = (s.declination_rad or 0.0) if s.reference == "magnetic" else 0.0
-        self._add_heading(s.t, s.heading_rad + dec, s.source)
+        self._add_heading(s.t, s.heading_rad, s.source)
 
     def _on_attitude(self, s: Attitude) -> None:
         if self.track.imu is not None:
