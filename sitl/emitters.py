@@ -75,7 +75,7 @@ from onboard.core.messages import (
     VehicleInfo,
     VelocityOverGround,
 )
-from onboard.sitl.frames import GeoOrigin, ned_to_body
+from onboard.sitl.frames import GeoOrigin, ned_to_body_fast
 
 DEFAULT_EPOCH_S = 1_767_225_600.0
 """Unix time of simulation t = 0 in logs: 2026-01-01T00:00:00Z (fixed, for determinism)."""
@@ -242,7 +242,7 @@ class MavlinkEncoder:
         psi = self._heading
         phi = self._att.roll_rad if self._att else 0.0
         th = self._att.pitch_rad if self._att else 0.0
-        x, y, z = ned_to_body(phi, th, psi, EARTH_FIELD_GAUSS)
+        x, y, z = ned_to_body_fast(phi, th, psi, EARTH_FIELD_GAUSS)
         return _i16(x * 1000.0), _i16(y * 1000.0), _i16(z * 1000.0)
 
     def _global_position(self, s: VelocityOverGround, ms: int) -> bytes:

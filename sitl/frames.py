@@ -8,12 +8,13 @@ would cancel in every comparison with truth. So the simulator takes:
 
 * latitude/longitude from pymap3d (``enu2geodetic``: the simulator's north/east plane is
   the WGS-84 tangent plane at the scenario's origin, a point at zero up);
-* rotations from :class:`scipy.spatial.transform.Rotation` (intrinsic ZYX Euler angles:
-  yaw, pitch, roll; body FRD to earth NED), wherever speed allows;
-* in the plants' right-hand side, called four times per integration step, its own plain
-  float kinematics (:func:`kinematics`, :func:`ned_to_body_fast`): ~1 us against scipy's
-  ~20 us. ``tests/test_sitl_frames.py`` checks them against scipy's ``Rotation`` (the
-  position rates) and against the time derivative of scipy's rotation (the Euler rates);
+* rotations of sensor samples from :class:`scipy.spatial.transform.Rotation` (intrinsic
+  ZYX Euler angles: yaw, pitch, roll; body FRD to earth NED);
+* where it runs at every step (the plants' right-hand side, four times a step; their
+  truth and ideal IMU; the magnetometer of every IMU frame), its own plain-float code
+  (:func:`kinematics`, :func:`euler_to_matrix`, :func:`ned_to_body_fast`): ~3 us against
+  scipy's ~20 us. ``tests/test_sitl_frames.py`` checks them against scipy's ``Rotation``
+  and against the time derivative of scipy's rotation (the Euler rates);
 * angles wrapped by :func:`math.remainder` and ``%``, not the estimators' ``fmod`` code.
 """
 
@@ -62,8 +63,10 @@ def rotation(roll: float, pitch: float, yaw: float) -> Rotation:
 
 
 def euler_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """The 3x3 body-to-NED rotation matrix (``x_ned = R @ x_frd``) of ZYX Euler angles."""
-    return rotation(roll, pitch, yaw).as_matrix()
+    """The 3x3 body-to-NED rotation matrix (``x_ned = R @ x_frd``) of ZYX Euler angles:
+    its columns are the body axes in NED (:func:`_axes`; the plants' truth and ideal IMU
+    call it at every step, where scipy would cost ~20 us)."""
+    return np.array(_axes(roll, pitch, yaw)).T
 
 
 def body_to_ned(roll: float, pitch: float, yaw: float,

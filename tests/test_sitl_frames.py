@@ -106,3 +106,11 @@ def test_every_plants_position_rate_is_scipys_rotation_of_its_velocity(name) -> 
     assert abs(x[7]) > 1e-3 or name != "rudder_boat"  # a sway to rotate (the boat turns)
     # measured: 2e-16 m/s
     assert rates == pytest.approx(ref, abs=1e-12)
+
+
+@pytest.mark.parametrize("att", ATTITUDES[:10])
+def test_the_fast_matrix_is_scipys(att) -> None:
+    r, p, y = att
+    ref = Rotation.from_euler("ZYX", (y, p, r)).as_matrix()
+    # measured: 4e-16
+    assert frames.euler_to_matrix(r, p, y) == pytest.approx(ref, abs=1e-12)
