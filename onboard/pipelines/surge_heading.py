@@ -72,9 +72,10 @@ SPEED_ACCURACY_MAX_MPS = 5.0
 """Ceiling of a fix's reported speed accuracy (m/s)."""
 CRAB_MIN_SPEED_MPS = 0.5
 """Below this speed over ground (m/s) the course is too noisy for the crab angle."""
-DOPPLER_SIGN_MIN_SPEED_MPS = 0.3
-"""Below this speed over ground (m/s) a fix's course is too noisy to tell ahead from
-astern (3x the default GNSS speed sigma of 0.1 m/s): its Doppler speed is not used."""
+DOPPLER_SIGN_MIN_SPEED_MPS = 0.1
+"""Below this speed over ground (m/s), the default GNSS speed sigma, a fix's course has
+~1 rad of noise and cannot tell ahead from astern: its Doppler speed is not used (0.2
+and 0.3 m/s were measured too and cost the AIE on slow turns: docs/aie.md)."""
 SIGN_UNKNOWN = "sign_unknown"
 """The ``surge.rate`` rejection reason of a Doppler speed whose sign is unknown."""
 SAME_POINT_S = 1e-3
