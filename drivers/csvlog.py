@@ -10,8 +10,9 @@ Per row, one sample of each type whose columns are mapped and numeric:
 sample              columns                                                     notes
 ==================  ==========================================================  ==========
 GnssFix             ``lat_deg``, ``lon_deg`` (+ ``alt_m``, ``sog_mps``)         decimal deg
-GnssFix             ``north_m``, ``east_m`` when lat/lon are not mapped         flat earth
-                                                                                around
+GnssFix             ``north_m``, ``east_m`` when lat/lon are not mapped         WGS-84
+                                                                                tangent
+                                                                                plane at
                                                                                 ``origin_*``
 Heading             ``heading`` (``heading_unit``, ``heading_reference``)       rad
 Attitude            ``heading`` + ``yaw_rate`` + (``roll``, ``pitch`` or         rad, rad/s
@@ -50,6 +51,7 @@ mapped column missing from a file's header raises :class:`UnreadableLog`.
 from __future__ import annotations
 
 import csv
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,7 +59,7 @@ from typing import Iterator, Sequence
 
 from onboard.drivers.base import TIME_JUMP_S, ReadStats, UnreadableLog
 from onboard.core.config import CsvFormat
-from onboard.core.geo import wrap_2pi
+from onboard.core.geo import LocalFrame, wrap_2pi
 from onboard.core.messages import (
     ActuatorColumn,
     ActuatorOutputs,
@@ -68,9 +70,6 @@ from onboard.core.messages import (
     Sample,
     VelocityOverGround,
 )
-
-EARTH_RADIUS_M = 6378137.0
-"""WGS-84 equatorial radius, for the flat-earth north/east -> lat/lon conversion."""
 
 
 @dataclass
@@ -185,6 +184,12 @@ class _HeadingSpikes:
             return [s for s in held if not isinstance(s, (Heading, Attitude))]
         self._last = h
         return held
+
+
+@functools.lru_cache(maxsize=8)
+def _frame(lat0_deg: float, lon0_deg: float) -> LocalFrame:
+    """The local frame of the ``north_m``/``east_m`` columns (one per origin)."""
+    return LocalFrame(lat0_deg, lon0_deg)
 
 
 class _Bad(Exception):
@@ -408,9 +413,7 @@ class CsvReader:
                     raise _Bad("out_of_range")
             elif f.north_m and f.east_m:
                 n, e = num(f.north_m), num(f.east_m)
-                lat = f.origin_lat_deg + math.degrees(n / EARTH_RADIUS_M)
-                lon = f.origin_lon_deg + math.degrees(
-                    e / (EARTH_RADIUS_M * math.cos(math.radians(f.origin_lat_deg))))
+                lat, lon = _frame(f.origin_lat_deg, f.origin_lon_deg).to_latlon(n, e)
             else:
                 lat = lon = None
             if lat is not None:

@@ -60,7 +60,6 @@ from typing import Protocol, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from onboard.core.geo import metres_per_degree
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -76,7 +75,7 @@ from onboard.core.messages import (
     VehicleInfo,
     VelocityOverGround,
 )
-from onboard.core.so3 import ned_to_body
+from onboard.sitl.frames import GeoOrigin, ned_to_body_fast
 
 DEFAULT_EPOCH_S = 1_767_225_600.0
 """Unix time of simulation t = 0 in logs: 2026-01-01T00:00:00Z (fixed, for determinism)."""
@@ -120,7 +119,7 @@ class MavlinkEncoder:
         self.mav = mavlink2.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.mav_type = mav_type
         self.custom_mode = custom_mode
-        self.m_lat, self.m_lon = metres_per_degree(origin[0])
+        self._geo = GeoOrigin(*origin)
         self.origin = origin
         self.ins_ne = list(start_ne)
         self.epoch_s = epoch_s
@@ -243,7 +242,7 @@ class MavlinkEncoder:
         psi = self._heading
         phi = self._att.roll_rad if self._att else 0.0
         th = self._att.pitch_rad if self._att else 0.0
-        x, y, z = ned_to_body(phi, th, psi, EARTH_FIELD_GAUSS)
+        x, y, z = ned_to_body_fast(phi, th, psi, EARTH_FIELD_GAUSS)
         return _i16(x * 1000.0), _i16(y * 1000.0), _i16(z * 1000.0)
 
     def _global_position(self, s: VelocityOverGround, ms: int) -> bytes:
@@ -255,8 +254,7 @@ class MavlinkEncoder:
         self._t_ins = t
         self._speed = math.hypot(s.v_north_mps, s.v_east_mps)
         self._climb = -(s.v_down_mps or 0.0)
-        lat = self.origin[0] + self.ins_ne[0] / self.m_lat
-        lon = self.origin[1] + self.ins_ne[1] / self.m_lon
+        lat, lon = self._geo.to_latlon(self.ins_ne[0], self.ins_ne[1])
         yaw = s.heading_rad
         if yaw is None:
             yaw = self._att.yaw_rad if self._att is not None else self._heading

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from onboard.sitl.frames import GeoOrigin
 from onboard.sitl.integrate import GRAVITY
 
 __all__ = [
@@ -295,22 +296,14 @@ class WaveField:
         return WaveMotion(disp, vel, acc, roll=roll, pitch=pitch, p=p, q=q)
 
 
-def _equirectangular_m_per_deg(lat_deg: float) -> tuple[float, float]:
-    """Metres per degree of latitude and longitude (algorithms.md section 1.3)."""
-    lat = math.radians(lat_deg)
-    r_lat = 111132.954 - 559.822 * math.cos(2 * lat) + 1.175 * math.cos(4 * lat)
-    r_lon = (math.pi / 180.0) * 6367449.0 * math.cos(lat)
-    return r_lat, r_lon
-
-
 @dataclass
 class Environment:
     """The sea a plant moves in: a current field, optional waves, constants, geo origin.
 
     ``current_ned(t, p)`` is the water velocity (m/s, NED); :meth:`current_rate_ned` its
     material derivative along a moving point. ``origin_lat_deg``/``origin_lon_deg``, when
-    set, let plants report latitude/longitude (equirectangular projection, algorithms.md
-    section 1.3).
+    set, let plants report latitude/longitude (:class:`onboard.sitl.frames.GeoOrigin`:
+    pymap3d on the WGS-84 tangent plane at the origin).
     """
 
     current: CurrentField = field(default_factory=UniformCurrent)
@@ -356,5 +349,4 @@ class Environment:
         """(lat_deg, lon_deg) of a local NED position, or None without a geo origin."""
         if self.origin_lat_deg is None or self.origin_lon_deg is None:
             return None
-        r_lat, r_lon = _equirectangular_m_per_deg(self.origin_lat_deg)
-        return self.origin_lat_deg + north / r_lat, self.origin_lon_deg + east / r_lon
+        return GeoOrigin(self.origin_lat_deg, self.origin_lon_deg).to_latlon(north, east)

@@ -30,7 +30,7 @@ from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 
-from onboard.core.geo import wrap_pi
+from onboard.sitl.frames import wrap_pi
 from onboard.core.messages import Heading, Imu, Sample
 from onboard.sitl.plants.base import Command
 from onboard.sitl.truth import TruthRecord

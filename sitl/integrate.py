@@ -1,6 +1,6 @@
 """Fixed-step RK4 integration shared by the plants, and the plants' gravity.
 
-Angles are wrapped by :mod:`onboard.core.geo` and rotated by :mod:`onboard.core.so3` (ZYX
+Angles are wrapped and rotated by :mod:`onboard.sitl.frames` (ZYX
 Euler angles, NED earth frame, FRD body frame, as in Fossen, *Handbook of Marine Craft
 Hydrodynamics and Motion Control*, 2nd ed., 2021).
 """

@@ -49,7 +49,6 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
-from onboard.core.geo import LocalFrame, wrap_2pi, wrap_pi
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -65,7 +64,7 @@ from onboard.core.messages import (
 from onboard.core.messages import (
     Imu as ImuSample,
 )
-from onboard.core.so3 import body_to_ned
+from onboard.sitl.frames import GeoOrigin, body_to_ned, wrap_2pi, wrap_pi
 from onboard.sitl.truth import TruthRecord
 
 GRAVITY = 9.80665
@@ -78,10 +77,6 @@ def sensor_rng(seed: int, name: str) -> np.random.Generator:
                                                          zlib.crc32(name.encode())]))
 
 
-GeoOrigin = LocalFrame
-"""The sensors' local tangent plane about ``(lat0, lon0)`` (deg): the pipelines' own
-projection (algorithms.md §1.3), so the projection contributes no error to a comparison
-of estimates with truth."""
 
 
 class WorldView:

@@ -358,3 +358,56 @@ def test_a_doppler_speed_reporting_a_poor_accuracy_is_down_weighted(mod) -> None
     # are exact but taken at the configured 1.5 m, so they settle the speed only slowly)
     assert aware < 0.5 * fixed
     assert aware < 0.25
+
+
+def _doppler_run(mod, speed: float, course_off_rad: float, duration: float = 20.0):
+    """A boat heading north (compass 0) whose track runs ``course_off_rad`` off its
+    heading at ``speed`` m/s (fixes at 5 Hz with that SOG and COG, no noise). Returns the
+    pipeline, its ``surge.rate`` records and its last output."""
+    from onboard.core.geo import LocalFrame
+    from onboard.core.messages import GnssFix, Heading
+
+    p = mod.build(CONFIG[mod](), 1.5, 0.03, 0.1)
+    fr = LocalFrame(47.0, 8.0)
+    recs, out = [], {}
+    for i in range(int(duration * 10)):
+        t = 0.1 * i
+        batch = [Heading(t=t, source="c", heading_rad=0.0)]
+        if i % 2 == 0:
+            d = speed * t
+            lat, lon = fr.to_latlon(d * math.cos(course_off_rad), d * math.sin(course_off_rad))
+            batch.append(GnssFix(t=t, source="g", lat_deg=lat, lon_deg=lon, sog_mps=speed,
+                                 cog_rad=course_off_rad % (2 * math.pi)))
+        out = dict(p.step(t, batch))
+        recs += [r for r in p.innovations() if r.channel == "surge.rate"]
+    return p, recs, out
+
+
+@pytest.mark.parametrize("mod", [aie_mod, kf_mod])
+@pytest.mark.parametrize("speed,course_off_deg", [(0.05, 0.0), (0.05, 180.0), (0.09, 30.0)])
+def test_a_doppler_speed_of_unknown_sign_is_not_used(mod, speed, course_off_deg) -> None:
+    """Below DOPPLER_SIGN_MIN_SPEED_MPS (0.1 m/s) the course is noise and ahead cannot be
+    told from astern: no Doppler row, every such fix a ``surge.rate`` rejection of reason
+    ``sign_unknown``."""
+    from onboard.pipelines.surge_heading import SIGN_UNKNOWN
+
+    p, recs, out = _doppler_run(mod, speed, math.radians(course_off_deg))
+    assert len(recs) == 100 and all(not r.accepted and r.reason == SIGN_UNKNOWN for r in recs)
+    assert p.health()["surge.rate_steps"] == 0
+    # from the position increments alone after 20 s: |speed| at most the true one
+    assert abs(out["speed"]) <= speed + 0.01
+
+
+@pytest.mark.parametrize("mod", [aie_mod, kf_mod])
+@pytest.mark.parametrize("speed,course_off_deg", [(1.0, 0.0), (1.0, 180.0), (0.4, 60.0),
+                                                  (0.4, -120.0), (0.12, 180.0)])
+def test_a_doppler_speed_of_known_sign_is_used_signed(mod, speed, course_off_deg) -> None:
+    """Above the threshold and off abeam the Doppler speed is used, negative astern: the
+    published path speed is the speed over ground, signed by the course against the
+    heading."""
+    off = math.radians(course_off_deg)
+    p, recs, out = _doppler_run(mod, speed, off)
+    assert recs and all(r.reason != "sign_unknown" for r in recs)
+    assert p.health()["surge.rate_steps"] == 99  # every fix after the first window
+    # measured: +-1.0, +-0.3996 (aie), +-0.3995 (kf), -0.12
+    assert out["speed"] == pytest.approx(math.copysign(speed, math.cos(off)), abs=0.01)

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from onboard.drivers.base import UnreadableLog
 from onboard.drivers.csvlog import CsvReader
 from onboard.core.config import CONFIG_DIR, CsvFormat, load
+from onboard.core.geo import LocalFrame
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -108,9 +109,9 @@ def test_north_east_without_lat_lon_uses_the_origin(tmp_path: Path):
     fmt = CsvFormat(time="t", north_m="n", east_m="e", origin_lat_deg=60.0, origin_lon_deg=5.0)
     f = write(tmp_path / "ne.csv", ["0,0,0", "1,111.32,55.8"], header="t,n,e")
     a, b = list(CsvReader(f, fmt))
-    assert (a.lat_deg, a.lon_deg) == (60.0, 5.0)
-    assert (b.lat_deg - 60.0) * 111_320 == pytest.approx(111.32, rel=0.01)
-    assert (b.lon_deg - 5.0) * 111_320 * 0.5 == pytest.approx(55.8, rel=0.01)
+    # the WGS-84 tangent plane at the origin (onboard.core.geo.LocalFrame), to 1e-14 deg
+    assert (a.lat_deg, a.lon_deg) == pytest.approx((60.0, 5.0), abs=1e-12)
+    assert LocalFrame(60.0, 5.0).to_ne(b.lat_deg, b.lon_deg) == pytest.approx((111.32, 55.8))
 
 
 def test_unreadable_inputs(tmp_path: Path):

@@ -17,9 +17,8 @@ from onboard.sitl.environment import (
     UniformCurrent,
     WaveField,
 )
-from onboard.core.geo import wrap_2pi, wrap_pi
-from onboard.core.so3 import euler_rate_matrix
-from onboard.core.so3 import euler_to_matrix as rotation_body_to_ned
+from onboard.sitl.frames import euler_to_matrix as rotation_body_to_ned
+from onboard.sitl.frames import kinematics, wrap_2pi, wrap_pi
 from onboard.sitl.integrate import integrate_rk4, rk4_step
 
 P0 = np.zeros(3)
@@ -93,12 +92,14 @@ def test_environment_defaults_to_still_water_without_waves():
     assert np.allclose(wm.displacement, 0.0) and wm.roll == 0.0
 
 
-def test_latlon_uses_the_equirectangular_projection():
+def test_latlon_is_the_wgs84_tangent_plane_at_the_origin():
     env = Environment(origin_lat_deg=45.0, origin_lon_deg=10.0)
     lat, lon = env.latlon(1111.3, 0.0)
-    assert lat - 45.0 == pytest.approx(0.01, rel=2e-3) and lon == 10.0
-    _, lon = env.latlon(0.0, 787.0)  # 1/100 deg of longitude at 45 deg is ~786 m
-    assert lon - 10.0 == pytest.approx(0.01, rel=3e-3)
+    # 1/100 deg of latitude at 45 deg is 1111.4 m (WGS-84 meridional radius)
+    assert lat - 45.0 == pytest.approx(0.01, rel=2e-4) and lon == pytest.approx(10.0, abs=1e-12)
+    lat, lon = env.latlon(0.0, 788.6)  # 1/100 deg of longitude at 45 deg is 788.6 m
+    assert lon - 10.0 == pytest.approx(0.01, rel=2e-4)
+    assert lat - 45.0 == pytest.approx(0.0, abs=1e-6)  # the parallel curves off the plane
     assert Environment().latlon(1.0, 1.0) is None
 
 
@@ -208,5 +209,6 @@ def test_rotation_is_orthonormal_and_yaw_points_the_nose():
     assert nose_up[2] < 0.0  # positive pitch raises the nose (down is +)
 
 
-def test_euler_rate_matrix_at_level_is_identity():
-    assert np.allclose(euler_rate_matrix(0.0, 0.0), np.eye(3))
+def test_euler_rates_at_level_are_the_body_rates():
+    assert kinematics(0.0, 0.0, 0.0, (0, 0, 0, 0.1, -0.2, 0.3))[3:] == pytest.approx(
+        (0.1, -0.2, 0.3))

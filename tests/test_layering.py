@@ -125,6 +125,34 @@ def test_only_the_tools_and_the_closed_loop_runner_import_the_simulator() -> Non
     assert not outside, f"modules outside the tools importing sitl: {sorted(outside)}"
 
 
+ESTIMATOR_FORMULAS = {"onboard.core.geo", "onboard.core.so3", "onboard.estimators",
+                      "onboard.pipelines"}
+"""The estimators' geodesy, rotations and mathematics: the simulator computes its own
+(onboard.sitl.frames: pymap3d, scipy's Rotation; docs/sitl.md)."""
+SIM_EVALUATION = {"onboard.sitl.closed_loop"}
+"""Simulator modules that run or score the estimators (the closed loop is the experiment)."""
+
+
+def _formula_imports(path: Path, module: str | None = None) -> list[str]:
+    return [f"line {line}: {t}" for line, t in imports_of(path, module)
+            if _allowed(t, ESTIMATOR_FORMULAS)]
+
+
+def test_the_simulator_shares_no_formula_module_with_the_estimators() -> None:
+    wrong = {module_name(p): _formula_imports(p) for p in sorted((REPO / "sitl").rglob("*.py"))
+             if module_name(p) not in SIM_EVALUATION}
+    wrong = {m: w for m, w in wrong.items() if w}
+    assert not wrong, f"simulator modules importing the estimators' formulas: {wrong}"
+
+
+def test_the_formula_check_sees_a_shared_rotation(tmp_path: Path) -> None:
+    """A negative control: a plant that rotates with the estimators' so3 is caught."""
+    fake = tmp_path / "probe.py"
+    fake.write_text("from onboard.core.so3 import euler_to_matrix\n"
+                    "from onboard.core import geo\nfrom onboard.core.messages import Imu\n")
+    assert len(_formula_imports(fake, "onboard.sitl.plants.probe")) == 2
+
+
 def test_the_cli_dispatches_only_the_sitl_command_into_the_simulator() -> None:
     from onboard.cli import build_parser
 

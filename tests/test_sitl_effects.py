@@ -7,6 +7,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pymap3d
 import pytest
 
 from onboard.core.messages import GnssFix, Heading, Imu
@@ -93,7 +94,7 @@ def test_gps_latency_delays_the_fixes():
         for s in samples:
             key = round(s.t - lag, 3) if isinstance(s, GnssFix) else None
             if key in truth:
-                n = (s.lat_deg - o.lat0) * o.m_lat
+                n = float(pymap3d.geodetic2enu(s.lat_deg, s.lon_deg, 0.0, o.lat0, o.lon0, 0.0)[1])
                 e.append(n - truth[key].north)
         return float(np.sqrt(np.mean(np.square(e))))
 

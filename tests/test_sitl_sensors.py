@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pymap3d
 import pytest
 
 from onboard.core.messages import Attitude, DvlPosition, DvlVelocity, GnssFix, Heading, Imu
@@ -47,7 +48,9 @@ def _view(t: float, truth: TruthRecord, **kw) -> WorldView:
 
 
 def _ne(fix: GnssFix) -> tuple[float, float]:
-    return (fix.lat_deg - ORIGIN.lat0) * ORIGIN.m_lat, (fix.lon_deg - ORIGIN.lon0) * ORIGIN.m_lon
+    """North/east (m) of a fix, back through pymap3d (the simulator's own geodesy)."""
+    e, n, _ = pymap3d.geodetic2enu(fix.lat_deg, fix.lon_deg, 0.0, ORIGIN.lat0, ORIGIN.lon0, 0.0)
+    return float(n), float(e)
 
 
 def _run_gnss(cfg: GnssConfig, n: int, seed: int = 3, **truth_kw) -> list[GnssFix]:

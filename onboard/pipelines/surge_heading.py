@@ -30,6 +30,7 @@ course over ground (course mode).
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any, Callable, Literal, Mapping, Sequence
 
 from onboard.core.config import Config
@@ -50,7 +51,7 @@ from onboard.estimators.axis_model import (
     axis_commands,
     path_increment,
 )
-from onboard.estimators.increment_filter import IncrementFilter
+from onboard.estimators.increment_filter import PENDING_INNOVATIONS, IncrementFilter
 from onboard.estimators.measurement_points import (
     CommandHistory,
     HeadingUnwrapper,
@@ -59,6 +60,7 @@ from onboard.estimators.measurement_points import (
     finite_positive,
 )
 from onboard.estimators.reconstruction import Point, TrackReconstruction
+from onboard.pipelines.base import unused_measurement
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used."""
@@ -70,6 +72,12 @@ SPEED_ACCURACY_MAX_MPS = 5.0
 """Ceiling of a fix's reported speed accuracy (m/s)."""
 CRAB_MIN_SPEED_MPS = 0.5
 """Below this speed over ground (m/s) the course is too noisy for the crab angle."""
+DOPPLER_SIGN_MIN_SPEED_MPS = 0.1
+"""Below this speed over ground (m/s), the default GNSS speed sigma, a fix's course has
+~1 rad of noise and cannot tell ahead from astern: its Doppler speed is not used (0.2
+and 0.3 m/s were measured too and cost the AIE on slow turns: docs/aie.md)."""
+SIGN_UNKNOWN = "sign_unknown"
+"""The ``surge.rate`` rejection reason of a Doppler speed whose sign is unknown."""
 SAME_POINT_S = 1e-3
 """Two points closer in time than this (s) are one point: the newer is not used."""
 WINDOW_END_AFTER_FIX = 0.25
@@ -126,6 +134,8 @@ class SurgeHeadingPipeline:
             var_heading0=self.sigma_h ** 2, max_gap_s=cfg.max_gap_s,
             imu_aiding=cfg.imu_aiding, imu_horizon_s=cfg.imu_horizon_s)
         self.frame: LocalFrame | None = None
+        self._unused_rate: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
+        """Doppler speeds left out before any update (sign unknown), as records."""
         self._publish_inputs = "surge_input" in columns
         self._disc = Discretization()
         self._unwrap = HeadingUnwrapper()
@@ -243,7 +253,9 @@ class SurgeHeadingPipeline:
         """The fix's speed over ground as the signed path speed (astern when the course
         is more than 90 deg off the newest heading; always ahead without a heading), of
         noise the configured ``sigma_v`` or the fix's worse reported accuracy; its course
-        against the heading is the accelerometer's crab angle."""
+        against the heading is the accelerometer's crab angle. With a heading, a speed
+        below ``DOPPLER_SIGN_MIN_SPEED_MPS`` has no known sign (its course is noise): it is
+        not used, and recorded as a ``surge.rate`` rejection (``sign_unknown``)."""
         sog, cog, psi = s.sog_mps, s.cog_rad, self._unwrap.last
         imu = self.track.imu
         if (imu is not None and sog is not None and cog is not None
@@ -251,8 +263,13 @@ class SurgeHeadingPipeline:
             imu.crab(cog - psi)
         if sog is None or not self.cfg.gnss_velocity or not math.isfinite(sog):
             return
-        if cog is not None and psi is not None and math.cos(cog - psi) < 0.0:
-            sog = -sog
+        if cog is not None and psi is not None:
+            if abs(sog) < DOPPLER_SIGN_MIN_SPEED_MPS:
+                self._unused_rate.append(unused_measurement(
+                    f"{self.surge.name}.rate", s.t, 1, SIGN_UNKNOWN, s.source))
+                return
+            if math.cos(cog - psi) < 0.0:
+                sog = -sog
         extra = 0.0
         sacc = s.speed_acc_mps
         if sacc is not None and self.cfg.gnss_accuracy:
@@ -429,7 +446,8 @@ class SurgeHeadingPipeline:
         """The innovation records of both axes' updates since the last call (channels
         ``surge.increment``, ``surge.rate`` (the Doppler speed) and
         ``heading.increment``)."""
-        out: list[Innovation] = []
+        out: list[Innovation] = list(self._unused_rate)
+        self._unused_rate.clear()
         for _, ax in self._axes():
             out.extend(ax.innovations)
             ax.innovations.clear()

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from onboard.core.geo import wrap_2pi
+from onboard.core.geo import LocalFrame, wrap_2pi
 
 KEYS: tuple[str, ...] = (
     "replay_vs_pymavlink_parse",
@@ -189,7 +189,7 @@ def synthesize_tlog(path: Path, duration_s: float, seed: int = 0) -> dict[str, A
     m = mav.MAVLink(None, srcSystem=1, srcComponent=1)
     m.robust_parsing = True
     epoch = 1.7e9
-    lat0, lon0 = 41.6, -71.3
+    frame = LocalFrame(41.6, -71.3)
     n_ticks = int(round(duration_s * 50))
     frames = 0
     with TlogWriter(path) as w:
@@ -221,8 +221,7 @@ def synthesize_tlog(path: Path, duration_s: float, seed: int = 0) -> dict[str, A
                 put(t, mav.MAVLink_servo_output_raw_message(
                     ms * 1000, 0, 1500 + int(r * 1000), 1500, 1700, 1500, 0, 0, 0, 0))
             if k % 10 == 0:
-                lat = lat0 + north / 111_320.0
-                lon = lon0 + east / (111_320.0 * math.cos(math.radians(lat0)))
+                lat, lon = frame.to_latlon(north, east)
                 put(t, mav.MAVLink_gps_raw_int_message(
                     ms * 1000, 3, int(lat * 1e7), int(lon * 1e7), 0, 120, 65535,
                     int(u * 100), int(math.degrees(psi) * 100) % 36000, 12))

@@ -38,11 +38,14 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from onboard.core.geo import LocalFrame
 from onboard.drivers.nmea import encode_gga, encode_hdt, encode_rmc
 
 EPOCH_S = 1_767_225_600.0
 """UTC of t = 0 in the generated NMEA (2026-01-01)."""
 ORIGIN = (41.49, -71.42)
+ORIGIN_FRAME = LocalFrame(*ORIGIN)
+"""The traffic's local frame (deg origin)."""
 
 
 class TrafficGenerator:
@@ -92,8 +95,7 @@ class TrafficGenerator:
         out: list[bytes] = []
         n, e, hdg, _ = self.state(t)
         if k % 10 == 0:
-            lat = ORIGIN[0] + n / 111_320.0
-            lon = ORIGIN[1] + e / (111_320.0 * math.cos(math.radians(ORIGIN[0])))
+            lat, lon = ORIGIN_FRAME.to_latlon(n, e)
             out.append(encode_gga(EPOCH_S + t, lat, lon) + encode_rmc(
                 EPOCH_S + t, lat, lon, self.speed, hdg))
         if k % 5 == 0:

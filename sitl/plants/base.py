@@ -34,9 +34,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from onboard.core.geo import wrap_pi
 from onboard.core.messages import ActuatorCommand
-from onboard.core.so3 import euler_kinematics, euler_to_matrix
+from onboard.sitl.frames import euler_to_matrix, kinematics, wrap_pi
 from onboard.sitl.environment import Environment
 from onboard.sitl.integrate import GRAVITY, rk4_step_list
 from onboard.sitl.truth import TruthRecord
@@ -369,8 +368,8 @@ class PlantBase:
     def _kinematics(self, x: list[float]) -> list[float]:
         """``[N', E', D', phi', theta', psi']`` for the state ``x`` and the held current:
         ``R(Theta) nu_r[0:3] + V_c`` and ``T(Theta) omega``
-        (:func:`onboard.core.so3.euler_kinematics`)."""
-        dn, de, dd, dphi, dtheta, dpsi = euler_kinematics(x[3], x[4], x[5], x[6:12])
+        (:func:`onboard.sitl.frames.kinematics`)."""
+        dn, de, dd, dphi, dtheta, dpsi = kinematics(x[3], x[4], x[5], x[6:12])
         vc = self._vc
         return [dn + vc[0], de + vc[1], dd + vc[2], dphi, dtheta, dpsi]
 

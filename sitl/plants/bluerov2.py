@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from onboard.core.so3 import ned_to_body
+from onboard.sitl.frames import ned_to_body_fast
 from onboard.sitl.plants.base import Command, PlantBase, PropulsionWrench
 from onboard.sitl.plants.fossen import (
     SparseMatrix,
@@ -174,7 +174,7 @@ class BlueROV2(PlantBase):
         """R^T F_ext (N, body) for the held external force (zeros without one)."""
         if self._ext is None:
             return 0.0, 0.0, 0.0
-        return ned_to_body(phi, theta, psi, self._ext)
+        return ned_to_body_fast(phi, theta, psi, self._ext)
 
     def _rhs(self, t: float, x: list[float], command: Command) -> list[float]:
         p = self.params

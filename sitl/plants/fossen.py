@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from onboard.core.so3 import skew
+from onboard.sitl.frames import skew
 
 __all__ = [
     "SparseMatrix",
