@@ -24,10 +24,18 @@ turned. For a known regressor the coefficient part *is* RLS with forgetting; her
 regressor depends on ``nu_r = R^T (v_g - V_c)`` and the joint filter keeps the correlation
 between ``theta`` and ``V_c`` (:mod:`.model_identification`).
 
-Innovation-based calibration: a consistent filter has white innovations, so the mean of
-``N`` of them has covariance ``~ mean(S) / N``. Model and current errors are slow and survive
-the averaging, white sensor noise does not: a running mean of the block-mean NIS inflates the
-process noise (``q_scale``, never below 1).
+Innovation-based calibration (Mehra 1970; Mohamed & Schwarz 1999), both ways, per block of
+``calibrate_block`` full-dimension innovations:
+
+* the measurement noise: the mean per-sample NIS of a block is mostly the sensor's white
+  noise against its declared variance (the current's share of ``S`` is small), so it scales
+  the declared variances (``r_scale``, within :data:`R_SCALE_BOUNDS`): a receiver quieter
+  than its configuration no longer makes every sigma downstream too large;
+* the process noise: a consistent filter has white innovations, so the mean of ``N`` of
+  them has covariance ``~ mean(S) / N``. Model and current errors are slow and survive the
+  averaging, white sensor noise does not: a running mean of the block-mean NIS scales the
+  process noise (``q_scale``, within [:data:`Q_SCALE_MIN`, 100]), up when the slow errors
+  are larger than the filter says, down when they are smaller.
 """
 
 from __future__ import annotations
@@ -63,6 +71,18 @@ class VelocityMeasurement(NamedTuple):
 
 PREDICT_STEP_S = 0.2
 """Longest prediction sub-step (s): a tick longer than this is predicted in equal steps."""
+Q_SCALE_MIN = 0.1
+"""Smallest process-noise scale of the calibration: the configured process noise is an
+upper estimate of the model and current errors, and the block NIS may deflate it this far
+(a tenth of the variance, a third of the sigma) but no further."""
+Q_SCALE_MAX = 100.0
+"""Largest process-noise scale of the calibration."""
+R_SCALE_BOUNDS = (0.1, 10.0)
+"""Range of the measurement-noise scale of the calibration (variance ratio to the
+declared one-sigma squared)."""
+CALIBRATION_RATE = 0.1
+"""Per calibration block, the running mean of a NIS moves this fraction towards the block's
+value, and the scale it drives changes by ``exp(rate (mean - 1))``."""
 
 
 def inv_small(S: np.ndarray) -> np.ndarray | None:
@@ -129,7 +149,10 @@ class CurrentKalmanFilter:
         S: its covariance (m^2/s^2).
         nis: its normalized innovation squared ``y^T S^-1 y`` (NaN if ``S`` is singular).
         nis_avg: running mean of the block-mean NIS per dimension (calibration).
-        q_scale: process-noise scale from the calibration (1 to 100).
+        q_scale: process-noise scale from the calibration (:data:`Q_SCALE_MIN` to 100).
+        r_nis_avg: running mean of the per-sample NIS per dimension (calibration).
+        r_scale: measurement-noise scale from the calibration (:data:`R_SCALE_BOUNDS`);
+            every update's variance is ``r_scale std^2``.
         started: False until the first velocity measurement (and after a reset).
         identification: the :class:`.ModelIdentification` of the coefficients.
         counters: event counts (``updates``, ``rejected_gate``, ``diverged``), shared with
@@ -180,6 +203,9 @@ class CurrentKalmanFilter:
         self.nis = 0.0
         self.q_scale = 1.0
         self.nis_avg = 1.0
+        self.r_scale = 1.0
+        self.r_nis_avg = 1.0
+        self._blk_nis = 0.0
         self.started = False
         self._blk_y = np.zeros(nd)
         self._blk_S = np.zeros((nd, nd))
@@ -289,6 +315,7 @@ class CurrentKalmanFilter:
         self.x[:] = other.x
         self.P = other.P.copy()
         self.q_scale, self.nis_avg = other.q_scale, other.nis_avg
+        self.r_scale, self.r_nis_avg = other.r_scale, other.r_nis_avg
         self._unpack_coefficients()
         self.identification.masked = list(other.identification.masked)
 
@@ -360,10 +387,12 @@ class CurrentKalmanFilter:
             else:
                 row[:nd] = [dt * a for a in J[i]]
             row[i] += 1.0
-            if nt and (ident.identifying or ident.prior_dof[i]):
-                # coefficient uncertainty flows into nu_r while identifying, and always for
-                # a DOF whose model is only the generic prior (mode (b)): an assumed sway
-                # damping must not pin the sideslip in a turn
+            if nt:
+                # the coefficients' uncertainty always flows into nu_r (and so into the
+                # current): while not identifying they are consider parameters (their gain
+                # rows are zero, Schmidt), so a model identified elsewhere carries its own
+                # covariance to the current's sigma; an assumed sway damping must not pin
+                # the sideslip in a turn either
                 row[col:col + k] = [dt * a for a in phis[i]]
             col += k
             rows.append(row)
@@ -384,8 +413,9 @@ class CurrentKalmanFilter:
         q_nu = (self.accel_std ** 2 + turn * turn) * self.model_error_time_s * self.q_scale
         q = [q_nu * dt] * nd
         for i in range(nd):
-            if ident.masked[i]:  # still the generic prior
-                q[i] = max(q[i], self.prior_accel_std ** 2 * self.model_error_time_s * dt)
+            if ident.masked[i]:  # still the generic prior (scaled by the calibration too)
+                q[i] = max(q[i], self.prior_accel_std ** 2 * self.model_error_time_s * dt
+                           * self.q_scale)
         q += [self.current_walk ** 2 * dt * self.q_scale] * nd
         P = F @ self.P @ F.T
         P.ravel()[:o * (n + 1):n + 1] += q  # a view: the product is C-contiguous
@@ -394,7 +424,8 @@ class CurrentKalmanFilter:
     def update(self, kind: MeasurementKind, z: np.ndarray, std: float,
                R: np.ndarray) -> UpdateOutcome:
         """Kalman update with one velocity measurement ``z`` (m/s, one-sigma ``std`` per
-        component; the module docstring's table), ``R`` the body-to-earth rotation.
+        component as declared, its variance scaled by ``r_scale``; the module docstring's
+        table), ``R`` the body-to-earth rotation.
 
         A NIS above ``gate_nis`` rejects the measurement (after 50 updates, ``gated``); the
         covariance is in Joseph form for the gain actually used (the coefficient rows of
@@ -408,7 +439,7 @@ class CurrentKalmanFilter:
             H[:, :nd] = R[:m]
         elif kind == "bottom":
             H[:, nd:2 * nd] = R.T[:m]
-        var = std * std
+        var = std * std * self.r_scale
         y = z - H @ self.x
         PHt = self.P @ H.T
         S = H @ PHt
@@ -439,29 +470,37 @@ class CurrentKalmanFilter:
         self._unpack_coefficients()
         self.counters["updates"] += 1
         if self.calibrate and self.started and m == nd:
-            self._calibrate(y, S)
+            self._calibrate(y, S, nis)
         return "accepted"
 
-    def _calibrate(self, y: np.ndarray, S: np.ndarray) -> None:
-        """Fold one full-dimension innovation into the calibration block; at the end of a
-        block, move ``nis_avg`` towards the block-mean NIS and rescale ``q_scale``.
+    def _calibrate(self, y: np.ndarray, S: np.ndarray, nis: float) -> None:
+        """Fold one full-dimension innovation (NIS ``nis``) into the calibration block; at
+        the end of a block, move ``r_nis_avg`` towards the block's mean per-sample NIS and
+        ``nis_avg`` towards the block-mean NIS, and rescale ``r_scale`` and ``q_scale``
+        (module docstring).
 
         The per-sample NIS is blind to slow model and current errors (docs/current.md,
         "Honest sigma"); the block mean is not."""
         m = len(y)
         self._blk_y += y
         self._blk_S += S
+        self._blk_nis += nis
         self._blk_n += 1
         if self._blk_n >= self.calibrate_block:
             nb = self._blk_n
             yb = self._blk_y / nb
             Sb = self._blk_S / (nb * nb)
             nis_b = float(yb @ np.linalg.solve(Sb, yb)) / m
-            self.nis_avg += 0.1 * (min(nis_b, 10.0) - self.nis_avg)
-            self.q_scale = float(np.clip(
-                self.q_scale * math.exp(0.1 * (self.nis_avg - 1.0)), 1.0, 100.0))
+            k = CALIBRATION_RATE
+            self.nis_avg += k * (min(nis_b, 10.0) - self.nis_avg)
+            self.q_scale = float(np.clip(self.q_scale * math.exp(k * (self.nis_avg - 1.0)),
+                                         Q_SCALE_MIN, Q_SCALE_MAX))
+            self.r_nis_avg += k * (min(self._blk_nis / (nb * m), 10.0) - self.r_nis_avg)
+            self.r_scale = float(np.clip(self.r_scale * math.exp(k * (self.r_nis_avg - 1.0)),
+                                         *R_SCALE_BOUNDS))
             self._blk_y[:] = 0.0
             self._blk_S[:] = 0.0
+            self._blk_nis = 0.0
             self._blk_n = 0
 
     def current_var_horizontal(self) -> tuple[float, float]:

@@ -79,7 +79,7 @@ from onboard.estimators.current_kf import (
     VelocityMeasurement,
 )
 from onboard.estimators.flow_observer import FlowObserver
-from onboard.estimators.hgo import GainDesign, IncreasingGain
+from onboard.estimators.hgo import GainDesign, IncreasingGain, gamma_star, model_lipschitz
 from onboard.estimators.model_identification import (
     ModelIdentification,
     VelocityRls,
@@ -99,6 +99,9 @@ VELOCITY_FRESH_S = 1.0
 MEAS_INTERVAL_S = (1e-3, 0.1, 1.0)
 """Interval (s) between velocity measurements as the high-gain observer's increasing-gain
 law sees it: (floor, the first measurement's, ceiling)."""
+GAMMA_RECHECK_S = 10.0
+"""After the high-gain observer's RLS changes its model, gamma* is recomputed at most this
+often (s)."""
 PENDING_INNOVATIONS = 1024
 """Innovation records kept until the engine takes them; older ones are dropped."""
 REASONS: dict[str, str] = {"accepted": "", "gated": "gate", "reset": "diverged"}
@@ -114,7 +117,8 @@ class CurrentPipeline:
     own model identification, or None), ``restore_check`` (the probation of a restored
     current), ``inp`` (model inputs), ``roll``, ``pitch``, ``yaw`` (rad), ``counters``;
     shortcuts ``x``, ``P``, ``thetas`` (model coefficients in use, per channel),
-    ``yaw_rls`` and ``gamma`` (HGO gain, 0 without).
+    ``yaw_rls`` and ``gamma`` (HGO gain, 0 without); with the HGO, ``lipschitz`` and
+    ``gamma_star`` of the model it runs (:meth:`_gamma_from_model`).
     """
 
     name = "current"
@@ -172,6 +176,9 @@ class CurrentPipeline:
                 self.model, self.gain, _gain_law(cfg, self.gain), self.kf.P[:2 * nd, :2 * nd],
                 accel_std=cfg.accel_std, model_error_time_s=cfg.model_error_time_s,
                 current_walk=cfg.current_walk, counters=self.counters)
+            self._gamma_follows_model = _gain_is_design_fixed(cfg, self.gain)
+            self._gamma_t = -math.inf
+            self._gamma_from_model()
         self.flow: FlowObserver | None = None
         if cfg.observer == "flow":
             self.flow = FlowObserver(self.model, poles=cfg.flow_poles or None,
@@ -307,7 +314,9 @@ class CurrentPipeline:
         ``hgo.<channel>``); returns False if it diverged (the caller restarts it)."""
         hgo = self.hgo
         assert hgo is not None
-        ok = hgo.update(m.kind, m.z, m.std, dt_meas, R, self.inp)
+        # the sensor noise as the joint filter's calibration has found it
+        std = m.std * math.sqrt(self.kf.r_scale)
+        ok = hgo.update(m.kind, m.z, std, dt_meas, R, self.inp)
         if hgo.takes(m.kind, len(m.z)):
             channel = "hgo." + CHANNELS[m.kind]
             if ok:
@@ -384,6 +393,25 @@ class CurrentPipeline:
         self.counters["hgo_rls_updates"] = self.counters.get("hgo_rls_updates", 0) + (
             rls.n_updates - before)
         self.counters["hgo_rls_rejected"] = rls.n_rejected
+        if rls.n_updates != before and t - self._gamma_t >= GAMMA_RECHECK_S:
+            self._gamma_t = t
+            self._gamma_from_model()
+
+    def _gamma_from_model(self) -> None:
+        """gamma* of the model the high-gain observer runs (its RLS's coefficients):
+        ``L_f`` of that model (:func:`.hgo.model_lipschitz`) into ``gamma* = max(1, 2 ||P||
+        L_f / lambda)`` of the gain file's LMI solution, kept as ``lipschitz`` and
+        ``gamma_star``; the fixed gain of a gain file (``rho = 0``, nothing configured)
+        then runs at gamma* times the file's margin (``gamma / gamma_star``), so the
+        observer stays at its own sufficient condition when identification changes the
+        model."""
+        hgo, rls, design = self.hgo, self.hgo_rls, self.gain
+        assert hgo is not None and rls is not None and design is not None
+        self.lipschitz = model_lipschitz(self.model, rls.thetas)
+        self.gamma_star = gamma_star(design.P, design.lam, self.lipschitz)
+        if self._gamma_follows_model:
+            g = self.gamma_star * design.gamma / design.gamma_star
+            hgo.law.gamma = hgo.law.gamma_max = hgo.gamma_init = g
 
     def _surge_unobservable(self) -> bool:
         """The along-track current is unobservable for the reported observer: its surge
@@ -465,11 +493,12 @@ class CurrentPipeline:
 
     def health(self) -> Mapping[str, float]:
         """Counters (updates, rejections, RLS updates, restarts), the calibration's
-        ``q_scale``, the GNSS velocity one-sigma in use, coefficient and yaw-RLS spread,
+        ``q_scale`` and ``r_scale``, the GNSS velocity one-sigma in use, coefficient and yaw-RLS spread,
         observer diagnostics and observability."""
         h: dict[str, float] = dict(self.counters)
         kf = self.kf
         h["q_scale"] = kf.q_scale
+        h["r_scale"] = kf.r_scale
         h["velocity.gnss_std"] = self.samples.gnss_std_used
         if self.identification.n_theta:
             h["theta.std_max"] = kf.theta_std_max()
@@ -478,6 +507,8 @@ class CurrentPipeline:
             h["rls.yaw.sigma"] = math.sqrt(rls.sigma2)
         if self.hgo is not None:
             h["gamma"] = self.hgo.gamma
+            h["gamma_star"] = self.gamma_star
+            h["lipschitz"] = self.lipschitz
         if self.flow is not None:
             h["flow.gain_kept"] = float(self.flow.unobservable)
             h["flow.diverged"] = float(self.flow.diverged)
@@ -532,6 +563,7 @@ class CurrentPipeline:
             if self.hgo_rls is not None:
                 self.hgo_rls.restart(self.model.thetas_from_mapping(
                     state.get("hgo_thetas", state.get("thetas", {})), thetas)[:nd])
+                self._gamma_from_model()
             before = self.kf.x[nd:2 * nd].copy()
             self.kf.restore_current(state["current"], state.get("current_std", [0.3] * nd))
         except (KeyError, TypeError, ValueError):
@@ -582,6 +614,14 @@ def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification,
         prior_accel_std=cfg.prior_accel_std, gate_nis=cfg.gate_nis,
         calibrate=cfg.calibrate, calibrate_block=cfg.calibrate_block,
         counters=counters)
+
+
+def _gain_is_design_fixed(cfg: CurrentConfig, design: GainDesign) -> bool:
+    """Whether the observer runs a gain file's fixed gain (``rho = 0``, with a gamma*) and
+    nothing in ``[pipelines.current]`` overrides it: then the gain follows gamma* of the
+    model that runs (:meth:`CurrentPipeline._gamma_from_model`)."""
+    configured = (cfg.gamma, cfg.gamma_0, cfg.rho, cfg.gamma_max)
+    return all(v is None for v in configured) and design.rho == 0.0 and design.gamma_star > 0
 
 
 def _gain_law(cfg: CurrentConfig, design: GainDesign) -> IncreasingGain:

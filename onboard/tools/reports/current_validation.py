@@ -190,6 +190,12 @@ def body_axis_std(r: dict[str, Any], after: float) -> tuple[float, float, float]
     return tuple(float(np.std(e[:, i])) for i in range(3))  # type: ignore[return-value]
 
 
+CALM_SECTION = {"init_current_std": 1e-3, "current_walk": 1e-6, "forgetting": 1.0,
+                "identify_straight": True}
+"""``[pipelines.current]`` of a calm-water identification run: the current pinned to zero
+(tiny prior, no random walk), no forgetting, identification on straight lines too."""
+
+
 @cache
 def _calm(scenario: str, duration: float, seed: int) -> Any:
     from onboard.sitl import scenarios
@@ -204,12 +210,22 @@ def calm_model(scenario: str, config_name: str, duration: float = 400.0,
                seed: int = 7) -> dict[str, dict[str, float]]:
     """Identify the model in a calm-water run of the same vehicle and mission (WVAM step 1):
     the pipeline with the current pinned to zero (tiny prior, no random walk)."""
-    calm = _calm(scenario, duration, seed)
-    r = run(calm, {"init_current_std": 1e-3, "current_walk": 1e-6, "forgetting": 1.0,
-                     "identify_straight": True},
-            config_name, duration=duration, seed=seed)
-    pipe = r["pipe"]
-    return pipe.model.thetas_to_mapping(pipe.thetas)
+    return calm_state(scenario, config_name, duration, seed)["thetas"]
+
+
+@cache
+def _calm_run_state(scenario: str, config_name: str, duration: float,
+                    seed: int) -> tuple[tuple[str, Any], ...]:
+    r = run(_calm(scenario, duration, seed), CALM_SECTION, config_name, duration=duration,
+            seed=seed)
+    return tuple(identified_state(r).items())
+
+
+def calm_state(scenario: str, config_name: str, duration: float = 400.0,
+               seed: int = 7) -> dict[str, Any]:
+    """:func:`calm_model`'s identification as the persistent state that carries it
+    (:func:`identified_state`: the coefficients and their covariance)."""
+    return dict(_calm_run_state(scenario, config_name, duration, seed))
 
 
 GAVIA_RPMS = (1200.0, 1300.0, 1400.0, 1500.0, 1600.0)
@@ -246,29 +262,31 @@ def gavia_at(rpm: float, steps: tuple[float, ...] = (), calm: bool = False) -> A
 
 
 @cache
-def gavia_model(identification: str, seed: int = 7) -> dict[str, dict[str, float]]:
-    """The Gavia model identified in calm water (WVAM step 1, as :func:`calm_model`):
-    ``"one-rpm"`` on the mission itself (straight, 1500 rpm, 400 s: the model of the
-    default runs), ``"rpm-steps"`` on a straight run through :data:`GAVIA_ID_RPM_STEPS`."""
+def gavia_model(identification: str, seed: int = 7) -> dict[str, Any]:
+    """The Gavia model identified in calm water (WVAM step 1, as :func:`calm_model`) as
+    the persistent state that carries it (:func:`identified_state`: coefficients and their
+    covariance): ``"one-rpm"`` on the mission itself (straight, 1500 rpm, 400 s: the model
+    of the default runs), ``"rpm-steps"`` on a straight run through
+    :data:`GAVIA_ID_RPM_STEPS`."""
     if identification == "one-rpm":
-        return calm_model("gavia-tidal", "torpedo-auv")
-    duration = GAVIA_ID_STEP_S * len(GAVIA_ID_RPM_STEPS)
-    r = run(gavia_at(0.0, GAVIA_ID_RPM_STEPS, calm=True),
-            {"init_current_std": 1e-3, "current_walk": 1e-6, "forgetting": 1.0,
-             "identify_straight": True}, "torpedo-auv", duration=duration, seed=seed)
-    pipe = r["pipe"]
-    return pipe.model.thetas_to_mapping(pipe.thetas)
+        sc, duration = _calm("gavia-tidal", 400.0, seed), 400.0
+    else:
+        sc = gavia_at(0.0, GAVIA_ID_RPM_STEPS, calm=True)
+        duration = GAVIA_ID_STEP_S * len(GAVIA_ID_RPM_STEPS)
+    return identified_state(run(sc, CALM_SECTION, "torpedo-auv", duration=duration,
+                                seed=seed))
 
 
 def gavia_offdesign(identification: str, rpm: float, observer: str = "kf", seed: int = 1,
                     duration: float = 200.0, after: float = 60.0) -> dict[str, Any]:
     """:func:`metrics` of gavia-tidal flown at ``rpm`` with the model of
     :func:`gavia_model` (``identification``) and ``observer``."""
-    section: dict[str, Any] = {"model": gavia_model(identification)}
+    state = gavia_model(identification)
+    section: dict[str, Any] = {"model": state["thetas"]}
     if observer != "kf":
         section["observer"] = observer
-    return metrics(run(gavia_at(rpm), section, "torpedo-auv", duration=duration, seed=seed),
-                   after)
+    return metrics(run(gavia_at(rpm), section, "torpedo-auv", duration=duration, seed=seed,
+                       state=state), after)
 
 
 def gavia_offdesign_table(observers: tuple[str, ...] = ("kf", "hgo"), seed: int = 1) -> str:
@@ -289,6 +307,45 @@ def gavia_offdesign_table(observers: tuple[str, ...] = ("kf", "hgo"), seed: int 
     return "\n".join(lines)
 
 
+def identified_state(model_run: dict[str, Any]) -> dict[str, Any]:
+    """The persistent state (:meth:`CurrentPipeline.get_state`) of an identification run,
+    as a vehicle carries its identified model into the next mission: the coefficients and
+    their covariance, the current reset to zero at its prior one-sigma (so that it is not a
+    restored current on probation)."""
+    st = dict(model_run["pipe"].get_state())
+    nd = len(st["current"])
+    st["current"] = [0.0] * nd
+    st["current_std"] = [1.0] * nd
+    return st
+
+
+COVERAGE_RUNS = (("gavia-tidal", "kf"), ("gavia-tidal", "hgo"), ("spheroid-sawtooth", "kf"),
+                 ("spheroid-sawtooth", "hgo"), ("effect-current", "kf"), ("boat-tidal", "kf"),
+                 ("jaiabot-turns", "kf"), ("twin-thruster-turns", "kf"))
+"""The runs (``runs.CURRENT_RUNS`` keys) and observers of the coverage table."""
+
+
+def coverage_table(seed: int = 1) -> str:
+    """The markdown table of docs/current.md, "Calibrated sigma": per run of
+    :data:`COVERAGE_RUNS`, RMS error / mean published sigma and 1- and 2-sigma coverage per
+    axis (target 0.68 / 0.95)."""
+    from onboard.tools.reports import runs
+
+    lines = ["| run (seed 1) | observer | RMS / sigma N, E, D (m/s) | 1σ cover N / E / D | "
+             "2σ cover N / E / D |", "|---|---|---|---|---|"]
+    for key, obs in COVERAGE_RUNS:
+        m = runs.current_metrics(key, obs, seed)
+        axes = [a for a in ("north", "east", "down") if math.isfinite(m[a]["sigma"])]
+
+        def cov(k: str) -> str:
+            return " / ".join(f"{m[a][k]:.2f}" if math.isfinite(m[a][k]) else "n/a"
+                              for a in axes)
+        rs = ", ".join(f"{_fmt(m[a]['rms'])} / {_fmt(m[a]['sigma'])}" for a in axes)
+        lines.append(f"| {key} | {obs} | {rs} | {cov('cover1')} | {cov('cover2')} |")
+        print(lines[-1], flush=True)
+    return "\n".join(lines)
+
+
 def _fmt(x: float) -> str:
     return f"{x:.3f}" if math.isfinite(x) else "-"
 
@@ -301,6 +358,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="docs/figures")
     ap.add_argument("--no-plot", action="store_true")
     ap.add_argument("--only", nargs="*", default=None)
+    ap.add_argument("--coverage", action="store_true",
+                    help="only the coverage table (1- and 2-sigma, per axis)")
     ap.add_argument("--gavia-rpm", action="store_true",
                     help="only the Gavia off-design table (rpm 1200-1600, two models)")
     ap.add_argument("--glider", default=None, metavar="CSV",
@@ -308,6 +367,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.gavia_rpm:
         print(gavia_offdesign_table())
+        return 0
+    if args.coverage:
+        print(coverage_table())
         return 0
     out = Path(args.out)
     rows: list[list[str]] = []
