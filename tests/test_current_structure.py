@@ -95,13 +95,11 @@ def test_the_joint_kalman_filter_finds_the_current_without_the_pipeline():
             first = False
             continue
         kf.predict(0.1, inputs)
-        x0, P0, r_scale = kf.x.copy(), kf.P.copy(), kf.r_scale
+        x0, P0 = kf.x.copy(), kf.P.copy()
         assert kf.update("earth", z, 0.05, R) == "accepted"
         H = np.hstack([R, np.eye(2)])
         assert np.allclose(kf.y, z - H @ x0, rtol=0, atol=1e-12)
-        # the declared variance times the calibration's measurement-noise scale
-        assert np.allclose(kf.S, H @ P0 @ H.T + r_scale * 0.05 ** 2 * np.eye(2), rtol=1e-12,
-                           atol=1e-15)
+        assert np.allclose(kf.S, H @ P0 @ H.T + 0.05 ** 2 * np.eye(2), rtol=1e-12, atol=1e-15)
         assert kf.nis == pytest.approx(float(kf.y @ np.linalg.solve(kf.S, kf.y)), rel=1e-9)
     current, std, _ = kf.current_estimate()
     # measured: error (-0.0003, 0.002) m/s at one-sigma (0.059, 0.055): the boat turns all

@@ -24,18 +24,19 @@ turned. For a known regressor the coefficient part *is* RLS with forgetting; her
 regressor depends on ``nu_r = R^T (v_g - V_c)`` and the joint filter keeps the correlation
 between ``theta`` and ``V_c`` (:mod:`.model_identification`).
 
-Innovation-based calibration (Mehra 1970; Mohamed & Schwarz 1999), both ways, per block of
-``calibrate_block`` full-dimension innovations:
+Innovation-based calibration: a consistent filter has white innovations, so the mean of
+``N`` of them has covariance ``~ mean(S) / N``. Model and current errors are slow and survive
+the averaging, white sensor noise does not: a running mean of the block-mean NIS inflates the
+process noise (``q_scale``, never below 1). It does not deflate it: the innovations measure
+the sum ``R nu_r + V_c``, not how the model splits it, so a current error that ``nu_r``
+compensates is invisible to them (deflating to 0.1 made the spheroid's 1-sigma coverage
+0.24-0.48, docs/current.md, "Calibrated sigma").
 
-* the measurement noise: the mean per-sample NIS of a block is mostly the sensor's white
-  noise against its declared variance (the current's share of ``S`` is small), so it scales
-  the declared variances (``r_scale``, within :data:`R_SCALE_BOUNDS`): a receiver quieter
-  than its configuration no longer makes every sigma downstream too large;
-* the process noise: a consistent filter has white innovations, so the mean of ``N`` of
-  them has covariance ``~ mean(S) / N``. Model and current errors are slow and survive the
-  averaging, white sensor noise does not: a running mean of the block-mean NIS scales the
-  process noise (``q_scale``, within [:data:`Q_SCALE_MIN`, 100]), up when the slow errors
-  are larger than the filter says, down when they are smaller.
+Model coefficients: their covariance always flows into ``nu_r`` (and so into the current),
+also while they are not being identified (consider parameters: the gain rows of ``theta``
+are zero, Schmidt 1966), so a model identified elsewhere (its persistent state carries the
+covariance) brings its uncertainty into the current's sigma off the conditions it was
+identified in.
 """
 
 from __future__ import annotations
@@ -71,18 +72,6 @@ class VelocityMeasurement(NamedTuple):
 
 PREDICT_STEP_S = 0.2
 """Longest prediction sub-step (s): a tick longer than this is predicted in equal steps."""
-Q_SCALE_MIN = 0.1
-"""Smallest process-noise scale of the calibration: the configured process noise is an
-upper estimate of the model and current errors, and the block NIS may deflate it this far
-(a tenth of the variance, a third of the sigma) but no further."""
-Q_SCALE_MAX = 100.0
-"""Largest process-noise scale of the calibration."""
-R_SCALE_BOUNDS = (0.1, 10.0)
-"""Range of the measurement-noise scale of the calibration (variance ratio to the
-declared one-sigma squared)."""
-CALIBRATION_RATE = 0.1
-"""Per calibration block, the running mean of a NIS moves this fraction towards the block's
-value, and the scale it drives changes by ``exp(rate (mean - 1))``."""
 
 
 def inv_small(S: np.ndarray) -> np.ndarray | None:
@@ -149,10 +138,7 @@ class CurrentKalmanFilter:
         S: its covariance (m^2/s^2).
         nis: its normalized innovation squared ``y^T S^-1 y`` (NaN if ``S`` is singular).
         nis_avg: running mean of the block-mean NIS per dimension (calibration).
-        q_scale: process-noise scale from the calibration (:data:`Q_SCALE_MIN` to 100).
-        r_nis_avg: running mean of the per-sample NIS per dimension (calibration).
-        r_scale: measurement-noise scale from the calibration (:data:`R_SCALE_BOUNDS`);
-            every update's variance is ``r_scale std^2``.
+        q_scale: process-noise scale from the calibration (1 to 100).
         started: False until the first velocity measurement (and after a reset).
         identification: the :class:`.ModelIdentification` of the coefficients.
         counters: event counts (``updates``, ``rejected_gate``, ``diverged``), shared with
@@ -203,9 +189,6 @@ class CurrentKalmanFilter:
         self.nis = 0.0
         self.q_scale = 1.0
         self.nis_avg = 1.0
-        self.r_scale = 1.0
-        self.r_nis_avg = 1.0
-        self._blk_nis = 0.0
         self.started = False
         self._blk_y = np.zeros(nd)
         self._blk_S = np.zeros((nd, nd))
@@ -315,7 +298,6 @@ class CurrentKalmanFilter:
         self.x[:] = other.x
         self.P = other.P.copy()
         self.q_scale, self.nis_avg = other.q_scale, other.nis_avg
-        self.r_scale, self.r_nis_avg = other.r_scale, other.r_nis_avg
         self._unpack_coefficients()
         self.identification.masked = list(other.identification.masked)
 
@@ -413,9 +395,8 @@ class CurrentKalmanFilter:
         q_nu = (self.accel_std ** 2 + turn * turn) * self.model_error_time_s * self.q_scale
         q = [q_nu * dt] * nd
         for i in range(nd):
-            if ident.masked[i]:  # still the generic prior (scaled by the calibration too)
-                q[i] = max(q[i], self.prior_accel_std ** 2 * self.model_error_time_s * dt
-                           * self.q_scale)
+            if ident.masked[i]:  # still the generic prior
+                q[i] = max(q[i], self.prior_accel_std ** 2 * self.model_error_time_s * dt)
         q += [self.current_walk ** 2 * dt * self.q_scale] * nd
         P = F @ self.P @ F.T
         P.ravel()[:o * (n + 1):n + 1] += q  # a view: the product is C-contiguous
@@ -424,8 +405,7 @@ class CurrentKalmanFilter:
     def update(self, kind: MeasurementKind, z: np.ndarray, std: float,
                R: np.ndarray) -> UpdateOutcome:
         """Kalman update with one velocity measurement ``z`` (m/s, one-sigma ``std`` per
-        component as declared, its variance scaled by ``r_scale``; the module docstring's
-        table), ``R`` the body-to-earth rotation.
+        component; the module docstring's table), ``R`` the body-to-earth rotation.
 
         A NIS above ``gate_nis`` rejects the measurement (after 50 updates, ``gated``); the
         covariance is in Joseph form for the gain actually used (the coefficient rows of
@@ -439,7 +419,7 @@ class CurrentKalmanFilter:
             H[:, :nd] = R[:m]
         elif kind == "bottom":
             H[:, nd:2 * nd] = R.T[:m]
-        var = std * std * self.r_scale
+        var = std * std
         y = z - H @ self.x
         PHt = self.P @ H.T
         S = H @ PHt
@@ -470,37 +450,29 @@ class CurrentKalmanFilter:
         self._unpack_coefficients()
         self.counters["updates"] += 1
         if self.calibrate and self.started and m == nd:
-            self._calibrate(y, S, nis)
+            self._calibrate(y, S)
         return "accepted"
 
-    def _calibrate(self, y: np.ndarray, S: np.ndarray, nis: float) -> None:
-        """Fold one full-dimension innovation (NIS ``nis``) into the calibration block; at
-        the end of a block, move ``r_nis_avg`` towards the block's mean per-sample NIS and
-        ``nis_avg`` towards the block-mean NIS, and rescale ``r_scale`` and ``q_scale``
-        (module docstring).
+    def _calibrate(self, y: np.ndarray, S: np.ndarray) -> None:
+        """Fold one full-dimension innovation into the calibration block; at the end of a
+        block, move ``nis_avg`` towards the block-mean NIS and rescale ``q_scale``.
 
         The per-sample NIS is blind to slow model and current errors (docs/current.md,
         "Honest sigma"); the block mean is not."""
         m = len(y)
         self._blk_y += y
         self._blk_S += S
-        self._blk_nis += nis
         self._blk_n += 1
         if self._blk_n >= self.calibrate_block:
             nb = self._blk_n
             yb = self._blk_y / nb
             Sb = self._blk_S / (nb * nb)
             nis_b = float(yb @ np.linalg.solve(Sb, yb)) / m
-            k = CALIBRATION_RATE
-            self.nis_avg += k * (min(nis_b, 10.0) - self.nis_avg)
-            self.q_scale = float(np.clip(self.q_scale * math.exp(k * (self.nis_avg - 1.0)),
-                                         Q_SCALE_MIN, Q_SCALE_MAX))
-            self.r_nis_avg += k * (min(self._blk_nis / (nb * m), 10.0) - self.r_nis_avg)
-            self.r_scale = float(np.clip(self.r_scale * math.exp(k * (self.r_nis_avg - 1.0)),
-                                         *R_SCALE_BOUNDS))
+            self.nis_avg += 0.1 * (min(nis_b, 10.0) - self.nis_avg)
+            self.q_scale = float(np.clip(
+                self.q_scale * math.exp(0.1 * (self.nis_avg - 1.0)), 1.0, 100.0))
             self._blk_y[:] = 0.0
             self._blk_S[:] = 0.0
-            self._blk_nis = 0.0
             self._blk_n = 0
 
     def current_var_horizontal(self) -> tuple[float, float]:

@@ -314,9 +314,7 @@ class CurrentPipeline:
         ``hgo.<channel>``); returns False if it diverged (the caller restarts it)."""
         hgo = self.hgo
         assert hgo is not None
-        # the sensor noise as the joint filter's calibration has found it
-        std = m.std * math.sqrt(self.kf.r_scale)
-        ok = hgo.update(m.kind, m.z, std, dt_meas, R, self.inp)
+        ok = hgo.update(m.kind, m.z, m.std, dt_meas, R, self.inp)
         if hgo.takes(m.kind, len(m.z)):
             channel = "hgo." + CHANNELS[m.kind]
             if ok:
@@ -493,12 +491,11 @@ class CurrentPipeline:
 
     def health(self) -> Mapping[str, float]:
         """Counters (updates, rejections, RLS updates, restarts), the calibration's
-        ``q_scale`` and ``r_scale``, the GNSS velocity one-sigma in use, coefficient and yaw-RLS spread,
+        ``q_scale``, the GNSS velocity one-sigma in use, coefficient and yaw-RLS spread,
         observer diagnostics and observability."""
         h: dict[str, float] = dict(self.counters)
         kf = self.kf
         h["q_scale"] = kf.q_scale
-        h["r_scale"] = kf.r_scale
         h["velocity.gnss_std"] = self.samples.gnss_std_used
         if self.identification.n_theta:
             h["theta.std_max"] = kf.theta_std_max()
