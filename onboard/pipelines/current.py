@@ -25,7 +25,8 @@ samples and estimates:
     law of Alessandri & Rossi
     (:class:`~onboard.estimators.current_hgo.CurrentHighGainObserver`), on a model it
     identifies itself by RLS from its own through-water velocity
-    (:class:`~onboard.estimators.model_identification.VelocityRls`), from the same prior;
+    (:class:`~onboard.estimators.model_identification.VelocityRls`), from the same prior,
+    at gamma* of that model (its Lipschitz bound, recomputed when the RLS changes it);
   - ``"flow"``: the nonlinear observer of Fan et al.
     (:class:`~onboard.estimators.flow_observer.FlowObserver`), which observes ``nu_r``
     from the attitude through the yaw dynamics; the current is then ``V_g - R nu_r``;
