@@ -18,16 +18,21 @@ from onboard.tools.reports import runs
 
 
 def _mode_a(scenario: str, config: str, duration: float, **extra):
-    model = cv.calm_model(scenario, config, duration=300.0)
-    return cv.run(scenario, {"model": model, **extra}, config, duration=duration, seed=1)
+    # the calm-water model with its covariance, as its persistent state carries it
+    state = cv.calm_state(scenario, config, duration=300.0)
+    return cv.run(scenario, {"model": state["thetas"], **extra}, config, duration=duration,
+                  seed=1, state=state)
 
 
 @pytest.mark.slow
-def test_gavia_tidal_configured_model_beats_the_paper_on_every_axis():
+def test_gavia_tidal_configured_model_at_its_design_point():
+    """At the design point (the model identified in calm water on the same run and rpm),
+    against the simulator's truth. The paper's figures (HGO vs an ADCP in the field) are a
+    sanity bound here, not a comparison: the truths differ (docs/current.md)."""
     r = _mode_a("gavia-tidal", "torpedo-auv", 600.0)
     m = cv.metrics(r, after=60.0)
-    # measured (600 s): error std N/E/D 0.017 / 0.009 / 0.006 m/s vs the paper's
-    # 0.094 / 0.066 / 0.032; 2-sigma coverage 0.94 / 1.00 / 1.00; converged in < 1 s
+    # measured (600 s): error std N/E/D 0.017 / 0.009 / 0.006 m/s (the paper's field
+    # figures 0.094 / 0.066 / 0.032); 2-sigma coverage 0.94 / 1.00 / 1.00; converged in < 1 s
     for ax, paper in zip(("north", "east", "down"), cv.PAPER_GAVIA_STD):
         assert m[ax]["std"] < paper
     assert m["north"]["cover2"] > 0.85 and m["east"]["cover2"] > 0.9

@@ -101,3 +101,33 @@ def test_current_gain_maps_chain_correction():
         expect += list(np.roots([1.0, gamma * k1 + d, gamma * k1 * d + gamma ** 2 * k2]))
     assert np.allclose(sorted(eig, key=lambda z: (z.real, z.imag)),
                        sorted(expect, key=lambda z: (z.real, z.imag)), atol=1e-9)
+
+
+def _hgo_pipeline(**section):
+    from onboard.pipelines import current as current_mod
+    from onboard.tools.reports.current_validation import make_config
+
+    return current_mod.create(make_config("torpedo-auv", {"observer": "hgo", **section}))
+
+
+def test_the_hgo_gain_follows_gamma_star_of_the_model_it_runs():
+    """gamma* comes from the Lipschitz bound of the model the observer runs, not the
+    default model the gain file was designed with: a calm-water Gavia fit (u|u| -1.48,
+    n|n| 1.44) has L_f 6.7 and gamma* 27 against the file's 1.6 and 6.4."""
+    from onboard.estimators.hgo import GainDesign, gamma_star, model_lipschitz
+
+    design = GainDesign.load(Path("config/gains/torpedo-auv.json"))
+    default = _hgo_pipeline()
+    assert default.gamma_star == pytest.approx(design.gamma_star, rel=1e-6)
+    fitted = _hgo_pipeline(model={"surge": {"u|u|": -1.48, "n|n|": 1.44}})
+    lf = model_lipschitz(fitted.model, fitted.hgo_rls.thetas)
+    # measured: L_f 6.73, gamma* 26.9 (the file: 1.60, 6.40)
+    assert fitted.lipschitz == pytest.approx(lf) and lf > 3.0 * design.lipschitz
+    assert fitted.gamma_star == pytest.approx(gamma_star(design.P, design.lam, lf))
+    assert fitted.hgo.law.gamma == pytest.approx(fitted.gamma_star)
+    assert fitted.health()["gamma_star"] == pytest.approx(fitted.gamma_star)
+
+
+def test_a_configured_hgo_gain_is_kept_and_gamma_star_still_reported():
+    p = _hgo_pipeline(model={"surge": {"u|u|": -1.48, "n|n|": 1.44}}, gamma=2.0)
+    assert p.hgo.law.gamma == 2.0 and p.gamma_star > 20.0

@@ -27,7 +27,16 @@ between ``theta`` and ``V_c`` (:mod:`.model_identification`).
 Innovation-based calibration: a consistent filter has white innovations, so the mean of
 ``N`` of them has covariance ``~ mean(S) / N``. Model and current errors are slow and survive
 the averaging, white sensor noise does not: a running mean of the block-mean NIS inflates the
-process noise (``q_scale``, never below 1).
+process noise (``q_scale``, never below 1). It does not deflate it: the innovations measure
+the sum ``R nu_r + V_c``, not how the model splits it, so a current error that ``nu_r``
+compensates is invisible to them (deflating to 0.1 made the spheroid's 1-sigma coverage
+0.24-0.48, docs/current.md, "Calibrated sigma").
+
+Model coefficients: their covariance always flows into ``nu_r`` (and so into the current),
+also while they are not being identified (consider parameters: the gain rows of ``theta``
+are zero, Schmidt 1966), so a model identified elsewhere (its persistent state carries the
+covariance) brings its uncertainty into the current's sigma off the conditions it was
+identified in.
 """
 
 from __future__ import annotations
@@ -360,10 +369,12 @@ class CurrentKalmanFilter:
             else:
                 row[:nd] = [dt * a for a in J[i]]
             row[i] += 1.0
-            if nt and (ident.identifying or ident.prior_dof[i]):
-                # coefficient uncertainty flows into nu_r while identifying, and always for
-                # a DOF whose model is only the generic prior (mode (b)): an assumed sway
-                # damping must not pin the sideslip in a turn
+            if nt:
+                # the coefficients' uncertainty always flows into nu_r (and so into the
+                # current): while not identifying they are consider parameters (their gain
+                # rows are zero, Schmidt), so a model identified elsewhere carries its own
+                # covariance to the current's sigma; an assumed sway damping must not pin
+                # the sideslip in a turn either
                 row[col:col + k] = [dt * a for a in phis[i]]
             col += k
             rows.append(row)

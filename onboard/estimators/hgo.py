@@ -72,6 +72,28 @@ def gamma_star(P: np.ndarray, lam: float, lipschitz: float) -> float:
     return max(1.0, 2.0 * float(np.linalg.norm(P, 2)) * lipschitz / lam)
 
 
+LIPSCHITZ_SPEEDS = (0.3, 1.0, 2.0)
+"""Surge speeds (m/s) over which :func:`model_lipschitz` bounds the model's Jacobian."""
+
+
+def model_lipschitz(model: Any, thetas: Any,
+                    speeds: tuple[float, ...] = LIPSCHITZ_SPEEDS) -> float:
+    """``L_f = max ||d nu_r'/d nu_r||_2`` of ``model`` (a
+    :class:`~onboard.estimators.vehicle_models.RegressionModel`) with coefficients
+    ``thetas`` over ``speeds`` (m/s, surge), with small sway/heave (0.05, 0.02 m/s), unit
+    propulsion and the yaw rate of a turn (0.1 rad/s): the Lipschitz bound of gamma*."""
+    from onboard.estimators.vehicle_models import ModelInputs
+
+    x = ModelInputs()
+    x.r = 0.1
+    x.n = 1.0
+    lf = 0.0
+    for u in speeds:
+        nu = np.array([u, 0.05, 0.02][: model.nd])
+        lf = max(lf, float(np.linalg.norm(model.jacobian(nu, x, thetas), 2)))
+    return lf
+
+
 class GainDesign:
     """An LMI gain as stored by ``onboard design-gain`` (JSON).
 

@@ -25,7 +25,8 @@ samples and estimates:
     law of Alessandri & Rossi
     (:class:`~onboard.estimators.current_hgo.CurrentHighGainObserver`), on a model it
     identifies itself by RLS from its own through-water velocity
-    (:class:`~onboard.estimators.model_identification.VelocityRls`), from the same prior;
+    (:class:`~onboard.estimators.model_identification.VelocityRls`), from the same prior,
+    at gamma* of that model (its Lipschitz bound, recomputed when the RLS changes it);
   - ``"flow"``: the nonlinear observer of Fan et al.
     (:class:`~onboard.estimators.flow_observer.FlowObserver`), which observes ``nu_r``
     from the attitude through the yaw dynamics; the current is then ``V_g - R nu_r``;
@@ -79,7 +80,7 @@ from onboard.estimators.current_kf import (
     VelocityMeasurement,
 )
 from onboard.estimators.flow_observer import FlowObserver
-from onboard.estimators.hgo import GainDesign, IncreasingGain
+from onboard.estimators.hgo import GainDesign, IncreasingGain, gamma_star, model_lipschitz
 from onboard.estimators.model_identification import (
     ModelIdentification,
     VelocityRls,
@@ -99,6 +100,9 @@ VELOCITY_FRESH_S = 1.0
 MEAS_INTERVAL_S = (1e-3, 0.1, 1.0)
 """Interval (s) between velocity measurements as the high-gain observer's increasing-gain
 law sees it: (floor, the first measurement's, ceiling)."""
+GAMMA_RECHECK_S = 10.0
+"""After the high-gain observer's RLS changes its model, gamma* is recomputed at most this
+often (s)."""
 PENDING_INNOVATIONS = 1024
 """Innovation records kept until the engine takes them; older ones are dropped."""
 REASONS: dict[str, str] = {"accepted": "", "gated": "gate", "reset": "diverged"}
@@ -114,7 +118,8 @@ class CurrentPipeline:
     own model identification, or None), ``restore_check`` (the probation of a restored
     current), ``inp`` (model inputs), ``roll``, ``pitch``, ``yaw`` (rad), ``counters``;
     shortcuts ``x``, ``P``, ``thetas`` (model coefficients in use, per channel),
-    ``yaw_rls`` and ``gamma`` (HGO gain, 0 without).
+    ``yaw_rls`` and ``gamma`` (HGO gain, 0 without); with the HGO, ``lipschitz`` and
+    ``gamma_star`` of the model it runs (:meth:`_gamma_from_model`).
     """
 
     name = "current"
@@ -172,6 +177,9 @@ class CurrentPipeline:
                 self.model, self.gain, _gain_law(cfg, self.gain), self.kf.P[:2 * nd, :2 * nd],
                 accel_std=cfg.accel_std, model_error_time_s=cfg.model_error_time_s,
                 current_walk=cfg.current_walk, counters=self.counters)
+            self._gamma_follows_model = _gain_is_design_fixed(cfg, self.gain)
+            self._gamma_t = -math.inf
+            self._gamma_from_model()
         self.flow: FlowObserver | None = None
         if cfg.observer == "flow":
             self.flow = FlowObserver(self.model, poles=cfg.flow_poles or None,
@@ -400,6 +408,25 @@ class CurrentPipeline:
         self.counters["hgo_rls_updates"] = self.counters.get("hgo_rls_updates", 0) + (
             rls.n_updates - before)
         self.counters["hgo_rls_rejected"] = rls.n_rejected
+        if rls.n_updates != before and t - self._gamma_t >= GAMMA_RECHECK_S:
+            self._gamma_t = t
+            self._gamma_from_model()
+
+    def _gamma_from_model(self) -> None:
+        """gamma* of the model the high-gain observer runs (its RLS's coefficients):
+        ``L_f`` of that model (:func:`.hgo.model_lipschitz`) into ``gamma* = max(1, 2 ||P||
+        L_f / lambda)`` of the gain file's LMI solution, kept as ``lipschitz`` and
+        ``gamma_star``; the fixed gain of a gain file (``rho = 0``, nothing configured)
+        then runs at gamma* times the file's margin (``gamma / gamma_star``), so the
+        observer stays at its own sufficient condition when identification changes the
+        model."""
+        hgo, rls, design = self.hgo, self.hgo_rls, self.gain
+        assert hgo is not None and rls is not None and design is not None
+        self.lipschitz = model_lipschitz(self.model, rls.thetas)
+        self.gamma_star = gamma_star(design.P, design.lam, self.lipschitz)
+        if self._gamma_follows_model:
+            g = self.gamma_star * design.gamma / design.gamma_star
+            hgo.law.gamma = hgo.law.gamma_max = hgo.gamma_init = g
 
     def _surge_unobservable(self) -> bool:
         """The along-track current is unobservable for the reported observer: its surge
@@ -500,6 +527,8 @@ class CurrentPipeline:
             h["rls.yaw.sigma"] = math.sqrt(rls.sigma2)
         if self.hgo is not None:
             h["gamma"] = self.hgo.gamma
+            h["gamma_star"] = self.gamma_star
+            h["lipschitz"] = self.lipschitz
         if self.flow is not None:
             h["flow.gain_kept"] = float(self.flow.unobservable)
             h["flow.diverged"] = float(self.flow.diverged)
@@ -554,6 +583,7 @@ class CurrentPipeline:
             if self.hgo_rls is not None:
                 self.hgo_rls.restart(self.model.thetas_from_mapping(
                     state.get("hgo_thetas", state.get("thetas", {})), thetas)[:nd])
+                self._gamma_from_model()
             before = self.kf.x[nd:2 * nd].copy()
             self.kf.restore_current(state["current"], state.get("current_std", [0.3] * nd))
         except (KeyError, TypeError, ValueError):
@@ -604,6 +634,14 @@ def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification,
         prior_accel_std=cfg.prior_accel_std, gate_nis=cfg.gate_nis,
         calibrate=cfg.calibrate, calibrate_block=cfg.calibrate_block,
         counters=counters)
+
+
+def _gain_is_design_fixed(cfg: CurrentConfig, design: GainDesign) -> bool:
+    """Whether the observer runs a gain file's fixed gain (``rho = 0``, with a gamma*) and
+    nothing in ``[pipelines.current]`` overrides it: then the gain follows gamma* of the
+    model that runs (:meth:`CurrentPipeline._gamma_from_model`)."""
+    configured = (cfg.gamma, cfg.gamma_0, cfg.rho, cfg.gamma_max)
+    return all(v is None for v in configured) and design.rho == 0.0 and design.gamma_star > 0
 
 
 def _gain_law(cfg: CurrentConfig, design: GainDesign) -> IncreasingGain:

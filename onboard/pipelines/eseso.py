@@ -24,7 +24,9 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
 * **Measurements**: GNSS horizontal position and velocity (only at the surface: a fix
   while the filter is deeper than ``gnss_max_depth_m`` is rejected), INS velocity over
   ground (R its white noise ``ins_velocity_std_mps``, its correlated error the filter's
-  ``b_ins`` state), depth, DVL bottom-track velocity (its figure of merit as sigma),
+  ``b_ins`` state), depth, DVL bottom-track velocity (its figure of merit as sigma, no
+  less than ``DVL_FOM_FLOOR_MPS``; a fix's reported accuracy no less than
+  ``GNSS_H_ACC_FLOOR_M``),
   attitude (roll/pitch noise ``attitude_std_rad``, yaw the compass heading's, which an
   AHRS reports as its yaw), heading (only without an attitude stream, which carries the
   same yaw). Samples that cannot be used are counted ``rejected.<stream>.<reason>``.
@@ -106,6 +108,14 @@ ZUPT_IDLE_COMMAND = 0.05
 HEADING_HOLD_S = 1.0
 """A ``Heading`` sample within this long (s) after an ``Attitude`` with its yaw is not
 used (an AHRS reports the same yaw); the engine's source selector lets one through."""
+DVL_FOM_FLOOR_MPS = 0.003
+"""Smallest one-sigma (m/s) a DVL's figure of merit may give its bottom-track velocity: a
+FOM of a few mm/s is the sensor's short-term scatter, not its error (scale factor,
+alignment and sound speed add ~0.1-0.3 % of the speed), and a FOM near zero would make the
+update a hard constraint."""
+GNSS_H_ACC_FLOOR_M = 0.02
+"""Smallest one-sigma (m) a receiver's reported horizontal accuracy may give its fix: an
+RTK fix (1-2 cm) keeps its weight, a reported 0 or a few mm does not pin the filter."""
 YAW_UNSELECTED_VAR = 1.0e4
 """Yaw variance (rad^2) of an ``Attitude`` whose yaw the source selector did not choose:
 its roll and pitch are used, its yaw carries no information."""
@@ -386,7 +396,7 @@ class Eseso:
             self._gnss_offset = f.p[:2].copy()
         n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
         z = np.array([n, e]) + self._gnss_offset
-        r_p = (s.h_acc_m ** 2) if s.h_acc_m else self.r_gnss_p
+        r_p = max(s.h_acc_m, GNSS_H_ACC_FLOOR_M) ** 2 if s.h_acc_m else self.r_gnss_p
         f.update_position_ne(z, r_p, t=s.t, source=s.source)
         if s.sog_mps is not None and s.cog_rad is not None:
             vz = s.sog_mps * np.array([math.cos(s.cog_rad), math.sin(s.cog_rad)])
@@ -417,7 +427,7 @@ class Eseso:
             self._unused(s, "dvl", 3, "fom")
             return
         self._t_aided = s.t
-        r = (s.fom_mps ** 2) if s.fom_mps else self.r_dvl
+        r = max(s.fom_mps, DVL_FOM_FLOOR_MPS) ** 2 if s.fom_mps else self.r_dvl
         self.filter.update_body_velocity(np.array([s.vx, s.vy, s.vz]), r, t=s.t,
                                          source=s.source)
 

@@ -32,8 +32,9 @@ import numpy as np
 
 from onboard.core.config import CONFIG_DIR, Config, load, resolve
 from onboard.core.errors import UsageError
-from onboard.estimators.hgo import chain_matrices, gamma_star
-from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
+from onboard.estimators.hgo import LIPSCHITZ_SPEEDS, chain_matrices, gamma_star
+from onboard.estimators.hgo import model_lipschitz as hgo_lipschitz
+from onboard.estimators.vehicle_models import RegressionModel
 from onboard.pipelines.current import GAIN_DIR, model_kind
 
 
@@ -86,21 +87,13 @@ def solve_lmi(n_c: int = 2, p: int = 1, y_max: float = 10.0, eps: float = 1e-6,
     return out
 
 
-def model_lipschitz(cfg: Config, speeds: tuple[float, ...] = (0.3, 1.0, 2.0)) -> float:
+def model_lipschitz(cfg: Config, speeds: tuple[float, ...] = LIPSCHITZ_SPEEDS) -> float:
     """``max ||d nu_r'/d nu_r||_2`` of the configured (or default) model over ``speeds``
-    (m/s, surge) with small sway/heave and the nominal rates of a turn (0.1 rad/s)."""
+    (m/s, surge) with small sway/heave and the nominal rates of a turn (0.1 rad/s);
+    :func:`onboard.estimators.hgo.model_lipschitz` of the configured coefficients."""
     ccfg = cfg.pipelines.current
     model = RegressionModel(model_kind(cfg, ccfg))
-    th = model.thetas_from_mapping(ccfg.model)
-    x = ModelInputs()
-    x.r = 0.1
-    x.n = 1.0
-    lf = 0.0
-    for u in speeds:
-        nu = np.array([u, 0.05, 0.02][: model.nd])
-        J = model.jacobian(nu, x, th)
-        lf = max(lf, float(np.linalg.norm(J, 2)))
-    return lf
+    return hgo_lipschitz(model, model.thetas_from_mapping(ccfg.model), speeds)
 
 
 def design(cfg: Config, margin: float = 1.0) -> dict[str, Any]:

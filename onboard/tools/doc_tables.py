@@ -365,7 +365,7 @@ def _current_validation() -> DocTable:
                      Axes(p, "cover2", axes), Axes(p, "published", axes),
                      f"{{{p}.peak}} / {{{p}.peaking}}", f"{{{p}.settle}}"))
         if key == "gavia-tidal" and obs == "hgo":
-            rows.append(Quoted(("**Kim et al. 2018 (HGO vs ADCP)**", "",
+            rows.append(Quoted(("**Kim et al. 2018, field: HGO vs an ADCP (not simulator truth)**", "",
                                 "**0.094 / 0.066 / 0.032**", "", "", "peaking ~10 s", "")))
     return DocTable("current.validation", "current.md",
                     ("run (seed 1)", "rms N / E / D (m/s)", "std N / E / D (m/s)",

@@ -113,7 +113,8 @@ def run(scenario: Any, section: dict[str, Any], config_name: str,
 
 def metrics(r: dict[str, Any], after: float) -> dict[str, Any]:
     """Error statistics after ``after`` s per axis over the ticks where the component was
-    published (a number, not unknown): rms, std, mean, 2-sigma coverage, mean one-sigma
+    published (a number, not unknown): rms, std, mean, 1- and 2-sigma coverage (the
+    fraction of errors within one and two published sigmas), mean one-sigma
     (over all ticks), and ``published`` (the fraction of ticks with a number). A component
     never published has NaN statistics."""
     m = r["t"] >= after
@@ -128,6 +129,8 @@ def metrics(r: dict[str, Any], after: float) -> dict[str, Any]:
         out[ax] = {"rms": float(np.sqrt(np.mean(ei ** 2))) if len(ei) else nan,
                    "std": float(np.std(ei)) if len(ei) else nan,
                    "mean": float(np.mean(ei)) if len(ei) else nan,
+                   "cover1": float(np.mean(np.abs(ei) <= si))
+                   if len(ei) and np.all(np.isfinite(si)) else nan,
                    "cover2": float(np.mean(np.abs(ei) <= 2 * si))
                    if len(ei) and np.all(np.isfinite(si)) else nan,
                    "sigma": float(np.mean(s[:, i])) if len(s) else nan,
@@ -187,6 +190,12 @@ def body_axis_std(r: dict[str, Any], after: float) -> tuple[float, float, float]
     return tuple(float(np.std(e[:, i])) for i in range(3))  # type: ignore[return-value]
 
 
+CALM_SECTION = {"init_current_std": 1e-3, "current_walk": 1e-6, "forgetting": 1.0,
+                "identify_straight": True}
+"""``[pipelines.current]`` of a calm-water identification run: the current pinned to zero
+(tiny prior, no random walk), no forgetting, identification on straight lines too."""
+
+
 @cache
 def _calm(scenario: str, duration: float, seed: int) -> Any:
     from onboard.sitl import scenarios
@@ -201,12 +210,140 @@ def calm_model(scenario: str, config_name: str, duration: float = 400.0,
                seed: int = 7) -> dict[str, dict[str, float]]:
     """Identify the model in a calm-water run of the same vehicle and mission (WVAM step 1):
     the pipeline with the current pinned to zero (tiny prior, no random walk)."""
-    calm = _calm(scenario, duration, seed)
-    r = run(calm, {"init_current_std": 1e-3, "current_walk": 1e-6, "forgetting": 1.0,
-                     "identify_straight": True},
-            config_name, duration=duration, seed=seed)
-    pipe = r["pipe"]
-    return pipe.model.thetas_to_mapping(pipe.thetas)
+    return calm_state(scenario, config_name, duration, seed)["thetas"]
+
+
+@cache
+def _calm_run_state(scenario: str, config_name: str, duration: float,
+                    seed: int) -> tuple[tuple[str, Any], ...]:
+    r = run(_calm(scenario, duration, seed), CALM_SECTION, config_name, duration=duration,
+            seed=seed)
+    return tuple(identified_state(r).items())
+
+
+def calm_state(scenario: str, config_name: str, duration: float = 400.0,
+               seed: int = 7) -> dict[str, Any]:
+    """:func:`calm_model`'s identification as the persistent state that carries it
+    (:func:`identified_state`: the coefficients and their covariance)."""
+    return dict(_calm_run_state(scenario, config_name, duration, seed))
+
+
+GAVIA_RPMS = (1200.0, 1300.0, 1400.0, 1500.0, 1600.0)
+"""Propeller speeds (rpm) of the Gavia off-design runs: the tidal run flown at each."""
+GAVIA_ID_RPM_STEPS = (1100.0, 1700.0, 1300.0, 1600.0, 1200.0, 1500.0)
+"""The calm-water identification run with propeller steps (rpm), 60 s each: the transients
+after each step separate the drag term ``u|u|`` from the thrust term ``n|n|``, which a
+run at one rpm cannot (there ``u`` is proportional to ``n``)."""
+GAVIA_ID_STEP_S = 60.0
+"""Seconds per propeller step of the identification run."""
+
+
+def gavia_at(rpm: float, steps: tuple[float, ...] = (), calm: bool = False) -> Any:
+    """gavia-tidal flown at ``rpm`` (or through the propeller ``steps``, each
+    :data:`GAVIA_ID_STEP_S` long), in its tidal stream or in ``calm`` water; the start
+    speed scaled from the scenario's 1.5 m/s at 1500 rpm."""
+    from onboard.sitl import scenarios
+    from onboard.sitl.environment import Environment
+    from onboard.sitl.guidance import AuvAutopilot, HeadingSchedule
+
+    sc = scenarios.get("gavia-tidal")
+    first = steps[0] if steps else rpm
+
+    def pilot() -> Any:
+        return AuvAutopilot(rpm=first, depth_m=5.0, rpm_steps=steps,
+                            rpm_period_s=GAVIA_ID_STEP_S,
+                            schedule=HeadingSchedule((0.0,), 1e9))
+
+    name = f"gavia-{'steps' if steps else f'{rpm:.0f}rpm'}{'-calm' if calm else ''}"
+    extra: dict[str, Any] = {"injected": (), "environment": lambda: Environment()} if calm else {}
+    return dataclasses.replace(sc, name=name, controller=pilot,
+                               initial=dataclasses.replace(sc.initial, u=1.5 * first / 1500.0),
+                               **extra)
+
+
+@cache
+def gavia_model(identification: str, seed: int = 7) -> dict[str, Any]:
+    """The Gavia model identified in calm water (WVAM step 1, as :func:`calm_model`) as
+    the persistent state that carries it (:func:`identified_state`: coefficients and their
+    covariance): ``"one-rpm"`` on the mission itself (straight, 1500 rpm, 400 s: the model
+    of the default runs), ``"rpm-steps"`` on a straight run through
+    :data:`GAVIA_ID_RPM_STEPS`."""
+    if identification == "one-rpm":
+        sc, duration = _calm("gavia-tidal", 400.0, seed), 400.0
+    else:
+        sc = gavia_at(0.0, GAVIA_ID_RPM_STEPS, calm=True)
+        duration = GAVIA_ID_STEP_S * len(GAVIA_ID_RPM_STEPS)
+    return identified_state(run(sc, CALM_SECTION, "torpedo-auv", duration=duration,
+                                seed=seed))
+
+
+def gavia_offdesign(identification: str, rpm: float, observer: str = "kf", seed: int = 1,
+                    duration: float = 200.0, after: float = 60.0) -> dict[str, Any]:
+    """:func:`metrics` of gavia-tidal flown at ``rpm`` with the model of
+    :func:`gavia_model` (``identification``) and ``observer``."""
+    state = gavia_model(identification)
+    section: dict[str, Any] = {"model": state["thetas"]}
+    if observer != "kf":
+        section["observer"] = observer
+    return metrics(run(gavia_at(rpm), section, "torpedo-auv", duration=duration, seed=seed,
+                       state=state), after)
+
+
+def gavia_offdesign_table(observers: tuple[str, ...] = ("kf", "hgo"), seed: int = 1) -> str:
+    """The markdown table of docs/current.md, "Gavia off the design point": per
+    identification, observer and rpm, RMS error and 1-/2-sigma coverage per axis."""
+    lines = ["| model identified on | observer | rpm | RMS N / E / D (m/s) | "
+             "1σ cover N / E / D | 2σ cover N / E / D |", "|---|---|---|---|---|---|"]
+    for ident in ("one-rpm", "rpm-steps"):
+        for obs in observers:
+            for rpm in GAVIA_RPMS:
+                m = gavia_offdesign(ident, rpm, obs, seed)
+                ax = ("north", "east", "down")
+                cells = [" / ".join(_fmt(m[a][k]) if k == "rms" else
+                                    (f"{m[a][k]:.2f}" if math.isfinite(m[a][k]) else "-")
+                                    for a in ax) for k in ("rms", "cover1", "cover2")]
+                lines.append(f"| {ident} | {obs} | {rpm:.0f} | " + " | ".join(cells) + " |")
+                print(lines[-1], flush=True)
+    return "\n".join(lines)
+
+
+def identified_state(model_run: dict[str, Any]) -> dict[str, Any]:
+    """The persistent state (:meth:`CurrentPipeline.get_state`) of an identification run,
+    as a vehicle carries its identified model into the next mission: the coefficients and
+    their covariance, the current reset to zero at its prior one-sigma (so that it is not a
+    restored current on probation)."""
+    st = dict(model_run["pipe"].get_state())
+    nd = len(st["current"])
+    st["current"] = [0.0] * nd
+    st["current_std"] = [1.0] * nd
+    return st
+
+
+COVERAGE_RUNS = (("gavia-tidal", "kf"), ("gavia-tidal", "hgo"), ("spheroid-sawtooth", "kf"),
+                 ("spheroid-sawtooth", "hgo"), ("effect-current", "kf"), ("boat-tidal", "kf"),
+                 ("jaiabot-turns", "kf"), ("twin-thruster-turns", "kf"))
+"""The runs (``runs.CURRENT_RUNS`` keys) and observers of the coverage table."""
+
+
+def coverage_table(seed: int = 1) -> str:
+    """The markdown table of docs/current.md, "Calibrated sigma": per run of
+    :data:`COVERAGE_RUNS`, RMS error / mean published sigma and 1- and 2-sigma coverage per
+    axis (target 0.68 / 0.95)."""
+    from onboard.tools.reports import runs
+
+    lines = ["| run (seed 1) | observer | RMS / sigma N, E, D (m/s) | 1σ cover N / E / D | "
+             "2σ cover N / E / D |", "|---|---|---|---|---|"]
+    for key, obs in COVERAGE_RUNS:
+        m = runs.current_metrics(key, obs, seed)
+        axes = [a for a in ("north", "east", "down") if math.isfinite(m[a]["sigma"])]
+
+        def cov(k: str) -> str:
+            return " / ".join(f"{m[a][k]:.2f}" if math.isfinite(m[a][k]) else "n/a"
+                              for a in axes)
+        rs = ", ".join(f"{_fmt(m[a]['rms'])} / {_fmt(m[a]['sigma'])}" for a in axes)
+        lines.append(f"| {key} | {obs} | {rs} | {cov('cover1')} | {cov('cover2')} |")
+        print(lines[-1], flush=True)
+    return "\n".join(lines)
 
 
 def _fmt(x: float) -> str:
@@ -221,9 +358,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="docs/figures")
     ap.add_argument("--no-plot", action="store_true")
     ap.add_argument("--only", nargs="*", default=None)
+    ap.add_argument("--coverage", action="store_true",
+                    help="only the coverage table (1- and 2-sigma, per axis)")
+    ap.add_argument("--gavia-rpm", action="store_true",
+                    help="only the Gavia off-design table (rpm 1200-1600, two models)")
     ap.add_argument("--glider", default=None, metavar="CSV",
                     help="also run the Slocum glider log (glider_data.csv)")
     args = ap.parse_args(argv)
+    if args.gavia_rpm:
+        print(gavia_offdesign_table())
+        return 0
+    if args.coverage:
+        print(coverage_table())
+        return 0
     out = Path(args.out)
     rows: list[list[str]] = []
     burrs: list[str] = []

@@ -247,6 +247,16 @@ def calm_model(scenario: str, config_name: str) -> dict[str, dict[str, float]]:
     return cv.calm_model(scenario, config_name, duration=300.0)
 
 
+@cache
+def calm_state(scenario: str, config_name: str) -> dict[str, Any]:
+    """The persistent state of that calm-water identification (its coefficients and their
+    covariance, :func:`.current_validation.identified_state`): what mode (a) runs carry, so
+    that the model's uncertainty reaches the current's sigma."""
+    from onboard.tools.reports import current_validation as cv
+
+    return cv.calm_state(scenario, config_name, duration=300.0)
+
+
 CURRENT_RUNS: dict[str, tuple[str, str, bool, float, float]] = {
     # key: (scenario, config, configured model by default, duration s, metrics after s)
     "gavia-tidal": ("gavia-tidal", "torpedo-auv", True, 200.0, 60.0),
@@ -275,11 +285,12 @@ def _current_run(key: str, observer: str, seed: int, model: bool) -> dict[str, A
     from onboard.tools.reports import current_validation as cv
 
     scenario, cfg, _, duration, _ = CURRENT_RUNS[key]
-    section: dict[str, Any] = {"model": calm_model(scenario, cfg)} if model else {}
+    state = calm_state(scenario, cfg) if model else None
+    section: dict[str, Any] = {"model": state["thetas"]} if state else {}
     if observer != "kf":
         section["observer"] = observer
     sc = cv.boat_tidal_scenario() if scenario == "boat-tidal" else scenario
-    return cv.run(sc, section, cfg, duration=duration, seed=seed)
+    return cv.run(sc, section, cfg, duration=duration, seed=seed, state=state)
 
 
 def current_metrics(key: str, observer: str, seed: int, model: bool | None = None
