@@ -8,13 +8,14 @@ would cancel in every comparison with truth. So the simulator takes:
 
 * latitude/longitude from pymap3d (``enu2geodetic``: the simulator's north/east plane is
   the WGS-84 tangent plane at the scenario's origin, a point at zero up);
-* rotations of sensor samples from :class:`scipy.spatial.transform.Rotation` (intrinsic
-  ZYX Euler angles: yaw, pitch, roll; body FRD to earth NED);
-* where it runs at every step (the plants' right-hand side, four times a step; their
-  truth and ideal IMU; the magnetometer of every IMU frame), its own plain-float code
-  (:func:`kinematics`, :func:`euler_to_matrix`, :func:`ned_to_body_fast`): ~3 us against
-  scipy's ~20 us. ``tests/test_sitl_frames.py`` checks them against scipy's ``Rotation``
-  and against the time derivative of scipy's rotation (the Euler rates);
+* rotations (intrinsic ZYX Euler angles: yaw, pitch, roll; body FRD to earth NED) in its
+  own plain-float code wherever it runs while simulating (the plants' right-hand side,
+  four times a step; their truth and ideal IMU; the magnetometer of every IMU frame; the
+  sensors' true velocity): :func:`kinematics`, :func:`euler_to_matrix`,
+  :func:`ned_to_body_fast`, :func:`body_to_ned_fast`, ~3 us against ~20-40 us for a
+  :class:`scipy.spatial.transform.Rotation`. ``tests/test_sitl_frames.py`` checks them
+  against scipy's ``Rotation`` (:func:`rotation`, :func:`body_to_ned`) and against the
+  time derivative of scipy's rotation (the Euler rates);
 * angles wrapped by :func:`math.remainder` and ``%``, not the estimators' ``fmod`` code.
 """
 
