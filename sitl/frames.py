@@ -8,13 +8,14 @@ would cancel in every comparison with truth. So the simulator takes:
 
 * latitude/longitude from pymap3d (``enu2geodetic``: the simulator's north/east plane is
   the WGS-84 tangent plane at the scenario's origin, a point at zero up);
-* rotations of sensor samples from :class:`scipy.spatial.transform.Rotation` (intrinsic
-  ZYX Euler angles: yaw, pitch, roll; body FRD to earth NED);
-* where it runs at every step (the plants' right-hand side, four times a step; their
-  truth and ideal IMU; the magnetometer of every IMU frame), its own plain-float code
-  (:func:`kinematics`, :func:`euler_to_matrix`, :func:`ned_to_body_fast`): ~3 us against
-  scipy's ~20 us. ``tests/test_sitl_frames.py`` checks them against scipy's ``Rotation``
-  and against the time derivative of scipy's rotation (the Euler rates);
+* rotations (intrinsic ZYX Euler angles: yaw, pitch, roll; body FRD to earth NED) in its
+  own plain-float code wherever it runs while simulating (the plants' right-hand side,
+  four times a step; their truth and ideal IMU; the magnetometer of every IMU frame; the
+  sensors' true velocity): :func:`kinematics`, :func:`euler_to_matrix`,
+  :func:`ned_to_body_fast`, :func:`body_to_ned_fast`, ~3 us against ~20-40 us for a
+  :class:`scipy.spatial.transform.Rotation`. ``tests/test_sitl_frames.py`` checks them
+  against scipy's ``Rotation`` (:func:`rotation`, :func:`body_to_ned`) and against the
+  time derivative of scipy's rotation (the Euler rates);
 * angles wrapped by :func:`math.remainder` and ``%``, not the estimators' ``fmod`` code.
 """
 
@@ -28,6 +29,7 @@ from scipy.spatial.transform import Rotation
 
 try:
     import pymap3d
+    from pymap3d.ellipsoid import Ellipsoid
 except ImportError as exc:  # pragma: no cover - the extra is in [test] and [all]
     raise ImportError("the simulator needs pymap3d: pip install 'onboard[sim]'") from exc
 
@@ -39,9 +41,17 @@ EULER_ORDER = "ZYX"
 
 # -- geodesy ------------------------------------------------------------------------------
 
+WGS84 = Ellipsoid.from_name("wgs84")
+"""pymap3d's WGS-84 ellipsoid, built once (pymap3d builds it on every call otherwise)."""
+
+
 class GeoOrigin:
     """The simulator's north/east plane about ``(lat0, lon0)`` (deg), mapped to latitude
-    and longitude by pymap3d (the WGS-84 tangent plane at the origin, up 0)."""
+    and longitude by pymap3d (the WGS-84 tangent plane at the origin, up 0).
+
+    A pymap3d call costs ~110 us whatever its size (its per-call array handling), a
+    vectorized one ~1-2 us a point in batches of 100: where the positions can wait
+    (the truth records), convert them with :meth:`to_latlon_many`."""
 
     __slots__ = ("lat0", "lon0")
 
@@ -51,8 +61,18 @@ class GeoOrigin:
 
     def to_latlon(self, north_m: float, east_m: float) -> tuple[float, float]:
         """(lat, lon) in degrees of the point at ``north_m``, ``east_m`` (m)."""
-        lat, lon, _ = pymap3d.enu2geodetic(east_m, north_m, 0.0, self.lat0, self.lon0, 0.0)
+        lat, lon, _ = pymap3d.enu2geodetic(east_m, north_m, 0.0, self.lat0, self.lon0, 0.0,
+                                           ell=WGS84)
         return float(lat), float(lon)
+
+    def to_latlon_many(self, north_m: Sequence[float],
+                       east_m: Sequence[float]) -> tuple[list[float], list[float]]:
+        """:meth:`to_latlon` of many points (m) in one pymap3d call: (lats, lons) in
+        degrees."""
+        lat, lon, _ = pymap3d.enu2geodetic(np.asarray(east_m, dtype=float),
+                                           np.asarray(north_m, dtype=float), 0.0,
+                                           self.lat0, self.lon0, 0.0, ell=WGS84)
+        return np.atleast_1d(lat).tolist(), np.atleast_1d(lon).tolist()
 
 
 # -- rotations ----------------------------------------------------------------------------
@@ -105,6 +125,17 @@ def ned_to_body_fast(roll: float, pitch: float, yaw: float,
     return (xb[0] * v[0] + xb[1] * v[1] + xb[2] * v[2],
             yb[0] * v[0] + yb[1] * v[1] + yb[2] * v[2],
             zb[0] * v[0] + zb[1] * v[1] + zb[2] * v[2])
+
+
+def body_to_ned_fast(roll: float, pitch: float, yaw: float,
+                     v: Sequence[float]) -> tuple[float, float, float]:
+    """:func:`body_to_ned` in plain floats, for the sensors' samples (the true velocity
+    over ground of every GNSS fix, INS and DVL report): ``v`` along the body axes
+    (:func:`_axes`), summed in NED."""
+    xb, yb, zb = _axes(roll, pitch, yaw)
+    return (xb[0] * v[0] + yb[0] * v[1] + zb[0] * v[2],
+            xb[1] * v[0] + yb[1] * v[1] + zb[1] * v[2],
+            xb[2] * v[0] + yb[2] * v[1] + zb[2] * v[2])
 
 
 def kinematics(roll: float, pitch: float, yaw: float,

@@ -64,7 +64,7 @@ from onboard.core.messages import (
 from onboard.core.messages import (
     Imu as ImuSample,
 )
-from onboard.sitl.frames import GeoOrigin, body_to_ned, wrap_2pi, wrap_pi
+from onboard.sitl.frames import GeoOrigin, body_to_ned_fast, wrap_2pi, wrap_pi
 from onboard.sitl.truth import TruthRecord
 
 GRAVITY = 9.80665
@@ -136,7 +136,7 @@ class WorldView:
         given."""
         if self._v_ned is None:
             tr = self.truth
-            self._v_ned = body_to_ned(tr.roll, tr.pitch, tr.yaw, (tr.u, tr.v, tr.w))
+            self._v_ned = body_to_ned_fast(tr.roll, tr.pitch, tr.yaw, (tr.u, tr.v, tr.w))
         return self._v_ned
 
     @property
@@ -574,7 +574,7 @@ class Dvl(_Base):
                 altitude_m=max(0.0, alt + c.altitude_std_m * n[6]),
             ))
             if c.dead_reckoning:
-                self.pos += dt * np.array(body_to_ned(tr.roll, tr.pitch, tr.yaw, (vx, vy, vz)))
+                self.pos += dt * np.array(body_to_ned_fast(tr.roll, tr.pitch, tr.yaw, (vx, vy, vz)))
         else:
             out.append(DvlVelocity(t=t, source=self.name, vx=0.0, vy=0.0, vz=0.0,
                                    track="bottom", valid=False, fom_mps=c.invalid_fom_mps,

@@ -221,3 +221,19 @@ def test_cli_controller_report_is_merged_and_strict_json(tmp_path):
     assert d["tracking"]["rms_position_error_m"] > 0
     if "controller_report" in d:  # the controllers package's policy has a report()
         assert d["controller_report"]["controller"] == "pid"
+
+
+def test_batched_truth_positions_are_the_one_by_one_ones():
+    """simulate() fills the truth's latitude/longitude 100 records per pymap3d call
+    (runner.TRUTH_LATLON_BATCH); the stream is the one Simulation.steps gives converting
+    each record alone: same steps in the same order, same positions (measured: identical)."""
+    from onboard.sitl.runner import TRUTH_LATLON_BATCH, Simulation
+
+    duration = 25.0  # 251 records: two full batches and a partial one
+    batched = list(simulate("jaiabot-turns", duration, seed=3))
+    single = list(Simulation("jaiabot-turns", 3).steps(duration))
+    truths = [tr for _, _, tr in batched if tr is not None]
+    assert len(truths) == 251 > 2 * TRUTH_LATLON_BATCH
+    assert [t for t, _, _ in batched] == [t for t, _, _ in single]
+    for (_, sa, ta), (_, sb, tb) in zip(batched, single):
+        assert sa == sb and ta == tb and (ta is None or ta.lat_deg is not None)

@@ -79,6 +79,8 @@ ALLOCATION = np.array([
     [-0.167, 0.167, 0.175, -0.175, 0.0, 0.0],
 ])
 """Thruster allocation K (6x6, body FRD): ``tau = K @ f`` with f the six thrusts (N)."""
+_ALLOCATION_PINV = np.linalg.pinv(ALLOCATION)
+"""pinv(K), computed once (:func:`thruster_commands` runs at every control tick)."""
 
 T_FWD = 40.0
 """T200 thrust at full ahead command (N)."""
@@ -102,7 +104,7 @@ def thruster_commands(wrench_body: np.ndarray) -> tuple[float, ...]:
     """Normalized commands that best produce a body wrench ``[X, Y, Z, K, M, N]`` (N, N m):
     least-squares thrusts ``pinv(K) tau``, inverted through the thrust curve, clipped to
     [-1, 1]. Pitch (M) is not actuated and is ignored."""
-    f = np.linalg.pinv(ALLOCATION) @ np.asarray(wrench_body, dtype=float)
+    f = _ALLOCATION_PINV @ np.asarray(wrench_body, dtype=float)
     out = []
     for fi in f:
         k = T_FWD if fi >= 0.0 else T_REV
