@@ -42,6 +42,17 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   horizontal position and velocity, INS velocity over ground (``v + b_ins``), depth, DVL
   velocity (body frame), attitude (``Log(R^T R_meas)``, its noise given as roll, pitch and
   yaw variances turned into body axes), heading, and the thrust model ``h_tau`` below.
+* **Noise the filter is not told about** (:meth:`EsesoFilter._adapt_noise`,
+  :meth:`EsesoFilter._adapt_process`): each sensor channel's configured noise is scaled by
+  the exponential mean of its innovations' excess over ``H P H^T`` (covariance matching),
+  and the IMU's white noise by the DVL innovations' excess over ``R`` (a fading factor);
+  each scale is clipped to [1, ``noise_scale_max``]: noise larger than configured is
+  learnt, smaller is not (``noise_adapt_updates`` 0 = off).
+* **Model uncertainty** (:meth:`EsesoFilter.model_force_var`): ``xi`` absorbs the model's
+  error, so the variance of the model's terms through the configured relative
+  uncertainties of mass, damping and thrust (:attr:`EsesoFilter.xi_model_var`) belongs in
+  the disturbance's published sigma; it is kept beside ``P``, not in it (a consider
+  covariance), and the pipeline adds it.
 * **Injection and reset** (paper eqs. 16d, 17, 18): every component of ``dx`` is injected
   (``v`` once, biases and gravity too, unlike the public code), then ``P <- G P G^T``
   with the reset Jacobian ``G = blockdiag(I, I, I - [dtheta/2]x, I, I, I, I)``

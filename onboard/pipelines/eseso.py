@@ -45,6 +45,11 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
   ``ZUPT_AFTER_S`` and the thrusters idle (every command within ``ZUPT_IDLE_COMMAND`` of
   neutral, or none fresh), the velocity over ground is measured as zero with
   ``ZUPT_STD_MPS`` every ``ZUPT_INTERVAL_S`` (channel ``zupt``; a zero-velocity update).
+* **Published sigmas**: the filter's covariance, the disturbance's plus the variance of
+  the model's terms through the configured relative uncertainties of mass, damping and
+  thrust (``mass_rel_std``, ``damping_rel_std``, ``thrust_rel_std``): the estimate is the
+  external force plus whatever the model gets wrong. The noise scales the filter learns
+  from its innovations are in health (``noise_scale.<channel>``, ``noise_scale.imu``).
 * **Position**: from the first fused GNSS fix (the local origin), or without one from the
   configured start point, then dead-reckoned with the DVL; its std grows without GNSS.
 
