@@ -571,6 +571,28 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Initial one-sigma of the disturbance force (N)."""
     max_imu_gap_s: float = 0.5
     """A longer gap between IMU samples restarts the propagation clock (counted)."""
+    # model uncertainty carried into the disturbance's sigma (consider covariance)
+    mass_rel_std: float = 0.2
+    """Relative one-sigma of the mass and added mass (dimensionless) [DEFAULT]: the
+    inertial force ``M (f + g_B) - A (w x nu) + w x (A nu)`` it scales is added, times
+    this, to the published disturbance variance (added mass is a guess from strip theory
+    or a paper's table, rarely measured). 0 = the filter's covariance alone."""
+    damping_rel_std: float = 0.3
+    """Relative one-sigma of the damping coefficients (dimensionless) [DEFAULT]; the
+    damping force ``D(nu) nu`` times this joins the published disturbance variance
+    (identified drag coefficients are rarely better than 30 %)."""
+    thrust_rel_std: float = 0.2
+    """Relative one-sigma of the thrust map (dimensionless) [DEFAULT]; the commanded body
+    force times this joins the published disturbance variance (a T200's thrust at a
+    given command varies by about 20 % between 12 and 16 V of battery)."""
+    # measurement-noise adaptation from the innovations (covariance matching)
+    noise_adapt_updates: int = 100
+    """Updates over which each sensor channel's noise scale is averaged (the time constant
+    of its exponential mean, in updates); 0 = no adaptation, the configured noise always."""
+    noise_scale_max: float = 9.0
+    """Ceiling of the measurement-noise variance scale (dimensionless; 9 = three times the
+    configured sigma). Its floor is 1: the adaptation only ever inflates the noise, so a
+    channel is never trusted more than configured."""
 
 
 

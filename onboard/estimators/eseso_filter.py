@@ -42,6 +42,17 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   horizontal position and velocity, INS velocity over ground (``v + b_ins``), depth, DVL
   velocity (body frame), attitude (``Log(R^T R_meas)``, its noise given as roll, pitch and
   yaw variances turned into body axes), heading, and the thrust model ``h_tau`` below.
+* **Noise the filter is not told about** (:meth:`EsesoFilter._adapt_noise`,
+  :meth:`EsesoFilter._adapt_process`): each sensor channel's configured noise is scaled by
+  the exponential mean of its innovations' excess over ``H P H^T`` (covariance matching),
+  and the IMU's white noise by the DVL innovations' excess over ``R`` (a fading factor);
+  each scale is clipped to [1, ``noise_scale_max``]: noise larger than configured is
+  learnt, smaller is not (``noise_adapt_updates`` 0 = off).
+* **Model uncertainty** (:meth:`EsesoFilter.model_force_var`): ``xi`` absorbs the model's
+  error, so the variance of the model's terms through the configured relative
+  uncertainties of mass, damping and thrust (:attr:`EsesoFilter.xi_model_var`) belongs in
+  the disturbance's published sigma; it is kept beside ``P``, not in it (a consider
+  covariance), and the pipeline adds it.
 * **Injection and reset** (paper eqs. 16d, 17, 18): every component of ``dx`` is injected
   (``v`` once, biases and gravity too, unlike the public code), then ``P <- G P G^T``
   with the reset Jacobian ``G = blockdiag(I, I, I - [dtheta/2]x, I, I, I, I)``
@@ -162,6 +173,34 @@ class EsesoParams:
     initial_gyro_bias_std: float
     initial_gravity_std: float
     initial_disturbance_std_n: float
+    mass_rel_std: float = 0.0
+    """Relative one-sigma of mass and added mass, carried into :attr:`EsesoFilter.xi_model_var`."""
+    damping_rel_std: float = 0.0
+    """Relative one-sigma of the damping coefficients (likewise)."""
+    thrust_rel_std: float = 0.0
+    """Relative one-sigma of the thrust map (likewise)."""
+    noise_adapt_updates: int = 0
+    """Time constant (updates) of each channel's noise-scale mean; 0 = no adaptation."""
+    noise_scale_max: float = 1.0
+    """Ceiling of a channel's measurement-noise variance scale (floor 1)."""
+
+
+NOISE_ADAPT_CHANNELS = frozenset({"attitude", "heading", "depth", "vog", "gnss_pos",
+                                  "gnss_vel"})
+"""Sensor channels whose noise is scaled from their innovations (:meth:`EsesoFilter.update`);
+the thrust channel has its own down-weighting, the zero-velocity update is a
+pseudo-measurement and the DVL's excess goes to the process noise
+(:data:`PROCESS_ADAPT_CHANNEL`)."""
+PROCESS_ADAPT_CHANNEL = "dvl"
+"""The channel whose innovations scale the IMU's white noise (the process noise of velocity
+and attitude; :meth:`EsesoFilter._adapt_process`): the DVL is the filter's velocity
+reference and reports its own noise per ping (its figure of merit, floored), while the
+IMU's noise is a configured number nobody measures on the vehicle, so DVL innovations
+larger than ``H P H^T + R`` say the propagated velocity is too confident."""
+NOISE_SAMPLE_CAP = 100.0
+"""Ceiling of one update's contribution to a channel's noise-scale mean (the ratio of
+excess innovation power to the configured noise power, dimensionless): one outlier moves
+the mean by at most this over ``noise_adapt_updates``."""
 
 
 class EsesoFilter:
@@ -181,6 +220,14 @@ class EsesoFilter:
             ``recovered.<channel>``, ``thrust.downweighted``), in order of first
             occurrence; the owner may count its own events in the same dictionary.
         initialized: False until :meth:`initialize`.
+        xi_model_var: variance (N^2, body axes) of the thrust model's terms through the
+            configured relative uncertainties of mass, damping and thrust, at the last
+            thrust update (:meth:`model_force_var`): the part of the disturbance's error
+            that the covariance ``P`` does not know about.
+        noise_scale: per sensor channel, the variance scale its noise is multiplied by
+            (1 to ``noise_scale_max``; :meth:`update`).
+        process_scale: the variance scale of the IMU's white noise in the propagation
+            (1 to ``noise_scale_max``; :data:`PROCESS_ADAPT_CHANNEL`).
     """
 
     def __init__(self, params: EsesoParams) -> None:
@@ -208,6 +255,10 @@ class EsesoFilter:
         self.innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
         self.counters: dict[str, int] = {}
         self._consecutive: dict[str, int] = {}
+        self.xi_model_var = np.zeros(3)
+        self.noise_scale: dict[str, float] = {}
+        self.process_scale = 1.0
+        self._noise_mean: dict[str, float] = {}
 
     def count(self, key: str) -> None:
         """Add one to the event counter ``key``."""
@@ -260,8 +311,8 @@ class EsesoFilter:
         F[BI, BI] = np.eye(2) * phi_ins
         q = np.empty(N_ERR)
         q[P_] = c.position_walk ** 2 * dt
-        q[V_] = (c.accel_std_mps2 * dt) ** 2
-        q[TH] = (c.gyro_std_rps * dt) ** 2
+        q[V_] = (c.accel_std_mps2 * dt) ** 2 * self.process_scale
+        q[TH] = (c.gyro_std_rps * dt) ** 2 * self.process_scale
         q[BA] = c.accel_bias_walk ** 2 * dt
         q[BG] = c.gyro_bias_walk ** 2 * dt
         q[G_] = c.gravity_walk ** 2 * dt
@@ -297,6 +348,11 @@ class EsesoFilter:
             False when the gate rejects the update.
         """
         PHt = self.P @ H.T
+        if self.params.noise_adapt_updates > 0:
+            if channel in NOISE_ADAPT_CHANNELS:
+                Rm = Rm * self._adapt_noise(channel, y, H @ PHt, Rm)
+            elif channel == PROCESS_ADAPT_CHANNEL:
+                self._adapt_process(y, H @ PHt, Rm)
         S = H @ PHt + Rm
         S = 0.5 * (S + S.T)
         Sinv = np.linalg.inv(S)
@@ -330,6 +386,39 @@ class EsesoFilter:
         self.P = 0.5 * (P + P.T)
         self.count(f"fused.{channel}")
         return True
+
+    def _adapt_noise(self, channel: str, y: Array, HPHt: Array, Rm: Array) -> float:
+        """The variance scale of ``channel``'s configured noise ``Rm`` after this update's
+        innovation ``y`` (covariance matching, Mehra 1970; Mohamed & Schwarz 1999):
+        ``E[y y^T] = H P H^T + s R``, so ``(y^T y - tr(H P H^T)) / tr(R)`` is a sample of
+        ``s``; its exponential mean over ``noise_adapt_updates`` updates (each sample
+        capped at :data:`NOISE_SAMPLE_CAP`), clipped to [1, ``noise_scale_max``], is the
+        scale. One-sided: noise larger than configured is learnt, smaller is not."""
+        c = self.params
+        sample = (float(y @ y) - float(np.trace(HPHt))) / max(float(np.trace(Rm)), 1e-300)
+        sample = min(sample, NOISE_SAMPLE_CAP)
+        mean = self._noise_mean.get(channel, 1.0)
+        mean += (sample - mean) / c.noise_adapt_updates
+        self._noise_mean[channel] = mean
+        scale = min(max(mean, 1.0), c.noise_scale_max)
+        self.noise_scale[channel] = scale
+        return scale
+
+    def _adapt_process(self, y: Array, HPHt: Array, Rm: Array) -> None:
+        """Scale the IMU's white noise from the DVL innovation ``y`` (a fading factor, Xia
+        et al. 1994): ``(y^T y - tr(R)) / tr(H P H^T)`` is a sample of how much larger the
+        prior covariance should be, and times the current scale a sample of the scale
+        (the prior already carries it); its exponential mean over ``noise_adapt_updates``
+        updates, clipped to [1, ``noise_scale_max``], multiplies the accelerometer and
+        gyro noise variances of the next propagations (:attr:`process_scale`)."""
+        c = self.params
+        ratio = (float(y @ y) - float(np.trace(Rm))) / max(float(np.trace(HPHt)), 1e-300)
+        # P already carries the current scale: the sample is the scale times the ratio
+        sample = min(self.process_scale * ratio, NOISE_SAMPLE_CAP)
+        mean = self._noise_mean.get("process", 1.0)
+        mean += (sample - mean) / c.noise_adapt_updates
+        self._noise_mean["process"] = mean
+        self.process_scale = min(max(mean, 1.0), c.noise_scale_max)
 
     def gate(self, dof: int) -> float:
         """The configured NIS gate of a ``dof``-dimensional update: ``gate_sigma**2 * dof``,
@@ -479,12 +568,37 @@ class EsesoFilter:
         H[:, XI] = -np.eye(3)
         return h, H
 
+    def model_force_var(self, f_m: Array, w_m: Array, tau: Array) -> Array:
+        """Variance (N^2, body axes) of the thrust model's error from the configured
+        relative uncertainties of its coefficients, at specific force ``f_m`` (m/s^2),
+        rate ``w_m`` (rad/s) and commanded force ``tau`` (N): the disturbance absorbs
+        whatever the model gets wrong, so its error against the external force is, to
+        first order, ``dM (f + g_B) - dA (w x nu) + w x (dA nu) + dD(nu) nu - dtau``. Each
+        coefficient group's relative error is independent, so per axis::
+
+            var = (mass_rel_std * inertial)^2 + (damping_rel_std * D(nu) nu)^2
+                  + (thrust_rel_std * tau)^2
+
+        A consider covariance (Schmidt): the coefficients are not estimated, their
+        uncertainty is carried into the published sigma and not into ``P``."""
+        c = self.params
+        f = f_m - self.b_a
+        w = w_m - self.b_g
+        RT = self.R.T
+        nu = RT @ self.v
+        inertial = (self.m_vec * (f + RT @ self.g) - self.A @ cross(w, nu)
+                    + cross(w, self.A @ nu))
+        damp = (self.d_l + self.d_nl * np.abs(nu)) * nu
+        return ((c.mass_rel_std * inertial) ** 2 + (c.damping_rel_std * damp) ** 2
+                + (c.thrust_rel_std * np.asarray(tau, float)) ** 2)
+
     def update_thrust(self, f_m: Array, w_m: Array, wdot: Array, tau: Array, *,
                       t: float = math.nan, source: str = "") -> bool:
         """Update on the thruster force ``tau`` (N, body) = :meth:`h_tau` at specific force
         ``f_m``, rate ``w_m`` and angular acceleration ``wdot``; channel ``thrust``, never
         gated, down-weighted above ``thrust_huber``."""
         h, H = self.h_tau(f_m, w_m, wdot)
+        self.xi_model_var = self.model_force_var(f_m, w_m, tau)
         y = tau - h
         Rm = self.R_tau
         if self.params.thrust_states == "disturbance":

@@ -45,6 +45,11 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
   ``ZUPT_AFTER_S`` and the thrusters idle (every command within ``ZUPT_IDLE_COMMAND`` of
   neutral, or none fresh), the velocity over ground is measured as zero with
   ``ZUPT_STD_MPS`` every ``ZUPT_INTERVAL_S`` (channel ``zupt``; a zero-velocity update).
+* **Published sigmas**: the filter's covariance, the disturbance's plus the variance of
+  the model's terms through the configured relative uncertainties of mass, damping and
+  thrust (``mass_rel_std``, ``damping_rel_std``, ``thrust_rel_std``): the estimate is the
+  external force plus whatever the model gets wrong. The noise scales the filter learns
+  from its innovations are in health (``noise_scale.<channel>``, ``noise_scale.imu``).
 * **Position**: from the first fused GNSS fix (the local origin), or without one from the
   configured start point, then dead-reckoned with the DVL; its std grows without GNSS.
 
@@ -151,6 +156,9 @@ def filter_params(c: EsesoConfig, sensors: Any | None = None) -> EsesoParams:
         initial_gyro_bias_std=c.initial_gyro_bias_std,
         initial_gravity_std=c.initial_gravity_std,
         initial_disturbance_std_n=c.initial_disturbance_std_n,
+        mass_rel_std=c.mass_rel_std, damping_rel_std=c.damping_rel_std,
+        thrust_rel_std=c.thrust_rel_std, noise_adapt_updates=c.noise_adapt_updates,
+        noise_scale_max=c.noise_scale_max,
     )
 
 
@@ -502,9 +510,17 @@ class Eseso:
         w = (self.w_m if self.w_m is not None else np.zeros(3)) - f.b_g
         vals = (
             *f.p, *f.v, *nu, roll, pitch, yaw, *w, *f.xi, *xi_e,
-            *d[P_], *s_nu, *d[XI], *f.b_a, *f.b_g, f.g[2],
+            *d[P_], *s_nu, *self._disturbance_std(), *f.b_a, *f.b_g, f.g[2],
         )
         return {k: float(v) for k, v in zip(self.columns, vals)}
+
+    def _disturbance_std(self) -> Array:
+        """One-sigma (N, body) of the disturbance: the filter's covariance plus the
+        model-coefficient variance of the last thrust update
+        (:meth:`~onboard.estimators.eseso_filter.EsesoFilter.model_force_var`), since the
+        estimate is the external force plus whatever the model gets wrong."""
+        f = self.filter
+        return np.sqrt(np.maximum(np.diag(f.P)[XI], 0.0) + f.xi_model_var)
 
     def std(self) -> dict[str, float]:
         """One-sigma uncertainties keyed like the values (``std_<q>`` columns -> ``<q>``),
@@ -530,8 +546,14 @@ class Eseso:
     def health(self) -> Mapping[str, float]:
         """The event counters: ``fused.<channel>``, ``rejected.<channel>.gate``,
         ``recovered.<channel>``, ``thrust.downweighted``, ``rejected.<stream>.<reason>``
-        of the sample handling, ``imu_gap``, ``diverged``."""
-        return {k: float(v) for k, v in self.counters.items()}
+        of the sample handling, ``imu_gap``, ``diverged``; and ``noise_scale.<channel>``,
+        the variance scale the innovations put on each sensor channel's configured noise
+        (1 = as configured), ``noise_scale.imu`` that of the IMU's noise (from the DVL's
+        innovations)."""
+        out = {k: float(v) for k, v in self.counters.items()}
+        out.update({f"noise_scale.{ch}": v for ch, v in self.filter.noise_scale.items()})
+        out["noise_scale.imu"] = self.filter.process_scale
+        return out
 
     def get_state(self) -> dict[str, Any]:
         """Sensor biases, gravity and the disturbance (worth keeping across a restart)."""
