@@ -169,14 +169,17 @@ def table_of(params: Sequence[Param], x: Sequence[float]) -> dict[str, Any]:
 
 def start_point(variant: Variant) -> list[float]:
     """``log10`` of the shipped defaults of the variant's parameters (``bias_q = 0``
-    starts at :data:`BIAS_OFF`), clipped to the bounds."""
+    starts at :data:`BIAS_OFF`; ``"auto"`` is the tuned value of the variant's
+    measurement set: without a Doppler speed where it fixes ``gnss_velocity = false``),
+    clipped to the bounds."""
     from onboard.core.pipeline_config import AieConfig, KfConfig
 
     cfg = AieConfig() if variant.pipeline == "aie" else KfConfig()
+    doppler = bool(variant.fixed.get("gnss_velocity", True))
     out = []
     for p in variant.params:
         axis, key = p.key.split(".")
-        v = getattr(getattr(cfg, axis), key)
+        v = getattr(cfg, axis).tuned(key, doppler)
         out.append(min(max(math.log10(v if v > 0 else BIAS_OFF), p.lo), p.hi))
     return out
 
