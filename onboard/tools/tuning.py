@@ -316,14 +316,6 @@ def _table(params: Mapping[str, float]) -> dict[str, Any]:
     return out
 
 
-def no_doppler_tables(path: Path = TUNING_FILE) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The ``[pipelines.aie]`` and ``[pipelines.kf]`` axis tables of the tuned
-    ``aie-no-doppler`` and ``kf-no-doppler`` parameters in ``path``: for logs whose fixes
-    carry no Doppler speed."""
-    res = json.loads(path.read_text(encoding="utf-8"))["variants"]
-    return (_table(res["aie-no-doppler"]["params"]), _table(res["kf-no-doppler"]["params"]))
-
-
 def evaluate(name: str, params: Mapping[str, float]) -> dict[str, dict[str, float]]:
     """Variant ``name`` with ``params`` on the held-out runs: :func:`metrics` per
     ``<scenario>@<seed>`` (whole runs of the tuning scenarios on
