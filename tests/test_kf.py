@@ -222,15 +222,19 @@ def test_gnss_only_log_gives_speed_and_track_along_the_course() -> None:
     from onboard.pipelines import aie as aie_mod
     pa = aie_mod.build(AieConfig(), 1.5, 0.03)
     ok, oa = run_pipelines(samples, [pk, pa], sim.t)
+    for p in (pk, pa):    # the fixes carry no speed: the no-Doppler tuned set
+        assert p.health()["tuned_set.doppler"] == 0.0
     for out in (ok, oa):
         assert "heading" not in {c for c in out if np.isfinite(out[c]).any()}
         m = sim.t > 40
         err = np.sqrt(np.nanmean((out["speed"][m] - sim.sog[m]) ** 2))
         pos = np.sqrt(np.nanmean((out["north"][m] - sim.north[m]) ** 2
                                  + (out["east"][m] - sim.east[m]) ** 2))
-        # measured: speed KF 0.088, AIE 0.152 m/s; position 3.55, 3.56 m (1 Hz, 1.5 m
-        # GNSS; the course over a 3-fix baseline lags in turns)
-        assert err < 0.2
+        # measured: speed KF 0.287, AIE 0.193 m/s; position 2.88, 2.81 m (1 Hz, 1.5 m
+        # GNSS; the course over a 3-fix baseline lags in turns). The no-Doppler set's
+        # large v_d (2.7 / 0.82, tuned on the mismatched SITL boats) costs here, where
+        # the plant is the filter's own model: the Doppler set would give 0.030 / 0.144
+        assert err < 0.35
         assert pos < 4.5
 
 

@@ -49,8 +49,10 @@ def test_the_committed_results_follow_the_protocol(committed) -> None:
 
 def test_the_shipped_defaults_are_the_tuned_ones(committed) -> None:
     """The tuned parameters of ``aie`` and ``kf`` (rounded to 2 digits) are the defaults
-    of [pipelines.aie] / [pipelines.kf] (they won on the held-out objective)."""
-    for name in ("aie", "kf"):
+    of [pipelines.aie] / [pipelines.kf] (they won on the held-out objective); those of
+    ``aie-no-doppler`` and ``kf-no-doppler`` the ``"auto"`` values without a Doppler
+    speed (pipeline_config.TunedPair)."""
+    for name in ("aie", "kf", "aie-no-doppler", "kf-no-doppler"):
         tuned = committed["variants"][name]["params"]
         start = dict(zip((p.key for p in T.VARIANTS[name].params),
                          (10.0 ** x for x in T.start_point(T.VARIANTS[name]))))

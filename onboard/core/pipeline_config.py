@@ -18,7 +18,7 @@ pipeline is imported; each pipeline module reads ``cfg.pipelines.<name>``.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal, Mapping, NamedTuple
 
 import msgspec
 
@@ -33,15 +33,74 @@ class NavConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
 # ---------------------------------------------------------------------------------------
 # [pipelines.aie] and [pipelines.kf]: the surge/heading pipelines
 
+AUTO = "auto"
+"""The default of a tuned noise parameter (``v_d``, ``r_d``): the value the common tuning
+protocol found for the measurement set present, with or without a Doppler speed
+(:class:`TunedPair`; the pipeline switches as fixes with or without a speed over ground
+come in: onboard/pipelines/surge_heading.py, docs/aie.md section 2.2). A number in the
+configuration is used with either set."""
 
-class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+Tuned = float | Literal["auto"]
+"""A tuned noise parameter: a number, or ``"auto"`` (:data:`AUTO`)."""
+
+
+class TunedPair(NamedTuple):
+    """One parameter as tuned with the GNSS Doppler speed row and without it."""
+
+    doppler: float
+    """Tuned where fixes carry a speed over ground."""
+    no_doppler: float
+    """Tuned on the position increments alone (``gnss_velocity = false``)."""
+
+    def pick(self, doppler: bool) -> float:
+        """The value for the measurement set: with (``doppler``) or without a speed."""
+        return self.doppler if doppler else self.no_doppler
+
+
+# The tuned sets of the common tuning protocol (`onboard tune`, onboard/tools/tuning.py),
+# read from docs/tuning.json, variants `aie` / `aie-no-doppler` and `kf` / `kf-no-doppler`
+# (docs/aie.md section 2.1), rounded to two significant digits; tests/test_tuning.py
+# checks them against the file. `bias_q` has no pair: without a Doppler speed the bias
+# state does not walk (input_models.CommandedInput), so `kf-no-doppler` leaves it alone.
+AIE_SURGE_V_D = TunedPair(0.04, 0.82)
+"""AIE surge ``v_d`` ((m/s^2)^2): variants ``aie`` / ``aie-no-doppler``."""
+AIE_SURGE_R_D = TunedPair(5.2, 0.084)
+"""AIE surge ``r_d``: variants ``aie`` / ``aie-no-doppler``."""
+AIE_HEADING_V_D = TunedPair(1.7, 2.5)
+"""AIE heading ``v_d`` ((rad/s^2)^2): variants ``aie`` / ``aie-no-doppler``."""
+AIE_HEADING_R_D = TunedPair(0.29, 2.0)
+"""AIE heading ``r_d``: variants ``aie`` / ``aie-no-doppler``."""
+KF_SURGE_V_D = TunedPair(0.0067, 2.7)
+"""KF surge ``v_d`` ((m/s^2)^2): variants ``kf`` / ``kf-no-doppler``."""
+KF_HEADING_V_D = TunedPair(2.6, 2.5)
+"""KF heading ``v_d`` ((rad/s^2)^2): variants ``kf`` / ``kf-no-doppler``."""
+
+
+class TunedKeys:
+    """Mixin of an axis table whose ``"auto"`` keys resolve through ``TUNED``."""
+
+    TUNED: ClassVar[Mapping[str, TunedPair]] = {}
+    """The tuned pair of each key whose default is ``"auto"``."""
+
+    def tuned(self, key: str, doppler: bool) -> float:
+        """Key ``key``'s value for the measurement set (with or without a Doppler
+        speed): the configured number, or for ``"auto"`` the tuned pair's."""
+        value = getattr(self, key)
+        if value == AUTO:
+            return self.TUNED[key].pick(doppler)
+        return float(value)
+
+
+class AxisConfig(TunedKeys, msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
+                 frozen=True):
     """One AIE axis: its model (§1.2), the RCIE hyperparameters (§2.10), the AIE noise.
 
     Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized. The
-    axes' ``v_d`` and ``r_d`` defaults come from the common tuning protocol
-    (``onboard tune aie``, onboard/tools/tuning.py: Nelder-Mead on SITL
-    ``jaiabot-turns``, ``twin-thruster-turns`` and ``effect-waves`` seed 10, held out
-    from the reported seeds; docs/aie.md section 2.1), rounded to two digits.
+    axes' ``v_d`` and ``r_d`` default to ``"auto"``: the values of the common tuning
+    protocol (``onboard tune aie`` and ``aie-no-doppler``, onboard/tools/tuning.py:
+    Nelder-Mead on SITL ``jaiabot-turns``, ``twin-thruster-turns`` and ``effect-waves``
+    seed 10, held out from the reported seeds; docs/aie.md section 2.1), rounded to two
+    digits, for the measurement set present (:data:`AUTO`).
     """
 
     a: float = 1.0
@@ -61,8 +120,9 @@ class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, froze
     """Taps of G_f (§2.4); 1 suffices for the relative-degree-1 increment model."""
     r_z: float = 1.0
     """Retrospective weight R_z (§2.5)."""
-    r_d: float = 1.0
-    """Input penalty R_d (normalized, §2.5), on the size or the change of d_hat."""
+    r_d: Tuned = 1.0
+    """Input penalty R_d (normalized, §2.5), on the size or the change of d_hat;
+    ``"auto"``: tuned, with or without a Doppler speed (:data:`AUTO`)."""
     rate_penalty: bool = True
     """Apply R_d to the change of the input estimate (d_hat_k - d_hat_{k-1}) instead of
     its size: penalizes noise amplification without biasing a nonzero mean input."""
@@ -70,8 +130,9 @@ class AxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, froze
     """Regularization R_theta; P_0 = I / r_theta (normalized, §2.5)."""
     lam: float = 0.999
     """RLS forgetting factor lambda (§2.6); memory ~ 1/(1 - lambda) steps."""
-    v_d: float = 0.3
-    """AIE: variance of the input-estimation error V_d (u^2), §2.2."""
+    v_d: Tuned = 0.3
+    """AIE: variance of the input-estimation error V_d (u^2), §2.2; ``"auto"``: tuned,
+    with or without a Doppler speed (:data:`AUTO`)."""
     q_v: float = 0.0
     """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
     known_input: bool = True
@@ -87,8 +148,9 @@ class SurgeAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True, froz
     gain: float = 3.0
     u_max: float = 5.0
     u_scale: float = 1.0
-    r_d: float = 5.2
-    v_d: float = 0.04
+    TUNED: ClassVar[Mapping[str, TunedPair]] = {"v_d": AIE_SURGE_V_D, "r_d": AIE_SURGE_R_D}
+    r_d: Tuned = AUTO
+    v_d: Tuned = AUTO
 
 
 class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
@@ -99,8 +161,10 @@ class HeadingAxisConfig(AxisConfig, forbid_unknown_fields=True, kw_only=True,
     gain: float = 2.0
     u_max: float = 5.0
     u_scale: float = 2.0
-    r_d: float = 0.29
-    v_d: float = 1.7
+    TUNED: ClassVar[Mapping[str, TunedPair]] = {"v_d": AIE_HEADING_V_D,
+                                                 "r_d": AIE_HEADING_R_D}
+    r_d: Tuned = AUTO
+    v_d: Tuned = AUTO
 
 
 class SurgeHeadingConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
@@ -184,7 +248,8 @@ class AieConfig(SurgeHeadingConfig, forbid_unknown_fields=True, kw_only=True, fr
     """``[pipelines.aie.heading]``."""
 
 
-class KfAxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+class KfAxisConfig(TunedKeys, msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
+                   frozen=True):
     """One axis of the KF baseline: its model (§1.2) and the noise of its commanded input
     (§2.12). Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized."""
 
@@ -199,8 +264,9 @@ class KfAxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, fro
     the ceiling ``(2 u_max)^2`` of the adapted input-error variance."""
     q_v: float = 0.0
     """Extra random walk of the rate per step (m^2/s^2 or rad^2/s^2)."""
-    v_d: float = 1.0
-    """Variance of the commanded input's error (u^2)."""
+    v_d: Tuned = 1.0
+    """Variance of the commanded input's error (u^2); ``"auto"``: tuned, with or without a
+    Doppler speed (:data:`AUTO`)."""
     bias_q: float = 0.0
     """Random walk of the input-bias state ((u^2)/s; 0: no bias state). The forecast
     input is the nominal one plus a bias the filter estimates with the rest of its state
@@ -209,12 +275,14 @@ class KfAxisConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, fro
 
 class KfSurgeConfig(KfAxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
     """``[pipelines.kf.surge]`` (m/s^2). ``v_d`` and ``bias_q`` of both axes: the common
-    tuning protocol (``onboard tune kf``, the same search, budget and runs as the AIE's;
-    docs/aie.md section 2.1), rounded to two digits."""
+    tuning protocol (``onboard tune kf`` and ``kf-no-doppler``, the same search, budget
+    and runs as the AIE's; docs/aie.md section 2.1), rounded to two digits; ``v_d`` for
+    the measurement set present (:data:`AUTO`)."""
 
     a: float = 1.0
     gain: float = 3.0
-    v_d: float = 0.0067
+    TUNED: ClassVar[Mapping[str, TunedPair]] = {"v_d": KF_SURGE_V_D}
+    v_d: Tuned = AUTO
     bias_q: float = 0.00086
 
 
@@ -223,7 +291,8 @@ class KfHeadingConfig(KfAxisConfig, forbid_unknown_fields=True, kw_only=True, fr
 
     a: float = 2.0
     gain: float = 2.0
-    v_d: float = 2.6
+    TUNED: ClassVar[Mapping[str, TunedPair]] = {"v_d": KF_HEADING_V_D}
+    v_d: Tuned = AUTO
     bias_q: float = 7.4e-5
 
 

@@ -165,6 +165,13 @@ class IncrementFilter:
         if y_v is not None:
             self._rate_update(y_v, R_v, t, source)
 
+    def set_input_error_var(self, input_error_var: float) -> None:
+        """Use ``input_error_var`` as the configured ``V_u`` from the next step on (the
+        pipeline's measurement set changed): ``V_u0`` and ``V_u`` both take it, so an
+        adaptation starts again from it; the state and what the input model learned are
+        kept."""
+        self.V_u = self.V_u0 = input_error_var
+
     def restart(self) -> None:
         """Forget the state (a gap in the measurements); keep what the input model and
         the model have learned."""

@@ -223,13 +223,20 @@ class Rcie:
         self.n = 2 * n_c + 1
         self.lam = lam
         self.wa = lam / r_z
-        self.wb = lam / r_d if r_d > 0.0 else 1e300   # R_d = 0: the row drops out
+        self.set_input_penalty(r_d)
         self.r_theta = r_theta
         self.rate_penalty = rate_penalty
         self.u_scale, self.z_scale, self.u_max = u_scale, z_scale, u_max
         self.trace_max = trace_max if trace_max is not None else 10.0 * self.n / r_theta
         self._kernel = rcie_kernel(self.n, rate_penalty)
         self.reset()
+
+    def set_input_penalty(self, r_d: float) -> None:
+        """Use the input penalty ``r_d`` (§2.5; 0 drops its row) from the next step on;
+        what RLS has learned is kept."""
+        if not r_d >= 0.0:
+            raise ValueError(f"need r_d >= 0, got {r_d}")
+        self.wb = self.lam / r_d if r_d > 0.0 else 1e300   # R_d = 0: the row drops out
 
     def reset(self) -> None:
         """theta <- 0, P <- I / R_theta, buffers <- 0 (the start-up of §2.7)."""

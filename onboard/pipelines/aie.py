@@ -28,24 +28,34 @@ COLUMNS = ("north", "east", "heading", "speed", "yaw_rate", "surge_input", "yaw_
 
 
 def axis_filter(model: AxisModel, c: AxisConfig, top: AieConfig,
-                name: str = "surge") -> IncrementFilter:
-    """One AIE axis: the increment filter with the RCIE input of ``c`` (§2.10)."""
-    rcie = Rcie(c.n_c, c.n_f, c.r_z, c.r_d, c.r_theta, c.lam, c.u_scale, 1.0, c.u_max,
-                rate_penalty=c.rate_penalty)
+                name: str = "surge", doppler: bool = True) -> IncrementFilter:
+    """One AIE axis: the increment filter with the RCIE input of ``c`` (§2.10), with
+    the ``"auto"`` parameters of the measurement set (``doppler``: with a Doppler speed)."""
+    rcie = Rcie(c.n_c, c.n_f, c.r_z, c.tuned("r_d", doppler), c.r_theta, c.lam, c.u_scale,
+                1.0, c.u_max, rate_penalty=c.rate_penalty)
     estimate = RcieInput(rcie, u_max=c.u_max, u_scale=c.u_scale, known_input=c.known_input,
                          divergence_input=top.divergence_input,
                          divergence_nis=top.divergence_nis, adaptive=top.adaptive,
                          adaptive_window=top.adaptive_window)
-    return IncrementFilter(model, estimate, input_error_var=c.v_d, u_max=c.u_max, q_v=c.q_v,
-                           correlated=top.correlated_noise, nis_gate=top.nis_gate,
+    return IncrementFilter(model, estimate, input_error_var=c.tuned("v_d", doppler),
+                           u_max=c.u_max, q_v=c.q_v, correlated=top.correlated_noise,
+                           nis_gate=top.nis_gate,
                            adaptive_rate_noise=top.adaptive_rate_noise, name=name)
+
+
+def retune(f: IncrementFilter, c: AxisConfig, doppler: bool) -> None:
+    """Axis ``f`` (built by :func:`axis_filter` from ``c``) takes the ``v_d`` and
+    ``r_d`` of the measurement set (``doppler``: with a Doppler speed)."""
+    assert isinstance(f.input, RcieInput)
+    f.set_input_error_var(c.tuned("v_d", doppler))
+    f.input.rcie.set_input_penalty(c.tuned("r_d", doppler))
 
 
 def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,
           gnss_velocity_std_mps: float = 0.1) -> SurgeHeadingPipeline:
     """An AIE pipeline from an :class:`AieConfig` (for code and tests)."""
     return SurgeHeadingPipeline("aie", COLUMNS, cfg, gnss_std_m, heading_std_rad,
-                                axis_filter, gnss_velocity_std_mps)
+                                axis_filter, gnss_velocity_std_mps, retune=retune)
 
 
 def create(cfg: Config) -> SurgeHeadingPipeline | None:

@@ -25,19 +25,26 @@ COLUMNS = ("north", "east", "heading", "speed", "yaw_rate",
 
 
 def axis_filter(model: AxisModel, c: KfAxisConfig, top: KfConfig,
-                name: str = "surge") -> IncrementFilter:
-    """One baseline axis: the increment filter with the commanded input of ``c``."""
-    return IncrementFilter(model, CommandedInput(c.bias_q), input_error_var=c.v_d,
-                           u_max=c.u_max, q_v=c.q_v, correlated=top.correlated_noise,
-                           nis_gate=top.nis_gate,
+                name: str = "surge", doppler: bool = True) -> IncrementFilter:
+    """One baseline axis: the increment filter with the commanded input of ``c``, with
+    the ``"auto"`` ``v_d`` of the measurement set (``doppler``: with a Doppler speed)."""
+    return IncrementFilter(model, CommandedInput(c.bias_q),
+                           input_error_var=c.tuned("v_d", doppler), u_max=c.u_max,
+                           q_v=c.q_v, correlated=top.correlated_noise, nis_gate=top.nis_gate,
                            adaptive_rate_noise=top.adaptive_rate_noise, name=name)
+
+
+def retune(f: IncrementFilter, c: KfAxisConfig, doppler: bool) -> None:
+    """Axis ``f`` (built by :func:`axis_filter` from ``c``) takes the ``v_d`` of the
+    measurement set (``doppler``: with a Doppler speed)."""
+    f.set_input_error_var(c.tuned("v_d", doppler))
 
 
 def build(cfg: KfConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,
           gnss_velocity_std_mps: float = 0.1) -> SurgeHeadingPipeline:
     """A KF baseline pipeline from a :class:`KfConfig` (for code and tests)."""
     return SurgeHeadingPipeline("kf", COLUMNS, cfg, gnss_std_m, heading_std_rad,
-                                axis_filter, gnss_velocity_std_mps)
+                                axis_filter, gnss_velocity_std_mps, retune=retune)
 
 
 def create(cfg: Config) -> SurgeHeadingPipeline | None:

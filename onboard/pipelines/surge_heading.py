@@ -25,6 +25,12 @@ runs with zero input). The engine's source selector lets one heading source thro
 without the selector a ``Heading`` sample within ``HEADING_HOLD_S`` wins over the yaw.
 Without any heading source (a GNSS-only log) the surge axis runs on the path along the
 course over ground (course mode).
+
+The tuned noise parameters (``v_d``, ``r_d``) left at ``"auto"`` follow the measurement
+set (docs/aie.md section 2.2): the values tuned with the Doppler speed row while fixes
+carry a speed over ground, those tuned without it once no fix has carried one for
+:data:`DOPPLER_HOLD_S`. The set is decided at each fix; a switch changes both axes'
+parameters from their next step on and keeps their state.
 """
 
 from __future__ import annotations
@@ -85,10 +91,17 @@ WINDOW_END_AFTER_FIX = 0.25
 closes with the first sample after its fix, not a step later."""
 COURSE_MODE_ANCHOR = 0.3
 """Least anchor gain in course mode: the course lags the track by half its baseline."""
+DOPPLER_HOLD_S = 5.0
+"""The Doppler set of the ``"auto"`` parameters holds this long (s) after the newest fix
+with a speed over ground (the default ``max_gap_s``: a few fixes without one, or a slow
+speed-message rate, are no switch); at a fix later than that, the no-Doppler set."""
 
 AxisFactory = Callable[[AxisModel, Any, Any, str], IncrementFilter]
 """``factory(model, axis_config, pipeline_config, name)``: one axis filter with its
-input, named ``surge`` or ``heading``."""
+input, named ``surge`` or ``heading``, with the Doppler set's tuned parameters."""
+AxisRetune = Callable[[IncrementFilter, Any, bool], None]
+"""``retune(filter, axis_config, doppler)``: give an axis filter the tuned parameters of
+the measurement set, with (``doppler``) or without a Doppler speed."""
 
 
 class SurgeHeadingPipeline:
@@ -107,11 +120,11 @@ class SurgeHeadingPipeline:
 
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
                  gnss_std_m: float, heading_std_rad: float, factory: AxisFactory,
-                 gnss_velocity_std_mps: float = 0.1) -> None:
+                 gnss_velocity_std_mps: float = 0.1, *, retune: AxisRetune) -> None:
         """``cfg``: the pipeline's table (``[pipelines.aie]`` or ``[pipelines.kf]``);
         ``gnss_std_m``, ``heading_std_rad`` and ``gnss_velocity_std_mps``: the
         ``[sensors]`` noise, unless ``cfg`` sets its own; ``factory`` builds each axis
-        filter with its input model."""
+        filter with its input model, ``retune`` switches its measurement set."""
         if not 0.0 < cfg.gnss_accuracy_min_m <= cfg.gnss_accuracy_max_m:
             raise ValueError(f"[pipelines.{name}] needs 0 < gnss_accuracy_min_m <= "
                              f"gnss_accuracy_max_m, got {cfg.gnss_accuracy_min_m}, "
@@ -134,6 +147,13 @@ class SurgeHeadingPipeline:
             var_heading0=self.sigma_h ** 2, max_gap_s=cfg.max_gap_s,
             imu_aiding=cfg.imu_aiding, imu_horizon_s=cfg.imu_horizon_s)
         self.frame: LocalFrame | None = None
+        self.doppler = True
+        """The measurement set of the ``"auto"`` parameters: True (also before the first
+        fix) with a Doppler speed, False without (:meth:`_select_measurement_set`)."""
+        self.set_switches = 0
+        """Switches of the measurement set so far."""
+        self._retune = retune
+        self._t_doppler = -math.inf          # time (s) of the newest fix with a speed
         self._unused_rate: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
         """Doppler speeds left out before any update (sign unknown), as records."""
         self._publish_inputs = "surge_input" in columns
@@ -236,6 +256,20 @@ class SurgeHeadingPipeline:
         n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
         self._w.add_fix(s.t, n, e, self._fix_variance(s.h_acc_m), s.source)
         self._add_speed(s)
+        self._select_measurement_set(s.t)
+
+    def _select_measurement_set(self, t: float) -> None:
+        """At a fix at ``t`` (s): the Doppler set if a fix within :data:`DOPPLER_HOLD_S`
+        carried a speed over ground (used or not), else the no-Doppler set. On a switch
+        both axes take the set's ``"auto"`` parameters from their next step on; their
+        state (rate, covariance, learned input) is kept."""
+        doppler = t - self._t_doppler <= DOPPLER_HOLD_S
+        if doppler == self.doppler:
+            return
+        self.doppler = doppler
+        self.set_switches += 1
+        self._retune(self.surge, self.cfg.surge, doppler)
+        self._retune(self.yaw, self.cfg.heading, doppler)
 
     def _fix_variance(self, acc: float | None) -> float:
         """A fix's position noise variance (m^2): its reported accuracy, clamped to
@@ -255,7 +289,8 @@ class SurgeHeadingPipeline:
         noise the configured ``sigma_v`` or the fix's worse reported accuracy; its course
         against the heading is the accelerometer's crab angle. With a heading, a speed
         below ``DOPPLER_SIGN_MIN_SPEED_MPS`` has no known sign (its course is noise): it is
-        not used, and recorded as a ``surge.rate`` rejection (``sign_unknown``)."""
+        not used, and recorded as a ``surge.rate`` rejection (``sign_unknown``). Any
+        finite speed (``gnss_velocity`` on) counts for the measurement set."""
         sog, cog, psi = s.sog_mps, s.cog_rad, self._unwrap.last
         imu = self.track.imu
         if (imu is not None and sog is not None and cog is not None
@@ -263,6 +298,7 @@ class SurgeHeadingPipeline:
             imu.crab(cog - psi)
         if sog is None or not self.cfg.gnss_velocity or not math.isfinite(sog):
             return
+        self._t_doppler = s.t
         if cog is not None and psi is not None:
             if abs(sog) < DOPPLER_SIGN_MIN_SPEED_MPS:
                 self._unused_rate.append(unused_measurement(
@@ -455,7 +491,9 @@ class SurgeHeadingPipeline:
 
     def health(self) -> Mapping[str, float]:
         """Per axis its counters (updates, skipped outliers, input-model divergences,
-        restarts) and the Doppler row's; then what the input model reports."""
+        restarts) and the Doppler row's; the measurement set of the ``"auto"`` parameters
+        (``tuned_set.doppler`` 1 or 0) and its switches; then what the input model
+        reports."""
         h: dict[str, float] = {}
         for nm, ax in self._axes():
             h[f"{nm}.steps"] = float(ax.steps)
@@ -465,6 +503,8 @@ class SurgeHeadingPipeline:
         h["surge.rate_steps"] = float(self.surge.rate_steps)
         h["surge.rate_rejected"] = float(self.surge.rate_rejected)
         h["surge.accuracy_rejected"] = float(self._acc_bad)
+        h["tuned_set.doppler"] = float(self.doppler)
+        h["tuned_set.switches"] = float(self.set_switches)
         for nm, ax in self._axes():
             h.update({f"{nm}.{k}": v for k, v in ax.input.health(ax).items()})
         return h

@@ -343,7 +343,7 @@ def aie_step_ratio(n: int = 5000, repeats: int = 5) -> dict[str, float]:
     f.F = A
     f.H = C.reshape(1, 3)
     f.R *= 2.0 * R
-    f.Q = np.outer(B, B) * top.surge.v_d
+    f.Q = np.outer(B, B) * top.surge.tuned("v_d", True)
     f.P *= 10.0
     zs = [np.array([y]) for y in ys]
     step = ax.step

@@ -160,7 +160,8 @@ def _aie_figures() -> list[Figure]:
         out.append(Figure(
             f"aie.blueboat.speed_rmse.{who}", "m/s",
             "NTNU BlueBoat field runs (no Doppler): models identified on the even runs, the "
-            "no-Doppler tuned noise (docs/tuning.json), "
+            "shipped defaults (their \"auto\" noise takes the no-Doppler tuned set, docs/aie.md "
+            "section 2.2), "
             f"mean over the 8 held-out runs of {label}'s speed RMSE against the logged surge",
             lambda s, who=who: runs.blueboat_heldout()[f"{who}.speed"],
             (), DATA, data=True))

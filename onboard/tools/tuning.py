@@ -169,14 +169,17 @@ def table_of(params: Sequence[Param], x: Sequence[float]) -> dict[str, Any]:
 
 def start_point(variant: Variant) -> list[float]:
     """``log10`` of the shipped defaults of the variant's parameters (``bias_q = 0``
-    starts at :data:`BIAS_OFF`), clipped to the bounds."""
+    starts at :data:`BIAS_OFF`; ``"auto"`` is the tuned value of the variant's
+    measurement set: without a Doppler speed where it fixes ``gnss_velocity = false``),
+    clipped to the bounds."""
     from onboard.core.pipeline_config import AieConfig, KfConfig
 
     cfg = AieConfig() if variant.pipeline == "aie" else KfConfig()
+    doppler = bool(variant.fixed.get("gnss_velocity", True))
     out = []
     for p in variant.params:
         axis, key = p.key.split(".")
-        v = getattr(getattr(cfg, axis), key)
+        v = getattr(cfg, axis).tuned(key, doppler)
         out.append(min(max(math.log10(v if v > 0 else BIAS_OFF), p.lo), p.hi))
     return out
 
@@ -311,14 +314,6 @@ def _table(params: Mapping[str, float]) -> dict[str, Any]:
         axis, key = k.split(".")
         out.setdefault(axis, {})[key] = v
     return out
-
-
-def no_doppler_tables(path: Path = TUNING_FILE) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The ``[pipelines.aie]`` and ``[pipelines.kf]`` axis tables of the tuned
-    ``aie-no-doppler`` and ``kf-no-doppler`` parameters in ``path``: for logs whose fixes
-    carry no Doppler speed."""
-    res = json.loads(path.read_text(encoding="utf-8"))["variants"]
-    return (_table(res["aie-no-doppler"]["params"]), _table(res["kf-no-doppler"]["params"]))
 
 
 def evaluate(name: str, params: Mapping[str, float]) -> dict[str, dict[str, float]]:

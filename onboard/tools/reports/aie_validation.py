@@ -335,9 +335,10 @@ def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | Non
                  aie_table: dict[str, Any] | None = None,
                  kf_noise: dict[str, dict[str, float]] | None = None
                  ) -> dict[str, np.ndarray]:
-    """AIE and KF on one run; estimates on the 10 Hz rows (NaN before the first).
-    ``kf_noise``: per axis the KF's own keys (``v_d``, ``bias_q``) beyond the model it
-    shares with the AIE's table."""
+    """AIE and KF on one run; estimates on the 10 Hz rows (NaN before the first), and
+    ``health.*``: the AIE's divergences per axis, the measurement set each filter ended
+    on (``tuned_set.doppler``, AIE then KF). ``kf_noise``: per axis the KF's own keys
+    (``v_d``, ``bias_q``) beyond the model it shares with the AIE's table."""
     table = {k: dict(v) if isinstance(v, dict) else v for k, v in (aie_table or {}).items()}
     if surge is not None:
         table.setdefault("surge", {}).update(a=surge.a, gain=surge.gain, offset=surge.offset)
@@ -366,6 +367,8 @@ def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | Non
     res["gps.north"], res["gps.east"] = ne[:, 0], ne[:, 1]
     res["health.surge.diverged"] = np.array([pa.health()["surge.diverged"]])
     res["health.heading.diverged"] = np.array([pa.health()["heading.diverged"]])
+    res["health.tuned_set.doppler"] = np.array([p.health()["tuned_set.doppler"]
+                                                for p in (pa, pk)])
     return res
 
 

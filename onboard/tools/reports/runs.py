@@ -212,12 +212,11 @@ def outage_metrics(seed: int) -> dict[str, float]:
 def blueboat_heldout() -> dict[str, float]:
     """The NTNU BlueBoat runs: models identified on the even runs, AIE / KF / the speed
     from consecutive fixes on the odd (held-out) runs; the mean over those runs of the
-    speed RMSE against the logged surge speed (m/s). The logs carry no Doppler speed, so
-    both filters run with the noise parameters the common tuning found without one
-    (``aie-no-doppler``, ``kf-no-doppler`` of docs/tuning.json)."""
+    speed RMSE against the logged surge speed (m/s). The logs carry no Doppler speed:
+    both filters run at their shipped defaults, which take the noise parameters the
+    common tuning found without one (``"auto"``, docs/aie.md section 2.2)."""
     from onboard.tools.reports.aie_validation import (blueboat_metrics, blueboat_runs,
                                                       identify_blueboat, run_blueboat)
-    from onboard.tools.tuning import no_doppler_tables
 
     d = data_dir()
     if not (d / "blueboat_sysid_ntnu").is_dir():
@@ -227,9 +226,7 @@ def blueboat_heldout() -> dict[str, float]:
     ms, my = identify_blueboat(train)
     acc: dict[str, list[float]] = {}
     for r in test:
-        aie_t, kf_t = no_doppler_tables()
-        met = blueboat_metrics(r, run_blueboat(r, ms, my, aie_table=aie_t, kf_noise=kf_t),
-                               ms, my)
+        met = blueboat_metrics(r, run_blueboat(r, ms, my), ms, my)
         for k in ("aie.speed", "kf.speed", "gps.speed"):
             acc.setdefault(k, []).append(met[k])
     return {k: float(np.nanmean(v)) for k, v in acc.items()} | {"runs": float(len(test))}
