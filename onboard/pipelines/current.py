@@ -103,13 +103,6 @@ law sees it: (floor, the first measurement's, ceiling)."""
 GAMMA_RECHECK_S = 10.0
 """After the high-gain observer's RLS changes its model, gamma* is recomputed at most this
 often (s)."""
-HGO_Q_SCALE = 1.0
-"""Process-noise scale of the high-gain observer: its own, not the joint filter's
-innovation calibration (``q_scale``, which measures the joint filter's consistency; 7.5 on
-gavia-tidal made the HGO's 1-sigma coverage 0.95-0.98 against 0.57-0.63 unscaled). The
-HGO cannot calibrate itself the same way: its innovations are not white (the held samples
-at a high gain), and a block-NIS calibration of its own inflated it further (sigma 0.077
-against an error of 0.033 m/s; docs/current.md, "Calibrated sigma")."""
 PENDING_INNOVATIONS = 1024
 """Innovation records kept until the engine takes them; older ones are dropped."""
 REASONS: dict[str, str] = {"accepted": "", "gated": "gate", "reset": "diverged"}
@@ -306,7 +299,7 @@ class CurrentPipeline:
             assert self.hgo_rls is not None
             n_sub = max(1, math.ceil(dt / PREDICT_STEP_S))
             for _ in range(n_sub):
-                if not hgo.predict(dt / n_sub, self.inp, self.hgo_rls.thetas, HGO_Q_SCALE):
+                if not hgo.predict(dt / n_sub, self.inp, self.hgo_rls.thetas, kf.q_scale):
                     hgo.restart(kf.x, kf.P)
                     hgo.reset_gain()
             self._identify_hgo(t, dt)
