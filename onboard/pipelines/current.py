@@ -258,7 +258,7 @@ class CurrentPipeline:
             return {}
         t_filter = self._t
         assert t_filter is not None  # set when the filter started
-        if t >= t_filter:
+        if t > t_filter:  # nothing to predict at the time of the last measurement
             self._predict(t, t - t_filter, probation)
             self._t = t
         dt = t - t_prev if t_prev is not None else 0.0
