@@ -104,11 +104,13 @@ def _toml(data: dict, prefix: str = "") -> str:
     return "\n".join(out)
 
 
-def test_kf_defaults_are_the_models_and_settings_it_read_from_the_aie_table():
-    """``[pipelines.kf]`` was split off ``[pipelines.aie]``: its defaults are the values the
-    KF used before (the axis models, the shared measurement handling, ``v_d`` 1.0 on both
-    axes, ``bias_q`` 0.01 on surge and 0 on heading), so the estimates are unchanged."""
-    from onboard.core.pipeline_config import AieConfig, KfConfig, SurgeHeadingConfig
+def test_kf_defaults_are_the_aie_models_and_its_own_tuned_noise():
+    """``[pipelines.kf]`` was split off ``[pipelines.aie]``: it shares the axis models and
+    the measurement handling, and has its own noise parameters from the one tuning
+    protocol (docs/aie.md section 2.1): ``v_d`` "auto" (the pair tuned with and without
+    the Doppler speed, section 2.2) and the tuned ``bias_q``."""
+    from onboard.core.pipeline_config import (
+        AUTO, KF_HEADING_V_D, KF_SURGE_V_D, AieConfig, KfConfig, SurgeHeadingConfig)
 
     aie, kf = AieConfig(), KfConfig()
     for name in SurgeHeadingConfig.__struct_fields__:
@@ -117,8 +119,10 @@ def test_kf_defaults_are_the_models_and_settings_it_read_from_the_aie_table():
         a, k = getattr(aie, axis), getattr(kf, axis)
         assert (k.a, k.gain, k.offset, k.u_max, k.q_v) == (a.a, a.gain, a.offset, a.u_max,
                                                            a.q_v), axis
-        assert k.v_d == 1.0
-    assert (kf.surge.bias_q, kf.heading.bias_q) == (0.01, 0.0)
+        assert k.v_d == AUTO
+    assert kf.surge.tuned("v_d", True) == KF_SURGE_V_D.pick(True)
+    assert kf.heading.tuned("v_d", False) == KF_HEADING_V_D.pick(False)
+    assert (kf.surge.bias_q, kf.heading.bias_q) == (0.00086, 7.4e-5)
 
 
 def test_diagnose_settings_are_a_top_level_table():
