@@ -96,7 +96,8 @@ def test_mavproxy_routes_the_simulator_to_the_service_and_the_estimates_to_a_gro
             for _ in range(600):  # at most 60 s; done as soon as everything arrived
                 await asyncio.sleep(0.1)
                 drain()
-                if (ours("WIND_COV") and any(m.name == "CUR_N" for m in ours("NAMED_VALUE_FLOAT"))
+                if (ours("WIND_COV") and ours("HEARTBEAT")
+                        and any(m.name == "CUR_N" for m in ours("NAMED_VALUE_FLOAT"))
                         and any(m.name == "THR_EST" for m in ours("NAMED_VALUE_FLOAT"))):
                     break
                 if proxy.poll() is not None or sim.poll() is not None:
@@ -118,10 +119,11 @@ def test_mavproxy_routes_the_simulator_to_the_service_and_the_estimates_to_a_gro
                 p.wait()
         gcs.close()
     log = proxy.stdout.read().decode(errors="replace")[-2000:] if proxy.stdout else ""
+    log += "\nsim: " + (sim.stderr.read().decode(errors="replace")[-2000:] if sim.stderr else "")
     autopilot = {m.get_type() for m in got if m.get_srcSystem() == 1}
     assert {"HEARTBEAT", "ATTITUDE", "SERVO_OUTPUT_RAW"} <= autopilot, (sorted(autopilot), log)
     assert svc.intake.sources["autopilot"].samples > 0  # the service got the stream via MAVProxy
-    assert ours("HEARTBEAT") and ours("HEARTBEAT")[0].type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
+    assert ours("HEARTBEAT") and ours("HEARTBEAT")[0].type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER, log
     names = {m.name for m in ours("NAMED_VALUE_FLOAT")}
     assert {"CUR_N", "CUR_E", "THR_EST", "TRQ_EST"} <= names, (sorted(names), log)
     wind = ours("WIND_COV")
