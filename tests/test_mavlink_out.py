@@ -153,36 +153,22 @@ def test_each_innovation_channel_feeds_the_estimator_status_ratio_of_its_kind(ch
 
 
 @pytest.mark.integration
-def test_a_position_flagged_by_the_integrity_checks_is_not_claimed(listener):
+@pytest.mark.parametrize("flag, claim", [
+    ("position_residual", mavlink2.ESTIMATOR_POS_HORIZ_REL),
+    ("speed_mismatch", mavlink2.ESTIMATOR_VELOCITY_HORIZ)])
+def test_an_estimate_flagged_by_the_integrity_checks_is_not_claimed(listener, flag, claim):
     """ESTIMATOR_STATUS claims a relative horizontal position only while no pipeline's
-    position disagrees with GNSS beyond its sigma (``position_residual``)."""
+    position disagrees with GNSS beyond its sigma (``position_residual``), and a horizontal
+    velocity only while no pipeline's speed disagrees with the Doppler or DVL speed
+    (``speed_mismatch``)."""
     port = listener.getsockname()[1]
     pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), system_id=7,
                            clock=lambda: 10.0)
     pub.start()
     pub.publish_estimates(_records(), now=10.0)
     pub.publish_health(HealthRecord(vehicle="b", t=10.0), now=10.0)
-    pub.publish_health(HealthRecord(vehicle="b", t=11.0,
-                                    flags={"aie": ["position_residual"]}), now=11.0)
+    pub.publish_health(HealthRecord(vehicle="b", t=11.0, flags={"aie": [flag]}), now=11.0)
     pub.close()
     st = [m for m in receive_mavlink(listener) if m.get_type() == "ESTIMATOR_STATUS"]
-    assert st[0].flags & mavlink2.ESTIMATOR_POS_HORIZ_REL
-    assert not st[1].flags & mavlink2.ESTIMATOR_POS_HORIZ_REL
-
-
-@pytest.mark.integration
-def test_a_speed_flagged_by_the_integrity_checks_is_not_claimed(listener):
-    """ESTIMATOR_STATUS claims a horizontal velocity only while no pipeline's speed
-    disagrees with the Doppler or DVL speed beyond its sigma (``speed_mismatch``)."""
-    port = listener.getsockname()[1]
-    pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), system_id=7,
-                           clock=lambda: 10.0)
-    pub.start()
-    pub.publish_estimates(_records(), now=10.0)
-    pub.publish_health(HealthRecord(vehicle="b", t=10.0), now=10.0)
-    pub.publish_health(HealthRecord(vehicle="b", t=11.0,
-                                    flags={"aie": ["speed_mismatch"]}), now=11.0)
-    pub.close()
-    st = [m for m in receive_mavlink(listener) if m.get_type() == "ESTIMATOR_STATUS"]
-    assert st[0].flags & mavlink2.ESTIMATOR_VELOCITY_HORIZ
-    assert not st[1].flags & mavlink2.ESTIMATOR_VELOCITY_HORIZ
+    assert st[0].flags & claim
+    assert not st[1].flags & claim

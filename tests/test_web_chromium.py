@@ -64,17 +64,12 @@ def test_the_page_shows_the_track_and_the_current_arrow(view, tmp_path, query):
         shutil.copyfile(out, os.environ["ONBOARD_WEB_SCREENSHOT"])
 
 
-class PrefixProxy:
-    """A reverse proxy serving ``backend`` under ``prefix`` (strips it, forwards the
-    request, relays the answer), logging each request's path and status; anything
-    outside the prefix is answered 404."""
+class LoopbackServer:
+    """An asyncio TCP server on a free loopback port; each subclass answers a connection in
+    its ``_client(reader, writer)``; ``port`` is known after :meth:`start`."""
 
-    def __init__(self, backend_port: int, prefix: str) -> None:
-        self.backend_port = backend_port
-        self.prefix = prefix
-        self.port = 0
-        self.log: list[tuple[str, int]] = []
-        self._server: asyncio.AbstractServer | None = None
+    port = 0
+    _server: asyncio.AbstractServer | None = None
 
     async def start(self) -> None:
         self._server = await asyncio.start_server(self._client, "127.0.0.1", 0)
@@ -84,6 +79,17 @@ class PrefixProxy:
         assert self._server is not None
         self._server.close()
         await self._server.wait_closed()
+
+
+class PrefixProxy(LoopbackServer):
+    """A reverse proxy serving ``backend`` under ``prefix`` (strips it, forwards the
+    request, relays the answer), logging each request's path and status; anything
+    outside the prefix is answered 404."""
+
+    def __init__(self, backend_port: int, prefix: str) -> None:
+        self.backend_port = backend_port
+        self.prefix = prefix
+        self.log: list[tuple[str, int]] = []
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         head = await reader.readuntil(b"\r\n\r\n")
@@ -133,23 +139,12 @@ def solid_png(rgb: tuple[int, int, int], size: int = 256) -> bytes:
             + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
 
 
-class TileServer:
+class TileServer(LoopbackServer):
     """Answers every ``/{z}/{x}/{y}.png`` with one solid tile and logs (z, x, y)."""
 
     def __init__(self) -> None:
-        self.port = 0
         self.requested: list[tuple[int, int, int]] = []
         self._png = solid_png(TILE_RGB)
-        self._server: asyncio.AbstractServer | None = None
-
-    async def start(self) -> None:
-        self._server = await asyncio.start_server(self._client, "127.0.0.1", 0)
-        self.port = self._server.sockets[0].getsockname()[1]
-
-    async def close(self) -> None:
-        assert self._server is not None
-        self._server.close()
-        await self._server.wait_closed()
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         head = await reader.readuntil(b"\r\n\r\n")
