@@ -136,12 +136,10 @@ NIS_EFFECTIVE_N = 2 * RECENT_STEPS - 1
 
 
 def circular_mean(angles: Iterable[float]) -> float:
-    """The circular mean (rad, in ``(-pi, pi]``) of ``angles`` (rad)."""
-    s = c = 0.0
-    for a in angles:
-        s += math.sin(a)
-        c += math.cos(a)
-    return math.atan2(s, c)
+    """The circular mean (rad, in ``(-pi, pi]``) of ``angles`` (rad): the direction of
+    the sum of their unit vectors, each sum taken with ``sum`` in the angles' order."""
+    a = tuple(angles)
+    return math.atan2(sum(map(math.sin, a)), sum(map(math.cos, a)))
 
 
 def crab_bound(sog_mps: float) -> float:
@@ -193,7 +191,13 @@ class HeadingCourseCheck:
 
     def __init__(self) -> None:
         self._heading: tuple[float, float] | None = None  # (t, heading rad)
-        self._window: deque[tuple[float, float, float]] = deque()  # (t, diff, sog)
+        # the window, one deque per column, oldest first: the sums are taken in C over
+        # whole columns, and each difference's sine and cosine once, as it arrives
+        self._t: deque[float] = deque()  # s
+        self._diff: deque[float] = deque()  # heading - course, rad
+        self._sin: deque[float] = deque()  # sin(diff)
+        self._cos: deque[float] = deque()  # cos(diff)
+        self._sog: deque[float] = deque()  # m/s
         self.offset_rad: float | None = None
         self.mismatch = False
         self.worst: tuple[float, float] | None = None
@@ -209,17 +213,17 @@ class HeadingCourseCheck:
         (True: mismatch), or None when the window cannot be judged."""
         h = self._heading
         sog, cog = s.sog_mps, s.cog_rad
-        win = self._window
-        while win and win[0][0] < s.t - HEADING_WINDOW_S:
-            win.popleft()
+        self._drop_before(s.t - HEADING_WINDOW_S)
         if (h is None or sog is None or cog is None or s.t - h[0] > HEADING_FRESH_S
                 or not sog > HEADING_MIN_SPEED_MPS or not math.isfinite(cog)):
             return None
-        win.append((s.t, h[1] - cog, sog))
-        if len(win) < HEADING_MIN_FIXES or s.t - win[0][0] < 0.8 * HEADING_WINDOW_S:
+        self._append(s.t, h[1] - cog, sog)
+        n = len(self._t)
+        if n < HEADING_MIN_FIXES or s.t - self._t[0] < 0.8 * HEADING_WINDOW_S:
             return None
-        self.offset_rad = circular_mean(d for _, d, _ in win)
-        sog_mean = sum(v for _, _, v in win) / len(win)
+        # circular_mean(self._diff), from the sines and cosines kept (tests/test_integrity.py)
+        self.offset_rad = math.atan2(sum(self._sin), sum(self._cos))
+        sog_mean = sum(self._sog) / n
         self.mismatch = abs(self.offset_rad) > crab_bound(sog_mean)
         if not self.mismatch:
             self.worst = None
@@ -229,8 +233,24 @@ class HeadingCourseCheck:
 
     def speed(self) -> float:
         """Mean speed over ground (m/s) of the window."""
-        win = self._window
-        return sum(v for _, _, v in win) / len(win) if win else math.nan
+        win = self._sog
+        return sum(win) / len(win) if win else math.nan
+
+    def _append(self, t: float, diff: float, sog: float) -> None:
+        """One moving fix into the window: its time (s), heading - course (rad) and
+        speed over ground (m/s)."""
+        self._t.append(t)
+        self._diff.append(diff)
+        self._sin.append(math.sin(diff))
+        self._cos.append(math.cos(diff))
+        self._sog.append(sog)
+
+    def _drop_before(self, t: float) -> None:
+        """Drop the window's fixes older than ``t`` (s)."""
+        times = self._t
+        while times and times[0] < t:
+            for column in (times, self._diff, self._sin, self._cos, self._sog):
+                column.popleft()
 
 
 class PositionCheck:
@@ -238,6 +258,9 @@ class PositionCheck:
 
     def __init__(self) -> None:
         self._window: deque[tuple[float, float, float]] = deque()  # (t, distance, metres)
+        self.beyond = 0
+        """Comparisons in the window beyond :data:`POSITION_SIGMA_BOUND` (a count kept as
+        they come and go: an integer, exact)."""
         self.failing = False
 
     def add(self, t: float, residual_ne: tuple[float, float], var_ne: tuple[float, float]
@@ -249,12 +272,12 @@ class PositionCheck:
         d = math.sqrt(dn * dn / var_ne[0] + de * de / var_ne[1])
         win = self._window
         win.append((t, d, math.hypot(dn, de)))
+        self.beyond += d > POSITION_SIGMA_BOUND
         while win[0][0] < t - POSITION_WINDOW_S:
-            win.popleft()
+            self.beyond -= win.popleft()[1] > POSITION_SIGMA_BOUND
         if len(win) < POSITION_MIN_CHECKS:
             return None
-        beyond = sum(1 for _, x, _ in win if x > POSITION_SIGMA_BOUND)
-        self.failing = beyond > POSITION_FRACTION * len(win)
+        self.failing = self.beyond > POSITION_FRACTION * len(win)
         return self.failing
 
     def median_m(self) -> float:
@@ -277,6 +300,9 @@ class SpeedCheck:
 
     def __init__(self) -> None:
         self._window: deque[tuple[float, float, bool]] = deque()  # (t, |residual|, failed)
+        self.failed = 0
+        """Failed comparisons in the window (a count kept as they come and go: an
+        integer, exact)."""
         self.failing = False
 
     def add(self, t: float, residual_mps: float, var: float) -> bool | None:
@@ -287,11 +313,12 @@ class SpeedCheck:
         failed = r > SPEED_FLOOR_MPS and r > SPEED_SIGMA_BOUND * math.sqrt(var)
         win = self._window
         win.append((t, r, failed))
+        self.failed += failed
         while win[0][0] < t - SPEED_WINDOW_S:
-            win.popleft()
+            self.failed -= win.popleft()[2]
         if len(win) < SPEED_MIN_CHECKS:
             return None
-        self.failing = sum(1 for w in win if w[2]) > SPEED_FRACTION * len(win)
+        self.failing = self.failed > SPEED_FRACTION * len(win)
         return self.failing
 
     def median_mps(self) -> float:

@@ -11,9 +11,14 @@ from onboard.core.geo import LocalFrame
 from onboard.core.messages import DvlVelocity, EstimateRecord, GnssFix, Heading, Innovation
 from onboard.integrity import (
     HEADING_BOUND_RAD,
+    POSITION_SIGMA_BOUND,
+    HeadingCourseCheck,
     IntegrityMonitor,
     NisCheck,
+    PositionCheck,
     SPEED_FLOOR_MPS,
+    SpeedCheck,
+    circular_mean,
     crab_bound,
     nis_band,
 )
@@ -188,3 +193,58 @@ def test_an_eseso_running_away_from_the_dvl_bottom_track_is_flagged() -> None:
 def test_an_eseso_following_the_dvl_passes() -> None:
     alerts, m = _speeds("eseso", {"u": 0.52, "v": 0.1}, dvl_vx=0.5, std=0.03)
     assert not alerts.codes() and not m.active()
+
+
+# ------------------------------------------------------------------ window bookkeeping
+# The windows keep what each judgement needs as the comparisons come and go (counts, the
+# sines and cosines); these tests hold them to a recomputation over the whole window.
+
+
+def test_the_circular_mean_is_the_loop_over_sines_and_cosines() -> None:
+    angles = np.random.default_rng(5).uniform(-4.0, 4.0, 200).tolist()
+    s = c = 0.0
+    for a in angles:  # the plain loop the mean was first written as
+        s += math.sin(a)
+        c += math.cos(a)
+    assert circular_mean(angles) == math.atan2(s, c)
+    assert circular_mean(iter(angles)) == circular_mean(angles)
+
+
+def test_the_heading_window_mean_equals_the_circular_mean_of_its_differences() -> None:
+    """Every judged window's offset, from the sines and cosines kept as fixes arrive, is
+    bit for bit the circular mean of the window's differences, and its speed the mean."""
+    rng = np.random.default_rng(3)
+    check = HeadingCourseCheck()
+    judged = 0
+    for k in range(600):  # 5 Hz for 120 s, with stops that empty the window
+        t = 0.2 * k
+        sog = 0.0 if 300 <= k < 400 else float(rng.uniform(0.6, 2.0))
+        check.heading(t - 0.05, float(rng.uniform(-math.pi, math.pi)))
+        fix = GnssFix(t=t, lat_deg=LAT0, lon_deg=LON0, sog_mps=sog,
+                      cog_rad=float(rng.uniform(-math.pi, math.pi)))
+        if check.fix(fix) is not None:
+            judged += 1
+            assert check.offset_rad == circular_mean(check._diff)
+            assert check.speed() == sum(check._sog) / len(check._sog)
+        assert all(x >= t - 10.0 for x in check._t)
+    assert judged > 300  # 420 of the 600 fixes judged
+
+
+def test_the_position_and_speed_windows_count_their_failures_exactly() -> None:
+    """The counts kept as comparisons come and go equal a recount of the window, and the
+    verdicts follow them, through windows that fill with failures and empty again."""
+    rng = np.random.default_rng(4)
+    pos, speed = PositionCheck(), SpeedCheck()
+    flips = speed_flips = 0
+    for k in range(1000):  # 5 Hz; the error comes and goes every 40 s
+        t = 0.2 * k
+        err = 10.0 if (k // 200) % 2 else 1.0
+        was, speed_was = pos.failing, speed.failing
+        pos.add(t, (float(rng.normal(0.0, err)), float(rng.normal(0.0, err))), (4.0, 4.0))
+        speed.add(t, float(rng.normal(0.0, 0.1 * err)), 0.01)
+        flips += pos.failing != was
+        speed_flips += speed.failing != speed_was
+        assert pos.beyond == sum(1 for _, d, _ in pos._window if d > POSITION_SIGMA_BOUND)
+        assert speed.failed == sum(1 for w in speed._window if w[2])
+        assert pos.failing == (pos.beyond > 0.5 * len(pos._window))
+    assert flips >= 4 and speed_flips >= 4  # each verdict changed 4 times
