@@ -332,13 +332,15 @@ def _published_speed(pipeline: str, rec: EstimateRecord, forward_only: bool
     """``rec``'s speed (m/s) and its variance (m^2/s^2) as compared with a measurement:
     its forward speed (signed, ``forward_only``) or its horizontal speed (a magnitude);
     None when it is not published with its sigma."""
-    qs = SPEED_PIPELINES[pipeline][:1] if forward_only else SPEED_PIPELINES[pipeline]
+    qs = SPEED_PIPELINES[pipeline]
     v, sd = rec.values, rec.std
-    if not all(q in v and q in sd for q in qs):
-        return None
     if forward_only:
-        return v[qs[0]], sd[qs[0]] ** 2
-    return math.hypot(*(v[q] for q in qs)), sum(sd[q] ** 2 for q in qs)
+        q = qs[0]
+        return (v[q], sd[q] ** 2) if q in v and q in sd else None
+    for q in qs:
+        if q not in v or q not in sd:
+            return None
+    return math.hypot(*[v[q] for q in qs]), sum([sd[q] ** 2 for q in qs])
 
 
 class NisCheck:
@@ -492,13 +494,17 @@ class IntegrityMonitor:
         acc = fix.h_acc_m
         var_fix = (acc * acc if acc is not None and acc > 0 and math.isfinite(acc)
                    else self.fix_std_m ** 2)
+        in_frame: dict[LocalFrame, tuple[float, float]] = {}  # the fix, once per frame
         for rec in records:
             if rec.pipeline in POSITION_PIPELINES:
-                self._position(rec, pipelines.get(rec.pipeline), fix, (dn, de), var_fix)
+                self._position(rec, pipelines.get(rec.pipeline), fix, (dn, de), var_fix,
+                               in_frame)
 
     def _position(self, rec: EstimateRecord, p: Any, fix: GnssFix,
-                  moved: tuple[float, float], var_fix: float) -> None:
-        """One pipeline's comparison with ``fix``, moved by ``moved`` (m) to the tick."""
+                  moved: tuple[float, float], var_fix: float,
+                  in_frame: dict[LocalFrame, tuple[float, float]]) -> None:
+        """One pipeline's comparison with ``fix``, moved by ``moved`` (m) to the tick;
+        ``in_frame`` holds the fix's north/east (m) in the frames converted so far."""
         own = getattr(p, "frame", None)
         v, sd = rec.values, rec.std
         if own is None or "north" not in v or "east" not in v or "north" not in sd \
@@ -507,7 +513,10 @@ class IntegrityMonitor:
         offset = getattr(p, "frame_offset", None)
         frame = own if offset is not None else self.frame
         off_n, off_e = offset if offset is not None else (0.0, 0.0)
-        fn, fe = frame.to_ne(fix.lat_deg, fix.lon_deg)
+        ne = in_frame.get(frame)
+        if ne is None:
+            ne = in_frame[frame] = frame.to_ne(fix.lat_deg, fix.lon_deg)
+        fn, fe = ne
         res = (v["north"] - (fn + off_n + moved[0]), v["east"] - (fe + off_e + moved[1]))
         var = (sd["north"] ** 2 + var_fix, sd["east"] ** 2 + var_fix)
         check = self.positions.get(rec.pipeline)
