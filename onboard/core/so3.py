@@ -27,6 +27,10 @@ Array = NDArray[np.float64]
 
 _EPS = 1e-9
 
+_I3 = np.eye(3)
+"""The identity, made once (read-only: the functions below only add to it)."""
+_I3.setflags(write=False)
+
 
 def cross(a: Array, b: Array) -> Array:
     """``a x b`` of two 3-vectors (numpy's ``cross`` costs ~10x more on tiny arrays)."""
@@ -48,10 +52,10 @@ def exp_so3(theta: Array) -> Array:
     K = skew(theta)
     if angle < 1e-6:
         # second-order series, exact to O(angle^3)
-        return np.eye(3) + K + 0.5 * (K @ K)
+        return _I3 + K + 0.5 * (K @ K)
     s = math.sin(angle) / angle
     c = (1.0 - math.cos(angle)) / (angle * angle)
-    return np.eye(3) + s * K + c * (K @ K)
+    return _I3 + s * K + c * (K @ K)
 
 
 def log_so3(R: Array) -> Array:
@@ -64,7 +68,7 @@ def log_so3(R: Array) -> Array:
         return 0.5 * v
     if math.pi - angle < 1e-4:
         # near pi: axis from the symmetric part, R = 2 a a^T - I
-        B = 0.5 * (R + np.eye(3))
+        B = 0.5 * (R + _I3)
         i = int(np.argmax(np.diag(B)))
         a = B[:, i] / math.sqrt(max(B[i, i], _EPS))
         if float(a @ v) < 0.0:
@@ -79,10 +83,10 @@ def right_jacobian(theta: Array) -> Array:
     angle = float(np.linalg.norm(theta))
     K = skew(theta)
     if angle < 1e-6:
-        return np.eye(3) - 0.5 * K + (K @ K) / 6.0
+        return _I3 - 0.5 * K + (K @ K) / 6.0
     a2 = angle * angle
     return (
-        np.eye(3)
+        _I3
         - (1.0 - math.cos(angle)) / a2 * K
         + (angle - math.sin(angle)) / (a2 * angle) * (K @ K)
     )

@@ -121,6 +121,17 @@ N_ERR = 23
 
 E3 = np.array([0.0, 0.0, 1.0])
 
+
+def _frozen_eye(n: int) -> Array:
+    """The ``n`` x ``n`` identity, read-only: made once and shared by every propagation
+    and update (a matrix filled in place from it starts as a ``copy()``)."""
+    eye = np.eye(n)
+    eye.setflags(write=False)
+    return eye
+
+
+_I2, _I3, _I_N = _frozen_eye(2), _frozen_eye(3), _frozen_eye(N_ERR)
+
 CHI2_999 = {1: 10.83, 2: 13.82, 3: 16.27}
 """Chi-square 99.9 % quantiles for 1, 2, 3 degrees of freedom."""
 PENDING_INNOVATIONS = 1024
@@ -292,14 +303,14 @@ class EsesoFilter:
         acc = Rf + self.g
         dR = exp_so3(w * dt)
         dRt = dR.T
-        F = np.eye(N_ERR)
-        F[P_, V_] = np.eye(3) * dt
+        F = _I_N.copy()
+        F[P_, V_] = _I3 * dt
         F[P_, TH] = -0.5 * (self.R @ skew(f)) * dt * dt
         F[P_, BA] = -0.5 * self.R * dt * dt
-        F[P_, G_] = 0.5 * np.eye(3) * dt * dt
+        F[P_, G_] = 0.5 * _I3 * dt * dt
         F[V_, TH] = -(self.R @ skew(f)) * dt
         F[V_, BA] = -self.R * dt
-        F[V_, G_] = np.eye(3) * dt
+        F[V_, G_] = _I3 * dt
         F[TH, TH] = dRt
         # exact in the gyro-bias error: Exp((w - db) dt) = Exp(w dt) Exp(-Jr(w dt) db dt)
         F[TH, BG] = -right_jacobian(w * dt) * dt
@@ -308,7 +319,7 @@ class EsesoFilter:
             F[XI, BG] = -(dRt @ skew(self.xi) @ right_jacobian(-w * dt)) * dt
         # INS velocity bias: first-order Gauss-Markov, exact discretization
         phi_ins = math.exp(-dt / c.ins_bias_tau_s) if c.ins_bias_tau_s > 0 else 0.0
-        F[BI, BI] = np.eye(2) * phi_ins
+        F[BI, BI] = _I2 * phi_ins
         q = np.empty(N_ERR)
         q[P_] = c.position_walk ** 2 * dt
         q[V_] = (c.accel_std_mps2 * dt) ** 2 * self.process_scale
@@ -376,11 +387,11 @@ class EsesoFilter:
         self._record(channel, t, source, gate, accepted=True)
         K = PHt @ Sinv
         dx = K @ y
-        IKH = np.eye(N_ERR) - K @ H
+        IKH = _I_N - K @ H
         P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
         self.inject(dx)
         # reset (17b): G = I except the attitude block, I - [dtheta/2]x (Sola eq. 287)
-        G = np.eye(N_ERR)
+        G = _I_N.copy()
         G[TH, TH] -= skew(0.5 * dx[TH])
         P = G @ P @ G.T
         self.P = 0.5 * (P + P.T)
@@ -456,8 +467,8 @@ class EsesoFilter:
         """Horizontal position ``z`` (north, east; m) with variance ``var`` (m^2) per axis;
         channel ``gnss_pos``."""
         H = np.zeros((2, N_ERR))
-        H[:, 0:2] = np.eye(2)
-        return self.update("gnss_pos", z - self.p[:2], H, np.eye(2) * var, t=t,
+        H[:, 0:2] = _I2
+        return self.update("gnss_pos", z - self.p[:2], H, _I2 * var, t=t,
                            source=source)
 
     def update_velocity_ne(self, z: Array, var: float, *,
@@ -465,8 +476,8 @@ class EsesoFilter:
         """Horizontal velocity over ground ``z`` (north, east; m/s) with variance ``var``
         (m^2/s^2) per axis; channel ``gnss_vel``."""
         H = np.zeros((2, N_ERR))
-        H[:, 3:5] = np.eye(2)
-        return self.update("gnss_vel", z - self.v[:2], H, np.eye(2) * var, t=t,
+        H[:, 3:5] = _I2
+        return self.update("gnss_vel", z - self.v[:2], H, _I2 * var, t=t,
                            source=source)
 
     def update_zero_velocity(self, var: float, *, t: float = math.nan,
@@ -475,17 +486,17 @@ class EsesoFilter:
         (m^2/s^2): the pseudo-measurement of a vehicle left idle with nothing else to
         bound its velocity (a ZUPT, Foxlin 2005); channel ``zupt``."""
         H = np.zeros((3, N_ERR))
-        H[:, V_] = np.eye(3)
-        return self.update("zupt", -self.v, H, np.eye(3) * var, t=t, source=source)
+        H[:, V_] = _I3
+        return self.update("zupt", -self.v, H, _I3 * var, t=t, source=source)
 
     def update_ins_velocity(self, z: Array, var: float, *,
                             t: float = math.nan, source: str = "") -> bool:
         """INS velocity over ground ``z`` (north, east; m/s) = ``v + b_ins`` + white noise
         of variance ``var`` (m^2/s^2) per axis; channel ``vog``."""
         H = np.zeros((2, N_ERR))
-        H[:, 3:5] = np.eye(2)
-        H[:, BI] = np.eye(2)
-        return self.update("vog", z - self.v[:2] - self.b_ins, H, np.eye(2) * var, t=t,
+        H[:, 3:5] = _I2
+        H[:, BI] = _I2
+        return self.update("vog", z - self.v[:2] - self.b_ins, H, _I2 * var, t=t,
                            source=source)
 
     def update_depth(self, depth_m: float, var: float, *,
@@ -504,7 +515,7 @@ class EsesoFilter:
         H = np.zeros((3, N_ERR))
         H[:, V_] = self.R.T
         H[:, TH] = skew(nu)
-        return self.update("dvl", z - nu, H, np.eye(3) * var, t=t, source=source)
+        return self.update("dvl", z - nu, H, _I3 * var, t=t, source=source)
 
     def update_attitude(self, R_meas: Array, roll: float, pitch: float,
                         var_roll_pitch: float, var_yaw: float, *,
@@ -513,7 +524,7 @@ class EsesoFilter:
         independent roll and pitch noise ``var_roll_pitch`` and yaw noise ``var_yaw``
         (rad^2), turned into the body-frame rotation vector; channel ``attitude``."""
         H = np.zeros((3, N_ERR))
-        H[:, TH] = np.eye(3)
+        H[:, TH] = _I3
         # the Euler-rate-to-body-rate matrix (Fossen eq. 2.41 inverted)
         sr, cr = math.sin(roll), math.cos(roll)
         sp, cp = math.sin(pitch), math.cos(pitch)
@@ -565,7 +576,7 @@ class EsesoFilter:
         H[:, BA] = -M
         H[:, BG] = -J_w
         H[:, G_] = M @ RT
-        H[:, XI] = -np.eye(3)
+        H[:, XI] = -_I3
         return h, H
 
     def model_force_var(self, f_m: Array, w_m: Array, tau: Array) -> Array:
@@ -606,7 +617,7 @@ class EsesoFilter:
             Ho[:, XI] = 0.0
             Rm = Rm + Ho @ self.P @ Ho.T
             H = np.zeros_like(H)
-            H[:, XI] = -np.eye(3)
+            H[:, XI] = -_I3
         k = self.params.thrust_huber
         if k > 0:
             S = H @ self.P @ H.T + Rm
