@@ -108,6 +108,23 @@ def test_without_a_position_magnetic_headings_wait_then_pass_uncorrected_with_a_
     assert eng.health(100.0 + n).declination.source == "none"
 
 
+def test_the_model_is_evaluated_once_a_run_not_per_sample(monkeypatch):
+    """pygeomag is pure Python (~1 ms a call): the engine evaluates it at the first fix
+    only; each magnetic heading after that is one addition."""
+    import onboard.declination as declination
+
+    calls = []
+    real = declination.wmm_declination
+    monkeypatch.setattr(declination, "wmm_declination",
+                        lambda *a, **k: calls.append(a) or real(*a, **k))
+    eng = Engine(Config(), pipelines=[])
+    for i in range(50):  # 10 s at 5 Hz, the boat moving ~1 km north
+        t = JULY_2026 + 0.2 * i
+        eng.push(GnssFix(t=t, lat_deg=AKHIOK[0] + 2e-4 * i, lon_deg=AKHIOK[1]))
+        eng.push(_hdm(t + 0.1, 10.0))
+    assert len(calls) == 1 and eng.accepted[("heading", "")] == 50
+    assert eng.declination.report.lat_deg == AKHIOK[0]  # the first fix's position
+
 def test_the_config_key_takes_degrees_or_auto_and_nothing_else():
     assert Corrections().declination_deg == "auto"
     assert from_dict({"corrections": {"declination_deg": 12}}).corrections \
