@@ -526,7 +526,7 @@ class IntegrityMonitor:
         if verdict is None:
             return
         self._flag(rec.pipeline, "position_residual", verdict)
-        if verdict:
+        if verdict and self._due("position_residual", rec.pipeline, rec.t):
             self._warn("position_residual", rec.pipeline, rec.t, (
                 f"{rec.pipeline} position is {check.median_m():.1f} m from GNSS (median over "
                 f"{POSITION_WINDOW_S:.0f} s), {check.median_sigma():.1f} sigma with its stated "
@@ -583,7 +583,7 @@ class IntegrityMonitor:
         if verdict is None:
             return
         self._flag(rec.pipeline, "speed_mismatch", any(c.failing for c in per.values()))
-        if verdict:
+        if verdict and self._due("speed_mismatch", rec.pipeline, rec.t):
             self._warn("speed_mismatch", rec.pipeline, rec.t, (
                 f"{rec.pipeline} speed is {check.median_mps():.2f} m/s from the {what} speed "
                 f"(median over {SPEED_WINDOW_S:.0f} s) with its stated "
@@ -641,10 +641,14 @@ class IntegrityMonitor:
               t_start: float | None = None) -> None:
         """Raise ``code`` at ``t`` (s) at most every :data:`WARN_EVERY_S` per (code,
         pipeline, key), spanning from ``t_start`` (default ``t``)."""
-        k = (code, pipeline + ":" + key)
-        last = self._last_warn.get(k)
-        if last is not None and 0.0 <= t - last < WARN_EVERY_S:
+        if not self._due(code, pipeline, t, key):
             return
-        self._last_warn[k] = t
+        self._last_warn[(code, pipeline + ":" + key)] = t
         self.alerts.warn(code, message, t if t_start is None else t_start,
                          pipeline=pipeline, t_end=t)
+
+    def _due(self, code: str, pipeline: str, t: float, key: str = "") -> bool:
+        """Whether :meth:`_warn` would raise ``code`` at ``t`` (s): a message is composed
+        (window medians sorted) only when it is (a failing check fails at every fix)."""
+        last = self._last_warn.get((code, pipeline + ":" + key))
+        return last is None or not 0.0 <= t - last < WARN_EVERY_S

@@ -248,3 +248,25 @@ def test_the_position_and_speed_windows_count_their_failures_exactly() -> None:
         assert speed.failed == sum(1 for w in speed._window if w[2])
         assert pos.failing == (pos.beyond > 0.5 * len(pos._window))
     assert flips >= 4 and speed_flips >= 4  # each verdict changed 4 times
+
+
+def test_a_failing_window_composes_its_warning_at_most_once_a_second(monkeypatch) -> None:
+    """At 5 Hz a failing check fails at every fix; its message (two sorted medians) is
+    composed only when the warning is raised, every WARN_EVERY_S."""
+    composed = []
+    median = PositionCheck.median_m
+    monkeypatch.setattr(PositionCheck, "median_m",
+                        lambda self: composed.append(1) or median(self))
+    alerts = Alerts()
+    m = IntegrityMonitor(alerts, "rudder-boat", fix_std_m=1.0)
+    lat, lon = FRAME.to_latlon(0.0, 0.0)
+    for k in range(200):  # 40 s at 5 Hz, 14 m off with a stated 1.9 m
+        t = 0.2 * k
+        m.observe(GnssFix(t=t, lat_deg=lat, lon_deg=lon, sog_mps=0.0, cog_rad=0.0))
+        rec = EstimateRecord(vehicle="v", pipeline="aie", t=t + 0.05,
+                             values={"north": 14.0, "east": 0.0},
+                             std={"north": 1.9, "east": 1.9})
+        m.positions_at(t + 0.05, [rec], {"aie": _Pipe()})
+    warning = next(iter(alerts))
+    assert warning.code == "position_residual" and warning.n == len(composed)
+    assert len(composed) <= 40  # 40 of the 196 failing comparisons
