@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
+import pytest
 
 from onboard.alerts import Alerts
 from onboard.core.geo import LocalFrame
@@ -206,7 +208,11 @@ def test_the_circular_mean_is_the_loop_over_sines_and_cosines() -> None:
     for a in angles:  # the plain loop the mean was first written as
         s += math.sin(a)
         c += math.cos(a)
-    assert circular_mean(angles) == math.atan2(s, c)
+    # bit for bit where sum adds left to right (Python 3.11); from 3.12 on sum compensates
+    # the rounding, for the kept columns as for circular_mean alike
+    if sys.version_info < (3, 12):
+        assert circular_mean(angles) == math.atan2(s, c)
+    assert circular_mean(angles) == pytest.approx(math.atan2(s, c), abs=1e-12)
     assert circular_mean(iter(angles)) == circular_mean(angles)
 
 
