@@ -144,7 +144,7 @@ def test_the_high_gain_observer_finds_the_current_without_the_pipeline():
             hgo.x[:2] = R.T @ z
             first = False
             continue
-        hgo.predict(0.1, inputs, ident.thetas, 1.0)
+        hgo.predict(0.1, inputs, ident.thetas)
         x0, P0 = hgo.x.copy(), hgo.covariance().copy()
         assert hgo.update("earth", z, 0.05, 0.1, R, inputs)
         H = np.hstack([R, np.eye(2)])

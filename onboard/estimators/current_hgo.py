@@ -9,6 +9,13 @@ filter's), and corrects it with the
 output injection ``G(gamma) (y - C x_hat)`` (Kim eq. 11) written in that state
 (:func:`.hgo.current_hgo_gain`). The covariance is propagated for this gain (Joseph form),
 so the one-sigma is that of the observer actually running.
+
+The model's coefficients are uncertain: their covariance (:meth:`consider`, from the
+observer's own identification) is carried as consider parameters (Schmidt 1966): the
+coefficient error ``dtheta`` drives ``nu_r`` through the regressors, ``nu_r' += Phi^T
+dtheta``, and the cross-covariance ``C = E[x_err dtheta^T]`` is propagated beside ``P``;
+the gain is unchanged (it is the LMI design, not a Kalman gain), so only the published
+one-sigma sees them (docs/current.md, "The HGO's sigma").
 """
 
 from __future__ import annotations
@@ -34,7 +41,10 @@ class CurrentHighGainObserver:
 
     Attributes (filterpy style):
         x: state ``[nu_r (m/s, body), V_c (m/s, earth)]``.
-        P: covariance of the state's error under this gain.
+        P: covariance of the state's error under this gain (the coefficients' uncertainty
+            included).
+        theta_cov: covariance of the model coefficients (consider parameters, the
+            concatenated velocity DOFs' coefficients; None: known exactly).
         y: last velocity innovation (m/s, the measurement's axes).
         S: its covariance ``H P H^T + std^2 I`` before the correction (m^2/s^2).
         nis: its normalized innovation squared (NaN if ``S`` is singular).
@@ -83,6 +93,26 @@ class CurrentHighGainObserver:
         self._hold: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
         self._hold_age = 0.0
         self._psi = np.zeros((2 * nd, nd))
+        self.theta_cov: np.ndarray | None = None
+        # cross-covariance of the state's error with the coefficients' error
+        self._C: np.ndarray | None = None
+
+    def consider(self, cov: np.ndarray, *, fresh: bool = False) -> None:
+        """Take ``cov`` as the covariance of the coefficients passed to :meth:`predict`
+        (consider parameters; concatenated in DOF order). A new covariance of the same
+        coefficients (an identification update ``dtheta+ = M dtheta``, ``M = cov
+        cov_old^-1`` for RLS) carries the cross-covariance along: ``C <- C M^T``; with
+        ``fresh`` (other coefficients, e.g. a restored model) it starts from zero."""
+        cov = np.array(cov, float)
+        old, C = self.theta_cov, self._C
+        if fresh or C is None or old is None or old.shape != cov.shape:
+            self._C = np.zeros((2 * self.nd, len(cov)))
+        elif not np.array_equal(old, cov):
+            try:
+                self._C = np.linalg.solve(old, C.T).T @ cov  # C old^-1 cov (symmetric)
+            except np.linalg.LinAlgError:
+                self._C = np.zeros_like(C)
+        self.theta_cov = cov
 
     def restart(self, x: np.ndarray, P: np.ndarray) -> None:
         """Take ``[nu_r, V_c]`` and its covariance from the leading block of ``x`` and ``P``
@@ -93,13 +123,14 @@ class CurrentHighGainObserver:
         self._hold = None
         self._hold_age = 0.0
         self._psi = np.zeros((o, self.nd))
+        if self._C is not None:
+            self._C = np.zeros_like(self._C)
 
     def reset_gain(self) -> None:
         """Restart the increasing-gain law from ``gamma_init``."""
         self.law.gamma = self.gamma_init
 
-    def predict(self, dt: float, inputs: ModelInputs, thetas: list[np.ndarray],
-                q_scale: float) -> bool:
+    def predict(self, dt: float, inputs: ModelInputs, thetas: list[np.ndarray]) -> bool:
         """Integrate Kim eq. (11) over ``dt`` (s): the model with coefficients ``thetas``
         (linearized at the start of the step) plus the output injection ``G(gamma) (y -
         H x_hat)`` of the newest velocity sample, held (zero-order hold) for at most
@@ -107,13 +138,16 @@ class CurrentHighGainObserver:
         integrated, never applied as one discrete jump (``G dt`` is unstable once
         ``gamma k1 dt > 2``). The covariance follows the same linear dynamics; the held
         sample's noise enters every sub-step with the same value, so its contribution is
-        carried as ``Psi`` (``x_err += Psi v``) and added as ``Psi r Psi^T``. Process
-        noise scaled by ``q_scale``. Returns False (state left as it was, counted) on a
+        carried as ``Psi`` (``x_err += Psi v``) and added as ``Psi r Psi^T``. The
+        coefficients' covariance (:meth:`consider`) enters through the regressors ``B =
+        [Phi^T; 0]``: per sub-step ``[P C; C^T P_theta] <- F_a [P C; C^T P_theta] F_a^T``,
+        ``F_a = [[F, h B], [0, I]]``. Returns False (state left as it was, counted) on a
         divergence."""
         nd = self.nd
         n = 2 * nd
         nu = self.x[:nd]
-        _, f, J = self.model.linearize(nu.tolist(), inputs, [t.tolist() for t in thetas[:nd]])
+        phis, f, J = self.model.linearize(nu.tolist(), inputs,
+                                          [t.tolist() for t in thetas[:nd]])
         self._J = Jm = np.array(J)
         A = np.zeros((n, n))
         A[:nd, :nd] = Jm
@@ -133,20 +167,38 @@ class CurrentHighGainObserver:
         n_sub = max(1, math.ceil(dt * rate / 0.2))
         h = dt / n_sub
         F = np.eye(n) + h * A
-        q = np.concatenate([np.full(nd, self.accel_std ** 2 * self.model_error_time_s
-                                    * q_scale), np.full(nd, self.current_walk ** 2)]) * h
-        x, P, Psi = self.x.copy(), self.P, self._psi
+        q = np.concatenate([np.full(nd, self.accel_std ** 2 * self.model_error_time_s),
+                            np.full(nd, self.current_walk ** 2)]) * h
+        x, P, Psi, C = self.x.copy(), self.P, self._psi, self._C
+        hB = self._coefficient_input(phis, h) if C is not None else None
         for _ in range(n_sub):
             x = x + h * (A @ x + b)
-            P = F @ P @ F.T
+            if hB is not None:
+                FC = F @ C
+                hBPt = hB @ self.theta_cov
+                P = F @ P @ F.T + FC @ hB.T + hB @ FC.T + hBPt @ hB.T
+                C = FC + hBPt
+            else:
+                P = F @ P @ F.T
             P.ravel()[::n + 1] += q
             if G is not None:
                 Psi = F @ Psi + h * G
         if not (np.all(np.isfinite(x)) and float(np.max(np.abs(x))) < DIVERGED_ABOVE):
             self.counters["hgo_diverged"] = self.counters.get("hgo_diverged", 0) + 1
             return False
-        self.x, self.P, self._psi = x, P, Psi
+        self.x, self.P, self._psi, self._C = x, P, Psi, C
         return True
+
+    def _coefficient_input(self, phis: list[tuple[float, ...]], h: float) -> np.ndarray:
+        """``h B``: the sensitivity of ``x`` to the coefficients' error over a sub-step of
+        ``h`` (s), the regressor of DOF ``i`` on row ``i`` in that DOF's columns."""
+        assert self._C is not None
+        hB = np.zeros_like(self._C)
+        col = 0
+        for i, phi in enumerate(phis[: self.nd]):
+            hB[i, col:col + len(phi)] = phi
+            col += len(phi)
+        return h * hB
 
     def _fold_hold(self) -> None:
         """End the held sample: its noise contribution joins ``P``."""

@@ -177,6 +177,7 @@ class CurrentPipeline:
                 self.model, self.gain, _gain_law(cfg, self.gain), self.kf.P[:2 * nd, :2 * nd],
                 accel_std=cfg.accel_std, model_error_time_s=cfg.model_error_time_s,
                 current_walk=cfg.current_walk, counters=self.counters)
+            self.hgo.consider(self.hgo_rls.covariance())
             self._gamma_follows_model = _gain_is_design_fixed(cfg, self.gain)
             self._gamma_t = -math.inf
             self._gamma_from_model()
@@ -299,7 +300,7 @@ class CurrentPipeline:
             assert self.hgo_rls is not None
             n_sub = max(1, math.ceil(dt / PREDICT_STEP_S))
             for _ in range(n_sub):
-                if not hgo.predict(dt / n_sub, self.inp, self.hgo_rls.thetas, kf.q_scale):
+                if not hgo.predict(dt / n_sub, self.inp, self.hgo_rls.thetas):
                     hgo.restart(kf.x, kf.P)
                     hgo.reset_gain()
             self._identify_hgo(t, dt)
@@ -408,6 +409,8 @@ class CurrentPipeline:
         self.counters["hgo_rls_updates"] = self.counters.get("hgo_rls_updates", 0) + (
             rls.n_updates - before)
         self.counters["hgo_rls_rejected"] = rls.n_rejected
+        if rls.n_updates != before:
+            hgo.consider(rls.covariance())
         if rls.n_updates != before and t - self._gamma_t >= GAMMA_RECHECK_S:
             self._gamma_t = t
             self._gamma_from_model()
@@ -581,9 +584,7 @@ class CurrentPipeline:
             if ident.yaw_rls is not None and "yaw_rls" in state:
                 ident.restore_yaw(state["yaw_rls"])
             if self.hgo_rls is not None:
-                self.hgo_rls.restart(self.model.thetas_from_mapping(
-                    state.get("hgo_thetas", state.get("thetas", {})), thetas)[:nd])
-                self._gamma_from_model()
+                self._restore_hgo_model(state, thetas)
             before = self.kf.x[nd:2 * nd].copy()
             self.kf.restore_current(state["current"], state.get("current_std", [0.3] * nd))
         except (KeyError, TypeError, ValueError):
@@ -592,6 +593,24 @@ class CurrentPipeline:
             np.any(self.kf.x[nd:2 * nd]))
         if restored and self.cfg.restore_check_s > 0:
             self._start_probation(thetas, state.get("theta_cov", []))
+
+    def _restore_hgo_model(self, state: Mapping[str, Any], thetas: list[np.ndarray]) -> None:
+        """The high-gain observer's own model from a persistent state: its own
+        coefficients (``hgo_thetas``) or, without them, the joint filter's ``thetas``
+        with their covariance (``theta_cov``), which then becomes its RLS's covariance and
+        the observer's consider covariance (:meth:`.CurrentHighGainObserver.consider`)."""
+        assert self.hgo is not None and self.hgo_rls is not None
+        nd = self.nd
+        cov = None
+        if "hgo_thetas" not in state:
+            nt = self.identification.n_theta
+            c = np.asarray(state.get("theta_cov", []), float)
+            if nt and c.shape == (nt, nt) and np.all(np.isfinite(c)):
+                cov = c
+        self.hgo_rls.restart(self.model.thetas_from_mapping(
+            state.get("hgo_thetas", state.get("thetas", {})), thetas)[:nd], cov)
+        self.hgo.consider(self.hgo_rls.covariance(), fresh=True)
+        self._gamma_from_model()
 
     def _start_probation(self, thetas: list[np.ndarray], theta_cov: object) -> None:
         """The twin filter of the restored-current check: the restored model, the current
