@@ -36,6 +36,33 @@ HOLD_MAX_S = 1.0
 observer then runs on the model alone (a GNSS or DVL gap)."""
 
 
+def repeated_step(F: np.ndarray, U: np.ndarray, q: np.ndarray, n: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` steps of ``e <- F e + U w + v`` with ``w`` held constant and ``v`` white of
+    covariance ``diag(q)`` added after each step: ``(F^n, sum_k F^k U, sum_k F^k diag(q)
+    F^kT)`` (``k`` from 0 to ``n - 1``), by repeated squaring (``~2 log2 n`` compositions
+    instead of ``n`` steps)."""
+    m = len(F)
+    res = (np.eye(m), np.zeros_like(U), np.zeros((m, m)))
+    base = (F, U, np.diag(q))
+    while True:
+        if n & 1:
+            res = _then(res, base)
+        n >>= 1
+        if not n:
+            return res
+        base = _then(base, base)
+
+
+def _then(a: tuple[np.ndarray, np.ndarray, np.ndarray],
+          b: tuple[np.ndarray, np.ndarray, np.ndarray]
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Segment ``a`` followed by segment ``b`` (:func:`repeated_step`'s triples)."""
+    Fa, Ua, Qa = a
+    Fb, Ub, Qb = b
+    return Fb @ Fa, Fb @ Ua + Ub, Fb @ Qa @ Fb.T + Qb
+
+
 class CurrentHighGainObserver:
     """Kim et al.'s model-based high-gain observer of ``[nu_r, V_c]``.
 
@@ -141,7 +168,8 @@ class CurrentHighGainObserver:
         carried as ``Psi`` (``x_err += Psi v``) and added as ``Psi r Psi^T``. The
         coefficients' covariance (:meth:`consider`) enters through the regressors ``B =
         [Phi^T; 0]``: per sub-step ``[P C; C^T P_theta] <- F_a [P C; C^T P_theta] F_a^T``,
-        ``F_a = [[F, h B], [0, I]]``. Returns False (state left as it was, counted) on a
+        ``F_a = [[F, h B], [0, I]]``; the covariances are carried over all sub-steps at once
+        (:meth:`_propagate_covariance`). Returns False (state left as it was, counted) on a
         divergence."""
         nd = self.nd
         n = 2 * nd
@@ -169,25 +197,38 @@ class CurrentHighGainObserver:
         F = np.eye(n) + h * A
         q = np.concatenate([np.full(nd, self.accel_std ** 2 * self.model_error_time_s),
                             np.full(nd, self.current_walk ** 2)]) * h
-        x, P, Psi, C = self.x.copy(), self.P, self._psi, self._C
-        hB = self._coefficient_input(phis, h) if C is not None else None
+        x = self.x.copy()
         for _ in range(n_sub):
             x = x + h * (A @ x + b)
-            if hB is not None:
-                FC = F @ C
-                hBPt = hB @ self.theta_cov
-                P = F @ P @ F.T + FC @ hB.T + hB @ FC.T + hBPt @ hB.T
-                C = FC + hBPt
-            else:
-                P = F @ P @ F.T
-            P.ravel()[::n + 1] += q
-            if G is not None:
-                Psi = F @ Psi + h * G
         if not (np.all(np.isfinite(x)) and float(np.max(np.abs(x))) < DIVERGED_ABOVE):
             self.counters["hgo_diverged"] = self.counters.get("hgo_diverged", 0) + 1
             return False
-        self.x, self.P, self._psi, self._C = x, P, Psi, C
+        self.x = x
+        self._propagate_covariance(F, q, n_sub, phis, h * G if G is not None else None, h)
         return True
+
+    def _propagate_covariance(self, F: np.ndarray, q: np.ndarray, n_sub: int,
+                              phis: list[tuple[float, ...]], hG: np.ndarray | None,
+                              h: float) -> None:
+        """``P``, ``Psi`` and the coefficients' cross-covariance ``C`` over ``n_sub``
+        sub-steps of ``e <- F e + h B dtheta + h G v + w`` (``cov w = diag(q)``), in closed
+        form (:func:`repeated_step`) rather than sub-step by sub-step."""
+        nd = self.nd
+        C = self._C
+        hB = self._coefficient_input(phis, h) if C is not None else None
+        inputs = [u for u in (hB, hG) if u is not None]
+        U = np.hstack(inputs) if inputs else np.zeros((2 * nd, 0))
+        Phi, Gam, Q = repeated_step(F, U, q, n_sub)
+        P = Phi @ self.P @ Phi.T + Q
+        if hB is not None:
+            assert C is not None and self.theta_cov is not None
+            nt = hB.shape[1]
+            PhiC, GPt = Phi @ C, Gam[:, :nt] @ self.theta_cov
+            P += PhiC @ Gam[:, :nt].T + Gam[:, :nt] @ PhiC.T + GPt @ Gam[:, :nt].T
+            self._C = PhiC + GPt
+        if hG is not None:
+            self._psi = Phi @ self._psi + Gam[:, U.shape[1] - hG.shape[1]:]
+        self.P = P
 
     def _coefficient_input(self, phis: list[tuple[float, ...]], h: float) -> np.ndarray:
         """``h B``: the sensitivity of ``x`` to the coefficients' error over a sub-step of
