@@ -68,8 +68,10 @@ class CurrentHighGainObserver:
 
     Attributes (filterpy style):
         x: state ``[nu_r (m/s, body), V_c (m/s, earth)]``.
-        P: covariance of the state's error under this gain (the coefficients' uncertainty
-            included).
+        P: covariance of the state's error under this gain from the noises (measurement,
+            model acceleration, current walk).
+        P_model: the part the coefficients' uncertainty adds (:meth:`consider`); the
+            published covariance is ``P + P_model`` (:meth:`covariance`).
         theta_cov: covariance of the model coefficients (consider parameters, the
             concatenated velocity DOFs' coefficients; None: known exactly).
         y: last velocity innovation (m/s, the measurement's axes).
@@ -110,6 +112,7 @@ class CurrentHighGainObserver:
         self.gamma = self.gamma_init = law.gamma
         self.x = np.zeros(2 * nd)
         self.P = np.array(P0, float)
+        self.P_model = np.zeros_like(self.P)
         self.y = np.zeros(nd)
         self.S = np.eye(nd)
         self.nis = 0.0
@@ -147,6 +150,7 @@ class CurrentHighGainObserver:
         o = 2 * self.nd
         self.x = x[:o].copy()
         self.P = P[:o, :o].copy()
+        self.P_model = np.zeros_like(self.P)
         self._hold = None
         self._hold_age = 0.0
         self._psi = np.zeros((o, self.nd))
@@ -219,16 +223,16 @@ class CurrentHighGainObserver:
         inputs = [u for u in (hB, hG) if u is not None]
         U = np.hstack(inputs) if inputs else np.zeros((2 * nd, 0))
         Phi, Gam, Q = repeated_step(F, U, q, n_sub)
-        P = Phi @ self.P @ Phi.T + Q
+        self.P = Phi @ self.P @ Phi.T + Q
         if hB is not None:
             assert C is not None and self.theta_cov is not None
             nt = hB.shape[1]
             PhiC, GPt = Phi @ C, Gam[:, :nt] @ self.theta_cov
-            P += PhiC @ Gam[:, :nt].T + Gam[:, :nt] @ PhiC.T + GPt @ Gam[:, :nt].T
+            self.P_model = (Phi @ self.P_model @ Phi.T + PhiC @ Gam[:, :nt].T
+                            + Gam[:, :nt] @ PhiC.T + GPt @ Gam[:, :nt].T)
             self._C = PhiC + GPt
         if hG is not None:
             self._psi = Phi @ self._psi + Gam[:, U.shape[1] - hG.shape[1]:]
-        self.P = P
 
     def _coefficient_input(self, phis: list[tuple[float, ...]], h: float) -> np.ndarray:
         """``h B``: the sensitivity of ``x`` to the coefficients' error over a sub-step of
@@ -285,7 +289,7 @@ class CurrentHighGainObserver:
         self._fold_hold()
         self.y = y
         var = std * std
-        self.S = S = H @ self.P @ H.T + var * np.eye(m)
+        self.S = S = H @ (self.P + self.P_model) @ H.T + var * np.eye(m)
         Sinv = inv_small(S)
         self.nis = float(y @ Sinv @ y) if Sinv is not None else math.nan
         e_earth = y if kind == "earth" else R @ y
@@ -306,16 +310,19 @@ class CurrentHighGainObserver:
         state."""
         return not (kind == "water" or (kind == "bottom" and m != self.nd))
 
-    def covariance(self) -> np.ndarray:
-        """Covariance of ``x`` including the held sample's noise (m^2/s^2)."""
+    def covariance(self, model: bool = True) -> np.ndarray:
+        """Covariance of ``x`` including the held sample's noise (m^2/s^2) and, with
+        ``model``, the coefficients' uncertainty."""
+        P = self.P + self.P_model if model else self.P
         if self._hold is None:
-            return self.P
-        return self.P + self._hold[3] * (self._psi @ self._psi.T)
+            return P
+        return P + self._hold[3] * (self._psi @ self._psi.T)
 
-    def current_cov(self) -> np.ndarray:
-        """Covariance of the current (m^2/s^2, earth axes), a copy."""
+    def current_cov(self, model: bool = True) -> np.ndarray:
+        """Covariance of the current (m^2/s^2, earth axes), a copy; ``model`` as
+        :meth:`covariance`."""
         nd = self.nd
-        return self.covariance()[nd:, nd:].copy()
+        return self.covariance(model)[nd:, nd:].copy()
 
     def current_estimate(self) -> tuple[list[float], list[float], list[float]]:
         """(current (m/s, earth), its one-sigma (m/s), ``nu_r`` (m/s, body)) as lists."""

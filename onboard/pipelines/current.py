@@ -390,8 +390,9 @@ class CurrentPipeline:
         """One step of the high-gain observer's own RLS (``hgo_identify``) on its velocity
         ``nu_r``: learning while a velocity was measured within the last second, the
         through-water speed is above ``identify_min_speed`` and, with ``"turns"``, the
-        observer's horizontal current one-sigma is at most ``identify_max_current_std``
-        within ``identify_after_turn_s`` of a turn (``identify_straight``: anywhere)."""
+        observer's horizontal current one-sigma from the noises (without its model's
+        uncertainty) is at most ``identify_max_current_std`` within
+        ``identify_after_turn_s`` of a turn (``identify_straight``: anywhere)."""
         hgo, rls, cfg = self.hgo, self.hgo_rls, self.cfg
         assert hgo is not None and rls is not None
         nu = hgo.x[: self.nd].tolist()
@@ -399,7 +400,9 @@ class CurrentPipeline:
                  and t - self._last_velocity_t <= VELOCITY_FRESH_S
                  and nu[0] >= cfg.identify_min_speed)
         if learn and cfg.hgo_identify == "turns":
-            c_var = hgo.current_cov().diagonal()
+            # the noises' part only: the coefficients' part is what learning reduces (with
+            # it a loose prior would never let the RLS learn)
+            c_var = hgo.current_cov(model=False).diagonal()
             learn = (math.sqrt(max(float(c_var[0]), float(c_var[1])))
                      <= cfg.identify_max_current_std
                      and (cfg.identify_straight or t - self.identification.last_turn_t
