@@ -165,16 +165,22 @@ def test_the_hgo_model_survives_a_restart():
     import json
     pipe = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
     pipe.hgo_rls.thetas[0] = pipe.hgo_rls.thetas[0] + 0.01  # as if learned
+    pipe.hgo_rls.rls[0].P = 0.5 * pipe.hgo_rls.rls[0].P
     state = json.loads(json.dumps(pipe.get_state()))
     fresh = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
     fresh.set_state(state)
     assert np.allclose(fresh.hgo_rls.thetas[0], pipe.hgo_rls.thetas[0])
     assert np.allclose(fresh.hgo_rls.rls[0].theta, pipe.hgo_rls.thetas[0])
     assert not np.allclose(fresh.thetas[0], fresh.hgo_rls.thetas[0])
+    # with their covariance: the RLS's and the observer's consider covariance
+    assert np.allclose(fresh.hgo_rls.covariance(), pipe.hgo_rls.covariance())
+    assert np.allclose(fresh.hgo.theta_cov, pipe.hgo_rls.covariance())
     del state["hgo_thetas"]
     older = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
     older.set_state(state)
     assert np.allclose(older.hgo_rls.thetas[0], older.thetas[0])
+    # the joint filter's coefficients come with the joint filter's covariance
+    assert np.allclose(older.hgo.theta_cov, np.asarray(state["theta_cov"]))
 
 
 def test_bad_model_config_names_the_key():

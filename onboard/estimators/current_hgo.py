@@ -75,7 +75,8 @@ class CurrentHighGainObserver:
         theta_cov: covariance of the model coefficients (consider parameters, the
             concatenated velocity DOFs' coefficients; None: known exactly).
         y: last velocity innovation (m/s, the measurement's axes).
-        S: its covariance ``H P H^T + std^2 I`` before the correction (m^2/s^2).
+        S: its covariance ``H (P + P_model) H^T + std^2 I`` before the correction
+            (m^2/s^2).
         nis: its normalized innovation squared (NaN if ``S`` is singular).
         gamma: the gain used by the last correction (the initial one before any).
         gamma_init: the gain the law starts from (and restarts from).

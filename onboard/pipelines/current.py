@@ -565,6 +565,7 @@ class CurrentPipeline:
         if self.hgo_rls is not None:
             st["hgo_thetas"] = self.model.thetas_to_mapping(
                 self.hgo_rls.thetas + self.thetas[self.nd:])
+            st["hgo_theta_cov"] = self.hgo_rls.covariance().tolist()
         return st
 
     def set_state(self, state: Mapping[str, Any]) -> None:
@@ -599,17 +600,17 @@ class CurrentPipeline:
 
     def _restore_hgo_model(self, state: Mapping[str, Any], thetas: list[np.ndarray]) -> None:
         """The high-gain observer's own model from a persistent state: its own
-        coefficients (``hgo_thetas``) or, without them, the joint filter's ``thetas``
-        with their covariance (``theta_cov``), which then becomes its RLS's covariance and
-        the observer's consider covariance (:meth:`.CurrentHighGainObserver.consider`)."""
+        coefficients (``hgo_thetas``, with ``hgo_theta_cov``) or, without them, the joint
+        filter's ``thetas`` with their covariance (``theta_cov``); the covariance becomes
+        its RLS's covariance and the observer's consider covariance
+        (:meth:`.CurrentHighGainObserver.consider`). Raises ValueError or TypeError on a
+        covariance that is not a matrix of numbers."""
         assert self.hgo is not None and self.hgo_rls is not None
         nd = self.nd
-        cov = None
-        if "hgo_thetas" not in state:
-            nt = self.identification.n_theta
-            c = np.asarray(state.get("theta_cov", []), float)
-            if nt and c.shape == (nt, nt) and np.all(np.isfinite(c)):
-                cov = c
+        nt = self.identification.n_theta
+        c = np.asarray(state.get("hgo_theta_cov" if "hgo_thetas" in state else "theta_cov",
+                                 []), float)
+        cov = c if nt and c.shape == (nt, nt) and np.all(np.isfinite(c)) else None
         self.hgo_rls.restart(self.model.thetas_from_mapping(
             state.get("hgo_thetas", state.get("thetas", {})), thetas)[:nd], cov)
         self.hgo.consider(self.hgo_rls.covariance(), fresh=True)
