@@ -67,10 +67,15 @@ def test_torpedo_hgo_observer_with_increasing_gain():
     """The increasing-gain law (Alessandri & Rossi), configured: gamma grows from 0.05
     with the output error up to 1.29. (The bundled gain files run a fixed gamma* instead,
     test_current_sitl.py.)"""
+    # the plant's own coefficients, declared as known: with the default prior (20 %, the
+    # floor 0.02 on the zero terms, 2 % net weight) carried as consider parameters, this
+    # low gain, which leans on the model, puts east's one-sigma at 0.58 m/s (unpublished)
     pipe = current_pipeline("torpedo-auv", model=TORPEDO_TRUE, identify=False, observer="hgo",
-                            gamma_0=0.05, rho=0.01, gamma_max=1.29)
+                            gamma_0=0.05, rho=0.01, gamma_max=1.29, model_rel_std=0.02,
+                            theta_std_floor=1e-4, net_weight_std=0.001)
     rms, cover, _, _ = current_errors(pipe, simulate_torpedo(300.0), after=100.0)
-    # measured: rms [0.019, 0.036] m/s, coverage 1.0; gamma rose from 0.05 to 1.2. The
+    # measured: rms [0.019, 0.035] m/s, coverage 1.0 (one-sigma 0.06 / 0.12, coverage
+    # 0.99 / 0.99: timid); gamma rose from 0.05 to 1.25. The
     # higher the gain, the noisier on this synthetic run: fixed gamma 1.29 gives rms
     # [0.020, 0.038], 3.0 [0.060, 0.124]; at gamma* = 6.4 the east component's one-sigma
     # exceeds 0.3 m/s (unpublished)
@@ -160,16 +165,22 @@ def test_the_hgo_model_survives_a_restart():
     import json
     pipe = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
     pipe.hgo_rls.thetas[0] = pipe.hgo_rls.thetas[0] + 0.01  # as if learned
+    pipe.hgo_rls.rls[0].P = 0.5 * pipe.hgo_rls.rls[0].P
     state = json.loads(json.dumps(pipe.get_state()))
     fresh = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
     fresh.set_state(state)
     assert np.allclose(fresh.hgo_rls.thetas[0], pipe.hgo_rls.thetas[0])
     assert np.allclose(fresh.hgo_rls.rls[0].theta, pipe.hgo_rls.thetas[0])
     assert not np.allclose(fresh.thetas[0], fresh.hgo_rls.thetas[0])
+    # with their covariance: the RLS's and the observer's consider covariance
+    assert np.allclose(fresh.hgo_rls.covariance(), pipe.hgo_rls.covariance())
+    assert np.allclose(fresh.hgo.theta_cov, pipe.hgo_rls.covariance())
     del state["hgo_thetas"]
     older = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
     older.set_state(state)
     assert np.allclose(older.hgo_rls.thetas[0], older.thetas[0])
+    # the joint filter's coefficients come with the joint filter's covariance
+    assert np.allclose(older.hgo.theta_cov, np.asarray(state["theta_cov"]))
 
 
 def test_bad_model_config_names_the_key():

@@ -180,12 +180,16 @@ def test_gavia_tidal_hgo_runs_at_gamma_star():
     m = runs.current_metrics("gavia-tidal", "hgo", 1)  # after 60 s
     # measured (200 s, own RLS, which does not learn on this straight run), seeds 1 / 2 / 3:
     # rms N/E/D 0.022 / 0.016 / 0.015, 0.021 / 0.016 / 0.016, 0.020 / 0.015 / 0.017 m/s,
-    # 2-sigma coverage 1.00 throughout, no peaking (the paper vs ADCP: std 0.094 / 0.066 /
+    # no peaking (the paper vs ADCP: std 0.094 / 0.066 /
     # 0.032); at gamma 1.29 (the former cap): 0.018 / 0.010 / 0.007; the RLS learning at
     # every sample as in the paper (hgo_identify = "always"): 0.155 / 0.020 / 0.018, a
     # north bias the along-track ambiguity lets in (docs/current.md, HGO)
+    # Its sigma is calibrated both ways (its own model's coefficients as consider
+    # parameters, no borrowed q_scale), seed 1: 1-sigma coverage 0.60 / 0.62 / 0.65, 2-sigma
+    # 0.91 / 0.92 / 0.94 (with the joint filter's q_scale: 0.95-0.98 / 1.00, too timid)
     for ax, paper in zip(("north", "east", "down"), cv.PAPER_GAVIA_STD):
         assert m[ax]["published"] == 1.0
         assert m[ax]["std"] < paper
-        assert m[ax]["cover2"] > 0.9
+        assert 0.9 < m[ax]["cover2"] < 0.99
+        assert m[ax]["cover1"] < 0.8
         assert m[ax]["rms"] < 0.04

@@ -9,6 +9,13 @@ filter's), and corrects it with the
 output injection ``G(gamma) (y - C x_hat)`` (Kim eq. 11) written in that state
 (:func:`.hgo.current_hgo_gain`). The covariance is propagated for this gain (Joseph form),
 so the one-sigma is that of the observer actually running.
+
+The model's coefficients are uncertain: their covariance (:meth:`consider`, from the
+observer's own identification) is carried as consider parameters (Schmidt 1966): the
+coefficient error ``dtheta`` drives ``nu_r`` through the regressors, ``nu_r' += Phi^T
+dtheta``, and the cross-covariance ``C = E[x_err dtheta^T]`` is propagated beside ``P``;
+the gain is unchanged (it is the LMI design, not a Kalman gain), so only the published
+one-sigma sees them (docs/current.md, "The HGO's sigma").
 """
 
 from __future__ import annotations
@@ -29,14 +36,47 @@ HOLD_MAX_S = 1.0
 observer then runs on the model alone (a GNSS or DVL gap)."""
 
 
+def repeated_step(F: np.ndarray, U: np.ndarray, q: np.ndarray, n: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` steps of ``e <- F e + U w + v`` with ``w`` held constant and ``v`` white of
+    covariance ``diag(q)`` added after each step: ``(F^n, sum_k F^k U, sum_k F^k diag(q)
+    F^kT)`` (``k`` from 0 to ``n - 1``), by repeated squaring (``~2 log2 n`` compositions
+    instead of ``n`` steps)."""
+    m = len(F)
+    res = (np.eye(m), np.zeros_like(U), np.zeros((m, m)))
+    base = (F, U, np.diag(q))
+    while True:
+        if n & 1:
+            res = _then(res, base)
+        n >>= 1
+        if not n:
+            return res
+        base = _then(base, base)
+
+
+def _then(a: tuple[np.ndarray, np.ndarray, np.ndarray],
+          b: tuple[np.ndarray, np.ndarray, np.ndarray]
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Segment ``a`` followed by segment ``b`` (:func:`repeated_step`'s triples)."""
+    Fa, Ua, Qa = a
+    Fb, Ub, Qb = b
+    return Fb @ Fa, Fb @ Ua + Ub, Fb @ Qa @ Fb.T + Qb
+
+
 class CurrentHighGainObserver:
     """Kim et al.'s model-based high-gain observer of ``[nu_r, V_c]``.
 
     Attributes (filterpy style):
         x: state ``[nu_r (m/s, body), V_c (m/s, earth)]``.
-        P: covariance of the state's error under this gain.
+        P: covariance of the state's error under this gain from the noises (measurement,
+            model acceleration, current walk).
+        P_model: the part the coefficients' uncertainty adds (:meth:`consider`); the
+            published covariance is ``P + P_model`` (:meth:`covariance`).
+        theta_cov: covariance of the model coefficients (consider parameters, the
+            concatenated velocity DOFs' coefficients; None: known exactly).
         y: last velocity innovation (m/s, the measurement's axes).
-        S: its covariance ``H P H^T + std^2 I`` before the correction (m^2/s^2).
+        S: its covariance ``H (P + P_model) H^T + std^2 I`` before the correction
+            (m^2/s^2).
         nis: its normalized innovation squared (NaN if ``S`` is singular).
         gamma: the gain used by the last correction (the initial one before any).
         gamma_init: the gain the law starts from (and restarts from).
@@ -73,6 +113,7 @@ class CurrentHighGainObserver:
         self.gamma = self.gamma_init = law.gamma
         self.x = np.zeros(2 * nd)
         self.P = np.array(P0, float)
+        self.P_model = np.zeros_like(self.P)
         self.y = np.zeros(nd)
         self.S = np.eye(nd)
         self.nis = 0.0
@@ -83,6 +124,26 @@ class CurrentHighGainObserver:
         self._hold: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
         self._hold_age = 0.0
         self._psi = np.zeros((2 * nd, nd))
+        self.theta_cov: np.ndarray | None = None
+        # cross-covariance of the state's error with the coefficients' error
+        self._C: np.ndarray | None = None
+
+    def consider(self, cov: np.ndarray, *, fresh: bool = False) -> None:
+        """Take ``cov`` as the covariance of the coefficients passed to :meth:`predict`
+        (consider parameters; concatenated in DOF order). A new covariance of the same
+        coefficients (an identification update ``dtheta+ = M dtheta``, ``M = cov
+        cov_old^-1`` for RLS) carries the cross-covariance along: ``C <- C M^T``; with
+        ``fresh`` (other coefficients, e.g. a restored model) it starts from zero."""
+        cov = np.array(cov, float)
+        old, C = self.theta_cov, self._C
+        if fresh or C is None or old is None or old.shape != cov.shape:
+            self._C = np.zeros((2 * self.nd, len(cov)))
+        elif not np.array_equal(old, cov):
+            try:
+                self._C = np.linalg.solve(old, C.T).T @ cov  # C old^-1 cov (symmetric)
+            except np.linalg.LinAlgError:
+                self._C = np.zeros_like(C)
+        self.theta_cov = cov
 
     def restart(self, x: np.ndarray, P: np.ndarray) -> None:
         """Take ``[nu_r, V_c]`` and its covariance from the leading block of ``x`` and ``P``
@@ -90,16 +151,18 @@ class CurrentHighGainObserver:
         o = 2 * self.nd
         self.x = x[:o].copy()
         self.P = P[:o, :o].copy()
+        self.P_model = np.zeros_like(self.P)
         self._hold = None
         self._hold_age = 0.0
         self._psi = np.zeros((o, self.nd))
+        if self._C is not None:
+            self._C = np.zeros_like(self._C)
 
     def reset_gain(self) -> None:
         """Restart the increasing-gain law from ``gamma_init``."""
         self.law.gamma = self.gamma_init
 
-    def predict(self, dt: float, inputs: ModelInputs, thetas: list[np.ndarray],
-                q_scale: float) -> bool:
+    def predict(self, dt: float, inputs: ModelInputs, thetas: list[np.ndarray]) -> bool:
         """Integrate Kim eq. (11) over ``dt`` (s): the model with coefficients ``thetas``
         (linearized at the start of the step) plus the output injection ``G(gamma) (y -
         H x_hat)`` of the newest velocity sample, held (zero-order hold) for at most
@@ -107,13 +170,17 @@ class CurrentHighGainObserver:
         integrated, never applied as one discrete jump (``G dt`` is unstable once
         ``gamma k1 dt > 2``). The covariance follows the same linear dynamics; the held
         sample's noise enters every sub-step with the same value, so its contribution is
-        carried as ``Psi`` (``x_err += Psi v``) and added as ``Psi r Psi^T``. Process
-        noise scaled by ``q_scale``. Returns False (state left as it was, counted) on a
+        carried as ``Psi`` (``x_err += Psi v``) and added as ``Psi r Psi^T``. The
+        coefficients' covariance (:meth:`consider`) enters through the regressors ``B =
+        [Phi^T; 0]``: per sub-step ``[P C; C^T P_theta] <- F_a [P C; C^T P_theta] F_a^T``,
+        ``F_a = [[F, h B], [0, I]]``; the covariances are carried over all sub-steps at once
+        (:meth:`_propagate_covariance`). Returns False (state left as it was, counted) on a
         divergence."""
         nd = self.nd
         n = 2 * nd
         nu = self.x[:nd]
-        _, f, J = self.model.linearize(nu.tolist(), inputs, [t.tolist() for t in thetas[:nd]])
+        phis, f, J = self.model.linearize(nu.tolist(), inputs,
+                                          [t.tolist() for t in thetas[:nd]])
         self._J = Jm = np.array(J)
         A = np.zeros((n, n))
         A[:nd, :nd] = Jm
@@ -133,20 +200,51 @@ class CurrentHighGainObserver:
         n_sub = max(1, math.ceil(dt * rate / 0.2))
         h = dt / n_sub
         F = np.eye(n) + h * A
-        q = np.concatenate([np.full(nd, self.accel_std ** 2 * self.model_error_time_s
-                                    * q_scale), np.full(nd, self.current_walk ** 2)]) * h
-        x, P, Psi = self.x.copy(), self.P, self._psi
+        q = np.concatenate([np.full(nd, self.accel_std ** 2 * self.model_error_time_s),
+                            np.full(nd, self.current_walk ** 2)]) * h
+        x = self.x.copy()
         for _ in range(n_sub):
             x = x + h * (A @ x + b)
-            P = F @ P @ F.T
-            P.ravel()[::n + 1] += q
-            if G is not None:
-                Psi = F @ Psi + h * G
         if not (np.all(np.isfinite(x)) and float(np.max(np.abs(x))) < DIVERGED_ABOVE):
             self.counters["hgo_diverged"] = self.counters.get("hgo_diverged", 0) + 1
             return False
-        self.x, self.P, self._psi = x, P, Psi
+        self.x = x
+        self._propagate_covariance(F, q, n_sub, phis, h * G if G is not None else None, h)
         return True
+
+    def _propagate_covariance(self, F: np.ndarray, q: np.ndarray, n_sub: int,
+                              phis: list[tuple[float, ...]], hG: np.ndarray | None,
+                              h: float) -> None:
+        """``P``, ``Psi`` and the coefficients' cross-covariance ``C`` over ``n_sub``
+        sub-steps of ``e <- F e + h B dtheta + h G v + w`` (``cov w = diag(q)``), in closed
+        form (:func:`repeated_step`) rather than sub-step by sub-step."""
+        nd = self.nd
+        C = self._C
+        hB = self._coefficient_input(phis, h) if C is not None else None
+        inputs = [u for u in (hB, hG) if u is not None]
+        U = np.hstack(inputs) if inputs else np.zeros((2 * nd, 0))
+        Phi, Gam, Q = repeated_step(F, U, q, n_sub)
+        self.P = Phi @ self.P @ Phi.T + Q
+        if hB is not None:
+            assert C is not None and self.theta_cov is not None
+            nt = hB.shape[1]
+            PhiC, GPt = Phi @ C, Gam[:, :nt] @ self.theta_cov
+            self.P_model = (Phi @ self.P_model @ Phi.T + PhiC @ Gam[:, :nt].T
+                            + Gam[:, :nt] @ PhiC.T + GPt @ Gam[:, :nt].T)
+            self._C = PhiC + GPt
+        if hG is not None:
+            self._psi = Phi @ self._psi + Gam[:, U.shape[1] - hG.shape[1]:]
+
+    def _coefficient_input(self, phis: list[tuple[float, ...]], h: float) -> np.ndarray:
+        """``h B``: the sensitivity of ``x`` to the coefficients' error over a sub-step of
+        ``h`` (s), the regressor of DOF ``i`` on row ``i`` in that DOF's columns."""
+        assert self._C is not None
+        hB = np.zeros_like(self._C)
+        col = 0
+        for i, phi in enumerate(phis[: self.nd]):
+            hB[i, col:col + len(phi)] = phi
+            col += len(phi)
+        return h * hB
 
     def _fold_hold(self) -> None:
         """End the held sample: its noise contribution joins ``P``."""
@@ -192,7 +290,7 @@ class CurrentHighGainObserver:
         self._fold_hold()
         self.y = y
         var = std * std
-        self.S = S = H @ self.P @ H.T + var * np.eye(m)
+        self.S = S = H @ (self.P + self.P_model) @ H.T + var * np.eye(m)
         Sinv = inv_small(S)
         self.nis = float(y @ Sinv @ y) if Sinv is not None else math.nan
         e_earth = y if kind == "earth" else R @ y
@@ -213,16 +311,19 @@ class CurrentHighGainObserver:
         state."""
         return not (kind == "water" or (kind == "bottom" and m != self.nd))
 
-    def covariance(self) -> np.ndarray:
-        """Covariance of ``x`` including the held sample's noise (m^2/s^2)."""
+    def covariance(self, model: bool = True) -> np.ndarray:
+        """Covariance of ``x`` including the held sample's noise (m^2/s^2) and, with
+        ``model``, the coefficients' uncertainty."""
+        P = self.P + self.P_model if model else self.P
         if self._hold is None:
-            return self.P
-        return self.P + self._hold[3] * (self._psi @ self._psi.T)
+            return P
+        return P + self._hold[3] * (self._psi @ self._psi.T)
 
-    def current_cov(self) -> np.ndarray:
-        """Covariance of the current (m^2/s^2, earth axes), a copy."""
+    def current_cov(self, model: bool = True) -> np.ndarray:
+        """Covariance of the current (m^2/s^2, earth axes), a copy; ``model`` as
+        :meth:`covariance`."""
         nd = self.nd
-        return self.covariance()[nd:, nd:].copy()
+        return self.covariance(model)[nd:, nd:].copy()
 
     def current_estimate(self) -> tuple[list[float], list[float], list[float]]:
         """(current (m/s, earth), its one-sigma (m/s), ``nu_r`` (m/s, body)) as lists."""

@@ -421,12 +421,32 @@ class VelocityRls:
         self.n_updates = 0
         self.n_rejected = 0
 
-    def restart(self, thetas: Sequence[np.ndarray]) -> None:
-        """Continue from the coefficients ``thetas`` (a restored model), covariance kept."""
+    def restart(self, thetas: Sequence[np.ndarray], cov: np.ndarray | None = None) -> None:
+        """Continue from the coefficients ``thetas`` (a restored model); with ``cov``
+        (their covariance, concatenated in DOF order, as :meth:`covariance`) each DOF's
+        block becomes its RLS's covariance, else the covariance is kept."""
+        o = 0
         for i, (est, th) in enumerate(zip(self.rls, thetas)):
+            k = self._sizes[i]
             if len(th) == est.n and np.all(np.isfinite(th)):
-                est.set_state({**est.get_state(), "theta": np.asarray(th, float).tolist()})
+                st = {**est.get_state(), "theta": np.asarray(th, float).tolist()}
+                if cov is not None:
+                    st["P"] = (cov[o:o + k, o:o + k] / (self.noise_std * self.noise_std)
+                               ).tolist()
+                est.set_state(st)
                 self.thetas[i] = est.theta
+            o += k
+
+    def covariance(self) -> np.ndarray:
+        """Covariance of the velocity DOFs' coefficients (concatenated in DOF order):
+        each DOF's RLS covariance in units of the equation error's variance times
+        ``noise_std^2`` (the scale its prior was weighed against), DOFs uncorrelated."""
+        out = np.zeros((sum(self._sizes), sum(self._sizes)))
+        o = 0
+        for est, k in zip(self.rls, self._sizes):
+            out[o:o + k, o:o + k] = est.P * (self.noise_std * self.noise_std)
+            o += k
+        return out
 
     def step(self, dt: float, nu: Sequence[float], inputs: ModelInputs,
              learn: bool) -> None:

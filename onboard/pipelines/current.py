@@ -177,6 +177,7 @@ class CurrentPipeline:
                 self.model, self.gain, _gain_law(cfg, self.gain), self.kf.P[:2 * nd, :2 * nd],
                 accel_std=cfg.accel_std, model_error_time_s=cfg.model_error_time_s,
                 current_walk=cfg.current_walk, counters=self.counters)
+            self.hgo.consider(self.hgo_rls.covariance())
             self._gamma_follows_model = _gain_is_design_fixed(cfg, self.gain)
             self._gamma_t = -math.inf
             self._gamma_from_model()
@@ -299,7 +300,7 @@ class CurrentPipeline:
             assert self.hgo_rls is not None
             n_sub = max(1, math.ceil(dt / PREDICT_STEP_S))
             for _ in range(n_sub):
-                if not hgo.predict(dt / n_sub, self.inp, self.hgo_rls.thetas, kf.q_scale):
+                if not hgo.predict(dt / n_sub, self.inp, self.hgo_rls.thetas):
                     hgo.restart(kf.x, kf.P)
                     hgo.reset_gain()
             self._identify_hgo(t, dt)
@@ -389,8 +390,9 @@ class CurrentPipeline:
         """One step of the high-gain observer's own RLS (``hgo_identify``) on its velocity
         ``nu_r``: learning while a velocity was measured within the last second, the
         through-water speed is above ``identify_min_speed`` and, with ``"turns"``, the
-        observer's horizontal current one-sigma is at most ``identify_max_current_std``
-        within ``identify_after_turn_s`` of a turn (``identify_straight``: anywhere)."""
+        observer's horizontal current one-sigma from the noises (without its model's
+        uncertainty) is at most ``identify_max_current_std`` within
+        ``identify_after_turn_s`` of a turn (``identify_straight``: anywhere)."""
         hgo, rls, cfg = self.hgo, self.hgo_rls, self.cfg
         assert hgo is not None and rls is not None
         nu = hgo.x[: self.nd].tolist()
@@ -398,7 +400,9 @@ class CurrentPipeline:
                  and t - self._last_velocity_t <= VELOCITY_FRESH_S
                  and nu[0] >= cfg.identify_min_speed)
         if learn and cfg.hgo_identify == "turns":
-            c_var = hgo.current_cov().diagonal()
+            # the noises' part only: the coefficients' part is what learning reduces (with
+            # it a loose prior would never let the RLS learn)
+            c_var = hgo.current_cov(model=False).diagonal()
             learn = (math.sqrt(max(float(c_var[0]), float(c_var[1])))
                      <= cfg.identify_max_current_std
                      and (cfg.identify_straight or t - self.identification.last_turn_t
@@ -408,6 +412,8 @@ class CurrentPipeline:
         self.counters["hgo_rls_updates"] = self.counters.get("hgo_rls_updates", 0) + (
             rls.n_updates - before)
         self.counters["hgo_rls_rejected"] = rls.n_rejected
+        if rls.n_updates != before:
+            hgo.consider(rls.covariance())
         if rls.n_updates != before and t - self._gamma_t >= GAMMA_RECHECK_S:
             self._gamma_t = t
             self._gamma_from_model()
@@ -559,6 +565,7 @@ class CurrentPipeline:
         if self.hgo_rls is not None:
             st["hgo_thetas"] = self.model.thetas_to_mapping(
                 self.hgo_rls.thetas + self.thetas[self.nd:])
+            st["hgo_theta_cov"] = self.hgo_rls.covariance().tolist()
         return st
 
     def set_state(self, state: Mapping[str, Any]) -> None:
@@ -581,9 +588,7 @@ class CurrentPipeline:
             if ident.yaw_rls is not None and "yaw_rls" in state:
                 ident.restore_yaw(state["yaw_rls"])
             if self.hgo_rls is not None:
-                self.hgo_rls.restart(self.model.thetas_from_mapping(
-                    state.get("hgo_thetas", state.get("thetas", {})), thetas)[:nd])
-                self._gamma_from_model()
+                self._restore_hgo_model(state, thetas)
             before = self.kf.x[nd:2 * nd].copy()
             self.kf.restore_current(state["current"], state.get("current_std", [0.3] * nd))
         except (KeyError, TypeError, ValueError):
@@ -592,6 +597,24 @@ class CurrentPipeline:
             np.any(self.kf.x[nd:2 * nd]))
         if restored and self.cfg.restore_check_s > 0:
             self._start_probation(thetas, state.get("theta_cov", []))
+
+    def _restore_hgo_model(self, state: Mapping[str, Any], thetas: list[np.ndarray]) -> None:
+        """The high-gain observer's own model from a persistent state: its own
+        coefficients (``hgo_thetas``, with ``hgo_theta_cov``) or, without them, the joint
+        filter's ``thetas`` with their covariance (``theta_cov``); the covariance becomes
+        its RLS's covariance and the observer's consider covariance
+        (:meth:`.CurrentHighGainObserver.consider`). Raises ValueError or TypeError on a
+        covariance that is not a matrix of numbers."""
+        assert self.hgo is not None and self.hgo_rls is not None
+        nd = self.nd
+        nt = self.identification.n_theta
+        c = np.asarray(state.get("hgo_theta_cov" if "hgo_thetas" in state else "theta_cov",
+                                 []), float)
+        cov = c if nt and c.shape == (nt, nt) and np.all(np.isfinite(c)) else None
+        self.hgo_rls.restart(self.model.thetas_from_mapping(
+            state.get("hgo_thetas", state.get("thetas", {})), thetas)[:nd], cov)
+        self.hgo.consider(self.hgo_rls.covariance(), fresh=True)
+        self._gamma_from_model()
 
     def _start_probation(self, thetas: list[np.ndarray], theta_cov: object) -> None:
         """The twin filter of the restored-current check: the restored model, the current
