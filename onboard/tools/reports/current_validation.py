@@ -228,16 +228,26 @@ def calm_state(scenario: str, config_name: str, duration: float = 400.0,
     return dict(_calm_run_state(scenario, config_name, duration, seed))
 
 
-GAVIA_ID_SECTION = {**CALM_SECTION, "accel_std": 0.005, "prior_accel_std": 0.005}
+GAVIA_ID_SECTION = {**CALM_SECTION, "accel_std": 0.002, "prior_accel_std": 0.002,
+                    "model": {"sway": {"uv": -0.8}}}
 """``[pipelines.current]`` of the Gavia's calm-water identification runs (:func:`gavia_model`):
-:data:`CALM_SECTION` with the model's process noise at 0.005 m/s^2, a few times the
-regression's own residual in calm water (0.0012 m/s^2 in surge with the plant's coefficients
-on the rpm-steps run), for every DOF. With a mission's ``accel_std`` (0.02) and the generic
-prior's ``prior_accel_std`` (0.3, which a straight run never lifts: the unexcited terms keep
-a DOF's coefficient trace at its prior) the velocity is a random walk the coefficients barely
-explain: the rpm-steps run identified ``u|u|`` and ``n|n|`` at +-0.035 (70 %), pulled 15 %
-towards the prior's zero, and the joint filter's velocity noise biased them further
-(docs/current.md, "Gavia off the design point")."""
+:data:`CALM_SECTION` with
+
+* the model's process noise at the regression's own residual in calm water (0.002 m/s^2;
+  0.0012 / 0.0016 / 0.0005 m/s^2 in surge / sway / heave with the plant's coefficients on
+  the rpm-steps run), for every DOF. With a mission's ``accel_std`` (0.02) and the generic
+  prior's ``prior_accel_std`` (0.3, which a straight run never lifts: the turn terms keep a
+  DOF's coefficient trace at its prior) the velocity is a random walk the coefficients
+  barely explain (the rpm-steps run: ``u|u|``, ``n|n|`` +-0.035, 15 % towards the prior's
+  zero), and the joint filter reads its own velocity noise, which reverts to the mean at
+  the next measurement, as damping (started at the plant's coefficients it drifts heave
+  ``uw`` from -0.43 to -1.65);
+* the sway DOF configured at the generic prior's damping (``uv`` -0.8, no crabbing; held
+  within ``model_rel_std``): a straight run does not excite sway (``v_r`` stays at
+  0.006 m/s), and unconstrained the filter's noise bias made ``uv`` -6.9 (the plant's
+  -0.43), a Lipschitz bound 13.8 and a high-gain observer too stiff to run.
+
+docs/current.md, "Gavia off the design point"."""
 
 GAVIA_RPMS = (1200.0, 1300.0, 1400.0, 1500.0, 1600.0)
 """Propeller speeds (rpm) of the Gavia off-design runs: the tidal run flown at each."""
