@@ -228,6 +228,27 @@ def calm_state(scenario: str, config_name: str, duration: float = 400.0,
     return dict(_calm_run_state(scenario, config_name, duration, seed))
 
 
+GAVIA_ID_SECTION = {**CALM_SECTION, "accel_std": 0.002, "prior_accel_std": 0.002,
+                    "model": {"sway": {"uv": -0.8}}}
+"""``[pipelines.current]`` of the Gavia's calm-water identification runs (:func:`gavia_model`):
+:data:`CALM_SECTION` with
+
+* the model's process noise at the regression's own residual in calm water (0.002 m/s^2;
+  0.0012 / 0.0016 / 0.0005 m/s^2 in surge / sway / heave with the plant's coefficients on
+  the rpm-steps run), for every DOF. With a mission's ``accel_std`` (0.02) and the generic
+  prior's ``prior_accel_std`` (0.3, which a straight run never lifts: the turn terms keep a
+  DOF's coefficient trace at its prior) the velocity is a random walk the coefficients
+  barely explain (the rpm-steps run: ``u|u|``, ``n|n|`` +-0.035, 15 % towards the prior's
+  zero), and the joint filter reads its own velocity noise, which reverts to the mean at
+  the next measurement, as damping (started at the plant's coefficients it drifts heave
+  ``uw`` from -0.43 to -1.65);
+* the sway DOF configured at the generic prior's damping (``uv`` -0.8, no crabbing; held
+  within ``model_rel_std``): a straight run does not excite sway (``v_r`` stays at
+  0.006 m/s), and unconstrained the filter's noise bias made ``uv`` -6.9 (the plant's
+  -0.43), a Lipschitz bound 13.8 and a high-gain observer too stiff to run.
+
+docs/current.md, "Gavia off the design point"."""
+
 GAVIA_RPMS = (1200.0, 1300.0, 1400.0, 1500.0, 1600.0)
 """Propeller speeds (rpm) of the Gavia off-design runs: the tidal run flown at each."""
 GAVIA_ID_RPM_STEPS = (1100.0, 1700.0, 1300.0, 1600.0, 1200.0, 1500.0)
@@ -265,16 +286,71 @@ def gavia_at(rpm: float, steps: tuple[float, ...] = (), calm: bool = False) -> A
 def gavia_model(identification: str, seed: int = 7) -> dict[str, Any]:
     """The Gavia model identified in calm water (WVAM step 1, as :func:`calm_model`) as
     the persistent state that carries it (:func:`identified_state`: coefficients and their
-    covariance): ``"one-rpm"`` on the mission itself (straight, 1500 rpm, 400 s: the model
-    of the default runs), ``"rpm-steps"`` on a straight run through
-    :data:`GAVIA_ID_RPM_STEPS`."""
+    covariance) with :data:`GAVIA_ID_SECTION`: ``"one-rpm"`` on the mission itself
+    (straight, 1500 rpm, 400 s: as the model of the default runs), ``"rpm-steps"`` on a
+    straight run through :data:`GAVIA_ID_RPM_STEPS`."""
     if identification == "one-rpm":
         sc, duration = _calm("gavia-tidal", 400.0, seed), 400.0
     else:
         sc = gavia_at(0.0, GAVIA_ID_RPM_STEPS, calm=True)
         duration = GAVIA_ID_STEP_S * len(GAVIA_ID_RPM_STEPS)
-    return identified_state(run(sc, CALM_SECTION, "torpedo-auv", duration=duration,
+    return identified_state(run(sc, GAVIA_ID_SECTION, "torpedo-auv", duration=duration,
                                 seed=seed))
+
+
+GAVIA_TABLE_TERMS = {"surge": ("u|u|", "sin(theta)", "n|n|"),
+                     "sway": ("uv", "cos(theta)sin(phi)", "u|u|dr"),
+                     "heave": ("uw", "uq", "cos(theta)cos(phi)", "u|u|ds")}
+"""The coefficients of docs/current.md's identification table: those a straight run
+excites (the turn terms ``vr``, ``r^2``, ... stay at their prior there)."""
+
+
+def gavia_plant_coefficients(rpm_scale: float = 1000.0) -> dict[str, dict[str, float]]:
+    """The SITL torpedo plant (Prestero's REMUS, :mod:`sitl.plants.torpedo_auv`) in the
+    regression form of :class:`.RegressionModel` ``"torpedo"``: each force coefficient over
+    its DOF's mass term (``m - X_udot``, ``m - Y_vdot``, ``m - Z_wdot``), the thrust per
+    ``(rpm / rpm_scale)^2``, the rudder sign of the plant's docstring. The plant's
+    off-diagonal mass terms (``m z_g``, ``Z_qdot``, ``Y_rdot``) have no regressor; on a
+    straight run they move the terms below by a few percent (``u|u|``) to ~20 % (heave)."""
+    from onboard.sitl.plants.torpedo_auv import REMUS100 as c
+    m = c.m
+    ms, my, mh = m - c.x_udot, m - c.y_vdot, m - c.z_wdot
+    wb = c.weight - c.buoyancy
+    return {
+        "surge": {"u|u|": c.x_uu / ms, "wq": (c.x_wq - m) / ms, "q^2": c.x_qq / ms,
+                  "vr": (c.x_vr + m) / ms, "r^2": c.x_rr / ms, "sin(theta)": -wb / ms,
+                  "n|n|": c.k_t * rpm_scale ** 2 / ms},
+        "sway": {"v|v|": c.y_vv / my, "r|r|": c.y_rr / my, "uv": c.y_uv / my,
+                 "ur": (c.y_ur - m) / my, "wp": (c.y_wp + m) / my, "pq": c.y_pq / my,
+                 "cos(theta)sin(phi)": wb / my, "u|u|dr": -c.y_uudr / my},
+        "heave": {"w|w|": c.z_ww / mh, "q|q|": c.z_qq / mh, "uw": c.z_uw / mh,
+                  "uq": (c.z_uq + m) / mh, "vp": (c.z_vp - m) / mh, "rp": c.z_rp / mh,
+                  "cos(theta)cos(phi)": wb / mh, "u|u|ds": c.z_uuds / mh},
+    }
+
+
+def gavia_coefficient_table() -> str:
+    """The markdown table of docs/current.md, "Gavia off the design point": the
+    coefficients of :data:`GAVIA_TABLE_TERMS` identified by :func:`gavia_model` (one-rpm,
+    rpm-steps; one-sigma from the carried covariance) beside the plant's
+    (:func:`gavia_plant_coefficients`)."""
+    from onboard.estimators.vehicle_models import RegressionModel
+    model = RegressionModel("torpedo")
+    plant = gavia_plant_coefficients()
+    states = {k: gavia_model(k) for k in ("one-rpm", "rpm-steps")}
+    lines = ["| DOF | term | plant | one-rpm | rpm-steps |", "|---|---|---|---|---|"]
+    for ch, terms in GAVIA_TABLE_TERMS.items():
+        for k in terms:
+            cells = []
+            for st in states.values():
+                i = sum(len(model.terms[c]) for c in model.dofs[:model.dofs.index(ch)])
+                i += model.terms[ch].index(k)
+                sd = math.sqrt(st["theta_cov"][i][i])
+                cells.append(f"{st['thetas'][ch][k]:+.3f} ± {sd:.3f}")
+            name = k.replace("|", "\\|")  # a bare | ends a markdown table cell
+            lines.append(f"| {ch} | `{name}` | {plant[ch][k]:+.3f} | " + " | ".join(cells)
+                         + " |")
+    return "\n".join(lines)
 
 
 def gavia_offdesign(identification: str, rpm: float, observer: str = "kf", seed: int = 1,
@@ -366,6 +442,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="also run the Slocum glider log (glider_data.csv)")
     args = ap.parse_args(argv)
     if args.gavia_rpm:
+        print(gavia_coefficient_table(), flush=True)
+        print()
         print(gavia_offdesign_table())
         return 0
     if args.coverage:
