@@ -147,7 +147,7 @@ def test_a_consistent_channel_stays_in_band_and_an_overconfident_one_does_not() 
 
 
 def test_a_timid_channel_at_half_its_nis_is_flagged_below() -> None:
-    # the simulator's GNSS increments before [sensors.gnss] drift_std_m: NIS 0.48-0.57
+    # the simulator's GNSS increments before [sensors.gnss] drift_share: NIS 0.48-0.57
     rng = np.random.default_rng(2)
     check = NisCheck(1)
     assert any(check.add(float(x)) for x in 0.5 * rng.chisquare(1, 400))

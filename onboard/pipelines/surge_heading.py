@@ -91,10 +91,6 @@ WINDOW_END_AFTER_FIX = 0.25
 closes with the first sample after its fix, not a step later."""
 COURSE_MODE_ANCHOR = 0.3
 """Least anchor gain in course mode: the course lags the track by half its baseline."""
-WHITE_SHARE_MIN = 0.1
-"""The white (fix-to-fix) part of a point's noise variance is taken as at least this
-share of it, whatever ``[sensors.gnss] drift_std_m`` says: a fix reporting an accuracy
-better than the configured drift (RTK) is not taken as exact."""
 DOPPLER_HOLD_S = 5.0
 """The Doppler set of the ``"auto"`` parameters holds this long (s) after the newest fix
 with a speed over ground (the default ``max_gap_s``: a few fixes without one, or a slow
@@ -125,12 +121,12 @@ class SurgeHeadingPipeline:
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
                  gnss_std_m: float, heading_std_rad: float, factory: AxisFactory,
                  gnss_velocity_std_mps: float = 0.1, *, retune: AxisRetune,
-                 gnss_drift_std_m: float = 0.0) -> None:
+                 gnss_drift_share: float = 0.0) -> None:
         """``cfg``: the pipeline's table (``[pipelines.aie]`` or ``[pipelines.kf]``);
         ``gnss_std_m``, ``heading_std_rad`` and ``gnss_velocity_std_mps``: the
-        ``[sensors]`` noise, unless ``cfg`` sets its own; ``gnss_drift_std_m``: the
-        slowly wandering part of a fix's noise (``[sensors.gnss] drift_std_m``), left out
-        of the increments' noise; ``factory`` builds each axis filter with its input
+        ``[sensors]`` noise, unless ``cfg`` sets its own; ``gnss_drift_share``: the
+        slowly wandering share of a fix's noise variance (``[sensors.gnss]
+        drift_share``), left out of the increments' noise; ``factory`` builds each axis filter with its input
         model, ``retune`` switches its measurement set."""
         if not 0.0 < cfg.gnss_accuracy_min_m <= cfg.gnss_accuracy_max_m:
             raise ValueError(f"[pipelines.{name}] needs 0 < gnss_accuracy_min_m <= "
@@ -145,8 +141,8 @@ class SurgeHeadingPipeline:
         self.sigma_h = (cfg.heading_std_rad if cfg.heading_std_rad is not None
                         else heading_std_rad)
         """Noise of one heading (rad)."""
-        self.drift_var = gnss_drift_std_m ** 2
-        """Slowly wandering part of a fix's noise variance (m^2): not in an increment."""
+        self.drift_share = gnss_drift_share
+        """Slowly wandering share of a fix's noise variance: not in an increment."""
         s, h = cfg.surge, cfg.heading
         self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg, "surge")
         self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg, "heading")
@@ -186,7 +182,7 @@ class SurgeHeadingPipeline:
         self._pt_prev: tuple[float, float, float, float] | None = None  # t, N, E, psi
         self._h_prev: tuple[float, float] | None = None                 # t, psi
         self._R_prev = self.sigma_p ** 2     # noise variance of the previous point (m^2)
-        self._R_inc_prev = increment_variance(self._R_prev, 1, self.drift_var)  # its white part
+        self._R_inc_prev = increment_variance(self._R_prev, self.drift_share)  # its white part
         self._R_h_prev = self.sigma_h ** 2   # of the previous heading point (rad^2)
 
     # -- samples in ------------------------------------------------------------------------
@@ -409,7 +405,7 @@ class SurgeHeadingPipeline:
             return
         self._pt_prev = (tp, n, e, w.sh / w.n_h if w.n_h else math.nan)
         R_s_prev, self._R_prev = self._R_prev, R_s
-        R_inc = increment_variance(R_s, w.n_fix, self.drift_var)
+        R_inc = increment_variance(R_s, self.drift_share)
         R_inc_prev, self._R_inc_prev = self._R_inc_prev, R_inc
         if pp is None or tp - pp[0] > self.cfg.max_gap_s:
             self._restart_surge_chain(pp, tp, n, e, R_s, R_s_prev)
@@ -566,16 +562,15 @@ def _restored_model(m: object) -> AxisModel | None:
 
 
 def sensor_noise(cfg: Config) -> tuple[float, float, float, float]:
-    """``(gnss_std_m, heading_std_rad, gnss_velocity_std_mps, gnss_drift_std_m)`` from
+    """``(gnss_std_m, heading_std_rad, gnss_velocity_std_mps, gnss_drift_share)`` from
     ``[sensors]``."""
     g = cfg.sensors.gnss
     return (g.position_std_m, cfg.sensors.compass.heading_std_rad, g.velocity_std_mps,
-            g.drift_std_m)
+            g.drift_share)
 
 
-def increment_variance(R: float, n_fix: int, drift_var: float) -> float:
-    """The noise variance (m^2) of a point (the mean of ``n_fix`` fixes, variance ``R``)
-    as a path increment sees it: less the slowly wandering part ``drift_var`` (m^2 per
-    fix; common to the window's fixes, so ``drift_var / n_fix`` of ``R``, which sums the
-    fixes' variances over ``n_fix^2``), at least :data:`WHITE_SHARE_MIN` of ``R``."""
-    return max(R - drift_var / n_fix, WHITE_SHARE_MIN * R)
+def increment_variance(R: float, drift_share: float) -> float:
+    """The noise variance (m^2) of a point of noise variance ``R`` as a path increment
+    sees it: ``R`` less the slowly wandering share ``drift_share`` (``[sensors.gnss]
+    drift_share``, the same share of every fix's variance, so of the window mean's too)."""
+    return R * (1.0 - drift_share)
