@@ -19,10 +19,16 @@ published records and the innovation records, and runs four checks:
   published one-sigma and the fix's own; ``position_residual`` when more than
   :data:`POSITION_FRACTION` of the comparisons of the last :data:`POSITION_WINDOW_S` are
   beyond :data:`POSITION_SIGMA_BOUND`. The pipeline is flagged, its values kept.
-* **NIS against its chi-square band** (:class:`NisCheck`): per channel the running mean
-  NIS of :mod:`onboard.innovations` (weight ``1/RECENT_STEPS``) against the 95 % band of
-  such a mean for a consistent filter; ``nis_out_of_band`` after
-  :data:`NIS_SUSTAIN_UPDATES` updates in a row outside it. The pipeline is flagged.
+* **NIS against its chi-square band** (:class:`NisCheck`): per channel the mean NIS of
+  each block of :data:`NIS_BLOCK_UPDATES` accepted updates against the :data:`NIS_BAND`
+  band of such a mean for a consistent filter, ``chi2(dof n) / n``, with ``n`` the
+  block's effective number of independent updates from the measured lag-1
+  autocorrelation of its NIS (:func:`effective_count`; 100 for white innovations), never
+  narrower than the NIS of sigmas within the 1-sigma coverage target
+  (:data:`NIS_COVERAGE_TARGET`);
+  ``nis_out_of_band`` after :data:`NIS_SUSTAIN_BLOCKS` blocks in a row outside it on the
+  same side (too large: sigmas too small; too small: sigmas too large). The pipeline is
+  flagged.
 * **speed against Doppler or DVL** (:class:`SpeedCheck`): at the first tick after each
   GNSS fix with a speed over ground, or each valid DVL bottom-track report, the published
   speed of :data:`SPEED_PIPELINES` against it: ``aie``/``kf`` ``speed`` (the path speed,
@@ -44,6 +50,7 @@ handles. The flag, the count ``pipeline:<name>:flagged`` and the warning say why
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from typing import Any, Iterable, Mapping, Sequence
@@ -59,7 +66,6 @@ from onboard.core.messages import (
     Innovation,
     Sample,
 )
-from onboard.innovations import RECENT_STEPS, RecentMean
 
 HEADING_MIN_SPEED_MPS = 0.5
 """Below this GNSS speed (m/s) the course over ground is too noisy to check a heading."""
@@ -123,16 +129,28 @@ DEFAULT_SPEED_STD_MPS = 0.1
 DEFAULT_DVL_STD_MPS = 0.01
 """One-sigma (m/s) of a DVL velocity that reports no figure of merit."""
 
-NIS_BAND = 0.95
-"""Probability of the band the running mean NIS of a consistent filter stays in."""
-NIS_SUSTAIN_UPDATES = 2 * RECENT_STEPS
-"""Updates in a row outside the band that raise ``nis_out_of_band``: the running mean is
-correlated over about ``RECENT_STEPS`` updates, so one excursion is not evidence."""
+NIS_BLOCK_UPDATES = 100
+"""Accepted updates per block: the check judges each block's mean NIS (10 s of a 10 Hz
+channel, 20 s of a 5 Hz one)."""
+NIS_BAND = 0.99
+"""Probability of the two-sided band a consistent filter's block mean stays in."""
+NIS_SUSTAIN_BLOCKS = 2
+"""Blocks in a row outside the band, on the same side, that raise ``nis_out_of_band``: a
+consistent filter does so in ~1 % of one-hour 10 Hz channels (tests/test_integrity.py)."""
 NIS_EXEMPT_CHANNELS = frozenset({"zupt"})
 """Pseudo-measurements whose sigma is a bound, not a noise: their NIS is not chi-square."""
-NIS_EFFECTIVE_N = 2 * RECENT_STEPS - 1
-"""Independent updates with the same variance of the mean as the running mean of weight
-``1/RECENT_STEPS`` (``(2 - a) / a``)."""
+NIS_COVERAGE_TARGET = (0.6, 0.8)
+"""The 1-sigma coverage a calibrated sigma gives (issue 23's target on the simulator's
+scenarios; 0.68 exact). It is a tolerance on the sigma's scale: the band is never
+narrower than the mean NIS per degree of freedom such a sigma gives
+(:func:`calibrated_nis`), 0.61-1.41, so a significant but immaterial miscalibration
+(the simulator's heading increments at 0.79) is not flagged."""
+NIS_RHO_MAX = 0.9
+"""Largest lag-1 autocorrelation of the NIS taken into the effective sample count: a
+block keeps at least ``(1 - 0.9) / (1 + 0.9)`` of its updates (5 of 100), so a channel
+whose NIS wanders slowly is still judged."""
+NIS_RHO_MEMORY = 0.5
+"""Weight of the earlier blocks' sums in the lag-1 autocorrelation (per block)."""
 
 
 def circular_mean(angles: Iterable[float]) -> float:
@@ -151,13 +169,14 @@ def crab_bound(sog_mps: float) -> float:
 
 
 def _chi2_quantile(p: float, dof: float) -> float:
-    """The chi-square ``p`` quantile for ``dof`` degrees of freedom (Wilson-Hilferty; within
-    1 % of the exact value for ``dof >= 20``, which the window gives)."""
+    """The chi-square ``p`` quantile for ``dof`` (real, > 0) degrees of freedom
+    (Wilson-Hilferty: within 1 % of the exact value for ``dof >= 20``, ~5 % at 5)."""
     z = _normal_quantile(p)
     h = 2.0 / (9.0 * dof)
-    return dof * (1.0 - h + z * math.sqrt(h)) ** 3
+    return dof * max(1.0 - h + z * math.sqrt(h), 0.0) ** 3
 
 
+@functools.cache
 def _normal_quantile(p: float) -> float:
     """The standard normal ``p`` quantile (bisection on ``erf``; p in (0, 1))."""
     lo, hi = -10.0, 10.0
@@ -170,12 +189,37 @@ def _normal_quantile(p: float) -> float:
     return 0.5 * (lo + hi)
 
 
-def nis_band(dof: int, n: int = NIS_EFFECTIVE_N, p: float = NIS_BAND) -> tuple[float, float]:
-    """The two-sided ``p`` band of the mean of ``n`` independent chi-square(``dof``) NIS
-    values: ``chi2_q(dof n) / n`` at ``(1 -+ p) / 2``."""
+def effective_count(n: int, rho: float) -> float:
+    """The number of independent values whose mean has the variance of the mean of ``n``
+    values of lag-1 autocorrelation ``rho`` (AR(1), large ``n``): ``n (1 - r) / (1 +
+    r)``, ``r`` clipped to [0, :data:`NIS_RHO_MAX`] (a negative correlation is not taken
+    to narrow the band)."""
+    r = min(max(rho, 0.0), NIS_RHO_MAX)
+    return n * (1.0 - r) / (1.0 + r)
+
+
+def calibrated_nis(coverage: tuple[float, float] = NIS_COVERAGE_TARGET
+                   ) -> tuple[float, float]:
+    """The mean NIS per degree of freedom (lo, hi) of sigmas whose 1-sigma coverage is
+    ``coverage`` (hi, lo): a sigma ``k`` times the true one covers ``2 Phi(k) - 1``, and
+    its NIS is ``1 / k^2``."""
+    k_lo = _normal_quantile(0.5 + coverage[0] / 2.0)
+    k_hi = _normal_quantile(0.5 + coverage[1] / 2.0)
+    return 1.0 / (k_hi * k_hi), 1.0 / (k_lo * k_lo)
+
+
+def nis_band(dof: int, n: float = NIS_BLOCK_UPDATES, p: float = NIS_BAND
+             ) -> tuple[float, float]:
+    """The band of the mean of ``n`` (effective, possibly fractional) NIS values of
+    ``dof`` degrees of freedom: the two-sided ``p`` band of a consistent filter's,
+    ``chi2_q(dof n) / n`` at ``(1 -+ p) / 2`` (Bar-Shalom, Li & Kirubarajan 2001,
+    §5.4.2, the time-average NIS), widened to at least ``dof`` times
+    :func:`calibrated_nis`."""
     k = dof * n
     a = (1.0 - p) / 2.0
-    return _chi2_quantile(a, k) / n, _chi2_quantile(1.0 - a, k) / n
+    c_lo, c_hi = calibrated_nis()
+    return (min(_chi2_quantile(a, k) / n, dof * c_lo),
+            max(_chi2_quantile(1.0 - a, k) / n, dof * c_hi))
 
 
 class HeadingCourseCheck:
@@ -344,33 +388,78 @@ def _published_speed(pipeline: str, rec: EstimateRecord, forward_only: bool
 
 
 class NisCheck:
-    """One channel's running mean NIS against its band (module docstring)."""
+    """One channel's block-mean NIS against its band (module docstring).
+
+    Each block of :data:`NIS_BLOCK_UPDATES` accepted updates is judged at its end: its
+    mean against :func:`nis_band` for ``dof`` and the block's effective sample count
+    (:func:`effective_count`) from the lag-1 autocorrelation of the NIS, measured on the
+    blocks so far (each block's deviations from its own mean; earlier blocks weighted by
+    :data:`NIS_RHO_MEMORY` per block).
+
+    Attributes:
+        dof: degrees of freedom of one NIS.
+        mean: the newest judged block's mean NIS (nan before one).
+        rho: the lag-1 autocorrelation of the NIS used for it.
+        band: its band (lo, hi).
+        outside: judged blocks in a row outside the band on the same side: positive
+            above, negative below.
+        first_failed: when (s) the check first failed: one warning per pipeline spans
+            the run's failures, not one per excursion.
+    """
+
+    __slots__ = ("dof", "mean", "rho", "band", "outside", "first_failed", "_n", "_sx",
+                 "_sxx", "_sxy", "_first", "_prev", "_sv", "_sc")
 
     def __init__(self, dof: int) -> None:
         self.dof = dof
+        self.mean = math.nan
+        self.rho = 0.0
         self.band = nis_band(dof)
-        self._mean = RecentMean()
         self.outside = 0
-        """Updates in a row with the running mean outside the band."""
         self.first_failed: float | None = None
-        """When (s) the check first failed: one warning per pipeline spans the run's
-        failures, not one per excursion."""
+        self._sv = self._sc = 0.0   # pooled deviation power and lag-1 product
+        self._reset()
+
+    def _reset(self) -> None:
+        self._n = 0
+        self._sx = self._sxx = self._sxy = 0.0
+        self._first = self._prev = 0.0
 
     @property
-    def mean(self) -> float:
-        """The running mean NIS of the recent accepted updates."""
-        return self._mean.value
+    def failing(self) -> bool:
+        """Whether the newest :data:`NIS_SUSTAIN_BLOCKS` blocks were outside the band on
+        the same side."""
+        return abs(self.outside) >= NIS_SUSTAIN_BLOCKS
 
     def add(self, nis: float) -> bool:
-        """One accepted update's NIS; True when the running mean has been outside the
-        band for :data:`NIS_SUSTAIN_UPDATES` updates in a row."""
-        mean = self._mean.add(nis)
-        lo, hi = self.band
-        if self._mean.n >= RECENT_STEPS and not lo <= mean <= hi:
-            self.outside += 1
+        """One accepted update's NIS; returns :attr:`failing`."""
+        if self._n:
+            self._sxy += nis * self._prev
         else:
-            self.outside = 0
-        return self.outside >= NIS_SUSTAIN_UPDATES
+            self._first = nis
+        self._n += 1
+        self._sx += nis
+        self._sxx += nis * nis
+        self._prev = nis
+        if self._n >= NIS_BLOCK_UPDATES:
+            self._judge()
+        return abs(self.outside) >= NIS_SUSTAIN_BLOCKS
+
+    def _judge(self) -> None:
+        """The block's mean against its band; the next block starts."""
+        n, sx = self._n, self._sx
+        m = sx / n
+        dev = self._sxx - n * m * m
+        lag = self._sxy - m * (2.0 * sx - self._first - self._prev) + (n - 1) * m * m
+        self._sv = NIS_RHO_MEMORY * self._sv + dev
+        self._sc = NIS_RHO_MEMORY * self._sc + lag
+        self.rho = self._sc / self._sv if self._sv > 0.0 else 0.0
+        self.band = lo, hi = nis_band(self.dof, effective_count(n, self.rho))
+        self.mean = m
+        side = 1 if m > hi else -1 if m < lo else 0
+        self.outside = (self.outside + side if side and self.outside * side >= 0
+                        else side)
+        self._reset()
 
 
 REORIGINED = ("; its own local frame is no longer about the first fix (a restart "
@@ -605,7 +694,7 @@ class IntegrityMonitor:
             check = per.get(rec.channel)
             if check is None or check.dof != rec.dof:
                 check = per[rec.channel] = NisCheck(rec.dof)
-            was = check.outside >= NIS_SUSTAIN_UPDATES
+            was = check.failing
             now = check.add(nis)
             if now:
                 if check.first_failed is None:
@@ -613,7 +702,7 @@ class IntegrityMonitor:
                 self._nis_warning(pipeline, rec.channel, check, rec.t)
             if now != was:
                 self._flag(pipeline, "nis_out_of_band",
-                           any(c.outside >= NIS_SUSTAIN_UPDATES for c in per.values()))
+                           any(c.failing for c in per.values()))
 
     def _nis_warning(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
         lo, hi = check.band
@@ -621,9 +710,11 @@ class IntegrityMonitor:
                if check.mean > hi else "smaller than the filter expects: its sigmas are "
                "larger than its errors (or its measurement noise is set too high)")
         self._warn("nis_out_of_band", pipeline, t, (
-            f"{pipeline} {channel}: recent NIS {check.mean:.2f} outside its 95 % band "
-            f"[{lo:.2f}, {hi:.2f}] (dof {check.dof}) for {check.outside} updates: the "
-            f"innovations are {how}"), key=channel, t_start=check.first_failed)
+            f"{pipeline} {channel}: mean NIS {check.mean:.2f} over {NIS_BLOCK_UPDATES} "
+            f"updates outside its {NIS_BAND:.0%} band [{lo:.2f}, {hi:.2f}] (dof "
+            f"{check.dof}; lag-1 autocorrelation {check.rho:.2f}) for {abs(check.outside)} "
+            f"blocks in a row: the innovations are {how}"), key=channel,
+            t_start=check.first_failed)
 
     # ------------------------------------------------------------------ flags
     def _flag(self, pipeline: str, code: str, on: bool) -> None:

@@ -72,10 +72,12 @@ def test_no_divergence_and_surge_coefficients_converge(jaiabot, twin) -> None:
     for run in (jaiabot, twin):
         h = run.pipelines[0].health()
         assert h["surge.diverged"] == 0 and h["heading.diverged"] == 0
-    # measured: surge theta within 20 % of its final value after 461 of its 0.2 s steps
-    # (92 s; paper: ~100 steps), on the rate innovation; the heading coefficients (10 Hz
-    # steps, lambda = 0.999) keep adapting
-    assert 0 <= convergence_step(jaiabot.theta["surge"]) < 750
+    # measured: surge theta within 20 % of its final value after 849 of its 1493 0.2 s
+    # steps (170 s; paper: ~100 steps), on the rate innovation; 457 before [sensors.gnss]
+    # drift_share, with the relative error's path the same within 0.002: it sits at
+    # 0.15-0.17 from step 700 to 850 and one step there now crosses 0.2. The heading
+    # coefficients (10 Hz steps, lambda = 0.999) keep adapting
+    assert 0 <= convergence_step(jaiabot.theta["surge"]) < 900
 
 
 _position_coverage = runs.position_coverage

@@ -16,12 +16,15 @@ from onboard.integrity import (
     POSITION_SIGMA_BOUND,
     HeadingCourseCheck,
     IntegrityMonitor,
+    NIS_BLOCK_UPDATES,
     NisCheck,
     PositionCheck,
     SPEED_FLOOR_MPS,
     SpeedCheck,
+    calibrated_nis,
     circular_mean,
     crab_bound,
+    effective_count,
     nis_band,
 )
 
@@ -122,10 +125,24 @@ def test_a_track_within_its_sigma_passes() -> None:
     assert not alerts.codes() and not m.active()
 
 
-def test_the_nis_band_is_the_chi_square_band_of_the_running_mean() -> None:
-    lo, hi = nis_band(1)
-    # chi2(39) 2.5 % and 97.5 % quantiles / 39: 23.65 / 39 = 0.606, 58.12 / 39 = 1.490
-    assert abs(lo - 0.606) < 0.01 and abs(hi - 1.490) < 0.01
+def test_the_nis_band_is_the_chi_square_band_of_the_block_mean_or_the_coverage_target() -> None:
+    # 20 effective updates: chi2(20) 0.5 % and 99.5 % quantiles / 20: 7.43 / 20 = 0.372,
+    # 40.00 / 20 = 2.000 (wider than the coverage target's NIS)
+    lo, hi = nis_band(1, 20.0)
+    assert abs(lo - 0.372) < 0.02 and abs(hi - 2.000) < 0.03
+    # 1-sigma coverage 0.6-0.8 is a sigma 0.84-1.28 times the true one: NIS 1.41-0.61
+    c_lo, c_hi = calibrated_nis()
+    assert abs(c_lo - 0.609) < 0.002 and abs(c_hi - 1.412) < 0.002
+    # 100 white updates: chi2(100) gives [0.673, 1.402], narrower: the target is the band
+    assert nis_band(1) == (c_lo, c_hi)
+    assert nis_band(3) == (3 * c_lo, 3 * c_hi)
+
+
+def test_the_effective_count_follows_the_lag_1_autocorrelation() -> None:
+    assert effective_count(100, 0.0) == 100
+    assert effective_count(100, -0.3) == 100               # never narrower than white
+    assert abs(effective_count(100, 0.5) - 100 / 3) < 1e-9
+    assert abs(effective_count(100, 0.99) - 100 * 0.1 / 1.9) < 1e-9   # clipped at 0.9
 
 
 def test_a_consistent_channel_stays_in_band_and_an_overconfident_one_does_not() -> None:
@@ -133,14 +150,46 @@ def test_a_consistent_channel_stays_in_band_and_an_overconfident_one_does_not() 
     ok = NisCheck(2)
     assert not any(ok.add(float(x)) for x in rng.chisquare(2, 2000))
     bad = NisCheck(2)
-    assert any(bad.add(float(x)) for x in 4.0 * rng.chisquare(2, 200))
+    assert any(bad.add(float(x)) for x in 4.0 * rng.chisquare(2, 2 * NIS_BLOCK_UPDATES))
+
+
+def test_a_timid_channel_at_half_its_nis_is_flagged_below() -> None:
+    # the simulator's GNSS increments before [sensors.gnss] drift_share: NIS 0.48-0.57
+    rng = np.random.default_rng(2)
+    check = NisCheck(1)
+    assert any(check.add(float(x)) for x in 0.5 * rng.chisquare(1, 400))
+    assert check.outside <= -2 and check.mean < check.band[0]
+
+
+def test_a_consistent_channel_rarely_fires_in_an_hour() -> None:
+    # 36000 white dof-1 updates (1 h at 10 Hz), 10 runs: none fires (measured 0 of 20
+    # runs per dof 1-3; the old 20-update running mean fired in 20-25 % of them)
+    rng = np.random.default_rng(3)
+    fired = 0
+    for _ in range(10):
+        check = NisCheck(1)
+        fired += any(check.add(x) for x in rng.chisquare(1, 36000).tolist())
+    assert fired == 0
+
+
+def test_correlated_but_consistent_innovations_widen_the_band_and_pass() -> None:
+    # normalized innovations AR(1) with lag-1 correlation 0.95 (NIS correlation 0.9):
+    # blocks of 100 vary like ~5 independent updates; white bands would fire
+    rng = np.random.default_rng(4)
+    z = np.empty(20000)
+    z[0] = rng.standard_normal()
+    for k in range(1, len(z)):
+        z[k] = 0.95 * z[k - 1] + math.sqrt(1 - 0.95 ** 2) * rng.standard_normal()
+    check = NisCheck(1)
+    assert not any(check.add(x) for x in (z * z).tolist())
+    assert check.rho > 0.7            # measured 0.87
 
 
 def test_nis_out_of_band_flags_the_pipeline_and_names_the_channel() -> None:
     alerts = Alerts()
     m = IntegrityMonitor(alerts)
     recs = [Innovation(channel="velocity", t=0.1 * k, z=(1.0, 1.0), S=(0.1, 0, 0, 0.1),
-                       nis=20.0, dof=2) for k in range(100)]
+                       nis=20.0, dof=2) for k in range(2 * NIS_BLOCK_UPDATES)]
     m.innovations("current", recs)
     assert m.active() == {"current": ["nis_out_of_band"]}
     assert "velocity" in next(iter(alerts)).message

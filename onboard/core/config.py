@@ -131,6 +131,13 @@ class GnssNoise(_Strict):
     """Velocity noise, one sigma (m/s)."""
     rate_hz: float = 5.0
     """Fix rate (Hz)."""
+    drift_share: Annotated[float, msgspec.Meta(ge=0.0, le=0.9)] = 0.0
+    """The share of a fix's position noise variance (``position_std_m`` squared, or its
+    reported accuracy squared) that wanders slowly: multipath and atmosphere, correlated
+    over far longer than a surge step, so the same in consecutive fixes and cancelled in a
+    path increment. The ``aie``/``kf`` increment filters take the rest, white, as a fix's
+    noise; positions keep the whole. 0: all of it white. The simulator's consumer
+    receiver: 1.0 m white and 1.1 m drift per axis, ``1.1^2 / (1.0^2 + 1.1^2) = 0.55``."""
 
 
 class ImuNoise(_Strict):

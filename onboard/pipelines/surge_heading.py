@@ -120,11 +120,14 @@ class SurgeHeadingPipeline:
 
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
                  gnss_std_m: float, heading_std_rad: float, factory: AxisFactory,
-                 gnss_velocity_std_mps: float = 0.1, *, retune: AxisRetune) -> None:
+                 gnss_velocity_std_mps: float = 0.1, *, retune: AxisRetune,
+                 gnss_drift_share: float = 0.0) -> None:
         """``cfg``: the pipeline's table (``[pipelines.aie]`` or ``[pipelines.kf]``);
         ``gnss_std_m``, ``heading_std_rad`` and ``gnss_velocity_std_mps``: the
-        ``[sensors]`` noise, unless ``cfg`` sets its own; ``factory`` builds each axis
-        filter with its input model, ``retune`` switches its measurement set."""
+        ``[sensors]`` noise, unless ``cfg`` sets its own; ``gnss_drift_share``: the
+        slowly wandering share of a fix's noise variance (``[sensors.gnss]
+        drift_share``), left out of the increments' noise; ``factory`` builds each axis filter with its input
+        model, ``retune`` switches its measurement set."""
         if not 0.0 < cfg.gnss_accuracy_min_m <= cfg.gnss_accuracy_max_m:
             raise ValueError(f"[pipelines.{name}] needs 0 < gnss_accuracy_min_m <= "
                              f"gnss_accuracy_max_m, got {cfg.gnss_accuracy_min_m}, "
@@ -138,6 +141,8 @@ class SurgeHeadingPipeline:
         self.sigma_h = (cfg.heading_std_rad if cfg.heading_std_rad is not None
                         else heading_std_rad)
         """Noise of one heading (rad)."""
+        self.drift_share = gnss_drift_share
+        """Slowly wandering share of a fix's noise variance: not in an increment."""
         s, h = cfg.surge, cfg.heading
         self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg, "surge")
         self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg, "heading")
@@ -177,6 +182,7 @@ class SurgeHeadingPipeline:
         self._pt_prev: tuple[float, float, float, float] | None = None  # t, N, E, psi
         self._h_prev: tuple[float, float] | None = None                 # t, psi
         self._R_prev = self.sigma_p ** 2     # noise variance of the previous point (m^2)
+        self._R_inc_prev = increment_variance(self._R_prev, self.drift_share)  # its white part
         self._R_h_prev = self.sigma_h ** 2   # of the previous heading point (rad^2)
 
     # -- samples in ------------------------------------------------------------------------
@@ -399,10 +405,12 @@ class SurgeHeadingPipeline:
             return
         self._pt_prev = (tp, n, e, w.sh / w.n_h if w.n_h else math.nan)
         R_s_prev, self._R_prev = self._R_prev, R_s
+        R_inc = increment_variance(R_s, self.drift_share)
+        R_inc_prev, self._R_inc_prev = self._R_inc_prev, R_inc
         if pp is None or tp - pp[0] > self.cfg.max_gap_s:
             self._restart_surge_chain(pp, tp, n, e, R_s, R_s_prev)
         else:
-            self._surge_step(w, pp, R_s, R_s_prev, course_mode)
+            self._surge_step(w, pp, R_s, (R_inc, R_inc_prev), course_mode)
 
     def _restart_surge_chain(self, pp: Point | None, tp: float, n: float, e: float,
                              R_s: float, R_s_prev: float) -> None:
@@ -412,11 +420,13 @@ class SurgeHeadingPipeline:
             self.surge.restart()
         self.track.restart_position(pp, tp, n, e, R_s, R_s_prev)
 
-    def _surge_step(self, w: Window, pp: Point, R_s: float, R_s_prev: float,
+    def _surge_step(self, w: Window, pp: Point, R_s: float, R_inc: tuple[float, float],
                     course_mode: bool) -> None:
         """The path increment from the previous point to the new one (§1.3) through the
         surge filter (§2.7, with the window's mean Doppler speed as the rate), then the
-        track (§2.11)."""
+        track (§2.11). ``R_s``: the new point's noise variance (m^2); ``R_inc``: the
+        white part of it and of the previous point's (:func:`increment_variance`), the
+        noise the increment carries."""
         point = self._pt_prev
         assert point is not None
         tp, n, e, psi = point
@@ -431,7 +441,7 @@ class SurgeHeadingPipeline:
         y_v, R_v = w.speed_point(self.sigma_v)
         surge = self.surge
         v_prev = surge.kf.v if surge.kf.initialized else None
-        surge.step(self._disc(surge.damping(cmd), tp - pp[0]), y, R_s, R_s_prev, cmd,
+        surge.step(self._disc(surge.damping(cmd), tp - pp[0]), y, R_inc[0], R_inc[1], cmd,
                    y_v, R_v, t=tp, source=w.fix_source)
         if self.track.imu is not None and v_prev is not None and y_v is not None:
             self.track.learn_imu_forecast(pp[0], tp, v_prev, y_v)
@@ -551,7 +561,16 @@ def _restored_model(m: object) -> AxisModel | None:
     return None
 
 
-def sensor_noise(cfg: Config) -> tuple[float, float, float]:
-    """``(gnss_std_m, heading_std_rad, gnss_velocity_std_mps)`` from ``[sensors]``."""
+def sensor_noise(cfg: Config) -> tuple[float, float, float, float]:
+    """``(gnss_std_m, heading_std_rad, gnss_velocity_std_mps, gnss_drift_share)`` from
+    ``[sensors]``."""
     g = cfg.sensors.gnss
-    return g.position_std_m, cfg.sensors.compass.heading_std_rad, g.velocity_std_mps
+    return (g.position_std_m, cfg.sensors.compass.heading_std_rad, g.velocity_std_mps,
+            g.drift_share)
+
+
+def increment_variance(R: float, drift_share: float) -> float:
+    """The noise variance (m^2) of a point of noise variance ``R`` as a path increment
+    sees it: ``R`` less the slowly wandering share ``drift_share`` (``[sensors.gnss]
+    drift_share``, the same share of every fix's variance, so of the window mean's too)."""
+    return R * (1.0 - drift_share)
