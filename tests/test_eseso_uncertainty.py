@@ -107,3 +107,22 @@ def test_dvl_innovations_larger_than_expected_scale_the_imu_noise() -> None:
         f.update_body_velocity(np.zeros(3), 1e-8)
     assert f.process_scale > 3.0
     assert "dvl" not in f.noise_scale  # the DVL's own noise is its figure of merit
+
+
+def test_a_thruster_noisier_than_the_imu_explains_is_learnt_up_to_its_own_ceiling() -> None:
+    f = _level_filter(noise_adapt_updates=50, noise_scale_max=9.0, thrust_noise_scale_max=100.0)
+    rng = np.random.default_rng(2)
+    for _ in range(600):
+        f.P = np.eye(f.P.shape[0]) * 1e-6  # a well-known state: the residual is the noise
+        f.xi = np.zeros(3)
+        # 5 N of thruster force error against the ~1 N the IMU's noise explains: x25
+        f.update_thrust(GRAVITY_ONLY, np.zeros(3), np.zeros(3), rng.normal(0.0, 5.0, 3),
+                        wdot_dt=0.02)
+    assert 15.0 < f.noise_scale["thrust"] < 40.0  # measured 26.4, above the sensors' 9
+    capped = _level_filter(noise_adapt_updates=50, thrust_noise_scale_max=4.0)
+    for _ in range(300):
+        capped.P = np.eye(capped.P.shape[0]) * 1e-6
+        capped.xi = np.zeros(3)
+        capped.update_thrust(GRAVITY_ONLY, np.zeros(3), np.zeros(3),
+                             rng.normal(0.0, 5.0, 3), wdot_dt=0.02)
+    assert capped.noise_scale["thrust"] == 4.0

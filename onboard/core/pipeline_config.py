@@ -662,6 +662,12 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Ceiling of the measurement-noise variance scale (dimensionless; 9 = three times the
     configured sigma). Its floor is 1: the adaptation only ever inflates the noise, so a
     channel is never trusted more than configured."""
+    thrust_noise_scale_max: float = 100.0
+    """Ceiling of the thrust channel's noise variance scale (dimensionless; 100 = ten
+    times the ~1 N the IMU's noise puts into the thrust model): a real thruster's force
+    error (lag, thrust curve against battery voltage; 3-4 N on the ArduSub tlog of
+    ``/work/shared/data``) is several times what the IMU explains, and unlike a sensor's
+    it is configured by nobody."""
 
 
 

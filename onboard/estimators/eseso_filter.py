@@ -186,12 +186,15 @@ class EsesoParams:
     """Time constant (updates) of each channel's noise-scale mean; 0 = no adaptation."""
     noise_scale_max: float = 1.0
     """Ceiling of a channel's measurement-noise variance scale (floor 1)."""
+    thrust_noise_scale_max: float = 1.0
+    """Ceiling of the thrust channel's noise variance scale (floor 1)."""
 
 
-NOISE_ADAPT_CHANNELS = frozenset({"thrust", "attitude", "heading", "depth", "vog",
-                                  "gnss_pos", "gnss_vel"})
-"""Channels whose noise is scaled from their innovations (:meth:`EsesoFilter.update`); the
-thrust channel's too (a real thruster's force error, lag and thrust curve against battery
+NOISE_ADAPT_CHANNELS = frozenset({"attitude", "heading", "depth", "vog", "gnss_pos",
+                                  "gnss_vel"})
+"""Sensor channels whose noise is scaled from their innovations (:meth:`EsesoFilter.update`);
+the thrust channel's is scaled likewise in :meth:`EsesoFilter.update_thrust`, before its
+Huber weight (a real thruster's force error, lag and thrust curve against battery
 voltage, is not the simulator's and nobody measures it on the vehicle); the zero-velocity
 update is a pseudo-measurement and the DVL's excess goes to the process noise
 (:data:`PROCESS_ADAPT_CHANNEL`)."""
@@ -402,15 +405,16 @@ class EsesoFilter:
         innovation ``y`` (covariance matching, Mehra 1970; Mohamed & Schwarz 1999):
         ``E[y y^T] = H P H^T + s R``, so ``(y^T y - tr(H P H^T)) / tr(R)`` is a sample of
         ``s``; its exponential mean over ``noise_adapt_updates`` updates (each sample
-        capped at :data:`NOISE_SAMPLE_CAP`), clipped to [1, ``noise_scale_max``], is the
-        scale. One-sided: noise larger than configured is learnt, smaller is not."""
+        capped at :data:`NOISE_SAMPLE_CAP`), clipped to [1, ``noise_scale_max``] (the
+        thrust channel's to [1, ``thrust_noise_scale_max``]), is the scale. One-sided: noise larger than configured is learnt, smaller is not."""
         c = self.params
         sample = (float(y @ y) - float(np.trace(HPHt))) / max(float(np.trace(Rm)), 1e-300)
         sample = min(sample, NOISE_SAMPLE_CAP)
         mean = self._noise_mean.get(channel, 1.0)
         mean += (sample - mean) / c.noise_adapt_updates
         self._noise_mean[channel] = mean
-        scale = min(max(mean, 1.0), c.noise_scale_max)
+        ceiling = c.thrust_noise_scale_max if channel == "thrust" else c.noise_scale_max
+        scale = min(max(mean, 1.0), ceiling)
         self.noise_scale[channel] = scale
         return scale
 
@@ -638,10 +642,13 @@ class EsesoFilter:
         self.P[XI, XI] += np.diag(self.model_change_var(tau))
         y = tau - h
         Rm = self.R_tau = self.thrust_noise(wdot_dt)
+        HPHt = H @ self.P @ H.T
+        if self.params.noise_adapt_updates > 0:  # before the Huber weight, which it would learn
+            Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
         only = XI if self.params.thrust_states == "disturbance" else None
         k = self.params.thrust_huber
         if k > 0:
-            S = H @ self.P @ H.T + Rm
+            S = HPHt + Rm
             nis = float(y @ np.linalg.solve(S, y))
             if nis > k:
                 Rm = Rm * (nis / k)

@@ -160,7 +160,7 @@ def filter_params(c: EsesoConfig, sensors: Any | None = None) -> EsesoParams:
         initial_disturbance_std_n=c.initial_disturbance_std_n,
         damping_rel_std=c.damping_rel_std, thrust_rel_std=c.thrust_rel_std,
         noise_adapt_updates=c.noise_adapt_updates,
-        noise_scale_max=c.noise_scale_max,
+        noise_scale_max=c.noise_scale_max, thrust_noise_scale_max=c.thrust_noise_scale_max,
     )
 
 
