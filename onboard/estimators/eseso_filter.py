@@ -51,9 +51,11 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
 * **What ``xi`` is**: the lumped disturbance, the force the thrust model misses: the
   external push plus whatever the model's mass, damping and thrust map get wrong (the
   paper's definition, and what the AMPC adds to its prediction model). Its sigma is
-  ``P``'s. On a vehicle circling at one speed under a constant push the push cannot be
-  told from a thrust-map error (docs/eseso-mpc.md, "What the disturbance is"), so no
-  separate push is estimated.
+  ``P``'s. When the commanded or the damping force changes, ``xi`` changes by the thrust
+  map's or the damping's relative error times the change: with their configured
+  one-sigmas that is process noise of ``xi`` (:meth:`EsesoFilter.model_change_var`). On
+  a vehicle circling at one speed under a constant push the push cannot be told from a
+  thrust-map error (docs/eseso-mpc.md), so no separate push is estimated.
 * **Injection and reset** (paper eqs. 16d, 17, 18): every component of ``dx`` is injected
   (``v`` once, biases and gravity too, unlike the public code), then ``P <- G P G^T``
   with the reset Jacobian ``G = blockdiag(I, I, I - [dtheta/2]x, I, I, I, I)``
