@@ -81,7 +81,7 @@ alone; here both are explicit.
 
 With ``thrust_states = "disturbance"`` the thrust update corrects the disturbance alone (as
 the paper's H, -I on ``dxi`` only) but as a Schmidt-Kalman update (Schmidt 1966; Simon,
-"Optimal State Estimation", 2006, §7.5): the full Jacobian enters ``S`` and the covariance
+"Optimal State Estimation", 2006, section 7.5): the full Jacobian enters ``S`` and the covariance
 and only the gain's ``dxi`` rows are kept, so the cross-covariance of ``xi`` with the
 attitude and velocity (a tilt error of 3 mrad is 0.4 N through ``M g``, which ``xi``
 absorbs) is carried instead of counted as white noise at every update. Through the
