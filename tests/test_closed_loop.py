@@ -37,7 +37,8 @@ def test_ampc_tracks_at_least_twice_as_well_as_the_nmpc_and_better_than_the_pid(
 
 def test_disturbance_estimate_is_within_4_newtons_after_5_seconds(runs) -> None:
     for name, rep in runs.items():
-        # measured: max 0.7 N after 5 s for all three; RMS after 10 s 0.32 N
+        # measured: RMS after 10 s 0.41 N (AMPC; 0.32 N with the 3 N thrust noise of before,
+        # docs/eseso-mpc.md "Consistency"); max after 5 s 1.3 N over 240 s
         assert rep["disturbance_error_max_after_5s_n"] < 4.0, name
         assert rep["disturbance_error_n"] < 1.5, name
 

@@ -593,8 +593,11 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     as its yaw."""
     heading_std_rad: float | None = None
     """Compass heading noise (rad); default ``[sensors.compass]``."""
-    thrust_std_n: float = 3.0
-    """Thrust-model error besides accelerometer noise (thruster lag, model error), N."""
+    thrust_std_n: float = 0.0
+    """The thrusters' own force error (N, one-sigma per body axis) besides what the IMU's
+    noise puts into the thrust model (``EsesoFilter.thrust_noise``) [DEFAULT: the
+    simulated thrusters have none; a real thruster's larger error is learnt by the thrust
+    channel's noise scale, ``noise_adapt_updates``]."""
     accel_std_mps2: float | None = None
     """Accelerometer noise (m/s^2); default ``[sensors.imu]``."""
     gyro_std_rps: float | None = None
@@ -606,10 +609,10 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     gate_sigma: float = 0.0
     """0 = chi-square 99.9 % gates; else the NIS gate is ``gate_sigma**2 * dof``."""
     thrust_states: Literal["disturbance", "all"] = "disturbance"
-    """Which error states the thrust update corrects. ``"disturbance"`` (the paper's H,
-    -I on dxi only): the other states' uncertainty is added to the update's noise
-    instead (``R + H_o P_oo H_o^T``), so thruster and model errors cannot move the
-    velocity. ``"all"``: the full Jacobian."""
+    """Which error states the thrust update corrects. ``"disturbance"`` (as the paper's
+    H, the disturbance alone): a Schmidt-Kalman update, the full Jacobian in the
+    innovation covariance and the covariance, the gain's other rows zeroed, so thruster
+    and model errors cannot move the velocity. ``"all"``: a full update."""
     max_consecutive_rejects: int = 5
     """After this many gated samples in a row a channel is fused again, down-weighted by
     NIS / gate, so one bad spell cannot lock a sensor out for good."""
@@ -640,20 +643,17 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Initial one-sigma of the disturbance force (N)."""
     max_imu_gap_s: float = 0.5
     """A longer gap between IMU samples restarts the propagation clock (counted)."""
-    # model uncertainty carried into the disturbance's sigma (consider covariance)
-    mass_rel_std: float = 0.2
-    """Relative one-sigma of the mass and added mass (dimensionless) [DEFAULT]: the
-    inertial force ``M (f + g_B) - A (w x nu) + w x (A nu)`` it scales is added, times
-    this, to the published disturbance variance (added mass is a guess from strip theory
-    or a paper's table, rarely measured). 0 = the filter's covariance alone."""
+    # model uncertainty: process noise of the lumped disturbance
     damping_rel_std: float = 0.3
-    """Relative one-sigma of the damping coefficients (dimensionless) [DEFAULT]; the
-    damping force ``D(nu) nu`` times this joins the published disturbance variance
-    (identified drag coefficients are rarely better than 30 %)."""
+    """Relative one-sigma of the damping coefficients (dimensionless) [DEFAULT: identified
+    drag coefficients are rarely better than 30 %]. The lumped disturbance carries the
+    damping's error, so when the damping force ``D(nu) nu`` changes, the disturbance
+    changes by this times the change: added to its process noise at each thrust update
+    (``EsesoFilter.model_change_var``). 0 = the random walk alone."""
     thrust_rel_std: float = 0.2
-    """Relative one-sigma of the thrust map (dimensionless) [DEFAULT]; the commanded body
-    force times this joins the published disturbance variance (a T200's thrust at a
-    given command varies by about 20 % between 12 and 16 V of battery)."""
+    """Relative one-sigma of the thrust map (dimensionless) [DEFAULT: a T200's thrust at a
+    given command varies by about 20 % between 12 and 16 V of battery]; likewise for each
+    change of the commanded body force."""
     # measurement-noise adaptation from the innovations (covariance matching)
     noise_adapt_updates: int = 100
     """Updates over which each sensor channel's noise scale is averaged (the time constant
@@ -662,6 +662,12 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Ceiling of the measurement-noise variance scale (dimensionless; 9 = three times the
     configured sigma). Its floor is 1: the adaptation only ever inflates the noise, so a
     channel is never trusted more than configured."""
+    thrust_noise_scale_max: float = 100.0
+    """Ceiling of the thrust channel's noise variance scale (dimensionless; 100 = ten
+    times the ~1 N the IMU's noise puts into the thrust model): a real thruster's force
+    error (lag, thrust curve against battery voltage; 3-4 N on the ArduSub tlog of
+    ``/work/shared/data``) is several times what the IMU explains, and unlike a sensor's
+    it is configured by nobody."""
 
 
 

@@ -48,11 +48,14 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   and the IMU's white noise by the DVL innovations' excess over ``R`` (a fading factor);
   each scale is clipped to [1, ``noise_scale_max``]: noise larger than configured is
   learnt, smaller is not (``noise_adapt_updates`` 0 = off).
-* **Model uncertainty** (:meth:`EsesoFilter.model_force_var`): ``xi`` absorbs the model's
-  error, so the variance of the model's terms through the configured relative
-  uncertainties of mass, damping and thrust (:attr:`EsesoFilter.xi_model_var`) belongs in
-  the disturbance's published sigma; it is kept beside ``P``, not in it (a consider
-  covariance), and the pipeline adds it.
+* **What ``xi`` is**: the lumped disturbance, the force the thrust model misses: the
+  external push plus whatever the model's mass, damping and thrust map get wrong (the
+  paper's definition, and what the AMPC adds to its prediction model). Its sigma is
+  ``P``'s. When the commanded or the damping force changes, ``xi`` changes by the thrust
+  map's or the damping's relative error times the change: with their configured
+  one-sigmas that is process noise of ``xi`` (:meth:`EsesoFilter.model_change_var`). On
+  a vehicle circling at one speed under a constant push the push cannot be told from a
+  thrust-map error (docs/eseso-mpc.md), so no separate push is estimated.
 * **Injection and reset** (paper eqs. 16d, 17, 18): every component of ``dx`` is injected
   (``v`` once, biases and gravity too, unlike the public code), then ``P <- G P G^T``
   with the reset Jacobian ``G = blockdiag(I, I, I - [dtheta/2]x, I, I, I, I)``
@@ -76,11 +79,14 @@ the thruster force in body axes. The paper's ``M_RB (u_a - b_a)`` misses the ``m
 term, which only cancels against the weight if the restoring term is written with ``B``
 alone; here both are explicit.
 
-With ``thrust_states = "disturbance"`` (the paper's H with -I on ``dxi`` only) the thrust
-update corrects the disturbance alone and carries the other states' uncertainty in its
-noise (``R + H_o P_oo H_o^T``): through the damping slope (up to 66 N per m/s) the full
-Jacobian (``"all"``) makes it a velocity sensor too, which thruster lag or model errors
-would drag away from the DVL. Its residual is down-weighted Huber-style above
+With ``thrust_states = "disturbance"`` the thrust update corrects the disturbance alone (as
+the paper's H, -I on ``dxi`` only) but as a Schmidt-Kalman update (Schmidt 1966; Simon,
+"Optimal State Estimation", 2006, section 7.5): the full Jacobian enters ``S`` and the covariance
+and only the gain's ``dxi`` rows are kept, so the cross-covariance of ``xi`` with the
+attitude and velocity (a tilt error of 3 mrad is 0.4 N through ``M g``, which ``xi``
+absorbs) is carried instead of counted as white noise at every update. Through the
+damping slope (up to 66 N per m/s) the full update (``"all"``) makes it a velocity
+sensor too, which thruster lag or model errors would drag away from the DVL. Its residual is down-weighted Huber-style above
 ``thrust_huber``: thruster steps excite roll and pitch accelerations faster than the IMU
 rate resolves.
 
@@ -184,23 +190,26 @@ class EsesoParams:
     initial_gyro_bias_std: float
     initial_gravity_std: float
     initial_disturbance_std_n: float
-    mass_rel_std: float = 0.0
-    """Relative one-sigma of mass and added mass, carried into :attr:`EsesoFilter.xi_model_var`."""
     damping_rel_std: float = 0.0
-    """Relative one-sigma of the damping coefficients (likewise)."""
+    """Relative one-sigma of the damping coefficients: the lumped disturbance's process
+    noise (:meth:`EsesoFilter.model_change_var`)."""
     thrust_rel_std: float = 0.0
     """Relative one-sigma of the thrust map (likewise)."""
     noise_adapt_updates: int = 0
     """Time constant (updates) of each channel's noise-scale mean; 0 = no adaptation."""
     noise_scale_max: float = 1.0
     """Ceiling of a channel's measurement-noise variance scale (floor 1)."""
+    thrust_noise_scale_max: float = 1.0
+    """Ceiling of the thrust channel's noise variance scale (floor 1)."""
 
 
 NOISE_ADAPT_CHANNELS = frozenset({"attitude", "heading", "depth", "vog", "gnss_pos",
                                   "gnss_vel"})
 """Sensor channels whose noise is scaled from their innovations (:meth:`EsesoFilter.update`);
-the thrust channel has its own down-weighting, the zero-velocity update is a
-pseudo-measurement and the DVL's excess goes to the process noise
+the thrust channel's is scaled likewise in :meth:`EsesoFilter.update_thrust`, before its
+Huber weight (a real thruster's force error, lag and thrust curve against battery
+voltage, is not the simulator's and nobody measures it on the vehicle); the zero-velocity
+update is a pseudo-measurement and the DVL's excess goes to the process noise
 (:data:`PROCESS_ADAPT_CHANNEL`)."""
 PROCESS_ADAPT_CHANNEL = "dvl"
 """The channel whose innovations scale the IMU's white noise (the process noise of velocity
@@ -231,10 +240,8 @@ class EsesoFilter:
             ``recovered.<channel>``, ``thrust.downweighted``), in order of first
             occurrence; the owner may count its own events in the same dictionary.
         initialized: False until :meth:`initialize`.
-        xi_model_var: variance (N^2, body axes) of the thrust model's terms through the
-            configured relative uncertainties of mass, damping and thrust, at the last
-            thrust update (:meth:`model_force_var`): the part of the disturbance's error
-            that the covariance ``P`` does not know about.
+        R_tau: the thrust update's noise covariance at the last thrust update
+            (:meth:`thrust_noise`, N^2), before the other states' share and the scales.
         noise_scale: per sensor channel, the variance scale its noise is multiplied by
             (1 to ``noise_scale_max``; :meth:`update`).
         process_scale: the variance scale of the IMU's white noise in the propagation
@@ -247,8 +254,6 @@ class EsesoFilter:
         self.A = np.diag(np.asarray(c.added_mass, float))
         self.d_l = np.asarray(c.damping_linear, float)
         self.d_nl = np.asarray(c.damping_quadratic, float)
-        # thrust-update noise: accelerometer noise through M plus model error (N^2)
-        self.R_tau = np.diag((self.m_vec * c.accel_std_mps2) ** 2 + c.thrust_std_n ** 2)
         self.initialized = False
         self.p = np.zeros(3)
         self.v = np.zeros(3)
@@ -266,10 +271,12 @@ class EsesoFilter:
         self.innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
         self.counters: dict[str, int] = {}
         self._consecutive: dict[str, int] = {}
-        self.xi_model_var = np.zeros(3)
         self.noise_scale: dict[str, float] = {}
         self.process_scale = 1.0
         self._noise_mean: dict[str, float] = {}
+        self._model_terms: tuple[Array, Array] | None = None  # (tau, D(nu) nu), last update
+        # thrust-update noise (N^2), :meth:`thrust_noise`; updated at every thrust update
+        self.R_tau = self.thrust_noise(None)
 
     def count(self, key: str) -> None:
         """Add one to the event counter ``key``."""
@@ -342,7 +349,8 @@ class EsesoFilter:
 
     # ------------------------------------------------------------------ update
     def update(self, channel: str, y: Array, H: Array, Rm: Array,
-               gate: float | None = None, *, t: float = math.nan, source: str = "") -> bool:
+               gate: float | None = None, *, t: float = math.nan, source: str = "",
+               only: slice | None = None) -> bool:
         """One Kalman update on the error state (paper eq. 16), Joseph form, then error
         injection (16d) and reset with its Jacobian (17, 18).
 
@@ -354,6 +362,9 @@ class EsesoFilter:
             gate: the NIS above which the update is rejected; None = the configured gate
                 (:meth:`gate`), 0 = no gate.
             t, source: the measurement's time (s) and sample source, for its record.
+            only: the error-state block the update may correct (a Schmidt-Kalman update,
+                Schmidt 1966: the other rows of the gain are zeroed, the Joseph form keeps
+                the covariance right for that gain); None = all.
 
         Returns:
             False when the gate rejects the update.
@@ -386,6 +397,10 @@ class EsesoFilter:
         self._consecutive[channel] = 0
         self._record(channel, t, source, gate, accepted=True)
         K = PHt @ Sinv
+        if only is not None:
+            keep = K[only].copy()
+            K = np.zeros_like(K)
+            K[only] = keep
         dx = K @ y
         IKH = _I_N - K @ H
         P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
@@ -403,15 +418,16 @@ class EsesoFilter:
         innovation ``y`` (covariance matching, Mehra 1970; Mohamed & Schwarz 1999):
         ``E[y y^T] = H P H^T + s R``, so ``(y^T y - tr(H P H^T)) / tr(R)`` is a sample of
         ``s``; its exponential mean over ``noise_adapt_updates`` updates (each sample
-        capped at :data:`NOISE_SAMPLE_CAP`), clipped to [1, ``noise_scale_max``], is the
-        scale. One-sided: noise larger than configured is learnt, smaller is not."""
+        capped at :data:`NOISE_SAMPLE_CAP`), clipped to [1, ``noise_scale_max``] (the
+        thrust channel's to [1, ``thrust_noise_scale_max``]), is the scale. One-sided: noise larger than configured is learnt, smaller is not."""
         c = self.params
         sample = (float(y @ y) - float(np.trace(HPHt))) / max(float(np.trace(Rm)), 1e-300)
         sample = min(sample, NOISE_SAMPLE_CAP)
         mean = self._noise_mean.get(channel, 1.0)
         mean += (sample - mean) / c.noise_adapt_updates
         self._noise_mean[channel] = mean
-        scale = min(max(mean, 1.0), c.noise_scale_max)
+        ceiling = c.thrust_noise_scale_max if channel == "thrust" else c.noise_scale_max
+        scale = min(max(mean, 1.0), ceiling)
         self.noise_scale[channel] = scale
         return scale
 
@@ -579,50 +595,75 @@ class EsesoFilter:
         H[:, XI] = -_I3
         return h, H
 
-    def model_force_var(self, f_m: Array, w_m: Array, tau: Array) -> Array:
-        """Variance (N^2, body axes) of the thrust model's error from the configured
-        relative uncertainties of its coefficients, at specific force ``f_m`` (m/s^2),
-        rate ``w_m`` (rad/s) and commanded force ``tau`` (N): the disturbance absorbs
-        whatever the model gets wrong, so its error against the external force is, to
-        first order, ``dM (f + g_B) - dA (w x nu) + w x (dA nu) + dD(nu) nu - dtau``. Each
-        coefficient group's relative error is independent, so per axis::
+    def model_change_var(self, tau: Array) -> Array:
+        """Variance (N^2, body) the lumped disturbance gains since the last thrust update
+        from the model's uncertain coefficients, at the commanded force ``tau`` (N): ``xi``
+        carries ``-dk_t tau + dk_d D(nu) nu`` (relative errors of the thrust map and the
+        damping), so when the thrust or the damping force changes, ``xi`` changes by those
+        errors times the change. With their configured one-sigmas, per axis::
 
-            var = (mass_rel_std * inertial)^2 + (damping_rel_std * D(nu) nu)^2
-                  + (thrust_rel_std * tau)^2
+            q_model = (thrust_rel_std (tau - tau_prev))^2
+                      + (damping_rel_std (D(nu) nu - D(nu_prev) nu_prev))^2
 
-        A consider covariance (Schmidt): the coefficients are not estimated, their
-        uncertainty is carried into the published sigma and not into ``P``."""
+        added to ``P[xi, xi]`` before the update (zero at the first update). The mass term
+        is left out: its force is the measured acceleration, whose noise is not a change of
+        the model's error."""
         c = self.params
-        f = f_m - self.b_a
-        w = w_m - self.b_g
-        RT = self.R.T
-        nu = RT @ self.v
-        inertial = (self.m_vec * (f + RT @ self.g) - self.A @ cross(w, nu)
-                    + cross(w, self.A @ nu))
-        damp = (self.d_l + self.d_nl * np.abs(nu)) * nu
-        return ((c.mass_rel_std * inertial) ** 2 + (c.damping_rel_std * damp) ** 2
-                + (c.thrust_rel_std * np.asarray(tau, float)) ** 2)
+        nu = self.R.T @ self.v
+        terms = (np.asarray(tau, float).copy(), (self.d_l + self.d_nl * np.abs(nu)) * nu)
+        last, self._model_terms = self._model_terms, terms
+        if last is None:
+            return np.zeros(3)
+        return ((c.thrust_rel_std * (terms[0] - last[0])) ** 2
+                + (c.damping_rel_std * (terms[1] - last[1])) ** 2)
+
+    def thrust_noise(self, wdot_dt: float | None) -> Array:
+        """Noise covariance (N^2, body) of the thrust update: what the IMU's white noise puts
+        into :meth:`h_tau`, plus the thrusters' own force error ``thrust_std_n``::
+
+            R_tau = diag((M_ii sigma_a)^2) s_imu
+                    + (m z_G)^2 2 sigma_g^2 / dt_w^2 s_imu   on x and y
+                    + thrust_std_n^2 I
+
+        The second term is the centre-of-gravity force ``m w' x r_g`` with ``w'`` the
+        difference of two gyro samples ``dt_w`` (s, ``wdot_dt``) apart: each carries the
+        gyro's white noise ``sigma_g``, so ``w'`` carries ``sqrt(2) sigma_g / dt_w`` (0.35
+        rad/s^2 at 50 Hz, 0.80 N through ``m z_G`` = 2.25 kg m on the simulated BlueROV2:
+        more than the accelerometer's 0.56-0.84 N). ``s_imu`` is the learnt IMU noise
+        scale (:attr:`process_scale`). Without ``wdot_dt`` (no angular acceleration) the
+        second term is left out, as the force is."""
+        c = self.params
+        s_imu = self.process_scale
+        var = (self.m_vec * c.accel_std_mps2) ** 2 * s_imu + c.thrust_std_n ** 2
+        if wdot_dt is not None and wdot_dt > 0.0:
+            var_wdot = 2.0 * c.gyro_std_rps ** 2 / wdot_dt ** 2 * s_imu
+            var[:2] += (c.mass_kg * c.cg_z_m) ** 2 * var_wdot
+        return np.diag(var)
 
     def update_thrust(self, f_m: Array, w_m: Array, wdot: Array, tau: Array, *,
-                      t: float = math.nan, source: str = "") -> bool:
+                      wdot_dt: float | None = None, t: float = math.nan,
+                      source: str = "") -> bool:
         """Update on the thruster force ``tau`` (N, body) = :meth:`h_tau` at specific force
-        ``f_m``, rate ``w_m`` and angular acceleration ``wdot``; channel ``thrust``, never
-        gated, down-weighted above ``thrust_huber``."""
+        ``f_m``, rate ``w_m`` and angular acceleration ``wdot`` (the difference of two gyro
+        samples ``wdot_dt`` s apart; its noise in :meth:`thrust_noise`); channel
+        ``thrust``, never gated, down-weighted above ``thrust_huber``. The lumped
+        disturbance's model-change variance (:meth:`model_change_var`) is added to its
+        covariance first. With ``thrust_states = "disturbance"`` a Schmidt-Kalman update:
+        the full Jacobian in ``S`` and in the covariance, the gain's rows other than
+        ``dxi`` zeroed (:meth:`update`'s ``only``)."""
         h, H = self.h_tau(f_m, w_m, wdot)
-        self.xi_model_var = self.model_force_var(f_m, w_m, tau)
+        self.P[XI, XI] += np.diag(self.model_change_var(tau))
         y = tau - h
-        Rm = self.R_tau
-        if self.params.thrust_states == "disturbance":
-            Ho = H.copy()
-            Ho[:, XI] = 0.0
-            Rm = Rm + Ho @ self.P @ Ho.T
-            H = np.zeros_like(H)
-            H[:, XI] = -_I3
+        Rm = self.R_tau = self.thrust_noise(wdot_dt)
+        HPHt = H @ self.P @ H.T
+        if self.params.noise_adapt_updates > 0:  # before the Huber weight, which it would learn
+            Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
+        only = XI if self.params.thrust_states == "disturbance" else None
         k = self.params.thrust_huber
         if k > 0:
-            S = H @ self.P @ H.T + Rm
+            S = HPHt + Rm
             nis = float(y @ np.linalg.solve(S, y))
             if nis > k:
                 Rm = Rm * (nis / k)
                 self.count("thrust.downweighted")
-        return self.update("thrust", y, H, Rm, gate=0.0, t=t, source=source)
+        return self.update("thrust", y, H, Rm, gate=0.0, t=t, source=source, only=only)

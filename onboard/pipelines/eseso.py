@@ -45,11 +45,13 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
   ``ZUPT_AFTER_S`` and the thrusters idle (every command within ``ZUPT_IDLE_COMMAND`` of
   neutral, or none fresh), the velocity over ground is measured as zero with
   ``ZUPT_STD_MPS`` every ``ZUPT_INTERVAL_S`` (channel ``zupt``; a zero-velocity update).
-* **Published sigmas**: the filter's covariance, the disturbance's plus the variance of
-  the model's terms through the configured relative uncertainties of mass, damping and
-  thrust (``mass_rel_std``, ``damping_rel_std``, ``thrust_rel_std``): the estimate is the
-  external force plus whatever the model gets wrong. The noise scales the filter learns
-  from its innovations are in health (``noise_scale.<channel>``, ``noise_scale.imu``).
+* **Published disturbance**: the lumped disturbance ``xi`` (``dist_*``, body;
+  ``dist_north`` ... earth), the force the thrust model misses: the external push plus
+  whatever the model's mass, damping and thrust map get wrong, the paper's definition and
+  what the AMPC adds to its model; off the design point it is not the push alone.
+* **Published sigmas**: the filter's covariance. The noise scales the filter learns from
+  its innovations are in health (``noise_scale.<channel>``, ``noise_scale.imu``; the
+  thrust channel's too).
 * **Position**: from the first fused GNSS fix (the local origin), or without one from the
   configured start point, then dead-reckoned with the DVL; its std grows without GNSS.
 
@@ -156,9 +158,9 @@ def filter_params(c: EsesoConfig, sensors: Any | None = None) -> EsesoParams:
         initial_gyro_bias_std=c.initial_gyro_bias_std,
         initial_gravity_std=c.initial_gravity_std,
         initial_disturbance_std_n=c.initial_disturbance_std_n,
-        mass_rel_std=c.mass_rel_std, damping_rel_std=c.damping_rel_std,
-        thrust_rel_std=c.thrust_rel_std, noise_adapt_updates=c.noise_adapt_updates,
-        noise_scale_max=c.noise_scale_max,
+        damping_rel_std=c.damping_rel_std, thrust_rel_std=c.thrust_rel_std,
+        noise_adapt_updates=c.noise_adapt_updates,
+        noise_scale_max=c.noise_scale_max, thrust_noise_scale_max=c.thrust_noise_scale_max,
     )
 
 
@@ -299,8 +301,8 @@ class Eseso:
         tau = self._tau_mean(t0, t1)
         if tau is None:
             return
-        self.filter.update_thrust(f1, w1, (w1 - w0) / (t1 - t0), tau, t=t1,
-                                  source=self._tau_source)
+        self.filter.update_thrust(f1, w1, (w1 - w0) / (t1 - t0), tau, wdot_dt=t1 - t0,
+                                  t=t1, source=self._tau_source)
 
     # ------------------------------------------------------------------ samples
     def _on_imu(self, s: Imu) -> None:
@@ -515,12 +517,9 @@ class Eseso:
         return {k: float(v) for k, v in zip(self.columns, vals)}
 
     def _disturbance_std(self) -> Array:
-        """One-sigma (N, body) of the disturbance: the filter's covariance plus the
-        model-coefficient variance of the last thrust update
-        (:meth:`~onboard.estimators.eseso_filter.EsesoFilter.model_force_var`), since the
-        estimate is the external force plus whatever the model gets wrong."""
-        f = self.filter
-        return np.sqrt(np.maximum(np.diag(f.P)[XI], 0.0) + f.xi_model_var)
+        """One-sigma (N, body) of the lumped disturbance ``xi`` (the external force plus
+        whatever the model gets wrong, module docstring): the filter's covariance."""
+        return np.sqrt(np.maximum(np.diag(self.filter.P)[XI], 0.0))
 
     def std(self) -> dict[str, float]:
         """One-sigma uncertainties keyed like the values (``std_<q>`` columns -> ``<q>``),
