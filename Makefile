@@ -34,11 +34,15 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/onboard demo
 
+# On every core (pytest-xdist); --dist loadscope keeps each module on one worker, so a
+# module's shared fixture (one simulated flight for several tests) is computed once.
+PYTEST_PARALLEL ?= -n auto --dist loadscope
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -m "not slow" $(PYTEST_PARALLEL)
 
 test-all: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(PYTEST_PARALLEL)
 
 bench: $(STAMP)
 	$(BIN)/onboard bench
