@@ -34,11 +34,17 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/onboard demo
 
+# On every core (pytest-xdist). --dist loadscope, scoped by tests/conftest.py: each module
+# runs whole on one worker (a module's shared fixture, one simulated flight for several
+# tests, is computed once), the modules sharing the figures' memoised runs together.
+# PYTEST_PARALLEL= runs the suite in one process.
+PYTEST_PARALLEL ?= -n auto --dist loadscope
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -m "not slow" $(PYTEST_PARALLEL)
 
 test-all: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(PYTEST_PARALLEL)
 
 bench: $(STAMP)
 	$(BIN)/onboard bench

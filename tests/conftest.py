@@ -1,8 +1,13 @@
-"""Shared fixtures and the ``unit`` marker.
+"""Shared fixtures, the ``unit`` marker and the parallel groups.
 
 Real field logs are looked up in $ONBOARD_DATA or ../shared/data. Every test not marked
 ``integration`` is marked ``unit``, so ``-m unit`` and ``-m integration`` split the suite
 (markers in pyproject.toml).
+
+``make test`` runs the suite on every core (pytest-xdist, ``--dist loadscope``). One worker
+runs each module whole (its module-scoped fixtures are computed once), and the modules of
+``FIGURE_RUN_MODULES`` together (they read the same memoised simulator runs,
+``onboard.tools.reports.runs``, which a second worker would fly again).
 """
 
 from __future__ import annotations
@@ -13,6 +18,13 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
+
+FIGURE_RUN_MODULES = frozenset({"test_figures", "test_aie_sitl", "test_closed_loop",
+                                "test_current_sitl", "test_diagnose_sitl"})
+"""Test modules that share the runs memoised in ``onboard.tools.reports.runs`` (the
+default suite's figures recompute the AIE, current, closed-loop and diagnosis runs these
+modules assert on): one unit of work for pytest-xdist, so each run is flown once."""
+FIGURE_RUN_GROUP = "figure-runs"
 
 
 def shared_data_dir() -> Path | None:
@@ -39,3 +51,19 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.get_closest_marker("integration") is None:
             item.add_marker(pytest.mark.unit)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """With ``--dist loadscope`` (pytest-xdist): each module one unit of work, the modules of
+    ``FIGURE_RUN_MODULES`` one unit together (see the module docstring)."""
+    if config.getvalue("dist") != "loadscope":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class _Scheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return FIGURE_RUN_GROUP if Path(module).stem in FIGURE_RUN_MODULES else module
+
+    return _Scheduling(config, log)

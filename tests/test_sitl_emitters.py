@@ -111,17 +111,20 @@ def test_mavlink_over_udp_arrives_intact():
     port = rx.getsockname()[1]
     rx.settimeout(0.5)
     datagrams: list[bytes] = []
+    ran = threading.Event()
 
     def receive() -> None:
-        while True:
+        while True:  # until the run is over and the socket drained
             try:
                 datagrams.append(rx.recv(4096))
             except socket.timeout:
-                return
+                if ran.is_set():
+                    return
 
     th = threading.Thread(target=receive, daemon=True)
     th.start()
     summary = run("effect-current", 5.0, seed=1, mavlink=[UdpSink("127.0.0.1", port)])
+    ran.set()
     th.join(5)
     rx.close()
     counts, bad = _parse_mavlink(b"".join(datagrams))
@@ -139,13 +142,18 @@ def test_mavlink_tcp_server_and_dvl_json_server():
         clients.append(c)
     assert mav_srv.wait_for_client(2.0) and dvl_srv.wait_for_client(2.0)
     received = [bytearray(), bytearray()]
+    ran = threading.Event()
 
     def receive(i: int) -> None:
+        # until the run is over and the socket drained (a busy machine can leave it silent
+        # for longer than the timeout before the first frame)
         while True:
             try:
                 chunk = clients[i].recv(65536)
             except socket.timeout:
-                return
+                if ran.is_set():
+                    return
+                continue
             if not chunk:
                 return
             received[i] += chunk
@@ -154,6 +162,7 @@ def test_mavlink_tcp_server_and_dvl_json_server():
     for th in threads:
         th.start()
     summary = run("bluerov2-circle", 6.0, seed=1, mavlink=[mav_srv], dvl_json=[dvl_srv])
+    ran.set()
     for th in threads:
         th.join(5)
     for c in clients:
