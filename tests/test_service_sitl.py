@@ -69,6 +69,11 @@ def test_sitl_vehicle_through_the_service_to_zenoh_and_mavlink(scenario, vclass,
     hb = [m for m in msgs if m.get_type() == "HEARTBEAT"]
     assert hb and hb[0].get_srcComponent() == 191 and hb[0].type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
     assert any(m.get_type() == "ESTIMATOR_STATUS" for m in msgs)
-    if "current.north" in cols:
+    # The publisher sends the newest current record at its rate: WIND_COV needs north and
+    # east both published, CUR_N north. Asserted where most records carry them, so that a
+    # component published only in the last ticks of a loaded run is not a race.
+    cur = [r.values for r in res.estimates if r.pipeline == "current"]
+    if cur and sum("north" in v and "east" in v for v in cur) > len(cur) / 2:
         assert any(m.get_type() == "WIND_COV" for m in msgs)
+    if cur and sum("north" in v for v in cur) > len(cur) / 2:
         assert any(m.get_type() == "NAMED_VALUE_FLOAT" and m.name == "CUR_N" for m in msgs)
