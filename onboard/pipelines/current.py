@@ -633,7 +633,7 @@ def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification,
         model_error_time_s=cfg.model_error_time_s, turn_accel_gain=cfg.turn_accel_gain,
         prior_accel_std=cfg.prior_accel_std, gate_nis=cfg.gate_nis,
         calibrate=cfg.calibrate, calibrate_block=cfg.calibrate_block,
-        counters=counters)
+        max_speed_through_water=cfg.max_speed_through_water, counters=counters)
 
 
 def _gain_is_design_fixed(cfg: CurrentConfig, design: GainDesign) -> bool:
