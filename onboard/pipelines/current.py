@@ -577,7 +577,7 @@ class CurrentPipeline:
                 return
             ident.thetas = thetas
             if ident.n_theta:
-                self.kf.restore_coefficients(thetas[:nd], state.get("theta_cov", []))
+                self.kf.restore_coefficients(thetas[:nd], self._saved_theta_cov(state))
             if ident.yaw_rls is not None and "yaw_rls" in state:
                 ident.restore_yaw(state["yaw_rls"])
             if self.hgo_rls is not None:
@@ -591,7 +591,27 @@ class CurrentPipeline:
         restored = not np.array_equal(before, self.kf.x[nd:2 * nd]) or bool(
             np.any(self.kf.x[nd:2 * nd]))
         if restored and self.cfg.restore_check_s > 0:
-            self._start_probation(thetas, state.get("theta_cov", []))
+            self._start_probation(thetas, self._saved_theta_cov(state))
+
+    def _saved_theta_cov(self, state: Mapping[str, Any]) -> object:
+        """The saved coefficients' covariance (``theta_cov``) in the model's term order:
+        a state saved by a model with fewer terms (before the surge's turn-loss term,
+        vehicle_models.TURN_LOSS_REGRESSORS) keeps its covariance for the terms it has,
+        the new ones start at their prior variance. As saved if the terms match or the
+        matrix does not fit the saved terms."""
+        cov = state.get("theta_cov", [])
+        saved = state.get("thetas", {})
+        dofs = self.model.dofs
+        names = [(ch, k) for ch in dofs for k in saved.get(ch, {})]
+        here = [(ch, k) for ch in dofs for k in self.model.terms[ch]]
+        c = np.asarray(cov, float)
+        if (names == here or c.shape != (len(names), len(names))
+                or not set(names) <= set(here)):
+            return cov
+        idx = [here.index(n) for n in names]
+        out = np.diag(np.asarray(self.identification.theta_var0, float))
+        out[np.ix_(idx, idx)] = c
+        return out
 
     def _start_probation(self, thetas: list[np.ndarray], theta_cov: object) -> None:
         """The twin filter of the restored-current check: the restored model, the current
