@@ -129,8 +129,11 @@ def test_the_surface_surge_rows_carry_the_speed_lost_in_turns():
     # u|r| on the skid-steered boat, which has no rudder angle
     assert rudder.terms["surge"][-1] == "u|u|dr^2"
     assert rudder.regressor_rows([1.5, 0.1], x)[0][-1] == pytest.approx(1.5 * 1.5 * 0.09)
-    assert twin.terms["surge"][-1] == "u|r|"
+    assert twin.terms["surge"][-2:] == ("tau_astern", "u|r|")
     assert twin.regressor_rows([1.5, 0.1], x)[0][-1] == pytest.approx(0.75)
+    # and the astern part of the thrust, which a turn on the spot uses (weaker than ahead)
+    x.left, x.right = 0.6, -0.5
+    assert twin.regressor_rows([0.0, 0.0], x)[0][3:5] == pytest.approx((0.36 - 0.25, -0.25))
     # their coefficients are drags, never positive, as the quadratic dampings'
     assert [rudder.terms[c][j] for c, d in zip(rudder.dofs, rudder.drag_terms) for j in d] \
         == ["u|u|", "u|u|dr^2", "v|v|"]

@@ -89,6 +89,11 @@ TURN_LOSS_REGRESSORS = ("u|u|dr^2", "u|r|")
   through a turn meets the water at a drift angle), for a skid-steered boat, whose turn
   leaves no rudder angle to regress on (``surface-twin``).
 
+The skid-steered boat's surge row carries ``tau_astern`` too, the astern part of its
+thrust regressor (``sum min(T, 0)`` over the thrusters' signed squares ``T``): a turn on
+the spot runs one thruster astern, and a propeller's astern thrust is not its ahead
+thrust reversed, so a single ``tau_u`` coefficient reads the difference as speed change.
+
 Without them the centripetal term ``vr`` is the only speed loss in a turn, and the joint
 filter's surge model error had to stand in for the rest (docs/current.md, "Surface boats:
 the speed lost in turns")."""
@@ -142,10 +147,13 @@ class RegressionModel:
             self.aux = ("yaw",)
             tau_r = ("u|u|dr", "n|n|dr") if kind == "surface-rudder" else ("l|l|-r|r|",)
             # the speed lost in turns (TURN_LOSS_REGRESSORS): rudder drag where the rudder
-            # angle is known, hull drag in a turn on a skid-steered boat
-            loss = "u|u|dr^2" if kind == "surface-rudder" else "u|r|"
+            # angle is known; on a skid-steered boat the hull's drag in a turn and the
+            # astern thrust a turn uses (weaker than ahead: T200 ~30 N against ~40 N),
+            # "tau_astern", the astern part of tau_u
+            surge_extra = (("u|u|dr^2",) if kind == "surface-rudder"
+                           else ("tau_astern", "u|r|"))
             self.terms = {
-                "surge": ("u|u|", "u", "vr", "tau_u", loss),
+                "surge": ("u|u|", "u", "vr", "tau_u") + surge_extra,
                 "sway": ("v", "v|v|", "ur", "r"),
                 "yaw": ("r", "r|r|", "uv") + tau_r,
             }
@@ -206,7 +214,8 @@ class RegressionModel:
             return out
         if self.kind == "surface-twin":
             tl, tr = _sq(x.left), _sq(x.right)
-            out = [(u * abs(u), u, v * r, tl + tr, u * abs(r)), (v, v * abs(v), u * r, r)]
+            out = [(u * abs(u), u, v * r, tl + tr, min(tl, 0.0) + min(tr, 0.0), u * abs(r)),
+                   (v, v * abs(v), u * r, r)]
             if not dofs_only:
                 out.append((r, r * abs(r), u * v, tl - tr))
             return out
