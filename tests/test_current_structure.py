@@ -156,16 +156,23 @@ def test_an_anti_damping_estimate_is_projected_onto_a_drag():
     assert kf.x[o + 1] < x_u - 0.2  # the linear damping takes its share of the change
 
 
-def test_a_through_water_speed_beyond_physics_resets_the_filter():
+def test_a_through_water_speed_beyond_physics_is_flagged_not_published():
     ident = _identification(configured={"sway": {"v|v|": 50.0}}, identify=False)
     kf = CurrentKalmanFilter(ident, **FILTER, max_speed_through_water=10.0)
     kf.start("earth", np.array([1.0, 2.0]), np.eye(2))
     inputs = ModelInputs()
-    for _ in range(50):
+    for _ in range(5):
         kf.predict(0.1, inputs)
-        if not kf.started:
-            break
-    assert kf.counters["runaway"] == 1 and not kf.started
+    assert kf.runaway and kf.counters["runaway"] == 1  # one episode, counted once
+    kf.x[:2] = [1.0, 0.0]
+    kf.predict(0.1, inputs)
+    assert not kf.runaway
+    pipe = current_pipeline("rudder-boat")
+    pipe.step(0.9, [Attitude(t=0.9, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0),
+                    GnssFix(t=0.9, lat_deg=0.0, lon_deg=0.0, sog_mps=1.2, cog_rad=0.1)])
+    pipe.kf.runaway = True
+    out = pipe._outputs()
+    assert "north" not in out and "east" not in out and "std_north" in out
 
 
 def test_inv_small_is_the_inverse_and_says_singular():

@@ -140,6 +140,8 @@ class CurrentKalmanFilter:
         nis_avg: running mean of the block-mean NIS per dimension (calibration).
         q_scale: process-noise scale from the calibration (1 to 100).
         started: False until the first velocity measurement (and after a reset).
+        runaway: the last prediction's through-water velocity left physical bounds
+            (``max_speed_through_water``): its current is not a number to publish.
         identification: the :class:`.ModelIdentification` of the coefficients.
         counters: event counts (``updates``, ``rejected_gate``, ``diverged``,
             ``runaway``), shared with the owner's health.
@@ -165,8 +167,8 @@ class CurrentKalmanFilter:
             calibrate: inflate the process noise when the block-mean NIS says so.
             calibrate_block: innovations per calibration block.
             max_speed_through_water: a predicted through-water speed component beyond
-                this (m/s) resets the filter (counted as ``runaway``): the model ran away,
-                not the vehicle.
+                this (m/s) sets ``runaway`` (counted once per episode): the model ran
+                away, not the vehicle; the owner publishes no current meanwhile.
             counters: event counts to add to (a new dict by default).
         """
         self.identification = ident = identification
@@ -182,6 +184,7 @@ class CurrentKalmanFilter:
         self.calibrate = calibrate
         self.calibrate_block = calibrate_block
         self.max_speed_through_water = max_speed_through_water
+        self.runaway = False
         self.counters: dict[str, float] = counters if counters is not None else {
             "rejected_gate": 0, "updates": 0}
         nt = ident.n_theta
@@ -244,6 +247,7 @@ class CurrentKalmanFilter:
         self.P = P
         self._unpack_coefficients()
         self.started = False
+        self.runaway = False
 
     def _unpack_coefficients(self) -> None:
         """Point the identification's coefficients of the velocity DOFs at the state."""
@@ -344,8 +348,6 @@ class CurrentKalmanFilter:
             n_sub = max(1, math.ceil(dt / PREDICT_STEP_S))
             for _ in range(n_sub):
                 self.predict(dt / n_sub, inputs)
-                if not self.started:
-                    break
         if self.started and ident.surge_unobservable() and ident.last_turn_t == -math.inf:
             psi = yaw or 0.0
             self.inflate_current_along([math.cos(psi), math.sin(psi)],
@@ -395,9 +397,11 @@ class CurrentKalmanFilter:
             if lam < 1.0:
                 F.ravel()[o * (n + 1)::n + 1] = 1.0 / math.sqrt(lam)
         nu = [a + dt * b for a, b in zip(nu, f)]
-        if self.started and max(map(abs, nu)) > self.max_speed_through_water:
-            self.reset("runaway")  # beyond physics: the model, not the vehicle, ran away
-            return
+        # beyond physics: the model, not the vehicle, ran away (flagged, counted per episode)
+        runaway = self.started and max(map(abs, nu)) > self.max_speed_through_water
+        if runaway and not self.runaway:
+            self.counters["runaway"] = self.counters.get("runaway", 0) + 1
+        self.runaway = runaway
         self.x[:nd] = nu
         q = self._model_error(nu, inputs, dt)
         for i in range(nd):
@@ -413,16 +417,21 @@ class CurrentKalmanFilter:
         plus a turn term that grows in manoeuvres (couplings the regression gets only
         roughly), so that the one-sigma widens at heading changes (the paper's burrs).
 
-        Each DOF's turn term is ``turn_accel_gain`` times its own centripetal
-        acceleration (Fossen's ``C_RB(nu) nu``): surge ``|v r| + |w q|``, sway ``|u r| +
-        |w p|``, heave ``|u q| + |v p|``. The surge's speed loss in a turn is a regressor
-        of its own (:data:`.vehicle_models.TURN_LOSS_REGRESSORS`), whose coefficient's
-        uncertainty flows into ``nu_r`` like every coefficient's."""
+        On the surface boats each DOF's turn term is ``turn_accel_gain`` times its own
+        centripetal acceleration (Fossen's ``C_RB(nu) nu``): surge ``|v r| + |w q|``, sway
+        ``|u r| + |w p|``, heave ``|u q| + |v p|``; their surge's speed loss in a turn is a
+        regressor of its own (:data:`.vehicle_models.TURN_LOSS_REGRESSORS`), whose
+        coefficient's uncertainty flows into ``nu_r`` like every coefficient's. The other
+        models have no such regressor, and ``|u r|`` stands in for it on every DOF (the
+        split made the Kolumbo glider's current worse, docs/current.md)."""
         nd = self.nd
         u, v = nu[0], nu[1]
         w = nu[2] if nd > 2 else 0.0
         p, q, r = inputs.p, inputs.q, inputs.r
-        own = (abs(v * r) + abs(w * q), abs(u * r) + abs(w * p), abs(u * q) + abs(v * p))
+        if self.model.kind.startswith("surface"):
+            own = (abs(v * r) + abs(w * q), abs(u * r) + abs(w * p), abs(u * q) + abs(v * p))
+        else:  # no turn-loss regressors: |u r| stands in on every DOF
+            own = (abs(u * r),) * 3
         k = self.turn_accel_gain
         scale = self.model_error_time_s * self.q_scale * dt
         return [(self.accel_std ** 2 + (k * a) ** 2) * scale for a in own[:nd]]

@@ -117,7 +117,7 @@ class RegressionModel:
         net_weight_terms: per channel, the terms among ``terms`` whose coefficient is the
             net weight over the DOF's mass term (:data:`NET_WEIGHT_REGRESSORS`).
         drag_terms: per velocity DOF, the indices in ``terms`` of its drag coefficients
-            (:data:`DRAG_REGRESSORS`, never positive).
+            (:data:`DRAG_REGRESSORS`, never positive; surface boats only, empty otherwise).
     """
 
     KINDS = ("torpedo", "surface-rudder", "surface-twin", "rov")
@@ -173,9 +173,12 @@ class RegressionModel:
         self.net_weight_terms: dict[str, tuple[str, ...]] = {
             ch: tuple(k for k in self.terms[ch] if k in NET_WEIGHT_REGRESSORS)
             for ch in self.channels}
-        # per velocity DOF, the indices of its drag coefficients (DRAG_REGRESSORS)
+        # per velocity DOF, the indices of its drag coefficients (DRAG_REGRESSORS), on the
+        # surface boats: projecting the torpedo's made the Kolumbo glider's east current
+        # worse (RMS 0.071 -> 0.15 m/s, docs/current.md), so its stay free
+        surface = kind.startswith("surface")
         self.drag_terms: list[tuple[int, ...]] = [
-            tuple(j for j, k in enumerate(self.terms[ch]) if k in DRAG_REGRESSORS)
+            tuple(j for j, k in enumerate(self.terms[ch]) if surface and k in DRAG_REGRESSORS)
             for ch in self.dofs]
 
     # ------------------------------------------------------------------ regressors

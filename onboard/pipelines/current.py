@@ -493,9 +493,11 @@ class CurrentPipeline:
         # a component the data do not determine is unknown, not a number
         thr = self.cfg.unknown_above_std
         obs = self.observable
+        # a through-water velocity beyond physics: the model ran away (health ``runaway``)
+        sane = not (obs_src is self.kf and self.kf.runaway)
         out: dict[str, float] = {}
         for i, ax in enumerate(("north", "east", "down")[:nd]):
-            obs[i] = std[i] <= thr and math.isfinite(c[i])
+            obs[i] = sane and std[i] <= thr and math.isfinite(c[i])
             if obs[i]:
                 out[ax] = float(c[i])
         out.update(std_north=float(std[0]), std_east=float(std[1]),
