@@ -120,6 +120,61 @@ def test_the_joint_filter_resets_on_a_runaway_and_keeps_finite_coefficients():
     assert ident.thetas[0][0] == 0.123  # the identification sees the state's coefficients
 
 
+def test_the_surface_surge_rows_carry_the_speed_lost_in_turns():
+    x = ModelInputs()
+    x.r, x.dr, x.n, x.left, x.right = -0.5, 0.3, 0.8, 0.6, 0.2
+    rudder = RegressionModel("surface-rudder")
+    twin = RegressionModel("surface-twin")
+    # rudder drag X_dd u^2 delta^2 where the rudder angle is known; hull drag in a turn
+    # u|r| on the skid-steered boat, which has no rudder angle
+    assert rudder.terms["surge"][-1] == "u|u|dr^2"
+    assert rudder.regressor_rows([1.5, 0.1], x)[0][-1] == pytest.approx(1.5 * 1.5 * 0.09)
+    assert twin.terms["surge"][-2:] == ("tau_astern", "u|r|")
+    assert twin.regressor_rows([1.5, 0.1], x)[0][-1] == pytest.approx(0.75)
+    # and the astern part of the thrust, which a turn on the spot uses (weaker than ahead)
+    x.left, x.right = 0.6, -0.5
+    assert twin.regressor_rows([0.0, 0.0], x)[0][3:5] == pytest.approx((0.36 - 0.25, -0.25))
+    # their coefficients are drags, never positive, as the quadratic dampings'
+    assert [rudder.terms[c][j] for c, d in zip(rudder.dofs, rudder.drag_terms) for j in d] \
+        == ["u|u|", "u|u|dr^2", "v|v|"]
+
+
+def test_an_anti_damping_estimate_is_projected_onto_a_drag():
+    """A positive quadratic damping estimate (a sway v|v| of +3.3 made the BlueBoat log's
+    through-water speed run away to 1e9 m/s) is projected onto 0 after the update; the
+    correlated coefficient moves with it (weighted by the covariance)."""
+    ident = _identification(configured={})
+    kf = CurrentKalmanFilter(ident, **FILTER)
+    kf.start("earth", np.array([1.0, 0.0]), np.eye(2))
+    ident.identifying = True
+    o = 4  # surge coefficients u|u|, u, vr, tau_u, u|u|dr^2 follow nu_r and V_c
+    kf.x[o] = 0.5
+    kf.P[o, o + 1] = kf.P[o + 1, o] = 0.5  # u|u| and u correlated (rho 0.5)
+    x_u = kf.x[o + 1]
+    assert kf.update("earth", np.array([1.0, 0.0]), 0.05, np.eye(2)) == "accepted"
+    assert kf.x[o] == 0.0 and ident.thetas[0][0] == 0.0
+    assert kf.x[o + 1] < x_u - 0.2  # the linear damping takes its share of the change
+
+
+def test_a_through_water_speed_beyond_physics_is_flagged_not_published():
+    ident = _identification(configured={"sway": {"v|v|": 50.0}}, identify=False)
+    kf = CurrentKalmanFilter(ident, **FILTER, max_speed_through_water=10.0)
+    kf.start("earth", np.array([1.0, 2.0]), np.eye(2))
+    inputs = ModelInputs()
+    for _ in range(5):
+        kf.predict(0.1, inputs)
+    assert kf.runaway and kf.counters["runaway"] == 1  # one episode, counted once
+    kf.x[:2] = [1.0, 0.0]
+    kf.predict(0.1, inputs)
+    assert not kf.runaway
+    pipe = current_pipeline("rudder-boat")
+    pipe.step(0.9, [Attitude(t=0.9, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0),
+                    GnssFix(t=0.9, lat_deg=0.0, lon_deg=0.0, sog_mps=1.2, cog_rad=0.1)])
+    pipe.kf.runaway = True
+    out = pipe._outputs()
+    assert "north" not in out and "east" not in out and "std_north" in out
+
+
 def test_inv_small_is_the_inverse_and_says_singular():
     rng = np.random.default_rng(3)
     for n in (2, 3, 4):
@@ -416,8 +471,13 @@ def test_a_state_saved_by_the_previous_layout_loads():
     pipe = current_pipeline("rudder-boat")
     pipe.set_state(PREVIOUS_STATE)
     st = pipe.get_state()
+    # the surge's rudder-drag term came later: it starts at 0 with its prior variance (1),
+    # the saved terms keep their values and covariance
+    assert st["thetas"]["surge"].pop("u|u|dr^2") == 0.0
     assert st["thetas"] == PREVIOUS_STATE["thetas"]
-    assert st["theta_cov"] == PREVIOUS_STATE["theta_cov"]
+    old = [0, 1, 2, 3, 5, 6, 7, 8]  # the saved terms' places among the 9 of now
+    assert np.array(st["theta_cov"])[np.ix_(old, old)].tolist() == PREVIOUS_STATE["theta_cov"]
+    assert st["theta_cov"][4][4] == 1.0 and sum(map(abs, st["theta_cov"][4])) == 1.0
     assert st["current"] == PREVIOUS_STATE["current"]
     assert st["current_std"] == [0.2, 0.2]  # inflated: it may have changed meanwhile
     assert st["yaw_rls"]["theta"] == PREVIOUS_STATE["yaw_rls"]["theta"]
@@ -426,7 +486,8 @@ def test_a_state_saved_by_the_previous_layout_loads():
     assert pipe.thetas[2].tolist() == PREVIOUS_STATE["yaw_rls"]["theta"]
     # the coefficients in the state are the restored ones, uncorrelated with the rest
     assert pipe.kf.x[4:].tolist() == [
-        *PREVIOUS_STATE["thetas"]["surge"].values(), *PREVIOUS_STATE["thetas"]["sway"].values()]
+        *PREVIOUS_STATE["thetas"]["surge"].values(), 0.0,
+        *PREVIOUS_STATE["thetas"]["sway"].values()]
     assert np.all(pipe.kf.P[:4, 4:] == 0.0)
     # and the filter runs on from there
     out = pipe.step(1.0, [Attitude(t=0.9, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0),
@@ -445,6 +506,7 @@ def test_a_state_that_does_not_fit_is_ignored():
     # a covariance of the wrong shape: the coefficients are taken, their prior kept
     pipe.set_state({**PREVIOUS_STATE, "theta_cov": [[1.0]]})
     st = pipe.get_state()
+    assert st["thetas"]["surge"].pop("u|u|dr^2") == 0.0  # not in the saved state
     assert st["thetas"] == PREVIOUS_STATE["thetas"]
     assert st["theta_cov"] == before["theta_cov"]
 

@@ -403,7 +403,14 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     axis and adds nothing to the sway constraint. 0.85: e.g. two headings 35 deg apart; a
     +-15 deg zig-zag gives 0.87 and keeps the floor."""
     turn_accel_gain: float = 1.0
-    """Extra model acceleration error in turns, m/s^2 per (m/s * rad/s) of ``u_r r``."""
+    """Extra model acceleration error in turns, m/s^2 per m/s^2 of each DOF's own
+    centripetal acceleration (surge ``|v_r r|``, sway ``|u_r r|``, ...; current_kf.py)."""
+    max_speed_through_water: Annotated[float, msgspec.Meta(gt=0.0)] = 10.0
+    """A predicted through-water velocity component beyond this (m/s) flags the joint
+    filter (health ``runaway``, counted per episode): its current is published as unknown
+    until the velocity is back within it (an update that leaves the state non-finite or
+    beyond 50 m/s resets the filter, ``diverged``). No vehicle this service serves moves
+    at 10 m/s through water; a model that identified an anti-damping can."""
     prior_accel_std: float = 0.3
     """Model acceleration error of a DOF that has only the generic prior (mode (b), not yet
     identified), m/s^2: the prior says "no crabbing", not how much."""

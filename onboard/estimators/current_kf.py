@@ -140,15 +140,18 @@ class CurrentKalmanFilter:
         nis_avg: running mean of the block-mean NIS per dimension (calibration).
         q_scale: process-noise scale from the calibration (1 to 100).
         started: False until the first velocity measurement (and after a reset).
+        runaway: the last prediction's through-water velocity left physical bounds
+            (``max_speed_through_water``): its current is not a number to publish.
         identification: the :class:`.ModelIdentification` of the coefficients.
-        counters: event counts (``updates``, ``rejected_gate``, ``diverged``), shared with
-            the owner's health.
+        counters: event counts (``updates``, ``rejected_gate``, ``diverged``,
+            ``runaway``), shared with the owner's health.
     """
 
     def __init__(self, identification: ModelIdentification, *, init_current_std: float,
                  current_walk: float, accel_std: float, model_error_time_s: float,
                  turn_accel_gain: float, prior_accel_std: float, gate_nis: float,
                  calibrate: bool, calibrate_block: int,
+                 max_speed_through_water: float = 10.0,
                  counters: dict[str, float] | None = None) -> None:
         """Args:
             identification: prior and schedule of the coefficients (and the model).
@@ -156,13 +159,16 @@ class CurrentKalmanFilter:
             current_walk: random walk of the current (m/s per sqrt(s)).
             accel_std: model acceleration error per DOF (m/s^2 over ``model_error_time_s``).
             model_error_time_s: correlation time of the model error (s).
-            turn_accel_gain: extra model acceleration error in turns (m/s^2 per m/s rad/s
-                of ``u_r r``).
+            turn_accel_gain: extra model acceleration error in turns (m/s^2 per m/s^2 of
+                each DOF's own centripetal acceleration, :meth:`_model_error`).
             prior_accel_std: model acceleration error of a DOF with only the generic prior
                 (m/s^2).
             gate_nis: innovations with a larger NIS are rejected (after 50 updates).
             calibrate: inflate the process noise when the block-mean NIS says so.
             calibrate_block: innovations per calibration block.
+            max_speed_through_water: a predicted through-water speed component beyond
+                this (m/s) sets ``runaway`` (counted once per episode): the model ran
+                away, not the vehicle; the owner publishes no current meanwhile.
             counters: event counts to add to (a new dict by default).
         """
         self.identification = ident = identification
@@ -177,6 +183,8 @@ class CurrentKalmanFilter:
         self.gate_nis = gate_nis
         self.calibrate = calibrate
         self.calibrate_block = calibrate_block
+        self.max_speed_through_water = max_speed_through_water
+        self.runaway = False
         self.counters: dict[str, float] = counters if counters is not None else {
             "rejected_gate": 0, "updates": 0}
         nt = ident.n_theta
@@ -239,6 +247,7 @@ class CurrentKalmanFilter:
         self.P = P
         self._unpack_coefficients()
         self.started = False
+        self.runaway = False
 
     def _unpack_coefficients(self) -> None:
         """Point the identification's coefficients of the velocity DOFs at the state."""
@@ -388,12 +397,13 @@ class CurrentKalmanFilter:
             if lam < 1.0:
                 F.ravel()[o * (n + 1)::n + 1] = 1.0 / math.sqrt(lam)
         nu = [a + dt * b for a, b in zip(nu, f)]
+        # beyond physics: the model, not the vehicle, ran away (flagged, counted per episode)
+        runaway = self.started and max(map(abs, nu)) > self.max_speed_through_water
+        if runaway and not self.runaway:
+            self.counters["runaway"] = self.counters.get("runaway", 0) + 1
+        self.runaway = runaway
         self.x[:nd] = nu
-        # model error grows in manoeuvres (couplings the regression gets only roughly): a
-        # turn-rate term, so that the one-sigma widens at heading changes (the paper's burrs)
-        turn = self.turn_accel_gain * abs(inputs.r * nu[0])
-        q_nu = (self.accel_std ** 2 + turn * turn) * self.model_error_time_s * self.q_scale
-        q = [q_nu * dt] * nd
+        q = self._model_error(nu, inputs, dt)
         for i in range(nd):
             if ident.masked[i]:  # still the generic prior
                 q[i] = max(q[i], self.prior_accel_std ** 2 * self.model_error_time_s * dt)
@@ -401,6 +411,51 @@ class CurrentKalmanFilter:
         P = F @ self.P @ F.T
         P.ravel()[:o * (n + 1):n + 1] += q  # a view: the product is C-contiguous
         self.P = P
+
+    def _model_error(self, nu: list[float], inputs: ModelInputs, dt: float) -> list[float]:
+        """Process-noise variance of each DOF of ``nu_r`` over ``dt`` (s): ``accel_std``
+        plus a turn term that grows in manoeuvres (couplings the regression gets only
+        roughly), so that the one-sigma widens at heading changes (the paper's burrs).
+
+        On the surface boats each DOF's turn term is ``turn_accel_gain`` times its own
+        centripetal acceleration (Fossen's ``C_RB(nu) nu``): surge ``|v r| + |w q|``, sway
+        ``|u r| + |w p|``, heave ``|u q| + |v p|``; their surge's speed loss in a turn is a
+        regressor of its own (:data:`.vehicle_models.TURN_LOSS_REGRESSORS`), whose
+        coefficient's uncertainty flows into ``nu_r`` like every coefficient's. The other
+        models have no such regressor, and ``|u r|`` stands in for it on every DOF (the
+        split made the Kolumbo glider's current worse, docs/current.md)."""
+        nd = self.nd
+        u, v = nu[0], nu[1]
+        w = nu[2] if nd > 2 else 0.0
+        p, q, r = inputs.p, inputs.q, inputs.r
+        if self.model.kind.startswith("surface"):
+            own = (abs(v * r) + abs(w * q), abs(u * r) + abs(w * p), abs(u * q) + abs(v * p))
+        else:  # no turn-loss regressors: |u r| stands in on every DOF
+            own = (abs(u * r),) * 3
+        k = self.turn_accel_gain
+        scale = self.model_error_time_s * self.q_scale * dt
+        return [(self.accel_std ** 2 + (k * a) ** 2) * scale for a in own[:nd]]
+
+    def _project_drag(self) -> None:
+        """Project the state onto the physical sign of the drag coefficients (``<= 0``,
+        :data:`.vehicle_models.DRAG_REGRESSORS`): the estimate projection of Simon & Chia
+        (2002) weighted by ``P^-1``, ``x <- x - P_:A P_AA^-1 x_A`` over the violated
+        coefficients ``A``, which moves the states correlated with them too (a quadratic
+        damping traded against the linear one); the covariance is kept. An anti-damping
+        estimate makes the through-water speed run away between measurements."""
+        o = 2 * self.nd
+        active: list[int] = []
+        for k, drag in zip(self.identification.sizes, self.model.drag_terms):
+            active += [o + j for j in drag if self.x[o + j] > 0.0]
+            o += k
+        if not active:
+            return
+        P_a = self.P[:, active]
+        try:
+            self.x = self.x - P_a @ np.linalg.solve(P_a[active], self.x[active])
+        except np.linalg.LinAlgError:
+            pass
+        self.x[active] = 0.0
 
     def update(self, kind: MeasurementKind, z: np.ndarray, std: float,
                R: np.ndarray) -> UpdateOutcome:
@@ -447,6 +502,8 @@ class CurrentKalmanFilter:
             self.reset("diverged")
             return "reset"
         self.x, self.P = x_new, P_new
+        if self.identification.n_theta and self.identification.identifying:
+            self._project_drag()
         self._unpack_coefficients()
         self.counters["updates"] += 1
         if self.calibrate and self.started and m == nd:

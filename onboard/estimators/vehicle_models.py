@@ -78,6 +78,34 @@ prior on it makes the unidentified spheroid and BlueROV2 runs worse (docs/curren
 "Net-weight prior")."""
 
 
+TURN_LOSS_REGRESSORS = ("u|u|dr^2", "u|r|")
+"""Surge regressors of the speed lost in turns (surface boats), coefficients ``<= 0``:
+
+* ``u|u|dr^2``: rudder drag, ``X_dd u^2 delta^2 / (m - X_udot)`` (the drag of a rudder
+  grows with the square of its angle), where the rudder angle is an
+  input (``surface-rudder``);
+* ``u|r|``: the hull's drag in a turn, ``X_ur u|r| / (m - X_udot)``: the first term of
+  the drag's growth with the non-dimensional turn rate ``r L / U`` (a hull crabbing
+  through a turn meets the water at a drift angle), for a skid-steered boat, whose turn
+  leaves no rudder angle to regress on (``surface-twin``).
+
+The skid-steered boat's surge row carries ``tau_astern`` too, the astern part of its
+thrust regressor (``sum min(T, 0)`` over the thrusters' signed squares ``T``): a turn on
+the spot runs one thruster astern, and a propeller's astern thrust is not its ahead
+thrust reversed, so a single ``tau_u`` coefficient reads the difference as speed change.
+
+Without them the centripetal term ``vr`` is the only speed loss in a turn, and the joint
+filter's surge model error had to stand in for the rest (docs/current.md, "Surface boats:
+the speed lost in turns")."""
+
+DRAG_REGRESSORS = ("u|u|", "v|v|", "w|w|") + TURN_LOSS_REGRESSORS
+"""Regressors whose coefficient is a drag over the DOF's mass term and cannot be
+positive (quadratic damping, the turn losses): an identified positive value would make
+the model's speed grow without bound (``v' = a v|v|`` with ``a > 0`` reaches infinity in
+finite time). The joint filter projects their estimates onto ``<= 0``
+(:meth:`.current_kf.CurrentKalmanFilter.update`)."""
+
+
 class RegressionModel:
     """A per-DOF linear-in-parameters model.
 
@@ -88,6 +116,8 @@ class RegressionModel:
         terms: regressor names per channel.
         net_weight_terms: per channel, the terms among ``terms`` whose coefficient is the
             net weight over the DOF's mass term (:data:`NET_WEIGHT_REGRESSORS`).
+        drag_terms: per velocity DOF, the indices in ``terms`` of its drag coefficients
+            (:data:`DRAG_REGRESSORS`, never positive; surface boats only, empty otherwise).
     """
 
     KINDS = ("torpedo", "surface-rudder", "surface-twin", "rov")
@@ -116,8 +146,14 @@ class RegressionModel:
             self.dofs = ("surge", "sway")
             self.aux = ("yaw",)
             tau_r = ("u|u|dr", "n|n|dr") if kind == "surface-rudder" else ("l|l|-r|r|",)
+            # the speed lost in turns (TURN_LOSS_REGRESSORS): rudder drag where the rudder
+            # angle is known; on a skid-steered boat the hull's drag in a turn and the
+            # astern thrust a turn uses (weaker than ahead: T200 ~30 N against ~40 N),
+            # "tau_astern", the astern part of tau_u
+            surge_extra = (("u|u|dr^2",) if kind == "surface-rudder"
+                           else ("tau_astern", "u|r|"))
             self.terms = {
-                "surge": ("u|u|", "u", "vr", "tau_u"),
+                "surge": ("u|u|", "u", "vr", "tau_u") + surge_extra,
                 "sway": ("v", "v|v|", "ur", "r"),
                 "yaw": ("r", "r|r|", "uv") + tau_r,
             }
@@ -137,6 +173,13 @@ class RegressionModel:
         self.net_weight_terms: dict[str, tuple[str, ...]] = {
             ch: tuple(k for k in self.terms[ch] if k in NET_WEIGHT_REGRESSORS)
             for ch in self.channels}
+        # per velocity DOF, the indices of its drag coefficients (DRAG_REGRESSORS), on the
+        # surface boats: projecting the torpedo's made the Kolumbo glider's east current
+        # worse (RMS 0.071 -> 0.15 m/s, docs/current.md), so its stay free
+        surface = kind.startswith("surface")
+        self.drag_terms: list[tuple[int, ...]] = [
+            tuple(j for j, k in enumerate(self.terms[ch]) if surface and k in DRAG_REGRESSORS)
+            for ch in self.dofs]
 
     # ------------------------------------------------------------------ regressors
     def regressor_rows(self, nu: Sequence[float], x: ModelInputs,
@@ -168,13 +211,14 @@ class RegressionModel:
         if self.kind == "surface-rudder":
             tau = _sq(x.n)
             uu = u * abs(u)
-            out = [(uu, u, v * r, tau), (v, v * abs(v), u * r, r)]
+            out = [(uu, u, v * r, tau, uu * x.dr * x.dr), (v, v * abs(v), u * r, r)]
             if not dofs_only:
                 out.append((r, r * abs(r), u * v, uu * x.dr, tau * x.dr))
             return out
         if self.kind == "surface-twin":
             tl, tr = _sq(x.left), _sq(x.right)
-            out = [(u * abs(u), u, v * r, tl + tr), (v, v * abs(v), u * r, r)]
+            out = [(u * abs(u), u, v * r, tl + tr, min(tl, 0.0) + min(tr, 0.0), u * abs(r)),
+                   (v, v * abs(v), u * r, r)]
             if not dofs_only:
                 out.append((r, r * abs(r), u * v, tl - tr))
             return out

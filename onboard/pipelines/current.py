@@ -499,9 +499,11 @@ class CurrentPipeline:
         # a component the data do not determine is unknown, not a number
         thr = self.cfg.unknown_above_std
         obs = self.observable
+        # a through-water velocity beyond physics: the model ran away (health ``runaway``)
+        sane = not (obs_src is self.kf and self.kf.runaway)
         out: dict[str, float] = {}
         for i, ax in enumerate(("north", "east", "down")[:nd]):
-            obs[i] = std[i] <= thr and math.isfinite(c[i])
+            obs[i] = sane and std[i] <= thr and math.isfinite(c[i])
             if obs[i]:
                 out[ax] = float(c[i])
         out.update(std_north=float(std[0]), std_east=float(std[1]),
@@ -584,7 +586,7 @@ class CurrentPipeline:
                 return
             ident.thetas = thetas
             if ident.n_theta:
-                self.kf.restore_coefficients(thetas[:nd], state.get("theta_cov", []))
+                self.kf.restore_coefficients(thetas[:nd], self._saved_theta_cov(state))
             if ident.yaw_rls is not None and "yaw_rls" in state:
                 ident.restore_yaw(state["yaw_rls"])
             if self.hgo_rls is not None:
@@ -596,7 +598,27 @@ class CurrentPipeline:
         restored = not np.array_equal(before, self.kf.x[nd:2 * nd]) or bool(
             np.any(self.kf.x[nd:2 * nd]))
         if restored and self.cfg.restore_check_s > 0:
-            self._start_probation(thetas, state.get("theta_cov", []))
+            self._start_probation(thetas, self._saved_theta_cov(state))
+
+    def _saved_theta_cov(self, state: Mapping[str, Any]) -> object:
+        """The saved coefficients' covariance (``theta_cov``) in the model's term order:
+        a state saved by a model with fewer terms (before the surge's turn-loss term,
+        vehicle_models.TURN_LOSS_REGRESSORS) keeps its covariance for the terms it has,
+        the new ones start at their prior variance. As saved if the terms match or the
+        matrix does not fit the saved terms."""
+        cov = state.get("theta_cov", [])
+        saved = state.get("thetas", {})
+        dofs = self.model.dofs
+        names = [(ch, k) for ch in dofs for k in saved.get(ch, {})]
+        here = [(ch, k) for ch in dofs for k in self.model.terms[ch]]
+        c = np.asarray(cov, float)
+        if (names == here or c.shape != (len(names), len(names))
+                or not set(names) <= set(here)):
+            return cov
+        idx = [here.index(n) for n in names]
+        out = np.diag(np.asarray(self.identification.theta_var0, float))
+        out[np.ix_(idx, idx)] = c
+        return out
 
     def _restore_hgo_model(self, state: Mapping[str, Any], thetas: list[np.ndarray]) -> None:
         """The high-gain observer's own model from a persistent state: its own
@@ -656,7 +678,7 @@ def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification,
         model_error_time_s=cfg.model_error_time_s, turn_accel_gain=cfg.turn_accel_gain,
         prior_accel_std=cfg.prior_accel_std, gate_nis=cfg.gate_nis,
         calibrate=cfg.calibrate, calibrate_block=cfg.calibrate_block,
-        counters=counters)
+        max_speed_through_water=cfg.max_speed_through_water, counters=counters)
 
 
 def _gain_is_design_fixed(cfg: CurrentConfig, design: GainDesign) -> bool:
