@@ -657,10 +657,13 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     damping's error, so when the damping force ``D(nu) nu`` changes, the disturbance
     changes by this times the change: added to its process noise at each thrust update
     (``EsesoFilter.model_change_var``). 0 = the random walk alone."""
-    thrust_rel_std: float = 0.2
-    """Relative one-sigma of the thrust map (dimensionless) [DEFAULT: a T200's thrust at a
-    given command varies by about 20 % between 12 and 16 V of battery]; likewise for each
-    change of the commanded body force."""
+    thrust_rel_std: float = 0.05
+    """Relative one-sigma of each change of the commanded body force (dimensionless), added
+    to the lumped disturbance's process noise like ``damping_rel_std`` [DEFAULT: measured in
+    the closed loop, docs/mismatch.md: a T200's map varies by ~20 % over the battery's
+    12-16 V, but slowly; at 0.2 per change the AMPC's own thrust swings under a 0.15 s
+    thruster lag made the disturbance chase the lag (bluerov2-circle, 30 s, seed 1: xi error
+    38.7 N, tracking 0.091 m), at 0.05 2.75 N and 0.055 m, nominal unchanged (0.015 m)]."""
     # measurement-noise adaptation from the innovations (covariance matching)
     noise_adapt_updates: int = 100
     """Updates over which each sensor channel's noise scale is averaged (the time constant
