@@ -699,7 +699,8 @@ class IntegrityMonitor:
             if now:
                 if check.first_failed is None:
                     check.first_failed = rec.t
-                self._nis_warning(pipeline, rec.channel, check, rec.t)
+                if self._due("nis_out_of_band", pipeline, rec.t, rec.channel):
+                    self._nis_warning(pipeline, rec.channel, check, rec.t)
             if now != was:
                 self._flag(pipeline, "nis_out_of_band",
                            any(c.failing for c in per.values()))
