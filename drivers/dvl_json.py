@@ -24,9 +24,13 @@ DVL sends zeros with ``velocity_valid: false``, which stays ``valid=False`` -- n
 valid zero velocity. ``altitude <= 0`` (the -1 "unknown") becomes ``None``.
 ``position_local`` gives :class:`~onboard.core.messages.DvlPosition` (angles in rad).
 
-Time: live (``feed(data, t_rx)``), ``t`` is the receive time, minus the DVL's own
-processing delay ``time_of_transmission - time_of_validity`` when present and within
-[0, 1] s. Captures without receive times (``nc host 16171 > out.txt``) are read with
+Time: live (``feed(data, t_rx)``), a report with its own time (``time_of_validity``, or
+``ts``) is stamped with it, mapped to the receiver's clock through the least-delayed report
+(:class:`~onboard.drivers.sender_clock.SenderClock` on ``time_of_transmission``, the
+processing delay ``time_of_transmission - time_of_validity`` taken off when within
+[0, 1] s): the DVL's clock need not be synchronized with ours, and a report that waited in
+a socket buffer is stamped when it was measured, not when it was read. A json_v1 report
+is stamped with its receive time. Captures without receive times (``nc host 16171 > out.txt``) are read with
 :class:`DvlJsonLogReader`: ``t = time_of_validity`` (or ``ts``) in Unix seconds when
 present; for json_v1, ``t`` is the running sum of ``time`` (s since the first report).
 
@@ -48,6 +52,7 @@ from typing import Any, Iterator
 import msgspec
 
 from onboard.drivers.base import TIME_JUMP_S, LineAssembler, ReadStats, UnreadableLog
+from onboard.drivers.sender_clock import SenderClock
 from onboard.core.messages import DvlPosition, DvlVelocity, Sample
 
 MAX_LINE = 16384
@@ -167,6 +172,8 @@ class DvlJsonParser:
         self.stats = ReadStats()
         self._lines = LineAssembler(self.stats, max_line, split_cr=False, skip_blank=False)
         self._last_line: bytes | None = None
+        self.clock = SenderClock()
+        """The DVL's clock mapped to the receiver's (live stamps)."""
 
     def feed(self, data: bytes, t_rx: float) -> list[Sample]:
         """Consume bytes received at ``t_rx`` (s); return the complete samples."""
@@ -182,9 +189,16 @@ class DvlJsonParser:
         obj = self.decode_line(line)
         if obj is None:
             return None
-        if isinstance(obj, dict):
-            t_rx = t_rx - processing_delay(obj)
-        return self.to_sample(obj, t_rx)
+        return self.to_sample(obj, self.stamp(obj, t_rx) if isinstance(obj, dict) else t_rx)
+
+    def stamp(self, obj: dict, t_rx: float) -> float:
+        """The receiver-clock time (s) at which report ``obj``, received at ``t_rx``, was
+        valid: its own time mapped through :attr:`clock`, else ``t_rx``."""
+        t_own = report_time(obj)
+        if t_own is None:
+            return t_rx
+        delay = processing_delay(obj)
+        return self.clock.update(t_own + delay, t_rx) - delay
 
     def decode_line(self, line: bytes | str) -> Any:
         """JSON-decode one line, counting the record; None when blank/rejected/duplicate."""

@@ -14,11 +14,12 @@ CRC-checked frame before decoding it. The link
 * **maps the autopilot's boot clock to the receiver's clock**: ``time_boot_ms`` (or the
   microseconds since boot of SERVO_OUTPUT_RAW / RAW_IMU / HIGHRES_IMU) plus a filtered
   offset, which stamps the samples with the time they were measured instead of the time
-  they arrived (:class:`BootClock`); TIMESYNC answers to the session's requests remove
-  the remaining one-way delay;
-* **detects reboots** (the boot clock going back by more than ``REBOOT_BACK_S``) and boot
-  clock jumps, counted in :attr:`reboots` and :attr:`clock_jumps` for the service's
-  MAVLink session, which re-requests its streams after a reboot;
+  they arrived (:class:`.sender_clock.SenderClock`); TIMESYNC answers to the session's
+  requests remove the remaining one-way delay;
+* **detects reboots** (the boot clock going back by more than
+  :data:`.sender_clock.REBOOT_BACK_S`) and boot clock jumps, counted in :attr:`reboots`
+  and :attr:`clock_jumps` for the service's MAVLink session, which re-requests its
+  streams after a reboot;
 * **counts** the frames of each message id from the autopilot (:attr:`counts`, for the
   requested-versus-received rates) and keeps the COMMAND_ACKs and parameters it sent.
 
@@ -34,6 +35,8 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as _dialect
 
+from onboard.drivers.sender_clock import SenderClock
+
 MAV_TYPE_GCS = 6
 MAV_AUTOPILOT_INVALID = 8
 MAV_COMP_ID_AUTOPILOT1 = 1
@@ -43,23 +46,6 @@ HEARTBEAT_ID = 0
 COMMAND_ACK_ID = 77
 PARAM_VALUE_ID = 22
 TIMESYNC_ID = 111
-MAX_SYNC_RTT_S = 0.5
-"""A TIMESYNC round trip longer than this (s) is not used."""
-
-REBOOT_BACK_S = 1.0
-"""The boot clock going back by more than this (s) is a reboot."""
-JUMP_S = 1.0
-"""A receive-minus-boot offset this far (s) below the filtered one is a clock jump; this far
-above it for longer than ``JUMP_PERSIST_S`` too (a link delay never lasts that long)."""
-JUMP_PERSIST_S = 3.0
-SYNC_KEEP_S = 30.0
-"""How long (s) the best TIMESYNC exchange is kept before a worse one replaces it."""
-DRIFT_PPM = 200.0
-"""How fast (parts per million) the filtered offset may grow: crystal drift of the two
-clocks (ArduPilot boards: < 50 ppm) with margin; a smaller transport delay lowers it at
-once."""
-
-
 def _boot_fields() -> dict[int, tuple[int, str, float]]:
     """message id -> (byte offset in the payload, struct code, seconds per unit) of the
     message's time-since-boot field, from pymavlink's wire layout."""
@@ -97,79 +83,6 @@ _WRAP_US = 2 ** 32 * 1e-6
 """SERVO_OUTPUT_RAW's 32-bit microseconds wrap every 71.6 minutes (s)."""
 
 
-class BootClock:
-    """Autopilot boot time (s) -> receiver time (s) with a filtered offset.
-
-    Each frame with a boot time ``b`` received at ``t_rx`` gives ``t_rx - b``: the offset
-    plus the transport delay, which is never negative. The filter keeps the smallest seen
-    (the least-delayed frame), allowed to grow at ``DRIFT_PPM`` so that it follows the
-    two crystals' drift; a mapped time ``b + offset`` is therefore never later than the
-    frame's arrival and is earlier by the delay beyond the smallest one. A reboot (boot
-    time back by more than ``REBOOT_BACK_S``) or a jump (see ``JUMP_S``) re-anchors it.
-    """
-
-    def __init__(self) -> None:
-        self.offset: float | None = None
-        self.sync: tuple[float, float, float] | None = None
-        """(offset, round trip, receive time) of the best recent TIMESYNC exchange (s)."""
-        self.t_update: float = 0.0
-        self.last_boot: float | None = None
-        self.reboots = 0
-        self.jumps = 0
-        self._t_above: float | None = None
-
-    def update(self, boot_s: float, t_rx: float) -> float:
-        """Take a boot time and its receive time; return the mapped time (s)."""
-        raw = t_rx - boot_s
-        off = self.offset
-        last = self.last_boot
-        if last is not None and boot_s < last - REBOOT_BACK_S:
-            self.reboots += 1
-            off = None
-            self.sync = None
-        self.last_boot = boot_s if last is None or off is None else max(last, boot_s)
-        if off is None:
-            off = raw
-            self._t_above = None
-        else:
-            grown = off + DRIFT_PPM * 1e-6 * max(0.0, t_rx - self.t_update)
-            if raw < off - JUMP_S:
-                self.jumps += 1
-                off = raw
-            elif raw > grown + JUMP_S:
-                if self._t_above is None:
-                    self._t_above = t_rx
-                elif t_rx - self._t_above > JUMP_PERSIST_S:
-                    self.jumps += 1
-                    off = raw
-                    self._t_above = None
-            else:
-                self._t_above = None
-                off = min(raw, grown)
-        self.offset = off
-        self.t_update = t_rx
-        sync = self.sync
-        if sync is not None and off is not None and sync[0] <= off + 1e-3:
-            return boot_s + sync[0]
-        return boot_s + off
-
-    def timesync(self, tc1_s: float, ts1_s: float, t_rx: float) -> None:
-        """A TIMESYNC answer: the autopilot's boot time ``tc1_s`` when it answered our
-        request sent at ``ts1_s`` (our clock), received at ``t_rx``. With a symmetric
-        link, the offset is ``ts1 + rtt/2 - tc1``: the least-delay estimate without the
-        one-way delay. The exchange with the shortest round trip of the last ``SYNC_KEEP_S``
-        is used; a reboot forgets it."""
-        rtt = t_rx - ts1_s
-        if not 0.0 <= rtt <= MAX_SYNC_RTT_S:
-            return
-        if self.last_boot is not None and tc1_s < self.last_boot - REBOOT_BACK_S:
-            return  # an answer from before a reboot
-        est = ts1_s + 0.5 * rtt - tc1_s
-        old = self.sync
-        if old is None or rtt <= old[1] or t_rx - old[2] > SYNC_KEEP_S:
-            self.sync = (est, rtt, t_rx)
-
-
 @dataclass
 class AutopilotLink:
     """The autopilot seen on one MAVLink input (see the module docstring).
@@ -202,7 +115,7 @@ class AutopilotLink:
     consumes them)."""
     params: dict[str, float] = field(default_factory=dict)
     """The parameters it sent (PARAM_VALUE), by name."""
-    clock: BootClock = field(default_factory=BootClock)
+    clock: SenderClock = field(default_factory=SenderClock)
     t_last: float | None = None
     """Receive time of the last frame from the autopilot (s)."""
     _last_stamp: dict[int, float] = field(default_factory=dict)

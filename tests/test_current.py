@@ -310,3 +310,36 @@ def test_the_hgo_variant_runs_on_its_own_identified_model():
     # true -1.2: both stay near the prior on this run
     assert np.all(rms < 0.04)
     assert np.all(cover > 0.9)
+
+
+def _yaw_matrix(psi: float) -> np.ndarray:
+    c, s = math.cos(psi), math.sin(psi)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_a_start_inconsistent_with_the_next_measurement_restarts_the_filter():
+    """The ROV's first DVL report (at rest) and the INS velocity a moment later (0.3 m/s,
+    the vehicle accelerating hard, the clocks still settling) disagree by 30 one-sigmas.
+    Fused, the disagreement went through the 1.1 deg heading difference into the one
+    direction the two sensors do not see, the split of the velocity over ground into
+    current and through-water velocity: u_r and the current north both jumped to 6.3 m/s
+    here (5.0 in the live demo run of fault-dvl-lock-loss-rov these figures are from).
+    Within its first updates the filter starts again from the newer measurement instead."""
+    kf = current_pipeline("bluerov2").kf
+    kf.start("bottom", np.array([-0.013, 0.004, -0.014]), _yaw_matrix(math.pi - 0.0012))
+    assert kf.update("bottom", np.array([-0.013, 0.004, -0.014]), 0.012,
+                     _yaw_matrix(math.pi - 0.0012)) == "accepted"
+    outcome = kf.update("earth", np.array([0.05, 0.28, 0.09]), 0.01,
+                        _yaw_matrix(math.pi - 0.0192))
+    assert outcome == "restarted" and kf.counters["restarted"] == 1
+    assert kf.nis > kf.gate_nis  # the record shows the inconsistency
+    # started from the INS velocity: u_r ~ -0.05 (heading south), v_r ~ -0.28 m/s
+    assert np.allclose(kf.x[:3], [-0.045, -0.281, 0.09], atol=0.002)
+    assert np.allclose(kf.x[3:6], 0.0)
+    # after START_UPDATES updates the gate rejects instead
+    from onboard.estimators.current_kf import START_UPDATES
+
+    for _ in range(START_UPDATES):
+        kf.update("earth", np.array([0.05, 0.28, 0.09]), 0.01, _yaw_matrix(math.pi - 0.0192))
+    assert kf.update("earth", np.array([0.05, 1.28, 0.09]), 0.01,
+                     _yaw_matrix(math.pi - 0.0192)) == "gated"

@@ -52,7 +52,8 @@ def test_pitched_attitude_sample_changes_the_gravity_regressors():
 
 
 def test_newest_attitude_at_or_before_the_step_time():
-    pipe = current_pipeline("torpedo-auv")
+    # the sample adapter's own ordering, without the late-sample hold (test_latency.py)
+    pipe = current_pipeline("torpedo-auv", max_late_hold_s=0.0)
     # time-ordered batch: the newest sample at or before the tick wins
     pipe.step(1.0, [_att(0.8, 0.0, 0.1), _att(0.9, 0.0, 0.2)])
     assert pipe.inp.pitch == 0.2 and pipe.pitch == 0.2

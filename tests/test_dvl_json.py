@@ -183,3 +183,19 @@ def test_waterlinked_repeated_capture_lines_are_duplicates(shared_data, name, di
     r = DvlJsonLogReader(shared_data / "waterlinked_dvl_a50_json_tank" / name)
     assert len(list(r)) == distinct
     assert r.stats.rejected["duplicate"] == r.stats.records - distinct
+
+
+def test_live_reports_are_stamped_at_their_time_of_validity_on_our_clock():
+    """The DVL's clock (Unix time, not ours) is mapped through the least-delayed report:
+    a report that waited in a socket buffer is stamped when it was measured."""
+    p = DvlJsonParser()
+    tov = 1.7e9
+    lines = [encode_velocity_report(0.5, 0.0, 0.0, t_validity_s=tov + k * 0.2,
+                                     t_transmission_s=tov + k * 0.2 + 0.05) for k in range(3)]
+    # received 0.30 s, 0.02 s and 0.15 s after transmission (our clock: 100 + ...)
+    (a,) = p.feed(lines[0], 100.0 + 0.05 + 0.30)
+    (b,) = p.feed(lines[1], 100.2 + 0.05 + 0.02)
+    (c,) = p.feed(lines[2], 100.4 + 0.05 + 0.15)
+    assert a.t == pytest.approx(100.30)  # the first: its own delay is all there is to go by
+    assert b.t == pytest.approx(100.22)  # the least-delayed one sets the offset
+    assert c.t == pytest.approx(100.42)  # the buffered one: stamped when it was measured

@@ -1,5 +1,6 @@
 """The GNSS latency: the pipelines fuse at the horizon ``tick - gnss_latency_s`` in time
-order, and the published estimates are forecast to the tick (onboard.latency).
+order, and the published estimates are forecast to the tick (onboard.latency); a
+pipeline's own hold of late samples (onboard.pipelines.base.LateSampleHold).
 
 The replay with a latency overlay is byte-compared with the reference in the harness
 (case ``jaiabot-latency``) and in tests/test_diagnose_roundtrip.py.
@@ -15,6 +16,7 @@ from onboard.core import config
 from onboard.core.messages import GnssFix, Heading, Sample
 from onboard.engine import Engine, TickQueue
 from onboard.latency import FixedLagQueue
+from onboard.pipelines.base import LateSampleHold
 
 
 class _Recorder:
@@ -185,3 +187,53 @@ def test_without_the_fixed_lag_a_late_fix_would_break_the_order():
     _run_live(eng, _live_stream(0.6), ticks=100)
     times = [s.t for _, batch in rec.fed for s in batch]
     assert times != sorted(times)
+
+
+# ------------------------------------------------------------------ LateSampleHold
+
+
+def _h(t: float) -> Heading:
+    return Heading(t=t, heading_rad=0.0)
+
+
+def test_hold_passes_in_order_samples_through_at_the_tick():
+    hold = LateSampleHold(0.5)
+    for k in range(1, 6):
+        batch = [_h(0.1 * k - 0.05), _h(0.1 * k)]
+        horizon, due = hold.release(0.1 * k, batch)
+        assert horizon == 0.1 * k and due == batch
+    assert hold.hold_s == 0.0 and hold.late == 0
+
+
+def test_hold_grows_to_the_lateness_seen_and_then_releases_in_time_order():
+    hold = LateSampleHold(0.5, memory_s=10.0)
+    hold.release(1.0, [_h(1.0)])
+    # a report stamped 0.8 arrives at the tick of 1.1, behind the horizon 1.0
+    horizon, due = hold.release(1.1, [_h(0.8), _h(1.1)])
+    assert hold.late == 1 and hold.hold_s == pytest.approx(0.3)
+    assert horizon == 1.0  # the horizon never goes back: it waits for the ticks
+    assert [s.t for s in due] == [0.8]  # the late one, handed on (behind the horizon)
+    # the next late report (0.18 s) arrives ahead of the horizon: held, then in order
+    horizon, due = hold.release(1.2, [_h(1.02), _h(1.2)])
+    assert horizon == 1.0 and due == [] and hold.late == 1
+    horizon, due = hold.release(1.45, [_h(1.45)])
+    assert horizon == pytest.approx(1.15) and [s.t for s in due] == [1.02, 1.1]
+    horizon, due = hold.release(1.6, [])
+    assert [s.t for s in due] == [1.2] and horizon == pytest.approx(1.3)
+    # no lateness for longer than the memory: the hold is back to 0, everything due
+    horizon, due = hold.release(12.0, [_h(12.0)])
+    assert hold.hold_s == 0.0 and horizon == 12.0 and [s.t for s in due] == [1.45, 12.0]
+
+
+def test_hold_counts_samples_later_than_its_ceiling():
+    hold = LateSampleHold(0.5)
+    hold.release(5.0, [_h(5.0)])
+    hold.release(5.05, [_h(4.2), _h(5.05)])  # a stall: 0.85 s late
+    assert hold.too_late == 1 and hold.hold_s == 0.5
+
+
+def test_hold_off_is_the_identity():
+    hold = LateSampleHold(0.0)
+    batch = [_h(0.2)]
+    assert hold.release(1.0, batch) == (1.0, batch)
+    assert hold.release(1.1, [_h(0.1)])[1][0].t == 0.1 and hold.late == 0

@@ -11,7 +11,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from onboard.drivers.mavlink import MavlinkParser
-from onboard.drivers.mavlink_link import AutopilotLink, BootClock
+from onboard.drivers.mavlink_link import AutopilotLink
+from onboard.drivers.sender_clock import SenderClock
 from onboard.sitl.autopilot import REBOOT_S, SimAutopilot
 from onboard.sitl.runner import Simulation, autopilot_for
 
@@ -161,7 +162,7 @@ def test_the_link_ignores_other_components_and_maps_the_boot_clock():
 
 
 def test_boot_clock_reboot_and_jump():
-    c = BootClock()
+    c = SenderClock()
     for k in range(100):
         assert c.update(10.0 + k * 0.1, 1000.0 + k * 0.1 + 0.02) == pytest.approx(1000.0 + k * 0.1 + 0.02)
     c.update(0.5, 1010.5)  # boot clock back from 19.9 s to 0.5 s: a reboot

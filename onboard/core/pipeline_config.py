@@ -449,6 +449,13 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """One-sigma of DVL velocity components (m/s); default from ``[sensors.dvl]``."""
     gate_nis: float = 30.0
     """Innovations with a larger NIS are rejected (counted in health)."""
+    max_late_hold_s: Annotated[float, msgspec.Meta(ge=0.0, le=2.0)] = 0.5
+    """The pipeline fuses its samples in time order up to ``tick - hold``, ``hold`` the
+    largest lateness of a sample in the last minute, at most this (s; 0: every sample at
+    the tick it arrives, a late one fused at the filter's time): a DVL's report stamped at
+    its time of validity arrives after the autopilot's frames of that instant, and fused
+    out of order it reads as information about the current (docs/current.md, "Late
+    measurements"). The published current is then that of the horizon."""
     calibrate: bool = True
     """Inflate the process noise when the innovation NIS says it is too small."""
     calibrate_block: int = 50

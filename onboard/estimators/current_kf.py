@@ -53,8 +53,11 @@ MeasurementKind = Literal["earth", "bottom", "water"]
 """``earth``: velocity over ground in earth axes; ``bottom``: DVL bottom track (over ground,
 body axes); ``water``: DVL water track (through water, body axes)."""
 
-UpdateOutcome = Literal["accepted", "gated", "reset"]
+UpdateOutcome = Literal["accepted", "gated", "reset", "restarted"]
 """What :meth:`CurrentKalmanFilter.update` did with a measurement."""
+START_UPDATES = 50
+"""The filter's first updates, during which an innovation beyond the gate starts it again
+from that measurement (the start was inconsistent with it) instead of being rejected."""
 
 
 class VelocityMeasurement(NamedTuple):
@@ -163,7 +166,8 @@ class CurrentKalmanFilter:
                 each DOF's own centripetal acceleration, :meth:`_model_error`).
             prior_accel_std: model acceleration error of a DOF with only the generic prior
                 (m/s^2).
-            gate_nis: innovations with a larger NIS are rejected (after 50 updates).
+            gate_nis: innovations with a larger NIS are rejected (in the first
+                ``START_UPDATES``: the filter starts again from them).
             calibrate: inflate the process noise when the block-mean NIS says so.
             calibrate_block: innovations per calibration block.
             max_speed_through_water: a predicted through-water speed component beyond
@@ -462,10 +466,12 @@ class CurrentKalmanFilter:
         """Kalman update with one velocity measurement ``z`` (m/s, one-sigma ``std`` per
         component; the module docstring's table), ``R`` the body-to-earth rotation.
 
-        A NIS above ``gate_nis`` rejects the measurement (after 50 updates, ``gated``); the
-        covariance is in Joseph form for the gain actually used (the coefficient rows of
-        the gain are zero while not identifying); a singular innovation covariance or a
-        non-finite or runaway state resets the filter (``reset``).
+        A NIS above ``gate_nis`` rejects the measurement (``gated``); within the first
+        ``START_UPDATES`` it starts the filter again from this measurement instead
+        (``restarted``, counted). The covariance is in Joseph form for the gain actually
+        used (the coefficient rows of the gain are zero while not identifying); a singular
+        innovation covariance or a non-finite or runaway state resets the filter
+        (``reset``).
         """
         nd = self.nd
         m = len(z)
@@ -486,9 +492,17 @@ class CurrentKalmanFilter:
             self.reset("diverged")
             return "reset"
         nis = self.nis = float(y @ Sinv @ y)
-        if nis > self.gate_nis and self.started and self.counters["updates"] > 50:
-            self.counters["rejected_gate"] += 1
-            return "gated"
+        if nis > self.gate_nis and self.started:
+            if self.counters["updates"] > START_UPDATES:
+                self.counters["rejected_gate"] += 1
+                return "gated"
+            # the start was inconsistent with what followed (a first sample stamped before
+            # the clocks settled, in a hard acceleration): start again from this one
+            self.reset("restarted")
+            self.start(kind, z, R)
+            outcome = self.update(kind, z, std, R)
+            self.y, self.S, self.nis = y, S, nis  # the record shows the inconsistency
+            return "restarted" if outcome == "accepted" else outcome
         K = PHt @ Sinv
         if self.identification.n_theta and not self.identification.identifying:
             K[2 * nd:] = 0.0

@@ -8,7 +8,10 @@ pipeline sees only its inputs, live operation and replay give identical results.
 
 from __future__ import annotations
 
+import bisect
 import math
+from collections import deque
+from operator import attrgetter
 from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
 
 from onboard.core.config import Config
@@ -66,6 +69,75 @@ def unused_measurement(channel: str, t: float, dof: int, reason: str,
     nan = math.nan
     return Innovation(channel=channel, t=t, z=(nan,) * dof, S=(nan,) * (dof * dof),
                       nis=nan, dof=dof, accepted=False, reason=reason, source=source)
+
+
+_sample_time = attrgetter("t")
+
+
+class LateSampleHold:
+    """A pipeline's own fusion horizon, held behind the tick by as much as its samples
+    have arrived late (a reorder buffer sized by what it sees).
+
+    A Water Linked DVL stamps its report with the instant it measured
+    (``time_of_validity``) and sends it after its processing: it reaches the service later
+    than the autopilot's frames of that instant, so a pipeline stepped at each tick would
+    get it after samples newer than it. :meth:`release` hands a pipeline the samples up to
+    a horizon ``tick - hold`` in time order, where ``hold`` is the largest lateness (the
+    tick it arrived at minus its stamp) of the samples that arrived behind the horizon
+    already passed in the last ``memory_s``, at most ``max_hold_s``. While nothing arrives
+    late, ``hold`` is 0 and the samples pass through at the tick as before. The horizon
+    never goes back: when ``hold`` grows, it waits for the ticks to catch up. The
+    estimates of a pipeline that holds are those of its horizon, up to ``max_hold_s`` old.
+    Everything here is a function of the sample and tick times, so a replay holds exactly
+    as the live run did.
+
+    Attributes:
+        hold_s: the current hold (s).
+        late: samples that arrived behind the horizon already passed.
+        too_late: of those, samples later than ``max_hold_s`` (handed on at once, out of
+            time order).
+    """
+
+    def __init__(self, max_hold_s: float, memory_s: float = 60.0) -> None:
+        self.max_hold_s = max_hold_s
+        self.memory_s = memory_s
+        self.hold_s = 0.0
+        self.late = 0
+        self.too_late = 0
+        self._held: list[Sample] = []
+        self._horizon = -math.inf
+        self._lateness: deque[tuple[float, float]] = deque()
+        """(tick time, lateness) of the late arrivals within ``memory_s``."""
+
+    def release(self, t: float, samples: Sequence[Sample]
+                ) -> tuple[float, Sequence[Sample]]:
+        """The tick at ``t`` (s) with its samples (time-ordered): the horizon (s) and the
+        samples up to it, in time order."""
+        if self.max_hold_s <= 0.0:
+            return t, samples
+        horizon = self._horizon
+        for s in samples:
+            if s.t < horizon:
+                self.late += 1
+                lateness = t - s.t
+                if lateness > self.max_hold_s:
+                    self.too_late += 1
+                self._lateness.append((t, min(lateness, self.max_hold_s)))
+        mem = self._lateness
+        while mem and mem[0][0] < t - self.memory_s:
+            mem.popleft()
+        self.hold_s = max((x for _, x in mem), default=0.0)
+        if not self.hold_s and not self._held:
+            self._horizon = t
+            return t, samples
+        held = self._held
+        held.extend(samples)
+        held.sort(key=_sample_time)
+        horizon = max(self._horizon, t - self.hold_s)
+        cut = bisect.bisect_right(held, horizon, key=_sample_time)
+        due, self._held = held[:cut], held[cut:]
+        self._horizon = horizon
+        return horizon, due
 
 
 class PipelineFactory(Protocol):

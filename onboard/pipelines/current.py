@@ -88,7 +88,7 @@ from onboard.estimators.model_identification import (
 )
 from onboard.estimators.restored_current import RestoredCurrentCheck
 from onboard.estimators.vehicle_models import RegressionModel, kind_for_class
-from onboard.pipelines.base import unused_measurement
+from onboard.pipelines.base import LateSampleHold, unused_measurement
 from onboard.pipelines.current_samples import CHANNELS, CurrentSamples
 
 GAIN_DIR = CONFIG_DIR / "gains"
@@ -105,7 +105,12 @@ GAMMA_RECHECK_S = 10.0
 often (s)."""
 PENDING_INNOVATIONS = 1024
 """Innovation records kept until the engine takes them; older ones are dropped."""
-REASONS: dict[str, str] = {"accepted": "", "gated": "gate", "reset": "diverged"}
+LATE_FUSE_MAX_S = 0.05
+"""A velocity measurement at most this much (s) older than the filter's time is fused at
+that time; an older one is dropped (``rejected_late``; with ``max_late_hold_s`` 0, fused
+at the filter's time)."""
+REASONS: dict[str, str] = {"accepted": "", "gated": "gate", "reset": "diverged",
+                           "restarted": "restart"}
 """The record's reason for each outcome of the joint filter's update."""
 
 
@@ -192,6 +197,7 @@ class CurrentPipeline:
         stamps of the fusion."""
         self.samples = CurrentSamples(cfg, sensors, self.nd, self.counters,
                                       self._innovations)
+        self.hold = LateSampleHold(cfg.max_late_hold_s)
         self.inp = self.samples.inp
         self._t: float | None = None
         self._last_meas_t: float | None = None
@@ -249,7 +255,10 @@ class CurrentPipeline:
 
         Each velocity measurement is fused at its own time (algorithms.md §3.5): the
         filters are predicted to it with the inputs of that time, updated with the
-        attitude of that time, and after the last one predicted to the tick."""
+        attitude of that time, and after the last one predicted to the tick. Samples that
+        arrive late are held (:attr:`hold`): the filter is stepped to the hold's horizon
+        with the samples up to it."""
+        t, samples = self.hold.release(t, samples)
         t_prev = self._t
         check = self.restore_check
         probation = check.active
@@ -273,8 +282,17 @@ class CurrentPipeline:
     def _fuse(self, m: VelocityMeasurement, probation: bool) -> None:
         """Velocity measurement ``m`` at its own time ``m.t``: the filters predicted to
         it (when it is newer than their time; the first one starts them), then updated
-        with the attitude of that time. Without a heading yet it is not used."""
+        with the attitude of that time. Without a heading yet it is not used. One older
+        than the filter's time by at most ``LATE_FUSE_MAX_S`` is fused at that time;
+        older, it is dropped (counted ``rejected_late``, reason ``late``: it came before
+        :attr:`hold` grew to cover it, or after a stall longer than the hold)."""
         if self.yaw is None:
+            return
+        late_by = self._t - m.t if self._t is not None else 0.0
+        if late_by > LATE_FUSE_MAX_S and self.cfg.max_late_hold_s > 0.0:
+            self.counters["rejected_late"] = self.counters.get("rejected_late", 0) + 1
+            self._innovations.append(unused_measurement(
+                CHANNELS[m.kind], m.t, len(m.z), "late", m.source))
             return
         if not self.kf.started:
             self._start(m)
@@ -318,7 +336,10 @@ class CurrentPipeline:
         self._record(CHANNELS[kind], m, kf.y, kf.S, kf.nis, kf.gate_nis, outcome)
         if outcome == "reset" and hgo is not None:
             hgo.reset_gain()
-        if hgo is not None and not self._update_hgo(m, dt_meas, R):
+        if outcome == "restarted" and hgo is not None:
+            hgo.restart(kf.x, kf.P)
+            hgo.reset_gain()
+        elif hgo is not None and not self._update_hgo(m, dt_meas, R):
             hgo.restart(kf.x, kf.P)
             hgo.reset_gain()
         if flow is not None:
@@ -545,6 +566,10 @@ class CurrentPipeline:
         h["observable"] = float(all(self.observable[:2]))
         h["along_track_unobservable"] = float(self._surge_unobservable())
         h["heading_diversity"] = self.identification.headings.length()
+        hold = self.hold
+        if hold.late:
+            h.update(late_samples=hold.late, late_hold_s=hold.hold_s,
+                     late_beyond_hold=hold.too_late)
         if self.restore_check.active:
             h["restore_probation_s"] = self.restore_check.held_s
             h["restore_chi2"] = self.restore_check.chi2

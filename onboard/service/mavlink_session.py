@@ -21,7 +21,7 @@ on USB and most TELEM ports) until a ground station asks. For each MAVLink input
    accepted is asked for again (and reported once), up to ``MAX_REASKS`` times, then
    reported absent (a GNSS-less ROV's GPS_RAW_INT);
 5. sends TIMESYNC requests (``tc1`` 0, ``ts1`` the service clock in ns); the autopilot's
-   answers let :class:`drivers.mavlink_link.BootClock` map its boot clock without the
+   answers let :class:`drivers.sender_clock.SenderClock` map its boot clock without the
    one-way link delay;
 6. starts over after a reboot (the boot clock went back) or a lost link (no HEARTBEAT
    for ``LINK_LOST_S``).
