@@ -194,10 +194,25 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
             chunks = list(sent_in)
         return [m for chunk in chunks for m in (mav.parse_buffer(chunk) or [])]
 
+    def answered() -> list:
+        """The autopilot's side, as it came back on mavlink_raw/out."""
+        mav = mavlink2.MAVLink(None)
+        with lock:
+            chunks = list(from_autopilot)
+        return [m for chunk in chunks for m in (mav.parse_buffer(chunk) or [])]
+
+    def all_answered() -> bool:
+        back = answered()
+        return ({m.param_id for m in back if m.get_type() == "PARAM_VALUE"}
+                >= {"SERVO1_FUNCTION", "SERVO3_FUNCTION"}
+                and any(m.get_type() == "TIMESYNC" and m.tc1 != 0 for m in back))
+
     try:
+        # every check below waited for (the parameter answers come one by one after the
+        # requests, and may trail the first estimates)
         deadline = time.monotonic() + WAIT_S
         while time.monotonic() < deadline and (estimating() != PIPELINES or not SENT <= {
-                m.get_type() for m in sent()} or not received()):
+                m.get_type() for m in sent()} or not received() or not all_answered()):
             assert service.poll() is None, service.stderr.read() if service.stderr else ""
             time.sleep(0.5)
     finally:
@@ -222,8 +237,7 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
     assert any(m.get_type() == "COMMAND_LONG" and m.command == 511 for m in msgs)
     assert {m.get_srcComponent() for m in msgs} == {191}
     # the autopilot's side, as it came back on mavlink_raw/out: the requests were answered
-    mav = mavlink2.MAVLink(None)
-    back = [m for chunk in from_autopilot for m in (mav.parse_buffer(chunk) or [])]
+    back = answered()
     assert any(m.get_type() == "COMMAND_ACK" and m.command == 511 and m.result == 0 for m in back)
     assert {m.param_id for m in back if m.get_type() == "PARAM_VALUE"} >= {"SERVO1_FUNCTION",
                                                                            "SERVO3_FUNCTION"}
