@@ -30,9 +30,10 @@ Time: live (``feed(data, t_rx)``), a report with its own time (``time_of_validit
 processing delay ``time_of_transmission - time_of_validity`` taken off when within
 [0, 1] s): the DVL's clock need not be synchronized with ours, and a report that waited in
 a socket buffer is stamped when it was measured, not when it was read. A json_v1 report
-is stamped with its receive time. Captures without receive times (``nc host 16171 > out.txt``) are read with
-:class:`DvlJsonLogReader`: ``t = time_of_validity`` (or ``ts``) in Unix seconds when
-present; for json_v1, ``t`` is the running sum of ``time`` (s since the first report).
+is stamped with its receive time. Captures without receive times (``nc host 16171 >
+out.txt``) are read with :class:`DvlJsonLogReader`: ``t = time_of_validity`` (or ``ts``)
+in Unix seconds when present; for json_v1, ``t`` is the running sum of ``time`` (s since
+the first report).
 
 Rejections: ``"json"`` (not JSON, or not an object), ``"malformed"`` (missing or wrongly
 typed field, non-finite number), ``"duplicate"`` (a line identical to the previous one --
