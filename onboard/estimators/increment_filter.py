@@ -207,18 +207,18 @@ class IncrementFilter:
         self.V_u = self.V_u0 if v < self.V_u0 else hi if v > hi else v
 
     def _rate_update(self, y_v: float, R_v: float, t: float, source: str) -> None:
-        """Assimilate the measured rate (``IncrementKF.update_rate``, after the increment:
-        ``z_v = y_v - v``, ``S_v = P_vv + R_v``); an outlier beyond ``nis_gate`` is left
+        """Assimilate the measured rate (``IncrementKF.update_rate``, after the increment;
+        its record's innovation is ``y_v - v``, measured minus forecast); an outlier beyond ``nis_gate`` is left
         out and counted, at most MAX_CONSECUTIVE_REJECTS in a row."""
         gate = (self.nis_gate if self._rate_consecutive_rejects < MAX_CONSECUTIVE_REJECTS
                 else math.inf)
-        z, S = y_v - self.kf.v, self.kf.P[3] + R_v
-        self.rate_nis = self.kf.update_rate(y_v, R_v, gate)
+        kf = self.kf
+        self.rate_nis = kf.update_rate(y_v, R_v, gate)
         self.rate_steps += 1
         accepted = self.rate_nis <= gate
         self.innovations.append(Innovation(
-            channel=f"{self.name}.rate", t=t, z=(z,), S=(S,), nis=self.rate_nis, dof=1,
-            gate=self.nis_gate, accepted=accepted, reason="" if accepted else "gate",
+            channel=f"{self.name}.rate", t=t, z=(-kf.z_v,), S=(kf.S_v,), nis=self.rate_nis,
+            dof=1, gate=self.nis_gate, accepted=accepted, reason="" if accepted else "gate",
             source=source))
         if not accepted:
             self.rate_rejected += 1

@@ -55,11 +55,12 @@ class IncrementKF:
             rad; rate in m/s or rad/s; noise of the previous point, m or rad).
         P: covariance, packed ``(dd, dv, de, vv, ve, ee)``, symmetric by construction.
         z: last innovation ``C x_fc - y``; S: its predicted variance; nis: ``z^2 / S``.
+        z_v, S_v: the same of the last rate measurement (:meth:`update_rate`).
         Ld, Lv: the gains of ``d`` and ``v`` in the last update.
         R: variance of one point's noise (correlated) or of the increment (white).
     """
 
-    __slots__ = ("d", "v", "e", "P", "z", "S", "nis", "Ld", "Lv", "R", "q_v",
+    __slots__ = ("d", "v", "e", "P", "z", "S", "nis", "z_v", "S_v", "Ld", "Lv", "R", "q_v",
                  "correlated", "initialized", "_y", "_skipped")
 
     def __init__(self, R: float, q_v: float = 0.0, correlated: bool = True) -> None:
@@ -73,6 +74,7 @@ class IncrementKF:
         self.z = 0.0
         self.S = R
         self.nis = 0.0
+        self.z_v = self.S_v = 0.0
         self.Ld = self.Lv = 0.0
         self.initialized = False
         self._y = 0.0
@@ -178,8 +180,8 @@ class IncrementKF:
         the measurement is not used (an outlier) and the state is unchanged.
         """
         dd, dv, de, vv, ve, ee = self.P
-        S = vv + R_v
-        z = self.v - y_v
+        S = self.S_v = vv + R_v
+        z = self.z_v = self.v - y_v
         nis = z * z / S
         if not nis <= gate:
             return nis
@@ -310,8 +312,8 @@ class BiasIncrementKF(IncrementKF):
     def update_rate(self, y_v: float, R_v: float, gate: float = math.inf) -> float:
         """The measured rate, row ``C_v = [0, 1, 0, 0]`` (as the base class)."""
         dd, dv, de, vv, ve, ee = self.P
-        S = vv + R_v
-        z = self.v - y_v
+        S = self.S_v = vv + R_v
+        z = self.z_v = self.v - y_v
         nis = z * z / S
         if not nis <= gate:
             return nis
