@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from onboard.core import config as configmod
-from onboard.core.messages import Attitude, Depth, DvlVelocity, GnssFix, Heading
+from onboard.core.messages import (Attitude, Depth, DvlVelocity, GnssFix, Heading,
+                                   VelocityOverGround)
 from onboard.pipelines import current as current_mod
 from tests.helpers.current_plants import (
     BOAT_TRUE,
@@ -343,3 +344,18 @@ def test_a_start_inconsistent_with_the_next_measurement_restarts_the_filter():
         kf.update("earth", np.array([0.05, 0.28, 0.09]), 0.01, _yaw_matrix(math.pi - 0.0192))
     assert kf.update("earth", np.array([0.05, 1.28, 0.09]), 0.01,
                      _yaw_matrix(math.pi - 0.0192)) == "gated"
+
+
+def test_the_pipeline_says_when_its_start_was_contradicted():
+    """Through the pipeline, the DVL at rest and the INS at 0.3 m/s stamped at the same
+    instant: an event names the restart, and the published through-water velocity is the
+    INS's."""
+    pipe = current_pipeline("bluerov2")
+    pipe.step(0.1, [Attitude(t=0.1, roll_rad=0.0, pitch_rad=0.0, yaw_rad=math.pi - 0.0012)])
+    out = pipe.step(0.2, [
+        DvlVelocity(t=0.2, vx=-0.013, vy=0.004, vz=-0.014),
+        VelocityOverGround(t=0.2, v_north_mps=0.05, v_east_mps=0.28, v_down_mps=0.09)])
+    assert pipe.counters["restarted"] == 1
+    assert any(e.startswith("the start was contradicted by a velocity measurement")
+               for e in pipe.events), pipe.events
+    assert abs(out["u_r"] + 0.05) < 0.01 and abs(out["v_r"] + 0.28) < 0.01

@@ -336,9 +336,8 @@ class CurrentPipeline:
         self._record(CHANNELS[kind], m, kf.y, kf.S, kf.nis, kf.gate_nis, outcome)
         if outcome == "reset" and hgo is not None:
             hgo.reset_gain()
-        if outcome == "restarted" and hgo is not None:
-            hgo.restart(kf.x, kf.P)
-            hgo.reset_gain()
+        if outcome == "restarted":
+            self._restarted(m)
         elif hgo is not None and not self._update_hgo(m, dt_meas, R):
             hgo.restart(kf.x, kf.P)
             hgo.reset_gain()
@@ -346,6 +345,22 @@ class CurrentPipeline:
             flow.observe_velocity(kind, z, std, R, kf.velocity_over_ground(R) if (
                 kind == "earth" and len(z) < self.nd) else None)
         self._last_velocity_t = tm
+
+    def _restarted(self, m: VelocityMeasurement) -> None:
+        """The joint filter started again from ``m``, which contradicted its start: the
+        observer follows, a restored current (now dropped) ends its probation, and an
+        event says so."""
+        kf = self.kf
+        if self.hgo is not None:
+            self.hgo.restart(kf.x, kf.P)
+            self.hgo.reset_gain()
+        dropped = ""
+        if self.restore_check.active:
+            self.restore_check.end()
+            dropped = "; the restored current is dropped"
+        self.events.append(
+            f"the start was contradicted by a {CHANNELS[m.kind]} measurement (NIS "
+            f"{kf.nis:.0f} > {kf.gate_nis:.0f}): started again from it{dropped}")
 
     def _update_hgo(self, m: VelocityMeasurement, dt_meas: float,
                     R: np.ndarray | None) -> bool:
