@@ -25,8 +25,8 @@ SYNC_KEEP_S = 30.0
 """How long (s) the best TIMESYNC exchange is kept before a worse one replaces it."""
 DRIFT_PPM = 200.0
 """How fast (parts per million) the filtered offset may grow: crystal drift of the two
-clocks (ArduPilot boards: < 50 ppm; a DVL on NTP: less) with margin; a smaller transport delay lowers it at
-once."""
+clocks (ArduPilot boards: < 50 ppm; a DVL on NTP: less) with margin; a smaller transport
+delay lowers it at once."""
 
 
 class SenderClock:

@@ -58,9 +58,9 @@ from onboard.alerts import Alerts
 from onboard.innovations import InnovationMonitor
 from onboard.integrity import WATCHED, IntegrityMonitor
 from onboard.inputs import InputMapper
-from onboard.latency import FixedLagQueue, sample_time
+from onboard.latency import FixedLagQueue
 from onboard.pipelines import build
-from onboard.pipelines.base import Pipeline
+from onboard.pipelines.base import Pipeline, sample_time
 from onboard.sources import SourceSelector
 from onboard.timeline import Jump, Timeline
 from onboard.validate import checker_for, sample_type

@@ -238,9 +238,8 @@ class HeadingCourseCheck:
         # the window, one deque per column, oldest first: the sums are taken in C over
         # whole columns, and each difference's sine and cosine once, as it arrives
         self._t: deque[float] = deque()  # s
-        self._diff: deque[float] = deque()  # heading - course, rad
-        self._sin: deque[float] = deque()  # sin(diff)
-        self._cos: deque[float] = deque()  # cos(diff)
+        self._sin: deque[float] = deque()  # sin(heading - course)
+        self._cos: deque[float] = deque()  # cos(heading - course)
         self._sog: deque[float] = deque()  # m/s
         self.offset_rad: float | None = None
         self.mismatch = False
@@ -265,7 +264,8 @@ class HeadingCourseCheck:
         n = len(self._t)
         if n < HEADING_MIN_FIXES or s.t - self._t[0] < 0.8 * HEADING_WINDOW_S:
             return None
-        # circular_mean(self._diff), from the sines and cosines kept (tests/test_integrity.py)
+        # the circular mean of the window's differences, from the sines and cosines kept
+        # (tests/test_integrity.py)
         self.offset_rad = math.atan2(sum(self._sin), sum(self._cos))
         sog_mean = sum(self._sog) / n
         self.mismatch = abs(self.offset_rad) > crab_bound(sog_mean)
@@ -284,7 +284,6 @@ class HeadingCourseCheck:
         """One moving fix into the window: its time (s), heading - course (rad) and
         speed over ground (m/s)."""
         self._t.append(t)
-        self._diff.append(diff)
         self._sin.append(math.sin(diff))
         self._cos.append(math.cos(diff))
         self._sog.append(sog)
@@ -293,7 +292,7 @@ class HeadingCourseCheck:
         """Drop the window's fixes older than ``t`` (s)."""
         times = self._t
         while times and times[0] < t:
-            for column in (times, self._diff, self._sin, self._cos, self._sog):
+            for column in (times, self._sin, self._cos, self._sog):
                 column.popleft()
 
 

@@ -37,20 +37,15 @@ delayed pipelines are stepped and the estimates are those at the horizon.
 
 from __future__ import annotations
 
-import bisect
 import copy
 import math
-from operator import attrgetter
-from typing import TYPE_CHECKING, Callable, Mapping
+from typing import TYPE_CHECKING, Mapping
 
 from onboard.core.messages import Sample
+from onboard.pipelines.base import sample_time, split_at
 
 if TYPE_CHECKING:
     from onboard.pipelines.base import Pipeline
-
-sample_time: Callable[[Sample], float] = attrgetter("t")
-"""The sort key of a tick's batch: the sample time (s); the sort is stable, so arrival
-order breaks ties."""
 
 
 class FixedLagQueue:
@@ -98,15 +93,10 @@ class FixedLagQueue:
     def open_tick(self, t: float, n_pipelines: int) -> None:
         """Split the queue at the horizon ``t - lag_s``: the samples up to it are fused
         this tick, the newer ones wait; decide whether the forks are made again."""
-        batch = self.pending
-        if len(batch) > 1:
-            batch.sort(key=sample_time)
         self._t = t
         self._horizon = t - self.lag_s
-        cut = bisect.bisect_right(batch, self._horizon, key=sample_time)
-        self._held = batch[cut:]
+        self._fused, self._held = split_at(self.pending, self._horizon)
         self.pending = list(self._held)
-        self._fused = batch[:cut]
         self.t_sensor = self._fused[-1].t if self._fused else None
         self._restarted = False
         if not self.forecast:

@@ -271,15 +271,19 @@ def test_the_heading_window_mean_equals_the_circular_mean_of_its_differences() -
     rng = np.random.default_rng(3)
     check = HeadingCourseCheck()
     judged = 0
+    diff: dict[float, float] = {}  # heading - course of each fix, by its time
     for k in range(600):  # 5 Hz for 120 s, with stops that empty the window
         t = 0.2 * k
         sog = 0.0 if 300 <= k < 400 else float(rng.uniform(0.6, 2.0))
-        check.heading(t - 0.05, float(rng.uniform(-math.pi, math.pi)))
+        heading = float(rng.uniform(-math.pi, math.pi))
+        check.heading(t - 0.05, heading)
         fix = GnssFix(t=t, lat_deg=LAT0, lon_deg=LON0, sog_mps=sog,
                       cog_rad=float(rng.uniform(-math.pi, math.pi)))
+        diff[t] = heading - fix.cog_rad
         if check.fix(fix) is not None:
             judged += 1
-            assert check.offset_rad == circular_mean(check._diff)
+            # the window's fixes are those at the times it keeps
+            assert check.offset_rad == circular_mean(diff[x] for x in check._t)
             assert check.speed() == sum(check._sog) / len(check._sog)
         assert all(x >= t - 10.0 for x in check._t)
     assert judged > 300  # 420 of the 600 fixes judged

@@ -27,9 +27,17 @@ Array = NDArray[np.float64]
 
 _EPS = 1e-9
 
-_I3 = np.eye(3)
-"""The identity, made once (read-only: the functions below only add to it)."""
-_I3.setflags(write=False)
+
+def frozen_eye(n: int) -> Array:
+    """The ``n`` x ``n`` identity, read-only: made once and shared by the hot paths that add
+    to it (a matrix filled in place from it starts as a ``copy()``)."""
+    eye = np.eye(n)
+    eye.setflags(write=False)
+    return eye
+
+
+_I3 = frozen_eye(3)
+"""The identity the functions below add to."""
 
 
 def cross(a: Array, b: Array) -> Array:

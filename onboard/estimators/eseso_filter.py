@@ -81,14 +81,14 @@ alone; here both are explicit.
 
 With ``thrust_states = "disturbance"`` the thrust update corrects the disturbance alone (as
 the paper's H, -I on ``dxi`` only) but as a Schmidt-Kalman update (Schmidt 1966; Simon,
-"Optimal State Estimation", 2006, section 7.5): the full Jacobian enters ``S`` and the covariance
-and only the gain's ``dxi`` rows are kept, so the cross-covariance of ``xi`` with the
+"Optimal State Estimation", 2006, section 7.5): the full Jacobian enters ``S`` and the
+covariance and only the gain's ``dxi`` rows are kept, so the cross-covariance of ``xi`` with the
 attitude and velocity (a tilt error of 3 mrad is 0.4 N through ``M g``, which ``xi``
 absorbs) is carried instead of counted as white noise at every update. Through the
 damping slope (up to 66 N per m/s) the full update (``"all"``) makes it a velocity
-sensor too, which thruster lag or model errors would drag away from the DVL. Its residual is down-weighted Huber-style above
-``thrust_huber``: thruster steps excite roll and pitch accelerations faster than the IMU
-rate resolves.
+sensor too, which thruster lag or model errors would drag away from the DVL. Its residual
+is down-weighted Huber-style above ``thrust_huber``: thruster steps excite roll and pitch
+accelerations faster than the IMU rate resolves.
 
 Numbers in, numbers out: no samples, no clock, no configuration file.
 """
@@ -108,6 +108,7 @@ from onboard.core.messages import Innovation
 from onboard.core.so3 import (
     cross,
     exp_so3,
+    frozen_eye,
     log_so3,
     matrix_to_euler,
     orthonormalize,
@@ -128,15 +129,8 @@ N_ERR = 23
 E3 = np.array([0.0, 0.0, 1.0])
 
 
-def _frozen_eye(n: int) -> Array:
-    """The ``n`` x ``n`` identity, read-only: made once and shared by every propagation
-    and update (a matrix filled in place from it starts as a ``copy()``)."""
-    eye = np.eye(n)
-    eye.setflags(write=False)
-    return eye
-
-
-_I2, _I3, _I_N = _frozen_eye(2), _frozen_eye(3), _frozen_eye(N_ERR)
+_I2, _I3, _I_N = frozen_eye(2), frozen_eye(3), frozen_eye(N_ERR)
+"""Identities made once (read-only) for every propagation and update."""
 
 CHI2_999 = {1: 10.83, 2: 13.82, 3: 16.27}
 """Chi-square 99.9 % quantiles for 1, 2, 3 degrees of freedom."""
@@ -419,7 +413,8 @@ class EsesoFilter:
         ``E[y y^T] = H P H^T + s R``, so ``(y^T y - tr(H P H^T)) / tr(R)`` is a sample of
         ``s``; its exponential mean over ``noise_adapt_updates`` updates (each sample
         capped at :data:`NOISE_SAMPLE_CAP`), clipped to [1, ``noise_scale_max``] (the
-        thrust channel's to [1, ``thrust_noise_scale_max``]), is the scale. One-sided: noise larger than configured is learnt, smaller is not."""
+        thrust channel's to [1, ``thrust_noise_scale_max``]), is the scale. One-sided:
+        noise larger than configured is learnt, smaller is not."""
         c = self.params
         sample = (float(y @ y) - float(np.trace(HPHt))) / max(float(np.trace(Rm)), 1e-300)
         sample = min(sample, NOISE_SAMPLE_CAP)
@@ -656,7 +651,7 @@ class EsesoFilter:
         y = tau - h
         Rm = self.R_tau = self.thrust_noise(wdot_dt)
         HPHt = H @ self.P @ H.T
-        if self.params.noise_adapt_updates > 0:  # before the Huber weight, which it would learn
+        if self.params.noise_adapt_updates > 0:  # before the Huber weight (it would learn it)
             Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
         only = XI if self.params.thrust_states == "disturbance" else None
         k = self.params.thrust_huber

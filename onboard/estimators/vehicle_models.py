@@ -103,7 +103,7 @@ DRAG_REGRESSORS = ("u|u|", "v|v|", "w|w|") + TURN_LOSS_REGRESSORS
 positive (quadratic damping, the turn losses): an identified positive value would make
 the model's speed grow without bound (``v' = a v|v|`` with ``a > 0`` reaches infinity in
 finite time). The joint filter projects their estimates onto ``<= 0``
-(:meth:`.current_kf.CurrentKalmanFilter.update`)."""
+(:meth:`.current_kf.CurrentKalmanFilter._project_drag`)."""
 
 
 class RegressionModel:

@@ -12,7 +12,7 @@ import bisect
 import math
 from collections import deque
 from operator import attrgetter
-from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
+from typing import Any, Callable, Mapping, Protocol, Sequence, runtime_checkable
 
 from onboard.core.config import Config
 from onboard.core.messages import Innovation, Sample
@@ -71,7 +71,18 @@ def unused_measurement(channel: str, t: float, dof: int, reason: str,
                       nis=nan, dof=dof, accepted=False, reason=reason, source=source)
 
 
-_sample_time = attrgetter("t")
+sample_time: Callable[[Sample], float] = attrgetter("t")
+"""The sort key of samples: their time (s); the sort is stable, so arrival order breaks
+ties."""
+
+
+def split_at(samples: list[Sample], horizon: float) -> tuple[list[Sample], list[Sample]]:
+    """``samples`` sorted by time in place, split into those stamped at or before
+    ``horizon`` (s) and the newer ones."""
+    if len(samples) > 1:
+        samples.sort(key=sample_time)
+    cut = bisect.bisect_right(samples, horizon, key=sample_time)
+    return samples[:cut], samples[cut:]
 
 
 class LateSampleHold:
@@ -130,12 +141,9 @@ class LateSampleHold:
         if not self.hold_s and not self._held:
             self._horizon = t
             return t, samples
-        held = self._held
-        held.extend(samples)
-        held.sort(key=_sample_time)
+        self._held.extend(samples)
         horizon = max(self._horizon, t - self.hold_s)
-        cut = bisect.bisect_right(held, horizon, key=_sample_time)
-        due, self._held = held[:cut], held[cut:]
+        due, self._held = split_at(self._held, horizon)
         self._horizon = horizon
         return horizon, due
 

@@ -340,11 +340,11 @@ def gavia_coefficient_table() -> str:
     states = {k: gavia_model(k) for k in ("one-rpm", "rpm-steps")}
     lines = ["| DOF | term | plant | one-rpm | rpm-steps |", "|---|---|---|---|---|"]
     for ch, terms in GAVIA_TABLE_TERMS.items():
+        first = sum(len(model.terms[c]) for c in model.dofs[:model.dofs.index(ch)])
         for k in terms:
+            i = first + model.terms[ch].index(k)  # the term's index in the covariance
             cells = []
             for st in states.values():
-                i = sum(len(model.terms[c]) for c in model.dofs[:model.dofs.index(ch)])
-                i += model.terms[ch].index(k)
                 sd = math.sqrt(st["theta_cov"][i][i])
                 cells.append(f"{st['thetas'][ch][k]:+.3f} ± {sd:.3f}")
             name = k.replace("|", "\\|")  # a bare | ends a markdown table cell
