@@ -52,18 +52,18 @@ bench: $(STAMP)
 # Recompute every figure into docs/figures.json and regenerate the README's "What it
 # estimates" table and the docs pages' generated tables from it (docs/reproducing.md;
 # of the order of 40 min on 2 cores; commit docs/figures.json, README.md and docs/). One estimator
-# only: $(BIN)/onboard validate --only 'aie.*' --write docs/figures.json --readme README.md --docs docs
+# only: $(BIN)/python -m validation figures --only 'aie.*' --write docs/figures.json --readme README.md --docs docs
 figures: $(STAMP)
-	$(BIN)/onboard validate --write docs/figures.json --readme README.md --docs docs \
+	$(BIN)/python -m validation figures --write docs/figures.json --readme README.md --docs docs \
 	  --results docs/results.csv
 
 docs: $(STAMP)
-	$(BIN)/onboard validate --readme README.md --docs docs --results docs/results.csv
+	$(BIN)/python -m validation figures --readme README.md --docs docs --results docs/results.csv
 
 clean:
 	rm -rf $(VENV) replay-out diagnose-out .pytest_cache
 
 install:
-	$(PYTHON) -m onboard.tools.install --destdir "$(DESTDIR)" --prefix "$(PREFIX)" \
+	$(PYTHON) -m onboard.apps.install --destdir "$(DESTDIR)" --prefix "$(PREFIX)" \
 	  --sysconfdir "$(SYSCONFDIR)" --unitdir "$(UNITDIR)" --credstore "$(CREDSTORE)" \
 	  --pip-args="$(PIP_ARGS)"

@@ -22,7 +22,7 @@ from onboard.core.messages import Sample
 
 TIME_JUMP_S = 10.0
 """Stamps this far apart (s), either way, are for the time line to judge
-(``onboard.timeline.TIME_JUMP_S``, the same figure: a test checks it). The CSV and
+(``onboard.engine.timeline.TIME_JUMP_S``, the same figure: a test checks it). The CSV and
 DataFlash readers apply the time line's rule to their rows themselves (a single bad stamp
 is their ``"time_outlier"``). The tlog, NMEA and DVL readers drop a sample a little older
 than the newest they emitted (``"time_backwards"``) but pass one this much older on to

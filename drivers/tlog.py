@@ -308,7 +308,7 @@ class TlogReader:
 _PARAM_VALUE = "PARAM_VALUE"
 _GCS_MAV_TYPES = frozenset({6, 18, 26})
 """HEARTBEAT MAV_TYPEs of ground stations, companion computers, gimbals: not the vehicle
-(as in :mod:`onboard.autodetect`)."""
+(as in :mod:`onboard.offline.autodetect`)."""
 
 
 def scan_header(path: str | os.PathLike) -> tuple[list[VehicleInfo], list[Parameter]]:

@@ -58,7 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-state", action="store_true",
                    help="keep the adaptive state in demo-out/state and restore it next run "
                         "(default: a fresh temporary state)")
-    p.set_defaults(handler="onboard.tools.demo:main")
+    p.set_defaults(handler="onboard.apps.demo:main")
 
     p = sub.add_parser("sitl", help="the simulator alone, emitting real protocols")
     p.add_argument("--list", action="store_true", help="list the scenarios")
@@ -97,7 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "as GeoJSON (lon/lat, RFC 7946) to FILE")
     p.add_argument("--gpx", metavar="FILE",
                    help="also write the tracks (one per pipeline and run) as GPX 1.1 to FILE")
-    p.set_defaults(handler="onboard.replay:main")
+    p.set_defaults(handler="onboard.offline.replay:main")
 
     p = sub.add_parser("diagnose", help="residuals, the missing effect, before/after")
     p.add_argument("log", metavar="LOG")
@@ -108,7 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--write-config", metavar="FILE",
                    help="write what the diagnosis found as a TOML config overlay, to pass "
                         "after the config: --config BASE --config FILE")
-    p.set_defaults(handler="onboard.diagnose:main")
+    p.set_defaults(handler="onboard.offline.diagnose:main")
 
     p = sub.add_parser("shore", help="live view of a vehicle's estimates from Zenoh")
     _add_zenoh_flags(p)
@@ -119,49 +119,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--foxglove", metavar="[HOST:]PORT", help="also serve the records to "
                    "Foxglove on a WebSocket server there (needs the foxglove extra; "
                    "docs/foxglove.md)")
-    p.set_defaults(handler="onboard.tools.shore:main")
+    p.set_defaults(handler="onboard.apps.shore:main")
 
     p = sub.add_parser("bench", help="performance figures")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.set_defaults(handler="onboard.tools.bench:main")
-
-    p = sub.add_parser("validate", help="recompute the README's and the docs tables' "
-                       "figures; write or check docs/figures.json, regenerate the tables")
-    p.add_argument("--only", action="append", default=None, metavar="PATTERN",
-                   help="figures whose name matches this glob or prefix (repeatable), "
-                        "e.g. 'aie.*' or current.gavia_tidal")
-    p.add_argument("--write", metavar="FILE", help="write the figures to FILE (merged into "
-                   "it when it exists), e.g. docs/figures.json")
-    p.add_argument("--check", metavar="FILE", help="compare with FILE; exit 1 when a "
-                   "figure is outside its tolerance")
-    p.add_argument("--readme", metavar="FILE", help="rewrite FILE's figures block from the "
-                   "file written (alone: from docs/figures.json, nothing recomputed)")
-    p.add_argument("--docs", metavar="DIR", help="rewrite the generated tables of the pages "
-                   "in DIR (e.g. docs) from the file written (alone: from "
-                   "docs/figures.json, nothing recomputed)")
-    p.add_argument("--results", metavar="FILE", help="write the results file (CSV: name, "
-                   "scenario, seed, value, unit, reference) from the file written (alone: "
-                   "from docs/figures.json), e.g. docs/results.csv")
-    p.set_defaults(handler="onboard.tools.figures:main")
-
-    p = sub.add_parser("tune", help="tune a filter's noise parameters by the common "
-                       "protocol and evaluate it on held-out runs (onboard/tools/tuning.py)")
-    p.add_argument("variants", nargs="*", metavar="VARIANT",
-                   help="aie, kf or an ablation variant (see --list)")
-    p.add_argument("--list", action="store_true", help="list the variants")
-    p.add_argument("--budget", type=int, default=None,
-                   help="objective evaluations per variant (default: the protocol's)")
-    p.add_argument("--no-tune", action="store_true",
-                   help="evaluate the shipped defaults only")
-    p.add_argument("--out", metavar="FILE", help="merge the results into this JSON file")
-    p.add_argument("--page", metavar="FILE", help="rewrite the ablation table of this page "
-                   "(docs/aie.md) from --out (alone: from docs/tuning.json)")
-    p.set_defaults(handler="onboard.tools.tuning:main")
+    p.set_defaults(handler="onboard.apps.bench:main")
 
     p = sub.add_parser("design-gain", help="solve the high-gain observer LMI offline")
     p.add_argument("--config", required=True)
     p.add_argument("--out", help="write the gain here (default: beside the config)")
-    p.set_defaults(handler="onboard.tools.design_gain:main")
+    p.set_defaults(handler="onboard.apps.design_gain:main")
     return parser
 
 

@@ -7,7 +7,7 @@ Real field logs are looked up in $ONBOARD_DATA or ../shared/data. Every test not
 ``make test`` runs the suite on every core (pytest-xdist, ``--dist loadscope``). One worker
 runs each module whole (its module-scoped fixtures are computed once), and the modules of
 ``FIGURE_RUN_MODULES`` together (they read the same memoised simulator runs,
-``onboard.tools.reports.runs``, which a second worker would fly again).
+``validation.reports.runs``, which a second worker would fly again).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 FIGURE_RUN_MODULES = frozenset({"test_figures", "test_aie_sitl", "test_closed_loop",
                                 "test_current_sitl", "test_diagnose_sitl"})
-"""Test modules that share the runs memoised in ``onboard.tools.reports.runs`` (the
+"""Test modules that share the runs memoised in ``validation.reports.runs`` (the
 default suite's figures recompute the AIE, current, closed-loop and diagnosis runs these
 modules assert on): one unit of work for pytest-xdist, so each run is flown once."""
 FIGURE_RUN_GROUP = "figure-runs"

@@ -211,7 +211,7 @@ def test_create_decodes_the_config_and_names_bad_keys() -> None:
 
 
 def test_bench_step_ratio_reports_both_timings() -> None:
-    from onboard.tools.bench import aie_step_ratio
+    from onboard.apps.bench import aie_step_ratio
 
     r = aie_step_ratio(n=300, repeats=1)
     assert set(r) == {"aie_axis_step_us", "filterpy_kf3_step_us", "ratio"}

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from onboard.tools.reports.aie_validation import (
+from validation.reports.aie_validation import (
     blueboat_metrics,
     blueboat_runs,
     identify_blueboat,

@@ -2,7 +2,7 @@
 
 The README's figures of these runs (speed and heading RMSE per filter and seed, the GNSS
 outage) are recomputed and checked against docs/figures.json by tests/test_figures.py,
-on the same runs (``onboard/tools/reports/runs.py`` flies each once per session). The
+on the same runs (``validation/reports/runs.py`` flies each once per session). The
 tests here state the claims those figures support (orderings, goals, convergence,
 coverage), with the goal named where it is not met.
 Both filters run with the defaults of the common tuning protocol (docs/aie.md section
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import pytest
 
-from onboard.tools.reports import runs
-from onboard.tools.reports.aie_validation import convergence_step, run_sitl, sitl_metrics
+from validation.reports import runs
+from validation.reports.aie_validation import convergence_step, run_sitl, sitl_metrics
 
 
 @pytest.fixture(scope="module")
@@ -148,7 +148,7 @@ def test_receiver_accuracy_as_noise_through_a_multipath_period() -> None:
     configured 1.5 m always, RMSE 40-90 s. Full 300 s runs on seeds 1-3: docs/aie.md."""
     import numpy as np
 
-    from onboard.tools.reports.aie_validation import _rmse
+    from validation.reports.aie_validation import _rmse
 
     sc = _degraded("jaiabot-turns", 30.0, 60.0, 5.0)
     res = {}

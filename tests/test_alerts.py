@@ -3,8 +3,8 @@ another, and the list is bounded."""
 
 from __future__ import annotations
 
-from onboard import alerts as alerts_mod
-from onboard.alerts import Alerts
+from onboard.monitor import alerts as alerts_mod
+from onboard.monitor.alerts import Alerts
 
 
 def test_a_repeated_warning_extends_its_span_and_counts() -> None:

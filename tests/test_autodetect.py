@@ -1,6 +1,6 @@
 """Vehicle class and input mapping are detected from HEARTBEAT and SERVOn_FUNCTION."""
 
-from onboard.autodetect import detect
+from onboard.offline.autodetect import detect
 from onboard.core.messages import Parameter, VehicleInfo
 
 
@@ -44,7 +44,7 @@ def test_submarine_with_rudder_and_elevator_is_a_torpedo_auv():
 
 
 def test_a_boat_configuration_on_a_submarine_log_is_a_class_mismatch():
-    from onboard.autodetect import consistency
+    from onboard.offline.autodetect import consistency
     from onboard.core import config
 
     sub = VehicleInfo(t=1, system_id=1, component_id=1, mav_type=12, autopilot=3)
@@ -54,7 +54,7 @@ def test_a_boat_configuration_on_a_submarine_log_is_a_class_mismatch():
 
 
 def test_five_of_six_rov_motors_is_an_incomplete_mapping():
-    from onboard.autodetect import consistency
+    from onboard.offline.autodetect import consistency
     from onboard.core import config
 
     five = [p(f"SERVO{i}_FUNCTION", 32 + i) for i in range(1, 6)]   # Motor1-5

@@ -28,8 +28,8 @@ import msgspec
 import pytest
 
 from onboard.core.messages import EstimateRecord, HealthRecord
-from onboard.tools.demo import run_demo
-from onboard.tools.service_bench import free_tcp_port, free_udp_port
+from onboard.apps.demo import run_demo
+from onboard.apps.service_bench import free_tcp_port, free_udp_port
 
 pytestmark = pytest.mark.integration
 

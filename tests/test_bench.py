@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from onboard.tools import bench
+from onboard.apps import bench
 
 
 def _env() -> dict[str, str]:
@@ -54,11 +54,11 @@ def test_table_names_every_figure_and_its_goal(monkeypatch):
     rep = bench.Report()
     rep.values["replay_vs_pymavlink_parse"] = 0.31
     rep.values["pipeline_step_us"] = {"nav": 12.0}
-    rep.missing(bench.SERVICE_KEYS, "module onboard.tools.service_bench missing")
+    rep.missing(bench.SERVICE_KEYS, "module onboard.apps.service_bench missing")
     text = bench.table(rep)
     for key in bench.KEYS:
         assert key in text
-    assert "not available: module onboard.tools.service_bench missing" in text
+    assert "not available: module onboard.apps.service_bench missing" in text
     assert "<= 0.5" in text and "<= 0.03" in text and "< 50" in text and "<= 1.5" in text
 
 

@@ -4,7 +4,7 @@
 controller, the ESESO in the loop through the onboard engine; metrics after 10 s. The
 full 240 s figures are in docs/eseso-mpc.md. Solve times are reported, never asserted.
 These 30 s runs are also figures of docs/figures.json (``eseso.circle_30s.*``), checked by
-tests/test_figures.py on the same runs (``onboard/tools/reports/runs.py``).
+tests/test_figures.py on the same runs (``validation/reports/runs.py``).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import pytest
 
 pytest.importorskip("casadi", reason="the MPCs need the 'mpc' extra (casadi)")
 
-from onboard.tools.reports import runs as figure_runs  # noqa: E402
+from validation.reports import runs as figure_runs  # noqa: E402
 from onboard.sitl import closed_loop  # noqa: E402
 
 DURATION = 30.0

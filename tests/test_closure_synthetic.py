@@ -18,11 +18,11 @@ import math
 import numpy as np
 import pytest
 
-from onboard.closure import report
-from onboard.closure.dataset import from_arrays
-from onboard.closure import model as M
-from onboard.closure.effects import ALL
-from onboard.closure.select import select, split
+from onboard.offline.closure import report
+from onboard.offline.closure.dataset import from_arrays
+from onboard.offline.closure import model as M
+from onboard.offline.closure.effects import ALL
+from onboard.offline.closure.select import select, split
 
 
 def synth(seed=0, T=600.0, dt=0.1, current=(0.0, 0.0), dev=(0.0, 0.0), gyro_bias=0.0,

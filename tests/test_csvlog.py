@@ -22,7 +22,7 @@ from onboard.core.messages import (
     Heading,
     VelocityOverGround,
 )
-from onboard.inputs import InputMapper
+from onboard.engine.inputs import InputMapper
 
 FMT = CsvFormat(time="ms", time_scale=0.001, lat_deg="lat", lon_deg="lon", heading="hdg",
                 heading_unit="deg", yaw_rate="r", surge_mps="u", sway_mps="v", depth_m="d",

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import onboard.tools.reports.current_validation as cv
+import validation.reports.current_validation as cv
 
 pytestmark = [pytest.mark.data, pytest.mark.slow]
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import pytest
 
-import onboard.tools.reports.current_validation as cv
+import validation.reports.current_validation as cv
 
 pytestmark = pytest.mark.data
 

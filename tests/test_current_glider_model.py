@@ -27,7 +27,7 @@ from onboard.core.messages import (
 )
 from onboard.drivers.csvlog import CsvReader
 from onboard.estimators.vehicle_models import GliderModel
-from onboard.inputs import InputMapper
+from onboard.engine.inputs import InputMapper
 
 CURRENT = (-0.2, 0.05)  # north, east (m/s)
 GLIDER = {"lift_kl": 387.6, "lift_kl0": 0.0, "drag_kd0": 7.72, "drag_kd": 539.8,

@@ -27,7 +27,7 @@ from onboard.core.config import load
 from onboard.core.messages import Attitude, Heading, VelocityOverGround
 from onboard.drivers.mavlink import MavlinkParser
 from onboard.pipelines.current_samples import VELOCITY_HEADING_HOLD_S, CurrentSamples
-from onboard.replay import replay
+from onboard.offline.replay import replay
 from onboard.sitl.emitters import MAV_TYPE_SUBMARINE, MavlinkEncoder
 from onboard.sitl.runner import read_truth, run_to_tlog
 

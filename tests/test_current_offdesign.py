@@ -13,7 +13,7 @@ import math
 
 import pytest
 
-import onboard.tools.reports.current_validation as cv
+import validation.reports.current_validation as cv
 from onboard.estimators.vehicle_models import RegressionModel
 
 SURGE = ("u|u|", "sin(theta)", "n|n|")

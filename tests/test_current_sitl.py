@@ -2,10 +2,10 @@
 
 Mode (a) "configured model" uses coefficients identified by the pipeline itself in a
 calm-water run of the same vehicle and mission (WVAM step 1), see
-onboard/tools/reports/current_validation.py. Measured figures (seed 1, full durations) are in
+validation/reports/current_validation.py. Measured figures (seed 1, full durations) are in
 the comments; the bounds leave margin for other seeds. Long runs are marked slow.
 The runs that are also README figures (``current.*`` in docs/figures.json, checked by
-tests/test_figures.py) come from ``onboard/tools/reports/runs.py``, flown once per session.
+tests/test_figures.py) come from ``validation/reports/runs.py``, flown once per session.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import onboard.tools.reports.current_validation as cv
-from onboard.tools.reports import runs
+import validation.reports.current_validation as cv
+from validation.reports import runs
 
 
 def _mode_a(scenario: str, config: str, duration: float, **extra):

@@ -1,4 +1,4 @@
-"""Magnetic headings made true (onboard/declination.py): the World Magnetic Model's value
+"""Magnetic headings made true (onboard/engine/declination.py): the World Magnetic Model's value
 against its published test values, the engine's rule for each heading, and the end
 result: an NMEA log with magnetic headings (HDM) at a place with 12 degrees of
 declination shows no false cross-track current.
@@ -17,7 +17,7 @@ import pytest
 from onboard.cli import main as cli_main
 from onboard.core.config import Config, ConfigError, Corrections, from_dict
 from onboard.core.messages import GnssFix, Heading
-from onboard.declination import (
+from onboard.engine.declination import (
     WAIT_FOR_FIX_S,
     DeclinationCorrector,
     decimal_year,
@@ -111,7 +111,7 @@ def test_without_a_position_magnetic_headings_wait_then_pass_uncorrected_with_a_
 def test_the_model_is_evaluated_once_a_run_not_per_sample(monkeypatch):
     """pygeomag is pure Python (~1 ms a call): the engine evaluates it at the first fix
     only; each magnetic heading after that is one addition."""
-    import onboard.declination as declination
+    import onboard.engine.declination as declination
 
     calls = []
     real = declination.wmm_declination

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from onboard.core.messages import EstimateRecord
-from onboard.tools.demo import main, run_demo, score
-from onboard.tools.service_bench import free_tcp_port
+from onboard.apps.demo import main, run_demo, score
+from onboard.apps.service_bench import free_tcp_port
 from onboard.sitl.truth import TruthRecord
 
 
@@ -102,7 +102,7 @@ def test_demo_truth_table_shows_filters_beating_the_raw_speed_and_no_phantom_cur
 
 
 def test_current_is_known_only_once_its_sigma_has_stayed_small():
-    from onboard.tools.demo import CURRENT_SETTLE_S, current_known
+    from onboard.apps.demo import CURRENT_SETTLE_S, current_known
 
     def rec(t: float, sd: float) -> EstimateRecord:
         return EstimateRecord(vehicle="v", pipeline="current", t=t,
@@ -123,5 +123,5 @@ def test_current_is_known_only_once_its_sigma_has_stayed_small():
     assert rows["current.north"].n == 0 and rows["current.north"].total == 50
     full = {r.column: r for r in score(hist, truth)}["current.north"]
     assert 0 < full.n < 300 and full.rmse == pytest.approx(0.3)   # 0.5 vs 0.2 once known
-    from onboard.tools.demo import format_scores
+    from onboard.apps.demo import format_scores
     assert "unknown" in format_scores(list(rows.values()))

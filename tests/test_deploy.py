@@ -169,7 +169,7 @@ def test_a_vehicle_listening_on_tls_uses_its_key_and_certificate_from_credential
 
     from onboard.core.messages import EstimateRecord
     from onboard.service.publishers.zenoh_pub import ZenohPublisher, session_config
-    from onboard.tools.service_bench import free_tcp_port
+    from onboard.apps.service_bench import free_tcp_port
 
     certs = make_test_certificates(tmp_path)
     creds = tmp_path / "credentials"
@@ -342,7 +342,7 @@ def test_recorder_errors_reach_health_and_statustext_and_no_fsync_runs_on_the_lo
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
     from onboard.service.daemon import Service
-    from onboard.tools.service_bench import free_udp_port
+    from onboard.apps.service_bench import free_udp_port
     from tests.helpers.mavlink_listener import receive_mavlink
     from tests.helpers.service_config import service_config
 
@@ -405,7 +405,7 @@ def test_recorder_errors_reach_health_and_statustext_and_no_fsync_runs_on_the_lo
 # --------------------------------------------------------------------------- make install
 
 def test_a_staged_install_puts_config_unit_and_credential_store_in_place_and_keeps_local_edits(tmp_path):
-    from onboard.tools.install import main
+    from onboard.apps.install import main
 
     stage = tmp_path / "stage"
     assert main(["--destdir", str(stage), "--no-venv"]) == 0
@@ -439,7 +439,7 @@ def test_make_install_into_a_prefix_gives_a_venv_and_a_unit_that_systemd_analyze
     assert r.returncode == 0, r.stdout + r.stderr
     venv_python = Path(p["opt"]) / "venv" / "bin" / "python"
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    where = subprocess.run([str(venv_python), "-c", "import onboard.tools.install as m; print(m.__file__)"],
+    where = subprocess.run([str(venv_python), "-c", "import onboard.apps.install as m; print(m.__file__)"],
                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
     assert where.stdout.strip().startswith(p["opt"] + "/venv/lib/"), where.stdout + where.stderr
     unit = Path(p["unit"]) / "onboard.service"

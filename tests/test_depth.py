@@ -1,4 +1,4 @@
-"""Pressure to depth and the surface/submerged mode (onboard.depth)."""
+"""Pressure to depth and the surface/submerged mode (onboard.engine.depth)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import pytest
 
 from onboard.core.config import DepthNoise
 from onboard.core.messages import Depth, Pressure
-from onboard.depth import GRAVITY, SUBMERGED, SURFACE, DepthMode
+from onboard.engine.depth import GRAVITY, SUBMERGED, SURFACE, DepthMode
 
 
 def test_pressure_becomes_depth_by_hydrostatics():

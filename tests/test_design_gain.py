@@ -15,7 +15,7 @@ from onboard.estimators.hgo import GainDesign, chain_matrices
 
 def test_lmi_solution_is_verified_and_well_scaled():
     pytest.importorskip("cvxpy", reason="the LMI design needs the 'design' extra (cvxpy)")
-    from onboard.tools.design_gain import solve_lmi
+    from onboard.apps.design_gain import solve_lmi
     sol = solve_lmi(2, 3)
     A, C = chain_matrices(2, 3)
     Acl = A - sol["K"] @ C
@@ -29,7 +29,7 @@ def test_lmi_solution_is_verified_and_well_scaled():
 
 def test_command_writes_a_gain_the_pipeline_loads(tmp_path):
     pytest.importorskip("cvxpy", reason="the LMI design needs the 'design' extra (cvxpy)")
-    from onboard.tools.design_gain import main
+    from onboard.apps.design_gain import main
     out = tmp_path / "gain.json"
     assert main(argparse.Namespace(config="torpedo-auv", out=str(out))) == 0
     data = json.loads(out.read_text())

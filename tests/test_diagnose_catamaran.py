@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from onboard.closure import dataset as D
-from onboard.closure.effects import ALL
-from onboard.closure.select import split
+from onboard.offline.closure import dataset as D
+from onboard.offline.closure.effects import ALL
+from onboard.offline.closure.select import split
 from onboard.core import config
-from onboard.tools import diagnose_campaign as campaign
+from validation import diagnose_campaign as campaign
 
 CFG = Path(__file__).resolve().parent.parent / "config" / "sitl-catamaran.toml"
 LATENCY = ALL["gps_latency"]

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 from onboard.core import config
-from onboard.diagnose import diagnose
-from onboard.replay import choose_config
+from onboard.offline.diagnose import diagnose
+from onboard.offline.replay import choose_config
 
 pytestmark = pytest.mark.data
 

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from onboard.closure import report
-from onboard.closure.dataset import from_arrays
-from onboard.closure.effects import ALL
-from onboard.closure.select import select
+from onboard.offline.closure import report
+from onboard.offline.closure.dataset import from_arrays
+from onboard.offline.closure.effects import ALL
+from onboard.offline.closure.select import select
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "diagnose.md"
 BEGIN, END = "<!-- effect-table:begin -->", "<!-- effect-table:end -->"
@@ -133,7 +133,7 @@ def test_docs_effect_table_is_the_generated_one():
     in_doc = text.split(BEGIN)[1].split(END)[0].strip() + "\n"
     assert in_doc == report.effect_table_markdown(), (
         "docs/diagnose.md's effect table is out of date; paste the output of "
-        "`python -c 'from onboard.closure.report import effect_table_markdown as f; "
+        "`python -c 'from onboard.offline.closure.report import effect_table_markdown as f; "
         "print(f())'` between the markers")
 
 

@@ -7,7 +7,7 @@ Before the fix a single run of less than ~160 s left the selection part empty (6
 blocks, every third for selection) and the first effect or generic basis on it raised
 (numpy ``gradient`` or a zero-size ``max``): the survey boat's Test2-6, 12 of the 16
 single BlueBoat runs, half of ``small.tlog``. Such runs now get shorter blocks; below
-:data:`onboard.closure.dataset.MIN_DATA_S` (50 s) they are refused (docs/diagnose.md,
+:data:`onboard.offline.closure.dataset.MIN_DATA_S` (50 s) they are refused (docs/diagnose.md,
 "What diagnose refuses").
 """
 
@@ -26,8 +26,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from onboard import cli
-from onboard.closure.dataset import MIN_DATA_S, NotEnoughData, from_arrays
-from onboard.closure.select import MIN_PART_S, split
+from onboard.offline.closure.dataset import MIN_DATA_S, NotEnoughData, from_arrays
+from onboard.offline.closure.select import MIN_PART_S, split
 from onboard.drivers import nmea
 
 REPO = Path(__file__).resolve().parent.parent

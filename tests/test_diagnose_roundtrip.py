@@ -24,7 +24,7 @@ from onboard.drivers.logs import open_log
 from onboard.cli import main
 from onboard.core import config
 from onboard.engine import Engine
-from onboard.plots import read_columns
+from onboard.offline.plots import read_columns
 from onboard.sitl.effects import Effect
 from onboard.sitl.runner import read_truth, run_to_tlog
 from onboard.sitl.scenarios import get

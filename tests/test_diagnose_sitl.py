@@ -10,7 +10,7 @@ measured figure (seed 1).
 
 Five scenarios run in the default suite (both boats' clean logs, current, compass
 deviation, two effects); the rest, and the campaigns over seeds 1-10
-(:mod:`onboard.tools.diagnose_campaign`), are marked slow (``pytest -m slow``), about
+(:mod:`validation.diagnose_campaign`), are marked slow (``pytest -m slow``), about
 30 s of CPU per log.
 """
 
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from onboard.tools import diagnose_campaign as campaign
-from onboard.tools.reports import runs
+from validation import diagnose_campaign as campaign
+from validation.reports import runs
 
 CFG = Path(__file__).resolve().parent.parent / "config" / "sitl-rudder-boat.toml"
 TWIN_CFG = Path(__file__).resolve().parent.parent / "config" / "sitl-twin-thruster.toml"

@@ -1,6 +1,6 @@
 """``onboard diagnose`` on effects outside its catalog (issue 16, item 2).
 
-Each scenario injects an effect no module of ``onboard/closure/effects`` describes; the
+Each scenario injects an effect no module of ``onboard/offline/closure/effects`` describes; the
 diagnosis must either name a catalog effect that truly matches it (with what is
 different, e.g. drift per window) or report ``unexplained`` with the channel and the
 regressor that carries the structure, and never force the nearest name. Seed 1, the
@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from onboard.core import config
-from onboard.diagnose import diagnose
+from onboard.offline.diagnose import diagnose
 from onboard.sitl.runner import run_to_tlog
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
@@ -49,7 +49,7 @@ def test_rotating_current_is_a_current_whose_drift_is_reported(tmp_path):
     # measured per 96 s window: north 0.260 -> 0.149, east 0.119 -> 0.272 m/s; slopes
     # -1.19 +- 0.40 and +1.44 +- 0.46 m/s per hour (truth -1.18 and +1.58 at mid-run).
     # North's slope is 2.996 sigma, just short of "changing" on its own: the effect's
-    # drift lists both components once one of them changes (onboard/closure/report.py)
+    # drift lists both components once one of them changes (onboard/offline/closure/report.py)
     assert drift["north"]["slope_per_hour"] < 0 < drift["east"]["slope_per_hour"]
     assert drift["north"]["last"] < drift["north"]["first"] - 0.08
     # a constant current does not hold on the test part: 0.180 m/s there against 0.106

@@ -462,7 +462,7 @@ def test_the_citation_check_flags_missing_sections_and_pages(tmp_path: Path) -> 
     page = tmp_path / "page.md"
     page.write_text("[gone](gone.md), `onboard/pipelines/aie_pipeline.py`, "
                     "`onboard.reports.aie_validation`, `onboard.engine.NoSuchThing`; fine: "
-                    f"[here]({page.name}), `onboard/engine.py`, `onboard.engine.Engine`, "
+                    f"[here]({page.name}), `onboard/engine/engine.py`, `onboard.engine.Engine`, "
                     "`/etc/onboard/onboard.toml`.\n")
     assert stale_references(page) == ["gone.md", "onboard.engine.NoSuchThing",
                                       "onboard.reports.aie_validation",

@@ -188,7 +188,7 @@ class Broken(Recorder):
 
 
 def test_a_failing_pipeline_is_counted_restarted_and_the_others_carry_on(monkeypatch):
-    import onboard.engine as engine_mod
+    import onboard.engine.engine as engine_mod
 
     monkeypatch.setattr(engine_mod, "build", lambda cfg, only=None: [Broken()])
     rec = Recorder()
@@ -246,7 +246,7 @@ class WithStd(Recorder):
 def test_std_columns_follow_the_pipeline_also_after_a_restart(monkeypatch):
     """The ``std_<q>`` columns are read from each pipeline's columns when it is built or
     restarted, by its name."""
-    import onboard.engine as engine_mod
+    import onboard.engine.engine as engine_mod
 
     monkeypatch.setattr(engine_mod, "build", lambda cfg, only=None: [WithStd()])
     eng = Engine(Config(), [WithStd(), Recorder()])
@@ -281,7 +281,7 @@ class _FastAie:
 
 
 def test_a_speed_that_disagrees_with_the_doppler_speed_is_flagged_in_the_health_record():
-    """The integrity monitor's ``speed_mismatch`` (onboard/integrity.py) reaches the health
+    """The integrity monitor's ``speed_mismatch`` (onboard/monitor/integrity.py) reaches the health
     record's flags (and from there ESTIMATOR_STATUS) and the warnings, as the other
     checks do: 2.0 m/s published against fixes at 1.2 m/s over ground."""
     eng = Engine(Config(), pipelines=[_FastAie()])

@@ -239,7 +239,7 @@ def test_reset_jacobian_keeps_attitude_covariance_consistent() -> None:
 
 
 def test_bench_step_cost_reports_per_tick_figures() -> None:
-    from onboard.tools.bench import eseso_step_cost
+    from onboard.apps.bench import eseso_step_cost
 
     res = eseso_step_cost(2.0)
     assert {"per_tick_us_p50", "per_tick_us_p99", "per_imu_sample_us"} <= set(res)

@@ -22,7 +22,7 @@ from onboard.core import config
 
 @pytest.fixture(scope="module")
 def replayed(tmp_path_factory) -> tuple[list[dict], list[dict], dict]:
-    from onboard.replay import replay
+    from onboard.offline.replay import replay
     from onboard.sitl.runner import run_to_tlog
 
     d = tmp_path_factory.mktemp("rov")

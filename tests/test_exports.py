@@ -12,7 +12,7 @@ import pytest
 
 from onboard.cli import main as cli_main
 from onboard.core.geo import LocalFrame
-from onboard.geojson import ARROW_SCALE_S, feature_collection
+from onboard.offline.exports import ARROW_SCALE_S, feature_collection
 
 REPO = Path(__file__).resolve().parents[1]
 JAIABOT = REPO / "tests/data/replay/jaiabot-turns.tlog"
@@ -125,7 +125,7 @@ def test_track_png_draws_positions_one_line_per_run_and_the_current_apart():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from onboard.plots import track_figure
+    from onboard.offline.plots import track_figure
 
     cols = {"t": [0.0, 0.1, 0.2, 0.3], "run": [0.0, 0.0, 1.0, 1.0],
             "aie.north": [0.0, 1.0, 50.0, 51.0], "aie.east": [0.0, 0.0, 0.0, 0.0],

@@ -6,7 +6,7 @@ hidden truth or the service's own counters:
 * SITL faults (``sitl.scenarios`` ``fault-*``, declared sensor faults of
   :mod:`sitl.effects`): the SITL child emits MAVLink over UDP, NMEA on a pty and DVL JSON
   over TCP; the in-process service runs on a clock shared with the simulator, scaled
-  ``SPEED`` times faster than the wall clock (``onboard.tools.demo.run_demo``); estimates are
+  ``SPEED`` times faster than the wall clock (``onboard.apps.demo.run_demo``); estimates are
   taken from an independent Zenoh subscriber behind an in-process router;
 * the Zenoh router restarted under a running service (wall clock: Zenoh's reconnection
   runs on it);
@@ -42,7 +42,7 @@ import pytest
 from onboard.drivers.recording import read_records
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import EstimateRecord, HealthRecord
-from onboard.tools.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
+from onboard.apps.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
 from tests.helpers.service_config import service_config
 
 pytestmark = pytest.mark.integration
@@ -68,7 +68,7 @@ def _fly(scenario: str, duration_s: float, tmp_path: Path, speed: float = SPEED)
     A run that fell behind the shared clock by more than ``MAX_LATE_S`` (the simulator's
     emission or the service's ticks: the machine was too busy for ``speed``) is flown
     again at half the speed, down to ``MIN_SPEED``."""
-    from onboard.tools.demo import run_demo
+    from onboard.apps.demo import run_demo
     from onboard.sitl.runner import read_truth
 
     while True:

@@ -1,17 +1,17 @@
 """The README's figures against docs/figures.json, and docs/figures.json against a rerun.
 
-* The README's "What it estimates" table is the one ``onboard validate --readme`` renders
+* The README's "What it estimates" table is the one ``python -m validation figures --readme`` renders
   from docs/figures.json (so every number in it is the file's), and the file holds every
   registered figure with the registry's unit, seeds and tolerance.
-* Likewise every generated table of the docs pages (``onboard/tools/doc_tables.py``,
-  ``onboard validate --docs docs``): each block between its markers is the rendering of
+* Likewise every generated table of the docs pages (``validation/doc_tables.py``,
+  ``python -m validation figures --docs docs``): each block between its markers is the rendering of
   the file (no simulation: cheap).
-* Each figure is recomputed (``onboard/tools/figures.py``, runs shared with the other SITL
-  tests through ``onboard/tools/reports/runs.py``) and compared with the file within its
+* Each figure is recomputed (``validation/figures.py``, runs shared with the other SITL
+  tests through ``validation/reports/runs.py``) and compared with the file within its
   stated tolerance: the figures' ``default_suite_seeds`` here, every other seed and figure
   with ``-m slow`` (real-log figures also skip without ../shared/data).
 
-After an intended change of an estimator's figures: ``make figures`` (or ``onboard validate
+After an intended change of an estimator's figures: ``make figures`` (or ``python -m validation figures
 --only 'aie.*' --write docs/figures.json --readme README.md --docs docs`` for the figures
 it moved) and commit docs/figures.json, README.md and docs/ with the change.
 """
@@ -25,9 +25,9 @@ import re
 import pytest
 
 from onboard.core.errors import UsageError
-from onboard.tools import doc_tables as D
-from onboard.tools import figures as F
-from onboard.tools.reports import runs
+from validation import doc_tables as D
+from validation import figures as F
+from validation.reports import runs
 
 REGISTRY = F.registry()
 
@@ -41,7 +41,7 @@ def test_the_readme_table_is_rendered_from_the_figures_file(committed) -> None:
     block = F.readme_block(F.README.read_text(encoding="utf-8"))
     assert block == F.render_table(committed), (
         "README.md's figures block differs from docs/figures.json: run "
-        "`onboard validate --readme README.md` (or `make figures` to recompute)")
+        "`python -m validation figures --readme README.md` (or `make figures` to recompute)")
 
 
 def test_the_figures_file_holds_every_figure_as_the_registry_states_it(committed) -> None:
@@ -86,13 +86,13 @@ def test_a_stale_readme_number_is_caught(committed) -> None:
 
 def test_the_results_file_is_rendered_from_the_figures_file(committed) -> None:
     """docs/results.csv: one row per figure and seed, with its scenario and what it is
-    measured against (``onboard validate --results docs/results.csv``)."""
-    from onboard.tools import results as R
+    measured against (``python -m validation figures --results docs/results.csv``)."""
+    from validation import results as R
 
     path = F.REPO / "docs" / "results.csv"
     assert path.read_text(encoding="utf-8") == R.render(committed), (
         "docs/results.csv differs from docs/figures.json: run "
-        "`onboard validate --results docs/results.csv`")
+        "`python -m validation figures --results docs/results.csv`")
     assert R.reference("aie.jaiabot_turns.speed_rmse.aie") == "simulator truth"
     assert R.reference("aie.blueboat.speed_rmse.aie").startswith("field log")
     assert R.scenario("aie.twin_thruster_turns.speed_rmse.kf") == "twin-thruster-turns"
@@ -105,7 +105,7 @@ def test_every_docs_table_is_rendered_from_the_figures_file(table, committed) ->
     page = F.REPO / "docs" / table.page
     assert table.block(page.read_text(encoding="utf-8")) == table.render(committed), (
         f"docs/{table.page}'s generated table {table.key} differs from docs/figures.json: "
-        "run `onboard validate --docs docs` (or `make figures` to recompute)")
+        "run `python -m validation figures --docs docs` (or `make figures` to recompute)")
 
 
 def test_every_docs_table_names_registered_figures_only() -> None:
@@ -229,7 +229,7 @@ def test_figure_reproduces_slow(name: str, key: str, committed: dict) -> None:
 
 def test_validate_checks_writes_and_exits_1_on_a_figure_outside_its_tolerance(
         committed, tmp_path, capsys) -> None:
-    """``onboard validate --only ... --check ... --write ...`` on one cheap figure (its run
+    """``python -m validation figures --only ... --check ... --write ...`` on one cheap figure (its run
     is the default suite's 30 s closed loop, shared): against the committed file it passes;
     against a file whose value is moved by twice the tolerance it exits 1 and says which;
     the written file holds the figure with its unit, tolerance and versions."""
@@ -257,7 +257,7 @@ def test_validate_checks_writes_and_exits_1_on_a_figure_outside_its_tolerance(
 
 
 def test_validate_docs_alone_rerenders_without_recomputing(committed, tmp_path, capsys) -> None:
-    """``onboard validate --docs DIR`` alone re-renders the pages from docs/figures.json
+    """``python -m validation figures --docs DIR`` alone re-renders the pages from docs/figures.json
     (a stale block is rewritten, nothing is recomputed); with ``--check`` and no
     ``--write`` it is a usage error."""
     import argparse

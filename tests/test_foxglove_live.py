@@ -18,8 +18,8 @@ from onboard.core.geo import LocalFrame  # noqa: E402
 from onboard.core.messages import HEALTH_SCHEMA_VERSION, EstimateRecord, HealthRecord  # noqa: E402,E501
 from onboard.core.wire import location_fix  # noqa: E402
 from onboard.service.publishers.zenoh_pub import ZenohPublisher, open_router, session_config  # noqa: E402
-from onboard.tools.foxglove_live import FoxgloveRelay, parse_listen  # noqa: E402
-from onboard.tools.service_bench import free_tcp_port  # noqa: E402
+from onboard.apps.foxglove_live import FoxgloveRelay, parse_listen  # noqa: E402
+from onboard.apps.service_bench import free_tcp_port  # noqa: E402
 
 
 def test_listen_address_parses():

@@ -27,7 +27,7 @@ from onboard.core.config import from_dict
 from onboard.core.messages import Attitude, GnssFix, Heading
 from onboard.engine import Engine
 from onboard.service.intake import Intake
-from onboard.tools.service_bench import free_tcp_port
+from onboard.apps.service_bench import free_tcp_port
 
 DATA = Path(__file__).resolve().parent / "data" / "gpsd"
 LINES = [ln for ln in (DATA / "boat.jsonl").read_bytes().split(b"\n") if ln.strip()]

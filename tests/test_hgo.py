@@ -105,7 +105,7 @@ def test_current_gain_maps_chain_correction():
 
 def _hgo_pipeline(**section):
     from onboard.pipelines import current as current_mod
-    from onboard.tools.reports.current_validation import make_config
+    from validation.reports.current_validation import make_config
 
     return current_mod.create(make_config("torpedo-auv", {"observer": "hgo", **section}))
 

@@ -1,11 +1,11 @@
-"""The innovation summaries per channel and per source (onboard/innovations.py)."""
+"""The innovation summaries per channel and per source (onboard/monitor/innovations.py)."""
 
 from __future__ import annotations
 
 import msgspec
 
 from onboard.core.messages import HEALTH_SCHEMA_VERSION, HealthRecord, Innovation
-from onboard.innovations import InnovationMonitor
+from onboard.monitor.innovations import InnovationMonitor
 
 
 def _rec(t: float, source: str, nis: float, gate: float = 10.0) -> Innovation:

@@ -1,4 +1,4 @@
-"""The integrity monitor's checks on synthetic samples (onboard/integrity.py)."""
+"""The integrity monitor's checks on synthetic samples (onboard/monitor/integrity.py)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import sys
 import numpy as np
 import pytest
 
-from onboard.alerts import Alerts
+from onboard.monitor.alerts import Alerts
 from onboard.core.geo import LocalFrame
 from onboard.core.messages import DvlVelocity, EstimateRecord, GnssFix, Heading, Innovation
-from onboard.integrity import (
+from onboard.monitor.integrity import (
     HEADING_BOUND_RAD,
     POSITION_SIGMA_BOUND,
     HeadingCourseCheck,

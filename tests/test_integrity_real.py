@@ -1,5 +1,5 @@
 """Integrity checks on real logs: each either consistent with GNSS or flagged
-(onboard/integrity.py; issue 22's findings)."""
+(onboard/monitor/integrity.py; issue 22's findings)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from onboard.drivers.logs import open_log
 from onboard.engine import Engine, run
-from onboard.replay import choose_config
+from onboard.offline.replay import choose_config
 
 pytestmark = pytest.mark.data
 

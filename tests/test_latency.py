@@ -1,5 +1,5 @@
 """The GNSS latency: the pipelines fuse at the horizon ``tick - gnss_latency_s`` in time
-order, and the published estimates are forecast to the tick (onboard.latency); a
+order, and the published estimates are forecast to the tick (onboard.engine.latency); a
 pipeline's own hold of late samples (onboard.pipelines.base.LateSampleHold).
 
 The replay with a latency overlay is byte-compared with the reference in the harness
@@ -15,7 +15,7 @@ import pytest
 from onboard.core import config
 from onboard.core.messages import GnssFix, Heading, Sample
 from onboard.engine import Engine, TickQueue
-from onboard.latency import FixedLagQueue
+from onboard.engine.latency import FixedLagQueue
 from onboard.pipelines.base import LateSampleHold
 
 
@@ -151,7 +151,7 @@ class _FailsOnce(_Recorder):
 def test_set_state_and_a_restart_fork_again(monkeypatch):
     """A fork must not outlive the state it was copied from: after set_state, and after
     a pipeline restart (the next tick forks the new pipeline)."""
-    import onboard.engine as engine_mod
+    import onboard.engine.engine as engine_mod
 
     monkeypatch.setattr(engine_mod, "build", lambda cfg, only=None: [_FailsOnce()])
     eng = _latency_engine(_FailsOnce())

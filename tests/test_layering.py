@@ -6,27 +6,27 @@ inside functions too (a lazy import is still a dependency at run time), and so a
 module names given to ``importlib.import_module`` as string literals. Imports under
 ``if TYPE_CHECKING:`` are type hints only and do not count.
 
-The rooms, from the bottom up (docs/architecture.md has the picture):
+The rooms, from the bottom up (docs/architecture.md §2 has the picture):
 
-* ``onboard.core``: messages, configuration, errors, geometry. Imports nothing of ours.
+* ``onboard.core``: messages, configuration, errors, geometry, vehicle classes,
+  statistics. Imports nothing of ours.
 * ``onboard.estimators``: the estimation mathematics, pure; only the core.
 * ``onboard.pipelines``: the registered pipelines, thin adapters over the estimators.
 * ``drivers``: bytes to samples; only the core.
-* ``sitl``: the simulator; the core and the drivers' encoders. Its closed-loop runner
-  (``sitl.closed_loop``) also runs the onboard engine, because the closed loop is the
-  experiment.
-* ``onboard.engine``, ``onboard.validate``, ``onboard.corrections``,
-  ``onboard.declination``, ``onboard.depth``,
-  ``onboard.inputs``, ``onboard.sources``, ``onboard.latency``, ``onboard.innovations``,
-  ``onboard.timeline``: time-ordered feeding of validated, corrected samples, one source per quantity, into the
-  pipelines, and the summary of their innovations.
+* ``sitl``: the simulator; the core and the drivers' MAVLink and log writers. Its
+  closed-loop runner (``sitl.closed_loop``) also runs the onboard engine, because the
+  closed loop is the experiment.
+* ``onboard.monitor``: the innovations' summary, integrity, the warnings; only the core.
+* ``onboard.engine``: the stages of a sample's way in (time line, checks, declination,
+  corrections, depth, sources, inputs) on the core alone; the GNSS latency's horizon on the
+  pipelines; the engine itself (queue and tick) on all of them and the monitors.
 * ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
-* ``onboard.closure``: model closure on recorded logs.
-* ``onboard.replay``, ``onboard.diagnose``, ``onboard.autodetect``, ``onboard.plots``,
-  ``onboard.geojson``: the offline commands.
+* ``onboard.offline``: the offline commands: replay, autodetection, exports, the track
+  figure; the model closure above them and ``onboard diagnose`` above it.
 * ``onboard.cli``: parses arguments, dispatches by module name.
-* ``onboard.tools``: demo, shore view, benchmarks, validation reports, gain design; may
-  use everything, the simulator included.
+* ``onboard.apps``: demo, shore view, benchmarks, gain design, installer; may use
+  everything, the simulator included.
+* ``validation`` (the checkout's docs machinery, not installed): everything.
 """
 
 from __future__ import annotations
@@ -41,16 +41,15 @@ from tests.helpers.imports import REPO, imports_of, module_name
 CORE = {"onboard.core"}
 MATH = CORE | {"onboard.estimators"}
 PIPELINES = MATH | {"onboard.pipelines"}
-ENGINE = PIPELINES | {"onboard.engine", "onboard.validate", "onboard.inputs",
-                      "onboard.sources", "onboard.alerts"}
-ENGINE_PARTS = {"onboard.corrections", "onboard.depth", "onboard.latency",
-                "onboard.innovations", "onboard.integrity", "onboard.timeline",
-                "onboard.declination"}
-"""The engine's own modules: only the engine imports them."""
+MONITOR = CORE | {"onboard.monitor"}
+ENGINE = PIPELINES | MONITOR | {"onboard.engine"}
 SERVICE = ENGINE | {"onboard.drivers", "onboard.service"}
-CLOSURE = ENGINE | {"onboard.drivers", "onboard.closure", "onboard.replay", "onboard.plots",
-                    "onboard.autodetect", "onboard.service.recorder"}
-OFFLINE = CLOSURE | {"onboard.diagnose"}
+OFFLINE = ENGINE | {"onboard.drivers", "onboard.service.recorder", "onboard.offline.replay",
+                    "onboard.offline.autodetect", "onboard.offline.exports",
+                    "onboard.offline.plots"}
+CLOSURE = OFFLINE | {"onboard.offline.closure"}
+EVERYTHING = SERVICE | CLOSURE | {"onboard.offline", "onboard.apps", "onboard.cli",
+                                  "onboard.sitl"}
 
 ROOMS: dict[str, set[str]] = {
     "onboard.core": CORE,
@@ -59,27 +58,21 @@ ROOMS: dict[str, set[str]] = {
     "onboard.drivers": CORE | {"onboard.drivers"},
     "onboard.sitl": CORE | {"onboard.drivers", "onboard.sitl"},
     "onboard.sitl.closed_loop": CORE | {"onboard.drivers", "onboard.sitl", "onboard.engine"},
-    "onboard.engine": ENGINE | ENGINE_PARTS,
-    "onboard.validate": CORE,
-    "onboard.corrections": CORE | {"onboard.sources"},
-    "onboard.declination": CORE,
-    "onboard.depth": CORE,
-    "onboard.latency": PIPELINES,
-    "onboard.innovations": CORE,
-    "onboard.integrity": CORE | {"onboard.alerts", "onboard.innovations"},
-    "onboard.timeline": CORE,
-    "onboard.alerts": CORE,
-    "onboard.inputs": CORE,
-    "onboard.sources": CORE,
+    "onboard.monitor": MONITOR,
+    "onboard.engine": CORE | {"onboard.engine"},  # the package and its stages
+    "onboard.engine.latency": PIPELINES,
+    "onboard.engine.engine": ENGINE,
     "onboard.service": SERVICE,
-    "onboard.closure": CLOSURE,
-    "onboard.replay": OFFLINE | {"onboard.geojson"},
-    "onboard.diagnose": OFFLINE,
-    "onboard.autodetect": CORE,
-    "onboard.plots": set(),
-    "onboard.geojson": CORE,
+    "onboard.offline": set(),  # the package's docstring
+    "onboard.offline.autodetect": CORE,
+    "onboard.offline.exports": CORE,
+    "onboard.offline.plots": set(),
+    "onboard.offline.replay": OFFLINE,
+    "onboard.offline.closure": CLOSURE,
+    "onboard.offline.diagnose": CLOSURE,
     "onboard.cli": CORE | {"onboard"},
-    "onboard.tools": OFFLINE | SERVICE | {"onboard.tools", "onboard.cli", "onboard.sitl"},
+    "onboard.apps": EVERYTHING,
+    "validation": EVERYTHING | {"validation"},
     "onboard": {"onboard"},  # the package's __init__ and __main__
 }
 """Room -> the rooms it may import. Keys and values are module-name prefixes."""
@@ -104,7 +97,8 @@ def _allowed(target: str, allowed: set[str]) -> bool:
 
 
 def _sources() -> list[Path]:
-    return sorted(p for top in ("onboard", "drivers", "sitl") for p in (REPO / top).rglob("*.py"))
+    return sorted(p for top in ("onboard", "drivers", "sitl", "validation")
+                  for p in (REPO / top).rglob("*.py"))
 
 
 @pytest.mark.parametrize("path", _sources(), ids=lambda p: str(p.relative_to(REPO)))
@@ -117,11 +111,11 @@ def test_each_module_imports_only_the_rooms_below_it(path: Path) -> None:
     assert not wrong, f"{module} (room {own_room}) imports outside {sorted(allowed)}: {wrong}"
 
 
-def test_only_the_tools_and_the_closed_loop_runner_import_the_simulator() -> None:
+def test_only_the_apps_validation_and_the_closed_loop_runner_import_the_simulator() -> None:
     importers = {module_name(p) for p in _sources()
                  if any(_allowed(t, {"onboard.sitl"}) for _, t in imports_of(p))}
     outside = {m for m in importers
-               if not m.startswith(("onboard.sitl", "onboard.tools"))}
+               if not m.startswith(("onboard.sitl", "onboard.apps", "validation"))}
     assert not outside, f"modules outside the tools importing sitl: {sorted(outside)}"
 
 
@@ -164,8 +158,8 @@ def test_the_cli_dispatches_only_the_sitl_command_into_the_simulator() -> None:
     for name, handler in handlers.items():
         module = handler.partition(":")[0]
         if name not in COMMANDS_INTO_SITL:
-            assert _room(module) in {"onboard.service", "onboard.tools", "onboard.replay",
-                                     "onboard.diagnose"}, (name, handler)
+            assert _room(module) in {"onboard.service", "onboard.apps", "onboard.offline.replay",
+                                     "onboard.offline.diagnose"}, (name, handler)
 
 
 def test_the_layering_check_sees_a_violation(tmp_path: Path) -> None:

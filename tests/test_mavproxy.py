@@ -28,7 +28,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from onboard.core.config import from_dict
-from onboard.tools.service_bench import free_udp_port
+from onboard.apps.service_bench import free_udp_port
 from tests.helpers.service_config import service_config
 
 pytestmark = pytest.mark.integration

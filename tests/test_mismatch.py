@@ -1,4 +1,4 @@
-"""Model mismatch (sitl.mismatch, onboard.tools.reports.mismatch): the plant perturbed from
+"""Model mismatch (sitl.mismatch, validation.reports.mismatch): the plant perturbed from
 outside, the estimators and controllers on the nominal model.
 
 Default suite: the perturbations do what they say on each plant, and one short run per
@@ -140,7 +140,7 @@ def test_boat_aie_and_kf_under_the_worst_case() -> None:
     above 1.5, outside the 95 % band); the surge increments' NIS doubles (0.48 -> 0.95)
     but stays in its band, since the adaptive input-error variance (docs/aie.md) takes the
     model error in."""
-    from onboard.tools.reports.mismatch import boat_run
+    from validation.reports.mismatch import boat_run
 
     r = boat_run("worst", seed=1, duration=90.0)
     assert r["speed_rmse_mps"]["aie"] < 0.2
@@ -181,7 +181,7 @@ jaiabot-turns 200 s)."""
 
 @pytest.fixture(scope="module")
 def campaign_rov() -> dict:
-    from onboard.tools.reports.mismatch import run_campaign
+    from validation.reports.mismatch import run_campaign
 
     return run_campaign(list(mm.CASES), CAMPAIGN_SEEDS, 30.0, 200.0, 200.0, ("rov",))["rov"]
 
@@ -198,7 +198,7 @@ def test_campaign_circle_claims(campaign_rov) -> None:
             for c in ("ampc", "nmpc-of"):
                 assert tr[c] < 0.6 * tr["nmpc"], (case, seed, tr)
                 assert tr[c] < tr["pid"], (case, seed, tr)
-    from onboard.tools.reports.mismatch import ampc_against_offset_free
+    from validation.reports.mismatch import ampc_against_offset_free
 
     score = {case: ampc_against_offset_free(per) for case, per in campaign_rov.items()}
     # measured (seeds better / worse by > 2 %): nominal 3/0, mass+20 2/0, mass-20 1/0,
@@ -218,7 +218,7 @@ def test_campaign_estimator_claims() -> None:
     speed is better than the KF's in every case but doubled sensor noise (``noise2x``,
     ``worst``), where the KF, with its input-bias state (docs/aie.md), is as good: AIE
     within 1.03x of it (measured 1.00-1.03x; elsewhere AIE 0.63-0.72x the KF)."""
-    from onboard.tools.reports.mismatch import run_campaign
+    from validation.reports.mismatch import run_campaign
 
     res = run_campaign(list(mm.CASES), CAMPAIGN_SEEDS, 30.0, 200.0, 200.0, ("gavia", "boat"))
     for case, runs in res["gavia"].items():

@@ -468,7 +468,7 @@ def test_notes_file_is_unreadable(shared_data):
 @pytest.mark.data
 def test_survey_boat_config_maps_rc_channels(shared_data):
     from onboard.core.config import CONFIG_DIR, load
-    from onboard.inputs import InputMapper
+    from onboard.engine.inputs import InputMapper
 
     cfg = load(CONFIG_DIR / "survey-boat-csv.toml")
     mapper = InputMapper(cfg.inputs)

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from onboard.cli import build_parser, main
-from onboard.closure import overlay
+from onboard.offline.closure import overlay
 from onboard.core import config
 from onboard.core.config import ConfigError
 from onboard.core.messages import Attitude, GnssFix, Heading, Imu
-from onboard.corrections import SampleCorrector
+from onboard.engine.corrections import SampleCorrector
 from onboard.engine import Engine, TickQueue
 
 # ----------------------------------------------------------------------------- merging
@@ -291,8 +291,8 @@ def test_overlay_of_a_detected_config_stands_alone(tmp_path):
 
 from pathlib import Path  # noqa: E402
 
-from onboard.closure import overlay_check  # noqa: E402
-from onboard.replay import choose_config  # noqa: E402
+from onboard.offline.closure import overlay_check  # noqa: E402
+from onboard.offline.replay import choose_config  # noqa: E402
 
 GOLDEN_LOG = str(Path(__file__).parent / "data" / "replay" / "jaiabot-turns.tlog")
 

@@ -13,9 +13,9 @@ import json
 
 import pytest
 
-from onboard.closure import overlay_check
+from onboard.offline.closure import overlay_check
 from onboard.core import config
-from onboard.diagnose import diagnose
+from onboard.offline.diagnose import diagnose
 
 pytestmark = [pytest.mark.data, pytest.mark.slow]
 

@@ -196,7 +196,7 @@ def test_receive_then_parse_gives_what_chunk_gives_in_the_same_order(tmp_path):
     tick or while waiting) queues, pushes and records exactly what ``chunk`` does: same
     samples in the same order, same counters, same recording (records in arrival order,
     before the tick that parsed them)."""
-    from onboard.tools.service_bench import TrafficGenerator
+    from onboard.apps.service_bench import TrafficGenerator
 
     def feed(split: bool, d):
         engine = Engine(_cfg())

@@ -86,7 +86,7 @@ def test_the_service_sends_ready_then_watchdog_from_its_tick_loop(notify_socket,
     """READY=1 after start-up; WATCHDOG=1 keeps coming while the loop ticks."""
     from onboard.core.config import from_dict
     from onboard.service.daemon import Service
-    from onboard.tools.service_bench import free_udp_port
+    from onboard.apps.service_bench import free_udp_port
 
     path, sock = notify_socket
     cfg = from_dict({"vehicle": {"id": "wd"}, "engine": {"rate_hz": 20.0}, "service": {

@@ -22,7 +22,7 @@ from onboard.core.config import ConfigError, MavlinkOut, from_dict
 from onboard.core.messages import Attitude
 from onboard.service.publishers.mavlink_pub import MavlinkPublisher
 from onboard.service.signing import SigningState, load_signing_key
-from onboard.tools.service_bench import free_udp_port
+from onboard.apps.service_bench import free_udp_port
 from tests.helpers.mavlink_listener import receive_mavlink
 from tests.helpers.tls import open_tls_acl_router
 from tests.helpers.waiting import wait_until
@@ -725,7 +725,7 @@ def acl_router():
     import zenoh
 
     from onboard.service.publishers.zenoh_pub import session_config
-    from onboard.tools.service_bench import free_tcp_port
+    from onboard.apps.service_bench import free_tcp_port
 
     ep = f"tcp/127.0.0.1:{free_tcp_port()}"
     conf = session_config("router", listen=[ep], config_file=str(ZENOH_DIR / "router-acl.json5"))
@@ -834,7 +834,7 @@ def test_onboard_shore_reads_through_the_access_controlled_router_with_its_confi
     from onboard.core.config import ZenohOut
     from onboard.core.messages import EstimateRecord
     from onboard.service.publishers.zenoh_pub import ZenohPublisher
-    from onboard.tools import shore
+    from onboard.apps import shore
 
     pub = ZenohPublisher(ZenohOut(mode="client", connect=[acl_router],
                                   config_file=str(ZENOH_DIR / "vehicle-boat1.json5"),

@@ -29,7 +29,7 @@ from onboard.engine import Engine
 from onboard.service.daemon import Service
 from onboard.service.publishers.zenoh_pub import open_router
 from onboard.service.recorder import replay_recording
-from onboard.tools.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
+from onboard.apps.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
 from tests.helpers.service_config import service_config
 
 REPO = Path(__file__).resolve().parent.parent

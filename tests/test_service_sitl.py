@@ -11,8 +11,8 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
 import onboard.pipelines as pipelines_pkg
-from onboard.tools.demo import run_demo
-from onboard.tools.service_bench import free_tcp_port
+from onboard.apps.demo import run_demo
+from onboard.apps.service_bench import free_tcp_port
 
 pytestmark = pytest.mark.integration
 

@@ -6,7 +6,7 @@
 The service runs in a child process of its own (``Service`` from ``onboard.service.daemon``,
 the rudder-boat config with every pipeline, recorder, MAVLink out and a Zenoh client to
 an in-process router here); this process feeds it real protocol bytes at 10x the nominal
-rates of ``onboard.tools.service_bench.TrafficGenerator``: SCALED_IMU 500 Hz, SERVO_OUTPUT_RAW
+rates of ``onboard.apps.service_bench.TrafficGenerator``: SCALED_IMU 500 Hz, SERVO_OUTPUT_RAW
 100 Hz, HEARTBEAT 1 Hz over UDP; GGA+RMC 50 Hz and HDT 100 Hz as NMEA over a pty; and
 counts what reaches a Zenoh subscriber.
 
@@ -114,7 +114,7 @@ class _Traffic(threading.Thread):
         super().__init__(daemon=True)
         import socket
 
-        from onboard.tools.service_bench import TrafficGenerator
+        from onboard.apps.service_bench import TrafficGenerator
 
         self.gen = TrafficGenerator()
         self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -128,7 +128,7 @@ class _Traffic(threading.Thread):
         from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
         from onboard.drivers.nmea import encode_gga, encode_hdt, encode_rmc
-        from onboard.tools.service_bench import EPOCH_S, ORIGIN
+        from onboard.apps.service_bench import EPOCH_S, ORIGIN
 
         g = self.gen
         t = k / 500.0
@@ -179,7 +179,7 @@ def test_soak_10_min_at_10x_nominal_rates(tmp_path):
     import zenoh
 
     from onboard.service.publishers.zenoh_pub import open_router, session_config
-    from onboard.tools.service_bench import bench_config_toml, free_tcp_port, free_udp_port
+    from onboard.apps.service_bench import bench_config_toml, free_tcp_port, free_udp_port
 
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     router = open_router(endpoint)

@@ -1,4 +1,4 @@
-"""One source per quantity (onboard/sources.py): the selector alone and inside the engine.
+"""One source per quantity (onboard/engine/sources.py): the selector alone and inside the engine.
 
 Two GNSS receivers 3 m apart never average or alternate; the autopilot's ATTITUDE yaw is
 used while fresh, VFR_HUD's whole-degree heading only when it is gone; a source dropping
@@ -16,7 +16,7 @@ from onboard.drivers.mavlink import MavlinkParser
 from onboard.core.config import SourcePriorities, from_dict
 from onboard.core.messages import Attitude, GnssFix, Heading, Sample
 from onboard.engine import Engine
-from onboard.sources import SourceSelector, pattern_matches
+from onboard.engine.sources import SourceSelector, pattern_matches
 
 LAT0, LON0 = 59.43, 10.47
 """Where the test boat sits (deg)."""

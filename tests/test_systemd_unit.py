@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from onboard.tools.service_bench import free_udp_port
+from onboard.apps.service_bench import free_udp_port
 from tests.helpers.systemd_boot import booted_systemd, skip_unless_available
 from tests.helpers.tls import open_tls_acl_router
 from tests.helpers.waiting import wait_until
@@ -50,7 +50,7 @@ def _stage(stage: Path, endpoint: str, ca_pem: Path, mav_port: int, gcs_port: in
     """``make install DESTDIR=stage`` (files only), the secrets in the credential store as
     the README says, a drop-in shortening the watchdog, and a venv whose packages are this
     test's (the package build itself is test_deploy's)."""
-    from onboard.tools.install import main as install
+    from onboard.apps.install import main as install
 
     assert install(["--destdir", str(stage), "--no-venv"]) == 0
     etc = stage / "etc" / "onboard"

@@ -17,7 +17,7 @@ import pytest
 from onboard.cli import main as cli_main
 from onboard.core.messages import Imu
 from onboard.drivers.dataflash import DataflashReader
-from onboard.timeline import CONFIRM_STAMPS, TIME_JUMP_S, Timeline
+from onboard.engine.timeline import CONFIRM_STAMPS, TIME_JUMP_S, Timeline
 from tests.helpers import dataflash_log as df
 
 REPO = Path(__file__).resolve().parents[1]
@@ -143,7 +143,7 @@ def test_a_csv_clock_that_goes_back_loses_the_rows_until_it_catches_up(tmp_path)
 
 def test_a_clock_that_jumps_1e9_s_ahead_and_stays_makes_a_segment_without_spinning(tmp_path):
     """The pipelines restart from their state at the new segment (beyond
-    onboard.engine.RESTART_AFTER_S): none of them predicts across 1e9 s (0.4 s here)."""
+    onboard.engine.engine.RESTART_AFTER_S): none of them predicts across 1e9 s (0.4 s here)."""
     base = baseline(tmp_path)
     lines = CSV.read_text().splitlines()
     s = replay(tmp_path, moved_csv(tmp_path, 1e12, range(BAD_ROW, len(lines))))

@@ -20,7 +20,7 @@ from onboard.drivers.transports import (
     parse_url,
 )
 from onboard.core.config import from_dict
-from onboard.tools.service_bench import free_tcp_port
+from onboard.apps.service_bench import free_tcp_port
 from tests.helpers.ptys import pty_behind
 
 TIMEOUT = 20.0  # generous: a loaded 2-core CI machine

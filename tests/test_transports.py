@@ -15,7 +15,7 @@ from onboard.drivers.transports import (
     open_transport,
     parse_url,
 )
-from onboard.tools.service_bench import free_tcp_port, free_udp_port
+from onboard.apps.service_bench import free_tcp_port, free_udp_port
 from tests.helpers.ptys import pty_behind
 
 TIMEOUT = 20.0  # generous: a loaded 2-core CI machine

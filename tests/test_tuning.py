@@ -1,6 +1,6 @@
-"""The tuning protocol (onboard/tools/tuning.py) and the ablation table it produced.
+"""The tuning protocol (validation/tuning.py) and the ablation table it produced.
 
-The tuning itself takes minutes per variant (``onboard tune``); here: its pieces, that
+The tuning itself takes minutes per variant (``python -m validation tune``); here: its pieces, that
 every variant builds a valid pipeline, and that docs/aie.md's ablation table is the
 rendering of the committed docs/tuning.json (cheap, no simulation).
 """
@@ -13,7 +13,7 @@ import math
 import pytest
 
 from onboard.core.errors import UsageError
-from onboard.tools import tuning as T
+from validation import tuning as T
 
 REPO = T.TUNING_FILE.parents[1]
 
@@ -27,7 +27,7 @@ def test_the_ablation_table_in_docs_aie_md_is_rendered_from_docs_tuning_json(com
     page = (REPO / "docs" / "aie.md").read_text(encoding="utf-8")
     assert T.table_block(page) == T.render_table(committed), (
         "docs/aie.md's ablation table differs from docs/tuning.json: run "
-        "`onboard tune --page docs/aie.md`")
+        "`python -m validation tune --page docs/aie.md`")
     with pytest.raises(UsageError):
         T.table_block("no markers")
 

@@ -1,4 +1,4 @@
-"""Sample checks (:mod:`onboard.validate`): the reason a sample is refused, for every
+"""Sample checks (:mod:`onboard.engine.checks`): the reason a sample is refused, for every
 sample type the drivers produce, against the rules written out here from the module's
 docstring."""
 
@@ -11,7 +11,7 @@ import typing
 import msgspec
 import pytest
 
-from onboard import validate
+from onboard.engine import checks as validate
 from onboard.core import messages as m
 
 _T0 = 1.7e9

@@ -24,7 +24,7 @@ from onboard.service.web.app import cockpit_extras, parse_listen, register_servi
 from onboard.service.web.config_edit import ConfigEditor
 from onboard.service.web.http import HttpServer, Request, parse_head
 from onboard.service.web.view import TRACK_PERIOD_S, LiveView
-from onboard.tools.service_bench import free_udp_port
+from onboard.apps.service_bench import free_udp_port
 from tests.helpers.web import ServerThread
 
 LAT0, LON0 = 43.0, 5.0
@@ -264,7 +264,7 @@ def test_onboard_shore_web_serves_the_page_from_zenoh_whatever_the_encodings_sch
     import zenoh
 
     from onboard.service.publishers.zenoh_pub import open_router, session_config
-    from onboard.tools.service_bench import free_tcp_port
+    from onboard.apps.service_bench import free_tcp_port
 
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     web_port = free_tcp_port()

@@ -17,7 +17,7 @@ from onboard.core.messages import (
     HealthRecord,
 )
 from onboard.service.publishers.zenoh_pub import ZenohPublisher, open_router, session_config
-from onboard.tools.service_bench import free_tcp_port
+from onboard.apps.service_bench import free_tcp_port
 
 pytestmark = pytest.mark.integration
 
@@ -114,7 +114,7 @@ def test_client_mode_without_a_router_fails_at_start_with_a_reason():
 def test_onboard_shore_once_prints_a_snapshot_from_the_queryables(router, capsys):
     import argparse
 
-    from onboard.tools import shore
+    from onboard.apps import shore
 
     endpoint, _ = router
     pub = ZenohPublisher(ZenohOut(mode="client", connect=[endpoint]), "boat9")
@@ -178,7 +178,7 @@ def test_positions_also_go_out_as_foxglove_location_fixes_with_their_schema_name
 
 
 def test_shore_decodes_its_schema_version_and_counts_another_as_bad():
-    from onboard.tools.shore import ShoreView
+    from onboard.apps.shore import ShoreView
 
     view = ShoreView()
     rec = EstimateRecord(vehicle="b", pipeline="kf", t=1.0, values={"speed": 1.0})

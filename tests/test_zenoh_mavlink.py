@@ -25,7 +25,7 @@ from onboard.drivers.transports import (
 )
 from onboard.service.daemon import check_zenoh_url
 from onboard.service.publishers.zenoh_pub import open_router, session_config
-from onboard.tools.service_bench import free_tcp_port
+from onboard.apps.service_bench import free_tcp_port
 from tests.helpers.zenoh_bridge import UdpZenohBridge
 
 REPO = Path(__file__).resolve().parent.parent

@@ -13,7 +13,7 @@ file and the key, e.g. ``overlay.toml: pipelines.aei: unknown key (misspelt?)``.
 Several files make one configuration with :func:`load_all` (``--config base.toml
 --config overlay.toml``): later files win key by key, tables are merged recursively,
 lists and values are replaced whole (:func:`merge`). ``onboard diagnose --write-config``
-writes such an overlay (:mod:`onboard.closure.overlay`).
+writes such an overlay (:mod:`onboard.offline.closure.overlay`).
 """
 
 from __future__ import annotations
@@ -119,7 +119,7 @@ class Inputs(_Strict):
     """A glider's moving-battery position (``full_scale`` in m, forward positive)."""
     from_autopilot: bool = True
     """Move a servo-mapped role to the output the autopilot's ``SERVOn_FUNCTION``
-    parameters name for it (in a log or read live), as ``onboard.autodetect`` does."""
+    parameters name for it (in a log or read live), as ``onboard.offline.autodetect`` does."""
 
 
 class GnssNoise(_Strict):
@@ -426,7 +426,7 @@ class ServiceConfig(_Strict):
 
 
 class SourcePriorities(_Strict):
-    """``[sources]``: which source gives each quantity (onboard/sources.py).
+    """``[sources]``: which source gives each quantity (onboard/engine/sources.py).
 
     Each list is a priority, best first, of glob patterns on a sample's ``source``
     (``mavlink:1/ATTITUDE``, an NMEA or gpsd input's name, ``mavlink:*/GPS*``); a pattern
@@ -474,7 +474,7 @@ class SourcePriorities(_Strict):
 
 class Corrections(_Strict):
     """``[corrections]``: known sensor errors taken out of every validated sample before
-    the pipelines see it (live and replay alike; ``onboard.engine.SampleCorrector``).
+    the pipelines see it (live and replay alike; ``onboard.engine.corrections.SampleCorrector``).
     The values ``onboard diagnose --write-config`` measures go here.
 
     Heading: the sensor reads ``true + offset + sum_k (sin_k sin(k psi) + cos_k cos(k
@@ -510,7 +510,7 @@ class Corrections(_Strict):
     """Magnetic declination (degrees, east positive: ``true = magnetic + declination``)
     added to every heading marked magnetic (NMEA HDM/HDG, a compass-only log) before the
     pipelines see it; ``"auto"``: the heading's own (HDG's variation), else the World
-    Magnetic Model at the first GNSS fix (:mod:`onboard.declination`). Headings marked
+    Magnetic Model at the first GNSS fix (:mod:`onboard.engine.declination`). Headings marked
     true pass unchanged."""
 
 
@@ -529,7 +529,7 @@ class DiagnoseConfig(_Strict):
     rate_hz: float = 10.0
     """Rate (Hz) of the grid the log is resampled on for the fits."""
     base_terms: list[str] = []
-    """The base model's optional terms to use (onboard.closure.dataset.BASE_TERMS:
+    """The base model's optional terms to use (onboard.offline.closure.dataset.BASE_TERMS:
     ``actuator_lag``, ``course_lag``, ``speed_drift``; ``["none"]`` for none); default
     ``actuator_lag`` and ``course_lag``. Switching them off shows what each one keeps
     from being named an effect."""

@@ -94,7 +94,7 @@ class Heading(Sample, frozen=True, tag="heading"):
     ``reference`` says whether it is relative to true or magnetic north; a magnetic
     heading needs the declination (``declination_rad`` when the source gives it). The
     engine makes every magnetic heading true before a pipeline sees it
-    (:mod:`onboard.declination`): a pipeline's headings are all true.
+    (:mod:`onboard.engine.declination`): a pipeline's headings are all true.
     """
 
     heading_rad: float
@@ -105,7 +105,7 @@ class Heading(Sample, frozen=True, tag="heading"):
 class Attitude(Sample, frozen=True, tag="attitude"):
     """Attitude as ZYX Euler angles (rad) and optionally the body rates (rad/s).
 
-    ``yaw_selected`` is False when the source selector (onboard/sources.py) chose another
+    ``yaw_selected`` is False when the source selector (onboard/engine/sources.py) chose another
     source for the heading: roll, pitch and the rates are to be used, the yaw is not.
     """
 
@@ -279,7 +279,7 @@ class EstimateRecord(msgspec.Struct, frozen=True, kw_only=True):
     value in SI units; ``std`` gives one-sigma uncertainties where the pipeline has them.
     ``t_sensor`` is the time of the newest input sample that contributed, so consumers can
     measure latency. ``sources`` maps each selected quantity (``position``, ``heading``,
-    ...) to the source in use at this tick (onboard/sources.py).
+    ...) to the source in use at this tick (onboard/engine/sources.py).
     """
 
     schema: int = SCHEMA_VERSION
@@ -339,7 +339,7 @@ class ChannelHealth(msgspec.Struct, frozen=True, kw_only=True):
         dof: the measurement's dimension.
         nis_mean: mean NIS of the accepted ones since the start (expected ``dof``).
         nis_recent: running mean of the accepted ones over about
-            ``onboard.innovations.RECENT_STEPS`` updates.
+            ``onboard.monitor.innovations.RECENT_STEPS`` updates.
         nis: the newest NIS; test_ratio: its ``nis / gate``; test_ratio_max: the largest
             since the previous record.
         z, S: the newest innovation and its covariance (row-major).
@@ -382,7 +382,7 @@ class Alert(msgspec.Struct, frozen=True, kw_only=True):
 
 class DeclinationReport(msgspec.Struct, frozen=True, kw_only=True):
     """The magnetic declination the engine applies to magnetic headings
-    (:mod:`onboard.declination`; HealthRecord, summary.json's ``declination``).
+    (:mod:`onboard.engine.declination`; HealthRecord, summary.json's ``declination``).
 
     ``deg`` east positive (``true = magnetic + deg``; null: none known); ``source``:
     ``wmm`` (the World Magnetic Model at ``lat_deg``, ``lon_deg`` on the decimal
@@ -415,7 +415,7 @@ class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
     and channel (:class:`ChannelHealth`), ``counters`` per pipeline (its steps, restarts,
     adaptive quantities: :meth:`onboard.pipelines.base.Pipeline.health`), ``events``
     recent human-readable events, ``sources`` the active source of each selected quantity
-    (onboard/sources.py), ``declination`` the one applied to magnetic headings
+    (onboard/engine/sources.py), ``declination`` the one applied to magnetic headings
     (:class:`DeclinationReport`).
     """
 

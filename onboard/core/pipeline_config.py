@@ -57,7 +57,7 @@ class TunedPair(NamedTuple):
         return self.doppler if doppler else self.no_doppler
 
 
-# The tuned sets of the common tuning protocol (`onboard tune`, onboard/tools/tuning.py),
+# The tuned sets of the common tuning protocol (`python -m validation tune`, validation/tuning.py),
 # read from docs/tuning.json, variants `aie` / `aie-no-doppler` and `kf` / `kf-no-doppler`
 # (docs/aie.md section 2.1), rounded to two significant digits; tests/test_tuning.py
 # checks them against the file. `bias_q` has no pair: without a Doppler speed the bias
@@ -97,7 +97,7 @@ class AxisConfig(TunedKeys, msgspec.Struct, forbid_unknown_fields=True, kw_only=
 
     Units: ``u`` is m/s^2 (surge) or rad/s^2 (heading); commands are normalized. The
     axes' ``v_d`` and ``r_d`` default to ``"auto"``: the values of the common tuning
-    protocol (``onboard tune aie`` and ``aie-no-doppler``, onboard/tools/tuning.py:
+    protocol (``python -m validation tune aie`` and ``aie-no-doppler``, validation/tuning.py:
     Nelder-Mead on SITL ``jaiabot-turns``, ``twin-thruster-turns`` and ``effect-waves``
     seed 10, held out from the reported seeds; docs/aie.md section 2.1), rounded to two
     digits, for the measurement set present (:data:`AUTO`).
@@ -275,7 +275,7 @@ class KfAxisConfig(TunedKeys, msgspec.Struct, forbid_unknown_fields=True, kw_onl
 
 class KfSurgeConfig(KfAxisConfig, forbid_unknown_fields=True, kw_only=True, frozen=True):
     """``[pipelines.kf.surge]`` (m/s^2). ``v_d`` and ``bias_q`` of both axes: the common
-    tuning protocol (``onboard tune kf`` and ``kf-no-doppler``, the same search, budget
+    tuning protocol (``python -m validation tune kf`` and ``kf-no-doppler``, the same search, budget
     and runs as the AIE's; docs/aie.md section 2.1), rounded to two digits; ``v_d`` for
     the measurement set present (:data:`AUTO`)."""
 

@@ -12,7 +12,7 @@ The system in observable chain form, ``p`` channels of ``n_c`` states each::
     G(gamma) = Theta(gamma) K,  Theta = diag(gamma, ..., gamma^n_c) per channel
 
 ``K`` comes from the LMI ``A^T P + P A - C^T Y^T - Y C + lambda I < 0``, ``K = P^-1 Y``
-(Kim eq. 16), solved offline by :mod:`onboard.tools.design_gain` and read from a JSON file; this
+(Kim eq. 16), solved offline by :mod:`onboard.apps.design_gain` and read from a JSON file; this
 module never imports cvxpy. With ``L_f`` the Lipschitz constant of a lower-triangular
 ``f``, convergence holds for ``gamma > gamma* = max(1, 2 ||P|| L_f / lambda)``
 (algorithms.md §3.1, derived from Kim eq. 14).

@@ -76,7 +76,7 @@ class PathAccelerometer:
         self.n_samples = 0
         self.n_breaks = 0
         # flat arrays of doubles: a copy of the pipeline (the forks of
-        # onboard.latency.FixedLagQueue) copies them as memory blocks
+        # onboard.engine.latency.FixedLagQueue) copies them as memory blocks
         self._t = array("d")
         self._V = array("d")
         self._S = array("d")

@@ -5,7 +5,7 @@ parses it (:func:`drivers.protocols.parser_for`) and queues its samples in a bou
 (drops counted per source); ``tick(T)`` records the tick, puts the queued samples
 stamped ``t <= T`` on the engine's time line (later ones wait for the next tick, so a
 pipeline never sees a sample from its future; one stamped more than
-``onboard.timeline.TIME_JUMP_S`` before ``T`` is a counted and warned ``time_outlier``, as
+``onboard.engine.timeline.TIME_JUMP_S`` before ``T`` is a counted and warned ``time_outlier``, as
 in a replay of a log), pushes them and steps the engine. The live service splits ``chunk()`` in two:
 ``receive()`` keeps the chunk, ``parse()`` (called by ``tick()`` and by the service while
 it waits for a sample) records and parses the chunks kept, in order. Parsing a handful

@@ -16,7 +16,7 @@ import msgspec
 from onboard.drivers import dvl_json, nmea, pd6
 from onboard.drivers.mavlink import select
 from onboard.drivers.mavlink_frame import CRC_EXTRA, x25crc
-from onboard.tools.bench import synthesize_tlog
+from onboard.apps.bench import synthesize_tlog
 from tests.fuzz.mutation import mutate, mutate_fields
 from tests.fuzz.scratch import SCRATCH
 from tests.helpers.dataflash_log import synthetic_log

@@ -54,7 +54,7 @@ def read_file_reader(make: Callable[[Path], Any], path: Path, *, ordered: bool =
     """Open and iterate a log reader; UnreadableLog is allowed only when opening. With
     ``ordered`` the samples come in time order, but for steps back of more than
     ``TIME_JUMP_S``, which the readers pass on for the engine's time line to judge (a clock
-    reset starts a segment, a lone bad stamp is an outlier: onboard/timeline.py)."""
+    reset starts a segment, a lone bad stamp is an outlier: onboard/engine/timeline.py)."""
     try:
         reader = make(path)
     except UnreadableLog:

@@ -41,7 +41,7 @@ def open_tls_acl_router(tmp_path: Path):
     import zenoh
 
     from onboard.service.publishers.zenoh_pub import session_config
-    from onboard.tools.service_bench import free_tcp_port
+    from onboard.apps.service_bench import free_tcp_port
 
     zenoh_dir = Path(__file__).resolve().parents[2] / "config" / "zenoh"
     certs = make_test_certificates(tmp_path)

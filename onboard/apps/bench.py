@@ -1,0 +1,647 @@
+"""``onboard bench [--json]``: the performance figures, each measured in one run.
+
+Every figure is a ratio or a distribution measured within the same process, so it holds on a
+noisy machine (a laptop on battery, a CI runner shared with other jobs): the reference and
+the thing measured run interleaved, several times, and the median is reported.
+
+==============================  =========================================================  =========
+key                             what                                                       goal
+==============================  =========================================================  =========
+``replay_vs_pymavlink_parse``   whole ``onboard replay`` of a 15-min 50 Hz-IMU tlog        <= 0.5
+                                divided by pymavlink's parse-only ``recv_match`` loop
+                                over the same file (CPU time of each, median of 5
+                                interleaved pairs; the wall-time ratio is in the detail)
+``aie_step_vs_filterpy_kf``     one AIE axis step / filterpy ``KalmanFilter(dim_x=3)``     <= 0.5
+                                predict+update (median of repeats)
+``service_cpu_fraction``        CPU s per wall s of ``onboard run`` fed by SITL            <= 0.03
+``sensor_to_zenoh_p50_ms``      sensor receive to Zenoh publication, median (ms)           context
+``sensor_to_zenoh_p99_ms``      same, 99th percentile (ms)                                 <= 5
+``service_rss_mb``              resident memory of the service (MB)                        <= 100
+``startup_to_ready_s``          process start to READY (s)                                 <= 1.5
+``mpc_solve_p99_ms``            NMPC solve time on the BlueROV2 circle, p99 (ms)           < 50
+``pipeline_step_us``            per-pipeline step cost, µs per engine tick (context)       --
+==============================  =========================================================  =========
+
+A piece whose module has not landed (or fails) gives ``null`` in the JSON and
+``not available: <reason>`` in the table; the JSON always has exactly the keys above.
+
+Environment: ``ONBOARD_BENCH_FAST=1`` shortens everything (a 20 s log, few repeats; for the
+test suite, figures then only show the command works), ``ONBOARD_BENCH_REPEATS=N`` sets the
+number of interleaved replay/parse pairs (default 5), ``ONBOARD_BENCH_MINUTES`` the log
+length (default 15), ``ONBOARD_BENCH_DETAIL=FILE`` writes every raw measurement behind the
+figures (each pair's CPU and wall times, the replay breakdown, the service's extra figures)
+as JSON.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import os
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+from onboard.core.geo import LocalFrame, wrap_2pi
+
+KEYS: tuple[str, ...] = (
+    "replay_vs_pymavlink_parse",
+    "aie_step_vs_filterpy_kf",
+    "service_cpu_fraction",
+    "sensor_to_zenoh_p50_ms",
+    "sensor_to_zenoh_p99_ms",
+    "service_rss_mb",
+    "startup_to_ready_s",
+    "mpc_solve_p99_ms",
+    "pipeline_step_us",
+)
+"""The JSON keys of ``onboard bench --json``, in table order (a contract: tools
+reading the JSON rely on these names)."""
+
+GOALS: dict[str, tuple[str, float | None]] = {
+    "replay_vs_pymavlink_parse": ("<=", 0.5),
+    "aie_step_vs_filterpy_kf": ("<=", 0.5),
+    "service_cpu_fraction": ("<=", 0.03),
+    "sensor_to_zenoh_p50_ms": ("", None),
+    "sensor_to_zenoh_p99_ms": ("<=", 5.0),
+    "service_rss_mb": ("<=", 100.0),
+    "startup_to_ready_s": ("<=", 1.5),
+    "mpc_solve_p99_ms": ("<", 50.0),
+    "pipeline_step_us": ("", None),
+}
+"""Goal of each figure: (comparison, bound); None = context only."""
+
+REPLAY_SCENARIO = "jaiabot-turns"
+"""SITL scenario of the replay log: rudder boat, 50 Hz IMU, 5 Hz GPS, 10 Hz compass."""
+
+CLASS_SCENARIOS: tuple[tuple[str, str], ...] = (
+    ("rudder-boat", "jaiabot-turns"),
+    ("twin-thruster-boat", "twin-thruster-turns"),
+    ("bluerov2", "bluerov2-circle"),
+    ("torpedo-auv", "gavia-tidal"),
+)
+"""(bundled config, SITL scenario) pairs used to time every pipeline on the vehicle it
+applies to."""
+
+
+@dataclass
+class Settings:
+    """How long and how often to measure."""
+
+    fast: bool = False
+    minutes: float = 15.0
+    repeats: int = 5
+    aie_steps: int = 20000
+    aie_repeats: int = 5
+    mpc_solves: int = 200
+    service_s: float = 30.0
+    pipeline_sim_s: float = 120.0
+
+    @classmethod
+    def from_env(cls) -> "Settings":
+        """The settings from the environment: ``ONBOARD_BENCH_FAST`` (a short run),
+        ``ONBOARD_BENCH_MINUTES`` and ``ONBOARD_BENCH_REPEATS`` (see the module docstring)."""
+        fast = os.environ.get("ONBOARD_BENCH_FAST", "") not in ("", "0")
+        s = cls(fast=True, minutes=20 / 60, repeats=1, aie_steps=500, aie_repeats=1,
+                mpc_solves=5, service_s=1.0, pipeline_sim_s=3.0) if fast else cls()
+        if os.environ.get("ONBOARD_BENCH_MINUTES"):
+            s.minutes = float(os.environ["ONBOARD_BENCH_MINUTES"])
+        if os.environ.get("ONBOARD_BENCH_REPEATS"):
+            s.repeats = max(1, int(os.environ["ONBOARD_BENCH_REPEATS"]))
+        return s
+
+
+@dataclass
+class Report:
+    """Figures (``None`` when not available), why not, and the detail behind each."""
+
+    values: dict[str, Any] = field(default_factory=lambda: {k: None for k in KEYS})
+    reasons: dict[str, str] = field(default_factory=dict)
+    detail: dict[str, Any] = field(default_factory=dict)
+
+    def missing(self, keys: Iterable[str], reason: str) -> None:
+        """Report ``keys`` as not measured (null in the JSON), with ``reason``."""
+        for k in keys:
+            self.values[k] = None
+            self.reasons[k] = reason
+
+
+class NotAvailable(Exception):
+    """A piece of the bench cannot run yet (module missing, optional dependency absent)."""
+
+
+def _quiet(fn: Callable[[], Any]) -> Any:
+    """Run ``fn`` with stdout and stderr captured (no progress output, no prints)."""
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        return fn()
+
+
+def _import(module: str, attr: str) -> Callable:
+    import importlib
+
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as err:
+        raise NotAvailable(f"module {err.name} missing (not written yet or not installed)") from None
+    fn = getattr(mod, attr, None)
+    if fn is None:
+        raise NotAvailable(f"{module}.{attr} missing")
+    return fn
+
+
+# --------------------------------------------------------------------------- the replay log
+
+
+def make_tlog(path: Path, duration_s: float, seed: int = 0) -> dict[str, Any]:
+    """Write a deterministic tlog of ``duration_s`` seconds with a 50 Hz IMU to ``path``.
+
+    With the simulator (:func:`sitl.runner.run_to_tlog`, scenario :data:`REPLAY_SCENARIO`)
+    when it is there, else :func:`synthesize_tlog`. Returns what was written.
+    """
+    try:
+        from onboard.sitl.runner import run_to_tlog
+    except ImportError:
+        run_to_tlog = None
+    if run_to_tlog is not None:
+        summary = run_to_tlog(REPLAY_SCENARIO, path, duration=duration_s, seed=seed)
+        return {"source": f"sitl:{REPLAY_SCENARIO}", "frames": sum(summary.frames.values()),
+                "samples": dict(sorted(summary.samples.items()))}
+    return synthesize_tlog(path, duration_s, seed)
+
+
+def synthesize_tlog(path: Path, duration_s: float, seed: int = 0) -> dict[str, Any]:
+    """A boat-like tlog from pymavlink encoders alone: HEARTBEAT and SERVO_OUTPUT_RAW at 1 and
+    10 Hz, SCALED_IMU 50 Hz, GPS_RAW_INT and GLOBAL_POSITION_INT 5 Hz, ATTITUDE and VFR_HUD
+    10 Hz, PARAM_VALUE for the rudder/throttle mapping once. Deterministic for ``seed``."""
+    import random
+
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    from onboard.drivers.tlog import TlogWriter
+
+    rng = random.Random(seed)
+    m = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    m.robust_parsing = True
+    epoch = 1.7e9
+    frame = LocalFrame(41.6, -71.3)
+    n_ticks = int(round(duration_s * 50))
+    frames = 0
+    with TlogWriter(path) as w:
+        def put(t: float, msg) -> None:
+            nonlocal frames
+            w.write(epoch + t, msg.pack(m))
+            frames += 1
+
+        for i, (name, value) in enumerate((("SERVO1_FUNCTION", 26.0), ("SERVO3_FUNCTION", 70.0))):
+            put(0.0, mav.MAVLink_param_value_message(name.encode(), value, 9, 2, i))
+        north = east = 0.0
+        psi = 0.0
+        for k in range(n_ticks):
+            t = k / 50.0
+            ms = int(t * 1000)
+            r = 0.1 * math.sin(0.05 * t)
+            psi = wrap_2pi(psi + r / 50.0)
+            u = 1.5 + 0.5 * math.sin(0.01 * t)
+            north += u * math.cos(psi) / 50.0
+            east += u * math.sin(psi) / 50.0
+            put(t, mav.MAVLink_scaled_imu_message(
+                ms, int(rng.gauss(0, 50)), int(rng.gauss(0, 50)), int(-1000 + rng.gauss(0, 50)),
+                int(rng.gauss(0, 5)), int(rng.gauss(0, 5)), int(r * 1000), 200, 0, -400))
+            if k % 50 == 0:
+                put(t, mav.MAVLink_heartbeat_message(11, 3, 209, 0, 4, 3))
+            if k % 5 == 0:
+                put(t, mav.MAVLink_attitude_message(ms, 0.0, 0.0, psi - math.pi, 0.0, 0.0, r))
+                put(t, mav.MAVLink_vfr_hud_message(u, u, int(math.degrees(psi)) % 360, 40, 0, 0))
+                put(t, mav.MAVLink_servo_output_raw_message(
+                    ms * 1000, 0, 1500 + int(r * 1000), 1500, 1700, 1500, 0, 0, 0, 0))
+            if k % 10 == 0:
+                lat, lon = frame.to_latlon(north, east)
+                put(t, mav.MAVLink_gps_raw_int_message(
+                    ms * 1000, 3, int(lat * 1e7), int(lon * 1e7), 0, 120, 65535,
+                    int(u * 100), int(math.degrees(psi) * 100) % 36000, 12))
+                put(t, mav.MAVLink_global_position_int_message(
+                    ms, int(lat * 1e7), int(lon * 1e7), 0, 0, int(u * math.cos(psi) * 100),
+                    int(u * math.sin(psi) * 100), 0, int(math.degrees(psi) * 100) % 36000))
+    return {"source": "synthetic (pymavlink encoders)", "frames": frames}
+
+
+# --------------------------------------------------------------------------- the figures
+
+
+def bench_replay(s: Settings, workdir: Path, rep: Report) -> None:
+    """``replay_vs_pymavlink_parse``: interleaved pairs, median ratio."""
+    from onboard.drivers.tlog import pymavlink_parse_seconds
+    from onboard.cli import main as cli_main
+
+    log = workdir / "bench.tlog"
+    t0 = time.perf_counter()
+    made = make_tlog(log, s.minutes * 60.0)
+    made["generate_s"] = round(time.perf_counter() - t0, 2)
+    made["bytes"] = log.stat().st_size
+    out = workdir / "replay-out"
+
+    def one_replay() -> tuple[float, float]:
+        w, c = time.perf_counter(), time.process_time()
+        status = _quiet(lambda: cli_main(["replay", str(log), "--out", str(out), "--no-plot"]))
+        w, c = time.perf_counter() - w, time.process_time() - c
+        if status != 0:
+            raise RuntimeError(f"onboard replay exited {status}")
+        return w, c
+
+    def one_parse() -> tuple[float, float]:
+        c = time.process_time()
+        w = pymavlink_parse_seconds(log)
+        return w, time.process_time() - c
+
+    one_replay()  # warm-up: imports and caches are not what is measured
+    replays, parses = [], []
+    for i in range(s.repeats):
+        # alternate the order so a slow phase of the machine hits both sides
+        if i % 2 == 0:
+            parses.append(one_parse())
+            replays.append(one_replay())
+        else:
+            replays.append(one_replay())
+            parses.append(one_parse())
+    cpu_ratios = [r[1] / p[1] for r, p in zip(replays, parses)]
+    wall_ratios = [r[0] / p[0] for r, p in zip(replays, parses)]
+    summary = json.loads((out / "summary.json").read_text())
+    # CPU time of this process: what another process on the machine cannot inflate (on an
+    # idle machine it equals the wall time, both loops being single-threaded and CPU-bound)
+    rep.values["replay_vs_pymavlink_parse"] = round(statistics.median(cpu_ratios), 3)
+    rep.detail["replay"] = {
+        "log": made, "duration_s": summary["time_span"]["duration_s"],
+        "samples": summary["read"]["samples"], "pipelines": summary["pipelines"],
+        "replay_cpu_s": [round(x[1], 3) for x in replays],
+        "pymavlink_cpu_s": [round(x[1], 3) for x in parses],
+        "replay_wall_s": [round(x[0], 3) for x in replays],
+        "pymavlink_wall_s": [round(x[0], 3) for x in parses],
+        "cpu_ratios": [round(x, 3) for x in cpu_ratios],
+        "wall_ratios": [round(x, 3) for x in wall_ratios],
+        "wall_ratio_median": round(statistics.median(wall_ratios), 3),
+        "breakdown_cpu_s": replay_breakdown(log),
+    }
+
+
+def replay_breakdown(log: Path) -> dict[str, float]:
+    """Where the replay's CPU time goes: reading the tlog, the engine (validation, ticks),
+    each pipeline's ``step``; one in-process pass (the CSV and summary are not included)."""
+    from onboard.drivers.tlog import TlogReader
+    from onboard.engine import Engine, run
+    from onboard.offline.replay import choose_config
+
+    cfg, _ = choose_config(str(log), None)
+    c = time.process_time()
+    samples = list(TlogReader(log))
+    read = time.process_time() - c
+    engine = Engine(cfg)
+    timed = [_Timed(p) for p in engine.pipelines]
+    engine.pipelines = timed  # type: ignore[assignment]
+    c = time.process_time()
+    ticks = run(engine, iter(samples), lambda t, recs: None)
+    total = time.process_time() - c
+    out = {"read": round(read, 3), "engine": round(total - sum(p.seconds for p in timed), 3)}
+    for p in timed:
+        out[f"pipeline.{p.name}"] = round(p.seconds, 3)
+    out["ticks"] = ticks
+    return out
+
+
+def aie_step_ratio(n: int = 5000, repeats: int = 5) -> dict[str, float]:
+    """Time one AIE axis step against filterpy ``KalmanFilter(dim_x=3, dim_z=1)``
+    predict+update on the same algorithms.md §1.2 model, in the same run.
+
+    The surge axis with the default configuration (``n_c = 3``: 7 RCIE coefficients,
+    the 3-state correlated-noise filter) is timed. Both loops run ``repeats`` times,
+    interleaved, and the fastest repeat of each counts (robust to other load).
+
+    Returns ``{"aie_axis_step_us", "filterpy_kf3_step_us", "ratio"}`` with ratio = AIE /
+    filterpy (the goal is <= 0.5). filterpy is imported here only (the ``bench`` extra).
+    """
+    import numpy as np
+    from filterpy.kalman import KalmanFilter
+
+    from onboard.estimators.axis_model import AxisModel, augmented_matrices, discretize
+    from onboard.core.pipeline_config import AieConfig
+    from onboard.pipelines.aie import axis_filter
+
+    top = AieConfig()
+    ax = axis_filter(AxisModel(1.0, 3.0), top.surge, top)
+    k = discretize(1.0, 1.0)
+    rng = np.random.default_rng(0)
+    ys = (1.0 + 2.0 * rng.standard_normal(n)).tolist()
+    R = 4.0
+    ax.step(k, ys[0], R, R, None)
+    A, B, C = augmented_matrices(1.0, 1.0)
+    f = KalmanFilter(dim_x=3, dim_z=1)
+    f.F = A
+    f.H = C.reshape(1, 3)
+    f.R *= 2.0 * R
+    f.Q = np.outer(B, B) * top.surge.tuned("v_d", True)
+    f.P *= 10.0
+    zs = [np.array([y]) for y in ys]
+    step = ax.step
+    best_aie = best_fp = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for y in ys:
+            step(k, y, R, R, None)
+        best_aie = min(best_aie, (time.perf_counter() - t0) / n)
+        t0 = time.perf_counter()
+        for z in zs:
+            f.predict()
+            f.update(z)
+        best_fp = min(best_fp, (time.perf_counter() - t0) / n)
+    return {"aie_axis_step_us": best_aie * 1e6, "filterpy_kf3_step_us": best_fp * 1e6,
+            "ratio": best_aie / best_fp}
+
+
+def bench_aie(s: Settings, rep: Report) -> None:
+    """``aie_step_vs_filterpy_kf`` from :func:`aie_step_ratio`."""
+    try:
+        import filterpy  # noqa: F401
+    except ImportError:
+        raise NotAvailable("filterpy not installed (pip install 'onboard[bench]')") from None
+    runs = [aie_step_ratio(s.aie_steps) for _ in range(s.aie_repeats)]
+    ratios = [r["ratio"] for r in runs]
+    rep.values["aie_step_vs_filterpy_kf"] = round(statistics.median(ratios), 3)
+    rep.detail["aie"] = {
+        "aie_axis_step_us": round(statistics.median(r["aie_axis_step_us"] for r in runs), 2),
+        "filterpy_kf3_step_us": round(statistics.median(r["filterpy_kf3_step_us"] for r in runs), 2),
+        "ratios": [round(x, 3) for x in ratios], "steps": s.aie_steps,
+    }
+
+
+SERVICE_KEYS = ("service_cpu_fraction", "sensor_to_zenoh_p50_ms", "sensor_to_zenoh_p99_ms",
+                "service_rss_mb", "startup_to_ready_s")
+_SERVICE_ALIASES: dict[str, tuple[str, ...]] = {
+    "service_cpu_fraction": ("service_cpu_fraction", "cpu_fraction", "cpu"),
+    "sensor_to_zenoh_p50_ms": ("sensor_to_zenoh_p50_ms", "latency_p50_ms", "p50_ms"),
+    "sensor_to_zenoh_p99_ms": ("sensor_to_zenoh_p99_ms", "latency_p99_ms", "p99_ms"),
+    "service_rss_mb": ("service_rss_mb", "rss_mb", "max_rss_mb"),
+    "startup_to_ready_s": ("startup_to_ready_s", "ready_s", "startup_s"),
+}
+
+
+def bench_service(s: Settings, rep: Report) -> None:
+    """The service figures from :func:`onboard.apps.service_bench.measure`."""
+    import inspect
+
+    fn = _import("onboard.apps.service_bench", "measure")
+    kw = {"warmup_s": 0.5} if s.fast and "warmup_s" in inspect.signature(fn).parameters else {}
+    res = _quiet(lambda: fn(s.service_s, **kw))
+    rep.detail["service"] = {k: v for k, v in res.items() if _jsonable(v)}
+    for key in SERVICE_KEYS:
+        v = next((res[a] for a in _SERVICE_ALIASES[key] if a in res), None)
+        if v is None or not _finite(v):
+            rep.missing([key], f"service_bench.measure gave no {key}")
+        else:
+            rep.values[key] = round(float(v), 4)
+
+
+def bench_mpc(s: Settings, rep: Report) -> None:
+    """``mpc_solve_p99_ms`` from :func:`sitl.controllers.nmpc.solve_time_stats`."""
+    fn = _import("onboard.sitl.controllers.nmpc", "solve_time_stats")
+    res = _quiet(lambda: fn(s.mpc_solves))
+    rep.values["mpc_solve_p99_ms"] = round(float(res["p99_ms"]), 2)
+    rep.detail["mpc"] = res
+
+
+class _Timed:
+    """A pipeline whose ``step`` CPU time is accumulated; everything else passes through."""
+
+    def __init__(self, inner: Any) -> None:
+        self._inner = inner
+        self.seconds = 0.0
+        self.calls = 0
+
+    def step(self, t: float, samples):
+        t0 = time.process_time()
+        out = self._inner.step(t, samples)
+        self.seconds += time.process_time() - t0
+        self.calls += 1
+        return out
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)
+
+
+def eseso_step_cost(duration_s: float = 20.0, tick_hz: float = 20.0) -> dict[str, float]:
+    """Wall-clock cost of the ESESO pipeline's ``step`` on a synthetic hovering-ROV stream:
+    50 Hz IMU, 20 Hz thruster commands, 5 Hz DVL, depth and attitude, ticked at
+    ``tick_hz`` for ``duration_s`` seconds.
+
+    Returns ``{"per_tick_us_p50", "per_tick_us_p99", "per_imu_sample_us", "ticks"}`` (µs).
+    """
+    import numpy as np
+
+    from onboard.core.messages import ActuatorCommand, Attitude, Depth, DvlVelocity, Imu
+    from onboard.pipelines.eseso import Eseso, EsesoConfig
+
+    rng = np.random.default_rng(0)
+    f = Eseso(EsesoConfig())
+    samples: list[Any] = []
+    n_imu = int(duration_s * 50)
+    for k in range(n_imu):
+        t = k / 50.0
+        samples.append(Imu(t=t, accel_x=rng.normal(0, 0.05), accel_y=rng.normal(0, 0.05),
+                           accel_z=-9.81 + rng.normal(0, 0.05), gyro_x=0.0, gyro_y=0.0,
+                           gyro_z=0.0))
+        if k % 10 == 0:
+            samples.append(Attitude(t=t, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0))
+            samples.append(Depth(t=t, depth_m=20.0))
+            samples.append(DvlVelocity(t=t, vx=0.0, vy=0.0, vz=0.0))
+        if k % 5 == 0:
+            samples.append(ActuatorCommand(t=t, thrusters=(0.0,) * 6))
+    costs = []
+    i = 0
+    n_ticks = int(duration_s * tick_hz)
+    for k in range(n_ticks):
+        t = (k + 1) / tick_hz
+        batch = []
+        while i < len(samples) and samples[i].t <= t:
+            batch.append(samples[i])
+            i += 1
+        t0 = time.perf_counter()
+        f.step(t, batch)
+        costs.append(time.perf_counter() - t0)
+    c = np.array(costs) * 1e6
+    return {"per_tick_us_p50": float(np.percentile(c, 50)),
+            "per_tick_us_p99": float(np.percentile(c, 99)),
+            "per_imu_sample_us": float(c.sum() / n_imu), "ticks": float(n_ticks)}
+
+
+def bench_pipelines(s: Settings, rep: Report) -> None:
+    """``pipeline_step_us``: mean step cost per engine tick of every pipeline, on the SITL
+    stream of a vehicle it applies to (each pipeline timed once, on its first vehicle)."""
+    from onboard.core import config as configmod
+    from onboard.engine import Engine, run
+    from onboard.pipelines import build
+
+    try:
+        from onboard.sitl.runner import simulate
+    except ImportError:
+        simulate = None
+    costs: dict[str, float] = {}
+    where: dict[str, str] = {}
+    errors: dict[str, str] = {}
+    for cfg_name, scenario in CLASS_SCENARIOS:
+        try:
+            cfg = configmod.load(configmod.resolve(cfg_name))
+        except Exception:  # noqa: BLE001 - a config that does not load is just skipped
+            continue
+        todo = [p for p in build(cfg) if p.name not in costs]
+        if not todo or simulate is None:
+            continue
+        timed = [_Timed(p) for p in todo]
+        engine = Engine(cfg, pipelines=timed)  # type: ignore[arg-type]
+        stream = (x for _, samples, _ in simulate(scenario, s.pipeline_sim_s, seed=0)
+                  for x in samples)
+        try:
+            run(engine, stream, lambda t, recs: None)
+        except Exception as err:  # noqa: BLE001 - a crashing pipeline is reported, not fatal
+            errors[cfg_name] = f"{type(err).__name__}: {err}"
+        for p in timed:
+            if p.calls:
+                costs[p.name] = round(p.seconds / p.calls * 1e6, 1)
+                where[p.name] = f"{cfg_name} / {scenario}"
+    if "eseso" not in costs:
+        try:
+            res = eseso_step_cost(max(2.0, s.pipeline_sim_s / 6))
+            costs["eseso"] = round(float(res["per_tick_us_p50"]), 1)
+            where["eseso"] = "eseso_step_cost (synthetic ROV stream), p50"
+        except (NotAvailable, Exception):  # noqa: BLE001
+            pass
+    if not costs:
+        raise NotAvailable("no pipeline applies to the bundled configs, or no simulator")
+    rep.values["pipeline_step_us"] = dict(sorted(costs.items()))
+    rep.detail["pipelines"] = {"measured_on": where, "sim_s": s.pipeline_sim_s,
+                               "errors": errors}
+
+
+def collect(s: Settings | None = None, progress: Callable[[str], None] | None = None) -> Report:
+    """Measure everything; a failing or missing piece becomes ``None`` with its reason."""
+    s = s or Settings.from_env()
+    say = progress or (lambda msg: None)
+    rep = Report()
+    rep.detail["settings"] = {"fast": s.fast, "minutes": s.minutes, "repeats": s.repeats}
+    with tempfile.TemporaryDirectory(prefix="onboard-bench-") as tmp:
+        steps: list[tuple[str, tuple[str, ...], Callable[[], None]]] = [
+            ("replay vs pymavlink", ("replay_vs_pymavlink_parse",),
+             lambda: bench_replay(s, Path(tmp), rep)),
+            ("AIE step vs filterpy", ("aie_step_vs_filterpy_kf",), lambda: bench_aie(s, rep)),
+            ("service", SERVICE_KEYS, lambda: bench_service(s, rep)),
+            ("MPC solve", ("mpc_solve_p99_ms",), lambda: bench_mpc(s, rep)),
+            ("pipeline steps", ("pipeline_step_us",), lambda: bench_pipelines(s, rep)),
+        ]
+        for label, keys, fn in steps:
+            say(f"measuring {label} ...")
+            t0 = time.perf_counter()
+            try:
+                fn()
+            except NotAvailable as err:
+                rep.missing(keys, str(err))
+            except Exception as err:  # noqa: BLE001 - one broken piece must not hide the rest
+                rep.missing(keys, f"failed: {type(err).__name__}: {err}")
+            rep.detail.setdefault("bench_wall_s", {})[label] = round(time.perf_counter() - t0, 2)
+    return rep
+
+
+# --------------------------------------------------------------------------- output
+
+
+def _finite(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _jsonable(v: Any) -> bool:
+    try:
+        json.dumps(v)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def verdict(key: str, value: Any) -> str:
+    """``ok``/``MISSED`` against the goal, ``""`` for context figures."""
+    op, bound = GOALS[key]
+    if bound is None or not _finite(value):
+        return ""
+    ok = value <= bound if op == "<=" else value < bound
+    return "ok" if ok else "MISSED"
+
+
+def table(rep: Report) -> str:
+    """The figures as a text table, goals beside them."""
+    rows = [("figure", "value", "goal", "")]
+    for k in KEYS:
+        v = rep.values[k]
+        op, bound = GOALS[k]
+        goal = f"{op} {bound:g}" if bound is not None else "context"
+        if k == "sensor_to_zenoh_p50_ms":
+            goal = "context"
+        if v is None:
+            rows.append((k, f"not available: {rep.reasons.get(k, 'unknown')}", goal, ""))
+        elif isinstance(v, dict):
+            rows.append((k, ", ".join(f"{n} {c:g}" for n, c in v.items()), goal, ""))
+        else:
+            rows.append((k, f"{v:g}", goal, verdict(k, v)))
+    w0 = max(len(r[0]) for r in rows)
+    w2 = max(len(r[2]) for r in rows)
+    lines = []
+    for i, (a, b, c, d) in enumerate(rows):
+        # a long "not available" reason goes last so the goal column stays aligned
+        lines.append(f"{a:<{w0}}  {c:<{w2}}  {d:<6}  {b}".rstrip())
+        if i == 0:
+            lines.append("-" * min(100, w0 + w2 + 40))
+    r = rep.detail.get("replay")
+    if r:
+        lines.append("")
+        lines.append(f"replay log: {r['log']['source']}, {r['duration_s']:.0f} s, "
+                     f"{r['samples']:,} samples, pipelines {', '.join(r['pipelines'])}")
+        lines.append(f"  replay {statistics.median(r['replay_cpu_s']):.2f} s CPU, pymavlink parse "
+                     f"{statistics.median(r['pymavlink_cpu_s']):.2f} s CPU (median of "
+                     f"{len(r['cpu_ratios'])} interleaved pairs; ratio of CPU times; wall-time "
+                     f"ratio {r['wall_ratio_median']:g})")
+        b = dict(r.get("breakdown_cpu_s") or {})
+        ticks = b.pop("ticks", 0)
+        if b:
+            lines.append("  replay CPU by stage: " + ", ".join(
+                f"{k} {v:.2f} s" for k, v in b.items()) + f" ({ticks:,} ticks)")
+    sv = rep.detail.get("service") or {}
+    if "tick_to_zenoh_p99_ms" in sv:
+        lines.append(f"service: tick-to-Zenoh p50 {sv.get('tick_to_zenoh_p50_ms', float('nan')):.2f} ms, "
+                     f"p99 {sv['tick_to_zenoh_p99_ms']:.2f} ms (what the service adds beyond "
+                     "the wait for the next tick)")
+    a = rep.detail.get("aie")
+    if a:
+        lines.append(f"AIE axis step {a['aie_axis_step_us']:.1f} us, filterpy KF(3) "
+                     f"predict+update {a['filterpy_kf3_step_us']:.1f} us")
+    if rep.detail.get("settings", {}).get("fast"):
+        lines.append("(fast mode: ONBOARD_BENCH_FAST is set; figures are not meaningful)")
+    return "\n".join(lines)
+
+
+def main(args) -> int:
+    """Entry point of ``onboard bench``."""
+    as_json = bool(getattr(args, "json", False))
+    progress = None if as_json or not sys.stderr.isatty() else (
+        lambda msg: print(msg, file=sys.stderr, flush=True))
+    rep = collect(Settings.from_env(), progress)
+    if as_json:
+        print(json.dumps({k: rep.values[k] for k in KEYS}, indent=2))
+        for k, why in rep.reasons.items():
+            print(f"onboard bench: {k} not available: {why}", file=sys.stderr)
+    else:
+        print(table(rep))
+    if os.environ.get("ONBOARD_BENCH_DETAIL"):
+        Path(os.environ["ONBOARD_BENCH_DETAIL"]).write_text(
+            json.dumps({"values": rep.values, "reasons": rep.reasons, "detail": rep.detail},
+                       indent=2, default=str) + "\n")
+    return 0

@@ -1,0 +1,108 @@
+"""``onboard diagnose LOG [--config FILE ...] [--out DIR] [--write-config FILE]``: model
+closure on measured data.
+
+Reads the log with the same readers and engine as ``onboard replay``, fits the base model,
+selects the effects that explain its structured residuals on held-out data, and writes
+``DIR/diagnosis.json`` and ``DIR/report.html`` (architecture.md §4.3); with
+``--write-config`` also a config overlay of what it found (:mod:`onboard.offline.closure.overlay`).
+Options in the config's ``[diagnose]`` table (:class:`onboard.core.config.DiagnoseConfig`):
+``declared`` (effects already in the model), ``known``, ``holdout_metric``, ``rate_hz``,
+``base_terms``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import msgspec
+
+from onboard.drivers.base import UnreadableLog
+from onboard.offline.closure import dataset, overlay, overlay_check, report
+from onboard.offline.closure.effects import ALL
+from onboard.offline.closure.select import select
+from onboard.core.errors import UsageError
+from onboard.offline.replay import choose_config, print_warnings
+
+
+def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
+             write_config: Path | None = None, config_note: str = "",
+             detected: bool = False, base_terms: tuple[str, ...] | None = None) -> dict:
+    """Model closure of ``log`` under configuration ``cfg``: fit, select the effects,
+    write ``diagnosis.json`` and ``report.html`` into ``out_dir``; return the diagnosis.
+
+    ``declared`` effects (default: the config's ``[diagnose] declared``) are
+    taken as part of the model and not searched; an unknown name is a
+    :class:`UsageError`. ``write_config``: also write the config overlay there
+    (``config_note`` names the base config in its header; ``detected``: ``cfg`` was
+    detected from the log, so the overlay carries its vehicle and inputs).
+    ``base_terms``: the base model's optional terms to fit (default: the config's
+    ``base_terms``, else :data:`onboard.offline.closure.dataset.DEFAULT_BASE_TERMS`;
+    :func:`onboard.offline.closure.dataset.with_base_terms`). A log without what model closure
+    needs (a heading, a velocity over ground, 50 s of both: docs/diagnose.md, "What
+    diagnose refuses") is a :class:`UsageError` naming it.
+    """
+    opts = cfg.diagnose
+    declared = tuple(declared) or tuple(opts.declared)
+    unknown = [d for d in (*declared, *opts.known) if d not in ALL]
+    if unknown:
+        raise UsageError(f"unknown declared effect(s) {unknown}; known: {', '.join(ALL)}")
+    try:
+        ds = dataset.from_log(log, cfg, rate_hz=opts.rate_hz)
+    except dataset.NotEnoughData as err:  # what is missing; any other error is a bug
+        raise UsageError(str(err)) from None
+    try:
+        ds = dataset.with_base_terms(ds, base_terms if base_terms is not None
+                                     else opts.base_terms)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    try:
+        sel = select(ds, declared=declared, metric=opts.holdout_metric or None,
+                     known=opts.known)
+    except dataset.NotEnoughData as err:
+        raise UsageError(str(err)) from None
+    doc = report.write(sel, log, out_dir)
+    if ds.warnings:   # what reading the log raised (time outliers, jumps), beside the fit
+        doc["warnings"] = msgspec.to_builtins(ds.warnings)
+        doc["log_start_s"] = float(ds.t[0])
+        (out_dir / "diagnosis.json").write_text(json.dumps(doc, indent=2) + "\n")
+    if write_config is not None:
+        verdicts = overlay_check.check(overlay.sections(doc, cfg, sel), log, cfg, sel)
+        doc = overlay_check.record(doc, verdicts, out_dir)
+        text = overlay.overlay_text(doc, cfg, sel, detected=detected, base_note=config_note,
+                                    refused={v.section: v.reason for v in verdicts
+                                             if not v.written})
+        try:
+            Path(write_config).write_text(text, encoding="utf-8")
+        except OSError as err:
+            raise UsageError(f"{write_config}: cannot write: {err.strerror}") from None
+    return doc
+
+
+def main(args) -> int:
+    """``onboard diagnose``: run :func:`diagnose` and print the effects found and the
+    error on the test part (never used to fit or to choose) before and after."""
+    if not Path(args.log).exists():
+        raise UsageError(f"{args.log}: no such file or directory")
+    try:
+        cfg, _ = choose_config(args.log, args.config)
+        doc = diagnose(args.log, cfg, Path(args.out),
+                       write_config=getattr(args, "write_config", None),
+                       config_note=" --config ".join(args.config or []),
+                       detected=not args.config)
+    except UnreadableLog as err:
+        raise UsageError(str(err)) from None
+    found = [e for e in doc["effects"] if e["detected"]]
+    names = ", ".join(e["name"] for e in found) or "none"
+    print(f"effects: {names}; test-part {doc['holdout_metric']}: "
+          f"{doc['holdout_error_before']:.4g} -> {doc['holdout_error_after']:.4g} "
+          f"({Path(args.out) / 'diagnosis.json'})")
+    for v in doc.get("overlay_check", []):
+        print(overlay_check.Verdict(v["section"], v["written"], v["reason"],
+                                    v["speed_rmse_before_mps"], v["speed_rmse_after_mps"]).line())
+    print_warnings(doc.get("warnings", []), doc.get("log_start_s", 0.0))
+    if getattr(args, "write_config", None):
+        base = " ".join(f"--config {c}" for c in args.config or [])
+        print(f"config overlay: {args.write_config} (use: {base + ' ' if base else ''}"
+              f"--config {args.write_config})")
+    return 0

@@ -1,2 +1,0 @@
-"""Validation reports: ``python -m onboard.tools.reports.<name>`` reruns the measurements
-behind the tables and figures of docs/aie.md and docs/current.md."""
