@@ -4,7 +4,7 @@
 #   make figures  recompute every figure (docs/figures.json) and regenerate the README's
 #                 table, the docs pages' results tables and docs/results.csv from it
 #   make docs     regenerate the README's and the docs pages' tables from docs/figures.json
-#                 (nothing recomputed: seconds)
+#                 and docs/tuning.json (nothing recomputed: seconds)
 # On the vehicle computer (docs/service.md "Install"):
 #   sudo make install   venv in $(PREFIX)/venv, config in $(SYSCONFDIR), the systemd unit
 PYTHON ?= python3
@@ -57,8 +57,11 @@ figures: $(STAMP)
 	$(BIN)/python -m validation figures --write docs/figures.json --readme README.md --docs docs \
 	  --results docs/results.csv
 
+# Regenerate the README's and the docs pages' tables from docs/figures.json and
+# docs/tuning.json through their templates (validation/templates/), nothing recomputed.
 docs: $(STAMP)
 	$(BIN)/python -m validation figures --readme README.md --docs docs --results docs/results.csv
+	$(BIN)/python -m validation tune --page docs/aie.md
 
 clean:
 	rm -rf $(VENV) replay-out diagnose-out .pytest_cache

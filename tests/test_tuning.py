@@ -1,8 +1,9 @@
 """The tuning protocol (validation/tuning.py) and the ablation table it produced.
 
-The tuning itself takes minutes per variant (``python -m validation tune``); here: its pieces, that
-every variant builds a valid pipeline, and that docs/aie.md's ablation table is the
-rendering of the committed docs/tuning.json (cheap, no simulation).
+The tuning itself takes minutes per variant (``python -m validation tune``); here: its
+pieces, that every variant builds a valid pipeline, and that docs/aie.md's ablation table
+is its template (``validation/templates/docs/aie.md``) filled from the committed
+docs/tuning.json (cheap, no simulation).
 """
 
 from __future__ import annotations
@@ -13,9 +14,11 @@ import math
 import pytest
 
 from onboard.core.errors import UsageError
+from validation import render as R
 from validation import tuning as T
 
 REPO = T.TUNING_FILE.parents[1]
+(BLOCK,) = R.template_blocks(R.DOCS_TEMPLATES / "aie.md", "tuning")
 
 
 @pytest.fixture(scope="module")
@@ -25,11 +28,63 @@ def committed() -> dict:
 
 def test_the_ablation_table_in_docs_aie_md_is_rendered_from_docs_tuning_json(committed) -> None:
     page = (REPO / "docs" / "aie.md").read_text(encoding="utf-8")
-    assert T.table_block(page) == T.render_table(committed), (
+    assert BLOCK.find(page) == BLOCK.render(T.records(committed)), (
         "docs/aie.md's ablation table differs from docs/tuning.json: run "
         "`python -m validation tune --page docs/aie.md`")
     with pytest.raises(UsageError):
-        T.table_block("no markers")
+        BLOCK.find("no markers")
+
+
+def test_the_ablation_table_has_a_row_per_variant_with_what_it_credits(committed) -> None:
+    """Every variant of the file has its row, in :data:`VARIANTS` order, saying what it
+    credits as the variant states it (VARIANTS, or the file for a variant of the past)."""
+    rows = [line.split(" | ") for line in BLOCK.body()[3:]]
+    names = [n for n in T.VARIANTS if n in committed["variants"]]
+    names += [n for n in committed["variants"] if n not in T.VARIANTS]
+    assert [r[0] for r in rows] == [f"| `{n}`" for n in names]
+    for row, name in zip(rows, names):
+        cause = (T.VARIANTS[name].cause if name in T.VARIANTS
+                 else committed["variants"][name]["cause"])
+        assert row[1] == cause, name
+        assert all(f"tuning.{T.token(name)}." in cell for cell in row[3:8]), name
+
+
+def test_a_stale_ablation_number_is_caught_and_rewritten(committed, tmp_path) -> None:
+    """Negative control: a held-out figure moved in the file changes the table;
+    ``update_page`` rewrites the block and keeps the rest of the page."""
+    import copy
+
+    doc = copy.deepcopy(committed)
+    doc["variants"]["aie"]["held_out"]["effect-waves@1"]["speed"] += 0.01
+    assert BLOCK.render(T.records(doc)) != BLOCK.render(T.records(committed))
+    page = tmp_path / "aie.md"
+    text = (REPO / "docs" / "aie.md").read_text(encoding="utf-8")
+    page.write_text(text, encoding="utf-8")
+    assert not T.update_page(page, committed)
+    assert T.update_page(page, doc)
+    new = page.read_text(encoding="utf-8")
+    assert new != text and new.replace(BLOCK.find(new), BLOCK.find(text)) == text
+    del doc["variants"]["kf-no-imu"]
+    with pytest.raises(UsageError):   # the template names a variant the file lacks
+        BLOCK.render(T.records(doc))
+
+
+def test_the_records_of_a_variant() -> None:
+    """What :func:`records` reduces a variant's held-out runs to (and how they print)."""
+    ev = {"jaiabot-turns@1": {"speed": 0.0521, "heading": 0.02, "raw_speed": 0.1,
+                              "speed_cover1": 0.7, "speed_cover2": 0.96,
+                              "heading_cover1": 0.6, "heading_cover2": 0.9},
+          "jaiabot-turns@2": {"speed": 0.0536, "heading": 0.03, "raw_speed": 0.1,
+                              "speed_cover1": 0.7, "speed_cover2": 0.94,
+                              "heading_cover1": 0.6, "heading_cover2": 0.9}}
+    recs = T.records({"variants": {"aie (before)": {"params": {"surge.v_d": 0.03977},
+                                                    "held_out": ev}}})
+    assert R.fill("{tuning.aie_before.speed.jaiabot_turns} {tuning.aie_before.param.surge.v_d} "
+                  "{tuning.aie_before.heading_mean.jaiabot_turns} "
+                  "{tuning.aie_before.speed_cover2} {tuning.raw_speed.jaiabot_turns}",
+                  recs) == "0.052-0.054 0.04 0.0250 0.94-0.96 0.100"
+    assert R.format_value(recs["tuning.aie_before.held_out_objective"]) == (
+        f"{T.held_out_objective(ev):.3f}")
 
 
 def test_the_committed_results_follow_the_protocol(committed) -> None:

@@ -1,15 +1,16 @@
-"""``python -m validation figures``: the README's figures, recomputed from the simulator and the field
-logs, written to and checked against ``docs/figures.json``.
+"""``python -m validation figures``: the README's figures, recomputed from the simulator and
+the field logs, written to and checked against ``docs/figures.json``.
 
 Each figure has a name (``aie.jaiabot_turns.speed_rmse.aie``: estimator, scenario,
 quantity, which filter), the function computing it from a run
 (``validation/reports/runs.py``, each run flown once per process), its unit, the seeds it
 is measured on and a tolerance. The README's "What it estimates" table is generated from
-the file (:data:`README_ROWS`, between the ``figures:begin`` / ``figures:end`` markers), and
-so are the docs pages' results tables (``validation/doc_tables.py``, ``--docs docs``), so
-their numbers are the file's; ``tests/test_figures.py`` checks every generated block against
-the file and recomputes the figures (a subset in the default suite, every one with
-``-m slow``) against it within each figure's tolerance. docs/reproducing.md says how to
+the file (between the ``figures:begin`` / ``figures:end`` markers), and so are the docs
+pages' results tables (``--docs docs``): Markdown templates under
+``validation/templates/`` filled by :mod:`validation.render`, so their numbers are the
+file's; ``tests/test_figures.py`` checks every generated block against the file and
+recomputes the figures (a subset in the default suite, every one with ``-m slow``)
+against it within each figure's tolerance. docs/reproducing.md says how to
 re-measure after a change.
 
 Tolerances. A run is deterministic per seed on one machine (same seed, same bytes), so a
@@ -28,8 +29,8 @@ from above: the AIE speed RMSE is 0.051-0.053 m/s over seeds 1-3 (4 %), the KF's
 * real-log figures: 2 % (:data:`DATA`; no simulator randomness, only rounding).
 
 A figure that moves by more than its tolerance is a change of the estimator, to be
-re-measured with ``python -m validation figures --only 'PREFIX.*' --write docs/figures.json --readme
-README.md --docs docs`` (all of them: ``make figures``) and committed with the change that
+re-measured with ``python -m validation figures --only 'PREFIX.*' --write docs/figures.json
+--readme README.md --docs docs`` (all of them: ``make figures``) and committed with the change that
 moved it.
 """
 
@@ -41,7 +42,6 @@ import fnmatch
 import json
 import math
 import platform
-import re
 import subprocess
 import sys
 import time
@@ -50,14 +50,12 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 from onboard.core.errors import UsageError
+from validation import render
 from validation.reports import runs
 
 REPO = Path(__file__).resolve().parents[1]
 FIGURES_FILE = REPO / "docs" / "figures.json"
 README = REPO / "README.md"
-BEGIN = ("<!-- figures:begin: generated from docs/figures.json by `python -m validation figures --readme "
-         "README.md`; the rows are README_ROWS in validation/figures.py -->")
-END = "<!-- figures:end -->"
 
 
 @dataclass(frozen=True)
@@ -505,130 +503,6 @@ def registry() -> dict[str, Figure]:
     return {f.name: f for f in figs}
 
 
-# ----------------------------------------------------------------------------- README
-
-SIM = "simulator truth"
-FIELD_SURGE = "field log: the logged surge speed (an autopilot estimate)"
-
-README_ROWS: tuple[tuple[str, str, str, str, str, str], ...] = (
-    # (estimator (paper), scenario, figure, ours: placeholders only, measured against, doc)
-    ("AIE vs KF (Faros & Tanner), both tuned alike", "`jaiabot-turns`, seeds 1-3",
-     "speed RMSE AIE / KF / raw GNSS (m/s)",
-     "{aie.jaiabot_turns.speed_rmse.aie} / {aie.jaiabot_turns.speed_rmse.kf} / "
-     "{aie.jaiabot_turns.speed_rmse.gnss}", SIM, "[docs/aie.md](docs/aie.md)"),
-    ("", "`jaiabot-turns`, seeds 1-3", "heading RMSE AIE / KF (rad)",
-     "{aie.jaiabot_turns.heading_rmse.aie} / {aie.jaiabot_turns.heading_rmse.kf}", SIM, ""),
-    ("", "`twin-thruster-turns`, seeds 1-3", "speed RMSE AIE / KF / raw GNSS (m/s)",
-     "{aie.twin_thruster_turns.speed_rmse.aie} / {aie.twin_thruster_turns.speed_rmse.kf} / "
-     "{aie.twin_thruster_turns.speed_rmse.gnss}", SIM, ""),
-    ("", "`effect-waves` (undeclared waves), seeds 1-3",
-     "speed RMSE AIE / KF / raw GNSS (m/s)",
-     "{aie.effect_waves.speed_rmse.aie} / {aie.effect_waves.speed_rmse.kf} / "
-     "{aie.effect_waves.speed_rmse.gnss}", SIM, ""),
-    ("", "BlueBoat, 8 held-out field runs (no Doppler)",
-     "mean speed RMSE AIE / KF / consecutive fixes (m/s)",
-     "{aie.blueboat.speed_rmse.aie} / {aie.blueboat.speed_rmse.kf} / "
-     "{aie.blueboat.speed_rmse.gps}", FIELD_SURGE, ""),
-    ("", "`fault-gnss-outage` (120 s without a fix), seeds 1-3",
-     "max position error AIE / KF (m); AIE 2-sigma coverage",
-     "{aie.gnss_outage.max_error.aie} / {aie.gnss_outage.max_error.kf}; "
-     "{aie.gnss_outage.cover2.aie}", SIM, ""),
-    ("Water current: joint KF and HGO (Kim, Fan & Bose, Gavia)",
-     "`gavia-tidal`, calm-water model, seed 1", "KF RMS north / east / down (m/s)",
-     "{current.gavia_tidal.kf.north_rms} / {current.gavia_tidal.kf.east_rms} / "
-     "{current.gavia_tidal.kf.down_rms}", SIM, "[docs/current.md](docs/current.md)"),
-    ("", "`gavia-tidal`, calm-water model, seed 1, HGO at gamma* of the model it runs",
-     "HGO RMS north / east / down (m/s); lowest 2-sigma coverage",
-     "{current.gavia_tidal.hgo.north_rms} / {current.gavia_tidal.hgo.east_rms} / "
-     "{current.gavia_tidal.hgo.down_rms}; {current.gavia_tidal.hgo.cover2_min}", SIM, ""),
-    ("Nonlinear flow observer (Fan et al.)", "`spheroid-sawtooth`, seed 1",
-     "flow observer / joint KF RMS north, east (m/s)",
-     "{current.spheroid_sawtooth.flow.north_rms}, {current.spheroid_sawtooth.flow.east_rms} / "
-     "{current.spheroid_sawtooth.kf.north_rms}, {current.spheroid_sawtooth.kf.east_rms}",
-     SIM, "[docs/current.md](docs/current.md)"),
-    ("Current on a surface boat, no model (joint KF)",
-     "`effect-current` / `boat-tidal`, seed 1", "RMS north, east (m/s)",
-     "{current.effect_current.kf.north_rms}, {current.effect_current.kf.east_rms} / "
-     "{current.boat_tidal.kf.north_rms}, {current.boat_tidal.kf.east_rms}", SIM,
-     "[docs/current.md](docs/current.md)"),
-    ("ESESO + adaptive MPC (Lo, Hu et al., BlueROV2)", "`bluerov2-circle`, seed 0",
-     "tracking RMSE AMPC / NMPC / PID (m)",
-     "{eseso.circle.tracking_rmse.ampc} / {eseso.circle.tracking_rmse.nmpc} / "
-     "{eseso.circle.tracking_rmse.pid}", SIM, "[docs/eseso-mpc.md](docs/eseso-mpc.md)"),
-    ("", "`bluerov2-circle`, seeds 1-3 pooled",
-     "ESESO mean NIS velocity (2) / attitude (3) / DVL (3) / thrust (3); channels in band "
-     "(filter told the plant's own model and noise)",
-     "{eseso.nis.vog} / {eseso.nis.attitude} / {eseso.nis.dvl} / {eseso.nis.thrust}; "
-     "{eseso.nis.channels_in_band} of 4", "chi-square band of the mean NIS", ""),
-    ("Model closure (`onboard diagnose`)", "11 effect scenarios, seed 1",
-     "injected effects named (of 12); on `clean`",
-     "{diagnose.effects_named}; {diagnose.clean.effects_named}",
-     "the simulator's injected effects", "[docs/diagnose.md](docs/diagnose.md)"),
-    ("", "BlueBoat field runs, thruster columns literal",
-     "open-loop surge error on test runs before -> after (m/s)",
-     "{diagnose.blueboat_literal.holdout_before} -> {diagnose.blueboat_literal.holdout_after}",
-     "field log: the logged surge speed", ""),
-)
-"""The README's "What it estimates" table: a few headline figures, each row (estimator
-and paper, scenario, what the figure is, ours, what it is measured against, doc). The
-"ours" cell holds ``{figure}`` placeholders and separators only; a placeholder prints
-the figure's value, or its range over the seeds (``lo-hi``) when they differ at the
-printed digits. The prose around the figures is the README's own text."""
-
-HEADER = ("estimator (paper)", "scenario", "figure", "ours", "measured against", "doc")
-
-PLACEHOLDER = re.compile(r"\{([a-z0-9_.]+)\}")
-
-
-def format_entry(entry: dict[str, Any], digits: int) -> str:
-    """One figure of the file as the README prints it: the value, or ``lo-hi`` over its
-    seeds when they differ at ``digits`` decimals."""
-    vals = [v for v in entry["values"].values() if v is not None]
-    if not vals:
-        return "n/a"
-    lo, hi = f"{min(vals):.{digits}f}", f"{max(vals):.{digits}f}"
-    return lo if lo == hi else f"{lo}-{hi}"
-
-
-def render_table(doc: dict[str, Any]) -> str:
-    """The README block (markers included) from a figures file's contents; a placeholder
-    naming a figure absent from ``doc`` is a :class:`UsageError`."""
-    figs = doc["figures"]
-
-    def sub(m: re.Match[str]) -> str:
-        name = m.group(1)
-        if name not in figs:
-            raise UsageError(f"README_ROWS names {name}, which the figures file lacks "
-                             "(run python -m validation figures --write)")
-        return format_entry(figs[name], int(figs[name]["digits"]))
-
-    lines = [BEGIN, "| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
-    for est, scenario, what, ours, ref, link in README_ROWS:
-        lines.append(f"| {est} | {scenario} | {what} | {PLACEHOLDER.sub(sub, ours)} | {ref} "
-                     f"| {link} |")
-    lines.append(END)
-    return "\n".join(lines)
-
-
-def readme_block(text: str) -> str:
-    """The generated block of a README's text (markers included); a
-    :class:`UsageError` when the markers are missing."""
-    i, j = text.find(BEGIN), text.find(END)
-    if i < 0 or j < i:
-        raise UsageError("README has no figures block (the figures:begin / figures:end "
-                         "markers)")
-    return text[i:j + len(END)]
-
-
-def update_readme(path: Path, doc: dict[str, Any]) -> bool:
-    """Rewrite the README's figures block from ``doc``; True when it changed."""
-    text = path.read_text(encoding="utf-8")
-    new = text.replace(readme_block(text), render_table(doc))
-    if new != text:
-        path.write_text(new, encoding="utf-8")
-    return new != text
-
-
 # ----------------------------------------------------------------------------- file
 
 
@@ -748,22 +622,23 @@ def run_figures(names: Sequence[str], figs: dict[str, Figure], log: Any = sys.st
 
 def render_pages(readme: str | None, docs: str | None, doc: dict[str, Any],
                  results: str | None = None) -> None:
-    """Rewrite the README's figures block (``readme``), the generated tables of the
-    pages in ``docs`` (``validation/doc_tables.py``) and the results file
+    """Rewrite the README's figures block (``readme``), the figures blocks of the pages
+    in ``docs`` (their templates, :mod:`validation.render`) and the results file
     (``results``, :mod:`validation.results`) from ``doc``, saying what changed."""
-    from validation import doc_tables
     from validation import results as results_mod
 
     if results:
         changed = results_mod.write(Path(results), doc)
         print(f"{results}: {'rewritten' if changed else 'unchanged'}")
-
+    figs = doc["figures"]
     if readme:
-        changed = update_readme(Path(readme), doc)
-        print(f"{readme}: figures block {'rewritten' if changed else 'unchanged'}")
+        keys = render.update_page(Path(readme), render.README_TEMPLATE, "figures", figs)
+        print(f"{readme}: figures block {'rewritten' if keys else 'unchanged'}")
     if docs:
-        keys = doc_tables.update_docs(Path(docs), doc)
-        print(f"{docs}: {len(doc_tables.tables())} generated tables, "
+        keys = render.update_docs(Path(docs), "figures", figs)
+        n = sum(len(render.template_blocks(t, "figures"))
+                for t in render.DOCS_TEMPLATES.glob("*.md"))
+        print(f"{docs}: {n} generated tables, "
               + (f"rewritten: {', '.join(keys)}" if keys else "all unchanged"))
 
 
@@ -814,8 +689,8 @@ def main(args: argparse.Namespace) -> int:
         doc["about"] = ("The README's and the docs tables' figures (python -m validation figures; "
                         "validation/figures.py says how each is computed and why its "
                         "tolerance; docs/reproducing.md how to re-measure).")
-        doc["command"] = ("python -m validation figures --write docs/figures.json --readme README.md "
-                          "--docs docs")
+        doc["command"] = ("python -m validation figures --write docs/figures.json "
+                          "--readme README.md --docs docs")
         doc["written_utc"] = now
         doc["versions"] = versions()
         for n, vals in values.items():

@@ -1,7 +1,7 @@
 """The results file: every figure of ``docs/figures.json`` as one row per seed.
 
-``python -m validation figures --results docs/results.csv`` writes it (alone: from docs/figures.json,
-nothing recomputed; with ``--write``: from the file written). Columns::
+``python -m validation figures --results docs/results.csv`` writes it (alone: from
+docs/figures.json, nothing recomputed; with ``--write``: from the file written). Columns::
 
     name, scenario, seed, value, unit, reference
 

@@ -23,9 +23,10 @@ method, not the care spent on its noise settings (issue 23, item 1):
   tuning scenarios (whole runs) and on :data:`UNSEEN_SCENARIOS`, which the tuning never
   saw: RMSE and 1-/2-sigma coverage of speed and heading (:func:`evaluate`).
 
-``python -m validation tune VARIANT... [--budget N] [--out FILE]`` runs it (``python -m validation tune --list``);
-docs/aie.md section 2.1 holds the ablation table it produced and says which defaults
-came from it.
+``python -m validation tune VARIANT... [--budget N] [--out FILE]`` runs it (``python -m
+validation tune --list``); docs/aie.md section 2.1 holds the ablation table it produced
+(its template ``validation/templates/docs/aie.md`` filled from :func:`records`) and says
+which defaults came from it.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ import argparse
 import functools
 import json
 import math
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -43,6 +45,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from onboard.core.errors import UsageError
+from validation import render
 
 TUNING_SCENARIOS = ("jaiabot-turns", "twin-thruster-turns", "effect-waves")
 """The scenarios the parameters are tuned on: the AIE paper's boat, a skid-steered one,
@@ -327,35 +330,20 @@ def evaluate(name: str, params: Mapping[str, float]) -> dict[str, dict[str, floa
             for sc, s in plan}
 
 
-# ----------------------------------------------------------------------------- command
+# ----------------------------------------------------------------------------- the table
 
 
-BEGIN = ("<!-- tuning:begin: generated from docs/tuning.json by `python -m validation tune --page "
-         "docs/aie.md`; the rows are table_rows() in validation/tuning.py -->")
-END = "<!-- tuning:end -->"
+TOKEN = re.compile(r"[^a-z0-9]+")
 
 
-def _range(ev: Mapping[str, Mapping[str, float]], keys: Sequence[str], q: str,
-           d: int = 3) -> str:
-    """``lo-hi`` (or one value) of metric ``q`` over the held-out runs ``keys``."""
-    v = [ev[k][q] for k in keys]
-    lo, hi = f"{min(v):.{d}f}", f"{max(v):.{d}f}"
-    return lo if lo == hi else f"{lo}-{hi}"
+def token(name: str) -> str:
+    """A variant's name as it appears in record names: ``aie (before)`` is
+    ``aie_before``."""
+    return TOKEN.sub("_", name.lower()).strip("_")
 
 
-def _short(params: Mapping[str, float]) -> str:
-    if not params:
-        return "shipped defaults"
-    return ", ".join(f"{k} {v:.2g}" for k, v in params.items())
-
-
-HEADER = ("variant", "what it credits", "tuned", *TUNING_SCENARIOS,
-          "unseen: " + ", ".join(UNSEEN_SCENARIOS), "heading (rad), mean per tuning scenario",
-          "speed 1 / 2 sigma", "heading 1 / 2 sigma", "held-out objective")
-"""The ablation table's columns: speed RMSE (m/s) on the held-out seeds of each tuning
-scenario, on the unseen scenarios, heading RMSE (rad) averaged over the held-out seeds
-of each tuning scenario, the coverage of the published sigmas over every held-out run,
-and :func:`held_out_objective`."""
+def _record(values: Mapping[str, float | None], digits: int | str) -> dict[str, Any]:
+    return {"values": dict(values), "digits": digits}
 
 
 def held_out_objective(ev: Mapping[str, Mapping[str, float]]) -> float:
@@ -364,63 +352,90 @@ def held_out_objective(ev: Mapping[str, Mapping[str, float]]) -> float:
     return float(np.mean([score(m) for m in ev.values()]))
 
 
-def table_rows(doc: Mapping[str, Any]) -> list[tuple[str, ...]]:
-    """The ablation table of a results file: the raw GNSS speed first, then one row per
-    variant in :data:`VARIANTS` order (then any other name in the file)."""
+def _groups(ev: Mapping[str, Any]) -> dict[str, list[str]]:
+    """The held-out runs (``<scenario>@<seed>``) by tuning scenario (its name with
+    underscores) and ``unseen``: the runs of :data:`UNSEEN_SCENARIOS`."""
+    by = {sc: [k for k in ev if k.split("@")[0] == sc]
+          for sc in (*TUNING_SCENARIOS, *UNSEEN_SCENARIOS)}
+    out = {sc.replace("-", "_"): by[sc] for sc in TUNING_SCENARIOS}
+    out["unseen"] = [k for sc in UNSEEN_SCENARIOS for k in by[sc]]
+    return out
+
+
+def variant_records(prefix: str, rec: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """The records of one variant's results (:func:`records`), named ``prefix.*``."""
+    ev = rec["held_out"]
+    groups = _groups(ev)
+    out = {f"{prefix}.speed.{g}": _record({k: ev[k]["speed"] for k in keys}, 3)
+           for g, keys in groups.items()}
+    for sc in TUNING_SCENARIOS:
+        keys = groups[sc.replace("-", "_")]
+        mean = float(np.mean([ev[k]["heading"] for k in keys])) if keys else None
+        out[f"{prefix}.heading_mean.{sc.replace('-', '_')}"] = _record({"mean": mean}, 4)
+    for q in ("speed_cover1", "speed_cover2", "heading_cover1", "heading_cover2"):
+        out[f"{prefix}.{q}"] = _record({k: m[q] for k, m in ev.items()}, 2)
+    out[f"{prefix}.held_out_objective"] = _record({"-": held_out_objective(ev)}, 3)
+    out |= {f"{prefix}.param.{k}": _record({"-": v}, "2g") for k, v in rec["params"].items()}
+    return out
+
+
+def records(doc: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """The ablation table's figures of a results file, as the records the template of
+    docs/aie.md reads (``validation/render.py``). Per variant ``V`` (:func:`token`):
+
+    * ``tuning.V.speed.S``: speed RMSE (m/s) on each held-out run of tuning scenario
+      ``S`` (``jaiabot_turns``, ...), ``tuning.V.speed.unseen`` on the unseen ones;
+    * ``tuning.V.heading_mean.S``: heading RMSE (rad), mean over the held-out runs of ``S``
+      (``null`` without one);
+    * ``tuning.V.speed_cover1`` (``_cover2``, ``heading_cover1``, ``heading_cover2``):
+      the coverage of the published sigma on each held-out run;
+    * ``tuning.V.held_out_objective``: :func:`held_out_objective`;
+    * ``tuning.V.param.KEY``: the tuned parameter ``KEY`` (``surge.v_d``; 2 significant
+      digits);
+
+    and ``tuning.raw_speed.S`` / ``.unseen``: the raw GNSS speed's RMSE on the held-out
+    runs (every variant flies the same runs; taken from the first variant in
+    :data:`VARIANTS` order)."""
     res = doc["variants"]
     names = [n for n in VARIANTS if n in res] + [n for n in res if n not in VARIANTS]
-    rows: list[tuple[str, ...]] = []
-    for i, name in enumerate(names):
-        ev = res[name]["held_out"]
-        by = {sc: [k for k in ev if k.split("@")[0] == sc]
-              for sc in (*TUNING_SCENARIOS, *UNSEEN_SCENARIOS)}
-        unseen = [k for sc in UNSEEN_SCENARIOS for k in by[sc]]
-        if i == 0:
-            rows.append(("raw GNSS speed", "the receiver's speed over ground (newest fix)",
-                         "-", *(_range(ev, by[sc], "raw_speed") for sc in TUNING_SCENARIOS),
-                         _range(ev, unseen, "raw_speed"), "", "", "", ""))
-        cause = VARIANTS[name].cause if name in VARIANTS else res[name].get("cause", "")
-        rows.append((f"`{name}`", cause, _short(res[name]["params"]),
-                     *(_range(ev, by[sc], "speed") for sc in TUNING_SCENARIOS),
-                     _range(ev, unseen, "speed"),
-                     " / ".join(f"{np.mean([ev[k]['heading'] for k in by[sc]]):.4f}"
-                                for sc in TUNING_SCENARIOS),
-                     *(_range(ev, list(ev), f"{q}_cover1", 2) + " / "
-                       + _range(ev, list(ev), f"{q}_cover2", 2)
-                       for q in ("speed", "heading")),
-                     f"{held_out_objective(ev):.3f}"))
-    return rows
-
-
-def render_table(doc: Mapping[str, Any]) -> str:
-    """The ablation table block (markers included) of a results file."""
-    lines = [BEGIN, "| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
-    lines += ["| " + " | ".join(r) + " |" for r in table_rows(doc)]
-    return "\n".join(lines + [END])
-
-
-def table_block(text: str) -> str:
-    """The ablation block of a page's text; a :class:`UsageError` without its markers."""
-    i, j = text.find(BEGIN.split(":", 1)[0] + ":"), text.find(END)
-    if i < 0 or j < i:
-        raise UsageError("the page has no tuning:begin / tuning:end block")
-    return text[i:j + len(END)]
+    out: dict[str, dict[str, Any]] = {}
+    for name in names:
+        prefix = f"tuning.{token(name)}"
+        if f"{prefix}.held_out_objective" in out:
+            raise UsageError(f"variants {name} and another share the record names {prefix}")
+        out |= variant_records(prefix, res[name])
+    if names:
+        ev = res[names[0]]["held_out"]
+        out |= {f"tuning.raw_speed.{g}": _record({k: ev[k]["raw_speed"] for k in keys}, 3)
+                for g, keys in _groups(ev).items()}
+    return out
 
 
 def update_page(path: Path, doc: Mapping[str, Any]) -> bool:
-    """Rewrite the page's ablation block from ``doc``; True when it changed."""
-    text = path.read_text(encoding="utf-8")
-    new = text.replace(table_block(text), render_table(doc))
-    if new != text:
-        path.write_text(new, encoding="utf-8")
-    return new != text
+    """Rewrite the page's ablation block (the template's ``tuning`` block of the page of
+    the same name, ``validation/templates/docs/aie.md``) from ``doc``; True when it
+    changed."""
+    template = render.DOCS_TEMPLATES / path.name
+    return bool(render.update_page(path, template, "tuning", records(doc)))
+
+
+def summary(doc: Mapping[str, Any]) -> list[str]:
+    """One line per record of ``doc`` (:func:`records`): its name and value, printed as
+    the table prints it."""
+    recs = records(doc)
+    w = max((len(n) for n in recs), default=0)
+    return [f"{n:{w}s}  {render.format_value(r)}" for n, r in recs.items()]
+
+
+# ----------------------------------------------------------------------------- command
 
 
 def main(args: argparse.Namespace) -> int:
-    """``python -m validation tune [--list] [--budget N] [--out FILE] [--no-tune] [--page FILE]
-    VARIANT...``: tune each variant (:func:`tune`), evaluate it (:func:`evaluate`),
-    print the table, merge the results into ``--out`` (JSON) and rewrite the ablation
-    table of ``--page`` from it (``--page`` alone: from docs/tuning.json)."""
+    """``python -m validation tune [--list] [--budget N] [--out FILE] [--no-tune]
+    [--page FILE] VARIANT...``: tune each variant (:func:`tune`), evaluate it
+    (:func:`evaluate`), print its table figures (:func:`summary`), merge the results into
+    ``--out`` (JSON) and rewrite the ablation table of ``--page`` from it (``--page``
+    alone: from docs/tuning.json)."""
     if args.page and not args.variants:
         update_page(Path(args.page), json.loads(Path(args.out or TUNING_FILE).read_text(
             encoding="utf-8")))
@@ -451,7 +466,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"{name}: {json.dumps({k: v for k, v in rec.items() if k != 'held_out'})}")
         if out:
             out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    print(render_table({"variants": {n: results[n] for n in args.variants}}))
+    print("\n".join(summary({"variants": {n: results[n] for n in args.variants}})))
     if args.page:
         if not out:
             raise UsageError("--page needs --out (the table is rendered from that file)")

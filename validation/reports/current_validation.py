@@ -395,33 +395,6 @@ def identified_state(model_run: dict[str, Any]) -> dict[str, Any]:
     return st
 
 
-COVERAGE_RUNS = (("gavia-tidal", "kf"), ("gavia-tidal", "hgo"), ("spheroid-sawtooth", "kf"),
-                 ("spheroid-sawtooth", "hgo"), ("effect-current", "kf"), ("boat-tidal", "kf"),
-                 ("jaiabot-turns", "kf"), ("twin-thruster-turns", "kf"))
-"""The runs (``runs.CURRENT_RUNS`` keys) and observers of the coverage table."""
-
-
-def coverage_table(seed: int = 1) -> str:
-    """The markdown table of docs/current.md, "Calibrated sigma": per run of
-    :data:`COVERAGE_RUNS`, RMS error / mean published sigma and 1- and 2-sigma coverage per
-    axis (target 0.68 / 0.95)."""
-    from validation.reports import runs
-
-    lines = ["| run (seed 1) | observer | RMS / sigma N, E, D (m/s) | 1σ cover N / E / D | "
-             "2σ cover N / E / D |", "|---|---|---|---|---|"]
-    for key, obs in COVERAGE_RUNS:
-        m = runs.current_metrics(key, obs, seed)
-        axes = [a for a in ("north", "east", "down") if math.isfinite(m[a]["sigma"])]
-
-        def cov(k: str) -> str:
-            return " / ".join(f"{m[a][k]:.2f}" if math.isfinite(m[a][k]) else "n/a"
-                              for a in axes)
-        rs = ", ".join(f"{_fmt(m[a]['rms'])} / {_fmt(m[a]['sigma'])}" for a in axes)
-        lines.append(f"| {key} | {obs} | {rs} | {cov('cover1')} | {cov('cover2')} |")
-        print(lines[-1], flush=True)
-    return "\n".join(lines)
-
-
 def _fmt(x: float) -> str:
     return f"{x:.3f}" if math.isfinite(x) else "-"
 
@@ -434,8 +407,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="docs/figures")
     ap.add_argument("--no-plot", action="store_true")
     ap.add_argument("--only", nargs="*", default=None)
-    ap.add_argument("--coverage", action="store_true",
-                    help="only the coverage table (1- and 2-sigma, per axis)")
     ap.add_argument("--gavia-rpm", action="store_true",
                     help="only the Gavia off-design table (rpm 1200-1600, two models)")
     ap.add_argument("--glider", default=None, metavar="CSV",
@@ -445,9 +416,6 @@ def main(argv: list[str] | None = None) -> int:
         print(gavia_coefficient_table(), flush=True)
         print()
         print(gavia_offdesign_table())
-        return 0
-    if args.coverage:
-        print(coverage_table())
         return 0
     out = Path(args.out)
     rows: list[list[str]] = []
