@@ -39,8 +39,9 @@ def test_the_code_imports_the_installed_names_only() -> None:
 
 
 def test_the_bundled_data_is_read_from_the_installed_package() -> None:
-    """The configs and gains are found through the package (importlib.resources), which
-    the editable install maps to config/; nothing computes the path from the source tree."""
+    """The configs and gains are the data of the package onboard.bundled, found with
+    importlib.resources (this editable install maps it to config/), and its package data
+    takes every config and gain of the folder into the wheel."""
     from onboard.core.config import BUNDLED_PACKAGE, CONFIG_DIR
     from onboard.pipelines.current import GAIN_DIR
 

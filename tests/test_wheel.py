@@ -5,8 +5,8 @@ What only an installed wheel can show: the bundled configs that autodetection an
 ``--config NAME`` load, and the high-gain observer's designed gains, are inside the
 package (read with importlib.resources), so the replay of a log gives the checkout's
 estimates to the byte. The wheel carries neither the docs machinery (``validation/``) nor
-the tests. A wheel built without the bundled data fails as the issue reported it (the
-negative control). tests/helpers/installed.py says how the venv gets its dependencies
+the tests. A wheel built without the bundled data cannot replay a log whose config it
+detects (the negative control). tests/helpers/installed.py says how the venv gets its dependencies
 offline.
 """
 
@@ -147,9 +147,9 @@ def test_a_named_bundled_config_and_its_designed_gain_work_from_the_installed_wh
     assert analytic != want
 
 
-def test_a_wheel_without_the_bundled_data_fails_as_the_issue_reported(deps, work):
+def test_a_wheel_without_the_bundled_data_cannot_load_the_config_it_detects(deps, work):
     """The negative control: a wheel built from this tree without the bundled data's
-    package-data line replays nothing, with the issue's message."""
+    package-data line exits 2 naming the config it detected and no bundled one."""
     src = work / "src-without-data"
     src.mkdir()
     for name in PACKAGE_FILES:
