@@ -12,14 +12,18 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-# make install: DESTDIR stages everything under a directory (packaging); PIP_ARGS adds pip
-# arguments (e.g. --no-index --find-links=wheels/ on a boat without internet).
+# make install: the wheel of this tree, built by the installed venv's pip (or WHEEL, one
+# built elsewhere), installed into $(PREFIX)/venv. DESTDIR stages everything under a
+# directory (packaging); PIP_ARGS adds pip arguments to the build and the install (e.g.
+# --no-index --find-links=wheels/ on a boat without internet: wheels/ then holds the
+# dependencies' wheels and setuptools, or give WHEEL).
 DESTDIR    ?=
 PREFIX     ?= /opt/onboard
 SYSCONFDIR ?= /etc/onboard
 UNITDIR    ?= /etc/systemd/system
 CREDSTORE  ?= /etc/credstore
 PIP_ARGS   ?=
+WHEEL      ?=
 
 .PHONY: demo test test-all bench figures docs setup clean install
 
@@ -69,4 +73,4 @@ clean:
 install:
 	$(PYTHON) -m onboard.apps.install --destdir "$(DESTDIR)" --prefix "$(PREFIX)" \
 	  --sysconfdir "$(SYSCONFDIR)" --unitdir "$(UNITDIR)" --credstore "$(CREDSTORE)" \
-	  --pip-args="$(PIP_ARGS)"
+	  --pip-args="$(PIP_ARGS)" --wheel="$(WHEEL)"

@@ -1,6 +1,7 @@
 #!/bin/sh
 # The extension's start: the bundled configuration of the vehicle class in ONBOARD_VEHICLE
-# (twin-thruster-boat for a BlueBoat, bluerov2, ...), then the extension's own file in the
+# (twin-thruster-boat for a BlueBoat, bluerov2, ...: a name, found inside the installed
+# package, as `onboard replay --config NAME` finds it), then the extension's own file in the
 # data folder (copied there at the first start; the web page edits it). State and
 # recordings go to the data folder too (/usr/blueos/extensions/onboard on the vehicle).
 set -eu
@@ -8,5 +9,5 @@ data=${ONBOARD_DATA:-/data}
 vehicle=${ONBOARD_VEHICLE:-twin-thruster-boat}
 mkdir -p "$data"
 [ -f "$data/onboard.toml" ] || cp /opt/onboard/blueos/onboard.toml "$data/onboard.toml"
-exec /opt/onboard/venv/bin/onboard run --config "/opt/onboard/config/$vehicle.toml" \
+exec /opt/onboard/venv/bin/onboard run --config "$vehicle" \
     --config "$data/onboard.toml" --state-dir "$data"

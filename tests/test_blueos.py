@@ -11,6 +11,7 @@ import json
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -18,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from onboard.core.config import load_all
+from onboard.apps.install import PACKAGE_FILES
+from onboard.core.config import bundled, load_all
 from onboard.service.daemon import check_config
 from onboard.service.web.app import parse_listen
 
@@ -117,11 +119,42 @@ def test_the_extensions_configuration_is_valid_over_each_vehicle_class(vehicle):
     assert cfg.service.zenoh.connect == ["tcp/127.0.0.1:7447"]  # BlueOS's zenohd
 
 
-def test_the_entrypoint_runs_the_files_the_image_installs():
+def source_copies(text: str) -> dict[str, str]:
+    """What the Dockerfile copies into ``/src``, the tree its wheel is built from: {path
+    in the repository: path under /src}. As Docker copies: a directory's contents go to
+    the target; a file goes into a target ending in ``/``, else to the target itself."""
+    out: dict[str, str] = {}
+    for word, rest in dockerfile_instructions(text):
+        if word != "COPY":
+            continue
+        *sources, dest = shlex.split(rest)
+        if not dest.startswith("/src/"):
+            continue
+        for src in sources:
+            into = dest.endswith("/") and not (REPO / src).is_dir()
+            out[src] = (dest + Path(src).name if into else dest).removeprefix("/src/").rstrip("/")
+    return out
+
+
+def test_the_image_builds_its_wheel_from_what_make_install_builds_it_from():
+    """The COPY lines into /src are install.PACKAGE_FILES, each at its own path: config/
+    among them, so the image's package carries the bundled configs and gains."""
+    copies = source_copies(DOCKERFILE.read_text())
+    assert set(copies) == set(PACKAGE_FILES) and all(k == v for k, v in copies.items()), copies
+    # the negative control: a Dockerfile that leaves config/ out is seen
+    without = DOCKERFILE.read_text().replace("COPY config /src/config", "")
+    assert "config" not in source_copies(without)
+
+
+def test_the_entrypoint_runs_a_bundled_config_by_name(label):
+    """The vehicle class is a bundled config's name, found inside the installed package;
+    nothing of the repository is copied into the image beside it."""
     entry = (REPO / "blueos" / "entrypoint.sh").read_text()
-    docker = DOCKERFILE.read_text()
-    assert "/opt/onboard/config/$vehicle.toml" in entry
-    assert "COPY config /opt/onboard/config" in docker
+    assert '--config "$vehicle"' in entry and "/opt/onboard/config" not in DOCKERFILE.read_text()
+    default = re.search(r"vehicle=\$\{ONBOARD_VEHICLE:-([\w-]+)\}", entry).group(1)
+    (env,) = [e for e in json.loads(label["permissions"])["Env"]
+              if e.startswith("ONBOARD_VEHICLE=")]
+    assert {default, env.split("=", 1)[1]} <= set(bundled())
     assert "--state-dir \"$data\"" in entry and DATA_BIND.endswith(":/data")
 
 
@@ -146,14 +179,22 @@ def test_the_mavlink_router_drop_in_feeds_the_input_and_takes_the_estimates():
 @pytest.mark.integration
 def test_the_images_install_steps_give_a_working_service_in_a_plain_venv(tmp_path):
     # 112 s measured (a wheel of this tree; numpy, scipy, zenoh, ... from pip's cache)
-    venv = tmp_path / "venv"
+    src, venv = tmp_path / "src", tmp_path / "venv"
+    src.mkdir()
+    for name, dest in source_copies(DOCKERFILE.read_text()).items():  # the image's /src
+        copy = shutil.copytree if (REPO / name).is_dir() else shutil.copy2
+        copy(REPO / name, src / dest)
     env = {**os.environ, "TARGETPLATFORM": "linux/amd64"}
     env.pop("PIP_NO_CACHE_DIR", None)
-    run = subprocess.run(["sh", str(REPO / "blueos" / "install.sh"), str(REPO), str(venv)],
+    run = subprocess.run(["sh", str(REPO / "blueos" / "install.sh"), str(src), str(venv)],
                          env=env, capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
     probe = ("from onboard.service.web.app import static_file; "
              "assert b'<title>onboard</title>' in static_file('index.html'); "
+             "from onboard.core.config import load; "
+             "from onboard.pipelines.current import GAIN_DIR; "
+             "assert load('twin-thruster-boat').vehicle.vehicle_class == 'twin-thruster-boat'; "
+             f"assert GAIN_DIR.is_relative_to({str(venv)!r}); "
              "import numpy, scipy, msgspec, zenoh, pymavlink; print('ok')")
     out = subprocess.run([str(venv / "bin" / "python"), "-c", probe], capture_output=True,
                          text=True, cwd=tmp_path, timeout=120)

@@ -18,6 +18,7 @@ import pytest
 from onboard.core.config import ConfigError, ZenohOut, load
 from onboard.service.credentials import private_file_problem, read_user_password, resolve_secret
 from onboard.service.signing import load_signing_key
+from tests.helpers.installed import clean_env, dependency_view, fresh_venv, run_installed
 from tests.helpers.tls import make_test_certificates, open_tls_acl_router
 from tests.helpers.waiting import wait_until
 
@@ -426,22 +427,36 @@ def test_a_staged_install_puts_config_unit_and_credential_store_in_place_and_kee
 
 
 @pytest.mark.integration
-def test_make_install_into_a_prefix_gives_a_venv_and_a_unit_that_systemd_analyze_verifies(tmp_path):
-    """``make install`` with every directory under a temporary prefix (no root): a venv with
-    the package (dependencies left out to stay offline and quick: --no-deps), the config,
-    the unit pointing at that venv; systemd-analyze verify passes on the installed unit."""
+def test_make_install_into_a_prefix_gives_a_venv_with_bundled_data_and_a_verified_unit(
+        tmp_path):
+    """``make install`` with every directory under a temporary prefix (no root): the wheel
+    of this tree built and installed into the venv, offline (the venv made beforehand
+    without pip, its dependencies this test venv's: tests/helpers/installed.py; PIP_ARGS
+    ``--no-index --no-build-isolation``), the config, the unit pointing at that venv. The
+    installed package replays a log from outside the checkout with the bundled config it
+    detects; systemd-analyze verify passes on the installed unit."""
     if shutil.which("make") is None:
         pytest.skip("make is not installed (Debian: apt-get install make)")
     p = {k: str(tmp_path / k) for k in ("opt", "etc", "unit", "credstore")}
+    venv = Path(p["opt"]) / "venv"
+    venv_python = fresh_venv(venv, dependency_view(tmp_path / "deps"))
     r = subprocess.run(["make", "-s", "install", f"PREFIX={p['opt']}", f"SYSCONFDIR={p['etc']}",
-                        f"UNITDIR={p['unit']}", f"CREDSTORE={p['credstore']}", "PIP_ARGS=--no-deps"],
+                        f"UNITDIR={p['unit']}", f"CREDSTORE={p['credstore']}",
+                        "PIP_ARGS=--no-index --no-build-isolation"],
                        cwd=REPO, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
-    venv_python = Path(p["opt"]) / "venv" / "bin" / "python"
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    where = subprocess.run([str(venv_python), "-c", "import onboard.apps.install as m; print(m.__file__)"],
-                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
-    assert where.stdout.strip().startswith(p["opt"] + "/venv/lib/"), where.stdout + where.stderr
+    assert "onboard-0.1.0-py3-none-any.whl built from" in r.stdout, r.stdout
+    where = subprocess.run([str(venv_python), "-c", "import onboard.core.config as m; "
+                            "print(m.__file__); print(m.CONFIG_DIR)"], cwd=tmp_path,
+                           env=clean_env(), capture_output=True, text=True, timeout=60)
+    assert where.returncode == 0, where.stderr
+    site = p["opt"] + "/venv/lib/"
+    assert all(line.startswith(site) for line in where.stdout.split()), where.stdout
+    log = REPO / "tests" / "data" / "replay" / "jaiabot-turns.tlog"
+    replay = run_installed(venv, "replay", str(log), "--out", "replay", "--no-plot", cwd=tmp_path)
+    assert replay.returncode == 0, replay.stderr
+    assert "(detected: SERVO1_FUNCTION=26 steering" in replay.stdout, replay.stdout
+    assert (tmp_path / "replay" / "estimates.csv").stat().st_size > 0
     unit = Path(p["unit"]) / "onboard.service"
     text = unit.read_text()
     assert f"\nExecStart={venv_python} -m onboard run --config ${{ONBOARD_CONFIG}}\n" in text

@@ -5,6 +5,12 @@ What only systemd itself can show: the unit as ``make install`` lays it out star
 publishes over TLS with the credential's user/password to the shipped ACL router, is
 killed and restarted by the watchdog when its loop stalls, and stops cleanly with its
 adaptive state saved in the ``StateDirectory``.
+
+The install is staged as ``make install DESTDIR=...`` stages it, the package included (its
+wheel built and installed into the staged venv), so the unit reads nothing of the checkout
+and the test runs from a clone anywhere, ``/tmp`` too (which the unit cannot see). The
+staged venv's dependencies are this test venv's site-packages, bound read-only into the
+booted system at :data:`BOUND_DEPS` (tests/helpers/installed.py builds it offline).
 """
 
 from __future__ import annotations
@@ -16,12 +22,12 @@ import shutil
 import signal
 import subprocess
 import sys
-import sysconfig
 from pathlib import Path
 
 import pytest
 
 from onboard.apps.service_bench import free_udp_port
+from tests.helpers.installed import PURELIB, dependency_view, fresh_venv, set_dependencies
 from tests.helpers.systemd_boot import booted_systemd, skip_unless_available
 from tests.helpers.tls import open_tls_acl_router
 from tests.helpers.waiting import wait_until
@@ -31,6 +37,11 @@ pytestmark = pytest.mark.integration
 REPO = Path(__file__).resolve().parents[1]
 SIM_S = 40.0
 DYNAMIC_UIDS = range(61184, 65520)  # systemd's range for DynamicUser=
+BOUND_DEPS = "/opt/onboard-test/site-packages"
+"""Where the booted system sees this test venv's site-packages (the staged venv's
+dependencies)."""
+OFFLINE_INSTALL = "--no-index --no-build-isolation"
+"""make install's PIP_ARGS here: no download (the build and the dependencies are local)."""
 
 
 def _deploy_config(example: str, endpoint: str, mav_port: int, gcs_port: int) -> str:
@@ -47,12 +58,16 @@ def _deploy_config(example: str, endpoint: str, mav_port: int, gcs_port: int) ->
 
 
 def _stage(stage: Path, endpoint: str, ca_pem: Path, mav_port: int, gcs_port: int) -> None:
-    """``make install DESTDIR=stage`` (files only), the secrets in the credential store as
-    the README says, a drop-in shortening the watchdog, and a venv whose packages are this
-    test's (the package build itself is test_deploy's)."""
+    """``make install DESTDIR=stage``, the package included (the venv made beforehand,
+    seeing this test venv's packages, so the install needs no download; then pointed at
+    :data:`BOUND_DEPS`), the secrets in the credential store as the README says, and a
+    drop-in shortening the watchdog."""
     from onboard.apps.install import main as install
 
-    assert install(["--destdir", str(stage), "--no-venv"]) == 0
+    venv = stage / "opt" / "onboard" / "venv"
+    fresh_venv(venv, dependency_view(stage.parent / "deps"))
+    assert install(["--destdir", str(stage), f"--pip-args={OFFLINE_INSTALL}"]) == 0
+    set_dependencies(venv, BOUND_DEPS)
     etc = stage / "etc" / "onboard"
     (etc / "onboard.toml").write_text(_deploy_config((etc / "onboard.toml").read_text(),
                                                      endpoint, mav_port, gcs_port))
@@ -67,27 +82,16 @@ def _stage(stage: Path, endpoint: str, ca_pem: Path, mav_port: int, gcs_port: in
     dropin.mkdir(parents=True)
     conf = "[Service]\nWatchdogSec=3\nRestartSec=1\n"
     if any(str(p).startswith(("/root/", "/home/")) for p in _readable()):
-        # the unit hides home directories (ProtectHome=yes); this test's Python or source
-        # tree lives in one, where an installed service's (/usr, /opt) never does
+        # the unit hides home directories (ProtectHome=yes); this test's Python lives in
+        # one, where an installed service's (/usr) never does
         conf += "ProtectHome=read-only\n"
     (dropin / "test.conf").write_text(conf)
-    venv = stage / "opt" / "onboard" / "venv"
-    subprocess.run([sys._base_executable, "-m", "venv", "--without-pip", str(venv)],  # type: ignore[attr-defined]
-                   check=True, timeout=60)
-    site = next((venv / "lib").glob("python3*/site-packages"))
-    purelib = Path(sysconfig.get_paths()["purelib"])
-    (site / "onboard-test.pth").write_text(f"{REPO}\n{purelib}\n")
-    # an editable install maps onboard.drivers and onboard.sitl to their top-level folders
-    # with a finder that its own .pth starts: the unit's venv gets the same
-    for f in purelib.glob("__editable__*onboard*"):
-        shutil.copy(f, site / f.name)
 
 
 def _readable() -> list[Path]:
-    """What the unit's dynamic user reads from this machine: the Python the test venv was
-    made from, this source tree, the test venv's packages."""
-    base = Path(sys._base_executable).resolve()  # type: ignore[attr-defined]
-    return [base.parent, REPO, Path(sysconfig.get_paths()["purelib"])]
+    """What the unit's dynamic user reads from this machine outside the staged tree and
+    :data:`BOUND_DEPS`: the Python the staged venv is made from."""
+    return [Path(sys._base_executable).resolve().parent]  # type: ignore[attr-defined]
 
 
 def _shore(endpoint: str, ca_pem: Path, got: dict[str, int]):
@@ -112,8 +116,8 @@ def test_the_installed_unit_runs_under_systemd_with_credentials_watchdog_and_sta
     skip_unless_available()
     in_tmp = [str(p) for p in _readable() if p.resolve().is_relative_to("/tmp")]
     if in_tmp:
-        pytest.skip(f"{in_tmp[0]} lies in /tmp, which the unit cannot see (DynamicUser= "
-                    "implies a private /tmp): run this test from a clone outside /tmp")
+        pytest.skip(f"the Python interpreter ({in_tmp[0]}) lies in /tmp, which the unit cannot "
+                    "see (DynamicUser= implies a private /tmp)")
     router, endpoint, certs = open_tls_acl_router(tmp_path)
     mav_port, gcs_port = free_udp_port(), free_udp_port()
     stage, scratch = tmp_path / "stage", tmp_path / "scratch"
@@ -124,7 +128,7 @@ def test_the_installed_unit_runs_under_systemd_with_credentials_watchdog_and_sta
     env = dict(os.environ, ONBOARD_LOG_LEVEL="WARNING", PYTHONPATH=str(REPO))
     sim = None
     try:
-        with booted_systemd(stage, scratch, _readable()) as sd:
+        with booted_systemd(stage, scratch, _readable(), [(PURELIB, BOUND_DEPS)]) as sd:
             # only the unit itself: its ordering on network-online means nothing in here
             sd.run("systemctl", "start", "--job-mode=ignore-requirements", "systemd-journald.service")
             start = sd.run("systemctl", "start", "--no-block", "--job-mode=ignore-requirements",
@@ -139,6 +143,12 @@ def test_the_installed_unit_runs_under_systemd_with_credentials_watchdog_and_sta
             # ready (Type=notify: "active" only after READY=1), as a dynamic user
             props = sd.wait_for("onboard.service", 30.0, ActiveState="active")
             assert props["ActiveState"] == "active", (props, sd.journal("onboard.service"))
+            # the staged venv runs the installed wheel, its dependencies from the bind
+            where = sd.run("/opt/onboard/venv/bin/python", "-c",
+                           "import onboard, zenoh; print(onboard.__file__, zenoh.__file__)")
+            package, dependency = where.stdout.split()
+            assert package.startswith("/opt/onboard/venv/lib/"), where
+            assert dependency.startswith(BOUND_DEPS + "/"), where
             main_pid = sd.show("onboard.service", "MainPID")["MainPID"]
             status = sd.run("cat", f"/proc/{main_pid}/status").stdout
             uid = int(re.search(r"(?m)^Uid:\s+(\d+)", status).group(1))

@@ -127,7 +127,9 @@ def design(cfg: Config, margin: float = 1.0) -> dict[str, Any]:
 
 
 def default_out(config_arg: str, cfg: Config) -> Path:
-    """``config/gains/<class>.json`` for a bundled config, else ``<config>.gain.json``."""
+    """For a bundled config, its class's file among the bundled gains (:data:`GAIN_DIR`:
+    ``config/gains/<class>.json`` of a checkout, inside the package when installed),
+    where the current pipeline loads it; else ``<config>.gain.json`` beside the file."""
     p = resolve(config_arg)
     if p.resolve().parent == CONFIG_DIR.resolve():
         return GAIN_DIR / f"{cfg.vehicle.vehicle_class}.json"

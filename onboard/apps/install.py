@@ -1,4 +1,4 @@
-"""``make install``: the service on a vehicle computer, from this source tree.
+"""``make install``: the service on a vehicle computer, from the wheel of this source tree.
 
 Run by the Makefile with the system Python (standard library only, nothing of ours
 installed yet)::
@@ -6,13 +6,17 @@ installed yet)::
     sudo make install                         # PREFIX=/opt/onboard SYSCONFDIR=/etc/onboard
     make install DESTDIR=/tmp/stage           # staged, for a package
     make install PREFIX=$HOME/o SYSCONFDIR=$HOME/o/etc UNITDIR=$HOME/o/unit CREDSTORE=$HOME/o/cred
+    make install WHEEL=dist/onboard-0.1.0-py3-none-any.whl   # a wheel built elsewhere
 
 What goes where (each path under ``DESTDIR`` when given):
 
 ==========================================  ==========================================
-``PREFIX/venv``                             a virtual environment with this package
-                                            (``pip install SOURCE``, not editable); the
-                                            unit runs ``PREFIX/venv/bin/python -m onboard``
+``PREFIX/venv``                             a virtual environment with this package:
+                                            its wheel (built from SOURCE by the venv's
+                                            pip, or ``WHEEL``) installed, as any user
+                                            installs it, bundled configs and gains
+                                            inside; the unit runs
+                                            ``PREFIX/venv/bin/python -m onboard``
 ``SYSCONFDIR/onboard.toml``                 config/deploy-example.toml, only if absent
 ``SYSCONFDIR/onboard.env``                  systemd/onboard.env.example, only if absent
 ``SYSCONFDIR/zenoh-vehicle.json5``          config/zenoh/vehicle-boat1.json5 (no secret),
@@ -24,10 +28,12 @@ What goes where (each path under ``DESTDIR`` when given):
 ==========================================  ==========================================
 
 A configuration already in place is never overwritten (the new example is written beside
-it as ``*.dist``). The state and log directories are not created here: systemd creates
-them at the first start (``StateDirectory=``, ``LogsDirectory=``), owned by the unit's
-dynamic user. Without ``DESTDIR``, and where ``systemd-analyze`` exists, the installed unit
-is checked with ``systemd-analyze verify``; a failure fails the install.
+it as ``*.dist``); the package in the venv always is (the same version too), its
+dependencies are installed where missing. The state and log directories are not created
+here: systemd creates them at the first start (``StateDirectory=``, ``LogsDirectory=``),
+owned by the unit's dynamic user. Without ``DESTDIR``, and where ``systemd-analyze``
+exists, the installed unit is checked with ``systemd-analyze verify``; a failure fails the
+install.
 """
 
 from __future__ import annotations
@@ -80,27 +86,48 @@ def unit_text(prefix: str, sysconfdir: str) -> str:
         UNIT_SYSCONFDIR + "/", sysconfdir.rstrip("/") + "/")
 
 
-PACKAGE_FILES = ("pyproject.toml", "README.md", "onboard", "drivers", "sitl")
-"""What the package is built from (copied to a temporary directory first, so the build
-leaves nothing in the source tree)."""
+PACKAGE_FILES = ("pyproject.toml", "README.md", "onboard", "drivers", "sitl", "config")
+"""What the wheel is built from (pyproject.toml maps drivers/, sitl/ and config/ into it)."""
+WHEEL_GLOB = "onboard-*.whl"
+"""The file name of this package's wheel (``onboard-VERSION-py3-none-any.whl``)."""
 
 
-def make_venv(venv: Path, python: str, pip_args: list[str], source: Path) -> None:
-    """Create (or update) ``venv`` and pip-install the package of ``source`` into it."""
+def build_wheel(source: Path, out: Path, python: str, pip_args: list[str]) -> Path:
+    """The wheel of the package in ``source``, built by ``python -m pip wheel --no-deps``
+    (with ``pip_args``) from a copy of :data:`PACKAGE_FILES` in a temporary directory, so
+    the build leaves nothing in the source tree; returned as its path in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="onboard-build-") as tmp:
+        src, dist = Path(tmp) / "src", Path(tmp) / "dist"
+        src.mkdir()
+        for name in PACKAGE_FILES:
+            if (source / name).is_dir():
+                shutil.copytree(source / name, src / name,
+                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+            else:
+                shutil.copy2(source / name, src / name)
+        subprocess.run([python, "-m", "pip", "wheel", "--quiet", "--disable-pip-version-check",
+                        "--no-deps", "--wheel-dir", str(dist), *pip_args, str(src)], check=True)
+        (built,) = dist.glob(WHEEL_GLOB)
+        return Path(shutil.move(built, out / built.name))
+
+
+def make_venv(venv: Path, python: str, pip_args: list[str], wheel: Path | None) -> None:
+    """Create (or update) ``venv`` and install ``wheel`` into it (None: the wheel of
+    :data:`SOURCE`, built by the venv's pip). The package is always replaced, the same
+    version too; its dependencies are installed where missing."""
     if not (venv / "bin" / "python").exists():
         subprocess.run([python, "-m", "venv", str(venv)], check=True)
         _say(f"{venv} created")
-    with tempfile.TemporaryDirectory(prefix="onboard-build-") as tmp:
-        for name in PACKAGE_FILES:
-            src = source / name
-            if src.is_dir():
-                shutil.copytree(src, Path(tmp) / name,
-                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-            else:
-                shutil.copy2(src, Path(tmp) / name)
-        subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet",
-                        "--disable-pip-version-check", "--upgrade", *pip_args, tmp], check=True)
-    _say(f"{source} installed into {venv}")
+    vpy = str(venv / "bin" / "python")
+    with tempfile.TemporaryDirectory(prefix="onboard-wheel-") as tmp:
+        if wheel is None:
+            wheel = build_wheel(SOURCE, Path(tmp), vpy, pip_args)
+            _say(f"{wheel.name} built from {SOURCE}")
+        pip = [vpy, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", *pip_args]
+        subprocess.run([*pip, str(wheel)], check=True)
+        subprocess.run([*pip, "--force-reinstall", "--no-deps", str(wheel)], check=True)
+        _say(f"{wheel.name} installed into {venv}")
 
 
 def verify_unit(unit: Path) -> str | None:
@@ -124,6 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--credstore", default="/etc/credstore")
     ap.add_argument("--python", default=sys.executable, help="the Python that makes the venv")
     ap.add_argument("--pip-args", default="", help="extra pip arguments (a wheelhouse ...)")
+    ap.add_argument("--wheel", default="", help="install this wheel (default: build one)")
     ap.add_argument("--no-venv", action="store_true", help="install files only")
     a = ap.parse_args(argv)
     for name in ("prefix", "sysconfdir", "unitdir", "credstore"):
@@ -131,7 +159,8 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(f"--{name} must be an absolute path")
     d = a.destdir
     if not a.no_venv:
-        make_venv(_stage(d, a.prefix) / "venv", a.python, a.pip_args.split(), SOURCE)
+        make_venv(_stage(d, a.prefix) / "venv", a.python, a.pip_args.split(),
+                  Path(a.wheel).resolve() if a.wheel else None)
     etc = _stage(d, a.sysconfdir)
     for src, name in ((SOURCE / "config" / "deploy-example.toml", "onboard.toml"),
                       (SOURCE / "systemd" / "onboard.env.example", "onboard.env"),

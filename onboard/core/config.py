@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import re
 import tomllib
+from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal, Sequence
 
@@ -32,8 +33,24 @@ VehicleClass = Literal[
     "rudder-boat", "twin-thruster-boat", "bluerov2", "torpedo-auv", "spheroid", "unknown"
 ]
 
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
-"""Where the bundled vehicle configs live in a source checkout."""
+BUNDLED_PACKAGE = "onboard.bundled"
+"""The package of the bundled configs and gains: the repository's ``config/`` folder,
+installed inside ``onboard`` (pyproject.toml ``package-dir``), data only."""
+
+
+def _package_dir(package: str) -> Path:
+    """The folder of ``package`` (:mod:`importlib.resources`): inside the installed package,
+    or the source folder an editable install maps it to. pip installs unpacked, so it is a
+    folder on the file system; anything else is an ImportError naming it."""
+    root = resources.files(package)
+    if not isinstance(root, Path):
+        raise ImportError(f"{package}: its data is not a folder on the file system ({root})")
+    return root
+
+
+CONFIG_DIR = _package_dir(BUNDLED_PACKAGE)
+"""Where the bundled vehicle configs live (``gains/`` under it): ``onboard/bundled/`` of the
+installed package, the checkout's ``config/`` in an editable install."""
 
 
 class ConfigError(UsageError, ValueError):
@@ -700,6 +717,6 @@ def resolve(path: str | Path) -> Path:
 
 
 def bundled() -> list[str]:
-    """Names of the configs shipped in ``config/``."""
+    """Names of the configs shipped in ``config/`` (:data:`CONFIG_DIR`)."""
     return sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
 

@@ -13,8 +13,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 OURS = {"onboard"}
 """The top-level package of this repository."""
-INSTALLED_AS = {"drivers": "onboard.drivers", "sitl": "onboard.sitl"}
-"""Top-level folders installed as subpackages of ``onboard`` (pyproject.toml)."""
+INSTALLED_AS = {"drivers": "onboard.drivers", "sitl": "onboard.sitl", "config": "onboard.bundled"}
+"""Top-level folders installed as subpackages of ``onboard`` (pyproject.toml); ``config/``
+is data only (the bundled configs and gains)."""
 
 
 def module_name(path: Path) -> str:

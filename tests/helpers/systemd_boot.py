@@ -3,11 +3,14 @@ view of this machine's root file system, for tests of the installed unit.
 
 ``booted_systemd(stage)`` mounts an overlay whose lower layer is ``/`` and whose upper
 layer is a tmpfs, copies the staged install tree ``stage`` (``etc/``, ``opt/`` ... as
-``make install DESTDIR=stage`` lays it out) into it, chroots and execs
-``/lib/systemd/systemd --system`` into an empty target. Nothing it writes (the unit's
-state directory, tmpfiles, the journal) reaches the real file system, and killing PID 1
-of the namespace ends every process in it. The network is shared with the test, so a
-service in there reaches a router or a simulator the test runs on loopback.
+``make install DESTDIR=stage`` lays it out) into it, binds the directories it is given
+read-only at the paths it is given (a fresh tmpfs covers ``/tmp`` in there, and a unit
+has its own private ``/tmp`` anyway: what lies in the host's ``/tmp`` is seen only through
+such a bind), chroots and execs ``/lib/systemd/systemd --system`` into an empty target.
+Nothing it writes (the unit's state directory, tmpfiles, the journal) reaches the real
+file system, and killing PID 1 of the namespace ends every process in it. The network is
+shared with the test, so a service in there reaches a router or a simulator the test runs
+on loopback.
 
 Needs root, util-linux (``unshare``, ``nsenter``), the overlay file system and systemd;
 the test is skipped with the Debian install line otherwise.
@@ -20,7 +23,7 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,8 +34,9 @@ SYSTEMD = Path("/lib/systemd/systemd")
 INSTALL_LINE = "sudo apt-get install systemd util-linux"
 
 # Runs inside `unshare --mount --pid --fork`: $1 an empty scratch directory, $2 the staged
-# tree, $3.. directories the unit's dynamic user must be able to traverse (the Python and
-# the source tree the test's venv points at; /root is 0700 on many machines).
+# tree, then directories the unit's dynamic user must be able to traverse (the Python the
+# staged venv is made from; /root is 0700 on many machines), then "--", then pairs of a
+# host directory and the path where the booted system sees it (read-only).
 BOOT_SCRIPT = r"""
 set -eu
 scratch=$1; stage=$2; shift 2
@@ -47,8 +51,16 @@ mount --rbind /dev "$r/dev"
 mount -t tmpfs tmpfs "$r/run"
 mount -t tmpfs tmpfs "$r/tmp"
 cp -a "$stage/." "$r/"
-for d in "$@"; do
+while [ $# -gt 0 ] && [ "$1" != -- ]; do
+  d=$1; shift
   while [ "$d" != / ]; do chmod o+x "$r$d"; d=$(dirname "$d"); done
+done
+if [ $# -gt 0 ]; then shift; fi
+while [ $# -gt 1 ]; do
+  mkdir -p "$r$2"
+  mount --bind "$1" "$r$2"
+  mount -o remount,bind,ro "$r$2"
+  shift 2
 done
 mkdir -p "$r/run/systemd/system"
 printf '[Unit]\nDescription=an empty boot target for tests\n' > "$r/run/systemd/system/onboard-test.target"
@@ -116,14 +128,17 @@ def _child_of(pid: int, timeout: float = 10.0) -> int:
 
 
 @contextmanager
-def booted_systemd(stage: Path, scratch: Path, readable: list[Path]) -> Iterator[BootedSystemd]:
+def booted_systemd(stage: Path, scratch: Path, readable: list[Path],
+                   binds: Sequence[tuple[Path, str]] = ()) -> Iterator[BootedSystemd]:
     """Boot systemd over ``/`` + ``stage`` (see the module docstring); ``scratch`` is an
     empty directory for the overlay's mounts; every directory above each of ``readable``
-    is made traversable inside the overlay. Yields once ``systemctl`` answers."""
+    is made traversable inside the overlay; each ``(directory, path)`` of ``binds`` is
+    seen read-only at ``path`` in there. Yields once ``systemctl`` answers."""
     skip_unless_available()
+    pairs = [str(x) for src, dst in binds for x in (src, dst)]
     proc = subprocess.Popen(["unshare", "--mount", "--pid", "--fork", "--propagation", "private",
                              "sh", "-c", BOOT_SCRIPT, "boot", str(scratch), str(stage),
-                             *(str(p) for p in readable)],
+                             *(str(p) for p in readable), "--", *pairs],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     booted = None
     try:
