@@ -9,7 +9,7 @@ the XOR of the characters between ``$`` and ``*`` as two hex digits
 (``generate_checksum``). This module lists the fields in the standard's order and
 chooses the values and the decimals of the numeric fields, which the standard leaves
 variable (``x.x``). (pynmeagps's ``NMEAMessage`` assembles whole sentences too, at 0.3 ms
-each: ten times this module's cost, which a demo flown at ten times real time feels.)
+each: twelve times this module's cost, which a demo flown at ten times real time feels.)
 
 =========  ========================================================================
 sentence   fields (NMEA 0183 4.10)
