@@ -32,7 +32,7 @@ Exact replay. The verdicts depend on the key, the wall clock and the streams tab
 of which a replay has. So the service records them instead: :class:`VerdictLog` wraps the
 live verifier of one input and notes which frames of each chunk it rejected and why; the
 recorder writes that as a ``verdicts`` record right after the chunk
-(:class:`drivers.recording.Verdicts`); on replay :class:`VerdictPlayer` stands in for the
+(:class:`drivers.verdicts.Verdicts`); on replay :class:`VerdictPlayer` stands in for the
 verifier and rejects exactly those frames under the same reasons, without the key.
 """
 
@@ -45,10 +45,10 @@ import zlib
 from typing import TYPE_CHECKING, Callable
 
 from onboard.drivers.mavlink_frame import IFLAG_SIGNED, SIGNATURE_LEN
+from onboard.drivers.verdicts import Verdicts
 
 if TYPE_CHECKING:
     from onboard.drivers.base import ReadStats
-    from onboard.drivers.recording import Verdicts
 
 SIGNING_EPOCH = 1420070400
 """MAVLink signing timestamps count 10 us units from 2015-01-01T00:00:00Z (POSIX s)."""
@@ -150,7 +150,7 @@ class VerdictLog:
     """Wraps the live verifier of one input and notes its rejections, chunk by chunk.
 
     Used as the parser's verifier (same ``check``); :meth:`take` after each chunk returns
-    its :class:`~drivers.recording.Verdicts` (None when every frame was accepted) and starts
+    its :class:`~drivers.verdicts.Verdicts` (None when every frame was accepted) and starts
     the next chunk.
     """
 
@@ -173,8 +173,6 @@ class VerdictLog:
 
     def take(self, chunk: bytes) -> Verdicts | None:
         """The verdicts of the chunk ``chunk`` just parsed (None: nothing rejected)."""
-        from onboard.drivers.recording import Verdicts
-
         out = None
         if self.rejected:
             out = Verdicts(zlib.crc32(chunk), self.checks, self.rejected)

@@ -61,7 +61,8 @@ Encoders
 --------
 :func:`encode_gga`, :func:`encode_rmc`, :func:`encode_vtg`, :func:`encode_hdt`,
 :func:`encode_hdg` and :func:`encode_hdm` build complete sentences (``$...*hh\\r\\n`` as
-bytes) from SI values, for the simulator's emitters.
+bytes) from SI values, for tests and benchmarks (the simulator writes its own:
+:mod:`sitl.nmea_out`).
 """
 
 from __future__ import annotations

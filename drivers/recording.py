@@ -15,7 +15,7 @@ protocol: ``mavlink``, ``nmea``, ``dvl-json``, ``pd6``; ``sample`` is an already
 sample encoded as msgpack, used by the simulator; ``tick`` marks a live engine tick, so a
 replay reproduces the live estimates exactly; ``meta`` carries JSON metadata such as the
 config used; ``verdicts`` (version 2) lists the frames of the chunk just before it that the
-input's signature verifier rejected live, see :class:`Verdicts`).
+input's signature verifier rejected live, see :class:`drivers.verdicts.Verdicts`).
 
 Versions and compatibility. The file magic carries the format version:
 
@@ -44,6 +44,7 @@ from typing import BinaryIO, Iterable, Iterator
 import msgspec
 
 from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.verdicts import Verdicts
 
 FILE_MAGIC = b"ONBREC01"
 """The magic of version 1 (see the module docstring for the versions)."""
@@ -65,24 +66,6 @@ class RawRecord(msgspec.Struct, array_like=True):
     source: str
     kind: str
     data: bytes
-
-
-class Verdicts(msgspec.Struct, array_like=True):
-    """What an input's signature verifier decided while the chunk before this record was
-    parsed live (the ``data`` of a ``verdicts`` record; its ``t`` and ``source`` are the
-    chunk's). Written only when it rejected at least one frame of the chunk; a chunk with
-    no ``verdicts`` record had every frame accepted.
-
-    ``chunk_crc`` (CRC-32 of the chunk's bytes) binds the verdicts to their chunk;
-    ``checks`` counts the frames the verifier saw while the chunk was parsed (frames
-    completed by it, in parser order); ``rejected`` lists ``(index among those checks,
-    reason, the frame's CRC-16)``, the CRC-16 being a check that replay is looking at the
-    same frame.
-    """
-
-    chunk_crc: int
-    checks: int
-    rejected: list[tuple[int, str, int]]
 
 
 def file_magic(version: int) -> bytes:

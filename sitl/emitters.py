@@ -4,9 +4,13 @@ Two layers, kept apart so each can be tested alone:
 
 * **encoders** turn the samples of one instant into protocol frames:
   :class:`MavlinkEncoder` (MAVLink 2, pymavlink's ``ardupilotmega`` dialect, CRCs by
-  pymavlink), :class:`NmeaEncoder` (GGA, RMC, VTG, HDT via :mod:`drivers.nmea`),
-  :class:`DvlJsonEncoder` (Water Linked A50 JSON lines via :mod:`drivers.dvl_json`) and
-  :class:`Pd6Encoder` (Teledyne RDI PD6 ensembles via :mod:`drivers.pd6`);
+  pymavlink), :class:`NmeaEncoder` (GGA, RMC, VTG, HDT built by pynmeagps,
+  :mod:`sitl.nmea_out`), :class:`DvlJsonEncoder` (Water Linked A50 JSON lines,
+  :mod:`sitl.dvl_json_out`) and :class:`Pd6Encoder` (Teledyne RDI PD6 ensembles,
+  :mod:`sitl.pd6_out`). None of them uses the drivers that read these protocols back
+  (``tests/test_layering.py``): the simulator's writers follow the protocols'
+  documents, so a misreading in a driver shows as a failed round trip instead of being
+  shared by both ends;
 * **sinks** move frames: :class:`TlogSink` (a ``.tlog``: 8-byte big-endian microseconds
   since the Unix epoch, then the frame), :class:`UdpSink`, :class:`TcpServerSink` (a
   listening socket; every connected client gets every frame), :class:`PtySink` (a serial
@@ -75,7 +79,8 @@ from onboard.core.messages import (
     VehicleInfo,
     VelocityOverGround,
 )
-from onboard.sitl.frames import GeoOrigin, ned_to_body_fast
+from onboard.sitl import dvl_json_out, nmea_out, pd6_out
+from onboard.sitl.frames import GeoOrigin, body_to_ned_fast, ned_to_body_fast
 
 DEFAULT_EPOCH_S = 1_767_225_600.0
 """Unix time of simulation t = 0 in logs: 2026-01-01T00:00:00Z (fixed, for determinism)."""
@@ -93,6 +98,10 @@ GRAVITY_MSS = 9.80665
 """ArduPilot's mg scaling constant (m/s^2 per 1000 mg)."""
 EARTH_FIELD_GAUSS = (0.2, 0.0, 0.4)
 """A mid-latitude magnetic field in NED (gauss), for SCALED_IMU's magnetometer fields."""
+DVL_POSITION_STD_M = 0.1
+"""Standard deviation of a dead-reckoned DVL position that gives none (m)."""
+PD6_TEMPERATURE_C = 10.0
+"""Water temperature in PD6's TS line until a Depth sample brings one (C)."""
 
 
 def _i16(x: float) -> int:
@@ -292,8 +301,8 @@ class MavlinkEncoder:
 
 
 class NmeaEncoder:
-    """GnssFix -> GGA, RMC, VTG (talker GP); Heading -> HDT (talker HE). Time of day from
-    ``epoch_s + t``."""
+    """GnssFix -> GGA, RMC, VTG (talker GP); Heading -> HDT (talker HE), sentences by
+    :mod:`sitl.nmea_out` (pynmeagps). Time of day and date from ``epoch_s + t``."""
 
     def __init__(self, epoch_s: float = DEFAULT_EPOCH_S) -> None:
         self.epoch_s = epoch_s
@@ -301,25 +310,25 @@ class NmeaEncoder:
     def encode(self, samples: Sequence[Sample]) -> list[bytes]:
         """The frames for ``samples`` (one instant, in order); samples this encoder has no
         sentence or report for give none."""
-        from onboard.drivers import nmea
-
         out: list[bytes] = []
         for s in samples:
             if isinstance(s, GnssFix):
                 tu = self.epoch_s + s.t
-                out.append(nmea.encode_gga(tu, s.lat_deg, s.lon_deg, s.alt_m or 0.0,
-                                           s.fix_quality, s.num_sats or 0, s.hdop or 1.0))
-                out.append(nmea.encode_rmc(tu, s.lat_deg, s.lon_deg, s.sog_mps or 0.0,
-                                           s.cog_rad))
-                out.append(nmea.encode_vtg(s.sog_mps or 0.0, s.cog_rad))
+                sog = s.sog_mps or 0.0
+                out.append(nmea_out.gga(tu, s.lat_deg, s.lon_deg, s.alt_m or 0.0,
+                                        s.fix_quality, s.num_sats or 0, s.hdop or 1.0))
+                out.append(nmea_out.rmc(tu, s.lat_deg, s.lon_deg, sog, s.cog_rad,
+                                        s.fix_quality))
+                out.append(nmea_out.vtg(sog, s.cog_rad))
             elif isinstance(s, Heading):
-                out.append(nmea.encode_hdt(s.heading_rad))
+                out.append(nmea_out.hdt(s.heading_rad))
         return out
 
 
 class DvlJsonEncoder:
-    """DvlVelocity -> Water Linked ``velocity`` (or ``velocity_water``) reports;
-    DvlPosition -> ``position_local`` reports (one JSON object per line)."""
+    """DvlVelocity -> Water Linked velocity-and-transducer reports (``velocity``, or
+    ``velocity_water`` in water tracking); DvlPosition -> ``position_local`` dead
+    reckoning reports: one JSON object per line, by :mod:`sitl.dvl_json_out`."""
 
     def __init__(self, epoch_s: float = DEFAULT_EPOCH_S, period_s: float = 0.2) -> None:
         self.epoch_s = epoch_s
@@ -329,62 +338,87 @@ class DvlJsonEncoder:
     def encode(self, samples: Sequence[Sample]) -> list[bytes]:
         """The report lines for ``samples`` (one instant, in order); other sample types give
         none."""
-        from onboard.drivers import dvl_json
-
         out: list[bytes] = []
         for s in samples:
             if isinstance(s, DvlVelocity):
                 last = self._t_last.get(s.track)
-                dt = self.period_s if last is None else s.t - last
                 self._t_last[s.track] = s.t
-                tu = self.epoch_s + s.t
-                out.append(dvl_json.encode_velocity_report(
+                out.append(dvl_json_out.velocity_report(
                     s.vx, s.vy, s.vz, valid=s.valid, fom_mps=s.fom_mps or 0.0,
-                    altitude_m=s.altitude_m if s.altitude_m is not None else -1.0,
-                    dt_ms=dt * 1000.0, t_validity_s=tu, t_transmission_s=tu,
-                    covariance=s.covariance, track=s.track))
+                    altitude_m=s.altitude_m, covariance=s.covariance, track=s.track,
+                    dt_s=self.period_s if last is None else s.t - last,
+                    t_validity_s=self.epoch_s + s.t))
             elif isinstance(s, DvlPosition):
-                out.append(dvl_json.encode_position_local(
+                out.append(dvl_json_out.dead_reckoning_report(
                     s.north_m, s.east_m, s.down_m, t_s=self.epoch_s + s.t,
-                    std_m=s.std_m if s.std_m is not None else 0.1,
+                    std_m=s.std_m if s.std_m is not None else DVL_POSITION_STD_M,
                     roll_rad=s.roll_rad or 0.0, pitch_rad=s.pitch_rad or 0.0,
                     yaw_rad=s.yaw_rad or 0.0))
         return out
 
 
 class Pd6Encoder:
-    """Bottom-track DvlVelocity -> a PD6 ensemble (SA, TS, BI, BS, BE, BD) using the last
-    Attitude and Depth; water-track DvlVelocity -> WI and WS lines."""
+    """DvlVelocity -> one PD6 ensemble per instant (:mod:`sitl.pd6_out`): SA and TS from
+    the last Attitude and Depth, then WI, WS for a water-track report and BI, BS, BE, BD
+    for a bottom-track report. BE is the velocity rotated into NED by the last attitude;
+    BD's distance made good sums BE over the time between good bottom-track reports."""
 
     def __init__(self, epoch_s: float = DEFAULT_EPOCH_S) -> None:
         self.epoch_s = epoch_s
         self._att: Attitude | None = None
         self._depth = 0.0
+        self._temperature_c = PD6_TEMPERATURE_C
+        self._made_good = [0.0, 0.0, 0.0]
+        """Distance made good east, north, up (m)."""
+        self._t_good: float | None = None
 
     def encode(self, samples: Sequence[Sample]) -> list[bytes]:
-        """The PD6 lines for ``samples`` (one instant, in order); Attitude and Depth are kept
-        for the next ensemble and give none."""
-        from onboard.drivers import pd6
-
-        out: list[bytes] = []
+        """The ensemble for ``samples`` (one instant), none without a DvlVelocity among
+        them; Attitude and Depth are kept for the ensembles."""
+        water = bottom = None
         for s in samples:
             if isinstance(s, Attitude):
                 self._att = s
             elif isinstance(s, Depth):
                 self._depth = s.depth_m
+                if s.temperature_c is not None:
+                    self._temperature_c = s.temperature_c
             elif isinstance(s, DvlVelocity):
                 if s.track == "water":
-                    out.append(pd6.encode_bi(s.vx, s.vy, s.vz, valid=s.valid, water=True)
-                               + pd6.encode_bs(s.vx, s.vy, s.vz, valid=s.valid, water=True))
-                    continue
-                a = self._att
-                out.append(pd6.encode_ensemble(
-                    self.epoch_s + s.t, s.vx, s.vy, s.vz, valid=s.valid,
-                    depth_m=max(0.0, self._depth),
-                    altitude_m=s.altitude_m if s.altitude_m is not None else 0.0,
-                    roll_rad=a.roll_rad if a else 0.0, pitch_rad=a.pitch_rad if a else 0.0,
-                    heading_rad=a.yaw_rad if a else 0.0))
-        return out
+                    water = s
+                else:
+                    bottom = s
+        if water is None and bottom is None:
+            return []
+        t = bottom.t if bottom is not None else water.t  # type: ignore[union-attr]
+        a = self._att
+        roll, pitch, yaw = (a.roll_rad, a.pitch_rad, a.yaw_rad) if a else (0.0, 0.0, 0.0)
+        lines = [pd6_out.sa(roll, pitch, yaw),
+                 pd6_out.ts(self.epoch_s + t, max(0.0, self._depth), self._temperature_c)]
+        if water is not None:
+            w = water
+            lines += [pd6_out.instrument_velocity(w.vx, w.vy, w.vz, w.fom_mps or 0.0, w.valid,
+                                                  water=True),
+                      pd6_out.ship_velocity(w.vx, w.vy, w.vz, w.valid, water=True)]
+        if bottom is not None:
+            lines += self._bottom(bottom, roll, pitch, yaw)
+        return [b"".join(lines)]
+
+    def _bottom(self, b: DvlVelocity, roll: float, pitch: float, yaw: float) -> list[bytes]:
+        """BI, BS, BE and BD of a bottom-track report."""
+        v_ned = body_to_ned_fast(roll, pitch, yaw, (b.vx, b.vy, b.vz))
+        if b.valid:
+            if self._t_good is not None:
+                dt = b.t - self._t_good
+                for i, v in enumerate((v_ned[1], v_ned[0], -v_ned[2])):
+                    self._made_good[i] += v * dt
+            self._t_good = b.t
+        since_good = 0.0 if self._t_good is None else b.t - self._t_good
+        rng = b.altitude_m if b.valid and b.altitude_m is not None else 0.0
+        return [pd6_out.instrument_velocity(b.vx, b.vy, b.vz, b.fom_mps or 0.0, b.valid),
+                pd6_out.ship_velocity(b.vx, b.vy, b.vz, b.valid),
+                pd6_out.earth_velocity(*v_ned, b.valid),
+                pd6_out.bottom_distance(*self._made_good, rng, since_good)]
 
 
 # --------------------------------------------------------------------------- sinks

@@ -147,6 +147,29 @@ def test_the_formula_check_sees_a_shared_rotation(tmp_path: Path) -> None:
     assert len(_formula_imports(fake, "onboard.sitl.plants.probe")) == 2
 
 
+PROTOCOL_DECODERS = {"onboard.drivers.nmea", "onboard.drivers.dvl_json", "onboard.drivers.pd6"}
+"""The drivers that read back what the simulator writes on NMEA, DVL JSON and PD6 links:
+the simulator writes with its own encoders (pynmeagps; the protocols' documents), so an
+encoder and a decoder cannot agree on a mistake (docs/sitl.md)."""
+
+
+def test_the_simulator_writes_nmea_dvl_json_and_pd6_without_their_drivers(
+        tmp_path: Path) -> None:
+    def decoders(path: Path, module: str | None = None) -> list[str]:
+        return [f"line {line}: {t}" for line, t in imports_of(path, module)
+                if _allowed(t, PROTOCOL_DECODERS)]
+
+    wrong = {module_name(p): decoders(p) for p in sorted((REPO / "sitl").rglob("*.py"))}
+    wrong = {m: w for m, w in wrong.items() if w}
+    assert not wrong, f"simulator modules importing the protocols' decoders: {wrong}"
+    probe = tmp_path / "probe.py"  # a negative control: each form of import is caught
+    probe.write_text("from onboard.drivers import nmea\n"
+                     "from onboard.drivers.pd6 import Pd6Parser\n"
+                     "def f():\n    import onboard.drivers.dvl_json\n"
+                     "from onboard.drivers.tlog import TlogWriter\n")
+    assert len(decoders(probe, "onboard.sitl.probe")) == 3
+
+
 def test_the_cli_dispatches_only_the_sitl_command_into_the_simulator() -> None:
     from onboard.cli import build_parser
 

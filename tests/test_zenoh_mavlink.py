@@ -23,7 +23,7 @@ from onboard.drivers.transports import (
     open_transport,
     parse_url,
 )
-from onboard.service.daemon import check_zenoh_url
+from onboard.service.config_check import check_zenoh_url
 from onboard.service.publishers.zenoh_pub import open_router, session_config
 from onboard.apps.service_bench import free_tcp_port
 from tests.helpers.zenoh_bridge import UdpZenohBridge

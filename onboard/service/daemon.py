@@ -46,16 +46,11 @@ from typing import Callable, Sequence
 
 import msgspec
 
-from onboard.drivers.transports import (
-    SinkError,
-    Transport,
-    TransportUrlError,
-    open_transport,
-    parse_url,
-)
+from onboard.drivers.transports import SinkError, Transport, open_transport
 from onboard.core.config import Config, ConfigError, SourceConfig, load_all
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.engine import Engine
+from onboard.service.config_check import check_config
 from onboard.service.intake import Intake
 from onboard.service.persistence import StateFile, plain
 from onboard.service.recorder import Recorder, config_to_dict
@@ -654,18 +649,6 @@ class Service:
             log.error("state save failed: %s", err)
 
 
-def check_zenoh_url(cfg: Config, url: str, where: str, kind: str) -> None:
-    """A ``zenoh:`` URL (MAVLink over Zenoh, on the session of ``[service.zenoh]``) needs
-    that session enabled and carries MAVLink only; ConfigError naming ``where``."""
-    if not url.startswith("zenoh:"):
-        return
-    if kind != "mavlink":
-        raise ConfigError(f"{where}: {url!r}: a zenoh: url carries MAVLink (kind \"mavlink\")")
-    if not cfg.service.zenoh.enabled:
-        raise ConfigError(f"{where}: {url!r} uses the Zenoh session of [service.zenoh], "
-                          "which is disabled (service.zenoh.enabled = false)")
-
-
 async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None,
                       config_paths: Sequence[str | Path] = ()) -> int:
     """Run until SIGTERM/SIGINT; return the exit status."""
@@ -678,31 +661,6 @@ async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None
             pass
     await svc.run()
     return 0
-
-
-def check_config(cfg: Config, origin: str) -> None:
-    """What ``onboard run`` requires of a configuration beyond its schema (at least one
-    source, parseable source URLs, gpsd URLs with kind gpsd only, a ``HOST:PORT`` web
-    listen address); ConfigError naming ``origin`` and the key otherwise."""
-    if not cfg.service.sources:
-        raise ConfigError(f"{origin}: service.sources is empty: nothing to read")
-    for i, src in enumerate(cfg.service.sources):
-        try:
-            spec = parse_url(src.url)
-        except TransportUrlError as err:
-            raise ConfigError(f"{origin}: service.sources[{i}].url: {err}") from None
-        if (spec.scheme == "gpsd") != (src.kind == "gpsd"):
-            raise ConfigError(f"{origin}: service.sources[{i}]: kind \"gpsd\" goes with "
-                              f"a gpsd://HOST:PORT url and only with it")
-        check_zenoh_url(cfg, src.url, f"{origin}: service.sources[{i}].url", src.kind)
-    check_zenoh_url(cfg, cfg.service.mavlink.url, f"{origin}: service.mavlink.url", "mavlink")
-    if cfg.service.web.listen:
-        from onboard.service.web.app import parse_listen
-
-        try:
-            parse_listen(cfg.service.web.listen)
-        except ValueError as err:
-            raise ConfigError(f"{origin}: service.web.listen: {err}") from None
 
 
 def main(args: argparse.Namespace) -> int:

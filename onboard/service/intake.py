@@ -27,23 +27,31 @@ from __future__ import annotations
 import logging
 from collections import Counter, deque
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable
+from typing import Callable, Protocol
 
 from onboard.drivers.base import StreamParser
 from onboard.drivers.mavlink_link import AutopilotLink
 from onboard.drivers.mavlink_signing import SignatureVerifier, VerdictLog, VerdictPlayer
 from onboard.drivers.protocols import parser_for
-from onboard.drivers.recording import VERDICTS_KIND, RawRecord, Verdicts, encode_verdicts
+from onboard.drivers.recording import VERDICTS_KIND, RawRecord, encode_verdicts
+from onboard.drivers.verdicts import Verdicts
 from onboard.core.messages import EstimateRecord, Sample
 from onboard.engine import Engine
-
-if TYPE_CHECKING:
-    from onboard.service.recorder import Recorder
 
 log = logging.getLogger(__name__)
 
 TICK_SOURCE = "engine"
 """The source name of the ``tick`` records the intake writes."""
+
+
+class RecordWriter(Protocol):
+    """Where the intake records what it consumed: the service's
+    :class:`onboard.service.recorder.Recorder`, or any writer with the same ``write``."""
+
+    def write(self, rec: RawRecord, *more: RawRecord) -> None:
+        """Record ``rec`` (and ``more``, in the same write: a chunk and its verdicts are
+        never split)."""
+        ...
 
 
 @dataclass
@@ -75,7 +83,7 @@ class Intake:
 
     engine: Engine
     queue_size: int = 4096
-    recorder: Recorder | None = None
+    recorder: RecordWriter | None = None
     sources: dict[str, SourceState] = field(default_factory=dict)
     dropped: Counter[str] = field(default_factory=Counter)
     pending: deque[Sample] = field(default_factory=deque)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from onboard.core.messages import EstimateRecord
-from onboard.sitl.controllers import Bluerov2Params
+from onboard.sitl.controllers.base import Bluerov2Params
 from onboard.sitl.controllers.nmpc import Nmpc, NmpcTuning
 
 

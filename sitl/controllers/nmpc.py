@@ -51,7 +51,7 @@ import casadi as ca
 import numpy as np
 
 from onboard.core.messages import EstimateRecord
-from onboard.sitl.controllers import (
+from onboard.sitl.controllers.base import (
     Bluerov2Params,
     CircleReference,
     ControlOutput,

@@ -23,7 +23,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from onboard.core.messages import EstimateRecord
-from onboard.sitl.controllers import Bluerov2Params, CircleReference, ControlOutput, state_from_record
+from onboard.sitl.controllers.base import (
+    Bluerov2Params,
+    CircleReference,
+    ControlOutput,
+    state_from_record,
+)
 
 
 @dataclass(frozen=True)

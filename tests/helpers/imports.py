@@ -30,21 +30,36 @@ def module_name(path: Path) -> str:
     return name
 
 
+def source_path(module: str) -> Path | None:
+    """The source file of ``module`` in this repository (a package: its ``__init__.py``),
+    None when there is none (``onboard.drivers.nmea``: ``drivers/nmea.py``)."""
+    for folder, installed in INSTALLED_AS.items():
+        if module == installed or module.startswith(installed + "."):
+            module = folder + module[len(installed):]
+    base = REPO / Path(*module.split("."))
+    for path in (base.with_suffix(".py"), base / "__init__.py"):
+        if path.is_file():
+            return path
+    return None
+
+
 def _is_type_checking(node: ast.If) -> bool:
     test = node.test
     return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
         isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
 
 
-def imports_of(path: Path, module: str | None = None) -> list[tuple[int, str]]:
-    """(line, module) for every import of ours in ``path`` (named ``module``, by default
-    from its place in the repository), lazy ones included."""
+def imports_of(path: Path, module: str | None = None, *, ours: set[str] = OURS,
+               type_hints: bool = False) -> list[tuple[int, str]]:
+    """(line, module) for every import in ``path`` (named ``module``, by default from its
+    place in the repository) of a module under the top-level names ``ours``, lazy ones
+    included; those under ``if TYPE_CHECKING:`` too when ``type_hints``."""
     module = module or module_name(path)
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     tree = ast.parse(path.read_text(), str(path))
     skip: set[int] = set()
     for node in ast.walk(tree):
-        if isinstance(node, ast.If) and _is_type_checking(node):
+        if not type_hints and isinstance(node, ast.If) and _is_type_checking(node):
             skip.update(id(n) for child in node.body for n in ast.walk(child))
     found: list[tuple[int, str]] = []
     for node in ast.walk(tree):
@@ -60,11 +75,9 @@ def imports_of(path: Path, module: str | None = None) -> list[tuple[int, str]]:
             # ``from pkg import mod`` names the submodule when there is one
             for a in node.names:
                 sub = f"{base}.{a.name}"
-                is_module = (REPO / Path(*sub.split("."))).with_suffix(".py").exists() or (
-                    REPO / Path(*sub.split(".")) / "__init__.py").exists()
-                found.append((node.lineno, sub if is_module else base))
+                found.append((node.lineno, sub if source_path(sub) is not None else base))
         elif (isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "import_module"
               and node.args and isinstance(node.args[0], ast.Constant)
               and isinstance(node.args[0].value, str)):
             found.append((node.lineno, node.args[0].value))
-    return [(line, m) for line, m in found if m.split(".")[0] in OURS]
+    return [(line, m) for line, m in found if m.split(".")[0] in ours]

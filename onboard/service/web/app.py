@@ -31,7 +31,14 @@ import msgspec
 
 from importlib.metadata import PackageNotFoundError, version
 from onboard.service.web.config_edit import ConfigEditor
-from onboard.service.web.http import Handler, HttpError, HttpServer, Request, Response
+from onboard.service.web.http import (
+    Handler,
+    HttpError,
+    HttpServer,
+    Request,
+    Response,
+    parse_listen,
+)
 from onboard.service.web.view import LiveView
 
 NAME = "onboard"
@@ -137,14 +144,6 @@ def _config_routes(editor: ConfigEditor) -> dict[tuple[str, str], Handler]:
 
     return {("GET", "/api/config"): lambda _r: json_response(editor.show()),
             ("POST", "/api/config/check"): check, ("POST", "/api/config"): save}
-
-
-def parse_listen(listen: str) -> tuple[str, int]:
-    """``HOST:PORT`` (``[::1]:8110`` for IPv6) as (host, port); ValueError otherwise."""
-    host, sep, port = listen.rpartition(":")
-    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise ValueError(f"{listen!r}: expected HOST:PORT")
-    return host.strip("[]") or "0.0.0.0", int(port)
 
 
 def make_server(listen: str, view: LiveView, editor: ConfigEditor | None = None) -> HttpServer:

@@ -4,9 +4,9 @@ The service runs with ``--config FILE [--config OVERLAY ...]``; the page shows e
 file and the configuration they make, and, with ``service.web.edit_config``, edits the
 last file: a new text is checked exactly as ``onboard run`` would load it (TOML, the
 schema with dotted-key errors, the deployment checks of
-:func:`onboard.service.daemon.check_config`) together with the files before it, and is
-saved (atomically, the previous text kept as ``FILE.bak``) only when it passes. The
-running service is not changed: the new file applies at its next start.
+:func:`onboard.service.config_check.check_config`) together with the files before it,
+and is saved (atomically, the previous text kept as ``FILE.bak``) only when it passes.
+The running service is not changed: the new file applies at its next start.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Sequence
 
 from onboard.core.config import ConfigError, load_all, resolve, to_dict
+from onboard.service.config_check import check_config
 
 
 class ConfigEditor:
@@ -54,8 +55,6 @@ class ConfigEditor:
 
     def check(self, text: str) -> list[str]:
         """What is wrong with ``text`` as the new last file (empty: nothing)."""
-        from onboard.service.daemon import check_config
-
         target = self.target
         if target is None:
             return ["the service was started without a configuration file"]

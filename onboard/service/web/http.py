@@ -88,6 +88,14 @@ def encode_response(resp: Response, head_only: bool = False) -> bytes:
     return head.encode("latin-1") + (b"" if head_only else resp.body)
 
 
+def parse_listen(listen: str) -> tuple[str, int]:
+    """``HOST:PORT`` (``[::1]:8110`` for IPv6) as (host, port); ValueError otherwise."""
+    host, sep, port = listen.rpartition(":")
+    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ValueError(f"{listen!r}: expected HOST:PORT")
+    return host.strip("[]") or "0.0.0.0", int(port)
+
+
 class HttpServer:
     """Serves ``routes`` (``(method, path) -> handler``; HEAD uses the GET handler).
 
