@@ -3,7 +3,7 @@ function, its quantiles, and the band of the mean of ``n`` NIS values.
 
 Every gate and every consistency band of the package takes its numbers from here
 (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking and
-Navigation*, 2001, §5.4: the NIS of a consistent filter's ``m``-dimensional innovation is
+Navigation*, 2001, section 5.4: the NIS of a consistent filter's ``m``-dimensional innovation is
 chi-square with ``m`` degrees of freedom, and ``n`` times the mean of ``n`` independent
 ones is chi-square with ``n m``). The values are those of ``scipy.stats.chi2``
 (tests/test_stats.py compares them): its ``sf`` and ``ppf`` evaluate
