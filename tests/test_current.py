@@ -325,15 +325,18 @@ def test_a_start_inconsistent_with_the_next_measurement_restarts_the_filter():
     direction the two sensors do not see, the split of the velocity over ground into
     current and through-water velocity: u_r and the current north both jumped to 6.3 m/s
     here (5.0 in the live demo run of fault-dvl-lock-loss-rov these figures are from).
-    Within its first updates the filter starts again from the newer measurement instead."""
+    Within its first updates the filter reports that the measurement contradicts its start
+    (and changes nothing); its owner starts it again from the newer measurement."""
     kf = current_pipeline("bluerov2").kf
     kf.start("bottom", np.array([-0.013, 0.004, -0.014]), _yaw_matrix(math.pi - 0.0012))
     assert kf.update("bottom", np.array([-0.013, 0.004, -0.014]), 0.012,
                      _yaw_matrix(math.pi - 0.0012)) == "accepted"
-    outcome = kf.update("earth", np.array([0.05, 0.28, 0.09]), 0.01,
-                        _yaw_matrix(math.pi - 0.0192))
-    assert outcome == "restarted" and kf.counters["restarted"] == 1
-    assert kf.nis > kf.gate_nis  # the record shows the inconsistency
+    z, R = np.array([0.05, 0.28, 0.09]), _yaw_matrix(math.pi - 0.0192)
+    x0 = kf.x.copy()
+    assert kf.update("earth", z, 0.01, R) == "contradicts_start"
+    assert kf.nis > kf.gate_nis and np.array_equal(kf.x, x0)  # reported, nothing changed
+    assert kf.restart_from("earth", z, 0.01, R) == "accepted"
+    assert kf.counters["restarted"] == 1
     # started from the INS velocity: u_r ~ -0.05 (heading south), v_r ~ -0.28 m/s
     assert np.allclose(kf.x[:3], [-0.045, -0.281, 0.09], atol=0.002)
     assert np.allclose(kf.x[3:6], 0.0)
@@ -359,3 +362,28 @@ def test_the_pipeline_says_when_its_start_was_contradicted():
     assert any(e.startswith("the start was contradicted by a velocity measurement")
                for e in pipe.events), pipe.events
     assert abs(out["u_r"] + 0.05) < 0.01 and abs(out["v_r"] + 0.28) < 0.01
+    # the pipeline's decision is on the record: the contradicting innovation, not the
+    # restarted filter's
+    (rec,) = [r for r in pipe.innovations() if r.channel == "velocity"]
+    assert (rec.accepted, rec.reason) == (False, "restart") and rec.nis > rec.gate
+
+
+def test_the_restored_currents_twin_starts_again_when_its_start_is_contradicted():
+    """The twin filter of a restored current's probation decides as the pipeline does on
+    the same contradiction: it starts again from the INS velocity."""
+    from onboard.estimators.current_kf import VelocityMeasurement
+    from onboard.estimators.restored_current import RestoredCurrentCheck
+
+    twin = current_pipeline("bluerov2").kf
+    check = RestoredCurrentCheck(hold_s=60.0, false_alarm_p=0.001, unknown_above_std=0.5,
+                                 init_current_std=1.0)
+    check.begin(twin, np.zeros(3), 0.01 * np.eye(3))
+    R0, R1 = _yaw_matrix(math.pi - 0.0012), _yaw_matrix(math.pi - 0.0192)
+    dvl = VelocityMeasurement("bottom", 0.2, np.array([-0.013, 0.004, -0.014]), 0.012)
+    ins = VelocityMeasurement("earth", 0.2, np.array([0.05, 0.28, 0.09]), 0.01)
+    check.start(dvl.kind, dvl.z, R0, math.pi)
+    check.update([dvl], R0)
+    assert "restarted" not in twin.counters
+    check.update([ins], R1)
+    assert twin.counters["restarted"] == 1
+    assert np.allclose(twin.x[:3], [-0.045, -0.281, 0.09], atol=0.002)

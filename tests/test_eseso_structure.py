@@ -17,10 +17,13 @@ import pytest
 from onboard.core import config
 from onboard.core.messages import Attitude, Depth, Imu
 from onboard.core.so3 import euler_to_matrix
-from onboard.estimators.eseso_filter import BI, CHI2_999, TH, V_, XI, EsesoFilter
+from onboard.core.stats import chi2_quantile
+from onboard.estimators.eseso_filter import BI, TH, TH_Z, V_, XI, EsesoFilter
 from onboard.pipelines.eseso import Eseso, EsesoConfig, filter_params, thruster_force
 from tests.helpers.imports import REPO, imports_of
 
+GATE_1 = chi2_quantile(0.999, 1)
+"""The default gate of a 1-dimensional update (10.8276)."""
 GRAVITY_ONLY = np.array([0.0, 0.0, -9.81])
 """Specific force (m/s^2, FRD) of a level vehicle at rest."""
 
@@ -54,7 +57,7 @@ def test_an_update_keeps_its_innovation_covariance_and_nis() -> None:
     (rec,) = f.innovations  # the update's record: measured minus predicted
     assert (rec.channel, rec.t, rec.source, rec.dof) == ("depth", 1.5, "bar30", 1)
     assert rec.z == pytest.approx((0.3,)) and rec.S == pytest.approx((S,))
-    assert rec.nis == f.nis and rec.gate == CHI2_999[1] and rec.accepted
+    assert rec.nis == f.nis and rec.gate == GATE_1 and rec.accepted
     # scalar Kalman gain on the depth
     assert f.p[2] == pytest.approx(20.0 + prior / S * 0.3)
     assert f.counters == {"fused.depth": 1}
@@ -64,18 +67,18 @@ def test_the_gate_rejects_then_fuses_down_weighted_after_max_consecutive_rejects
     f = _level_filter(max_consecutive_rejects=2, noise_adapt_updates=0)
     f.P[2, 2] = 0.01
     var = 0.01
-    z = 20.0 + 10.0  # NIS 5000 against the 1-dof gate of 10.83
+    z = 20.0 + 10.0  # NIS 5000 against the 1-dof gate of 10.83 (GATE_1)
     assert not f.update_depth(z, var)
     assert not f.update_depth(z, var)
     assert f.p[2] == 20.0 and f.counters["rejected.depth.gate"] == 2
     assert [(r.accepted, r.reason) for r in f.innovations] == [(False, "gate")] * 2
     nis = 10.0 ** 2 / (f.P[2, 2] + var)
-    r_recover = var * nis / CHI2_999[1]
+    r_recover = var * nis / GATE_1
     expected = 20.0 + f.P[2, 2] / (f.P[2, 2] + r_recover) * 10.0
     assert f.update_depth(z, var)
     assert f.counters["recovered.depth"] == 1
     assert f.p[2] == pytest.approx(expected)
-    assert f.innovations[-1].accepted and f.innovations[-1].nis > CHI2_999[1]
+    assert f.innovations[-1].accepted and f.innovations[-1].nis > GATE_1
 
 
 def _thrust_filter(states: str) -> EsesoFilter:
@@ -125,7 +128,7 @@ def test_an_attitude_update_moves_the_attitude_by_the_measured_rotation() -> Non
     R_meas = euler_to_matrix(0.0, 0.0, 0.2)
     assert f.update_attitude(R_meas, 0.0, 0.0, 1e-8, 1e-8)
     assert np.allclose(f.R, R_meas, atol=1e-6)
-    assert f.P[8, 8] < 1e-7 and f.P[V_, V_][0, 0] == pytest.approx(0.3 ** 2)
+    assert f.P[TH_Z, TH_Z] < 1e-7 and f.P[V_, V_][0, 0] == pytest.approx(0.3 ** 2)
     assert f.P[XI, XI][0, 0] == pytest.approx(40.0 ** 2)
 
 

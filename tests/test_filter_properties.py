@@ -42,6 +42,7 @@ from onboard.core.messages import (
     Imu,
     VelocityOverGround,
 )
+from onboard.core.stats import chi2_mean_band
 from onboard.engine import Engine, run
 
 PROPS = settings(max_examples=40, deadline=None, derandomize=True,
@@ -349,18 +350,6 @@ def test_nis_on_the_simulator_within_a_factor_of_ten(module, cfg_name, scenario,
     for ch, dim in dims.items():
         assert ch in means, f"{module}: no {ch} updates ({sorted(means)})"
         assert dim / 10 <= means[ch] <= dim * 10, (ch, means[ch], dim)
-
-
-def chi2_mean_band(n: int, dim: int, z: float = 1.959964) -> tuple[float, float]:
-    """Two-sided 95 % band of the mean of ``n`` independent chi-square(``dim``) NIS values:
-    ``n * mean`` is chi-square with ``n * dim`` degrees of freedom (Wilson-Hilferty
-    quantiles, exact to < 0.1 % at these sizes)."""
-    k = n * dim
-
-    def q(zz: float) -> float:
-        return k * (1.0 - 2.0 / (9.0 * k) + zz * math.sqrt(2.0 / (9.0 * k))) ** 3
-
-    return q(-z) / n, q(z) / n
 
 
 def eseso_nis_every_update(seed: int, seconds: float = 120.0) -> dict[str, list[float]]:

@@ -24,8 +24,9 @@ import math
 
 import numpy as np
 
-from onboard.estimators.current_kf import MeasurementKind, inv_small
+from onboard.estimators.current_kf import MeasurementKind
 from onboard.estimators.hgo import GainDesign, IncreasingGain, current_hgo_gain
+from onboard.estimators.kalman import inv_small
 from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
 
 DIVERGED_ABOVE = 50.0

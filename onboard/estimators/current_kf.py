@@ -46,6 +46,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
+from onboard.estimators import kalman
 from onboard.estimators.model_identification import ModelIdentification
 from onboard.estimators.vehicle_models import ModelInputs
 
@@ -53,11 +54,37 @@ MeasurementKind = Literal["earth", "bottom", "water"]
 """``earth``: velocity over ground in earth axes; ``bottom``: DVL bottom track (over ground,
 body axes); ``water``: DVL water track (through water, body axes)."""
 
-UpdateOutcome = Literal["accepted", "gated", "reset", "restarted"]
-"""What :meth:`CurrentKalmanFilter.update` did with a measurement."""
+UpdateOutcome = Literal["accepted", "gated", "reset", "contradicts_start"]
+"""What :meth:`CurrentKalmanFilter.update` did with a measurement: used it (``accepted``),
+rejected it at the gate (``gated``), reset the filter (``reset``: a divergence), or left
+everything as it was because the measurement contradicts the filter's start
+(``contradicts_start``: its owner decides, e.g. :meth:`CurrentKalmanFilter.restart_from`)."""
 START_UPDATES = 50
-"""The filter's first updates, during which an innovation beyond the gate starts it again
-from that measurement (the start was inconsistent with it) instead of being rejected."""
+"""The filter's first updates: an innovation beyond the gate in them says the start may be
+what is wrong (``contradicts_start``), after them it is an outlier (``gated``)."""
+NU_R_PRIOR_VAR = 1.0
+"""Prior variance of each through-water velocity component (m^2/s^2) before the first
+measurement starts it."""
+DIVERGED_ABOVE_MPS = 50.0
+"""A through-water velocity or current component beyond this (m/s) after an update is a
+divergence: the filter resets."""
+RESTORED_CURRENT_STD_FLOOR_MPS = 0.2
+"""Smallest one-sigma (m/s) of a restored current: it may have changed while the vehicle was
+off."""
+MAX_SPEED_THROUGH_WATER_MPS = 10.0
+"""Default bound (m/s) of a predicted through-water speed component; beyond it the model
+ran away, not the vehicle."""
+NIS_AVG_GAIN = 0.1
+"""Weight of the newest calibration block's NIS in :attr:`CurrentKalmanFilter.nis_avg`."""
+NIS_BLOCK_MAX = 10.0
+"""A calibration block's NIS per dimension enters ``nis_avg`` at most this large (one block
+of outliers must not inflate the process noise for good)."""
+Q_SCALE_RATE = 0.1
+"""Log-rate of the process-noise scale per block: ``q_scale *= exp(Q_SCALE_RATE (nis_avg -
+1))``."""
+Q_SCALE_RANGE = (1.0, 100.0)
+"""Bounds of the process-noise scale: never below the configured noise, at most 100 times
+it."""
 
 
 class VelocityMeasurement(NamedTuple):
@@ -77,59 +104,6 @@ PREDICT_STEP_S = 0.2
 """Longest prediction sub-step (s): a tick longer than this is predicted in equal steps."""
 
 
-def inv_small(S: np.ndarray) -> np.ndarray | None:
-    """Inverse of a 2x2 or 3x3 matrix (an innovation covariance) by the adjugate, or None
-    if it is singular; larger sizes by numpy. ``np.linalg.inv`` costs several µs of call
-    overhead at these sizes."""
-    m = len(S)
-    if m == 2:
-        (a, b), (c, d) = S.tolist()
-        det = a * d - b * c
-        if det == 0.0:
-            return None
-        return np.array([[d / det, -b / det], [-c / det, a / det]])
-    if m == 3:
-        (a, b, c), (d, e, f), (g, h, i) = S.tolist()
-        A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
-        det = a * A + b * B + c * C
-        if det == 0.0:
-            return None
-        return np.array([[A / det, (c * h - b * i) / det, (b * f - c * e) / det],
-                         [B / det, (a * i - c * g) / det, (c * d - a * f) / det],
-                         [C / det, (b * g - a * h) / det, (a * e - b * d) / det]])
-    try:
-        return np.linalg.inv(S)
-    except np.linalg.LinAlgError:
-        return None
-
-
-def chi2_sf(x: float, k: int) -> float:
-    """Survival function ``P(X > x)`` of a chi-square variable with ``k`` = 1, 2 or 3
-    degrees of freedom (closed forms; raises ValueError for other ``k``)."""
-    if x <= 0.0:
-        return 1.0
-    if k == 1:
-        return math.erfc(math.sqrt(0.5 * x))
-    if k == 2:
-        return math.exp(-0.5 * x)
-    if k == 3:
-        return math.erfc(math.sqrt(0.5 * x)) + math.sqrt(2.0 * x / math.pi) * math.exp(-0.5 * x)
-    raise ValueError(f"chi2_sf: {k} degrees of freedom (1 to 3 supported)")
-
-
-def chi2_quantile(p: float, k: int) -> float:
-    """The ``x`` with ``P(X > x) = p`` for a chi-square variable with ``k`` = 1 to 3 degrees
-    of freedom (bisection on :func:`chi2_sf`; 10.83 / 13.82 / 16.27 at p = 0.001)."""
-    lo, hi = 0.0, 200.0
-    for _ in range(80):
-        mid = 0.5 * (lo + hi)
-        if chi2_sf(mid, k) > p:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
 class CurrentKalmanFilter:
     """The joint extended Kalman filter of the module docstring.
 
@@ -141,7 +115,7 @@ class CurrentKalmanFilter:
         S: its covariance (m^2/s^2).
         nis: its normalized innovation squared ``y^T S^-1 y`` (NaN if ``S`` is singular).
         nis_avg: running mean of the block-mean NIS per dimension (calibration).
-        q_scale: process-noise scale from the calibration (1 to 100).
+        q_scale: process-noise scale from the calibration (``Q_SCALE_RANGE``).
         started: False until the first velocity measurement (and after a reset).
         runaway: the last prediction's through-water velocity left physical bounds
             (``max_speed_through_water``): its current is not a number to publish.
@@ -154,7 +128,7 @@ class CurrentKalmanFilter:
                  current_walk: float, accel_std: float, model_error_time_s: float,
                  turn_accel_gain: float, prior_accel_std: float, gate_nis: float,
                  calibrate: bool, calibrate_block: int,
-                 max_speed_through_water: float = 10.0,
+                 max_speed_through_water: float = MAX_SPEED_THROUGH_WATER_MPS,
                  counters: dict[str, float] | None = None) -> None:
         """Args:
             identification: prior and schedule of the coefficients (and the model).
@@ -167,7 +141,7 @@ class CurrentKalmanFilter:
             prior_accel_std: model acceleration error of a DOF with only the generic prior
                 (m/s^2).
             gate_nis: innovations with a larger NIS are rejected (in the first
-                ``START_UPDATES``: the filter starts again from them).
+                ``START_UPDATES``: they contradict the start, :meth:`update`).
             calibrate: inflate the process noise when the block-mean NIS says so.
             calibrate_block: innovations per calibration block.
             max_speed_through_water: a predicted through-water speed component beyond
@@ -191,44 +165,39 @@ class CurrentKalmanFilter:
         self.runaway = False
         self.counters: dict[str, float] = counters if counters is not None else {
             "rejected_gate": 0, "updates": 0}
-        nt = ident.n_theta
-        self.x = np.zeros(2 * nd + nt)
-        if nt:
+        n = 2 * nd + ident.n_theta
+        self.x = np.zeros(n)
+        if ident.n_theta:
             self.x[2 * nd:] = np.concatenate(ident.thetas[:nd])
-        self.P = np.diag([1.0] * nd + [init_current_std ** 2] * nd + ident.theta_var0)
-        self.y = np.zeros(nd)
-        self.S = np.eye(nd)
-        self.nis = 0.0
-        self.q_scale = 1.0
-        self.nis_avg = 1.0
+        self.P = self._prior_cov(ident.theta_var0)
+        self.y, self.S, self.nis = np.zeros(nd), np.eye(nd), 0.0
+        self.q_scale = self.nis_avg = 1.0
         self.started = False
-        self._blk_y = np.zeros(nd)
-        self._blk_S = np.zeros((nd, nd))
-        self._blk_n = 0
-        self._eye_n = np.eye(2 * nd + nt)
-        # measurement matrices without the rotation, per (kind, dimension)
-        self._H0: dict[tuple[str, int], np.ndarray] = {}
-        for kind in ("earth", "bottom", "water"):
-            for m in {2, nd}:
-                H = np.zeros((m, 2 * nd + nt))
-                H[:, :nd] = 0.0 if kind == "earth" else np.eye(nd)[:m]
-                H[:, nd:2 * nd] = np.eye(nd)[:m] if kind == "earth" else 0.0
-                self._H0[(kind, m)] = H
+        self._blk_y, self._blk_S, self._blk_n = np.zeros(nd), np.zeros((nd, nd)), 0
+        self._eye_n = np.eye(n)
+        self._H0 = _unrotated_measurement_matrices(nd, n)
+
+    def _prior_cov(self, theta_var: list[float]) -> np.ndarray:
+        """The prior covariance: ``NU_R_PRIOR_VAR`` per through-water component,
+        ``init_current_std^2`` per current component, ``theta_var`` for the coefficients."""
+        nd = self.nd
+        return np.diag([NU_R_PRIOR_VAR] * nd + [self.init_current_std ** 2] * nd
+                       + list(theta_var))
 
     # ------------------------------------------------------------------ state
-    def start(self, kind: MeasurementKind, z: np.ndarray, R: np.ndarray) -> None:
+    def start(self, kind: MeasurementKind, z: np.ndarray, rot: np.ndarray) -> None:
         """Initialize ``nu_r`` from the first velocity ``z`` (m/s) given the current in the
-        state (zero unless restored; the covariance says how well it is known); ``R`` the
-        body-to-earth rotation."""
+        state (zero unless restored; the covariance says how well it is known); ``rot``
+        the body-to-earth rotation ``R``."""
         nd = self.nd
         zz = np.zeros(nd)
         zz[: len(z)] = z
         c = self.x[nd:2 * nd]
         if kind == "earth":
             zz[len(z):] = c[len(z):]  # an unmeasured vertical: no relative vertical motion
-            self.x[:nd] = R.T @ (zz - c)
+            self.x[:nd] = rot.T @ (zz - c)
         elif kind == "bottom":
-            self.x[:nd] = zz - R.T @ c
+            self.x[:nd] = zz - rot.T @ c
         else:
             self.x[:nd] = zz
         self.started = True
@@ -241,7 +210,7 @@ class CurrentKalmanFilter:
         nt = self.identification.n_theta
         self.x[:o] = 0.0
         keep = np.all(np.isfinite(self.x[o:])) and np.all(np.isfinite(self.P[o:, o:]))
-        P = np.diag([1.0] * nd + [self.init_current_std ** 2] * nd + [0.0] * nt)
+        P = self._prior_cov([0.0] * nt)
         if nt:
             if keep:
                 P[o:, o:] = self.P[o:, o:]
@@ -279,7 +248,7 @@ class CurrentKalmanFilter:
 
     def restore_current(self, current: object, std: object) -> None:
         """Restart the current (m/s) from a saved value with its saved one-sigma ``std``
-        (m/s) floored at 0.2 (it may have changed meanwhile); ignored unless finite and of
+        (m/s) floored at ``RESTORED_CURRENT_STD_FLOOR_MPS``; ignored unless finite and of
         the state's dimension. Raises ValueError or TypeError on non-numbers."""
         nd, o = self.nd, 2 * self.nd
         c = np.asarray(current, float)
@@ -288,7 +257,7 @@ class CurrentKalmanFilter:
             sd = np.asarray(std, float)
             self.P[nd:o, :] = 0.0
             self.P[:, nd:o] = 0.0
-            self.P[nd:o, nd:o] = np.diag(np.maximum(sd, 0.2) ** 2)
+            self.P[nd:o, nd:o] = np.diag(np.maximum(sd, RESTORED_CURRENT_STD_FLOOR_MPS) ** 2)
 
     def inflate_current_along(self, direction: list[float], var_min: float) -> None:
         """Raise the current's variance along the unit vector ``direction`` (earth axes) to
@@ -325,10 +294,11 @@ class CurrentKalmanFilter:
         return (self.x[nd:2 * nd].tolist(), np.sqrt(self.P.diagonal()[nd:2 * nd]).tolist(),
                 self.x[:nd].tolist())
 
-    def velocity_over_ground(self, R: np.ndarray) -> np.ndarray:
-        """The filter's velocity over ground ``R nu_r + V_c`` (m/s, earth)."""
+    def velocity_over_ground(self, rot: np.ndarray) -> np.ndarray:
+        """The filter's velocity over ground ``R nu_r + V_c`` (m/s, earth), ``rot`` the
+        body-to-earth rotation ``R``."""
         nd = self.nd
-        return R @ self.x[:nd] + self.x[nd:2 * nd]
+        return rot @ self.x[:nd] + self.x[nd:2 * nd]
 
     # ------------------------------------------------------------------ filter
     def advance(self, t: float, dt: float, inputs: ModelInputs, yaw: float) -> None:
@@ -462,67 +432,78 @@ class CurrentKalmanFilter:
         self.x[active] = 0.0
 
     def update(self, kind: MeasurementKind, z: np.ndarray, std: float,
-               R: np.ndarray) -> UpdateOutcome:
-        """Kalman update with one velocity measurement ``z`` (m/s, one-sigma ``std`` per
-        component; the module docstring's table), ``R`` the body-to-earth rotation.
+               rot: np.ndarray) -> UpdateOutcome:
+        """Kalman update (:func:`.kalman.update`) with one velocity measurement ``z`` (m/s,
+        one-sigma ``std`` per component; the module docstring's table), ``rot`` the
+        body-to-earth rotation ``R``.
 
-        A NIS above ``gate_nis`` rejects the measurement (``gated``); within the first
-        ``START_UPDATES`` it starts the filter again from this measurement instead
-        (``restarted``, counted). The covariance is in Joseph form for the gain actually
-        used (the coefficient rows of the gain are zero while not identifying); a singular
+        A NIS above ``gate_nis`` rejects the measurement (``gated``, counted); within the
+        first ``START_UPDATES`` it says the measurement contradicts the start instead
+        (``contradicts_start``: nothing is changed, the owner decides, e.g.
+        :meth:`restart_from`). The covariance is in Joseph form for the gain actually used
+        (the coefficient rows of the gain are zero while not identifying); a singular
         innovation covariance or a non-finite or runaway state resets the filter
         (``reset``).
         """
-        nd = self.nd
         m = len(z)
-        H = self._H0[(kind, m)].copy()
-        if kind == "earth":
-            H[:, :nd] = R[:m]
-        elif kind == "bottom":
-            H[:, nd:2 * nd] = R.T[:m]
-        var = std * std
-        y = z - H @ self.x
-        PHt = self.P @ H.T
-        S = H @ PHt
-        S.ravel()[::m + 1] += var
-        Sinv = inv_small(S)
-        self.y, self.S = y, S
-        if Sinv is None:
-            self.nis = math.nan
-            self.reset("diverged")
-            return "reset"
-        nis = self.nis = float(y @ Sinv @ y)
-        if nis > self.gate_nis and self.started:
+        ident = self.identification
+        keep = slice(0, 2 * self.nd) if ident.n_theta and not ident.identifying else None
+        up = kalman.update(self.x, self.P, z, std * std * np.eye(m),
+                           self._measurement_matrix(kind, m, rot), keep=keep)
+        self.y, self.S, self.nis = up.y, up.S, up.nis
+        if up.K is None:
+            return self._diverged()
+        if up.nis > self.gate_nis and self.started:
             if self.counters["updates"] > START_UPDATES:
                 self.counters["rejected_gate"] += 1
                 return "gated"
-            # the start was inconsistent with what followed (a first sample stamped before
-            # the clocks settled, in a hard acceleration): start again from this one
-            self.reset("restarted")
-            self.start(kind, z, R)
-            outcome = self.update(kind, z, std, R)
-            self.y, self.S, self.nis = y, S, nis  # the record shows the inconsistency
-            return "restarted" if outcome == "accepted" else outcome
-        K = PHt @ Sinv
-        if self.identification.n_theta and not self.identification.identifying:
-            K[2 * nd:] = 0.0
-        x_new = self.x + K @ y
-        IKH = self._eye_n - K @ H
-        P_new = IKH @ self.P @ IKH.T + (K * var) @ K.T
-        # a NaN or inf anywhere makes the sums non-finite (a sum overflowing from finite
-        # entries would need |P| ~ 1e308: a divergence too)
-        if not (math.isfinite(float(x_new.sum()) + float(P_new.sum()))
-                and max(map(abs, x_new[:2 * nd].tolist())) < 50.0):
-            self.reset("diverged")
-            return "reset"
-        self.x, self.P = x_new, P_new
-        if self.identification.n_theta and self.identification.identifying:
+            return "contradicts_start"
+        if not self._plausible(up.x, up.P):
+            return self._diverged()
+        self.x, self.P = up.x, up.P
+        if ident.n_theta and ident.identifying:
             self._project_drag()
         self._unpack_coefficients()
         self.counters["updates"] += 1
-        if self.calibrate and self.started and m == nd:
-            self._calibrate(y, S)
+        if self.calibrate and self.started and m == self.nd:
+            self._calibrate(up.y, up.S)
         return "accepted"
+
+    def restart_from(self, kind: MeasurementKind, z: np.ndarray, std: float,
+                     rot: np.ndarray) -> UpdateOutcome:
+        """Start again from the measurement ``z`` (counted ``restarted``) and update with
+        it, as :meth:`update`: what an owner does when :meth:`update` says
+        ``contradicts_start`` and it trusts the measurement over the start (a first sample
+        stamped before the clocks settled, in a hard acceleration). The filter's ``y``,
+        ``S`` and ``nis`` are then those of this update."""
+        self.reset("restarted")
+        self.start(kind, z, rot)
+        return self.update(kind, z, std, rot)
+
+    def _measurement_matrix(self, kind: MeasurementKind, m: int,
+                            rot: np.ndarray) -> np.ndarray:
+        """``H`` of a ``kind`` measurement of ``m`` components at the body-to-earth
+        rotation ``rot`` (the module docstring's table)."""
+        nd = self.nd
+        H = self._H0[(kind, m)].copy()
+        if kind == "earth":
+            H[:, :nd] = rot[:m]
+        elif kind == "bottom":
+            H[:, nd:2 * nd] = rot.T[:m]
+        return H
+
+    def _plausible(self, x: np.ndarray, P: np.ndarray) -> bool:
+        """Whether an updated ``x`` and ``P`` are finite and every through-water and
+        current component is within ``DIVERGED_ABOVE_MPS``. (A NaN or inf anywhere makes
+        the sums non-finite; a sum overflowing from finite entries needs ``|P| ~ 1e308``:
+        a divergence too.)"""
+        return (math.isfinite(float(x.sum()) + float(P.sum()))
+                and max(map(abs, x[:2 * self.nd].tolist())) < DIVERGED_ABOVE_MPS)
+
+    def _diverged(self) -> UpdateOutcome:
+        """Reset on a divergence (counted ``diverged``)."""
+        self.reset("diverged")
+        return "reset"
 
     def _calibrate(self, y: np.ndarray, S: np.ndarray) -> None:
         """Fold one full-dimension innovation into the calibration block; at the end of a
@@ -539,9 +520,9 @@ class CurrentKalmanFilter:
             yb = self._blk_y / nb
             Sb = self._blk_S / (nb * nb)
             nis_b = float(yb @ np.linalg.solve(Sb, yb)) / m
-            self.nis_avg += 0.1 * (min(nis_b, 10.0) - self.nis_avg)
+            self.nis_avg += NIS_AVG_GAIN * (min(nis_b, NIS_BLOCK_MAX) - self.nis_avg)
             self.q_scale = float(np.clip(
-                self.q_scale * math.exp(0.1 * (self.nis_avg - 1.0)), 1.0, 100.0))
+                self.q_scale * math.exp(Q_SCALE_RATE * (self.nis_avg - 1.0)), *Q_SCALE_RANGE))
             self._blk_y[:] = 0.0
             self._blk_S[:] = 0.0
             self._blk_n = 0
@@ -554,3 +535,18 @@ class CurrentKalmanFilter:
     def theta_std_max(self) -> float:
         """Largest one-sigma among the coefficients in the state."""
         return float(np.sqrt(np.max(np.diag(self.P)[2 * self.nd:])))
+
+
+def _unrotated_measurement_matrices(nd: int, n: int) -> dict[tuple[str, int], np.ndarray]:
+    """The measurement matrices of an ``n``-state filter with ``nd`` velocity DOFs without
+    the rotation, per (kind, number of components): ``earth`` sees ``V_c``, ``bottom`` and
+    ``water`` see ``nu_r`` (:meth:`CurrentKalmanFilter._measurement_matrix` puts the
+    rotation in)."""
+    out: dict[tuple[str, int], np.ndarray] = {}
+    for kind in ("earth", "bottom", "water"):
+        for m in {2, nd}:
+            H = np.zeros((m, n))
+            H[:, :nd] = 0.0 if kind == "earth" else np.eye(nd)[:m]
+            H[:, nd:2 * nd] = np.eye(nd)[:m] if kind == "earth" else 0.0
+            out[(kind, m)] = H
+    return out

@@ -105,6 +105,7 @@ from numpy.typing import NDArray
 
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import Innovation
+from onboard.core.stats import chi2_quantile
 from onboard.core.so3 import (
     cross,
     exp_so3,
@@ -115,25 +116,40 @@ from onboard.core.so3 import (
     right_jacobian,
     skew,
 )
+from onboard.estimators import kalman
 
 Array = NDArray[np.float64]
 
 P_, V_, TH, BA, BG, G_, XI = (slice(3 * i, 3 * i + 3) for i in range(7))
 """Error-state blocks (paper eq. 11): position, velocity, attitude, accelerometer bias,
 gyro bias, gravity, disturbance."""
-BI = slice(21, 23)
+BI = slice(XI.stop, XI.stop + 2)
 """Error-state block of the INS velocity bias (north, east)."""
-N_ERR = 23
-"""Dimension of the error state."""
+N_ERR = BI.stop
+"""Dimension of the error state (23)."""
+P_NE = slice(P_.start, P_.start + 2)
+"""The horizontal position error (north, east) within :data:`P_`."""
+P_D = P_.start + 2
+"""The depth error (down) within :data:`P_`."""
+V_NE = slice(V_.start, V_.start + 2)
+"""The horizontal velocity error (north, east) within :data:`V_`."""
+TH_Z = TH.start + 2
+"""The attitude error about the body z axis within :data:`TH` (the yaw error of a level
+vehicle)."""
 
 E3 = np.array([0.0, 0.0, 1.0])
 
 
 _I2, _I3, _I_N = frozen_eye(2), frozen_eye(3), frozen_eye(N_ERR)
 """Identities made once (read-only) for every propagation and update."""
+_NO_ERROR = np.zeros(N_ERR)
+_NO_ERROR.setflags(write=False)
+"""The error state before an update: zero (the nominal state carries the estimate)."""
 
-CHI2_999 = {1: 10.83, 2: 13.82, 3: 16.27}
-"""Chi-square 99.9 % quantiles for 1, 2, 3 degrees of freedom."""
+GATE_PROBABILITY = 0.999
+"""Probability of a consistent innovation's NIS inside the default gate: the gate of a
+``dof``-dimensional update is ``chi2_quantile(GATE_PROBABILITY, dof)`` (10.83, 13.82,
+16.27 for 1, 2, 3)."""
 PENDING_INNOVATIONS = 1024
 """Innovation records kept until the owner takes them; older ones are dropped."""
 
@@ -289,7 +305,7 @@ class EsesoFilter:
         sd += [c.initial_disturbance_std_n] * 3 + [c.ins_bias_std_mps] * 2
         self.P = np.diag(np.square(sd))
         if yaw_std_rad is not None:
-            self.P[8, 8] = yaw_std_rad ** 2
+            self.P[TH_Z, TH_Z] = yaw_std_rad ** 2
         self.initialized = True
 
     # ------------------------------------------------------------------ propagation
@@ -363,20 +379,16 @@ class EsesoFilter:
         Returns:
             False when the gate rejects the update.
         """
-        PHt = self.P @ H.T
         if self.params.noise_adapt_updates > 0:
             if channel in NOISE_ADAPT_CHANNELS:
-                Rm = Rm * self._adapt_noise(channel, y, H @ PHt, Rm)
+                Rm = Rm * self._adapt_noise(channel, y, H @ (self.P @ H.T), Rm)
             elif channel == PROCESS_ADAPT_CHANNEL:
-                self._adapt_process(y, H @ PHt, Rm)
-        S = H @ PHt + Rm
-        S = 0.5 * (S + S.T)
-        Sinv = np.linalg.inv(S)
-        nis = float(y @ Sinv @ y)
-        self.y, self.S, self.nis = y, S, nis
+                self._adapt_process(y, H @ (self.P @ H.T), Rm)
+        up = self._kalman(y, H, Rm, only)
+        self.y, self.S, self.nis = y, up.S, up.nis
         if gate is None:
             gate = self.gate(len(y))
-        if gate > 0 and nis > gate:
+        if gate > 0 and up.nis > gate:
             self.count(f"rejected.{channel}.gate")
             n_rej = self._consecutive.get(channel, 0) + 1
             self._consecutive[channel] = n_rej
@@ -385,27 +397,26 @@ class EsesoFilter:
                 return False
             # recover: fuse, down-weighted so that the NIS equals the gate
             self.count(f"recovered.{channel}")
-            Rm = Rm * (nis / gate)
-            S = H @ PHt + Rm
-            Sinv = np.linalg.inv(0.5 * (S + S.T))
+            up = self._kalman(y, H, Rm * (up.nis / gate), only)
         self._consecutive[channel] = 0
         self._record(channel, t, source, gate, accepted=True)
-        K = PHt @ Sinv
-        if only is not None:
-            keep = K[only].copy()
-            K = np.zeros_like(K)
-            K[only] = keep
-        dx = K @ y
-        IKH = _I_N - K @ H
-        P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
-        self.inject(dx)
+        self.inject(up.x)
         # reset (17b): G = I except the attitude block, I - [dtheta/2]x (Sola eq. 287)
         G = _I_N.copy()
-        G[TH, TH] -= skew(0.5 * dx[TH])
-        P = G @ P @ G.T
+        G[TH, TH] -= skew(0.5 * up.x[TH])
+        P = G @ up.P @ G.T
         self.P = 0.5 * (P + P.T)
         self.count(f"fused.{channel}")
         return True
+
+    def _kalman(self, y: Array, H: Array, Rm: Array, only: slice | None
+                ) -> kalman.KalmanUpdate:
+        """The Kalman update (:func:`.kalman.update`) of the error state from zero with the
+        innovation ``y``, Jacobian ``H`` and noise ``Rm``; ``only`` the block it may correct
+        (None = all). ``S`` is symmetrized and inverted by LU (``np.linalg.inv``); its
+        ``x`` is the correction ``dx``."""
+        return kalman.update(_NO_ERROR, self.P, y, Rm, H, keep=only, symmetric=True,
+                             inverse=np.linalg.inv)
 
     def _adapt_noise(self, channel: str, y: Array, HPHt: Array, Rm: Array) -> float:
         """The variance scale of ``channel``'s configured noise ``Rm`` after this update's
@@ -444,10 +455,10 @@ class EsesoFilter:
 
     def gate(self, dof: int) -> float:
         """The configured NIS gate of a ``dof``-dimensional update: ``gate_sigma**2 * dof``,
-        or without ``gate_sigma`` the chi-square 99.9 % quantile."""
+        or without ``gate_sigma`` the chi-square quantile of :data:`GATE_PROBABILITY`."""
         if self.params.gate_sigma > 0:
             return self.params.gate_sigma ** 2 * dof
-        return CHI2_999.get(dof, 3.0 * dof + 8.0)
+        return chi2_quantile(GATE_PROBABILITY, dof)
 
     def _record(self, channel: str, t: float, source: str, gate: float,
                 accepted: bool) -> None:
@@ -478,7 +489,7 @@ class EsesoFilter:
         """Horizontal position ``z`` (north, east; m) with variance ``var`` (m^2) per axis;
         channel ``gnss_pos``."""
         H = np.zeros((2, N_ERR))
-        H[:, 0:2] = _I2
+        H[:, P_NE] = _I2
         return self.update("gnss_pos", z - self.p[:2], H, _I2 * var, t=t,
                            source=source)
 
@@ -487,7 +498,7 @@ class EsesoFilter:
         """Horizontal velocity over ground ``z`` (north, east; m/s) with variance ``var``
         (m^2/s^2) per axis; channel ``gnss_vel``."""
         H = np.zeros((2, N_ERR))
-        H[:, 3:5] = _I2
+        H[:, V_NE] = _I2
         return self.update("gnss_vel", z - self.v[:2], H, _I2 * var, t=t,
                            source=source)
 
@@ -505,7 +516,7 @@ class EsesoFilter:
         """INS velocity over ground ``z`` (north, east; m/s) = ``v + b_ins`` + white noise
         of variance ``var`` (m^2/s^2) per axis; channel ``vog``."""
         H = np.zeros((2, N_ERR))
-        H[:, 3:5] = _I2
+        H[:, V_NE] = _I2
         H[:, BI] = _I2
         return self.update("vog", z - self.v[:2] - self.b_ins, H, _I2 * var, t=t,
                            source=source)
@@ -514,7 +525,7 @@ class EsesoFilter:
                      t: float = math.nan, source: str = "") -> bool:
         """Depth (m, positive down) with variance ``var`` (m^2); channel ``depth``."""
         H = np.zeros((1, N_ERR))
-        H[0, 2] = 1.0
+        H[0, P_D] = 1.0
         return self.update("depth", np.array([depth_m - self.p[2]]), H, np.array([[var]]),
                            t=t, source=source)
 

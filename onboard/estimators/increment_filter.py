@@ -10,7 +10,8 @@ order of §2.7::
     forecast      x_fc = A x_da + B u,        P_f = A P A^T + V_u B B^T      (step 1)
     innovation    z = C x_fc - y,   S = C P_f C^T + R,   NIS = z^2 / S         (step 2)
     outlier gate  NIS > nis_gate: skipped (at most MAX_CONSECUTIVE_REJECTS in a row)
-    input model   AIE: the RCIE step on z (steps 3-5); KF: nothing
+    input model   AIE: the RCIE step on z (steps 3-5); KF: nothing. It returns its
+                  decision (InputStep: V_u from now on, diverged), which the filter applies
     update        x_da = x_fc - L z,   P = (I - L C) P_f                        (step 6)
     rate row      y_v = v + n_v (GNSS Doppler speed), assimilated after the increment
 
@@ -23,13 +24,11 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import TYPE_CHECKING
+from typing import Any, Mapping
 
 from onboard.core.messages import Innovation
 from onboard.estimators.axis_model import AxisModel, Discrete
-
-if TYPE_CHECKING:
-    from onboard.estimators.input_models import InputModel
+from onboard.estimators.input_models import AxisInnovation, InputModel
 
 RUNNING_MEAN_GAIN = 0.05
 """Weight of the newest value in the running means of the rate innovations (and of the
@@ -129,7 +128,8 @@ class IncrementFilter:
         if not kf.initialized:
             self._start(k, y, R, R_prev, command, y_v, R_v, t, source)
             return
-        kf.forecast(k, self.input.forecast_input(self, command, y_v is not None), self.V_u)
+        kf.forecast(k, self.input.forecast_input(kf, self._u_known(command), y_v is not None),
+                    self.V_u)
         self.rate_z = None if y_v is None else self._rate_innovation(k, y_v, R_v)
         kf.innovation(y)
         gate = (self.nis_gate if self._consecutive_rejects < MAX_CONSECUTIVE_REJECTS
@@ -146,7 +146,12 @@ class IncrementFilter:
         else:
             self._consecutive_rejects = 0
             self.nis_avg += RUNNING_MEAN_GAIN * (min(kf.nis, NIS_CLIP) - self.nis_avg)
-            self.input.after_innovation(self, k, command)
+            decision = self.input.after_innovation(
+                AxisInnovation(kf, self.rate_z, self.rate_S, self.nis_avg, self.V_u), k,
+                self._u_known(command))
+            if decision.diverged:
+                self.after_divergence(k)
+            self.V_u = decision.V_u
             kf.update()
             self.steps += 1
         if y_v is not None:
@@ -161,7 +166,7 @@ class IncrementFilter:
         no innovation record."""
         var_v = (self.u_max * k.dt) ** 2 + (R + R_prev) / (k.dt * k.dt)
         self.kf.init(y, k.dt, R_prev, var_v)
-        self.input.start(self, command, R + R_prev)
+        self.input.start(self._u_known(command), R + R_prev)
         if y_v is not None:
             self._rate_update(y_v, R_v, t, source)
 
@@ -230,12 +235,30 @@ class IncrementFilter:
 
     def damping(self, command: float | None) -> float:
         """The damping rate ``a`` (1/s) of the model over a step with ``command``."""
-        return self.input.damping(self, command)
+        return self.input.damping(self.model.a, command is not None)
 
     def input_ahead(self, command: float | None) -> float:
         """The input (unit of ``u``) to predict with beyond the last step, given the
         newest command."""
-        return self.input.input_ahead(self, command)
+        return self.input.input_ahead(self.kf, self._u_known(command))
+
+    def _u_known(self, command: float | None) -> float | None:
+        """The nominal input ``gain c + offset`` of ``command`` (None without one)."""
+        return None if command is None else self.model.input(command)
+
+    def input_health(self) -> dict[str, float]:
+        """What the input model reports (:meth:`.InputModel.health`)."""
+        return self.input.health(self.V_u)
+
+    def input_state(self) -> dict[str, Any]:
+        """What the input model learned, with ``V_u`` where it adapts it (JSON-safe)."""
+        return self.input.get_state(self.V_u)
+
+    def set_input_state(self, state: Mapping[str, Any]) -> None:
+        """Restore :meth:`input_state`; a ``V_u`` the input model returns is taken."""
+        V_u = self.input.set_state(state)
+        if V_u is not None:
+            self.V_u = V_u
 
     def speed_bias_var(self) -> float:
         """Variance ((m/s)^2) of a rate error that persists while no measurement comes
@@ -254,8 +277,9 @@ class IncrementFilter:
         return self.kf.P[3] + var_u / (a * a)
 
     def after_divergence(self, k: Discrete) -> None:
-        """The input model restarted (§2.7 step 4): count it, forget the NIS history and
-        widen the rate by the input's bound over one step, ``(u_max dt)^2``."""
+        """The input model diverged and restarted (its :class:`.InputStep` says so, §2.7
+        step 4): count it, forget the NIS history and widen the rate by the input's bound
+        over one step, ``(u_max dt)^2``."""
         self.diverged += 1
         self.nis_avg = 1.0
         self.kf.pvv += (self.u_max * k.dt) ** 2

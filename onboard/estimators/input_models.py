@@ -10,65 +10,99 @@ input ``u`` of its forecast ``x_fc = A x_da + B u``:
 * :class:`CommandedInput` (the paper's "standard Kalman filter"): ``u = gain c + offset``,
   the command at nominal scaling, plus an input-bias state where configured.
 
-An input model is called by the filter at fixed points of its step: :meth:`start` when
-the filter (re)starts, :meth:`forecast_input` for the step just ended, and
-:meth:`after_innovation` between the innovation and the update; the pipeline asks
-:meth:`input_ahead` and :meth:`damping` to predict between steps.
+An input model is called by the filter at fixed points of its step, with numbers, never
+with the filter: :meth:`~InputModel.start` when the filter (re)starts,
+:meth:`~InputModel.forecast_input` for the step just ended, and
+:meth:`~InputModel.after_innovation` between the innovation and the update, which returns
+its decision (:class:`InputStep`: the input-error variance from now on, and whether the
+estimator diverged) for the filter to act on; the filter asks
+:meth:`~InputModel.input_ahead` and :meth:`~InputModel.damping` to predict between steps.
+``u_known`` is the command's nominal input ``gain c + offset`` of the axis model (None
+without a command).
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Mapping, Protocol
+from typing import Any, Mapping, NamedTuple, Protocol
 
 from onboard.estimators.axis_model import Discrete
 from onboard.estimators.kalman import BiasIncrementKF, IncrementKF
 from onboard.estimators.rcie import Rcie
 
-if TYPE_CHECKING:
-    from onboard.estimators.increment_filter import IncrementFilter
+
+class AxisInnovation(NamedTuple):
+    """What an input model is shown of an accepted step (§2.7 step 2), before the update."""
+
+    kf: IncrementKF
+    """The axis filter after the forecast and the innovation (its ``z``, ``S`` and Markov
+    parameters, :meth:`.IncrementKF.markov`); read, not changed."""
+    rate_z: float | None
+    """The forecast innovation of the measured rate (m/s or rad/s; None without one)."""
+    rate_S: float
+    """Its variance."""
+    nis_avg: float
+    """The running mean of the accepted increment NIS."""
+    V_u: float
+    """The forecast's input-error variance (unit of ``u`` squared)."""
+
+
+class InputStep(NamedTuple):
+    """An input model's decision after an accepted innovation (§2.7 steps 3-5), which the
+    filter acts on."""
+
+    V_u: float
+    """The input-error variance from the next forecast on (unit of ``u`` squared)."""
+    diverged: bool
+    """The input estimator diverged and restarted (§2.7 step 4): the filter counts it and
+    widens its rate."""
 
 
 class InputModel(Protocol):
-    """What an :class:`IncrementFilter` needs of its input."""
+    """What an :class:`~onboard.estimators.increment_filter.IncrementFilter` needs of its
+    input."""
 
     def make_filter(self, q_v: float, correlated: bool) -> IncrementKF:
         """The filter whose state this input needs (the KF's bias state, or none)."""
         ...
 
-    def start(self, f: IncrementFilter, command: float | None, point_var: float) -> None:
+    def start(self, u_known: float | None, point_var: float) -> None:
         """The filter (re)started on an increment of noise variance ``point_var`` (the
-        sum of its two points'), with the step's mean ``command``."""
+        sum of its two points'), with the nominal input ``u_known`` of the step."""
         ...
 
-    def forecast_input(self, f: IncrementFilter, command: float | None,
+    def forecast_input(self, kf: IncrementKF, u_known: float | None,
                        has_rate: bool) -> float:
-        """``u`` over the step just ended (§2.7 step 1), given its mean command."""
+        """``u`` over the step just ended (§2.7 step 1), given its nominal input, for the
+        filter ``kf`` this model made."""
         ...
 
-    def after_innovation(self, f: IncrementFilter, k: Discrete,
-                         command: float | None) -> None:
-        """Between the innovation and the update of an accepted step."""
+    def after_innovation(self, inn: AxisInnovation, k: Discrete,
+                         u_known: float | None) -> InputStep:
+        """Between the innovation and the update of an accepted step: the decision."""
         ...
 
-    def input_ahead(self, f: IncrementFilter, command: float | None) -> float:
-        """``u`` to predict with beyond the last step, given the newest command."""
+    def input_ahead(self, kf: IncrementKF, u_known: float | None) -> float:
+        """``u`` to predict with beyond the last step, given the newest command's nominal
+        input."""
         ...
 
-    def damping(self, f: IncrementFilter, command: float | None) -> float:
-        """The damping rate ``a`` (1/s) of the model over a step with ``command``."""
+    def damping(self, a: float, commanded: bool) -> float:
+        """The damping rate (1/s) to predict with over a step, the model's being ``a``;
+        ``commanded``: the step has a command."""
         ...
 
-    def health(self, f: IncrementFilter) -> dict[str, float]:
-        """Diagnostics of the input, by name."""
+    def health(self, V_u: float) -> dict[str, float]:
+        """Diagnostics of the input, by name, at the filter's input-error variance."""
         ...
 
-    def get_state(self, f: IncrementFilter) -> dict[str, Any]:
-        """What the input learned, JSON-safe."""
+    def get_state(self, V_u: float) -> dict[str, Any]:
+        """What the input learned, JSON-safe, with the filter's input-error variance."""
         ...
 
-    def set_state(self, f: IncrementFilter, state: Mapping[str, Any]) -> None:
-        """Restore :meth:`get_state`; ignore what does not fit."""
+    def set_state(self, state: Mapping[str, Any]) -> float | None:
+        """Restore :meth:`get_state` (ignore what does not fit); returns the input-error
+        variance to restore, or None."""
         ...
 
 
@@ -126,99 +160,101 @@ class RcieInput:
         """The plain increment filter (§2.2)."""
         return IncrementKF(R=1.0, q_v=q_v, correlated=correlated)
 
-    def start(self, f: IncrementFilter, command: float | None, point_var: float) -> None:
+    def start(self, u_known: float | None, point_var: float) -> None:
         """The first start fixes the innovation's normalization ``z_scale = sqrt(R_k +
         R_{k-1})`` (§2.3); every start takes the command's nominal input."""
         if not self._z_scale_set:
             self.rcie.z_scale = math.sqrt(point_var)
             self._z_scale_set = True
-        if self.known_input and command is not None:
-            self.u = f.model.input(command)
+        if self.known_input and u_known is not None:
+            self.u = u_known
 
-    def forecast_input(self, f: IncrementFilter, command: float | None,
+    def forecast_input(self, kf: IncrementKF, u_known: float | None,
                        has_rate: bool) -> float:
         """``u = d_hat_{k-1} + u_known`` over the step just ended (§2.7 step 1)."""
         u = self.d_hat
-        if self.known_input and command is not None:
-            u += f.model.input(command)
+        if self.known_input and u_known is not None:
+            u += u_known
         return u
 
-    def after_innovation(self, f: IncrementFilter, k: Discrete,
-                         command: float | None) -> None:
-        """§2.7 steps 3-5: the RCIE step, the divergence check, the input for the coming
-        step, and optionally ASE (§2.8)."""
-        d = self._rcie_step(f, k)
+    def after_innovation(self, inn: AxisInnovation, k: Discrete,
+                         u_known: float | None) -> InputStep:
+        """§2.7 steps 3-5: the RCIE step, the divergence check (the estimator restarts),
+        the input for the coming step, and optionally ASE (§2.8)."""
+        d = self._rcie_step(inn, k)
         rc = self.rcie
-        if (d is None or abs(rc.d_hat_raw) > self.divergence_input * self.u_max
-                or (rc.steps > DIVERGENCE_MIN_STEPS and f.nis_avg > self.divergence_nis)):
-            self.rcie.reset()
-            f.after_divergence(k)
+        diverged = (d is None or abs(rc.d_hat_raw) > self.divergence_input * self.u_max
+                    or (rc.steps > DIVERGENCE_MIN_STEPS and inn.nis_avg > self.divergence_nis))
+        if d is None or diverged:
+            rc.reset()
             d = 0.0
         self.d_hat = d
-        self.u = d + (f.model.input(command)
-                      if self.known_input and command is not None else 0.0)
-        if self.adaptive:
-            self._adapt(f, k)
+        self.u = d + (u_known if self.known_input and u_known is not None else 0.0)
+        V_u = self._adapt(inn, k) if self.adaptive else inn.V_u
+        return InputStep(V_u, diverged)
 
-    def _rcie_step(self, f: IncrementFilter, k: Discrete) -> float | None:
+    def _rcie_step(self, inn: AxisInnovation, k: Discrete) -> float | None:
         """RCIE on the informative innovation (§2.4, §2.10): with a measured rate its
         forecast innovation ``z_v`` (Markov parameter ``C_v B = c1``, normalized by its
         predicted std), else the increment's ``z`` (``H_1 = c2``, or ``n_f`` taps)."""
         rc = self.rcie
-        if f.rate_z is not None:
-            rc.z_scale = math.sqrt(f.rate_S)
-            return rc.step(f.rate_z, [k.c1])
-        H = [k.c2] if rc.n_f == 1 else f.kf.markov(k, rc.n_f)
-        return rc.step(f.kf.z, H)
+        if inn.rate_z is not None:
+            rc.z_scale = math.sqrt(inn.rate_S)
+            return rc.step(inn.rate_z, [k.c1])
+        H = [k.c2] if rc.n_f == 1 else inn.kf.markov(k, rc.n_f)
+        return rc.step(inn.kf.z, H)
 
-    def _adapt(self, f: IncrementFilter, k: Discrete) -> None:
-        """ASE (§2.8): ``V_d`` such that the predicted innovation variance matches the
-        sample variance ``S_hat`` of the last ``N_w`` innovations. ``S`` is affine in
-        ``V_d`` (``S - V_u c2^2 + V c2^2``), so the match has the closed form
-        ``V* = (S_hat - S + V_u c2^2) / c2^2``."""
+    def _adapt(self, inn: AxisInnovation, k: Discrete) -> float:
+        """ASE (§2.8): the input-error variance ``V_d`` after this step, moved towards the
+        one whose predicted innovation variance matches the sample variance ``S_hat`` of
+        the last ``N_w`` innovations. ``S`` is affine in ``V_d`` (``S - V_u c2^2 + V
+        c2^2``), so the match has the closed form ``V* = (S_hat - S + V_u c2^2) / c2^2``.
+        Unchanged until the window holds enough innovations."""
         w = self._zwin
-        w.append(f.kf.z)
+        w.append(inn.kf.z)
         nw = self.adaptive_window
         if len(w) > nw:
             del w[0]
         if len(w) < max(ASE_MIN_FILL, nw // 2):
-            return
+            return inn.V_u
         m = sum(w) / len(w)
         s_hat = sum((x - m) ** 2 for x in w) / (len(w) - 1)
         c2 = k.c2
-        base = f.kf.S - f.V_u * c2 * c2
+        base = inn.kf.S - inn.V_u * c2 * c2
         v = (s_hat - base) / (c2 * c2)
         lo, hi = ASE_FLOOR * self.u_scale ** 2, ASE_CEILING * self.u_max ** 2
         v = lo if v < lo else hi if v > hi else v
-        f.V_u += ASE_GAIN * (v - f.V_u)
+        return inn.V_u + ASE_GAIN * (v - inn.V_u)
 
-    def input_ahead(self, f: IncrementFilter, command: float | None) -> float:
+    def input_ahead(self, kf: IncrementKF, u_known: float | None) -> float:
         """``d_hat`` plus the nominal input of the newest command (with
         ``known_input``), else the input of the last step."""
-        if self.known_input and command is not None:
-            return self.d_hat + f.model.input(command)
+        if self.known_input and u_known is not None:
+            return self.d_hat + u_known
         return self.u
 
-    def damping(self, f: IncrementFilter, command: float | None) -> float:
+    def damping(self, a: float, commanded: bool) -> float:
         """The model's ``a``."""
-        return f.model.a
+        return a
 
-    def health(self, f: IncrementFilter) -> dict[str, float]:
+    def health(self, V_u: float) -> dict[str, float]:
         """``input`` (``d_hat``), ``V_d`` (the filter's ``V_u``) and ``theta_norm``."""
-        return {"input": self.d_hat, "V_d": f.V_u,
+        return {"input": self.d_hat, "V_d": V_u,
                 "theta_norm": math.sqrt(sum(x * x for x in self.rcie.theta))}
 
-    def get_state(self, f: IncrementFilter) -> dict[str, Any]:
-        """RCIE's ``theta`` and ``P``, and ``V_d``."""
-        return {"rcie": self.rcie.get_state(), "V_d": f.V_u}
+    def get_state(self, V_u: float) -> dict[str, Any]:
+        """RCIE's ``theta`` and ``P``, and ``V_d`` (the filter's ``V_u``)."""
+        return {"rcie": self.rcie.get_state(), "V_d": V_u}
 
-    def set_state(self, f: IncrementFilter, state: Mapping[str, Any]) -> None:
-        """Restore :meth:`get_state`; a malformed or non-positive ``V_d`` is ignored."""
+    def set_state(self, state: Mapping[str, Any]) -> float | None:
+        """Restore :meth:`get_state`; returns ``V_d`` (None if malformed or not
+        positive)."""
         if isinstance(state.get("rcie"), dict):
             self.rcie.set_state(state["rcie"])
         v = state.get("V_d")
         if isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0:
-            f.V_u = float(v)
+            return float(v)
+        return None
 
 
 # ---------------------------------------------------------------------------------------
@@ -237,6 +273,7 @@ class CommandedInput:
 
     Attributes:
         u: the nominal input of the last step's command (unit of ``u``).
+        commanded: whether the last step had a command.
         bias_q: the bias's random walk ((unit of ``u``)^2 per second); it walks only over
             steps with a measured rate (the increments alone observe it too weakly).
     """
@@ -244,6 +281,7 @@ class CommandedInput:
     def __init__(self, bias_q: float) -> None:
         self.bias_q = bias_q
         self.u = 0.0
+        self.commanded = False
 
     def make_filter(self, q_v: float, correlated: bool) -> IncrementKF:
         """With ``bias_q > 0`` the filter with an input-bias state, starting at 0 with no
@@ -252,44 +290,46 @@ class CommandedInput:
             return BiasIncrementKF(R=1.0, q_v=q_v, correlated=correlated, q_b=0.0, pbb0=0.0)
         return IncrementKF(R=1.0, q_v=q_v, correlated=correlated)
 
-    def start(self, f: IncrementFilter, command: float | None, point_var: float) -> None:
+    def start(self, u_known: float | None, point_var: float) -> None:
         """The command's nominal input."""
-        if command is not None:
-            self.u = f.model.input(command)
+        self.commanded = u_known is not None
+        if u_known is not None:
+            self.u = u_known
 
-    def forecast_input(self, f: IncrementFilter, command: float | None,
+    def forecast_input(self, kf: IncrementKF, u_known: float | None,
                        has_rate: bool) -> float:
-        """``gain c + offset`` of the step's mean command (0 without one); the bias walks
-        only over a step with a measured rate."""
-        kf = f.kf
+        """``gain c + offset`` of the step's mean command (0 without one); the bias of the
+        filter ``kf`` walks only over a step with a measured rate."""
         if isinstance(kf, BiasIncrementKF):
             kf.q_b = self.bias_q if has_rate else 0.0
-        self.u = 0.0 if command is None else f.model.input(command)
+        self.commanded = u_known is not None
+        self.u = 0.0 if u_known is None else u_known
         return self.u
 
-    def after_innovation(self, f: IncrementFilter, k: Discrete,
-                         command: float | None) -> None:
-        """Nothing: the input is known."""
+    def after_innovation(self, inn: AxisInnovation, k: Discrete,
+                         u_known: float | None) -> InputStep:
+        """Nothing to decide: the input is known."""
+        return InputStep(inn.V_u, False)
 
-    def input_ahead(self, f: IncrementFilter, command: float | None) -> float:
-        """The nominal input of the newest command (the last step's without one), plus
-        the estimated bias."""
-        u = self.u if command is None or f.last_command is None else f.model.input(command)
-        kf = f.kf
+    def input_ahead(self, kf: IncrementKF, u_known: float | None) -> float:
+        """The nominal input of the newest command (the last step's without one, or
+        after a step without a command), plus the bias estimated by ``kf``."""
+        u = self.u if u_known is None or not self.commanded else u_known
         return u + kf.b if isinstance(kf, BiasIncrementKF) else u
 
-    def damping(self, f: IncrementFilter, command: float | None) -> float:
+    def damping(self, a: float, commanded: bool) -> float:
         """The model's ``a`` with a command; without one the constant-rate model (the
         damped model with zero input would pull the rate to 0)."""
-        return f.model.a if command is not None else CONSTANT_RATE_DAMPING_PER_S
+        return a if commanded else CONSTANT_RATE_DAMPING_PER_S
 
-    def health(self, f: IncrementFilter) -> dict[str, float]:
+    def health(self, V_u: float) -> dict[str, float]:
         """Nothing beyond the filter's."""
         return {}
 
-    def get_state(self, f: IncrementFilter) -> dict[str, Any]:
+    def get_state(self, V_u: float) -> dict[str, Any]:
         """Nothing is learned across restarts."""
         return {}
 
-    def set_state(self, f: IncrementFilter, state: Mapping[str, Any]) -> None:
+    def set_state(self, state: Mapping[str, Any]) -> float | None:
         """Nothing to restore."""
+        return None

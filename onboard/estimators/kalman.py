@@ -1,7 +1,25 @@
-"""The Kalman filter of one surge or heading axis, shared by AIE and the KF baseline.
+"""The Kalman update every filter of the package makes, and the Kalman filter of one surge
+or heading axis, shared by AIE and the KF baseline.
 
-algorithms.md §2.2 on the §1.2 model. The seed paper's augmented state is
-``X = [s_k, v_k, s_{k-1}]`` with output ``y = s_k - s_{k-1}``. Its direction ``[1, 0, 1]``
+**The update** (:func:`update`, filterpy's ``update(x, P, z, R, H)``; Bar-Shalom, Li &
+Kirubarajan 2001, section 5.2): for a measurement ``z = H x + v``, ``v ~ N(0, R)``::
+
+    y = z - H x,   S = H P H^T + R,   K = P H^T S^-1,   NIS = y^T S^-1 y
+    x+ = x + K y,  P+ = (I - K H) P (I - K H)^T + K R K^T          (Joseph form)
+
+The Joseph form keeps ``P+`` right (and symmetric positive semi-definite) for any gain,
+not only the optimal one, so a filter may zero rows of ``K`` (states it must not correct:
+a Schmidt-Kalman or consider update, Schmidt 1966; Simon 2006, section 7.5) and still carry the
+right covariance. The joint current filter (:mod:`.current_kf`, with the restored-current
+twin) and the ESESO (:mod:`.eseso_filter`, an error-state filter: ``x = 0``, ``z`` the
+innovation) update through it, and so does :class:`ReferenceIncrementKF`, the matrix
+form of the scalar filters below. The high-gain and flow observers are not Kalman
+filters: their gains are designed (LMI, pole placement), and a measurement enters their
+continuous-time dynamics, not an update (:mod:`.current_hgo`, :mod:`.flow_observer`).
+
+**The axis filter.** algorithms.md §2.2 on the §1.2 model. The seed paper's augmented
+state is ``X = [s_k, v_k, s_{k-1}]`` with output ``y = s_k - s_{k-1}``. Its direction
+``[1, 0, 1]``
 (adding a constant to both path lengths) is unobservable from increments, so the
 covariance of the 3-state filter grows without bound along it. In the coordinates
 ``(d_k, v_k, s_{k-1})`` with ``d_k = s_k - s_{k-1}`` the block ``(d, v)`` evolves on its
@@ -24,11 +42,107 @@ Sign convention of §2.2: innovation ``z = C x_fc - y``; ``x_da = x_fc - L z``.
 
 from __future__ import annotations
 
+import functools
 import math
+from typing import Callable, NamedTuple
 
 import numpy as np
+from numpy.typing import NDArray
 
+from onboard.core.so3 import frozen_eye
 from onboard.estimators.axis_model import Discrete
+
+Array = NDArray[np.float64]
+
+
+def inv_small(S: Array) -> Array | None:
+    """Inverse of a 2x2 or 3x3 matrix (an innovation covariance) by the adjugate, or None
+    if it is singular; other sizes by numpy (None if singular). ``np.linalg.inv`` costs
+    several µs of call overhead at these sizes."""
+    m = len(S)
+    if m == 2:
+        (a, b), (c, d) = S.tolist()
+        det = a * d - b * c
+        if det == 0.0:
+            return None
+        return np.array([[d / det, -b / det], [-c / det, a / det]])
+    if m == 3:
+        (a, b, c), (d, e, f), (g, h, i) = S.tolist()
+        A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
+        det = a * A + b * B + c * C
+        if det == 0.0:
+            return None
+        return np.array([[A / det, (c * h - b * i) / det, (b * f - c * e) / det],
+                         [B / det, (a * i - c * g) / det, (c * d - a * f) / det],
+                         [C / det, (b * g - a * h) / det, (a * e - b * d) / det]])
+    try:
+        return np.linalg.inv(S)
+    except np.linalg.LinAlgError:
+        return None
+
+
+@functools.lru_cache(maxsize=16)
+def _identity(n: int) -> Array:
+    """The ``n`` x ``n`` identity of :func:`update`, made once per size (read-only)."""
+    return frozen_eye(n)
+
+
+class KalmanUpdate(NamedTuple):
+    """The outcome of :func:`update`, with filterpy's names."""
+
+    x: Array
+    """The updated state ``x + K y`` (the prior ``x`` if ``S`` is singular)."""
+    P: Array
+    """Its covariance, Joseph form (the prior ``P`` if ``S`` is singular)."""
+    y: Array
+    """The innovation ``z - H x`` (the measurement's units)."""
+    S: Array
+    """Its covariance ``H P H^T + R`` (symmetrized with ``symmetric=True``)."""
+    K: Array | None
+    """The gain used (rows outside ``keep`` zero); None if ``S`` is singular."""
+    nis: float
+    """The normalized innovation squared ``y^T S^-1 y`` (NaN if ``S`` is singular)."""
+
+
+def update(x: Array, P: Array, z: Array, R: Array, H: Array, *,
+           keep: slice | None = None, symmetric: bool = False,
+           inverse: Callable[[Array], Array | None] = inv_small) -> KalmanUpdate:
+    """One Kalman update (the module docstring's equations), a pure function.
+
+    Args:
+        x, P: the prior state and its covariance (not changed).
+        z: the measurement (``m``); for an error-state filter ``x = 0`` and ``z`` the
+            innovation ``z_meas - h(x_nominal)``.
+        R: its noise covariance (``m`` x ``m``).
+        H: the measurement matrix (the Jacobian of ``h``; ``m`` x ``len(x)``).
+        keep: the states the update may correct (the other rows of ``K`` are zeroed: a
+            Schmidt-Kalman update, the Joseph form keeping ``P`` right for that gain);
+            None = all.
+        symmetric: replace ``S`` by its symmetric part ``(S + S^T) / 2`` (rounding leaves
+            ``H (P H^T)`` asymmetric in its last digits).
+        inverse: ``S^-1``, or None when ``S`` is singular (:func:`inv_small`;
+            ``np.linalg.inv`` raises ``np.linalg.LinAlgError`` instead).
+
+    The products are evaluated as ``H (P H^T)``, ``(P H^T) S^-1``, ``((I - K H) P) (I -
+    K H)^T + (K R) K^T``: the filters' estimates depend on that order in their last
+    digits, so it is fixed here.
+    """
+    y = z - H @ x
+    PHt = P @ H.T
+    S = H @ PHt + R
+    if symmetric:
+        S = 0.5 * (S + S.T)
+    Sinv = inverse(S)
+    if Sinv is None:
+        return KalmanUpdate(x, P, y, S, None, math.nan)
+    nis = float(y @ Sinv @ y)
+    K = PHt @ Sinv
+    if keep is not None:
+        kept = K[keep].copy()
+        K = np.zeros_like(K)
+        K[keep] = kept
+    IKH = _identity(len(x)) - K @ H
+    return KalmanUpdate(x + K @ y, IKH @ P @ IKH.T + K @ R @ K.T, y, S, K, nis)
 
 VARIANCE_FLOOR = 1e-300
 """The smallest variance of the rate (and of the input bias) an update leaves, in the
@@ -323,8 +437,9 @@ class BiasIncrementKF(IncrementKF):
 
 class ReferenceIncrementKF:
     """:class:`IncrementKF` (``bias=False``) and :class:`BiasIncrementKF` (``bias=True``)
-    in numpy, the class docs' equations as matrices on ``x = [d, v, e(, b)]``; the scalar
-    filters are this one unrolled (tests/test_kf.py compares them step by step).
+    in numpy, the class docs' equations as matrices on ``x = [d, v, e(, b)]``, updated
+    by :func:`update`; the scalar filters are this one unrolled (tests/test_kf.py
+    compares them step by step).
 
     Attributes: ``x``, ``P`` (full matrix), ``z``, ``S``, ``nis`` as the scalar filters';
     ``y`` the last increment and ``skipped`` whether it was used.
@@ -377,10 +492,11 @@ class ReferenceIncrementKF:
         return self.z
 
     def update(self) -> None:
-        """``K = P C^T / S``, ``x -= K z``, ``P -= K (P C^T)^T``."""
+        """The increment row ``C = [1, 0, -1(, 0)]`` through :func:`update` (``x + K (y -
+        C x) = x - K z``)."""
         C = np.zeros(self.n)
         C[0], C[2] = 1.0, -1.0
-        self._apply(C, self.z, self.S)
+        self._apply(C, self.y, self.R)
 
     def skip(self) -> None:
         """Keep the forecast; the last point's noise is then prior at the next step."""
@@ -390,15 +506,13 @@ class ReferenceIncrementKF:
         """The rate row ``C_v = [0, 1, 0(, 0)]``, ``Var = R_v``; returns the NIS."""
         C = np.zeros(self.n)
         C[1] = 1.0
-        z, S = float(C @ self.x - y_v), float(C @ self.P @ C + R_v)
-        self._apply(C, z, S)
-        return z * z / S
+        return self._apply(C, y_v, R_v)
 
-    def _apply(self, C: np.ndarray, z: float, S: float) -> None:
-        """The scalar-row update, then the rate (and bias) variance floored."""
-        PC = self.P @ C                                   # P C^T
-        K = PC / S                                        # K = P C^T / S
-        self.x = self.x - K * z                           # x_da = x_fc - K z
-        self.P = self.P - np.outer(K, PC)                 # P_da = P - K C P
+    def _apply(self, C: np.ndarray, y: float, R: float) -> float:
+        """The scalar row ``y = C x + n``, ``Var(n) = R``, through :func:`update` (Joseph
+        form), then the rate (and bias) variance floored; returns the NIS."""
+        up = update(self.x, self.P, np.array([y]), np.array([[R]]), C[None, :])
+        self.x, self.P = up.x, up.P
         for i in (1, 3) if self.n == 4 else (1,):
             self.P[i, i] = max(self.P[i, i], VARIANCE_FLOOR)
+        return up.nis

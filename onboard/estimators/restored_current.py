@@ -9,10 +9,10 @@ twin observes (its one-sigma, floored along the track while the surge model is u
 most ``unknown_above_std``) the difference of the two currents is tested::
 
     d = c_restored - c_twin
-    d^2 = d^T (P_restored + P_twin)^-1 d   >   chi2_quantile(p, k)   ->  discard
+    d^2 = d^T (P_restored + P_twin)^-1 d   >   chi2_quantile(1 - p, k)   ->  discard
 
-with ``P_restored`` the restored current's covariance, ``P_twin`` the twin's and ``k`` the
-number of observed components. A discarded current is replaced by the twin's; the current
+with ``P_restored`` the restored current's covariance, ``P_twin`` the twin's, ``k`` the
+number of observed components and ``p`` the false-alarm probability. A discarded current is replaced by the twin's; the current
 is confirmed after ``hold_s`` seconds of data without a discard while the twin observes
 both horizontal components.
 """
@@ -23,11 +23,11 @@ from typing import Literal
 
 import numpy as np
 
+from onboard.core.stats import chi2_quantile
 from onboard.estimators.current_kf import (
     CurrentKalmanFilter,
     MeasurementKind,
     VelocityMeasurement,
-    chi2_quantile,
 )
 from onboard.estimators.model_identification import floor_along_track
 from onboard.estimators.vehicle_models import ModelInputs
@@ -98,11 +98,14 @@ class RestoredCurrentCheck:
         self.twin.identification.headings.restart(yaw)
 
     def update(self, meas: list[VelocityMeasurement], R: np.ndarray) -> None:
-        """The twin's updates with the tick's velocity measurements."""
-        assert self.twin is not None
-        if self.twin.started:
+        """The twin's updates with the tick's velocity measurements; a measurement that
+        contradicts the twin's start starts it again (as the pipeline's filter)."""
+        twin = self.twin
+        assert twin is not None
+        if twin.started:
             for m in meas:
-                self.twin.update(m.kind, m.z, m.std, R)
+                if twin.update(m.kind, m.z, m.std, R) == "contradicts_start":
+                    twin.restart_from(m.kind, m.z, m.std, R)
 
     def evaluate(self, dt: float, yaw: float) -> Verdict:
         """The test of the module docstring after ``dt`` (s) of data at heading ``yaw``
@@ -120,7 +123,7 @@ class RestoredCurrentCheck:
         S = (self.cov + twin.current_cov())[np.ix_(axes, axes)]
         self.chi2 = float(d @ np.linalg.solve(S, d))
         self.n_axes = len(axes)
-        if self.chi2 > chi2_quantile(self.false_alarm_p, len(axes)):
+        if self.chi2 > chi2_quantile(1.0 - self.false_alarm_p, len(axes)):
             return "discard"
         if all(i in axes for i in range(2)):
             self.held_s += dt

@@ -57,6 +57,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from onboard.monitor.alerts import Alerts
 from onboard.core.geo import LocalFrame
+from onboard.core.stats import chi2_mean_band
 from onboard.core.messages import (
     Attitude,
     DvlVelocity,
@@ -168,14 +169,6 @@ def crab_bound(sog_mps: float) -> float:
     return max(HEADING_BOUND_RAD, math.asin(ratio))
 
 
-def _chi2_quantile(p: float, dof: float) -> float:
-    """The chi-square ``p`` quantile for ``dof`` (real, > 0) degrees of freedom
-    (Wilson-Hilferty: within 1 % of the exact value for ``dof >= 20``, ~5 % at 5)."""
-    z = _normal_quantile(p)
-    h = 2.0 / (9.0 * dof)
-    return dof * max(1.0 - h + z * math.sqrt(h), 0.0) ** 3
-
-
 @functools.cache
 def _normal_quantile(p: float) -> float:
     """The standard normal ``p`` quantile (bisection on ``erf``; p in (0, 1))."""
@@ -213,13 +206,11 @@ def nis_band(dof: int, n: float = NIS_BLOCK_UPDATES, p: float = NIS_BAND
     """The band of the mean of ``n`` (effective, possibly fractional) NIS values of
     ``dof`` degrees of freedom: the two-sided ``p`` band of a consistent filter's,
     ``chi2_q(dof n) / n`` at ``(1 -+ p) / 2`` (Bar-Shalom, Li & Kirubarajan 2001,
-    §5.4.2, the time-average NIS), widened to at least ``dof`` times
-    :func:`calibrated_nis`."""
-    k = dof * n
-    a = (1.0 - p) / 2.0
+    §5.4.2, the time-average NIS; :func:`onboard.core.stats.chi2_mean_band`), widened
+    to at least ``dof`` times :func:`calibrated_nis`."""
+    lo, hi = chi2_mean_band(n, dof, p)
     c_lo, c_hi = calibrated_nis()
-    return (min(_chi2_quantile(a, k) / n, dof * c_lo),
-            max(_chi2_quantile(1.0 - a, k) / n, dof * c_hi))
+    return min(lo, dof * c_lo), max(hi, dof * c_hi)
 
 
 class HeadingCourseCheck:

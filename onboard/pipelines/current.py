@@ -76,7 +76,6 @@ from onboard.estimators.current_hgo import CurrentHighGainObserver
 from onboard.estimators.current_kf import (
     PREDICT_STEP_S,
     CurrentKalmanFilter,
-    UpdateOutcome,
     VelocityMeasurement,
 )
 from onboard.estimators.flow_observer import FlowObserver
@@ -110,8 +109,10 @@ LATE_FUSE_MAX_S = 0.05
 that time; an older one is dropped (``rejected_late``; with ``max_late_hold_s`` 0, fused
 at the filter's time)."""
 REASONS: dict[str, str] = {"accepted": "", "gated": "gate", "reset": "diverged",
-                           "restarted": "restart"}
-"""The record's reason for each outcome of the joint filter's update."""
+                           "restarted": "restart", "contradicts_start": "restart"}
+"""The record's reason for each outcome of a velocity measurement in the joint filter: its
+update's (:data:`.current_kf.UpdateOutcome`), or ``restarted`` when the pipeline started the
+filter again from it (:meth:`CurrentPipeline._correct`)."""
 
 
 class CurrentPipeline:
@@ -332,12 +333,16 @@ class CurrentPipeline:
         dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else t_first
         dt_meas = min(max(dt_meas, t_min), t_max)
         self._last_meas_t = tm
-        outcome = kf.update(kind, z, std, R)
-        self._record(CHANNELS[kind], m, kf.y, kf.S, kf.nis, kf.gate_nis, outcome)
+        outcome: str = kf.update(kind, z, std, R)
+        y, S, nis = kf.y, kf.S, kf.nis  # the record shows the contradiction, if any
+        if outcome == "contradicts_start":
+            restart = kf.restart_from(kind, z, std, R)
+            outcome = "restarted" if restart == "accepted" else restart
+        self._record(CHANNELS[kind], m, y, S, nis, kf.gate_nis, outcome)
         if outcome == "reset" and hgo is not None:
             hgo.reset_gain()
         if outcome == "restarted":
-            self._restarted(m)
+            self._restarted(m, nis)
         elif hgo is not None and not self._update_hgo(m, dt_meas, R):
             hgo.restart(kf.x, kf.P)
             hgo.reset_gain()
@@ -346,10 +351,10 @@ class CurrentPipeline:
                 kind == "earth" and len(z) < self.nd) else None)
         self._last_velocity_t = tm
 
-    def _restarted(self, m: VelocityMeasurement) -> None:
-        """The joint filter started again from ``m``, which contradicted its start: the
-        observer follows, a restored current (now dropped) ends its probation, and an
-        event says so."""
+    def _restarted(self, m: VelocityMeasurement, nis: float) -> None:
+        """The joint filter started again from ``m``, which contradicted its start (at NIS
+        ``nis``): the observer follows, a restored current (now dropped) ends its
+        probation, and an event says so."""
         kf = self.kf
         if self.hgo is not None:
             self.hgo.restart(kf.x, kf.P)
@@ -360,7 +365,7 @@ class CurrentPipeline:
             dropped = "; the restored current is dropped"
         self.events.append(
             f"the start was contradicted by a {CHANNELS[m.kind]} measurement (NIS "
-            f"{kf.nis:.0f} > {kf.gate_nis:.0f}): started again from it{dropped}")
+            f"{nis:.0f} > {kf.gate_nis:.0f}): started again from it{dropped}")
 
     def _update_hgo(self, m: VelocityMeasurement, dt_meas: float,
                     R: np.ndarray | None) -> bool:
@@ -379,8 +384,7 @@ class CurrentPipeline:
         return ok
 
     def _record(self, channel: str, m: VelocityMeasurement, y: np.ndarray, S: np.ndarray,
-                nis: float, gate: float = math.inf,
-                outcome: UpdateOutcome = "accepted") -> None:
+                nis: float, gate: float = math.inf, outcome: str = "accepted") -> None:
         """The innovation record of one velocity update: ``y`` (m/s) and its covariance
         ``S``, NIS ``nis`` against ``gate``."""
         self._innovations.append(Innovation(

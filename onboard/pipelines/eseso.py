@@ -83,7 +83,7 @@ from onboard.core.messages import (
 )
 from onboard.core.pipeline_config import EsesoConfig
 from onboard.core.so3 import euler_to_matrix, matrix_to_euler
-from onboard.estimators.eseso_filter import P_, V_, XI, EsesoFilter, EsesoParams
+from onboard.estimators.eseso_filter import P_, P_D, V_, XI, EsesoFilter, EsesoParams
 from onboard.pipelines.base import unused_measurement
 
 Array = NDArray[np.float64]
@@ -394,7 +394,7 @@ class Eseso:
             self._count("rejected.gnss.no_fix")
             return
         f = self.filter
-        if f.p[2] > self.gnss_max_depth and f.P[2, 2] < 1.0:
+        if f.p[2] > self.gnss_max_depth and f.P[P_D, P_D] < 1.0:
             self._count("rejected.gnss.submerged")
             self._unused(s, "gnss_pos", 2, "submerged")
             if s.sog_mps is not None and s.cog_rad is not None:

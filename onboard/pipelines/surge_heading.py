@@ -516,7 +516,7 @@ class SurgeHeadingPipeline:
         h["tuned_set.doppler"] = float(self.doppler)
         h["tuned_set.switches"] = float(self.set_switches)
         for nm, ax in self._axes():
-            h.update({f"{nm}.{k}": v for k, v in ax.input.health(ax).items()})
+            h.update({f"{nm}.{k}": v for k, v in ax.input_health().items()})
         return h
 
     def get_state(self) -> dict[str, Any]:
@@ -525,7 +525,7 @@ class SurgeHeadingPipeline:
         for nm, ax in self._axes():
             m = ax.model
             st[nm] = {"model": {"a": m.a, "gain": m.gain, "offset": m.offset}}
-            st[nm].update(ax.input.get_state(ax))
+            st[nm].update(ax.input_state())
         return st
 
     def set_state(self, state: Mapping[str, Any]) -> None:
@@ -539,7 +539,7 @@ class SurgeHeadingPipeline:
             model = _restored_model(sub.get("model"))
             if model is not None:
                 ax.model = model
-            ax.input.set_state(ax, sub)
+            ax.set_input_state(sub)
 
     def set_model(self, axis: Literal["surge", "heading"], model: AxisModel) -> None:
         """Use an identified model (e.g. from :func:`axis_model.identify_surge`)."""

@@ -41,29 +41,11 @@ import numpy as np
 
 from onboard.core.geo import wrap_pi_array
 from onboard.core.messages import EstimateRecord
+from onboard.core.stats import chi2_mean_band
 
 CONTROLLERS = ("pid", "nmpc", "nmpc-of", "ampc")
 BEGIN = "<!-- mismatch:begin -->"
 END = "<!-- mismatch:end -->"
-
-
-def chi2_mean_band(n: int, dim: int, z: float = 1.959964) -> tuple[float, float]:
-    """Two-sided 95 % band of the mean of ``n`` independent chi-square(``dim``) values
-    (Wilson-Hilferty quantiles of chi-square(``n dim``), divided by ``n``).
-
-    Args:
-        n: number of NIS values.
-        dim: dimension of each innovation.
-        z: the normal quantile (1.96 for 95 %).
-    """
-    k = n * dim
-    if k <= 0:
-        return math.nan, math.nan
-
-    def q(zz: float) -> float:
-        return k * (1.0 - 2.0 / (9.0 * k) + zz * math.sqrt(2.0 / (9.0 * k))) ** 3
-
-    return q(-z) / n, q(z) / n
 
 
 def _rms(x: np.ndarray) -> float:

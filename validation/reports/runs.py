@@ -26,6 +26,8 @@ from typing import Any, Callable, TypeVar
 
 import numpy as np
 
+from onboard.core.stats import chi2_mean_band
+
 REPO = Path(__file__).resolve().parents[2]
 SITL_DIAGNOSE_CONFIG = REPO / "config" / "sitl-rudder-boat.toml"
 
@@ -348,17 +350,6 @@ def eseso_nis(seed: int, seconds: float = 120.0) -> dict[str, tuple[float, int]]
         if math.isfinite(r.nis):
             nis.setdefault(r.channel, []).append(r.nis)
     return {ch: (float(np.mean(v)), len(v)) for ch, v in nis.items()}
-
-
-def chi2_mean_band(n: int, dim: int, z: float = 1.959964) -> tuple[float, float]:
-    """Two-sided 95 % band of the mean of ``n`` independent chi-square(``dim``) values
-    (``n * mean`` is chi-square with ``n * dim`` degrees of freedom; Wilson-Hilferty)."""
-    k = n * dim
-
-    def q(zz: float) -> float:
-        return k * (1.0 - 2.0 / (9.0 * k) + zz * math.sqrt(2.0 / (9.0 * k))) ** 3
-
-    return q(-z) / n, q(z) / n
 
 
 # ----------------------------------------------------------------------------- diagnose
