@@ -27,10 +27,7 @@ import msgspec
 
 from onboard.core.errors import UsageError
 from onboard.core.pipeline_config import Pipelines
-
-VehicleClass = Literal[
-    "rudder-boat", "twin-thruster-boat", "bluerov2", "torpedo-auv", "spheroid", "unknown"
-]
+from onboard.core.vehicles import VehicleClass
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 """Where the bundled vehicle configs live in a source checkout."""
@@ -50,7 +47,8 @@ class Vehicle(_Strict):
     id: str = "vehicle"
     """Vehicle name: in the Zenoh keys and the saved adaptive state."""
     vehicle_class: VehicleClass = msgspec.field(default="unknown", name="class")
-    """Vehicle class (``class`` in the file): chooses the pipelines and their models."""
+    """Vehicle class (``class`` in the file): chooses the pipelines and their models
+    through its traits (:mod:`onboard.core.vehicles`)."""
     system_id: int = 1
     """MAVLink system id the estimates are sent as."""
     description: str = ""

@@ -42,6 +42,7 @@ identified in.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -130,6 +131,22 @@ def chi2_quantile(p: float, k: int) -> float:
     return 0.5 * (lo + hi)
 
 
+@dataclass
+class FilterCounters:
+    """What a :class:`CurrentKalmanFilter` counted."""
+
+    updates: int = 0
+    """Velocity updates fused."""
+    rejected_gate: int = 0
+    """Velocity updates rejected by the gate (after the first ``START_UPDATES``)."""
+    diverged: int = 0
+    """Resets to the prior after a singular or non-finite update."""
+    restarted: int = 0
+    """Starts again from a measurement that contradicted the first one."""
+    runaway: int = 0
+    """Episodes of a through-water velocity beyond ``max_speed_through_water``."""
+
+
 class CurrentKalmanFilter:
     """The joint extended Kalman filter of the module docstring.
 
@@ -146,16 +163,14 @@ class CurrentKalmanFilter:
         runaway: the last prediction's through-water velocity left physical bounds
             (``max_speed_through_water``): its current is not a number to publish.
         identification: the :class:`.ModelIdentification` of the coefficients.
-        counters: event counts (``updates``, ``rejected_gate``, ``diverged``,
-            ``runaway``), shared with the owner's health.
+        counters: its event counts (:class:`FilterCounters`).
     """
 
     def __init__(self, identification: ModelIdentification, *, init_current_std: float,
                  current_walk: float, accel_std: float, model_error_time_s: float,
                  turn_accel_gain: float, prior_accel_std: float, gate_nis: float,
                  calibrate: bool, calibrate_block: int,
-                 max_speed_through_water: float = 10.0,
-                 counters: dict[str, float] | None = None) -> None:
+                 max_speed_through_water: float = 10.0) -> None:
         """Args:
             identification: prior and schedule of the coefficients (and the model).
             init_current_std: prior one-sigma of the current (m/s).
@@ -173,7 +188,6 @@ class CurrentKalmanFilter:
             max_speed_through_water: a predicted through-water speed component beyond
                 this (m/s) sets ``runaway`` (counted once per episode): the model ran
                 away, not the vehicle; the owner publishes no current meanwhile.
-            counters: event counts to add to (a new dict by default).
         """
         self.identification = ident = identification
         self.model = ident.model
@@ -189,8 +203,7 @@ class CurrentKalmanFilter:
         self.calibrate_block = calibrate_block
         self.max_speed_through_water = max_speed_through_water
         self.runaway = False
-        self.counters: dict[str, float] = counters if counters is not None else {
-            "rejected_gate": 0, "updates": 0}
+        self.counters = FilterCounters()
         nt = ident.n_theta
         self.x = np.zeros(2 * nd + nt)
         if nt:
@@ -233,10 +246,13 @@ class CurrentKalmanFilter:
             self.x[:nd] = zz
         self.started = True
 
-    def reset(self, reason: str) -> None:
+    def reset(self, reason: Literal["diverged", "restarted"]) -> None:
         """Back to the prior, counted as ``reason``; the identified coefficients are kept
         if they and their covariance are finite."""
-        self.counters[reason] = self.counters.get(reason, 0) + 1
+        if reason == "diverged":
+            self.counters.diverged += 1
+        else:
+            self.counters.restarted += 1
         nd, o = self.nd, 2 * self.nd
         nt = self.identification.n_theta
         self.x[:o] = 0.0
@@ -404,7 +420,7 @@ class CurrentKalmanFilter:
         # beyond physics: the model, not the vehicle, ran away (flagged, counted per episode)
         runaway = self.started and max(map(abs, nu)) > self.max_speed_through_water
         if runaway and not self.runaway:
-            self.counters["runaway"] = self.counters.get("runaway", 0) + 1
+            self.counters.runaway += 1
         self.runaway = runaway
         self.x[:nd] = nu
         q = self._model_error(nu, inputs, dt)
@@ -493,8 +509,8 @@ class CurrentKalmanFilter:
             return "reset"
         nis = self.nis = float(y @ Sinv @ y)
         if nis > self.gate_nis and self.started:
-            if self.counters["updates"] > START_UPDATES:
-                self.counters["rejected_gate"] += 1
+            if self.counters.updates > START_UPDATES:
+                self.counters.rejected_gate += 1
                 return "gated"
             # the start was inconsistent with what followed (a first sample stamped before
             # the clocks settled, in a hard acceleration): start again from this one
@@ -519,7 +535,7 @@ class CurrentKalmanFilter:
         if self.identification.n_theta and self.identification.identifying:
             self._project_drag()
         self._unpack_coefficients()
-        self.counters["updates"] += 1
+        self.counters.updates += 1
         if self.calibrate and self.started and m == nd:
             self._calibrate(y, S)
         return "accepted"
