@@ -84,7 +84,7 @@ def test_glider_model_makes_the_along_track_current_known():
     assert last["north"] == pytest.approx(CURRENT[0], abs=0.02)
     assert last["east"] == pytest.approx(CURRENT[1], abs=0.02)
     assert last["std_north"] < 0.15 and last["std_east"] < 0.08
-    assert pipe.counters["glider_measurements"] == 299  # every tick but the first
+    assert pipe.samples.counters.glider_measurements == 299  # every tick but the first
 
 
 def test_without_the_glider_model_the_along_track_current_is_unknown():

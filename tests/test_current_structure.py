@@ -106,7 +106,7 @@ def test_the_joint_kalman_filter_finds_the_current_without_the_pipeline():
     # the time, and the model error grows with the turn rate (turn_accel_gain)
     assert abs(current[0] - 0.3) < 0.02 and abs(current[1] + 0.2) < 0.02
     assert max(std) < 0.1
-    assert kf.counters["updates"] == 1999 and kf.counters["rejected_gate"] == 0
+    assert kf.counters.updates == 1999 and kf.counters.rejected_gate == 0
 
 
 def test_the_joint_filter_resets_on_a_runaway_and_keeps_finite_coefficients():
@@ -115,7 +115,7 @@ def test_the_joint_filter_resets_on_a_runaway_and_keeps_finite_coefficients():
     kf.start("earth", np.array([1.0, 0.0]), np.eye(2))
     kf.x[4] = 0.123  # a coefficient "learned"
     assert kf.update("earth", np.array([400.0, -300.0]), 0.05, np.eye(2)) == "reset"
-    assert kf.counters["diverged"] == 1 and not kf.started
+    assert kf.counters.diverged == 1 and not kf.started
     assert np.all(kf.x[:4] == 0.0) and kf.x[4] == 0.123
     assert ident.thetas[0][0] == 0.123  # the identification sees the state's coefficients
 
@@ -163,7 +163,7 @@ def test_a_through_water_speed_beyond_physics_is_flagged_not_published():
     inputs = ModelInputs()
     for _ in range(5):
         kf.predict(0.1, inputs)
-    assert kf.runaway and kf.counters["runaway"] == 1  # one episode, counted once
+    assert kf.runaway and kf.counters.runaway == 1  # one episode, counted once
     kf.x[:2] = [1.0, 0.0]
     kf.predict(0.1, inputs)
     assert not kf.runaway
@@ -265,7 +265,7 @@ def test_a_diverging_high_gain_correction_is_refused_and_counted():
                                   current_walk=0.01)
     x0 = hgo.x.copy()
     assert not hgo.update("earth", np.array([1e6, 0.0]), 0.05, 1.0, np.eye(2), ModelInputs())
-    assert hgo.counters["hgo_diverged"] == 1
+    assert hgo.diverged == 1
     assert np.array_equal(hgo.x, x0)
     assert hgo.update("water", np.array([1e6, 0.0]), 0.05, 1.0, np.eye(2), ModelInputs())
 
@@ -417,7 +417,7 @@ def test_the_pipeline_reports_its_variants_estimate(observer):
         for ax, e in zip(("north", "east", "down"), expect):
             if ax in out:  # absent while unknown (one-sigma above unknown_above_std)
                 assert out[ax] == e
-    assert pipe.counters["updates"] > 100
+    assert pipe.kf.counters.updates > 100
     assert (pipe.hgo is not None) == (observer == "hgo")
     assert (pipe.flow is not None) == (observer == "flow")
     assert out["std_north"] > 0 and math.isfinite(out.get("north", 0.0))

@@ -36,6 +36,7 @@ from typing import Callable, Iterable, Mapping, Protocol, Sequence
 
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame
+from onboard.core.vehicles import traits
 from onboard.core.wire import LocationFix, location_fix
 from onboard.core.messages import (
     ActuatorColumn,
@@ -228,7 +229,8 @@ class Engine:
         self.alerts = Alerts(self.events)
         """Warnings for the user (pipeline restarts, integrity; the replay adds its own);
         each new one is also an event."""
-        self.integrity = IntegrityMonitor(self.alerts, cfg.vehicle.vehicle_class,
+        holonomic = traits(cfg.vehicle.vehicle_class).holonomic
+        self.integrity = IntegrityMonitor(self.alerts, holonomic,
                                           cfg.sensors.gnss.position_std_m,
                                           cfg.sensors.gnss.velocity_std_mps,
                                           cfg.sensors.dvl.velocity_std_mps)

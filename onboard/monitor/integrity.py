@@ -71,7 +71,6 @@ from onboard.core.messages import (
     Innovation,
     Sample,
 )
-from onboard.core.vehicles import traits
 
 HEADING_MIN_SPEED_MPS = 0.5
 """Below this GNSS speed (m/s) the course over ground is too noisy to check a heading."""
@@ -492,11 +491,13 @@ class IntegrityMonitor:
         nis: pipeline -> channel -> its NIS check.
     """
 
-    def __init__(self, alerts: Alerts, vehicle_class: str = "unknown",
+    def __init__(self, alerts: Alerts, holonomic: bool = False,
                  fix_std_m: float = DEFAULT_FIX_STD_M,
                  speed_std_mps: float = DEFAULT_SPEED_STD_MPS,
                  dvl_std_mps: float = DEFAULT_DVL_STD_MPS) -> None:
-        """Raise warnings into ``alerts``; ``fix_std_m`` is the one-sigma (m) of a fix that
+        """Raise warnings into ``alerts``; ``holonomic``: the vehicle moves sideways by
+        design (:attr:`onboard.core.vehicles.VehicleTraits.holonomic`: no heading/course
+        check); ``fix_std_m`` is the one-sigma (m) of a fix that
         reports no accuracy (``[sensors.gnss] position_std_m``), ``speed_std_mps`` of its
         speed over ground (``[sensors.gnss] velocity_std_mps``), ``dvl_std_mps`` of a DVL
         velocity with no figure of merit (``[sensors.dvl] velocity_std_mps``)."""
@@ -507,7 +508,7 @@ class IntegrityMonitor:
         self.speeds: dict[str, dict[str, SpeedCheck]] = {}
         self._speed_refs: list[tuple[float, float, float, str]] = []
         """Measured speeds since the previous tick: (t, m/s, variance, reference)."""
-        self.heading = None if traits(vehicle_class).holonomic else HeadingCourseCheck()
+        self.heading = None if holonomic else HeadingCourseCheck()
         self.watched: dict[str, Declared] = {}
         """The pipelines whose roles it reads, by name (:meth:`watch`)."""
         self.positions: dict[str, PositionCheck] = {}
