@@ -101,7 +101,7 @@ def test_glider_model_declines_at_a_shallow_pitch():
                                yaw_rate_rps=0.0),
                       Depth(t=t, source="s", depth_m=20.0 + 0.01 * k),
                       VelocityOverGround(t=t, source="s", v_north_mps=0.3, v_east_mps=0.0)])
-    assert pipe.counters.get("glider_measurements", 0) == 0
+    assert pipe.samples.counters.glider_measurements == 0
 
 
 def test_pump_and_battery_roles_read_their_columns():

@@ -166,7 +166,7 @@ def test_a_right_restored_current_is_confirmed(jaiabot_state):
                seed=2, state=jaiabot_state)
     pipe = r["pipe"]
     # measured (seed 2): the twin observes both components from 56 s, confirmed at 116 s
-    assert pipe.counters.get("restore_discarded", 0) == 0
+    assert pipe.counters.restore_discarded == 0
     assert pipe.counters.restore_confirmed == 1
     assert any("restored current confirmed" in e for e in r["engine"].events)
 

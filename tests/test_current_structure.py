@@ -522,7 +522,7 @@ def test_the_hgo_rls_identifies_the_velocity_dofs_from_the_observer_velocity():
     from onboard.pipelines.current import CurrentConfig, _identification
     from tests.helpers.current_plants import BOAT_TRUE
     model = RegressionModel("surface-rudder")
-    ident = _identification(CurrentConfig(), model, {})
+    ident = _identification(CurrentConfig(), model)
     rls = VelocityRls(ident, noise_std=0.02, forgetting=1.0, svf_cutoff_hz=0.3)
     true = model.thetas_from_mapping(BOAT_TRUE)
     prior = [t.copy() for t in rls.thetas]
@@ -559,7 +559,7 @@ def test_the_hgo_rls_keeps_a_damped_model():
     from onboard.estimators.model_identification import VelocityRls
     from onboard.pipelines.current import CurrentConfig, _identification
     model = RegressionModel("surface-rudder")
-    rls = VelocityRls(_identification(CurrentConfig(), model, {}), noise_std=1e-3,
+    rls = VelocityRls(_identification(CurrentConfig(), model), noise_std=1e-3,
                       forgetting=1.0, svf_cutoff_hz=0.3)
     x = ModelInputs()
     before = [t.copy() for t in rls.thetas]

@@ -13,10 +13,14 @@ import pytest
 
 from onboard.core import config as configmod
 from onboard.core.vehicles import CLASSES, TRAITS, VehicleClass, traits
+from onboard.estimators.current_kf import FilterCounters
+from onboard.estimators.eseso_filter import Outcome
 from onboard.estimators.vehicle_models import RegressionModel, kind_for_class
 from onboard.pipelines import MODULES, build
 from onboard.pipelines.base import Pipeline
 from onboard.pipelines.current import HEADING_DEPENDENT
+from onboard.pipelines.current_samples import SampleCounters
+from onboard.pipelines.eseso import EsesoCounters
 from onboard.service.mavlink_session import needed_streams
 
 REPO = Path(__file__).resolve().parents[1]
@@ -214,3 +218,34 @@ def test_health_is_typed_and_its_flat_form_round_trips_through_json() -> None:
             assert isinstance(h, msgspec.Struct), p.name
             flat = h.flat()
             assert msgspec.json.decode(msgspec.json.encode(flat)) == flat
+
+
+def test_the_current_pipelines_counters_that_appear_once_counted_come_in_a_fixed_order(
+        ) -> None:
+    """The five counters it always has, then each that has counted something, in the
+    order a measurement meets them, whatever the order they first counted in."""
+    p = _pipelines("rudder-boat")["current"]
+    h = p.health()
+    always = ["rejected_invalid_dvl", "rejected_gate", "rejected_nonfinite", "updates",
+              "rls_updates"]
+    assert list(h.flat())[:6] == always + ["q_scale"]
+    counted = msgspec.structs.replace(
+        h, filter=FilterCounters(runaway=1, restarted=2),
+        samples=SampleCounters(glider_measurements=3))
+    assert list(counted.flat())[:9] == always + [
+        "glider_measurements", "restarted", "runaway", "q_scale"]
+    assert msgspec.json.decode(msgspec.json.encode(counted))["filter"]["restarted"] == 2
+
+
+def test_the_eseso_counts_a_recovered_update_as_gated_recovered_and_fused() -> None:
+    """The filter returns what became of an update; the pipeline counts it, in the order
+    the events happened (the order of the health record's keys)."""
+    c = EsesoCounters()
+    c.imu_gap()
+    c.update("depth", Outcome.GATED)
+    c.update("depth", Outcome.RECOVERED)
+    c.downweighted()
+    c.update("thrust", Outcome.FUSED)
+    assert c.as_dict() == {"imu_gap": 1, "rejected.depth.gate": 2, "recovered.depth": 1,
+                           "fused.depth": 1, "thrust.downweighted": 1, "fused.thrust": 1}
+    assert [bool(o) for o in Outcome] == [True, False, True]  # fused, gated, recovered

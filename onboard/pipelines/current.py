@@ -64,11 +64,10 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import msgspec
 import numpy as np
 
 from onboard.core.config import CONFIG_DIR, Config, ConfigError
@@ -78,7 +77,6 @@ from onboard.estimators.current_hgo import CurrentHighGainObserver
 from onboard.estimators.current_kf import (
     PREDICT_STEP_S,
     CurrentKalmanFilter,
-    FilterCounters,
     UpdateOutcome,
     VelocityMeasurement,
 )
@@ -92,7 +90,8 @@ from onboard.estimators.model_identification import (
 from onboard.estimators.restored_current import RestoredCurrentCheck
 from onboard.estimators.vehicle_models import RegressionModel, kind_for_class
 from onboard.pipelines.base import LateSampleHold, Pipeline, unused_measurement
-from onboard.pipelines.current_samples import CHANNELS, CurrentSamples, SampleCounters
+from onboard.pipelines.current_health import CurrentHealth, LateHold, PipelineCounters
+from onboard.pipelines.current_samples import CHANNELS, CurrentSamples
 
 GAIN_DIR = CONFIG_DIR / "gains"
 """Precomputed LMI gains for the bundled configs (``onboard design-gain``)."""
@@ -118,125 +117,6 @@ REASONS: dict[str, str] = {"accepted": "", "gated": "gate", "reset": "diverged",
 HEADING_DEPENDENT = ("north", "east", "down", "u_r", "v_r", "w_r")
 """The columns computed by turning a velocity with the heading: the current is the
 velocity over ground less the through-water velocity turned to earth axes by it."""
-AXES = ("north", "east", "down")
-"""The earth axes of the current, in column order."""
-
-
-@dataclass
-class PipelineCounters:
-    """What :class:`CurrentPipeline` itself counted (its collaborators count their own)."""
-
-    rejected_late: int = 0
-    """Velocity measurements too old to fuse (``LATE_FUSE_MAX_S``)."""
-    hgo_rls_updates: int | None = None
-    """Updates of the high-gain observer's own RLS (None before its first step)."""
-    hgo_rls_rejected: int | None = None
-    """Its rejected updates (None before its first step)."""
-    restore_discarded: int = 0
-    """Restored currents the data contradicted."""
-    restore_confirmed: int = 0
-    """Restored currents the data confirmed."""
-
-
-class LateHold(msgspec.Struct, frozen=True):
-    """The late-sample hold (:class:`.LateSampleHold`) once a sample came late."""
-
-    samples: int
-    """Samples that arrived behind the horizon already passed."""
-    hold_s: float
-    """The current hold (s)."""
-    beyond_hold: int
-    """Of those, samples later than ``max_late_hold_s``."""
-
-
-class CurrentHealth(msgspec.Struct, frozen=True, kw_only=True):
-    """The health of pipeline ``current`` (:meth:`CurrentPipeline.health`): the counters
-    of the pipeline and of each collaborator, and the diagnostics. A field that is None
-    does not apply (no such observer or channel, nothing counted yet)."""
-
-    samples: SampleCounters
-    filter: FilterCounters
-    pipeline: PipelineCounters
-    rls_updates: int
-    """Updates of the yaw RLS."""
-    hgo_diverged: int
-    """Divergences of the high-gain observer (0 without it)."""
-    q_scale: float
-    """The joint filter's process-noise scale from the calibration."""
-    gnss_velocity_std: float
-    """The GNSS velocity one-sigma of the newest fused fix (m/s)."""
-    theta_std_max: float | None
-    """The largest coefficient one-sigma, relative (None: no coefficients)."""
-    yaw_rls_sigma: float | None
-    """The yaw RLS's residual one-sigma (rad/s^2; None: no yaw channel)."""
-    gamma: float | None
-    """The high-gain observer's gain, its gamma* and the Lipschitz bound of the model it
-    runs (None without it)."""
-    gamma_star: float | None
-    lipschitz: float | None
-    flow_gain_kept: int | None
-    """Steps the flow observer kept its gain (unobservable; None without it)."""
-    flow_diverged: int | None
-    """Divergences of the flow observer (None without it)."""
-    observable: tuple[bool, ...]
-    """Per earth axis, whether the published component was known."""
-    along_track_unobservable: bool
-    heading_diversity: float
-    """Mean doubled-heading length of the recent headings (1: one line)."""
-    late: LateHold | None
-    """The late-sample hold (None while no sample came late)."""
-    restore_probation_s: float | None
-    """Data time (s) a restored current on probation has held (None: no probation)."""
-    restore_chi2: float | None
-    """The probation's last test statistic (None: no probation)."""
-
-    def flat(self) -> dict[str, float]:
-        """The counters (``rejected_invalid_dvl``, ``rejected_gate``,
-        ``rejected_nonfinite``, ``updates``, ``rls_updates``, then those that appear once
-        counted, in the order a measurement meets them), then the diagnostics by name
-        (docs/current.md)."""
-        s, f, p = self.samples, self.filter, self.pipeline
-        h: dict[str, float] = {
-            "rejected_invalid_dvl": s.rejected_invalid_dvl, "rejected_gate": f.rejected_gate,
-            "rejected_nonfinite": s.rejected_nonfinite, "updates": f.updates,
-            "rls_updates": self.rls_updates}
-        once = (("glider_measurements", s.glider_measurements),
-                ("rejected_late", p.rejected_late), ("restarted", f.restarted),
-                ("diverged", f.diverged), ("runaway", f.runaway),
-                ("hgo_diverged", self.hgo_diverged))
-        h.update((k, v) for k, v in once if v)
-        if p.hgo_rls_updates is not None:
-            h["hgo_rls_updates"] = p.hgo_rls_updates
-        if p.hgo_rls_rejected is not None:
-            h["hgo_rls_rejected"] = p.hgo_rls_rejected
-        h.update((k, v) for k, v in (("restore_discarded", p.restore_discarded),
-                                     ("restore_confirmed", p.restore_confirmed)) if v)
-        h["q_scale"] = self.q_scale
-        h["velocity.gnss_std"] = self.gnss_velocity_std
-        _put(h, "theta.std_max", self.theta_std_max)
-        _put(h, "rls.yaw.sigma", self.yaw_rls_sigma)
-        _put(h, "gamma", self.gamma)
-        _put(h, "gamma_star", self.gamma_star)
-        _put(h, "lipschitz", self.lipschitz)
-        _put(h, "flow.gain_kept", self.flow_gain_kept)
-        _put(h, "flow.diverged", self.flow_diverged)
-        for ax, known in zip(AXES, self.observable):
-            h[f"observable.{ax}"] = float(known)
-        h["observable"] = float(all(self.observable[:2]))
-        h["along_track_unobservable"] = float(self.along_track_unobservable)
-        h["heading_diversity"] = self.heading_diversity
-        if self.late is not None:
-            h.update(late_samples=self.late.samples, late_hold_s=self.late.hold_s,
-                     late_beyond_hold=self.late.beyond_hold)
-        _put(h, "restore_probation_s", self.restore_probation_s)
-        _put(h, "restore_chi2", self.restore_chi2)
-        return h
-
-
-def _put(h: dict[str, float], key: str, value: float | None) -> None:
-    """``h[key] = value`` as a float unless ``value`` is None."""
-    if value is not None:
-        h[key] = float(value)
 
 
 class CurrentPipeline(Pipeline):
