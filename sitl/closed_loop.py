@@ -363,7 +363,7 @@ def _report(controller: str, duration: float, seed: int, sc: CircleScenario, log
     solve_ms = np.asarray(log.solve) * 1e3
     solve_ms = solve_ms[np.isfinite(solve_ms)]
     cpu_ms = np.asarray(getattr(ctl, "cpu_times", [])) * 1e3
-    health = dict(pipe.health())
+    health = pipe.health().flat()
     thrust = (innovations or {}).get("thrust")
     rep: dict[str, Any] = {
         "scenario": "bluerov2-circle",

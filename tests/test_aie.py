@@ -138,7 +138,7 @@ def test_aie_beats_a_kf_with_wrong_input_scaling() -> None:
     # measured: speed AIE 0.445 vs KF 0.879 m/s; position AIE 4.27 vs KF 4.60 m
     assert sa["speed"] < 0.8 * sk["speed"]
     assert sa["position"] < sk["position"]
-    assert pa.health()["surge.diverged"] == 0
+    assert pa.health().surge.diverged == 0
 
 
 def test_pipeline_columns_health_and_state_roundtrip() -> None:
@@ -149,7 +149,7 @@ def test_pipeline_columns_health_and_state_roundtrip() -> None:
                           "yaw_input", "std_north", "std_east", "std_speed", "std_heading")
     for c in pa.columns:
         assert np.isfinite(out[c][-1])
-    h = pa.health()
+    h = pa.health().flat()
     for key in ("surge.steps", "surge.diverged", "surge.V_d", "heading.steps",
                 "heading.diverged", "heading.theta_norm"):
         assert key in h and math.isfinite(h[key])
@@ -230,7 +230,7 @@ def test_adaptive_input_error_variance_follows_the_innovations() -> None:
     sim = simulate(SimConfig(duration=200.0, seed=4, gain=2.1, thrust_quadratic=True))
     pa = aie_mod.build(msgspec.convert({"adaptive": True}, AieConfig), 1.5, 0.03)
     out = run_pipelines(sim.samples, [pa], sim.t)[0]
-    h = pa.health()
+    h = pa.health().flat()
     assert h["surge.V_d"] != AieConfig().surge.v_d
     assert 0.0 < h["surge.V_d"] <= 10.0 * AieConfig().surge.u_max ** 2
     sc = score(sim, out)
@@ -287,7 +287,7 @@ def test_fix_accuracy_bounds_are_checked_and_bad_reports_counted() -> None:
     p = aie_mod.build(AieConfig(), 1.5, 0.03, 0.1)
     seen = iter((0.0, -1.0, math.nan))
     _straight_run(p, lambda t: next(seen, 1.0), duration=2.0)
-    assert p.health()["surge.accuracy_rejected"] == 3
+    assert p.health().accuracy_rejected == 3
     with pytest.raises(ValueError, match="gnss_accuracy_min_m"):
         aie_mod.build(msgspec.convert({"gnss_accuracy_min_m": 2.0,
                                        "gnss_accuracy_max_m": 1.0}, AieConfig))
@@ -321,7 +321,7 @@ def test_the_newest_fix_is_in_the_estimate_at_the_next_tick(close: bool) -> None
     jumped = [i for i in range(190, 210) if speed[i] > 1.5]
     assert jumped and jumped[0] == (200 if close else 201)
     # an early-closed window is no gap: no restart, no dead reckoning
-    assert p.health()["surge.restarts"] == 0
+    assert p.health().surge.restarts == 0
 
 
 @pytest.mark.parametrize("mod", [aie_mod, kf_mod])
@@ -393,7 +393,7 @@ def test_a_doppler_speed_of_unknown_sign_is_not_used(mod, speed, course_off_deg)
 
     p, recs, out = _doppler_run(mod, speed, math.radians(course_off_deg))
     assert len(recs) == 100 and all(not r.accepted and r.reason == SIGN_UNKNOWN for r in recs)
-    assert p.health()["surge.rate_steps"] == 0
+    assert p.health().rate_steps == 0
     # from the position increments alone after 20 s: |speed| at most the true one
     assert abs(out["speed"]) <= speed + 0.01
 
@@ -408,6 +408,6 @@ def test_a_doppler_speed_of_known_sign_is_used_signed(mod, speed, course_off_deg
     off = math.radians(course_off_deg)
     p, recs, out = _doppler_run(mod, speed, off)
     assert recs and all(r.reason != "sign_unknown" for r in recs)
-    assert p.health()["surge.rate_steps"] == 99  # every fix after the first window
+    assert p.health().rate_steps == 99  # every fix after the first window
     # measured: +-1.0, +-0.3996 (aie), +-0.3995 (kf), -0.12
     assert out["speed"] == pytest.approx(math.copysign(speed, math.cos(off)), abs=0.01)

@@ -71,7 +71,7 @@ def test_twin_thruster_turns_aie_and_kf_tie_below_the_raw_gnss_speed(twin) -> No
 def test_no_divergence_and_surge_coefficients_converge(jaiabot, twin) -> None:
     for run in (jaiabot, twin):
         h = run.pipelines[0].health()
-        assert h["surge.diverged"] == 0 and h["heading.diverged"] == 0
+        assert h.surge.diverged == 0 and h.heading.diverged == 0
     # measured: surge theta within 20 % of its final value after 849 of its 1493 0.2 s
     # steps (170 s; paper: ~100 steps), on the rate innovation; 457 before [sensors.gnss]
     # drift_share, with the relative error's path the same within 0.002: it sits at

@@ -53,7 +53,7 @@ def test_boat_no_model_identified_online():
     # measured: rms [0.003, 0.003] m/s, coverage 1.0 (first turn at 60 s)
     assert np.all(rms < 0.03)
     assert np.all(cover > 0.9)
-    assert pipe.counters["rls_updates"] > 0
+    assert pipe.identification.rls_updates > 0
 
 
 def test_torpedo_known_model_bottom_track():
@@ -110,8 +110,8 @@ def test_invalid_and_nonfinite_inputs_are_counted_not_fused():
            Heading(t=30.07, heading_rad=float("nan"))]
     pipe.innovations()
     out = pipe.step(30.1, bad)
-    assert pipe.counters["rejected_invalid_dvl"] == 1
-    assert pipe.counters["rejected_nonfinite"] == 2
+    assert pipe.samples.counters.rejected_invalid_dvl == 1
+    assert pipe.samples.counters.rejected_nonfinite == 2
     # the rejected velocities are records of their channel, without an innovation
     unused = [(r.channel, r.reason, r.dof) for r in pipe.innovations() if not r.accepted]
     assert unused == [("dvl", "invalid", 3), ("dvl", "nonfinite", 3)]
@@ -129,16 +129,16 @@ def test_every_measurement_update_is_an_innovation_record():
         pipe.step(t, samples)
         records += pipe.innovations()
     vel = [r for r in records if r.channel == "velocity"]
-    assert sum(r.accepted for r in vel) == pipe.counters["updates"] > 100
-    assert sum(r.reason == "gate" for r in vel) == pipe.counters["rejected_gate"]
+    assert sum(r.accepted for r in vel) == pipe.kf.counters.updates > 100
+    assert sum(r.reason == "gate" for r in vel) == pipe.kf.counters.rejected_gate
     for r in vel:
         S, z = np.reshape(r.S, (r.dof, r.dof)), np.array(r.z)
         assert r.dof == 2 and np.allclose(S, S.T) and r.gate == pipe.cfg.gate_nis
         assert r.nis == pytest.approx(float(z @ np.linalg.solve(S, z)), rel=1e-9)
     rls = [r for r in records if r.channel == "yaw_rls"]
-    assert len(rls) == pipe.counters["rls_updates"] > 0 and rls[0].dof == 1
+    assert len(rls) == pipe.identification.rls_updates > 0 and rls[0].dof == 1
     assert {r.channel for r in records} == {"velocity", "yaw_rls"}
-    assert not any("nis" in k or "innovation" in k for k in pipe.health())
+    assert not any("nis" in k or "innovation" in k for k in pipe.health().flat())
 
 
 def test_identified_model_survives_a_restart():
@@ -265,7 +265,7 @@ def test_current_torpedo_auv_takes_a_surface_gnss_velocity():
     after the turn the current is found. Deeper, the same fixes are ignored."""
     pipe, first, out, errors = _surface_run(depth_m=0.1)
     assert first == {}  # no velocity yet: the filter waits for one to start
-    assert pipe.counters["updates"] == 120 and pipe.counters["rejected_gate"] == 0
+    assert pipe.kf.counters.updates == 120 and pipe.kf.counters.rejected_gate == 0
     assert {"north", "east", "std_down", "w_r"} <= set(out)
     assert all(math.isfinite(v) for v in out.values())
     # the vertical current is never measured at the surface (GNSS is horizontal): unknown
@@ -279,7 +279,7 @@ def test_current_torpedo_auv_takes_a_surface_gnss_velocity():
     assert np.all(np.abs(current_error) < 2 * np.array([out["std_north"], out["std_east"]]))
 
     deep, _, out, _ = _surface_run(depth_m=5.0)
-    assert deep.counters["updates"] == 0 and out == {}  # under water: no GNSS velocity
+    assert deep.kf.counters.updates == 0 and out == {}  # under water: no GNSS velocity
 
 
 def test_the_hgo_variant_fuses_a_surface_gnss_velocity():
@@ -304,7 +304,7 @@ def test_the_hgo_variant_runs_on_its_own_identified_model():
              for ch, d in BOAT_TRUE.items() if ch != "yaw"}
     pipe = current_pipeline("rudder-boat", model=wrong, observer="hgo", gamma=0.3)
     rms, cover, _, _ = current_errors(pipe, simulate_boat(150.0), after=90.0)
-    assert pipe.counters["hgo_rls_updates"] > 100 and pipe.counters["rls_updates"] > 0
+    assert pipe.counters.hgo_rls_updates > 100 and pipe.identification.rls_updates > 0
     assert any(not np.allclose(a, b) for a, b in zip(pipe.hgo_rls.thetas, pipe.thetas[:2]))
     # measured (seed 0, after 90 s): rms N/E 0.013 / 0.012 m/s, coverage 1.00 (300 s:
     # 0.015 / 0.015); 678 HGO RLS updates; sway "v" -0.84 (HGO) vs -0.87 (joint filter),
@@ -336,7 +336,7 @@ def test_a_start_inconsistent_with_the_next_measurement_restarts_the_filter():
     assert kf.update("earth", z, 0.01, R) == "contradicts_start"
     assert kf.nis > kf.gate_nis and np.array_equal(kf.x, x0)  # reported, nothing changed
     assert kf.restart_from("earth", z, 0.01, R) == "accepted"
-    assert kf.counters["restarted"] == 1
+    assert kf.counters.restarted == 1
     # started from the INS velocity: u_r ~ -0.05 (heading south), v_r ~ -0.28 m/s
     assert np.allclose(kf.x[:3], [-0.045, -0.281, 0.09], atol=0.002)
     assert np.allclose(kf.x[3:6], 0.0)
@@ -358,7 +358,7 @@ def test_the_pipeline_says_when_its_start_was_contradicted():
     out = pipe.step(0.2, [
         DvlVelocity(t=0.2, vx=-0.013, vy=0.004, vz=-0.014),
         VelocityOverGround(t=0.2, v_north_mps=0.05, v_east_mps=0.28, v_down_mps=0.09)])
-    assert pipe.counters["restarted"] == 1
+    assert pipe.kf.counters.restarted == 1
     assert any(e.startswith("the start was contradicted by a velocity measurement")
                for e in pipe.events), pipe.events
     assert abs(out["u_r"] + 0.05) < 0.01 and abs(out["v_r"] + 0.28) < 0.01
@@ -383,7 +383,7 @@ def test_the_restored_currents_twin_starts_again_when_its_start_is_contradicted(
     ins = VelocityMeasurement("earth", 0.2, np.array([0.05, 0.28, 0.09]), 0.01)
     check.start(dvl.kind, dvl.z, R0, math.pi)
     check.update([dvl], R0)
-    assert "restarted" not in twin.counters
+    assert twin.counters.restarted == 0
     check.update([ins], R1)
-    assert twin.counters["restarted"] == 1
+    assert twin.counters.restarted == 1
     assert np.allclose(twin.x[:3], [-0.045, -0.281, 0.09], atol=0.002)

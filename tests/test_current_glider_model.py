@@ -84,7 +84,7 @@ def test_glider_model_makes_the_along_track_current_known():
     assert last["north"] == pytest.approx(CURRENT[0], abs=0.02)
     assert last["east"] == pytest.approx(CURRENT[1], abs=0.02)
     assert last["std_north"] < 0.15 and last["std_east"] < 0.08
-    assert pipe.counters["glider_measurements"] == 299  # every tick but the first
+    assert pipe.samples.counters.glider_measurements == 299  # every tick but the first
 
 
 def test_without_the_glider_model_the_along_track_current_is_unknown():
@@ -101,7 +101,7 @@ def test_glider_model_declines_at_a_shallow_pitch():
                                yaw_rate_rps=0.0),
                       Depth(t=t, source="s", depth_m=20.0 + 0.01 * k),
                       VelocityOverGround(t=t, source="s", v_north_mps=0.3, v_east_mps=0.0)])
-    assert pipe.counters.get("glider_measurements", 0) == 0
+    assert pipe.samples.counters.glider_measurements == 0
 
 
 def test_pump_and_battery_roles_read_their_columns():

@@ -72,8 +72,8 @@ def test_fixes_reporting_a_poor_accuracy_are_down_weighted(speed_accuracy):
     assert np.all(rms_aware < 0.04)
     assert 0.5 < nis_aware < 4.0
     assert nis_fixed > 6.0
-    assert fixed.counters["rejected_gate"] > 0 and aware.counters["rejected_gate"] == 0
-    assert aware.health()["velocity.gnss_std"] == 0.05  # back to nominal after the window
+    assert fixed.kf.counters.rejected_gate > 0 and aware.kf.counters.rejected_gate == 0
+    assert aware.health().gnss_velocity_std == 0.05  # back to nominal after the window
 
 
 def test_accuracy_scaling_never_tightens_and_falls_back_to_the_configured_noise():

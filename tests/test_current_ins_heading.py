@@ -75,8 +75,7 @@ def test_torpedo_ins_log_current_within_its_sigma_on_both_axes(tmp_path):
 
 def _samples() -> CurrentSamples:
     cfg = load(CONFIG)
-    counters = {"rejected_nonfinite": 0, "rejected_invalid_dvl": 0}
-    return CurrentSamples(cfg.pipelines.current, cfg.sensors, 3, counters, deque())
+    return CurrentSamples(cfg.pipelines.current, cfg.sensors, 3, deque())
 
 
 def _vog(t: float, heading: float | None) -> VelocityOverGround:

@@ -127,7 +127,7 @@ def test_straight_run_in_still_water_is_unknown_along_track_then_known_after_tur
     assert np.mean(np.abs(e[pub]) <= 2 * std[:, :2][pub]) > 0.95
     assert np.sqrt(np.mean(e[pub] ** 2)) < 0.08
     h = r["pipe"].health()
-    assert h["observable"] == 1.0 and h["along_track_unobservable"] == 0.0
+    assert all(h.observable[:2]) and not h.along_track_unobservable
 
 
 @pytest.fixture(scope="module")
@@ -151,7 +151,7 @@ def test_a_wrong_restored_current_is_discarded_with_an_event(jaiabot_state):
     # and the joint filter itself corrects the restored 0.8 m/s: published from the start
     # at the restored one-sigma floor (0.196 m/s, error 0.8), 0.31 m/s at 2.8 s (sigma
     # 0.11), 0.13 at 5.3 s, within 0.034 m/s from 10 s on
-    assert pipe.counters["restore_discarded"] == 1
+    assert pipe.counters.restore_discarded == 1
     assert any(e.startswith("current: restored current (0.80, 0.00) m/s contradicts")
                for e in r["engine"].events)
     e = (r["est"][:, :2] - r["truth"][:, :2])[r["t"] >= r["t"][0] + 10.0]
@@ -166,8 +166,8 @@ def test_a_right_restored_current_is_confirmed(jaiabot_state):
                seed=2, state=jaiabot_state)
     pipe = r["pipe"]
     # measured (seed 2): the twin observes both components from 56 s, confirmed at 116 s
-    assert pipe.counters.get("restore_discarded", 0) == 0
-    assert pipe.counters["restore_confirmed"] == 1
+    assert pipe.counters.restore_discarded == 0
+    assert pipe.counters.restore_confirmed == 1
     assert any("restored current confirmed" in e for e in r["engine"].events)
 
 

@@ -106,7 +106,7 @@ def test_the_joint_kalman_filter_finds_the_current_without_the_pipeline():
     # the time, and the model error grows with the turn rate (turn_accel_gain)
     assert abs(current[0] - 0.3) < 0.02 and abs(current[1] + 0.2) < 0.02
     assert max(std) < 0.1
-    assert kf.counters["updates"] == 1999 and kf.counters["rejected_gate"] == 0
+    assert kf.counters.updates == 1999 and kf.counters.rejected_gate == 0
 
 
 def test_the_joint_filter_resets_on_a_runaway_and_keeps_finite_coefficients():
@@ -119,10 +119,10 @@ def test_the_joint_filter_resets_on_a_runaway_and_keeps_finite_coefficients():
     # in its first updates the filter reports the contradiction and changes nothing; its
     # owner starts it again from the measurement, and the state then runs away
     assert kf.update("earth", z, 0.05, np.eye(2)) == "contradicts_start"
-    assert np.array_equal(kf.x, x0) and "restarted" not in kf.counters
+    assert np.array_equal(kf.x, x0) and kf.counters.restarted == 0
     assert kf.restart_from("earth", z, 0.05, np.eye(2)) == "reset"
-    assert kf.counters["restarted"] == 1
-    assert kf.counters["diverged"] == 1 and not kf.started
+    assert kf.counters.restarted == 1
+    assert kf.counters.diverged == 1 and not kf.started
     assert np.all(kf.x[:4] == 0.0) and kf.x[4] == 0.123
     assert ident.thetas[0][0] == 0.123  # the identification sees the state's coefficients
 
@@ -170,7 +170,7 @@ def test_a_through_water_speed_beyond_physics_is_flagged_not_published():
     inputs = ModelInputs()
     for _ in range(5):
         kf.predict(0.1, inputs)
-    assert kf.runaway and kf.counters["runaway"] == 1  # one episode, counted once
+    assert kf.runaway and kf.counters.runaway == 1  # one episode, counted once
     kf.x[:2] = [1.0, 0.0]
     kf.predict(0.1, inputs)
     assert not kf.runaway
@@ -263,7 +263,7 @@ def test_a_diverging_high_gain_correction_is_refused_and_counted():
                                   current_walk=0.01)
     x0 = hgo.x.copy()
     assert not hgo.update("earth", np.array([1e6, 0.0]), 0.05, 1.0, np.eye(2), ModelInputs())
-    assert hgo.counters["hgo_diverged"] == 1
+    assert hgo.diverged == 1
     assert np.array_equal(hgo.x, x0)
     assert hgo.update("water", np.array([1e6, 0.0]), 0.05, 1.0, np.eye(2), ModelInputs())
 
@@ -415,7 +415,7 @@ def test_the_pipeline_reports_its_variants_estimate(observer):
         for ax, e in zip(("north", "east", "down"), expect):
             if ax in out:  # absent while unknown (one-sigma above unknown_above_std)
                 assert out[ax] == e
-    assert pipe.counters["updates"] > 100
+    assert pipe.kf.counters.updates > 100
     assert (pipe.hgo is not None) == (observer == "hgo")
     assert (pipe.flow is not None) == (observer == "flow")
     assert out["std_north"] > 0 and math.isfinite(out.get("north", 0.0))
@@ -520,7 +520,7 @@ def test_the_hgo_rls_identifies_the_velocity_dofs_from_the_observer_velocity():
     from onboard.pipelines.current import CurrentConfig, _identification
     from tests.helpers.current_plants import BOAT_TRUE
     model = RegressionModel("surface-rudder")
-    ident = _identification(CurrentConfig(), model, {})
+    ident = _identification(CurrentConfig(), model)
     rls = VelocityRls(ident, noise_std=0.02, forgetting=1.0, svf_cutoff_hz=0.3)
     true = model.thetas_from_mapping(BOAT_TRUE)
     prior = [t.copy() for t in rls.thetas]
@@ -557,7 +557,7 @@ def test_the_hgo_rls_keeps_a_damped_model():
     from onboard.estimators.model_identification import VelocityRls
     from onboard.pipelines.current import CurrentConfig, _identification
     model = RegressionModel("surface-rudder")
-    rls = VelocityRls(_identification(CurrentConfig(), model, {}), noise_std=1e-3,
+    rls = VelocityRls(_identification(CurrentConfig(), model), noise_std=1e-3,
                       forgetting=1.0, svf_cutoff_hz=0.3)
     x = ModelInputs()
     before = [t.copy() for t in rls.thetas]

@@ -7,6 +7,7 @@ import math
 import msgspec
 
 from onboard.core.config import Config, from_dict
+from onboard.core.geo import LocalFrame
 from onboard.core.messages import (
     ActuatorCommand,
     ActuatorOutputs,
@@ -20,9 +21,19 @@ from onboard.core.messages import (
     Sample,
 )
 from onboard.engine import Engine, run
+from onboard.pipelines.base import NoHealth, Pipeline
 
 
-class Recorder:
+class Steps(msgspec.Struct, frozen=True):
+    """The health of :class:`Recorder`: its ticks."""
+
+    steps: int
+
+    def flat(self) -> dict[str, float]:
+        return {"x.steps": float(self.steps)}
+
+
+class Recorder(Pipeline):
     """A pipeline that remembers what it was given (to test the engine's contract)."""
 
     name = "rec"
@@ -42,7 +53,7 @@ class Recorder:
                            gate=4.0, accepted=n % 2 == 1, reason="" if n % 2 else "gate")]
 
     def health(self):
-        return {"x.steps": float(len(self.calls))}
+        return Steps(len(self.calls))
 
     def get_state(self):
         return {"k": len(self.calls)}
@@ -258,11 +269,13 @@ def test_std_columns_follow_the_pipeline_also_after_a_restart(monkeypatch):
     assert eng.pipeline_errors["withstd"] == 1
 
 
-class _FastAie:
-    """An ``aie`` that publishes 2.0 m/s (sigma 0.05) whatever it is given."""
+class _FastAie(Pipeline):
+    """An ``aie`` that publishes 2.0 m/s (sigma 0.05) whatever it is given, its speed
+    declared as such."""
 
     name = "aie"
     columns = ("speed", "std_speed")
+    speed = ("speed",)
 
     def step(self, t, samples):
         return {"speed": 2.0, "std_speed": 0.05}
@@ -271,7 +284,7 @@ class _FastAie:
         return []
 
     def health(self):
-        return {}
+        return NoHealth()
 
     def get_state(self):
         return {}
@@ -289,3 +302,59 @@ def test_a_speed_that_disagrees_with_the_doppler_speed_is_flagged_in_the_health_
     run(eng, samples, lambda t, recs: None)
     assert eng.health(20.0).flags == {"aie": ["speed_mismatch"]}
     assert "speed_mismatch" in eng.alerts.codes()
+
+
+class _Undeclared(_FastAie):
+    """The same numbers under the same name, its speed not declared."""
+
+    speed = ()
+
+
+class _Renamed(_FastAie):
+    """The same numbers and role under a name no check has ever heard of."""
+
+    name = "mine"
+
+
+def test_the_speed_check_follows_the_declared_role_not_the_name():
+    """Integrity reads what a pipeline declares: an ``aie`` that declares no speed is not
+    checked, a pipeline of any name that declares one is."""
+    samples = [fix(0.5 * k, sog_mps=1.2, cog_rad=0.0) for k in range(40)]
+    flags = {}
+    for cls in (_Undeclared, _Renamed):
+        eng = Engine(Config(), pipelines=[cls()])
+        run(eng, samples, lambda t, recs: None)
+        flags[cls.__name__] = eng.health(20.0).flags
+    assert flags == {"_Undeclared": {}, "_Renamed": {"mine": ["speed_mismatch"]}}
+
+
+class _Eventful(Recorder):
+    """A pipeline that reports one event at its second tick."""
+
+    name = "eventful"
+
+    def take_events(self):
+        return ["restored state discarded"] if len(self.calls) == 2 else []
+
+
+def test_a_pipelines_events_reach_the_health_events_prefixed_with_its_name():
+    eng = Engine(Config(), pipelines=[_Eventful(), Recorder()])
+    for t in (1.0, 2.0, 3.0):
+        eng.tick(t)
+    assert eng.health(3.0).events == ["eventful: restored state discarded"]
+
+
+class _Offset(Recorder):
+    """A pipeline whose positions are about its own frame, offset from its origin."""
+
+    name = "offset"
+    position = ("north", "east")
+    frame = LocalFrame(48.0, -124.0)
+    frame_offset = (5.0, -3.0)
+
+
+def test_the_local_frame_of_a_pipeline_is_its_declared_frame_and_offset():
+    eng = Engine(Config(), pipelines=[_Offset(), Recorder()])
+    assert eng.local_frame("offset") == (_Offset.frame, (5.0, -3.0))
+    assert eng.local_frame("rec") is None  # no frame declared
+    assert eng.local_frame("absent") is None

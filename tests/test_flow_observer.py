@@ -33,7 +33,7 @@ def test_flow_observer_current_on_synthetic_torpedo_with_known_model():
     assert np.all(cover > 0.9)
     assert pipe.flow.unobservable == 0
     health = pipe.health()  # the observer's own state reaches the health record
-    assert health["flow.gain_kept"] == 0 and health["flow.diverged"] == 0
+    assert health.flow_gain_kept == 0 and health.flow_diverged == 0
     heading = [r for r in pipe.innovations() if r.channel == "flow.heading"][-1]
     assert heading.dof == 1 and 0.0 <= heading.nis < 100.0
     assert heading.nis == pytest.approx(heading.z[0] ** 2 / heading.S[0])

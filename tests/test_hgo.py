@@ -125,7 +125,7 @@ def test_the_hgo_gain_follows_gamma_star_of_the_model_it_runs():
     assert fitted.lipschitz == pytest.approx(lf) and lf > 3.0 * design.lipschitz
     assert fitted.gamma_star == pytest.approx(gamma_star(design.P, design.lam, lf))
     assert fitted.hgo.law.gamma == pytest.approx(fitted.gamma_star)
-    assert fitted.health()["gamma_star"] == pytest.approx(fitted.gamma_star)
+    assert fitted.health().gamma_star == pytest.approx(fitted.gamma_star)
 
 
 def test_a_configured_hgo_gain_is_kept_and_gamma_star_still_reported():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -32,6 +33,31 @@ LAT0, LON0 = 48.0, -4.0
 FRAME = LocalFrame(LAT0, LON0)
 
 
+def declared(name: str, *, position: tuple[str, ...] = (), speed: tuple[str, ...] = (),
+             heading_dependent: tuple[str, ...] = (), frame: LocalFrame | None = None,
+             frame_offset: tuple[float, float] | None = None) -> SimpleNamespace:
+    """A pipeline as the monitor sees it: its name and its roles."""
+    return SimpleNamespace(name=name, position=position, speed=speed,
+                           heading_dependent=heading_dependent, frame=frame,
+                           frame_offset=frame_offset)
+
+
+CURRENT = declared("current", heading_dependent=("north", "east", "u_r", "v_r"))
+"""A current pipeline as declared: its current and through-water velocity turn with the
+heading."""
+AIE = declared("aie", position=("north", "east"), speed=("speed",), frame=FRAME)
+KF = declared("kf", position=("north", "east"), speed=("speed",), frame=FRAME)
+ESESO = declared("eseso", position=("north", "east"), speed=("u", "v"), frame=FRAME,
+                 frame_offset=(0.0, 0.0))
+
+
+def monitor(alerts: Alerts, holonomic: bool = False, **kw: float) -> IntegrityMonitor:
+    """A monitor watching :data:`CURRENT`, :data:`AIE`, :data:`KF` and :data:`ESESO`."""
+    m = IntegrityMonitor(alerts, holonomic, **kw)
+    m.watch([CURRENT, AIE, KF, ESESO])
+    return m
+
+
 def _boat(monitor: IntegrityMonitor, offset_deg: float, sog: float, seconds: int = 20,
           course_deg: float = 30.0) -> None:
     """A boat on a straight course at ``sog`` with its heading ``offset_deg`` off the
@@ -47,7 +73,7 @@ def _boat(monitor: IntegrityMonitor, offset_deg: float, sog: float, seconds: int
 
 def test_a_heading_73_deg_off_the_course_is_a_mismatch_and_withholds_the_current() -> None:
     alerts = Alerts()
-    m = IntegrityMonitor(alerts, "rudder-boat")
+    m = monitor(alerts)
     _boat(m, 73.5, 1.8)
     assert m.heading is not None and abs(math.degrees(m.heading.offset_rad) - 73.5) < 0.1
     assert "heading_course_mismatch" in alerts.codes()
@@ -58,7 +84,7 @@ def test_a_heading_73_deg_off_the_course_is_a_mismatch_and_withholds_the_current
 
 def test_a_crab_of_a_few_degrees_is_no_mismatch() -> None:
     alerts = Alerts()
-    m = IntegrityMonitor(alerts, "rudder-boat")
+    m = monitor(alerts)
     _boat(m, 8.0, 1.8)
     assert m.heading is not None and m.heading.mismatch is False
     assert not alerts.codes() and m.withheld("current") == ()
@@ -68,23 +94,23 @@ def test_the_bound_widens_with_the_crab_a_current_makes_at_low_speed() -> None:
     assert crab_bound(2.0) == HEADING_BOUND_RAD  # asin(0.5/2) = 14.5 deg < 25 deg
     assert math.degrees(crab_bound(0.6)) > 56.0  # asin(0.5/0.6) = 56.4 deg
     alerts = Alerts()
-    m = IntegrityMonitor(alerts, "rudder-boat")
+    m = monitor(alerts)
     _boat(m, 40.0, 0.6)  # 40 deg at 0.6 m/s: a 0.4 m/s cross current does that
     assert not alerts.codes()
 
 
 def test_a_stopped_boat_is_not_judged_and_an_rov_never() -> None:
     alerts = Alerts()
-    m = IntegrityMonitor(alerts, "rudder-boat")
+    m = monitor(alerts)
     _boat(m, 90.0, 0.3)
     assert m.heading is not None and m.heading.offset_rad is None
-    rov = IntegrityMonitor(alerts, "bluerov2")
+    rov = monitor(alerts, holonomic=True)
     _boat(rov, 90.0, 1.0)
     assert rov.heading is None and not alerts.codes()
 
 
 def test_the_mismatch_clears_when_the_heading_agrees_again() -> None:
-    m = IntegrityMonitor(Alerts(), "rudder-boat")
+    m = monitor(Alerts())
     _boat(m, 73.5, 1.8)
     assert m.withheld("current")
     cog = math.radians(30.0)
@@ -94,15 +120,9 @@ def test_the_mismatch_clears_when_the_heading_agrees_again() -> None:
     assert m.withheld("current") == ()
 
 
-class _Pipe:
-    """A pipeline as the position check sees it: its local frame."""
-
-    frame = FRAME
-
-
 def _positions(error_m: float, std_m: float) -> tuple[Alerts, IntegrityMonitor]:
     alerts = Alerts()
-    m = IntegrityMonitor(alerts, "rudder-boat", fix_std_m=1.0)
+    m = monitor(alerts, fix_std_m=1.0)
     for k in range(40):
         t = float(k)
         lat, lon = FRAME.to_latlon(0.0, 0.0)
@@ -110,7 +130,7 @@ def _positions(error_m: float, std_m: float) -> tuple[Alerts, IntegrityMonitor]:
         rec = EstimateRecord(vehicle="v", pipeline="aie", t=t + 0.05,
                              values={"north": error_m, "east": 0.0},
                              std={"north": std_m, "east": std_m})
-        m.positions_at(t + 0.05, [rec], {"aie": _Pipe()})
+        m.positions_at(t + 0.05, [rec])
     return alerts, m
 
 
@@ -200,7 +220,7 @@ def _speeds(pipeline: str, published: dict[str, float], sog: float | None = None
     """40 s of one fix (speed over ground ``sog``) and/or one DVL report (forward
     ``dvl_vx``) a second, and ``pipeline`` publishing ``published`` with sigma ``std``."""
     alerts = Alerts()
-    m = IntegrityMonitor(alerts, "rudder-boat")
+    m = monitor(alerts)
     for k in range(40):
         t = float(k)
         if sog is not None:
@@ -317,7 +337,7 @@ def test_a_failing_window_composes_its_warning_at_most_once_a_second(monkeypatch
     monkeypatch.setattr(PositionCheck, "median_m",
                         lambda self: composed.append(1) or median(self))
     alerts = Alerts()
-    m = IntegrityMonitor(alerts, "rudder-boat", fix_std_m=1.0)
+    m = monitor(alerts, fix_std_m=1.0)
     lat, lon = FRAME.to_latlon(0.0, 0.0)
     for k in range(200):  # 40 s at 5 Hz, 14 m off with a stated 1.9 m
         t = 0.2 * k
@@ -325,7 +345,69 @@ def test_a_failing_window_composes_its_warning_at_most_once_a_second(monkeypatch
         rec = EstimateRecord(vehicle="v", pipeline="aie", t=t + 0.05,
                              values={"north": 14.0, "east": 0.0},
                              std={"north": 1.9, "east": 1.9})
-        m.positions_at(t + 0.05, [rec], {"aie": _Pipe()})
+        m.positions_at(t + 0.05, [rec])
     warning = next(iter(alerts))
     assert warning.code == "position_residual" and warning.n == len(composed)
     assert len(composed) <= 40  # 40 of the 196 failing comparisons
+
+
+def test_a_heading_mismatch_withholds_what_is_declared_heading_dependent_whatever_its_name(
+        ) -> None:
+    """The withheld outputs follow the declaration: a pipeline called ``flow`` that turns
+    its ``v_x`` with the heading loses it; a ``current`` that declares nothing keeps all."""
+    alerts = Alerts()
+    m = IntegrityMonitor(alerts)
+    m.watch([declared("flow", heading_dependent=("v_x",)), declared("current")])
+    _boat(m, 73.5, 1.8)
+    assert "heading_course_mismatch" in alerts.codes()
+    assert m.withheld("flow") == ("v_x",) and m.withheld("current") == ()
+    assert m.active() == {"flow": ["heading_course_mismatch"]}
+
+
+def _positions_of(p: SimpleNamespace, error_m: float) -> IntegrityMonitor:
+    """40 fixes at the frame's origin and ``p`` publishing its declared position
+    ``error_m`` north of it (in its frame) with a 1.9 m sigma."""
+    m = IntegrityMonitor(Alerts(), fix_std_m=1.0)
+    m.watch([p])
+    qn, qe = p.position or ("north", "east")
+    off_n, off_e = p.frame_offset or (0.0, 0.0)
+    lat, lon = FRAME.to_latlon(0.0, 0.0)
+    for k in range(40):
+        t = float(k)
+        m.observe(GnssFix(t=t, lat_deg=lat, lon_deg=lon, sog_mps=0.0, cog_rad=0.0))
+        rec = EstimateRecord(vehicle="v", pipeline=p.name, t=t + 0.05,
+                             values={qn: off_n + error_m, qe: off_e},
+                             std={qn: 1.9, qe: 1.9})
+        m.positions_at(t + 0.05, [rec])
+    return m
+
+
+def test_the_position_check_reads_the_declared_columns_and_frame() -> None:
+    """14 m off with a stated 1.9 m fails wherever the position is declared: under any
+    name and column names, and in a frame whose origin sits at ``frame_offset`` in the
+    published position; an ``aie`` that declares no position is not checked."""
+    named = declared("x", position=("p_n", "p_e"), frame=FRAME)
+    offset = declared("y", position=("north", "east"), frame=FRAME,
+                      frame_offset=(100.0, -50.0))
+    undeclared = declared("aie", frame=FRAME)
+    assert _positions_of(named, 14.0).active() == {"x": ["position_residual"]}
+    assert _positions_of(offset, 14.0).active() == {"y": ["position_residual"]}
+    assert not _positions_of(offset, 2.0).active()  # the offset is taken off
+    assert not _positions_of(undeclared, 14.0).active()
+
+
+def test_the_doppler_comparison_takes_the_magnitude_of_the_declared_speed() -> None:
+    """A forward and a sideways speed are compared as their horizontal magnitude: (1.0,
+    1.2) m/s is 1.56 m/s, within the sigma of a 1.56 m/s Doppler speed; declared as the
+    forward speed alone, 1.0 m/s is 0.56 m/s off at 0.11 m/s and fails."""
+    for speed, failing in ((("u", "v"), False), (("u",), True)):
+        alerts = Alerts()
+        m = IntegrityMonitor(alerts)
+        m.watch([declared("z", speed=speed)])
+        for k in range(40):
+            t = float(k)
+            m.observe(GnssFix(t=t, lat_deg=LAT0, lon_deg=LON0, sog_mps=1.56, cog_rad=0.0))
+            rec = EstimateRecord(vehicle="v", pipeline="z", t=t + 0.05,
+                                 values={"u": 1.0, "v": 1.2}, std={"u": 0.05, "v": 0.05})
+            m.speeds_at(t + 0.05, [rec])
+        assert ("speed_mismatch" in alerts.codes()) is failing

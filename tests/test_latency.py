@@ -16,10 +16,10 @@ from onboard.core import config
 from onboard.core.messages import GnssFix, Heading, Sample
 from onboard.engine import Engine, TickQueue
 from onboard.engine.latency import FixedLagQueue
-from onboard.pipelines.base import LateSampleHold
+from onboard.pipelines.base import LateSampleHold, NoHealth, Pipeline
 
 
-class _Recorder:
+class _Recorder(Pipeline):
     """A pipeline that records what it is fed and answers the newest sample time."""
 
     name = "rec"
@@ -45,7 +45,7 @@ class _Recorder:
         return []
 
     def health(self):
-        return {}
+        return NoHealth()
 
     def get_state(self):
         return {}

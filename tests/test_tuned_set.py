@@ -87,7 +87,7 @@ def test_fixes_with_a_speed_keep_the_doppler_set(build) -> None:
     p = build()
     _drive(p, 0.0, 30.0, doppler=True)
     h = p.health()
-    assert h["tuned_set.doppler"] == 1.0 and h["tuned_set.switches"] == 0.0
+    assert h.doppler_set is True and h.set_switches == 0
     surge = AIE_SURGE_V_D if p.name == "aie" else KF_SURGE_V_D
     assert p.surge.V_u0 == surge.doppler
     if p.name == "aie":
@@ -99,10 +99,10 @@ def test_fixes_with_a_speed_keep_the_doppler_set(build) -> None:
 def test_fixes_without_a_speed_switch_to_the_no_doppler_set_at_the_first_fix(build) -> None:
     p = build()
     _drive(p, 0.0, 0.1, doppler=False)       # one fix
-    assert p.health()["tuned_set.doppler"] == 0.0
+    assert p.health().doppler_set is False
     _drive(p, 0.1, 30.0, doppler=False)
     h = p.health()
-    assert h["tuned_set.doppler"] == 0.0 and h["tuned_set.switches"] == 1.0
+    assert h.doppler_set is False and h.set_switches == 1
     surge, heading = ((AIE_SURGE_V_D, AIE_HEADING_V_D) if p.name == "aie"
                       else (KF_SURGE_V_D, KF_HEADING_V_D))
     assert p.surge.V_u == p.surge.V_u0 == surge.no_doppler

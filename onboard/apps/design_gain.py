@@ -32,6 +32,7 @@ import numpy as np
 
 from onboard.core.config import CONFIG_DIR, Config, load, resolve
 from onboard.core.errors import UsageError
+from onboard.core.vehicles import traits
 from onboard.estimators.hgo import LIPSCHITZ_SPEEDS, chain_matrices, gamma_star
 from onboard.estimators.hgo import model_lipschitz as hgo_lipschitz
 from onboard.estimators.vehicle_models import RegressionModel
@@ -106,8 +107,8 @@ def design(cfg: Config, margin: float = 1.0) -> dict[str, Any]:
     sol = solve_lmi(2, nd)
     lf = model_lipschitz(cfg)
     gs = gamma_star(sol["P"], sol["lambda"], lf)
-    rate = (cfg.sensors.dvl.rate_hz if cfg.vehicle.vehicle_class in (
-        "torpedo-auv", "spheroid", "bluerov2") else cfg.sensors.gnss.rate_hz)
+    rate = (cfg.sensors.dvl.rate_hz if traits(cfg.vehicle.vehicle_class).underwater
+            else cfg.sensors.gnss.rate_hz)
     gamma = margin * gs
     return {
         "comment": "HGO gain for the current observer (onboard design-gain); chain z1 = V_g, "

@@ -28,10 +28,7 @@ import msgspec
 
 from onboard.core.errors import UsageError
 from onboard.core.pipeline_config import Pipelines
-
-VehicleClass = Literal[
-    "rudder-boat", "twin-thruster-boat", "bluerov2", "torpedo-auv", "spheroid", "unknown"
-]
+from onboard.core.vehicles import VehicleClass
 
 BUNDLED_PACKAGE = "onboard.bundled"
 """The package of the bundled configs and gains: the repository's ``config/`` folder,
@@ -67,7 +64,8 @@ class Vehicle(_Strict):
     id: str = "vehicle"
     """Vehicle name: in the Zenoh keys and the saved adaptive state."""
     vehicle_class: VehicleClass = msgspec.field(default="unknown", name="class")
-    """Vehicle class (``class`` in the file): chooses the pipelines and their models."""
+    """Vehicle class (``class`` in the file): chooses the pipelines and their models
+    through its traits (:mod:`onboard.core.vehicles`)."""
     system_id: int = 1
     """MAVLink system id the estimates are sent as."""
     description: str = ""

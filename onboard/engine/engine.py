@@ -36,6 +36,7 @@ from typing import Callable, Iterable, Mapping, Protocol, Sequence
 
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame
+from onboard.core.vehicles import traits
 from onboard.core.wire import LocationFix, location_fix
 from onboard.core.messages import (
     ActuatorColumn,
@@ -228,12 +229,14 @@ class Engine:
         self.alerts = Alerts(self.events)
         """Warnings for the user (pipeline restarts, integrity; the replay adds its own);
         each new one is also an event."""
-        self.integrity = IntegrityMonitor(self.alerts, cfg.vehicle.vehicle_class,
+        holonomic = traits(cfg.vehicle.vehicle_class).holonomic
+        self.integrity = IntegrityMonitor(self.alerts, holonomic,
                                           cfg.sensors.gnss.position_std_m,
                                           cfg.sensors.gnss.velocity_std_mps,
                                           cfg.sensors.dvl.velocity_std_mps)
         """Each estimate against the independent measurements (:mod:`onboard.monitor.integrity`):
-        warnings, flags, and the values it withholds."""
+        warnings, flags, and the values it withholds; it reads the pipelines' roles."""
+        self.integrity.watch(self.pipelines)
         self._events_reported = 0
         self.selector = SourceSelector(cfg.sources, self.events)
         self.select_sources = select_sources
@@ -249,11 +252,10 @@ class Engine:
         (no such pipeline, no position, no fix yet): what turns its estimates into
         latitude and longitude (:func:`onboard.core.wire.location_fix`)."""
         p = next((q for q in self.pipelines if q.name == name), None)
-        frame = getattr(p, "frame", None)
-        if not isinstance(frame, LocalFrame):
+        if p is None or p.frame is None:
             return None
-        offset = getattr(p, "frame_offset", None)
-        return frame, (offset if offset is not None else (0.0, 0.0))
+        offset = p.frame_offset
+        return p.frame, (offset if offset is not None else (0.0, 0.0))
 
     def location_fixes(self, records: Sequence[EstimateRecord]) -> list[LocationFix]:
         """The positions among ``records`` as Foxglove LocationFixes (latitude and
@@ -346,6 +348,7 @@ class Engine:
         state = self.get_state()
         self.pipelines = [next(iter(build(self.cfg, {p.name})), p) for p in self.pipelines]
         self._std_names = {p.name: std_columns(p) for p in self.pipelines}
+        self.integrity.watch(self.pipelines)
         self.set_state(state)
 
     # ------------------------------------------------------------------------- push
@@ -480,17 +483,16 @@ class Engine:
             if values:
                 records.append(self._record(p, t, values, queue.t_sensor))
         queue.close_tick()
-        self.integrity.positions_at(t, records, {p.name: p for p in self.pipelines})
+        self.integrity.positions_at(t, records)
         self.integrity.speeds_at(t, records)
         return records
 
     def _take_events(self, p: Pipeline) -> None:
         """Move a pipeline's own events (e.g. restored state discarded) into the health
         events, prefixed with its name."""
-        pev = getattr(p, "events", None)
+        pev = p.take_events()
         if pev:
             self.events.extend(f"{p.name}: {e}" for e in pev)
-            pev.clear()
 
     def _record(self, p: Pipeline, t: float, values: Mapping[str, float],
                 t_sensor: float | None) -> EstimateRecord:
@@ -547,6 +549,7 @@ class Engine:
         if fresh:
             self.pipelines[i] = fresh[0]
             self._std_names[fresh[0].name] = std_columns(fresh[0])
+            self.integrity.watch(self.pipelines)
         return None
 
     def health(self, t: float, rates_hz: dict[str, float] | None = None,
@@ -575,10 +578,10 @@ class Engine:
         return rejected
 
     def counters(self) -> dict[str, dict[str, float | None]]:
-        """Every pipeline's :meth:`~onboard.pipelines.base.Pipeline.health` (a value that
-        is not finite as None: JSON has no NaN)."""
+        """Every pipeline's :meth:`~onboard.pipelines.base.Pipeline.health` in its flat
+        form (a value that is not finite as None: JSON has no NaN)."""
         return {p.name: {k: (float(v) if math.isfinite(v) else None)
-                         for k, v in p.health().items()} for p in self.pipelines}
+                         for k, v in p.health().flat().items()} for p in self.pipelines}
 
     def _new_events(self) -> list[str]:
         new = self.events[self._events_reported:][-10:]

@@ -82,13 +82,13 @@ class CurrentHighGainObserver:
         gamma: the gain used by the last correction (the initial one before any).
         gamma_init: the gain the law starts from (and restarts from).
         law: the :class:`.IncreasingGain` law.
-        counters: event counts (``hgo_diverged``), shared with the owner's health.
+        diverged: divergences so far (a prediction or innovation beyond bounds; the
+            owner restarts it).
     """
 
     def __init__(self, model: RegressionModel, design: GainDesign, law: IncreasingGain,
                  P0: np.ndarray, *, accel_std: float, model_error_time_s: float,
-                 current_walk: float, innovation_max: float = 1.0,
-                 counters: dict[str, float] | None = None) -> None:
+                 current_walk: float, innovation_max: float = 1.0) -> None:
         """Args:
             model: the regression model.
             design: the LMI gain (its first channel's chain gain ``k1, k2`` is used on each
@@ -101,14 +101,13 @@ class CurrentHighGainObserver:
             current_walk: random walk of the current (m/s per sqrt(s)).
             innovation_max: saturation of the injected innovation (m/s per component,
                 anti-peaking).
-            counters: event counts to add to (a new dict by default).
         """
         self.model = model
         self.nd = nd = model.nd
         self.accel_std = accel_std
         self.model_error_time_s = model_error_time_s
         self.current_walk = current_walk
-        self.counters: dict[str, float] = counters if counters is not None else {}
+        self.diverged = 0
         self._k = design.chain_gain(0) / design.time_scale_s ** np.arange(1, 3)
         self.law = law
         self.gamma = self.gamma_init = law.gamma
@@ -207,7 +206,7 @@ class CurrentHighGainObserver:
         for _ in range(n_sub):
             x = x + h * (A @ x + b)
         if not (np.all(np.isfinite(x)) and float(np.max(np.abs(x))) < DIVERGED_ABOVE):
-            self.counters["hgo_diverged"] = self.counters.get("hgo_diverged", 0) + 1
+            self.diverged += 1
             return False
         self.x = x
         self._propagate_covariance(F, q, n_sub, phis, h * G if G is not None else None, h)
@@ -286,7 +285,7 @@ class CurrentHighGainObserver:
              else np.hstack([np.eye(nd), R.T]))[:m]
         y = z - H @ self.x
         if not np.all(np.isfinite(y)) or float(np.max(np.abs(y))) > DIVERGED_ABOVE:
-            self.counters["hgo_diverged"] = self.counters.get("hgo_diverged", 0) + 1
+            self.diverged += 1
             return False
         self._fold_hold()
         self.y = y

@@ -42,6 +42,7 @@ identified in.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -104,6 +105,22 @@ PREDICT_STEP_S = 0.2
 """Longest prediction sub-step (s): a tick longer than this is predicted in equal steps."""
 
 
+@dataclass
+class FilterCounters:
+    """What a :class:`CurrentKalmanFilter` counted."""
+
+    updates: int = 0
+    """Velocity updates fused."""
+    rejected_gate: int = 0
+    """Velocity updates rejected by the gate (after the first ``START_UPDATES``)."""
+    diverged: int = 0
+    """Resets to the prior after a singular or non-finite update."""
+    restarted: int = 0
+    """Starts again from a measurement that contradicted the first one."""
+    runaway: int = 0
+    """Episodes of a through-water velocity beyond ``max_speed_through_water``."""
+
+
 class CurrentKalmanFilter:
     """The joint extended Kalman filter of the module docstring.
 
@@ -120,16 +137,14 @@ class CurrentKalmanFilter:
         runaway: the last prediction's through-water velocity left physical bounds
             (``max_speed_through_water``): its current is not a number to publish.
         identification: the :class:`.ModelIdentification` of the coefficients.
-        counters: event counts (``updates``, ``rejected_gate``, ``diverged``,
-            ``runaway``), shared with the owner's health.
+        counters: its event counts (:class:`FilterCounters`).
     """
 
     def __init__(self, identification: ModelIdentification, *, init_current_std: float,
                  current_walk: float, accel_std: float, model_error_time_s: float,
                  turn_accel_gain: float, prior_accel_std: float, gate_nis: float,
                  calibrate: bool, calibrate_block: int,
-                 max_speed_through_water: float = MAX_SPEED_THROUGH_WATER_MPS,
-                 counters: dict[str, float] | None = None) -> None:
+                 max_speed_through_water: float = MAX_SPEED_THROUGH_WATER_MPS) -> None:
         """Args:
             identification: prior and schedule of the coefficients (and the model).
             init_current_std: prior one-sigma of the current (m/s).
@@ -147,7 +162,6 @@ class CurrentKalmanFilter:
             max_speed_through_water: a predicted through-water speed component beyond
                 this (m/s) sets ``runaway`` (counted once per episode): the model ran
                 away, not the vehicle; the owner publishes no current meanwhile.
-            counters: event counts to add to (a new dict by default).
         """
         self.identification = ident = identification
         self.model = ident.model
@@ -163,8 +177,7 @@ class CurrentKalmanFilter:
         self.calibrate_block = calibrate_block
         self.max_speed_through_water = max_speed_through_water
         self.runaway = False
-        self.counters: dict[str, float] = counters if counters is not None else {
-            "rejected_gate": 0, "updates": 0}
+        self.counters = FilterCounters()
         n = 2 * nd + ident.n_theta
         self.x = np.zeros(n)
         if ident.n_theta:
@@ -202,10 +215,13 @@ class CurrentKalmanFilter:
             self.x[:nd] = zz
         self.started = True
 
-    def reset(self, reason: str) -> None:
+    def reset(self, reason: Literal["diverged", "restarted"]) -> None:
         """Back to the prior, counted as ``reason``; the identified coefficients are kept
         if they and their covariance are finite."""
-        self.counters[reason] = self.counters.get(reason, 0) + 1
+        if reason == "diverged":
+            self.counters.diverged += 1
+        else:
+            self.counters.restarted += 1
         nd, o = self.nd, 2 * self.nd
         nt = self.identification.n_theta
         self.x[:o] = 0.0
@@ -374,7 +390,7 @@ class CurrentKalmanFilter:
         # beyond physics: the model, not the vehicle, ran away (flagged, counted per episode)
         runaway = self.started and max(map(abs, nu)) > self.max_speed_through_water
         if runaway and not self.runaway:
-            self.counters["runaway"] = self.counters.get("runaway", 0) + 1
+            self.counters.runaway += 1
         self.runaway = runaway
         self.x[:nd] = nu
         q = self._model_error(nu, inputs, dt)
@@ -454,8 +470,8 @@ class CurrentKalmanFilter:
         if up.K is None:
             return self._diverged()
         if up.nis > self.gate_nis and self.started:
-            if self.counters["updates"] > START_UPDATES:
-                self.counters["rejected_gate"] += 1
+            if self.counters.updates > START_UPDATES:
+                self.counters.rejected_gate += 1
                 return "gated"
             return "contradicts_start"
         if not self._plausible(up.x, up.P):
@@ -464,7 +480,7 @@ class CurrentKalmanFilter:
         if ident.n_theta and ident.identifying:
             self._project_drag()
         self._unpack_coefficients()
-        self.counters["updates"] += 1
+        self.counters.updates += 1
         if self.calibrate and self.started and m == self.nd:
             self._calibrate(up.y, up.S)
         return "accepted"

@@ -95,6 +95,7 @@ Numbers in, numbers out: no samples, no clock, no configuration file.
 
 from __future__ import annotations
 
+import enum
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -233,6 +234,22 @@ excess innovation power to the configured noise power, dimensionless): one outli
 the mean by at most this over ``noise_adapt_updates``."""
 
 
+class Outcome(enum.Enum):
+    """What became of one measurement update (:meth:`EsesoFilter.update`); true when the
+    measurement was fused. The owner counts them."""
+
+    FUSED = "fused"
+    """Fused as it came."""
+    GATED = "gated"
+    """Rejected by the gate."""
+    RECOVERED = "recovered"
+    """Beyond the gate after ``max_consecutive_rejects`` rejections in a row: fused,
+    down-weighted so that its NIS equals the gate."""
+
+    def __bool__(self) -> bool:
+        return self is not Outcome.GATED
+
+
 class EsesoFilter:
     """The ESESO error-state Kalman filter (module docstring).
 
@@ -246,9 +263,8 @@ class EsesoFilter:
             ``thrust``, ``attitude``, ``heading``, ``dvl``, ``depth``, ``vog``,
             ``gnss_pos``, ``gnss_vel``; innovation = measured - predicted; a gated update
             has ``accepted`` False and reason ``gate``).
-        counters: event counts (``fused.<channel>``, ``rejected.<channel>.gate``,
-            ``recovered.<channel>``, ``thrust.downweighted``), in order of first
-            occurrence; the owner may count its own events in the same dictionary.
+        downweighted: whether the last thrust update was down-weighted
+            (``thrust_huber``).
         initialized: False until :meth:`initialize`.
         R_tau: the thrust update's noise covariance at the last thrust update
             (:meth:`thrust_noise`, N^2), before the other states' share and the scales.
@@ -279,7 +295,7 @@ class EsesoFilter:
         self.S: Array | None = None
         self.nis: float | None = None
         self.innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
-        self.counters: dict[str, int] = {}
+        self.downweighted = False
         self._consecutive: dict[str, int] = {}
         self.noise_scale: dict[str, float] = {}
         self.process_scale = 1.0
@@ -287,10 +303,6 @@ class EsesoFilter:
         self._model_terms: tuple[Array, Array] | None = None  # (tau, D(nu) nu), last update
         # thrust-update noise (N^2), :meth:`thrust_noise`; updated at every thrust update
         self.R_tau = self.thrust_noise(None)
-
-    def count(self, key: str) -> None:
-        """Add one to the event counter ``key``."""
-        self.counters[key] = self.counters.get(key, 0) + 1
 
     def initialize(self, R0: Array, position: Array, yaw_std_rad: float | None = None) -> None:
         """Start at attitude ``R0`` (projected onto SO(3)) and NED ``position`` (m), at rest,
@@ -360,12 +372,12 @@ class EsesoFilter:
     # ------------------------------------------------------------------ update
     def update(self, channel: str, y: Array, H: Array, Rm: Array,
                gate: float | None = None, *, t: float = math.nan, source: str = "",
-               only: slice | None = None) -> bool:
+               only: slice | None = None) -> Outcome:
         """One Kalman update on the error state (paper eq. 16), Joseph form, then error
         injection (16d) and reset with its Jacobian (17, 18).
 
         Args:
-            channel: the measurement's name in the records and the counters.
+            channel: the measurement's name in the records.
             y: the innovation (measurement minus prediction).
             H: its Jacobian with respect to the error state (``len(y)`` x 23).
             Rm: its noise covariance.
@@ -377,8 +389,9 @@ class EsesoFilter:
                 the covariance right for that gain); None = all.
 
         Returns:
-            False when the gate rejects the update.
+            What became of it (:class:`Outcome`; false when the gate rejects it).
         """
+        outcome = Outcome.FUSED
         if self.params.noise_adapt_updates > 0:
             if channel in NOISE_ADAPT_CHANNELS:
                 Rm = Rm * self._adapt_noise(channel, y, H @ (self.P @ H.T), Rm)
@@ -389,14 +402,13 @@ class EsesoFilter:
         if gate is None:
             gate = self.gate(len(y))
         if gate > 0 and up.nis > gate:
-            self.count(f"rejected.{channel}.gate")
             n_rej = self._consecutive.get(channel, 0) + 1
             self._consecutive[channel] = n_rej
             if n_rej <= self.params.max_consecutive_rejects:
                 self._record(channel, t, source, gate, accepted=False)
-                return False
+                return Outcome.GATED
             # recover: fuse, down-weighted so that the NIS equals the gate
-            self.count(f"recovered.{channel}")
+            outcome = Outcome.RECOVERED
             up = self._kalman(y, H, Rm * (up.nis / gate), only)
         self._consecutive[channel] = 0
         self._record(channel, t, source, gate, accepted=True)
@@ -406,8 +418,7 @@ class EsesoFilter:
         G[TH, TH] -= skew(0.5 * up.x[TH])
         P = G @ up.P @ G.T
         self.P = 0.5 * (P + P.T)
-        self.count(f"fused.{channel}")
-        return True
+        return outcome
 
     def _kalman(self, y: Array, H: Array, Rm: Array, only: slice | None
                 ) -> kalman.KalmanUpdate:
@@ -485,7 +496,7 @@ class EsesoFilter:
 
     # ------------------------------------------------------------------ measurement models
     def update_position_ne(self, z: Array, var: float, *,
-                           t: float = math.nan, source: str = "") -> bool:
+                           t: float = math.nan, source: str = "") -> Outcome:
         """Horizontal position ``z`` (north, east; m) with variance ``var`` (m^2) per axis;
         channel ``gnss_pos``."""
         H = np.zeros((2, N_ERR))
@@ -494,7 +505,7 @@ class EsesoFilter:
                            source=source)
 
     def update_velocity_ne(self, z: Array, var: float, *,
-                           t: float = math.nan, source: str = "") -> bool:
+                           t: float = math.nan, source: str = "") -> Outcome:
         """Horizontal velocity over ground ``z`` (north, east; m/s) with variance ``var``
         (m^2/s^2) per axis; channel ``gnss_vel``."""
         H = np.zeros((2, N_ERR))
@@ -503,7 +514,7 @@ class EsesoFilter:
                            source=source)
 
     def update_zero_velocity(self, var: float, *, t: float = math.nan,
-                             source: str = "") -> bool:
+                             source: str = "") -> Outcome:
         """Zero velocity over ground (north, east, down), each with variance ``var``
         (m^2/s^2): the pseudo-measurement of a vehicle left idle with nothing else to
         bound its velocity (a ZUPT, Foxlin 2005); channel ``zupt``."""
@@ -512,7 +523,7 @@ class EsesoFilter:
         return self.update("zupt", -self.v, H, _I3 * var, t=t, source=source)
 
     def update_ins_velocity(self, z: Array, var: float, *,
-                            t: float = math.nan, source: str = "") -> bool:
+                            t: float = math.nan, source: str = "") -> Outcome:
         """INS velocity over ground ``z`` (north, east; m/s) = ``v + b_ins`` + white noise
         of variance ``var`` (m^2/s^2) per axis; channel ``vog``."""
         H = np.zeros((2, N_ERR))
@@ -522,7 +533,7 @@ class EsesoFilter:
                            source=source)
 
     def update_depth(self, depth_m: float, var: float, *,
-                     t: float = math.nan, source: str = "") -> bool:
+                     t: float = math.nan, source: str = "") -> Outcome:
         """Depth (m, positive down) with variance ``var`` (m^2); channel ``depth``."""
         H = np.zeros((1, N_ERR))
         H[0, P_D] = 1.0
@@ -530,7 +541,7 @@ class EsesoFilter:
                            t=t, source=source)
 
     def update_body_velocity(self, z: Array, var: float, *,
-                             t: float = math.nan, source: str = "") -> bool:
+                             t: float = math.nan, source: str = "") -> Outcome:
         """Velocity over ground in body axes ``z`` (m/s, a DVL's bottom track) with variance
         ``var`` (m^2/s^2) per axis; channel ``dvl``."""
         nu = self.R.T @ self.v
@@ -541,7 +552,7 @@ class EsesoFilter:
 
     def update_attitude(self, R_meas: Array, roll: float, pitch: float,
                         var_roll_pitch: float, var_yaw: float, *,
-                        t: float = math.nan, source: str = "") -> bool:
+                        t: float = math.nan, source: str = "") -> Outcome:
         """Attitude ``R_meas`` (body to NED; from ``roll``, ``pitch`` in rad) with
         independent roll and pitch noise ``var_roll_pitch`` and yaw noise ``var_yaw``
         (rad^2), turned into the body-frame rotation vector; channel ``attitude``."""
@@ -556,7 +567,7 @@ class EsesoFilter:
                            source=source)
 
     def update_heading(self, heading_rad: float, var: float, *,
-                       t: float = math.nan, source: str = "") -> bool:
+                       t: float = math.nan, source: str = "") -> Outcome:
         """True heading (rad from north) with variance ``var`` (rad^2); channel
         ``heading``."""
         roll, pitch, yaw = matrix_to_euler(self.R)
@@ -648,7 +659,7 @@ class EsesoFilter:
 
     def update_thrust(self, f_m: Array, w_m: Array, wdot: Array, tau: Array, *,
                       wdot_dt: float | None = None, t: float = math.nan,
-                      source: str = "") -> bool:
+                      source: str = "") -> Outcome:
         """Update on the thruster force ``tau`` (N, body) = :meth:`h_tau` at specific force
         ``f_m``, rate ``w_m`` and angular acceleration ``wdot`` (the difference of two gyro
         samples ``wdot_dt`` s apart; its noise in :meth:`thrust_noise`); channel
@@ -666,10 +677,11 @@ class EsesoFilter:
             Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
         only = XI if self.params.thrust_states == "disturbance" else None
         k = self.params.thrust_huber
+        self.downweighted = False
         if k > 0:
             S = HPHt + Rm
             nis = float(y @ np.linalg.solve(S, y))
             if nis > k:
                 Rm = Rm * (nis / k)
-                self.count("thrust.downweighted")
+                self.downweighted = True
         return self.update("thrust", y, H, Rm, gate=0.0, t=t, source=source, only=only)

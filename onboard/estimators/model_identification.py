@@ -159,7 +159,7 @@ class ModelIdentification:
         yaw_rls: the yaw channel's :class:`.RecursiveLeastSquares` (None without a yaw
             channel).
         svf: the yaw channel's :class:`StateVariableFilter` (None without a yaw channel).
-        counters: event counts (``rls_updates``), shared with the owner's health.
+        rls_updates: updates of the yaw RLS so far.
     """
 
     def __init__(self, model: RegressionModel, configured: Mapping[str, Mapping[str, float]],
@@ -168,8 +168,8 @@ class ModelIdentification:
                  identify_max_current_std: float, identify_min_rate: float,
                  identify_after_turn_s: float, identify_straight: bool,
                  identify_min_speed: float, yaw_rls_p0: float, yaw_forgetting: float,
-                 svf_cutoff_hz: float, heading_memory_s: float, heading_diversity: float,
-                 counters: dict[str, float] | None = None) -> None:
+                 svf_cutoff_hz: float, heading_memory_s: float,
+                 heading_diversity: float) -> None:
         """Args:
             model: the regression model.
             configured: configured coefficients by channel and term (mode (a)); empty for
@@ -192,7 +192,6 @@ class ModelIdentification:
             heading_memory_s: memory of the heading diversity (s).
             heading_diversity: mean doubled-heading length above which the headings count
                 as one line.
-            counters: event counts to add to (a new dict by default).
         """
         self.model = model
         self.configured = configured
@@ -204,8 +203,7 @@ class ModelIdentification:
         self.identify_straight = identify_straight
         self.identify_min_speed = identify_min_speed
         self.heading_diversity = heading_diversity
-        self.counters: dict[str, float] = counters if counters is not None else {
-            "rls_updates": 0}
+        self.rls_updates = 0
         self._init_prior(configured, identify, model_rel_std, theta_std, theta_std_floor,
                          net_weight_std)
         self.identifying = False
@@ -347,7 +345,7 @@ class ModelIdentification:
             return
         self.yaw_rls.update(self.svf.y[1:], self.svf.dy[0])
         self.thetas[i] = self.yaw_rls.theta
-        self.counters["rls_updates"] = self.counters.get("rls_updates", 0) + 1
+        self.rls_updates += 1
 
     def restore_yaw(self, state: Mapping[str, Any]) -> None:
         """Restore the yaw RLS from :meth:`.RecursiveLeastSquares.get_state` and use its

@@ -32,6 +32,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from onboard.core.vehicles import traits
+
 
 class ModelInputs:
     """Everything a regressor needs besides ``nu_r``; units in the module docstring.
@@ -320,14 +322,10 @@ class RegressionModel:
 
 
 def kind_for_class(vehicle_class: str, has_twin: bool = False) -> str:
-    """The regression-model kind for a config's ``vehicle.class``."""
-    if vehicle_class in ("torpedo-auv", "spheroid"):
-        return "torpedo"
-    if vehicle_class == "bluerov2":
-        return "rov"
-    if vehicle_class == "twin-thruster-boat" or has_twin:
-        return "surface-twin"
-    return "surface-rudder"
+    """The regression-model kind for a config's ``vehicle.class`` (its traits'
+    ``model_kind``); a rudder boat's becomes the twin thrusters' with ``has_twin``."""
+    kind = traits(vehicle_class).model_kind
+    return "surface-twin" if has_twin and kind == "surface-rudder" else kind
 
 
 # ---------------------------------------------------------------------------- glider

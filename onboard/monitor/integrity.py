@@ -9,14 +9,14 @@ published records and the innovation records, and runs four checks:
   moves (GNSS speed above :data:`HEADING_MIN_SPEED_MPS`), the circular mean of
   ``heading - course`` over :data:`HEADING_WINDOW_S` must stay within
   :func:`crab_bound`. Beyond it ``heading_course_mismatch`` is raised naming the angle, and
-  the estimates that turn a velocity with the heading (the ``current`` pipeline's current
-  and through-water velocity, :data:`WITHHELD_ON_HEADING`) are published as unknown while
-  it lasts. Vehicles that move sideways by design (:data:`HOLONOMIC_CLASSES`) are not
-  checked.
+  the estimates that turn a velocity with the heading (each pipeline's
+  ``heading_dependent`` outputs: the ``current`` pipeline's current and through-water
+  velocity) are published as unknown while it lasts. Vehicles that move sideways by
+  design (:attr:`onboard.core.vehicles.VehicleTraits.holonomic`) are not checked.
 * **position against GNSS** (:class:`PositionCheck`): at the first tick after each fix,
-  the published position of :data:`POSITION_PIPELINES` against the fix (in the frame about
-  the first fix, as documented; the ESESO in its own frame and ``frame_offset``), normalized by the
-  published one-sigma and the fix's own; ``position_residual`` when more than
+  each pipeline's published ``position`` against the fix (in the frame about the first
+  fix, as documented; a pipeline with a ``frame_offset``, the ESESO, in its own frame),
+  normalized by the published one-sigma and the fix's own; ``position_residual`` when more than
   :data:`POSITION_FRACTION` of the comparisons of the last :data:`POSITION_WINDOW_S` are
   beyond :data:`POSITION_SIGMA_BOUND`. The pipeline is flagged, its values kept.
 * **NIS against its chi-square band** (:class:`NisCheck`): per channel the mean NIS of
@@ -30,11 +30,11 @@ published records and the innovation records, and runs four checks:
   same side (too large: sigmas too small; too small: sigmas too large). The pipeline is
   flagged.
 * **speed against Doppler or DVL** (:class:`SpeedCheck`): at the first tick after each
-  GNSS fix with a speed over ground, or each valid DVL bottom-track report, the published
-  speed of :data:`SPEED_PIPELINES` against it: ``aie``/``kf`` ``speed`` (the path speed,
-  over ground: no current enters it) as its magnitude against the Doppler speed over
-  ground, signed against the DVL's forward ``vx``; ``eseso`` its horizontal body speed
-  ``hypot(u, v)`` against the speed over ground, ``u`` against the DVL's ``vx``. Normalized
+  GNSS fix with a speed over ground, or each valid DVL bottom-track report, each
+  pipeline's published ``speed`` against it: its horizontal speed (the magnitude of its
+  forward speed and, where it declares one, its sideways speed: ``aie``/``kf`` the path
+  speed over ground, no current enters it; ``eseso`` ``hypot(u, v)``) against the Doppler
+  speed over ground, its signed forward speed against the DVL's forward ``vx``. Normalized
   by the published one-sigma and the measurement's own; ``speed_mismatch`` when more than
   :data:`SPEED_FRACTION` of the comparisons of the last :data:`SPEED_WINDOW_S` are beyond
   :data:`SPEED_SIGMA_BOUND` and :data:`SPEED_FLOOR_MPS`. The pipeline is flagged, its
@@ -46,6 +46,11 @@ the Shenzhen log's 73.5 deg at 1.8 m/s), not noise; a wider sigma around that me
 still publish the wrong number as the best guess, and the pipeline already publishes a
 component it cannot determine as absent (``unknown_above_std``), which every consumer
 handles. The flag, the count ``pipeline:<name>:flagged`` and the warning say why.
+
+Which outputs are a position, a speed or heading-dependent, and in which frame, each
+pipeline declares (its roles, :class:`Declared`; ``onboard.pipelines.base.Pipeline``):
+the monitor reads the declarations of the pipelines it watches (:meth:`IntegrityMonitor.watch`),
+never their names.
 """
 
 from __future__ import annotations
@@ -53,7 +58,7 @@ from __future__ import annotations
 import functools
 import math
 from collections import deque
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Iterable, Protocol, Sequence
 
 from onboard.monitor.alerts import Alerts
 from onboard.core.geo import LocalFrame
@@ -83,17 +88,7 @@ turn or a cross wind is a few degrees."""
 PLAUSIBLE_CURRENT_MPS = 0.5
 """A current this strong (m/s) across the track makes a crab angle of ``asin(c / sog)``
 at speed over ground ``sog``: the bound widens with it at low speed."""
-HOLONOMIC_CLASSES = frozenset({"bluerov2", "spheroid"})
-"""Vehicle classes that move sideways by design: their heading says nothing of their
-course."""
-WITHHELD_ON_HEADING: dict[str, tuple[str, ...]] = {
-    "current": ("north", "east", "down", "u_r", "v_r", "w_r"),
-}
-"""Per pipeline, the estimates published as unknown during a heading/course mismatch:
-those that turn a velocity with the heading (module docstring)."""
 
-POSITION_PIPELINES = ("aie", "kf", "eseso")
-"""Pipelines whose ``north``/``east`` are a position (m) with ``std_north``/``std_east``."""
 POSITION_SIGMA_BOUND = 3.0
 """Mahalanobis distance (2 dof) of the position residual beyond which a comparison fails:
 a consistent estimate exceeds it 1.1 % of the time."""
@@ -108,11 +103,6 @@ FIX_MAX_AGE_S = 1.0
 DEFAULT_FIX_STD_M = 2.0
 """One-sigma (m) of a fix that reports no accuracy and has no configured one."""
 
-SPEED_PIPELINES: dict[str, tuple[str, ...]] = {
-    "aie": ("speed",), "kf": ("speed",), "eseso": ("u", "v"),
-}
-"""Per pipeline, its forward speed (m/s, over ground) and, for a vehicle that moves
-sideways, its sideways speed: their one-sigma is ``std_<q>``."""
 SPEED_SIGMA_BOUND = 3.0
 """Normalized speed residual beyond which a comparison fails: a consistent estimate
 exceeds it 0.27 % of the time."""
@@ -361,12 +351,12 @@ class SpeedCheck:
         return xs[len(xs) // 2] if xs else math.nan
 
 
-def _published_speed(pipeline: str, rec: EstimateRecord, forward_only: bool
+def _published_speed(qs: tuple[str, ...], rec: EstimateRecord, forward_only: bool
                      ) -> tuple[float, float] | None:
-    """``rec``'s speed (m/s) and its variance (m^2/s^2) as compared with a measurement:
-    its forward speed (signed, ``forward_only``) or its horizontal speed (a magnitude);
-    None when it is not published with its sigma."""
-    qs = SPEED_PIPELINES[pipeline]
+    """``rec``'s speed (m/s) and its variance (m^2/s^2) as compared with a measurement,
+    ``qs`` its forward speed and maybe its sideways speed: the forward speed (signed,
+    ``forward_only``) or the horizontal speed (a magnitude); None when it is not
+    published with its sigma."""
     v, sd = rec.values, rec.std
     if forward_only:
         q = qs[0]
@@ -461,6 +451,24 @@ WATCHED = frozenset({GnssFix, Heading, Attitude, DvlVelocity})
 """The sample types the monitor reads (the engine hands it only these)."""
 
 
+class Declared(Protocol):
+    """A pipeline as the monitor sees it: its name and the roles it declares
+    (``onboard.pipelines.base.Pipeline`` documents them)."""
+
+    name: str
+    position: tuple[str, ...]
+    """The columns that are a position (north, east; m), each with its ``std_<q>``."""
+    speed: tuple[str, ...]
+    """Its forward speed over ground (m/s) and maybe its sideways speed."""
+    heading_dependent: tuple[str, ...]
+    """The columns withheld while the heading disagrees with the course."""
+    frame: LocalFrame | None
+    """The local frame about its first fix (None before it)."""
+    frame_offset: tuple[float, float] | None
+    """Where ``frame``'s origin lies in its published position (None: its positions are
+    about the first fix handed to the pipelines)."""
+
+
 class IntegrityMonitor:
     """The four checks of one run and their flags (module docstring).
 
@@ -474,11 +482,13 @@ class IntegrityMonitor:
         nis: pipeline -> channel -> its NIS check.
     """
 
-    def __init__(self, alerts: Alerts, vehicle_class: str = "unknown",
+    def __init__(self, alerts: Alerts, holonomic: bool = False,
                  fix_std_m: float = DEFAULT_FIX_STD_M,
                  speed_std_mps: float = DEFAULT_SPEED_STD_MPS,
                  dvl_std_mps: float = DEFAULT_DVL_STD_MPS) -> None:
-        """Raise warnings into ``alerts``; ``fix_std_m`` is the one-sigma (m) of a fix that
+        """Raise warnings into ``alerts``; ``holonomic``: the vehicle moves sideways by
+        design (:attr:`onboard.core.vehicles.VehicleTraits.holonomic`: no heading/course
+        check); ``fix_std_m`` is the one-sigma (m) of a fix that
         reports no accuracy (``[sensors.gnss] position_std_m``), ``speed_std_mps`` of its
         speed over ground (``[sensors.gnss] velocity_std_mps``), ``dvl_std_mps`` of a DVL
         velocity with no figure of merit (``[sensors.dvl] velocity_std_mps``)."""
@@ -489,7 +499,9 @@ class IntegrityMonitor:
         self.speeds: dict[str, dict[str, SpeedCheck]] = {}
         self._speed_refs: list[tuple[float, float, float, str]] = []
         """Measured speeds since the previous tick: (t, m/s, variance, reference)."""
-        self.heading = None if vehicle_class in HOLONOMIC_CLASSES else HeadingCourseCheck()
+        self.heading = None if holonomic else HeadingCourseCheck()
+        self.watched: dict[str, Declared] = {}
+        """The pipelines whose roles it reads, by name (:meth:`watch`)."""
         self.positions: dict[str, PositionCheck] = {}
         self.nis: dict[str, dict[str, NisCheck]] = {}
         self.flags: dict[str, set[str]] = {}
@@ -500,6 +512,11 @@ class IntegrityMonitor:
         published ``aie``/``kf`` positions ("m from the first fix")."""
         self._fix_new = False
         self._last_warn: dict[tuple[str, str], float] = {}
+
+    def watch(self, pipelines: Iterable[Declared]) -> None:
+        """Read the roles (and frames) of ``pipelines`` from now on, replacing those
+        watched so far (the engine calls it whenever its pipelines change)."""
+        self.watched = {p.name: p for p in pipelines}
 
     # ------------------------------------------------------------------ samples
     def observe(self, s: Sample) -> None:
@@ -524,12 +541,14 @@ class IntegrityMonitor:
             hc.heading(s.t, s.yaw_rad)  # type: ignore[attr-defined]
 
     def _heading_verdict(self, verdict: bool | None, t: float) -> None:
-        """Set or clear the heading/course flag of :data:`WITHHELD_ON_HEADING`."""
+        """Set or clear the heading/course flag of the pipelines with heading-dependent
+        outputs."""
         if verdict is None:
             return
         code = "heading_course_mismatch"
-        for p in WITHHELD_ON_HEADING:
-            self._flag(p, code, verdict)
+        for name, p in self.watched.items():
+            if p.heading_dependent:
+                self._flag(name, code, verdict)
         if verdict:
             hc = self.heading
             assert hc is not None and hc.worst is not None
@@ -546,19 +565,17 @@ class IntegrityMonitor:
         """The quantities of ``pipeline`` to publish as unknown now."""
         flags = self.flags.get(pipeline)
         if flags and "heading_course_mismatch" in flags:
-            return WITHHELD_ON_HEADING.get(pipeline, ())
+            p = self.watched.get(pipeline)
+            return p.heading_dependent if p is not None else ()
         return ()
 
     def count_withheld(self, pipeline: str, n: int) -> None:
         """``n`` values of ``pipeline`` were left out of its record."""
         self.flagged[pipeline] = self.flagged.get(pipeline, 0) + n
 
-    def positions_at(self, t: float, records: Sequence[EstimateRecord],
-                     pipelines: Mapping[str, Any]) -> None:
-        """At the first tick after a fix, compare the published positions with it;
-        ``pipelines`` by name give their local frame (``frame``, a
-        :class:`~onboard.core.geo.LocalFrame`, and ``frame_offset``, the published
-        position of the frame's origin, (0, 0) when absent)."""
+    def positions_at(self, t: float, records: Sequence[EstimateRecord]) -> None:
+        """At the first tick after a fix, compare the published positions (the
+        ``position`` of each watched pipeline, in its frame) with it."""
         fix = self._fix
         if not self._fix_new or fix is None or self.frame is None:
             return
@@ -574,30 +591,31 @@ class IntegrityMonitor:
         var_fix = (acc * acc if acc is not None and acc > 0 and math.isfinite(acc)
                    else self.fix_std_m ** 2)
         in_frame: dict[LocalFrame, tuple[float, float]] = {}  # the fix, once per frame
+        watched = self.watched
         for rec in records:
-            if rec.pipeline in POSITION_PIPELINES:
-                self._position(rec, pipelines.get(rec.pipeline), fix, (dn, de), var_fix,
-                               in_frame)
+            p = watched.get(rec.pipeline)
+            if p is not None and p.position:
+                self._position(rec, p, fix, (dn, de), var_fix, in_frame)
 
-    def _position(self, rec: EstimateRecord, p: Any, fix: GnssFix,
+    def _position(self, rec: EstimateRecord, p: Declared, fix: GnssFix,
                   moved: tuple[float, float], var_fix: float,
                   in_frame: dict[LocalFrame, tuple[float, float]]) -> None:
         """One pipeline's comparison with ``fix``, moved by ``moved`` (m) to the tick;
         ``in_frame`` holds the fix's north/east (m) in the frames converted so far."""
-        own = getattr(p, "frame", None)
+        own = p.frame
+        qn, qe = p.position
         v, sd = rec.values, rec.std
-        if own is None or "north" not in v or "east" not in v or "north" not in sd \
-                or "east" not in sd:
+        if own is None or qn not in v or qe not in v or qn not in sd or qe not in sd:
             return
-        offset = getattr(p, "frame_offset", None)
+        offset = p.frame_offset
         frame = own if offset is not None else self.frame
         off_n, off_e = offset if offset is not None else (0.0, 0.0)
         ne = in_frame.get(frame)
         if ne is None:
             ne = in_frame[frame] = frame.to_ne(fix.lat_deg, fix.lon_deg)
         fn, fe = ne
-        res = (v["north"] - (fn + off_n + moved[0]), v["east"] - (fe + off_e + moved[1]))
-        var = (sd["north"] ** 2 + var_fix, sd["east"] ** 2 + var_fix)
+        res = (v[qn] - (fn + off_n + moved[0]), v[qe] - (fe + off_e + moved[1]))
+        var = (sd[qn] ** 2 + var_fix, sd[qe] ** 2 + var_fix)
         check = self.positions.get(rec.pipeline)
         if check is None:
             check = self.positions[rec.pipeline] = PositionCheck()
@@ -609,7 +627,7 @@ class IntegrityMonitor:
             self._warn("position_residual", rec.pipeline, rec.t, (
                 f"{rec.pipeline} position is {check.median_m():.1f} m from GNSS (median over "
                 f"{POSITION_WINDOW_S:.0f} s), {check.median_sigma():.1f} sigma with its stated "
-                f"{math.sqrt(sd['north'] ** 2 + sd['east'] ** 2):.1f} m and the fix's "
+                f"{math.sqrt(sd[qn] ** 2 + sd[qe] ** 2):.1f} m and the fix's "
                 f"{math.sqrt(var_fix):.1f} m: its position and sigma are not to be trusted"
                 + (REORIGINED if own is not frame and (own.lat0, own.lon0)
                    != (frame.lat0, frame.lon0) else "")))
@@ -641,19 +659,22 @@ class IntegrityMonitor:
             return
         newest = {ref[3]: ref for ref in refs if t - ref[0] <= FIX_MAX_AGE_S}
         refs.clear()
+        watched = self.watched
         for rec in records:
-            if rec.pipeline in SPEED_PIPELINES:
+            p = watched.get(rec.pipeline)
+            if p is not None and p.speed:
                 for ref in newest.values():
-                    self._speed(rec, ref)
+                    self._speed(rec, p.speed, ref)
 
-    def _speed(self, rec: EstimateRecord, ref: tuple[float, float, float, str]) -> None:
-        """One pipeline's comparison with one measured speed."""
+    def _speed(self, rec: EstimateRecord, qs: tuple[str, ...],
+               ref: tuple[float, float, float, str]) -> None:
+        """One pipeline's comparison with one measured speed; ``qs``: its speed role."""
         _, measured, var_ref, what = ref
         dvl = what == "DVL"
-        pub = _published_speed(rec.pipeline, rec, forward_only=dvl)
+        pub = _published_speed(qs, rec, forward_only=dvl)
         if pub is None:
             return
-        speed = pub[0] if dvl or rec.pipeline == "eseso" else abs(pub[0])
+        speed = pub[0] if dvl else abs(pub[0])
         per = self.speeds.setdefault(rec.pipeline, {})
         check = per.get(what)
         if check is None:

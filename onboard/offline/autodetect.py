@@ -12,7 +12,9 @@ Evidence, strongest first:
 3. ArduPilot defaults otherwise: Rover with SERVO1 = steering and SERVO3 = throttle.
 
 The mapping's pulse-width scaling comes from the bundled class config; the
-``SERVOn_MIN/MAX/TRIM`` parameters refine it where the log has them.
+``SERVOn_MIN/MAX/TRIM`` parameters refine it where the log has them. What a class is
+(whether it dives, its HEARTBEAT, its thrusters) is read from
+:mod:`onboard.core.vehicles`.
 """
 
 from __future__ import annotations
@@ -24,10 +26,13 @@ import msgspec
 from onboard.core import config as configmod
 from onboard.core.config import ChannelMap, Config, Inputs
 from onboard.core.messages import Parameter, Sample, VehicleInfo
+from onboard.core.vehicles import (
+    BOAT_MAV_TYPES,
+    MARINE_MAV_TYPES,
+    MAV_TYPE_SUBMARINE,
+    traits,
+)
 
-MAV_TYPE_GROUND_ROVER = 10
-MAV_TYPE_SURFACE_BOAT = 11
-MAV_TYPE_SUBMARINE = 12
 _GCS_TYPES = {6, 18, 26}  # GCS, ONBOARD_CONTROLLER, GIMBAL... not the vehicle
 
 SERVO_ELEVATOR = 19
@@ -37,6 +42,8 @@ SERVO_THROTTLE = 70
 SERVO_THROTTLE_LEFT = 73
 SERVO_THROTTLE_RIGHT = 74
 SERVO_MOTOR1 = 33
+ROV_MOTORS = traits("bluerov2").thrusters
+"""Motor functions (``SERVO_MOTOR1`` on) that make a log a ``bluerov2``'s."""
 
 
 def _servo_functions(params: dict[str, float]) -> dict[int, int]:
@@ -104,12 +111,12 @@ def detect(samples: Iterable[Sample]) -> tuple[Config, str]:
             stern_plane=_refine(base.inputs.stern_plane, plane, params))
         why = (f"HEARTBEAT MAV_TYPE_SUBMARINE with SERVO{rudder}_FUNCTION=21 rudder and "
                f"SERVO{plane}_FUNCTION=19 elevator (torpedo AUV; propeller from RPM.rpm1)")
-    elif any(SERVO_MOTOR1 <= f < SERVO_MOTOR1 + 6 for f in functions.values()) or (
+    elif any(SERVO_MOTOR1 <= f < SERVO_MOTOR1 + ROV_MOTORS for f in functions.values()) or (
         mav_type == MAV_TYPE_SUBMARINE
     ):
         base = configmod.load("bluerov2")
         motors = {f - SERVO_MOTOR1: ch for ch, f in functions.items()
-                  if SERVO_MOTOR1 <= f < SERVO_MOTOR1 + 6}
+                  if SERVO_MOTOR1 <= f < SERVO_MOTOR1 + ROV_MOTORS}
         thrusters = [
             _refine(m, motors.get(i, m.channel), params) for i, m in enumerate(base.inputs.thrusters)
         ]
@@ -125,43 +132,35 @@ def detect(samples: Iterable[Sample]) -> tuple[Config, str]:
             throttle=_refine(base.inputs.throttle, throttle, params))
         if functions:
             why = f"SERVO{steer}_FUNCTION=26 steering, SERVO{throttle}_FUNCTION=70 throttle"
-        elif mav_type in (MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT):
+        elif mav_type in BOAT_MAV_TYPES:
             why = f"HEARTBEAT MAV_TYPE {mav_type}; ArduRover defaults SERVO1 steering, SERVO3 throttle"
         else:
             why = "no vehicle evidence in the log; ArduRover defaults (SERVO1 steering, SERVO3 throttle)"
     return msgspec.structs.replace(base, inputs=inputs), why
 
 
-UNDERWATER_CLASSES = {"bluerov2", "torpedo-auv", "spheroid"}
-"""Vehicle classes that dive (HEARTBEAT MAV_TYPE_SUBMARINE)."""
-SURFACE_CLASSES = {"rudder-boat", "twin-thruster-boat"}
-"""Vehicle classes that stay at the surface (HEARTBEAT rover or boat)."""
-BLUEROV2_MOTORS = 6
-"""Thrusters of the BlueROV2 class (SERVOn_FUNCTION Motor1-6)."""
-
-
 def consistency(cfg: Config, samples: Iterable[Sample]) -> list[tuple[str, str]]:
     """What in a log's HEARTBEAT and SERVOn_FUNCTION samples disagrees with ``cfg``:
-    ``(code, message)`` pairs, ``class_mismatch`` (the configured class dives and the
-    autopilot is a boat or rover, or the other way round) and
-    ``actuator_mapping_incomplete`` (motor functions for fewer than the class's
-    thrusters: the missing ones keep the defaults' channels)."""
+    ``(code, message)`` pairs, ``class_mismatch`` (the autopilot's MAV_TYPE is a marine
+    vehicle's but not one the configured class's autopilot sends: a diving class against
+    a boat or rover, or the other way round) and ``actuator_mapping_incomplete`` (motor
+    functions for fewer than the class's thrusters: the missing ones keep the defaults'
+    channels)."""
     params, mav_type = _evidence(samples)
     out: list[tuple[str, str]] = []
     cls = cfg.vehicle.vehicle_class
-    if mav_type is not None:
-        boat = mav_type in (MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT)
-        if (mav_type == MAV_TYPE_SUBMARINE and cls in SURFACE_CLASSES) or (
-                boat and cls in UNDERWATER_CLASSES):
-            out.append(("class_mismatch",
-                        f"the configuration is for a {cls} but the autopilot's HEARTBEAT "
-                        f"says MAV_TYPE {mav_type}: the models and inputs may not fit"))
+    expected = traits(cls).heartbeat_mav_types
+    if mav_type in MARINE_MAV_TYPES and expected and mav_type not in expected:
+        out.append(("class_mismatch",
+                    f"the configuration is for a {cls} but the autopilot's HEARTBEAT "
+                    f"says MAV_TYPE {mav_type}: the models and inputs may not fit"))
+    n = traits(cls).thrusters
     motors = {f for f in _servo_functions(params).values()
-              if SERVO_MOTOR1 <= f < SERVO_MOTOR1 + BLUEROV2_MOTORS}
-    if cls == "bluerov2" and motors and len(motors) < BLUEROV2_MOTORS:
-        lost = sorted(i + 1 for i in range(BLUEROV2_MOTORS) if SERVO_MOTOR1 + i not in motors)
+              if SERVO_MOTOR1 <= f < SERVO_MOTOR1 + n}
+    if motors and len(motors) < n:
+        lost = sorted(i + 1 for i in range(n) if SERVO_MOTOR1 + i not in motors)
         out.append(("actuator_mapping_incomplete",
-                    f"SERVOn_FUNCTION names {len(motors)} of the {BLUEROV2_MOTORS} motors; "
+                    f"SERVOn_FUNCTION names {len(motors)} of the {n} motors; "
                     f"motor(s) {lost} keep the default channels"))
     return out
 

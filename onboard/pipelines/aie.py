@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from onboard.core.config import Config
 from onboard.core.pipeline_config import AieConfig, AxisConfig
+from onboard.core.vehicles import traits
 from onboard.estimators.axis_model import AxisModel
 from onboard.estimators.increment_filter import IncrementFilter
 from onboard.estimators.input_models import RcieInput
@@ -61,7 +62,8 @@ def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03
 
 
 def create(cfg: Config) -> SurgeHeadingPipeline | None:
-    """Pipeline ``aie`` for surface vehicles (None for the BlueROV2 and the spheroid)."""
-    if cfg.vehicle.vehicle_class in ("bluerov2", "spheroid"):
+    """Pipeline ``aie`` for the vehicle classes its surge/heading model fits (None for the
+    others: :attr:`onboard.core.vehicles.VehicleTraits.surge_heading_model`)."""
+    if not traits(cfg.vehicle.vehicle_class).surge_heading_model:
         return None
     return build(cfg.pipelines.aie, *sensor_noise(cfg))

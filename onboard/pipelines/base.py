@@ -14,13 +14,37 @@ from collections import deque
 from operator import attrgetter
 from typing import Any, Callable, Mapping, Protocol, Sequence, runtime_checkable
 
+import msgspec
+
 from onboard.core.config import Config
+from onboard.core.geo import LocalFrame
 from onboard.core.messages import Innovation, Sample
+
+
+class PipelineHealth(Protocol):
+    """What a pipeline's :meth:`Pipeline.health` returns: its own counters and
+    diagnostics as typed fields, and their flat form for the records."""
+
+    def flat(self) -> dict[str, float]:
+        """Every field by its dotted name (e.g. ``surge.steps``), in a fixed order: the
+        pipeline's entry of the health record's ``counters`` (architecture.md §4.4) and
+        of summary.json's ``pipeline_health``."""
+        ...
+
+
+class NoHealth(msgspec.Struct, frozen=True):
+    """The health of a pipeline that has no filter to report on."""
+
+    def flat(self) -> dict[str, float]:
+        """Nothing."""
+        return {}
 
 
 @runtime_checkable
 class Pipeline(Protocol):
     """One estimator family, e.g. ``aie`` or ``current``.
+
+    A pipeline class subclasses this protocol to inherit the defaults below.
 
     Attributes:
         name: the pipeline name, the prefix of its columns in estimates.csv and its
@@ -28,13 +52,29 @@ class Pipeline(Protocol):
         columns: the quantities it can estimate (without the prefix), in the order they
             appear in estimates.csv. Fixed at construction.
 
-    Optional: ``events``, a list of human-readable event strings; after each step the
-    engine moves them into its health events (prefixed with the pipeline name) and
-    empties the list.
+    Roles: what its outputs mean, declared as class attributes (empty by default). The
+    engine and the monitors read these, never a pipeline's name:
+
+    * ``position``: the columns that are an estimated position (m, north then east,
+      each with its ``std_<q>``) in the frame below.
+    * ``speed``: its forward speed over ground (m/s, negative astern) and, for a vehicle
+      that moves sideways, its sideways speed, each with its ``std_<q>``.
+    * ``heading_dependent``: the columns computed by turning a velocity with the
+      heading: unknown while the heading disagrees with the course over ground.
+    * ``frame``: the local tangent plane about its first fix (None: no position, or no
+      fix yet).
+    * ``frame_offset``: where ``frame``'s origin lies in its published position (north,
+      east; m); None: its positions are metres from the first fix handed to the
+      pipelines (the documented origin, architecture.md §4.2).
     """
 
     name: str
     columns: tuple[str, ...]
+    position: tuple[str, ...] = ()
+    speed: tuple[str, ...] = ()
+    heading_dependent: tuple[str, ...] = ()
+    frame: LocalFrame | None = None
+    frame_offset: tuple[float, float] | None = None
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         """Advance to tick time ``t`` (s) given the new ``samples`` (time-ordered, all
@@ -48,9 +88,15 @@ class Pipeline(Protocol):
         reason); the pipeline keeps none of them after the call."""
         ...
 
-    def health(self) -> Mapping[str, float]:
-        """Counters and diagnostics by name, e.g. ``{"surge.steps": 120, "surge.diverged":
-        0, "surge.V_d": 0.1}``: the pipeline's own numbers beside its innovations."""
+    def take_events(self) -> list[str]:
+        """Human-readable events since the last call (e.g. a restored state discarded);
+        the pipeline keeps none of them after the call. The engine moves them into its
+        health events, prefixed with the pipeline name. None by default."""
+        return []
+
+    def health(self) -> PipelineHealth:
+        """Its own counters and diagnostics (e.g. an axis's steps and divergences): the
+        pipeline's numbers beside its innovations."""
         ...
 
     def get_state(self) -> dict[str, Any]:

@@ -64,6 +64,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -87,7 +88,8 @@ from onboard.estimators.model_identification import (
 )
 from onboard.estimators.restored_current import RestoredCurrentCheck
 from onboard.estimators.vehicle_models import RegressionModel, kind_for_class
-from onboard.pipelines.base import LateSampleHold, unused_measurement
+from onboard.pipelines.base import LateSampleHold, Pipeline, unused_measurement
+from onboard.pipelines.current_health import CurrentHealth, LateHold, PipelineCounters
 from onboard.pipelines.current_samples import CHANNELS, CurrentSamples
 
 GAIN_DIR = CONFIG_DIR / "gains"
@@ -113,19 +115,26 @@ REASONS: dict[str, str] = {"accepted": "", "gated": "gate", "reset": "diverged",
 """The record's reason for each outcome of a velocity measurement in the joint filter: its
 update's (:data:`.current_kf.UpdateOutcome`), or ``restarted`` when the pipeline started the
 filter again from it (:meth:`CurrentPipeline._correct`)."""
+HEADING_DEPENDENT = ("north", "east", "down", "u_r", "v_r", "w_r")
+"""The columns computed by turning a velocity with the heading: the current is the
+velocity over ground less the through-water velocity turned to earth axes by it."""
 
 
-class CurrentPipeline:
+class CurrentPipeline(Pipeline):
     """Pipeline ``current``: water current with one-sigma, any vehicle class.
 
     Inspectable attributes (filterpy style): ``kf`` (the joint Kalman filter: ``x``, ``P``,
     ``y``, ``S``, ``nis``), ``identification`` (prior, schedule, yaw RLS), ``hgo`` and
     ``flow`` (the observer of that variant, or None), ``hgo_rls`` (the high-gain observer's
     own model identification, or None), ``restore_check`` (the probation of a restored
-    current), ``inp`` (model inputs), ``roll``, ``pitch``, ``yaw`` (rad), ``counters``;
+    current), ``inp`` (model inputs), ``roll``, ``pitch``, ``yaw`` (rad), ``counters``
+    (its own, :class:`PipelineCounters`; each collaborator keeps its own);
     shortcuts ``x``, ``P``, ``thetas`` (model coefficients in use, per channel),
     ``yaw_rls`` and ``gamma`` (HGO gain, 0 without); with the HGO, ``lipschitz`` and
     ``gamma_star`` of the model it runs (:meth:`_gamma_from_model`).
+
+    Roles: the current and the through-water velocity it has of
+    :data:`HEADING_DEPENDENT` (:class:`~onboard.pipelines.base.Pipeline`).
     """
 
     name = "current"
@@ -146,16 +155,15 @@ class CurrentPipeline:
         self.columns: tuple[str, ...] = ("north", "east") + (("down",) if nd == 3 else ()) + (
             "std_north", "std_east") + (("std_down",) if nd == 3 else ()) + (
             "u_r", "v_r") + (("w_r",) if nd == 3 else ())
+        self.heading_dependent = tuple(c for c in HEADING_DEPENDENT if c in self.columns)
         self.configured = configured
-        self.counters: dict[str, float] = {"rejected_invalid_dvl": 0, "rejected_gate": 0,
-                                           "rejected_nonfinite": 0, "updates": 0,
-                                           "rls_updates": 0}
+        self.counters = PipelineCounters()
         self._innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
-        self.identification = _identification(cfg, self.model, self.counters)
-        self.kf = _joint_filter(cfg, self.identification, self.counters)
+        self.identification = _identification(cfg, self.model)
+        self.kf = _joint_filter(cfg, self.identification)
         self.events: list[str] = []
-        """Human-readable events since the engine last collected them (it empties the
-        list): a restored current discarded or confirmed."""
+        """Human-readable events not yet taken (:meth:`take_events`): a restored current
+        discarded or confirmed, a start contradicted."""
         self.observable: list[bool] = [False] * nd
         """Per earth axis: whether the last published component was known (one-sigma at
         most ``unknown_above_std``)."""
@@ -182,7 +190,7 @@ class CurrentPipeline:
             self.hgo = CurrentHighGainObserver(
                 self.model, self.gain, _gain_law(cfg, self.gain), self.kf.P[:2 * nd, :2 * nd],
                 accel_std=cfg.accel_std, model_error_time_s=cfg.model_error_time_s,
-                current_walk=cfg.current_walk, counters=self.counters)
+                current_walk=cfg.current_walk)
             self.hgo.consider(self.hgo_rls.covariance())
             self._gamma_follows_model = _gain_is_design_fixed(cfg, self.gain)
             self._gamma_t = -math.inf
@@ -196,7 +204,7 @@ class CurrentPipeline:
     def _init_sample_state(self, cfg: CurrentConfig, sensors: Any) -> None:
         """The sample adapter (model inputs, attitude, velocity measurements) and the
         stamps of the fusion."""
-        self.samples = CurrentSamples(cfg, sensors, self.nd, self.counters,
+        self.samples = CurrentSamples(cfg, sensors, self.nd,
                                       self._innovations)
         self.hold = LateSampleHold(cfg.max_late_hold_s)
         self.inp = self.samples.inp
@@ -291,7 +299,7 @@ class CurrentPipeline:
             return
         late_by = self._t - m.t if self._t is not None else 0.0
         if late_by > LATE_FUSE_MAX_S and self.cfg.max_late_hold_s > 0.0:
-            self.counters["rejected_late"] = self.counters.get("rejected_late", 0) + 1
+            self.counters.rejected_late += 1
             self._innovations.append(unused_measurement(
                 CHANNELS[m.kind], m.t, len(m.z), "late", m.source))
             return
@@ -449,9 +457,9 @@ class CurrentPipeline:
                           <= cfg.identify_after_turn_s))
         before = rls.n_updates
         rls.step(dt, nu, self.inp, learn)
-        self.counters["hgo_rls_updates"] = self.counters.get("hgo_rls_updates", 0) + (
-            rls.n_updates - before)
-        self.counters["hgo_rls_rejected"] = rls.n_rejected
+        c = self.counters
+        c.hgo_rls_updates = (c.hgo_rls_updates or 0) + rls.n_updates - before
+        c.hgo_rls_rejected = rls.n_rejected
         if rls.n_updates != before:
             hgo.consider(rls.covariance())
         if rls.n_updates != before and t - self._gamma_t >= GAMMA_RECHECK_S:
@@ -501,14 +509,14 @@ class CurrentPipeline:
             if self.hgo is not None:
                 self.hgo.restart(self.kf.x, self.kf.P)
                 self.hgo.reset_gain()
-            self.counters["restore_discarded"] = self.counters.get("restore_discarded", 0) + 1
+            self.counters.restore_discarded += 1
             self.events.append(
                 "restored current (" + ", ".join(f"{v:.2f}" for v in check.current) + ") m/s "
                 "contradicts the data (" + ", ".join(f"{v:.2f}" for v in c_twin) + f"; "
                 f"chi2 {check.chi2:.1f} on {check.n_axes} axes): discarded")
             check.end()
         elif verdict == "confirm":
-            self.counters["restore_confirmed"] = self.counters.get("restore_confirmed", 0) + 1
+            self.counters.restore_confirmed += 1
             self.events.append(f"restored current confirmed by {check.held_s:.0f} s "
                                f"of data (chi2 {check.chi2:.1f})")
             check.end()
@@ -560,39 +568,37 @@ class CurrentPipeline:
         self._innovations.clear()
         return out
 
-    def health(self) -> Mapping[str, float]:
-        """Counters (updates, rejections, RLS updates, restarts), the calibration's
-        ``q_scale``, the GNSS velocity one-sigma in use, coefficient and yaw-RLS spread,
-        observer diagnostics and observability."""
-        h: dict[str, float] = dict(self.counters)
-        kf = self.kf
-        h["q_scale"] = kf.q_scale
-        h["velocity.gnss_std"] = self.samples.gnss_std_used
-        if self.identification.n_theta:
-            h["theta.std_max"] = kf.theta_std_max()
-        rls = self.identification.yaw_rls
-        if rls is not None:
-            h["rls.yaw.sigma"] = math.sqrt(rls.sigma2)
-        if self.hgo is not None:
-            h["gamma"] = self.hgo.gamma
-            h["gamma_star"] = self.gamma_star
-            h["lipschitz"] = self.lipschitz
-        if self.flow is not None:
-            h["flow.gain_kept"] = float(self.flow.unobservable)
-            h["flow.diverged"] = float(self.flow.diverged)
-        for i, ax in enumerate(("north", "east", "down")[: self.nd]):
-            h[f"observable.{ax}"] = float(self.observable[i])
-        h["observable"] = float(all(self.observable[:2]))
-        h["along_track_unobservable"] = float(self._surge_unobservable())
-        h["heading_diversity"] = self.identification.headings.length()
-        hold = self.hold
-        if hold.late:
-            h.update(late_samples=hold.late, late_hold_s=hold.hold_s,
-                     late_beyond_hold=hold.too_late)
-        if self.restore_check.active:
-            h["restore_probation_s"] = self.restore_check.held_s
-            h["restore_chi2"] = self.restore_check.chi2
-        return h
+    def take_events(self) -> list[str]:
+        """The events since the last call (:attr:`events`), which it empties."""
+        out, self.events = self.events, []
+        return out
+
+    def health(self) -> CurrentHealth:
+        """The counters of the pipeline, its sample adapter, joint filter, model
+        identification and observers; the calibration's ``q_scale``, the GNSS velocity
+        one-sigma in use, coefficient and yaw-RLS spread, observer diagnostics,
+        observability, the late-sample hold and the probation (:class:`CurrentHealth`)."""
+        kf, ident, hgo, flow, hold = (self.kf, self.identification, self.hgo, self.flow,
+                                      self.hold)
+        rls, check = ident.yaw_rls, self.restore_check
+        return CurrentHealth(
+            samples=replace(self.samples.counters), filter=replace(kf.counters),
+            pipeline=replace(self.counters), rls_updates=ident.rls_updates,
+            hgo_diverged=hgo.diverged if hgo is not None else 0, q_scale=kf.q_scale,
+            gnss_velocity_std=self.samples.gnss_std_used,
+            theta_std_max=kf.theta_std_max() if ident.n_theta else None,
+            yaw_rls_sigma=math.sqrt(rls.sigma2) if rls is not None else None,
+            gamma=hgo.gamma if hgo is not None else None,
+            gamma_star=self.gamma_star if hgo is not None else None,
+            lipschitz=self.lipschitz if hgo is not None else None,
+            flow_gain_kept=flow.unobservable if flow is not None else None,
+            flow_diverged=flow.diverged if flow is not None else None,
+            observable=tuple(self.observable),
+            along_track_unobservable=self._surge_unobservable(),
+            heading_diversity=ident.headings.length(),
+            late=LateHold(hold.late, hold.hold_s, hold.too_late) if hold.late else None,
+            restore_probation_s=check.held_s if check.active else None,
+            restore_chi2=check.chi2 if check.active else None)
 
     def get_state(self) -> dict[str, Any]:
         """Identified model (coefficients and their covariance) and the last current."""
@@ -686,9 +692,9 @@ class CurrentPipeline:
         """The twin filter of the restored-current check: the restored model, the current
         at its prior."""
         nd = self.nd
-        ident = _identification(self.cfg, self.model, {"rls_updates": 0})
+        ident = _identification(self.cfg, self.model)
         ident.thetas = [t.copy() for t in thetas]
-        kf = _joint_filter(self.cfg, ident, {"rejected_gate": 0, "updates": 0})
+        kf = _joint_filter(self.cfg, ident)
         if ident.n_theta:
             try:
                 kf.restore_coefficients(ident.thetas[:nd], theta_cov)
@@ -697,8 +703,7 @@ class CurrentPipeline:
         self.restore_check.begin(kf, self.kf.x[nd:2 * nd].copy(), self.kf.current_cov())
 
 
-def _identification(cfg: CurrentConfig, model: RegressionModel,
-                    counters: dict[str, float]) -> ModelIdentification:
+def _identification(cfg: CurrentConfig, model: RegressionModel) -> ModelIdentification:
     """The model identification of ``[pipelines.current]``."""
     return ModelIdentification(
         model, cfg.model, identify=cfg.identify, model_rel_std=cfg.model_rel_std,
@@ -710,11 +715,10 @@ def _identification(cfg: CurrentConfig, model: RegressionModel,
         identify_straight=cfg.identify_straight, identify_min_speed=cfg.identify_min_speed,
         yaw_rls_p0=cfg.yaw_rls_p0, yaw_forgetting=cfg.yaw_forgetting,
         svf_cutoff_hz=cfg.svf_cutoff_hz, heading_memory_s=cfg.heading_memory_s,
-        heading_diversity=cfg.heading_diversity, counters=counters)
+        heading_diversity=cfg.heading_diversity)
 
 
-def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification,
-                  counters: dict[str, float]) -> CurrentKalmanFilter:
+def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification) -> CurrentKalmanFilter:
     """The joint Kalman filter of ``[pipelines.current]`` on ``ident``'s model."""
     return CurrentKalmanFilter(
         ident, init_current_std=cfg.init_current_std,
@@ -722,7 +726,7 @@ def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification,
         model_error_time_s=cfg.model_error_time_s, turn_accel_gain=cfg.turn_accel_gain,
         prior_accel_std=cfg.prior_accel_std, gate_nis=cfg.gate_nis,
         calibrate=cfg.calibrate, calibrate_block=cfg.calibrate_block,
-        max_speed_through_water=cfg.max_speed_through_water, counters=counters)
+        max_speed_through_water=cfg.max_speed_through_water)
 
 
 def _gain_is_design_fixed(cfg: CurrentConfig, design: GainDesign) -> bool:

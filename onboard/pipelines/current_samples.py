@@ -28,9 +28,9 @@
   horizontal speed (:meth:`.vehicle_models.GliderModel.glide_from_depth_rate`); none
   where the model cannot give the speed (an inflection, a shallow glide).
 
-Rejected samples are counted in the shared ``counters`` (``rejected_nonfinite``,
-``rejected_invalid_dvl``); a rejected velocity is also an innovation record of its
-channel (:data:`CHANNELS`) with reason ``nonfinite`` or ``invalid`` and no innovation.
+Rejected samples are counted in its own :class:`SampleCounters`; a rejected velocity is
+also an innovation record of its channel (:data:`CHANNELS`) with reason ``nonfinite`` or
+``invalid`` and no innovation.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -88,6 +89,18 @@ earth axes (GNSS SOG/COG, ``VelocityOverGround``), ``dvl`` bottom track and
 ``water_track`` (body axes)."""
 
 
+@dataclass
+class SampleCounters:
+    """What :class:`CurrentSamples` counted."""
+
+    rejected_invalid_dvl: int = 0
+    """DVL velocities flagged invalid or beyond the largest figure of merit."""
+    rejected_nonfinite: int = 0
+    """Samples with a value that is not finite."""
+    glider_measurements: int = 0
+    """Through-water velocities of the glider model."""
+
+
 class CurrentSamples:
     """Samples to model inputs, attitude and velocity measurements (module docstring).
 
@@ -102,12 +115,12 @@ class CurrentSamples:
         dvl_std: one-sigma of DVL velocity (m/s); ``dvl_max_fom`` the largest figure of
             merit accepted (m/s).
         surface_depth: GNSS is used only at most this deep (m).
-        counters: rejection counts, shared with the owner's health.
+        counters: its counts (:class:`SampleCounters`).
         innovations: the owner's pending innovation records (rejected velocities go in).
         yaw_t, yaw_source: time (s) and sample source of the heading in use.
     """
 
-    def __init__(self, cfg: Any, sensors: Any, nd: int, counters: dict[str, float],
+    def __init__(self, cfg: Any, sensors: Any, nd: int,
                  innovations: deque[Innovation]) -> None:
         """Args:
             cfg: the ``[pipelines.current]`` section (``rpm_scale`` and the one-sigmas
@@ -115,11 +128,10 @@ class CurrentSamples:
             sensors: the ``[sensors]`` section (defaults of those, DVL figure of merit,
                 surface depth).
             nd: velocity dimension of the model (2 surface, 3 underwater).
-            counters: rejection counts to add to.
             innovations: the records of rejected velocities are appended here.
         """
         self.nd = nd
-        self.counters = counters
+        self.counters = SampleCounters()
         self.innovations = innovations
         self.rpm_scale = cfg.rpm_scale
         self.gnss_std = cfg.gnss_velocity_std or sensors.gnss.velocity_std_mps
@@ -212,13 +224,13 @@ class CurrentSamples:
         u, v, w = g.body_velocity(self.pitch)
         z = [u, v, w] if self.nd == 3 else [g.u_h, 0.0]
         self.glider_t = tr
-        self.counters["glider_measurements"] = self.counters.get("glider_measurements", 0) + 1
+        self.counters.glider_measurements += 1
         meas.append(VelocityMeasurement("water", tr, np.array(z), g.std_u_h, GLIDER_SOURCE))
 
     def _on_attitude(self, s: Attitude, meas: list) -> None:
         if not (math.isfinite(s.roll_rad) and math.isfinite(s.pitch_rad)
                 and math.isfinite(s.yaw_rad)):
-            self.counters["rejected_nonfinite"] += 1
+            self.counters.rejected_nonfinite += 1
             return
         self._set_attitude(s.t, s.roll_rad, s.pitch_rad, True)
         # yaw_selected False: the source selector chose another heading source
@@ -237,7 +249,7 @@ class CurrentSamples:
         if s.roll_rad is None or s.pitch_rad is None:
             return
         if not (math.isfinite(s.roll_rad) and math.isfinite(s.pitch_rad)):
-            self.counters["rejected_nonfinite"] += 1
+            self.counters.rejected_nonfinite += 1
             return
         self._set_attitude(s.t, s.roll_rad, s.pitch_rad, False)
 
@@ -262,7 +274,7 @@ class CurrentSamples:
 
     def _on_heading(self, s: Heading, meas: list) -> None:
         if not math.isfinite(s.heading_rad):
-            self.counters["rejected_nonfinite"] += 1
+            self.counters.rejected_nonfinite += 1
             return
         if self._velocity_heading_fresh(s.t):
             return
@@ -309,6 +321,7 @@ class CurrentSamples:
         z = [s.v_north_mps, s.v_east_mps] + ([s.v_down_mps] if (
             self.nd == 3 and s.v_down_mps is not None) else [])
         if not all(math.isfinite(v) for v in z):
+            self.counters.rejected_nonfinite += 1
             self._reject(s, "earth", len(z), "nonfinite")
             return
         psi = s.heading_rad
@@ -320,10 +333,12 @@ class CurrentSamples:
     def _on_dvl(self, s: DvlVelocity, meas: list) -> None:
         kind = "bottom" if s.track == "bottom" else "water"
         if not s.valid or (s.fom_mps is not None and s.fom_mps > self.dvl_max_fom):
-            self._reject(s, kind, self.nd, "invalid", "rejected_invalid_dvl")
+            self.counters.rejected_invalid_dvl += 1
+            self._reject(s, kind, self.nd, "invalid")
             return
         z = [s.vx, s.vy, s.vz][: self.nd]
         if not all(math.isfinite(v) for v in z):
+            self.counters.rejected_nonfinite += 1
             self._reject(s, kind, self.nd, "nonfinite")
             return
         std = max(self.dvl_std, s.fom_mps or 0.0)
@@ -335,6 +350,7 @@ class CurrentSamples:
         if self.depth is not None and self.depth > self.surface_depth:
             return
         if not (math.isfinite(s.sog_mps) and math.isfinite(s.cog_rad)):
+            self.counters.rejected_nonfinite += 1
             self._reject(s, "earth", 2, "nonfinite")
             return
         z = np.array([s.sog_mps * math.cos(s.cog_rad), s.sog_mps * math.sin(s.cog_rad)])
@@ -347,11 +363,9 @@ class CurrentSamples:
         self.gnss_std_used = std
         meas.append(VelocityMeasurement("earth", s.t, z, std, s.source))
 
-    def _reject(self, s: Sample, kind: str, dof: int, reason: str,
-                counter: str = "rejected_nonfinite") -> None:
-        """Count a velocity sample that cannot be used and record it as a rejected
-        measurement of its channel."""
-        self.counters[counter] += 1
+    def _reject(self, s: Sample, kind: str, dof: int, reason: str) -> None:
+        """Record a velocity sample that cannot be used as a rejected measurement of its
+        channel (the caller counts it)."""
         self.innovations.append(unused_measurement(CHANNELS[kind], s.t, dof, reason,
                                                    s.source))
 

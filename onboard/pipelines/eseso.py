@@ -63,6 +63,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping, Sequence
 
+import msgspec
 import numpy as np
 from numpy.typing import NDArray
 
@@ -83,8 +84,8 @@ from onboard.core.messages import (
 )
 from onboard.core.pipeline_config import EsesoConfig
 from onboard.core.so3 import euler_to_matrix, matrix_to_euler
-from onboard.estimators.eseso_filter import P_, P_D, V_, XI, EsesoFilter, EsesoParams
-from onboard.pipelines.base import unused_measurement
+from onboard.estimators.eseso_filter import P_, P_D, V_, XI, EsesoFilter, EsesoParams, Outcome
+from onboard.pipelines.base import Pipeline, unused_measurement
 
 Array = NDArray[np.float64]
 
@@ -173,7 +174,75 @@ def thruster_force(cmd: float, c: EsesoConfig) -> float:
     return mag * (c.thruster_max_forward_n if cmd > 0 else -c.thruster_max_reverse_n)
 
 
-class Eseso:
+class EsesoCounters:
+    """The ESESO's event counts in the order each first occurred: those of its sample
+    handling and the outcomes of its filter's updates (module docstring, "Innovations").
+
+    Counted as ``fused.<channel>``, ``rejected.<channel>.gate`` (a recovered update
+    too), ``recovered.<channel>``, ``thrust.downweighted``, ``rejected.<stream>.<reason>``,
+    ``imu_gap`` and ``diverged``.
+    """
+
+    def __init__(self) -> None:
+        self._n: dict[str, int] = {}
+
+    def _add(self, key: str) -> None:
+        self._n[key] = self._n.get(key, 0) + 1
+
+    def update(self, channel: str, outcome: Outcome) -> None:
+        """One update of ``channel`` and what became of it."""
+        if outcome is not Outcome.FUSED:
+            self._add(f"rejected.{channel}.gate")
+        if outcome is Outcome.RECOVERED:
+            self._add(f"recovered.{channel}")
+        if outcome:
+            self._add(f"fused.{channel}")
+
+    def downweighted(self) -> None:
+        """A thrust update down-weighted (``thrust_huber``)."""
+        self._add("thrust.downweighted")
+
+    def rejected(self, stream: str, reason: str) -> None:
+        """A sample of ``stream`` (``imu``, ``gnss``, ...) not used, for ``reason``."""
+        self._add(f"rejected.{stream}.{reason}")
+
+    def imu_gap(self) -> None:
+        """An IMU interval longer than ``max_imu_gap_s``."""
+        self._add("imu_gap")
+
+    def diverged(self) -> None:
+        """The filter diverged and started again."""
+        self._add("diverged")
+
+    def get(self, key: str) -> int:
+        """The count of ``key`` (0 if never counted)."""
+        return self._n.get(key, 0)
+
+    def as_dict(self) -> dict[str, int]:
+        """Every count by its name, in the order each first occurred."""
+        return dict(self._n)
+
+
+class EsesoHealth(msgspec.Struct, frozen=True):
+    """The health of pipeline ``eseso`` (:meth:`Eseso.health`)."""
+
+    counts: dict[str, int]
+    """The event counts (:class:`EsesoCounters`), in the order each first occurred."""
+    noise_scale: dict[str, float]
+    """Per sensor channel, the variance scale the innovations put on its configured
+    noise (1 = as configured)."""
+    imu_noise_scale: float
+    """The variance scale of the IMU's noise (from the DVL's innovations)."""
+
+    def flat(self) -> dict[str, float]:
+        """The counts, then ``noise_scale.<channel>`` and ``noise_scale.imu``."""
+        out = {k: float(v) for k, v in self.counts.items()}
+        out.update({f"noise_scale.{ch}": v for ch, v in self.noise_scale.items()})
+        out["noise_scale.imu"] = self.imu_noise_scale
+        return out
+
+
+class Eseso(Pipeline):
     """The ESESO pipeline (``eseso``): state, disturbance force and their covariance.
 
     Attributes:
@@ -182,9 +251,14 @@ class Eseso:
         r_gnss_p, r_gnss_v, r_depth, r_dvl, r_head, r_att, r_att_yaw, r_ins: measurement
             variances (SI units squared) resolved from ``[pipelines.eseso]`` and
             ``[sensors]``.
-        counters: event counts of the filter and of the sample handling (one dictionary,
-            the filter's).
+        counters: its event counts (:class:`EsesoCounters`).
+
+    Roles: ``north``/``east`` a position in its own frame (``frame_offset``), ``u``/``v``
+    its forward and sideways speed (:class:`~onboard.pipelines.base.Pipeline`).
     """
+
+    position = ("north", "east")
+    speed = ("u", "v")
 
     name = "eseso"
     columns = (
@@ -222,7 +296,7 @@ class Eseso:
         self.gnss_max_depth = _or(c.gnss_max_depth_m, s.depth.surface_depth_m if s else 0.3)
 
         self.filter = EsesoFilter(filter_params(c, s))
-        self.counters = self.filter.counters
+        self.counters = EsesoCounters()
         self.frame: LocalFrame | None = None
         self._gnss_offset = np.zeros(2)
         self.t_imu: float | None = None
@@ -254,9 +328,6 @@ class Eseso:
     def initialized(self) -> bool:
         """True once the filter has started (it has an attitude)."""
         return self.filter.initialized
-
-    def _count(self, key: str) -> None:
-        self.counters[key] = self.counters.get(key, 0) + 1
 
     def _unused(self, s: Sample, channel: str, dof: int, reason: str) -> None:
         """Record the sample as a measurement of ``channel`` rejected for ``reason``
@@ -301,14 +372,17 @@ class Eseso:
         tau = self._tau_mean(t0, t1)
         if tau is None:
             return
-        self.filter.update_thrust(f1, w1, (w1 - w0) / (t1 - t0), tau, wdot_dt=t1 - t0,
-                                  t=t1, source=self._tau_source)
+        outcome = self.filter.update_thrust(f1, w1, (w1 - w0) / (t1 - t0), tau,
+                                            wdot_dt=t1 - t0, t=t1, source=self._tau_source)
+        if self.filter.downweighted:
+            self.counters.downweighted()
+        self.counters.update("thrust", outcome)
 
     # ------------------------------------------------------------------ samples
     def _on_imu(self, s: Imu) -> None:
         accel, gyro = (s.accel_x, s.accel_y, s.accel_z), (s.gyro_x, s.gyro_y, s.gyro_z)
         if not all(map(math.isfinite, accel + gyro)):  # floats: cheaper than numpy's
-            self._count("rejected.imu.nonfinite")
+            self.counters.rejected("imu", "nonfinite")
             return
         f_m, w_m = np.array(accel), np.array(gyro)
         if not self.filter.initialized:
@@ -324,10 +398,10 @@ class Eseso:
             self.t_imu = s.t
         dt = s.t - self.t_imu
         if dt <= 0.0:
-            self._count("rejected.imu.time")
+            self.counters.rejected("imu", "time")
             return
         if dt > self.cfg.max_imu_gap_s:
-            self._count("imu_gap")
+            self.counters.imu_gap()
             dt = self.cfg.max_imu_gap_s
         self.filter.propagate(f_m, w_m, dt)
         self.t_imu = s.t
@@ -350,7 +424,7 @@ class Eseso:
         if fresh and self._cmd_max > ZUPT_IDLE_COMMAND:
             return
         self._t_zupt = t
-        self.filter.update_zero_velocity(ZUPT_STD_MPS ** 2, t=t)
+        self.counters.update("zupt", self.filter.update_zero_velocity(ZUPT_STD_MPS ** 2, t=t))
 
     def _level_from_gravity(self, f_m: Array) -> bool:
         """Average the specific force ``f_m`` (m/s^2) of :data:`LEVELLING_SAMPLES` IMU
@@ -372,11 +446,11 @@ class Eseso:
             return
         n = self.K_alloc.shape[1]
         if len(s.thrusters) != n:
-            self._count("rejected.command.thruster_count")
+            self.counters.rejected("command", "thruster_count")
             return
         forces = np.array([thruster_force(float(cmd), self.cfg) for cmd in s.thrusters])
         if not np.all(np.isfinite(forces)):
-            self._count("rejected.command.nonfinite")
+            self.counters.rejected("command", "nonfinite")
             return
         self.tau = self.K_alloc @ forces
         self._cmd_max = max((abs(float(c)) for c in s.thrusters), default=0.0)
@@ -391,11 +465,11 @@ class Eseso:
 
     def _on_gnss(self, s: GnssFix) -> None:
         if s.fix_quality <= 0:
-            self._count("rejected.gnss.no_fix")
+            self.counters.rejected("gnss", "no_fix")
             return
         f = self.filter
         if f.p[2] > self.gnss_max_depth and f.P[P_D, P_D] < 1.0:
-            self._count("rejected.gnss.submerged")
+            self.counters.rejected("gnss", "submerged")
             self._unused(s, "gnss_pos", 2, "submerged")
             if s.sog_mps is not None and s.cog_rad is not None:
                 self._unused(s, "gnss_vel", 2, "submerged")
@@ -407,51 +481,55 @@ class Eseso:
         n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
         z = np.array([n, e]) + self._gnss_offset
         r_p = max(s.h_acc_m, GNSS_H_ACC_FLOOR_M) ** 2 if s.h_acc_m else self.r_gnss_p
-        f.update_position_ne(z, r_p, t=s.t, source=s.source)
+        self.counters.update("gnss_pos", f.update_position_ne(z, r_p, t=s.t, source=s.source))
         if s.sog_mps is not None and s.cog_rad is not None:
             vz = s.sog_mps * np.array([math.cos(s.cog_rad), math.sin(s.cog_rad)])
-            f.update_velocity_ne(vz, self.r_gnss_v, t=s.t, source=s.source)
+            self.counters.update("gnss_vel", f.update_velocity_ne(
+                vz, self.r_gnss_v, t=s.t, source=s.source))
 
     def _on_vog(self, s: VelocityOverGround) -> None:
         vz = np.array([s.v_north_mps, s.v_east_mps])
         if not np.all(np.isfinite(vz)):
-            self._count("rejected.vog.nonfinite")
+            self.counters.rejected("vog", "nonfinite")
             self._unused(s, "vog", 2, "nonfinite")
             return
         self._t_aided = s.t
-        self.filter.update_ins_velocity(vz, self.r_ins, t=s.t, source=s.source)
+        self.counters.update("vog", self.filter.update_ins_velocity(
+            vz, self.r_ins, t=s.t, source=s.source))
 
     def _on_depth(self, s: Depth) -> None:
-        self.filter.update_depth(s.depth_m, self.r_depth, t=s.t, source=s.source)
+        self.counters.update("depth", self.filter.update_depth(
+            s.depth_m, self.r_depth, t=s.t, source=s.source))
 
     def _on_dvl(self, s: DvlVelocity) -> None:
         if not s.valid:
-            self._count("rejected.dvl.invalid")
+            self.counters.rejected("dvl", "invalid")
             self._unused(s, "dvl", 3, "invalid")
             return
         if s.track != "bottom":
-            self._count("rejected.dvl.water_track")
+            self.counters.rejected("dvl", "water_track")
             return
         if s.fom_mps is not None and s.fom_mps > self.dvl_max_fom:
-            self._count("rejected.dvl.fom")
+            self.counters.rejected("dvl", "fom")
             self._unused(s, "dvl", 3, "fom")
             return
         self._t_aided = s.t
         r = max(s.fom_mps, DVL_FOM_FLOOR_MPS) ** 2 if s.fom_mps else self.r_dvl
-        self.filter.update_body_velocity(np.array([s.vx, s.vy, s.vz]), r, t=s.t,
-                                         source=s.source)
+        self.counters.update("dvl", self.filter.update_body_velocity(
+            np.array([s.vx, s.vy, s.vz]), r, t=s.t, source=s.source))
 
     def _on_attitude(self, s: Attitude) -> None:
         """Roll, pitch and yaw; the yaw with the variance ``YAW_UNSELECTED_VAR`` (no
         information) when the source selector chose another heading source."""
         R_meas = euler_to_matrix(s.roll_rad, s.pitch_rad, s.yaw_rad)
-        self.filter.update_attitude(R_meas, s.roll_rad, s.pitch_rad, self.r_att,
-                                    self.r_att_yaw if s.yaw_selected else YAW_UNSELECTED_VAR,
-                                    t=s.t, source=s.source)
+        self.counters.update("attitude", self.filter.update_attitude(
+            R_meas, s.roll_rad, s.pitch_rad, self.r_att,
+            self.r_att_yaw if s.yaw_selected else YAW_UNSELECTED_VAR, t=s.t, source=s.source))
 
     def _on_heading(self, s: Heading) -> None:
         meas = s.heading_rad
-        self.filter.update_heading(meas, self.r_head, t=s.t, source=s.source)
+        self.counters.update("heading", self.filter.update_heading(
+            meas, self.r_head, t=s.t, source=s.source))
 
     # ------------------------------------------------------------------ Pipeline API
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
@@ -494,7 +572,7 @@ class Eseso:
         if not f.initialized:
             return {}
         if not np.all(np.isfinite(f.P)) or not np.all(np.isfinite(f.p)):
-            self._count("diverged")
+            self.counters.diverged()
             self.__init__(self.cfg, self._sensors)  # type: ignore[misc]
             return {}
         return self.estimates()
@@ -542,17 +620,13 @@ class Eseso:
         pending.clear()
         return out
 
-    def health(self) -> Mapping[str, float]:
-        """The event counters: ``fused.<channel>``, ``rejected.<channel>.gate``,
-        ``recovered.<channel>``, ``thrust.downweighted``, ``rejected.<stream>.<reason>``
-        of the sample handling, ``imu_gap``, ``diverged``; and ``noise_scale.<channel>``,
-        the variance scale the innovations put on each sensor channel's configured noise
-        (1 = as configured), ``noise_scale.imu`` that of the IMU's noise (from the DVL's
-        innovations)."""
-        out = {k: float(v) for k, v in self.counters.items()}
-        out.update({f"noise_scale.{ch}": v for ch, v in self.filter.noise_scale.items()})
-        out["noise_scale.imu"] = self.filter.process_scale
-        return out
+    def health(self) -> EsesoHealth:
+        """The event counts (:class:`EsesoCounters`: ``fused.<channel>``,
+        ``rejected.<channel>.gate``, ``recovered.<channel>``, ``thrust.downweighted``,
+        ``rejected.<stream>.<reason>`` of the sample handling, ``imu_gap``, ``diverged``)
+        and the noise scales the filter learnt from its innovations."""
+        f = self.filter
+        return EsesoHealth(self.counters.as_dict(), dict(f.noise_scale), f.process_scale)
 
     def get_state(self) -> dict[str, Any]:
         """Sensor biases, gravity and the disturbance (worth keeping across a restart)."""

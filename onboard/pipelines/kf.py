@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from onboard.core.config import Config
 from onboard.core.pipeline_config import KfAxisConfig, KfConfig
+from onboard.core.vehicles import traits
 from onboard.estimators.axis_model import AxisModel
 from onboard.estimators.increment_filter import IncrementFilter
 from onboard.estimators.input_models import CommandedInput
@@ -52,6 +53,6 @@ def build(cfg: KfConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,
 def create(cfg: Config) -> SurgeHeadingPipeline | None:
     """Pipeline ``kf`` wherever ``aie`` applies, from ``[pipelines.kf]`` (``enabled =
     false`` is honoured by the pipeline registry)."""
-    if cfg.vehicle.vehicle_class in ("bluerov2", "spheroid"):
+    if not traits(cfg.vehicle.vehicle_class).surge_heading_model:
         return None
     return build(cfg.pipelines.kf, *sensor_noise(cfg))

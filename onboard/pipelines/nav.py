@@ -23,6 +23,7 @@ from onboard.core.messages import (
     Sample,
     VelocityOverGround,
 )
+from onboard.pipelines.base import NoHealth, Pipeline
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used; the
@@ -30,8 +31,11 @@ engine's source selector lets one heading source through, and an ``Attitude`` wh
 it did not select (``yaw_selected`` False) gives no heading."""
 
 
-class NavTrack:
-    """Latest measured position, heading, speed and depth (pipeline ``nav``)."""
+class NavTrack(Pipeline):
+    """Latest measured position, heading, speed and depth (pipeline ``nav``).
+
+    It declares no roles: its position and speed are the measurements the estimates are
+    checked against, not estimates; ``frame`` is the local frame about its first fix."""
 
     name = "nav"
     columns = ("north", "east", "speed", "course", "heading", "v_north", "v_east", "depth")
@@ -102,9 +106,9 @@ class NavTrack:
         """None: the measured track makes no measurement update."""
         return []
 
-    def health(self) -> Mapping[str, float]:
+    def health(self) -> NoHealth:
         """Nothing: the measured track has no filter to report on."""
-        return {}
+        return NoHealth()
 
     def get_state(self) -> dict[str, Any]:
         """Nothing: the measured track keeps no adaptive state."""

@@ -39,6 +39,8 @@ import math
 from collections import deque
 from typing import Any, Callable, Literal, Mapping, Sequence
 
+import msgspec
+
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame, wrap_pi
 from onboard.core.messages import (
@@ -66,7 +68,7 @@ from onboard.estimators.measurement_points import (
     finite_positive,
 )
 from onboard.estimators.reconstruction import Point, TrackReconstruction
-from onboard.pipelines.base import unused_measurement
+from onboard.pipelines.base import Pipeline, unused_measurement
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used."""
@@ -104,12 +106,73 @@ AxisRetune = Callable[[IncrementFilter, Any, bool], None]
 the measurement set, with (``doppler``) or without a Doppler speed."""
 
 
-class SurgeHeadingPipeline:
+class AxisHealth(msgspec.Struct, frozen=True):
+    """One axis filter's counters (:class:`IncrementFilter`)."""
+
+    steps: int
+    """Increment updates."""
+    rejected: int
+    """Increments skipped as outliers (beyond ``nis_gate``)."""
+    diverged: int
+    """Divergences of its input model (each restarts the input estimate)."""
+    restarts: int
+    """Restarts of its chain (a silence longer than ``max_gap_s``)."""
+
+    @classmethod
+    def of(cls, f: IncrementFilter) -> AxisHealth:
+        """The counters of axis filter ``f``."""
+        return cls(f.steps, f.rejected, f.diverged, f.restarts)
+
+
+class SurgeHeadingHealth(msgspec.Struct, frozen=True):
+    """The health of an ``aie`` or ``kf`` pipeline (:meth:`SurgeHeadingPipeline.health`)."""
+
+    surge: AxisHealth
+    heading: AxisHealth
+    rate_steps: int
+    """Doppler speed updates of the surge axis."""
+    rate_rejected: int
+    """Doppler speeds skipped as outliers or left out (sign unknown)."""
+    accuracy_rejected: int
+    """Fixes and speeds whose reported accuracy was not a positive number."""
+    doppler_set: bool
+    """The ``"auto"`` parameters in use are the Doppler set (else the no-Doppler set)."""
+    set_switches: int
+    """Switches of the measurement set so far."""
+    surge_input: dict[str, float]
+    """What the surge axis's input model reports (AIE: ``input``, ``V_d``,
+    ``theta_norm``)."""
+    heading_input: dict[str, float]
+    """What the heading axis's input model reports."""
+
+    def flat(self) -> dict[str, float]:
+        """``surge.steps`` ... ``heading.restarts``, ``surge.rate_steps``,
+        ``surge.rate_rejected``, ``surge.accuracy_rejected``, ``tuned_set.doppler`` (1 or
+        0), ``tuned_set.switches``, then each axis's input model's by
+        ``<axis>.<name>``."""
+        h: dict[str, float] = {}
+        for nm, ax in (("surge", self.surge), ("heading", self.heading)):
+            h[f"{nm}.steps"] = float(ax.steps)
+            h[f"{nm}.rejected"] = float(ax.rejected)
+            h[f"{nm}.diverged"] = float(ax.diverged)
+            h[f"{nm}.restarts"] = float(ax.restarts)
+        h["surge.rate_steps"] = float(self.rate_steps)
+        h["surge.rate_rejected"] = float(self.rate_rejected)
+        h["surge.accuracy_rejected"] = float(self.accuracy_rejected)
+        h["tuned_set.doppler"] = float(self.doppler_set)
+        h["tuned_set.switches"] = float(self.set_switches)
+        for nm, inp in (("surge", self.surge_input), ("heading", self.heading_input)):
+            h.update({f"{nm}.{k}": v for k, v in inp.items()})
+        return h
+
+
+class SurgeHeadingPipeline(Pipeline):
     """Surge and heading filters with trajectory reconstruction (``aie`` or ``kf``).
 
     ``columns``: north, east (m from the first fix), heading (rad, [0, 2 pi)), speed
     (m/s), yaw_rate (rad/s), their one-sigma ``std_*``, and for AIE surge_input (m/s^2)
-    and yaw_input (rad/s^2).
+    and yaw_input (rad/s^2). Roles: ``north``/``east`` a position, ``speed`` the path
+    speed over ground (:class:`~onboard.pipelines.base.Pipeline`).
 
     Attributes:
         surge, yaw: the axis filters (:class:`IncrementFilter`).
@@ -117,6 +180,9 @@ class SurgeHeadingPipeline:
         commands: the command history (:class:`CommandHistory`).
         frame: the local frame about the first fix (None before it).
     """
+
+    position = ("north", "east")
+    speed = ("speed",)
 
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
                  gnss_std_m: float, heading_std_rad: float, factory: AxisFactory,
@@ -499,25 +565,15 @@ class SurgeHeadingPipeline:
             ax.innovations.clear()
         return out
 
-    def health(self) -> Mapping[str, float]:
-        """Per axis its counters (updates, skipped outliers, input-model divergences,
-        restarts) and the Doppler row's; the measurement set of the ``"auto"`` parameters
-        (``tuned_set.doppler`` 1 or 0) and its switches; then what the input model
-        reports."""
-        h: dict[str, float] = {}
-        for nm, ax in self._axes():
-            h[f"{nm}.steps"] = float(ax.steps)
-            h[f"{nm}.rejected"] = float(ax.rejected)
-            h[f"{nm}.diverged"] = float(ax.diverged)
-            h[f"{nm}.restarts"] = float(ax.restarts)
-        h["surge.rate_steps"] = float(self.surge.rate_steps)
-        h["surge.rate_rejected"] = float(self.surge.rate_rejected)
-        h["surge.accuracy_rejected"] = float(self._acc_bad)
-        h["tuned_set.doppler"] = float(self.doppler)
-        h["tuned_set.switches"] = float(self.set_switches)
-        for nm, ax in self._axes():
-            h.update({f"{nm}.{k}": v for k, v in ax.input_health().items()})
-        return h
+    def health(self) -> SurgeHeadingHealth:
+        """Per axis its counters and the Doppler row's, the fixes of unusable accuracy,
+        the measurement set of the ``"auto"`` parameters and its switches, and what each
+        input model reports."""
+        surge, yaw = self.surge, self.yaw
+        return SurgeHeadingHealth(
+            AxisHealth.of(surge), AxisHealth.of(yaw), surge.rate_steps, surge.rate_rejected,
+            self._acc_bad, self.doppler, self.set_switches, surge.input_health(),
+            yaw.input_health())
 
     def get_state(self) -> dict[str, Any]:
         """The axis models in use and what the input models learned (JSON-safe)."""

@@ -382,7 +382,7 @@ class Service:
     def _origin(self, pipeline: str) -> tuple[float, float] | None:
         """(lat, lon) in degrees of the local origin of ``pipeline``'s positions."""
         for p in self.engine.pipelines:
-            frame = getattr(p, "frame", None) if p.name == pipeline else None
+            frame = p.frame if p.name == pipeline else None
             if frame is not None:
                 return frame.lat0, frame.lon0
         return None

@@ -46,6 +46,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from onboard.drivers.mavlink_link import AutopilotLink
 from onboard.drivers.transports import Transport
 from onboard.core.config import Config, SourceConfig
+from onboard.core.vehicles import traits
 from onboard.service.signing import SigningState
 
 log = logging.getLogger(__name__)
@@ -66,7 +67,6 @@ SYNC_PERIOD_S = 10.0
 """TIMESYNC requests: three 1 s apart after (re)connecting, then every 10 s."""
 ACTUATOR_RATE_HZ = 10.0
 """Requested rate of the actuator outputs, depth and INS velocity (Hz)."""
-UNDERWATER = {"bluerov2", "torpedo-auv", "spheroid", "glider"}
 
 STREAM_GROUPS: dict[str, int] = {
     "SCALED_IMU": 1, "RAW_IMU": 1, "SCALED_IMU2": 1, "SCALED_IMU3": 1,
@@ -113,7 +113,7 @@ def needed_streams(cfg: Config, src: SourceConfig) -> dict[str, float]:
     for m in maps:
         if m.source in by_source:
             out[by_source[m.source]] = ACTUATOR_RATE_HZ
-    if cfg.vehicle.vehicle_class in UNDERWATER:
+    if traits(cfg.vehicle.vehicle_class).underwater:
         out["SCALED_PRESSURE2"] = ACTUATOR_RATE_HZ
         out["GLOBAL_POSITION_INT"] = ACTUATOR_RATE_HZ
     for name, hz in src.streams.items():
@@ -246,8 +246,8 @@ class MavlinkSession:
                       f"{link.component_id}, type {link.mav_type}, autopilot {link.autopilot}"
                       + ("; requesting streams" if self.src.request_streams else ""))
         vclass = self.cfg.vehicle.vehicle_class
-        expect = {12} if vclass in UNDERWATER else {10, 11} if vclass != "unknown" else None
-        if expect is not None and link.mav_type not in expect and why == "found":
+        expect = traits(vclass).heartbeat_mav_types
+        if expect and link.mav_type not in expect and why == "found":
             self.on_event(f"{self.name}: the autopilot says MAV_TYPE {link.mav_type}, "
                           f"the configuration class {vclass} (expected {sorted(expect)})")
         if self.src.request_streams:

@@ -365,9 +365,9 @@ def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | Non
     frame = pa.frame or LocalFrame(float(run.lat[0]), float(run.lon[0]))
     ne = np.array([frame.to_ne(a, b) for a, b in zip(run.lat, run.lon)])
     res["gps.north"], res["gps.east"] = ne[:, 0], ne[:, 1]
-    res["health.surge.diverged"] = np.array([pa.health()["surge.diverged"]])
-    res["health.heading.diverged"] = np.array([pa.health()["heading.diverged"]])
-    res["health.tuned_set.doppler"] = np.array([p.health()["tuned_set.doppler"]
+    res["health.surge.diverged"] = np.array([pa.health().flat()["surge.diverged"]])
+    res["health.heading.diverged"] = np.array([pa.health().flat()["heading.diverged"]])
+    res["health.tuned_set.doppler"] = np.array([p.health().flat()["tuned_set.doppler"]
                                                 for p in (pa, pk)])
     return res
 

@@ -41,6 +41,7 @@ from onboard.core.messages import (
 )
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
+from onboard.pipelines.base import NoHealth, Pipeline
 
 
 class NotEnoughData(ValueError):
@@ -60,7 +61,7 @@ the test part is the last fifth, and each part needs
 figure, by :func:`from_log` below :data:`MIN_TICKS` and by the split above it."""
 
 
-class _Collector:
+class _Collector(Pipeline):
     """A pipeline that records the newest measured value of each channel per tick."""
 
     name = "collect"
@@ -145,8 +146,8 @@ class _Collector:
     def innovations(self) -> list:
         return []
 
-    def health(self) -> Mapping[str, float]:
-        return {}
+    def health(self) -> NoHealth:
+        return NoHealth()
 
     def get_state(self) -> dict[str, Any]:
         return {}
