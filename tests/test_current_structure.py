@@ -83,6 +83,23 @@ def _identification(configured=BOAT_TRUE, **kw) -> ModelIdentification:
 # --------------------------------------------------------------------------- joint filter
 
 
+def test_the_current_keys_reach_the_identification_and_the_joint_filter():
+    """Each ``[pipelines.current]`` key with a unit suffix reaches the estimator argument
+    it sets (the estimators keep the symbol's name, the configuration adds the unit)."""
+    pipe = current_pipeline(
+        "rudder-boat", identify_max_current_std_mps=0.15, identify_min_rate_rps=0.05,
+        identify_min_speed_mps=0.3, max_speed_through_water_mps=8.0,
+        prior_accel_std_mps2=0.4, accel_std_mps2=0.03, current_walk_mps_rts=0.02,
+        initial_current_std_mps=0.8)
+    ident, kf = pipe.identification, pipe.kf
+    assert (ident.identify_max_current_std, ident.identify_min_rate,
+            ident.identify_min_speed) == (0.15, 0.05, 0.3)
+    assert (kf.max_speed_through_water, kf.prior_accel_std, kf.accel_std, kf.current_walk,
+            kf.init_current_std) == (8.0, 0.4, 0.03, 0.02, 0.8)
+    default = current_pipeline("rudder-boat")  # negative control: the defaults differ
+    assert (default.kf.accel_std, default.identification.identify_min_rate) == (0.02, 0.03)
+
+
 def test_the_joint_kalman_filter_finds_the_current_without_the_pipeline():
     """Driven directly with a known model: the current is found, and the exposed
     innovation, its covariance and NIS are those of the update's own equations."""
