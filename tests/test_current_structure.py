@@ -39,12 +39,14 @@ IDENTIFICATION = {
     "identify_min_rate": 0.03, "identify_after_turn_s": 30.0, "identify_straight": False,
     "identify_min_speed": 0.2, "yaw_rls_p0": 1e6, "yaw_forgetting": 0.9995,
     "svf_cutoff_hz": 0.3, "heading_memory_s": 300.0, "heading_diversity": 0.85}
-"""The ``[pipelines.current]`` defaults of the identification."""
+"""The ``[pipelines.current]`` defaults of the identification, as its arguments (the
+estimator names the symbol, the configuration adds the unit: ``identify_min_rate_rps``)."""
 
 FILTER = {"init_current_std": 1.0, "current_walk": 0.01, "accel_std": 0.02,
           "model_error_time_s": 1.0, "turn_accel_gain": 1.0, "prior_accel_std": 0.3,
           "gate_nis": 30.0, "calibrate": True, "calibrate_block": 50}
-"""The ``[pipelines.current]`` defaults of the joint Kalman filter."""
+"""The ``[pipelines.current]`` defaults of the joint Kalman filter, as its arguments
+(``init_current_std`` is ``initial_current_std_mps`` in the configuration)."""
 
 
 def _rot2(yaw: float) -> np.ndarray:
@@ -430,7 +432,7 @@ def test_the_pipeline_reports_its_variants_estimate(observer):
         else:
             continue
         for ax, e in zip(("north", "east", "down"), expect):
-            if ax in out:  # absent while unknown (one-sigma above unknown_above_std)
+            if ax in out:  # absent while unknown (one-sigma above unknown_above_std_mps)
                 assert out[ax] == e
     assert pipe.kf.counters.updates > 100
     assert (pipe.hgo is not None) == (observer == "hgo")
