@@ -160,8 +160,9 @@ def simulate(controller: str, duration: float = 240.0, seed: int = 0,
     """Fly the circle with ``controller`` (``pid``, ``nmpc``, ``nmpc-of``, ``ampc``) for
     ``duration`` simulated seconds; returns (report, time series). ``eseso_overrides`` are
     ``[pipelines.eseso]`` keys (its nested tables merged key by key:
-    ``{"process": {"thrust_rel_std": 0.2}}``); ``mismatch`` a :mod:`sitl.mismatch` case applied to the
-    plant and the sensors (the ESESO and the controller keep the nominal model and noise);
+    ``{"process": {"thrust_rel_std": 0.2}}``); ``mismatch`` a :mod:`sitl.mismatch` case
+    applied to the plant and the sensors (the ESESO and the controller keep the nominal
+    model and noise);
     ``collect_nis`` adds the mean NIS of every ESESO update per channel (its innovation
     records, gated updates included) to the report (``nis``: ``{channel: {"mean", "n",
     "dim"}}``); ``controller_kw`` go to the controller's constructor."""

@@ -546,9 +546,9 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Inflate the process noise when the innovation NIS says it is too small."""
     calibrate_block: int = 50
     """Innovations averaged per calibration block (whiteness test)."""
-    hgo: HgoConfig = HgoConfig()
+    hgo: HgoConfig = msgspec.field(default_factory=HgoConfig)
     """``[pipelines.current.hgo]``: the high-gain observer."""
-    flow: FlowObserverConfig = FlowObserverConfig()
+    flow: FlowObserverConfig = msgspec.field(default_factory=FlowObserverConfig)
     """``[pipelines.current.flow]``: the flow observer."""
     unknown_above_std_mps: Annotated[float, msgspec.Meta(gt=0.0)] = 0.3
     """A component of the current whose one-sigma exceeds this (m/s) is published as
@@ -779,15 +779,15 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     0 = plain update."""
     max_imu_gap_s: float = 0.5
     """A longer gap between IMU samples restarts the propagation clock (counted)."""
-    vehicle: EsesoVehicleConfig = EsesoVehicleConfig()
+    vehicle: EsesoVehicleConfig = msgspec.field(default_factory=EsesoVehicleConfig)
     """``[pipelines.eseso.vehicle]``."""
-    thrusters: EsesoThrustersConfig = EsesoThrustersConfig()
+    thrusters: EsesoThrustersConfig = msgspec.field(default_factory=EsesoThrustersConfig)
     """``[pipelines.eseso.thrusters]``."""
-    process: EsesoProcessConfig = EsesoProcessConfig()
+    process: EsesoProcessConfig = msgspec.field(default_factory=EsesoProcessConfig)
     """``[pipelines.eseso.process]``."""
-    noise: EsesoNoiseConfig = EsesoNoiseConfig()
+    noise: EsesoNoiseConfig = msgspec.field(default_factory=EsesoNoiseConfig)
     """``[pipelines.eseso.noise]``."""
-    initial: EsesoInitialConfig = EsesoInitialConfig()
+    initial: EsesoInitialConfig = msgspec.field(default_factory=EsesoInitialConfig)
     """``[pipelines.eseso.initial]``."""
 
 

@@ -237,11 +237,11 @@ GAVIA_ID_SECTION = {**CALM_SECTION, "accel_std_mps2": 0.002, "prior_accel_std_mp
   0.0012 / 0.0016 / 0.0005 m/s^2 in surge / sway / heave with the plant's coefficients on
   the rpm-steps run), for every DOF. With a mission's ``accel_std_mps2`` (0.02) and the
   generic prior's ``prior_accel_std_mps2`` (0.3, which a straight run never lifts: the
-  turn terms keep a DOF's coefficient trace at its prior) the velocity is a random walk the coefficients
-  barely explain (the rpm-steps run: ``u|u|``, ``n|n|`` +-0.035, 15 % towards the prior's
-  zero), and the joint filter reads its own velocity noise, which reverts to the mean at
-  the next measurement, as damping (started at the plant's coefficients it drifts heave
-  ``uw`` from -0.43 to -1.65);
+  turn terms keep a DOF's coefficient trace at its prior) the velocity is a random walk
+  the coefficients barely explain (the rpm-steps run: ``u|u|``, ``n|n|`` +-0.035, 15 %
+  towards the prior's zero), and the joint filter reads its own velocity noise, which
+  reverts to the mean at the next measurement, as damping (started at the plant's
+  coefficients it drifts heave ``uw`` from -0.43 to -1.65);
 * the sway DOF configured at the generic prior's damping (``uv`` -0.8, no crabbing; held
   within ``model_rel_std``): a straight run does not excite sway (``v_r`` stays at
   0.006 m/s), and unconstrained the filter's noise bias made ``uv`` -6.9 (the plant's
