@@ -139,12 +139,12 @@ def eseso_engine(start_north: float, start_east: float, plant: BlueROV2 | BlueRO
     data = msgspec.to_builtins(onboard_config.load("bluerov2"))
     section = data["pipelines"]["eseso"]
     pp = plant if isinstance(plant, BlueROV2Params) else plant.params
-    section.update(initial_north_m=start_north, initial_east_m=start_east,
-                   mass_kg=pp.m, added_mass=list(pp.added_mass[:3]),
-                   damping_linear=[-d for d in pp.d_lin[:3]],
-                   damping_quadratic=[-d for d in pp.d_quad[:3]],
-                   weight_n=pp.weight, buoyancy_n=pp.buoyancy, cg_z_m=pp.z_g)
-    section.update(overrides or {})
+    section["initial"].update(north_m=start_north, east_m=start_east)
+    section["vehicle"].update(mass_kg=pp.m, added_mass_kg=list(pp.added_mass[:3]),
+                              damping_linear=[-d for d in pp.d_lin[:3]],
+                              damping_quadratic=[-d for d in pp.d_quad[:3]],
+                              weight_n=pp.weight, buoyancy_n=pp.buoyancy, cg_z_m=pp.z_g)
+    data["pipelines"]["eseso"] = onboard_config.merge(section, dict(overrides or {}))
     cfg = onboard_config.from_dict(data)
     engine = Engine(cfg, only={"eseso"})
     if not engine.pipelines:
@@ -159,8 +159,10 @@ def simulate(controller: str, duration: float = 240.0, seed: int = 0,
              **controller_kw: Any) -> tuple[dict[str, Any], RunLog]:
     """Fly the circle with ``controller`` (``pid``, ``nmpc``, ``nmpc-of``, ``ampc``) for
     ``duration`` simulated seconds; returns (report, time series). ``eseso_overrides`` are
-    ``[pipelines.eseso]`` keys; ``mismatch`` a :mod:`sitl.mismatch` case applied to the
-    plant and the sensors (the ESESO and the controller keep the nominal model and noise);
+    ``[pipelines.eseso]`` keys (its nested tables merged key by key:
+    ``{"process": {"thrust_rel_std": 0.2}}``); ``mismatch`` a :mod:`sitl.mismatch` case
+    applied to the plant and the sensors (the ESESO and the controller keep the nominal
+    model and noise);
     ``collect_nis`` adds the mean NIS of every ESESO update per channel (its innovation
     records, gated updates included) to the report (``nis``: ``{channel: {"mean", "n",
     "dim"}}``); ``controller_kw`` go to the controller's constructor."""

@@ -60,7 +60,7 @@ def test_rls_kernel_reports_a_non_positive_gamma() -> None:
 def _axis_run(sig: float, n: int = 400, seed: int = 0, **over):
     """AIE on one exact §1.2 axis, MA(1) GPS-like noise of std ``sig`` per point."""
     rng = np.random.default_rng(seed)
-    top = msgspec.convert({"nis_gate": 1e9, "divergence_nis": 1e9}, AieConfig)
+    top = msgspec.convert({"gate_nis": 1e9, "divergence_nis": 1e9}, AieConfig)
     ac = msgspec.structs.replace(top.surge, **over)
     ax = axis_filter(AxisModel(1.0, 3.0), ac, top)
     k = discretize(1.0, 1.0)

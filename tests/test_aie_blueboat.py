@@ -53,7 +53,7 @@ def test_aie_on_held_out_runs(runs, models) -> None:
             acc.setdefault(k, []).append(v)
     m = {k: float(np.mean(v)) for k, v in acc.items()}
     print(m)
-    # measured (mean of the 8 test runs, gnss_std_m = 0.1: the logged positions are the
+    # measured (mean of the 8 test runs, gnss_position_std_m = 0.1: the logged positions are the
     # autopilot's smoothed track; the no-Doppler set): speed AIE 0.085 vs KF 0.078
     # m/s against the logged surge (a tie, the KF ahead; at the hand-tuned defaults
     # 0.094 vs 0.093), raw speed from consecutive fixes 0.134 (better on 6 of 8 runs,

@@ -91,7 +91,7 @@ def test_published_position_sigma_covers_the_truth(jaiabot) -> None:
     c1k, c2k = _position_coverage(jaiabot, "kf")
     print(f"coverage aie {c1a:.3f}/{c2a:.3f} kf {c1k:.3f}/{c2k:.3f}")
     # measured seed 1: aie 0.95 / 1.00, kf 0.95 / 1.00: conservative since the Doppler
-    # speed made the track ~2x better (0.98 m RMS) while the gnss_std_m floor (1.5 m,
+    # speed made the track ~2x better (0.98 m RMS) while the gnss_position_std_m floor (1.5 m,
     # the configured one-fix sigma) stayed; the Gaussian 0.68 / 0.95 is not met
     for c1, c2 in ((c1a, c2a), (c1k, c2k)):
         assert c2 >= 0.85

@@ -74,15 +74,16 @@ def test_pipeline_tables_are_decoded_when_the_config_loads():
 
 @pytest.mark.parametrize("table, key", [
     ({"aei": {}}, "pipelines.aei"),
-    ({"diagnose": {"known": {}}}, "pipelines.diagnose"),
-    ({"aie": {"surge": {"kf_v_d": 1.0}}}, "pipelines.aie.surge.kf_v_d"),
-    ({"aie": {"heading": {"kf_bias_q": 0.0}}}, "pipelines.aie.heading.kf_bias_q"),
     ({"kf": {"adaptive": True}}, "pipelines.kf.adaptive"),
     ({"nav": {"stale_s": 2.0}}, "pipelines.nav.stale_s"),
     ({"eseso": {"mass_kgg": 3.0}}, "pipelines.eseso.mass_kgg"),
+    ({"eseso": {"vehicle": {"mass_kgg": 3.0}}}, "pipelines.eseso.vehicle.mass_kgg"),
+    ({"current": {"hgo": {"gama": 1.0}}}, "pipelines.current.hgo.gama"),
+    ({"current": {"flow": {"pitch_rad": 1.0}}}, "pipelines.current.flow.pitch_rad"),
 ])
 def test_unknown_pipeline_name_or_key_is_an_error_naming_the_file_and_key(tmp_path, table,
                                                                            key):
+    """A key that never existed (a renamed one names its new one: test_config_renames.py)."""
     import tomllib
 
     f = tmp_path / "overlay.toml"

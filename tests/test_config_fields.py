@@ -11,7 +11,9 @@ reachable from it and every field:
 * (b) exercised: its TOML name appears as a key in some test (``"name"``, ``name =``,
   ``name=`` or ``.name`` in ``tests/**/*.py``) or bundled test configuration
   (``tests/**/*.toml``). Like python-control's, the check is textual: it finds fields no
-  test mentions at all, the ones most likely to be silently ignored.
+  test mentions at all, the ones most likely to be silently ignored;
+* (c) named by the rule (onboard/core/pipeline_config.py): every numeric key of a pipeline
+  table ends in its unit, or :data:`NO_UNIT_SUFFIX` says why not.
 
 Each checker has a negative control.
 """
@@ -126,6 +128,62 @@ def test_every_config_field_is_exercised_by_a_test(cls):
     missing = [n for n in unexercised_fields(cls, corpus_of_tests())
                if f"{cls.__name__}.{n}" not in NOT_EXERCISED]
     assert missing == []
+
+
+UNIT_SUFFIX = re.compile(r"_(s|m|mps|mps2|rad|rps|deg|n|kg|hz|us|mb|kgm3|pa|cc)(_rts)?$")
+"""The unit suffixes of the naming rule (onboard/core/pipeline_config.py, README
+"Configuration"); ``_rts``: a random walk's, per root second."""
+
+NO_UNIT_SUFFIX: dict[str, str] = {
+    **dict.fromkeys((
+        "heading_anchor", "position_anchor", "gate_nis", "adaptive_window",
+        "divergence_input", "divergence_nis", "n_c", "n_f", "r_z", "r_d", "r_theta", "lam",
+        "model_rel_std", "net_weight_std", "forgetting", "heading_diversity",
+        "turn_accel_gain", "yaw_forgetting", "calibrate_block", "restore_check_p",
+        "gate_sigma", "max_consecutive_rejects", "thrust_huber", "allocation", "exponent",
+        "deadband", "damping_rel_std", "thrust_rel_std", "adapt_updates", "scale_max",
+        "thrust_scale_max"), "dimensionless"),
+    **dict.fromkeys((
+        "a", "gain", "offset", "u_max", "u_scale", "v_d", "q_v", "bias_q", "gamma",
+        "gamma_0", "rho", "gamma_max", "poles", "lift_kl", "lift_kl0", "drag_kd0", "drag_kd",
+        "theta_std", "theta_std_floor", "model", "yaw_rls_p0"), "symbol, unit in its docstring"),
+    **dict.fromkeys(("damping_linear", "damping_quadratic"), "compound unit (N s/m, N s^2/m^2)"),
+    "rpm_scale": "its unit, rpm, is its first word",
+}
+"""The numeric keys of the pipeline tables without a unit suffix, and why (the rule's
+exceptions, onboard/core/pipeline_config.py)."""
+
+
+def keys_without_unit(structs: list[type]) -> list[str]:
+    """``Struct.key`` of every numeric field (a number, or a list or table of numbers) of
+    ``structs`` whose key ends in no unit suffix and is not in :data:`NO_UNIT_SUFFIX`."""
+    out = []
+    for cls in structs:
+        hints = typing.get_type_hints(cls)
+        for f in msgspec.structs.fields(cls):
+            numeric = re.search(r"\b(float|int)\b", str(hints[f.name]))
+            if (numeric and not UNIT_SUFFIX.search(f.encode_name)
+                    and f.encode_name not in NO_UNIT_SUFFIX):
+                out.append(f"{cls.__name__}.{f.encode_name}")
+    return out
+
+
+def test_every_numeric_pipeline_key_ends_in_its_unit_or_says_why_not():
+    from onboard.core.pipeline_config import Pipelines
+
+    structs = reachable_structs(Pipelines)
+    assert keys_without_unit(structs) == []
+    keys = {f.encode_name for cls in structs for f in msgspec.structs.fields(cls)}
+    assert set(NO_UNIT_SUFFIX) <= keys  # no stale exception
+
+
+def test_negative_control_a_key_without_its_unit_is_caught():
+    class _Walk(msgspec.Struct, kw_only=True):
+        current_walk: float = 0.01
+        current_walk_mps_rts: float = 0.01
+        gate_nis: float = 30.0
+
+    assert keys_without_unit([_Walk]) == ["_Walk.current_walk"]
 
 
 def test_allow_list_names_real_fields():

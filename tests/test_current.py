@@ -72,7 +72,8 @@ def test_torpedo_hgo_observer_with_increasing_gain():
     # floor 0.02 on the zero terms, 2 % net weight) carried as consider parameters, this
     # low gain, which leans on the model, puts east's one-sigma at 0.58 m/s (unpublished)
     pipe = current_pipeline("torpedo-auv", model=TORPEDO_TRUE, identify=False, observer="hgo",
-                            gamma_0=0.05, rho=0.01, gamma_max=1.29, model_rel_std=0.02,
+                            hgo={"gamma_0": 0.05, "rho": 0.01, "gamma_max": 1.29},
+                            model_rel_std=0.02,
                             theta_std_floor=1e-4, net_weight_std=0.001)
     rms, cover, _, _ = current_errors(pipe, simulate_torpedo(300.0), after=100.0)
     # measured: rms [0.019, 0.035] m/s, coverage 1.0 (one-sigma 0.06 / 0.12, coverage
@@ -164,11 +165,11 @@ def test_the_hgo_model_survives_a_restart():
     into its RLS, apart from the joint filter's; a state without them restores the joint
     filter's into both."""
     import json
-    pipe = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
+    pipe = current_pipeline("rudder-boat", observer="hgo", hgo={"gamma": 0.3})
     pipe.hgo_rls.thetas[0] = pipe.hgo_rls.thetas[0] + 0.01  # as if learned
     pipe.hgo_rls.rls[0].P = 0.5 * pipe.hgo_rls.rls[0].P
     state = json.loads(json.dumps(pipe.get_state()))
-    fresh = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
+    fresh = current_pipeline("rudder-boat", observer="hgo", hgo={"gamma": 0.3})
     fresh.set_state(state)
     assert np.allclose(fresh.hgo_rls.thetas[0], pipe.hgo_rls.thetas[0])
     assert np.allclose(fresh.hgo_rls.rls[0].theta, pipe.hgo_rls.thetas[0])
@@ -177,7 +178,7 @@ def test_the_hgo_model_survives_a_restart():
     assert np.allclose(fresh.hgo_rls.covariance(), pipe.hgo_rls.covariance())
     assert np.allclose(fresh.hgo.theta_cov, pipe.hgo_rls.covariance())
     del state["hgo_thetas"]
-    older = current_pipeline("rudder-boat", observer="hgo", gamma=0.3)
+    older = current_pipeline("rudder-boat", observer="hgo", hgo={"gamma": 0.3})
     older.set_state(state)
     assert np.allclose(older.hgo_rls.thetas[0], older.thetas[0])
     # the joint filter's coefficients come with the joint filter's covariance
@@ -286,7 +287,7 @@ def test_the_hgo_variant_fuses_a_surface_gnss_velocity():
     """The HGO corrects with a horizontal-only over-ground velocity (GNSS at the surface,
     2 components for a 3-D state) through those components; it used to skip every such fix
     and report its initial (zero) current while its over-ground velocity drifted."""
-    pipe, _, out, errors = _surface_run(depth_m=0.1, observer="hgo", gamma=0.05)
+    pipe, _, out, errors = _surface_run(depth_m=0.1, observer="hgo", hgo={"gamma": 0.05})
     # measured (seed 0, fixed gamma 0.05): over-ground RMS error 0.051 / 0.061 m/s (the
     # fixes' noise is 0.05); before: 0.44 / 0.41 m/s with the current stuck at 0. At the
     # bundled gamma* = 6.4 with these 1 Hz fixes and no identified model (mode (b)) the
@@ -302,7 +303,7 @@ def test_the_hgo_variant_runs_on_its_own_identified_model():
     bound. The configured model is 30 % off (surge coefficients x1.3, sway x0.7)."""
     wrong = {ch: {k: v * (1.3 if ch == "surge" else 0.7) for k, v in d.items()}
              for ch, d in BOAT_TRUE.items() if ch != "yaw"}
-    pipe = current_pipeline("rudder-boat", model=wrong, observer="hgo", gamma=0.3)
+    pipe = current_pipeline("rudder-boat", model=wrong, observer="hgo", hgo={"gamma": 0.3})
     rms, cover, _, _ = current_errors(pipe, simulate_boat(150.0), after=90.0)
     assert pipe.counters.hgo_rls_updates > 100 and pipe.identification.rls_updates > 0
     assert any(not np.allclose(a, b) for a, b in zip(pipe.hgo_rls.thetas, pipe.thetas[:2]))

@@ -31,14 +31,16 @@ from onboard.engine.inputs import InputMapper
 
 CURRENT = (-0.2, 0.05)  # north, east (m/s)
 GLIDER = {"lift_kl": 387.6, "lift_kl0": 0.0, "drag_kd0": 7.72, "drag_kd": 539.8,
-          "density": 1029.0, "neutral_pump_cc": 0.0, "vertical_water_std": 0.02,
-          "glide_angle_std": 0.035, "min_glide_angle": 0.21, "max_depth_interval_s": 30.0,
+          "water_density_kgm3": 1029.0, "neutral_pump_cc": 0.0,
+          "vertical_water_std_mps": 0.02, "glide_angle_std_rad": 0.035,
+          "min_glide_angle_rad": 0.21, "max_depth_interval_s": 30.0,
           "hold_s": 300.0}
 
 
 def _config(glider: dict | None):
     data = msgspec.to_builtins(load("torpedo-auv"))
-    sec: dict = {"identify": False, "dvl_velocity_std": 0.1, "current_walk": 0.01}
+    sec: dict = {"identify": False, "dvl_velocity_std_mps": 0.1,
+                 "current_walk_mps_rts": 0.01}
     if glider is not None:
         sec["glider"] = glider
     data["pipelines"] = {"current": sec}

@@ -43,7 +43,7 @@ def degraded_boat(report_accuracy: bool, seed: int = 0, duration: float = 240.0,
 
 
 def _run(report_accuracy: bool, seed: int = 0, speed_accuracy: bool = False):
-    pipe = current_pipeline("rudder-boat", gnss_velocity_std=0.05,
+    pipe = current_pipeline("rudder-boat", gnss_velocity_std_mps=0.05,
                             gnss_nominal_accuracy_m=1.5)
     errs = []
     nis = []  # of every velocity update in the window, gated ones included
@@ -77,7 +77,7 @@ def test_fixes_reporting_a_poor_accuracy_are_down_weighted(speed_accuracy):
 
 
 def test_accuracy_scaling_never_tightens_and_falls_back_to_the_configured_noise():
-    pipe = current_pipeline("rudder-boat", gnss_velocity_std=0.1,
+    pipe = current_pipeline("rudder-boat", gnss_velocity_std_mps=0.1,
                             gnss_nominal_accuracy_m=1.5)
     meas: list = []
     for acc, expect in ((0.02, 0.1), (3.0, 0.2), (None, 0.1), (math.nan, 0.1), (-1.0, 0.1)):
@@ -88,7 +88,7 @@ def test_accuracy_scaling_never_tightens_and_falls_back_to_the_configured_noise(
         pipe.samples._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
                               h_acc_m=3.0, speed_acc_mps=sacc), meas)
         assert meas[-1][3] == pytest.approx(expect)
-    off = current_pipeline("rudder-boat", gnss_velocity_std=0.1, gnss_nominal_accuracy_m=0.0)
+    off = current_pipeline("rudder-boat", gnss_velocity_std_mps=0.1, gnss_nominal_accuracy_m=0.0)
     off.samples._on_gnss(GnssFix(t=0.0, lat_deg=0.0, lon_deg=0.0, sog_mps=1.0, cog_rad=0.0,
                          h_acc_m=30.0), meas)
     assert meas[-1][3] == 0.1

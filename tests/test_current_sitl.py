@@ -74,8 +74,8 @@ def test_spheroid_sawtooth_configured_model_rms_below_3cm():
 def test_spheroid_sawtooth_flow_observer():
     m = runs.current_metrics("spheroid-sawtooth", "flow", 1)  # 600 s, after 100 s
     # measured: rms N/E 0.012 / 0.023 m/s, coverage 0.99 / 0.99 (the KF: 0.006 / 0.010);
-    # with the pitch as a second output (flow_pitch = true) N/E the same to 4 decimals, D
-    # 0.012 against 0.007 (docs/current.md, "Flow observer")
+    # with the pitch as a second output ([pipelines.current.flow] pitch = true) N/E the
+    # same to 4 decimals, D 0.012 against 0.007 (docs/current.md, "Flow observer")
     assert m["north"]["rms"] < 0.1 and m["east"]["rms"] < 0.1
 
 
@@ -186,8 +186,8 @@ def test_gavia_tidal_hgo_runs_at_gamma_star():
     # rms N/E/D 0.022 / 0.016 / 0.015, 0.021 / 0.016 / 0.016, 0.020 / 0.015 / 0.017 m/s,
     # no peaking (the paper vs ADCP: std 0.094 / 0.066 /
     # 0.032); at gamma 1.29 (the former cap): 0.018 / 0.010 / 0.007; the RLS learning at
-    # every sample as in the paper (hgo_identify = "always"): 0.155 / 0.020 / 0.018, a
-    # north bias the along-track ambiguity lets in (docs/current.md, HGO)
+    # every sample as in the paper ([pipelines.current.hgo] identify = "always"): 0.155 /
+    # 0.020 / 0.018, a north bias the along-track ambiguity lets in (docs/current.md, HGO)
     # Its sigma is calibrated both ways (its own model's coefficients as consider
     # parameters, no borrowed q_scale), seed 1: 1-sigma coverage 0.60 / 0.62 / 0.65, 2-sigma
     # 0.91 / 0.92 / 0.94 (with the joint filter's q_scale: 0.95-0.98 / 1.00, too timid)

@@ -39,12 +39,14 @@ IDENTIFICATION = {
     "identify_min_rate": 0.03, "identify_after_turn_s": 30.0, "identify_straight": False,
     "identify_min_speed": 0.2, "yaw_rls_p0": 1e6, "yaw_forgetting": 0.9995,
     "svf_cutoff_hz": 0.3, "heading_memory_s": 300.0, "heading_diversity": 0.85}
-"""The ``[pipelines.current]`` defaults of the identification."""
+"""The ``[pipelines.current]`` defaults of the identification, as its arguments (the
+estimator names the symbol, the configuration adds the unit: ``identify_min_rate_rps``)."""
 
 FILTER = {"init_current_std": 1.0, "current_walk": 0.01, "accel_std": 0.02,
           "model_error_time_s": 1.0, "turn_accel_gain": 1.0, "prior_accel_std": 0.3,
           "gate_nis": 30.0, "calibrate": True, "calibrate_block": 50}
-"""The ``[pipelines.current]`` defaults of the joint Kalman filter."""
+"""The ``[pipelines.current]`` defaults of the joint Kalman filter, as its arguments
+(``init_current_std`` is ``initial_current_std_mps`` in the configuration)."""
 
 
 def _rot2(yaw: float) -> np.ndarray:
@@ -81,6 +83,23 @@ def _identification(configured=BOAT_TRUE, **kw) -> ModelIdentification:
 
 
 # --------------------------------------------------------------------------- joint filter
+
+
+def test_the_current_keys_reach_the_identification_and_the_joint_filter():
+    """Each ``[pipelines.current]`` key with a unit suffix reaches the estimator argument
+    it sets (the estimators keep the symbol's name, the configuration adds the unit)."""
+    pipe = current_pipeline(
+        "rudder-boat", identify_max_current_std_mps=0.15, identify_min_rate_rps=0.05,
+        identify_min_speed_mps=0.3, max_speed_through_water_mps=8.0,
+        prior_accel_std_mps2=0.4, accel_std_mps2=0.03, current_walk_mps_rts=0.02,
+        initial_current_std_mps=0.8)
+    ident, kf = pipe.identification, pipe.kf
+    assert (ident.identify_max_current_std, ident.identify_min_rate,
+            ident.identify_min_speed) == (0.15, 0.05, 0.3)
+    assert (kf.max_speed_through_water, kf.prior_accel_std, kf.accel_std, kf.current_walk,
+            kf.init_current_std) == (8.0, 0.4, 0.03, 0.02, 0.8)
+    default = current_pipeline("rudder-boat")  # negative control: the defaults differ
+    assert (default.kf.accel_std, default.identification.identify_min_rate) == (0.02, 0.03)
 
 
 def test_the_joint_kalman_filter_finds_the_current_without_the_pipeline():
@@ -413,7 +432,7 @@ def test_the_pipeline_reports_its_variants_estimate(observer):
         else:
             continue
         for ax, e in zip(("north", "east", "down"), expect):
-            if ax in out:  # absent while unknown (one-sigma above unknown_above_std)
+            if ax in out:  # absent while unknown (one-sigma above unknown_above_std_mps)
                 assert out[ax] == e
     assert pipe.kf.counters.updates > 100
     assert (pipe.hgo is not None) == (observer == "hgo")

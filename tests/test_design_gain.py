@@ -44,7 +44,8 @@ def test_command_writes_a_gain_the_pipeline_loads(tmp_path):
     from onboard.core.config import from_dict
     from onboard.pipelines.current import create
     cfg = from_dict({"vehicle": {"class": "torpedo-auv"},
-                     "pipelines": {"current": {"observer": "hgo", "gain_file": str(out)}}})
+                     "pipelines": {"current": {"observer": "hgo",
+                                                  "hgo": {"gain_file": str(out)}}}})
     pipe = create(cfg)
     assert pipe.gain is not None and pipe.gain.gamma_star == pytest.approx(data["gamma_star"])
 

@@ -98,8 +98,9 @@ def _hover_samples(xi_true: np.ndarray, duration: float, seed: int = 0) -> list:
     IMU/attitude/depth/DVL with noise."""
     rng = np.random.default_rng(seed)
     cfg = eseso.EsesoConfig()
-    K = np.asarray(cfg.force_allocation)
-    tau = -xi_true - (cfg.weight_n - cfg.buoyancy_n) * np.array([0.0, 0.0, 1.0])
+    K = np.asarray(cfg.thrusters.allocation)
+    net_weight_n = cfg.vehicle.weight_n - cfg.vehicle.buoyancy_n
+    tau = -xi_true - net_weight_n * np.array([0.0, 0.0, 1.0])
     forces = np.linalg.pinv(K) @ tau
     cmds = tuple(float(math.copysign(math.sqrt(abs(x) / (40.0 if x >= 0 else 30.0)), x))
                  for x in forces)
@@ -196,7 +197,8 @@ def test_gnss_is_not_fused_when_submerged_and_bad_samples_are_counted() -> None:
 
 
 def test_gnss_position_and_velocity_are_fused_at_the_surface() -> None:
-    f = eseso.Eseso(eseso.EsesoConfig(initial_position_std_m=10.0))
+    f = eseso.Eseso(msgspec.convert({"initial": {"position_std_m": 10.0}},
+                                    eseso.EsesoConfig))
     rng = np.random.default_rng(5)
     samples = []
     for k in range(200):

@@ -11,11 +11,13 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
 from onboard.core import config
 from onboard.core.messages import Attitude, Depth, Imu
+from onboard.core.pipeline_config import EsesoNoiseConfig, EsesoThrustersConfig
 from onboard.core.so3 import euler_to_matrix
 from onboard.core.stats import chi2_quantile
 from onboard.estimators.eseso_filter import BI, TH, TH_Z, V_, XI, EsesoFilter, Outcome
@@ -28,8 +30,10 @@ GRAVITY_ONLY = np.array([0.0, 0.0, -9.81])
 """Specific force (m/s^2, FRD) of a level vehicle at rest."""
 
 
-def _level_filter(**overrides: object) -> EsesoFilter:
-    f = EsesoFilter(filter_params(EsesoConfig(**overrides)))  # type: ignore[arg-type]
+def _level_filter(**tables: object) -> EsesoFilter:
+    """A filter started level at 20 m with ``[pipelines.eseso]`` keys and tables ``tables``
+    (``noise={"adapt_updates": 0}``)."""
+    f = EsesoFilter(filter_params(msgspec.convert(tables, EsesoConfig)))
     f.initialize(np.eye(3), np.array([0.0, 0.0, 20.0]))
     return f
 
@@ -63,7 +67,7 @@ def test_an_update_keeps_its_innovation_covariance_and_nis() -> None:
 
 
 def test_the_gate_rejects_then_fuses_down_weighted_after_max_consecutive_rejects() -> None:
-    f = _level_filter(max_consecutive_rejects=2, noise_adapt_updates=0)
+    f = _level_filter(max_consecutive_rejects=2, noise={"adapt_updates": 0})
     f.P[2, 2] = 0.01
     var = 0.01
     z = 20.0 + 10.0  # NIS 5000 against the 1-dof gate of 10.83 (GATE_1)
@@ -100,11 +104,15 @@ def test_the_thrust_update_on_the_disturbance_alone_leaves_the_velocity() -> Non
 
 def test_the_pipeline_hands_the_filter_its_configured_noise() -> None:
     cfg = config.load("bluerov2")
-    pipe = Eseso(EsesoConfig(depth_std_m=0.07), cfg.sensors)
+    pipe = Eseso(EsesoConfig(noise=EsesoNoiseConfig(depth_std_m=0.07)), cfg.sensors)
     params = pipe.filter.params
-    assert params.accel_std_mps2 == cfg.sensors.imu.accel_std_mps2
-    assert params.gyro_std_rps == cfg.sensors.imu.gyro_std_rps
-    assert filter_params(EsesoConfig(accel_std_mps2=0.3)).accel_std_mps2 == 0.3
+    assert params.noise.accel_std_mps2 == cfg.sensors.imu.accel_std_mps2
+    assert params.noise.gyro_std_rps == cfg.sensors.imu.gyro_std_rps
+    set_here = EsesoConfig(noise=EsesoNoiseConfig(accel_std_mps2=0.3))
+    assert filter_params(set_here, cfg.sensors).noise.accel_std_mps2 == 0.3
+    # the typed tables reach the filter as they are (the IMU noise resolved)
+    assert (params.vehicle, params.process, params.initial) == (
+        pipe.cfg.vehicle, pipe.cfg.process, pipe.cfg.initial)
     pipe.step(0.0, [Attitude(t=0.0, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0),
                     Depth(t=0.0, depth_m=20.0)])
     pipe.step(0.02, [Imu(t=0.02, accel_x=0.0, accel_y=0.0, accel_z=-9.81, gyro_x=0.0,
@@ -130,7 +138,7 @@ def test_an_attitude_update_moves_the_attitude_by_the_measured_rotation() -> Non
 
 
 def test_the_thrust_curve_is_quadratic_with_separate_reverse_force_and_a_deadband() -> None:
-    c = EsesoConfig(thruster_deadband=0.05)
+    c = EsesoThrustersConfig(deadband=0.05)
     assert thruster_force(1.0, c) == 40.0 and thruster_force(-1.0, c) == -30.0
     assert thruster_force(0.5, c) == pytest.approx(10.0)
     assert thruster_force(0.04, c) == 0.0 and thruster_force(2.0, c) == 40.0

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -17,19 +18,21 @@ GRAVITY_ONLY = np.array([0.0, 0.0, -9.81])
 """Specific force (m/s^2, FRD) of a level vehicle at rest."""
 
 
-def _level_filter(**overrides: object) -> EsesoFilter:
-    f = EsesoFilter(filter_params(EsesoConfig(**overrides)))  # type: ignore[arg-type]
+def _level_filter(**tables: object) -> EsesoFilter:
+    """A filter started level at 20 m with ``[pipelines.eseso]`` keys and tables ``tables``
+    (``noise={"adapt_updates": 0}``)."""
+    f = EsesoFilter(filter_params(msgspec.convert(tables, EsesoConfig)))
     f.initialize(np.eye(3), np.array([0.0, 0.0, 20.0]))
     return f
 
 
 def test_a_change_of_thrust_or_damping_force_adds_its_model_uncertainty_to_xi() -> None:
-    f = _level_filter(damping_rel_std=0.3, thrust_rel_std=0.25)
+    f = _level_filter(process={"damping_rel_std": 0.3, "thrust_rel_std": 0.25})
     f.v = np.array([0.5, 0.0, 0.0])
     assert np.all(f.model_change_var(np.array([20.0, -4.0, 0.0])) == 0.0)  # first update
     f.v = np.array([0.6, 0.0, 0.0])
     var = f.model_change_var(np.array([30.0, -4.0, 0.0]))
-    c = EsesoConfig()
+    c = EsesoConfig().vehicle
     d_x = [(c.damping_linear[0] + c.damping_quadratic[0] * u) * u for u in (0.5, 0.6)]
     # the lumped disturbance carries -dk_t tau + dk_d D(nu) nu: each change times its sigma
     assert var[0] == pytest.approx((0.25 * 10.0) ** 2 + (0.3 * (d_x[1] - d_x[0])) ** 2)
@@ -37,24 +40,24 @@ def test_a_change_of_thrust_or_damping_force_adds_its_model_uncertainty_to_xi() 
 
 
 def test_without_model_uncertainty_xi_keeps_its_random_walk_alone() -> None:
-    f = _level_filter(damping_rel_std=0.0, thrust_rel_std=0.0)
+    f = _level_filter(process={"damping_rel_std": 0.0, "thrust_rel_std": 0.0})
     f.model_change_var(np.zeros(3))
     f.v = np.array([0.5, 0.2, 0.1])
     assert np.all(f.model_change_var(np.ones(3) * 30.0) == 0.0)
 
 
 def test_the_thrust_noise_is_what_the_imu_puts_into_the_thrust_model() -> None:
-    f = _level_filter(thrust_std_n=0.0)
-    c = EsesoConfig()
-    m_vec = c.mass_kg + np.asarray(c.added_mass)
+    f = _level_filter(noise={"thrust_std_n": 0.0})
+    c = EsesoConfig().vehicle
+    m_vec = c.mass_kg + np.asarray(c.added_mass_kg)
     dt = 0.02
     R = f.thrust_noise(dt)
     # accelerometer noise through M, and the differenced gyro through the CG lever m z_G:
     # 0.65 N and 0.80 N on x, 1.03 N together (the residual on bluerov2-circle, seed 1:
     # 1.14 N RMS)
-    cg = (c.mass_kg * c.cg_z_m) ** 2 * 2.0 * f.params.gyro_std_rps ** 2 / dt ** 2
-    assert R[0, 0] == pytest.approx((m_vec[0] * f.params.accel_std_mps2) ** 2 + cg)
-    assert R[2, 2] == pytest.approx((m_vec[2] * f.params.accel_std_mps2) ** 2)
+    cg = (c.mass_kg * c.cg_z_m) ** 2 * 2.0 * f.params.noise.gyro_std_rps ** 2 / dt ** 2
+    assert R[0, 0] == pytest.approx((m_vec[0] * f.params.noise.accel_std_mps2) ** 2 + cg)
+    assert R[2, 2] == pytest.approx((m_vec[2] * f.params.noise.accel_std_mps2) ** 2)
     assert math.sqrt(R[0, 0]) == pytest.approx(1.03, abs=0.01)
     assert np.all(np.diag(f.thrust_noise(None)) < np.diag(R) + 1e-12)
 
@@ -79,26 +82,26 @@ def _depth_updates(f: EsesoFilter, std: float, n: int, seed: int = 0) -> None:
 
 
 def test_noise_larger_than_configured_is_learnt_within_floor_and_ceiling() -> None:
-    f = _level_filter(noise_adapt_updates=100, noise_scale_max=9.0)
+    f = _level_filter(noise={"adapt_updates": 100, "scale_max": 9.0})
     _depth_updates(f, 0.04, 1000)  # twice the configured 0.02 m: variance x4
     assert f.noise_scale["depth"] == pytest.approx(4.0, rel=0.25)
     assert f.S[0, 0] == pytest.approx(1e-6 + f.noise_scale["depth"] * 0.02 ** 2)
-    loud = _level_filter(noise_adapt_updates=100, noise_scale_max=9.0)
+    loud = _level_filter(noise={"adapt_updates": 100, "scale_max": 9.0})
     _depth_updates(loud, 0.2, 1000)  # ten times: the ceiling
     assert loud.noise_scale["depth"] == 9.0
 
 
 def test_noise_as_configured_or_smaller_keeps_the_configured_noise() -> None:
-    f = _level_filter(noise_adapt_updates=100)
+    f = _level_filter(noise={"adapt_updates": 100})
     _depth_updates(f, 0.01, 1000)  # half the configured noise: one-sided, floor 1
     assert f.noise_scale["depth"] == 1.0
-    off = _level_filter(noise_adapt_updates=0)
+    off = _level_filter(noise={"adapt_updates": 0})
     _depth_updates(off, 0.04, 300)
     assert off.noise_scale == {} and off.S[0, 0] == pytest.approx(1e-6 + 0.02 ** 2)
 
 
 def test_dvl_innovations_larger_than_expected_scale_the_imu_noise() -> None:
-    f = _level_filter(noise_adapt_updates=50, noise_scale_max=9.0)
+    f = _level_filter(noise={"adapt_updates": 50, "scale_max": 9.0})
     rng = np.random.default_rng(1)
     for _ in range(400):
         f.propagate(GRAVITY_ONLY, np.zeros(3), 0.2)
@@ -110,7 +113,8 @@ def test_dvl_innovations_larger_than_expected_scale_the_imu_noise() -> None:
 
 
 def test_a_thruster_noisier_than_the_imu_explains_is_learnt_up_to_its_own_ceiling() -> None:
-    f = _level_filter(noise_adapt_updates=50, noise_scale_max=9.0, thrust_noise_scale_max=100.0)
+    f = _level_filter(noise={"adapt_updates": 50, "scale_max": 9.0,
+                             "thrust_scale_max": 100.0})
     rng = np.random.default_rng(2)
     for _ in range(600):
         f.P = np.eye(f.P.shape[0]) * 1e-6  # a well-known state: the residual is the noise
@@ -119,7 +123,7 @@ def test_a_thruster_noisier_than_the_imu_explains_is_learnt_up_to_its_own_ceilin
         f.update_thrust(GRAVITY_ONLY, np.zeros(3), np.zeros(3), rng.normal(0.0, 5.0, 3),
                         wdot_dt=0.02)
     assert 15.0 < f.noise_scale["thrust"] < 40.0  # measured 26.4, above the sensors' 9
-    capped = _level_filter(noise_adapt_updates=50, thrust_noise_scale_max=4.0)
+    capped = _level_filter(noise={"adapt_updates": 50, "thrust_scale_max": 4.0})
     for _ in range(300):
         capped.P = np.eye(capped.P.shape[0]) * 1e-6
         capped.xi = np.zeros(3)

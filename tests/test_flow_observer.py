@@ -40,11 +40,11 @@ def test_flow_observer_current_on_synthetic_torpedo_with_known_model():
 
 
 def test_the_vertical_block_observes_heave_from_the_pitch():
-    """flow_pitch: a torpedo in the vertical plane with a pitch channel of PITCH_TERMS
-    (Munk moment ``uw``, fins, restoring), stern plane varied. The pitch RLS identifies it
-    from the exact velocity and measured rates, and the vertical block then finds the heave
-    speed through water from the measured pitch alone (heading held at 0), from a 0.3 m/s
-    initial error."""
+    """[pipelines.current.flow] pitch: a torpedo in the vertical plane with a pitch channel of
+    PITCH_TERMS (Munk moment ``uw``, fins, restoring), stern plane varied. The pitch RLS
+    identifies it from the exact velocity and measured rates, and the vertical block then
+    finds the heave speed through water from the measured pitch alone (heading held at 0),
+    from a 0.3 m/s initial error."""
     import math
 
     from onboard.estimators.flow_observer import PITCH_TERMS, FlowObserver, pitch_regressors

@@ -129,5 +129,6 @@ def test_the_hgo_gain_follows_gamma_star_of_the_model_it_runs():
 
 
 def test_a_configured_hgo_gain_is_kept_and_gamma_star_still_reported():
-    p = _hgo_pipeline(model={"surge": {"u|u|": -1.48, "n|n|": 1.44}}, gamma=2.0)
+    p = _hgo_pipeline(model={"surge": {"u|u|": -1.48, "n|n|": 1.44}},
+                      hgo={"gamma": 2.0})
     assert p.hgo.law.gamma == 2.0 and p.gamma_star > 20.0

@@ -225,7 +225,7 @@ class _DivergingInput(CommandedInput):
 def test_the_filter_acts_on_the_input_models_decision():
     model = AxisModel(a=0.5, gain=1.0, offset=0.0)
     f = IncrementFilter(model, _DivergingInput(), input_error_var=0.01, u_max=2.0, q_v=0.0,
-                        correlated=True, nis_gate=1e9, adaptive_rate_noise=False)
+                        correlated=True, gate_nis=1e9, adaptive_rate_noise=False)
     k = discretize(model.a, 0.1)
     f.step(k, 0.1, 1e-4, 1e-4, 0.5)
     f.step(k, 0.1, 1e-4, 1e-4, 0.5)

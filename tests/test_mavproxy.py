@@ -74,7 +74,7 @@ def test_mavproxy_routes_the_simulator_to_the_service_and_the_estimates_to_a_gro
     # routing is under test, not observability: the current is published from the start
     # (by default it is published once its sigma is below 0.3 m/s, after the first turn)
     data = msgspec.to_builtins(cfg)
-    data["pipelines"] = {"current": {"unknown_above_std": 100.0}}
+    data["pipelines"] = {"current": {"unknown_above_std_mps": 100.0}}
     cfg = from_dict(data)
     svc = Service(cfg, state_dir=tmp_path)
     mav = mavlink2.MAVLink(None)

@@ -109,14 +109,19 @@ def test_cli_bad_overlay_exits_2_with_one_line(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("command", ["replay", "run", "diagnose"])
-@pytest.mark.parametrize("table, key", [
-    ("[pipelines.aei]\nstep_s = 0.1\n", "pipelines.aei"),             # a misspelt pipeline
-    ("[pipelines.kf.surge]\ngian = 2.0\n", "pipelines.kf.surge.gian"),  # a misspelt key
-    ("[pipelines.aie.surge]\nkf_v_d = 2.0\n", "pipelines.aie.surge.kf_v_d"),  # moved key
-    ("[pipelines.diagnose]\nrate_hz = 5.0\n", "pipelines.diagnose"),  # now [diagnose]
+@pytest.mark.parametrize("table, message", [
+    # a misspelt pipeline, a misspelt key
+    ("[pipelines.aei]\nstep_s = 0.1\n", "pipelines.aei: unknown key (misspelt?)"),
+    ("[pipelines.kf.surge]\ngian = 2.0\n", "pipelines.kf.surge.gian: unknown key (misspelt?)"),
+    # renamed keys and tables name their new one (onboard/core/config_renames.py)
+    ("[pipelines.aie.surge]\nkf_v_d = 2.0\n",
+     "pipelines.aie.surge.kf_v_d: renamed to pipelines.kf.surge.v_d"),
+    ("[pipelines.diagnose]\nrate_hz = 5.0\n", "pipelines.diagnose: renamed to diagnose"),
+    ("[pipelines.aie]\nnis_gate = 100.0\n",
+     "pipelines.aie.nis_gate: renamed to pipelines.aie.gate_nis"),
 ])
 def test_cli_bad_pipeline_table_in_an_overlay_exits_2_naming_file_and_key(
-        tmp_path, capsys, command, table, key):
+        tmp_path, capsys, command, table, message):
     log = tmp_path / "x.csv"
     log.write_text("t,heading\n0,1\n")
     bad = _write(tmp_path, "overlay.toml", table)
@@ -126,7 +131,7 @@ def test_cli_bad_pipeline_table_in_an_overlay_exits_2_naming_file_and_key(
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err
-    assert f"{bad}: {key}: unknown key (misspelt?)" in err
+    assert f"{bad}: {message}" in err
 
 
 def test_run_reports_the_overlay_chain_in_its_errors(tmp_path):
@@ -273,7 +278,7 @@ def test_overlay_current_prior_and_what_it_cannot_write(tmp_path):
                            "evidence": {"heading": {"regressor": "heading harmonic 2"}}})
     text = overlay.overlay_text(doc, config.load("rudder-boat"))
     cfg = config.load_all(["rudder-boat", _write(tmp_path, "o.toml", text)])
-    assert cfg.pipelines.current.init_current_std == pytest.approx(
+    assert cfg.pipelines.current.initial_current_std_mps == pytest.approx(
         math.hypot(0.25, 0.15) + 3 * math.hypot(0.01, 0.01), abs=1e-3)
     assert "no config key the pipelines read: sideslip" in text
     assert "heading: heading harmonic 2" in text

@@ -159,7 +159,8 @@ def main(args: argparse.Namespace) -> int:
           f"gamma* = {data['gamma_star']:.3f}, gamma = {data['gamma']:.3f}, "
           f"increasing gain {data['gamma_0']:.2f} -> {data['gamma_max']:.3f}")
     if out.parent.resolve() != GAIN_DIR.resolve():
-        print(f"set [pipelines.current] gain_file = \"{out}\" and observer = \"hgo\"")
+        print(f"set [pipelines.current.hgo] gain_file = \"{out}\" and [pipelines.current] "
+              "observer = \"hgo\"")
     return 0
 
 

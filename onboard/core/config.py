@@ -8,7 +8,9 @@ with the dotted key and what was expected, e.g.::
 
 Every ``[pipelines.<name>]`` table is decoded here too, into its struct of
 :mod:`onboard.core.pipeline_config`: an unknown pipeline name or key is an error naming the
-file and the key, e.g. ``overlay.toml: pipelines.aei: unknown key (misspelt?)``.
+file and the key, e.g. ``overlay.toml: pipelines.aei: unknown key (misspelt?)``; a
+renamed key is an error naming its new one, e.g. ``my.toml: pipelines.aie.nis_gate:
+renamed to pipelines.aie.gate_nis`` (:mod:`onboard.core.config_renames`).
 
 Several files make one configuration with :func:`load_all` (``--config base.toml
 --config overlay.toml``): later files win key by key, tables are merged recursively,
@@ -26,6 +28,7 @@ from typing import Annotated, Any, Literal, Sequence
 
 import msgspec
 
+from onboard.core.config_renames import renamed_key
 from onboard.core.errors import UsageError
 from onboard.core.pipeline_config import Pipelines
 from onboard.core.vehicles import VehicleClass
@@ -632,7 +635,12 @@ def _enum_choices(key: str) -> list[str]:
 
 
 def from_dict(data: dict[str, Any], origin: str = "<dict>") -> Config:
-    """Decode a configuration from a plain mapping; raises ConfigError naming the key."""
+    """Decode a configuration from a plain mapping; raises ConfigError naming the key. A
+    renamed key is an error naming its new one, looked for before decoding
+    (:data:`onboard.core.config_renames.RENAMED`)."""
+    renamed = renamed_key(data)
+    if renamed is not None:
+        raise ConfigError(f"{origin}: {renamed[0]}: renamed to {renamed[1]}")
     try:
         return msgspec.convert(data, Config)
     except msgspec.ValidationError as err:

@@ -12,8 +12,48 @@ pipeline is imported; each pipeline module reads ``cfg.pipelines.<name>``.
 * ``[pipelines.kf]``, ``[pipelines.kf.surge]``, ``[pipelines.kf.heading]``:
   :class:`KfConfig`, the same measurement handling with the KF baseline's model and noise
   (algorithms.md §2.12);
-* ``[pipelines.current]``: :class:`CurrentConfig` (algorithms.md §3-§4);
-* ``[pipelines.eseso]``: :class:`EsesoConfig` (algorithms.md §5).
+* ``[pipelines.current]``: :class:`CurrentConfig` (algorithms.md §3-§4), with
+  ``[pipelines.current.hgo]`` (:class:`HgoConfig`, §3.1), ``[pipelines.current.flow]``
+  (:class:`FlowObserverConfig`, §4.4) and ``[pipelines.current.glider]``
+  (:class:`GliderModelConfig`);
+* ``[pipelines.eseso]``: :class:`EsesoConfig` (algorithms.md §5), with
+  ``[pipelines.eseso.vehicle]``, ``.thrusters``, ``.process``, ``.noise`` and ``.initial``
+  (:class:`EsesoVehicleConfig`, :class:`EsesoThrustersConfig`,
+  :class:`EsesoProcessConfig`, :class:`EsesoNoiseConfig`, :class:`EsesoInitialConfig`).
+
+Key names follow one rule, the same as the rest of the configuration's (``[sensors]``,
+``[engine]``, ``[service]``; README, "Configuration"):
+
+1. A key that holds a dimensional quantity ends in its unit: ``_s``, ``_m``, ``_mps``
+   (m/s), ``_mps2`` (m/s^2), ``_rad``, ``_rps`` (rad/s), ``_deg``, ``_n`` (N), ``_kg``,
+   ``_hz``, ``_us``, ``_mb``, ``_kgm3`` (kg/m^3), ``_pa``, ``_cc`` (cm^3). A random walk's
+   unit is its quantity's unit per square root of a second, written ``<unit>_rts`` ("per
+   root second"): ``current_walk_mps_rts`` is m/s/sqrt(s), ``disturbance_walk_n_rts``
+   N/sqrt(s). A dimensionless key (a ratio, gain, probability, count, NIS, a relative
+   one-sigma such as ``model_rel_std``) has no suffix.
+2. A one-sigma is ``<quantity>_std_<unit>`` (``heading_std_rad``); a prior one-sigma
+   likewise, ``initial_`` in front where it is the initial state's
+   (``initial_current_std_mps``; in ``[pipelines.eseso.initial]`` the table says it).
+3. A gate is ``gate_<measure>``: ``gate_nis`` for a NIS threshold, ``gate_sigma`` for
+   one in sigmas. A threshold that never rejects is not a gate and keeps its measure
+   last (``divergence_nis``: a divergence test; ``thrust_huber``: a down-weighting).
+4. A part of a pipeline with its own section in algorithms.md is a nested table
+   (``[pipelines.current.hgo]``, ``[pipelines.current.flow]``,
+   ``[pipelines.current.glider]``), and so are the ESESO's vehicle, thrusters, process
+   noise, measurement noise and initial state; a key in a nested table drops the prefix
+   the table now says (``hgo_identify`` is ``[pipelines.current.hgo] identify``).
+
+Where rule 1 is wrong: a key that is the symbol of algorithms.md keeps the symbol, its
+unit in its docstring: the axis tables' ``a``, ``gain``, ``offset``, ``u_max``, ``v_d``,
+``r_d``, ``q_v``, ``bias_q`` (their unit is the axis's, m/s^2 in ``surge``, rad/s^2 in
+``heading``: one field of one struct cannot end in both), the HGO's ``gamma`` and ``rho``,
+the flow observer's ``poles``, the glider's ``lift_kl`` ... ``drag_kd``; so do the model
+coefficients' priors ``theta_std`` and ``theta_std_floor`` (each coefficient has its own
+unit), a compound unit without a short suffix (``damping_linear``, N s/m) and
+``rpm_scale`` (its unit, rpm, is its first word).
+
+A renamed key is an error that names its new one
+(:data:`onboard.core.config_renames.RENAMED`).
 """
 
 from __future__ import annotations
@@ -187,13 +227,13 @@ class SurgeHeadingConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
     """Longer without a measurement point restarts the increment chain."""
     input_mode: Literal["auto", "throttle-rudder", "differential"] = "auto"
     """How commands map to the two axes (see surge_heading.axis_commands)."""
-    gnss_std_m: float | None = None
+    gnss_position_std_m: float | None = None
     """GNSS position noise, one sigma (m); default [sensors.gnss] position_std_m. The
     noise of fixes without their own accuracy (and of all with ``gnss_accuracy = false``)."""
     gnss_accuracy: bool = True
     """Take each fix's own accuracy (``h_acc_m``: GPS_RAW_INT h_acc, gpsd eph/epx/epy) as
     its position noise, clamped to [``gnss_accuracy_min_m``, ``gnss_accuracy_max_m``],
-    and scale the position anchor by ``gnss_std_m^2`` over it; and its speed accuracy
+    and scale the position anchor by ``gnss_position_std_m^2`` over it; and its speed accuracy
     (``speed_acc_mps``: GPS_RAW_INT vel_acc, gpsd eps) as the Doppler speed's noise where
     it is worse than ``gnss_velocity_std_mps`` (down-weighting only, at most 5 m/s)."""
     gnss_accuracy_min_m: float = 0.05
@@ -215,7 +255,7 @@ class SurgeHeadingConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
     position_anchor: float = 0.05
     """Gain pulling the reconstructed position toward the GNSS point per surge step
     (0: pure dead reckoning from the estimates, paper §3.3)."""
-    nis_gate: float = 400.0
+    gate_nis: float = 400.0
     """An innovation with z^2/S above this is rejected as an outlier (20 sigma)."""
     adaptive_rate_noise: bool = True
     """Raise the input-error variance (the axis's ``v_d``) to what the measured
@@ -327,17 +367,17 @@ class GliderModelConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
     """Parasite drag ``K_D0`` (kg/m): ``D = (K_D0 + K_D alpha^2) U^2``."""
     drag_kd: float = 25.0
     """Induced drag ``K_D`` (kg/(m rad^2))."""
-    density: Annotated[float, msgspec.Meta(gt=0.0)] = 1027.0
+    water_density_kgm3: Annotated[float, msgspec.Meta(gt=0.0)] = 1027.0
     """Sea-water density (kg/m^3)."""
     neutral_pump_cc: float = 0.0
     """Pump volume (cm^3) at which the glider is neutrally buoyant."""
-    vertical_water_std: Annotated[float, msgspec.Meta(ge=0.0)] = 0.02
+    vertical_water_std_mps: Annotated[float, msgspec.Meta(ge=0.0)] = 0.02
     """One-sigma (m/s) of the vertical water velocity (internal waves, convection) that
     the depth rate cannot tell from the glider's own sinking or rising."""
-    glide_angle_std: Annotated[float, msgspec.Meta(ge=0.0)] = 0.035
+    glide_angle_std_rad: Annotated[float, msgspec.Meta(ge=0.0)] = 0.035
     """One-sigma (rad) of the flight-path angle: the pitch sensor's error and the angle
     of attack's (0.035 rad = 2 deg)."""
-    min_glide_angle: Annotated[float, msgspec.Meta(gt=0.0)] = 0.21
+    min_glide_angle_rad: Annotated[float, msgspec.Meta(gt=0.0)] = 0.21
     """Below this pitch (rad; 0.21 = 12 deg) the depth rate says nothing usable about the
     horizontal speed (``u_h = dz/dt / tan(gamma)``): no measurement."""
     max_depth_interval_s: Annotated[float, msgspec.Meta(gt=0.0)] = 30.0
@@ -346,6 +386,51 @@ class GliderModelConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
     """The along-track current counts as observed for this long (s) after the model's
     last measurement (through an inflection); afterwards it is floored at the prior like
     any current without a surge model (``heading_memory_s``)."""
+
+
+class HgoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.current.hgo]``: the high-gain observer (algorithms.md §3.1,
+    :mod:`onboard.estimators.current_hgo`): its gain law and its own model identification.
+    The gain law's keys default to the gain file's (``onboard design-gain``)."""
+
+    gain_file: str = ""
+    """HGO gain JSON (``onboard design-gain``); default ``config/gains/<class>.json``."""
+    gamma: float | None = None
+    """A fixed high gain (``rho = 0``); default: the gain file's law."""
+    gamma_0: float | None = None
+    """Initial gain of the increasing-gain law; default the gain file's."""
+    rho: float | None = None
+    """Growth rate (1/s) of the increasing-gain law; default the gain file's."""
+    gamma_max: float | None = None
+    """Ceiling of the increasing gain; default the gain file's."""
+    identify: Literal["turns", "always"] = "turns"
+    """When the high-gain observer's own RLS (``observer = "hgo"``,
+    :class:`~onboard.estimators.model_identification.VelocityRls`) learns: ``"turns"``
+    under the joint filter's schedule (the observer's current one-sigma at most
+    ``[pipelines.current] identify_max_current_std_mps``, within ``identify_after_turn_s``
+    of a turn, or always with ``identify_straight``), ``"always"`` at every tick with a
+    fresh velocity, as in Kim et al. (on a straight line the along-track current then
+    trades against the thrust coefficient, docs/current.md, HGO). ``[pipelines.current]
+    identify = false`` disables it."""
+    rls_noise_std_mps2: Annotated[float, msgspec.Meta(gt=0.0)] = 0.2
+    """One-sigma (m/s^2) of the equation error of the high-gain observer's RLS, against
+    which the coefficient prior is weighed: the observer's velocity at ``gamma*`` carries
+    the sensor noise through the injection, so a small value lets that noise drag the
+    coefficients (docs/current.md, "The HGO's own model", compares 0.02, 0.05 and 0.2)."""
+
+
+class FlowObserverConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
+                         frozen=True):
+    """``[pipelines.current.flow]``: the flow observer of Fan et al. (algorithms.md §4.4,
+    :mod:`onboard.estimators.flow_observer`), used with ``observer = "flow"``."""
+
+    pitch: bool = False
+    """3-D models: add the vertical block ``[theta, q, w_r]`` observed from the measured
+    pitch, its pitch channel identified online by RLS (flow_observer.py,
+    ``PITCH_TERMS``); False: Fan et al.'s observer reduced to the heading output, ``w_r``
+    from the joint filter (docs/current.md, "Flow observer")."""
+    poles: list[float] = []
+    """Flow-observer poles (1/s, negative); empty: the defaults of flow_observer.py."""
 
 
 class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -386,13 +471,13 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Propeller rpm divided by this gives the normalized propulsion ``n``."""
     svf_cutoff_hz: float = 0.3
     """State-variable filter cut-off for the yaw-channel RLS (algorithms.md §3.4)."""
-    current_walk: float = 0.01
+    current_walk_mps_rts: float = 0.01
     """Random walk of the current, m/s per sqrt(s), before calibration (0.01: 0.08 m/s in a
     minute, 1 sigma; turbulence and tides; the innovation calibration raises it)."""
-    accel_std: float = 0.02
+    accel_std_mps2: float = 0.02
     """Model acceleration error (process noise) per DOF, m/s^2 over ``model_error_time_s``."""
     model_error_time_s: float = 1.0
-    """Time (s) over which ``accel_std`` is the model's velocity error."""
+    """Time (s) over which ``accel_std_mps2`` is the model's velocity error."""
     heading_diversity: float = 0.85
     """See ``heading_memory_s``."""
     heading_memory_s: float = 300.0
@@ -405,20 +490,20 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     turn_accel_gain: float = 1.0
     """Extra model acceleration error in turns, m/s^2 per m/s^2 of each DOF's own
     centripetal acceleration (surge ``|v_r r|``, sway ``|u_r r|``, ...; current_kf.py)."""
-    max_speed_through_water: Annotated[float, msgspec.Meta(gt=0.0)] = 10.0
+    max_speed_through_water_mps: Annotated[float, msgspec.Meta(gt=0.0)] = 10.0
     """A predicted through-water velocity component beyond this (m/s) flags the joint
     filter (health ``runaway``, counted per episode): its current is published as unknown
     until the velocity is back within it (an update that leaves the state non-finite or
     beyond 50 m/s resets the filter, ``diverged``). No vehicle this service serves moves
     at 10 m/s through water; a model that identified an anti-damping can."""
-    prior_accel_std: float = 0.3
+    prior_accel_std_mps2: float = 0.3
     """Model acceleration error of a DOF that has only the generic prior (mode (b), not yet
     identified), m/s^2: the prior says "no crabbing", not how much."""
-    init_current_std: float = 1.0
+    initial_current_std_mps: float = 1.0
     """Prior one-sigma of the current (m/s) before any turn has made it observable."""
-    identify_max_current_std: float = 0.1
+    identify_max_current_std_mps: float = 0.1
     """The coefficients are updated only once the current's one-sigma is below this (m/s)."""
-    identify_min_rate: float = 0.03
+    identify_min_rate_rps: float = 0.03
     """A yaw rate (rad/s) above this marks a turn, which makes the model identifiable."""
     identify_after_turn_s: float = 30.0
     """Coefficients are updated during turns and this long after them (s)."""
@@ -430,10 +515,11 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Forgetting factor of the yaw-channel RLS per update."""
     identify_straight: bool = False
     """Identify on straight lines too: only where the current is known (a calm-water
-    identification run with ``init_current_std`` ~ 0 and ``current_walk`` ~ 0)."""
-    identify_min_speed: float = 0.2
-    """Below this through-water speed the yaw RLS does not learn."""
-    gnss_velocity_std: float | None = None
+    identification run with ``initial_current_std_mps`` ~ 0 and ``current_walk_mps_rts``
+    ~ 0)."""
+    identify_min_speed_mps: float = 0.2
+    """Below this through-water speed (m/s) the yaw RLS does not learn."""
+    gnss_velocity_std_mps: float | None = None
     """One-sigma of GNSS velocity components (m/s) at the receiver's nominal accuracy;
     default from ``[sensors.gnss]``."""
     gnss_nominal_accuracy_m: Annotated[float, msgspec.Meta(ge=0.0)] | None = None
@@ -441,11 +527,11 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     (m/s, one sigma) has that as its velocity one-sigma; one reporting only a horizontal
     accuracy ``h_acc_m`` (m, one sigma) worse than this has its velocity one-sigma scaled
     by ``h_acc_m / nominal`` (both scale with the satellite geometry and signal quality).
-    Never below ``gnss_velocity_std`` (a fix claiming better, RTK say, does not make its
+    Never below ``gnss_velocity_std_mps`` (a fix claiming better, RTK say, does not make its
     Doppler velocity better). Default ``[sensors.gnss] position_std_m``; 0: the configured
     one-sigma for every fix. A fix without a finite positive accuracy takes the
     configured one-sigma."""
-    dvl_velocity_std: float | None = None
+    dvl_velocity_std_mps: float | None = None
     """One-sigma of DVL velocity components (m/s); default from ``[sensors.dvl]``."""
     gate_nis: float = 30.0
     """Innovations with a larger NIS are rejected (counted in health)."""
@@ -460,43 +546,17 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Inflate the process noise when the innovation NIS says it is too small."""
     calibrate_block: int = 50
     """Innovations averaged per calibration block (whiteness test)."""
-    gain_file: str = ""
-    """HGO gain JSON (``onboard design-gain``); default ``config/gains/<class>.json``."""
-    gamma: float | None = None
-    """A fixed high gain (``rho = 0``); default: the gain file's law."""
-    gamma_0: float | None = None
-    """Initial gain of the increasing-gain law; default the gain file's."""
-    rho: float | None = None
-    """Growth rate (1/s) of the increasing-gain law; default the gain file's."""
-    gamma_max: float | None = None
-    """Ceiling of the increasing gain; default the gain file's."""
-    hgo_identify: Literal["turns", "always"] = "turns"
-    """When the high-gain observer's own RLS (``observer = "hgo"``,
-    :class:`~onboard.estimators.model_identification.VelocityRls`) learns: ``"turns"``
-    under the joint filter's schedule (the observer's current one-sigma at most
-    ``identify_max_current_std``, within ``identify_after_turn_s`` of a turn, or always with
-    ``identify_straight``), ``"always"`` at every tick with a fresh velocity, as in Kim et
-    al. (on a straight line the along-track current then trades against the thrust
-    coefficient, docs/current.md, HGO). ``identify = false`` disables it."""
-    hgo_rls_noise_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.2
-    """One-sigma (m/s^2) of the equation error of the high-gain observer's RLS, against
-    which the coefficient prior is weighed: the observer's velocity at ``gamma*`` carries
-    the sensor noise through the injection, so a small value lets that noise drag the
-    coefficients (docs/current.md, "The HGO's own model", compares 0.02, 0.05 and 0.2)."""
-    flow_pitch: bool = False
-    """Flow observer (``observer = "flow"``, 3-D models): add the vertical block ``[theta,
-    q, w_r]`` observed from the measured pitch, its pitch channel identified online by RLS
-    (flow_observer.py, ``PITCH_TERMS``); False: Fan et al.'s observer reduced to the heading
-    output, ``w_r`` from the joint filter (docs/current.md, "Flow observer")."""
-    flow_poles: list[float] = []
-    """Flow-observer poles (1/s, negative); empty: the defaults of flow_observer.py."""
-    unknown_above_std: Annotated[float, msgspec.Meta(gt=0.0)] = 0.3
+    hgo: HgoConfig = msgspec.field(default_factory=HgoConfig)
+    """``[pipelines.current.hgo]``: the high-gain observer."""
+    flow: FlowObserverConfig = msgspec.field(default_factory=FlowObserverConfig)
+    """``[pipelines.current.flow]``: the flow observer."""
+    unknown_above_std_mps: Annotated[float, msgspec.Meta(gt=0.0)] = 0.3
     """A component of the current whose one-sigma exceeds this (m/s) is published as
     unknown: absent from the estimates (an empty cell in estimates.csv, no ``CUR_N`` or
     ``WIND_COV`` on MAVLink), its ``std_`` still published, ``observable.<axis> = 0`` in
     health. 0.3: a 2-sigma band of +-0.6 m/s says nothing about a small vehicle's current
     (the along-track current without a surge model has a one-sigma of at least
-    ``init_current_std``, 1 m/s, and is never published)."""
+    ``initial_current_std_mps``, 1 m/s, and is never published)."""
     restore_check_s: Annotated[float, msgspec.Meta(ge=0.0)] = 120.0
     """A restored current is on probation: a twin filter runs beside the pipeline from the
     restored model with the current at its prior, and the restored current must agree with
@@ -524,24 +584,14 @@ BLUEROV2_FORCE_ALLOCATION: tuple[tuple[float, ...], ...] = (
 )
 
 
-class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    """``[pipelines.eseso]``: model, thrusters and noise of the ESESO.
+class EsesoVehicleConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
+                         frozen=True):
+    """``[pipelines.eseso.vehicle]``: the rigid body and its hydrodynamics (algorithms.md
+    §5.1, §5.4). Defaults: the paper's Table I (BlueROV2)."""
 
-    Vehicle parameters default to the paper's Table I (BlueROV2). Noise figures not given
-    here come from ``[sensors]``. Defaults marked [DEFAULT] are ours (tuned on the
-    ``bluerov2-circle`` scenario), not the paper's Q = 1e-3 I and
-    R = diag(0.01 I, 0.02 I, 0.0006 I, 0.012 I), which are per-step numbers of a 50 Hz
-    loop in unstated units.
-    """
-
-    enabled: bool | None = None
-    """Unset: built for ``vehicle_classes``; true: built for any vehicle class; false:
-    never built."""
-    vehicle_classes: list[str] = msgspec.field(default_factory=lambda: ["bluerov2"])
-    """Vehicle classes the pipeline is built for (any class with ``enabled = true``)."""
     mass_kg: float = 11.26
     """Vehicle mass (kg)."""
-    added_mass: list[float] = msgspec.field(default_factory=lambda: [1.7182, 0.0, 5.468])
+    added_mass_kg: list[float] = msgspec.field(default_factory=lambda: [1.7182, 0.0, 5.468])
     """X_udot, Y_vdot, Z_wdot as positive added masses (kg)."""
     damping_linear: list[float] = msgspec.field(default_factory=lambda: [11.7391, 20.0, 31.8678])
     """Positive linear damping d_l (N s/m); the paper lists them negated."""
@@ -554,33 +604,67 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Weight (N)."""
     buoyancy_n: float = 114.8
     """Buoyancy (N)."""
-    gravity_mps2: float = 9.81
-    """Nominal gravity (m/s^2)."""
-    force_allocation: list[list[float]] = msgspec.field(
+
+
+class EsesoThrustersConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
+                           frozen=True):
+    """``[pipelines.eseso.thrusters]``: normalized thruster commands into a body force
+    (algorithms.md §5.2): the allocation times each thruster's thrust curve
+    ``max * sign(c) |c|^exponent`` outside the deadband."""
+
+    allocation: list[list[float]] = msgspec.field(
         default_factory=lambda: [list(r) for r in BLUEROV2_FORCE_ALLOCATION])
     """3 x n_thrusters: body force (N, FRD) per newton of each thruster."""
-    thruster_max_forward_n: float = 40.0
+    max_forward_n: float = 40.0
     """Thrust (N) at normalized command +1 (T200 at ~14.8 V, as the SITL plant)."""
-    thruster_max_reverse_n: float = 30.0
+    max_reverse_n: float = 30.0
     """Thrust magnitude (N) at normalized command -1."""
-    thruster_exponent: float = 2.0
+    exponent: float = 2.0
     """Thrust = max * sign(c) |c|^exponent (1 = linear map, 2 = quadratic in command)."""
-    thruster_deadband: float = 0.0
+    deadband: float = 0.0
     """Normalized commands with |c| below this give no thrust."""
+    command_timeout_s: float = 0.5
+    """A thruster command older than this is not used by the thrust update."""
+
+
+class EsesoProcessConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
+                         frozen=True):
+    """``[pipelines.eseso.process]``: the process noise of the error states
+    (``EsesoFilter.propagate``) and of the lumped disturbance's model changes
+    (``EsesoFilter.model_change_var``) [DEFAULT]."""
+
     disturbance_model: Literal["earth_fixed", "body_fixed"] = "earth_fixed"
     """Axes in which the disturbance force is a random walk."""
-    # process noise [DEFAULT]
-    accel_bias_walk: float = 1e-4
+    accel_bias_walk_mps2_rts: float = 1e-4
     """Accelerometer bias random walk (m/s^2/sqrt(s))."""
-    gyro_bias_walk: float = 1e-5
+    gyro_bias_walk_rps_rts: float = 1e-5
     """Gyro bias random walk (rad/s/sqrt(s))."""
-    gravity_walk: float = 1e-6
+    gravity_walk_mps2_rts: float = 1e-6
     """Gravity random walk (m/s^2/sqrt(s)); it only absorbs a wrong nominal g."""
-    disturbance_walk: float = 1.0
+    disturbance_walk_n_rts: float = 1.0
     """Disturbance random walk (N/sqrt(s))."""
-    position_walk: float = 1e-3
+    position_walk_m_rts: float = 1e-3
     """Extra position random walk (m/sqrt(s)), keeps P well conditioned."""
-    # measurement noise; None = from [sensors]
+    damping_rel_std: float = 0.3
+    """Relative one-sigma of the damping coefficients (dimensionless) [DEFAULT: identified
+    drag coefficients are rarely better than 30 %]. The lumped disturbance carries the
+    damping's error, so when the damping force ``D(nu) nu`` changes, the disturbance
+    changes by this times the change: added to its process noise at each thrust update
+    (``EsesoFilter.model_change_var``). 0 = the random walk alone."""
+    thrust_rel_std: float = 0.05
+    """Relative one-sigma of each change of the commanded body force (dimensionless), added
+    to the lumped disturbance's process noise like ``damping_rel_std`` [DEFAULT: measured in
+    the closed loop, docs/mismatch.md: a T200's map varies by ~20 % over the battery's
+    12-16 V, but slowly; at 0.2 per change the AMPC's own thrust swings under a 0.15 s
+    thruster lag made the disturbance chase the lag (bluerov2-circle, 30 s, seed 1: xi error
+    38.7 N, tracking 0.091 m), at 0.05 2.75 N and 0.055 m, nominal unchanged (0.015 m)]."""
+
+
+class EsesoNoiseConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
+                       frozen=True):
+    """``[pipelines.eseso.noise]``: the measurement noise of each channel (None: from
+    ``[sensors]``) and its adaptation from the innovations (covariance matching)."""
+
     ins_velocity_std_mps: float = 0.02
     """White noise of the INS velocity over ground per horizontal axis (m/s) [DEFAULT: the
     simulated DVL-aided INS of ``bluerov2-circle``, ``sitl.sensors.InsConfig``]."""
@@ -611,15 +695,73 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """The thrusters' own force error (N, one-sigma per body axis) besides what the IMU's
     noise puts into the thrust model (``EsesoFilter.thrust_noise``) [DEFAULT: the
     simulated thrusters have none; a real thruster's larger error is learnt by the thrust
-    channel's noise scale, ``noise_adapt_updates``]."""
+    channel's noise scale, ``adapt_updates``]."""
     accel_std_mps2: float | None = None
     """Accelerometer noise (m/s^2); default ``[sensors.imu]``."""
     gyro_std_rps: float | None = None
     """Gyro noise (rad/s); default ``[sensors.imu]``."""
+    adapt_updates: int = 100
+    """Updates over which each sensor channel's noise scale is averaged (the time constant
+    of its exponential mean, in updates); 0 = no adaptation, the configured noise always."""
+    scale_max: float = 9.0
+    """Ceiling of the measurement-noise variance scale (dimensionless; 9 = three times the
+    configured sigma). Its floor is 1: the adaptation only ever inflates the noise, so a
+    channel is never trusted more than configured."""
+    thrust_scale_max: float = 100.0
+    """Ceiling of the thrust channel's noise variance scale (dimensionless; 100 = ten
+    times the ~1 N the IMU's noise puts into the thrust model): a real thruster's force
+    error (lag, thrust curve against battery voltage; 3-4 N on the ArduSub tlog of
+    ``/work/shared/data``) is several times what the IMU explains, and unlike a sensor's
+    it is configured by nobody."""
+
+
+class EsesoInitialConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True,
+                         frozen=True):
+    """``[pipelines.eseso.initial]``: the initial state the filter does not measure at its
+    start, and the initial one-sigma of each error state."""
+
+    north_m: float = 0.0
+    """See ``east_m``."""
+    east_m: float = 0.0
+    """Start position (m) when no GNSS fix precedes the start (a surveyed launch point);
+    positions are then relative to this point until a fix arrives."""
+    gravity_mps2: float = 9.81
+    """Nominal gravity (m/s^2): the gravity state's start."""
+    position_std_m: float = 1.0
+    """Initial one-sigma of the position (m)."""
+    velocity_std_mps: float = 0.3
+    """Initial one-sigma of the velocity (m/s)."""
+    attitude_std_rad: float = 0.05
+    """Initial one-sigma of the attitude (rad)."""
+    accel_bias_std_mps2: float = 0.05
+    """Initial one-sigma of the accelerometer bias (m/s^2)."""
+    gyro_bias_std_rps: float = 0.005
+    """Initial one-sigma of the gyro bias (rad/s)."""
+    gravity_std_mps2: float = 0.01
+    """Initial one-sigma of gravity (m/s^2)."""
+    disturbance_std_n: float = 40.0
+    """Initial one-sigma of the disturbance force (N)."""
+
+
+class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """``[pipelines.eseso]``: when the ESESO is built, how its updates are gated, and its
+    nested tables: ``[pipelines.eseso.vehicle]``, ``.thrusters``, ``.process``, ``.noise``
+    and ``.initial``.
+
+    Vehicle parameters default to the paper's Table I (BlueROV2). Noise figures not given
+    here come from ``[sensors]``. Defaults marked [DEFAULT] are ours (tuned on the
+    ``bluerov2-circle`` scenario), not the paper's Q = 1e-3 I and
+    R = diag(0.01 I, 0.02 I, 0.0006 I, 0.012 I), which are per-step numbers of a 50 Hz
+    loop in unstated units.
+    """
+
+    enabled: bool | None = None
+    """Unset: built for ``vehicle_classes``; true: built for any vehicle class; false:
+    never built."""
+    vehicle_classes: list[str] = msgspec.field(default_factory=lambda: ["bluerov2"])
+    """Vehicle classes the pipeline is built for (any class with ``enabled = true``)."""
     gnss_max_depth_m: float | None = None
     """Fixes received deeper than this are rejected (default sensors.depth.surface_depth_m)."""
-    command_timeout_s: float = 0.5
-    """A thruster command older than this is not used by the thrust update."""
     gate_sigma: float = 0.0
     """0 = chi-square 99.9 % gates; else the NIS gate is ``gate_sigma**2 * dof``."""
     thrust_states: Literal["disturbance", "all"] = "disturbance"
@@ -635,57 +777,18 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     a Huber-type robust update) instead of rejected: thruster steps excite roll and pitch
     accelerations faster than the IMU rate resolves, while a new push must still get in.
     0 = plain update."""
-    initial_north_m: float = 0.0
-    """See ``initial_east_m``."""
-    initial_east_m: float = 0.0
-    """Start position (m) when no GNSS fix precedes the start (a surveyed launch point);
-    positions are then relative to this point until a fix arrives."""
-    # initial uncertainty
-    initial_position_std_m: float = 1.0
-    """Initial one-sigma of the position (m)."""
-    initial_velocity_std_mps: float = 0.3
-    """Initial one-sigma of the velocity (m/s)."""
-    initial_attitude_std_rad: float = 0.05
-    """Initial one-sigma of the attitude (rad)."""
-    initial_accel_bias_std: float = 0.05
-    """Initial one-sigma of the accelerometer bias (m/s^2)."""
-    initial_gyro_bias_std: float = 0.005
-    """Initial one-sigma of the gyro bias (rad/s)."""
-    initial_gravity_std: float = 0.01
-    """Initial one-sigma of gravity (m/s^2)."""
-    initial_disturbance_std_n: float = 40.0
-    """Initial one-sigma of the disturbance force (N)."""
     max_imu_gap_s: float = 0.5
     """A longer gap between IMU samples restarts the propagation clock (counted)."""
-    # model uncertainty: process noise of the lumped disturbance
-    damping_rel_std: float = 0.3
-    """Relative one-sigma of the damping coefficients (dimensionless) [DEFAULT: identified
-    drag coefficients are rarely better than 30 %]. The lumped disturbance carries the
-    damping's error, so when the damping force ``D(nu) nu`` changes, the disturbance
-    changes by this times the change: added to its process noise at each thrust update
-    (``EsesoFilter.model_change_var``). 0 = the random walk alone."""
-    thrust_rel_std: float = 0.05
-    """Relative one-sigma of each change of the commanded body force (dimensionless), added
-    to the lumped disturbance's process noise like ``damping_rel_std`` [DEFAULT: measured in
-    the closed loop, docs/mismatch.md: a T200's map varies by ~20 % over the battery's
-    12-16 V, but slowly; at 0.2 per change the AMPC's own thrust swings under a 0.15 s
-    thruster lag made the disturbance chase the lag (bluerov2-circle, 30 s, seed 1: xi error
-    38.7 N, tracking 0.091 m), at 0.05 2.75 N and 0.055 m, nominal unchanged (0.015 m)]."""
-    # measurement-noise adaptation from the innovations (covariance matching)
-    noise_adapt_updates: int = 100
-    """Updates over which each sensor channel's noise scale is averaged (the time constant
-    of its exponential mean, in updates); 0 = no adaptation, the configured noise always."""
-    noise_scale_max: float = 9.0
-    """Ceiling of the measurement-noise variance scale (dimensionless; 9 = three times the
-    configured sigma). Its floor is 1: the adaptation only ever inflates the noise, so a
-    channel is never trusted more than configured."""
-    thrust_noise_scale_max: float = 100.0
-    """Ceiling of the thrust channel's noise variance scale (dimensionless; 100 = ten
-    times the ~1 N the IMU's noise puts into the thrust model): a real thruster's force
-    error (lag, thrust curve against battery voltage; 3-4 N on the ArduSub tlog of
-    ``/work/shared/data``) is several times what the IMU explains, and unlike a sensor's
-    it is configured by nobody."""
-
+    vehicle: EsesoVehicleConfig = msgspec.field(default_factory=EsesoVehicleConfig)
+    """``[pipelines.eseso.vehicle]``."""
+    thrusters: EsesoThrustersConfig = msgspec.field(default_factory=EsesoThrustersConfig)
+    """``[pipelines.eseso.thrusters]``."""
+    process: EsesoProcessConfig = msgspec.field(default_factory=EsesoProcessConfig)
+    """``[pipelines.eseso.process]``."""
+    noise: EsesoNoiseConfig = msgspec.field(default_factory=EsesoNoiseConfig)
+    """``[pipelines.eseso.noise]``."""
+    initial: EsesoInitialConfig = msgspec.field(default_factory=EsesoInitialConfig)
+    """``[pipelines.eseso.initial]``."""
 
 
 class Pipelines(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):

@@ -46,8 +46,8 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   :meth:`EsesoFilter._adapt_process`): each sensor channel's configured noise is scaled by
   the exponential mean of its innovations' excess over ``H P H^T`` (covariance matching),
   and the IMU's white noise by the DVL innovations' excess over ``R`` (a fading factor);
-  each scale is clipped to [1, ``noise_scale_max``]: noise larger than configured is
-  learnt, smaller is not (``noise_adapt_updates`` 0 = off).
+  each scale is clipped to [1, ``noise.scale_max``]: noise larger than configured is
+  learnt, smaller is not (``noise.adapt_updates`` 0 = off).
 * **What ``xi`` is**: the lumped disturbance, the force the thrust model misses: the
   external push plus whatever the model's mass, damping and thrust map get wrong (the
   paper's definition, and what the AMPC adds to its prediction model). Its sigma is
@@ -106,6 +106,12 @@ from numpy.typing import NDArray
 
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import Innovation
+from onboard.core.pipeline_config import (
+    EsesoInitialConfig,
+    EsesoNoiseConfig,
+    EsesoProcessConfig,
+    EsesoVehicleConfig,
+)
 from onboard.core.stats import chi2_quantile
 from onboard.core.so3 import (
     cross,
@@ -157,61 +163,29 @@ PENDING_INNOVATIONS = 1024
 
 @dataclass(frozen=True)
 class EsesoParams:
-    """Vehicle model, noise and gating of :class:`EsesoFilter` (SI units, NED/FRD).
-
-    Built from ``[pipelines.eseso]`` and ``[sensors]`` by
-    :func:`onboard.pipelines.eseso.filter_params`; the meaning of each number is in
-    :class:`onboard.core.pipeline_config.EsesoConfig`.
+    """Vehicle model, noise and gating of :class:`EsesoFilter` (SI units, NED/FRD): the
+    typed tables of ``[pipelines.eseso]`` (:mod:`onboard.core.pipeline_config`, where
+    each number's meaning is), built by :func:`onboard.pipelines.eseso.filter_params`.
     """
 
-    mass_kg: float
-    added_mass: tuple[float, float, float]
-    """X_udot, Y_vdot, Z_wdot as positive added masses (kg)."""
-    damping_linear: tuple[float, float, float]
-    """Positive linear damping d_l (N s/m)."""
-    damping_quadratic: tuple[float, float, float]
-    """Positive quadratic damping d_nl (N s^2/m^2)."""
-    cg_z_m: float
-    """Centre of gravity below the body origin (m)."""
-    weight_n: float
-    buoyancy_n: float
-    gravity_mps2: float
-    disturbance_model: Literal["earth_fixed", "body_fixed"]
-    accel_std_mps2: float
-    """Accelerometer white noise (m/s^2), also the thrust update's noise through M."""
-    gyro_std_rps: float
-    """Gyro white noise (rad/s)."""
-    accel_bias_walk: float
-    gyro_bias_walk: float
-    gravity_walk: float
-    disturbance_walk: float
-    position_walk: float
-    ins_bias_std_mps: float
-    ins_bias_tau_s: float
-    thrust_std_n: float
+    vehicle: EsesoVehicleConfig
+    """Mass, added mass, damping, centre of gravity, weight and buoyancy."""
+    process: EsesoProcessConfig
+    """The disturbance's axes, the random walks and the model-change noise."""
+    noise: EsesoNoiseConfig
+    """Measurement noise and its adaptation; ``accel_std_mps2`` and ``gyro_std_rps`` set
+    (from ``[sensors.imu]`` where the table leaves them unset): the IMU's white noise,
+    also the thrust update's noise through M."""
+    initial: EsesoInitialConfig
+    """Nominal gravity and the initial one-sigmas (the start position is the pipeline's)."""
     thrust_states: Literal["disturbance", "all"]
+    """The error states the thrust update corrects."""
     thrust_huber: float
+    """NIS above which the thrust update is down-weighted; 0 = plain update."""
     gate_sigma: float
     """0 = chi-square 99.9 % gates; else the NIS gate is ``gate_sigma**2 * dof``."""
     max_consecutive_rejects: int
-    initial_position_std_m: float
-    initial_velocity_std_mps: float
-    initial_attitude_std_rad: float
-    initial_accel_bias_std: float
-    initial_gyro_bias_std: float
-    initial_gravity_std: float
-    initial_disturbance_std_n: float
-    damping_rel_std: float = 0.0
-    """Relative one-sigma of the damping coefficients: the lumped disturbance's process
-    noise (:meth:`EsesoFilter.model_change_var`)."""
-    thrust_rel_std: float = 0.0
-    """Relative one-sigma of the thrust map (likewise)."""
-    noise_adapt_updates: int = 0
-    """Time constant (updates) of each channel's noise-scale mean; 0 = no adaptation."""
-    noise_scale_max: float = 1.0
-    """Ceiling of a channel's measurement-noise variance scale (floor 1)."""
-    thrust_noise_scale_max: float = 1.0
-    """Ceiling of the thrust channel's noise variance scale (floor 1)."""
+    """Gated updates in a row after which a channel is fused again, down-weighted."""
 
 
 NOISE_ADAPT_CHANNELS = frozenset({"attitude", "heading", "depth", "vog", "gnss_pos",
@@ -231,7 +205,7 @@ larger than ``H P H^T + R`` say the propagated velocity is too confident."""
 NOISE_SAMPLE_CAP = 100.0
 """Ceiling of one update's contribution to a channel's noise-scale mean (the ratio of
 excess innovation power to the configured noise power, dimensionless): one outlier moves
-the mean by at most this over ``noise_adapt_updates``."""
+the mean by at most this over ``noise.adapt_updates``."""
 
 
 class Outcome(enum.Enum):
@@ -269,15 +243,16 @@ class EsesoFilter:
         R_tau: the thrust update's noise covariance at the last thrust update
             (:meth:`thrust_noise`, N^2), before the other states' share and the scales.
         noise_scale: per sensor channel, the variance scale its noise is multiplied by
-            (1 to ``noise_scale_max``; :meth:`update`).
+            (1 to ``noise.scale_max``; :meth:`update`).
         process_scale: the variance scale of the IMU's white noise in the propagation
-            (1 to ``noise_scale_max``; :data:`PROCESS_ADAPT_CHANNEL`).
+            (1 to ``noise.scale_max``; :data:`PROCESS_ADAPT_CHANNEL`).
     """
 
     def __init__(self, params: EsesoParams) -> None:
-        self.params = c = params
-        self.m_vec = c.mass_kg + np.asarray(c.added_mass, float)  # diag of M, kg
-        self.A = np.diag(np.asarray(c.added_mass, float))
+        self.params = params
+        c = params.vehicle
+        self.m_vec = c.mass_kg + np.asarray(c.added_mass_kg, float)  # diag of M, kg
+        self.A = np.diag(np.asarray(c.added_mass_kg, float))
         self.d_l = np.asarray(c.damping_linear, float)
         self.d_nl = np.asarray(c.damping_quadratic, float)
         self.initialized = False
@@ -286,7 +261,7 @@ class EsesoFilter:
         self.R = np.eye(3)
         self.b_a = np.zeros(3)
         self.b_g = np.zeros(3)
-        self.g = np.array([0.0, 0.0, c.gravity_mps2])
+        self.g = np.array([0.0, 0.0, params.initial.gravity_mps2])
         self.xi = np.zeros(3)
         self.b_ins = np.zeros(2)
         self.P = np.eye(N_ERR)
@@ -308,13 +283,13 @@ class EsesoFilter:
         """Start at attitude ``R0`` (projected onto SO(3)) and NED ``position`` (m), at rest,
         with the configured initial standard deviations; ``yaw_std_rad`` replaces the
         attitude std about the body z axis (an attitude levelled from gravity alone)."""
-        c = self.params
+        c = self.params.initial
         self.R = orthonormalize(R0)
         self.p[:] = position
-        sd = [c.initial_position_std_m] * 3 + [c.initial_velocity_std_mps] * 3
-        sd += [c.initial_attitude_std_rad] * 3 + [c.initial_accel_bias_std] * 3
-        sd += [c.initial_gyro_bias_std] * 3 + [c.initial_gravity_std] * 3
-        sd += [c.initial_disturbance_std_n] * 3 + [c.ins_bias_std_mps] * 2
+        sd = [c.position_std_m] * 3 + [c.velocity_std_mps] * 3
+        sd += [c.attitude_std_rad] * 3 + [c.accel_bias_std_mps2] * 3
+        sd += [c.gyro_bias_std_rps] * 3 + [c.gravity_std_mps2] * 3
+        sd += [c.disturbance_std_n] * 3 + [self.params.noise.ins_bias_std_mps] * 2
         self.P = np.diag(np.square(sd))
         if yaw_std_rad is not None:
             self.P[TH_Z, TH_Z] = yaw_std_rad ** 2
@@ -325,7 +300,7 @@ class EsesoFilter:
         """Propagate over ``dt`` (s) driven by the interval's mean specific force ``f_m``
         (m/s^2) and rate ``w_m`` (rad/s), body axes: nominal state by paper eq. (10b),
         covariance by eqs. (11)-(13) with the Jacobian F of algorithms.md §5.1."""
-        c = self.params
+        c, n = self.params.process, self.params.noise
         f = f_m - self.b_a
         w = w_m - self.b_g
         Rf = self.R @ f
@@ -347,17 +322,17 @@ class EsesoFilter:
             F[XI, XI] = dRt
             F[XI, BG] = -(dRt @ skew(self.xi) @ right_jacobian(-w * dt)) * dt
         # INS velocity bias: first-order Gauss-Markov, exact discretization
-        phi_ins = math.exp(-dt / c.ins_bias_tau_s) if c.ins_bias_tau_s > 0 else 0.0
+        phi_ins = math.exp(-dt / n.ins_bias_tau_s) if n.ins_bias_tau_s > 0 else 0.0
         F[BI, BI] = _I2 * phi_ins
         q = np.empty(N_ERR)
-        q[P_] = c.position_walk ** 2 * dt
-        q[V_] = (c.accel_std_mps2 * dt) ** 2 * self.process_scale
-        q[TH] = (c.gyro_std_rps * dt) ** 2 * self.process_scale
-        q[BA] = c.accel_bias_walk ** 2 * dt
-        q[BG] = c.gyro_bias_walk ** 2 * dt
-        q[G_] = c.gravity_walk ** 2 * dt
-        q[XI] = c.disturbance_walk ** 2 * dt
-        q[BI] = c.ins_bias_std_mps ** 2 * (1.0 - phi_ins * phi_ins)
+        q[P_] = c.position_walk_m_rts ** 2 * dt
+        q[V_] = (n.accel_std_mps2 * dt) ** 2 * self.process_scale
+        q[TH] = (n.gyro_std_rps * dt) ** 2 * self.process_scale
+        q[BA] = c.accel_bias_walk_mps2_rts ** 2 * dt
+        q[BG] = c.gyro_bias_walk_rps_rts ** 2 * dt
+        q[G_] = c.gravity_walk_mps2_rts ** 2 * dt
+        q[XI] = c.disturbance_walk_n_rts ** 2 * dt
+        q[BI] = n.ins_bias_std_mps ** 2 * (1.0 - phi_ins * phi_ins)
         # nominal state (10b)
         self.p = self.p + self.v * dt + 0.5 * acc * dt * dt
         self.v = self.v + acc * dt
@@ -392,7 +367,7 @@ class EsesoFilter:
             What became of it (:class:`Outcome`; false when the gate rejects it).
         """
         outcome = Outcome.FUSED
-        if self.params.noise_adapt_updates > 0:
+        if self.params.noise.adapt_updates > 0:
             if channel in NOISE_ADAPT_CHANNELS:
                 Rm = Rm * self._adapt_noise(channel, y, H @ (self.P @ H.T), Rm)
             elif channel == PROCESS_ADAPT_CHANNEL:
@@ -433,17 +408,17 @@ class EsesoFilter:
         """The variance scale of ``channel``'s configured noise ``Rm`` after this update's
         innovation ``y`` (covariance matching, Mehra 1970; Mohamed & Schwarz 1999):
         ``E[y y^T] = H P H^T + s R``, so ``(y^T y - tr(H P H^T)) / tr(R)`` is a sample of
-        ``s``; its exponential mean over ``noise_adapt_updates`` updates (each sample
-        capped at :data:`NOISE_SAMPLE_CAP`), clipped to [1, ``noise_scale_max``] (the
-        thrust channel's to [1, ``thrust_noise_scale_max``]), is the scale. One-sided:
+        ``s``; its exponential mean over ``noise.adapt_updates`` updates (each sample
+        capped at :data:`NOISE_SAMPLE_CAP`), clipped to [1, ``noise.scale_max``] (the
+        thrust channel's to [1, ``noise.thrust_scale_max``]), is the scale. One-sided:
         noise larger than configured is learnt, smaller is not."""
-        c = self.params
+        c = self.params.noise
         sample = (float(y @ y) - float(np.trace(HPHt))) / max(float(np.trace(Rm)), 1e-300)
         sample = min(sample, NOISE_SAMPLE_CAP)
         mean = self._noise_mean.get(channel, 1.0)
-        mean += (sample - mean) / c.noise_adapt_updates
+        mean += (sample - mean) / c.adapt_updates
         self._noise_mean[channel] = mean
-        ceiling = c.thrust_noise_scale_max if channel == "thrust" else c.noise_scale_max
+        ceiling = c.thrust_scale_max if channel == "thrust" else c.scale_max
         scale = min(max(mean, 1.0), ceiling)
         self.noise_scale[channel] = scale
         return scale
@@ -452,17 +427,17 @@ class EsesoFilter:
         """Scale the IMU's white noise from the DVL innovation ``y`` (a fading factor, Xia
         et al. 1994): ``(y^T y - tr(R)) / tr(H P H^T)`` is a sample of how much larger the
         prior covariance should be, and times the current scale a sample of the scale
-        (the prior already carries it); its exponential mean over ``noise_adapt_updates``
-        updates, clipped to [1, ``noise_scale_max``], multiplies the accelerometer and
+        (the prior already carries it); its exponential mean over ``noise.adapt_updates``
+        updates, clipped to [1, ``noise.scale_max``], multiplies the accelerometer and
         gyro noise variances of the next propagations (:attr:`process_scale`)."""
-        c = self.params
+        c = self.params.noise
         ratio = (float(y @ y) - float(np.trace(Rm))) / max(float(np.trace(HPHt)), 1e-300)
         # P already carries the current scale: the sample is the scale times the ratio
         sample = min(self.process_scale * ratio, NOISE_SAMPLE_CAP)
         mean = self._noise_mean.get("process", 1.0)
-        mean += (sample - mean) / c.noise_adapt_updates
+        mean += (sample - mean) / c.adapt_updates
         self._noise_mean["process"] = mean
-        self.process_scale = min(max(mean, 1.0), c.noise_scale_max)
+        self.process_scale = min(max(mean, 1.0), c.scale_max)
 
     def gate(self, dof: int) -> float:
         """The configured NIS gate of a ``dof``-dimensional update: ``gate_sigma**2 * dof``,
@@ -584,7 +559,7 @@ class EsesoFilter:
         ``w_m`` (rad/s), and its 3 x 23 Jacobian (paper eq. 14b as re-derived in the
         module docstring). ``wdot`` is the angular acceleration (rad/s^2); without it the
         centre-of-gravity terms are left out."""
-        c = self.params
+        c = self.params.vehicle
         f = f_m - self.b_a
         w = w_m - self.b_g
         RT = self.R.T
@@ -625,7 +600,7 @@ class EsesoFilter:
         added to ``P[xi, xi]`` before the update (zero at the first update). The mass term
         is left out: its force is the measured acceleration, whose noise is not a change of
         the model's error."""
-        c = self.params
+        c = self.params.process
         nu = self.R.T @ self.v
         terms = (np.asarray(tau, float).copy(), (self.d_l + self.d_nl * np.abs(nu)) * nu)
         last, self._model_terms = self._model_terms, terms
@@ -649,12 +624,12 @@ class EsesoFilter:
         more than the accelerometer's 0.56-0.84 N). ``s_imu`` is the learnt IMU noise
         scale (:attr:`process_scale`). Without ``wdot_dt`` (no angular acceleration) the
         second term is left out, as the force is."""
-        c = self.params
+        n, v = self.params.noise, self.params.vehicle
         s_imu = self.process_scale
-        var = (self.m_vec * c.accel_std_mps2) ** 2 * s_imu + c.thrust_std_n ** 2
+        var = (self.m_vec * n.accel_std_mps2) ** 2 * s_imu + n.thrust_std_n ** 2
         if wdot_dt is not None and wdot_dt > 0.0:
-            var_wdot = 2.0 * c.gyro_std_rps ** 2 / wdot_dt ** 2 * s_imu
-            var[:2] += (c.mass_kg * c.cg_z_m) ** 2 * var_wdot
+            var_wdot = 2.0 * n.gyro_std_rps ** 2 / wdot_dt ** 2 * s_imu
+            var[:2] += (v.mass_kg * v.cg_z_m) ** 2 * var_wdot
         return np.diag(var)
 
     def update_thrust(self, f_m: Array, w_m: Array, wdot: Array, tau: Array, *,
@@ -673,7 +648,7 @@ class EsesoFilter:
         y = tau - h
         Rm = self.R_tau = self.thrust_noise(wdot_dt)
         HPHt = H @ self.P @ H.T
-        if self.params.noise_adapt_updates > 0:  # before the Huber weight (it would learn it)
+        if self.params.noise.adapt_updates > 0:  # before the Huber weight (it would learn it)
             Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
         only = XI if self.params.thrust_states == "disturbance" else None
         k = self.params.thrust_huber

@@ -21,11 +21,11 @@ q, r]`` and measures the three Euler angles, roll, pitch and yaw (Fan eq. 7 with
 0]``, §III). This implementation is reduced to the horizontal plane, ``z = [psi, r, v_r]``,
 and measures the heading only (``C = [1 0 0]``); the heave and pitch/roll channels, which in
 the paper make ``w_r`` (and through the pitch moment ``u_r``) visible, are not observed here.
-With ``pitch = True`` (``[pipelines.current] flow_pitch``) the vertical block ``zv = [theta,
-q, w_r]`` is added with the measured pitch as a second output (its own Ackermann gain), its
-pitch channel (:data:`PITCH_TERMS`) identified by RLS (:meth:`FlowObserver.identify_pitch`);
-roll is not observed. The vertical block leaves the north and east current as they are
-and makes down worse than the joint filter's ``w_r`` (docs/current.md, "Flow observer"), so
+With ``pitch = True`` (``[pipelines.current.flow] pitch``) the vertical block ``zv =
+[theta, q, w_r]`` is added with the measured pitch as a second output (its own Ackermann
+gain), its pitch channel (:data:`PITCH_TERMS`) identified by RLS
+(:meth:`FlowObserver.identify_pitch`); roll is not observed. The vertical block leaves the
+north and east current as they are and makes down worse than the joint filter's ``w_r`` (docs/current.md, "Flow observer"), so
 the heading-only reduction is the default. The surge speed through water ``u_r`` is not
 observable from the attitude on a straight line; it is the surge model run open loop, as in the WVAM
 (Randeni et al. 2017). The current is then ``V_c = R (v_g - nu_r)`` (Fan, §III.A).

@@ -9,7 +9,7 @@ order of §2.7::
 
     forecast      x_fc = A x_da + B u,        P_f = A P A^T + V_u B B^T      (step 1)
     innovation    z = C x_fc - y,   S = C P_f C^T + R,   NIS = z^2 / S         (step 2)
-    outlier gate  NIS > nis_gate: skipped (at most MAX_CONSECUTIVE_REJECTS in a row)
+    outlier gate  NIS > gate_nis: skipped (at most MAX_CONSECUTIVE_REJECTS in a row)
     input model   AIE: the RCIE step on z (steps 3-5); KF: nothing. It returns its
                   decision (InputStep: V_u from now on, diverged), which the filter applies
     update        x_da = x_fc - L z,   P = (I - L C) P_f                        (step 6)
@@ -71,7 +71,7 @@ class IncrementFilter:
     """
 
     def __init__(self, model: AxisModel, input_model: InputModel, *, input_error_var: float,
-                 u_max: float, q_v: float, correlated: bool, nis_gate: float,
+                 u_max: float, q_v: float, correlated: bool, gate_nis: float,
                  adaptive_rate_noise: bool, name: str = "axis") -> None:
         """Args:
             model: the axis model (§1.1).
@@ -81,7 +81,7 @@ class IncrementFilter:
                 prior spread is ``u_max dt``, and ``V_u`` stays below ``(2 u_max)^2``.
             q_v: extra random walk of the rate per step.
             correlated: model the MA(1) noise of increments (§2.2).
-            nis_gate: NIS beyond which a measurement is an outlier.
+            gate_nis: NIS beyond which a measurement is an outlier.
             adaptive_rate_noise: covariance matching of ``V_u`` on the rate row.
             name: the axis (``surge``, ``heading``): the prefix of its channels.
         """
@@ -89,7 +89,7 @@ class IncrementFilter:
         self.model = model
         self.input = input_model
         self.u_max = u_max
-        self.nis_gate = nis_gate
+        self.gate_nis = gate_nis
         self.adaptive_rate_noise = adaptive_rate_noise
         self.V_u = self.V_u0 = input_error_var
         self.kf = input_model.make_filter(q_v, correlated)
@@ -132,12 +132,12 @@ class IncrementFilter:
                     self.V_u)
         self.rate_z = None if y_v is None else self._rate_innovation(k, y_v, R_v)
         kf.innovation(y)
-        gate = (self.nis_gate if self._consecutive_rejects < MAX_CONSECUTIVE_REJECTS
+        gate = (self.gate_nis if self._consecutive_rejects < MAX_CONSECUTIVE_REJECTS
                 else math.inf)
         accepted = not kf.nis > gate
         self.innovations.append(Innovation(
             channel=f"{self.name}.increment", t=t, z=(-kf.z,), S=(kf.S,), nis=kf.nis,
-            dof=1, gate=self.nis_gate, accepted=accepted,
+            dof=1, gate=self.gate_nis, accepted=accepted,
             reason="" if accepted else "gate", source=source))
         if not accepted:
             self.rejected += 1
@@ -192,7 +192,7 @@ class IncrementFilter:
         kf = self.kf
         z_v = kf.v - y_v
         S_v = self.rate_S = kf.P[3] + R_v
-        if z_v * z_v <= self.nis_gate * S_v:
+        if z_v * z_v <= self.gate_nis * S_v:
             self._rate_ms += RUNNING_MEAN_GAIN * (z_v * z_v - self._rate_ms)
             self._rate_pred += RUNNING_MEAN_GAIN * (S_v - self._rate_pred)
             self._rate_mean += RATE_BIAS_MEAN_GAIN * (z_v - self._rate_mean)
@@ -213,9 +213,9 @@ class IncrementFilter:
 
     def _rate_update(self, y_v: float, R_v: float, t: float, source: str) -> None:
         """Assimilate the measured rate (``IncrementKF.update_rate``, after the increment;
-        its record's innovation is ``y_v - v``, measured minus forecast); an outlier beyond ``nis_gate`` is left
+        its record's innovation is ``y_v - v``, measured minus forecast); an outlier beyond ``gate_nis`` is left
         out and counted, at most MAX_CONSECUTIVE_REJECTS in a row."""
-        gate = (self.nis_gate if self._rate_consecutive_rejects < MAX_CONSECUTIVE_REJECTS
+        gate = (self.gate_nis if self._rate_consecutive_rejects < MAX_CONSECUTIVE_REJECTS
                 else math.inf)
         kf = self.kf
         self.rate_nis = kf.update_rate(y_v, R_v, gate)
@@ -223,7 +223,7 @@ class IncrementFilter:
         accepted = self.rate_nis <= gate
         self.innovations.append(Innovation(
             channel=f"{self.name}.rate", t=t, z=(-kf.z_v,), S=(kf.S_v,), nis=self.rate_nis,
-            dof=1, gate=self.nis_gate, accepted=accepted, reason="" if accepted else "gate",
+            dof=1, gate=self.gate_nis, accepted=accepted, reason="" if accepted else "gate",
             source=source))
         if not accepted:
             self.rate_rejected += 1

@@ -44,8 +44,9 @@ Why withhold rather than inflate the current's sigma under a heading mismatch: a
 offset ``d`` at speed ``s`` adds a bias of ``2 s sin(d/2)`` to the current (1.8 m/s for
 the Shenzhen log's 73.5 deg at 1.8 m/s), not noise; a wider sigma around that mean would
 still publish the wrong number as the best guess, and the pipeline already publishes a
-component it cannot determine as absent (``unknown_above_std``), which every consumer
-handles. The flag, the count ``pipeline:<name>:flagged`` and the warning say why.
+component it cannot determine as absent (``[pipelines.current] unknown_above_std_mps``),
+which every consumer handles. The flag, the count ``pipeline:<name>:flagged`` and the
+warning say why.
 
 Which outputs are a position, a speed or heading-dependent, and in which frame, each
 pipeline declares (its roles, :class:`Declared`; ``onboard.pipelines.base.Pipeline``):

@@ -40,7 +40,7 @@ def axis_filter(model: AxisModel, c: AxisConfig, top: AieConfig,
                          adaptive_window=top.adaptive_window)
     return IncrementFilter(model, estimate, input_error_var=c.tuned("v_d", doppler),
                            u_max=c.u_max, q_v=c.q_v, correlated=top.correlated_noise,
-                           nis_gate=top.nis_gate,
+                           gate_nis=top.gate_nis,
                            adaptive_rate_noise=top.adaptive_rate_noise, name=name)
 
 
@@ -52,11 +52,11 @@ def retune(f: IncrementFilter, c: AxisConfig, doppler: bool) -> None:
     f.input.rcie.set_input_penalty(c.tuned("r_d", doppler))
 
 
-def build(cfg: AieConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,
+def build(cfg: AieConfig, gnss_position_std_m: float = 1.5, heading_std_rad: float = 0.03,
           gnss_velocity_std_mps: float = 0.1, gnss_drift_share: float = 0.0
           ) -> SurgeHeadingPipeline:
     """An AIE pipeline from an :class:`AieConfig` (for code and tests)."""
-    return SurgeHeadingPipeline("aie", COLUMNS, cfg, gnss_std_m, heading_std_rad,
+    return SurgeHeadingPipeline("aie", COLUMNS, cfg, gnss_position_std_m, heading_std_rad,
                                 axis_filter, gnss_velocity_std_mps, retune=retune,
                                 gnss_drift_share=gnss_drift_share)
 

@@ -72,7 +72,7 @@ import numpy as np
 
 from onboard.core.config import CONFIG_DIR, Config, ConfigError
 from onboard.core.messages import Innovation, Sample
-from onboard.core.pipeline_config import CurrentConfig
+from onboard.core.pipeline_config import CurrentConfig, HgoConfig
 from onboard.estimators.current_hgo import CurrentHighGainObserver
 from onboard.estimators.current_kf import (
     PREDICT_STEP_S,
@@ -166,10 +166,11 @@ class CurrentPipeline(Pipeline):
         discarded or confirmed, a start contradicted."""
         self.observable: list[bool] = [False] * nd
         """Per earth axis: whether the last published component was known (one-sigma at
-        most ``unknown_above_std``)."""
+        most ``unknown_above_std_mps``)."""
         self.restore_check = RestoredCurrentCheck(
             hold_s=cfg.restore_check_s, false_alarm_p=cfg.restore_check_p,
-            unknown_above_std=cfg.unknown_above_std, init_current_std=cfg.init_current_std)
+            unknown_above_std=cfg.unknown_above_std_mps,
+            init_current_std=cfg.initial_current_std_mps)
         self._init_observers(cfg, sensors, gain)
         self._init_sample_state(cfg, sensors)
 
@@ -183,23 +184,24 @@ class CurrentPipeline(Pipeline):
         self.hgo_rls: VelocityRls | None = None
         if cfg.observer == "hgo":
             # the observer's own model: RLS from its own velocity, from the same prior
-            self.hgo_rls = VelocityRls(self.identification, noise_std=cfg.hgo_rls_noise_std,
+            self.hgo_rls = VelocityRls(self.identification,
+                                       noise_std=cfg.hgo.rls_noise_std_mps2,
                                        forgetting=cfg.forgetting,
                                        svf_cutoff_hz=cfg.svf_cutoff_hz)
             self.gain = gain or GainDesign.analytic()
             self.hgo = CurrentHighGainObserver(
-                self.model, self.gain, _gain_law(cfg, self.gain), self.kf.P[:2 * nd, :2 * nd],
-                accel_std=cfg.accel_std, model_error_time_s=cfg.model_error_time_s,
-                current_walk=cfg.current_walk)
+                self.model, self.gain, _gain_law(cfg.hgo, self.gain), self.kf.P[:2 * nd, :2 * nd],
+                accel_std=cfg.accel_std_mps2, model_error_time_s=cfg.model_error_time_s,
+                current_walk=cfg.current_walk_mps_rts)
             self.hgo.consider(self.hgo_rls.covariance())
-            self._gamma_follows_model = _gain_is_design_fixed(cfg, self.gain)
+            self._gamma_follows_model = _gain_is_design_fixed(cfg.hgo, self.gain)
             self._gamma_t = -math.inf
             self._gamma_from_model()
         self.flow: FlowObserver | None = None
         if cfg.observer == "flow":
-            self.flow = FlowObserver(self.model, poles=cfg.flow_poles or None,
+            self.flow = FlowObserver(self.model, poles=cfg.flow.poles or None,
                                      psi_std=sensors.compass.heading_std_rad,
-                                     pitch=cfg.flow_pitch, svf_cutoff_hz=cfg.svf_cutoff_hz)
+                                     pitch=cfg.flow.pitch, svf_cutoff_hz=cfg.svf_cutoff_hz)
 
     def _init_sample_state(self, cfg: CurrentConfig, sensors: Any) -> None:
         """The sample adapter (model inputs, attitude, velocity measurements) and the
@@ -432,27 +434,27 @@ class CurrentPipeline(Pipeline):
                 z=(float(rls.e),), S=(float(rls.S),), nis=float(rls.nis), dof=1))
         if flow is not None:
             flow.identify_pitch(dt, kf.x[: self.nd].tolist(), self.inp, learn=(
-                fresh and cfg.identify and float(kf.x[0]) >= cfg.identify_min_speed))
+                fresh and cfg.identify and float(kf.x[0]) >= cfg.identify_min_speed_mps))
 
     def _identify_hgo(self, t: float, dt: float) -> None:
-        """One step of the high-gain observer's own RLS (``hgo_identify``) on its velocity
-        ``nu_r``: learning while a velocity was measured within the last second, the
-        through-water speed is above ``identify_min_speed`` and, with ``"turns"``, the
-        observer's horizontal current one-sigma from the noises (without its model's
-        uncertainty) is at most ``identify_max_current_std`` within
-        ``identify_after_turn_s`` of a turn (``identify_straight``: anywhere)."""
+        """One step of the high-gain observer's own RLS (``[pipelines.current.hgo]
+        identify``) on its velocity ``nu_r``: learning while a velocity was measured within
+        the last second, the through-water speed is above ``identify_min_speed_mps`` and,
+        with ``"turns"``, the observer's horizontal current one-sigma from the noises
+        (without its model's uncertainty) is at most ``identify_max_current_std_mps``
+        within ``identify_after_turn_s`` of a turn (``identify_straight``: anywhere)."""
         hgo, rls, cfg = self.hgo, self.hgo_rls, self.cfg
         assert hgo is not None and rls is not None
         nu = hgo.x[: self.nd].tolist()
         learn = (cfg.identify and self._last_velocity_t is not None
                  and t - self._last_velocity_t <= VELOCITY_FRESH_S
-                 and nu[0] >= cfg.identify_min_speed)
-        if learn and cfg.hgo_identify == "turns":
+                 and nu[0] >= cfg.identify_min_speed_mps)
+        if learn and cfg.hgo.identify == "turns":
             # the noises' part only: the coefficients' part is what learning reduces (with
             # it a loose prior would never let the RLS learn)
             c_var = hgo.current_cov(model=False).diagonal()
             learn = (math.sqrt(max(float(c_var[0]), float(c_var[1])))
-                     <= cfg.identify_max_current_std
+                     <= cfg.identify_max_current_std_mps
                      and (cfg.identify_straight or t - self.identification.last_turn_t
                           <= cfg.identify_after_turn_s))
         before = rls.n_updates
@@ -538,14 +540,14 @@ class CurrentPipeline(Pipeline):
         c, std, nu = obs_src.current_estimate()
         if self._surge_unobservable():
             std = floor_along_track(obs_src.current_cov(), self.yaw or 0.0,
-                                    self.cfg.init_current_std)
+                                    self.cfg.initial_current_std_mps)
         flow = self.flow
         if flow is not None and flow.ready and flow.v_g is not None:
             c_flow, std, nu = flow.current(self._R())
             if c_flow is not None:
                 c = c_flow
         # a component the data do not determine is unknown, not a number
-        thr = self.cfg.unknown_above_std
+        thr = self.cfg.unknown_above_std_mps
         obs = self.observable
         # a through-water velocity beyond physics: the model ran away (health ``runaway``)
         sane = not (obs_src is self.kf and self.kf.runaway)
@@ -605,7 +607,7 @@ class CurrentPipeline(Pipeline):
         nd, o = self.nd, 2 * self.nd
         kf = self.kf
         std = floor_along_track(  # as published: unknown along track without a model
-            kf.current_cov(), self.yaw or 0.0, self.cfg.init_current_std if (
+            kf.current_cov(), self.yaw or 0.0, self.cfg.initial_current_std_mps if (
                 self.yaw is not None and self.identification.surge_unobservable()) else 0.0)
         st: dict[str, Any] = {"model_kind": self.model.kind,
                               "thetas": self.model.thetas_to_mapping(self.thetas),
@@ -709,10 +711,11 @@ def _identification(cfg: CurrentConfig, model: RegressionModel) -> ModelIdentifi
         model, cfg.model, identify=cfg.identify, model_rel_std=cfg.model_rel_std,
         theta_std=cfg.theta_std, theta_std_floor=cfg.theta_std_floor,
         net_weight_std=cfg.net_weight_std, forgetting=cfg.forgetting,
-        identify_max_current_std=cfg.identify_max_current_std,
-        identify_min_rate=cfg.identify_min_rate,
+        identify_max_current_std=cfg.identify_max_current_std_mps,
+        identify_min_rate=cfg.identify_min_rate_rps,
         identify_after_turn_s=cfg.identify_after_turn_s,
-        identify_straight=cfg.identify_straight, identify_min_speed=cfg.identify_min_speed,
+        identify_straight=cfg.identify_straight,
+        identify_min_speed=cfg.identify_min_speed_mps,
         yaw_rls_p0=cfg.yaw_rls_p0, yaw_forgetting=cfg.yaw_forgetting,
         svf_cutoff_hz=cfg.svf_cutoff_hz, heading_memory_s=cfg.heading_memory_s,
         heading_diversity=cfg.heading_diversity)
@@ -721,25 +724,25 @@ def _identification(cfg: CurrentConfig, model: RegressionModel) -> ModelIdentifi
 def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification) -> CurrentKalmanFilter:
     """The joint Kalman filter of ``[pipelines.current]`` on ``ident``'s model."""
     return CurrentKalmanFilter(
-        ident, init_current_std=cfg.init_current_std,
-        current_walk=cfg.current_walk, accel_std=cfg.accel_std,
+        ident, init_current_std=cfg.initial_current_std_mps,
+        current_walk=cfg.current_walk_mps_rts, accel_std=cfg.accel_std_mps2,
         model_error_time_s=cfg.model_error_time_s, turn_accel_gain=cfg.turn_accel_gain,
-        prior_accel_std=cfg.prior_accel_std, gate_nis=cfg.gate_nis,
+        prior_accel_std=cfg.prior_accel_std_mps2, gate_nis=cfg.gate_nis,
         calibrate=cfg.calibrate, calibrate_block=cfg.calibrate_block,
-        max_speed_through_water=cfg.max_speed_through_water)
+        max_speed_through_water=cfg.max_speed_through_water_mps)
 
 
-def _gain_is_design_fixed(cfg: CurrentConfig, design: GainDesign) -> bool:
+def _gain_is_design_fixed(cfg: HgoConfig, design: GainDesign) -> bool:
     """Whether the observer runs a gain file's fixed gain (``rho = 0``, with a gamma*) and
-    nothing in ``[pipelines.current]`` overrides it: then the gain follows gamma* of the
-    model that runs (:meth:`CurrentPipeline._gamma_from_model`)."""
+    nothing in ``[pipelines.current.hgo]`` overrides it: then the gain follows gamma* of
+    the model that runs (:meth:`CurrentPipeline._gamma_from_model`)."""
     configured = (cfg.gamma, cfg.gamma_0, cfg.rho, cfg.gamma_max)
     return all(v is None for v in configured) and design.rho == 0.0 and design.gamma_star > 0
 
 
-def _gain_law(cfg: CurrentConfig, design: GainDesign) -> IncreasingGain:
-    """The increasing-gain law: the design's, unless ``gamma_0``, ``rho``, ``gamma_max`` or
-    a fixed ``gamma`` (``rho = 0``) are configured."""
+def _gain_law(cfg: HgoConfig, design: GainDesign) -> IncreasingGain:
+    """The increasing-gain law of ``[pipelines.current.hgo]``: the design's, unless
+    ``gamma_0``, ``rho``, ``gamma_max`` or a fixed ``gamma`` (``rho = 0``) are configured."""
     g0 = cfg.gamma_0 if cfg.gamma_0 is not None else (
         cfg.gamma if cfg.gamma is not None else design.gamma_0)
     rho = cfg.rho if cfg.rho is not None else (0.0 if cfg.gamma is not None else design.rho)
@@ -756,19 +759,19 @@ def model_kind(cfg: Config, ccfg: CurrentConfig) -> str:
 
 
 def _gain_for(cfg: Config, ccfg: CurrentConfig) -> GainDesign | None:
-    """The HGO gain file of this configuration (``gain_file`` or the bundled
-    ``config/gains/<class>.json``), None if not ``hgo`` or no bundled file exists."""
+    """The HGO gain file of this configuration (``[pipelines.current.hgo] gain_file`` or the
+    bundled ``config/gains/<class>.json``), None if not ``hgo`` or no bundled file exists."""
     if ccfg.observer != "hgo":
         return None
     default = GAIN_DIR / f"{cfg.vehicle.vehicle_class}.json"
-    path = Path(ccfg.gain_file) if ccfg.gain_file else default
+    path = Path(ccfg.hgo.gain_file) if ccfg.hgo.gain_file else default
     if path.exists():
         try:
             return GainDesign.load(path)
         except (OSError, ValueError, KeyError) as err:
-            raise ConfigError(f"pipelines.current.gain_file: {path}: {err}") from None
-    if ccfg.gain_file:
-        raise ConfigError(f"pipelines.current.gain_file: {path}: no such file "
+            raise ConfigError(f"pipelines.current.hgo.gain_file: {path}: {err}") from None
+    if ccfg.hgo.gain_file:
+        raise ConfigError(f"pipelines.current.hgo.gain_file: {path}: no such file "
                           "(run `onboard design-gain --config ...`)")
     return None
 

@@ -134,12 +134,12 @@ class CurrentSamples:
         self.counters = SampleCounters()
         self.innovations = innovations
         self.rpm_scale = cfg.rpm_scale
-        self.gnss_std = cfg.gnss_velocity_std or sensors.gnss.velocity_std_mps
+        self.gnss_std = cfg.gnss_velocity_std_mps or sensors.gnss.velocity_std_mps
         self.gnss_nominal_acc = (cfg.gnss_nominal_accuracy_m
                                  if cfg.gnss_nominal_accuracy_m is not None
                                  else sensors.gnss.position_std_m)
         self.gnss_std_used = self.gnss_std
-        self.dvl_std = cfg.dvl_velocity_std or sensors.dvl.velocity_std_mps
+        self.dvl_std = cfg.dvl_velocity_std_mps or sensors.dvl.velocity_std_mps
         self.dvl_max_fom = sensors.dvl.max_fom_mps
         self.surface_depth = sensors.depth.surface_depth_m
         self.inp = ModelInputs()
@@ -173,9 +173,9 @@ class CurrentSamples:
         g = cfg.glider
         self.glider: GliderModel | None = None if g is None else GliderModel(
             k_l=g.lift_kl, k_l0=g.lift_kl0, k_d0=g.drag_kd0, k_d=g.drag_kd,
-            density=g.density, neutral_pump_cc=g.neutral_pump_cc,
-            vertical_water_std=g.vertical_water_std, gamma_std=g.glide_angle_std,
-            min_glide=g.min_glide_angle)
+            density=g.water_density_kgm3, neutral_pump_cc=g.neutral_pump_cc,
+            vertical_water_std=g.vertical_water_std_mps, gamma_std=g.glide_angle_std_rad,
+            min_glide=g.min_glide_angle_rad)
         self.glider_max_dt = g.max_depth_interval_s if g is not None else 0.0
         self.pump_cc: float | None = None
         self._depth_prev: tuple[float, float] | None = None

@@ -11,23 +11,23 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
   sample (an IMU's delta-velocity / anti-aliased output belongs to the interval ending at
   its stamp); a gap longer than ``max_imu_gap_s`` is propagated as that long (counted
   ``imu_gap``). Every IMU sample then triggers the thrust update while a thruster command
-  is fresh (``command_timeout_s``): the sample's specific force and rate, the angular
+  is fresh (``thrusters.command_timeout_s``): the sample's specific force and rate, the angular
   acceleration from the last two gyro samples, and the thruster force averaged over the
   sample's interval (commands are held between updates and may change within it).
 * **Thruster commands** (normalized, [-1, 1]) become a body force: the force rows of the
   allocation matrix times the per-thruster forces of the thrust curve
   (``f = f_max c|c|`` for the T200).
 * **Start**: at the first IMU sample after an attitude sample (position from the
-  configured start point ``initial_north_m``/``initial_east_m``, a surveyed launch, and
+  configured start point ``initial.north_m``/``initial.east_m``, a surveyed launch, and
   the last depth); without an attitude stream, levelled from gravity after 50 IMU samples
   with the yaw unknown (std pi).
 * **Measurements**: GNSS horizontal position and velocity (only at the surface: a fix
   while the filter is deeper than ``gnss_max_depth_m`` is rejected), INS velocity over
-  ground (R its white noise ``ins_velocity_std_mps``, its correlated error the filter's
+  ground (R its white noise ``noise.ins_velocity_std_mps``, its correlated error the filter's
   ``b_ins`` state), depth, DVL bottom-track velocity (its figure of merit as sigma, no
   less than ``DVL_FOM_FLOOR_MPS``; a fix's reported accuracy no less than
   ``GNSS_H_ACC_FLOOR_M``),
-  attitude (roll/pitch noise ``attitude_std_rad``, yaw the compass heading's, which an
+  attitude (roll/pitch noise ``noise.attitude_std_rad``, yaw the compass heading's, which an
   AHRS reports as its yaw), heading (only without an attitude stream, which carries the
   same yaw). Samples that cannot be used are counted ``rejected.<stream>.<reason>``.
 * **Innovations** (:meth:`Eseso.innovations`): one record per update, channels ``thrust``
@@ -82,7 +82,7 @@ from onboard.core.messages import (
     Sample,
     VelocityOverGround,
 )
-from onboard.core.pipeline_config import EsesoConfig
+from onboard.core.pipeline_config import EsesoConfig, EsesoThrustersConfig
 from onboard.core.so3 import euler_to_matrix, matrix_to_euler
 from onboard.estimators.eseso_filter import P_, P_D, V_, XI, EsesoFilter, EsesoParams, Outcome
 from onboard.pipelines.base import Pipeline, unused_measurement
@@ -135,43 +135,26 @@ def _or(value: float | None, default: float) -> float:
 
 
 def filter_params(c: EsesoConfig, sensors: Any | None = None) -> EsesoParams:
-    """The filter's parameters from ``[pipelines.eseso]`` and, for the IMU noise not given
-    there, ``[sensors.imu]`` (``sensors`` None: 0.05 m/s^2 and 0.005 rad/s)."""
+    """The filter's parameters: the tables of ``[pipelines.eseso]``, the IMU noise that
+    ``[pipelines.eseso.noise]`` leaves unset from ``[sensors.imu]`` (``sensors`` None:
+    0.05 m/s^2 and 0.005 rad/s)."""
+    n = c.noise
+    noise = msgspec.structs.replace(
+        n, accel_std_mps2=_or(n.accel_std_mps2, sensors.imu.accel_std_mps2 if sensors else 0.05),
+        gyro_std_rps=_or(n.gyro_std_rps, sensors.imu.gyro_std_rps if sensors else 0.005))
     return EsesoParams(
-        mass_kg=c.mass_kg,
-        added_mass=tuple(c.added_mass),  # type: ignore[arg-type]
-        damping_linear=tuple(c.damping_linear),  # type: ignore[arg-type]
-        damping_quadratic=tuple(c.damping_quadratic),  # type: ignore[arg-type]
-        cg_z_m=c.cg_z_m, weight_n=c.weight_n, buoyancy_n=c.buoyancy_n,
-        gravity_mps2=c.gravity_mps2, disturbance_model=c.disturbance_model,
-        accel_std_mps2=_or(c.accel_std_mps2, sensors.imu.accel_std_mps2 if sensors else 0.05),
-        gyro_std_rps=_or(c.gyro_std_rps, sensors.imu.gyro_std_rps if sensors else 0.005),
-        accel_bias_walk=c.accel_bias_walk, gyro_bias_walk=c.gyro_bias_walk,
-        gravity_walk=c.gravity_walk, disturbance_walk=c.disturbance_walk,
-        position_walk=c.position_walk, ins_bias_std_mps=c.ins_bias_std_mps,
-        ins_bias_tau_s=c.ins_bias_tau_s, thrust_std_n=c.thrust_std_n,
+        vehicle=c.vehicle, process=c.process, noise=noise, initial=c.initial,
         thrust_states=c.thrust_states, thrust_huber=c.thrust_huber, gate_sigma=c.gate_sigma,
-        max_consecutive_rejects=c.max_consecutive_rejects,
-        initial_position_std_m=c.initial_position_std_m,
-        initial_velocity_std_mps=c.initial_velocity_std_mps,
-        initial_attitude_std_rad=c.initial_attitude_std_rad,
-        initial_accel_bias_std=c.initial_accel_bias_std,
-        initial_gyro_bias_std=c.initial_gyro_bias_std,
-        initial_gravity_std=c.initial_gravity_std,
-        initial_disturbance_std_n=c.initial_disturbance_std_n,
-        damping_rel_std=c.damping_rel_std, thrust_rel_std=c.thrust_rel_std,
-        noise_adapt_updates=c.noise_adapt_updates,
-        noise_scale_max=c.noise_scale_max, thrust_noise_scale_max=c.thrust_noise_scale_max,
-    )
+        max_consecutive_rejects=c.max_consecutive_rejects)
 
 
-def thruster_force(cmd: float, c: EsesoConfig) -> float:
+def thruster_force(cmd: float, c: EsesoThrustersConfig) -> float:
     """Per-thruster force (N) of a normalized command in [-1, 1]: the thrust curve
-    ``max * sign(c) |c|^exponent`` with the configured deadband."""
-    if abs(cmd) <= c.thruster_deadband:
+    ``max * sign(c) |c|^exponent`` of ``[pipelines.eseso.thrusters]`` with its deadband."""
+    if abs(cmd) <= c.deadband:
         return 0.0
-    mag = min(abs(cmd), 1.0) ** c.thruster_exponent
-    return mag * (c.thruster_max_forward_n if cmd > 0 else -c.thruster_max_reverse_n)
+    mag = min(abs(cmd), 1.0) ** c.exponent
+    return mag * (c.max_forward_n if cmd > 0 else -c.max_reverse_n)
 
 
 class EsesoCounters:
@@ -280,18 +263,19 @@ class Eseso(Pipeline):
     def __init__(self, config: EsesoConfig, sensors: Any | None = None) -> None:
         c = self.cfg = config
         s = self._sensors = sensors
-        self.K_alloc = np.asarray(c.force_allocation, float)
+        self.K_alloc = np.asarray(c.thrusters.allocation, float)
         if self.K_alloc.shape[0] != 3:
-            raise ValueError("pipelines.eseso.force_allocation: expected 3 rows")
+            raise ValueError("pipelines.eseso.thrusters.allocation: expected 3 rows")
 
-        self.r_gnss_p = _or(c.gnss_position_std_m, s.gnss.position_std_m if s else 2.0) ** 2
-        self.r_gnss_v = _or(c.gnss_velocity_std_mps, s.gnss.velocity_std_mps if s else 0.1) ** 2
-        self.r_depth = _or(c.depth_std_m, s.depth.depth_std_m if s else 0.02) ** 2
-        self.r_dvl = _or(c.dvl_velocity_std_mps, s.dvl.velocity_std_mps if s else 0.01) ** 2
-        self.r_head = _or(c.heading_std_rad, s.compass.heading_std_rad if s else 0.02) ** 2
-        self.r_att = c.attitude_std_rad ** 2
-        self.r_att_yaw = _or(c.attitude_yaw_std_rad, math.sqrt(self.r_head)) ** 2
-        self.r_ins = c.ins_velocity_std_mps ** 2
+        n = c.noise
+        self.r_gnss_p = _or(n.gnss_position_std_m, s.gnss.position_std_m if s else 2.0) ** 2
+        self.r_gnss_v = _or(n.gnss_velocity_std_mps, s.gnss.velocity_std_mps if s else 0.1) ** 2
+        self.r_depth = _or(n.depth_std_m, s.depth.depth_std_m if s else 0.02) ** 2
+        self.r_dvl = _or(n.dvl_velocity_std_mps, s.dvl.velocity_std_mps if s else 0.01) ** 2
+        self.r_head = _or(n.heading_std_rad, s.compass.heading_std_rad if s else 0.02) ** 2
+        self.r_att = n.attitude_std_rad ** 2
+        self.r_att_yaw = _or(n.attitude_yaw_std_rad, math.sqrt(self.r_head)) ** 2
+        self.r_ins = n.ins_velocity_std_mps ** 2
         self.dvl_max_fom = s.dvl.max_fom_mps if s else 0.05
         self.gnss_max_depth = _or(c.gnss_max_depth_m, s.depth.surface_depth_m if s else 0.3)
 
@@ -338,16 +322,16 @@ class Eseso(Pipeline):
     def _initialize(self, R0: Array, yaw_std_rad: float | None = None) -> None:
         """Start the filter at attitude ``R0``, at the configured start point and the last
         depth received."""
-        c = self.cfg
+        start = self.cfg.initial
         depth = self._pending_depth if self._pending_depth is not None else 0.0
-        self.filter.initialize(R0, np.array([c.initial_north_m, c.initial_east_m, depth]),
+        self.filter.initialize(R0, np.array([start.north_m, start.east_m, depth]),
                                yaw_std_rad)
 
     # ------------------------------------------------------------------ thrust
     def _tau_mean(self, t0: float, t1: float) -> Array | None:
         """Time average (N, body) over [t0, t1] of the held thruster commands."""
         hist = self._tau_hist
-        if not hist or t1 - hist[-1][0] > self.cfg.command_timeout_s:
+        if not hist or t1 - hist[-1][0] > self.cfg.thrusters.command_timeout_s:
             return None
         if t1 <= t0:
             return hist[-1][1]
@@ -420,7 +404,7 @@ class Eseso(Pipeline):
             self._t_aided = t  # the filter's start: count the silence from here
         if t - self._t_aided < ZUPT_AFTER_S or t - self._t_zupt < ZUPT_INTERVAL_S:
             return
-        fresh = t - self.t_tau <= self.cfg.command_timeout_s
+        fresh = t - self.t_tau <= self.cfg.thrusters.command_timeout_s
         if fresh and self._cmd_max > ZUPT_IDLE_COMMAND:
             return
         self._t_zupt = t
@@ -448,7 +432,8 @@ class Eseso(Pipeline):
         if len(s.thrusters) != n:
             self.counters.rejected("command", "thruster_count")
             return
-        forces = np.array([thruster_force(float(cmd), self.cfg) for cmd in s.thrusters])
+        thrusters = self.cfg.thrusters
+        forces = np.array([thruster_force(float(cmd), thrusters) for cmd in s.thrusters])
         if not np.all(np.isfinite(forces)):
             self.counters.rejected("command", "nonfinite")
             return

@@ -31,7 +31,7 @@ def axis_filter(model: AxisModel, c: KfAxisConfig, top: KfConfig,
     the ``"auto"`` ``v_d`` of the measurement set (``doppler``: with a Doppler speed)."""
     return IncrementFilter(model, CommandedInput(c.bias_q),
                            input_error_var=c.tuned("v_d", doppler), u_max=c.u_max,
-                           q_v=c.q_v, correlated=top.correlated_noise, nis_gate=top.nis_gate,
+                           q_v=c.q_v, correlated=top.correlated_noise, gate_nis=top.gate_nis,
                            adaptive_rate_noise=top.adaptive_rate_noise, name=name)
 
 
@@ -41,11 +41,11 @@ def retune(f: IncrementFilter, c: KfAxisConfig, doppler: bool) -> None:
     f.set_input_error_var(c.tuned("v_d", doppler))
 
 
-def build(cfg: KfConfig, gnss_std_m: float = 1.5, heading_std_rad: float = 0.03,
+def build(cfg: KfConfig, gnss_position_std_m: float = 1.5, heading_std_rad: float = 0.03,
           gnss_velocity_std_mps: float = 0.1, gnss_drift_share: float = 0.0
           ) -> SurgeHeadingPipeline:
     """A KF baseline pipeline from a :class:`KfConfig` (for code and tests)."""
-    return SurgeHeadingPipeline("kf", COLUMNS, cfg, gnss_std_m, heading_std_rad,
+    return SurgeHeadingPipeline("kf", COLUMNS, cfg, gnss_position_std_m, heading_std_rad,
                                 axis_filter, gnss_velocity_std_mps, retune=retune,
                                 gnss_drift_share=gnss_drift_share)
 

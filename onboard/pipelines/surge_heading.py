@@ -112,7 +112,7 @@ class AxisHealth(msgspec.Struct, frozen=True):
     steps: int
     """Increment updates."""
     rejected: int
-    """Increments skipped as outliers (beyond ``nis_gate``)."""
+    """Increments skipped as outliers (beyond ``gate_nis``)."""
     diverged: int
     """Divergences of its input model (each restarts the input estimate)."""
     restarts: int
@@ -185,11 +185,11 @@ class SurgeHeadingPipeline(Pipeline):
     speed = ("speed",)
 
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
-                 gnss_std_m: float, heading_std_rad: float, factory: AxisFactory,
+                 gnss_position_std_m: float, heading_std_rad: float, factory: AxisFactory,
                  gnss_velocity_std_mps: float = 0.1, *, retune: AxisRetune,
                  gnss_drift_share: float = 0.0) -> None:
         """``cfg``: the pipeline's table (``[pipelines.aie]`` or ``[pipelines.kf]``);
-        ``gnss_std_m``, ``heading_std_rad`` and ``gnss_velocity_std_mps``: the
+        ``gnss_position_std_m``, ``heading_std_rad`` and ``gnss_velocity_std_mps``: the
         ``[sensors]`` noise, unless ``cfg`` sets its own; ``gnss_drift_share``: the
         slowly wandering share of a fix's noise variance (``[sensors.gnss]
         drift_share``), left out of the increments' noise; ``factory`` builds each axis filter with its input
@@ -199,7 +199,8 @@ class SurgeHeadingPipeline(Pipeline):
                              f"gnss_accuracy_max_m, got {cfg.gnss_accuracy_min_m}, "
                              f"{cfg.gnss_accuracy_max_m}")
         self.name, self.columns, self.cfg = name, columns, cfg
-        self.sigma_p = cfg.gnss_std_m if cfg.gnss_std_m is not None else gnss_std_m
+        self.sigma_p = (cfg.gnss_position_std_m if cfg.gnss_position_std_m is not None
+                        else gnss_position_std_m)
         """Position noise of one fix without its own accuracy (m)."""
         self.sigma_v = (cfg.gnss_velocity_std_mps if cfg.gnss_velocity_std_mps is not None
                         else gnss_velocity_std_mps)
@@ -618,7 +619,7 @@ def _restored_model(m: object) -> AxisModel | None:
 
 
 def sensor_noise(cfg: Config) -> tuple[float, float, float, float]:
-    """``(gnss_std_m, heading_std_rad, gnss_velocity_std_mps, gnss_drift_share)`` from
+    """``(gnss_position_std_m, heading_std_rad, gnss_velocity_std_mps, gnss_drift_share)`` from
     ``[sensors]``."""
     g = cfg.sensors.gnss
     return (g.position_std_m, cfg.sensors.compass.heading_std_rad, g.velocity_std_mps,

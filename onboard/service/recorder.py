@@ -448,8 +448,11 @@ def recording_meta(path: str | Path) -> dict[str, Any]:
 
 
 def recording_config(path: str | Path) -> Config | None:
-    """The configuration the service ran with, from the recording's meta record."""
+    """The configuration the service ran with, from the recording's meta record; keys
+    renamed since the recording was made are read under their new names
+    (:func:`onboard.core.config_renames.migrate`)."""
     from onboard.core.config import from_dict
+    from onboard.core.config_renames import migrate
 
     files = recording_files(path)
     if not files:
@@ -462,7 +465,7 @@ def recording_config(path: str | Path) -> Config | None:
             # made before the autopilot link existed: every frame was decoded and stamped
             # with its receive time; replay it so
             src.update(autopilot_time=False, filter_components=False)
-    return from_dict(cfg, str(path))
+    return from_dict(migrate(cfg), str(path))
 
 
 def replay_recording(paths: str | Path | Iterable[str | Path], engine: Engine,

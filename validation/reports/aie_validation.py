@@ -331,7 +331,7 @@ def identify_blueboat(runs: Sequence[BlueBoatRun], dt: float = 1.0
 
 
 def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | None,
-                 gnss_std_m: float = 0.1, heading_std_rad: float = 0.01,
+                 gnss_position_std_m: float = 0.1, heading_std_rad: float = 0.01,
                  aie_table: dict[str, Any] | None = None,
                  kf_noise: dict[str, dict[str, float]] | None = None
                  ) -> dict[str, np.ndarray]:
@@ -347,8 +347,8 @@ def run_blueboat(run: BlueBoatRun, surge: AxisModel | None, yaw: AxisModel | Non
     ktable = kf_table(table)
     for axis, keys in (kf_noise or {}).items():
         ktable.setdefault(axis, {}).update(keys)
-    pa = aie_mod.build(msgspec.convert(table, AieConfig), gnss_std_m, heading_std_rad)
-    pk = kf_mod.build(msgspec.convert(ktable, KfConfig), gnss_std_m, heading_std_rad)
+    pa = aie_mod.build(msgspec.convert(table, AieConfig), gnss_position_std_m, heading_std_rad)
+    pk = kf_mod.build(msgspec.convert(ktable, KfConfig), gnss_position_std_m, heading_std_rad)
     samples = blueboat_samples(run)
     out: dict[str, list[float]] = {f"{p.name}.{c}": [] for p in (pa, pk) for c in p.columns}
     j = 0

@@ -190,8 +190,8 @@ def body_axis_std(r: dict[str, Any], after: float) -> tuple[float, float, float]
     return tuple(float(np.std(e[:, i])) for i in range(3))  # type: ignore[return-value]
 
 
-CALM_SECTION = {"init_current_std": 1e-3, "current_walk": 1e-6, "forgetting": 1.0,
-                "identify_straight": True}
+CALM_SECTION = {"initial_current_std_mps": 1e-3, "current_walk_mps_rts": 1e-6,
+                "forgetting": 1.0, "identify_straight": True}
 """``[pipelines.current]`` of a calm-water identification run: the current pinned to zero
 (tiny prior, no random walk), no forgetting, identification on straight lines too."""
 
@@ -228,20 +228,20 @@ def calm_state(scenario: str, config_name: str, duration: float = 400.0,
     return dict(_calm_run_state(scenario, config_name, duration, seed))
 
 
-GAVIA_ID_SECTION = {**CALM_SECTION, "accel_std": 0.002, "prior_accel_std": 0.002,
+GAVIA_ID_SECTION = {**CALM_SECTION, "accel_std_mps2": 0.002, "prior_accel_std_mps2": 0.002,
                     "model": {"sway": {"uv": -0.8}}}
 """``[pipelines.current]`` of the Gavia's calm-water identification runs (:func:`gavia_model`):
 :data:`CALM_SECTION` with
 
 * the model's process noise at the regression's own residual in calm water (0.002 m/s^2;
   0.0012 / 0.0016 / 0.0005 m/s^2 in surge / sway / heave with the plant's coefficients on
-  the rpm-steps run), for every DOF. With a mission's ``accel_std`` (0.02) and the generic
-  prior's ``prior_accel_std`` (0.3, which a straight run never lifts: the turn terms keep a
-  DOF's coefficient trace at its prior) the velocity is a random walk the coefficients
-  barely explain (the rpm-steps run: ``u|u|``, ``n|n|`` +-0.035, 15 % towards the prior's
-  zero), and the joint filter reads its own velocity noise, which reverts to the mean at
-  the next measurement, as damping (started at the plant's coefficients it drifts heave
-  ``uw`` from -0.43 to -1.65);
+  the rpm-steps run), for every DOF. With a mission's ``accel_std_mps2`` (0.02) and the
+  generic prior's ``prior_accel_std_mps2`` (0.3, which a straight run never lifts: the
+  turn terms keep a DOF's coefficient trace at its prior) the velocity is a random walk
+  the coefficients barely explain (the rpm-steps run: ``u|u|``, ``n|n|`` +-0.035, 15 %
+  towards the prior's zero), and the joint filter reads its own velocity noise, which
+  reverts to the mean at the next measurement, as damping (started at the plant's
+  coefficients it drifts heave ``uw`` from -0.43 to -1.65);
 * the sway DOF configured at the generic prior's damping (``uv`` -0.8, no crabbing; held
   within ``model_rel_std``): a straight run does not excite sway (``v_r`` stays at
   0.006 m/s), and unconstrained the filter's noise bias made ``uv`` -6.9 (the plant's
@@ -429,7 +429,7 @@ def main(argv: list[str] | None = None) -> int:
         ("gavia hgo gamma* model(a)", "gavia-tidal", "torpedo-auv",
          ("calm", {"observer": "hgo"}), 600 * q, 60.0),
         ("gavia hgo-below gamma=1.29 model(a)", "gavia-tidal", "torpedo-auv",
-         ("calm", {"observer": "hgo", "gamma": 1.29}), 200 * q, 60.0),
+         ("calm", {"observer": "hgo", "hgo": {"gamma": 1.29}}), 200 * q, 60.0),
         ("spheroid kf model(a)", "spheroid-sawtooth", "spheroid", "calm", 600 * q, 100.0),
         ("spheroid kf no-model(b)", "spheroid-sawtooth", "spheroid", {}, 600 * q, 100.0),
         ("spheroid hgo model(a)", "spheroid-sawtooth", "spheroid",
@@ -604,7 +604,7 @@ def run_glider(path: str | Path, section: dict[str, Any] | None = None) -> dict[
     8 s row; errors against the DVL-measured current."""
     from onboard.engine import run as engine_run
     samples, truth = glider_samples(path)
-    sec = {"dvl_velocity_std": 0.05, **(section or {})}
+    sec = {"dvl_velocity_std_mps": 0.05, **(section or {})}
     cfg = make_config("torpedo-auv", sec)
     cfg = from_dict({**__import__("msgspec").to_builtins(cfg), "engine": {"rate_hz": 0.125}})
     pipe = current_mod.create(cfg)

@@ -94,7 +94,7 @@ def run(case: str, seed: int, seconds: float = SECONDS) -> dict[str, Any]:
             continue
         eng.tick(t)
         rec = eng.latest.get(p.name)
-        lumped = lumped_truth(truth, prev, mismatch, cfg.pipelines.eseso)
+        lumped = lumped_truth(truth, prev, mismatch, cfg.pipelines.eseso.vehicle)
         prev = truth
         if rec is None or not rec.values or t < AFTER_S:
             continue
@@ -135,7 +135,7 @@ def lumped_truth(truth: Any, prev: Any, case: Any, c: Any) -> Any:
     push = np.array([truth.disturbance_x or 0.0, truth.disturbance_y or 0.0,
                      truth.disturbance_z or 0.0])
     thrust = np.array([truth.force_x or 0.0, truth.force_y or 0.0, truth.force_z or 0.0])
-    added = np.asarray(c.added_mass, float)
+    added = np.asarray(c.added_mass_kg, float)
     m_vec = c.mass_kg + added
     d = (np.asarray(c.damping_linear, float)
          + np.asarray(c.damping_quadratic, float) * np.abs(nu)) * nu
@@ -235,7 +235,7 @@ def _rel_stds() -> str:
     """The configured relative one-sigmas of damping and thrust, as percentages."""
     from onboard.core.pipeline_config import EsesoConfig
 
-    c = EsesoConfig()
+    c = EsesoConfig().process
     return " / ".join(f"{100 * x:.0f} %" for x in (c.damping_rel_std, c.thrust_rel_std))
 
 

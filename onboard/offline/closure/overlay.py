@@ -19,7 +19,7 @@ only holds the keys it changes:
   tables) from the diagnosis's surge fit when the log has commands; with a ``thrust_nonlinearity`` the pipelines' linear map is the least
   squares line through the fitted thrust curve over the commands the log flew (the
   curve itself is written as a comment);
-* ``[pipelines.current] init_current_std`` from ``water_current``: the size of the
+* ``[pipelines.current] initial_current_std_mps`` from ``water_current``: the size of the
   current this log showed (plus three sigma) as the prior's scale, not its value
   (currents change from one mission to the next).
 
@@ -224,7 +224,7 @@ def surge_model(doc: dict, sel: Any) -> tuple[dict[str, Any], list[str]]:
 
 
 def current_prior(doc: dict) -> tuple[dict[str, Any], list[str]]:
-    """``[pipelines.current] init_current_std`` from a ``water_current`` found."""
+    """``[pipelines.current] initial_current_std_mps`` from a ``water_current`` found."""
     e = _found(doc).get("water_current")
     if e is None:
         return {}, []
@@ -233,7 +233,7 @@ def current_prior(doc: dict) -> tuple[dict[str, Any], list[str]]:
     speed = math.hypot(n, east)
     scale = max(0.05, speed + 3.0 * math.hypot(sn, se))
     toward = math.degrees(math.atan2(east, n)) % 360
-    return ({"init_current_std": round(scale, 3)},
+    return ({"initial_current_std_mps": round(scale, 3)},
             [f"water_current: {speed:.3f} m/s toward {toward:.0f} deg in this log; "
              + "its size is the prior's scale"])
 
