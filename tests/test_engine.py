@@ -245,6 +245,23 @@ def test_non_finite_estimates_are_left_out_of_the_record_and_counted():
     assert not any(k.startswith("pipeline:half") for k in health.rejected)
 
 
+def test_estimates_withheld_by_integrity_are_outputs_counted_apart_from_rejected_inputs(
+        monkeypatch):
+    """The values the integrity monitor withholds (a heading/course mismatch) are counted
+    per value and per row in health's ``withheld``, never among the inputs ``rejected``
+    (before: ``pipeline:<name>:flagged`` in ``rejected``, summed as rejected inputs)."""
+    eng = Engine(Config(), [Recorder()])
+    monkeypatch.setattr(eng.integrity, "withheld", lambda name: ("n",))
+    for t in (1.0, 2.0, 3.0):
+        eng.push(imu(t))
+        (rec,) = eng.tick(t)
+        assert rec.values == {}
+    health = eng.health(3.0)
+    assert health.withheld == {"pipeline:rec:flagged": 3}
+    assert eng.integrity.withheld_rows == {"rec": 3}
+    assert not any(k.startswith("pipeline:") for k in health.rejected)
+
+
 class WithStd(Recorder):
     """A pipeline with a standard deviation column."""
 
