@@ -14,7 +14,7 @@ import pytest
 
 from onboard.cli import main as cli_main
 from onboard.core.errors import UsageError
-from onboard.core.outputs import PROBE_PREFIX, Output, check
+from onboard.core.outputs import PROBE_PREFIX, Output, check, existing
 
 REPO = Path(__file__).resolve().parent.parent
 JAIABOT = REPO / "tests" / "data" / "replay" / "jaiabot-turns.tlog"
@@ -121,6 +121,16 @@ def test_an_input_or_a_path_inside_an_input_directory_is_never_an_output(tmp_pat
         check([Output("--out", runs / "out", "dir", ("estimates.csv",))], force=True,
               inputs=[runs])
     check([Output("--out", tmp_path / "out", "dir")], inputs=[log, runs])   # beside: fine
+
+
+def test_the_config_given_is_an_input_no_output_may_overwrite(tmp_path, capsys):
+    """``diagnose --config my.toml --write-config my.toml --force`` would have replaced
+    the base config with the overlay."""
+    cfg = tmp_path / "my.toml"
+    cfg.write_text('[vehicle]\nclass = "rudder-boat"\n')
+    refused(["diagnose", str(JAIABOT), "--config", str(cfg), "--out", str(tmp_path / "d"),
+             "--write-config", str(cfg), "--force"], capsys, "--write-config", "is the input")
+    assert existing("rudder-boat") == [] and existing(str(cfg)) == [cfg]
 
 
 def test_two_outputs_naming_one_file_are_refused(tmp_path):

@@ -16,9 +16,10 @@ out``, exit status 2), before any log is read or any simulation flown. The rules
   when it holds what a previous run of the command wrote (``writes``: the names the
   command puts in it, e.g. a replay's ``estimates.csv``), it is reused only with
   ``--force``. An empty directory, or one holding other files, is fine.
-* No output is an input (the log), lies inside an input directory (a folder of CSV runs
-  would read a replay's ``estimates.csv`` as a run), or is named twice (``--gpx x`` and
-  ``--geojson x``, or ``--mcap DIR/estimates.csv``); ``--force`` does not lift these.
+* No output is an input (the log, a ``--config`` file), lies inside an input directory (a
+  folder of CSV runs would read a replay's ``estimates.csv`` as a run), or is named twice
+  (``--gpx x`` and ``--geojson x``, or ``--mcap DIR/estimates.csv``); ``--force`` does not
+  lift these.
 
 Writability is probed by creating (and removing) a temporary file in the directory: the
 permission bits alone do not tell (root ignores them; a read-only mount does not).
@@ -78,6 +79,14 @@ def check(outputs: Iterable[Output], *, force: bool = False,
             _check_dir(out, force)
         else:
             _check_file(out, force)
+
+
+def existing(paths: Iterable[str | Path] | None) -> list[Path]:
+    """Those of ``paths`` that are files or directories (a ``--config`` may also name a
+    bundled config, which no output can overwrite): inputs for :func:`check`."""
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    return [Path(p) for p in paths or () if Path(p).exists()]
 
 
 def _check_file(out: Output, force: bool) -> None:

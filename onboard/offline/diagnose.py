@@ -22,7 +22,7 @@ from onboard.offline.closure import dataset, overlay, overlay_check, report
 from onboard.offline.closure.effects import ALL
 from onboard.offline.closure.select import select
 from onboard.core.errors import OutputFailed, UsageError
-from onboard.core.outputs import Output, check as check_outputs
+from onboard.core.outputs import Output, check as check_outputs, existing
 from onboard.offline.replay import choose_config, print_warnings
 
 
@@ -101,7 +101,7 @@ def main(args) -> int:
     if not Path(args.log).exists():
         raise UsageError(f"{args.log}: no such file or directory")
     check_outputs(planned_outputs(args), force=bool(getattr(args, "force", False)),
-                  inputs=[args.log])
+                  inputs=[args.log, *existing(args.config)])
     try:
         cfg, _ = choose_config(args.log, args.config)
         doc = diagnose(args.log, cfg, Path(args.out),

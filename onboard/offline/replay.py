@@ -1,11 +1,17 @@
-"""``onboard replay LOG [--config FILE] [--out DIR] [--mcap FILE]``: run the pipelines
-over a log.
+"""``onboard replay LOG [--config FILE] [--out DIR] [--force] [--mcap FILE] ...``: run
+the pipelines over a log.
 
-Writes ``DIR/estimates.csv`` (architecture.md §4.2), ``DIR/summary.json`` (what was read
-and rejected, rates, time span, the vehicle config used and why) and ``DIR/track.png``;
-with ``--mcap`` also the estimates as MCAP, on the channels and with the schemas of the
-live Zenoh records (:mod:`drivers.mcap_out`, docs/foxglove.md).
+Writes ``DIR/estimates.csv`` (architecture.md §4.2), ``DIR/summary.json`` (what was read,
+the inputs rejected and the estimates withheld apart, rates, time span, the vehicle
+config used and why) and ``DIR/track.png``; with ``--mcap`` also the estimates as MCAP,
+on the channels and with the schemas of the live Zenoh records (:mod:`drivers.mcap_out`,
+docs/foxglove.md), with ``--geojson``/``--gpx`` the tracks (:mod:`onboard.offline.exports`).
 The same engine and pipelines as the live service, so a replay is the live result.
+
+Every output path is checked before the log is read (:mod:`onboard.core.outputs`); each
+export is then written on its own, one that fails listed in summary.json's ``failed``
+and on the last line printed (exit status 1), and track.png, the slowest, is drawn last,
+once summary.json is written and the headline and warnings are printed.
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ from onboard.offline.autodetect import consistency, detect
 from onboard.core import config as configmod
 from onboard.core.config import Config
 from onboard.core.errors import OutputFailed, UsageError
-from onboard.core.outputs import Output, check as check_outputs
+from onboard.core.outputs import Output, check as check_outputs, existing
 from onboard.core.messages import EstimateRecord, Parameter, Sample, VehicleInfo
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
@@ -350,7 +356,7 @@ def _summary(log: str, fmt: str, cfg: Config, engine: Engine, csv: EstimatesCsv,
         "rows": csv.rows,
         "rate_hz": cfg.engine.rate_hz,
         "warnings": msgspec.to_builtins(list(run_warnings(
-            engine, kinds, cfg, header, reader.stats.rejected))),
+            engine, kinds, cfg, header, reader.stats.rejected, fmt))),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
         "declination": msgspec.to_builtins(engine.declination.report),
@@ -475,23 +481,26 @@ kinds of which the log must have one each."""
 
 def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
                  header: Sequence[Sample] = (),
-                 read_rejected: Mapping[str, int] | None = None) -> Alerts:
+                 read_rejected: Mapping[str, int] | None = None, fmt: str = "") -> Alerts:
     """The engine's warnings and those of the whole run: the log's HEARTBEAT and servo
     functions against ``cfg`` (:func:`onboard.offline.autodetect.consistency`), records the
     reader dropped as time outliers and MCAP messages it could not read
     (``read_rejected``: its rejections by reason), no position source, and every pipeline
-    that gave no estimate with what it lacked (``kinds``: accepted samples by kind)."""
+    that gave no estimate with what it lacked (``kinds``: accepted samples by kind);
+    ``fmt``: the log's format (a CSV log's columns are mapped in ``[csv]``)."""
     alerts = engine.alerts
     for code, message in consistency(cfg, header):
         alerts.warn(code, message)
     _reader_warnings(alerts, read_rejected or {})
     have = {k for k, n in kinds.items() if n > 0}
+    csv = fmt in ("csv", "csv-dir")
+    listed = "summary.json samples_accepted_by_type lists what the log has"
     if not have & POSITION_KINDS:
         alerts.warn("no_position_source", "no position in the log (no GNSS fix, no DVL "
-                    "position): positions are dead reckoned from velocities, or absent; a "
-                    "CSV log maps its position columns in [csv]",
-                    details="position samples are kinds " + ", ".join(sorted(POSITION_KINDS))
-                    + "; summary.json samples_accepted_by_type lists what the log has")
+                    "position): positions are dead reckoned from velocities, or absent; "
+                    + ("map its position columns in [csv]" if csv else listed),
+                    details="position samples: " + ", ".join(sorted(POSITION_KINDS))
+                    + ("" if csv else "; normal for a vehicle under water without them"))
     log_has = ", ".join(f"{k} ({kinds[k]})" for k in sorted(have)) or "no usable sample"
     for p in engine.pipelines:
         if p.name in engine.latest:
@@ -501,8 +510,9 @@ def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
         why = f"it needs {needs}" if missing or not groups else "its inputs never lined up"
         alerts.warn("no_estimate", f"{p.name} gave no estimate: {why}; the log has "
                     f"{log_has}; [pipelines.{p.name}] enabled = false leaves it out",
-                    pipeline=p.name, details="a CSV log maps its columns to samples in "
-                    "[csv] (docs/formats-text.md)")
+                    pipeline=p.name, details=(
+                        "a CSV log maps its columns to samples in [csv] (docs/formats-text.md)"
+                        if csv else ""))
     return alerts
 
 
@@ -609,7 +619,7 @@ def main(args) -> int:
     if not Path(log).exists():
         raise UsageError(f"{log}: no such file or directory")
     force = bool(getattr(args, "force", False))
-    check_outputs(planned_outputs(args), force=force, inputs=[log])
+    check_outputs(planned_outputs(args), force=force, inputs=[log, *existing(args.config)])
     mcap = getattr(args, "mcap", None)
     out_dir = Path(args.out)
     try:
