@@ -192,6 +192,68 @@ def _frame(lat0_deg: float, lon0_deg: float) -> LocalFrame:
     return LocalFrame(lat0_deg, lon0_deg)
 
 
+def mapped_columns(fmt: CsvFormat, actuator_columns: Sequence[str] = ()) -> list[str]:
+    """The columns a ``[csv]`` mapping reads (and ``actuator_columns``, the ``[inputs]``
+    roles with ``source = "column"``): a log's header must have each."""
+    cols = [fmt.time, fmt.lat_deg, fmt.lon_deg, fmt.alt_m, fmt.north_m, fmt.east_m,
+            fmt.heading, fmt.yaw_rate, fmt.surge_mps, fmt.sway_mps, fmt.sog_mps, fmt.depth_m,
+            fmt.roll, fmt.pitch, fmt.north_mps, fmt.east_mps, fmt.run_column,
+            *fmt.pwm_columns, *actuator_columns]
+    return [c for c in cols if c]
+
+
+def csv_header(path: str | Path) -> list[str]:
+    """The header of a CSV log (of its first file, for a directory of runs); empty when
+    there is none to read."""
+    p = Path(path)
+    first = min(p.glob("*.csv"), default=None) if p.is_dir() else p
+    try:
+        with open(first, newline="", encoding="utf-8", errors="replace") as fh:  # type: ignore[arg-type]
+            return [h.strip() for h in next(csv.reader(fh), [])]
+    except (OSError, TypeError, csv.Error):
+        return []
+
+
+def fitting_configs(header: Sequence[str]) -> list[str]:
+    """The bundled configs (``onboard.core.config.bundled``) with a ``[csv]`` mapping whose
+    every column, and every column its ``[inputs]`` read, is in ``header``; the one
+    that maps the most columns first."""
+    from onboard.core import config as configmod
+
+    have, fits = set(header), []
+    for name in configmod.bundled():
+        try:
+            cfg = configmod.load(name)
+        except Exception:  # noqa: BLE001 - a config that does not load fits nothing
+            continue
+        if not (cfg.csv.lat_deg or cfg.csv.north_m):
+            continue
+        cols = mapped_columns(cfg.csv, _column_inputs(cfg.inputs))
+        if set(cols) <= have:
+            fits.append((-len(cols), name))
+    return [name for _, name in sorted(fits)]
+
+
+def _column_inputs(inputs) -> list[str]:
+    """The columns the ``[inputs]`` roles with ``source = "column"`` read."""
+    maps = []
+    for name in inputs.__struct_fields__:
+        v = getattr(inputs, name)
+        maps.extend(v if isinstance(v, list) else [v])
+    return [m.column for m in maps if getattr(m, "source", "") == "column"]
+
+
+def fitting_note(header: Sequence[str]) -> str:
+    """What to pass for a CSV log with ``header``: the bundled config that fits it, or
+    how to write a mapping."""
+    fits = fitting_configs(header)
+    if fits:
+        return f"its header fits the bundled config {fits[0]}: --config {fits[0]}"
+    shown = ", ".join(header[:8]) + (", ..." if len(header) > 8 else "")
+    return (f"no bundled config fits its header ({shown or 'none'}): write a [csv] table "
+            "(docs/formats-text.md)")
+
+
 class _Bad(Exception):
     def __init__(self, reason: str) -> None:
         self.reason = reason
@@ -244,19 +306,15 @@ class CsvReader:
         return [h.strip() for h in header], rd, fh
 
     def _columns(self) -> list[str]:
-        f = self.fmt
-        cols = [f.time, f.lat_deg, f.lon_deg, f.alt_m, f.north_m, f.east_m, f.heading,
-                f.yaw_rate, f.surge_mps, f.sway_mps, f.sog_mps, f.depth_m, f.roll, f.pitch,
-                f.north_mps, f.east_mps,
-                f.run_column, *f.pwm_columns, *self.actuator_columns]
-        return [c for c in cols if c]
+        return mapped_columns(self.fmt, self.actuator_columns)
 
     def _index(self, header: list[str], path: Path) -> dict[str, int]:
         idx = {name: i for i, name in enumerate(header)}
         missing = [c for c in self._columns() if c not in idx]
         if missing:
-            raise UnreadableLog(f"{path}: column(s) {', '.join(map(repr, missing))} not in the "
-                                f"header (check the [csv] mapping)")
+            raise UnreadableLog(f"{path}: the [csv] mapping's column(s) "
+                                f"{', '.join(map(repr, missing))} not in its header; "
+                                f"{fitting_note(header)}")
         return idx
 
     @staticmethod

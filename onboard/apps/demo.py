@@ -52,6 +52,7 @@ import msgspec
 
 from onboard.core.config import Config, SourceConfig, load
 from onboard.core.errors import UsageError
+from onboard.core.outputs import Output, check as check_outputs
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import EstimateRecord
 
@@ -605,6 +606,8 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
     scenario = args.scenario or DEFAULT_SCENARIO
     speed = 1.0 if args.realtime else SPEED
+    # the demo's own folder, reused each run (its recordings replaced): writable first
+    check_outputs([Output("the demo's folder", OUT_DIR, "dir")])
     res = asyncio.run(run_demo(scenario, duration, speed=speed,
                                keep_state=bool(getattr(args, "keep_state", False))))
     return 0 if res.estimates else 1

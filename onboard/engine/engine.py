@@ -323,9 +323,11 @@ class Engine:
         clock = "log's clock" if now is None else "receive clock"
         off = outliers[0].t - ref if ref is not None else math.nan
         self.alerts.warn("time_outlier",
-                         f"{n} sample(s) stamped far from their neighbours were dropped "
-                         f"(the last {off:+.6g} s off the {clock}); the samples after "
-                         "them were kept", ref)
+                         f"{n} sample(s) dropped: stamped far from their neighbours (the "
+                         f"last {off:+.6g} s off the {clock}); counted in rejected "
+                         "<type>:time_outlier", ref,
+                         details="a corrupted or mistyped time stamp, or a sender whose "
+                         "clock is not the others'; the samples after them were kept")
         outliers.clear()
 
     def start_segment(self, jump: Jump) -> None:
@@ -336,8 +338,12 @@ class Engine:
         step = jump.step_s
         what = (f"the clock went back {-step:.6g} s (a reboot or a clock reset)" if step < 0
                 else f"no sample for {step:.6g} s (a gap in the log or a clock step)")
-        self.alerts.warn("time_jump", f"{what}: a new time segment starts; durations "
-                         "count each segment, not the time between them", jump.t_after)
+        restart = not 0.0 <= step <= RESTART_AFTER_S
+        self.alerts.warn("time_jump", f"{what}: a new time segment and a new run in "
+                         "estimates.csv start here (summary.json time_span.segments)",
+                         jump.t_after, details="durations count each segment, not the "
+                         "time between them; " + ("the pipelines restart from their "
+                         "adaptive state" if restart else "the pipelines carry on"))
         self.events.append(f"time: {what}; new segment")
         if 0.0 <= step <= RESTART_AFTER_S:
             return
@@ -391,15 +397,20 @@ class Engine:
         if outcome == "wait":
             return s, "no_declination"
         if outcome == "uncorrected":
-            self.alerts.warn("no_declination", self.declination.warning, s.t)
+            message, details = self.declination.warning
+            self.alerts.warn("no_declination", message, s.t, details=details)
         return s, None
 
     def _observe_fix(self, fix: GnssFix) -> None:
         """Show the first fix to the declination (the World Magnetic Model's position
-        and date); warn when its value is unreliable there."""
+        and date); warn when its value is unreliable there, and tell the truth of the
+        magnetic headings used as true before it."""
         warning = self.declination.observe_fix(fix)
         if warning:
-            self.alerts.warn("declination_unreliable", warning, fix.t)
+            self.alerts.warn("declination_unreliable", warning[0], fix.t, details=warning[1])
+        if self.declination.uncorrected:
+            message, details = self.declination.warning
+            self.alerts.revise("no_declination", message, details=details)
 
     def _checker(self, sample: Sample) -> tuple[str, Callable[[Sample], str | None]]:
         """The tag and the value checker of the sample's class (:mod:`onboard.engine.checks`)."""
@@ -543,8 +554,11 @@ class Engine:
         self.pipeline_errors[p.name] += 1
         self.alerts.warn("pipeline_restarted",
                          f"{p.name} failed ({type(err).__name__}: {err}) and was restarted "
-                         "from its configuration; what it had learned is lost",
-                         t, pipeline=p.name)
+                         f"from its configuration; [pipelines.{p.name}] enabled = false "
+                         "leaves it out", t, pipeline=p.name,
+                         details="what it had learned is lost at each restart (counted "
+                         f"in rejected pipeline:{p.name}:error); a failing pipeline is a "
+                         "bug: please report it with the log")
         fresh = build(self.cfg, only={p.name})
         if fresh:
             self.pipelines[i] = fresh[0]
@@ -559,23 +573,28 @@ class Engine:
         among them."""
         self._check_stale(t)
         return HealthRecord(vehicle=self.cfg.vehicle.id, t=t, rates_hz=rates_hz or {},
-                            rejected=self.rejections(), innovations=self.monitor.snapshot(),
+                            rejected=self.rejections(), withheld=self.withheld(),
+                            innovations=self.monitor.snapshot(),
                             counters=self.counters(),
                             events=(events or []) + self._new_events(), mode=self.mode,
                             sources=self.selector.active, flags=self.integrity.active(),
                             declination=self.declination.report)
 
     def rejections(self) -> dict[str, int]:
-        """Every count of what was not used: samples by ``<type>:<reason>``, and per
-        pipeline its failures (``pipeline:<name>:error``, each a restart) and the
-        estimates left out as not finite (``pipeline:<name>:nonfinite``) or withheld by
-        a failed integrity check (``pipeline:<name>:flagged``)."""
+        """What was refused on the way in: samples by ``<type>:<reason>``, and per
+        pipeline its failures (``pipeline:<name>:error``, each a restart). The estimates
+        left out on the way out are apart: :meth:`withheld`."""
         rejected = dict(self.rejected)
         rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
-        rejected.update({f"pipeline:{k}:nonfinite": n for k, n in self.nonfinite.items()})
-        rejected.update({f"pipeline:{k}:flagged": n
-                         for k, n in self.integrity.flagged.items()})
         return rejected
+
+    def withheld(self) -> dict[str, int]:
+        """The estimate values left out of the records: as not finite
+        (``pipeline:<name>:nonfinite``), or withheld by a failed integrity check
+        (``pipeline:<name>:flagged``; the rows: ``integrity.withheld_rows``)."""
+        out = {f"pipeline:{k}:nonfinite": n for k, n in self.nonfinite.items()}
+        out.update({f"pipeline:{k}:flagged": n for k, n in self.integrity.flagged.items()})
+        return out
 
     def counters(self) -> dict[str, dict[str, float | None]]:
         """Every pipeline's :meth:`~onboard.pipelines.base.Pipeline.health` in its flat
