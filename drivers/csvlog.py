@@ -44,7 +44,8 @@ heading is a spike loses its Heading and Attitude (``"heading_spike"``, :class:`
 Rejections (per row): ``"malformed"`` (wrong number of cells), ``"bad_time"`` (time not
 numeric or not finite), ``"time_backwards"`` (time earlier than the previous row of the
 run), ``"time_outlier"`` (one row stamped more than :data:`TIME_JUMP_S` away from the rows
-before and after it; the rows after it are kept; :class:`_RowClock`). Per sample type of a row: ``"nan"`` (empty or NaN cell), ``"non_numeric"``. A
+before and after it, the rows after it kept; or a row outside the group of the run's
+first stamps that agree, where the run starts; :class:`_RowClock`). Per sample type of a row: ``"nan"`` (empty or NaN cell), ``"non_numeric"``. A
 mapped column missing from a file's header raises :class:`UnreadableLog`.
 """
 

@@ -34,7 +34,10 @@ declination, which the autopilot has already done into ``ATT.Yaw``.
 ``FMTU``/``UNIT``/``MULT`` are not needed: the scaled format characters (``c C e E L``) are
 applied from the format, and the few columns read have fixed documented units.
 
-Time base: ``Sample.t`` = ``TimeUS`` * 1e-6, seconds since the autopilot booted.
+Time base: ``Sample.t`` = ``TimeUS`` * 1e-6, seconds since the autopilot booted. The log
+starts where its first stamps agree (:class:`onboard.core.stamps.Anchor`: the records
+outside the largest group of the first five distinct stamps within :data:`TIME_JUMP_S`
+of each other are ``"time_outlier"``), so a damaged first stamp costs one record.
 ArduPilot writes from several threads, so records are slightly out of time order; the
 reader re-orders them through a 2 s window. A record older than the last emitted sample
 (beyond that window) is ``"time_backwards"``, and ``"time_outlier"`` when it is more than

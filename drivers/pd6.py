@@ -40,7 +40,10 @@ Samples:
 Time: ``time_base="rx"`` stamps samples with the receive time (live);
 ``time_base="instrument"`` with the last ``TS`` time (POSIX s; captures), and lines before
 the first ``TS`` are rejected as ``"untimed"``; an SA line (sent before TS in an
-ensemble) is held and stamped with the TS that follows.
+ensemble) is held and stamped with the TS that follows. In the instrument time base a
+sample up to ``drivers.base.TIME_JUMP_S`` older than the newest is ``"time_backwards"``,
+one further back is passed on for the engine's time line to judge
+(:class:`drivers.base.TimeOrder`).
 """
 
 from __future__ import annotations

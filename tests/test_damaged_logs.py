@@ -103,6 +103,27 @@ def test_a_diagnose_that_cannot_work_on_a_damaged_tlog_says_it_is_damaged(tmp_pa
     assert re.search(r"only [\d.]+ % of r.tlog could be used: the file is damaged", err)
 
 
+def test_prose_quoting_a_few_nmea_sentences_says_most_of_it_is_not_log_records(
+        tmp_path, capsys):
+    """A README quoting NMEA sentences in its prose (the Shenzhen data set's
+    README_upstream.md: 4 sentences, 12.6 % used) replays as a 0.0 s log; before, with no
+    word that most of the file was not read."""
+    from onboard.drivers.nmea import encode_gga, encode_hdt
+
+    prose = [f"Line {k} of a description of the data set, its receiver and its antennas."
+             for k in range(16)]
+    t = 1_733_365_638.8
+    nmea = [encode_gga(t, 22.5, 113.9).decode().strip(), encode_hdt(1.0).decode().strip()]
+    log = tmp_path / "README.md"
+    log.write_text("\n".join(prose[:8] + nmea + prose[8:]) + "\n")
+    s, printed = replay(tmp_path, log, capsys)
+    first = s["warnings"][0]
+    assert first["code"] == "log_mostly_unread"
+    assert "of README.md could be used: the file is damaged, or mostly not log records" in (
+        first["message"])
+    assert s["read"]["used_bytes"] / s["read"]["size_bytes"] < 0.2  # measured 0.079
+
+
 @pytest.mark.data
 def test_small_tlog_with_a_tenth_of_its_bytes_randomised_is_read_to_its_end(
         tmp_path, capsys, shared_data):

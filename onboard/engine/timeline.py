@@ -3,7 +3,12 @@
 A log's stamps are trusted only when they agree with each other. Every sample passes
 :meth:`Timeline.admit` before the engine's other time checks:
 
-* a sample within :data:`TIME_JUMP_S` of the newest released time (either side) continues
+* the log starts where its first stamps agree, not on its first one
+  (:class:`onboard.core.stamps.Anchor`): the first samples are held until
+  :data:`~onboard.core.stamps.ANCHOR_STAMPS` distinct stamps (or the end, :meth:`flush`),
+  the largest group of them that chain within :data:`TIME_JUMP_S` is released as the
+  first segment and the others are outliers;
+* after that, a sample within :data:`TIME_JUMP_S` of the newest released time (either side) continues
   the current segment and is released at once (the engine's ``backwards`` and ``late``
   checks still apply to it);
 * a sample further away is *held*, with the samples that agree with it (within
