@@ -122,7 +122,8 @@ def counted_lines(stats: ReadStats, lines: Iterable[bytes], ends: int = 0) -> It
 
 class TimeOrder:
     """The time rule of the readers that pass a clock reset on to the engine's time line
-    (tlog, NMEA, DVL JSON, PD6, the text captures): a stamp up to :data:`TIME_JUMP_S`
+    (DVL JSON, PD6, the NMEA and DDBoat captures; the tlog reader and the NMEA parser
+    apply it inline): a stamp up to :data:`TIME_JUMP_S`
     older than the newest one kept is dropped (``"time_backwards"``), one further back
     is kept and becomes the newest, so that the time line sees a reset (a new segment) or
     a single bad stamp (an outlier) instead of the reader dropping every later sample
