@@ -34,7 +34,10 @@ declination, which the autopilot has already done into ``ATT.Yaw``.
 ``FMTU``/``UNIT``/``MULT`` are not needed: the scaled format characters (``c C e E L``) are
 applied from the format, and the few columns read have fixed documented units.
 
-Time base: ``Sample.t`` = ``TimeUS`` * 1e-6, seconds since the autopilot booted.
+Time base: ``Sample.t`` = ``TimeUS`` * 1e-6, seconds since the autopilot booted. The log
+starts where its first stamps agree (:class:`onboard.core.stamps.Anchor`: the records
+outside the largest group of the first five distinct stamps within :data:`TIME_JUMP_S`
+of each other are ``"time_outlier"``), so a damaged first stamp costs one record.
 ArduPilot writes from several threads, so records are slightly out of time order; the
 reader re-orders them through a 2 s window. A record older than the last emitted sample
 (beyond that window) is ``"time_backwards"``, and ``"time_outlier"`` when it is more than
@@ -65,6 +68,7 @@ from typing import Callable, Iterable, Iterator
 from onboard.drivers.base import TIME_JUMP_S, ReadStats, UnreadableLog
 from onboard.drivers.mavlink import GPS_FIX_TO_QUALITY, wanted_types
 from onboard.core.geo import wrap_2pi
+from onboard.core.stamps import Anchor
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -129,6 +133,75 @@ class _Ahead:
         for _ in self.held:
             self.stats.reject("time_outlier")
         self.held = []
+
+
+class _Order:
+    """The samples of the records in time order: the start where the first stamps agree
+    (:class:`onboard.core.stamps.Anchor`, the others ``"time_outlier"``), then the
+    re-ordering window of :data:`REORDER_WINDOW_S`, records far ahead held
+    (:class:`_Ahead`), records behind the last emitted sample dropped (see the module
+    docstring).
+
+    Attributes:
+        clock: the stamp (s) of a record that carries none: the latest stamp taken into
+            the window, before that the last stamp seen, 0 before any.
+    """
+
+    def __init__(self, stats: ReadStats) -> None:
+        self.stats = stats
+        self.clock = 0.0
+        self._anchor: Anchor[Sample] = Anchor(TIME_JUMP_S)
+        self._ahead = _Ahead(stats)
+        self._heap: list[tuple[float, int, Sample]] = []
+        self._seq = 0
+        self._emitted_t = -math.inf
+        self._latest_t = -math.inf
+
+    def push(self, t: float, sample: Sample) -> list[Sample]:
+        """Take ``sample`` stamped ``t`` (s); return the samples ready, in time order."""
+        if self._anchor.decided:
+            return self._order(t, sample)
+        self.clock = t
+        return self._start(*self._anchor.push(t, sample))
+
+    def flush(self) -> list[Sample]:
+        """The log ended: the samples still waiting, in time order (held far-ahead ones
+        are outliers)."""
+        out = [] if self._anchor.decided else self._start(*self._anchor.decide())
+        self._ahead.drop()
+        while self._heap:
+            self._emitted_t, _, s = heapq.heappop(self._heap)
+            out.append(s)
+        return out
+
+    def _start(self, kept: list[tuple[float, Sample]],
+               outliers: list[tuple[float, Sample]]) -> list[Sample]:
+        for _ in outliers:
+            self.stats.reject("time_outlier")
+        return [out for t, s in kept for out in self._order(t, s)]
+
+    def _order(self, t: float, sample: Sample) -> list[Sample]:
+        if t < self._emitted_t:
+            self.stats.reject("time_outlier" if t < self._emitted_t - TIME_JUMP_S
+                              else "time_backwards")
+            return []
+        latest = self._latest_t
+        if latest != -math.inf and t > latest + TIME_JUMP_S:
+            batch = self._ahead.hold(t, sample)
+        else:
+            self._ahead.drop()
+            batch = [(t, sample)]
+        heap = self._heap
+        for bt, bs in batch:
+            latest = max(latest, bt)
+            heapq.heappush(heap, (bt, self._seq, bs))
+            self._seq += 1
+        self._latest_t = self.clock = latest
+        out = []
+        while heap and heap[0][0] <= latest - REORDER_WINDOW_S:
+            self._emitted_t, _, s = heapq.heappop(heap)
+            out.append(s)
+        return out
 
 
 _VEHICLES = {"ArduSub": 12, "ArduRover": 10, "ArduPlane": 1, "ArduCopter": 2}
@@ -439,13 +512,10 @@ class DataflashReader:
         formats: dict[int, _Format] = {}
         lengths: dict[int, int] = {FMT_ID: 89}
         want = self._want
-        heap: list[tuple[float, int, Sample]] = []
-        seq = 0
-        emitted_t = -math.inf
-        latest_t = -math.inf
-        ahead = _Ahead(stats)
+        order = _Order(stats)
         n_samples = 0
         records = 0
+        used = 0  # bytes of the records read whole
         pos = self._first
         if pos > 0:
             stats.reject("garbage")
@@ -472,6 +542,7 @@ class DataflashReader:
                 pos = nxt
                 continue
             records += 1
+            used += length
             if typ == FMT_ID:
                 self._add_format(data, pos, formats, lengths, stats)
                 counts["FMT"] += 1
@@ -485,9 +556,7 @@ class DataflashReader:
             h = f.handler
             if h is not None:
                 v = f.struct.unpack_from(data, pos + 3)
-                t = v[0] / 1e6 if f.timed else latest_t
-                if t == -math.inf:
-                    t = 0.0
+                t = v[0] / 1e6 if f.timed else order.clock
                 try:
                     s = h(v, t, st)
                 except (TypeError, ValueError, OverflowError):
@@ -497,31 +566,17 @@ class DataflashReader:
                     pos = end
                     continue
                 if s is not None and (want is None or isinstance(s, want)):
-                    if t < emitted_t:
-                        stats.reject("time_outlier" if t < emitted_t - TIME_JUMP_S
-                                     else "time_backwards")
-                    else:
-                        if latest_t != -math.inf and t > latest_t + TIME_JUMP_S:
-                            batch = ahead.hold(t, s)
-                        else:
-                            ahead.drop()
-                            batch = [(t, s)]
-                        for bt, bs in batch:
-                            latest_t = max(latest_t, bt)
-                            heapq.heappush(heap, (bt, seq, bs))
-                            seq += 1
-                        while heap and heap[0][0] <= latest_t - REORDER_WINDOW_S:
-                            emitted_t, _, out = heapq.heappop(heap)
-                            n_samples += 1
-                            yield out
+                    for out in order.push(t, s):
+                        n_samples += 1
+                        yield out
             pos = end
-        ahead.drop()
-        while heap:
-            emitted_t, _, out = heapq.heappop(heap)
+        for out in order.flush():
             n_samples += 1
             yield out
         stats.records = records
         stats.samples = n_samples
+        stats.size_bytes = n
+        stats.used_bytes = used
 
     @staticmethod
     def _resync(data: bytes, start: int, n: int, lengths: dict[int, int]) -> int:

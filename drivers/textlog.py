@@ -67,7 +67,7 @@ from typing import Iterator
 
 import msgspec
 
-from onboard.drivers.base import LogReader, ReadStats, UnreadableLog
+from onboard.drivers.base import LogReader, ReadStats, TimeOrder, UnreadableLog, counted_lines
 from onboard.drivers.nmea import NmeaError, NmeaParser, parse_gga, parse_rmc, split_sentence
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
@@ -210,19 +210,16 @@ class NmeaCaptureReader:
 
     def __iter__(self) -> Iterator[Sample]:
         p, st = self._parser, self.stats
-        last_t: float | None = None
+        order = TimeOrder(st)
 
         def ordered(samples: list[Sample]) -> Iterator[Sample]:
-            nonlocal last_t
             for s in samples:
-                if last_t is not None and s.t < last_t:
-                    st.reject("time_backwards")
+                if not order.keep(s.t):
                     st.samples -= 1
                     continue
-                last_t = s.t
                 yield s
 
-        for ln in self._lines:
+        for ln in counted_lines(st, self._lines, ends=1):
             ln = ln.strip()
             if not ln:
                 continue
@@ -279,7 +276,7 @@ class MixedCaptureReader:
         rows: list[list[float]] = []
         marks: list[tuple[int, float]] = []  # (index of the next row, GPS UTC)
         last_utc: float | None = None
-        for raw in self._lines:
+        for raw in counted_lines(st, self._lines, ends=1):
             ln = raw.strip()
             if not ln:
                 continue
@@ -423,9 +420,9 @@ class DdboatLogReader:
 
     def __iter__(self) -> Iterator[Sample]:
         st, src = self.stats, self.source
-        last_t: float | None = None
+        order = TimeOrder(st)
         last_gps: str | None = None
-        for raw in self._lines:
+        for raw in counted_lines(st, self._lines, ends=1):
             ln = raw.strip()
             if not ln:
                 continue
@@ -435,10 +432,8 @@ class DdboatLogReader:
                 st.reject("unrecognized")
                 continue
             t = pt[0]
-            if last_t is not None and t < last_t:
-                st.reject("time_backwards")
+            if not order.keep(t):
                 continue
-            last_t = t
             text = ln.decode("utf-8", "replace")
             out: list[Sample] = []
             m = _DD_GPS.search(text)

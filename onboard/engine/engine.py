@@ -30,6 +30,7 @@ timer instead. Given the same samples and tick times, the output is identical.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import Counter
 from typing import Callable, Iterable, Mapping, Protocol, Sequence
@@ -63,7 +64,7 @@ from onboard.engine.latency import FixedLagQueue
 from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline, sample_time
 from onboard.engine.sources import SourceSelector
-from onboard.engine.timeline import Jump, Timeline
+from onboard.engine.timeline import Jump, Timeline, outlier_words
 from onboard.engine.checks import checker_for, sample_type
 
 __all__ = ["Engine", "SampleCorrector", "TickQueue", "run"]
@@ -304,10 +305,12 @@ class Engine:
             self._count_outliers(now)
         return released
 
-    def finish(self) -> None:
-        """The run ended: samples still held on the time line are outliers."""
-        self.timeline.flush()
+    def finish(self) -> list[Sample]:
+        """The run ended: samples still held on the time line are outliers; return the
+        samples its end releases (the start of a log of few stamps), to :meth:`push`."""
+        released = self.timeline.flush()
         self._count_outliers()
+        return released
 
     def _count_outliers(self, now: float | None = None) -> None:
         """Count and warn of the time line's outliers, and clear its list; ``now``: the
@@ -319,16 +322,20 @@ class Engine:
         for s in outliers:
             kind, _ = self._checker(s)
             self._reject(kind, "time_outlier")
-        n = sum(v for k, v in self.rejected.items() if k.endswith(":time_outlier"))
-        clock = "log's clock" if now is None else "receive clock"
-        off = outliers[0].t - ref if ref is not None else math.nan
-        self.alerts.warn("time_outlier",
-                         f"{n} sample(s) dropped: stamped far from their neighbours (the "
-                         f"last {off:+.6g} s off the {clock}); counted in rejected "
-                         "<type>:time_outlier", ref,
-                         details="a corrupted or mistyped time stamp, or a sender whose "
+        n = self.time_outliers()
+        if now is None:
+            message = outlier_words(n, outliers[-1].t, ref)
+        else:
+            message = (f"{n} sample(s) stamped far from their neighbours were dropped (the "
+                       f"last {outliers[-1].t - now:+.6g} s off the receive clock)")
+        self.alerts.warn("time_outlier", f"{message}; counted in rejected <type>:time_outlier",
+                         ref, details="a corrupted or mistyped time stamp, or a sender whose "
                          "clock is not the others'; the samples after them were kept")
         outliers.clear()
+
+    def time_outliers(self) -> int:
+        """Samples dropped so far as outliers of the time line (all types)."""
+        return sum(v for k, v in self.rejected.items() if k.endswith(":time_outlier"))
 
     def start_segment(self, jump: Jump) -> None:
         """A confirmed clock jump (:class:`onboard.engine.timeline.Jump`): warn, and when it goes
@@ -336,8 +343,7 @@ class Engine:
         move the source selection's times with the clock, and restart the pipelines
         from their own adaptive state (:meth:`get_state`)."""
         step = jump.step_s
-        what = (f"the clock went back {-step:.6g} s (a reboot or a clock reset)" if step < 0
-                else f"no sample for {step:.6g} s (a gap in the log or a clock step)")
+        what = jump.words()
         restart = not 0.0 <= step <= RESTART_AFTER_S
         self.alerts.warn("time_jump", f"{what}: a new time segment and a new run in "
                          "estimates.csv start here (summary.json time_span.segments)",
@@ -345,7 +351,7 @@ class Engine:
                          "time between them; " + ("the pipelines restart from their "
                          "adaptive state" if restart else "the pipelines carry on"))
         self.events.append(f"time: {what}; new segment")
-        if 0.0 <= step <= RESTART_AFTER_S:
+        if not restart:
             return
         self._last_t.clear()
         self.t_newest = -math.inf
@@ -641,8 +647,8 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
         *, gap_s: float = 10.0, tick_times: Iterable[float] | None = None) -> int:
     """Replay ``samples`` (time-ordered) through ``engine``; return the number of ticks.
 
-    Every sample goes through the time line first (:meth:`Engine.admit`): outliers are
-    dropped, and a clock jump back or beyond :data:`RESTART_AFTER_S` gets a last tick of
+    Every sample goes through the time line first (:meth:`Engine.admit`): the log starts
+    where its first stamps agree, outliers are dropped, and a clock jump back or beyond :data:`RESTART_AFTER_S` gets a last tick of
     the old segment, then :meth:`Engine.start_segment` and a new grid from the new
     segment's first stamp. Ticks fall on the grid ``t0 + k / rate_hz`` from the (segment's)
     first sample's time ``t0``; each tick at time ``T`` sees exactly the samples with
@@ -669,8 +675,8 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
     t0 = None
     k = 0
     next_t = math.inf
-    for s_in in samples:
-        released = engine.admit(s_in)
+    for s_in in itertools.chain(samples, (None,)):   # None: the end, which may release
+        released = engine.admit(s_in) if s_in is not None else engine.finish()
         if not released:
             continue
         jump = engine.timeline.jump
@@ -698,7 +704,6 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
                     k += 1
                     next_t = t0 + k * period
             engine.push(s)
-    engine.finish()
     if t0 is not None:
         on_tick(next_t, engine.tick(next_t))
         ticks += 1

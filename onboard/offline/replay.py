@@ -27,7 +27,7 @@ from typing import Iterable, Iterator, Mapping, Sequence
 
 import msgspec
 
-from onboard.drivers.base import UnreadableLog
+from onboard.drivers.base import ReadStats, UnreadableLog, shortfall
 from onboard.drivers.logs import open_log, sniff
 from onboard.monitor.alerts import Alerts
 from onboard.offline.autodetect import consistency, detect
@@ -38,6 +38,7 @@ from onboard.core.outputs import Output, check as check_outputs, existing
 from onboard.core.messages import EstimateRecord, Parameter, Sample, VehicleInfo
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
+from onboard.engine.timeline import log_time
 from onboard.engine.sources import QUANTITIES
 
 
@@ -264,9 +265,10 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     first = next(samples, None)
     if first is None:
         raise UnreadableLog(f"{log}: no usable samples ({reader.stats.as_dict()['rejected']})")
-    # A live recording starts ticking before its first sample: count from the first tick.
-    csv = EstimatesCsv(out_dir / "estimates.csv", engine.columns,
-                       None if fmt == "recording" else first.t,
+    # ``t`` counts from the first tick: the first stamp the time line kept (the reader's
+    # first sample may be an outlier), or a live recording's first tick before its first
+    # sample.
+    csv = EstimatesCsv(out_dir / "estimates.csv", engine.columns, None,
                        Runs(engine, [r for r in getattr(reader, "runs", ())
                                      if r.t_start == r.t_start]))
     failed: list[dict] = []
@@ -355,8 +357,9 @@ def _summary(log: str, fmt: str, cfg: Config, engine: Engine, csv: EstimatesCsv,
         "ticks": ticks,
         "rows": csv.rows,
         "rate_hz": cfg.engine.rate_hz,
-        "warnings": msgspec.to_builtins(list(run_warnings(
-            engine, kinds, cfg, header, reader.stats.rejected, fmt))),
+        "warnings": msgspec.to_builtins(sorted(run_warnings(   # a log mostly unread first
+            engine, kinds, cfg, header, reader.stats.rejected, fmt, reader.stats,
+            Path(log).name), key=lambda a: a.code != "log_mostly_unread")),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
         "declination": msgspec.to_builtins(engine.declination.report),
@@ -450,13 +453,15 @@ def _origin(engine: Engine) -> dict | None:
 
 
 def _time_span(engine: Engine, t_first: float) -> dict:
-    """``start`` and ``end`` (s, log clock) of the run, ``duration_s`` the sum of its
+    """``start`` and ``end`` (s, log clock): the earliest and the latest stamp of the
+    run's time line (after a clock that went back, not those of its first and last
+    segment), ``duration_s`` the sum of its
     segments' durations (the time between segments is not counted), and ``segments``:
     each segment's start, end and duration (:mod:`onboard.engine.timeline`). A recording replayed
     at its recorded ticks has one segment, from the first sample to the newest."""
     segments = [(s.start, s.end) for s in engine.timeline.segments] or \
         [(t_first, max(engine.t_newest, t_first))]
-    return {"start": segments[0][0], "end": segments[-1][1],
+    return {"start": min(a for a, _ in segments), "end": max(b for _, b in segments),
             "duration_s": sum(b - a for a, b in segments),
             "segments": [{"start": a, "end": b, "duration_s": b - a} for a, b in segments]}
 
@@ -481,14 +486,20 @@ kinds of which the log must have one each."""
 
 def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
                  header: Sequence[Sample] = (),
-                 read_rejected: Mapping[str, int] | None = None, fmt: str = "") -> Alerts:
-    """The engine's warnings and those of the whole run: the log's HEARTBEAT and servo
+                 read_rejected: Mapping[str, int] | None = None, fmt: str = "",
+                 read: ReadStats | None = None, log_name: str = "log") -> Alerts:
+    """The engine's warnings and those of the whole run: a log of which little could be
+    used (``read``: the reader's counts, :func:`onboard.drivers.base.shortfall`), the log's
+    HEARTBEAT and servo
     functions against ``cfg`` (:func:`onboard.offline.autodetect.consistency`), records the
     reader dropped as time outliers and MCAP messages it could not read
     (``read_rejected``: its rejections by reason), no position source, and every pipeline
     that gave no estimate with what it lacked (``kinds``: accepted samples by kind);
     ``fmt``: the log's format (a CSV log's columns are mapped in ``[csv]``)."""
     alerts = engine.alerts
+    little = read and shortfall(read, log_name, engine.time_outliers())
+    if little:
+        alerts.warn("log_mostly_unread", little)
     for code, message in consistency(cfg, header):
         alerts.warn(code, message)
     _reader_warnings(alerts, read_rejected or {})
@@ -534,16 +545,23 @@ def _reader_warnings(alerts: Alerts, read_rejected: Mapping[str, int]) -> None:
                     "read.rejected)")
 
 
-def print_warnings(warnings: list[dict], t0: float) -> None:
-    """The warnings: each one's actionable line (its code, its span in s from the start
-    of the log, its message), then its details indented below."""
+def print_warnings(warnings: list[dict], t0: float,
+                   segments: Sequence[Mapping] = ()) -> None:
+    """The warnings, one line each, times from the start of the log (s): along the time
+    line's ``segments`` (summary.json ``time_span.segments``; the time between them not
+    counted, :func:`onboard.engine.timeline.log_time`), else from ``t0``."""
     if not warnings:
         return
+    spans = [(g["start"], g["end"]) for g in segments]
+
+    def at(t: float) -> float:
+        return log_time(spans, t) if spans else t - t0
+
     print(f"{len(warnings)} warning{'s' if len(warnings) > 1 else ''}:")
     for w in warnings:
         span = ""
         if w["t_start"] is not None:
-            span = f" [{w['t_start'] - t0:.1f}-{w['t_end'] - t0:.1f} s]"
+            span = f" [{at(w['t_start']):.1f}-{at(w['t_end']):.1f} s]"
         print(f"  {w['code']}{span}: {w['message']}")
         if w.get("details"):
             print(f"      {w['details']}")
@@ -637,7 +655,8 @@ def main(args) -> int:
     print(headline(summary, out_dir / "estimates.csv"))
     if "mcap" in summary:
         print(f"  {summary['mcap']['messages']:,} records -> {mcap} (MCAP; docs/foxglove.md)")
-    print_warnings(summary["warnings"], summary["time_span"]["start"])
+    print_warnings(summary["warnings"], summary["time_span"]["start"],
+                   summary["time_span"]["segments"])
     if not args.no_plot:
         add_figure(out_dir, summary, Path(log).name)
     elif force:

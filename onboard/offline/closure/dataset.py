@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.signal import savgol_filter
 
+from onboard.drivers.base import shortfall
 from onboard.drivers.logs import open_log
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame
@@ -494,14 +496,21 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     col = _Collector()
     engine = Engine(cfg, [col], select_sources=False, fresh_estimates=False)
     run(engine, reader, lambda t, r: None, gap_s=2.0)
-    if not col.rows:
-        raise NotEnoughData(f"{path}: no samples in time (no time-stamped heading, "
-                            "position, velocity or command the engine could use)")
-    cols = list(zip(*col.rows))
-    (t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs, cl, cr,
-     ax, ay) = (np.array(c) for c in cols)
-    t = t.astype(float)
-    ok = _usable_ticks(path, psi.astype(float), v_n.astype(float), v_e.astype(float), rate_hz)
+    little = shortfall(reader.stats, Path(path).name, engine.time_outliers())
+    if little:   # said beside the fit, or with the refusal: the log is mostly unread
+        engine.alerts.warn("log_mostly_unread", little)
+    try:
+        if not col.rows:
+            raise NotEnoughData(f"{path}: no samples in time (no time-stamped heading, "
+                                "position, velocity or command the engine could use)")
+        cols = list(zip(*col.rows))
+        (t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs, cl,
+         cr, ax, ay) = (np.array(c) for c in cols)
+        t = t.astype(float)
+        ok = _usable_ticks(path, psi.astype(float), v_n.astype(float), v_e.astype(float),
+                           rate_hz)
+    except NotEnoughData as err:
+        raise NotEnoughData(f"{little}; in what could: {err}" if little else str(err)) from None
     idx = np.flatnonzero(ok)
     # Keep the longest stretches; breaks in time become separate runs.
     t = t[idx]
