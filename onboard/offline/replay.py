@@ -21,8 +21,10 @@ from typing import Iterable, Iterator, Mapping, Sequence
 import msgspec
 
 from onboard.drivers.base import UnreadableLog
+from onboard.drivers.logclock import LogClock, log_clock
 from onboard.drivers.logs import open_log
 from onboard.monitor.alerts import Alerts
+from onboard.offline import exports
 from onboard.offline.autodetect import consistency, detect
 from onboard.core import config as configmod
 from onboard.core.config import Config
@@ -209,10 +211,13 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
 
 def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
            plot: bool = True, progress: bool = False, mcap: Path | None = None,
-           geojson: Path | None = None, gpx: Path | None = None) -> dict:
+           geojson: Path | None = None, gpx: Path | None = None,
+           foxglove_layout: Path | None = None) -> dict:
     """Run the pipelines over ``log``; write the outputs into ``out_dir`` (and the
     estimates as MCAP into ``mcap`` when given; with ``geojson`` the tracks and current
-    arrows there, with ``gpx`` the tracks, :mod:`onboard.offline.exports`); return the summary."""
+    arrows there, with ``gpx`` the tracks, with ``foxglove_layout`` a Foxglove layout of
+    the topics published, :mod:`onboard.offline.exports`); return the summary. MCAP and
+    GPX are stamped in UTC where the log knows it (:mod:`drivers.logclock`)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     wall0 = time.perf_counter()
     fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
@@ -228,14 +233,21 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
                                      if r.t_start == r.t_start]))
     on_tick = csv.write
     mcap_out = None
+    clock = log_clock(fmt, reader, log, first.t) if mcap or gpx else None
+    published = exports.Published() if foxglove_layout is not None else None
     if mcap is not None:
         from onboard.drivers.mcap_out import McapRecordWriter
 
-        mcap_out = McapRecordWriter(mcap, cfg.service.zenoh.key_prefix, cfg.vehicle.id)
-
+        mcap_out = McapRecordWriter(mcap, cfg.service.zenoh.key_prefix, cfg.vehicle.id,
+                                    clock)
+    if mcap_out is not None or published is not None:
         def on_tick(t: float, records: Sequence[EstimateRecord]) -> None:
             csv.write(t, records)
-            mcap_out.write(t, records, engine.location_fixes(records))
+            fixes = engine.location_fixes(records)
+            if mcap_out is not None:
+                mcap_out.write(t, records, fixes)
+            if published is not None:
+                published.add(records, fixes)
     meter = _Progress(progress)
 
     header: list[Sample] = []   # HEARTBEAT and parameters, checked against cfg at the end
@@ -301,10 +313,15 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "declination": msgspec.to_builtins(engine.declination.report),
         "wall_time_s": round(time.perf_counter() - wall0, 3),
     }
+    if clock is not None:
+        summary["utc"] = clock.summary(time_span["start"])
     if mcap_out is not None:
         summary["mcap"] = {"file": str(mcap), "messages": mcap_out.messages}
     if geojson is not None or gpx is not None:
-        summary["geojson"] = _write_geojson(out_dir, geojson, gpx, summary)
+        summary["geojson"] = _write_geojson(out_dir, geojson, gpx, summary, clock, csv.t0)
+    if published is not None:
+        summary["foxglove_layout"] = exports.write_foxglove_layout(
+            foxglove_layout, cfg.service.zenoh.key_prefix, cfg.vehicle.id, published)
     if plot:
         summary["figure"] = _plot_track(out_dir, Path(log).name)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -402,15 +419,16 @@ def print_warnings(warnings: list[dict], t0: float) -> None:
 
 
 def _write_geojson(out_dir: Path, path: Path | None, gpx: Path | None,
-                   summary: dict) -> dict:
+                   summary: dict, clock: LogClock | None = None, t0: float = 0.0) -> dict:
     """The replay's tracks and current arrows as GeoJSON in ``path``, its tracks as GPX in
-    ``gpx`` (either may be None); what was written."""
-    from onboard.offline import exports as geojson
+    ``gpx`` (either may be None; the GPX's times in UTC where ``clock`` has it, ``t0`` the
+    log time of ``t`` = 0); what was written."""
     from onboard.offline.plots import read_columns
 
     cols = read_columns(out_dir / "estimates.csv")
-    n = geojson.write(path, cols, summary["origin"], summary["runs"],
-                      Path(summary["log"]).name, gpx)
+    utc = (lambda t: clock.to_utc(t0 + t)) if clock is not None and clock.utc else None
+    n = exports.write(path, cols, summary["origin"], summary["runs"],
+                      Path(summary["log"]).name, gpx, utc, clock.source if clock else "")
     return {"path": str(path) if path else None, "gpx": str(gpx) if gpx else None,
             "features": n}
 
@@ -443,7 +461,8 @@ def main(args) -> int:
                          plot=not args.no_plot, progress=sys.stderr.isatty(),
                          mcap=Path(mcap) if mcap else None,
                          geojson=getattr(args, "geojson", None),
-                         gpx=getattr(args, "gpx", None))
+                         gpx=getattr(args, "gpx", None),
+                         foxglove_layout=getattr(args, "foxglove_layout", None))
     except UnreadableLog as err:
         raise UsageError(str(err)) from None
     read = summary["read"]
@@ -453,5 +472,11 @@ def main(args) -> int:
           f"-> {Path(args.out) / 'estimates.csv'} ({summary['config']})")
     if mcap:
         print(f"  {summary['mcap']['messages']:,} records -> {mcap} (MCAP; docs/foxglove.md)")
+    if "utc" in summary:
+        print(f"  export times: {summary['utc']['source']}")
+    if "foxglove_layout" in summary:
+        lay = summary["foxglove_layout"]
+        print(f"  Foxglove layout of {len(lay['topics'])} topics of {lay['vehicle_id']} -> "
+              f"{lay['file']}")
     print_warnings(summary["warnings"], summary["time_span"]["start"])
     return 0
