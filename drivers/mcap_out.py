@@ -97,12 +97,10 @@ class McapRecordWriter:
         if self._start is None:
             self._start = t
         t_out = self.clock.to_utc(t)
-        if t_out is None:
-            t_out = t
-        elif t_out != t:
-            stamp = wire.foxglove_time(t_out)
+        t_ns = max(0, round((t if t_out is None else t_out) * wire.NS_PER_S))
+        if t_out is not None and t_out != t:
+            stamp = wire.Time(*divmod(t_ns, wire.NS_PER_S))
             fixes = [msgspec.structs.replace(f, timestamp=stamp) for f in fixes]
-        t_ns = max(0, round(t_out * wire.NS_PER_S))
         enc = self._enc.encode
         for rec in records:
             self._add(wire.estimate_key(self.prefix, self.vehicle, rec.pipeline),

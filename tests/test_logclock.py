@@ -16,7 +16,7 @@ from onboard.drivers.logclock import LogClock, gps_to_utc, iso8601, log_clock
 from onboard.drivers.logs import open_log
 from onboard.drivers.recording import RawRecord, RecordingWriter
 from onboard.core import config as configmod
-from tests.helpers.dataflash_log import FORMATS, fmt_record, record
+from tests.helpers.dataflash_log import gps_timed_log
 
 REPO = Path(__file__).resolve().parents[1]
 JAIABOT = REPO / "tests/data/replay/jaiabot-turns.tlog"
@@ -45,17 +45,9 @@ def test_gps_time_becomes_utc_with_the_leap_seconds_of_its_day():
 
 
 def _dataflash(tmp_path: Path, week: int, tow_ms: int) -> Path:
-    """GPS records at 5 Hz from 10 s after boot (the first two without a GPS time), then an
-    IMU record; GPS time advances with TimeUS."""
-    out = [fmt_record(n) for n in FORMATS]
-    for k in range(12):
-        t_us = 10_000_000 + 200_000 * k
-        wk, ms = (0, 0) if k < 2 else (week, tow_ms + 200 * (k - 2))
-        out.append(record("GPS", t_us, 0, 3, ms, wk, 12, 90, int(63.4e7), int(10.3e7), 1000,
-                          0.5, 90.0, 0.0, 0.0, 1))
-    out.append(record("IMU2", 13_000_000, 0.0, 0.0, 0.0, 0.0, 0.0, -9.8))
+    """The synthetic boat with GPS time (tests/helpers/dataflash_log.py)."""
     path = tmp_path / "gps.bin"
-    path.write_bytes(b"".join(out))
+    path.write_bytes(gps_timed_log(week, tow_ms))
     return path
 
 

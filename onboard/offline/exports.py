@@ -266,6 +266,8 @@ SPEED_SERIES = (("nav", "speed", "nav (GNSS)"), ("aie", "speed", "aie"),
 """The speed plot: (pipeline, its value, label)."""
 CURRENT_AXES = ("north", "east", "down")
 """The current plot: these values and their sigmas, where published."""
+PANEL_TITLE = "foxglovePanelTitle"
+"""The key of a panel's title in the config of an exported Foxglove layout."""
 PLOT_STYLE = {"showLegend": True, "legendDisplay": "floating", "showXAxisLabels": True,
               "showYAxisLabels": True, "isSynced": True, "xAxisVal": "timestamp"}
 """The settings every plot shares (Foxglove's Plot panel config)."""
@@ -294,7 +296,7 @@ def _speed_panel(prefix: str, vehicle: str, pub: Published) -> dict | None:
     """The plot of every published speed, or None without any."""
     paths = [_series(wire.estimate_key(prefix, vehicle, p), "values." + q, label)
              for p, q, label in SPEED_SERIES if q in pub.values.get(p, ())]
-    return {"title": "Speed (m/s)", "paths": paths, **PLOT_STYLE} if paths else None
+    return {PANEL_TITLE: "Speed (m/s)", "paths": paths, **PLOT_STYLE} if paths else None
 
 
 def _current_panel(prefix: str, vehicle: str, pub: Published) -> dict | None:
@@ -304,8 +306,8 @@ def _current_panel(prefix: str, vehicle: str, pub: Published) -> dict | None:
              if a in pub.values.get("current", ())]
     paths += [_series(topic, "std." + a, "sigma " + a) for a in CURRENT_AXES
               if a in pub.std.get("current", ())]
-    return {"title": "Water current (m/s, NED, the direction it flows to)", "paths": paths,
-            **PLOT_STYLE} if paths else None
+    return {PANEL_TITLE: "Water current (m/s, NED, the direction it flows to)",
+            "paths": paths, **PLOT_STYLE} if paths else None
 
 
 def foxglove_layout(prefix: str, vehicle: str, pub: Published) -> dict:
