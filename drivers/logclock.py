@@ -14,8 +14,9 @@ time elsewhere. :func:`log_clock` says which, as a :class:`LogClock`:
   (``wall_time`` and ``clock`` when the file was opened).
 * CSV: the time column times ``time_scale``, each later run of a directory shifted onto one
   time line; UTC as the column reads, run by run.
-* NMEA capture: the lines' wall-clock prefixes (taken as UTC), else the sentences' UTC with
-  the first RMC date; UTC as is.
+* NMEA capture: the lines' wall-clock prefixes, UTC from the valid RMC sentences' date and
+  time (the median of their difference: the prefixes may be local time), as is without
+  any; else the sentences' UTC with the first RMC date, UTC as is.
 * mixed Arduino capture: the GPS's UTC with its clock jumps removed; UTC as the GPS read
   after its last jump (``MixedCaptureReader.utc_offset_s``).
 * DVL JSON: ``time_of_validity`` or ``ts`` (Unix time), else the sum of json_v1 ``time``
@@ -38,6 +39,7 @@ import calendar
 import json
 import math
 import os
+import statistics
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -49,6 +51,7 @@ UTC_MAX_S = float(calendar.timegm((2100, 1, 1, 0, 0, 0)))
 GPS_EPOCH_S = float(calendar.timegm((1980, 1, 6, 0, 0, 0)))
 """The start of GPS week 0 (POSIX s, 1980-01-06T00:00:00Z)."""
 SECONDS_PER_WEEK = 604800.0
+SECONDS_PER_HOUR = 3600.0
 MS_PER_S = 1000.0
 LEAP_SECONDS: tuple[tuple[float, int], ...] = tuple(
     (float(calendar.timegm((y, m, 1, 0, 0, 0))), n) for n, (y, m) in enumerate((
@@ -146,7 +149,7 @@ def log_clock(fmt: str, reader: object, path: str | os.PathLike, t_first: float)
     if name == "MixedCaptureReader":
         return _mixed_clock(reader, t_first)
     if name == "NmeaCaptureReader" and getattr(reader, "receive_times", False):
-        return _posix("the capture's wall-clock line prefixes (taken as UTC)", t_first)
+        return _prefixed_nmea_clock(path, t_first)
     if name == "NmeaCaptureReader":
         return _posix("the NMEA sentences' UTC time and the capture's first RMC date",
                       t_first, no_date="the NMEA sentences give a time of day, and the "
@@ -162,6 +165,34 @@ def _posix(words: str, t_first: float, offset_s: float = 0.0,
     if is_date(t_first + offset_s):
         return LogClock(f"UTC from {words}", ((t_first, offset_s),))
     return LogClock("no UTC: " + (no_date or f"{words} {NO_DATE}"))
+
+
+def _prefixed_nmea_clock(path: str | os.PathLike, t_first: float) -> LogClock:
+    """The wall-clock line prefixes put on UTC by the capture's valid RMC sentences: the
+    median of (RMC date and time less the line's prefix); the prefixes as UTC without
+    any."""
+    from onboard.drivers.nmea import NmeaError, parse_rmc, split_sentence
+    from onboard.drivers.textlog import prefix_time
+
+    offsets = []
+    for line in Path(path).read_bytes().splitlines():
+        stamp, i = prefix_time(line) or (None, 0)
+        j = line.find(b"$", i)
+        if stamp is None or j < 0 or line[j + 3:j + 7] != b"RMC,":
+            continue
+        try:
+            rmc = parse_rmc(split_sentence(line[j:].decode("ascii", "replace"))[2])
+        except NmeaError:
+            continue
+        if rmc.valid and rmc.day_s is not None and rmc.tod_s is not None:
+            offsets.append(rmc.day_s + rmc.tod_s - stamp)
+    if not offsets:
+        return _posix("the capture's wall-clock line prefixes (taken as UTC: no valid RMC "
+                      "sentence gives the date)", t_first)
+    offset = statistics.median(offsets)
+    return _posix("the RMC sentences' date and time (the capture's wall-clock line "
+                  f"prefixes are {-offset / SECONDS_PER_HOUR:+.2f} h from UTC: their "
+                  "time zone, or their computer's clock error)", t_first, offset)
 
 
 def _dataflash_clock(path: str | os.PathLike) -> LogClock:

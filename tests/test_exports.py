@@ -16,6 +16,7 @@ import pytest
 from onboard.cli import main as cli_main
 from onboard.core.geo import LocalFrame
 from onboard.offline.exports import ARROW_SCALE_S, feature_collection
+from tests.helpers.nmea_times import rmc_times
 
 REPO = Path(__file__).resolve().parents[1]
 JAIABOT = REPO / "tests/data/replay/jaiabot-turns.tlog"
@@ -224,25 +225,7 @@ def test_gpx_of_a_real_nmea_capture_is_timed_by_its_rmc_dates(shared_data, tmp_p
     RMC date and time, as the sentences read them (parsed here on their own)."""
     log = shared_data / "usv_rtk_gnss_heading_nmea_shenzhen" / "202412051037.txt"
     gpx, _, s = _gpx_replay(log, tmp_path)
-    rmc = [ln.split(",") for ln in log.read_text(errors="replace").splitlines()
-           if ln[3:6] == "RMC" and ln.count(",") >= 9]
-    stamps = [datetime.strptime(f[9] + f[1][:6], "%d%m%y%H%M%S").replace(
-        tzinfo=timezone.utc).timestamp() + float("0" + f[1][6:]) for f in rmc if f[1] and f[9]]
+    stamps = rmc_times(log)
     t0, t1 = gpx.get_time_bounds()
     assert min(stamps) - 1.0 <= t0.timestamp() and t1.timestamp() <= max(stamps) + 1.0
     assert t1.timestamp() - t0.timestamp() > 0.9 * s["time_span"]["duration_s"]
-
-
-@pytest.mark.data
-def test_gpx_of_a_real_tlog_is_timed_as_pymavlink_reads_the_tlog(shared_data, tmp_path):
-    """ArduSub small.tlog: the points' times lie within the record stamps pymavlink reads."""
-    from pymavlink import mavutil
-
-    log = shared_data / "ardusub_small_logs" / "small.tlog"
-    gpx, _, _ = _gpx_replay(log, tmp_path)
-    mlog = mavutil.mavlink_connection(str(log))
-    stamps = []
-    while (m := mlog.recv_match(type="GPS_RAW_INT")) is not None:
-        stamps.append(m._timestamp)
-    t0, t1 = gpx.get_time_bounds()
-    assert stamps[0] - 1.0 <= t0.timestamp() < t1.timestamp() <= stamps[-1] + 1.0

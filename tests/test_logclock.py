@@ -166,11 +166,14 @@ def test_the_offsets_apply_from_their_start_and_the_first_before_it():
 
 @pytest.mark.data
 def test_real_logs_with_and_without_utc(shared_data):
-    """Measured: the ArduSub tlog from 2023-05-04 17:15 (the topside's clock), the
+    """Measured: the ArduSub tlog from 2023-05-04 17:15 (the topside's clock), its NMEA
+    capture from 2023-09-01 22:56 (the RMC sentences; the lines' prefixes are 7 h off), the
     Shenzhen NMEA from 2024-12-05 02:27 (RMC date and time), the survey boat's Test1 from
     2018-04-18 (its GPS started on a default date in 2009 and jumped twice); the ArduSub
     DataFlash (no GPS records) and the BlueBoat CSV (ms since boot) have no UTC."""
     want = {"ardusub_small_logs/small.tlog": "2023-05-04T17:15",
+            # its line prefixes read 15:56, local time: the RMC sentences say 22:56 UTC
+            "ardusub_small_logs/nmea_log.txt": "2023-09-01T22:56",
             "usv_rtk_gnss_heading_nmea_shenzhen/202412051037.txt": "2024-12-05T02:27",
             "survey_boat_arduino_rc/Test1_counterclockwise.TXT": "2018-04-18T17:4",
             "ardusub_small_logs/small.BIN": None}

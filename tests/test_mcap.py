@@ -29,6 +29,7 @@ from onboard.drivers.mavlink_json import JsonFrameError, frame_from_json, parse 
 from onboard.drivers.mcap_log import McapReader  # noqa: E402
 from onboard.drivers.tlog import TlogReader  # noqa: E402
 from tests.helpers.blueos_mcap import BlueosRecorder, blueos_mcap_from_tlog, to_serde  # noqa: E402
+from tests.helpers.nmea_times import rmc_times  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 TLOG = REPO / "tests" / "data" / "replay" / "jaiabot-turns.tlog"
@@ -344,22 +345,40 @@ def test_a_layout_for_another_vehicle_and_prefix_names_its_own_topics(tmp_path):
         _check_layout(layout, tmp_path / "e.mcap", "onboard", "rudder-boat")
 
 
-@pytest.mark.data
-@pytest.mark.parametrize("name, extra, vehicle", [
-    ("ardusub_small_logs/small.tlog", (), "bluerov2"),
-    ("usv_rtk_gnss_heading_nmea_shenzhen/202412051037.txt", (), "vehicle"),
-    ("blueboat_sysid_ntnu", ("--config", "config/blueboat-ntnu-csv.toml"), "blueboat-ntnu"),
-])
-def test_real_logs_get_a_layout_of_their_own_vehicle(shared_data, tmp_path, name, extra, vehicle):
-    """Measured: bluerov2 (the ESESO's position and surge), vehicle (an NMEA capture: GNSS
-    and the current), blueboat-ntnu (16 CSV runs): each layout's every topic is in the
-    MCAP of the same replay."""
-    extra = tuple(str(REPO / e) if e.startswith("config/") else e for e in extra)
-    summary = _replay(shared_data / name, tmp_path / "r", *extra, "--mcap",
+def test_the_blueboat_csv_gets_a_layout_of_blueboat_ntnu(tmp_path):
+    summary = _replay(REPO / "tests/data/csv/blueboat-run.csv", tmp_path / "r", "--config",
+                      str(REPO / "config/blueboat-ntnu-csv.toml"), "--mcap",
                       str(tmp_path / "e.mcap"), "--foxglove-layout", str(tmp_path / "l.json"))
-    assert summary["vehicle_id"] == vehicle
-    layout = json.loads((tmp_path / "l.json").read_text())
-    _check_layout(layout, tmp_path / "e.mcap", "onboard", vehicle)
+    assert summary["vehicle_id"] == "blueboat-ntnu"
+    _check_layout(json.loads((tmp_path / "l.json").read_text()), tmp_path / "e.mcap",
+                  "onboard", "blueboat-ntnu")
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("name, vehicle", [("ardusub_small_logs/small.tlog", "bluerov2"),
+                                           ("ardusub_small_logs/nmea_log.txt", "vehicle")])
+def test_real_logs_get_a_layout_of_their_vehicle_and_utc_log_times(shared_data, tmp_path,
+                                                                     name, vehicle):
+    """bluerov2 (the ESESO's position and surge) and vehicle (an NMEA capture whose
+    wall-clock prefixes are local time, 7 h behind its RMC sentences' UTC): each layout's
+    every topic is in the MCAP of the same replay, whose log times lie within the log's own
+    UTC as read here without our readers (pymavlink's record stamps for the tlog, the RMC
+    date and time for the capture)."""
+    log = shared_data / name
+    summary = _replay(log, tmp_path / "r", "--mcap", str(tmp_path / "e.mcap"),
+                      "--foxglove-layout", str(tmp_path / "l.json"))
+    assert summary["vehicle_id"] == vehicle and summary["utc"]["utc"]
+    _check_layout(json.loads((tmp_path / "l.json").read_text()), tmp_path / "e.mcap",
+                  "onboard", vehicle)
+    if log.suffix == ".tlog":
+        from pymavlink import mavutil
+
+        mlog = mavutil.mavlink_connection(str(log))
+        stamps = [m._timestamp for m in iter(mlog.recv_msg, None)]
+    else:
+        stamps = rmc_times(log)
+    times = [lt / 1e9 for *_, lt, _, _ in _read(tmp_path / "e.mcap")[0]]
+    assert min(stamps) - 1.0 <= min(times) <= max(times) <= max(stamps) + 1.0
 
 
 def test_without_the_mcap_package_the_error_names_the_extra(monkeypatch):
