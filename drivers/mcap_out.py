@@ -17,7 +17,7 @@ record stamps, a DataFlash log's GPS time, a CSV's POSIX time column, ...), and 
 LocationFix's ``timestamp``; the records keep ``t`` and ``t_sensor`` on the log's clock, as
 the live service's keep its own. A log without UTC (time since boot and no GPS time) is
 written on its own clock, seconds since boot or since its start: Foxglove shows them as
-1970-01-01. Either way the file's metadata record ``onboard.clock`` says which
+1970-01-01. Either way the file's metadata record ``onboard-clock`` says which
 (``utc``: ``"true"`` or ``"false"``; ``source``: the log's clock in words; ``start``: the
 first tick in ISO 8601 UTC, or empty). The health record is the live service's (1 Hz,
 with its rates); a replay's counterpart is summary.json.
@@ -39,7 +39,7 @@ from onboard.drivers.logclock import LogClock, iso8601
 
 LIBRARY = "onboard replay"
 """The MCAP header's library field."""
-CLOCK_METADATA = "onboard.clock"
+CLOCK_METADATA = "onboard-clock"
 """The name of the metadata record that says how the file is stamped."""
 NO_CLOCK = "no UTC: the log's own clock (none was given to the writer)"
 """The clock's words when the writer is given none."""
@@ -110,7 +110,7 @@ class McapRecordWriter:
                       wire.LOCATION_FIX_SCHEMA, t_ns, enc(fix))
 
     def close(self) -> None:
-        """Write the ``onboard.clock`` metadata, finish the file (summary, index) and close
+        """Write the ``onboard-clock`` metadata, finish the file (summary, index) and close
         it."""
         try:
             start = self.clock.to_utc(self._start) if self._start is not None else None

@@ -202,8 +202,8 @@ def test_mcap_log_times_are_utc_ns_from_a_dataflash_logs_gps_time(tmp_path):
                                                                 condition="GPS.GWk > 0")
     offset = first_gps._timestamp - first_gps.TimeUS / 1e6  # UTC minus time since boot
     assert summary["utc"]["utc"] and summary["utc"]["start"].startswith("2023-05-")
-    assert meta["onboard.clock"]["utc"] == "true"
-    assert meta["onboard.clock"]["start"] == summary["utc"]["start"]
+    assert meta["onboard-clock"]["utc"] == "true"
+    assert meta["onboard-clock"]["start"] == summary["utc"]["start"]
     assert msgs
     for schema, topic, log_time, publish_time, payload in msgs:
         assert publish_time == log_time
@@ -225,7 +225,7 @@ def test_mcap_of_a_log_without_utc_keeps_its_clock_and_says_so(tmp_path):
                       str(REPO / "config/blueboat-ntnu-csv.toml"), "--mcap",
                       str(tmp_path / "e.mcap"))
     msgs, meta = _read(tmp_path / "e.mcap")
-    assert meta["onboard.clock"] == {"utc": "false", "start": "",
+    assert meta["onboard-clock"] == {"utc": "false", "start": "",
                                      "source": summary["utc"]["source"]}
     est = [(lt, p["t"]) for s, _, lt, _, p in msgs if s == "onboard.Estimate.v1"]
     assert est and all(lt == round(t * 1e9) for lt, t in est)
