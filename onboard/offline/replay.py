@@ -4,7 +4,10 @@ over a log.
 Writes ``DIR/estimates.csv`` (architecture.md §4.2), ``DIR/summary.json`` (what was read
 and rejected, rates, time span, the vehicle config used and why) and ``DIR/track.png``;
 with ``--mcap`` also the estimates as MCAP, on the channels and with the schemas of the
-live Zenoh records (:mod:`drivers.mcap_out`, docs/foxglove.md).
+live Zenoh records (:mod:`drivers.mcap_out`, docs/foxglove.md); with ``--geojson``,
+``--gpx`` and ``--foxglove-layout`` the tracks, current arrows and a Foxglove layout of
+the topics published (:mod:`onboard.offline.exports`). MCAP and GPX are in UTC where the
+log has it (:mod:`drivers.logclock`).
 The same engine and pipelines as the live service, so a replay is the live result.
 """
 
