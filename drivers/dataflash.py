@@ -37,7 +37,9 @@ applied from the format, and the few columns read have fixed documented units.
 Time base: ``Sample.t`` = ``TimeUS`` * 1e-6, seconds since the autopilot booted. The log
 starts where its first stamps agree (:class:`onboard.core.stamps.Anchor`: the records
 outside the largest group of the first five distinct stamps within :data:`TIME_JUMP_S`
-of each other are ``"time_outlier"``), so a damaged first stamp costs one record.
+of each other are ``"time_outlier"``), so a damaged first stamp costs one record. The
+first GPS record whose ``GWk`` is set gives :attr:`DataflashReader.gps_time` (its
+``TimeUS``, ``GWk``, ``GMS``), from which :mod:`drivers.logclock` finds the log's UTC.
 ArduPilot writes from several threads, so records are slightly out of time order; the
 reader re-orders them through a 2 s window. A record older than the last emitted sample
 (beyond that window) is ``"time_backwards"``, and ``"time_outlier"`` when it is more than
@@ -217,6 +219,8 @@ class _State:
         self.stats = stats
         self.params: dict[str, float] = {}
         self.vehicle_sent = False
+        self.gps_time: tuple[float, int, int] | None = None
+        """(TimeUS in s, GWk, GMS) of the first GPS record with a GPS time (GWk > 0)."""
 
 
 class _Format:
@@ -315,9 +319,11 @@ def _att(f: _Format, base: str) -> _Handler | None:
 def _gps(f: _Format, base: str) -> _Handler | None:
     if f.name != "GPS":  # GPS2 (old logs): second receiver
         return None
-    g = {c: _getter(f, c) for c in ("Status", "Lat", "Lng", "Alt", "NSats", "HDop", "Spd", "GCrs")}
+    g = {c: _getter(f, c) for c in ("Status", "Lat", "Lng", "Alt", "NSats", "HDop", "Spd", "GCrs",
+                                    "GWk", "GMS")}
     if g["Status"] is None or g["Lat"] is None or g["Lng"] is None:
         return None
+    timed = g["GWk"] is not None and g["GMS"] is not None
     inst = _instance(f, base)
     d2r = math.pi / 180.0
 
@@ -328,6 +334,8 @@ def _gps(f: _Format, base: str) -> _Handler | None:
     def h(v, t, st):
         if inst(v) != 0:
             return None
+        if timed and st.gps_time is None and g["GWk"](v) > 0:
+            st.gps_time = (t, int(g["GWk"](v)), int(g["GMS"](v)))
         status = g["Status"](v)
         q = GPS_FIX_TO_QUALITY.get(status)
         if q is None:
@@ -465,6 +473,7 @@ class DataflashReader:
         self.path = Path(path)
         self.stats = ReadStats()
         self._want = wanted_types(types) if types is not None else None
+        self._state: _State | None = None
         try:
             with open(self.path, "rb") as f:
                 head = f.read(1 << 16)
@@ -484,6 +493,13 @@ class DataflashReader:
         typ, length, name, fmt, cols = _FMT.unpack_from(data, i + 3)
         name_s, fmt_s = _text(name), _text(fmt)
         return length >= 3 and name_s.isalnum() and all(c in FORMAT_CHARS for c in fmt_s)
+
+    @property
+    def gps_time(self) -> tuple[float, int, int] | None:
+        """(log time in s, GPS week, GPS time of week in ms) of the first record of the first
+        receiver that carries a GPS time (``GWk`` > 0), as far as the log has been read;
+        None before that. :mod:`drivers.logclock` turns it into the log's UTC."""
+        return self._state.gps_time if self._state is not None else None
 
     def _wanted_name(self, name: str) -> bool:
         if name == "PARM":
@@ -508,7 +524,7 @@ class DataflashReader:
 
     def _walk(self, data: bytes, stats: ReadStats, counts: Counter[str]) -> Iterator[Sample]:
         n = len(data)
-        st = _State(stats)
+        st = self._state = _State(stats)
         formats: dict[int, _Format] = {}
         lengths: dict[int, int] = {FMT_ID: 89}
         want = self._want

@@ -32,7 +32,10 @@ goes backwards, or forwards by more than ``max(max_gap_s, 2 x (rows since the la
 and jumps to 2018; ``Test3`` steps back 2 s at 17:56:08): the jump is removed -- the mark
 is placed ``rows / rate`` after the previous one and every later time (rows and NMEA
 samples) is shifted by the same amount -- and counted in ``stats.by_type["clock_jump"]``.
-So ``t`` is one continuous time line that equals the GPS UTC up to the first jump. The rows
+So ``t`` is one continuous time line that equals the GPS UTC up to the first jump (a GPS
+that has not yet set its clock counts from a default date: ``Test1`` from 2009-02-14);
+``utc_offset_s`` is the GPS UTC minus ``t`` after the last jump, the time the GPS settled
+on. The rows
 between two marks are spread evenly: row ``j`` of ``n`` gets ``t_k + j (t_k+1 - t_k) / n``;
 rows before the first mark and after the last are placed at the row rate. The GPS sentences reach the logger
 after their epoch (4800 baud), so rows are stamped up to ~0.3 s late relative to UTC; the
@@ -266,6 +269,10 @@ class MixedCaptureReader:
         self.stats = ReadStats()
         self.row_rate_hz: float | None = None
         """Median row rate between good epoch marks (after iteration)."""
+        self.utc_offset_s: float | None = None
+        """UTC (POSIX s) minus ``t`` after the last clock jump: the GPS's time at its last
+        epoch mark less that mark's place on the time line (0 without jumps; None without
+        any GPS time). Known once the first sample is out."""
 
     def __iter__(self) -> Iterator[Sample]:
         st = self.stats
@@ -349,6 +356,8 @@ class MixedCaptureReader:
             else:
                 self.stats.by_type["clock_jump"] += 1
                 adj.append(adj[-1] + max(expected, 1e-3))
+        if marks:
+            self.utc_offset_s = marks[-1][1] - adj[-1]
         return adj
 
     def _row_times(self, n: int, marks: list[tuple[int, float]]) -> list[float]:

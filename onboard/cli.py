@@ -115,6 +115,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "as GeoJSON (lon/lat, RFC 7946) to FILE")
     p.add_argument("--gpx", metavar="FILE",
                    help="also write the tracks (one per pipeline and run) as GPX 1.1 to FILE")
+    p.add_argument("--foxglove-layout", metavar="FILE",
+                   help="also write a Foxglove layout of the topics the replay published, "
+                        "named with its vehicle id, to FILE")
     p.set_defaults(handler="onboard.offline.replay:main")
 
     p = sub.add_parser("diagnose", help="residuals, the missing effect, before/after")

@@ -5,7 +5,10 @@ Writes ``DIR/estimates.csv`` (architecture.md §4.2), ``DIR/summary.json`` (what
 the inputs rejected and the estimates withheld apart, rates, time span, the vehicle
 config used and why) and ``DIR/track.png``; with ``--mcap`` also the estimates as MCAP,
 on the channels and with the schemas of the live Zenoh records (:mod:`drivers.mcap_out`,
-docs/foxglove.md), with ``--geojson``/``--gpx`` the tracks (:mod:`onboard.offline.exports`).
+docs/foxglove.md); with ``--geojson``, ``--gpx`` and ``--foxglove-layout`` the tracks,
+current arrows and a Foxglove layout of the topics published
+(:mod:`onboard.offline.exports`). MCAP and GPX are in UTC where the log has it
+(:mod:`drivers.logclock`).
 The same engine and pipelines as the live service, so a replay is the live result.
 
 Every output path is checked before the log is read (:mod:`onboard.core.outputs`); each
@@ -28,14 +31,17 @@ from typing import Iterable, Iterator, Mapping, Sequence
 import msgspec
 
 from onboard.drivers.base import ReadStats, UnreadableLog, shortfall
+from onboard.drivers.logclock import LogClock, log_clock
 from onboard.drivers.logs import open_log, sniff
 from onboard.monitor.alerts import Alerts
+from onboard.offline import exports
 from onboard.offline.autodetect import consistency, detect
 from onboard.core import config as configmod
 from onboard.core.config import Config
 from onboard.core.errors import OutputFailed, UsageError
 from onboard.core.outputs import Output, check as check_outputs, existing
-from onboard.core.messages import EstimateRecord, Parameter, Sample, VehicleInfo
+from onboard.core.messages import (EstimateRecord, LocationFix, Parameter, Sample,
+                                    VehicleInfo)
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
 from onboard.engine.timeline import log_time
@@ -250,13 +256,16 @@ def _needs_csv_mapping(log: str, cfg: Config | None, given: str) -> None:
 
 def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
            plot: bool = True, progress: bool = False, mcap: Path | None = None,
-           geojson: Path | None = None, gpx: Path | None = None) -> dict:
+           geojson: Path | None = None, gpx: Path | None = None,
+           foxglove_layout: Path | None = None) -> dict:
     """Run the pipelines over ``log``; write the outputs into ``out_dir`` (and the
     estimates as MCAP into ``mcap`` when given; with ``geojson`` the tracks and current
-    arrows there, with ``gpx`` the tracks, :mod:`onboard.offline.exports`); return the
-    summary. Each export is written on its own: one that fails is listed in the
-    summary's ``failed`` and the others, summary.json included, are still written;
-    track.png is drawn last, after summary.json (:func:`add_figure`)."""
+    arrows there, with ``gpx`` the tracks, with ``foxglove_layout`` a Foxglove layout of
+    the topics published, :mod:`onboard.offline.exports`); return the summary. MCAP and
+    GPX are stamped in UTC where the log knows it (:mod:`drivers.logclock`). Each export
+    is written on its own: one that fails is listed in the summary's ``failed`` and the
+    others, summary.json included, are still written; track.png is drawn last, after
+    summary.json (:func:`add_figure`)."""
     wall0 = time.perf_counter()
     fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -272,8 +281,18 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
                        Runs(engine, [r for r in getattr(reader, "runs", ())
                                      if r.t_start == r.t_start]))
     failed: list[dict] = []
-    mcap_out = _McapExport(mcap, cfg, engine, failed) if mcap is not None else None
-    on_tick = csv.write if mcap_out is None else mcap_out.beside(csv.write)
+    clock = log_clock(fmt, reader, log, first.t) if mcap or gpx else None
+    mcap_out = _McapExport(mcap, cfg, engine, clock, failed) if mcap is not None else None
+    published = exports.Published() if foxglove_layout is not None else None
+
+    def on_tick(t: float, records: Sequence[EstimateRecord]) -> None:
+        csv.write(t, records)
+        if mcap_out is not None or published is not None:
+            fixes = engine.location_fixes(records)
+            if mcap_out is not None:
+                mcap_out.write(t, records, fixes)
+            if published is not None:
+                published.add(records, fixes)
     meter = _Progress(progress)
 
     header: list[Sample] = []   # HEARTBEAT and parameters, checked against cfg at the end
@@ -294,12 +313,17 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     summary = _summary(log, fmt, cfg, engine, csv, reader, first.t, ticks, header,
                        config_note)
     summary["wall_time_s"] = round(time.perf_counter() - wall0, 3)
+    if clock is not None:
+        summary["utc"] = clock.summary(summary["time_span"]["start"])
     if mcap_out is not None:
         mcap_out.close()
         if mcap_out.writer is not None:
             summary["mcap"] = {"file": str(mcap), "messages": mcap_out.writer.messages}
     if geojson is not None or gpx is not None:
-        summary["geojson"] = _write_geojson(out_dir, geojson, gpx, summary, failed)
+        summary["geojson"] = _write_geojson(out_dir, geojson, gpx, summary, failed, clock,
+                                            csv.t0)
+    if published is not None:
+        summary["foxglove_layout"] = _write_layout(foxglove_layout, cfg, published, failed)
     summary["failed"] = failed
     write_summary(out_dir, summary)
     if plot:
@@ -397,26 +421,25 @@ class _McapExport:
         writer: the MCAP writer (None once failed).
     """
 
-    def __init__(self, path: Path, cfg: Config, engine: Engine, failed: list[dict]) -> None:
+    def __init__(self, path: Path, cfg: Config, clock: LogClock | None,
+                 failed: list[dict]) -> None:
         from onboard.drivers.mcap_out import McapRecordWriter
 
-        self.path, self.engine, self.failed = path, engine, failed
+        self.path, self.failed = path, failed
         try:
             self.writer = McapRecordWriter(path, cfg.service.zenoh.key_prefix,
-                                           cfg.vehicle.id)
+                                           cfg.vehicle.id, clock)
         except Exception as err:  # noqa: BLE001 - one export fails, not the replay
             self._fail(err)
 
-    def beside(self, write_csv):
-        """The tick callback: ``write_csv`` (estimates.csv), then the MCAP records."""
-        def on_tick(t: float, records: Sequence[EstimateRecord]) -> None:
-            write_csv(t, records)
-            if self.writer is not None:
-                try:
-                    self.writer.write(t, records, self.engine.location_fixes(records))
-                except Exception as err:  # noqa: BLE001
-                    self._fail(err)
-        return on_tick
+    def write(self, t: float, records: Sequence[EstimateRecord],
+              fixes: Sequence[LocationFix]) -> None:
+        """One tick's records and the positions they carry."""
+        if self.writer is not None:
+            try:
+                self.writer.write(t, records, fixes)
+            except Exception as err:  # noqa: BLE001
+                self._fail(err)
 
     def close(self) -> None:
         if self.writer is not None:
@@ -441,6 +464,19 @@ def add_figure(out_dir: Path, summary: dict, title: str) -> None:
         export_failed(summary.setdefault("failed", []), "track.png", out_dir / "track.png",
                       err)
     write_summary(out_dir, summary)
+
+
+def _write_layout(path: Path, cfg: Config, published: exports.Published,
+                  failed: list[dict]) -> dict | None:
+    """``--foxglove-layout``: the layout of what the replay published, for its vehicle
+    (:func:`onboard.offline.exports.write_foxglove_layout`); None, listed in ``failed``,
+    when it could not be written."""
+    try:
+        return exports.write_foxglove_layout(path, cfg.service.zenoh.key_prefix,
+                                             cfg.vehicle.id, published)
+    except Exception as err:  # noqa: BLE001 - one export fails, not the replay
+        export_failed(failed, "--foxglove-layout", path, err)
+        return None
 
 
 def _origin(engine: Engine) -> dict | None:
@@ -568,11 +604,12 @@ def print_warnings(warnings: list[dict], t0: float,
 
 
 def _write_geojson(out_dir: Path, path: Path | None, gpx: Path | None,
-                   summary: dict, failed: list[dict]) -> dict:
+                   summary: dict, failed: list[dict], clock: LogClock | None = None,
+                   t0: float = 0.0) -> dict:
     """The replay's tracks and current arrows as GeoJSON in ``path``, its tracks as GPX in
-    ``gpx`` (either may be None; :mod:`onboard.offline.exports`), each written on its
-    own (a failure listed in ``failed``); what was written."""
-    from onboard.offline import exports
+    ``gpx`` (either may be None; :mod:`onboard.offline.exports`; the GPX's times in UTC
+    where ``clock`` has it, ``t0`` the log time of ``t`` = 0), each written on its own (a
+    failure listed in ``failed``); what was written."""
     from onboard.offline.plots import read_columns
 
     try:
@@ -584,9 +621,13 @@ def _write_geojson(out_dir: Path, path: Path | None, gpx: Path | None,
             if p is not None:
                 export_failed(failed, flag, p, err)
         return {"path": None, "gpx": None, "features": 0}
+    utc = (lambda t: clock.to_utc(t0 + t)) if clock is not None and clock.utc else None
     written = {"--geojson": None, "--gpx": None}
-    for flag, p, text in (("--geojson", path, lambda: json.dumps(fc, allow_nan=False) + "\n"),
-                          ("--gpx", gpx, lambda: exports.to_gpx(fc))):
+    for flag, p, text in (
+            ("--geojson", path, lambda: json.dumps(fc, allow_nan=False) + "\n"),
+            ("--gpx", gpx, lambda: exports.to_gpx(cols, summary["origin"],
+                                                  Path(summary["log"]).name, utc,
+                                                  clock.source if clock else ""))):
         if p is None:
             continue
         try:
@@ -612,7 +653,8 @@ def _plot_track(out_dir: Path, title: str) -> str | None:
 REPLAY_WRITES = ("estimates.csv", "summary.json", "track.png")
 """What ``onboard replay`` writes in ``--out DIR``: a DIR holding one of them is a previous
 replay's, reused only with ``--force``."""
-EXPORT_FLAGS = (("--mcap", "mcap"), ("--geojson", "geojson"), ("--gpx", "gpx"))
+EXPORT_FLAGS = (("--mcap", "mcap"), ("--geojson", "geojson"), ("--gpx", "gpx"),
+                ("--foxglove-layout", "foxglove_layout"))
 """The file exports: flag and argument name."""
 
 
@@ -649,12 +691,19 @@ def main(args) -> int:
         summary = replay(log, cfg, out_dir, config_note=note, plot=False,
                          progress=sys.stderr.isatty(), mcap=Path(mcap) if mcap else None,
                          geojson=getattr(args, "geojson", None),
-                         gpx=getattr(args, "gpx", None))
+                         gpx=getattr(args, "gpx", None),
+                         foxglove_layout=getattr(args, "foxglove_layout", None))
     except UnreadableLog as err:
         raise UsageError(str(err)) from None
     print(headline(summary, out_dir / "estimates.csv"))
     if "mcap" in summary:
         print(f"  {summary['mcap']['messages']:,} records -> {mcap} (MCAP; docs/foxglove.md)")
+    if "utc" in summary:
+        print(f"  export times: {summary['utc']['source']}")
+    if summary.get("foxglove_layout"):
+        lay = summary["foxglove_layout"]
+        print(f"  Foxglove layout of {len(lay['topics'])} topics of {lay['vehicle_id']} -> "
+              f"{lay['file']}")
     print_warnings(summary["warnings"], summary["time_span"]["start"],
                    summary["time_span"]["segments"])
     if not args.no_plot:
@@ -698,7 +747,8 @@ def last_line(summary: dict, out_dir: Path, plot: bool) -> str:
                                                  else [])
     extra = [p for p in (summary.get("mcap", {}).get("file"),
                          summary.get("geojson", {}).get("path"),
-                         summary.get("geojson", {}).get("gpx")) if p]
+                         summary.get("geojson", {}).get("gpx"),
+                         (summary.get("foxglove_layout") or {}).get("file")) if p]
     wrote = f"wrote {', '.join(names)} in {out_dir}" + (f", and {', '.join(extra)}"
                                                         if extra else "")
     if plot and "figure" in summary and summary["figure"] is None and not any(
