@@ -200,6 +200,9 @@ REAL_LOGS = [
     # refused before and after, now naming what is missing
     ("survey_boat_arduino_rc/Test1_counterclockwise.TXT", SURVEY, "no velocity over ground"),
     ("ardusub_small_logs/nmea_log.txt", None, "no heading"),
+    # its 2 GPS lines carry no status: no fix, so no declination for its THETA headings
+    ("ddboat_ensta_log/logexample.txt", None,
+     "no heading: its 13 magnetic heading(s) waited for a GNSS fix"),
     ("waterlinked_dvl_a50_json_tank/out20210528_circle.txt", None, "no heading"),
     # refused for "no heading" before: the THETA heading is read, the fixes differenced
     ("ddboat_ensta_log/DDBOAT8_t_2022_9_2_0_0.log", None, "ok"),

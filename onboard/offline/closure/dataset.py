@@ -569,7 +569,8 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0,
     rate_hz_log = col.yaw_rate_hz()
     has_rate = col.has_rate and rate_hz_log >= MIN_YAW_RATE_HZ
     ok = _usable_ticks(path, psi.astype(float), v_n, v_e, rate_hz,
-                       gyro.astype(float) if has_rate else None, len(col.fixes))
+                       gyro.astype(float) if has_rate else None, len(col.fixes),
+                       engine.rejections().get("heading:no_declination", 0))
     idx = np.flatnonzero(ok)
     # Keep the longest stretches; breaks in time become separate runs.
     t = t[idx]
@@ -679,14 +680,20 @@ def glide_speed(cfg: Config, t: np.ndarray, pitch: np.ndarray, pump: np.ndarray,
 
 def _usable_ticks(path: str, psi: np.ndarray, v_n: np.ndarray, v_e: np.ndarray,
                   rate_hz: float, rate: np.ndarray | None = None,
-                  n_fixes: int = 0) -> np.ndarray:
+                  n_fixes: int = 0, waiting_headings: int = 0) -> np.ndarray:
     """The ticks with both a heading and a velocity over ground, and a yaw rate when the
     log has one (``rate``: its first ticks may come before the first rate), as a boolean
-    mask; a :class:`NotEnoughData` naming what is missing when the log has no heading, no
-    velocity over ground (``n_fixes``: the GNSS fixes it has, too few or too far apart
+    mask; a :class:`NotEnoughData` naming what is missing when the log has no heading
+    (``waiting_headings``: magnetic ones the engine rejected for want of a declination),
+    no velocity over ground (``n_fixes``: the GNSS fixes it has, too few or too far apart
     to difference), or fewer than :data:`MIN_TICKS` ticks with both."""
     has_psi = np.isfinite(psi)
     has_v = np.isfinite(v_n) & np.isfinite(v_e)
+    if not has_psi.any() and waiting_headings:
+        raise NotEnoughData(
+            f"{path}: no heading: its {waiting_headings} magnetic heading(s) waited for a "
+            "GNSS fix to give their declination and none came (set [corrections] "
+            "declination_deg); model closure needs one")
     if not has_psi.any():
         raise NotEnoughData(f"{path}: no heading (no compass, attitude or true heading in "
                             "the log); model closure needs one")
