@@ -18,7 +18,8 @@
     CSV rows ``ax,ay,az,mx,my,mz,rx,ry,rz,roll,pitch,yaw,throttle,rudder`` (the
     ``survey_boat_arduino_rc`` captures; :class:`MixedCaptureReader`).
 ``ddboat``
-    The ENSTA DDBoat Python ``logging`` lines (:class:`DdboatLogReader`).
+    The ENSTA DDBoat Python ``logging`` lines (:class:`DdboatLogReader`): GPS fixes, motor
+    commands and the boat's own compass heading (``THETA``).
 
 Anything else raises :class:`~drivers.base.UnreadableLog`.
 
@@ -408,16 +409,34 @@ def _check_row(v: list[float]) -> str:
 
 _DD_GPS = re.compile(r"/GPS \[([\d.]+), '([NS])', ([\d.]+), '([EW])', ([\d.]+), '([AV])'\]")
 _DD_CMD = re.compile(r"dirl: (\d), motl: (\d+), dirr: (\d), motr: (\d+)")
+_DD_THETA = re.compile(r"/CONTROL: .*? THETA (\S+)")
+DDBOAT_HEADING_SOURCE = "ddboat/THETA"
+"""The source of the DDBoat's heading samples: the ``THETA`` of its ``CONTROL:`` record."""
 
 
 class DdboatLogReader:
-    """ENSTA DDBoat ``logging`` lines: GPS fixes and left/right motor commands.
+    """ENSTA DDBoat ``logging`` lines: GPS fixes, left/right motor commands and the boat's
+    compass heading.
 
     ``t`` is the line's wall-clock stamp (the boat's clock, taken as UTC). ``GPS [ddmm.mmmm,
     'N', dddmm.mmmm, 'W', hhmmss, 'A']`` gives a GnssFix (status ``V`` is ``"no_fix"``, a
     repeat of the previous GPS time ``"duplicate"``). ``cmd motors`` gives an
     ActuatorCommand with ``left``/``right`` = +-mot/255 (``dir`` 0 = ahead, as the
-    controller's positive CMDL/CMDR show). The raw IMU counts are unscaled and not used.
+    controller's positive CMDL/CMDR show).
+
+    ``CONTROL: ... THETA th`` gives a magnetic Heading (source
+    :data:`DDBOAT_HEADING_SOURCE`): ``th`` is the boat's own compass heading, its raw
+    magnetometer through the boat's calibration (ENSTA's ``DdboatFilter.cap``: 0 facing
+    east, counterclockwise, rad), so the heading from north, clockwise, is ``pi/2 - th``.
+    The sense is the data's: ``th`` turns against the gyro's z axis (which points down,
+    as the accelerometer's -1 g on it shows) with 0.084 deg/s per count, the LSM9DS1's
+    70 mdps per count at 2000 deg/s (correlation -0.62 over DDBOAT8_t_2022_9_2_0_0.log).
+    A non-numeric ``THETA`` is rejected as ``"bad_heading"``.
+
+    The raw ``IMU: MAG`` counts are not read as a second heading: they are the same
+    sensor as ``THETA`` before the calibration, and the log does not carry the hard- and
+    soft-iron calibration that turns them into a heading. The accelerometer and gyro
+    counts are unscaled and not read either.
     """
 
     def __init__(self, path: str | Path, source: str = "ddboat", full_scale: float = 255.0) -> None:
@@ -459,6 +478,9 @@ class DdboatLogReader:
                     out.append(GnssFix(t=t, source=src, lat_deg=lat, lon_deg=lon))
             elif "/GPS timeout" in text:
                 st.by_type["gps_timeout"] += 1
+            heading = self._heading(t, text)
+            if heading is not None:
+                out.append(heading)
             m = _DD_CMD.search(text)
             if m:
                 st.by_type["cmd"] += 1
@@ -471,6 +493,22 @@ class DdboatLogReader:
                 st.by_type["other"] += 1
             st.samples += len(out)
             yield from out
+
+    def _heading(self, t: float, text: str) -> Heading | None:
+        """The Heading of a line's ``THETA`` (class docstring), or None without one."""
+        m = _DD_THETA.search(text)
+        if not m:
+            return None
+        self.stats.by_type["theta"] += 1
+        try:
+            theta = float(m.group(1))
+        except ValueError:
+            theta = math.nan
+        if not math.isfinite(theta):
+            self.stats.reject("bad_heading")
+            return None
+        return Heading(t=t, source=DDBOAT_HEADING_SOURCE,
+                       heading_rad=wrap_2pi(0.5 * math.pi - theta), reference="magnetic")
 
 
 def _ddmm(value: str, hemi: str) -> float | None:

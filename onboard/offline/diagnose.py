@@ -18,7 +18,7 @@ from pathlib import Path
 import msgspec
 
 from onboard.drivers.base import UnreadableLog
-from onboard.offline.closure import dataset, overlay, overlay_check, report
+from onboard.offline.closure import base_models, dataset, overlay, overlay_check, report
 from onboard.offline.closure.effects import ALL
 from onboard.offline.closure.select import select
 from onboard.core.errors import OutputFailed, UsageError
@@ -39,17 +39,20 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     detected from the log, so the overlay carries its vehicle and inputs).
     ``base_terms``: the base model's optional terms to fit (default: the config's
     ``base_terms``, else :data:`onboard.offline.closure.dataset.DEFAULT_BASE_TERMS`;
-    :func:`onboard.offline.closure.dataset.with_base_terms`). A log without what model closure
-    needs (a heading, a velocity over ground, 50 s of both: docs/diagnose.md, "What
-    diagnose refuses") is a :class:`UsageError` naming it.
+    :func:`onboard.offline.closure.dataset.with_base_terms`). The base model is the vehicle
+    class's (:func:`onboard.offline.closure.base_models.for_config`). A vehicle class with
+    no base model, or a log without what model closure needs (a heading, a velocity over
+    ground, 50 s of both: docs/diagnose.md, "What diagnose refuses"), is a
+    :class:`UsageError` naming it.
     """
     opts = cfg.diagnose
     declared = tuple(declared) or tuple(opts.declared)
     unknown = [d for d in (*declared, *opts.known) if d not in ALL]
     if unknown:
         raise UsageError(f"unknown declared effect(s) {unknown}; known: {', '.join(ALL)}")
+    base = base_models.for_config(cfg)
     try:
-        ds = dataset.from_log(log, cfg, rate_hz=opts.rate_hz)
+        ds = dataset.from_log(log, cfg, rate_hz=opts.rate_hz, base_model=base.name)
     except dataset.NotEnoughData as err:  # what is missing; any other error is a bug
         raise UsageError(str(err)) from None
     try:
@@ -59,7 +62,7 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
         raise UsageError(str(err)) from None
     try:
         sel = select(ds, declared=declared, metric=opts.holdout_metric or None,
-                     known=opts.known)
+                     known=opts.known, candidates=base.effects or None)
     except dataset.NotEnoughData as err:
         raise UsageError(str(err)) from None
     doc = report.write(sel, log, out_dir)
