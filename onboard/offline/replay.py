@@ -306,7 +306,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     if geojson is not None or gpx is not None:
         summary["geojson"] = _write_geojson(out_dir, geojson, gpx, summary)
     if plot:
-        summary["figure"] = _plot_track(out_dir, Path(log).name)
+        summary["figure"] = _plot_track(out_dir, Path(log).name, fmt, cfg.csv.position_kind)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
 
@@ -415,13 +415,15 @@ def _write_geojson(out_dir: Path, path: Path | None, gpx: Path | None,
             "features": n}
 
 
-def _plot_track(out_dir: Path, title: str) -> str | None:
-    """track.png: the measured track and every reconstructed one, the current in a panel
-    of its own, titled ``title``; None without matplotlib."""
-    from onboard.offline.plots import plot_track
+def _plot_track(out_dir: Path, title: str, fmt: str, position_kind: str) -> str | None:
+    """track.png: the measured track (labelled by the log's format ``fmt`` and, for a
+    CSV, its ``[csv] position_kind``) and every reconstructed one, the current along them
+    and in a panel of its own, titled ``title``; None without matplotlib."""
+    from onboard.offline.plots import plot_track, position_label
 
     try:
-        return plot_track(out_dir / "estimates.csv", out_dir / "track.png", title)
+        return plot_track(out_dir / "estimates.csv", out_dir / "track.png", title,
+                          position_label(fmt, position_kind))
     except ImportError:
         return None
 
