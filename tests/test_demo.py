@@ -179,6 +179,8 @@ def test_the_demo_config_takes_the_simulated_sensors_noise():
     assert load("rudder-boat").sensors.gnss.position_std_m == 1.5
     jaia, note = demo_base_config(get("jaiabot-turns"), "rudder-boat")
     assert jaia == load("sitl-jaiabot") and "held-out" in note
+    rov, note = demo_base_config(get("bluerov2-circle"), "bluerov2")
+    assert rov == load("bluerov2") and note == "bundled bluerov2"  # sensors as configured
     no_gnss = dataclasses.replace(sc.sensors, gnss=None)
     assert with_sensor_noise(load("rudder-boat"), no_gnss).sensors.gnss == \
         load("rudder-boat").sensors.gnss
