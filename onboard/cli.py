@@ -64,8 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler="onboard.service.daemon:main")
 
     p = sub.add_parser("demo", help="simulated vehicle + service + shore view on loopback")
-    p.add_argument("--duration", type=float, default=60.0, help="simulated seconds (default 60)")
-    p.add_argument("--scenario", default=None, help="SITL scenario (default: jaiabot-turns)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="simulated seconds (default 150)")
+    p.add_argument("--scenario", default=None, help="SITL scenario (default: effect-current)")
     p.add_argument("--realtime", action="store_true", help="run at wall-clock speed")
     p.add_argument("--keep-state", action="store_true",
                    help="keep the adaptive state in demo-out/state and restore it next run "

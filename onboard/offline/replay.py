@@ -327,7 +327,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     summary["failed"] = failed
     write_summary(out_dir, summary)
     if plot:
-        add_figure(out_dir, summary, Path(log).name)
+        add_figure(out_dir, summary, Path(log).name, cfg.csv.position_kind)
     return summary
 
 
@@ -453,12 +453,13 @@ class _McapExport:
         export_failed(self.failed, "--mcap", self.path, err)
 
 
-def add_figure(out_dir: Path, summary: dict, title: str) -> None:
+def add_figure(out_dir: Path, summary: dict, title: str, position_kind: str = "") -> None:
     """Draw ``out_dir/track.png`` from estimates.csv, the last and slowest output, once
-    summary.json is written; then record it in the summary (``figure``: its path, None
+    summary.json is written (its measured track labelled by the log's format and, for a
+    CSV, ``position_kind``, its ``[csv] position_kind``); then record it in the summary (``figure``: its path, None
     without matplotlib; a failure in ``failed``) and write summary.json again."""
     try:
-        summary["figure"] = _plot_track(out_dir, title)
+        summary["figure"] = _plot_track(out_dir, title, summary["format"], position_kind)
     except Exception as err:  # noqa: BLE001 - the other outputs are written already
         summary["figure"] = None
         export_failed(summary.setdefault("failed", []), "track.png", out_dir / "track.png",
@@ -639,13 +640,15 @@ def _write_geojson(out_dir: Path, path: Path | None, gpx: Path | None,
             "features": len(fc["features"])}
 
 
-def _plot_track(out_dir: Path, title: str) -> str | None:
-    """track.png: the measured track and every reconstructed one, the current in a panel
-    of its own, titled ``title``; None without matplotlib."""
-    from onboard.offline.plots import plot_track
+def _plot_track(out_dir: Path, title: str, fmt: str, position_kind: str) -> str | None:
+    """track.png: the measured track (labelled by the log's format ``fmt`` and, for a
+    CSV, its ``[csv] position_kind``) and every reconstructed one, the current along them
+    and in a panel of its own, titled ``title``; None without matplotlib."""
+    from onboard.offline.plots import plot_track, position_label
 
     try:
-        return plot_track(out_dir / "estimates.csv", out_dir / "track.png", title)
+        return plot_track(out_dir / "estimates.csv", out_dir / "track.png", title,
+                          position_label(fmt, position_kind))
     except ImportError:
         return None
 
@@ -707,7 +710,7 @@ def main(args) -> int:
     print_warnings(summary["warnings"], summary["time_span"]["start"],
                    summary["time_span"]["segments"])
     if not args.no_plot:
-        add_figure(out_dir, summary, Path(log).name)
+        add_figure(out_dir, summary, Path(log).name, cfg.csv.position_kind)
     elif force:
         (out_dir / "track.png").unlink(missing_ok=True)  # not a previous run's figure
     print(last_line(summary, out_dir, plot=not args.no_plot))
