@@ -280,10 +280,10 @@ def test_the_figure_is_drawn_after_the_summary_is_written_and_printed(
     seen = {}
     real = plots.plot_track
 
-    def spy(csv_path, png, title):
+    def spy(csv_path, png, title, *label):
         seen["summary"] = (Path(csv_path).parent / "summary.json").exists()
         seen["printed"] = capsys.readouterr().out
-        return real(csv_path, png, title)
+        return real(csv_path, png, title, *label)
 
     monkeypatch.setattr(plots, "plot_track", spy)
     out = tmp_path / "out"

@@ -188,7 +188,7 @@ QUOTES: tuple[Quote, ...] = (
                 f"finds the mapping itself first: {{{_BBL}.holdout_before}} -> "
                 f"{{{_BBL}.holdout_after}} m/s"),
     Measured("README.md", "A component whose sigma is above {0.3} m/s is published as "
-             "unknown", (current_default("unknown_above_std"),)),
+             "unknown", (current_default("unknown_above_std_mps"),)),
     Measured("README.md", "(by default {150} s of a boat flying turns in a {0.29} m/s "
              "current it is not told about", (demo("DEFAULT_DURATION_S"),
                                               scenario_current("effect-current"))),

@@ -396,7 +396,7 @@ def report(history: list[EstimateRecord], truth: list[Any], rows: list[ScoreRow]
         out += ["", "what the rows that look bad mean:"]
         out += [textwrap.fill(n, WRAP, initial_indent="* ", subsequent_indent="  ")
                 for n in said]
-    story = current_story(history, truth, cfg.pipelines.current.unknown_above_std)
+    story = current_story(history, truth, cfg.pipelines.current.unknown_above_std_mps)
     if story:
         out += [""] + [textwrap.fill(s, WRAP, subsequent_indent="  ") for s in story]
     out.append("")

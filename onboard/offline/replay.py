@@ -40,8 +40,8 @@ from onboard.core import config as configmod
 from onboard.core.config import Config
 from onboard.core.errors import OutputFailed, UsageError
 from onboard.core.outputs import Output, check as check_outputs, existing
-from onboard.core.messages import (EstimateRecord, LocationFix, Parameter, Sample,
-                                    VehicleInfo)
+from onboard.core.messages import EstimateRecord, Parameter, Sample, VehicleInfo
+from onboard.core.wire import LocationFix
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
 from onboard.engine.timeline import log_time
@@ -282,7 +282,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
                                      if r.t_start == r.t_start]))
     failed: list[dict] = []
     clock = log_clock(fmt, reader, log, first.t) if mcap or gpx else None
-    mcap_out = _McapExport(mcap, cfg, engine, clock, failed) if mcap is not None else None
+    mcap_out = _McapExport(mcap, cfg, clock, failed) if mcap is not None else None
     published = exports.Published() if foxglove_layout is not None else None
 
     def on_tick(t: float, records: Sequence[EstimateRecord]) -> None:

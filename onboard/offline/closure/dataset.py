@@ -47,8 +47,8 @@ from onboard.core.messages import (
 )
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
-from onboard.estimators.vehicle_models import GliderModel
 from onboard.pipelines.base import NoHealth, Pipeline
+from onboard.pipelines.current_samples import glider_model
 
 
 class NotEnoughData(ValueError):
@@ -664,10 +664,7 @@ def glide_speed(cfg: Config, t: np.ndarray, pitch: np.ndarray, pump: np.ndarray,
     ``max_depth_interval_s``). NaN where the glide gives no speed (a shallow pitch, an
     inflection)."""
     g = cfg.pipelines.current.glider
-    model = GliderModel(k_l=g.lift_kl, k_l0=g.lift_kl0, k_d0=g.drag_kd0, k_d=g.drag_kd,
-                        density=g.density, neutral_pump_cc=g.neutral_pump_cc,
-                        vertical_water_std=g.vertical_water_std,
-                        gamma_std=g.glide_angle_std, min_glide=g.min_glide_angle)
+    model = glider_model(g)
     out = np.full(len(t), math.nan)
     if len(depths) < 2:
         return out
