@@ -51,7 +51,9 @@ that is a corrupted stamp). A record stamped more than :data:`TIME_JUMP_S` ahead
 Rejections: ``"garbage"`` bytes that are not a record start (resync on the next
 ``A3 95`` whose type is known and which is followed by another record start or the end
 of the file); ``"unknown_format"`` a record type without FMT; ``"truncated"`` an
-incomplete record at the end; ``"bad_fmt"`` an FMT record that cannot be understood;
+incomplete record at the end; ``"bad_fmt"`` an FMT record that cannot be understood (the
+reader goes on from the next record start inside it: damaged bytes that only look like an
+FMT do not swallow the records after them);
 ``"time_backwards"``, ``"time_outlier"`` (above);
 handler rejections ``"no_fix"``, ``"nan"``, ``"invalid"``.
 """
@@ -557,13 +559,22 @@ class DataflashReader:
                     break
                 pos = nxt
                 continue
-            records += 1
-            used += length
             if typ == FMT_ID:
-                self._add_format(data, pos, formats, lengths, stats)
+                if not self._add_format(data, pos, formats, lengths, stats):
+                    # not a format: bytes that only looked like one; read on from the
+                    # next record start inside them
+                    nxt = self._resync(data, pos + 1, n, lengths)
+                    if nxt < 0:
+                        break
+                    pos = nxt
+                    continue
+                records += 1
+                used += length
                 counts["FMT"] += 1
                 pos = end
                 continue
+            records += 1
+            used += length
             f = formats.get(typ)
             if f is None:  # length known only for FMT itself
                 pos = end
@@ -609,18 +620,21 @@ class DataflashReader:
         return -1
 
     def _add_format(self, data: bytes, pos: int, formats: dict[int, _Format],
-                    lengths: dict[int, int], stats: ReadStats) -> None:
+                    lengths: dict[int, int], stats: ReadStats) -> bool:
+        """Read the FMT record at ``pos`` into ``formats`` and ``lengths``; False (counted
+        ``"bad_fmt"``) when it cannot be understood."""
         typ, length, name_b, fmt_b, cols_b = _FMT.unpack_from(data, pos + 3)
         if typ == FMT_ID:
-            return
+            return True
         try:
             name, fmt, cols = _text(name_b), _text(fmt_b), _text(cols_b).split(",")
             f = _Format(typ, name, length, fmt, cols if fmt else [])
         except (KeyError, ValueError, struct.error):
             stats.reject("bad_fmt")
-            return
+            return False
         if self._wanted_name(name):
             factory, base, _ = _FACTORIES[name]
             f.handler = factory(f, base)
         formats[typ] = f
         lengths[typ] = length
+        return True

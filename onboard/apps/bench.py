@@ -250,7 +250,8 @@ def bench_replay(s: Settings, workdir: Path, rep: Report) -> None:
 
     def one_replay() -> tuple[float, float]:
         w, c = time.perf_counter(), time.process_time()
-        status = _quiet(lambda: cli_main(["replay", str(log), "--out", str(out), "--no-plot"]))
+        status = _quiet(lambda: cli_main(["replay", str(log), "--out", str(out), "--no-plot",
+                                              "--force"]))
         w, c = time.perf_counter() - w, time.process_time() - c
         if status != 0:
             raise RuntimeError(f"onboard replay exited {status}")
