@@ -294,6 +294,19 @@ def test_the_figure_is_drawn_after_the_summary_is_written_and_printed(
     assert json.loads((out / "summary.json").read_text())["figure"] == str(out / "track.png")
 
 
+def test_a_log_without_positions_says_why_it_has_no_figure(tmp_path, capsys):
+    """A DVL capture alone gives no position: no track.png, and the last line says so
+    (not that matplotlib is missing, which it is not)."""
+    out = tmp_path / "out"
+    rc, lines, _ = run(["replay", str(REPO / "tests" / "data" / "dvl_json" / "a50.jsonl"),
+                        "--out", str(out)], capsys)
+    summary = json.loads((out / "summary.json").read_text())
+    assert rc == 0 and summary["figure"] is None and not (out / "track.png").exists()
+    assert summary["figure_skipped"] == "no pipeline gave a position to draw"
+    assert "no track.png: no pipeline gave a position to draw" in lines[-1]
+    assert "matplotlib" not in lines[-1]
+
+
 # ----------------------------------------------------------------- the other commands
 
 def test_diagnose_out_on_a_file_is_refused_before_reading_the_log(tmp_path, capsys):

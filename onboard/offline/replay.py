@@ -456,10 +456,16 @@ class _McapExport:
 def add_figure(out_dir: Path, summary: dict, title: str, position_kind: str = "") -> None:
     """Draw ``out_dir/track.png`` from estimates.csv, the last and slowest output, once
     summary.json is written (its measured track labelled by the log's format and, for a
-    CSV, ``position_kind``, its ``[csv] position_kind``); then record it in the summary (``figure``: its path, None
-    without matplotlib; a failure in ``failed``) and write summary.json again."""
+    CSV, ``position_kind``, its ``[csv] position_kind``); then record it in the summary
+    (``figure``: its path, or None and ``figure_skipped`` saying why; a failure in
+    ``failed``) and write summary.json again."""
     try:
         summary["figure"] = _plot_track(out_dir, title, summary["format"], position_kind)
+        if summary["figure"] is None:
+            summary["figure_skipped"] = "no pipeline gave a position to draw"
+    except ImportError:
+        summary["figure"] = None
+        summary["figure_skipped"] = "matplotlib is missing (pip install 'onboard[plot]')"
     except Exception as err:  # noqa: BLE001 - the other outputs are written already
         summary["figure"] = None
         export_failed(summary.setdefault("failed", []), "track.png", out_dir / "track.png",
@@ -643,14 +649,12 @@ def _write_geojson(out_dir: Path, path: Path | None, gpx: Path | None,
 def _plot_track(out_dir: Path, title: str, fmt: str, position_kind: str) -> str | None:
     """track.png: the measured track (labelled by the log's format ``fmt`` and, for a
     CSV, its ``[csv] position_kind``) and every reconstructed one, the current along them
-    and in a panel of its own, titled ``title``; None without matplotlib."""
+    and in a panel of its own, titled ``title``; None when no pipeline has a position.
+    Raises ImportError without matplotlib."""
     from onboard.offline.plots import plot_track, position_label
 
-    try:
-        return plot_track(out_dir / "estimates.csv", out_dir / "track.png", title,
-                          position_label(fmt, position_kind))
-    except ImportError:
-        return None
+    return plot_track(out_dir / "estimates.csv", out_dir / "track.png", title,
+                      position_label(fmt, position_kind))
 
 
 REPLAY_WRITES = ("estimates.csv", "summary.json", "track.png")
@@ -754,9 +758,8 @@ def last_line(summary: dict, out_dir: Path, plot: bool) -> str:
                          (summary.get("foxglove_layout") or {}).get("file")) if p]
     wrote = f"wrote {', '.join(names)} in {out_dir}" + (f", and {', '.join(extra)}"
                                                         if extra else "")
-    if plot and "figure" in summary and summary["figure"] is None and not any(
-            f["output"] == "track.png" for f in summary["failed"]):
-        wrote += "; no track.png: matplotlib is missing (pip install 'onboard[plot]')"
+    if plot and summary.get("figure_skipped"):
+        wrote += f"; no track.png: {summary['figure_skipped']}"
     failed = [f"{f['output'] + ' ' if f['output'].startswith('--') else ''}{f['path']}: "
               f"{f['error']}" for f in summary["failed"]]
     if failed:
