@@ -16,19 +16,39 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Iterator, Protocol
+from typing import Iterable, Iterator, Protocol
 
 from onboard.core.messages import Sample
 
 TIME_JUMP_S = 10.0
 """Stamps this far apart (s), either way, are for the time line to judge
 (``onboard.engine.timeline.TIME_JUMP_S``, the same figure: a test checks it). The CSV and
-DataFlash readers apply the time line's rule to their rows themselves (a single bad stamp
-is their ``"time_outlier"``). The tlog, NMEA and DVL readers drop a sample a little older
-than the newest they emitted (``"time_backwards"``) but pass one this much older on to
-the engine's time line, so that a clock reset (a reboot) becomes a new segment and a
-single bad stamp a counted ``time_outlier``, instead of every later sample being dropped
-until the clock catches up."""
+DataFlash readers apply the time line's rule to their rows themselves (a single bad stamp,
+or a first stamp outside the group of first stamps that agree, is their
+``"time_outlier"``). The tlog, NMEA, DVL, PD6 and DDBoat readers drop a sample a little
+older than the newest they emitted (``"time_backwards"``) but pass one this much older on
+to the engine's time line (:class:`TimeOrder`), so that a clock reset (a reboot) becomes
+a new segment and a single bad stamp a counted ``time_outlier``, instead of every later
+sample being dropped until the clock catches up."""
+
+
+TIME_REASONS = ("time_backwards", "time_outlier", "timestamp")
+"""The rejections of a reader's time rules: records dropped for their stamp alone."""
+UNREAD_REASONS = frozenset({
+    "crc", "checksum", "no_checksum", "garbage", "truncated", "too_long", "incompat",
+    "json", "bad_json", "malformed", "unrecognized", "unknown_format", "bad_fmt",
+    "decode", "length", "bad_time", "format"})
+"""The rejections of a record that could not be read whole (framing, checksum, syntax), as
+opposed to one read whole that said nothing usable (``"no_fix"``, ``"nan"``,
+``"duplicate"`` ...): the line readers count the bytes of the first kind as not used."""
+USED_SHARE_MIN = 0.5
+"""A log of which the reader used less than this share is reported in one loud line
+(:func:`shortfall`, the ``log_mostly_unread`` warning): the share of the file's bytes in
+records read whole, times the share of those records its time rules kept. Half: where
+"mostly" begins, and far from both sides measured. The real logs of ``../shared/data``
+use 98.3 % (``nmea_log.txt``, its logger's own lines) to 100 %; a tlog with a tenth of
+its bytes randomised 4-7 %; a README with four NMEA sentences in its prose 12.6 %. A
+smaller loss is in the counts (``read.rejected``, ``read.used_bytes``), not warned of."""
 
 
 class UnreadableLog(Exception):
@@ -50,14 +70,29 @@ class ReadStats:
     skipped: Counter[str] = field(default_factory=Counter)
     """Records left out by design, not for a fault, by reason (an MCAP's channels that
     are not the MAVLink read: :mod:`drivers.mcap_log`)."""
+    size_bytes: int = 0
+    """Bytes of the file(s) read (a text log's characters); 0 when not known (a stream,
+    an MCAP's compressed chunks)."""
+    used_bytes: int = 0
+    """Of :attr:`size_bytes`, those in records read whole (framing, checksum, syntax
+    good), whatever they said: the rest is damage the reader skipped."""
+    time_source: str = ""
+    """Where the stamps come from, when a setting decides it (the CSV reader's
+    ``[csv] time = "..." with time_scale = ...``), for a warning that they disagree."""
+    unread: int = 0
+    """Rejections for a reason of :data:`UNREAD_REASONS` so far (the line readers compare
+    it before and after a line)."""
 
     def reject(self, reason: str) -> None:
         """Count one rejection for ``reason``."""
         self.rejected[reason] += 1
+        if reason in UNREAD_REASONS:
+            self.unread += 1
 
     def as_dict(self) -> dict:
         """The counts as a JSON-serializable dict (``records``, ``samples``, ``rejected`` and
-        ``by_type``, keys sorted; ``skipped`` too when any)."""
+        ``by_type``, keys sorted; ``skipped`` too when any; ``size_bytes`` and
+        ``used_bytes`` when the size is known)."""
         out = {
             "records": self.records,
             "samples": self.samples,
@@ -66,7 +101,109 @@ class ReadStats:
         }
         if self.skipped:
             out["skipped"] = dict(sorted(self.skipped.items()))
+        if self.size_bytes:
+            out["size_bytes"] = self.size_bytes
+            out["used_bytes"] = self.used_bytes
         return out
+
+
+def counted_lines(stats: ReadStats, lines: Iterable[bytes], ends: int = 0) -> Iterator[bytes]:
+    """Yield ``lines`` (with their line ends, or ``ends`` bytes short each), counting their
+    bytes in ``stats.size_bytes`` and, unless the caller counted a rejection of
+    :data:`UNREAD_REASONS` while it handled the line, in ``stats.used_bytes``."""
+    for line in lines:
+        unread = stats.unread
+        yield line
+        k = len(line) + ends
+        stats.size_bytes += k
+        if stats.unread == unread:
+            stats.used_bytes += k
+
+
+class TimeOrder:
+    """The time rule of the readers that pass a clock reset on to the engine's time line
+    (DVL JSON, PD6, the NMEA and DDBoat captures; the tlog reader and the NMEA parser
+    apply it inline): a stamp up to :data:`TIME_JUMP_S`
+    older than the newest one kept is dropped (``"time_backwards"``), one further back
+    is kept and becomes the newest, so that the time line sees a reset (a new segment) or
+    a single bad stamp (an outlier) instead of the reader dropping every later sample
+    until its clock catches up; whatever the first stamp, nothing after it is lost."""
+
+    def __init__(self, stats: ReadStats) -> None:
+        self.stats = stats
+        self.newest: float | None = None
+        """The newest stamp kept (s)."""
+
+    def behind(self, t: float) -> bool:
+        """Whether a stamp ``t`` (s) is one to drop: up to :data:`TIME_JUMP_S` older than
+        the newest kept."""
+        newest = self.newest
+        return newest is not None and newest - TIME_JUMP_S <= t < newest
+
+    def keep(self, t: float) -> bool:
+        """Whether a sample stamped ``t`` (s) is kept (then ``t`` is the newest); a dropped
+        one is counted."""
+        if self.behind(t):
+            self.stats.reject("time_backwards")
+            return False
+        self.newest = t
+        return True
+
+
+def used_share(stats: ReadStats, time_outliers: int = 0) -> float:
+    """The share of a log its reader used (0-1): of the file's bytes, those in records
+    read whole (1 when the size is not known), times the share of the records the time
+    rules kept: the reader's (:data:`TIME_REASONS` among its ``records``) or the engine's
+    time line (``time_outliers`` among the reader's ``samples``), whichever dropped more."""
+    whole = stats.used_bytes / stats.size_bytes if stats.size_bytes else 1.0
+    by_reader = sum(stats.rejected[r] for r in TIME_REASONS) / max(stats.records, 1)
+    by_engine = time_outliers / max(stats.samples, 1)
+    return max(0.0, whole * (1.0 - max(by_reader, by_engine)))
+
+
+def shortfall(stats: ReadStats, name: str, time_outliers: int = 0) -> str | None:
+    """One line when the reader of log ``name`` used less than :data:`USED_SHARE_MIN` of
+    it (:func:`used_share`), else None: how much, what to do (for the larger loss: a
+    damaged file, or stamps that disagree, with the setting they come from,
+    :attr:`ReadStats.time_source`), then why the rest was not used (the bytes in records read
+    whole, the records and samples the time rules dropped, the largest rejections)."""
+    share = used_share(stats, time_outliers)
+    if share >= USED_SHARE_MIN:
+        return None
+    whole = stats.used_bytes / stats.size_bytes if stats.size_bytes else 1.0
+    timed = sum(stats.rejected[r] for r in TIME_REASONS)
+    why = []
+    if whole < 1.0:
+        why.append(f"{_size(stats.used_bytes)} of its {_size(stats.size_bytes)} were "
+                   "records read whole")
+    if timed:
+        why.append(f"the time rules dropped {timed:,} of its {stats.records:,} records")
+    if time_outliers:
+        why.append(f"the time line dropped {time_outliers:,} of its {stats.samples:,} "
+                   "samples as outliers")
+    kept_by_time = share / whole if whole > 0.0 else 1.0
+    if whole <= kept_by_time:
+        fix = "the file is damaged, or mostly not log records: use an undamaged log"
+    else:
+        fix = ("its time stamps disagree with each other: check "
+               + (stats.time_source or "the clock of the logger that wrote it"))
+    top = sorted(stats.rejected.items(), key=lambda kv: -kv[1])[:_REASONS_SHOWN]
+    counts = ", ".join(f"{k} {n:,}" for k, n in top)
+    return (f"only {100 * share:.1f} % of {name} could be used: {fix}; " + "; ".join(why)
+            + (f" (rejected: {counts})" if counts else ""))
+
+
+_REASONS_SHOWN = 4
+"""Rejection reasons :func:`shortfall` names, the largest first."""
+
+
+def _size(n: int) -> str:
+    """``n`` bytes in words: ``812 B``, ``19.6 kB``, ``1.51 MB``."""
+    if n < 1000:
+        return f"{n} B"
+    if n < 1_000_000:
+        return f"{n / 1e3:.3g} kB"
+    return f"{n / 1e6:.3g} MB"
 
 
 class LineAssembler:

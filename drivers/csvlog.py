@@ -44,7 +44,8 @@ heading is a spike loses its Heading and Attitude (``"heading_spike"``, :class:`
 Rejections (per row): ``"malformed"`` (wrong number of cells), ``"bad_time"`` (time not
 numeric or not finite), ``"time_backwards"`` (time earlier than the previous row of the
 run), ``"time_outlier"`` (one row stamped more than :data:`TIME_JUMP_S` away from the rows
-before and after it; the rows after it are kept; :class:`_RowClock`). Per sample type of a row: ``"nan"`` (empty or NaN cell), ``"non_numeric"``. A
+before and after it, the rows after it kept; or a row outside the group of the run's
+first stamps that agree, where the run starts; :class:`_RowClock`). Per sample type of a row: ``"nan"`` (empty or NaN cell), ``"non_numeric"``. A
 mapped column missing from a file's header raises :class:`UnreadableLog`.
 """
 
@@ -60,6 +61,7 @@ from typing import Iterator, Sequence
 from onboard.drivers.base import TIME_JUMP_S, ReadStats, UnreadableLog
 from onboard.core.config import CsvFormat
 from onboard.core.geo import LocalFrame, wrap_2pi
+from onboard.core.stamps import Anchor
 from onboard.core.messages import (
     ActuatorColumn,
     ActuatorOutputs,
@@ -89,9 +91,12 @@ class RunInfo:
 
 
 class _RowClock:
-    """The time order of one run's rows, proof against one bad stamp.
+    """The time order of one run's rows, proof against bad stamps.
 
-    A row up to :data:`TIME_JUMP_S` before the newest used one is ``time_backwards``. A row
+    The run starts where its first rows agree (:class:`onboard.core.stamps.Anchor`: the
+    largest group of the first :data:`~onboard.core.stamps.ANCHOR_STAMPS` distinct
+    stamps; the rows outside it are ``time_outlier``), so a bad first row costs itself
+    only. Then a row up to :data:`TIME_JUMP_S` before the newest used one is ``time_backwards``. A row
     further ahead is held: the next row decides whether it was a jump (the next row agrees
     with it: both are used) or a ``time_outlier`` (the next row continues the old times).
     A row further back is rejected; the next row decides the count: ``time_outlier`` when
@@ -107,9 +112,24 @@ class _RowClock:
         """The newest time used (s)."""
         self._held: tuple[float, object] | None = None
         self._back: float | None = None
+        self._anchor: Anchor[object] = Anchor(TIME_JUMP_S)
 
     def admit(self, t: float, item: object) -> list:
         """The items to use, in order, after a row at ``t`` (s) carrying ``item``."""
+        if not self._anchor.decided:
+            return self._start(*self._anchor.push(t, item))
+        return self._order(t, item)
+
+    def _start(self, kept: list[tuple[float, object]],
+               outliers: list[tuple[float, object]]) -> list:
+        """The run's first rows, once the anchor chose its start: ``outliers`` counted,
+        ``kept`` put in order."""
+        for _ in outliers:
+            self._count("time_outlier")
+        return [used for t, item in kept for used in self._order(t, item)]
+
+    def _order(self, t: float, item: object) -> list:
+        """The items to use after a row at ``t`` (s), the run's start known."""
         last = self.last
         if self._back is not None:
             agrees = abs(t - self._back) <= TIME_JUMP_S and (
@@ -138,11 +158,15 @@ class _RowClock:
             self._back = t
         return []
 
-    def end(self) -> None:
-        """The run ended: a row still held, or rejected far back, was an outlier."""
+    def end(self) -> list:
+        """The run ended: return the items it releases (a run shorter than the anchor's
+        stamps: its start is chosen now); a row still held, or rejected far back, was an
+        outlier."""
+        out = [] if self._anchor.decided else self._start(*self._anchor.decide())
         if self._held is not None or self._back is not None:
             self._count("time_outlier")
         self._held = self._back = None
+        return out
 
     def _count(self, reason: str) -> None:
         if self.stats is not None:
@@ -192,6 +216,103 @@ def _frame(lat0_deg: float, lon0_deg: float) -> LocalFrame:
     return LocalFrame(lat0_deg, lon0_deg)
 
 
+def mapped_columns(fmt: CsvFormat, actuator_columns: Sequence[str] = ()) -> list[str]:
+    """The columns a ``[csv]`` mapping reads (and ``actuator_columns``, the ``[inputs]``
+    roles with ``source = "column"``): a log's header must have each."""
+    cols = [fmt.time, fmt.lat_deg, fmt.lon_deg, fmt.alt_m, fmt.north_m, fmt.east_m,
+            fmt.heading, fmt.yaw_rate, fmt.surge_mps, fmt.sway_mps, fmt.sog_mps, fmt.depth_m,
+            fmt.roll, fmt.pitch, fmt.north_mps, fmt.east_mps, fmt.run_column,
+            *fmt.pwm_columns, *actuator_columns]
+    return [c for c in cols if c]
+
+
+def csv_header(path: str | Path) -> list[str]:
+    """The header of a CSV log (of its first file, for a directory of runs); empty when
+    there is none to read."""
+    p = Path(path)
+    first = min(p.glob("*.csv"), default=None) if p.is_dir() else p
+    try:
+        with open(first, newline="", encoding="utf-8", errors="replace") as fh:  # type: ignore[arg-type]
+            return [h.strip() for h in next(csv.reader(fh), [])]
+    except (OSError, TypeError, csv.Error):
+        return []
+
+
+def fitting_configs(header: Sequence[str]) -> list[str]:
+    """The bundled configs (``onboard.core.config.bundled``) with a ``[csv]`` mapping whose
+    every column, and every column its ``[inputs]`` read, is in ``header``; the one
+    that maps the most columns first."""
+    from onboard.core import config as configmod
+
+    have, fits = set(header), []
+    for name in configmod.bundled():
+        try:
+            cfg = configmod.load(name)
+        except Exception:  # noqa: BLE001 - a config that does not load fits nothing
+            continue
+        if not (cfg.csv.lat_deg or cfg.csv.north_m):
+            continue
+        cols = mapped_columns(cfg.csv, _column_inputs(cfg.inputs))
+        if set(cols) <= have:
+            fits.append((-len(cols), name))
+    return [name for _, name in sorted(fits)]
+
+
+def _column_inputs(inputs) -> list[str]:
+    """The columns the ``[inputs]`` roles with ``source = "column"`` read."""
+    maps = []
+    for name in inputs.__struct_fields__:
+        v = getattr(inputs, name)
+        maps.extend(v if isinstance(v, list) else [v])
+    return [m.column for m in maps if getattr(m, "source", "") == "column"]
+
+
+def fitting_note(header: Sequence[str]) -> str:
+    """What to pass for a CSV log with ``header``: the bundled config that fits it, or
+    how to write a mapping."""
+    fits = fitting_configs(header)
+    if fits:
+        return f"its header fits the bundled config {fits[0]}: --config {fits[0]}"
+    shown = ", ".join(header[:8]) + (", ..." if len(header) > 8 else "")
+    return (f"no bundled config fits its header ({shown or 'none'}): write a [csv] table "
+            "(docs/formats-text.md)")
+
+
+class _Lines:
+    """The lines of an open text file for :func:`csv.reader`, counting their characters:
+    ``n`` so far, ``counted`` up to the previous call of :meth:`row` (a CSV row may span
+    lines)."""
+
+    def __init__(self, fh) -> None:  # type: ignore[no-untyped-def]
+        self.fh = fh
+        self.n = 0
+        self.counted = 0
+
+    def __iter__(self) -> "_Lines":
+        return self
+
+    def __next__(self) -> str:
+        line = next(self.fh)
+        self.n += len(line)
+        return line
+
+    def row(self) -> int:
+        """Characters of the lines read since the previous call (the last row's)."""
+        k, self.counted = self.n - self.counted, self.n
+        return k
+
+    def rest(self) -> int:
+        """Characters of the whole file: those read and the rest, read now (what a CSV
+        error left unread)."""
+        for _ in self:
+            pass
+        return self.n
+
+    def close(self) -> None:
+        """Close the file."""
+        self.fh.close()
+
+
 class _Bad(Exception):
     def __init__(self, reason: str) -> None:
         self.reason = reason
@@ -211,7 +332,8 @@ class CsvReader:
         self.actuator_columns = tuple(dict.fromkeys(actuator_columns))
         """Columns read as :class:`ActuatorColumn` samples (each once)."""
         self.prefix = source_prefix
-        self.stats = ReadStats()
+        self.stats = ReadStats(time_source=f'[csv] time = "{fmt.time}" with time_scale = '
+                               f"{fmt.time_scale:g}")
         if self.path.is_dir():
             files = sorted(self.path.glob("*.csv"))
             if not files:
@@ -227,9 +349,9 @@ class CsvReader:
 
     # -- helpers
 
-    def _open(self, path: Path) -> tuple[list[str], Iterator[list[str]], object]:
+    def _open(self, path: Path) -> tuple[list[str], Iterator[list[str]], _Lines]:
         try:
-            fh = open(path, newline="", encoding="utf-8", errors="replace")
+            fh = _Lines(open(path, newline="", encoding="utf-8", errors="replace"))
         except OSError as err:
             raise UnreadableLog(f"{path}: {err.strerror or err}") from None
         rd = csv.reader(fh)
@@ -244,19 +366,15 @@ class CsvReader:
         return [h.strip() for h in header], rd, fh
 
     def _columns(self) -> list[str]:
-        f = self.fmt
-        cols = [f.time, f.lat_deg, f.lon_deg, f.alt_m, f.north_m, f.east_m, f.heading,
-                f.yaw_rate, f.surge_mps, f.sway_mps, f.sog_mps, f.depth_m, f.roll, f.pitch,
-                f.north_mps, f.east_mps,
-                f.run_column, *f.pwm_columns, *self.actuator_columns]
-        return [c for c in cols if c]
+        return mapped_columns(self.fmt, self.actuator_columns)
 
     def _index(self, header: list[str], path: Path) -> dict[str, int]:
         idx = {name: i for i, name in enumerate(header)}
         missing = [c for c in self._columns() if c not in idx]
         if missing:
-            raise UnreadableLog(f"{path}: column(s) {', '.join(map(repr, missing))} not in the "
-                                f"header (check the [csv] mapping)")
+            raise UnreadableLog(f"{path}: the [csv] mapping's column(s) "
+                                f"{', '.join(map(repr, missing))} not in its header; "
+                                f"{fitting_note(header)}")
         return idx
 
     @staticmethod
@@ -276,40 +394,44 @@ class CsvReader:
     # -- pre-scan: run boundaries and time offsets
 
     def _scan(self) -> None:
-        f = self.fmt
         prev_end: float | None = None
         for path in self.files:
             header, rd, fh = self._open(path)
             try:
                 idx = self._index(header, path)
-                ti = idx[f.time]
-                cur: str | None = None
-                first = last = None
-                rows = 0
-                clock = _RowClock(None)  # the times the rows will be used at
                 try:
-                    for row in rd:
-                        if not row or not any(c.strip() for c in row):
-                            continue
-                        name = self._run_name(path, row, idx)
-                        t = self._time(row, ti, f.time_scale)
-                        if cur is not None and name != cur:
-                            prev_end = self._add_run(cur, path, first, last, rows, prev_end)
-                            first = last = None
-                            rows = 0
-                            clock = _RowClock(None)
-                        cur = name
-                        rows += 1
-                        for used in clock.admit(t, t) if t is not None else ():
-                            if first is None:
-                                first = used
-                            last = used if last is None else max(last, used)
+                    for name, times, rows in self._scan_runs(rd, idx, len(header), path):
+                        first = times[0] if times else None
+                        last = max(times) if times else None
+                        prev_end = self._add_run(name, path, first, last, rows, prev_end)
                 except csv.Error as err:
                     raise UnreadableLog(f"{path}: not CSV: {err}") from None
-                if cur is not None:
-                    prev_end = self._add_run(cur, path, first, last, rows, prev_end)
             finally:
-                fh.close()  # type: ignore[attr-defined]
+                fh.close()
+
+    def _scan_runs(self, rd: Iterator[list[str]], idx: dict[str, int], ncol: int,
+                   path: Path) -> Iterator[tuple[str, list[float], int]]:
+        """Per run of one file: its name, the times its rows will be used at (in order:
+        the run's clock applied as in :meth:`__iter__`) and its rows."""
+        f = self.fmt
+        cur: str | None = None
+        times: list[float] = []
+        rows = 0
+        clock = _RowClock(None)
+        for row in rd:
+            if not row or not any(c.strip() for c in row):
+                continue
+            name = self._run_name(path, row, idx)
+            if cur is not None and name != cur:
+                yield cur, times + clock.end(), rows
+                times, rows, clock = [], 0, _RowClock(None)
+            cur = name
+            rows += 1
+            t = self._time(row, idx[f.time], f.time_scale) if len(row) == ncol else None
+            if t is not None:
+                times += clock.admit(t, t)
+        if cur is not None:
+            yield cur, times + clock.end(), rows
 
     def _add_run(self, name: str, path: Path, first: float | None, last: float | None,
                  rows: int, prev_end: float | None) -> float | None:
@@ -328,16 +450,20 @@ class CsvReader:
         f = self.fmt
         runs = {(r.path, r.name): r for r in self.runs}
         st = self.stats
+        st.size_bytes = st.used_bytes = 0
         for path in self.files:
             header, rd, fh = self._open(path)
             try:
                 idx = self._index(header, path)
                 ncol = len(header)
+                st.used_bytes += fh.row()  # the header
                 clock = _RowClock(st)
                 spikes = _HeadingSpikes(f.heading_spike_deg, st) if f.heading_spike_deg else None
                 cur = None
                 for row in rd:
+                    chars = fh.row()
                     if not row or not any(c.strip() for c in row):
+                        st.used_bytes += chars
                         continue
                     st.records += 1
                     name = self._run_name(path, row, idx)
@@ -346,7 +472,7 @@ class CsvReader:
                         st.reject("malformed")
                         continue
                     if run is not cur:
-                        clock.end()
+                        yield from self._rows(clock.end(), idx, cur, spikes)
                         cur, clock = run, _RowClock(st)
                         if spikes is not None:  # the previous run's last row
                             yield from self._count(spikes.push(None))
@@ -358,18 +484,25 @@ class CsvReader:
                     if t is None:
                         st.reject("bad_time")
                         continue
+                    st.used_bytes += chars
                     t += run.t_offset
-                    for row_t, cells in clock.admit(t, (t, row)):
-                        st.by_type["row"] += 1
-                        out = self._samples(cells, idx, row_t, run.source)
-                        yield from self._count(spikes.push(out) if spikes is not None else out)
-                clock.end()
+                    yield from self._rows(clock.admit(t, (t, row)), idx, run, spikes)
+                yield from self._rows(clock.end(), idx, cur, spikes)
                 if spikes is not None:
                     yield from self._count(spikes.push(None))
             except csv.Error:
                 st.reject("malformed")
             finally:
-                fh.close()  # type: ignore[attr-defined]
+                st.size_bytes += fh.rest()
+                fh.close()
+
+    def _rows(self, rows: list[tuple[float, list[str]]], idx: dict[str, int],
+              run: RunInfo | None, spikes: _HeadingSpikes | None) -> Iterator[Sample]:
+        """The samples of the rows the clock released, ``(t, cells)`` of ``run``."""
+        for row_t, cells in rows:
+            self.stats.by_type["row"] += 1
+            out = self._samples(cells, idx, row_t, run.source)  # type: ignore[union-attr]
+            yield from self._count(spikes.push(out) if spikes is not None else out)
 
     def _count(self, samples: list[Sample]) -> Iterator[Sample]:
         """Yield ``samples``, counting them."""

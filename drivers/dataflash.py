@@ -34,7 +34,12 @@ declination, which the autopilot has already done into ``ATT.Yaw``.
 ``FMTU``/``UNIT``/``MULT`` are not needed: the scaled format characters (``c C e E L``) are
 applied from the format, and the few columns read have fixed documented units.
 
-Time base: ``Sample.t`` = ``TimeUS`` * 1e-6, seconds since the autopilot booted.
+Time base: ``Sample.t`` = ``TimeUS`` * 1e-6, seconds since the autopilot booted. The log
+starts where its first stamps agree (:class:`onboard.core.stamps.Anchor`: the records
+outside the largest group of the first five distinct stamps within :data:`TIME_JUMP_S`
+of each other are ``"time_outlier"``), so a damaged first stamp costs one record. The
+first GPS record whose ``GWk`` is set gives :attr:`DataflashReader.gps_time` (its
+``TimeUS``, ``GWk``, ``GMS``), from which :mod:`drivers.logclock` finds the log's UTC.
 ArduPilot writes from several threads, so records are slightly out of time order; the
 reader re-orders them through a 2 s window. A record older than the last emitted sample
 (beyond that window) is ``"time_backwards"``, and ``"time_outlier"`` when it is more than
@@ -46,7 +51,9 @@ that is a corrupted stamp). A record stamped more than :data:`TIME_JUMP_S` ahead
 Rejections: ``"garbage"`` bytes that are not a record start (resync on the next
 ``A3 95`` whose type is known and which is followed by another record start or the end
 of the file); ``"unknown_format"`` a record type without FMT; ``"truncated"`` an
-incomplete record at the end; ``"bad_fmt"`` an FMT record that cannot be understood;
+incomplete record at the end; ``"bad_fmt"`` an FMT record that cannot be understood (the
+reader goes on from the next record start inside it: damaged bytes that only look like an
+FMT do not swallow the records after them);
 ``"time_backwards"``, ``"time_outlier"`` (above);
 handler rejections ``"no_fix"``, ``"nan"``, ``"invalid"``.
 """
@@ -65,6 +72,7 @@ from typing import Callable, Iterable, Iterator
 from onboard.drivers.base import TIME_JUMP_S, ReadStats, UnreadableLog
 from onboard.drivers.mavlink import GPS_FIX_TO_QUALITY, wanted_types
 from onboard.core.geo import wrap_2pi
+from onboard.core.stamps import Anchor
 from onboard.core.messages import (
     ActuatorOutputs,
     Attitude,
@@ -131,6 +139,75 @@ class _Ahead:
         self.held = []
 
 
+class _Order:
+    """The samples of the records in time order: the start where the first stamps agree
+    (:class:`onboard.core.stamps.Anchor`, the others ``"time_outlier"``), then the
+    re-ordering window of :data:`REORDER_WINDOW_S`, records far ahead held
+    (:class:`_Ahead`), records behind the last emitted sample dropped (see the module
+    docstring).
+
+    Attributes:
+        clock: the stamp (s) of a record that carries none: the latest stamp taken into
+            the window, before that the last stamp seen, 0 before any.
+    """
+
+    def __init__(self, stats: ReadStats) -> None:
+        self.stats = stats
+        self.clock = 0.0
+        self._anchor: Anchor[Sample] = Anchor(TIME_JUMP_S)
+        self._ahead = _Ahead(stats)
+        self._heap: list[tuple[float, int, Sample]] = []
+        self._seq = 0
+        self._emitted_t = -math.inf
+        self._latest_t = -math.inf
+
+    def push(self, t: float, sample: Sample) -> list[Sample]:
+        """Take ``sample`` stamped ``t`` (s); return the samples ready, in time order."""
+        if self._anchor.decided:
+            return self._order(t, sample)
+        self.clock = t
+        return self._start(*self._anchor.push(t, sample))
+
+    def flush(self) -> list[Sample]:
+        """The log ended: the samples still waiting, in time order (held far-ahead ones
+        are outliers)."""
+        out = [] if self._anchor.decided else self._start(*self._anchor.decide())
+        self._ahead.drop()
+        while self._heap:
+            self._emitted_t, _, s = heapq.heappop(self._heap)
+            out.append(s)
+        return out
+
+    def _start(self, kept: list[tuple[float, Sample]],
+               outliers: list[tuple[float, Sample]]) -> list[Sample]:
+        for _ in outliers:
+            self.stats.reject("time_outlier")
+        return [out for t, s in kept for out in self._order(t, s)]
+
+    def _order(self, t: float, sample: Sample) -> list[Sample]:
+        if t < self._emitted_t:
+            self.stats.reject("time_outlier" if t < self._emitted_t - TIME_JUMP_S
+                              else "time_backwards")
+            return []
+        latest = self._latest_t
+        if latest != -math.inf and t > latest + TIME_JUMP_S:
+            batch = self._ahead.hold(t, sample)
+        else:
+            self._ahead.drop()
+            batch = [(t, sample)]
+        heap = self._heap
+        for bt, bs in batch:
+            latest = max(latest, bt)
+            heapq.heappush(heap, (bt, self._seq, bs))
+            self._seq += 1
+        self._latest_t = self.clock = latest
+        out = []
+        while heap and heap[0][0] <= latest - REORDER_WINDOW_S:
+            self._emitted_t, _, s = heapq.heappop(heap)
+            out.append(s)
+        return out
+
+
 _VEHICLES = {"ArduSub": 12, "ArduRover": 10, "ArduPlane": 1, "ArduCopter": 2}
 _BANNER = re.compile(r"\b(ArduSub|ArduRover|ArduPlane|ArduCopter)\b")
 
@@ -144,6 +221,8 @@ class _State:
         self.stats = stats
         self.params: dict[str, float] = {}
         self.vehicle_sent = False
+        self.gps_time: tuple[float, int, int] | None = None
+        """(TimeUS in s, GWk, GMS) of the first GPS record with a GPS time (GWk > 0)."""
 
 
 class _Format:
@@ -242,9 +321,11 @@ def _att(f: _Format, base: str) -> _Handler | None:
 def _gps(f: _Format, base: str) -> _Handler | None:
     if f.name != "GPS":  # GPS2 (old logs): second receiver
         return None
-    g = {c: _getter(f, c) for c in ("Status", "Lat", "Lng", "Alt", "NSats", "HDop", "Spd", "GCrs")}
+    g = {c: _getter(f, c) for c in ("Status", "Lat", "Lng", "Alt", "NSats", "HDop", "Spd", "GCrs",
+                                    "GWk", "GMS")}
     if g["Status"] is None or g["Lat"] is None or g["Lng"] is None:
         return None
+    timed = g["GWk"] is not None and g["GMS"] is not None
     inst = _instance(f, base)
     d2r = math.pi / 180.0
 
@@ -255,6 +336,8 @@ def _gps(f: _Format, base: str) -> _Handler | None:
     def h(v, t, st):
         if inst(v) != 0:
             return None
+        if timed and st.gps_time is None and g["GWk"](v) > 0:
+            st.gps_time = (t, int(g["GWk"](v)), int(g["GMS"](v)))
         status = g["Status"](v)
         q = GPS_FIX_TO_QUALITY.get(status)
         if q is None:
@@ -392,6 +475,7 @@ class DataflashReader:
         self.path = Path(path)
         self.stats = ReadStats()
         self._want = wanted_types(types) if types is not None else None
+        self._state: _State | None = None
         try:
             with open(self.path, "rb") as f:
                 head = f.read(1 << 16)
@@ -411,6 +495,13 @@ class DataflashReader:
         typ, length, name, fmt, cols = _FMT.unpack_from(data, i + 3)
         name_s, fmt_s = _text(name), _text(fmt)
         return length >= 3 and name_s.isalnum() and all(c in FORMAT_CHARS for c in fmt_s)
+
+    @property
+    def gps_time(self) -> tuple[float, int, int] | None:
+        """(log time in s, GPS week, GPS time of week in ms) of the first record of the first
+        receiver that carries a GPS time (``GWk`` > 0), as far as the log has been read;
+        None before that. :mod:`drivers.logclock` turns it into the log's UTC."""
+        return self._state.gps_time if self._state is not None else None
 
     def _wanted_name(self, name: str) -> bool:
         if name == "PARM":
@@ -435,17 +526,14 @@ class DataflashReader:
 
     def _walk(self, data: bytes, stats: ReadStats, counts: Counter[str]) -> Iterator[Sample]:
         n = len(data)
-        st = _State(stats)
+        st = self._state = _State(stats)
         formats: dict[int, _Format] = {}
         lengths: dict[int, int] = {FMT_ID: 89}
         want = self._want
-        heap: list[tuple[float, int, Sample]] = []
-        seq = 0
-        emitted_t = -math.inf
-        latest_t = -math.inf
-        ahead = _Ahead(stats)
+        order = _Order(stats)
         n_samples = 0
         records = 0
+        used = 0  # bytes of the records read whole
         pos = self._first
         if pos > 0:
             stats.reject("garbage")
@@ -471,12 +559,22 @@ class DataflashReader:
                     break
                 pos = nxt
                 continue
-            records += 1
             if typ == FMT_ID:
-                self._add_format(data, pos, formats, lengths, stats)
+                if not self._add_format(data, pos, formats, lengths, stats):
+                    # not a format: bytes that only looked like one; read on from the
+                    # next record start inside them
+                    nxt = self._resync(data, pos + 1, n, lengths)
+                    if nxt < 0:
+                        break
+                    pos = nxt
+                    continue
+                records += 1
+                used += length
                 counts["FMT"] += 1
                 pos = end
                 continue
+            records += 1
+            used += length
             f = formats.get(typ)
             if f is None:  # length known only for FMT itself
                 pos = end
@@ -485,9 +583,7 @@ class DataflashReader:
             h = f.handler
             if h is not None:
                 v = f.struct.unpack_from(data, pos + 3)
-                t = v[0] / 1e6 if f.timed else latest_t
-                if t == -math.inf:
-                    t = 0.0
+                t = v[0] / 1e6 if f.timed else order.clock
                 try:
                     s = h(v, t, st)
                 except (TypeError, ValueError, OverflowError):
@@ -497,31 +593,17 @@ class DataflashReader:
                     pos = end
                     continue
                 if s is not None and (want is None or isinstance(s, want)):
-                    if t < emitted_t:
-                        stats.reject("time_outlier" if t < emitted_t - TIME_JUMP_S
-                                     else "time_backwards")
-                    else:
-                        if latest_t != -math.inf and t > latest_t + TIME_JUMP_S:
-                            batch = ahead.hold(t, s)
-                        else:
-                            ahead.drop()
-                            batch = [(t, s)]
-                        for bt, bs in batch:
-                            latest_t = max(latest_t, bt)
-                            heapq.heappush(heap, (bt, seq, bs))
-                            seq += 1
-                        while heap and heap[0][0] <= latest_t - REORDER_WINDOW_S:
-                            emitted_t, _, out = heapq.heappop(heap)
-                            n_samples += 1
-                            yield out
+                    for out in order.push(t, s):
+                        n_samples += 1
+                        yield out
             pos = end
-        ahead.drop()
-        while heap:
-            emitted_t, _, out = heapq.heappop(heap)
+        for out in order.flush():
             n_samples += 1
             yield out
         stats.records = records
         stats.samples = n_samples
+        stats.size_bytes = n
+        stats.used_bytes = used
 
     @staticmethod
     def _resync(data: bytes, start: int, n: int, lengths: dict[int, int]) -> int:
@@ -538,18 +620,21 @@ class DataflashReader:
         return -1
 
     def _add_format(self, data: bytes, pos: int, formats: dict[int, _Format],
-                    lengths: dict[int, int], stats: ReadStats) -> None:
+                    lengths: dict[int, int], stats: ReadStats) -> bool:
+        """Read the FMT record at ``pos`` into ``formats`` and ``lengths``; False (counted
+        ``"bad_fmt"``) when it cannot be understood."""
         typ, length, name_b, fmt_b, cols_b = _FMT.unpack_from(data, pos + 3)
         if typ == FMT_ID:
-            return
+            return True
         try:
             name, fmt, cols = _text(name_b), _text(fmt_b), _text(cols_b).split(",")
             f = _Format(typ, name, length, fmt, cols if fmt else [])
         except (KeyError, ValueError, struct.error):
             stats.reject("bad_fmt")
-            return
+            return False
         if self._wanted_name(name):
             factory, base, _ = _FACTORIES[name]
             f.handler = factory(f, base)
         formats[typ] = f
         lengths[typ] = length
+        return True

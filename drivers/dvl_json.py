@@ -52,7 +52,8 @@ from typing import Any, Iterator
 
 import msgspec
 
-from onboard.drivers.base import TIME_JUMP_S, LineAssembler, ReadStats, UnreadableLog
+from onboard.drivers.base import (LineAssembler, ReadStats, TimeOrder, UnreadableLog,
+                                  counted_lines)
 from onboard.drivers.sender_clock import SenderClock
 from onboard.core.messages import DvlPosition, DvlVelocity, Sample
 
@@ -259,9 +260,9 @@ class DvlJsonLogReader:
         p = self._parser
         t_rel = 0.0
         first_rel = True
-        last_t: float | None = None
+        order = TimeOrder(p.stats)
         with open(self.path, "rb") as fh:
-            for line in fh:
+            for line in counted_lines(p.stats, fh):
                 if len(line) > p.max_line:
                     p.stats.records += 1
                     p.stats.reject("too_long")
@@ -277,12 +278,12 @@ class DvlJsonLogReader:
                         t_rel += dt * 1e-3
                     first_rel = False
                     t = t_rel
-                if last_t is not None and last_t - TIME_JUMP_S <= t < last_t:
+                if order.behind(t):
                     p.stats.reject("time_backwards")
                     continue
                 s = p.to_sample(obj, t)
                 if s is not None:
-                    last_t = t
+                    order.newest = t
                     yield s
 
 

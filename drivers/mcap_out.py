@@ -11,10 +11,16 @@ channel (topic)                    schema name (``jsonschema``)    message
 ``<prefix>/<id>/fix/<pipeline>``   ``foxglove.LocationFix``        its position
 =================================  ==============================  =================
 
-Messages are JSON (message encoding ``json``), log and publish time the tick time ``t``
-in ns (the log's clock: seconds since the epoch for a tlog, a DataFlash log with GPS time
-or a BlueOS recording). The health record is the live service's (1 Hz, with its rates);
-a replay's counterpart is summary.json.
+Messages are JSON (message encoding ``json``). Log and publish time are the tick time in
+UTC, ns since the epoch, wherever the log knows UTC (:mod:`drivers.logclock`: a tlog's
+record stamps, a DataFlash log's GPS time, a CSV's POSIX time column, ...), and so is each
+LocationFix's ``timestamp``; the records keep ``t`` and ``t_sensor`` on the log's clock, as
+the live service's keep its own. A log without UTC (time since boot and no GPS time) is
+written on its own clock, seconds since boot or since its start: Foxglove shows them as
+1970-01-01. Either way the file's metadata record ``onboard-clock`` says which
+(``utc``: ``"true"`` or ``"false"``; ``source``: the log's clock in words; ``start``: the
+first tick in ISO 8601 UTC, or empty). The health record is the live service's (1 Hz,
+with its rates); a replay's counterpart is summary.json.
 
 Needs the ``mcap`` package (the ``mcap`` extra).
 """
@@ -29,9 +35,14 @@ import msgspec
 
 from onboard.core import wire
 from onboard.core.messages import EstimateRecord
+from onboard.drivers.logclock import LogClock, iso8601
 
 LIBRARY = "onboard replay"
 """The MCAP header's library field."""
+CLOCK_METADATA = "onboard-clock"
+"""The name of the metadata record that says how the file is stamped."""
+NO_CLOCK = "no UTC: the log's own clock (none was given to the writer)"
+"""The clock's words when the writer is given none."""
 
 
 class McapRecordWriter:
@@ -41,15 +52,20 @@ class McapRecordWriter:
         path: the file to write.
         prefix: the first key segment (``[service.zenoh] key_prefix``).
         vehicle: the vehicle id (the second).
+        clock: the log's clock (:func:`drivers.logclock.log_clock`); None: a log without
+            UTC, written on its own clock.
     """
 
-    def __init__(self, path: str | os.PathLike, prefix: str, vehicle: str) -> None:
+    def __init__(self, path: str | os.PathLike, prefix: str, vehicle: str,
+                 clock: LogClock | None = None) -> None:
         from onboard.drivers.mcap_log import mcap_module
 
         mcap_module()
         from mcap.writer import Writer
 
         self.prefix, self.vehicle = prefix, vehicle
+        self.clock = clock if clock is not None else LogClock(NO_CLOCK)
+        self._start: float | None = None
         self._f = open(path, "wb")
         self.writer = Writer(self._f)
         self.writer.start(profile="", library=LIBRARY)
@@ -69,27 +85,38 @@ class McapRecordWriter:
             cid = self._channels[topic] = self.writer.register_channel(topic, "json", sid)
         return cid
 
-    def _add(self, topic: str, schema: str, t: float, payload: bytes) -> None:
-        t_ns = max(0, round(t * wire.NS_PER_S))
+    def _add(self, topic: str, schema: str, t_ns: int, payload: bytes) -> None:
         self.writer.add_message(self._channel(topic, schema), log_time=t_ns, data=payload,
                                 publish_time=t_ns)
         self.messages += 1
 
     def write(self, t: float, records: Sequence[EstimateRecord],
               fixes: Sequence[wire.LocationFix] = ()) -> None:
-        """One tick at ``t`` (s): each record on its ``est/`` channel, each fix on its
-        ``fix/`` channel."""
+        """One tick at ``t`` (s, the log's clock): each record on its ``est/`` channel,
+        each fix on its ``fix/`` channel, stamped in UTC where the log knows it."""
+        if self._start is None:
+            self._start = t
+        t_out = self.clock.to_utc(t)
+        t_ns = max(0, round((t if t_out is None else t_out) * wire.NS_PER_S))
+        if t_out is not None and t_out != t:
+            stamp = wire.Time(*divmod(t_ns, wire.NS_PER_S))
+            fixes = [msgspec.structs.replace(f, timestamp=stamp) for f in fixes]
         enc = self._enc.encode
         for rec in records:
             self._add(wire.estimate_key(self.prefix, self.vehicle, rec.pipeline),
-                      wire.ESTIMATE_SCHEMA, t, enc(rec))
+                      wire.ESTIMATE_SCHEMA, t_ns, enc(rec))
         for fix in fixes:
             self._add(wire.fix_key(self.prefix, self.vehicle, fix.frame_id),
-                      wire.LOCATION_FIX_SCHEMA, t, enc(fix))
+                      wire.LOCATION_FIX_SCHEMA, t_ns, enc(fix))
 
     def close(self) -> None:
-        """Finish the file (summary, index) and close it."""
+        """Write the ``onboard-clock`` metadata, finish the file (summary, index) and close
+        it."""
         try:
+            start = self.clock.to_utc(self._start) if self._start is not None else None
+            self.writer.add_metadata(CLOCK_METADATA, {
+                "utc": "true" if self.clock.utc else "false", "source": self.clock.source,
+                "start": iso8601(start) if start is not None else ""})
             self.writer.finish()
         finally:
             self._f.close()

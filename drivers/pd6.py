@@ -40,7 +40,10 @@ Samples:
 Time: ``time_base="rx"`` stamps samples with the receive time (live);
 ``time_base="instrument"`` with the last ``TS`` time (POSIX s; captures), and lines before
 the first ``TS`` are rejected as ``"untimed"``; an SA line (sent before TS in an
-ensemble) is held and stamped with the TS that follows.
+ensemble) is held and stamped with the TS that follows. In the instrument time base a
+sample up to ``drivers.base.TIME_JUMP_S`` older than the newest is ``"time_backwards"``,
+one further back is passed on for the engine's time line to judge
+(:class:`drivers.base.TimeOrder`).
 """
 
 from __future__ import annotations
@@ -54,7 +57,7 @@ from typing import Iterator, Literal
 
 import msgspec
 
-from onboard.drivers.base import LineAssembler, ReadStats, UnreadableLog
+from onboard.drivers.base import LineAssembler, ReadStats, TimeOrder, UnreadableLog, counted_lines
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import (
     Altitude,
@@ -138,7 +141,7 @@ class Pd6Parser:
         self.instrument_time: float | None = None
         """POSIX time of the last TS line."""
         self._lines = LineAssembler(self.stats, max_line, split_cr=True, skip_blank=True)
-        self._last_t: float | None = None
+        self._order = TimeOrder(self.stats)
         self._pending_sa: Attitude | None = None
 
     def feed(self, data: bytes, t_rx: float) -> list[Sample]:
@@ -179,13 +182,7 @@ class Pd6Parser:
             else:
                 st.reject(err.reason)
             return []
-        out = []
-        for s in samples:
-            if self._last_t is not None and s.t < self._last_t and self.time_base != "rx":
-                st.reject("time_backwards")
-                continue
-            self._last_t = s.t
-            out.append(s)
+        out = [s for s in samples if self.time_base == "rx" or self._order.keep(s.t)]
         st.samples += len(out)
         return out
 
@@ -288,7 +285,7 @@ class Pd6LogReader:
 
     def __iter__(self) -> Iterator[Sample]:
         with open(self.path, "rb") as fh:
-            for line in fh:
+            for line in counted_lines(self.stats, fh):
                 if len(line) > self._parser.max_line:
                     self.stats.records += 1
                     self.stats.reject("too_long")

@@ -18,7 +18,8 @@
     CSV rows ``ax,ay,az,mx,my,mz,rx,ry,rz,roll,pitch,yaw,throttle,rudder`` (the
     ``survey_boat_arduino_rc`` captures; :class:`MixedCaptureReader`).
 ``ddboat``
-    The ENSTA DDBoat Python ``logging`` lines (:class:`DdboatLogReader`).
+    The ENSTA DDBoat Python ``logging`` lines (:class:`DdboatLogReader`): GPS fixes, motor
+    commands and the boat's own compass heading (``THETA``).
 
 Anything else raises :class:`~drivers.base.UnreadableLog`.
 
@@ -32,7 +33,10 @@ goes backwards, or forwards by more than ``max(max_gap_s, 2 x (rows since the la
 and jumps to 2018; ``Test3`` steps back 2 s at 17:56:08): the jump is removed -- the mark
 is placed ``rows / rate`` after the previous one and every later time (rows and NMEA
 samples) is shifted by the same amount -- and counted in ``stats.by_type["clock_jump"]``.
-So ``t`` is one continuous time line that equals the GPS UTC up to the first jump. The rows
+So ``t`` is one continuous time line that equals the GPS UTC up to the first jump (a GPS
+that has not yet set its clock counts from a default date: ``Test1`` from 2009-02-14);
+``utc_offset_s`` is the GPS UTC minus ``t`` after the last jump, the time the GPS settled
+on. The rows
 between two marks are spread evenly: row ``j`` of ``n`` gets ``t_k + j (t_k+1 - t_k) / n``;
 rows before the first mark and after the last are placed at the row rate. The GPS sentences reach the logger
 after their epoch (4800 baud), so rows are stamped up to ~0.3 s late relative to UTC; the
@@ -67,7 +71,7 @@ from typing import Iterator
 
 import msgspec
 
-from onboard.drivers.base import LogReader, ReadStats, UnreadableLog
+from onboard.drivers.base import LogReader, ReadStats, TimeOrder, UnreadableLog, counted_lines
 from onboard.drivers.nmea import NmeaError, NmeaParser, parse_gga, parse_rmc, split_sentence
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
@@ -210,19 +214,16 @@ class NmeaCaptureReader:
 
     def __iter__(self) -> Iterator[Sample]:
         p, st = self._parser, self.stats
-        last_t: float | None = None
+        order = TimeOrder(st)
 
         def ordered(samples: list[Sample]) -> Iterator[Sample]:
-            nonlocal last_t
             for s in samples:
-                if last_t is not None and s.t < last_t:
-                    st.reject("time_backwards")
+                if not order.keep(s.t):
                     st.samples -= 1
                     continue
-                last_t = s.t
                 yield s
 
-        for ln in self._lines:
+        for ln in counted_lines(st, self._lines, ends=1):
             ln = ln.strip()
             if not ln:
                 continue
@@ -269,6 +270,10 @@ class MixedCaptureReader:
         self.stats = ReadStats()
         self.row_rate_hz: float | None = None
         """Median row rate between good epoch marks (after iteration)."""
+        self.utc_offset_s: float | None = None
+        """UTC (POSIX s) minus ``t`` after the last clock jump: the GPS's time at its last
+        epoch mark less that mark's place on the time line (0 without jumps; None without
+        any GPS time). Known once the first sample is out."""
 
     def __iter__(self) -> Iterator[Sample]:
         st = self.stats
@@ -279,7 +284,7 @@ class MixedCaptureReader:
         rows: list[list[float]] = []
         marks: list[tuple[int, float]] = []  # (index of the next row, GPS UTC)
         last_utc: float | None = None
-        for raw in self._lines:
+        for raw in counted_lines(st, self._lines, ends=1):
             ln = raw.strip()
             if not ln:
                 continue
@@ -352,6 +357,8 @@ class MixedCaptureReader:
             else:
                 self.stats.by_type["clock_jump"] += 1
                 adj.append(adj[-1] + max(expected, 1e-3))
+        if marks:
+            self.utc_offset_s = marks[-1][1] - adj[-1]
         return adj
 
     def _row_times(self, n: int, marks: list[tuple[int, float]]) -> list[float]:
@@ -402,16 +409,34 @@ def _check_row(v: list[float]) -> str:
 
 _DD_GPS = re.compile(r"/GPS \[([\d.]+), '([NS])', ([\d.]+), '([EW])', ([\d.]+), '([AV])'\]")
 _DD_CMD = re.compile(r"dirl: (\d), motl: (\d+), dirr: (\d), motr: (\d+)")
+_DD_THETA = re.compile(r"/CONTROL: .*? THETA (\S+)")
+DDBOAT_HEADING_SOURCE = "ddboat/THETA"
+"""The source of the DDBoat's heading samples: the ``THETA`` of its ``CONTROL:`` record."""
 
 
 class DdboatLogReader:
-    """ENSTA DDBoat ``logging`` lines: GPS fixes and left/right motor commands.
+    """ENSTA DDBoat ``logging`` lines: GPS fixes, left/right motor commands and the boat's
+    compass heading.
 
     ``t`` is the line's wall-clock stamp (the boat's clock, taken as UTC). ``GPS [ddmm.mmmm,
     'N', dddmm.mmmm, 'W', hhmmss, 'A']`` gives a GnssFix (status ``V`` is ``"no_fix"``, a
     repeat of the previous GPS time ``"duplicate"``). ``cmd motors`` gives an
     ActuatorCommand with ``left``/``right`` = +-mot/255 (``dir`` 0 = ahead, as the
-    controller's positive CMDL/CMDR show). The raw IMU counts are unscaled and not used.
+    controller's positive CMDL/CMDR show).
+
+    ``CONTROL: ... THETA th`` gives a magnetic Heading (source
+    :data:`DDBOAT_HEADING_SOURCE`): ``th`` is the boat's own compass heading, its raw
+    magnetometer through the boat's calibration (ENSTA's ``DdboatFilter.cap``: 0 facing
+    east, counterclockwise, rad), so the heading from north, clockwise, is ``pi/2 - th``.
+    The sense is the data's: ``th`` turns against the gyro's z axis (which points down,
+    as the accelerometer's -1 g on it shows) with 0.084 deg/s per count, the LSM9DS1's
+    70 mdps per count at 2000 deg/s (correlation -0.62 over DDBOAT8_t_2022_9_2_0_0.log).
+    A non-numeric ``THETA`` is rejected as ``"bad_heading"``.
+
+    The raw ``IMU: MAG`` counts are not read as a second heading: they are the same
+    sensor as ``THETA`` before the calibration, and the log does not carry the hard- and
+    soft-iron calibration that turns them into a heading. The accelerometer and gyro
+    counts are unscaled and not read either.
     """
 
     def __init__(self, path: str | Path, source: str = "ddboat", full_scale: float = 255.0) -> None:
@@ -423,9 +448,9 @@ class DdboatLogReader:
 
     def __iter__(self) -> Iterator[Sample]:
         st, src = self.stats, self.source
-        last_t: float | None = None
+        order = TimeOrder(st)
         last_gps: str | None = None
-        for raw in self._lines:
+        for raw in counted_lines(st, self._lines, ends=1):
             ln = raw.strip()
             if not ln:
                 continue
@@ -435,10 +460,8 @@ class DdboatLogReader:
                 st.reject("unrecognized")
                 continue
             t = pt[0]
-            if last_t is not None and t < last_t:
-                st.reject("time_backwards")
+            if not order.keep(t):
                 continue
-            last_t = t
             text = ln.decode("utf-8", "replace")
             out: list[Sample] = []
             m = _DD_GPS.search(text)
@@ -455,6 +478,9 @@ class DdboatLogReader:
                     out.append(GnssFix(t=t, source=src, lat_deg=lat, lon_deg=lon))
             elif "/GPS timeout" in text:
                 st.by_type["gps_timeout"] += 1
+            heading = self._heading(t, text)
+            if heading is not None:
+                out.append(heading)
             m = _DD_CMD.search(text)
             if m:
                 st.by_type["cmd"] += 1
@@ -467,6 +493,22 @@ class DdboatLogReader:
                 st.by_type["other"] += 1
             st.samples += len(out)
             yield from out
+
+    def _heading(self, t: float, text: str) -> Heading | None:
+        """The Heading of a line's ``THETA`` (class docstring), or None without one."""
+        m = _DD_THETA.search(text)
+        if not m:
+            return None
+        self.stats.by_type["theta"] += 1
+        try:
+            theta = float(m.group(1))
+        except ValueError:
+            theta = math.nan
+        if not math.isfinite(theta):
+            self.stats.reject("bad_heading")
+            return None
+        return Heading(t=t, source=DDBOAT_HEADING_SOURCE,
+                       heading_rad=wrap_2pi(0.5 * math.pi - theta), reference="magnetic")
 
 
 def _ddmm(value: str, hemi: str) -> float | None:

@@ -10,8 +10,9 @@ Time base: ``Sample.t`` is the record's receive time in seconds since the epoch 
 logger's clock), never the autopilot's boot time inside the message.
 
 Rejections (``stats.rejected``): ``"crc"`` bad checksum; ``"garbage"`` bytes that are not a
-record (the reader resynchronizes on the next plausible record: time stamp within
-[-1 s, +1 day] of the last good one, start byte, fitting frame, valid CRC); ``"truncated"``
+record (the reader resynchronizes on the next plausible record: start byte, fitting frame,
+valid CRC; for an id outside the dialect, whose CRC cannot be checked, a time stamp within
+[-1 s, +1 day] of the last good record and the start of another record after it); ``"truncated"``
 an incomplete record at the end of the file; ``"incompat"`` unknown MAVLink 2
 incompatibility flags; ``"timestamp"`` a record whose time stamp (which the CRC does not
 cover) jumps more than a second ahead of both its neighbours; ``"time_backwards"`` a
@@ -99,21 +100,21 @@ _BACK_US = int(TIME_JUMP_S * 1e6)
 
 
 def _plausible(data: bytes, p: int, n: int, lo: int, hi: int) -> int:
-    """End of a believable record at ``p`` (time stamp in [lo, hi], framing, CRC or, for an
-    id outside the dialect, a following record start), else -1."""
+    """End of a believable record at ``p``, else -1: framing and a valid CRC, whatever
+    its time stamp (which the CRC does not cover: a damaged one must not make the reader
+    skip the rest of the file), or, for an id outside the dialect (no CRC to check), a
+    time stamp in [lo, hi] and a following record start."""
     f = _frame_at(data, p, n)
     if f is None:
         return -1
     end, msgid, _, plen, inc, v2 = f
     if inc & ~IFLAG_SIGNED:
         return -1
-    ts = _TS.unpack_from(data, p)[0]
-    if not lo <= ts <= hi:
-        return -1
     ok = _crc_ok(data, p, msgid, plen, v2)
     if ok is None:
-        ok = end == n or (end + TIMESTAMP_LEN + 1 <= n and data[end] == 0
-                          and data[end + TIMESTAMP_LEN] in (MAGIC_V1, MAGIC_V2))
+        ok = lo <= _TS.unpack_from(data, p)[0] <= hi and (
+            end == n or (end + TIMESTAMP_LEN + 1 <= n and data[end] == 0
+                         and data[end + TIMESTAMP_LEN] in (MAGIC_V1, MAGIC_V2)))
     return end if ok else -1
 
 
@@ -191,6 +192,7 @@ class TlogReader:
         last_us = 0  # time stamp of the last record decoded (us)
         good = -1  # start of the last good record
         records = 0
+        used = 0  # bytes of the records read whole
         n_samples = 0
         try:
             while pos < n:
@@ -240,6 +242,7 @@ class TlogReader:
                                 reason = "crc"
                     if reason is None:
                         records += 1
+                        used += end - pos
                         counts[msgid if extra is not None else -1 - msgid] += 1
                         good = pos
                         if spec is not None:
@@ -301,6 +304,8 @@ class TlogReader:
         finally:
             stats.records = records
             stats.samples = n_samples
+            stats.size_bytes = n
+            stats.used_bytes = used
             for k, c in counts.items():
                 stats.by_type[type_name(k)] += c
 

@@ -5,8 +5,9 @@ parses arguments and dispatches; each command's work lives in its own module, im
 when the command runs so that ``onboard run`` on the vehicle never imports plotting or
 optimization libraries.
 
-Exit status: 0 success, 2 bad usage or unreadable input (one line on stderr), 1 internal
-error.
+Exit status: 0 success, 2 bad usage, unreadable input or an output path that cannot be
+written (one line on stderr, before any work: :mod:`onboard.core.outputs`), 1 an output
+that failed once the work had begun (one line naming it) or an internal error.
 """
 
 from __future__ import annotations
@@ -17,7 +18,13 @@ import sys
 from typing import Sequence
 
 from onboard import __version__
-from onboard.core.errors import UsageError
+from onboard.core.errors import OutputFailed, UsageError
+
+
+LOG_HELP = ("the log to read: .tlog, DataFlash .bin, .mcap (a BlueOS recording), NMEA, DVL "
+            "JSON or PD6 capture, CSV file or directory of CSV runs (with a [csv] mapping), "
+            "or an onboard recording (.onbrec or its directory); the format is read from "
+            "the content")
 
 
 def _add_zenoh_flags(p: argparse.ArgumentParser) -> None:
@@ -30,6 +37,10 @@ def _add_zenoh_flags(p: argparse.ArgumentParser) -> None:
                    help="Zenoh session mode")
     p.add_argument("--zenoh-config", default="", metavar="FILE",
                    help="Zenoh JSON5 config: TLS, user/password (config/zenoh/shore.json5)")
+
+
+FORCE_HELP = ("replace files a previous run wrote (an existing FILE, or what DIR holds from "
+              "a previous run); without it they are refused before any work")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -47,17 +58,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", required=True, action="append", metavar="FILE",
                    help="vehicle/deployment TOML file; repeat to apply overlays in order "
                         "(later keys win)")
-    p.add_argument("--state-dir", default=None, help="directory for recordings and state "
-                   "(default: $STATE_DIRECTORY or the current directory)")
+    p.add_argument("--state-dir", default=None, metavar="DIR",
+                   help="directory for recordings and state, created if missing and reused "
+                        "run after run (default: $STATE_DIRECTORY or the current directory)")
     p.set_defaults(handler="onboard.service.daemon:main")
 
     p = sub.add_parser("demo", help="simulated vehicle + service + shore view on loopback")
-    p.add_argument("--duration", type=float, default=60.0, help="simulated seconds (default 60)")
-    p.add_argument("--scenario", default=None, help="SITL scenario (default: jaiabot-turns)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="simulated seconds (default 150)")
+    p.add_argument("--scenario", default=None, help="SITL scenario (default: effect-current)")
     p.add_argument("--realtime", action="store_true", help="run at wall-clock speed")
     p.add_argument("--keep-state", action="store_true",
                    help="keep the adaptive state in demo-out/state and restore it next run "
-                        "(default: a fresh temporary state)")
+                        "(default: a fresh temporary state); the demo writes in ./demo-out, "
+                        "its recordings replaced each run")
     p.set_defaults(handler="onboard.apps.demo:main")
 
     p = sub.add_parser("sitl", help="the simulator alone, emitting real protocols")
@@ -65,15 +79,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", help="scenario name (see --list)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--tlog", help="write the MAVLink stream to this .tlog")
-    p.add_argument("--truth", help="write the hidden truth (JSON lines) to this file")
+    p.add_argument("--tlog", metavar="FILE", help="write the MAVLink stream to this .tlog "
+                   "(and the scenario's metadata beside it, FILE's stem + .scenario.json)")
+    p.add_argument("--truth", metavar="FILE",
+                   help="write the hidden truth (JSON lines) to this file")
     p.add_argument("--link", help="udp:HOST:PORT, tcp:HOST:PORT or pty")
     p.add_argument("--nmea-pty", action="store_true", help="emit NMEA on a pseudo-terminal")
     p.add_argument("--dvl", metavar="tcp:HOST:PORT", help="serve Water Linked DVL JSON")
     p.add_argument("--realtime", action="store_true", help="run at wall-clock speed")
     p.add_argument("--controller", choices=("pid", "nmpc", "nmpc-of", "ampc"), default=None,
                    help="closed-loop controller (bluerov2-circle)")
-    p.add_argument("--report", help="write a JSON report of the closed-loop run")
+    p.add_argument("--report", metavar="FILE", help="write a JSON report of the run")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--stream-unasked", action="store_true",
                    help="the --link streams every message unasked (no stream negotiation)")
     p.add_argument("--reboot-at", type=float, action="append", metavar="S",
@@ -83,12 +100,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler="onboard.sitl.cli:main")
 
     p = sub.add_parser("replay", help="run the pipelines over a recorded log")
-    p.add_argument("log", metavar="LOG", help=".tlog, .bin, .mcap (a BlueOS recording), "
-                   "NMEA/DVL capture, CSV (file or directory), or an onboard recording")
+    p.add_argument("log", metavar="LOG", help=LOG_HELP)
     p.add_argument("--config", action="append", metavar="FILE",
                    help="vehicle config (default: detect from the log); repeat to apply "
                         "overlays in order, e.g. one written by diagnose --write-config")
-    p.add_argument("--out", default="replay-out", help="output directory (default replay-out)")
+    p.add_argument("--out", default="replay-out", metavar="DIR",
+                   help="output directory for estimates.csv, summary.json and track.png "
+                        "(default ./replay-out; created if missing)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--no-plot", action="store_true", help="skip the track figure")
     p.add_argument("--mcap", metavar="FILE", help="also write the estimates as MCAP (the "
                    "live Zenoh channels and schemas; needs the mcap extra)")
@@ -97,14 +116,21 @@ def build_parser() -> argparse.ArgumentParser:
                         "as GeoJSON (lon/lat, RFC 7946) to FILE")
     p.add_argument("--gpx", metavar="FILE",
                    help="also write the tracks (one per pipeline and run) as GPX 1.1 to FILE")
+    p.add_argument("--foxglove-layout", metavar="FILE",
+                   help="also write a Foxglove layout of the topics the replay published, "
+                        "named with its vehicle id, to FILE")
     p.set_defaults(handler="onboard.offline.replay:main")
 
     p = sub.add_parser("diagnose", help="residuals, the missing effect, before/after")
-    p.add_argument("log", metavar="LOG")
+    p.add_argument("log", metavar="LOG", help=LOG_HELP + "; at least 50 s with a heading "
+                   "and a velocity over ground")
     p.add_argument("--config", action="append", metavar="FILE",
                    help="vehicle config (default: detect from the log); repeatable, "
                         "applied in order")
-    p.add_argument("--out", default="diagnose-out", help="output directory")
+    p.add_argument("--out", default="diagnose-out", metavar="DIR",
+                   help="output directory for diagnosis.json, report.html and its figures "
+                        "(default ./diagnose-out; created if missing)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--write-config", metavar="FILE",
                    help="write what the diagnosis found as a TOML config overlay, to pass "
                         "after the config: --config BASE --config FILE")
@@ -126,16 +152,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler="onboard.apps.bench:main")
 
     p = sub.add_parser("design-gain", help="solve the high-gain observer LMI offline")
-    p.add_argument("--config", required=True)
-    p.add_argument("--out", help="write the gain here (default: beside the config)")
+    p.add_argument("--config", required=True, metavar="FILE")
+    p.add_argument("--out", metavar="FILE", help="write the gain here (default: beside the "
+                   "config; for a bundled config, its class's bundled gain, replaced)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(handler="onboard.apps.design_gain:main")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default ``sys.argv[1:]``), import the command's module and run it;
-    return the exit status (a :class:`UsageError` prints one line and gives 2, Ctrl-C
-    gives 130)."""
+    return the exit status (a :class:`UsageError` prints one line and gives 2, an
+    :class:`OutputFailed` one line and 1, Ctrl-C gives 130)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     module_name, func_name = args.handler.split(":")
@@ -145,6 +173,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UsageError as err:
         print(f"onboard {args.command}: {err}", file=sys.stderr)
         return 2
+    except OutputFailed as err:
+        print(f"onboard {args.command}: {err}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
 

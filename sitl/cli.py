@@ -40,7 +40,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from onboard.core.errors import UsageError
+from onboard.core.errors import OutputFailed, UsageError
+from onboard.core.outputs import Output, check as check_outputs
 from onboard.sitl.emitters import PtySink, Sink, TcpServerSink, TlogSink, open_link
 from onboard.sitl.guidance import Controller
 from onboard.sitl.runner import run
@@ -79,8 +80,23 @@ def _server(url: str) -> tuple[str, int]:
     return host, int(port)
 
 
+def planned_outputs(args: argparse.Namespace) -> list[Output]:
+    """The files ``onboard sitl`` writes (:func:`onboard.core.outputs.check`): ``--tlog``
+    and the scenario's metadata beside it, ``--truth``, ``--report``."""
+    outs = []
+    if args.tlog:
+        p = Path(args.tlog)
+        outs += [Output("--tlog", p),
+                 Output("--tlog (its metadata)", p.with_name(p.stem + ".scenario.json"))]
+    for flag, value in (("--truth", args.truth), ("--report", getattr(args, "report", None))):
+        if value:
+            outs.append(Output(flag, Path(value)))
+    return outs
+
+
 def main(args: argparse.Namespace) -> int:
-    """Entry point of ``onboard sitl`` (arguments parsed by :mod:`onboard.cli`)."""
+    """Entry point of ``onboard sitl`` (arguments parsed by :mod:`onboard.cli`); every
+    output file is checked before the run (:mod:`onboard.core.outputs`)."""
     if getattr(args, "list", False):
         print(list_scenarios())
         return 0
@@ -90,6 +106,7 @@ def main(args: argparse.Namespace) -> int:
     duration = sc.duration_s if args.duration is None else float(args.duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
+    check_outputs(planned_outputs(args), force=bool(getattr(args, "force", False)))
     controller = make_controller(args.controller, sc) if args.controller else None
 
     mavlink: list[Sink] = []
@@ -166,8 +183,12 @@ def main(args: argparse.Namespace) -> int:
             for key in ("tracking_rmse_m", "disturbance_error_n"):
                 if key in report["controller_report"]:
                     report[key] = report["controller_report"][key]
-        Path(args.report).write_text(json.dumps(_jsonable(report), indent=2,
-                                                allow_nan=False) + "\n")
+        try:
+            Path(args.report).write_text(json.dumps(_jsonable(report), indent=2,
+                                                    allow_nan=False) + "\n")
+        except OSError as err:  # checked before the run: a full disk, a removed folder
+            raise OutputFailed(f"--report {args.report}: cannot write: "
+                               f"{err.strerror or err}") from None
     return 0
 
 

@@ -38,3 +38,28 @@ def test_each_new_warning_is_also_an_event_once() -> None:
     a.warn("heading_course_mismatch", "off by 74 deg", 1.0, pipeline="aie")
     a.warn("heading_course_mismatch", "off by 75 deg", 2.0, pipeline="aie")   # extends
     assert events == ["heading_course_mismatch: off by 74 deg"]
+
+
+def test_a_warning_is_one_line_and_its_details_and_its_events_carry_the_line() -> None:
+    events: list[str] = []
+    a = Alerts(events)
+    a.warn("nis_out_of_band", "aie surge.rate: NIS 0.2; its noise is set in [pipelines.aie]",
+           5.0, pipeline="aie", details="100 updates, dof 1")
+    (w,) = list(a)
+    assert (w.message, w.details) == ("aie surge.rate: NIS 0.2; its noise is set in "
+                                      "[pipelines.aie]", "100 updates, dof 1")
+    assert events == ["nis_out_of_band: aie surge.rate: NIS 0.2; its noise is set in "
+                      "[pipelines.aie]"]
+
+
+def test_revise_replaces_the_text_of_a_warning_and_keeps_its_span_and_count() -> None:
+    """What is learnt later (a GNSS fix after headings were used magnetic) changes what is
+    true of a warning already raised; its span stays the span it covered."""
+    a = Alerts()
+    for t in (30.0, 31.0):
+        a.warn("no_declination", "no fix yet", t)
+    assert a.revise("no_declination", "corrected after the fix", details="2 headings")
+    (w,) = list(a)
+    assert (w.message, w.details, w.t_start, w.t_end, w.n) == (
+        "corrected after the fix", "2 headings", 30.0, 31.0, 2)
+    assert not a.revise("no_declination", "x", pipeline="aie")   # none of that key

@@ -53,6 +53,18 @@ def test_a_boat_configuration_on_a_submarine_log_is_a_class_mismatch():
     assert consistency(config.load("bluerov2"), [sub]) == []
 
 
+def test_a_class_mismatch_names_the_config_that_fits_the_log():
+    from onboard.offline.autodetect import consistency
+    from onboard.core import config
+
+    sub = VehicleInfo(t=1, system_id=1, component_id=1, mav_type=12, autopilot=3)
+    ((_, message),) = consistency(config.load("rudder-boat"), [sub])
+    assert "a bluerov2's" in message and "--config bluerov2 fits the log" in message
+    boat = VehicleInfo(t=1, system_id=1, component_id=1, mav_type=11, autopilot=3)
+    ((_, message),) = consistency(config.load("bluerov2"), [boat])
+    assert "--config rudder-boat fits the log" in message
+
+
 def test_five_of_six_rov_motors_is_an_incomplete_mapping():
     from onboard.offline.autodetect import consistency
     from onboard.core import config

@@ -9,6 +9,7 @@ from __future__ import annotations
 import calendar
 import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -106,6 +107,48 @@ def test_without_a_position_magnetic_headings_wait_then_pass_uncorrected_with_a_
     assert eng.accepted[("heading", "")] == n - WAIT_FOR_FIX_S
     assert "no_declination" in eng.alerts.codes()
     assert eng.health(100.0 + n).declination.source == "none"
+
+
+def test_a_fix_after_the_wait_makes_the_warning_say_what_was_done_to_which_headings():
+    """The survey boat's case: magnetic headings wait 30 s, are used as true until the
+    first fix, corrected by the WMM's declination after it. The warning says both (before:
+    'no GNSS position' while summary.json held the declination applied after the fix)."""
+    eng = Engine(Config(), pipelines=[])
+    for i in range(60):
+        eng.push(_hdm(JULY_2026 + i, 45.0))
+    eng.push(GnssFix(t=JULY_2026 + 60.0, lat_deg=AKHIOK[0], lon_deg=AKHIOK[1]))
+    eng.push(_hdm(JULY_2026 + 61.0, 45.0))
+    (w,) = [a for a in eng.alerts if a.code == "no_declination"]
+    deg = eng.declination.report.deg
+    assert w.message.startswith("magnetic headings used as true until the first GNSS fix, "
+                                f"then corrected by {deg:+.1f} deg (wmm)")
+    assert "[corrections] declination_deg" in w.message
+    assert "30 magnetic heading(s) rejected" in w.details and "30 used as true" in w.details
+    assert f"on {time.strftime('%Y-%m-%d', time.gmtime(JULY_2026 + 60.0))}" in w.details
+    assert (w.t_start, w.t_end) == (JULY_2026 + 30.0, JULY_2026 + 59.0)  # the magnetic span
+    assert eng.declination.uncorrected == 30   # the heading after the fix was corrected
+
+
+def test_without_any_fix_the_warning_says_so_and_names_the_key():
+    eng = Engine(Config(), pipelines=[])
+    for i in range(40):
+        eng.push(_hdm(100.0 + i, 45.0))
+    (w,) = [a for a in eng.alerts if a.code == "no_declination"]
+    assert w.message.startswith("magnetic headings used as true: no GNSS fix")
+    assert "set declination_deg" in w.message
+
+
+def test_a_date_outside_the_models_years_is_unreliable_and_said():
+    """The survey boat's receiver stamps its only fix in February 2009 (its clock unset):
+    the WMM is extrapolated back from WMM-2010; the run says so, with the key to set."""
+    feb_2009 = calendar.timegm((2009, 2, 14, 17, 49, 33))
+    c = DeclinationCorrector("auto")
+    message, details = c.observe_fix(GnssFix(t=feb_2009, lat_deg=32.88, lon_deg=-117.23))
+    assert c.report.model == "WMM-2010 (extrapolated)"
+    assert "extrapolated to 2009-02-14" in message and "declination_deg" in message
+    assert "default date" in details
+    inside = DeclinationCorrector("auto")
+    assert inside.observe_fix(GnssFix(t=JULY_2026, lat_deg=32.88, lon_deg=-117.23)) is None
 
 
 def test_the_model_is_evaluated_once_a_run_not_per_sample(monkeypatch):

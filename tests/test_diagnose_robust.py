@@ -1,7 +1,7 @@
 """``onboard diagnose`` never crashes (issue 22, item 4): every log, every truncation and
 every byte-flipped copy of one either diagnoses (exit 0) or is refused with exit status 2
 and one line naming the log and what is missing (too short, no heading, no velocity over
-ground, a split part too short).
+ground, a split part too short), or the vehicle class that has no base model.
 
 Before the fix a single run of less than ~160 s left the selection part empty (60 s
 blocks, every third for selection) and the first effect or generic basis on it raised
@@ -188,7 +188,6 @@ SURVEY = "config/survey-boat-csv.toml"
 BLUEBOAT = "config/blueboat-ntnu-csv.toml"
 
 REAL_LOGS = [
-    # (log under shared/data, config, expected: "ok" or the refusal's words)
     # tracebacks before the fix, now diagnosed (76-130 s single runs)
     ("survey_boat_arduino_rc/Test2_clockwise.txt", SURVEY, "ok"),
     ("survey_boat_arduino_rc/Test3_slow.txt", SURVEY, "ok"),
@@ -200,11 +199,20 @@ REAL_LOGS = [
     ("blueboat_sysid_ntnu/fixed_00000216.csv", BLUEBOAT, "too short: 48.3 s"),
     # refused before and after, now naming what is missing
     ("survey_boat_arduino_rc/Test1_counterclockwise.TXT", SURVEY, "no velocity over ground"),
-    ("ardusub_small_logs/small.BIN", None, "no velocity over ground"),
     ("ardusub_small_logs/nmea_log.txt", None, "no heading"),
-    ("ddboat_ensta_log/DDBOAT8_t_2022_9_2_0_0.log", None, "no heading"),
+    # its 2 GPS lines carry no status: no fix, so no declination for its THETA headings
+    ("ddboat_ensta_log/logexample.txt", None,
+     "no heading: its 13 magnetic heading(s) waited for a GNSS fix"),
     ("waterlinked_dvl_a50_json_tank/out20210528_circle.txt", None, "no heading"),
+    # refused for "no heading" before: the THETA heading is read, the fixes differenced
+    ("ddboat_ensta_log/DDBOAT8_t_2022_9_2_0_0.log", None, "ok"),
+    # a BlueROV2 (detected): no base model for its class, before the log is read (it was
+    # refused for "no velocity over ground"; the .tlog was diagnosed with the boat's model)
+    ("ardusub_small_logs/small.BIN", None, "no base model for the bluerov2 class yet"),
+    ("ardusub_small_logs/small.tlog", None, "no base model for the bluerov2 class yet"),
 ]
+"""(log under shared/data, config, "ok" or the refusal's words: after "LOG: " for what
+the log lacks, alone for a vehicle class without a base model)."""
 
 
 @pytest.mark.data
@@ -218,6 +226,8 @@ def test_real_log_diagnoses_or_says_why(shared_data, tmp_path, name, config, exp
                                                else []))
     if expected == "ok":
         assert rc == 0
+    elif expected.startswith("no base model"):
+        assert rc == 2 and lines[0].startswith(f"onboard diagnose: {expected} (supported: ")
     else:
         assert rc == 2 and f"{name}: {expected}" in lines[0]
 

@@ -226,7 +226,8 @@ class HalfKnown(Recorder):
 def test_non_finite_estimates_are_left_out_of_the_record_and_counted():
     """A record carries only finite values: JSON has no NaN (msgspec writes null, and a
     subscriber decoding EstimateRecord drops the whole record, the finite heading with
-    it); the unknown quantities are absent, counted per pipeline in health."""
+    it); the unknown quantities are absent, counted per pipeline in health's
+    ``withheld`` (outputs), never among the inputs ``rejected``."""
     import msgspec
 
     from onboard.core.messages import EstimateRecord
@@ -238,8 +239,27 @@ def test_non_finite_estimates_are_left_out_of_the_record_and_counted():
     assert rec.values == {"n": 1.0}
     decoded = msgspec.json.decode(msgspec.json.encode(half), type=EstimateRecord)
     assert decoded.values == {"heading": 1.0}
-    assert eng.health(1.0).rejected["pipeline:half:nonfinite"] == 3
-    assert "pipeline:rec:nonfinite" not in eng.health(1.0).rejected
+    health = eng.health(1.0)
+    assert health.withheld["pipeline:half:nonfinite"] == 3
+    assert "pipeline:rec:nonfinite" not in health.withheld
+    assert not any(k.startswith("pipeline:half") for k in health.rejected)
+
+
+def test_estimates_withheld_by_integrity_are_outputs_counted_apart_from_rejected_inputs(
+        monkeypatch):
+    """The values the integrity monitor withholds (a heading/course mismatch) are counted
+    per value and per row in health's ``withheld``, never among the inputs ``rejected``
+    (before: ``pipeline:<name>:flagged`` in ``rejected``, summed as rejected inputs)."""
+    eng = Engine(Config(), [Recorder()])
+    monkeypatch.setattr(eng.integrity, "withheld", lambda name: ("n",))
+    for t in (1.0, 2.0, 3.0):
+        eng.push(imu(t))
+        (rec,) = eng.tick(t)
+        assert rec.values == {}
+    health = eng.health(3.0)
+    assert health.withheld == {"pipeline:rec:flagged": 3}
+    assert eng.integrity.withheld_rows == {"rec": 3}
+    assert not any(k.startswith("pipeline:") for k in health.rejected)
 
 
 class WithStd(Recorder):

@@ -1,11 +1,14 @@
-"""Exports and plots of a replay (issue 24, item 7): the ``run`` column of estimates.csv,
-summary.json's origin and runs, ``--geojson`` (RFC 7946) and track.png."""
+"""Exports and plots of a replay (issue 24, item 7; issue 30): the ``run`` column of
+estimates.csv, summary.json's origin and runs, ``--geojson`` (RFC 7946), track.png, and
+``--gpx`` read back with gpxpy: its tracks, points and their UTC times where the log has
+UTC, none where it does not."""
 
 from __future__ import annotations
 
 import csv
 import json
 import math
+from datetime import datetime, timezone
 from pathlib import Path
 
 import pytest
@@ -13,6 +16,7 @@ import pytest
 from onboard.cli import main as cli_main
 from onboard.core.geo import LocalFrame
 from onboard.offline.exports import ARROW_SCALE_S, feature_collection
+from tests.helpers.nmea_times import rmc_times
 
 REPO = Path(__file__).resolve().parents[1]
 JAIABOT = REPO / "tests/data/replay/jaiabot-turns.tlog"
@@ -156,3 +160,72 @@ def test_gpx_has_a_track_per_pipeline_and_run_in_gpx_1_1(tmp_path):
     first = root.find("g:trk/g:trkseg/g:trkpt", ns)
     assert abs(float(first.get("lat")) - o["lat_deg"]) < 1e-4
     assert abs(float(first.get("lon")) - o["lon_deg"]) < 1e-4
+
+
+# ------------------------------------------------------------------ GPX read back by gpxpy
+
+
+def _gpx_replay(log: Path, out: Path, *extra: str):
+    """Replay ``log`` with --gpx and --geojson; (the GPX as gpxpy reads it, the GeoJSON,
+    the summary)."""
+    gpxpy = pytest.importorskip("gpxpy", reason="needs gpxpy: pip install -e '.[test]'")
+    assert cli_main(["replay", str(log), "--out", str(out), "--no-plot", *extra,
+                     "--gpx", str(out / "t.gpx"), "--geojson", str(out / "t.geojson")]) == 0
+    with open(out / "t.gpx") as f:
+        gpx = gpxpy.parse(f)
+    return (gpx, json.loads((out / "t.geojson").read_text()),
+            json.loads((out / "summary.json").read_text()))
+
+
+def _utc_of_rows(out: Path, start_utc: float, pipeline: str) -> list[float]:
+    """The UTC (POSIX s) of the rows of estimates.csv where ``pipeline`` has a position:
+    the log's UTC start plus their ``t``."""
+    rows = csv.DictReader(open(out / "estimates.csv"))
+    return [start_utc + float(r["t"]) for r in rows if r[pipeline + ".north"]]
+
+
+def test_gpx_reads_back_with_its_tracks_points_and_utc_times(tmp_path):
+    """The simulator's tlog is stamped from 2026-01-01T00:00:00Z: every point of every
+    track has the UTC of its row, to the millisecond, and the same position as GeoJSON."""
+    gpx, fc, s = _gpx_replay(JAIABOT, tmp_path)
+    assert s["utc"]["utc"] and s["utc"]["start"] == "2026-01-01T00:00:00.000Z"
+    assert "point times in UTC from the tlog's record stamps" in gpx.description
+    assert gpx.name == "jaiabot-turns.tlog"
+    tracks = [f for f in fc["features"] if f["properties"]["kind"] == "track"]
+    assert [t.name for t in gpx.tracks] == \
+        [f"{f['properties']['pipeline']} run {f['properties']['run']}" for f in tracks]
+    start = datetime(2026, 1, 1, tzinfo=timezone.utc).timestamp()
+    for trk, feature in zip(gpx.tracks, tracks):
+        (seg,) = trk.segments
+        coords = feature["geometry"]["coordinates"]
+        assert len(seg.points) == feature["properties"]["points"] == len(coords)
+        assert [[p.longitude, p.latitude] for p in seg.points] == coords
+        want = _utc_of_rows(tmp_path, start, feature["properties"]["pipeline"])
+        got = [p.time.timestamp() for p in seg.points]
+        assert all(p.time.utcoffset().total_seconds() == 0 for p in seg.points)
+        assert got == pytest.approx(want, abs=1e-3)
+    t0, t1 = gpx.get_time_bounds()
+    assert (t1 - t0).total_seconds() == pytest.approx(40.0, abs=0.2)  # the 40 s log
+
+
+def test_gpx_of_a_log_without_utc_has_no_times_and_says_why(tmp_path):
+    """The BlueBoat CSV is stamped in ms since the autopilot booted: the points have no
+    time (rather than dates in 1970), and the description says so."""
+    gpx, fc, s = _gpx_replay(BLUEBOAT_CSV, tmp_path, "--config", str(BLUEBOAT_CONFIG))
+    assert s["utc"] == {"utc": False, "start": None, "source": s["utc"]["source"]}
+    assert "no point times (no UTC: the CSV time column reads before 2000" in gpx.description
+    points = [p for t in gpx.tracks for seg in t.segments for p in seg.points]
+    assert points and all(p.time is None for p in points)
+    assert len(gpx.tracks) == sum(f["properties"]["kind"] == "track" for f in fc["features"])
+
+
+@pytest.mark.data
+def test_gpx_of_a_real_nmea_capture_is_timed_by_its_rmc_dates(shared_data, tmp_path):
+    """Shenzhen USV, 2024-12-05: the point times lie within the capture's first and last
+    RMC date and time, as the sentences read them (parsed here on their own)."""
+    log = shared_data / "usv_rtk_gnss_heading_nmea_shenzhen" / "202412051037.txt"
+    gpx, _, s = _gpx_replay(log, tmp_path)
+    stamps = rmc_times(log)
+    t0, t1 = gpx.get_time_bounds()
+    assert min(stamps) - 1.0 <= t0.timestamp() and t1.timestamp() <= max(stamps) + 1.0
+    assert t1.timestamp() - t0.timestamp() > 0.9 * s["time_span"]["duration_s"]

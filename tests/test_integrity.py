@@ -120,6 +120,34 @@ def test_the_mismatch_clears_when_the_heading_agrees_again() -> None:
     assert m.withheld("current") == ()
 
 
+def test_a_mismatch_withholds_until_they_agree_again_and_its_warning_says_so() -> None:
+    """Shenzhen 202412051751's case: the boat stops after the mismatch (no verdict below
+    the speed floor), so the current stays withheld to the end of the log; the warning
+    says 'until they agree again' (before: 'while it lasts', its span ending at the stop)
+    and names the command and the key that fix a constant offset."""
+    alerts = Alerts()
+    m = monitor(alerts)
+    _boat(m, 73.5, 1.8)
+    cog = math.radians(30.0)
+    for k in range(20, 80):  # stopped: below the speed floor, not judged
+        m.observe(Heading(t=k - 0.05, heading_rad=cog + math.radians(73.5)))
+        m.observe(GnssFix(t=float(k), lat_deg=LAT0, lon_deg=LON0, sog_mps=0.05,
+                          cog_rad=cog))
+    assert m.withheld("current")
+    (w,) = list(alerts)
+    assert "current withheld until they agree again" in w.message
+    assert "onboard diagnose LOG --write-config FILE" in w.message
+    assert "[corrections] heading_offset_rad" in w.message
+    assert "\n" not in w.message and "misaligned compass" in w.details
+
+
+def test_withheld_rows_count_each_record_with_a_value_withheld() -> None:
+    m = monitor(Alerts())
+    for n in (4, 0, 2):
+        m.count_withheld("current", n)
+    assert m.flagged == {"current": 6} and m.withheld_rows == {"current": 2}
+
+
 def _positions(error_m: float, std_m: float) -> tuple[Alerts, IntegrityMonitor]:
     alerts = Alerts()
     m = monitor(alerts, fix_std_m=1.0)

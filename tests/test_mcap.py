@@ -29,6 +29,7 @@ from onboard.drivers.mavlink_json import JsonFrameError, frame_from_json, parse 
 from onboard.drivers.mcap_log import McapReader  # noqa: E402
 from onboard.drivers.tlog import TlogReader  # noqa: E402
 from tests.helpers.blueos_mcap import BlueosRecorder, blueos_mcap_from_tlog, to_serde  # noqa: E402
+from tests.helpers.nmea_times import rmc_times  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 TLOG = REPO / "tests" / "data" / "replay" / "jaiabot-turns.tlog"
@@ -171,29 +172,213 @@ def test_replay_writes_the_live_zenoh_channels_and_schemas_as_mcap(tmp_path):
     assert cli_main(["replay", str(out), "--out", str(tmp_path / "again")]) == 2
 
 
-def test_the_foxglove_layout_names_channels_and_fields_the_replay_writes(tmp_path):
-    out = tmp_path / "estimates.mcap"
-    _replay(TLOG, tmp_path / "r", "--mcap", str(out))
-    payloads: dict[str, dict] = {}  # per topic, every field any of its records had
-    for topic, _, _, _, data in _messages(out):
-        merged = payloads.setdefault(topic, {})
-        for k, v in json.loads(data).items():
+def _read(path: Path) -> tuple[list, dict[str, dict[str, str]]]:
+    """(schema name, topic, log time, publish time, payload) of every message, and the
+    metadata records, as the mcap library reads them."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        msgs = [(s.name, c.topic, m.log_time, m.publish_time, json.loads(m.data))
+                for s, c, m in reader.iter_messages()]
+        f.seek(0)
+        meta = {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}
+    return msgs, meta
+
+
+def test_mcap_log_times_are_utc_ns_from_a_dataflash_logs_gps_time(tmp_path):
+    """A DataFlash log stamped in time since boot, whose GPS records carry GPS week 2262:
+    the MCAP's log and publish times and the fixes' timestamps are the UTC of each tick
+    (as pymavlink's DataFlash clock gives it), the records keep the log's clock."""
+    from pymavlink import mavutil
+
+    from tests.helpers.dataflash_log import gps_timed_log
+
+    log = tmp_path / "boat.bin"
+    log.write_bytes(gps_timed_log(2262, 345_600_000, seconds=6.0))
+    summary = _replay(log, tmp_path / "r", "--mcap", str(tmp_path / "e.mcap"))
+    msgs, meta = _read(tmp_path / "e.mcap")
+    first_gps = mavutil.mavlink_connection(str(log)).recv_match(type="GPS",
+                                                                condition="GPS.GWk > 0")
+    offset = first_gps._timestamp - first_gps.TimeUS / 1e6  # UTC minus time since boot
+    assert summary["utc"]["utc"] and summary["utc"]["start"].startswith("2023-05-")
+    assert meta["onboard-clock"]["utc"] == "true"
+    assert meta["onboard-clock"]["start"] == summary["utc"]["start"]
+    assert msgs
+    for schema, topic, log_time, publish_time, payload in msgs:
+        assert publish_time == log_time
+        if schema == "onboard.Estimate.v1":
+            assert payload["t"] < 100.0  # the record's own t: seconds since boot
+            assert log_time == pytest.approx((payload["t"] + offset) * 1e9, abs=2e3)
+        else:
+            stamp = payload["timestamp"]["sec"] * 10**9 + payload["timestamp"]["nsec"]
+            assert abs(stamp - log_time) <= 1
+
+
+def test_mcap_of_a_log_without_utc_keeps_its_clock_and_says_so(tmp_path):
+    """The BlueBoat CSV in ms since boot: log times are the ticks on the log's clock
+    (seconds since boot, shown by Foxglove as 1970-01-01), and the metadata says why."""
+    from onboard.drivers.logclock import UTC_MIN_S
+
+    csv_log = REPO / "tests/data/csv/blueboat-run.csv"
+    summary = _replay(csv_log, tmp_path / "r", "--config",
+                      str(REPO / "config/blueboat-ntnu-csv.toml"), "--mcap",
+                      str(tmp_path / "e.mcap"))
+    msgs, meta = _read(tmp_path / "e.mcap")
+    assert meta["onboard-clock"] == {"utc": "false", "start": "",
+                                     "source": summary["utc"]["source"]}
+    est = [(lt, p["t"]) for s, _, lt, _, p in msgs if s == "onboard.Estimate.v1"]
+    assert est and all(lt == round(t * 1e9) for lt, t in est)
+    assert max(lt for lt, _ in est) < UTC_MIN_S * 1e9
+
+
+# ------------------------------------------------------------------ the Foxglove layout
+
+
+def _camel(name: str) -> str:
+    head, *rest = name.split("_")
+    return head + "".join(w.title() for w in rest)
+
+
+def _literals(hint) -> tuple:
+    """The values a (possibly optional) Literal type allows; () for any other type."""
+    import typing
+
+    if typing.get_origin(hint) is typing.Literal:
+        return typing.get_args(hint)
+    return tuple(v for a in typing.get_args(hint) for v in _literals(a))
+
+
+def _as_sdk(cls, cfg: dict):
+    """``cfg`` (a panel config as the layout has it) built as the foxglove-sdk's typed
+    config ``cls``: every key must be one the SDK's schema of Foxglove's panels knows,
+    every value of an enumerated setting one it allows."""
+    import dataclasses
+    import typing
+
+    import foxglove.layouts as fl
+
+    fields = {_camel(f.name): f.name for f in dataclasses.fields(cls)}
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for key, value in cfg.items():
+        assert key in fields, f"{cls.__name__} has no {key!r}"
+        allowed = _literals(hints[fields[key]])
+        assert not allowed or value in allowed, f"{key} = {value!r} not in {allowed}"
+        kwargs[fields[key]] = ([_as_sdk(fl.PlotSeries, p) for p in value] if key == "paths"
+                               else value)
+    return cls(**kwargs)
+
+
+def _check_layout(layout: dict, mcap: Path, prefix: str, vehicle: str) -> set[str]:
+    """A layout of onboard replay against what Foxglove expects and what the MCAP holds;
+    the topics it names."""
+    fl = pytest.importorskip("foxglove.layouts", reason="needs foxglove-sdk")
+    msgs, _ = _read(mcap)
+    fields: dict[str, dict] = {}  # per topic, every numeric field any of its records had
+    schemas = {}
+    for schema, topic, _, _, payload in msgs:
+        schemas[topic] = schema
+        merged = fields.setdefault(topic, {})
+        for k, v in payload.items():
             if isinstance(v, dict):
-                merged.setdefault(k, {}).update(v)
-            else:
-                merged[k] = v
-    layout = json.loads(LAYOUT.read_text())
+                merged.setdefault(k, {}).update({f: x for f, x in v.items() if x is not None})
+    # Foxglove's exported-layout format: panels by id (type!name), the mosaic of their ids
+    assert set(layout) >= {"configById", "layout", "globalVariables", "userNodes",
+                           "playbackConfig"}
     panels = layout["configById"]
-    assert {k.split("!")[0] for k in panels} == {"Map", "Plot"}
-    for cfg in panels.values():
+
+    def ids(node):
+        return [node] if isinstance(node, str) else ids(node["first"]) + ids(node["second"])
+    assert sorted(ids(layout["layout"])) == sorted(panels)
+    named = set()
+    for pid, cfg in panels.items():
+        kind = pid.split("!")[0]
+        panel, config = {"Map": (fl.MapPanel, fl.MapConfig),
+                         "Plot": (fl.PlotPanel, fl.PlotConfig)}[kind]
+        # a panel's title is its config's foxglovePanelTitle in an exported layout
+        own = {k: v for k, v in cfg.items() if k != "foxglovePanelTitle"}
+        sdk = panel(config=_as_sdk(config, own), title=cfg.get("foxglovePanelTitle"))
+        as_sdk = json.loads(sdk.to_json())
+        assert as_sdk["panelType"] == kind and as_sdk.get("title") == cfg.get(
+            "foxglovePanelTitle")
+        assert as_sdk["config"] == own  # nothing lost, nothing Foxglove does not know
         for path in cfg.get("paths", []):
-            topic, _, fields = path["value"][1:].partition('".')
-            node = payloads[topic]
-            for f in fields.split("."):
-                node = node[f]  # every plotted field exists in the records
+            topic, _, field = path["value"][1:].partition('".')
+            node = fields[topic]
+            for f in field.split("."):
+                node = node[f]  # every plotted field is in the records
             assert isinstance(node, float)
-        for topic in [cfg.get("followTopic"), *cfg.get("disabledTopics", [])]:
-            assert topic is None or topic in payloads
+            named.add(topic)
+        for topic in [cfg.get("followTopic"), *cfg.get("disabledTopics", []),
+                      *cfg.get("topicColors", {})]:
+            if topic is not None:
+                assert schemas[topic] == "foxglove.LocationFix"
+                named.add(topic)
+    assert named and all(t.startswith(f"{prefix}/{vehicle}/") for t in named)
+    return named
+
+
+def test_the_foxglove_layout_is_written_for_the_replay_and_names_what_the_mcap_holds(tmp_path):
+    summary = _replay(TLOG, tmp_path / "r", "--mcap", str(tmp_path / "e.mcap"),
+                      "--foxglove-layout", str(tmp_path / "layout.json"))
+    layout = json.loads((tmp_path / "layout.json").read_text())
+    named = _check_layout(layout, tmp_path / "e.mcap", "onboard", summary["vehicle_id"])
+    assert summary["foxglove_layout"]["vehicle_id"] == summary["vehicle_id"] == "rudder-boat"
+    assert set(summary["foxglove_layout"]["topics"]) == named
+    assert {t.rsplit("/", 2)[1] for t in named} == {"est", "fix"}
+    # the layout of docs/foxglove.md is this replay's (the simulator's rudder-boat)
+    assert LAYOUT.read_text() == (tmp_path / "layout.json").read_text()
+
+
+def test_a_layout_for_another_vehicle_and_prefix_names_its_own_topics(tmp_path):
+    """A config overlay naming the vehicle boat7 under the prefix fleet: no topic of the
+    layout names rudder-boat or onboard (the negative control of the id check)."""
+    overlay = tmp_path / "boat7.toml"
+    overlay.write_text('[vehicle]\nid = "boat7"\n[service.zenoh]\nkey_prefix = "fleet"\n')
+    base = REPO / "config" / "rudder-boat.toml"
+    _replay(TLOG, tmp_path / "r", "--config", str(base), "--config", str(overlay),
+            "--mcap", str(tmp_path / "e.mcap"), "--foxglove-layout", str(tmp_path / "l.json"))
+    layout = json.loads((tmp_path / "l.json").read_text())
+    _check_layout(layout, tmp_path / "e.mcap", "fleet", "boat7")
+    with pytest.raises(AssertionError):
+        _check_layout(layout, tmp_path / "e.mcap", "onboard", "rudder-boat")
+
+
+def test_the_blueboat_csv_gets_a_layout_of_blueboat_ntnu(tmp_path):
+    summary = _replay(REPO / "tests/data/csv/blueboat-run.csv", tmp_path / "r", "--config",
+                      str(REPO / "config/blueboat-ntnu-csv.toml"), "--mcap",
+                      str(tmp_path / "e.mcap"), "--foxglove-layout", str(tmp_path / "l.json"))
+    assert summary["vehicle_id"] == "blueboat-ntnu"
+    _check_layout(json.loads((tmp_path / "l.json").read_text()), tmp_path / "e.mcap",
+                  "onboard", "blueboat-ntnu")
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("name, vehicle", [("ardusub_small_logs/small.tlog", "bluerov2"),
+                                           ("ardusub_small_logs/nmea_log.txt", "vehicle")])
+def test_real_logs_get_a_layout_of_their_vehicle_and_utc_log_times(shared_data, tmp_path,
+                                                                     name, vehicle):
+    """bluerov2 (the ESESO's position and surge) and vehicle (an NMEA capture whose
+    wall-clock prefixes are local time, 7 h behind its RMC sentences' UTC): each layout's
+    every topic is in the MCAP of the same replay, whose log times lie within the log's own
+    UTC as read here without our readers (pymavlink's record stamps for the tlog, the RMC
+    date and time for the capture)."""
+    log = shared_data / name
+    summary = _replay(log, tmp_path / "r", "--mcap", str(tmp_path / "e.mcap"),
+                      "--foxglove-layout", str(tmp_path / "l.json"))
+    assert summary["vehicle_id"] == vehicle and summary["utc"]["utc"]
+    _check_layout(json.loads((tmp_path / "l.json").read_text()), tmp_path / "e.mcap",
+                  "onboard", vehicle)
+    if log.suffix == ".tlog":
+        from pymavlink import mavutil
+
+        mlog = mavutil.mavlink_connection(str(log))
+        stamps = [m._timestamp for m in iter(mlog.recv_msg, None)]
+    else:
+        stamps = rmc_times(log)
+    times = [lt / 1e9 for *_, lt, _, _ in _read(tmp_path / "e.mcap")[0]]
+    assert min(stamps) - 1.0 <= min(times) <= max(times) <= max(stamps) + 1.0
 
 
 def test_without_the_mcap_package_the_error_names_the_extra(monkeypatch):

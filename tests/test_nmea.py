@@ -441,6 +441,35 @@ def test_survey_boat_gps_clock_jumps_are_removed(shared_data):
     assert "time_backwards" not in r3.stats.rejected
 
 
+DDBOAT_LINE = ("2022-09-02 11:41:14,483 - INFO - Temperature l,r are 24 26 deg.C /cmd motors "
+               "l,r are b'dirl: 1, motl: 0, dirr: 1, motr: 0\\r' /GPS timeout /IMU: MAG "
+               "[225, -3715, 1858] /CONTROL: ACCD -0.42 WD 0.41 CMDL 10.0 CMDR 23.6 THETA {} "
+               "/KAL: STATE [[-3.4], [3.1]]\n")
+
+
+@pytest.mark.parametrize("theta, heading_deg", [(0.0, 90.0), (math.pi / 2, 0.0),
+                                                (-2.81148625373, 251.08)])
+def test_ddboat_theta_is_a_magnetic_heading_from_east_counterclockwise(tmp_path, theta,
+                                                                       heading_deg):
+    # THETA is 0 facing east and grows counterclockwise (ENSTA's DdboatFilter.cap)
+    log = tmp_path / "ddboat.log"
+    log.write_text(DDBOAT_LINE.format(theta))
+    heading = [s for s in DdboatLogReader(log) if isinstance(s, Heading)]
+    assert len(heading) == 1 and heading[0].reference == "magnetic"
+    assert heading[0].source == "ddboat/THETA"
+    assert math.degrees(heading[0].heading_rad) == pytest.approx(heading_deg, abs=0.01)
+
+
+def test_ddboat_line_without_a_number_for_theta_gives_no_heading(tmp_path):
+    log = tmp_path / "ddboat.log"
+    log.write_text(DDBOAT_LINE.format("nan") + DDBOAT_LINE.format("x")
+                   + DDBOAT_LINE.replace(" THETA {}", ""))
+    r = DdboatLogReader(log)
+    out = list(r)
+    assert not [s for s in out if isinstance(s, Heading)]
+    assert len(out) == 3 and r.stats.rejected["bad_heading"] == 2
+
+
 @pytest.mark.data
 def test_ddboat_log(shared_data):
     r = open_text_log(shared_data / "ddboat_ensta_log" / "DDBOAT8_t_2022_9_2_0_0.log")
@@ -448,15 +477,17 @@ def test_ddboat_log(shared_data):
     out = list(r)
     fixes = [s for s in out if isinstance(s, GnssFix)]
     cmds = [s for s in out if isinstance(s, ActuatorCommand)]
-    # SOURCE.md: 2,439 lines, 245 s, 245 GPS fixes, motor commands 0-200 (of 255)
-    assert len(fixes) == 245 and len(cmds) == 2436
+    headings = [s for s in out if isinstance(s, Heading)]
+    # SOURCE.md: 2,439 lines, 245 s, 245 GPS fixes, motor commands 0-200 (of 255); a
+    # CONTROL record with THETA on 2,436 lines
+    assert len(fixes) == 245 and len(cmds) == 2436 and len(headings) == 2436
     assert abs(out[-1].t - out[0].t - 245) < 1
     assert statistics.median(f.lat_deg for f in fixes) == pytest.approx(48.418, abs=1e-3)
     assert statistics.median(f.lon_deg for f in fixes) == pytest.approx(-4.4736, abs=1e-3)
     assert max(c.left for c in cmds) == pytest.approx(200 / 255)
     assert not r.stats.rejected
     ex = list(open_text_log(shared_data / "ddboat_ensta_log" / "logexample.txt"))
-    assert len(ex) == 24
+    assert len(ex) == 24 + 13   # 24 motor commands, 13 THETA headings
 
 
 @pytest.mark.data

@@ -17,6 +17,7 @@ import pytest
 from onboard.cli import main as cli_main
 from onboard.core.messages import Imu
 from onboard.drivers.dataflash import DataflashReader
+from onboard.core.stamps import ANCHOR_STAMPS
 from onboard.engine.timeline import CONFIRM_STAMPS, TIME_JUMP_S, Timeline
 from tests.helpers import dataflash_log as df
 
@@ -36,8 +37,13 @@ def imu(t: float) -> Imu:
 
 def admit_all(tl: Timeline, times: list[float]) -> list[float]:
     out = [s.t for t in times for s in tl.admit(imu(t))]
-    tl.flush()
-    return out
+    return out + [s.t for s in tl.flush()]
+
+
+def started(tl: Timeline, t0: float = 0.0) -> list[float]:
+    """Start ``tl`` with :data:`ANCHOR_STAMPS` agreeing stamps from ``t0`` (0.1 s apart);
+    the stamps released."""
+    return [s.t for k in range(ANCHOR_STAMPS) for s in tl.admit(imu(t0 + 0.1 * k))]
 
 
 # ------------------------------------------------------------------- the rule itself
@@ -57,20 +63,21 @@ def test_a_single_stamp_far_back_is_an_outlier_too():
 
 def test_a_clock_that_goes_back_and_stays_there_is_a_jump_with_two_segments():
     tl = Timeline()
-    released = []
-    for t in [500.0, 500.1, 500.2, 3.0, 3.1, 3.2]:
+    released = started(tl, 500.0)
+    for t in [3.0, 3.1, 3.2]:
         released += [s.t for s in tl.admit(imu(t))]
         if tl.jump is not None:
             jump = tl.jump
-    assert released == [500.0, 500.1, 500.2, 3.0, 3.1, 3.2]  # nothing lost
-    assert jump.t_before == 500.2 and jump.t_after == 3.0
-    assert [(s.start, s.end) for s in tl.segments] == [(500.0, 500.2), (3.0, 3.2)]
-    assert tl.duration_s == pytest.approx(0.4)
+    assert released == pytest.approx([500.0, 500.1, 500.2, 500.3, 500.4, 3.0, 3.1, 3.2])
+    assert jump.t_before == pytest.approx(500.4) and jump.t_after == 3.0
+    assert [(s.start, s.end) for s in tl.segments] == [
+        (500.0, pytest.approx(500.4)), (3.0, 3.2)]
+    assert tl.duration_s == pytest.approx(0.6)
 
 
 def test_a_stamp_is_held_only_until_its_side_has_CONFIRM_STAMPS_stamps():
     tl = Timeline()
-    tl.admit(imu(0.0))
+    started(tl)
     far = 2 * TIME_JUMP_S
     held = [tl.admit(imu(far + 0.1 * k)) for k in range(CONFIRM_STAMPS)]
     assert all(r == [] for r in held[:-1]) and len(held[-1]) == CONFIRM_STAMPS
@@ -80,6 +87,90 @@ def test_samples_still_held_when_the_run_ends_are_outliers():
     tl = Timeline()
     assert admit_all(tl, [0.0, 0.1, 1e6]) == [0.0, 0.1]
     assert [s.t for s in tl.outliers] == [1e6]
+
+
+# ---------------------------------------------------- the start: a consensus, not a row
+
+@pytest.mark.parametrize("bad", [[1e9], [-1e9], [1e9, 1e9 + 0.1], [1e9, -1e9]],
+                         ids=["far-ahead", "far-back", "two-agreeing", "both-sides"])
+def test_bad_first_stamps_are_outliers_and_the_log_starts_where_the_rest_agree(bad):
+    """Before: the first stamp was trusted; a bad one started a segment of its own and the
+    real stamps came as a clock jump (issue 30: "time_jump [-837399.4--837399.4 s]")."""
+    tl = Timeline()
+    good = [0.1 * k for k in range(8)]
+    assert admit_all(tl, [*bad, *good]) == pytest.approx(good)
+    assert sorted(s.t for s in tl.outliers) == sorted(bad)
+    assert [(s.start, s.end) for s in tl.segments] == [(0.0, pytest.approx(0.7))]
+
+
+def test_the_start_is_decided_after_ANCHOR_STAMPS_distinct_stamps_and_released_in_order():
+    tl = Timeline()
+    out = [[s.t for s in tl.admit(imu(t))] for t in [5.0, 5.0, 5.1, 5.2, 5.3, 5.4, 5.5]]
+    # two samples share the first stamp: the fifth distinct stamp (the sixth sample) decides
+    assert out[:5] == [[]] * 5 and out[5] == [5.0, 5.0, 5.1, 5.2, 5.3, 5.4]
+    assert out[6] == [5.5]
+
+
+def test_a_log_of_fewer_stamps_than_the_anchor_waits_for_is_released_at_its_end():
+    tl = Timeline()
+    assert [s.t for t in [7.0, 7.1, 1e9] for s in tl.admit(imu(t))] == []
+    assert [s.t for s in tl.flush()] == [7.0, 7.1] and [s.t for s in tl.outliers] == [1e9]
+
+
+def test_two_disagreeing_stamps_keep_the_first_as_before_any_anchoring():
+    tl = Timeline()
+    assert admit_all(tl, [3.0, 500.0]) == [3.0]
+
+
+def test_a_clock_jump_within_the_first_stamps_loses_the_minority_before_it():
+    """The rule's price, written down in docs/architecture.md §3: a log whose clock steps
+    within its first ANCHOR_STAMPS stamps starts after the step; the stamps before it are
+    counted outliers, not a segment of their own."""
+    tl = Timeline()
+    assert admit_all(tl, [3.0, 3.1, 500.0, 500.1, 500.2, 500.3]) == pytest.approx(
+        [500.0, 500.1, 500.2, 500.3])
+    assert [s.t for s in tl.outliers] == [3.0, 3.1] and len(tl.segments) == 1
+
+
+def test_largest_group_chains_slow_stamps_and_breaks_ties_by_order():
+    from onboard.core.stamps import largest_group
+
+    # a glider's 8 s steps chain into one group although 0 and 32 are 32 s apart
+    assert largest_group([0.0, 8.0, 16.0, 1e9, 24.0], TIME_JUMP_S) == (0.0, 24.0)
+    assert largest_group([500.0, 3.0], TIME_JUMP_S) == (500.0, 500.0)
+    assert largest_group([3.0, 500.0, 500.1], TIME_JUMP_S) == (500.0, 500.1)
+
+
+# ------------------------------------------------------------------- the words of time
+
+def test_a_stamp_is_named_as_a_utc_time_or_as_seconds_on_the_logs_clock():
+    from onboard.engine.timeline import duration_words, stamp_words
+
+    assert stamp_words(1683220541.05) == "2023-05-04 17:15:41.0 UTC"
+    assert stamp_words(1444.25) == "t = 1,444.2 s"
+    assert duration_words(10.36) == "10.4 s"
+    assert duration_words(837399.4) == "837,399 s (9.7 days)"
+
+
+def test_a_jump_says_from_what_stamp_to_what():
+    from onboard.engine.timeline import Jump
+
+    back = Jump(1683220804.4, 1682383405.0).words()
+    assert back.startswith("the log's clock went back 837,399 s (9.7 days), from "
+                           "2023-05-04 17:20:04.4 UTC to 2023-04-25 00:43:25.0 UTC")
+    assert Jump(292.2, 401.2).words().startswith(
+        "no sample for 109.0 s, from t = 292.2 s to t = 401.2 s")
+
+
+def test_log_time_counts_the_segments_never_negative():
+    from onboard.engine.timeline import log_time
+
+    segments = [(1000.0, 1010.0), (3.0, 8.0)]  # the clock went back after 10 s
+    assert log_time(segments, 1000.0) == 0.0
+    assert log_time(segments, 1005.0) == 5.0
+    assert log_time(segments, 5.0) == 12.0  # 10 s of the first segment + 2 s
+    assert log_time(segments, 1.0) == 0.0   # before every segment: the start
+    assert log_time([], 5.0) == 0.0
 
 
 # --------------------------------------------------------------- replays of a CSV log
@@ -141,6 +232,22 @@ def test_a_csv_clock_that_goes_back_loses_the_rows_until_it_catches_up(tmp_path)
     assert len(s["time_span"]["segments"]) == 1
 
 
+@pytest.mark.parametrize("shift_ms", [1e12, -1e12])
+def test_a_csv_whose_first_row_is_stamped_far_off_loses_that_row_only(tmp_path, shift_ms):
+    """Issue 30: "a CSV whose first row has a timestamp of 1e12 ms keeps 2 of 486 rows
+    (time_backwards)": the first row anchored the run's clock. Now the run starts where
+    its first rows agree (onboard.core.stamps.Anchor) and the moved row is the outlier."""
+    base = baseline(tmp_path)
+    s = replay(tmp_path, moved_csv(tmp_path, shift_ms, range(1, 2)))
+    assert s["read"]["by_type"]["row"] == base["read"]["by_type"]["row"] - 1
+    assert s["read"]["rejected"] == {**base["read"]["rejected"], "time_outlier": 1}
+    # the file's 1.2 s less the first row's 0.1 s (before: 0.0 s at +1e12 ms)
+    assert s["time_span"]["duration_s"] == pytest.approx(
+        base["time_span"]["duration_s"] - 0.1)
+    assert len(s["time_span"]["segments"]) == 1 and s["runs"][0]["t_start"] == 0.0
+    assert "time_outlier" in {w["code"] for w in s["warnings"]}
+
+
 def test_a_clock_that_jumps_1e9_s_ahead_and_stays_makes_a_segment_without_spinning(tmp_path):
     """The pipelines restart from their state at the new segment (beyond
     onboard.engine.engine.RESTART_AFTER_S): none of them predicts across 1e9 s (0.4 s here)."""
@@ -177,6 +284,22 @@ def test_a_dataflash_record_stamped_far_ahead_is_an_outlier_and_costs_nothing_el
     assert s["read"]["rejected"] == {"time_outlier": 1}
     assert s["time_span"]["duration_s"] == pytest.approx(2.0, abs=0.01)  # 1.9999 s
     assert "time_outlier" in {w["code"] for w in s["warnings"]}
+
+
+def test_a_dataflash_log_whose_first_stamp_is_far_ahead_loses_that_record_only(tmp_path):
+    """Before: the first record's stamp anchored the re-ordering window far ahead, so
+    nothing was re-ordered (the late IMU2 record was ``time_backwards``)."""
+    data = df.synthetic_log()
+    good = tmp_path / "good.bin"
+    good.write_bytes(data)
+    expected = [s.t for s in DataflashReader(good)]
+    first = data.index(df.record("PARM", 1000, b"FRAME_CLASS", 2.0))
+    bad = df.record("PARM", 2**62 + 1000, b"FRAME_CLASS", 2.0)
+    log = tmp_path / "first.bin"
+    log.write_bytes(data[:first] + bad + data[first + len(bad):])
+    reader = DataflashReader(log)
+    assert [s.t for s in reader] == expected[1:]
+    assert reader.stats.rejected == {"time_outlier": 1}
 
 
 @pytest.mark.data
@@ -342,3 +465,57 @@ def test_a_tlog_clock_reset_replays_as_two_segments_with_a_time_jump(tmp_path):
     assert [seg["duration_s"] for seg in s["time_span"]["segments"]] == \
         [pytest.approx(9.9), pytest.approx(9.9)]
     assert "time_jump" in {w["code"] for w in s["warnings"]} and not s["read"]["rejected"]
+
+
+# ----------------------------------------- text readers: a bad first stamp costs itself
+
+FAR_S = 2 * 365.25 * 86400.0
+"""How far the first stamp of the text-capture tests is moved ahead (s): two years."""
+
+
+def _stamp(t: float, sep: str = ".") -> str:
+    import time
+
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(t)) + f"{sep}{int(t * 1000) % 1000:03d}"
+
+
+@pytest.mark.parametrize("kind", ["nmea", "ddboat"])
+def test_a_text_capture_whose_first_line_is_stamped_far_ahead_keeps_every_later_line(
+        tmp_path, kind):
+    """Before: a text capture's reader dropped every sample older than its newest, so a
+    first line stamped two years ahead lost the whole capture (``time_backwards``). Now
+    the readers drop only a sample a little behind (drivers.base.TimeOrder) and the
+    engine's time line drops the far one as an outlier."""
+    from onboard.drivers.nmea import encode_gga
+    from onboard.drivers.textlog import open_text_log
+
+    day = 1_662_076_800.0  # 2022-09-02 00:00 UTC
+    times = [day + 42_000.0 + 0.2 * k for k in range(40)]
+    times[0] += FAR_S
+    if kind == "nmea":
+        lines = [f"{_stamp(t)} | DEBUG | recv - " + encode_gga(t, 48.4, -4.5).decode().strip()
+                 for t in times]
+    else:
+        lines = [f"{_stamp(t, ',')} - INFO - /cmd motors l,r are b'dirl: 0, motl: {k}, "
+                 f"dirr: 0, motr: {k}\\r' /GPS timeout /" for k, t in enumerate(times)]
+    path = tmp_path / f"{kind}.txt"
+    path.write_text("\n".join(lines) + "\n")
+    reader = open_text_log(path)
+    stamps = [s.t for s in reader]
+    assert stamps == pytest.approx(times) and not reader.stats.rejected
+    tl = Timeline()
+    assert len(admit_all(tl, stamps)) == len(times) - 1
+    assert [s.t for s in tl.outliers] == [pytest.approx(times[0])]
+
+
+def test_a_pd6_capture_whose_first_ensemble_is_stamped_far_ahead_keeps_the_later_ones(
+        tmp_path):
+    from onboard.drivers.pd6 import Pd6LogReader, encode_ensemble
+
+    t0 = 1_717_245_015.0
+    times = [t0 + FAR_S] + [t0 + 0.2 * k for k in range(1, 10)]
+    path = tmp_path / "dvl.pd6"
+    path.write_bytes(b"".join(encode_ensemble(t, 0.5, 0.0, 0.0) for t in times))
+    reader = Pd6LogReader(path)
+    stamps = sorted({s.t for s in reader})
+    assert stamps == pytest.approx(sorted(times)) and not reader.stats.rejected

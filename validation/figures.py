@@ -78,6 +78,9 @@ CLOSED_LOOP = Tolerance(rel=0.10, abs=0.002)
 """The MPC closed loop: the solver's iteration path differs between library versions."""
 FRACTION = Tolerance(abs=0.02)
 """Coverage fractions."""
+MODEL = Tolerance(rel=0.01)
+"""A property of a model identified on the simulator (a Lipschitz bound, gamma*): the
+identification is deterministic per seed, only rounding differs."""
 COUNT = Tolerance(abs=0.0)
 """Counts: exact."""
 DATA = Tolerance(rel=0.02, abs=0.001)
@@ -347,7 +350,29 @@ def _current_figures() -> list[Figure]:
             lambda s, key=key, obs=obs, axes=axes: min(
                 runs.current_metrics(key, obs, s)[a]["cover2"] for a in axes),
             (1,), FRACTION, default_seeds=dflt, digits=2))
-    return out + _current_table_figures({f.name for f in out})
+    return out + _hgo_model_figures() + _current_table_figures({f.name for f in out})
+
+
+def _hgo_model_figures() -> list[Figure]:
+    """The Lipschitz bound and gamma* of the model the high-gain observer runs at the end
+    of its mode (a) runs (docs/current.md, "HGO"): properties of an identified model."""
+    out: list[Figure] = []
+    for key, dflt in (("gavia-tidal", (1,)), ("spheroid-sawtooth", ())):
+        k = key.replace("-", "_")
+        what = (f"{key}, {runs.CURRENT_RUNS[key][3]:.0f} s, seed 1, model identified in calm "
+                "water (mode (a)), the high-gain observer: ")
+        out.append(Figure(
+            f"current.{k}.hgo.lipschitz", "1/s",
+            what + "the Lipschitz bound L_f of the model it runs (its own RLS's "
+            "coefficients, at the speeds and rates of design-gain)",
+            lambda s, key=key: runs.current_run(key, "hgo", s)["pipe"].lipschitz,
+            (1,), MODEL, default_seeds=dflt, digits=2))
+        out.append(Figure(
+            f"current.{k}.hgo.gamma_star", "1",
+            what + "gamma* = max(1, 2 ||P|| L_f / lambda) of that model, the gain it runs at",
+            lambda s, key=key: runs.current_run(key, "hgo", s)["pipe"].gamma_star,
+            (1,), MODEL, default_seeds=dflt, digits=1))
+    return out
 
 
 def _nis_pooled(channel: str) -> float:
@@ -480,6 +505,14 @@ def _diagnose_figures() -> list[Figure]:
         "(false alarms)",
         lambda s: float(len(runs.named(runs.diagnose_sitl("clean", s)))),
         (1,), COUNT, default_seeds=(1,), digits=0))
+    for which in ("before", "after"):
+        out.append(Figure(
+            f"diagnose.blueboat.holdout_{which}", "m/s",
+            "NTNU BlueBoat with config/blueboat-ntnu-csv.toml as shipped (its thruster "
+            "mapping; the README's `onboard diagnose` command): open-loop surge speed RMSE "
+            f"on the 5 test runs {which} the effects the diagnosis found",
+            lambda s, which=which: runs.diagnose_blueboat()[f"holdout_error_{which}"],
+            (), DATA, data=True))
     for which in ("before", "after"):
         out.append(Figure(
             f"diagnose.blueboat_literal.holdout_{which}", "m/s",

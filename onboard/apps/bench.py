@@ -48,6 +48,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
+from onboard.core.errors import OutputFailed
+from onboard.core.outputs import Output, check as check_outputs
 from onboard.core.geo import LocalFrame, wrap_2pi
 
 KEYS: tuple[str, ...] = (
@@ -248,7 +250,8 @@ def bench_replay(s: Settings, workdir: Path, rep: Report) -> None:
 
     def one_replay() -> tuple[float, float]:
         w, c = time.perf_counter(), time.process_time()
-        status = _quiet(lambda: cli_main(["replay", str(log), "--out", str(out), "--no-plot"]))
+        status = _quiet(lambda: cli_main(["replay", str(log), "--out", str(out), "--no-plot",
+                                              "--force"]))
         w, c = time.perf_counter() - w, time.process_time() - c
         if status != 0:
             raise RuntimeError(f"onboard replay exited {status}")
@@ -631,6 +634,9 @@ def table(rep: Report) -> str:
 def main(args) -> int:
     """Entry point of ``onboard bench``."""
     as_json = bool(getattr(args, "json", False))
+    detail = os.environ.get("ONBOARD_BENCH_DETAIL")
+    if detail:  # replaced by design: a measurement's dump, named anew each time
+        check_outputs([Output("ONBOARD_BENCH_DETAIL", Path(detail), replace=True)])
     progress = None if as_json or not sys.stderr.isatty() else (
         lambda msg: print(msg, file=sys.stderr, flush=True))
     rep = collect(Settings.from_env(), progress)
@@ -640,8 +646,12 @@ def main(args) -> int:
             print(f"onboard bench: {k} not available: {why}", file=sys.stderr)
     else:
         print(table(rep))
-    if os.environ.get("ONBOARD_BENCH_DETAIL"):
-        Path(os.environ["ONBOARD_BENCH_DETAIL"]).write_text(
-            json.dumps({"values": rep.values, "reasons": rep.reasons, "detail": rep.detail},
-                       indent=2, default=str) + "\n")
+    if detail:
+        try:
+            Path(detail).write_text(
+                json.dumps({"values": rep.values, "reasons": rep.reasons,
+                            "detail": rep.detail}, indent=2, default=str) + "\n")
+        except OSError as err:  # checked before the run: a full disk, a removed folder
+            raise OutputFailed(f"ONBOARD_BENCH_DETAIL {detail}: cannot write: "
+                               f"{err.strerror or err}") from None
     return 0

@@ -10,14 +10,30 @@ What runs (all on 127.0.0.1, nothing to install beyond the package)::
     service  -> in-process Zenoh router (tcp/127.0.0.1:7447, or a free port when taken)
              -> MAVLink out (udpout:127.0.0.1:14550: a ground station there sees it)
              -> recording + adaptive state in ./demo-out/
-    shore subscriber (onboard.apps.shore.ShoreView) on the router: the live line every
-    second, and at the end the estimates it received scored against the simulator's
-    hidden truth (RMSE per quantity).
+    shore subscriber (onboard.apps.shore.ShoreView) on the router: the live line (progress,
+    position, speed, heading and the water current with its sigma), and at the end the
+    estimates it received scored against the simulator's hidden truth
+    (:mod:`onboard.apps.demo_truth`).
+
+What it shows by default (``DEFAULT_SCENARIO``, ``DEFAULT_DURATION_S``): the effect
+scenarios' rudder boat flying straight legs, circles and speed steps in a 0.29 m/s water
+current it is not told about. The input estimators (``aie``, ``kf``) track speed and
+heading from the first second; the current is unknown on the first straight leg (the
+current along the track cannot be told from the boat's own speed without a surge model)
+and converges, its sigma shrinking, once the boat has turned; the end compares it with the
+simulated current.
 
 Clock: by default the simulator and the service share a clock running ``SPEED`` (10)
-times faster than the wall clock, so the default 60 simulated seconds take about 6 s
+times faster than the wall clock, so the default 150 simulated seconds take about 15 s
 plus start-up. Everything else is real: the bytes on the links, the fixed-rate ticks
-(on the scaled clock), Zenoh, the recorder. ``--realtime`` runs at wall-clock speed.
+(on the scaled clock), Zenoh, the recorder. ``--realtime`` runs at wall-clock speed; the
+live line comes at most :data:`LIVE_LINES` times a run, so a long run shows its progress
+without flooding the terminal.
+
+Config: the scenario's calibrated config (``SCENARIO_CONFIGS``) or the bundled config of
+its vehicle class; for the effect family (the default among them), whose sensors the
+bundled configs do not describe, with ``[sensors]`` set to the simulated sensors' noise
+(:func:`with_sensor_noise`: what a user copies from the datasheets).
 
 The recording (``demo-out/recordings``) replays exactly with ``onboard replay``. The
 adaptive state goes to a fresh temporary directory, deleted at the end, so every demo
@@ -26,9 +42,10 @@ restores it in the next run.
 
 The truth table puts each estimate beside the raw measurement it improves on (``aie.speed``
 and ``kf.speed`` beside the GNSS ``nav.speed``, positions beside the fix, heading beside the
-compass). A quantity the estimator cannot know yet (the water current before its sigma is
-small: the along-track current on a straight run without a model) is printed as unknown,
-from the pipeline's own published sigma, never as a number.
+compass) and the mean sigma it published, and says what each truth is; notes below it say
+what a row that looks bad means. A quantity the estimator cannot know yet (the water
+current before its sigma is small) is printed as unknown, from the pipeline's own
+published sigma, never as a number.
 """
 
 from __future__ import annotations
@@ -43,34 +60,96 @@ import socket
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, TextIO
+from typing import Any, TextIO
 
 import msgspec
 
+from onboard.apps.demo_truth import (CURRENT_KNOWN_STD, CURRENT_SETTLE_S, LEGEND, ScoreRow,
+                                     current_known, current_story, format_scores, notes,
+                                     score)
 from onboard.core.config import Config, SourceConfig, load
 from onboard.core.errors import UsageError
-from onboard.core.geo import wrap_pi
+from onboard.core.outputs import Output, check as check_outputs
 from onboard.core.messages import EstimateRecord
 
-DEFAULT_SCENARIO = "jaiabot-turns"
+__all__ = ["CURRENT_KNOWN_STD", "CURRENT_SETTLE_S", "ScoreRow", "current_known",
+           "format_scores", "score", "run_demo", "main"]
+
+DEFAULT_SCENARIO = "effect-current"
+DEFAULT_DURATION_S = 150.0
+"""Simulated seconds of the default demo: the first straight leg (30 s, current unknown),
+the first circle (the current becomes observable) and four more legs with it known."""
 SPEED = 10.0
 """Default clock speed-up of the demo (simulated seconds per wall second)."""
+LIVE_LINES = 20
+"""The live line is printed every wall second, or this many times a run when that is
+less often (a long ``--realtime`` run)."""
+LATE_WARN_S = 1.0
+"""Simulated seconds the simulator may fall behind the shared clock before the demo warns
+that the machine could not keep up (the samples then reach the service that late)."""
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 OUT_DIR = Path("demo-out")
 SCENARIO_CONFIGS = {"jaiabot-turns": "sitl-jaiabot"}
 """Scenarios with a calibrated config (models identified from a held-out seed)."""
-CURRENT_KNOWN_STD = 0.1
-"""A current estimate is shown as known when its published one-sigma (the larger of
-``std_north`` and ``std_east``, m/s) has been at most this for ``CURRENT_SETTLE_S``."""
-CURRENT_SETTLE_S = 10.0
+SENSORS_FROM_SCENARIO = ("clean", "effect-", "cat-")
+"""Names (prefixes) of the scenarios whose sensors the bundled configs do not describe:
+the effect family's good GNSS (0.5 m white, 0.3 m drift, 0.05 m/s) and quiet compass
+(0.015 rad), where the boat configs state a consumer receiver (1.5 m) and compass
+(0.03 rad). The demo sets ``[sensors]`` to the simulated ones for them
+(:func:`with_sensor_noise`); the other scenarios fly sensors their configs state."""
+WRAP = 88
+"""Width (characters) the notes under the table are wrapped to."""
+MAX_DRIFT_SHARE = 0.9
+"""The largest ``[sensors.gnss] drift_share`` the config accepts."""
 
 
 def config_for(vehicle_class: str, scenario: str | None = None) -> str:
     """The bundled config name of a scenario (its calibrated config) or vehicle class."""
     return SCENARIO_CONFIGS.get(scenario or "", vehicle_class)
+
+
+def with_sensor_noise(base: Config, sensors: Any) -> Config:
+    """``base`` with its ``[sensors]`` GNSS, IMU and compass noise and rates those of the
+    simulator's sensor suite ``sensors`` (``sitl.sensors.SensorSuiteConfig``; a sensor it
+    lacks keeps the config's figures): the GNSS position one-sigma is the white and the
+    drift part together, ``drift_share`` the drift's share of its variance."""
+    s = base.sensors
+    gnss, imu, compass = s.gnss, s.imu, s.compass
+    if sensors.gnss is not None:
+        g = sensors.gnss
+        total = math.hypot(g.position_std_m, g.drift_std_m)
+        share = min(MAX_DRIFT_SHARE, (g.drift_std_m / total) ** 2) if total > 0 else 0.0
+        gnss = msgspec.structs.replace(
+            gnss, position_std_m=total, velocity_std_mps=g.velocity_std_mps,
+            rate_hz=g.rate_hz, drift_share=share)
+    if sensors.imu is not None:
+        i = sensors.imu
+        imu = msgspec.structs.replace(imu, accel_std_mps2=i.accel_noise_std,
+                                      gyro_std_rps=i.gyro_noise_std, rate_hz=i.rate_hz)
+    if sensors.compass is not None:
+        c = sensors.compass
+        compass = msgspec.structs.replace(compass, heading_std_rad=c.noise_std_rad,
+                                          rate_hz=c.rate_hz)
+    return msgspec.structs.replace(base, sensors=msgspec.structs.replace(
+        s, gnss=gnss, imu=imu, compass=compass))
+
+
+def demo_base_config(scenario: Any, vehicle_class: str) -> tuple[Config, str]:
+    """The config the demo's service starts from, and a line saying which: the scenario's
+    calibrated config (``SCENARIO_CONFIGS``), else the bundled config of its vehicle
+    class, with the simulated sensors' noise for :data:`SENSORS_FROM_SCENARIO`
+    (:func:`with_sensor_noise`)."""
+    name = config_for(vehicle_class, scenario.name)
+    if scenario.name in SCENARIO_CONFIGS:
+        return load(name), f"bundled {name} (models identified on a held-out seed)"
+    if scenario.name.startswith(SENSORS_FROM_SCENARIO):
+        return (with_sensor_noise(load(name), scenario.sensors),
+                f"bundled {name}, [sensors] set to the simulated sensors' noise")
+    return load(name), f"bundled {name}"
 
 
 # --------------------------------------------------------------------------- SITL child
@@ -171,195 +250,6 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
     send({"done": frames, "late_s": late * plan.speed})
 
 
-# --------------------------------------------------------------------------- scoring
-
-
-_TRUTH: dict[str, Callable[[Any], float | None]] = {
-    "heading": lambda tr: tr.yaw, "yaw": lambda tr: tr.yaw,
-    "roll": lambda tr: tr.roll, "pitch": lambda tr: tr.pitch,
-    "speed": lambda tr: math.hypot(tr.u, tr.v), "yaw_rate": lambda tr: tr.r,
-    "u": lambda tr: tr.u, "v": lambda tr: tr.v, "w": lambda tr: tr.w,
-    "u_r": lambda tr: tr.u_r, "v_r": lambda tr: tr.v_r, "w_r": lambda tr: tr.w_r,
-    "rate_p": lambda tr: tr.p, "rate_q": lambda tr: tr.q, "rate_r": lambda tr: tr.r,
-    "surge_input": lambda tr: tr.surge_input, "yaw_input": lambda tr: tr.yaw_input,
-    "dist_x": lambda tr: tr.disturbance_x, "dist_y": lambda tr: tr.disturbance_y,
-    "dist_z": lambda tr: tr.disturbance_z, "depth": lambda tr: tr.down,
-}
-_ANGLES = {"heading", "yaw", "roll", "pitch"}
-_POSITIONS = {"north": "north", "east": "east", "down": "down"}
-_CURRENT = {"north": "current_north", "east": "current_east", "down": "current_down"}
-_RAW = {"speed": "nav.speed", "north": "nav.north", "east": "nav.east",
-        "heading": "nav.heading"}
-"""The raw measurement each estimated quantity improves on (pipelines other than nav)."""
-
-
-@dataclass
-class ScoreRow:
-    """RMSE of one estimated quantity against the truth.
-
-    ``n`` counts the samples scored; ``total`` the samples received. For the current
-    pipeline only the samples it knows (:func:`current_known`) are scored, so ``n``
-    may be below ``total`` and zero (``rmse`` NaN: printed as unknown). ``raw`` names the
-    raw measurement the quantity improves on, ``raw_rmse`` is that one's RMSE.
-    """
-
-    column: str
-    n: int
-    rmse: float
-    truth_std: float
-    unit: str
-    total: int = 0
-    raw: str | None = None
-    raw_rmse: float = math.nan
-    max_std: float = math.nan
-    """The largest published sigma among the unscored samples (current only)."""
-
-
-def current_known(history: list[EstimateRecord]) -> dict[float, bool]:
-    """For each ``current`` record time (s): whether its estimate is known, i.e. its
-    horizontal one-sigma (``max(std_north, std_east)``, m/s) has stayed at most
-    ``CURRENT_KNOWN_STD`` for ``CURRENT_SETTLE_S`` seconds. A record without sigmas is
-    unknown."""
-    out: dict[float, bool] = {}
-    since: float | None = None
-    for rec in history:
-        if rec.pipeline != "current":
-            continue
-        sn, se = rec.std.get("north", math.inf), rec.std.get("east", math.inf)
-        sd = max(sn, se)
-        if math.isfinite(sd) and sd <= CURRENT_KNOWN_STD:
-            if since is None:
-                since = rec.t
-            out[rec.t] = rec.t - since >= CURRENT_SETTLE_S
-        else:
-            since = None
-            out[rec.t] = False
-    return out
-
-
-def _unit(pipeline: str, q: str) -> str:
-    if pipeline == "current" and q in _CURRENT:
-        return "m/s"
-    if q in _ANGLES:
-        return "deg"
-    if q in ("yaw_rate", "rate_p", "rate_q", "rate_r"):
-        return "deg/s"
-    if q == "surge_input":
-        return "m/s^2"
-    if q == "yaw_input":
-        return "rad/s^2"
-    if q.startswith("dist_"):
-        return "N"
-    if q in _POSITIONS or q == "depth":
-        return "m"
-    return "m/s"
-
-
-def score(history: list[EstimateRecord], truth: list[Any]) -> list[ScoreRow]:
-    """RMSE of every estimated quantity that has a truth counterpart.
-
-    Estimates are matched to the truth record nearest in time (within 60 ms). Positions
-    (``north``/``east``/``down`` of pipelines other than ``current``) are compared as
-    displacements from the pipeline's first estimate, as the estimators report them from
-    their first fix. Current samples are scored only where :func:`current_known`; each
-    row names the raw measurement it improves on (``_RAW``) with that one's RMSE.
-    """
-    if not truth:
-        return []
-    ts = [tr.t for tr in truth]
-    dt = (ts[-1] - ts[0]) / max(1, len(ts) - 1) if len(ts) > 1 else 0.1
-
-    def at(t: float) -> Any | None:
-        i = int(round((t - ts[0]) / dt)) if dt > 0 else 0
-        for j in (i, i - 1, i + 1):
-            if 0 <= j < len(ts) and abs(ts[j] - t) <= 0.06:
-                return truth[j]
-        return None
-
-    errs: dict[str, list[float]] = {}
-    refs: dict[str, list[float]] = {}
-    totals: dict[str, int] = {}
-    max_std: dict[str, float] = {}
-    first: dict[tuple[str, str], tuple[float, float]] = {}
-    known = current_known(history)
-    for rec in history:
-        tr = at(rec.t)
-        if tr is None:
-            continue
-        for q, v in rec.values.items():
-            if q.startswith("std_") or not math.isfinite(v):
-                continue
-            if rec.pipeline == "current":
-                col = f"current.{q}"
-                totals[col] = totals.get(col, 0) + 1
-                if not known.get(rec.t, False):
-                    sd = max(rec.std.get("north", math.inf), rec.std.get("east", math.inf))
-                    max_std[col] = max(max_std.get(col, 0.0), sd)
-                    errs.setdefault(col, [])
-                    refs.setdefault(col, [])
-                    continue
-            if rec.pipeline == "current" and q in _CURRENT:
-                ref = getattr(tr, _CURRENT[q])
-            elif q in _POSITIONS:
-                key = (rec.pipeline, q)
-                base = first.setdefault(key, (v, getattr(tr, _POSITIONS[q])))
-                ref = base[0] + getattr(tr, _POSITIONS[q]) - base[1]
-            elif q in _TRUTH:
-                ref = _TRUTH[q](tr)
-            else:
-                continue
-            if ref is None or not math.isfinite(ref):
-                continue
-            e = wrap_pi(v - ref) if q in _ANGLES else v - ref
-            col = f"{rec.pipeline}.{q}"
-            errs.setdefault(col, []).append(e)
-            refs.setdefault(col, []).append(ref)
-    rows = []
-    for col, es in errs.items():
-        pipe, q = col.split(".", 1)
-        r = refs[col]
-        rmse = math.sqrt(sum(e * e for e in es) / len(es)) if es else math.nan
-        mean = sum(r) / len(r) if r else math.nan
-        std = math.sqrt(sum((x - mean) ** 2 for x in r) / len(r)) if r else math.nan
-        if q in _ANGLES or q in ("yaw_rate", "rate_p", "rate_q", "rate_r"):
-            rmse, std = math.degrees(rmse), math.degrees(std)
-        rows.append(ScoreRow(col, len(es), rmse, std, _unit(pipe, q),
-                             total=totals.get(col, len(es)),
-                             raw=_RAW.get(q) if pipe not in ("nav", "current") else None,
-                             max_std=max_std.get(col, math.nan)))
-    by_col = {row.column: row for row in rows}
-    for row in rows:
-        if row.raw in by_col:
-            row.raw_rmse = by_col[row.raw].rmse
-    return sorted(rows, key=lambda r: r.column)
-
-
-def format_scores(rows: list[ScoreRow]) -> str:
-    """The truth comparison as a text table: estimate, samples, RMSE, the raw
-    measurement it improves on and that one's RMSE, truth std, unit. An estimate with
-    no known sample reads ``unknown`` with the largest sigma it published."""
-    if not rows:
-        return "no estimates matched the truth (nothing to score)"
-    w = max(len(r.column) for r in rows)
-    out = [f"{'estimate':<{w}}  {'n':>5}  {'RMSE':>9}  {'raw':<{w}}  {'raw RMSE':>9}  "
-           f"{'truth std':>9}  unit"]
-    for r in rows:
-        raw = r.raw if r.raw is not None and math.isfinite(r.raw_rmse) else "-"
-        raw_rmse = f"{r.raw_rmse:9.3f}" if raw != "-" else f"{'':9}"
-        if r.n == 0:
-            note = (f"unknown: sigma up to {r.max_std:.2f} {r.unit}"
-                    if math.isfinite(r.max_std) else "unknown")
-            out.append(f"{r.column:<{w}}  {0:>5}  {'unknown':>9}  {'-':<{w}}  {'':9}  "
-                       f"{'':9}  {r.unit}  ({note}, {r.total} samples)")
-            continue
-        line = (f"{r.column:<{w}}  {r.n:>5}  {r.rmse:9.3f}  {raw:<{w}}  {raw_rmse}  "
-                f"{r.truth_std:9.3f}  {r.unit}")
-        if r.total > r.n:
-            line += f"  (known in {r.n} of {r.total} samples)"
-        out.append(line)
-    return "\n".join(out)
-
-
 # --------------------------------------------------------------------------- the demo
 
 
@@ -431,14 +321,106 @@ class DemoResult:
     """The service's largest tick lateness (service s; ``ServiceStats.tick_late_max_s``)."""
 
 
-async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *,
+def _live_nav(rec: EstimateRecord) -> str:
+    v = rec.values
+    if "north" not in v or "east" not in v:
+        return ""
+    return f"nav N {v['north']:+.1f} E {v['east']:+.1f} m"
+
+
+def _live_speed_heading(rec: EstimateRecord) -> str:
+    v = rec.values
+    parts = [f"{v['speed']:.2f} m/s"] if "speed" in v else []
+    if "heading" in v:
+        parts.append(f"{math.degrees(v['heading']) % 360.0:.0f}°")
+    return f"{rec.pipeline} " + " ".join(parts) if parts else ""
+
+
+def _live_current(rec: EstimateRecord) -> str:
+    """The current's components, each with its one-sigma, or unknown with its sigma."""
+    parts = []
+    for q, label in (("north", "N"), ("east", "E"), ("down", "D")):
+        sd = rec.std.get(q)
+        if q in rec.values:
+            sigma = f" ± {sd:.3f}" if sd is not None else ""
+            parts.append(f"{label} {rec.values[q]:+.3f}{sigma}")
+        elif sd is not None:
+            parts.append(f"{label} unknown (sigma {sd:.2f})")
+    return "current " + " ".join(parts) + " m/s" if parts else ""
+
+
+def _live_eseso(rec: EstimateRecord) -> str:
+    v = rec.values
+    qs = [q for q in ("dist_x", "dist_y", "dist_z") if q in v]
+    return ("eseso disturbance " + " ".join(f"{v[q]:+.1f}" for q in qs) + " N") if qs else ""
+
+
+_LIVE = (("nav", _live_nav), ("aie", _live_speed_heading), ("kf", _live_speed_heading),
+         ("current", _live_current), ("eseso", _live_eseso))
+"""The live line's parts: pipeline and how its newest record is shown."""
+
+
+def live_line(view: Any, vehicle: str, duration_s: float) -> str:
+    """One line of the run so far, from the shore view ``view``
+    (:class:`onboard.apps.shore.ShoreView`): the simulated time of the ``duration_s``
+    total, the position, the speed and heading of ``aie`` and ``kf``, the water current
+    with its one-sigma (a component not published reads unknown with its sigma), the
+    ESESO's disturbance, and the rejected and dropped inputs with the mode."""
+    with view.lock:
+        est = {p: r for (v, p), r in view.estimates.items() if v == vehicle}
+        h = view.health.get(vehicle)
+    if not est:
+        return "waiting for estimates ..."
+    t = max(r.t for r in est.values())
+    parts = [f"t={t:4.0f} of {duration_s:.0f} s"]
+    for pipe, show in _LIVE:
+        text = show(est[pipe]) if pipe in est else ""
+        if text:
+            parts.append(text)
+    if h is not None:
+        parts.append(f"rej {sum(h.rejected.values())} drop {sum(h.dropped.values())} {h.mode}")
+    return " | ".join(parts)
+
+
+def report(history: list[EstimateRecord], truth: list[Any], rows: list[ScoreRow],
+           cfg: Config, *, health: Any = None, sim_late_s: float = math.nan,
+           speed: float = SPEED) -> list[str]:
+    """The end of the demo: the table against the truth with its legend, the notes on
+    the rows that look bad, the water current's story, the rejected inputs, and a warning
+    when the simulator fell more than :data:`LATE_WARN_S` behind the shared clock."""
+    out = ["", f"estimates vs the simulator's truth ({len(history)} records received "
+           "over Zenoh):", LEGEND, format_scores(rows)]
+    models = {"surge": cfg.pipelines.aie.surge.a, "heading": cfg.pipelines.aie.heading.a}
+    said = notes(rows, models)
+    if said:
+        out += ["", "what the rows that look bad mean:"]
+        out += [textwrap.fill(n, WRAP, initial_indent="* ", subsequent_indent="  ")
+                for n in said]
+    story = current_story(history, truth, cfg.pipelines.current.unknown_above_std_mps)
+    if story:
+        out += [""] + [textwrap.fill(s, WRAP, subsequent_indent="  ") for s in story]
+    out.append("")
+    if health is not None:
+        rej = ", ".join(f"{k}={n}" for k, n in sorted(health.rejected.items())) or "none"
+        out.append(f"rejected inputs: {rej}")
+    if math.isfinite(sim_late_s) and sim_late_s > LATE_WARN_S:
+        out.append(textwrap.fill(
+            f"warning: the simulator fell up to {sim_late_s:.1f} s (simulated) behind the "
+            f"shared clock: this machine could not keep up with {speed:g}x, samples reached "
+            "the service that late and the figures above are worse for it; rerun on a "
+            "quieter machine or with --realtime", WRAP))
+    return out
+
+
+async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAULT_DURATION_S, *,
                    speed: float = SPEED, seed: int = 1, out_dir: Path = OUT_DIR,
                    router_endpoint: str | None = None, mavlink_out: str = "udpout:127.0.0.1:14550",
                    out: TextIO | None = sys.stdout, keep_state: bool = False,
                    config: Config | None = None, nmea: bool = True,
                    autopilot: dict[str, Any] | None = None) -> DemoResult:
-    """Run the whole demo; print the live line every wall second and the scores to
-    ``out`` (None: silent). ``router_endpoint`` None: 7447, or a free port when taken.
+    """Run the whole demo; print the live line (:func:`live_line`, every wall second or
+    :data:`LIVE_LINES` times a run) and the comparison with the truth (:func:`report`) to
+    ``out`` (None: silent). ``config`` None: :func:`demo_base_config`. ``router_endpoint`` None: 7447, or a free port when taken.
     ``keep_state``: the adaptive state in ``out_dir/state``, restored from the previous
     run; otherwise a fresh temporary directory, deleted at the end. ``nmea`` False sends
     the GNSS fixes and headings over MAVLink too; ``autopilot`` sets :class:`LinkPlan`'s
@@ -489,8 +471,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
         hello = await _read_json(proc, 60.0)
         if hello is None:
             raise RuntimeError(f"the simulator did not start (exit status {proc.poll()})")
-        base = config if config is not None else load(config_for(hello["vehicle_class"],
-                                                                 sc.name))
+        base, cfg_note = ((config, "given") if config is not None
+                          else demo_base_config(sc, hello["vehicle_class"]))
         cfg = demo_config(base, mav_port=plan.mavlink_udp_port, nmea_pty=hello["nmea_pty"],
                           dvl_port=plan.dvl_tcp_port if hello["dvl"] else None,
                           zenoh_endpoint=endpoint, mavlink_out=mavlink_out,
@@ -502,8 +484,9 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
         healths: list[Any] = []
         svc = Service(cfg, state_dir=out_dir, clock=clock, on_health=healths.append)
         await svc.start()
-        say(f"onboard demo: scenario {sc.name} ({sc.vehicle.vehicle_class}), "
-            f"{duration_s:g} s simulated at {speed:g}x, vehicle id {vid!r}")
+        say(f"onboard demo: scenario {sc.name} ({sc.vehicle.vehicle_class}: "
+            f"{sc.description}), {duration_s:g} s simulated at {speed:g}x, vehicle id {vid!r}")
+        say(f"  config: {cfg_note}")
         say("  inputs: " + ", ".join(f"{s.name}={s.kind} over {s.url}" for s in cfg.service.sources))
         say(f"  Zenoh router {endpoint}; MAVLink out {cfg.service.mavlink.url}; "
             f"recording in {svc.recorder_dir}")
@@ -515,6 +498,7 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
         proc.stdin.write(json.dumps({"start": start}) + "\n")
         proc.stdin.flush()
         done_task = asyncio.ensure_future(_read_json(proc, duration_s / speed + 60.0))
+        period = max(1.0, duration_s / speed / LIVE_LINES)
         next_print = time.monotonic() + 1.0
         deadline = start + duration_s / speed + 60.0
         while time.monotonic() < deadline:
@@ -524,8 +508,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
                 sim_late = float(msg.get("late_s", math.nan)) if isinstance(msg, dict) else math.nan
                 break
             if time.monotonic() >= next_print:
-                next_print += 1.0
-                say("  " + view.line(vid))
+                next_print += period
+                say("  " + live_line(view, vid, duration_s))
             await asyncio.sleep(0.05)
         await asyncio.sleep(max(0.3, 2.0 / speed))  # the last ticks reach the shore
         svc.request_stop()
@@ -565,15 +549,12 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = 60.0, *
     with view.lock:
         history = list(view.history)
     rows = score(history, truth)
-    wall = time.monotonic() - t_wall0
-    say("")
-    say(f"estimates vs the simulator's truth ({len(history)} records received over Zenoh):")
-    say(format_scores(rows))
-    if health is not None:
-        rej = ", ".join(f"{k}={n}" for k, n in sorted(health.rejected.items())) or "none"
-        say(f"rejected inputs: {rej}")
+    for line in report(history, truth, rows, cfg, health=health, sim_late_s=sim_late,
+                       speed=speed):
+        say(line)
     if rec_files:
         say(f"recording: {', '.join(rec_files)} (replay it: onboard replay {rec_files[0]})")
+    wall = time.monotonic() - t_wall0
     say(f"done in {wall:.1f} s wall")
     return DemoResult(scenario=sc.name, vehicle=vid, duration_s=duration_s, wall_s=wall,
                       estimates=history, health=health, healths=healths, scores=rows, frames=frames,
@@ -600,11 +581,13 @@ async def _read_json(proc: subprocess.Popen, timeout_s: float) -> dict | None:
 
 def main(args: argparse.Namespace) -> int:
     """``onboard demo [--duration S] [--scenario NAME] [--realtime] [--keep-state]``."""
-    duration = float(args.duration)
+    duration = DEFAULT_DURATION_S if args.duration is None else float(args.duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
     scenario = args.scenario or DEFAULT_SCENARIO
     speed = 1.0 if args.realtime else SPEED
+    # the demo's own folder, reused each run (its recordings replaced): writable first
+    check_outputs([Output("the demo's folder", OUT_DIR, "dir")])
     res = asyncio.run(run_demo(scenario, duration, speed=speed,
                                keep_state=bool(getattr(args, "keep_state", False))))
     return 0 if res.estimates else 1

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 
 from onboard.core.config import CONFIG_DIR, Config, load, resolve
-from onboard.core.errors import UsageError
+from onboard.core.errors import OutputFailed, UsageError
+from onboard.core.outputs import Output, check as check_outputs
 from onboard.core.vehicles import traits
 from onboard.estimators.hgo import LIPSCHITZ_SPEEDS, chain_matrices, gamma_star
 from onboard.estimators.hgo import model_lipschitz as hgo_lipschitz
@@ -140,6 +141,10 @@ def default_out(config_arg: str, cfg: Config) -> Path:
 def main(args: argparse.Namespace) -> int:
     """Entry point of ``onboard design-gain``."""
     cfg = load(args.config)
+    given = getattr(args, "out", None)
+    out = Path(given) if given else default_out(args.config, cfg)
+    check_outputs([Output("--out" if given else "the default --out", out, replace=not given)],
+                  force=bool(getattr(args, "force", False)))
     try:
         import cvxpy  # noqa: F401
     except ImportError:
@@ -149,9 +154,10 @@ def main(args: argparse.Namespace) -> int:
     except RuntimeError as err:
         print(f"onboard design-gain: {err}", file=sys.stderr)
         return 1
-    out = Path(args.out) if getattr(args, "out", None) else default_out(args.config, cfg)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    try:
+        out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    except OSError as err:  # checked before the solve: a full disk, a removed folder
+        raise OutputFailed(f"{out}: cannot write: {err.strerror or err}") from None
     k = np.asarray(data["K"])
     print(f"{out}: K chain = [{k[0, 0]:.4f}, {k[1, 0]:.4f}], lambda = {data['lambda']:.4f}, "
           f"||P|| = {np.linalg.norm(np.asarray(data['P']), 2):.3f}, "

@@ -6,7 +6,8 @@ our schemas (``application/json;onboard.Estimate.v1``, ``onboard.Health.v2``,
 ``foxglove.LocationFix``: :mod:`onboard.core.wire`) on a channel of the same name as its
 Zenoh key, JSON messages with that schema name and its JSON schema, through the
 ``foxglove-sdk`` package (the ``foxglove`` extra). In Foxglove: *Open connection* →
-*Foxglove WebSocket* → ``ws://HOST:PORT``, then import docs/foxglove-layout.json.
+*Foxglove WebSocket* → ``ws://HOST:PORT``, then import the vehicle's layout (written by
+``onboard replay --foxglove-layout``, docs/foxglove.md).
 """
 
 from __future__ import annotations

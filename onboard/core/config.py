@@ -289,6 +289,12 @@ class CsvFormat(_Strict):
     """Longitude (deg) of the ``north_m``/``east_m`` origin."""
     run_gap_s: float = 10.0
     """Gap (s) put between consecutive runs when they are joined on one time line."""
+    position_kind: Literal["gnss", "navigation", "unstated"] = "unstated"
+    """What the position columns hold: a GNSS receiver's fixes (``gnss``), the vehicle's
+    own navigation solution (``navigation``: an INS, or a glider's dead-reckoned track
+    corrected at the surface), or ``unstated``. Replay's track.png labels the measured
+    track by it (``onboard.offline.plots.position_label``); the estimators use the
+    positions alike."""
 
 
 class ZenohOut(_Strict):

@@ -368,13 +368,15 @@ class ChannelHealth(msgspec.Struct, frozen=True, kw_only=True):
 
 class Alert(msgspec.Struct, frozen=True, kw_only=True):
     """A warning a user reads first (summary.json's ``warnings``; docs/architecture.md
-    §4.2): ``code`` for programs, ``message`` for people, about ``pipeline`` (empty: the
-    log or the engine), from ``t_start`` to ``t_end`` (s; null: the whole run), raised
-    ``n`` times in that span."""
+    §4.2): ``code`` for programs; ``message`` for people, one line: what happened, where,
+    and the config key or command that changes it; ``details`` after it (why, what was
+    measured; may be empty); about ``pipeline`` (empty: the log or the engine), from
+    ``t_start`` to ``t_end`` (s; null: the whole run), raised ``n`` times in that span."""
 
     code: str
     pipeline: str = ""
     message: str
+    details: str = ""
     t_start: float | None = None
     t_end: float | None = None
     n: int = 1
@@ -411,7 +413,9 @@ ignores unknown fields skips; 2: typed innovations and counters apart; 1 had fla
 class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
     """Service health, published on ``onboard/<id>/health``.
 
-    ``rates_hz`` per source, ``rejected`` counts per reason, ``innovations`` per pipeline
+    ``rates_hz`` per source, ``rejected`` counts of the inputs refused per reason (and
+    the pipelines' failures), ``withheld`` counts of the estimate values left out of the
+    records (not finite, or withheld by an integrity check), ``innovations`` per pipeline
     and channel (:class:`ChannelHealth`), ``counters`` per pipeline (its steps, restarts,
     adaptive quantities: :meth:`onboard.pipelines.base.Pipeline.health`), ``events``
     recent human-readable events, ``sources`` the active source of each selected quantity
@@ -424,6 +428,7 @@ class HealthRecord(msgspec.Struct, frozen=True, kw_only=True):
     t: float
     rates_hz: dict[str, float] = {}
     rejected: dict[str, int] = {}
+    withheld: dict[str, int] = {}
     dropped: dict[str, int] = {}
     innovations: dict[str, dict[str, ChannelHealth]] = {}
     counters: dict[str, dict[str, float | None]] = {}

@@ -97,8 +97,6 @@ class DeclinationCorrector:
         report: the declination in use and where it came from.
         waiting: magnetic headings rejected while waiting for a fix.
         uncorrected: magnetic headings passed as they are (no declination known).
-        warning: why, for the user, once a magnetic heading was passed uncorrected
-            (empty otherwise); the engine raises it as a ``no_declination`` warning.
     """
 
     def __init__(self, setting: float | str = "auto",
@@ -110,8 +108,9 @@ class DeclinationCorrector:
         self._first_magnetic_t: float | None = None
         self.waiting = 0
         self.uncorrected = 0
-        self.warning = ""
         self._wmm_rad: float | None = None
+        self._wmm_date = ""
+        """The date (YYYY-MM-DD) the WMM's declination was computed for."""
         if isinstance(setting, (int, float)):
             self.report = DeclinationReport(deg=float(setting), source="config")
             self._config_rad: float | None = math.radians(setting)
@@ -124,24 +123,60 @@ class DeclinationCorrector:
         """Whether the next GNSS fix should be shown to :meth:`observe_fix`."""
         return self._config_rad is None and self._wmm_rad is None
 
-    def observe_fix(self, fix: GnssFix) -> str:
+    def observe_fix(self, fix: GnssFix) -> tuple[str, str] | None:
         """The first fix (in ``auto``): the WMM's declination at its position and date.
-        Returns a warning for the user when that value is unreliable (else empty)."""
+        Returns the ``declination_unreliable`` warning (its line and details) when that
+        value is unreliable: near a magnetic pole, or extrapolated to a date outside the
+        models' years (a receiver's unset clock gives such dates); else None."""
         if not self.needs_fix:
-            return ""
+            return None
         utc = UTC_MIN_S <= fix.t < UTC_MAX_S
-        year = decimal_year(fix.t if utc else self._today())
+        t_date = fix.t if utc else self._today()
+        year = decimal_year(t_date)
         deg, model, h_nt = wmm_declination(fix.lat_deg, fix.lon_deg, year)
         self._wmm_rad = math.radians(deg)
         self.report = DeclinationReport(deg=deg, source="wmm", model=model,
                                         lat_deg=fix.lat_deg, lon_deg=fix.lon_deg,
                                         year=round(year, 3),
                                         date_from="log" if utc else "today")
+        date = self._wmm_date = time.strftime("%Y-%m-%d", time.gmtime(t_date))
         if h_nt < BLACKOUT_NT:
-            return (f"the World Magnetic Model's declination ({deg:.1f} deg) is unreliable "
-                    f"this close to the magnetic pole (horizontal field {h_nt:.0f} nT): "
-                    "so are compass headings")
-        return ""
+            return (f"the World Magnetic Model's declination ({deg:+.1f} deg) is unreliable "
+                    f"this close to the magnetic pole (horizontal field {h_nt:.0f} nT); "
+                    "set [corrections] declination_deg from a local chart",
+                    "so are compass headings there")
+        if model.endswith("(extrapolated)"):
+            return (f"the World Magnetic Model's declination ({deg:+.1f} deg) is extrapolated "
+                    f"to {date}, outside the years its models cover ({MODEL_YEARS[0]}-"
+                    f"{MODEL_YEARS[1]}); if the log was not made then, set [corrections] "
+                    "declination_deg",
+                    ("the date of the log's first fix; a GNSS receiver may report a default "
+                     "date until its clock is set" if utc else "today's date: the log has "
+                     "no UTC time stamps") + " (summary.json declination)")
+        return None
+
+    @property
+    def warning(self) -> tuple[str, str]:
+        """The ``no_declination`` warning, its line and details, once a magnetic heading
+        was used as true (empty before): what was done to which headings, and the key
+        that changes it."""
+        if not self.uncorrected:
+            return "", ""
+        done = (f"{self.waiting} magnetic heading(s) rejected while waiting "
+                f"{WAIT_FOR_FIX_S:.0f} s for a GNSS fix, then {self.uncorrected} used as "
+                "true (over this warning's span)")
+        r = self.report
+        if r.deg is None:
+            return ("magnetic headings used as true: no GNSS fix for the World Magnetic "
+                    "Model and no [corrections] declination_deg; set declination_deg for "
+                    "where the log was made", done)
+        where = (f" at {r.lat_deg:.4f}, {r.lon_deg:.4f} on {self._wmm_date} ({r.model}; "
+                 + ("the log's date)" if r.date_from == "log" else "today's date)")
+                 if r.source == "wmm" else "")
+        return (f"magnetic headings used as true until the first GNSS fix, then corrected "
+                f"by {r.deg:+.1f} deg ({r.source}); set [corrections] declination_deg to "
+                "correct them all", f"{done}; the declination after it{where}: "
+                "summary.json declination")
 
     def heading(self, s: Heading) -> tuple[Heading, Outcome]:
         """``s`` relative to true north (``reference = "true"``, ``declination_rad`` None:
@@ -156,8 +191,6 @@ class DeclinationCorrector:
                 self.waiting += 1
                 return s, "wait"
             self.uncorrected += 1
-            self.warning = ("magnetic headings are used as true: no GNSS position for the "
-                            "World Magnetic Model and no [corrections] declination_deg")
             if self.report.source != "none":
                 self.report = DeclinationReport()
             return s, "uncorrected"

@@ -30,6 +30,7 @@ timer instead. Given the same samples and tick times, the output is identical.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import Counter
 from typing import Callable, Iterable, Mapping, Protocol, Sequence
@@ -63,7 +64,7 @@ from onboard.engine.latency import FixedLagQueue
 from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline, sample_time
 from onboard.engine.sources import SourceSelector
-from onboard.engine.timeline import Jump, Timeline
+from onboard.engine.timeline import Jump, Timeline, outlier_words
 from onboard.engine.checks import checker_for, sample_type
 
 __all__ = ["Engine", "SampleCorrector", "TickQueue", "run"]
@@ -304,10 +305,12 @@ class Engine:
             self._count_outliers(now)
         return released
 
-    def finish(self) -> None:
-        """The run ended: samples still held on the time line are outliers."""
-        self.timeline.flush()
+    def finish(self) -> list[Sample]:
+        """The run ended: samples still held on the time line are outliers; return the
+        samples its end releases (the start of a log of few stamps), to :meth:`push`."""
+        released = self.timeline.flush()
         self._count_outliers()
+        return released
 
     def _count_outliers(self, now: float | None = None) -> None:
         """Count and warn of the time line's outliers, and clear its list; ``now``: the
@@ -319,14 +322,20 @@ class Engine:
         for s in outliers:
             kind, _ = self._checker(s)
             self._reject(kind, "time_outlier")
-        n = sum(v for k, v in self.rejected.items() if k.endswith(":time_outlier"))
-        clock = "log's clock" if now is None else "receive clock"
-        off = outliers[0].t - ref if ref is not None else math.nan
-        self.alerts.warn("time_outlier",
-                         f"{n} sample(s) stamped far from their neighbours were dropped "
-                         f"(the last {off:+.6g} s off the {clock}); the samples after "
-                         "them were kept", ref)
+        n = self.time_outliers()
+        if now is None:
+            message = outlier_words(n, outliers[-1].t, ref)
+        else:
+            message = (f"{n} sample(s) stamped far from their neighbours were dropped (the "
+                       f"last {outliers[-1].t - now:+.6g} s off the receive clock)")
+        self.alerts.warn("time_outlier", f"{message}; counted in rejected <type>:time_outlier",
+                         ref, details="a corrupted or mistyped time stamp, or a sender whose "
+                         "clock is not the others'; the samples after them were kept")
         outliers.clear()
+
+    def time_outliers(self) -> int:
+        """Samples dropped so far as outliers of the time line (all types)."""
+        return sum(v for k, v in self.rejected.items() if k.endswith(":time_outlier"))
 
     def start_segment(self, jump: Jump) -> None:
         """A confirmed clock jump (:class:`onboard.engine.timeline.Jump`): warn, and when it goes
@@ -334,12 +343,15 @@ class Engine:
         move the source selection's times with the clock, and restart the pipelines
         from their own adaptive state (:meth:`get_state`)."""
         step = jump.step_s
-        what = (f"the clock went back {-step:.6g} s (a reboot or a clock reset)" if step < 0
-                else f"no sample for {step:.6g} s (a gap in the log or a clock step)")
-        self.alerts.warn("time_jump", f"{what}: a new time segment starts; durations "
-                         "count each segment, not the time between them", jump.t_after)
+        what = jump.words()
+        restart = not 0.0 <= step <= RESTART_AFTER_S
+        self.alerts.warn("time_jump", f"{what}: a new time segment and a new run in "
+                         "estimates.csv start here (summary.json time_span.segments)",
+                         jump.t_after, details="durations count each segment, not the "
+                         "time between them; " + ("the pipelines restart from their "
+                         "adaptive state" if restart else "the pipelines carry on"))
         self.events.append(f"time: {what}; new segment")
-        if 0.0 <= step <= RESTART_AFTER_S:
+        if not restart:
             return
         self._last_t.clear()
         self.t_newest = -math.inf
@@ -391,15 +403,20 @@ class Engine:
         if outcome == "wait":
             return s, "no_declination"
         if outcome == "uncorrected":
-            self.alerts.warn("no_declination", self.declination.warning, s.t)
+            message, details = self.declination.warning
+            self.alerts.warn("no_declination", message, s.t, details=details)
         return s, None
 
     def _observe_fix(self, fix: GnssFix) -> None:
         """Show the first fix to the declination (the World Magnetic Model's position
-        and date); warn when its value is unreliable there."""
+        and date); warn when its value is unreliable there, and tell the truth of the
+        magnetic headings used as true before it."""
         warning = self.declination.observe_fix(fix)
         if warning:
-            self.alerts.warn("declination_unreliable", warning, fix.t)
+            self.alerts.warn("declination_unreliable", warning[0], fix.t, details=warning[1])
+        if self.declination.uncorrected:
+            message, details = self.declination.warning
+            self.alerts.revise("no_declination", message, details=details)
 
     def _checker(self, sample: Sample) -> tuple[str, Callable[[Sample], str | None]]:
         """The tag and the value checker of the sample's class (:mod:`onboard.engine.checks`)."""
@@ -543,8 +560,11 @@ class Engine:
         self.pipeline_errors[p.name] += 1
         self.alerts.warn("pipeline_restarted",
                          f"{p.name} failed ({type(err).__name__}: {err}) and was restarted "
-                         "from its configuration; what it had learned is lost",
-                         t, pipeline=p.name)
+                         f"from its configuration; [pipelines.{p.name}] enabled = false "
+                         "leaves it out", t, pipeline=p.name,
+                         details="what it had learned is lost at each restart (counted "
+                         f"in rejected pipeline:{p.name}:error); a failing pipeline is a "
+                         "bug: please report it with the log")
         fresh = build(self.cfg, only={p.name})
         if fresh:
             self.pipelines[i] = fresh[0]
@@ -559,23 +579,28 @@ class Engine:
         among them."""
         self._check_stale(t)
         return HealthRecord(vehicle=self.cfg.vehicle.id, t=t, rates_hz=rates_hz or {},
-                            rejected=self.rejections(), innovations=self.monitor.snapshot(),
+                            rejected=self.rejections(), withheld=self.withheld(),
+                            innovations=self.monitor.snapshot(),
                             counters=self.counters(),
                             events=(events or []) + self._new_events(), mode=self.mode,
                             sources=self.selector.active, flags=self.integrity.active(),
                             declination=self.declination.report)
 
     def rejections(self) -> dict[str, int]:
-        """Every count of what was not used: samples by ``<type>:<reason>``, and per
-        pipeline its failures (``pipeline:<name>:error``, each a restart) and the
-        estimates left out as not finite (``pipeline:<name>:nonfinite``) or withheld by
-        a failed integrity check (``pipeline:<name>:flagged``)."""
+        """What was refused on the way in: samples by ``<type>:<reason>``, and per
+        pipeline its failures (``pipeline:<name>:error``, each a restart). The estimates
+        left out on the way out are apart: :meth:`withheld`."""
         rejected = dict(self.rejected)
         rejected.update({f"pipeline:{k}:error": n for k, n in self.pipeline_errors.items()})
-        rejected.update({f"pipeline:{k}:nonfinite": n for k, n in self.nonfinite.items()})
-        rejected.update({f"pipeline:{k}:flagged": n
-                         for k, n in self.integrity.flagged.items()})
         return rejected
+
+    def withheld(self) -> dict[str, int]:
+        """The estimate values left out of the records: as not finite
+        (``pipeline:<name>:nonfinite``), or withheld by a failed integrity check
+        (``pipeline:<name>:flagged``; the rows: ``integrity.withheld_rows``)."""
+        out = {f"pipeline:{k}:nonfinite": n for k, n in self.nonfinite.items()}
+        out.update({f"pipeline:{k}:flagged": n for k, n in self.integrity.flagged.items()})
+        return out
 
     def counters(self) -> dict[str, dict[str, float | None]]:
         """Every pipeline's :meth:`~onboard.pipelines.base.Pipeline.health` in its flat
@@ -622,8 +647,8 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
         *, gap_s: float = 10.0, tick_times: Iterable[float] | None = None) -> int:
     """Replay ``samples`` (time-ordered) through ``engine``; return the number of ticks.
 
-    Every sample goes through the time line first (:meth:`Engine.admit`): outliers are
-    dropped, and a clock jump back or beyond :data:`RESTART_AFTER_S` gets a last tick of
+    Every sample goes through the time line first (:meth:`Engine.admit`): the log starts
+    where its first stamps agree, outliers are dropped, and a clock jump back or beyond :data:`RESTART_AFTER_S` gets a last tick of
     the old segment, then :meth:`Engine.start_segment` and a new grid from the new
     segment's first stamp. Ticks fall on the grid ``t0 + k / rate_hz`` from the (segment's)
     first sample's time ``t0``; each tick at time ``T`` sees exactly the samples with
@@ -650,8 +675,8 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
     t0 = None
     k = 0
     next_t = math.inf
-    for s_in in samples:
-        released = engine.admit(s_in)
+    for s_in in itertools.chain(samples, (None,)):   # None: the end, which may release
+        released = engine.admit(s_in) if s_in is not None else engine.finish()
         if not released:
             continue
         jump = engine.timeline.jump
@@ -679,7 +704,6 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
                     k += 1
                     next_t = t0 + k * period
             engine.push(s)
-    engine.finish()
     if t0 is not None:
         on_tick(next_t, engine.tick(next_t))
         ticks += 1

@@ -3,7 +3,12 @@
 A log's stamps are trusted only when they agree with each other. Every sample passes
 :meth:`Timeline.admit` before the engine's other time checks:
 
-* a sample within :data:`TIME_JUMP_S` of the newest released time (either side) continues
+* the log starts where its first stamps agree, not on its first one
+  (:class:`onboard.core.stamps.Anchor`): the first samples are held until
+  :data:`~onboard.core.stamps.ANCHOR_STAMPS` distinct stamps (or the end, :meth:`flush`),
+  the largest group of them that chain within :data:`TIME_JUMP_S` is released as the
+  first segment and the others are outliers;
+* after that, a sample within :data:`TIME_JUMP_S` of the newest released time (either side) continues
   the current segment and is released at once (the engine's ``backwards`` and ``late``
   checks still apply to it);
 * a sample further away is *held*, with the samples that agree with it (within
@@ -36,9 +41,13 @@ like a log's.
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass
+from typing import Sequence
 
 from onboard.core.messages import Sample
+from onboard.core.stamps import Anchor
 
 TIME_JUMP_S = 10.0
 """A stamp this far (s) from the newest released one, either way, is held until the
@@ -75,6 +84,69 @@ class Jump:
         """``t_after - t_before`` (s): negative when the clock went back (a reboot)."""
         return self.t_after - self.t_before
 
+    def words(self) -> str:
+        """What jumped, for a warning: ``the log's clock went back 10.4 s, from
+        2023-05-04 17:15:49.4 UTC to 2023-05-04 17:15:39.0 UTC (a reboot or a clock
+        reset)``, or ``no sample for 109.0 s, from t = 291.9 s to t = 400.9 s (a gap in the
+        log or a clock step)``."""
+        step = self.step_s
+        span = f"from {stamp_words(self.t_before)} to {stamp_words(self.t_after)}"
+        if step < 0:
+            return (f"the log's clock went back {duration_words(-step)}, {span} "
+                    "(a reboot or a clock reset)")
+        return f"no sample for {duration_words(step)}, {span} (a gap in the log or a clock step)"
+
+
+def log_time(segments: Sequence[tuple[float, float]], t: float) -> float:
+    """Seconds into the log of the stamp ``t`` (s): the durations of the segments
+    (``(start, end)`` stamps, in order) before the one ``t`` belongs to, plus ``t`` less
+    its start; never negative. ``t`` belongs to the newest segment that spans it, else
+    the newest that started before it, as a tick belongs to its run (the ``run`` column
+    of estimates.csv)."""
+    if not segments:
+        return 0.0
+    k = next((i for i in range(len(segments) - 1, -1, -1)
+              if segments[i][0] <= t <= segments[i][1]), None)
+    if k is None:
+        k = next((i for i in range(len(segments) - 1, -1, -1) if segments[i][0] <= t), 0)
+    return sum(b - a for a, b in segments[:k]) + max(t - segments[k][0], 0.0)
+
+
+def outlier_words(n: int, t: float, ref: float | None) -> str:
+    """``n`` samples dropped as outliers, the last stamped ``t`` while the log's clock was
+    at ``ref`` (s), for a warning."""
+    where = ""
+    if ref is not None:
+        side = "after" if t > ref else "before"
+        where = (f" (the last stamped {stamp_words(t)}, {duration_words(abs(t - ref))} "
+                 f"{side} the log's clock at {stamp_words(ref)})")
+    return f"samples stamped far from their neighbours were dropped, {n:,} so far{where}"
+
+
+EPOCH_STAMPS_S = (946_684_800.0, 4_102_444_800.0)
+"""Stamps in this range (s) are read as POSIX time (2000-01-01 to 2100-01-01 UTC) when a
+warning names them; others are seconds on the log's own clock (since a boot, say)."""
+_UNITS_S = ((365.25 * 86400.0, "years"), (86400.0, "days"), (3600.0, "h"), (60.0, "min"))
+
+
+def stamp_words(t: float) -> str:
+    """A stamp (s) as a user reads it: ``2023-05-04 17:16:35.1 UTC`` for POSIX time
+    (:data:`EPOCH_STAMPS_S`), else ``t = 1,444.3 s`` on the log's clock."""
+    if EPOCH_STAMPS_S[0] <= t <= EPOCH_STAMPS_S[1]:
+        whole = math.floor(t)
+        day = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(whole))
+        return f"{day}.{int(10 * (t - whole))} UTC"
+    return f"t = {t:,.1f} s" if math.isfinite(t) else f"t = {t}"
+
+
+def duration_words(seconds: float) -> str:
+    """A positive duration (s) in words: ``10.4 s``, ``837,399 s (9.7 days)``."""
+    text = f"{seconds:,.1f} s" if seconds < 1000.0 else f"{seconds:,.0f} s"
+    for unit_s, name in _UNITS_S:
+        if seconds >= 2.0 * unit_s:
+            return f"{text} ({seconds / unit_s:,.1f} {name})"
+    return text
+
 
 class Timeline:
     """Sorts stamps into segments and outliers (see the module docstring).
@@ -90,6 +162,7 @@ class Timeline:
         self.segments: list[Segment] = []
         self.outliers: list[Sample] = []
         self.jump: Jump | None = None
+        self._anchor: Anchor[Sample] = Anchor(TIME_JUMP_S)
         self._held: list[Sample] = []
         self._held_stamps: set[float] = set()
         self._held_newest = 0.0
@@ -108,12 +181,12 @@ class Timeline:
 
     def admit(self, sample: Sample) -> list[Sample]:
         """Take one sample; return the samples released by it, in order (none while it
-        is held; the held ones with it when it confirms a jump). Sets :attr:`jump`."""
+        is held; the held ones with it when it confirms a jump or the start). Sets
+        :attr:`jump`."""
         self.jump = None
         t = sample.t
-        if not self.segments:
-            self.segments.append(Segment(t, t))
-            return [sample]
+        if not self._anchor.decided:
+            return self._start(*self._anchor.push(t, sample))
         seg = self.segments[-1]
         if self._held and abs(t - self._held_newest) <= TIME_JUMP_S:
             return self._hold(sample)
@@ -148,9 +221,26 @@ class Timeline:
                 seg.start = t
         return [sample]
 
-    def flush(self) -> None:
-        """The run ended: samples still held are outliers."""
+    def flush(self) -> list[Sample]:
+        """The run ended: return the samples released by it (a log shorter than
+        :data:`~onboard.core.stamps.ANCHOR_STAMPS` distinct stamps: its start is chosen
+        now); samples still held are outliers."""
+        self.jump = None
+        if not self._anchor.decided:
+            return self._start(*self._anchor.decide())
         self._drop_held()
+        return []
+
+    def _start(self, kept: list[tuple[float, Sample]],
+               outliers: list[tuple[float, Sample]]) -> list[Sample]:
+        """The first segment, once the anchor chose it: the stamps of ``kept`` agree
+        with each other, so they are released in their order, and ``outliers`` listed."""
+        self.outliers.extend(s for _, s in outliers)
+        if not kept:
+            return []
+        stamps = [t for t, _ in kept]
+        self.segments.append(Segment(min(stamps), max(stamps)))
+        return [s for _, s in kept]
 
     def _hold(self, sample: Sample) -> list[Sample]:
         """Hold ``sample`` with the others of its side; release them all as a new segment

@@ -476,7 +476,8 @@ class IntegrityMonitor:
     Attributes:
         flags: pipeline -> the codes of the checks it fails now.
         flagged: per pipeline, the values withheld from its records (the health record's
-            ``pipeline:<name>:flagged``).
+            ``withheld``: ``pipeline:<name>:flagged``).
+        withheld_rows: per pipeline, the records (ticks) it had values withheld from.
         heading: the heading/course check, None for a holonomic vehicle.
         positions: pipeline -> its position check.
         speeds: pipeline -> reference (``GNSS Doppler``, ``DVL``) -> its speed check.
@@ -507,6 +508,7 @@ class IntegrityMonitor:
         self.nis: dict[str, dict[str, NisCheck]] = {}
         self.flags: dict[str, set[str]] = {}
         self.flagged: dict[str, int] = {}
+        self.withheld_rows: dict[str, int] = {}
         self._fix: GnssFix | None = None
         self.frame: LocalFrame | None = None
         """The local frame about the first fix handed to the pipelines: the frame of the
@@ -554,12 +556,16 @@ class IntegrityMonitor:
             hc = self.heading
             assert hc is not None and hc.worst is not None
             offset, sog = hc.worst
+            held = ", ".join(n for n, p in self.watched.items() if p.heading_dependent)
             self._warn(code, "", t, (
-                f"heading disagrees with course over ground by "
-                f"{math.degrees(offset):.1f} deg at {sog:.1f} m/s over "
-                f"{HEADING_WINDOW_S:.0f} s (bound {math.degrees(crab_bound(sog)):.0f} deg): a "
-                "misaligned compass or antenna baseline, or a heading from another vehicle; "
-                "the current is published as unknown while it lasts"))
+                f"heading disagrees with course over ground by {math.degrees(offset):.1f} "
+                f"deg at {sog:.1f} m/s (bound {math.degrees(crab_bound(sog)):.0f} deg): "
+                + (f"{held} withheld until they agree again; " if held else "")
+                + "a constant offset is measured by onboard diagnose LOG --write-config "
+                "FILE ([corrections] heading_offset_rad)"), details=(
+                f"the median over {HEADING_WINDOW_S:.0f} s; a misaligned compass or antenna "
+                "baseline, or a heading from another vehicle; the rows withheld: "
+                "summary.json withheld_rows"))
 
     # ------------------------------------------------------------------ records
     def withheld(self, pipeline: str) -> tuple[str, ...]:
@@ -573,6 +579,8 @@ class IntegrityMonitor:
     def count_withheld(self, pipeline: str, n: int) -> None:
         """``n`` values of ``pipeline`` were left out of its record."""
         self.flagged[pipeline] = self.flagged.get(pipeline, 0) + n
+        if n:
+            self.withheld_rows[pipeline] = self.withheld_rows.get(pipeline, 0) + 1
 
     def positions_at(self, t: float, records: Sequence[EstimateRecord]) -> None:
         """At the first tick after a fix, compare the published positions (the
@@ -626,12 +634,15 @@ class IntegrityMonitor:
         self._flag(rec.pipeline, "position_residual", verdict)
         if verdict and self._due("position_residual", rec.pipeline, rec.t):
             self._warn("position_residual", rec.pipeline, rec.t, (
-                f"{rec.pipeline} position is {check.median_m():.1f} m from GNSS (median over "
-                f"{POSITION_WINDOW_S:.0f} s), {check.median_sigma():.1f} sigma with its stated "
-                f"{math.sqrt(sd[qn] ** 2 + sd[qe] ** 2):.1f} m and the fix's "
-                f"{math.sqrt(var_fix):.1f} m: its position and sigma are not to be trusted"
-                + (REORIGINED if own is not frame and (own.lat0, own.lon0)
-                   != (frame.lat0, frame.lon0) else "")))
+                f"{rec.pipeline} position is {check.median_m():.1f} m from GNSS "
+                f"({check.median_sigma():.1f} sigma): its position and sigma are not to be "
+                f"trusted; the fix's sigma is [sensors.gnss] position_std_m when it reports "
+                f"none, the filter's noise in [pipelines.{rec.pipeline}] (docs/integrity.md)"),
+                details=(f"the median over {POSITION_WINDOW_S:.0f} s, with its stated "
+                         f"{math.sqrt(sd[qn] ** 2 + sd[qe] ** 2):.1f} m and the fix's "
+                         f"{math.sqrt(var_fix):.1f} m"
+                         + (REORIGINED if own is not frame and (own.lat0, own.lon0)
+                            != (frame.lat0, frame.lon0) else "")))
 
     # ------------------------------------------------------------------ speeds
     def _doppler(self, s: GnssFix) -> None:
@@ -686,10 +697,13 @@ class IntegrityMonitor:
         self._flag(rec.pipeline, "speed_mismatch", any(c.failing for c in per.values()))
         if verdict and self._due("speed_mismatch", rec.pipeline, rec.t):
             self._warn("speed_mismatch", rec.pipeline, rec.t, (
-                f"{rec.pipeline} speed is {check.median_mps():.2f} m/s from the {what} speed "
-                f"(median over {SPEED_WINDOW_S:.0f} s) with its stated "
+                f"{rec.pipeline} speed is {check.median_mps():.2f} m/s from the {what} speed: "
+                "its speed and sigma are not to be trusted; onboard diagnose LOG names what "
+                f"its model lacks, [pipelines.{rec.pipeline}] sets its noise "
+                "(docs/integrity.md)"), details=(
+                f"the median over {SPEED_WINDOW_S:.0f} s, with its stated "
                 f"{math.sqrt(pub[1]):.2f} m/s and the measurement's "
-                f"{math.sqrt(var_ref):.2f} m/s: its speed and sigma are not to be trusted"))
+                f"{math.sqrt(var_ref):.2f} m/s"))
 
     # ------------------------------------------------------------------ innovations
     def innovations(self, pipeline: str, records: Iterable[Innovation]) -> None:
@@ -721,13 +735,16 @@ class IntegrityMonitor:
         lo, hi = check.band
         how = ("larger than the filter expects: its sigmas are too small"
                if check.mean > hi else "smaller than the filter expects: its sigmas are "
-               "larger than its errors (or its measurement noise is set too high)")
+               "larger than its errors")
         self._warn("nis_out_of_band", pipeline, t, (
-            f"{pipeline} {channel}: mean NIS {check.mean:.2f} over {NIS_BLOCK_UPDATES} "
-            f"updates outside its {NIS_BAND:.0%} band [{lo:.2f}, {hi:.2f}] (dof "
-            f"{check.dof}; lag-1 autocorrelation {check.rho:.2f}) for {abs(check.outside)} "
-            f"blocks in a row: the innovations are {how}"), key=channel,
-            t_start=check.first_failed)
+            f"{pipeline} {channel}: mean NIS {check.mean:.2f} outside [{lo:.2f}, {hi:.2f}], "
+            f"the innovations {how}; its noise is set in [pipelines.{pipeline}] "
+            "(docs/integrity.md)"), details=(
+            f"each block of {NIS_BLOCK_UPDATES} updates against its {NIS_BAND:.0%} band, "
+            f"for {abs(check.outside)} blocks in a row (dof {check.dof}; lag-1 "
+            f"autocorrelation {check.rho:.2f})"
+            + ("; or its measurement noise is set too high" if check.mean < lo else "")),
+            key=channel, t_start=check.first_failed)
 
     # ------------------------------------------------------------------ flags
     def _flag(self, pipeline: str, code: str, on: bool) -> None:
@@ -742,14 +759,15 @@ class IntegrityMonitor:
         return {p: sorted(f) for p, f in self.flags.items() if f}
 
     def _warn(self, code: str, pipeline: str, t: float, message: str, key: str = "",
-              t_start: float | None = None) -> None:
+              t_start: float | None = None, details: str = "") -> None:
         """Raise ``code`` at ``t`` (s) at most every :data:`WARN_EVERY_S` per (code,
-        pipeline, key), spanning from ``t_start`` (default ``t``)."""
+        pipeline, key), spanning from ``t_start`` (default ``t``); ``message`` the
+        actionable line, ``details`` after it."""
         if not self._due(code, pipeline, t, key):
             return
         self._last_warn[(code, pipeline + ":" + key)] = t
         self.alerts.warn(code, message, t if t_start is None else t_start,
-                         pipeline=pipeline, t_end=t)
+                         pipeline=pipeline, t_end=t, details=details)
 
     def _due(self, code: str, pipeline: str, t: float, key: str = "") -> bool:
         """Whether :meth:`_warn` would raise ``code`` at ``t`` (s): a message is composed

@@ -146,14 +146,17 @@ def consistency(cfg: Config, samples: Iterable[Sample]) -> list[tuple[str, str]]
     a boat or rover, or the other way round) and ``actuator_mapping_incomplete`` (motor
     functions for fewer than the class's thrusters: the missing ones keep the defaults'
     channels)."""
+    samples = list(samples)
     params, mav_type = _evidence(samples)
     out: list[tuple[str, str]] = []
     cls = cfg.vehicle.vehicle_class
     expected = traits(cls).heartbeat_mav_types
     if mav_type in MARINE_MAV_TYPES and expected and mav_type not in expected:
+        fit = detect(samples)[0].vehicle.vehicle_class
         out.append(("class_mismatch",
                     f"the configuration is for a {cls} but the autopilot's HEARTBEAT "
-                    f"says MAV_TYPE {mav_type}: the models and inputs may not fit"))
+                    f"says MAV_TYPE {mav_type}, a {fit}'s: the models and inputs may not "
+                    f"fit; --config {fit} fits the log, or no --config (detected from it)"))
     n = traits(cls).thrusters
     motors = {f for f in _servo_functions(params).values()
               if SERVO_MOTOR1 <= f < SERVO_MOTOR1 + n}
@@ -161,7 +164,8 @@ def consistency(cfg: Config, samples: Iterable[Sample]) -> list[tuple[str, str]]
         lost = sorted(i + 1 for i in range(n) if SERVO_MOTOR1 + i not in motors)
         out.append(("actuator_mapping_incomplete",
                     f"SERVOn_FUNCTION names {len(motors)} of the {n} motors; "
-                    f"motor(s) {lost} keep the default channels"))
+                    f"motor(s) {lost} keep the default channels: set their channel in "
+                    "[inputs] thrusters if that is wrong"))
     return out
 
 

@@ -1,5 +1,5 @@
-"""``onboard diagnose LOG [--config FILE ...] [--out DIR] [--write-config FILE]``: model
-closure on measured data.
+"""``onboard diagnose LOG [--config FILE ...] [--out DIR] [--write-config FILE] [--force]``:
+model closure on measured data.
 
 Reads the log with the same readers and engine as ``onboard replay``, fits the base model,
 selects the effects that explain its structured residuals on held-out data, and writes
@@ -18,10 +18,11 @@ from pathlib import Path
 import msgspec
 
 from onboard.drivers.base import UnreadableLog
-from onboard.offline.closure import dataset, overlay, overlay_check, report
+from onboard.offline.closure import base_models, dataset, overlay, overlay_check, report
 from onboard.offline.closure.effects import ALL
 from onboard.offline.closure.select import select
-from onboard.core.errors import UsageError
+from onboard.core.errors import OutputFailed, UsageError
+from onboard.core.outputs import Output, check as check_outputs, existing
 from onboard.offline.replay import choose_config, print_warnings
 
 
@@ -38,17 +39,20 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     detected from the log, so the overlay carries its vehicle and inputs).
     ``base_terms``: the base model's optional terms to fit (default: the config's
     ``base_terms``, else :data:`onboard.offline.closure.dataset.DEFAULT_BASE_TERMS`;
-    :func:`onboard.offline.closure.dataset.with_base_terms`). A log without what model closure
-    needs (a heading, a velocity over ground, 50 s of both: docs/diagnose.md, "What
-    diagnose refuses") is a :class:`UsageError` naming it.
+    :func:`onboard.offline.closure.dataset.with_base_terms`). The base model is the vehicle
+    class's (:func:`onboard.offline.closure.base_models.for_config`). A vehicle class with
+    no base model, or a log without what model closure needs (a heading, a velocity over
+    ground, 50 s of both: docs/diagnose.md, "What diagnose refuses"), is a
+    :class:`UsageError` naming it.
     """
     opts = cfg.diagnose
     declared = tuple(declared) or tuple(opts.declared)
     unknown = [d for d in (*declared, *opts.known) if d not in ALL]
     if unknown:
         raise UsageError(f"unknown declared effect(s) {unknown}; known: {', '.join(ALL)}")
+    base = base_models.for_config(cfg)
     try:
-        ds = dataset.from_log(log, cfg, rate_hz=opts.rate_hz)
+        ds = dataset.from_log(log, cfg, rate_hz=opts.rate_hz, base_model=base.name)
     except dataset.NotEnoughData as err:  # what is missing; any other error is a bug
         raise UsageError(str(err)) from None
     try:
@@ -58,7 +62,7 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
         raise UsageError(str(err)) from None
     try:
         sel = select(ds, declared=declared, metric=opts.holdout_metric or None,
-                     known=opts.known)
+                     known=opts.known, candidates=base.effects or None)
     except dataset.NotEnoughData as err:
         raise UsageError(str(err)) from None
     doc = report.write(sel, log, out_dir)
@@ -74,16 +78,33 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
                                              if not v.written})
         try:
             Path(write_config).write_text(text, encoding="utf-8")
-        except OSError as err:
-            raise UsageError(f"{write_config}: cannot write: {err.strerror}") from None
+        except OSError as err:  # checked before the work: a full disk, a removed folder
+            raise OutputFailed(f"--write-config {write_config}: cannot write: "
+                               f"{err.strerror}; diagnosis.json is written") from None
     return doc
 
 
+DIAGNOSE_WRITES = ("diagnosis.json", "report.html")
+"""What marks ``--out DIR`` as a previous diagnosis's (reused only with ``--force``);
+the figures (PNG) beside them are replaced with them."""
+
+
+def planned_outputs(args) -> list[Output]:
+    """Every path ``onboard diagnose`` will write (:func:`onboard.core.outputs.check`)."""
+    outs = [Output("--out", Path(args.out), "dir", DIAGNOSE_WRITES)]
+    if getattr(args, "write_config", None):
+        outs.append(Output("--write-config", Path(args.write_config)))
+    return outs
+
+
 def main(args) -> int:
-    """``onboard diagnose``: run :func:`diagnose` and print the effects found and the
-    error on the test part (never used to fit or to choose) before and after."""
+    """``onboard diagnose``: check every output path, run :func:`diagnose` and print the
+    effects found and the error on the test part (never used to fit or to choose)
+    before and after, the warnings, and a last line saying what was written."""
     if not Path(args.log).exists():
         raise UsageError(f"{args.log}: no such file or directory")
+    check_outputs(planned_outputs(args), force=bool(getattr(args, "force", False)),
+                  inputs=[args.log, *existing(args.config)])
     try:
         cfg, _ = choose_config(args.log, args.config)
         doc = diagnose(args.log, cfg, Path(args.out),
@@ -101,8 +122,17 @@ def main(args) -> int:
         print(overlay_check.Verdict(v["section"], v["written"], v["reason"],
                                     v["speed_rmse_before_mps"], v["speed_rmse_after_mps"]).line())
     print_warnings(doc.get("warnings", []), doc.get("log_start_s", 0.0))
+    print(_last_line(args, len(doc.get("warnings", []))))
+    return 0
+
+
+def _last_line(args, n_warnings: int) -> str:
+    """What was written, and how to use the overlay."""
+    line = f"wrote diagnosis.json, report.html in {args.out}"
     if getattr(args, "write_config", None):
         base = " ".join(f"--config {c}" for c in args.config or [])
-        print(f"config overlay: {args.write_config} (use: {base + ' ' if base else ''}"
-              f"--config {args.write_config})")
-    return 0
+        line += (f", and the config overlay {args.write_config} (use: "
+                 f"{base + ' ' if base else ''}--config {args.write_config})")
+    if n_warnings:
+        line += f" ({n_warnings} warning{'s' if n_warnings > 1 else ''} above)"
+    return line

@@ -1,11 +1,20 @@
-"""``onboard replay LOG [--config FILE] [--out DIR] [--mcap FILE]``: run the pipelines
-over a log.
+"""``onboard replay LOG [--config FILE] [--out DIR] [--force] [--mcap FILE] ...``: run
+the pipelines over a log.
 
-Writes ``DIR/estimates.csv`` (architecture.md §4.2), ``DIR/summary.json`` (what was read
-and rejected, rates, time span, the vehicle config used and why) and ``DIR/track.png``;
-with ``--mcap`` also the estimates as MCAP, on the channels and with the schemas of the
-live Zenoh records (:mod:`drivers.mcap_out`, docs/foxglove.md).
+Writes ``DIR/estimates.csv`` (architecture.md §4.2), ``DIR/summary.json`` (what was read,
+the inputs rejected and the estimates withheld apart, rates, time span, the vehicle
+config used and why) and ``DIR/track.png``; with ``--mcap`` also the estimates as MCAP,
+on the channels and with the schemas of the live Zenoh records (:mod:`drivers.mcap_out`,
+docs/foxglove.md); with ``--geojson``, ``--gpx`` and ``--foxglove-layout`` the tracks,
+current arrows and a Foxglove layout of the topics published
+(:mod:`onboard.offline.exports`). MCAP and GPX are in UTC where the log has it
+(:mod:`drivers.logclock`).
 The same engine and pipelines as the live service, so a replay is the live result.
+
+Every output path is checked before the log is read (:mod:`onboard.core.outputs`); each
+export is then written on its own, one that fails listed in summary.json's ``failed``
+and on the last line printed (exit status 1), and track.png, the slowest, is drawn last,
+once summary.json is written and the headline and warnings are printed.
 """
 
 from __future__ import annotations
@@ -15,21 +24,27 @@ import itertools
 import json
 import sys
 import time
+import traceback
 from pathlib import Path
 from typing import Iterable, Iterator, Mapping, Sequence
 
 import msgspec
 
-from onboard.drivers.base import UnreadableLog
-from onboard.drivers.logs import open_log
+from onboard.drivers.base import ReadStats, UnreadableLog, shortfall
+from onboard.drivers.logclock import LogClock, log_clock
+from onboard.drivers.logs import open_log, sniff
 from onboard.monitor.alerts import Alerts
+from onboard.offline import exports
 from onboard.offline.autodetect import consistency, detect
 from onboard.core import config as configmod
 from onboard.core.config import Config
-from onboard.core.errors import UsageError
+from onboard.core.errors import OutputFailed, UsageError
+from onboard.core.outputs import Output, check as check_outputs, existing
 from onboard.core.messages import EstimateRecord, Parameter, Sample, VehicleInfo
+from onboard.core.wire import LocationFix
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
+from onboard.engine.timeline import log_time
 from onboard.engine.sources import QUANTITIES
 
 
@@ -59,8 +74,12 @@ class EstimatesCsv:
         self.runs: list[dict] = []
         self._by_pipeline: dict[str, dict[str, int]] = {}
         """Per pipeline: quantity -> column index (the quantities it has written)."""
-        self._f = open(path, "w", encoding="utf-8", newline="\n")
-        self._f.write(",".join(self.columns) + "\n")
+        self.path = path
+        try:
+            self._f = open(path, "w", encoding="utf-8", newline="\n")
+            self._f.write(",".join(self.columns) + "\n")
+        except OSError as err:
+            raise self._failed(err) from None
 
     def _column(self, pipeline: str, quantity: str) -> int | None:
         """Index of ``<pipeline>.<quantity>``, None if that is not a column (cached)."""
@@ -88,7 +107,10 @@ class EstimatesCsv:
                     if i is None:
                         continue
                 row[i] = "" if v != v else f"{v:.10g}"   # _fmt, inline
-        self._f.write(",".join(row) + "\n")
+        try:
+            self._f.write(",".join(row) + "\n")
+        except OSError as err:
+            raise self._failed(err) from None
         self.rows += 1
 
     def _run(self, t: float, t_csv: float) -> str:
@@ -106,7 +128,14 @@ class EstimatesCsv:
 
     def close(self) -> None:
         """Close the file (rows already written are complete lines)."""
-        self._f.close()
+        try:
+            self._f.close()
+        except OSError as err:
+            raise self._failed(err) from None
+
+    def _failed(self, err: OSError) -> OutputFailed:
+        """estimates.csv could not be written: the replay cannot go on without it."""
+        return OutputFailed(f"{self.path}: cannot write: {err.strerror or err}")
 
 
 RUN_COLUMN = "run"
@@ -186,7 +215,10 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
     if isinstance(config_path, str):
         config_path = [config_path]
     if config_path:
-        return configmod.load_all(config_path), f"from {' + '.join(config_path)}"
+        cfg = configmod.load_all(config_path)
+        _needs_csv_mapping(log, cfg, " + ".join(config_path))
+        return cfg, f"from {' + '.join(config_path)}"
+    _needs_csv_mapping(log, None, "")
     fmt, reader = open_log(log)
     if fmt == "recording":
         from onboard.service.recorder import recording_config
@@ -207,35 +239,60 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
     return cfg, f"detected: {why}"
 
 
+def _needs_csv_mapping(log: str, cfg: Config | None, given: str) -> None:
+    """A CSV log read without a ``[csv]`` column mapping (no ``--config``, or ``given``
+    configs with none) is :class:`UnreadableLog`, naming the bundled config that fits
+    its header (:func:`onboard.drivers.csvlog.fitting_note`)."""
+    if sniff(log) not in ("csv", "csv-dir"):
+        return
+    if cfg is not None and (cfg.csv.lat_deg or cfg.csv.north_m):
+        return
+    from onboard.drivers.csvlog import csv_header, fitting_note
+
+    lacks = f"{given} has no [csv] column mapping" if given else \
+        "a CSV log needs a [csv] column mapping (--config)"
+    raise UnreadableLog(f"{log}: {lacks}; {fitting_note(csv_header(log))}")
+
+
 def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
            plot: bool = True, progress: bool = False, mcap: Path | None = None,
-           geojson: Path | None = None, gpx: Path | None = None) -> dict:
+           geojson: Path | None = None, gpx: Path | None = None,
+           foxglove_layout: Path | None = None) -> dict:
     """Run the pipelines over ``log``; write the outputs into ``out_dir`` (and the
     estimates as MCAP into ``mcap`` when given; with ``geojson`` the tracks and current
-    arrows there, with ``gpx`` the tracks, :mod:`onboard.offline.exports`); return the summary."""
-    out_dir.mkdir(parents=True, exist_ok=True)
+    arrows there, with ``gpx`` the tracks, with ``foxglove_layout`` a Foxglove layout of
+    the topics published, :mod:`onboard.offline.exports`); return the summary. MCAP and
+    GPX are stamped in UTC where the log knows it (:mod:`drivers.logclock`). Each export
+    is written on its own: one that fails is listed in the summary's ``failed`` and the
+    others, summary.json included, are still written; track.png is drawn last, after
+    summary.json (:func:`add_figure`)."""
     wall0 = time.perf_counter()
     fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
+    out_dir.mkdir(parents=True, exist_ok=True)
     engine = Engine(cfg)
     samples = iter(reader)
     first = next(samples, None)
     if first is None:
         raise UnreadableLog(f"{log}: no usable samples ({reader.stats.as_dict()['rejected']})")
-    # A live recording starts ticking before its first sample: count from the first tick.
-    csv = EstimatesCsv(out_dir / "estimates.csv", engine.columns,
-                       None if fmt == "recording" else first.t,
+    # ``t`` counts from the first tick: the first stamp the time line kept (the reader's
+    # first sample may be an outlier), or a live recording's first tick before its first
+    # sample.
+    csv = EstimatesCsv(out_dir / "estimates.csv", engine.columns, None,
                        Runs(engine, [r for r in getattr(reader, "runs", ())
                                      if r.t_start == r.t_start]))
-    on_tick = csv.write
-    mcap_out = None
-    if mcap is not None:
-        from onboard.drivers.mcap_out import McapRecordWriter
+    failed: list[dict] = []
+    clock = log_clock(fmt, reader, log, first.t) if mcap or gpx else None
+    mcap_out = _McapExport(mcap, cfg, clock, failed) if mcap is not None else None
+    published = exports.Published() if foxglove_layout is not None else None
 
-        mcap_out = McapRecordWriter(mcap, cfg.service.zenoh.key_prefix, cfg.vehicle.id)
-
-        def on_tick(t: float, records: Sequence[EstimateRecord]) -> None:
-            csv.write(t, records)
-            mcap_out.write(t, records, engine.location_fixes(records))
+    def on_tick(t: float, records: Sequence[EstimateRecord]) -> None:
+        csv.write(t, records)
+        if mcap_out is not None or published is not None:
+            fixes = engine.location_fixes(records)
+            if mcap_out is not None:
+                mcap_out.write(t, records, fixes)
+            if published is not None:
+                published.add(records, fixes)
     meter = _Progress(progress)
 
     header: list[Sample] = []   # HEARTBEAT and parameters, checked against cfg at the end
@@ -248,29 +305,57 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
 
     source = meter.wrap(stream()) if progress else stream()
     if fmt == "recording":
-        # The service's own recording: re-parse every raw chunk in the order it arrived,
-        # through the same intake as live, ticking at the recorded tick times, so the
-        # estimates are exactly the live ones (onboard.service.recorder.replay_recording).
-        from onboard.service.recorder import replay_recording
-
-        result = replay_recording(log, engine, on_tick)
-        ticks = result.ticks
-        reader.stats = result.stats
-        for reason, n in result.rejected.items():
-            reader.stats.rejected[reason] += n
-        reader.stats.samples = sum(engine.accepted.values()) + sum(engine.rejected.values())
+        ticks = _replay_recording(log, engine, on_tick, reader)
     else:
         ticks = run(engine, source, on_tick)
     csv.close()
+    meter.done()
+    summary = _summary(log, fmt, cfg, engine, csv, reader, first.t, ticks, header,
+                       config_note)
+    summary["wall_time_s"] = round(time.perf_counter() - wall0, 3)
+    if clock is not None:
+        summary["utc"] = clock.summary(summary["time_span"]["start"])
     if mcap_out is not None:
         mcap_out.close()
-    meter.done()
-    time_span = _time_span(engine, first.t)
+        if mcap_out.writer is not None:
+            summary["mcap"] = {"file": str(mcap), "messages": mcap_out.writer.messages}
+    if geojson is not None or gpx is not None:
+        summary["geojson"] = _write_geojson(out_dir, geojson, gpx, summary, failed, clock,
+                                            csv.t0)
+    if published is not None:
+        summary["foxglove_layout"] = _write_layout(foxglove_layout, cfg, published, failed)
+    summary["failed"] = failed
+    write_summary(out_dir, summary)
+    if plot:
+        add_figure(out_dir, summary, Path(log).name, cfg.csv.position_kind)
+    return summary
+
+
+def _replay_recording(log: str, engine: Engine, on_tick, reader) -> int:
+    """The service's own recording: every raw chunk re-parsed in the order it arrived,
+    through the same intake as live, ticking at the recorded tick times, so the
+    estimates are exactly the live ones (onboard.service.recorder.replay_recording);
+    ``reader``'s counts become the recording's. Returns the ticks."""
+    from onboard.service.recorder import replay_recording
+
+    result = replay_recording(log, engine, on_tick)
+    reader.stats = result.stats
+    for reason, n in result.rejected.items():
+        reader.stats.rejected[reason] += n
+    reader.stats.samples = sum(engine.accepted.values()) + sum(engine.rejected.values())
+    return result.ticks
+
+
+def _summary(log: str, fmt: str, cfg: Config, engine: Engine, csv: EstimatesCsv, reader,
+             t_first: float, ticks: int, header: Sequence[Sample], config_note: str) -> dict:
+    """summary.json's content (architecture.md §4.2) but for the exports and the wall
+    time."""
+    time_span = _time_span(engine, t_first)
     span = time_span["duration_s"]
     kinds: dict[str, int] = {}
     for (kind, _), n in engine.accepted.items():
         kinds[kind] = kinds.get(kind, 0) + n
-    summary = {
+    return {
         "log": str(log),
         "format": fmt,
         "config": config_note,
@@ -286,6 +371,8 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "rates_hz": {k: (n / span if span > 0 else None) for k, n in sorted(kinds.items())},
         "accepted": {f"{k}:{src}": n for (k, src), n in sorted(engine.accepted.items())},
         "rejected": dict(sorted(engine.rejections().items())),
+        "withheld": dict(sorted(engine.withheld().items())),
+        "withheld_rows": dict(sorted(engine.integrity.withheld_rows.items())),
         "sources": {"active": dict(engine.selector.active),
                     "switches": engine.selector.switches,
                     "events": [e for e in engine.events if e.split(":", 1)[0] in QUANTITIES],
@@ -294,21 +381,109 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
         "ticks": ticks,
         "rows": csv.rows,
         "rate_hz": cfg.engine.rate_hz,
-        "warnings": msgspec.to_builtins(list(run_warnings(
-            engine, kinds, cfg, header, reader.stats.rejected))),
+        "warnings": msgspec.to_builtins(sorted(run_warnings(   # a log mostly unread first
+            engine, kinds, cfg, header, reader.stats.rejected, fmt, reader.stats,
+            Path(log).name), key=lambda a: a.code != "log_mostly_unread")),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
         "declination": msgspec.to_builtins(engine.declination.report),
-        "wall_time_s": round(time.perf_counter() - wall0, 3),
     }
-    if mcap_out is not None:
-        summary["mcap"] = {"file": str(mcap), "messages": mcap_out.messages}
-    if geojson is not None or gpx is not None:
-        summary["geojson"] = _write_geojson(out_dir, geojson, gpx, summary)
-    if plot:
-        summary["figure"] = _plot_track(out_dir, Path(log).name)
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return summary
+
+
+def write_summary(out_dir: Path, summary: dict) -> None:
+    """``out_dir/summary.json``; a failure to write it is :class:`OutputFailed`."""
+    path = out_dir / "summary.json"
+    try:
+        path.write_text(json.dumps(summary, indent=2) + "\n")
+    except OSError as err:
+        raise OutputFailed(f"{path}: cannot write: {err.strerror or err}") from None
+
+
+def export_failed(failed: list[dict], output: str, path: Path | str,
+                  err: BaseException) -> None:
+    """Record in ``failed`` that ``output`` (its flag, or its name in the output
+    directory) could not be written to ``path``, and why: a file system error in its
+    words; any other error is a bug, whose traceback goes to stderr."""
+    if isinstance(err, OSError):
+        why = f"cannot write: {err.strerror or err}"
+    else:
+        traceback.print_exception(err, file=sys.stderr)
+        why = f"internal error: {type(err).__name__}: {err}"
+    failed.append({"output": output, "path": str(path), "error": why})
+
+
+class _McapExport:
+    """``--mcap``: the estimates as MCAP, written tick by tick beside estimates.csv. A
+    failure (opening, a write, closing) stops this export only; it is listed in
+    ``failed`` and the replay carries on.
+
+    Attributes:
+        writer: the MCAP writer (None once failed).
+    """
+
+    def __init__(self, path: Path, cfg: Config, clock: LogClock | None,
+                 failed: list[dict]) -> None:
+        from onboard.drivers.mcap_out import McapRecordWriter
+
+        self.path, self.failed = path, failed
+        try:
+            self.writer = McapRecordWriter(path, cfg.service.zenoh.key_prefix,
+                                           cfg.vehicle.id, clock)
+        except Exception as err:  # noqa: BLE001 - one export fails, not the replay
+            self._fail(err)
+
+    def write(self, t: float, records: Sequence[EstimateRecord],
+              fixes: Sequence[LocationFix]) -> None:
+        """One tick's records and the positions they carry."""
+        if self.writer is not None:
+            try:
+                self.writer.write(t, records, fixes)
+            except Exception as err:  # noqa: BLE001
+                self._fail(err)
+
+    def close(self) -> None:
+        if self.writer is not None:
+            try:
+                self.writer.close()
+            except Exception as err:  # noqa: BLE001
+                self._fail(err)
+
+    def _fail(self, err: BaseException) -> None:
+        self.writer = None
+        export_failed(self.failed, "--mcap", self.path, err)
+
+
+def add_figure(out_dir: Path, summary: dict, title: str, position_kind: str = "") -> None:
+    """Draw ``out_dir/track.png`` from estimates.csv, the last and slowest output, once
+    summary.json is written (its measured track labelled by the log's format and, for a
+    CSV, ``position_kind``, its ``[csv] position_kind``); then record it in the summary
+    (``figure``: its path, or None and ``figure_skipped`` saying why; a failure in
+    ``failed``) and write summary.json again."""
+    try:
+        summary["figure"] = _plot_track(out_dir, title, summary["format"], position_kind)
+        if summary["figure"] is None:
+            summary["figure_skipped"] = "no pipeline gave a position to draw"
+    except ImportError:
+        summary["figure"] = None
+        summary["figure_skipped"] = "matplotlib is missing (pip install 'onboard[plot]')"
+    except Exception as err:  # noqa: BLE001 - the other outputs are written already
+        summary["figure"] = None
+        export_failed(summary.setdefault("failed", []), "track.png", out_dir / "track.png",
+                      err)
+    write_summary(out_dir, summary)
+
+
+def _write_layout(path: Path, cfg: Config, published: exports.Published,
+                  failed: list[dict]) -> dict | None:
+    """``--foxglove-layout``: the layout of what the replay published, for its vehicle
+    (:func:`onboard.offline.exports.write_foxglove_layout`); None, listed in ``failed``,
+    when it could not be written."""
+    try:
+        return exports.write_foxglove_layout(path, cfg.service.zenoh.key_prefix,
+                                             cfg.vehicle.id, published)
+    except Exception as err:  # noqa: BLE001 - one export fails, not the replay
+        export_failed(failed, "--foxglove-layout", path, err)
+        return None
 
 
 def _origin(engine: Engine) -> dict | None:
@@ -321,13 +496,15 @@ def _origin(engine: Engine) -> dict | None:
 
 
 def _time_span(engine: Engine, t_first: float) -> dict:
-    """``start`` and ``end`` (s, log clock) of the run, ``duration_s`` the sum of its
+    """``start`` and ``end`` (s, log clock): the earliest and the latest stamp of the
+    run's time line (after a clock that went back, not those of its first and last
+    segment), ``duration_s`` the sum of its
     segments' durations (the time between segments is not counted), and ``segments``:
     each segment's start, end and duration (:mod:`onboard.engine.timeline`). A recording replayed
     at its recorded ticks has one segment, from the first sample to the newest."""
     segments = [(s.start, s.end) for s in engine.timeline.segments] or \
         [(t_first, max(engine.t_newest, t_first))]
-    return {"start": segments[0][0], "end": segments[-1][1],
+    return {"start": min(a for a, _ in segments), "end": max(b for _, b in segments),
             "duration_s": sum(b - a for a, b in segments),
             "segments": [{"start": a, "end": b, "duration_s": b - a} for a, b in segments]}
 
@@ -352,31 +529,32 @@ kinds of which the log must have one each."""
 
 def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
                  header: Sequence[Sample] = (),
-                 read_rejected: Mapping[str, int] | None = None) -> Alerts:
-    """The engine's warnings and those of the whole run: the log's HEARTBEAT and servo
+                 read_rejected: Mapping[str, int] | None = None, fmt: str = "",
+                 read: ReadStats | None = None, log_name: str = "log") -> Alerts:
+    """The engine's warnings and those of the whole run: a log of which little could be
+    used (``read``: the reader's counts, :func:`onboard.drivers.base.shortfall`), the log's
+    HEARTBEAT and servo
     functions against ``cfg`` (:func:`onboard.offline.autodetect.consistency`), records the
     reader dropped as time outliers and MCAP messages it could not read
-    (``read_rejected``: its rejections by reason), no position source, and every pipeline that gave no estimate with what it lacked
-    (``kinds``: accepted samples by kind)."""
+    (``read_rejected``: its rejections by reason), no position source, and every pipeline
+    that gave no estimate with what it lacked (``kinds``: accepted samples by kind);
+    ``fmt``: the log's format (a CSV log's columns are mapped in ``[csv]``)."""
     alerts = engine.alerts
+    little = read and shortfall(read, log_name, engine.time_outliers())
+    if little:
+        alerts.warn("log_mostly_unread", little)
     for code, message in consistency(cfg, header):
         alerts.warn(code, message)
-    n_out = (read_rejected or {}).get("time_outlier", 0)
-    if n_out:
-        alerts.warn("time_outlier", f"the reader dropped {n_out} record(s) stamped far from "
-                    "the records around them (a corrupted or mistyped time); the records "
-                    "after them were kept")
-    unread = {k.split(":", 1)[1]: n for k, n in (read_rejected or {}).items()
-              if k.startswith("mcap:")}
-    if unread:
-        alerts.warn("mcap_unread", "the MCAP's MAVLink JSON had what this version does not "
-                    "read (counts: " + ", ".join(f"{k} {n}" for k, n in sorted(unread.items()))
-                    + "): those messages were skipped, unknown fields ignored, missing ones "
-                    "taken as 0 (summary.json read.rejected)")
+    _reader_warnings(alerts, read_rejected or {})
     have = {k for k, n in kinds.items() if n > 0}
+    csv = fmt in ("csv", "csv-dir")
+    listed = "summary.json samples_accepted_by_type lists what the log has"
     if not have & POSITION_KINDS:
-        alerts.warn("no_position_source", "no position source in the log (no GNSS fix, no "
-                    "DVL position): positions are dead reckoned from velocities, or absent")
+        alerts.warn("no_position_source", "no position in the log (no GNSS fix, no DVL "
+                    "position): positions are dead reckoned from velocities, or absent; "
+                    + ("map its position columns in [csv]" if csv else listed),
+                    details="position samples: " + ", ".join(sorted(POSITION_KINDS))
+                    + ("" if csv else "; normal for a vehicle under water without them"))
     log_has = ", ".join(f"{k} ({kinds[k]})" for k in sorted(have)) or "no usable sample"
     for p in engine.pipelines:
         if p.name in engine.latest:
@@ -384,74 +562,207 @@ def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
         needs, groups = NEEDS.get(p.name, ("inputs this log lacks", ()))
         missing = [g for g in groups if not g & have]
         why = f"it needs {needs}" if missing or not groups else "its inputs never lined up"
-        alerts.warn("no_estimate", f"{p.name} gave no estimate: {why}; the log has {log_has}",
-                    pipeline=p.name)
+        alerts.warn("no_estimate", f"{p.name} gave no estimate: {why}; the log has "
+                    f"{log_has}; [pipelines.{p.name}] enabled = false leaves it out",
+                    pipeline=p.name, details=(
+                        "a CSV log maps its columns to samples in [csv] (docs/formats-text.md)"
+                        if csv else ""))
     return alerts
 
 
-def print_warnings(warnings: list[dict], t0: float) -> None:
-    """The warnings, one line each, times from the start of the log (s)."""
+def _reader_warnings(alerts: Alerts, read_rejected: Mapping[str, int]) -> None:
+    """The warnings of what the reader refused: records stamped far from the others, and
+    an MCAP's messages or fields this version does not read."""
+    n_out = read_rejected.get("time_outlier", 0)
+    if n_out:
+        alerts.warn("time_outlier", f"the reader dropped {n_out} record(s) stamped far from "
+                    "the records around them; counted in summary.json read.rejected",
+                    details="a corrupted or mistyped time; the records after them were kept")
+    unread = {k.split(":", 1)[1]: n for k, n in read_rejected.items()
+              if k.startswith("mcap:")}
+    if unread:
+        alerts.warn("mcap_unread", "the MCAP's MAVLink JSON had what this version does not "
+                    "read (counts: " + ", ".join(f"{k} {n}" for k, n in sorted(unread.items()))
+                    + "): those messages skipped; a newer onboard may read them",
+                    details="unknown fields ignored, missing ones taken as 0 (summary.json "
+                    "read.rejected)")
+
+
+def print_warnings(warnings: list[dict], t0: float,
+                   segments: Sequence[Mapping] = ()) -> None:
+    """The warnings, one line each, times from the start of the log (s): along the time
+    line's ``segments`` (summary.json ``time_span.segments``; the time between them not
+    counted, :func:`onboard.engine.timeline.log_time`), else from ``t0``."""
     if not warnings:
         return
+    spans = [(g["start"], g["end"]) for g in segments]
+
+    def at(t: float) -> float:
+        return log_time(spans, t) if spans else t - t0
+
     print(f"{len(warnings)} warning{'s' if len(warnings) > 1 else ''}:")
     for w in warnings:
         span = ""
         if w["t_start"] is not None:
-            span = f" [{w['t_start'] - t0:.1f}-{w['t_end'] - t0:.1f} s]"
+            span = f" [{at(w['t_start']):.1f}-{at(w['t_end']):.1f} s]"
         print(f"  {w['code']}{span}: {w['message']}")
+        if w.get("details"):
+            print(f"      {w['details']}")
 
 
 def _write_geojson(out_dir: Path, path: Path | None, gpx: Path | None,
-                   summary: dict) -> dict:
+                   summary: dict, failed: list[dict], clock: LogClock | None = None,
+                   t0: float = 0.0) -> dict:
     """The replay's tracks and current arrows as GeoJSON in ``path``, its tracks as GPX in
-    ``gpx`` (either may be None); what was written."""
-    from onboard.offline import exports as geojson
+    ``gpx`` (either may be None; :mod:`onboard.offline.exports`; the GPX's times in UTC
+    where ``clock`` has it, ``t0`` the log time of ``t`` = 0), each written on its own (a
+    failure listed in ``failed``); what was written."""
     from onboard.offline.plots import read_columns
 
-    cols = read_columns(out_dir / "estimates.csv")
-    n = geojson.write(path, cols, summary["origin"], summary["runs"],
-                      Path(summary["log"]).name, gpx)
-    return {"path": str(path) if path else None, "gpx": str(gpx) if gpx else None,
-            "features": n}
-
-
-def _plot_track(out_dir: Path, title: str) -> str | None:
-    """track.png: the measured track and every reconstructed one, the current in a panel
-    of its own, titled ``title``; None without matplotlib."""
-    from onboard.offline.plots import plot_track
-
     try:
-        return plot_track(out_dir / "estimates.csv", out_dir / "track.png", title)
-    except ImportError:
-        return None
+        cols = read_columns(out_dir / "estimates.csv")
+        fc = exports.feature_collection(cols, summary["origin"], summary["runs"],
+                                        Path(summary["log"]).name)
+    except Exception as err:  # noqa: BLE001 - both exports fail, not the replay
+        for flag, p in (("--geojson", path), ("--gpx", gpx)):
+            if p is not None:
+                export_failed(failed, flag, p, err)
+        return {"path": None, "gpx": None, "features": 0}
+    utc = (lambda t: clock.to_utc(t0 + t)) if clock is not None and clock.utc else None
+    written = {"--geojson": None, "--gpx": None}
+    for flag, p, text in (
+            ("--geojson", path, lambda: json.dumps(fc, allow_nan=False) + "\n"),
+            ("--gpx", gpx, lambda: exports.to_gpx(cols, summary["origin"],
+                                                  Path(summary["log"]).name, utc,
+                                                  clock.source if clock else ""))):
+        if p is None:
+            continue
+        try:
+            Path(p).write_text(text())
+            written[flag] = str(p)
+        except Exception as err:  # noqa: BLE001
+            export_failed(failed, flag, p, err)
+    return {"path": written["--geojson"], "gpx": written["--gpx"],
+            "features": len(fc["features"])}
+
+
+def _plot_track(out_dir: Path, title: str, fmt: str, position_kind: str) -> str | None:
+    """track.png: the measured track (labelled by the log's format ``fmt`` and, for a
+    CSV, its ``[csv] position_kind``) and every reconstructed one, the current along them
+    and in a panel of its own, titled ``title``; None when no pipeline has a position.
+    Raises ImportError without matplotlib."""
+    from onboard.offline.plots import plot_track, position_label
+
+    return plot_track(out_dir / "estimates.csv", out_dir / "track.png", title,
+                      position_label(fmt, position_kind))
+
+
+REPLAY_WRITES = ("estimates.csv", "summary.json", "track.png")
+"""What ``onboard replay`` writes in ``--out DIR``: a DIR holding one of them is a previous
+replay's, reused only with ``--force``."""
+EXPORT_FLAGS = (("--mcap", "mcap"), ("--geojson", "geojson"), ("--gpx", "gpx"),
+                ("--foxglove-layout", "foxglove_layout"))
+"""The file exports: flag and argument name."""
+
+
+def planned_outputs(args) -> list[Output]:
+    """Every path ``onboard replay`` will write, per its arguments
+    (:func:`onboard.core.outputs.check`)."""
+    outs = [Output("--out", Path(args.out), "dir", REPLAY_WRITES)]
+    for flag, attr in EXPORT_FLAGS:
+        value = getattr(args, attr, None)
+        if value:
+            outs.append(Output(flag, Path(value)))
+    return outs
 
 
 def main(args) -> int:
-    """``onboard replay``: choose the configuration, replay, print a one-line summary;
-    a missing or unreadable log is a :class:`UsageError` (exit status 2)."""
+    """``onboard replay``: check every output path, choose the configuration, replay,
+    print the headline, the warnings and, after the figure, one last line saying what
+    was written (and what failed). A missing or unreadable log, or an output path that
+    cannot be written, is a :class:`UsageError` (exit status 2) before any work; an
+    export that failed gives exit status 1, the others written."""
     log = args.log
     if not Path(log).exists():
         raise UsageError(f"{log}: no such file or directory")
+    force = bool(getattr(args, "force", False))
+    check_outputs(planned_outputs(args), force=force, inputs=[log, *existing(args.config)])
     mcap = getattr(args, "mcap", None)
+    out_dir = Path(args.out)
     try:
         if mcap:
             from onboard.drivers.mcap_log import mcap_module
 
             mcap_module()  # a missing package is said before the replay, not after
         cfg, note = choose_config(log, args.config)
-        summary = replay(log, cfg, Path(args.out), config_note=note,
-                         plot=not args.no_plot, progress=sys.stderr.isatty(),
-                         mcap=Path(mcap) if mcap else None,
+        summary = replay(log, cfg, out_dir, config_note=note, plot=False,
+                         progress=sys.stderr.isatty(), mcap=Path(mcap) if mcap else None,
                          geojson=getattr(args, "geojson", None),
-                         gpx=getattr(args, "gpx", None))
+                         gpx=getattr(args, "gpx", None),
+                         foxglove_layout=getattr(args, "foxglove_layout", None))
     except UnreadableLog as err:
         raise UsageError(str(err)) from None
-    read = summary["read"]
-    rejected = sum(read["rejected"].values()) + sum(summary["rejected"].values())
-    print(f"{summary['format']} log, {summary['time_span']['duration_s']:.1f} s, "
-          f"{read['samples']:,} samples, {rejected:,} rejected; {summary['rows']:,} rows "
-          f"-> {Path(args.out) / 'estimates.csv'} ({summary['config']})")
-    if mcap:
+    print(headline(summary, out_dir / "estimates.csv"))
+    if "mcap" in summary:
         print(f"  {summary['mcap']['messages']:,} records -> {mcap} (MCAP; docs/foxglove.md)")
-    print_warnings(summary["warnings"], summary["time_span"]["start"])
-    return 0
+    if "utc" in summary:
+        print(f"  export times: {summary['utc']['source']}")
+    if summary.get("foxglove_layout"):
+        lay = summary["foxglove_layout"]
+        print(f"  Foxglove layout of {len(lay['topics'])} topics of {lay['vehicle_id']} -> "
+              f"{lay['file']}")
+    print_warnings(summary["warnings"], summary["time_span"]["start"],
+                   summary["time_span"]["segments"])
+    if not args.no_plot:
+        add_figure(out_dir, summary, Path(log).name, cfg.csv.position_kind)
+    elif force:
+        (out_dir / "track.png").unlink(missing_ok=True)  # not a previous run's figure
+    print(last_line(summary, out_dir, plot=not args.no_plot))
+    return 1 if summary["failed"] else 0
+
+
+def inputs_rejected(summary: dict) -> int:
+    """Inputs refused: the records the reader could not use and the samples the engine
+    rejected (not the pipelines' failures, not the estimates withheld)."""
+    return sum(summary["read"]["rejected"].values()) + sum(
+        n for k, n in summary["rejected"].items() if not k.startswith("pipeline:"))
+
+
+def headline(summary: dict, csv_path: Path) -> str:
+    """The first line of ``onboard replay``: the log read, its inputs rejected, the rows
+    written and the estimates withheld on them, apart."""
+    return (f"{summary['format']} log, {summary['time_span']['duration_s']:.1f} s, "
+            f"{summary['read']['samples']:,} samples, {inputs_rejected(summary):,} "
+            f"rejected; {summary['rows']:,} rows{_withheld_note(summary)} -> {csv_path} "
+            f"({summary['config']})")
+
+
+def _withheld_note(summary: dict) -> str:
+    """`` (current withheld on 3,217)``: per pipeline, the rows on which the integrity
+    monitor withheld estimates, and the values left out as not finite; empty without."""
+    parts = [f"{p} withheld on {n:,}" for p, n in summary.get("withheld_rows", {}).items()
+             if n]
+    parts += [f"{n:,} {k.split(':')[1]} values not finite"
+              for k, n in summary.get("withheld", {}).items() if k.endswith(":nonfinite") and n]
+    return f" ({'; '.join(parts)})" if parts else ""
+
+
+def last_line(summary: dict, out_dir: Path, plot: bool) -> str:
+    """The last line of ``onboard replay``: what was written, and first what failed and
+    why (exit status 1)."""
+    names = ["estimates.csv", "summary.json"] + (["track.png"] if summary.get("figure")
+                                                 else [])
+    extra = [p for p in (summary.get("mcap", {}).get("file"),
+                         summary.get("geojson", {}).get("path"),
+                         summary.get("geojson", {}).get("gpx"),
+                         (summary.get("foxglove_layout") or {}).get("file")) if p]
+    wrote = f"wrote {', '.join(names)} in {out_dir}" + (f", and {', '.join(extra)}"
+                                                        if extra else "")
+    if plot and summary.get("figure_skipped"):
+        wrote += f"; no track.png: {summary['figure_skipped']}"
+    failed = [f"{f['output'] + ' ' if f['output'].startswith('--') else ''}{f['path']}: "
+              f"{f['error']}" for f in summary["failed"]]
+    if failed:
+        return f"failed: {'; '.join(failed)}; {wrote}"
+    n = len(summary["warnings"])
+    return wrote + (f" ({n} warning{'s' if n > 1 else ''} above)" if n else "")

@@ -89,6 +89,16 @@ earth axes (GNSS SOG/COG, ``VelocityOverGround``), ``dvl`` bottom track and
 ``water_track`` (body axes)."""
 
 
+def glider_model(g: Any) -> GliderModel:
+    """The steady-glide model of a ``[pipelines.current.glider]`` table
+    (:class:`onboard.core.pipeline_config.GliderModelConfig`)."""
+    return GliderModel(
+        k_l=g.lift_kl, k_l0=g.lift_kl0, k_d0=g.drag_kd0, k_d=g.drag_kd,
+        density=g.water_density_kgm3, neutral_pump_cc=g.neutral_pump_cc,
+        vertical_water_std=g.vertical_water_std_mps, gamma_std=g.glide_angle_std_rad,
+        min_glide=g.min_glide_angle_rad)
+
+
 @dataclass
 class SampleCounters:
     """What :class:`CurrentSamples` counted."""
@@ -171,11 +181,7 @@ class CurrentSamples:
         volume (cm^3), the previous depth sample, the pending depth rate, the time of the
         model's last measurement (``glider_t``, s)."""
         g = cfg.glider
-        self.glider: GliderModel | None = None if g is None else GliderModel(
-            k_l=g.lift_kl, k_l0=g.lift_kl0, k_d0=g.drag_kd0, k_d=g.drag_kd,
-            density=g.water_density_kgm3, neutral_pump_cc=g.neutral_pump_cc,
-            vertical_water_std=g.vertical_water_std_mps, gamma_std=g.glide_angle_std_rad,
-            min_glide=g.min_glide_angle_rad)
+        self.glider: GliderModel | None = None if g is None else glider_model(g)
         self.glider_max_dt = g.max_depth_interval_s if g is not None else 0.0
         self.pump_cc: float | None = None
         self._depth_prev: tuple[float, float] | None = None

@@ -49,6 +49,7 @@ import msgspec
 from onboard.drivers.transports import SinkError, Transport, open_transport
 from onboard.core.config import Config, ConfigError, SourceConfig, load_all
 from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.core.outputs import Output, check as check_outputs
 from onboard.engine import Engine
 from onboard.service.config_check import check_config
 from onboard.service.intake import Intake
@@ -677,6 +678,8 @@ def main(args: argparse.Namespace) -> int:
 
         check_signing(mav)  # fail before anything starts, with one line
     state_dir, logs_dir = resolve_dirs(getattr(args, "state_dir", None))
+    check_outputs([Output("--state-dir", state_dir, "dir")]
+                  + ([Output("$LOGS_DIRECTORY", logs_dir, "dir")] if logs_dir else []))
     try:
         state_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:

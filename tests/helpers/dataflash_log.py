@@ -59,3 +59,19 @@ def synthetic_log() -> bytes:
     out.append(record("IMU2", 1_500_000, 0.01, 0.02, 0.03, 0.1, 0.2, -9.8))
     out.append(record("IMU2", 1_480_000, 0.01, 0.02, 0.03, 0.1, 0.2, -9.7))  # late
     return b"".join(out)
+
+
+def gps_timed_log(week: int, tow_ms: int, seconds: float = 2.4) -> bytes:
+    """A boat moving north at 1 m/s: GPS records at 5 Hz from 10 s after boot for
+    ``seconds``, the first two without a GPS time (``GWk`` 0), the others at GPS week
+    ``week`` and time of week from ``tow_ms`` (ms), advancing with ``TimeUS``; an ATT record
+    (heading north) with each."""
+    out = [fmt_record(n) for n in FORMATS]
+    for k in range(round(seconds * 5)):
+        t_us = 10_000_000 + 200_000 * k
+        wk, ms = (0, 0) if k < 2 else (week, tow_ms + 200 * k)
+        lat = int(63.4e7 + 0.2 * k / 111_320.0 * 1e7)
+        out.append(record("GPS", t_us, 0, 3, ms, wk, 12, 90, lat, int(10.3e7), 1000,
+                          1.0, 0.0, 0.0, 0.0, 1))
+        out.append(record("ATT", t_us + 10, 0, 0, 0, 0, 0, 0, 0, 0, 3))
+    return b"".join(out)

@@ -393,6 +393,21 @@ def effects_named(scenario: str, seed: int = 1) -> int:
 
 
 @cache
+def diagnose_blueboat() -> dict[str, Any]:
+    """``onboard diagnose`` of the NTNU BlueBoat runs with ``config/blueboat-ntnu-csv.toml``
+    as shipped (its thruster mapping): the README's command."""
+    from onboard.core import config as config_mod
+    from onboard.offline.diagnose import diagnose
+
+    runs = data_dir() / "blueboat_sysid_ntnu"
+    if not runs.is_dir():
+        raise MissingData(f"{runs} not in the shared data")
+    with tempfile.TemporaryDirectory(prefix="onboard-figures-") as tmp:
+        return diagnose(str(runs), config_mod.load(REPO / "config" / "blueboat-ntnu-csv.toml"),
+                        Path(tmp) / "out")
+
+
+@cache
 def diagnose_blueboat_literal() -> dict[str, Any]:
     """``onboard diagnose`` of the NTNU BlueBoat runs with the thruster columns taken
     literally (``thr_left`` = left, both ahead above neutral): the mapping must be found."""

@@ -3,36 +3,42 @@
 The log is read by the same readers and engine as ``onboard replay`` (validation, input
 mapping, surface/submerged gating); a collector pipeline samples the newest value of every
 channel at each engine tick. Velocity over ground comes from, in order of preference, an
-INS/DVL navigation solution (VelocityOverGround), the receiver's Doppler SOG/COG, or
-differenced GNSS positions.
+INS/DVL navigation solution (VelocityOverGround), the receiver's Doppler SOG/COG, or, in a
+log with neither, the GNSS positions differenced (:func:`fix_velocity`).
 
 Derived channels, all at the tick rate ``1/dt``:
 
 * ``psi``: measured heading (rad, unwrapped), from the compass or the autopilot attitude;
 * ``along``, ``lateral``: velocity over ground projected on the measured heading (m/s),
   ``along = cos(psi) v_n + sin(psi) v_e``, ``lateral = -sin(psi) v_n + cos(psi) v_e``;
-* ``r``: yaw rate (rad/s) from the gyro where there is one, else from the heading;
+* ``r``: yaw rate (rad/s) from the gyro (an IMU's, else an attitude's body rate: ATTITUDE
+  ``yawspeed``, a CSV ``yaw_rate`` column) where the log has one, else from the heading;
 * ``psi_dot``: time derivative of the measured heading (rad/s);
 * ``cmd_surge``, ``cmd_yaw``: normalized commands (throttle and rudder, or the mean and
   half-difference of a skid-steered boat's thrusters);
-* ``run``: run label (a directory of CSV runs), used to split fit and held-out data.
+* ``run``: run label (a directory of CSV runs), used to split fit and held-out data;
+* ``u_model``: with a glider's base model, its through-water speed along the heading from
+  the steady glide (:func:`glide_speed`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.signal import savgol_filter
 
+from onboard.drivers.base import shortfall
 from onboard.drivers.logs import open_log
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame
 from onboard.core.messages import (
     ActuatorCommand,
     Attitude,
+    Depth,
     GnssFix,
     Heading,
     Imu,
@@ -42,6 +48,7 @@ from onboard.core.messages import (
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
 from onboard.pipelines.base import NoHealth, Pipeline
+from onboard.pipelines.current_samples import glider_model
 
 
 class NotEnoughData(ValueError):
@@ -59,6 +66,14 @@ MIN_DATA_S = 50.0
 the test part is the last fifth, and each part needs
 :data:`onboard.offline.closure.select.MIN_PART_S` (10 s). Shorter logs are refused with this
 figure, by :func:`from_log` below :data:`MIN_TICKS` and by the split above it."""
+
+
+MIN_YAW_RATE_HZ = 1.0
+"""Fewest yaw-rate samples per second (Hz) that are taken as the gyro: rarer ones are spot
+values of a rate that changes faster than they come, which integrate to no heading change
+(the Kolumbo glider's ``r`` column, one value per 8 s row: its integral over each row
+against the heading change correlates at 0.00, the glider yawing back and forth within
+the row). Such a log is diagnosed with the rate from its heading, like one without."""
 
 
 class _Collector(Pipeline):
@@ -85,7 +100,17 @@ class _Collector(Pipeline):
         self.cmd_surge = self.cmd_yaw = self.cmd_quad = self.cmd_rev = math.nan
         self.cmd_left = self.cmd_right = math.nan
         self.run = ""
-        self.has_gyro = False
+        self.has_imu = False
+        self.has_rate = False
+        """A yaw rate of any kind came: an IMU's gyro or an attitude's body rate."""
+        self.rate_n = 0
+        self.rate_t0 = self.rate_t1 = math.nan
+        """How many yaw-rate samples came, the first's and the newest's time (s)."""
+        self.fixes: list[tuple[float, float, float]] = []
+        """Every fix as (t, north, east) (s, m, m): the velocity of a log without one."""
+        self.pitch = self.pump = math.nan
+        self.depths: list[tuple[float, float]] = []
+        """Every depth sample as (t, depth) (s, m): a glider's depth rate."""
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         for s in samples:
@@ -95,10 +120,15 @@ class _Collector(Pipeline):
             elif isinstance(s, Attitude):
                 if not self.heading_src_compass:
                     self.heading = s.yaw_rad
-                if s.yaw_rate_rps is not None and not self.has_gyro:
-                    self.gyro_last = s.yaw_rate_rps
+                self.pitch = s.pitch_rad
+                if s.yaw_rate_rps is not None:
+                    self.has_rate = True
+                    self._count_rate(s.t)
+                    if not self.has_imu:
+                        self.gyro_last = s.yaw_rate_rps
             elif isinstance(s, Imu):
-                self.has_gyro = True
+                self.has_imu = self.has_rate = True
+                self._count_rate(s.t)
                 self.gyro_sum += s.gyro_z
                 self.gyro_n += 1
                 self.acc_sum[0] += s.accel_x
@@ -108,6 +138,7 @@ class _Collector(Pipeline):
                     self.frame = LocalFrame(s.lat_deg, s.lon_deg)
                 self.north, self.east = self.frame.to_ne(s.lat_deg, s.lon_deg)
                 self.fix_t = s.t
+                self.fixes.append((s.t, self.north, self.east))
                 if s.sog_mps is not None and s.cog_rad is not None:
                     self.gnss_vn = s.sog_mps * math.cos(s.cog_rad)
                     self.gnss_ve = s.sog_mps * math.sin(s.cog_rad)
@@ -117,7 +148,11 @@ class _Collector(Pipeline):
                 self.vn, self.ve, self.vog_t = s.v_north_mps, s.v_east_mps, s.t
                 if s.source.startswith("csv:"):
                     self.run = s.source
+            elif isinstance(s, Depth):
+                self.depths.append((s.t, s.depth_m))
             elif isinstance(s, ActuatorCommand):
+                if s.pump_cc is not None:
+                    self.pump = s.pump_cc
                 if s.throttle is not None:
                     self.cmd_surge = s.throttle
                     self.cmd_quad = s.throttle * abs(s.throttle)
@@ -140,8 +175,20 @@ class _Collector(Pipeline):
             self.vn if vog_fresh else self.gnss_vn, self.ve if vog_fresh else self.gnss_ve,
             self.north, self.east, self.fix_t, self.cmd_surge, self.cmd_yaw, self.cmd_quad,
             self.cmd_rev, self.run, self.cmd_left, self.cmd_right, *self.acc_last,
+            self.pitch, self.pump,
         ))
         return {}
+
+    def _count_rate(self, t: float) -> None:
+        self.rate_n += 1
+        self.rate_t1 = t
+        if self.rate_n == 1:
+            self.rate_t0 = t
+
+    def yaw_rate_hz(self) -> float:
+        """The mean rate (Hz) of the yaw-rate samples (0 with fewer than two)."""
+        span = self.rate_t1 - self.rate_t0 if self.rate_n > 1 else 0.0
+        return (self.rate_n - 1) / span if span > 0 else 0.0
 
     def innovations(self) -> list:
         return []
@@ -202,6 +249,16 @@ class Dataset:
     None."""
     acc_y: np.ndarray | None = None
     """The IMU's starboard specific force (m/s^2), else None."""
+    u_model: np.ndarray | None = None
+    """The through-water speed along the heading (m/s) that the vehicle class's model
+    gives from what it measures (a glider's steady glide: :func:`glide_speed`; NaN where
+    it gives none), the along-track channel's base prediction; None for a boat, whose
+    speed the surge model predicts from the commands."""
+    base_model: str = "surface-boat"
+    """The base model the data are for (:mod:`onboard.offline.closure.base_models`)."""
+    yaw_rate_hz: float = 0.0
+    """How often the log's yaw rate came (Hz; 0 without one); below
+    :data:`MIN_YAW_RATE_HZ` it is not taken as the gyro (``has_gyro`` false)."""
 
     def __post_init__(self) -> None:
         if not self.base_terms:
@@ -421,9 +478,11 @@ def _smooth(x: np.ndarray, window: int, deriv: int = 0, dt: float = 1.0) -> np.n
 def from_arrays(t, psi, v_n, v_e, *, r=None, cmd_surge=None, cmd_yaw=None,
                 thrust_quadratic=None, thrust_reverse=None, run=None,
                 north=None, east=None, smooth_s: float = 1.0, source: str = "",
-                cmd_left=None, cmd_right=None, acc_x=None, acc_y=None) -> Dataset:
+                cmd_left=None, cmd_right=None, acc_x=None, acc_y=None, u_model=None,
+                base_model: str = "surface-boat") -> Dataset:
     """Build a dataset from uniformly sampled arrays (SI units, heading in rad);
-    ``acc_x``, ``acc_y`` the IMU's horizontal specific force (body frame), if any."""
+    ``acc_x``, ``acc_y`` the IMU's horizontal specific force (body frame), if any;
+    ``u_model`` and ``base_model`` as the :class:`Dataset` fields."""
     t = np.asarray(t, float)
     n = len(t)
     dt = float(np.median(np.diff(t))) if n > 1 else 0.1
@@ -458,7 +517,8 @@ def from_arrays(t, psi, v_n, v_e, *, r=None, cmd_surge=None, cmd_yaw=None,
         cmd_left=None if cmd_left is None else np.asarray(cmd_left, float),
         cmd_right=None if cmd_right is None else np.asarray(cmd_right, float),
         acc_x=None if acc_x is None else np.asarray(acc_x, float),
-        acc_y=None if acc_y is None else np.asarray(acc_y, float))
+        acc_y=None if acc_y is None else np.asarray(acc_y, float),
+        u_model=None if u_model is None else np.asarray(u_model, float), base_model=base_model)
 
 
 def remeasured(ds: Dataset, *, psi: np.ndarray | None = None, v_n: np.ndarray | None = None,
@@ -477,7 +537,9 @@ def remeasured(ds: Dataset, *, psi: np.ndarray | None = None, v_n: np.ndarray | 
                       cmd_left=None if ds.cmd_left is None else ds.cmd_left[k],
                       cmd_right=None if ds.cmd_right is None else ds.cmd_right[k],
                       acc_x=None if ds.acc_x is None else ds.acc_x[k],
-                      acc_y=None if ds.acc_y is None else ds.acc_y[k])
+                      acc_y=None if ds.acc_y is None else ds.acc_y[k],
+                      u_model=None if ds.u_model is None else ds.u_model[k],
+                      base_model=ds.base_model)
     out.actuator_lag_s = ds.actuator_lag_s
     out.base_terms = ds.base_terms
     if not ds.has_gyro:
@@ -485,8 +547,11 @@ def remeasured(ds: Dataset, *, psi: np.ndarray | None = None, v_n: np.ndarray | 
     return out
 
 
-def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
-    """Read ``path`` through the engine and collect its channels at ``rate_hz``."""
+def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0,
+             base_model: str = "surface-boat") -> Dataset:
+    """Read ``path`` through the engine and collect its channels at ``rate_hz``, for the
+    base model named ``base_model`` (a ``"glider"``'s: its steady-glide speed as
+    ``u_model``, from ``cfg``'s ``[pipelines.current.glider]``, and no commands)."""
     import msgspec
 
     cfg = msgspec.structs.replace(cfg, engine=msgspec.structs.replace(cfg.engine, rate_hz=rate_hz))
@@ -494,14 +559,27 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     col = _Collector()
     engine = Engine(cfg, [col], select_sources=False, fresh_estimates=False)
     run(engine, reader, lambda t, r: None, gap_s=2.0)
-    if not col.rows:
-        raise NotEnoughData(f"{path}: no samples in time (no time-stamped heading, "
-                            "position, velocity or command the engine could use)")
-    cols = list(zip(*col.rows))
-    (t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs, cl, cr,
-     ax, ay) = (np.array(c) for c in cols)
-    t = t.astype(float)
-    ok = _usable_ticks(path, psi.astype(float), v_n.astype(float), v_e.astype(float), rate_hz)
+    little = shortfall(reader.stats, Path(path).name, engine.time_outliers())
+    if little:   # said beside the fit, or with the refusal: the log is mostly unread
+        engine.alerts.warn("log_mostly_unread", little)
+    try:
+        if not col.rows:
+            raise NotEnoughData(f"{path}: no samples in time (no time-stamped heading, "
+                                "position, velocity or command the engine could use)")
+        cols = list(zip(*col.rows))
+        (t, psi, gyro, v_n, v_e, north, east, fix_t, cmd_s, cmd_y, cmd_q, cmd_r, runs, cl,
+         cr, ax, ay, pitch, pump) = (np.array(c) for c in cols)
+        t = t.astype(float)
+        v_n, v_e = v_n.astype(float), v_e.astype(float)
+        if not (np.isfinite(v_n) & np.isfinite(v_e)).any() and col.fixes:
+            v_n, v_e = fix_velocity(col.fixes, t)
+        rate_hz_log = col.yaw_rate_hz()
+        has_rate = col.has_rate and rate_hz_log >= MIN_YAW_RATE_HZ
+        ok = _usable_ticks(path, psi.astype(float), v_n, v_e, rate_hz,
+                           gyro.astype(float) if has_rate else None, len(col.fixes),
+                           engine.rejections().get("heading:no_declination", 0))
+    except NotEnoughData as err:
+        raise NotEnoughData(f"{little}; in what could: {err}" if little else str(err)) from None
     idx = np.flatnonzero(ok)
     # Keep the longest stretches; breaks in time become separate runs.
     t = t[idx]
@@ -509,37 +587,134 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0) -> Dataset:
     gap = np.r_[False, np.diff(t) > 2.5 / rate_hz]
     seg = np.cumsum(gap)
     labels = np.array([f"{r}#{k}" for r, k in zip(runs, seg)], dtype=object)
-    gyro = gyro[idx].astype(float)
     ax, ay = ax[idx].astype(float), ay[idx].astype(float)
     has_acc = bool(np.isfinite(ax).all() and np.isfinite(ay).all())
-    ds = from_arrays(
-        t, psi[idx].astype(float), v_n[idx].astype(float), v_e[idx].astype(float),
-        r=gyro if col.has_gyro and np.isfinite(gyro).all() else None,
+    glider = base_model == "glider"
+    u_model = glide_speed(cfg, t, pitch[idx].astype(float), pump[idx].astype(float),
+                          col.depths) if glider else None
+    cmd = {} if glider else dict(
         cmd_surge=cmd_s[idx].astype(float), cmd_yaw=cmd_y[idx].astype(float),
         thrust_quadratic=cmd_q[idx].astype(float), thrust_reverse=cmd_r[idx].astype(float),
-        run=labels,
-        north=north[idx].astype(float), east=east[idx].astype(float), source=str(path),
         cmd_left=cl[idx].astype(float) if np.isfinite(cl.astype(float)).any() else None,
-        cmd_right=cr[idx].astype(float) if np.isfinite(cr.astype(float)).any() else None,
-        acc_x=ax if has_acc else None, acc_y=ay if has_acc else None)
+        cmd_right=cr[idx].astype(float) if np.isfinite(cr.astype(float)).any() else None)
+    ds = from_arrays(
+        t, psi[idx].astype(float), v_n[idx], v_e[idx],
+        r=gyro[idx].astype(float) if has_rate else None, run=labels,
+        north=north[idx].astype(float), east=east[idx].astype(float), source=str(path),
+        acc_x=ax if has_acc else None, acc_y=ay if has_acc else None, u_model=u_model,
+        base_model=base_model, **cmd)
     ds.warnings = list(engine.alerts)
+    ds.yaw_rate_hz = rate_hz_log
     return ds
 
 
+FIX_VELOCITY_SPAN_S = 4.0
+"""Span (s) of the straight line through the fixes whose slope is the velocity over
+ground of a log without one (:func:`fix_velocity`): five fixes at 1 Hz; on the DDBoat's
+positions, rounded to 1e-4 arc minute (0.19 m north, 0.12 m east), the slope's rounding
+noise is about 0.02 m/s."""
+
+FIX_GAP_S = 3.0
+"""Fixes further apart than this (s) are not differenced across: the velocity between
+them is unknown."""
+
+
+def fix_velocity(fixes: Sequence[tuple[float, float, float]], t: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity over ground (north, east; m/s) at the ticks ``t`` from the GNSS positions
+    alone: at each fix the slope of the least-squares line through the fixes within
+    :data:`FIX_VELOCITY_SPAN_S` centred on it (at least three, spanning half of it, none
+    across a gap of :data:`FIX_GAP_S`); at a tick between two fixes of one stretch, the
+    linear interpolation of theirs, else NaN. ``fixes`` are (t, north, east).
+
+    A fix that repeats the previous position exactly is not a new position: a receiver's
+    fixes wander by more than their last digit even at rest, so a repeat is a position
+    held (the DDBoat's receiver holds one for 4-64 s at a time, 46 % of its fixes, while
+    both motors run at 200/255 and the compass turns through 80-210 deg, then jumps 1-5
+    m). Such a stretch is a gap: its velocity is unknown, not zero."""
+    tf, n, e = (np.asarray(c, float) for c in zip(*fixes))
+    keep = np.r_[True, (np.diff(tf) > 0.0) & ((np.diff(n) != 0.0) | (np.diff(e) != 0.0))]
+    tf, n, e = tf[keep], n[keep], e[keep]
+    seg = np.cumsum(np.r_[0, np.diff(tf) > FIX_GAP_S])
+    vn, ve = np.full(len(tf), math.nan), np.full(len(tf), math.nan)
+    half = 0.5 * FIX_VELOCITY_SPAN_S
+    for i in range(len(tf)):
+        m = (np.abs(tf - tf[i]) <= half + 1e-6) & (seg == seg[i])
+        if m.sum() >= 3 and np.ptp(tf[m]) >= half:
+            dt = tf[m] - tf[m].mean()
+            vn[i] = float(dt @ n[m] / (dt @ dt))
+            ve[i] = float(dt @ e[m] / (dt @ dt))
+    k = np.clip(np.searchsorted(tf, t, side="right") - 1, 0, max(0, len(tf) - 2))
+    nxt = np.minimum(k + 1, len(tf) - 1)
+    inside = (t >= tf[0]) & (t <= tf[-1]) & (seg[k] == seg[nxt])
+    w = np.clip((t - tf[k]) / np.maximum(tf[nxt] - tf[k], 1e-9), 0.0, 1.0)
+    out_n = vn[k] + w * (vn[nxt] - vn[k])
+    out_e = ve[k] + w * (ve[nxt] - ve[k])
+    return np.where(inside, out_n, math.nan), np.where(inside, out_e, math.nan)
+
+
+def glide_speed(cfg: Config, t: np.ndarray, pitch: np.ndarray, pump: np.ndarray,
+                depths: Sequence[tuple[float, float]]) -> np.ndarray:
+    """A glider's through-water speed along its heading (m/s) at the ticks ``t``: the
+    steady glide (:meth:`onboard.estimators.vehicle_models.GliderModel.glide_from_depth_rate`,
+    with ``cfg``'s ``[pipelines.current.glider]`` coefficients, as the current pipeline
+    uses it) at the tick's pitch (rad) and pump volume (cm^3; the neutral volume where
+    none came) and the depth rate of the newest depth sample (m/s: the centred difference
+    of the depth samples either side, none across more than the table's
+    ``max_depth_interval_s``). NaN where the glide gives no speed (a shallow pitch, an
+    inflection)."""
+    g = cfg.pipelines.current.glider
+    model = glider_model(g)
+    out = np.full(len(t), math.nan)
+    if len(depths) < 2:
+        return out
+    td, z = (np.asarray(c, float) for c in zip(*depths))
+    rate = np.full(len(td), math.nan)
+    lo, hi = np.r_[0, np.arange(len(td) - 1)], np.r_[np.arange(1, len(td)), len(td) - 1]
+    span = td[hi] - td[lo]
+    close = (span > 0) & (np.maximum(td - td[lo], td[hi] - td) <= g.max_depth_interval_s)
+    rate[close] = (z[hi] - z[lo])[close] / span[close]
+    k = np.searchsorted(td, t, side="right") - 1
+    pump = np.where(np.isfinite(pump), pump, g.neutral_pump_cc)
+    for i in np.flatnonzero(k >= 0):
+        glide = model.glide_from_depth_rate(float(pitch[i]), float(rate[k[i]]),
+                                            float(pump[i]))
+        if glide is not None:
+            out[i] = glide.u_h
+    return out
+
+
 def _usable_ticks(path: str, psi: np.ndarray, v_n: np.ndarray, v_e: np.ndarray,
-                  rate_hz: float) -> np.ndarray:
-    """The ticks with both a heading and a velocity over ground (a boolean mask); a
-    :class:`NotEnoughData` naming what is missing when the log has no heading, no
-    velocity over ground, or fewer than :data:`MIN_TICKS` ticks with both."""
+                  rate_hz: float, rate: np.ndarray | None = None,
+                  n_fixes: int = 0, waiting_headings: int = 0) -> np.ndarray:
+    """The ticks with both a heading and a velocity over ground, and a yaw rate when the
+    log has one (``rate``: its first ticks may come before the first rate), as a boolean
+    mask; a :class:`NotEnoughData` naming what is missing when the log has no heading
+    (``waiting_headings``: magnetic ones the engine rejected for want of a declination),
+    no velocity over ground (``n_fixes``: the GNSS fixes it has, too few or too far apart
+    to difference), or fewer than :data:`MIN_TICKS` ticks with both."""
     has_psi = np.isfinite(psi)
     has_v = np.isfinite(v_n) & np.isfinite(v_e)
+    if not has_psi.any() and waiting_headings:
+        raise NotEnoughData(
+            f"{path}: no heading: its {waiting_headings} magnetic heading(s) waited for a "
+            "GNSS fix to give their declination and none came (set [corrections] "
+            "declination_deg); model closure needs one")
     if not has_psi.any():
         raise NotEnoughData(f"{path}: no heading (no compass, attitude or true heading in "
                             "the log); model closure needs one")
+    if not has_v.any() and n_fixes:
+        raise NotEnoughData(
+            f"{path}: no velocity over ground (no Doppler or INS/DVL velocity, and its "
+            f"{n_fixes} GNSS fix(es) are too few or too far apart to difference: three "
+            f"within {FIX_VELOCITY_SPAN_S:.0f} s, no gap over {FIX_GAP_S:.0f} s); model "
+            "closure needs one")
     if not has_v.any():
         raise NotEnoughData(f"{path}: no velocity over ground (no GNSS fix, Doppler or "
                             "INS/DVL velocity in the log); model closure needs one")
     ok = has_psi & has_v
+    if rate is not None:
+        ok &= np.isfinite(rate)
     if ok.sum() < MIN_TICKS:
         raise NotEnoughData(too_short(path, ok.sum() / rate_hz,
                                       f" (heading {has_psi.sum() / rate_hz:.0f} s, velocity "

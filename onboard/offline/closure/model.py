@@ -17,6 +17,11 @@ course lag and the speed drift are switched by
 Effects add linear regressors to those channels (:mod:`.effects`). All parameters enter
 linearly once ``a`` and ``b`` are fixed, so a fit is a weighted least-squares problem over
 the stacked channels, iterated to refresh ``a`` and ``b``.
+
+A glider's base model (:mod:`onboard.offline.closure.base_models`) keeps the lateral and
+heading channels and replaces the surge model: its along-track velocity over ground is
+the through-water speed of the steady glide (``Dataset.u_model``) plus the effects' terms,
+algebraic (no open-loop simulation, no commands).
 """
 
 from __future__ import annotations
@@ -40,13 +45,25 @@ BASE_PARAMS = ("a", "b", "c0")
 
 
 def channel_targets(ds: Dataset) -> dict[str, np.ndarray]:
-    """The measured quantity each channel's regression explains."""
+    """The measured quantity each channel's regression explains (a glider's along-track
+    channel: the velocity over ground along the heading minus the glide's speed, m/s)."""
     out = {"lateral": ds.lateral}
     if ds.has_gyro:
         out["heading"] = heading_drift(ds)
     if ds.has_commands:
         out["along"] = ds.speed_dot
+    elif ds.u_model is not None:
+        out["along"] = ds.along - ds.u_model
     return out
+
+
+def along_base_output(ds: Dataset, f: "Fit") -> np.ndarray:
+    """The base model's term of the along-track channel as :func:`channel_targets` states
+    it: the surge model's acceleration (m/s^2) with commands; 0 for a glider, whose
+    glide speed the target already holds."""
+    if ds.has_commands:
+        return _base_columns(ds) @ f.base
+    return np.zeros(len(ds))
 
 
 def lateral_base_output(ds: Dataset, f: "Fit") -> np.ndarray:
@@ -293,8 +310,8 @@ def predict(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
     """Model predictions of each channel on ``ds``; the along-track speed open loop.
 
     ``along`` is the predicted along-track speed over ground (m/s), simulated from the
-    commands from the measured speed at the start of each contiguous segment; the other
-    channels are algebraic.
+    commands from the measured speed at the start of each contiguous segment (a glider's:
+    its glide speed plus the effects' terms); the other channels are algebraic.
     """
     n = len(ds)
     ctx = f.ctx
@@ -320,6 +337,8 @@ def predict(ds: Dataset, f: Fit) -> dict[str, np.ndarray]:
                 ts = ds.t[seg]
                 along[seg] = np.interp(ts - delay, ts, along[seg])
         preds["along"] = along + out_along
+    elif ds.u_model is not None:
+        preds["along"] = ds.u_model + out_along
     return preds
 
 
@@ -426,7 +445,9 @@ def score(ds: Dataset, f: Fit, metric: str) -> Score:
 def metric_name(ds: Dataset, requested: str | None = None) -> str:
     """The held-out metric: ``surge_speed_open_loop_rmse_mps`` (open-loop prediction of the
     surge speed from the commands), ``ground_velocity_rmse_mps`` (open-loop along-track
-    plus lateral velocity over ground) or, without commands, ``lateral_velocity_rmse_mps``."""
+    plus lateral velocity over ground; a glider's along-track speed is its glide's) or,
+    without commands or a glide, ``lateral_velocity_rmse_mps``."""
     if requested:
         return requested
-    return "ground_velocity_rmse_mps" if ds.has_commands else "lateral_velocity_rmse_mps"
+    has_along = ds.has_commands or ds.u_model is not None
+    return "ground_velocity_rmse_mps" if has_along else "lateral_velocity_rmse_mps"

@@ -20,14 +20,11 @@ import numpy as np
 
 from onboard.offline.closure import model as M
 from onboard.offline.closure import stats
+from onboard.offline.closure.base_models import BY_NAME
+from onboard.offline.closure.dataset import MIN_YAW_RATE_HZ
 from onboard.offline.closure.effects import ALL
 from onboard.offline.closure.select import Selection
 from onboard.offline.plots import break_gaps
-
-BASE_MODEL = ("velocity over ground along the measured heading but for the hull's sway in "
-              "turns (v = x_p r + x_pd r' + k_ur U r + k_urd (U r)'); heading rate equal to the gyro's; first-order surge model "
-              "U' = -a U + b c + c0 from the normalized command through the shaft lag")
-
 
 PARAM_UNITS: dict[str, tuple[tuple[str, str, str, float], ...]] = {
     "water_current": (("north", "m/s", "m/s", 1.0), ("east", "m/s", "m/s", 1.0)),
@@ -193,7 +190,8 @@ def diagnosis(sel: Selection, log: str) -> dict:
                              if c.name == name and c.accepted), None)
             if accepted is not None and accepted.alternatives:
                 entry["evidence"]["ambiguous_with"] = list(accepted.alternatives)
-        elif not ALL[name].applies(sel.split.fit, f.ctx):
+        elif (not ALL[name].applies(sel.split.fit, f.ctx)
+              or BY_NAME[sel.split.fit.base_model].why_not(name)):
             entry["evidence"]["not_testable"] = _why_not(name, sel)
         effects.append(entry)
     if sel.unexplained:
@@ -202,7 +200,9 @@ def diagnosis(sel: Selection, log: str) -> dict:
     a, b, c0 = (float(x) for x in f.base)
     return _clean({
         "log": log,
-        "model": BASE_MODEL + (f"; declared: {', '.join(sel.declared)}" if sel.declared else ""),
+        "model": BY_NAME[sel.split.fit.base_model].description
+                 + (f"; declared: {', '.join(sel.declared)}" if sel.declared else ""),
+        "base_model": sel.split.fit.base_model,
         "split": sel.split.how,
         "base_params": {**({"a": a, "b": b, "c0": c0,
                             "actuator_lag_s": float(sel.actuator_lag_s)}
@@ -226,10 +226,23 @@ def diagnosis(sel: Selection, log: str) -> dict:
     })
 
 
+def needs_yaw_rate(yaw_rate_hz: float) -> str:
+    """Why an effect that needs the gyro is not tried on a log whose yaw rate came at
+    ``yaw_rate_hz`` (0: none): none at all, or too rare to integrate
+    (:data:`onboard.offline.closure.dataset.MIN_YAW_RATE_HZ`)."""
+    if yaw_rate_hz <= 0.0:
+        return "needs a yaw rate (no gyro or attitude rate in the log)"
+    return (f"needs a yaw rate at {MIN_YAW_RATE_HZ:g} Hz or more (the log's comes at "
+            f"{yaw_rate_hz:.3g} Hz: spot values that do not integrate to the heading change)")
+
+
 def _why_not(name: str, sel: Selection) -> str:
     e = ALL[name]
+    outside = BY_NAME[sel.split.fit.base_model].why_not(name)
+    if outside:
+        return outside
     if e.needs_gyro and not sel.split.fit.has_gyro:
-        return "needs a gyro"
+        return needs_yaw_rate(sel.split.fit.yaw_rate_hz)
     if e.needs_commands and not sel.split.fit.has_commands:
         return "needs actuator commands"
     if name == "wave_oscillation":

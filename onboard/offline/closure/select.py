@@ -223,7 +223,7 @@ def _sigma(ds: Dataset, f: M.Fit) -> dict[str, float]:
     for ch, y in targets.items():
         pred = np.zeros(len(ds))
         if ch == "along":
-            pred = M._base_columns(ds) @ f.base
+            pred = M.along_base_output(ds, f)
         elif ch == "lateral":
             pred = M.lateral_base_output(ds, f)
         r = y - pred
@@ -485,9 +485,11 @@ def generic_basis(ds: Dataset, channel: str) -> list[tuple[str, np.ndarray]]:
     """Groups of generic regressors for ``channel``'s residual, by name: what a missing
     effect of any kind would correlate with (heading harmonics, speed, turn rate,
     commands, time and their products), in the channel's own form (the heading channel
-    is integrated from each segment's start, so its regressors are too)."""
+    is integrated from each segment's start, so its regressors are too). The speed is a
+    glider's glide speed where it has one: the measured along-track speed is in the along
+    channel's residual, and a regressor made of it explains its noise."""
     tau = (ds.t - ds.t.mean()) / max(1.0, float(np.ptp(ds.t)))
-    u = np.nan_to_num(ds.along)
+    u = np.nan_to_num(ds.along if ds.u_model is None else ds.u_model)
     groups: list[tuple[str, np.ndarray]] = []
     if channel == "heading":
         s0 = segment_starts(ds)
