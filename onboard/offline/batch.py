@@ -79,7 +79,8 @@ def find_logs(paths: Sequence[str]) -> Found:
     """The logs among ``paths``: a file given is a log (it fails if it cannot be read);
     a folder that is one log (:func:`is_log_dir`: CSV runs, a service recording) is one;
     any other folder is searched, in name order, for the files the readers recognise
-    (:func:`is_log`) and the folders that are logs, the other files listed as skipped."""
+    (:func:`is_log`) and the folders that are logs, the other files listed as skipped.
+    A log found twice (given, and in a folder given) is listed once."""
     found = Found()
     for arg in paths:
         p = Path(arg)
@@ -89,7 +90,10 @@ def find_logs(paths: Sequence[str]) -> Found:
             found.logs.append(str(p))
         else:
             _search(p, found)
-    return found
+    seen: set[Path] = set()
+    unique = [log for log in found.logs
+              if not (Path(log).resolve() in seen or seen.add(Path(log).resolve()))]
+    return Found(unique, found.skipped)
 
 
 def _search(folder: Path, found: Found) -> None:
@@ -169,8 +173,8 @@ def folder_names(logs: Sequence[str]) -> list[str]:
         seen: dict[str, list[int]] = {}
         for i, n in enumerate(names):
             seen.setdefault(n, []).append(i)
-        clash = [i for group in seen.values() if len(group) > 1 for i in group
-                 if depth[i] < len(parts[i])]
+        clash = [i for group in seen.values() if len({parts[j] for j in group}) > 1
+                 for i in group if depth[i] < len(parts[i])]
         if not clash:
             return _numbered(names)
         for i in clash:
@@ -423,7 +427,7 @@ def plan(args) -> tuple[list[Task], Found]:
             f" ({len(found.skipped)} file(s) skipped as not logs)" if found.skipped else ""))
     out = Path(args.out)
     names = folder_names(found.logs)
-    inputs = [*map(Path, found.logs), *existing(args.config)]
+    inputs = [*map(Path, args.logs), *map(Path, found.logs), *existing(args.config)]
     # the logs' folders are checked by their tasks (resuming reuses them)
     check([Output("--out", out, "dir", ())], inputs=inputs)
     check([Output("--out", out / n, "dir", ()) for n in names], inputs=inputs)
