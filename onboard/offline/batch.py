@@ -237,11 +237,12 @@ def _replay_and_diagnose(task: Task, out: Path) -> dict:
     """The replay's (and diagnosis's) figures for the row; raises what failed."""
     from onboard.core.outputs import Output, check, existing
     from onboard.offline import batch_tables
-    from onboard.offline.diagnose import DIAGNOSE_WRITES
     from onboard.offline.replay import REPLAY_WRITES, replay
 
     outs = [Output("--out", out, "dir", (*REPLAY_WRITES, RUN_FILE))]
-    if task.diagnose:
+    if task.diagnose:   # imported only then: model closure's imports take a second
+        from onboard.offline.diagnose import DIAGNOSE_WRITES
+
         outs.append(Output("--out", out / DIAGNOSE_DIR, "dir", DIAGNOSE_WRITES))
     check(outs, force=task.force or _ours(task), inputs=[task.log, *existing(task.configs)])
     for stale in (RUN_FILE, batch_tables.LOG_CURRENT):
