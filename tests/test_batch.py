@@ -102,7 +102,7 @@ def test_current_table_holds_every_published_current(local):
     assert table.column_names == ["name", "vehicle", "t_s", "utc", "lat", "lon", "north",
                                   "east", "std_north", "std_east", "flags"]
     rows = [r for r in table.to_pylist() if r["name"] == "current.tlog"]
-    est = batch_tables._columns(out / "current.tlog" / "estimates.csv")
+    est = batch_tables.read_estimates(out / "current.tlog" / "estimates.csv")
     import numpy as np
 
     published = np.isfinite(est["current.north"]) & np.isfinite(est["current.east"])

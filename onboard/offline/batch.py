@@ -250,8 +250,9 @@ def _replay_and_diagnose(task: Task, out: Path) -> dict:
     cfg, note = _config(task)
     summary = replay(task.log, cfg, out, config_note=note, plot=False)
     clock = batch_tables.clock_of(task.log, cfg)
-    figures = batch_tables.replay_figures(summary, out / "estimates.csv", clock)
-    batch_tables.write_log_current(out, summary, clock)
+    est = batch_tables.read_estimates(out / "estimates.csv")
+    figures = batch_tables.replay_figures(summary, est, clock)
+    batch_tables.write_log_current(out, summary, est, clock)
     if task.diagnose:
         figures.update(_diagnose(task, cfg, out / DIAGNOSE_DIR))
     return figures
@@ -385,6 +386,7 @@ class Progress:
                   f"{now - self.t0:.0f} s", end="", file=sys.stderr, flush=True)
 
     def close(self) -> None:
+        """End the line redrawn in place (a terminal)."""
         if self.tty and self.done:
             print(file=sys.stderr)
 

@@ -78,8 +78,9 @@ def _t0(summary: dict) -> float:
     return segments[0]["start"] if segments else summary["time_span"]["start"]
 
 
-def _columns(csv_path: Path) -> dict[str, np.ndarray]:
-    """estimates.csv as float columns (NaN where empty)."""
+def read_estimates(csv_path: Path) -> dict[str, np.ndarray]:
+    """estimates.csv as float columns (NaN where empty), read once for the row and the
+    current (:func:`onboard.offline.plots.read_columns`)."""
     from onboard.offline.plots import read_columns
 
     return {k: np.asarray(v, dtype=float) for k, v in read_columns(csv_path).items()}
@@ -90,9 +91,10 @@ def _median(x: np.ndarray) -> float | None:
     return float(np.median(x)) if x.size else None
 
 
-def replay_figures(summary: dict, csv_path: Path, clock) -> dict:
+def replay_figures(summary: dict, cols: dict[str, np.ndarray], clock) -> dict:
     """The row's figures of a replay: what summary.json says, the UTC start, and the key
-    figures of estimates.csv (:func:`_estimate_figures`)."""
+    figures of its estimates.csv ``cols`` (:func:`read_estimates`,
+    :func:`_estimate_figures`)."""
     warnings: dict[str, int] = {}
     for w in summary["warnings"]:
         warnings[w["code"]] = warnings.get(w["code"], 0) + 1
@@ -106,7 +108,7 @@ def replay_figures(summary: dict, csv_path: Path, clock) -> dict:
            "samples": summary["read"]["samples"], "rows": summary["rows"],
            "warnings": warnings, "n_warnings": len(summary["warnings"]),
            "origin_lat_deg": origin.get("lat_deg"), "origin_lon_deg": origin.get("lon_deg")}
-    row.update(_estimate_figures(_columns(csv_path), summary["pipelines"]))
+    row.update(_estimate_figures(cols, summary["pipelines"]))
     return row
 
 
@@ -218,13 +220,13 @@ def _flag_spans(warnings: Sequence[dict]) -> list[tuple[str, float, float]]:
     return spans
 
 
-def write_log_current(out: Path, summary: dict, clock) -> None:
-    """``out/current.parquet``: the log's current rows (:func:`current_rows`), with its
-    vehicle and folder name."""
+def write_log_current(out: Path, summary: dict, est: dict[str, np.ndarray], clock) -> None:
+    """``out/current.parquet``: the log's current rows (:func:`current_rows` of its
+    estimates.csv ``est``), with its vehicle and folder name."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    cols = current_rows(_columns(out / "estimates.csv"), summary, clock)
+    cols = current_rows(est, summary, clock)
     n = len(cols["t_s"])
     table = pa.table({"name": [out.name] * n, "vehicle": [summary["vehicle_id"]] * n,
                       **{k: v for k, v in cols.items()}}, schema=CURRENT_SCHEMA())
