@@ -5,6 +5,7 @@ statuses; the season report; the docs' queries (docs/batch.md) run on the tables
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -158,6 +159,16 @@ def test_names_that_collide_get_their_own_folders():
     assert batch.folder_names(["a.tlog", "a.tlog"]) == ["a.tlog", "a.tlog-2"]
 
 
+def test_a_worker_that_dies_fails_its_log_alone(season):
+    from concurrent.futures import ProcessPoolExecutor
+
+    task = batch.Task(str(season / "gnss-compass.nmea"), "unused", "gnss-compass.nmea")
+    with ProcessPoolExecutor(max_workers=1) as pool:
+        row = batch._result(pool.submit(os._exit, 1), task)
+    assert row["status"] == "failed" and row["name"] == "gnss-compass.nmea"
+    assert row["error"].startswith("the worker failed: BrokenProcessPool")
+
+
 def test_bad_usage_and_nothing_readable_exit_2(season, tmp_path):
     r = onboard("batch", str(tmp_path / "missing"), "--out", str(tmp_path / "o1"))
     assert r.returncode == 2 and "no such file or directory" in r.stderr
@@ -173,6 +184,9 @@ def test_bad_usage_and_nothing_readable_exit_2(season, tmp_path):
     assert "broken.tlog" in r.stdout.strip().splitlines()[-1]
     r = onboard("batch", str(season / "a"), "--out", str(season / "a" / "out"))
     assert r.returncode == 2 and "inside the input directory" in r.stderr
+    r = onboard("batch", str(season / "a"), "--out", str(tmp_path / "o5"), "--config",
+                str(tmp_path / "nowhere.toml"))
+    assert r.returncode == 2 and f"--config {tmp_path / 'nowhere.toml'}" in r.stderr
 
 
 def test_on_a_dask_local_cluster(season, local, tmp_path):

@@ -329,9 +329,23 @@ def run_local(tasks: Sequence[Task], jobs: int) -> Iterator[dict]:
             yield run_log(t)
         return
     with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
-        futures = [pool.submit(run_log, t) for t in tasks]
+        futures = {pool.submit(run_log, t): t for t in tasks}
         for f in as_completed(futures):
-            yield f.result()
+            yield _result(f, futures[f])
+
+
+def _result(future, task: Task) -> dict:
+    """The row of a finished ``future`` of ``task``; a worker that died under it (killed,
+    out of memory) fails that log alone."""
+    try:
+        return future.result()
+    except Exception as err:  # noqa: BLE001 - BrokenProcessPool, KilledWorker, ...
+        from onboard.offline import batch_tables
+
+        row = batch_tables.empty_row(task.log, task.name)
+        row.update(status="failed", error=one_line(f"the worker failed: "
+                                                   f"{type(err).__name__}: {err}"))
+        return row
 
 
 def run_dask(tasks: Sequence[Task], address: str) -> Iterator[dict]:
@@ -350,8 +364,9 @@ def run_dask(tasks: Sequence[Task], address: str) -> Iterator[dict]:
     with client:
         futures = client.map(run_log, tasks, key=[f"onboard-batch-{t.name}" for t in tasks],
                              pure=False)
+        task_of = dict(zip((f.key for f in futures), tasks))
         for f in as_completed(futures):
-            yield f.result()
+            yield _result(f, task_of[f.key])
 
 
 class Progress:
@@ -434,13 +449,14 @@ def plan(args) -> tuple[list[Task], Found]:
     # the logs' folders are checked by their tasks (resuming reuses them)
     check([Output("--out", out, "dir", ())], inputs=inputs)
     check([Output("--out", out / n, "dir", ()) for n in names], inputs=inputs)
-    for cfg_file in args.config or []:
+    if args.config:   # a config that does not load is bad usage, said before any work
         from onboard.core import config as configmod
 
         try:
-            configmod.load(cfg_file)
-        except Exception as err:  # noqa: BLE001 - a config that does not load is usage
-            raise UsageError(f"--config {cfg_file}: {one_line(str(err))}") from None
+            configmod.load_all(args.config)
+        except Exception as err:  # noqa: BLE001 - whatever the loader refuses
+            raise UsageError(f"--config {' '.join(args.config)}: {one_line(str(err))}"
+                             ) from None
     tasks = [Task(str(log), str(out / n), n, tuple(args.config or ()),
                   bool(args.diagnose), bool(args.force))
              for log, n in zip(found.logs, names)]

@@ -229,12 +229,13 @@ def write_log_current(out: Path, summary: dict, est: dict[str, np.ndarray], cloc
     cols = current_rows(est, summary, clock)
     n = len(cols["t_s"])
     table = pa.table({"name": [out.name] * n, "vehicle": [summary["vehicle_id"]] * n,
-                      **{k: v for k, v in cols.items()}}, schema=CURRENT_SCHEMA())
+                      **{k: v for k, v in cols.items()}}, schema=current_schema())
     pq.write_table(table, out / LOG_CURRENT)
 
 
-def CURRENT_SCHEMA():  # noqa: N802 - a constant that needs pyarrow, built when asked
-    """current.parquet's schema (docs/batch.md)."""
+def current_schema():
+    """current.parquet's schema (docs/batch.md); built when asked (pyarrow is imported
+    only by a batch)."""
     import pyarrow as pa
 
     f64 = pa.float64()
@@ -244,7 +245,7 @@ def CURRENT_SCHEMA():  # noqa: N802 - a constant that needs pyarrow, built when 
                       ("std_east", f64), ("flags", pa.list_(pa.string()))])
 
 
-def RUNS_SCHEMA():  # noqa: N802
+def runs_schema():
     """runs.parquet's schema (docs/batch.md), its columns in :data:`ROW_KEYS` order."""
     import pyarrow as pa
 
@@ -276,10 +277,10 @@ def write_tables(out: Path, rows: Sequence[dict]) -> list[str]:
     data["utc_start"] = [_utc(x) for x in data["utc_start"]]
     for k in ("warnings", "availability", "effect_params"):
         data[k] = [list((x or {}).items()) for x in data[k]]
-    pq.write_table(pa.table(data, schema=RUNS_SCHEMA()), out / "runs.parquet")
-    parts = [pq.read_table(out / r["name"] / LOG_CURRENT, schema=CURRENT_SCHEMA())
+    pq.write_table(pa.table(data, schema=runs_schema()), out / "runs.parquet")
+    parts = [pq.read_table(out / r["name"] / LOG_CURRENT, schema=current_schema())
              for r in rows if r["status"] == "ok" and (out / r["name"] / LOG_CURRENT).exists()]
-    current = pa.concat_tables(parts) if parts else CURRENT_SCHEMA().empty_table()
+    current = pa.concat_tables(parts) if parts else current_schema().empty_table()
     pq.write_table(current, out / "current.parquet")
     return [str(out / "runs.parquet"), str(out / "current.parquet")]
 
