@@ -302,3 +302,23 @@ def test_real_logs_beside_notes(shared_data, tmp_path):
         assert cli_main(["replay", row["log"], "--out", str(single), "--no-plot"]) == 0
         assert (single / "estimates.csv").read_bytes() == \
             (out / name / "estimates.csv").read_bytes(), name
+
+
+def test_progress_redraws_one_line_on_a_terminal_and_prints_a_line_per_log_otherwise(
+        monkeypatch, capsys):
+    monkeypatch.setattr(batch, "PROGRESS_EVERY_S", 0.05)
+    p = batch.Progress(2, tty=True)
+    import time
+
+    time.sleep(0.2)   # a long log: the elapsed time is redrawn while it runs
+    p.add({"status": "ok", "name": "x", "duration_s": 1800.0})
+    p.add({"status": "failed", "name": "y", "error": "bad"})
+    p.close()
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.count("\r") >= 3
+    assert err.rstrip().endswith("2/2 logs, 1 failed, 0.50 log-h, 0 s")
+    p = batch.Progress(2, tty=False)
+    p.add({"status": "ok", "name": "x"}, skipped=True)
+    p.add({"status": "failed", "name": "y", "error": "bad"})
+    p.close()
+    assert capsys.readouterr().err == "[1/2] skipped (done before) x\n[2/2] failed y: bad\n"

@@ -47,8 +47,8 @@ LOG_SUFFIXES = frozenset({".tlog", ".bin", ".mcap", ".onbrec"})
 log), where any other file the readers do not recognise is skipped (not a log)."""
 EXIT_SOME_FAILED = 3
 """Exit status when some logs failed and the others were replayed."""
-PROGRESS_EVERY_S = 0.5
-"""The progress line on a terminal is redrawn at most this often (s)."""
+PROGRESS_EVERY_S = 1.0
+"""The progress line on a terminal is redrawn this often while logs run (s)."""
 SECONDS_PER_HOUR = 3600.0
 
 
@@ -370,40 +370,58 @@ def run_dask(tasks: Sequence[Task], address: str) -> Iterator[dict]:
 
 
 class Progress:
-    """The batch's progress on stderr: one line redrawn in place on a terminal (logs
-    done of all, failed, log-hours, elapsed), a line per log otherwise."""
+    """The batch's progress on stderr: on a terminal one line redrawn in place (a bar,
+    logs done of all, failed, log-hours replayed, elapsed), every
+    :data:`PROGRESS_EVERY_S` while logs run (a long log shows its time passing) and at
+    each log done; otherwise a line per log as it finishes."""
+
+    BAR_WIDTH = 30
+    """Characters of the bar."""
 
     def __init__(self, total: int, tty: bool) -> None:
+        import threading
+
         self.total, self.tty = total, tty
         self.done = self.failed = 0
         self.log_s = 0.0
         self.t0 = time.monotonic()
-        self.last = 0.0
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        if tty:
+            threading.Thread(target=self._tick, daemon=True).start()
 
     def add(self, row: dict, skipped: bool = False) -> None:
         """Count ``row`` and show it."""
-        self.done += 1
-        self.failed += row["status"] != "ok"
-        self.log_s += row.get("duration_s") or 0.0
-        state = "skipped (done before)" if skipped else row["status"]
-        if not self.tty:
-            why = f": {row['error']}" if row.get("error") else ""
-            print(f"[{self.done}/{self.total}] {state} {row['name']}{why}", file=sys.stderr,
-                  flush=True)
+        with self._lock:
+            self.done += 1
+            self.failed += row["status"] != "ok"
+            self.log_s += row.get("duration_s") or 0.0
+        if self.tty:
+            self._draw()
             return
-        now = time.monotonic()
-        if now - self.last >= PROGRESS_EVERY_S or self.done == self.total:
-            self.last = now
-            width = 30
-            filled = round(width * self.done / max(self.total, 1))
-            print(f"\r[{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} "
-                  f"logs, {self.failed} failed, {self.log_s / SECONDS_PER_HOUR:.2f} log-h, "
-                  f"{now - self.t0:.0f} s", end="", file=sys.stderr, flush=True)
+        state = "skipped (done before)" if skipped else row["status"]
+        why = f": {row['error']}" if row.get("error") else ""
+        print(f"[{self.done}/{self.total}] {state} {row['name']}{why}", file=sys.stderr,
+              flush=True)
+
+    def _tick(self) -> None:
+        while not self._stop.wait(PROGRESS_EVERY_S):
+            self._draw()
+
+    def _draw(self) -> None:
+        with self._lock:
+            filled = round(self.BAR_WIDTH * self.done / max(self.total, 1))
+            print(f"\r[{'#' * filled}{'.' * (self.BAR_WIDTH - filled)}] {self.done}/"
+                  f"{self.total} logs, {self.failed} failed, "
+                  f"{self.log_s / SECONDS_PER_HOUR:.2f} log-h, "
+                  f"{time.monotonic() - self.t0:.0f} s", end="", file=sys.stderr, flush=True)
 
     def close(self) -> None:
-        """End the line redrawn in place (a terminal)."""
-        if self.tty and self.done:
-            print(file=sys.stderr)
+        """Stop redrawing and end the line (a terminal)."""
+        self._stop.set()
+        if self.tty:
+            with self._lock:
+                print(file=sys.stderr)
 
 
 def run_batch(tasks: Sequence[Task], jobs: int, scheduler: str | None,
