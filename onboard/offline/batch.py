@@ -362,8 +362,11 @@ def run_dask(tasks: Sequence[Task], address: str) -> Iterator[dict]:
         raise UsageError(f"--scheduler {address}: cannot connect: {one_line(str(err))}"
                          ) from None
     with client:
-        futures = client.map(run_log, tasks, key=[f"onboard-batch-{t.name}" for t in tasks],
-                             pure=False)
+        import uuid
+
+        run = uuid.uuid4().hex[:8]   # two batches on one cluster keep their tasks apart
+        futures = client.map(run_log, tasks, pure=False,
+                             key=[f"onboard-batch-{run}-{t.name}" for t in tasks])
         task_of = dict(zip((f.key for f in futures), tasks))
         for f in as_completed(futures):
             yield _result(f, task_of[f.key])
