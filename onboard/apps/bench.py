@@ -20,6 +20,13 @@ key                             what                                            
 ``startup_to_ready_s``          process start to READY (s)                                 <= 1.5
 ``mpc_solve_p99_ms``            NMPC solve time on the BlueROV2 circle, p99 (ms)           < 50
 ``pipeline_step_us``            per-pipeline step cost, µs per engine tick (context)       --
+``batch_log_hours_per_wall_``   ``onboard batch`` throughput: log-hours replayed per       context
+``minute``                      wall-clock minute with 2 local workers, on
+                                :data:`BATCH_LOGS` copies of a rudder boat's tlog (the
+                                whole command: finding the logs, the replays, the
+                                tables); the figure with 1 worker, the speed-up and the
+                                CPU time per log-hour are in the detail (``batch``) and
+                                on the table's last lines. Added by issue 29 (additive).
 ==============================  =========================================================  =========
 
 A piece whose module has not landed (or fails) gives ``null`` in the JSON and
@@ -62,6 +69,7 @@ KEYS: tuple[str, ...] = (
     "startup_to_ready_s",
     "mpc_solve_p99_ms",
     "pipeline_step_us",
+    "batch_log_hours_per_wall_minute",
 )
 """The JSON keys of ``onboard bench --json``, in table order (a contract: tools
 reading the JSON rely on these names)."""
@@ -76,6 +84,7 @@ GOALS: dict[str, tuple[str, float | None]] = {
     "startup_to_ready_s": ("<=", 1.5),
     "mpc_solve_p99_ms": ("<", 50.0),
     "pipeline_step_us": ("", None),
+    "batch_log_hours_per_wall_minute": ("", None),
 }
 """Goal of each figure: (comparison, bound); None = context only."""
 
@@ -528,6 +537,62 @@ def bench_pipelines(s: Settings, rep: Report) -> None:
                                "errors": errors}
 
 
+BATCH_LOGS = 4
+"""Logs in the batch of ``batch_log_hours_per_wall_minute``: copies of one tlog (a batch
+of identical logs keeps the two workers equally loaded)."""
+BATCH_LOG_FRACTION = 1 / 3
+"""Each batch log is this fraction of ``ONBOARD_BENCH_MINUTES`` long (5 min of 15)."""
+BATCH_WORKERS = (1, 2)
+"""The local workers the batch is timed with; the key is the last one's figure."""
+
+
+def bench_batch(s: Settings, workdir: Path, rep: Report) -> None:
+    """``batch_log_hours_per_wall_minute``: ``onboard batch --force`` of
+    :data:`BATCH_LOGS` copies of a tlog, with 1 and with 2 local workers, interleaved
+    (``repeats`` rounds, median); log-hours from runs.parquet's ``duration_s``."""
+    from onboard.cli import main as cli_main
+
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise NotAvailable("pyarrow missing (pip install 'onboard[batch]')") from None
+    logs = workdir / "batch-logs"
+    logs.mkdir()
+    made = make_tlog(logs / "log-0.tlog", s.minutes * 60.0 * BATCH_LOG_FRACTION, seed=1)
+    for k in range(1, BATCH_LOGS):
+        (logs / f"log-{k}.tlog").write_bytes((logs / "log-0.tlog").read_bytes())
+    out = workdir / "batch-out"
+
+    def one_batch(jobs: int) -> dict[str, float]:
+        w, c = time.perf_counter(), time.process_time()
+        status = _quiet(lambda: cli_main(["batch", str(logs), "--out", str(out), "--jobs",
+                                          str(jobs), "--force"]))
+        w = time.perf_counter() - w
+        if status != 0:
+            raise RuntimeError(f"onboard batch exited {status}")
+        rows = pq.read_table(out / "runs.parquet").to_pylist()
+        hours = sum(r["duration_s"] for r in rows) / 3600.0
+        return {"wall_s": w, "parent_cpu_s": time.process_time() - c,
+                "workers_cpu_s": sum(r["cpu_s"] for r in rows), "log_hours": hours,
+                "per_wall_minute": hours / (w / 60.0)}
+
+    one_batch(1)  # warm-up: the imports of the in-process worker are not what is measured
+    runs: dict[int, list[dict[str, float]]] = {j: [] for j in BATCH_WORKERS}
+    for i in range(max(1, s.repeats // 2)):
+        for j in (BATCH_WORKERS if i % 2 == 0 else BATCH_WORKERS[::-1]):
+            runs[j].append(one_batch(j))
+    fig = {j: statistics.median(r["per_wall_minute"] for r in runs[j]) for j in runs}
+    rep.values["batch_log_hours_per_wall_minute"] = round(fig[BATCH_WORKERS[-1]], 3)
+    rep.detail["batch"] = {
+        "log": made, "logs": BATCH_LOGS, "log_hours": runs[1][0]["log_hours"],
+        "per_wall_minute": {str(j): round(v, 3) for j, v in fig.items()},
+        "speedup": round(fig[BATCH_WORKERS[-1]] / fig[BATCH_WORKERS[0]], 3),
+        "workers_cpu_s_per_log_hour": round(statistics.median(
+            r["workers_cpu_s"] / r["log_hours"] for rs in runs.values() for r in rs), 2),
+        "runs": {str(j): [{k: round(v, 3) for k, v in r.items()} for r in rs]
+                 for j, rs in runs.items()}}
+
+
 def collect(s: Settings | None = None, progress: Callable[[str], None] | None = None) -> Report:
     """Measure everything; a failing or missing piece becomes ``None`` with its reason."""
     s = s or Settings.from_env()
@@ -542,6 +607,8 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
             ("service", SERVICE_KEYS, lambda: bench_service(s, rep)),
             ("MPC solve", ("mpc_solve_p99_ms",), lambda: bench_mpc(s, rep)),
             ("pipeline steps", ("pipeline_step_us",), lambda: bench_pipelines(s, rep)),
+            ("batch throughput", ("batch_log_hours_per_wall_minute",),
+             lambda: bench_batch(s, Path(tmp), rep)),
         ]
         for label, keys, fn in steps:
             say(f"measuring {label} ...")
@@ -626,6 +693,13 @@ def table(rep: Report) -> str:
     if a:
         lines.append(f"AIE axis step {a['aie_axis_step_us']:.1f} us, filterpy KF(3) "
                      f"predict+update {a['filterpy_kf3_step_us']:.1f} us")
+    bt = rep.detail.get("batch")
+    if bt:
+        lines.append(f"batch: {bt['logs']} logs, {bt['log_hours']:.2f} log-h; log-hours per "
+                     "wall minute " + ", ".join(f"{v:g} with {k} worker(s)" for k, v in
+                                                bt["per_wall_minute"].items())
+                     + f" (speed-up {bt['speedup']:g}); "
+                     f"{bt['workers_cpu_s_per_log_hour']:g} s CPU per log-hour")
     if rep.detail.get("settings", {}).get("fast"):
         lines.append("(fast mode: ONBOARD_BENCH_FAST is set; figures are not meaningful)")
     return "\n".join(lines)
