@@ -109,6 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default ./replay-out; created if missing)")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--no-plot", action="store_true", help="skip the track figure")
+    p.add_argument("--pipelines", metavar="NAMES",
+                   help="run only these pipelines (comma-separated, e.g. current); the "
+                        "others are off, as with enabled = false in the config; each "
+                        "one's estimates are those of a replay with every pipeline")
     p.add_argument("--mcap", metavar="FILE", help="also write the estimates as MCAP (the "
                    "live Zenoh channels and schemas; needs the mcap extra)")
     p.add_argument("--geojson", metavar="FILE",
