@@ -152,3 +152,21 @@ def test_tlog_reader_memory_does_not_grow_with_the_file(tmp_path):
                          check=True)
     grown_mb = float(out.stdout)
     assert grown_mb < size_mb / 2, grown_mb
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 3, 7, 64, 1 << 20])
+def test_text_lines_read_in_chunks_split_as_the_whole_text(tmp_path, chunk):
+    """A line, or a CR LF, cut by a chunk's end is carried over: the lines are those of
+    the whole text split at CR LF, LF and CR."""
+    from onboard.drivers import textlog
+
+    rng = np.random.default_rng(chunk)
+    alphabet = np.frombuffer(b"ab$,\r\n\r\n", np.uint8)
+    for k in range(30):
+        data = bytes(rng.choice(alphabet, size=int(rng.integers(0, 200))))
+        if k == 0:
+            data = b"$GPRMC,1\r\n$GPGGA,2\r\n\r\r\n\n"
+        path = tmp_path / f"cap{k}.txt"
+        path.write_bytes(data)
+        whole = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n").split(b"\n")
+        assert list(textlog._read_lines(path, chunk)) == whole, data

@@ -20,6 +20,11 @@ key                             what                                            
 ``startup_to_ready_s``          process start to READY (s)                                 <= 1.5
 ``mpc_solve_p99_ms``            NMPC solve time on the BlueROV2 circle, p99 (ms)           < 50
 ``pipeline_step_us``            per-pipeline step cost, µs per engine tick (context)       --
+``replay_peak_rss_mb``          peak resident memory (MB) of ``onboard replay --no-plot``  <= 100
+                                of a 2-h 50 Hz-IMU tlog, in a fresh process (a log's
+                                length must not show: the readers stream it)
+``diagnose_peak_rss_mb``        peak resident memory (MB) of ``onboard diagnose`` of the   <= 400
+                                same log, in a fresh process
 ==============================  =========================================================  =========
 
 A piece whose module has not landed (or fails) gives ``null`` in the JSON and
@@ -28,7 +33,8 @@ A piece whose module has not landed (or fails) gives ``null`` in the JSON and
 Environment: ``ONBOARD_BENCH_FAST=1`` shortens everything (a 20 s log, few repeats; for the
 test suite, figures then only show the command works), ``ONBOARD_BENCH_REPEATS=N`` sets the
 number of interleaved replay/parse pairs (default 5), ``ONBOARD_BENCH_MINUTES`` the log
-length (default 15), ``ONBOARD_BENCH_DETAIL=FILE`` writes every raw measurement behind the
+length (default 15), ``ONBOARD_BENCH_MEMORY_HOURS`` the length of the memory figures' log
+(default 2; 3 minutes when fast), ``ONBOARD_BENCH_DETAIL=FILE`` writes every raw measurement behind the
 figures (each pair's CPU and wall times, the replay breakdown, the service's extra figures)
 as JSON.
 """
@@ -62,6 +68,8 @@ KEYS: tuple[str, ...] = (
     "startup_to_ready_s",
     "mpc_solve_p99_ms",
     "pipeline_step_us",
+    "replay_peak_rss_mb",
+    "diagnose_peak_rss_mb",
 )
 """The JSON keys of ``onboard bench --json``, in table order (a contract: tools
 reading the JSON rely on these names)."""
@@ -76,6 +84,8 @@ GOALS: dict[str, tuple[str, float | None]] = {
     "startup_to_ready_s": ("<=", 1.5),
     "mpc_solve_p99_ms": ("<", 50.0),
     "pipeline_step_us": ("", None),
+    "replay_peak_rss_mb": ("<=", 100.0),
+    "diagnose_peak_rss_mb": ("<=", 400.0),
 }
 """Goal of each figure: (comparison, bound); None = context only."""
 
@@ -104,6 +114,7 @@ class Settings:
     mpc_solves: int = 200
     service_s: float = 30.0
     pipeline_sim_s: float = 120.0
+    memory_hours: float = 2.0
 
     @classmethod
     def from_env(cls) -> "Settings":
@@ -111,11 +122,14 @@ class Settings:
         ``ONBOARD_BENCH_MINUTES`` and ``ONBOARD_BENCH_REPEATS`` (see the module docstring)."""
         fast = os.environ.get("ONBOARD_BENCH_FAST", "") not in ("", "0")
         s = cls(fast=True, minutes=20 / 60, repeats=1, aie_steps=500, aie_repeats=1,
-                mpc_solves=5, service_s=1.0, pipeline_sim_s=3.0) if fast else cls()
+                mpc_solves=5, service_s=1.0, pipeline_sim_s=3.0,
+                memory_hours=0.05) if fast else cls()
         if os.environ.get("ONBOARD_BENCH_MINUTES"):
             s.minutes = float(os.environ["ONBOARD_BENCH_MINUTES"])
         if os.environ.get("ONBOARD_BENCH_REPEATS"):
             s.repeats = max(1, int(os.environ["ONBOARD_BENCH_REPEATS"]))
+        if os.environ.get("ONBOARD_BENCH_MEMORY_HOURS"):
+            s.memory_hours = float(os.environ["ONBOARD_BENCH_MEMORY_HOURS"])
         return s
 
 
@@ -542,6 +556,7 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
             ("service", SERVICE_KEYS, lambda: bench_service(s, rep)),
             ("MPC solve", ("mpc_solve_p99_ms",), lambda: bench_mpc(s, rep)),
             ("pipeline steps", ("pipeline_step_us",), lambda: bench_pipelines(s, rep)),
+            ("memory", MEMORY_KEYS, lambda: bench_memory(s, Path(tmp), rep)),
         ]
         for label, keys, fn in steps:
             say(f"measuring {label} ...")
@@ -554,6 +569,50 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
                 rep.missing(keys, f"failed: {type(err).__name__}: {err}")
             rep.detail.setdefault("bench_wall_s", {})[label] = round(time.perf_counter() - t0, 2)
     return rep
+
+
+# --------------------------------------------------------------------------- memory
+
+MEMORY_KEYS = ("replay_peak_rss_mb", "diagnose_peak_rss_mb")
+"""The figures of :func:`bench_memory`."""
+
+
+def peak_rss_of(argv: list[str]) -> dict[str, float]:
+    """Run ``argv`` in a fresh process (output discarded) and return its own peak resident
+    memory (MB, ``ru_maxrss`` of that child alone, from ``os.wait4``) and CPU time (s).
+    Raises RuntimeError when it fails."""
+    import subprocess
+
+    with tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, ru = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        if proc.returncode != 0:
+            err.seek(0)
+            tail = err.read().decode(errors="replace").strip().splitlines()[-1:]
+            raise RuntimeError(f"{' '.join(argv[2:4])} exited {proc.returncode}: {tail}")
+    return {"peak_rss_mb": round(ru.ru_maxrss / 1024.0, 1),
+            "cpu_s": round(ru.ru_utime + ru.ru_stime, 2)}
+
+
+def bench_memory(s: Settings, workdir: Path, rep: Report) -> None:
+    """``replay_peak_rss_mb``, ``diagnose_peak_rss_mb``: ``onboard replay --no-plot`` and
+    ``onboard diagnose`` of a ``s.memory_hours`` log (:func:`make_tlog`), each in a fresh
+    process."""
+    log = workdir / "memory.tlog"
+    t0 = time.perf_counter()
+    made = make_tlog(log, s.memory_hours * 3600.0)
+    made["generate_s"] = round(time.perf_counter() - t0, 2)
+    made["bytes"] = log.stat().st_size
+    cli = [sys.executable, "-m", "onboard"]
+    replay = peak_rss_of(cli + ["replay", str(log), "--no-plot", "--force",
+                                "--out", str(workdir / "memory-replay")])
+    diagnose = peak_rss_of(cli + ["diagnose", str(log), "--force",
+                                  "--out", str(workdir / "memory-diagnose")])
+    rep.values["replay_peak_rss_mb"] = replay["peak_rss_mb"]
+    rep.values["diagnose_peak_rss_mb"] = diagnose["peak_rss_mb"]
+    rep.detail["memory"] = {"log": made, "log_hours": s.memory_hours,
+                            "replay": replay, "diagnose": diagnose}
 
 
 # --------------------------------------------------------------------------- output
