@@ -23,7 +23,8 @@ def _dense_lateral_shares(t, north, east, psi, y, periods, directions, starts, v
     ind[np.cumsum(bid), np.arange(n)] = 1.0
     w = 2.0 * math.pi / periods
     k = w * w / wo.GRAVITY
-    ph = np.outer(t, w) - np.outer(north, k * np.cos(directions)) - np.outer(east, k * np.sin(directions))
+    ph = (np.outer(t, w) - np.outer(north, k * np.cos(directions))
+          - np.outer(east, k * np.sin(directions)))
     gain = 1.0 - (np.outer(v_n, np.cos(directions)) + np.outer(v_e, np.sin(directions))) * (k / w)
     s, c = gain * np.sin(ph), gain * np.cos(ph)
     out = np.zeros(len(periods))
