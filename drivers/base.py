@@ -96,6 +96,16 @@ class MappedLog:
         self.next_release = self._step if self._can_release else 1 << 62
         """Position from which :meth:`release` has something to do."""
 
+    @classmethod
+    def of_bytes(cls, data: bytes, path: str | os.PathLike = "") -> "MappedLog":
+        """Records already in memory (an MCAP's tlog records), read the same way; nothing
+        to release."""
+        log = cls.__new__(cls)
+        log.path, log.data = path, data
+        log._step, log._can_release, log._released = 0, False, 0
+        log.next_release = 1 << 62
+        return log
+
     def release(self, pos: int) -> None:
         """Hand back the whole pages before ``pos`` when ``pos`` has passed
         :attr:`next_release`."""

@@ -165,8 +165,12 @@ class TlogReader:
     release_bytes = RELEASE_BYTES
     """Pages behind the reader are released every this many bytes (:class:`MappedLog`)."""
 
+    def _open(self) -> MappedLog:
+        """The log's bytes, mapped (:class:`MappedLog`)."""
+        return MappedLog(self.path, self.release_bytes)
+
     def __iter__(self) -> Iterator[Sample]:
-        mapped = MappedLog(self.path, self.release_bytes)
+        mapped = self._open()
         try:
             yield from self._walk(mapped)
         finally:
