@@ -40,8 +40,8 @@ on. The rows
 between two marks are spread evenly: row ``j`` of ``n`` gets ``t_k + j (t_k+1 - t_k) / n``;
 rows before the first mark and after the last are placed at the row rate. The GPS sentences reach the logger
 after their epoch (4800 baud), so rows are stamped up to ~0.3 s late relative to UTC; the
-offset is nearly constant within a capture. The reader holds the whole capture in memory
-and yields all samples sorted by time.
+offset is nearly constant within a capture. The reader reads the capture line by line but
+holds its samples until the end, and yields them sorted by time.
 
 Row -> samples (source ``"arduino"``; the NMEA samples have source ``"nmea"``):
 
