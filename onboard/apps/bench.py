@@ -30,6 +30,11 @@ key                             what                                            
 ``boat_replay_x_realtime``      seconds of the rudder-boat tlog replayed per CPU second    >= 500
                                 (the same log, one process, every pipeline; median of
                                 3 replays)
+``replay_peak_rss_mb``          peak resident memory (MB) of ``onboard replay --no-plot``  <= 100
+                                of a 2-h 50 Hz-IMU tlog, in a fresh process (a log's
+                                length must not show: the readers stream it)
+``diagnose_peak_rss_mb``        peak resident memory (MB) of ``onboard diagnose`` of the   <= 400
+                                same log, in a fresh process
 ==============================  =========================================================  =========
 
 A piece whose module has not landed (or fails) gives ``null`` in the JSON and
@@ -38,9 +43,10 @@ A piece whose module has not landed (or fails) gives ``null`` in the JSON and
 Environment: ``ONBOARD_BENCH_FAST=1`` shortens everything (a 20 s log, few repeats; for the
 test suite, figures then only show the command works), ``ONBOARD_BENCH_REPEATS=N`` sets the
 number of interleaved replay/parse pairs (default 5), ``ONBOARD_BENCH_MINUTES`` the log
-length (default 15), ``ONBOARD_BENCH_DETAIL=FILE`` writes every raw measurement behind the
-figures (each pair's CPU and wall times, the replay breakdown, the service's extra figures)
-as JSON.
+length (default 15), ``ONBOARD_BENCH_MEMORY_HOURS`` the length of the memory figures' log
+(default 2; 72 s of :func:`synthesize_tlog` when fast), ``ONBOARD_BENCH_DETAIL=FILE``
+writes every raw measurement behind the figures (each pair's CPU and wall times, the
+replay breakdown, the service's extra figures, the memory runs' CPU times) as JSON.
 """
 
 from __future__ import annotations
@@ -74,6 +80,8 @@ KEYS: tuple[str, ...] = (
     "pipeline_step_us",
     "batch_log_hours_per_wall_minute",
     "boat_replay_x_realtime",
+    "replay_peak_rss_mb",
+    "diagnose_peak_rss_mb",
 )
 """The JSON keys of ``onboard bench --json``, in table order (a contract: tools
 reading the JSON rely on these names)."""
@@ -90,6 +98,8 @@ GOALS: dict[str, tuple[str, float | None]] = {
     "pipeline_step_us": ("", None),
     "batch_log_hours_per_wall_minute": ("", None),
     "boat_replay_x_realtime": (">=", 500.0),
+    "replay_peak_rss_mb": ("<=", 100.0),
+    "diagnose_peak_rss_mb": ("<=", 400.0),
 }
 """Goal of each figure: (comparison, bound); None = context only."""
 
@@ -118,6 +128,7 @@ class Settings:
     mpc_solves: int = 200
     service_s: float = 30.0
     pipeline_sim_s: float = 120.0
+    memory_hours: float = 2.0
 
     @classmethod
     def from_env(cls) -> "Settings":
@@ -125,11 +136,14 @@ class Settings:
         ``ONBOARD_BENCH_MINUTES`` and ``ONBOARD_BENCH_REPEATS`` (see the module docstring)."""
         fast = os.environ.get("ONBOARD_BENCH_FAST", "") not in ("", "0")
         s = cls(fast=True, minutes=20 / 60, repeats=1, aie_steps=500, aie_repeats=1,
-                mpc_solves=5, service_s=1.0, pipeline_sim_s=3.0) if fast else cls()
+                mpc_solves=5, service_s=1.0, pipeline_sim_s=3.0,
+                memory_hours=0.02) if fast else cls()
         if os.environ.get("ONBOARD_BENCH_MINUTES"):
             s.minutes = float(os.environ["ONBOARD_BENCH_MINUTES"])
         if os.environ.get("ONBOARD_BENCH_REPEATS"):
             s.repeats = max(1, int(os.environ["ONBOARD_BENCH_REPEATS"]))
+        if os.environ.get("ONBOARD_BENCH_MEMORY_HOURS"):
+            s.memory_hours = float(os.environ["ONBOARD_BENCH_MEMORY_HOURS"])
         return s
 
 
@@ -648,6 +662,7 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
              lambda: bench_batch(s, Path(tmp), rep)),
             ("boat replay real-time factor", ("boat_replay_x_realtime",),
              lambda: bench_boat_realtime(s, Path(tmp), rep)),
+            ("memory", MEMORY_KEYS, lambda: bench_memory(s, Path(tmp), rep)),
         ]
         for label, keys, fn in steps:
             say(f"measuring {label} ...")
@@ -660,6 +675,50 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
                 rep.missing(keys, f"failed: {type(err).__name__}: {err}")
             rep.detail.setdefault("bench_wall_s", {})[label] = round(time.perf_counter() - t0, 2)
     return rep
+
+
+# --------------------------------------------------------------------------- memory
+
+MEMORY_KEYS = ("replay_peak_rss_mb", "diagnose_peak_rss_mb")
+"""The figures of :func:`bench_memory`."""
+
+
+def peak_rss_of(argv: list[str]) -> dict[str, float]:
+    """Run ``argv`` in a fresh process (output discarded) and return its own peak resident
+    memory (MB, ``ru_maxrss`` of that child alone, from ``os.wait4``) and CPU time (s).
+    Raises RuntimeError when it fails."""
+    import subprocess
+
+    with tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, ru = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        if proc.returncode != 0:
+            err.seek(0)
+            tail = err.read().decode(errors="replace").strip().splitlines()[-1:]
+            raise RuntimeError(f"{' '.join(argv[2:4])} exited {proc.returncode}: {tail}")
+    return {"peak_rss_mb": round(ru.ru_maxrss / 1024.0, 1),
+            "cpu_s": round(ru.ru_utime + ru.ru_stime, 2)}
+
+
+def bench_memory(s: Settings, workdir: Path, rep: Report) -> None:
+    """``replay_peak_rss_mb``, ``diagnose_peak_rss_mb``: ``onboard replay --no-plot`` and
+    ``onboard diagnose`` of a ``s.memory_hours`` log (:func:`make_tlog`; when fast,
+    :func:`synthesize_tlog`, which takes no simulator start-up), each in a fresh process."""
+    log = workdir / "memory.tlog"
+    t0 = time.perf_counter()
+    made = (synthesize_tlog if s.fast else make_tlog)(log, s.memory_hours * 3600.0)
+    made["generate_s"] = round(time.perf_counter() - t0, 2)
+    made["bytes"] = log.stat().st_size
+    cli = [sys.executable, "-m", "onboard"]
+    replay = peak_rss_of(cli + ["replay", str(log), "--no-plot", "--force",
+                                "--out", str(workdir / "memory-replay")])
+    diagnose = peak_rss_of(cli + ["diagnose", str(log), "--force",
+                                  "--out", str(workdir / "memory-diagnose")])
+    rep.values["replay_peak_rss_mb"] = replay["peak_rss_mb"]
+    rep.values["diagnose_peak_rss_mb"] = diagnose["peak_rss_mb"]
+    rep.detail["memory"] = {"log": made, "log_hours": s.memory_hours,
+                            "replay": replay, "diagnose": diagnose}
 
 
 # --------------------------------------------------------------------------- output
