@@ -286,6 +286,7 @@ def test_the_vehicle_install_stays_lean():
 
 
 @pytest.mark.data
+@pytest.mark.slow   # 16 s; each of these logs is replayed alone by tests/test_real_logs.py
 def test_real_logs_beside_notes(shared_data, tmp_path):
     """A folder of real logs (a tlog, a DataFlash .bin, an NMEA capture) and its
     SOURCE.md: every log replayed as a single replay would, the notes skipped."""
