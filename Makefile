@@ -45,7 +45,7 @@ demo: $(STAMP)
 PYTEST_PARALLEL ?= -n auto --dist loadscope
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow" $(PYTEST_PARALLEL)
+	$(BIN)/python -m pytest -q -m "not slow" --durations=25 $(PYTEST_PARALLEL)
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q $(PYTEST_PARALLEL)

@@ -43,8 +43,14 @@ as ``declination_rad``, east positive) are :class:`~onboard.core.messages.Headin
 
 Time
 ----
-``time_base="rx"`` (live, and captures with receive times): a fix is stamped with the
-receive time of the first sentence of its epoch, a heading with its own receive time.
+``time_base="synced"`` (live, and recordings of the live service): a fix is stamped with its
+sentence UTC mapped to the receive clock through the least-delayed epoch seen
+(:class:`drivers.sender_clock.SenderClock`, as an autopilot's boot time is), so fixes that
+arrive bunched after a stall of the receiving computer keep the spacing the receiver gave
+them; a heading is stamped with its own receive time.
+
+``time_base="rx"`` (captures with receive times): a fix is stamped with the receive time
+of the first sentence of its epoch, a heading with its own receive time.
 
 ``time_base="utc"`` (captures without receive times): samples are stamped with the
 sentence UTC as POSIX seconds. The date comes from RMC (the last one seen; a capture
@@ -74,6 +80,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from onboard.drivers.base import TIME_JUMP_S, LineAssembler, ReadStats
+from onboard.drivers.sender_clock import SenderClock
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import GnssFix, Heading, Sample
 
@@ -370,8 +377,9 @@ class NmeaParser:
     source:
         ``Sample.source`` of the samples produced.
     time_base:
-        ``"rx"`` stamps samples with the receive time; ``"utc"`` with the sentence UTC
-        (see the module docstring).
+        ``"synced"`` stamps fixes with their sentence UTC mapped to the receive clock,
+        ``"rx"`` with the receive time, ``"utc"`` with the sentence UTC (see the module
+        docstring).
     require_checksum:
         Reject sentences without ``*hh`` (default) or accept them.
     hold_s:
@@ -388,7 +396,7 @@ class NmeaParser:
     def __init__(
         self,
         source: str = "nmea",
-        time_base: Literal["rx", "utc"] = "rx",
+        time_base: Literal["synced", "rx", "utc"] = "synced",
         require_checksum: bool = True,
         hold_s: float = 0.25,
         date: float | None = None,
@@ -415,6 +423,7 @@ class NmeaParser:
         self._last_t: float | None = None
         self._last_fix_key: float | None = None
         self._lines = LineAssembler(self.stats, max_line, split_cr=True, skip_blank=True)
+        self._clock = SenderClock()
 
     # -- byte stream
 
@@ -486,7 +495,7 @@ class NmeaParser:
         except NmeaError as err:
             st.reject(err.reason)
             return []
-        if self.time_base == "rx":
+        if self.time_base != "utc":
             if t_rx is None:
                 st.reject("untimed")
                 return []
@@ -563,13 +572,7 @@ class NmeaParser:
         self._epoch = None
         if e is None:
             return []
-        if self.time_base == "rx":
-            t = e.t_rx
-        else:
-            day0 = self._day0 or 0.0
-            t = day0 + e.tod_s
-            if self._last_tod is not None and e.tod_s > self._last_tod + 43200.0:
-                t -= 86400.0  # epoch from just before a rollover that was already applied
+        t = self._epoch_time(e)
         if t is None:
             self.stats.reject("untimed")
             return []
@@ -581,6 +584,17 @@ class NmeaParser:
             out.append(Heading(t=t, source=self.source, heading_rad=h[0],
                                reference=h[1], declination_rad=h[2]))  # type: ignore[arg-type]
         return self._emit(out)
+
+    def _epoch_time(self, e: _Epoch) -> float | None:
+        """The stamp of epoch ``e`` in this parser's time base (None: untimed)."""
+        if self.time_base == "rx":
+            return e.t_rx
+        utc = (self._day0 or 0.0) + e.tod_s
+        if self._last_tod is not None and e.tod_s > self._last_tod + 43200.0:
+            utc -= 86400.0  # epoch from just before a rollover that was already applied
+        if self.time_base == "utc":
+            return utc
+        return None if e.t_rx is None else self._clock.update(utc, e.t_rx)
 
     def _fix(self, e: _Epoch, t: float) -> GnssFix | None:
         g, r, v = e.gga, e.rmc, e.vtg

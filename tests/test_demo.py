@@ -18,6 +18,25 @@ from onboard.apps.demo import main, run_demo, score
 from onboard.apps.service_bench import free_tcp_port
 from onboard.sitl.truth import TruthRecord
 
+MAX_LATE_S = 1.0
+"""A live demo whose simulator fell further behind the shared clock than this (simulated
+s; the demo warns) could not keep up with its speed on a loaded machine: it is run again
+at half the speed, down to ``MIN_SPEED``, so that the accuracy checks look at a run that
+kept up (as tests/test_faults.py does), or at the slowest one."""
+MIN_SPEED = 2.5
+
+
+def demo_that_kept_up(*args, speed: float = 10.0, **kwargs):
+    """``run_demo(*args, speed=speed, **kwargs)``, run again slower while it fell behind;
+    (the result, what it printed)."""
+    while True:
+        out = io.StringIO()
+        res = asyncio.run(run_demo(*args, speed=speed, out=out,
+                                   router_endpoint=f"tcp/127.0.0.1:{free_tcp_port()}", **kwargs))
+        if not res.sim_late_s > MAX_LATE_S or speed / 2 < MIN_SPEED:
+            return res, out.getvalue()
+        speed /= 2
+
 
 @pytest.mark.integration
 def test_demo_runs_end_to_end_and_prints_the_truth_comparison(tmp_path):
@@ -78,11 +97,8 @@ def test_demo_truth_table_shows_filters_beating_the_raw_speed_and_no_phantom_cur
     """The done-when of issue 15 on the demo's own output: aie.speed and kf.speed below
     nav.speed (the raw GNSS speed over ground) in the truth table, and the current of a
     still-water run either shown as unknown or, where shown, right."""
-    out = io.StringIO()
-    res = asyncio.run(run_demo("jaiabot-turns", 60.0, speed=10.0, out_dir=tmp_path,
-                               router_endpoint=f"tcp/127.0.0.1:{free_tcp_port()}",
-                               mavlink_out="udpout:127.0.0.1:9", out=out))
-    text = out.getvalue()
+    res, text = demo_that_kept_up("jaiabot-turns", 60.0, speed=10.0, out_dir=tmp_path,
+                                  mavlink_out="udpout:127.0.0.1:9")
     rows = {r.column: r for r in res.scores}
     nav = rows["nav.speed"].rmse
     # measured on a quiet machine: aie 0.030, kf 0.057, nav 0.099 m/s; under heavy load
@@ -140,10 +156,7 @@ def test_the_default_demo_shows_the_current_converging_with_its_sigma(tmp_path):
     sigma first, then known with its sigma, and compares it with the simulated current."""
     from onboard.apps.demo import DEFAULT_DURATION_S, DEFAULT_SCENARIO
 
-    out = io.StringIO()
-    res = asyncio.run(run_demo(out_dir=tmp_path, router_endpoint=f"tcp/127.0.0.1:{free_tcp_port()}",
-                               mavlink_out="udpout:127.0.0.1:9", out=out))
-    text = out.getvalue()
+    res, text = demo_that_kept_up(out_dir=tmp_path, mavlink_out="udpout:127.0.0.1:9")
     assert res.scenario == DEFAULT_SCENARIO and res.duration_s == DEFAULT_DURATION_S
     rows = {r.column: r for r in res.scores}
     for col in ("current.north", "current.east"):

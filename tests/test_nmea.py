@@ -168,7 +168,7 @@ def test_utc_midnight_rollover_without_and_with_date():
 
 
 def test_receive_time_stamps_and_hold_timeout():
-    p = NmeaParser(hold_s=0.25)
+    p = NmeaParser(time_base="rx", hold_s=0.25)
     assert p.feed_line(GGA, 10.0) == []  # first epoch: waits for the rest of its sentences
     assert p.feed_line(RMC, 10.01) == []
     (fix,) = p.feed(b"", 11.0)  # hold expired: emitted, stamped with the GGA's arrival
@@ -185,6 +185,35 @@ def test_receive_time_stamps_and_hold_timeout():
     assert p.poll(11.5) == []
     (fix3,) = p.poll(11.7)  # ... until the hold expires on the transport's timer
     assert fix3.t == 11.4 and fix3.sog_mps is None
+
+
+def _epoch_lines(tod: str) -> list[str]:
+    gga = sentence(GGA[1:GGA.rfind("*")].replace("094155.20", tod))
+    rmc = sentence(RMC[1:RMC.rfind("*")].replace("094155.20", tod))
+    return [gga, rmc]
+
+
+def test_live_stamps_keep_the_receivers_spacing_when_fixes_arrive_bunched():
+    """The live time base maps each fix's UTC through the least-delayed epoch: five 5 Hz
+    epochs that reach a stalled computer together 1.5 s late keep their 0.2 s spacing
+    and the times they were received at without the stall; stamped with their receive
+    time (``rx``, the negative control) they would all share one instant."""
+    tods = [f"0941{55.2 + 0.2 * k:05.2f}" for k in range(8)]
+    arrivals = [10.0, 10.2, 10.4] + [12.1] * 5  # the last five after a 1.5 s stall
+
+    def stamps(time_base: str) -> list[float]:
+        p = NmeaParser(time_base=time_base)
+        out = []
+        for tod, t_rx in zip(tods, arrivals):
+            for k, line in enumerate(_epoch_lines(tod)):
+                out += p.feed_line(line, t_rx + 0.001 * k)
+        return [s.t for s in out + p.flush() if isinstance(s, GnssFix)]
+
+    synced = stamps("synced")
+    assert synced == pytest.approx([10.0 + 0.2 * k for k in range(8)], abs=1e-3)
+    assert NmeaParser().time_base == "synced"  # the live default
+    rx = stamps("rx")
+    assert rx[3:] == pytest.approx([12.1] * 5, abs=0.01)
 
 
 # ----------------------------------------------------------------------------- the stream
