@@ -50,6 +50,7 @@ from onboard.drivers.transports import SinkError, Transport, open_transport
 from onboard.core.config import Config, ConfigError, SourceConfig, load_all
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.outputs import Output, check as check_outputs
+from onboard.core.stats import preload as preload_chi2
 from onboard.engine import Engine
 from onboard.service.config_check import check_config
 from onboard.service.intake import Intake
@@ -295,6 +296,7 @@ class Service:
         if svc.web.listen:
             await self._start_web()
         deadline = time.monotonic() + READY_WAIT_S
+        await asyncio.get_running_loop().run_in_executor(None, preload_chi2)  # while inputs connect
         while time.monotonic() < deadline and not all(i.transport.stats.connected for i in self.inputs):
             await asyncio.sleep(0.01)
         self._tasks.append(asyncio.create_task(self._tick_loop(), name="ticks"))
