@@ -1,0 +1,127 @@
+"""The web page's fleet layer: the fleet service's grid (``<prefix>/fleet/current/grid``,
+``onboard.FleetGrid.v1``) fed to the page's model as the shore receives it, served on
+``api/fleet``, and drawn by headless Chromium as arrows where the field is known and
+nothing where it is null, with the vehicles' tracks and their own estimates.
+
+Set ``ONBOARD_FLEET_SCREENSHOT=docs/figures/web-fleet.png`` to keep the capture."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import urllib.request
+
+import pytest
+
+from onboard.service.web.view import LiveView
+from tests.helpers.web import CHROMIUM_INSTALL, ServerThread, chromium, dump_dom, screenshot
+
+FLEET_RGB = (0x7B, 0x1F, 0xA2)
+FLEET_TRACK_RGB = (0x2E, 0x7D, 0x32)
+FLEET_VEHICLE_RGB = (0xEF, 0x6C, 0x00)
+"""The fleet layer's colours (static/page.js)."""
+GRID_KEY = "onboard/fleet/current/grid"
+LAT0, LON0, SPACING_M = 43.0, 5.0, 200.0
+COLS = ROWS = 6
+KNOWN_COLS = 3
+"""The west half of the grid knows the field (0.3 m/s towards north), the east half not."""
+
+
+def synthetic_grid(utc: float, *, known_cols: int = KNOWN_COLS) -> dict:
+    """A 6 x 6 grid of 200 m cells about (43 N, 5 E): the first ``known_cols`` columns
+    (west) known, the rest null; two vehicles moving north in the west half."""
+    m_lat, m_lon = 111132.95, 111319.49 * 0.7313537  # cos(43 deg)
+    cells = []
+    for i in range(ROWS):
+        for j in range(COLS):
+            lat = LAT0 + (i - (ROWS - 1) / 2) * SPACING_M / m_lat
+            lon = LON0 + (j - (COLS - 1) / 2) * SPACING_M / m_lon
+            known = j < known_cols
+            std = 0.01 if i % 2 == 0 else 0.2  # every other row uncertain: drawn faded
+            cells.append({"lat": lat, "lon": lon, "utc": utc,
+                          "north": 0.3 if known else None, "east": 0.0 if known else None,
+                          "std_north": std if known else None, "std_east": std if known else None,
+                          "n_obs": 12 if known else 0})
+    vehicles = [{"vehicle": f"bot{k}", "utc": utc,
+                 "lat": LAT0 + ((utc - 1000.0) * 4.0 - 450.0) / m_lat,
+                 "lon": LON0 - (250.0 + 150.0 * k) / m_lon,
+                 "north": 0.28, "east": 0.02, "std_north": 0.03, "std_east": 0.03}
+                for k in range(2)]
+    return {"schema": 1, "utc": utc, "spacing_m": SPACING_M, "cells": cells, "vehicles": vehicles}
+
+
+def fleet_view(known_cols: int = KNOWN_COLS, n: int = 12) -> LiveView:
+    """A LiveView fed ``n`` grids 5 s apart on the grid's key, as the shore receives them."""
+    view = LiveView()
+    for k in range(n):
+        view.feed_zenoh(GRID_KEY, json.dumps(synthetic_grid(1000.0 + 5.0 * k,
+                                                            known_cols=known_cols)).encode())
+    return view
+
+
+def test_the_newest_grid_is_kept_and_each_vehicle_leaves_a_track():
+    view = fleet_view()
+    view.feed_zenoh(GRID_KEY, json.dumps(synthetic_grid(1020.0)).encode())  # late: ignored
+    view.feed_zenoh(GRID_KEY, b"[1, 2]")  # not a grid: counted
+    assert view.bad == 1
+    f = view.fleet()
+    assert f["grid"]["utc"] == 1055.0 and len(f["grid"]["cells"]) == 36
+    assert sorted(f["tracks"]) == ["bot0", "bot1"] and len(f["tracks"]["bot0"]) == 12
+    assert view.fleet(since=1055.0)["grid"] is None  # nothing newer than what the page has
+    assert view.vehicles == {}  # the grid is no vehicle
+
+
+def test_api_fleet_serves_the_grid_with_its_null_cells_as_null():
+    with ServerThread(view=fleet_view()) as srv:
+        with urllib.request.urlopen(srv.url + "/api/fleet?since=0") as r:
+            f = json.load(r)
+    unknown = [c for c in f["grid"]["cells"] if c["north"] is None]
+    assert len(unknown) == ROWS * (COLS - KNOWN_COLS)
+    assert all(c["east"] is None and c["n_obs"] == 0 for c in unknown)
+
+
+def pixels_near(img, rgb: tuple[int, int, int], tol: int = 12) -> int:
+    import numpy as np
+
+    a = (img[..., :3] * 255.0).round()
+    return int(np.all(np.abs(a - np.array(rgb)) <= tol, axis=-1).sum())
+
+
+@pytest.mark.parametrize("known_cols", [KNOWN_COLS, 0], ids=["half-known", "all-null"])
+@pytest.mark.integration
+@pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")
+def test_the_page_draws_arrows_where_the_field_is_known_and_nothing_where_it_is_null(
+        tmp_path, known_cols):
+    mpimg = pytest.importorskip("matplotlib.image")
+    out = tmp_path / "fleet.png"
+    with ServerThread(view=fleet_view(known_cols)) as srv:
+        run = screenshot(srv.url + "/?tiles=0", out, tmp_path / "profile")
+    assert run.returncode == 0 and out.exists(), run.stderr[-2000:]
+    img = mpimg.imread(out)
+    # the map is the left 710 px; the grid is centred on it, its west half left of x = 355;
+    # the top 40 px hold the legends
+    west, east = img[40:, :345], img[40:, 365:700]
+    if known_cols:
+        # measured: 1,236 opaque arrow pixels in the west half (18 arrows, 9 faded)
+        assert pixels_near(west, FLEET_RGB) > 400
+        assert pixels_near(west, FLEET_TRACK_RGB) > 100  # the two vehicles' tracks
+        assert pixels_near(west, FLEET_VEHICLE_RGB) > 50  # their own estimates
+    else:
+        assert pixels_near(west, FLEET_RGB) == 0
+    assert pixels_near(east, FLEET_RGB) == 0  # null cells: nothing drawn
+    if os.environ.get("ONBOARD_FLEET_SCREENSHOT") and known_cols:
+        shutil.copyfile(out, os.environ["ONBOARD_FLEET_SCREENSHOT"])
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")
+def test_the_panel_counts_the_known_and_unknown_cells(tmp_path):
+    with ServerThread(view=fleet_view()) as srv:
+        dom = dump_dom(srv.url + "/?tiles=0", tmp_path / "profile")
+    text = re.search(r'id="fleet"[^>]*>([^<]*)<', dom)
+    assert text, dom[:2000]
+    assert text.group(1).startswith("18 cells known · 18 unknown · 2 vehicles · 200 m cells")
+    # a page without a vehicle yet keeps polling: it waits, with no HTTP error
+    assert re.search(r'id="status"[^>]*>waiting for a vehicle', dom), dom[:2000]
