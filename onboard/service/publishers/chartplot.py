@@ -72,6 +72,7 @@ class UdpSender:
         self.errors = 0
 
     def send(self, payload: bytes) -> None:
+        """Send one datagram now, or count it in ``errors``."""
         try:
             self.sock.sendto(payload, self.addr)
             self.sent += 1
@@ -79,6 +80,7 @@ class UdpSender:
             self.errors += 1
 
     def close(self) -> None:
+        """Close the socket."""
         self.sock.close()
 
 
@@ -113,6 +115,7 @@ class SetDriftPublisher:
 
     @property
     def sent(self) -> int:
+        """Datagrams sent."""
         return 0 if self.udp is None else self.udp.sent
 
     def publish_estimates(self, records: Sequence[EstimateRecord], now: float | None = None) -> None:
@@ -142,6 +145,7 @@ class SetDriftPublisher:
         raise NotImplementedError
 
     def close(self) -> None:
+        """Close the socket."""
         if self.udp is not None:
             self.udp.close()
 
