@@ -125,3 +125,43 @@ def test_the_panel_counts_the_known_and_unknown_cells(tmp_path):
     assert text.group(1).startswith("18 cells known · 18 unknown · 2 vehicles · 200 m cells")
     # a page without a vehicle yet keeps polling: it waits, with no HTTP error
     assert re.search(r'id="status"[^>]*>waiting for a vehicle', dom), dom[:2000]
+
+
+@pytest.mark.integration
+def test_onboard_shore_web_for_one_vehicle_still_hears_the_fleet_grid():
+    import subprocess
+    import sys
+    import time
+
+    import zenoh
+
+    from onboard.apps.service_bench import free_tcp_port
+    from onboard.service.publishers.zenoh_pub import open_router, session_config
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    web_port = free_tcp_port()
+    router = open_router(endpoint)
+    pub = zenoh.open(session_config("client", [endpoint]))
+    # --vehicle: onboard/shoreboat/** does not match the grid's key; its own subscription does
+    shore = subprocess.Popen([sys.executable, "-m", "onboard", "shore", "--connect", endpoint,
+                              "--vehicle", "shoreboat", "--web", f"127.0.0.1:{web_port}"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert "the page is on" in shore.stdout.readline()
+        grid: dict | None = None
+        deadline = time.monotonic() + 15
+        k = 0
+        while grid is None:
+            assert time.monotonic() < deadline
+            k += 1
+            pub.put(GRID_KEY, json.dumps(synthetic_grid(1000.0 + k)).encode(),
+                    encoding="application/json;onboard.FleetGrid.v1")
+            time.sleep(0.2)
+            with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/api/fleet") as r:
+                grid = json.load(r)["grid"]
+        assert len(grid["cells"]) == ROWS * COLS and grid["spacing_m"] == SPACING_M
+    finally:
+        shore.terminate()
+        shore.wait(10)
+        pub.close()
+        router.close()
