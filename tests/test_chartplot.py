@@ -153,6 +153,8 @@ def test_the_outputs_are_off_by_default_and_a_bad_url_names_its_key():
         SignalKPublisher(SignalKOut(url="tcp:127.0.0.1:3000"))
     with pytest.raises(ConfigError, match="talker"):
         from_dict({"service": {"nmea_vdr": {"talker": "gp"}}})
+    with pytest.raises(ConfigError, match=r"service\.nmea_vdr\.url: expected str matching"):
+        from_dict({"service": {"nmea_vdr": {"url": "udpout:127.0.0.1:10110"}}})
     assert current_of(current_record(0.0, 0.1, None)) is None
 
 
@@ -183,3 +185,30 @@ def test_the_service_sends_each_ticks_current_to_the_enabled_outputs(tmp_path, l
     assert [type(p).__name__ for p in pubs] == ["NmeaVdrPublisher"]  # signalk: off
     (line,) = received(listener)
     assert line.startswith(b"$IIVDR,90.0,T,85.0,M,0.39,N*")  # the configured declination
+
+
+def test_a_host_name_is_looked_up_off_the_loop_and_again_later_while_it_does_not_resolve():
+    import time
+
+    now = [0.0]
+    pub = NmeaVdrPublisher(NmeaVdrOut(enabled=True, url="udp:no-such-host.invalid:10110"),
+                           clock=lambda: now[0])
+    pub.start()  # a name: looked up in a thread, no exception
+    try:
+        pub.udp._lookup.join(10)
+        for k in range(30):  # 30 s at 1 Hz
+            now[0] = float(k)
+            pub.publish_estimates([current_record(now[0], 0.1, 0.1)])
+            if pub.udp._lookup is not None:
+                pub.udp._lookup.join(10)
+        assert pub.sent == 0 and pub.udp.errors == 30
+        assert pub.udp._t_lookup == 20.0  # looked up at 0, 10 and 20 s
+    finally:
+        pub.close()
+    local = NmeaVdrPublisher(NmeaVdrOut(enabled=True, url="udp:localhost:9"))
+    local.start()
+    deadline = time.monotonic() + 10
+    while local.udp.sock is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert local.udp.sock is not None  # a name that resolves: the socket opens
+    local.close()

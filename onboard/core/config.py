@@ -420,6 +420,10 @@ class WebOut(_Strict):
     service would load it before it is saved, and applies at the next start."""
 
 
+UDP_URL = r"^udp:[^\s]+:[0-9]{1,5}$"
+"""``udp:HOST:PORT``: the form of the chart plotter outputs' ``url``."""
+
+
 class NmeaVdrOut(_Strict):
     """``[service.nmea_vdr]``: the current's set and drift as NMEA 0183 ``VDR`` sentences
     over UDP, for chart plotters (OpenCPN, a Signal K server's NMEA 0183 input;
@@ -427,8 +431,9 @@ class NmeaVdrOut(_Strict):
 
     enabled: bool = False
     """Send VDR."""
-    url: str = "udp:127.0.0.1:10110"
-    """Where (``udp:HOST:PORT``; 10110 is the NMEA-over-IP port OpenCPN listens on)."""
+    url: Annotated[str, msgspec.Meta(pattern=UDP_URL)] = "udp:127.0.0.1:10110"
+    """Where (``udp:HOST:PORT``, a host name or address, a broadcast address too; 10110 is
+    the NMEA-over-IP port OpenCPN listens on)."""
     talker: Annotated[str, msgspec.Meta(pattern="^[A-Z]{2}$")] = "II"
     """The sentence's talker (two capital letters; ``II`` integrated instrumentation)."""
     rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 1.0
@@ -444,7 +449,7 @@ class SignalKOut(_Strict):
 
     enabled: bool = False
     """Send Signal K deltas."""
-    url: str = "udp:127.0.0.1:8375"
+    url: Annotated[str, msgspec.Meta(pattern=UDP_URL)] = "udp:127.0.0.1:8375"
     """Where (``udp:HOST:PORT``: the server's Signal K UDP input)."""
     context: str = "vessels.self"
     """The delta's context: ``vessels.self``, or ``vessels.urn:mrn:imo:mmsi:...`` when the

@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 import socket
+import threading
 import time
 from typing import Callable, Sequence
 
@@ -47,6 +48,8 @@ __all__ = ["CURRENT_PIPELINE", "NmeaVdrPublisher", "SetDriftPublisher", "SignalK
 CURRENT_PIPELINE = "current"
 """The pipeline whose ``north``/``east`` (and their ``std``) are the current sent."""
 
+RESOLVE_RETRY_S = 10.0
+"""Seconds between two lookups of a host name that did not resolve."""
 DeclinationFn = Callable[[], "float | None"]
 """The declination in use (deg, east positive), or None while unknown."""
 
@@ -61,27 +64,71 @@ def parse_udp_url(url: str, key: str) -> tuple[str, int]:
 
 
 class UdpSender:
-    """A non-blocking UDP socket to one address; a send that fails is counted, not raised."""
+    """A non-blocking UDP socket to one host and port; a send that fails is counted, not
+    raised. A numeric address is used at once; a host name is looked up in a thread of its
+    own (a lookup may wait seconds on an unreachable DNS server, and the estimator loop must
+    not), once, and again after :data:`RESOLVE_RETRY_S` while it does not resolve (the
+    network not up yet); until then sends are counted in ``errors``. A broadcast address
+    (``x.x.x.255``) is allowed to broadcast."""
 
-    def __init__(self, host: str, port: int) -> None:
-        self.addr = (host, port)
-        self.sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET,
-                                  socket.SOCK_DGRAM)
-        self.sock.setblocking(False)
+    def __init__(self, host: str, port: int, clock: Callable[[], float] = time.monotonic) -> None:
+        self.host, self.port = host, port
+        self.clock = clock
+        self.addr: tuple | None = None
+        self.sock: socket.socket | None = None
         self.sent = 0
         self.errors = 0
+        self._t_lookup = -math.inf
+        self._lookup: threading.Thread | None = None
+
+    def resolve(self) -> None:
+        """Open the socket for a numeric address now, else start a lookup of the name in a
+        thread (unless one runs, or failed less than :data:`RESOLVE_RETRY_S` ago)."""
+        try:
+            self._open(socket.getaddrinfo(self.host, self.port, type=socket.SOCK_DGRAM,
+                                          flags=socket.AI_NUMERICHOST)[0])
+            return
+        except OSError:  # not a numeric address: a name
+            pass
+        now = self.clock()
+        busy = self._lookup is not None and self._lookup.is_alive()
+        if busy or now - self._t_lookup < RESOLVE_RETRY_S:
+            return
+        self._t_lookup = now
+        self._lookup = threading.Thread(target=self._look_up, name="udp-lookup", daemon=True)
+        self._lookup.start()
+
+    def _look_up(self) -> None:
+        try:
+            self._open(socket.getaddrinfo(self.host, self.port, type=socket.SOCK_DGRAM)[0])
+        except OSError:
+            pass  # tried again after RESOLVE_RETRY_S
+
+    def _open(self, info: tuple) -> None:
+        family, _, _, _, addr = info
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        sock.setblocking(False)
+        if family == socket.AF_INET and addr[0].endswith(".255"):
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+        self.addr, self.sock = addr, sock
 
     def send(self, payload: bytes) -> None:
         """Send one datagram now, or count it in ``errors``."""
+        sock = self.sock
+        if sock is None:
+            self.resolve()
+            self.errors += 1
+            return
         try:
-            self.sock.sendto(payload, self.addr)
+            sock.sendto(payload, self.addr)
             self.sent += 1
         except OSError:  # nobody listening (ICMP), buffer full: drop, never block
             self.errors += 1
 
     def close(self) -> None:
         """Close the socket."""
-        self.sock.close()
+        if self.sock is not None:
+            self.sock.close()
 
 
 class SetDriftPublisher:
@@ -110,8 +157,9 @@ class SetDriftPublisher:
         self._next = -math.inf
 
     def start(self) -> None:
-        """Open the socket."""
-        self.udp = UdpSender(*self.addr)
+        """Open the socket (a host name: once it resolves, :class:`UdpSender`)."""
+        self.udp = UdpSender(*self.addr, clock=self.clock)
+        self.udp.resolve()
 
     @property
     def sent(self) -> int:
