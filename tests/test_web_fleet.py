@@ -104,10 +104,11 @@ def test_the_page_draws_arrows_where_the_field_is_known_and_nothing_where_it_is_
     # the top 40 px hold the legends
     west, east = img[40:, :345], img[40:, 365:700]
     if known_cols:
-        # measured: 1,236 opaque arrow pixels in the west half (18 arrows, 9 faded)
-        assert pixels_near(west, FLEET_RGB) > 400
-        assert pixels_near(west, FLEET_TRACK_RGB) > 100  # the two vehicles' tracks
-        assert pixels_near(west, FLEET_VEHICLE_RGB) > 50  # their own estimates
+        # measured: 459 opaque arrow pixels in the west half (9 opaque arrows, 9 faded
+        # ones, which are not counted), the tracks 120, the vehicles' own estimates 221
+        assert pixels_near(west, FLEET_RGB) > 300
+        assert pixels_near(west, FLEET_TRACK_RGB) > 60  # the two vehicles' tracks
+        assert pixels_near(west, FLEET_VEHICLE_RGB) > 100  # their own estimates
     else:
         assert pixels_near(west, FLEET_RGB) == 0
     assert pixels_near(east, FLEET_RGB) == 0  # null cells: nothing drawn
@@ -165,3 +166,48 @@ def test_onboard_shore_web_for_one_vehicle_still_hears_the_fleet_grid():
         shore.wait(10)
         pub.close()
         router.close()
+
+
+def two_vehicle_view() -> LiveView:
+    """Two vehicles followed by the view itself (their own estimates, no fleet service):
+    ``alpha`` going north, ``beta`` going east 300 m away, both in a 0.2 m/s current."""
+    from onboard.core.messages import EstimateRecord
+
+    origins = {"alpha": (LAT0, LON0), "beta": (LAT0, LON0 + 0.004)}
+    view = LiveView(origin=lambda _p: None)
+    for k in range(60):
+        t = float(k)
+        for vid, (n, e) in (("alpha", (2.0 * t, 0.0)), ("beta", (0.0, 2.0 * t))):
+            view.feed_estimates([
+                EstimateRecord(vehicle=vid, pipeline="nav", t=t, values={"north": n, "east": e}),
+                EstimateRecord(vehicle=vid, pipeline="current", t=t,
+                               values={"north": 0.0, "east": 0.2},
+                               std={"north": 0.02, "east": 0.02})])
+    for vid, o in origins.items():
+        view.vehicles[vid].origin = o
+    return view
+
+
+def test_without_a_fleet_service_the_other_vehicles_are_the_fleet_layer():
+    f = two_vehicle_view().fleet(shown="alpha")
+    assert f["grid"] is None
+    (beta,) = f["vehicles"]  # alpha is the page's own layer
+    assert beta["vehicle"] == "beta" and beta["east"] == 0.2 and beta["std_north"] == 0.02
+    assert beta["lat"] == pytest.approx(LAT0) and beta["lon"] > LON0 + 0.004
+    assert len(f["tracks"]["beta"]) == 12  # one point per 5 s of its 60 s
+    assert two_vehicle_view().fleet(shown="")["vehicles"][0]["vehicle"] == "alpha"
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")
+def test_the_page_draws_the_other_vehicles_track_and_current(tmp_path):
+    mpimg = pytest.importorskip("matplotlib.image")
+    out = tmp_path / "two.png"
+    with ServerThread(view=two_vehicle_view()) as srv:
+        run = screenshot(srv.url + "/?tiles=0&vehicle=alpha", out, tmp_path / "profile")
+    assert run.returncode == 0 and out.exists(), run.stderr[-2000:]
+    map_part = mpimg.imread(out)[:, :700]
+    # measured: beta's dashed track 56 px, its dot, arrow and label 91 px; a blank page: 0
+    assert pixels_near(map_part, FLEET_TRACK_RGB) > 30
+    assert pixels_near(map_part, FLEET_VEHICLE_RGB) > 45
+    assert pixels_near(map_part, FLEET_RGB) == 0  # no grid: no field

@@ -235,14 +235,50 @@ class LiveView:
                    "health": _health(v), "estimates": _estimates(v)}
         return out
 
-    def fleet(self, since: float = -math.inf) -> dict:
+    def fleet(self, since: float = -math.inf, shown: str = "") -> dict:
         """The fleet layer's JSON: ``grid`` (the newest grid as published, null when
-        there is none or it is not newer than ``since``, its ``utc``) and ``tracks``
-        (vehicle -> [[utc, lat, lon], ...])."""
+        there is none or it is not newer than ``since``, its ``utc``), ``vehicles`` (each
+        vehicle's newest place and current estimate: the grid's ``vehicles``, then every
+        vehicle this view follows itself that the grid does not list, with ``t`` its
+        vehicle time) and ``tracks`` (vehicle -> [[time, lat, lon], ...]: from the grids,
+        else one point per :data:`FLEET_TRACK_PERIOD_S` of the vehicle's own track). The
+        vehicle ``shown`` (the page's own layer draws it) is left out of those this view
+        follows, so the service's page, whose only vehicle is its own, costs nothing here."""
         with self.lock:
             grid = self.grid if self.grid is not None and self.grid["utc"] > since else None
-            tracks = {vid: [list(p) for p in tr] for vid, tr in sorted(self.fleet_tracks.items())}
-        return {"grid": grid, "tracks": tracks}
+            tracks = {vid: [list(p) for p in tr] for vid, tr in self.fleet_tracks.items()}
+            vehicles = [dict(v) for v in (self.grid or {}).get("vehicles") or []
+                        if isinstance(v, dict)]
+            listed = {str(v.get("vehicle")) for v in vehicles}
+            for vid, v in sorted(self.vehicles.items()):
+                if vid not in listed and vid != shown and v.origin is not None and v.track:
+                    vehicles.append(_own_place(vid, v))
+                    tracks.setdefault(vid, _own_track(v))
+        return {"grid": grid, "vehicles": vehicles, "tracks": dict(sorted(tracks.items()))}
+
+
+def _latlon(origin: tuple[float, float], north_m: float, east_m: float) -> tuple[float, float]:
+    m_lat, m_lon = metres_per_degree(origin[0])
+    return origin[0] + north_m / m_lat, origin[1] + east_m / m_lon
+
+
+def _own_place(vid: str, v: _Vehicle) -> dict:
+    """A vehicle this view follows, as the grid lists its vehicles: its newest track
+    point and current estimate (null where unknown)."""
+    t, n, e = v.track[-1]
+    lat, lon = _latlon(v.origin, n, e)
+    cur = v.estimates.get(CURRENT_PIPELINE)
+    values, std = (cur.values, cur.std) if cur is not None else ({}, {})
+    return {"vehicle": vid, "t": t, "lat": lat, "lon": lon, "north": values.get("north"),
+            "east": values.get("east"), "std_north": std.get("north"), "std_east": std.get("east")}
+
+
+def _own_track(v: _Vehicle) -> list[list[float]]:
+    out: list[list[float]] = []
+    for t, n, e in v.track:
+        if not out or t - out[-1][0] >= FLEET_TRACK_PERIOD_S:
+            out.append([t, *_latlon(v.origin, n, e)])
+    return out
 
 
 def _finite(x: Any) -> bool:

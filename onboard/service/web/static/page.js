@@ -39,7 +39,7 @@ let state = null;
 const tiles = new Map(); // 'z/x/y' -> {img, ok}
 let tilesFailed = !USE_TILES;
 let tilesLoaded = 0;
-let fleet = {grid: null, tracks: {}, origin: null};  // origin: the first grid's centre
+let fleet = {grid: null, vehicles: [], tracks: {}, origin: null};  // origin: the first grid's centre
 
 const $ = (id) => document.getElementById(id);
 const fmt = (x, d) => (x === null || x === undefined) ? '?' : x.toFixed(d);
@@ -70,13 +70,16 @@ async function poll() {
 async function pollFleet() {
   try {
     const since = fleet.grid ? fleet.grid.utc : -1e300;
-    const r = await fetch('api/fleet?' + new URLSearchParams({since: String(since)}), {cache: 'no-store'});
+    const q = new URLSearchParams({since: String(since), vehicle: (state && state.vehicle) || ''});
+    const r = await fetch('api/fleet?' + q, {cache: 'no-store'});
     if (r.ok) {
       const f = await r.json();
       if (f.grid) fleet.grid = f.grid;
       fleet.tracks = f.tracks;
+      fleet.vehicles = f.vehicles;
       if (!fleet.origin && fleet.grid && fleet.grid.cells.length) fleet.origin = centre(fleet.grid.cells);
-      if (fleet.grid) { fleetPanel(); draw(); }
+      if (!fleet.origin && fleet.vehicles.length) fleet.origin = centre(fleet.vehicles);
+      if (fleet.grid || fleet.vehicles.length) { fleetPanel(); draw(); }
     }
   } catch (err) { /* an older service without api/fleet: no fleet layer */ }
   setTimeout(pollFleet, FLEET_POLL_MS);
@@ -89,11 +92,14 @@ function centre(cells) {
 }
 
 function fleetPanel() {
-  const g = fleet.grid, known = g.cells.filter(known_cell).length;
-  const t = new Date(g.utc * 1000).toISOString().slice(11, 19);
+  const g = fleet.grid;
   $('fleet-box').hidden = false;
+  const n = fleet.vehicles.length, vehicles = `${n} vehicle${n === 1 ? '' : 's'}`;
+  if (!g) { $('fleet').textContent = `${vehicles} more · no fleet field`; return; }
+  const known = g.cells.filter(known_cell).length;
+  const t = new Date(g.utc * 1000).toISOString().slice(11, 19);
   $('fleet').textContent = `${known} cells known · ${g.cells.length - known} unknown · ` +
-    `${(g.vehicles || []).length} vehicles · ${g.spacing_m} m cells · ${t} UTC`;
+    `${vehicles} · ${g.spacing_m} m cells · ${t} UTC`;
 }
 
 const known_cell = (c) => c.north !== null && c.east !== null && c.north !== undefined && c.east !== undefined;
@@ -287,8 +293,9 @@ function local(lat, lon) {
 
 function fleetPoints() {
   // Every place of the fleet layer in local metres (the extent shown holds them all).
-  if (!fleet.grid || !mapOrigin()) return [];
-  const pts = fleet.grid.cells.map((c) => local(c.lat, c.lon));
+  if (!mapOrigin()) return [];
+  const pts = fleet.grid ? fleet.grid.cells.map((c) => local(c.lat, c.lon)) : [];
+  for (const b of fleet.vehicles) pts.push(local(b.lat, b.lon));
   for (const tr of Object.values(fleet.tracks)) for (const [, lat, lon] of tr) pts.push(local(lat, lon));
   return pts;
 }
@@ -301,10 +308,11 @@ function fleetAlpha(c) {
 
 function drawFleet(ctx, v) {
   const g = fleet.grid;
-  if (!g || !mapOrigin()) return;
-  const cells = g.cells.filter(known_cell);
+  if (!mapOrigin() || (!g && !fleet.vehicles.length)) return;
+  const cells = g ? g.cells.filter(known_cell) : [];
   const fastest = Math.max(1e-3, ...cells.map((c) => Math.hypot(c.north, c.east)));
-  const scale = Math.min(ARROW_PX_PER_MPS, FLEET_ARROW_OF_SPACING * g.spacing_m / v.mpp / fastest);  // px per m/s
+  const scale = g ? Math.min(ARROW_PX_PER_MPS, FLEET_ARROW_OF_SPACING * g.spacing_m / v.mpp / fastest)
+                  : ARROW_PX_PER_MPS;  // px per m/s
   for (const c of cells) {
     const [x, y] = v.px(...local(c.lat, c.lon));
     ctx.globalAlpha = fleetAlpha(c);
@@ -318,13 +326,14 @@ function drawFleet(ctx, v) {
     ctx.stroke();
   }
   ctx.setLineDash([]);
-  for (const b of g.vehicles || []) {
+  for (const b of fleet.vehicles) {
     const [x, y] = v.px(...local(b.lat, b.lon));
-    if (b.north !== null && b.east !== null)
+    if (known_cell(b))
       currentArrow(ctx, x, y, b.north, b.east, b.std_north, b.std_east, scale, FLEET_VEHICLE_COLOUR, 'rgba(239, 108, 0, 0.15)', 3, 9);
     ctx.fillStyle = FLEET_VEHICLE_COLOUR; ctx.beginPath(); ctx.arc(x, y, 4, 0, 2 * Math.PI); ctx.fill();
     ctx.font = '11px sans-serif'; ctx.fillText(b.vehicle, x + 6, y + 12);
   }
+  if (!g) return;
   ctx.fillStyle = FLEET_COLOUR; ctx.font = '11px sans-serif';
   ctx.fillText(`fleet field (${scale.toFixed(0)} px per m/s, 1σ ellipse, faint: uncertain)`, 8, 30);
 }
