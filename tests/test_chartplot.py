@@ -212,3 +212,21 @@ def test_a_host_name_is_looked_up_off_the_loop_and_again_later_while_it_does_not
         time.sleep(0.01)
     assert local.udp.sock is not None  # a name that resolves: the socket opens
     local.close()
+
+
+def test_nothing_is_sent_while_the_health_record_flags_the_current_pipeline(listener):
+    from onboard.core.messages import HealthRecord
+
+    port = listener.getsockname()[1]
+    pub = NmeaVdrPublisher(NmeaVdrOut(enabled=True, url=f"udp:127.0.0.1:{port}", rate_hz=10.0))
+    pub.start()
+    try:
+        flagged = HealthRecord(vehicle="boat", t=0.0, flags={"current": ["nis_out_of_band"]})
+        pub.publish_health(flagged)
+        pub.publish_estimates([current_record(0.0, 0.2, 0.0)], now=0.0)
+        pub.publish_health(HealthRecord(vehicle="boat", t=1.0, flags={"aie": ["speed_mismatch"]}))
+        pub.publish_estimates([current_record(1.0, 0.2, 0.0)], now=1.0)
+        got = received(listener)
+    finally:
+        pub.close()
+    assert pub.held_back == 1 and len(got) == 1  # another pipeline's flag: sent

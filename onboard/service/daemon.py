@@ -596,6 +596,8 @@ class Service:
             self.zenoh.publish_health(h)
         if self.mavlink is not None:
             self.mavlink.publish_health(h, now)
+        for pub in self.chartplot:
+            pub.publish_health(h)
         if self.web_view is not None:
             self.web_view.feed_health(h)
         if self.on_health is not None:

@@ -15,7 +15,9 @@ Both take the newest record of the ``current`` pipeline and send it at most ``ra
 times a second, and only while its north and east are known: a component the data do not
 determine, or one the integrity monitor withheld, is absent from the published record, and
 then nothing is sent (a chart plotter keeps showing the last set and drift until its own
-timeout, never a guessed one). ``max_std_mps`` (0 off) also holds back a current whose
+timeout, never a guessed one); nor while the newest health record flags the ``current``
+pipeline (an integrity check that keeps the values but doubts them: ``nis_out_of_band``,
+:mod:`onboard.monitor.integrity`). ``max_std_mps`` (0 off) also holds back a current whose
 larger one-sigma is above it. The magnetic set uses the engine's declination where it is
 known (:class:`onboard.core.messages.DeclinationReport`), else its field is empty (VDR)
 or absent (Signal K). Signal K's timestamp is the record's ``utc`` where it carries one,
@@ -33,7 +35,7 @@ import time
 from typing import Callable, Sequence
 
 from onboard.core.config import ConfigError, NmeaVdrOut, SignalKOut
-from onboard.core.messages import EstimateRecord
+from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.service.publishers.set_drift import (
     SetDrift,
     current_of,
@@ -153,7 +155,9 @@ class SetDriftPublisher:
         self.clock = clock
         self.udp: UdpSender | None = None
         self.held_back = 0
-        """Records of the current not sent: unknown, or their sigma above the bound."""
+        """Records of the current not sent: unknown, flagged, or their sigma above the bound."""
+        self.flags: list[str] = []
+        """The integrity flags of the ``current`` pipeline in the newest health record."""
         self._next = -math.inf
 
     def start(self) -> None:
@@ -175,12 +179,16 @@ class SetDriftPublisher:
         if now < self._next:
             return
         ne = current_of(rec)
-        if ne is None or not self._precise(rec):
+        if ne is None or self.flags or not self._precise(rec):
             self.held_back += 1
             return
         self._next = now + self.period_s
         sd = set_drift(*ne, declination_deg=self.declination())
         self.udp.send(self.payload(sd, rec))
+
+    def publish_health(self, h: HealthRecord) -> None:
+        """Keep the ``current`` pipeline's integrity flags (nothing is sent while any)."""
+        self.flags = list(h.flags.get(CURRENT_PIPELINE, ()))
 
     def _precise(self, rec: EstimateRecord) -> bool:
         if self.max_std_mps <= 0.0:
