@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import math
+from abc import ABC, abstractmethod
 import socket
 import threading
 import time
@@ -133,8 +134,9 @@ class UdpSender:
             self.sock.close()
 
 
-class SetDriftPublisher:
-    """The newest known current as set and drift, at most ``rate_hz`` a second, over UDP.
+class SetDriftPublisher(ABC):
+    """The newest known current as set and drift, at most ``rate_hz`` a second, over UDP;
+    each output says how a datagram reads (:meth:`payload`).
 
     Parameters:
         url: ``udp:HOST:PORT``.
@@ -196,9 +198,9 @@ class SetDriftPublisher:
         std = max(rec.std.get("north", math.inf), rec.std.get("east", math.inf))
         return std <= self.max_std_mps
 
+    @abstractmethod
     def payload(self, sd: SetDrift, rec: EstimateRecord) -> bytes:
-        """The datagram of ``sd`` (each output its own)."""
-        raise NotImplementedError
+        """The datagram of ``sd``, the set and drift of ``rec``."""
 
     def close(self) -> None:
         """Close the socket."""
