@@ -22,7 +22,9 @@ The fleet layer: the fleet service's grid (``<prefix>/fleet/current/grid``, JSON
 ``n_obs``; ``vehicles`` with ``vehicle``, ``utc``, ``lat``, ``lon``, ``north``, ``east``
 and their sigmas) is kept as it came (:meth:`LiveView.feed_grid`), the newest by ``utc``,
 and each vehicle of it leaves a track of (utc, lat, lon), one point per
-:data:`FLEET_TRACK_PERIOD_S`. :meth:`LiveView.fleet` is the JSON of ``api/fleet``.
+:data:`FLEET_TRACK_PERIOD_S` (the shore feeds the grid's Zenoh samples; a fleet service
+serving the page itself calls :meth:`LiveView.feed_grid` with each grid it makes).
+:meth:`LiveView.fleet` is the JSON of ``api/fleet``.
 """
 
 from __future__ import annotations
