@@ -13,7 +13,8 @@ second: one row per pipeline with its newest values (angles in degrees, everythi
 in SI units), then the vehicle's mode, input rates, rejections with reasons, drops and
 recent events. With ``--web HOST:PORT`` it serves the service's web page instead
 (:mod:`onboard.service.web`: live map, current, speed, heading, flags, health), fed from
-the same subscription (:func:`serve_web`).
+the same subscription (:func:`serve_web`), with the fleet service's current field
+(``onboard/fleet/current/grid``) as its fleet layer.
 ``--foxglove [HOST:]PORT`` also serves the records to Foxglove on a
 WebSocket server (:mod:`onboard.apps.foxglove_live`, docs/foxglove.md).
 
@@ -39,6 +40,8 @@ from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.wire import ESTIMATE_SCHEMA, HEALTH_SCHEMA, LOCATION_FIX_SCHEMA
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+FLEET_GRID_KEY = "onboard/fleet/current/grid"
+"""The fleet service's grid (``onboard fleet``), drawn by ``--web`` as the fleet layer."""
 EXPECTED = {"est": ESTIMATE_SCHEMA, "health": HEALTH_SCHEMA, "fix": LOCATION_FIX_SCHEMA}
 """Third key segment -> the schema name this version decodes there."""
 ANGLES = {"heading", "course", "yaw", "roll", "pitch"}
@@ -223,6 +226,7 @@ def serve_web(session: Any, vehicle: str, listen: str) -> int:
         raise UsageError(f"--web {err}") from None
     view = LiveView(vehicle="" if vehicle == "*" else vehicle)
     sub = session.declare_subscriber(f"onboard/{vehicle}/**", view.on_sample)
+    grid_sub = session.declare_subscriber(FLEET_GRID_KEY, view.on_sample)  # the fleet layer
     for rep in session.get(f"onboard/{vehicle}/**", timeout=3.0):
         if rep.ok is not None:
             view.feed_zenoh(str(rep.ok.key_expr), rep.ok.payload.to_bytes())
@@ -245,6 +249,7 @@ def serve_web(session: Any, vehicle: str, listen: str) -> int:
         pass
     finally:
         sub.undeclare()
+        grid_sub.undeclare()
     return 0
 
 

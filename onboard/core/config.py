@@ -420,6 +420,48 @@ class WebOut(_Strict):
     service would load it before it is saved, and applies at the next start."""
 
 
+UDP_URL = r"^udp:[^\s]+:[0-9]{1,5}$"
+"""``udp:HOST:PORT``: the form of the chart plotter outputs' ``url``."""
+
+
+class NmeaVdrOut(_Strict):
+    """``[service.nmea_vdr]``: the current's set and drift as NMEA 0183 ``VDR`` sentences
+    over UDP, for chart plotters (OpenCPN, a Signal K server's NMEA 0183 input;
+    docs/chartplotters.md)."""
+
+    enabled: bool = False
+    """Send VDR."""
+    url: Annotated[str, msgspec.Meta(pattern=UDP_URL)] = "udp:127.0.0.1:10110"
+    """Where (``udp:HOST:PORT``, a host name or address, a broadcast address too; 10110 is
+    the NMEA-over-IP port OpenCPN listens on)."""
+    talker: Annotated[str, msgspec.Meta(pattern="^[A-Z]{2}$")] = "II"
+    """The sentence's talker (two capital letters; ``II`` integrated instrumentation)."""
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 1.0
+    """At most this many sentences a second (the newest known current)."""
+    max_std_mps: Annotated[float, msgspec.Meta(ge=0.0)] = 0.0
+    """Send nothing while the current's larger one-sigma (m/s) is above this; 0: no bound."""
+
+
+class SignalKOut(_Strict):
+    """``[service.signalk]``: the current's set and drift as Signal K
+    ``environment.current`` deltas over UDP, to a Signal K server's "Signal K" UDP data
+    connection (docs/chartplotters.md)."""
+
+    enabled: bool = False
+    """Send Signal K deltas."""
+    url: Annotated[str, msgspec.Meta(pattern=UDP_URL)] = "udp:127.0.0.1:8375"
+    """Where (``udp:HOST:PORT``: the server's Signal K UDP input)."""
+    context: str = "vessels.self"
+    """The delta's context: ``vessels.self``, or ``vessels.urn:mrn:imo:mmsi:...`` when the
+    server belongs to another vessel."""
+    label: str = "onboard"
+    """The delta's source label."""
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 1.0
+    """At most this many deltas a second (the newest known current)."""
+    max_std_mps: Annotated[float, msgspec.Meta(ge=0.0)] = 0.0
+    """Send nothing while the current's larger one-sigma (m/s) is above this; 0: no bound."""
+
+
 class ServiceConfig(_Strict):
     """``[service]``: live inputs, publishers, recorder and persistence."""
 
@@ -433,6 +475,10 @@ class ServiceConfig(_Strict):
     """``[service.recorder]``."""
     web: WebOut = WebOut()
     """``[service.web]``."""
+    nmea_vdr: NmeaVdrOut = NmeaVdrOut()
+    """``[service.nmea_vdr]``."""
+    signalk: SignalKOut = SignalKOut()
+    """``[service.signalk]``."""
     state_file: str = "state/adaptive.json"
     """Where the adaptive state is kept across restarts (relative to the state
     directory)."""

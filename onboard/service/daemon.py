@@ -10,6 +10,7 @@ One asyncio loop, one thread doing estimation::
          push queued samples (checked, rejections counted with their reason, GNSS only
          at the surface), step the pipelines
       -> Zenoh (every tick), MAVLink (rate_hz), health at 1 Hz      onboard.service.publishers
+      -> set and drift to chart plotters (NMEA VDR, Signal K; rate_hz) publishers.chartplot
       -> the MAVLink sessions with the autopilots, every 0.1 s      onboard.service.mavlink_session
       -> adaptive state saved atomically every state_save_interval_s onboard.service.persistence
       -> systemd: READY=1 once inputs and publishers are up, STATUS every 5 s,
@@ -212,6 +213,8 @@ class Service:
         """The MAVLink sessions with the autopilot (onboard.service.mavlink_session)."""
         self.zenoh = None
         self.mavlink = None
+        self.chartplot: list = []
+        """Set and drift to chart plotters (``[service.nmea_vdr]``, ``[service.signalk]``)."""
         self._tasks: list[asyncio.Task] = []
         self._stop = asyncio.Event()
         self._rate_prev: dict[str, int] = {}
@@ -319,6 +322,7 @@ class Service:
         cfg = self.cfg
         if cfg.service.mavlink.enabled and not self._open_mavlink():
             self._tasks.append(asyncio.create_task(self._mavlink_retry(), name="mavlink-retry"))
+        self._open_chartplot()
         if cfg.service.zenoh.enabled:
             if not await self._open_zenoh():
                 self._tasks.append(asyncio.create_task(self._zenoh_retry(), name="zenoh-retry"))
@@ -342,6 +346,19 @@ class Service:
             return False
         self.mavlink = pub
         return True
+
+    def _open_chartplot(self) -> None:
+        """The set-and-drift outputs that are enabled (onboard.service.publishers.chartplot)."""
+        from onboard.service.publishers.chartplot import NmeaVdrPublisher, SignalKPublisher
+
+        svc = self.cfg.service
+        declination = lambda: self.engine.declination.report.deg  # noqa: E731
+        outs = [(svc.nmea_vdr, NmeaVdrPublisher), (svc.signalk, SignalKPublisher)]
+        for out_cfg, cls in outs:
+            if out_cfg.enabled:
+                pub = cls(out_cfg, declination=declination, clock=self.clock.now)
+                pub.start()
+                self.chartplot.append(pub)
 
     async def _mavlink_retry(self) -> None:
         delay = 1.0
@@ -453,6 +470,8 @@ class Service:
             self.zenoh.close()
         if self.mavlink is not None:
             self.mavlink.close()
+        for pub in self.chartplot:
+            pub.close()
         if self.signing is not None:
             await loop.run_in_executor(None, self.signing.close)
         self.notifier.close()
@@ -555,6 +574,8 @@ class Service:
             self.zenoh.publish_estimates(records, self.engine.location_fixes(records))
         if self.mavlink is not None:
             self.mavlink.publish_estimates(records, now)
+        for pub in self.chartplot:
+            pub.publish_estimates(records, now)
         if self.web_view is not None and records:
             self.web_view.feed_estimates(records)
         if self.on_tick is not None:
@@ -577,6 +598,8 @@ class Service:
             self.zenoh.publish_health(h)
         if self.mavlink is not None:
             self.mavlink.publish_health(h, now)
+        for pub in self.chartplot:
+            pub.publish_health(h)
         if self.web_view is not None:
             self.web_view.feed_health(h)
         if self.on_health is not None:

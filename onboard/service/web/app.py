@@ -7,6 +7,9 @@
                                version, webpage, api, works_in_relative_paths, extras.cockpit)
 ``GET /cockpit_extras.json``   the Cockpit widget description: the page in an iframe
 ``GET /api/state``             :meth:`.view.LiveView.state` (``?vehicle=&since=&epoch=``)
+``GET /api/fleet``             :meth:`.view.LiveView.fleet`: the newest fleet grid (``?since=``
+                               its utc seen), the fleet's vehicles and tracks (``&vehicle=``
+                               the one the page shows, left out)
 ``GET /api/config``            the configuration files and the configuration in use (service)
 ``POST /api/config/check``     check a new text of the last file: ``{"errors": [...]}``
 ``POST /api/config``           check and save it (422 with the errors when it fails)
@@ -116,6 +119,8 @@ def routes(view: LiveView, editor: ConfigEditor | None = None) -> dict[tuple[str
                                          int(_float(q, "epoch", -1))))
 
     table[("GET", "/api/state")] = state
+    table[("GET", "/api/fleet")] = lambda req: json_response(
+        view.fleet(_float(req.query, "since", -math.inf), req.query.get("vehicle", "")))
     if editor is not None:
         table.update(_config_routes(editor))
     return table

@@ -15,6 +15,16 @@ the service asks its pipeline for it (``origin`` callable); the shore derives it
 sample of the vehicle that carries ``latitude`` and ``longitude`` (Foxglove's
 LocationFix) and the track point of that moment. Without an origin the page draws a
 metric grid.
+
+The fleet layer: the fleet service's grid (``<prefix>/fleet/current/grid``, JSON
+``onboard.FleetGrid.v1``: ``utc``, ``spacing_m``, ``cells`` with ``lat``, ``lon``,
+``north``, ``east`` (null where the field knows nothing), ``std_north``, ``std_east``,
+``n_obs``; ``vehicles`` with ``vehicle``, ``utc``, ``lat``, ``lon``, ``north``, ``east``
+and their sigmas) is kept as it came (:meth:`LiveView.feed_grid`), the newest by ``utc``,
+and each vehicle of it leaves a track of (utc, lat, lon), one point per
+:data:`FLEET_TRACK_PERIOD_S` (the shore feeds the grid's Zenoh samples; a fleet service
+serving the page itself calls :meth:`LiveView.feed_grid` with each grid it makes).
+:meth:`LiveView.fleet` is the JSON of ``api/fleet``.
 """
 
 from __future__ import annotations
@@ -42,6 +52,12 @@ TRACK_MAX_POINTS = 7200
 """Track points kept per vehicle (2 h at one a second)."""
 EVENTS_KEPT = 20
 """Recent health events kept per vehicle."""
+FLEET_GRID_SUFFIX = "/fleet/current/grid"
+"""The key of the fleet service's grid ends so: ``<prefix>/fleet/current/grid``."""
+FLEET_TRACK_PERIOD_S = 5.0
+"""UTC seconds between two points of a vehicle's track on the fleet layer."""
+FLEET_TRACK_MAX_POINTS = 1440
+"""Fleet track points kept per vehicle (2 h at one every 5 s)."""
 
 OriginFn = Callable[[str], "tuple[float, float] | None"]
 """(lat, lon) in degrees of the local origin of a pipeline's positions, or None."""
@@ -81,6 +97,10 @@ class LiveView:
         """Zenoh payloads that could not be decoded (another schema, a foreign publisher)."""
         self._dec_est = msgspec.json.Decoder(EstimateRecord)
         self._dec_health = msgspec.json.Decoder(HealthRecord)
+        self.grid: dict | None = None
+        """The newest fleet grid, as published."""
+        self.fleet_tracks: dict[str, deque[tuple[float, float, float]]] = {}
+        """Vehicle -> (utc, lat, lon) from the grids' ``vehicles``."""
 
     # ------------------------------------------------------------------ feeding
 
@@ -102,6 +122,12 @@ class LiveView:
         """One Zenoh sample on ``<prefix>/<vehicle>/...``: ``est/<pipeline>`` is an
         EstimateRecord, ``health`` a HealthRecord; any other JSON object of the vehicle
         with ``latitude`` and ``longitude`` (a LocationFix) places the track on the map."""
+        if key.endswith(FLEET_GRID_SUFFIX):
+            try:
+                self.feed_grid(msgspec.json.decode(payload))
+            except (msgspec.DecodeError, ValueError):
+                self.bad += 1
+            return
         parts = key.split("/")
         if len(parts) < 3:
             return
@@ -114,6 +140,28 @@ class LiveView:
                 self._location(parts[1], msgspec.json.decode(payload))
         except (msgspec.DecodeError, msgspec.ValidationError):
             self.bad += 1
+
+    def feed_grid(self, grid: Any) -> None:
+        """One fleet grid (the decoded JSON): kept when it is newer than the one held (a
+        grid heard twice, or late, changes nothing); its vehicles extend their tracks.
+        Raises ValueError when it is not a grid."""
+        if not (isinstance(grid, dict) and isinstance(grid.get("cells"), list)
+                and _finite(grid.get("utc"))):
+            raise ValueError("not a fleet grid")
+        with self.lock:
+            if self.grid is not None and grid["utc"] <= self.grid["utc"]:
+                return
+            self.grid = grid
+            for v in grid.get("vehicles") or []:
+                self._fleet_point(v)
+
+    def _fleet_point(self, v: Any) -> None:
+        if not isinstance(v, dict) or not all(_finite(v.get(k)) for k in ("utc", "lat", "lon")):
+            return
+        track = self.fleet_tracks.setdefault(str(v.get("vehicle")),
+                                             deque(maxlen=FLEET_TRACK_MAX_POINTS))
+        if not track or v["utc"] - track[-1][0] >= FLEET_TRACK_PERIOD_S:
+            track.append((v["utc"], v["lat"], v["lon"]))
 
     def on_sample(self, sample: Any) -> None:
         """Zenoh subscriber callback."""
@@ -188,6 +236,55 @@ class LiveView:
                    "current": _current(v.estimates.get(CURRENT_PIPELINE)),
                    "health": _health(v), "estimates": _estimates(v)}
         return out
+
+    def fleet(self, since: float = -math.inf, shown: str = "") -> dict:
+        """The fleet layer's JSON: ``grid`` (the newest grid as published, null when
+        there is none or it is not newer than ``since``, its ``utc``), ``vehicles`` (each
+        vehicle's newest place and current estimate: the grid's ``vehicles``, then every
+        vehicle this view follows itself that the grid does not list, with ``t`` its
+        vehicle time) and ``tracks`` (vehicle -> [[time, lat, lon], ...]: from the grids,
+        else one point per :data:`FLEET_TRACK_PERIOD_S` of the vehicle's own track). The
+        vehicle ``shown`` (the page's own layer draws it) is left out of those this view
+        follows, so the service's page, whose only vehicle is its own, costs nothing here."""
+        with self.lock:
+            grid = self.grid if self.grid is not None and self.grid["utc"] > since else None
+            tracks = {vid: [list(p) for p in tr] for vid, tr in self.fleet_tracks.items()}
+            vehicles = [dict(v) for v in (self.grid or {}).get("vehicles") or []
+                        if isinstance(v, dict)]
+            listed = {str(v.get("vehicle")) for v in vehicles}
+            for vid, v in sorted(self.vehicles.items()):
+                if vid not in listed and vid != shown and v.origin is not None and v.track:
+                    vehicles.append(_own_place(vid, v))
+                    tracks.setdefault(vid, _own_track(v))
+        return {"grid": grid, "vehicles": vehicles, "tracks": dict(sorted(tracks.items()))}
+
+
+def _latlon(origin: tuple[float, float], north_m: float, east_m: float) -> tuple[float, float]:
+    m_lat, m_lon = metres_per_degree(origin[0])
+    return origin[0] + north_m / m_lat, origin[1] + east_m / m_lon
+
+
+def _own_place(vid: str, v: _Vehicle) -> dict:
+    """A vehicle this view follows, as the grid lists its vehicles: its newest track
+    point and current estimate (null where unknown)."""
+    t, n, e = v.track[-1]
+    lat, lon = _latlon(v.origin, n, e)
+    cur = v.estimates.get(CURRENT_PIPELINE)
+    values, std = (cur.values, cur.std) if cur is not None else ({}, {})
+    return {"vehicle": vid, "t": t, "lat": lat, "lon": lon, "north": values.get("north"),
+            "east": values.get("east"), "std_north": std.get("north"), "std_east": std.get("east")}
+
+
+def _own_track(v: _Vehicle) -> list[list[float]]:
+    out: list[list[float]] = []
+    for t, n, e in v.track:
+        if not out or t - out[-1][0] >= FLEET_TRACK_PERIOD_S:
+            out.append([t, *_latlon(v.origin, n, e)])
+    return out
+
+
+def _finite(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
 def _position(v: _Vehicle) -> dict | None:

@@ -3,6 +3,9 @@
 // the current as an arrow from the vehicle with its one-sigma ellipse at the tip, and
 // fills the panel. ?widget=1: compact (Cockpit iframe); ?tiles=0: never ask for tiles;
 // ?tile_url=.../{z}/{x}/{y}.png: another tile server (a local one, offline).
+// The fleet layer polls api/fleet: the fleet service's current field as arrows with their
+// one-sigma ellipse, faded where the sigma is large, nothing where the field is unknown;
+// each vehicle's track and its own estimate's arrow.
 'use strict';
 
 const params = new URLSearchParams(location.search);
@@ -20,6 +23,15 @@ const MAX_TRACK_POINTS = 7200;
 const TILE_URL = params.get('tile_url') || 'https://tile.openstreetmap.org/{z}/{x}/{y}.png';
 const EARTH_RES = 156543.03392;  // Web Mercator metres per pixel at zoom 0 on the equator
 const MAX_TILES = 400;           // tiles kept in memory (the oldest dropped)
+const FLEET_POLL_MS = 2000;
+const FLEET_COLOUR = '#7b1fa2';          // the field's arrows
+const FLEET_ELLIPSE_FILL = 'rgba(123, 31, 162, 0.15)';
+const FLEET_TRACK_COLOUR = '#2e7d32';    // the fleet's vehicles' tracks
+const FLEET_VEHICLE_COLOUR = '#ef6c00';  // each vehicle's own estimate
+const FLEET_STD_FULL = 0.05;   // m/s: a cell this certain or better is drawn opaque
+const FLEET_ALPHA_MIN = 0.15;  // the faintest cell drawn
+const FLEET_ARROW_OF_SPACING = 0.9;  // the fastest cell's arrow spans this much of a cell
+const M_PER_DEG_LAT = 111132.95, M_PER_DEG_LON_EQ = 111319.49;
 
 let track = [];          // [t, north_m, east_m]
 let epoch = -1;
@@ -27,6 +39,7 @@ let state = null;
 const tiles = new Map(); // 'z/x/y' -> {img, ok}
 let tilesFailed = !USE_TILES;
 let tilesLoaded = 0;
+let fleet = {grid: null, vehicles: [], tracks: {}, origin: null};  // origin: the first grid's centre
 
 const $ = (id) => document.getElementById(id);
 const fmt = (x, d) => (x === null || x === undefined) ? '?' : x.toFixed(d);
@@ -42,7 +55,7 @@ async function poll() {
     const r = await fetch('api/state?' + q, {cache: 'no-store'});
     if (!r.ok) throw new Error('HTTP ' + r.status);
     const s = await r.json();
-    if (s.epoch !== epoch) { track = []; epoch = s.epoch; }
+    if (s.epoch !== undefined && s.epoch !== epoch) { track = []; epoch = s.epoch; }  // none before the first vehicle
     if (s.track) track.push(...s.track.points);
     if (track.length > MAX_TRACK_POINTS) track.splice(0, track.length - MAX_TRACK_POINTS);
     state = s;
@@ -53,6 +66,43 @@ async function poll() {
   }
   setTimeout(poll, POLL_MS);
 }
+
+async function pollFleet() {
+  try {
+    const since = fleet.grid ? fleet.grid.utc : -1e300;
+    const q = new URLSearchParams({since: String(since), vehicle: (state && state.vehicle) || ''});
+    const r = await fetch('api/fleet?' + q, {cache: 'no-store'});
+    if (r.ok) {
+      const f = await r.json();
+      if (f.grid) fleet.grid = f.grid;
+      fleet.tracks = f.tracks;
+      fleet.vehicles = f.vehicles;
+      if (!fleet.origin && fleet.grid && fleet.grid.cells.length) fleet.origin = centre(fleet.grid.cells);
+      if (!fleet.origin && fleet.vehicles.length) fleet.origin = centre(fleet.vehicles);
+      if (fleet.grid || fleet.vehicles.length) { fleetPanel(); draw(); }
+    }
+  } catch (err) { /* an older service without api/fleet: no fleet layer */ }
+  setTimeout(pollFleet, FLEET_POLL_MS);
+}
+
+function centre(cells) {
+  const lat = cells.reduce((a, c) => a + c.lat, 0) / cells.length;
+  const lon = cells.reduce((a, c) => a + c.lon, 0) / cells.length;
+  return {lat_deg: lat, lon_deg: lon};
+}
+
+function fleetPanel() {
+  const g = fleet.grid;
+  $('fleet-box').hidden = false;
+  const n = fleet.vehicles.length, vehicles = `${n} vehicle${n === 1 ? '' : 's'}`;
+  if (!g) { $('fleet').textContent = `${vehicles} more · no fleet field`; return; }
+  const known = g.cells.filter(known_cell).length;
+  const t = new Date(g.utc * 1000).toISOString().slice(11, 19);
+  $('fleet').textContent = `${known} cells known · ${g.cells.length - known} unknown · ` +
+    `${vehicles} · ${g.spacing_m} m cells · ${t} UTC`;
+}
+
+const known_cell = (c) => c.north !== null && c.east !== null && c.north !== undefined && c.east !== undefined;
 
 function panel(s) {
   if (s.t === null) { $('status').textContent = `waiting for ${s.vehicle || 'a vehicle'} ...`; return; }
@@ -88,6 +138,7 @@ function view(w, h) {
   for (const [, n, e] of track) { n0 = Math.min(n0, n); n1 = Math.max(n1, n); e0 = Math.min(e0, e); e1 = Math.max(e1, e); }
   const p = state && state.position;
   if (p) { n0 = Math.min(n0, p.north_m); n1 = Math.max(n1, p.north_m); e0 = Math.min(e0, p.east_m); e1 = Math.max(e1, p.east_m); }
+  for (const [n, e] of fleetPoints()) { n0 = Math.min(n0, n); n1 = Math.max(n1, n); e0 = Math.min(e0, e); e1 = Math.max(e1, e); }
   if (!isFinite(n0)) { n0 = e0 = -MIN_SPAN_M / 2; n1 = e1 = MIN_SPAN_M / 2; }
   const cn = (n0 + n1) / 2, ce = (e0 + e1) / 2;
   // the widget's panel lies over the map's right-hand side: centre on what is left
@@ -110,11 +161,13 @@ function draw() {
   ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
   ctx.fillStyle = '#f4f6f9'; ctx.fillRect(0, 0, w, h);
   const v = view(w, h);
-  const origin = state && state.origin;
+  const origin = mapOrigin();
   const onTiles = origin && !tilesFailed && drawTiles(ctx, v, origin);
   if (!onTiles) drawGrid(ctx, v);
-  $('attribution').textContent = onTiles ? '© OpenStreetMap contributors' : 'grid: metres from the first fix';
+  const from = (state && state.origin) || !fleet.origin ? 'the first fix' : 'the fleet grid\'s centre';
+  $('attribution').textContent = onTiles ? '© OpenStreetMap contributors' : `grid: metres from ${from}`;
   drawTrack(ctx, v);
+  drawFleet(ctx, v);
   drawVehicleAndCurrent(ctx, v);
 }
 
@@ -197,7 +250,7 @@ function drawVehicleAndCurrent(ctx, v) {
     ctx.beginPath();
     ctx.ellipse(tx, ty, Math.max(1, c.std_east_mps * ARROW_PX_PER_MPS), Math.max(1, c.std_north_mps * ARROW_PX_PER_MPS), 0, 0, 2 * Math.PI);
     ctx.fill(); ctx.stroke();
-    if (c.known) arrow(ctx, x, y, tx, ty);
+    if (c.known) arrow(ctx, x, y, tx, ty, ARROW_COLOUR, 4, 12);
     ctx.fillStyle = ARROW_COLOUR; ctx.font = '11px sans-serif';
     ctx.fillText(`current (${ARROW_PX_PER_MPS} px per m/s, 1σ ellipse)`, 8, 16);
   }
@@ -215,14 +268,85 @@ function drawVehicleAndCurrent(ctx, v) {
   ctx.fill();
 }
 
-function arrow(ctx, x0, y0, x1, y1) {
-  const a = Math.atan2(y1 - y0, x1 - x0), head = 12;
-  ctx.strokeStyle = ARROW_COLOUR; ctx.fillStyle = ARROW_COLOUR; ctx.lineWidth = 4;
+function arrow(ctx, x0, y0, x1, y1, colour, width, head) {
+  const a = Math.atan2(y1 - y0, x1 - x0);
+  ctx.strokeStyle = colour; ctx.fillStyle = colour; ctx.lineWidth = width;
   ctx.beginPath(); ctx.moveTo(x0, y0); ctx.lineTo(x1 - head * 0.8 * Math.cos(a), y1 - head * 0.8 * Math.sin(a)); ctx.stroke();
   ctx.beginPath(); ctx.moveTo(x1, y1);
   ctx.lineTo(x1 - head * Math.cos(a - 0.45), y1 - head * Math.sin(a - 0.45));
   ctx.lineTo(x1 - head * Math.cos(a + 0.45), y1 - head * Math.sin(a + 0.45));
   ctx.closePath(); ctx.fill();
+}
+
+// ---------------------------------------------------------------- the fleet layer
+
+function mapOrigin() {
+  // The vehicle's origin places everything; a fleet page without one uses the first grid's centre.
+  return (state && state.origin) || fleet.origin;
+}
+
+function local(lat, lon) {
+  // (north, east) metres of (lat, lon) about the map's origin (the page's flat-earth scale).
+  const o = mapOrigin();
+  return [(lat - o.lat_deg) * M_PER_DEG_LAT, (lon - o.lon_deg) * M_PER_DEG_LON_EQ * Math.cos(o.lat_deg * Math.PI / 180)];
+}
+
+function fleetPoints() {
+  // Every place of the fleet layer in local metres (the extent shown holds them all).
+  if (!mapOrigin()) return [];
+  const pts = fleet.grid ? fleet.grid.cells.map((c) => local(c.lat, c.lon)) : [];
+  for (const b of fleet.vehicles) pts.push(local(b.lat, b.lon));
+  for (const tr of Object.values(fleet.tracks)) for (const [, lat, lon] of tr) pts.push(local(lat, lon));
+  return pts;
+}
+
+function fleetAlpha(c) {
+  // Opaque where the larger sigma is FLEET_STD_FULL or less, fading as it grows.
+  const s = Math.max(c.std_north ?? Infinity, c.std_east ?? Infinity);
+  return Math.max(FLEET_ALPHA_MIN, Math.min(1, FLEET_STD_FULL / s));
+}
+
+function drawFleet(ctx, v) {
+  const g = fleet.grid;
+  if (!mapOrigin() || (!g && !fleet.vehicles.length)) return;
+  const cells = g ? g.cells.filter(known_cell) : [];
+  const fastest = Math.max(1e-3, ...cells.map((c) => Math.hypot(c.north, c.east)));
+  const scale = g ? Math.min(ARROW_PX_PER_MPS, FLEET_ARROW_OF_SPACING * g.spacing_m / v.mpp / fastest)
+                  : ARROW_PX_PER_MPS;  // px per m/s
+  for (const c of cells) {
+    const [x, y] = v.px(...local(c.lat, c.lon));
+    ctx.globalAlpha = fleetAlpha(c);
+    currentArrow(ctx, x, y, c.north, c.east, c.std_north, c.std_east, scale, FLEET_COLOUR, FLEET_ELLIPSE_FILL, 2, 7);
+  }
+  ctx.globalAlpha = 1;
+  ctx.strokeStyle = FLEET_TRACK_COLOUR; ctx.lineWidth = 2; ctx.setLineDash([6, 4]);
+  for (const tr of Object.values(fleet.tracks)) {
+    ctx.beginPath();
+    tr.forEach(([, lat, lon], i) => { const [x, y] = v.px(...local(lat, lon)); if (i) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
+    ctx.stroke();
+  }
+  ctx.setLineDash([]);
+  for (const b of fleet.vehicles) {
+    const [x, y] = v.px(...local(b.lat, b.lon));
+    if (known_cell(b))
+      currentArrow(ctx, x, y, b.north, b.east, b.std_north, b.std_east, scale, FLEET_VEHICLE_COLOUR, 'rgba(239, 108, 0, 0.15)', 3, 9);
+    ctx.fillStyle = FLEET_VEHICLE_COLOUR; ctx.beginPath(); ctx.arc(x, y, 4, 0, 2 * Math.PI); ctx.fill();
+    ctx.font = '11px sans-serif'; ctx.fillText(b.vehicle, x + 6, y + 12);
+  }
+  if (!g) return;
+  ctx.fillStyle = FLEET_COLOUR; ctx.font = '11px sans-serif';
+  ctx.fillText(`fleet field (${scale.toFixed(0)} px per m/s, 1σ ellipse, faint: uncertain)`, 8, 30);
+}
+
+function currentArrow(ctx, x, y, north, east, stdN, stdE, scale, colour, fill, width, head) {
+  // An arrow of the current from (x, y), its one-sigma ellipse at the tip.
+  const tx = x + east * scale, ty = y - north * scale;
+  if (stdN !== null && stdE !== null && stdN !== undefined && stdE !== undefined) {
+    ctx.fillStyle = fill; ctx.beginPath();
+    ctx.ellipse(tx, ty, Math.max(1, stdE * scale), Math.max(1, stdN * scale), 0, 0, 2 * Math.PI);
+    ctx.fill();
+  }
+  arrow(ctx, x, y, tx, ty, colour, width, head);
 }
 
 // ---------------------------------------------------------------- configuration
@@ -255,3 +379,4 @@ window.addEventListener('resize', draw);
 if (!WIDGET) loadConfig();
 draw();
 poll();
+pollFleet();
