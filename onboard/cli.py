@@ -75,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fleet", nargs="?", const="fleet-demo", default=None, metavar="NAME",
                    help="a fleet instead of one vehicle: each vehicle's simulator feeding its "
                         "own service on one Zenoh router (default fleet: fleet-demo)")
-    p.set_defaults(handler="onboard.apps.demo:main")
+    p.set_defaults(handler="onboard.apps.demo_fleet:main")
 
     p = sub.add_parser("sitl", help="the simulator alone, emitting real protocols")
     p.add_argument("--list", action="store_true", help="list the scenarios and fleets")

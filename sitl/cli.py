@@ -9,6 +9,7 @@ Examples::
     onboard sitl --scenario bluerov2-circle --realtime --link tcp:0.0.0.0:5760 \\
         --dvl tcp:0.0.0.0:16171                           # Water Linked DVL JSON server
     onboard sitl --scenario gavia-tidal --realtime --link pty --nmea-pty --dvl pty
+    onboard sitl --fleet fleet-channel --out fleet-out --seed 1  # a fleet, offline (sitl.fleet)
 
 On ``--link`` the simulated autopilot behaves as ArduPilot's MAVLink side
 (:mod:`sitl.autopilot`): HEARTBEAT only until the receiver asks for streams

@@ -18,7 +18,8 @@ truth of the current at every vehicle (``truth-current.csv``), the field on a gr
 
 Named fleets: :data:`FLEETS` (``fleet-channel``: two boats and a torpedo AUV in a tidal
 channel with a drifting eddy and a moving front, 600 s; ``fleet-demo``: the same sea with
-its tide compressed to a 20 min period, so that a short demo sees it turn).
+its tide compressed to a 20 min period, so that a short demo sees it turn, and the
+vehicles on shorter lines, launched 10 s apart).
 """
 
 from __future__ import annotations
@@ -218,14 +219,23 @@ CHANNEL_VEHICLES = (
 )
 
 
+DEMO_VEHICLES = (
+    dataclasses.replace(CHANNEL_VEHICLES[0], leg_s=40.0, step_s=15.0),
+    dataclasses.replace(CHANNEL_VEHICLES[1], leg_s=45.0, start_delay_s=10.0),
+    dataclasses.replace(CHANNEL_VEHICLES[2], start_delay_s=20.0),
+)
+"""fleet-demo's vehicles: fleet-channel's with shorter lines and launches 10 s apart, so
+that every current is known within the first two minutes of a demo."""
+
+
 def _build() -> dict[str, Fleet]:
     origin = (50.3500, -4.1500)  # Plymouth Sound
     utc0 = DEFAULT_EPOCH_S
     return {f.name: f for f in (
         Fleet("fleet-channel", "a tidal channel (M2) with a drifting eddy and a moving front",
               channel_sea(origin, utc0, 12.4206012 * 3600.0), CHANNEL_VEHICLES, 600.0, utc0),
-        Fleet("fleet-demo", "fleet-channel's sea with its tide compressed to a 20 min period",
-              channel_sea(origin, utc0, 1200.0), CHANNEL_VEHICLES, 600.0, utc0),
+        Fleet("fleet-demo", "fleet-channel's sea with its tide compressed to a 20 min period, "
+              "shorter lines", channel_sea(origin, utc0, 1200.0), DEMO_VEHICLES, 600.0, utc0),
     )}
 
 

@@ -602,8 +602,8 @@ async def _read_json(proc: subprocess.Popen, timeout_s: float) -> dict | None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """``onboard demo [--duration S] [--scenario NAME] [--realtime] [--keep-state]``;
-    ``--fleet [NAME]`` runs a fleet instead (:mod:`onboard.apps.demo_fleet`)."""
+    """``onboard demo [--duration S] [--scenario NAME] [--realtime] [--keep-state]``
+    (``--fleet`` goes to :func:`onboard.apps.demo_fleet.main`)."""
     duration = DEFAULT_DURATION_S if args.duration is None else float(args.duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
@@ -611,10 +611,6 @@ def main(args: argparse.Namespace) -> int:
     speed = 1.0 if args.realtime else SPEED
     # the demo's own folder, reused each run (its recordings replaced): writable first
     check_outputs([Output("the demo's folder", OUT_DIR, "dir")])
-    if getattr(args, "fleet", None):
-        from onboard.apps.demo_fleet import main as fleet_main
-
-        return fleet_main(args.fleet, args.duration, bool(args.realtime))
     res = asyncio.run(run_demo(scenario, duration, speed=speed,
                                keep_state=bool(getattr(args, "keep_state", False))))
     return 0 if res.estimates else 1

@@ -26,6 +26,7 @@ against the truth at the same time, and the share within 1.96 of its sigma.
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import dataclasses
 import json
@@ -43,10 +44,12 @@ from typing import Any, Protocol, Sequence, TextIO
 import msgspec
 import numpy as np
 
+from onboard.apps import demo
 from onboard.apps.demo import (LIVE_LINES, LinkPlan, _free_port, _port_free, _read_json,
                                DEFAULT_ROUTER, demo_config)
 from onboard.core.config import Config, load
 from onboard.core.errors import UsageError
+from onboard.core.outputs import Output, check as check_outputs
 
 DEFAULT_FLEET = "fleet-demo"
 FLEET_DURATION_S = 300.0
@@ -54,6 +57,8 @@ FLEET_DURATION_S = 300.0
 FLEET_SPEED = 5.0
 """Clock speed-up of the fleet demo (several simulators and services share the CPU)."""
 Z95 = 1.96
+STOP_TIMEOUT_S = 20.0
+"""Wall seconds a member's service is given to shut down."""
 
 
 class FleetMember(Protocol):
@@ -149,9 +154,13 @@ class ServiceMember:
 
     async def stop(self) -> None:
         if self.svc is not None:
-            self.svc.request_stop()
-            await self.svc.shutdown()
-            self.svc = None
+            svc, self.svc = self.svc, None
+            svc.request_stop()
+            try:
+                await asyncio.wait_for(svc.shutdown(), STOP_TIMEOUT_S)
+            except asyncio.TimeoutError:
+                print(f"{self.name}: not stopped after {STOP_TIMEOUT_S:g} s, left behind",
+                      file=sys.stderr, flush=True)
 
 
 @dataclass
@@ -327,6 +336,7 @@ async def run_fleet_demo(fleet_name: str = DEFAULT_FLEET, duration_s: float = FL
     router = open_router(endpoint)
     shore = sub = None
     members: list[Any] = []
+    sims: list[SimulatorMember] = []
     view = ShoreView(keep_history=True)
     t_wall0 = time.monotonic()
     try:
@@ -356,7 +366,8 @@ async def run_fleet_demo(fleet_name: str = DEFAULT_FLEET, duration_s: float = FL
             with view.lock:
                 cur = {veh: r for (veh, p), r in view.estimates.items() if p == "current"}
             for v, s in zip(fleet.vehicles, sims):
-                say("  " + vehicle_line(v.id, cur.get(v.id), last_truth(s.plan.truth_path)))
+                if not s.done():
+                    say("  " + vehicle_line(v.id, cur.get(v.id), last_truth(s.plan.truth_path)))
 
         await run_members(members, start,
                           lambda: all(s.done() for s in sims) or time.monotonic() > deadline,
@@ -385,15 +396,27 @@ async def run_fleet_demo(fleet_name: str = DEFAULT_FLEET, duration_s: float = FL
         say(f"  {v.id:>7}: " + "; ".join(
             f"{q} {s['n']} known, rms {s['rms']:.3f} m/s, {100 * s['cover95']:.0f} % in 1.96 sigma"
             if s["n"] else f"{q} never known" for q, s in sc.items()))
+    late = {s.plan.scenario: float(s.result.get("late_s", math.nan)) for s in sims}
+    for vid, lag in late.items():
+        if math.isfinite(lag) and lag > demo.LATE_WARN_S:
+            say(f"warning: {vid}'s simulator fell up to {lag:.1f} s (simulated) behind the "
+                f"shared clock: this machine could not keep up with {speed:g}x, its samples "
+                "reached its service that late; rerun on a quieter machine or with --realtime")
     say(f"done in {time.monotonic() - t_wall0:.1f} s wall; recordings under {out_dir}")
     return result
 
 
-def main(fleet_name: str, duration_s: float | None, realtime: bool) -> int:
-    """``onboard demo --fleet NAME [--duration S] [--realtime]``."""
-    duration = FLEET_DURATION_S if duration_s is None else float(duration_s)
+def main(args: argparse.Namespace) -> int:
+    """``onboard demo``'s entry point: ``--fleet NAME [--duration S] [--realtime]`` runs
+    the fleet demo, anything else the single vehicle's (:func:`onboard.apps.demo.main`)."""
+    if not getattr(args, "fleet", None):
+        return demo.main(args)
+    if args.scenario or getattr(args, "keep_state", False):
+        raise UsageError("--fleet takes --duration and --realtime only")
+    duration = FLEET_DURATION_S if args.duration is None else float(args.duration)
     if not (duration > 0 and math.isfinite(duration)):
-        raise UsageError(f"--duration must be a positive number of seconds, got {duration_s}")
-    res = asyncio.run(run_fleet_demo(fleet_name, duration,
-                                     speed=1.0 if realtime else FLEET_SPEED))
+        raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
+    check_outputs([Output("the demo's folder", demo.OUT_DIR, "dir")])
+    res = asyncio.run(run_fleet_demo(args.fleet, duration,
+                                     speed=1.0 if args.realtime else FLEET_SPEED))
     return 0 if any(r["estimates"] for r in res.values()) else 1
