@@ -83,6 +83,15 @@ class FieldPart:
         ``utc`` (s since the Unix epoch)."""
         raise NotImplementedError
 
+    def velocity_point(self, north: float, east: float, depth: float,
+                       utc: float) -> tuple[float, float]:
+        """:meth:`velocity` at one point, in plain floats: the plants call it at every
+        RK4 sub-step, where numpy's per-call overhead doubled a boat's simulation time
+        (docs/sitl.md "A fleet in a current field"); the parts below write it out with
+        :mod:`math`, and tests/test_current_field.py checks it against :meth:`velocity`."""
+        vn, ve = self.velocity(north, east, depth, utc)
+        return float(vn), float(ve)
+
     def describe(self) -> dict[str, Any]:
         """The part's kind and parameters (JSON-ready), for the truth file."""
         d = {k: v for k, v in self.__dict__.items()}
@@ -99,6 +108,10 @@ class UniformFlow(FieldPart):
     def velocity(self, north: Num, east: Num, depth: Num, utc: Num) -> tuple[Num, Num]:
         zero = 0.0 * (north + east + depth + utc)
         return zero + self.north, zero + self.east
+
+    def velocity_point(self, north: float, east: float, depth: float,
+                       utc: float) -> tuple[float, float]:
+        return self.north, self.east
 
 
 @dataclass(frozen=True)
@@ -154,6 +167,22 @@ class TidalChannel(FieldPart):
         speed = self.tide(utc) * self.lateral(north, east) * self.vertical(depth)
         return speed * math.cos(self.direction), speed * math.sin(self.direction)
 
+    def velocity_point(self, north: float, east: float, depth: float,
+                       utc: float) -> tuple[float, float]:
+        c, s = math.cos(self.direction), math.sin(self.direction)
+        y = -(north - self.centre_north) * s + (east - self.centre_east) * c
+        lateral = max(0.0, 1.0 - (2.0 * y / self.width) ** 2)
+        vertical = 1.0
+        if self.water_depth is not None:
+            h = self.water_depth
+            z = min(max(h - depth, 1e-3 * h), h)
+            vertical = ((z / (SOULSBY_ROUGHNESS_SCALE * h)) ** SEVENTH if z < 0.5 * h
+                        else SOULSBY_UPPER_FACTOR)
+        tide = self.mean + self.amplitude * math.cos(
+            2.0 * math.pi * (utc - self.t_ref) / self.period + self.phase)
+        speed = tide * lateral * vertical
+        return speed * c, speed * s
+
 
 @dataclass(frozen=True)
 class LambOseenEddy(FieldPart):
@@ -195,6 +224,18 @@ class LambOseenEddy(FieldPart):
         k = self.circulation / (2.0 * math.pi) * _one_minus_exp_over(dn * dn + de * de,
                                                                     self.core_radius)
         # counter-clockwise seen from above, in (north, east): (dn, de) -> (de, -dn)
+        return k * de, -k * dn
+
+    def velocity_point(self, north: float, east: float, depth: float,
+                       utc: float) -> tuple[float, float]:
+        dt = utc - self.t_ref
+        dn = north - (self.north0 + self.drift_north * dt)
+        de = east - (self.east0 + self.drift_east * dt)
+        r2 = dn * dn + de * de
+        rc2 = self.core_radius * self.core_radius
+        x = r2 / rc2
+        f = 1.0 / rc2 if x < 1e-8 else -math.expm1(-x) / r2
+        k = self.circulation / (2.0 * math.pi) * f
         return k * de, -k * dn
 
 
@@ -240,6 +281,14 @@ class TanhFront(FieldPart):
         return (self.a_north + (self.b_north - self.a_north) * w,
                 self.a_east + (self.b_east - self.a_east) * w)
 
+    def velocity_point(self, north: float, east: float, depth: float,
+                       utc: float) -> tuple[float, float]:
+        d = ((north - self.north0) * math.cos(self.normal)
+             + (east - self.east0) * math.sin(self.normal) - self.speed * (utc - self.t_ref))
+        w = 0.5 * (1.0 + math.tanh(d / self.half_width))
+        return (self.a_north + (self.b_north - self.a_north) * w,
+                self.a_east + (self.b_east - self.a_east) * w)
+
 
 @dataclass(frozen=True)
 class SeaField:
@@ -261,6 +310,16 @@ class SeaField:
             a, b = p.velocity(north, east, depth, utc)
             vn = vn + a
             ve = ve + b
+        return vn, ve
+
+    def local_point(self, north: float, east: float, depth: float,
+                    utc: float) -> tuple[float, float]:
+        """:meth:`local` at one point in plain floats (:meth:`FieldPart.velocity_point`)."""
+        vn = ve = 0.0
+        for p in self.parts:
+            a, b = p.velocity_point(north, east, depth, utc)
+            vn += a
+            ve += b
         return vn, ve
 
     def to_local(self, lat_deg: Num, lon_deg: Num) -> tuple[np.ndarray, np.ndarray]:
@@ -314,7 +373,7 @@ class VehicleCurrent(CurrentField):
     utc0: float = 0.0
 
     def velocity_ned(self, t: float, position_ned: np.ndarray) -> np.ndarray:
-        vn, ve = self.sea.local(self.offset_north + float(position_ned[0]),
-                                self.offset_east + float(position_ned[1]),
-                                float(position_ned[2]), self.utc0 + t)
-        return np.array([float(vn), float(ve), 0.0])
+        vn, ve = self.sea.local_point(self.offset_north + float(position_ned[0]),
+                                      self.offset_east + float(position_ned[1]),
+                                      float(position_ned[2]), self.utc0 + t)
+        return np.array([vn, ve, 0.0])

@@ -266,6 +266,7 @@ def vehicle_config_toml(fleet: Fleet, v: FleetVehicle) -> str:
 
 
 def vehicle_class(v: FleetVehicle) -> str:
+    """The onboard ``[vehicle] class`` of the vehicle's kind."""
     return {"rudder-boat": "rudder-boat", "twin-thruster": "twin-thruster-boat",
             "torpedo-auv": "torpedo-auv"}[v.kind]
 

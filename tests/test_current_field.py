@@ -149,3 +149,24 @@ def test_plant_takes_the_field_at_its_own_position_and_time():
     vn, ve = sea.local(40.0, 40.0, 2.0, UTC0 + 42.0)
     assert got.tolist() == pytest.approx([float(vn), float(ve), 0.0])
     assert math.hypot(*got[:2]) > 0.05
+
+
+def test_the_plants_point_path_agrees_with_the_array_formulas():
+    """Each part's float path (what the plants call) against its numpy formula, at random
+    points spanning the eddy's core and centre, the channel's banks, the column from the
+    surface to the bed and the front."""
+    rng = np.random.default_rng(11)
+    n = np.concatenate([rng.uniform(-800, 800, 300), [-120.0]])
+    e = np.concatenate([rng.uniform(-800, 800, 300), [60.0]])
+    d = np.concatenate([rng.uniform(0, 12.5, 300), [0.0]])
+    t = np.concatenate([UTC0 + rng.uniform(-3000, 3000, 300), [UTC0]])
+    for fleet in FLEETS.values():
+        for part in fleet.sea.parts:
+            vn, ve = part.velocity(n, e, d, t)
+            pts = np.array([part.velocity_point(*map(float, x)) for x in zip(n, e, d, t)])
+            np.testing.assert_allclose(pts[:, 0], vn, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(pts[:, 1], ve, rtol=1e-12, atol=1e-15)
+        sea = fleet.sea
+        got = sea.local_point(10.0, 20.0, 5.0, UTC0 + 7.0)
+        assert got == pytest.approx(tuple(float(x) for x in sea.local(10.0, 20.0, 5.0, UTC0 + 7.0)),
+                                    rel=1e-12)

@@ -100,6 +100,7 @@ class SimulatorMember:
         return hello
 
     async def start(self, start: float) -> None:
+        """Tell the child when its t = 0 is: the fleet's plus the vehicle's launch delay."""
         assert self.proc is not None and self.proc.stdin is not None
         self.proc.stdin.write(json.dumps({"start": start + self.start_delay_s / self.speed}) + "\n")
         self.proc.stdin.flush()
@@ -115,6 +116,7 @@ class SimulatorMember:
         return False
 
     async def stop(self) -> None:
+        """Close the child's stdin (it stops), wait for it (killed after 10 s)."""
         p = self.proc
         if p is None:
             return
@@ -145,6 +147,7 @@ class ServiceMember:
     svc: Any = None
 
     async def start(self, start: float) -> None:
+        """Start the service on the shared clock, from the vehicle's launch."""
         from onboard.service.daemon import Service, ServiceClock
 
         clock = ServiceClock(speed=self.speed, origin=0.0,
@@ -153,6 +156,7 @@ class ServiceMember:
         await self.svc.start()
 
     async def stop(self) -> None:
+        """Shut the service down (given :data:`STOP_TIMEOUT_S`)."""
         if self.svc is not None:
             svc, self.svc = self.svc, None
             svc.request_stop()
@@ -173,9 +177,11 @@ class CommandMember:
     proc: subprocess.Popen | None = None
 
     async def start(self, start: float) -> None:
+        """Start the command."""
         self.proc = subprocess.Popen(self.argv)
 
     async def stop(self) -> None:
+        """Terminate the command (killed after 10 s)."""
         if self.proc is not None:
             self.proc.terminate()
             try:
