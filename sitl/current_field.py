@@ -342,6 +342,17 @@ class SeaField:
         """The parts with their parameters (JSON-ready)."""
         return [p.describe() for p in self.parts]
 
+    @classmethod
+    def from_description(cls, origin: Sequence[float],
+                         parts: Sequence[dict[str, Any]]) -> SeaField:
+        """The field :meth:`describe` described (``fleet.json``'s ``field``)."""
+        kinds = {k.__name__: k for k in (UniformFlow, TidalChannel, LambOseenEddy, TanhFront)}
+        built = []
+        for d in parts:
+            params = {k: v for k, v in d.items() if k != "kind"}
+            built.append(kinds[d["kind"]](**params))
+        return cls((float(origin[0]), float(origin[1])), tuple(built))
+
     def grid(self, lat_deg: Sequence[float], lon_deg: Sequence[float],
              depth_m: Sequence[float], utc: Sequence[float]) -> dict[str, Any]:
         """The field on a grid: ``north``/``east`` (m/s) indexed ``[utc][depth][lat][lon]``

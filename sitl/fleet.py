@@ -397,6 +397,13 @@ def read_manifest(out: str | Path) -> dict[str, Any]:
     return json.loads((Path(out) / "fleet.json").read_text())
 
 
+def read_sea(out: str | Path) -> SeaField:
+    """The field of a fleet written by :func:`write_fleet`, from its ``fleet.json``: what
+    a fleet evaluation predicts against, anywhere and at any time (:meth:`SeaField.at`)."""
+    m = read_manifest(out)
+    return SeaField.from_description(m["origin_deg"], m["field"])
+
+
 def replace_vehicles(fleet: Fleet, vehicles: tuple[FleetVehicle, ...]) -> Fleet:
     """``fleet`` with other vehicles (the tests' small fleets)."""
     return dataclasses.replace(fleet, vehicles=vehicles)

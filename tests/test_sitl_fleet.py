@@ -21,7 +21,7 @@ import pytest
 from onboard.core.config import load_all
 from onboard.core.errors import UsageError
 from onboard.sitl.fleet import (
-    FLEETS, BASE_CONFIGS, FleetVehicle, get_fleet, read_manifest, replace_vehicles,
+    FLEETS, BASE_CONFIGS, FleetVehicle, get_fleet, read_manifest, read_sea, replace_vehicles,
     write_fleet)
 from onboard.sitl.runner import read_truth
 
@@ -61,6 +61,10 @@ def test_offline_fleet_writes_each_vehicle_its_clock_and_the_truth(tmp_path):
     np.testing.assert_allclose(fn, vn, atol=2e-6)
     np.testing.assert_allclose(fe, ve, atol=2e-6)
     assert np.ptp(vn) > 0.01  # the boat sees the field change along its track
+    # the field rebuilt from fleet.json gives the same truth
+    rn, re_ = read_sea(tmp_path).at(lat, lon, depth, utc)
+    np.testing.assert_allclose(rn, vn, atol=2e-6)
+    np.testing.assert_allclose(re_, ve, atol=2e-6)
     assert depth[[r["vehicle"] == "auv-1" for r in rows]].min() > 4.0
     # negative control: the same records against a uniform current are far off
     assert np.abs(vn - vn.mean()).max() > 10 * 2e-6
