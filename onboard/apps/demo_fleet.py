@@ -407,7 +407,8 @@ async def run_fleet_demo(fleet_name: str = DEFAULT_FLEET, duration_s: float = FL
         if math.isfinite(lag) and lag > demo.LATE_WARN_S:
             say(f"warning: {vid}'s simulator fell up to {lag:.1f} s (simulated) behind the "
                 f"shared clock: this machine could not keep up with {speed:g}x, its samples "
-                "reached its service that late; rerun on a quieter machine or with --realtime")
+                "reached its service that late; rerun on a quieter machine"
+                + (" or with --realtime" if speed > 1.0 else ""))
     say(f"done in {time.monotonic() - t_wall0:.1f} s wall; recordings under {out_dir}")
     return result
 
