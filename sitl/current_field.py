@@ -269,7 +269,8 @@ class TanhFront(FieldPart):
 
     def distance(self, north: Num, east: Num, utc: Num) -> Num:
         """Signed distance (m) from the front line at ``utc``, positive on the ``b`` side."""
-        s = (north - self.north0) * math.cos(self.normal) + (east - self.east0) * math.sin(self.normal)
+        s = ((north - self.north0) * math.cos(self.normal)
+             + (east - self.east0) * math.sin(self.normal))
         return s - self.speed * (utc - self.t_ref)
 
     def share(self, north: Num, east: Num, utc: Num) -> Num:

@@ -9,7 +9,6 @@ measured figures with margin (the comments say which)."""
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import math
 import struct
@@ -26,9 +25,6 @@ from onboard.sitl.fleet import (
 from onboard.sitl.runner import read_truth
 
 CHANNEL = FLEETS["fleet-channel"]
-KNOWN_STD = 0.1
-"""A current estimate counts as known below this one-sigma (m/s): the config's
-``unknown_above_std_mps`` publishes nothing above it."""
 
 
 def small_fleet(*vids: str) -> object:
@@ -117,7 +113,8 @@ def test_cli_lists_and_writes_a_fleet(tmp_path, capsys):
                  "3", "--seed", "2"]) == 0
     out = capsys.readouterr().out
     assert "onboard replay" in out and "boat-1.tlog" in out
-    assert [v["id"] for v in read_manifest(tmp_path)["vehicles"]] == ["boat-1"]  # the others launch later
+    # the others launch after 3 s
+    assert [v["id"] for v in read_manifest(tmp_path)["vehicles"]] == ["boat-1"]
 
 
 # --------------------------------------------------------------------------- replayed
