@@ -72,11 +72,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep the adaptive state in demo-out/state and restore it next run "
                         "(default: a fresh temporary state); the demo writes in ./demo-out, "
                         "its recordings replaced each run")
-    p.set_defaults(handler="onboard.apps.demo:main")
+    p.add_argument("--fleet", nargs="?", const="fleet-demo", default=None, metavar="NAME",
+                   help="a fleet instead of one vehicle: each vehicle's simulator feeding its "
+                        "own service on one Zenoh router (default fleet: fleet-demo)")
+    p.set_defaults(handler="onboard.apps.demo_fleet:main")
 
     p = sub.add_parser("sitl", help="the simulator alone, emitting real protocols")
-    p.add_argument("--list", action="store_true", help="list the scenarios")
+    p.add_argument("--list", action="store_true", help="list the scenarios and fleets")
     p.add_argument("--scenario", help="scenario name (see --list)")
+    p.add_argument("--fleet", metavar="NAME",
+                   help="several vehicles in a current field (see --list), written with --out")
+    p.add_argument("--out", metavar="DIR",
+                   help="with --fleet: one log, truth, capture and config per vehicle, the "
+                        "truth of the field and fleet.json in DIR")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--tlog", metavar="FILE", help="write the MAVLink stream to this .tlog "

@@ -9,6 +9,7 @@ Examples::
     onboard sitl --scenario bluerov2-circle --realtime --link tcp:0.0.0.0:5760 \\
         --dvl tcp:0.0.0.0:16171                           # Water Linked DVL JSON server
     onboard sitl --scenario gavia-tidal --realtime --link pty --nmea-pty --dvl pty
+    onboard sitl --fleet fleet-channel --out fleet-out --seed 1  # a fleet, offline (sitl.fleet)
 
 On ``--link`` the simulated autopilot behaves as ArduPilot's MAVLink side
 (:mod:`sitl.autopilot`): HEARTBEAT only until the receiver asks for streams
@@ -37,6 +38,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import time
 from pathlib import Path
 from typing import Any
 
@@ -51,10 +53,46 @@ DEFAULT_LINK = "udp:127.0.0.1:14550"
 
 
 def list_scenarios() -> str:
-    """One line per scenario: name, vehicle class, default duration, description."""
+    """One line per scenario: name, vehicle class, default duration, description; then one
+    per fleet (:mod:`sitl.fleet`): name, vehicles, duration, description."""
+    from onboard.sitl.fleet import FLEETS
+
     w = max(len(n) for n in SCENARIOS)
-    return "\n".join(f"{sc.name:<{w}}  {sc.vehicle.vehicle_class:<18}  {sc.duration_s:5.0f} s  "
-                     f"{sc.description}" for sc in SCENARIOS.values())
+    lines = [f"{sc.name:<{w}}  {sc.vehicle.vehicle_class:<18}  {sc.duration_s:5.0f} s  "
+             f"{sc.description}" for sc in SCENARIOS.values()]
+    lines += [f"{f.name:<{w}}  {len(f.vehicles)} vehicles{'':<8}  {f.duration_s:5.0f} s  "
+              f"fleet (--fleet): {f.description}" for f in FLEETS.values()]
+    return "\n".join(lines)
+
+
+def run_fleet(args: argparse.Namespace) -> int:
+    """``onboard sitl --fleet NAME --out DIR``: every vehicle of the fleet written offline
+    (:func:`sitl.fleet.write_fleet`). The live fleet runs under ``onboard demo --fleet``."""
+    from onboard.sitl.fleet import get_fleet, write_fleet
+
+    fleet = get_fleet(args.fleet)
+    if not args.out:
+        raise UsageError("--fleet writes its vehicles' logs offline: give --out DIR "
+                         "(the live fleet: onboard demo --fleet NAME)")
+    if args.scenario or args.tlog or args.truth or args.link or args.nmea_pty or args.dvl:
+        raise UsageError("--fleet takes --out, --duration and --seed only")
+    duration = fleet.duration_s if args.duration is None else float(args.duration)
+    if not (duration > 0 and math.isfinite(duration)):
+        raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
+    check_outputs([Output("--out", Path(args.out) / "fleet.json")],
+                  force=bool(getattr(args, "force", False)))
+    t0 = time.process_time()
+    manifest = write_fleet(fleet, args.out, args.seed, duration)
+    cpu = time.process_time() - t0
+    for v in manifest["vehicles"]:
+        base, own = v["configs"]
+        print(f"{v['id']}: {v['kind']} {v['pattern']}, {v['duration_s']:.0f} s from utc "
+              f"{v['utc_start']:.0f}, {v['samples']} samples -> "
+              f"onboard replay {Path(args.out) / v['files']['tlog']} --config {base} "
+              f"--config {Path(args.out) / own}", flush=True)
+    print(f"{fleet.name}: {len(manifest['vehicles'])} vehicles, {duration:.0f} s, "
+          f"{cpu:.1f} s CPU; truth in {Path(args.out) / 'fleet.json'}", flush=True)
+    return 0
 
 
 def make_controller(name: str, sc: Scenario) -> Controller:
@@ -100,6 +138,8 @@ def main(args: argparse.Namespace) -> int:
     if getattr(args, "list", False):
         print(list_scenarios())
         return 0
+    if getattr(args, "fleet", None):
+        return run_fleet(args)
     if not args.scenario:
         raise UsageError("give --scenario NAME (see --list)")
     sc = get(args.scenario)

@@ -321,8 +321,10 @@ class RunSummary:
                 "outputs": self.outputs, "tracking": self.tracking}
 
 
-def mavlink_encoder(sim: Simulation, epoch_s: float = DEFAULT_EPOCH_S) -> MavlinkEncoder:
-    """The MAVLink encoder for a simulation's vehicle (type, system id, origin, DVL)."""
+def mavlink_encoder(sim: Simulation, epoch_s: float = DEFAULT_EPOCH_S,
+                    boot_age_s: float = 0.0) -> MavlinkEncoder:
+    """The MAVLink encoder for a simulation's vehicle (type, system id, origin, DVL);
+    ``boot_age_s``: the autopilot booted that long before t = 0 (``time_boot_ms``)."""
     sc = sim.scenario
     dvl = sim.sensor_config.dvl
     enc = MavlinkEncoder(
@@ -332,6 +334,7 @@ def mavlink_encoder(sim: Simulation, epoch_s: float = DEFAULT_EPOCH_S) -> Mavlin
         dvl_period_s=1.0 / dvl.rate_hz if dvl else 0.2,
         dvl_max_altitude_m=dvl.max_altitude_m if dvl else 50.0, epoch_s=epoch_s)
     enc.set_parameters(sim.heartbeat.params)
+    enc.boot_t0 = -boot_age_s
     return enc
 
 
@@ -352,7 +355,7 @@ def run(scenario: Scenario | str, duration: float | None = None, seed: int = 0, 
         meta_path: str | Path | None = None, realtime: bool = False,
         controller: Controller | None = None, epoch_s: float = DEFAULT_EPOCH_S,
         truth_rate_hz: float = 10.0, live_mavlink: Sequence[Sink] = (),
-        autopilot: dict[str, Any] | None = None) -> RunSummary:
+        autopilot: dict[str, Any] | None = None, boot_age_s: float = 0.0) -> RunSummary:
     """Run a scenario and push its samples through the protocol encoders to the sinks.
 
     ``mavlink``, ``nmea``, ``dvl_json`` and ``pd6`` are lists of sinks per protocol
@@ -361,7 +364,8 @@ def run(scenario: Scenario | str, duration: float | None = None, seed: int = 0, 
     (:func:`autopilot_for`, options ``autopilot``): heartbeats only until asked.
     ``truth_path`` gets the truth as JSON lines;
     ``meta_path`` the scenario metadata (:meth:`Scenario.metadata`, what the estimator may
-    read); ``realtime`` paces the loop to the wall clock. Sinks are closed at the end.
+    read); ``realtime`` paces the loop to the wall clock; ``boot_age_s``: the autopilot
+    booted that long before t = 0 (the logged ``time_boot_ms``). Sinks are closed at the end.
     """
     sim = Simulation(scenario, seed, controller=controller, truth_rate_hz=truth_rate_hz,
                      truth_latlon=False)
@@ -370,7 +374,7 @@ def run(scenario: Scenario | str, duration: float | None = None, seed: int = 0, 
     summary = RunSummary(scenario=sc.name, seed=seed, duration_s=dur)
     channels: dict[str, Channel | SimAutopilot] = {}
     if mavlink:
-        channels["mavlink"] = Channel(mavlink_encoder(sim, epoch_s), list(mavlink))
+        channels["mavlink"] = Channel(mavlink_encoder(sim, epoch_s, boot_age_s), list(mavlink))
     if live_mavlink:
         channels["mavlink_live"] = autopilot_for(sim, live_mavlink, epoch_s, **(autopilot or {}))
     if nmea:

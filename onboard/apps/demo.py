@@ -174,6 +174,10 @@ class LinkPlan:
     """A ground station and a camera share the MAVLink link (sitl.autopilot)."""
     reboot_at: list[float] = field(default_factory=list)
     """Simulated times (s) at which the autopilot reboots."""
+    fleet: str = ""
+    """A fleet's name (:mod:`sitl.fleet`): ``scenario`` is then the id of one of its
+    vehicles, stamped with its own UTC, its truth flushed record by record (the fleet
+    demo reads it live)."""
 
 
 def _route(sample: Any, dvl: bool, nmea: bool) -> str:
@@ -198,25 +202,25 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
     import select
 
     from onboard.sitl.emitters import Channel, DvlJsonEncoder, NmeaEncoder, PtySink, TcpServerSink, UdpSink
-    from onboard.sitl.runner import Simulation, autopilot_for
+    from onboard.sitl.runner import autopilot_for
 
     def send(obj: dict) -> None:
         outp.write(json.dumps(obj) + "\n")
         outp.flush()
 
-    sim = Simulation(plan.scenario, plan.seed)
+    sim, epoch = _child_simulation(plan)
     channels: dict[str, Any] = {
-        "mavlink": autopilot_for(sim, [UdpSink("127.0.0.1", plan.mavlink_udp_port)],
+        "mavlink": autopilot_for(sim, [UdpSink("127.0.0.1", plan.mavlink_udp_port)], epoch,
                                  stream_unasked=plan.stream_unasked, others=plan.others,
                                  reboot_at=plan.reboot_at)}
     pty = None
     if plan.nmea:
         pty = PtySink()
-        channels["nmea"] = Channel(NmeaEncoder(), [pty])
+        channels["nmea"] = Channel(NmeaEncoder(epoch), [pty])
     dvl_cfg = sim.sensor_config.dvl
     dvl = plan.dvl_tcp_port is not None and dvl_cfg is not None
     if dvl:
-        channels["dvl"] = Channel(DvlJsonEncoder(period_s=1.0 / dvl_cfg.rate_hz),  # type: ignore[union-attr]
+        channels["dvl"] = Channel(DvlJsonEncoder(epoch, period_s=1.0 / dvl_cfg.rate_hz),  # type: ignore[union-attr]
                                   [TcpServerSink("127.0.0.1", plan.dvl_tcp_port)])  # type: ignore[arg-type]
     send({"nmea_pty": pty.path if pty else None, "dvl": dvl,
           "vehicle_class": sim.scenario.vehicle.vehicle_class})
@@ -245,9 +249,27 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
                     frames[k] += channels[k].emit(t, ss)
             if truth is not None:
                 truth_f.write(enc.encode(truth) + b"\n")
+                if plan.fleet:
+                    truth_f.flush()
     for ch in channels.values():
         ch.close()
     send({"done": frames, "late_s": late * plan.speed})
+
+
+def _child_simulation(plan: LinkPlan) -> tuple[Any, float]:
+    """The simulation a SITL child runs and the UTC (s) of its t = 0: the scenario's on
+    the default epoch, or a fleet vehicle's (:func:`sitl.fleet.vehicle_scenario`) on its
+    own launch time."""
+    from onboard.sitl.emitters import DEFAULT_EPOCH_S
+    from onboard.sitl.runner import Simulation
+
+    if not plan.fleet:
+        return Simulation(plan.scenario, plan.seed), DEFAULT_EPOCH_S
+    from onboard.sitl.fleet import get_fleet, vehicle_scenario
+
+    fleet = get_fleet(plan.fleet)
+    v = fleet.vehicle(plan.scenario)
+    return Simulation(vehicle_scenario(fleet, v), plan.seed), fleet.utc_start(v)
 
 
 # --------------------------------------------------------------------------- the demo
@@ -580,7 +602,8 @@ async def _read_json(proc: subprocess.Popen, timeout_s: float) -> dict | None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """``onboard demo [--duration S] [--scenario NAME] [--realtime] [--keep-state]``."""
+    """``onboard demo [--duration S] [--scenario NAME] [--realtime] [--keep-state]``
+    (``--fleet`` goes to :func:`onboard.apps.demo_fleet.main`)."""
     duration = DEFAULT_DURATION_S if args.duration is None else float(args.duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
