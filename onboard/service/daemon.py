@@ -93,10 +93,21 @@ class ServiceClock:
         self._start = time.monotonic() if start is None else start
         """The time.monotonic() instant at which ``now() == origin``."""
         self.origin = self._start if origin is None else origin
+        self._wall0 = time.time() - (time.monotonic() - self._start)
+        """The system clock (POSIX s) at service time ``origin``."""
 
     def now(self) -> float:
         """Service time (s)."""
         return self.origin + (time.monotonic() - self._start) * self.speed
+
+    def utc(self, t: float) -> float:
+        """The UTC (POSIX s) of service time ``t`` on the system clock: at ``speed`` 1 the
+        system clock now less the time since ``t`` (it follows the clock's corrections);
+        scaled, the system clock at ``origin`` plus the service time since, so a faster
+        simulation keeps its own UTC time line."""
+        if self.speed == 1.0:
+            return time.time() - (self.now() - t)
+        return self._wall0 + (t - self.origin)
 
     def wall_delay(self, t: float) -> float:
         """Wall seconds until service time ``t`` (<= 0 when past)."""
@@ -188,6 +199,7 @@ class Service:
         self.state_dir = Path(state_dir)
         svc = cfg.service
         self.engine = Engine(cfg)
+        self.engine.whereabouts.utc_of = self.clock.utc
         self.stats = ServiceStats(t_start=self.t_construct)
         self.events: deque[str] = deque(maxlen=64)
         self.state_file = StateFile(self._path(svc.state_file), cfg.vehicle.id,
