@@ -41,7 +41,7 @@ import msgspec
 from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord
 from onboard.core.wire import ESTIMATE_SCHEMAS, encoding
-from onboard.fleet.field import CurrentField, Plane
+from onboard.fleet.field import CurrentField, Plane, one_blas_thread
 from onboard.fleet.messages import (
     FLEET_CURRENT_SCHEMA,
     FLEET_GRID_SCHEMA,
@@ -83,6 +83,7 @@ class FleetService:
                  field: CurrentField | None = None, mcap: str | Path | None = None,
                  refit_s: float = REFIT_PERIOD_S) -> None:
         self.session, self.prefix, self.refit_s = session, prefix, refit_s
+        self._one_thread = one_blas_thread()   # queries' small Cholesky on one thread
         self.field = field if field is not None else CurrentField()
         self.newest: dict[str, VehicleCurrent] = {}
         self.received: dict[str, int] = {}
@@ -97,14 +98,16 @@ class FleetService:
             self._declare(session)
 
     def _declare(self, session: Any) -> None:
-        self._declared = [
-            session.declare_subscriber(f"{self.prefix}/*/est/current", self.on_sample),
-            session.declare_queryable(current_key(self.prefix), self.on_query)]
         self._grid_pub = session.declare_publisher(grid_key(self.prefix),
                                                    encoding=encoding(FLEET_GRID_SCHEMA))
+        self._declared = [
+            session.declare_subscriber(f"{self.prefix}/*/est/current", self.on_sample),
+            session.declare_queryable(current_key(self.prefix), self.on_query),
+            self._grid_pub]
 
     def close(self) -> None:
-        """Undeclare the subscriber and queryable; finish the MCAP file."""
+        """Undeclare the subscriber, the queryable and the grid's publisher; finish the
+        MCAP file."""
         for d in self._declared:
             d.undeclare()
         self._declared = []

@@ -137,7 +137,7 @@ def ar1(rng: np.random.Generator, n: int, rate_hz: float, tau_s: float,
     return lfilter([1.0], [1.0, -phi], drive)
 
 
-def fleet(field: str, seed: int, vehicles: int = 8, duration_s: float = 1800.0,
+def fleet(field: str, seed: int, vehicles: int = 10, duration_s: float = 1800.0,
           rate_hz: float = 10.0, half_width_m: float = 1000.0, speed_mps: float = 1.5,
           sigma: float = 0.03, tau_s: float = 60.0, white: float = 0.01,
           t_start: float = 0.0) -> Fleet:
