@@ -175,6 +175,8 @@ def test_set_and_drift():
 def test_the_grid_covers_the_vehicles_with_the_contracts_objects():
     f = fleet("tidal_channel", seed=4, vehicles=4, duration_s=600.0, rate_hz=1.0)
     service = FleetService()
+    assert service.step(refit=True) is None     # no record yet: no grid, no error
+    assert service.answer(43.1, 5.9, UTC0).north is None
     enc = msgspec.json.Encoder()
     for i in range(len(f.t)):
         assert service.feed(enc.encode(f.record(i)), "application/json;onboard.Estimate.v2")

@@ -285,13 +285,15 @@ class CurrentField:
         """The super-observations (outliers left out), after forgetting the windows beyond
         the history; None without any. The only step that reads what :meth:`add` writes
         (a service holds its lock for this alone)."""
+        if self.plane is None:   # nothing added yet
+            return None
         oldest = math.floor((self.newest_utc - self.history_s) / self.thin_s)
         for key in [k for k in self._bins if k[1] < oldest]:
             del self._bins[key]
             self._outliers.discard(key)
             self._screened_keys.discard(key)
         keys = [k for k in self._bins if k not in self._outliers]
-        if not keys or self.plane is None:
+        if not keys:
             return None
         acc = np.array([self._bins[k] for k in keys])
         n = acc[:, :1]
