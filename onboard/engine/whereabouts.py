@@ -7,9 +7,12 @@ vehicles on one map and one time line (``onboard fleet``, docs/fleet.md):
 * ``utc`` (POSIX s) is the engine's tick time ``t`` on the UTC clock given by
   :attr:`Whereabouts.utc_of`: in a replay the log's own clock mapped to UTC
   (:func:`onboard.drivers.logclock.log_clock`: a tlog's receive times, a DataFlash log's
-  GPS week and time of week, an NMEA capture's RMC date and time), live the vehicle
-  computer's system clock (on a vehicle usually disciplined by GNSS through chrony or
-  gpsd); null when neither is known (a log stamped in time since boot with no GPS time).
+  GPS week and time of week, an NMEA capture's RMC date and time; a service recording's
+  meta ``utc_offset_s``, so that its replay stamps as live did), live the vehicle
+  computer's system clock at the service's start plus its monotonic time since
+  (``onboard.service.daemon.ServiceClock.utc``; on a vehicle the system clock is usually
+  disciplined by GNSS through chrony or gpsd); null when neither is known (a log stamped
+  in time since boot with no GPS time).
 * ``lat_deg``/``lon_deg`` are the vehicle's best position at the tick: the newest GNSS fix
   handed to the pipelines when it is at most :data:`FIX_MAX_AGE_S` old (a measurement,
   independent of any model), else the position of the first pipeline whose record of this

@@ -93,21 +93,20 @@ class ServiceClock:
         self._start = time.monotonic() if start is None else start
         """The time.monotonic() instant at which ``now() == origin``."""
         self.origin = self._start if origin is None else origin
-        self._wall0 = time.time() - (time.monotonic() - self._start)
-        """The system clock (POSIX s) at service time ``origin``."""
+        self.utc_offset_s = time.time() - (time.monotonic() - self._start) - self.origin
+        """UTC (POSIX s, the system clock when the clock was made) less service time: the
+        estimate records' ``utc`` is ``t + utc_offset_s`` (:meth:`utc`), recorded in the
+        recording's meta so that a replay gives the same."""
 
     def now(self) -> float:
         """Service time (s)."""
         return self.origin + (time.monotonic() - self._start) * self.speed
 
     def utc(self, t: float) -> float:
-        """The UTC (POSIX s) of service time ``t`` on the system clock: at ``speed`` 1 the
-        system clock now less the time since ``t`` (it follows the clock's corrections);
-        scaled, the system clock at ``origin`` plus the service time since, so a faster
-        simulation keeps its own UTC time line."""
-        if self.speed == 1.0:
-            return time.time() - (self.now() - t)
-        return self._wall0 + (t - self.origin)
+        """The UTC (POSIX s) of service time ``t``: the system clock when the clock was
+        made plus the service time since (a correction of the system clock later shows at
+        the next start; scaled, a faster simulation keeps its own UTC time line)."""
+        return t + self.utc_offset_s
 
     def wall_delay(self, t: float) -> float:
         """Wall seconds until service time ``t`` (<= 0 when past)."""
@@ -264,7 +263,8 @@ class Service:
         if svc.recorder.enabled:
             meta = {"vehicle": cfg.vehicle.id, "config": config_to_dict(cfg),
                     "sources": {self._name(i, s): s.kind for i, s in enumerate(svc.sources)},
-                    "queue_size": svc.queue_size, "state": self.restored}
+                    "queue_size": svc.queue_size, "state": self.restored,
+                    "utc_offset_s": self.clock.utc_offset_s}
             try:
                 self.recorder = Recorder(self.recorder_dir, flush_interval_s=svc.recorder.flush_interval_s,
                                          rotate_mb=svc.recorder.rotate_mb,
