@@ -39,11 +39,15 @@ UTC0 = 1_780_000_000.0
 """The simulated fleet's start (POSIX s)."""
 
 
-def tide(north_m: np.ndarray, east_m: np.ndarray, t_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """A tidal stream (m/s) sheared across the area, M2 period."""
-    phase = 2.0 * math.pi * t_s / 44714.0
-    return 0.05 + 0.0 * north_m, 0.6 * math.cos(phase) * (1.0 - (north_m / AREA_M) ** 2) + \
-        0.0 * east_m
+M2_S = 44714.0
+"""The M2 tidal period (s)."""
+
+
+def tide(north_m: np.ndarray, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """A tidal stream (m/s, north and east) along east, sheared across the area (slowest
+    at its north and south edges), with a weak northward drift."""
+    along = 0.6 * math.cos(2.0 * math.pi * t_s / M2_S) * (1.0 - (north_m / AREA_M) ** 2)
+    return np.full_like(north_m, 0.05), along
 
 
 class SimFleet:
@@ -68,7 +72,7 @@ class SimFleet:
         phi = math.exp(-dt_s / 60.0)
         self.err = phi * self.err + self.rng.normal(0.0, 0.03 * math.sqrt(1 - phi * phi),
                                                    self.err.shape)
-        c_n, c_e = tide(n, e, t_s)
+        c_n, c_e = tide(n, t_s)
         lat, lon = self.plane.to_latlon(n, e)
         return lat, lon, np.column_stack([c_n, c_e]) + self.err
 
