@@ -7,7 +7,7 @@ record it:
 =================================  ==============================  =================
 channel (topic)                    schema name (``jsonschema``)    message
 =================================  ==============================  =================
-``<prefix>/<id>/est/<pipeline>``   ``onboard.Estimate.v1``         EstimateRecord
+``<prefix>/<id>/est/<pipeline>``   ``onboard.Estimate.v2``         EstimateRecord
 ``<prefix>/<id>/fix/<pipeline>``   ``foxglove.LocationFix``        its position
 =================================  ==============================  =================
 

@@ -187,6 +187,22 @@ def build_parser() -> argparse.ArgumentParser:
                    "docs/foxglove.md)")
     p.set_defaults(handler="onboard.apps.shore:main")
 
+    p = sub.add_parser("fleet", help="one current field from every vehicle's estimates, "
+                       "served on Zenoh (docs/fleet.md)")
+    _add_zenoh_flags(p)
+    p.add_argument("--prefix", default="onboard",
+                   help="the key prefix the vehicles publish under (default: onboard)")
+    p.add_argument("--period", type=float, default=5.0, metavar="S",
+                   help="seconds between two grids on <prefix>/fleet/current/grid "
+                        "(default: 5)")
+    p.add_argument("--refit", type=float, default=60.0, metavar="S",
+                   help="seconds between two fits of the field's hyperparameters "
+                        "(default: 60)")
+    p.add_argument("--mcap", metavar="FILE",
+                   help="also write every grid into FILE (MCAP, for Foxglove; needs the "
+                        "mcap extra)")
+    p.set_defaults(handler="onboard.fleet.service:main")
+
     p = sub.add_parser("bench", help="performance figures")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(handler="onboard.apps.bench:main")

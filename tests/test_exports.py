@@ -212,7 +212,8 @@ def test_gpx_of_a_log_without_utc_has_no_times_and_says_why(tmp_path):
     """The BlueBoat CSV is stamped in ms since the autopilot booted: the points have no
     time (rather than dates in 1970), and the description says so."""
     gpx, fc, s = _gpx_replay(BLUEBOAT_CSV, tmp_path, "--config", str(BLUEBOAT_CONFIG))
-    assert s["utc"] == {"utc": False, "start": None, "source": s["utc"]["source"]}
+    assert s["utc"] == {"utc": False, "start": None, "source": s["utc"]["source"],
+                        "start_s": None, "offsets": []}
     assert "no point times (no UTC: the CSV time column reads before 2000" in gpx.description
     points = [p for t in gpx.tracks for seg in t.segments for p in seg.points]
     assert points and all(p.time is None for p in points)

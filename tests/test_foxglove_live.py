@@ -65,7 +65,7 @@ def test_records_reach_foxglove_channels_named_as_their_keys_with_their_schemas(
         seen = {c.topic: (s.name, s.encoding, c.message_encoding, json.loads(s.data))
                 for s, c, _ in make_reader(f).iter_messages()}
     assert {k: v[:3] for k, v in seen.items()} == {
-        "onboard/boat1/est/kf": ("onboard.Estimate.v1", "jsonschema", "json"),
+        "onboard/boat1/est/kf": ("onboard.Estimate.v2", "jsonschema", "json"),
         "onboard/boat1/fix/kf": ("foxglove.LocationFix", "jsonschema", "json"),
         "onboard/boat1/health": (f"onboard.Health.v{HEALTH_SCHEMA_VERSION}", "jsonschema", "json")}
     assert "values" in seen["onboard/boat1/est/kf"][3]["properties"]

@@ -23,6 +23,9 @@ The rooms, from the bottom up (docs/architecture.md §2 has the picture):
 * ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
 * ``onboard.offline``: the offline commands: replay, autodetection, exports, the track
   figure; the model closure above them and ``onboard diagnose`` above it.
+* ``onboard.fleet``: the fleet's current field (shore side), pure on the core; its Zenoh
+  service (``onboard.fleet.service``) also on the Zenoh session's configuration and the
+  drivers' MCAP import.
 * ``onboard.cli``: parses arguments, dispatches by module name.
 * ``onboard.apps``: demo, shore view, benchmarks, gain design, installer; may use
   everything, the simulator included.
@@ -49,7 +52,7 @@ OFFLINE = ENGINE | {"onboard.drivers", "onboard.service.recorder", "onboard.offl
                     "onboard.offline.plots"}
 CLOSURE = OFFLINE | {"onboard.offline.closure"}
 EVERYTHING = SERVICE | CLOSURE | {"onboard.offline", "onboard.apps", "onboard.cli",
-                                  "onboard.sitl"}
+                                  "onboard.sitl", "onboard.fleet"}
 
 ROOMS: dict[str, set[str]] = {
     "onboard.core": CORE,
@@ -73,6 +76,9 @@ ROOMS: dict[str, set[str]] = {
     "onboard.offline.batch": CLOSURE | {"onboard.offline.diagnose", "onboard.offline.batch",
                                         "onboard.offline.batch_tables"},
     "onboard.offline.batch_tables": OFFLINE,
+    "onboard.fleet": CORE | {"onboard.fleet"},  # the fleet's field, pure
+    "onboard.fleet.service": CORE | {"onboard.fleet", "onboard.service.publishers",
+                                     "onboard.drivers"},
     "onboard.cli": CORE | {"onboard"},
     "onboard.apps": EVERYTHING,
     "validation": EVERYTHING | {"validation"},
@@ -185,7 +191,8 @@ def test_the_cli_dispatches_only_the_sitl_command_into_the_simulator() -> None:
         module = handler.partition(":")[0]
         if name not in COMMANDS_INTO_SITL:
             assert _room(module) in {"onboard.service", "onboard.apps", "onboard.offline.replay",
-                                     "onboard.offline.diagnose", "onboard.offline.batch"}, \
+                                     "onboard.offline.diagnose", "onboard.offline.batch",
+                                     "onboard.fleet.service"}, \
                 (name, handler)
 
 

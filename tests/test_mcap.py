@@ -154,8 +154,8 @@ def test_replay_writes_the_live_zenoh_channels_and_schemas_as_mcap(tmp_path):
     for topic, enc, schema, schema_enc, data in msgs:
         assert enc == "json" and schema_enc == "jsonschema"
         by_schema.setdefault(schema, []).append((topic, data))
-    assert set(by_schema) == {"onboard.Estimate.v1", "foxglove.LocationFix"}
-    recs = [msgspec.json.decode(d, type=EstimateRecord) for _, d in by_schema["onboard.Estimate.v1"]]
+    assert set(by_schema) == {"onboard.Estimate.v2", "foxglove.LocationFix"}
+    recs = [msgspec.json.decode(d, type=EstimateRecord) for _, d in by_schema["onboard.Estimate.v2"]]
     assert {r.vehicle for r in recs} == {vid}
     fixes = [msgspec.json.decode(d, type=LocationFix) for _, d in by_schema["foxglove.LocationFix"]]
     # the fixes lie where the estimates say: back to metres about the first nav fix
@@ -207,7 +207,7 @@ def test_mcap_log_times_are_utc_ns_from_a_dataflash_logs_gps_time(tmp_path):
     assert msgs
     for schema, topic, log_time, publish_time, payload in msgs:
         assert publish_time == log_time
-        if schema == "onboard.Estimate.v1":
+        if schema == "onboard.Estimate.v2":
             assert payload["t"] < 100.0  # the record's own t: seconds since boot
             assert log_time == pytest.approx((payload["t"] + offset) * 1e9, abs=2e3)
         else:
@@ -227,7 +227,7 @@ def test_mcap_of_a_log_without_utc_keeps_its_clock_and_says_so(tmp_path):
     msgs, meta = _read(tmp_path / "e.mcap")
     assert meta["onboard-clock"] == {"utc": "false", "start": "",
                                      "source": summary["utc"]["source"]}
-    est = [(lt, p["t"]) for s, _, lt, _, p in msgs if s == "onboard.Estimate.v1"]
+    est = [(lt, p["t"]) for s, _, lt, _, p in msgs if s == "onboard.Estimate.v2"]
     assert est and all(lt == round(t * 1e9) for lt, t in est)
     assert max(lt for lt, _ in est) < UTC_MIN_S * 1e9
 

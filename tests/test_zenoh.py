@@ -77,7 +77,7 @@ def test_estimates_and_health_arrive_as_json_with_schema_on_the_contract_keys(ro
             by_key = {k: (p, e) for k, p, e in got}
         assert {"onboard/boat7/est/current", "onboard/boat7/health"} <= keys
         payload, enc = by_key["onboard/boat7/est/current"]
-        assert enc == "application/json;onboard.Estimate.v1"  # the schema named, versioned
+        assert enc == "application/json;onboard.Estimate.v2"  # the schema named, versioned
         assert by_key["onboard/boat7/health"][1] == f"application/json;onboard.Health.v{HEALTH_SCHEMA_VERSION}"
         back = msgspec.json.decode(payload, type=EstimateRecord)
         assert back == rec and back.schema == SCHEMA_VERSION
@@ -177,16 +177,24 @@ def test_positions_also_go_out_as_foxglove_location_fixes_with_their_schema_name
     assert back.position_covariance_type == 2
 
 
-def test_shore_decodes_its_schema_version_and_counts_another_as_bad():
+def test_shore_decodes_its_schema_versions_and_counts_another_as_bad():
     from onboard.apps.shore import ShoreView
 
     view = ShoreView()
-    rec = EstimateRecord(vehicle="b", pipeline="kf", t=1.0, values={"speed": 1.0})
+    rec = EstimateRecord(vehicle="b", pipeline="kf", t=1.0, values={"speed": 1.0},
+                         utc=1.7e9, lat_deg=43.0, lon_deg=5.0)
     payload = msgspec.json.encode(rec)
-    view.feed("onboard/b/est/kf", payload, "application/json;onboard.Estimate.v1")
+    view.feed("onboard/b/est/kf", payload, "application/json;onboard.Estimate.v2")
     view.feed("onboard/b/est/kf", payload, "application/json")  # before schema names
     assert view.received["est"] == 2 and view.bad == 0
-    view.feed("onboard/b/est/kf", payload, "application/json;onboard.Estimate.v2")
-    assert view.received["est"] == 2 and view.bad == 1
+    assert view.estimates[("b", "kf")].utc == 1.7e9
+    # a schema-1 record (no utc, lat_deg, lon_deg) is read and counted apart
+    v1 = b'{"schema":1,"vehicle":"b","pipeline":"kf","t":2.0,"values":{"speed":1.5}}'
+    view.feed("onboard/b/est/kf", v1, "application/json;onboard.Estimate.v1")
+    assert view.received["est"] == 3 and view.received["est.v1"] == 1 and view.bad == 0
+    old = view.estimates[("b", "kf")]
+    assert old.utc is None and old.lat_deg is None and old.values == {"speed": 1.5}
+    view.feed("onboard/b/est/kf", payload, "application/json;onboard.Estimate.v3")
+    assert view.received["est"] == 3 and view.bad == 1
     view.feed("onboard/b/fix/kf", b"{}", "application/json;foxglove.LocationFix")
     assert view.bad == 1  # a fix is not decoded by the table, and not bad

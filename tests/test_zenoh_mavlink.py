@@ -227,7 +227,7 @@ def test_onboard_run_on_zenoh_mavlink_raw_gives_every_pipeline_from_the_bridged_
         router.close()
     assert estimating() == PIPELINES, (sorted(records), err[-2000:])
     assert service.returncode == 0, err[-2000:]
-    assert encodings == {"est": "application/json;onboard.Estimate.v1",
+    assert encodings == {"est": "application/json;onboard.Estimate.v2",
                          "fix": "application/json;foxglove.LocationFix"}
     # what the service wrote on mavlink_raw/in: its stream requests, parameter reads and
     # TIMESYNC to the autopilot, and its estimates as component 191

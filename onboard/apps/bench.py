@@ -35,6 +35,17 @@ key                             what                                            
                                 length must not show: the readers stream it)
 ``diagnose_peak_rss_mb``        peak resident memory (MB) of ``onboard diagnose`` of the   <= 400
                                 same log, in a fresh process
+``fleet_cpu_share_10``          ``onboard fleet``'s CPU time per second of fleet time      context
+                                (1.0: one core) with 10 simulated vehicles publishing
+                                their current at 10 Hz, the field's 6-h history filled
+                                in (:func:`onboard.fleet.load.measure`: decoding and
+                                fusing every record, the field refreshed and its grid
+                                made every 5 s, hyperparameters every 60 s). Added by
+                                issue 33 (additive).
+``fleet_cpu_share_100``         the same with 100 vehicles                                 <= 1
+``fleet_query_p99_ms_10``       a ``<prefix>/fleet/current`` query's answer, CPU time,     < 100
+                                99th percentile (ms), 10 vehicles (wall time in detail)
+``fleet_query_p99_ms_100``      the same with 100 vehicles                                 < 100
 ==============================  =========================================================  =========
 
 A piece whose module has not landed (or fails) gives ``null`` in the JSON and
@@ -82,6 +93,10 @@ KEYS: tuple[str, ...] = (
     "boat_replay_x_realtime",
     "replay_peak_rss_mb",
     "diagnose_peak_rss_mb",
+    "fleet_cpu_share_10",
+    "fleet_cpu_share_100",
+    "fleet_query_p99_ms_10",
+    "fleet_query_p99_ms_100",
 )
 """The JSON keys of ``onboard bench --json``, in table order (a contract: tools
 reading the JSON rely on these names)."""
@@ -100,6 +115,10 @@ GOALS: dict[str, tuple[str, float | None]] = {
     "boat_replay_x_realtime": (">=", 500.0),
     "replay_peak_rss_mb": ("<=", 100.0),
     "diagnose_peak_rss_mb": ("<=", 400.0),
+    "fleet_cpu_share_10": ("", None),
+    "fleet_cpu_share_100": ("<=", 1.0),
+    "fleet_query_p99_ms_10": ("<", 100.0),
+    "fleet_query_p99_ms_100": ("<", 100.0),
 }
 """Goal of each figure: (comparison, bound); None = context only."""
 
@@ -663,6 +682,7 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
             ("boat replay real-time factor", ("boat_replay_x_realtime",),
              lambda: bench_boat_realtime(s, Path(tmp), rep)),
             ("memory", MEMORY_KEYS, lambda: bench_memory(s, Path(tmp), rep)),
+            ("fleet", FLEET_KEYS, lambda: bench_fleet(s, rep)),
         ]
         for label, keys, fn in steps:
             say(f"measuring {label} ...")
@@ -719,6 +739,29 @@ def bench_memory(s: Settings, workdir: Path, rep: Report) -> None:
     rep.values["diagnose_peak_rss_mb"] = diagnose["peak_rss_mb"]
     rep.detail["memory"] = {"log": made, "log_hours": s.memory_hours,
                             "replay": replay, "diagnose": diagnose}
+
+
+# --------------------------------------------------------------------------- fleet
+
+FLEET_KEYS = ("fleet_cpu_share_10", "fleet_cpu_share_100", "fleet_query_p99_ms_10",
+              "fleet_query_p99_ms_100")
+"""The figures of :func:`bench_fleet`."""
+FLEET_VEHICLES = (10, 100)
+"""The simulated fleets' sizes."""
+
+
+def bench_fleet(s: Settings, rep: Report) -> None:
+    """The fleet figures from :func:`onboard.fleet.load.measure`: 120 s of fleet time after
+    a 6-h history (fast: 5 s after 2 min), 200 queries."""
+    measure = _import("onboard.fleet.load", "measure")
+    kw = {"duration_s": 5.0, "history_s": 120.0, "queries": 20} if s.fast else \
+        {"duration_s": 120.0}
+    runs = {n: measure(n, **kw) for n in FLEET_VEHICLES}
+    for n, r in runs.items():
+        rep.values[f"fleet_cpu_share_{n}"] = round(r["cpu_share"], 4)
+        rep.values[f"fleet_query_p99_ms_{n}"] = round(r["query_p99_ms"], 3)
+    rep.detail["fleet"] = {str(n): {k: (round(v, 4) if isinstance(v, float) else v)
+                                    for k, v in r.items()} for n, r in runs.items()}
 
 
 # --------------------------------------------------------------------------- output

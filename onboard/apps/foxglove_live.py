@@ -2,7 +2,7 @@
 
 Foxglove reads live data from a Foxglove WebSocket server, not from Zenoh. The relay
 subscribes to ``onboard/<vehicle>/**`` and logs every record whose encoding names one of
-our schemas (``application/json;onboard.Estimate.v1``, ``onboard.Health.v2``,
+our schemas (``application/json;onboard.Estimate.v2``, ``onboard.Health.v3``,
 ``foxglove.LocationFix``: :mod:`onboard.core.wire`) on a channel of the same name as its
 Zenoh key, JSON messages with that schema name and its JSON schema, through the
 ``foxglove-sdk`` package (the ``foxglove`` extra). In Foxglove: *Open connection* →

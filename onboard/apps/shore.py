@@ -37,13 +37,15 @@ import msgspec
 
 from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord, HealthRecord
-from onboard.core.wire import ESTIMATE_SCHEMA, HEALTH_SCHEMA, LOCATION_FIX_SCHEMA
+from onboard.core.wire import ESTIMATE_SCHEMAS, HEALTH_SCHEMA, LOCATION_FIX_SCHEMA
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 FLEET_GRID_KEY = "onboard/fleet/current/grid"
 """The fleet service's grid (``onboard fleet``), drawn by ``--web`` as the fleet layer."""
-EXPECTED = {"est": ESTIMATE_SCHEMA, "health": HEALTH_SCHEMA, "fix": LOCATION_FIX_SCHEMA}
-"""Third key segment -> the schema name this version decodes there."""
+EXPECTED = {"est": ESTIMATE_SCHEMAS, "health": frozenset({HEALTH_SCHEMA}),
+            "fix": frozenset({LOCATION_FIX_SCHEMA})}
+"""Third key segment -> the schema names this version decodes there (every version of
+the estimate record: schema 1 decodes with its ``utc`` and position null)."""
 ANGLES = {"heading", "course", "yaw", "roll", "pitch"}
 """Quantities shown in degrees."""
 ANGLE_RATES = {"yaw_rate", "rate_p", "rate_q", "rate_r"}
@@ -68,7 +70,8 @@ class ShoreView:
         estimates: newest EstimateRecord per (vehicle, pipeline).
         health: newest HealthRecord per vehicle.
         history: every EstimateRecord received when ``keep_history`` (the demo scores it).
-        received: number of records received, by kind.
+        received: number of records received, by kind (and the estimates by schema
+            version, ``est.v1``, ``est.v2``).
     """
 
     def __init__(self, keep_history: bool = False) -> None:
@@ -90,7 +93,7 @@ class ShoreView:
         key (another schema version) is counted in ``bad`` and skipped."""
         parts = key.split("/")
         schema = encoding.partition(";")[2]
-        if schema and len(parts) >= 3 and EXPECTED.get(parts[2], schema) != schema:
+        if schema and len(parts) >= 3 and schema not in EXPECTED.get(parts[2], (schema,)):
             self.bad += 1
             return
         try:
@@ -101,6 +104,7 @@ class ShoreView:
                     if self.keep_history:
                         self.history.append(rec)
                     self.received["est"] += 1
+                    self.received[f"est.v{rec.schema}"] += 1
             elif len(parts) >= 3 and parts[2] == "health":
                 h = self._dec_health.decode(payload)
                 with self.lock:

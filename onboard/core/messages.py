@@ -21,9 +21,10 @@ from typing import Literal, Union
 
 import msgspec
 
-SCHEMA_VERSION = 1
-"""Version of the wire schema of :class:`EstimateRecord` (:class:`HealthRecord` has its
-own, :data:`HEALTH_SCHEMA_VERSION`)."""
+SCHEMA_VERSION = 2
+"""Version of the wire schema of :class:`EstimateRecord` (2: ``utc``, ``lat_deg`` and
+``lon_deg`` on every record, fields a schema-1 reader that ignores unknown fields skips;
+:class:`HealthRecord` has its own, :data:`HEALTH_SCHEMA_VERSION`)."""
 
 
 class Sample(msgspec.Struct, frozen=True, kw_only=True, tag_field="type"):
@@ -279,7 +280,11 @@ class EstimateRecord(msgspec.Struct, frozen=True, kw_only=True):
     value in SI units; ``std`` gives one-sigma uncertainties where the pipeline has them.
     ``t_sensor`` is the time of the newest input sample that contributed, so consumers can
     measure latency. ``sources`` maps each selected quantity (``position``, ``heading``,
-    ...) to the source in use at this tick (onboard/engine/sources.py).
+    ...) to the source in use at this tick (onboard/engine/sources.py). ``utc`` is the
+    tick's time in UTC (POSIX s: the log's UTC in a replay, the system clock live; null
+    when unknown) and ``lat_deg``, ``lon_deg`` the vehicle's best position at the tick
+    (null when unknown; :mod:`onboard.engine.whereabouts`). A schema-1 record decodes
+    with the three null.
     """
 
     schema: int = SCHEMA_VERSION
@@ -290,6 +295,9 @@ class EstimateRecord(msgspec.Struct, frozen=True, kw_only=True):
     std: dict[str, float] = {}
     t_sensor: float | None = None
     sources: dict[str, str] = {}
+    utc: float | None = None
+    lat_deg: float | None = None
+    lon_deg: float | None = None
 
 
 class Innovation(msgspec.Struct, frozen=True, kw_only=True):

@@ -4,7 +4,7 @@ Every record the service publishes over Zenoh, and ``onboard replay --mcap`` wri
 JSON object whose Zenoh encoding (and MCAP schema name) names its schema and version
 (architecture.md §4.4)::
 
-    application/json;onboard.Estimate.v1   EstimateRecord (SCHEMA_VERSION)
+    application/json;onboard.Estimate.v2   EstimateRecord (SCHEMA_VERSION)
     application/json;onboard.Health.v2     HealthRecord (HEALTH_SCHEMA_VERSION)
     application/json;foxglove.LocationFix  a position as Foxglove's LocationFix
 
@@ -40,6 +40,9 @@ from onboard.core.messages import (
 JSON_MIME = "application/json"
 ESTIMATE_SCHEMA = f"onboard.Estimate.v{SCHEMA_VERSION}"
 """Schema name of an :class:`EstimateRecord`."""
+ESTIMATE_SCHEMAS = frozenset(f"onboard.Estimate.v{v}" for v in range(1, SCHEMA_VERSION + 1))
+"""Every schema name an :class:`EstimateRecord` decodes (each version only added fields:
+an older record decodes with the newer fields at their defaults)."""
 HEALTH_SCHEMA = f"onboard.Health.v{HEALTH_SCHEMA_VERSION}"
 """Schema name of a :class:`HealthRecord`."""
 LOCATION_FIX_SCHEMA = "foxglove.LocationFix"
@@ -106,7 +109,8 @@ def foxglove_time(t: float) -> Time:
 def location_fix(rec: EstimateRecord, frame: LocalFrame,
                  offset: tuple[float, float] = (0.0, 0.0)) -> LocationFix | None:
     """The position of ``rec`` as a LocationFix, or None when it has no finite north and
-    east. ``frame`` is the pipeline's local frame (its first fix) and ``offset`` the
+    east; stamped with the record's ``utc`` where known (Foxglove expects epoch time), else
+    its engine time ``t``. ``frame`` is the pipeline's local frame (its first fix) and ``offset`` the
     published position (north, east; m) of the frame's origin (the ESESO's; (0, 0) for
     the others). Altitude is ``-down`` where the pipeline estimates depth, else 0; the
     covariance is diagonal (East, North, Up) from the ``std`` of north, east and down
@@ -126,9 +130,9 @@ def location_fix(rec: EstimateRecord, frame: LocalFrame,
         cov[0], cov[4], cov[8] = s_e * s_e, s_n * s_n, s_d * s_d
         kind = COVARIANCE_DIAGONAL_KNOWN
     heading = v.get("heading", v.get("yaw"))
-    return LocationFix(timestamp=foxglove_time(rec.t), frame_id=rec.pipeline, latitude=lat,
-                       longitude=lon, altitude=alt, position_covariance=cov,
-                       position_covariance_type=kind,
+    return LocationFix(timestamp=foxglove_time(rec.t if rec.utc is None else rec.utc),
+                       frame_id=rec.pipeline, latitude=lat, longitude=lon, altitude=alt,
+                       position_covariance=cov, position_covariance_type=kind,
                        heading=heading if heading is not None and math.isfinite(heading) else None)
 
 

@@ -65,6 +65,7 @@ from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline, sample_time
 from onboard.engine.sources import SourceSelector
 from onboard.engine.timeline import Jump, Timeline, outlier_words
+from onboard.engine.whereabouts import Whereabouts
 from onboard.engine.checks import checker_for, sample_type
 
 __all__ = ["Engine", "SampleCorrector", "TickQueue", "run"]
@@ -214,6 +215,9 @@ class Engine:
         self.rejected: Counter[str] = Counter()
         self.depth_mode = DepthMode(cfg.sensors.depth)
         self.latest: dict[str, EstimateRecord] = {}
+        self.whereabouts = Whereabouts()
+        """The UTC and position every record carries (:mod:`onboard.engine.whereabouts`;
+        a replay or the service sets its ``utc_of``)."""
         self.t_first: float | None = None
         self.t_newest = -math.inf
         self._last_t: dict[tuple[str, str], float] = {}
@@ -468,6 +472,8 @@ class Engine:
         self.queue.put(chosen)
         if type(chosen) in WATCHED:
             self.integrity.observe(chosen)
+            if type(chosen) is GnssFix:
+                self.whereabouts.observe(chosen)  # type: ignore[arg-type]
         cls = type(raw)
         if cls in _RAW_ACTUATORS and self.mapper.active:
             cmd = self.mapper.map(raw)
@@ -486,7 +492,7 @@ class Engine:
         others carry on."""
         queue = self.queue
         queue.open_tick(t, len(self.pipelines))
-        records = []
+        stepped = []
         monitor, integrity = self.monitor, self.integrity
         for i, p in enumerate(self.pipelines):
             try:
@@ -500,8 +506,9 @@ class Engine:
                 monitor.add(p.name, innovations)
                 integrity.innovations(p.name, innovations)
             if values:
-                records.append(self._record(p, t, values, queue.t_sensor))
+                stepped.append((p, self._published(p, values), queue.t_sensor))
         queue.close_tick()
+        records = self._records(t, stepped)
         integrity.positions_at(t, records)
         integrity.speeds_at(t, records)
         return records
@@ -513,15 +520,35 @@ class Engine:
         if pev:
             self.events.extend(f"{p.name}: {e}" for e in pev)
 
-    def _record(self, p: Pipeline, t: float, values: Mapping[str, float],
-                t_sensor: float | None) -> EstimateRecord:
-        """The record of ``p``'s estimates at ``t`` (non-finite values left out), also
-        kept as :attr:`latest`."""
+    def _published(self, p: Pipeline, values: Mapping[str, float]) -> Mapping[str, float]:
+        """``p``'s values as published: non-finite ones and those the integrity monitor
+        withholds left out."""
         if not all(map(math.isfinite, values.values())):
             values = self._finite(p.name, values)
         withheld = self.integrity.withheld(p.name)
         if withheld:
             values = self._withhold(p.name, values, withheld)
+        return values
+
+    def _records(self, t: float, stepped: Sequence[tuple[Pipeline, Mapping[str, float],
+                                                          float | None]]
+                 ) -> list[EstimateRecord]:
+        """The records of the pipelines ``stepped`` at ``t`` (each with its published
+        values and its newest sample's time), all with the tick's UTC and the vehicle's
+        position (:mod:`onboard.engine.whereabouts`)."""
+        if not stepped:
+            return []
+        where = self.whereabouts
+        lat, lon = where.position(t, ((v, self.local_frame(p.name)) for p, v, _ in stepped
+                                      if "north" in v))
+        utc = where.utc(t)
+        return [self._record(p, t, v, ts, utc, lat, lon) for p, v, ts in stepped]
+
+    def _record(self, p: Pipeline, t: float, values: Mapping[str, float],
+                t_sensor: float | None, utc: float | None = None,
+                lat: float | None = None, lon: float | None = None) -> EstimateRecord:
+        """The record of ``p``'s published estimates at ``t`` (UTC ``utc``, the vehicle
+        at ``lat``, ``lon``), also kept as :attr:`latest`."""
         std_names = self._std_names.get(p.name)
         if std_names is None:  # a pipeline put in after construction
             std_names = self._std_names[p.name] = std_columns(p)
@@ -530,7 +557,8 @@ class Engine:
             if std_names else {}
         rec = EstimateRecord(vehicle=self.cfg.vehicle.id, pipeline=p.name, t=t,
                              values=dict(values), std=std, t_sensor=t_sensor,
-                             sources=self.selector.active)
+                             sources=self.selector.active, utc=utc, lat_deg=lat,
+                             lon_deg=lon)
         self.latest[p.name] = rec
         return rec
 

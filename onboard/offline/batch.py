@@ -249,7 +249,7 @@ def _replay_and_diagnose(task: Task, out: Path) -> dict:
         (out / stale).unlink(missing_ok=True)
     cfg, note = _config(task)
     summary = replay(task.log, cfg, out, config_note=note, plot=False)
-    clock = batch_tables.clock_of(task.log, cfg)
+    clock = batch_tables.clock_of(summary)
     est = batch_tables.read_estimates(out / "estimates.csv")
     figures = batch_tables.replay_figures(summary, est, clock)
     batch_tables.write_log_current(out, summary, est, clock)

@@ -6,8 +6,8 @@ A log's row is computed where it was replayed, from its summary.json, estimates.
 diagnosis.json (:func:`replay_figures`, :func:`diagnosis_figures`), and kept as JSON in
 its folder; its current goes into ``current.parquet`` in its folder
 (:func:`write_log_current`); :func:`write_tables` gathers them. UTC comes from the log's
-clock (:func:`drivers.logclock.log_clock`), positions from estimates.csv's
-``north``/``east`` about summary.json's ``origin`` (:class:`onboard.core.geo.LocalFrame`).
+clock as the replay recorded it in summary.json's ``utc`` (:func:`clock_of`), positions
+from estimates.csv's ``north``/``east`` about summary.json's ``origin`` (:class:`onboard.core.geo.LocalFrame`).
 pyarrow is imported only here (the ``batch`` extra).
 """
 
@@ -57,19 +57,13 @@ def empty_row(log: str, name: str) -> dict:
     return row
 
 
-def clock_of(log: str, cfg):
-    """The :class:`drivers.logclock.LogClock` of ``log`` read with ``cfg`` (as the replay
-    read it), None when it cannot be told."""
-    from onboard.drivers.logclock import log_clock
-    from onboard.drivers.logs import open_log
-    from onboard.engine.inputs import column_names
+def clock_of(summary: dict):
+    """The :class:`drivers.logclock.LogClock` the replay recorded in ``summary``
+    (summary.json's ``utc``: :func:`onboard.offline.replay.clock_from_summary`), None
+    when it recorded none."""
+    from onboard.offline.replay import clock_from_summary
 
-    try:
-        fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
-        first = next(iter(reader), None)
-        return None if first is None else log_clock(fmt, reader, log, first.t)
-    except Exception:  # noqa: BLE001 - the row says the UTC is unknown
-        return None
+    return clock_from_summary(summary)
 
 
 def _t0(summary: dict) -> float:

@@ -281,7 +281,9 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
                        Runs(engine, [r for r in getattr(reader, "runs", ())
                                      if r.t_start == r.t_start]))
     failed: list[dict] = []
-    clock = log_clock(fmt, reader, log, first.t) if mcap or gpx else None
+    clock = _clock(fmt, reader, log, first.t)
+    if clock.utc:
+        engine.whereabouts.utc_of = clock.to_utc
     mcap_out = _McapExport(mcap, cfg, clock, failed) if mcap is not None else None
     published = exports.Published() if foxglove_layout is not None else None
 
@@ -313,8 +315,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     summary = _summary(log, fmt, cfg, engine, csv, reader, first.t, ticks, header,
                        config_note)
     summary["wall_time_s"] = round(time.perf_counter() - wall0, 3)
-    if clock is not None:
-        summary["utc"] = clock.summary(summary["time_span"]["start"])
+    summary["utc"] = utc_summary(clock, summary["time_span"]["start"])
     if mcap_out is not None:
         mcap_out.close()
         if mcap_out.writer is not None:
@@ -329,6 +330,36 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     if plot:
         add_figure(out_dir, summary, Path(log).name, cfg.csv.position_kind)
     return summary
+
+
+def _clock(fmt: str, reader, log: str, t_first: float) -> LogClock:
+    """The log's clock and its UTC (:func:`onboard.drivers.logclock.log_clock`); a log
+    whose clock cannot be read has no UTC (the estimates are the same)."""
+    try:
+        return log_clock(fmt, reader, log, t_first)
+    except Exception as err:  # noqa: BLE001 - the records say the UTC is unknown
+        return LogClock(f"no UTC: the log's clock could not be read ({type(err).__name__}: "
+                        f"{err})")
+
+
+def utc_summary(clock: LogClock, t_start: float) -> dict:
+    """summary.json's ``utc``: whether the log has UTC, from where, its start in ISO 8601
+    and in POSIX s (``start_s``), and the log clock's ``offsets`` (``[t_from, offset_s]``
+    pairs: UTC is ``t + offset_s``; :class:`onboard.drivers.logclock.LogClock`), so that a
+    reader maps any log time to UTC without reading the log again
+    (:func:`clock_from_summary`)."""
+    return {**clock.summary(t_start), "start_s": clock.to_utc(t_start),
+            "offsets": [list(p) for p in clock.offsets]}
+
+
+def clock_from_summary(summary: Mapping) -> LogClock | None:
+    """The :class:`LogClock` a replay recorded in its summary.json (:func:`utc_summary`),
+    None for a summary written before it recorded one."""
+    utc = summary.get("utc")
+    if not isinstance(utc, dict) or "offsets" not in utc:
+        return None
+    return LogClock(utc.get("source", ""), tuple((float(a), float(b))
+                                                 for a, b in utc["offsets"]))
 
 
 def _replay_recording(log: str, engine: Engine, on_tick, reader) -> int:
@@ -729,7 +760,7 @@ def main(args) -> int:
     print(headline(summary, out_dir / "estimates.csv"))
     if "mcap" in summary:
         print(f"  {summary['mcap']['messages']:,} records -> {mcap} (MCAP; docs/foxglove.md)")
-    if "utc" in summary:
+    if mcap or getattr(args, "gpx", None):   # the exports stamped in UTC
         print(f"  export times: {summary['utc']['source']}")
     if summary.get("foxglove_layout"):
         lay = summary["foxglove_layout"]

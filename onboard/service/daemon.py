@@ -95,10 +95,20 @@ class ServiceClock:
         self._start = time.monotonic() if start is None else start
         """The time.monotonic() instant at which ``now() == origin``."""
         self.origin = self._start if origin is None else origin
+        self.utc_offset_s = time.time() - (time.monotonic() - self._start) - self.origin
+        """UTC (POSIX s, the system clock when the clock was made) less service time: the
+        estimate records' ``utc`` is ``t + utc_offset_s`` (:meth:`utc`), recorded in the
+        recording's meta so that a replay gives the same."""
 
     def now(self) -> float:
         """Service time (s)."""
         return self.origin + (time.monotonic() - self._start) * self.speed
+
+    def utc(self, t: float) -> float:
+        """The UTC (POSIX s) of service time ``t``: the system clock when the clock was
+        made plus the service time since (a correction of the system clock later shows at
+        the next start; scaled, a faster simulation keeps its own UTC time line)."""
+        return t + self.utc_offset_s
 
     def wall_delay(self, t: float) -> float:
         """Wall seconds until service time ``t`` (<= 0 when past)."""
@@ -190,6 +200,7 @@ class Service:
         self.state_dir = Path(state_dir)
         svc = cfg.service
         self.engine = Engine(cfg)
+        self.engine.whereabouts.utc_of = self.clock.utc
         self.stats = ServiceStats(t_start=self.t_construct)
         self.events: deque[str] = deque(maxlen=64)
         self.state_file = StateFile(self._path(svc.state_file), cfg.vehicle.id,
@@ -256,7 +267,8 @@ class Service:
         if svc.recorder.enabled:
             meta = {"vehicle": cfg.vehicle.id, "config": config_to_dict(cfg),
                     "sources": {self._name(i, s): s.kind for i, s in enumerate(svc.sources)},
-                    "queue_size": svc.queue_size, "state": self.restored}
+                    "queue_size": svc.queue_size, "state": self.restored,
+                    "utc_offset_s": self.clock.utc_offset_s}
             try:
                 self.recorder = Recorder(self.recorder_dir, flush_interval_s=svc.recorder.flush_interval_s,
                                          rotate_mb=svc.recorder.rotate_mb,

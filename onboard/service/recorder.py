@@ -468,6 +468,14 @@ def recording_config(path: str | Path) -> Config | None:
     return from_dict(migrate(cfg), str(path))
 
 
+def _utc_as_live(engine: Engine, meta: dict) -> None:
+    """The records' ``utc`` as the live service stamped them: service time plus the meta's
+    ``utc_offset_s`` (recordings made before it was recorded keep the engine's own)."""
+    off = meta.get("utc_offset_s")
+    if isinstance(off, (int, float)) and not isinstance(off, bool):
+        engine.whereabouts.utc_of = lambda t, off=float(off): t + off
+
+
 def replay_recording(paths: str | Path | Iterable[str | Path], engine: Engine,
                      on_tick: Callable[[float, Sequence[EstimateRecord]], None],
                      *, queue_size: int | None = None,
@@ -505,6 +513,7 @@ def replay_recording(paths: str | Path | Iterable[str | Path], engine: Engine,
                     engine.set_state(meta["state"])
                 if isinstance(meta.get("queue_size"), int) and queue_size is None:
                     intake.queue_size = meta["queue_size"]
+                _utc_as_live(engine, meta)
             else:
                 try:
                     intake.chunk(rec.source, kind, rec.data, rec.t, verdicts)

@@ -10,7 +10,7 @@ Keys (``<prefix>`` is ``onboard`` unless configured)::
 
 Payloads are JSON objects: the msgspec structs of :mod:`onboard.core.messages`, each with
 its ``schema`` version, and Foxglove's LocationFix; the Zenoh encoding names the schema
-(``application/json;onboard.Estimate.v1``, ``application/json;onboard.Health.v2``,
+(``application/json;onboard.Estimate.v2``, ``application/json;onboard.Health.v3``,
 ``application/json;foxglove.LocationFix``: :mod:`onboard.core.wire`), so BlueOS's
 recorder writes them into its MCAP under that schema name and Foxglove maps the fixes. The vehicle's session is a peer
 or client with multicast scouting off: it connects to the endpoints configured (a router

@@ -1,0 +1,506 @@
+"""One current field from every vehicle's estimates: Gaussian-process regression in space
+and time with a per-vehicle correlated error (docs/algorithms.md, "The fleet's current
+field").
+
+The water current ``c(x, t)`` (north and east, m/s) at position ``x`` (m on a local plane)
+and time ``t`` (UTC, s) is a Gaussian process about a constant mean, each component
+independent with the same covariance (the signal)::
+
+    k_c((x, t), (x', t')) = sigma_f^2 exp(-|x - x'|^2 / (2 l_s^2) - (t - t')^2 / (2 l_t^2))
+
+A vehicle's estimate is the field plus the vehicle's own error, which is not white: a
+current estimator's error wanders slowly (a compass offset, a model error, the filter's
+memory), so ten records a second are not ten measurements. Each vehicle's error is an
+Ornstein-Uhlenbeck process along its own time line, scaled by the sigma the vehicle
+reports (``std``), plus a small white floor::
+
+    k_e(i, j) = a^2 s_i s_j exp(-|t_i - t_j| / tau)   for records i, j of one vehicle
+              + sigma_w^2 [i = j]
+
+The records are first thinned into super-observations: the records of one vehicle within
+one window of :data:`THIN_S` seconds averaged (position, time, current; ``s`` their RMS
+sigma), so the cost follows the fleet's hours, not its record rate. The hyperparameters
+``theta = (sigma_f north, sigma_f east, l_s, l_t, a, tau, sigma_w)`` maximize the marginal likelihood of a
+sample of at most :data:`FIT_MAX` super-observations (runs of consecutive ones, so that
+``tau`` is seen; both components share them), with its analytic gradient (Rasmussen and
+Williams 2006, eq. 5.9) and scipy's L-BFGS-B.
+
+A prediction at ``(x*, t*)`` uses the :data:`NEIGHBOURS` super-observations nearest in the
+scaled distance ``sqrt(|x - x*|^2 / l_s^2 + (t - t*)^2 / l_t^2)`` (a k-d tree), within
+:data:`KNOWN_WITHIN`: with ``K = k_c + k_e`` over them and ``k*`` the signal covariance
+with the point::
+
+    mean = m + k*' K^-1 (y - m),   var = sigma_f^2 - k*' K^-1 k*
+
+per component (``sigma_f``, the error term and the sigmas differ by component: a tidal
+stream along a channel varies far more along it than across). With no
+super-observation within :data:`KNOWN_WITHIN` the field knows nothing there (``None``).
+A record without a current (``north``/``east``: withheld by an integrity check, not yet
+converged, not finite) or without its sigma or time or position is not an observation; a
+super-observation further than :data:`OUTLIER_SIGMA` predictive sigmas from what the other
+vehicles say at its place is an outlier and left out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from onboard.core.geo import radii_of_curvature
+from onboard.core.messages import EstimateRecord
+
+THIN_S = 30.0
+"""Length (s) of the windows a vehicle's records are averaged in (one super-observation
+per vehicle and window)."""
+HISTORY_S = 6 * 3600.0
+"""Super-observations older than this (s) before the newest are forgotten."""
+NEIGHBOURS = 64
+"""Super-observations a prediction uses (the nearest in scaled distance)."""
+KNOWN_WITHIN = 3.0
+"""Scaled distance (length scales) beyond which a super-observation says nothing."""
+FIT_MAX = 240
+"""Super-observations the marginal likelihood is computed over."""
+FIT_RUN = 6
+"""Consecutive super-observations of one vehicle per run of the fitting sample."""
+MIN_FIT = 24
+"""Fewer super-observations than this keep the hyperparameters as they are."""
+OUTLIER_SIGMA = 5.0
+"""A super-observation this many predictive sigmas from the others' field is an outlier."""
+JUDGES = 2
+"""Other vehicles whose windows must be near a window for it to be judged an outlier."""
+SCREEN_WITHIN_S = 600.0
+"""Only windows this recent (s before the newest record) are judged for outliers: a live
+fleet's windows are judged as they close; a history that arrives in bulk (a service
+restarted onto stored records) is taken as it is, so a fit's cost stays bounded."""
+MAX_STD_MPS = 0.5
+"""A record whose current sigma exceeds this (m/s) is not converged: not an observation."""
+MAX_SPEED_MPS = 6.0
+"""A current faster than this (m/s) is not water: not an observation."""
+
+
+class Hyper(NamedTuple):
+    """The hyperparameters ``theta`` (module docstring), in SI units."""
+
+    sigma_north: float = 0.2  # m/s, the field's spread about its mean, north
+    sigma_east: float = 0.2   # m/s, and east
+    length_m: float = 1000.0  # m, its length scale
+    length_s: float = 3600.0  # s, its time scale
+    scale: float = 1.0        # the reported sigmas' factor, a
+    tau_s: float = 60.0       # s, the correlation time of a vehicle's error
+    white: float = 0.005      # m/s, the white floor sigma_w
+
+    @staticmethod
+    def bounds() -> list[tuple[float, float]]:
+        """Bounds of each hyperparameter (SI), for the fit (in logarithms)."""
+        return [(1e-3, 5.0), (1e-3, 5.0), (30.0, 1e5), (60.0, 2e5), (0.1, 10.0), (1.0, 7200.0),
+                (1e-4, 0.5)]
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One vehicle's current estimate at one instant: where (deg), when (UTC s), the
+    current (north, east; m/s) and its one-sigma (m/s)."""
+
+    vehicle: str
+    utc: float
+    lat_deg: float
+    lon_deg: float
+    north: float
+    east: float
+    std_north: float
+    std_east: float
+
+
+def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
+    """The observation a ``current`` record makes, or None and why not (``no_time``,
+    ``no_position``, ``no_current``, ``no_std``, ``not_converged``, ``too_fast``)."""
+    v, sd = rec.values, rec.std
+    if rec.utc is None:
+        return None, "no_time"
+    if rec.lat_deg is None or rec.lon_deg is None:
+        return None, "no_position"
+    n, e = v.get("north"), v.get("east")
+    if n is None or e is None or not (math.isfinite(n) and math.isfinite(e)):
+        return None, "no_current"
+    s_n, s_e = sd.get("north"), sd.get("east")
+    if s_n is None or s_e is None or not (s_n > 0.0 and s_e > 0.0):
+        return None, "no_std"
+    if s_n > MAX_STD_MPS or s_e > MAX_STD_MPS:
+        return None, "not_converged"
+    if math.hypot(n, e) > MAX_SPEED_MPS:
+        return None, "too_fast"
+    return Observation(rec.vehicle, rec.utc, rec.lat_deg, rec.lon_deg, n, e, s_n, s_e), ""
+
+
+class Prediction(NamedTuple):
+    """The field at one place and time: the current (m/s; None where unknown), its
+    one-sigma (m/s; None where unknown) and how many super-observations it rests on."""
+
+    north: float | None
+    east: float | None
+    std_north: float | None
+    std_east: float | None
+    n_obs: int
+
+
+UNKNOWN = Prediction(None, None, None, None, 0)
+
+
+class Plane:
+    """Latitude and longitude on a local plane (m) about a reference point: the WGS-84
+    meridional and prime-vertical radii at the reference (an equirectangular projection,
+    within 0.1 % over tens of km)."""
+
+    def __init__(self, lat0_deg: float, lon0_deg: float) -> None:
+        m, n = radii_of_curvature(lat0_deg)
+        self.lat0, self.lon0 = lat0_deg, lon0_deg
+        self.m_per_rad_lat = m
+        self.m_per_rad_lon = n * math.cos(math.radians(lat0_deg))
+
+    def to_ne(self, lat_deg, lon_deg):
+        """(north, east) in m of latitude and longitude (deg; scalars or arrays)."""
+        return (np.radians(np.asarray(lat_deg) - self.lat0) * self.m_per_rad_lat,
+                np.radians(np.asarray(lon_deg) - self.lon0) * self.m_per_rad_lon)
+
+    def to_latlon(self, north_m, east_m):
+        """(lat, lon) in deg of a position on the plane (m; scalars or arrays)."""
+        return (self.lat0 + np.degrees(np.asarray(north_m) / self.m_per_rad_lat),
+                self.lon0 + np.degrees(np.asarray(east_m) / self.m_per_rad_lon))
+
+
+class SuperObs(NamedTuple):
+    """The super-observations as arrays: ``x`` (n, 3) north m, east m, UTC s less
+    ``t_ref``; ``y`` (n, 2) current north, east (m/s); ``s`` (n, 2) their sigmas;
+    ``vehicle`` (n,) an integer per vehicle; ``utc`` (n,) the UTC (s); ``keys`` (vehicle
+    id, window number) of each."""
+
+    x: np.ndarray
+    y: np.ndarray
+    s: np.ndarray
+    vehicle: np.ndarray
+    utc: np.ndarray
+    keys: list[tuple[str, int]]
+
+    def take(self, pick: np.ndarray) -> "SuperObs":
+        """The super-observations ``pick`` selects (a boolean mask or indices)."""
+        idx = np.flatnonzero(pick) if pick.dtype == bool else pick
+        return SuperObs(self.x[idx], self.y[idx], self.s[idx], self.vehicle[idx],
+                        self.utc[idx], [self.keys[i] for i in idx])
+
+
+def signal_corr(h: Hyper, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
+    """``k_c / sigma_f^2`` between the rows of ``xa`` and ``xb`` (north m, east m, time
+    s)."""
+    d2 = ((xa[:, None, :2] - xb[None, :, :2]) ** 2).sum(-1) / h.length_m ** 2 + \
+        (xa[:, None, 2] - xb[None, :, 2]) ** 2 / h.length_s ** 2
+    return np.exp(-0.5 * d2)
+
+
+def error_cov(h: Hyper, t: np.ndarray, vehicle: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``k_e`` among observations at times ``t`` (s) of ``vehicle`` with sigmas ``s``."""
+    same = vehicle[:, None] == vehicle[None, :]
+    corr = np.exp(-np.abs(t[:, None] - t[None, :]) / h.tau_s)
+    return (h.scale ** 2) * np.outer(s, s) * corr * same + h.white ** 2 * np.eye(len(t))
+
+
+class CurrentField:
+    """The fleet's current field (module docstring): :meth:`add` observations in any
+    order, :meth:`fit` (the super-observations, and the hyperparameters by marginal
+    likelihood), :meth:`predict` at a place and time.
+
+    Attributes:
+        hyper: the hyperparameters (:class:`Hyper`).
+        fitted: the field of the last fit (:class:`Fitted`: its super-observations,
+            hyperparameters and mean; None before).
+        added: observations added; rejected: observations and super-observations left
+            out, by reason (:func:`observation`'s, ``outlier``, ``too_old``).
+        log_likelihood: the marginal log-likelihood of the last hyperparameter fit.
+    """
+
+    def __init__(self, hyper: Hyper = Hyper(), thin_s: float = THIN_S,
+                 history_s: float = HISTORY_S, neighbours: int = NEIGHBOURS,
+                 seed: int = 0) -> None:
+        self.hyper, self.thin_s, self.history_s = hyper, thin_s, history_s
+        self.neighbours = neighbours
+        self.plane: Plane | None = None
+        self.t_ref: float | None = None
+        self.fitted: Fitted | None = None
+        self.added = 0
+        self.rejected: dict[str, int] = {}
+        self.log_likelihood: float | None = None
+        self.newest_utc = -math.inf
+        self._bins: dict[tuple[str, int], list[float]] = {}
+        self._vehicles: dict[str, int] = {}
+        self._outliers: set[tuple[str, int]] = set()
+        self._screened_keys: set[tuple[str, int]] = set()
+        self._rng = np.random.default_rng(seed)
+
+    # ------------------------------------------------------------------ observations
+    def add(self, obs: Observation) -> bool:
+        """Take one observation (late and out of order as well); False when it is older
+        than the history kept (counted ``too_old``)."""
+        if obs.utc < self.newest_utc - self.history_s:
+            self._reject("too_old")
+            return False
+        if self.plane is None:
+            self.plane, self.t_ref = Plane(obs.lat_deg, obs.lon_deg), obs.utc
+        self.newest_utc = max(self.newest_utc, obs.utc)
+        key = (obs.vehicle, math.floor(obs.utc / self.thin_s))
+        acc = self._bins.get(key)
+        if acc is None:
+            acc = self._bins[key] = [0.0] * 8
+            self._vehicles.setdefault(obs.vehicle, len(self._vehicles))
+        acc[0] += 1.0
+        acc[1] += obs.utc
+        acc[2] += obs.lat_deg
+        acc[3] += obs.lon_deg
+        acc[4] += obs.north
+        acc[5] += obs.east
+        acc[6] += obs.std_north ** 2
+        acc[7] += obs.std_east ** 2
+        self.added += 1
+        return True
+
+    def add_record(self, rec: EstimateRecord) -> bool:
+        """:meth:`add` the observation of a ``current`` record; False (the reason counted
+        in :attr:`rejected`) when it makes none."""
+        obs, why = observation(rec)
+        if obs is None:
+            self._reject(why)
+            return False
+        return self.add(obs)
+
+    def _reject(self, why: str, n: int = 1) -> None:
+        self.rejected[why] = self.rejected.get(why, 0) + n
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, hyperparameters: bool = True) -> None:
+        """:meth:`gather` the super-observations and :meth:`update` the field with them."""
+        self.update(self.gather(), hyperparameters)
+
+    def gather(self) -> SuperObs | None:
+        """The super-observations (outliers left out), after forgetting the windows beyond
+        the history; None without any. The only step that reads what :meth:`add` writes
+        (a service holds its lock for this alone)."""
+        if self.plane is None:   # nothing added yet
+            return None
+        oldest = math.floor((self.newest_utc - self.history_s) / self.thin_s)
+        for key in [k for k in self._bins if k[1] < oldest]:
+            del self._bins[key]
+            self._outliers.discard(key)
+            self._screened_keys.discard(key)
+        keys = [k for k in self._bins if k not in self._outliers]
+        if not keys:
+            return None
+        acc = np.array([self._bins[k] for k in keys])
+        n = acc[:, :1]
+        mean = acc[:, 1:6] / n
+        north, east = self.plane.to_ne(mean[:, 1], mean[:, 2])
+        x = np.column_stack([north, east, mean[:, 0] - self.t_ref])
+        return SuperObs(x, mean[:, 3:5], np.sqrt(acc[:, 6:8] / n),
+                        np.array([self._vehicles[k[0]] for k in keys]), mean[:, 0], keys)
+
+    def update(self, obs: SuperObs | None, hyperparameters: bool = True) -> None:
+        """Fit the hyperparameters to ``obs`` by marginal likelihood when asked and there
+        are enough, leave the outliers out, and index the rest for :meth:`predict` (the
+        field :meth:`predict` reads is replaced at once, when it is ready)."""
+        if obs is None:
+            self.fitted = None
+            return
+        with one_blas_thread():
+            self._update(obs, hyperparameters)
+
+    def _update(self, obs: SuperObs, hyperparameters: bool) -> None:
+        mean = obs.y.mean(axis=0)
+        if hyperparameters and len(obs.y) >= MIN_FIT:
+            self.hyper, self.log_likelihood = fit_hyper(
+                self.hyper, _fitting_sample(obs, self._rng), mean)
+        fitted = Fitted(obs, self.hyper, mean, self.neighbours)
+        out = self._outliers_in(fitted)
+        if out.size:
+            keep = np.ones(len(obs.y), bool)
+            keep[out] = False
+            fitted = Fitted(obs.take(keep), self.hyper, mean, self.neighbours)
+        self.fitted = fitted
+
+    def _outliers_in(self, fitted: "Fitted") -> np.ndarray:
+        """The super-observations of ``fitted`` further than :data:`OUTLIER_SIGMA`
+        predictive sigmas from what the other vehicles say at their place, each window
+        judged once, when its vehicle has moved on to the next, if within
+        :data:`SCREEN_WITHIN_S` of the newest record (their indices; they are left out from
+        now on, counted ``outlier``)."""
+        obs = fitted.obs
+        newest: dict[str, int] = {}
+        for v, k in obs.keys:
+            newest[v] = max(newest.get(v, k), k)
+        recent = math.floor((self.newest_utc - SCREEN_WITHIN_S) / self.thin_s)
+        out = []
+        for i, key in enumerate(obs.keys):
+            if recent <= key[1] < newest[key[0]] and key not in self._screened_keys:
+                self._screened_keys.add(key)
+                if fitted.is_outlier(i):
+                    out.append(i)
+                    self._outliers.add(key)
+        if out:
+            self._reject("outlier", len(out))
+        return np.array(out, dtype=int)
+
+    # ------------------------------------------------------------------ predict
+    def predict(self, lat_deg: float, lon_deg: float, utc: float) -> Prediction:
+        """The field at ``lat_deg``, ``lon_deg`` (deg) and ``utc`` (POSIX s) as of the
+        last :meth:`fit` (:data:`UNKNOWN` where no super-observation is near)."""
+        fitted = self.fitted
+        if fitted is None or self.plane is None:
+            return UNKNOWN
+        n, e = self.plane.to_ne(lat_deg, lon_deg)
+        return fitted.predict(np.array([float(n), float(e), utc - self.t_ref]))
+
+
+class Fitted:
+    """The field as one :meth:`CurrentField.update` left it, never changed afterwards (a
+    query reads it while the next is fitted): the super-observations, the
+    hyperparameters, the mean and the k-d tree of the scaled coordinates."""
+
+    def __init__(self, obs: SuperObs, hyper: Hyper, mean: np.ndarray,
+                 neighbours: int = NEIGHBOURS) -> None:
+        from scipy.spatial import cKDTree
+
+        self.obs, self.hyper, self.mean, self.neighbours = obs, hyper, mean, neighbours
+        self.scale = np.array([hyper.length_m, hyper.length_m, hyper.length_s])
+        self.tree = cKDTree(obs.x / self.scale)
+
+    def predict(self, x: np.ndarray, exclude: int = -1) -> Prediction:
+        """The field at plane coordinates ``x`` (north m, east m, time s less ``t_ref``),
+        leaving out the super-observations of vehicle ``exclude``."""
+        idx = self.neighbourhood(x, exclude)
+        return self.krige(x, idx) if idx.size else UNKNOWN
+
+    def neighbourhood(self, x: np.ndarray, exclude: int = -1) -> np.ndarray:
+        """The indices of the super-observations a prediction at ``x`` uses: the
+        ``neighbours`` nearest in scaled distance within :data:`KNOWN_WITHIN`, none of
+        vehicle ``exclude``."""
+        obs = self.obs
+        k = min(self.neighbours * (2 if exclude >= 0 else 1), len(obs.y))
+        dist, idx = self.tree.query(x / self.scale, k=k, distance_upper_bound=KNOWN_WITHIN)
+        idx = np.atleast_1d(idx)[np.isfinite(np.atleast_1d(dist))]
+        if exclude >= 0:
+            idx = idx[obs.vehicle[idx] != exclude][:self.neighbours]
+        return idx
+
+    def krige(self, x: np.ndarray, idx: np.ndarray) -> Prediction:
+        """The Gaussian-process mean and sigma at ``x`` from the super-observations
+        ``idx`` (module docstring), per component."""
+        from scipy.linalg import cho_factor, cho_solve
+
+        obs, h = self.obs, self.hyper
+        xs = obs.x[idx]
+        corr = signal_corr(h, xs, xs)
+        corr_s = signal_corr(h, x[None, :], xs)[0]
+        out = []
+        for c, sigma_f in enumerate((h.sigma_north, h.sigma_east)):
+            kc, ks = sigma_f ** 2 * corr, sigma_f ** 2 * corr_s
+            factor = cho_factor(kc + error_cov(h, xs[:, 2], obs.vehicle[idx], obs.s[idx, c]),
+                                lower=True)
+            alpha = cho_solve(factor, obs.y[idx, c] - self.mean[c])
+            v = cho_solve(factor, ks)
+            var = max(sigma_f ** 2 - float(ks @ v), 0.0)
+            out.append((float(self.mean[c] + ks @ alpha), math.sqrt(var)))
+        return Prediction(out[0][0], out[1][0], out[0][1], out[1][1], int(idx.size))
+
+    def is_outlier(self, i: int) -> bool:
+        """Whether super-observation ``i`` is further than :data:`OUTLIER_SIGMA` sigmas
+        (the prediction's and its own) from the other vehicles' field at its place; a
+        place fewer than :data:`JUDGES` other vehicles saw has no outliers (one vehicle
+        against another cannot tell which is wrong)."""
+        obs, h = self.obs, self.hyper
+        idx = self.neighbourhood(obs.x[i], exclude=obs.vehicle[i])
+        if len(set(obs.vehicle[idx].tolist())) < JUDGES:
+            return False
+        p = self.krige(obs.x[i], idx)
+        for c, (m, sd) in enumerate(((p.north, p.std_north), (p.east, p.std_east))):
+            var = sd ** 2 + (h.scale * obs.s[i, c]) ** 2 + h.white ** 2
+            if abs(obs.y[i, c] - m) > OUTLIER_SIGMA * math.sqrt(var):
+                return True
+        return False
+
+
+def one_blas_thread():
+    """A context in which BLAS runs on one thread (threadpoolctl, the ``fleet`` extra): a
+    64 x 64 or 240 x 240 Cholesky gains nothing from more, and on a busy machine the
+    threads spin on each other's cores (a 64 x 64 Cholesky took 9 ms instead of 0.1 ms,
+    measured under a load of 20); a no-op without threadpoolctl. Also the limit itself:
+    ``one_blas_thread()`` keeps it for as long as the returned object lives."""
+    import scipy.linalg  # noqa: F401 - its own BLAS must be loaded to be limited
+
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def _fitting_sample(obs: SuperObs, rng: np.random.Generator) -> SuperObs:
+    """At most :data:`FIT_MAX` super-observations: runs of :data:`FIT_RUN` consecutive
+    ones of one vehicle from random starts (all of them when they are few)."""
+    n = len(obs.y)
+    if n <= FIT_MAX:
+        return obs
+    order = np.lexsort((obs.x[:, 2], obs.vehicle))   # by vehicle, then time
+    starts = rng.choice(n, size=FIT_MAX // FIT_RUN, replace=False)
+    pos = (starts[:, None] + np.arange(FIT_RUN)[None, :]).ravel()
+    return obs.take(np.unique(order[pos[pos < n]]))
+
+
+def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray
+                   ) -> tuple[float, np.ndarray]:
+    """The negative marginal log-likelihood of ``obs`` (both components) at
+    ``theta`` (the logarithms of :class:`Hyper`'s fields) and its gradient in ``theta``
+    (Rasmussen and Williams 2006, eq. 5.9: ``1/2 tr((alpha alpha' - K^-1) dK)``)."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    h = Hyper(*np.exp(theta))
+    x, n = obs.x, len(obs.y)
+    d2s = ((x[:, None, :2] - x[None, :, :2]) ** 2).sum(-1) / h.length_m ** 2
+    d2t = (x[:, None, 2] - x[None, :, 2]) ** 2 / h.length_s ** 2
+    corr = np.exp(-0.5 * (d2s + d2t))
+    dt = np.abs(x[:, None, 2] - x[None, :, 2])
+    same = (obs.vehicle[:, None] == obs.vehicle[None, :]) * np.exp(-dt / h.tau_s)
+    nll, grad = 0.0, np.zeros(7)
+    eye = np.eye(n)
+    for c, sigma_f in enumerate((h.sigma_north, h.sigma_east)):
+        kc = sigma_f ** 2 * corr
+        ve = np.outer(obs.s[:, c], obs.s[:, c]) * same * h.scale ** 2
+        k = kc + ve + h.white ** 2 * eye
+        try:
+            factor = cho_factor(k, lower=True)
+        except np.linalg.LinAlgError:
+            return 1e10, np.zeros(7)
+        r = obs.y[:, c] - mean[c]
+        alpha = cho_solve(factor, r)
+        nll += 0.5 * r @ alpha + np.log(np.diag(factor[0])).sum() + 0.5 * n * math.log(2 * math.pi)
+        w = cho_solve(factor, eye) - np.outer(alpha, alpha)
+        dks = (2.0 * kc, kc * d2s, kc * d2t, 2.0 * ve, ve * dt / h.tau_s,
+               2.0 * h.white ** 2 * eye)
+        g = [(w * dk).sum() for dk in dks]
+        grad += 0.5 * np.array([g[0] * (c == 0), g[0] * (c == 1), *g[1:]])
+    return float(nll), grad
+
+
+def fit_hyper(start: Hyper, obs: SuperObs, mean: np.ndarray) -> tuple[Hyper, float]:
+    """The hyperparameters that maximize the marginal likelihood of ``obs``, from
+    ``start`` (scipy's L-BFGS-B in the logarithms, within :meth:`Hyper.bounds`), and the
+    log-likelihood reached; ``start`` kept when the fit fails."""
+    from scipy.optimize import minimize
+
+    bounds = [(math.log(lo), math.log(hi)) for lo, hi in Hyper.bounds()]
+    theta0 = np.clip(np.log(np.array(start)), [b[0] for b in bounds], [b[1] for b in bounds])
+    res = minimize(log_likelihood, theta0, args=(obs, mean), jac=True, method="L-BFGS-B",
+                   bounds=bounds, options={"maxiter": 50})
+    if not np.all(np.isfinite(res.x)) or res.fun >= 1e10:
+        return start, float("nan")
+    return Hyper(*map(float, np.exp(res.x))), -float(res.fun)

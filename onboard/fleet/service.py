@@ -1,0 +1,354 @@
+"""``onboard fleet``: the fleet's current field on Zenoh (docs/fleet.md).
+
+Runs on a shore machine that reaches the vehicles' Zenoh network::
+
+    onboard fleet --connect tcp/192.168.2.1:7447
+    onboard fleet --connect tcp/192.168.2.1:7447 --mcap field.mcap
+
+It subscribes ``<prefix>/*/est/current`` (every vehicle's current pipeline,
+:class:`~onboard.core.messages.EstimateRecord` of schema 2: ``utc``, ``lat_deg``,
+``lon_deg``), adds each record to one :class:`~onboard.fleet.field.CurrentField` on its
+own ``utc`` (late and out-of-order records too; a schema-1 record, with no time or
+position, is counted and skipped), and
+
+* answers queries on ``<prefix>/fleet/current`` (parameters ``lat``, ``lon`` in deg and
+  ``utc`` in POSIX s) with one ``FleetCurrent`` (:mod:`onboard.fleet.messages`);
+* every ``--period`` seconds refreshes the field and publishes it on
+  ``<prefix>/fleet/current/grid`` as a ``FleetGrid``: the area of the vehicles' newest
+  positions plus a margin, at most :data:`GRID_CELLS` cells a side, at the newest record's
+  time; the hyperparameters are fitted again every ``--refit`` seconds;
+* with ``--mcap FILE`` writes each grid into an MCAP file for Foxglove: the ``FleetGrid``
+  on ``<prefix>/fleet/current/grid`` and the same field as arrows on
+  ``<prefix>/fleet/current/geojson`` (``foxglove.GeoJSON``, for the Map panel).
+
+The field is fitted on its own thread (:meth:`FleetService.step`); a query reads the
+field the last fit left (:class:`onboard.fleet.field.Fitted`) and never waits for the
+next.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import threading
+import time
+from pathlib import Path
+from typing import Any, Mapping
+
+import msgspec
+
+from onboard.core.errors import UsageError
+from onboard.core.messages import EstimateRecord
+from onboard.core.wire import ESTIMATE_SCHEMAS, encoding
+from onboard.fleet.field import CurrentField, Plane, one_blas_thread
+from onboard.fleet.messages import (
+    FLEET_CURRENT_SCHEMA,
+    FLEET_GRID_SCHEMA,
+    FleetCurrent,
+    FleetGrid,
+    QueryError,
+    VehicleCurrent,
+    current_key,
+    grid_key,
+)
+
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+GRID_PERIOD_S = 5.0
+"""Seconds between two grids (and two refreshes of the field)."""
+REFIT_PERIOD_S = 60.0
+"""Seconds between two fits of the hyperparameters."""
+GRID_CELLS = 16
+"""Cells along the longer side of the grid, at most."""
+GRID_MARGIN_M = 500.0
+"""Margin (m) about the vehicles' positions the grid covers."""
+MIN_SPACING_M = 50.0
+"""The grid's cells are at least this large (m)."""
+ARROW_S = 600.0
+"""An arrow of the GeoJSON map is as long as the water moves in this time (s)."""
+
+
+class FleetService:
+    """The fleet's field on a Zenoh session (module docstring); without a session (None)
+    it is fed by :meth:`feed` and stepped by :meth:`step` (the tests, the benchmark).
+
+    Attributes:
+        field: the :class:`CurrentField`.
+        newest: each vehicle's newest record (:class:`VehicleCurrent`).
+        received: records received, by schema (``est.v1``, ``est.v2``) and ``bad``.
+        grids: grids published.
+    """
+
+    def __init__(self, session: Any = None, prefix: str = "onboard",
+                 field: CurrentField | None = None, mcap: str | Path | None = None,
+                 refit_s: float = REFIT_PERIOD_S) -> None:
+        self.session, self.prefix, self.refit_s = session, prefix, refit_s
+        self._one_thread = one_blas_thread()   # queries' small Cholesky on one thread
+        self.field = field if field is not None else CurrentField()
+        self.newest: dict[str, VehicleCurrent] = {}
+        self.received: dict[str, int] = {}
+        self.grids = 0
+        self.lock = threading.Lock()
+        self._dec = msgspec.json.Decoder(EstimateRecord)
+        self._enc = msgspec.json.Encoder()
+        self._refit_due = 0.0
+        self.mcap = _McapGrid(mcap, prefix) if mcap is not None else None
+        self._declared: list[Any] = []
+        if session is not None:
+            self._declare(session)
+
+    def _declare(self, session: Any) -> None:
+        self._grid_pub = session.declare_publisher(grid_key(self.prefix),
+                                                   encoding=encoding(FLEET_GRID_SCHEMA))
+        self._declared = [
+            session.declare_subscriber(f"{self.prefix}/*/est/current", self.on_sample),
+            session.declare_queryable(current_key(self.prefix), self.on_query),
+            self._grid_pub]
+
+    def close(self) -> None:
+        """Undeclare the subscriber, the queryable and the grid's publisher; finish the
+        MCAP file."""
+        for d in self._declared:
+            d.undeclare()
+        self._declared = []
+        if self.mcap is not None:
+            self.mcap.close()
+
+    # ----------------------------------------------------------------- records in
+    def on_sample(self, sample: Any) -> None:
+        """Zenoh subscriber callback."""
+        self.feed(sample.payload.to_bytes(), str(sample.encoding))
+
+    def feed(self, payload: bytes, enc: str = "") -> bool:
+        """One ``est/current`` record; False when it is not one this version reads or
+        makes no observation (counted in :attr:`received` and the field's ``rejected``)."""
+        schema = enc.partition(";")[2]
+        if schema and schema not in ESTIMATE_SCHEMAS:
+            self._count("bad")
+            return False
+        try:
+            rec = self._dec.decode(payload)
+        except msgspec.DecodeError:
+            self._count("bad")
+            return False
+        self._count(f"est.v{rec.schema}")
+        with self.lock:
+            self._note(rec)
+            return self.field.add_record(rec)
+
+    def _count(self, what: str) -> None:
+        self.received[what] = self.received.get(what, 0) + 1
+
+    def _note(self, rec: EstimateRecord) -> None:
+        """Keep ``rec`` as its vehicle's newest (by ``utc``) when it has a time."""
+        old = self.newest.get(rec.vehicle)
+        if rec.utc is None or (old is not None and old.utc is not None and old.utc > rec.utc):
+            return
+        v, sd = rec.values, rec.std
+        self.newest[rec.vehicle] = VehicleCurrent(
+            vehicle=rec.vehicle, utc=rec.utc, lat=rec.lat_deg, lon=rec.lon_deg,
+            north=v.get("north"), east=v.get("east"), std_north=sd.get("north"),
+            std_east=sd.get("east"))
+
+    # ----------------------------------------------------------------- the field
+    def step(self, refit: bool | None = None) -> FleetGrid | None:
+        """Refresh the field (the hyperparameters too when ``refit``, by default every
+        ``refit_s``), then publish the grid (and write it to the MCAP);
+        return it (None before the first observation)."""
+        now = time.monotonic()
+        if refit is None:
+            refit = now >= self._refit_due
+        if refit:
+            self._refit_due = now + self.refit_s
+        with self.lock:
+            obs = self.field.gather()
+            vehicles = list(self.newest.values())
+        self.field.update(obs, hyperparameters=refit)
+        grid = self.grid(vehicles)
+        if grid is not None:
+            self._publish(grid)
+        return grid
+
+    def grid(self, vehicles: list[VehicleCurrent]) -> FleetGrid | None:
+        """The field on the grid about ``vehicles`` (module docstring), None without a
+        fitted field or a vehicle with a position."""
+        field = self.field
+        placed = [v for v in vehicles if v.lat is not None and v.lon is not None]
+        if field.fitted is None or not placed or field.plane is None:
+            return None
+        utc = max(v.utc for v in placed if v.utc is not None)
+        lats, lons, spacing = grid_points(field.plane, [v.lat for v in placed],
+                                          [v.lon for v in placed])
+        cells = [self.answer(la, lo, utc) for la in lats for lo in lons]
+        return FleetGrid(utc=utc, spacing_m=spacing, cells=cells,
+                         vehicles=sorted(vehicles, key=lambda v: v.vehicle))
+
+    def answer(self, lat: float, lon: float, utc: float) -> FleetCurrent:
+        """The field at ``lat``, ``lon`` (deg) and ``utc`` (s) as a :class:`FleetCurrent`."""
+        p = self.field.predict(lat, lon, utc)
+        return FleetCurrent(lat=lat, lon=lon, utc=utc, north=p.north, east=p.east,
+                            std_north=p.std_north, std_east=p.std_east, n_obs=p.n_obs)
+
+    def _publish(self, grid: FleetGrid) -> None:
+        payload = self._enc.encode(grid)
+        if self._declared:
+            self._grid_pub.put(payload)
+        if self.mcap is not None:
+            self.mcap.write(grid, payload)
+        self.grids += 1
+
+    # ----------------------------------------------------------------- queries
+    def on_query(self, query: Any) -> None:
+        """Zenoh queryable callback: one :class:`FleetCurrent`, or a :class:`QueryError`
+        naming the bad parameter."""
+        payload, ok = self.reply(dict(query.parameters))
+        schema = FLEET_CURRENT_SCHEMA if ok else "onboard.FleetQueryError.v1"
+        if ok:
+            query.reply(current_key(self.prefix), payload, encoding=encoding(schema))
+        else:
+            query.reply_err(payload, encoding=encoding(schema))
+
+    def reply(self, params: Mapping[str, str]) -> tuple[bytes, bool]:
+        """The reply to a query's ``params``: (JSON, True) with the field there, or
+        (JSON of a :class:`QueryError`, False)."""
+        try:
+            lat, lon, utc = parse_query(params)
+        except ValueError as err:
+            return self._enc.encode(QueryError(str(err))), False
+        return self._enc.encode(self.answer(lat, lon, utc)), True
+
+
+def parse_query(params: Mapping[str, str]) -> tuple[float, float, float]:
+    """``(lat, lon, utc)`` of a query's parameters; ValueError saying which is missing or
+    bad (a latitude within +-90 deg, a longitude within +-180, a finite time)."""
+    out = []
+    for name, limit in (("lat", 90.0), ("lon", 180.0), ("utc", math.inf)):
+        text = params.get(name)
+        if text is None:
+            raise ValueError(f"parameter {name} is missing: ask "
+                             f"fleet/current?lat=<deg>;lon=<deg>;utc=<POSIX s>")
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(f"parameter {name}={text!r} is not a number") from None
+        if not math.isfinite(value) or abs(value) > limit:
+            raise ValueError(f"parameter {name}={text!r} is out of range")
+        out.append(value)
+    return out[0], out[1], out[2]
+
+
+def grid_points(plane: Plane, lats: list[float], lons: list[float]
+                ) -> tuple[list[float], list[float], float]:
+    """The latitudes and longitudes (deg) of the grid's rows and columns over the box
+    of ``lats``, ``lons`` plus :data:`GRID_MARGIN_M`, and its spacing (m): at most
+    :data:`GRID_CELLS` cells along the longer side, cells at least :data:`MIN_SPACING_M`."""
+    north, east = plane.to_ne(lats, lons)
+    n0, n1 = float(min(north)) - GRID_MARGIN_M, float(max(north)) + GRID_MARGIN_M
+    e0, e1 = float(min(east)) - GRID_MARGIN_M, float(max(east)) + GRID_MARGIN_M
+    spacing = max(max(n1 - n0, e1 - e0) / GRID_CELLS, MIN_SPACING_M)
+    rows = [n0 + spacing * (k + 0.5) for k in range(max(1, round((n1 - n0) / spacing)))]
+    cols = [e0 + spacing * (k + 0.5) for k in range(max(1, round((e1 - e0) / spacing)))]
+    lat_rows = [float(plane.to_latlon(n, 0.0)[0]) for n in rows]
+    lon_cols = [float(plane.to_latlon(0.0, e)[1]) for e in cols]
+    return lat_rows, lon_cols, spacing
+
+
+def geojson_arrows(grid: FleetGrid) -> dict:
+    """The grid as Foxglove's ``foxglove.GeoJSON`` message: an arrow (a LineString from
+    the cell toward where the water flows in :data:`ARROW_S`) per known cell, properties
+    the cell's object."""
+    features = []
+    for c in grid.cells:
+        if c.north is None or c.east is None:
+            continue
+        m_lat = 111_132.0
+        m_lon = m_lat * math.cos(math.radians(c.lat))
+        end = [c.lon + c.east * ARROW_S / m_lon, c.lat + c.north * ARROW_S / m_lat]
+        features.append({"type": "Feature", "properties": msgspec.to_builtins(c),
+                         "geometry": {"type": "LineString",
+                                      "coordinates": [[c.lon, c.lat], end]}})
+    return {"geojson": json.dumps({"type": "FeatureCollection", "features": features})}
+
+
+GEOJSON_SCHEMA = {"type": "object", "properties": {"geojson": {"type": "string"}}}
+"""Foxglove's ``foxglove.GeoJSON`` as a JSON schema."""
+
+
+class _McapGrid:
+    """``--mcap``: every grid as a ``FleetGrid`` and as ``foxglove.GeoJSON`` arrows, at
+    the grid's UTC."""
+
+    def __init__(self, path: str | Path, prefix: str) -> None:
+        from onboard.drivers.mcap_log import mcap_module
+
+        mcap_module()
+        from mcap.writer import Writer
+
+        self._f = open(path, "wb")
+        self.writer = Writer(self._f)
+        self.writer.start(profile="", library="onboard fleet")
+        grid_schema = self.writer.register_schema(
+            FLEET_GRID_SCHEMA, "jsonschema", json.dumps(msgspec.json.schema(FleetGrid)).encode())
+        geo_schema = self.writer.register_schema("foxglove.GeoJSON", "jsonschema",
+                                                 json.dumps(GEOJSON_SCHEMA).encode())
+        self.grid_channel = self.writer.register_channel(grid_key(prefix), "json", grid_schema)
+        self.geo_channel = self.writer.register_channel(f"{current_key(prefix)}/geojson",
+                                                        "json", geo_schema)
+        self.messages = 0
+
+    def write(self, grid: FleetGrid, payload: bytes) -> None:
+        t_ns = max(0, round(grid.utc * 1e9))
+        self.writer.add_message(self.grid_channel, log_time=t_ns, publish_time=t_ns,
+                                data=payload)
+        self.writer.add_message(self.geo_channel, log_time=t_ns, publish_time=t_ns,
+                                data=json.dumps(geojson_arrows(grid)).encode())
+        self.messages += 2
+
+    def close(self) -> None:
+        try:
+            self.writer.finish()
+        finally:
+            self._f.close()
+
+
+def open_session(connect: list[str] | None, listen: list[str] | None, mode: str | None,
+                 config_file: str = "") -> Any:
+    """A shore Zenoh session (client by default), as ``onboard shore`` opens one."""
+    import zenoh
+
+    from onboard.service.publishers.zenoh_pub import session_config
+
+    if config_file and not Path(config_file).is_file():
+        raise UsageError(f"--zenoh-config {config_file}: no such file")
+    try:
+        return zenoh.open(session_config(mode or "client", connect or [DEFAULT_CONNECT],
+                                         listen or [], config_file))
+    except Exception as err:  # noqa: BLE001 - zenoh.ZError
+        raise UsageError(f"cannot reach Zenoh at {', '.join(connect or [DEFAULT_CONNECT])}: "
+                         f"{str(err).split(' at ')[0]}") from None
+
+
+def main(args: argparse.Namespace) -> int:
+    """``onboard fleet [--connect E] [--listen E] [--mode M] [--zenoh-config FILE]
+    [--prefix P] [--period S] [--refit S] [--mcap FILE]``."""
+    if not args.period > 0 or not args.refit > 0:
+        raise UsageError("--period and --refit are positive seconds")
+    session = open_session(args.connect, args.listen, args.mode,
+                           getattr(args, "zenoh_config", "") or "")
+    service = FleetService(session, args.prefix, mcap=args.mcap, refit_s=args.refit)
+    stop = threading.Event()
+    print(f"onboard fleet: fusing {args.prefix}/*/est/current; ask "
+          f"{current_key(args.prefix)}?lat=..;lon=..;utc=..; grid on "
+          f"{grid_key(args.prefix)} every {args.period:g} s", flush=True)
+    try:
+        while not stop.wait(args.period):
+            grid = service.step()
+            known = sum(c.north is not None for c in grid.cells) if grid else 0
+            print(f"{time.strftime('%H:%M:%S')} {len(service.newest)} vehicles, "
+                  f"{service.field.added:,} records, {known} cells known", flush=True)
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        service.close()
+        session.close()
+    return 0

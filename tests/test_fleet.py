@@ -1,0 +1,190 @@
+"""``onboard fleet``: the fleet's current field, measured on synthetic fleets in analytic
+fields (tests/helpers/fleet_scenarios.py), and its contract (architecture.md §4.4).
+
+The measure is the issue's: the field fitted without one vehicle, predicted along that
+vehicle's track (every 30 s), against the truth there: RMS error per component at most
+0.03 m/s and 95 % coverage (``|error| < 1.96 sigma``) between 0.90 and 0.99. The
+vehicles' estimates err as current estimators do: AR(1) with a 60 s correlation time and
+0.03 m/s sigma per component, plus 0.01 m/s white, at 10 Hz.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+
+import msgspec
+import numpy as np
+import pytest
+
+from onboard.core.messages import EstimateRecord
+from onboard.fleet.field import CurrentField, Hyper, observation, one_blas_thread
+from onboard.fleet.messages import FleetCurrent, FleetGrid
+from onboard.fleet.service import FleetService, parse_query
+from tests.helpers.fleet_scenarios import FIELDS, UTC0, fleet
+
+RMS_MAX = 0.03
+COVERAGE = (0.90, 0.99)
+
+
+def held_out(f, v: int, hyper: Hyper | None = None, every_s: float = 30.0):
+    """Errors (n, 2) and errors in sigmas (n, 2) of the field fitted without vehicle
+    ``v`` (hyperparameters fitted, or ``hyper`` kept as given), along ``v``'s track."""
+    field = CurrentField(hyper=hyper or Hyper())
+    for o in f.observations(skip=v):
+        field.add(o)
+    field.fit(hyperparameters=hyper is None)
+    sel = np.flatnonzero((f.vehicle == v) & (np.mod(f.t, every_s) < 1e-6))
+    lat, lon = f.plane.to_latlon(f.north_m[sel], f.east_m[sel])
+    err, z = [], []
+    with one_blas_thread():
+        preds = [field.predict(float(lat[j]), float(lon[j]), UTC0 + float(f.t[i]))
+                 for j, i in enumerate(sel)]
+    for i, p in zip(sel, preds):
+        assert p.north is not None, "a place between the other vehicles is known"
+        e = np.array([p.north, p.east]) - f.truth[i]
+        err.append(e)
+        z.append(np.abs(e) / np.array([p.std_north, p.std_east]))
+    return np.array(err), np.array(z)
+
+
+def score(pairs):
+    err = np.concatenate([e for e, _ in pairs])
+    z = np.concatenate([z for _, z in pairs])
+    return np.sqrt((err ** 2).mean(axis=0)), float((z < 1.96).mean())
+
+
+def test_a_vehicle_left_out_is_predicted_within_3_cm_s_with_honest_sigmas():
+    """One vehicle left out of each of the three fields, 10 vehicles for 30 minutes in a
+    2-km square (a fast variant of the slow test below). Measured: RMS 0.015/0.022 m/s
+    (north/east), coverage 0.89. Its 180 errors lie along three tracks, strongly
+    correlated: the coverage of so few has a spread of several points, so the issue's
+    0.90-0.99 is asserted over every vehicle of every field in the slow test, and here a
+    band that still fails an overconfident field (the negative control below: 0.19)."""
+    pairs = [held_out(fleet(name, seed=11 + k), v=k) for k, name in enumerate(FIELDS)]
+    rms, coverage = score(pairs)
+    assert np.all(rms <= RMS_MAX), rms
+    assert 0.85 <= coverage <= COVERAGE[1], coverage
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(FIELDS))
+def test_every_vehicle_left_out_on_held_out_seeds(name):
+    """Every vehicle of a 10-vehicle, 30-minute fleet left out in turn, on two seeds the
+    method was not set up on (docs/fleet.md "Measured" has the figures)."""
+    for seed in (101, 102):
+        f = fleet(name, seed)
+        rms, coverage = score([held_out(f, v) for v in range(10)])
+        assert np.all(rms <= RMS_MAX), (seed, rms)
+        assert COVERAGE[0] <= coverage <= COVERAGE[1], (seed, coverage)
+
+
+def test_records_taken_as_independent_would_be_overconfident():
+    """The negative control: the same fleet with each 30-s window's records taken as
+    independent measurements (sigma / sqrt(300), no correlated error) covers far less
+    than 95 % (measured 0.19): the per-vehicle error model is what makes sigma honest."""
+    f = fleet("eddy", seed=11, vehicles=6, duration_s=1200.0)
+    naive = Hyper(sigma_north=0.2, sigma_east=0.2, length_m=600.0, length_s=20000.0,
+                  scale=1.0 / math.sqrt(300.0), tau_s=1.0, white=1e-4)
+    _, coverage = score([held_out(f, v=0, hyper=naive)])
+    assert coverage < COVERAGE[0] - 0.2, coverage
+
+
+def test_late_and_out_of_order_records_give_the_same_field():
+    f = fleet("front", seed=5, vehicles=4, duration_s=300.0, rate_hz=2.0)
+    recs = [f.record(i) for i in range(len(f.t))]
+    fields = []
+    for order in (recs, random.Random(3).sample(recs, len(recs))):
+        field = CurrentField(hyper=Hyper(length_m=500.0))
+        for r in order:
+            assert field.add_record(r)
+        field.fit(hyperparameters=False)
+        fields.append(field.predict(43.1, 5.9, UTC0 + 200.0))
+    # the same up to the local plane's reference, the first record (measured 1e-5 m/s)
+    assert fields[0].north == pytest.approx(fields[1].north, abs=1e-4)
+    assert fields[0].std_east == pytest.approx(fields[1].std_east, abs=1e-4)
+    assert fields[0].n_obs == fields[1].n_obs
+
+
+def test_a_biased_vehicle_is_left_out_as_an_outlier():
+    """A vehicle whose estimate is 0.4 m/s off (a compass 30 deg off at 0.8 m/s) is
+    judged against the others window by window as they close (the service refreshes the
+    field every few seconds) and mostly left out. Measured: 27 of its 40 windows left out
+    (the first dozen, while the field is young, are kept) and 18 of the other five
+    vehicles' 200 (those judged against a field it had bent)."""
+    f = fleet("eddy", seed=12, vehicles=6, duration_s=1200.0, rate_hz=2.0)
+    f.est[f.vehicle == 3] += np.array([0.4, 0.0])
+    field = CurrentField(hyper=Hyper(length_m=600.0, length_s=20000.0, scale=0.85,
+                                     tau_s=80.0, white=1e-4))
+    order = np.argsort(f.t, kind="stable")
+    obs = list(f.observations())
+    for j, i in enumerate(order):
+        field.add(obs[i])
+        if j % 600 == 599:   # every 50 s of the fleet's records
+            field.fit(hyperparameters=False)
+    field.fit(hyperparameters=False)
+    kept = field.fitted.obs.keys
+    biased = sum(v == "v3" for v, _ in kept)
+    assert biased <= 40 - 25                                # most of its 40 windows out
+    assert sum(v != "v3" for v, _ in kept) >= 5 * 40 - 25   # the others mostly kept
+    assert field.rejected["outlier"] == 6 * 41 - len(kept)   # 40 windows and a partial each
+
+
+def test_records_that_make_no_observation_are_counted_by_reason():
+    base = dict(vehicle="b", pipeline="current", t=1.0, utc=UTC0, lat_deg=43.0,
+                lon_deg=5.0, values={"north": 0.1, "east": 0.2},
+                std={"north": 0.02, "east": 0.02})
+    cases = {"no_time": dict(utc=None), "no_position": dict(lat_deg=None),
+             "no_current": dict(values={"north": 0.1}),   # east withheld (flagged)
+             "no_std": dict(std={}), "not_converged": dict(std={"north": 2.0, "east": 2.0}),
+             "too_fast": dict(values={"north": 9.0, "east": 0.0})}
+    for why, change in cases.items():
+        assert observation(EstimateRecord(**{**base, **change})) == (None, why)
+    assert observation(EstimateRecord(**base))[0] is not None
+
+
+def test_a_place_far_from_every_vehicle_is_unknown():
+    f = fleet("eddy", seed=2, vehicles=3, duration_s=300.0, rate_hz=1.0)
+    field = CurrentField(hyper=Hyper(length_m=500.0, length_s=3600.0))
+    for o in f.observations():
+        field.add(o)
+    field.fit(hyperparameters=False)
+    assert field.predict(43.1, 5.9, UTC0 + 100.0).north is not None
+    far = field.predict(43.3, 5.9, UTC0 + 100.0)       # 22 km north
+    assert far.north is None and far.std_east is None and far.n_obs == 0
+    assert field.predict(43.1, 5.9, UTC0 + 86400.0).north is None   # tomorrow
+
+
+def test_the_query_parameters_are_checked():
+    assert parse_query({"lat": "43.1", "lon": "-5.9", "utc": "1780000000"}) == \
+        (43.1, -5.9, 1780000000.0)
+    for bad, words in (({"lon": "1", "utc": "1"}, "lat is missing"),
+                       ({"lat": "x", "lon": "1", "utc": "1"}, "not a number"),
+                       ({"lat": "91", "lon": "1", "utc": "1"}, "out of range"),
+                       ({"lat": "1", "lon": "1", "utc": "nan"}, "out of range")):
+        with pytest.raises(ValueError, match=words):
+            parse_query(bad)
+
+
+def test_the_grid_covers_the_vehicles_with_the_contracts_objects():
+    f = fleet("tidal_channel", seed=4, vehicles=4, duration_s=600.0, rate_hz=1.0)
+    service = FleetService()
+    assert service.step(refit=True) is None     # no record yet: no grid, no error
+    assert service.answer(43.1, 5.9, UTC0).north is None
+    enc = msgspec.json.Encoder()
+    for i in range(len(f.t)):
+        assert service.feed(enc.encode(f.record(i)), "application/json;onboard.Estimate.v2")
+    assert not service.feed(b'{"schema": 1}', "application/json;onboard.Estimate.v1")
+    assert not service.feed(b"{}", "application/json;onboard.Health.v3")
+    assert service.received == {"est.v2": len(f.t), "bad": 2}
+    grid = msgspec.json.decode(enc.encode(service.step(refit=True)), type=FleetGrid)
+    assert grid.schema == 1 and grid.utc == pytest.approx(UTC0 + f.t.max())
+    assert 50.0 <= grid.spacing_m <= 300.0 and 16 <= len(grid.cells) <= 16 * 16
+    assert sum(c.north is not None for c in grid.cells) > len(grid.cells) // 2
+    assert [v.vehicle for v in grid.vehicles] == ["v0", "v1", "v2", "v3"]
+    doc = msgspec.json.decode(enc.encode(grid))
+    assert set(doc["cells"][0]) == {"lat", "lon", "utc", "north", "east", "std_north",
+                                    "std_east", "n_obs"}
+    assert set(doc["vehicles"][0]) == {"vehicle", "utc", "lat", "lon", "north", "east",
+                                       "std_north", "std_east"}
+    assert isinstance(grid.cells[0], FleetCurrent)

@@ -1,0 +1,99 @@
+"""``onboard fleet`` end to end through a real Zenoh router (in process): vehicles publish
+schema-2 records on ``<prefix>/<id>/est/current``, the service fuses them, answers
+``<prefix>/fleet/current`` queries and publishes ``<prefix>/fleet/current/grid``
+(architecture.md §4.4)."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import msgspec
+import numpy as np
+import pytest
+
+from onboard.apps.service_bench import free_tcp_port
+from onboard.fleet.messages import FleetCurrent, FleetGrid
+from onboard.fleet.service import FleetService
+from onboard.service.publishers.zenoh_pub import open_router, session_config
+from tests.helpers.fleet_scenarios import UTC0, eddy, fleet
+
+pytestmark = pytest.mark.integration
+TIMEOUT = 30.0
+
+
+def wait_for(cond, timeout=TIMEOUT):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_records_from_several_vehicles_become_a_field_that_answers_queries(tmp_path):
+    import zenoh
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_router(endpoint)
+    sessions = [zenoh.open(session_config("client", connect=[endpoint])) for _ in range(3)]
+    fleet_session, vehicles, shore = sessions
+    service = FleetService(fleet_session, "onboard", mcap=tmp_path / "field.mcap")
+    grids: list[tuple[bytes, str]] = []
+    lock = threading.Lock()
+
+    def on_grid(sample):
+        with lock:
+            grids.append((sample.payload.to_bytes(), str(sample.encoding)))
+
+    sub = shore.declare_subscriber("onboard/fleet/current/grid", on_grid)
+    try:
+        f = fleet("eddy", seed=21, vehicles=4, duration_s=900.0, rate_hz=1.0)
+        enc = msgspec.json.Encoder()
+        order = np.random.default_rng(0).permutation(len(f.t))   # late, out of order
+        pubs = {}
+        for i in order:
+            rec = f.record(int(i))
+            key = f"onboard/{rec.vehicle}/est/current"
+            if key not in pubs:
+                pubs[key] = vehicles.declare_publisher(   # every record arrives
+                    key, encoding="application/json;onboard.Estimate.v2",
+                    congestion_control=zenoh.CongestionControl.BLOCK)
+            pubs[key].put(enc.encode(rec))
+        assert wait_for(lambda: service.field.added == len(f.t)), service.received
+        assert service.step(refit=True) is not None
+        lat, lon = f.plane.to_latlon(100.0, -200.0)
+        utc = UTC0 + 600.0
+        replies = list(shore.get(f"onboard/fleet/current?lat={lat};lon={lon};utc={utc}",
+                                 timeout=10.0))
+        assert len(replies) == 1 and replies[0].ok is not None
+        ok = replies[0].ok
+        assert str(ok.encoding) == "application/json;onboard.FleetCurrent.v1"
+        doc = json.loads(ok.payload.to_bytes())
+        assert list(doc) == ["lat", "lon", "utc", "north", "east", "std_north", "std_east",
+                             "n_obs"]
+        got = msgspec.json.decode(ok.payload.to_bytes(), type=FleetCurrent)
+        truth = eddy(np.array(100.0), np.array(-200.0), 600.0)
+        assert got.n_obs > 0 and got.utc == utc
+        assert abs(got.north - float(truth[0])) < 3 * got.std_north + 0.01
+        assert abs(got.east - float(truth[1])) < 3 * got.std_east + 0.01
+        bad = list(shore.get("onboard/fleet/current?lat=43;utc=1", timeout=10.0))
+        assert len(bad) == 1 and bad[0].err is not None
+        assert "lon is missing" in json.loads(bad[0].err.payload.to_bytes())["error"]
+        assert wait_for(lambda: len(grids) >= 1)
+        payload, encoding = grids[0]
+        assert encoding == "application/json;onboard.FleetGrid.v1"
+        grid = msgspec.json.decode(payload, type=FleetGrid)
+        assert len(grid.vehicles) == 4 and any(c.north is not None for c in grid.cells)
+    finally:
+        sub.undeclare()
+        service.close()
+        for s in sessions:
+            s.close()
+        router.close()
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "field.mcap", "rb") as fh:
+        topics = [ch.topic for _, ch, _ in make_reader(fh).iter_messages()]
+    assert topics == ["onboard/fleet/current/grid", "onboard/fleet/current/geojson"]
