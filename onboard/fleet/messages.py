@@ -17,7 +17,6 @@ come from :func:`onboard.service.publishers.set_drift.set_drift`.
 
 from __future__ import annotations
 
-
 import msgspec
 
 FLEET_CURRENT_SCHEMA = "onboard.FleetCurrent.v1"
