@@ -201,6 +201,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mcap", metavar="FILE",
                    help="also write every grid into FILE (MCAP, for Foxglove; needs the "
                         "mcap extra)")
+    p.add_argument("--web", default="", metavar="HOST:PORT",
+                   help="serve the web page there: the field as arrows with their "
+                        "uncertainty over the map, each vehicle's track and estimate")
     p.set_defaults(handler="onboard.fleet.service:main")
 
     p = sub.add_parser("bench", help="performance figures")

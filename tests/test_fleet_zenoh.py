@@ -97,3 +97,51 @@ def test_records_from_several_vehicles_become_a_field_that_answers_queries(tmp_p
     with open(tmp_path / "field.mcap", "rb") as fh:
         topics = [ch.topic for _, ch, _ in make_reader(fh).iter_messages()]
     assert topics == ["onboard/fleet/current/grid", "onboard/fleet/current/geojson"]
+
+
+def test_onboard_fleet_serves_its_field_on_the_web_page():
+    """``onboard fleet --web``: the page's ``/api/fleet`` holds the grid the service made
+    from the vehicles' records, known cells with their sigmas."""
+    import subprocess
+    import sys
+    import urllib.request
+
+    import zenoh
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_router(endpoint)
+    vehicles = zenoh.open(session_config("client", connect=[endpoint]))
+    proc = subprocess.Popen([sys.executable, "-m", "onboard", "fleet", "--connect", endpoint,
+                             "--period", "1", "--web", "127.0.0.1:0"],
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        url = ""
+        while not url:
+            line = proc.stdout.readline()
+            assert line, "onboard fleet ended before serving its page"
+            if "the page is on " in line:
+                url = line.split("the page is on ")[1].strip()
+        f = fleet("eddy", seed=22, vehicles=3, duration_s=600.0, rate_hz=1.0)
+        enc = msgspec.json.Encoder()
+        pubs = {}
+        for i in range(len(f.t)):
+            rec = f.record(i)
+            key = f"onboard/{rec.vehicle}/est/current"
+            if key not in pubs:
+                pubs[key] = vehicles.declare_publisher(
+                    key, encoding="application/json;onboard.Estimate.v2",
+                    congestion_control=zenoh.CongestionControl.BLOCK)
+            pubs[key].put(enc.encode(rec))
+
+        def grid():
+            with urllib.request.urlopen(url + "api/fleet", timeout=5.0) as r:
+                return json.loads(r.read()).get("grid")
+
+        assert wait_for(lambda: (grid() or {}).get("cells"), timeout=60.0)
+        known = [c for c in grid()["cells"] if c["north"] is not None]
+        assert known and all(c["std_north"] > 0 for c in known)
+    finally:
+        proc.terminate()
+        proc.wait(20.0)
+        vehicles.close()
+        router.close()

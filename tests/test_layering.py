@@ -24,8 +24,8 @@ The rooms, from the bottom up (docs/architecture.md §2 has the picture):
 * ``onboard.offline``: the offline commands: replay, autodetection, exports, the track
   figure; the model closure above them and ``onboard diagnose`` above it.
 * ``onboard.fleet``: the fleet's current field (shore side), pure on the core; its Zenoh
-  service (``onboard.fleet.service``) also on the Zenoh session's configuration and the
-  drivers' MCAP import.
+  service (``onboard.fleet.service``) also on the Zenoh session's configuration, the web
+  page and the drivers' MCAP import.
 * ``onboard.cli``: parses arguments, dispatches by module name.
 * ``onboard.apps``: demo, shore view, benchmarks, gain design, installer; may use
   everything, the simulator included.
@@ -78,7 +78,7 @@ ROOMS: dict[str, set[str]] = {
     "onboard.offline.batch_tables": OFFLINE,
     "onboard.fleet": CORE | {"onboard.fleet"},  # the fleet's field, pure
     "onboard.fleet.service": CORE | {"onboard.fleet", "onboard.service.publishers",
-                                     "onboard.drivers"},
+                                     "onboard.service.web", "onboard.drivers"},
     "onboard.cli": CORE | {"onboard"},
     "onboard.apps": EVERYTHING,
     "validation": EVERYTHING | {"validation"},

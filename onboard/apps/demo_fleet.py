@@ -174,11 +174,16 @@ class CommandMember:
 
     argv: list[str]
     name: str = ""
+    log: Path | None = None
+    """Where its output goes (None: the demo's terminal)."""
     proc: subprocess.Popen | None = None
 
     async def start(self, start: float) -> None:
         """Start the command."""
-        self.proc = subprocess.Popen(self.argv)
+        out = None if self.log is None else open(self.log, "w")  # noqa: SIM115 - the child's
+        self.proc = subprocess.Popen(self.argv, stdout=out, stderr=subprocess.STDOUT if out else None)
+        if out is not None:
+            out.close()
 
     async def stop(self) -> None:
         """Terminate the command (killed after 10 s)."""
@@ -424,6 +429,12 @@ def main(args: argparse.Namespace) -> int:
     if not (duration > 0 and math.isfinite(duration)):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
     check_outputs([Output("the demo's folder", demo.OUT_DIR, "dir")])
-    res = asyncio.run(run_fleet_demo(args.fleet, duration,
+    out_dir = demo.OUT_DIR / "fleet"
+    page = f"127.0.0.1:{_free_port(socket.SOCK_STREAM)}"
+    fusion = CommandMember([sys.executable, "-m", "onboard", "fleet", "--connect", "{endpoint}",
+                            "--web", page], name="fleet", log=demo.OUT_DIR / "fleet-service.log")
+    print(f"the fleet's current field (onboard fleet): http://{page}/, its log "
+          f"{fusion.log}", flush=True)
+    res = asyncio.run(run_fleet_demo(args.fleet, duration, out_dir=out_dir, extra=[fusion],
                                      speed=1.0 if args.realtime else FLEET_SPEED))
     return 0 if any(r["estimates"] for r in res.values()) else 1
