@@ -109,6 +109,11 @@ def test_current_table_holds_every_published_current(local):
     published = np.isfinite(est["current.north"]) & np.isfinite(est["current.east"])
     assert len(rows) == int(published.sum()) > 0
     assert all(r["vehicle"] == "rudder-boat" and r["utc"] is not None for r in rows)
+    # the log's own UTC, to the millisecond (a float of seconds taken as milliseconds
+    # put it in January 1970)
+    start = _rows(out)["current.tlog"]["utc_start"]
+    assert (rows[0]["utc"] - start).total_seconds() == pytest.approx(rows[0]["t_s"], abs=1.0)
+    assert len({r["utc"] for r in rows[:20]}) == len(rows[:20])  # 0.1 s apart, all distinct
     assert all(r["lat"] is not None and abs(r["lat"] - 41.49) < 0.1 for r in rows)
     assert rows[0]["north"] == pytest.approx(est["current.north"][published][0])
 

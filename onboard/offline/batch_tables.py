@@ -183,7 +183,7 @@ def current_rows(cols: dict[str, np.ndarray], summary: dict, clock) -> dict[str,
     spans = _flag_spans(summary["warnings"])
     for i in np.flatnonzero(np.isfinite(cn) & np.isfinite(ce)):
         t = float(cols["t"][i])
-        utc = clock.to_utc(t0 + t) if clock is not None else None
+        utc = round(1000.0 * clock.to_utc(t0 + t)) if clock is not None else None  # ms
         lat = lon = None
         for p in where:
             n, e = cols[p + ".north"][i], cols[p + ".east"][i]
