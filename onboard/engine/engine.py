@@ -473,6 +473,7 @@ class Engine:
             cmd = self.mapper.map(raw)
             if cmd is not None:
                 self.queue.put(cmd)
+                self.integrity.observe(cmd)
         elif cls is Parameter:
             for change in self.mapper.parameter(raw.name, raw.value):  # type: ignore[attr-defined]
                 self.events.append(f"inputs: {change}")
@@ -502,6 +503,7 @@ class Engine:
             if values:
                 records.append(self._record(p, t, values, queue.t_sensor))
         queue.close_tick()
+        integrity.currents_at(t, records)
         integrity.positions_at(t, records)
         integrity.speeds_at(t, records)
         return records
@@ -519,7 +521,11 @@ class Engine:
         kept as :attr:`latest`."""
         if not all(map(math.isfinite, values.values())):
             values = self._finite(p.name, values)
-        withheld = self.integrity.withheld(p.name)
+        integrity = self.integrity
+        if integrity.deviation is not None and integrity.deviation.deviated:
+            values = dict(values)
+            integrity.widened(p.name, t, values)  # type: ignore[arg-type]
+        withheld = integrity.withheld(p.name)
         if withheld:
             values = self._withhold(p.name, values, withheld)
         std_names = self._std_names.get(p.name)

@@ -62,9 +62,11 @@ from collections import deque
 from typing import Iterable, Protocol, Sequence
 
 from onboard.monitor.alerts import Alerts
+from onboard.monitor.compass_deviation import CompassDeviation
 from onboard.core.geo import LocalFrame
 from onboard.core.stats import chi2_mean_band
 from onboard.core.messages import (
+    ActuatorCommand,
     Attitude,
     DvlVelocity,
     EstimateRecord,
@@ -89,6 +91,34 @@ turn or a cross wind is a few degrees."""
 PLAUSIBLE_CURRENT_MPS = 0.5
 """A current this strong (m/s) across the track makes a crab angle of ``asin(c / sog)``
 at speed over ground ``sog``: the bound widens with it at low speed."""
+
+LEG_S = 5.0
+"""A straight leg of the compass-deviation fit lasts this long (s)."""
+LEG_GAP_S = 2.0
+"""A gap between moving fixes longer than this (s) ends the leg being gathered."""
+LEG_STRAIGHT_RAD = math.radians(5.0)
+"""Largest circular standard deviation (rad) of a straight leg's headings and courses."""
+DEVIATION_WALD = 18.47
+"""The compass deviation is significant when the Wald statistic of its four harmonic
+terms exceeds this: the chi-square(4) 0.999 quantile."""
+DEVIATION_MIN_RAD = math.radians(2.0)
+"""A significant deviation this large (rad, RMS over a turn) withholds the heading-
+dependent outputs (the current): at 1.5 m/s it puts ``2 s sin(d / 2)`` = 0.05 m/s into
+the current, the size of its sigma."""
+
+IDLE_COMMAND = 0.05
+"""A normalized thruster command within this of zero pushes nothing (an ESC's
+deadband)."""
+IDLE_SETTLE_S = 10.0
+"""After this long (s) of idle commands a small vehicle moves with the water (a boat's
+surge time constant is a few seconds)."""
+IDLE_WINDOW_S = 30.0
+"""The idle drift is fitted over at most the last this long (s)."""
+IDLE_MIN_SPAN_S = 5.0
+"""Least span (s) of idle fixes that measures a drift."""
+IDLE_DRIFT_BOUND = 3.44
+"""Mahalanobis distance (2 dof) of current minus drift beyond which the current fails:
+the chi-square(2) 0.9973 quantile's square root (a 3-sigma event)."""
 
 POSITION_SIGMA_BOUND = 3.0
 """Mahalanobis distance (2 dof) of the position residual beyond which a comparison fails:
@@ -226,8 +256,8 @@ class HeadingCourseCheck:
         self.offset_rad: float | None = None
         self.mismatch = False
         self.worst: tuple[float, float] | None = None
-        """(offset rad, mean speed m/s) of the fastest window of the present mismatch:
-        the course is the most precise there."""
+        """(offset rad, mean speed m/s) of the window of the present mismatch whose
+        offset is the largest: the angle an operator must allow for."""
 
     def heading(self, t: float, heading_rad: float) -> None:
         """The newest heading (rad, true) at ``t`` (s)."""
@@ -253,7 +283,7 @@ class HeadingCourseCheck:
         self.mismatch = abs(self.offset_rad) > crab_bound(sog_mean)
         if not self.mismatch:
             self.worst = None
-        elif self.worst is None or sog_mean > self.worst[1]:
+        elif self.worst is None or abs(self.offset_rad) > abs(self.worst[0]):
             self.worst = (self.offset_rad, sog_mean)
         return self.mismatch
 
@@ -276,6 +306,142 @@ class HeadingCourseCheck:
         while times and times[0] < t:
             for column in (times, self._sin, self._cos, self._sog):
                 column.popleft()
+
+
+class CompassDeviationCheck:
+    """The compass's heading-dependent error, learned against course over ground on
+    straight legs (:class:`onboard.monitor.compass_deviation.CompassDeviation`).
+
+    The fixes of a moving vehicle with a fresh heading are gathered into legs of
+    :data:`LEG_S`; a leg whose headings and courses each stay within
+    :data:`LEG_STRAIGHT_RAD` (circular standard deviation) of their mean is one equation
+    of the fit, a turning one is dropped (a turn's lag between heading and course is not
+    a deviation).
+
+    Attributes:
+        fit: the least-squares fit.
+        deviated: whether the fit's harmonic terms are significant (Wald statistic above
+            :data:`DEVIATION_WALD`); the monitor then compares their size with each
+            pipeline's heading sigma.
+    """
+
+    def __init__(self) -> None:
+        self.fit = CompassDeviation()
+        self.deviated = False
+        self._leg: list[tuple[float, float, float, float]] = []  # (t, psi, chi, sog)
+
+    def fix(self, t: float, psi: float, chi: float, sog: float) -> bool:
+        """One moving fix with its fresh heading ``psi`` and course ``chi`` (rad), speed
+        over ground ``sog`` (m/s); returns whether a leg was closed (the fit may have
+        moved)."""
+        leg = self._leg
+        if leg and t - leg[-1][0] > LEG_GAP_S:
+            leg.clear()
+        leg.append((t, psi, chi, sog))
+        if t - leg[0][0] < LEG_S:
+            return False
+        mean_psi, straight_psi = _circular_stats([p for _, p, _, _ in leg])
+        mean_chi, straight_chi = _circular_stats([c for _, _, c, _ in leg])
+        sog_mean = sum(v for _, _, _, v in leg) / len(leg)
+        leg.clear()
+        if max(straight_psi, straight_chi) > LEG_STRAIGHT_RAD:
+            return False
+        self.fit.leg(mean_psi, mean_chi, sog_mean)
+        self.deviated = self.fit.significance() > DEVIATION_WALD
+        return True
+
+    def rms(self) -> float:
+        """The deviation's RMS over a turn (rad) when it is significant, else 0."""
+        return self.fit.rms() if self.deviated else 0.0
+
+
+def _circular_stats(angles: Sequence[float]) -> tuple[float, float]:
+    """The circular mean (rad) of ``angles`` and their circular standard deviation
+    ``sqrt(-2 ln R)`` (rad), R the mean resultant length."""
+    s = sum(map(math.sin, angles))
+    c = sum(map(math.cos, angles))
+    r = min(math.hypot(s, c) / len(angles), 1.0)
+    return math.atan2(s, c), math.sqrt(-2.0 * math.log(r)) if r > 0.0 else math.inf
+
+
+class IdleDriftCheck:
+    """The published current against the vehicle's drift while its thrusters idle.
+
+    A vehicle with no thrust settles to the water's velocity: after
+    :data:`IDLE_SETTLE_S` of idle commands its velocity over ground is the current (and
+    what wind pushes). The drift is the least-squares slope of the fixes' north and east
+    against time over the idle span (at most :data:`IDLE_WINDOW_S`; a slope of ``n``
+    fixes of one-sigma ``s`` over a span of time-spread ``sd_t`` has the one-sigma ``s /
+    (sqrt(n) sd_t)``). At each fix of a span of at least :data:`IDLE_MIN_SPAN_S` the
+    published current is compared with it: the Mahalanobis distance of their difference
+    with both covariances (2 dof) beyond :data:`IDLE_DRIFT_BOUND` fails.
+
+    Attributes:
+        idle_since: when (s) the commands last became idle, None while thrusting.
+        failing: the newest verdict (kept while no idle span can judge).
+        last: (drift north, east, current north, east (m/s), distance) of the newest
+            comparison.
+    """
+
+    def __init__(self) -> None:
+        self.idle_since: float | None = None
+        self.failing = False
+        self.last: tuple[float, float, float, float, float] | None = None
+        self._fixes: deque[tuple[float, float, float, float]] = deque()  # t, n, e, var
+
+    def command(self, t: float, idle: bool) -> None:
+        """A normalized command at ``t`` (s): ``idle`` when no thruster pushes."""
+        if not idle:
+            self.idle_since = None
+            self._fixes.clear()
+        elif self.idle_since is None:
+            self.idle_since = t
+
+    def fix(self, t: float, north: float, east: float, var_m2: float) -> None:
+        """A fix (m in the monitor's frame, its variance m^2 per axis) during idle."""
+        since = self.idle_since
+        if since is None or t - since < IDLE_SETTLE_S:
+            return
+        fixes = self._fixes
+        fixes.append((t, north, east, var_m2))
+        while fixes and fixes[0][0] < t - IDLE_WINDOW_S:
+            fixes.popleft()
+
+    def drift(self) -> tuple[float, float, float] | None:
+        """The drift (north, east, m/s) and its variance per axis (m^2/s^2), None when
+        the idle span is shorter than :data:`IDLE_MIN_SPAN_S`."""
+        fixes = self._fixes
+        if len(fixes) < 3 or fixes[-1][0] - fixes[0][0] < IDLE_MIN_SPAN_S:
+            return None
+        n = len(fixes)
+        tm = sum(f[0] for f in fixes) / n
+        stt = sum((f[0] - tm) ** 2 for f in fixes)
+        nm = sum(f[1] for f in fixes) / n
+        em = sum(f[2] for f in fixes) / n
+        vn = sum((f[0] - tm) * (f[1] - nm) for f in fixes) / stt
+        ve = sum((f[0] - tm) * (f[2] - em) for f in fixes) / stt
+        var = sum(f[3] for f in fixes) / n / stt
+        return vn, ve, var
+
+    def judge(self, current: tuple[float, float], var: tuple[float, float]) -> bool | None:
+        """The published current (north, east, m/s) and its variance per axis against
+        the drift; the verdict (True: failing), None when no idle span can judge."""
+        d = self.drift()
+        if d is None:
+            return None
+        dn, de = d[0] - current[0], d[1] - current[1]
+        m = math.sqrt(dn * dn / (d[2] + var[0]) + de * de / (d[2] + var[1]))
+        self.last = (d[0], d[1], current[0], current[1], m)
+        self.failing = m > IDLE_DRIFT_BOUND
+        return self.failing
+
+
+def _idle(c: ActuatorCommand) -> bool:
+    """Whether command ``c`` pushes nothing: every thruster within
+    :data:`IDLE_COMMAND` of zero (a rudder alone does not push)."""
+    pushes = [x for x in (c.throttle, c.left, c.right) if x is not None]
+    pushes += list(c.thrusters or ())
+    return bool(pushes) and all(abs(x) <= IDLE_COMMAND for x in pushes)
 
 
 class PositionCheck:
@@ -448,7 +614,7 @@ REORIGINED = ("; its own local frame is no longer about the first fix (a restart
 """Added to ``position_residual`` when the pipeline's frame moved."""
 WARN_EVERY_S = 1.0
 """A condition that lasts is re-raised at most this often (s) (one warning spans it)."""
-WATCHED = frozenset({GnssFix, Heading, Attitude, DvlVelocity})
+WATCHED = frozenset({GnssFix, Heading, Attitude, DvlVelocity, ActuatorCommand})
 """The sample types the monitor reads (the engine hands it only these)."""
 
 
@@ -463,6 +629,12 @@ class Declared(Protocol):
     """Its forward speed over ground (m/s) and maybe its sideways speed."""
     heading_dependent: tuple[str, ...]
     """The columns withheld while the heading disagrees with the course."""
+    heading_estimate: tuple[str, ...]
+    """Its published heading (rad), with its ``std_<q>``: widened by a detected compass
+    deviation, withheld with ``position`` while the heading disagrees with the course."""
+    current_estimate: tuple[str, ...]
+    """Its water current (north, east; m/s), each with its ``std_<q>``: judged against
+    the idle drift."""
     frame: LocalFrame | None
     """The local frame about its first fix (None before it)."""
     frame_offset: tuple[float, float] | None
@@ -502,6 +674,8 @@ class IntegrityMonitor:
         self._speed_refs: list[tuple[float, float, float, str]] = []
         """Measured speeds since the previous tick: (t, m/s, variance, reference)."""
         self.heading = None if holonomic else HeadingCourseCheck()
+        self.deviation = None if holonomic else CompassDeviationCheck()
+        self.idle = IdleDriftCheck()
         self.watched: dict[str, Declared] = {}
         """The pipelines whose roles it reads, by name (:meth:`watch`)."""
         self.positions: dict[str, PositionCheck] = {}
@@ -532,10 +706,14 @@ class IntegrityMonitor:
                 self._doppler(s)  # type: ignore[arg-type]
                 if self.frame is None:
                     self.frame = LocalFrame(s.lat_deg, s.lon_deg)  # type: ignore
+                self._idle_fix(s)  # type: ignore[arg-type]
                 if hc is not None:
                     self._heading_verdict(hc.fix(s), s.t)  # type: ignore[arg-type]
+                    self._deviation_fix(s)  # type: ignore[arg-type]
         elif cls is DvlVelocity:
             self._dvl(s)  # type: ignore[arg-type]
+        elif cls is ActuatorCommand:
+            self.idle.command(s.t, _idle(s))  # type: ignore[arg-type]
         elif hc is None:
             return
         elif cls is Heading:
@@ -567,14 +745,125 @@ class IntegrityMonitor:
                 "baseline, or a heading from another vehicle; the rows withheld: "
                 "summary.json withheld_rows"))
 
+    def _deviation_fix(self, s: GnssFix) -> None:
+        """A fix's course against the newest heading, into the compass-deviation fit;
+        the pipelines with heading-dependent outputs flagged while the deviation is
+        significant and above :data:`DEVIATION_MIN_RAD`."""
+        hc, dc = self.heading, self.deviation
+        assert hc is not None and dc is not None
+        h = hc._heading
+        sog, cog = s.sog_mps, s.cog_rad
+        if (h is None or sog is None or cog is None or s.t - h[0] > HEADING_FRESH_S
+                or not sog > HEADING_MIN_SPEED_MPS or not math.isfinite(cog)):
+            return
+        if not dc.fix(s.t, h[1], cog, sog):
+            return
+        on = dc.rms() > DEVIATION_MIN_RAD
+        dependent = [n for n, p in self.watched.items() if p.heading_dependent]
+        was = any("compass_deviation" in self.flags.get(n, ()) for n in dependent)
+        for name in dependent:
+            self._flag(name, "compass_deviation", on)
+        if on and not was:
+            self._deviation_warning("", s.t, ", ".join(dependent))
+
+    def _deviation_warning(self, pipeline: str, t: float, held: str = "") -> None:
+        dc = self.deviation
+        assert dc is not None and dc.fit.residual_std is not None
+        what = (f"{pipeline} heading sigma widened by it at each heading"
+                if pipeline else f"{held} withheld while it lasts" if held
+                else "the heading sigmas widened by it")
+        self._warn("compass_deviation", pipeline, t, (
+            f"the compass errs with the heading by {math.degrees(dc.rms()):.1f} deg RMS "
+            f"(learned against course over ground on {dc.fit.legs} straight legs): "
+            f"{what}; onboard diagnose LOG names and sizes the deviation"), details=(
+            f"Wald statistic {dc.fit.significance():.0f} on 4 dof (bound "
+            f"{DEVIATION_WALD}); legs' residual {math.degrees(dc.fit.residual_std):.1f} deg; "
+            "the constant term and a uniform current are fitted beside it "
+            "(docs/integrity.md)"))
+
+    def _idle_fix(self, s: GnssFix) -> None:
+        """A fix into the idle-drift fit, in the monitor's frame."""
+        idle = self.idle
+        if idle.idle_since is None or self.frame is None:
+            return
+        acc = s.h_acc_m
+        var = (acc * acc if acc is not None and acc > 0 and math.isfinite(acc)
+               else self.fix_std_m ** 2)
+        n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
+        idle.fix(s.t, n, e, var)
+
+    def currents_at(self, t: float, records: Sequence[EstimateRecord]) -> None:
+        """At a tick after a fix during an idle span, each published current (the
+        ``current_estimate`` role) against the idle drift (:class:`IdleDriftCheck`)."""
+        idle = self.idle
+        if idle.idle_since is None or not self._fix_new:
+            return
+        for rec in records:
+            p = self.watched.get(rec.pipeline)
+            qs = getattr(p, "current_estimate", ()) if p is not None else ()
+            v, sd = rec.values, rec.std
+            if len(qs) != 2 or not all(q in v and q in sd for q in qs):
+                continue
+            verdict = idle.judge((v[qs[0]], v[qs[1]]), (sd[qs[0]] ** 2, sd[qs[1]] ** 2))
+            if verdict is None:
+                continue
+            self._flag(rec.pipeline, "current_idle_drift", verdict)
+            if verdict and idle.last is not None:
+                self._idle_warning(rec.pipeline, t, idle.last)
+
+    def _idle_warning(self, pipeline: str, t: float,
+                      last: tuple[float, float, float, float, float]) -> None:
+        dn, de, cn, ce, m = last
+        self._warn("current_idle_drift", pipeline, t, (
+            f"{pipeline} current {math.hypot(cn, ce):.2f} m/s is {m:.1f} sigma from the "
+            f"drift over ground {math.hypot(dn, de):.2f} m/s with the thrusters idle: "
+            "withheld until an idle drift agrees with it; its noise is set in "
+            f"[pipelines.{pipeline}] (docs/integrity.md)"), details=(
+            f"drift north/east {dn:.3f}/{de:.3f} m/s, current {cn:.3f}/{ce:.3f} m/s; the "
+            f"drift is the slope of the fixes after {IDLE_SETTLE_S:.0f} s of idle commands "
+            "(wind pushes a drifting boat too)"))
+
     # ------------------------------------------------------------------ records
     def withheld(self, pipeline: str) -> tuple[str, ...]:
-        """The quantities of ``pipeline`` to publish as unknown now."""
+        """The quantities of ``pipeline`` to publish as unknown now: its heading-
+        dependent outputs while the heading disagrees with the course or the compass
+        deviates (and its heading and position, each with its ``std_``, while the
+        heading disagrees with the course); its current while it disagrees with the idle
+        drift."""
         flags = self.flags.get(pipeline)
-        if flags and "heading_course_mismatch" in flags:
-            p = self.watched.get(pipeline)
-            return p.heading_dependent if p is not None else ()
-        return ()
+        p = self.watched.get(pipeline)
+        if not flags or p is None:
+            return ()
+        out: tuple[str, ...] = ()
+        if "heading_course_mismatch" in flags:
+            own = tuple(getattr(p, "heading_estimate", ())) + tuple(p.position)
+            out = p.heading_dependent + own + tuple("std_" + q for q in own)
+        elif "compass_deviation" in flags:
+            out = p.heading_dependent
+        if "current_idle_drift" in flags:
+            out += tuple(q for q in getattr(p, "current_estimate", ()) if q not in out)
+        return out
+
+    def widened(self, pipeline: str, t: float, values: dict[str, float]) -> None:
+        """Widen in ``values`` (a pipeline's record at ``t`` (s) before it is made) the sigma of its
+        heading by the compass deviation at that heading while the deviation exceeds
+        the sigma (``compass_deviation`` on the pipeline): ``std <- hypot(std, d(psi))``."""
+        dc = self.deviation
+        p = self.watched.get(pipeline)
+        qs = getattr(p, "heading_estimate", ()) if p is not None else ()
+        if dc is None or not qs or not dc.deviated:
+            return
+        q, sq = qs[0], "std_" + qs[0]
+        if q not in values or sq not in values:
+            return
+        rms = dc.rms()
+        on = rms > values[sq]
+        was = "compass_deviation" in self.flags.get(pipeline, ())
+        self._flag(pipeline, "compass_deviation", on)
+        if on:
+            values[sq] = math.hypot(values[sq], dc.fit.deviation(values[q]))
+            if not was:
+                self._deviation_warning(pipeline, t)
 
     def count_withheld(self, pipeline: str, n: int) -> None:
         """``n`` values of ``pipeline`` were left out of its record."""

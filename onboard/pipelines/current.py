@@ -156,6 +156,7 @@ class CurrentPipeline(Pipeline):
             "std_north", "std_east") + (("std_down",) if nd == 3 else ()) + (
             "u_r", "v_r") + (("w_r",) if nd == 3 else ())
         self.heading_dependent = tuple(c for c in HEADING_DEPENDENT if c in self.columns)
+        self.current_estimate = ("north", "east")
         self.configured = configured
         self.counters = PipelineCounters()
         self._innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)

@@ -183,6 +183,7 @@ class SurgeHeadingPipeline(Pipeline):
 
     position = ("north", "east")
     speed = ("speed",)
+    heading_estimate = ("heading",)
 
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
                  gnss_position_std_m: float, heading_std_rad: float, factory: AxisFactory,
