@@ -503,7 +503,7 @@ class Engine:
             if values:
                 records.append(self._record(p, t, values, queue.t_sensor))
         queue.close_tick()
-        integrity.currents_at(t, records)
+        integrity.counters_at(t)
         integrity.positions_at(t, records)
         integrity.speeds_at(t, records)
         return records
@@ -522,9 +522,9 @@ class Engine:
         if not all(map(math.isfinite, values.values())):
             values = self._finite(p.name, values)
         integrity = self.integrity
-        if integrity.deviation is not None and integrity.deviation.deviated:
+        if integrity.amends:
             values = dict(values)
-            integrity.widened(p.name, t, values)  # type: ignore[arg-type]
+            integrity.amend(p.name, t, values)  # type: ignore[arg-type]
         withheld = integrity.withheld(p.name)
         if withheld:
             values = self._withhold(p.name, values, withheld)

@@ -116,9 +116,24 @@ IDLE_WINDOW_S = 30.0
 """The idle drift is fitted over at most the last this long (s)."""
 IDLE_MIN_SPAN_S = 5.0
 """Least span (s) of idle fixes that measures a drift."""
+IDLE_GAP_S = 2.0
+"""A gap in the fixes longer than this (s) restarts the idle span (a new run)."""
 IDLE_DRIFT_BOUND = 3.44
 """Mahalanobis distance (2 dof) of current minus drift beyond which the current fails:
 the chi-square(2) 0.9973 quantile's square root (a 3-sigma event)."""
+
+NIS_FAR_FACTOR = 10.0
+"""A channel whose mean NIS over the run exceeds this many times its degrees of freedom
+is far above any band: ``nis_far_above`` names it (a consistent filter's is 1 per dof;
+the block check's band tops out near 1.5-5 per dof)."""
+NIS_FAR_MIN_UPDATES = 500
+"""Accepted updates of a channel before its run mean is judged."""
+DIVERGENCE_WINDOW_S = 60.0
+"""Input-model divergences are counted over windows this long (s)."""
+DIVERGENCE_STORM = 5
+"""Divergences of one input model in one window that make a storm: its input estimate
+restarts every 12 s or more often, and the sigmas published between restarts do not
+count the restarts."""
 
 POSITION_SIGMA_BOUND = 3.0
 """Mahalanobis distance (2 dof) of the position residual beyond which a comparison fails:
@@ -258,6 +273,9 @@ class HeadingCourseCheck:
         self.worst: tuple[float, float] | None = None
         """(offset rad, mean speed m/s) of the window of the present mismatch whose
         offset is the largest: the angle an operator must allow for."""
+        self.fastest: tuple[float, float] | None = None
+        """(offset rad, mean speed m/s) of its fastest window: the course is the most
+        precise there."""
 
     def heading(self, t: float, heading_rad: float) -> None:
         """The newest heading (rad, true) at ``t`` (s)."""
@@ -282,10 +300,13 @@ class HeadingCourseCheck:
         sog_mean = sum(self._sog) / n
         self.mismatch = abs(self.offset_rad) > crab_bound(sog_mean)
         if not self.mismatch:
-            self.worst = None
-        elif self.worst is None or abs(self.offset_rad) > abs(self.worst[0]):
+            self.worst = self.fastest = None
+            return False
+        if self.worst is None or abs(self.offset_rad) > abs(self.worst[0]):
             self.worst = (self.offset_rad, sog_mean)
-        return self.mismatch
+        if self.fastest is None or sog_mean > self.fastest[1]:
+            self.fastest = (self.offset_rad, sog_mean)
+        return True
 
     def speed(self) -> float:
         """Mean speed over ground (m/s) of the window."""
@@ -388,6 +409,7 @@ class IdleDriftCheck:
         self.failing = False
         self.last: tuple[float, float, float, float, float] | None = None
         self._fixes: deque[tuple[float, float, float, float]] = deque()  # t, n, e, var
+        self._last_fix_t: float | None = None
 
     def command(self, t: float, idle: bool) -> None:
         """A normalized command at ``t`` (s): ``idle`` when no thruster pushes."""
@@ -398,9 +420,17 @@ class IdleDriftCheck:
             self.idle_since = t
 
     def fix(self, t: float, north: float, east: float, var_m2: float) -> None:
-        """A fix (m in the monitor's frame, its variance m^2 per axis) during idle."""
+        """A fix (m in the monitor's frame, its variance m^2 per axis) during idle; after
+        a gap in the fixes longer than :data:`IDLE_GAP_S` the vehicle settles anew."""
         since = self.idle_since
-        if since is None or t - since < IDLE_SETTLE_S:
+        if since is None:
+            return
+        last = self._last_fix_t
+        self._last_fix_t = t
+        if last is not None and t - last > IDLE_GAP_S:
+            self.idle_since = since = t
+            self._fixes.clear()
+        if t - since < IDLE_SETTLE_S:
             return
         fixes = self._fixes
         fixes.append((t, north, east, var_m2))
@@ -609,6 +639,73 @@ class NisCheck:
         self._reset()
 
 
+class NisRunMean:
+    """One channel's mean NIS over the whole run against :data:`NIS_FAR_FACTOR` times
+    its degrees of freedom: the block check (:class:`NisCheck`) widens its band for
+    correlated innovations and judges blocks, so a channel whose mean is carried by rare
+    huge innovations can stay inside every block's band while its run mean is 100."""
+
+    __slots__ = ("dof", "n", "total", "far")
+
+    def __init__(self, dof: int) -> None:
+        self.dof = dof
+        self.n = 0
+        self.total = 0.0
+        self.far = False
+
+    @property
+    def mean(self) -> float:
+        return self.total / self.n if self.n else math.nan
+
+    def add(self, nis: float) -> bool:
+        """One accepted NIS; returns True when the channel has just become far above."""
+        self.n += 1
+        self.total += nis
+        if self.far or self.n < NIS_FAR_MIN_UPDATES or self.n % NIS_BLOCK_UPDATES:
+            return False
+        self.far = self.mean > NIS_FAR_FACTOR * self.dof
+        return self.far
+
+
+class DivergenceCheck:
+    """Input-model divergences per pipeline counter (``<axis>.diverged`` in its health)
+    over windows of :data:`DIVERGENCE_WINDOW_S`: :data:`DIVERGENCE_STORM` or more in
+    one window is a storm.
+
+    Attributes:
+        storms: counter key (``<pipeline>:<axis>.diverged``) -> (divergences in the
+            newest stormy window, its length s).
+    """
+
+    def __init__(self) -> None:
+        self._start: float | None = None
+        self._counts: dict[str, float] = {}
+        self.storms: dict[str, tuple[float, float]] = {}
+        self.first: dict[str, float] = {}
+        """counter key -> when (s) its first stormy window began."""
+
+    def due(self, t: float) -> bool:
+        """Whether a window ends at ``t`` (s) (the first call starts one)."""
+        if self._start is None:
+            self._start = t
+            return False
+        return t - self._start >= DIVERGENCE_WINDOW_S
+
+    def window(self, t: float, counters: dict[str, float]) -> list[str]:
+        """The counters at the end of a window; returns the keys that stormed in it."""
+        span = t - (self._start if self._start is not None else t)
+        stormed = []
+        for key, n in counters.items():
+            before = self._counts.get(key)
+            self._counts[key] = n
+            if before is not None and n - before >= DIVERGENCE_STORM:
+                self.storms[key] = (n - before, span)
+                self.first.setdefault(key, t - span)
+                stormed.append(key)
+        self._start = t
+        return stormed
+
+
 REORIGINED = ("; its own local frame is no longer about the first fix (a restart "
               "re-origins it at the next fix), so its published positions jumped")
 """Added to ``position_residual`` when the pipeline's frame moved."""
@@ -676,6 +773,8 @@ class IntegrityMonitor:
         self.heading = None if holonomic else HeadingCourseCheck()
         self.deviation = None if holonomic else CompassDeviationCheck()
         self.idle = IdleDriftCheck()
+        self.run_means: dict[str, dict[str, NisRunMean]] = {}
+        self.divergences = DivergenceCheck()
         self.watched: dict[str, Declared] = {}
         """The pipelines whose roles it reads, by name (:meth:`watch`)."""
         self.positions: dict[str, PositionCheck] = {}
@@ -728,17 +827,22 @@ class IntegrityMonitor:
             return
         code = "heading_course_mismatch"
         for name, p in self.watched.items():
-            if p.heading_dependent:
+            if p.heading_dependent or getattr(p, "heading_estimate", ()):
                 self._flag(name, code, verdict)
         if verdict:
             hc = self.heading
-            assert hc is not None and hc.worst is not None
+            assert hc is not None and hc.worst is not None and hc.fastest is not None
             offset, sog = hc.worst
             held = ", ".join(n for n, p in self.watched.items() if p.heading_dependent)
+            held += "".join(f", {n} heading and position" for n, p in self.watched.items()
+                            if getattr(p, "heading_estimate", ()))
             self._warn(code, "", t, (
-                f"heading disagrees with course over ground by {math.degrees(offset):.1f} "
-                f"deg at {sog:.1f} m/s (bound {math.degrees(crab_bound(sog)):.0f} deg): "
-                + (f"{held} withheld until they agree again; " if held else "")
+                f"heading disagrees with course over ground by up to "
+                f"{math.degrees(offset):.1f} deg at {sog:.1f} m/s (bound "
+                f"{math.degrees(crab_bound(sog)):.0f} deg; "
+                f"{math.degrees(hc.fastest[0]):.1f} deg at its fastest, "
+                f"{hc.fastest[1]:.1f} m/s): "
+                + (f"{held.lstrip(', ')} withheld until they agree again; " if held else "")
                 + "a constant offset is measured by onboard diagnose LOG --write-config "
                 "FILE ([corrections] heading_offset_rad)"), details=(
                 f"the median over {HEADING_WINDOW_S:.0f} s; a misaligned compass or antenna "
@@ -792,24 +896,22 @@ class IntegrityMonitor:
         n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
         idle.fix(s.t, n, e, var)
 
-    def currents_at(self, t: float, records: Sequence[EstimateRecord]) -> None:
-        """At a tick after a fix during an idle span, each published current (the
-        ``current_estimate`` role) against the idle drift (:class:`IdleDriftCheck`)."""
-        idle = self.idle
-        if idle.idle_since is None or not self._fix_new:
+    def _idle_current(self, pipeline: str, qs: tuple[str, ...], t: float,
+                      values: dict[str, float]) -> None:
+        """At a tick after a fix during an idle span, the current ``qs`` (north, east) in
+        ``values`` (before anything is withheld) against the idle drift
+        (:class:`IdleDriftCheck`)."""
+        sq = ["std_" + q for q in qs]
+        if len(qs) != 2 or not all(q in values for q in (*qs, *sq)):
             return
-        for rec in records:
-            p = self.watched.get(rec.pipeline)
-            qs = getattr(p, "current_estimate", ()) if p is not None else ()
-            v, sd = rec.values, rec.std
-            if len(qs) != 2 or not all(q in v and q in sd for q in qs):
-                continue
-            verdict = idle.judge((v[qs[0]], v[qs[1]]), (sd[qs[0]] ** 2, sd[qs[1]] ** 2))
-            if verdict is None:
-                continue
-            self._flag(rec.pipeline, "current_idle_drift", verdict)
-            if verdict and idle.last is not None:
-                self._idle_warning(rec.pipeline, t, idle.last)
+        idle = self.idle
+        verdict = idle.judge((values[qs[0]], values[qs[1]]),
+                             (values[sq[0]] ** 2, values[sq[1]] ** 2))
+        if verdict is None:
+            return
+        self._flag(pipeline, "current_idle_drift", verdict)
+        if verdict and idle.last is not None:
+            self._idle_warning(pipeline, t, idle.last)
 
     def _idle_warning(self, pipeline: str, t: float,
                       last: tuple[float, float, float, float, float]) -> None:
@@ -844,13 +946,27 @@ class IntegrityMonitor:
             out += tuple(q for q in getattr(p, "current_estimate", ()) if q not in out)
         return out
 
-    def widened(self, pipeline: str, t: float, values: dict[str, float]) -> None:
-        """Widen in ``values`` (a pipeline's record at ``t`` (s) before it is made) the sigma of its
-        heading by the compass deviation at that heading while the deviation exceeds
-        the sigma (``compass_deviation`` on the pipeline): ``std <- hypot(std, d(psi))``."""
+    @property
+    def amends(self) -> bool:
+        """Whether :meth:`amend` may judge or change a record now: during an idle span
+        or while the compass deviation is significant."""
         dc = self.deviation
+        return self.idle.idle_since is not None or (dc is not None and dc.deviated)
+
+    def amend(self, pipeline: str, t: float, values: dict[str, float]) -> None:
+        """A pipeline's values at ``t`` (s) before its record is made: its current (the
+        ``current_estimate`` role) judged against the idle drift at a tick after a fix
+        of an idle span, and the sigma of its heading (``heading_estimate``) widened in
+        ``values`` by the compass deviation at that heading while the deviation exceeds
+        the sigma (``compass_deviation`` on the pipeline): ``std <- hypot(std, d(psi))``."""
         p = self.watched.get(pipeline)
-        qs = getattr(p, "heading_estimate", ()) if p is not None else ()
+        if p is None:
+            return
+        if self._fix_new and self.idle.idle_since is not None:
+            self._idle_current(pipeline, tuple(getattr(p, "current_estimate", ())), t,
+                               values)
+        dc = self.deviation
+        qs = getattr(p, "heading_estimate", ())
         if dc is None or not qs or not dc.deviated:
             return
         q, sq = qs[0], "std_" + qs[0]
@@ -1009,6 +1125,7 @@ class IntegrityMonitor:
             check = per.get(rec.channel)
             if check is None or check.dof != rec.dof:
                 check = per[rec.channel] = NisCheck(rec.dof)
+            self._run_mean(pipeline, rec.channel, rec.dof, nis, rec.t)
             was = check.failing
             now = check.add(nis)
             if now:
@@ -1019,6 +1136,52 @@ class IntegrityMonitor:
             if now != was:
                 self._flag(pipeline, "nis_out_of_band",
                            any(c.failing for c in per.values()))
+
+    def _run_mean(self, pipeline: str, channel: str, dof: int, nis: float, t: float) -> None:
+        """One accepted NIS into the channel's run mean; ``nis_far_above`` (once per
+        channel) when it is far above its degrees of freedom."""
+        per = self.run_means.setdefault(pipeline, {})
+        rm = per.get(channel)
+        if rm is None or rm.dof != dof:
+            rm = per[channel] = NisRunMean(dof)
+        if not rm.add(nis):
+            return
+        self._flag(pipeline, "nis_far_above", True)
+        self._warn("nis_far_above", pipeline, t, (
+            f"{pipeline} {channel}: mean NIS {rm.mean:.1f} over {rm.n} updates, "
+            f"{rm.mean / dof:.0f} times a consistent filter's {dof}: its innovations are "
+            "not what its model predicts; a heading off the course over ground, an input "
+            f"model that diverges, or its noise in [pipelines.{pipeline}] "
+            "(docs/integrity.md)"), key=channel, details=(
+            f"the mean of every accepted update so far against {NIS_FAR_FACTOR:.0f} times "
+            "its degrees of freedom; rare huge innovations carry such a mean while most "
+            "blocks stay in their band"))
+
+    def counters_at(self, t: float) -> None:
+        """Every :data:`DIVERGENCE_WINDOW_S`, the watched pipelines' input-model
+        divergence counters (``*.diverged`` of their health); a storm is
+        ``input_model_divergence`` on the pipeline, raised once per counter."""
+        dc = self.divergences
+        if not dc.due(t):
+            return
+        counters: dict[str, float] = {}
+        for name, p in self.watched.items():
+            health = getattr(p, "health", None)
+            if health is None:
+                continue
+            for k, v in health().flat().items():
+                if k.endswith(".diverged") and math.isfinite(v):
+                    counters[f"{name}:{k}"] = v
+        for key in dc.window(t, counters):
+            name, axis = key.split(":", 1)
+            n, span = dc.storms[key]
+            self._flag(name, "input_model_divergence", True)
+            self._warn("input_model_divergence", name, t, (
+                f"{name} {axis.removesuffix('.diverged')} input model diverged {n:.0f} "
+                f"times in {span:.0f} s (every {span / n:.1f} s): its estimate restarts "
+                "each time and its sigma does not count it; a heading off the course, or "
+                f"its divergence bounds in [pipelines.{name}] (docs/integrity.md)"),
+                key=axis, t_start=dc.first[key])
 
     def _nis_warning(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
         lo, hi = check.band
