@@ -113,10 +113,11 @@ class _Collector(Pipeline):
         self.depths: list[tuple[float, float]] = []
         """Every depth sample as (t, depth) (s, m): a glider's depth rate."""
         self.raw: dict[str, list[tuple[float, ...]]] = {
-            "heading": [], "gnss_velocity": [], "dvl": [], "gnss_accuracy": []}
+            "heading": [], "attitude_yaw": [], "gnss_velocity": [], "dvl": [],
+            "gnss_accuracy": []}
         """Every measurement as it came, for the noise identification
         (:mod:`onboard.offline.closure.noise`): headings (t, rad), GNSS velocities (t,
-        north, east; m/s), DVL bottom-track velocities (t, vx, vy; m/s) and the fixes'
+        north, east; m/s), attitude yaws (t, rad), DVL bottom-track velocities (t, vx, vy; m/s) and the fixes'
         reported accuracies (t, m)."""
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
@@ -128,8 +129,8 @@ class _Collector(Pipeline):
             elif isinstance(s, Attitude):
                 if not self.heading_src_compass:
                     self.heading = s.yaw_rad
-                    if s.yaw_selected:
-                        self.raw["heading"].append((s.t, s.yaw_rad))
+                if s.yaw_selected:
+                    self.raw["attitude_yaw"].append((s.t, s.yaw_rad))
                 self.pitch = s.pitch_rad
                 if s.yaw_rate_rps is not None:
                     self.has_rate = True

@@ -43,9 +43,12 @@ MAX_GAP_S = 2.0
 """Samples further apart (s) are not differenced across."""
 WHITE_LAG1 = -2.0 / 3.0
 """The lag-1 autocorrelation of the second differences of white noise."""
-WHITE_LAG1_MAX = -0.45
+WHITE_LAG1_MAX = -0.55
 """Above this lag-1 autocorrelation of the second differences the noise is not white
-(a filtered output): the figure is not written to a config."""
+(a filtered output): the figure is not written to a config. Even a 5-point moving
+average of white noise reads -0.5 (second-difference coefficients ``[1, -1, 0, 0, 0, -1,
+1] / 5``) while its spread understates the noise per sample threefold; white noise reads
+-0.67 within about ``1 / sqrt(n)``."""
 SIGNAL_RATIO_MAX = 1.3
 """Largest ratio of the third-difference to the second-difference estimate before the
 motion is taken to leak into them."""
@@ -140,12 +143,17 @@ def identify(raw: dict) -> dict:
     vel = _axes(raw.get("gnss_velocity") or [], (1, 2))
     if vel is not None:
         out["gnss_velocity"] = {**vel, "unit": "m/s"}
-    head = raw.get("heading") or []
-    if head:
-        h = np.asarray(head, float)
-        fig = white_noise(h[:, 0], np.unwrap(h[:, 1]))
+    # one heading source, never mixed: the most frequent (the finest sampling leaves the
+    # least motion in the differences)
+    for source in sorted(("heading", "attitude_yaw"), key=lambda k: -len(raw.get(k) or [])):
+        head = raw.get(source) or []
+        fig = None
+        if len(head) > 2:
+            h = np.asarray(head, float)
+            fig = white_noise(h[:, 0], np.unwrap(h[:, 1]))
         if fig is not None:
-            out["compass"] = {**fig, "unit": "rad"}
+            out["compass"] = {**fig, "unit": "rad", "source": source}
+            break
     dvl = _axes(raw.get("dvl") or [], (1, 2))
     if dvl is not None:
         out["dvl"] = {**dvl, "unit": "m/s"}
