@@ -7,17 +7,21 @@ soft iron),
 
     d(psi) = A + B1 sin psi + C1 cos psi + B2 sin 2 psi + C2 cos 2 psi.
 
-On a straight leg the heading differs from the course over ground ``chi`` by the
-deviation and by the crab a uniform current ``(c_n, c_e)`` imposes: the through-water
-velocity is the velocity over ground less the current, so its direction lies
-``-c_perp / sog`` from the course, with ``c_perp = -c_n sin chi + c_e cos chi`` the
-current across the track (small angles). One leg's mean difference is therefore
+On a straight leg the velocity over ground ``v_g`` (speed ``sog``, course ``chi``) less
+a uniform current ``(c_n, c_e)`` is the through-water velocity, which points along the
+true heading ``psi - d(psi)``: their cross product vanishes. To first order in the
+deviation, with ``y = sog sin(psi - chi)`` the ground velocity across the compass
+heading and ``u = sog cos(psi - chi)`` along it (m/s),
 
-    psi - chi = d(psi) + (c_n sin chi - c_e cos chi) / sog + e,
+    y = d(psi) u + c_n sin psi - c_e cos psi + e,
 
-linear in the seven unknowns ``(A, B1, C1, B2, C2, c_n, c_e)``. The current's columns
-scale with ``1 / sog`` and the deviation's do not, so the two separate once the vehicle
-has held several headings at different speeds; the constant ``A`` also carries any
+linear in the seven unknowns ``(A, B1, C1, B2, C2, c_n, c_e)`` (the neglected term is
+``d`` times the current along the heading: a deviation read a few tens of percent off
+in a strong current at low speed, never a current read as a deviation). The deviation's
+columns scale with the speed through the water and the current's do not, so the two
+separate once the vehicle has held several headings at different speeds (a current's
+crab at low speed is large, 20 deg for 0.29 m/s at 0.65 m/s on the simulator's
+``effect-current``, and this form holds it exactly); the constant ``A`` also carries any
 steady sideslip and a heading bias, so only the harmonic terms are called deviation.
 
 :class:`CompassDeviation` accumulates the normal equations of the legs (ordinary least
@@ -41,10 +45,10 @@ MIN_HEADING_SPREAD = 0.5
 0: one heading, 1: uniform round the circle) for the harmonics to be identifiable."""
 MIN_SECTORS = 6
 """Least number of 30-degree heading sectors the legs must cover."""
-LEG_NOISE_RAD = math.radians(1.0)
-"""One-sigma (rad) of a leg's mean heading-minus-course from the sensors' noise alone
-(a consumer receiver's course over 5 s of fixes at 1-2 m/s); the fit's residual scales
-it up when the legs scatter more."""
+LEG_NOISE_MPS = 0.02
+"""One-sigma (m/s) of a leg's ground velocity across the heading from the sensors' noise
+alone (a consumer receiver's Doppler velocity, 0.1 m/s per fix, over 5 s of fixes at
+5 Hz); the fit's residual scales it up when the legs scatter more."""
 PRIOR_STD = (0.5, 0.3, 0.3, 0.05, 0.05, 0.5, 0.5)
 """Prior one-sigma of the unknowns (rad; m/s for the current): any constant or
 semicircular deviation, a quadrantal one of a few degrees (a small craft's soft iron),
@@ -52,10 +56,13 @@ a current up to half a metre per second. The prior keeps a fit over few headings
 determined; the data overrule it wherever they speak."""
 
 
-def _regressors(psi: float, chi: float, sog: float) -> tuple[float, ...]:
-    """One leg's row: heading ``psi`` and course ``chi`` (rad), speed over ground (m/s)."""
-    return (1.0, math.sin(psi), math.cos(psi), math.sin(2.0 * psi), math.cos(2.0 * psi),
-            math.sin(chi) / sog, -math.cos(chi) / sog)
+def _row(psi: float, chi: float, sog: float) -> tuple[tuple[float, ...], float]:
+    """One leg's regressors and observation ``y`` (m/s): heading ``psi`` and course
+    ``chi`` (rad), speed over ground ``sog`` (m/s)."""
+    u = sog * math.cos(psi - chi)
+    sp, cp = math.sin(psi), math.cos(psi)
+    x = (u, u * sp, u * cp, u * math.sin(2.0 * psi), u * math.cos(2.0 * psi), sp, -cp)
+    return x, sog * math.sin(psi - chi)
 
 
 def solve_spd(a: list[list[float]], b: list[float]) -> tuple[list[float], list[list[float]]]:
@@ -84,7 +91,7 @@ class CompassDeviation:
         theta: the unknowns ``(A, B1, C1, B2, C2, c_n, c_e)`` (rad, rad, ..., m/s), None
             before :data:`MIN_LEGS` legs over :data:`MIN_HEADING_SPREAD`.
         cov: their covariance, None with ``theta``.
-        residual_std: the legs' residual standard deviation (rad), None with ``theta``.
+        residual_std: the legs' residual standard deviation (m/s), None with ``theta``.
     """
 
     def __init__(self) -> None:
@@ -101,8 +108,7 @@ class CompassDeviation:
     def leg(self, psi: float, chi: float, sog: float) -> None:
         """One straight leg's circular-mean heading ``psi`` and course ``chi`` (rad) and
         mean speed over ground ``sog`` (m/s)."""
-        x = _regressors(psi, chi, sog)
-        y = math.atan2(math.sin(psi - chi), math.cos(psi - chi))
+        x, y = _row(psi, chi, sog)
         for i in range(N_PARAMS):
             row = self._xtx[i]
             for j in range(N_PARAMS):
@@ -123,14 +129,14 @@ class CompassDeviation:
 
     def _fit(self) -> None:
         """The posterior mean and covariance of the unknowns (Gaussian prior
-        :data:`PRIOR_STD`, legs of one-sigma :data:`LEG_NOISE_RAD`), once enough legs
+        :data:`PRIOR_STD`, legs of one-sigma :data:`LEG_NOISE_MPS`), once enough legs
         round enough headings are in; the covariance is scaled up by the residual's
         variance where it exceeds the legs' assumed one."""
         n = self.legs
         if (n < MIN_LEGS or self.spread() < MIN_HEADING_SPREAD
                 or len(self._sectors) < MIN_SECTORS):
             return
-        w = 1.0 / LEG_NOISE_RAD ** 2
+        w = 1.0 / LEG_NOISE_MPS ** 2
         a = [[w * v + (1.0 / PRIOR_STD[i] ** 2 if i == j else 0.0)
               for j, v in enumerate(row)] for i, row in enumerate(self._xtx)]
         theta, inv = solve_spd(a, [w * v for v in self._xty])
@@ -139,7 +145,7 @@ class CompassDeviation:
                    for i in range(N_PARAMS) for j in range(N_PARAMS))
         rss = max(self._yty - 2.0 * sum(t * v for t, v in zip(theta, self._xty)) + quad, 0.0)
         s2 = rss / max(n - N_PARAMS, 1)
-        scale = max(1.0, s2 / LEG_NOISE_RAD ** 2)
+        scale = max(1.0, s2 / LEG_NOISE_MPS ** 2)
         self.theta = theta
         self.cov = [[scale * v for v in row] for row in inv]
         self.residual_std = math.sqrt(s2)

@@ -881,7 +881,8 @@ class IntegrityMonitor:
             f"(learned against course over ground on {dc.fit.legs} straight legs): "
             f"{what}; onboard diagnose LOG names and sizes the deviation"), details=(
             f"Wald statistic {dc.fit.significance():.0f} on 4 dof (bound "
-            f"{DEVIATION_WALD}); legs' residual {math.degrees(dc.fit.residual_std):.1f} deg; "
+            f"{DEVIATION_WALD}); legs' residual {dc.fit.residual_std:.3f} m/s across the "
+            "heading; "
             "the constant term and a uniform current are fitted beside it "
             "(docs/integrity.md)"))
 
