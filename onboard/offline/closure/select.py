@@ -377,8 +377,8 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
         for name, (value, _) in transformed.items():
             fit_data, hold_data, test_data = (ALL[name].transform(d, value)
                                               for d in (fit_data, hold_data, test_data))
-        final = M.fit(concat([fit_data, hold_data]), _model_effects((*declared, *chosen)),
-                      sigma, ctx, known=known)
+        both = concat([fit_data, hold_data])
+        final = M.fit(both, _model_effects((*declared, *chosen)), sigma, ctx, known=known)
         after = M.score(test_data, final, metric)
         if not chosen or not _worse_on_test(after, before):
             break
