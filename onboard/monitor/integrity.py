@@ -655,6 +655,7 @@ class NisRunMean:
 
     @property
     def mean(self) -> float:
+        """The mean NIS of the accepted updates so far (nan before one)."""
         return self.total / self.n if self.n else math.nan
 
     def add(self, nis: float) -> bool:

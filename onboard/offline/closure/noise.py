@@ -18,9 +18,9 @@ Two checks decide whether a figure is usable:
 
 * **whiteness**: the lag-1 autocorrelation of the second differences of white noise is
   ``-4 / 6 = -2/3``. An autopilot's filtered output (smooth, correlated) gives near 0 or
-  positive values; its second-difference spread then says nothing about the error the
-  filter should expect, and the figure is reported but not written
-  (:data:`WHITE_LAG1_MAX`).
+  positive values, a resampled one values near -1; its second-difference spread then
+  says nothing about the error the filter should expect, and the figure is reported but
+  not written (outside :data:`WHITE_LAG1_MIN` - :data:`WHITE_LAG1_MAX`).
 * **the signal's share**: the same statistic on the third differences (variance ``20
   s^2``, lag-1 ``-15/20``) must agree with the second's within :data:`SIGNAL_RATIO_MAX`;
   a larger third-difference figure means motion leaks in (too coarse a sampling).
@@ -49,6 +49,10 @@ WHITE_LAG1_MAX = -0.55
 average of white noise reads -0.5 (second-difference coefficients ``[1, -1, 0, 0, 0, -1,
 1] / 5``) while its spread understates the noise per sample threefold; white noise reads
 -0.67 within about ``1 / sqrt(n)``."""
+WHITE_LAG1_MIN = -0.8
+"""Below this lag-1 autocorrelation the second differences alternate more than white
+noise's do: a resampled or interpolated channel (the BlueBoat's 10 Hz positions read
+-0.97), whose spread is no noise either."""
 SIGNAL_RATIO_MAX = 1.3
 """Largest ratio of the third-difference to the second-difference estimate before the
 motion is taken to leak into them."""
@@ -93,7 +97,7 @@ def white_noise(t: np.ndarray, x: np.ndarray) -> dict | None:
     third = _third(t, x)
     ratio = third / s2 if third is not None and s2 > 0 else math.nan
     lag1 = _lag1(d2[np.r_[True, np.diff(k) == 1]]) if len(k) > 2 else math.nan
-    white = (s2 > 0 and lag1 <= WHITE_LAG1_MAX
+    white = (s2 > 0 and WHITE_LAG1_MIN <= lag1 <= WHITE_LAG1_MAX
              and (not math.isfinite(ratio) or ratio <= SIGNAL_RATIO_MAX))
     return {"std": s2, "lag1": lag1, "third_ratio": ratio, "samples": int(len(k)),
             "white": bool(white)}
