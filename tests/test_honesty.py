@@ -12,7 +12,7 @@ import random
 
 import pytest
 
-from onboard.core.messages import ActuatorCommand, GnssFix, Heading
+from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Innovation
 from onboard.monitor.alerts import Alerts
 from onboard.monitor.compass_deviation import CompassDeviation
 from onboard.monitor.integrity import (
@@ -220,16 +220,22 @@ def test_thrust_ends_the_idle_span() -> None:
 
 def test_a_run_mean_nis_carried_by_rare_huge_innovations_is_far_above() -> None:
     """Shenzhen 1751's surge increments: mean NIS 99.6, most updates near zero."""
-    rm = NisRunMean(1)
-    fired = [rm.add(5000.0 if k % 50 == 0 else 0.01) for k in range(NIS_FAR_MIN_UPDATES)]
-    assert fired[-1] and rm.mean > 10.0
+    monitor = IntegrityMonitor(Alerts())
+    recs = [Innovation(channel="surge.increment", t=0.1 * k, z=(0.0,),
+                       S=(1.0,), nis=5000.0 if k % 50 == 0 else 0.01, dof=1, accepted=True)
+            for k in range(NIS_FAR_MIN_UPDATES)]
+    monitor.innovations("aie", recs)
+    rm = monitor.run_means["aie"]["surge.increment"]
+    # 100.0 per update: 10 huge ones in 500
+    assert rm.far and rm.mean == pytest.approx(100.0, rel=0.01)
+    assert "nis_far_above" in monitor.active()["aie"]
 
 
 def test_a_consistent_channel_is_not_far_above() -> None:
     rng = random.Random(7)
     rm = NisRunMean(2)
-    assert not any(rm.add(rng.gauss(0, 1) ** 2 + rng.gauss(0, 1) ** 2)
-                   for _ in range(5000))
+    assert not any(rm.add_block(sum(rng.gauss(0, 1) ** 2 + rng.gauss(0, 1) ** 2
+                                    for _ in range(100)) / 100, 100) for _ in range(50))
 
 
 def test_a_divergence_storm_is_counted_per_window() -> None:

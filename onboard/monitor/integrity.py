@@ -468,10 +468,15 @@ class IdleDriftCheck:
 
 def _idle(c: ActuatorCommand) -> bool:
     """Whether command ``c`` pushes nothing: every thruster within
-    :data:`IDLE_COMMAND` of zero (a rudder alone does not push)."""
-    pushes = [x for x in (c.throttle, c.left, c.right) if x is not None]
-    pushes += list(c.thrusters or ())
-    return bool(pushes) and all(abs(x) <= IDLE_COMMAND for x in pushes)
+    :data:`IDLE_COMMAND` of zero (a rudder alone does not push); a command without a
+    thruster is not idle."""
+    some = False
+    for x in (c.throttle, c.left, c.right, *(c.thrusters or ())):
+        if x is not None:
+            if not -IDLE_COMMAND <= x <= IDLE_COMMAND:
+                return False
+            some = True
+    return some
 
 
 class PositionCheck:
@@ -658,11 +663,12 @@ class NisRunMean:
         """The mean NIS of the accepted updates so far (nan before one)."""
         return self.total / self.n if self.n else math.nan
 
-    def add(self, nis: float) -> bool:
-        """One accepted NIS; returns True when the channel has just become far above."""
-        self.n += 1
-        self.total += nis
-        if self.far or self.n < NIS_FAR_MIN_UPDATES or self.n % NIS_BLOCK_UPDATES:
+    def add_block(self, mean: float, n: int) -> bool:
+        """A block of ``n`` accepted updates of mean NIS ``mean``; returns True when the
+        channel has just become far above."""
+        self.n += n
+        self.total += mean * n
+        if self.far or self.n < NIS_FAR_MIN_UPDATES:
             return False
         self.far = self.mean > NIS_FAR_FACTOR * self.dof
         return self.far
@@ -1127,9 +1133,10 @@ class IntegrityMonitor:
             check = per.get(rec.channel)
             if check is None or check.dof != rec.dof:
                 check = per[rec.channel] = NisCheck(rec.dof)
-            self._run_mean(pipeline, rec.channel, rec.dof, nis, rec.t)
             was = check.failing
             now = check.add(nis)
+            if not check._n:  # a block was judged: its mean into the run's
+                self._run_mean(pipeline, rec.channel, check, rec.t)
             if now:
                 if check.first_failed is None:
                     check.first_failed = rec.t
@@ -1139,14 +1146,16 @@ class IntegrityMonitor:
                 self._flag(pipeline, "nis_out_of_band",
                            any(c.failing for c in per.values()))
 
-    def _run_mean(self, pipeline: str, channel: str, dof: int, nis: float, t: float) -> None:
-        """One accepted NIS into the channel's run mean; ``nis_far_above`` (once per
-        channel) when it is far above its degrees of freedom."""
+    def _run_mean(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
+        """The block ``check`` has just judged into the channel's run mean;
+        ``nis_far_above`` (once per channel) when it is far above its degrees of
+        freedom."""
+        dof = check.dof
         per = self.run_means.setdefault(pipeline, {})
         rm = per.get(channel)
         if rm is None or rm.dof != dof:
             rm = per[channel] = NisRunMean(dof)
-        if not rm.add(nis):
+        if not rm.add_block(check.mean, NIS_BLOCK_UPDATES):
             return
         self._flag(pipeline, "nis_far_above", True)
         self._warn("nis_far_above", pipeline, t, (
