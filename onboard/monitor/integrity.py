@@ -3,7 +3,7 @@
 The pipelines fuse what they are given; nothing inside a filter can see that a sensor is
 misaligned or that its own covariance has stopped meaning anything. This module watches
 from beside the engine, fed at every tick with the samples handed to the pipelines, the
-published records and the innovation records, and runs four checks:
+published records and the innovation records, and runs these checks:
 
 * **heading against course over ground** (:class:`HeadingCourseCheck`): while the vehicle
   moves (GNSS speed above :data:`HEADING_MIN_SPEED_MPS`), the circular mean of
@@ -39,6 +39,26 @@ published records and the innovation records, and runs four checks:
   :data:`SPEED_FRACTION` of the comparisons of the last :data:`SPEED_WINDOW_S` are beyond
   :data:`SPEED_SIGMA_BOUND` and :data:`SPEED_FLOOR_MPS`. The pipeline is flagged, its
   values kept.
+
+Issue 32 adds, each its own class (docs/integrity.md, "Heading honesty", "Current
+honesty"):
+
+* **compass deviation** (:class:`CompassDeviationCheck`): a heading-dependent compass
+  error learned against the course over ground on straight legs, beside the current's
+  crab; while significant, each published heading's sigma is widened by the deviation at
+  that heading when the deviation exceeds it (``compass_deviation`` on the pipeline:
+  :meth:`IntegrityMonitor.amend`), and the heading-dependent outputs are withheld when
+  it exceeds :data:`DEVIATION_MIN_RAD`. Under ``heading_course_mismatch`` the aie/kf
+  heading and positions (``heading_estimate``, ``position``) are withheld too, and the
+  warning quotes the worst window's angle beside the fastest's.
+* **idle drift** (:class:`IdleDriftCheck`): with every thruster idle, the published
+  current (``current_estimate``) against the slope of the fixes; ``current_idle_drift``
+  withholds it while they disagree.
+* **run mean NIS** (:class:`NisRunMean`): ``nis_far_above`` when a channel's mean NIS
+  over the run exceeds :data:`NIS_FAR_FACTOR` per degree of freedom.
+* **divergence storms** (:class:`DivergenceCheck`): ``input_model_divergence`` when an
+  input model restarts :data:`DIVERGENCE_STORM` times or more in
+  :data:`DIVERGENCE_WINDOW_S`.
 
 Why withhold rather than inflate the current's sigma under a heading mismatch: a heading
 offset ``d`` at speed ``s`` adds a bias of ``2 s sin(d/2)`` to the current (1.8 m/s for

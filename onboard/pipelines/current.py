@@ -134,7 +134,8 @@ class CurrentPipeline(Pipeline):
     ``gamma_star`` of the model it runs (:meth:`_gamma_from_model`).
 
     Roles: the current and the through-water velocity it has of
-    :data:`HEADING_DEPENDENT` (:class:`~onboard.pipelines.base.Pipeline`).
+    :data:`HEADING_DEPENDENT`; ``north``/``east`` its ``current_estimate``, judged
+    against the idle drift (:class:`~onboard.pipelines.base.Pipeline`).
     """
 
     name = "current"
