@@ -479,6 +479,7 @@ class Engine:
             cmd = self.mapper.map(raw)
             if cmd is not None:
                 self.queue.put(cmd)
+                self.integrity.observe(cmd)
         elif cls is Parameter:
             for change in self.mapper.parameter(raw.name, raw.value):  # type: ignore[attr-defined]
                 self.events.append(f"inputs: {change}")
@@ -506,8 +507,9 @@ class Engine:
                 monitor.add(p.name, innovations)
                 integrity.innovations(p.name, innovations)
             if values:
-                stepped.append((p, self._published(p, values), queue.t_sensor))
+                stepped.append((p, self._published(p, t, values), queue.t_sensor))
         queue.close_tick()
+        integrity.counters_at(t)
         records = self._records(t, stepped)
         integrity.positions_at(t, records)
         integrity.speeds_at(t, records)
@@ -520,12 +522,17 @@ class Engine:
         if pev:
             self.events.extend(f"{p.name}: {e}" for e in pev)
 
-    def _published(self, p: Pipeline, values: Mapping[str, float]) -> Mapping[str, float]:
-        """``p``'s values as published: non-finite ones and those the integrity monitor
-        withholds left out."""
+    def _published(self, p: Pipeline, t: float, values: Mapping[str, float]
+                   ) -> Mapping[str, float]:
+        """``p``'s values at ``t`` as published: non-finite ones and those the integrity
+        monitor withholds left out, those it amends (a widened sigma) amended."""
         if not all(map(math.isfinite, values.values())):
             values = self._finite(p.name, values)
-        withheld = self.integrity.withheld(p.name)
+        integrity = self.integrity
+        if integrity.amends:
+            values = dict(values)
+            integrity.amend(p.name, t, values)  # type: ignore[arg-type]
+        withheld = integrity.withheld(p.name)
         if withheld:
             values = self._withhold(p.name, values, withheld)
         return values

@@ -3,7 +3,7 @@
 The pipelines fuse what they are given; nothing inside a filter can see that a sensor is
 misaligned or that its own covariance has stopped meaning anything. This module watches
 from beside the engine, fed at every tick with the samples handed to the pipelines, the
-published records and the innovation records, and runs four checks:
+published records and the innovation records, and runs these checks:
 
 * **heading against course over ground** (:class:`HeadingCourseCheck`): while the vehicle
   moves (GNSS speed above :data:`HEADING_MIN_SPEED_MPS`), the circular mean of
@@ -40,6 +40,26 @@ published records and the innovation records, and runs four checks:
   :data:`SPEED_SIGMA_BOUND` and :data:`SPEED_FLOOR_MPS`. The pipeline is flagged, its
   values kept.
 
+Issue 32 adds, each its own class (docs/integrity.md, "Heading honesty", "Current
+honesty"):
+
+* **compass deviation** (:class:`CompassDeviationCheck`): a heading-dependent compass
+  error learned against the course over ground on straight legs, beside the current's
+  crab; while significant, each published heading's sigma is widened by the deviation at
+  that heading when the deviation exceeds it (``compass_deviation`` on the pipeline:
+  :meth:`IntegrityMonitor.amend`), and the heading-dependent outputs are withheld when
+  it exceeds :data:`DEVIATION_MIN_RAD`. Under ``heading_course_mismatch`` the aie/kf
+  heading and positions (``heading_estimate``, ``position``) are withheld too, and the
+  warning quotes the worst window's angle beside the fastest's.
+* **idle drift** (:class:`IdleDriftCheck`): with every thruster idle, the published
+  current (``current_estimate``) against the slope of the fixes; ``current_idle_drift``
+  withholds it while they disagree.
+* **run mean NIS** (:class:`NisRunMean`): ``nis_far_above`` when a channel's mean NIS
+  over the run exceeds :data:`NIS_FAR_FACTOR` per degree of freedom.
+* **divergence storms** (:class:`DivergenceCheck`): ``input_model_divergence`` when an
+  input model restarts :data:`DIVERGENCE_STORM` times or more in
+  :data:`DIVERGENCE_WINDOW_S`.
+
 Why withhold rather than inflate the current's sigma under a heading mismatch: a heading
 offset ``d`` at speed ``s`` adds a bias of ``2 s sin(d/2)`` to the current (1.8 m/s for
 the Shenzhen log's 73.5 deg at 1.8 m/s), not noise; a wider sigma around that mean would
@@ -62,9 +82,11 @@ from collections import deque
 from typing import Iterable, Protocol, Sequence
 
 from onboard.monitor.alerts import Alerts
+from onboard.monitor.compass_deviation import CompassDeviation
 from onboard.core.geo import LocalFrame
 from onboard.core.stats import chi2_mean_band
 from onboard.core.messages import (
+    ActuatorCommand,
     Attitude,
     DvlVelocity,
     EstimateRecord,
@@ -89,6 +111,49 @@ turn or a cross wind is a few degrees."""
 PLAUSIBLE_CURRENT_MPS = 0.5
 """A current this strong (m/s) across the track makes a crab angle of ``asin(c / sog)``
 at speed over ground ``sog``: the bound widens with it at low speed."""
+
+LEG_S = 5.0
+"""A straight leg of the compass-deviation fit lasts this long (s)."""
+LEG_GAP_S = 2.0
+"""A gap between moving fixes longer than this (s) ends the leg being gathered."""
+LEG_STRAIGHT_RAD = math.radians(5.0)
+"""Largest circular standard deviation (rad) of a straight leg's headings and courses."""
+DEVIATION_WALD = 18.47
+"""The compass deviation is significant when the Wald statistic of its four harmonic
+terms exceeds this: the chi-square(4) 0.999 quantile."""
+DEVIATION_MIN_RAD = math.radians(2.0)
+"""A significant deviation this large (rad, RMS over a turn) withholds the heading-
+dependent outputs (the current): at 1.5 m/s it puts ``2 s sin(d / 2)`` = 0.05 m/s into
+the current, the size of its sigma."""
+
+IDLE_COMMAND = 0.05
+"""A normalized thruster command within this of zero pushes nothing (an ESC's
+deadband)."""
+IDLE_SETTLE_S = 10.0
+"""After this long (s) of idle commands a small vehicle moves with the water (a boat's
+surge time constant is a few seconds)."""
+IDLE_WINDOW_S = 30.0
+"""The idle drift is fitted over at most the last this long (s)."""
+IDLE_MIN_SPAN_S = 5.0
+"""Least span (s) of idle fixes that measures a drift."""
+IDLE_GAP_S = 2.0
+"""A gap in the fixes longer than this (s) restarts the idle span (a new run)."""
+IDLE_DRIFT_BOUND = 3.44
+"""Mahalanobis distance (2 dof) of current minus drift beyond which the current fails:
+the chi-square(2) 0.9973 quantile's square root (a 3-sigma event)."""
+
+NIS_FAR_FACTOR = 10.0
+"""A channel whose mean NIS over the run exceeds this many times its degrees of freedom
+is far above any band: ``nis_far_above`` names it (a consistent filter's is 1 per dof;
+the block check's band tops out near 1.5-5 per dof)."""
+NIS_FAR_MIN_UPDATES = 500
+"""Accepted updates of a channel before its run mean is judged."""
+DIVERGENCE_WINDOW_S = 60.0
+"""Input-model divergences are counted over windows this long (s)."""
+DIVERGENCE_STORM = 5
+"""Divergences of one input model in one window that make a storm: its input estimate
+restarts every 12 s or more often, and the sigmas published between restarts do not
+count the restarts."""
 
 POSITION_SIGMA_BOUND = 3.0
 """Mahalanobis distance (2 dof) of the position residual beyond which a comparison fails:
@@ -226,8 +291,11 @@ class HeadingCourseCheck:
         self.offset_rad: float | None = None
         self.mismatch = False
         self.worst: tuple[float, float] | None = None
-        """(offset rad, mean speed m/s) of the fastest window of the present mismatch:
-        the course is the most precise there."""
+        """(offset rad, mean speed m/s) of the window of the present mismatch whose
+        offset is the largest: the angle an operator must allow for."""
+        self.fastest: tuple[float, float] | None = None
+        """(offset rad, mean speed m/s) of its fastest window: the course is the most
+        precise there."""
 
     def heading(self, t: float, heading_rad: float) -> None:
         """The newest heading (rad, true) at ``t`` (s)."""
@@ -252,10 +320,13 @@ class HeadingCourseCheck:
         sog_mean = sum(self._sog) / n
         self.mismatch = abs(self.offset_rad) > crab_bound(sog_mean)
         if not self.mismatch:
-            self.worst = None
-        elif self.worst is None or sog_mean > self.worst[1]:
+            self.worst = self.fastest = None
+            return False
+        if self.worst is None or abs(self.offset_rad) > abs(self.worst[0]):
             self.worst = (self.offset_rad, sog_mean)
-        return self.mismatch
+        if self.fastest is None or sog_mean > self.fastest[1]:
+            self.fastest = (self.offset_rad, sog_mean)
+        return True
 
     def speed(self) -> float:
         """Mean speed over ground (m/s) of the window."""
@@ -276,6 +347,156 @@ class HeadingCourseCheck:
         while times and times[0] < t:
             for column in (times, self._sin, self._cos, self._sog):
                 column.popleft()
+
+
+class CompassDeviationCheck:
+    """The compass's heading-dependent error, learned against course over ground on
+    straight legs (:class:`onboard.monitor.compass_deviation.CompassDeviation`).
+
+    The fixes of a moving vehicle with a fresh heading are gathered into legs of
+    :data:`LEG_S`; a leg whose headings and courses each stay within
+    :data:`LEG_STRAIGHT_RAD` (circular standard deviation) of their mean is one equation
+    of the fit, a turning one is dropped (a turn's lag between heading and course is not
+    a deviation).
+
+    Attributes:
+        fit: the least-squares fit.
+        deviated: whether the fit's harmonic terms are significant (Wald statistic above
+            :data:`DEVIATION_WALD`); the monitor then compares their size with each
+            pipeline's heading sigma.
+    """
+
+    def __init__(self) -> None:
+        self.fit = CompassDeviation()
+        self.deviated = False
+        self._leg: list[tuple[float, float, float, float]] = []  # (t, psi, chi, sog)
+
+    def fix(self, t: float, psi: float, chi: float, sog: float) -> bool:
+        """One moving fix with its fresh heading ``psi`` and course ``chi`` (rad), speed
+        over ground ``sog`` (m/s); returns whether a leg was closed (the fit may have
+        moved)."""
+        leg = self._leg
+        if leg and t - leg[-1][0] > LEG_GAP_S:
+            leg.clear()
+        leg.append((t, psi, chi, sog))
+        if t - leg[0][0] < LEG_S:
+            return False
+        mean_psi, straight_psi = _circular_stats([p for _, p, _, _ in leg])
+        mean_chi, straight_chi = _circular_stats([c for _, _, c, _ in leg])
+        sog_mean = sum(v for _, _, _, v in leg) / len(leg)
+        leg.clear()
+        if max(straight_psi, straight_chi) > LEG_STRAIGHT_RAD:
+            return False
+        self.fit.leg(mean_psi, mean_chi, sog_mean)
+        self.deviated = self.fit.significance() > DEVIATION_WALD
+        return True
+
+    def rms(self) -> float:
+        """The deviation's RMS over a turn (rad) when it is significant, else 0."""
+        return self.fit.rms() if self.deviated else 0.0
+
+
+def _circular_stats(angles: Sequence[float]) -> tuple[float, float]:
+    """The circular mean (rad) of ``angles`` and their circular standard deviation
+    ``sqrt(-2 ln R)`` (rad), R the mean resultant length."""
+    s = sum(map(math.sin, angles))
+    c = sum(map(math.cos, angles))
+    r = min(math.hypot(s, c) / len(angles), 1.0)
+    return math.atan2(s, c), math.sqrt(-2.0 * math.log(r)) if r > 0.0 else math.inf
+
+
+class IdleDriftCheck:
+    """The published current against the vehicle's drift while its thrusters idle.
+
+    A vehicle with no thrust settles to the water's velocity: after
+    :data:`IDLE_SETTLE_S` of idle commands its velocity over ground is the current (and
+    what wind pushes). The drift is the least-squares slope of the fixes' north and east
+    against time over the idle span (at most :data:`IDLE_WINDOW_S`; a slope of ``n``
+    fixes of one-sigma ``s`` over a span of time-spread ``sd_t`` has the one-sigma ``s /
+    (sqrt(n) sd_t)``). At each fix of a span of at least :data:`IDLE_MIN_SPAN_S` the
+    published current is compared with it: the Mahalanobis distance of their difference
+    with both covariances (2 dof) beyond :data:`IDLE_DRIFT_BOUND` fails.
+
+    Attributes:
+        idle_since: when (s) the commands last became idle, None while thrusting.
+        failing: the newest verdict (kept while no idle span can judge).
+        last: (drift north, east, current north, east (m/s), distance) of the newest
+            comparison.
+    """
+
+    def __init__(self) -> None:
+        self.idle_since: float | None = None
+        self.failing = False
+        self.last: tuple[float, float, float, float, float] | None = None
+        self._fixes: deque[tuple[float, float, float, float]] = deque()  # t, n, e, var
+        self._last_fix_t: float | None = None
+
+    def command(self, t: float, idle: bool) -> None:
+        """A normalized command at ``t`` (s): ``idle`` when no thruster pushes."""
+        if not idle:
+            self.idle_since = None
+            self._fixes.clear()
+        elif self.idle_since is None:
+            self.idle_since = t
+
+    def fix(self, t: float, north: float, east: float, var_m2: float) -> None:
+        """A fix (m in the monitor's frame, its variance m^2 per axis) during idle; after
+        a gap in the fixes longer than :data:`IDLE_GAP_S` the vehicle settles anew."""
+        since = self.idle_since
+        if since is None:
+            return
+        last = self._last_fix_t
+        self._last_fix_t = t
+        if last is not None and t - last > IDLE_GAP_S:
+            self.idle_since = since = t
+            self._fixes.clear()
+        if t - since < IDLE_SETTLE_S:
+            return
+        fixes = self._fixes
+        fixes.append((t, north, east, var_m2))
+        while fixes and fixes[0][0] < t - IDLE_WINDOW_S:
+            fixes.popleft()
+
+    def drift(self) -> tuple[float, float, float] | None:
+        """The drift (north, east, m/s) and its variance per axis (m^2/s^2), None when
+        the idle span is shorter than :data:`IDLE_MIN_SPAN_S`."""
+        fixes = self._fixes
+        if len(fixes) < 3 or fixes[-1][0] - fixes[0][0] < IDLE_MIN_SPAN_S:
+            return None
+        n = len(fixes)
+        tm = sum(f[0] for f in fixes) / n
+        stt = sum((f[0] - tm) ** 2 for f in fixes)
+        nm = sum(f[1] for f in fixes) / n
+        em = sum(f[2] for f in fixes) / n
+        vn = sum((f[0] - tm) * (f[1] - nm) for f in fixes) / stt
+        ve = sum((f[0] - tm) * (f[2] - em) for f in fixes) / stt
+        var = sum(f[3] for f in fixes) / n / stt
+        return vn, ve, var
+
+    def judge(self, current: tuple[float, float], var: tuple[float, float]) -> bool | None:
+        """The published current (north, east, m/s) and its variance per axis against
+        the drift; the verdict (True: failing), None when no idle span can judge."""
+        d = self.drift()
+        if d is None:
+            return None
+        dn, de = d[0] - current[0], d[1] - current[1]
+        m = math.sqrt(dn * dn / (d[2] + var[0]) + de * de / (d[2] + var[1]))
+        self.last = (d[0], d[1], current[0], current[1], m)
+        self.failing = m > IDLE_DRIFT_BOUND
+        return self.failing
+
+
+def _idle(c: ActuatorCommand) -> bool:
+    """Whether command ``c`` pushes nothing: every thruster within
+    :data:`IDLE_COMMAND` of zero (a rudder alone does not push); a command without a
+    thruster is not idle."""
+    some = False
+    for x in (c.throttle, c.left, c.right, *(c.thrusters or ())):
+        if x is not None:
+            if not -IDLE_COMMAND <= x <= IDLE_COMMAND:
+                return False
+            some = True
+    return some
 
 
 class PositionCheck:
@@ -443,12 +664,81 @@ class NisCheck:
         self._reset()
 
 
+class NisRunMean:
+    """One channel's mean NIS over the whole run against :data:`NIS_FAR_FACTOR` times
+    its degrees of freedom: the block check (:class:`NisCheck`) widens its band for
+    correlated innovations and judges blocks, so a channel whose mean is carried by rare
+    huge innovations can stay inside every block's band while its run mean is 100."""
+
+    __slots__ = ("dof", "n", "total", "far")
+
+    def __init__(self, dof: int) -> None:
+        self.dof = dof
+        self.n = 0
+        self.total = 0.0
+        self.far = False
+
+    @property
+    def mean(self) -> float:
+        """The mean NIS of the accepted updates so far (nan before one)."""
+        return self.total / self.n if self.n else math.nan
+
+    def add_block(self, mean: float, n: int) -> bool:
+        """A block of ``n`` accepted updates of mean NIS ``mean``; returns True when the
+        channel has just become far above."""
+        self.n += n
+        self.total += mean * n
+        if self.far or self.n < NIS_FAR_MIN_UPDATES:
+            return False
+        self.far = self.mean > NIS_FAR_FACTOR * self.dof
+        return self.far
+
+
+class DivergenceCheck:
+    """Input-model divergences per pipeline counter (``<axis>.diverged`` in its health)
+    over windows of :data:`DIVERGENCE_WINDOW_S`: :data:`DIVERGENCE_STORM` or more in
+    one window is a storm.
+
+    Attributes:
+        storms: counter key (``<pipeline>:<axis>.diverged``) -> (divergences in the
+            newest stormy window, its length s).
+    """
+
+    def __init__(self) -> None:
+        self._start: float | None = None
+        self._counts: dict[str, float] = {}
+        self.storms: dict[str, tuple[float, float]] = {}
+        self.first: dict[str, float] = {}
+        """counter key -> when (s) its first stormy window began."""
+
+    def due(self, t: float) -> bool:
+        """Whether a window ends at ``t`` (s) (the first call starts one)."""
+        if self._start is None:
+            self._start = t
+            return False
+        return t - self._start >= DIVERGENCE_WINDOW_S
+
+    def window(self, t: float, counters: dict[str, float]) -> list[str]:
+        """The counters at the end of a window; returns the keys that stormed in it."""
+        span = t - (self._start if self._start is not None else t)
+        stormed = []
+        for key, n in counters.items():
+            before = self._counts.get(key)
+            self._counts[key] = n
+            if before is not None and n - before >= DIVERGENCE_STORM:
+                self.storms[key] = (n - before, span)
+                self.first.setdefault(key, t - span)
+                stormed.append(key)
+        self._start = t
+        return stormed
+
+
 REORIGINED = ("; its own local frame is no longer about the first fix (a restart "
               "re-origins it at the next fix), so its published positions jumped")
 """Added to ``position_residual`` when the pipeline's frame moved."""
 WARN_EVERY_S = 1.0
 """A condition that lasts is re-raised at most this often (s) (one warning spans it)."""
-WATCHED = frozenset({GnssFix, Heading, Attitude, DvlVelocity})
+WATCHED = frozenset({GnssFix, Heading, Attitude, DvlVelocity, ActuatorCommand})
 """The sample types the monitor reads (the engine hands it only these)."""
 
 
@@ -463,6 +753,12 @@ class Declared(Protocol):
     """Its forward speed over ground (m/s) and maybe its sideways speed."""
     heading_dependent: tuple[str, ...]
     """The columns withheld while the heading disagrees with the course."""
+    heading_estimate: tuple[str, ...]
+    """Its published heading (rad), with its ``std_<q>``: widened by a detected compass
+    deviation, withheld with ``position`` while the heading disagrees with the course."""
+    current_estimate: tuple[str, ...]
+    """Its water current (north, east; m/s), each with its ``std_<q>``: judged against
+    the idle drift."""
     frame: LocalFrame | None
     """The local frame about its first fix (None before it)."""
     frame_offset: tuple[float, float] | None
@@ -502,6 +798,10 @@ class IntegrityMonitor:
         self._speed_refs: list[tuple[float, float, float, str]] = []
         """Measured speeds since the previous tick: (t, m/s, variance, reference)."""
         self.heading = None if holonomic else HeadingCourseCheck()
+        self.deviation = None if holonomic else CompassDeviationCheck()
+        self.idle = IdleDriftCheck()
+        self.run_means: dict[str, dict[str, NisRunMean]] = {}
+        self.divergences = DivergenceCheck()
         self.watched: dict[str, Declared] = {}
         """The pipelines whose roles it reads, by name (:meth:`watch`)."""
         self.positions: dict[str, PositionCheck] = {}
@@ -532,10 +832,14 @@ class IntegrityMonitor:
                 self._doppler(s)  # type: ignore[arg-type]
                 if self.frame is None:
                     self.frame = LocalFrame(s.lat_deg, s.lon_deg)  # type: ignore
+                self._idle_fix(s)  # type: ignore[arg-type]
                 if hc is not None:
                     self._heading_verdict(hc.fix(s), s.t)  # type: ignore[arg-type]
+                    self._deviation_fix(s)  # type: ignore[arg-type]
         elif cls is DvlVelocity:
             self._dvl(s)  # type: ignore[arg-type]
+        elif cls is ActuatorCommand:
+            self.idle.command(s.t, _idle(s))  # type: ignore[arg-type]
         elif hc is None:
             return
         elif cls is Heading:
@@ -550,31 +854,160 @@ class IntegrityMonitor:
             return
         code = "heading_course_mismatch"
         for name, p in self.watched.items():
-            if p.heading_dependent:
+            if p.heading_dependent or getattr(p, "heading_estimate", ()):
                 self._flag(name, code, verdict)
         if verdict:
             hc = self.heading
-            assert hc is not None and hc.worst is not None
+            assert hc is not None and hc.worst is not None and hc.fastest is not None
             offset, sog = hc.worst
             held = ", ".join(n for n, p in self.watched.items() if p.heading_dependent)
+            held += "".join(f", {n} heading and position" for n, p in self.watched.items()
+                            if getattr(p, "heading_estimate", ()))
             self._warn(code, "", t, (
-                f"heading disagrees with course over ground by {math.degrees(offset):.1f} "
-                f"deg at {sog:.1f} m/s (bound {math.degrees(crab_bound(sog)):.0f} deg): "
-                + (f"{held} withheld until they agree again; " if held else "")
+                f"heading disagrees with course over ground by up to "
+                f"{math.degrees(offset):.1f} deg at {sog:.1f} m/s (bound "
+                f"{math.degrees(crab_bound(sog)):.0f} deg; "
+                f"{math.degrees(hc.fastest[0]):.1f} deg at its fastest, "
+                f"{hc.fastest[1]:.1f} m/s): "
+                + (f"{held.lstrip(', ')} withheld until they agree again; " if held else "")
                 + "a constant offset is measured by onboard diagnose LOG --write-config "
                 "FILE ([corrections] heading_offset_rad)"), details=(
                 f"the median over {HEADING_WINDOW_S:.0f} s; a misaligned compass or antenna "
                 "baseline, or a heading from another vehicle; the rows withheld: "
                 "summary.json withheld_rows"))
 
+    def _deviation_fix(self, s: GnssFix) -> None:
+        """A fix's course against the newest heading, into the compass-deviation fit;
+        the pipelines with heading-dependent outputs flagged while the deviation is
+        significant and above :data:`DEVIATION_MIN_RAD`."""
+        hc, dc = self.heading, self.deviation
+        assert hc is not None and dc is not None
+        h = hc._heading
+        sog, cog = s.sog_mps, s.cog_rad
+        if (h is None or sog is None or cog is None or s.t - h[0] > HEADING_FRESH_S
+                or not sog > HEADING_MIN_SPEED_MPS or not math.isfinite(cog)):
+            return
+        if not dc.fix(s.t, h[1], cog, sog):
+            return
+        on = dc.rms() > DEVIATION_MIN_RAD
+        dependent = [n for n, p in self.watched.items() if p.heading_dependent]
+        was = any("compass_deviation" in self.flags.get(n, ()) for n in dependent)
+        for name in dependent:
+            self._flag(name, "compass_deviation", on)
+        if on and not was:
+            self._deviation_warning("", s.t, ", ".join(dependent))
+
+    def _deviation_warning(self, pipeline: str, t: float, held: str = "") -> None:
+        dc = self.deviation
+        assert dc is not None and dc.fit.residual_std is not None
+        what = (f"{pipeline} heading sigma widened by it at each heading"
+                if pipeline else f"{held} withheld while it lasts" if held
+                else "the heading sigmas widened by it")
+        self._warn("compass_deviation", pipeline, t, (
+            f"the compass errs with the heading by {math.degrees(dc.rms()):.1f} deg RMS "
+            f"(learned against course over ground on {dc.fit.legs} straight legs): "
+            f"{what}; onboard diagnose LOG names and sizes the deviation"), details=(
+            f"Wald statistic {dc.fit.significance():.0f} on 4 dof (bound "
+            f"{DEVIATION_WALD}); legs' residual {dc.fit.residual_std:.3f} m/s across the "
+            "heading; "
+            "the constant term and a uniform current are fitted beside it "
+            "(docs/integrity.md)"))
+
+    def _idle_fix(self, s: GnssFix) -> None:
+        """A fix into the idle-drift fit, in the monitor's frame."""
+        idle = self.idle
+        if idle.idle_since is None or self.frame is None:
+            return
+        acc = s.h_acc_m
+        var = (acc * acc if acc is not None and acc > 0 and math.isfinite(acc)
+               else self.fix_std_m ** 2)
+        n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
+        idle.fix(s.t, n, e, var)
+
+    def _idle_current(self, pipeline: str, qs: tuple[str, ...], t: float,
+                      values: dict[str, float]) -> None:
+        """At a tick after a fix during an idle span, the current ``qs`` (north, east) in
+        ``values`` (before anything is withheld) against the idle drift
+        (:class:`IdleDriftCheck`)."""
+        sq = ["std_" + q for q in qs]
+        if len(qs) != 2 or not all(q in values for q in (*qs, *sq)):
+            return
+        idle = self.idle
+        verdict = idle.judge((values[qs[0]], values[qs[1]]),
+                             (values[sq[0]] ** 2, values[sq[1]] ** 2))
+        if verdict is None:
+            return
+        self._flag(pipeline, "current_idle_drift", verdict)
+        if verdict and idle.last is not None:
+            self._idle_warning(pipeline, t, idle.last)
+
+    def _idle_warning(self, pipeline: str, t: float,
+                      last: tuple[float, float, float, float, float]) -> None:
+        dn, de, cn, ce, m = last
+        self._warn("current_idle_drift", pipeline, t, (
+            f"{pipeline} current {math.hypot(cn, ce):.2f} m/s is {m:.1f} sigma from the "
+            f"drift over ground {math.hypot(dn, de):.2f} m/s with the thrusters idle: "
+            "withheld until an idle drift agrees with it; its noise is set in "
+            f"[pipelines.{pipeline}] (docs/integrity.md)"), details=(
+            f"drift north/east {dn:.3f}/{de:.3f} m/s, current {cn:.3f}/{ce:.3f} m/s; the "
+            f"drift is the slope of the fixes after {IDLE_SETTLE_S:.0f} s of idle commands "
+            "(wind pushes a drifting boat too)"))
+
     # ------------------------------------------------------------------ records
     def withheld(self, pipeline: str) -> tuple[str, ...]:
-        """The quantities of ``pipeline`` to publish as unknown now."""
+        """The quantities of ``pipeline`` to publish as unknown now: its heading-
+        dependent outputs while the heading disagrees with the course or the compass
+        deviates (and its heading and position, each with its ``std_``, while the
+        heading disagrees with the course); its current while it disagrees with the idle
+        drift."""
         flags = self.flags.get(pipeline)
-        if flags and "heading_course_mismatch" in flags:
-            p = self.watched.get(pipeline)
-            return p.heading_dependent if p is not None else ()
-        return ()
+        p = self.watched.get(pipeline)
+        if not flags or p is None:
+            return ()
+        out: tuple[str, ...] = ()
+        if "heading_course_mismatch" in flags:
+            own = tuple(getattr(p, "heading_estimate", ())) + tuple(p.position)
+            out = p.heading_dependent + own + tuple("std_" + q for q in own)
+        elif "compass_deviation" in flags:
+            out = p.heading_dependent
+        if "current_idle_drift" in flags:
+            out += tuple(q for q in getattr(p, "current_estimate", ()) if q not in out)
+        return out
+
+    @property
+    def amends(self) -> bool:
+        """Whether :meth:`amend` may judge or change a record now: during an idle span
+        or while the compass deviation is significant."""
+        dc = self.deviation
+        return self.idle.idle_since is not None or (dc is not None and dc.deviated)
+
+    def amend(self, pipeline: str, t: float, values: dict[str, float]) -> None:
+        """A pipeline's values at ``t`` (s) before its record is made: its current (the
+        ``current_estimate`` role) judged against the idle drift at a tick after a fix
+        of an idle span, and the sigma of its heading (``heading_estimate``) widened in
+        ``values`` by the compass deviation at that heading while the deviation exceeds
+        the sigma (``compass_deviation`` on the pipeline): ``std <- hypot(std, d(psi))``."""
+        p = self.watched.get(pipeline)
+        if p is None:
+            return
+        if self._fix_new and self.idle.idle_since is not None:
+            self._idle_current(pipeline, tuple(getattr(p, "current_estimate", ())), t,
+                               values)
+        dc = self.deviation
+        qs = getattr(p, "heading_estimate", ())
+        if dc is None or not qs or not dc.deviated:
+            return
+        q, sq = qs[0], "std_" + qs[0]
+        if q not in values or sq not in values:
+            return
+        rms = dc.rms()
+        on = rms > values[sq]
+        was = "compass_deviation" in self.flags.get(pipeline, ())
+        self._flag(pipeline, "compass_deviation", on)
+        if on:
+            values[sq] = math.hypot(values[sq], dc.fit.deviation(values[q]))
+            if not was:
+                self._deviation_warning(pipeline, t)
 
     def count_withheld(self, pipeline: str, n: int) -> None:
         """``n`` values of ``pipeline`` were left out of its record."""
@@ -722,6 +1155,8 @@ class IntegrityMonitor:
                 check = per[rec.channel] = NisCheck(rec.dof)
             was = check.failing
             now = check.add(nis)
+            if not check._n:  # a block was judged: its mean into the run's
+                self._run_mean(pipeline, rec.channel, check, rec.t)
             if now:
                 if check.first_failed is None:
                     check.first_failed = rec.t
@@ -730,6 +1165,54 @@ class IntegrityMonitor:
             if now != was:
                 self._flag(pipeline, "nis_out_of_band",
                            any(c.failing for c in per.values()))
+
+    def _run_mean(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
+        """The block ``check`` has just judged into the channel's run mean;
+        ``nis_far_above`` (once per channel) when it is far above its degrees of
+        freedom."""
+        dof = check.dof
+        per = self.run_means.setdefault(pipeline, {})
+        rm = per.get(channel)
+        if rm is None or rm.dof != dof:
+            rm = per[channel] = NisRunMean(dof)
+        if not rm.add_block(check.mean, NIS_BLOCK_UPDATES):
+            return
+        self._flag(pipeline, "nis_far_above", True)
+        self._warn("nis_far_above", pipeline, t, (
+            f"{pipeline} {channel}: mean NIS {rm.mean:.1f} over {rm.n} updates, "
+            f"{rm.mean / dof:.0f} times a consistent filter's {dof}: its innovations are "
+            "not what its model predicts; a heading off the course over ground, an input "
+            f"model that diverges, or its noise in [pipelines.{pipeline}] "
+            "(docs/integrity.md)"), key=channel, details=(
+            f"the mean of every accepted update so far against {NIS_FAR_FACTOR:.0f} times "
+            "its degrees of freedom; rare huge innovations carry such a mean while most "
+            "blocks stay in their band"))
+
+    def counters_at(self, t: float) -> None:
+        """Every :data:`DIVERGENCE_WINDOW_S`, the watched pipelines' input-model
+        divergence counters (``*.diverged`` of their health); a storm is
+        ``input_model_divergence`` on the pipeline, raised once per counter."""
+        dc = self.divergences
+        if not dc.due(t):
+            return
+        counters: dict[str, float] = {}
+        for name, p in self.watched.items():
+            health = getattr(p, "health", None)
+            if health is None:
+                continue
+            for k, v in health().flat().items():
+                if k.endswith(".diverged") and math.isfinite(v):
+                    counters[f"{name}:{k}"] = v
+        for key in dc.window(t, counters):
+            name, axis = key.split(":", 1)
+            n, span = dc.storms[key]
+            self._flag(name, "input_model_divergence", True)
+            self._warn("input_model_divergence", name, t, (
+                f"{name} {axis.removesuffix('.diverged')} input model diverged {n:.0f} "
+                f"times in {span:.0f} s (every {span / n:.1f} s): its estimate restarts "
+                "each time and its sigma does not count it; a heading off the course, or "
+                f"its divergence bounds in [pipelines.{name}] (docs/integrity.md)"),
+                key=axis, t_start=dc.first[key])
 
     def _nis_warning(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
         lo, hi = check.band

@@ -18,7 +18,7 @@ from pathlib import Path
 import msgspec
 
 from onboard.drivers.base import UnreadableLog
-from onboard.offline.closure import base_models, dataset, overlay, overlay_check, report
+from onboard.offline.closure import base_models, dataset, noise, overlay, overlay_check, report
 from onboard.offline.closure.effects import ALL
 from onboard.offline.closure.select import select
 from onboard.core.errors import OutputFailed, UsageError
@@ -66,10 +66,12 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     except dataset.NotEnoughData as err:
         raise UsageError(str(err)) from None
     doc = report.write(sel, log, out_dir)
+    doc["sensor_noise"] = noise.identify(ds.raw)
     if ds.warnings:   # what reading the log raised (time outliers, jumps), beside the fit
         doc["warnings"] = msgspec.to_builtins(ds.warnings)
         doc["log_start_s"] = float(ds.t[0])
-        (out_dir / "diagnosis.json").write_text(json.dumps(doc, indent=2) + "\n")
+    doc = report._clean(doc)
+    (out_dir / "diagnosis.json").write_text(json.dumps(doc, indent=2) + "\n")
     if write_config is not None:
         verdicts = overlay_check.check(overlay.sections(doc, cfg, sel), log, cfg, sel)
         doc = overlay_check.record(doc, verdicts, out_dir)

@@ -61,6 +61,11 @@ class Pipeline(Protocol):
       that moves sideways, its sideways speed, each with its ``std_<q>``.
     * ``heading_dependent``: the columns computed by turning a velocity with the
       heading: unknown while the heading disagrees with the course over ground.
+    * ``heading_estimate``: its published heading (rad) with its ``std_<q>``: its sigma widened
+      by a compass deviation the integrity monitor detects, and withheld with its
+      ``position`` while the heading disagrees with the course over ground.
+    * ``current_estimate``: its water current (north, east; m/s) with its ``std_<q>``: withheld
+      while it disagrees with the vehicle's drift with the thrusters idle.
     * ``frame``: the local tangent plane about its first fix (None: no position, or no
       fix yet).
     * ``frame_offset``: where ``frame``'s origin lies in its published position (north,
@@ -73,6 +78,8 @@ class Pipeline(Protocol):
     position: tuple[str, ...] = ()
     speed: tuple[str, ...] = ()
     heading_dependent: tuple[str, ...] = ()
+    heading_estimate: tuple[str, ...] = ()
+    current_estimate: tuple[str, ...] = ()
     frame: LocalFrame | None = None
     frame_offset: tuple[float, float] | None = None
 

@@ -134,7 +134,8 @@ class CurrentPipeline(Pipeline):
     ``gamma_star`` of the model it runs (:meth:`_gamma_from_model`).
 
     Roles: the current and the through-water velocity it has of
-    :data:`HEADING_DEPENDENT` (:class:`~onboard.pipelines.base.Pipeline`).
+    :data:`HEADING_DEPENDENT`; ``north``/``east`` its ``current_estimate``, judged
+    against the idle drift (:class:`~onboard.pipelines.base.Pipeline`).
     """
 
     name = "current"
@@ -156,6 +157,7 @@ class CurrentPipeline(Pipeline):
             "std_north", "std_east") + (("std_down",) if nd == 3 else ()) + (
             "u_r", "v_r") + (("w_r",) if nd == 3 else ())
         self.heading_dependent = tuple(c for c in HEADING_DEPENDENT if c in self.columns)
+        self.current_estimate = ("north", "east")
         self.configured = configured
         self.counters = PipelineCounters()
         self._innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)

@@ -172,7 +172,8 @@ class SurgeHeadingPipeline(Pipeline):
     ``columns``: north, east (m from the first fix), heading (rad, [0, 2 pi)), speed
     (m/s), yaw_rate (rad/s), their one-sigma ``std_*``, and for AIE surge_input (m/s^2)
     and yaw_input (rad/s^2). Roles: ``north``/``east`` a position, ``speed`` the path
-    speed over ground (:class:`~onboard.pipelines.base.Pipeline`).
+    speed over ground, ``heading`` its ``heading_estimate``
+    (:class:`~onboard.pipelines.base.Pipeline`).
 
     Attributes:
         surge, yaw: the axis filters (:class:`IncrementFilter`).
@@ -183,6 +184,7 @@ class SurgeHeadingPipeline(Pipeline):
 
     position = ("north", "east")
     speed = ("speed",)
+    heading_estimate = ("heading",)
 
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
                  gnss_position_std_m: float, heading_std_rad: float, factory: AxisFactory,

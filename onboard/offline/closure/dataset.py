@@ -39,6 +39,7 @@ from onboard.core.messages import (
     ActuatorCommand,
     Attitude,
     Depth,
+    DvlVelocity,
     GnssFix,
     Heading,
     Imu,
@@ -111,15 +112,25 @@ class _Collector(Pipeline):
         self.pitch = self.pump = math.nan
         self.depths: list[tuple[float, float]] = []
         """Every depth sample as (t, depth) (s, m): a glider's depth rate."""
+        self.raw: dict[str, list[tuple[float, ...]]] = {
+            "heading": [], "attitude_yaw": [], "gnss_velocity": [], "dvl": [],
+            "gnss_accuracy": []}
+        """Every measurement as it came, for the noise identification
+        (:mod:`onboard.offline.closure.noise`): headings (t, rad), GNSS velocities (t,
+        north, east; m/s), attitude yaws (t, rad), DVL bottom-track velocities (t, vx, vy; m/s) and the fixes'
+        reported accuracies (t, m)."""
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         for s in samples:
             if isinstance(s, Heading):
                 self.heading_src_compass = True
                 self.heading = s.heading_rad
+                self.raw["heading"].append((s.t, s.heading_rad))
             elif isinstance(s, Attitude):
                 if not self.heading_src_compass:
                     self.heading = s.yaw_rad
+                if s.yaw_selected:
+                    self.raw["attitude_yaw"].append((s.t, s.yaw_rad))
                 self.pitch = s.pitch_rad
                 if s.yaw_rate_rps is not None:
                     self.has_rate = True
@@ -142,6 +153,9 @@ class _Collector(Pipeline):
                 if s.sog_mps is not None and s.cog_rad is not None:
                     self.gnss_vn = s.sog_mps * math.cos(s.cog_rad)
                     self.gnss_ve = s.sog_mps * math.sin(s.cog_rad)
+                    self.raw["gnss_velocity"].append((s.t, self.gnss_vn, self.gnss_ve))
+                if s.h_acc_m is not None and math.isfinite(s.h_acc_m):
+                    self.raw["gnss_accuracy"].append((s.t, s.h_acc_m))
                 if s.source.startswith("csv:"):
                     self.run = s.source
             elif isinstance(s, VelocityOverGround):
@@ -150,6 +164,9 @@ class _Collector(Pipeline):
                     self.run = s.source
             elif isinstance(s, Depth):
                 self.depths.append((s.t, s.depth_m))
+            elif isinstance(s, DvlVelocity):
+                if s.track == "bottom" and s.valid:
+                    self.raw["dvl"].append((s.t, s.vx, s.vy))
             elif isinstance(s, ActuatorCommand):
                 if s.pump_cc is not None:
                     self.pump = s.pump_cc
@@ -257,6 +274,9 @@ class Dataset:
     base_model: str = "surface-boat"
     """The base model the data are for (:mod:`onboard.offline.closure.base_models`)."""
     yaw_rate_hz: float = 0.0
+    raw: dict = field(default_factory=dict)
+    """The log's measurements as they came (channel -> rows; ``_Collector.raw`` and the
+    fixes as (t, north, east)), for :mod:`onboard.offline.closure.noise`."""
     """How often the log's yaw rate came (Hz; 0 without one); below
     :data:`MIN_YAW_RATE_HZ` it is not taken as the gyro (``has_gyro`` false)."""
 
@@ -605,6 +625,7 @@ def from_log(path: str, cfg: Config, *, rate_hz: float = 10.0,
         base_model=base_model, **cmd)
     ds.warnings = list(engine.alerts)
     ds.yaw_rate_hz = rate_hz_log
+    ds.raw = {"fixes": col.fixes, **col.raw}
     return ds
 
 

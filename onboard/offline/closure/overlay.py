@@ -238,6 +238,36 @@ def current_prior(doc: dict) -> tuple[dict[str, Any], list[str]]:
              + "its size is the prior's scale"])
 
 
+def sensor_noise(doc: dict, cfg: Config) -> tuple[dict[str, dict[str, Any]], list[str]]:
+    """The ``[sensors.*]`` noise keys from the white noise identified in the log
+    (``doc["sensor_noise"]``, :mod:`onboard.offline.closure.noise`): a channel whose
+    noise is not white (a filtered output) is noted, not written. Fixes that report
+    their accuracy keep it, and the overlay writes the share of it that wanders
+    (``drift_share``) instead of ``position_std_m``."""
+    from onboard.offline.closure.noise import CONFIG_KEYS
+
+    found = doc.get("sensor_noise") or {}
+    tables: dict[str, dict[str, Any]] = {}
+    notes: list[str] = []
+    for channel, fig in found.items():
+        table, key = CONFIG_KEYS[channel]
+        std = float(fig["std"])
+        line = (f"{channel}: white noise {std:.3g} {fig['unit']} (second differences, "
+                f"{fig['samples']} samples, lag-1 {fig['lag1']:.2f} against -0.67 for white)")
+        if not fig["white"] or not std > 0:
+            notes.append(line + "; not white (a filtered output): not written")
+            continue
+        if channel == "gnss_position" and "reported_std" in fig:
+            share = round(min(0.9, float(fig["drift_share"])), 3)
+            tables.setdefault(table, {})["drift_share"] = share
+            notes.append(line + f"; the fixes report {fig['reported_std']:.3g} m: "
+                         f"drift_share {share}")
+            continue
+        tables.setdefault(table, {})[key] = float(f"{std:.3g}")
+        notes.append(line)
+    return tables, notes
+
+
 @dataclass
 class Section:
     """One checked part of the overlay (:mod:`onboard.offline.closure.overlay_check`): its
@@ -263,7 +293,7 @@ class Section:
 def sections(doc: dict, cfg: Config, sel: Any = None) -> list[Section]:
     """The overlay's sections in the order they are checked and written:
     ``corrections``, ``inputs`` (the re-mapping only), ``surge model`` (aie and kf),
-    ``current prior``."""
+    ``current prior``, ``sensor noise``."""
     corr, c_notes = corrections(doc, cfg)
     inputs, i_notes = actuator_inputs(doc, cfg)
     surge, s_notes = surge_model(doc, sel)
@@ -274,6 +304,8 @@ def sections(doc: dict, cfg: Config, sel: Any = None) -> list[Section]:
     out.append(Section("surge model", tables, s_notes, ("inputs",) if inputs else ()))
     out.append(Section("current prior", {"pipelines.current": prior} if prior else {},
                        p_notes))
+    noise, n_notes = sensor_noise(doc, cfg)
+    out.append(Section("sensor noise", noise, n_notes))
     return out
 
 
@@ -307,9 +339,11 @@ def _render(out: _Doc, sec: Section, cfg: Config, detected: bool, refused: str) 
     for i, (name, keys) in enumerate(sec.tables.items()):
         if name == "inputs":
             _render_inputs(out, keys, notes)
-        else:
+        elif sec.name == "surge model":
             out.table(name, keys, "\n".join(notes) if i == 0 else
                       "the same surge model for the KF baseline")
+        else:
+            out.table(name, keys, "\n".join(notes) if i == 0 else "")
 
 
 def overlay_text(doc: dict, cfg: Config, sel: Any = None, *, detected: bool = False,

@@ -114,6 +114,12 @@ def summary_text(doc: dict) -> str:
         text = "The log is explained by " + "; ".join(parts) + f"; {err}."
     else:
         text = f"No effect of the catalog is needed to explain this log; {err}."
+    for r in doc.get("rejected_on_test") or ():
+        text += (f" Tried and rejected: {r['name'].replace('_', ' ')} (chosen on the "
+                 f"selection part, it made the test part worse: {r['test_error_without']:.3g}"
+                 f" -> {r['test_error_with']:.3g} {unit})."
+                 if r.get("test_error_without") is not None and r.get("test_error_with")
+                 is not None else f" Tried and rejected: {r['name']}.")
     un = next((e for e in doc["effects"] if e["name"] == "unexplained"), None)
     if un is not None:
         chans = [f"{ch} (follows {v.get('regressor')})" for ch, v in un["evidence"].items()
@@ -190,6 +196,10 @@ def diagnosis(sel: Selection, log: str) -> dict:
                              if c.name == name and c.accepted), None)
             if accepted is not None and accepted.alternatives:
                 entry["evidence"]["ambiguous_with"] = list(accepted.alternatives)
+            rej = next((r for r in sel.rejected_on_test if r["name"] == name), None)
+            if rej is not None:
+                entry["evidence"]["rejected_on_test"] = {
+                    k: v for k, v in rej.items() if k != "name"}
         elif (not ALL[name].applies(sel.split.fit, f.ctx)
               or BY_NAME[sel.split.fit.base_model].why_not(name)):
             entry["evidence"]["not_testable"] = _why_not(name, sel)
@@ -223,6 +233,7 @@ def diagnosis(sel: Selection, log: str) -> dict:
         "selection_error_before": sel.select_before.headline,
         "selection_error_after": sel.select_after.headline,
         "drift": sel.drift,
+        "rejected_on_test": sel.rejected_on_test,
     })
 
 

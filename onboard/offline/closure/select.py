@@ -214,6 +214,18 @@ class Selection:
     part's commands (:func:`onboard.offline.closure.model.estimate_actuator_lag`)."""
     drift: dict = field(default_factory=dict)
     """Per-window re-estimates of the chosen effects and the surge gain (:mod:`.drift`)."""
+    rejected_on_test: list[dict] = field(default_factory=list)
+    """Effects chosen on the selection part whose model scored worse on the test part
+    than the model without them (``_worse_on_test``), last chosen first: each ``name``,
+    ``test_error_without`` and ``test_error_with`` (the headline metric)."""
+
+
+def _worse_on_test(after: M.Score, before: M.Score) -> bool:
+    """Whether the model with the chosen effects is worse on the test part than the base
+    model: a higher headline error."""
+    a, b = after.headline, before.headline
+    return (a is not None and b is not None and math.isfinite(a) and math.isfinite(b)
+            and a > b)
 
 
 def _sigma(ds: Dataset, f: M.Fit) -> dict[str, float]:
@@ -354,25 +366,37 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
             current_rel = top.score
         else:
             break
-    sel_after = M.score(hold_data, current_fit, metric)
-
-    # The final score: both models refitted on fit + selection, scored on the test part.
+    # The final score: both models refitted on fit + selection, scored on the test part;
+    # an effect that makes the test part worse than the model without it is rejected.
     test = sp.test if sp.test is not None and len(sp.test) else sp.holdout
-    test_data = test
-    for name, (value, _) in transformed.items():
-        test_data = ALL[name].transform(test_data, value)
-    both_base = concat([sp.fit, sp.holdout])
-    both = concat([fit_data, hold_data])
-    base_final = M.fit(both_base, declared, sigma, ctx, known=known)
-    final = M.fit(both, _model_effects((*declared, *chosen)), sigma, ctx, known=known)
+    base_final = M.fit(concat([sp.fit, sp.holdout]), declared, sigma, ctx, known=known)
     before = M.score(test, base_final, metric)
-    after = M.score(test_data, final, metric)
+    rejected: list[dict] = []
+    while True:
+        fit_data, hold_data, test_data = sp.fit, sp.holdout, test
+        for name, (value, _) in transformed.items():
+            fit_data, hold_data, test_data = (ALL[name].transform(d, value)
+                                              for d in (fit_data, hold_data, test_data))
+        both = concat([fit_data, hold_data])
+        final = M.fit(both, _model_effects((*declared, *chosen)), sigma, ctx, known=known)
+        after = M.score(test_data, final, metric)
+        if not chosen or not _worse_on_test(after, before):
+            break
+        name = chosen.pop()
+        transformed.pop(name, None)
+        rejected.append({"name": name, "test_error_without": before.headline,
+                         "test_error_with": after.headline})
+    if rejected:
+        current_fit = M.fit(fit_data, _model_effects((*declared, *chosen)), sigma, ctx,
+                            known=known)
+    sel_after = M.score(hold_data, current_fit, metric)
     final_split = Split(fit_data, hold_data, sp.how, test_data, sp.parts)
     sel = Selection(split=sp, metric=metric, declared=tuple(declared), chosen=tuple(chosen),
                     base_fit=base_final, final_fit=final, before=before, after=after,
                     rounds=rounds, wave=wave, final_split=final_split, transformed=transformed,
                     select_before=sel_before, select_after=sel_after,
-                    selection_fit=current_fit, base_test=test, actuator_lag_s=lag)
+                    selection_fit=current_fit, base_test=test, actuator_lag_s=lag,
+                    rejected_on_test=rejected)
     sel.unexplained = structure_left(final_split, current_fit)
     sel.drift = drift.per_window(both, current_fit)
     return sel

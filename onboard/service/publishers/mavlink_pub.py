@@ -23,7 +23,9 @@ ESTIMATOR_STATUS   health: test ratios sqrt(NIS)/3 (1 = a 3-sigma innovation) of
                    the velocity (vel_ratio), position (pos_horiz_ratio), depth
                    (pos_vert_ratio) and heading (mag_ratio) channels; flags
                    VELOCITY_HORIZ / POS_HORIZ_REL when estimating (not while a
-                   pipeline fails speed_mismatch / position_residual), GPS_GLITCH when
+                   pipeline fails speed_mismatch / position_residual or
+                   heading_course_mismatch, which withholds the headings and
+                   positions), GPS_GLITCH when
                    GNSS fixes were rejected since the last report
 STATUSTEXT         events (source lost or silent, state restored or corrupt),   <= 1 per
                    rate-limited by a token bucket (burst 5); the number           2 s avg
@@ -198,6 +200,12 @@ def ratio_kind(channel: str) -> str | None:
     return None
 
 
+POSITION_FLAGS = ("position_residual", "heading_course_mismatch")
+"""Integrity flags (:mod:`onboard.monitor.integrity`) under which ESTIMATOR_STATUS
+claims no horizontal position: a position off the fixes, or positions withheld while
+the heading disagrees with the course over ground."""
+
+
 def estimator_test_ratios(health: HealthRecord) -> dict[str, float]:
     """Per ESTIMATOR_STATUS ratio, the largest test ratio (NIS over its gate; above 1 a
     measurement is rejected) among the channels that feed it since the previous health
@@ -352,7 +360,8 @@ class MavlinkPublisher:
         speed_flagged = any("speed_mismatch" in f for f in health.flags.values())
         if ({"speed", "north"} & vals or "current" in self._latest) and not speed_flagged:
             flags |= mavlink2.ESTIMATOR_VELOCITY_HORIZ
-        position_flagged = any("position_residual" in f for f in health.flags.values())
+        position_flagged = any(code in f for f in health.flags.values()
+                               for code in POSITION_FLAGS)
         if {"north", "east"} <= vals and not position_flagged:
             flags |= mavlink2.ESTIMATOR_POS_HORIZ_REL
         gnss_rej = sum(n for k, n in health.rejected.items() if k.startswith("gnss:"))

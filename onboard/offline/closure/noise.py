@@ -1,0 +1,180 @@
+"""Each sensor's white noise, identified from the log itself.
+
+Method: second differences (the "variate difference" method; Tintner 1940). For a
+signal sampled every ``dt`` whose third derivative is small, the second difference
+``x[k+1] - 2 x[k] + x[k-1]`` removes the signal up to ``x''' dt^3`` and leaves white noise
+of one-sigma ``s`` with the variance ``6 s^2``; a slowly wandering error (a receiver's
+drift, a bias) cancels too. So ``s`` is the second differences' robust spread (1.4826
+times their median absolute deviation, which a few outliers or manoeuvres do not move)
+over ``sqrt(6)``.
+
+Why differencing and not the Allan deviation: the Allan deviation separates white noise
+from slower processes on a *still* sensor; on a moving vehicle the motion dominates every
+averaging time longer than a sample, and its white-noise floor at the shortest one is the
+same second difference. The drift, where the fixes report their own accuracy, is what
+that accuracy holds beyond the white part: ``drift_share = 1 - s^2 / h_acc^2``.
+
+Two checks decide whether a figure is usable:
+
+* **whiteness**: the lag-1 autocorrelation of the second differences of white noise is
+  ``-4 / 6 = -2/3``. An autopilot's filtered output (smooth, correlated) gives near 0 or
+  positive values, a resampled one values near -1; its second-difference spread then
+  says nothing about the error the filter should expect, and the figure is reported but
+  not written (outside :data:`WHITE_LAG1_MIN` - :data:`WHITE_LAG1_MAX`).
+* **the signal's share**: the same statistic on the third differences (variance ``20
+  s^2``, lag-1 ``-15/20``) must agree with the second's within :data:`SIGNAL_RATIO_MAX`;
+  a larger third-difference figure means motion leaks in (too coarse a sampling).
+
+Only triples of samples evenly spaced (their two intervals within
+:data:`EVEN_SPACING` of each other) and closer than :data:`MAX_GAP_S` are used.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+MIN_TRIPLES = 50
+"""Least evenly spaced triples of samples for a figure."""
+EVEN_SPACING = 0.1
+"""Largest relative difference of the two intervals of a usable triple."""
+MAX_GAP_S = 2.0
+"""Samples further apart (s) are not differenced across."""
+WHITE_LAG1 = -2.0 / 3.0
+"""The lag-1 autocorrelation of the second differences of white noise."""
+WHITE_LAG1_MAX = -0.55
+"""Above this lag-1 autocorrelation of the second differences the noise is not white
+(a filtered output): the figure is not written to a config. Even a 5-point moving
+average of white noise reads -0.5 (second-difference coefficients ``[1, -1, 0, 0, 0, -1,
+1] / 5``) while its spread understates the noise per sample threefold; white noise reads
+-0.67 within about ``1 / sqrt(n)``."""
+WHITE_LAG1_MIN = -0.8
+"""Below this lag-1 autocorrelation the second differences alternate more than white
+noise's do: a resampled or interpolated channel (the BlueBoat's 10 Hz positions read
+-0.97), whose spread is no noise either."""
+SIGNAL_RATIO_MAX = 1.3
+"""Largest ratio of the third-difference to the second-difference estimate before the
+motion is taken to leak into them."""
+MAD_TO_STD = 1.4826
+"""Normal one-sigma per median absolute deviation."""
+
+
+def _robust_std(x: np.ndarray) -> float:
+    return float(MAD_TO_STD * np.median(np.abs(x - np.median(x))))
+
+
+def _lag1(x: np.ndarray) -> float:
+    d = x - np.mean(x)
+    den = float(np.dot(d, d))
+    return float(np.dot(d[1:], d[:-1]) / den) if den > 0 else 0.0
+
+
+def _even_runs(t: np.ndarray) -> np.ndarray:
+    """Indices ``k`` whose samples ``k-1, k, k+1`` are evenly spaced and close."""
+    dt = np.diff(t)
+    a, b = dt[:-1], dt[1:]
+    ok = ((a > 0) & (b > 0) & (a < MAX_GAP_S) & (b < MAX_GAP_S)
+          & (np.abs(a - b) <= EVEN_SPACING * np.maximum(a, b)))
+    return np.flatnonzero(ok) + 1
+
+
+def white_noise(t: np.ndarray, x: np.ndarray) -> dict | None:
+    """The white noise of one channel: ``std`` (the channel's unit), ``lag1`` of its
+    second differences, ``third_ratio`` (third-difference over second-difference
+    estimate), ``samples``, ``white`` (usable); None with too few evenly spaced
+    triples."""
+    t, x = np.asarray(t, float), np.asarray(x, float)
+    keep = np.isfinite(t) & np.isfinite(x)
+    t, x = t[keep], x[keep]
+    if len(t) < MIN_TRIPLES + 2:
+        return None
+    k = _even_runs(t)
+    if len(k) < MIN_TRIPLES:
+        return None
+    d2 = x[k + 1] - 2.0 * x[k] + x[k - 1]
+    s2 = _robust_std(d2) / math.sqrt(6.0)
+    third = _third(t, x)
+    ratio = third / s2 if third is not None and s2 > 0 else math.nan
+    lag1 = _lag1(d2[np.r_[True, np.diff(k) == 1]]) if len(k) > 2 else math.nan
+    white = (s2 > 0 and WHITE_LAG1_MIN <= lag1 <= WHITE_LAG1_MAX
+             and (not math.isfinite(ratio) or ratio <= SIGNAL_RATIO_MAX))
+    return {"std": s2, "lag1": lag1, "third_ratio": ratio, "samples": int(len(k)),
+            "white": bool(white)}
+
+
+def _third(t: np.ndarray, x: np.ndarray) -> float | None:
+    """The white-noise estimate from third differences (variance ``20 s^2``)."""
+    dt = np.diff(t)
+    if len(dt) < 3:
+        return None
+    a, b, c = dt[:-2], dt[1:-1], dt[2:]
+    hi = np.maximum(np.maximum(a, b), c)
+    ok = ((np.minimum(np.minimum(a, b), c) > 0) & (hi < MAX_GAP_S)
+          & (hi - np.minimum(np.minimum(a, b), c) <= EVEN_SPACING * hi))
+    k = np.flatnonzero(ok)
+    if len(k) < MIN_TRIPLES:
+        return None
+    d3 = x[k + 3] - 3.0 * x[k + 2] + 3.0 * x[k + 1] - x[k]
+    return _robust_std(d3) / math.sqrt(20.0)
+
+
+def _axes(rows, cols: tuple[int, ...]) -> dict | None:
+    """The per-axis figures of ``rows`` (time first) over the columns ``cols``, pooled:
+    the root mean square of the axes' ``std``, white only if every axis is."""
+    if not rows:
+        return None
+    a = np.asarray(rows, float)
+    per = [white_noise(a[:, 0], a[:, c]) for c in cols]
+    if any(p is None for p in per):
+        return None
+    std = math.sqrt(sum(p["std"] ** 2 for p in per) / len(per))
+    return {"std": std, "per_axis": [p["std"] for p in per],
+            "lag1": max(p["lag1"] for p in per),
+            "third_ratio": max(p["third_ratio"] for p in per),
+            "samples": min(p["samples"] for p in per), "white": all(p["white"] for p in per)}
+
+
+def identify(raw: dict) -> dict:
+    """Every channel's white noise from the log's measurements (``Dataset.raw``):
+    ``gnss_position`` (m per axis), ``gnss_velocity`` (m/s per axis), ``compass`` (rad),
+    ``dvl`` (m/s per axis), each with its method and checks; ``gnss_drift_share`` where
+    the fixes report their accuracy. Channels the log lacks are left out."""
+    out: dict = {}
+    pos = _axes(raw.get("fixes") or [], (1, 2))
+    if pos is not None:
+        out["gnss_position"] = {**pos, "unit": "m"}
+    vel = _axes(raw.get("gnss_velocity") or [], (1, 2))
+    if vel is not None:
+        out["gnss_velocity"] = {**vel, "unit": "m/s"}
+    # one heading source, never mixed: the most frequent (the finest sampling leaves the
+    # least motion in the differences)
+    for source in sorted(("heading", "attitude_yaw"), key=lambda k: -len(raw.get(k) or [])):
+        head = raw.get(source) or []
+        fig = None
+        if len(head) > 2:
+            h = np.asarray(head, float)
+            fig = white_noise(h[:, 0], np.unwrap(h[:, 1]))
+        if fig is not None:
+            out["compass"] = {**fig, "unit": "rad", "source": source}
+            break
+    dvl = _axes(raw.get("dvl") or [], (1, 2))
+    if dvl is not None:
+        out["dvl"] = {**dvl, "unit": "m/s"}
+    acc = [a for _, a in raw.get("gnss_accuracy") or [] if a > 0]
+    if pos is not None and acc:
+        h_acc = float(np.median(acc))
+        out["gnss_position"]["reported_std"] = h_acc
+        out["gnss_position"]["drift_share"] = max(0.0, 1.0 - pos["std"] ** 2 / h_acc ** 2)
+    for v in out.values():
+        v["method"] = "second differences (robust), white-noise checked"
+    return out
+
+
+CONFIG_KEYS = {
+    "gnss_position": ("sensors.gnss", "position_std_m"),
+    "gnss_velocity": ("sensors.gnss", "velocity_std_mps"),
+    "compass": ("sensors.compass", "heading_std_rad"),
+    "dvl": ("sensors.dvl", "velocity_std_mps"),
+}
+"""Where each identified channel's one-sigma goes in a config."""
