@@ -10,10 +10,15 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
 * **IMU**: each sample drives the propagation over the real interval since the previous
   sample (an IMU's delta-velocity / anti-aliased output belongs to the interval ending at
   its stamp); a gap longer than ``max_imu_gap_s`` is propagated as that long (counted
-  ``imu_gap``). Every IMU sample then triggers the thrust update while a thruster command
-  is fresh (``thrusters.command_timeout_s``): the sample's specific force and rate, the angular
-  acceleration from the last two gyro samples, and the thruster force averaged over the
-  sample's interval (commands are held between updates and may change within it).
+  ``imu_gap``). The first IMU sample after a new thruster command triggers the thrust
+  update (while the command is fresh, ``thrusters.command_timeout_s``): the sample's
+  specific force and rate, the angular acceleration from the last two gyro samples, and
+  the thruster force averaged over the sample's interval (commands are held between
+  updates and may change within it). The update runs at the actuator's rate, not the
+  IMU's: the thrust is a measurement (paper eq. 14b) only when the controller sends it
+  (the paper's controller at 20 Hz, its IMU at 50 Hz); a held command fused again at the
+  next IMU sample would count the thrusters' force error (``noise.thrust_std_n``, the
+  same for as long as the command is held) as new information each time.
 * **Thruster commands** (normalized, [-1, 1]) become a body force: the force rows of the
   allocation matrix times the per-thruster forces of the thrust curve
   (``f = f_max c|c|`` for the T200).
@@ -291,6 +296,7 @@ class Eseso(Pipeline):
         self.t_tau = -math.inf
         self._tau_source = ""  # source of the last thruster command
         self._tau_hist: list[tuple[float, Array]] = []  # (t, body force) of held commands
+        self._t_tau_fused = -math.inf  # time (s) of the newest command a thrust update used
         self._imu_hist: list[tuple[float, Array, Array]] = []  # last IMU (t, f, w), <= 2
         self.t_sensor: float | None = None
         self._pending_depth: float | None = None
@@ -348,14 +354,16 @@ class Eseso(Pipeline):
         return acc / covered
 
     def _thrust_update_at_imu(self) -> None:
-        """The thrust update for the IMU sample just received (module docstring)."""
+        """The thrust update for the IMU sample just received when a thruster command
+        arrived since the last one (module docstring)."""
         hist = self._imu_hist
-        if len(hist) < 2:
+        if len(hist) < 2 or not self._tau_hist or self._tau_hist[-1][0] <= self._t_tau_fused:
             return
         (t0, _, w0), (t1, f1, w1) = hist[-2:]
         tau = self._tau_mean(t0, t1)
         if tau is None:
             return
+        self._t_tau_fused = self._tau_hist[-1][0]
         outcome = self.filter.update_thrust(f1, w1, (w1 - w0) / (t1 - t0), tau,
                                             wdot_dt=t1 - t0, t=t1, source=self._tau_source)
         if self.filter.downweighted:
@@ -520,8 +528,9 @@ class Eseso(Pipeline):
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         """Consume the samples (time-ordered) and return the estimates at tick ``t`` (s).
 
-        IMU samples propagate the state (and trigger the thrust update while a thruster
-        command is fresh); every other supported sample is one measurement update.
+        IMU samples propagate the state (the first after a new, fresh thruster command
+        triggers the thrust update); every other supported sample is one measurement
+        update.
         """
         for s in samples:
             if isinstance(s, Imu):
