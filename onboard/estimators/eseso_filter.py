@@ -32,7 +32,9 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   earth frame whose body components turn with the vehicle (``xi <- Exp(-w dt) xi``,
   ``"earth_fixed"``): a push, a tether or a current drag is earth-fixed, and on the paper's
   2 m circle the body components turn at up to 0.75 rad/s, which a random walk cannot
-  follow.
+  follow. The covariance is propagated by the transition's blocks
+  (:class:`Transition`, :func:`propagate_covariance`; the dense ``F`` is
+  :func:`transition_matrix`, the readable reference).
 * **Updates** (paper eqs. 14, 16), each through :meth:`EsesoFilter.update`, Joseph form,
   with the innovation ``y``, its covariance ``S`` and the NIS of each update kept as an
   :class:`~onboard.core.messages.Innovation` record in :attr:`EsesoFilter.innovations`
