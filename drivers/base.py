@@ -14,6 +14,8 @@ raises :class:`UnreadableLog`.
 
 from __future__ import annotations
 
+import mmap
+import os
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Iterable, Iterator, Protocol
@@ -53,6 +55,72 @@ smaller loss is in the counts (``read.rejected``, ``read.used_bytes``), not warn
 
 class UnreadableLog(Exception):
     """The file cannot be read at all, or is not in a format this reader understands."""
+
+
+RELEASE_BYTES = 8 << 20
+"""A mapped log (:class:`MappedLog`) hands the pages behind its reader back to the page
+cache every this many bytes read: the reader's resident memory stays near this, whatever
+the log's length."""
+
+
+class MappedLog:
+    """A log file mapped read-only, as a bytes-like ``data`` (indexing, slicing,
+    ``find``, ``struct.unpack_from``, ``re`` over it all read the file), released behind
+    the reader as it goes.
+
+    The binary readers (:mod:`drivers.tlog`, :mod:`drivers.dataflash`) walk a log by
+    offset, look ahead to the next record and back to the last good one, and resynchronize
+    anywhere after damage; mapped, they do all that over the whole file as over bytes in
+    memory, with the same results, while only the pages they touch are resident.
+    Touched file pages count in the process's resident memory until unmapped, so
+    :meth:`release` (called with the reader's position, cheap when nothing is due) tells
+    the kernel, every ``release_bytes``, that the pages before the position are not
+    needed (``madvise(MADV_DONTNEED)``: they stay in the page cache, and a look back
+    reads them again). Where ``madvise`` is missing (not Linux or BSD) the mapping is
+    kept whole, resident as it is read. Raises :class:`UnreadableLog` when the file
+    cannot be opened or mapped.
+    """
+
+    def __init__(self, path: str | os.PathLike, release_bytes: int = RELEASE_BYTES) -> None:
+        self.path = path
+        try:
+            with open(path, "rb") as f:
+                size = os.fstat(f.fileno()).st_size
+                self.data: bytes | mmap.mmap = (
+                    mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) if size else b"")
+        except (OSError, ValueError) as e:
+            raise UnreadableLog(f"{path}: {getattr(e, 'strerror', None) or e}") from e
+        self._step = max(mmap.PAGESIZE, release_bytes // mmap.PAGESIZE * mmap.PAGESIZE)
+        self._can_release = isinstance(self.data, mmap.mmap) and hasattr(mmap, "MADV_DONTNEED")
+        self._released = 0
+        self.next_release = self._step if self._can_release else 1 << 62
+        """Position from which :meth:`release` has something to do."""
+
+    @classmethod
+    def of_bytes(cls, data: bytes, path: str | os.PathLike = "") -> "MappedLog":
+        """Records already in memory (an MCAP's tlog records), read the same way; nothing
+        to release."""
+        log = cls.__new__(cls)
+        log.path, log.data = path, data
+        log._step, log._can_release, log._released = 0, False, 0
+        log.next_release = 1 << 62
+        return log
+
+    def release(self, pos: int) -> None:
+        """Hand back the whole pages before ``pos`` when ``pos`` has passed
+        :attr:`next_release`."""
+        if pos < self.next_release:
+            return
+        upto = pos // mmap.PAGESIZE * mmap.PAGESIZE
+        self.data.madvise(mmap.MADV_DONTNEED, self._released,  # type: ignore[union-attr]
+                          upto - self._released)
+        self._released = upto
+        self.next_release = upto + self._step
+
+    def close(self) -> None:
+        """Unmap the file (the samples read keep no reference to it)."""
+        if isinstance(self.data, mmap.mmap):
+            self.data.close()
 
 
 @dataclass

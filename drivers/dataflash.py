@@ -69,7 +69,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
-from onboard.drivers.base import TIME_JUMP_S, ReadStats, UnreadableLog
+from onboard.drivers.base import RELEASE_BYTES, TIME_JUMP_S, MappedLog, ReadStats, UnreadableLog
 from onboard.drivers.mavlink import GPS_FIX_TO_QUALITY, wanted_types
 from onboard.core.geo import wrap_2pi
 from onboard.core.stamps import Anchor
@@ -511,20 +511,22 @@ class DataflashReader:
             return False
         return self._want is None or any(issubclass(c, self._want) for c in entry[2])
 
+    release_bytes = RELEASE_BYTES
+    """Pages behind the reader are released every this many bytes (:class:`MappedLog`)."""
+
     def __iter__(self) -> Iterator[Sample]:
-        try:
-            data = self.path.read_bytes()
-        except OSError as e:
-            raise UnreadableLog(f"{self.path}: {e.strerror or e}") from e
+        mapped = MappedLog(self.path, self.release_bytes)
         stats = self.stats = ReadStats()
         counts: Counter[str] = Counter()
         try:
-            yield from self._walk(data, stats, counts)
+            yield from self._walk(mapped, stats, counts)
         finally:
+            mapped.close()
             for k, c in counts.items():
                 stats.by_type[k] += c
 
-    def _walk(self, data: bytes, stats: ReadStats, counts: Counter[str]) -> Iterator[Sample]:
+    def _walk(self, mapped: MappedLog, stats: ReadStats, counts: Counter[str]) -> Iterator[Sample]:
+        data = mapped.data
         n = len(data)
         st = self._state = _State(stats)
         formats: dict[int, _Format] = {}
@@ -538,6 +540,8 @@ class DataflashReader:
         if pos > 0:
             stats.reject("garbage")
         while pos < n:
+            if pos >= mapped.next_release:
+                mapped.release(pos)
             reason = None
             if data[pos] == 0xA3 and pos + 3 <= n and data[pos + 1] == 0x95:
                 typ = data[pos + 2]

@@ -40,7 +40,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Iterator
 
-from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.base import MappedLog, ReadStats, UnreadableLog
 from onboard.drivers.mavlink import select, wanted_types
 from onboard.drivers.mavlink_frame import header_at
 from onboard.drivers.mavlink_json import JsonFrameError, frame_from_json, parse
@@ -229,5 +229,5 @@ class _TlogBytes(TlogReader):
         self._data = data
         self._first = 0
 
-    def _read(self) -> bytes:
-        return self._data
+    def _open(self) -> MappedLog:
+        return MappedLog.of_bytes(self._data, self.path)

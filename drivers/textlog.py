@@ -40,8 +40,8 @@ on. The rows
 between two marks are spread evenly: row ``j`` of ``n`` gets ``t_k + j (t_k+1 - t_k) / n``;
 rows before the first mark and after the last are placed at the row rate. The GPS sentences reach the logger
 after their epoch (4800 baud), so rows are stamped up to ~0.3 s late relative to UTC; the
-offset is nearly constant within a capture. The reader holds the whole capture in memory
-and yields all samples sorted by time.
+offset is nearly constant within a capture. The reader reads the capture line by line but
+holds its samples until the end, and yields them sorted by time.
 
 Row -> samples (source ``"arduino"``; the NMEA samples have source ``"nmea"``):
 
@@ -63,11 +63,12 @@ in ``stats.by_type``.
 from __future__ import annotations
 
 import calendar
+import itertools
 import math
 import re
 import statistics
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import msgspec
 
@@ -155,15 +156,34 @@ def open_text_log(path: str | Path) -> LogReader:
                         f"{SNIFF_BYTES // 1024} kB")
 
 
-def _read_lines(path: Path) -> list[bytes]:
-    try:
-        data = path.read_bytes()
-    except OSError as err:
-        raise UnreadableLog(f"{path}: {err.strerror or err}") from None
+LINE_CHUNK_BYTES = 1 << 20
+"""A text capture is read this many bytes at a time (:func:`_read_lines`)."""
+
+
+def _split_lines(data: bytes) -> list[bytes]:
     return data.replace(b"\r\n", b"\n").replace(b"\r", b"\n").split(b"\n")
 
 
-def first_rmc_date(lines: list[bytes]) -> float | None:
+def _read_lines(path: Path, chunk_bytes: int = LINE_CHUNK_BYTES) -> Iterator[bytes]:
+    """The lines of the file at ``path``, as its whole text split at CR LF, LF or CR (a
+    last line after the last line end, empty when the file ends with one), read
+    ``chunk_bytes`` at a time: the line being read carries over into the next chunk, and
+    so does a CR at a chunk's end (the first half of a CR LF)."""
+    try:
+        with open(path, "rb") as fh:
+            carry = b""
+            while chunk := fh.read(chunk_bytes):
+                buf = carry + chunk
+                held = b"\r" if buf.endswith(b"\r") else b""
+                lines = _split_lines(buf[:len(buf) - len(held)])
+                carry = lines.pop() + held
+                yield from lines
+    except OSError as err:
+        raise UnreadableLog(f"{path}: {err.strerror or err}") from None
+    yield from _split_lines(carry)
+
+
+def first_rmc_date(lines: Iterable[bytes]) -> float | None:
     """POSIX midnight of the capture's first day: the first RMC date (valid checksum), a
     day earlier when that RMC comes after midnight and an earlier sentence before it."""
     first_tod: float | None = None
@@ -200,14 +220,14 @@ class NmeaCaptureReader:
     def __init__(self, path: str | Path, source: str = "nmea") -> None:
         self.path = Path(path)
         self.source = source
-        self._lines = _read_lines(self.path)
-        stamped = sum(1 for ln in self._lines[:500] if _PREFIX.match(ln) and b"$" in ln)
-        nmea = sum(1 for ln in self._lines[:500] if b"$" in ln)
+        head = list(itertools.islice(_read_lines(self.path), 500))
+        stamped = sum(1 for ln in head if _PREFIX.match(ln) and b"$" in ln)
+        nmea = sum(1 for ln in head if b"$" in ln)
         self.receive_times = nmea > 0 and stamped >= nmea / 2
         """True when the lines carry wall-clock receive times (used as ``t``)."""
         self._parser = NmeaParser(
             source=source, time_base="rx" if self.receive_times else "utc",
-            date=None if self.receive_times else first_rmc_date(self._lines),
+            date=None if self.receive_times else first_rmc_date(_read_lines(self.path)),
             hold_s=1e9 if self.receive_times else 0.25,
         )
         self.stats = self._parser.stats
@@ -223,7 +243,7 @@ class NmeaCaptureReader:
                     continue
                 yield s
 
-        for ln in counted_lines(st, self._lines, ends=1):
+        for ln in counted_lines(st, _read_lines(self.path), ends=1):
             ln = ln.strip()
             if not ln:
                 continue
@@ -266,7 +286,6 @@ class MixedCaptureReader:
         self.source = source
         self.imu_rate_hz = imu_rate_hz
         self.max_gap_s = max_gap_s
-        self._lines = _read_lines(self.path)
         self.stats = ReadStats()
         self.row_rate_hz: float | None = None
         """Median row rate between good epoch marks (after iteration)."""
@@ -277,14 +296,15 @@ class MixedCaptureReader:
 
     def __iter__(self) -> Iterator[Sample]:
         st = self.stats
-        nmea = NmeaParser(source="nmea", time_base="utc", date=first_rmc_date(self._lines),
+        nmea = NmeaParser(source="nmea", time_base="utc",
+                          date=first_rmc_date(_read_lines(self.path)),
                           monotonic=False)
         nmea.stats = st  # one set of counters for the whole capture
         fixes: list[tuple[Sample, int]] = []  # (sample, index of the latest mark)
         rows: list[list[float]] = []
         marks: list[tuple[int, float]] = []  # (index of the next row, GPS UTC)
         last_utc: float | None = None
-        for raw in counted_lines(st, self._lines, ends=1):
+        for raw in counted_lines(st, _read_lines(self.path), ends=1):
             ln = raw.strip()
             if not ln:
                 continue
@@ -443,14 +463,13 @@ class DdboatLogReader:
         self.path = Path(path)
         self.source = source
         self.full_scale = full_scale
-        self._lines = _read_lines(self.path)
         self.stats = ReadStats()
 
     def __iter__(self) -> Iterator[Sample]:
         st, src = self.stats, self.source
         order = TimeOrder(st)
         last_gps: str | None = None
-        for raw in counted_lines(st, self._lines, ends=1):
+        for raw in counted_lines(st, _read_lines(self.path), ends=1):
             ln = raw.strip()
             if not ln:
                 continue

@@ -32,7 +32,7 @@ from collections import Counter
 from pathlib import Path
 from typing import BinaryIO, Iterable, Iterator
 
-from onboard.drivers.base import TIME_JUMP_S, ReadStats, UnreadableLog
+from onboard.drivers.base import RELEASE_BYTES, TIME_JUMP_S, MappedLog, ReadStats, UnreadableLog
 from onboard.drivers.mavlink import (
     DecodeContext,
     Spec,
@@ -162,14 +162,23 @@ class TlogReader:
         if self._first < 0 or self._first > _PROBE_BYTES:
             raise UnreadableLog(f"{self.path}: not a MAVLink telemetry log (no valid tlog record)")
 
-    def _read(self) -> bytes:
-        try:
-            return self.path.read_bytes()
-        except OSError as e:
-            raise UnreadableLog(f"{self.path}: {e.strerror or e}") from e
+    release_bytes = RELEASE_BYTES
+    """Pages behind the reader are released every this many bytes (:class:`MappedLog`)."""
+
+    def _open(self) -> MappedLog:
+        """The log's bytes, mapped (:class:`MappedLog`)."""
+        return MappedLog(self.path, self.release_bytes)
 
     def __iter__(self) -> Iterator[Sample]:
-        data = self._read()
+        mapped = self._open()
+        try:
+            yield from self._walk(mapped)
+        finally:
+            mapped.close()
+
+    def _walk(self, mapped: MappedLog) -> Iterator[Sample]:
+        data = mapped.data
+        release = mapped.release
         stats = self.stats = ReadStats()
         ctx = DecodeContext(stats, self._include_gcs)
         counts: Counter[int] = Counter()
@@ -196,6 +205,8 @@ class TlogReader:
         n_samples = 0
         try:
             while pos < n:
+                if pos >= mapped.next_release:
+                    release(pos)
                 # ---- framing: _frame_at and drivers.mavlink_frame.header_at inlined, for
                 # speed (offsets from the frame's start byte f as in mavlink_frame)
                 reason = None

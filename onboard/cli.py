@@ -109,6 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default ./replay-out; created if missing)")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--no-plot", action="store_true", help="skip the track figure")
+    p.add_argument("--pipelines", metavar="NAMES",
+                   help="run only these pipelines (comma-separated, e.g. current); the "
+                        "others are off, as with enabled = false in the config; each "
+                        "one's estimates are those of a replay with every pipeline")
     p.add_argument("--mcap", metavar="FILE", help="also write the estimates as MCAP (the "
                    "live Zenoh channels and schemas; needs the mcap extra)")
     p.add_argument("--geojson", metavar="FILE",
@@ -135,6 +139,34 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write what the diagnosis found as a TOML config overlay, to pass "
                         "after the config: --config BASE --config FILE")
     p.set_defaults(handler="onboard.offline.diagnose:main")
+
+    p = sub.add_parser("batch", help="replay (and diagnose) a season of logs into one "
+                       "folder, with a table of the season (runs.parquet, current.parquet)")
+    p.add_argument("logs", nargs="+", metavar="LOG|DIR",
+                   help="logs, and folders searched for the files the readers recognise "
+                        "(a folder of CSV runs or of .onbrec files is one log); other "
+                        "files are listed as skipped")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output directory: a folder per log (estimates.csv, summary.json, "
+                        "run.json, current.parquet; diagnose/ with --diagnose), "
+                        "runs.parquet, current.parquet (docs/batch.md)")
+    p.add_argument("--config", action="append", metavar="FILE",
+                   help="vehicle config for every log (default: detected per log; a CSV "
+                        "log takes the bundled config its header fits); repeatable, "
+                        "applied in order")
+    p.add_argument("--jobs", type=int, default=None, metavar="N",
+                   help="local worker processes (default: the cores)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the logs on the Dask distributed cluster there, e.g. "
+                        "tcp://10.0.0.5:8786 (its workers see the logs and --out at the "
+                        "same paths; needs the batch extra)")
+    p.add_argument("--diagnose", action="store_true",
+                   help="also diagnose each log (diagnose/ in its folder) and write a "
+                        "season report, season.md")
+    p.add_argument("--force", action="store_true",
+                   help="redo the logs done before (default: a log whose outputs are "
+                        "complete is skipped) and reuse folders other runs wrote")
+    p.set_defaults(handler="onboard.offline.batch:main")
 
     p = sub.add_parser("shore", help="live view of a vehicle's estimates from Zenoh")
     _add_zenoh_flags(p)

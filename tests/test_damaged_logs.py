@@ -26,6 +26,7 @@ import pytest
 from onboard.cli import main as cli_main
 from onboard.drivers.base import USED_SHARE_MIN
 from onboard.drivers.tlog import TIMESTAMP_LEN
+from tests.helpers.reset_tlog import write_reset_tlog
 
 REPO = Path(__file__).resolve().parents[1]
 TLOG = REPO / "tests/data/replay/jaiabot-turns.tlog"
@@ -191,19 +192,7 @@ def test_a_clock_reset_prints_where_it_happened_and_from_what_stamp_to_what(
         tmp_path, capsys):
     """A logger clock that went back 1000 s after 10 s: before, the jump was printed at
     ``[-1000.0--1000.0 s]`` and ``time_span.end`` came before ``start``."""
-    from pymavlink.dialects.v20 import ardupilotmega as mav
-
-    from onboard.drivers.tlog import TlogWriter
-
-    m = mav.MAVLink(None, 1, 1)
-    log = tmp_path / "reset.tlog"
-    with TlogWriter(log) as w:
-        for base in (1.7e9, 1.7e9 - 1000.0):
-            for i in range(100):
-                t = base + 0.1 * i
-                w.write(t, m.attitude_encode(0, 0.0, 0, 0.1 * i, 0, 0, 0.01).pack(m))
-                w.write(t, m.global_position_int_encode(
-                    0, int(48e7 + i * 10), int(-4e7), 0, 0, 100, 0, 0, 100).pack(m))
+    log = write_reset_tlog(tmp_path / "reset.tlog")
     s, printed = replay(tmp_path, log, capsys)
     (line,) = [ln for ln in printed.splitlines() if "time_jump" in ln]
     assert line.startswith("  time_jump [9.9-9.9 s]: the log's clock went back 1,010 s "

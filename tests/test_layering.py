@@ -70,6 +70,9 @@ ROOMS: dict[str, set[str]] = {
     "onboard.offline.replay": OFFLINE,
     "onboard.offline.closure": CLOSURE,
     "onboard.offline.diagnose": CLOSURE,
+    "onboard.offline.batch": CLOSURE | {"onboard.offline.diagnose", "onboard.offline.batch",
+                                        "onboard.offline.batch_tables"},
+    "onboard.offline.batch_tables": OFFLINE,
     "onboard.cli": CORE | {"onboard"},
     "onboard.apps": EVERYTHING,
     "validation": EVERYTHING | {"validation"},
@@ -182,7 +185,8 @@ def test_the_cli_dispatches_only_the_sitl_command_into_the_simulator() -> None:
         module = handler.partition(":")[0]
         if name not in COMMANDS_INTO_SITL:
             assert _room(module) in {"onboard.service", "onboard.apps", "onboard.offline.replay",
-                                     "onboard.offline.diagnose"}, (name, handler)
+                                     "onboard.offline.diagnose", "onboard.offline.batch"}, \
+                (name, handler)
 
 
 def test_the_layering_check_sees_a_violation(tmp_path: Path) -> None:

@@ -20,6 +20,7 @@ from onboard.drivers.dataflash import DataflashReader
 from onboard.core.stamps import ANCHOR_STAMPS
 from onboard.engine.timeline import CONFIRM_STAMPS, TIME_JUMP_S, Timeline
 from tests.helpers import dataflash_log as df
+from tests.helpers.reset_tlog import write_reset_tlog
 
 REPO = Path(__file__).resolve().parents[1]
 CSV = REPO / "tests/data/csv/blueboat-run.csv"
@@ -447,20 +448,7 @@ def test_a_dvl_json_capture_clock_reset_is_passed_on_a_small_step_back_is_not(tm
 def test_a_tlog_clock_reset_replays_as_two_segments_with_a_time_jump(tmp_path):
     """End to end: 10 s of data, the logger's clock back 1000 s, 10 s more (before: the
     second half was lost as ``time_backwards``)."""
-    from pymavlink.dialects.v20 import ardupilotmega as mav
-
-    from onboard.drivers.tlog import TlogWriter
-
-    m = mav.MAVLink(None, 1, 1)
-    log = tmp_path / "reset.tlog"
-    with TlogWriter(log) as w:
-        for base in (1.7e9, 1.7e9 - 1000.0):
-            for i in range(100):
-                t = base + 0.1 * i
-                w.write(t, m.heartbeat_encode(10, 3, 0, 0, 4, 3).pack(m))
-                w.write(t, m.attitude_encode(0, 0.0, 0, 0.1 * i, 0, 0, 0.01).pack(m))
-                w.write(t, m.global_position_int_encode(
-                    0, int(48e7 + i * 10), int(-4e7), 0, 0, 100, 0, 0, 100).pack(m))
+    log = write_reset_tlog(tmp_path / "reset.tlog", heartbeat=True)
     s = replay(tmp_path, log)
     assert [seg["duration_s"] for seg in s["time_span"]["segments"]] == \
         [pytest.approx(9.9), pytest.approx(9.9)]

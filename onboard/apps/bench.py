@@ -7,13 +7,13 @@ the thing measured run interleaved, several times, and the median is reported.
 ==============================  =========================================================  =========
 key                             what                                                       goal
 ==============================  =========================================================  =========
-``replay_vs_pymavlink_parse``   whole ``onboard replay`` of a 15-min 50 Hz-IMU tlog        <= 0.5
+``replay_vs_pymavlink_parse``   whole ``onboard replay`` of a 15-min 50 Hz-IMU tlog        <= 3
                                 divided by pymavlink's parse-only ``recv_match`` loop
                                 over the same file (CPU time of each, median of 5
                                 interleaved pairs; the wall-time ratio is in the detail)
 ``aie_step_vs_filterpy_kf``     one AIE axis step / filterpy ``KalmanFilter(dim_x=3)``     <= 0.5
                                 predict+update (median of repeats)
-``service_cpu_fraction``        CPU s per wall s of ``onboard run`` fed by SITL            <= 0.03
+``service_cpu_fraction``        CPU s per wall s of ``onboard run`` fed by SITL            <= 0.015
 ``sensor_to_zenoh_p50_ms``      sensor receive to Zenoh publication, median (ms)           context
 ``sensor_to_zenoh_p99_ms``      same, 99th percentile (ms)                                 <= 5
 ``service_rss_mb``              resident memory of the service (MB)                        <= 100
@@ -24,6 +24,21 @@ key                             what                                            
                                 IMU, 10 Hz thruster commands, the ESESO) that ``onboard
                                 replay --no-plot`` replays per CPU second (median of 3;
                                 ``ONBOARD_BENCH_ROV_MINUTES``, default 10)
+``batch_log_hours_per_wall_``   ``onboard batch`` throughput: log-hours replayed per       context
+``minute``                      wall-clock minute with 2 local workers, on
+                                :data:`BATCH_LOGS` copies of a rudder boat's tlog (the
+                                whole command: finding the logs, the replays, the
+                                tables); the figure with 1 worker, the speed-up and the
+                                CPU time per log-hour are in the detail (``batch``) and
+                                on the table's last lines. Added by issue 29 (additive).
+``boat_replay_x_realtime``      seconds of the rudder-boat tlog replayed per CPU second    >= 500
+                                (the same log, one process, every pipeline; median of
+                                3 replays)
+``replay_peak_rss_mb``          peak resident memory (MB) of ``onboard replay --no-plot``  <= 100
+                                of a 2-h 50 Hz-IMU tlog, in a fresh process (a log's
+                                length must not show: the readers stream it)
+``diagnose_peak_rss_mb``        peak resident memory (MB) of ``onboard diagnose`` of the   <= 400
+                                same log, in a fresh process
 ==============================  =========================================================  =========
 
 A piece whose module has not landed (or fails) gives ``null`` in the JSON and
@@ -32,9 +47,11 @@ A piece whose module has not landed (or fails) gives ``null`` in the JSON and
 Environment: ``ONBOARD_BENCH_FAST=1`` shortens everything (a 20 s log, few repeats; for the
 test suite, figures then only show the command works), ``ONBOARD_BENCH_REPEATS=N`` sets the
 number of interleaved replay/parse pairs (default 5), ``ONBOARD_BENCH_MINUTES`` the log
-length (default 15), ``ONBOARD_BENCH_ROV_MINUTES`` the ROV log's (default 10), ``ONBOARD_BENCH_DETAIL=FILE`` writes every raw measurement behind the
-figures (each pair's CPU and wall times, the replay breakdown, the service's extra figures)
-as JSON.
+length (default 15), ``ONBOARD_BENCH_ROV_MINUTES`` the ROV log's (default 10),
+``ONBOARD_BENCH_MEMORY_HOURS`` the length of the memory figures' log
+(default 2; 72 s of :func:`synthesize_tlog` when fast), ``ONBOARD_BENCH_DETAIL=FILE``
+writes every raw measurement behind the figures (each pair's CPU and wall times, the
+replay breakdown, the service's extra figures, the memory runs' CPU times) as JSON.
 """
 
 from __future__ import annotations
@@ -67,14 +84,18 @@ KEYS: tuple[str, ...] = (
     "mpc_solve_p99_ms",
     "pipeline_step_us",
     "rov_replay_x_realtime",
+    "batch_log_hours_per_wall_minute",
+    "boat_replay_x_realtime",
+    "replay_peak_rss_mb",
+    "diagnose_peak_rss_mb",
 )
 """The JSON keys of ``onboard bench --json``, in table order (a contract: tools
 reading the JSON rely on these names)."""
 
 GOALS: dict[str, tuple[str, float | None]] = {
-    "replay_vs_pymavlink_parse": ("<=", 0.5),
+    "replay_vs_pymavlink_parse": ("<=", 3.0),
     "aie_step_vs_filterpy_kf": ("<=", 0.5),
-    "service_cpu_fraction": ("<=", 0.03),
+    "service_cpu_fraction": ("<=", 0.015),
     "sensor_to_zenoh_p50_ms": ("", None),
     "sensor_to_zenoh_p99_ms": ("<=", 5.0),
     "service_rss_mb": ("<=", 100.0),
@@ -82,6 +103,10 @@ GOALS: dict[str, tuple[str, float | None]] = {
     "mpc_solve_p99_ms": ("<", 50.0),
     "pipeline_step_us": ("", None),
     "rov_replay_x_realtime": (">=", 200.0),
+    "batch_log_hours_per_wall_minute": ("", None),
+    "boat_replay_x_realtime": (">=", 500.0),
+    "replay_peak_rss_mb": ("<=", 100.0),
+    "diagnose_peak_rss_mb": ("<=", 400.0),
 }
 """Goal of each figure: (comparison, bound); None = context only."""
 
@@ -110,6 +135,7 @@ class Settings:
     mpc_solves: int = 200
     service_s: float = 30.0
     pipeline_sim_s: float = 120.0
+    memory_hours: float = 2.0
 
     @classmethod
     def from_env(cls) -> "Settings":
@@ -117,11 +143,14 @@ class Settings:
         ``ONBOARD_BENCH_MINUTES`` and ``ONBOARD_BENCH_REPEATS`` (see the module docstring)."""
         fast = os.environ.get("ONBOARD_BENCH_FAST", "") not in ("", "0")
         s = cls(fast=True, minutes=20 / 60, repeats=1, aie_steps=500, aie_repeats=1,
-                mpc_solves=5, service_s=1.0, pipeline_sim_s=3.0) if fast else cls()
+                mpc_solves=5, service_s=1.0, pipeline_sim_s=3.0,
+                memory_hours=0.02) if fast else cls()
         if os.environ.get("ONBOARD_BENCH_MINUTES"):
             s.minutes = float(os.environ["ONBOARD_BENCH_MINUTES"])
         if os.environ.get("ONBOARD_BENCH_REPEATS"):
             s.repeats = max(1, int(os.environ["ONBOARD_BENCH_REPEATS"]))
+        if os.environ.get("ONBOARD_BENCH_MEMORY_HOURS"):
+            s.memory_hours = float(os.environ["ONBOARD_BENCH_MEMORY_HOURS"])
         return s
 
 
@@ -320,6 +349,38 @@ def replay_breakdown(log: Path) -> dict[str, float]:
         out[f"pipeline.{p.name}"] = round(p.seconds, 3)
     out["ticks"] = ticks
     return out
+
+
+BOAT_REPLAYS = 3
+"""Replays of the bench's log timed for :func:`bench_boat_realtime` (1 in the fast mode)."""
+
+
+def bench_boat_realtime(s: Settings, workdir: Path, rep: Report) -> None:
+    """``boat_replay_x_realtime``: simulated seconds of the rudder-boat tlog per CPU
+    second of the whole ``onboard replay LOG --no-plot`` in this process (the log of
+    :func:`bench_replay` when it is there), median of :data:`BOAT_REPLAYS` after a
+    warm-up; the detail has each replay's CPU seconds."""
+    from onboard.cli import main as cli_main
+
+    log = workdir / "bench.tlog"
+    if not log.exists():
+        make_tlog(log, s.minutes * 60.0)
+    out = workdir / "boat-out"
+
+    def one_replay() -> float:
+        c = time.process_time()
+        status = _quiet(lambda: cli_main(["replay", str(log), "--out", str(out), "--no-plot",
+                                          "--force"]))
+        if status != 0:
+            raise RuntimeError(f"onboard replay exited {status}")
+        return time.process_time() - c
+
+    one_replay()  # warm-up: imports and caches are not what is measured
+    cpu = [one_replay() for _ in range(1 if s.fast else BOAT_REPLAYS)]
+    duration = json.loads((out / "summary.json").read_text())["time_span"]["duration_s"]
+    rep.values["boat_replay_x_realtime"] = round(duration / statistics.median(cpu), 1)
+    rep.detail["boat_replay"] = {"duration_s": duration,
+                                 "replay_cpu_s": [round(x, 3) for x in cpu]}
 
 
 def aie_step_ratio(n: int = 5000, repeats: int = 5) -> dict[str, float]:
@@ -575,6 +636,62 @@ def bench_rov_replay(s: Settings, workdir: Path, rep: Report) -> None:
         "replay_cpu_s": [round(x, 3) for x in cpu], "breakdown_cpu_s": replay_breakdown(log)}
 
 
+BATCH_LOGS = 4
+"""Logs in the batch of ``batch_log_hours_per_wall_minute``: copies of one tlog (a batch
+of identical logs keeps the two workers equally loaded)."""
+BATCH_LOG_FRACTION = 1 / 3
+"""Each batch log is this fraction of ``ONBOARD_BENCH_MINUTES`` long (5 min of 15)."""
+BATCH_WORKERS = (1, 2)
+"""The local workers the batch is timed with; the key is the last one's figure."""
+
+
+def bench_batch(s: Settings, workdir: Path, rep: Report) -> None:
+    """``batch_log_hours_per_wall_minute``: ``onboard batch --force`` of
+    :data:`BATCH_LOGS` copies of a tlog, with 1 and with 2 local workers, interleaved
+    (``repeats`` rounds, median); log-hours from runs.parquet's ``duration_s``."""
+    from onboard.cli import main as cli_main
+
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise NotAvailable("pyarrow missing (pip install 'onboard[batch]')") from None
+    logs = workdir / "batch-logs"
+    logs.mkdir()
+    made = make_tlog(logs / "log-0.tlog", s.minutes * 60.0 * BATCH_LOG_FRACTION, seed=1)
+    for k in range(1, BATCH_LOGS):
+        (logs / f"log-{k}.tlog").write_bytes((logs / "log-0.tlog").read_bytes())
+    out = workdir / "batch-out"
+
+    def one_batch(jobs: int) -> dict[str, float]:
+        w, c = time.perf_counter(), time.process_time()
+        status = _quiet(lambda: cli_main(["batch", str(logs), "--out", str(out), "--jobs",
+                                          str(jobs), "--force"]))
+        w = time.perf_counter() - w
+        if status != 0:
+            raise RuntimeError(f"onboard batch exited {status}")
+        rows = pq.read_table(out / "runs.parquet").to_pylist()
+        hours = sum(r["duration_s"] for r in rows) / 3600.0
+        return {"wall_s": w, "parent_cpu_s": time.process_time() - c,
+                "workers_cpu_s": sum(r["cpu_s"] for r in rows), "log_hours": hours,
+                "per_wall_minute": hours / (w / 60.0)}
+
+    one_batch(1)  # warm-up: the imports of the in-process worker are not what is measured
+    runs: dict[int, list[dict[str, float]]] = {j: [] for j in BATCH_WORKERS}
+    for i in range(max(1, s.repeats // 2)):
+        for j in (BATCH_WORKERS if i % 2 == 0 else BATCH_WORKERS[::-1]):
+            runs[j].append(one_batch(j))
+    fig = {j: statistics.median(r["per_wall_minute"] for r in runs[j]) for j in runs}
+    rep.values["batch_log_hours_per_wall_minute"] = round(fig[BATCH_WORKERS[-1]], 3)
+    rep.detail["batch"] = {
+        "log": made, "logs": BATCH_LOGS, "log_hours": runs[1][0]["log_hours"],
+        "per_wall_minute": {str(j): round(v, 3) for j, v in fig.items()},
+        "speedup": round(fig[BATCH_WORKERS[-1]] / fig[BATCH_WORKERS[0]], 3),
+        "workers_cpu_s_per_log_hour": round(statistics.median(
+            r["workers_cpu_s"] / r["log_hours"] for rs in runs.values() for r in rs), 2),
+        "runs": {str(j): [{k: round(v, 3) for k, v in r.items()} for r in rs]
+                 for j, rs in runs.items()}}
+
+
 def collect(s: Settings | None = None, progress: Callable[[str], None] | None = None) -> Report:
     """Measure everything; a failing or missing piece becomes ``None`` with its reason."""
     s = s or Settings.from_env()
@@ -591,6 +708,11 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
             ("pipeline steps", ("pipeline_step_us",), lambda: bench_pipelines(s, rep)),
             ("ROV replay", ("rov_replay_x_realtime",),
              lambda: bench_rov_replay(s, Path(tmp), rep)),
+            ("batch throughput", ("batch_log_hours_per_wall_minute",),
+             lambda: bench_batch(s, Path(tmp), rep)),
+            ("boat replay real-time factor", ("boat_replay_x_realtime",),
+             lambda: bench_boat_realtime(s, Path(tmp), rep)),
+            ("memory", MEMORY_KEYS, lambda: bench_memory(s, Path(tmp), rep)),
         ]
         for label, keys, fn in steps:
             say(f"measuring {label} ...")
@@ -603,6 +725,50 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
                 rep.missing(keys, f"failed: {type(err).__name__}: {err}")
             rep.detail.setdefault("bench_wall_s", {})[label] = round(time.perf_counter() - t0, 2)
     return rep
+
+
+# --------------------------------------------------------------------------- memory
+
+MEMORY_KEYS = ("replay_peak_rss_mb", "diagnose_peak_rss_mb")
+"""The figures of :func:`bench_memory`."""
+
+
+def peak_rss_of(argv: list[str]) -> dict[str, float]:
+    """Run ``argv`` in a fresh process (output discarded) and return its own peak resident
+    memory (MB, ``ru_maxrss`` of that child alone, from ``os.wait4``) and CPU time (s).
+    Raises RuntimeError when it fails."""
+    import subprocess
+
+    with tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, ru = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        if proc.returncode != 0:
+            err.seek(0)
+            tail = err.read().decode(errors="replace").strip().splitlines()[-1:]
+            raise RuntimeError(f"{' '.join(argv[2:4])} exited {proc.returncode}: {tail}")
+    return {"peak_rss_mb": round(ru.ru_maxrss / 1024.0, 1),
+            "cpu_s": round(ru.ru_utime + ru.ru_stime, 2)}
+
+
+def bench_memory(s: Settings, workdir: Path, rep: Report) -> None:
+    """``replay_peak_rss_mb``, ``diagnose_peak_rss_mb``: ``onboard replay --no-plot`` and
+    ``onboard diagnose`` of a ``s.memory_hours`` log (:func:`make_tlog`; when fast,
+    :func:`synthesize_tlog`, which takes no simulator start-up), each in a fresh process."""
+    log = workdir / "memory.tlog"
+    t0 = time.perf_counter()
+    made = (synthesize_tlog if s.fast else make_tlog)(log, s.memory_hours * 3600.0)
+    made["generate_s"] = round(time.perf_counter() - t0, 2)
+    made["bytes"] = log.stat().st_size
+    cli = [sys.executable, "-m", "onboard"]
+    replay = peak_rss_of(cli + ["replay", str(log), "--no-plot", "--force",
+                                "--out", str(workdir / "memory-replay")])
+    diagnose = peak_rss_of(cli + ["diagnose", str(log), "--force",
+                                  "--out", str(workdir / "memory-diagnose")])
+    rep.values["replay_peak_rss_mb"] = replay["peak_rss_mb"]
+    rep.values["diagnose_peak_rss_mb"] = diagnose["peak_rss_mb"]
+    rep.detail["memory"] = {"log": made, "log_hours": s.memory_hours,
+                            "replay": replay, "diagnose": diagnose}
 
 
 # --------------------------------------------------------------------------- output
@@ -675,6 +841,13 @@ def table(rep: Report) -> str:
     if a:
         lines.append(f"AIE axis step {a['aie_axis_step_us']:.1f} us, filterpy KF(3) "
                      f"predict+update {a['filterpy_kf3_step_us']:.1f} us")
+    bt = rep.detail.get("batch")
+    if bt:
+        lines.append(f"batch: {bt['logs']} logs, {bt['log_hours']:.2f} log-h; log-hours per "
+                     "wall minute " + ", ".join(f"{v:g} with {k} worker(s)" for k, v in
+                                                bt["per_wall_minute"].items())
+                     + f" (speed-up {bt['speedup']:g}); "
+                     f"{bt['workers_cpu_s_per_log_hour']:g} s CPU per log-hour")
     if rep.detail.get("settings", {}).get("fast"):
         lines.append("(fast mode: ONBOARD_BENCH_FAST is set; figures are not meaningful)")
     return "\n".join(lines)

@@ -487,6 +487,7 @@ class Engine:
         queue = self.queue
         queue.open_tick(t, len(self.pipelines))
         records = []
+        monitor, integrity = self.monitor, self.integrity
         for i, p in enumerate(self.pipelines):
             try:
                 values = queue.step(i, p)
@@ -495,13 +496,14 @@ class Engine:
                 queue.restarted(i)
             self._take_events(p)
             innovations = p.innovations()
-            self.monitor.add(p.name, innovations)
-            self.integrity.innovations(p.name, innovations)
+            if innovations:  # most ticks make no measurement update
+                monitor.add(p.name, innovations)
+                integrity.innovations(p.name, innovations)
             if values:
                 records.append(self._record(p, t, values, queue.t_sensor))
         queue.close_tick()
-        self.integrity.positions_at(t, records)
-        self.integrity.speeds_at(t, records)
+        integrity.positions_at(t, records)
+        integrity.speeds_at(t, records)
         return records
 
     def _take_events(self, p: Pipeline) -> None:

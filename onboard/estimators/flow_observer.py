@@ -25,10 +25,10 @@ With ``pitch = True`` (``[pipelines.current.flow] pitch``) the vertical block ``
 [theta, q, w_r]`` is added with the measured pitch as a second output (its own Ackermann
 gain), its pitch channel (:data:`PITCH_TERMS`) identified by RLS
 (:meth:`FlowObserver.identify_pitch`); roll is not observed. The vertical block leaves the
-north and east current as they are and makes down worse than the joint filter's ``w_r`` (docs/current.md, "Flow observer"), so
-the heading-only reduction is the default. The surge speed through water ``u_r`` is not
-observable from the attitude on a straight line; it is the surge model run open loop, as in the WVAM
-(Randeni et al. 2017). The current is then ``V_c = R (v_g - nu_r)`` (Fan, §III.A).
+north and east current as they are and makes down worse than the joint filter's ``w_r``
+(docs/current.md, "Flow observer"), so the heading-only reduction is the default. The
+surge speed through water ``u_r`` is not observable from the attitude on a straight line;
+it is the surge model run open loop, as in the WVAM (Randeni et al. 2017). The current is then ``V_c = R (v_g - nu_r)`` (Fan, §III.A).
 
 The covariance of ``z`` is propagated for this gain (Joseph form, heading noise
 ``psi_std``), so the reported one-sigma belongs to this observer. The current's one-sigma

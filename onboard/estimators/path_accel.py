@@ -38,6 +38,8 @@ from bisect import bisect_right
 GRAVITY = 9.80665
 """Standard gravity (m/s^2)."""
 
+_sin, _cos, _isfinite = math.sin, math.cos, math.isfinite  # module-level: one lookup each
+
 
 class PathAccelerometer:
     """Integrated path acceleration from IMU and attitude samples (see the module doc).
@@ -101,45 +103,46 @@ class PathAccelerometer:
         """One IMU sample at ``t`` (s): specific force ``fx``, ``fy`` (m/s^2) and body
         rates ``p``, ``q``, ``r`` (rad/s), FRD. Returns False (integral broken) when no
         attitude is recent enough or the sample is not finite."""
-        if not (t - self._t_att <= self.max_attitude_age_s and math.isfinite(fx)
-                and math.isfinite(fy) and math.isfinite(p) and math.isfinite(q)
-                and math.isfinite(r)):
+        t_att = self._t_att
+        if not (t - t_att <= self.max_attitude_age_s and _isfinite(fx) and _isfinite(fy)
+                and _isfinite(p) and _isfinite(q) and _isfinite(r)):
             self._break()
             return False
         # attitude propagated from its time to t with the gyro (ZYX Euler rates)
-        dt_a = t - self._t_att
+        dt_a = t - t_att
         phi, th = self._roll, self._pitch
         if dt_a > 0.0:
-            sp, cp = math.sin(phi), math.cos(phi)
-            ct = math.cos(th)
-            tt = math.sin(th) / ct if abs(ct) > 1e-3 else 0.0
+            sp, cp = _sin(phi), _cos(phi)
+            ct = _cos(th)
+            tt = _sin(th) / ct if abs(ct) > 1e-3 else 0.0
             phi += (p + (q * sp + r * cp) * tt) * dt_a
             th += (q * cp - r * sp) * dt_a
             self._roll, self._pitch, self._t_att = phi, th, t
         g = self.gravity
-        ax = fx - g * math.sin(th)
-        ay = fy + g * math.sin(phi) * math.cos(th)
+        ax = fx - g * _sin(th)
+        ay = fy + g * _sin(phi) * _cos(th)
         a = ax * self._cb + ay * self._sb
-        ts = self._t
-        if not ts or t - self._t_last > self.max_gap_s:
+        ts, V, S, acc = self._t, self._V, self._S, self._a
+        t_last = self._t_last
+        if not ts or t - t_last > self.max_gap_s:
             if ts:
                 self._break()
             ts.append(t)
-            self._V.append(0.0)
-            self._S.append(0.0)
-            self._a.append(a)
-        elif t > self._t_last:
-            dt = t - self._t_last
-            a0, V0 = self._a[-1], self._V[-1]
+            V.append(0.0)
+            S.append(0.0)
+            acc.append(a)
+        elif t > t_last:
+            dt = t - t_last
+            a0, V0 = acc[-1], V[-1]
             ts.append(t)
-            self._V.append(V0 + a0 * dt)
-            self._S.append(self._S[-1] + V0 * dt + 0.5 * a0 * dt * dt)
-            self._a.append(a)
+            V.append(V0 + a0 * dt)
+            S.append(S[-1] + V0 * dt + 0.5 * a0 * dt * dt)
+            acc.append(a)
             if t - ts[0] > self.keep_s + 2.0:
                 cut = bisect_right(ts, t - self.keep_s)
-                del ts[:cut], self._V[:cut], self._S[:cut], self._a[:cut]
+                del ts[:cut], V[:cut], S[:cut], acc[:cut]
         else:   # same time stamp: the newer reading
-            self._a[-1] = a
+            acc[-1] = a
         self._t_last = t
         self.n_samples += 1
         return True

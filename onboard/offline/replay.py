@@ -676,6 +676,28 @@ def planned_outputs(args) -> list[Output]:
     return outs
 
 
+def only_pipelines(cfg: Config, names: str) -> Config:
+    """``cfg`` with only the pipelines named in ``names`` (comma-separated) enabled: the
+    ``--pipelines`` of ``onboard replay``. A name that is no pipeline, or a list of which
+    none applies to the vehicle, is a :class:`UsageError`."""
+    from onboard.pipelines import MODULES, build
+
+    wanted = {n.strip() for n in names.split(",") if n.strip()}
+    unknown = sorted(wanted - set(MODULES))
+    if unknown or not wanted:
+        raise UsageError(f"--pipelines {names}: {', '.join(unknown) or 'no name'} is not a "
+                         f"pipeline (one or more of {', '.join(MODULES)})")
+    tables = {name: msgspec.structs.replace(getattr(cfg.pipelines, name), enabled=False)
+              for name in MODULES if name not in wanted}
+    cut = msgspec.structs.replace(cfg, pipelines=msgspec.structs.replace(cfg.pipelines,
+                                                                         **tables))
+    if not build(cut):
+        on = [p.name for p in build(cfg)]
+        raise UsageError(f"--pipelines {names}: none of them runs on {cfg.vehicle.id} "
+                         f"(class {cfg.vehicle.vehicle_class}; its pipelines: {', '.join(on)})")
+    return cut
+
+
 def main(args) -> int:
     """``onboard replay``: check every output path, choose the configuration, replay,
     print the headline, the warnings and, after the figure, one last line saying what
@@ -695,6 +717,8 @@ def main(args) -> int:
 
             mcap_module()  # a missing package is said before the replay, not after
         cfg, note = choose_config(log, args.config)
+        if getattr(args, "pipelines", None):
+            cfg = only_pipelines(cfg, args.pipelines)
         summary = replay(log, cfg, out_dir, config_note=note, plot=False,
                          progress=sys.stderr.isatty(), mcap=Path(mcap) if mcap else None,
                          geojson=getattr(args, "geojson", None),

@@ -134,7 +134,7 @@ class CurrentSamples:
                  innovations: deque[Innovation]) -> None:
         """Args:
             cfg: the ``[pipelines.current]`` section (``rpm_scale`` and the one-sigmas
-                ``gnss_velocity_std``, ``gnss_nominal_accuracy_m``, ``dvl_velocity_std``).
+                ``gnss_velocity_std_mps``, ``gnss_nominal_accuracy_m``, ``dvl_velocity_std_mps``).
             sensors: the ``[sensors]`` section (defaults of those, DVL figure of merit,
                 surface depth).
             nd: velocity dimension of the model (2 surface, 3 underwater).

@@ -128,9 +128,31 @@ class WaveOscillation(Effect):
 EFFECT = WaveOscillation()
 
 
+BATCH_ELEMENTS = 2_000_000
+"""Samples x cells of one batch of :func:`lateral_shares` (each of its ten or so working
+arrays is then at most 16 MB, whatever the log's length)."""
+BATCH_CELLS = 500
+"""Most cells in one batch of :func:`lateral_shares` (a short log's batch)."""
+
+
+def _block_sums(starts: np.ndarray, n: int, rows: tuple[np.ndarray, ...]):
+    """The sparse matrix that sums weighted samples by block: for each weight array ``w``
+    of ``rows`` (length ``n``) one band of ``len(starts)`` rows, row ``b`` holding ``w`` on
+    the samples of block ``b`` (``starts[b]`` up to the next start) and zeros elsewhere.
+    ``M @ x`` is then, band by band, ``sum over block b of w * x``. Sparse: one entry per
+    sample and weight, where the dense indicator was blocks x samples."""
+    from scipy import sparse
+
+    nb = len(starts)
+    block = np.repeat(np.arange(nb), np.diff(np.r_[starts, n]))
+    cols = np.arange(n)
+    return sparse.vstack([sparse.csr_matrix((w, (block, cols)), shape=(nb, n)) for w in rows],
+                         format="csr")
+
+
 def lateral_shares(t: np.ndarray, north: np.ndarray, east: np.ndarray, psi: np.ndarray,
                    y: np.ndarray, periods: np.ndarray, directions: np.ndarray,
-                   block_starts: np.ndarray | None = None, chunk: int = 500,
+                   block_starts: np.ndarray | None = None, chunk: int | None = None,
                    v_north: np.ndarray | None = None,
                    v_east: np.ndarray | None = None) -> np.ndarray:
     """Share of the variance of the lateral residual ``y`` (m/s, zero mean) that the wave's
@@ -155,7 +177,9 @@ def lateral_shares(t: np.ndarray, north: np.ndarray, east: np.ndarray, psi: np.n
         periods: wave period (s) of each cell.
         directions: direction the waves travel toward (rad) of each cell.
         block_starts: first index of each block, starting with 0; None for one block.
-        chunk: cells evaluated per batch (memory: about 10 arrays of ``len(t) x chunk``).
+        chunk: cells evaluated per batch (memory: about 10 arrays of ``len(t) x chunk``);
+            None for as many as keep each array within :data:`BATCH_ELEMENTS`, at most
+            :data:`BATCH_CELLS`. The shares do not depend on it beyond the last digit.
         v_north: velocity over ground north (m/s), for the encounter factor ``w_e / w``
             of the regressors; None (with ``v_east``) for none.
         v_east: velocity over ground east (m/s).
@@ -165,16 +189,14 @@ def lateral_shares(t: np.ndarray, north: np.ndarray, east: np.ndarray, psi: np.n
     sp, cp = np.sin(psi), np.cos(psi)
     starts = np.array([0]) if block_starts is None else np.asarray(block_starts, int)
     nb = len(starts)
-    bid = np.zeros(n, int)
-    bid[starts[1:]] = 1
-    ind = np.zeros((nb, n))
-    ind[np.cumsum(bid), np.arange(n)] = 1.0
-    weights = np.concatenate([ind * (sp * sp), ind * (sp * cp), ind * (cp * cp)])
-    proj = np.concatenate([ind * (sp * y), ind * (cp * y)])
+    weights = _block_sums(starts, n, (sp * sp, sp * cp, cp * cp))
+    proj = _block_sums(starts, n, (sp * y, cp * y))
     total = float(y @ y)
     out = np.zeros(len(periods))
     if total <= 0.0:
         return out
+    if chunk is None:
+        chunk = max(1, min(BATCH_CELLS, BATCH_ELEMENTS // max(n, 1)))
     for a in range(0, len(periods), chunk):
         w = 2.0 * math.pi / np.asarray(periods[a:a + chunk], float)
         d = np.asarray(directions[a:a + chunk], float)

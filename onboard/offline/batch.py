@@ -1,0 +1,520 @@
+"""``onboard batch LOG|DIR... --out DIR [--config FILE ...] [--jobs N] [--scheduler ADDRESS]
+[--diagnose] [--force]``: a season of logs, each replayed (and diagnosed) on its own.
+
+Every log given, or found in the folders given (:func:`find_logs`), is one task, a pure
+function of (log, config, output folder): :func:`run_log` calls the same code as
+``onboard replay`` (:func:`onboard.offline.replay.choose_config`,
+:func:`onboard.offline.replay.replay`) and, with ``--diagnose``, ``onboard diagnose``
+(:func:`onboard.offline.diagnose.diagnose`), so a log's ``estimates.csv`` is
+byte-identical to ``onboard replay LOG --out X``'s. The tasks run on local processes
+(``--jobs N``, default the cores) or, with ``--scheduler ADDRESS``, on the Dask
+distributed cluster there (``distributed.Client(ADDRESS)``; its workers must see the logs
+and ``--out`` at the same paths). Each log writes into its own folder ``DIR/<name>``
+(:func:`folder_names`) and, last, ``DIR/<name>/run.json``, its row of ``runs.parquet``:
+a log whose ``run.json`` says it was replayed (and diagnosed, when asked) is skipped on
+the next run unless ``--force`` (the batch is resumable). Then ``DIR/runs.parquet`` and
+``DIR/current.parquet`` are written (:mod:`onboard.offline.batch_tables`, docs/batch.md)
+and, with ``--diagnose``, ``DIR/season.md``.
+
+A log that fails (unreadable, not enough data to diagnose, an internal error) fails
+alone, its one-line reason in its row, in the table printed at the end and on the last
+line. Exit status: 0 every log replayed, 3 some failed, 2 bad usage or nothing could be
+read (architecture.md §4.1).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable, Iterator, Sequence
+
+from onboard.core.errors import OutputFailed, UsageError
+
+RUN_FILE = "run.json"
+"""The file a task writes last in its log's folder: its row of runs.parquet (resuming)."""
+DIAGNOSE_DIR = "diagnose"
+"""The sub-folder of a log's folder that ``--diagnose`` writes diagnosis.json into."""
+BATCH_WRITES = ("runs.parquet", "current.parquet", "season.md")
+"""What ``onboard batch`` writes in ``--out DIR`` besides the logs' folders."""
+LOG_SUFFIXES = frozenset({".tlog", ".bin", ".mcap", ".onbrec"})
+"""File name endings that mark a log: such a file that cannot be read fails (a broken
+log), where any other file the readers do not recognise is skipped (not a log)."""
+EXIT_SOME_FAILED = 3
+"""Exit status when some logs failed and the others were replayed."""
+PROGRESS_EVERY_S = 1.0
+"""The progress line on a terminal is redrawn this often while logs run (s)."""
+SECONDS_PER_HOUR = 3600.0
+
+
+@dataclass(frozen=True)
+class Found:
+    """What :func:`find_logs` made of the arguments: the logs, and the files skipped as
+    not logs, each with why."""
+
+    logs: list[str] = field(default_factory=list)
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Task:
+    """One log's work: replay ``log`` with ``configs`` (applied in order; empty: detect
+    it, or for a CSV log the bundled config that fits its header) into ``out``, and
+    diagnose it into ``out/diagnose`` when ``diagnose``."""
+
+    log: str
+    out: str
+    name: str
+    configs: tuple[str, ...] = ()
+    diagnose: bool = False
+    force: bool = False
+
+
+def find_logs(paths: Sequence[str]) -> Found:
+    """The logs among ``paths``: a file given is a log (it fails if it cannot be read);
+    a folder that is one log (:func:`is_log_dir`: CSV runs, a service recording) is one;
+    any other folder is searched, in name order, for the files the readers recognise
+    (:func:`is_log`) and the folders that are logs, the other files listed as skipped.
+    A log found twice (given, and in a folder given) is listed once."""
+    found = Found()
+    for arg in paths:
+        p = Path(arg)
+        if not p.exists():
+            raise UsageError(f"{arg}: no such file or directory")
+        if p.is_file() or is_log_dir(p):
+            found.logs.append(str(p))
+        else:
+            _search(p, found)
+    seen: set[Path] = set()
+    unique = [log for log in found.logs
+              if not (Path(log).resolve() in seen or seen.add(Path(log).resolve()))]
+    return Found(unique, found.skipped)
+
+
+def _search(folder: Path, found: Found) -> None:
+    """Add the logs in ``folder`` and its sub-folders to ``found``, and the files that
+    are not logs to its ``skipped``."""
+    for f in sorted(folder.iterdir()):
+        if f.is_dir():
+            if is_log_dir(f):
+                found.logs.append(str(f))
+            else:
+                _search(f, found)
+            continue
+        why = is_log(f)
+        if why:
+            found.skipped.append((str(f), why))
+        else:
+            found.logs.append(str(f))
+
+
+def is_log_dir(p: Path) -> bool:
+    """A folder that is one log, as ``onboard replay`` reads it: it holds ``.onbrec``
+    files (a service recording), or ``.csv`` files (runs of one CSV log) and no other
+    file the readers recognise (a README beside them is fine; a folder of CSV files and
+    tlogs is searched instead, each CSV file a log)."""
+    if not p.is_dir():
+        return False
+    if any(p.glob("*.onbrec")):
+        return True
+    if not any(p.glob("*.csv")):
+        return False
+    return all(is_log(f) for f in p.iterdir() if f.is_file() and f.suffix.lower() != ".csv")
+
+
+def is_log(path: Path) -> str:
+    """Empty when the readers recognise ``path`` as a log (or its name says it is one,
+    :data:`LOG_SUFFIXES`); else why it is not one."""
+    from onboard.drivers.base import UnreadableLog
+    from onboard.drivers.logs import sniff
+
+    if path.suffix.lower() in LOG_SUFFIXES:
+        return ""
+    try:
+        fmt = sniff(path)
+    except UnreadableLog as err:
+        return _reason(err, path)
+    if fmt != "text":
+        return ""
+    from onboard.drivers.textlog import open_text_log
+
+    try:
+        open_text_log(path)
+    except UnreadableLog as err:
+        return _reason(err, path)
+    return ""
+
+
+def _reason(err: BaseException, path: Path | str) -> str:
+    """The one-line reason of ``err``, without the path it names."""
+    text = one_line(str(err))
+    prefix = f"{path}: "
+    return text[len(prefix):] if text.startswith(prefix) else text
+
+
+def one_line(text: str) -> str:
+    """``text`` on one line (its lines joined with ``; ``)."""
+    return "; ".join(line.strip() for line in text.strip().splitlines() if line.strip())
+
+
+def folder_names(logs: Sequence[str]) -> list[str]:
+    """A folder name per log, unique among them and the same run after run: the log's
+    file name, prefixed with as many parent folders (joined with ``__``) as it takes to
+    tell apart logs of the same name (``a__run.tlog``, ``b__run.tlog``)."""
+    parts = [Path(log).absolute().parts for log in logs]
+    depth = [1] * len(logs)
+    while True:
+        names = ["__".join(p[-d:]).lstrip("/") for p, d in zip(parts, depth)]
+        seen: dict[str, list[int]] = {}
+        for i, n in enumerate(names):
+            seen.setdefault(n, []).append(i)
+        clash = [i for group in seen.values() if len({parts[j] for j in group}) > 1
+                 for i in group if depth[i] < len(parts[i])]
+        if not clash:
+            return _numbered(names)
+        for i in clash:
+            depth[i] += 1
+
+
+def _numbered(names: list[str]) -> list[str]:
+    """``names`` with any left duplicate (the same path given twice) numbered ``-2``, ..."""
+    out, count = [], {}
+    for n in names:
+        count[n] = count.get(n, 0) + 1
+        out.append(n if count[n] == 1 else f"{n}-{count[n]}")
+    return out
+
+
+def run_log(task: Task) -> dict:
+    """Replay (and diagnose) one log; its row of runs.parquet
+    (:func:`onboard.offline.batch_tables.log_row`), also written as ``run.json`` in its
+    folder with its current as ``current.parquet`` beside it. Never raises: a log that
+    fails gives a row with ``status`` ``failed`` and its one-line ``error``."""
+    from onboard.offline import batch_tables
+
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    out = Path(task.out)
+    row = batch_tables.empty_row(task.log, task.name)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            row.update(_replay_and_diagnose(task, out))
+    except Exception as err:  # noqa: BLE001 - one log fails, not the batch
+        row.update(status="failed", error=_failure(err))
+    row["cpu_s"] = time.process_time() - cpu0
+    row["wall_s"] = time.perf_counter() - wall0
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / RUN_FILE).write_text(json.dumps(row, indent=1, default=str) + "\n")
+    except OSError as err:
+        row.update(status="failed", error=f"{out / RUN_FILE}: cannot write: "
+                   f"{err.strerror or err}")
+    return row
+
+
+def _named(row: dict) -> str:
+    """``LOG: reason`` of a failed row (its reason names the log already, or not)."""
+    error = row["error"] or ""
+    return error if error.startswith(row["log"] + ":") else f"{row['log']}: {error}"
+
+
+def _failure(err: BaseException) -> str:
+    """The one line a failed log is listed with: the message of an unreadable log, of
+    bad usage or of an output that could not be written; the type too for anything else
+    (an internal error)."""
+    from onboard.drivers.base import UnreadableLog
+
+    if isinstance(err, (UsageError, UnreadableLog, OutputFailed)):
+        return one_line(str(err))
+    return one_line(f"internal error: {type(err).__name__}: {err}")
+
+
+def _replay_and_diagnose(task: Task, out: Path) -> dict:
+    """The replay's (and diagnosis's) figures for the row; raises what failed."""
+    from onboard.core.outputs import Output, check, existing
+    from onboard.offline import batch_tables
+    from onboard.offline.replay import REPLAY_WRITES, replay
+
+    outs = [Output("--out", out, "dir", (*REPLAY_WRITES, RUN_FILE))]
+    if task.diagnose:   # imported only then: model closure's imports take a second
+        from onboard.offline.diagnose import DIAGNOSE_WRITES
+
+        outs.append(Output("--out", out / DIAGNOSE_DIR, "dir", DIAGNOSE_WRITES))
+    check(outs, force=task.force or _ours(task), inputs=[task.log, *existing(task.configs)])
+    for stale in (RUN_FILE, batch_tables.LOG_CURRENT):
+        (out / stale).unlink(missing_ok=True)
+    cfg, note = _config(task)
+    summary = replay(task.log, cfg, out, config_note=note, plot=False)
+    clock = batch_tables.clock_of(task.log, cfg)
+    est = batch_tables.read_estimates(out / "estimates.csv")
+    figures = batch_tables.replay_figures(summary, est, clock)
+    batch_tables.write_log_current(out, summary, est, clock)
+    if task.diagnose:
+        figures.update(_diagnose(task, cfg, out / DIAGNOSE_DIR))
+    return figures
+
+
+def _ours(task: Task) -> bool:
+    """True when ``task``'s folder holds what a batch wrote for the same log (an
+    unfinished or failed run, redone without ``--force``); a folder holding another
+    log's or another command's outputs is reused only with ``--force``."""
+    try:
+        row = json.loads((Path(task.out) / RUN_FILE).read_text())
+    except (OSError, ValueError):
+        return False
+    return Path(row.get("log", "")).absolute() == Path(task.log).absolute()
+
+
+def _config(task: Task):
+    """(config, note) for ``task``: its ``--config`` files, else what ``onboard replay``
+    would detect; a CSV log without ``--config`` takes the bundled config that fits its
+    header best (:func:`onboard.drivers.csvlog.fitting_configs`), else fails naming what
+    to write."""
+    from onboard.drivers.logs import sniff
+    from onboard.offline.replay import choose_config
+
+    if not task.configs and sniff(task.log) in ("csv", "csv-dir"):
+        from onboard.drivers.csvlog import csv_header, fitting_configs
+
+        fits = fitting_configs(csv_header(task.log))
+        if fits:
+            cfg, _ = choose_config(task.log, [fits[0]])
+            return cfg, f"from {fits[0]} (its header fits this bundled config)"
+    return choose_config(task.log, list(task.configs) or None)
+
+
+def _diagnose(task: Task, cfg, out: Path) -> dict:
+    """The diagnosis's figures for the row (:func:`onboard.offline.diagnose.diagnose`)."""
+    from onboard.offline import batch_tables
+    from onboard.offline.diagnose import diagnose
+
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        doc = diagnose(task.log, cfg, out)
+    except UsageError as err:   # a log too short or without what closure needs
+        return {"diagnosed": False, "diagnose_error": one_line(str(err))}
+    return batch_tables.diagnosis_figures(doc)
+
+
+def is_complete(task: Task) -> dict | None:
+    """The row of ``task``'s previous run when its outputs are complete (replayed, and
+    diagnosed when asked, of the same log), else None."""
+    from onboard.offline import batch_tables
+
+    out = Path(task.out)
+    try:
+        row = json.loads((out / RUN_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    same = Path(row.get("log", "")).absolute() == Path(task.log).absolute()
+    done = row.get("status") == "ok" and (not task.diagnose or row.get("diagnosed")
+                                          or row.get("diagnose_error"))
+    files = all((out / n).exists() for n in ("estimates.csv", "summary.json",
+                                              batch_tables.LOG_CURRENT))
+    return row if same and done and files else None
+
+
+# -- running the tasks ---------------------------------------------------------------
+
+def run_local(tasks: Sequence[Task], jobs: int) -> Iterator[dict]:
+    """The rows of ``tasks`` run on ``jobs`` local processes, as they finish."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    if jobs <= 1 or len(tasks) <= 1:
+        for t in tasks:
+            yield run_log(t)
+        return
+    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
+        futures = {pool.submit(run_log, t): t for t in tasks}
+        for f in as_completed(futures):
+            yield _result(f, futures[f])
+
+
+def _result(future, task: Task) -> dict:
+    """The row of a finished ``future`` of ``task``; a worker that died under it (killed,
+    out of memory) fails that log alone."""
+    try:
+        return future.result()
+    except Exception as err:  # noqa: BLE001 - BrokenProcessPool, KilledWorker, ...
+        from onboard.offline import batch_tables
+
+        row = batch_tables.empty_row(task.log, task.name)
+        row.update(status="failed", error=one_line(f"the worker failed: "
+                                                   f"{type(err).__name__}: {err}"))
+        return row
+
+
+def run_dask(tasks: Sequence[Task], address: str) -> Iterator[dict]:
+    """The rows of ``tasks`` run on the Dask distributed cluster at ``address``, as they
+    finish; a scheduler that cannot be reached is a :class:`UsageError`."""
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise UsageError("--scheduler needs dask distributed: pip install "
+                         "'onboard[batch]'") from None
+    try:
+        client = Client(address, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as err:
+        raise UsageError(f"--scheduler {address}: cannot connect: {one_line(str(err))}"
+                         ) from None
+    with client:
+        import uuid
+
+        run = uuid.uuid4().hex[:8]   # two batches on one cluster keep their tasks apart
+        futures = client.map(run_log, tasks, pure=False,
+                             key=[f"onboard-batch-{run}-{t.name}" for t in tasks])
+        task_of = dict(zip((f.key for f in futures), tasks))
+        for f in as_completed(futures):
+            yield _result(f, task_of[f.key])
+
+
+class Progress:
+    """The batch's progress on stderr: on a terminal one line redrawn in place (a bar,
+    logs done of all, failed, log-hours replayed, elapsed), every
+    :data:`PROGRESS_EVERY_S` while logs run (a long log shows its time passing) and at
+    each log done; otherwise a line per log as it finishes."""
+
+    BAR_WIDTH = 30
+    """Characters of the bar."""
+
+    def __init__(self, total: int, tty: bool) -> None:
+        import threading
+
+        self.total, self.tty = total, tty
+        self.done = self.failed = 0
+        self.log_s = 0.0
+        self.t0 = time.monotonic()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        if tty:
+            threading.Thread(target=self._tick, daemon=True).start()
+
+    def add(self, row: dict, skipped: bool = False) -> None:
+        """Count ``row`` and show it."""
+        with self._lock:
+            self.done += 1
+            self.failed += row["status"] != "ok"
+            self.log_s += row.get("duration_s") or 0.0
+        if self.tty:
+            self._draw()
+            return
+        state = "skipped (done before)" if skipped else row["status"]
+        why = f": {row['error']}" if row.get("error") else ""
+        print(f"[{self.done}/{self.total}] {state} {row['name']}{why}", file=sys.stderr,
+              flush=True)
+
+    def _tick(self) -> None:
+        while not self._stop.wait(PROGRESS_EVERY_S):
+            self._draw()
+
+    def _draw(self) -> None:
+        with self._lock:
+            filled = round(self.BAR_WIDTH * self.done / max(self.total, 1))
+            print(f"\r[{'#' * filled}{'.' * (self.BAR_WIDTH - filled)}] {self.done}/"
+                  f"{self.total} logs, {self.failed} failed, "
+                  f"{self.log_s / SECONDS_PER_HOUR:.2f} log-h, "
+                  f"{time.monotonic() - self.t0:.0f} s", end="", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        """Stop redrawing and end the line (a terminal)."""
+        self._stop.set()
+        if self.tty:
+            with self._lock:
+                print(file=sys.stderr)
+
+
+def run_batch(tasks: Sequence[Task], jobs: int, scheduler: str | None,
+              on_row: Callable[[dict, bool], None] = lambda row, skipped: None
+              ) -> list[dict]:
+    """Every task's row, in the order of ``tasks``: a complete previous one for a task
+    without ``force`` (:func:`is_complete`), else the task run on the cluster at
+    ``scheduler`` or on ``jobs`` local processes; ``on_row`` is told of each (and whether
+    it was skipped) as it comes."""
+    rows: dict[str, dict] = {}
+    todo = []
+    for t in tasks:
+        previous = None if t.force else is_complete(t)
+        if previous is not None:
+            rows[t.name] = previous
+            on_row(previous, True)
+        else:
+            todo.append(t)
+    results: Iterable[dict] = run_dask(todo, scheduler) if scheduler and todo else \
+        run_local(todo, jobs)
+    for row in results:
+        rows[row["name"]] = row
+        on_row(row, False)
+    return [rows[t.name] for t in tasks]
+
+
+# -- the command ---------------------------------------------------------------------
+
+def plan(args) -> tuple[list[Task], Found]:
+    """The tasks of ``onboard batch``'s arguments, every output path checked first
+    (:func:`onboard.core.outputs.check`); bad usage is a :class:`UsageError`."""
+    from onboard.core.outputs import Output, check, existing
+
+    if args.jobs is not None and args.jobs < 1:
+        raise UsageError(f"--jobs {args.jobs}: give 1 or more")
+    found = find_logs(args.logs)
+    if not found.logs:
+        raise UsageError("no log found in " + ", ".join(args.logs) + (
+            f" ({len(found.skipped)} file(s) skipped as not logs)" if found.skipped else ""))
+    out = Path(args.out)
+    names = folder_names(found.logs)
+    inputs = [*map(Path, args.logs), *map(Path, found.logs), *existing(args.config)]
+    # the logs' folders are checked by their tasks (resuming reuses them)
+    check([Output("--out", out, "dir", ())], inputs=inputs)
+    check([Output("--out", out / n, "dir", ()) for n in names], inputs=inputs)
+    if args.config:   # a config that does not load is bad usage, said before any work
+        from onboard.core import config as configmod
+
+        try:
+            configmod.load_all(args.config)
+        except Exception as err:  # noqa: BLE001 - whatever the loader refuses
+            raise UsageError(f"--config {' '.join(args.config)}: {one_line(str(err))}"
+                             ) from None
+    tasks = [Task(str(log), str(out / n), n, tuple(args.config or ()),
+                  bool(args.diagnose), bool(args.force))
+             for log, n in zip(found.logs, names)]
+    return tasks, found
+
+
+def main(args) -> int:
+    """``onboard batch``: plan, run every log (skipping those done before), write
+    runs.parquet, current.parquet (and season.md with ``--diagnose``), print the table,
+    the skipped files and the failed logs; exit status 0, 3 or 2 (module docstring)."""
+    from onboard.offline import batch_tables
+
+    batch_tables.require_pyarrow()
+    tasks, found = plan(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    progress = Progress(len(tasks), sys.stderr.isatty())
+    jobs = args.jobs or os.cpu_count() or 1
+    try:
+        rows = run_batch(tasks, jobs, args.scheduler, progress.add)
+    finally:
+        progress.close()
+    written = batch_tables.write_tables(out, rows)
+    print(batch_tables.table_text(rows))
+    for path, why in found.skipped:
+        print(f"skipped {path}: not a log ({why})")
+    if args.diagnose:
+        report = batch_tables.season_report(rows)
+        (out / "season.md").write_text(report)
+        written.append(str(out / "season.md"))
+        print(report)
+    failed = [r for r in rows if r["status"] != "ok"]
+    ok = len(rows) - len(failed)
+    print(f"{ok} of {len(rows)} logs replayed; wrote {', '.join(written)}")
+    for r in failed:
+        print(f"failed {_named(r)}")
+    if not ok:
+        print("onboard batch: no log could be read", file=sys.stderr)
+        return 2
+    return EXIT_SOME_FAILED if failed else 0

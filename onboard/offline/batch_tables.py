@@ -1,0 +1,346 @@
+"""The season's tables of ``onboard batch``: ``runs.parquet`` (a row per log) and
+``current.parquet`` (every published current), their columns in docs/batch.md and
+architecture.md §4.7, and the season report of ``--diagnose`` (:func:`season_report`).
+
+A log's row is computed where it was replayed, from its summary.json, estimates.csv and
+diagnosis.json (:func:`replay_figures`, :func:`diagnosis_figures`), and kept as JSON in
+its folder; its current goes into ``current.parquet`` in its folder
+(:func:`write_log_current`); :func:`write_tables` gathers them. UTC comes from the log's
+clock (:func:`drivers.logclock.log_clock`), positions from estimates.csv's
+``north``/``east`` about summary.json's ``origin`` (:class:`onboard.core.geo.LocalFrame`).
+pyarrow is imported only here (the ``batch`` extra).
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from onboard.core.errors import UsageError
+
+LOG_CURRENT = "current.parquet"
+"""A log's current in its own folder, gathered into ``DIR/current.parquet``."""
+POSITION_PIPELINES = ("nav", "kf", "aie", "eseso")
+"""Where a current row is located: the first of these with a position at that row."""
+MOVING_MPS = 0.5
+"""Speed over ground above which heading minus course is counted (m/s): below it the
+course of a GNSS is noise."""
+ROW_KEYS = ("log", "name", "status", "error", "format", "vehicle_id", "vehicle_class",
+            "config", "utc_start", "utc_source", "duration_s", "samples", "rows",
+            "warnings", "n_warnings", "origin_lat_deg", "origin_lon_deg",
+            "current_fraction", "current_speed_median_mps", "current_north_median_mps",
+            "current_east_median_mps", "current_std_median_mps",
+            "heading_minus_course_median_deg", "availability", "diagnosed",
+            "diagnose_error", "effects", "effect_params", "holdout_metric",
+            "holdout_error_before", "holdout_error_after", "cpu_s", "wall_s")
+"""The columns of runs.parquet, in order (docs/batch.md)."""
+
+
+def require_pyarrow() -> None:
+    """A :class:`UsageError` naming the extra when pyarrow is missing."""
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        raise UsageError("onboard batch writes Parquet with pyarrow: pip install "
+                         "'onboard[batch]'") from None
+
+
+def empty_row(log: str, name: str) -> dict:
+    """A row of runs.parquet for ``log`` (its folder ``name``) with nothing known yet."""
+    row: dict = dict.fromkeys(ROW_KEYS)
+    row.update(log=str(log), name=name, status="ok", warnings={}, availability={},
+               diagnosed=False, effects=[], effect_params={}, n_warnings=0)
+    return row
+
+
+def clock_of(log: str, cfg):
+    """The :class:`drivers.logclock.LogClock` of ``log`` read with ``cfg`` (as the replay
+    read it), None when it cannot be told."""
+    from onboard.drivers.logclock import log_clock
+    from onboard.drivers.logs import open_log
+    from onboard.engine.inputs import column_names
+
+    try:
+        fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
+        first = next(iter(reader), None)
+        return None if first is None else log_clock(fmt, reader, log, first.t)
+    except Exception:  # noqa: BLE001 - the row says the UTC is unknown
+        return None
+
+
+def _t0(summary: dict) -> float:
+    """The log time (s) of estimates.csv's ``t`` = 0: the first stamp of the time line."""
+    segments = summary["time_span"]["segments"]
+    return segments[0]["start"] if segments else summary["time_span"]["start"]
+
+
+def read_estimates(csv_path: Path) -> dict[str, np.ndarray]:
+    """estimates.csv as float columns (NaN where empty), read once for the row and the
+    current (:func:`onboard.offline.plots.read_columns`)."""
+    from onboard.offline.plots import read_columns
+
+    return {k: np.asarray(v, dtype=float) for k, v in read_columns(csv_path).items()}
+
+
+def _median(x: np.ndarray) -> float | None:
+    x = x[np.isfinite(x)]
+    return float(np.median(x)) if x.size else None
+
+
+def replay_figures(summary: dict, cols: dict[str, np.ndarray], clock) -> dict:
+    """The row's figures of a replay: what summary.json says, the UTC start, and the key
+    figures of its estimates.csv ``cols`` (:func:`read_estimates`,
+    :func:`_estimate_figures`)."""
+    warnings: dict[str, int] = {}
+    for w in summary["warnings"]:
+        warnings[w["code"]] = warnings.get(w["code"], 0) + 1
+    origin = summary.get("origin") or {}
+    utc = clock.summary(_t0(summary)) if clock is not None else None
+    row = {"status": "ok", "format": summary["format"], "vehicle_id": summary["vehicle_id"],
+           "vehicle_class": summary["vehicle_class"], "config": summary["config"],
+           "utc_start": utc["start"] if utc else None,
+           "utc_source": utc["source"] if utc else None,
+           "duration_s": summary["time_span"]["duration_s"],
+           "samples": summary["read"]["samples"], "rows": summary["rows"],
+           "warnings": warnings, "n_warnings": len(summary["warnings"]),
+           "origin_lat_deg": origin.get("lat_deg"), "origin_lon_deg": origin.get("lon_deg")}
+    row.update(_estimate_figures(cols, summary["pipelines"]))
+    return row
+
+
+def _estimate_figures(cols: dict[str, np.ndarray], pipelines: Sequence[str]) -> dict:
+    """Key figures of the estimates: the fraction of rows with a current, its median
+    speed, north, east and sigma (the root mean square of its north and east sigmas),
+    the median of heading minus course while moving (``nav``; a compass offset, or a
+    crab angle), and per pipeline the fraction of rows with an estimate."""
+    n = len(cols.get("t", ()))
+    out: dict = {"availability": {}}
+    for p in pipelines:
+        mine = [v for k, v in cols.items() if k.startswith(p + ".")]
+        have = np.any([np.isfinite(v) for v in mine], axis=0) if mine and n else []
+        out["availability"][p] = float(np.mean(have)) if n and mine else 0.0
+    cn, ce = cols.get("current.north"), cols.get("current.east")
+    if cn is not None and ce is not None and n:
+        known = np.isfinite(cn) & np.isfinite(ce)
+        out["current_fraction"] = float(np.mean(known))
+        out["current_speed_median_mps"] = _median(np.hypot(cn, ce))
+        out["current_north_median_mps"] = _median(cn)
+        out["current_east_median_mps"] = _median(ce)
+        sn, se = cols.get("current.std_north"), cols.get("current.std_east")
+        if sn is not None and se is not None:
+            out["current_std_median_mps"] = _median(np.sqrt((sn ** 2 + se ** 2) / 2.0))
+    else:
+        out["current_fraction"] = 0.0
+    hd, co, sp = cols.get("nav.heading"), cols.get("nav.course"), cols.get("nav.speed")
+    if hd is not None and co is not None and sp is not None:
+        moving = sp > MOVING_MPS
+        diff = np.degrees(np.angle(np.exp(1j * (hd[moving] - co[moving]))))
+        out["heading_minus_course_median_deg"] = _median(diff)
+    return out
+
+
+def diagnosis_figures(doc: dict) -> dict:
+    """The row's figures of a diagnosis: the effects found, their parameters
+    (``<effect>.<param>``, a list's items as ``<param>[k]``) and the test-part error
+    before and after."""
+    found = [e for e in doc["effects"] if e.get("detected")]
+    params: dict[str, float] = {}
+    for e in found:
+        for k, v in (e.get("params") or {}).items():
+            for key, x in _flat(f"{e['name']}.{k}", v):
+                params[key] = x
+    return {"diagnosed": True, "effects": [e["name"] for e in found],
+            "effect_params": params, "holdout_metric": doc.get("holdout_metric"),
+            "holdout_error_before": doc.get("holdout_error_before"),
+            "holdout_error_after": doc.get("holdout_error_after")}
+
+
+def _flat(key: str, v) -> list[tuple[str, float]]:
+    """``(key, number)`` of a parameter: a number, or each item of a list of numbers."""
+    if isinstance(v, bool) or v is None:
+        return []
+    if isinstance(v, (int, float)):
+        return [(key, float(v))] if math.isfinite(v) else []
+    if isinstance(v, (list, tuple)):
+        return [kv for i, x in enumerate(v) for kv in _flat(f"{key}[{i}]", x)]
+    return []
+
+
+def current_rows(cols: dict[str, np.ndarray], summary: dict, clock) -> dict[str, list]:
+    """The current.parquet columns of one log: a row per row of estimates.csv with a
+    published current (module docstring of docs/batch.md)."""
+    from onboard.core.geo import LocalFrame
+
+    cn, ce = cols.get("current.north"), cols.get("current.east")
+    keys = ("t_s", "utc", "lat", "lon", "north", "east", "std_north", "std_east", "flags")
+    out: dict[str, list] = {k: [] for k in keys}
+    if cn is None or ce is None:
+        return out
+    origin = summary.get("origin")
+    frame = LocalFrame(origin["lat_deg"], origin["lon_deg"]) if origin else None
+    where = [p for p in POSITION_PIPELINES if p + ".north" in cols and p + ".east" in cols]
+    sn = cols.get("current.std_north", np.full_like(cn, np.nan))
+    se = cols.get("current.std_east", np.full_like(cn, np.nan))
+    t0 = _t0(summary)
+    spans = _flag_spans(summary["warnings"])
+    for i in np.flatnonzero(np.isfinite(cn) & np.isfinite(ce)):
+        t = float(cols["t"][i])
+        utc = clock.to_utc(t0 + t) if clock is not None else None
+        lat = lon = None
+        for p in where:
+            n, e = cols[p + ".north"][i], cols[p + ".east"][i]
+            if frame is not None and np.isfinite(n) and np.isfinite(e):
+                lat, lon = frame.to_latlon(float(n), float(e))
+                break
+        for k, v in zip(keys, (t, utc, lat, lon, float(cn[i]), float(ce[i]),
+                               _num(sn[i]), _num(se[i]),
+                               sorted({c for c, a, b in spans if a <= t0 + t <= b}))):
+            out[k].append(v)
+    return out
+
+
+def _num(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def _flag_spans(warnings: Sequence[dict]) -> list[tuple[str, float, float]]:
+    """(code, start, end) of the warnings that flag the current: those of the ``current``
+    pipeline (over the whole log when they have no time) and those of no pipeline with a
+    time (a clock jump, a source switch)."""
+    spans = []
+    for w in warnings:
+        timed = w.get("t_start") is not None
+        if w.get("pipeline") == "current" or (not w.get("pipeline") and timed):
+            spans.append((w["code"], w["t_start"] if timed else -math.inf,
+                          w["t_end"] if timed else math.inf))
+    return spans
+
+
+def write_log_current(out: Path, summary: dict, est: dict[str, np.ndarray], clock) -> None:
+    """``out/current.parquet``: the log's current rows (:func:`current_rows` of its
+    estimates.csv ``est``), with its vehicle and folder name."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cols = current_rows(est, summary, clock)
+    n = len(cols["t_s"])
+    table = pa.table({"name": [out.name] * n, "vehicle": [summary["vehicle_id"]] * n,
+                      **{k: v for k, v in cols.items()}}, schema=current_schema())
+    pq.write_table(table, out / LOG_CURRENT)
+
+
+def current_schema():
+    """current.parquet's schema (docs/batch.md); built when asked (pyarrow is imported
+    only by a batch)."""
+    import pyarrow as pa
+
+    f64 = pa.float64()
+    return pa.schema([("name", pa.string()), ("vehicle", pa.string()), ("t_s", f64),
+                      ("utc", pa.timestamp("ms", tz="UTC")), ("lat", f64), ("lon", f64),
+                      ("north", f64), ("east", f64), ("std_north", f64),
+                      ("std_east", f64), ("flags", pa.list_(pa.string()))])
+
+
+def runs_schema():
+    """runs.parquet's schema (docs/batch.md), its columns in :data:`ROW_KEYS` order."""
+    import pyarrow as pa
+
+    f64, s, i64 = pa.float64(), pa.string(), pa.int64()
+    types = {"log": s, "name": s, "status": s, "error": s, "format": s, "vehicle_id": s,
+             "vehicle_class": s, "config": s, "utc_start": pa.timestamp("ms", tz="UTC"),
+             "utc_source": s, "samples": i64, "rows": i64,
+             "warnings": pa.map_(s, i64), "n_warnings": i64,
+             "availability": pa.map_(s, f64), "diagnosed": pa.bool_(),
+             "diagnose_error": s, "effects": pa.list_(s), "effect_params": pa.map_(s, f64),
+             "holdout_metric": s}
+    return pa.schema([(k, types.get(k, f64)) for k in ROW_KEYS])
+
+
+def _utc(text: str | None):
+    """A datetime of summary.json's ISO 8601 UTC, None for None."""
+    from datetime import datetime
+
+    return None if text is None else datetime.fromisoformat(text.replace("Z", "+00:00"))
+
+
+def write_tables(out: Path, rows: Sequence[dict]) -> list[str]:
+    """``out/runs.parquet`` (one row per log) and ``out/current.parquet`` (every log's
+    current, in the order of ``rows``); the paths written."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    data = {k: [r.get(k) for r in rows] for k in ROW_KEYS}
+    data["utc_start"] = [_utc(x) for x in data["utc_start"]]
+    for k in ("warnings", "availability", "effect_params"):
+        data[k] = [list((x or {}).items()) for x in data[k]]
+    pq.write_table(pa.table(data, schema=runs_schema()), out / "runs.parquet")
+    parts = [pq.read_table(out / r["name"] / LOG_CURRENT, schema=current_schema())
+             for r in rows if r["status"] == "ok" and (out / r["name"] / LOG_CURRENT).exists()]
+    current = pa.concat_tables(parts) if parts else current_schema().empty_table()
+    pq.write_table(current, out / "current.parquet")
+    return [str(out / "runs.parquet"), str(out / "current.parquet")]
+
+
+def table_text(rows: Sequence[dict]) -> str:
+    """The table printed at the end of a batch: a line per log (status, vehicle, log
+    time, rows, warnings, current, effects found; the reason of a failed one)."""
+    lines = [f"{'log':<32} {'status':<7} {'vehicle':<16} {'log s':>8} {'rows':>8} "
+             f"{'warn':>4} {'current':>8}  effects / error"]
+    for r in rows:
+        if r["status"] != "ok":
+            lines.append(f"{r['name'][:32]:<32} {'failed':<7} {'':<16} {'':>8} {'':>8} "
+                         f"{'':>4} {'':>8}  {r['error']}")
+            continue
+        cur = r.get("current_speed_median_mps")
+        effects = ", ".join(r.get("effects") or []) if r.get("diagnosed") else \
+            (f"not diagnosed: {r['diagnose_error']}" if r.get("diagnose_error") else "")
+        lines.append(f"{r['name'][:32]:<32} {'ok':<7} {str(r['vehicle_id'])[:16]:<16} "
+                     f"{r['duration_s']:>8.0f} {r['rows']:>8,} {r['n_warnings']:>4} "
+                     f"{(f'{cur:.2f}m/s' if cur is not None else '-'):>8}  {effects}")
+    return "\n".join(lines)
+
+
+def season_report(rows: Sequence[dict]) -> str:
+    """The season report of a ``--diagnose`` batch (Markdown): per vehicle and effect, in
+    how many of its diagnosed logs it was found, and per parameter its mean, standard
+    deviation, range and its first and last value in UTC order (a compass deviation that
+    drifts, a thruster that weakens)."""
+    lines = ["# Season report", "",
+             "| vehicle | effect | found in | parameter | mean | std | min | max | "
+             "first -> last |", "|---|---|---|---|---|---|---|---|---|"]
+    by_vehicle: dict[str, list[dict]] = {}
+    for r in rows:
+        if r["status"] == "ok" and r.get("diagnosed"):
+            by_vehicle.setdefault(str(r["vehicle_id"]), []).append(r)
+    for vehicle, logs in sorted(by_vehicle.items()):
+        logs = sorted(logs, key=lambda r: (r.get("utc_start") is None,
+                                           r.get("utc_start") or "", r["name"]))
+        effects = sorted({e for r in logs for e in r["effects"]})
+        if not effects:
+            lines.append(f"| {vehicle} | none | 0 of {len(logs)} | | | | | | |")
+        for effect in effects:
+            found = [r for r in logs if effect in r["effects"]]
+            lines.extend(_effect_lines(vehicle, effect, found, len(logs)))
+    if not by_vehicle:
+        lines.append("| | no log diagnosed | | | | | | | |")
+    return "\n".join(lines) + "\n"
+
+
+def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int) -> list[str]:
+    """The report's lines of one vehicle's effect: one per parameter (one without)."""
+    keys = sorted({k for r in found for k in r["effect_params"]
+                   if k.startswith(effect + ".")})
+    head = f"| {vehicle} | {effect} | {len(found)} of {n_logs} |"
+    if not keys:
+        return [head + " | | | | | |"]
+    out = []
+    for k in keys:
+        x = [r["effect_params"][k] for r in found if k in r["effect_params"]]
+        std = statistics.stdev(x) if len(x) > 1 else 0.0
+        out.append(f"{head} {k[len(effect) + 1:]} | {statistics.fmean(x):.4g} | "
+                   f"{std:.3g} | {min(x):.4g} | {max(x):.4g} | {x[0]:.4g} -> {x[-1]:.4g} |")
+    return out

@@ -1,0 +1,325 @@
+"""``onboard batch``: a folder of mixed logs with one broken file, locally and on a Dask
+``LocalCluster``; every good log's estimates.csv identical to a single ``onboard replay``;
+runs.parquet and current.parquet read back; resuming, ``--force``, name collisions, exit
+statuses; the season report; the docs' queries (docs/batch.md) run on the tables."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from onboard.cli import main as cli_main
+from onboard.offline import batch, batch_tables
+from onboard.sitl.runner import run_to_tlog
+
+pa = pytest.importorskip("pyarrow", reason="onboard batch needs the batch extra")
+import pyarrow.parquet as pq  # noqa: E402
+
+pytestmark = pytest.mark.integration  # child processes, a Dask cluster
+
+REPO = Path(__file__).resolve().parent.parent
+DATA = REPO / "tests" / "data"
+CURRENT_SIM_S = 120.0
+"""Length of the simulated log whose current converges and is published (s)."""
+BROKEN = b"this is no telemetry log\n" * 100
+
+
+def onboard(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "onboard", *args], capture_output=True,
+                          text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def season(tmp_path_factory) -> Path:
+    """Simulated logs (two named run.tlog in two folders), an NMEA capture, a CSV log, a
+    README and a broken tlog."""
+    d = tmp_path_factory.mktemp("logs") / "season"
+    (d / "a").mkdir(parents=True)
+    (d / "b").mkdir()
+    shutil.copy(DATA / "replay" / "jaiabot-turns.tlog", d / "a" / "run.tlog")
+    shutil.copy(DATA / "replay" / "gavia-tidal.tlog", d / "b" / "run.tlog")
+    shutil.copy(DATA / "nmea" / "gnss-compass.nmea", d)
+    shutil.copy(DATA / "csv" / "blueboat-run.csv", d)
+    run_to_tlog("effect-current", d / "current.tlog", None, duration=CURRENT_SIM_S, seed=1)
+    (d / "README.md").write_text("# notes of the season\n")
+    (d / "broken.tlog").write_bytes(BROKEN)
+    return d
+
+
+@pytest.fixture(scope="module")
+def local(season) -> tuple[subprocess.CompletedProcess, Path]:
+    """``onboard batch`` of the season on two local processes."""
+    out = season.parent / "season-out"
+    return onboard("batch", str(season), "--out", str(out), "--jobs", "2"), out
+
+
+def _rows(out: Path) -> dict[str, dict]:
+    return {r["name"]: r for r in pq.read_table(out / "runs.parquet").to_pylist()}
+
+
+def test_exit_3_names_the_broken_log_and_skips_what_is_no_log(local, season):
+    r, out = local
+    assert r.returncode == 3, r.stderr
+    last = r.stdout.strip().splitlines()
+    assert last[-1].startswith(f"failed {season / 'broken.tlog'}: ")
+    assert "not a MAVLink telemetry log" in last[-1]
+    assert f"skipped {season / 'README.md'}: not a log" in r.stdout
+    assert last[-2].startswith("5 of 6 logs replayed")
+
+
+def test_runs_table_has_a_row_per_log(local, season):
+    _, out = local
+    table = pq.read_table(out / "runs.parquet")
+    assert table.column_names == list(batch_tables.ROW_KEYS)
+    assert table.schema.field("utc_start").type == pa.timestamp("ms", tz="UTC")
+    rows = _rows(out)
+    assert sorted(rows) == ["a__run.tlog", "b__run.tlog", "blueboat-run.csv",
+                            "broken.tlog", "current.tlog", "gnss-compass.nmea"]
+    broken = rows["broken.tlog"]
+    assert broken["status"] == "failed" and "not a MAVLink telemetry log" in broken["error"]
+    assert broken["log"] == str(season / "broken.tlog")
+    good = [r for r in rows.values() if r is not broken]
+    assert all(r["status"] == "ok" and r["error"] is None for r in good)
+    cur = rows["current.tlog"]
+    assert cur["vehicle_class"] == "rudder-boat" and cur["format"] == "tlog"
+    assert cur["duration_s"] == pytest.approx(CURRENT_SIM_S, abs=0.5)
+    assert cur["utc_start"] is not None and cur["samples"] > 0
+    assert 0.0 < cur["current_fraction"] <= 1.0 and cur["current_speed_median_mps"] > 0.0
+    assert dict(cur["availability"])["current"] > 0.0
+    assert dict(rows["b__run.tlog"]["warnings"])["no_position_source"] == 1
+    assert rows["blueboat-run.csv"]["config"].startswith("from blueboat-ntnu-csv")
+
+
+def test_current_table_holds_every_published_current(local):
+    _, out = local
+    table = pq.read_table(out / "current.parquet")
+    assert table.column_names == ["name", "vehicle", "t_s", "utc", "lat", "lon", "north",
+                                  "east", "std_north", "std_east", "flags"]
+    rows = [r for r in table.to_pylist() if r["name"] == "current.tlog"]
+    est = batch_tables.read_estimates(out / "current.tlog" / "estimates.csv")
+    import numpy as np
+
+    published = np.isfinite(est["current.north"]) & np.isfinite(est["current.east"])
+    assert len(rows) == int(published.sum()) > 0
+    assert all(r["vehicle"] == "rudder-boat" and r["utc"] is not None for r in rows)
+    assert all(r["lat"] is not None and abs(r["lat"] - 41.49) < 0.1 for r in rows)
+    assert rows[0]["north"] == pytest.approx(est["current.north"][published][0])
+
+
+def test_every_good_log_identical_to_a_single_replay(local, tmp_path):
+    _, out = local
+    for name, row in _rows(out).items():
+        if row["status"] != "ok":
+            continue
+        config = ["--config", "blueboat-ntnu-csv"] if name.endswith(".csv") else []
+        single = tmp_path / name
+        assert cli_main(["replay", row["log"], "--out", str(single), "--no-plot",
+                         *config]) == 0
+        assert (single / "estimates.csv").read_bytes() == \
+            (out / name / "estimates.csv").read_bytes(), name
+
+
+def test_resumes_and_force_redoes(season, tmp_path):
+    logs = [str(season / "gnss-compass.nmea"), str(season / "blueboat-run.csv")]
+    out = tmp_path / "out"
+    assert onboard("batch", *logs, "--out", str(out), "--jobs", "1").returncode == 0
+    done = {p: p.stat().st_mtime_ns for p in out.glob("*/run.json")}
+    assert len(done) == 2
+    again = onboard("batch", *logs, "--out", str(out))
+    assert again.returncode == 0 and again.stderr.count("skipped (done before)") == 2
+    assert {p: p.stat().st_mtime_ns for p in out.glob("*/run.json")} == done
+    assert len(pq.read_table(out / "runs.parquet")) == 2
+    forced = onboard("batch", *logs, "--out", str(out), "--force")
+    assert forced.returncode == 0 and "skipped" not in forced.stderr
+    assert all(p.stat().st_mtime_ns != t for p, t in done.items())
+
+
+def test_a_folder_of_another_command_is_not_overwritten(season, tmp_path):
+    out = tmp_path / "out"
+    (out / "gnss-compass.nmea").mkdir(parents=True)
+    (out / "gnss-compass.nmea" / "estimates.csv").write_text("t\n")
+    r = onboard("batch", str(season / "gnss-compass.nmea"), "--out", str(out))
+    assert r.returncode == 2 and "holds a previous run's estimates.csv" in r.stdout
+    assert onboard("batch", str(season / "gnss-compass.nmea"), "--out", str(out),
+                   "--force").returncode == 0
+
+
+def test_names_that_collide_get_their_own_folders():
+    assert batch.folder_names(["x/a/run.tlog", "x/b/run.tlog", "y.bin"]) == \
+        ["a__run.tlog", "b__run.tlog", "y.bin"]
+    assert batch.folder_names(["p/a/run.tlog", "q/a/run.tlog"]) == \
+        ["p__a__run.tlog", "q__a__run.tlog"]
+    assert batch.folder_names(["a.tlog", "a.tlog"]) == ["a.tlog", "a.tlog-2"]
+
+
+def test_a_worker_that_dies_fails_its_log_alone(season):
+    from concurrent.futures import ProcessPoolExecutor
+
+    task = batch.Task(str(season / "gnss-compass.nmea"), "unused", "gnss-compass.nmea")
+    with ProcessPoolExecutor(max_workers=1) as pool:
+        row = batch._result(pool.submit(os._exit, 1), task)
+    assert row["status"] == "failed" and row["name"] == "gnss-compass.nmea"
+    assert row["error"].startswith("the worker failed: BrokenProcessPool")
+
+
+def test_bad_usage_and_nothing_readable_exit_2(season, tmp_path):
+    r = onboard("batch", str(tmp_path / "missing"), "--out", str(tmp_path / "o1"))
+    assert r.returncode == 2 and "no such file or directory" in r.stderr
+    r = onboard("batch", str(season / "a"), "--out", str(tmp_path / "o2"), "--jobs", "0")
+    assert r.returncode == 2 and "--jobs 0" in r.stderr
+    notes = tmp_path / "notes"
+    notes.mkdir()
+    (notes / "README.md").write_text("# nothing here\n")
+    r = onboard("batch", str(notes), "--out", str(tmp_path / "o3"))
+    assert r.returncode == 2 and "no log found" in r.stderr
+    r = onboard("batch", str(season / "broken.tlog"), "--out", str(tmp_path / "o4"))
+    assert r.returncode == 2 and "no log could be read" in r.stderr
+    assert "broken.tlog" in r.stdout.strip().splitlines()[-1]
+    r = onboard("batch", str(season / "a"), "--out", str(season / "a" / "out"))
+    assert r.returncode == 2 and "inside the input directory" in r.stderr
+    r = onboard("batch", str(season / "a"), "--out", str(tmp_path / "o5"), "--config",
+                str(tmp_path / "nowhere.toml"))
+    assert r.returncode == 2 and f"--config {tmp_path / 'nowhere.toml'}" in r.stderr
+
+
+def test_on_a_dask_local_cluster(season, local, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    _, local_out = local
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in ("current.tlog", "broken.tlog", "gnss-compass.nmea"):
+        shutil.copy(season / name, logs / name)
+    out = tmp_path / "out"
+    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                                  dashboard_address=None) as cluster:
+        r = onboard("batch", str(logs), "--out", str(out), "--scheduler",
+                    cluster.scheduler_address)
+    assert r.returncode == 3, r.stderr
+    assert r.stdout.strip().splitlines()[-1].startswith(f"failed {logs / 'broken.tlog'}")
+    rows = _rows(out)
+    assert {n: r["status"] for n, r in rows.items()} == {
+        "current.tlog": "ok", "broken.tlog": "failed", "gnss-compass.nmea": "ok"}
+    for name in ("current.tlog", "gnss-compass.nmea"):
+        assert (out / name / "estimates.csv").read_bytes() == \
+            (local_out / name / "estimates.csv").read_bytes()
+    assert pq.read_table(out / "current.parquet").num_rows == \
+        len([r for r in pq.read_table(local_out / "current.parquet").to_pylist()
+             if r["name"] == "current.tlog"])
+
+
+def test_an_unreachable_scheduler_is_bad_usage(season, tmp_path):
+    pytest.importorskip("distributed")
+    r = onboard("batch", str(season / "gnss-compass.nmea"), "--out", str(tmp_path / "o"),
+                "--scheduler", "tcp://127.0.0.1:9")
+    assert r.returncode == 2 and "--scheduler tcp://127.0.0.1:9: cannot connect" in r.stderr
+
+
+def test_diagnose_writes_the_season_report(season, tmp_path):
+    out = tmp_path / "out"
+    r = onboard("batch", str(season / "current.tlog"), str(season / "a" / "run.tlog"),
+                "--out", str(out), "--diagnose")
+    assert r.returncode == 0, r.stderr
+    rows = _rows(out)
+    cur = rows["current.tlog"]
+    doc = (out / "current.tlog" / "diagnose" / "diagnosis.json").read_text()
+    import json
+
+    found = [e["name"] for e in json.loads(doc)["effects"] if e["detected"]]
+    assert cur["diagnosed"] and cur["effects"] == found
+    assert cur["holdout_error_after"] <= cur["holdout_error_before"]
+    short = rows["run.tlog"]
+    assert short["status"] == "ok" and not short["diagnosed"]
+    assert "too short" in short["diagnose_error"]
+    report = (out / "season.md").read_text()
+    assert report in r.stdout and "| rudder-boat |" in report
+
+
+def test_season_report_per_vehicle_and_effect():
+    def row(name, vehicle, utc, effects, params, diagnosed=True):
+        r = batch_tables.empty_row(name, name)
+        r.update(vehicle_id=vehicle, utc_start=utc, diagnosed=diagnosed, effects=effects,
+                 effect_params=params)
+        return r
+
+    rows = [row("l2", "boat", "2026-06-02T00:00:00.000Z", ["heading_bias"],
+                {"heading_bias.bias": 3.0}),
+            row("l1", "boat", "2026-06-01T00:00:00.000Z", ["heading_bias"],
+                {"heading_bias.bias": 1.0}),
+            row("l3", "boat", "2026-06-03T00:00:00.000Z", [], {}),
+            row("l4", "boat", None, ["heading_bias"], {"heading_bias.bias": 9.0},
+                diagnosed=False),
+            row("g1", "glider", None, [], {})]
+    report = batch_tables.season_report(rows)
+    assert "| boat | heading_bias | 2 of 3 | bias | 2 | 1.41 | 1 | 3 | 1 -> 3 |" in report
+    assert "| glider | none | 0 of 1 |" in report
+
+
+def test_the_docs_queries_run_on_the_tables(local, monkeypatch, capsys):
+    """Every Python block of docs/batch.md runs on the tables (``season-out``)."""
+    pytest.importorskip("duckdb")
+    pytest.importorskip("pandas")
+    _, out = local
+    monkeypatch.chdir(out.parent)
+    blocks = re.findall(r"```python\n(.*?)```", (REPO / "docs" / "batch.md").read_text(),
+                        re.S)
+    assert len(blocks) >= 3
+    for code in blocks:
+        exec(compile(code, "docs/batch.md", "exec"), {})
+    assert "current.tlog" in capsys.readouterr().out
+
+
+def test_the_vehicle_install_stays_lean():
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    core = " ".join(project["dependencies"])
+    for heavy in ("dask", "distributed", "pyarrow", "pandas", "duckdb"):
+        assert heavy not in core
+    assert {"dask[distributed]", "pyarrow"} <= {
+        re.split(r"[<>=]", d)[0] for d in project["optional-dependencies"]["batch"]}
+    assert "onboard[batch]" in project["optional-dependencies"]["test"]
+
+
+@pytest.mark.data
+@pytest.mark.slow   # 16 s; each of these logs is replayed alone by tests/test_real_logs.py
+def test_real_logs_beside_notes(shared_data, tmp_path):
+    """A folder of real logs (a tlog, a DataFlash .bin, an NMEA capture) and its
+    SOURCE.md: every log replayed as a single replay would, the notes skipped."""
+    src = shared_data / "ardusub_small_logs"
+    out = tmp_path / "out"
+    r = onboard("batch", str(src), "--out", str(out))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert f"skipped {src / 'SOURCE.md'}: not a log" in r.stdout
+    rows = _rows(out)
+    assert sorted(rows) == ["nmea_log.txt", "small.BIN", "small.tlog"]
+    for name, row in rows.items():
+        assert row["status"] == "ok" and row["duration_s"] > 0
+        single = tmp_path / name
+        assert cli_main(["replay", row["log"], "--out", str(single), "--no-plot"]) == 0
+        assert (single / "estimates.csv").read_bytes() == \
+            (out / name / "estimates.csv").read_bytes(), name
+
+
+def test_progress_redraws_one_line_on_a_terminal_and_prints_a_line_per_log_otherwise(
+        monkeypatch, capsys):
+    monkeypatch.setattr(batch, "PROGRESS_EVERY_S", 0.05)
+    p = batch.Progress(2, tty=True)
+    import time
+
+    time.sleep(0.2)   # a long log: the elapsed time is redrawn while it runs
+    p.add({"status": "ok", "name": "x", "duration_s": 1800.0})
+    p.add({"status": "failed", "name": "y", "error": "bad"})
+    p.close()
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.count("\r") >= 3
+    assert err.rstrip().endswith("2/2 logs, 1 failed, 0.50 log-h, 0 s")
+    p = batch.Progress(2, tty=False)
+    p.add({"status": "ok", "name": "x"}, skipped=True)
+    p.add({"status": "failed", "name": "y", "error": "bad"})
+    p.close()
+    assert capsys.readouterr().err == "[1/2] skipped (done before) x\n[2/2] failed y: bad\n"
