@@ -339,6 +339,9 @@ class EsesoFilter:
             (1 to ``noise.scale_max``; :meth:`update`).
         process_scale: the variance scale of the IMU's white noise in the propagation
             (1 to ``noise.scale_max``; :data:`PROCESS_ADAPT_CHANNEL`).
+        disturbance_excess: per body axis, the error variance of ``xi`` (N^2) that the
+            thrust innovations show beyond ``P`` (:meth:`_learn_disturbance_excess`); added
+            to the published sigma (:meth:`published_disturbance_var`), not to ``P``.
     """
 
     def __init__(self, params: EsesoParams) -> None:
@@ -369,6 +372,8 @@ class EsesoFilter:
         self.process_scale = 1.0
         self._noise_mean: dict[str, float] = {}
         self._model_terms: tuple[Array, Array] | None = None  # (tau, D(nu) nu), last update
+        self.disturbance_excess = np.zeros(3)
+        self._excess_mean = np.zeros(3)  # its running mean, before the floor
         # thrust-update noise (N^2), :meth:`thrust_noise`; updated at every thrust update
         self.R_tau = self.thrust_noise(None)
 
@@ -520,6 +525,29 @@ class EsesoFilter:
         scale = min(max(mean, 1.0), ceiling)
         self.noise_scale[channel] = scale
         return scale
+
+    def _learn_disturbance_excess(self, y: Array, S_model: Array) -> None:
+        """Learn :attr:`disturbance_excess` from the thrust innovation ``y`` (N) and its
+        covariance ``S_model = H P H^T + R_tau`` as the filter's model gives it (the
+        configured thrust noise, before the learnt scale and the Huber weight). With
+        ``H[:, XI] = -I`` the innovation carries the prior error of ``xi`` one to one, so
+        covariance matching (Mehra 1972) on each body axis, ``E[y_i^2] = S_ii + D_ii``,
+        makes ``y_i^2 - S_ii`` a sample of ``D_ii``, the error variance of ``xi`` that
+        ``P`` does not carry (a lumped disturbance moving faster than its process noise
+        allows). Its exponential mean over ``noise.adapt_updates`` updates (each sample
+        capped at :data:`NOISE_SAMPLE_CAP` times ``S_ii``), floored at 0, is the excess."""
+        S_ii = np.diag(S_model)
+        sample = np.minimum(y * y - S_ii, NOISE_SAMPLE_CAP * S_ii)
+        self._excess_mean += (sample - self._excess_mean) / self.params.noise.adapt_updates
+        self.disturbance_excess = np.maximum(self._excess_mean, 0.0)
+
+    def published_disturbance_var(self) -> Array:
+        """Variance (N^2, body, per axis) of the published lumped disturbance: the
+        covariance's ``P[xi, xi]`` plus :attr:`disturbance_excess`, the error variance
+        the thrust innovations show beyond it. The filter's own gain, and so ``xi``
+        (what a controller consumes), keeps ``P`` alone (docs/eseso-mpc.md, "What the
+        controller needs and what the sigma claims")."""
+        return np.maximum(np.diag(self.P)[XI], 0.0) + self.disturbance_excess
 
     def _adapt_process(self, y: Array, HPHt: Array, Rm: Array) -> None:
         """Scale the IMU's white noise from the DVL innovation ``y`` (a fading factor, Xia
@@ -747,6 +775,7 @@ class EsesoFilter:
         Rm = self.R_tau = self.thrust_noise(wdot_dt)
         HPHt = H @ self.P @ H.T
         if self.params.noise.adapt_updates > 0:  # before the Huber weight (it would learn it)
+            self._learn_disturbance_excess(y, HPHt + Rm)
             Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
         only = XI if self.params.thrust_states == "disturbance" else None
         k = self.params.thrust_huber

@@ -54,9 +54,12 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
   ``dist_north`` ... earth), the force the thrust model misses: the external push plus
   whatever the model's mass, damping and thrust map get wrong, the paper's definition and
   what the AMPC adds to its model; off the design point it is not the push alone.
-* **Published sigmas**: the filter's covariance. The noise scales the filter learns from
-  its innovations are in health (``noise_scale.<channel>``, ``noise_scale.imu``; the
-  thrust channel's too).
+* **Published sigmas**: the filter's covariance; the disturbance's plus the error
+  variance its thrust innovations show beyond that covariance (per body axis, learnt by
+  covariance matching, ``EsesoFilter.disturbance_excess``), which the filter's gain does
+  not use: the ``xi`` a controller consumes keeps its tuning, the sigma says how wrong
+  it is (docs/eseso-mpc.md). The noise scales the filter learns from its innovations are
+  in health (``noise_scale.<channel>``, ``noise_scale.imu``; the thrust channel's too).
 * **Position**: from the first fused GNSS fix (the local origin), or without one from the
   configured start point, then dead-reckoned with the DVL; its std grows without GNSS.
 
@@ -89,7 +92,7 @@ from onboard.core.messages import (
 )
 from onboard.core.pipeline_config import EsesoConfig, EsesoThrustersConfig
 from onboard.core.so3 import euler_to_matrix, matrix_to_euler
-from onboard.estimators.eseso_filter import P_, P_D, V_, XI, EsesoFilter, EsesoParams, Outcome
+from onboard.estimators.eseso_filter import P_, P_D, V_, EsesoFilter, EsesoParams, Outcome
 from onboard.pipelines.base import Pipeline, unused_measurement
 
 Array = NDArray[np.float64]
@@ -590,8 +593,10 @@ class Eseso(Pipeline):
 
     def _disturbance_std(self) -> Array:
         """One-sigma (N, body) of the lumped disturbance ``xi`` (the external force plus
-        whatever the model gets wrong, module docstring): the filter's covariance."""
-        return np.sqrt(np.maximum(np.diag(self.filter.P)[XI], 0.0))
+        whatever the model gets wrong, module docstring): the filter's covariance plus
+        the excess its thrust innovations show
+        (:meth:`~onboard.estimators.eseso_filter.EsesoFilter.published_disturbance_var`)."""
+        return np.sqrt(self.filter.published_disturbance_var())
 
     def std(self) -> dict[str, float]:
         """One-sigma uncertainties keyed like the values (``std_<q>`` columns -> ``<q>``),
