@@ -373,7 +373,7 @@ class EsesoFilter:
         self._noise_mean: dict[str, float] = {}
         self._model_terms: tuple[Array, Array] | None = None  # (tau, D(nu) nu), last update
         self.disturbance_excess = np.zeros(3)
-        self._excess_mean = np.zeros(3)  # its running mean, before the floor
+        self._excess_ratio = np.ones(3)  # E[y_i^2] / S_ii of the thrust innovations
         # thrust-update noise (N^2), :meth:`thrust_noise`; updated at every thrust update
         self.R_tau = self.thrust_noise(None)
 
@@ -531,15 +531,18 @@ class EsesoFilter:
         covariance ``S_model = H P H^T + R_tau`` as the filter's model gives it (the
         configured thrust noise, before the learnt scale and the Huber weight). With
         ``H[:, XI] = -I`` the innovation carries the prior error of ``xi`` one to one, so
-        covariance matching (Mehra 1972) on each body axis, ``E[y_i^2] = S_ii + D_ii``,
-        makes ``y_i^2 - S_ii`` a sample of ``D_ii``, the error variance of ``xi`` that
-        ``P`` does not carry (a lumped disturbance moving faster than its process noise
-        allows). Its exponential mean over ``noise.adapt_updates`` updates (each sample
-        capped at :data:`NOISE_SAMPLE_CAP` times ``S_ii``), floored at 0, is the excess."""
+        covariance matching (Mehra 1972) on each body axis, ``E[y_i^2] = r_i S_ii`` with
+        ``r_i = 1 + D_ii / S_ii``, makes ``y_i^2 / S_ii`` a sample of ``r_i``, and ``D_ii``
+        is the error variance of ``xi`` that ``P`` does not carry (a lumped disturbance
+        moving faster than its process noise allows). ``r_i`` is the exponential mean of
+        its samples over ``noise.adapt_updates`` updates (each capped at
+        :data:`NOISE_SAMPLE_CAP`; a ratio, so the start, whose ``S`` is the initial
+        disturbance sigma's 1600 N^2, weighs no more than any other update), and the
+        excess is ``max(r_i - 1, 0) S_ii`` at this update."""
         S_ii = np.diag(S_model)
-        sample = np.minimum(y * y - S_ii, NOISE_SAMPLE_CAP * S_ii)
-        self._excess_mean += (sample - self._excess_mean) / self.params.noise.adapt_updates
-        self.disturbance_excess = np.maximum(self._excess_mean, 0.0)
+        sample = np.minimum(y * y / np.maximum(S_ii, 1e-300), NOISE_SAMPLE_CAP)
+        self._excess_ratio += (sample - self._excess_ratio) / self.params.noise.adapt_updates
+        self.disturbance_excess = np.maximum(self._excess_ratio - 1.0, 0.0) * S_ii
 
     def published_disturbance_var(self) -> Array:
         """Variance (N^2, body, per axis) of the published lumped disturbance: the
