@@ -153,12 +153,6 @@ VARIANTS: dict[str, Variant] = {
 """Every variant of docs/aie.md's ablation table, in its order."""
 
 
-ESESO = "eseso"
-"""The name that runs the protocol on the ESESO's thrust noise instead
-(:mod:`validation.tuning_eseso`; alone on the command line, its results under the results
-file's ``eseso`` key)."""
-
-
 def merged(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
     """``base`` with ``over`` merged in, key by key, tables recursively."""
     out = dict(base)
@@ -450,13 +444,7 @@ def main(args: argparse.Namespace) -> int:
         for n, v in VARIANTS.items():
             print(f"{n:16s} {v.pipeline:4s} {', '.join(p.key for p in v.params):40s} "
                   f"{v.cause}")
-        print(f"{ESESO:16s} the ESESO's thrust noise (validation/tuning_eseso.py)")
         return 0
-    if args.variants == [ESESO]:
-        from validation import tuning_eseso
-
-        return tuning_eseso.main(args.budget, Path(args.out) if args.out else None,
-                                 args.no_tune)
     bad = [v for v in args.variants if v not in VARIANTS]
     if bad:
         raise UsageError(f"unknown variant(s) {', '.join(bad)} (python -m validation tune --list)")

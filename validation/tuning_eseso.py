@@ -194,3 +194,19 @@ def main(budget: int | None, out: Path | None, no_tune: bool) -> int:
         doc["eseso"] = rec
         out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     return 0
+
+
+ESESO = "eseso"
+"""The name that runs the protocol on the ESESO's thrust noise (alone on the command line;
+its results under the results file's ``eseso`` key)."""
+
+
+def tune_command(args: Any) -> int:
+    """``python -m validation tune``: ``eseso`` alone runs :func:`main`, every other
+    variant :func:`validation.tuning.main` (``--list`` names both)."""
+    if args.variants == [ESESO]:
+        return main(args.budget, Path(args.out) if args.out else None, args.no_tune)
+    status = tuning.main(args)
+    if args.list or not args.variants:
+        print(f"{ESESO:16s} the ESESO's thrust noise (validation/tuning_eseso.py)")
+    return status
