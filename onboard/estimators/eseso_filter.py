@@ -52,8 +52,10 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   learnt, smaller is not (``noise.adapt_updates`` 0 = off).
 * **What ``xi`` is**: the lumped disturbance, the force the thrust model misses: the
   external push plus whatever the model's mass, damping and thrust map get wrong (the
-  paper's definition, and what the AMPC adds to its prediction model). Its sigma is
-  ``P``'s. When the commanded or the damping force changes, ``xi`` changes by the thrust
+  paper's definition, and what the AMPC adds to its prediction model). Its published
+  variance is ``P``'s plus the error variance the thrust innovations show beyond it
+  (:meth:`EsesoFilter.published_disturbance_var`), which never enters ``P``, the gain
+  or ``xi``: a controller's ``xi`` keeps the filter's tuning. When the commanded or the damping force changes, ``xi`` changes by the thrust
   map's or the damping's relative error times the change: with their configured
   one-sigmas that is process noise of ``xi`` (:meth:`EsesoFilter.model_change_var`). On
   a vehicle circling at one speed under a constant push the push cannot be told from a
