@@ -147,3 +147,21 @@ def test_the_objective_penalizes_an_overconfident_sigma() -> None:
     bad = dict(good, speed_cover2=0.80)
     assert T.score(bad) - T.score(good) == pytest.approx(T.COVERAGE_WEIGHT * 0.10)
     assert math.isfinite(T.score(dict(good, heading_cover2=0.0)))
+
+
+def test_the_eseso_protocol_starts_at_the_shipped_thrust_noise_and_penalizes_overconfidence(
+) -> None:
+    """The ESESO's thrust noise by the same protocol (validation/tuning_eseso.py): the
+    start is the shipped defaults (``thrust_std_n`` 0 starts at its floor), the objective
+    charges a 2-sigma coverage below the floor by the common weight (negative control)."""
+    from onboard.core.pipeline_config import EsesoConfig
+    from validation import tuning_eseso as E
+
+    x0 = E.start_point()
+    assert x0 == [math.log10(E.THRUST_STD_OFF),
+                  math.log10(EsesoConfig().process.disturbance_walk_n_rts)]
+    assert all(p.lo <= x <= p.hi for p, x in zip(E.PARAMS, x0))
+    good = {"dist": 0.5, "dist_cover1": 0.68, "dist_cover2": 0.95}
+    assert E.score(good) == pytest.approx(0.5 / E.DIST_SCALE)
+    bad = dict(good, dist_cover2=0.80)
+    assert E.score(bad) - E.score(good) == pytest.approx(T.COVERAGE_WEIGHT * 0.10)

@@ -48,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("tune", help="tune a filter's noise parameters by the common "
                        "protocol and evaluate it on held-out runs (validation/tuning.py)")
     p.add_argument("variants", nargs="*", metavar="VARIANT",
-                   help="aie, kf or an ablation variant (see --list)")
+                   help="aie, kf, an ablation variant or eseso (see --list)")
     p.add_argument("--list", action="store_true", help="list the variants")
     p.add_argument("--budget", type=int, default=None,
                    help="objective evaluations per variant (default: the protocol's)")
@@ -57,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="FILE", help="merge the results into this JSON file")
     p.add_argument("--page", metavar="FILE", help="rewrite the ablation table of this page "
                    "(docs/aie.md) from --out (alone: from docs/tuning.json)")
-    p.set_defaults(handler="validation.tuning:main")
+    p.set_defaults(handler="validation.tuning_eseso:tune_command")
 
     return parser
 

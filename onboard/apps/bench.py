@@ -20,6 +20,10 @@ key                             what                                            
 ``startup_to_ready_s``          process start to READY (s)                                 <= 1.5
 ``mpc_solve_p99_ms``            NMPC solve time on the BlueROV2 circle, p99 (ms)           < 50
 ``pipeline_step_us``            per-pipeline step cost, µs per engine tick (context)       --
+``rov_replay_x_realtime``       simulated seconds of a ``bluerov2-circle`` tlog (50 Hz     >= 200
+                                IMU, 10 Hz thruster commands, the ESESO) that ``onboard
+                                replay --no-plot`` replays per CPU second (median of 3;
+                                ``ONBOARD_BENCH_ROV_MINUTES``, default 10)
 ``batch_log_hours_per_wall_``   ``onboard batch`` throughput: log-hours replayed per       context
 ``minute``                      wall-clock minute with 2 local workers, on
                                 :data:`BATCH_LOGS` copies of a rudder boat's tlog (the
@@ -54,7 +58,8 @@ A piece whose module has not landed (or fails) gives ``null`` in the JSON and
 Environment: ``ONBOARD_BENCH_FAST=1`` shortens everything (a 20 s log, few repeats; for the
 test suite, figures then only show the command works), ``ONBOARD_BENCH_REPEATS=N`` sets the
 number of interleaved replay/parse pairs (default 5), ``ONBOARD_BENCH_MINUTES`` the log
-length (default 15), ``ONBOARD_BENCH_MEMORY_HOURS`` the length of the memory figures' log
+length (default 15), ``ONBOARD_BENCH_ROV_MINUTES`` the ROV log's (default 10),
+``ONBOARD_BENCH_MEMORY_HOURS`` the length of the memory figures' log
 (default 2; 72 s of :func:`synthesize_tlog` when fast), ``ONBOARD_BENCH_DETAIL=FILE``
 writes every raw measurement behind the figures (each pair's CPU and wall times, the
 replay breakdown, the service's extra figures, the memory runs' CPU times) as JSON.
@@ -89,6 +94,7 @@ KEYS: tuple[str, ...] = (
     "startup_to_ready_s",
     "mpc_solve_p99_ms",
     "pipeline_step_us",
+    "rov_replay_x_realtime",
     "batch_log_hours_per_wall_minute",
     "boat_replay_x_realtime",
     "replay_peak_rss_mb",
@@ -111,6 +117,7 @@ GOALS: dict[str, tuple[str, float | None]] = {
     "startup_to_ready_s": ("<=", 1.5),
     "mpc_solve_p99_ms": ("<", 50.0),
     "pipeline_step_us": ("", None),
+    "rov_replay_x_realtime": (">=", 200.0),
     "batch_log_hours_per_wall_minute": ("", None),
     "boat_replay_x_realtime": (">=", 500.0),
     "replay_peak_rss_mb": ("<=", 100.0),
@@ -607,6 +614,47 @@ def bench_pipelines(s: Settings, rep: Report) -> None:
                                "errors": errors}
 
 
+ROV_SCENARIO = "bluerov2-circle"
+"""The simulator scenario of ``rov_replay_x_realtime`` (a BlueROV2 config, the ESESO)."""
+ROV_REPLAYS = 3
+"""Replays of the ROV log whose median CPU time is reported (1 with ``ONBOARD_BENCH_FAST``)."""
+ROV_MINUTES = 10.0
+"""Default length (min) of the ROV log; ``ONBOARD_BENCH_ROV_MINUTES`` overrides it, and
+``ONBOARD_BENCH_FAST`` makes it 20 s."""
+
+
+def bench_rov_replay(s: Settings, workdir: Path, rep: Report) -> None:
+    """``rov_replay_x_realtime``: the log's duration over the median CPU time of a whole
+    ``onboard replay --no-plot`` of a simulated ROV tlog (after a warm-up replay)."""
+    from onboard.cli import main as cli_main
+
+    try:
+        from onboard.sitl.runner import run_to_tlog
+    except ImportError as err:
+        raise NotAvailable(f"no simulator for the ROV log: {err}") from err
+    minutes = float(os.environ.get("ONBOARD_BENCH_ROV_MINUTES") or
+                    (20 / 60 if s.fast else ROV_MINUTES))
+    log, out = workdir / "rov.tlog", workdir / "rov-out"
+    run_to_tlog(ROV_SCENARIO, log, duration=minutes * 60.0, seed=0)
+
+    def one_replay() -> float:
+        c = time.process_time()
+        status = _quiet(lambda: cli_main(["replay", str(log), "--out", str(out), "--no-plot",
+                                          "--force"]))
+        if status != 0:
+            raise RuntimeError(f"onboard replay exited {status}")
+        return time.process_time() - c
+
+    one_replay()  # warm-up: imports and caches are not what is measured
+    cpu = [one_replay() for _ in range(1 if s.fast else ROV_REPLAYS)]
+    summary = json.loads((out / "summary.json").read_text())
+    duration = float(summary["time_span"]["duration_s"])
+    rep.values["rov_replay_x_realtime"] = round(duration / statistics.median(cpu), 1)
+    rep.detail["rov_replay"] = {
+        "scenario": ROV_SCENARIO, "duration_s": duration, "pipelines": summary["pipelines"],
+        "replay_cpu_s": [round(x, 3) for x in cpu], "breakdown_cpu_s": replay_breakdown(log)}
+
+
 BATCH_LOGS = 4
 """Logs in the batch of ``batch_log_hours_per_wall_minute``: copies of one tlog (a batch
 of identical logs keeps the two workers equally loaded)."""
@@ -677,6 +725,8 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
             ("service", SERVICE_KEYS, lambda: bench_service(s, rep)),
             ("MPC solve", ("mpc_solve_p99_ms",), lambda: bench_mpc(s, rep)),
             ("pipeline steps", ("pipeline_step_us",), lambda: bench_pipelines(s, rep)),
+            ("ROV replay", ("rov_replay_x_realtime",),
+             lambda: bench_rov_replay(s, Path(tmp), rep)),
             ("batch throughput", ("batch_log_hours_per_wall_minute",),
              lambda: bench_batch(s, Path(tmp), rep)),
             ("boat replay real-time factor", ("boat_replay_x_realtime",),

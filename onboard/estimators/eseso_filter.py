@@ -32,7 +32,9 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   earth frame whose body components turn with the vehicle (``xi <- Exp(-w dt) xi``,
   ``"earth_fixed"``): a push, a tether or a current drag is earth-fixed, and on the paper's
   2 m circle the body components turn at up to 0.75 rad/s, which a random walk cannot
-  follow.
+  follow. The covariance is propagated by the transition's blocks
+  (:class:`Transition`, :func:`propagate_covariance`; the dense ``F`` is
+  :func:`transition_matrix`, the readable reference).
 * **Updates** (paper eqs. 14, 16), each through :meth:`EsesoFilter.update`, Joseph form,
   with the innovation ``y``, its covariance ``S`` and the NIS of each update kept as an
   :class:`~onboard.core.messages.Innovation` record in :attr:`EsesoFilter.innovations`
@@ -50,8 +52,10 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   learnt, smaller is not (``noise.adapt_updates`` 0 = off).
 * **What ``xi`` is**: the lumped disturbance, the force the thrust model misses: the
   external push plus whatever the model's mass, damping and thrust map get wrong (the
-  paper's definition, and what the AMPC adds to its prediction model). Its sigma is
-  ``P``'s. When the commanded or the damping force changes, ``xi`` changes by the thrust
+  paper's definition, and what the AMPC adds to its prediction model). Its published
+  variance is ``P``'s plus the error variance the thrust innovations show beyond it
+  (:meth:`EsesoFilter.published_disturbance_var`), which never enters ``P``, the gain
+  or ``xi``: a controller's ``xi`` keeps the filter's tuning. When the commanded or the damping force changes, ``xi`` changes by the thrust
   map's or the damping's relative error times the change: with their configured
   one-sigmas that is process noise of ``xi`` (:meth:`EsesoFilter.model_change_var`). On
   a vehicle circling at one speed under a constant push the push cannot be told from a
@@ -224,6 +228,97 @@ class Outcome(enum.Enum):
         return self is not Outcome.GATED
 
 
+@dataclass(frozen=True, slots=True)
+class Transition:
+    """The blocks of one propagation's error-state transition ``F`` (paper eq. 12;
+    algorithms.md §5.1) that are not identity or zero, over ``dt`` (s)::
+
+        F[P, V]  = I dt          F[P, TH] = -R [f]x dt^2/2   F[P, BA] = -R dt^2/2
+        F[P, G]  = I dt^2/2      F[V, TH] = -R [f]x dt       F[V, BA] = -R dt
+        F[V, G]  = I dt          F[TH, TH] = Exp(w dt)^T     F[TH, BG] = -Jr(w dt) dt
+        F[XI, XI] = Exp(w dt)^T  F[XI, BG] = -Exp(w dt)^T [xi]x Jr(-w dt) dt  (earth-fixed)
+        F[BI, BI] = phi_ins I
+
+    Every other diagonal block is the identity (biases, gravity; ``xi`` when body-fixed)
+    and every other off-diagonal block zero. :func:`transition_matrix` is the dense ``F``
+    (the readable reference), :func:`propagate_covariance` applies it by blocks.
+    """
+
+    dt: float
+    """The interval (s)."""
+    R_skew_f: Array
+    """``R [f]x`` (m/s^2): attitude times the skew matrix of the bias-corrected specific
+    force."""
+    R: Array
+    """The body-to-earth rotation at the interval's start."""
+    dRt: Array
+    """``Exp(w dt)^T``."""
+    th_bg: Array
+    """``F[TH, BG] = -Jr(w dt) dt`` (s)."""
+    xi_bg: Array | None
+    """``F[XI, BG]`` (N s) with the earth-fixed disturbance (``F[XI, XI] = Exp(w dt)^T``);
+    None with the body-fixed one (``F[XI, XI] = I``)."""
+    phi_ins: float
+    """The INS bias's decay over ``dt``."""
+
+
+def transition_matrix(tr: Transition) -> Array:
+    """The dense 23 x 23 error-state transition ``F`` of :class:`Transition` (the
+    readable reference of :func:`propagate_covariance`)."""
+    dt = tr.dt
+    F = _I_N.copy()
+    F[P_, V_] = _I3 * dt
+    F[P_, TH] = -0.5 * tr.R_skew_f * dt * dt
+    F[P_, BA] = -0.5 * tr.R * dt * dt
+    F[P_, G_] = 0.5 * _I3 * dt * dt
+    F[V_, TH] = -tr.R_skew_f * dt
+    F[V_, BA] = -tr.R * dt
+    F[V_, G_] = _I3 * dt
+    F[TH, TH] = tr.dRt
+    F[TH, BG] = tr.th_bg
+    if tr.xi_bg is not None:
+        F[XI, XI] = tr.dRt
+        F[XI, BG] = tr.xi_bg
+    F[BI, BI] = _I2 * tr.phi_ins
+    return F
+
+
+def propagate_covariance(P: Array, tr: Transition, q: Array) -> Array:
+    """``F P F^T + diag(q)`` (paper eq. 13) with ``F`` applied by its blocks: as ``F (F
+    P)^T`` (``P`` symmetric), each product changing only the rows of position, velocity,
+    attitude, ``xi`` and the INS bias (:func:`_transition_rows`). Agrees with the dense
+    ``transition_matrix(tr) @ P @ transition_matrix(tr).T`` to rounding (tested to 1e-12)
+    at a fifth of its numpy calls."""
+    out = _transition_rows(_transition_rows(P, tr).T, tr)
+    out.ravel()[:: N_ERR + 1] += q
+    return out
+
+
+_TH_TO_BA = slice(TH.start, BA.stop)
+"""The attitude and accelerometer-bias rows, adjacent (what ``F[V, :]`` mixes in)."""
+_TH_TO_BG = slice(TH.start, BG.stop)
+"""Attitude to gyro bias (what ``F[TH, :]`` mixes in)."""
+_BG_TO_XI = slice(BG.start, XI.stop)
+"""Gyro bias to disturbance (what ``F[XI, :]`` mixes in)."""
+
+
+def _transition_rows(M: Array, tr: Transition) -> Array:
+    """``F M`` for the 23-row ``M``, by blocks: ``F[V, :] M = M[V] + dt (M[G] - [R[f]x,
+    R] M[TH:BA])`` and, since ``F[P, TH:G] = F[V, TH:G] dt / 2``, ``F[P, :] M = M[P] +
+    dt (M[V] + (F M)[V]) / 2``; the attitude, ``xi`` and INS-bias rows by their blocks;
+    the bias and gravity rows unchanged."""
+    dt = tr.dt
+    out = M.copy()
+    v_new = M[V_] + dt * (M[G_] - np.concatenate((tr.R_skew_f, tr.R), axis=1) @ M[_TH_TO_BA])
+    out[P_] += 0.5 * dt * (M[V_] + v_new)
+    out[V_] = v_new
+    out[TH] = tr.dRt @ M[TH] + tr.th_bg @ M[BG]
+    if tr.xi_bg is not None:
+        out[XI] = tr.dRt @ M[XI] + tr.xi_bg @ M[BG]
+    out[BI] *= tr.phi_ins
+    return out
+
+
 class EsesoFilter:
     """The ESESO error-state Kalman filter (module docstring).
 
@@ -246,6 +341,9 @@ class EsesoFilter:
             (1 to ``noise.scale_max``; :meth:`update`).
         process_scale: the variance scale of the IMU's white noise in the propagation
             (1 to ``noise.scale_max``; :data:`PROCESS_ADAPT_CHANNEL`).
+        disturbance_excess: per body axis, the error variance of ``xi`` (N^2) that the
+            thrust innovations show beyond ``P`` (:meth:`_learn_disturbance_excess`); added
+            to the published sigma (:meth:`published_disturbance_var`), not to ``P``.
     """
 
     def __init__(self, params: EsesoParams) -> None:
@@ -265,7 +363,7 @@ class EsesoFilter:
         self.xi = np.zeros(3)
         self.b_ins = np.zeros(2)
         self.P = np.eye(N_ERR)
-        self.F = np.eye(N_ERR)
+        self._transition: Transition | None = None  # the last propagation's (:attr:`F`)
         self.y: Array | None = None
         self.S: Array | None = None
         self.nis: float | None = None
@@ -276,6 +374,8 @@ class EsesoFilter:
         self.process_scale = 1.0
         self._noise_mean: dict[str, float] = {}
         self._model_terms: tuple[Array, Array] | None = None  # (tau, D(nu) nu), last update
+        self.disturbance_excess = np.zeros(3)
+        self._excess_ratio = np.ones(3)  # E[y_i^2] / S_ii of the thrust innovations
         # thrust-update noise (N^2), :meth:`thrust_noise`; updated at every thrust update
         self.R_tau = self.thrust_noise(None)
 
@@ -299,31 +399,38 @@ class EsesoFilter:
     def propagate(self, f_m: Array, w_m: Array, dt: float) -> None:
         """Propagate over ``dt`` (s) driven by the interval's mean specific force ``f_m``
         (m/s^2) and rate ``w_m`` (rad/s), body axes: nominal state by paper eq. (10b),
-        covariance by eqs. (11)-(13) with the Jacobian F of algorithms.md §5.1."""
+        covariance by eqs. (11)-(13) with the Jacobian F of algorithms.md §5.1, its
+        non-identity blocks (:class:`Transition`) applied by :func:`propagate_covariance`."""
         c, n = self.params.process, self.params.noise
         f = f_m - self.b_a
         w = w_m - self.b_g
-        Rf = self.R @ f
-        acc = Rf + self.g
+        acc = self.R @ f + self.g
         dR = exp_so3(w * dt)
         dRt = dR.T
-        F = _I_N.copy()
-        F[P_, V_] = _I3 * dt
-        F[P_, TH] = -0.5 * (self.R @ skew(f)) * dt * dt
-        F[P_, BA] = -0.5 * self.R * dt * dt
-        F[P_, G_] = 0.5 * _I3 * dt * dt
-        F[V_, TH] = -(self.R @ skew(f)) * dt
-        F[V_, BA] = -self.R * dt
-        F[V_, G_] = _I3 * dt
-        F[TH, TH] = dRt
         # exact in the gyro-bias error: Exp((w - db) dt) = Exp(w dt) Exp(-Jr(w dt) db dt)
-        F[TH, BG] = -right_jacobian(w * dt) * dt
-        if c.disturbance_model == "earth_fixed":
-            F[XI, XI] = dRt
-            F[XI, BG] = -(dRt @ skew(self.xi) @ right_jacobian(-w * dt)) * dt
+        Jr = right_jacobian(w * dt)
+        earth_fixed = c.disturbance_model == "earth_fixed"
+        # Jr(-w dt) = Jr(w dt)^T
+        xi_bg = -(dRt @ skew(self.xi) @ Jr.T) * dt if earth_fixed else None
         # INS velocity bias: first-order Gauss-Markov, exact discretization
         phi_ins = math.exp(-dt / n.ins_bias_tau_s) if n.ins_bias_tau_s > 0 else 0.0
-        F[BI, BI] = _I2 * phi_ins
+        tr = Transition(dt, self.R @ skew(f), self.R, dRt, -Jr * dt, xi_bg, phi_ins)
+        q = self._process_noise(dt, phi_ins)
+        # nominal state (10b)
+        self.p = self.p + self.v * dt + 0.5 * acc * dt * dt
+        self.v = self.v + acc * dt
+        self.R = self.R @ dR
+        if earth_fixed:
+            self.xi = dRt @ self.xi
+        self.b_ins = self.b_ins * phi_ins
+        self.P = propagate_covariance(self.P, tr, q)
+        self._transition = tr
+
+    def _process_noise(self, dt: float, phi_ins: float) -> Array:
+        """The diagonal of the discrete process noise ``Q`` over ``dt`` (s) (paper eq. 13):
+        random walks times ``dt``, the IMU's white noise (times :attr:`process_scale`) over
+        the interval, the INS bias's Gauss-Markov variance with decay ``phi_ins``."""
+        c, n = self.params.process, self.params.noise
         q = np.empty(N_ERR)
         q[P_] = c.position_walk_m_rts ** 2 * dt
         q[V_] = (n.accel_std_mps2 * dt) ** 2 * self.process_scale
@@ -333,16 +440,14 @@ class EsesoFilter:
         q[G_] = c.gravity_walk_mps2_rts ** 2 * dt
         q[XI] = c.disturbance_walk_n_rts ** 2 * dt
         q[BI] = n.ins_bias_std_mps ** 2 * (1.0 - phi_ins * phi_ins)
-        # nominal state (10b)
-        self.p = self.p + self.v * dt + 0.5 * acc * dt * dt
-        self.v = self.v + acc * dt
-        self.R = self.R @ dR
-        if c.disturbance_model == "earth_fixed":
-            self.xi = dRt @ self.xi
-        self.b_ins = self.b_ins * phi_ins
-        self.P = F @ self.P @ F.T
-        self.P[np.diag_indices(N_ERR)] += q
-        self.F = F
+        return q
+
+    @property
+    def F(self) -> Array:
+        """The last propagation's error-state transition, dense (:func:`transition_matrix`;
+        the identity before the first)."""
+        tr = self._transition
+        return _I_N.copy() if tr is None else transition_matrix(tr)
 
     # ------------------------------------------------------------------ update
     def update(self, channel: str, y: Array, H: Array, Rm: Array,
@@ -422,6 +527,32 @@ class EsesoFilter:
         scale = min(max(mean, 1.0), ceiling)
         self.noise_scale[channel] = scale
         return scale
+
+    def _learn_disturbance_excess(self, y: Array, S_model: Array) -> None:
+        """Learn :attr:`disturbance_excess` from the thrust innovation ``y`` (N) and its
+        covariance ``S_model = H P H^T + R_tau`` as the filter's model gives it (the
+        configured thrust noise, before the learnt scale and the Huber weight). With
+        ``H[:, XI] = -I`` the innovation carries the prior error of ``xi`` one to one, so
+        covariance matching (Mehra 1972) on each body axis, ``E[y_i^2] = r_i S_ii`` with
+        ``r_i = 1 + D_ii / S_ii``, makes ``y_i^2 / S_ii`` a sample of ``r_i``, and ``D_ii``
+        is the error variance of ``xi`` that ``P`` does not carry (a lumped disturbance
+        moving faster than its process noise allows). ``r_i`` is the exponential mean of
+        its samples over ``noise.adapt_updates`` updates (each capped at
+        :data:`NOISE_SAMPLE_CAP`; a ratio, so the start, whose ``S`` is the initial
+        disturbance sigma's 1600 N^2, weighs no more than any other update), and the
+        excess is ``max(r_i - 1, 0) S_ii`` at this update."""
+        S_ii = np.diag(S_model)
+        sample = np.minimum(y * y / np.maximum(S_ii, 1e-300), NOISE_SAMPLE_CAP)
+        self._excess_ratio += (sample - self._excess_ratio) / self.params.noise.adapt_updates
+        self.disturbance_excess = np.maximum(self._excess_ratio - 1.0, 0.0) * S_ii
+
+    def published_disturbance_var(self) -> Array:
+        """Variance (N^2, body, per axis) of the published lumped disturbance: the
+        covariance's ``P[xi, xi]`` plus :attr:`disturbance_excess`, the error variance
+        the thrust innovations show beyond it. The filter's own gain, and so ``xi``
+        (what a controller consumes), keeps ``P`` alone (docs/eseso-mpc.md, "What the
+        controller needs and what the sigma claims")."""
+        return np.maximum(np.diag(self.P)[XI], 0.0) + self.disturbance_excess
 
     def _adapt_process(self, y: Array, HPHt: Array, Rm: Array) -> None:
         """Scale the IMU's white noise from the DVL innovation ``y`` (a fading factor, Xia
@@ -649,6 +780,7 @@ class EsesoFilter:
         Rm = self.R_tau = self.thrust_noise(wdot_dt)
         HPHt = H @ self.P @ H.T
         if self.params.noise.adapt_updates > 0:  # before the Huber weight (it would learn it)
+            self._learn_disturbance_excess(y, HPHt + Rm)
             Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
         only = XI if self.params.thrust_states == "disturbance" else None
         k = self.params.thrust_huber

@@ -10,10 +10,15 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
 * **IMU**: each sample drives the propagation over the real interval since the previous
   sample (an IMU's delta-velocity / anti-aliased output belongs to the interval ending at
   its stamp); a gap longer than ``max_imu_gap_s`` is propagated as that long (counted
-  ``imu_gap``). Every IMU sample then triggers the thrust update while a thruster command
-  is fresh (``thrusters.command_timeout_s``): the sample's specific force and rate, the angular
-  acceleration from the last two gyro samples, and the thruster force averaged over the
-  sample's interval (commands are held between updates and may change within it).
+  ``imu_gap``). The first IMU sample after a new thruster command triggers the thrust
+  update (while the command is fresh, ``thrusters.command_timeout_s``): the sample's
+  specific force and rate, the angular acceleration from the last two gyro samples, and
+  the thruster force averaged over the sample's interval (commands are held between
+  updates and may change within it). The update runs at the actuator's rate, not the
+  IMU's: the thrust is a measurement (paper eq. 14b) only when the controller sends it
+  (the paper's controller at 20 Hz, its IMU at 50 Hz); a held command fused again at the
+  next IMU sample would count the thrusters' force error (``noise.thrust_std_n``, the
+  same for as long as the command is held) as new information each time.
 * **Thruster commands** (normalized, [-1, 1]) become a body force: the force rows of the
   allocation matrix times the per-thruster forces of the thrust curve
   (``f = f_max c|c|`` for the T200).
@@ -49,9 +54,12 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
   ``dist_north`` ... earth), the force the thrust model misses: the external push plus
   whatever the model's mass, damping and thrust map get wrong, the paper's definition and
   what the AMPC adds to its model; off the design point it is not the push alone.
-* **Published sigmas**: the filter's covariance. The noise scales the filter learns from
-  its innovations are in health (``noise_scale.<channel>``, ``noise_scale.imu``; the
-  thrust channel's too).
+* **Published sigmas**: the filter's covariance; the disturbance's plus the error
+  variance its thrust innovations show beyond that covariance (per body axis, learnt by
+  covariance matching, ``EsesoFilter.disturbance_excess``), which the filter's gain does
+  not use: the ``xi`` a controller consumes keeps its tuning, the sigma says how wrong
+  it is (docs/eseso-mpc.md). The noise scales the filter learns from its innovations are
+  in health (``noise_scale.<channel>``, ``noise_scale.imu``; the thrust channel's too).
 * **Position**: from the first fused GNSS fix (the local origin), or without one from the
   configured start point, then dead-reckoned with the DVL; its std grows without GNSS.
 
@@ -84,7 +92,7 @@ from onboard.core.messages import (
 )
 from onboard.core.pipeline_config import EsesoConfig, EsesoThrustersConfig
 from onboard.core.so3 import euler_to_matrix, matrix_to_euler
-from onboard.estimators.eseso_filter import P_, P_D, V_, XI, EsesoFilter, EsesoParams, Outcome
+from onboard.estimators.eseso_filter import P_, P_D, V_, EsesoFilter, EsesoParams, Outcome
 from onboard.pipelines.base import Pipeline, unused_measurement
 
 Array = NDArray[np.float64]
@@ -291,6 +299,7 @@ class Eseso(Pipeline):
         self.t_tau = -math.inf
         self._tau_source = ""  # source of the last thruster command
         self._tau_hist: list[tuple[float, Array]] = []  # (t, body force) of held commands
+        self._t_tau_fused = -math.inf  # time (s) of the newest command a thrust update used
         self._imu_hist: list[tuple[float, Array, Array]] = []  # last IMU (t, f, w), <= 2
         self.t_sensor: float | None = None
         self._pending_depth: float | None = None
@@ -348,14 +357,16 @@ class Eseso(Pipeline):
         return acc / covered
 
     def _thrust_update_at_imu(self) -> None:
-        """The thrust update for the IMU sample just received (module docstring)."""
+        """The thrust update for the IMU sample just received when a thruster command
+        arrived since the last one (module docstring)."""
         hist = self._imu_hist
-        if len(hist) < 2:
+        if len(hist) < 2 or not self._tau_hist or self._tau_hist[-1][0] <= self._t_tau_fused:
             return
         (t0, _, w0), (t1, f1, w1) = hist[-2:]
         tau = self._tau_mean(t0, t1)
         if tau is None:
             return
+        self._t_tau_fused = self._tau_hist[-1][0]
         outcome = self.filter.update_thrust(f1, w1, (w1 - w0) / (t1 - t0), tau,
                                             wdot_dt=t1 - t0, t=t1, source=self._tau_source)
         if self.filter.downweighted:
@@ -520,8 +531,9 @@ class Eseso(Pipeline):
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         """Consume the samples (time-ordered) and return the estimates at tick ``t`` (s).
 
-        IMU samples propagate the state (and trigger the thrust update while a thruster
-        command is fresh); every other supported sample is one measurement update.
+        IMU samples propagate the state (the first after a new, fresh thruster command
+        triggers the thrust update); every other supported sample is one measurement
+        update.
         """
         for s in samples:
             if isinstance(s, Imu):
@@ -581,8 +593,10 @@ class Eseso(Pipeline):
 
     def _disturbance_std(self) -> Array:
         """One-sigma (N, body) of the lumped disturbance ``xi`` (the external force plus
-        whatever the model gets wrong, module docstring): the filter's covariance."""
-        return np.sqrt(np.maximum(np.diag(self.filter.P)[XI], 0.0))
+        whatever the model gets wrong, module docstring): the filter's covariance plus
+        the excess its thrust innovations show
+        (:meth:`~onboard.estimators.eseso_filter.EsesoFilter.published_disturbance_var`)."""
+        return np.sqrt(self.filter.published_disturbance_var())
 
     def std(self) -> dict[str, float]:
         """One-sigma uncertainties keyed like the values (``std_<q>`` columns -> ``<q>``),

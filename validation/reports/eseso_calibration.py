@@ -42,6 +42,10 @@ AXES = {"velocity": (("u", "u"), ("v", "v"), ("w", "w")),
         "disturbance": (("dist_x", "disturbance_x"), ("dist_y", "disturbance_y"),
                         ("dist_z", "disturbance_z"))}
 """Per quantity, the (estimate column, truth field) of each axis."""
+P_ALONE = "@P"
+"""Suffix of a disturbance column's sigma from the filter's covariance alone (``sqrt(P[xi,
+xi])``, what its gain uses and the published sigma before issue 32's deliverable 7),
+beside the published one (the covariance plus the excess the thrust innovations show)."""
 CHANNELS = {"thrust": 3, "dvl": 3, "attitude": 3, "vog": 2, "depth": 1}
 """The update channels of the NIS columns and their dimensions."""
 BEGIN = "<!-- eseso-calibration:begin -->"
@@ -67,16 +71,30 @@ def _case(name: str) -> Any:
 @cache
 def run(case: str, seed: int, seconds: float = SECONDS) -> dict[str, Any]:
     """One ``bluerov2-circle`` run with the plant and sensors perturbed by ``case`` and the
-    ESESO nominal: ``{"errors": {column: array}, "sigma": {column: array}, "nis":
-    {channel: list}}`` (errors estimate minus truth at the truth records after
-    :data:`AFTER_S`)."""
+    ESESO nominal (``config/bluerov2.toml``): :func:`fly` of a fresh simulation."""
     from onboard.core import config as config_mod
-    from onboard.engine import Engine
-    from onboard.pipelines import eseso as eseso_mod
+
+    return fly(config_mod.load("bluerov2"), case, simulate_case(case, seed, seconds))
+
+
+def simulate_case(case: str, seed: int, seconds: float) -> Any:
+    """The simulator's ``(t, samples, truth)`` steps of ``bluerov2-circle`` perturbed by
+    ``case`` (an iterator: flown as it is consumed)."""
     from onboard.sitl.mismatch import perturb_scenario
     from onboard.sitl.runner import simulate
 
-    cfg = config_mod.load("bluerov2")
+    return simulate(perturb_scenario("bluerov2-circle", _case(case)), seconds, seed=seed)
+
+
+def fly(cfg: Any, case: str, steps: Any) -> dict[str, Any]:
+    """The ESESO of ``cfg`` alone through the engine over the simulated ``steps`` of
+    ``case``: ``{"errors": {column: array}, "sigma": {column: array}, "nis": {channel:
+    list}}`` (errors estimate minus truth at the truth records after :data:`AFTER_S`;
+    each disturbance column's sigma from ``P`` alone under ``column`` + :data:`P_ALONE`)."""
+    from onboard.engine import Engine
+    from onboard.estimators.eseso_filter import XI
+    from onboard.pipelines import eseso as eseso_mod
+
     p = eseso_mod.create(cfg)
     assert p is not None
     eng = Engine(cfg, pipelines=[p])
@@ -84,10 +102,10 @@ def run(case: str, seed: int, seconds: float = SECONDS) -> dict[str, Any]:
     cols = [c for axes in AXES.values() for c, _ in axes]
     err: dict[str, list[float]] = {c: [] for c in cols}
     sig: dict[str, list[float]] = {c: [] for c in cols}
+    sig.update({c + P_ALONE: [] for c, _ in AXES["disturbance"]})
     mismatch = _case(case)
-    scenario = perturb_scenario("bluerov2-circle", mismatch)
     prev = None
-    for t, samples, truth in simulate(scenario, seconds, seed=seed):
+    for t, samples, truth in steps:
         for s in samples:
             eng.push(s)
         if truth is None:
@@ -101,9 +119,11 @@ def run(case: str, seed: int, seconds: float = SECONDS) -> dict[str, Any]:
         for col, field in AXES["velocity"]:
             err[col].append(rec.values[col] - float(getattr(truth, field)))
             sig[col].append(rec.std[col])
+        sig_p = np.sqrt(np.maximum(np.diag(p.filter.P)[XI], 0.0))
         for i, (col, _) in enumerate(AXES["disturbance"]):
             err[col].append(rec.values[col] - lumped[i])
             sig[col].append(rec.std[col])
+            sig[col + P_ALONE].append(float(sig_p[i]))
     nis: dict[str, list[float]] = {}
     for r in records:
         if math.isfinite(r.nis):
@@ -163,16 +183,23 @@ def pooled(case: str, seeds: Sequence[int]) -> dict[str, Any]:
             e = np.concatenate([r["errors"][col] for r in runs])
             s = np.concatenate([r["sigma"][col] for r in runs])
             z = np.abs(e) / np.maximum(s, 1e-12)
-            out["axes"][col] = {"rms": float(np.sqrt(np.mean(e * e))),
-                                "sigma": float(np.sqrt(np.mean(s * s))),
-                                "cover1": float(np.mean(z <= 1.0)),
-                                "cover2": float(np.mean(z <= 2.0))}
+            out["axes"][col] = _scores(e, s)
+            if col + P_ALONE in runs[0]["sigma"]:
+                out["axes"][col + P_ALONE] = _scores(
+                    e, np.concatenate([r["sigma"][col + P_ALONE] for r in runs]))
     for ch, dim in CHANNELS.items():
         v = [x for r in runs for x in r["nis"].get(ch, [])]
         if v:
             lo, hi = chi2_mean_band(len(v), dim)
             out["nis"][ch] = {"mean": float(np.mean(v)), "n": len(v), "lo": lo, "hi": hi}
     return out
+
+
+def _scores(e: Any, s: Any) -> dict[str, float]:
+    """RMS error, RMS sigma and the 1-/2-sigma coverage of errors ``e`` with sigmas ``s``."""
+    z = np.abs(e) / np.maximum(s, 1e-12)
+    return {"rms": float(np.sqrt(np.mean(e * e))), "sigma": float(np.sqrt(np.mean(s * s))),
+            "cover1": float(np.mean(z <= 1.0)), "cover2": float(np.mean(z <= 2.0))}
 
 
 def _cover(c1: float, c2: float) -> str:
@@ -212,6 +239,16 @@ def table(seeds: Sequence[int]) -> str:
         cov += f"| {name} | " + " | ".join(_cover(a[c]["cover1"], a[c]["cover2"])
                                             for axes in AXES.values() for c, _ in axes) + " |\n"
         nis += f"| {name} | " + " | ".join(_nis(p["nis"].get(ch)) for ch in CHANNELS) + " |\n"
+    dist = [c for c, _ in AXES["disturbance"]]
+    own = ("| case | " + " | ".join(f"{c} sigma P / published" for c in dist) + " | "
+           + " | ".join(f"{c} 1σ / 2σ P → published" for c in dist)
+           + " |\n|---|" + "---|" * 6 + "\n")
+    for name, (_, p) in rows.items():
+        a = p["axes"]
+        own += (f"| {name} | " + " | ".join(
+            f"{a[c + P_ALONE]['sigma']:.2f} / {a[c]['sigma']:.2f}" for c in dist) + " | "
+            + " | ".join(_cover(a[c + P_ALONE]["cover1"], a[c + P_ALONE]["cover2"]) + " → "
+                         + _cover(a[c]["cover1"], a[c]["cover2"]) for c in dist) + " |\n")
     nom = rows["nominal"][1]["nis"]
     bands = ", ".join(f"{ch} [{v['lo']:.2f}, {v['hi']:.2f}]" for ch, v in nom.items())
     s = ", ".join(str(x) for x in seeds)
@@ -228,7 +265,12 @@ def table(seeds: Sequence[int]) -> str:
             "0.68 / 0.95; ↓ below 0.6 / 0.9, too confident; ↑ above 0.8 / 0.99, too "
             "timid):\n\n" + cov
             + "\nMean NIS per update channel (dimension), pooled (↑ above, ↓ below the 95 % "
-            "band of its mean; no mark: inside). Nominal bands: " + bands + ".\n\n" + nis)
+            "band of its mean; no mark: inside). Nominal bands: " + bands + ".\n\n" + nis
+            + "\nThe disturbance's sigma from the filter's covariance alone (`sqrt(P[xi, "
+            "xi])`, what its gain and so the controller's `xi` use; the published sigma "
+            "before issue 32) against the published one (plus the error variance the "
+            "thrust innovations show beyond `P`): RMS sigma (N) and coverage, P alone → "
+            "published:\n\n" + own)
 
 
 def _rel_stds() -> str:
