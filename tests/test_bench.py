@@ -27,7 +27,7 @@ def _env() -> dict[str, str]:
 @pytest.mark.integration
 def test_bench_json_prints_exactly_the_contract_keys():
     proc = subprocess.run([sys.executable, "-m", "onboard", "bench", "--json"], env=_env(),
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert list(out) == list(bench.KEYS)
