@@ -17,7 +17,8 @@ order of §2.7::
 
 The rate row's forecast innovation ``z_v = v_fc - y_v`` also drives the covariance matching
 of ``V_u`` (``adaptive_rate_noise``): ``E[z_v^2] = S_v`` with ``S_v = alpha^2 P_vv + c1^2
-V_u + R_v`` affine in ``V_u``.
+V_u + R_v`` affine in ``V_u``, once the rate's own noise has been learned (before, an
+excess of Doppler noise would be taken for an input error).
 
 Each measurement row learns its own noise from its innovations (algorithms.md §6,
 :class:`~onboard.estimators.noise_learning.NoiseScale`): the increment's point noise
@@ -159,13 +160,13 @@ class IncrementFilter:
         else:
             self._consecutive_rejects = 0
             self.nis_avg += RUNNING_MEAN_GAIN * (min(kf.nis, NIS_CLIP) - self.nis_avg)
+            self.noise.observe(kf.z * kf.z, kf.S, kf.R)
             decision = self.input.after_innovation(
                 AxisInnovation(kf, self.rate_z, self.rate_S, self.nis_avg, self.V_u), k,
                 self._u_known(command))
             if decision.diverged:
                 self.after_divergence(k)
             self.V_u = decision.V_u
-            self.noise.observe(kf.z * kf.z, kf.S, kf.R)
             kf.update()
             self.steps += 1
         if y_v is not None:
@@ -214,7 +215,7 @@ class IncrementFilter:
             self._rate_bias2 += RATE_BIAS_POWER_GAIN * (m2 - self._rate_bias2)
             self._c1 = k.c1
             self.rate_noise.observe(z_v * z_v, S_v, R_v)
-            if self.adaptive_rate_noise:
+            if self.adaptive_rate_noise and self.rate_noise.learned:
                 self._match_input_error_var(z_v * z_v - S_v, k.c1)
         return z_v
 

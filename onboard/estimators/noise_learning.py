@@ -6,16 +6,21 @@ noise covariance ``R`` has ``E[z z^T] = H P_f H^T + R``. With ``R = s R_0`` (``R
 declared noise, ``s`` the channel's variance scale) each accepted update gives one sample
 of the scale::
 
-    s_k = (z^T z - tr(H P_f H^T)) / tr(R_0)                (one sample, capped at SAMPLE_MAX)
+    s_k = (min(z^T z, CAP tr(S)) - tr(H P_f H^T)) / tr(R_0)      (one sample)
     m_k = m_{k-1} + (s_k - m_{k-1}) / min(n_k, WINDOW)     (its mean over the last WINDOW)
     s   = clip(m_k, FLOOR, CEILING)   once n_k >= MIN_UPDATES, else the start value
 
-``tr(H P_f H^T)`` is ``tr(S) - tr(R)`` of the update as made, so the filter's own ``S``
+``tr(H P_f H^T)`` is ``tr(S) - tr(R)`` of the update as made, and ``CAP`` clips an
+innovation at 3 sigma (Huber-like: a manoeuvre's model error, an outlier inside the gate,
+must not carry the scale; for Gaussian innovations the clip takes 1.5 % off the mean of
+``z^2``, and a noise far above ``S`` is still approached, by a factor up to ``CAP`` per
+window), so the filter's own ``S``
 and ``R`` are all a channel needs to hand over. A sample is taken only while the
-forecast's share is at most ``FORECAST_SHARE_MAX`` times the noise's: the sample's
-variance is ``2 tr(S)^2 / tr(R_0)^2`` for Gaussian innovations, so a filter still
-converging (``P_f`` many times ``R``: its first updates, a restart) says next to nothing
-about ``R`` and would swamp the mean. The mean moves both ways: a declared noise
+forecast's share is at most ``FORECAST_SHARE_MAX`` times the declared noise's: the
+sample's variance is ``2 tr(S)^2 / tr(R_0)^2`` for Gaussian innovations, so a filter still
+converging (``P_f`` many times ``R_0``: its first updates, a restart) says next to nothing
+about ``R`` and would swamp the mean. (Against the declared, not the learned noise: a
+scale at its floor must still see the samples that lift it.) The mean moves both ways: a declared noise
 three times too large is narrowed as a too small one is widened, within ``[FLOOR,
 CEILING]`` times the declared variance (``FLOOR``: a sigma 0.2 times the declared;
 ``CEILING``: 5 times). Before ``MIN_UPDATES`` samples the scale keeps its start value (1,
@@ -46,12 +51,9 @@ declared."""
 CEILING = 25.0
 """Largest variance scale: a noise learned at most 5 times larger (sigma) than declared."""
 FORECAST_SHARE_MAX = 3.0
-"""A sample is taken only while ``tr(H P_f H^T) <= FORECAST_SHARE_MAX tr(R)``: a sample's
-standard deviation is then at most ``sqrt(2) (1 + FORECAST_SHARE_MAX)`` times the
-scale."""
-SAMPLE_MAX = 100.0
-"""One sample enters the mean at most this large (one outlier inside the gate must not
-carry the scale to its ceiling)."""
+"""A sample is taken only while ``tr(H P_f H^T) <= FORECAST_SHARE_MAX tr(R_0)``."""
+CAP = 9.0
+"""An innovation enters a sample at most as ``z^T z = CAP tr(S)``: 3 sigma."""
 
 
 class NoiseScale:
@@ -84,11 +86,10 @@ class NoiseScale:
         R0 = R_trace / self.scale
         forecast = S_trace - R_trace
         if not (R0 > 0.0 and math.isfinite(innovation_power)
-                and forecast <= FORECAST_SHARE_MAX * R_trace):
+                and forecast <= FORECAST_SHARE_MAX * R0):
             return
-        sample = (innovation_power - forecast) / R0
-        if sample > SAMPLE_MAX:
-            sample = SAMPLE_MAX
+        cap = CAP * S_trace
+        sample = ((innovation_power if innovation_power < cap else cap) - forecast) / R0
         if self.n < WINDOW:
             self.n += 1
         self.mean += (sample - self.mean) / self.n
@@ -100,6 +101,11 @@ class NoiseScale:
     def std(self) -> float:
         """The learned one-sigma (unit of :attr:`unit`): ``declared sqrt(scale)``."""
         return self.declared * math.sqrt(self.scale)
+
+    @property
+    def learned(self) -> bool:
+        """Whether the scale has had its :data:`MIN_UPDATES` samples (or was restored)."""
+        return self.n >= MIN_UPDATES
 
     @property
     def at_bound(self) -> int:
