@@ -1,4 +1,4 @@
-"""Measurement noise learned online, both ways (algorithms.md §6, issue 32): a world whose
+"""Measurement noise learned online, both ways (algorithms.md §8, issue 32): a world whose
 sensors are 3 times quieter or 3 times louder than the unchanged config declares
 (``sitl.scenarios.noise_scaled``) gets sigmas that cover the errors; with the learning off
 (the negative controls) they do not."""
@@ -155,3 +155,24 @@ def test_the_nis_warning_waits_for_the_adaptation_and_names_the_key() -> None:
     between = _learn(1.0, 0.0)
     (msg,) = _nis_warnings(between, 5.0)
     assert "the rest is the forecast's" in msg, msg
+
+
+def test_a_pipeline_starts_where_the_last_run_ended(tmp_path) -> None:
+    from onboard.pipelines import current as current_mod
+    from onboard.service.persistence import StateFile
+
+    cfg = config_mod.load("rudder-boat")
+    first = [aie_mod.create(cfg), current_mod.create(cfg)]
+    first[0].yaw.noise.set_state({"scale": 0.09, "n": 200})          # as if learned
+    first[1].kf.noise["earth"].set_state({"scale": 4.0, "n": 120})
+    sf = StateFile(tmp_path / "adaptive.json", "boat-1", "rudder_boat")
+    sf.save({p.name: p.get_state() for p in first})
+    state = sf.load().state
+    assert state is not None
+    again = [aie_mod.create(cfg), current_mod.create(cfg)]
+    for p in again:
+        p.set_state(state[p.name])
+    assert again[0].yaw.noise.scale == pytest.approx(0.09)
+    assert again[0].health().flat()["noise.heading.increment.std"] == pytest.approx(0.009)
+    assert again[1].kf.noise["earth"].scale == pytest.approx(4.0)
+    assert again[1].kf.noise_std("earth", 0.1) == pytest.approx(0.2)

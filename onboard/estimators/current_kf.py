@@ -34,7 +34,7 @@ compensates is invisible to them (deflating to 0.1 made the spheroid's 1-sigma c
 
 Measurement noise learned both ways: each measurement kind's noise ``R = s std^2 I`` has
 its own variance scale ``s`` learned from its innovations by covariance matching
-(algorithms.md §6, :class:`.NoiseScale`), after the first ``START_UPDATES``.
+(algorithms.md §8, :class:`.NoiseScale`), after the first ``START_UPDATES``.
 
 Model coefficients: their covariance always flows into ``nu_r`` (and so into the current),
 also while they are not being identified (consider parameters: the gain rows of ``theta``

@@ -20,7 +20,7 @@ of ``V_u`` (``adaptive_rate_noise``): ``E[z_v^2] = S_v`` with ``S_v = alpha^2 P_
 V_u + R_v`` affine in ``V_u``, once the rate's own noise has been learned (before, an
 excess of Doppler noise would be taken for an input error).
 
-Each measurement row learns its own noise from its innovations (algorithms.md §6,
+Each measurement row learns its own noise from its innovations (algorithms.md §8,
 :class:`~onboard.estimators.noise_learning.NoiseScale`): the increment's point noise
 ``R = s R_0`` (``noise``) and the rate's ``R_v = s_v R_v0`` (``rate_noise``), both ways.
 """

@@ -1,4 +1,4 @@
-"""Measurement noise learned from a channel's own innovations, both ways (algorithms.md §6).
+"""Measurement noise learned from a channel's own innovations, both ways (algorithms.md §8).
 
 Windowed covariance matching (Mehra 1972; Mohamed & Schwarz 1999, eq. 21): for a filter
 whose forecast covariance is right, the innovation ``z = y - H x_f`` of a measurement of

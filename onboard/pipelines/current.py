@@ -163,7 +163,7 @@ class CurrentPipeline(Pipeline):
         self.identification = _identification(cfg, self.model)
         self.kf = _joint_filter(cfg, self.identification)
         self.noise = _learned_noise(self.kf, cfg, sensors)
-        """The learned noise of the velocity channels (algorithms.md §6)."""
+        """The learned noise of the velocity channels (algorithms.md §8)."""
         self.events: list[str] = []
         """Human-readable events not yet taken (:meth:`take_events`): a restored current
         discarded or confirmed, a start contradicted."""

@@ -219,7 +219,7 @@ class SurgeHeadingPipeline(Pipeline):
         self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg, "surge")
         self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg, "heading")
         self.noise = self._learned_noise()
-        """The learned noise of the three measurement channels (algorithms.md §6)."""
+        """The learned noise of the three measurement channels (algorithms.md §8)."""
         self.commands = CommandHistory()
         self.track = TrackReconstruction(
             self.surge, self.yaw, self.commands, var_fix=self.sigma_p ** 2,

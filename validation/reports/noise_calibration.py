@@ -7,7 +7,9 @@ each noise-scale scenario (``sitl.scenarios.noise_scaled``: every sensor's true 
 ``aie``, ``kf`` and ``current`` pipelines of that unchanged config; per scenario, pooled
 over the seeds after :data:`AFTER_S`, the 1- and 2-sigma coverage of speed, heading and
 current, each channel's mean NIS and the learned noise against the true and the declared,
-and the ``nis_out_of_band`` warnings; printed as the page's Markdown tables.
+and the ``nis_out_of_band`` warnings; printed as the page's Markdown tables. With
+``--summaries DIR/*/replay/summary.json`` (replays of the real logs): the real-log table,
+what each log's channels learned and whether the NIS check still warns.
 """
 
 from __future__ import annotations
@@ -171,6 +173,36 @@ def noise_rows(results: dict[str, Pooled]) -> list[str]:
     return lines
 
 
+def log_rows(summaries: Sequence[str]) -> list[str]:
+    """The real-log table from replays' ``summary.json`` (``onboard replay`` of each log
+    with its config): per log and learning channel of ``aie``/``kf``/``current`` the
+    learned one-sigma over the declared, the mean NIS per dof, and whether
+    ``nis_out_of_band`` was raised about the channel (its message's remedy)."""
+    import json
+    from pathlib import Path
+
+    lines = ["| log | channel | learned / declared σ | mean NIS / dof | warned |",
+             "|---|---|---|---|---|"]
+    for path in summaries:
+        doc = json.loads(Path(path).read_text())
+        name = Path(path).parent.parent.name if Path(path).parent.name == "replay" \
+            else Path(path).parent.name
+        health, inn = doc.get("pipeline_health", {}), doc.get("innovations", {})
+        warned = {(w.get("pipeline", ""), w["message"].split(":")[0].split(" ", 1)[-1])
+                  for w in doc.get("warnings", []) if w["code"] == "nis_out_of_band"}
+        for p in ("aie", "kf", "current"):
+            for key, scale in sorted(health.get(p, {}).items()):
+                if not (key.startswith("noise.") and key.endswith(".scale")):
+                    continue
+                ch = key[len("noise."):-len(".scale")]
+                h = inn.get(p, {}).get(ch, {})
+                nis = h.get("nis_mean")
+                nis_s = f"{nis / h.get('dof', 1):.2f}" if nis is not None else "-"
+                lines.append(f"| {name} | {p} {ch} | {math.sqrt(scale):.2f} | {nis_s} | "
+                             f"{'yes' if (p, ch) in warned else 'no'} |")
+    return lines
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Print both tables. Returns 0."""
     from onboard.sitl import scenarios
@@ -179,7 +211,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=list(HELD_OUT_SEEDS))
     ap.add_argument("--duration", type=float, default=None)
     ap.add_argument("--only", default="noise-", help="scenario name prefix")
+    ap.add_argument("--summaries", nargs="+", metavar="SUMMARY_JSON",
+                    help="print the real-log table of these replays' summary.json instead")
     a = ap.parse_args(argv)
+    if a.summaries:
+        print("\n".join(log_rows(a.summaries)))
+        return 0
     names = [n for n in scenarios.names() if n.startswith(a.only)]
     results = run_family(a.seeds, a.duration, names)
     print("\n".join(coverage_rows(results)))
