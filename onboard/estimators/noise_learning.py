@@ -7,10 +7,19 @@ declared noise, ``s`` the channel's variance scale) each accepted update gives o
 of the scale::
 
     s_k = (min(z^T z, CAP tr(S)) - tr(H P_f H^T)) / tr(R_0)      (one sample)
-    m_k = m_{k-1} + (s_k - m_{k-1}) / min(n_k, WINDOW)     (its mean over the last WINDOW)
-    s   = clip(m_k, FLOOR, CEILING)   once n_k >= MIN_UPDATES, else the start value
+    f_k = tr(H P_f H^T) / tr(R_0)                                  (the forecast's share)
+    m_k = m_{k-1} + (s_k - m_{k-1}) / min(n_k, WINDOW)     (their means over the last
+    f_k = f_{k-1} + (f_k - f_{k-1}) / min(n_k, WINDOW)      WINDOW updates)
+    s   = clip(1 into [m_k - TRUST f_k, m_k + TRUST f_k], FLOOR, CEILING)
+          once n_k >= MIN_UPDATES, else the start value
 
-``tr(H P_f H^T)`` is ``tr(S) - tr(R)`` of the update as made, and ``CAP`` clips an
+The matching takes the forecast covariance as right, and an error ``e`` of it moves
+straight into ``R`` (``E[s_k] = s + e f``): with the forecast a large share of ``S`` (the
+Doppler row of a boat, the current's velocity rows) a forecast 20 % too timid would halve
+the learned noise. So the declared noise is kept unless the innovations contradict it by
+more than a forecast error of ``TRUST`` (25 %) explains: the scale is the value nearest its
+start value (1, or the scale a previous run ended with) within ``m_k +- TRUST f_k``. ``tr(H P_f H^T)`` is ``tr(S) - tr(R)`` of the
+update as made, and ``CAP`` clips an
 innovation at 3 sigma (Huber-like: a manoeuvre's model error, an outlier inside the gate,
 must not carry the scale; for Gaussian innovations the clip takes 1.5 % off the mean of
 ``z^2``, and a noise far above ``S`` is still approached, by a factor up to ``CAP`` per
@@ -52,6 +61,10 @@ CEILING = 25.0
 """Largest variance scale: a noise learned at most 5 times larger (sigma) than declared."""
 FORECAST_SHARE_MAX = 3.0
 """A sample is taken only while ``tr(H P_f H^T) <= FORECAST_SHARE_MAX tr(R_0)``."""
+TRUST = 0.25
+"""Relative error of the forecast covariance taken as possible: the learned scale moves
+from its start value (the declared noise, or the one restored) only as far as the
+innovations contradict it beyond that."""
 CAP = 9.0
 """An innovation enters a sample at most as ``z^T z = CAP tr(S)``: 3 sigma."""
 
@@ -67,9 +80,11 @@ class NoiseScale:
         scale: the variance scale in use (``R = scale R_0``).
         n: samples taken (capped at :data:`WINDOW`).
         mean: their windowed mean (unclipped).
+        forecast: the windowed mean of the forecast's share ``f_k``.
     """
 
-    __slots__ = ("channel", "key", "declared", "unit", "scale", "n", "mean", "_start")
+    __slots__ = ("channel", "key", "declared", "unit", "scale", "n", "mean", "forecast",
+                 "_start")
 
     def __init__(self, channel: str, key: str, declared: float, unit: str) -> None:
         self.channel = channel
@@ -79,6 +94,7 @@ class NoiseScale:
         self.scale = self._start = 1.0
         self.n = 0
         self.mean = 1.0
+        self.forecast = 0.0
 
     def observe(self, innovation_power: float, S_trace: float, R_trace: float) -> None:
         """One accepted update: ``innovation_power = z^T z``, ``S_trace = tr(S)`` and
@@ -93,8 +109,10 @@ class NoiseScale:
         if self.n < WINDOW:
             self.n += 1
         self.mean += (sample - self.mean) / self.n
+        self.forecast += (forecast / R0 - self.forecast) / self.n
         if self.n >= MIN_UPDATES:
-            m = self.mean
+            slack = TRUST * self.forecast
+            m = min(max(self._start, self.mean - slack), self.mean + slack)
             self.scale = FLOOR if m < FLOOR else CEILING if m > CEILING else m
 
     @property
@@ -112,11 +130,11 @@ class NoiseScale:
         """+1 at the ceiling, -1 at the floor, 0 between (or not moved yet)."""
         if self.n < MIN_UPDATES:
             return 0
-        return 1 if self.mean >= CEILING else -1 if self.mean <= FLOOR else 0
+        return 1 if self.scale >= CEILING else -1 if self.scale <= FLOOR else 0
 
     def get_state(self) -> dict[str, float]:
         """What to persist: the scale and the samples behind it."""
-        return {"scale": self.scale, "n": self.n}
+        return {"scale": self.scale, "n": self.n, "forecast": self.forecast}
 
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restore :meth:`get_state`: a finite scale within ``[FLOOR, CEILING]`` becomes
@@ -129,6 +147,8 @@ class NoiseScale:
         if math.isfinite(s) and FLOOR <= s <= CEILING and n >= 0:
             self.scale = self.mean = self._start = s
             self.n = min(n, WINDOW)
+            f = state.get("forecast", 0.0)
+            self.forecast = float(f) if isinstance(f, (int, float)) and f >= 0.0 else 0.0
 
 
 class ChannelNoise:
