@@ -145,6 +145,7 @@ class CurrentKalmanFilter:
         counters: its event counts (:class:`FilterCounters`).
         noise: per measurement kind its learned noise scale (:class:`.NoiseScale`; the
             owner may replace them with ones that name their configuration keys).
+        learn_noise: whether the updates teach them (the owner may turn it off).
     """
 
     def __init__(self, identification: ModelIdentification, *, init_current_std: float,
@@ -195,6 +196,7 @@ class CurrentKalmanFilter:
         self.started = False
         self.noise: dict[str, NoiseScale] = {
             k: NoiseScale(k, "", 0.0, "m/s") for k in ("earth", "bottom", "water")}
+        self.learn_noise = True
         self._blk_y, self._blk_S, self._blk_n = np.zeros(nd), np.zeros((nd, nd)), 0
         self._eye_n = np.eye(n)
         self._H0 = _unrotated_measurement_matrices(nd, n)
@@ -492,7 +494,7 @@ class CurrentKalmanFilter:
             self._project_drag()
         self._unpack_coefficients()
         self.counters.updates += 1
-        if self.started and self.counters.updates > START_UPDATES:
+        if self.learn_noise and self.started and self.counters.updates > START_UPDATES:
             self.noise[kind].observe(float(up.y @ up.y), float(np.trace(up.S)),
                                      m * std * std)
         if self.calibrate and self.started and m == self.nd:

@@ -731,7 +731,10 @@ def _identification(cfg: CurrentConfig, model: RegressionModel) -> ModelIdentifi
 def _learned_noise(kf: CurrentKalmanFilter, cfg: CurrentConfig,
                    sensors: Any) -> ChannelNoise:
     """One :class:`.NoiseScale` per measurement kind of ``kf``, named by its channel and
-    the configuration key that declares its noise, given to ``kf`` which learns it."""
+    the configuration key that declares its noise, given to ``kf`` which learns it; not on
+    a glider (``[pipelines.current.glider]``): its velocities come from its flight model
+    and a DVL whose errors last a dive, not white, and the matching does not hold (learned,
+    the Kolumbo current got worse than zero north, 0.21 -> 0.27 m/s)."""
     gnss = (("[pipelines.current] gnss_velocity_std_mps", cfg.gnss_velocity_std_mps)
             if cfg.gnss_velocity_std_mps else
             ("[sensors.gnss] velocity_std_mps", sensors.gnss.velocity_std_mps))
@@ -740,6 +743,7 @@ def _learned_noise(kf: CurrentKalmanFilter, cfg: CurrentConfig,
            ("[sensors.dvl] velocity_std_mps", sensors.dvl.velocity_std_mps))
     for kind, (key, std) in (("earth", gnss), ("bottom", dvl), ("water", dvl)):
         kf.noise[kind] = NoiseScale(CHANNELS[kind], key, std, "m/s")
+    kf.learn_noise = cfg.glider is None
     return ChannelNoise(list(kf.noise.values()))
 
 
