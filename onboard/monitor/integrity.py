@@ -3,7 +3,7 @@
 The pipelines fuse what they are given; nothing inside a filter can see that a sensor is
 misaligned or that its own covariance has stopped meaning anything. This module watches
 from beside the engine, fed at every tick with the samples handed to the pipelines, the
-published records and the innovation records, and runs four checks:
+published records and the innovation records, and runs five checks:
 
 * **heading against course over ground** (:class:`HeadingCourseCheck`): while the vehicle
   moves (GNSS speed above :data:`HEADING_MIN_SPEED_MPS`), the circular mean of
@@ -496,7 +496,7 @@ class Declared(Protocol):
 
 
 class IntegrityMonitor:
-    """The four checks of one run and their flags (module docstring).
+    """The five checks of one run and their flags (module docstring).
 
     Attributes:
         flags: pipeline -> the codes of the checks it fails now.
