@@ -148,8 +148,10 @@ def _nis_warnings(scale: NoiseScale, nis: float) -> list[str]:
 
 
 def test_the_nis_warning_waits_for_the_adaptation_and_names_the_key() -> None:
-    learning = NoiseScale("x", "[sensors.x] std", 1.0, "m")
+    learning = _learn(0.3, 0.0, n=10)
     assert _nis_warnings(learning, 0.05) == []                     # still adapting
+    idle = NoiseScale("x", "[sensors.x] std", 1.0, "m")            # nothing to learn from
+    assert len(_nis_warnings(idle, 0.05)) == 1
     at_floor = _learn(0.01, 0.0)
     (msg,) = _nis_warnings(at_floor, 0.05)
     assert "at its floor: set [sensors.x] std = 0.2" in msg, msg

@@ -793,10 +793,12 @@ class IntegrityMonitor:
         return report(channel) if report is not None else None
 
     def _adapted(self, pipeline: str, channel: str) -> bool:
-        """Whether the channel's NIS may be judged: its noise is not learned, or has had
-        its samples (an NIS out of band first drives the adaptation)."""
+        """Whether the channel's NIS may be judged: its noise is not learned, has had its
+        samples, or had none to learn from (an NIS out of band first drives the
+        adaptation; a channel whose forecast always dominates adapts nothing)."""
         learned = self._learned(pipeline, channel)
-        return learned is None or bool(getattr(learned, "learned", True))
+        return (learned is None or bool(getattr(learned, "learned", True))
+                or getattr(learned, "n", 0) == 0)
 
     def _nis_remedy(self, pipeline: str, channel: str, above: bool) -> str:
         """What to change: the learned noise's key and value when it sits at its bound on

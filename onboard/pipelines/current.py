@@ -744,7 +744,7 @@ def _learned_noise(kf: CurrentKalmanFilter, cfg: CurrentConfig,
     for kind, (key, std) in (("earth", gnss), ("bottom", dvl), ("water", dvl)):
         kf.noise[kind] = NoiseScale(CHANNELS[kind], key, std, "m/s")
     kf.learn_noise = cfg.glider is None
-    return ChannelNoise(list(kf.noise.values()))
+    return ChannelNoise(list(kf.noise.values()) if kf.learn_noise else [])
 
 
 def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification) -> CurrentKalmanFilter:
