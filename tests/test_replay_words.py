@@ -52,8 +52,13 @@ def test_shenzhen_headline_counts_withheld_outputs_apart_from_rejected_inputs(
     rows = summary["withheld_rows"]["current"]
     assert summary["withheld"]["pipeline:current:flagged"] > rows > 0
     assert not any(k.startswith("pipeline:") for k in summary["rejected"])
+    # since issue 32 the heading/course check withholds the aie/kf heading and positions
+    # too, on the same rows
+    w = summary["withheld_rows"]
+    assert w["aie"] == w["kf"] == rows
     assert lines[0].startswith("text log, 579.2 s, 5,794 samples, 0 rejected; "
-                               f"5,793 rows (current withheld on {rows:,}) -> ")
+                               f"5,793 rows (aie withheld on {rows:,}; current withheld on "
+                               f"{rows:,}; kf withheld on {rows:,}) -> ")
 
 
 def test_the_headline_sums_reader_and_engine_rejections_but_not_pipeline_failures():
