@@ -46,7 +46,7 @@ from onboard.core.errors import OutputFailed, UsageError
 from onboard.core.outputs import Output, check as check_outputs
 from onboard.sitl.emitters import PtySink, Sink, TcpServerSink, TlogSink, open_link
 from onboard.sitl.guidance import Controller
-from onboard.sitl.runner import run
+from onboard.sitl.runner import jsonable, run
 from onboard.sitl.scenarios import SCENARIOS, Scenario, get
 
 DEFAULT_LINK = "udp:127.0.0.1:14550"
@@ -224,7 +224,7 @@ def main(args: argparse.Namespace) -> int:
                 if key in report["controller_report"]:
                     report[key] = report["controller_report"][key]
         try:
-            Path(args.report).write_text(json.dumps(_jsonable(report), indent=2,
+            Path(args.report).write_text(json.dumps(jsonable(report), indent=2,
                                                     allow_nan=False) + "\n")
         except OSError as err:  # checked before the run: a full disk, a removed folder
             raise OutputFailed(f"--report {args.report}: cannot write: "
@@ -232,14 +232,3 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _jsonable(obj: Any) -> Any:
-    """A report as strict JSON: numpy values as Python ones, NaN and infinities as null."""
-    if hasattr(obj, "tolist"):
-        obj = obj.tolist()
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj

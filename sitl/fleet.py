@@ -311,6 +311,8 @@ def write_fleet(fleet: Fleet, out: str | Path, seed: int = 0,
     ``fleet.json``, whose content is returned. Vehicle i runs with seed ``seed + i``:
     byte-identical for the same arguments. A vehicle launched after ``duration_s`` is
     left out."""
+    from onboard.sitl.runner import jsonable
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     dur = fleet.duration_s if duration_s is None else float(duration_s)
@@ -323,7 +325,7 @@ def write_fleet(fleet: Fleet, out: str | Path, seed: int = 0,
     (out / "field-grid.json").write_text(json.dumps(grid, separators=(",", ":")) + "\n")
     manifest = {"fleet": fleet.name, "description": fleet.description, "seed": seed,
                 "utc0": fleet.utc0, "duration_s": dur, "origin_deg": list(fleet.sea.origin),
-                "field": _jsonable(fleet.sea.describe()), "vehicles": entries,
+                "field": jsonable(fleet.sea.describe()), "vehicles": entries,
                 "truth_current": "truth-current.csv", "field_grid": "field-grid.json"}
     (out / "fleet.json").write_text(json.dumps(manifest, indent=2) + "\n")
     return manifest
@@ -380,16 +382,6 @@ def _axis(lo: float, hi: float) -> np.ndarray:
     a = math.floor(lo / GRID_STEP_M) * GRID_STEP_M
     b = math.ceil(hi / GRID_STEP_M) * GRID_STEP_M
     return np.arange(a, b + 1e-9, GRID_STEP_M)
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def read_manifest(out: str | Path) -> dict[str, Any]:

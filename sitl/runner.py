@@ -467,3 +467,16 @@ def read_truth(path: str | Path) -> list[TruthRecord]:
     dec = msgspec.json.Decoder(TruthRecord)
     with open(path, "rb") as f:
         return [dec.decode(line) for line in f if line.strip()]
+
+
+def jsonable(obj: Any) -> Any:
+    """A report as strict JSON: numpy values as Python ones, NaN and infinities as null."""
+    if hasattr(obj, "tolist"):
+        obj = obj.tolist()
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

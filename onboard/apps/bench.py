@@ -374,17 +374,11 @@ BOAT_REPLAYS = 3
 """Replays of the bench's log timed for :func:`bench_boat_realtime` (1 in the fast mode)."""
 
 
-def bench_boat_realtime(s: Settings, workdir: Path, rep: Report) -> None:
-    """``boat_replay_x_realtime``: simulated seconds of the rudder-boat tlog per CPU
-    second of the whole ``onboard replay LOG --no-plot`` in this process (the log of
-    :func:`bench_replay` when it is there), median of :data:`BOAT_REPLAYS` after a
-    warm-up; the detail has each replay's CPU seconds."""
+def replays_cpu(log: Path, out: Path, n: int) -> tuple[dict, list[float]]:
+    """The CPU seconds of ``n`` whole ``onboard replay LOG --no-plot`` in this process after
+    a warm-up one (imports and caches are not what is measured), and the last one's
+    summary.json."""
     from onboard.cli import main as cli_main
-
-    log = workdir / "bench.tlog"
-    if not log.exists():
-        make_tlog(log, s.minutes * 60.0)
-    out = workdir / "boat-out"
 
     def one_replay() -> float:
         c = time.process_time()
@@ -394,9 +388,21 @@ def bench_boat_realtime(s: Settings, workdir: Path, rep: Report) -> None:
             raise RuntimeError(f"onboard replay exited {status}")
         return time.process_time() - c
 
-    one_replay()  # warm-up: imports and caches are not what is measured
-    cpu = [one_replay() for _ in range(1 if s.fast else BOAT_REPLAYS)]
-    duration = json.loads((out / "summary.json").read_text())["time_span"]["duration_s"]
+    one_replay()
+    cpu = [one_replay() for _ in range(n)]
+    return json.loads((out / "summary.json").read_text()), cpu
+
+
+def bench_boat_realtime(s: Settings, workdir: Path, rep: Report) -> None:
+    """``boat_replay_x_realtime``: simulated seconds of the rudder-boat tlog per CPU
+    second of the whole ``onboard replay LOG --no-plot`` in this process (the log of
+    :func:`bench_replay` when it is there), median of :data:`BOAT_REPLAYS` after a
+    warm-up; the detail has each replay's CPU seconds."""
+    log = workdir / "bench.tlog"
+    if not log.exists():
+        make_tlog(log, s.minutes * 60.0)
+    summary, cpu = replays_cpu(log, workdir / "boat-out", 1 if s.fast else BOAT_REPLAYS)
+    duration = float(summary["time_span"]["duration_s"])
     rep.values["boat_replay_x_realtime"] = round(duration / statistics.median(cpu), 1)
     rep.detail["boat_replay"] = {"duration_s": duration,
                                  "replay_cpu_s": [round(x, 3) for x in cpu]}
@@ -626,8 +632,6 @@ ROV_MINUTES = 10.0
 def bench_rov_replay(s: Settings, workdir: Path, rep: Report) -> None:
     """``rov_replay_x_realtime``: the log's duration over the median CPU time of a whole
     ``onboard replay --no-plot`` of a simulated ROV tlog (after a warm-up replay)."""
-    from onboard.cli import main as cli_main
-
     try:
         from onboard.sitl.runner import run_to_tlog
     except ImportError as err:
@@ -637,17 +641,7 @@ def bench_rov_replay(s: Settings, workdir: Path, rep: Report) -> None:
     log, out = workdir / "rov.tlog", workdir / "rov-out"
     run_to_tlog(ROV_SCENARIO, log, duration=minutes * 60.0, seed=0)
 
-    def one_replay() -> float:
-        c = time.process_time()
-        status = _quiet(lambda: cli_main(["replay", str(log), "--out", str(out), "--no-plot",
-                                          "--force"]))
-        if status != 0:
-            raise RuntimeError(f"onboard replay exited {status}")
-        return time.process_time() - c
-
-    one_replay()  # warm-up: imports and caches are not what is measured
-    cpu = [one_replay() for _ in range(1 if s.fast else ROV_REPLAYS)]
-    summary = json.loads((out / "summary.json").read_text())
+    summary, cpu = replays_cpu(log, out, 1 if s.fast else ROV_REPLAYS)
     duration = float(summary["time_span"]["duration_s"])
     rep.values["rov_replay_x_realtime"] = round(duration / statistics.median(cpu), 1)
     rep.detail["rov_replay"] = {
