@@ -17,25 +17,7 @@ from onboard.core.messages import EstimateRecord
 from onboard.apps.demo import main, run_demo, score
 from onboard.apps.service_bench import free_tcp_port
 from onboard.sitl.truth import TruthRecord
-
-MAX_LATE_S = 1.0
-"""A live demo whose simulator fell further behind the shared clock than this (simulated
-s; the demo warns) could not keep up with its speed on a loaded machine: it is run again
-at half the speed, down to ``MIN_SPEED``, so that the accuracy checks look at a run that
-kept up (as tests/test_faults.py does), or at the slowest one."""
-MIN_SPEED = 2.5
-
-
-def demo_that_kept_up(*args, speed: float = 10.0, **kwargs):
-    """``run_demo(*args, speed=speed, **kwargs)``, run again slower while it fell behind;
-    (the result, what it printed)."""
-    while True:
-        out = io.StringIO()
-        res = asyncio.run(run_demo(*args, speed=speed, out=out,
-                                   router_endpoint=f"tcp/127.0.0.1:{free_tcp_port()}", **kwargs))
-        if not res.sim_late_s > MAX_LATE_S or speed / 2 < MIN_SPEED:
-            return res, out.getvalue()
-        speed /= 2
+from tests.helpers.live_demo import demo_that_kept_up
 
 
 @pytest.mark.integration

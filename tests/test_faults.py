@@ -18,8 +18,8 @@ test_an_unplugged_input_is_reported_and_picked_up_again_while_the_service_runs``
 Every bound is set from a measured figure, written beside it (measured on the 2-core
 development VM with other jobs running; SITL seed 1). Timing is never asserted: the
 deadlines below only stop a hung test. A SITL run on a machine too busy for its speed
-(the simulator or the service more than ``MAX_LATE_S`` behind the shared clock, as the
-demo reports it) is flown again slower: at load 18-19 on 2 cores the runs needed 2.5-5x
+(the simulator or the service more than ``MAX_LATE_S`` of :mod:`tests.helpers.live_demo`
+behind the shared clock, as the demo reports it) is flown again slower: at load 18-19 on 2 cores the runs needed 2.5-5x
 instead of 10-20x, and passed.
 """
 
@@ -43,6 +43,7 @@ from onboard.drivers.recording import read_records
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.apps.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
+from tests.helpers.live_demo import demo_that_kept_up
 from tests.helpers.service_config import service_config
 
 pytestmark = pytest.mark.integration
@@ -51,37 +52,19 @@ REPO = Path(__file__).resolve().parent.parent
 SPEED = 10.0
 """Simulated seconds per wall second in the SITL fault tests."""
 TIMEOUT = 180.0
-MAX_LATE_S = 1.0
-"""A SITL run whose simulator or service fell further behind the shared clock than this
-(simulated s) could not keep up with its speed (a loaded machine): it is flown again at
-half the speed (down to ``MIN_SPEED``); the checks always look at a run that kept up,
-or at the slowest one flown."""
-MIN_SPEED = 2.5
 
 
 # --------------------------------------------------------------------------- helpers
 
 
 def _fly(scenario: str, duration_s: float, tmp_path: Path, speed: float = SPEED):
-    """Fly ``scenario`` through the service; (DemoResult, truth by round(10 t)).
-
-    A run that fell behind the shared clock by more than ``MAX_LATE_S`` (the simulator's
-    emission or the service's ticks: the machine was too busy for ``speed``) is flown
-    again at half the speed, down to ``MIN_SPEED``."""
-    from onboard.apps.demo import run_demo
+    """Fly ``scenario`` through the service; (DemoResult, truth by round(10 t)), flown
+    again slower while the machine could not keep up (:mod:`tests.helpers.live_demo`)."""
     from onboard.sitl.runner import read_truth
 
-    while True:
-        res = asyncio.run(asyncio.wait_for(run_demo(
-            scenario, duration_s, speed=speed, out_dir=tmp_path, out=None, keep_state=False,
-            router_endpoint=f"tcp/127.0.0.1:{free_tcp_port()}",
-            mavlink_out=f"udpout:127.0.0.1:{free_udp_port()}"), TIMEOUT * max(1.0, SPEED / speed)))
-        late = max(res.sim_late_s, res.service_late_s)
-        print(f"{scenario} at {speed:g}x: simulator {res.sim_late_s:.2f} s, service "
-              f"{res.service_late_s:.2f} s behind the clock at worst")
-        if not late > MAX_LATE_S or speed / 2 < MIN_SPEED:
-            break
-        speed /= 2
+    res, _ = demo_that_kept_up(scenario, duration_s, speed=speed, out_dir=tmp_path,
+                               keep_state=False,
+                               mavlink_out=f"udpout:127.0.0.1:{free_udp_port()}")
     truth = {round(tr.t * 10): tr for tr in read_truth(tmp_path / "truth.jsonl")}
     return res, truth
 
