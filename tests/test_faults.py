@@ -309,6 +309,10 @@ def test_gnss_outage_uncertainty_grows(gnss_outage):
     assert _median(early) < _median(late) < 10.0
 
 
+DIVE_RATE_MPS = 0.25
+"""The fastest descent of fault-gnss-submerged's AUV after 15 s (truth: 0.245 m/s at 15-17 s)."""
+
+
 def test_gnss_under_water_is_rejected_and_counted_estimates_continue(tmp_path):
     """fault-gnss-submerged: a torpedo AUV dives from the surface; its receiver keeps
     reporting (wrong) fixes at 1 Hz. Every fix below the surface depth is rejected as
@@ -336,8 +340,13 @@ def test_gnss_under_water_is_rejected_and_counted_estimates_continue(tmp_path):
     assert ticks > 0.5 * 230 and n / ticks > 0.9  # measured 1.00-1.01 (202 at 200 ticks)
     nav = _series(res, truth, "nav")
     depth_err = _max(abs(v["depth"] - tr.down) for t, v, tr in nav if t > 15.0 and "depth" in v)
-    print(f"nav depth error under water {depth_err:.3f} m")
-    assert depth_err < 0.2  # measured 0.07 m (depth sensor 0.02 m noise, 10 Hz)
+    # a tick takes the depth samples that arrived before it: a simulator running behind
+    # the shared clock delivers them late, and the vehicle, diving at up to
+    # DIVE_RATE_MPS, is deeper by then (measured 0.07 m when on time; 0.24 m with the
+    # simulator 0.73 s behind on a loaded 2-core runner)
+    allowed = 0.1 + DIVE_RATE_MPS * res.sim_late_s
+    print(f"nav depth error under water {depth_err:.3f} m (allowed {allowed:.3f} m)")
+    assert depth_err < allowed
 
 
 @pytest.fixture(scope="module")

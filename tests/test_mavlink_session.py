@@ -12,7 +12,9 @@ import pytest
 from onboard.drivers.mavlink import MavlinkParser
 from onboard.drivers.mavlink_link import AutopilotLink
 from onboard.core.config import SourceConfig, load
-from onboard.service.mavlink_session import MavlinkSession
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from onboard.service.mavlink_session import PARAM_TRIES, PARAMETERS, MavlinkSession
 from onboard.sitl.runner import Simulation, autopilot_for
 
 
@@ -41,11 +43,33 @@ class Loop:
         return True
 
 
-def run(duration: float, *, down: tuple[float, float] | None = None, **options):
+class LossyLoop(Loop):
+    """A link that loses the first ``lose`` PARAM_REQUEST_READs of each named parameter
+    and counts every parameter request sent."""
+
+    def __init__(self, lose: dict[str, int]) -> None:
+        super().__init__()
+        self.lose = dict(lose)
+        self.asked: Counter[str] = Counter()
+        self._mav = mavlink2.MAVLink(None)
+
+    def send(self, data: bytes) -> bool:
+        for m in self._mav.parse_buffer(data) or []:
+            if m.get_type() == "PARAM_REQUEST_READ":
+                self.asked[m.param_id] += 1
+                if self.lose.get(m.param_id, 0) > 0:
+                    self.lose[m.param_id] -= 1
+                    return True
+            self.inbox += m.get_msgbuf()
+        return True
+
+
+def run(duration: float, *, down: tuple[float, float] | None = None, loop: Loop | None = None,
+        **options):
     """Fly jaiabot-turns with the session asking; returns (session, link, events,
     samples per source in the last 10 s)."""
     sim = Simulation("jaiabot-turns", 1)
-    loop = Loop()
+    loop = loop or Loop()
     ap = autopilot_for(sim, [loop], **options)
     cfg = load("rudder-boat")
     link = AutopilotLink()
@@ -94,6 +118,17 @@ def test_firmware_without_message_interval_falls_back_to_request_data_stream():
         assert abs(rates[f"autopilot/{name}:received"] - hz) <= 0.1 * hz, (name, rates)
     # ArduPilot's RAW_SENSORS group carries the IMU as RAW_IMU (decoded for ArduPilot)
     assert late["mavlink:1/RAW_IMU"] == pytest.approx(500, abs=2)
+
+
+def test_a_parameter_request_lost_on_the_link_is_asked_again_and_the_asking_stops():
+    loop = LossyLoop({"SERVO3_FUNCTION": 2})
+    _, link, _, _ = run(10.0, loop=loop)
+    assert link.params["SERVO3_FUNCTION"] == 70.0  # answered at the third request
+    assert loop.asked["SERVO3_FUNCTION"] == PARAM_TRIES
+    assert loop.asked["SERVO1_FUNCTION"] == 1  # answered at once, never asked again
+    # a name the autopilot does not have is left unanswered: asked PARAM_TRIES times only
+    missing = [p for p in PARAMETERS if p not in link.params]
+    assert missing and all(loop.asked[p] == PARAM_TRIES for p in missing), loop.asked
 
 
 def test_reboot_and_lost_link_restart_the_requests():

@@ -15,7 +15,8 @@ on USB and most TELEM ports) until a ground station asks. For each MAVLink input
    of that group needs;
 3. reads the parameters that say which servo output is which actuator
    (PARAM_REQUEST_READ of ``SERVOn_FUNCTION``, ``FRAME_CLASS``): they reach the engine as
-   Parameter samples, in the recording too;
+   Parameter samples, in the recording too; one not answered within ``PARAM_RETRY_S`` is
+   asked again, ``PARAM_TRIES`` requests in all;
 4. confirms that the streams arrive: every ``RATE_WINDOW_S`` the rate received per
    message; a message below half its requested rate ``CHECK_AFTER_S`` after it was
    accepted is asked for again (and reported once), up to ``MAX_REASKS`` times, then
@@ -87,6 +88,11 @@ goes out as RAW_IMU with the same scaling); the fallback asks for RAW_SENSORS fo
 
 PARAMETERS = tuple(f"SERVO{n}_FUNCTION" for n in range(1, 17)) + ("FRAME_CLASS",)
 """Parameters read from the autopilot (the actuator mapping, as replay reads it from a log)."""
+PARAM_RETRY_S = 2.0
+PARAM_TRIES = 3
+"""A parameter not answered ``PARAM_RETRY_S`` after its request is asked again, up to
+``PARAM_TRIES`` requests in all (a request or its answer lost on a UDP link; ArduPilot
+leaves a name it does not have unanswered, so the asking stops)."""
 
 
 def needed_streams(cfg: Config, src: SourceConfig) -> dict[str, float]:
@@ -184,6 +190,8 @@ class MavlinkSession:
     _legacy_sent: dict[int, float] = field(default_factory=dict)
     _next_sync: float = -math.inf
     _syncs: int = 0
+    _params_asked: dict[str, tuple[float, int]] = field(default_factory=dict)
+    """Parameter -> (when last asked, requests sent) since the session (re)started."""
 
     def __post_init__(self) -> None:
         self._mav = mavlink2.MAVLink(None, srcSystem=self.cfg.vehicle.system_id,
@@ -226,6 +234,7 @@ class MavlinkSession:
         self._acks()
         self._rates(now)
         self._send_due(now)
+        self._read_params(now)
         if now >= self._next_sync:
             self._syncs += 1
             self._next_sync = now + (SYNC_FIRST_S if self._syncs < 3 else SYNC_PERIOD_S)
@@ -250,13 +259,25 @@ class MavlinkSession:
         if expect and link.mav_type not in expect and why == "found":
             self.on_event(f"{self.name}: the autopilot says MAV_TYPE {link.mav_type}, "
                           f"the configuration class {vclass} (expected {sorted(expect)})")
+        self._params_asked.clear()
         if self.src.request_streams:
-            for p in PARAMETERS:
-                self._send(self._mav.param_request_read_encode(  # type: ignore[union-attr]
-                    link.system_id, link.component_id, p.encode(), -1))
+            self._read_params(now)
         else:
             for st in self.streams.values():
                 st.state, st.t_accepted = "accepted", now
+
+    def _read_params(self, now: float) -> None:
+        """Ask for every parameter not yet answered whose last request is due again."""
+        if not self.src.request_streams:
+            return
+        link = self.link
+        for name in PARAMETERS:
+            t_sent, tries = self._params_asked.get(name, (-math.inf, 0))
+            if tries == 0 or (name not in link.params and tries < PARAM_TRIES
+                              and now - t_sent >= PARAM_RETRY_S):
+                self._params_asked[name] = (now, tries + 1)
+                self._send(self._mav.param_request_read_encode(  # type: ignore[union-attr]
+                    link.system_id, link.component_id, name.encode(), -1))
 
     def _acks(self) -> None:
         acks = self.link.acks
