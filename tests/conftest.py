@@ -7,7 +7,9 @@ Real field logs are looked up in $ONBOARD_DATA or ../shared/data. Every test not
 ``make test`` runs the suite on every core (pytest-xdist, ``--dist loadscope``). One worker
 runs each module whole (its module-scoped fixtures are computed once), and the modules of
 ``FIGURE_RUN_MODULES`` together (they read the same memoised simulator runs,
-``validation.reports.runs``, which a second worker would fly again).
+``validation.reports.runs``, which a second worker would fly again). The units are handed
+out longest first (``LONGEST_FIRST``, then by their number of tests), so that a long
+module does not start last and leave the other workers idle at the end.
 """
 
 from __future__ import annotations
@@ -25,6 +27,20 @@ FIGURE_RUN_MODULES = frozenset({"test_figures", "test_aie_sitl", "test_closed_lo
 default suite's figures recompute the AIE, current, closed-loop and diagnosis runs these
 modules assert on): one unit of work for pytest-xdist, so each run is flown once."""
 FIGURE_RUN_GROUP = "figure-runs"
+
+LONGEST_FIRST = (FIGURE_RUN_GROUP, "test_faults", "test_demo", "test_real_logs",
+                 "test_autopilot_streams", "test_diagnose_real", "test_batch", "test_bench",
+                 "test_diagnose_roundtrip", "test_systemd_unit", "test_declination",
+                 "test_mcap", "test_gpsd")
+"""The units of work that take longest (``--durations`` of the default suite: the figure
+runs several minutes, test_faults two to three, test_demo one; the rest 20-60 s), handed
+out first; the others follow by their number of tests, as pytest-xdist orders them."""
+
+
+def _unit(item: pytest.Item) -> str:
+    """The unit of work an item belongs to: its module, or the figure runs' group."""
+    stem = Path(str(item.fspath)).stem
+    return FIGURE_RUN_GROUP if stem in FIGURE_RUN_MODULES else stem
 
 
 def shared_data_dir() -> Path | None:
@@ -47,10 +63,17 @@ def shared_data() -> Path:
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark every test that is not an integration test as a unit test."""
+    """Mark every test that is not an integration test as a unit test; order the units of
+    work longest first (``LONGEST_FIRST``; a stable sort: the tests within a unit keep
+    their order)."""
     for item in items:
         if item.get_closest_marker("integration") is None:
             item.add_marker(pytest.mark.unit)
+    counts: dict[str, int] = {}
+    for item in items:
+        counts[_unit(item)] = counts.get(_unit(item), 0) + 1
+    rank = {u: i for i, u in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda it: (rank.get(_unit(it), len(rank)), -counts[_unit(it)], _unit(it)))
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -60,6 +83,8 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log):
     if config.getvalue("dist") != "loadscope":
         return None
     from xdist.scheduler import LoadScopeScheduling
+
+    config.option.loadscopereorder = False  # the collection is in order already
 
     class _Scheduling(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
