@@ -92,6 +92,15 @@ SIGMA_DOWN_BOUNDS = (1e-3, 1.0)
 """Bounds (m/s) of the down component's spread in its fit."""
 MIN_FIT_DOWN = 12
 """Fewer super-observations with a down than this keep its spread as it is."""
+MIN_FIT_VEHICLES = 3
+"""Super-observations of fewer vehicles than this keep the hyperparameters as they are:
+with two, every difference between them may be one vehicle's slowly wandering error, and
+the likelihood says so (on the simulator's fleet-channel, two vehicles fitted a 76 m
+length scale, a 0.016 m/s spread and a 530 s error correlation: sigmas a third of the
+misses)."""
+MAX_POSITION_STD_M = 200.0
+"""A record whose position sigma exceeds this (m per axis; an AUV dead reckoned for
+hours) is not placed: not an observation."""
 
 
 NORTH, EAST, DOWN = 0, 1, 2
@@ -131,11 +140,14 @@ class Observation:
     std_east: float
     down: float | None = None
     std_down: float | None = None
+    position_std_m: float | None = None
 
 
 def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
     """The observation a ``current`` record makes, or None and why not (``no_time``,
-    ``no_position``, ``no_current``, ``no_std``, ``not_converged``, ``too_fast``). Its
+    ``no_position``, ``position_uncertain`` (its ``position_std_m`` above
+    :data:`MAX_POSITION_STD_M`), ``no_current``, ``no_std``, ``not_converged``,
+    ``too_fast``). Its
     ``down`` (and ``std_down``) only where the record gives a finite one with a converged
     sigma (a boat's record has none: it is absent, never 0)."""
     v, sd = rec.values, rec.std
@@ -143,6 +155,9 @@ def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
         return None, "no_time"
     if rec.lat_deg is None or rec.lon_deg is None:
         return None, "no_position"
+    p = rec.position_std_m
+    if p is not None and not p <= MAX_POSITION_STD_M:
+        return None, "position_uncertain"
     n, e = v.get("north"), v.get("east")
     if n is None or e is None or not (math.isfinite(n) and math.isfinite(e)):
         return None, "no_current"
@@ -157,7 +172,7 @@ def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
     if d is None or s_d is None or not (math.isfinite(d) and 0.0 < s_d <= MAX_STD_MPS):
         d = s_d = None
     return Observation(rec.vehicle, rec.utc, rec.lat_deg, rec.lon_deg, n, e, s_n, s_e,
-                       d, s_d), ""
+                       d, s_d, p), ""
 
 
 class Prediction(NamedTuple):
@@ -205,7 +220,8 @@ class SuperObs(NamedTuple):
     ``t_ref``; ``y`` (n, 3) current north, east, down (m/s; down NaN in a window
     without one); ``s`` (n, 3) their sigmas;
     ``vehicle`` (n,) an integer per vehicle; ``utc`` (n,) the UTC (s); ``keys`` (vehicle
-    id, window number) of each."""
+    id, window number) of each; ``place`` (n,) the RMS of its records' position sigmas
+    (m per axis; 0 where they gave none)."""
 
     x: np.ndarray
     y: np.ndarray
@@ -213,12 +229,13 @@ class SuperObs(NamedTuple):
     vehicle: np.ndarray
     utc: np.ndarray
     keys: list[tuple[str, int]]
+    place: np.ndarray
 
     def take(self, pick: np.ndarray) -> "SuperObs":
         """The super-observations ``pick`` selects (a boolean mask or indices)."""
         idx = np.flatnonzero(pick) if pick.dtype == bool else pick
         return SuperObs(self.x[idx], self.y[idx], self.s[idx], self.vehicle[idx],
-                        self.utc[idx], [self.keys[i] for i in idx])
+                        self.utc[idx], [self.keys[i] for i in idx], self.place[idx])
 
 
 def signal_corr(h: Hyper, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
@@ -234,6 +251,17 @@ def error_cov(h: Hyper, t: np.ndarray, vehicle: np.ndarray, s: np.ndarray) -> np
     same = vehicle[:, None] == vehicle[None, :]
     corr = np.exp(-np.abs(t[:, None] - t[None, :]) / h.tau_s)
     return (h.scale ** 2) * np.outer(s, s) * corr * same + h.white ** 2 * np.eye(len(t))
+
+
+def place_variance(sigma_f: float, length_m: float, place: np.ndarray) -> np.ndarray:
+    """The variance (m^2/s^2) a position sigma ``place`` (m per axis) adds to an
+    observation of a component of spread ``sigma_f`` (m/s) and length scale ``length_m``:
+    the mean square of the field's difference between the true and the reported place,
+    ``E[(c(x + d) - c(x))^2] = 2 sigma_f^2 place^2 / (l_s^2 + place^2)`` for ``d`` normal
+    of ``place`` per axis (0 for a fix-placed window; up to ``2 sigma_f^2``, an
+    observation that says nothing, for one lost far beyond the length scale)."""
+    p2 = place ** 2
+    return 2.0 * sigma_f ** 2 * p2 / (length_m ** 2 + p2)
 
 
 class CurrentField:
@@ -284,7 +312,7 @@ class CurrentField:
         key = (obs.vehicle, math.floor(obs.utc / self.thin_s))
         acc = self._bins.get(key)
         if acc is None:
-            acc = self._bins[key] = [0.0] * 11
+            acc = self._bins[key] = [0.0] * 12
             self._vehicles.setdefault(obs.vehicle, len(self._vehicles))
         acc[0] += 1.0
         acc[1] += obs.utc
@@ -298,6 +326,8 @@ class CurrentField:
             acc[8] += 1.0
             acc[9] += obs.down
             acc[10] += obs.std_down ** 2
+        if obs.position_std_m is not None:
+            acc[11] += obs.position_std_m ** 2
         self.added += 1
         return True
 
@@ -343,7 +373,7 @@ class CurrentField:
         y = np.column_stack([mean[:, 3:5], down[:, 0]])
         s = np.column_stack([np.sqrt(acc[:, 6:8] / n), np.sqrt(down[:, 1])])
         return SuperObs(x, y, s, np.array([self._vehicles[k[0]] for k in keys]), mean[:, 0],
-                        keys)
+                        keys, np.sqrt(acc[:, 11] / n[:, 0]))
 
     def update(self, obs: SuperObs | None, hyperparameters: bool = True) -> None:
         """Fit the hyperparameters to ``obs`` by marginal likelihood when asked and there
@@ -359,10 +389,11 @@ class CurrentField:
         has_down = np.isfinite(obs.y[:, 2])
         mean = np.r_[obs.y[:, :2].mean(axis=0),
                      obs.y[has_down, 2].mean() if has_down.any() else 0.0]
-        if hyperparameters and len(obs.y) >= MIN_FIT:
+        if hyperparameters and len(obs.y) >= MIN_FIT and _vehicles(obs) >= MIN_FIT_VEHICLES:
             self.hyper, self.log_likelihood = fit_hyper(
                 self.hyper, _fitting_sample(obs, self._rng), mean)
-        if hyperparameters and has_down.sum() >= MIN_FIT_DOWN:
+        if hyperparameters and has_down.sum() >= MIN_FIT_DOWN and \
+                _vehicles(obs.take(has_down)) >= MIN_FIT_VEHICLES:
             self.sigma_down = fit_sigma_down(
                 self.hyper, _fitting_sample(obs.take(has_down), self._rng), mean[2],
                 self.sigma_down)
@@ -468,18 +499,23 @@ class Fitted:
     def krige_component(self, x: np.ndarray, idx: np.ndarray, c: int, sigma_f: float
                         ) -> tuple[float, float]:
         """Component ``c`` (:data:`NORTH`, :data:`EAST`, :data:`DOWN`) of spread
-        ``sigma_f`` at ``x`` from the super-observations ``idx``: its mean and sigma."""
+        ``sigma_f`` at ``x`` from the super-observations ``idx``: its mean and sigma
+        (down's mean unknown: :func:`gls_mean`)."""
         from scipy.linalg import cho_factor, cho_solve
 
         obs, h = self.obs, self.hyper
         xs = obs.x[idx]
         kc = sigma_f ** 2 * signal_corr(h, xs, xs)
         ks = sigma_f ** 2 * signal_corr(h, x[None, :], xs)[0]
-        factor = cho_factor(kc + error_cov(h, xs[:, 2], obs.vehicle[idx], obs.s[idx, c]),
-                            lower=True)
-        alpha = cho_solve(factor, obs.y[idx, c] - self.mean[c])
-        var = max(sigma_f ** 2 - float(ks @ cho_solve(factor, ks)), 0.0)
-        return float(self.mean[c] + ks @ alpha), math.sqrt(var)
+        ke = error_cov(h, xs[:, 2], obs.vehicle[idx], obs.s[idx, c]) + \
+            np.diag(place_variance(sigma_f, h.length_m, obs.place[idx]))
+        factor = cho_factor(kc + ke, lower=True)
+        y, mean, var_mean = obs.y[idx, c], self.mean[c], 0.0
+        if c == DOWN:
+            mean, var_mean = gls_mean(factor, ks, y)
+        alpha = cho_solve(factor, y - mean)
+        var = max(sigma_f ** 2 - float(ks @ cho_solve(factor, ks)), 0.0) + var_mean
+        return float(mean + ks @ alpha), math.sqrt(var)
 
     def is_outlier(self, i: int) -> bool:
         """Whether super-observation ``i`` is further than :data:`OUTLIER_SIGMA` sigmas
@@ -491,11 +527,27 @@ class Fitted:
         if len(set(obs.vehicle[idx].tolist())) < JUDGES:
             return False
         p = self.krige(obs.x[i], idx)
-        for c, (m, sd) in enumerate(((p.north, p.std_north), (p.east, p.std_east))):
-            var = sd ** 2 + (h.scale * obs.s[i, c]) ** 2 + h.white ** 2
+        for c, (m, sd), sigma_f in ((NORTH, (p.north, p.std_north), h.sigma_north),
+                                    (EAST, (p.east, p.std_east), h.sigma_east)):
+            var = sd ** 2 + (h.scale * obs.s[i, c]) ** 2 + h.white ** 2 + \
+                float(place_variance(sigma_f, h.length_m, obs.place[i]))
             if abs(obs.y[i, c] - m) > OUTLIER_SIGMA * math.sqrt(var):
                 return True
         return False
+
+
+def gls_mean(factor, ks: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """The constant mean of ``y`` unknown (a vague prior): its generalized-least-squares
+    estimate ``beta = 1' K^-1 y / 1' K^-1 1`` from the neighbourhood (``factor``: the
+    Cholesky factor of ``K``) and the variance its uncertainty adds to a prediction with
+    signal covariance ``ks``, ``(1 - 1' K^-1 ks)^2 / 1' K^-1 1`` (Rasmussen and Williams
+    2006, eq. 2.42): a component few vehicles give (down, often from one vehicle) cannot
+    take its mean as known."""
+    from scipy.linalg import cho_solve
+
+    k1 = cho_solve(factor, np.ones(len(y)))
+    w = float(k1.sum())
+    return float(k1 @ y) / w, (1.0 - float(ks @ k1)) ** 2 / w
 
 
 def one_blas_thread():
@@ -515,6 +567,11 @@ def one_blas_thread():
     return threadpool_limits(limits=1, user_api="blas")
 
 
+def _vehicles(obs: SuperObs) -> int:
+    """How many vehicles ``obs`` come from."""
+    return len(np.unique(obs.vehicle))
+
+
 def _fitting_sample(obs: SuperObs, rng: np.random.Generator) -> SuperObs:
     """At most :data:`FIT_MAX` super-observations: runs of :data:`FIT_RUN` consecutive
     ones of one vehicle from random starts (all of them when they are few)."""
@@ -527,11 +584,13 @@ def _fitting_sample(obs: SuperObs, rng: np.random.Generator) -> SuperObs:
     return obs.take(np.unique(order[pos[pos < n]]))
 
 
-def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray
-                   ) -> tuple[float, np.ndarray]:
+def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray,
+                   placed: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """The negative marginal log-likelihood of ``obs`` (both components) at
     ``theta`` (the logarithms of :class:`Hyper`'s fields) and its gradient in ``theta``
-    (Rasmussen and Williams 2006, eq. 5.9: ``1/2 tr((alpha alpha' - K^-1) dK)``)."""
+    (Rasmussen and Williams 2006, eq. 5.9: ``1/2 tr((alpha alpha' - K^-1) dK)``);
+    ``placed`` (n, 2): each observation's :func:`place_variance` per component, held
+    fixed (None: none)."""
     from scipy.linalg import cho_factor, cho_solve
 
     h = Hyper(*np.exp(theta))
@@ -547,6 +606,8 @@ def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray
         kc = sigma_f ** 2 * corr
         ve = np.outer(obs.s[:, c], obs.s[:, c]) * same * h.scale ** 2
         k = kc + ve + h.white ** 2 * eye
+        if placed is not None:
+            k = k + np.diag(placed[:, c])
         try:
             factor = cho_factor(k, lower=True)
         except np.linalg.LinAlgError:
@@ -565,13 +626,19 @@ def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray
 def fit_hyper(start: Hyper, obs: SuperObs, mean: np.ndarray) -> tuple[Hyper, float]:
     """The hyperparameters that maximize the marginal likelihood of ``obs``, from
     ``start`` (scipy's L-BFGS-B in the logarithms, within :meth:`Hyper.bounds`), and the
-    log-likelihood reached; ``start`` kept when the fit fails."""
+    log-likelihood reached; ``start`` kept when the fit fails. The variance a window's
+    position sigma adds (:func:`place_variance`) is computed at ``start`` and held fixed
+    through the fit (the next fit, a minute later, starts from this one's result)."""
     from scipy.optimize import minimize
 
     bounds = [(math.log(lo), math.log(hi)) for lo, hi in Hyper.bounds()]
     theta0 = np.clip(np.log(np.array(start)), [b[0] for b in bounds], [b[1] for b in bounds])
-    res = minimize(log_likelihood, theta0, args=(obs, mean), jac=True, method="L-BFGS-B",
-                   bounds=bounds, options={"maxiter": 50})
+    placed = None
+    if np.any(obs.place > 0):
+        placed = np.column_stack([place_variance(sf, start.length_m, obs.place)
+                                  for sf in (start.sigma_north, start.sigma_east)])
+    res = minimize(log_likelihood, theta0, args=(obs, mean, placed), jac=True,
+                   method="L-BFGS-B", bounds=bounds, options={"maxiter": 50})
     if not np.all(np.isfinite(res.x)) or res.fun >= 1e10:
         return start, float("nan")
     return Hyper(*map(float, np.exp(res.x))), -float(res.fun)
@@ -584,7 +651,8 @@ def down_nll(log_sigma: float, h: Hyper, obs: SuperObs, mean_down: float) -> flo
 
     sigma_f = math.exp(log_sigma)
     k = sigma_f ** 2 * signal_corr(h, obs.x, obs.x) + \
-        error_cov(h, obs.x[:, 2], obs.vehicle, obs.s[:, DOWN])
+        error_cov(h, obs.x[:, 2], obs.vehicle, obs.s[:, DOWN]) + \
+        np.diag(place_variance(sigma_f, h.length_m, obs.place))
     try:
         factor = cho_factor(k, lower=True)
     except np.linalg.LinAlgError:
