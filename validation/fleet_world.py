@@ -197,7 +197,8 @@ def describe(fig: dict | None) -> str:
 
 
 def spread(per_seed: list[dict]) -> None:
-    """Each vehicle's figures over the seeds: median and range."""
+    """Each vehicle's figures over the seeds: median and range (a seed changes the
+    sensors' noise and so each vehicle's own error, not the sea or the tracks)."""
     for key in sorted({k for f in per_seed for k in f}):
         got = [f[key] for f in per_seed if key in f]
         rms = np.array([np.atleast_1d(g["rms"]) for g in got])
@@ -205,9 +206,9 @@ def spread(per_seed: list[dict]) -> None:
         parts = [f"{len(got)} seeds"]
         for k, name in enumerate(("north", "east") if rms.shape[1] == 2 else ("down",)):
             parts.append(f"RMS {name} {np.median(rms[:, k]):.3f} "
-                         f"({rms[:, k].min():.3f}-{rms[:, k].max():.3f})")
+                         f"({rms[:, k].min():.3f}-{rms[:, k].max():.3f}) m/s")
         parts.append(f"coverage {np.median(cov):.2f} ({cov.min():.2f}-{cov.max():.2f})")
-        print(f"over the seeds, {key[0]}, {key[1]}: " + ", ".join(parts) + " m/s")
+        print(f"over the seeds, {key[0]}, {key[1]}: " + ", ".join(parts))
 
 
 def main(argv: list[str] | None = None) -> int:

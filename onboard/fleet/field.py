@@ -491,22 +491,26 @@ class Fitted:
     def krige(self, x: np.ndarray, idx: np.ndarray) -> Prediction:
         """The Gaussian-process mean and sigma of north and east at ``x`` from the
         super-observations ``idx`` (module docstring), per component."""
-        h = self.hyper
-        (n, s_n), (e, s_e) = (self.krige_component(x, idx, c, sigma_f)
+        h, xs = self.hyper, self.obs.x[idx]
+        corr = (signal_corr(h, xs, xs), signal_corr(h, x[None, :], xs)[0])
+        (n, s_n), (e, s_e) = (self.krige_component(x, idx, c, sigma_f, corr)
                               for c, sigma_f in ((NORTH, h.sigma_north), (EAST, h.sigma_east)))
         return Prediction(n, e, s_n, s_e, int(idx.size))
 
-    def krige_component(self, x: np.ndarray, idx: np.ndarray, c: int, sigma_f: float
+    def krige_component(self, x: np.ndarray, idx: np.ndarray, c: int, sigma_f: float,
+                        corr: tuple[np.ndarray, np.ndarray] | None = None
                         ) -> tuple[float, float]:
         """Component ``c`` (:data:`NORTH`, :data:`EAST`, :data:`DOWN`) of spread
         ``sigma_f`` at ``x`` from the super-observations ``idx``: its mean and sigma
-        (down's mean unknown: :func:`gls_mean`)."""
+        (down's mean unknown: :func:`gls_mean`); ``corr``: the signal correlations among
+        them and with ``x`` when already computed."""
         from scipy.linalg import cho_factor, cho_solve
 
         obs, h = self.obs, self.hyper
         xs = obs.x[idx]
-        kc = sigma_f ** 2 * signal_corr(h, xs, xs)
-        ks = sigma_f ** 2 * signal_corr(h, x[None, :], xs)[0]
+        if corr is None:
+            corr = (signal_corr(h, xs, xs), signal_corr(h, x[None, :], xs)[0])
+        kc, ks = sigma_f ** 2 * corr[0], sigma_f ** 2 * corr[1]
         ke = error_cov(h, xs[:, 2], obs.vehicle[idx], obs.s[idx, c]) + \
             np.diag(place_variance(sigma_f, h.length_m, obs.place[idx]))
         factor = cho_factor(kc + ke, lower=True)
