@@ -39,7 +39,9 @@ from onboard.sitl.current_field import (
     LambOseenEddy, SeaField, TanhFront, TidalChannel, UniformFlow, VehicleCurrent)
 from onboard.sitl.emitters import DEFAULT_EPOCH_S, FileSink, TlogSink
 from onboard.sitl.environment import Environment
-from onboard.sitl.guidance import AuvAutopilot, BoatAutopilot, Controller, HeadingSchedule, Leg
+from onboard.sitl.guidance import (
+    AuvAutopilot, BoatAutopilot, ControlInput, Controller, HeadingSchedule, Leg)
+from onboard.sitl.plants.base import Command
 from onboard.sitl.plants.twin_thruster import TwinThrusterParams
 from onboard.sitl.scenarios import (
     NOMINAL_BOAT, Initial, Scenario, SCENARIOS, _auv, _effect_sensors, _rudder_boat,
@@ -75,7 +77,9 @@ class FleetVehicle:
     length, a loiter's lap); ``speed`` (m/s) through the water; ``start_delay_s`` after
     the fleet's start; ``clock_offset_s``: its logging computer's clock minus UTC (the
     telemetry log's stamps; GNSS time stays true); ``boot_age_s``: its autopilot booted
-    that long before its start."""
+    that long before its start; ``surface_s`` (an AUV): it starts at the surface and
+    runs there that long, its GNSS antenna out of the water, before it dives (0: it
+    starts at its depth, with no fix ever)."""
 
     id: str
     kind: str
@@ -90,6 +94,7 @@ class FleetVehicle:
     start_delay_s: float = 0.0
     clock_offset_s: float = 0.0
     boot_age_s: float = 0.0
+    surface_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -156,8 +161,27 @@ def _controller(v: FleetVehicle) -> Callable[[], Controller]:
         speed = _speed_to_command(lambda c: p.steady_speed(2.0 * p.thrust(c * p.n_max)))
         return lambda: BoatAutopilot(boat_legs(v), speed, steering="skid", kp=0.8, ki=0.02,
                                      kd=0.3, steer_limit=0.6, initial_heading=v.heading)
-    return lambda: AuvAutopilot(rpm=1500.0 * v.speed / 1.5, depth_m=AUV_DEPTH_M,
-                                schedule=auv_schedule(v))
+    def auv() -> Controller:
+        pilot = AuvAutopilot(rpm=1500.0 * v.speed / 1.5, depth_m=AUV_DEPTH_M,
+                             schedule=auv_schedule(v))
+        return SurfaceThenDive(pilot, v.surface_s) if v.surface_s > 0 else pilot
+    return auv
+
+
+class SurfaceThenDive:
+    """An AUV's mission start as a real one flies it: afloat at the surface, propeller
+    stopped and fins centred, for ``surface_s`` seconds (its GNSS antenna out of the
+    water: fixes), then its autopilot, which dives it. (Started at cruise speed at the
+    surface, the simulated torpedo pitches up and planes instead of diving.)"""
+
+    def __init__(self, pilot: AuvAutopilot, surface_s: float) -> None:
+        self.pilot, self.surface_s = pilot, surface_s
+        self.rate_hz = pilot.rate_hz
+
+    def __call__(self, inp: ControlInput) -> Command:
+        if inp.t < self.surface_s:
+            return Command(propeller_rpm=0.0, rudder_rad=0.0, stern_plane_rad=0.0)
+        return self.pilot(inp)
 
 
 def vehicle_scenario(fleet: Fleet, v: FleetVehicle) -> Scenario:
@@ -168,8 +192,10 @@ def vehicle_scenario(fleet: Fleet, v: FleetVehicle) -> Scenario:
     if v.kind == "torpedo-auv":
         base = SCENARIOS["gavia-tidal"]
         vehicle, sensors = _auv("torpedo"), base.sensors
-        initial = Initial(north=v.start_north, east=v.start_east, down=AUV_DEPTH_M,
-                          yaw=v.heading, u=v.speed)
+        afloat = v.surface_s > 0
+        initial = Initial(north=v.start_north, east=v.start_east,
+                          down=0.0 if afloat else AUV_DEPTH_M, yaw=v.heading,
+                          u=0.0 if afloat else v.speed)
         bottom = base.bottom_depth_m
     else:
         vehicle = _rudder_boat(NOMINAL_BOAT) if v.kind == "rudder-boat" else _twin_thruster()
@@ -215,17 +241,18 @@ CHANNEL_VEHICLES = (
                  start_delay_s=20.0, clock_offset_s=-2.5, boot_age_s=610.0),
     FleetVehicle("auv-1", "torpedo-auv", "lawnmower", 13, start_north=-50.0,
                  start_east=200.0, heading=-60 * DEG, leg_s=40.0, speed=1.5,
-                 start_delay_s=40.0, clock_offset_s=1.25, boot_age_s=120.0),
+                 start_delay_s=40.0, clock_offset_s=1.25, boot_age_s=120.0, surface_s=30.0),
 )
 
 
 DEMO_VEHICLES = (
     dataclasses.replace(CHANNEL_VEHICLES[0], leg_s=40.0, step_s=15.0),
     dataclasses.replace(CHANNEL_VEHICLES[1], leg_s=45.0, start_delay_s=10.0),
-    dataclasses.replace(CHANNEL_VEHICLES[2], start_delay_s=20.0),
+    dataclasses.replace(CHANNEL_VEHICLES[2], start_delay_s=20.0, surface_s=0.0),
 )
 """fleet-demo's vehicles: fleet-channel's with shorter lines and launches 10 s apart, so
-that every current is known within the first two minutes of a demo."""
+that every current is known within the first two minutes of a demo (its AUV starts at
+its depth, without the half minute afloat for a fix)."""
 
 
 def _build() -> dict[str, Fleet]:

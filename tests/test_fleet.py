@@ -10,6 +10,7 @@ vehicles' estimates err as current estimators do: AR(1) with a 60 s correlation 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import random
 
@@ -18,7 +19,7 @@ import numpy as np
 import pytest
 
 from onboard.core.messages import EstimateRecord
-from onboard.fleet.field import CurrentField, Hyper, observation, one_blas_thread
+from onboard.fleet.field import CurrentField, Hyper, Observation, observation, one_blas_thread
 from onboard.fleet.messages import FleetCurrent, FleetGrid
 from onboard.fleet.service import FleetService, parse_query
 from tests.helpers.fleet_scenarios import FIELDS, UTC0, fleet
@@ -184,7 +185,98 @@ def test_the_grid_covers_the_vehicles_with_the_contracts_objects():
     assert [v.vehicle for v in grid.vehicles] == ["v0", "v1", "v2", "v3"]
     doc = msgspec.json.decode(enc.encode(grid))
     assert set(doc["cells"][0]) == {"lat", "lon", "utc", "north", "east", "std_north",
-                                    "std_east", "n_obs"}
+                                    "std_east", "n_obs", "down", "std_down"}
     assert set(doc["vehicles"][0]) == {"vehicle", "utc", "lat", "lon", "north", "east",
-                                       "std_north", "std_east"}
+                                       "std_north", "std_east", "down", "std_down"}
+    # boats give no down: the field knows nothing of it, and says null
+    assert all(c.down is None and c.std_down is None for c in grid.cells)
     assert isinstance(grid.cells[0], FleetCurrent)
+
+
+def down_fleet(boats_say_zero: bool):
+    """A fleet of six in the eddy for 20 minutes, vehicle v0 an underwater vehicle whose
+    records give a down of 0.04 m/s (sigma 0.01, its error white), the others boats
+    (no down; with ``boats_say_zero`` they say 0 instead, the negative control); the
+    field fitted on all of it, and v0's track every 60 s."""
+    f = fleet("eddy", seed=21, vehicles=6, duration_s=1200.0, rate_hz=2.0)
+    rng = np.random.default_rng(21)
+    field = CurrentField()
+    for o in f.observations():
+        if o.vehicle == "v0":
+            o = dataclasses.replace(o, down=0.04 + rng.normal(0.0, 0.01), std_down=0.01)
+        elif boats_say_zero:
+            o = dataclasses.replace(o, down=0.0, std_down=0.01)
+        field.add(o)
+    field.fit()
+    sel = np.flatnonzero((f.vehicle == 0) & (np.mod(f.t, 60.0) < 1e-6))
+    lat, lon = f.plane.to_latlon(f.north_m[sel], f.east_m[sel])
+    with one_blas_thread():
+        return field, [field.predict(float(la), float(lo), UTC0 + float(f.t[i]))
+                       for la, lo, i in zip(lat, lon, sel)]
+
+
+def test_down_is_fused_where_given_and_a_boat_is_not_a_down_of_zero():
+    """The down of the one vehicle that gives it is the field's down along its track
+    (measured 0.0406 m/s against 0.04, at most 0.001 off, sigma 0.004-0.007: one
+    vehicle, so its spread stays at 0.02 and its mean is estimated in each neighbourhood);
+    the boats' windows have no down (NaN, not 0). The negative control: the boats'
+    records taken as a down of 0 pull it to 0.017."""
+    field, preds = down_fleet(boats_say_zero=False)
+    downs = np.array([p.down for p in preds])
+    assert np.all(np.abs(downs - 0.04) < 0.005), downs
+    assert all(p.std_down is not None and p.std_down < 0.01 for p in preds)
+    obs = field.fitted.obs
+    boats = obs.vehicle != obs.vehicle[field.fitted.down_rows[0]]
+    assert boats.sum() == 5 * 41 and np.isnan(obs.y[boats, 2]).all()  # no down in theirs
+    control = np.array([p.down for p in down_fleet(boats_say_zero=True)[1]])
+    assert np.mean(control) < 0.03, control
+
+
+def test_a_place_no_diving_vehicle_saw_has_no_down():
+    """Two boats 3 km south of a diving vehicle: there the field has a north and east but
+    no down (null), by the diving vehicle its down; a record's down counts only with a
+    converged sigma."""
+    from onboard.fleet.field import Plane
+
+    plane = Plane(43.1, 5.9)
+    field = CurrentField(hyper=Hyper(length_m=300.0, length_s=3600.0))
+    for k in range(600):
+        t = UTC0 + k
+        for v, north, down in (("b1", -3000.0, None), ("b2", -3050.0, None),
+                               ("auv", 0.0, 0.02)):
+            lat, lon = plane.to_latlon(north, 2.0 * k)
+            field.add(Observation(v, t, float(lat), float(lon), 0.1, 0.2, 0.02, 0.02,
+                                  down, None if down is None else 0.005))
+    field.fit(hyperparameters=False)
+    lat, lon = plane.to_latlon(-3000.0, 600.0)
+    boats = field.predict(float(lat), float(lon), UTC0 + 300.0)
+    assert boats.north == pytest.approx(0.1, abs=0.01)
+    assert boats.down is None and boats.std_down is None
+    lat, lon = plane.to_latlon(0.0, 600.0)
+    auv = field.predict(float(lat), float(lon), UTC0 + 300.0)
+    assert auv.down == pytest.approx(0.02, abs=1e-3) and 0.0 < auv.std_down < 0.01
+    rec = EstimateRecord(vehicle="a", pipeline="current", t=1.0, utc=UTC0, lat_deg=43.0,
+                         lon_deg=5.0, values={"north": 0.1, "east": 0.2, "down": 0.03},
+                         std={"north": 0.02, "east": 0.02, "down": 0.01})
+    assert observation(rec)[0].down == 0.03 and observation(rec)[0].std_down == 0.01
+    no_sigma = msgspec.structs.replace(rec, std={"north": 0.02, "east": 0.02})
+    assert observation(no_sigma)[0].down is None
+
+
+def test_a_position_sigma_adds_the_fields_mean_square_difference_over_it():
+    """place_variance against a Monte Carlo of its definition: the mean of
+    ``2 sigma_f^2 (1 - exp(-|d|^2 / (2 l^2)))`` (the squared-exponential field's
+    ``E[(c(x + d) - c(x))^2]``) over ``d`` normal of sigma ``place`` per axis; 0 for a fix,
+    ``2 sigma_f^2`` for a place lost far beyond the length scale."""
+    from onboard.fleet.field import place_variance
+
+    rng = np.random.default_rng(7)
+    sigma_f, length = 0.2, 400.0
+    for place in (5.0, 100.0, 400.0, 2000.0):
+        d = rng.normal(0.0, place, (200_000, 2))
+        mc = np.mean(2 * sigma_f ** 2 * (1 - np.exp(-(d ** 2).sum(1) / (2 * length ** 2))))
+        assert float(place_variance(sigma_f, length, np.array(place))) == \
+            pytest.approx(mc, rel=0.01)
+    assert place_variance(sigma_f, length, np.zeros(1))[0] == 0.0
+    assert place_variance(sigma_f, length, np.array([1e6]))[0] == \
+        pytest.approx(2 * sigma_f ** 2, rel=1e-6)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -110,3 +111,49 @@ def test_a_log_without_utc_gives_records_without_utc(tmp_path):
     run(engine, fixes, lambda t, rs: recs.extend(rs))
     assert recs and all(r.utc is None for r in recs)
     assert all(r.lat_deg == pytest.approx(43.0, abs=1e-4) for r in recs)
+
+
+def test_a_diving_vehicle_is_dead_reckoned_from_its_last_fix_with_a_growing_sigma():
+    """An AUV's last surface fix carried forward with its velocity over ground: 1 m/s
+    north from 0.1 s to 100 s puts it 99.9 m north of the fix, its sigma grown from the
+    fix's 2 m to sqrt(2^2 + (1 % of 99.9 m)^2 + (0.005 m/s x 100 s)^2) = 2.29 m; a boat (no dead
+    reckoning) keeps the pipeline's position, with that pipeline's sigma."""
+    from onboard.core.messages import VelocityOverGround
+    from onboard.engine.whereabouts import DR_MAX_GAP_S
+
+    frame = LocalFrame(43.0, 5.0)
+    kf = ({"north": 500.0, "east": 0.0, "std_north": 40.0, "std_east": 30.0},
+          (frame, (0.0, 0.0)))
+    fix = GnssFix(t=0.0, lat_deg=43.0, lon_deg=5.0, h_acc_m=2.0)
+    auv, boat = Whereabouts(dead_reckon=True), Whereabouts()
+    for where in (auv, boat):
+        where.observe(fix)
+        assert where.place(1.0, [kf]) == (43.0, 5.0, 2.0)     # the fresh fix
+        for k in range(1, 1001):
+            where.observe_velocity(VelocityOverGround(t=0.1 * k, v_north_mps=1.0,
+                                                      v_east_mps=0.0))
+    lat, lon, std = auv.place(100.0, [kf])
+    assert frame.to_ne(lat, lon) == pytest.approx((100.0 - 0.1, 0.0), abs=1e-6)
+    assert std == pytest.approx(math.sqrt(2.0 ** 2 + 0.999 ** 2 + 0.5 ** 2))  # 99.9 m run
+    lat, lon, std = boat.place(100.0, [kf])                  # no reckoning: the pipeline's
+    assert frame.to_ne(lat, lon) == pytest.approx((500.0, 0.0), abs=1e-4) and std == 40.0
+    # the navigation solution silent too long: no reckoned position; the pipeline's
+    assert auv.place(100.0 + DR_MAX_GAP_S + 0.1, [kf]).std_m == 40.0
+    auv.observe_velocity(VelocityOverGround(t=200.0, v_north_mps=1.0, v_east_mps=0.0))
+    assert auv.place(200.0, []) == (None, None, None)        # broken until the next fix
+
+
+def test_a_record_carries_its_position_sigma_and_the_field_weighs_it():
+    """``position_std_m`` on the record (additive, null when unknown); the field takes a
+    record placed within MAX_POSITION_STD_M and refuses one beyond it."""
+    from onboard.fleet.field import MAX_POSITION_STD_M, observation
+
+    rec = EstimateRecord(vehicle="a", pipeline="current", t=1.0, utc=1.78e9, lat_deg=43.0,
+                         lon_deg=5.0, values={"north": 0.1, "east": 0.2},
+                         std={"north": 0.02, "east": 0.02}, position_std_m=8.0)
+    assert json.loads(msgspec.json.encode(rec))["position_std_m"] == 8.0
+    assert observation(rec)[0].position_std_m == 8.0
+    lost = msgspec.structs.replace(rec, position_std_m=MAX_POSITION_STD_M + 1.0)
+    assert observation(lost) == (None, "position_uncertain")
+    v1 = b'{"schema":1,"vehicle":"b","pipeline":"kf","t":2.0,"values":{}}'
+    assert msgspec.json.decode(v1, type=EstimateRecord).position_std_m is None

@@ -1,19 +1,27 @@
 """``onboard fleet``'s field on a fleet it did not build: the simulator's fleet
 (:mod:`sitl.fleet`: its own current field, vehicles, protocols and clocks), each vehicle's
-log replayed by ``onboard batch`` with its own configs, its ``current.parquet`` fused
-without one vehicle and predicted along that vehicle's track, against the true field.
+log replayed by ``onboard replay`` with its own configs, its ``current`` records (as the
+vehicle publishes them on Zenoh, read from the replay's MCAP: ``utc``, ``lat_deg``,
+``lon_deg``, ``position_std_m``) fused without one vehicle and predicted along that
+vehicle's track, against the true field.
 
-    python -m validation.fleet_world [FLEET] [--seed N] [--out DIR] [--every N]
+    python -m validation.fleet_world [FLEET] [--seeds 0,1,...] [--without ID]...
+                                     [--out DIR] [--every N]
 
-Prints, per vehicle left out: the points predicted, the field's RMS error per component,
-the share within 1.96 of its sigma, and the vehicle's own estimate's RMS at the same
-points (what the field is up against). A vehicle whose rows have no position (an AUV that
+Prints per seed and vehicle left out: the points predicted, the field's RMS error per
+component, the share within 1.96 of its sigma, and the vehicle's own estimate's RMS at
+the same points (what the field is up against); the field's down at the vehicles that
+give one (fitted with every vehicle: no other gives a down) against the true field's
+(none: the simulator's field is horizontal); then, over the seeds, each figure's median
+and range. ``--without ID`` scores the same logs again with vehicle ``ID`` left out of
+every fit (the field without it); a vehicle whose records have no position (an AUV that
 never had a GNSS fix) can be neither fused nor scored: it is named so.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import subprocess
 import sys
 import tempfile
@@ -23,52 +31,85 @@ import numpy as np
 
 
 def replay_fleet(root: Path, manifest: dict) -> dict[str, Path]:
-    """``onboard batch`` of each vehicle's log with its configs; vehicle -> its
-    current.parquet."""
-    tables = {}
+    """``onboard replay`` of each vehicle's log with its configs, its records into an
+    MCAP; vehicle -> that MCAP."""
+    out = {}
     for v in manifest["vehicles"]:
-        out = root / f"batch-{v['id']}"
+        rep = root / f"replay-{v['id']}"
+        rep.mkdir(exist_ok=True)
         configs = [a for c in v["configs"]   # a bundled name, then the vehicle's own file
                    for a in ("--config", str(root / c) if (root / c).exists() else c)]
-        subprocess.run([sys.executable, "-m", "onboard", "batch", str(root / v["files"]["tlog"]),
-                        *configs, "--out", str(out), "--jobs", "1", "--force"],
+        subprocess.run([sys.executable, "-m", "onboard", "replay",
+                        str(root / v["files"]["tlog"]), *configs, "--out", str(rep),
+                        "--no-plot", "--mcap", str(rep / "estimates.mcap"), "--force"],
                        check=True, stdout=subprocess.DEVNULL)
-        tables[v["id"]] = out / "current.parquet"
-    return tables
+        out[v["id"]] = rep / "estimates.mcap"
+    return out
 
 
-def observations(table: Path) -> list:
-    """The placed, timed rows of a current.parquet as the field's observations."""
-    import pyarrow.parquet as pq
+def observations(mcap: Path) -> tuple[list, dict[str, int]]:
+    """The ``current`` records of a replay's MCAP as the field's observations (those
+    :func:`onboard.fleet.field.observation` takes), and the others counted by reason."""
+    import msgspec
+    from mcap.reader import make_reader
 
-    from onboard.fleet.field import Observation
+    from onboard.core.messages import EstimateRecord
+    from onboard.fleet.field import observation
 
-    return [Observation(vehicle=r["vehicle"], utc=r["utc"].timestamp(), lat_deg=r["lat"],
-                        lon_deg=r["lon"], north=r["north"], east=r["east"],
-                        std_north=r["std_north"], std_east=r["std_east"])
-            for r in pq.read_table(table).to_pylist()
-            if None not in (r["utc"], r["lat"], r["lon"], r["std_north"], r["std_east"])]
+    dec = msgspec.json.Decoder(EstimateRecord)
+    obs: list = []
+    left: dict[str, int] = {}
+    with open(mcap, "rb") as f:
+        for _, channel, msg in make_reader(f).iter_messages():
+            if channel.topic.endswith("/est/current"):
+                o, why = observation(dec.decode(msg.data))
+                if o is None:
+                    left[why] = left.get(why, 0) + 1
+                else:
+                    obs.append(o)
+    return obs, left
 
 
-def left_out(sea, obs: dict[str, list], vehicle: str, every: int) -> dict[str, np.ndarray]:
-    """The field without ``vehicle``, predicted at every ``every``-th of its rows: errors
-    of the field and of the vehicle's own estimate against the true field, and the
-    field's errors in sigmas."""
-    from onboard.fleet.field import CurrentField, Hyper, one_blas_thread
+def depth_of(root: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each vehicle's true (utc, depth) from ``truth-current.csv``."""
+    rows: dict[str, list[tuple[float, float]]] = {}
+    with open(root / "truth-current.csv") as f:
+        for r in csv.DictReader(f):
+            rows.setdefault(r["vehicle"], []).append((float(r["utc"]), float(r["depth_m"])))
+    return {v: (np.array([a for a, _ in x]), np.array([b for _, b in x]))
+            for v, x in rows.items()}
+
+
+def fused(obs: dict[str, list], leave: set[str]):
+    """The field fitted (hyperparameters by marginal likelihood) on every vehicle's
+    observations but those of ``leave``."""
+    from onboard.fleet.field import CurrentField, Hyper
 
     field = CurrentField(hyper=Hyper())
-    for other, rows in obs.items():
-        if other != vehicle:
+    for vid, rows in obs.items():
+        if vid not in leave:
             for o in rows:
                 field.add(o)
     field.fit()
+    return field
+
+
+def left_out(sea, depth, obs: dict[str, list], vehicle: str, without: set[str],
+             every: int) -> dict[str, np.ndarray]:
+    """The field without ``vehicle`` (and ``without``), predicted at every ``every``-th of
+    its rows at its depth: errors of the field and of the vehicle's own estimate against
+    the true field, and the field's errors in sigmas."""
+    from onboard.fleet.field import one_blas_thread
+
+    field = fused(obs, without | {vehicle})
     err, own, z = [], [], []
+    t_d, d = depth[vehicle]
     with one_blas_thread():
         for o in obs[vehicle][::every]:
             p = field.predict(o.lat_deg, o.lon_deg, o.utc)
             if p.north is None:
                 continue
-            tn, te = sea.at(o.lat_deg, o.lon_deg, 0.0, o.utc)
+            tn, te = sea.at(o.lat_deg, o.lon_deg, float(np.interp(o.utc, t_d, d)), o.utc)
             e = np.array([p.north - tn, p.east - te])
             err.append(e)
             own.append([o.north - tn, o.east - te])
@@ -77,42 +118,116 @@ def left_out(sea, obs: dict[str, list], vehicle: str, every: int) -> dict[str, n
             "z": np.reshape(z, (-1, 2))}
 
 
-def main(argv: list[str] | None = None) -> int:
+def down_at(obs: dict[str, list], without: set[str], every: int) -> dict[str, np.ndarray]:
+    """The field's down (fitted with every vehicle but ``without``) at every ``every``-th
+    row of the vehicles that give one, against the true down (0: the simulator's field is
+    horizontal): errors and errors in sigmas."""
+    from onboard.fleet.field import one_blas_thread
+
+    field = fused(obs, without)
+    err, z = [], []
+    with one_blas_thread():
+        for vid, rows in obs.items():
+            for o in rows[::every]:
+                if vid in without or o.down is None:
+                    continue
+                p = field.predict(o.lat_deg, o.lon_deg, o.utc)
+                if p.down is not None:
+                    err.append(p.down)
+                    z.append(abs(p.down) / p.std_down)
+    return {"err": np.array(err), "z": np.array(z)}
+
+
+def one_seed(fleet: str, seed: int, root: Path, without: list[set[str]], every: int
+             ) -> dict:
+    """Simulate ``fleet`` with ``seed`` into ``root``, replay it, and score each vehicle
+    left out (and the down), once per set of vehicles in ``without`` left out of every
+    fit; prints a line per figure; returns the figures by (set, vehicle)."""
     from onboard.sitl.fleet import get_fleet, read_sea, write_fleet
 
+    root.mkdir(parents=True, exist_ok=True)
+    manifest = write_fleet(get_fleet(fleet), root, seed=seed)
+    obs = {}
+    for vid, mcap in replay_fleet(root, manifest).items():
+        obs[vid], left = observations(mcap)
+        if left:
+            print(f"seed {seed} {vid}: records not fused: {left}")
+    sea, depth = read_sea(root), depth_of(root)
+    figures: dict = {}
+    for leave in without:
+        label = "without " + ", ".join(sorted(leave)) if leave else "every vehicle"
+        for vid in obs:
+            if vid not in leave:
+                fig = score(sea, depth, obs, vid, leave, every)
+                if fig is not None:
+                    figures[label, vid] = fig
+                print(f"seed {seed} {label}, {vid} left out: " + describe(fig), flush=True)
+        down = down_at(obs, leave, every)
+        if len(down["err"]):
+            figures[label, "down"] = fig = {
+                "points": len(down["err"]), "rms": np.sqrt((down["err"] ** 2).mean()),
+                "coverage": float((down["z"] < 1.96).mean())}
+            print(f"seed {seed} {label}, down at the diving vehicles: {fig['points']} "
+                  f"points; RMS {fig['rms']:.3f} m/s, {fig['coverage']:.2f} within 1.96 "
+                  "sigma", flush=True)
+    return figures
+
+
+def score(sea, depth, obs: dict[str, list], vehicle: str, leave: set[str], every: int
+          ) -> dict | None:
+    """:func:`left_out`'s figures for ``vehicle`` (None: not placed, or nothing known
+    along its track)."""
+    if not obs[vehicle]:
+        return None
+    r = left_out(sea, depth, obs, vehicle, leave, every)
+    if not len(r["err"]):
+        return None
+    return {"points": len(r["err"]), "rms": np.sqrt((r["err"] ** 2).mean(axis=0)),
+            "coverage": float((r["z"] < 1.96).mean()),
+            "own": np.sqrt((r["own"] ** 2).mean(axis=0))}
+
+
+def describe(fig: dict | None) -> str:
+    """A vehicle's figures in words."""
+    if fig is None:
+        return "no record with a position, or the field knows nothing along its track"
+    return (f"{fig['points']} points; field RMS north {fig['rms'][0]:.3f}, east "
+            f"{fig['rms'][1]:.3f} m/s, {fig['coverage']:.2f} within 1.96 sigma; its own "
+            f"estimate {fig['own'][0]:.3f}, {fig['own'][1]:.3f} m/s")
+
+
+def spread(per_seed: list[dict]) -> None:
+    """Each vehicle's figures over the seeds: median and range (a seed changes the
+    sensors' noise and so each vehicle's own error, not the sea or the tracks)."""
+    for key in sorted({k for f in per_seed for k in f}):
+        got = [f[key] for f in per_seed if key in f]
+        rms = np.array([np.atleast_1d(g["rms"]) for g in got])
+        cov = np.array([g["coverage"] for g in got])
+        parts = [f"{len(got)} seeds"]
+        for k, name in enumerate(("north", "east") if rms.shape[1] == 2 else ("down",)):
+            parts.append(f"RMS {name} {np.median(rms[:, k]):.3f} "
+                         f"({rms[:, k].min():.3f}-{rms[:, k].max():.3f}) m/s")
+        parts.append(f"coverage {np.median(cov):.2f} ({cov.min():.2f}-{cov.max():.2f})")
+        print(f"over the seeds, {key[0]}, {key[1]}: " + ", ".join(parts))
+
+
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m validation.fleet_world", description=__doc__)
     ap.add_argument("fleet", nargs="?", default="fleet-channel")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seeds", default="0", help="comma-separated simulator seeds")
+    ap.add_argument("--without", action="append", default=[],
+                    help="score again with this vehicle left out of every fit "
+                         "(repeatable: one more pass each)")
     ap.add_argument("--out", type=Path, default=None, help="keep the logs here")
     ap.add_argument("--every", type=int, default=50, help="predict at every N-th row")
     a = ap.parse_args(argv)
     root = a.out or Path(tempfile.mkdtemp(prefix="fleet-world-"))
-    root.mkdir(parents=True, exist_ok=True)
-    manifest = write_fleet(get_fleet(a.fleet), root, seed=a.seed)
-    tables = replay_fleet(root, manifest)
-    obs = {vid: observations(t) for vid, t in tables.items()}
-    sea = read_sea(root)
-    pooled = []
-    for vid, rows in obs.items():
-        if not rows:
-            print(f"{vid}: no row with a position and a time: neither fused nor scored")
-            continue
-        r = left_out(sea, obs, vid, a.every)
-        if not len(r["err"]):
-            print(f"{vid}: the field knows nothing along its track without it")
-            continue
-        rms = np.sqrt((r["err"] ** 2).mean(axis=0))
-        own = np.sqrt((r["own"] ** 2).mean(axis=0))
-        print(f"{vid}: {len(r['err'])} points; field RMS north {rms[0]:.3f}, east {rms[1]:.3f} "
-              f"m/s, {(r['z'] < 1.96).mean():.2f} within 1.96 sigma; its own estimate "
-              f"{own[0]:.3f}, {own[1]:.3f} m/s")
-        pooled.append(r)
-    if pooled:
-        err = np.concatenate([r["err"] for r in pooled])
-        z = np.concatenate([r["z"] for r in pooled])
-        rms = np.sqrt((err ** 2).mean(axis=0))
-        print(f"pooled: RMS north {rms[0]:.3f}, east {rms[1]:.3f} m/s, "
-              f"{(z < 1.96).mean():.2f} within 1.96 sigma ({len(err)} points)")
+    seeds = [int(s) for s in a.seeds.split(",")]
+    leave = [set()] + [{v} for v in a.without]
+    per_seed = [one_seed(a.fleet, seed, root / f"seed-{seed}", leave, a.every)
+                for seed in seeds]
+    if len(seeds) > 1:
+        spread(per_seed)
     return 0
 
 

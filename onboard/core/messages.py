@@ -283,8 +283,10 @@ class EstimateRecord(msgspec.Struct, frozen=True, kw_only=True):
     ...) to the source in use at this tick (onboard/engine/sources.py). ``utc`` is the
     tick's time in UTC (POSIX s: the log's UTC in a replay, the system clock live; null
     when unknown) and ``lat_deg``, ``lon_deg`` the vehicle's best position at the tick
-    (null when unknown; :mod:`onboard.engine.whereabouts`). A schema-1 record decodes
-    with the three null.
+    (null when unknown; :mod:`onboard.engine.whereabouts`), ``position_std_m`` its
+    one-sigma per horizontal axis (m; null when unknown; an AUV's dead-reckoned position
+    grows it; added after ``lon_deg``, issue 33). A schema-1 record decodes with the four
+    null.
     """
 
     schema: int = SCHEMA_VERSION
@@ -298,6 +300,7 @@ class EstimateRecord(msgspec.Struct, frozen=True, kw_only=True):
     utc: float | None = None
     lat_deg: float | None = None
     lon_deg: float | None = None
+    position_std_m: float | None = None
 
 
 class Innovation(msgspec.Struct, frozen=True, kw_only=True):

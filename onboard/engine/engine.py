@@ -52,6 +52,7 @@ from onboard.core.messages import (
     PropellerRpm,
     RcChannels,
     Sample,
+    VelocityOverGround,
 )
 from onboard.engine.corrections import SampleCorrector
 from onboard.engine.declination import DeclinationCorrector
@@ -65,7 +66,7 @@ from onboard.pipelines import build
 from onboard.pipelines.base import Pipeline, sample_time
 from onboard.engine.sources import SourceSelector
 from onboard.engine.timeline import Jump, Timeline, outlier_words
-from onboard.engine.whereabouts import Whereabouts
+from onboard.engine.whereabouts import NOWHERE, Place, Whereabouts
 from onboard.engine.checks import checker_for, sample_type
 
 __all__ = ["Engine", "SampleCorrector", "TickQueue", "run"]
@@ -215,7 +216,8 @@ class Engine:
         self.rejected: Counter[str] = Counter()
         self.depth_mode = DepthMode(cfg.sensors.depth)
         self.latest: dict[str, EstimateRecord] = {}
-        self.whereabouts = Whereabouts()
+        self.whereabouts = Whereabouts(
+            dead_reckon=traits(cfg.vehicle.vehicle_class).underwater)
         """The UTC and position every record carries (:mod:`onboard.engine.whereabouts`;
         a replay or the service sets its ``utc_of``)."""
         self.t_first: float | None = None
@@ -474,6 +476,8 @@ class Engine:
             self.integrity.observe(chosen)
             if type(chosen) is GnssFix:
                 self.whereabouts.observe(chosen)  # type: ignore[arg-type]
+        elif type(chosen) is VelocityOverGround:
+            self.whereabouts.observe_velocity(chosen)  # type: ignore[arg-type]
         cls = type(raw)
         if cls in _RAW_ACTUATORS and self.mapper.active:
             cmd = self.mapper.map(raw)
@@ -546,16 +550,16 @@ class Engine:
         if not stepped:
             return []
         where = self.whereabouts
-        lat, lon = where.position(t, ((v, self.local_frame(p.name)) for p, v, _ in stepped
-                                      if "north" in v))
+        place = where.place(t, ((v, self.local_frame(p.name)) for p, v, _ in stepped
+                                if "north" in v))
         utc = where.utc(t)
-        return [self._record(p, t, v, ts, utc, lat, lon) for p, v, ts in stepped]
+        return [self._record(p, t, v, ts, utc, place) for p, v, ts in stepped]
 
     def _record(self, p: Pipeline, t: float, values: Mapping[str, float],
                 t_sensor: float | None, utc: float | None = None,
-                lat: float | None = None, lon: float | None = None) -> EstimateRecord:
+                place: Place = NOWHERE) -> EstimateRecord:
         """The record of ``p``'s published estimates at ``t`` (UTC ``utc``, the vehicle
-        at ``lat``, ``lon``), also kept as :attr:`latest`."""
+        at ``place``), also kept as :attr:`latest`."""
         std_names = self._std_names.get(p.name)
         if std_names is None:  # a pipeline put in after construction
             std_names = self._std_names[p.name] = std_columns(p)
@@ -564,8 +568,8 @@ class Engine:
             if std_names else {}
         rec = EstimateRecord(vehicle=self.cfg.vehicle.id, pipeline=p.name, t=t,
                              values=dict(values), std=std, t_sensor=t_sensor,
-                             sources=self.selector.active, utc=utc, lat_deg=lat,
-                             lon_deg=lon)
+                             sources=self.selector.active, utc=utc, lat_deg=place.lat_deg,
+                             lon_deg=place.lon_deg, position_std_m=place.std_m)
         self.latest[p.name] = rec
         return rec
 

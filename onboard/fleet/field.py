@@ -35,6 +35,12 @@ with the point::
 per component (``sigma_f``, the error term and the sigmas differ by component: a tidal
 stream along a channel varies far more along it than across). With no
 super-observation within :data:`KNOWN_WITHIN` the field knows nothing there (``None``).
+The vertical current ``down``, where a record gives one (an underwater vehicle's; a
+boat's has none, which is not a down of 0), is the same process with its own mean and
+spread ``sigma_down`` (fitted by its own marginal likelihood, :func:`fit_sigma_down`), the
+scales and the error model of north and east, predicted from the super-observations that
+have one (None where none is near); depth is not a coordinate.
+
 A record without a current (``north``/``east``: withheld by an integrity check, not yet
 converged, not finite) or without its sigma or time or position is not an observation; a
 super-observation further than :data:`OUTLIER_SIGMA` predictive sigmas from what the other
@@ -79,6 +85,26 @@ MAX_STD_MPS = 0.5
 """A record whose current sigma exceeds this (m/s) is not converged: not an observation."""
 MAX_SPEED_MPS = 6.0
 """A current faster than this (m/s) is not water: not an observation."""
+SIGMA_DOWN = 0.02
+"""The down component's spread about its mean (m/s) before it is fitted: vertical
+currents are a few cm/s at most outside convection and internal waves."""
+SIGMA_DOWN_BOUNDS = (1e-3, 1.0)
+"""Bounds (m/s) of the down component's spread in its fit."""
+MIN_FIT_DOWN = 12
+"""Fewer super-observations with a down than this keep its spread as it is."""
+MIN_FIT_VEHICLES = 3
+"""Super-observations of fewer vehicles than this keep the hyperparameters as they are:
+with two, every difference between them may be one vehicle's slowly wandering error, and
+the likelihood says so (on the simulator's fleet-channel, two vehicles fitted a 76 m
+length scale, a 0.016 m/s spread and a 530 s error correlation: sigmas a third of the
+misses)."""
+MAX_POSITION_STD_M = 200.0
+"""A record whose position sigma exceeds this (m per axis; an AUV dead reckoned for
+hours) is not placed: not an observation."""
+
+
+NORTH, EAST, DOWN = 0, 1, 2
+"""The current's components, the columns of :attr:`SuperObs.y` and :attr:`SuperObs.s`."""
 
 
 class Hyper(NamedTuple):
@@ -112,16 +138,26 @@ class Observation:
     east: float
     std_north: float
     std_east: float
+    down: float | None = None
+    std_down: float | None = None
+    position_std_m: float | None = None
 
 
 def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
     """The observation a ``current`` record makes, or None and why not (``no_time``,
-    ``no_position``, ``no_current``, ``no_std``, ``not_converged``, ``too_fast``)."""
+    ``no_position``, ``position_uncertain`` (its ``position_std_m`` above
+    :data:`MAX_POSITION_STD_M`), ``no_current``, ``no_std``, ``not_converged``,
+    ``too_fast``). Its
+    ``down`` (and ``std_down``) only where the record gives a finite one with a converged
+    sigma (a boat's record has none: it is absent, never 0)."""
     v, sd = rec.values, rec.std
     if rec.utc is None:
         return None, "no_time"
     if rec.lat_deg is None or rec.lon_deg is None:
         return None, "no_position"
+    p = rec.position_std_m
+    if p is not None and not p <= MAX_POSITION_STD_M:
+        return None, "position_uncertain"
     n, e = v.get("north"), v.get("east")
     if n is None or e is None or not (math.isfinite(n) and math.isfinite(e)):
         return None, "no_current"
@@ -132,18 +168,26 @@ def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
         return None, "not_converged"
     if math.hypot(n, e) > MAX_SPEED_MPS:
         return None, "too_fast"
-    return Observation(rec.vehicle, rec.utc, rec.lat_deg, rec.lon_deg, n, e, s_n, s_e), ""
+    d, s_d = v.get("down"), sd.get("down")
+    if d is None or s_d is None or not (math.isfinite(d) and 0.0 < s_d <= MAX_STD_MPS):
+        d = s_d = None
+    return Observation(rec.vehicle, rec.utc, rec.lat_deg, rec.lon_deg, n, e, s_n, s_e,
+                       d, s_d, p), ""
 
 
 class Prediction(NamedTuple):
     """The field at one place and time: the current (m/s; None where unknown), its
-    one-sigma (m/s; None where unknown) and how many super-observations it rests on."""
+    one-sigma (m/s; None where unknown) and how many super-observations it rests on;
+    ``down`` and ``std_down`` from the super-observations that have one (None where none
+    is near)."""
 
     north: float | None
     east: float | None
     std_north: float | None
     std_east: float | None
     n_obs: int
+    down: float | None = None
+    std_down: float | None = None
 
 
 UNKNOWN = Prediction(None, None, None, None, 0)
@@ -173,9 +217,11 @@ class Plane:
 
 class SuperObs(NamedTuple):
     """The super-observations as arrays: ``x`` (n, 3) north m, east m, UTC s less
-    ``t_ref``; ``y`` (n, 2) current north, east (m/s); ``s`` (n, 2) their sigmas;
+    ``t_ref``; ``y`` (n, 3) current north, east, down (m/s; down NaN in a window
+    without one); ``s`` (n, 3) their sigmas;
     ``vehicle`` (n,) an integer per vehicle; ``utc`` (n,) the UTC (s); ``keys`` (vehicle
-    id, window number) of each."""
+    id, window number) of each; ``place`` (n,) the RMS of its records' position sigmas
+    (m per axis; 0 where they gave none)."""
 
     x: np.ndarray
     y: np.ndarray
@@ -183,12 +229,13 @@ class SuperObs(NamedTuple):
     vehicle: np.ndarray
     utc: np.ndarray
     keys: list[tuple[str, int]]
+    place: np.ndarray
 
     def take(self, pick: np.ndarray) -> "SuperObs":
         """The super-observations ``pick`` selects (a boolean mask or indices)."""
         idx = np.flatnonzero(pick) if pick.dtype == bool else pick
         return SuperObs(self.x[idx], self.y[idx], self.s[idx], self.vehicle[idx],
-                        self.utc[idx], [self.keys[i] for i in idx])
+                        self.utc[idx], [self.keys[i] for i in idx], self.place[idx])
 
 
 def signal_corr(h: Hyper, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
@@ -206,6 +253,17 @@ def error_cov(h: Hyper, t: np.ndarray, vehicle: np.ndarray, s: np.ndarray) -> np
     return (h.scale ** 2) * np.outer(s, s) * corr * same + h.white ** 2 * np.eye(len(t))
 
 
+def place_variance(sigma_f: float, length_m: float, place: np.ndarray) -> np.ndarray:
+    """The variance (m^2/s^2) a position sigma ``place`` (m per axis) adds to an
+    observation of a component of spread ``sigma_f`` (m/s) and length scale ``length_m``:
+    the mean square of the field's difference between the true and the reported place,
+    ``E[(c(x + d) - c(x))^2] = 2 sigma_f^2 place^2 / (l_s^2 + place^2)`` for ``d`` normal
+    of ``place`` per axis (0 for a fix-placed window; up to ``2 sigma_f^2``, an
+    observation that says nothing, for one lost far beyond the length scale)."""
+    p2 = place ** 2
+    return 2.0 * sigma_f ** 2 * p2 / (length_m ** 2 + p2)
+
+
 class CurrentField:
     """The fleet's current field (module docstring): :meth:`add` observations in any
     order, :meth:`fit` (the super-observations, and the hyperparameters by marginal
@@ -213,6 +271,8 @@ class CurrentField:
 
     Attributes:
         hyper: the hyperparameters (:class:`Hyper`).
+        sigma_down: the down component's own spread (m/s), fitted on the
+            super-observations that have a down (:func:`fit_sigma_down`).
         fitted: the field of the last fit (:class:`Fitted`: its super-observations,
             hyperparameters and mean; None before).
         added: observations added; rejected: observations and super-observations left
@@ -224,6 +284,7 @@ class CurrentField:
                  history_s: float = HISTORY_S, neighbours: int = NEIGHBOURS,
                  seed: int = 0) -> None:
         self.hyper, self.thin_s, self.history_s = hyper, thin_s, history_s
+        self.sigma_down = SIGMA_DOWN
         self.neighbours = neighbours
         self.plane: Plane | None = None
         self.t_ref: float | None = None
@@ -251,7 +312,7 @@ class CurrentField:
         key = (obs.vehicle, math.floor(obs.utc / self.thin_s))
         acc = self._bins.get(key)
         if acc is None:
-            acc = self._bins[key] = [0.0] * 8
+            acc = self._bins[key] = [0.0] * 12
             self._vehicles.setdefault(obs.vehicle, len(self._vehicles))
         acc[0] += 1.0
         acc[1] += obs.utc
@@ -261,6 +322,12 @@ class CurrentField:
         acc[5] += obs.east
         acc[6] += obs.std_north ** 2
         acc[7] += obs.std_east ** 2
+        if obs.down is not None and obs.std_down is not None:
+            acc[8] += 1.0
+            acc[9] += obs.down
+            acc[10] += obs.std_down ** 2
+        if obs.position_std_m is not None:
+            acc[11] += obs.position_std_m ** 2
         self.added += 1
         return True
 
@@ -300,8 +367,13 @@ class CurrentField:
         mean = acc[:, 1:6] / n
         north, east = self.plane.to_ne(mean[:, 1], mean[:, 2])
         x = np.column_stack([north, east, mean[:, 0] - self.t_ref])
-        return SuperObs(x, mean[:, 3:5], np.sqrt(acc[:, 6:8] / n),
-                        np.array([self._vehicles[k[0]] for k in keys]), mean[:, 0], keys)
+        n_down = acc[:, 8:9]
+        with np.errstate(invalid="ignore", divide="ignore"):   # NaN: no down in the window
+            down = np.where(n_down > 0, acc[:, 9:11] / n_down, np.nan)
+        y = np.column_stack([mean[:, 3:5], down[:, 0]])
+        s = np.column_stack([np.sqrt(acc[:, 6:8] / n), np.sqrt(down[:, 1])])
+        return SuperObs(x, y, s, np.array([self._vehicles[k[0]] for k in keys]), mean[:, 0],
+                        keys, np.sqrt(acc[:, 11] / n[:, 0]))
 
     def update(self, obs: SuperObs | None, hyperparameters: bool = True) -> None:
         """Fit the hyperparameters to ``obs`` by marginal likelihood when asked and there
@@ -314,16 +386,24 @@ class CurrentField:
             self._update(obs, hyperparameters)
 
     def _update(self, obs: SuperObs, hyperparameters: bool) -> None:
-        mean = obs.y.mean(axis=0)
-        if hyperparameters and len(obs.y) >= MIN_FIT:
+        has_down = np.isfinite(obs.y[:, 2])
+        mean = np.r_[obs.y[:, :2].mean(axis=0),
+                     obs.y[has_down, 2].mean() if has_down.any() else 0.0]
+        if hyperparameters and len(obs.y) >= MIN_FIT and _vehicles(obs) >= MIN_FIT_VEHICLES:
             self.hyper, self.log_likelihood = fit_hyper(
                 self.hyper, _fitting_sample(obs, self._rng), mean)
-        fitted = Fitted(obs, self.hyper, mean, self.neighbours)
+        if hyperparameters and has_down.sum() >= MIN_FIT_DOWN and \
+                _vehicles(obs.take(has_down)) >= MIN_FIT_VEHICLES:
+            self.sigma_down = fit_sigma_down(
+                self.hyper, _fitting_sample(obs.take(has_down), self._rng), mean[2],
+                self.sigma_down)
+        fitted = Fitted(obs, self.hyper, mean, self.neighbours, self.sigma_down)
         out = self._outliers_in(fitted)
         if out.size:
             keep = np.ones(len(obs.y), bool)
             keep[out] = False
-            fitted = Fitted(obs.take(keep), self.hyper, mean, self.neighbours)
+            fitted = Fitted(obs.take(keep), self.hyper, mean, self.neighbours,
+                            self.sigma_down)
         self.fitted = fitted
 
     def _outliers_in(self, fitted: "Fitted") -> np.ndarray:
@@ -362,53 +442,84 @@ class CurrentField:
 class Fitted:
     """The field as one :meth:`CurrentField.update` left it, never changed afterwards (a
     query reads it while the next is fitted): the super-observations, the
-    hyperparameters, the mean and the k-d tree of the scaled coordinates."""
+    hyperparameters, the mean (north, east, down), the down component's spread and the
+    k-d trees of the scaled coordinates (all super-observations; those with a down)."""
 
     def __init__(self, obs: SuperObs, hyper: Hyper, mean: np.ndarray,
-                 neighbours: int = NEIGHBOURS) -> None:
+                 neighbours: int = NEIGHBOURS, sigma_down: float = SIGMA_DOWN) -> None:
         from scipy.spatial import cKDTree
 
         self.obs, self.hyper, self.mean, self.neighbours = obs, hyper, mean, neighbours
+        self.sigma_down = sigma_down
         self.scale = np.array([hyper.length_m, hyper.length_m, hyper.length_s])
         self.tree = cKDTree(obs.x / self.scale)
+        self.down_rows = np.flatnonzero(np.isfinite(obs.y[:, 2]))
+        self.down_tree = cKDTree(obs.x[self.down_rows] / self.scale) \
+            if self.down_rows.size else None
 
     def predict(self, x: np.ndarray, exclude: int = -1) -> Prediction:
         """The field at plane coordinates ``x`` (north m, east m, time s less ``t_ref``),
         leaving out the super-observations of vehicle ``exclude``."""
         idx = self.neighbourhood(x, exclude)
-        return self.krige(x, idx) if idx.size else UNKNOWN
+        if not idx.size:
+            return UNKNOWN
+        p = self.krige(x, idx)
+        idx_down = self.neighbourhood(x, exclude, down=True)
+        if not idx_down.size:
+            return p
+        down, std_down = self.krige_component(x, idx_down, DOWN, self.sigma_down)
+        return p._replace(down=down, std_down=std_down)
 
-    def neighbourhood(self, x: np.ndarray, exclude: int = -1) -> np.ndarray:
+    def neighbourhood(self, x: np.ndarray, exclude: int = -1, down: bool = False
+                      ) -> np.ndarray:
         """The indices of the super-observations a prediction at ``x`` uses: the
         ``neighbours`` nearest in scaled distance within :data:`KNOWN_WITHIN`, none of
-        vehicle ``exclude``."""
-        obs = self.obs
-        k = min(self.neighbours * (2 if exclude >= 0 else 1), len(obs.y))
-        dist, idx = self.tree.query(x / self.scale, k=k, distance_upper_bound=KNOWN_WITHIN)
+        vehicle ``exclude``; with ``down`` only those that have a down."""
+        tree, rows = (self.down_tree, self.down_rows) if down else (self.tree, None)
+        if tree is None:
+            return np.zeros(0, dtype=int)
+        n = tree.n
+        k = min(self.neighbours * (2 if exclude >= 0 else 1), n)
+        dist, idx = tree.query(x / self.scale, k=k, distance_upper_bound=KNOWN_WITHIN)
         idx = np.atleast_1d(idx)[np.isfinite(np.atleast_1d(dist))]
+        if rows is not None:
+            idx = rows[idx]
         if exclude >= 0:
-            idx = idx[obs.vehicle[idx] != exclude][:self.neighbours]
+            idx = idx[self.obs.vehicle[idx] != exclude][:self.neighbours]
         return idx
 
     def krige(self, x: np.ndarray, idx: np.ndarray) -> Prediction:
-        """The Gaussian-process mean and sigma at ``x`` from the super-observations
-        ``idx`` (module docstring), per component."""
+        """The Gaussian-process mean and sigma of north and east at ``x`` from the
+        super-observations ``idx`` (module docstring), per component."""
+        h, xs = self.hyper, self.obs.x[idx]
+        corr = (signal_corr(h, xs, xs), signal_corr(h, x[None, :], xs)[0])
+        (n, s_n), (e, s_e) = (self.krige_component(x, idx, c, sigma_f, corr)
+                              for c, sigma_f in ((NORTH, h.sigma_north), (EAST, h.sigma_east)))
+        return Prediction(n, e, s_n, s_e, int(idx.size))
+
+    def krige_component(self, x: np.ndarray, idx: np.ndarray, c: int, sigma_f: float,
+                        corr: tuple[np.ndarray, np.ndarray] | None = None
+                        ) -> tuple[float, float]:
+        """Component ``c`` (:data:`NORTH`, :data:`EAST`, :data:`DOWN`) of spread
+        ``sigma_f`` at ``x`` from the super-observations ``idx``: its mean and sigma
+        (down's mean unknown: :func:`gls_mean`); ``corr``: the signal correlations among
+        them and with ``x`` when already computed."""
         from scipy.linalg import cho_factor, cho_solve
 
         obs, h = self.obs, self.hyper
         xs = obs.x[idx]
-        corr = signal_corr(h, xs, xs)
-        corr_s = signal_corr(h, x[None, :], xs)[0]
-        out = []
-        for c, sigma_f in enumerate((h.sigma_north, h.sigma_east)):
-            kc, ks = sigma_f ** 2 * corr, sigma_f ** 2 * corr_s
-            factor = cho_factor(kc + error_cov(h, xs[:, 2], obs.vehicle[idx], obs.s[idx, c]),
-                                lower=True)
-            alpha = cho_solve(factor, obs.y[idx, c] - self.mean[c])
-            v = cho_solve(factor, ks)
-            var = max(sigma_f ** 2 - float(ks @ v), 0.0)
-            out.append((float(self.mean[c] + ks @ alpha), math.sqrt(var)))
-        return Prediction(out[0][0], out[1][0], out[0][1], out[1][1], int(idx.size))
+        if corr is None:
+            corr = (signal_corr(h, xs, xs), signal_corr(h, x[None, :], xs)[0])
+        kc, ks = sigma_f ** 2 * corr[0], sigma_f ** 2 * corr[1]
+        ke = error_cov(h, xs[:, 2], obs.vehicle[idx], obs.s[idx, c]) + \
+            np.diag(place_variance(sigma_f, h.length_m, obs.place[idx]))
+        factor = cho_factor(kc + ke, lower=True)
+        y, mean, var_mean = obs.y[idx, c], self.mean[c], 0.0
+        if c == DOWN:
+            mean, var_mean = gls_mean(factor, ks, y)
+        alpha = cho_solve(factor, y - mean)
+        var = max(sigma_f ** 2 - float(ks @ cho_solve(factor, ks)), 0.0) + var_mean
+        return float(mean + ks @ alpha), math.sqrt(var)
 
     def is_outlier(self, i: int) -> bool:
         """Whether super-observation ``i`` is further than :data:`OUTLIER_SIGMA` sigmas
@@ -420,11 +531,27 @@ class Fitted:
         if len(set(obs.vehicle[idx].tolist())) < JUDGES:
             return False
         p = self.krige(obs.x[i], idx)
-        for c, (m, sd) in enumerate(((p.north, p.std_north), (p.east, p.std_east))):
-            var = sd ** 2 + (h.scale * obs.s[i, c]) ** 2 + h.white ** 2
+        for c, (m, sd), sigma_f in ((NORTH, (p.north, p.std_north), h.sigma_north),
+                                    (EAST, (p.east, p.std_east), h.sigma_east)):
+            var = sd ** 2 + (h.scale * obs.s[i, c]) ** 2 + h.white ** 2 + \
+                float(place_variance(sigma_f, h.length_m, obs.place[i]))
             if abs(obs.y[i, c] - m) > OUTLIER_SIGMA * math.sqrt(var):
                 return True
         return False
+
+
+def gls_mean(factor, ks: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """The constant mean of ``y`` unknown (a vague prior): its generalized-least-squares
+    estimate ``beta = 1' K^-1 y / 1' K^-1 1`` from the neighbourhood (``factor``: the
+    Cholesky factor of ``K``) and the variance its uncertainty adds to a prediction with
+    signal covariance ``ks``, ``(1 - 1' K^-1 ks)^2 / 1' K^-1 1`` (Rasmussen and Williams
+    2006, eq. 2.42): a component few vehicles give (down, often from one vehicle) cannot
+    take its mean as known."""
+    from scipy.linalg import cho_solve
+
+    k1 = cho_solve(factor, np.ones(len(y)))
+    w = float(k1.sum())
+    return float(k1 @ y) / w, (1.0 - float(ks @ k1)) ** 2 / w
 
 
 def one_blas_thread():
@@ -444,6 +571,11 @@ def one_blas_thread():
     return threadpool_limits(limits=1, user_api="blas")
 
 
+def _vehicles(obs: SuperObs) -> int:
+    """How many vehicles ``obs`` come from."""
+    return len(np.unique(obs.vehicle))
+
+
 def _fitting_sample(obs: SuperObs, rng: np.random.Generator) -> SuperObs:
     """At most :data:`FIT_MAX` super-observations: runs of :data:`FIT_RUN` consecutive
     ones of one vehicle from random starts (all of them when they are few)."""
@@ -456,11 +588,13 @@ def _fitting_sample(obs: SuperObs, rng: np.random.Generator) -> SuperObs:
     return obs.take(np.unique(order[pos[pos < n]]))
 
 
-def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray
-                   ) -> tuple[float, np.ndarray]:
+def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray,
+                   placed: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """The negative marginal log-likelihood of ``obs`` (both components) at
     ``theta`` (the logarithms of :class:`Hyper`'s fields) and its gradient in ``theta``
-    (Rasmussen and Williams 2006, eq. 5.9: ``1/2 tr((alpha alpha' - K^-1) dK)``)."""
+    (Rasmussen and Williams 2006, eq. 5.9: ``1/2 tr((alpha alpha' - K^-1) dK)``);
+    ``placed`` (n, 2): each observation's :func:`place_variance` per component, held
+    fixed (None: none)."""
     from scipy.linalg import cho_factor, cho_solve
 
     h = Hyper(*np.exp(theta))
@@ -476,6 +610,8 @@ def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray
         kc = sigma_f ** 2 * corr
         ve = np.outer(obs.s[:, c], obs.s[:, c]) * same * h.scale ** 2
         k = kc + ve + h.white ** 2 * eye
+        if placed is not None:
+            k = k + np.diag(placed[:, c])
         try:
             factor = cho_factor(k, lower=True)
         except np.linalg.LinAlgError:
@@ -494,13 +630,51 @@ def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray
 def fit_hyper(start: Hyper, obs: SuperObs, mean: np.ndarray) -> tuple[Hyper, float]:
     """The hyperparameters that maximize the marginal likelihood of ``obs``, from
     ``start`` (scipy's L-BFGS-B in the logarithms, within :meth:`Hyper.bounds`), and the
-    log-likelihood reached; ``start`` kept when the fit fails."""
+    log-likelihood reached; ``start`` kept when the fit fails. The variance a window's
+    position sigma adds (:func:`place_variance`) is computed at ``start`` and held fixed
+    through the fit (the next fit, a minute later, starts from this one's result)."""
     from scipy.optimize import minimize
 
     bounds = [(math.log(lo), math.log(hi)) for lo, hi in Hyper.bounds()]
     theta0 = np.clip(np.log(np.array(start)), [b[0] for b in bounds], [b[1] for b in bounds])
-    res = minimize(log_likelihood, theta0, args=(obs, mean), jac=True, method="L-BFGS-B",
-                   bounds=bounds, options={"maxiter": 50})
+    placed = None
+    if np.any(obs.place > 0):
+        placed = np.column_stack([place_variance(sf, start.length_m, obs.place)
+                                  for sf in (start.sigma_north, start.sigma_east)])
+    res = minimize(log_likelihood, theta0, args=(obs, mean, placed), jac=True,
+                   method="L-BFGS-B", bounds=bounds, options={"maxiter": 50})
     if not np.all(np.isfinite(res.x)) or res.fun >= 1e10:
         return start, float("nan")
     return Hyper(*map(float, np.exp(res.x))), -float(res.fun)
+
+
+def down_nll(log_sigma: float, h: Hyper, obs: SuperObs, mean_down: float) -> float:
+    """The negative marginal log-likelihood of the down component of ``obs`` (all with a
+    down) with spread ``exp(log_sigma)`` (m/s) and the rest of ``h``."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    sigma_f = math.exp(log_sigma)
+    k = sigma_f ** 2 * signal_corr(h, obs.x, obs.x) + \
+        error_cov(h, obs.x[:, 2], obs.vehicle, obs.s[:, DOWN]) + \
+        np.diag(place_variance(sigma_f, h.length_m, obs.place))
+    try:
+        factor = cho_factor(k, lower=True)
+    except np.linalg.LinAlgError:
+        return 1e10
+    r = obs.y[:, DOWN] - mean_down
+    return float(0.5 * r @ cho_solve(factor, r) + np.log(np.diag(factor[0])).sum())
+
+
+def fit_sigma_down(h: Hyper, obs: SuperObs, mean_down: float, start: float) -> float:
+    """The down component's spread (m/s) that maximizes the marginal likelihood of the
+    super-observations ``obs`` that have a down, the length and time scales and the error
+    model being ``h``'s (fitted on north and east, which every vehicle gives); bounded by
+    :data:`SIGMA_DOWN_BOUNDS`; ``start`` kept when the fit fails."""
+    from scipy.optimize import minimize_scalar
+
+    lo, hi = (math.log(b) for b in SIGMA_DOWN_BOUNDS)
+    res = minimize_scalar(down_nll, bounds=(lo, hi), args=(h, obs, mean_down),
+                          method="bounded", options={"xatol": 0.01})
+    if not res.success or not math.isfinite(res.x) or res.fun >= 1e10:
+        return start
+    return float(math.exp(res.x))

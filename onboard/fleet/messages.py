@@ -41,7 +41,10 @@ class FleetCurrent(msgspec.Struct, frozen=True, kw_only=True):
     """The field at one place and time: ``lat``, ``lon`` (deg), ``utc`` (POSIX s), the
     current ``north``, ``east`` (m/s, the direction the water flows toward; null where
     the field knows nothing there), their one-sigma ``std_north``, ``std_east`` (m/s; null
-    there too) and ``n_obs``, the super-observations the answer rests on (0: none)."""
+    there too), ``n_obs``, the super-observations the answer rests on (0: none), and the
+    vertical current ``down`` (m/s, positive down) with its one-sigma ``std_down``: null
+    where no vehicle that gives one (an underwater vehicle) was near (added in issue 33,
+    after ``n_obs``)."""
 
     lat: float
     lon: float
@@ -51,12 +54,15 @@ class FleetCurrent(msgspec.Struct, frozen=True, kw_only=True):
     std_north: float | None
     std_east: float | None
     n_obs: int
+    down: float | None = None
+    std_down: float | None = None
 
 
 class VehicleCurrent(msgspec.Struct, frozen=True, kw_only=True):
     """A vehicle's newest current estimate as the fleet received it: ``vehicle`` id,
-    ``utc`` (POSIX s), ``lat``, ``lon`` (deg), ``north``, ``east`` and their one-sigma
-    (m/s; null where the record had none)."""
+    ``utc`` (POSIX s), ``lat``, ``lon`` (deg), ``north``, ``east`` and their one-sigma,
+    ``down`` and its one-sigma (m/s; null where the record had none: a boat has no
+    down)."""
 
     vehicle: str
     utc: float | None
@@ -66,6 +72,8 @@ class VehicleCurrent(msgspec.Struct, frozen=True, kw_only=True):
     east: float | None
     std_north: float | None
     std_east: float | None
+    down: float | None = None
+    std_down: float | None = None
 
 
 class FleetGrid(msgspec.Struct, frozen=True, kw_only=True):

@@ -148,7 +148,7 @@ class FleetService:
         self.newest[rec.vehicle] = VehicleCurrent(
             vehicle=rec.vehicle, utc=rec.utc, lat=rec.lat_deg, lon=rec.lon_deg,
             north=v.get("north"), east=v.get("east"), std_north=sd.get("north"),
-            std_east=sd.get("east"))
+            std_east=sd.get("east"), down=v.get("down"), std_down=sd.get("down"))
 
     # ----------------------------------------------------------------- the field
     def step(self, refit: bool | None = None) -> FleetGrid | None:
@@ -187,7 +187,8 @@ class FleetService:
         """The field at ``lat``, ``lon`` (deg) and ``utc`` (s) as a :class:`FleetCurrent`."""
         p = self.field.predict(lat, lon, utc)
         return FleetCurrent(lat=lat, lon=lon, utc=utc, north=p.north, east=p.east,
-                            std_north=p.std_north, std_east=p.std_east, n_obs=p.n_obs)
+                            std_north=p.std_north, std_east=p.std_east, n_obs=p.n_obs,
+                            down=p.down, std_down=p.std_down)
 
     def _publish(self, grid: FleetGrid) -> None:
         payload = self._enc.encode(grid)
