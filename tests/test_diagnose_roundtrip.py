@@ -154,11 +154,16 @@ def test_diagnose_overlay_replay_round_trip(tmp_path):
     print(results)
     for log in ("one", "two"):
         b, a = results[(log, "before")], results[(log, "after")]
-        assert a["aie.speed"] < 0.75 * b["aie.speed"]  # 0.62 / 0.59
-        assert a["kf.speed"] < 0.88 * b["kf.speed"]    # 0.81 / 0.78
+        assert a["aie.speed"] < 0.75 * b["aie.speed"]  # 0.43 / 0.45
+        assert a["kf.speed"] < 0.88 * b["kf.speed"]    # 0.54 / 0.50
         assert a["aie.heading"] < 0.3 * b["aie.heading"]
         assert a["kf.heading"] < 0.3 * b["kf.heading"]
-        assert a["current"] < 0.3 * b["current"]
+        assert a["current"] < 0.03                     # 0.017 / 0.017 m/s
+    # uncorrected, the deviation is learned online (183 s) and the current withheld from
+    # then on: none published in log one's window (from 479.6 s), log two's is from its
+    # first 183 s (0.174 m/s)
+    assert math.isnan(results[("one", "before")]["current"])
+    assert results[("two", "after")]["current"] < 0.3 * results[("two", "before")]["current"]
 
 
 @pytest.mark.slow
