@@ -1,4 +1,4 @@
-"""Measurement noise learned online, both ways (algorithms.md §8, issue 32): a world whose
+"""Measurement noise learned online, both ways (algorithms.md §9, issue 32): a world whose
 sensors are 3 times quieter or 3 times louder than the unchanged config declares
 (``sitl.scenarios.noise_scaled``) gets sigmas that cover the errors; with the learning off
 (the negative controls) they do not."""
@@ -37,9 +37,9 @@ def _learn(k: float, forecast: float, n: int = 400, seed: int = 1) -> NoiseScale
     rng = random.Random(seed)
     s = NoiseScale("x", "[sensors.x] std", 1.0, "m")
     for _ in range(n):
-        R = s.scale
+        R = s.applied  # the update takes the widening only
         z = rng.gauss(0.0, math.sqrt(forecast + k * k))
-        s.observe(z * z, forecast + R, R)
+        s.observe(z, forecast + R, R)
     return s
 
 
@@ -100,18 +100,23 @@ def no_learning(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(noise_learning.NoiseScale, "observe", lambda *a: None)
 
 
-def test_too_quiet_sensors_narrow_the_sigmas() -> None:
-    cover, pipe, _ = _fly("noise-boat-0.3x")
-    # measured 0.71, speed 0.63 (0.99 and 0.95 with the learning off, the negative
-    # control below)
-    assert 0.55 <= cover["heading"] <= 0.85, cover
-    assert 0.15 < math.sqrt(pipe.yaw.noise.scale) < 0.45          # true 0.3
-
-
-@pytest.mark.slow
-def test_too_quiet_sensors_without_learning_are_too_timid(no_learning: None) -> None:
-    cover, _, _ = _fly("noise-boat-0.3x")
-    assert cover["heading"] > 0.85, cover
+def test_too_quiet_sensors_are_learned_where_the_innovations_identify_them() -> None:
+    """Every sensor 0.3x the declared noise. The position increments' innovations are
+    mostly noise: learned 0.41x (true 0.3x, the GNSS drift in them). The Doppler speed's
+    and the heading's are smaller than their forecasts alone explain (mean sample -0.10
+    and -0.95 of the declared variance): the forecast is too timid, the sensor noise is not
+    identified, nothing is narrowed, and the warning names the process noise, not the
+    sensor key. The sigmas stay too timid (measured 1-sigma coverage speed 0.95, heading
+    0.985): the open miss of docs/integrity.md "Learned noise"."""
+    cover, pipe, alerts = _fly("noise-boat-0.3x")
+    assert pipe.surge.noise.identified
+    assert 0.25 < math.sqrt(pipe.surge.noise.scale) < 0.5                  # true 0.3
+    assert not pipe.surge.rate_noise.identified and not pipe.yaw.noise.identified
+    assert pipe.surge.rate_noise.applied == pipe.yaw.noise.applied == 1.0
+    assert min(cover.values()) >= 0.55, cover                            # never too confident
+    nis = [a.message for a in alerts if a.code == "nis_out_of_band"]
+    assert nis and all("process noise in [pipelines.aie]" in m and "cannot be learned" in m
+                       for m in nis), nis
 
 
 def test_too_loud_sensors_widen_the_sigmas() -> None:

@@ -495,7 +495,7 @@ class CurrentKalmanFilter:
         self._unpack_coefficients()
         self.counters.updates += 1
         if self.learn_noise and self.started and self.counters.updates > START_UPDATES:
-            self.noise[kind].observe(float(up.y @ up.y), float(np.trace(up.S)),
+            self.noise[kind].observe(up.y.copy(), float(np.trace(up.S)),
                                      m * std * std)
         if self.calibrate and self.started and m == self.nd:
             self._calibrate(up.y, up.S)
@@ -504,7 +504,7 @@ class CurrentKalmanFilter:
     def noise_std(self, kind: MeasurementKind, std: float) -> float:
         """The one-sigma (m/s) a ``kind`` measurement declared at ``std`` is taken with:
         ``std sqrt(s)``, ``s`` its learned variance scale."""
-        return std * math.sqrt(self.noise[kind].scale)
+        return std * math.sqrt(self.noise[kind].applied)
 
     def restart_from(self, kind: MeasurementKind, z: np.ndarray, std: float,
                      rot: np.ndarray) -> UpdateOutcome:

@@ -135,8 +135,8 @@ class IncrementFilter:
         variances are the declared ones: the learned scales multiply them.
         """
         kf = self.kf
-        s = self.noise.scale
-        R, R_prev, R_v = s * R, s * R_prev, self.rate_noise.scale * R_v
+        s = self.noise.applied
+        R, R_prev, R_v = s * R, s * R_prev, self.rate_noise.applied * R_v
         self.last_command = command
         kf.R = R if kf.correlated else R + R_prev
         if not kf.initialized:
@@ -160,7 +160,7 @@ class IncrementFilter:
         else:
             self._consecutive_rejects = 0
             self.nis_avg += RUNNING_MEAN_GAIN * (min(kf.nis, NIS_CLIP) - self.nis_avg)
-            self.noise.observe(kf.z * kf.z, kf.S, kf.R)
+            self.noise.observe(kf.z, kf.S, kf.R)
             decision = self.input.after_innovation(
                 AxisInnovation(kf, self.rate_z, self.rate_S, self.nis_avg, self.V_u), k,
                 self._u_known(command))
@@ -214,7 +214,7 @@ class IncrementFilter:
             m2 = self._rate_mean * self._rate_mean
             self._rate_bias2 += RATE_BIAS_POWER_GAIN * (m2 - self._rate_bias2)
             self._c1 = k.c1
-            self.rate_noise.observe(z_v * z_v, S_v, R_v)
+            self.rate_noise.observe(z_v, S_v, R_v)
             if self.adaptive_rate_noise and self.rate_noise.learned:
                 self._match_input_error_var(z_v * z_v - S_v, k.c1)
         return z_v

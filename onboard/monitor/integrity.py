@@ -1294,6 +1294,10 @@ class IntegrityMonitor:
         if n is None:
             return f"its noise is set in [pipelines.{pipeline}]"
         bound = n.at_bound  # type: ignore[attr-defined]
+        if not above and not n.identified:  # type: ignore[attr-defined]
+            return (f"the innovations are smaller than its forecast alone explains: the "
+                    f"model's process noise in [pipelines.{pipeline}] is set higher than "
+                    f"they show ({n.key} cannot be learned from them)")  # type: ignore[attr-defined]
         if bound == (1 if above else -1):
             return (f"its learned noise is at its {'ceiling' if above else 'floor'}: set "
                     f"{n.key} = {n.std:.3g} (declared {n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]

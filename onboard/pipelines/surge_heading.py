@@ -469,12 +469,12 @@ class SurgeHeadingPipeline(Pipeline):
             self.yaw.restart()
             hp = None
         if hp is None:
-            self.track.heading.restart(th, psi, R_h * self.yaw.noise.scale)
+            self.track.heading.restart(th, psi, R_h * self.yaw.noise.applied)
             return
         cmd = self.commands.mean(hp[0], th, 2)
         self.yaw.step(self._disc(self.yaw.damping(cmd), th - hp[0]), wrap_pi(psi - hp[1]),
                       R_h, R_h_prev, cmd, t=th, source=w.heading_source)
-        self.track.heading.step(th, psi, R_h * self.yaw.noise.scale, self.yaw.kf,
+        self.track.heading.step(th, psi, R_h * self.yaw.noise.applied, self.yaw.kf,
                                 self.cfg.heading_anchor, hp[1])
         self._trim_commands()
 
