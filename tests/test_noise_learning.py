@@ -100,23 +100,32 @@ def no_learning(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(noise_learning.NoiseScale, "observe", lambda *a: None)
 
 
-def test_too_quiet_sensors_are_learned_where_the_innovations_identify_them() -> None:
-    """Every sensor 0.3x the declared noise. The position increments' innovations are
-    mostly noise: learned 0.41x (true 0.3x, the GNSS drift in them). The Doppler speed's
-    and the heading's are smaller than their forecasts alone explain (mean sample -0.10
-    and -0.95 of the declared variance): the forecast is too timid, the sensor noise is not
-    identified, nothing is narrowed, and the warning names the process noise, not the
-    sensor key. The sigmas stay too timid (measured 1-sigma coverage speed 0.95, heading
-    0.985): the open miss of docs/integrity.md "Learned noise"."""
+def test_too_quiet_sensors_are_learned_and_the_compass_narrowed() -> None:
+    """Every sensor 0.3x the declared noise. The heading increments' noise is learned and
+    applied (0.23x, true 0.3x): the heading's 1-sigma coverage 0.71 (0.985 with the
+    declared noise kept). The position increments' is learned (0.41x: the GNSS drift in
+    them) and reported, not applied; the Doppler speed's innovations are smaller than its
+    forecast alone explains (mean sample -0.10 of the declared variance): the forecast is
+    too timid, the sensor noise not identified, and the warning names the process noise,
+    not the sensor key. The speed's sigma stays too timid (coverage 0.95): the open miss
+    of docs/integrity.md "Learned noise" (narrowing the Doppler noise cost accuracy,
+    algorithms.md §9)."""
     cover, pipe, alerts = _fly("noise-boat-0.3x")
-    assert pipe.surge.noise.identified
+    assert 0.55 <= cover["heading"] <= 0.85, cover
+    assert 0.15 < math.sqrt(pipe.yaw.noise.applied) < 0.45                 # true 0.3
+    assert pipe.surge.noise.identified and pipe.surge.noise.applied == 1.0
     assert 0.25 < math.sqrt(pipe.surge.noise.scale) < 0.5                  # true 0.3
-    assert not pipe.surge.rate_noise.identified and not pipe.yaw.noise.identified
-    assert pipe.surge.rate_noise.applied == pipe.yaw.noise.applied == 1.0
-    assert min(cover.values()) >= 0.55, cover                            # never too confident
+    assert not pipe.surge.rate_noise.identified and pipe.surge.rate_noise.applied == 1.0
+    assert cover["speed"] >= 0.55, cover                                   # never too confident
     nis = [a.message for a in alerts if a.code == "nis_out_of_band"]
     assert nis and all("process noise in [pipelines.aie]" in m and "cannot be learned" in m
                        for m in nis), nis
+
+
+@pytest.mark.slow
+def test_too_quiet_sensors_without_learning_are_too_timid(no_learning: None) -> None:
+    cover, _, _ = _fly("noise-boat-0.3x")
+    assert cover["heading"] > 0.85, cover
 
 
 def test_too_loud_sensors_widen_the_sigmas() -> None:

@@ -258,7 +258,7 @@ class SurgeHeadingPipeline(Pipeline):
             cfg.gnss_velocity_std_mps, "gnss", "gnss_velocity_std_mps"), self.sigma_v, "m/s")
         yaw.noise = NoiseScale(f"{yaw.name}.increment", (
             f"[pipelines.{name}] heading_std_rad" if cfg.heading_std_rad is not None
-            else "[sensors.compass] heading_std_rad"), self.sigma_h, "rad")
+            else "[sensors.compass] heading_std_rad"), self.sigma_h, "rad", narrows=True)
         return ChannelNoise([surge.noise, surge.rate_noise, yaw.noise])
 
     def _init_windows(self) -> None:
