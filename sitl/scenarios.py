@@ -24,7 +24,13 @@
   (:mod:`sitl.effects`): ``fault-gnss-outage`` (no GNSS for 120 s), ``fault-gnss-submerged``
   (a torpedo AUV diving from the surface with a receiver that keeps reporting fixes under
   water), ``fault-dvl-lock-loss`` and ``fault-dvl-lock-loss-rov`` (30 s without bottom
-  lock), ``fault-compass-step`` (the compass reads 30 deg off for 5 s).
+  lock), ``fault-compass-step`` (the compass reads 30 deg off for 5 s);
+* a world whose noise the configuration does not know (:func:`noise_scaled`): the true
+  sensor noise ``k`` times what the vehicle's bundled config declares (GNSS position and
+  its drift, Doppler velocity, compass, DVL; the receiver keeps reporting the declared
+  accuracy), ``k`` in :data:`NOISE_SCALES`, for a boat in a current (``noise-boat-0.3x``,
+  ``noise-boat-1x``, ``noise-boat-3x``, config ``rudder-boat``) and a torpedo AUV
+  (``noise-auv-0.3x`` ... on ``gavia-tidal``, config ``torpedo-auv``).
 
 What the estimator may know of a scenario is :meth:`Scenario.metadata` (vehicle class,
 sensor rates and noise figures, the *declared* effects); the injected effects'
@@ -811,7 +817,56 @@ def _build() -> dict[str, Scenario]:
                                         "radians": 30 * DEG}),)),
     ]
     by_name.update((sc.name, sc) for sc in faults)
+    by_name.update((sc.name, sc) for sc in _noise_family(by_name))
     return by_name
+
+
+NOISE_SCALES = (0.3, 1.0, 3.0)
+"""The true sensor noise of the noise-scale scenarios, relative to the declared."""
+NOISE_BOAT_CURRENT = {"north": 0.15, "east": -0.2}
+"""The noise-scale boat's water current (m/s, earth; 0.25 m/s), undeclared."""
+AUV_DECLARED_COMPASS_RAD = 0.02
+"""The compass noise ``config/torpedo-auv.toml`` declares (the default of
+``[sensors.compass] heading_std_rad``)."""
+
+
+def noise_scaled(base: Scenario, name: str, k: float, compass_declared_rad: float
+                 ) -> Scenario:
+    """``base`` with every sensor's white noise (and the GNSS drift) ``k`` times its own,
+    the compass's ``k`` times ``compass_declared_rad``; the receiver reports the accuracy
+    of ``k = 1``. ``base``'s noise is what its config declares."""
+    sn = base.sensors
+    g, c, d = sn.gnss, sn.compass, sn.dvl
+    changes: dict[str, Any] = {}
+    if g is not None:
+        changes["gnss"] = dataclasses.replace(
+            g, position_std_m=k * g.position_std_m, drift_std_m=k * g.drift_std_m,
+            velocity_std_mps=k * g.velocity_std_mps,
+            reported_accuracy_m=math.hypot(g.position_std_m, g.drift_std_m))
+    if c is not None:
+        changes["compass"] = dataclasses.replace(c, noise_std_rad=k * compass_declared_rad)
+    if d is not None:
+        changes["dvl"] = dataclasses.replace(d, velocity_std_mps=k * d.velocity_std_mps)
+    return dataclasses.replace(
+        base, name=name, sensors=dataclasses.replace(sn, **changes),
+        description=f"{base.description}; every sensor's noise {k:g} times the declared",
+        reproduces="a world whose noise the configuration does not know (issue 32)")
+
+
+def _noise_family(by_name: dict[str, Scenario]) -> list[Scenario]:
+    """The noise-scale scenarios (module docstring): the rudder boat of the effect
+    scenarios with the small-boat sensors ``config/rudder-boat.toml`` declares, in a
+    0.25 m/s current, and ``gavia-tidal``."""
+    boat = dataclasses.replace(
+        by_name["effect-current"], sensors=_boat_sensors(),
+        description="rudder boat on the effect mission in a 0.25 m/s current",
+        injected=(Effect("water_current", NOISE_BOAT_CURRENT),))
+    out = []
+    for k in NOISE_SCALES:
+        out.append(noise_scaled(boat, f"noise-boat-{k:g}x", k, 0.03))
+        out.append(noise_scaled(by_name["gavia-tidal"], f"noise-auv-{k:g}x", k,
+                                AUV_DECLARED_COMPASS_RAD))
+    return out
 
 
 def _fault(base: Scenario, name: str, description: str, effects: tuple[Effect, ...],

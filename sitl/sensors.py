@@ -275,6 +275,9 @@ class GnssConfig:
     time_jitter_std_s: float = 0.0
     """Std of a normal error of each fix's time tag (s), zero mean: a receiver whose time
     tags are not locked to its measurement epochs (the ``gnss_jitter`` effect)."""
+    reported_accuracy_m: float | None = None
+    """The ``h_acc_m`` the receiver reports (m); None: its true ``hypot(white, drift)``. A
+    receiver whose accuracy estimate is not its noise (the noise-scale scenarios)."""
 
 
 class Gnss(_Base):
@@ -324,7 +327,8 @@ class Gnss(_Base):
             alt_m=-tr.down + c.altitude_std_m * n[4], fix_quality=1,
             num_sats=c.num_sats, hdop=c.hdop,
             sog_mps=math.hypot(vn, ve), cog_rad=wrap_2pi(math.atan2(ve, vn)),
-            h_acc_m=math.hypot(pos_std, c.drift_std_m),
+            h_acc_m=(math.hypot(pos_std, c.drift_std_m) if c.reported_accuracy_m is None
+                     else c.reported_accuracy_m),
             v_acc_m=c.altitude_std_m,
         )
         # delivered in order, and never before the instant measured

@@ -133,23 +133,22 @@ def test_perturbed_scenario_runs_with_the_perturbed_plant() -> None:
 def test_boat_aie_and_kf_under_the_worst_case() -> None:
     """jaiabot-turns, 90 s (errors after 30 s), seed 1, plant ``worst`` (mass +20 %,
     damping -30 %, thrust -15 %, lag 0.15 s, noise x2) against the nominal config.
-    Measured: speed RMSE AIE 0.174, KF 0.164 m/s at the fairly tuned defaults (docs/aie.md
-    section 2.1): the model error costs the AIE more than the KF here, the KF 6 % ahead
-    (bounds 0.2 / 0.3 m/s, AIE within 10 % of the KF). Mean NIS of the heading increments 3.80 for a dimension of 1 (nominal 0.98): the
-    filters are told the nominal noise and model, and the heading NIS says so (bound:
-    above 1.5, outside the 95 % band); the surge increments' NIS doubles (0.48 -> 0.95)
-    but stays in its band, since the adaptive input-error variance (docs/aie.md) takes the
-    model error in."""
+    Measured: speed RMSE AIE 0.101, KF 0.097 m/s (0.174 and 0.164 with the declared noise
+    kept: the sensors' doubled noise, learned from the innovations and applied, algorithms.md
+    §9). The learned noise says what the config got wrong: the Doppler speed's and the
+    heading's one-sigma 1.93x the nominal run's (true 2x); the position increment's 1.37x
+    (its innovations carry the GNSS drift, which the run's doubling leaves as it was)."""
     from validation.reports.mismatch import boat_run
 
     r = boat_run("worst", seed=1, duration=90.0)
-    assert r["speed_rmse_mps"]["aie"] < 0.2
-    assert r["speed_rmse_mps"]["kf"] < 0.3
+    assert r["speed_rmse_mps"]["aie"] < 0.13
+    assert r["speed_rmse_mps"]["kf"] < 0.13
     assert r["speed_rmse_mps"]["aie"] < 1.10 * r["speed_rmse_mps"]["kf"]
-    assert r["nis"]["aie.heading.increment"]["mean"] > 1.5
     nominal = boat_run("nominal", seed=1, duration=90.0)
-    assert (r["nis"]["aie.surge.increment"]["mean"]
-            > 1.5 * nominal["nis"]["aie.surge.increment"]["mean"])
+    for p in ("aie", "kf"):
+        for channel in ("surge.rate", "heading.increment"):
+            ratio = r["noise_std"][p][channel] / nominal["noise_std"][p][channel]
+            assert 1.6 < ratio < 2.5, (p, channel, ratio)
 
 
 # --------------------------------------------------------------------------- controllers

@@ -32,6 +32,10 @@ the sum ``R nu_r + V_c``, not how the model splits it, so a current error that `
 compensates is invisible to them (deflating to 0.1 made the spheroid's 1-sigma coverage
 0.24-0.48, docs/current.md, "Calibrated sigma").
 
+Measurement noise learned both ways: each measurement kind's noise ``R = s std^2 I`` has
+its own variance scale ``s`` learned from its innovations by covariance matching
+(algorithms.md §9, :class:`.NoiseScale`), after the first ``START_UPDATES``.
+
 Model coefficients: their covariance always flows into ``nu_r`` (and so into the current),
 also while they are not being identified (consider parameters: the gain rows of ``theta``
 are zero, Schmidt 1966), so a model identified elsewhere (its persistent state carries the
@@ -49,6 +53,7 @@ import numpy as np
 
 from onboard.estimators import kalman
 from onboard.estimators.model_identification import ModelIdentification
+from onboard.estimators.noise_learning import NoiseScale
 from onboard.estimators.vehicle_models import ModelInputs
 
 MeasurementKind = Literal["earth", "bottom", "water"]
@@ -138,6 +143,9 @@ class CurrentKalmanFilter:
             (``max_speed_through_water``): its current is not a number to publish.
         identification: the :class:`.ModelIdentification` of the coefficients.
         counters: its event counts (:class:`FilterCounters`).
+        noise: per measurement kind its learned noise scale (:class:`.NoiseScale`; the
+            owner may replace them with ones that name their configuration keys).
+        learn_noise: whether the updates teach them (the owner may turn it off).
     """
 
     def __init__(self, identification: ModelIdentification, *, init_current_std: float,
@@ -186,6 +194,9 @@ class CurrentKalmanFilter:
         self.y, self.S, self.nis = np.zeros(nd), np.eye(nd), 0.0
         self.q_scale = self.nis_avg = 1.0
         self.started = False
+        self.noise: dict[str, NoiseScale] = {
+            k: NoiseScale(k, "", 0.0, "m/s") for k in ("earth", "bottom", "water")}
+        self.learn_noise = True
         self._blk_y, self._blk_S, self._blk_n = np.zeros(nd), np.zeros((nd, nd)), 0
         self._eye_n = np.eye(n)
         self._H0 = _unrotated_measurement_matrices(nd, n)
@@ -459,11 +470,13 @@ class CurrentKalmanFilter:
         :meth:`restart_from`). The covariance is in Joseph form for the gain actually used
         (the coefficient rows of the gain are zero while not identifying); a singular
         innovation covariance or a non-finite or runaway state resets the filter
-        (``reset``).
+        (``reset``). ``std`` is the declared one-sigma: the learned scale of ``kind``
+        multiplies its variance (:meth:`noise_std`).
         """
         m = len(z)
         ident = self.identification
         keep = slice(0, 2 * self.nd) if ident.n_theta and not ident.identifying else None
+        std = self.noise_std(kind, std)
         up = kalman.update(self.x, self.P, z, std * std * np.eye(m),
                            self._measurement_matrix(kind, m, rot), keep=keep)
         self.y, self.S, self.nis = up.y, up.S, up.nis
@@ -481,9 +494,17 @@ class CurrentKalmanFilter:
             self._project_drag()
         self._unpack_coefficients()
         self.counters.updates += 1
+        if self.learn_noise and self.started and self.counters.updates > START_UPDATES:
+            self.noise[kind].observe(up.y.copy(), float(np.trace(up.S)),
+                                     m * std * std)
         if self.calibrate and self.started and m == self.nd:
             self._calibrate(up.y, up.S)
         return "accepted"
+
+    def noise_std(self, kind: MeasurementKind, std: float) -> float:
+        """The one-sigma (m/s) a ``kind`` measurement declared at ``std`` is taken with:
+        ``std sqrt(s)``, ``s`` its learned variance scale."""
+        return std * math.sqrt(self.noise[kind].applied)
 
     def restart_from(self, kind: MeasurementKind, z: np.ndarray, std: float,
                      rot: np.ndarray) -> UpdateOutcome:

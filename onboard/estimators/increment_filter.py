@@ -17,7 +17,12 @@ order of §2.7::
 
 The rate row's forecast innovation ``z_v = v_fc - y_v`` also drives the covariance matching
 of ``V_u`` (``adaptive_rate_noise``): ``E[z_v^2] = S_v`` with ``S_v = alpha^2 P_vv + c1^2
-V_u + R_v`` affine in ``V_u``.
+V_u + R_v`` affine in ``V_u``, once the rate's own noise has been learned (before, an
+excess of Doppler noise would be taken for an input error).
+
+Each measurement row learns its own noise from its innovations (algorithms.md §9,
+:class:`~onboard.estimators.noise_learning.NoiseScale`): the increment's point noise
+``R = s R_0`` (``noise``) and the rate's ``R_v = s_v R_v0`` (``rate_noise``), both ways.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from typing import Any, Mapping
 from onboard.core.messages import Innovation
 from onboard.estimators.axis_model import AxisModel, Discrete
 from onboard.estimators.input_models import AxisInnovation, InputModel
+from onboard.estimators.noise_learning import NoiseScale
 
 RUNNING_MEAN_GAIN = 0.05
 """Weight of the newest value in the running means of the rate innovations (and of the
@@ -68,6 +74,9 @@ class IncrementFilter:
             rate row.
         innovations: the records of the updates not yet taken (channels
             ``<name>.increment`` and ``<name>.rate``; innovation = measured - forecast).
+        noise, rate_noise: the learned noise scales of the increment's points and of the
+            rate (:class:`.NoiseScale`); the ``R``, ``R_prev`` and ``R_v`` a step is
+            given are the declared ones, multiplied by them.
     """
 
     def __init__(self, model: AxisModel, input_model: InputModel, *, input_error_var: float,
@@ -108,6 +117,8 @@ class IncrementFilter:
         self._rate_bias2 = 0.0  # running mean of its square ((m/s)^2)
         self._c1 = 0.0          # c1 (s) of the last step with a rate
         self.innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
+        self.noise = NoiseScale(f"{name}.increment", "", 0.0, "")
+        self.rate_noise = NoiseScale(f"{name}.rate", "", 0.0, "")
 
     # -- §2.7, one step ------------------------------------------------------------------
 
@@ -120,9 +131,12 @@ class IncrementFilter:
         ``R_prev``; ``command``: the mean normalized command over the step (None if
         unknown); ``y_v``: the rate measured at the newer point (m/s, the window's mean
         Doppler speed; None without one), of noise variance ``R_v``; ``t``, ``source``:
-        the newer point's time (s) and sample source, for the innovation records.
+        the newer point's time (s) and sample source, for the innovation records. The
+        variances are the declared ones: the learned scales multiply them.
         """
         kf = self.kf
+        s = self.noise.applied
+        R, R_prev, R_v = s * R, s * R_prev, self.rate_noise.applied * R_v
         self.last_command = command
         kf.R = R if kf.correlated else R + R_prev
         if not kf.initialized:
@@ -146,6 +160,7 @@ class IncrementFilter:
         else:
             self._consecutive_rejects = 0
             self.nis_avg += RUNNING_MEAN_GAIN * (min(kf.nis, NIS_CLIP) - self.nis_avg)
+            self.noise.observe(kf.z, kf.S, kf.R)
             decision = self.input.after_innovation(
                 AxisInnovation(kf, self.rate_z, self.rate_S, self.nis_avg, self.V_u), k,
                 self._u_known(command))
@@ -199,7 +214,8 @@ class IncrementFilter:
             m2 = self._rate_mean * self._rate_mean
             self._rate_bias2 += RATE_BIAS_POWER_GAIN * (m2 - self._rate_bias2)
             self._c1 = k.c1
-            if self.adaptive_rate_noise:
+            self.rate_noise.observe(z_v, S_v, R_v)
+            if self.adaptive_rate_noise and self.rate_noise.learned:
                 self._match_input_error_var(z_v * z_v - S_v, k.c1)
         return z_v
 

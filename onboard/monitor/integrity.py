@@ -27,8 +27,16 @@ published records and the innovation records, and runs these checks:
   narrower than the NIS of sigmas within the 1-sigma coverage target
   (:data:`NIS_COVERAGE_TARGET`);
   ``nis_out_of_band`` after :data:`NIS_SUSTAIN_BLOCKS` blocks in a row outside it on the
-  same side (too large: sigmas too small; too small: sigmas too large). The pipeline is
-  flagged.
+  same side (too large: sigmas too small; too small: sigmas too large). A channel whose
+  pipeline learns its measurement noise (the pipeline's ``noise``,
+  :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
+  is learned: an NIS out of band first drives the adaptation, and the warning says what
+  is still inconsistent after it (the learned noise at its bound: the configuration key
+  to change and the learned value; else the forecast's share). The pipeline is flagged.
+* **position consistency** (:class:`PositionNeesCheck`): where a fix is better than the
+  estimate (the published variance :data:`POSITION_NEES_FIX_RATIO` times the fix's), the NEES of the published position
+  against it, ``d^T (P + R_fix)^-1 d`` (2 dof), by blocks as the NIS;
+  ``position_inconsistent`` when it stays outside its band.
 * **speed against Doppler or DVL** (:class:`SpeedCheck`): at the first tick after each
   GNSS fix with a speed over ground, or each valid DVL bottom-track report, each
   pipeline's published ``speed`` against it: its horizontal speed (the magnitude of its
@@ -742,6 +750,23 @@ WATCHED = frozenset({GnssFix, Heading, Attitude, DvlVelocity, ActuatorCommand})
 """The sample types the monitor reads (the engine hands it only these)."""
 
 
+POSITION_NEES_FIX_RATIO = 4.0
+"""A fix is better than the estimate when the published variance is at least this many
+times the fix's (its sigma half the estimate's): the fix's own error (and the drift the
+estimate shares with it) is then a small part of the residual."""
+
+
+class PositionNeesCheck(NisCheck):
+    """One pipeline's position NEES against the fixes better than its estimate (module
+    docstring): a :class:`NisCheck` of 2 degrees of freedom fed with
+    ``d^T (P + R_fix)^-1 d`` where ``R_fix < P``."""
+
+    __slots__ = ()
+
+    def __init__(self) -> None:
+        super().__init__(2)
+
+
 class Declared(Protocol):
     """A pipeline as the monitor sees it: its name and the roles it declares
     (``onboard.pipelines.base.Pipeline`` documents them)."""
@@ -767,7 +792,7 @@ class Declared(Protocol):
 
 
 class IntegrityMonitor:
-    """The four checks of one run and their flags (module docstring).
+    """The five checks of one run and their flags (module docstring).
 
     Attributes:
         flags: pipeline -> the codes of the checks it fails now.
@@ -806,6 +831,7 @@ class IntegrityMonitor:
         """The pipelines whose roles it reads, by name (:meth:`watch`)."""
         self.positions: dict[str, PositionCheck] = {}
         self.nis: dict[str, dict[str, NisCheck]] = {}
+        self.position_nees: dict[str, PositionNeesCheck] = {}
         self.flags: dict[str, set[str]] = {}
         self.flagged: dict[str, int] = {}
         self.withheld_rows: dict[str, int] = {}
@@ -1058,6 +1084,7 @@ class IntegrityMonitor:
         fn, fe = ne
         res = (v[qn] - (fn + off_n + moved[0]), v[qe] - (fe + off_e + moved[1]))
         var = (sd[qn] ** 2 + var_fix, sd[qe] ** 2 + var_fix)
+        self._position_nees(rec, res, var, var_fix)
         check = self.positions.get(rec.pipeline)
         if check is None:
             check = self.positions[rec.pipeline] = PositionCheck()
@@ -1076,6 +1103,33 @@ class IntegrityMonitor:
                          f"{math.sqrt(var_fix):.1f} m"
                          + (REORIGINED if own is not frame and (own.lat0, own.lon0)
                             != (frame.lat0, frame.lon0) else "")))
+
+    def _position_nees(self, rec: EstimateRecord, res: tuple[float, float],
+                       var: tuple[float, float], var_fix: float) -> None:
+        """The position NEES of ``rec`` against a fix of variance ``var_fix`` (m^2) better
+        than the estimate on both axes (``var`` the sum of both, per axis);
+        ``position_inconsistent`` while its :class:`PositionNeesCheck` fails."""
+        lim = (1.0 + POSITION_NEES_FIX_RATIO) * var_fix
+        if not (var[0] > lim and var[1] > lim):
+            return
+        check = self.position_nees.get(rec.pipeline)
+        if check is None:
+            check = self.position_nees[rec.pipeline] = PositionNeesCheck()
+        was = check.failing
+        now = check.add(res[0] * res[0] / var[0] + res[1] * res[1] / var[1])
+        if now and check.first_failed is None:
+            check.first_failed = rec.t
+        if now and self._due("position_inconsistent", rec.pipeline, rec.t):
+            lo, hi = check.band
+            self._warn("position_inconsistent", rec.pipeline, rec.t, (
+                f"{rec.pipeline} position: mean NEES {check.mean:.2f} against the fixes "
+                f"better than it, outside [{lo:.2f}, {hi:.2f}]: its position sigma "
+                + ("is too small" if check.mean > hi else "is larger than its error")
+                + " (docs/integrity.md)"), details=(
+                f"each block of {NIS_BLOCK_UPDATES} comparisons (dof 2; lag-1 "
+                f"autocorrelation {check.rho:.2f})"), t_start=check.first_failed)
+        if now != was:
+            self._flag(rec.pipeline, "position_inconsistent", now)
 
     # ------------------------------------------------------------------ speeds
     def _doppler(self, s: GnssFix) -> None:
@@ -1157,6 +1211,7 @@ class IntegrityMonitor:
             now = check.add(nis)
             if not check._n:  # a block was judged: its mean into the run's
                 self._run_mean(pipeline, rec.channel, check, rec.t)
+            now = now and self._adapted(pipeline, rec.channel)
             if now:
                 if check.first_failed is None:
                     check.first_failed = rec.t
@@ -1214,6 +1269,41 @@ class IntegrityMonitor:
                 f"its divergence bounds in [pipelines.{name}] (docs/integrity.md)"),
                 key=axis, t_start=dc.first[key])
 
+    def _learned(self, pipeline: str, channel: str) -> object | None:
+        """The channel's learned noise (a :class:`.NoiseScale`), None if its pipeline
+        learns none for it."""
+        noise = getattr(self.watched.get(pipeline), "noise", None)
+        report = getattr(noise, "report", None)
+        return report(channel) if report is not None else None
+
+    def _adapted(self, pipeline: str, channel: str) -> bool:
+        """Whether the channel's NIS may be judged: its noise is not learned, has had its
+        samples, or had none to learn from (an NIS out of band first drives the
+        adaptation; a channel whose forecast always dominates adapts nothing)."""
+        learned = self._learned(pipeline, channel)
+        return (learned is None or bool(getattr(learned, "learned", True))
+                or getattr(learned, "n", 0) == 0)
+
+    def _nis_remedy(self, pipeline: str, channel: str, above: bool) -> str:
+        """What to change: the learned noise's key and value when it sits at its bound on
+        the failing side, else the forecast's share (the pipeline's model and process
+        noise)."""
+        n = self._learned(pipeline, channel)
+        forecast = (f"its measurement noise is learned, the rest is the forecast's: the "
+                    f"model or process noise in [pipelines.{pipeline}]")
+        if n is None:
+            return f"its noise is set in [pipelines.{pipeline}]"
+        bound = n.at_bound  # type: ignore[attr-defined]
+        if not above and not n.identified:  # type: ignore[attr-defined]
+            return (f"the innovations are smaller than its forecast alone explains: the "
+                    f"model's process noise in [pipelines.{pipeline}] is set higher than "
+                    f"they show ({n.key} cannot be learned from them)")  # type: ignore[attr-defined]
+        if bound == (1 if above else -1):
+            return (f"its learned noise is at its {'ceiling' if above else 'floor'}: set "
+                    f"{n.key} = {n.std:.3g} (declared {n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
+        return (f"{forecast} (learned {n.key} = {n.std:.3g}, declared "  # type: ignore[attr-defined]
+                f"{n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
+
     def _nis_warning(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
         lo, hi = check.band
         how = ("larger than the filter expects: its sigmas are too small"
@@ -1221,7 +1311,7 @@ class IntegrityMonitor:
                "larger than its errors")
         self._warn("nis_out_of_band", pipeline, t, (
             f"{pipeline} {channel}: mean NIS {check.mean:.2f} outside [{lo:.2f}, {hi:.2f}], "
-            f"the innovations {how}; its noise is set in [pipelines.{pipeline}] "
+            f"the innovations {how}; {self._nis_remedy(pipeline, channel, check.mean > hi)} "
             "(docs/integrity.md)"), details=(
             f"each block of {NIS_BLOCK_UPDATES} updates against its {NIS_BAND:.0%} band, "
             f"for {abs(check.outside)} blocks in a row (dof {check.dof}; lag-1 "

@@ -86,6 +86,7 @@ from onboard.estimators.model_identification import (
     VelocityRls,
     floor_along_track,
 )
+from onboard.estimators.noise_learning import ChannelNoise, NoiseScale
 from onboard.estimators.restored_current import RestoredCurrentCheck
 from onboard.estimators.vehicle_models import RegressionModel, kind_for_class
 from onboard.pipelines.base import LateSampleHold, Pipeline, unused_measurement
@@ -163,6 +164,8 @@ class CurrentPipeline(Pipeline):
         self._innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
         self.identification = _identification(cfg, self.model)
         self.kf = _joint_filter(cfg, self.identification)
+        self.noise = _learned_noise(self.kf, cfg, sensors)
+        """The learned noise of the velocity channels (algorithms.md §9)."""
         self.events: list[str] = []
         """Human-readable events not yet taken (:meth:`take_events`): a restored current
         discarded or confirmed, a start contradicted."""
@@ -345,11 +348,13 @@ class CurrentPipeline(Pipeline):
         dt_meas = tm - self._last_meas_t if self._last_meas_t is not None else t_first
         dt_meas = min(max(dt_meas, t_min), t_max)
         self._last_meas_t = tm
-        outcome: str = kf.update(kind, z, std, R)
+        outcome: str = kf.update(kind, z, std, R)  # its learned noise inside
         y, S, nis = kf.y, kf.S, kf.nis  # the record shows the contradiction, if any
         if outcome == "contradicts_start":
             restart = kf.restart_from(kind, z, std, R)
             outcome = "restarted" if restart == "accepted" else restart
+        std = kf.noise_std(kind, std)   # the observers take the learned noise too
+        m = m._replace(std=std)
         self._record(CHANNELS[kind], m, y, S, nis, kf.gate_nis, outcome)
         if outcome == "reset" and hgo is not None:
             hgo.reset_gain()
@@ -602,7 +607,7 @@ class CurrentPipeline(Pipeline):
             heading_diversity=ident.headings.length(),
             late=LateHold(hold.late, hold.hold_s, hold.too_late) if hold.late else None,
             restore_probation_s=check.held_s if check.active else None,
-            restore_chi2=check.chi2 if check.active else None)
+            restore_chi2=check.chi2 if check.active else None, noise=self.noise.health())
 
     def get_state(self) -> dict[str, Any]:
         """Identified model (coefficients and their covariance) and the last current."""
@@ -618,6 +623,7 @@ class CurrentPipeline(Pipeline):
             st["theta_cov"] = kf.P[o:, o:].tolist()
         if self.identification.yaw_rls is not None:
             st["yaw_rls"] = self.identification.yaw_rls.get_state()
+        st["noise"] = self.noise.get_state()
         if self.hgo_rls is not None:
             st["hgo_thetas"] = self.model.thetas_to_mapping(
                 self.hgo_rls.thetas + self.thetas[self.nd:])
@@ -629,6 +635,7 @@ class CurrentPipeline(Pipeline):
         its saved uncertainty inflated (it may have changed while the service was down)
         and is on probation (``restore_check_s``): a twin filter with the restored model and
         the current at its prior checks it against the first minutes of data."""
+        self.noise.set_state(state.get("noise"))
         if state.get("model_kind") != self.model.kind:
             return
         self.restore_check.end()
@@ -721,6 +728,25 @@ def _identification(cfg: CurrentConfig, model: RegressionModel) -> ModelIdentifi
         yaw_rls_p0=cfg.yaw_rls_p0, yaw_forgetting=cfg.yaw_forgetting,
         svf_cutoff_hz=cfg.svf_cutoff_hz, heading_memory_s=cfg.heading_memory_s,
         heading_diversity=cfg.heading_diversity)
+
+
+def _learned_noise(kf: CurrentKalmanFilter, cfg: CurrentConfig,
+                   sensors: Any) -> ChannelNoise:
+    """One :class:`.NoiseScale` per measurement kind of ``kf``, named by its channel and
+    the configuration key that declares its noise, given to ``kf`` which learns it; not on
+    a glider (``[pipelines.current.glider]``): its velocities come from its flight model
+    and a DVL whose errors last a dive, not white, and the matching does not hold (learned,
+    the Kolumbo current got worse than zero north, 0.21 -> 0.27 m/s)."""
+    gnss = (("[pipelines.current] gnss_velocity_std_mps", cfg.gnss_velocity_std_mps)
+            if cfg.gnss_velocity_std_mps else
+            ("[sensors.gnss] velocity_std_mps", sensors.gnss.velocity_std_mps))
+    dvl = (("[pipelines.current] dvl_velocity_std_mps", cfg.dvl_velocity_std_mps)
+           if cfg.dvl_velocity_std_mps else
+           ("[sensors.dvl] velocity_std_mps", sensors.dvl.velocity_std_mps))
+    for kind, (key, std) in (("earth", gnss), ("bottom", dvl), ("water", dvl)):
+        kf.noise[kind] = NoiseScale(CHANNELS[kind], key, std, "m/s")
+    kf.learn_noise = cfg.glider is None
+    return ChannelNoise(list(kf.noise.values()) if kf.learn_noise else [])
 
 
 def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification) -> CurrentKalmanFilter:

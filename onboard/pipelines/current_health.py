@@ -87,6 +87,9 @@ class CurrentHealth(msgspec.Struct, frozen=True, kw_only=True):
     """Data time (s) a restored current on probation has held (None: no probation)."""
     restore_chi2: float | None
     """The probation's last test statistic (None: no probation)."""
+    noise: dict[str, float] = {}
+    """The learned measurement noise of the channels that had updates
+    (:meth:`.ChannelNoise.health`)."""
 
     def flat(self) -> dict[str, float]:
         """The counters (``rejected_invalid_dvl``, ``rejected_gate``,
@@ -128,6 +131,7 @@ class CurrentHealth(msgspec.Struct, frozen=True, kw_only=True):
                      late_beyond_hold=self.late.beyond_hold)
         _put(h, "restore_probation_s", self.restore_probation_s)
         _put(h, "restore_chi2", self.restore_chi2)
+        h.update(self.noise)
         return h
 
 

@@ -67,6 +67,7 @@ from onboard.estimators.measurement_points import (
     clamp,
     finite_positive,
 )
+from onboard.estimators.noise_learning import ChannelNoise, NoiseScale
 from onboard.estimators.reconstruction import Point, TrackReconstruction
 from onboard.pipelines.base import Pipeline, unused_measurement
 
@@ -144,6 +145,9 @@ class SurgeHeadingHealth(msgspec.Struct, frozen=True):
     ``theta_norm``)."""
     heading_input: dict[str, float]
     """What the heading axis's input model reports."""
+    noise: dict[str, float] = {}
+    """The learned measurement noise (:meth:`.ChannelNoise.health`: ``noise.<channel>.scale``
+    and ``noise.<channel>.std``)."""
 
     def flat(self) -> dict[str, float]:
         """``surge.steps`` ... ``heading.restarts``, ``surge.rate_steps``,
@@ -163,6 +167,7 @@ class SurgeHeadingHealth(msgspec.Struct, frozen=True):
         h["tuned_set.switches"] = float(self.set_switches)
         for nm, inp in (("surge", self.surge_input), ("heading", self.heading_input)):
             h.update({f"{nm}.{k}": v for k, v in inp.items()})
+        h.update(self.noise)
         return h
 
 
@@ -215,6 +220,8 @@ class SurgeHeadingPipeline(Pipeline):
         s, h = cfg.surge, cfg.heading
         self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg, "surge")
         self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg, "heading")
+        self.noise = self._learned_noise()
+        """The learned noise of the three measurement channels (algorithms.md §9)."""
         self.commands = CommandHistory()
         self.track = TrackReconstruction(
             self.surge, self.yaw, self.commands, var_fix=self.sigma_p ** 2,
@@ -235,6 +242,24 @@ class SurgeHeadingPipeline(Pipeline):
         self._unwrap = HeadingUnwrapper()
         self._acc_bad = 0                    # fixes whose reported accuracy was not > 0
         self._init_windows()
+
+    def _learned_noise(self) -> ChannelNoise:
+        """One :class:`.NoiseScale` per measurement row, named by the configuration key
+        that declares its noise, given to the axis filter that learns it."""
+        cfg, name = self.cfg, self.name
+
+        def key(own: object, sensor: str, field: str) -> str:
+            return (f"[pipelines.{name}] {field}" if own is not None
+                    else f"[sensors.{sensor}] {field.split('_', 1)[1]}")
+        surge, yaw = self.surge, self.yaw
+        surge.noise = NoiseScale(f"{surge.name}.increment", key(
+            cfg.gnss_position_std_m, "gnss", "gnss_position_std_m"), self.sigma_p, "m")
+        surge.rate_noise = NoiseScale(f"{surge.name}.rate", key(
+            cfg.gnss_velocity_std_mps, "gnss", "gnss_velocity_std_mps"), self.sigma_v, "m/s")
+        yaw.noise = NoiseScale(f"{yaw.name}.increment", (
+            f"[pipelines.{name}] heading_std_rad" if cfg.heading_std_rad is not None
+            else "[sensors.compass] heading_std_rad"), self.sigma_h, "rad", narrows=True)
+        return ChannelNoise([surge.noise, surge.rate_noise, yaw.noise])
 
     def _init_windows(self) -> None:
         """The measurement windows and the previous points of both axes."""
@@ -434,7 +459,7 @@ class SurgeHeadingPipeline(Pipeline):
         if w.n_h == 0:
             return
         th, psi = w.heading_point()
-        R_h = self.sigma_h ** 2 / w.n_h
+        R_h = self.sigma_h ** 2 / w.n_h   # declared; the filter and the track scale it
         R_h_prev, self._R_h_prev = self._R_h_prev, R_h
         hp = self._h_prev
         if hp is not None and th - hp[0] <= SAME_POINT_S:
@@ -444,12 +469,13 @@ class SurgeHeadingPipeline(Pipeline):
             self.yaw.restart()
             hp = None
         if hp is None:
-            self.track.heading.restart(th, psi, R_h)
+            self.track.heading.restart(th, psi, R_h * self.yaw.noise.applied)
             return
         cmd = self.commands.mean(hp[0], th, 2)
         self.yaw.step(self._disc(self.yaw.damping(cmd), th - hp[0]), wrap_pi(psi - hp[1]),
                       R_h, R_h_prev, cmd, t=th, source=w.heading_source)
-        self.track.heading.step(th, psi, R_h, self.yaw.kf, self.cfg.heading_anchor, hp[1])
+        self.track.heading.step(th, psi, R_h * self.yaw.noise.applied, self.yaw.kf,
+                                self.cfg.heading_anchor, hp[1])
         self._trim_commands()
 
     # -- the surge axis: one step per GNSS window --------------------------------------------
@@ -576,7 +602,7 @@ class SurgeHeadingPipeline(Pipeline):
         return SurgeHeadingHealth(
             AxisHealth.of(surge), AxisHealth.of(yaw), surge.rate_steps, surge.rate_rejected,
             self._acc_bad, self.doppler, self.set_switches, surge.input_health(),
-            yaw.input_health())
+            yaw.input_health(), self.noise.health())
 
     def get_state(self) -> dict[str, Any]:
         """The axis models in use and what the input models learned (JSON-safe)."""
@@ -585,12 +611,14 @@ class SurgeHeadingPipeline(Pipeline):
             m = ax.model
             st[nm] = {"model": {"a": m.a, "gain": m.gain, "offset": m.offset}}
             st[nm].update(ax.input_state())
+        st["noise"] = self.noise.get_state()
         return st
 
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restore :meth:`get_state`; a model that is missing, malformed, not finite or
         not damped (``a <= 0``) is ignored, and so is what does not fit an input model."""
         self.track.invalidate()
+        self.noise.set_state(state.get("noise"))
         for nm, ax in self._axes():
             sub = state.get(nm)
             if not isinstance(sub, dict):

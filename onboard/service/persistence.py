@@ -1,8 +1,9 @@
 """Adaptive state across restarts: saved atomically at intervals, restored on start.
 
 What is kept is whatever the pipelines return from ``get_state()`` (RLS coefficients and
-covariances, AIE coefficients, identified model parameters, the current estimate), wrapped
-in a versioned envelope::
+covariances, AIE coefficients, identified model parameters, the current estimate, and the
+measurement noise each channel learned, ``noise``: algorithms.md §9), wrapped in a
+versioned envelope::
 
     {"format": "onboard-state", "version": 1, "vehicle": "<id>", "vehicle_class": "...",
      "saved_at": <POSIX s>, "pipelines": {"<pipeline>": {...}, ...}}

@@ -194,7 +194,11 @@ def boat_run(case: str, seed: int, duration: float, after: float = 30.0) -> dict
                                                             - truth.yaw]))[0]))
     return {"speed_rmse_mps": {p: _rms(np.asarray(v)) for p, v in speed.items()},
             "heading_rmse_rad": {p: _rms(np.asarray(v)) for p, v in heading.items()},
-            "nis": nis()}
+            "nis": nis(),
+            "noise_std": {p.name: {k.removeprefix("noise.").removesuffix(".std"): v
+                                   for k, v in p.health().flat().items()
+                                   if k.startswith("noise.") and k.endswith(".std")}
+                          for p in (pa, pk)}}
 
 
 # --------------------------------------------------------------------------- campaign

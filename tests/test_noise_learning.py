@@ -1,0 +1,195 @@
+"""Measurement noise learned online, both ways (algorithms.md §9, issue 32): a world whose
+sensors are 3 times quieter or 3 times louder than the unchanged config declares
+(``sitl.scenarios.noise_scaled``) gets sigmas that cover the errors; with the learning off
+(the negative controls) they do not."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+import pytest
+
+from onboard.core import config as config_mod
+from onboard.core.geo import wrap_pi_array
+from onboard.engine import Engine
+from onboard.estimators import noise_learning
+from onboard.estimators.noise_learning import (
+    CEILING,
+    FLOOR,
+    MIN_UPDATES,
+    ChannelNoise,
+    NoiseScale,
+)
+from onboard.monitor.alerts import Alerts
+from onboard.monitor.integrity import IntegrityMonitor
+from onboard.pipelines import aie as aie_mod
+from onboard.sitl.runner import simulate
+
+DURATION_S = 240.0
+AFTER_S = 120.0
+
+
+def _learn(k: float, forecast: float, n: int = 400, seed: int = 1) -> NoiseScale:
+    """A channel declared at variance 1 whose innovations have variance ``forecast + k^2``
+    (the filter's forecast share known, its noise ``k`` times the declared sigma)."""
+    rng = random.Random(seed)
+    s = NoiseScale("x", "[sensors.x] std", 1.0, "m")
+    for _ in range(n):
+        R = s.applied  # the update takes the widening only
+        z = rng.gauss(0.0, math.sqrt(forecast + k * k))
+        s.observe(z, forecast + R, R)
+    return s
+
+
+@pytest.mark.parametrize("k", [0.3, 1.0, 3.0])
+def test_a_scale_is_learned_both_ways(k: float) -> None:
+    s = _learn(k, forecast=min(0.5 * k * k, 2.0))
+    assert math.sqrt(s.scale) == pytest.approx(k, rel=0.15)
+    assert s.std == pytest.approx(k * s.declared, rel=0.15)
+
+
+def test_it_moves_only_after_its_samples_and_within_its_bounds() -> None:
+    assert _learn(3.0, 0.1, n=MIN_UPDATES - 1).scale == 1.0
+    assert _learn(0.01, 0.0).scale == FLOOR and _learn(0.01, 0.0).at_bound == -1
+    assert _learn(10.0, 0.0, n=2000).scale == CEILING
+    # a filter still converging (forecast many times the noise) says nothing about it
+    assert _learn(3.0, 100.0).n == 0
+
+
+def test_the_learned_noise_is_persisted_and_restored() -> None:
+    s = _learn(0.3, 0.05)
+    st = ChannelNoise([s]).get_state()
+    t = NoiseScale("x", "[sensors.x] std", 1.0, "m")
+    ChannelNoise([t]).set_state(st)
+    assert (t.scale, t.learned) == (s.scale, True)
+    ChannelNoise([t]).set_state({"x": {"scale": math.nan}})   # ignored
+    assert t.scale == s.scale
+
+
+def _fly(scenario: str) -> tuple[dict[str, float], object, Alerts]:
+    """``scenario`` (seed 2, held out) through the AIE of the unchanged ``rudder-boat``
+    config: the 1-sigma coverage of speed and heading after ``AFTER_S`` (the issue pools
+    after 120 s)."""
+    cfg = config_mod.load("rudder-boat")
+    pipe = aie_mod.create(cfg)
+    assert pipe is not None
+    eng = Engine(cfg, pipelines=[pipe])
+    err: dict[str, list[float]] = {"speed": [], "heading": []}
+    next_tick = None
+    for t, samples, truth in simulate(scenario, duration=DURATION_S, seed=2):
+        for s in samples:
+            eng.push(s)
+        next_tick = t if next_tick is None else next_tick
+        if t + 1e-9 < next_tick or truth is None:
+            continue
+        next_tick = t + 0.1
+        v = {r.pipeline: r.values for r in eng.tick(t)}.get("aie", {})
+        if t < AFTER_S or "std_speed" not in v:
+            continue
+        speed = math.copysign(math.hypot(truth.u, truth.v), truth.u)
+        err["speed"].append(abs(v["speed"] - speed) / v["std_speed"])
+        err["heading"].append(abs(float(wrap_pi_array(np.array([v["heading"] - truth.yaw]))[0]))
+                              / v["std_heading"])
+    return {q: float(np.mean(np.array(e) < 1.0)) for q, e in err.items()}, pipe, eng.alerts
+
+
+@pytest.fixture
+def no_learning(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(noise_learning.NoiseScale, "observe", lambda *a: None)
+
+
+def test_too_quiet_sensors_are_learned_and_the_compass_narrowed() -> None:
+    """Every sensor 0.3x the declared noise. The heading increments' noise is learned and
+    applied (0.23x, true 0.3x): the heading's 1-sigma coverage 0.71 (0.985 with the
+    declared noise kept). The position increments' is learned (0.41x: the GNSS drift in
+    them) and reported, not applied; the Doppler speed's innovations are smaller than its
+    forecast alone explains (mean sample -0.10 of the declared variance): the forecast is
+    too timid, the sensor noise not identified, and the warning names the process noise,
+    not the sensor key. The speed's sigma stays too timid (coverage 0.95): the open miss
+    of docs/integrity.md "Learned noise" (narrowing the Doppler noise cost accuracy,
+    algorithms.md §9)."""
+    cover, pipe, alerts = _fly("noise-boat-0.3x")
+    assert 0.55 <= cover["heading"] <= 0.85, cover
+    assert 0.15 < math.sqrt(pipe.yaw.noise.applied) < 0.45                 # true 0.3
+    assert pipe.surge.noise.identified and pipe.surge.noise.applied == 1.0
+    assert 0.25 < math.sqrt(pipe.surge.noise.scale) < 0.5                  # true 0.3
+    assert not pipe.surge.rate_noise.identified and pipe.surge.rate_noise.applied == 1.0
+    assert cover["speed"] >= 0.55, cover                                   # never too confident
+    nis = [a.message for a in alerts if a.code == "nis_out_of_band"]
+    assert nis and all("process noise in [pipelines.aie]" in m and "cannot be learned" in m
+                       for m in nis), nis
+
+
+@pytest.mark.slow
+def test_too_quiet_sensors_without_learning_are_too_timid(no_learning: None) -> None:
+    cover, _, _ = _fly("noise-boat-0.3x")
+    assert cover["heading"] > 0.85, cover
+
+
+def test_too_loud_sensors_widen_the_sigmas() -> None:
+    cover, pipe, _ = _fly("noise-boat-3x")
+    # measured 0.70, heading 0.77 (0.31 and 0.31 with the learning off)
+    assert 0.55 <= cover["speed"] <= 0.85, cover
+    assert 2.0 < math.sqrt(pipe.surge.rate_noise.scale) < 4.0      # true 3
+
+
+@pytest.mark.slow
+def test_too_loud_sensors_without_learning_are_overconfident(no_learning: None) -> None:
+    cover, _, _ = _fly("noise-boat-3x")
+    assert cover["speed"] < 0.55, cover
+
+
+class _Pipe:
+    name = "aie"
+    position = speed = heading_dependent = ()
+    frame = frame_offset = None
+
+    def __init__(self, scale: NoiseScale) -> None:
+        self.noise = ChannelNoise([scale])
+
+
+def _nis_warnings(scale: NoiseScale, nis: float) -> list[str]:
+    alerts = Alerts()
+    mon = IntegrityMonitor(alerts)
+    mon.watch([_Pipe(scale)])
+    from onboard.core.messages import Innovation
+    mon.innovations("aie", [Innovation(channel="x", t=0.1 * i, z=(0.0,), S=(1.0,), nis=nis,
+                                       dof=1, gate=400.0, accepted=True)
+                            for i in range(400)])
+    return [a.message for a in alerts if a.code == "nis_out_of_band"]
+
+
+def test_the_nis_warning_waits_for_the_adaptation_and_names_the_key() -> None:
+    learning = _learn(0.3, 0.0, n=10)
+    assert _nis_warnings(learning, 0.05) == []                     # still adapting
+    idle = NoiseScale("x", "[sensors.x] std", 1.0, "m")            # nothing to learn from
+    assert len(_nis_warnings(idle, 0.05)) == 1
+    at_floor = _learn(0.01, 0.0)
+    (msg,) = _nis_warnings(at_floor, 0.05)
+    assert "at its floor: set [sensors.x] std = 0.2" in msg, msg
+    between = _learn(1.0, 0.0)
+    (msg,) = _nis_warnings(between, 5.0)
+    assert "the rest is the forecast's" in msg, msg
+
+
+def test_a_pipeline_starts_where_the_last_run_ended(tmp_path) -> None:
+    from onboard.pipelines import current as current_mod
+    from onboard.service.persistence import StateFile
+
+    cfg = config_mod.load("rudder-boat")
+    first = [aie_mod.create(cfg), current_mod.create(cfg)]
+    first[0].yaw.noise.set_state({"scale": 0.09, "n": 200})          # as if learned
+    first[1].kf.noise["earth"].set_state({"scale": 4.0, "n": 120})
+    sf = StateFile(tmp_path / "adaptive.json", "boat-1", "rudder_boat")
+    sf.save({p.name: p.get_state() for p in first})
+    state = sf.load().state
+    assert state is not None
+    again = [aie_mod.create(cfg), current_mod.create(cfg)]
+    for p in again:
+        p.set_state(state[p.name])
+    assert again[0].yaw.noise.scale == pytest.approx(0.09)
+    assert again[0].health().flat()["noise.heading.increment.std"] == pytest.approx(0.009)
+    assert again[1].kf.noise["earth"].scale == pytest.approx(4.0)
+    assert again[1].kf.noise_std("earth", 0.1) == pytest.approx(0.2)
