@@ -274,7 +274,8 @@ def test_estimates_csv_that_cannot_be_written_is_one_line_and_status_1(
 def test_the_figure_is_drawn_after_the_summary_is_written_and_printed(
         tmp_path, capsys, monkeypatch):
     """track.png is the slowest output: the headline, the warnings and summary.json
-    come first; the figure is then recorded in summary.json."""
+    come first; the figure is then recorded in summary.json. (The log replayed with a
+    torpedo AUV's config, so that it has a warning to print: class_mismatch.)"""
     import onboard.offline.plots as plots
 
     seen = {}
@@ -287,9 +288,10 @@ def test_the_figure_is_drawn_after_the_summary_is_written_and_printed(
 
     monkeypatch.setattr(plots, "plot_track", spy)
     out = tmp_path / "out"
-    rc, lines, _ = run(["replay", str(JAIABOT), "--out", str(out)], capsys)
+    rc, lines, _ = run(["replay", str(JAIABOT), "--config", "torpedo-auv", "--out", str(out)],
+                       capsys)
     assert rc == 0 and seen["summary"]
-    assert seen["printed"].startswith("tlog log, 40.0 s") and "warning" in seen["printed"]
+    assert seen["printed"].startswith("tlog log, 40.0 s") and "class_mismatch" in seen["printed"]
     assert lines[-1].startswith("wrote estimates.csv, summary.json, track.png in")
     assert json.loads((out / "summary.json").read_text())["figure"] == str(out / "track.png")
 
