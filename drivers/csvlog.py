@@ -464,6 +464,8 @@ class CsvReader:
                     chars = fh.row()
                     if not row or not any(c.strip() for c in row):
                         st.used_bytes += chars
+                        if row:  # cells, all empty: a spreadsheet's empty row
+                            st.skipped["empty_row"] += 1
                         continue
                     st.records += 1
                     name = self._run_name(path, row, idx)

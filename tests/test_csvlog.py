@@ -7,7 +7,7 @@ import statistics
 from pathlib import Path
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from onboard.drivers.base import UnreadableLog
@@ -132,12 +132,15 @@ def test_unreadable_inputs(tmp_path: Path):
 @given(st.lists(st.lists(st.sampled_from(["0", "1.5", "-2", "", "nan", "inf", "x", "1e400",
                                           "63.4", "1500"]), min_size=9, max_size=11),
                 max_size=6))
+@example(rows=[[""] * 9, ["0"] * 9])  # a spreadsheet's empty row beside a record
 def test_property_rows_never_raise_and_are_counted(tmp_path_factory, rows):
     d = tmp_path_factory.mktemp("h")
     f = write(d / "h.csv", [",".join(r) for r in rows])
     r = CsvReader(f, FMT)
     out = list(r)
-    assert r.stats.records == len(rows)
+    empty = sum(1 for row in rows if not any(c.strip() for c in row))  # ",,,,,,,,"
+    assert r.stats.records == len(rows) - empty
+    assert r.stats.skipped["empty_row"] == empty
     for s in out:
         assert math.isfinite(s.t)
         for name in s.__struct_fields__:
