@@ -86,6 +86,7 @@ def test_compass_deviation_is_found_not_a_false_current(diagnosed):
     assert f["compass_deviation"]["params"]["phase"] == pytest.approx(0.7, abs=0.1)
 
 
+@pytest.mark.slow  # 23 s; two effects at once in the default suite: test_closure_synthetic
 def test_two_effects_at_once(diagnosed):
     f = found(diagnosed("effect-two"))
     # (with the deviation's leftover first harmonic as unexplained, gain 0.168: as above)

@@ -28,6 +28,7 @@ import contextlib
 import io
 import json
 import os
+import socket
 import sys
 import time
 from dataclasses import dataclass, field
@@ -50,6 +51,9 @@ EXIT_SOME_FAILED = 3
 PROGRESS_EVERY_S = 1.0
 """The progress line on a terminal is redrawn this often while logs run (s)."""
 SECONDS_PER_HOUR = 3600.0
+SCHEDULER_PROBE_S = 2.0
+"""Seconds a first plain TCP connection to a ``tcp://`` scheduler may take: refused, the
+batch stops at once (exit 2); else distributed's client tries for 10 s."""
 
 
 @dataclass(frozen=True)
@@ -348,6 +352,21 @@ def _result(future, task: Task) -> dict:
         return row
 
 
+def _refused(address: str) -> bool:
+    """Whether a ``tcp://HOST:PORT`` scheduler address refuses the connection at once
+    (nothing listens there: distributed's client would retry it until its timeout)."""
+    host, _, port = address.removeprefix("tcp://").rpartition(":")
+    if not port.isdigit():
+        return False
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), SCHEDULER_PROBE_S).close()
+    except ConnectionRefusedError:
+        return True
+    except OSError:  # unreachable, unresolved, another scheme: the client will say
+        pass
+    return False
+
+
 def run_dask(tasks: Sequence[Task], address: str) -> Iterator[dict]:
     """The rows of ``tasks`` run on the Dask distributed cluster at ``address``, as they
     finish; a scheduler that cannot be reached is a :class:`UsageError`."""
@@ -356,6 +375,8 @@ def run_dask(tasks: Sequence[Task], address: str) -> Iterator[dict]:
     except ImportError:
         raise UsageError("--scheduler needs dask distributed: pip install "
                          "'onboard[batch]'") from None
+    if _refused(address):
+        raise UsageError(f"--scheduler {address}: cannot connect: connection refused")
     try:
         client = Client(address, timeout="10s")
     except (OSError, TimeoutError, ValueError) as err:
