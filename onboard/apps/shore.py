@@ -24,7 +24,6 @@ WebSocket server (:mod:`onboard.apps.foxglove_live`, docs/foxglove.md).
 from __future__ import annotations
 
 import argparse
-import asyncio
 import math
 import sys
 import threading
@@ -220,40 +219,20 @@ def snapshot(session: Any, view: ShoreView, vehicle: str = "*", timeout_s: float
 
 def serve_web(session: Any, vehicle: str, listen: str) -> int:
     """Serve the web page on ``listen`` (``HOST:PORT``) from the vehicles' samples until
-    Ctrl-C: the queryables' latest values first, then every sample."""
-    from onboard.service.web.app import make_server, parse_listen
-    from onboard.service.web.view import LiveView
+    Ctrl-C: the queryables' latest values first, then every sample, and the fleet
+    service's grids (the fleet layer)."""
+    from onboard.service.web.app import PageOnThread
 
+    key = f"onboard/{vehicle}/**"
+    page = PageOnThread(session, [key, FLEET_GRID_KEY], listen,
+                        vehicle="" if vehicle == "*" else vehicle, prime=[key])
+    print(f"onboard shore: the page is on {page.url}", flush=True)
     try:
-        parse_listen(listen)
-    except ValueError as err:
-        raise UsageError(f"--web {err}") from None
-    view = LiveView(vehicle="" if vehicle == "*" else vehicle)
-    sub = session.declare_subscriber(f"onboard/{vehicle}/**", view.on_sample)
-    grid_sub = session.declare_subscriber(FLEET_GRID_KEY, view.on_sample)  # the fleet layer
-    for rep in session.get(f"onboard/{vehicle}/**", timeout=3.0):
-        if rep.ok is not None:
-            view.feed_zenoh(str(rep.ok.key_expr), rep.ok.payload.to_bytes())
-    server = make_server(listen, view)
-
-    async def run() -> None:
-        try:
-            await server.start()
-        except OSError as err:
-            raise UsageError(f"--web {listen}: {err.strerror}") from None
-        print(f"onboard shore: the page is on http://{server.host}:{server.port}/", flush=True)
-        try:
-            await asyncio.Event().wait()
-        finally:
-            await server.close()
-
-    try:
-        asyncio.run(run())
+        threading.Event().wait()
     except KeyboardInterrupt:
         pass
     finally:
-        sub.undeclare()
-        grid_sub.undeclare()
+        page.close()
     return 0
 
 

@@ -329,54 +329,6 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
                          f"{str(err).split(' at ')[0]}") from None
 
 
-class WebPage:
-    """The web page (:mod:`onboard.service.web`) served by the fleet service itself on
-    ``listen`` (``HOST:PORT``): the vehicles' samples from ``<prefix>/**``, the field from
-    every grid :meth:`show` is given. Its server runs on an event loop of its own thread,
-    so that a fit never holds a page request back."""
-
-    def __init__(self, session: Any, prefix: str, listen: str) -> None:
-        import asyncio
-
-        from onboard.service.web.app import make_server, parse_listen
-        from onboard.service.web.view import LiveView
-
-        try:
-            parse_listen(listen)
-        except ValueError as err:
-            raise UsageError(f"--web {err}") from None
-        self.view = LiveView(vehicle="")
-        self.server = make_server(listen, self.view)
-        self._loop = asyncio.new_event_loop()
-        try:
-            self._loop.run_until_complete(self.server.start())
-        except OSError as err:
-            self._loop.close()
-            raise UsageError(f"--web {listen}: {err.strerror}") from None
-        self._sub = session.declare_subscriber(f"{prefix}/**", self.view.on_sample)
-        self._thread = threading.Thread(target=self._loop.run_forever, name="web", daemon=True)
-        self._thread.start()
-
-    @property
-    def url(self) -> str:
-        """Where the page is."""
-        return f"http://{self.server.host}:{self.server.port}/"
-
-    def show(self, grid: FleetGrid) -> None:
-        """Draw ``grid`` as the page's fleet layer."""
-        self.view.feed_grid(msgspec.to_builtins(grid))
-
-    def close(self) -> None:
-        """Stop serving the page."""
-        import asyncio
-
-        self._sub.undeclare()
-        asyncio.run_coroutine_threadsafe(self.server.close(), self._loop).result(10.0)
-        self._loop.call_soon_threadsafe(self._loop.stop)
-        self._thread.join(10.0)
-        self._loop.close()
-
-
 def main(args: argparse.Namespace) -> int:
     """``onboard fleet [--connect E] [--listen E] [--mode M] [--zenoh-config FILE]
     [--prefix P] [--period S] [--refit S] [--mcap FILE] [--web HOST:PORT]``."""
@@ -392,12 +344,14 @@ def main(args: argparse.Namespace) -> int:
           f"{grid_key(args.prefix)} every {args.period:g} s", flush=True)
     try:
         if getattr(args, "web", ""):
-            page = WebPage(session, args.prefix, args.web)
+            from onboard.service.web.app import PageOnThread
+
+            page = PageOnThread(session, [f"{args.prefix}/**"], args.web)
             print(f"onboard fleet: the page is on {page.url}", flush=True)
         while not stop.wait(args.period):
             grid = service.step()
             if grid is not None and page is not None:
-                page.show(grid)
+                page.view.feed_grid(msgspec.to_builtins(grid))
             known = sum(c.north is not None for c in grid.cells) if grid else 0
             print(f"{time.strftime('%H:%M:%S')} {len(service.newest)} vehicles, "
                   f"{service.field.added:,} records, {known} cells known", flush=True)

@@ -25,14 +25,18 @@ URL (bluerobotics/cockpit ``src/libs/blueos.ts``).
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 import os
+import threading
 from importlib import resources
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any, Sequence
 
 import msgspec
 
-from importlib.metadata import PackageNotFoundError, version
+from onboard.core.errors import UsageError
 from onboard.service.web.config_edit import ConfigEditor
 from onboard.service.web.http import (
     Handler,
@@ -55,6 +59,10 @@ WEBPAGE_ENV = "ONBOARD_WEBPAGE"
 (the BlueOS image sets it from the repository it is built from; empty otherwise)."""
 COCKPIT_EXTRAS = "/cockpit_extras.json"
 COCKPIT_API_VERSION = "1.0.0"
+
+
+PRIME_TIMEOUT_S = 3.0
+"""Seconds :class:`PageOnThread` waits for the answers it is primed with."""
 
 
 def _version() -> str:
@@ -157,3 +165,47 @@ def make_server(listen: str, view: LiveView, editor: ConfigEditor | None = None)
     return HttpServer(routes(view, editor), host, port)
 
 
+class PageOnThread:
+    """The page served on ``listen`` (``HOST:PORT``) from a :class:`LiveView` fed by Zenoh
+    subscriptions to ``keys``, its server on an event loop of its own thread (so that the
+    caller's work, a fleet fit or a wait for Ctrl-C, never holds a page request back).
+
+    A bad ``listen`` or a port that cannot be bound is a :class:`UsageError` naming
+    ``--web``. ``prime``: answers of a Zenoh ``get`` on these key expressions fed first
+    (a shore's queryables' latest values)."""
+
+    def __init__(self, session: Any, keys: Sequence[str], listen: str, *, vehicle: str = "",
+                 prime: Sequence[str] = ()) -> None:
+        try:
+            parse_listen(listen)
+        except ValueError as err:
+            raise UsageError(f"--web {err}") from None
+        self.view = LiveView(vehicle=vehicle)
+        for key in prime:
+            for rep in session.get(key, timeout=PRIME_TIMEOUT_S):
+                if rep.ok is not None:
+                    self.view.feed_zenoh(str(rep.ok.key_expr), rep.ok.payload.to_bytes())
+        self.server = make_server(listen, self.view)
+        self._loop = asyncio.new_event_loop()
+        try:
+            self._loop.run_until_complete(self.server.start())
+        except OSError as err:
+            self._loop.close()
+            raise UsageError(f"--web {listen}: {err.strerror}") from None
+        self._subs = [session.declare_subscriber(k, self.view.on_sample) for k in keys]
+        self._thread = threading.Thread(target=self._loop.run_forever, name="web", daemon=True)
+        self._thread.start()
+
+    @property
+    def url(self) -> str:
+        """Where the page is."""
+        return f"http://{self.server.host}:{self.server.port}/"
+
+    def close(self) -> None:
+        """Stop serving the page."""
+        for sub in self._subs:
+            sub.undeclare()
+        asyncio.run_coroutine_threadsafe(self.server.close(), self._loop).result(10.0)
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(10.0)
+        self._loop.close()
