@@ -340,11 +340,12 @@ def test_gnss_under_water_is_rejected_and_counted_estimates_continue(tmp_path):
     assert ticks > 0.5 * 230 and n / ticks > 0.9  # measured 1.00-1.01 (202 at 200 ticks)
     nav = _series(res, truth, "nav")
     depth_err = _max(abs(v["depth"] - tr.down) for t, v, tr in nav if t > 15.0 and "depth" in v)
-    # a tick takes the depth samples that arrived before it: a simulator running behind
-    # the shared clock delivers them late, and the vehicle, diving at up to
-    # DIVE_RATE_MPS, is deeper by then (measured 0.07 m when on time; 0.24 m with the
-    # simulator 0.73 s behind on a loaded 2-core runner)
-    allowed = 0.1 + DIVE_RATE_MPS * res.sim_late_s
+    # a tick takes the depth samples the service has read before it: a simulator running
+    # behind the shared clock sends them late, a service running behind reads them late,
+    # and the vehicle, diving at up to DIVE_RATE_MPS, is deeper by then (measured 0.06-0.07
+    # m when on time; 0.24 m with the two 0.73 s and 0.50 s behind on a loaded 2-core
+    # runner, 0.33 m with 0.88 s and 0.72 s)
+    allowed = 0.1 + DIVE_RATE_MPS * (res.sim_late_s + res.service_late_s)
     print(f"nav depth error under water {depth_err:.3f} m (allowed {allowed:.3f} m)")
     assert depth_err < allowed
 
@@ -424,13 +425,17 @@ def test_compass_step_30_deg_for_5_s_is_followed_then_recovered_nis_reported(tmp
     34 deg at 0.03 rad noise): the AIE/KF follow it, the heading NIS shows it in health,
     and within seconds of the step's end the heading is back within a few degrees."""
     res, truth = _fly("fault-compass-step", 62.0, tmp_path)
+    # recovered 3 s after the step's end, plus what the machine made the samples late by
+    # (the simulator sending, the service reading behind the shared clock: under the
+    # suite's load the recovery came 1-2 s later, 9.2 deg at 48 s)
+    recovered_from = 48.0 + res.sim_late_s + res.service_late_s
     for name in ("aie", "kf"):
         he = _heading_errors_deg(_series(res, truth, name))
         before = _median(_in(he, 25.0, 40.0))
         in_step = _max(_in(he, 40.0, 45.5))
-        after = _max(_in(he, 48.0, 62.0))
+        after = _max(_in(he, recovered_from, 62.0))
         print(f"{name} heading error: before {before:.2f}, max in the step {in_step:.1f}, "
-              f"max from 3 s after {after:.2f} deg")
+              f"max from {recovered_from:.1f} s {after:.2f} deg")
         assert in_step < 50.0  # measured 31-42 deg: follows the 30 deg step
         assert after < 6.0  # measured 2.7 deg (aie)
         assert before < 3.0
