@@ -265,6 +265,23 @@ def simulate(scenario: Scenario | str, duration: float | None = None, seed: int 
     return with_truth_latlon(sim.steps(duration), sim.geo)
 
 
+def engine_ticks(engine: Any, steps: Iterator[Step], tick_s: float = 0.1
+                 ) -> Iterator[tuple[float, list[Any], TruthRecord]]:
+    """Feed ``engine`` (an :class:`onboard.engine.Engine`) every sample of ``steps`` and tick
+    it at the truth records at most every ``tick_s`` s apart; yields ``(t, records,
+    truth)`` per tick, the records its ``tick(t)`` returned."""
+    next_tick: float | None = None
+    for t, samples, truth in steps:
+        for s in samples:
+            engine.push(s)
+        if next_tick is None:
+            next_tick = t
+        if t + 1e-9 < next_tick or truth is None:
+            continue
+        next_tick = t + tick_s
+        yield t, engine.tick(t), truth
+
+
 def with_truth_latlon(steps: Iterator[Step], geo: GeoOrigin,
                       batch: int = TRUTH_LATLON_BATCH) -> Iterator[Step]:
     """``steps`` with every truth record's ``lat_deg``/``lon_deg`` filled by ``geo``,

@@ -25,7 +25,7 @@ from onboard.estimators.noise_learning import (
 from onboard.monitor.alerts import Alerts
 from onboard.monitor.integrity import IntegrityMonitor
 from onboard.pipelines import aie as aie_mod
-from onboard.sitl.runner import simulate
+from onboard.sitl.runner import engine_ticks, simulate
 
 DURATION_S = 240.0
 AFTER_S = 120.0
@@ -77,15 +77,8 @@ def _fly(scenario: str) -> tuple[dict[str, float], object, Alerts]:
     assert pipe is not None
     eng = Engine(cfg, pipelines=[pipe])
     err: dict[str, list[float]] = {"speed": [], "heading": []}
-    next_tick = None
-    for t, samples, truth in simulate(scenario, duration=DURATION_S, seed=2):
-        for s in samples:
-            eng.push(s)
-        next_tick = t if next_tick is None else next_tick
-        if t + 1e-9 < next_tick or truth is None:
-            continue
-        next_tick = t + 0.1
-        v = {r.pipeline: r.values for r in eng.tick(t)}.get("aie", {})
+    for t, records, truth in engine_ticks(eng, simulate(scenario, duration=DURATION_S, seed=2)):
+        v = {r.pipeline: r.values for r in records}.get("aie", {})
         if t < AFTER_S or "std_speed" not in v:
             continue
         speed = math.copysign(math.hypot(truth.u, truth.v), truth.u)

@@ -163,7 +163,7 @@ def boat_run(case: str, seed: int, duration: float, after: float = 30.0) -> dict
     from onboard.pipelines import aie as aie_mod
     from onboard.pipelines import kf as kf_mod
     from onboard.sitl.mismatch import perturb_scenario
-    from onboard.sitl.runner import simulate
+    from onboard.sitl.runner import engine_ticks, simulate
 
     cfg = config_mod.load("rudder-boat")
     pa, pk = aie_mod.create(cfg), kf_mod.create(cfg)
@@ -173,17 +173,9 @@ def boat_run(case: str, seed: int, duration: float, after: float = 30.0) -> dict
     nis = _keep_innovations(eng, [pa, pk])
     speed: dict[str, list[float]] = {"aie": [], "kf": []}
     heading: dict[str, list[float]] = {"aie": [], "kf": []}
-    next_tick: float | None = None
-    for t, samples, truth in simulate(perturb_scenario("jaiabot-turns", case),
-                                      duration=duration, seed=seed):
-        for s in samples:
-            eng.push(s)
-        if next_tick is None:
-            next_tick = t
-        if t + 1e-9 < next_tick or truth is None:
-            continue
-        next_tick = t + 0.1
-        recs: dict[str, EstimateRecord] = {r.pipeline: r for r in eng.tick(t)}
+    steps = simulate(perturb_scenario("jaiabot-turns", case), duration=duration, seed=seed)
+    for t, records, truth in engine_ticks(eng, steps):
+        recs: dict[str, EstimateRecord] = {r.pipeline: r for r in records}
         if t < after:
             continue
         true_speed = math.copysign(math.hypot(truth.u, truth.v), truth.u)

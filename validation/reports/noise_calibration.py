@@ -65,24 +65,15 @@ def fly(scenario: str, seed: int, duration: float | None, pooled: Pooled) -> Non
     from onboard.pipelines import aie as aie_mod
     from onboard.pipelines import current as current_mod
     from onboard.pipelines import kf as kf_mod
-    from onboard.sitl.runner import simulate
+    from onboard.sitl.runner import engine_ticks, simulate
 
     cfg = config_mod.load(SCENARIO_CONFIG[family(scenario)])
     pipes = [p for p in (aie_mod.create(cfg), kf_mod.create(cfg), current_mod.create(cfg))
              if p is not None]
     eng = Engine(cfg, pipelines=pipes)
-    rows: list[tuple[float, dict[str, dict[str, float]], Any]] = []
-    next_tick = None
-    for t, samples, truth in simulate(scenario, duration=duration, seed=seed):
-        for s in samples:
-            eng.push(s)
-        if next_tick is None:
-            next_tick = t
-        if t + 1e-9 < next_tick or truth is None:
-            continue
-        next_tick = t + TICK_S
-        recs = {r.pipeline: r.values for r in eng.tick(t)}
-        rows.append((t, recs, truth))
+    rows: list[tuple[float, dict[str, dict[str, float]], Any]] = [
+        (t, {r.pipeline: r.values for r in recs}, truth) for t, recs, truth in
+        engine_ticks(eng, simulate(scenario, duration=duration, seed=seed), TICK_S)]
     t = np.array([r[0] for r in rows])
     m = t >= t[0] + AFTER_S
 
