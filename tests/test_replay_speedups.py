@@ -1,10 +1,9 @@
 """The replay's fast paths give the reference results: the early stop of
-:func:`drivers.tlog.scan_header`, estimates.csv's one-format rows, the discretization
-cached by the exact step, the learned noise's products on floats."""
+:func:`drivers.tlog.scan_header`, the discretization cached by the exact step, the
+learned noise's products on floats."""
 
 from __future__ import annotations
 
-import math
 import random
 from pathlib import Path
 
@@ -42,68 +41,6 @@ def test_scan_header_stops_once_the_parameter_set_is_complete(tmp_path: Path,
     assert [(v.mav_type, v.autopilot) for v in infos] == [(11, 3)]
     by_name = {x.name: x.value for x in found}
     assert by_name["SERVO1_FUNCTION"] == (26.0 if complete else 33.0)
-
-
-def _records(rng, columns: dict[str, list[str]]) -> list:
-    """One tick's records: each pipeline with a random subset of its quantities, some
-    values NaN, infinite, -0.0, integral or tiny."""
-    from onboard.core.messages import EstimateRecord
-
-    special = [math.nan, math.inf, -math.inf, -0.0, 0.0, 3.0, 1e-320, 1.7e308, 1e16]
-    out = []
-    for name, qs in columns.items():
-        if rng.random() < 0.2:
-            continue
-        values = {q: (rng.choice(special) if rng.random() < 0.15
-                      else rng.gauss(0.0, 10.0 ** rng.randint(-8, 8)))
-                  for q in rng.sample(qs, rng.randint(0, len(qs)))}
-        out.append(EstimateRecord(vehicle="v", pipeline=name, t=0.0, values=values))
-    return out
-
-
-def test_estimates_csv_lines_are_the_cell_by_cell_reference(tmp_path: Path) -> None:
-    """EstimatesCsv.write formats a row with one ``%`` template per set of filled columns;
-    every line is its cell-by-cell reference (:func:`_fmt` per value, empty for NaN and
-    for a quantity without a value), over 400 random rows with NaN, infinities, -0.0 and
-    unknown quantities."""
-    from onboard.offline.replay import EstimatesCsv
-
-    rng = random.Random(29)
-    columns = {"a": ["x", "y", "std_x", "heading"], "b": ["north", "east", "speed"]}
-    header = ["t"] + [f"{p}.{q}" for p, qs in columns.items() for q in qs]
-    csv = EstimatesCsv(tmp_path / "estimates.csv", header, None)
-    unknown = EstimateRecordWith("a", {"not_a_column": 1.0})
-    expected = []
-    for k in range(400):
-        t = 100.0 + 0.1 * k
-        recs = _records(rng, columns) + ([unknown] if k % 7 == 0 else [])
-        expected.append(csv.reference_line(t, "0", recs))
-        csv.write(t, recs)
-    csv.close()
-    lines = (tmp_path / "estimates.csv").read_text().splitlines(keepends=True)
-    assert lines[1:] == expected
-    assert any(",," in x for x in expected) and any("inf" in x for x in expected)
-
-
-def EstimateRecordWith(pipeline: str, values: dict):
-    from onboard.core.messages import EstimateRecord
-
-    return EstimateRecord(vehicle="v", pipeline=pipeline, t=0.0, values=values)
-
-
-def test_estimates_csv_reference_differs_from_a_wrong_line(tmp_path: Path) -> None:
-    """Negative control: the reference sees a value the fast path would drop (a row
-    whose value is changed after writing is not its reference any more)."""
-    from onboard.offline.replay import EstimatesCsv
-
-    csv = EstimatesCsv(tmp_path / "e.csv", ["t", "a.x", "a.y"], None)
-    rec = EstimateRecordWith("a", {"x": 1.5, "y": math.nan})
-    csv.write(1.0, [rec])
-    csv.close()
-    line = (tmp_path / "e.csv").read_text().splitlines(keepends=True)[1]
-    assert line == csv.reference_line(1.0, "0", [rec]) == "0.000000,0,1.5,\n"
-    assert line != csv.reference_line(1.0, "0", [EstimateRecordWith("a", {"x": 1.5,
-                                                                          "y": 2.0})])
 
 
 def test_discretization_by_the_exact_step_is_the_rounded_one() -> None:

@@ -53,10 +53,6 @@ def _fmt(v: float) -> str:
     return "" if v != v else f"{v:.10g}"
 
 
-TEMPLATES_KEPT = 256
-"""Row templates (:meth:`EstimatesCsv._template`) kept before the cache starts afresh."""
-
-
 class EstimatesCsv:
     """Streams ticks into estimates.csv: ``t`` since the first sample, ``run`` (the run
     the tick belongs to, :class:`Runs`), then a column per ``<pipeline>.<quantity>``,
@@ -78,8 +74,6 @@ class EstimatesCsv:
         self.runs: list[dict] = []
         self._by_pipeline: dict[str, dict[str, int]] = {}
         """Per pipeline: quantity -> column index (the quantities it has written)."""
-        self._templates: dict[tuple[int, ...], str] = {}
-        """The line of a row by the columns it has values in (:meth:`_template`)."""
         self.path = path
         try:
             self._f = open(path, "w", encoding="utf-8", newline="\n")
@@ -95,25 +89,12 @@ class EstimatesCsv:
         return i
 
     def write(self, t: float, records: Sequence[EstimateRecord]) -> None:
-        """One row at tick time ``t`` (s); values as :func:`_fmt` writes them
-        (:meth:`reference_line` is the cell-by-cell reference of the line written)."""
+        """One row at tick time ``t`` (s); values as :func:`_fmt` writes them."""
         if self.t0 is None:
             self.t0 = t
-        tt = f"{t - self.t0:.6f}"
-        run = self._run(t, float(tt))
-        cells = self._cells(records)
-        present = tuple(sorted(cells))
-        line = self._templates.get(present) or self._template(present)
-        try:
-            self._f.write(line % (tt, run, *[cells[i] for i in present]))
-        except OSError as err:
-            raise self._failed(err) from None
-        self.rows += 1
-
-    def _cells(self, records: Sequence[EstimateRecord]) -> dict[int, float]:
-        """Column index -> value of the row's finite-or-infinite values (a NaN leaves its
-        cell empty)."""
-        cells: dict[int, float] = {}
+        row = [""] * len(self.columns)
+        row[0] = tt = f"{t - self.t0:.6f}"
+        row[1] = self._run(t, float(tt))
         by_pipeline = self._by_pipeline
         for rec in records:
             index = by_pipeline.get(rec.pipeline)
@@ -125,38 +106,12 @@ class EstimatesCsv:
                     i = self._column(rec.pipeline, k)
                     if i is None:
                         continue
-                if v == v:
-                    cells[i] = v
-                else:
-                    cells.pop(i, None)
-        return cells
-
-    def _template(self, present: tuple[int, ...]) -> str:
-        """The line of a row whose values fill the columns ``present`` (sorted): ``%s``
-        for ``t`` and ``run``, ``%.10g`` for each value (the same text as :func:`_fmt`'s
-        f-string, one ``%`` for the whole line), empty cells elsewhere (cached; the set of
-        columns with a value changes rarely)."""
-        cells = [""] * len(self.columns)
-        cells[0] = cells[1] = "%s"
-        for i in present:
-            cells[i] = "%.10g"
-        if len(self._templates) >= TEMPLATES_KEPT:
-            self._templates.clear()
-        line = self._templates[present] = ",".join(cells) + "\n"
-        return line
-
-    def reference_line(self, t: float, run: str, records: Sequence[EstimateRecord]) -> str:
-        """The line :meth:`write` writes for the tick at ``t`` (s) of run ``run``, cell by
-        cell with :func:`_fmt`: the reference of its one-format fast path (tested)."""
-        row = [""] * len(self.columns)
-        row[0] = f"{t - (self.t0 if self.t0 is not None else t):.6f}"
-        row[1] = run
-        for rec in records:
-            for k, v in rec.values.items():
-                i = self.index.get(rec.pipeline + "." + k)
-                if i is not None:
-                    row[i] = _fmt(v)
-        return ",".join(row) + "\n"
+                row[i] = "" if v != v else f"{v:.10g}"   # _fmt, inline
+        try:
+            self._f.write(",".join(row) + "\n")
+        except OSError as err:
+            raise self._failed(err) from None
+        self.rows += 1
 
     def _run(self, t: float, t_csv: float) -> str:
         """The run of the tick at ``t`` (s, log clock; ``t_csv`` as written), counted in
