@@ -1,8 +1,10 @@
 """The replay's fast paths give the reference results: the early stop of
-:func:`drivers.tlog.scan_header`."""
+:func:`drivers.tlog.scan_header`, the discretization cached by the exact step, the
+learned noise's products on floats."""
 
 from __future__ import annotations
 
+import random
 from pathlib import Path
 
 import pytest
@@ -39,3 +41,34 @@ def test_scan_header_stops_once_the_parameter_set_is_complete(tmp_path: Path,
     assert [(v.mav_type, v.autopilot) for v in infos] == [(11, 3)]
     by_name = {x.name: x.value for x in found}
     assert by_name["SERVO1_FUNCTION"] == (26.0 if complete else 33.0)
+
+
+def test_discretization_by_the_exact_step_is_the_rounded_one() -> None:
+    """Discretization's cache by the unrounded (a, dt) returns what the rounded lookup
+    computes, for repeated and fresh steps, across the caches' resets."""
+    from onboard.estimators.axis_model import CACHE_SIZE, Discretization, discretize
+
+    rng = random.Random(7)
+    disc = Discretization()
+    steps = [0.1 + rng.uniform(-1e-6, 1e-6) for _ in range(3 * CACHE_SIZE)]
+    for dt in steps + steps[:20] + [1e-9, 0.2]:
+        for a in (0.5, 2.0):
+            assert disc(a, dt) == discretize(a, max(round(dt, 4), 1e-4))
+
+
+def test_noise_scale_on_floats_is_the_numpy_one() -> None:
+    """NoiseScale.observe on a float innovation (products without numpy) leaves the same
+    state, to the bit, as on the same innovation as a 1-vector (np.dot)."""
+    import numpy as np
+
+    from onboard.estimators.noise_learning import NoiseScale
+
+    rng = random.Random(3)
+    a, b = NoiseScale("c", "k", 1.0, "m"), NoiseScale("c", "k", 1.0, "m")
+    for _ in range(500):
+        z, S, R = rng.gauss(0.0, 1.5), 1.0 + rng.random(), 1.0
+        a.observe(z, S, R * a.applied)
+        b.observe(np.array([z]), S, R * b.applied)
+    fields = ("scale", "n", "mean", "forecast", "power", "lag")
+    assert [getattr(a, f) for f in fields] == [getattr(b, f) for f in fields]
+    assert a.n == 200 and a.lag != 0.0

@@ -377,12 +377,12 @@ class Engine:
         ``now`` is the receive clock in live operation, used to reject stamps from the
         future; replay passes None.
         """
-        kind, check = self._checker(sample)
+        cls = type(sample)
+        kind, check = self._kinds.get(cls) or self._checker(sample)
         reason = check(sample)
         if reason is None and now is not None and sample.t > now + FUTURE_TOLERANCE_S:
             reason = "future"
         if reason is None:
-            cls = type(sample)
             if cls is Heading:
                 sample, reason = self._true_heading(sample)  # type: ignore[arg-type]
             elif cls is GnssFix and self.declination.needs_fix:
@@ -390,12 +390,14 @@ class Engine:
         if reason is None:
             if self.correct is not None:
                 sample = self.correct(sample)
-            reason = self._out_of_order(kind, sample)
+            key = (kind, sample.source)   # the sample's stream
+            reason = self._out_of_order(key, sample.t)
         if reason is None and type(sample) in _DEPTH_OR_GNSS:
             sample, reason = self._depth_and_mode(sample)
+            key = (kind, sample.source)
         if reason is not None:
             return self._reject(kind, reason)
-        self._accept(kind, sample)
+        self._accept(key, sample.t)
         chosen = self.selector.admit(sample) if self.select_sources else sample
         if chosen is not None:  # None: another source of its quantity is active
             self._enqueue(chosen, sample)
@@ -436,13 +438,14 @@ class Engine:
         self.rejected[f"{kind}:{reason}"] += 1
         return False
 
-    def _out_of_order(self, kind: str, sample: Sample) -> str | None:
-        """``backwards`` if older than the newest accepted of its stream, ``late`` if
-        older than ``max_sample_age_s`` behind the newest accepted sample; else None."""
-        last = self._last_t.get((kind, sample.source))
-        if last is not None and sample.t < last:
+    def _out_of_order(self, stream: tuple[str, str], t: float) -> str | None:
+        """``backwards`` if ``t`` (s) is older than the newest accepted of its ``stream``
+        (type, source), ``late`` if older than ``max_sample_age_s`` behind the newest
+        accepted sample; else None."""
+        last = self._last_t.get(stream)
+        if last is not None and t < last:
             return "backwards"
-        if sample.t < self.t_newest - self.max_age:
+        if t < self.t_newest - self.max_age:
             return "late"
         return None
 
@@ -456,16 +459,15 @@ class Engine:
             return sample, None
         return sample, "submerged" if self.depth_mode.submerged else None
 
-    def _accept(self, kind: str, sample: Sample) -> None:
-        """Count ``sample`` accepted and note its time."""
-        t = sample.t
-        key = (kind, sample.source)
-        self._last_t[key] = t
+    def _accept(self, stream: tuple[str, str], t: float) -> None:
+        """Count a sample of ``stream`` (type, source) at ``t`` (s) accepted and note its
+        time."""
+        self._last_t[stream] = t
         if t > self.t_newest:
             self.t_newest = t
         if self.t_first is None:
             self.t_first = t
-        self.accepted[key] += 1
+        self.accepted[stream] += 1
 
     def _enqueue(self, chosen: Sample, raw: Sample) -> None:
         """Queue ``chosen`` (``raw`` as the source selector passed it), and with a raw

@@ -110,10 +110,23 @@ class Discretization:
 
     def __init__(self) -> None:
         self._cache: dict[tuple[float, float], Discrete] = {}
+        self._exact: dict[tuple[float, float], Discrete] = {}
+        """The same coefficients by the unrounded ``(a, dt)``: a step of a length seen
+        before skips the rounding (``round(dt, 4)`` is the costly part of a call)."""
 
     def __call__(self, a: float, dt: float) -> Discrete:
         """The coefficients of ``x' = -a x + u`` over ``dt`` (s) rounded; a positive
         ``dt`` below the resolution takes the resolution (it must not round to zero)."""
+        d = self._exact.get((a, dt))
+        if d is None:
+            d = self._rounded(a, dt)
+            if len(self._exact) > CACHE_SIZE:
+                self._exact.clear()
+            self._exact[(a, dt)] = d
+        return d
+
+    def _rounded(self, a: float, dt: float) -> Discrete:
+        """:meth:`__call__` by the rounded ``dt``."""
         key = (a, max(round(dt, DT_DIGITS), 10.0 ** -DT_DIGITS))
         d = self._cache.get(key)
         if d is None:

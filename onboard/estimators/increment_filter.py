@@ -117,6 +117,8 @@ class IncrementFilter:
         self._rate_bias2 = 0.0  # running mean of its square ((m/s)^2)
         self._c1 = 0.0          # c1 (s) of the last step with a rate
         self.innovations: deque[Innovation] = deque(maxlen=PENDING_INNOVATIONS)
+        self._increment_channel = f"{name}.increment"   # the innovation records' channels
+        self._rate_channel = f"{name}.rate"
         self.noise = NoiseScale(f"{name}.increment", "", 0.0, "")
         self.rate_noise = NoiseScale(f"{name}.rate", "", 0.0, "")
 
@@ -150,7 +152,7 @@ class IncrementFilter:
                 else math.inf)
         accepted = not kf.nis > gate
         self.innovations.append(Innovation(
-            channel=f"{self.name}.increment", t=t, z=(-kf.z,), S=(kf.S,), nis=kf.nis,
+            channel=self._increment_channel, t=t, z=(-kf.z,), S=(kf.S,), nis=kf.nis,
             dof=1, gate=self.gate_nis, accepted=accepted,
             reason="" if accepted else "gate", source=source))
         if not accepted:
@@ -238,7 +240,7 @@ class IncrementFilter:
         self.rate_steps += 1
         accepted = self.rate_nis <= gate
         self.innovations.append(Innovation(
-            channel=f"{self.name}.rate", t=t, z=(-kf.z_v,), S=(kf.S_v,), nis=self.rate_nis,
+            channel=self._rate_channel, t=t, z=(-kf.z_v,), S=(kf.S_v,), nis=self.rate_nis,
             dof=1, gate=self.gate_nis, accepted=accepted, reason="" if accepted else "gate",
             source=source))
         if not accepted:

@@ -131,14 +131,17 @@ class NoiseScale:
         tr(S)`` and ``R_trace = tr(R)`` of the update as made (``R`` already scaled by
         :attr:`applied`)."""
         R0 = R_trace / self.applied
-        power = float(np.dot(z, z))
+        scalar = isinstance(z, float)   # z * z: the same product as np.dot, without numpy
+        power = float(z * z) if scalar else float(np.dot(z, z))
         forecast = S_trace - R_trace
         if not (R0 > 0.0 and math.isfinite(power) and forecast <= FORECAST_SHARE_MAX * R0):
             self._prev = None
             return
         cap = CAP * S_trace
         sample = ((power if power < cap else cap) - forecast) / R0
-        lag = float(np.dot(z, self._prev)) if self._prev is not None else 0.0
+        prev = self._prev
+        lag = (0.0 if prev is None else float(z * prev) if scalar and isinstance(prev, float)
+               else float(np.dot(z, prev)))
         self._prev = z
         if self.n < WINDOW:
             self.n += 1

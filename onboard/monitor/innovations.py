@@ -79,7 +79,7 @@ class ChannelStats:
         self.n += 1
         self.dof = rec.dof
         self.last = rec
-        ratio = rec.test_ratio
+        ratio = rec.nis / rec.gate   # rec.test_ratio, without the property's call
         if ratio > self._ratio_max:
             self._ratio_max = ratio
         if not rec.accepted:
