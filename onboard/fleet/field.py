@@ -561,6 +561,8 @@ class Fitted:
         from scipy.linalg import cho_factor, cho_solve
 
         obs, h = self.obs, self.hyper
+        if c == DOWN:   # one vehicle's down is checked against no other's: never narrowed
+            h = h._replace(scale=max(h.scale, 1.0))
         xs = obs.x[idx]
         if corr is None:
             corr = (signal_corr(h, xs, xs), signal_corr(h, x[None, :], xs)[0])
