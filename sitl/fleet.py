@@ -261,43 +261,46 @@ def survey_sea(origin: tuple[float, float], utc0: float) -> SeaField:
     tidal channel 1.2 km wide running toward 30 deg (0.5 m/s on its axis at flood, 12 m
     deep), its shear across the survey box (0.12 m/s from the axis to 300 m off it); an
     eddy of 150 m core (0.15 m/s at its fastest ring, 170 m out) turning clockwise and
-    drifting east-north-east at 5 cm/s; a front 100 m wide (half-width 50 m) 100 m north
+    drifting east-north-east at 5 cm/s; a front 100 m wide (half-width 50 m) 20 m north
     of the origin, moving north at 2 cm/s, across which the current gains 0.12 m/s toward
     the east; a weak uniform drift."""
     return SeaField(origin, (
         TidalChannel(amplitude=0.5, direction=30 * DEG, width=1200.0, centre_east=-100.0,
                      period=12.4206012 * 3600.0, phase=-0.6, t_ref=utc0, water_depth=12.0),
-        LambOseenEddy.with_peak(-0.15, 150.0, north0=-100.0, east0=0.0, t_ref=utc0,
+        LambOseenEddy.with_peak(-0.15, 150.0, north0=-100.0, east0=-50.0, t_ref=utc0,
                                 drift_north=0.02, drift_east=0.045),
-        TanhFront(b_east=0.12, normal=0.0, half_width=50.0, north0=100.0, t_ref=utc0,
+        TanhFront(b_east=0.12, normal=0.0, half_width=50.0, north0=20.0, t_ref=utc0,
                   speed=0.02),
         UniformFlow(north=0.03, east=-0.02),
     ))
 
 
 SURVEY_VEHICLES = (
-    FleetVehicle("boat-1", "rudder-boat", "lawnmower", 21, start_north=-200.0,
-                 start_east=-240.0, heading=0.0, leg_s=260.0, step_s=40.0, speed=1.5,
+    FleetVehicle("boat-1", "rudder-boat", "lawnmower", 21, start_north=-75.0,
+                 start_east=-150.0, heading=0.0, leg_s=100.0, step_s=20.0, speed=1.5,
                  boot_age_s=35.0),
-    FleetVehicle("boat-2", "twin-thruster", "lawnmower", 22, start_north=-200.0,
-                 start_east=-210.0, heading=0.0, leg_s=260.0, step_s=40.0, speed=1.5,
+    FleetVehicle("boat-2", "rudder-boat", "lawnmower", 22, start_north=-75.0,
+                 start_east=-135.0, heading=0.0, leg_s=100.0, step_s=20.0, speed=1.5,
                  start_delay_s=10.0, clock_offset_s=-2.5, boot_age_s=610.0),
-    FleetVehicle("boat-3", "rudder-boat", "lawnmower", 23, start_north=180.0,
-                 start_east=-250.0, heading=90 * DEG, leg_s=250.0, step_s=60.0, speed=1.5,
+    FleetVehicle("boat-3", "rudder-boat", "lawnmower", 23, start_north=90.0,
+                 start_east=-150.0, heading=90 * DEG, leg_s=100.0, step_s=20.0, speed=1.5,
                  start_delay_s=20.0, clock_offset_s=0.75, boot_age_s=90.0),
-    FleetVehicle("keeper", "twin-thruster", "loiter", 24, start_north=0.0, start_east=-60.0,
+    FleetVehicle("keeper", "twin-thruster", "loiter", 24, start_north=0.0, start_east=-40.0,
                  heading=0.0, leg_s=90.0, speed=0.8, start_delay_s=5.0, boot_age_s=300.0),
-    FleetVehicle("auv-1", "torpedo-auv", "transects", 25, start_north=-180.0,
-                 start_east=-120.0, heading=20 * DEG, leg_s=240.0, speed=1.5,
+    FleetVehicle("auv-1", "torpedo-auv", "lawnmower", 25, start_north=-220.0,
+                 start_east=-140.0, heading=-60 * DEG, leg_s=40.0, speed=1.5,
                  start_delay_s=30.0, clock_offset_s=1.25, boot_age_s=120.0, surface_s=30.0),
-    FleetVehicle("auv-2", "torpedo-auv", "transects", 26, start_north=150.0,
-                 start_east=100.0, heading=-120 * DEG, leg_s=240.0, speed=1.5,
+    FleetVehicle("auv-2", "torpedo-auv", "lawnmower", 26, start_north=200.0,
+                 start_east=60.0, heading=120 * DEG, leg_s=40.0, speed=1.5,
                  start_delay_s=40.0, clock_offset_s=-0.5, boot_age_s=200.0, surface_s=30.0),
 )
-"""fleet-survey's vehicles, flying one survey box about 450 m square with interleaved
-tracks: two boats on north-south lawnmower lines 30 m apart (each line of one between
-two of the other's), a third on east-west lines across them, a station-keeper circling
-(14 m across) in the box's middle, and two AUVs on transects across the box at 5 m."""
+"""fleet-survey's vehicles, flying one survey box about 250 m square with interleaved
+tracks, each pattern one its current estimator learns from (turns every 1-2 minutes:
+docs/sitl.md): two boats on north-south lawnmower lines (150 m, 30-m steps east) offset
+15 m, so each line of one lies between two of the other's; a third on east-west lines
+across them (stepping south); a station-keeper circling (18 m across) in the box; two
+AUVs at 5 m zig-zagging across the box along the channel, one each way (40-s legs, the
+lawnmower fleet-channel's AUV flies)."""
 
 
 def _build() -> dict[str, Fleet]:
