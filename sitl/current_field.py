@@ -33,6 +33,13 @@ The parts and their published forms:
   along-front component is a shear front (divergence-free); a jump in the normal
   component makes it convergent, divergence ``(V_b - V_a) . n sech^2(s / L) / (2 L)``.
 * :class:`UniformFlow`: a constant background current.
+* :class:`BickleyJet`: the Bickley jet with three travelling waves, the flow of
+  del-Castillo-Negrete and Morrison 1993 (Phys. Fluids A 5, 948-965) in the form and
+  with the parameters of Rypina et al. 2007 (J. Atmos. Sci. 64, 3595-3610, eqs. 1-2):
+  stream function ``psi = -U0 L tanh(y/L) + U0 L sech^2(y/L) sum_n eps_n cos(k_n (x -
+  c_n t))``, ``u = -dpsi/dy``, ``v = dpsi/dx`` (``x`` along the jet, ``y`` across it),
+  its shape kept and its size scaled (:meth:`BickleyJet.coastal`). Not used by the
+  named fleets' seas: a flow whose formula is not ours, to test the fleet's field on.
 
 Nothing here is shared with the estimators.
 """
@@ -54,6 +61,7 @@ __all__ = [
     "TidalChannel",
     "LambOseenEddy",
     "TanhFront",
+    "BickleyJet",
     "SeaField",
     "VehicleCurrent",
     "LAMB_OSEEN_PEAK_RADIUS",
@@ -112,6 +120,60 @@ class UniformFlow(FieldPart):
     def velocity_point(self, north: float, east: float, depth: float,
                        utc: float) -> tuple[float, float]:
         return self.north, self.east
+
+
+RYPINA_L_OVER_R0 = 1770.0 / 6371.0
+"""Rypina et al. 2007's jet half-width over the radius ``r0`` that sets its wave numbers
+(``L`` = 1770 km, ``r0`` = 6371 km)."""
+RYPINA_EPS = (0.0075, 0.15, 0.3)
+"""Their wave amplitudes ``eps_n``."""
+RYPINA_C_OVER_U0 = (0.1446, 0.205, 0.461)
+"""Their waves' phase speeds ``c_n / U0``."""
+
+
+@dataclass(frozen=True)
+class BickleyJet(FieldPart):
+    """The Bickley jet with three waves (module docstring): a jet of peak speed ``u0``
+    (m/s) and half-width ``half_width`` (m, ``L``) toward ``direction`` (rad, clockwise
+    from north) through ``(north0, east0)`` (m), wave numbers ``k_n = 2 n / r0`` with
+    ``r0 = L / RYPINA_L_OVER_R0``, amplitudes ``eps`` and phase speeds ``c_over_u0 *
+    u0`` along the jet, ``t`` in s since ``t_ref`` (utc)."""
+
+    u0: float = 0.3
+    half_width: float = 120.0
+    direction: float = 0.0
+    north0: float = 0.0
+    east0: float = 0.0
+    t_ref: float = 0.0
+    eps: tuple[float, float, float] = RYPINA_EPS
+    c_over_u0: tuple[float, float, float] = RYPINA_C_OVER_U0
+
+    @classmethod
+    def coastal(cls, u0: float, half_width: float, **kw: Any) -> BickleyJet:
+        """Rypina et al.'s jet (``U0`` = 62.66 m/s, ``L`` = 1770 km) scaled to a peak speed
+        ``u0`` (m/s) and half-width ``half_width`` (m): the same shape (``L / r0``,
+        ``eps_n``, ``c_n / U0``), so the same flow in units of ``L`` and ``L / U0``."""
+        return cls(u0=u0, half_width=half_width, **kw)
+
+    def velocity(self, north: Num, east: Num, depth: Num, utc: Num) -> tuple[Num, Num]:
+        c, s = math.cos(self.direction), math.sin(self.direction)
+        dn, de = north - self.north0, east - self.east0
+        x = dn * c + de * s                     # along the jet
+        y = -dn * s + de * c                    # across it, to its right
+        t = utc - self.t_ref
+        big_l, u0 = self.half_width, self.u0
+        r0 = big_l / RYPINA_L_OVER_R0
+        sech2 = 1.0 / np.cosh(y / big_l) ** 2
+        wave, dwave = 0.0 * x, 0.0 * x
+        for n, (eps, c_n) in enumerate(zip(self.eps, self.c_over_u0), start=1):
+            k = 2.0 * n / r0
+            phase = k * (x - c_n * u0 * t)
+            wave = wave + eps * np.cos(phase)
+            dwave = dwave - eps * k * np.sin(phase)
+        u = u0 * sech2 + 2.0 * u0 * sech2 * np.tanh(y / big_l) * wave   # -dpsi/dy
+        v = u0 * big_l * sech2 * dwave                                    # dpsi/dx
+        # (x, y) to (north, east): y points to the jet's right, x along it
+        return u * c - v * s, u * s + v * c
 
 
 @dataclass(frozen=True)
@@ -347,7 +409,8 @@ class SeaField:
     def from_description(cls, origin: Sequence[float],
                          parts: Sequence[dict[str, Any]]) -> SeaField:
         """The field :meth:`describe` described (``fleet.json``'s ``field``)."""
-        kinds = {k.__name__: k for k in (UniformFlow, TidalChannel, LambOseenEddy, TanhFront)}
+        kinds = {k.__name__: k for k in (UniformFlow, TidalChannel, LambOseenEddy, TanhFront,
+                                         BickleyJet)}
         built = []
         for d in parts:
             params = {k: v for k, v in d.items() if k != "kind"}

@@ -19,7 +19,8 @@ truth of the current at every vehicle (``truth-current.csv``), the field on a gr
 Named fleets: :data:`FLEETS` (``fleet-channel``: two boats and a torpedo AUV in a tidal
 channel with a drifting eddy and a moving front, 600 s; ``fleet-demo``: the same sea with
 its tide compressed to a 20 min period, so that a short demo sees it turn, and the
-vehicles on shorter lines, launched 10 s apart).
+vehicles on shorter lines, launched 10 s apart; ``fleet-survey``: six vehicles an operator
+would fly to survey a box of a tidal channel, interleaved, for 15 minutes).
 """
 
 from __future__ import annotations
@@ -255,6 +256,53 @@ that every current is known within the first two minutes of a demo (its AUV star
 its depth, without the half minute afloat for a fix)."""
 
 
+def survey_sea(origin: tuple[float, float], utc0: float) -> SeaField:
+    """fleet-survey's sea, at the scales an operator surveying a coastal channel meets: a
+    tidal channel 1.2 km wide running toward 30 deg (0.5 m/s on its axis at flood, 12 m
+    deep), its shear across the survey box (0.12 m/s from the axis to 300 m off it); an
+    eddy of 150 m core (0.15 m/s at its fastest ring, 170 m out) turning clockwise and
+    drifting east-north-east at 5 cm/s; a front 100 m wide (half-width 50 m) 20 m north
+    of the origin, moving north at 2 cm/s, across which the current gains 0.12 m/s toward
+    the east; a weak uniform drift."""
+    return SeaField(origin, (
+        TidalChannel(amplitude=0.5, direction=30 * DEG, width=1200.0, centre_east=-100.0,
+                     period=12.4206012 * 3600.0, phase=-0.6, t_ref=utc0, water_depth=12.0),
+        LambOseenEddy.with_peak(-0.15, 150.0, north0=-100.0, east0=-50.0, t_ref=utc0,
+                                drift_north=0.02, drift_east=0.045),
+        TanhFront(b_east=0.12, normal=0.0, half_width=50.0, north0=20.0, t_ref=utc0,
+                  speed=0.02),
+        UniformFlow(north=0.03, east=-0.02),
+    ))
+
+
+SURVEY_VEHICLES = (
+    FleetVehicle("boat-1", "rudder-boat", "lawnmower", 21, start_north=-75.0,
+                 start_east=-150.0, heading=0.0, leg_s=100.0, step_s=20.0, speed=1.5,
+                 boot_age_s=35.0),
+    FleetVehicle("boat-2", "rudder-boat", "lawnmower", 22, start_north=-75.0,
+                 start_east=-135.0, heading=0.0, leg_s=100.0, step_s=20.0, speed=1.5,
+                 start_delay_s=10.0, clock_offset_s=-2.5, boot_age_s=610.0),
+    FleetVehicle("boat-3", "rudder-boat", "lawnmower", 23, start_north=90.0,
+                 start_east=-150.0, heading=90 * DEG, leg_s=100.0, step_s=20.0, speed=1.5,
+                 start_delay_s=20.0, clock_offset_s=0.75, boot_age_s=90.0),
+    FleetVehicle("keeper", "twin-thruster", "loiter", 24, start_north=0.0, start_east=-40.0,
+                 heading=0.0, leg_s=90.0, speed=0.8, start_delay_s=5.0, boot_age_s=300.0),
+    FleetVehicle("auv-1", "torpedo-auv", "lawnmower", 25, start_north=-220.0,
+                 start_east=-140.0, heading=-60 * DEG, leg_s=40.0, speed=1.5,
+                 start_delay_s=30.0, clock_offset_s=1.25, boot_age_s=120.0, surface_s=30.0),
+    FleetVehicle("auv-2", "torpedo-auv", "lawnmower", 26, start_north=200.0,
+                 start_east=60.0, heading=120 * DEG, leg_s=40.0, speed=1.5,
+                 start_delay_s=40.0, clock_offset_s=-0.5, boot_age_s=200.0, surface_s=30.0),
+)
+"""fleet-survey's vehicles, flying one survey box about 250 m square with interleaved
+tracks, each pattern one its current estimator learns from (turns every 1-2 minutes:
+docs/sitl.md): two boats on north-south lawnmower lines (150 m, 30-m steps east) offset
+15 m, so each line of one lies between two of the other's; a third on east-west lines
+across them (stepping south); a station-keeper circling (18 m across) in the box; two
+AUVs at 5 m zig-zagging across the box along the channel, one each way (40-s legs, the
+lawnmower fleet-channel's AUV flies)."""
+
+
 def _build() -> dict[str, Fleet]:
     origin = (50.3500, -4.1500)  # Plymouth Sound
     utc0 = DEFAULT_EPOCH_S
@@ -263,6 +311,9 @@ def _build() -> dict[str, Fleet]:
               channel_sea(origin, utc0, 12.4206012 * 3600.0), CHANNEL_VEHICLES, 600.0, utc0),
         Fleet("fleet-demo", "fleet-channel's sea with its tide compressed to a 20 min period, "
               "shorter lines", channel_sea(origin, utc0, 1200.0), DEMO_VEHICLES, 600.0, utc0),
+        Fleet("fleet-survey", "six vehicles surveying a box of a tidal channel with an eddy "
+              "and a front: interleaved lawnmowers, a station-keeper, two AUV transects",
+              survey_sea(origin, utc0), SURVEY_VEHICLES, 900.0, utc0),
     )}
 
 

@@ -30,12 +30,16 @@ from pathlib import Path
 import numpy as np
 
 
-def replay_fleet(root: Path, manifest: dict) -> dict[str, Path]:
+def replay_fleet(root: Path, manifest: dict, reuse: bool = False) -> dict[str, Path]:
     """``onboard replay`` of each vehicle's log with its configs, its records into an
-    MCAP; vehicle -> that MCAP."""
+    MCAP (with ``reuse``, an MCAP already there is taken as it is); vehicle -> that
+    MCAP."""
     out = {}
     for v in manifest["vehicles"]:
         rep = root / f"replay-{v['id']}"
+        out[v["id"]] = rep / "estimates.mcap"
+        if reuse and out[v["id"]].exists():
+            continue
         rep.mkdir(exist_ok=True)
         configs = [a for c in v["configs"]   # a bundled name, then the vehicle's own file
                    for a in ("--config", str(root / c) if (root / c).exists() else c)]
@@ -43,7 +47,6 @@ def replay_fleet(root: Path, manifest: dict) -> dict[str, Path]:
                         str(root / v["files"]["tlog"]), *configs, "--out", str(rep),
                         "--no-plot", "--mcap", str(rep / "estimates.mcap"), "--force"],
                        check=True, stdout=subprocess.DEVNULL)
-        out[v["id"]] = rep / "estimates.mcap"
     return out
 
 
@@ -138,17 +141,22 @@ def down_at(obs: dict[str, list], without: set[str], every: int) -> dict[str, np
     return {"err": np.array(err), "z": np.array(z)}
 
 
-def one_seed(fleet: str, seed: int, root: Path, without: list[set[str]], every: int
-             ) -> dict:
+def one_seed(fleet: str, seed: int, root: Path, without: list[set[str]], every: int,
+             reuse: bool = False) -> dict:
     """Simulate ``fleet`` with ``seed`` into ``root``, replay it, and score each vehicle
     left out (and the down), once per set of vehicles in ``without`` left out of every
-    fit; prints a line per figure; returns the figures by (set, vehicle)."""
-    from onboard.sitl.fleet import get_fleet, read_sea, write_fleet
+    fit; prints a line per figure; returns the figures by (set, vehicle). With ``reuse``
+    the logs and replays already in ``root`` are scored again (the simulator and the
+    replays are deterministic for a seed: only the field's own code is run)."""
+    from onboard.sitl.fleet import get_fleet, read_manifest, read_sea, write_fleet
 
     root.mkdir(parents=True, exist_ok=True)
-    manifest = write_fleet(get_fleet(fleet), root, seed=seed)
+    if reuse and (root / "fleet.json").exists():
+        manifest = read_manifest(root)
+    else:
+        manifest = write_fleet(get_fleet(fleet), root, seed=seed)
     obs = {}
-    for vid, mcap in replay_fleet(root, manifest).items():
+    for vid, mcap in replay_fleet(root, manifest, reuse).items():
         obs[vid], left = observations(mcap)
         if left:
             print(f"seed {seed} {vid}: records not fused: {left}")
@@ -220,11 +228,13 @@ def main(argv: list[str] | None = None) -> int:
                          "(repeatable: one more pass each)")
     ap.add_argument("--out", type=Path, default=None, help="keep the logs here")
     ap.add_argument("--every", type=int, default=50, help="predict at every N-th row")
+    ap.add_argument("--reuse", action="store_true",
+                    help="score the logs and replays already under --out again")
     a = ap.parse_args(argv)
     root = a.out or Path(tempfile.mkdtemp(prefix="fleet-world-"))
     seeds = [int(s) for s in a.seeds.split(",")]
     leave = [set()] + [{v} for v in a.without]
-    per_seed = [one_seed(a.fleet, seed, root / f"seed-{seed}", leave, a.every)
+    per_seed = [one_seed(a.fleet, seed, root / f"seed-{seed}", leave, a.every, a.reuse)
                 for seed in seeds]
     if len(seeds) > 1:
         spread(per_seed)

@@ -23,7 +23,11 @@ sigma), so the cost follows the fleet's hours, not its record rate. The hyperpar
 ``theta = (sigma_f north, sigma_f east, l_s, l_t, a, tau, sigma_w)`` maximize the marginal likelihood of a
 sample of at most :data:`FIT_MAX` super-observations (runs of consecutive ones, so that
 ``tau`` is seen; both components share them), with its analytic gradient (Rasmussen and
-Williams 2006, eq. 5.9) and scipy's L-BFGS-B.
+Williams 2006, eq. 5.9) and scipy's L-BFGS-B; with a :class:`Prior` (the default,
+:data:`PRIOR`: log-normal, from the physical scales of coastal currents) they are the
+posterior's mode instead. A fleet too sparse to fit (windows of fewer than
+:data:`MIN_FIT_VEHICLES` vehicles) is averaged over the prior's length scales
+(:class:`Averaged`), so its sigma carries the hyperparameters' own uncertainty.
 
 A prediction at ``(x*, t*)`` uses the :data:`NEIGHBOURS` super-observations nearest in the
 scaled distance ``sqrt(|x - x*|^2 / l_s^2 + (t - t*)^2 / l_t^2)`` (a k-d tree), within
@@ -93,11 +97,13 @@ SIGMA_DOWN_BOUNDS = (1e-3, 1.0)
 MIN_FIT_DOWN = 12
 """Fewer super-observations with a down than this keep its spread as it is."""
 MIN_FIT_VEHICLES = 3
-"""Super-observations of fewer vehicles than this keep the hyperparameters as they are:
-with two, every difference between them may be one vehicle's slowly wandering error, and
-the likelihood says so (on the simulator's fleet-channel, two vehicles fitted a 76 m
-length scale, a 0.016 m/s spread and a 530 s error correlation: sigmas a third of the
-misses)."""
+"""Super-observations of fewer vehicles than this are not fitted: with two, every
+difference between them may be one vehicle's slowly wandering error, and the likelihood
+says so (on the simulator's fleet-channel, two vehicles fitted a 76 m length scale, a
+0.016 m/s spread and a 530 s error correlation by maximum likelihood, sigmas a third of
+the misses; with the prior, the posterior's mode was as small: 0.017 m/s, 73 m). With a
+prior the field is then averaged over it (:meth:`Prior.quadrature`); without, the
+hyperparameters are kept as they are."""
 MAX_POSITION_STD_M = 200.0
 """A record whose position sigma exceeds this (m per axis; an AUV dead reckoned for
 hours) is not placed: not an observation."""
@@ -124,6 +130,43 @@ class Hyper(NamedTuple):
         return [(1e-3, 5.0), (1e-3, 5.0), (30.0, 1e5), (60.0, 2e5), (0.1, 10.0), (1.0, 7200.0),
                 (1e-4, 0.5)]
 
+
+
+class Prior(NamedTuple):
+    """A log-normal prior on each hyperparameter (docs/algorithms.md §8.3): ``log theta_j``
+    normal about ``log median_j`` with standard deviation ``log_sd_j``."""
+
+    median: Hyper
+    log_sd: Hyper
+
+    def penalty(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
+        """``-log p(theta)`` (up to a constant) at ``theta`` (the logarithms of
+        :class:`Hyper`'s fields) and its gradient in ``theta``."""
+        sd = np.array(self.log_sd)
+        dev = (theta - np.log(np.array(self.median))) / sd
+        return 0.5 * float(dev @ dev), dev / sd
+
+    def quadrature(self) -> list[tuple[float, Hyper]]:
+        """The prior's length scale at the three points of a Gauss-Hermite rule for its
+        normal logarithm (``log median +- sqrt(3) log_sd`` and the median, weights 1/6,
+        2/3, 1/6), every other hyperparameter at its median: the hyperparameters a field
+        is averaged over when the fleet is too sparse to fit them."""
+        step = math.sqrt(3.0) * self.log_sd.length_m
+        return [(w, self.median._replace(length_m=self.median.length_m * math.exp(k * step)))
+                for w, k in ((1.0 / 6.0, -1), (2.0 / 3.0, 0), (1.0 / 6.0, 1))]
+
+
+PRIOR = Prior(
+    median=Hyper(sigma_north=0.1, sigma_east=0.1, length_m=300.0, length_s=3600.0,
+                 scale=1.0, tau_s=60.0, white=0.005),
+    log_sd=Hyper(sigma_north=1.0, sigma_east=1.0, length_m=1.0, length_s=1.0,
+                 scale=0.5, tau_s=1.0, white=2.0))
+"""The field's prior from the physical scales of coastal currents and of a current
+estimator's error (docs/algorithms.md §8.3 gives the sources): a spread of 0.1 m/s (0.04-0.27
+within one log-sd) over a survey area, a length scale of 300 m (110-820 m: the
+submesoscale's fronts and eddies), a time scale of 1 h (a tide turns in hours), the
+reported sigmas trusted within a factor 1.6, a vehicle's error correlated over 60 s
+(22-160 s: a current filter's memory), a white floor of 5 mm/s (loose)."""
 
 @dataclass(frozen=True)
 class Observation:
@@ -282,8 +325,9 @@ class CurrentField:
 
     def __init__(self, hyper: Hyper = Hyper(), thin_s: float = THIN_S,
                  history_s: float = HISTORY_S, neighbours: int = NEIGHBOURS,
-                 seed: int = 0) -> None:
+                 seed: int = 0, prior: Prior | None = PRIOR) -> None:
         self.hyper, self.thin_s, self.history_s = hyper, thin_s, history_s
+        self.prior = prior
         self.sigma_down = SIGMA_DOWN
         self.neighbours = neighbours
         self.plane: Plane | None = None
@@ -389,22 +433,32 @@ class CurrentField:
         has_down = np.isfinite(obs.y[:, 2])
         mean = np.r_[obs.y[:, :2].mean(axis=0),
                      obs.y[has_down, 2].mean() if has_down.any() else 0.0]
-        if hyperparameters and len(obs.y) >= MIN_FIT and _vehicles(obs) >= MIN_FIT_VEHICLES:
+        sparse = _vehicles(obs) < MIN_FIT_VEHICLES
+        if hyperparameters and len(obs.y) >= MIN_FIT and not sparse:
             self.hyper, self.log_likelihood = fit_hyper(
-                self.hyper, _fitting_sample(obs, self._rng), mean)
+                self.hyper, _fitting_sample(obs, self._rng), mean, self.prior)
         if hyperparameters and has_down.sum() >= MIN_FIT_DOWN and \
                 _vehicles(obs.take(has_down)) >= MIN_FIT_VEHICLES:
             self.sigma_down = fit_sigma_down(
                 self.hyper, _fitting_sample(obs.take(has_down), self._rng), mean[2],
                 self.sigma_down)
-        fitted = Fitted(obs, self.hyper, mean, self.neighbours, self.sigma_down)
+        averaged = hyperparameters and sparse and self.prior is not None
+        fitted = self._fitted(obs, mean, averaged)
         out = self._outliers_in(fitted)
         if out.size:
             keep = np.ones(len(obs.y), bool)
             keep[out] = False
-            fitted = Fitted(obs.take(keep), self.hyper, mean, self.neighbours,
-                            self.sigma_down)
+            fitted = self._fitted(obs.take(keep), mean, averaged)
         self.fitted = fitted
+
+    def _fitted(self, obs: SuperObs, mean: np.ndarray, averaged: bool
+                ) -> "Fitted | Averaged":
+        """The field of ``obs`` with the hyperparameters in hand, or (``averaged``) over
+        the prior's :meth:`Prior.quadrature`."""
+        if not averaged:
+            return Fitted(obs, self.hyper, mean, self.neighbours, self.sigma_down)
+        return Averaged([(w, Fitted(obs, h, mean, self.neighbours, self.sigma_down))
+                         for w, h in self.prior.quadrature()])
 
     def _outliers_in(self, fitted: "Fitted") -> np.ndarray:
         """The super-observations of ``fitted`` further than :data:`OUTLIER_SIGMA`
@@ -507,6 +561,8 @@ class Fitted:
         from scipy.linalg import cho_factor, cho_solve
 
         obs, h = self.obs, self.hyper
+        if c == DOWN:   # one vehicle's down is checked against no other's: never narrowed
+            h = h._replace(scale=max(h.scale, 1.0))
         xs = obs.x[idx]
         if corr is None:
             corr = (signal_corr(h, xs, xs), signal_corr(h, x[None, :], xs)[0])
@@ -538,6 +594,57 @@ class Fitted:
             if abs(obs.y[i, c] - m) > OUTLIER_SIGMA * math.sqrt(var):
                 return True
         return False
+
+
+class Averaged:
+    """The field averaged over hyperparameters the fleet cannot fit (docs/algorithms.md
+    §8.3): a weighted mixture of :class:`Fitted` fields, one per hyperparameter value.
+    A member that knows nothing at a place gives its prior there (the mean, ``sigma_c``);
+    the mixture knows nothing where no member knows anything. Its mean is the weighted
+    mean of the members', its variance theirs plus the spread of their means (the law
+    of total variance). Outliers are judged by the heaviest member."""
+
+    def __init__(self, members: list[tuple[float, Fitted]]) -> None:
+        self.members = members
+        self.central = max(members, key=lambda m: m[0])[1]
+        self.obs, self.hyper, self.mean = self.central.obs, self.central.hyper, self.central.mean
+        self.down_rows = self.central.down_rows
+
+    def predict(self, x: np.ndarray, exclude: int = -1) -> Prediction:
+        """The mixture's prediction at ``x`` (:meth:`Fitted.predict`'s arguments)."""
+        preds = [(w, f, f.predict(x, exclude)) for w, f in self.members]
+        if all(p.north is None for _, _, p in preds):
+            return UNKNOWN
+        parts = [mixture([(w, *_or_prior(p, f, c)) for w, f, p in preds])
+                 for c in (NORTH, EAST)]
+        down = [(w, p.down, p.std_down) for w, _, p in preds if p.down is not None]
+        d = mixture(down) if down else (None, None)
+        return Prediction(parts[0][0], parts[1][0], parts[0][1], parts[1][1],
+                          max(p.n_obs for _, _, p in preds), *d)
+
+    def is_outlier(self, i: int) -> bool:
+        """:meth:`Fitted.is_outlier` of the heaviest member."""
+        return self.central.is_outlier(i)
+
+
+def _or_prior(p: Prediction, f: Fitted, c: int) -> tuple[float, float]:
+    """Component ``c`` (:data:`NORTH`, :data:`EAST`) of ``p``: its mean and sigma, or
+    where ``f`` knows nothing its prior, the mean and spread ``sigma_c``."""
+    if p.north is None:
+        return float(f.mean[c]), (f.hyper.sigma_north, f.hyper.sigma_east)[c]
+    return (p.north, p.std_north) if c == NORTH else (p.east, p.std_east)
+
+
+def mixture(parts: list[tuple[float, float, float]]) -> tuple[float, float]:
+    """The mean and sigma of a mixture of normals given as (weight, mean, sigma): the
+    weighted mean, and the square root of the weighted mean variance plus the weighted
+    spread of the means (weights normalized)."""
+    w = np.array([p[0] for p in parts])
+    m = np.array([p[1] for p in parts])
+    sd = np.array([p[2] for p in parts])
+    w = w / w.sum()
+    mean = float(w @ m)
+    return mean, math.sqrt(float(w @ (sd ** 2 + (m - mean) ** 2)))
 
 
 def gls_mean(factor, ks: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -627,10 +734,22 @@ def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray,
     return float(nll), grad
 
 
-def fit_hyper(start: Hyper, obs: SuperObs, mean: np.ndarray) -> tuple[Hyper, float]:
-    """The hyperparameters that maximize the marginal likelihood of ``obs``, from
-    ``start`` (scipy's L-BFGS-B in the logarithms, within :meth:`Hyper.bounds`), and the
-    log-likelihood reached; ``start`` kept when the fit fails. The variance a window's
+def log_posterior(theta: np.ndarray, obs: SuperObs, mean: np.ndarray,
+                  placed: np.ndarray | None, prior: Prior) -> tuple[float, np.ndarray]:
+    """The negative log-posterior of ``theta`` (up to a constant): :func:`log_likelihood`'s
+    negative marginal log-likelihood plus ``prior``'s :meth:`Prior.penalty`, and its
+    gradient."""
+    nll, grad = log_likelihood(theta, obs, mean, placed)
+    pen, dpen = prior.penalty(theta)
+    return nll + pen, grad + dpen
+
+
+def fit_hyper(start: Hyper, obs: SuperObs, mean: np.ndarray,
+              prior: Prior | None = None) -> tuple[Hyper, float]:
+    """The hyperparameters that maximize the marginal likelihood of ``obs`` (with
+    ``prior``: its posterior, the maximum a posteriori), from ``start`` (scipy's
+    L-BFGS-B in the logarithms, within :meth:`Hyper.bounds`), and the log-likelihood (or
+    log-posterior) reached; ``start`` kept when the fit fails. The variance a window's
     position sigma adds (:func:`place_variance`) is computed at ``start`` and held fixed
     through the fit (the next fit, a minute later, starts from this one's result)."""
     from scipy.optimize import minimize
@@ -641,7 +760,9 @@ def fit_hyper(start: Hyper, obs: SuperObs, mean: np.ndarray) -> tuple[Hyper, flo
     if np.any(obs.place > 0):
         placed = np.column_stack([place_variance(sf, start.length_m, obs.place)
                                   for sf in (start.sigma_north, start.sigma_east)])
-    res = minimize(log_likelihood, theta0, args=(obs, mean, placed), jac=True,
+    objective, args = (log_likelihood, (obs, mean, placed)) if prior is None else \
+        (log_posterior, (obs, mean, placed, prior))
+    res = minimize(objective, theta0, args=args, jac=True,
                    method="L-BFGS-B", bounds=bounds, options={"maxiter": 50})
     if not np.all(np.isfinite(res.x)) or res.fun >= 1e10:
         return start, float("nan")
