@@ -101,16 +101,16 @@ def test_too_quiet_sensors_are_learned_and_the_compass_narrowed() -> None:
     them) and reported, not applied; the Doppler speed's innovations are smaller than its
     forecast alone explains (mean sample -0.10 of the declared variance): the forecast is
     too timid, the sensor noise not identified, and the warning names the process noise,
-    not the sensor key. The speed's sigma stays too timid (coverage 0.95): the open miss
-    of docs/integrity.md "Learned noise" (narrowing the Doppler noise cost accuracy,
-    algorithms.md §9)."""
+    not the sensor key. The filter's speed sigma stays too timid (narrowing the Doppler
+    noise cost accuracy, algorithms.md §9); the published one is scaled apart from the
+    gain (§9.1): 1-sigma coverage 0.95 -> 0.68 (test below)."""
     cover, pipe, alerts = _fly("noise-boat-0.3x")
     assert 0.55 <= cover["heading"] <= 0.85, cover
     assert 0.15 < math.sqrt(pipe.yaw.noise.applied) < 0.45                 # true 0.3
     assert pipe.surge.noise.identified and pipe.surge.noise.applied == 1.0
     assert 0.25 < math.sqrt(pipe.surge.noise.scale) < 0.5                  # true 0.3
     assert not pipe.surge.rate_noise.identified and pipe.surge.rate_noise.applied == 1.0
-    assert cover["speed"] >= 0.55, cover                                   # never too confident
+    assert 0.55 <= cover["speed"] <= 0.85, cover                           # §9.1
     nis = [a.message for a in alerts if a.code == "nis_out_of_band"]
     assert nis and all("process noise in [pipelines.aie]" in m and "cannot be learned" in m
                        for m in nis), nis
@@ -250,5 +250,7 @@ def test_quiet_sensors_get_a_calibrated_speed_and_current_sigma() -> None:
             off[q].append(abs(err) * math.sqrt(f) / sd)
     for q in on:
         c1, c2 = _coverage(on[q])
-        assert 0.55 <= c1 <= 0.85 and 0.88 <= c2 <= 0.995, (q, c1, c2)
+        # the 2-sigma band's upper end (0.995) is judged on the report's 2 x 480 s pooled
+        # (docs/integrity.md): 1,200 ticks of one slow current error are too few for it
+        assert 0.55 <= c1 <= 0.85 and c2 >= 0.88, (q, c1, c2)
         assert _coverage(off[q])[0] > 0.85, q                     # the negative control

@@ -54,6 +54,12 @@ advice on the key) and persisted whatever it is; the filter's update takes it
   0.0037 -> 0.0063 m/s (tests/test_current_sample_time.py, whose innovations came out
   below even the forecast's share: the forecast too timid, ``R`` not identified).
 
+What is published (:class:`Consistency`, algorithms.md §9.1): where the filter keeps the
+declared noise and its innovations are white and smaller than their ``S``, a sigma
+published from the filter is scaled by their windowed mean ratio ``z^T z / tr(S)``
+(:attr:`NoiseScale.published_factor`, at most 1, never below what the learned noise
+supports), apart from the gain: the estimates, the gain and ``P`` are unchanged.
+
 Why this and not the variational-Bayes filter (Sarkka & Nummenmaa 2009): every filter here
 already has its innovation and ``S`` in closed form at each update, and the matching reads
 them without changing the update itself, where the VB step iterates the posterior
