@@ -577,10 +577,12 @@ class CurrentPipeline(Pipeline):
     def _published_std(self, std: list[float]) -> list[float]:
         """The joint filter's current one-sigma ``std`` (m/s) as published: times the
         square root of the velocity-over-ground rows' consistency factor, apart from the
-        gain (algorithms.md §9.1; :attr:`.NoiseScale.published_factor`), never above
-        ``std``. Whether a component is known is decided on ``std`` itself, so the factor
-        changes sigmas only. The along-track floor of a model without surge is kept."""
-        f = self.kf.noise["earth"].published_factor
+        gain (algorithms.md §9.1; :attr:`.NoiseScale.published_factor`), at least the
+        filter's block-mean NIS per dimension (``kf.nis_avg``: an error slower than a
+        block, a current that changes, survives the block mean), never above ``std``.
+        Whether a component is known is decided on ``std`` itself, so the factor changes
+        sigmas only. The along-track floor of a model without surge is kept."""
+        f = max(self.kf.noise["earth"].published_factor, self.kf.nis_avg)
         if f >= 1.0:
             return std
         if self._surge_unobservable():   # floored after the factor, never above ``std``
