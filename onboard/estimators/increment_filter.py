@@ -294,6 +294,15 @@ class IncrementFilter:
             var_u = self.V_u
         return self.kf.P[3] + var_u / (a * a)
 
+    def published_rate_factor(self) -> float:
+        """The variance factor (at most 1) of the published rate's sigma, apart from the
+        gain (algorithms.md §9.1): the consistency factor of the Doppler row where it has
+        one, else of the increment row; never below what either row's learned noise
+        supports (:attr:`.NoiseScale.supported_floor`)."""
+        row = self.rate_noise if self.rate_noise.consistency.n else self.noise
+        floor = max(self.noise.supported_floor, self.rate_noise.supported_floor)
+        return row.consistency.factor(floor)
+
     def after_divergence(self, k: Discrete) -> None:
         """The input model diverged and restarted (its :class:`.InputStep` says so, §2.7
         step 4): count it, forget the NIS history and widen the rate by the input's bound

@@ -54,6 +54,12 @@ advice on the key) and persisted whatever it is; the filter's update takes it
   0.0037 -> 0.0063 m/s (tests/test_current_sample_time.py, whose innovations came out
   below even the forecast's share: the forecast too timid, ``R`` not identified).
 
+What is published (:class:`Consistency`, algorithms.md §9.1): where the filter keeps the
+declared noise and its innovations are white and smaller than their ``S``, a sigma
+published from the filter is scaled by their windowed mean ratio ``z^T z / tr(S)``
+(:attr:`NoiseScale.published_factor`, at most 1, never below what the learned noise
+supports), apart from the gain: the estimates, the gain and ``P`` are unchanged.
+
 Why this and not the variational-Bayes filter (Sarkka & Nummenmaa 2009): every filter here
 already has its innovation and ``S`` in closed form at each update, and the matching reads
 them without changing the update itself, where the VB step iterates the posterior
@@ -95,6 +101,60 @@ CAP = 9.0
 """An innovation enters a sample at most as ``z^T z = CAP tr(S)``: 3 sigma."""
 
 
+class Consistency:
+    """The consistency factor of a channel's published sigma (algorithms.md §9.1): the
+    windowed mean of ``r_k = min(z^T z, CAP tr(S)) / tr(S)`` over every accepted update
+    (whatever the forecast's share), and the lag-1 autocorrelation of the normalized
+    innovations ``z / sqrt(tr(S))``.
+
+    For a linear filter whose process and measurement noise are both ``c`` times the true
+    ones, the actual error covariance is ``c P`` and ``E[r_k] = c``; white innovations
+    are what says the gain is the optimal one for the true noise up to that scale
+    (Mehra 1970), so the factor is taken only while they are white.
+
+    Attributes (read them to debug):
+        n: updates taken (capped at :data:`WINDOW`).
+        ratio: the windowed mean of ``r_k``.
+        lag: the windowed mean of ``z_k . z_{k-1} / sqrt(tr(S_k) tr(S_{k-1}))``.
+    """
+
+    __slots__ = ("n", "ratio", "lag", "_prev")
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.ratio = 1.0
+        self.lag = 0.0
+        self._prev: np.ndarray | None = None
+
+    def observe(self, z: float | np.ndarray, S_trace: float) -> None:
+        """One accepted update: innovation ``z`` and ``tr(S)`` as made."""
+        power = float(np.dot(z, z))
+        if not (S_trace > 0.0 and math.isfinite(power)):
+            self._prev = None
+            return
+        w = np.asarray(z, dtype=float) / math.sqrt(S_trace)
+        lag = float(np.dot(w, self._prev)) if self._prev is not None else 0.0
+        self._prev = w
+        if self.n < WINDOW:
+            self.n += 1
+        gain = 1.0 / self.n
+        self.ratio += gain * (min(power / S_trace, CAP) - self.ratio)
+        self.lag += gain * (max(-CAP, min(lag, CAP)) - self.lag)
+
+    @property
+    def lag1(self) -> float:
+        """The normalized innovations' lag-1 autocorrelation over the window."""
+        return self.lag / self.ratio if self.ratio > 0.0 else 0.0
+
+    def factor(self, floor: float) -> float:
+        """The variance factor of the published sigma: ``ratio`` within ``[floor, 1]``
+        once :data:`MIN_UPDATES` updates are in and the innovations are white (lag-1 at
+        most :data:`WHITE_LAG1_MAX`); else 1."""
+        if self.n < MIN_UPDATES or self.lag1 > WHITE_LAG1_MAX:
+            return 1.0
+        return min(max(self.ratio, floor), 1.0)
+
+
 class NoiseScale:
     """The learned variance scale of one measurement channel (module docstring).
 
@@ -110,7 +170,7 @@ class NoiseScale:
     """
 
     __slots__ = ("channel", "key", "declared", "unit", "narrows", "scale", "n", "mean",
-                 "forecast", "power", "lag", "_start", "_prev")
+                 "forecast", "power", "lag", "_start", "_prev", "consistency")
 
     def __init__(self, channel: str, key: str, declared: float, unit: str, *,
                  narrows: bool = False) -> None:
@@ -125,11 +185,13 @@ class NoiseScale:
         self.forecast = 0.0
         self._prev: float | np.ndarray | None = None
         self.power = self.lag = 0.0
+        self.consistency = Consistency()
 
     def observe(self, z: float | np.ndarray, S_trace: float, R_trace: float) -> None:
         """One accepted update: the innovation ``z`` (a number or a vector), ``S_trace =
         tr(S)`` and ``R_trace = tr(R)`` of the update as made (``R`` already scaled by
         :attr:`applied`)."""
+        self.consistency.observe(z, S_trace)
         R0 = R_trace / self.applied
         scalar = isinstance(z, float)   # z * z: the same product as np.dot, without numpy
         power = float(z * z) if scalar else float(np.dot(z, z))
@@ -182,6 +244,22 @@ class NoiseScale:
         forecast could make of it. A mean below says the forecast alone is larger than the
         innovations (its process noise set too high), not that the sensor is quiet."""
         return self.learned and self.mean > TRUST * self.forecast
+
+    @property
+    def supported_floor(self) -> float:
+        """The smallest variance factor of a published sigma the learned noise supports
+        (algorithms.md §9.1): where the innovations identify the noise, the smallest scale
+        its samples are consistent with (``m_k - TRUST f_k``, a forecast ``TRUST`` too
+        timid) over the applied one, at least :data:`FLOOR`; else :data:`FLOOR`."""
+        if self.identified:
+            return max((self.mean - TRUST * self.forecast) / self.applied, FLOOR)
+        return FLOOR
+
+    @property
+    def published_factor(self) -> float:
+        """The variance factor (at most 1) of a sigma published from this channel's
+        filter: :meth:`Consistency.factor` floored at :attr:`supported_floor`."""
+        return self.consistency.factor(self.supported_floor)
 
     @property
     def learned(self) -> bool:

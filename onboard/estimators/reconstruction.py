@@ -11,7 +11,9 @@ between steps need:
   the model and the newest command; speed and position predicted from the last surge step
   the same way, or blended with the accelerometer's path acceleration (``imu_aiding``,
   :mod:`onboard.estimators.path_accel`) by the weight their misses of the Doppler speed
-  give; one sigma of each (:func:`~onboard.estimators.track.position_std`);
+  give; one sigma of each (:func:`~onboard.estimators.track.position_std`; the speed's
+  scaled by the surge filter's consistency factor, apart from its gain,
+  :meth:`~onboard.estimators.increment_filter.IncrementFilter.published_rate_factor`);
 * dead reckoning through a GNSS outage longer than ``max_gap_s``
   (:class:`~onboard.estimators.dead_reckoning.DeadReckoner`);
 * course mode (no heading source at all): the path along the course over ground.
@@ -252,7 +254,7 @@ class TrackReconstruction:
         out["std_north"], out["std_east"] = position_std(
             pos.var_n, pos.var_e, c, s, var_ds, ds * ds * var_h,
             self._held_var(tau_raw, v, var_v))
-        out["std_speed"] = math.sqrt(var_v)
+        out["std_speed"] = math.sqrt(var_v * surge.published_rate_factor())
 
     def _imu_forecast(self, t_s: float, t: float, tau: float, tau_raw: float, ds: float,
                       v: float, var_ds: float, var_v: float
@@ -326,4 +328,4 @@ class TrackReconstruction:
         out["std_north"], out["std_east"] = position_std(
             pos.var_n, pos.var_e, c, s, k.c1 * k.c1 * P_vv + k.c2 * k.c2 * V_u,
             ds * ds * self.var_course, self._held_var(tau_raw, v, var_v))
-        out["std_speed"] = math.sqrt(var_v)
+        out["std_speed"] = math.sqrt(var_v * surge.published_rate_factor())

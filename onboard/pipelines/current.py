@@ -545,12 +545,16 @@ class CurrentPipeline(Pipeline):
         nd = self.nd
         obs_src = self.hgo if self.hgo is not None else self.kf
         c, std, nu = obs_src.current_estimate()
+        published = std
         if self._surge_unobservable():
             std = floor_along_track(obs_src.current_cov(), self.yaw or 0.0,
                                     self.cfg.initial_current_std_mps)
+        if obs_src is self.kf:
+            published = self._published_std(std)
         flow = self.flow
         if flow is not None and flow.ready and flow.v_g is not None:
             c_flow, std, nu = flow.current(self._R())
+            published = std
             if c_flow is not None:
                 c = c_flow
         # a component the data do not determine is unknown, not a number
@@ -563,11 +567,28 @@ class CurrentPipeline(Pipeline):
             obs[i] = sane and std[i] <= thr and math.isfinite(c[i])
             if obs[i]:
                 out[ax] = float(c[i])
+        std = published
         out.update(std_north=float(std[0]), std_east=float(std[1]),
                    u_r=float(nu[0]), v_r=float(nu[1]))
         if nd == 3:
             out.update(std_down=float(std[2]), w_r=float(nu[2]))
         return out
+
+    def _published_std(self, std: list[float]) -> list[float]:
+        """The joint filter's current one-sigma ``std`` (m/s) as published: times the
+        square root of the velocity-over-ground rows' consistency factor, apart from the
+        gain (algorithms.md §9.1; :attr:`.NoiseScale.published_factor`), at least the
+        filter's block-mean NIS per dimension (``kf.nis_avg``: an error slower than a
+        block, a current that changes, survives the block mean), never above ``std``.
+        Whether a component is known is decided on ``std`` itself, so the factor changes
+        sigmas only. The along-track floor of a model without surge is kept."""
+        f = max(self.kf.noise["earth"].published_factor, self.kf.nis_avg)
+        if f >= 1.0:
+            return std
+        if self._surge_unobservable():   # floored after the factor, never above ``std``
+            return [min(a, b) for a, b in zip(std, floor_along_track(
+                f * self.kf.current_cov(), self.yaw or 0.0, self.cfg.initial_current_std_mps))]
+        return [x * math.sqrt(f) for x in std]
 
     def innovations(self) -> list[Innovation]:
         """The records of the measurement updates since the last call (channels in the
