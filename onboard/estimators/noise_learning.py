@@ -124,16 +124,19 @@ class Consistency:
         self.n = 0
         self.ratio = 1.0
         self.lag = 0.0
-        self._prev: np.ndarray | None = None
+        self._prev: np.ndarray | float | None = None
 
     def observe(self, z: float | np.ndarray, S_trace: float) -> None:
         """One accepted update: innovation ``z`` and ``tr(S)`` as made."""
-        power = float(np.dot(z, z))
+        scalar = isinstance(z, float)   # z * z: the same product as np.dot, without numpy
+        power = float(z * z) if scalar else float(np.dot(z, z))
         if not (S_trace > 0.0 and math.isfinite(power)):
             self._prev = None
             return
-        w = np.asarray(z, dtype=float) / math.sqrt(S_trace)
-        lag = float(np.dot(w, self._prev)) if self._prev is not None else 0.0
+        w = z / math.sqrt(S_trace) if scalar else np.asarray(z, dtype=float) / math.sqrt(S_trace)
+        prev = self._prev
+        lag = (0.0 if prev is None else float(w * prev) if scalar and isinstance(prev, float)
+               else float(np.dot(w, prev)))
         self._prev = w
         if self.n < WINDOW:
             self.n += 1
