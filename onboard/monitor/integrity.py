@@ -1077,7 +1077,7 @@ class IntegrityMonitor:
         dependent outputs while the heading disagrees with the course or the compass
         deviates (and its heading and position, each with its ``std_``, while the
         heading disagrees with the course); its current while it disagrees with the idle
-        drift."""
+        drift, and the components of its current the data do not resolve."""
         flags = self.flags.get(pipeline)
         p = self.watched.get(pipeline)
         if not flags or p is None:
@@ -1096,16 +1096,17 @@ class IntegrityMonitor:
 
     @property
     def amends(self) -> bool:
-        """Whether :meth:`amend` may judge or change a record now: during an idle span
-        or while the compass deviation is significant."""
+        """Whether :meth:`amend` may judge or change a record now: while a watched
+        pipeline publishes a current (its resolution is judged at every tick), during an
+        idle span or while the compass deviation is significant."""
         dc = self.deviation
         return (self._resolving or self.idle.idle_since is not None
                 or (dc is not None and dc.deviated))
 
     def amend(self, pipeline: str, t: float, values: dict[str, float]) -> None:
         """A pipeline's values at ``t`` (s) before its record is made: its current (the
-        ``current_estimate`` role) judged against the idle drift at a tick after a fix
-        of an idle span, and the sigma of its heading (``heading_estimate``) widened in
+        ``current_estimate`` role) judged for its resolution (:class:`CurrentResolution`)
+        and against the idle drift at a tick after a fix of an idle span, and the sigma of its heading (``heading_estimate``) widened in
         ``values`` by the compass deviation at that heading while the deviation exceeds
         the sigma (``compass_deviation`` on the pipeline): ``std <- hypot(std, d(psi))``."""
         p = self.watched.get(pipeline)
