@@ -30,24 +30,27 @@ def figures(shared_data, tmp_path_factory):
 
 def test_north_beats_estimating_zero_with_covering_sigma(figures):
     n = figures["north"]
-    # measured: rms 0.213 m/s against zero's 0.265 (the torpedo regression: 0.68),
-    # published on 99.8 % of the ticks, 2-sigma coverage 0.92, 1-sigma 0.64; mean error
-    # +0.080 (the model's through-water speed 0.04 m/s below the DVL's, and the filter's
-    # lag behind the current's change with depth)
+    # measured: rms 0.215 m/s against zero's 0.293 on the same ticks (0.265 on all; the
+    # torpedo regression: 0.68); 2-sigma coverage 0.92, 1-sigma 0.62. Published on 38.8 %
+    # of the ticks (99.8 % before issue 32): north's RMS over 600 s is within its own
+    # one-sigma (0.19) on the others, and it is withheld there as `current_unresolved`
+    # although it beat zero there too (0.212 against 0.245): the criterion cannot tell a
+    # lagging estimate of a large current from a noise-following one of a small current
+    # (docs/integrity.md, "The current not resolved")
     assert n["zero_rms"] == pytest.approx(0.265, abs=0.001)
     assert n["rms"] < 0.24
-    assert n["published"] > 0.95
+    assert n["rms"] < n["zero_rms_published"]
+    assert 0.3 < n["published"] < 0.5
     assert n["cover2"] > 0.85
     assert 0.5 < n["cover1"] < 0.8
 
 
-def test_east_is_covered_but_no_better_than_zero(figures):
+def test_east_worse_than_zero_is_withheld(figures):
+    """Issue 32: the east current, worse than estimating zero (0.097 m/s against 0.059
+    before), is flagged and withheld after the first 600 s window (`current_unresolved`:
+    its RMS over the window 0.05-0.17 m/s against its one-sigma of 0.18-0.19)."""
     e = figures["east"]
-    # measured: rms 0.097 m/s against zero's 0.059 (an honest miss: the east current is
-    # +-0.06 m/s, under the 0.18 m/s one-sigma the 8 s navigation allows); 2-sigma
-    # coverage 1.00, 1-sigma 0.93 (too timid); mean error +0.035 (a 2.5 deg crab of the
-    # course through water against the logged heading the model has no term for)
+    # measured: published on none of the ticks after the first 20 minutes (on 37.7 % of
+    # the first 20, before the first window is judged)
     assert e["zero_rms"] == pytest.approx(0.059, abs=0.001)
-    assert e["rms"] < 0.12
-    assert e["published"] > 0.95
-    assert e["cover2"] > 0.95
+    assert e["published"] == 0.0

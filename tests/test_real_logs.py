@@ -15,8 +15,15 @@ model restarting every 6 s: flagged (``nis_far_above``, ``input_model_divergence
 BlueBoat current against its idle drift: flagged in runs 232-233
 (``current_idle_drift``), consistent within its sigma in the other idle spans;
 Shenzhen 1037/1110: consistent with the course, the fixes and the Doppler speed (none of
-these raised); the Kolumbo glider: no independent course or fix (its track is the
-corrected underwater navigation): none raised.
+these raised); the DDBoat's heading (THETA) 79 deg off the course of its track, the course
+derived from its fixes, which carry none: flagged (``heading_course_mismatch``), its
+aie/kf heading and positions withheld; the Kolumbo glider's current, east worse than
+estimating zero against the DVL current: flagged and withheld where the current is inside
+its own one-sigma of zero (``current_unresolved``: east after the first window, north
+on 61 % of the ticks), its track the corrected underwater navigation (no fix-based
+check applies); Shenzhen 1110's current north, inside its one-sigma of 0.17 m/s over the
+last 600 s with the boat nearly still: flagged the same way (the log has no independent
+measurement of the current).
 """
 
 from __future__ import annotations
@@ -33,9 +40,12 @@ from onboard.cli import main as cli_main
 
 pytestmark = pytest.mark.data
 
-CONSISTENT = {"position_residual", "pipeline_restarted", "time_outlier", "speed_mismatch"}
+CONSISTENT = {"position_residual", "pipeline_restarted", "time_outlier", "speed_mismatch",
+              "current_unresolved"}
 """Codes a well-behaved log must not raise (``speed_mismatch``: no published speed
-disagrees with the Doppler or DVL speed; measured on every case below, none fails it)."""
+disagrees with the Doppler or DVL speed; measured on every case below, none fails it;
+``current_unresolved``: no published current component lies inside its own one-sigma of
+zero where that one-sigma exceeds 0.15 m/s)."""
 
 HONESTY = {"compass_deviation", "current_idle_drift", "input_model_divergence"}
 """Issue 32's flags of an estimate that disagrees with the log's own measurement (a
@@ -58,10 +68,11 @@ CASES: list[tuple[str, str, str | None, set[str], set[str]]] = [
     ("blueboat", "blueboat_sysid_ntnu", "blueboat-ntnu-csv", {"current_idle_drift:current"},
      CONSISTENT | {"heading_course_mismatch", "no_position_source", "compass_deviation",
                    "input_model_divergence"}),
-    # the heading is the boat's THETA, 79 deg off the course (below); the check of the
-    # heading against the course needs the receiver's course, which these fixes lack
-    ("ddboat", "ddboat_ensta_log/DDBOAT8_t_2022_9_2_0_0.log", None, set(),
-     CONSISTENT | {"heading_course_mismatch"}),
+    # the heading is the boat's THETA, 79 deg off the course (below); its fixes carry no
+    # course, the check takes the course of their track (issue 32): flagged from 140 s,
+    # up to 90 deg at 0.8 m/s, the aie/kf heading and positions withheld on 1,049 rows
+    ("ddboat", "ddboat_ensta_log/DDBOAT8_t_2022_9_2_0_0.log", None,
+     {"heading_course_mismatch"}, CONSISTENT),
     ("shenzhen-1037", "usv_rtk_gnss_heading_nmea_shenzhen/202412051037.txt", None, set(),
      CONSISTENT | HONESTY | {"heading_course_mismatch", "nis_far_above"}),
     # the dual-antenna heading 73.5 deg off the course (diagnose finds the offset): the
@@ -73,8 +84,12 @@ CASES: list[tuple[str, str, str | None, set[str], set[str]]] = [
     ("shenzhen-1021", "usv_rtk_gnss_heading_nmea_shenzhen/202412071021.txt", None,
      {"heading_course_mismatch", "nis_far_above:aie", "input_model_divergence:aie"},
      CONSISTENT),
-    ("shenzhen-1110", "usv_rtk_gnss_heading_nmea_shenzhen/202412071110.txt", None, set(),
-     CONSISTENT | HONESTY | {"heading_course_mismatch", "nis_far_above"}),
+    # the current north 0.052 m/s RMS over the last 600 s against its one-sigma 0.169,
+    # the boat nearly still: not told from zero, withheld from 528 s (issue 32)
+    ("shenzhen-1110", "usv_rtk_gnss_heading_nmea_shenzhen/202412071110.txt", None,
+     {"current_unresolved:current"},
+     (CONSISTENT - {"current_unresolved"}) | HONESTY | {"heading_course_mismatch",
+                                                         "nis_far_above"}),
     ("survey-test1", "survey_boat_arduino_rc/Test1_counterclockwise.TXT", "survey-boat-csv",
      set(), CONSISTENT | {"heading_course_mismatch"}),
     # the compass reads up to 135 deg off the course in the clockwise and later runs
@@ -84,10 +99,15 @@ CASES: list[tuple[str, str, str | None, set[str], set[str]]] = [
     # learned noise its sigma is 0.06 m/s (0.36 before, when it went unflagged): flagged
     ("survey-test4", "survey_boat_arduino_rc/Test4_fast.txt", "survey-boat-csv",
      {"heading_course_mismatch", "speed_mismatch:kf"}, CONSISTENT - {"speed_mismatch"}),
-    # the glider model's current (docs/current.md, "Glider model on the Kolumbo log"); the
-    # track is the corrected underwater navigation, not GNSS: no fix-based check applies
+    # the glider model's current (docs/current.md, "Glider model on the Kolumbo log"):
+    # east worse than zero (0.097 against 0.059 m/s), inside its one-sigma of 0.18-0.19:
+    # withheld from the first window on, north where it is inside its one-sigma too
+    # (issue 32); the track is the corrected underwater navigation, not GNSS: no
+    # fix-based check applies (its 5 m positions give no course from the track in 30 s)
     ("glider-kolumbo", "slocum_glider_kolumbo_dvl/glider_data.csv", "slocum-glider-kolumbo",
-     set(), CONSISTENT | HONESTY | {"no_estimate:current", "heading_course_mismatch"}),
+     {"current_unresolved:current"},
+     (CONSISTENT - {"current_unresolved"}) | HONESTY | {"no_estimate:current",
+                                                         "heading_course_mismatch"}),
     ("dvl-circle", "waterlinked_dvl_a50_json_tank/out20210528_circle.txt", None,
      NO_ESTIMATE_ALL, CONSISTENT),
     ("dvl-still", "waterlinked_dvl_a50_json_tank/out_still_60s.txt", None,
@@ -195,8 +215,10 @@ def heading_minus_course(estimates: Path, pipeline: str) -> np.ndarray:
         if j >= len(tf) or math.hypot(nf[j] - nf[i], ef[j] - ef[i]) < STRAIGHT_LEG_MIN_M:
             continue
         w = (t >= tf[i]) & (t <= tf[j]) & np.isfinite(h)
+        if w.sum() < 10:
+            continue
         c, s = np.mean(np.cos(h[w])), np.mean(np.sin(h[w]))
-        if w.sum() < 10 or math.hypot(c, s) < STRAIGHT_LEG_MIN_R:
+        if math.hypot(c, s) < STRAIGHT_LEG_MIN_R:
             continue
         d = math.atan2(s, c) - math.atan2(ef[j] - ef[i], nf[j] - nf[i])
         out.append(math.atan2(math.sin(d), math.cos(d)))
@@ -208,17 +230,49 @@ def test_the_ddboat_heading_is_its_compass_79_deg_off_the_course(shared_data: Pa
     """The DDBoat log's THETA (its own compass heading) is read: aie and kf publish a
     measured heading, which they did not (no heading in the log as read before). On
     straight legs it is 79 deg off the course over ground: the compass is, and
-    ``onboard diagnose`` names it (heading_bias 75.2 deg, tests/test_diagnose_classes.py)."""
+    ``onboard diagnose`` names it (heading_bias 75.2 deg, tests/test_diagnose_classes.py).
+    Since issue 32 the heading check takes the course of the track of these fixes, which
+    carry none: flagged from 140 s on, the aie/kf heading and positions withheld there."""
     log = shared_data / "ddboat_ensta_log/DDBOAT8_t_2022_9_2_0_0.log"
     if not log.exists():
         pytest.skip(f"{log} not present")
     assert cli_main(["replay", str(log), "--out", str(tmp_path), "--no-plot"]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["sources"]["active"]["heading"] == "ddboat/THETA"
+    d = heading_minus_course(tmp_path / "estimates.csv", "nav")
+    # measured: the heading as read (nav), 96 legs, mean +79.4 deg; aie and kf published
+    # the same before issue 32 (median |.| 78.3 deg); with the overlay diagnose writes
+    # (heading_offset_rad 1.312): +4.2 deg, median 9.2
+    assert len(d) > 80
+    mean = math.degrees(math.atan2(np.mean(np.sin(d)), np.mean(np.cos(d))))
+    assert mean == pytest.approx(79.4, abs=3.0)
     for p in ("aie", "kf"):
         d = heading_minus_course(tmp_path / "estimates.csv", p)
-        # measured: 96 legs, mean +79.4 deg, median |.| 78.3 deg (aie and kf alike); with
-        # the overlay diagnose writes (heading_offset_rad 1.312): +4.2 deg, median 9.2
-        assert len(d) > 80
+        # measured: 27 legs before the mismatch is judged (140 s), mean +84.5 deg; the
+        # heading withheld on the 1,049 rows after
+        assert 20 < len(d) < 40
         mean = math.degrees(math.atan2(np.mean(np.sin(d)), np.mean(np.cos(d))))
-        assert mean == pytest.approx(79.4, abs=3.0)
+        assert mean == pytest.approx(84.5, abs=3.0)
+        assert summary["withheld_rows"][p] > 1000
+
+
+def test_the_glider_current_not_told_from_zero_is_withheld_with_its_sigma(
+        shared_data: Path, tmp_path: Path) -> None:
+    """Issue 32: the Kolumbo glider's east current, worse than estimating zero, is
+    withheld after the first 600 s window (``current_unresolved``), its one-sigma kept as
+    an unknown component's is; north is published where it is resolved."""
+    log = shared_data / "slocum_glider_kolumbo_dvl/glider_data.csv"
+    if not log.exists():
+        pytest.skip(f"{log} not present")
+    args = ["replay", str(log), "--out", str(tmp_path), "--no-plot", "--config",
+            "slocum-glider-kolumbo"]
+    assert cli_main(args) == 0
+    rows = [r for r in csv.DictReader((tmp_path / "estimates.csv").open())
+            if float(r["t"]) > 1200.0]
+    # measured: 1,030 rows after 1200 s; east withheld on all of them, north on 630
+    assert rows and all(not r["current.east"] and r["current.std_east"] for r in rows)
+    north = sum(bool(r["current.north"]) for r in rows)
+    assert 0.3 * len(rows) < north < 0.5 * len(rows)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    warning = next(w for w in summary["warnings"] if w["code"] == "current_unresolved")
+    assert "east" in warning["message"] and "std_ kept" in warning["message"]

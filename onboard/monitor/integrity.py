@@ -8,7 +8,9 @@ published records and the innovation records, and runs these checks:
 * **heading against course over ground** (:class:`HeadingCourseCheck`): while the vehicle
   moves (GNSS speed above :data:`HEADING_MIN_SPEED_MPS`), the circular mean of
   ``heading - course`` over :data:`HEADING_WINDOW_S` must stay within
-  :func:`crab_bound`. Beyond it ``heading_course_mismatch`` is raised naming the angle, and
+  :func:`crab_bound` (for fixes that carry no course, the course of their track:
+  :class:`onboard.monitor.track_course.TrackCourse`). Beyond it
+  ``heading_course_mismatch`` is raised naming the angle, and
   the estimates that turn a velocity with the heading (each pipeline's
   ``heading_dependent`` outputs: the ``current`` pipeline's current and through-water
   velocity) are published as unknown while it lasts. Vehicles that move sideways by
@@ -62,6 +64,10 @@ honesty"):
 * **idle drift** (:class:`IdleDriftCheck`): with every thruster idle, the published
   current (``current_estimate``) against the slope of the fixes; ``current_idle_drift``
   withholds it while they disagree.
+* **current resolution** (:class:`onboard.monitor.current_resolution.CurrentResolution`):
+  per component, the published current's RMS over a window against its RMS one-sigma;
+  ``current_unresolved`` withholds a component inside its own one-sigma of zero (an
+  estimate then worse than zero) where that one-sigma is material.
 * **run mean NIS** (:class:`NisRunMean`): ``nis_far_above`` when a channel's mean NIS
   over the run exceeds :data:`NIS_FAR_FACTOR` per degree of freedom.
 * **divergence storms** (:class:`DivergenceCheck`): ``input_model_divergence`` when an
@@ -91,6 +97,9 @@ from typing import Iterable, Protocol, Sequence
 
 from onboard.monitor.alerts import Alerts
 from onboard.monitor.compass_deviation import CompassDeviation
+from onboard.monitor.current_resolution import (RESOLVE_MIN_STD_MPS, RESOLVE_WINDOW_S,
+                                                CurrentResolution)
+from onboard.monitor.track_course import TrackCourse
 from onboard.core.geo import LocalFrame
 from onboard.core.stats import chi2_mean_band
 from onboard.core.messages import (
@@ -313,14 +322,25 @@ class HeadingCourseCheck:
         """Compare the fix's course with the newest heading; return the window's verdict
         (True: mismatch), or None when the window cannot be judged."""
         h = self._heading
-        sog, cog = s.sog_mps, s.cog_rad
-        self._drop_before(s.t - HEADING_WINDOW_S)
-        if (h is None or sog is None or cog is None or s.t - h[0] > HEADING_FRESH_S
-                or not sog > HEADING_MIN_SPEED_MPS or not math.isfinite(cog)):
+        if h is None or s.t - h[0] > HEADING_FRESH_S:
+            self._drop_before(s.t - HEADING_WINDOW_S)
             return None
-        self._append(s.t, h[1] - cog, sog)
+        return self.course(s.t, h[1], s.sog_mps, s.cog_rad)
+
+    def course(self, t: float, heading_rad: float, sog: float | None, cog: float | None
+               ) -> bool | None:
+        """Compare a course ``cog`` (rad) at speed over ground ``sog`` (m/s) at ``t`` (s)
+        with the heading (rad) it was made under (a fix's with the newest heading, or one
+        derived from the track with the mean heading over it,
+        :class:`onboard.monitor.track_course.TrackCourse`); return the window's verdict
+        (True: mismatch), or None when the window cannot be judged."""
+        self._drop_before(t - HEADING_WINDOW_S)
+        if (sog is None or cog is None or not sog > HEADING_MIN_SPEED_MPS
+                or not math.isfinite(cog)):
+            return None
+        self._append(t, heading_rad - cog, sog)
         n = len(self._t)
-        if n < HEADING_MIN_FIXES or s.t - self._t[0] < 0.8 * HEADING_WINDOW_S:
+        if n < HEADING_MIN_FIXES or t - self._t[0] < 0.8 * HEADING_WINDOW_S:
             return None
         # the circular mean of the window's differences, from the sines and cosines kept
         # (tests/test_integrity.py)
@@ -505,6 +525,14 @@ def _idle(c: ActuatorCommand) -> bool:
                 return False
             some = True
     return some
+
+
+def _astern(c: ActuatorCommand) -> bool:
+    """Whether command ``c`` pushes backwards: its throttle, or the mean of its
+    thrusters, below -:data:`IDLE_COMMAND`."""
+    pushes = [x for x in (c.throttle, c.left, c.right, *(c.thrusters or ()))
+              if x is not None]
+    return bool(pushes) and sum(pushes) / len(pushes) < -IDLE_COMMAND
 
 
 class PositionCheck:
@@ -825,10 +853,17 @@ class IntegrityMonitor:
         self.heading = None if holonomic else HeadingCourseCheck()
         self.deviation = None if holonomic else CompassDeviationCheck()
         self.idle = IdleDriftCheck()
+        self.track = TrackCourse()
+        """The course of the track of fixes that carry none (for the heading check)."""
         self.run_means: dict[str, dict[str, NisRunMean]] = {}
         self.divergences = DivergenceCheck()
         self.watched: dict[str, Declared] = {}
         """The pipelines whose roles it reads, by name (:meth:`watch`)."""
+        self._resolving = False
+        """Whether a watched pipeline publishes a current (judged at every tick by
+        :meth:`amend`)."""
+        self.resolution: dict[str, CurrentResolution] = {}
+        """pipeline -> whether the data resolve its current, per component."""
         self.positions: dict[str, PositionCheck] = {}
         self.nis: dict[str, dict[str, NisCheck]] = {}
         self.position_nees: dict[str, PositionNeesCheck] = {}
@@ -846,6 +881,8 @@ class IntegrityMonitor:
         """Read the roles (and frames) of ``pipelines`` from now on, replacing those
         watched so far (the engine calls it whenever its pipelines change)."""
         self.watched = {p.name: p for p in pipelines}
+        self._resolving = any(getattr(p, "current_estimate", ())
+                              for p in self.watched.values())
 
     # ------------------------------------------------------------------ samples
     def observe(self, s: Sample) -> None:
@@ -860,18 +897,47 @@ class IntegrityMonitor:
                     self.frame = LocalFrame(s.lat_deg, s.lon_deg)  # type: ignore
                 self._idle_fix(s)  # type: ignore[arg-type]
                 if hc is not None:
-                    self._heading_verdict(hc.fix(s), s.t)  # type: ignore[arg-type]
+                    self._heading_verdict(self._course(s), s.t)  # type: ignore[arg-type]
                     self._deviation_fix(s)  # type: ignore[arg-type]
         elif cls is DvlVelocity:
             self._dvl(s)  # type: ignore[arg-type]
         elif cls is ActuatorCommand:
             self.idle.command(s.t, _idle(s))  # type: ignore[arg-type]
+            if _astern(s):  # type: ignore[arg-type]
+                self.track.astern(s.t)
         elif hc is None:
             return
         elif cls is Heading:
             hc.heading(s.t, s.heading_rad)  # type: ignore
+            if self.track.active:
+                self.track.heading(s.t, s.heading_rad)  # type: ignore
         elif cls is Attitude and s.yaw_selected:  # type: ignore[attr-defined]
             hc.heading(s.t, s.yaw_rad)  # type: ignore[attr-defined]
+            if self.track.active:
+                self.track.heading(s.t, s.yaw_rad)  # type: ignore[attr-defined]
+
+    def _course(self, s: GnssFix) -> bool | None:
+        """The heading/course verdict at fix ``s``: against its own course, or, when it
+        carries none, against the course of the track of the fixes
+        (:class:`TrackCourse`) with the mean heading over it."""
+        hc = self.heading
+        assert hc is not None and self.frame is not None
+        if s.cog_rad is not None:
+            return hc.fix(s)
+        n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
+        derived = self.track.fix(s.t, n, e, self._fix_var(s))
+        h = hc._heading
+        if derived is None or h is None or s.t - h[0] > HEADING_FRESH_S:
+            return hc.course(s.t, 0.0, None, None)
+        sog, cog, mean_heading = derived
+        return hc.course(s.t, mean_heading, sog, cog)
+
+    def _fix_var(self, s: GnssFix) -> float:
+        """A fix's variance (m^2) per axis: its reported accuracy squared, else
+        ``fix_std_m`` squared."""
+        acc = s.h_acc_m
+        return (acc * acc if acc is not None and acc > 0 and math.isfinite(acc)
+                else self.fix_std_m ** 2)
 
     def _heading_verdict(self, verdict: bool | None, t: float) -> None:
         """Set or clear the heading/course flag of the pipelines with heading-dependent
@@ -944,11 +1010,37 @@ class IntegrityMonitor:
         idle = self.idle
         if idle.idle_since is None or self.frame is None:
             return
-        acc = s.h_acc_m
-        var = (acc * acc if acc is not None and acc > 0 and math.isfinite(acc)
-               else self.fix_std_m ** 2)
         n, e = self.frame.to_ne(s.lat_deg, s.lon_deg)
-        idle.fix(s.t, n, e, var)
+        idle.fix(s.t, n, e, self._fix_var(s))
+
+    def _resolution(self, pipeline: str, t: float, values: dict[str, float],
+                    qs: tuple[str, ...]) -> None:
+        """The current ``qs`` (north, east) in ``values`` (before anything is withheld)
+        into its :class:`CurrentResolution`; ``current_unresolved`` while a component is
+        not told from zero (withheld, its ``std_`` kept)."""
+        res = self.resolution.get(pipeline)
+        if res is None:
+            res = self.resolution[pipeline] = CurrentResolution()
+        res.add(t, values, qs)
+        axes = res.unresolved()
+        self._flag(pipeline, "current_unresolved", bool(axes))
+        if axes and self._due("current_unresolved", pipeline, t):
+            self._unresolved_warning(pipeline, t, res, axes)
+
+    def _unresolved_warning(self, pipeline: str, t: float, res: CurrentResolution,
+                            axes: tuple[str, ...]) -> None:
+        said = "; ".join(f"{q} {res.axes[q].rms:.3f} m/s RMS against its one-sigma "
+                         f"{res.axes[q].sigma:.3f}" for q in axes)
+        self._warn("current_unresolved", pipeline, t, (
+            f"{pipeline}: the current is not told from zero over {RESOLVE_WINDOW_S:.0f} s "
+            f"({said}): "
+            "the current it claims is inside its own one-sigma, an estimate that is then "
+            f"worse than zero; {', '.join(axes)} withheld (std_ kept) until it is "
+            "resolved; a velocity source of lower noise ([sensors.gnss] "
+            "velocity_std_mps, a DVL) resolves it (docs/integrity.md)"), details=(
+            f"judged where the one-sigma exceeds {RESOLVE_MIN_STD_MPS} m/s: the filter "
+            "follows its measurements' noise, whose variance is about half its claimed "
+            "one's"))
 
     def _idle_current(self, pipeline: str, qs: tuple[str, ...], t: float,
                       values: dict[str, float]) -> None:
@@ -985,7 +1077,7 @@ class IntegrityMonitor:
         dependent outputs while the heading disagrees with the course or the compass
         deviates (and its heading and position, each with its ``std_``, while the
         heading disagrees with the course); its current while it disagrees with the idle
-        drift."""
+        drift, and the components of its current the data do not resolve."""
         flags = self.flags.get(pipeline)
         p = self.watched.get(pipeline)
         if not flags or p is None:
@@ -998,24 +1090,31 @@ class IntegrityMonitor:
             out = p.heading_dependent
         if "current_idle_drift" in flags:
             out += tuple(q for q in getattr(p, "current_estimate", ()) if q not in out)
+        if "current_unresolved" in flags:
+            out += tuple(q for q in self.resolution[pipeline].unresolved() if q not in out)
         return out
 
     @property
     def amends(self) -> bool:
-        """Whether :meth:`amend` may judge or change a record now: during an idle span
-        or while the compass deviation is significant."""
+        """Whether :meth:`amend` may judge or change a record now: while a watched
+        pipeline publishes a current (its resolution is judged at every tick), during an
+        idle span or while the compass deviation is significant."""
         dc = self.deviation
-        return self.idle.idle_since is not None or (dc is not None and dc.deviated)
+        return (self._resolving or self.idle.idle_since is not None
+                or (dc is not None and dc.deviated))
 
     def amend(self, pipeline: str, t: float, values: dict[str, float]) -> None:
         """A pipeline's values at ``t`` (s) before its record is made: its current (the
-        ``current_estimate`` role) judged against the idle drift at a tick after a fix
-        of an idle span, and the sigma of its heading (``heading_estimate``) widened in
+        ``current_estimate`` role) judged for its resolution (:class:`CurrentResolution`)
+        and against the idle drift at a tick after a fix of an idle span, and the sigma of its heading (``heading_estimate``) widened in
         ``values`` by the compass deviation at that heading while the deviation exceeds
         the sigma (``compass_deviation`` on the pipeline): ``std <- hypot(std, d(psi))``."""
         p = self.watched.get(pipeline)
         if p is None:
             return
+        currents = tuple(getattr(p, "current_estimate", ()))
+        if currents:
+            self._resolution(pipeline, t, values, currents)
         if self._fix_new and self.idle.idle_since is not None:
             self._idle_current(pipeline, tuple(getattr(p, "current_estimate", ())), t,
                                values)
