@@ -545,12 +545,10 @@ class CurrentPipeline(Pipeline):
         nd = self.nd
         obs_src = self.hgo if self.hgo is not None else self.kf
         c, std, nu = obs_src.current_estimate()
-        published = std
         if self._surge_unobservable():
             std = floor_along_track(obs_src.current_cov(), self.yaw or 0.0,
                                     self.cfg.initial_current_std_mps)
-        if obs_src is self.kf:
-            published = self._published_std(std)
+        published = self._published_std(std) if obs_src is self.kf else std
         flow = self.flow
         if flow is not None and flow.ready and flow.v_g is not None:
             c_flow, std, nu = flow.current(self._R())
@@ -567,7 +565,8 @@ class CurrentPipeline(Pipeline):
             obs[i] = sane and std[i] <= thr and math.isfinite(c[i])
             if obs[i]:
                 out[ax] = float(c[i])
-        std = published
+        # an unknown component keeps the sigma that made it unknown
+        std = [p if known else s for p, known, s in zip(published, obs, std)]
         out.update(std_north=float(std[0]), std_east=float(std[1]),
                    u_r=float(nu[0]), v_r=float(nu[1]))
         if nd == 3:
@@ -581,7 +580,9 @@ class CurrentPipeline(Pipeline):
         filter's block-mean NIS per dimension (``kf.nis_avg``: an error slower than a
         block, a current that changes, survives the block mean), never above ``std``.
         Whether a component is known is decided on ``std`` itself, so the factor changes
-        sigmas only. The along-track floor of a model without surge is kept."""
+        sigmas only, and of the known components only (an unknown one is published with
+        ``std``, above ``unknown_above_std_mps``). The along-track floor of a model without
+        surge is kept."""
         f = max(self.kf.noise["earth"].published_factor, self.kf.nis_avg)
         if f >= 1.0:
             return std
