@@ -439,3 +439,22 @@ def test_the_doppler_comparison_takes_the_magnitude_of_the_declared_speed() -> N
                                  values={"u": 1.0, "v": 1.2}, std={"u": 0.05, "v": 0.05})
             m.speeds_at(t + 0.05, [rec])
         assert ("speed_mismatch" in alerts.codes()) is failing
+
+
+def test_a_channel_is_judged_against_the_sigma_its_pipeline_publishes() -> None:
+    # the current's velocity rows at a quarter of their S (NIS 0.5 for 2): a filter too
+    # timid by 4; its published sigma scaled by the factor 0.25 (algorithms.md §9.1) makes
+    # them consistent with what is published, so no warning. Negative control: the same
+    # innovations from a pipeline that publishes its filter's sigma (factor 1) are flagged.
+    from onboard.estimators.noise_learning import ChannelNoise
+
+    rng = np.random.default_rng(5)
+    nis = (0.25 * rng.chisquare(2, 4 * NIS_BLOCK_UPDATES)).tolist()
+    recs = [Innovation(channel="velocity", t=0.1 * k, z=(0.1, 0.1), S=(0.1, 0, 0, 0.1),
+                       nis=x, dof=2) for k, x in enumerate(nis)]
+    for published, flagged in (({"velocity": lambda: 0.25}, False), ({}, True)):
+        alerts = Alerts()
+        m = IntegrityMonitor(alerts)
+        m.watch([SimpleNamespace(name="current", noise=ChannelNoise([], published))])
+        m.innovations("current", recs)
+        assert ("nis_out_of_band" in alerts.codes()) is flagged, published

@@ -71,7 +71,7 @@ confident puts its excess into ``R`` (which still makes ``S``, and so the NIS, r
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -299,8 +299,12 @@ class ChannelNoise:
     """The learned noise of a pipeline's channels, by channel name: reported, persisted
     and read by the integrity monitor (:meth:`report`)."""
 
-    def __init__(self, scales: list[NoiseScale]) -> None:
+    def __init__(self, scales: list[NoiseScale],
+                 published: Mapping[str, Callable[[], float]] | None = None) -> None:
         self.scales = {s.channel: s for s in scales}
+        self.published = dict(published or {})
+        """Per channel, the variance factor its pipeline's published sigma applies
+        (algorithms.md §9.1), for the channels whose factor a published sigma takes."""
 
     def health(self) -> dict[str, float]:
         """``noise.<channel>.scale`` and ``noise.<channel>.std`` (the learned one-sigma in
@@ -330,3 +334,11 @@ class ChannelNoise:
     def report(self, channel: str) -> NoiseScale | None:
         """The channel's learned noise (None if it learns none)."""
         return self.scales.get(channel)
+
+    def published_factor(self, channel: str) -> float:
+        """The variance factor (at most 1) the pipeline's published sigma applies to what
+        this channel measures: its innovations are consistent with that sigma when their
+        NIS over the factor is (algorithms.md §9.1); 1 for a channel no published sigma
+        is scaled by."""
+        factor = self.published.get(channel)
+        return 1.0 if factor is None else factor()

@@ -34,7 +34,9 @@ published records and the innovation records, and runs these checks:
   :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
   is learned: an NIS out of band first drives the adaptation, and the warning says what
   is still inconsistent after it (the learned noise at its bound: the configuration key
-  to change and the learned value; else the forecast's share). The pipeline is flagged.
+  to change and the learned value; else the forecast's share). A channel whose factor a
+  published sigma takes (``ChannelNoise.published_factor``, algorithms.md §9.1) is judged
+  against that sigma: its NIS over the factor. The pipeline is flagged.
 * **position consistency** (:class:`PositionNeesCheck`): where a fix is better than the
   estimate (the published variance :data:`POSITION_NEES_FIX_RATIO` times the fix's), the NEES of the published position
   against it, ``d^T (P + R_fix)^-1 d`` (2 dof), by blocks as the NIS;
@@ -279,7 +281,7 @@ def nis_band(dof: int, n: float = NIS_BLOCK_UPDATES, p: float = NIS_BAND
     """The band of the mean of ``n`` (effective, possibly fractional) NIS values of
     ``dof`` degrees of freedom: the two-sided ``p`` band of a consistent filter's,
     ``chi2_q(dof n) / n`` at ``(1 -+ p) / 2`` (Bar-Shalom, Li & Kirubarajan 2001,
-    §5.4.2, the time-average NIS; :func:`onboard.core.stats.chi2_mean_band`), widened
+    section 5.4.2, the time-average NIS; :func:`onboard.core.stats.chi2_mean_band`), widened
     to at least ``dof`` times :func:`calibrated_nis`."""
     lo, hi = chi2_mean_band(n, dof, p)
     c_lo, c_hi = calibrated_nis()
@@ -1307,7 +1309,7 @@ class IntegrityMonitor:
             if check is None or check.dof != rec.dof:
                 check = per[rec.channel] = NisCheck(rec.dof)
             was = check.failing
-            now = check.add(nis)
+            now = check.add(nis / self._published_factor(pipeline, rec.channel))
             if not check._n:  # a block was judged: its mean into the run's
                 self._run_mean(pipeline, rec.channel, check, rec.t)
             now = now and self._adapted(pipeline, rec.channel)
@@ -1374,6 +1376,15 @@ class IntegrityMonitor:
         noise = getattr(self.watched.get(pipeline), "noise", None)
         report = getattr(noise, "report", None)
         return report(channel) if report is not None else None
+
+    def _published_factor(self, pipeline: str, channel: str) -> float:
+        """The variance factor the pipeline's published sigma applies to what ``channel``
+        measures (1: none): its NIS is judged over it, against the covariance the
+        published sigma claims (an NIS out of band first drives that factor; algorithms.md
+        §9.1)."""
+        noise = getattr(self.watched.get(pipeline), "noise", None)
+        published = getattr(noise, "published_factor", None)
+        return published(channel) if published is not None else 1.0
 
     def _adapted(self, pipeline: str, channel: str) -> bool:
         """Whether the channel's NIS may be judged: its noise is not learned, has had its

@@ -165,7 +165,9 @@ class CurrentPipeline(Pipeline):
         self.identification = _identification(cfg, self.model)
         self.kf = _joint_filter(cfg, self.identification)
         self.noise = _learned_noise(self.kf, cfg, sensors)
-        """The learned noise of the velocity channels (algorithms.md §9)."""
+        """The learned noise of the velocity channels (algorithms.md §9), and the factor
+        the published current's sigma takes from the velocity over ground (§9.1)."""
+        self.noise.published[CHANNELS["earth"]] = self.published_factor
         self.events: list[str] = []
         """Human-readable events not yet taken (:meth:`take_events`): a restored current
         discarded or confirmed, a start contradicted."""
@@ -573,6 +575,12 @@ class CurrentPipeline(Pipeline):
             out.update(std_down=float(std[2]), w_r=float(nu[2]))
         return out
 
+    def published_factor(self) -> float:
+        """The variance factor of the joint filter's published current sigma
+        (:meth:`_published_std`): the velocity-over-ground rows' consistency factor, at
+        least the filter's block-mean NIS per dimension, at most 1."""
+        return min(max(self.kf.noise["earth"].published_factor, self.kf.nis_avg), 1.0)
+
     def _published_std(self, std: list[float]) -> list[float]:
         """The joint filter's current one-sigma ``std`` (m/s) as published: times the
         square root of the velocity-over-ground rows' consistency factor, apart from the
@@ -583,7 +591,7 @@ class CurrentPipeline(Pipeline):
         sigmas only, and of the known components only (an unknown one is published with
         ``std``, above ``unknown_above_std_mps``). The along-track floor of a model without
         surge is kept."""
-        f = max(self.kf.noise["earth"].published_factor, self.kf.nis_avg)
+        f = self.published_factor()
         if f >= 1.0:
             return std
         if self._surge_unobservable():   # floored after the factor, never above ``std``

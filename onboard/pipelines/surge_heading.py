@@ -259,7 +259,11 @@ class SurgeHeadingPipeline(Pipeline):
         yaw.noise = NoiseScale(f"{yaw.name}.increment", (
             f"[pipelines.{name}] heading_std_rad" if cfg.heading_std_rad is not None
             else "[sensors.compass] heading_std_rad"), self.sigma_h, "rad", narrows=True)
-        return ChannelNoise([surge.noise, surge.rate_noise, yaw.noise])
+        # the published speed's sigma takes the surge filter's factor (its Doppler row's,
+        # else its increment row's): both rows are judged against it
+        rate_factor = surge.published_rate_factor
+        return ChannelNoise([surge.noise, surge.rate_noise, yaw.noise], published={
+            surge.noise.channel: rate_factor, surge.rate_noise.channel: rate_factor})
 
     def _init_windows(self) -> None:
         """The measurement windows and the previous points of both axes."""
