@@ -55,6 +55,8 @@ def test_clean_scenario_detects_no_effect(diagnosed):
     assert "x_pd" in doc["base_params"]
 
 
+@pytest.mark.slow  # 18 s; the mapping's negative control in the default suite:
+# test_closure_synthetic::test_actuator_mapping_is_not_named_when_the_channels_are_right
 def test_clean_twin_thruster_detects_no_effect(diagnosed):
     # square-law thrust behind a 0.3 s shaft lag on both thrusters: no latency, no lag
     # posing as anything else
@@ -75,6 +77,8 @@ def test_current_is_found(diagnosed):
     assert doc["holdout_error_after"] < 0.4 * doc["holdout_error_before"]
 
 
+@pytest.mark.slow  # 19 s; in the default suite:
+# test_closure_synthetic::test_compass_deviation_is_not_mistaken_for_a_current
 def test_compass_deviation_is_found_not_a_false_current(diagnosed):
     f = found(diagnosed("effect-compass-deviation"))
     # On the realistic hull a first heading harmonic is left in the heading channel just
