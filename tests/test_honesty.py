@@ -25,6 +25,7 @@ from onboard.monitor.integrity import (
     IntegrityMonitor,
     NisRunMean,
 )
+from tests.helpers.watched import Boat, Current
 
 DEV_AMP, DEV_PHASE = 0.12, 0.7
 """The simulator's ``effect-compass-deviation``: 0.12 sin(psi + 0.7) rad (4.9 deg RMS)."""
@@ -71,30 +72,6 @@ def test_a_current_alone_is_not_taken_for_a_deviation() -> None:
     assert math.degrees(fit.rms()) < 1.0
 
 
-class _Boat:
-    """A pipeline as the monitor sees it: a heading and a position."""
-
-    name = "aie"
-    position = ("north", "east")
-    speed = ("speed",)
-    heading_dependent: tuple[str, ...] = ()
-    heading_estimate = ("heading",)
-    current_estimate: tuple[str, ...] = ()
-    frame = None
-    frame_offset = None
-
-
-class _Current:
-    name = "current"
-    position: tuple[str, ...] = ()
-    speed: tuple[str, ...] = ()
-    heading_dependent = ("north", "east", "u_r", "v_r")
-    heading_estimate: tuple[str, ...] = ()
-    current_estimate = ("north", "east")
-    frame = None
-    frame_offset = None
-
-
 def _drive(monitor: IntegrityMonitor, amp: float, offset: float = 0.0,
            duration: float = 600.0) -> None:
     """Straight legs of 20 s at eight headings and changing speeds, fixes at 5 Hz and a
@@ -128,7 +105,7 @@ def _values(heading: float) -> dict[str, float]:
 
 def test_a_compass_deviation_widens_the_heading_sigma_and_withholds_the_current() -> None:
     monitor = IntegrityMonitor(Alerts())
-    monitor.watch([_Boat(), _Current()])
+    monitor.watch([Boat(), Current()])
     _drive(monitor, DEV_AMP)
     assert monitor.deviation is not None and monitor.deviation.deviated
     values = _values(1.0)
@@ -144,7 +121,7 @@ def test_a_compass_deviation_widens_the_heading_sigma_and_withholds_the_current(
 def test_a_compass_without_deviation_stays_unflagged() -> None:
     """Negative control: the same legs with a true compass."""
     monitor = IntegrityMonitor(Alerts())
-    monitor.watch([_Boat(), _Current()])
+    monitor.watch([Boat(), Current()])
     _drive(monitor, 0.0)
     values = _values(1.0)
     monitor.amend("aie", 600.0, values)
@@ -157,7 +134,7 @@ def test_a_heading_off_the_course_withholds_the_heading_and_the_positions() -> N
     """A compass 70 deg off (Shenzhen 1751/1021, the survey boat): the heading, the
     positions and the current are withheld; the warning quotes the worst window."""
     monitor = IntegrityMonitor(Alerts())
-    monitor.watch([_Boat(), _Current()])
+    monitor.watch([Boat(), Current()])
     _drive(monitor, 0.0, offset=math.radians(70.0), duration=120.0)
     withheld = set(monitor.withheld("aie"))
     assert {"heading", "std_heading", "north", "east", "std_north", "std_east"} <= withheld

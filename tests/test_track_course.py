@@ -17,20 +17,10 @@ from onboard.core.messages import ActuatorCommand, GnssFix, Heading
 from onboard.monitor.alerts import Alerts
 from onboard.monitor.integrity import IntegrityMonitor
 from onboard.monitor.track_course import COURSE_MAX_STD_RAD, TrackCourse
+from tests.helpers.watched import Boat
 
 LAT0, LON0 = 48.2, -4.47
 """Near Brest, where the DDBoat log was taken."""
-
-
-class _Boat:
-    name = "aie"
-    position = ("north", "east")
-    speed = ("speed",)
-    heading_dependent: tuple[str, ...] = ()
-    heading_estimate = ("heading",)
-    current_estimate: tuple[str, ...] = ()
-    frame = None
-    frame_offset = None
 
 
 def _fix(t: float, n: float, e: float) -> GnssFix:
@@ -65,7 +55,7 @@ def _drive(monitor: IntegrityMonitor, offset_deg: float, speed: float = 0.85,
 
 def test_a_heading_79_deg_off_the_track_is_flagged_without_a_receiver_course() -> None:
     monitor = IntegrityMonitor(Alerts())  # fixes taken at the default 2.0 m
-    monitor.watch([_Boat()])
+    monitor.watch([Boat()])
     _drive(monitor, 79.0)
     assert monitor.heading is not None and monitor.heading.mismatch
     # measured: 213 windows judged, their mean heading - course 78.3-79.3 deg
@@ -77,7 +67,7 @@ def test_a_heading_79_deg_off_the_track_is_flagged_without_a_receiver_course() -
 def test_a_heading_along_the_track_stays_silent() -> None:
     """Negative control: the same drive, the compass true (turns included)."""
     monitor = IntegrityMonitor(Alerts())
-    monitor.watch([_Boat()])
+    monitor.watch([Boat()])
     _drive(monitor, 0.0)
     assert monitor.heading is not None and monitor.heading.offset_rad is not None
     # measured: 213 windows judged, |mean heading - course| at most 0.7 deg (bound 25;
@@ -90,7 +80,7 @@ def test_a_vehicle_at_rest_gives_no_course() -> None:
     """Negative control: fixes scattering by 2 m about one point (the default accuracy)
     never lie far enough apart for a course, whatever the compass reads."""
     monitor = IntegrityMonitor(Alerts())
-    monitor.watch([_Boat()])
+    monitor.watch([Boat()])
     _drive(monitor, 79.0, speed=0.0, fix_noise_m=2.0)
     assert monitor.heading is not None and monitor.heading.offset_rad is None
     assert monitor.active() == {}
@@ -103,7 +93,7 @@ def test_a_vehicle_going_astern_is_not_taken_for_a_reversed_compass(throttle: fl
     course is derived for 60 s after a command astern. Control: the same track and
     compass with the thrusters ahead is a compass 180 deg off, flagged."""
     monitor = IntegrityMonitor(Alerts())
-    monitor.watch([_Boat()])
+    monitor.watch([Boat()])
     _drive(monitor, 180.0, throttle=throttle)
     assert monitor.heading is not None
     assert monitor.heading.mismatch is (throttle > 0)
