@@ -207,6 +207,9 @@ def test_the_consistency_factor_narrows_on_white_innovations_only() -> None:
     assert _consistency(0.1).factor(FLOOR) == pytest.approx(0.1, rel=0.25)
     assert _consistency(0.1, n=MIN_UPDATES - 1).factor(FLOOR) == 1.0    # too few yet
     assert _consistency(0.1, rho=0.8).factor(FLOOR) == 1.0   # a model's error: not narrowed
+    # a gain above the optimal one (negative lag-1, the BlueROV2's INS rows): not narrowed
+    assert _consistency(0.1, rho=-0.5).factor(FLOOR) == 1.0
+    assert _consistency(0.1, rho=-0.1).factor(FLOOR) == pytest.approx(0.1, rel=0.25)
     assert _consistency(4.0).factor(FLOOR) == 1.0            # widening is the learning's
     assert _consistency(0.001).factor(FLOOR) == FLOOR
     assert _consistency(0.1).factor(0.5) == 0.5               # what the learned noise supports
