@@ -2,8 +2,10 @@
 records (a simulated fleet's replayed logs, as :mod:`validation.fleet_world` leaves them)
 against the simulator's true field at its place, depth and time, and how the vehicles'
 errors go together: the correlation between two vehicles' errors by time lag and by the
-distance between them, and the share of each vehicle's error variance that the others'
-errors share (docs/fleet.md, "The error the fleet shares").
+distance between them, the share of each vehicle's error variance that the others'
+errors share, and each vehicle's error against the water where it was some seconds
+before (its estimator's memory of its track; docs/fleet.md, "What the vehicles' errors
+are"; docs/algorithms.md §8.9).
 
     python -m validation.fleet_shared DIR [DIR ...] [--step S]
 
@@ -17,8 +19,8 @@ The share of vehicle ``v``'s error variance that is common: under a one-factor m
 mean product of two vehicles' errors at one time is ``E[g^2]``, so the share is
 ``mean_u E[e_v e_u] / E[e_v^2]`` over the other vehicles ``u`` at the same times; and
 ``E[g^2]`` against the vehicles' reported variance, ``mean_u E[e_v e_u] / E[s_v s_u]``,
-is what the field's common-error term takes as a fraction of the reported variance
-(docs/algorithms.md §8.9).
+is the fraction of the reported variance a term for an error common to the fleet would
+carry (on fleet-survey 1-3 % at the boats, nil at the others: no such term is built).
 """
 
 from __future__ import annotations
