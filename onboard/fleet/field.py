@@ -45,6 +45,10 @@ spread ``sigma_down`` (fitted by its own marginal likelihood, :func:`fit_sigma_d
 scales and the error model of north and east, predicted from the super-observations that
 have one (None where none is near); depth is not a coordinate.
 
+A vehicle's estimate is a memory of the water along its track, not the water where it is:
+a window's place is as uncertain as the distance its vehicle covers in the estimator's
+memory :data:`ESTIMATE_MEMORY_S` (:func:`memory_place`, added to its position's sigma).
+
 A record without a current (``north``/``east``: withheld by an integrity check, not yet
 converged, not finite) or without its sigma or time or position is not an observation; a
 super-observation further than :data:`OUTLIER_SIGMA` predictive sigmas from what the other
@@ -107,6 +111,15 @@ hyperparameters are kept as they are."""
 MAX_POSITION_STD_M = 200.0
 """A record whose position sigma exceeds this (m per axis; an AUV dead reckoned for
 hours) is not placed: not an observation."""
+ESTIMATE_MEMORY_S = 20.0
+"""How far back along its own track (s) a vehicle's current estimate reaches: a current
+estimator's estimate is a memory of the water it crossed, not of the water where it is
+(docs/algorithms.md §8.9). Measured on the simulator's ``fleet-survey`` (seeds 1-2,
+``python -m validation.fleet_shared``): each vehicle's error against the true water
+where it was earlier is least 5-30 s back (the boats on north-south lines 5 s, the AUVs
+and the boat on east-west lines 10-20 s, the station-keeper 30 s). A window's place is
+as uncertain as the distance its vehicle covers in that memory: ``speed x
+ESTIMATE_MEMORY_S`` per axis (:func:`memory_place`)."""
 
 
 NORTH, EAST, DOWN = 0, 1, 2
@@ -263,8 +276,10 @@ class SuperObs(NamedTuple):
     ``t_ref``; ``y`` (n, 3) current north, east, down (m/s; down NaN in a window
     without one); ``s`` (n, 3) their sigmas;
     ``vehicle`` (n,) an integer per vehicle; ``utc`` (n,) the UTC (s); ``keys`` (vehicle
-    id, window number) of each; ``place`` (n,) the RMS of its records' position sigmas
-    (m per axis; 0 where they gave none)."""
+    id, window number) of each; ``place`` (n,) how far the water it observed may be
+    from its place (m per axis): the RMS of its records' position sigmas (0 where they
+    gave none) and its estimate's memory along the track (:func:`memory_place`) in
+    quadrature."""
 
     x: np.ndarray
     y: np.ndarray
@@ -307,6 +322,30 @@ def place_variance(sigma_f: float, length_m: float, place: np.ndarray) -> np.nda
     return 2.0 * sigma_f ** 2 * p2 / (length_m ** 2 + p2)
 
 
+def memory_place(speed_mps: np.ndarray, memory_s: float = ESTIMATE_MEMORY_S) -> np.ndarray:
+    """The place sigma (m per axis) of an estimate that remembers the water along its
+    track: an exponential memory of ``memory_s`` (s) at ``speed_mps`` (m/s over ground)
+    puts the water it observed ``d = speed u`` back, ``u`` exponential of mean
+    ``memory_s``, ``E|d|^2 = 2 (speed memory_s)^2``: as a place error of the same mean
+    square spread over both axes, ``speed x memory_s`` per axis (docs/algorithms.md
+    §8.9)."""
+    return speed_mps * memory_s
+
+
+def window_speed(acc: np.ndarray, plane: "Plane") -> np.ndarray:
+    """Each window's speed over ground (m/s) from its sums (:meth:`CurrentField.add`):
+    the least-squares slope of its records' latitude and longitude against their time in
+    the window; 0 for a window whose records share one time."""
+    n = acc[:, 0]
+    t_mean = acc[:, 12] / n
+    var_t = acc[:, 13] / n - t_mean ** 2
+    slope = (acc[:, 14:16] / n[:, None] - acc[:, 2:4] / n[:, None] * t_mean[:, None])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slope = np.where(var_t[:, None] > 1e-9, slope / var_t[:, None], 0.0)   # deg/s
+    return np.hypot(np.radians(slope[:, 0]) * plane.m_per_rad_lat,
+                    np.radians(slope[:, 1]) * plane.m_per_rad_lon)
+
+
 class CurrentField:
     """The fleet's current field (module docstring): :meth:`add` observations in any
     order, :meth:`fit` (the super-observations, and the hyperparameters by marginal
@@ -321,13 +360,16 @@ class CurrentField:
         added: observations added; rejected: observations and super-observations left
             out, by reason (:func:`observation`'s, ``outlier``, ``too_old``).
         log_likelihood: the marginal log-likelihood of the last hyperparameter fit.
+        memory_s: how far back along its track a vehicle's estimate reaches (s;
+            :data:`ESTIMATE_MEMORY_S`; 0: the water where the vehicle is).
     """
 
     def __init__(self, hyper: Hyper = Hyper(), thin_s: float = THIN_S,
                  history_s: float = HISTORY_S, neighbours: int = NEIGHBOURS,
-                 seed: int = 0, prior: Prior | None = PRIOR) -> None:
+                 seed: int = 0, prior: Prior | None = PRIOR,
+                 memory_s: float = ESTIMATE_MEMORY_S) -> None:
         self.hyper, self.thin_s, self.history_s = hyper, thin_s, history_s
-        self.prior = prior
+        self.prior, self.memory_s = prior, memory_s
         self.sigma_down = SIGMA_DOWN
         self.neighbours = neighbours
         self.plane: Plane | None = None
@@ -356,7 +398,7 @@ class CurrentField:
         key = (obs.vehicle, math.floor(obs.utc / self.thin_s))
         acc = self._bins.get(key)
         if acc is None:
-            acc = self._bins[key] = [0.0] * 12
+            acc = self._bins[key] = [0.0] * 16
             self._vehicles.setdefault(obs.vehicle, len(self._vehicles))
         acc[0] += 1.0
         acc[1] += obs.utc
@@ -372,6 +414,11 @@ class CurrentField:
             acc[10] += obs.std_down ** 2
         if obs.position_std_m is not None:
             acc[11] += obs.position_std_m ** 2
+        u = obs.utc - key[1] * self.thin_s   # s into its window: the track's slope
+        acc[12] += u
+        acc[13] += u * u
+        acc[14] += obs.lat_deg * u
+        acc[15] += obs.lon_deg * u
         self.added += 1
         return True
 
@@ -416,8 +463,10 @@ class CurrentField:
             down = np.where(n_down > 0, acc[:, 9:11] / n_down, np.nan)
         y = np.column_stack([mean[:, 3:5], down[:, 0]])
         s = np.column_stack([np.sqrt(acc[:, 6:8] / n), np.sqrt(down[:, 1])])
+        place = np.hypot(np.sqrt(acc[:, 11] / n[:, 0]),
+                         memory_place(window_speed(acc, self.plane), self.memory_s))
         return SuperObs(x, y, s, np.array([self._vehicles[k[0]] for k in keys]), mean[:, 0],
-                        keys, np.sqrt(acc[:, 11] / n[:, 0]))
+                        keys, place)
 
     def update(self, obs: SuperObs | None, hyperparameters: bool = True) -> None:
         """Fit the hyperparameters to ``obs`` by marginal likelihood when asked and there

@@ -16,7 +16,9 @@ A vehicle moves between random waypoints at its cruise speed; its current estima
 truth at its position plus its own error: per component an AR(1) process at the record
 rate with correlation time ``tau_s`` and stationary sigma ``sigma`` (the sigma it reports
 as its ``std``), plus white noise of ``white`` m/s: the error of a current estimator, which
-wanders slowly, so ten records a second are not ten measurements.
+wanders slowly, so ten records a second are not ten measurements. With ``memory_s`` its
+estimate is also a memory of the water it crossed: the truth along its own track through
+an exponential filter of that time constant (docs/algorithms.md §8.9).
 """
 
 from __future__ import annotations
@@ -137,12 +139,25 @@ def ar1(rng: np.random.Generator, n: int, rate_hz: float, tau_s: float,
     return lfilter([1.0], [1.0, -phi], drive)
 
 
+def remembered(truth: np.ndarray, rate_hz: float, memory_s: float) -> np.ndarray:
+    """The truth along a track (n, 2) at ``rate_hz`` through an exponential filter of time
+    constant ``memory_s`` (s), started on its first value (``truth`` itself for 0)."""
+    if memory_s <= 0.0:
+        return truth
+    from scipy.signal import lfilter
+
+    phi = math.exp(-1.0 / (rate_hz * memory_s))
+    return np.column_stack([lfilter([1.0 - phi], [1.0, -phi], col - col[0]) + col[0]
+                            for col in truth.T])
+
+
 def fleet(field: str, seed: int, vehicles: int = 10, duration_s: float = 1800.0,
           rate_hz: float = 10.0, half_width_m: float = 1000.0, speed_mps: float = 1.5,
           sigma: float = 0.03, tau_s: float = 60.0, white: float = 0.01,
-          t_start: float = 0.0) -> Fleet:
+          t_start: float = 0.0, memory_s: float = 0.0) -> Fleet:
     """A fleet of ``vehicles`` in ``field`` (one of :data:`FIELDS`) for ``duration_s`` at
-    ``rate_hz``, the estimates' error AR(1) (``sigma``, ``tau_s``) plus white."""
+    ``rate_hz``, the estimates' error AR(1) (``sigma``, ``tau_s``) plus white, about the
+    truth along the track remembered over ``memory_s`` (s; 0: the truth where it is)."""
     rng = np.random.default_rng(seed)
     t, paths = tracks(rng, vehicles, duration_s, rate_hz, half_width_m, speed_mps)
     t = t + t_start
@@ -152,8 +167,9 @@ def fleet(field: str, seed: int, vehicles: int = 10, duration_s: float = 1800.0,
         truth = np.column_stack([c_n, c_e])
         err = np.column_stack([ar1(rng, t.size, rate_hz, tau_s, sigma) for _ in range(2)])
         err += rng.normal(0.0, white, err.shape)
+        seen = remembered(truth, rate_hz, memory_s)
         for key, val in (("v", np.full(t.size, k)), ("t", t), ("n", n), ("e", e),
-                         ("est", truth + err), ("truth", truth)):
+                         ("est", seen + err), ("truth", truth)):
             cols[key].append(val)
     cat = {k: np.concatenate(v) for k, v in cols.items()}
     return Fleet(cat["v"], cat["t"], cat["n"], cat["e"], cat["est"], cat["truth"],
