@@ -145,14 +145,22 @@ class _Pipe:
         self.noise = ChannelNoise([scale])
 
 
-def _nis_warnings(scale: NoiseScale, nis: float) -> list[str]:
+def _nis_alerts(scale: NoiseScale, nis: float, unpublished: tuple[str, ...] = ()
+                ) -> tuple[Alerts, IntegrityMonitor]:
     alerts = Alerts()
     mon = IntegrityMonitor(alerts)
-    mon.watch([_Pipe(scale)])
+    pipe = _Pipe(scale)
+    pipe.unpublished_channels = unpublished
+    mon.watch([pipe])
     from onboard.core.messages import Innovation
     mon.innovations("aie", [Innovation(channel="x", t=0.1 * i, z=(0.0,), S=(1.0,), nis=nis,
                                        dof=1, gate=400.0, accepted=True)
                             for i in range(400)])
+    return alerts, mon
+
+
+def _nis_warnings(scale: NoiseScale, nis: float) -> list[str]:
+    alerts, _ = _nis_alerts(scale, nis)
     return [a.message for a in alerts if a.code == "nis_out_of_band"]
 
 
@@ -167,6 +175,37 @@ def test_the_nis_warning_waits_for_the_adaptation_and_names_the_key() -> None:
     between = _learn(1.0, 0.0)
     (msg,) = _nis_warnings(between, 5.0)
     assert "the rest is the forecast's" in msg, msg
+
+
+def test_a_narrowed_noise_the_filter_does_not_take_is_named_with_its_value() -> None:
+    # identified (innovations 0.5 of the declared sigma beside a forecast share of 0.2),
+    # learned 0.5, not applied (the channel does not narrow): the config declares too much
+    quiet = _learn(0.5, 0.2)
+    assert quiet.identified and quiet.applied == 1.0
+    (msg,) = _nis_warnings(quiet, 0.05)
+    assert "not applied (the filter keeps the declared): set [sensors.x] std = " in msg
+    assert float(msg.split("std = ")[1].split()[0]) == pytest.approx(0.5, rel=0.1)  # 0.487
+    # negative control: one that narrows takes it, and the message names the forecast
+    narrowing = _learn(0.5, 0.2)
+    narrowing.narrows = True
+    (msg,) = _nis_warnings(narrowing, 0.05)
+    assert "the rest is the forecast's" in msg, msg
+
+
+def test_an_unpublished_forecast_below_its_band_is_information_once() -> None:
+    idle = NoiseScale("x", "[sensors.x] std", 1.0, "m")      # nothing to learn from
+    alerts, mon = _nis_alerts(idle, 0.05, unpublished=("x",))
+    notes = [a for a in alerts if a.code == "nis_unpublished"]
+    assert [a.code for a in alerts] == ["nis_unpublished"] and len(notes) == 1
+    assert "information, not an inconsistency" in notes[0].message
+    assert "nis_out_of_band" not in mon.active().get("aie", [])
+    # negative controls: the same channel not declared warns and flags; declared, an NIS
+    # above the band (innovations larger than their forecast reach the estimates) warns
+    alerts, mon = _nis_alerts(idle, 0.05)
+    assert [a.code for a in alerts] == ["nis_out_of_band"]
+    assert mon.active()["aie"] == ["nis_out_of_band"]
+    alerts, mon = _nis_alerts(idle, 5.0, unpublished=("x",))
+    assert [a.code for a in alerts] == ["nis_out_of_band"]
 
 
 def test_a_pipeline_starts_where_the_last_run_ended(tmp_path) -> None:
