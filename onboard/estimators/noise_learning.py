@@ -60,6 +60,14 @@ published from the filter is scaled by their windowed mean ratio ``z^T z / tr(S)
 (:attr:`NoiseScale.published_factor`, at most 1, never below what the learned noise
 supports), apart from the gain: the estimates, the gain and ``P`` are unchanged.
 
+The process noise (:class:`ProcessScale`, algorithms.md §9.3): where a channel's
+innovations are smaller than the forecast's share alone (the noise not identified), a
+measurement-noise scale cannot fix them; on the heading axis the forecast's input error
+``V_u`` takes a learned scale ``q``, shrinking while the innovations' windowed ``z^2 / S``
+is below :data:`PROCESS_NIS_BAND` and their lag-1 autocorrelation is below
+:data:`PUBLISHED_LAG1_MIN` (a gain above the optimal one), growing back to at most 1
+above the band or with positively correlated innovations.
+
 Why this and not the variational-Bayes filter (Sarkka & Nummenmaa 2009): every filter here
 already has its innovation and ``S`` in closed form at each update, and the matching reads
 them without changing the update itself, where the VB step iterates the posterior

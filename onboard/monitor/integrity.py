@@ -34,9 +34,13 @@ published records and the innovation records, and runs these checks:
   :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
   is learned: an NIS out of band first drives the adaptation, and the warning says what
   is still inconsistent after it (the learned noise at its bound: the configuration key
-  to change and the learned value; else the forecast's share). A channel whose factor a
+  to change and the learned value; a noise learned below the declared that the update
+  does not take, the same; else the forecast's share). A channel whose factor a
   published sigma takes (``ChannelNoise.published_factor``, algorithms.md §9.1) is judged
-  against that sigma: its NIS over the factor. The pipeline is flagged.
+  against that sigma: its NIS over the factor. The pipeline is flagged. Below its band
+  on one of the pipeline's ``unpublished_channels`` (a forecast of what it publishes
+  without a sigma, algorithms.md §9.2) the NIS is information, ``nis_unpublished`` once
+  per channel, not flagged.
 * **position consistency** (:class:`PositionNeesCheck`): where a fix is better than the
   estimate (the published variance :data:`POSITION_NEES_FIX_RATIO` times the fix's), the NEES of the published position
   against it, ``d^T (P + R_fix)^-1 d`` (2 dof), by blocks as the NIS;
