@@ -34,7 +34,7 @@ from typing import Any, Mapping
 from onboard.core.messages import Innovation
 from onboard.estimators.axis_model import AxisModel, Discrete
 from onboard.estimators.input_models import AxisInnovation, InputModel
-from onboard.estimators.noise_learning import NoiseScale
+from onboard.estimators.noise_learning import NoiseScale, ProcessScale
 
 RUNNING_MEAN_GAIN = 0.05
 """Weight of the newest value in the running means of the rate innovations (and of the
@@ -121,6 +121,9 @@ class IncrementFilter:
         self._rate_channel = f"{name}.rate"
         self.noise = NoiseScale(f"{name}.increment", "", 0.0, "")
         self.rate_noise = NoiseScale(f"{name}.rate", "", 0.0, "")
+        self.process: ProcessScale | None = None
+        """The learned scale of ``V_u`` from the increments (algorithms.md §9.3; None: the
+        axis does not learn it): the forecast takes ``q V_u``."""
 
     # -- §2.7, one step ------------------------------------------------------------------
 
@@ -145,7 +148,7 @@ class IncrementFilter:
             self._start(k, y, R, R_prev, command, y_v, R_v, t, source)
             return
         kf.forecast(k, self.input.forecast_input(kf, self._u_known(command), y_v is not None),
-                    self.V_u)
+                    self.forecast_var_u)
         self.rate_z = None if y_v is None else self._rate_innovation(k, y_v, R_v)
         kf.innovation(y)
         gate = (self.gate_nis if self._consecutive_rejects < MAX_CONSECUTIVE_REJECTS
@@ -163,6 +166,8 @@ class IncrementFilter:
             self._consecutive_rejects = 0
             self.nis_avg += RUNNING_MEAN_GAIN * (min(kf.nis, NIS_CLIP) - self.nis_avg)
             self.noise.observe(kf.z, kf.S, kf.R)
+            if self.process is not None:
+                self.process.observe(self.noise)
             decision = self.input.after_innovation(
                 AxisInnovation(kf, self.rate_z, self.rate_S, self.nis_avg, self.V_u), k,
                 self._u_known(command))
@@ -186,6 +191,12 @@ class IncrementFilter:
         self.input.start(self._u_known(command), R + R_prev)
         if y_v is not None:
             self._rate_update(y_v, R_v, t, source)
+
+    @property
+    def forecast_var_u(self) -> float:
+        """The input-error variance the forecast takes: ``q V_u``, ``q`` the learned
+        process-noise scale (:attr:`process`; 1 without one)."""
+        return self.V_u if self.process is None else self.process.scale * self.V_u
 
     def set_input_error_var(self, input_error_var: float) -> None:
         """Use ``input_error_var`` as the configured ``V_u`` from the next step on (the

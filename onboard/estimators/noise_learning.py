@@ -60,6 +60,14 @@ published from the filter is scaled by their windowed mean ratio ``z^T z / tr(S)
 (:attr:`NoiseScale.published_factor`, at most 1, never below what the learned noise
 supports), apart from the gain: the estimates, the gain and ``P`` are unchanged.
 
+The process noise (:class:`ProcessScale`, algorithms.md §9.3): where a channel's
+innovations are smaller than the forecast's share alone (the noise not identified), a
+measurement-noise scale cannot fix them; on the heading axis the forecast's input error
+``V_u`` takes a learned scale ``q``, shrinking while the innovations' windowed ``z^2 / S``
+is below :data:`PROCESS_NIS_BAND` and their lag-1 autocorrelation is below
+:data:`PUBLISHED_LAG1_MIN` (a gain above the optimal one), growing back to at most 1
+above the band or with positively correlated innovations.
+
 Why this and not the variational-Bayes filter (Sarkka & Nummenmaa 2009): every filter here
 already has its innovation and ``S`` in closed form at each update, and the matching reads
 them without changing the update itself, where the VB step iterates the posterior
@@ -311,16 +319,71 @@ class NoiseScale:
             self.forecast = float(f) if isinstance(f, (int, float)) and f >= 0.0 else 0.0
 
 
+PROCESS_NIS_BAND = (0.61, 1.41)
+"""The windowed mean ``z^2 / S`` (:attr:`Consistency.ratio`) outside which a channel's
+process-noise scale moves (algorithms.md §9.3): the NIS per degree of freedom of sigmas
+whose 1-sigma coverage is 0.6-0.8 (docs/integrity.md, "The band"); inside it the scale
+holds."""
+PROCESS_STEP = 0.02
+"""Gain of the process-noise scale's log per accepted update: ``q <- q exp(PROCESS_STEP
+(r - 1))``; at ``r = 0.2``, 10 Hz, an e-fold in 6 s (the window of ``r``, 200 updates,
+lags by about half of it: an overshoot of at most ``exp(-0.8)``, which the band's other
+side brings back)."""
+PROCESS_FLOOR = 1e-3
+"""Smallest process-noise scale: an input error learned at most 30 times smaller (sigma)
+than the configured ``v_d``."""
+
+
+class ProcessScale:
+    """The learned scale ``q`` of an axis filter's process noise (its input-error variance
+    ``V_u``, algorithms.md §9.3): the forecast takes ``q V_u``.
+
+    Covariance matching on the forecast's side (Mehra 1972; the adaptive ``V_d`` of the
+    AIE papers, §2.8): where the channel's measurement noise is learned and its
+    innovations are smaller than the forecast's share alone (:attr:`NoiseScale.identified`
+    false: what no measurement-noise scale can fix) and their windowed ``z^2 / S`` is
+    below :data:`PROCESS_NIS_BAND`, ``q`` shrinks; above the band it grows back, never
+    above 1 (widening the process noise is the rate row's matching of ``V_u``, §2.7) nor
+    below :data:`PROCESS_FLOOR`; inside the band, or while the innovations identify the
+    measurement noise, it holds.
+
+    Attributes (read them to debug):
+        scale: ``q``, 1 until it moves.
+    """
+
+    __slots__ = ("scale",)
+
+    def __init__(self) -> None:
+        self.scale = 1.0
+
+    def observe(self, noise: NoiseScale) -> None:
+        """After the channel's accepted update (``noise`` has observed it): one step of
+        ``q`` from its windowed ``z^2 / S`` (:attr:`Consistency.ratio`)."""
+        c = noise.consistency
+        if not noise.learned or c.n < WINDOW:
+            return
+        r, lag1 = c.ratio, c.lag1
+        lo, hi = PROCESS_NIS_BAND
+        if (r < lo and lag1 < PUBLISHED_LAG1_MIN and not noise.identified) or (
+                (r > hi or lag1 > WHITE_LAG1_MAX) and self.scale < 1.0):
+            q = self.scale * math.exp(PROCESS_STEP * (min(r, CAP) - 1.0))
+            self.scale = PROCESS_FLOOR if q < PROCESS_FLOOR else 1.0 if q > 1.0 else q
+
+
 class ChannelNoise:
     """The learned noise of a pipeline's channels, by channel name: reported, persisted
     and read by the integrity monitor (:meth:`report`)."""
 
     def __init__(self, scales: list[NoiseScale],
-                 published: Mapping[str, Callable[[], float]] | None = None) -> None:
+                 published: Mapping[str, Callable[[], float]] | None = None,
+                 processes: Mapping[str, ProcessScale] | None = None) -> None:
         self.scales = {s.channel: s for s in scales}
         self.published = dict(published or {})
         """Per channel, the variance factor its pipeline's published sigma applies
         (algorithms.md §9.1), for the channels whose factor a published sigma takes."""
+        self.processes = dict(processes or {})
+        """Per channel, the learned scale of the process noise of the filter it updates
+        (algorithms.md §9.3), for the channels that learn one."""
 
     def health(self) -> dict[str, float]:
         """``noise.<channel>.scale`` and ``noise.<channel>.std`` (the learned one-sigma in
@@ -331,21 +394,33 @@ class ChannelNoise:
                 continue
             out[f"noise.{ch}.scale"] = s.scale
             out[f"noise.{ch}.std"] = s.std
+            q = self.processes.get(ch)
+            if q is not None and q.scale != 1.0:
+                out[f"noise.{ch}.process_scale"] = q.scale
         return out
 
     def get_state(self) -> dict[str, dict[str, float]]:
-        """Per channel its :meth:`NoiseScale.get_state`."""
-        return {ch: s.get_state() for ch, s in self.scales.items()}
+        """Per channel its :meth:`NoiseScale.get_state`, with ``process_scale`` where the
+        channel learns its filter's process noise."""
+        out = {ch: s.get_state() for ch, s in self.scales.items()}
+        for ch, q in self.processes.items():
+            if ch in out:
+                out[ch]["process_scale"] = q.scale
+        return out
 
     def set_state(self, state: object) -> None:
         """Restore :meth:`get_state`; unknown channels and malformed entries are
-        ignored."""
+        ignored (a ``process_scale`` outside ``[PROCESS_FLOOR, 1]`` too)."""
         if not isinstance(state, dict):
             return
         for ch, sub in state.items():
             s = self.scales.get(ch)
             if s is not None and isinstance(sub, dict):
                 s.set_state(sub)
+                q, v = self.processes.get(ch), sub.get("process_scale")
+                if (q is not None and isinstance(v, (int, float))
+                        and PROCESS_FLOOR <= v <= 1.0):
+                    q.scale = float(v)
 
     def report(self, channel: str) -> NoiseScale | None:
         """The channel's learned noise (None if it learns none)."""

@@ -216,7 +216,7 @@ class TrackReconstruction:
                 k = self.disc(yaw.damping(yaw.last_command), tau)
                 dpsi, r = yaw.kf.predict_ahead(k, yaw.input_ahead(self.commands.latest(2)))
                 psi = psi + dpsi
-                var_h += k.c1 * k.c1 * yaw.kf.P[3] + k.c2 * k.c2 * yaw.V_u
+                var_h += k.c1 * k.c1 * yaw.kf.P[3] + k.c2 * k.c2 * yaw.forecast_var_u
             out["heading"] = wrap_2pi(psi)
             out["yaw_rate"] = r
         else:

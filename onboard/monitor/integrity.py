@@ -34,9 +34,13 @@ published records and the innovation records, and runs these checks:
   :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
   is learned: an NIS out of band first drives the adaptation, and the warning says what
   is still inconsistent after it (the learned noise at its bound: the configuration key
-  to change and the learned value; else the forecast's share). A channel whose factor a
+  to change and the learned value; a noise learned below the declared that the update
+  does not take, the same; else the forecast's share). A channel whose factor a
   published sigma takes (``ChannelNoise.published_factor``, algorithms.md §9.1) is judged
-  against that sigma: its NIS over the factor. The pipeline is flagged.
+  against that sigma: its NIS over the factor. The pipeline is flagged. Below its band
+  on one of the pipeline's ``unpublished_channels`` (a forecast of what it publishes
+  without a sigma, algorithms.md §9.2) the NIS is information, ``nis_unpublished`` once
+  per channel, not flagged.
 * **position consistency** (:class:`PositionNeesCheck`): where a fix is better than the
   estimate (the published variance :data:`POSITION_NEES_FIX_RATIO` times the fix's), the NEES of the published position
   against it, ``d^T (P + R_fix)^-1 d`` (2 dof), by blocks as the NIS;
@@ -814,6 +818,9 @@ class Declared(Protocol):
     current_estimate: tuple[str, ...]
     """Its water current (north, east; m/s), each with its ``std_<q>``: judged against
     the idle drift."""
+    unpublished_channels: tuple[str, ...]
+    """Its innovation channels whose forecast is of a quantity published without a sigma:
+    below their band, information (``nis_unpublished``), not ``nis_out_of_band``."""
     frame: LocalFrame | None
     """The local frame about its first fix (None before it)."""
     frame_offset: tuple[float, float] | None
@@ -878,6 +885,8 @@ class IntegrityMonitor:
         published ``aie``/``kf`` positions ("m from the first fix")."""
         self._fix_new = False
         self._last_warn: dict[tuple[str, str], float] = {}
+        self._noted_unpublished: dict[str, list[str]] = {}
+        """pipeline -> its unpublished channels already noted (``nis_unpublished``)."""
 
     def watch(self, pipelines: Iterable[Declared]) -> None:
         """Read the roles (and frames) of ``pipelines`` from now on, replacing those
@@ -1308,19 +1317,29 @@ class IntegrityMonitor:
             check = per.get(rec.channel)
             if check is None or check.dof != rec.dof:
                 check = per[rec.channel] = NisCheck(rec.dof)
-            was = check.failing
-            now = check.add(nis / self._published_factor(pipeline, rec.channel))
+            was = self._failing(pipeline, rec.channel, check)
+            check.add(nis / self._published_factor(pipeline, rec.channel))
             if not check._n:  # a block was judged: its mean into the run's
                 self._run_mean(pipeline, rec.channel, check, rec.t)
-            now = now and self._adapted(pipeline, rec.channel)
+            now = (self._failing(pipeline, rec.channel, check)
+                   and self._adapted(pipeline, rec.channel))
             if now:
                 if check.first_failed is None:
                     check.first_failed = rec.t
                 if self._due("nis_out_of_band", pipeline, rec.t, rec.channel):
                     self._nis_warning(pipeline, rec.channel, check, rec.t)
+            elif check.failing and check.outside < 0 and self._adapted(pipeline, rec.channel):
+                self._unpublished_note(pipeline, rec.channel, check, rec.t)
             if now != was:
-                self._flag(pipeline, "nis_out_of_band",
-                           any(c.failing for c in per.values()))
+                self._flag(pipeline, "nis_out_of_band", any(
+                    self._failing(pipeline, c, k) for c, k in per.items()))
+
+    def _failing(self, pipeline: str, channel: str, check: NisCheck) -> bool:
+        """Whether the channel's check fails as an inconsistency: not below the band on
+        one of the pipeline's ``unpublished_channels`` (information there,
+        :meth:`_unpublished_note`)."""
+        return check.failing and not (check.outside < 0
+                                      and self._unpublished(pipeline, channel))
 
     def _run_mean(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
         """The block ``check`` has just judged into the channel's run mean;
@@ -1394,6 +1413,32 @@ class IntegrityMonitor:
         return (learned is None or bool(getattr(learned, "learned", True))
                 or getattr(learned, "n", 0) == 0)
 
+    def _unpublished(self, pipeline: str, channel: str) -> bool:
+        """Whether ``channel`` is one of the pipeline's ``unpublished_channels``."""
+        return channel in getattr(self.watched.get(pipeline), "unpublished_channels", ())
+
+    def _unpublished_note(self, pipeline: str, channel: str, check: NisCheck,
+                          t: float) -> None:
+        """Once per channel and run: ``nis_unpublished``, the channel's NIS below its band
+        says the forecast of a quantity published without a sigma is conservative
+        (information: no flag, no published sigma in question)."""
+        noted = self._noted_unpublished.setdefault(pipeline, [])
+        if channel in noted:
+            return
+        before = f" (noted before: {', '.join(noted)})" if noted else ""
+        noted.append(channel)
+        lo, hi = check.band
+        self.alerts.warn("nis_unpublished", (
+            f"{pipeline} {channel}: mean NIS {check.mean:.2f} below [{lo:.2f}, {hi:.2f}]: "
+            "information, not an inconsistency: the channel forecasts what the pipeline "
+            "publishes without a sigma, and that forecast is more conservative than its "
+            f"innovations show (its process noise in [pipelines.{pipeline}]){before} "
+            "(docs/integrity.md)"), t, pipeline=pipeline, details=(
+                f"each block of {NIS_BLOCK_UPDATES} updates against its {NIS_BAND:.0%} "
+                f"band, for {abs(check.outside)} blocks in a row (dof {check.dof}; lag-1 "
+                f"autocorrelation {check.rho:.2f}); no published sigma takes a factor "
+                "from these channels (algorithms.md §9.2)"))
+
     def _nis_remedy(self, pipeline: str, channel: str, above: bool) -> str:
         """What to change: the learned noise's key and value when it sits at its bound on
         the failing side, else the forecast's share (the pipeline's model and process
@@ -1411,6 +1456,10 @@ class IntegrityMonitor:
         if bound == (1 if above else -1):
             return (f"its learned noise is at its {'ceiling' if above else 'floor'}: set "
                     f"{n.key} = {n.std:.3g} (declared {n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
+        if not above and n.scale < 1.0 and n.applied == 1.0:  # type: ignore[attr-defined]
+            return (f"its noise is learned below the declared and not applied (the filter "
+                    f"keeps the declared): set {n.key} = {n.std:.3g} (declared "  # type: ignore[attr-defined]
+                    f"{n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
         return (f"{forecast} (learned {n.key} = {n.std:.3g}, declared "  # type: ignore[attr-defined]
                 f"{n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
 

@@ -66,6 +66,11 @@ class Pipeline(Protocol):
       ``position`` while the heading disagrees with the course over ground.
     * ``current_estimate``: its water current (north, east; m/s) with its ``std_<q>``: withheld
       while it disagrees with the vehicle's drift with the thrusters idle.
+    * ``unpublished_channels``: its innovation channels whose forecast is of a quantity it
+      publishes without a sigma and from which no published sigma takes a factor: an NIS
+      below its band there says that forecast is conservative, not that a published sigma
+      is (the integrity monitor says so once, ``nis_unpublished``); above its band it is
+      ``nis_out_of_band`` as on every channel (algorithms.md §9.2).
     * ``frame``: the local tangent plane about its first fix (None: no position, or no
       fix yet).
     * ``frame_offset``: where ``frame``'s origin lies in its published position (north,
@@ -80,6 +85,7 @@ class Pipeline(Protocol):
     heading_dependent: tuple[str, ...] = ()
     heading_estimate: tuple[str, ...] = ()
     current_estimate: tuple[str, ...] = ()
+    unpublished_channels: tuple[str, ...] = ()
     frame: LocalFrame | None = None
     frame_offset: tuple[float, float] | None = None
 

@@ -93,6 +93,16 @@ from onboard.pipelines.base import LateSampleHold, Pipeline, unused_measurement
 from onboard.pipelines.current_health import CurrentHealth, LateHold, PipelineCounters
 from onboard.pipelines.current_samples import CHANNELS, CurrentSamples
 
+UNPUBLISHED_CHANNELS = ("dvl", "water_track", "yaw_rls")
+"""The innovation channels whose forecast is of a quantity published without a sigma
+(algorithms.md §9.2): the DVL rows forecast the velocity through the water plus the
+current in body axes, ``nu_r + R^T V_c`` (bottom track) or ``nu_r`` (water track), whose
+sum is known far better than either part (on the torpedo AUV, the spheroid and the
+BlueROV2 the current's own forecast variance is 5-25 times the bottom-track rows' ``tr S``:
+the split between the two is what the published current's sigma carries, and no
+innovation sees it); the yaw RLS's equation error is that of the yaw regression, whose
+coefficients the joint filter does not use."""
+
 GAIN_DIR = CONFIG_DIR / "gains"
 """Precomputed LMI gains for the bundled configs (``onboard design-gain``)."""
 
@@ -136,10 +146,12 @@ class CurrentPipeline(Pipeline):
 
     Roles: the current and the through-water velocity it has of
     :data:`HEADING_DEPENDENT`; ``north``/``east`` its ``current_estimate``, judged
-    against the idle drift (:class:`~onboard.pipelines.base.Pipeline`).
+    against the idle drift; :data:`UNPUBLISHED_CHANNELS` its ``unpublished_channels``
+    (:class:`~onboard.pipelines.base.Pipeline`).
     """
 
     name = "current"
+    unpublished_channels = UNPUBLISHED_CHANNELS
 
     def __init__(self, cfg: CurrentConfig, kind: str, sensors: Any,
                  configured: bool, gain: GainDesign | None = None) -> None:

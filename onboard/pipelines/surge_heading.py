@@ -67,7 +67,7 @@ from onboard.estimators.measurement_points import (
     clamp,
     finite_positive,
 )
-from onboard.estimators.noise_learning import ChannelNoise, NoiseScale
+from onboard.estimators.noise_learning import ChannelNoise, NoiseScale, ProcessScale
 from onboard.estimators.reconstruction import Point, TrackReconstruction
 from onboard.pipelines.base import Pipeline, unused_measurement
 
@@ -259,11 +259,13 @@ class SurgeHeadingPipeline(Pipeline):
         yaw.noise = NoiseScale(f"{yaw.name}.increment", (
             f"[pipelines.{name}] heading_std_rad" if cfg.heading_std_rad is not None
             else "[sensors.compass] heading_std_rad"), self.sigma_h, "rad", narrows=True)
+        yaw.process = ProcessScale()   # the heading's input error, algorithms.md §9.3
         # the published speed's sigma takes the surge filter's factor (its Doppler row's,
         # else its increment row's): both rows are judged against it
         rate_factor = surge.published_rate_factor
         return ChannelNoise([surge.noise, surge.rate_noise, yaw.noise], published={
-            surge.noise.channel: rate_factor, surge.rate_noise.channel: rate_factor})
+            surge.noise.channel: rate_factor, surge.rate_noise.channel: rate_factor},
+            processes={yaw.noise.channel: yaw.process})
 
     def _init_windows(self) -> None:
         """The measurement windows and the previous points of both axes."""
