@@ -304,8 +304,6 @@ RECORDS: tuple[Record, ...] = (
            "the same table's variant at twice the gain file's gamma*"),
     Record("docs/current.md", "a high-gain observer at γ* ≈ 55 too stiff to run",
            "a former model's gamma*, the reason it was dropped"),
-    Record("docs/current.md", "at γ* 18.9 and 30.7 of the models",
-           "\"Gavia off the design point\": models identified there once, dated"),
     Record("docs/current.md", "the published current's 95th percentile 0.48 → 0.36 m/s and "
            "its largest 0.80 → 0.67 m/s", "the BlueBoat before and after the surge "
            "turn-loss regressor (r26, the page says so)"),
