@@ -273,7 +273,8 @@ def fitting_note(header: Sequence[str]) -> str:
     fits = fitting_configs(header)
     if fits:
         return f"its header fits the bundled config {fits[0]}: --config {fits[0]}"
-    shown = ", ".join(header[:8]) + (", ..." if len(header) > 8 else "")
+    shown = (", ".join(h if h.isprintable() else repr(h) for h in header[:8])
+             + (", ..." if len(header) > 8 else ""))  # a control character quoted, not printed
     return (f"no bundled config fits its header ({shown or 'none'}): write a [csv] table "
             "(docs/formats-text.md)")
 

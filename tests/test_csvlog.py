@@ -296,3 +296,14 @@ def test_a_column_source_on_a_log_without_columns_is_an_error():
     log = Path(__file__).parent / "data" / "replay" / "jaiabot-turns.tlog"
     with pytest.raises(UnreadableLog, match="'rudder_deg'.*has no columns"):
         open_log(log, None, ["rudder_deg"])
+
+
+def test_a_header_with_control_characters_is_named_on_one_line():
+    """A header whose names hold line breaks of ``str.splitlines`` (a corrupted file: the
+    fuzz campaign found ``\\x1c`` and ``\\x85``) is shown quoted in the error, which stays
+    one line; printable names are shown as they are."""
+    from onboard.drivers.csvlog import fitting_note
+
+    note = fitting_note(["time", "la\x1ct", "lo\x85n", "speed"])
+    assert len(note.splitlines()) == 1, note
+    assert "'la\\x1ct'" in note and "time, " in note
