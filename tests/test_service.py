@@ -284,11 +284,12 @@ def test_ticks_fire_on_the_grid_or_on_the_first_sample_after_it(tmp_path, wait_s
     if wait_s == 0.0:
         assert all(t == g or abs(t - g) < 1e-9 for (t, _), g in zip(fed, grid))
         assert after_grid == 0.0
-    else:  # each tick carried a sample from after its grid time, or waited the whole wait
-        assert all(ts > g or t - g >= wait_s - 1e-3 for (t, ts), g in zip(fed, grid))
-        # the 50 Hz IMU is sent within 20 ms of every grid time: most ticks triggered
-        # (measured 0.9-1.0 alone; 0.42 in a CI run whose load stalled the sender, which
-        # shares the service's event loop)
+    else:
+        # the 50 Hz IMU is sent within 20 ms of every grid time: most ticks carry a sample
+        # stamped after it (measured 0.9-1.0 alone; 0.42 in a CI run whose load stalled the
+        # sender, which shares the service's event loop). A tick is triggered by a chunk
+        # that arrives after its grid time, and a MAVLink sample is stamped by its own
+        # boot time, which may lie before it: the share, not every tick, is asserted
         assert after_grid > 0.2, after_grid
 
 
