@@ -144,7 +144,6 @@ class Hyper(NamedTuple):
                 (1e-4, 0.5)]
 
 
-
 class Prior(NamedTuple):
     """A log-normal prior on each hyperparameter (docs/algorithms.md §8.3): ``log theta_j``
     normal about ``log median_j`` with standard deviation ``log_sd_j``."""
