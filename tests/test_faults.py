@@ -433,16 +433,33 @@ def test_compass_step_30_deg_for_5_s_is_followed_then_recovered_nis_reported(tmp
     # recovered 3 s after the step's end, plus what the machine made the samples late by
     # (the simulator sending, the service reading behind the shared clock: under the
     # suite's load the recovery came 1-2 s later, 9.2 deg at 48 s)
-    recovered_from = 48.0 + res.sim_late_s + res.service_late_s
+    late_s = res.sim_late_s + res.service_late_s
+    recovered_from = 48.0 + late_s
+    # The gyro compass's HDT carries no time and is stamped on receipt: a sentence the
+    # loaded simulator sent late_s late is that old, which in the boat's turns (up to
+    # 16 deg/s) is a heading error the service cannot see. The test allows it on top of
+    # the filter's own error: 3 s of each run flown live showed 11-22 deg of it, under
+    # published sigmas of 1.4-2.6 deg, where ATTITUDE had fallen silent under the load
+    # and the heading had switched to the receipt-stamped compass (docs/formats-text.md,
+    # "Time").
+    stale_deg = late_s * max(abs(math.degrees(tr.r)) for tr in truth.values()
+                             if recovered_from <= tr.t < 60.0)
     for name in ("aie", "kf"):
         he = _heading_errors_deg(_series(res, truth, name))
         before = _median(_in(he, 25.0, 40.0))
         in_step = _max(_in(he, 40.0, 45.5))
-        after = _max(_in(he, recovered_from, 62.0))
+        # up to 60 s: the simulator's last samples are sent at 62 s
+        after = _median(_in(he, recovered_from, 60.0))
+        after_max = _max(_in(he, recovered_from, 60.0))
         print(f"{name} heading error: before {before:.2f}, max in the step {in_step:.1f}, "
-              f"max from {recovered_from:.1f} s {after:.2f} deg")
+              f"from {recovered_from:.1f} s median {after:.2f}, max {after_max:.2f} deg "
+              f"(a heading {late_s:.2f} s stale: up to {stale_deg:.1f} deg)")
         assert in_step < 50.0  # measured 31-42 deg: follows the 30 deg step
-        assert after < 6.0  # measured 2.7 deg (aie)
+        # replayed, the error is back in its noise within 0.5 s of the step's end
+        assert after < 3.0  # measured 1.0-1.6 deg
+        # a third of the step left would be 10 deg; the largest of ~110 samples measured
+        # 3.8-4.7 deg (published sigma 1.5-1.6 deg) where no heading came late
+        assert after_max < 6.0 + stale_deg
         assert before < 3.0
     # the heading channel's largest test ratio (NIS over its gate) since the previous
     # health record (1 Hz), as ESTIMATOR_STATUS reports it
