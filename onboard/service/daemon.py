@@ -47,7 +47,7 @@ from typing import Callable, Sequence
 
 import msgspec
 
-from onboard.drivers.transports import SinkError, Transport, open_transport
+from onboard.drivers.transports import Poller, SinkError, Transport, open_transport
 from onboard.core.config import Config, ConfigError, SourceConfig, load_all
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.outputs import Output, check as check_outputs
@@ -217,8 +217,10 @@ class Service:
 
             secret_settings(svc.zenoh)
         self.intake.verifier = self.signing.verifier if self.signing and svc.mavlink.require_signing else None
-        self._chunk_arrived = asyncio.Event()
-        """Set by every chunk received (wakes a tick waiting for a fresh sample)."""
+        self.poller = Poller(self.clock.now, self.clock.speed)
+        """Reads the UDP inputs at the ticks (drivers.transports.Poller)."""
+        self._fresh: asyncio.Future[None] | None = None
+        """While a tick waits for a fresh sample: done once a chunk queued one."""
         self.inputs: list[_Input] = []
         self.sessions: list = []
         """The MAVLink sessions with the autopilot (onboard.service.mavlink_session)."""
@@ -429,21 +431,22 @@ class Service:
 
     async def _read(self, inp: _Input) -> None:
         """Feed one input's chunks to the intake, forever: the transport hands each chunk
-        to :meth:`Intake.receive` as it is read (:meth:`drivers.transports.Transport.pump`;
-        the intake parses the chunks kept at the tick or when the tick waits for a sample)
-        and reconnects by itself; an unexpected error (a bug) is logged and the input
+        to :meth:`Intake.receive` (:meth:`drivers.transports.Transport.pump`: a UDP input
+        when the tick loop drains :attr:`poller`, the others as they are read; the intake
+        parses the chunks kept at the tick or when the tick waits for a sample) and
+        reconnects by itself; an unexpected error (a bug) is logged and the input
         restarted after 1 s."""
         receive = self.intake.receive
-        arrived = self._chunk_arrived
         name, kind = inp.name, inp.cfg.kind
 
         def sink(data: bytes, t_rx: float) -> None:
             receive(name, kind, data, t_rx)
-            arrived.set()
+            if self._fresh is not None:
+                self._arrival()
 
         while True:
             try:
-                await inp.transport.pump(sink)
+                await inp.transport.pump(sink, self.poller)
             except asyncio.CancelledError:
                 raise
             except Exception as err:  # noqa: BLE001
@@ -516,8 +519,9 @@ class Service:
                 k = k_new
                 t = k * period
             elif wait > 0:
-                now = await self._await_sample(t + wait)
+                now = await self._await_sample(t, t + wait)
                 t = max(t, now)
+            self.poller.drain()
             w0 = perf()
             try:
                 self._tick(t, now)
@@ -554,30 +558,40 @@ class Service:
             except Exception:  # noqa: BLE001 - a session bug must not stop the ticks
                 log.exception("mavlink session %s failed", sess.name)
 
-    async def _await_sample(self, deadline: float) -> float:
-        """Wait until a chunk queues a sample or service time ``deadline``; return the
-        service time then. Ticking on the arrival of a sample (normally the IMU's, the
-        fastest stream) instead of on the bare grid makes the newest sample of a tick
-        milliseconds old rather than up to one sample period.
+    async def _await_sample(self, t: float, deadline: float) -> float:
+        """Wait until a chunk received after grid time ``t`` queues a sample, or service
+        time ``deadline``; return the service time then. Ticking on the arrival of a
+        sample (normally the IMU's, the fastest stream) instead of on the bare grid makes
+        the newest sample of a tick milliseconds old rather than up to one sample period.
 
-        The chunks received since the last tick are parsed first (their samples do not
-        count as fresh), then each chunk as it arrives, until one queues a sample."""
-        arrived = self._chunk_arrived
-        parse = self.intake.parse
-        parse()
-        while True:
-            arrived.clear()
-            delay = self.clock.wall_delay(deadline)
-            if delay <= 0:
-                break
-            try:
-                async with asyncio.timeout(delay):
-                    await arrived.wait()
-            except TimeoutError:
-                break
-            if parse():
-                break
+        The UDP inputs are drained and the chunks received since the last tick parsed
+        first (those received after ``t`` count as fresh); then, until one queues a
+        sample, each chunk as it arrives (:meth:`_arrival`): one future and one timer
+        per tick, and the UDP sockets watched only during this wait."""
+        self.poller.drain()
+        if self.intake.parse(after=t):
+            return self.clock.now()
+        delay = self.clock.wall_delay(deadline)
+        if delay <= 0:
+            return self.clock.now()
+        loop = asyncio.get_running_loop()
+        fresh = self._fresh = loop.create_future()
+        timer = loop.call_later(delay, _resolve, fresh)
+        self.poller.watch()
+        try:
+            await fresh
+        finally:
+            self.poller.unwatch()
+            timer.cancel()
+            self._fresh = None
         return self.clock.now()
+
+    def _arrival(self) -> None:
+        """A chunk arrived while a tick waits: parse what was received; a sample queued
+        ends the wait."""
+        fresh = self._fresh
+        if fresh is not None and not fresh.done() and self.intake.parse():
+            fresh.set_result(None)
 
     def _tick(self, t: float, now: float) -> None:
         records = self.intake.tick(t)
@@ -685,6 +699,11 @@ class Service:
         except (OSError, TypeError, ValueError) as err:
             self.stats.state_errors += 1
             log.error("state save failed: %s", err)
+
+
+def _resolve(fut: asyncio.Future[None]) -> None:
+    if not fut.done():
+        fut.set_result(None)
 
 
 async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None,

@@ -25,6 +25,7 @@ what makes the replay exact.
 from __future__ import annotations
 
 import logging
+import math
 from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Callable, Protocol
@@ -155,15 +156,18 @@ class Intake:
         if len(backlog) >= self.max_backlog:
             self.parse()
 
-    def parse(self) -> int:
+    def parse(self, after: float = -math.inf) -> int:
         """Record, parse and queue the chunks kept by :meth:`receive`, in the order
-        received; return the number of samples queued."""
+        received; return the number of samples queued from those received after
+        ``after`` (s; all by default)."""
         backlog = self.backlog
         queued = 0
         parse = self._parse
         while backlog:
             name, st, data, t_rx = backlog.popleft()
-            queued += parse(name, st, data, t_rx, None)
+            n = parse(name, st, data, t_rx, None)
+            if t_rx > after:
+                queued += n
         return queued
 
     def _received(self, name: str, kind: str, data: bytes, t_rx: float) -> SourceState:
