@@ -263,6 +263,10 @@ class Transport:
             self.stats.tx_dropped += 1
         return ok
 
+    def drained_by(self, poller: "Poller | None") -> bool:
+        """Whether :meth:`pump` with ``poller`` leaves the reading to its drains."""
+        return False
+
     def _event(self, text: str) -> None:
         if self._on_event is not None:
             self._on_event(text)
@@ -582,6 +586,9 @@ class _UdpProtocol(asyncio.DatagramProtocol):
 class UdpTransport(Transport):
     """Listens for datagrams on ``host:port``; each datagram is one chunk."""
 
+    def drained_by(self, poller: "Poller | None") -> bool:
+        return poller is not None and KERNEL_STAMPS
+
     async def _session(self) -> AsyncIterator[Chunk]:
         box = _Mailbox(self.queue_size, self.stats)
         transport = await self._bind(lambda data, t_rx: box.put((data, t_rx)), box.put)
@@ -601,7 +608,8 @@ class UdpTransport(Transport):
             if not lost.done():
                 lost.set_exception(err)
 
-        if poller is not None and KERNEL_STAMPS:
+        if self.drained_by(poller):
+            assert poller is not None
             await self._polled_session(self._deliverer(sink, fail), lost, poller)
             return
         transport = await self._bind(self._deliverer(sink, fail), fail)
@@ -733,6 +741,7 @@ class Poller:
         self.speed = speed
         self.sockets: list[_PolledSocket] = []
         self.watching = False
+        self.on_data: Callable[[], None] | None = None
         self.drains = 0
         """Drains that read at least one datagram."""
 
@@ -740,7 +749,7 @@ class Poller:
         """Read ``polled`` from now on."""
         self.sockets.append(polled)
         if self.watching:
-            asyncio.get_running_loop().add_reader(polled.fd, self.drain)
+            asyncio.get_running_loop().add_reader(polled.fd, self._readable)
 
     def remove(self, polled: _PolledSocket) -> None:
         """Stop reading ``polled`` (its transport closes it)."""
@@ -765,13 +774,19 @@ class Poller:
             polled.deliver(data, t_rx)
         return len(got)
 
-    def watch(self) -> None:
-        """Drain whenever a socket becomes readable, until :meth:`unwatch`."""
+    def watch(self, on_data: Callable[[], None] | None = None) -> None:
+        """Until :meth:`unwatch`, drain whenever a socket becomes readable, then call
+        ``on_data()``."""
+        self.on_data = on_data
         if not self.watching:
             self.watching = True
             loop = asyncio.get_running_loop()
             for polled in self.sockets:
-                loop.add_reader(polled.fd, self.drain)
+                loop.add_reader(polled.fd, self._readable)
+
+    def _readable(self) -> None:
+        if self.drain() and self.on_data is not None:
+            self.on_data()
 
     def unwatch(self) -> None:
         """Leave the datagrams in the kernel's queues until the next :meth:`drain`."""

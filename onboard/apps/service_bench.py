@@ -207,6 +207,8 @@ def _renice(n: int) -> None:
 
 
 PROFILED: tuple[tuple[str, str, str], ...] = (
+    ("asyncio.base_events", "BaseEventLoop._run_once", "loop: its step"),
+    ("asyncio.events", "Handle._run", "loop: callbacks and task steps"),
     ("selectors", "EpollSelector.select", "select"),
     ("asyncio.selector_events", "_SelectorDatagramTransport._read_ready", "udp read"),
     ("onboard.drivers.transports", "Poller.drain", "udp read"),

@@ -27,6 +27,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter, deque
+from itertools import islice
 from dataclasses import dataclass, field
 from typing import Callable, Protocol
 
@@ -158,16 +159,17 @@ class Intake:
 
     def parse(self, after: float = -math.inf) -> int:
         """Record, parse and queue the chunks kept by :meth:`receive`, in the order
-        received; return the number of samples queued from those received after
-        ``after`` (s; all by default)."""
+        received; return the number of samples queued that are stamped after ``after``
+        (s; all by default)."""
         backlog = self.backlog
         queued = 0
         parse = self._parse
+        n0 = len(self.pending)
         while backlog:
             name, st, data, t_rx = backlog.popleft()
-            n = parse(name, st, data, t_rx, None)
-            if t_rx > after:
-                queued += n
+            queued += parse(name, st, data, t_rx, None)
+        if queued and after > -math.inf:
+            return sum(s.t > after for s in islice(self.pending, n0, None))
         return queued
 
     def _received(self, name: str, kind: str, data: bytes, t_rx: float) -> SourceState:
