@@ -17,7 +17,10 @@ reports:
   adds (pushing, all pipelines, encoding, Zenoh) beyond the fixed tick grid;
 * ``service_rss_mb``: resident memory at the end (MB = 2^20 B), and its peak;
 * ``startup_to_ready_s``: from spawning the process to READY=1 on the notify socket
-  (interpreter start, imports, state restore, inputs and publishers up).
+  (interpreter start, imports, state restore, inputs and publishers up);
+* ``service_wakeups_per_s``: the voluntary context switches of the service's main thread
+  per wall second (each is a sleep of its event loop, so this counts the loop's wake-ups;
+  the involuntary ones, preemptions by other processes, are ``main_thread_preemptions_per_s``).
 
 :class:`TrafficGenerator` (the byte streams) is reused by the service tests.
 """
@@ -178,6 +181,19 @@ def _threads_cpu_s(pid: int) -> dict[str, float]:
         parts = stat.rsplit(")", 1)[1].split()
         out[comm] = out.get(comm, 0.0) + (int(parts[11]) + int(parts[12])) / ticks
     return out
+
+
+def _switches(pid: int) -> tuple[int, int]:
+    """(voluntary, involuntary) context switches of the main thread of process ``pid``:
+    the voluntary ones are its sleeps, so their count is the event loop's wake-ups."""
+    vol = invol = 0
+    with open(f"/proc/{pid}/task/{pid}/status") as f:
+        for line in f:
+            if line.startswith("voluntary_ctxt_switches:"):
+                vol = int(line.split()[1])
+            elif line.startswith("nonvoluntary_ctxt_switches:"):
+                invol = int(line.split()[1])
+    return vol, invol
 
 
 def _proc_rss_mb(pid: int) -> tuple[float, float]:
@@ -418,6 +434,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
             if cpu0 is None and t >= warmup_s:
                 cpu0, wall0 = _proc_cpu_s(proc.pid), time.monotonic()
                 threads0 = _threads_cpu_s(proc.pid)
+                switches0 = _switches(proc.pid)
                 if profile:
                     proc.send_signal(signal.SIGUSR1)
                 measuring.set()
@@ -429,6 +446,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
         measuring.clear()
         cpu1, wall1 = _proc_cpu_s(proc.pid), time.monotonic()
         threads1 = _threads_cpu_s(proc.pid)
+        switches1 = _switches(proc.pid)
         if profile:
             proc.send_signal(signal.SIGUSR1)
         rss, hwm = _proc_rss_mb(proc.pid)
@@ -439,6 +457,8 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
             "cpu_fraction_by_thread": {
                 k: round((v - threads0.get(k, 0.0)) / (wall1 - wall0), 4)
                 for k, v in sorted(threads1.items()) if v - threads0.get(k, 0.0) > 0},
+            "service_wakeups_per_s": (switches1[0] - switches0[0]) / (wall1 - wall0),
+            "main_thread_preemptions_per_s": (switches1[1] - switches0[1]) / (wall1 - wall0),
             "sensor_to_zenoh_p50_ms": _pct(lat_sensor, 50),
             "sensor_to_zenoh_p99_ms": _pct(lat_sensor, 99),
             "tick_to_zenoh_p50_ms": _pct(lat_tick, 50),

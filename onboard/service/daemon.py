@@ -3,10 +3,11 @@
 One asyncio loop, one thread doing estimation::
 
     transports (serial/pty, UDP, TCP; reconnect with backoff)      drivers.transports
+      (UDP: drained by the ticks, drivers.transports.Poller)
       -> Intake.receive: record raw bytes + receive time;            onboard.service.intake
          Intake.parse (at the tick, or while it waits for a sample):
          parse, bounded queue (drops counted per input)
-      -> every 1/rate_hz s on the monotonic clock: Intake.tick:      onboard.engine
+      -> every 1/rate_hz s on the monotonic clock (_Ticker): Intake.tick: onboard.engine
          push queued samples (checked, rejections counted with their reason, GNSS only
          at the surface), step the pipelines
       -> Zenoh (every tick), MAVLink (rate_hz), health at 1 Hz      onboard.service.publishers
