@@ -742,8 +742,6 @@ class Poller:
         self.sockets: list[_PolledSocket] = []
         self.watching = False
         self.on_data: Callable[[], None] | None = None
-        self.drains = 0
-        """Drains that read at least one datagram."""
 
     def add(self, polled: _PolledSocket) -> None:
         """Read ``polled`` from now on."""
@@ -767,7 +765,6 @@ class Poller:
             polled.read(got, now, wall_ns, self.speed)
         if not got:
             return 0
-        self.drains += 1
         if len(self.sockets) > 1:
             got.sort(key=_first)
         for t_rx, polled, data in got:
