@@ -733,7 +733,9 @@ class Poller:
     :meth:`drain` reads every datagram queued on every socket and hands them to their
     transports' sinks in the order the kernel received them, stamped on ``clock`` (the
     transports' clock; ``speed``: its seconds per wall second). Between :meth:`watch` and
-    :meth:`unwatch`, a socket becoming readable wakes the event loop, which drains.
+    :meth:`unwatch`, a socket becoming readable wakes the event loop, which drains. A
+    polled transport's idle timeout counts from the last drain that read a datagram, so
+    the consumer must drain more often than that.
     """
 
     def __init__(self, clock: Clock = time.monotonic, speed: float = 1.0) -> None:
