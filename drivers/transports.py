@@ -44,6 +44,15 @@ Besides iterating, a consumer can have the chunks delivered: :meth:`Transport.pu
 the sink from the read callback itself, without waking a task per chunk (the service's
 intake runs so, at a fraction of the CPU time of the iteration); TCP iterates.
 
+A UDP transport pumped with a :class:`Poller` is not read per datagram at all: its socket
+stays in the kernel's queue until the consumer calls :meth:`Poller.drain` (the service: at
+each tick), which reads every queued datagram with non-blocking ``recvmsg`` until there is
+none, each stamped with the time the kernel received it (``SO_TIMESTAMPNS``) on the
+transport's clock; between :meth:`Poller.watch` and :meth:`Poller.unwatch` a datagram wakes
+the loop, which drains at once (the service: while a tick waits for a fresh sample). One
+wake-up then serves every datagram queued since the last, and the stamps are the same as
+if each had been read the moment it arrived (closer: they leave out the wake-up's delay).
+
 :meth:`Transport.send` writes back on the open connection (the service asks the autopilot
 for its streams): to the serial port, to the TCP server, or to the address the last
 datagram came from on UDP (as a ground station answers an autopilot). It never blocks: what
@@ -57,7 +66,10 @@ import asyncio
 import contextlib
 import errno
 import os
+import platform
 import socket
+import struct
+import sys
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -97,6 +109,23 @@ ZENOH_MAVLINK_ENCODING = "application/octet-stream;mavlink"
 """The encoding of raw MAVLink frames (mavlink-server's ``mavlink_raw/out``)."""
 SESSION_POLL_S = 0.1
 """How often (s) a Zenoh transport looks whether the caller's session is open yet."""
+
+
+POLL_BATCH = 1024
+"""Most datagrams one :meth:`Poller.drain` reads from one socket (the rest wait for the
+next drain), so that a flood cannot hold the event loop."""
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
+"""Linux's socket option (and control message type, ``SCM_TIMESTAMPNS``) that stamps each
+datagram with the system clock when the kernel received it, as a ``struct timespec``
+(asm-generic/socket.h: 35 on every architecture but SPARC and PA-RISC; Python's socket
+module names it from 3.12 on)."""
+KERNEL_STAMPS = (sys.platform.startswith("linux") and hasattr(socket.socket, "recvmsg")
+                 and not platform.machine().startswith(("sparc", "parisc")))
+"""Whether datagrams carry their kernel receive time (Linux): a UDP transport is drained
+by a :class:`Poller` only then (else it is read per datagram)."""
+_TIMESPEC = struct.Struct("@ll")
+"""``struct timespec`` (seconds, nanoseconds) of an ``SCM_TIMESTAMPNS`` message."""
+_ANC_SIZE = socket.CMSG_SPACE(_TIMESPEC.size) if KERNEL_STAMPS else 0
 
 
 class IdleTimeout(OSError):
@@ -234,6 +263,10 @@ class Transport:
             self.stats.tx_dropped += 1
         return ok
 
+    def drained_by(self, poller: "Poller | None") -> bool:
+        """Whether :meth:`pump` with ``poller`` leaves the reading to its drains."""
+        return False
+
     def _event(self, text: str) -> None:
         if self._on_event is not None:
             self._on_event(text)
@@ -254,10 +287,15 @@ class Transport:
                 raise
             delay = await self._retry(reason, t_open, delay)
 
-    async def pump(self, sink: Callable[[bytes, float], None]) -> None:
+    async def pump(self, sink: Callable[[bytes, float], None],
+                   poller: "Poller | None" = None) -> None:
         """Call ``sink(data, t_rx)`` for every chunk, in order, forever: the chunks and the
         reconnection of the iteration, delivered by the read callback itself where the
         transport has one (UDP, serial), so that no task wakes per chunk.
+
+        With ``poller``, a UDP transport (where the kernel stamps datagrams,
+        :data:`KERNEL_STAMPS`) is read only when the poller drains it (see the module
+        docstring); other transports ignore it.
 
         The sink runs on the event loop and must not block. An exception it raises ends
         the pump with :class:`SinkError` (from the original). Only cancelling the task
@@ -267,7 +305,7 @@ class Transport:
         while True:
             t_open = time.monotonic()
             try:
-                await self._pump_session(sink)
+                await self._pump_session(sink, poller)
                 reason = "closed by peer"
             except SinkError:
                 self.stats.connected = False
@@ -279,7 +317,8 @@ class Transport:
                 raise
             delay = await self._retry(reason, t_open, delay)
 
-    async def _pump_session(self, sink: Callable[[bytes, float], None]) -> None:
+    async def _pump_session(self, sink: Callable[[bytes, float], None],
+                            poller: "Poller | None" = None) -> None:
         """One connection of :meth:`pump`; by default the iteration of :meth:`_session`."""
         async with contextlib.aclosing(self._session()) as session:
             async for data, t_rx in session:
@@ -431,7 +470,8 @@ class SerialTransport(Transport):
         finally:
             self._close_port(port, fd)
 
-    async def _pump_session(self, sink: Callable[[bytes, float], None]) -> None:
+    async def _pump_session(self, sink: Callable[[bytes, float], None],
+                            poller: "Poller | None" = None) -> None:
         lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
 
         def fail(err: BaseException) -> None:
@@ -546,6 +586,9 @@ class _UdpProtocol(asyncio.DatagramProtocol):
 class UdpTransport(Transport):
     """Listens for datagrams on ``host:port``; each datagram is one chunk."""
 
+    def drained_by(self, poller: "Poller | None") -> bool:
+        return poller is not None and KERNEL_STAMPS
+
     async def _session(self) -> AsyncIterator[Chunk]:
         box = _Mailbox(self.queue_size, self.stats)
         transport = await self._bind(lambda data, t_rx: box.put((data, t_rx)), box.put)
@@ -557,13 +600,18 @@ class UdpTransport(Transport):
             self._tx = None
             transport.close()
 
-    async def _pump_session(self, sink: Callable[[bytes, float], None]) -> None:
+    async def _pump_session(self, sink: Callable[[bytes, float], None],
+                            poller: "Poller | None" = None) -> None:
         lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
 
         def fail(err: BaseException) -> None:
             if not lost.done():
                 lost.set_exception(err)
 
+        if self.drained_by(poller):
+            assert poller is not None
+            await self._polled_session(self._deliverer(sink, fail), lost, poller)
+            return
         transport = await self._bind(self._deliverer(sink, fail), fail)
         try:
             await self._until_lost(lost)
@@ -571,19 +619,52 @@ class UdpTransport(Transport):
             self._tx = None
             transport.close()
 
-    async def _bind(self, deliver: Callable[[bytes, float], None],
-                    fail: Callable[[BaseException], None]) -> asyncio.DatagramTransport:
-        """Bind the socket: datagrams to ``deliver``, its loss to ``fail``."""
-        loop = asyncio.get_running_loop()
+    async def _polled_session(self, deliver: Callable[[bytes, float], None],
+                              lost: asyncio.Future[None], poller: "Poller") -> None:
+        """One binding of the socket, read by ``poller``'s drains (stamped by the kernel);
+        sends answer the last datagram's sender."""
+        sock = self._socket()
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        polled = _PolledSocket(sock, deliver, poller.clock())
+
+        def tx(data: bytes) -> bool:
+            if polled.peer is None:
+                return False
+            try:
+                sock.sendto(data, polled.peer)
+            except (BlockingIOError, InterruptedError):  # the socket's buffer is full
+                return False
+            return True
+
+        self._tx = tx
+        poller.add(polled)
+        self._connected()
+        try:
+            await self._until_lost(lost)
+        finally:
+            self._tx = None
+            poller.remove(polled)
+            sock.close()
+
+    def _socket(self) -> socket.socket:
+        """A non-blocking datagram socket bound to the transport's address."""
         family = socket.AF_INET6 if ":" in self.spec.host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_DGRAM)
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
             sock.bind((self.spec.host, self.spec.port))
+            sock.setblocking(False)
         except OSError:
             sock.close()
             raise
+        return sock
+
+    async def _bind(self, deliver: Callable[[bytes, float], None],
+                    fail: Callable[[BaseException], None]) -> asyncio.DatagramTransport:
+        """Bind the socket: datagrams to ``deliver``, its loss to ``fail``."""
+        loop = asyncio.get_running_loop()
+        sock = self._socket()
         proto = _UdpProtocol(deliver, fail, self.clock)
         transport, _ = await loop.create_datagram_endpoint(lambda: proto, sock=sock)
 
@@ -601,6 +682,122 @@ class UdpTransport(Transport):
     def local_port(self) -> int:
         """The UDP port listened on."""
         return self.spec.port
+
+
+class _PolledSocket:
+    """A UDP transport's socket as a :class:`Poller` reads it."""
+
+    def __init__(self, sock: socket.socket, deliver: Callable[[bytes, float], None],
+                 t_open: float) -> None:
+        self.sock = sock
+        self.fd = sock.fileno()
+        self.deliver = deliver
+        self.peer: object | None = None
+        """Where the last datagram came from: where :meth:`Transport.send` answers."""
+        self.t_floor = t_open
+        """No datagram still queued was received before this time (the bind, then the
+        previous drain): the earliest stamp a datagram can be given."""
+
+    def read(self, out: list[tuple[float, "_PolledSocket", bytes]], now: float,
+             wall_ns: int, speed: float) -> None:
+        """Append ``(t_rx, self, data)`` for every datagram queued (at most
+        :data:`POLL_BATCH`): ``t_rx`` is ``now`` less the datagram's age since the kernel
+        stamped it (``wall_ns``: the system clock at ``now``; ``speed``: clock seconds per
+        wall second), kept between ``t_floor`` and ``now`` and in the order received."""
+        recvmsg = self.sock.recvmsg
+        floor = self.t_floor
+        level, kind = socket.SOL_SOCKET, SO_TIMESTAMPNS
+        for _ in range(POLL_BATCH):
+            try:
+                data, anc, _, addr = recvmsg(READ_SIZE, _ANC_SIZE)
+            except (BlockingIOError, InterruptedError):
+                floor = now  # every datagram received before now has been read
+                break
+            except OSError:  # an ICMP error of an earlier send: not fatal for a listener
+                continue
+            t_rx = now
+            for lvl, typ, payload in anc:
+                if lvl == level and typ == kind and len(payload) >= _TIMESPEC.size:
+                    sec, nsec = _TIMESPEC.unpack_from(payload)
+                    t_rx = now - speed * (wall_ns - sec * 1_000_000_000 - nsec) * 1e-9
+            t_rx = min(max(t_rx, floor), now)
+            floor = t_rx
+            self.peer = addr
+            out.append((t_rx, self, data))
+        self.t_floor = floor
+
+
+class Poller:
+    """Reads the sockets of UDP transports when asked, not per datagram (module docstring).
+
+    :meth:`drain` reads every datagram queued on every socket and hands them to their
+    transports' sinks in the order the kernel received them, stamped on ``clock`` (the
+    transports' clock; ``speed``: its seconds per wall second). Between :meth:`watch` and
+    :meth:`unwatch`, a socket becoming readable wakes the event loop, which drains. A
+    polled transport's idle timeout counts from the last drain that read a datagram, so
+    the consumer must drain more often than that.
+    """
+
+    def __init__(self, clock: Clock = time.monotonic, speed: float = 1.0) -> None:
+        self.clock = clock
+        self.speed = speed
+        self.sockets: list[_PolledSocket] = []
+        self.watching = False
+        self.on_data: Callable[[], None] | None = None
+
+    def add(self, polled: _PolledSocket) -> None:
+        """Read ``polled`` from now on."""
+        self.sockets.append(polled)
+        if self.watching:
+            asyncio.get_running_loop().add_reader(polled.fd, self._readable)
+
+    def remove(self, polled: _PolledSocket) -> None:
+        """Stop reading ``polled`` (its transport closes it)."""
+        if polled in self.sockets:
+            self.sockets.remove(polled)
+            if self.watching:
+                asyncio.get_running_loop().remove_reader(polled.fd)
+
+    def drain(self) -> int:
+        """Read every queued datagram of every socket and deliver them, oldest first;
+        return how many."""
+        got: list[tuple[float, _PolledSocket, bytes]] = []
+        now, wall_ns = self.clock(), time.time_ns()
+        for polled in self.sockets:
+            polled.read(got, now, wall_ns, self.speed)
+        if not got:
+            return 0
+        if len(self.sockets) > 1:
+            got.sort(key=_first)
+        for t_rx, polled, data in got:
+            polled.deliver(data, t_rx)
+        return len(got)
+
+    def watch(self, on_data: Callable[[], None] | None = None) -> None:
+        """Until :meth:`unwatch`, drain whenever a socket becomes readable, then call
+        ``on_data()``."""
+        self.on_data = on_data
+        if not self.watching:
+            self.watching = True
+            loop = asyncio.get_running_loop()
+            for polled in self.sockets:
+                loop.add_reader(polled.fd, self._readable)
+
+    def _readable(self) -> None:
+        if self.drain() and self.on_data is not None:
+            self.on_data()
+
+    def unwatch(self) -> None:
+        """Leave the datagrams in the kernel's queues until the next :meth:`drain`."""
+        if self.watching:
+            self.watching = False
+            loop = asyncio.get_running_loop()
+            for polled in self.sockets:
+                loop.remove_reader(polled.fd)
+
+
+def _first(item: tuple[float, _PolledSocket, bytes]) -> float:
+    return item[0]
 
 
 def set_keepalive(sock: socket.socket) -> None:
@@ -746,7 +943,8 @@ class ZenohTransport(Transport):
         finally:
             self._unsubscribe(sub, writer)
 
-    async def _pump_session(self, sink: Callable[[bytes, float], None]) -> None:
+    async def _pump_session(self, sink: Callable[[bytes, float], None],
+                            poller: "Poller | None" = None) -> None:
         lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
 
         def fail(err: BaseException) -> None:

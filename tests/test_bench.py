@@ -43,7 +43,7 @@ def test_bench_json_prints_exactly_the_contract_keys():
     # the service, Zenoh and the service bench are core parts: their figures are always
     # there (a subscriber on the wrong key gives null latencies)
     for key in ("service_cpu_fraction", "sensor_to_zenoh_p50_ms", "sensor_to_zenoh_p99_ms",
-                "service_rss_mb", "startup_to_ready_s"):
+                "service_rss_mb", "startup_to_ready_s", "service_wakeups_per_s"):
         assert out[key] is not None, (key, proc.stderr)
     # a missing piece is explained on stderr, never silently null
     for key, value in out.items():

@@ -9,6 +9,7 @@ import socket
 import pytest
 
 from onboard.drivers.transports import (
+    KERNEL_STAMPS,
     TcpTransport,
     TransportUrlError,
     UdpTransport,
@@ -217,6 +218,68 @@ def test_pump_delivers_udp_datagrams_in_order_and_ends_on_a_sink_error():
     assert got == [(b"msg0", 100.0), (b"msg1", 101.0), (b"msg2", 102.0)]
     assert stats.chunks == 4 and stats.connects == 1 and stats.disconnects == 0
     assert not stats.connected
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(not KERNEL_STAMPS, reason="datagrams carry no kernel receive time here")
+def test_polled_udp_inputs_are_read_at_the_drain_in_the_order_and_at_the_time_received():
+    """``pump(sink, poller)``: nothing is read until ``Poller.drain``, which reads every
+    queued datagram of both sockets, in the order they were sent across the two, each
+    stamped with its kernel receive time (not the drain's); while watched, a datagram is
+    delivered without a drain; a send answers the last sender."""
+    import time
+
+    from onboard.drivers.transports import Poller
+
+    ports = free_udp_port(), free_udp_port()
+    got: list[tuple[bytes, float]] = []
+
+    async def main():
+        poller = Poller(time.monotonic)
+        trs = [open_transport(f"udp:127.0.0.1:{p}") for p in ports]
+        pumps = [asyncio.create_task(tr.pump(lambda d, t: got.append((d, t)), poller))
+                 for tr in trs]
+        while not all(tr.stats.connected for tr in trs):
+            await asyncio.sleep(0.01)
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        tx.bind(("127.0.0.1", 0))
+        sent = []
+        for i in range(6):
+            sent.append(time.monotonic())
+            tx.sendto(b"m%d" % i, ("127.0.0.1", ports[i % 2]))
+            await asyncio.sleep(0.01)
+        await asyncio.sleep(0.05)
+        unread = list(got)  # the loop ran for 100 ms: no datagram read yet
+        t_drain = time.monotonic()
+        n = poller.drain()
+        await asyncio.sleep(0.01)
+        answered = trs[0].send(b"reply")
+        reply = tx.recv(100)
+        poller.watch()
+        tx.sendto(b"w", ("127.0.0.1", ports[1]))
+        t_w = time.monotonic()
+        while len(got) < 7 and time.monotonic() - t_w < TIMEOUT:
+            await asyncio.sleep(0.005)
+        poller.unwatch()
+        tx.sendto(b"late", ("127.0.0.1", ports[0]))
+        await asyncio.sleep(0.05)
+        after_unwatch = len(got)
+        poller.drain()
+        for p in pumps:
+            p.cancel()
+        await asyncio.gather(*pumps, return_exceptions=True)
+        tx.close()
+        return unread, n, sent, t_drain, answered, reply, after_unwatch
+
+    unread, n, sent, t_drain, answered, reply, after_unwatch = run(main())
+    assert unread == [] and n == 6
+    assert [d for d, _ in got[:6]] == [b"m%d" % i for i in range(6)]
+    stamps = [t for _, t in got[:6]]
+    assert stamps == sorted(stamps)
+    for t_sent, t_rx in zip(sent, stamps):  # the kernel's time, not the drain's (>= 50 ms on)
+        assert t_sent <= t_rx < t_sent + 0.01 < t_drain - 0.03
+    assert answered and reply == b"reply"
+    assert got[6][0] == b"w" and after_unwatch == 7 and got[7][0] == b"late"
 
 
 @pytest.mark.integration

@@ -50,6 +50,12 @@ key                             what                                            
 ``fleet_query_p99_ms_10``       a ``<prefix>/fleet/current`` query's answer, CPU time,     < 100
                                 99th percentile (ms), 10 vehicles (wall time in detail)
 ``fleet_query_p99_ms_100``      the same with 100 vehicles                                 < 100
+``service_wakeups_per_s``       the service's event-loop wake-ups per second in the        <= 40
+                                ``service_cpu_fraction`` run: voluntary context switches
+                                of its main thread (two per 10 Hz tick: the grid time
+                                and the first fresh sample, and a few sleeps outside
+                                the loop; one per datagram, 76/s, would be back above
+                                the goal). Added by issue 29 (additive).
 ==============================  =========================================================  =========
 
 A piece whose module has not landed (or fails) gives ``null`` in the JSON and
@@ -103,6 +109,7 @@ KEYS: tuple[str, ...] = (
     "fleet_cpu_share_100",
     "fleet_query_p99_ms_10",
     "fleet_query_p99_ms_100",
+    "service_wakeups_per_s",
 )
 """The JSON keys of ``onboard bench --json``, in table order (a contract: tools
 reading the JSON rely on these names)."""
@@ -126,6 +133,7 @@ GOALS: dict[str, tuple[str, float | None]] = {
     "fleet_cpu_share_100": ("<=", 1.0),
     "fleet_query_p99_ms_10": ("<", 100.0),
     "fleet_query_p99_ms_100": ("<", 100.0),
+    "service_wakeups_per_s": ("<=", 40.0),
 }
 """Goal of each figure: (comparison, bound); None = context only."""
 
@@ -500,6 +508,14 @@ def bench_service(s: Settings, rep: Report) -> None:
             rep.values[key] = round(float(v), 4)
 
 
+def bench_service_wakeups(rep: Report) -> None:
+    """``service_wakeups_per_s`` from the run of :func:`bench_service` (its detail)."""
+    v = (rep.detail.get("service") or {}).get("service_wakeups_per_s")
+    if v is None or not _finite(v):
+        raise NotAvailable("the service run gave no wake-up count")
+    rep.values["service_wakeups_per_s"] = round(float(v), 1)
+
+
 def bench_mpc(s: Settings, rep: Report) -> None:
     """``mpc_solve_p99_ms`` from :func:`sitl.controllers.nmpc.solve_time_stats`."""
     fn = _import("onboard.sitl.controllers.nmpc", "solve_time_stats")
@@ -727,6 +743,7 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
              lambda: bench_boat_realtime(s, Path(tmp), rep)),
             ("memory", MEMORY_KEYS, lambda: bench_memory(s, Path(tmp), rep)),
             ("fleet", FLEET_KEYS, lambda: bench_fleet(s, rep)),
+            ("service wake-ups", ("service_wakeups_per_s",), lambda: bench_service_wakeups(rep)),
         ]
         for label, keys, fn in steps:
             say(f"measuring {label} ...")

@@ -17,15 +17,21 @@ reports:
   adds (pushing, all pipelines, encoding, Zenoh) beyond the fixed tick grid;
 * ``service_rss_mb``: resident memory at the end (MB = 2^20 B), and its peak;
 * ``startup_to_ready_s``: from spawning the process to READY=1 on the notify socket
-  (interpreter start, imports, state restore, inputs and publishers up).
+  (interpreter start, imports, state restore, inputs and publishers up);
+* ``service_wakeups_per_s``: the voluntary context switches of the service's main thread
+  per wall second (each is a sleep of its event loop, so this counts the loop's wake-ups;
+  the involuntary ones, preemptions by other processes, are ``main_thread_preemptions_per_s``).
 
 :class:`TrafficGenerator` (the byte streams) is reused by the service tests.
 """
 
 from __future__ import annotations
 
+import gc
+import json
 import math
 import os
+import signal
 import socket
 import statistics
 import subprocess
@@ -177,6 +183,19 @@ def _threads_cpu_s(pid: int) -> dict[str, float]:
     return out
 
 
+def _switches(pid: int) -> tuple[int, int]:
+    """(voluntary, involuntary) context switches of the main thread of process ``pid``:
+    the voluntary ones are its sleeps, so their count is the event loop's wake-ups."""
+    vol = invol = 0
+    with open(f"/proc/{pid}/task/{pid}/status") as f:
+        for line in f:
+            if line.startswith("voluntary_ctxt_switches:"):
+                vol = int(line.split()[1])
+            elif line.startswith("nonvoluntary_ctxt_switches:"):
+                invol = int(line.split()[1])
+    return vol, invol
+
+
 def _proc_rss_mb(pid: int) -> tuple[float, float]:
     rss = hwm = math.nan
     with open(f"/proc/{pid}/status") as f:
@@ -203,8 +222,122 @@ def _renice(n: int) -> None:
         pass
 
 
+PROFILED: tuple[tuple[str, str, str], ...] = (
+    ("asyncio.base_events", "BaseEventLoop._run_once", "loop: its step"),
+    ("asyncio.events", "Handle._run", "loop: callbacks and task steps"),
+    ("selectors", "EpollSelector.select", "select"),
+    ("asyncio.selector_events", "_SelectorDatagramTransport._read_ready", "udp read"),
+    ("onboard.drivers.transports", "Poller.drain", "udp read"),
+    ("onboard.service.intake", "Intake.receive", "receive"),
+    ("onboard.service.intake", "Intake.parse", "parse"),
+    ("onboard.service.intake", "Intake._parse", "parse"),
+    ("onboard.service.recorder", "Recorder.write", "record"),
+    ("onboard.service.recorder", "Recorder.poll", "record"),
+    ("onboard.engine.engine", "Engine.push", "engine push"),
+    ("onboard.engine.engine", "Engine.admit", "engine push"),
+    ("onboard.engine.engine", "Engine.tick", "engine tick"),
+    ("onboard.engine.engine", "Engine.location_fixes", "zenoh"),
+    ("onboard.service.intake", "Intake.tick", "intake tick"),
+    ("onboard.service.publishers.zenoh_pub", "ZenohPublisher.publish_estimates", "zenoh"),
+    ("onboard.service.publishers.zenoh_pub", "ZenohPublisher.publish_health", "zenoh"),
+    ("onboard.service.publishers.mavlink_pub", "MavlinkPublisher.publish_estimates", "mavlink out"),
+    ("onboard.service.publishers.mavlink_pub", "MavlinkPublisher.publish_health", "mavlink out"),
+    ("onboard.service.daemon", "Service._health", "health"),
+    ("onboard.service.daemon", "Service._poll_sessions", "sessions"),
+    ("onboard.service.daemon", "Service._tick", "tick rest"),
+)
+"""(module, qualified name, component): the functions whose CPU time the profiled child
+(:func:`profiled_run`) attributes to a component, exclusive of the profiled functions they
+call; a name missing from the tree is skipped. The main thread's remaining CPU time is the
+event loop's own (its steps, tasks, futures and timers) and the wait for the tick."""
+
+
+def profiled_run(argv: list[str], out_path: str) -> int:
+    """``onboard run ARGV`` with the functions of :data:`PROFILED` timed in thread CPU
+    time (exclusive of nested profiled calls) and the event loop's iterations counted;
+    every SIGUSR1 appends a JSON line of the totals so far (with the main thread's CPU
+    time) to ``out_path``. The parent takes the difference of two lines (a window)."""
+    import importlib
+
+    totals: dict[str, float] = {}
+    calls: dict[str, int] = {}
+    stack: list[list[float]] = []
+    tt = time.thread_time
+    main_ident = threading.get_ident()
+
+    def wrap(fn: Any, comp: str) -> Any:
+        def timed(*a: Any, **kw: Any) -> Any:
+            if threading.get_ident() != main_ident:
+                return fn(*a, **kw)
+            frame = [tt(), 0.0]
+            stack.append(frame)
+            try:
+                return fn(*a, **kw)
+            finally:
+                stack.pop()
+                spent = tt() - frame[0]
+                totals[comp] = totals.get(comp, 0.0) + spent - frame[1]
+                calls[comp] = calls.get(comp, 0) + 1
+                if stack:
+                    stack[-1][1] += spent
+        return timed
+
+    for mod_name, qual, comp in PROFILED:
+        try:
+            owner: Any = importlib.import_module(mod_name)
+            *path, name = qual.split(".")
+            for part in path:
+                owner = getattr(owner, part)
+            fn = getattr(owner, name)
+        except (ImportError, AttributeError):
+            continue
+        setattr(owner, name, wrap(fn, comp))
+
+    gc_start = [0.0]
+
+    def on_gc(phase: str, info: dict[str, int]) -> None:
+        if threading.get_ident() != main_ident:
+            return
+        if phase == "start":
+            gc_start[0] = tt()
+            return
+        spent = tt() - gc_start[0]
+        comp = f"gc (generation {info['generation']})"
+        totals[comp] = totals.get(comp, 0.0) + spent
+        calls[comp] = calls.get(comp, 0) + 1
+        if stack:
+            stack[-1][1] += spent
+
+    gc.callbacks.append(on_gc)
+
+    def snapshot(signum: int, frame: Any) -> None:
+        with open(out_path, "a") as f:
+            f.write(json.dumps({"main_cpu_s": tt(), "components_s": totals,
+                                "calls": calls}) + "\n")
+
+    signal.signal(signal.SIGUSR1, snapshot)
+    from onboard.cli import main
+
+    return main(argv)
+
+
+def _profile_window(lines: list[dict[str, Any]], wall_s: float) -> dict[str, Any]:
+    """Per component ms of main-thread CPU per wall second between two snapshots, and
+    calls per second (``select`` calls are the event loop's wake-ups)."""
+    a, b = lines[0], lines[-1]
+    comps = {k: (v - a["components_s"].get(k, 0.0)) * 1000.0 / wall_s
+             for k, v in b["components_s"].items()}
+    main_ms = (b["main_cpu_s"] - a["main_cpu_s"]) * 1000.0 / wall_s
+    comps["loop and the rest"] = main_ms - sum(comps.values())
+    rates = {k: (v - a["calls"].get(k, 0)) / wall_s for k, v in b["calls"].items()}
+    return {"main_thread_ms_per_s": round(main_ms, 2),
+            "ms_per_s": {k: round(v, 2) for k, v in sorted(comps.items(), key=lambda kv: -kv[1])},
+            "calls_per_s": {k: round(v, 1) for k, v in sorted(rates.items())}}
+
+
 def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
-            pipelines: tuple[str, ...] | None = None, nice: int = -5) -> dict[str, Any]:
+            pipelines: tuple[str, ...] | None = None, nice: int = -5,
+            profile: bool = False) -> dict[str, Any]:
     """Run the service under nominal load for ``duration_s`` wall seconds (after
     ``warmup_s``); return the figures of the module docstring (and a few more).
 
@@ -212,6 +345,9 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
     in the child, e.g. ``("nav", "aie", "kf", "current")``; None runs those registered.
     ``nice`` is applied to the child as systemd/onboard.service does (``Nice=-5``) when
     permitted (root or CAP_SYS_NICE), else ignored; ``nice_applied`` says which.
+    ``profile``: the child is :func:`profiled_run` and ``profile`` in the result has its
+    main thread's CPU per component over the window (the timing adds ~1 µs per profiled
+    call to the figures).
     """
     from onboard.service.publishers.zenoh_pub import open_router
 
@@ -252,7 +388,13 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
     env.pop("WATCHDOG_USEC", None)
     t_spawn = time.monotonic()
     argv = ["run", "--config", str(d / "bench.toml"), "--state-dir", str(d)]
-    if pipelines is None:
+    prof_path = str(d / "profile.jsonl")
+    if profile:
+        set_pipes = f"p.MODULES = {tuple(pipelines)!r}; " if pipelines is not None else ""
+        cmd = [sys.executable, "-c", f"import sys, onboard.pipelines as p; {set_pipes}"
+               "from onboard.apps.service_bench import profiled_run; "
+               f"sys.exit(profiled_run({argv!r}, {prof_path!r}))"]
+    elif pipelines is None:
         cmd = [sys.executable, "-m", "onboard", *argv]
     else:
         cmd = [sys.executable, "-c", "import sys, onboard.pipelines as p; "
@@ -292,6 +434,9 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
             if cpu0 is None and t >= warmup_s:
                 cpu0, wall0 = _proc_cpu_s(proc.pid), time.monotonic()
                 threads0 = _threads_cpu_s(proc.pid)
+                switches0 = _switches(proc.pid)
+                if profile:
+                    proc.send_signal(signal.SIGUSR1)
                 measuring.set()
             for f in gen.mavlink(t):
                 tx.sendto(f, ("127.0.0.1", mav_port))
@@ -301,6 +446,9 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
         measuring.clear()
         cpu1, wall1 = _proc_cpu_s(proc.pid), time.monotonic()
         threads1 = _threads_cpu_s(proc.pid)
+        switches1 = _switches(proc.pid)
+        if profile:
+            proc.send_signal(signal.SIGUSR1)
         rss, hwm = _proc_rss_mb(proc.pid)
         tx.close()
         assert cpu0 is not None and wall0 is not None and threads0 is not None
@@ -309,6 +457,8 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
             "cpu_fraction_by_thread": {
                 k: round((v - threads0.get(k, 0.0)) / (wall1 - wall0), 4)
                 for k, v in sorted(threads1.items()) if v - threads0.get(k, 0.0) > 0},
+            "service_wakeups_per_s": (switches1[0] - switches0[0]) / (wall1 - wall0),
+            "main_thread_preemptions_per_s": (switches1[1] - switches0[1]) / (wall1 - wall0),
             "sensor_to_zenoh_p50_ms": _pct(lat_sensor, 50),
             "sensor_to_zenoh_p99_ms": _pct(lat_sensor, 99),
             "tick_to_zenoh_p50_ms": _pct(lat_tick, 50),
@@ -322,9 +472,13 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
             "nice_applied": nice if nice_ok else 0,
             "loadavg_1min": os.getloadavg()[0],
             "duration_s": wall1 - wall0,
-            "load": "IMU 50 Hz, servo 10 Hz, heartbeat 1 Hz (MAVLink/UDP); GNSS 5 Hz, "
+                        "load": "IMU 50 Hz, servo 10 Hz, heartbeat 1 Hz (MAVLink/UDP); GNSS 5 Hz, "
                     "heading 10 Hz (NMEA/UDP)",
         }
+        if profile:
+            time.sleep(0.2)
+            lines = [json.loads(x) for x in Path(prof_path).read_text().splitlines()]
+            out["profile"] = _profile_window(lines, wall1 - wall0)
     finally:
         proc.terminate()
         try:

@@ -3,10 +3,11 @@
 One asyncio loop, one thread doing estimation::
 
     transports (serial/pty, UDP, TCP; reconnect with backoff)      drivers.transports
+      (UDP: drained by the ticks, drivers.transports.Poller)
       -> Intake.receive: record raw bytes + receive time;            onboard.service.intake
          Intake.parse (at the tick, or while it waits for a sample):
          parse, bounded queue (drops counted per input)
-      -> every 1/rate_hz s on the monotonic clock: Intake.tick:      onboard.engine
+      -> every 1/rate_hz s on the monotonic clock (_Ticker): Intake.tick: onboard.engine
          push queued samples (checked, rejections counted with their reason, GNSS only
          at the surface), step the pipelines
       -> Zenoh (every tick), MAVLink (rate_hz), health at 1 Hz      onboard.service.publishers
@@ -47,7 +48,7 @@ from typing import Callable, Sequence
 
 import msgspec
 
-from onboard.drivers.transports import SinkError, Transport, open_transport
+from onboard.drivers.transports import Poller, SinkError, Transport, open_transport
 from onboard.core.config import Config, ConfigError, SourceConfig, load_all
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.outputs import Output, check as check_outputs
@@ -70,7 +71,10 @@ READY_WAIT_S = 1.0
 """Longest wait (s) for the inputs to connect before READY=1 (a missing port does not
 hold the service back: it becomes READY degraded and keeps reconnecting)."""
 FINE_SLEEP_S = 0.0012
-"""The last part (wall s) of the wait for a tick is slept precisely (see sleep_until)."""
+"""With ``tick_wait_s = 0``, the last part (wall s) of the wait for a tick's grid time is
+slept in ``time.sleep`` (epoll, under asyncio, only wakes with millisecond granularity,
+rounded up; this removes ~0.5 ms of average lateness at the cost of blocking the loop for
+< 1.2 ms per tick)."""
 MAX_TICK_LAG_S = 1.0
 SESSION_POLL_S = 0.1
 """The MAVLink sessions are polled by the tick loop, after the tick, every this many
@@ -113,22 +117,6 @@ class ServiceClock:
     def wall_delay(self, t: float) -> float:
         """Wall seconds until service time ``t`` (<= 0 when past)."""
         return (t - self.now()) / self.speed
-
-    async def sleep_until(self, t: float, precise: bool = True) -> None:
-        """Sleep until service time ``t``: on the event loop until ~1 ms before, then, if
-        ``precise``, the last fraction of a millisecond in ``time.sleep`` (epoll, under
-        asyncio, only wakes with millisecond granularity, rounded up; this removes ~0.5 ms
-        of average lateness at the cost of blocking the loop for < 1.2 ms per tick)."""
-        d = self.wall_delay(t)
-        if not precise:
-            if d > 0:
-                await asyncio.sleep(d)
-            return
-        if d > FINE_SLEEP_S:
-            await asyncio.sleep(d - FINE_SLEEP_S)
-            d = self.wall_delay(t)
-        if d > 0:
-            time.sleep(min(d, FINE_SLEEP_S))
 
 
 @dataclass
@@ -217,8 +205,11 @@ class Service:
 
             secret_settings(svc.zenoh)
         self.intake.verifier = self.signing.verifier if self.signing and svc.mavlink.require_signing else None
-        self._chunk_arrived = asyncio.Event()
-        """Set by every chunk received (wakes a tick waiting for a fresh sample)."""
+        self.poller = Poller(self.clock.now, self.clock.speed)
+        """Reads the UDP inputs at the ticks (drivers.transports.Poller)."""
+        self._ticker: _Ticker | None = None
+        """The tick callbacks, once running."""
+        self._due = _Due()
         self.inputs: list[_Input] = []
         self.sessions: list = []
         """The MAVLink sessions with the autopilot (onboard.service.mavlink_session)."""
@@ -429,21 +420,24 @@ class Service:
 
     async def _read(self, inp: _Input) -> None:
         """Feed one input's chunks to the intake, forever: the transport hands each chunk
-        to :meth:`Intake.receive` as it is read (:meth:`drivers.transports.Transport.pump`;
-        the intake parses the chunks kept at the tick or when the tick waits for a sample)
-        and reconnects by itself; an unexpected error (a bug) is logged and the input
+        to :meth:`Intake.receive` (:meth:`drivers.transports.Transport.pump`: a UDP input
+        when the tick loop drains :attr:`poller`, the others as they are read; the intake
+        parses the chunks kept at the tick or when the tick waits for a sample) and
+        reconnects by itself; an unexpected error (a bug) is logged and the input
         restarted after 1 s."""
         receive = self.intake.receive
-        arrived = self._chunk_arrived
         name, kind = inp.name, inp.cfg.kind
+        direct = not inp.transport.drained_by(self.poller)  # else the poller tells the ticker
 
         def sink(data: bytes, t_rx: float) -> None:
             receive(name, kind, data, t_rx)
-            arrived.set()
+            ticker = self._ticker
+            if direct and ticker is not None and ticker.waiting:
+                ticker.arrival()
 
         while True:
             try:
-                await inp.transport.pump(sink)
+                await inp.transport.pump(sink, self.poller)
             except asyncio.CancelledError:
                 raise
             except Exception as err:  # noqa: BLE001
@@ -491,60 +485,30 @@ class Service:
     # ------------------------------------------------------------------ the loop
 
     async def _tick_loop(self) -> None:
-        clock = self.clock
-        period = 1.0 / self.cfg.engine.rate_hz
-        k0 = math.ceil(clock.now() / period)
-        k = k0
-        next_health = clock.now() + HEALTH_PERIOD_S
-        next_status = clock.now() + STATUS_PERIOD_S
-        save_every = self.cfg.service.state_save_interval_s
-        next_save = clock.now() + save_every if save_every > 0 else math.inf
-        perf = time.perf_counter
-        watchdog = self.cfg.service.watchdog
-        wait = min(self.cfg.service.tick_wait_s, 0.5 * period)
-        next_poll = -math.inf
-        while True:
-            t = k * period
-            await clock.sleep_until(t, precise=wait == 0)  # a waiting tick needs no precision
-            now = clock.now()
-            if now - t > self.stats.tick_late_max_s:
-                self.stats.tick_late_max_s = now - t
-            if -clock.wall_delay(t) > MAX_TICK_LAG_S:
-                k_new = math.floor(now / period)
-                self.stats.tick_skips += k_new - k
-                self.event(f"estimator loop stalled {now - t:.1f} s: skipped {k_new - k} ticks")
-                k = k_new
-                t = k * period
-            elif wait > 0:
-                now = await self._await_sample(t + wait)
-                t = max(t, now)
-            w0 = perf()
-            try:
-                self._tick(t, now)
-                if now >= next_health:
-                    next_health += HEALTH_PERIOD_S * max(1, math.ceil((now - next_health) / HEALTH_PERIOD_S))
-                    self._health(now)
-                if now >= next_status:
-                    next_status = now + STATUS_PERIOD_S
-                    self.notifier.status(self.status_line())
-                if now >= next_save:
-                    next_save = now + save_every
-                    self._save_state_async()
-                if self.recorder is not None:
-                    self.recorder.poll(now)
-                if self.sessions and k * period >= next_poll:
-                    next_poll = k * period + SESSION_POLL_S - 0.5 * period
-                    self._poll_sessions(now)
-            except Exception as err:  # noqa: BLE001 - a pipeline bug must not stop the loop
-                self.stats.tick_errors += 1
-                if self.stats.tick_errors == 1 or self.stats.tick_errors % 600 == 0:
-                    log.exception("tick at %.3f failed (%d so far)", t, self.stats.tick_errors)
-                    self.event(f"tick failed ({type(err).__name__}; {self.stats.tick_errors} "
-                               "so far): see the log")
-            self.stats.tick_compute_s.append(perf() - w0)
-            if watchdog:
-                self.notifier.watchdog()
-            k += 1
+        """Run the ticks until cancelled (:class:`_Ticker`: timer and reader callbacks,
+        no task step per tick)."""
+        ended: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        ticker = _Ticker(self, ended)
+        try:
+            await ended
+        finally:
+            ticker.cancel()
+
+    def _periodic(self, now: float) -> None:
+        """What is due after a tick: health (1 Hz), STATUS, the state save, the recorder's
+        flush, the MAVLink sessions (every ``SESSION_POLL_S``)."""
+        due = self._due
+        if now >= due.health:
+            due.health += HEALTH_PERIOD_S * max(1, math.ceil((now - due.health) / HEALTH_PERIOD_S))
+            self._health(now)
+        if now >= due.status:
+            due.status = now + STATUS_PERIOD_S
+            self.notifier.status(self.status_line())
+        if now >= due.save:
+            due.save = now + self.cfg.service.state_save_interval_s
+            self._save_state_async()
+        if self.recorder is not None:
+            self.recorder.poll(now)
 
     def _poll_sessions(self, now: float) -> None:
         """One step of every MAVLink session (a session bug is logged, never raised)."""
@@ -553,31 +517,6 @@ class Service:
                 sess.poll(now)
             except Exception:  # noqa: BLE001 - a session bug must not stop the ticks
                 log.exception("mavlink session %s failed", sess.name)
-
-    async def _await_sample(self, deadline: float) -> float:
-        """Wait until a chunk queues a sample or service time ``deadline``; return the
-        service time then. Ticking on the arrival of a sample (normally the IMU's, the
-        fastest stream) instead of on the bare grid makes the newest sample of a tick
-        milliseconds old rather than up to one sample period.
-
-        The chunks received since the last tick are parsed first (their samples do not
-        count as fresh), then each chunk as it arrives, until one queues a sample."""
-        arrived = self._chunk_arrived
-        parse = self.intake.parse
-        parse()
-        while True:
-            arrived.clear()
-            delay = self.clock.wall_delay(deadline)
-            if delay <= 0:
-                break
-            try:
-                async with asyncio.timeout(delay):
-                    await arrived.wait()
-            except TimeoutError:
-                break
-            if parse():
-                break
-        return self.clock.now()
 
     def _tick(self, t: float, now: float) -> None:
         records = self.intake.tick(t)
@@ -685,6 +624,146 @@ class Service:
         except (OSError, TypeError, ValueError) as err:
             self.stats.state_errors += 1
             log.error("state save failed: %s", err)
+
+
+@dataclass
+class _Due:
+    """Service times at which the periodic work after a tick is next due."""
+
+    health: float = math.inf
+    status: float = math.inf
+    save: float = math.inf
+    poll: float = -math.inf
+
+
+class _Ticker:
+    """The service's ticks as event-loop callbacks: a timer at each grid time
+    ``k / rate_hz``; with ``tick_wait_s`` > 0 the UDP inputs are drained then and, unless
+    the chunks received queued a sample stamped after the grid time, the inputs are watched
+    until one does (:meth:`arrival`) or the wait ends; then the tick and what is due after
+    it (the tick's newest sample is then milliseconds old, not up to a period). A tick
+    costs the loop its timer and one wake-up per arrival while it waits: no task step,
+    future or coroutine per tick.
+
+    A grid time more than ``MAX_TICK_LAG_S`` past (the loop stalled) skips the missed
+    ticks. An exception in a tick is counted and logged and the next tick scheduled; one
+    in the ticker itself ends ``ended`` with it (the watchdog then sees no ticks)."""
+
+    def __init__(self, svc: "Service", ended: asyncio.Future[None]) -> None:
+        self.svc = svc
+        self.ended = ended
+        self.loop = asyncio.get_running_loop()
+        self.period = 1.0 / svc.cfg.engine.rate_hz
+        self.wait = min(svc.cfg.service.tick_wait_s, 0.5 * self.period)
+        now = svc.clock.now()
+        self.k = math.ceil(now / self.period)
+        self.t = self.k * self.period
+        """The grid time of the coming tick (service s)."""
+        self.waiting = False
+        self.handle: asyncio.TimerHandle | None = None
+        save_every = svc.cfg.service.state_save_interval_s
+        svc._due = _Due(now + HEALTH_PERIOD_S, now + STATUS_PERIOD_S,
+                        now + save_every if save_every > 0 else math.inf)
+        svc._ticker = self
+        self._schedule()
+
+    def cancel(self) -> None:
+        """Stop ticking."""
+        if self.handle is not None:
+            self.handle.cancel()
+        if self.waiting:
+            self.waiting = False
+            self.svc.poller.unwatch()
+        self.svc._ticker = None
+
+    def _schedule(self) -> None:
+        """The timer of the next grid time (waking ``FINE_SLEEP_S`` early to sleep the
+        rest precisely when ticks do not wait for a sample)."""
+        self.t = self.k * self.period
+        d = self.svc.clock.wall_delay(self.t) - (FINE_SLEEP_S if self.wait == 0 else 0.0)
+        self.handle = self.loop.call_later(max(d, 0.0), self._on_grid)
+
+    def _on_grid(self) -> None:
+        try:
+            self._grid()
+        except Exception as err:  # noqa: BLE001 - a bug of the ticker: end the tick task
+            if not self.ended.done():
+                self.ended.set_exception(err)
+
+    def _grid(self) -> None:
+        """At the grid time: skip a stall; wait for a fresh sample; or tick."""
+        svc, clock, t = self.svc, self.svc.clock, self.t
+        if self.wait == 0:
+            d = clock.wall_delay(t)
+            if d > 0:
+                time.sleep(min(d, FINE_SLEEP_S))
+        now = clock.now()
+        svc.stats.tick_late_max_s = max(svc.stats.tick_late_max_s, now - t)
+        if -clock.wall_delay(t) > MAX_TICK_LAG_S:
+            k_new = math.floor(now / self.period)
+            svc.stats.tick_skips += k_new - self.k
+            svc.event(f"estimator loop stalled {now - t:.1f} s: skipped {k_new - self.k} ticks")
+            self.k = k_new
+            self.t = k_new * self.period
+            self._fire(self.t, now, drain=True)
+            return
+        if self.wait == 0:
+            self._fire(t, now, drain=True)
+            return
+        svc.poller.drain()
+        if not svc.intake.parse(after=t):
+            delay = clock.wall_delay(t + self.wait)
+            if delay > 0:
+                self.waiting = True
+                svc.poller.watch(self.arrival)
+                self.handle = self.loop.call_later(delay, self._end_wait)
+                return
+        now = clock.now()
+        self._fire(max(t, now), now, drain=False)
+
+    def arrival(self) -> None:
+        """Chunks arrived while the tick waits: parse them; a sample queued that is
+        stamped after the grid time ends the wait."""
+        if self.waiting and self.svc.intake.parse(after=self.t):
+            if self.handle is not None:
+                self.handle.cancel()
+            self._end_wait()
+
+    def _end_wait(self) -> None:
+        try:
+            self.waiting = False
+            self.svc.poller.unwatch()
+            now = self.svc.clock.now()
+            self._fire(max(self.t, now), now, drain=False)
+        except Exception as err:  # noqa: BLE001 - as in _on_grid
+            if not self.ended.done():
+                self.ended.set_exception(err)
+
+    def _fire(self, t: float, now: float, drain: bool) -> None:
+        """Tick at ``t`` (``drain``: read the UDP inputs first), publish, do what is due,
+        ping the watchdog; schedule the next grid time whatever happens."""
+        svc = self.svc
+        w0 = time.perf_counter()
+        try:
+            if drain:
+                svc.poller.drain()
+            svc._tick(t, now)
+            svc._periodic(now)
+            if svc.sessions and self.k * self.period >= svc._due.poll:
+                svc._due.poll = self.k * self.period + SESSION_POLL_S - 0.5 * self.period
+                svc._poll_sessions(now)
+        except Exception as err:  # noqa: BLE001 - a pipeline bug must not stop the loop
+            svc.stats.tick_errors += 1
+            if svc.stats.tick_errors == 1 or svc.stats.tick_errors % 600 == 0:
+                log.exception("tick at %.3f failed (%d so far)", t, svc.stats.tick_errors)
+                svc.event(f"tick failed ({type(err).__name__}; {svc.stats.tick_errors} "
+                          "so far): see the log")
+        finally:
+            svc.stats.tick_compute_s.append(time.perf_counter() - w0)
+            if svc.cfg.service.watchdog:
+                svc.notifier.watchdog()
+            self.k += 1
+            self._schedule()
 
 
 async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None,

@@ -25,7 +25,9 @@ what makes the replay exact.
 from __future__ import annotations
 
 import logging
+import math
 from collections import Counter, deque
+from itertools import islice
 from dataclasses import dataclass, field
 from typing import Callable, Protocol
 
@@ -155,15 +157,28 @@ class Intake:
         if len(backlog) >= self.max_backlog:
             self.parse()
 
-    def parse(self) -> int:
+    def parse(self, after: float = -math.inf) -> int:
         """Record, parse and queue the chunks kept by :meth:`receive`, in the order
-        received; return the number of samples queued."""
+        received; return the number of samples queued that are stamped after ``after``
+        (s; all by default)."""
         backlog = self.backlog
         queued = 0
         parse = self._parse
+        n0 = len(self.pending)
+        rec = self.recorder
+        if rec is not None and self.verifier is None and backlog:
+            # every chunk recorded before parsing, in one write (no input records after its
+            # parse: none verifies signatures)
+            rec.write(*[RawRecord(t=t_rx, source=name, kind=st.kind, data=bytes(data))
+                        for name, st, data, t_rx in backlog])
+            while backlog:
+                name, st, data, t_rx = backlog.popleft()
+                queued += parse(name, st, data, t_rx, None, recorded=True)
         while backlog:
             name, st, data, t_rx = backlog.popleft()
             queued += parse(name, st, data, t_rx, None)
+        if queued and after > -math.inf:
+            return sum(s.t > after for s in islice(self.pending, n0, None))
         return queued
 
     def _received(self, name: str, kind: str, data: bytes, t_rx: float) -> SourceState:
@@ -177,14 +192,14 @@ class Intake:
         return st
 
     def _parse(self, name: str, st: SourceState, data: bytes, t_rx: float,
-               verdicts: Verdicts | None) -> int:
-        """Record (unless its input verifies signatures: it is then recorded with its
-        verdicts once parsed) and parse one chunk of input ``name`` (counted by
-        :meth:`_received`); queue its samples; return the number queued."""
+               verdicts: Verdicts | None, recorded: bool = False) -> int:
+        """Record (unless ``recorded`` already, or its input verifies signatures: it is
+        then recorded with its verdicts once parsed) and parse one chunk of input ``name``
+        (counted by :meth:`_received`); queue its samples; return the number queued."""
         vlog = st.verdicts if type(st.verdicts) is VerdictLog else None
         player = st.verdicts if type(st.verdicts) is VerdictPlayer else None
         rec = self.recorder
-        if rec is not None and vlog is None:
+        if rec is not None and vlog is None and not recorded:
             # before parsing: nothing a parser does can lose it
             rec.write(RawRecord(t=t_rx, source=name, kind=st.kind, data=bytes(data)))
         if player is not None:
