@@ -368,6 +368,32 @@ def test_a_section_that_lowers_the_held_out_error_is_written_one_that_raises_it_
                           "speed_rmse_after_mps"}
 
 
+def test_a_section_is_judged_together_with_the_section_fitted_on_it():
+    # As the re-mapped inputs and the surge model fitted on them: "remap" alone (a 1.5 s
+    # latency on the planted 1 s) raises the error, with "fitted" (latency 0 over it) the
+    # pair lowers it; both are written. Its negative: with "fitted" implausible, "remap"
+    # is judged alone and refused.
+    base, _ = choose_config(GOLDEN_LOG, None)
+    base = overlay_check.with_layer(base, {"corrections": {"gnss_latency_s": 1.0}})
+    remap = overlay.Section("remap", {"corrections": {"gnss_latency_s": 1.5}})
+    fitted = overlay.Section("fitted", {"corrections": {"gnss_latency_s": 0.0}},
+                             needs=("remap",))
+    v = {x.section: x for x in overlay_check.check([remap, fitted], GOLDEN_LOG, base,
+                                                   _whole_log_selection())}
+    assert list(v) == ["remap", "fitted"]
+    assert v["remap"].written and v["fitted"].written
+    assert "judged together" in v["remap"].reason
+    assert v["remap"].after["kf"] < v["remap"].before["kf"] - 0.05
+    implausible = overlay.Section("fitted", {"pipelines.aie.surge": {"a": 0.01, "gain": 0.05}},
+                                  needs=("remap",))
+    v = {x.section: x for x in overlay_check.check([remap, implausible], GOLDEN_LOG, base,
+                                                   _whole_log_selection())}
+    assert list(v) == ["remap", "fitted"]
+    assert not v["remap"].written and "raises" in v["remap"].reason
+    assert "judged together" not in v["remap"].reason
+    assert not v["fitted"].written and "time constant" in v["fitted"].reason
+
+
 def test_overlay_text_writes_a_refused_section_as_a_comment_only():
     doc = _doc(("heading_bias", {"bias": -0.05}, {"bias": 0.001}))
     cfg = config.load("rudder-boat")

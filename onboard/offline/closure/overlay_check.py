@@ -16,9 +16,11 @@ Two checks, in this order, per section (:class:`onboard.offline.closure.overlay.
    is written when it raises neither error by more than :data:`TIE_MPS`; a tie is kept
    (a section no filter reads, such as the current's prior, leaves both unchanged).
 
-Sections are checked in the overlay's order, each on top of those already accepted (the
-surge model was fitted on the re-mapped commands, so it is judged with them); a surge
-model whose ``[inputs]`` re-mapping was refused is refused too.
+Sections are checked in the overlay's order, each on top of those already accepted. A
+section is judged together with the sections fitted on it (the surge model, fitted on the
+re-mapped ``[inputs]``, with the re-mapping: the new mapping under the old model, or the
+new model under the old mapping, is a configuration nobody fitted); both are written or
+neither, and a surge model whose re-mapping was refused is refused too.
 """
 
 from __future__ import annotations
@@ -218,50 +220,79 @@ def _worse(before: dict, after: dict) -> list[str]:
     return out
 
 
+def _refusal(sec: Any, written: set[str]) -> str | None:
+    """Why ``sec`` cannot be judged on the log: an implausible model, or a section it
+    was fitted with refused; None when it can."""
+    why = next((w for t, v in sec.tables.items() if (w := implausible(t, v))), None)
+    if why is not None:
+        return "implausible: " + why
+    missing = [n for n in sec.needs if n not in written]
+    if missing:
+        return f"fitted with the {', '.join(missing)} section, which was not written"
+    return None
+
+
 def check(sections: Sequence[Any], log: str, cfg: Config, sel: Any) -> list[Verdict]:
     """A :class:`Verdict` per section with tables (see the module docstring)."""
     ranges = held_out_ranges(sel)
+    todo = [s for s in sections if s.tables]
     current = cfg
     base_err: dict[str, float | None] | None = None
     written: set[str] = set()
+    judged: set[str] = set()
     out = []
-    for sec in sections:
-        if not sec.tables:
-            continue
-        why = next((w for t, v in sec.tables.items() if (w := implausible(t, v))), None)
-        if why is None and sec.needs and not set(sec.needs) <= written:
-            why = (f"fitted with the {', '.join(sec.needs)} section, which was not "
-                   "written")
+    for i, sec in enumerate(todo):
+        if sec.name in judged:
+            continue  # judged with the section it was fitted on
+        why = _refusal(sec, written)
         if why is not None:
-            out.append(Verdict(sec.name, False, "implausible: " + why))
+            out.append(Verdict(sec.name, False, why))
             continue
+        # the section with those fitted on it (the surge model on the re-mapped inputs):
+        # either alone is a configuration nobody fitted
+        group = [sec]
+        for dep in todo[i + 1:]:
+            if sec.name in dep.needs:
+                why = _refusal(dep, written | {sec.name})
+                if why is None:
+                    group.append(dep)
+                else:
+                    out.append(Verdict(dep.name, False, why))
+                judged.add(dep.name)
+        names = [g.name for g in group]
+        together = (f" ({' and '.join(names)} judged together, the one fitted on the "
+                    "other)" if len(group) > 1 else "")
         try:
-            cand = with_layer(current, sec.layer())
+            cand = current
+            for g in group:
+                cand = with_layer(cand, g.layer())
         except ValueError as err:
-            out.append(Verdict(sec.name, False, f"invalid configuration: {err}"))
+            out.extend(Verdict(n, False, f"invalid configuration: {err}") for n in names)
             continue
         if sec.name in JUDGED_BY_DIAGNOSIS:
-            out.append(Verdict(sec.name, True, JUDGED_BY_DIAGNOSIS[sec.name]))
-            written.add(sec.name)
+            out.extend(Verdict(n, True, JUDGED_BY_DIAGNOSIS[sec.name]) for n in names)
+            written.update(names)
             current = cand
             base_err = None
             continue
         if not ranges:
-            out.append(Verdict(sec.name, False, "no test part to replay"))
+            out.extend(Verdict(n, False, "no test part to replay") for n in names)
             continue
         if base_err is None:
             base_err = speed_errors(log, current, ranges)
         err = speed_errors(log, cand, ranges)
         worse = _worse(base_err, err)
         if worse:
-            out.append(Verdict(sec.name, False, "raises the test-part speed error: "
-                               + "; ".join(worse), dict(base_err), err))
+            out.extend(Verdict(n, False, "raises the test-part speed error: "
+                               + "; ".join(worse) + together, dict(base_err), err)
+                       for n in names)
             continue
-        out.append(Verdict(sec.name, True, "does not raise the test-part speed error of "
-                           "aie or kf", dict(base_err), err))
-        written.add(sec.name)
+        out.extend(Verdict(n, True, "does not raise the test-part speed error of aie or "
+                           "kf" + together, dict(base_err), err) for n in names)
+        written.update(names)
         current, base_err = cand, err
-    return out
+    order = {s.name: k for k, s in enumerate(todo)}
+    return sorted(out, key=lambda v: order[v.section])
 
 
 def record(doc: dict, verdicts: Sequence[Verdict], out_dir: Path) -> dict:
