@@ -19,9 +19,10 @@ COVERAGE = (0.90, 0.99)
 
 def left_out(f, v: int, prior, every_s: float = 30.0):
     """Errors and errors in sigmas (n, 2) along vehicle ``v``'s track of the field fitted
-    without it (``prior``: the field's prior, or None for maximum likelihood); the
-    field."""
-    field = CurrentField(hyper=Hyper(), prior=prior)
+    without it (``prior``: the field's prior, or None for maximum likelihood, then
+    without the sigma's calibration on the fleet's data, which would hide the control);
+    the field."""
+    field = CurrentField(hyper=Hyper(), prior=prior, calibrate=prior is not None)
     for o in f.observations(skip=v):
         field.add(o)
     field.fit()

@@ -49,6 +49,10 @@ A vehicle's estimate is a memory of the water along its track, not the water whe
 a window's place is as uncertain as the distance its vehicle covers in the estimator's
 memory :data:`ESTIMATE_MEMORY_S` (:func:`memory_place`, added to its position's sigma).
 
+The predictive sigma is scaled by what the fleet's own windows show: each predicted from
+the other vehicles misses by more or less than the process says (:func:`calibration`,
+learned with the hyperparameters; it only widens).
+
 A record without a current (``north``/``east``: withheld by an integrity check, not yet
 converged, not finite) or without its sigma or time or position is not an observation; a
 super-observation further than :data:`OUTLIER_SIGMA` predictive sigmas from what the other
@@ -89,6 +93,15 @@ SCREEN_WITHIN_S = 600.0
 """Only windows this recent (s before the newest record) are judged for outliers: a live
 fleet's windows are judged as they close; a history that arrives in bulk (a service
 restarted onto stored records) is taken as it is, so a fit's cost stays bounded."""
+CALIBRATION_SAMPLE = 120
+"""Super-observations (evenly spread over the history) each fit predicts from the other
+vehicles to calibrate the field's sigma (:func:`calibration`)."""
+CALIBRATION_MIN = 20
+"""Fewer leave-one-vehicle-out predictions than this leave the field's sigma as the
+Gaussian process gives it."""
+VARIANCE_SCALE_BOUNDS = (1.0, 25.0)
+"""Bounds of the learned scale of the field's predictive variance (:func:`calibration`):
+its sigma at most halved, at most five times wider."""
 MAX_STD_MPS = 0.5
 """A record whose current sigma exceeds this (m/s) is not converged: not an observation."""
 MAX_SPEED_MPS = 6.0
@@ -361,14 +374,18 @@ class CurrentField:
         log_likelihood: the marginal log-likelihood of the last hyperparameter fit.
         memory_s: how far back along its track a vehicle's estimate reaches (s;
             :data:`ESTIMATE_MEMORY_S`; 0: the water where the vehicle is).
+        calibrate: whether the field's sigma is calibrated on the fleet's own data.
+        variance_scale: the scale of the predictive variance (north, east), learned
+            with the hyperparameters and at the first fit (:func:`calibration`; 1 when
+            not calibrated).
     """
 
     def __init__(self, hyper: Hyper = Hyper(), thin_s: float = THIN_S,
                  history_s: float = HISTORY_S, neighbours: int = NEIGHBOURS,
                  seed: int = 0, prior: Prior | None = PRIOR,
-                 memory_s: float = ESTIMATE_MEMORY_S) -> None:
+                 memory_s: float = ESTIMATE_MEMORY_S, calibrate: bool = True) -> None:
         self.hyper, self.thin_s, self.history_s = hyper, thin_s, history_s
-        self.prior, self.memory_s = prior, memory_s
+        self.prior, self.memory_s, self.calibrate = prior, memory_s, calibrate
         self.sigma_down = SIGMA_DOWN
         self.neighbours = neighbours
         self.plane: Plane | None = None
@@ -377,6 +394,7 @@ class CurrentField:
         self.added = 0
         self.rejected: dict[str, int] = {}
         self.log_likelihood: float | None = None
+        self.variance_scale = (1.0, 1.0)
         self.newest_utc = -math.inf
         self._bins: dict[tuple[str, int], list[float]] = {}
         self._vehicles: dict[str, int] = {}
@@ -497,6 +515,10 @@ class CurrentField:
             keep = np.ones(len(obs.y), bool)
             keep[out] = False
             fitted = self._fitted(obs.take(keep), mean, averaged)
+        if not self.calibrate:
+            self.variance_scale = (1.0, 1.0)
+        elif hyperparameters or self.fitted is None:   # learned with the hyperparameters
+            self.variance_scale = calibration(fitted)
         self.fitted = fitted
 
     def _fitted(self, obs: SuperObs, mean: np.ndarray, averaged: bool
@@ -538,7 +560,64 @@ class CurrentField:
         if fitted is None or self.plane is None:
             return UNKNOWN
         n, e = self.plane.to_ne(lat_deg, lon_deg)
-        return fitted.predict(np.array([float(n), float(e), utc - self.t_ref]))
+        p = fitted.predict(np.array([float(n), float(e), utc - self.t_ref]))
+        if p.north is None:
+            return p
+        k_n, k_e = self.variance_scale
+        return p._replace(std_north=p.std_north * math.sqrt(k_n),
+                          std_east=p.std_east * math.sqrt(k_e))
+
+
+def calibration(fitted: "Fitted | Averaged") -> tuple[float, float]:
+    """The scale of the field's predictive variance (north, east) learned from the
+    fleet's own data (docs/algorithms.md §8.10): at :data:`CALIBRATION_SAMPLE`
+    super-observations spread evenly over the history, the field predicted from the other
+    vehicles (``exclude``, as :meth:`Fitted.is_outlier` does) misses the window by ``r``,
+    whose variance is the field's ``k v_f`` (its predictive variance, scaled) plus the
+    window's own ``v_o`` (its estimate's scaled sigma, the white error and its place
+    term). ``k`` is the maximum-likelihood value of ``sum log(k v_f + v_o) + r^2 / (k v_f
+    + v_o)`` within :data:`VARIANCE_SCALE_BOUNDS`; 1 with fewer than
+    :data:`CALIBRATION_MIN` predictions."""
+    obs, h = fitted.obs, fitted.hyper
+    central = fitted.central if isinstance(fitted, Averaged) else fitted
+    pick = np.unique(np.linspace(0, len(obs.y) - 1, CALIBRATION_SAMPLE).astype(int))
+    rows: list[tuple[float, float, float, float, float, float]] = []
+    for i in pick:
+        others = central.neighbourhood(obs.x[i], exclude=int(obs.vehicle[i]))
+        if len(set(obs.vehicle[others].tolist())) < JUDGES:
+            continue   # one vehicle against another cannot tell which is wrong
+        p = fitted.predict(obs.x[i], exclude=int(obs.vehicle[i]))
+        if p.north is None:
+            continue
+        rows.append((obs.y[i, NORTH] - p.north, p.std_north ** 2,
+                     _own_variance(h, obs, i, NORTH),
+                     obs.y[i, EAST] - p.east, p.std_east ** 2,
+                     _own_variance(h, obs, i, EAST)))
+    if len(rows) < CALIBRATION_MIN:
+        return 1.0, 1.0
+    a = np.array(rows)
+    return _ml_scale(*a[:, 0:3].T), _ml_scale(*a[:, 3:6].T)
+
+
+def _ml_scale(r: np.ndarray, v_f: np.ndarray, v_o: np.ndarray) -> float:
+    """The ``k`` within :data:`VARIANCE_SCALE_BOUNDS` that maximizes the likelihood of the
+    misses ``r``, normal of variance ``k v_f + v_o``."""
+    from scipy.optimize import minimize_scalar
+
+    def nll(log_k: float) -> float:
+        v = math.exp(log_k) * v_f + v_o
+        return float(np.sum(np.log(v) + r * r / v))
+
+    lo, hi = np.log(VARIANCE_SCALE_BOUNDS)
+    return math.exp(minimize_scalar(nll, bounds=(lo, hi), method="bounded").x)
+
+
+def _own_variance(h: Hyper, obs: SuperObs, i: int, c: int) -> float:
+    """The variance of super-observation ``i``'s component ``c`` about the water at its
+    place (its estimate's sigma scaled, the white error, its place term)."""
+    sigma_f = h.sigma_north if c == NORTH else h.sigma_east
+    return (h.scale * obs.s[i, c]) ** 2 + h.white ** 2 + \
+        float(place_variance(sigma_f, h.length_m, obs.place[i]))
 
 
 class Fitted:
@@ -635,10 +714,8 @@ class Fitted:
         if len(set(obs.vehicle[idx].tolist())) < JUDGES:
             return False
         p = self.krige(obs.x[i], idx)
-        for c, (m, sd), sigma_f in ((NORTH, (p.north, p.std_north), h.sigma_north),
-                                    (EAST, (p.east, p.std_east), h.sigma_east)):
-            var = sd ** 2 + (h.scale * obs.s[i, c]) ** 2 + h.white ** 2 + \
-                float(place_variance(sigma_f, h.length_m, obs.place[i]))
+        for c, m, sd in ((NORTH, p.north, p.std_north), (EAST, p.east, p.std_east)):
+            var = sd ** 2 + _own_variance(h, obs, i, c)
             if abs(obs.y[i, c] - m) > OUTLIER_SIGMA * math.sqrt(var):
                 return True
         return False
