@@ -132,12 +132,15 @@ def test_a_thruster_noisier_than_the_imu_explains_is_learnt_up_to_its_own_ceilin
     assert capped.noise_scale["thrust"] == 4.0
 
 
-def _thrust_residuals(f: EsesoFilter, xi_error_std: float, n: int, seed: int) -> None:
+def _thrust_residuals(f: EsesoFilter, xi_error_std: float, n: int, seed: int,
+                      xi_var: float = 1e-6) -> None:
     """``n`` thrust updates of a well-known state whose ``xi`` is wrong by ``xi_error_std``
-    (N per axis) more than ``P`` says: the residual is that error plus the IMU's noise."""
+    (N per axis) while ``P`` says ``xi_var`` (N^2): the residual is that error plus the
+    IMU's noise."""
     rng = np.random.default_rng(seed)
     for _ in range(n):
         f.P = np.eye(f.P.shape[0]) * 1e-6
+        f.P[18:21, 18:21] = np.eye(3) * xi_var
         f.xi = np.zeros(3)  # the truth: the thrust is the model's with no disturbance
         tau = f.h_tau(GRAVITY_ONLY, np.zeros(3), np.zeros(3))[0]
         tau = tau + rng.normal(0.0, np.sqrt(np.diag(f.thrust_noise(0.02))))
@@ -171,3 +174,18 @@ def test_a_disturbance_as_wrong_as_its_covariance_says_keeps_the_published_sigma
     _thrust_residuals(off, 2.0, 300, seed=3)
     assert np.all(off.disturbance_excess == 0.0)
     assert np.allclose(off.published_disturbance_var(), np.diag(off.P)[18:21])
+
+
+def test_a_disturbance_better_than_its_covariance_says_narrows_the_published_sigma() -> None:
+    # P says 2 N per axis (4 N^2), the error is 1.5 N (2.25 N^2): the excess is -1.75 N^2
+    # and the published variance the error's, P and xi untouched
+    f = _level_filter(noise={"adapt_updates": 100})
+    _thrust_residuals(f, 1.5, 1500, seed=5, xi_var=4.0)
+    assert np.allclose(f.disturbance_excess, -1.75, rtol=0.35)
+    f.P[18:21, 18:21] = np.eye(3) * 4.0
+    assert np.allclose(f.published_disturbance_var(), 2.25, rtol=0.3)
+    # an exact xi under the same P: narrowed to its floor, a quarter of P's variance
+    exact = _level_filter(noise={"adapt_updates": 100})
+    _thrust_residuals(exact, 0.0, 1500, seed=5, xi_var=4.0)
+    exact.P[18:21, 18:21] = np.eye(3) * 4.0
+    assert np.allclose(exact.published_disturbance_var(), 0.25 * 4.0)

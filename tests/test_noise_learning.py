@@ -146,12 +146,13 @@ class _Pipe:
         self.noise = ChannelNoise([scale])
 
 
-def _nis_alerts(scale: NoiseScale, nis: float, unpublished: tuple[str, ...] = ()
-                ) -> tuple[Alerts, IntegrityMonitor]:
+def _nis_alerts(scale: NoiseScale, nis: float, unpublished: tuple[str, ...] = (),
+                calibrating: tuple[str, ...] = ()) -> tuple[Alerts, IntegrityMonitor]:
     alerts = Alerts()
     mon = IntegrityMonitor(alerts)
     pipe = _Pipe(scale)
     pipe.unpublished_channels = unpublished
+    pipe.calibrating_channels = calibrating
     mon.watch([pipe])
     from onboard.core.messages import Innovation
     mon.innovations("aie", [Innovation(channel="x", t=0.1 * i, z=(0.0,), S=(1.0,), nis=nis,
@@ -206,6 +207,19 @@ def test_an_unpublished_forecast_below_its_band_is_information_once() -> None:
     assert [a.code for a in alerts] == ["nis_out_of_band"]
     assert mon.active()["aie"] == ["nis_out_of_band"]
     alerts, mon = _nis_alerts(idle, 5.0, unpublished=("x",))
+    assert [a.code for a in alerts] == ["nis_out_of_band"]
+
+
+def test_a_channel_that_corrects_its_published_sigma_below_its_band_is_information() -> None:
+    # the ESESO's thrust rows: the published disturbance sigma is narrowed from them
+    idle = NoiseScale("x", "[sensors.x] std", 1.0, "m")
+    alerts, mon = _nis_alerts(idle, 0.05, calibrating=("x",))
+    (note,) = alerts
+    assert note.code == "nis_corrected"
+    assert "correct the published sigma both ways" in note.message
+    assert "nis_out_of_band" not in mon.active().get("aie", [])
+    # negative control: above its band it warns and flags as every channel
+    alerts, mon = _nis_alerts(idle, 5.0, calibrating=("x",))
     assert [a.code for a in alerts] == ["nis_out_of_band"]
 
 

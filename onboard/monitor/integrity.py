@@ -40,7 +40,9 @@ published records and the innovation records, and runs these checks:
   against that sigma: its NIS over the factor. The pipeline is flagged. Below its band
   on one of the pipeline's ``unpublished_channels`` (a forecast of what it publishes
   without a sigma, algorithms.md §9.2) the NIS is information, ``nis_unpublished`` once
-  per channel, not flagged.
+  per channel, not flagged; on one of its ``calibrating_channels`` (whose innovations
+  correct the published sigma both ways, the filter's gain keeping its tuning) the same,
+  ``nis_corrected``.
 * **position consistency** (:class:`PositionNeesCheck`): where a fix is better than the
   estimate (the published variance :data:`POSITION_NEES_FIX_RATIO` times the fix's), the NEES of the published position
   against it, ``d^T (P + R_fix)^-1 d`` (2 dof), by blocks as the NIS;
@@ -821,6 +823,9 @@ class Declared(Protocol):
     unpublished_channels: tuple[str, ...]
     """Its innovation channels whose forecast is of a quantity published without a sigma:
     below their band, information (``nis_unpublished``), not ``nis_out_of_band``."""
+    calibrating_channels: tuple[str, ...]
+    """Its innovation channels whose innovations correct a published sigma both ways:
+    below their band, information (``nis_corrected``), not ``nis_out_of_band``."""
     frame: LocalFrame | None
     """The local frame about its first fix (None before it)."""
     frame_offset: tuple[float, float] | None
@@ -886,7 +891,8 @@ class IntegrityMonitor:
         self._fix_new = False
         self._last_warn: dict[tuple[str, str], float] = {}
         self._noted_unpublished: dict[str, list[str]] = {}
-        """pipeline -> its unpublished channels already noted (``nis_unpublished``)."""
+        """pipeline -> its channels already noted below their band as information
+        (``nis_unpublished``, ``nis_corrected``)."""
 
     def watch(self, pipelines: Iterable[Declared]) -> None:
         """Read the roles (and frames) of ``pipelines`` from now on, replacing those
@@ -1414,30 +1420,49 @@ class IntegrityMonitor:
                 or getattr(learned, "n", 0) == 0)
 
     def _unpublished(self, pipeline: str, channel: str) -> bool:
-        """Whether ``channel`` is one of the pipeline's ``unpublished_channels``."""
-        return channel in getattr(self.watched.get(pipeline), "unpublished_channels", ())
+        """Whether ``channel``'s NIS below its band is information: one of the pipeline's
+        ``unpublished_channels`` or ``calibrating_channels``."""
+        p = self.watched.get(pipeline)
+        return (channel in getattr(p, "unpublished_channels", ())
+                or self._calibrating(pipeline, channel))
+
+    def _calibrating(self, pipeline: str, channel: str) -> bool:
+        """Whether ``channel`` is one of the pipeline's ``calibrating_channels``."""
+        return channel in getattr(self.watched.get(pipeline), "calibrating_channels", ())
 
     def _unpublished_note(self, pipeline: str, channel: str, check: NisCheck,
                           t: float) -> None:
-        """Once per channel and run: ``nis_unpublished``, the channel's NIS below its band
-        says the forecast of a quantity published without a sigma is conservative
-        (information: no flag, no published sigma in question)."""
+        """Once per channel and run: the channel's NIS below its band as information (no
+        flag): ``nis_unpublished``, the forecast of a quantity published without a sigma
+        is conservative; ``nis_corrected``, the filter's forecast is conservative and the
+        published sigma, corrected from these innovations, is not."""
         noted = self._noted_unpublished.setdefault(pipeline, [])
         if channel in noted:
             return
         before = f" (noted before: {', '.join(noted)})" if noted else ""
         noted.append(channel)
         lo, hi = check.band
-        self.alerts.warn("nis_unpublished", (
+        if self._calibrating(pipeline, channel):
+            code, what, why = "nis_corrected", (
+                "the channel's innovations correct the published sigma both ways, and the "
+                "forecast the filter's gain uses is more conservative than they show (its "
+                f"process noise in [pipelines.{pipeline}], set for the controller)"), (
+                "the published sigma is narrowed from these innovations (algorithms.md "
+                "§5.1); the filter's covariance keeps its tuning")
+        else:
+            code, what, why = "nis_unpublished", (
+                "the channel forecasts what the pipeline publishes without a sigma, and "
+                "that forecast is more conservative than its innovations show (its "
+                f"process noise in [pipelines.{pipeline}])"), (
+                "no published sigma takes a factor from these channels (algorithms.md "
+                "§9.2)")
+        self.alerts.warn(code, (
             f"{pipeline} {channel}: mean NIS {check.mean:.2f} below [{lo:.2f}, {hi:.2f}]: "
-            "information, not an inconsistency: the channel forecasts what the pipeline "
-            "publishes without a sigma, and that forecast is more conservative than its "
-            f"innovations show (its process noise in [pipelines.{pipeline}]){before} "
-            "(docs/integrity.md)"), t, pipeline=pipeline, details=(
+            f"information, not an inconsistency: {what}{before} (docs/integrity.md)"), t,
+            pipeline=pipeline, details=(
                 f"each block of {NIS_BLOCK_UPDATES} updates against its {NIS_BAND:.0%} "
                 f"band, for {abs(check.outside)} blocks in a row (dof {check.dof}; lag-1 "
-                f"autocorrelation {check.rho:.2f}); no published sigma takes a factor "
-                "from these channels (algorithms.md §9.2)"))
+                f"autocorrelation {check.rho:.2f}); {why}"))
 
     def _nis_remedy(self, pipeline: str, channel: str, above: bool) -> str:
         """What to change: the learned noise's key and value when it sits at its bound on

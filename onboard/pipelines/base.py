@@ -71,6 +71,12 @@ class Pipeline(Protocol):
       below its band there says that forecast is conservative, not that a published sigma
       is (the integrity monitor says so once, ``nis_unpublished``); above its band it is
       ``nis_out_of_band`` as on every channel (algorithms.md §9.2).
+    * ``calibrating_channels``: its innovation channels whose innovations correct a
+      published sigma both ways while the filter's own covariance keeps its tuning (the
+      ESESO's ``thrust``: the disturbance's excess, algorithms.md §5.1): an NIS below its
+      band there says the filter's forecast is conservative and the published sigma
+      already narrowed (the integrity monitor says so once, ``nis_corrected``); above its
+      band it is ``nis_out_of_band`` as on every channel.
     * ``frame``: the local tangent plane about its first fix (None: no position, or no
       fix yet).
     * ``frame_offset``: where ``frame``'s origin lies in its published position (north,
@@ -86,6 +92,7 @@ class Pipeline(Protocol):
     heading_estimate: tuple[str, ...] = ()
     current_estimate: tuple[str, ...] = ()
     unpublished_channels: tuple[str, ...] = ()
+    calibrating_channels: tuple[str, ...] = ()
     frame: LocalFrame | None = None
     frame_offset: tuple[float, float] | None = None
 

@@ -250,6 +250,7 @@ class Eseso(Pipeline):
 
     position = ("north", "east")
     speed = ("u", "v")
+    calibrating_channels = ("thrust",)
 
     name = "eseso"
     columns = (

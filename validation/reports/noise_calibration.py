@@ -98,7 +98,8 @@ def fly(scenario: str, seed: int, duration: float | None, pooled: Pooled) -> Non
 
 def _channels(eng: Any, pipes: list[Any], pooled: Pooled) -> None:
     """Each channel's mean NIS per dof and learned noise (one-sigma), and the run's
-    ``nis_out_of_band`` warnings and ``nis_unpublished`` notes, into ``pooled``."""
+    ``nis_out_of_band`` warnings and ``nis_unpublished``/``nis_corrected`` notes, into
+    ``pooled``."""
     summary = eng.monitor.snapshot()
     for p in pipes:
         noise = getattr(p, "noise", None)
@@ -115,7 +116,7 @@ def _channels(eng: Any, pipes: list[Any], pooled: Pooled) -> None:
     for a in eng.alerts:
         if a.code == "nis_out_of_band":
             pooled.warnings.append(f"{a.pipeline}: {a.message}")
-        elif a.code == "nis_unpublished":
+        elif a.code in ("nis_unpublished", "nis_corrected"):
             pooled.notes.append(f"{a.pipeline}: {a.message}")
 
 
