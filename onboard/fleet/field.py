@@ -101,7 +101,7 @@ CALIBRATION_MIN = 20
 Gaussian process gives it."""
 VARIANCE_SCALE_BOUNDS = (1.0, 25.0)
 """Bounds of the learned scale of the field's predictive variance (:func:`calibration`):
-its sigma at most halved, at most five times wider."""
+its sigma never narrowed, at most five times wider."""
 MAX_STD_MPS = 0.5
 """A record whose current sigma exceeds this (m/s) is not converged: not an observation."""
 MAX_SPEED_MPS = 6.0
@@ -515,10 +515,8 @@ class CurrentField:
             keep = np.ones(len(obs.y), bool)
             keep[out] = False
             fitted = self._fitted(obs.take(keep), mean, averaged)
-        if not self.calibrate:
-            self.variance_scale = (1.0, 1.0)
-        elif hyperparameters or self.fitted is None:   # learned with the hyperparameters
-            self.variance_scale = calibration(fitted)
+        if self.calibrate and (hyperparameters or self.fitted is None):
+            self.variance_scale = calibration(fitted)   # learned with the hyperparameters
         self.fitted = fitted
 
     def _fitted(self, obs: SuperObs, mean: np.ndarray, averaged: bool
