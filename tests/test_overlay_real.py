@@ -32,14 +32,15 @@ def test_blueboat_overlay_does_not_raise_the_aie_kf_speed_error(shared_data, tmp
     surge = verdicts["surge model"]
     assert not surge["written"] and "51.9 m/s" in surge["reason"]
     assert "[pipelines.aie.surge]" not in ov.read_text()
-    # the compass deviation is written: test part aie 0.300 -> 0.298, kf 0.418 -> 0.418 m/s
+    # the compass deviation is written (judged by the diagnosis's own held-out test)
     assert verdicts["corrections"]["written"]
-    # the whole folder replayed without and with the overlay: aie 0.227 -> 0.225 m/s,
-    # kf 0.316 -> 0.316 m/s (signed surge speed against the signed GNSS speed)
+    # the whole folder replayed without and with the overlay: aie 0.167 -> 0.167 m/s,
+    # kf 0.289 -> 0.288 m/s (signed surge speed against the signed GNSS speed; 0.227 ->
+    # 0.225 and 0.316 -> 0.316 before the filters learned their noise, issue 32)
     whole = [(-1.0e12, 1.0e12)]
     before = overlay_check.speed_errors(log, base, whole)
     after = overlay_check.speed_errors(log, config.load_all(["blueboat-ntnu-csv", ov]), whole)
     for k in ("aie", "kf"):
         assert after[k] <= before[k] + overlay_check.TIE_MPS, (k, before, after)
-    assert before["aie"] == pytest.approx(0.227, abs=0.01)
-    assert before["kf"] == pytest.approx(0.316, abs=0.01)
+    assert before["aie"] == pytest.approx(0.167, abs=0.01)
+    assert before["kf"] == pytest.approx(0.289, abs=0.01)
