@@ -890,7 +890,7 @@ class IntegrityMonitor:
         published ``aie``/``kf`` positions ("m from the first fix")."""
         self._fix_new = False
         self._last_warn: dict[tuple[str, str], float] = {}
-        self._noted_unpublished: dict[str, list[str]] = {}
+        self._noted_below: dict[str, list[str]] = {}
         """pipeline -> its channels already noted below their band as information
         (``nis_unpublished``, ``nis_corrected``)."""
 
@@ -1335,17 +1335,17 @@ class IntegrityMonitor:
                 if self._due("nis_out_of_band", pipeline, rec.t, rec.channel):
                     self._nis_warning(pipeline, rec.channel, check, rec.t)
             elif check.failing and check.outside < 0 and self._adapted(pipeline, rec.channel):
-                self._unpublished_note(pipeline, rec.channel, check, rec.t)
+                self._below_band_note(pipeline, rec.channel, check, rec.t)
             if now != was:
                 self._flag(pipeline, "nis_out_of_band", any(
                     self._failing(pipeline, c, k) for c, k in per.items()))
 
     def _failing(self, pipeline: str, channel: str, check: NisCheck) -> bool:
         """Whether the channel's check fails as an inconsistency: not below the band on
-        one of the pipeline's ``unpublished_channels`` (information there,
-        :meth:`_unpublished_note`)."""
+        one of the pipeline's ``unpublished_channels`` or ``calibrating_channels``
+        (information there, :meth:`_below_band_note`)."""
         return check.failing and not (check.outside < 0
-                                      and self._unpublished(pipeline, channel))
+                                      and self._below_is_information(pipeline, channel))
 
     def _run_mean(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
         """The block ``check`` has just judged into the channel's run mean;
@@ -1419,7 +1419,7 @@ class IntegrityMonitor:
         return (learned is None or bool(getattr(learned, "learned", True))
                 or getattr(learned, "n", 0) == 0)
 
-    def _unpublished(self, pipeline: str, channel: str) -> bool:
+    def _below_is_information(self, pipeline: str, channel: str) -> bool:
         """Whether ``channel``'s NIS below its band is information: one of the pipeline's
         ``unpublished_channels`` or ``calibrating_channels``."""
         p = self.watched.get(pipeline)
@@ -1430,13 +1430,13 @@ class IntegrityMonitor:
         """Whether ``channel`` is one of the pipeline's ``calibrating_channels``."""
         return channel in getattr(self.watched.get(pipeline), "calibrating_channels", ())
 
-    def _unpublished_note(self, pipeline: str, channel: str, check: NisCheck,
+    def _below_band_note(self, pipeline: str, channel: str, check: NisCheck,
                           t: float) -> None:
         """Once per channel and run: the channel's NIS below its band as information (no
         flag): ``nis_unpublished``, the forecast of a quantity published without a sigma
         is conservative; ``nis_corrected``, the filter's forecast is conservative and the
         published sigma, corrected from these innovations, is not."""
-        noted = self._noted_unpublished.setdefault(pipeline, [])
+        noted = self._noted_below.setdefault(pipeline, [])
         if channel in noted:
             return
         before = f" (noted before: {', '.join(noted)})" if noted else ""
