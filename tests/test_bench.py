@@ -96,3 +96,16 @@ def test_verdict_against_goals():
     assert bench.verdict("boat_replay_x_realtime", 490.0) == "MISSED"
     assert bench.verdict("mpc_solve_p99_ms", 50.0) == "MISSED"
     assert bench.verdict("pipeline_step_us", {"nav": 1.0}) == ""
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs Linux's /proc")
+def test_peak_memory_is_the_childs_own_not_its_parents():
+    """``peak_rss_of`` reports the measured command's own peak: Linux carries a process's
+    largest resident size over ``exec``, so ``ru_maxrss`` of a child started from a
+    300 MB parent is at least 300 MB whatever the child does (measured: 312 MB for
+    ``onboard --version``, which takes 13 MB)."""
+    held = bytearray(300 * 1024 * 1024)
+    held[::4096] = b"\x01" * len(held[::4096])   # resident, not only reserved
+    got = bench.peak_rss_of(["--version"])
+    assert got["peak_rss_mb"] < 100.0, got
+    assert held[0] == 1

@@ -764,21 +764,47 @@ MEMORY_KEYS = ("replay_peak_rss_mb", "diagnose_peak_rss_mb")
 """The figures of :func:`bench_memory`."""
 
 
-def peak_rss_of(argv: list[str]) -> dict[str, float]:
-    """Run ``argv`` in a fresh process (output discarded) and return its own peak resident
-    memory (MB, ``ru_maxrss`` of that child alone, from ``os.wait4``) and CPU time (s).
-    Raises RuntimeError when it fails."""
+_OWN_PEAK = """\
+import runpy, sys
+out, module = sys.argv[1], sys.argv[2]
+sys.argv = [module] + sys.argv[3:]
+try:
+    runpy.run_module(module, run_name="__main__", alter_sys=True)
+finally:
+    with open("/proc/self/status") as status, open(out, "w") as f:
+        f.write(next((ln.split()[1] for ln in status if ln.startswith("VmHWM:")), ""))
+"""
+"""Runs ``python -m MODULE ARGS`` (``argv[1]``: where to write, ``argv[2]``: the module)
+and writes the process's own peak resident memory (``VmHWM``, kB) when it ends."""
+
+
+def peak_rss_of(args: list[str], module: str = "onboard") -> dict[str, float]:
+    """Run ``python -m module args`` in a fresh process (output discarded) and return its
+    own peak resident memory (MB) and CPU time (s). Raises RuntimeError when it fails.
+
+    The peak is the process's ``VmHWM`` as it ends, which belongs to the program's own
+    address space. ``ru_maxrss`` (``os.wait4``) is not: Linux carries the largest
+    resident size over ``exec``, so a child started from a process larger than itself
+    (the bench, after its earlier figures) reports its parent's size. Where there is no
+    ``/proc`` the ``ru_maxrss`` is given, an upper bound."""
     import subprocess
 
-    with tempfile.TemporaryFile() as err:
-        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=err)
-        _, status, ru = os.wait4(proc.pid, 0)
-        proc.returncode = os.waitstatus_to_exitcode(status)
-        if proc.returncode != 0:
-            err.seek(0)
-            tail = err.read().decode(errors="replace").strip().splitlines()[-1:]
-            raise RuntimeError(f"{' '.join(argv[2:4])} exited {proc.returncode}: {tail}")
-    return {"peak_rss_mb": round(ru.ru_maxrss / 1024.0, 1),
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "vmhwm"
+        argv = [sys.executable, "-c", _OWN_PEAK, str(out), module, *args] \
+            if Path("/proc/self/status").exists() else [sys.executable, "-m", module, *args]
+        with tempfile.TemporaryFile() as err:
+            proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=err)
+            _, status, ru = os.wait4(proc.pid, 0)
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            if proc.returncode != 0:
+                err.seek(0)
+                tail = err.read().decode(errors="replace").strip().splitlines()[-1:]
+                raise RuntimeError(f"{module} {' '.join(args[:1])} exited {proc.returncode}: "
+                                   f"{tail}")
+        hwm_kb = out.read_text().strip() if out.exists() else ""
+    peak_kb = float(hwm_kb) if hwm_kb else ru.ru_maxrss
+    return {"peak_rss_mb": round(peak_kb / 1024.0, 1),
             "cpu_s": round(ru.ru_utime + ru.ru_stime, 2)}
 
 
@@ -791,11 +817,10 @@ def bench_memory(s: Settings, workdir: Path, rep: Report) -> None:
     made = (synthesize_tlog if s.fast else make_tlog)(log, s.memory_hours * 3600.0)
     made["generate_s"] = round(time.perf_counter() - t0, 2)
     made["bytes"] = log.stat().st_size
-    cli = [sys.executable, "-m", "onboard"]
-    replay = peak_rss_of(cli + ["replay", str(log), "--no-plot", "--force",
-                                "--out", str(workdir / "memory-replay")])
-    diagnose = peak_rss_of(cli + ["diagnose", str(log), "--force",
-                                  "--out", str(workdir / "memory-diagnose")])
+    replay = peak_rss_of(["replay", str(log), "--no-plot", "--force",
+                          "--out", str(workdir / "memory-replay")])
+    diagnose = peak_rss_of(["diagnose", str(log), "--force",
+                            "--out", str(workdir / "memory-diagnose")])
     rep.values["replay_peak_rss_mb"] = replay["peak_rss_mb"]
     rep.values["diagnose_peak_rss_mb"] = diagnose["peak_rss_mb"]
     rep.detail["memory"] = {"log": made, "log_hours": s.memory_hours,
