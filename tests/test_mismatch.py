@@ -213,10 +213,12 @@ def test_campaign_circle_claims(campaign_rov) -> None:
 def test_campaign_estimator_claims() -> None:
     """docs/mismatch.md: the current KF's model (a) error grows tenfold with a damping
     mismatch, sevenfold with the thrust curve 15 % off, and stays within 0.03 m/s under
-    mass, lag and noise; the AIE's
-    speed is better than the KF's in every case but doubled sensor noise (``noise2x``,
-    ``worst``), where the KF, with its input-bias state (docs/aie.md), is as good: AIE
-    within 1.03x of it (measured 1.00-1.03x; elsewhere AIE 0.63-0.72x the KF)."""
+    mass, lag and noise. On the rudder boat (both filters tuned by one protocol, both
+    learning their noise) the KF is ahead of the AIE on speed in every case and seed
+    (measured: the AIE 1.15-1.33x the KF; 1.01-1.04x with damping -30 %; 1.02-1.14x with
+    doubled noise), and the AIE ahead on heading wherever the noise is as declared
+    (0.025-0.028 against 0.028-0.029 rad); with doubled noise they tie on heading (within
+    3 %)."""
     from validation.reports.mismatch import run_campaign
 
     res = run_campaign(list(mm.CASES), CAMPAIGN_SEEDS, 30.0, 200.0, 200.0, ("gavia", "boat"))
@@ -228,8 +230,9 @@ def test_campaign_estimator_claims() -> None:
             assert rms < 0.03, (case, rms)
     for case, runs in res["boat"].items():
         for r in runs:
-            sp = r["speed_rmse_mps"]
+            sp, hd = r["speed_rmse_mps"], r["heading_rmse_rad"]
+            assert sp["kf"] < sp["aie"] < 1.4 * sp["kf"], (case, r)
             if case in ("noise2x", "worst"):
-                assert sp["aie"] < 1.05 * sp["kf"], (case, r)
+                assert abs(hd["aie"] - hd["kf"]) < 0.03 * hd["kf"], (case, r)
             else:
-                assert sp["aie"] < sp["kf"], (case, r)
+                assert hd["aie"] < hd["kf"], (case, r)
