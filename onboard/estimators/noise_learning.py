@@ -141,6 +141,10 @@ class Consistency:
     are what says the gain is the optimal one for the true noise up to that scale
     (Mehra 1970), so the factor is taken only while they are white.
 
+    Its lag-1 is not :attr:`NoiseScale.lag1`: that one whitens by the declared noise and
+    takes only the updates whose forecast share lets them measure the sensor, this one
+    whitens by ``S`` and takes every accepted update, as the published sigma does.
+
     Attributes (read them to debug):
         n: updates taken (capped at :data:`WINDOW`).
         ratio: the windowed mean of ``r_k``.
