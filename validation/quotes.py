@@ -307,6 +307,11 @@ RECORDS: tuple[Record, ...] = (
     Record("docs/current.md", "the published current's 95th percentile 0.48 → 0.36 m/s and "
            "its largest 0.80 → 0.67 m/s", "the BlueBoat before and after the surge "
            "turn-loss regressor (r26, the page says so)"),
+    Record("docs/current.md", "`gamma` follows gamma* of the model it runs: L_f 4.24 for the "
+           "one-rpm", "the one-rpm Gavia HGO run of issue 32 (gavia-rpm, 1500 rpm, seed 1; "
+           "the page says so), measured once: the pipeline's health lipschitz"),
+    Record("docs/current.md", "model with L_f 8.09 (heave `uw` -4.05, surge `u|u|` -0.249)",
+           "the same run on the code before the noise learning (67ff9d3^), measured once"),
     Record("docs/diagnose.md", "surge 0.047 -> 0.049 m/s",
            "single-run robustness table: measured once, dated; tests check bounds"),
     Record("docs/diagnose.md", "surge 0.124 -> 0.121 m/",

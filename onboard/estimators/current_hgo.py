@@ -16,11 +16,17 @@ coefficient error ``dtheta`` drives ``nu_r`` through the regressors, ``nu_r' += 
 dtheta``, and the cross-covariance ``C = E[x_err dtheta^T]`` is propagated beside ``P``;
 the gain is unchanged (it is the LMI design, not a Kalman gain), so only the published
 one-sigma sees them (docs/current.md, "The HGO's sigma").
+
+The one-sigma swings with the phase of the held sample (a new sample's step rings through
+the observer's poles, ``gamma sqrt(k2)`` rad/s); whether a component is known is decided on
+its largest one-sigma over the last ``SIGMA_PEAK_WINDOW_S`` (:meth:`current_std_peak`), not
+on the trough the tick happens to fall in.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -35,6 +41,11 @@ DIVERGED_ABOVE = 50.0
 HOLD_MAX_S = 1.0
 """s: a velocity sample is injected (held) for at most this long; without a newer one the
 observer then runs on the model alone (a GNSS or DVL gap)."""
+
+SIGMA_PEAK_WINDOW_S = HOLD_MAX_S
+"""s: :meth:`CurrentHighGainObserver.current_std_peak` is the largest current one-sigma over
+this window, the longest a sample is held: at least one whole cycle of the held samples
+(docs/current.md, "The HGO at its own design rpm")."""
 
 
 def repeated_step(F: np.ndarray, U: np.ndarray, q: np.ndarray, n: int
@@ -84,6 +95,7 @@ class CurrentHighGainObserver:
         law: the :class:`.IncreasingGain` law.
         diverged: divergences so far (a prediction or innovation beyond bounds; the
             owner restarts it).
+        clock: time integrated by :meth:`predict` (s).
     """
 
     def __init__(self, model: RegressionModel, design: GainDesign, law: IncreasingGain,
@@ -127,6 +139,10 @@ class CurrentHighGainObserver:
         self.theta_cov: np.ndarray | None = None
         # cross-covariance of the state's error with the coefficients' error
         self._C: np.ndarray | None = None
+        self.clock = 0.0
+        # (clock (s), current variances (m^2/s^2)) after each prediction, the last
+        # SIGMA_PEAK_WINDOW_S of them
+        self._current_vars: deque[tuple[float, np.ndarray]] = deque()
 
     def consider(self, cov: np.ndarray, *, fresh: bool = False) -> None:
         """Take ``cov`` as the covariance of the coefficients passed to :meth:`predict`
@@ -157,6 +173,7 @@ class CurrentHighGainObserver:
         self._psi = np.zeros((o, self.nd))
         if self._C is not None:
             self._C = np.zeros_like(self._C)
+        self._current_vars.clear()
 
     def reset_gain(self) -> None:
         """Restart the increasing-gain law from ``gamma_init``."""
@@ -210,7 +227,17 @@ class CurrentHighGainObserver:
             return False
         self.x = x
         self._propagate_covariance(F, q, n_sub, phis, h * G if G is not None else None, h)
+        self._remember_current_var(dt)
         return True
+
+    def _remember_current_var(self, dt: float) -> None:
+        """Advance :attr:`clock` by ``dt`` (s) and keep the current's variances of now
+        for :meth:`current_std_peak`, dropping those older than ``SIGMA_PEAK_WINDOW_S``."""
+        self.clock += dt
+        kept = self._current_vars
+        kept.append((self.clock, self.covariance().diagonal()[self.nd:].copy()))
+        while kept and kept[0][0] < self.clock - SIGMA_PEAK_WINDOW_S:
+            kept.popleft()
 
     def _propagate_covariance(self, F: np.ndarray, q: np.ndarray, n_sub: int,
                               phis: list[tuple[float, ...]], hG: np.ndarray | None,
@@ -324,6 +351,15 @@ class CurrentHighGainObserver:
         :meth:`covariance`."""
         nd = self.nd
         return self.covariance(model)[nd:, nd:].copy()
+
+    def current_std_peak(self) -> list[float]:
+        """The current's largest one-sigma per earth axis (m/s) over the last
+        ``SIGMA_PEAK_WINDOW_S`` of predictions and now, with the coefficients' part."""
+        nd = self.nd
+        peak = self.covariance().diagonal()[nd:].copy()
+        for _, var in self._current_vars:
+            peak = np.maximum(peak, var)
+        return np.sqrt(np.maximum(peak, 0.0)).tolist()
 
     def current_estimate(self) -> tuple[list[float], list[float], list[float]]:
         """(current (m/s, earth), its one-sigma (m/s), ``nu_r`` (m/s, body)) as lists."""

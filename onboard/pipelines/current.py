@@ -563,6 +563,8 @@ class CurrentPipeline(Pipeline):
             std = floor_along_track(obs_src.current_cov(), self.yaw or 0.0,
                                     self.cfg.initial_current_std_mps)
         published = self._published_std(std) if obs_src is self.kf else std
+        if self.hgo is not None:  # known on the held-sample cycle's largest one-sigma
+            std = [max(s, p) for s, p in zip(std, self.hgo.current_std_peak())]
         flow = self.flow
         if flow is not None and flow.ready and flow.v_g is not None:
             c_flow, std, nu = flow.current(self._R())
