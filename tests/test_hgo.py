@@ -144,8 +144,8 @@ def test_the_hgo_sigma_peak_covers_the_held_sample_cycle():
     """At gamma* of the one-rpm Gavia model (17) a held 5 Hz DVL sample rings through the
     observer (poles at ~18 rad/s): the current's one-sigma swings with the sample's phase
     (here, samples on the ticks, by ~10 %; 0.24-2.3 m/s north on the simulated Gavia,
-    whose samples fall between ticks), and current_std_peak is the largest one-sigma of the predictions over the
-    last SIGMA_PEAK_WINDOW_S (a restart forgets them)."""
+    whose samples fall between ticks), and current_std_peak is the largest one-sigma of
+    the predictions over the last SIGMA_PEAK_WINDOW_S (a restart forgets them)."""
     from onboard.estimators.current_hgo import SIGMA_PEAK_WINDOW_S
     from onboard.estimators.vehicle_models import ModelInputs
 
@@ -178,13 +178,13 @@ def test_the_hgo_current_is_known_on_the_cycle_peak_not_its_trough():
     the tick's own one-sigma (the gate before) is below the threshold on far more ticks
     (measured, seed 1: 0.89 of the ticks against 0.38 published)."""
     from onboard.engine import Engine
+    from onboard.pipelines import current as current_mod
     from onboard.sitl.runner import simulate
     from validation.reports import current_validation as cv
 
     thr = 0.7
     cfg = cv.make_config("torpedo-auv", {"model": ONE_RPM_GAVIA, "observer": "hgo",
                                           "identify": False, "unknown_above_std_mps": thr})
-    from onboard.pipelines import current as current_mod
     pipe = current_mod.create(cfg)
     eng = Engine(cfg, pipelines=[pipe])
     tick, next_tick, published, inst = 0.1, None, [], []
@@ -200,7 +200,8 @@ def test_the_hgo_current_is_known_on_the_cycle_peak_not_its_trough():
             eng.push(s)
     inst_a, pub = np.array(inst), np.array(published)
     window = int(round(1.0 / tick))
-    cycle_peak = np.array([inst_a[max(0, i - window + 1):i + 1].max() for i in range(len(inst_a))])
+    cycle_peak = np.array([inst_a[max(0, i - window + 1):i + 1].max()
+                           for i in range(len(inst_a))])
     assert pub.any()
     assert np.all(cycle_peak[pub] <= thr)
     assert np.mean(inst_a <= thr) > np.mean(pub) + 0.2
