@@ -199,6 +199,9 @@ def test_thruster_swap_round_trip(tmp_path):
     assert a["kf.heading"] < 0.6 * b["kf.heading"]
 
 
+@pytest.mark.slow  # 34 s: two diagnoses of a 25-min log; in the default suite the first
+# (tests/test_diagnose_real.py::test_shenzhen_dual_antenna_heading_offset), and overlays
+# written and judged (tests/test_overlay.py, the round trips above)
 @pytest.mark.data
 def test_real_usv_overlay_leaves_nothing_to_find(shared_data, tmp_path):
     """The Shenzhen USV (dual-antenna heading 73.5 deg off the bow, GNSS 1.2 s late; no

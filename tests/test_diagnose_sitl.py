@@ -8,8 +8,8 @@ lag and the course lag in turns, and the boat's speed lost in turns comes from a
 calm-water calibration on other seeds (config/sitl-rudder-boat.toml). Bounds carry the
 measured figure (seed 1).
 
-Five scenarios run in the default suite (both boats' clean logs, current, compass
-deviation, two effects); the rest, and the campaigns over seeds 1-10
+Three scenarios run in the default suite (both boats' clean logs and the current); the
+rest, and the campaigns over seeds 1-10
 (:mod:`validation.diagnose_campaign`), are marked slow (``pytest -m slow``), about
 30 s of CPU per log.
 """

@@ -481,7 +481,11 @@ def _eseso_figures() -> list[Figure]:
     return out
 
 
-DIAGNOSE_DEFAULT = ("effect-current", "effect-compass-deviation", "effect-two")
+DIAGNOSE_DEFAULT = ("effect-current",)
+"""The scenarios whose diagnose figure the default suite recomputes; the others' run with
+``-m slow`` (each is a 600 s diagnose, 12-17 s of CPU; in the default suite
+tests/test_diagnose_sitl.py names the current, tests/test_closure_synthetic.py a compass
+deviation and two effects at once)."""
 
 
 def _diagnose_figures() -> list[Figure]:
