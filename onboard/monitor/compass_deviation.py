@@ -24,16 +24,28 @@ crab at low speed is large, 20 deg for 0.29 m/s at 0.65 m/s on the simulator's
 ``effect-current``, and this form holds it exactly); the constant ``A`` also carries any
 steady sideslip and a heading bias, so only the harmonic terms are called deviation.
 
-:class:`CompassDeviation` accumulates the normal equations of the legs (ordinary least
-squares with a Gaussian prior, every leg one equation) and reports the harmonic terms
-with their posterior covariance. Pure Python: seven unknowns, one leg every few
-seconds.
+The current is the water the vehicle crosses, and that changes along its track (a
+channel's shear, an eddy, a front): it is a random walk of :data:`CURRENT_WALK` from leg
+to leg, the deviation a constant. A fit that holds one current for every leg takes the
+difference between the water of a lawnmower's northbound and southbound lines for a
+deviation (fleet-survey's rudder boats, no deviation simulated: 25-32 deg RMS at a Wald
+statistic of 22-79), because the few headings of a lawnmower give the four harmonic
+terms as many degrees of freedom as it has kinds of line. With the walk, only headings
+changed within a short time (a turn, in nearly the same water) inform the deviation.
+
+:class:`CompassDeviation` is the Kalman filter of the seven unknowns (with no walk, the
+least-squares fit of every leg under a Gaussian prior) and reports the harmonic terms
+with their covariance, scaled by the innovations' mean NIS where they scatter more than
+the legs' assumed noise. Pure Python: seven unknowns, one leg every few seconds.
 """
 
 from __future__ import annotations
 
 import math
 
+UNTIMED_LEG_S = 5.0
+"""The time between legs (s) the current walks over when the caller gives no times: the
+integrity monitor's leg length."""
 N_PARAMS = 7
 """Unknowns: the constant, four harmonic terms, the current's north and east (m/s)."""
 HARMONICS = slice(1, 5)
@@ -54,6 +66,13 @@ PRIOR_STD = (0.5, 0.3, 0.3, 0.05, 0.05, 0.5, 0.5)
 semicircular deviation, a quadrantal one of a few degrees (a small craft's soft iron),
 a current up to half a metre per second. The prior keeps a fit over few headings
 determined; the data overrule it wherever they speak."""
+CURRENT_WALK = 0.003
+"""Random walk of the current between legs (m/s per sqrt(s)): 0.05 m/s over five
+minutes, the change of a coastal current over a few hundred metres of track (the fleet
+field's prior spread of 0.1 m/s over 300 m, docs/algorithms.md §8.3, is 0.08 m/s over a
+250-m line). Measured (docs/integrity.md): 0 gives the lawnmowers' false deviations,
+0.003 silences them and finds the simulator's deviations on the same legs as without a
+walk; at 0.005 ``effect-two``'s is no longer found."""
 
 
 def _row(psi: float, chi: float, sog: float) -> tuple[tuple[float, ...], float]:
@@ -84,20 +103,26 @@ def solve_spd(a: list[list[float]], b: list[float]) -> tuple[list[float], list[l
 
 
 class CompassDeviation:
-    """Least-squares deviation and current from straight legs (module docstring).
+    """The deviation and the current from straight legs (module docstring), a Kalman
+    filter of ``(A, B1, C1, B2, C2, c_n, c_e)``.
 
     Attributes:
         legs: legs taken so far.
-        theta: the unknowns ``(A, B1, C1, B2, C2, c_n, c_e)`` (rad, rad, ..., m/s), None
-            before :data:`MIN_LEGS` legs over :data:`MIN_HEADING_SPREAD`.
+        theta: the unknowns (rad, rad, ..., m/s), None before :data:`MIN_LEGS` legs over
+            :data:`MIN_HEADING_SPREAD` and :data:`MIN_SECTORS`.
         cov: their covariance, None with ``theta``.
-        residual_std: the legs' residual standard deviation (m/s), None with ``theta``.
+        residual_std: the legs' noise across the heading that their innovations show,
+            :data:`LEG_NOISE_MPS` times the root of their mean NIS (m/s; the first
+            :data:`N_PARAMS` legs, which start the unknowns, left out), None with
+            ``theta``.
     """
 
     def __init__(self) -> None:
-        self._xtx = [[0.0] * N_PARAMS for _ in range(N_PARAMS)]
-        self._xty = [0.0] * N_PARAMS
-        self._yty = 0.0
+        self._x = [0.0] * N_PARAMS
+        self._P = [[PRIOR_STD[i] ** 2 if i == j else 0.0 for j in range(N_PARAMS)]
+                   for i in range(N_PARAMS)]
+        self._t: float | None = None
+        self._nis_sum = 0.0
         self._hs = self._hc = 0.0  # sums of the legs' heading unit vectors
         self._sectors: set[int] = set()
         self.legs = 0
@@ -105,21 +130,35 @@ class CompassDeviation:
         self.cov: list[list[float]] | None = None
         self.residual_std: float | None = None
 
-    def leg(self, psi: float, chi: float, sog: float) -> None:
-        """One straight leg's circular-mean heading ``psi`` and course ``chi`` (rad) and
-        mean speed over ground ``sog`` (m/s)."""
-        x, y = _row(psi, chi, sog)
-        for i in range(N_PARAMS):
-            row = self._xtx[i]
-            for j in range(N_PARAMS):
-                row[j] += x[i] * x[j]
-            self._xty[i] += x[i] * y
-        self._yty += y * y
+    def leg(self, psi: float, chi: float, sog: float, t: float | None = None) -> None:
+        """One straight leg's circular-mean heading ``psi`` and course ``chi`` (rad), mean
+        speed over ground ``sog`` (m/s) and time ``t`` (s; the current walks over the
+        time since the previous leg, :data:`UNTIMED_LEG_S` when not given)."""
+        dt = UNTIMED_LEG_S if t is None or self._t is None else max(t - self._t, 0.0)
+        self._t = t
+        self._update(*_row(psi, chi, sog), CURRENT_WALK ** 2 * dt)
         self._hs += math.sin(psi)
         self._hc += math.cos(psi)
         self._sectors.add(int(math.degrees(psi) % 360.0 // 30.0))
         self.legs += 1
-        self._fit()
+        self._publish()
+
+    def _update(self, h: tuple[float, ...], y: float, q: float) -> None:
+        """The current's walk ``q`` (m^2/s^2) on its two variances, then the update with
+        the leg's row ``h`` and observation ``y`` (noise :data:`LEG_NOISE_MPS`)."""
+        x, P = self._x, self._P
+        P[5][5] += q
+        P[6][6] += q
+        ph = [sum(a * b for a, b in zip(row, h)) for row in P]
+        s = sum(a * b for a, b in zip(h, ph)) + LEG_NOISE_MPS ** 2
+        z = y - sum(a * b for a, b in zip(h, x))
+        for i in range(N_PARAMS):
+            x[i] += ph[i] * z / s
+            row = P[i]
+            for j in range(N_PARAMS):
+                row[j] -= ph[i] * ph[j] / s
+        if self.legs >= N_PARAMS:  # the first legs start the unknowns from their prior
+            self._nis_sum += z * z / s
 
     def spread(self) -> float:
         """The circular spread ``1 - R`` of the legs' headings (0 before any)."""
@@ -127,28 +166,19 @@ class CompassDeviation:
             return 0.0
         return 1.0 - math.hypot(self._hs, self._hc) / self.legs
 
-    def _fit(self) -> None:
-        """The posterior mean and covariance of the unknowns (Gaussian prior
-        :data:`PRIOR_STD`, legs of one-sigma :data:`LEG_NOISE_MPS`), once enough legs
-        round enough headings are in; the covariance is scaled up by the residual's
-        variance where it exceeds the legs' assumed one."""
+    def _publish(self) -> None:
+        """``theta`` and ``cov`` from the filter once enough legs round enough headings
+        are in; the covariance scaled up by the innovations' mean NIS where it exceeds
+        1 (legs that scatter more than :data:`LEG_NOISE_MPS`), both over the legs after
+        the first :data:`N_PARAMS`."""
         n = self.legs
         if (n < MIN_LEGS or self.spread() < MIN_HEADING_SPREAD
                 or len(self._sectors) < MIN_SECTORS):
             return
-        w = 1.0 / LEG_NOISE_MPS ** 2
-        a = [[w * v + (1.0 / PRIOR_STD[i] ** 2 if i == j else 0.0)
-              for j, v in enumerate(row)] for i, row in enumerate(self._xtx)]
-        theta, inv = solve_spd(a, [w * v for v in self._xty])
-        # the residual sum of squares y'y - 2 theta' X'y + theta' X'X theta
-        quad = sum(theta[i] * self._xtx[i][j] * theta[j]
-                   for i in range(N_PARAMS) for j in range(N_PARAMS))
-        rss = max(self._yty - 2.0 * sum(t * v for t, v in zip(theta, self._xty)) + quad, 0.0)
-        s2 = rss / max(n - N_PARAMS, 1)
-        scale = max(1.0, s2 / LEG_NOISE_MPS ** 2)
-        self.theta = theta
-        self.cov = [[scale * v for v in row] for row in inv]
-        self.residual_std = math.sqrt(s2)
+        nis = self._nis_sum / (n - N_PARAMS)  # the innovations' mean NIS (_update)
+        self.theta = list(self._x)
+        self.cov = [[max(1.0, nis) * v for v in row] for row in self._P]
+        self.residual_std = LEG_NOISE_MPS * math.sqrt(nis)
 
     def deviation(self, psi: float) -> float:
         """The harmonic deviation (rad) at heading ``psi`` (rad); 0 before a fit."""

@@ -423,7 +423,7 @@ class CompassDeviationCheck:
         leg.clear()
         if max(straight_psi, straight_chi) > LEG_STRAIGHT_RAD:
             return False
-        self.fit.leg(mean_psi, mean_chi, sog_mean)
+        self.fit.leg(mean_psi, mean_chi, sog_mean, t)
         self.deviated = self.fit.significance() > DEVIATION_WALD
         return True
 
