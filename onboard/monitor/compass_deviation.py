@@ -8,7 +8,7 @@ soft iron),
     d(psi) = A + B1 sin psi + C1 cos psi + B2 sin 2 psi + C2 cos 2 psi.
 
 On a straight leg the velocity over ground ``v_g`` (speed ``sog``, course ``chi``) less
-a uniform current ``(c_n, c_e)`` is the through-water velocity, which points along the
+the current ``(c_n, c_e)`` is the through-water velocity, which points along the
 true heading ``psi - d(psi)``: their cross product vanishes. To first order in the
 deviation, with ``y = sog sin(psi - chi)`` the ground velocity across the compass
 heading and ``u = sog cos(psi - chi)`` along it (m/s),
@@ -60,7 +60,7 @@ MIN_SECTORS = 6
 LEG_NOISE_MPS = 0.02
 """One-sigma (m/s) of a leg's ground velocity across the heading from the sensors' noise
 alone (a consumer receiver's Doppler velocity, 0.1 m/s per fix, over 5 s of fixes at
-5 Hz); the fit's residual scales it up when the legs scatter more."""
+5 Hz); the innovations' mean NIS scales it up when the legs scatter more."""
 PRIOR_STD = (0.5, 0.3, 0.3, 0.05, 0.05, 0.5, 0.5)
 """Prior one-sigma of the unknowns (rad; m/s for the current): any constant or
 semicircular deviation, a quadrantal one of a few degrees (a small craft's soft iron),
