@@ -195,3 +195,13 @@ def test_the_kernel_is_switched_off_by_the_environment(monkeypatch) -> None:
     assert not EsesoFilter(filter_params(EsesoConfig())).compiled
     monkeypatch.setenv(KERNEL_ENV, "1")
     assert EsesoFilter(filter_params(EsesoConfig())).compiled
+
+
+def test_the_kernels_blocks_are_the_filters() -> None:
+    """The kernel names the error state's blocks by offsets of its own (it cannot import
+    the filter that imports it): they must be the filter's."""
+    blocks = ("P_", "V_", "TH", "BA", "BG", "G_", "XI", "BI")
+    for name in blocks:
+        offset = getattr(eseso_kernel, "_" + name.rstrip("_"))
+        assert offset == getattr(eseso_filter, name).start, name
+    assert eseso_kernel._N == N_ERR
