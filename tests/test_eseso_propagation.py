@@ -82,7 +82,7 @@ def test_filter_propagation_matches_the_dense_reference(model: str) -> None:
         w_m = rng.normal(0.0, 0.5, size=3)
         dt = float(rng.uniform(0.01, 0.05))
         f.propagate(f_m, w_m, dt)
-        q = f._process_noise(dt, f._transition.phi_ins)
+        q = f._process_noise(dt, f.transition.phi_ins)
         F = f.F
         want = F @ P0 @ F.T + np.diag(q)
         assert np.max(np.abs(f.P - want)) <= TOL * np.max(np.abs(want))

@@ -124,7 +124,11 @@ def test_the_installed_package_is_the_wheel_and_reads_its_data_from_itself(venv,
 
 
 @pytest.mark.parametrize("case", ["jaiabot-turns", "bluerov2-circle", "gavia-tidal"])
-def test_the_installed_wheel_replays_a_log_by_autodetection_as_the_checkout(venv, work, case):
+def test_the_installed_wheel_replays_a_log_by_autodetection_as_the_checkout(venv, work, case,
+                                                                          monkeypatch):
+    # both on the ESESO's numpy reference: its numba kernels would compile afresh in the
+    # fresh venv (~8 s of CPU); they are tested against it in tests/test_eseso_kernel.py
+    monkeypatch.setenv("ONBOARD_ESESO_KERNEL", "0")
     log = REPLAY / f"{case}.tlog"
     got = _replay_installed(venv, log, work / f"auto-{case}")
     assert got == _replay_checkout(log, work / f"auto-{case}-checkout")

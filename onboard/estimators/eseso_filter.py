@@ -35,6 +35,11 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   follow. The covariance is propagated by the transition's blocks
   (:class:`Transition`, :func:`propagate_covariance`; the dense ``F`` is
   :func:`transition_matrix`, the readable reference).
+* **Compiled twins** (:func:`compiled_kernel`): with numba installed (the ``fast`` extra)
+  the propagation, the Joseph update and the reset run in :mod:`.eseso_kernel`, the same
+  equations on compiled loops (tests/test_eseso_kernel.py: to rounding); this module's
+  numpy code is their reference and runs without numba or with
+  ``ONBOARD_ESESO_KERNEL=0``.
 * **Updates** (paper eqs. 14, 16), each through :meth:`EsesoFilter.update`, Joseph form,
   with the innovation ``y``, its covariance ``S`` and the NIS of each update kept as an
   :class:`~onboard.core.messages.Innovation` record in :attr:`EsesoFilter.innovations`
@@ -100,9 +105,12 @@ Numbers in, numbers out: no samples, no clock, no configuration file.
 from __future__ import annotations
 
 import enum
+import functools
 import math
+import os
 from collections import deque
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Literal
 
 import numpy as np
@@ -295,6 +303,19 @@ def transition_matrix(tr: Transition) -> Array:
     return F
 
 
+def transition(R: Array, f: Array, w: Array, xi: Array, dt: float, phi_ins: float,
+               earth_fixed: bool) -> Transition:
+    """The :class:`Transition` over ``dt`` (s) from attitude ``R``, the bias-corrected
+    specific force ``f`` (m/s^2) and rate ``w`` (rad/s), the disturbance ``xi`` (N, body;
+    its block only when ``earth_fixed``) and the INS bias's decay ``phi_ins``."""
+    dRt = exp_so3(w * dt).T
+    # exact in the gyro-bias error: Exp((w - db) dt) = Exp(w dt) Exp(-Jr(w dt) db dt)
+    Jr = right_jacobian(w * dt)
+    # Jr(-w dt) = Jr(w dt)^T
+    xi_bg = -(dRt @ skew(xi) @ Jr.T) * dt if earth_fixed else None
+    return Transition(dt, R @ skew(f), R, dRt, -Jr * dt, xi_bg, phi_ins)
+
+
 def propagate_covariance(P: Array, tr: Transition, q: Array) -> Array:
     """``F P F^T + diag(q)`` (paper eq. 13) with ``F`` applied by its blocks: as ``F (F
     P)^T`` (``P`` symmetric), each product changing only the rows of position, velocity,
@@ -331,13 +352,49 @@ def _transition_rows(M: Array, tr: Transition) -> Array:
     return out
 
 
+def reset_covariance(P: Array, dtheta: Array) -> Array:
+    """The covariance after injecting the attitude error ``dtheta`` (rad; paper eq. 17b):
+    ``G P G^T`` with ``G = I`` but its attitude block ``I - [dtheta/2]x`` (Sola eq. 287),
+    symmetrized."""
+    G = _I_N.copy()
+    G[TH, TH] -= skew(0.5 * dtheta)
+    P = G @ P @ G.T
+    return 0.5 * (P + P.T)
+
+
+KERNEL_ENV = "ONBOARD_ESESO_KERNEL"
+"""Environment variable: ``0`` keeps the numpy reference even where numba is installed
+(to time or compare the two paths); read when a filter is made."""
+
+
+@functools.cache
+def _import_kernel() -> ModuleType | None:
+    """:mod:`.eseso_kernel`, or None when numba does not import (once a process)."""
+    try:
+        from onboard.estimators import eseso_kernel
+    except ImportError:
+        return None
+    return eseso_kernel
+
+
+def compiled_kernel() -> ModuleType | None:
+    """The compiled twins of the propagation and of the update (:mod:`.eseso_kernel`, the
+    ``fast`` extra) when numba imports and ``ONBOARD_ESESO_KERNEL`` is not ``0``, else
+    None: the numpy code of this module is the reference and the default without it."""
+    if os.environ.get(KERNEL_ENV, "1").strip() == "0":
+        return None
+    return _import_kernel()
+
+
 class EsesoFilter:
     """The ESESO error-state Kalman filter (module docstring).
 
     Attributes (filterpy-style, read them to debug):
         p, v, R, b_a, b_g, g, xi, b_ins: the nominal state (see the module docstring).
         P: the 23 x 23 error covariance, ordered as :data:`P_` ... :data:`BI`.
-        F: the last propagation's error-state transition.
+        F: the last propagation's error-state transition (:attr:`transition`, dense).
+        compiled: whether the propagation and the updates run the compiled kernels
+            (:func:`compiled_kernel`; the same equations, to rounding).
         y, S, nis: innovation, its covariance and the NIS of the last update (any channel,
             gated or not).
         innovations: the records of the updates not yet taken, one per update (channels
@@ -376,6 +433,9 @@ class EsesoFilter:
         self.b_ins = np.zeros(2)
         self.P = np.eye(N_ERR)
         self._transition: Transition | None = None  # the last propagation's (:attr:`F`)
+        # what the compiled propagation's transition is built from when it is read
+        self._transition_inputs: tuple | None = None
+        self.compiled = compiled_kernel() is not None
         self.y: Array | None = None
         self.S: Array | None = None
         self.nis: float | None = None
@@ -413,31 +473,42 @@ class EsesoFilter:
         """Propagate over ``dt`` (s) driven by the interval's mean specific force ``f_m``
         (m/s^2) and rate ``w_m`` (rad/s), body axes: nominal state by paper eq. (10b),
         covariance by eqs. (11)-(13) with the Jacobian F of algorithms.md §5.1, its
-        non-identity blocks (:class:`Transition`) applied by :func:`propagate_covariance`."""
-        c, n = self.params.process, self.params.noise
+        non-identity blocks (:func:`transition`) applied by :func:`propagate_covariance`;
+        with :attr:`compiled`, the same in :func:`.eseso_kernel.propagate`."""
+        n = self.params.noise
+        earth_fixed = self.params.process.disturbance_model == "earth_fixed"
+        # INS velocity bias: first-order Gauss-Markov, exact discretization
+        phi_ins = math.exp(-dt / n.ins_bias_tau_s) if n.ins_bias_tau_s > 0 else 0.0
+        q = self._process_noise(dt, phi_ins)
+        if self.compiled:
+            self._propagate_compiled(f_m, w_m, dt, phi_ins, q, earth_fixed)
+            return
         f = f_m - self.b_a
         w = w_m - self.b_g
         acc = self.R @ f + self.g
-        dR = exp_so3(w * dt)
-        dRt = dR.T
-        # exact in the gyro-bias error: Exp((w - db) dt) = Exp(w dt) Exp(-Jr(w dt) db dt)
-        Jr = right_jacobian(w * dt)
-        earth_fixed = c.disturbance_model == "earth_fixed"
-        # Jr(-w dt) = Jr(w dt)^T
-        xi_bg = -(dRt @ skew(self.xi) @ Jr.T) * dt if earth_fixed else None
-        # INS velocity bias: first-order Gauss-Markov, exact discretization
-        phi_ins = math.exp(-dt / n.ins_bias_tau_s) if n.ins_bias_tau_s > 0 else 0.0
-        tr = Transition(dt, self.R @ skew(f), self.R, dRt, -Jr * dt, xi_bg, phi_ins)
-        q = self._process_noise(dt, phi_ins)
+        tr = transition(self.R, f, w, self.xi, dt, phi_ins, earth_fixed)
         # nominal state (10b)
         self.p = self.p + self.v * dt + 0.5 * acc * dt * dt
         self.v = self.v + acc * dt
-        self.R = self.R @ dR
+        self.R = self.R @ tr.dRt.T
         if earth_fixed:
-            self.xi = dRt @ self.xi
+            self.xi = tr.dRt @ self.xi
         self.b_ins = self.b_ins * phi_ins
         self.P = propagate_covariance(self.P, tr, q)
         self._transition = tr
+
+    def _propagate_compiled(self, f_m: Array, w_m: Array, dt: float, phi_ins: float,
+                            q: Array, earth_fixed: bool) -> None:
+        """:meth:`propagate` by :func:`.eseso_kernel.propagate`; its :class:`Transition`
+        is built only when read (:attr:`transition`)."""
+        self._transition = None
+        self._transition_inputs = (self.R, self.xi, self.b_a, self.b_g, f_m, w_m, dt,
+                                   phi_ins, earth_fixed)
+        kernel = _import_kernel()
+        assert kernel is not None
+        self.p, self.v, self.R, self.xi, self.b_ins, self.P = kernel.propagate(
+            self.p, self.v, self.R, self.b_a, self.b_g, self.g, self.xi, self.b_ins,
+            self.P, f_m, w_m, dt, earth_fixed, phi_ins, q)
 
     def _process_noise(self, dt: float, phi_ins: float) -> Array:
         """The diagonal of the discrete process noise ``Q`` over ``dt`` (s) (paper eq. 13):
@@ -456,10 +527,19 @@ class EsesoFilter:
         return q
 
     @property
+    def transition(self) -> Transition | None:
+        """The last propagation's :class:`Transition` (None before the first)."""
+        if self._transition is None and self._transition_inputs is not None:
+            R, xi, b_a, b_g, f_m, w_m, dt, phi_ins, earth_fixed = self._transition_inputs
+            self._transition = transition(R, f_m - b_a, w_m - b_g, xi, dt, phi_ins,
+                                          earth_fixed)
+        return self._transition
+
+    @property
     def F(self) -> Array:
         """The last propagation's error-state transition, dense (:func:`transition_matrix`;
         the identity before the first)."""
-        tr = self._transition
+        tr = self.transition
         return _I_N.copy() if tr is None else transition_matrix(tr)
 
     # ------------------------------------------------------------------ update
@@ -507,10 +587,7 @@ class EsesoFilter:
         self._record(channel, t, source, gate, accepted=True)
         self.inject(up.x)
         # reset (17b): G = I except the attitude block, I - [dtheta/2]x (Sola eq. 287)
-        G = _I_N.copy()
-        G[TH, TH] -= skew(0.5 * up.x[TH])
-        P = G @ up.P @ G.T
-        self.P = 0.5 * (P + P.T)
+        self.P = self._reset(up.P, up.x[TH])
         return outcome
 
     def _kalman(self, y: Array, H: Array, Rm: Array, only: slice | None
@@ -518,9 +595,26 @@ class EsesoFilter:
         """The Kalman update (:func:`.kalman.update`) of the error state from zero with the
         innovation ``y``, Jacobian ``H`` and noise ``Rm``; ``only`` the block it may correct
         (None = all). ``S`` is symmetrized and inverted by LU (``np.linalg.inv``); its
-        ``x`` is the correction ``dx``."""
-        return kalman.update(_NO_ERROR, self.P, y, Rm, H, keep=only, symmetric=True,
-                             inverse=np.linalg.inv)
+        ``x`` is the correction ``dx``. With :attr:`compiled`, the same in
+        :func:`.eseso_kernel.joseph_update` (its record has no ``K``)."""
+        if not self.compiled:
+            return kalman.update(_NO_ERROR, self.P, y, Rm, H, keep=only, symmetric=True,
+                                 inverse=np.linalg.inv)
+        kernel = _import_kernel()
+        assert kernel is not None
+        lo, hi = (0, N_ERR) if only is None else (only.start, only.stop)
+        dx, P, S, nis, ok = kernel.joseph_update(self.P, y, H, Rm, lo, hi)
+        if not ok:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return kalman.KalmanUpdate(dx, P, y, S, None, float(nis))
+
+    def _reset(self, P: Array, dtheta: Array) -> Array:
+        """:func:`reset_covariance`; with :attr:`compiled`, :func:`.eseso_kernel.reset`."""
+        if not self.compiled:
+            return reset_covariance(P, dtheta)
+        kernel = _import_kernel()
+        assert kernel is not None
+        return kernel.reset(P, dtheta)
 
     def _adapt_noise(self, channel: str, y: Array, HPHt: Array, Rm: Array) -> float:
         """The variance scale of ``channel``'s configured noise ``Rm`` after this update's

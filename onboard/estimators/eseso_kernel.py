@@ -1,0 +1,304 @@
+"""The ESESO's compiled kernels: its propagation and its Joseph update, in numba.
+
+The readable reference is :mod:`onboard.estimators.eseso_filter` (algorithms.md §5.1);
+these functions compute the same equations on plain loops, compiled by numba, because at
+23 states numpy's per-call overhead (~1 µs a call, ~50 calls a propagation and ~30 an
+update) costs more than the arithmetic (docs/performance.md, "The ESESO's vehicle-day").
+:class:`~onboard.estimators.eseso_filter.EsesoFilter` uses them when this module imports
+(:func:`~onboard.estimators.eseso_filter.compiled_kernel`: numba installed, the ``fast``
+extra, and ``ONBOARD_ESESO_KERNEL`` not ``0``); tests/test_eseso_kernel.py checks that
+kernel and reference agree to rounding.
+
+* :func:`propagate`: :meth:`EsesoFilter.propagate` whole, the nominal state (paper eq.
+  10b) and ``F P F^T + diag(q)`` (eq. 13) with ``F`` applied by the blocks of
+  :class:`~onboard.estimators.eseso_filter.Transition`, as
+  :func:`~onboard.estimators.eseso_filter.propagate_covariance` does.
+* :func:`joseph_update`: :func:`onboard.estimators.kalman.update` as the ESESO calls it
+  (error state zero, ``S`` symmetrized and inverted, the gain's rows outside ``keep``
+  zeroed), its Joseph form ``(I - K H) P (I - K H)^T + K R K^T`` evaluated through its
+  rank-``m`` factors: ``(I - K H) X = X - K (H X)`` is ``m n^2`` multiply-adds where the
+  dense product is ``n^3``.
+* :func:`reset`: the reset ``G P G^T`` after an injection (paper eq. 17b, Sola eq. 287),
+  ``G`` the identity but for its attitude block ``I - [dtheta/2]x``, then symmetrized.
+
+Compiled on first call, not at import (8 s of CPU here, docs/performance.md), and cached
+beside this module (``cache=True``), so a machine compiles once; a process then pays
+numba's start, ~0.6 s, at its first call. Loops only: numba compiles array expressions,
+slice assignments and transposed views two to four times slower, and BLAS's call costs
+more than these 3- and 23-row products.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# the error-state blocks of eseso_filter (P_, V_, TH, BA, BG, G_, XI, BI), as offsets
+_P, _V, _TH, _BA, _BG, _G, _XI, _BI = 0, 3, 6, 9, 12, 15, 18, 21
+_N = 23
+_SMALL_ANGLE = 1e-6
+"""Below this angle (rad) Exp and Jr take their series, as :mod:`onboard.core.so3`."""
+
+
+@njit(cache=True)
+def _mm(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A @ B`` on plain loops (BLAS's call costs more than these small products)."""
+    n, m = A.shape[0], B.shape[1]
+    out = np.zeros((n, m))
+    for i in range(n):
+        for k in range(A.shape[1]):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(m):
+                    out[i, j] += a * B[k, j]
+    return out
+
+
+@njit(cache=True)
+def _mmt(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A @ B.T`` on plain loops."""
+    n, m = A.shape[0], B.shape[0]
+    out = np.empty((n, m))
+    for i in range(n):
+        for j in range(m):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                acc += A[i, k] * B[j, k]
+            out[i, j] = acc
+    return out
+
+
+@njit(cache=True)
+def _mv(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A @ x`` on plain loops."""
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        for k in range(A.shape[1]):
+            out[i] += A[i, k] * x[k]
+    return out
+
+
+@njit(cache=True)
+def _transpose(A: np.ndarray) -> np.ndarray:
+    """``A.T``, contiguous."""
+    out = np.empty((A.shape[1], A.shape[0]))
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            out[j, i] = A[i, j]
+    return out
+
+
+@njit(cache=True)
+def _skew(t: np.ndarray) -> np.ndarray:
+    """``[t]x`` of a 3-vector."""
+    K = np.zeros((3, 3))
+    K[0, 1], K[0, 2], K[1, 2] = -t[2], t[1], -t[0]
+    K[1, 0], K[2, 0], K[2, 1] = t[2], -t[1], t[0]
+    return K
+
+
+@njit(cache=True)
+def _identity_plus(a: float, K: np.ndarray, b: float, K2: np.ndarray) -> np.ndarray:
+    """``I + a K + b K2`` of 3 x 3 matrices."""
+    out = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = (1.0 if i == j else 0.0) + a * K[i, j] + b * K2[i, j]
+    return out
+
+
+@njit(cache=True)
+def exp_so3(theta: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula, as :func:`onboard.core.so3.exp_so3`."""
+    angle = math.sqrt(theta[0] ** 2 + theta[1] ** 2 + theta[2] ** 2)
+    K = _skew(theta)
+    K2 = _mm(K, K)
+    if angle < _SMALL_ANGLE:
+        return _identity_plus(1.0, K, 0.5, K2)
+    s = math.sin(angle) / angle
+    c = (1.0 - math.cos(angle)) / (angle * angle)
+    return _identity_plus(s, K, c, K2)
+
+
+@njit(cache=True)
+def right_jacobian(theta: np.ndarray) -> np.ndarray:
+    """``Jr(theta)`` of SO(3), as :func:`onboard.core.so3.right_jacobian`."""
+    angle = math.sqrt(theta[0] ** 2 + theta[1] ** 2 + theta[2] ** 2)
+    K = _skew(theta)
+    K2 = _mm(K, K)
+    if angle < _SMALL_ANGLE:
+        return _identity_plus(-0.5, K, 1.0 / 6.0, K2)
+    a2 = angle * angle
+    return _identity_plus(-(1.0 - math.cos(angle)) / a2, K,
+                          (angle - math.sin(angle)) / (a2 * angle), K2)
+
+
+@njit(cache=True)
+def _transition_rows(M: np.ndarray, dt: float, A: np.ndarray, dRt: np.ndarray,
+                     th_bg: np.ndarray, xi_bg: np.ndarray, earth_fixed: bool,
+                     phi_ins: float) -> np.ndarray:
+    """``F M`` for the 23-row ``M``: ``A = [R [f]x, R]`` (3 x 6, what ``F[V, TH:BA]``
+    is times ``-dt``), the other blocks of :class:`Transition` as named there."""
+    out = M.copy()
+    cols = M.shape[1]
+    for i in range(3):
+        for j in range(cols):
+            mixed = 0.0
+            for k in range(6):
+                mixed += A[i, k] * M[_TH + k, j]
+            v_new = M[_V + i, j] + dt * (M[_G + i, j] - mixed)
+            out[_P + i, j] += 0.5 * dt * (M[_V + i, j] + v_new)
+            out[_V + i, j] = v_new
+            th = 0.0
+            for k in range(3):
+                th += dRt[i, k] * M[_TH + k, j] + th_bg[i, k] * M[_BG + k, j]
+            out[_TH + i, j] = th
+            if earth_fixed:
+                x = 0.0
+                for k in range(3):
+                    x += dRt[i, k] * M[_XI + k, j] + xi_bg[i, k] * M[_BG + k, j]
+                out[_XI + i, j] = x
+    for j in range(cols):
+        out[_BI, j] *= phi_ins
+        out[_BI + 1, j] *= phi_ins
+    return out
+
+
+@njit(cache=True)
+def propagate(p, v, R, b_a, b_g, g, xi, b_ins, P, f_m, w_m, dt, earth_fixed, phi_ins, q):
+    """:meth:`EsesoFilter.propagate` over ``dt`` (s) at the mean specific force ``f_m``
+    (m/s^2) and rate ``w_m`` (rad/s), with the process-noise diagonal ``q``: the new
+    ``(p, v, R, xi, b_ins, P)`` (the biases and gravity do not change)."""
+    f, w_dt = np.empty(3), np.empty(3)
+    for i in range(3):
+        f[i] = f_m[i] - b_a[i]
+        w_dt[i] = (w_m[i] - b_g[i]) * dt
+    acc = _mv(R, f)
+    dR = exp_so3(w_dt)
+    dRt = _transpose(dR)
+    Jr = right_jacobian(w_dt)
+    R_skew_f = _mm(R, _skew(f))
+    A = np.empty((3, 6))  # [R [f]x, R]
+    th_bg = np.empty((3, 3))  # -Jr(w dt) dt
+    for i in range(3):
+        acc[i] += g[i]
+        for j in range(3):
+            A[i, j], A[i, 3 + j] = R_skew_f[i, j], R[i, j]
+            th_bg[i, j] = -Jr[i, j] * dt
+    xi_bg = np.zeros((3, 3))
+    if earth_fixed:  # -Exp(w dt)^T [xi]x Jr(-w dt) dt, Jr(-w dt) = Jr(w dt)^T
+        xi_bg = _mmt(_mm(dRt, _skew(xi)), Jr)
+        for i in range(3):
+            for j in range(3):
+                xi_bg[i, j] *= -dt
+    P_new = _transition_rows(_transpose(_transition_rows(P, dt, A, dRt, th_bg, xi_bg,
+                                                         earth_fixed, phi_ins)),
+                             dt, A, dRt, th_bg, xi_bg, earth_fixed, phi_ins)
+    for i in range(P.shape[0]):
+        P_new[i, i] += q[i]
+    p_new, v_new = np.empty(3), np.empty(3)
+    for i in range(3):
+        p_new[i] = p[i] + v[i] * dt + 0.5 * acc[i] * dt * dt
+        v_new[i] = v[i] + acc[i] * dt
+    xi_new = _mv(dRt, xi) if earth_fixed else xi.copy()
+    b_ins_new = np.empty(2)
+    for i in range(2):
+        b_ins_new[i] = b_ins[i] * phi_ins
+    return p_new, v_new, _mm(R, dR), xi_new, b_ins_new, P_new
+
+
+@njit(cache=True)
+def _inverse(S: np.ndarray) -> tuple[np.ndarray, bool]:
+    """``S^-1`` by Gauss-Jordan elimination with partial pivoting (LU's arithmetic), and
+    False when ``S`` is singular."""
+    m = S.shape[0]
+    a = S.copy()
+    inv = np.zeros((m, m))
+    for i in range(m):
+        inv[i, i] = 1.0
+    for c in range(m):
+        piv = c
+        for r in range(c + 1, m):
+            if abs(a[r, c]) > abs(a[piv, c]):
+                piv = r
+        if a[piv, c] == 0.0:
+            return inv, False
+        for j in range(m):
+            a[c, j], a[piv, j] = a[piv, j], a[c, j]
+            inv[c, j], inv[piv, j] = inv[piv, j], inv[c, j]
+        d = a[c, c]
+        for j in range(m):
+            a[c, j] /= d
+            inv[c, j] /= d
+        for r in range(m):
+            e = a[r, c]
+            if r != c and e != 0.0:
+                for j in range(m):
+                    a[r, j] -= e * a[c, j]
+                    inv[r, j] -= e * inv[c, j]
+    return inv, True
+
+
+@njit(cache=True)
+def joseph_update(P, y, H, Rm, keep_lo, keep_hi):
+    """The ESESO's Kalman update of its error state from zero (:func:`.kalman.update`
+    with ``symmetric=True`` and ``keep = slice(keep_lo, keep_hi)``): ``(dx, P+, S, nis,
+    ok)``, ``ok`` False (and the rest meaningless) when ``S`` is singular. ``P+`` is the
+    Joseph form through its rank-``m`` factors (module docstring)."""
+    n, m = P.shape[0], y.shape[0]
+    PHt = _mmt(P, H)
+    HPHt = _mm(H, PHt)
+    S = np.empty((m, m))
+    for i in range(m):
+        for j in range(m):
+            S[i, j] = 0.5 * ((HPHt[i, j] + Rm[i, j]) + (HPHt[j, i] + Rm[j, i]))
+    Sinv, ok = _inverse(S)
+    if not ok:
+        return np.zeros(n), P, S, math.nan, False
+    Sinv_y = _mv(Sinv, y)
+    nis = 0.0
+    for i in range(m):
+        nis += y[i] * Sinv_y[i]
+    K = _mm(PHt, Sinv)
+    for i in range(n):
+        if i < keep_lo or i >= keep_hi:
+            for j in range(m):
+                K[i, j] = 0.0
+    B = _mm(K, _mm(H, P))  # K H P; (I - K H) P = P - K H P
+    for i in range(n):
+        for j in range(n):
+            B[i, j] = P[i, j] - B[i, j]
+    BHtKt = _mmt(_mmt(B, H), K)  # (I - K H) P H^T K^T
+    KRKt = _mmt(_mm(K, Rm), K)
+    P_new = np.empty((n, n))  # (I - K H) P (I - K H)^T + K R K^T
+    for i in range(n):
+        for j in range(n):
+            P_new[i, j] = B[i, j] - BHtKt[i, j] + KRKt[i, j]
+    return _mv(K, y), P_new, S, nis, True
+
+
+@njit(cache=True)
+def reset(P: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
+    """``G P G^T`` with ``G = I`` but ``G[TH, TH] = I - [dtheta/2]x``, symmetrized."""
+    n = P.shape[0]
+    half = np.empty(3)
+    for i in range(3):
+        half[i] = 0.5 * dtheta[i]
+    K = _skew(half)
+    GP = P.copy()  # G P: the attitude rows mixed
+    for i in range(3):
+        for j in range(n):
+            GP[_TH + i, j] = P[_TH + i, j] - (K[i, 0] * P[_TH, j] + K[i, 1] * P[_TH + 1, j]
+                                               + K[i, 2] * P[_TH + 2, j])
+    GPGt = GP.copy()  # (G P) G^T: the attitude columns mixed
+    for i in range(n):
+        for j in range(3):
+            GPGt[i, _TH + j] = GP[i, _TH + j] - (GP[i, _TH] * K[j, 0] + GP[i, _TH + 1] * K[j, 1]
+                                                 + GP[i, _TH + 2] * K[j, 2])
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = 0.5 * (GPGt[i, j] + GPGt[j, i])
+    return out

@@ -1,0 +1,207 @@
+"""The ESESO's compiled kernels against their numpy reference.
+
+:mod:`onboard.estimators.eseso_kernel` (numba, the ``fast`` extra) computes the ESESO's
+propagation and its Joseph update and reset; :mod:`onboard.estimators.eseso_filter` is
+the readable reference. They must agree to rounding: on random states and covariances,
+and on the real states of a replay (every propagation and update of the committed
+BlueROV2 log, the kernel run from the reference's own state beside it). Agreement is
+measured per entry against the entry's scale: a vector's largest component, and for a
+covariance ``sqrt(P_ii P_jj)`` (its entries span 1e-12 to 1e3 in their own units).
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import pytest
+
+pytest.importorskip("numba", reason="the ESESO kernels need numba: pip install 'onboard[fast]'")
+
+from onboard.cli import main as cli_main  # noqa: E402
+from onboard.core.pipeline_config import EsesoConfig  # noqa: E402
+from onboard.core.so3 import exp_so3  # noqa: E402
+from onboard.estimators import eseso_filter, eseso_kernel, kalman  # noqa: E402
+from onboard.estimators.eseso_filter import (  # noqa: E402
+    KERNEL_ENV,
+    N_ERR,
+    TH,
+    XI,
+    EsesoFilter,
+    reset_covariance,
+)
+from onboard.pipelines.eseso import filter_params  # noqa: E402
+
+TOL = 1e-12
+"""Largest difference allowed, relative to the entry's scale (module docstring). Measured
+at worst: 6.5e-16 (propagation) and 2.4e-15 (update) on the random states below, 6.0e-16
+and 2.1e-15 on the replay's."""
+GOLDEN_ROV = Path(__file__).resolve().parent / "data" / "replay" / "bluerov2-circle.tlog"
+NOMINAL = ("p", "v", "R", "b_a", "b_g", "g", "xi", "b_ins")
+
+
+def _gap(got: np.ndarray, want: np.ndarray) -> float:
+    """The largest difference of ``got`` from ``want`` relative to its scale: for a square
+    matrix with a positive diagonal (a covariance) ``sqrt(P_ii P_jj)``, else the largest
+    entry."""
+    got, want = np.asarray(got, float), np.asarray(want, float)
+    if want.ndim == 2 and want.shape[0] == want.shape[1] > 3 and np.all(np.diag(want) > 0):
+        d = np.sqrt(np.diag(want))
+        scale = np.outer(d, d)
+    else:
+        scale = np.full(want.shape, max(float(np.max(np.abs(want))), 1e-300))
+    return float(np.max(np.abs(got - want) / scale))
+
+
+def _filters(model: str = "earth_fixed") -> tuple[EsesoFilter, EsesoFilter]:
+    """A reference filter and a compiled one with the same parameters."""
+    c = EsesoConfig()
+    c = msgspec.structs.replace(c, process=msgspec.structs.replace(
+        c.process, disturbance_model=model))
+    ref, fast = EsesoFilter(filter_params(c)), EsesoFilter(filter_params(c))
+    ref.compiled = False
+    assert fast.compiled, "numba imports, so the kernels are used by default"
+    return ref, fast
+
+
+def _random_state(f: EsesoFilter, rng: np.random.Generator) -> None:
+    """A random nominal state and a random covariance spanning the filter's scales."""
+    f.initialize(exp_so3(rng.normal(size=3)), rng.normal(0.0, 50.0, size=3))
+    f.v, f.b_a = rng.normal(0.0, 1.0, 3), rng.normal(0.0, 0.05, 3)
+    f.b_g, f.xi = rng.normal(0.0, 0.01, 3), rng.normal(0.0, 30.0, 3)
+    f.b_ins = rng.normal(0.0, 0.05, 2)
+    sd = np.sqrt(np.diag(f.P)) * rng.uniform(0.1, 10.0, N_ERR)
+    C = rng.normal(size=(N_ERR, N_ERR))
+    C = C @ C.T / N_ERR + np.eye(N_ERR)
+    C /= np.sqrt(np.outer(np.diag(C), np.diag(C)))
+    f.P = C * np.outer(sd, sd)
+
+
+def _same_state(ref: EsesoFilter, fast: EsesoFilter) -> None:
+    for name in NOMINAL + ("P",):
+        setattr(fast, name, getattr(ref, name).copy())
+
+
+def _agreement(ref: EsesoFilter, fast: EsesoFilter) -> float:
+    return max(_gap(getattr(fast, n), getattr(ref, n)) for n in NOMINAL + ("P",))
+
+
+@pytest.mark.parametrize("model", ["earth_fixed", "body_fixed"])
+def test_compiled_propagation_agrees_with_the_reference_on_random_states(model: str) -> None:
+    rng = np.random.default_rng(29)
+    ref, fast = _filters(model)
+    for _ in range(200):
+        _random_state(ref, rng)
+        _same_state(ref, fast)
+        f_m = np.array([0.0, 0.0, -9.81]) + rng.normal(0.0, 2.0, 3)
+        w_m = rng.normal(0.0, 1.0, 3) * rng.choice([1e-9, 1.0])  # the small-angle series too
+        dt = float(rng.uniform(0.005, 0.2))
+        ref.propagate(f_m, w_m, dt)
+        fast.propagate(f_m, w_m, dt)
+        assert _agreement(ref, fast) <= TOL
+        assert _gap(fast.F, ref.F) <= TOL  # the transition it exposes, built when read
+
+
+@pytest.mark.parametrize("rows, only", [(1, None), (2, None), (3, None), (3, XI)])
+def test_compiled_update_agrees_with_kalman_update(rows: int, only: slice | None) -> None:
+    """The Joseph update (all states, and Schmidt-Kalman on ``xi`` alone) and its reset."""
+    rng = np.random.default_rng(rows)
+    ref, _ = _filters()
+    for _ in range(200):
+        _random_state(ref, rng)
+        # sparse, each state's share of S of order one (a badly conditioned S would
+        # amplify any rounding by its condition number, in both)
+        H = rng.normal(size=(rows, N_ERR)) * (rng.uniform(size=(rows, N_ERR)) < 0.3)
+        H /= np.sqrt(np.diag(ref.P))
+        A = rng.normal(0.0, 0.3, size=(rows, rows))
+        Rm = A @ A.T + np.diag(rng.uniform(0.5, 2.0, rows))  # correlated, well conditioned
+        y = rng.normal(size=rows) * 3.0
+        want = kalman.update(np.zeros(N_ERR), ref.P, y, Rm, H, keep=only, symmetric=True,
+                             inverse=np.linalg.inv)
+        lo, hi = (0, N_ERR) if only is None else (only.start, only.stop)
+        dx, P, S, nis, ok = eseso_kernel.joseph_update(ref.P, y, H, Rm, lo, hi)
+        assert ok
+        assert _gap(dx, want.x) <= TOL and _gap(P, want.P) <= TOL
+        assert _gap(S, want.S) <= TOL and abs(nis - want.nis) <= TOL * want.nis
+        dtheta = rng.normal(0.0, 0.05, 3)
+        assert _gap(eseso_kernel.reset(P, dtheta), reset_covariance(want.P, dtheta)) <= TOL
+
+
+def test_a_singular_innovation_covariance_raises_in_both() -> None:
+    ref, fast = _filters()
+    for f in (ref, fast):
+        f.initialize(np.eye(3), np.zeros(3))
+        f.P[:] = 0.0
+        with pytest.raises(np.linalg.LinAlgError):
+            f.update_depth(1.0, 0.0)
+
+
+def test_compiled_filter_agrees_on_every_step_of_a_real_replay(tmp_path: Path,
+                                                               monkeypatch) -> None:
+    """Every propagation and update of the ESESO's replay of the committed BlueROV2 log
+    (30 s: 1,499 propagations, 1,350 updates) is repeated from the same state by the
+    compiled filter; the two must agree to :data:`TOL` (measured: 2.1e-15 at worst)."""
+    worst = {"propagate": 0.0, "update": 0.0}
+    calls = {"propagate": 0, "update": 0}
+    propagate, update = EsesoFilter.propagate, EsesoFilter.update
+
+    def twin(name, method):
+        def checked(self: EsesoFilter, *args, **kwargs):
+            if not self.compiled:
+                return method(self, *args, **kwargs)
+            ref = copy.deepcopy(self)
+            ref.compiled = False
+            out = method(ref, *args, **kwargs)
+            got = method(self, *args, **kwargs)
+            assert got == out
+            worst[name] = max(worst[name], _agreement(ref, self))
+            calls[name] += 1
+            _same_state(ref, self)  # go on from the reference's state
+            return out
+        return checked
+
+    monkeypatch.setattr(EsesoFilter, "propagate", twin("propagate", propagate))
+    monkeypatch.setattr(EsesoFilter, "update", twin("update", update))
+    assert cli_main(["replay", str(GOLDEN_ROV), "--out", str(tmp_path), "--no-plot",
+                     "--pipelines", "eseso"]) == 0
+    assert calls["propagate"] > 1000 and calls["update"] > 1000
+    assert max(worst.values()) <= TOL, worst
+
+
+def test_the_comparison_sees_a_difference_beyond_rounding() -> None:
+    """A negative control: a covariance entry moved by 1e-10 of its scale, a small
+    variance moved by 1e-10 of itself, and a vector component by 1e-10 of the vector's
+    largest are each caught; a difference of 1e-14 is not."""
+    rng = np.random.default_rng(5)
+    ref, _ = _filters()
+    _random_state(ref, rng)
+    P = ref.P.copy()
+    moved = P.copy()
+    moved[TH.start, XI.start] += 1e-10 * np.sqrt(P[TH.start, TH.start] * P[XI.start, XI.start])
+    assert _gap(moved, P) > TOL
+    small = P.copy()
+    small[12, 12] *= 1 + 1e-10  # a gyro-bias variance, ~1e-9 of the largest
+    assert _gap(small, P) > TOL
+    v = np.array([1.0, 1e-6, 3.0])
+    assert _gap(v + np.array([0.0, 3e-10, 0.0]), v) > TOL
+    assert _gap(P * (1 + 1e-14), P) <= TOL
+
+
+def test_the_kernel_is_switched_off_by_the_environment(monkeypatch) -> None:
+    monkeypatch.setenv(KERNEL_ENV, "0")
+    assert eseso_filter.compiled_kernel() is None
+    assert not EsesoFilter(filter_params(EsesoConfig())).compiled
+    monkeypatch.setenv(KERNEL_ENV, "1")
+    assert EsesoFilter(filter_params(EsesoConfig())).compiled
+
+
+def test_the_kernels_blocks_are_the_filters() -> None:
+    """The kernel names the error state's blocks by offsets of its own (it cannot import
+    the filter that imports it): they must be the filter's."""
+    blocks = ("P_", "V_", "TH", "BA", "BG", "G_", "XI", "BI")
+    for name in blocks:
+        offset = getattr(eseso_kernel, "_" + name.rstrip("_"))
+        assert offset == getattr(eseso_filter, name).start, name
+    assert eseso_kernel._N == N_ERR
