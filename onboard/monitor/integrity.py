@@ -1574,23 +1574,38 @@ class IntegrityMonitor:
         comes to 1 (algorithms.md §9.2): with ``r`` the filter's own block-mean NIS per
         degree of freedom and ``phi`` the forecast's share of ``S``, the forecast's
         variance times ``c = 1 + (r - 1) / phi``; the key the pipeline names for the
-        channel (``forecast_noise``), its variance in proportion to the forecast's."""
-        r = check.mean * self._published_factor(pipeline, channel) / check.dof
+        channel (``forecast_noise``), its variance in proportion to the forecast's. Where
+        ``c`` would be below :data:`FORECAST_FACTOR_MIN` the measurement noise alone is
+        larger than the innovations: its key and the value ``r / (1 - phi)`` of the noise
+        applied. Where the NIS is above its band only against a published sigma narrowed
+        by its consistency factor (``r`` at most 1), that factor is what is wrong."""
+        pf = self._published_factor(pipeline, channel)
+        r = check.mean * pf / check.dof
+        if check.mean > check.band[1] and r <= 1.0:
+            return (f"the filter's own innovations are within what it expects (NIS {r:.3g} "
+                    f"per degree of freedom); the published sigma's consistency factor "
+                    f"{pf:.2g} on its variance (algorithms.md §9.1) narrows it below them: "
+                    f"no key of [pipelines.{pipeline}] sets that factor")
         phi = _forecast_share(n)
-        c = max(1.0 + (r - 1.0) / phi, FORECAST_FACTOR_MIN)
+        c = 1.0 + (r - 1.0) / phi
+        quiet = ""
+        if c < FORECAST_FACTOR_MIN and n is not None and phi < 1.0:
+            s = r / (1.0 - phi)
+            quiet = (f"; the innovations are smaller than its measurement noise alone "
+                     f"({s:.2g} of its variance): set {n.key} = "  # type: ignore[attr-defined]
+                     f"{n.declared * math.sqrt(n.applied * s):.3g} (declared "  # type: ignore[attr-defined]
+                     f"{n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
+        c = max(c, FORECAST_FACTOR_MIN)
         how = (f"the forecast's variance times {c:.2g} brings the NIS to 1 (the filter's "
                f"own NIS {r:.3g} per degree of freedom, the forecast {phi:.0%} of S)")
-        if r < 1.0 - phi:
-            how += ("; the innovations are smaller than the measurement noise alone "
-                    "explains: at most that factor")
         name = getattr(self.watched.get(pipeline), "forecast_noise", None)
         key = name(channel) if name is not None else None
         if key is None:
-            return f"the process noise in [pipelines.{pipeline}]: {how}"
+            return f"the process noise in [pipelines.{pipeline}]: {how}{quiet}"
         k, value, unit, power = key
         return (f"the forecast's process noise: set {k} = {value * c ** (1.0 / power):.3g} "
                 f"(now {value:.3g} {unit}; {how}, taken in proportion to this key's "
-                f"variance)")
+                f"variance){quiet}")
 
     def _nis_warning(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
         lo, hi = check.band
