@@ -29,20 +29,25 @@ published records and the innovation records, and runs these checks:
   narrower than the NIS of sigmas within the 1-sigma coverage target
   (:data:`NIS_COVERAGE_TARGET`);
   ``nis_out_of_band`` after :data:`NIS_SUSTAIN_BLOCKS` blocks in a row outside it on the
-  same side (too large: sigmas too small; too small: sigmas too large). A channel whose
+  same side (too large: sigmas too small; too small: sigmas too large); below the band,
+  not judged within :data:`NIS_SETTLE_S` of the channel's filter's start or restart (a
+  filter converging from a wide prior; above it is judged from the start). A channel whose
   pipeline learns its measurement noise (the pipeline's ``noise``,
   :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
   is learned: an NIS out of band first drives the adaptation, and the warning says what
   is still inconsistent after it (the learned noise at its bound: the configuration key
   to change and the learned value; a noise learned below the declared that the update
-  does not take, the same; else the forecast's share). A channel whose factor a
+  does not take, the same; else the process-noise key the pipeline names for the
+  channel's forecast, ``forecast_noise``, with the value that brings the NIS to 1 from
+  its mean and the forecast's share of ``S``). A channel whose factor a
   published sigma takes (``ChannelNoise.published_factor``, algorithms.md §9.1) is judged
   against that sigma: its NIS over the factor. The pipeline is flagged. Below its band
   on one of the pipeline's ``unpublished_channels`` (a forecast of what it publishes
   without a sigma, algorithms.md §9.2) the NIS is information, ``nis_unpublished`` once
   per channel, not flagged; on one of its ``calibrating_channels`` (whose innovations
   correct the published sigma both ways, the filter's gain keeping its tuning) the same,
-  ``nis_corrected``.
+  ``nis_corrected``; on one of its ``regression_channels`` (a regression's residual, whose
+  ``S`` no gain uses) ``nis_unpublished`` on either side.
 * **position consistency** (:class:`PositionNeesCheck`): where a fix is better than the
   estimate (the published variance :data:`POSITION_NEES_FIX_RATIO` times the fix's), the NEES of the published position
   against it, ``d^T (P + R_fix)^-1 d`` (2 dof), by blocks as the NIS;
@@ -864,7 +869,11 @@ class PositionNeesCheck(NisCheck):
 
 class Declared(Protocol):
     """A pipeline as the monitor sees it: its name and the roles it declares
-    (``onboard.pipelines.base.Pipeline`` documents them)."""
+    (``onboard.pipelines.base.Pipeline`` documents them). It may also name, per innovation
+    channel, the configuration key whose process noise sets that channel's forecast:
+    ``forecast_noise(channel) -> (key, value, unit, power) | None`` (the forecast's
+    variance taken as proportional to the value to that power; read where present, for
+    the NIS warning's remedy)."""
 
     name: str
     position: tuple[str, ...]
@@ -885,6 +894,9 @@ class Declared(Protocol):
     calibrating_channels: tuple[str, ...]
     """Its innovation channels whose innovations correct a published sigma both ways:
     below their band, information (``nis_corrected``), not ``nis_out_of_band``."""
+    regression_channels: tuple[str, ...]
+    """Its innovation channels that are a regression's a-priori residuals: out of their
+    band on either side, information (``nis_unpublished``), not ``nis_out_of_band``."""
     frame: LocalFrame | None
     """The local frame about its first fix (None before it)."""
     frame_offset: tuple[float, float] | None
