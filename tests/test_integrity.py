@@ -450,7 +450,7 @@ def test_a_channel_is_judged_against_the_sigma_its_pipeline_publishes() -> None:
 
     rng = np.random.default_rng(5)
     nis = (0.25 * rng.chisquare(2, 4 * NIS_BLOCK_UPDATES)).tolist()
-    recs = [Innovation(channel="velocity", t=0.1 * k, z=(0.1, 0.1), S=(0.1, 0, 0, 0.1),
+    recs = [Innovation(channel="velocity", t=0.5 * k, z=(0.1, 0.1), S=(0.1, 0, 0, 0.1),
                        nis=x, dof=2) for k, x in enumerate(nis)]
     for published, flagged in (({"velocity": lambda: 0.25}, False), ({}, True)):
         alerts = Alerts()

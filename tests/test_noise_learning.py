@@ -155,7 +155,7 @@ def _nis_alerts(scale: NoiseScale, nis: float, unpublished: tuple[str, ...] = ()
     pipe.calibrating_channels = calibrating
     mon.watch([pipe])
     from onboard.core.messages import Innovation
-    mon.innovations("aie", [Innovation(channel="x", t=0.1 * i, z=(0.0,), S=(1.0,), nis=nis,
+    mon.innovations("aie", [Innovation(channel="x", t=0.5 * i, z=(0.0,), S=(1.0,), nis=nis,
                                        dof=1, gate=400.0, accepted=True)
                             for i in range(400)])
     return alerts, mon

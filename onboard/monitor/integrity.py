@@ -29,20 +29,25 @@ published records and the innovation records, and runs these checks:
   narrower than the NIS of sigmas within the 1-sigma coverage target
   (:data:`NIS_COVERAGE_TARGET`);
   ``nis_out_of_band`` after :data:`NIS_SUSTAIN_BLOCKS` blocks in a row outside it on the
-  same side (too large: sigmas too small; too small: sigmas too large). A channel whose
+  same side (too large: sigmas too small; too small: sigmas too large); below the band,
+  not judged within :data:`NIS_SETTLE_S` of the channel's filter's start or restart (a
+  filter converging from a wide prior; above it is judged from the start). A channel whose
   pipeline learns its measurement noise (the pipeline's ``noise``,
   :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
   is learned: an NIS out of band first drives the adaptation, and the warning says what
   is still inconsistent after it (the learned noise at its bound: the configuration key
   to change and the learned value; a noise learned below the declared that the update
-  does not take, the same; else the forecast's share). A channel whose factor a
+  does not take, the same; else the process-noise key the pipeline names for the
+  channel's forecast, ``forecast_noise``, with the value that brings the NIS to 1 from
+  its mean and the forecast's share of ``S``). A channel whose factor a
   published sigma takes (``ChannelNoise.published_factor``, algorithms.md §9.1) is judged
   against that sigma: its NIS over the factor. The pipeline is flagged. Below its band
   on one of the pipeline's ``unpublished_channels`` (a forecast of what it publishes
   without a sigma, algorithms.md §9.2) the NIS is information, ``nis_unpublished`` once
   per channel, not flagged; on one of its ``calibrating_channels`` (whose innovations
   correct the published sigma both ways, the filter's gain keeping its tuning) the same,
-  ``nis_corrected``.
+  ``nis_corrected``; on one of its ``regression_channels`` (a regression's residual, whose
+  ``S`` no gain uses) ``nis_unpublished`` on either side.
 * **position consistency** (:class:`PositionNeesCheck`): where a fix is better than the
   estimate (the published variance :data:`POSITION_NEES_FIX_RATIO` times the fix's), the NEES of the published position
   against it, ``d^T (P + R_fix)^-1 d`` (2 dof), by blocks as the NIS;
@@ -233,6 +238,21 @@ block keeps at least ``(1 - 0.9) / (1 + 0.9)`` of its updates (5 of 100), so a c
 whose NIS wanders slowly is still judged."""
 NIS_RHO_MEMORY = 0.5
 """Weight of the earlier blocks' sums in the lag-1 autocorrelation (per block)."""
+NIS_SETTLE_S = 120.0
+"""A channel's NIS *below* its band is not judged within this long (s) of its filter's
+start (the channel's first accepted update, or its first after the pipeline restarted the
+filter: :data:`RESTART_REASONS`). A filter converging from a prior that is wide on purpose
+has a forecast larger than its errors until the prior is forgotten, so its innovations are
+smaller than their ``S`` whatever its steady state will be; issue 32's calibration bands
+pool after 120 s for that reason. Measured on the harness's clean boat logs: the current's
+velocity rows below their band only before 80-120 s (their innovations' lag-1
+autocorrelation -0.3 to -0.45 there, the gain above the optimal one; the current's
+covariance still shrinking 2-100 fold), in band after it. *Above* the band is judged from
+the start: a filter more confident than its errors while it converges is a real miss
+(docs/integrity.md, "The clean simulator logs")."""
+RESTART_REASONS = frozenset({"restart", "diverged"})
+"""Reasons of a rejected innovation record that say the pipeline restarted the channel's
+filter from its prior (``onboard.pipelines.current.REASONS``): its settling starts again."""
 
 
 def circular_mean(angles: Iterable[float]) -> float:
@@ -292,6 +312,43 @@ def nis_band(dof: int, n: float = NIS_BLOCK_UPDATES, p: float = NIS_BAND
     lo, hi = chi2_mean_band(n, dof, p)
     c_lo, c_hi = calibrated_nis()
     return min(lo, dof * c_lo), max(hi, dof * c_hi)
+
+
+FORECAST_FACTOR_MIN = 0.01
+"""The smallest factor on a forecast's variance a remedy names (:meth:`IntegrityMonitor.
+_forecast_remedy`): innovations smaller than the measurement noise alone explains give no
+factor from the data, and the remedy says so."""
+NIS_DIGITS = (2, 6)
+"""Decimals of a printed NIS and band: the fewest from the first at which the mean and
+both edges read apart, at most the second (a mean 3.2746 outside [0.09, 3.2743] never
+reads "3.27 outside [0.09, 3.27]")."""
+
+
+def _nis_vs_band(check: NisCheck, word: str = "outside") -> str:
+    """``"<mean> <word> [lo, hi]"`` with :data:`NIS_DIGITS` decimals."""
+    lo, hi = check.band
+    m = check.mean
+    d = NIS_DIGITS[0]
+    while d < NIS_DIGITS[1] and f"{m:.{d}f}" in (f"{lo:.{d}f}", f"{hi:.{d}f}"):
+        d += 1
+    return f"{m:.{d}f} {word} [{lo:.{d}f}, {hi:.{d}f}]"
+
+
+def _learned_key(n: object) -> str:
+    """``<key> = <learned one-sigma> (declared <value> <unit>)`` of a learned noise."""
+    return (f"{n.key} = {n.std:.3g} (declared {n.declared:.3g} "  # type: ignore[attr-defined]
+            f"{n.unit})")  # type: ignore[attr-defined]
+
+
+def _forecast_share(n: object | None) -> float:
+    """The forecast's share of ``S`` (``tr(H P_f H^T) / tr(S)``) from a channel's learned
+    noise: its windowed forecast ``f_k`` over ``f_k`` plus the noise applied (both over
+    the declared); 1 where it has no sample (its forecast always above
+    ``FORECAST_SHARE_MAX`` times the noise) or learns none."""
+    f = getattr(n, "forecast", 0.0)
+    if n is None or not getattr(n, "n", 0) or f <= 0.0:
+        return 1.0
+    return f / (f + n.applied)  # type: ignore[attr-defined]
 
 
 class HeadingCourseCheck:
@@ -653,8 +710,8 @@ class NisCheck:
             the run's failures, not one per excursion.
     """
 
-    __slots__ = ("dof", "mean", "rho", "band", "outside", "first_failed", "_n", "_sx",
-                 "_sxx", "_sxy", "_first", "_prev", "_sv", "_sc")
+    __slots__ = ("dof", "mean", "rho", "band", "outside", "first_failed", "t_start",
+                 "_n", "_sx", "_sxx", "_sxy", "_first", "_prev", "_sv", "_sc")
 
     def __init__(self, dof: int) -> None:
         self.dof = dof
@@ -663,6 +720,9 @@ class NisCheck:
         self.band = nis_band(dof)
         self.outside = 0
         self.first_failed: float | None = None
+        self.t_start: float | None = None
+        """When (s) the channel's filter started (or restarted): the monitor's settling
+        clock (:data:`NIS_SETTLE_S`); None before its first accepted update."""
         self._sv = self._sc = 0.0   # pooled deviation power and lag-1 product
         self._reset()
 
@@ -677,8 +737,10 @@ class NisCheck:
         the same side."""
         return abs(self.outside) >= NIS_SUSTAIN_BLOCKS
 
-    def add(self, nis: float) -> bool:
-        """One accepted update's NIS; returns :attr:`failing`."""
+    def add(self, nis: float, settling: bool = False) -> bool:
+        """One accepted update's NIS; ``settling``: the filter still settles from its
+        prior (a block that ends so is not judged below its band). Returns
+        :attr:`failing`."""
         if self._n:
             self._sxy += nis * self._prev
         else:
@@ -688,11 +750,13 @@ class NisCheck:
         self._sxx += nis * nis
         self._prev = nis
         if self._n >= NIS_BLOCK_UPDATES:
-            self._judge()
+            self._judge(settling)
         return abs(self.outside) >= NIS_SUSTAIN_BLOCKS
 
-    def _judge(self) -> None:
-        """The block's mean against its band; the next block starts."""
+    def _judge(self, settling: bool = False) -> None:
+        """The block's mean against its band (below it not judged while ``settling``:
+        such a block neither counts towards :data:`NIS_SUSTAIN_BLOCKS` nor extends a run
+        below); the next block starts."""
         n, sx = self._n, self._sx
         m = sx / n
         dev = self._sxx - n * m * m
@@ -702,7 +766,7 @@ class NisCheck:
         self.rho = self._sc / self._sv if self._sv > 0.0 else 0.0
         self.band = lo, hi = nis_band(self.dof, effective_count(n, self.rho))
         self.mean = m
-        side = 1 if m > hi else -1 if m < lo else 0
+        side = 1 if m > hi else -1 if m < lo and not settling else 0
         self.outside = (self.outside + side if side and self.outside * side >= 0
                         else side)
         self._reset()
@@ -805,7 +869,11 @@ class PositionNeesCheck(NisCheck):
 
 class Declared(Protocol):
     """A pipeline as the monitor sees it: its name and the roles it declares
-    (``onboard.pipelines.base.Pipeline`` documents them)."""
+    (``onboard.pipelines.base.Pipeline`` documents them). It may also name, per innovation
+    channel, the configuration key whose process noise sets that channel's forecast:
+    ``forecast_noise(channel) -> (key, value, unit, power) | None`` (the forecast's
+    variance taken as proportional to the value to that power; read where present, for
+    the NIS warning's remedy)."""
 
     name: str
     position: tuple[str, ...]
@@ -826,6 +894,9 @@ class Declared(Protocol):
     calibrating_channels: tuple[str, ...]
     """Its innovation channels whose innovations correct a published sigma both ways:
     below their band, information (``nis_corrected``), not ``nis_out_of_band``."""
+    regression_channels: tuple[str, ...]
+    """Its innovation channels that are a regression's a-priori residuals: out of their
+    band on either side, information (``nis_unpublished``), not ``nis_out_of_band``."""
     frame: LocalFrame | None
     """The local frame about its first fix (None before it)."""
     frame_offset: tuple[float, float] | None
@@ -1317,14 +1388,19 @@ class IntegrityMonitor:
             nis = rec.nis
             if not rec.accepted or not math.isfinite(nis) \
                     or rec.channel in NIS_EXEMPT_CHANNELS:
+                if rec.reason in RESTART_REASONS and per and rec.channel in per:
+                    per[rec.channel].t_start = None  # settles again from its prior
                 continue
             if per is None:
                 per = self.nis[pipeline] = {}
             check = per.get(rec.channel)
             if check is None or check.dof != rec.dof:
                 check = per[rec.channel] = NisCheck(rec.dof)
+            if check.t_start is None:
+                check.t_start = rec.t
             was = self._failing(pipeline, rec.channel, check)
-            check.add(nis / self._published_factor(pipeline, rec.channel))
+            check.add(nis / self._published_factor(pipeline, rec.channel),
+                      rec.t - check.t_start < NIS_SETTLE_S)
             if not check._n:  # a block was judged: its mean into the run's
                 self._run_mean(pipeline, rec.channel, check, rec.t)
             now = (self._failing(pipeline, rec.channel, check)
@@ -1334,18 +1410,17 @@ class IntegrityMonitor:
                     check.first_failed = rec.t
                 if self._due("nis_out_of_band", pipeline, rec.t, rec.channel):
                     self._nis_warning(pipeline, rec.channel, check, rec.t)
-            elif check.failing and check.outside < 0 and self._adapted(pipeline, rec.channel):
-                self._below_band_note(pipeline, rec.channel, check, rec.t)
+            elif check.failing and self._adapted(pipeline, rec.channel):
+                self._band_note(pipeline, rec.channel, check, rec.t)
             if now != was:
                 self._flag(pipeline, "nis_out_of_band", any(
                     self._failing(pipeline, c, k) for c, k in per.items()))
 
     def _failing(self, pipeline: str, channel: str, check: NisCheck) -> bool:
-        """Whether the channel's check fails as an inconsistency: not below the band on
-        one of the pipeline's ``unpublished_channels`` or ``calibrating_channels``
-        (information there, :meth:`_below_band_note`)."""
-        return check.failing and not (check.outside < 0
-                                      and self._below_is_information(pipeline, channel))
+        """Whether the channel's check fails as an inconsistency: not on a side where its
+        band is information (:meth:`_is_information`, :meth:`_band_note`)."""
+        return check.failing and not self._is_information(pipeline, channel,
+                                                          check.outside > 0)
 
     def _run_mean(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
         """The block ``check`` has just judged into the channel's run mean;
@@ -1419,74 +1494,130 @@ class IntegrityMonitor:
         return (learned is None or bool(getattr(learned, "learned", True))
                 or getattr(learned, "n", 0) == 0)
 
-    def _below_is_information(self, pipeline: str, channel: str) -> bool:
-        """Whether ``channel``'s NIS below its band is information: one of the pipeline's
+    def _is_information(self, pipeline: str, channel: str, above: bool) -> bool:
+        """Whether ``channel``'s NIS out of its band on that side is information: either
+        side on one of the pipeline's ``regression_channels``; below on one of its
         ``unpublished_channels`` or ``calibrating_channels``."""
         p = self.watched.get(pipeline)
-        return (channel in getattr(p, "unpublished_channels", ())
-                or self._calibrating(pipeline, channel))
+        if channel in getattr(p, "regression_channels", ()):
+            return True
+        return not above and (channel in getattr(p, "unpublished_channels", ())
+                              or self._calibrating(pipeline, channel))
 
     def _calibrating(self, pipeline: str, channel: str) -> bool:
         """Whether ``channel`` is one of the pipeline's ``calibrating_channels``."""
         return channel in getattr(self.watched.get(pipeline), "calibrating_channels", ())
 
-    def _below_band_note(self, pipeline: str, channel: str, check: NisCheck,
-                          t: float) -> None:
-        """Once per channel and run: the channel's NIS below its band as information (no
-        flag): ``nis_unpublished``, the forecast of a quantity published without a sigma
-        is conservative; ``nis_corrected``, the filter's forecast is conservative and the
-        published sigma, corrected from these innovations, is not."""
+    def _band_note(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
+        """Once per channel, side and run: the channel's NIS out of its band as
+        information (no flag; :meth:`_is_information`): ``nis_unpublished``, a
+        regression's residual or the forecast of a quantity published without a sigma;
+        ``nis_corrected``, the filter's forecast is conservative and the published sigma,
+        corrected from these innovations, is not."""
+        above = check.outside > 0
         noted = self._noted_below.setdefault(pipeline, [])
-        if channel in noted:
+        tag = channel + (" (above)" if above else "")
+        if tag in noted:
             return
         before = f" (noted before: {', '.join(noted)})" if noted else ""
-        noted.append(channel)
-        lo, hi = check.band
-        if self._calibrating(pipeline, channel):
-            code, what, why = "nis_corrected", (
-                "the channel's innovations correct the published sigma both ways, and the "
-                "forecast the filter's gain uses is more conservative than they show (its "
-                f"process noise in [pipelines.{pipeline}], set for the controller)"), (
-                "the published sigma is narrowed from these innovations (algorithms.md "
-                "§5.1); the filter's covariance keeps its tuning")
-        else:
-            code, what, why = "nis_unpublished", (
-                "the channel forecasts what the pipeline publishes without a sigma, and "
-                "that forecast is more conservative than its innovations show (its "
-                f"process noise in [pipelines.{pipeline}])"), (
-                "no published sigma takes a factor from these channels (algorithms.md "
-                "§9.2)")
+        noted.append(tag)
+        code, what, why = self._note_text(pipeline, channel, above)
         self.alerts.warn(code, (
-            f"{pipeline} {channel}: mean NIS {check.mean:.2f} below [{lo:.2f}, {hi:.2f}]: "
-            f"information, not an inconsistency: {what}{before} (docs/integrity.md)"), t,
+            f"{pipeline} {channel}: mean NIS {_nis_vs_band(check, 'above' if above else 'below')}"
+            ": information, not an "
+            f"inconsistency: {what}{before} (docs/integrity.md)"), t,
             pipeline=pipeline, details=(
                 f"each block of {NIS_BLOCK_UPDATES} updates against its {NIS_BAND:.0%} "
                 f"band, for {abs(check.outside)} blocks in a row (dof {check.dof}; lag-1 "
                 f"autocorrelation {check.rho:.2f}); {why}"))
 
-    def _nis_remedy(self, pipeline: str, channel: str, above: bool) -> str:
-        """What to change: the learned noise's key and value when it sits at its bound on
-        the failing side, else the forecast's share (the pipeline's model and process
-        noise)."""
+    def _note_text(self, pipeline: str, channel: str, above: bool) -> tuple[str, str, str]:
+        """The code, what the note says and why, for :meth:`_band_note`."""
+        if channel in getattr(self.watched.get(pipeline), "regression_channels", ()):
+            return "nis_unpublished", (
+                "the channel is a regression's a-priori residual, whose variance is the "
+                "regression's own running mean of its residuals: no gain uses it and no "
+                "published sigma takes it; its residual is "
+                + ("larger than that mean (a manoeuvre, the coefficients still converging)"
+                   if above else "smaller than that mean (a straight leg, its start)")
+                + f"; the mean's memory is [pipelines.{pipeline}]'s forgetting"), (
+                "no configuration key sets that variance; it follows the residuals over "
+                "the regression's forgetting memory (algorithms.md §9.2)")
+        if self._calibrating(pipeline, channel):
+            return "nis_corrected", (
+                "the channel's innovations correct the published sigma both ways, and the "
+                "forecast the filter's gain uses is more conservative than they show (its "
+                f"process noise in [pipelines.{pipeline}], set for the controller)"), (
+                "the published sigma is narrowed from these innovations (algorithms.md "
+                "§5.1); the filter's covariance keeps its tuning")
+        return "nis_unpublished", (
+            "the channel forecasts what the pipeline publishes without a sigma, and "
+            "that forecast is more conservative than its innovations show (its "
+            f"process noise in [pipelines.{pipeline}])"), (
+            "no published sigma takes a factor from these channels (algorithms.md "
+            "§9.2)")
+
+    def _nis_remedy(self, pipeline: str, channel: str, check: NisCheck) -> str:
+        """What to change, with the key and a value from the data: the learned noise's
+        when it sits at its bound on the failing side, or is learned below the declared
+        and not applied; else the process noise that sets the channel's forecast
+        (:meth:`_forecast_remedy`)."""
+        above = check.mean > check.band[1]
         n = self._learned(pipeline, channel)
-        forecast = (f"its measurement noise is learned, the rest is the forecast's: the "
-                    f"model or process noise in [pipelines.{pipeline}]")
-        if n is None:
-            return f"its noise is set in [pipelines.{pipeline}]"
-        bound = n.at_bound  # type: ignore[attr-defined]
-        if not above and not n.identified:  # type: ignore[attr-defined]
-            return (f"the innovations are smaller than its forecast alone explains: the "
-                    f"model's process noise in [pipelines.{pipeline}] is set higher than "
-                    f"they show ({n.key} cannot be learned from them)")  # type: ignore[attr-defined]
-        if bound == (1 if above else -1):
-            return (f"its learned noise is at its {'ceiling' if above else 'floor'}: set "
-                    f"{n.key} = {n.std:.3g} (declared {n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
-        if not above and n.scale < 1.0 and n.applied == 1.0:  # type: ignore[attr-defined]
-            return (f"its noise is learned below the declared and not applied (the filter "
-                    f"keeps the declared): set {n.key} = {n.std:.3g} (declared "  # type: ignore[attr-defined]
-                    f"{n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
-        return (f"{forecast} (learned {n.key} = {n.std:.3g}, declared "  # type: ignore[attr-defined]
-                f"{n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
+        if n is not None and n.learned and (above or n.identified):  # type: ignore[attr-defined]
+            if n.at_bound == (1 if above else -1):  # type: ignore[attr-defined]
+                return (f"its learned noise is at its {'ceiling' if above else 'floor'}: "
+                        f"set {_learned_key(n)}")
+            if not above and n.scale < 1.0 and n.applied == 1.0:  # type: ignore[attr-defined]
+                return ("its noise is learned below the declared and not applied (the "
+                        f"filter keeps the declared): set {_learned_key(n)}")
+        forecast = self._forecast_remedy(pipeline, channel, check, n)
+        if n is not None and n.learned and n.identified:  # type: ignore[attr-defined]
+            return (f"its measurement noise is learned ({_learned_key(n)}), the rest is "
+                    f"the forecast's: {forecast}")
+        if n is not None and not above:
+            return (f"the innovations are smaller than its forecast alone explains "
+                    f"({n.key} cannot be learned from them): {forecast}")  # type: ignore[attr-defined]
+        return forecast
+
+    def _forecast_remedy(self, pipeline: str, channel: str, check: NisCheck,
+                         n: object | None) -> str:
+        """The process noise that sets the channel's forecast, scaled so that the NIS
+        comes to 1 (algorithms.md §9.2): with ``r`` the filter's own block-mean NIS per
+        degree of freedom and ``phi`` the forecast's share of ``S``, the forecast's
+        variance times ``c = 1 + (r - 1) / phi``; the key the pipeline names for the
+        channel (``forecast_noise``), its variance in proportion to the forecast's. Where
+        ``c`` would be below :data:`FORECAST_FACTOR_MIN` the measurement noise alone is
+        larger than the innovations: its key and the value ``r / (1 - phi)`` of the noise
+        applied. Where the NIS is above its band only against a published sigma narrowed
+        by its consistency factor (``r`` at most 1), that factor is what is wrong."""
+        pf = self._published_factor(pipeline, channel)
+        r = check.mean * pf / check.dof
+        if check.mean > check.band[1] and r <= 1.0:
+            return (f"the filter's own innovations are within what it expects (NIS {r:.3g} "
+                    f"per degree of freedom); the published sigma's consistency factor "
+                    f"{pf:.2g} on its variance (algorithms.md §9.1) narrows it below them: "
+                    f"no key of [pipelines.{pipeline}] sets that factor")
+        phi = _forecast_share(n)
+        c = 1.0 + (r - 1.0) / phi
+        quiet = ""
+        if c < FORECAST_FACTOR_MIN and n is not None and phi < 1.0:
+            s = r / (1.0 - phi)
+            quiet = (f"; the innovations are smaller than its measurement noise alone "
+                     f"({s:.2g} of its variance): set {n.key} = "  # type: ignore[attr-defined]
+                     f"{n.declared * math.sqrt(n.applied * s):.3g} (declared "  # type: ignore[attr-defined]
+                     f"{n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
+        c = max(c, FORECAST_FACTOR_MIN)
+        how = (f"the forecast's variance times {c:.2g} brings the NIS to 1 (the filter's "
+               f"own NIS {r:.3g} per degree of freedom, the forecast {phi:.0%} of S)")
+        name = getattr(self.watched.get(pipeline), "forecast_noise", None)
+        key = name(channel) if name is not None else None
+        if key is None:
+            return f"the process noise in [pipelines.{pipeline}]: {how}{quiet}"
+        k, value, unit, power = key
+        return (f"the forecast's process noise: set {k} = {value * c ** (1.0 / power):.3g} "
+                f"(now {value:.3g} {unit}; {how}, taken in proportion to this key's "
+                f"variance){quiet}")
 
     def _nis_warning(self, pipeline: str, channel: str, check: NisCheck, t: float) -> None:
         lo, hi = check.band
@@ -1494,14 +1625,11 @@ class IntegrityMonitor:
                if check.mean > hi else "smaller than the filter expects: its sigmas are "
                "larger than its errors")
         self._warn("nis_out_of_band", pipeline, t, (
-            f"{pipeline} {channel}: mean NIS {check.mean:.2f} outside [{lo:.2f}, {hi:.2f}], "
-            f"the innovations {how}; {self._nis_remedy(pipeline, channel, check.mean > hi)} "
-            "(docs/integrity.md)"), details=(
+            f"{pipeline} {channel}: mean NIS {_nis_vs_band(check)}, the innovations {how}; "
+            f"{self._nis_remedy(pipeline, channel, check)} (docs/integrity.md)"), details=(
             f"each block of {NIS_BLOCK_UPDATES} updates against its {NIS_BAND:.0%} band, "
             f"for {abs(check.outside)} blocks in a row (dof {check.dof}; lag-1 "
-            f"autocorrelation {check.rho:.2f})"
-            + ("; or its measurement noise is set too high" if check.mean < lo else "")),
-            key=channel, t_start=check.first_failed)
+            f"autocorrelation {check.rho:.2f})"), key=channel, t_start=check.first_failed)
 
     # ------------------------------------------------------------------ flags
     def _flag(self, pipeline: str, code: str, on: bool) -> None:

@@ -77,6 +77,12 @@ class Pipeline(Protocol):
       band there says the filter's forecast is conservative and the published sigma
       already narrowed (the integrity monitor says so once, ``nis_corrected``); above its
       band it is ``nis_out_of_band`` as on every channel.
+    * ``regression_channels``: its innovation channels that are a regression's a-priori
+      residuals rather than a filter's measurement updates (the current's yaw RLS): their
+      predicted variance is the regression's own running residual variance, which no
+      gain uses and no published sigma takes, so their NIS out of its band on either
+      side is information (``nis_unpublished``), never ``nis_out_of_band``
+      (algorithms.md §9.2).
     * ``frame``: the local tangent plane about its first fix (None: no position, or no
       fix yet).
     * ``frame_offset``: where ``frame``'s origin lies in its published position (north,
@@ -93,6 +99,7 @@ class Pipeline(Protocol):
     current_estimate: tuple[str, ...] = ()
     unpublished_channels: tuple[str, ...] = ()
     calibrating_channels: tuple[str, ...] = ()
+    regression_channels: tuple[str, ...] = ()
     frame: LocalFrame | None = None
     frame_offset: tuple[float, float] | None = None
 

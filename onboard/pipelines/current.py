@@ -103,6 +103,15 @@ the split between the two is what the published current's sigma carries, and no
 innovation sees it); the yaw RLS's equation error is that of the yaw regression, whose
 coefficients the joint filter does not use."""
 
+REGRESSION_CHANNELS = ("yaw_rls",)
+"""The innovation channels that are a regression's a-priori residuals (algorithms.md §9.2):
+the yaw RLS's ``S`` is ``sigma2 (1 + phi^T P phi)``, its ``sigma2`` the forgetting-weighted
+mean of its own residuals (``yaw_forgetting``: 2000 updates), which its gain
+(``P phi / s``) does not use and no published sigma takes; its residual, a yaw
+acceleration through the state-variable filter, is correlated over seconds (lag-1 0.97 at
+10 Hz) and larger in turns than on straight legs, so its NIS swings both ways about 1 over
+a run (the bench: block means 0.03-8.3, 0.94 over 900 s)."""
+
 GAIN_DIR = CONFIG_DIR / "gains"
 """Precomputed LMI gains for the bundled configs (``onboard design-gain``)."""
 
@@ -146,12 +155,14 @@ class CurrentPipeline(Pipeline):
 
     Roles: the current and the through-water velocity it has of
     :data:`HEADING_DEPENDENT`; ``north``/``east`` its ``current_estimate``, judged
-    against the idle drift; :data:`UNPUBLISHED_CHANNELS` its ``unpublished_channels``
+    against the idle drift; :data:`UNPUBLISHED_CHANNELS` its ``unpublished_channels``,
+    :data:`REGRESSION_CHANNELS` its ``regression_channels``
     (:class:`~onboard.pipelines.base.Pipeline`).
     """
 
     name = "current"
     unpublished_channels = UNPUBLISHED_CHANNELS
+    regression_channels = REGRESSION_CHANNELS
 
     def __init__(self, cfg: CurrentConfig, kind: str, sensors: Any,
                  configured: bool, gain: GainDesign | None = None) -> None:
@@ -588,6 +599,28 @@ class CurrentPipeline(Pipeline):
         if nd == 3:
             out.update(std_down=float(std[2]), w_r=float(nu[2]))
         return out
+
+    def forecast_noise(self, channel: str) -> tuple[str, float, str, int] | None:
+        """The configuration key whose process noise dominates the forecast of the joint
+        filter's ``channel`` (``velocity``, ``dvl``, ``water_track``; None for another):
+        ``(key, its value, unit, 2)``, the forecast's variance taken in proportion to the
+        key's square (the integrity monitor's remedy, algorithms.md §9.2). Of the
+        horizontal DOFs' noise per step, §3.5: ``prior_accel_std_mps2`` on a DOF still on
+        the generic prior, ``accel_std_mps2`` on an identified one, against the current's
+        ``current_walk_mps_rts``, the largest."""
+        if channel not in CHANNELS.values():
+            return None
+        kf, cfg = self.kf, self.cfg
+        masked = self.identification.masked[:2]
+        tau = kf.model_error_time_s
+        shares = {  # each key's process-noise variance per second on the horizontal rows
+            "prior_accel_std_mps2": sum(masked) * kf.prior_accel_std ** 2 * tau,
+            "accel_std_mps2": (len(masked) - sum(masked)) * kf.accel_std ** 2 * tau
+            * kf.q_scale,
+            "current_walk_mps_rts": 2.0 * kf.current_walk ** 2 * kf.q_scale}
+        key = max(shares, key=shares.__getitem__)
+        unit = "m/s/sqrt(s)" if key == "current_walk_mps_rts" else "m/s^2"
+        return f"[pipelines.{self.name}] {key}", float(getattr(cfg, key)), unit, 2
 
     def published_factor(self) -> float:
         """The variance factor of the joint filter's published current sigma

@@ -267,6 +267,17 @@ class SurgeHeadingPipeline(Pipeline):
             surge.noise.channel: rate_factor, surge.rate_noise.channel: rate_factor},
             processes={yaw.noise.channel: yaw.process})
 
+    def forecast_noise(self, channel: str) -> tuple[str, float, str, int] | None:
+        """The configuration key whose process noise sets ``channel``'s forecast: its
+        axis's input-error variance ``[pipelines.<name>.<axis>] v_d`` with the value the
+        forecast takes now (``q V_u``, algorithms.md §9.3), its unit and power 1 (a
+        variance); None for another channel (the integrity monitor's remedy, §9.2)."""
+        for axis, unit in ((self.surge, "(m/s^2)^2"), (self.yaw, "(rad/s^2)^2")):
+            if channel.startswith(axis.name + "."):
+                return (f"[pipelines.{self.name}.{axis.name}] v_d", axis.forecast_var_u,
+                        unit, 1)
+        return None
+
     def _init_windows(self) -> None:
         """The measurement windows and the previous points of both axes."""
         cfg = self.cfg
