@@ -13,8 +13,8 @@ import random
 import pytest
 
 from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Innovation
-from onboard.monitor.alerts import Alerts
 from onboard.monitor import compass_deviation
+from onboard.monitor.alerts import Alerts
 from onboard.monitor.compass_deviation import CompassDeviation
 from onboard.monitor.integrity import (
     DEVIATION_WALD,
