@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from onboard.fleet.field import (
-    PRIOR, Averaged, CurrentField, Hyper, mixture, one_blas_thread)
+    PRIOR, Averaged, CurrentField, Hyper, SuperObs, log_likelihood, mixture, one_blas_thread)
 from tests.helpers.fleet_scenarios import UTC0, fleet
 
 COVERAGE = (0.90, 0.99)
@@ -94,11 +94,33 @@ def test_the_priors_penalty_and_its_gradient():
     theta = np.log(np.array(Hyper(0.05, 0.3, 120.0, 900.0, 0.7, 200.0, 0.01)))
     pen, grad = PRIOR.penalty(theta)
     assert PRIOR.penalty(np.log(np.array(PRIOR.median)))[0] == pytest.approx(0.0)
-    for j in range(7):
-        d = np.zeros(7)
+    for j in range(len(theta)):
+        d = np.zeros(len(theta))
         d[j] = 1e-6
         num = (PRIOR.penalty(theta + d)[0] - PRIOR.penalty(theta - d)[0]) / 2e-6
         assert grad[j] == pytest.approx(num, rel=1e-5)
+
+
+def test_the_likelihoods_gradient_in_every_hyperparameter():
+    """The analytic gradient of the marginal likelihood (docs/algorithms.md §8.3) in
+    every hyperparameter, against central differences."""
+    rng = np.random.default_rng(1)
+    n = 40
+    x = np.column_stack([rng.uniform(0, 500, n), rng.uniform(0, 500, n),
+                         np.sort(rng.uniform(0, 1800, n))])
+    y = np.column_stack([rng.normal(0, 0.1, (n, 2)), np.full(n, np.nan)])
+    vehicle = rng.integers(0, 4, n)
+    obs = SuperObs(x, y, np.full((n, 3), 0.02), vehicle, x[:, 2],
+                   [(str(v), i) for i, v in enumerate(vehicle)], rng.uniform(0, 20, n))
+    placed = rng.uniform(0, 1e-4, (n, 2))
+    theta = np.log(np.array(Hyper(0.05, 0.3, 120.0, 900.0, 0.7, 200.0, 0.01)))
+    _, grad = log_likelihood(theta, obs, np.zeros(3), placed)
+    for j in range(len(theta)):
+        d = np.zeros(len(theta))
+        d[j] = 1e-6
+        num = (log_likelihood(theta + d, obs, np.zeros(3), placed)[0] -
+               log_likelihood(theta - d, obs, np.zeros(3), placed)[0]) / 2e-6
+        assert grad[j] == pytest.approx(num, rel=1e-5, abs=1e-6), j
 
 
 def test_the_mixture_is_the_law_of_total_variance():
