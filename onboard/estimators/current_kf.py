@@ -36,15 +36,6 @@ Measurement noise learned both ways: each measurement kind's noise ``R = s std^2
 its own variance scale ``s`` learned from its innovations by covariance matching
 (algorithms.md §9, :class:`.NoiseScale`), after the first ``START_UPDATES``.
 
-The generic prior's process noise learned down: a DOF still on the generic prior takes
-``prior_accel_std^2 q`` (:meth:`prior_accel_var`), ``q`` learned from the velocity-over-
-ground rows by the rule of algorithms.md §9.3 (:class:`.ProcessScale`): it shrinks while
-their innovations are smaller than the forecast alone explains and negatively correlated
-(a gain above the optimal one: the forecast too wide, Mehra 1970), and grows back when
-they say the opposite. On a lawnmower's straight legs the generic prior's 0.3 m/s^2 keeps
-the velocity forecast wide while the through-water velocity barely changes: the current's
-sigma several times its error, and the published factor withheld (§9.1).
-
 Model coefficients: their covariance always flows into ``nu_r`` (and so into the current),
 also while they are not being identified (consider parameters: the gain rows of ``theta``
 are zero, Schmidt 1966), so a model identified elsewhere (its persistent state carries the
@@ -62,7 +53,7 @@ import numpy as np
 
 from onboard.estimators import kalman
 from onboard.estimators.model_identification import ModelIdentification
-from onboard.estimators.noise_learning import NoiseScale, ProcessScale
+from onboard.estimators.noise_learning import NoiseScale
 from onboard.estimators.vehicle_models import ModelInputs
 
 MeasurementKind = Literal["earth", "bottom", "water"]
@@ -154,9 +145,6 @@ class CurrentKalmanFilter:
         counters: its event counts (:class:`FilterCounters`).
         noise: per measurement kind its learned noise scale (:class:`.NoiseScale`; the
             owner may replace them with ones that name their configuration keys).
-        prior_process: the learned scale of the generic prior's process noise
-            (:meth:`prior_accel_var`), taught by the velocity-over-ground rows while a
-            velocity DOF is on the generic prior.
         learn_noise: whether the updates teach them (the owner may turn it off).
     """
 
@@ -209,7 +197,6 @@ class CurrentKalmanFilter:
         self.noise: dict[str, NoiseScale] = {
             k: NoiseScale(k, "", 0.0, "m/s") for k in ("earth", "bottom", "water")}
         self.learn_noise = True
-        self.prior_process = ProcessScale()
         self._blk_y, self._blk_S, self._blk_n = np.zeros(nd), np.zeros((nd, nd)), 0
         self._eye_n = np.eye(n)
         self._H0 = _unrotated_measurement_matrices(nd, n)
@@ -419,8 +406,8 @@ class CurrentKalmanFilter:
         self.x[:nd] = nu
         q = self._model_error(nu, inputs, dt)
         for i in range(nd):
-            if ident.masked[i]:  # still the generic prior, at its learned scale
-                q[i] = max(q[i], self.prior_accel_var() * self.model_error_time_s * dt)
+            if ident.masked[i]:  # still the generic prior
+                q[i] = max(q[i], self.prior_accel_std ** 2 * self.model_error_time_s * dt)
         q += [self.current_walk ** 2 * dt * self.q_scale] * nd
         P = F @ self.P @ F.T
         P.ravel()[:o * (n + 1):n + 1] += q  # a view: the product is C-contiguous
@@ -510,17 +497,9 @@ class CurrentKalmanFilter:
         if self.learn_noise and self.started and self.counters.updates > START_UPDATES:
             self.noise[kind].observe(up.y.copy(), float(np.trace(up.S)),
                                      m * std * std)
-            if kind == "earth" and any(ident.masked[:self.nd]):
-                self.prior_process.observe(self.noise[kind])
         if self.calibrate and self.started and m == self.nd:
             self._calibrate(up.y, up.S)
         return "accepted"
-
-    def prior_accel_var(self) -> float:
-        """The acceleration error variance ((m/s^2)^2) of a DOF on the generic prior:
-        ``prior_accel_std^2`` times the scale learned from the velocity-over-ground rows
-        (:attr:`prior_process`, algorithms.md §9.3)."""
-        return self.prior_accel_std ** 2 * self.prior_process.scale
 
     def noise_std(self, kind: MeasurementKind, std: float) -> float:
         """The one-sigma (m/s) a ``kind`` measurement declared at ``std`` is taken with:

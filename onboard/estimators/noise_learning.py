@@ -339,9 +339,8 @@ than the configured ``v_d``."""
 
 
 class ProcessScale:
-    """The learned scale ``q`` of a filter's process noise (algorithms.md §9.3): an axis
-    filter's input-error variance ``V_u`` (the forecast takes ``q V_u``), the current's
-    joint filter's generic-prior acceleration error (``q prior_accel_std^2``).
+    """The learned scale ``q`` of an axis filter's process noise (its input-error variance
+    ``V_u``, algorithms.md §9.3): the forecast takes ``q V_u``.
 
     Covariance matching on the forecast's side (Mehra 1972; the adaptive ``V_d`` of the
     AIE papers, §2.8): where the channel's measurement noise is learned and its

@@ -606,8 +606,7 @@ class CurrentPipeline(Pipeline):
         ``(key, its value, unit, 2)``, the forecast's variance taken in proportion to the
         key's square (the integrity monitor's remedy, algorithms.md §9.2). Of the
         horizontal DOFs' noise per step, §3.5: ``prior_accel_std_mps2`` on a DOF still on
-        the generic prior (with the value the forecast takes, its learned scale included,
-        algorithms.md §9.3), ``accel_std_mps2`` on an identified one, against the current's
+        the generic prior, ``accel_std_mps2`` on an identified one, against the current's
         ``current_walk_mps_rts``, the largest."""
         if channel not in CHANNELS.values():
             return None
@@ -615,15 +614,13 @@ class CurrentPipeline(Pipeline):
         masked = self.identification.masked[:2]
         tau = kf.model_error_time_s
         shares = {  # each key's process-noise variance per second on the horizontal rows
-            "prior_accel_std_mps2": sum(masked) * kf.prior_accel_var() * tau,
+            "prior_accel_std_mps2": sum(masked) * kf.prior_accel_std ** 2 * tau,
             "accel_std_mps2": (len(masked) - sum(masked)) * kf.accel_std ** 2 * tau
             * kf.q_scale,
             "current_walk_mps_rts": 2.0 * kf.current_walk ** 2 * kf.q_scale}
         key = max(shares, key=shares.__getitem__)
         unit = "m/s/sqrt(s)" if key == "current_walk_mps_rts" else "m/s^2"
-        value = (math.sqrt(kf.prior_accel_var()) if key == "prior_accel_std_mps2"
-                 else float(getattr(cfg, key)))   # the generic prior's: as the forecast takes it
-        return f"[pipelines.{self.name}] {key}", value, unit, 2
+        return f"[pipelines.{self.name}] {key}", float(getattr(cfg, key)), unit, 2
 
     def published_factor(self) -> float:
         """The variance factor of the joint filter's published current sigma
@@ -813,9 +810,7 @@ def _identification(cfg: CurrentConfig, model: RegressionModel) -> ModelIdentifi
 def _learned_noise(kf: CurrentKalmanFilter, cfg: CurrentConfig,
                    sensors: Any) -> ChannelNoise:
     """One :class:`.NoiseScale` per measurement kind of ``kf``, named by its channel and
-    the configuration key that declares its noise, given to ``kf`` which learns it (and
-    with the velocity over ground, the generic prior's process-noise scale
-    :attr:`.CurrentKalmanFilter.prior_process`); not on
+    the configuration key that declares its noise, given to ``kf`` which learns it; not on
     a glider (``[pipelines.current.glider]``): its velocities come from its flight model
     and a DVL whose errors last a dive, not white, and the matching does not hold (learned,
     the Kolumbo current got worse than zero north, 0.21 -> 0.27 m/s)."""
@@ -828,11 +823,7 @@ def _learned_noise(kf: CurrentKalmanFilter, cfg: CurrentConfig,
     for kind, (key, std) in (("earth", gnss), ("bottom", dvl), ("water", dvl)):
         kf.noise[kind] = NoiseScale(CHANNELS[kind], key, std, "m/s")
     kf.learn_noise = cfg.glider is None
-    if not kf.learn_noise:
-        return ChannelNoise([])
-    # the generic prior's process noise, learned from the velocity-over-ground rows (§9.3)
-    return ChannelNoise(list(kf.noise.values()),
-                        processes={CHANNELS["earth"]: kf.prior_process})
+    return ChannelNoise(list(kf.noise.values()) if kf.learn_noise else [])
 
 
 def _joint_filter(cfg: CurrentConfig, ident: ModelIdentification) -> CurrentKalmanFilter:
