@@ -53,10 +53,12 @@ The predictive sigma is scaled by what the fleet's own windows show: each predic
 the other vehicles misses by more or less than the process says (:func:`calibration`,
 learned with the hyperparameters; it only widens).
 
-A record without a current (``north``/``east``: withheld by an integrity check, not yet
-converged, not finite) or without its sigma or time or position is not an observation; a
-super-observation further than :data:`OUTLIER_SIGMA` predictive sigmas from what the other
-vehicles say at its place is an outlier and left out.
+A record without time or position, or without either component of the current with a
+converged sigma (withheld by an integrity check, not yet converged, not finite), is not
+an observation; one that gives one component is an observation of that component, and a
+super-observation's other component is NaN, as a boat's down is. A super-observation
+further than :data:`OUTLIER_SIGMA` predictive sigmas from what the other vehicles say at
+its place is an outlier and left out.
 """
 
 from __future__ import annotations
@@ -103,7 +105,7 @@ VARIANCE_SCALE_BOUNDS = (1.0, 25.0)
 """Bounds of the learned scale of the field's predictive variance (:func:`calibration`):
 its sigma never narrowed, at most five times wider."""
 MAX_STD_MPS = 0.5
-"""A record whose current sigma exceeds this (m/s) is not converged: not an observation."""
+"""A component whose sigma exceeds this (m/s) is not converged: not observed."""
 MAX_SPEED_MPS = 6.0
 """A current faster than this (m/s) is not water: not an observation."""
 SIGMA_DOWN = 0.02
