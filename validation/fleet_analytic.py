@@ -74,8 +74,9 @@ def measured_errors(obs: dict[str, list], sea, depth) -> dict[str, tuple[np.ndar
         t_d, d = depth[vid]
         truth = np.array([sea.at(o.lat_deg, o.lon_deg, float(np.interp(o.utc, t_d, d)), o.utc)
                           for o in rows])
-        est = np.array([[o.north, o.east] for o in rows])
-        out[vid] = error_model(t, est - truth)
+        est = np.array([[o.north, o.east] for o in rows], dtype=float)   # None: NaN
+        known = np.isfinite(est).all(axis=1)   # the records that give both components
+        out[vid] = error_model(t[known], (est - truth)[known])
     return out
 
 
@@ -93,9 +94,10 @@ def sampled(obs: dict[str, list], jet, errors: dict, seed: int) -> dict[str, lis
         e_n, e_e = ar1_at(rng, t, s_n, tau), ar1_at(rng, t, s_e, tau)
         c_n, c_e = jet.at(np.array([o.lat_deg for o in rows]),
                           np.array([o.lon_deg for o in rows]), 0.0, t)
-        out[vid] = [dataclasses.replace(o, north=float(c_n[i] + e_n[i]),
-                                        east=float(c_e[i] + e_e[i]), down=None, std_down=None)
-                    for i, o in enumerate(rows)]
+        out[vid] = [dataclasses.replace(  # a component the vehicle did not give stays None
+            o, north=None if o.north is None else float(c_n[i] + e_n[i]),
+            east=None if o.east is None else float(c_e[i] + e_e[i]), down=None, std_down=None)
+            for i, o in enumerate(rows)]
     return out
 
 

@@ -175,7 +175,8 @@ def one_seed(root: Path, step_s: float) -> dict:
     from validation import fleet_world as fw
 
     manifest = json.loads((root / "fleet.json").read_text())
-    obs = {v["id"]: fw.observations(root / f"replay-{v['id']}" / "estimates.mcap")[0]
+    obs = {v["id"]: fw.complete(fw.observations(root / f"replay-{v['id']}" /
+                                                "estimates.mcap")[0])
            for v in manifest["vehicles"]}
     obs = {v: rows for v, rows in obs.items() if len(rows) > 10}
     sea, depth = read_sea(root), fw.depth_of(root)

@@ -73,6 +73,12 @@ def observations(mcap: Path) -> tuple[list, dict[str, int]]:
     return obs, left
 
 
+def complete(rows: list) -> list:
+    """The observations of ``rows`` that give both horizontal components: where a
+    vehicle's own estimate is compared with the truth (the field fuses the others too)."""
+    return [o for o in rows if o.north is not None and o.east is not None]
+
+
 def depth_of(root: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Each vehicle's true (utc, depth) from ``truth-current.csv``."""
     rows: dict[str, list[tuple[float, float]]] = {}
@@ -108,7 +114,7 @@ def left_out(sea, depth, obs: dict[str, list], vehicle: str, without: set[str],
     err, own, z = [], [], []
     t_d, d = depth[vehicle]
     with one_blas_thread():
-        for o in obs[vehicle][::every]:
+        for o in complete(obs[vehicle])[::every]:
             p = field.predict(o.lat_deg, o.lon_deg, o.utc)
             if p.north is None:
                 continue

@@ -53,10 +53,12 @@ The predictive sigma is scaled by what the fleet's own windows show: each predic
 the other vehicles misses by more or less than the process says (:func:`calibration`,
 learned with the hyperparameters; it only widens).
 
-A record without a current (``north``/``east``: withheld by an integrity check, not yet
-converged, not finite) or without its sigma or time or position is not an observation; a
-super-observation further than :data:`OUTLIER_SIGMA` predictive sigmas from what the other
-vehicles say at its place is an outlier and left out.
+A record without time or position, or without either component of the current with a
+converged sigma (withheld by an integrity check, not yet converged, not finite), is not
+an observation; one that gives one component is an observation of that component, and a
+super-observation's other component is NaN, as a boat's down is. A super-observation
+further than :data:`OUTLIER_SIGMA` predictive sigmas from what the other vehicles say at
+its place is an outlier and left out.
 """
 
 from __future__ import annotations
@@ -103,7 +105,7 @@ VARIANCE_SCALE_BOUNDS = (1.0, 25.0)
 """Bounds of the learned scale of the field's predictive variance (:func:`calibration`):
 its sigma never narrowed, at most five times wider."""
 MAX_STD_MPS = 0.5
-"""A record whose current sigma exceeds this (m/s) is not converged: not an observation."""
+"""A component whose sigma exceeds this (m/s) is not converged: not observed."""
 MAX_SPEED_MPS = 6.0
 """A current faster than this (m/s) is not water: not an observation."""
 SIGMA_DOWN = 0.02
@@ -196,16 +198,18 @@ reported sigmas trusted within a factor 1.6, a vehicle's error correlated over 6
 @dataclass(frozen=True)
 class Observation:
     """One vehicle's current estimate at one instant: where (deg), when (UTC s), the
-    current (north, east; m/s) and its one-sigma (m/s)."""
+    current (north, east; m/s) and its one-sigma (m/s); a component the vehicle does not
+    know (withheld as unknown, e.g. along its track before it has turned) is None with
+    its sigma, and at least one is known."""
 
     vehicle: str
     utc: float
     lat_deg: float
     lon_deg: float
-    north: float
-    east: float
-    std_north: float
-    std_east: float
+    north: float | None
+    east: float | None
+    std_north: float | None
+    std_east: float | None
     down: float | None = None
     std_down: float | None = None
     position_std_m: float | None = None
@@ -215,9 +219,13 @@ def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
     """The observation a ``current`` record makes, or None and why not (``no_time``,
     ``no_position``, ``position_uncertain`` (its ``position_std_m`` above
     :data:`MAX_POSITION_STD_M`), ``no_current``, ``no_std``, ``not_converged``,
-    ``too_fast``). Its
-    ``down`` (and ``std_down``) only where the record gives a finite one with a converged
-    sigma (a boat's record has none: it is absent, never 0)."""
+    ``too_fast``). A horizontal component is observed where the record gives a finite
+    value with a sigma in (0, :data:`MAX_STD_MPS`]; a record observes at least one (a
+    vehicle publishes the component across its track before the one along it, which
+    needs its turns; docs/current.md), else it is no observation, for the first of
+    these reasons its components have: no value (withheld), no sigma, a sigma not
+    converged. Its ``down`` (and ``std_down``) only where the record gives a finite one
+    with a converged sigma (a boat's record has none: it is absent, never 0)."""
     v, sd = rec.values, rec.std
     if rec.utc is None:
         return None, "no_time"
@@ -226,15 +234,21 @@ def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
     p = rec.position_std_m
     if p is not None and not p <= MAX_POSITION_STD_M:
         return None, "position_uncertain"
-    n, e = v.get("north"), v.get("east")
-    if n is None or e is None or not (math.isfinite(n) and math.isfinite(e)):
-        return None, "no_current"
-    s_n, s_e = sd.get("north"), sd.get("east")
-    if s_n is None or s_e is None or not (s_n > 0.0 and s_e > 0.0):
-        return None, "no_std"
-    if s_n > MAX_STD_MPS or s_e > MAX_STD_MPS:
-        return None, "not_converged"
-    if math.hypot(n, e) > MAX_SPEED_MPS:
+    known, why = [], []
+    for ax in ("north", "east"):
+        x, s_x = v.get(ax), sd.get(ax)
+        if x is None or not math.isfinite(x):
+            known.append((None, None)), why.append("no_current")
+        elif s_x is None or not s_x > 0.0:
+            known.append((None, None)), why.append("no_std")
+        elif s_x > MAX_STD_MPS:
+            known.append((None, None)), why.append("not_converged")
+        else:
+            known.append((x, s_x))
+    (n, s_n), (e, s_e) = known
+    if n is None and e is None:
+        return None, min(why, key=("no_current", "no_std", "not_converged").index)
+    if math.hypot(n or 0.0, e or 0.0) > MAX_SPEED_MPS:
         return None, "too_fast"
     d, s_d = v.get("down"), sd.get("down")
     if d is None or s_d is None or not (math.isfinite(d) and 0.0 < s_d <= MAX_STD_MPS):
@@ -285,8 +299,8 @@ class Plane:
 
 class SuperObs(NamedTuple):
     """The super-observations as arrays: ``x`` (n, 3) north m, east m, UTC s less
-    ``t_ref``; ``y`` (n, 3) current north, east, down (m/s; down NaN in a window
-    without one); ``s`` (n, 3) their sigmas;
+    ``t_ref``; ``y`` (n, 3) current north, east, down (m/s; NaN in a window without the
+    component); ``s`` (n, 3) their sigmas;
     ``vehicle`` (n,) an integer per vehicle; ``utc`` (n,) the UTC (s); ``keys`` (vehicle
     id, window number) of each; ``place`` (n,) how far the water it observed may be
     from its place (m per axis): the RMS of its records' position sigmas (0 where they
@@ -415,16 +429,20 @@ class CurrentField:
         key = (obs.vehicle, math.floor(obs.utc / self.thin_s))
         acc = self._bins.get(key)
         if acc is None:
-            acc = self._bins[key] = [0.0] * 16
+            acc = self._bins[key] = [0.0] * 18
             self._vehicles.setdefault(obs.vehicle, len(self._vehicles))
         acc[0] += 1.0
         acc[1] += obs.utc
         acc[2] += obs.lat_deg
         acc[3] += obs.lon_deg
-        acc[4] += obs.north
-        acc[5] += obs.east
-        acc[6] += obs.std_north ** 2
-        acc[7] += obs.std_east ** 2
+        if obs.north is not None:
+            acc[16] += 1.0
+            acc[4] += obs.north
+            acc[6] += obs.std_north ** 2
+        if obs.east is not None:
+            acc[17] += 1.0
+            acc[5] += obs.east
+            acc[7] += obs.std_east ** 2
         if obs.down is not None and obs.std_down is not None:
             acc[8] += 1.0
             acc[9] += obs.down
@@ -472,14 +490,16 @@ class CurrentField:
             return None
         acc = np.array([self._bins[k] for k in keys])
         n = acc[:, :1]
-        mean = acc[:, 1:6] / n
+        mean = acc[:, 1:4] / n
         north, east = self.plane.to_ne(mean[:, 1], mean[:, 2])
         x = np.column_stack([north, east, mean[:, 0] - self.t_ref])
-        n_down = acc[:, 8:9]
-        with np.errstate(invalid="ignore", divide="ignore"):   # NaN: no down in the window
+        n_horizontal, n_down = acc[:, 16:18], acc[:, 8:9]
+        with np.errstate(invalid="ignore", divide="ignore"):   # NaN: none in the window
+            n_each = np.tile(n_horizontal, 2)   # the values' and the variances' counts
+            horizontal = np.where(n_each > 0, acc[:, 4:8] / n_each, np.nan)
             down = np.where(n_down > 0, acc[:, 9:11] / n_down, np.nan)
-        y = np.column_stack([mean[:, 3:5], down[:, 0]])
-        s = np.column_stack([np.sqrt(acc[:, 6:8] / n), np.sqrt(down[:, 1])])
+        y = np.column_stack([horizontal[:, :2], down[:, 0]])
+        s = np.column_stack([np.sqrt(horizontal[:, 2:]), np.sqrt(down[:, 1])])
         place = np.hypot(np.sqrt(acc[:, 11] / n[:, 0]),
                          memory_place(window_speed(acc, self.plane), self.memory_s))
         return SuperObs(x, y, s, np.array([self._vehicles[k[0]] for k in keys]), mean[:, 0],
@@ -496,9 +516,9 @@ class CurrentField:
             self._update(obs, hyperparameters)
 
     def _update(self, obs: SuperObs, hyperparameters: bool) -> None:
-        has_down = np.isfinite(obs.y[:, 2])
-        mean = np.r_[obs.y[:, :2].mean(axis=0),
-                     obs.y[has_down, 2].mean() if has_down.any() else 0.0]
+        mean = np.array([obs.y[np.isfinite(obs.y[:, c]), c].mean()
+                         if np.isfinite(obs.y[:, c]).any() else 0.0 for c in (NORTH, EAST, DOWN)])
+        has_down = np.isfinite(obs.y[:, DOWN])
         sparse = _vehicles(obs) < MIN_FIT_VEHICLES
         if hyperparameters and len(obs.y) >= MIN_FIT and not sparse:
             self.hyper, self.log_likelihood = fit_hyper(
@@ -591,10 +611,12 @@ def calibration(fitted: "Fitted | Averaged") -> tuple[float, float]:
                      _own_variance(h, obs, i, NORTH),
                      obs.y[i, EAST] - p.east, p.std_east ** 2,
                      _own_variance(h, obs, i, EAST)))
-    if len(rows) < CALIBRATION_MIN:
-        return 1.0, 1.0
-    a = np.array(rows)
-    return _ml_scale(*a[:, 0:3].T), _ml_scale(*a[:, 3:6].T)
+    a = np.array(rows).reshape(-1, 6)
+    scales = []
+    for part in (a[:, 0:3], a[:, 3:6]):   # a window without the component: NaN
+        part = part[np.isfinite(part[:, 0])]
+        scales.append(_ml_scale(*part.T) if len(part) >= CALIBRATION_MIN else 1.0)
+    return scales[0], scales[1]
 
 
 def _ml_scale(r: np.ndarray, v_f: np.ndarray, v_o: np.ndarray) -> float:
@@ -644,7 +666,7 @@ class Fitted:
             return UNKNOWN
         p = self.krige(x, idx)
         idx_down = self.neighbourhood(x, exclude, down=True)
-        if not idx_down.size:
+        if p.north is None or not idx_down.size:
             return p
         down, std_down = self.krige_component(x, idx_down, DOWN, self.sigma_down)
         return p._replace(down=down, std_down=std_down)
@@ -669,11 +691,18 @@ class Fitted:
 
     def krige(self, x: np.ndarray, idx: np.ndarray) -> Prediction:
         """The Gaussian-process mean and sigma of north and east at ``x`` from the
-        super-observations ``idx`` (module docstring), per component."""
+        super-observations ``idx`` (module docstring), per component from those that give
+        it (:data:`UNKNOWN` where one has none)."""
         h, xs = self.hyper, self.obs.x[idx]
         corr = (signal_corr(h, xs, xs), signal_corr(h, x[None, :], xs)[0])
-        (n, s_n), (e, s_e) = (self.krige_component(x, idx, c, sigma_f, corr)
-                              for c, sigma_f in ((NORTH, h.sigma_north), (EAST, h.sigma_east)))
+        parts = []
+        for c, sigma_f in ((NORTH, h.sigma_north), (EAST, h.sigma_east)):
+            gives = np.isfinite(self.obs.y[idx, c])
+            if not gives.any():
+                return UNKNOWN
+            own = corr if gives.all() else (corr[0][np.ix_(gives, gives)], corr[1][gives])
+            parts.append(self.krige_component(x, idx[gives], c, sigma_f, own))
+        (n, s_n), (e, s_e) = parts
         return Prediction(n, e, s_n, s_e, int(idx.size))
 
     def krige_component(self, x: np.ndarray, idx: np.ndarray, c: int, sigma_f: float,
@@ -712,7 +741,11 @@ class Fitted:
         if len(set(obs.vehicle[idx].tolist())) < JUDGES:
             return False
         p = self.krige(obs.x[i], idx)
+        if p.north is None:
+            return False
         for c, m, sd in ((NORTH, p.north, p.std_north), (EAST, p.east, p.std_east)):
+            if not np.isfinite(obs.y[i, c]):
+                continue
             var = sd ** 2 + _own_variance(h, obs, i, c)
             if abs(obs.y[i, c] - m) > OUTLIER_SIGMA * math.sqrt(var):
                 return True
@@ -828,29 +861,34 @@ def log_likelihood(theta: np.ndarray, obs: SuperObs, mean: np.ndarray,
     from scipy.linalg import cho_factor, cho_solve
 
     h = Hyper(*np.exp(theta))
-    x, n = obs.x, len(obs.y)
+    x = obs.x
     d2s = ((x[:, None, :2] - x[None, :, :2]) ** 2).sum(-1) / h.length_m ** 2
     d2t = (x[:, None, 2] - x[None, :, 2]) ** 2 / h.length_s ** 2
     corr = np.exp(-0.5 * (d2s + d2t))
     dt = np.abs(x[:, None, 2] - x[None, :, 2])
     same = (obs.vehicle[:, None] == obs.vehicle[None, :]) * np.exp(-dt / h.tau_s)
     nll, grad = 0.0, np.zeros(7)
-    eye = np.eye(n)
     for c, sigma_f in enumerate((h.sigma_north, h.sigma_east)):
-        kc = sigma_f ** 2 * corr
-        ve = np.outer(obs.s[:, c], obs.s[:, c]) * same * h.scale ** 2
+        m = np.isfinite(obs.y[:, c])   # the windows that give the component
+        if not m.any():
+            continue
+        sub = np.ix_(m, m)
+        n_c, eye = int(m.sum()), np.eye(int(m.sum()))
+        kc = sigma_f ** 2 * corr[sub]
+        ve = np.outer(obs.s[m, c], obs.s[m, c]) * same[sub] * h.scale ** 2
         k = kc + ve + h.white ** 2 * eye
         if placed is not None:
-            k = k + np.diag(placed[:, c])
+            k = k + np.diag(placed[m, c])
         try:
             factor = cho_factor(k, lower=True)
         except np.linalg.LinAlgError:
             return 1e10, np.zeros(7)
-        r = obs.y[:, c] - mean[c]
+        r = obs.y[m, c] - mean[c]
         alpha = cho_solve(factor, r)
-        nll += 0.5 * r @ alpha + np.log(np.diag(factor[0])).sum() + 0.5 * n * math.log(2 * math.pi)
+        nll += 0.5 * r @ alpha + np.log(np.diag(factor[0])).sum() + \
+            0.5 * n_c * math.log(2 * math.pi)
         w = cho_solve(factor, eye) - np.outer(alpha, alpha)
-        dks = (2.0 * kc, kc * d2s, kc * d2t, 2.0 * ve, ve * dt / h.tau_s,
+        dks = (2.0 * kc, kc * d2s[sub], kc * d2t[sub], 2.0 * ve, ve * dt[sub] / h.tau_s,
                2.0 * h.white ** 2 * eye)
         g = [(w * dk).sum() for dk in dks]
         grad += 0.5 * np.array([g[0] * (c == 0), g[0] * (c == 1), *g[1:]])
