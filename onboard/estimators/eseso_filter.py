@@ -419,7 +419,8 @@ class EsesoFilter:
         self.params = params
         c = params.vehicle
         self.m_vec = c.mass_kg + np.asarray(c.added_mass_kg, float)  # diag of M, kg
-        self.A = np.diag(np.asarray(c.added_mass_kg, float))
+        self.d_a = np.asarray(c.added_mass_kg, float)  # diag of A, kg
+        self.A = np.diag(self.d_a)
         self.d_l = np.asarray(c.damping_linear, float)
         self.d_nl = np.asarray(c.damping_quadratic, float)
         self.initialized = False
@@ -567,9 +568,9 @@ class EsesoFilter:
         outcome = Outcome.FUSED
         if self.params.noise.adapt_updates > 0:
             if channel in NOISE_ADAPT_CHANNELS:
-                Rm = Rm * self._adapt_noise(channel, y, H @ (self.P @ H.T), Rm)
+                Rm = Rm * self._adapt_noise(channel, y, self._project(H), Rm)
             elif channel == PROCESS_ADAPT_CHANNEL:
-                self._adapt_process(y, H @ (self.P @ H.T), Rm)
+                self._adapt_process(y, self._project(H), Rm)
         up = self._kalman(y, H, Rm, only)
         self.y, self.S, self.nis = y, up.S, up.nis
         if gate is None:
@@ -585,9 +586,7 @@ class EsesoFilter:
             up = self._kalman(y, H, Rm * (up.nis / gate), only)
         self._consecutive[channel] = 0
         self._record(channel, t, source, gate, accepted=True)
-        self.inject(up.x)
-        # reset (17b): G = I except the attitude block, I - [dtheta/2]x (Sola eq. 287)
-        self.P = self._reset(up.P, up.x[TH])
+        self._inject_and_reset(up.x, up.P)
         return outcome
 
     def _kalman(self, y: Array, H: Array, Rm: Array, only: slice | None
@@ -608,13 +607,36 @@ class EsesoFilter:
             raise np.linalg.LinAlgError("Singular matrix")
         return kalman.KalmanUpdate(dx, P, y, S, None, float(nis))
 
-    def _reset(self, P: Array, dtheta: Array) -> Array:
-        """:func:`reset_covariance`; with :attr:`compiled`, :func:`.eseso_kernel.reset`."""
+    def _inject_and_reset(self, dx: Array, P: Array) -> None:
+        """:meth:`inject` the correction ``dx`` and reset the updated covariance ``P``
+        (17b: ``G = I`` except the attitude block, ``I - [dtheta/2]x``, Sola eq. 287;
+        :func:`reset_covariance`); with :attr:`compiled`, both in one
+        :func:`.eseso_kernel.inject_reset`."""
         if not self.compiled:
-            return reset_covariance(P, dtheta)
+            self.inject(dx)
+            self.P = reset_covariance(P, dx[TH])
+            return
         kernel = _import_kernel()
         assert kernel is not None
-        return kernel.reset(P, dtheta)
+        (self.p, self.v, self.R, self.b_a, self.b_g, self.g, self.xi, self.b_ins,
+         self.P) = kernel.inject_reset(self.p, self.v, self.R, self.b_a, self.b_g, self.g,
+                                       self.xi, self.b_ins, P, dx)
+
+    def _mahalanobis(self, S: Array, y: Array) -> float:
+        """``y^T S^-1 y``; with :attr:`compiled`, :func:`.eseso_kernel.mahalanobis`."""
+        if not self.compiled:
+            return float(y @ np.linalg.solve(S, y))
+        kernel = _import_kernel()
+        assert kernel is not None
+        return kernel.mahalanobis(S, y)
+
+    def _project(self, H: Array) -> Array:
+        """``H P H^T``; with :attr:`compiled`, :func:`.eseso_kernel.project`."""
+        if not self.compiled:
+            return H @ (self.P @ H.T)
+        kernel = _import_kernel()
+        assert kernel is not None
+        return kernel.project(self.P, H)
 
     def _adapt_noise(self, channel: str, y: Array, HPHt: Array, Rm: Array) -> float:
         """The variance scale of ``channel``'s configured noise ``Rm`` after this update's
@@ -803,8 +825,17 @@ class EsesoFilter:
         """Predicted thruster force (N, body) at specific force ``f_m`` (m/s^2) and rate
         ``w_m`` (rad/s), and its 3 x 23 Jacobian (paper eq. 14b as re-derived in the
         module docstring). ``wdot`` is the angular acceleration (rad/s^2); without it the
-        centre-of-gravity terms are left out."""
+        centre-of-gravity terms are left out. With :attr:`compiled`, the same in
+        :func:`.eseso_kernel.h_tau`."""
         c = self.params.vehicle
+        if self.compiled:
+            kernel = _import_kernel()
+            assert kernel is not None
+            return kernel.h_tau(self.R, self.v, self.g, self.b_a, self.b_g, self.xi,
+                                np.asarray(f_m, float), np.asarray(w_m, float),
+                                np.zeros(3) if wdot is None else np.asarray(wdot, float),
+                                wdot is not None, self.m_vec, self.d_a, self.d_l, self.d_nl,
+                                c.weight_n - c.buoyancy_n, c.mass_kg, c.cg_z_m)
         f = f_m - self.b_a
         w = w_m - self.b_g
         RT = self.R.T
@@ -892,7 +923,7 @@ class EsesoFilter:
         self.P[XI, XI] += np.diag(self.model_change_var(tau))
         y = tau - h
         Rm = self.R_tau = self.thrust_noise(wdot_dt)
-        HPHt = H @ self.P @ H.T
+        HPHt = self._project(H) if self.compiled else H @ self.P @ H.T
         if self.params.noise.adapt_updates > 0:  # before the Huber weight (it would learn it)
             self._learn_disturbance_excess(y, HPHt + Rm)
             Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
@@ -901,7 +932,7 @@ class EsesoFilter:
         self.downweighted = False
         if k > 0:
             S = HPHt + Rm
-            nis = float(y @ np.linalg.solve(S, y))
+            nis = self._mahalanobis(S, y)
             if nis > k:
                 Rm = Rm * (nis / k)
                 self.downweighted = True
