@@ -569,7 +569,7 @@ class Eseso(Pipeline):
         f = self.filter
         if not f.initialized:
             return {}
-        if not np.all(np.isfinite(f.P)) or not np.all(np.isfinite(f.p)):
+        if not np.isfinite(f.P).all() or not np.isfinite(f.p).all():
             self.counters.diverged()
             self.__init__(self.cfg, self._sensors)  # type: ignore[misc]
             return {}
@@ -578,19 +578,18 @@ class Eseso(Pipeline):
     def estimates(self) -> dict[str, float]:
         """The current estimates by column name (SI, NED/FRD, rad)."""
         f = self.filter
-        roll, pitch, yaw = matrix_to_euler(f.R)
-        nu = f.R.T @ f.v
+        RT = f.R.T
+        nu = RT @ f.v
         xi_e = f.R @ f.xi
-        d = np.sqrt(np.maximum(np.diag(f.P), 0.0))
+        d = np.sqrt(np.maximum(f.P.diagonal()[P_], 0.0))
         # body-velocity std: R^T P_vv R
-        P_nu = f.R.T @ f.P[V_, V_] @ f.R
-        s_nu = np.sqrt(np.maximum(np.diag(P_nu), 0.0))
+        P_nu = RT @ f.P[V_, V_] @ f.R
+        s_nu = np.sqrt(np.maximum(P_nu.diagonal(), 0.0))
         w = (self.w_m if self.w_m is not None else np.zeros(3)) - f.b_g
-        vals = (
-            *f.p, *f.v, *nu, roll, pitch, yaw, *w, *f.xi, *xi_e,
-            *d[P_], *s_nu, *self._disturbance_std(), *f.b_a, *f.b_g, f.g[2],
-        )
-        return {k: float(v) for k, v in zip(self.columns, vals)}
+        vals = np.concatenate((
+            f.p, f.v, nu, matrix_to_euler(f.R), w, f.xi, xi_e,
+            d, s_nu, self._disturbance_std(), f.b_a, f.b_g, f.g[2:]))
+        return dict(zip(self.columns, vals.tolist()))
 
     def _disturbance_std(self) -> Array:
         """One-sigma (N, body) of the lumped disturbance ``xi`` (the external force plus
