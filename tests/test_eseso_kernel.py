@@ -32,7 +32,7 @@ from onboard.estimators.eseso_filter import (  # noqa: E402
     EsesoFilter,
     reset_covariance,
 )
-from onboard.pipelines.eseso import filter_params  # noqa: E402
+from onboard.pipelines.eseso import Eseso, filter_params  # noqa: E402
 
 TOL = 1e-12
 """Largest difference allowed, relative to the entry's scale (module docstring). Measured
@@ -165,6 +165,24 @@ def test_compiled_injection_and_products_agree_with_the_reference() -> None:
         S, y = ref._project(H) + np.eye(3), rng.normal(size=3) * 3.0
         want = ref._mahalanobis(S, y)
         assert abs(fast._mahalanobis(S, y) - want) <= TOL * want
+
+
+def test_compiled_estimates_agree_with_the_reference() -> None:
+    """The ESESO pipeline's published values (:meth:`Eseso.estimates`) on random states,
+    and a covariance with a NaN published as NaN by both."""
+    rng = np.random.default_rng(37)
+    ref, fast = Eseso(EsesoConfig()), Eseso(EsesoConfig())
+    ref.filter.compiled = False
+    for _ in range(200):
+        _random_state(ref.filter, rng)
+        ref.filter.disturbance_excess = rng.normal(0.0, 100.0, 3)
+        _same_state(ref.filter, fast.filter)
+        ref.w_m = fast.w_m = rng.normal(0.0, 1.0, 3)
+        want, got = ref.estimates(), fast.estimates()
+        assert list(got) == list(want) == list(Eseso.columns)
+        assert _gap(np.array(list(got.values())), np.array(list(want.values()))) <= TOL
+    ref.filter.P[0, 0] = fast.filter.P[0, 0] = np.nan
+    assert np.isnan(ref.estimates()["std_north"]) and np.isnan(fast.estimates()["std_north"])
 
 
 def test_a_singular_innovation_covariance_raises_in_both() -> None:

@@ -405,3 +405,39 @@ def mahalanobis(S: np.ndarray, y: np.ndarray) -> float:
     for i in range(y.shape[0]):
         out += y[i] * Sinv_y[i]
     return out
+
+
+@njit(cache=True)
+def _floor(x: float, lo: float) -> float:
+    """``max(x, lo)``, NaN kept (as ``np.maximum``)."""
+    return lo if x < lo else x
+
+
+@njit(cache=True)
+def estimates(p, v, R, xi, P, b_a, b_g, g, w_m, excess, min_share):
+    """The ESESO pipeline's published values in its column order
+    (:meth:`onboard.pipelines.eseso.Eseso.estimates`): position, velocity (earth and
+    body), roll, pitch, yaw (ZYX, as :func:`onboard.core.so3.matrix_to_euler`), rate,
+    disturbance (body and earth), the position's and body velocity's sigmas, the
+    disturbance's published sigma
+    (:meth:`~onboard.estimators.eseso_filter.EsesoFilter.published_disturbance_var`
+    with the thrust innovations' ``excess`` and the floor ``min_share``), the biases and
+    gravity's down component."""
+    out = np.empty(37)
+    RT = _transpose(R)
+    nu, xi_e = _mv(RT, v), _mv(R, xi)
+    P_nu = _mm(_mm(RT, P[_V:_V + 3, _V:_V + 3].copy()), R)  # R^T P_vv R
+    for i in range(3):
+        out[i], out[3 + i], out[6 + i] = p[i], v[i], nu[i]
+        out[12 + i] = w_m[i] - b_g[i]
+        out[15 + i], out[18 + i] = xi[i], xi_e[i]
+        out[21 + i] = math.sqrt(_floor(P[_P + i, _P + i], 0.0))
+        out[24 + i] = math.sqrt(_floor(P_nu[i, i], 0.0))
+        var = _floor(P[_XI + i, _XI + i], 0.0)
+        out[27 + i] = math.sqrt(_floor(var + excess[i], min_share * var))
+        out[30 + i], out[33 + i] = b_a[i], b_g[i]
+    out[9] = math.atan2(R[2, 1], R[2, 2])
+    out[10] = -math.asin(max(-1.0, min(1.0, R[2, 0])))
+    out[11] = math.atan2(R[1, 0], R[0, 0])
+    out[36] = g[2]
+    return out

@@ -92,7 +92,15 @@ from onboard.core.messages import (
 )
 from onboard.core.pipeline_config import EsesoConfig, EsesoThrustersConfig
 from onboard.core.so3 import euler_to_matrix, matrix_to_euler
-from onboard.estimators.eseso_filter import P_, P_D, V_, EsesoFilter, EsesoParams, Outcome
+from onboard.estimators.eseso_filter import (
+    P_,
+    P_D,
+    PUBLISHED_VAR_MIN_SHARE,
+    V_,
+    EsesoFilter,
+    EsesoParams,
+    Outcome,
+)
 from onboard.pipelines.base import Pipeline, unused_measurement
 
 Array = NDArray[np.float64]
@@ -578,6 +586,12 @@ class Eseso(Pipeline):
     def estimates(self) -> dict[str, float]:
         """The current estimates by column name (SI, NED/FRD, rad)."""
         f = self.filter
+        w_m = self.w_m if self.w_m is not None else np.zeros(3)
+        if f.compiled:  # the same values by the filter's compiled kernels, to rounding
+            from onboard.estimators import eseso_kernel
+            return dict(zip(self.columns, eseso_kernel.estimates(
+                f.p, f.v, f.R, f.xi, f.P, f.b_a, f.b_g, f.g, w_m, f.disturbance_excess,
+                PUBLISHED_VAR_MIN_SHARE).tolist()))
         RT = f.R.T
         nu = RT @ f.v
         xi_e = f.R @ f.xi
@@ -585,7 +599,7 @@ class Eseso(Pipeline):
         # body-velocity std: R^T P_vv R
         P_nu = RT @ f.P[V_, V_] @ f.R
         s_nu = np.sqrt(np.maximum(P_nu.diagonal(), 0.0))
-        w = (self.w_m if self.w_m is not None else np.zeros(3)) - f.b_g
+        w = w_m - f.b_g
         vals = np.concatenate((
             f.p, f.v, nu, matrix_to_euler(f.R), w, f.xi, xi_e,
             d, s_nu, self._disturbance_std(), f.b_a, f.b_g, f.g[2:]))
