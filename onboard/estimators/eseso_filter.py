@@ -167,12 +167,13 @@ _NO_ERROR.setflags(write=False)
 
 
 def _jacobian(rows: int, *blocks: tuple[slice | int, Array | float]) -> Array:
-    """A constant ``rows`` x 23 measurement Jacobian, read-only: zero but for the given
-    ``(columns, value)`` blocks."""
+    """A constant ``rows`` x 23 measurement Jacobian: zero but for the given ``(columns,
+    value)`` blocks. Left writable, as the state's Jacobians are (numba compiles a kernel
+    again for a read-only argument: 2-3 s more of the first compile), and never written:
+    the update and the kernels only read ``H``."""
     H = np.zeros((rows, N_ERR))
     for cols, value in blocks:
         H[:, cols] = value
-    H.setflags(write=False)
     return H
 
 
