@@ -1,12 +1,14 @@
 """The ESESO's compiled kernels against their numpy reference.
 
 :mod:`onboard.estimators.eseso_kernel` (numba, the ``fast`` extra) computes the ESESO's
-propagation, its Joseph update, the injection and reset, the thrust model and the
-products around them; :mod:`onboard.estimators.eseso_filter` is the readable reference. They must agree to rounding: on random states and covariances,
-and on the real states of a replay (every propagation and update of the committed
-BlueROV2 log, the kernel run from the reference's own state beside it). Agreement is
-measured per entry against the entry's scale: a vector's largest component, and for a
-covariance ``sqrt(P_ii P_jj)`` (its entries span 1e-12 to 1e3 in their own units).
+propagation, its Joseph update, the injection and reset, the thrust model, the products
+around them and the pipeline's published values; :mod:`onboard.estimators.eseso_filter`
+and :mod:`onboard.pipelines.eseso` are the readable reference. They must agree to
+rounding: on random states and covariances, and on the real states of a replay (every
+propagation, update and thrust update of the committed BlueROV2 log, the kernel run from
+the reference's own state beside it). Agreement is measured per entry against the
+entry's scale: a vector's largest component, and for a covariance ``sqrt(P_ii P_jj)``
+(its entries span 1e-12 to 1e3 in their own units).
 """
 
 from __future__ import annotations

@@ -36,9 +36,10 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   (:class:`Transition`, :func:`propagate_covariance`; the dense ``F`` is
   :func:`transition_matrix`, the readable reference).
 * **Compiled twins** (:func:`compiled_kernel`): with numba installed (the ``fast`` extra)
-  the propagation, the Joseph update and the reset run in :mod:`.eseso_kernel`, the same
-  equations on compiled loops (tests/test_eseso_kernel.py: to rounding); this module's
-  numpy code is their reference and runs without numba or with
+  the propagation, the Joseph update, the injection and reset, the thrust model and the
+  products of the noise adaptation and of the Huber test run in :mod:`.eseso_kernel`,
+  the same equations on compiled loops (tests/test_eseso_kernel.py: to rounding); this
+  module's numpy code is their reference and runs without numba or with
   ``ONBOARD_ESESO_KERNEL=0``.
 * **Updates** (paper eqs. 14, 16), each through :meth:`EsesoFilter.update`, Joseph form,
   with the innovation ``y``, its covariance ``S`` and the NIS of each update kept as an

@@ -584,10 +584,13 @@ class Eseso(Pipeline):
         return self.estimates()
 
     def estimates(self) -> dict[str, float]:
-        """The current estimates by column name (SI, NED/FRD, rad)."""
+        """The current estimates by column name (SI, NED/FRD, rad); where the filter runs
+        its compiled kernels, the same values (to rounding) in one call of
+        :func:`onboard.estimators.eseso_kernel.estimates`."""
         f = self.filter
         w_m = self.w_m if self.w_m is not None else np.zeros(3)
-        if f.compiled:  # the same values by the filter's compiled kernels, to rounding
+        if f.compiled:
+            # imported here: a process whose filter does not compile never imports numba
             from onboard.estimators import eseso_kernel
             return dict(zip(self.columns, eseso_kernel.estimates(
                 f.p, f.v, f.R, f.xi, f.P, f.b_a, f.b_g, f.g, w_m, f.disturbance_excess,
