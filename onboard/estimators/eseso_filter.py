@@ -944,6 +944,7 @@ class EsesoFilter:
         self.P[XI, XI] += np.diag(self.model_change_var(tau))
         y = tau - h
         Rm = self.R_tau = self.thrust_noise(wdot_dt)
+        # the reference keeps its own association, (H P) H^T (:meth:`_project`'s is H (P H^T))
         HPHt = self._project(H) if self.compiled else H @ self.P @ H.T
         if self.params.noise.adapt_updates > 0:  # before the Huber weight (it would learn it)
             self._learn_disturbance_excess(y, HPHt + Rm)
