@@ -1,12 +1,14 @@
 """The ESESO's compiled kernels against their numpy reference.
 
 :mod:`onboard.estimators.eseso_kernel` (numba, the ``fast`` extra) computes the ESESO's
-propagation and its Joseph update and reset; :mod:`onboard.estimators.eseso_filter` is
-the readable reference. They must agree to rounding: on random states and covariances,
-and on the real states of a replay (every propagation and update of the committed
-BlueROV2 log, the kernel run from the reference's own state beside it). Agreement is
-measured per entry against the entry's scale: a vector's largest component, and for a
-covariance ``sqrt(P_ii P_jj)`` (its entries span 1e-12 to 1e3 in their own units).
+propagation, its Joseph update, the injection and reset, the thrust model, the products
+around them and the pipeline's published values; :mod:`onboard.estimators.eseso_filter`
+and :mod:`onboard.pipelines.eseso` are the readable reference. They must agree to
+rounding: on random states and covariances, and on the real states of a replay (every
+propagation, update and thrust update of the committed BlueROV2 log, the kernel run from
+the reference's own state beside it). Agreement is measured per entry against the
+entry's scale: a vector's largest component, and for a covariance ``sqrt(P_ii P_jj)``
+(its entries span 1e-12 to 1e3 in their own units).
 """
 
 from __future__ import annotations
@@ -32,12 +34,13 @@ from onboard.estimators.eseso_filter import (  # noqa: E402
     EsesoFilter,
     reset_covariance,
 )
-from onboard.pipelines.eseso import filter_params  # noqa: E402
+from onboard.pipelines.eseso import Eseso, filter_params  # noqa: E402
 
 TOL = 1e-12
 """Largest difference allowed, relative to the entry's scale (module docstring). Measured
-at worst: 6.5e-16 (propagation) and 2.4e-15 (update) on the random states below, 6.0e-16
-and 2.1e-15 on the replay's."""
+at worst: 6.5e-16 (propagation), 2.4e-15 (update), 3.4e-16 (thrust model), 4.1e-16
+(injection and reset), 4.9e-16 (``H P H^T``, ``y^T S^-1 y``) and 5.7e-17 (the published
+values) on the random states below, 4.0e-15 on the replay's."""
 GOLDEN_ROV = Path(__file__).resolve().parent / "data" / "replay" / "bluerov2-circle.tlog"
 NOMINAL = ("p", "v", "R", "b_a", "b_g", "g", "xi", "b_ins")
 
@@ -80,8 +83,11 @@ def _random_state(f: EsesoFilter, rng: np.random.Generator) -> None:
 
 
 def _same_state(ref: EsesoFilter, fast: EsesoFilter) -> None:
-    for name in NOMINAL + ("P",):
-        setattr(fast, name, getattr(ref, name).copy())
+    """Everything of ``ref`` (the nominal state, ``P``, the adaptation's means) into
+    ``fast``, which keeps its kernels."""
+    for name, value in vars(ref).items():
+        if name != "compiled":
+            setattr(fast, name, copy.deepcopy(value))
 
 
 def _agreement(ref: EsesoFilter, fast: EsesoFilter) -> float:
@@ -129,6 +135,59 @@ def test_compiled_update_agrees_with_kalman_update(rows: int, only: slice | None
         assert _gap(eseso_kernel.reset(P, dtheta), reset_covariance(want.P, dtheta)) <= TOL
 
 
+@pytest.mark.parametrize("with_wdot", [False, True])
+def test_compiled_thrust_model_agrees_with_the_reference(with_wdot: bool) -> None:
+    """:meth:`EsesoFilter.h_tau` (the force and its Jacobian) on random states."""
+    rng = np.random.default_rng(14)
+    ref, fast = _filters()
+    for _ in range(200):
+        _random_state(ref, rng)
+        _same_state(ref, fast)
+        f_m = np.array([0.0, 0.0, -9.81]) + rng.normal(0.0, 2.0, 3)
+        w_m = rng.normal(0.0, 1.0, 3)
+        wdot = rng.normal(0.0, 3.0, 3) if with_wdot else None
+        (h_ref, H_ref), (h, H) = ref.h_tau(f_m, w_m, wdot), fast.h_tau(f_m, w_m, wdot)
+        assert H.shape == H_ref.shape
+        assert _gap(h, h_ref) <= TOL and _gap(H, H_ref) <= TOL
+
+
+def test_compiled_injection_and_products_agree_with_the_reference() -> None:
+    """The injection and reset after an update, ``H P H^T`` and ``y^T S^-1 y``."""
+    rng = np.random.default_rng(16)
+    ref, fast = _filters()
+    for _ in range(200):
+        _random_state(ref, rng)
+        _same_state(ref, fast)
+        dx = rng.normal(size=N_ERR) * np.sqrt(np.diag(ref.P))
+        P_up = ref.P * rng.uniform(0.5, 1.0)
+        ref._inject_and_reset(dx, P_up)
+        fast._inject_and_reset(dx, P_up)
+        assert _agreement(ref, fast) <= TOL
+        H = rng.normal(size=(3, N_ERR)) / np.sqrt(np.diag(ref.P))
+        assert _gap(fast._project(H), ref._project(H)) <= TOL
+        S, y = ref._project(H) + np.eye(3), rng.normal(size=3) * 3.0
+        want = ref._mahalanobis(S, y)
+        assert abs(fast._mahalanobis(S, y) - want) <= TOL * want
+
+
+def test_compiled_estimates_agree_with_the_reference() -> None:
+    """The ESESO pipeline's published values (:meth:`Eseso.estimates`) on random states,
+    and a covariance with a NaN published as NaN by both."""
+    rng = np.random.default_rng(37)
+    ref, fast = Eseso(EsesoConfig()), Eseso(EsesoConfig())
+    ref.filter.compiled = False
+    for _ in range(200):
+        _random_state(ref.filter, rng)
+        ref.filter.disturbance_excess = rng.normal(0.0, 100.0, 3)
+        _same_state(ref.filter, fast.filter)
+        ref.w_m = fast.w_m = rng.normal(0.0, 1.0, 3)
+        want, got = ref.estimates(), fast.estimates()
+        assert list(got) == list(want) == list(Eseso.columns)
+        assert _gap(np.array(list(got.values())), np.array(list(want.values()))) <= TOL
+    ref.filter.P[0, 0] = fast.filter.P[0, 0] = np.nan
+    assert np.isnan(ref.estimates()["std_north"]) and np.isnan(fast.estimates()["std_north"])
+
+
 def test_a_singular_innovation_covariance_raises_in_both() -> None:
     ref, fast = _filters()
     for f in (ref, fast):
@@ -140,12 +199,15 @@ def test_a_singular_innovation_covariance_raises_in_both() -> None:
 
 def test_compiled_filter_agrees_on_every_step_of_a_real_replay(tmp_path: Path,
                                                                monkeypatch) -> None:
-    """Every propagation and update of the ESESO's replay of the committed BlueROV2 log
-    (30 s: 1,499 propagations, 1,350 updates) is repeated from the same state by the
-    compiled filter; the two must agree to :data:`TOL` (measured: 2.1e-15 at worst)."""
-    worst = {"propagate": 0.0, "update": 0.0}
-    calls = {"propagate": 0, "update": 0}
-    propagate, update = EsesoFilter.propagate, EsesoFilter.update
+    """Every propagation, update and thrust update (its model, noise and Huber weight
+    around its update) of the ESESO's replay of the committed BlueROV2 log (30 s: 1,499
+    propagations, 1,350 updates, 300 of them the thrust's) is repeated from the same
+    state by the compiled filter; the two must agree to :data:`TOL` (measured: 4.0e-15
+    at worst)."""
+    methods = {name: getattr(EsesoFilter, name)
+               for name in ("propagate", "update", "update_thrust")}
+    worst = dict.fromkeys(methods, 0.0)
+    calls = dict.fromkeys(methods, 0)
 
     def twin(name, method):
         def checked(self: EsesoFilter, *args, **kwargs):
@@ -162,11 +224,12 @@ def test_compiled_filter_agrees_on_every_step_of_a_real_replay(tmp_path: Path,
             return out
         return checked
 
-    monkeypatch.setattr(EsesoFilter, "propagate", twin("propagate", propagate))
-    monkeypatch.setattr(EsesoFilter, "update", twin("update", update))
+    for name, method in methods.items():
+        monkeypatch.setattr(EsesoFilter, name, twin(name, method))
     assert cli_main(["replay", str(GOLDEN_ROV), "--out", str(tmp_path), "--no-plot",
                      "--pipelines", "eseso"]) == 0
     assert calls["propagate"] > 1000 and calls["update"] > 1000
+    assert calls["update_thrust"] > 200
     assert max(worst.values()) <= TOL, worst
 
 

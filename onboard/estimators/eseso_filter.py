@@ -36,9 +36,10 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   (:class:`Transition`, :func:`propagate_covariance`; the dense ``F`` is
   :func:`transition_matrix`, the readable reference).
 * **Compiled twins** (:func:`compiled_kernel`): with numba installed (the ``fast`` extra)
-  the propagation, the Joseph update and the reset run in :mod:`.eseso_kernel`, the same
-  equations on compiled loops (tests/test_eseso_kernel.py: to rounding); this module's
-  numpy code is their reference and runs without numba or with
+  the propagation, the Joseph update, the injection and reset, the thrust model and the
+  products of the noise adaptation and of the Huber test run in :mod:`.eseso_kernel`,
+  the same equations on compiled loops (tests/test_eseso_kernel.py: to rounding); this
+  module's numpy code is their reference and runs without numba or with
   ``ONBOARD_ESESO_KERNEL=0``.
 * **Updates** (paper eqs. 14, 16), each through :meth:`EsesoFilter.update`, Joseph form,
   with the innovation ``y``, its covariance ``S`` and the NIS of each update kept as an
@@ -164,6 +165,26 @@ _I2, _I3, _I_N = frozen_eye(2), frozen_eye(3), frozen_eye(N_ERR)
 _NO_ERROR = np.zeros(N_ERR)
 _NO_ERROR.setflags(write=False)
 """The error state before an update: zero (the nominal state carries the estimate)."""
+
+
+def _jacobian(rows: int, *blocks: tuple[slice | int, Array | float]) -> Array:
+    """A constant ``rows`` x 23 measurement Jacobian: zero but for the given ``(columns,
+    value)`` blocks. Left writable, as the state's Jacobians are (numba compiles a kernel
+    again for a read-only argument: 2-3 s more of the first compile), and never written:
+    the update and the kernels only read ``H``."""
+    H = np.zeros((rows, N_ERR))
+    for cols, value in blocks:
+        H[:, cols] = value
+    return H
+
+
+_H_POSITION_NE = _jacobian(2, (P_NE, _I2))
+_H_VELOCITY_NE = _jacobian(2, (V_NE, _I2))
+_H_ZERO_VELOCITY = _jacobian(3, (V_, _I3))
+_H_INS_VELOCITY = _jacobian(2, (V_NE, _I2), (BI, _I2))
+_H_DEPTH = _jacobian(1, (P_D, 1.0))
+_H_ATTITUDE = _jacobian(3, (TH, _I3))
+"""The measurement models' Jacobians that do not depend on the state, made once."""
 
 GATE_PROBABILITY = 0.999
 """Probability of a consistent innovation's NIS inside the default gate: the gate of a
@@ -419,7 +440,8 @@ class EsesoFilter:
         self.params = params
         c = params.vehicle
         self.m_vec = c.mass_kg + np.asarray(c.added_mass_kg, float)  # diag of M, kg
-        self.A = np.diag(np.asarray(c.added_mass_kg, float))
+        self.d_a = np.asarray(c.added_mass_kg, float)  # diag of A, kg
+        self.A = np.diag(self.d_a)
         self.d_l = np.asarray(c.damping_linear, float)
         self.d_nl = np.asarray(c.damping_quadratic, float)
         self.initialized = False
@@ -433,6 +455,8 @@ class EsesoFilter:
         self.b_ins = np.zeros(2)
         self.P = np.eye(N_ERR)
         self._transition: Transition | None = None  # the last propagation's (:attr:`F`)
+        self._interval_key: tuple[float, float] | None = None  # :meth:`_interval_noise`'s
+        self._interval: tuple[float, Array] = (0.0, _NO_ERROR)
         # what the compiled propagation's transition is built from when it is read
         self._transition_inputs: tuple | None = None
         self.compiled = compiled_kernel() is not None
@@ -475,11 +499,8 @@ class EsesoFilter:
         covariance by eqs. (11)-(13) with the Jacobian F of algorithms.md §5.1, its
         non-identity blocks (:func:`transition`) applied by :func:`propagate_covariance`;
         with :attr:`compiled`, the same in :func:`.eseso_kernel.propagate`."""
-        n = self.params.noise
         earth_fixed = self.params.process.disturbance_model == "earth_fixed"
-        # INS velocity bias: first-order Gauss-Markov, exact discretization
-        phi_ins = math.exp(-dt / n.ins_bias_tau_s) if n.ins_bias_tau_s > 0 else 0.0
-        q = self._process_noise(dt, phi_ins)
+        phi_ins, q = self._interval_noise(dt)
         if self.compiled:
             self._propagate_compiled(f_m, w_m, dt, phi_ins, q, earth_fixed)
             return
@@ -509,6 +530,19 @@ class EsesoFilter:
         self.p, self.v, self.R, self.xi, self.b_ins, self.P = kernel.propagate(
             self.p, self.v, self.R, self.b_a, self.b_g, self.g, self.xi, self.b_ins,
             self.P, f_m, w_m, dt, earth_fixed, phi_ins, q)
+
+    def _interval_noise(self, dt: float) -> tuple[float, Array]:
+        """The INS bias's decay over ``dt`` (s) (first-order Gauss-Markov, exact
+        discretization) and the process noise's diagonal (:meth:`_process_noise`), kept
+        while ``dt`` and :attr:`process_scale` stay the same (a steady IMU rate: most
+        intervals; the diagonal is read, never written)."""
+        key = (dt, self.process_scale)
+        if key != self._interval_key:
+            tau = self.params.noise.ins_bias_tau_s
+            phi_ins = math.exp(-dt / tau) if tau > 0 else 0.0
+            self._interval_key = key
+            self._interval = (phi_ins, self._process_noise(dt, phi_ins))
+        return self._interval
 
     def _process_noise(self, dt: float, phi_ins: float) -> Array:
         """The diagonal of the discrete process noise ``Q`` over ``dt`` (s) (paper eq. 13):
@@ -567,9 +601,9 @@ class EsesoFilter:
         outcome = Outcome.FUSED
         if self.params.noise.adapt_updates > 0:
             if channel in NOISE_ADAPT_CHANNELS:
-                Rm = Rm * self._adapt_noise(channel, y, H @ (self.P @ H.T), Rm)
+                Rm = Rm * self._adapt_noise(channel, y, self._project(H), Rm)
             elif channel == PROCESS_ADAPT_CHANNEL:
-                self._adapt_process(y, H @ (self.P @ H.T), Rm)
+                self._adapt_process(y, self._project(H), Rm)
         up = self._kalman(y, H, Rm, only)
         self.y, self.S, self.nis = y, up.S, up.nis
         if gate is None:
@@ -585,9 +619,7 @@ class EsesoFilter:
             up = self._kalman(y, H, Rm * (up.nis / gate), only)
         self._consecutive[channel] = 0
         self._record(channel, t, source, gate, accepted=True)
-        self.inject(up.x)
-        # reset (17b): G = I except the attitude block, I - [dtheta/2]x (Sola eq. 287)
-        self.P = self._reset(up.P, up.x[TH])
+        self._inject_and_reset(up.x, up.P)
         return outcome
 
     def _kalman(self, y: Array, H: Array, Rm: Array, only: slice | None
@@ -608,13 +640,36 @@ class EsesoFilter:
             raise np.linalg.LinAlgError("Singular matrix")
         return kalman.KalmanUpdate(dx, P, y, S, None, float(nis))
 
-    def _reset(self, P: Array, dtheta: Array) -> Array:
-        """:func:`reset_covariance`; with :attr:`compiled`, :func:`.eseso_kernel.reset`."""
+    def _inject_and_reset(self, dx: Array, P: Array) -> None:
+        """:meth:`inject` the correction ``dx`` and reset the updated covariance ``P``
+        (17b: ``G = I`` except the attitude block, ``I - [dtheta/2]x``, Sola eq. 287;
+        :func:`reset_covariance`); with :attr:`compiled`, both in one
+        :func:`.eseso_kernel.inject_reset`."""
         if not self.compiled:
-            return reset_covariance(P, dtheta)
+            self.inject(dx)
+            self.P = reset_covariance(P, dx[TH])
+            return
         kernel = _import_kernel()
         assert kernel is not None
-        return kernel.reset(P, dtheta)
+        (self.p, self.v, self.R, self.b_a, self.b_g, self.g, self.xi, self.b_ins,
+         self.P) = kernel.inject_reset(self.p, self.v, self.R, self.b_a, self.b_g, self.g,
+                                       self.xi, self.b_ins, P, dx)
+
+    def _mahalanobis(self, S: Array, y: Array) -> float:
+        """``y^T S^-1 y``; with :attr:`compiled`, :func:`.eseso_kernel.mahalanobis`."""
+        if not self.compiled:
+            return float(y @ np.linalg.solve(S, y))
+        kernel = _import_kernel()
+        assert kernel is not None
+        return kernel.mahalanobis(S, y)
+
+    def _project(self, H: Array) -> Array:
+        """``H P H^T``; with :attr:`compiled`, :func:`.eseso_kernel.project`."""
+        if not self.compiled:
+            return H @ (self.P @ H.T)
+        kernel = _import_kernel()
+        assert kernel is not None
+        return kernel.project(self.P, H)
 
     def _adapt_noise(self, channel: str, y: Array, HPHt: Array, Rm: Array) -> float:
         """The variance scale of ``channel``'s configured noise ``Rm`` after this update's
@@ -625,7 +680,7 @@ class EsesoFilter:
         thrust channel's to [1, ``noise.thrust_scale_max``]), is the scale. One-sided:
         noise larger than configured is learnt, smaller is not."""
         c = self.params.noise
-        sample = (float(y @ y) - float(np.trace(HPHt))) / max(float(np.trace(Rm)), 1e-300)
+        sample = (float(y @ y) - float(HPHt.trace())) / max(float(Rm.trace()), 1e-300)
         sample = min(sample, NOISE_SAMPLE_CAP)
         mean = self._noise_mean.get(channel, 1.0)
         mean += (sample - mean) / c.adapt_updates
@@ -651,7 +706,7 @@ class EsesoFilter:
         ``noise.adapt_updates`` updates where it is above 1, over
         :data:`NARROWING_MEMORY` times as many where it is below; the excess is
         ``(max(r_fast - 1, 0) + min(r_slow - 1, 0)) S_ii`` at this update."""
-        S_ii = np.diag(S_model)
+        S_ii = S_model.diagonal()
         sample = np.minimum(y * y / np.maximum(S_ii, 1e-300), NOISE_SAMPLE_CAP)
         self._excess_ratio += (sample - self._excess_ratio) / self.params.noise.adapt_updates
         self._excess_ratio_slow += (sample - self._excess_ratio_slow) / (
@@ -676,7 +731,7 @@ class EsesoFilter:
         updates, clipped to [1, ``noise.scale_max``], multiplies the accelerometer and
         gyro noise variances of the next propagations (:attr:`process_scale`)."""
         c = self.params.noise
-        ratio = (float(y @ y) - float(np.trace(Rm))) / max(float(np.trace(HPHt)), 1e-300)
+        ratio = (float(y @ y) - float(Rm.trace())) / max(float(HPHt.trace()), 1e-300)
         # P already carries the current scale: the sample is the scale times the ratio
         sample = min(self.process_scale * ratio, NOISE_SAMPLE_CAP)
         mean = self._noise_mean.get("process", 1.0)
@@ -719,18 +774,14 @@ class EsesoFilter:
                            t: float = math.nan, source: str = "") -> Outcome:
         """Horizontal position ``z`` (north, east; m) with variance ``var`` (m^2) per axis;
         channel ``gnss_pos``."""
-        H = np.zeros((2, N_ERR))
-        H[:, P_NE] = _I2
-        return self.update("gnss_pos", z - self.p[:2], H, _I2 * var, t=t,
+        return self.update("gnss_pos", z - self.p[:2], _H_POSITION_NE, _I2 * var, t=t,
                            source=source)
 
     def update_velocity_ne(self, z: Array, var: float, *,
                            t: float = math.nan, source: str = "") -> Outcome:
         """Horizontal velocity over ground ``z`` (north, east; m/s) with variance ``var``
         (m^2/s^2) per axis; channel ``gnss_vel``."""
-        H = np.zeros((2, N_ERR))
-        H[:, V_NE] = _I2
-        return self.update("gnss_vel", z - self.v[:2], H, _I2 * var, t=t,
+        return self.update("gnss_vel", z - self.v[:2], _H_VELOCITY_NE, _I2 * var, t=t,
                            source=source)
 
     def update_zero_velocity(self, var: float, *, t: float = math.nan,
@@ -738,27 +789,21 @@ class EsesoFilter:
         """Zero velocity over ground (north, east, down), each with variance ``var``
         (m^2/s^2): the pseudo-measurement of a vehicle left idle with nothing else to
         bound its velocity (a ZUPT, Foxlin 2005); channel ``zupt``."""
-        H = np.zeros((3, N_ERR))
-        H[:, V_] = _I3
-        return self.update("zupt", -self.v, H, _I3 * var, t=t, source=source)
+        return self.update("zupt", -self.v, _H_ZERO_VELOCITY, _I3 * var, t=t,
+                           source=source)
 
     def update_ins_velocity(self, z: Array, var: float, *,
                             t: float = math.nan, source: str = "") -> Outcome:
         """INS velocity over ground ``z`` (north, east; m/s) = ``v + b_ins`` + white noise
         of variance ``var`` (m^2/s^2) per axis; channel ``vog``."""
-        H = np.zeros((2, N_ERR))
-        H[:, V_NE] = _I2
-        H[:, BI] = _I2
-        return self.update("vog", z - self.v[:2] - self.b_ins, H, _I2 * var, t=t,
-                           source=source)
+        return self.update("vog", z - self.v[:2] - self.b_ins, _H_INS_VELOCITY, _I2 * var,
+                           t=t, source=source)
 
     def update_depth(self, depth_m: float, var: float, *,
                      t: float = math.nan, source: str = "") -> Outcome:
         """Depth (m, positive down) with variance ``var`` (m^2); channel ``depth``."""
-        H = np.zeros((1, N_ERR))
-        H[0, P_D] = 1.0
-        return self.update("depth", np.array([depth_m - self.p[2]]), H, np.array([[var]]),
-                           t=t, source=source)
+        return self.update("depth", np.array([depth_m - self.p[2]]), _H_DEPTH,
+                           np.array([[var]]), t=t, source=source)
 
     def update_body_velocity(self, z: Array, var: float, *,
                              t: float = math.nan, source: str = "") -> Outcome:
@@ -776,14 +821,12 @@ class EsesoFilter:
         """Attitude ``R_meas`` (body to NED; from ``roll``, ``pitch`` in rad) with
         independent roll and pitch noise ``var_roll_pitch`` and yaw noise ``var_yaw``
         (rad^2), turned into the body-frame rotation vector; channel ``attitude``."""
-        H = np.zeros((3, N_ERR))
-        H[:, TH] = _I3
         # the Euler-rate-to-body-rate matrix (Fossen eq. 2.41 inverted)
         sr, cr = math.sin(roll), math.cos(roll)
         sp, cp = math.sin(pitch), math.cos(pitch)
         J = np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
         Rm = J @ np.diag([var_roll_pitch, var_roll_pitch, var_yaw]) @ J.T
-        return self.update("attitude", log_so3(self.R.T @ R_meas), H, Rm, t=t,
+        return self.update("attitude", log_so3(self.R.T @ R_meas), _H_ATTITUDE, Rm, t=t,
                            source=source)
 
     def update_heading(self, heading_rad: float, var: float, *,
@@ -803,8 +846,17 @@ class EsesoFilter:
         """Predicted thruster force (N, body) at specific force ``f_m`` (m/s^2) and rate
         ``w_m`` (rad/s), and its 3 x 23 Jacobian (paper eq. 14b as re-derived in the
         module docstring). ``wdot`` is the angular acceleration (rad/s^2); without it the
-        centre-of-gravity terms are left out."""
+        centre-of-gravity terms are left out. With :attr:`compiled`, the same in
+        :func:`.eseso_kernel.h_tau`."""
         c = self.params.vehicle
+        if self.compiled:
+            kernel = _import_kernel()
+            assert kernel is not None
+            return kernel.h_tau(self.R, self.v, self.g, self.b_a, self.b_g, self.xi,
+                                np.asarray(f_m, float), np.asarray(w_m, float),
+                                np.zeros(3) if wdot is None else np.asarray(wdot, float),
+                                wdot is not None, self.m_vec, self.d_a, self.d_l, self.d_nl,
+                                c.weight_n - c.buoyancy_n, c.mass_kg, c.cg_z_m)
         f = f_m - self.b_a
         w = w_m - self.b_g
         RT = self.R.T
@@ -892,7 +944,8 @@ class EsesoFilter:
         self.P[XI, XI] += np.diag(self.model_change_var(tau))
         y = tau - h
         Rm = self.R_tau = self.thrust_noise(wdot_dt)
-        HPHt = H @ self.P @ H.T
+        # the reference keeps its own association, (H P) H^T (:meth:`_project`'s is H (P H^T))
+        HPHt = self._project(H) if self.compiled else H @ self.P @ H.T
         if self.params.noise.adapt_updates > 0:  # before the Huber weight (it would learn it)
             self._learn_disturbance_excess(y, HPHt + Rm)
             Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
@@ -901,7 +954,7 @@ class EsesoFilter:
         self.downweighted = False
         if k > 0:
             S = HPHt + Rm
-            nis = float(y @ np.linalg.solve(S, y))
+            nis = self._mahalanobis(S, y)
             if nis > k:
                 Rm = Rm * (nis / k)
                 self.downweighted = True

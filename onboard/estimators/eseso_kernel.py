@@ -1,4 +1,5 @@
-"""The ESESO's compiled kernels: its propagation and its Joseph update, in numba.
+"""The ESESO's compiled kernels: its propagation, its Joseph update and the Python around
+them (injection, thrust model, published values), in numba.
 
 The readable reference is :mod:`onboard.estimators.eseso_filter` (algorithms.md §5.1);
 these functions compute the same equations on plain loops, compiled by numba, because at
@@ -19,7 +20,18 @@ kernel and reference agree to rounding.
   rank-``m`` factors: ``(I - K H) X = X - K (H X)`` is ``m n^2`` multiply-adds where the
   dense product is ``n^3``.
 * :func:`reset`: the reset ``G P G^T`` after an injection (paper eq. 17b, Sola eq. 287),
-  ``G`` the identity but for its attitude block ``I - [dtheta/2]x``, then symmetrized.
+  ``G`` the identity but for its attitude block ``I - [dtheta/2]x``, then symmetrized;
+  :func:`inject_reset`: the injection of the update's correction into the nominal state
+  (eq. 16d) and that reset, in one call.
+* :func:`h_tau`: :meth:`EsesoFilter.h_tau`, the thrust model and its Jacobian;
+  :func:`project` (``H P H^T``) and :func:`mahalanobis` (``y^T S^-1 y``) for the noise
+  adaptation and the thrust update's Huber weight.
+* :func:`estimates`: the ESESO pipeline's published values
+  (:meth:`onboard.pipelines.eseso.Eseso.estimates`) in one array.
+
+Each call costs ~1 µs of numba's dispatch and ~0.3 µs per array it returns, so a kernel
+pays where it replaces a dozen numpy calls or more (docs/performance.md, "The Python
+around the ESESO's kernels").
 
 Compiled on first call, not at import (8 s of CPU here, docs/performance.md), and cached
 beside this module (``cache=True``), so a machine compiles once; a process then pays
@@ -301,4 +313,143 @@ def reset(P: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
     for i in range(n):
         for j in range(n):
             out[i, j] = 0.5 * (GPGt[i, j] + GPGt[j, i])
+    return out
+
+
+@njit(cache=True)
+def inject_reset(p, v, R, b_a, b_g, g, xi, b_ins, P, dx):
+    """:meth:`EsesoFilter.inject` of the correction ``dx`` (paper eq. 16d: every
+    component added, the attitude by ``R Exp(dtheta)``) and :func:`reset` of the updated
+    ``P`` with its ``dtheta``: the new ``(p, v, R, b_a, b_g, g, xi, b_ins, P)``."""
+    p_new, v_new, b_a_new, b_g_new = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    g_new, xi_new, b_ins_new = np.empty(3), np.empty(3), np.empty(2)
+    for i in range(3):
+        p_new[i] = p[i] + dx[_P + i]
+        v_new[i] = v[i] + dx[_V + i]
+        b_a_new[i] = b_a[i] + dx[_BA + i]
+        b_g_new[i] = b_g[i] + dx[_BG + i]
+        g_new[i] = g[i] + dx[_G + i]
+        xi_new[i] = xi[i] + dx[_XI + i]
+    for i in range(2):
+        b_ins_new[i] = b_ins[i] + dx[_BI + i]
+    dtheta = dx[_TH:_TH + 3].copy()
+    return (p_new, v_new, _mm(R, exp_so3(dtheta)), b_a_new, b_g_new, g_new, xi_new,
+            b_ins_new, reset(P, dtheta))
+
+
+@njit(cache=True)
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` of two 3-vectors."""
+    out = np.empty(3)
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+    return out
+
+
+@njit(cache=True)
+def h_tau(R, v, g, b_a, b_g, xi, f_m, w_m, wdot, with_wdot, m_vec, added, d_l, d_nl,
+          w_minus_b, mass, cg_z):
+    """:meth:`EsesoFilter.h_tau`: the predicted thruster force (N, body) and its 3 x 23
+    Jacobian at specific force ``f_m`` and rate ``w_m``, the centre-of-gravity terms only
+    ``with_wdot`` (angular acceleration ``wdot``). ``m_vec`` is the diagonal of ``M``,
+    ``added`` of ``A``, ``d_l`` and ``d_nl`` the damping's, ``w_minus_b`` the weight
+    minus the buoyancy (N), ``mass`` (kg) and ``cg_z`` (m) the centre of gravity's."""
+    f, w = np.empty(3), np.empty(3)
+    for i in range(3):
+        f[i] = f_m[i] - b_a[i]
+        w[i] = w_m[i] - b_g[i]
+    RT = _transpose(R)
+    nu, gB = _mv(RT, v), _mv(RT, g)
+    zB = RT[:, 2].copy()  # R^T e3
+    Anu = np.empty(3)
+    for i in range(3):
+        Anu[i] = added[i] * nu[i]
+    w_nu, w_Anu = _cross(w, nu), _cross(w, Anu)
+    h = np.empty(3)
+    for i in range(3):
+        damp = (d_l[i] + d_nl[i] * abs(nu[i])) * nu[i]
+        h[i] = (m_vec[i] * (f[i] + gB[i]) - added[i] * w_nu[i] + w_Anu[i] + damp
+                - w_minus_b * zB[i] - xi[i])
+    if with_wdot:
+        r_g = np.zeros(3)
+        r_g[2] = cg_z
+        cg = _cross(wdot, r_g)
+        ww = _cross(w, _cross(w, r_g))
+        for i in range(3):
+            h[i] += mass * (cg[i] + ww[i])
+    Sw, Snu = _skew(w), _skew(nu)
+    J_nu = np.empty((3, 3))  # -A [w]x + [w]x A + diag(d_l + 2 d_nl |nu|)
+    for i in range(3):
+        for j in range(3):
+            J_nu[i, j] = -added[i] * Sw[i, j] + Sw[i, j] * added[j]
+        J_nu[i, i] += d_l[i] + 2.0 * d_nl[i] * abs(nu[i])
+    J_v, J_nu_nu = _mm(J_nu, RT), _mm(J_nu, Snu)
+    SgB, SzB, SAnu = _skew(gB), _skew(zB), _skew(Anu)
+    H = np.zeros((3, _N))
+    for i in range(3):
+        for j in range(3):
+            H[i, _V + j] = J_v[i, j]
+            # J_nu [nu]x + M [gB]x - (W - B) [zB]x
+            H[i, _TH + j] = J_nu_nu[i, j] + m_vec[i] * SgB[i, j] - w_minus_b * SzB[i, j]
+            # -J_w = -(A [nu]x - [A nu]x)
+            H[i, _BG + j] = -(added[i] * Snu[i, j] - SAnu[i, j])
+            H[i, _G + j] = m_vec[i] * RT[i, j]
+        H[i, _BA + i] = -m_vec[i]
+        H[i, _XI + i] = -1.0
+    return h, H
+
+
+@njit(cache=True)
+def project(P: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """``H P H^T``."""
+    return _mm(H, _mmt(P, H))
+
+
+@njit(cache=True)
+def mahalanobis(S: np.ndarray, y: np.ndarray) -> float:
+    """``y^T S^-1 y`` (``nan`` when ``S`` is singular)."""
+    Sinv, ok = _inverse(S)
+    if not ok:
+        return math.nan
+    Sinv_y = _mv(Sinv, y)
+    out = 0.0
+    for i in range(y.shape[0]):
+        out += y[i] * Sinv_y[i]
+    return out
+
+
+@njit(cache=True)
+def _floor(x: float, lo: float) -> float:
+    """``max(x, lo)``, NaN kept (as ``np.maximum``)."""
+    return lo if x < lo else x
+
+
+@njit(cache=True)
+def estimates(p, v, R, xi, P, b_a, b_g, g, w_m, excess, min_share):
+    """The ESESO pipeline's published values in its column order
+    (:meth:`onboard.pipelines.eseso.Eseso.estimates`): position, velocity (earth and
+    body), roll, pitch, yaw (ZYX, as :func:`onboard.core.so3.matrix_to_euler`), rate,
+    disturbance (body and earth), the position's and body velocity's sigmas, the
+    disturbance's published sigma
+    (:meth:`~onboard.estimators.eseso_filter.EsesoFilter.published_disturbance_var`
+    with the thrust innovations' ``excess`` and the floor ``min_share``), the biases and
+    gravity's down component."""
+    out = np.empty(37)
+    RT = _transpose(R)
+    nu, xi_e = _mv(RT, v), _mv(R, xi)
+    P_nu = _mm(_mm(RT, P[_V:_V + 3, _V:_V + 3].copy()), R)  # R^T P_vv R
+    for i in range(3):
+        out[i], out[3 + i], out[6 + i] = p[i], v[i], nu[i]
+        out[12 + i] = w_m[i] - b_g[i]
+        out[15 + i], out[18 + i] = xi[i], xi_e[i]
+        out[21 + i] = math.sqrt(_floor(P[_P + i, _P + i], 0.0))
+        out[24 + i] = math.sqrt(_floor(P_nu[i, i], 0.0))
+        var = _floor(P[_XI + i, _XI + i], 0.0)
+        out[27 + i] = math.sqrt(_floor(var + excess[i], min_share * var))
+        out[30 + i], out[33 + i] = b_a[i], b_g[i]
+    out[9] = math.atan2(R[2, 1], R[2, 2])
+    out[10] = -math.asin(max(-1.0, min(1.0, R[2, 0])))
+    out[11] = math.atan2(R[1, 0], R[0, 0])
+    out[36] = g[2]
     return out

@@ -92,7 +92,15 @@ from onboard.core.messages import (
 )
 from onboard.core.pipeline_config import EsesoConfig, EsesoThrustersConfig
 from onboard.core.so3 import euler_to_matrix, matrix_to_euler
-from onboard.estimators.eseso_filter import P_, P_D, V_, EsesoFilter, EsesoParams, Outcome
+from onboard.estimators.eseso_filter import (
+    P_,
+    P_D,
+    PUBLISHED_VAR_MIN_SHARE,
+    V_,
+    EsesoFilter,
+    EsesoParams,
+    Outcome,
+)
 from onboard.pipelines.base import Pipeline, unused_measurement
 
 Array = NDArray[np.float64]
@@ -569,28 +577,36 @@ class Eseso(Pipeline):
         f = self.filter
         if not f.initialized:
             return {}
-        if not np.all(np.isfinite(f.P)) or not np.all(np.isfinite(f.p)):
+        if not np.isfinite(f.P).all() or not np.isfinite(f.p).all():
             self.counters.diverged()
             self.__init__(self.cfg, self._sensors)  # type: ignore[misc]
             return {}
         return self.estimates()
 
     def estimates(self) -> dict[str, float]:
-        """The current estimates by column name (SI, NED/FRD, rad)."""
+        """The current estimates by column name (SI, NED/FRD, rad); where the filter runs
+        its compiled kernels, the same values (to rounding) in one call of
+        :func:`onboard.estimators.eseso_kernel.estimates`."""
         f = self.filter
-        roll, pitch, yaw = matrix_to_euler(f.R)
-        nu = f.R.T @ f.v
+        w_m = self.w_m if self.w_m is not None else np.zeros(3)
+        if f.compiled:
+            # imported here: a process whose filter does not compile never imports numba
+            from onboard.estimators import eseso_kernel
+            return dict(zip(self.columns, eseso_kernel.estimates(
+                f.p, f.v, f.R, f.xi, f.P, f.b_a, f.b_g, f.g, w_m, f.disturbance_excess,
+                PUBLISHED_VAR_MIN_SHARE).tolist()))
+        RT = f.R.T
+        nu = RT @ f.v
         xi_e = f.R @ f.xi
-        d = np.sqrt(np.maximum(np.diag(f.P), 0.0))
+        d = np.sqrt(np.maximum(f.P.diagonal()[P_], 0.0))
         # body-velocity std: R^T P_vv R
-        P_nu = f.R.T @ f.P[V_, V_] @ f.R
-        s_nu = np.sqrt(np.maximum(np.diag(P_nu), 0.0))
-        w = (self.w_m if self.w_m is not None else np.zeros(3)) - f.b_g
-        vals = (
-            *f.p, *f.v, *nu, roll, pitch, yaw, *w, *f.xi, *xi_e,
-            *d[P_], *s_nu, *self._disturbance_std(), *f.b_a, *f.b_g, f.g[2],
-        )
-        return {k: float(v) for k, v in zip(self.columns, vals)}
+        P_nu = RT @ f.P[V_, V_] @ f.R
+        s_nu = np.sqrt(np.maximum(P_nu.diagonal(), 0.0))
+        w = w_m - f.b_g
+        vals = np.concatenate((
+            f.p, f.v, nu, matrix_to_euler(f.R), w, f.xi, xi_e,
+            d, s_nu, self._disturbance_std(), f.b_a, f.b_g, f.g[2:]))
+        return dict(zip(self.columns, vals.tolist()))
 
     def _disturbance_std(self) -> Array:
         """One-sigma (N, body) of the lumped disturbance ``xi`` (the external force plus
