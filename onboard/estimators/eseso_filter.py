@@ -398,6 +398,14 @@ def _import_kernel() -> ModuleType | None:
     return eseso_kernel
 
 
+def _kernel() -> ModuleType:
+    """:mod:`.eseso_kernel`, for a filter whose :attr:`EsesoFilter.compiled` says it
+    imported."""
+    kernel = _import_kernel()
+    assert kernel is not None
+    return kernel
+
+
 def compiled_kernel() -> ModuleType | None:
     """The compiled twins of the propagation and of the update (:mod:`.eseso_kernel`, the
     ``fast`` extra) when numba imports and ``ONBOARD_ESESO_KERNEL`` is not ``0``, else
@@ -525,8 +533,7 @@ class EsesoFilter:
         self._transition = None
         self._transition_inputs = (self.R, self.xi, self.b_a, self.b_g, f_m, w_m, dt,
                                    phi_ins, earth_fixed)
-        kernel = _import_kernel()
-        assert kernel is not None
+        kernel = _kernel()
         self.p, self.v, self.R, self.xi, self.b_ins, self.P = kernel.propagate(
             self.p, self.v, self.R, self.b_a, self.b_g, self.g, self.xi, self.b_ins,
             self.P, f_m, w_m, dt, earth_fixed, phi_ins, q)
@@ -632,8 +639,7 @@ class EsesoFilter:
         if not self.compiled:
             return kalman.update(_NO_ERROR, self.P, y, Rm, H, keep=only, symmetric=True,
                                  inverse=np.linalg.inv)
-        kernel = _import_kernel()
-        assert kernel is not None
+        kernel = _kernel()
         lo, hi = (0, N_ERR) if only is None else (only.start, only.stop)
         dx, P, S, nis, ok = kernel.joseph_update(self.P, y, H, Rm, lo, hi)
         if not ok:
@@ -649,8 +655,7 @@ class EsesoFilter:
             self.inject(dx)
             self.P = reset_covariance(P, dx[TH])
             return
-        kernel = _import_kernel()
-        assert kernel is not None
+        kernel = _kernel()
         (self.p, self.v, self.R, self.b_a, self.b_g, self.g, self.xi, self.b_ins,
          self.P) = kernel.inject_reset(self.p, self.v, self.R, self.b_a, self.b_g, self.g,
                                        self.xi, self.b_ins, P, dx)
@@ -659,16 +664,14 @@ class EsesoFilter:
         """``y^T S^-1 y``; with :attr:`compiled`, :func:`.eseso_kernel.mahalanobis`."""
         if not self.compiled:
             return float(y @ np.linalg.solve(S, y))
-        kernel = _import_kernel()
-        assert kernel is not None
+        kernel = _kernel()
         return kernel.mahalanobis(S, y)
 
     def _project(self, H: Array) -> Array:
         """``H P H^T``; with :attr:`compiled`, :func:`.eseso_kernel.project`."""
         if not self.compiled:
             return H @ (self.P @ H.T)
-        kernel = _import_kernel()
-        assert kernel is not None
+        kernel = _kernel()
         return kernel.project(self.P, H)
 
     def _adapt_noise(self, channel: str, y: Array, HPHt: Array, Rm: Array) -> float:
@@ -850,8 +853,7 @@ class EsesoFilter:
         :func:`.eseso_kernel.h_tau`."""
         c = self.params.vehicle
         if self.compiled:
-            kernel = _import_kernel()
-            assert kernel is not None
+            kernel = _kernel()
             return kernel.h_tau(self.R, self.v, self.g, self.b_a, self.b_g, self.xi,
                                 np.asarray(f_m, float), np.asarray(w_m, float),
                                 np.zeros(3) if wdot is None else np.asarray(wdot, float),
