@@ -25,7 +25,7 @@ CREDSTORE  ?= /etc/credstore
 PIP_ARGS   ?=
 WHEEL      ?=
 
-.PHONY: demo test test-all bench figures docs setup clean install
+.PHONY: demo test test-all bench compiled bench-compiled figures docs setup clean install
 
 setup: $(STAMP)
 
@@ -53,6 +53,19 @@ test-all: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/onboard bench
 
+# The compiled build (setup.py; docs/performance.md "The compiled build"): the wheel with
+# the replay's hot path compiled by mypyc into dist/, then `onboard bench` run on it from
+# build/compiled (the venv's dependencies, the checkout's code nowhere on the path).
+# On the vehicle: sudo make install WHEEL=dist/onboard-0.1.0-cp311-cp311-linux_x86_64.whl
+compiled: $(STAMP)
+	rm -rf build/compiled dist/onboard-*-cp*.whl
+	ONBOARD_COMPILE=1 $(BIN)/python -m pip wheel --quiet --no-build-isolation --no-deps \
+	  --wheel-dir dist .
+	$(BIN)/python -m pip install --quiet --no-deps --target build/compiled dist/onboard-*-cp*.whl
+
+bench-compiled: compiled
+	cd build && PYTHONPATH=$(CURDIR)/build/compiled $(CURDIR)/$(BIN)/python -m onboard bench
+
 # Recompute every figure into docs/figures.json and regenerate the README's "What it
 # estimates" table and the docs pages' generated tables from it (docs/reproducing.md;
 # of the order of 40 min on 2 cores; commit docs/figures.json, README.md and docs/). One estimator
@@ -68,7 +81,7 @@ docs: $(STAMP)
 	$(BIN)/python -m validation tune --page docs/aie.md
 
 clean:
-	rm -rf $(VENV) replay-out diagnose-out .pytest_cache
+	rm -rf $(VENV) replay-out diagnose-out .pytest_cache build dist
 
 install:
 	$(PYTHON) -m onboard.apps.install --destdir "$(DESTDIR)" --prefix "$(PREFIX)" \

@@ -363,8 +363,8 @@ def scan_header(path: str | os.PathLike) -> tuple[list[VehicleInfo], list[Parame
         if isinstance(s, VehicleInfo):
             vehicles.setdefault((s.system_id, s.component_id, s.mav_type, s.autopilot), s)
             vehicle_seen = vehicle_seen or s.mav_type not in _GCS_MAV_TYPES
-        else:
-            params[(s.source, s.name)] = s  # type: ignore[union-attr]
+        elif isinstance(s, Parameter):
+            params[(s.source, s.name)] = s
         if vehicle_seen and missing and not any(missing.values()):
             break
     return list(vehicles.values()), list(params.values())

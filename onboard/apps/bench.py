@@ -721,12 +721,32 @@ def bench_batch(s: Settings, workdir: Path, rep: Report) -> None:
                  for j, rs in runs.items()}}
 
 
+def compiled_modules() -> list[str]:
+    """The modules of this package that are extension modules: the replay's hot path when
+    the package was built with ``ONBOARD_COMPILE=1`` (setup.py), none in the pure build."""
+    import importlib.util
+    import pkgutil
+
+    import onboard
+
+    names = []
+    for m in pkgutil.walk_packages(onboard.__path__, "onboard."):
+        if m.ispkg or m.name.startswith(("onboard.sitl", "onboard.drivers")):
+            continue
+        spec = importlib.util.find_spec(m.name)
+        origin = spec.origin if spec else None
+        if origin and not origin.endswith(".py"):
+            names.append(m.name)
+    return sorted(names)
+
+
 def collect(s: Settings | None = None, progress: Callable[[str], None] | None = None) -> Report:
     """Measure everything; a failing or missing piece becomes ``None`` with its reason."""
     s = s or Settings.from_env()
     say = progress or (lambda msg: None)
     rep = Report()
     rep.detail["settings"] = {"fast": s.fast, "minutes": s.minutes, "repeats": s.repeats}
+    rep.detail["compiled_modules"] = compiled_modules()
     with tempfile.TemporaryDirectory(prefix="onboard-bench-") as tmp:
         steps: list[tuple[str, tuple[str, ...], Callable[[], None]]] = [
             ("replay vs pymavlink", ("replay_vs_pymavlink_parse",),
@@ -927,6 +947,10 @@ def table(rep: Report) -> str:
                                                 bt["per_wall_minute"].items())
                      + f" (speed-up {bt['speedup']:g}); "
                      f"{bt['workers_cpu_s_per_log_hour']:g} s CPU per log-hour")
+    compiled = rep.detail.get("compiled_modules")
+    lines.append(f"build: compiled, {len(compiled)} modules (setup.py, ONBOARD_COMPILE=1)"
+                 if compiled else "build: pure Python (`make bench-compiled` measures the "
+                 "compiled build)")
     if rep.detail.get("settings", {}).get("fast"):
         lines.append("(fast mode: ONBOARD_BENCH_FAST is set; figures are not meaningful)")
     return "\n".join(lines)

@@ -86,7 +86,7 @@ def unit_text(prefix: str, sysconfdir: str) -> str:
         UNIT_SYSCONFDIR + "/", sysconfdir.rstrip("/") + "/")
 
 
-PACKAGE_FILES = ("pyproject.toml", "README.md", "onboard", "drivers", "sitl", "config")
+PACKAGE_FILES = ("pyproject.toml", "setup.py", "README.md", "onboard", "drivers", "sitl", "config")
 """What the wheel is built from (pyproject.toml maps drivers/, sitl/ and config/ into it)."""
 WHEEL_GLOB = "onboard-*.whl"
 """The file name of this package's wheel (``onboard-VERSION-py3-none-any.whl``)."""

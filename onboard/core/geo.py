@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 
+from mypy_extensions import mypyc_attr
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -116,6 +117,7 @@ def _height(lat: float, p: float) -> tuple[float, float]:
     return n, p / math.cos(lat) - n
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class LocalFrame:
     """North/east metres on the WGS-84 tangent plane at a reference latitude/longitude
     (deg), points taken on the ellipsoid (height 0).

@@ -70,8 +70,14 @@ def _make_checker(cls: type) -> Callable[[Sample], str | None]:
     one left-to-right sum (NaN and infinities propagate through addition, and a sum that
     overflows is rejected too), then the type's physical bounds."""
     floats, tuples = _float_fields(cls)
-    get_floats = attrgetter(*floats) if len(floats) > 1 else (
-        (lambda s, _g=attrgetter(floats[0]): (_g(s),)) if floats else (lambda s: ()))
+    get_floats: Callable[[Sample], tuple]
+    if len(floats) > 1:
+        get_floats = attrgetter(*floats)
+    elif floats:
+        get_one = attrgetter(floats[0])
+        get_floats = (lambda s: (get_one(s),))
+    else:
+        get_floats = (lambda s: ())
     get_tuples = [attrgetter(n) for n in tuples]
     bounds = [(attrgetter(n), lo, hi) for n, lo, hi in _BOUNDS.get(cls, ())]
     isfinite = math.isfinite
@@ -172,5 +178,5 @@ def sample_type(sample: Sample) -> str:
     cls = type(sample)
     tag = _TAGS.get(cls)
     if tag is None:
-        tag = _TAGS[cls] = cls.__struct_config__.tag  # type: ignore[attr-defined]
+        tag = _TAGS[cls] = str(cls.__struct_config__.tag)  # type: ignore[attr-defined]
     return tag

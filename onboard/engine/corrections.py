@@ -137,22 +137,21 @@ class SampleCorrector:
 
     def __call__(self, sample: Sample) -> Sample:
         """``sample`` with the corrections applied (a new sample, or itself)."""
-        cls = type(sample)
-        if cls is GnssFix:
+        if type(sample) is GnssFix:
             if self.latency_s > 0.0:
                 return msgspec.structs.replace(sample, t=sample.t - self.latency_s)
-        elif cls is Heading:
+        elif type(sample) is Heading:
             if self.has_heading and self._heading_source(sample.source):
                 return msgspec.structs.replace(
                     sample, heading_rad=wrap_2pi(self.heading.true_heading(sample.heading_rad)))
-        elif cls is Imu:
+        elif type(sample) is Imu:
             if self.has_gyro:
                 gx, gy, gz = self.gyro
                 return msgspec.structs.replace(sample, gyro_x=sample.gyro_x - gx,
                                                gyro_y=sample.gyro_y - gy,
                                                gyro_z=sample.gyro_z - gz)
-        elif cls is Attitude:
-            return self._attitude(sample)  # type: ignore[arg-type]
+        elif type(sample) is Attitude:
+            return self._attitude(sample)
         return sample
 
     def _attitude(self, sample: Attitude) -> Attitude:

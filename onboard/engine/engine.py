@@ -502,10 +502,12 @@ class Engine:
         stepped = []
         monitor, integrity = self.monitor, self.integrity
         for i, p in enumerate(self.pipelines):
+            values: Mapping[str, float] | None
             try:
                 values = queue.step(i, p)
             except Exception as err:  # a pipeline bug must not stop the others
-                values = self._recover(i, p, err, t)
+                self._recover(i, p, err, t)
+                values = None
                 queue.restarted(i)
             self._take_events(p)
             innovations = p.innovations()

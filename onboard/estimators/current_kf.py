@@ -49,6 +49,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
+from mypy_extensions import mypyc_attr
 import numpy as np
 
 from onboard.estimators import kalman
@@ -110,6 +111,7 @@ PREDICT_STEP_S = 0.2
 """Longest prediction sub-step (s): a tick longer than this is predicted in equal steps."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 @dataclass
 class FilterCounters:
     """What a :class:`CurrentKalmanFilter` counted."""
@@ -126,6 +128,7 @@ class FilterCounters:
     """Episodes of a through-water velocity beyond ``max_speed_through_water``."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class CurrentKalmanFilter:
     """The joint extended Kalman filter of the module docstring.
 

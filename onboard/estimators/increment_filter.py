@@ -31,6 +31,8 @@ import math
 from collections import deque
 from typing import Any, Mapping
 
+from mypy_extensions import mypyc_attr
+
 from onboard.core.messages import Innovation
 from onboard.estimators.axis_model import AxisModel, Discrete
 from onboard.estimators.input_models import AxisInnovation, InputModel
@@ -54,6 +56,7 @@ DAMPING_FLOOR_PER_S = 0.05
 speed error ``du / a`` (an undamped model would make it unbounded)."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class IncrementFilter:
     """One axis: the §2.2 filter, its outlier gate, the rate row and the input model.
 

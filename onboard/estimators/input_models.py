@@ -26,6 +26,8 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping, NamedTuple, Protocol
 
+from mypy_extensions import mypyc_attr
+
 from onboard.estimators.axis_model import Discrete
 from onboard.estimators.kalman import BiasIncrementKF, IncrementKF
 from onboard.estimators.rcie import Rcie
@@ -121,6 +123,7 @@ ASE_CEILING = 10.0
 """Upper clip of the matched ``V_d``, times ``u_max^2`` (§2.8)."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class RcieInput:
     """AIE's input (§2.7): ``u = d_hat + u_known``, ``d_hat`` from RCIE.
 
@@ -265,6 +268,7 @@ CONSTANT_RATE_DAMPING_PER_S = 1e-9
 (``a -> 0``: a random-walk rate)."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class CommandedInput:
     """The baseline's input (§2.12): ``u = gain c + offset`` of the mean command, plus
     an input bias ``b`` estimated as a fourth state where ``bias_q > 0``

@@ -46,6 +46,7 @@ import functools
 import math
 from typing import Callable, NamedTuple
 
+from mypy_extensions import mypyc_attr
 import numpy as np
 from numpy.typing import NDArray
 
@@ -55,7 +56,7 @@ from onboard.estimators.axis_model import Discrete
 Array = NDArray[np.float64]
 
 
-def inv_small(S: Array) -> Array | None:
+def inv_small(S: Array) -> np.ndarray | None:
     """Inverse of a 2x2 or 3x3 matrix (an innovation covariance) by the adjugate, or None
     if it is singular; other sizes by numpy (None if singular). ``np.linalg.inv`` costs
     several µs of call overhead at these sizes."""
@@ -153,6 +154,7 @@ variance; the floor keeps ``std_v = sqrt(P_vv)`` defined and the next rate innov
 variance ``P_vv + R_v`` positive. Any variance the filter carries in use is far above it."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class IncrementKF:
     """Kalman filter of ``x = (d, v, e)`` for one axis (§2.2), scalar-specialised.
 
@@ -331,6 +333,7 @@ class IncrementKF:
         return math.sqrt(self.P[3])
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class BiasIncrementKF(IncrementKF):
     """:class:`IncrementKF` with a random-walk input bias ``b`` as a fourth state.
 
@@ -435,6 +438,7 @@ class BiasIncrementKF(IncrementKF):
         return nis
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class ReferenceIncrementKF:
     """:class:`IncrementKF` (``bias=False``) and :class:`BiasIncrementKF` (``bias=True``)
     in numpy, the class docs' equations as matrices on ``x = [d, v, e(, b)]``, updated

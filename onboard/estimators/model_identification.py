@@ -34,6 +34,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from mypy_extensions import mypyc_attr
 import numpy as np
 
 from onboard.estimators.rls import RecursiveLeastSquares
@@ -50,6 +51,7 @@ FORGETTING_PERIOD_S = 0.1
 """The forgetting factors are per this period (s): one 10 Hz tick."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class StateVariableFilter:
     """``H(s) = w^2 / (s^2 + 2 zeta w s + w^2)`` on a vector of channels; gives the filtered
     value and its derivative, so ``d/dt (H y) = (H phi)^T theta`` holds exactly for constant
@@ -90,6 +92,7 @@ class StateVariableFilter:
         self.y, self.dy = y, dy
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class HeadingDiversity:
     """Running mean of the doubled-angle heading vector ``(cos 2 psi, sin 2 psi)``.
 
@@ -135,6 +138,7 @@ def floor_along_track(cov: np.ndarray, yaw: float, sigma: float) -> list[float]:
     return np.sqrt(np.maximum(np.diagonal(cov) + d * a * a, 0.0)).tolist()
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class ModelIdentification:
     """Prior, schedule and forgetting of the vehicle-model coefficients; the yaw channel.
 
@@ -356,6 +360,7 @@ class ModelIdentification:
         self.thetas[self.model.channels.index("yaw")] = self.yaw_rls.theta.copy()
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class VelocityRls:
     """The velocity DOFs' coefficients identified by recursive least squares from an
     observer's own through-water velocity (Kim et al. §II.B, eq. 6-9; algorithms.md §3.4):

@@ -81,6 +81,7 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Mapping
 
+from mypy_extensions import mypyc_attr
 import numpy as np
 
 WINDOW = 200
@@ -130,6 +131,7 @@ def _dot(a: float | np.ndarray, b: float | np.ndarray) -> float:
     return float(np.dot(a, b))
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class Consistency:
     """The consistency factor of a channel's published sigma (algorithms.md §9.1): the
     windowed mean of ``r_k = min(z^T z, CAP tr(S)) / tr(S)`` over every accepted update
@@ -189,6 +191,7 @@ class Consistency:
         return min(max(self.ratio, floor), 1.0)
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class NoiseScale:
     """The learned variance scale of one measurement channel (module docstring).
 
@@ -338,6 +341,7 @@ PROCESS_FLOOR = 1e-3
 than the configured ``v_d``."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class ProcessScale:
     """The learned scale ``q`` of an axis filter's process noise (its input-error variance
     ``V_u``, algorithms.md §9.3): the forecast takes ``q V_u``.
@@ -374,6 +378,7 @@ class ProcessScale:
             self.scale = PROCESS_FLOOR if q < PROCESS_FLOOR else 1.0 if q > 1.0 else q
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class ChannelNoise:
     """The learned noise of a pipeline's channels, by channel name: reported, persisted
     and read by the integrity monitor (:meth:`report`)."""

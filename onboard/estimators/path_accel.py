@@ -35,12 +35,15 @@ import math
 from array import array
 from bisect import bisect_right
 
+from mypy_extensions import mypyc_attr
+
 GRAVITY = 9.80665
 """Standard gravity (m/s^2)."""
 
 _sin, _cos, _isfinite = math.sin, math.cos, math.isfinite  # module-level: one lookup each
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class PathAccelerometer:
     """Integrated path acceleration from IMU and attitude samples (see the module doc).
 
@@ -194,6 +197,7 @@ class PathAccelerometer:
         self.bias_var += g * (e * e - self.bias_var)
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class ForecastBlend:
     """The weight of two forecasts of one quantity that minimises the mean square error
     of their combination ``w f_imu + (1 - w) f_model``, learned from their misses of the

@@ -41,6 +41,7 @@ from collections.abc import Sequence
 from functools import cache
 from typing import Any, Callable, Mapping
 
+from mypy_extensions import mypyc_attr
 import numpy as np
 
 
@@ -186,6 +187,7 @@ def rcie_kernel(n: int, rate_penalty: bool) -> RcieKernel:
     return compile_kernel(src, f"rcie_kernel({n}, {rate_penalty})")
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class Rcie:
     """RCIE input estimator of one scalar axis (§2.7 steps 2-5 and 8).
 

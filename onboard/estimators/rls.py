@@ -47,6 +47,7 @@ from collections.abc import Mapping, Sequence
 from operator import mul
 from typing import Any
 
+from mypy_extensions import mypyc_attr
 import numpy as np
 
 Rows = list[list[float]]
@@ -112,6 +113,7 @@ def rls_update(
     return P_new, [t + k * e for t, k in zip(theta, K)], e, lam, s
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class RecursiveLeastSquares:
     """RLS with forgetting, bounded covariance and a residual-variance estimate.
 
@@ -138,7 +140,7 @@ class RecursiveLeastSquares:
         beta: float | None = None,
         delta: float | None = None,
         sigma2_0: float = 1e-2,
-        theta0: Sequence[float] | None = None,
+        theta0: Sequence[float] | np.ndarray | None = None,
         names: Sequence[str] | None = None,
     ) -> None:
         """Args:
@@ -196,8 +198,8 @@ class RecursiveLeastSquares:
 
     def prediction_variance(self, phi: Sequence[float]) -> float:
         """Variance of ``a`` about ``phi^T theta``: ``sigma2 (1 + phi^T P phi)``."""
-        phi = np.asarray(phi, float)
-        return float(self.sigma2 * (1.0 + phi @ self.P @ phi))
+        x = np.asarray(phi, float)
+        return float(self.sigma2 * (1.0 + x @ self.P @ x))
 
     def update(self, phi: Sequence[float], a: float, weight: float = 1.0) -> float:
         """Fold in one sample ``a = phi^T theta + e``; returns the a priori residual.

@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import math
 
+from mypy_extensions import mypyc_attr
+
 from onboard.core.geo import wrap_pi
 from onboard.estimators.kalman import IncrementKF
 
@@ -39,6 +41,7 @@ ANCHOR_RESIDUAL_GAIN = 0.05
 """Weight of the newest anchor residual in its running mean square (about 20 steps)."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class HeadingTrack:
     """The reconstructed heading (§2.11).
 
@@ -79,6 +82,7 @@ class HeadingTrack:
         self.t = t
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class PositionTrack:
     """The reconstructed position (§2.11), north/east (m) in the local frame.
 

@@ -27,14 +27,16 @@ from __future__ import annotations
 
 import math
 import operator
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import NamedTuple
 
+from mypy_extensions import mypyc_attr
 import numpy as np
 
 from onboard.core.vehicles import traits
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class ModelInputs:
     """Everything a regressor needs besides ``nu_r``; units in the module docstring.
 
@@ -64,7 +66,7 @@ def _sq(x: float) -> float:
     return x * abs(x)
 
 
-def _dot(a: Sequence[float], b: Sequence[float]) -> float:
+def _dot(a: Iterable[float], b: Iterable[float]) -> float:
     """``a . b`` summed left to right in plain floats."""
     return sum(map(operator.mul, a, b))
 
@@ -108,6 +110,7 @@ finite time). The joint filter projects their estimates onto ``<= 0``
 (:meth:`.current_kf.CurrentKalmanFilter._project_drag`)."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class RegressionModel:
     """A per-DOF linear-in-parameters model.
 
@@ -429,6 +432,7 @@ class GlideState(NamedTuple):
         return (self.speed * math.cos(a), 0.0, self.speed * math.sin(a))
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class GliderModel:
     """Steady wings-level glide of a buoyancy-driven glider (Graver 2005;
     Fan & Woolsey 2014; Merckelbach et al. 2010, 2019).

@@ -1264,6 +1264,7 @@ class IntegrityMonitor:
             return
         offset = p.frame_offset
         frame = own if offset is not None else self.frame
+        assert frame is not None  # positions_at compares only once it has a frame
         off_n, off_e = offset if offset is not None else (0.0, 0.0)
         ne = in_frame.get(frame)
         if ne is None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import msgspec
+from mypy_extensions import mypyc_attr
 
 from onboard.estimators.current_kf import FilterCounters
 from onboard.pipelines.current_samples import SampleCounters
@@ -17,6 +18,7 @@ AXES = ("north", "east", "down")
 """The earth axes of the current, in column order."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 @dataclass
 class PipelineCounters:
     """What :class:`~onboard.pipelines.current.CurrentPipeline` itself counted (its

@@ -41,6 +41,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from mypy_extensions import mypyc_attr
 import numpy as np
 
 from onboard.core.geo import wrap_pi
@@ -58,7 +59,7 @@ from onboard.core.messages import (
     VelocityOverGround,
 )
 from onboard.core.so3 import euler_to_matrix
-from onboard.estimators.current_kf import VelocityMeasurement
+from onboard.estimators.current_kf import MeasurementKind, VelocityMeasurement
 from onboard.estimators.vehicle_models import GliderModel, ModelInputs
 from onboard.pipelines.base import unused_measurement
 
@@ -99,6 +100,7 @@ def glider_model(g: Any) -> GliderModel:
         min_glide=g.min_glide_angle_rad)
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 @dataclass
 class SampleCounters:
     """What :class:`CurrentSamples` counted."""
@@ -111,6 +113,7 @@ class SampleCounters:
     """Through-water velocities of the glider model."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class CurrentSamples:
     """Samples to model inputs, attitude and velocity measurements (module docstring).
 
@@ -169,12 +172,15 @@ class CurrentSamples:
         self._yaw_prev: tuple[float, float] | None = None
         self.depth: float | None = None
         self._init_glider(cfg)
-        # sample handlers by exact class (the sample classes have no subclasses)
-        self._handlers: dict[type, Callable[[Any, list], None]] = {
-            Attitude: self._on_attitude, Heading: self._on_heading, Imu: self._on_imu,
-            ActuatorCommand: self._on_command, Depth: self._on_depth,
-            VelocityOverGround: self._on_vog, DvlVelocity: self._on_dvl,
-            DvlPosition: self._on_dvl_position, GnssFix: self._on_gnss}
+        # sample handlers by exact class (the sample classes have no subclasses); the
+        # class's functions, not methods bound to this object, so that a copy of it
+        # (the GNSS latency's fork) handles its samples itself
+        cls = CurrentSamples
+        self._handlers: dict[type, Callable[[CurrentSamples, Any, list], None]] = {
+            Attitude: cls._on_attitude, Heading: cls._on_heading, Imu: cls._on_imu,
+            ActuatorCommand: cls._on_command, Depth: cls._on_depth,
+            VelocityOverGround: cls._on_vog, DvlVelocity: cls._on_dvl,
+            DvlPosition: cls._on_dvl_position, GnssFix: cls._on_gnss}
 
     def _init_glider(self, cfg: Any) -> None:
         """The glider model of ``cfg.glider`` (None without) and its inputs: the pump
@@ -210,7 +216,7 @@ class CurrentSamples:
                 pending.clear()
             h = handlers.get(type(s))
             if h is not None:
-                h(s, pending)
+                h(self, s, pending)
         if self._depth_rate is not None:  # the glider model's measurement of this tick
             self._glide(pending)
         yield from pending
@@ -337,7 +343,7 @@ class CurrentSamples:
         meas.append(VelocityMeasurement("earth", s.t, np.array(z), self.dvl_std, s.source))
 
     def _on_dvl(self, s: DvlVelocity, meas: list) -> None:
-        kind = "bottom" if s.track == "bottom" else "water"
+        kind: MeasurementKind = "bottom" if s.track == "bottom" else "water"
         if not s.valid or (s.fom_mps is not None and s.fom_mps > self.dvl_max_fom):
             self.counters.rejected_invalid_dvl += 1
             self._reject(s, kind, self.nd, "invalid")

@@ -1,0 +1,87 @@
+"""The optional compiled build: ``ONBOARD_COMPILE=1`` compiles the modules on a replay's
+hot path with mypyc (docs/performance.md, "The compiled build").
+
+The modules are the readable Python as written: mypyc compiles them to C extensions from
+their type annotations, and the estimates are the pure build's to the byte
+(tests/test_compiled.py). The estimators' classes, each subclass too (it is not
+inherited), carry ``@mypyc_attr(allow_interpreted_subclasses=True)`` (a no-op in Python):
+compiled, they can then be deep-copied (the GNSS latency's fixed-lag forks,
+onboard/engine/latency.py) and subclassed by Python code (the tests' doubles). Without
+``ONBOARD_COMPILE=1`` the wheel is pure Python, as the vehicle's install from source and
+the editable development install are (do not set it for an editable install: its
+extensions would shadow the edited ``.py`` files). Everything else about the package is in
+pyproject.toml.
+
+    pip install "mypy==<MYPYC_VERSION>"
+    ONBOARD_COMPILE=1 pip wheel --no-build-isolation --no-deps -w dist .
+"""
+
+import os
+
+from setuptools import setup
+
+MYPYC_VERSION = "1.15.0"
+"""The mypy (mypyc) release the compiled build is tested with: its C differs by release."""
+
+COMPILED_MODULES = [
+    # the estimators of the boats' pipelines (aie, kf, current)
+    "onboard/estimators/increment_filter.py",
+    "onboard/estimators/rcie.py",
+    "onboard/estimators/noise_learning.py",
+    "onboard/estimators/rls.py",
+    "onboard/estimators/kalman.py",
+    "onboard/estimators/current_kf.py",
+    "onboard/estimators/track.py",
+    "onboard/estimators/path_accel.py",
+    "onboard/estimators/model_identification.py",
+    "onboard/estimators/vehicle_models.py",
+    "onboard/estimators/input_models.py",
+    "onboard/pipelines/aie.py",
+    "onboard/pipelines/kf.py",
+    "onboard/pipelines/current_samples.py",
+    "onboard/pipelines/current_health.py",
+    # the engine: per sample and per tick
+    "onboard/engine/engine.py",
+    "onboard/engine/checks.py",
+    "onboard/engine/timeline.py",
+    "onboard/engine/sources.py",
+    "onboard/engine/whereabouts.py",
+    "onboard/engine/corrections.py",
+    "onboard/monitor/integrity.py",
+    "onboard/monitor/innovations.py",
+    "onboard/monitor/track_course.py",
+    "onboard/core/stats.py",
+    "onboard/core/so3.py",
+    "onboard/core/geo.py",
+]
+
+MYPY_OPTIONS = ["--follow-imports=silent", "--ignore-missing-imports"]
+"""The compiled modules are type-checked; the modules they import are read for their
+types only, and numpy, scipy and msgspec are taken as they declare themselves."""
+
+C_FLAGS = [
+    # the same rounding on every architecture: no fused multiply-add where the Python
+    # source has a multiplication and an addition (aarch64's compilers fuse by default)
+    "-ffp-contract=off",
+    # mypyc's runtime headers trip gcc 12's bounds warning, which mypyc makes an error
+    "-Wno-array-bounds",
+]
+
+
+def ext_modules() -> list:
+    """The compiled extensions when ``ONBOARD_COMPILE=1``, else none."""
+    if os.environ.get("ONBOARD_COMPILE") != "1":
+        return []
+    try:
+        from mypyc.build import mypycify
+    except ImportError as err:
+        raise SystemExit(
+            f"ONBOARD_COMPILE=1 needs mypyc in the build environment: pip install "
+            f"'mypy=={MYPYC_VERSION}', then build with --no-build-isolation") from err
+    exts = mypycify([*MYPY_OPTIONS, *COMPILED_MODULES], opt_level="3")
+    for ext in exts:
+        ext.extra_compile_args = [*ext.extra_compile_args, *C_FLAGS]
+    return exts
+
+
+setup(ext_modules=ext_modules())

@@ -1,0 +1,134 @@
+"""The compiled build (setup.py, ``ONBOARD_COMPILE=1``): the modules of a replay's hot path
+compiled by mypyc from the same Python, installed from their wheel into a fresh venv, give
+the pure build's estimates to the byte.
+
+The wheel is built as ``make install`` builds it, offline with this venv's mypyc
+(tests/helpers/installed.py). What is checked: every module of setup.py's list is an
+extension module in the installed package (and none of the others is), and a replay of a
+boat, an ROV and an AUV log, of the boat's with a GNSS latency correction (whose forks
+copy the compiled objects) and of a real log writes the checkout's estimates.csv and
+summary.json (but its wall time). The ESESO runs its numpy reference on both sides (its
+numba kernels would compile afresh in the fresh venv; tests/test_eseso_kernel.py holds
+them to it).
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from onboard.cli import main as cli_main
+from tests.helpers.imports import REPO
+from tests.helpers.installed import clean_env, dependency_view, run_installed, site_packages
+
+pytestmark = pytest.mark.integration
+
+mypyc = pytest.importorskip(
+    "mypyc", reason="the compiled build needs mypyc: .venv/bin/pip install -e '.[test]'")
+
+REPLAY = REPO / "tests" / "data" / "replay"
+
+
+def setup_constant(name: str) -> object:
+    """A module-level constant of setup.py (which builds when imported)."""
+    tree = ast.parse((REPO / "setup.py").read_text())
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", None) == name:
+            return ast.literal_eval(node.value)
+    raise KeyError(name)
+
+
+COMPILED = [p.removesuffix(".py").replace("/", ".")
+            for p in setup_constant("COMPILED_MODULES")]  # type: ignore[union-attr]
+
+
+def test_the_test_extra_pins_the_mypyc_that_setup_py_names():
+    import tomllib
+
+    extras = tomllib.loads((REPO / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"]["test"]
+    assert f"mypy=={setup_constant('MYPYC_VERSION')}" in extras
+
+
+@pytest.fixture(scope="module")
+def venv(tmp_path_factory) -> Path:
+    """The compiled wheel installed into a fresh venv outside the checkout."""
+    from onboard.apps.install import build_wheel, make_venv
+    from tests.helpers.installed import OFFLINE_BUILD, fresh_venv
+
+    work = tmp_path_factory.mktemp("compiled")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("ONBOARD_COMPILE", "1")
+    try:
+        wheel = build_wheel(REPO, work / "dist", sys.executable, OFFLINE_BUILD)
+    finally:
+        mp.undo()
+    assert "-py3-none-any" not in wheel.name, wheel.name  # a platform wheel
+    venv = work / "venv"
+    fresh_venv(venv, dependency_view(work / "deps"))
+    make_venv(venv, sys.executable, ["--no-index"], wheel)
+    return venv
+
+
+def test_the_listed_modules_and_only_they_are_compiled(venv):
+    probe = ("import importlib, json, pkgutil, onboard; "
+             "names = [m.name for m in pkgutil.walk_packages(onboard.__path__, 'onboard.') "
+             "if not m.name.startswith(('onboard.sitl', 'onboard.apps', 'onboard.service'))]; "
+             "print(json.dumps({n: importlib.util.find_spec(n).origin for n in names}))")
+    r = subprocess.run([str(venv / "bin" / "python"), "-c", probe], cwd=venv,
+                       env=clean_env(), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    origins = json.loads(r.stdout)
+    site = str(site_packages(venv).resolve())
+    assert all(o.startswith(site) for o in origins.values()), origins
+    compiled = sorted(n for n, o in origins.items() if o.endswith(".so"))
+    assert compiled == sorted(COMPILED)
+
+
+def _estimates(out: Path) -> tuple[str, dict]:
+    summary = json.loads((out / "summary.json").read_text())
+    summary.pop("wall_time_s")
+    return (out / "estimates.csv").read_text(), summary
+
+
+@pytest.mark.parametrize("case", ["jaiabot-turns", "bluerov2-circle", "gavia-tidal"])
+def test_the_compiled_replay_is_the_pure_one_to_the_byte(venv, tmp_path, case, monkeypatch):
+    monkeypatch.setenv("ONBOARD_ESESO_KERNEL", "0")
+    log = REPLAY / f"{case}.tlog"
+    r = run_installed(venv, "replay", str(log), "--out", "compiled", "--no-plot",
+                      cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert cli_main(["replay", str(log), "--out", str(tmp_path / "pure"), "--no-plot"]) == 0
+    assert _estimates(tmp_path / "compiled") == _estimates(tmp_path / "pure")
+
+
+def test_the_gnss_latency_forks_replay_compiled_as_pure(venv, tmp_path):
+    """A GNSS latency correction forks every pipeline with ``copy.deepcopy`` at each
+    re-stamped fix (onboard/engine/latency.py): the compiled classes copy as the pure ones
+    (``mypyc_attr``), and a copy handles its samples itself, not through methods bound to
+    the object it was copied from."""
+    overlay = tmp_path / "latency.toml"
+    overlay.write_text("[corrections]\ngnss_latency_s = 1.0\n")
+    log = REPLAY / "jaiabot-turns.tlog"
+    r = run_installed(venv, "replay", str(log), "--config", str(overlay), "--out", "compiled",
+                      "--no-plot", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert cli_main(["replay", str(log), "--config", str(overlay), "--out",
+                     str(tmp_path / "pure"), "--no-plot"]) == 0
+    assert _estimates(tmp_path / "compiled") == _estimates(tmp_path / "pure")
+
+
+def test_a_real_log_replays_compiled_as_pure(venv, tmp_path, shared_data):
+    """A real boat's NMEA log (RTK heading, Doppler speed): another reader, the integrity
+    checks' warnings on real sensors."""
+    log = shared_data / "usv_rtk_gnss_heading_nmea_shenzhen" / "202412051751.txt"
+    r = run_installed(venv, "replay", str(log), "--out", "compiled", "--no-plot",
+                      cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert cli_main(["replay", str(log), "--out", str(tmp_path / "pure"), "--no-plot"]) == 0
+    assert _estimates(tmp_path / "compiled") == _estimates(tmp_path / "pure")
