@@ -58,7 +58,7 @@ bench: $(STAMP)
 # build/compiled (the venv's dependencies, the checkout's code nowhere on the path).
 # On the vehicle: sudo make install WHEEL=dist/onboard-0.1.0-cp311-cp311-linux_x86_64.whl
 compiled: $(STAMP)
-	rm -rf build/compiled dist/onboard-*-cp*.whl
+	rm -rf build dist/onboard-*-cp*.whl
 	ONBOARD_COMPILE=1 $(BIN)/python -m pip wheel --quiet --no-build-isolation --no-deps \
 	  --wheel-dir dist .
 	$(BIN)/python -m pip install --quiet --no-deps --target build/compiled dist/onboard-*-cp*.whl
