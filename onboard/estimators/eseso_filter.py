@@ -159,6 +159,32 @@ vehicle)."""
 
 E3 = np.array([0.0, 0.0, 1.0])
 
+X_P, X_V = slice(0, 3), slice(3, 6)
+X_R = slice(6, 15)
+X_BA, X_BG, X_G, X_XI = (slice(15 + 3 * i, 18 + 3 * i) for i in range(4))
+X_BI = slice(27, 29)
+"""The nominal state's entries in the filter's one array :attr:`EsesoFilter.x`: ``p``,
+``v``, ``R`` (row by row), ``b_a``, ``b_g``, ``g``, ``xi``, ``b_ins``."""
+N_NOMINAL = X_BI.stop
+"""Length of the nominal state's array (29)."""
+
+
+def _nominal(block: slice, doc: str) -> property:
+    """The part ``block`` of :attr:`EsesoFilter.x` as an attribute: read, a view (written
+    in place, it writes the state); assigned, a new array with the value (what was read
+    before keeps its values, as any rebound attribute)."""
+    shape = (3, 3) if block == X_R else (block.stop - block.start,)
+
+    def get(self: "EsesoFilter") -> Array:
+        return self.x[block].reshape(shape)
+
+    def put(self: "EsesoFilter", value: Array) -> None:
+        x = self.x.copy()
+        x[block] = np.ravel(value)
+        self.x = x
+
+    return property(get, put, doc=doc)
+
 
 _I2, _I3, _I_N = frozen_eye(2), frozen_eye(3), frozen_eye(N_ERR)
 """Identities made once (read-only) for every propagation and update."""
@@ -419,7 +445,10 @@ class EsesoFilter:
     """The ESESO error-state Kalman filter (module docstring).
 
     Attributes (filterpy-style, read them to debug):
-        p, v, R, b_a, b_g, g, xi, b_ins: the nominal state (see the module docstring).
+        x: the nominal state in one array (:data:`X_P` ... :data:`X_BI`), which the
+            compiled kernels write in place.
+        p, v, R, b_a, b_g, g, xi, b_ins: the nominal state (see the module docstring),
+            views of :attr:`x`.
         P: the 23 x 23 error covariance, ordered as :data:`P_` ... :data:`BI`.
         F: the last propagation's error-state transition (:attr:`transition`, dense).
         compiled: whether the propagation and the updates run the compiled kernels
@@ -444,6 +473,15 @@ class EsesoFilter:
             to the published sigma (:meth:`published_disturbance_var`), not to ``P``.
     """
 
+    p = _nominal(X_P, "Position, NED, m.")
+    v = _nominal(X_V, "Velocity over ground, NED, m/s.")
+    R = _nominal(X_R, "Body(FRD)-to-earth(NED) rotation.")
+    b_a = _nominal(X_BA, "Accelerometer bias, body, m/s^2.")
+    b_g = _nominal(X_BG, "Gyro bias, body, rad/s.")
+    g = _nominal(X_G, "Gravity, NED, m/s^2.")
+    xi = _nominal(X_XI, "Lumped disturbance force, body FRD, N.")
+    b_ins = _nominal(X_BI, "INS velocity bias (north, east), m/s.")
+
     def __init__(self, params: EsesoParams) -> None:
         self.params = params
         c = params.vehicle
@@ -453,19 +491,16 @@ class EsesoFilter:
         self.d_l = np.asarray(c.damping_linear, float)
         self.d_nl = np.asarray(c.damping_quadratic, float)
         self.initialized = False
-        self.p = np.zeros(3)
-        self.v = np.zeros(3)
+        self.x = np.zeros(N_NOMINAL)  # p, v, b_a, b_g, xi, b_ins zero
         self.R = np.eye(3)
-        self.b_a = np.zeros(3)
-        self.b_g = np.zeros(3)
         self.g = np.array([0.0, 0.0, params.initial.gravity_mps2])
-        self.xi = np.zeros(3)
-        self.b_ins = np.zeros(2)
         self.P = np.eye(N_ERR)
         self._transition: Transition | None = None  # the last propagation's (:attr:`F`)
         self._interval_key: tuple[float, float] | None = None  # :meth:`_interval_noise`'s
         self._interval: tuple[float, Array] = (0.0, _NO_ERROR)
-        # what the compiled propagation's transition is built from when it is read
+        # what the compiled propagation's transition is built from when it is read: the
+        # state before it (written by the kernel) and its inputs
+        self._x_prev = np.zeros(N_NOMINAL)
         self._transition_inputs: tuple | None = None
         self.compiled = compiled_kernel() is not None
         self.y: Array | None = None
@@ -528,15 +563,13 @@ class EsesoFilter:
 
     def _propagate_compiled(self, f_m: Array, w_m: Array, dt: float, phi_ins: float,
                             q: Array, earth_fixed: bool) -> None:
-        """:meth:`propagate` by :func:`.eseso_kernel.propagate`; its :class:`Transition`
-        is built only when read (:attr:`transition`)."""
+        """:meth:`propagate` by :func:`.eseso_kernel.propagate_in_place` (:attr:`x` and
+        :attr:`P` written in place); its :class:`Transition` is built only when read
+        (:attr:`transition`)."""
         self._transition = None
-        self._transition_inputs = (self.R, self.xi, self.b_a, self.b_g, f_m, w_m, dt,
-                                   phi_ins, earth_fixed)
-        kernel = _kernel()
-        self.p, self.v, self.R, self.xi, self.b_ins, self.P = kernel.propagate(
-            self.p, self.v, self.R, self.b_a, self.b_g, self.g, self.xi, self.b_ins,
-            self.P, f_m, w_m, dt, earth_fixed, phi_ins, q)
+        self._transition_inputs = (f_m, w_m, dt, phi_ins, earth_fixed)
+        _kernel().propagate_in_place(self.x, self.P, self._x_prev, f_m, w_m, dt, earth_fixed,
+                                     phi_ins, q)
 
     def _interval_noise(self, dt: float) -> tuple[float, Array]:
         """The INS bias's decay over ``dt`` (s) (first-order Gauss-Markov, exact
@@ -571,9 +604,10 @@ class EsesoFilter:
     def transition(self) -> Transition | None:
         """The last propagation's :class:`Transition` (None before the first)."""
         if self._transition is None and self._transition_inputs is not None:
-            R, xi, b_a, b_g, f_m, w_m, dt, phi_ins, earth_fixed = self._transition_inputs
-            self._transition = transition(R, f_m - b_a, w_m - b_g, xi, dt, phi_ins,
-                                          earth_fixed)
+            f_m, w_m, dt, phi_ins, earth_fixed = self._transition_inputs
+            x = self._x_prev.copy()
+            self._transition = transition(x[X_R].reshape(3, 3), f_m - x[X_BA], w_m - x[X_BG],
+                                          x[X_XI], dt, phi_ins, earth_fixed)
         return self._transition
 
     @property
@@ -605,6 +639,10 @@ class EsesoFilter:
         Returns:
             What became of it (:class:`Outcome`; false when the gate rejects it).
         """
+        if gate is None:
+            gate = self.gate(len(y))
+        if self.compiled:
+            return self._fuse(channel, y, H, Rm, gate, t, source, only)
         outcome = Outcome.FUSED
         if self.params.noise.adapt_updates > 0:
             if channel in NOISE_ADAPT_CHANNELS:
@@ -613,8 +651,6 @@ class EsesoFilter:
                 self._adapt_process(y, self._project(H), Rm)
         up = self._kalman(y, H, Rm, only)
         self.y, self.S, self.nis = y, up.S, up.nis
-        if gate is None:
-            gate = self.gate(len(y))
         if gate > 0 and up.nis > gate:
             n_rej = self._consecutive.get(channel, 0) + 1
             self._consecutive[channel] = n_rej
@@ -628,6 +664,42 @@ class EsesoFilter:
         self._record(channel, t, source, gate, accepted=True)
         self._inject_and_reset(up.x, up.P)
         return outcome
+
+    def _fuse(self, channel: str, y: Array, H: Array, Rm: Array, gate: float, t: float,
+              source: str, only: slice | None) -> Outcome:
+        """:meth:`update` with :attr:`compiled`: its noise adaptation, Kalman update, gate
+        and injection in one call of :func:`.eseso_kernel.fuse` (:attr:`x` and :attr:`P`
+        written in place), the bookkeeping (the adaptation's means, the rejections in a
+        row, the record) here."""
+        kernel = _kernel()
+        c = self.params.noise
+        adapt, key = kernel.ADAPT_NONE, channel
+        if c.adapt_updates > 0 and channel in NOISE_ADAPT_CHANNELS:
+            adapt = kernel.ADAPT_NOISE
+        elif c.adapt_updates > 0 and channel == PROCESS_ADAPT_CHANNEL:
+            adapt, key = kernel.ADAPT_PROCESS, "process"
+        n_rej = self._consecutive.get(channel, 0) + 1
+        lo, hi = (0, N_ERR) if only is None else (only.start, only.stop)
+        outcome, nis, S, mean, scale = kernel.fuse(
+            self.x, self.P, y, H, Rm, lo, hi, gate,
+            n_rej > self.params.max_consecutive_rejects, adapt, c.adapt_updates,
+            self._noise_mean.get(key, 1.0), self.process_scale, c.scale_max, NOISE_SAMPLE_CAP)
+        if adapt != kernel.ADAPT_NONE:
+            self._noise_mean[key] = mean
+            if adapt == kernel.ADAPT_NOISE:
+                self.noise_scale[channel] = scale
+            else:
+                self.process_scale = scale
+        if outcome == kernel.SINGULAR:
+            raise np.linalg.LinAlgError("Singular matrix")
+        self.y, self.S, self.nis = y, S, nis
+        if outcome == kernel.GATED:
+            self._consecutive[channel] = n_rej
+            self._record(channel, t, source, gate, accepted=False)
+            return Outcome.GATED
+        self._consecutive[channel] = 0
+        self._record(channel, t, source, gate, accepted=True)
+        return Outcome.RECOVERED if outcome == kernel.RECOVERED else Outcome.FUSED
 
     def _kalman(self, y: Array, H: Array, Rm: Array, only: slice | None
                 ) -> kalman.KalmanUpdate:
@@ -650,15 +722,12 @@ class EsesoFilter:
         """:meth:`inject` the correction ``dx`` and reset the updated covariance ``P``
         (17b: ``G = I`` except the attitude block, ``I - [dtheta/2]x``, Sola eq. 287;
         :func:`reset_covariance`); with :attr:`compiled`, both in one
-        :func:`.eseso_kernel.inject_reset`."""
+        :func:`.eseso_kernel.inject_reset_in_place`."""
         if not self.compiled:
             self.inject(dx)
             self.P = reset_covariance(P, dx[TH])
             return
-        kernel = _kernel()
-        (self.p, self.v, self.R, self.b_a, self.b_g, self.g, self.xi, self.b_ins,
-         self.P) = kernel.inject_reset(self.p, self.v, self.R, self.b_a, self.b_g, self.g,
-                                       self.xi, self.b_ins, P, dx)
+        _kernel().inject_reset_in_place(self.x, self.P, P, dx)
 
     def _mahalanobis(self, S: Array, y: Array) -> float:
         """``y^T S^-1 y``; with :attr:`compiled`, :func:`.eseso_kernel.mahalanobis`."""
@@ -854,8 +923,7 @@ class EsesoFilter:
         c = self.params.vehicle
         if self.compiled:
             kernel = _kernel()
-            return kernel.h_tau(self.R, self.v, self.g, self.b_a, self.b_g, self.xi,
-                                np.asarray(f_m, float), np.asarray(w_m, float),
+            return kernel.h_tau(self.x, np.asarray(f_m, float), np.asarray(w_m, float),
                                 np.zeros(3) if wdot is None else np.asarray(wdot, float),
                                 wdot is not None, self.m_vec, self.d_a, self.d_l, self.d_nl,
                                 c.weight_n - c.buoyancy_n, c.mass_kg, c.cg_z_m)

@@ -50,6 +50,9 @@ from numba import njit
 # the error-state blocks of eseso_filter (P_, V_, TH, BA, BG, G_, XI, BI), as offsets
 _P, _V, _TH, _BA, _BG, _G, _XI, _BI = 0, 3, 6, 9, 12, 15, 18, 21
 _N = 23
+# the nominal state's entries in the filter's one array (eseso_filter's X_P ... X_BI)
+_XP, _XV, _XR, _XBA, _XBG, _XG, _XXI, _XBI = 0, 3, 6, 15, 18, 21, 24, 27
+_NX = 29
 _SMALL_ANGLE = 1e-6
 """Below this angle (rad) Exp and Jr take their series, as :mod:`onboard.core.so3`."""
 
@@ -222,6 +225,49 @@ def propagate(p, v, R, b_a, b_g, g, xi, b_ins, P, f_m, w_m, dt, earth_fixed, phi
 
 
 @njit(cache=True)
+def _unpack(x: np.ndarray):
+    """The nominal state's ``(p, v, R, b_a, b_g, g, xi, b_ins)`` out of the filter's one
+    array ``x`` (copies)."""
+    return (x[_XP:_XP + 3].copy(), x[_XV:_XV + 3].copy(), x[_XR:_XR + 9].copy().reshape((3, 3)),
+            x[_XBA:_XBA + 3].copy(), x[_XBG:_XBG + 3].copy(), x[_XG:_XG + 3].copy(),
+            x[_XXI:_XXI + 3].copy(), x[_XBI:_XBI + 2].copy())
+
+
+@njit(cache=True)
+def _pack(x, p, v, R, b_a, b_g, g, xi, b_ins) -> None:
+    """The nominal state into the filter's one array ``x``."""
+    for i in range(3):
+        x[_XP + i], x[_XV + i] = p[i], v[i]
+        x[_XBA + i], x[_XBG + i], x[_XG + i], x[_XXI + i] = b_a[i], b_g[i], g[i], xi[i]
+        for j in range(3):
+            x[_XR + 3 * i + j] = R[i, j]
+    for i in range(2):
+        x[_XBI + i] = b_ins[i]
+
+
+@njit(cache=True)
+def _store(P: np.ndarray, P_new: np.ndarray) -> None:
+    """``P[:] = P_new``."""
+    for i in range(P.shape[0]):
+        for j in range(P.shape[1]):
+            P[i, j] = P_new[i, j]
+
+
+@njit(cache=True)
+def propagate_in_place(x, P, x_prev, f_m, w_m, dt, earth_fixed, phi_ins, q) -> None:
+    """:func:`propagate` of the filter's nominal state ``x`` and covariance ``P``, both
+    written in place, the state before it into ``x_prev`` (what the transition is built
+    from when read): one call, no array returned."""
+    for i in range(_NX):
+        x_prev[i] = x[i]
+    p, v, R, b_a, b_g, g, xi, b_ins = _unpack(x)
+    p, v, R, xi, b_ins, P_new = propagate(p, v, R, b_a, b_g, g, xi, b_ins, P, f_m, w_m, dt,
+                                          earth_fixed, phi_ins, q)
+    _pack(x, p, v, R, b_a, b_g, g, xi, b_ins)
+    _store(P, P_new)
+
+
+@njit(cache=True)
 def _inverse(S: np.ndarray) -> tuple[np.ndarray, bool]:
     """``S^-1`` by Gauss-Jordan elimination with partial pivoting (LU's arithmetic), and
     False when ``S`` is singular."""
@@ -338,6 +384,70 @@ def inject_reset(p, v, R, b_a, b_g, g, xi, b_ins, P, dx):
 
 
 @njit(cache=True)
+def inject_reset_in_place(x: np.ndarray, P: np.ndarray, P_up: np.ndarray,
+                          dx: np.ndarray) -> None:
+    """:func:`inject_reset` of the correction ``dx`` into the filter's nominal state ``x``
+    and of the updated covariance ``P_up`` into ``P``, both written in place."""
+    p, v, R, b_a, b_g, g, xi, b_ins = _unpack(x)
+    p, v, R, b_a, b_g, g, xi, b_ins, P_new = inject_reset(p, v, R, b_a, b_g, g, xi, b_ins,
+                                                           P_up, dx)
+    _pack(x, p, v, R, b_a, b_g, g, xi, b_ins)
+    _store(P, P_new)
+
+
+ADAPT_NONE, ADAPT_NOISE, ADAPT_PROCESS = 0, 1, 2
+"""What an update's innovation adapts (:func:`fuse`): nothing, its channel's noise scale
+(:meth:`EsesoFilter._adapt_noise`) or the IMU's (:meth:`EsesoFilter._adapt_process`)."""
+GATED, FUSED, RECOVERED, SINGULAR = 0, 1, 2, -1
+"""What :func:`fuse` made of an update (the filter's ``Outcome``; ``SINGULAR``: ``S``
+could not be inverted, nothing changed)."""
+
+
+@njit(cache=True)
+def fuse(x, P, y, H, Rm, keep_lo, keep_hi, gate, may_recover, adapt, adapt_n, mean, scale,
+         ceiling, cap):
+    """:meth:`EsesoFilter.update` but its bookkeeping, in one call: the noise adaptation
+    (``adapt``: its exponential mean ``mean`` over ``adapt_n`` updates, the current
+    ``scale``, clipped to [1, ``ceiling``], each sample capped at ``cap``), the Joseph
+    update (:func:`joseph_update`), the gate (``gate`` > 0; beyond it the update is
+    rejected unless ``may_recover``, then fused with its noise scaled so that its NIS
+    equals the gate) and the injection and reset into ``x`` and ``P`` in place. Returns
+    ``(outcome, nis, S, mean, scale)``: ``nis`` and ``S`` the first update's, ``mean``
+    and ``scale`` the adaptation's new ones."""
+    m = y.shape[0]
+    if adapt != ADAPT_NONE:
+        HPHt = project(P, H)
+        yy, tr_h, tr_r = 0.0, 0.0, 0.0
+        for i in range(m):
+            yy += y[i] * y[i]
+            tr_h += HPHt[i, i]
+            tr_r += Rm[i, i]
+        if adapt == ADAPT_NOISE:
+            sample = (yy - tr_h) / max(tr_r, 1e-300)
+        else:  # P already carries the current scale: the sample is the scale times the ratio
+            sample = scale * ((yy - tr_r) / max(tr_h, 1e-300))
+        sample = cap if cap < sample else sample  # Python's min(sample, cap), NaN kept
+        mean += (sample - mean) / adapt_n
+        scale = 1.0 if 1.0 > mean else mean
+        scale = ceiling if ceiling < scale else scale
+        if adapt == ADAPT_NOISE:
+            Rm = Rm * scale
+    dx, P_up, S, nis, ok = joseph_update(P, y, H, Rm, keep_lo, keep_hi)
+    if not ok:
+        return SINGULAR, nis, S, mean, scale
+    outcome = FUSED
+    if gate > 0.0 and nis > gate:
+        if not may_recover:
+            return GATED, nis, S, mean, scale
+        outcome = RECOVERED
+        dx, P_up, _, _, ok = joseph_update(P, y, H, Rm * (nis / gate), keep_lo, keep_hi)
+        if not ok:
+            return SINGULAR, nis, S, mean, scale
+    inject_reset_in_place(x, P, P_up, dx)
+    return outcome, nis, S, mean, scale
+
+
+@njit(cache=True)
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a x b`` of two 3-vectors."""
     out = np.empty(3)
@@ -348,13 +458,14 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def h_tau(R, v, g, b_a, b_g, xi, f_m, w_m, wdot, with_wdot, m_vec, added, d_l, d_nl,
-          w_minus_b, mass, cg_z):
-    """:meth:`EsesoFilter.h_tau`: the predicted thruster force (N, body) and its 3 x 23
-    Jacobian at specific force ``f_m`` and rate ``w_m``, the centre-of-gravity terms only
-    ``with_wdot`` (angular acceleration ``wdot``). ``m_vec`` is the diagonal of ``M``,
-    ``added`` of ``A``, ``d_l`` and ``d_nl`` the damping's, ``w_minus_b`` the weight
-    minus the buoyancy (N), ``mass`` (kg) and ``cg_z`` (m) the centre of gravity's."""
+def h_tau(x, f_m, w_m, wdot, with_wdot, m_vec, added, d_l, d_nl, w_minus_b, mass, cg_z):
+    """:meth:`EsesoFilter.h_tau` at the nominal state ``x`` (the filter's one array): the
+    predicted thruster force (N, body) and its 3 x 23 Jacobian at specific force ``f_m``
+    and rate ``w_m``, the centre-of-gravity terms only ``with_wdot`` (angular
+    acceleration ``wdot``). ``m_vec`` is the diagonal of ``M``, ``added`` of ``A``,
+    ``d_l`` and ``d_nl`` the damping's, ``w_minus_b`` the weight minus the buoyancy (N),
+    ``mass`` (kg) and ``cg_z`` (m) the centre of gravity's."""
+    _, v, R, b_a, b_g, g, xi, _ = _unpack(x)
     f, w = np.empty(3), np.empty(3)
     for i in range(3):
         f[i] = f_m[i] - b_a[i]
@@ -426,7 +537,7 @@ def _floor(x: float, lo: float) -> float:
 
 
 @njit(cache=True)
-def estimates(p, v, R, xi, P, b_a, b_g, g, w_m, excess, min_share):
+def estimates(x, P, w_m, excess, min_share):
     """The ESESO pipeline's published values in its column order
     (:meth:`onboard.pipelines.eseso.Eseso.estimates`): position, velocity (earth and
     body), roll, pitch, yaw (ZYX, as :func:`onboard.core.so3.matrix_to_euler`), rate,
@@ -434,7 +545,8 @@ def estimates(p, v, R, xi, P, b_a, b_g, g, w_m, excess, min_share):
     disturbance's published sigma
     (:meth:`~onboard.estimators.eseso_filter.EsesoFilter.published_disturbance_var`
     with the thrust innovations' ``excess`` and the floor ``min_share``), the biases and
-    gravity's down component."""
+    gravity's down component, at the nominal state ``x`` (the filter's one array)."""
+    p, v, R, b_a, b_g, g, xi, _ = _unpack(x)
     out = np.empty(37)
     RT = _transpose(R)
     nu, xi_e = _mv(RT, v), _mv(R, xi)

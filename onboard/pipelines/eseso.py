@@ -593,8 +593,7 @@ class Eseso(Pipeline):
             # imported here: a process whose filter does not compile never imports numba
             from onboard.estimators import eseso_kernel
             return dict(zip(self.columns, eseso_kernel.estimates(
-                f.p, f.v, f.R, f.xi, f.P, f.b_a, f.b_g, f.g, w_m, f.disturbance_excess,
-                PUBLISHED_VAR_MIN_SHARE).tolist()))
+                f.x, f.P, w_m, f.disturbance_excess, PUBLISHED_VAR_MIN_SHARE).tolist()))
         RT = f.R.T
         nu = RT @ f.v
         xi_e = f.R @ f.xi
