@@ -512,12 +512,14 @@ class EsesoFilter:
         self.noise_scale: dict[str, float] = {}
         self.process_scale = 1.0
         self._noise_mean: dict[str, float] = {}
-        self._model_terms: tuple[Array, Array] | None = None  # (tau, D(nu) nu), last update
+        self._model_terms: Array | None = None  # rows tau, D(nu) nu at the last update
         self.disturbance_excess = np.zeros(3)
         self._excess_ratio = np.ones(3)  # E[y_i^2] / S_ii of the thrust innovations
         self._excess_ratio_slow = np.ones(3)  # the same over NARROWING_MEMORY times longer
         # thrust-update noise (N^2), :meth:`thrust_noise`; updated at every thrust update
         self.R_tau = self.thrust_noise(None)
+        # the compiled thrust update's constants (eseso_kernel.thrust_constants), once
+        self._thrust_constants: tuple[Array, Array] | None = None
 
     def initialize(self, R0: Array, position: Array, yaw_std_rad: float | None = None) -> None:
         """Start at attitude ``R0`` (projected onto SO(3)) and NED ``position`` (m), at rest,
@@ -690,6 +692,14 @@ class EsesoFilter:
                 self.noise_scale[channel] = scale
             else:
                 self.process_scale = scale
+        return self._settle(channel, outcome, y, S, nis, gate, n_rej, t, source)
+
+    def _settle(self, channel: str, outcome: int, y: Array, S: Array, nis: float,
+                gate: float, n_rej: int, t: float, source: str) -> Outcome:
+        """The bookkeeping of a compiled update (:meth:`_fuse`, the thrust's) whose
+        ``outcome`` (:data:`.eseso_kernel.FUSED` ...) is known: the last innovation, the
+        rejections in a row (``n_rej`` with this one), the record."""
+        kernel = _kernel()
         if outcome == kernel.SINGULAR:
             raise np.linalg.LinAlgError("Singular matrix")
         self.y, self.S, self.nis = y, S, nis
@@ -969,7 +979,7 @@ class EsesoFilter:
         the model's error."""
         c = self.params.process
         nu = self.R.T @ self.v
-        terms = (np.asarray(tau, float).copy(), (self.d_l + self.d_nl * np.abs(nu)) * nu)
+        terms = np.array((np.asarray(tau, float), (self.d_l + self.d_nl * np.abs(nu)) * nu))
         last, self._model_terms = self._model_terms, terms
         if last is None:
             return np.zeros(3)
@@ -1009,7 +1019,10 @@ class EsesoFilter:
         disturbance's model-change variance (:meth:`model_change_var`) is added to its
         covariance first. With ``thrust_states = "disturbance"`` a Schmidt-Kalman update:
         the full Jacobian in ``S`` and in the covariance, the gain's rows other than
-        ``dxi`` zeroed (:meth:`update`'s ``only``)."""
+        ``dxi`` zeroed (:meth:`update`'s ``only``). With :attr:`compiled`, all of it but
+        the bookkeeping in one call of :func:`.eseso_kernel.thrust_update`."""
+        if self.compiled:
+            return self._update_thrust_compiled(f_m, w_m, wdot, tau, wdot_dt, t, source)
         h, H = self.h_tau(f_m, w_m, wdot)
         self.P[XI, XI] += np.diag(self.model_change_var(tau))
         y = tau - h
@@ -1029,3 +1042,28 @@ class EsesoFilter:
                 Rm = Rm * (nis / k)
                 self.downweighted = True
         return self.update("thrust", y, H, Rm, gate=0.0, t=t, source=source, only=only)
+
+    def _update_thrust_compiled(self, f_m: Array, w_m: Array, wdot: Array, tau: Array,
+                                wdot_dt: float | None, t: float, source: str) -> Outcome:
+        """:meth:`update_thrust` by :func:`.eseso_kernel.thrust_update` (:attr:`x`,
+        :attr:`P`, :attr:`R_tau`, :attr:`disturbance_excess` and the means behind it
+        written in place); the bookkeeping here."""
+        kernel = _kernel()
+        if self._thrust_constants is None:
+            self._thrust_constants = kernel.thrust_constants(self.params, NOISE_SAMPLE_CAP,
+                                                             NARROWING_MEMORY)
+        vehicle, k = self._thrust_constants
+        has_last = self._model_terms is not None
+        if not has_last:
+            self._model_terms = np.empty((2, 3))
+        keep = XI if self.params.thrust_states == "disturbance" else slice(0, N_ERR)
+        outcome, nis, S, y, mean, scale, self.downweighted = kernel.thrust_update(
+            self.x, self.P, np.asarray(f_m, float), np.asarray(w_m, float),
+            np.asarray(wdot, float), 0.0 if wdot_dt is None else wdot_dt,
+            np.asarray(tau, float), vehicle, k, self._model_terms, has_last,
+            self._excess_ratio, self._excess_ratio_slow, self.disturbance_excess, self.R_tau,
+            self._noise_mean.get("thrust", 1.0), self.process_scale, keep.start, keep.stop)
+        if self.params.noise.adapt_updates > 0:
+            self._noise_mean["thrust"] = mean
+            self.noise_scale["thrust"] = scale
+        return self._settle("thrust", outcome, y, S, nis, 0.0, 1, t, source)

@@ -530,6 +530,101 @@ def mahalanobis(S: np.ndarray, y: np.ndarray) -> float:
     return out
 
 
+THRUST_CONSTANTS = ("w_minus_b", "mass", "cg_z", "thrust_rel_std", "damping_rel_std",
+                    "accel_std", "gyro_std", "thrust_std", "adapt_updates", "scale_max",
+                    "sample_cap", "narrowing", "huber")
+"""The scalars of :func:`thrust_update`'s ``k`` in their order (:func:`thrust_constants`)."""
+(_K_W_MINUS_B, _K_MASS, _K_CG_Z, _K_THRUST_REL, _K_DAMPING_REL, _K_ACCEL_STD, _K_GYRO_STD,
+ _K_THRUST_STD, _K_ADAPT_N, _K_SCALE_MAX, _K_CAP, _K_NARROWING, _K_HUBER) = range(13)
+
+
+def thrust_constants(params, sample_cap: float, narrowing: float) -> tuple[np.ndarray, np.ndarray]:
+    """The constants of :func:`thrust_update` from the filter's ``EsesoParams``, made once
+    per filter: the vehicle's diagonals (rows ``M``, ``A``, linear and quadratic damping)
+    and the scalars of :data:`THRUST_CONSTANTS` (the noise sample's cap and the narrowing
+    memory are the filter's constants)."""
+    v, n, c = params.vehicle, params.noise, params.process
+    added = np.asarray(v.added_mass_kg, float)
+    vehicle = np.array([v.mass_kg + added, added, np.asarray(v.damping_linear, float),
+                        np.asarray(v.damping_quadratic, float)])
+    k = np.array([v.weight_n - v.buoyancy_n, v.mass_kg, v.cg_z_m, c.thrust_rel_std,
+                  c.damping_rel_std, n.accel_std_mps2, n.gyro_std_rps, n.thrust_std_n,
+                  n.adapt_updates, n.thrust_scale_max, sample_cap, narrowing,
+                  params.thrust_huber], float)
+    return vehicle, k
+
+
+@njit(cache=True)
+def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, has_last,
+                  excess_ratio, excess_slow, excess, R_tau, mean, s_imu, keep_lo, keep_hi):
+    """:meth:`EsesoFilter.update_thrust` but its bookkeeping, in one call (``vehicle`` and
+    ``k`` from :func:`thrust_constants`): the thrust model (:func:`h_tau`), the
+    model-change variance into ``P[xi, xi]`` (``model_terms``, the last update's
+    ``(tau, D(nu) nu)`` rows, read when ``has_last`` and written), the noise ``R_tau``
+    (written) at the IMU noise scale ``s_imu``, the disturbance excess's means and the
+    excess (``excess_ratio``, ``excess_slow``, ``excess``, written) and the thrust
+    channel's noise scale (its mean ``mean``) when ``k``'s ``adapt_updates`` > 0, the
+    Huber weight, then :func:`fuse` (no gate) into ``x`` and ``P`` in place. Returns
+    ``(outcome, nis, S, y, mean, scale, downweighted)``."""
+    m_vec, added, d_l, d_nl = vehicle[0], vehicle[1], vehicle[2], vehicle[3]
+    h, H = h_tau(x, f_m, w_m, wdot, True, m_vec, added, d_l, d_nl, k[_K_W_MINUS_B],
+                 k[_K_MASS], k[_K_CG_Z])
+    _, v, R, _, _, _, _, _ = _unpack(x)
+    nu = _mv(_transpose(R), v)
+    for i in range(3):  # the model change since the last update (model_change_var)
+        damp = (d_l[i] + d_nl[i] * abs(nu[i])) * nu[i]
+        if has_last:
+            P[_XI + i, _XI + i] += ((k[_K_THRUST_REL] * (tau[i] - model_terms[0, i])) ** 2
+                                    + (k[_K_DAMPING_REL] * (damp - model_terms[1, i])) ** 2)
+        model_terms[0, i], model_terms[1, i] = tau[i], damp
+    y, var = np.empty(3), np.empty(3)
+    for i in range(3):  # thrust_noise
+        y[i] = tau[i] - h[i]
+        var[i] = (m_vec[i] * k[_K_ACCEL_STD]) ** 2 * s_imu + k[_K_THRUST_STD] ** 2
+    if wdot_dt > 0.0:
+        var_wdot = 2.0 * k[_K_GYRO_STD] ** 2 / wdot_dt ** 2 * s_imu
+        for i in range(2):
+            var[i] += (k[_K_MASS] * k[_K_CG_Z]) ** 2 * var_wdot
+    for i in range(3):
+        for j in range(3):
+            R_tau[i, j] = var[i] if i == j else 0.0
+    Rm = R_tau.copy()
+    HPHt = project(P, H)
+    scale = 1.0
+    adapt_n = k[_K_ADAPT_N]
+    if adapt_n > 0:  # before the Huber weight (it would learn it)
+        slow_n = k[_K_NARROWING] * adapt_n
+        yy, tr_h, tr_r = 0.0, 0.0, 0.0
+        for i in range(3):  # _learn_disturbance_excess, at S = H P H^T + R_tau
+            S_ii = HPHt[i, i] + Rm[i, i]
+            sample = y[i] * y[i] / _floor(S_ii, 1e-300)
+            sample = k[_K_CAP] if sample > k[_K_CAP] else sample
+            excess_ratio[i] += (sample - excess_ratio[i]) / adapt_n
+            excess_slow[i] += (sample - excess_slow[i]) / slow_n
+            wider, narrower = excess_ratio[i] - 1.0, excess_slow[i] - 1.0
+            excess[i] = (_floor(wider, 0.0) + (0.0 if narrower > 0.0 else narrower)) * S_ii
+            yy += y[i] * y[i]
+            tr_h += HPHt[i, i]
+            tr_r += Rm[i, i]
+        sample = (yy - tr_h) / max(tr_r, 1e-300)  # _adapt_noise, the thrust's ceiling
+        sample = k[_K_CAP] if k[_K_CAP] < sample else sample
+        mean += (sample - mean) / adapt_n
+        scale = 1.0 if 1.0 > mean else mean
+        scale = k[_K_SCALE_MAX] if k[_K_SCALE_MAX] < scale else scale
+        Rm = Rm * scale
+    downweighted = False
+    huber = k[_K_HUBER]
+    if huber > 0.0:
+        S = HPHt + Rm
+        nis = mahalanobis(S, y)
+        if nis > huber:
+            Rm = Rm * (nis / huber)
+            downweighted = True
+    outcome, nis, S, _, _ = fuse(x, P, y, H, Rm, keep_lo, keep_hi, 0.0, False, ADAPT_NONE,
+                                 1, 0.0, 1.0, 1.0, 1.0)
+    return outcome, nis, S, y, mean, scale, downweighted
+
+
 @njit(cache=True)
 def _floor(x: float, lo: float) -> float:
     """``max(x, lo)``, NaN kept (as ``np.maximum``)."""
