@@ -270,6 +270,22 @@ def test_compiled_estimates_agree_with_the_reference() -> None:
     assert np.isnan(ref.estimates()["std_north"]) and np.isnan(fast.estimates()["std_north"])
 
 
+def test_compiled_divergence_test_agrees_with_the_reference() -> None:
+    """:meth:`EsesoFilter.finite`: a non-finite covariance entry or position is
+    divergence, in both; a non-finite bias is not looked at, in both."""
+    start, _ = _filters()
+    _random_state(start, np.random.default_rng(3))
+    for where, value in [(None, 0.0), (("P", (4, 17)), np.nan), (("P", (0, 0)), np.inf),
+                         (("p", 2), -np.inf), (("p", 0), np.nan), (("b_a", 1), np.nan)]:
+        ref, fast = _filters()
+        _same_state(start, ref)
+        _same_state(start, fast)
+        for f in (ref, fast):
+            if where is not None:
+                getattr(f, where[0])[where[1]] = value
+        assert fast.finite() is ref.finite() is (where is None or where[0] == "b_a")
+
+
 def test_a_singular_innovation_covariance_raises_in_both() -> None:
     ref, fast = _filters()
     for f in (ref, fast):

@@ -543,11 +543,14 @@ class EsesoFilter:
         (m/s^2) and rate ``w_m`` (rad/s), body axes: nominal state by paper eq. (10b),
         covariance by eqs. (11)-(13) with the Jacobian F of algorithms.md §5.1, its
         non-identity blocks (:func:`transition`) applied by :func:`propagate_covariance`;
-        with :attr:`compiled`, the same in :func:`.eseso_kernel.propagate`."""
+        with :attr:`compiled`, the same in :func:`.eseso_kernel.propagate_in_place`."""
         earth_fixed = self.params.process.disturbance_model == "earth_fixed"
         phi_ins, q = self._interval_noise(dt)
-        if self.compiled:
-            self._propagate_compiled(f_m, w_m, dt, phi_ins, q, earth_fixed)
+        if self.compiled:  # x and P written in place; the transition built when read
+            self._transition = None
+            self._transition_inputs = (f_m, w_m, dt, phi_ins, earth_fixed)
+            _kernel().propagate_in_place(self.x, self.P, self._x_prev, f_m, w_m, dt,
+                                         earth_fixed, phi_ins, q)
             return
         f = f_m - self.b_a
         w = w_m - self.b_g
@@ -562,16 +565,6 @@ class EsesoFilter:
         self.b_ins = self.b_ins * phi_ins
         self.P = propagate_covariance(self.P, tr, q)
         self._transition = tr
-
-    def _propagate_compiled(self, f_m: Array, w_m: Array, dt: float, phi_ins: float,
-                            q: Array, earth_fixed: bool) -> None:
-        """:meth:`propagate` by :func:`.eseso_kernel.propagate_in_place` (:attr:`x` and
-        :attr:`P` written in place); its :class:`Transition` is built only when read
-        (:attr:`transition`)."""
-        self._transition = None
-        self._transition_inputs = (f_m, w_m, dt, phi_ins, earth_fixed)
-        _kernel().propagate_in_place(self.x, self.P, self._x_prev, f_m, w_m, dt, earth_fixed,
-                                     phi_ins, q)
 
     def _interval_noise(self, dt: float) -> tuple[float, Array]:
         """The INS bias's decay over ``dt`` (s) (first-order Gauss-Markov, exact
@@ -601,6 +594,13 @@ class EsesoFilter:
         q[XI] = c.disturbance_walk_n_rts ** 2 * dt
         q[BI] = n.ins_bias_std_mps ** 2 * (1.0 - phi_ins * phi_ins)
         return q
+
+    def finite(self) -> bool:
+        """Whether ``P`` and the position are finite (else the filter diverged); with
+        :attr:`compiled`, :func:`.eseso_kernel.finite`."""
+        if self.compiled:
+            return _kernel().finite(self.x, self.P)
+        return bool(np.isfinite(self.P).all() and np.isfinite(self.p).all())
 
     @property
     def transition(self) -> Transition | None:
@@ -787,7 +787,15 @@ class EsesoFilter:
         disturbance sigma's 1600 N^2, weighs no more than any other update): over
         ``noise.adapt_updates`` updates where it is above 1, over
         :data:`NARROWING_MEMORY` times as many where it is below; the excess is
-        ``(max(r_fast - 1, 0) + min(r_slow - 1, 0)) S_ii`` at this update."""
+        ``(max(r_fast - 1, 0) + min(r_slow - 1, 0)) S_ii`` at this update. With
+        :attr:`compiled`, the same in :func:`.eseso_kernel.learn_excess` (the means and
+        the excess written in place)."""
+        if self.compiled:
+            n = self.params.noise.adapt_updates
+            _kernel().learn_excess(y, S_model, self._excess_ratio, self._excess_ratio_slow,
+                                   self.disturbance_excess, n, NARROWING_MEMORY * n,
+                                   NOISE_SAMPLE_CAP)
+            return
         S_ii = S_model.diagonal()
         sample = np.minimum(y * y / np.maximum(S_ii, 1e-300), NOISE_SAMPLE_CAP)
         self._excess_ratio += (sample - self._excess_ratio) / self.params.noise.adapt_updates
@@ -1046,24 +1054,23 @@ class EsesoFilter:
     def _update_thrust_compiled(self, f_m: Array, w_m: Array, wdot: Array, tau: Array,
                                 wdot_dt: float | None, t: float, source: str) -> Outcome:
         """:meth:`update_thrust` by :func:`.eseso_kernel.thrust_update` (:attr:`x`,
-        :attr:`P`, :attr:`R_tau`, :attr:`disturbance_excess` and the means behind it
-        written in place); the bookkeeping here."""
+        :attr:`P` and :attr:`R_tau` written in place); the bookkeeping and
+        :meth:`_learn_disturbance_excess` here."""
         kernel = _kernel()
         if self._thrust_constants is None:
-            self._thrust_constants = kernel.thrust_constants(self.params, NOISE_SAMPLE_CAP,
-                                                             NARROWING_MEMORY)
+            self._thrust_constants = kernel.thrust_constants(self.params, NOISE_SAMPLE_CAP)
         vehicle, k = self._thrust_constants
         has_last = self._model_terms is not None
         if not has_last:
             self._model_terms = np.empty((2, 3))
         keep = XI if self.params.thrust_states == "disturbance" else slice(0, N_ERR)
-        outcome, nis, S, y, mean, scale, self.downweighted = kernel.thrust_update(
+        outcome, nis, S, y, S_model, mean, scale, self.downweighted = kernel.thrust_update(
             self.x, self.P, np.asarray(f_m, float), np.asarray(w_m, float),
             np.asarray(wdot, float), 0.0 if wdot_dt is None else wdot_dt,
-            np.asarray(tau, float), vehicle, k, self._model_terms, has_last,
-            self._excess_ratio, self._excess_ratio_slow, self.disturbance_excess, self.R_tau,
+            np.asarray(tau, float), vehicle, k, self._model_terms, has_last, self.R_tau,
             self._noise_mean.get("thrust", 1.0), self.process_scale, keep.start, keep.stop)
         if self.params.noise.adapt_updates > 0:
+            self._learn_disturbance_excess(y, S_model)  # it changes neither P nor the gain
             self._noise_mean["thrust"] = mean
             self.noise_scale["thrust"] = scale
         return self._settle("thrust", outcome, y, S, nis, 0.0, 1, t, source)

@@ -532,40 +532,39 @@ def mahalanobis(S: np.ndarray, y: np.ndarray) -> float:
 
 THRUST_CONSTANTS = ("w_minus_b", "mass", "cg_z", "thrust_rel_std", "damping_rel_std",
                     "accel_std", "gyro_std", "thrust_std", "adapt_updates", "scale_max",
-                    "sample_cap", "narrowing", "huber")
+                    "sample_cap", "huber")
 """The scalars of :func:`thrust_update`'s ``k`` in their order (:func:`thrust_constants`)."""
 (_K_W_MINUS_B, _K_MASS, _K_CG_Z, _K_THRUST_REL, _K_DAMPING_REL, _K_ACCEL_STD, _K_GYRO_STD,
- _K_THRUST_STD, _K_ADAPT_N, _K_SCALE_MAX, _K_CAP, _K_NARROWING, _K_HUBER) = range(13)
+ _K_THRUST_STD, _K_ADAPT_N, _K_SCALE_MAX, _K_CAP, _K_HUBER) = range(12)
 
 
-def thrust_constants(params, sample_cap: float, narrowing: float) -> tuple[np.ndarray, np.ndarray]:
+def thrust_constants(params, sample_cap: float) -> tuple[np.ndarray, np.ndarray]:
     """The constants of :func:`thrust_update` from the filter's ``EsesoParams``, made once
     per filter: the vehicle's diagonals (rows ``M``, ``A``, linear and quadratic damping)
-    and the scalars of :data:`THRUST_CONSTANTS` (the noise sample's cap and the narrowing
-    memory are the filter's constants)."""
+    and the scalars of :data:`THRUST_CONSTANTS` (the noise sample's cap is the filter's
+    constant)."""
     v, n, c = params.vehicle, params.noise, params.process
     added = np.asarray(v.added_mass_kg, float)
     vehicle = np.array([v.mass_kg + added, added, np.asarray(v.damping_linear, float),
                         np.asarray(v.damping_quadratic, float)])
     k = np.array([v.weight_n - v.buoyancy_n, v.mass_kg, v.cg_z_m, c.thrust_rel_std,
                   c.damping_rel_std, n.accel_std_mps2, n.gyro_std_rps, n.thrust_std_n,
-                  n.adapt_updates, n.thrust_scale_max, sample_cap, narrowing,
-                  params.thrust_huber], float)
+                  n.adapt_updates, n.thrust_scale_max, sample_cap, params.thrust_huber], float)
     return vehicle, k
 
 
 @njit(cache=True)
 def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, has_last,
-                  excess_ratio, excess_slow, excess, R_tau, mean, s_imu, keep_lo, keep_hi):
-    """:meth:`EsesoFilter.update_thrust` but its bookkeeping, in one call (``vehicle`` and
-    ``k`` from :func:`thrust_constants`): the thrust model (:func:`h_tau`), the
-    model-change variance into ``P[xi, xi]`` (``model_terms``, the last update's
-    ``(tau, D(nu) nu)`` rows, read when ``has_last`` and written), the noise ``R_tau``
-    (written) at the IMU noise scale ``s_imu``, the disturbance excess's means and the
-    excess (``excess_ratio``, ``excess_slow``, ``excess``, written) and the thrust
-    channel's noise scale (its mean ``mean``) when ``k``'s ``adapt_updates`` > 0, the
-    Huber weight, then :func:`fuse` (no gate) into ``x`` and ``P`` in place. Returns
-    ``(outcome, nis, S, y, mean, scale, downweighted)``."""
+                  R_tau, mean, s_imu, keep_lo, keep_hi):
+    """:meth:`EsesoFilter.update_thrust` but its bookkeeping and the published excess's
+    learning, in one call (``vehicle`` and ``k`` from :func:`thrust_constants`): the
+    thrust model (:func:`h_tau`), the model-change variance into ``P[xi, xi]``
+    (``model_terms``, the last update's ``(tau, D(nu) nu)`` rows, read when ``has_last``
+    and written), the noise ``R_tau`` (written) at the IMU noise scale ``s_imu``, the
+    thrust channel's noise scale (its mean ``mean``) when ``k``'s ``adapt_updates`` > 0,
+    the Huber weight, then :func:`fuse` (no gate) into ``x`` and ``P`` in place. Returns
+    ``(outcome, nis, S, y, S_model, mean, scale, downweighted)``, ``S_model = H P H^T +
+    R_tau`` what :func:`learn_excess` learns from."""
     m_vec, added, d_l, d_nl = vehicle[0], vehicle[1], vehicle[2], vehicle[3]
     h, H = h_tau(x, f_m, w_m, wdot, True, m_vec, added, d_l, d_nl, k[_K_W_MINUS_B],
                  k[_K_MASS], k[_K_CG_Z])
@@ -590,19 +589,12 @@ def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, h
             R_tau[i, j] = var[i] if i == j else 0.0
     Rm = R_tau.copy()
     HPHt = project(P, H)
+    S_model = HPHt + Rm
     scale = 1.0
     adapt_n = k[_K_ADAPT_N]
     if adapt_n > 0:  # before the Huber weight (it would learn it)
-        slow_n = k[_K_NARROWING] * adapt_n
         yy, tr_h, tr_r = 0.0, 0.0, 0.0
-        for i in range(3):  # _learn_disturbance_excess, at S = H P H^T + R_tau
-            S_ii = HPHt[i, i] + Rm[i, i]
-            sample = y[i] * y[i] / _floor(S_ii, 1e-300)
-            sample = k[_K_CAP] if sample > k[_K_CAP] else sample
-            excess_ratio[i] += (sample - excess_ratio[i]) / adapt_n
-            excess_slow[i] += (sample - excess_slow[i]) / slow_n
-            wider, narrower = excess_ratio[i] - 1.0, excess_slow[i] - 1.0
-            excess[i] = (_floor(wider, 0.0) + (0.0 if narrower > 0.0 else narrower)) * S_ii
+        for i in range(3):
             yy += y[i] * y[i]
             tr_h += HPHt[i, i]
             tr_r += Rm[i, i]
@@ -622,7 +614,36 @@ def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, h
             downweighted = True
     outcome, nis, S, _, _ = fuse(x, P, y, H, Rm, keep_lo, keep_hi, 0.0, False, ADAPT_NONE,
                                  1, 0.0, 1.0, 1.0, 1.0)
-    return outcome, nis, S, y, mean, scale, downweighted
+    return outcome, nis, S, y, S_model, mean, scale, downweighted
+
+
+@njit(cache=True)
+def learn_excess(y, S_model, excess_ratio, excess_slow, excess, adapt_n, slow_n, cap) -> None:
+    """:meth:`EsesoFilter._learn_disturbance_excess` in place: the thrust innovation
+    ``y``'s exponential means ``excess_ratio`` (over ``adapt_n`` updates) and
+    ``excess_slow`` (over ``slow_n``) of ``y_i^2 / S_ii`` (each sample capped at ``cap``)
+    and the ``excess`` they make."""
+    for i in range(3):
+        S_ii = S_model[i, i]
+        sample = y[i] * y[i] / _floor(S_ii, 1e-300)
+        sample = cap if sample > cap else sample  # np.minimum: NaN kept
+        excess_ratio[i] += (sample - excess_ratio[i]) / adapt_n
+        excess_slow[i] += (sample - excess_slow[i]) / slow_n
+        wider, narrower = excess_ratio[i] - 1.0, excess_slow[i] - 1.0
+        excess[i] = (_floor(wider, 0.0) + (0.0 if narrower > 0.0 else narrower)) * S_ii
+
+
+@njit(cache=True)
+def finite(x: np.ndarray, P: np.ndarray) -> bool:
+    """Whether ``P`` and the position in the nominal state ``x`` are finite."""
+    for i in range(3):
+        if not math.isfinite(x[_XP + i]):
+            return False
+    for i in range(P.shape[0]):
+        for j in range(P.shape[1]):
+            if not math.isfinite(P[i, j]):
+                return False
+    return True
 
 
 @njit(cache=True)

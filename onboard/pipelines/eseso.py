@@ -303,7 +303,6 @@ class Eseso(Pipeline):
         self.t_imu: float | None = None
         self.f_m: Array | None = None  # last specific force (m/s^2)
         self.w_m: Array | None = None  # last angular rate (rad/s)
-        self.wdot = np.zeros(3)  # angular acceleration from differenced gyro (rad/s^2)
         self.tau: Array | None = None  # last commanded body force (N)
         self.t_tau = -math.inf
         self._tau_source = ""  # source of the last thruster command
@@ -369,7 +368,7 @@ class Eseso(Pipeline):
         """The thrust update for the IMU sample just received when a thruster command
         arrived since the last one (module docstring)."""
         hist = self._imu_hist
-        if len(hist) < 2 or not self._tau_hist or self._tau_hist[-1][0] <= self._t_tau_fused:
+        if len(hist) < 2:
             return
         (t0, _, w0), (t1, f1, w1) = hist[-2:]
         tau = self._tau_mean(t0, t1)
@@ -409,13 +408,12 @@ class Eseso(Pipeline):
             dt = self.cfg.max_imu_gap_s
         self.filter.propagate(f_m, w_m, dt)
         self.t_imu = s.t
-        if self.w_m is not None:
-            self.wdot = (w_m - self.w_m) / dt
         self.f_m, self.w_m = f_m, w_m
         self._imu_hist.append((s.t, f_m, w_m))
         if len(self._imu_hist) > IMU_HISTORY:
             del self._imu_hist[0]
-        self._thrust_update_at_imu()
+        if self._tau_hist and self._tau_hist[-1][0] > self._t_tau_fused:  # a new command
+            self._thrust_update_at_imu()
         self._zero_velocity(s.t)
 
     def _zero_velocity(self, t: float) -> None:
@@ -577,7 +575,7 @@ class Eseso(Pipeline):
         f = self.filter
         if not f.initialized:
             return {}
-        if not np.isfinite(f.P).all() or not np.isfinite(f.p).all():
+        if not f.finite():
             self.counters.diverged()
             self.__init__(self.cfg, self._sensors)  # type: ignore[misc]
             return {}
