@@ -543,13 +543,13 @@ class EsesoFilter:
         (m/s^2) and rate ``w_m`` (rad/s), body axes: nominal state by paper eq. (10b),
         covariance by eqs. (11)-(13) with the Jacobian F of algorithms.md §5.1, its
         non-identity blocks (:func:`transition`) applied by :func:`propagate_covariance`;
-        with :attr:`compiled`, the same in :func:`.eseso_kernel.propagate_in_place`."""
+        with :attr:`compiled`, the same in :func:`.eseso_kernel.propagate`."""
         earth_fixed = self.params.process.disturbance_model == "earth_fixed"
         phi_ins, q = self._interval_noise(dt)
         if self.compiled:  # x and P written in place; the transition built when read
             self._transition = None
             self._transition_inputs = (f_m, w_m, dt, phi_ins, earth_fixed)
-            _kernel().propagate_in_place(self.x, self.P, self._x_prev, f_m, w_m, dt,
+            _kernel().propagate(self.x, self.P, self._x_prev, f_m, w_m, dt,
                                          earth_fixed, phi_ins, q)
             return
         f = f_m - self.b_a

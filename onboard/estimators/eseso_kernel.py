@@ -153,39 +153,55 @@ def right_jacobian(theta: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def _transition_rows(M: np.ndarray, dt: float, A: np.ndarray, dRt: np.ndarray,
                      th_bg: np.ndarray, xi_bg: np.ndarray, earth_fixed: bool,
-                     phi_ins: float) -> np.ndarray:
-    """``F M`` for the 23-row ``M``: ``A = [R [f]x, R]`` (3 x 6, what ``F[V, TH:BA]``
-    is times ``-dt``), the other blocks of :class:`Transition` as named there."""
-    out = M.copy()
+                     phi_ins: float, out: np.ndarray) -> None:
+    """``out = F M`` for the 23-row ``M`` (``out`` another array): ``A = [R [f]x, R]``
+    (3 x 6, what ``F[V, TH:BA]`` is times ``-dt``), the other blocks of
+    :class:`Transition` as named there. Row by row, the inner loops along a row."""
     cols = M.shape[1]
-    for i in range(3):
+    for r in range(M.shape[0]):
         for j in range(cols):
-            mixed = 0.0
-            for k in range(6):
-                mixed += A[i, k] * M[_TH + k, j]
-            v_new = M[_V + i, j] + dt * (M[_G + i, j] - mixed)
+            out[r, j] = M[r, j]
+    acc = np.empty(cols)
+    for i in range(3):
+        acc[:] = 0.0  # [R [f]x, R] M[TH:BA]
+        for k in range(6):
+            a = A[i, k]
+            for j in range(cols):
+                acc[j] += a * M[_TH + k, j]
+        for j in range(cols):
+            v_new = M[_V + i, j] + dt * (M[_G + i, j] - acc[j])
             out[_P + i, j] += 0.5 * dt * (M[_V + i, j] + v_new)
             out[_V + i, j] = v_new
-            th = 0.0
+        acc[:] = 0.0
+        for k in range(3):
+            a, b = dRt[i, k], th_bg[i, k]
+            for j in range(cols):
+                acc[j] += a * M[_TH + k, j] + b * M[_BG + k, j]
+        for j in range(cols):
+            out[_TH + i, j] = acc[j]
+        if earth_fixed:
+            acc[:] = 0.0
             for k in range(3):
-                th += dRt[i, k] * M[_TH + k, j] + th_bg[i, k] * M[_BG + k, j]
-            out[_TH + i, j] = th
-            if earth_fixed:
-                x = 0.0
-                for k in range(3):
-                    x += dRt[i, k] * M[_XI + k, j] + xi_bg[i, k] * M[_BG + k, j]
-                out[_XI + i, j] = x
+                a, b = dRt[i, k], xi_bg[i, k]
+                for j in range(cols):
+                    acc[j] += a * M[_XI + k, j] + b * M[_BG + k, j]
+            for j in range(cols):
+                out[_XI + i, j] = acc[j]
     for j in range(cols):
         out[_BI, j] *= phi_ins
         out[_BI + 1, j] *= phi_ins
-    return out
 
 
 @njit(cache=True)
-def propagate(p, v, R, b_a, b_g, g, xi, b_ins, P, f_m, w_m, dt, earth_fixed, phi_ins, q):
+def propagate(x, P, x_prev, f_m, w_m, dt, earth_fixed, phi_ins, q) -> None:
     """:meth:`EsesoFilter.propagate` over ``dt`` (s) at the mean specific force ``f_m``
-    (m/s^2) and rate ``w_m`` (rad/s), with the process-noise diagonal ``q``: the new
-    ``(p, v, R, xi, b_ins, P)`` (the biases and gravity do not change)."""
+    (m/s^2) and rate ``w_m`` (rad/s), with the process-noise diagonal ``q``: the nominal
+    state ``x`` (the filter's one array; the biases and gravity do not change) and the
+    covariance ``P`` written in place, the state before it into ``x_prev`` (what the
+    transition is built from when read). One call, no array returned."""
+    for i in range(_NX):
+        x_prev[i] = x[i]
+    p, v, R, b_a, b_g, g, xi, b_ins = _unpack(x)
     f, w_dt = np.empty(3), np.empty(3)
     for i in range(3):
         f[i] = f_m[i] - b_a[i]
@@ -208,11 +224,12 @@ def propagate(p, v, R, b_a, b_g, g, xi, b_ins, P, f_m, w_m, dt, earth_fixed, phi
         for i in range(3):
             for j in range(3):
                 xi_bg[i, j] *= -dt
-    P_new = _transition_rows(_transpose(_transition_rows(P, dt, A, dRt, th_bg, xi_bg,
-                                                         earth_fixed, phi_ins)),
-                             dt, A, dRt, th_bg, xi_bg, earth_fixed, phi_ins)
+    FP = np.empty_like(P)
+    _transition_rows(P, dt, A, dRt, th_bg, xi_bg, earth_fixed, phi_ins, FP)
+    # F (F P)^T = F P F^T (P symmetric), into P, which is read no more
+    _transition_rows(_transpose(FP), dt, A, dRt, th_bg, xi_bg, earth_fixed, phi_ins, P)
     for i in range(P.shape[0]):
-        P_new[i, i] += q[i]
+        P[i, i] += q[i]
     p_new, v_new = np.empty(3), np.empty(3)
     for i in range(3):
         p_new[i] = p[i] + v[i] * dt + 0.5 * acc[i] * dt * dt
@@ -221,7 +238,7 @@ def propagate(p, v, R, b_a, b_g, g, xi, b_ins, P, f_m, w_m, dt, earth_fixed, phi
     b_ins_new = np.empty(2)
     for i in range(2):
         b_ins_new[i] = b_ins[i] * phi_ins
-    return p_new, v_new, _mm(R, dR), xi_new, b_ins_new, P_new
+    _pack(x, p_new, v_new, _mm(R, dR), b_a, b_g, g, xi_new, b_ins_new)
 
 
 @njit(cache=True)
@@ -251,20 +268,6 @@ def _store(P: np.ndarray, P_new: np.ndarray) -> None:
     for i in range(P.shape[0]):
         for j in range(P.shape[1]):
             P[i, j] = P_new[i, j]
-
-
-@njit(cache=True)
-def propagate_in_place(x, P, x_prev, f_m, w_m, dt, earth_fixed, phi_ins, q) -> None:
-    """:func:`propagate` of the filter's nominal state ``x`` and covariance ``P``, both
-    written in place, the state before it into ``x_prev`` (what the transition is built
-    from when read): one call, no array returned."""
-    for i in range(_NX):
-        x_prev[i] = x[i]
-    p, v, R, b_a, b_g, g, xi, b_ins = _unpack(x)
-    p, v, R, xi, b_ins, P_new = propagate(p, v, R, b_a, b_g, g, xi, b_ins, P, f_m, w_m, dt,
-                                          earth_fixed, phi_ins, q)
-    _pack(x, p, v, R, b_a, b_g, g, xi, b_ins)
-    _store(P, P_new)
 
 
 @njit(cache=True)
