@@ -21,8 +21,8 @@ kernel and reference agree to rounding.
   dense product is ``n^3``.
 * :func:`reset`: the reset ``G P G^T`` after an injection (paper eq. 17b, Sola eq. 287),
   ``G`` the identity but for its attitude block ``I - [dtheta/2]x``, then symmetrized;
-  :func:`inject_reset`: the injection of the update's correction into the nominal state
-  (eq. 16d) and that reset, in one call.
+  :func:`inject_reset_in_place`: the injection of the update's correction into the
+  nominal state (eq. 16d) and that reset.
 * :func:`h_tau`: :meth:`EsesoFilter.h_tau`, the thrust model and its Jacobian;
   :func:`project` (``H P H^T``) and :func:`mahalanobis` (``y^T S^-1 y``) for the noise
   adaptation and the thrust update's Huber weight.
@@ -303,99 +303,138 @@ def _inverse(S: np.ndarray) -> tuple[np.ndarray, bool]:
 
 
 @njit(cache=True)
-def joseph_update(P, y, H, Rm, keep_lo, keep_hi):
-    """The ESESO's Kalman update of its error state from zero (:func:`.kalman.update`
-    with ``symmetric=True`` and ``keep = slice(keep_lo, keep_hi)``): ``(dx, P+, S, nis,
-    ok)``, ``ok`` False (and the rest meaningless) when ``S`` is singular. ``P+`` is the
-    Joseph form through its rank-``m`` factors (module docstring)."""
-    n, m = P.shape[0], y.shape[0]
-    PHt = _mmt(P, H)
-    HPHt = _mm(H, PHt)
+def _gain(PHt, HPHt, y, Rm, keep_lo, keep_hi):
+    """The Kalman gain from ``P H^T`` and ``H P H^T``: ``(S, nis, K, ok)``, ``S``
+    symmetrized, the rows of ``K`` outside ``[keep_lo, keep_hi)`` zeroed; ``ok`` False
+    (and ``nis``, ``K`` meaningless) when ``S`` is singular."""
+    m = y.shape[0]
     S = np.empty((m, m))
     for i in range(m):
         for j in range(m):
             S[i, j] = 0.5 * ((HPHt[i, j] + Rm[i, j]) + (HPHt[j, i] + Rm[j, i]))
     Sinv, ok = _inverse(S)
     if not ok:
-        return np.zeros(n), P, S, math.nan, False
+        return S, math.nan, PHt, False
     Sinv_y = _mv(Sinv, y)
     nis = 0.0
     for i in range(m):
         nis += y[i] * Sinv_y[i]
     K = _mm(PHt, Sinv)
-    for i in range(n):
+    for i in range(K.shape[0]):
         if i < keep_lo or i >= keep_hi:
             for j in range(m):
                 K[i, j] = 0.0
-    B = _mm(K, _mm(H, P))  # K H P; (I - K H) P = P - K H P
+    return S, nis, K, True
+
+
+@njit(cache=True)
+def _joseph_into(P, H, K, Rm, out) -> None:
+    """``out = (I - K H) P (I - K H)^T + K R K^T`` through its rank-``m`` factors (module
+    docstring), row by row: ``B = P - K (H P)``, then ``B - (B H^T) K^T + (K R) K^T``.
+    Row ``i`` of ``out`` needs row ``i`` of ``P`` alone (``H P`` is made first), so
+    ``out`` may be ``P``."""
+    n, m = P.shape[0], H.shape[0]
+    HP, KR = _mm(H, P), _mm(K, Rm)
+    B, BHt = np.empty(n), np.empty(m)
     for i in range(n):
         for j in range(n):
-            B[i, j] = P[i, j] - B[i, j]
-    BHtKt = _mmt(_mmt(B, H), K)  # (I - K H) P H^T K^T
-    KRKt = _mmt(_mm(K, Rm), K)
-    P_new = np.empty((n, n))  # (I - K H) P (I - K H)^T + K R K^T
-    for i in range(n):
+            khp = 0.0
+            for a in range(m):
+                if K[i, a] != 0.0:
+                    khp += K[i, a] * HP[a, j]
+            B[j] = P[i, j] - khp
+        for a in range(m):
+            acc = 0.0
+            for k in range(n):
+                acc += B[k] * H[a, k]
+            BHt[a] = acc
         for j in range(n):
-            P_new[i, j] = B[i, j] - BHtKt[i, j] + KRKt[i, j]
+            bhk, krk = 0.0, 0.0
+            for a in range(m):
+                bhk += BHt[a] * K[j, a]
+            for a in range(m):
+                krk += KR[i, a] * K[j, a]
+            out[i, j] = B[j] - bhk + krk
+
+
+@njit(cache=True)
+def joseph_update(P, y, H, Rm, keep_lo, keep_hi):
+    """The ESESO's Kalman update of its error state from zero (:func:`.kalman.update`
+    with ``symmetric=True`` and ``keep = slice(keep_lo, keep_hi)``): ``(dx, P+, S, nis,
+    ok)``, ``ok`` False (and the rest meaningless) when ``S`` is singular. ``P+`` is the
+    Joseph form through its rank-``m`` factors (module docstring)."""
+    PHt = _mmt(P, H)
+    S, nis, K, ok = _gain(PHt, _mm(H, PHt), y, Rm, keep_lo, keep_hi)
+    if not ok:
+        return np.zeros(P.shape[0]), P, S, nis, False
+    P_new = np.empty_like(P)
+    _joseph_into(P, H, K, Rm, P_new)
     return _mv(K, y), P_new, S, nis, True
 
 
 @njit(cache=True)
-def reset(P: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
-    """``G P G^T`` with ``G = I`` but ``G[TH, TH] = I - [dtheta/2]x``, symmetrized."""
+def _reset_into(P: np.ndarray, dtheta: np.ndarray) -> None:
+    """``P <- G P G^T`` with ``G = I`` but ``G[TH, TH] = I - [dtheta/2]x``, symmetrized,
+    in place: only the attitude rows, then columns, change."""
     n = P.shape[0]
     half = np.empty(3)
     for i in range(3):
         half[i] = 0.5 * dtheta[i]
     K = _skew(half)
-    GP = P.copy()  # G P: the attitude rows mixed
+    rows = P[_TH:_TH + 3, :].copy()  # G P: the attitude rows mixed
     for i in range(3):
         for j in range(n):
-            GP[_TH + i, j] = P[_TH + i, j] - (K[i, 0] * P[_TH, j] + K[i, 1] * P[_TH + 1, j]
-                                               + K[i, 2] * P[_TH + 2, j])
-    GPGt = GP.copy()  # (G P) G^T: the attitude columns mixed
+            P[_TH + i, j] = rows[i, j] - (K[i, 0] * rows[0, j] + K[i, 1] * rows[1, j]
+                                          + K[i, 2] * rows[2, j])
+    cols = P[:, _TH:_TH + 3].copy()  # (G P) G^T: the attitude columns mixed
     for i in range(n):
         for j in range(3):
-            GPGt[i, _TH + j] = GP[i, _TH + j] - (GP[i, _TH] * K[j, 0] + GP[i, _TH + 1] * K[j, 1]
-                                                 + GP[i, _TH + 2] * K[j, 2])
-    out = np.empty((n, n))
+            P[i, _TH + j] = cols[i, j] - (cols[i, 0] * K[j, 0] + cols[i, 1] * K[j, 1]
+                                          + cols[i, 2] * K[j, 2])
     for i in range(n):
-        for j in range(n):
-            out[i, j] = 0.5 * (GPGt[i, j] + GPGt[j, i])
+        for j in range(i, n):
+            sym = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = sym
+            P[j, i] = sym
+
+
+@njit(cache=True)
+def reset(P: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
+    """``G P G^T`` with ``G = I`` but ``G[TH, TH] = I - [dtheta/2]x``, symmetrized."""
+    out = P.copy()
+    _reset_into(out, dtheta)
     return out
 
 
 @njit(cache=True)
-def inject_reset(p, v, R, b_a, b_g, g, xi, b_ins, P, dx):
-    """:meth:`EsesoFilter.inject` of the correction ``dx`` (paper eq. 16d: every
-    component added, the attitude by ``R Exp(dtheta)``) and :func:`reset` of the updated
-    ``P`` with its ``dtheta``: the new ``(p, v, R, b_a, b_g, g, xi, b_ins, P)``."""
-    p_new, v_new, b_a_new, b_g_new = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    g_new, xi_new, b_ins_new = np.empty(3), np.empty(3), np.empty(2)
+def _inject_into(x: np.ndarray, dx: np.ndarray) -> None:
+    """:meth:`EsesoFilter.inject` of the correction ``dx`` into the filter's nominal
+    state ``x`` in place (paper eq. 16d: every component added, the attitude by
+    ``R Exp(dtheta)``)."""
     for i in range(3):
-        p_new[i] = p[i] + dx[_P + i]
-        v_new[i] = v[i] + dx[_V + i]
-        b_a_new[i] = b_a[i] + dx[_BA + i]
-        b_g_new[i] = b_g[i] + dx[_BG + i]
-        g_new[i] = g[i] + dx[_G + i]
-        xi_new[i] = xi[i] + dx[_XI + i]
+        x[_XP + i] += dx[_P + i]
+        x[_XV + i] += dx[_V + i]
+        x[_XBA + i] += dx[_BA + i]
+        x[_XBG + i] += dx[_BG + i]
+        x[_XG + i] += dx[_G + i]
+        x[_XXI + i] += dx[_XI + i]
     for i in range(2):
-        b_ins_new[i] = b_ins[i] + dx[_BI + i]
-    dtheta = dx[_TH:_TH + 3].copy()
-    return (p_new, v_new, _mm(R, exp_so3(dtheta)), b_a_new, b_g_new, g_new, xi_new,
-            b_ins_new, reset(P, dtheta))
+        x[_XBI + i] += dx[_BI + i]
+    R = _mm(x[_XR:_XR + 9].copy().reshape((3, 3)), exp_so3(dx[_TH:_TH + 3].copy()))
+    for i in range(3):
+        for j in range(3):
+            x[_XR + 3 * i + j] = R[i, j]
 
 
 @njit(cache=True)
 def inject_reset_in_place(x: np.ndarray, P: np.ndarray, P_up: np.ndarray,
                           dx: np.ndarray) -> None:
-    """:func:`inject_reset` of the correction ``dx`` into the filter's nominal state ``x``
-    and of the updated covariance ``P_up`` into ``P``, both written in place."""
-    p, v, R, b_a, b_g, g, xi, b_ins = _unpack(x)
-    p, v, R, b_a, b_g, g, xi, b_ins, P_new = inject_reset(p, v, R, b_a, b_g, g, xi, b_ins,
-                                                           P_up, dx)
-    _pack(x, p, v, R, b_a, b_g, g, xi, b_ins)
-    _store(P, P_new)
+    """:meth:`EsesoFilter.inject` of the correction ``dx`` into the filter's nominal state
+    ``x`` and the reset (:func:`reset`) of the updated covariance ``P_up`` into ``P``,
+    both in place."""
+    _inject_into(x, dx)
+    _store(P, P_up)
+    _reset_into(P, dx[_TH:_TH + 3].copy())
 
 
 ADAPT_NONE, ADAPT_NOISE, ADAPT_PROCESS = 0, 1, 2
@@ -404,6 +443,30 @@ ADAPT_NONE, ADAPT_NOISE, ADAPT_PROCESS = 0, 1, 2
 GATED, FUSED, RECOVERED, SINGULAR = 0, 1, 2, -1
 """What :func:`fuse` made of an update (the filter's ``Outcome``; ``SINGULAR``: ``S``
 could not be inverted, nothing changed)."""
+
+
+@njit(cache=True)
+def _fuse_gated(x, P, y, H, Rm, PHt, HPHt, keep_lo, keep_hi, gate, may_recover):
+    """The Joseph update of ``P`` (with its ``P H^T`` and ``H P H^T``), the gate and the
+    injection and reset into ``x`` and ``P`` in place (:func:`fuse`): ``(outcome, nis,
+    S)``, the first update's."""
+    S, nis, K, ok = _gain(PHt, HPHt, y, Rm, keep_lo, keep_hi)
+    if not ok:
+        return SINGULAR, nis, S
+    outcome = FUSED
+    if gate > 0.0 and nis > gate:
+        if not may_recover:
+            return GATED, nis, S
+        outcome = RECOVERED
+        Rm = Rm * (nis / gate)
+        _, _, K, ok = _gain(PHt, HPHt, y, Rm, keep_lo, keep_hi)
+        if not ok:
+            return SINGULAR, nis, S
+    dx = _mv(K, y)
+    _joseph_into(P, H, K, Rm, P)
+    _inject_into(x, dx)
+    _reset_into(P, dx[_TH:_TH + 3].copy())
+    return outcome, nis, S
 
 
 @njit(cache=True)
@@ -418,8 +481,9 @@ def fuse(x, P, y, H, Rm, keep_lo, keep_hi, gate, may_recover, adapt, adapt_n, me
     ``(outcome, nis, S, mean, scale)``: ``nis`` and ``S`` the first update's, ``mean``
     and ``scale`` the adaptation's new ones."""
     m = y.shape[0]
+    PHt = _mmt(P, H)
+    HPHt = _mm(H, PHt)
     if adapt != ADAPT_NONE:
-        HPHt = project(P, H)
         yy, tr_h, tr_r = 0.0, 0.0, 0.0
         for i in range(m):
             yy += y[i] * y[i]
@@ -435,18 +499,8 @@ def fuse(x, P, y, H, Rm, keep_lo, keep_hi, gate, may_recover, adapt, adapt_n, me
         scale = ceiling if ceiling < scale else scale
         if adapt == ADAPT_NOISE:
             Rm = Rm * scale
-    dx, P_up, S, nis, ok = joseph_update(P, y, H, Rm, keep_lo, keep_hi)
-    if not ok:
-        return SINGULAR, nis, S, mean, scale
-    outcome = FUSED
-    if gate > 0.0 and nis > gate:
-        if not may_recover:
-            return GATED, nis, S, mean, scale
-        outcome = RECOVERED
-        dx, P_up, _, _, ok = joseph_update(P, y, H, Rm * (nis / gate), keep_lo, keep_hi)
-        if not ok:
-            return SINGULAR, nis, S, mean, scale
-    inject_reset_in_place(x, P, P_up, dx)
+    outcome, nis, S = _fuse_gated(x, P, y, H, Rm, PHt, HPHt, keep_lo, keep_hi, gate,
+                                  may_recover)
     return outcome, nis, S, mean, scale
 
 
@@ -591,7 +645,8 @@ def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, h
         for j in range(3):
             R_tau[i, j] = var[i] if i == j else 0.0
     Rm = R_tau.copy()
-    HPHt = project(P, H)
+    PHt = _mmt(P, H)
+    HPHt = _mm(H, PHt)
     S_model = HPHt + Rm
     scale = 1.0
     adapt_n = k[_K_ADAPT_N]
@@ -615,8 +670,7 @@ def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, h
         if nis > huber:
             Rm = Rm * (nis / huber)
             downweighted = True
-    outcome, nis, S, _, _ = fuse(x, P, y, H, Rm, keep_lo, keep_hi, 0.0, False, ADAPT_NONE,
-                                 1, 0.0, 1.0, 1.0, 1.0)
+    outcome, nis, S = _fuse_gated(x, P, y, H, Rm, PHt, HPHt, keep_lo, keep_hi, 0.0, False)
     return outcome, nis, S, y, S_model, mean, scale, downweighted
 
 
