@@ -24,7 +24,7 @@ pytest.importorskip("numba", reason="the ESESO kernels need numba: pip install '
 
 from onboard.cli import main as cli_main  # noqa: E402
 from onboard.core.pipeline_config import EsesoConfig  # noqa: E402
-from onboard.core.so3 import exp_so3  # noqa: E402
+from onboard.core.so3 import exp_so3, log_so3  # noqa: E402
 from onboard.estimators import eseso_filter, eseso_kernel, kalman  # noqa: E402
 from onboard.estimators.eseso_filter import (  # noqa: E402
     KERNEL_ENV,
@@ -233,6 +233,30 @@ def test_compiled_thrust_update_agrees_with_the_reference(states: str) -> None:
     assert weights == {False, True}
 
 
+def test_compiled_attitude_update_agrees_with_the_reference() -> None:
+    """:meth:`EsesoFilter.update_attitude` (its innovation ``Log(R^T R_meas)`` and noise
+    compiled) on random states, and Log itself near zero, at moderate angles and within
+    :data:`.eseso_kernel._LOG_NEAR_PI` of pi, where it takes another formula."""
+    rng = np.random.default_rng(41)
+    ref, fast = _filters()
+    for _ in range(200):
+        _random_state(ref, rng)
+        _same_state(ref, fast)
+        R_meas = ref.R @ exp_so3(rng.normal(0.0, 0.05, 3))
+        roll, pitch = rng.uniform(-1.0, 1.0, 2)
+        var_rp, var_yaw = rng.uniform(1e-5, 1e-3, 2)  # S well conditioned (as above)
+        want = ref.update_attitude(R_meas, roll, pitch, var_rp, var_yaw, t=1.0)
+        assert fast.update_attitude(R_meas, roll, pitch, var_rp, var_yaw, t=1.0) is want
+        assert _update_agreement(ref, fast) <= TOL
+    for _ in range(300):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        angle = rng.choice([rng.uniform(0.0, 1e-6), rng.uniform(0.0, 3.0),
+                            np.pi - rng.uniform(0.0, 1e-4)])
+        R = exp_so3(angle * axis)
+        assert _gap(eseso_kernel.log_so3(R), log_so3(R)) <= TOL
+
+
 def test_compiled_injection_and_products_agree_with_the_reference() -> None:
     """The injection and reset after an update, ``H P H^T`` and ``y^T S^-1 y``."""
     rng = np.random.default_rng(16)
@@ -303,7 +327,7 @@ def test_compiled_filter_agrees_on_every_step_of_a_real_replay(tmp_path: Path,
     state by the compiled filter; the two must agree to :data:`TOL` (measured: 4.0e-15
     at worst)."""
     methods = {name: getattr(EsesoFilter, name)
-               for name in ("propagate", "update", "update_thrust")}
+               for name in ("propagate", "update", "update_thrust", "update_attitude")}
     worst = dict.fromkeys(methods, 0.0)
     calls = dict.fromkeys(methods, 0)
 
@@ -328,7 +352,7 @@ def test_compiled_filter_agrees_on_every_step_of_a_real_replay(tmp_path: Path,
     assert cli_main(["replay", str(GOLDEN_ROV), "--out", str(tmp_path), "--no-plot",
                      "--pipelines", "eseso"]) == 0
     assert calls["propagate"] > 1000 and calls["update"] > 1000
-    assert calls["update_thrust"] > 200
+    assert calls["update_thrust"] > 200 and calls["update_attitude"] > 200
     assert max(worst.values()) <= TOL, worst
 
 

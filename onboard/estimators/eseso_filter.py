@@ -910,7 +910,13 @@ class EsesoFilter:
                         t: float = math.nan, source: str = "") -> Outcome:
         """Attitude ``R_meas`` (body to NED; from ``roll``, ``pitch`` in rad) with
         independent roll and pitch noise ``var_roll_pitch`` and yaw noise ``var_yaw``
-        (rad^2), turned into the body-frame rotation vector; channel ``attitude``."""
+        (rad^2), turned into the body-frame rotation vector; channel ``attitude``. With
+        :attr:`compiled`, the innovation and its noise by
+        :func:`.eseso_kernel.attitude_innovation`."""
+        if self.compiled:
+            y, Rm = _kernel().attitude_innovation(self.x, R_meas, roll, pitch,
+                                                  var_roll_pitch, var_yaw)
+            return self.update("attitude", y, _H_ATTITUDE, Rm, t=t, source=source)
         # the Euler-rate-to-body-rate matrix (Fossen eq. 2.41 inverted)
         sr, cr = math.sin(roll), math.cos(roll)
         sp, cp = math.sin(pitch), math.cos(pitch)

@@ -137,6 +137,61 @@ def exp_so3(theta: np.ndarray) -> np.ndarray:
     return _identity_plus(s, K, c, K2)
 
 
+_LOG_NEAR_PI = 1e-4
+"""Within this of pi (rad) Log takes the axis from the symmetric part, as
+:func:`onboard.core.so3.log_so3`."""
+_LOG_EPS = 1e-9
+"""Floor of the symmetric part's diagonal entry there (:data:`onboard.core.so3._EPS`)."""
+
+
+@njit(cache=True)
+def log_so3(R: np.ndarray) -> np.ndarray:
+    """``Log(R)``, as :func:`onboard.core.so3.log_so3`."""
+    half = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    cos_a = half if half < 1.0 else 1.0  # Python's max(-1, min(1, half))
+    cos_a = cos_a if cos_a > -1.0 else -1.0
+    angle = math.acos(cos_a)
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < _SMALL_ANGLE:
+        return 0.5 * v
+    if math.pi - angle < _LOG_NEAR_PI:  # the axis from the symmetric part, R = 2 a a^T - I
+        i = 0
+        for k in range(1, 3):
+            if 0.5 * (R[k, k] + 1.0) > 0.5 * (R[i, i] + 1.0):
+                i = k
+        B_ii = 0.5 * (R[i, i] + 1.0)
+        root = math.sqrt(_LOG_EPS if _LOG_EPS > B_ii else B_ii)
+        a = np.empty(3)
+        for k in range(3):
+            a[k] = 0.5 * (R[k, i] + (1.0 if k == i else 0.0)) / root
+        if a[0] * v[0] + a[1] * v[1] + a[2] * v[2] < 0.0:
+            a = -a
+        norm = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+        return angle * a / norm
+    return angle / (2.0 * math.sin(angle)) * v
+
+
+@njit(cache=True)
+def attitude_innovation(x, R_meas, roll, pitch, var_roll_pitch, var_yaw):
+    """:meth:`EsesoFilter.update_attitude`'s innovation ``Log(R^T R_meas)`` at the
+    nominal state ``x`` and its noise ``J diag(var_roll_pitch, var_roll_pitch, var_yaw)
+    J^T`` (``J`` the Euler-rate-to-body-rate matrix at ``roll``, ``pitch``)."""
+    R = x[_XR:_XR + 9].copy().reshape((3, 3))
+    y = log_so3(_mm(_transpose(R), R_meas))
+    sr, cr = math.sin(roll), math.cos(roll)
+    sp, cp = math.sin(pitch), math.cos(pitch)
+    J = np.array([[1.0, 0.0, -sp], [0.0, cr, sr * cp], [0.0, -sr, cr * cp]])
+    d = np.array([var_roll_pitch, var_roll_pitch, var_yaw])
+    Rm = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += J[i, k] * d[k] * J[j, k]
+            Rm[i, j] = acc
+    return y, Rm
+
+
 @njit(cache=True)
 def right_jacobian(theta: np.ndarray) -> np.ndarray:
     """``Jr(theta)`` of SO(3), as :func:`onboard.core.so3.right_jacobian`."""
