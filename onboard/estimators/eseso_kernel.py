@@ -106,6 +106,26 @@ def _transpose(A: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def _scaled(A: np.ndarray, a: float) -> np.ndarray:
+    """``a A`` (a new array)."""
+    out = np.empty_like(A)
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            out[i, j] = A[i, j] * a
+    return out
+
+
+@njit(cache=True)
+def _sum(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A + B`` (a new array)."""
+    out = np.empty_like(A)
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            out[i, j] = A[i, j] + B[i, j]
+    return out
+
+
+@njit(cache=True)
 def _skew(t: np.ndarray) -> np.ndarray:
     """``[t]x`` of a 3-vector."""
     K = np.zeros((3, 3))
@@ -151,9 +171,13 @@ def log_so3(R: np.ndarray) -> np.ndarray:
     cos_a = half if half < 1.0 else 1.0  # Python's max(-1, min(1, half))
     cos_a = cos_a if cos_a > -1.0 else -1.0
     angle = math.acos(cos_a)
-    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    v = np.empty(3)
+    v[0], v[1], v[2] = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
+    out = np.empty(3)
     if angle < _SMALL_ANGLE:
-        return 0.5 * v
+        for k in range(3):
+            out[k] = 0.5 * v[k]
+        return out
     if math.pi - angle < _LOG_NEAR_PI:  # the axis from the symmetric part, R = 2 a a^T - I
         i = 0
         for k in range(1, 3):
@@ -164,11 +188,15 @@ def log_so3(R: np.ndarray) -> np.ndarray:
         a = np.empty(3)
         for k in range(3):
             a[k] = 0.5 * (R[k, i] + (1.0 if k == i else 0.0)) / root
-        if a[0] * v[0] + a[1] * v[1] + a[2] * v[2] < 0.0:
-            a = -a
+        sign = -1.0 if a[0] * v[0] + a[1] * v[1] + a[2] * v[2] < 0.0 else 1.0
         norm = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-        return angle * a / norm
-    return angle / (2.0 * math.sin(angle)) * v
+        for k in range(3):
+            out[k] = angle * (sign * a[k]) / norm
+        return out
+    c = angle / (2.0 * math.sin(angle))
+    for k in range(3):
+        out[k] = c * v[k]
+    return out
 
 
 @njit(cache=True)
@@ -218,7 +246,8 @@ def _transition_rows(M: np.ndarray, dt: float, A: np.ndarray, dRt: np.ndarray,
             out[r, j] = M[r, j]
     acc = np.empty(cols)
     for i in range(3):
-        acc[:] = 0.0  # [R [f]x, R] M[TH:BA]
+        for j in range(cols):  # [R [f]x, R] M[TH:BA]
+            acc[j] = 0.0
         for k in range(6):
             a = A[i, k]
             for j in range(cols):
@@ -227,7 +256,8 @@ def _transition_rows(M: np.ndarray, dt: float, A: np.ndarray, dRt: np.ndarray,
             v_new = M[_V + i, j] + dt * (M[_G + i, j] - acc[j])
             out[_P + i, j] += 0.5 * dt * (M[_V + i, j] + v_new)
             out[_V + i, j] = v_new
-        acc[:] = 0.0
+        for j in range(cols):
+            acc[j] = 0.0
         for k in range(3):
             a, b = dRt[i, k], th_bg[i, k]
             for j in range(cols):
@@ -235,7 +265,8 @@ def _transition_rows(M: np.ndarray, dt: float, A: np.ndarray, dRt: np.ndarray,
         for j in range(cols):
             out[_TH + i, j] = acc[j]
         if earth_fixed:
-            acc[:] = 0.0
+            for j in range(cols):
+                acc[j] = 0.0
             for k in range(3):
                 a, b = dRt[i, k], xi_bg[i, k]
                 for j in range(cols):
@@ -501,6 +532,16 @@ could not be inverted, nothing changed)."""
 
 
 @njit(cache=True)
+def _correct(x, P, y, H, K, Rm) -> None:
+    """The update with gain ``K``: the Joseph form into ``P``, then the injection of
+    ``K y`` into ``x`` and the reset of ``P``, in place."""
+    dx = _mv(K, y)
+    _joseph_into(P, H, K, Rm, P)
+    _inject_into(x, dx)
+    _reset_into(P, dx[_TH:_TH + 3].copy())
+
+
+@njit(cache=True)
 def _fuse_gated(x, P, y, H, Rm, PHt, HPHt, keep_lo, keep_hi, gate, may_recover):
     """The Joseph update of ``P`` (with its ``P H^T`` and ``H P H^T``), the gate and the
     injection and reset into ``x`` and ``P`` in place (:func:`fuse`): ``(outcome, nis,
@@ -513,14 +554,11 @@ def _fuse_gated(x, P, y, H, Rm, PHt, HPHt, keep_lo, keep_hi, gate, may_recover):
         if not may_recover:
             return GATED, nis, S
         outcome = RECOVERED
-        Rm = Rm * (nis / gate)
+        Rm = _scaled(Rm, nis / gate)
         _, _, K, ok = _gain(PHt, HPHt, y, Rm, keep_lo, keep_hi)
         if not ok:
             return SINGULAR, nis, S
-    dx = _mv(K, y)
-    _joseph_into(P, H, K, Rm, P)
-    _inject_into(x, dx)
-    _reset_into(P, dx[_TH:_TH + 3].copy())
+    _correct(x, P, y, H, K, Rm)
     return outcome, nis, S
 
 
@@ -553,7 +591,7 @@ def fuse(x, P, y, H, Rm, keep_lo, keep_hi, gate, may_recover, adapt, adapt_n, me
         scale = 1.0 if 1.0 > mean else mean
         scale = ceiling if ceiling < scale else scale
         if adapt == ADAPT_NOISE:
-            Rm = Rm * scale
+            Rm = _scaled(Rm, scale)
     outcome, nis, S = _fuse_gated(x, P, y, H, Rm, PHt, HPHt, keep_lo, keep_hi, gate,
                                   may_recover)
     return outcome, nis, S, mean, scale
@@ -674,7 +712,7 @@ def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, h
     (``model_terms``, the last update's ``(tau, D(nu) nu)`` rows, read when ``has_last``
     and written), the noise ``R_tau`` (written) at the IMU noise scale ``s_imu``, the
     thrust channel's noise scale (its mean ``mean``) when ``k``'s ``adapt_updates`` > 0,
-    the Huber weight, then :func:`fuse` (no gate) into ``x`` and ``P`` in place. Returns
+    the Huber weight, then the update (never gated) into ``x`` and ``P`` in place. Returns
     ``(outcome, nis, S, y, S_model, mean, scale, downweighted)``, ``S_model = H P H^T +
     R_tau`` what :func:`learn_excess` learns from."""
     m_vec, added, d_l, d_nl = vehicle[0], vehicle[1], vehicle[2], vehicle[3]
@@ -702,7 +740,7 @@ def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, h
     Rm = R_tau.copy()
     PHt = _mmt(P, H)
     HPHt = _mm(H, PHt)
-    S_model = HPHt + Rm
+    S_model = _sum(HPHt, Rm)
     scale = 1.0
     adapt_n = k[_K_ADAPT_N]
     if adapt_n > 0:  # before the Huber weight (it would learn it)
@@ -716,17 +754,19 @@ def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, h
         mean += (sample - mean) / adapt_n
         scale = 1.0 if 1.0 > mean else mean
         scale = k[_K_SCALE_MAX] if k[_K_SCALE_MAX] < scale else scale
-        Rm = Rm * scale
+        Rm = _scaled(Rm, scale)
     downweighted = False
     huber = k[_K_HUBER]
     if huber > 0.0:
-        S = HPHt + Rm
+        S = _sum(HPHt, Rm)
         nis = mahalanobis(S, y)
         if nis > huber:
-            Rm = Rm * (nis / huber)
+            Rm = _scaled(Rm, nis / huber)
             downweighted = True
-    outcome, nis, S = _fuse_gated(x, P, y, H, Rm, PHt, HPHt, keep_lo, keep_hi, 0.0, False)
-    return outcome, nis, S, y, S_model, mean, scale, downweighted
+    S, nis, K, ok = _gain(PHt, HPHt, y, Rm, keep_lo, keep_hi)  # never gated
+    if ok:
+        _correct(x, P, y, H, K, Rm)
+    return FUSED if ok else SINGULAR, nis, S, y, S_model, mean, scale, downweighted
 
 
 @njit(cache=True)
