@@ -420,27 +420,33 @@ def _joseph_into(P, H, K, Rm, out) -> None:
     Row ``i`` of ``out`` needs row ``i`` of ``P`` alone (``H P`` is made first), so
     ``out`` may be ``P``."""
     n, m = P.shape[0], H.shape[0]
-    HP, KR = _mm(H, P), _mm(K, Rm)
-    B, BHt = np.empty(n), np.empty(m)
+    HP, KR, Kt = _mm(H, P), _mm(K, Rm), _transpose(K)
+    B, BHt, BHtKt, KRKt = np.empty(n), np.empty(m), np.empty(n), np.empty(n)
     for i in range(n):
+        for j in range(n):  # B[i] = P[i] - K[i] (H P), the inner loops along the rows
+            B[j] = 0.0
+        for a in range(m):
+            k_ia = K[i, a]
+            if k_ia != 0.0:
+                for j in range(n):
+                    B[j] += k_ia * HP[a, j]
         for j in range(n):
-            khp = 0.0
-            for a in range(m):
-                if K[i, a] != 0.0:
-                    khp += K[i, a] * HP[a, j]
-            B[j] = P[i, j] - khp
+            B[j] = P[i, j] - B[j]
         for a in range(m):
             acc = 0.0
             for k in range(n):
                 acc += B[k] * H[a, k]
             BHt[a] = acc
+        for j in range(n):  # row i of (B H^T) K^T and of (K R) K^T
+            BHtKt[j], KRKt[j] = 0.0, 0.0
+        for a in range(m):
+            bht, kr = BHt[a], KR[i, a]
+            for j in range(n):
+                BHtKt[j] += bht * Kt[a, j]
+            for j in range(n):
+                KRKt[j] += kr * Kt[a, j]
         for j in range(n):
-            bhk, krk = 0.0, 0.0
-            for a in range(m):
-                bhk += BHt[a] * K[j, a]
-            for a in range(m):
-                krk += KR[i, a] * K[j, a]
-            out[i, j] = B[j] - bhk + krk
+            out[i, j] = B[j] - BHtKt[j] + KRKt[j]
 
 
 @njit(cache=True)
