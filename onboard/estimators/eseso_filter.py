@@ -716,42 +716,20 @@ class EsesoFilter:
         """The Kalman update (:func:`.kalman.update`) of the error state from zero with the
         innovation ``y``, Jacobian ``H`` and noise ``Rm``; ``only`` the block it may correct
         (None = all). ``S`` is symmetrized and inverted by LU (``np.linalg.inv``); its
-        ``x`` is the correction ``dx``. With :attr:`compiled`, the same in
-        :func:`.eseso_kernel.joseph_update` (its record has no ``K``)."""
-        if not self.compiled:
-            return kalman.update(_NO_ERROR, self.P, y, Rm, H, keep=only, symmetric=True,
-                                 inverse=np.linalg.inv)
-        kernel = _kernel()
-        lo, hi = (0, N_ERR) if only is None else (only.start, only.stop)
-        dx, P, S, nis, ok = kernel.joseph_update(self.P, y, H, Rm, lo, hi)
-        if not ok:
-            raise np.linalg.LinAlgError("Singular matrix")
-        return kalman.KalmanUpdate(dx, P, y, S, None, float(nis))
+        ``x`` is the correction ``dx``."""
+        return kalman.update(_NO_ERROR, self.P, y, Rm, H, keep=only, symmetric=True,
+                             inverse=np.linalg.inv)
 
     def _inject_and_reset(self, dx: Array, P: Array) -> None:
         """:meth:`inject` the correction ``dx`` and reset the updated covariance ``P``
         (17b: ``G = I`` except the attitude block, ``I - [dtheta/2]x``, Sola eq. 287;
-        :func:`reset_covariance`); with :attr:`compiled`, both in one
-        :func:`.eseso_kernel.inject_reset_in_place`."""
-        if not self.compiled:
-            self.inject(dx)
-            self.P = reset_covariance(P, dx[TH])
-            return
-        _kernel().inject_reset_in_place(self.x, self.P, P, dx)
-
-    def _mahalanobis(self, S: Array, y: Array) -> float:
-        """``y^T S^-1 y``; with :attr:`compiled`, :func:`.eseso_kernel.mahalanobis`."""
-        if not self.compiled:
-            return float(y @ np.linalg.solve(S, y))
-        kernel = _kernel()
-        return kernel.mahalanobis(S, y)
+        :func:`reset_covariance`)."""
+        self.inject(dx)
+        self.P = reset_covariance(P, dx[TH])
 
     def _project(self, H: Array) -> Array:
-        """``H P H^T``; with :attr:`compiled`, :func:`.eseso_kernel.project`."""
-        if not self.compiled:
-            return H @ (self.P @ H.T)
-        kernel = _kernel()
-        return kernel.project(self.P, H)
+        """``H P H^T``."""
+        return H @ (self.P @ H.T)
 
     def _adapt_noise(self, channel: str, y: Array, HPHt: Array, Rm: Array) -> float:
         """The variance scale of ``channel``'s configured noise ``Rm`` after this update's
@@ -1041,8 +1019,7 @@ class EsesoFilter:
         self.P[XI, XI] += np.diag(self.model_change_var(tau))
         y = tau - h
         Rm = self.R_tau = self.thrust_noise(wdot_dt)
-        # the reference keeps its own association, (H P) H^T (:meth:`_project`'s is H (P H^T))
-        HPHt = self._project(H) if self.compiled else H @ self.P @ H.T
+        HPHt = H @ self.P @ H.T  # (H P) H^T, not :meth:`_project`'s H (P H^T)
         if self.params.noise.adapt_updates > 0:  # before the Huber weight (it would learn it)
             self._learn_disturbance_excess(y, HPHt + Rm)
             Rm = Rm * self._adapt_noise("thrust", y, HPHt, Rm)
@@ -1051,7 +1028,7 @@ class EsesoFilter:
         self.downweighted = False
         if k > 0:
             S = HPHt + Rm
-            nis = self._mahalanobis(S, y)
+            nis = float(y @ np.linalg.solve(S, y))
             if nis > k:
                 Rm = Rm * (nis / k)
                 self.downweighted = True

@@ -1,5 +1,6 @@
-"""The ESESO's compiled kernels: its propagation, its Joseph update and the Python around
-them (injection, thrust model, published values), in numba.
+"""The ESESO's compiled kernels: its propagation, its updates and the Python around them
+(noise adaptation, gate, injection, thrust and attitude models, published values), in
+numba.
 
 The readable reference is :mod:`onboard.estimators.eseso_filter` (algorithms.md §5.1);
 these functions compute the same equations on plain loops, compiled by numba, because at
@@ -10,34 +11,42 @@ update) costs more than the arithmetic (docs/performance.md, "The ESESO's vehicl
 extra, and ``ONBOARD_ESESO_KERNEL`` not ``0``); tests/test_eseso_kernel.py checks that
 kernel and reference agree to rounding.
 
+The nominal state is the filter's one array ``x``
+(:data:`~onboard.estimators.eseso_filter.X_P` ...), which the kernels, as ``P``, write in
+place: each propagation and each update is one call that returns no array or one.
+
 * :func:`propagate`: :meth:`EsesoFilter.propagate` whole, the nominal state (paper eq.
   10b) and ``F P F^T + diag(q)`` (eq. 13) with ``F`` applied by the blocks of
   :class:`~onboard.estimators.eseso_filter.Transition`, as
   :func:`~onboard.estimators.eseso_filter.propagate_covariance` does.
-* :func:`joseph_update`: :func:`onboard.estimators.kalman.update` as the ESESO calls it
+* :func:`fuse`: :meth:`EsesoFilter.update` but its bookkeeping: the noise adaptation, the
+  Kalman update as :func:`onboard.estimators.kalman.update` makes it for the ESESO
   (error state zero, ``S`` symmetrized and inverted, the gain's rows outside ``keep``
-  zeroed), its Joseph form ``(I - K H) P (I - K H)^T + K R K^T`` evaluated through its
-  rank-``m`` factors: ``(I - K H) X = X - K (H X)`` is ``m n^2`` multiply-adds where the
-  dense product is ``n^3``.
-* :func:`reset`: the reset ``G P G^T`` after an injection (paper eq. 17b, Sola eq. 287),
-  ``G`` the identity but for its attitude block ``I - [dtheta/2]x``, then symmetrized;
-  :func:`inject_reset_in_place`: the injection of the update's correction into the
-  nominal state (eq. 16d) and that reset.
-* :func:`h_tau`: :meth:`EsesoFilter.h_tau`, the thrust model and its Jacobian;
-  :func:`project` (``H P H^T``) and :func:`mahalanobis` (``y^T S^-1 y``) for the noise
-  adaptation and the thrust update's Huber weight.
+  zeroed; :func:`_gain`) with its Joseph form ``(I - K H) P (I - K H)^T + K R K^T``
+  evaluated through its rank-``m`` factors (``(I - K H) X = X - K (H X)`` is ``m n^2``
+  multiply-adds where the dense product is ``n^3``; :func:`_joseph_into`), the gate, the
+  injection of the correction (eq. 16d; :func:`_inject_into`) and the reset ``G P G^T``
+  (eq. 17b, Sola eq. 287, ``G`` the identity but for its attitude block
+  ``I - [dtheta/2]x``, then symmetrized; :func:`_reset_into`).
+* :func:`thrust_update`: :meth:`EsesoFilter.update_thrust` but its bookkeeping: the
+  thrust model (:func:`h_tau`, also :meth:`EsesoFilter.h_tau`), the model-change
+  variance, the noise, its adaptation, the Huber weight (:func:`mahalanobis`) and the
+  update; :func:`learn_excess`, the published disturbance excess it learns.
+* :func:`attitude_innovation`: the attitude update's innovation (:func:`log_so3`) and
+  noise.
 * :func:`estimates`: the ESESO pipeline's published values
-  (:meth:`onboard.pipelines.eseso.Eseso.estimates`) in one array.
+  (:meth:`onboard.pipelines.eseso.Eseso.estimates`) in one array; :func:`finite`, its
+  divergence test.
 
 Each call costs ~1 µs of numba's dispatch and ~0.3 µs per array it returns, so a kernel
 pays where it replaces a dozen numpy calls or more (docs/performance.md, "The Python
 around the ESESO's kernels").
 
-Compiled on first call, not at import (8 s of CPU here, docs/performance.md), and cached
-beside this module (``cache=True``), so a machine compiles once; a process then pays
-numba's start, ~0.6 s, at its first call. Loops only: numba compiles array expressions,
-slice assignments and transposed views two to four times slower, and BLAS's call costs
-more than these 3- and 23-row products.
+Compiled on first call, not at import (~11 s of CPU here, docs/performance.md), and
+cached beside this module (``cache=True``), so a machine compiles once; a process then
+pays numba's start, ~0.6 s, at its first call. Loops only: numba compiles array
+expressions, slice assignments and transposed views two to four times slower, and BLAS's
+call costs more than these 3- and 23-row products.
 """
 
 from __future__ import annotations
@@ -349,14 +358,6 @@ def _pack(x, p, v, R, b_a, b_g, g, xi, b_ins) -> None:
 
 
 @njit(cache=True)
-def _store(P: np.ndarray, P_new: np.ndarray) -> None:
-    """``P[:] = P_new``."""
-    for i in range(P.shape[0]):
-        for j in range(P.shape[1]):
-            P[i, j] = P_new[i, j]
-
-
-@njit(cache=True)
 def _inverse(S: np.ndarray) -> tuple[np.ndarray, bool]:
     """``S^-1`` by Gauss-Jordan elimination with partial pivoting (LU's arithmetic), and
     False when ``S`` is singular."""
@@ -450,21 +451,6 @@ def _joseph_into(P, H, K, Rm, out) -> None:
 
 
 @njit(cache=True)
-def joseph_update(P, y, H, Rm, keep_lo, keep_hi):
-    """The ESESO's Kalman update of its error state from zero (:func:`.kalman.update`
-    with ``symmetric=True`` and ``keep = slice(keep_lo, keep_hi)``): ``(dx, P+, S, nis,
-    ok)``, ``ok`` False (and the rest meaningless) when ``S`` is singular. ``P+`` is the
-    Joseph form through its rank-``m`` factors (module docstring)."""
-    PHt = _mmt(P, H)
-    S, nis, K, ok = _gain(PHt, _mm(H, PHt), y, Rm, keep_lo, keep_hi)
-    if not ok:
-        return np.zeros(P.shape[0]), P, S, nis, False
-    P_new = np.empty_like(P)
-    _joseph_into(P, H, K, Rm, P_new)
-    return _mv(K, y), P_new, S, nis, True
-
-
-@njit(cache=True)
 def _reset_into(P: np.ndarray, dtheta: np.ndarray) -> None:
     """``P <- G P G^T`` with ``G = I`` but ``G[TH, TH] = I - [dtheta/2]x``, symmetrized,
     in place: only the attitude rows, then columns, change."""
@@ -491,14 +477,6 @@ def _reset_into(P: np.ndarray, dtheta: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def reset(P: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
-    """``G P G^T`` with ``G = I`` but ``G[TH, TH] = I - [dtheta/2]x``, symmetrized."""
-    out = P.copy()
-    _reset_into(out, dtheta)
-    return out
-
-
-@njit(cache=True)
 def _inject_into(x: np.ndarray, dx: np.ndarray) -> None:
     """:meth:`EsesoFilter.inject` of the correction ``dx`` into the filter's nominal
     state ``x`` in place (paper eq. 16d: every component added, the attitude by
@@ -516,17 +494,6 @@ def _inject_into(x: np.ndarray, dx: np.ndarray) -> None:
     for i in range(3):
         for j in range(3):
             x[_XR + 3 * i + j] = R[i, j]
-
-
-@njit(cache=True)
-def inject_reset_in_place(x: np.ndarray, P: np.ndarray, P_up: np.ndarray,
-                          dx: np.ndarray) -> None:
-    """:meth:`EsesoFilter.inject` of the correction ``dx`` into the filter's nominal state
-    ``x`` and the reset (:func:`reset`) of the updated covariance ``P_up`` into ``P``,
-    both in place."""
-    _inject_into(x, dx)
-    _store(P, P_up)
-    _reset_into(P, dx[_TH:_TH + 3].copy())
 
 
 ADAPT_NONE, ADAPT_NOISE, ADAPT_PROCESS = 0, 1, 2
@@ -574,9 +541,10 @@ def fuse(x, P, y, H, Rm, keep_lo, keep_hi, gate, may_recover, adapt, adapt_n, me
     """:meth:`EsesoFilter.update` but its bookkeeping, in one call: the noise adaptation
     (``adapt``: its exponential mean ``mean`` over ``adapt_n`` updates, the current
     ``scale``, clipped to [1, ``ceiling``], each sample capped at ``cap``), the Joseph
-    update (:func:`joseph_update`), the gate (``gate`` > 0; beyond it the update is
-    rejected unless ``may_recover``, then fused with its noise scaled so that its NIS
-    equals the gate) and the injection and reset into ``x`` and ``P`` in place. Returns
+    update (:func:`_gain`, :func:`_joseph_into`), the gate (``gate`` > 0; beyond it the
+    update is rejected unless ``may_recover``, then fused with its noise scaled so that
+    its NIS equals the gate) and the injection and reset into ``x`` and ``P`` in place
+    (:func:`_correct`). Returns
     ``(outcome, nis, S, mean, scale)``: ``nis`` and ``S`` the first update's, ``mean``
     and ``scale`` the adaptation's new ones."""
     m = y.shape[0]
@@ -665,12 +633,6 @@ def h_tau(x, f_m, w_m, wdot, with_wdot, m_vec, added, d_l, d_nl, w_minus_b, mass
         H[i, _BA + i] = -m_vec[i]
         H[i, _XI + i] = -1.0
     return h, H
-
-
-@njit(cache=True)
-def project(P: np.ndarray, H: np.ndarray) -> np.ndarray:
-    """``H P H^T``."""
-    return _mm(H, _mmt(P, H))
 
 
 @njit(cache=True)
