@@ -36,11 +36,13 @@ than S (docs/eseso-mpc.md, "Measurement noise and consistency").
   (:class:`Transition`, :func:`propagate_covariance`; the dense ``F`` is
   :func:`transition_matrix`, the readable reference).
 * **Compiled twins** (:func:`compiled_kernel`): with numba installed (the ``fast`` extra)
-  the propagation, the Joseph update, the injection and reset, the thrust model and the
-  products of the noise adaptation and of the Huber test run in :mod:`.eseso_kernel`,
-  the same equations on compiled loops (tests/test_eseso_kernel.py: to rounding); this
-  module's numpy code is their reference and runs without numba or with
-  ``ONBOARD_ESESO_KERNEL=0``.
+  each propagation and each update (its noise adaptation, Kalman update, gate,
+  injection and reset; the thrust update whole, its model, noise and Huber weight too;
+  the attitude's innovation) is one call of :mod:`.eseso_kernel`, the same equations on
+  compiled loops writing the nominal state's one array :attr:`EsesoFilter.x` and ``P``
+  in place (tests/test_eseso_kernel.py: to rounding); the bookkeeping (the records, the
+  rejections in a row, the adaptation's means) stays here. This module's numpy code is
+  their reference and runs without numba or with ``ONBOARD_ESESO_KERNEL=0``.
 * **Updates** (paper eqs. 14, 16), each through :meth:`EsesoFilter.update`, Joseph form,
   with the innovation ``y``, its covariance ``S`` and the NIS of each update kept as an
   :class:`~onboard.core.messages.Innovation` record in :attr:`EsesoFilter.innovations`
@@ -172,7 +174,9 @@ N_NOMINAL = X_BI.stop
 def _nominal(block: slice, doc: str) -> property:
     """The part ``block`` of :attr:`EsesoFilter.x` as an attribute: read, a view (written
     in place, it writes the state); assigned, a new array with the value (what was read
-    before keeps its values, as any rebound attribute)."""
+    before keeps its values, as any rebound attribute). The compiled kernels write
+    :attr:`EsesoFilter.x` in place: a view read before one of their propagations or
+    updates shows the state after it."""
     shape = (3, 3) if block == X_R else (block.stop - block.start,)
 
     def get(self: "EsesoFilter") -> Array:
@@ -549,8 +553,8 @@ class EsesoFilter:
         if self.compiled:  # x and P written in place; the transition built when read
             self._transition = None
             self._transition_inputs = (f_m, w_m, dt, phi_ins, earth_fixed)
-            _kernel().propagate(self.x, self.P, self._x_prev, f_m, w_m, dt,
-                                         earth_fixed, phi_ins, q)
+            _kernel().propagate(self.x, self.P, self._x_prev, f_m, w_m, dt, earth_fixed,
+                                phi_ins, q)
             return
         f = f_m - self.b_a
         w = w_m - self.b_g
