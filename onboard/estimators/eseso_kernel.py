@@ -499,6 +499,28 @@ def _inject_into(x: np.ndarray, dx: np.ndarray) -> None:
 ADAPT_NONE, ADAPT_NOISE, ADAPT_PROCESS = 0, 1, 2
 """What an update's innovation adapts (:func:`fuse`): nothing, its channel's noise scale
 (:meth:`EsesoFilter._adapt_noise`) or the IMU's (:meth:`EsesoFilter._adapt_process`)."""
+
+
+@njit(cache=True)
+def _adapted(adapt, y, HPHt, Rm, mean, scale, adapt_n, ceiling, cap):
+    """The noise scale's exponential ``mean`` (over ``adapt_n`` updates) and the
+    ``scale`` (the mean clipped to [1, ``ceiling``]) after the innovation ``y`` of
+    covariance ``H P H^T + s R``: a sample of its channel's scale ``(y^T y - tr(H P H^T))
+    / tr(R)`` (``ADAPT_NOISE``) or of the IMU's, ``scale (y^T y - tr(R)) / tr(H P H^T)``
+    (``ADAPT_PROCESS``: ``P`` already carries the current scale), capped at ``cap``."""
+    yy, tr_h, tr_r = 0.0, 0.0, 0.0
+    for i in range(y.shape[0]):
+        yy += y[i] * y[i]
+        tr_h += HPHt[i, i]
+        tr_r += Rm[i, i]
+    if adapt == ADAPT_NOISE:
+        sample = (yy - tr_h) / max(tr_r, 1e-300)
+    else:
+        sample = scale * ((yy - tr_r) / max(tr_h, 1e-300))
+    sample = cap if cap < sample else sample  # Python's min(sample, cap), NaN kept
+    mean += (sample - mean) / adapt_n
+    scale = 1.0 if 1.0 > mean else mean
+    return mean, ceiling if ceiling < scale else scale
 GATED, FUSED, RECOVERED, SINGULAR = 0, 1, 2, -1
 """What :func:`fuse` made of an update (the filter's ``Outcome``; ``SINGULAR``: ``S``
 could not be inverted, nothing changed)."""
@@ -547,23 +569,10 @@ def fuse(x, P, y, H, Rm, keep_lo, keep_hi, gate, may_recover, adapt, adapt_n, me
     (:func:`_correct`). Returns
     ``(outcome, nis, S, mean, scale)``: ``nis`` and ``S`` the first update's, ``mean``
     and ``scale`` the adaptation's new ones."""
-    m = y.shape[0]
     PHt = _mmt(P, H)
     HPHt = _mm(H, PHt)
     if adapt != ADAPT_NONE:
-        yy, tr_h, tr_r = 0.0, 0.0, 0.0
-        for i in range(m):
-            yy += y[i] * y[i]
-            tr_h += HPHt[i, i]
-            tr_r += Rm[i, i]
-        if adapt == ADAPT_NOISE:
-            sample = (yy - tr_h) / max(tr_r, 1e-300)
-        else:  # P already carries the current scale: the sample is the scale times the ratio
-            sample = scale * ((yy - tr_r) / max(tr_h, 1e-300))
-        sample = cap if cap < sample else sample  # Python's min(sample, cap), NaN kept
-        mean += (sample - mean) / adapt_n
-        scale = 1.0 if 1.0 > mean else mean
-        scale = ceiling if ceiling < scale else scale
+        mean, scale = _adapted(adapt, y, HPHt, Rm, mean, scale, adapt_n, ceiling, cap)
         if adapt == ADAPT_NOISE:
             Rm = _scaled(Rm, scale)
     outcome, nis, S = _fuse_gated(x, P, y, H, Rm, PHt, HPHt, keep_lo, keep_hi, gate,
@@ -712,16 +721,8 @@ def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, h
     scale = 1.0
     adapt_n = k[_K_ADAPT_N]
     if adapt_n > 0:  # before the Huber weight (it would learn it)
-        yy, tr_h, tr_r = 0.0, 0.0, 0.0
-        for i in range(3):
-            yy += y[i] * y[i]
-            tr_h += HPHt[i, i]
-            tr_r += Rm[i, i]
-        sample = (yy - tr_h) / max(tr_r, 1e-300)  # _adapt_noise, the thrust's ceiling
-        sample = k[_K_CAP] if k[_K_CAP] < sample else sample
-        mean += (sample - mean) / adapt_n
-        scale = 1.0 if 1.0 > mean else mean
-        scale = k[_K_SCALE_MAX] if k[_K_SCALE_MAX] < scale else scale
+        mean, scale = _adapted(ADAPT_NOISE, y, HPHt, Rm, mean, scale, adapt_n,
+                               k[_K_SCALE_MAX], k[_K_CAP])
         Rm = _scaled(Rm, scale)
     downweighted = False
     huber = k[_K_HUBER]
