@@ -494,6 +494,7 @@ class EsesoFilter:
         self.A = np.diag(self.d_a)
         self.d_l = np.asarray(c.damping_linear, float)
         self.d_nl = np.asarray(c.damping_quadratic, float)
+        self._earth_fixed = params.process.disturbance_model == "earth_fixed"
         self.initialized = False
         self.x = np.zeros(N_NOMINAL)  # p, v, b_a, b_g, xi, b_ins zero
         self.R = np.eye(3)
@@ -548,7 +549,7 @@ class EsesoFilter:
         covariance by eqs. (11)-(13) with the Jacobian F of algorithms.md §5.1, its
         non-identity blocks (:func:`transition`) applied by :func:`propagate_covariance`;
         with :attr:`compiled`, the same in :func:`.eseso_kernel.propagate`."""
-        earth_fixed = self.params.process.disturbance_model == "earth_fixed"
+        earth_fixed = self._earth_fixed
         phi_ins, q = self._interval_noise(dt)
         if self.compiled:  # x and P written in place; the transition built when read
             self._transition = None

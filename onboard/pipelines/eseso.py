@@ -190,11 +190,12 @@ class EsesoCounters:
 
     def update(self, channel: str, outcome: Outcome) -> None:
         """One update of ``channel`` and what became of it."""
-        if outcome is not Outcome.FUSED:
-            self._add(f"rejected.{channel}.gate")
+        if outcome is Outcome.FUSED:  # most updates
+            self._add(f"fused.{channel}")
+            return
+        self._add(f"rejected.{channel}.gate")
         if outcome is Outcome.RECOVERED:
             self._add(f"recovered.{channel}")
-        if outcome:
             self._add(f"fused.{channel}")
 
     def downweighted(self) -> None:
@@ -352,9 +353,13 @@ class Eseso(Pipeline):
             return None
         if t1 <= t0:
             return hist[-1][1]
+        first = len(hist) - 1  # the command held at t0; those before it ended by then
+        while first > 0 and hist[first][0] > t0:
+            first -= 1
         acc = np.zeros(3)
         covered = 0.0
-        for i, (tc, tau) in enumerate(hist):
+        for i in range(first, len(hist)):
+            tc, tau = hist[i]
             start = max(tc, t0)
             end = min(hist[i + 1][0], t1) if i + 1 < len(hist) else t1
             if end > start:
@@ -451,11 +456,11 @@ class Eseso(Pipeline):
             self.counters.rejected("command", "thruster_count")
             return
         thrusters = self.cfg.thrusters
-        forces = np.array([thruster_force(float(cmd), thrusters) for cmd in s.thrusters])
-        if not np.all(np.isfinite(forces)):
+        forces = [thruster_force(float(cmd), thrusters) for cmd in s.thrusters]
+        if not all(map(math.isfinite, forces)):  # floats: cheaper than numpy's
             self.counters.rejected("command", "nonfinite")
             return
-        self.tau = self.K_alloc @ forces
+        self.tau = self.K_alloc @ np.array(forces)
         self._cmd_max = max((abs(float(c)) for c in s.thrusters), default=0.0)
         self.t_tau = s.t
         self._tau_source = s.source
