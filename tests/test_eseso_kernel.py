@@ -393,10 +393,13 @@ def test_the_kernel_is_switched_off_by_the_environment(monkeypatch) -> None:
 
 
 def test_the_kernels_blocks_are_the_filters() -> None:
-    """The kernel names the error state's blocks by offsets of its own (it cannot import
-    the filter that imports it): they must be the filter's."""
+    """The kernel names the error state's blocks and the nominal state's entries by offsets
+    of its own (it cannot import the filter that imports it): they must be the filter's."""
     blocks = ("P_", "V_", "TH", "BA", "BG", "G_", "XI", "BI")
     for name in blocks:
         offset = getattr(eseso_kernel, "_" + name.rstrip("_"))
         assert offset == getattr(eseso_filter, name).start, name
     assert eseso_kernel._N == N_ERR
+    for name in ("P", "V", "R", "BA", "BG", "G", "XI", "BI"):  # the nominal state's array
+        assert getattr(eseso_kernel, "_X" + name) == getattr(eseso_filter, "X_" + name).start
+    assert eseso_kernel._NX == eseso_filter.N_NOMINAL

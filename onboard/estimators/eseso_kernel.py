@@ -657,18 +657,19 @@ def mahalanobis(S: np.ndarray, y: np.ndarray) -> float:
     return out
 
 
-THRUST_CONSTANTS = ("w_minus_b", "mass", "cg_z", "thrust_rel_std", "damping_rel_std",
-                    "accel_std", "gyro_std", "thrust_std", "adapt_updates", "scale_max",
-                    "sample_cap", "huber")
-"""The scalars of :func:`thrust_update`'s ``k`` in their order (:func:`thrust_constants`)."""
 (_K_W_MINUS_B, _K_MASS, _K_CG_Z, _K_THRUST_REL, _K_DAMPING_REL, _K_ACCEL_STD, _K_GYRO_STD,
  _K_THRUST_STD, _K_ADAPT_N, _K_SCALE_MAX, _K_CAP, _K_HUBER) = range(12)
+"""Where each scalar of :func:`thrust_update`'s ``k`` is (:func:`thrust_constants`): the
+weight minus the buoyancy (N), the mass (kg), the centre of gravity (m), the thrust map's
+and the damping's relative one-sigmas, the accelerometer's (m/s^2), the gyro's (rad/s)
+and the thrusters' (N) noise, ``noise.adapt_updates``, ``noise.thrust_scale_max``, the
+noise sample's cap and ``thrust_huber``."""
 
 
 def thrust_constants(params, sample_cap: float) -> tuple[np.ndarray, np.ndarray]:
     """The constants of :func:`thrust_update` from the filter's ``EsesoParams``, made once
     per filter: the vehicle's diagonals (rows ``M``, ``A``, linear and quadratic damping)
-    and the scalars of :data:`THRUST_CONSTANTS` (the noise sample's cap is the filter's
+    and the scalars at :data:`_K_W_MINUS_B` ... (the noise sample's cap is the filter's
     constant)."""
     v, n, c = params.vehicle, params.noise, params.process
     added = np.asarray(v.added_mass_kg, float)
