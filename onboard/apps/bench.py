@@ -727,10 +727,9 @@ def compiled_modules() -> list[str]:
     import importlib.util
     import pkgutil
 
-    import onboard
-
+    package = Path(__file__).resolve().parents[1]  # onboard/, this module in onboard/apps/
     names = []
-    for m in pkgutil.walk_packages(onboard.__path__, "onboard."):
+    for m in pkgutil.walk_packages([str(package)], "onboard."):
         if m.ispkg or m.name.startswith(("onboard.sitl", "onboard.drivers")):
             continue
         spec = importlib.util.find_spec(m.name)
