@@ -243,6 +243,22 @@ def right_jacobian(theta: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def _rotated_row(M: np.ndarray, i: int, block: int, dRt: np.ndarray, B: np.ndarray,
+                 acc: np.ndarray, out: np.ndarray) -> None:
+    """Row ``i`` of the block at ``block`` (the attitude's or the earth-fixed
+    disturbance's) of ``F M``: ``dR^T M[block] + B M[BG]`` (``acc`` a scratch row)."""
+    cols = M.shape[1]
+    for j in range(cols):
+        acc[j] = 0.0
+    for k in range(3):
+        a, b = dRt[i, k], B[i, k]
+        for j in range(cols):
+            acc[j] += a * M[block + k, j] + b * M[_BG + k, j]
+    for j in range(cols):
+        out[block + i, j] = acc[j]
+
+
+@njit(cache=True)
 def _transition_rows(M: np.ndarray, dt: float, A: np.ndarray, dRt: np.ndarray,
                      th_bg: np.ndarray, xi_bg: np.ndarray, earth_fixed: bool,
                      phi_ins: float, out: np.ndarray) -> None:
@@ -265,23 +281,9 @@ def _transition_rows(M: np.ndarray, dt: float, A: np.ndarray, dRt: np.ndarray,
             v_new = M[_V + i, j] + dt * (M[_G + i, j] - acc[j])
             out[_P + i, j] += 0.5 * dt * (M[_V + i, j] + v_new)
             out[_V + i, j] = v_new
-        for j in range(cols):
-            acc[j] = 0.0
-        for k in range(3):
-            a, b = dRt[i, k], th_bg[i, k]
-            for j in range(cols):
-                acc[j] += a * M[_TH + k, j] + b * M[_BG + k, j]
-        for j in range(cols):
-            out[_TH + i, j] = acc[j]
+        _rotated_row(M, i, _TH, dRt, th_bg, acc, out)
         if earth_fixed:
-            for j in range(cols):
-                acc[j] = 0.0
-            for k in range(3):
-                a, b = dRt[i, k], xi_bg[i, k]
-                for j in range(cols):
-                    acc[j] += a * M[_XI + k, j] + b * M[_BG + k, j]
-            for j in range(cols):
-                out[_XI + i, j] = acc[j]
+            _rotated_row(M, i, _XI, dRt, xi_bg, acc, out)
     for j in range(cols):
         out[_BI, j] *= phi_ins
         out[_BI + 1, j] *= phi_ins
