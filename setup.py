@@ -36,10 +36,14 @@ COMPILED_MODULES = [
     "onboard/estimators/model_identification.py",
     "onboard/estimators/vehicle_models.py",
     "onboard/estimators/input_models.py",
+    "onboard/pipelines/surge_heading.py",
     "onboard/pipelines/aie.py",
     "onboard/pipelines/kf.py",
+    "onboard/pipelines/current.py",
     "onboard/pipelines/current_samples.py",
     "onboard/pipelines/current_health.py",
+    # the measured track every estimate is compared with
+    "onboard/pipelines/nav.py",
     # the engine: per sample and per tick
     "onboard/engine/engine.py",
     "onboard/engine/checks.py",

@@ -44,7 +44,9 @@ class NoHealth(msgspec.Struct, frozen=True):
 class Pipeline(Protocol):
     """One estimator family, e.g. ``aie`` or ``current``.
 
-    A pipeline class subclasses this protocol to inherit the defaults below.
+    A pipeline class subclasses this protocol to inherit the defaults below, or, to be
+    compiled by mypyc (setup.py), :class:`PipelineDefaults`, the same defaults in a plain
+    class.
 
     Attributes:
         name: the pipeline name, the prefix of its columns in estimates.csv and its
@@ -133,6 +135,27 @@ class Pipeline(Protocol):
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restore what :meth:`get_state` returned; ignore what does not fit."""
         ...
+
+
+class PipelineDefaults:
+    """:class:`Pipeline`'s defaults (its roles empty, no frame, no events) in a plain class:
+    the base of the pipelines compiled by mypyc (setup.py), which compiles no class that
+    inherits attribute defaults from a protocol."""
+
+    position: tuple[str, ...] = ()
+    speed: tuple[str, ...] = ()
+    heading_dependent: tuple[str, ...] = ()
+    heading_estimate: tuple[str, ...] = ()
+    current_estimate: tuple[str, ...] = ()
+    unpublished_channels: tuple[str, ...] = ()
+    calibrating_channels: tuple[str, ...] = ()
+    regression_channels: tuple[str, ...] = ()
+    frame: LocalFrame | None = None
+    frame_offset: tuple[float, float] | None = None
+
+    def take_events(self) -> list[str]:
+        """None (:meth:`Pipeline.take_events`)."""
+        return []
 
 
 def unused_measurement(channel: str, t: float, dof: int, reason: str,
