@@ -3,9 +3,9 @@ hot path with mypyc (docs/performance.md, "The compiled build").
 
 The modules are the readable Python as written: mypyc compiles them to C extensions from
 their type annotations, and the estimates are the pure build's to the byte
-(tests/test_compiled.py). The estimators' classes, each subclass too (it is not
-inherited), carry ``@mypyc_attr(allow_interpreted_subclasses=True)`` (a no-op in Python):
-compiled, they can then be deep-copied (the GNSS latency's fixed-lag forks,
+(tests/test_compiled.py). The estimators' and the pipelines' classes, each subclass too
+(it is not inherited), carry ``@mypyc_attr(allow_interpreted_subclasses=True)`` (a no-op
+in Python): compiled, they can then be deep-copied (the GNSS latency's fixed-lag forks,
 onboard/engine/latency.py) and subclassed by Python code (the tests' doubles). Without
 ``ONBOARD_COMPILE=1`` the wheel is pure Python, as the vehicle's install from source and
 the editable development install are (do not set it for an editable install: its
@@ -24,7 +24,7 @@ MYPYC_VERSION = "1.15.0"
 """The mypy (mypyc) release the compiled build is tested with: its C differs by release."""
 
 COMPILED_MODULES = [
-    # the estimators of the boats' pipelines (aie, kf, current)
+    # the boats' pipelines (aie, kf, current) and their estimators
     "onboard/estimators/increment_filter.py",
     "onboard/estimators/rcie.py",
     "onboard/estimators/noise_learning.py",
@@ -36,10 +36,14 @@ COMPILED_MODULES = [
     "onboard/estimators/model_identification.py",
     "onboard/estimators/vehicle_models.py",
     "onboard/estimators/input_models.py",
+    "onboard/pipelines/surge_heading.py",
     "onboard/pipelines/aie.py",
     "onboard/pipelines/kf.py",
+    "onboard/pipelines/current.py",
     "onboard/pipelines/current_samples.py",
     "onboard/pipelines/current_health.py",
+    # the measured track every estimate is compared with
+    "onboard/pipelines/nav.py",
     # the engine: per sample and per tick
     "onboard/engine/engine.py",
     "onboard/engine/checks.py",

@@ -21,7 +21,7 @@ from onboard.core.messages import (
     Sample,
 )
 from onboard.engine import Engine, run
-from onboard.pipelines.base import NoHealth, Pipeline
+from onboard.pipelines.base import NoHealth, PipelineDefaults
 
 
 class Steps(msgspec.Struct, frozen=True):
@@ -33,7 +33,7 @@ class Steps(msgspec.Struct, frozen=True):
         return {"x.steps": float(self.steps)}
 
 
-class Recorder(Pipeline):
+class Recorder(PipelineDefaults):
     """A pipeline that remembers what it was given (to test the engine's contract)."""
 
     name = "rec"
@@ -289,7 +289,7 @@ def test_std_columns_follow_the_pipeline_also_after_a_restart(monkeypatch):
     assert eng.pipeline_errors["withstd"] == 1
 
 
-class _FastAie(Pipeline):
+class _FastAie(PipelineDefaults):
     """An ``aie`` that publishes 2.0 m/s (sigma 0.05) whatever it is given, its speed
     declared as such."""
 

@@ -16,10 +16,10 @@ from onboard.core import config
 from onboard.core.messages import GnssFix, Heading, Sample
 from onboard.engine import Engine, TickQueue
 from onboard.engine.latency import FixedLagQueue
-from onboard.pipelines.base import LateSampleHold, NoHealth, Pipeline
+from onboard.pipelines.base import LateSampleHold, NoHealth, PipelineDefaults
 
 
-class _Recorder(Pipeline):
+class _Recorder(PipelineDefaults):
     """A pipeline that records what it is fed and answers the newest sample time."""
 
     name = "rec"

@@ -44,7 +44,9 @@ class NoHealth(msgspec.Struct, frozen=True):
 class Pipeline(Protocol):
     """One estimator family, e.g. ``aie`` or ``current``.
 
-    A pipeline class subclasses this protocol to inherit the defaults below.
+    A pipeline class subclasses :class:`PipelineDefaults` for the defaults of the roles
+    below (a plain class: mypyc, setup.py, compiles no class that inherits attribute
+    defaults from a protocol).
 
     Attributes:
         name: the pipeline name, the prefix of its columns in estimates.csv and its
@@ -92,16 +94,16 @@ class Pipeline(Protocol):
 
     name: str
     columns: tuple[str, ...]
-    position: tuple[str, ...] = ()
-    speed: tuple[str, ...] = ()
-    heading_dependent: tuple[str, ...] = ()
-    heading_estimate: tuple[str, ...] = ()
-    current_estimate: tuple[str, ...] = ()
-    unpublished_channels: tuple[str, ...] = ()
-    calibrating_channels: tuple[str, ...] = ()
-    regression_channels: tuple[str, ...] = ()
-    frame: LocalFrame | None = None
-    frame_offset: tuple[float, float] | None = None
+    position: tuple[str, ...]
+    speed: tuple[str, ...]
+    heading_dependent: tuple[str, ...]
+    heading_estimate: tuple[str, ...]
+    current_estimate: tuple[str, ...]
+    unpublished_channels: tuple[str, ...]
+    calibrating_channels: tuple[str, ...]
+    regression_channels: tuple[str, ...]
+    frame: LocalFrame | None
+    frame_offset: tuple[float, float] | None
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         """Advance to tick time ``t`` (s) given the new ``samples`` (time-ordered, all
@@ -119,7 +121,7 @@ class Pipeline(Protocol):
         """Human-readable events since the last call (e.g. a restored state discarded);
         the pipeline keeps none of them after the call. The engine moves them into its
         health events, prefixed with the pipeline name. None by default."""
-        return []
+        ...
 
     def health(self) -> PipelineHealth:
         """Its own counters and diagnostics (e.g. an axis's steps and divergences): the
@@ -133,6 +135,26 @@ class Pipeline(Protocol):
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Restore what :meth:`get_state` returned; ignore what does not fit."""
         ...
+
+
+class PipelineDefaults:
+    """What a pipeline is by default (:class:`Pipeline`): its roles empty, no frame, no
+    events. Every pipeline class subclasses it."""
+
+    position: tuple[str, ...] = ()
+    speed: tuple[str, ...] = ()
+    heading_dependent: tuple[str, ...] = ()
+    heading_estimate: tuple[str, ...] = ()
+    current_estimate: tuple[str, ...] = ()
+    unpublished_channels: tuple[str, ...] = ()
+    calibrating_channels: tuple[str, ...] = ()
+    regression_channels: tuple[str, ...] = ()
+    frame: LocalFrame | None = None
+    frame_offset: tuple[float, float] | None = None
+
+    def take_events(self) -> list[str]:
+        """None (:meth:`Pipeline.take_events`)."""
+        return []
 
 
 def unused_measurement(channel: str, t: float, dof: int, reason: str,

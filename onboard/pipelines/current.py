@@ -69,6 +69,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from mypy_extensions import mypyc_attr
 
 from onboard.core.config import CONFIG_DIR, Config, ConfigError
 from onboard.core.messages import Innovation, Sample
@@ -89,7 +90,7 @@ from onboard.estimators.model_identification import (
 from onboard.estimators.noise_learning import ChannelNoise, NoiseScale
 from onboard.estimators.restored_current import RestoredCurrentCheck
 from onboard.estimators.vehicle_models import RegressionModel, kind_for_class
-from onboard.pipelines.base import LateSampleHold, Pipeline, unused_measurement
+from onboard.pipelines.base import LateSampleHold, PipelineDefaults, unused_measurement
 from onboard.pipelines.current_health import CurrentHealth, LateHold, PipelineCounters
 from onboard.pipelines.current_samples import CHANNELS, CurrentSamples
 
@@ -140,7 +141,8 @@ HEADING_DEPENDENT = ("north", "east", "down", "u_r", "v_r", "w_r")
 velocity over ground less the through-water velocity turned to earth axes by it."""
 
 
-class CurrentPipeline(Pipeline):
+@mypyc_attr(allow_interpreted_subclasses=True)
+class CurrentPipeline(PipelineDefaults):
     """Pipeline ``current``: water current with one-sigma, any vehicle class.
 
     Inspectable attributes (filterpy style): ``kf`` (the joint Kalman filter: ``x``, ``P``,
@@ -409,8 +411,7 @@ class CurrentPipeline(Pipeline):
             f"the start was contradicted by a {CHANNELS[m.kind]} measurement (NIS "
             f"{nis:.0f} > {kf.gate_nis:.0f}): started again from it{dropped}")
 
-    def _update_hgo(self, m: VelocityMeasurement, dt_meas: float,
-                    R: np.ndarray | None) -> bool:
+    def _update_hgo(self, m: VelocityMeasurement, dt_meas: float, R: np.ndarray) -> bool:
         """The high-gain observer's update with ``m`` and its record (channel
         ``hgo.<channel>``); returns False if it diverged (the caller restarts it)."""
         hgo = self.hgo
@@ -578,10 +579,11 @@ class CurrentPipeline(Pipeline):
             std = [max(s, p) for s, p in zip(std, self.hgo.current_std_peak())]
         flow = self.flow
         if flow is not None and flow.ready and flow.v_g is not None:
-            c_flow, std, nu = flow.current(self._R())
-            published = std
+            c_flow, std_flow, nu_flow = flow.current(self._R())
+            std = published = std_flow.tolist()
+            nu = nu_flow.tolist()
             if c_flow is not None:
-                c = c_flow
+                c = c_flow.tolist()
         # a component the data do not determine is unknown, not a number
         thr = self.cfg.unknown_above_std_mps
         obs = self.observable

@@ -101,7 +101,7 @@ from onboard.estimators.eseso_filter import (
     EsesoParams,
     Outcome,
 )
-from onboard.pipelines.base import Pipeline, unused_measurement
+from onboard.pipelines.base import PipelineDefaults, unused_measurement
 
 Array = NDArray[np.float64]
 
@@ -242,7 +242,7 @@ class EsesoHealth(msgspec.Struct, frozen=True):
         return out
 
 
-class Eseso(Pipeline):
+class Eseso(PipelineDefaults):
     """The ESESO pipeline (``eseso``): state, disturbance force and their covariance.
 
     Attributes:

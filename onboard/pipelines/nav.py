@@ -23,7 +23,9 @@ from onboard.core.messages import (
     Sample,
     VelocityOverGround,
 )
-from onboard.pipelines.base import NoHealth, Pipeline
+from mypy_extensions import mypyc_attr
+
+from onboard.pipelines.base import NoHealth, PipelineDefaults
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used; the
@@ -31,7 +33,8 @@ engine's source selector lets one heading source through, and an ``Attitude`` wh
 it did not select (``yaw_selected`` False) gives no heading."""
 
 
-class NavTrack(Pipeline):
+@mypyc_attr(allow_interpreted_subclasses=True)
+class NavTrack(PipelineDefaults):
     """Latest measured position, heading, speed and depth (pipeline ``nav``).
 
     It declares no roles: its position and speed are the measurements the estimates are
@@ -45,7 +48,7 @@ class NavTrack(Pipeline):
         self.frame: LocalFrame | None = None
         self._values: dict[str, tuple[float, float]] = {}  # quantity -> (t, value)
         self._t_heading = -math.inf  # time (s) of the newest Heading sample
-        self._handlers: dict[type, Callable[[Any], None] | None] = {}
+        self._handlers: dict[type, Callable[[NavTrack, Any], None] | None] = {}
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
         """Take the newest measurements from ``samples``; return those at most
@@ -55,20 +58,22 @@ class NavTrack(Pipeline):
             cls = type(s)
             h = handlers[cls] if cls in handlers else self._handler(cls)
             if h is not None:
-                h(s)
+                h(self, s)
         stale = self.stale_s
         out = {k: v for k, (ts, v) in self._values.items() if t - ts <= stale}
         if "speed" not in out and "v_north" in out:
             out["speed"] = math.hypot(out["v_north"], out["v_east"])
         return out
 
-    def _handler(self, cls: type) -> Callable[[Any], None] | None:
-        """The intake method for a sample class (None: not used), cached per class;
-        subclasses get their base's handler."""
-        h = None
-        for base, fn in ((GnssFix, self._on_fix), (Heading, self._on_heading),
-                         (Attitude, self._on_attitude), (VelocityOverGround, self._on_vog),
-                         (Depth, self._on_depth)):
+    def _handler(self, cls: type) -> Callable[[NavTrack, Any], None] | None:
+        """The intake function for a sample class (None: not used), cached per class;
+        subclasses get their base's handler. The class's functions, not methods bound to
+        this object, so that a copy of it (the GNSS latency's fork) handles its samples
+        itself."""
+        h: Callable[[NavTrack, Any], None] | None = None
+        for base, fn in ((GnssFix, NavTrack._on_fix), (Heading, NavTrack._on_heading),
+                         (Attitude, NavTrack._on_attitude),
+                         (VelocityOverGround, NavTrack._on_vog), (Depth, NavTrack._on_depth)):
             if issubclass(cls, base):
                 h = fn
                 break

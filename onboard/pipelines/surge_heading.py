@@ -40,6 +40,7 @@ from collections import deque
 from typing import Any, Callable, Literal, Mapping, Sequence
 
 import msgspec
+from mypy_extensions import mypyc_attr
 
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame, wrap_pi
@@ -69,7 +70,7 @@ from onboard.estimators.measurement_points import (
 )
 from onboard.estimators.noise_learning import ChannelNoise, NoiseScale, ProcessScale
 from onboard.estimators.reconstruction import Point, TrackReconstruction
-from onboard.pipelines.base import Pipeline, unused_measurement
+from onboard.pipelines.base import PipelineDefaults, unused_measurement
 
 HEADING_HOLD_S = 1.0
 """An ``Attitude`` yaw within this long (s) after a ``Heading`` sample is not used."""
@@ -171,7 +172,8 @@ class SurgeHeadingHealth(msgspec.Struct, frozen=True):
         return h
 
 
-class SurgeHeadingPipeline(Pipeline):
+@mypyc_attr(allow_interpreted_subclasses=True)
+class SurgeHeadingPipeline(PipelineDefaults):
     """Surge and heading filters with trajectory reconstruction (``aie`` or ``kf``).
 
     ``columns``: north, east (m from the first fix), heading (rad, [0, 2 pi)), speed
@@ -288,7 +290,7 @@ class SurgeHeadingPipeline(Pipeline):
         self._w_end = self._hw_end = math.inf
         self._next_end = math.inf            # the earlier of the two ends
         self._w_early = False                # the surge window was closed at an output
-        self._handlers: dict[type, Callable[[Any], None] | None] = {}
+        self._handlers: dict[type, Callable[[SurgeHeadingPipeline, Any], None] | None] = {}
         self._t_heading = -math.inf          # time (s) of the newest Heading sample
         self._pt_prev: tuple[float, float, float, float] | None = None  # t, N, E, psi
         self._h_prev: tuple[float, float] | None = None                 # t, psi
@@ -311,20 +313,23 @@ class SurgeHeadingPipeline(Pipeline):
             cls = type(s)
             h = handlers[cls] if cls in handlers else self._handler(cls)
             if h is not None:
-                h(s)
+                h(self, s)
         w = self._w
         if w.n_fix and self.cfg.close_at_output and (w.n_h or self._unwrap.last is None):
             self._close_surge_window(t)
             self._w_early = True
         return self._output(t)
 
-    def _handler(self, cls: type) -> Callable[[Any], None] | None:
-        """The intake method for a sample class (None: not an input), cached per class;
-        subclasses of the input messages get their base's handler."""
-        h = None
-        for base, fn in ((GnssFix, self._on_fix), (Heading, self._on_heading),
-                         (Attitude, self._on_attitude), (ActuatorCommand, self._on_command),
-                         (Imu, self._on_imu)):
+    def _handler(self, cls: type) -> Callable[[SurgeHeadingPipeline, Any], None] | None:
+        """The intake function for a sample class (None: not an input), cached per class;
+        subclasses of the input messages get their base's handler. The class's functions,
+        not methods bound to this object, so that a copy of it (the GNSS latency's fork)
+        handles its samples itself."""
+        c = SurgeHeadingPipeline
+        h: Callable[[SurgeHeadingPipeline, Any], None] | None = None
+        for base, fn in ((GnssFix, c._on_fix), (Heading, c._on_heading),
+                         (Attitude, c._on_attitude), (ActuatorCommand, c._on_command),
+                         (Imu, c._on_imu)):
             if issubclass(cls, base):
                 h = fn
                 break

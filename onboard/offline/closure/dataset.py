@@ -48,7 +48,7 @@ from onboard.core.messages import (
 )
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
-from onboard.pipelines.base import NoHealth, Pipeline
+from onboard.pipelines.base import NoHealth, PipelineDefaults
 from onboard.pipelines.current_samples import glider_model
 
 
@@ -77,7 +77,7 @@ against the heading change correlates at 0.00, the glider yawing back and forth 
 the row). Such a log is diagnosed with the rate from its heading, like one without."""
 
 
-class _Collector(Pipeline):
+class _Collector(PipelineDefaults):
     """A pipeline that records the newest measured value of each channel per tick."""
 
     name = "collect"
