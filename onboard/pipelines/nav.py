@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Mapping, Sequence
 
+from mypy_extensions import mypyc_attr
+
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame, wrap_2pi
 from onboard.core.messages import (
@@ -23,8 +25,6 @@ from onboard.core.messages import (
     Sample,
     VelocityOverGround,
 )
-from mypy_extensions import mypyc_attr
-
 from onboard.pipelines.base import NoHealth, PipelineDefaults
 
 HEADING_HOLD_S = 1.0
