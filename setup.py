@@ -17,6 +17,7 @@ pyproject.toml.
 """
 
 import os
+import shutil
 
 from setuptools import setup
 
@@ -36,6 +37,8 @@ COMPILED_MODULES = [
     "onboard/estimators/model_identification.py",
     "onboard/estimators/vehicle_models.py",
     "onboard/estimators/input_models.py",
+    "onboard/estimators/reconstruction.py",
+    "onboard/estimators/measurement_points.py",
     "onboard/pipelines/surge_heading.py",
     "onboard/pipelines/aie.py",
     "onboard/pipelines/kf.py",
@@ -51,9 +54,17 @@ COMPILED_MODULES = [
     "onboard/engine/sources.py",
     "onboard/engine/whereabouts.py",
     "onboard/engine/corrections.py",
+    "onboard/engine/inputs.py",
     "onboard/monitor/integrity.py",
     "onboard/monitor/innovations.py",
     "onboard/monitor/track_course.py",
+    "onboard/monitor/current_resolution.py",
+    # the replay's estimates.csv
+    "onboard/offline/estimates_csv.py",
+    # the tlog reader and its MAVLink decoders (drivers/, installed as onboard/drivers)
+    "onboard/drivers/tlog.py",
+    "onboard/drivers/mavlink.py",
+    "onboard/drivers/logclock.py",
     "onboard/core/stats.py",
     "onboard/core/so3.py",
     "onboard/core/geo.py",
@@ -63,6 +74,14 @@ MYPY_OPTIONS = ["--follow-imports=silent", "--ignore-missing-imports"]
 """The compiled modules are type-checked; the modules they import are read for their
 types only, and numpy, scipy and msgspec are taken as they declare themselves."""
 
+PACKAGE_DIRS = {"onboard": "onboard", "onboard/drivers": "drivers"}
+"""Where each installed package's sources are in the checkout (pyproject.toml's
+package-dir, for the packages a compiled module is in)."""
+
+STAGE = "build/mypyc-src"
+"""The compiled modules' sources laid out as installed, for mypyc to name them as they are
+imported (drivers/tlog.py is ``onboard.drivers.tlog``)."""
+
 C_FLAGS = [
     # the same rounding on every architecture: no fused multiply-add where the Python
     # source has a multiplication and an addition (aarch64's compilers fuse by default)
@@ -70,6 +89,16 @@ C_FLAGS = [
     # mypyc's runtime headers trip gcc 12's bounds warning, which mypyc makes an error
     "-Wno-array-bounds",
 ]
+
+
+def staged(modules: list[str]) -> list[str]:
+    """The paths of ``modules`` (as installed) in a copy of the package laid out as
+    installed (:data:`STAGE`)."""
+    shutil.rmtree(STAGE, ignore_errors=True)
+    skip = shutil.ignore_patterns("__pycache__", "*.so")
+    for package, source in sorted(PACKAGE_DIRS.items()):
+        shutil.copytree(source, os.path.join(STAGE, package), ignore=skip, dirs_exist_ok=True)
+    return [os.path.join(STAGE, m) for m in modules]
 
 
 def ext_modules() -> list:
@@ -82,7 +111,7 @@ def ext_modules() -> list:
         raise SystemExit(
             f"ONBOARD_COMPILE=1 needs mypyc in the build environment: pip install "
             f"'mypy=={MYPYC_VERSION}', then build with --no-build-isolation") from err
-    exts = mypycify([*MYPY_OPTIONS, *COMPILED_MODULES], opt_level="3")
+    exts = mypycify([*MYPY_OPTIONS, *staged(COMPILED_MODULES)], opt_level="3")
     for ext in exts:
         ext.extra_compile_args = [*ext.extra_compile_args, *C_FLAGS]
     return exts

@@ -18,7 +18,7 @@ import mmap
 import os
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Iterable, Iterator, Protocol
+from typing import Iterable, Iterator, Protocol, Union
 
 from onboard.core.messages import Sample
 
@@ -57,6 +57,9 @@ class UnreadableLog(Exception):
     """The file cannot be read at all, or is not in a format this reader understands."""
 
 
+LogBytes = Union[bytes, mmap.mmap]
+"""A log's bytes: in memory, or the file mapped (:class:`MappedLog`)."""
+
 RELEASE_BYTES = 8 << 20
 """A mapped log (:class:`MappedLog`) hands the pages behind its reader back to the page
 cache every this many bytes read: the reader's resident memory stays near this, whatever
@@ -86,7 +89,7 @@ class MappedLog:
         try:
             with open(path, "rb") as f:
                 size = os.fstat(f.fileno()).st_size
-                self.data: bytes | mmap.mmap = (
+                self.data: LogBytes = (
                     mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) if size else b"")
         except (OSError, ValueError) as e:
             raise UnreadableLog(f"{path}: {getattr(e, 'strerror', None) or e}") from e

@@ -143,8 +143,9 @@ def log_clock(fmt: str, reader: object, path: str | os.PathLike, t_first: float)
         return _dataflash_clock(path)
     if fmt == "recording":
         return _recording_clock(path)
-    if fmt in ("csv", "csv-dir") and getattr(reader, "runs", None):
-        return _csv_clock(reader.runs)
+    runs = getattr(reader, "runs", None)
+    if fmt in ("csv", "csv-dir") and runs:
+        return _csv_clock(runs)
     name = type(reader).__name__
     if name == "MixedCaptureReader":
         return _mixed_clock(reader, t_first)

@@ -31,6 +31,7 @@ import struct
 from collections import Counter
 from typing import TYPE_CHECKING, Callable, Iterable
 
+import msgspec
 from pymavlink.dialects.v20 import ardupilotmega as _dialect
 
 from onboard.drivers.base import ReadStats
@@ -178,7 +179,8 @@ class Spec:
 
     __slots__ = ("msgid", "name", "struct", "size", "crc_extra", "handler", "produces")
 
-    def __init__(self, name: str, handler: Handler, produces: tuple[type, ...]) -> None:
+    def __init__(self, name: str, handler: Handler,
+                 produces: tuple[type[msgspec.Struct], ...]) -> None:
         self.msgid, self.struct, _ = _layout(name)
         self.name = name
         self.size = self.struct.size
@@ -191,7 +193,7 @@ HANDLERS: dict[int, Spec] = {}
 """Decoded message ids -> :class:`Spec`."""
 
 
-def _register(name: str, produces: tuple[type, ...]):
+def _register(name: str, produces: tuple[type[msgspec.Struct], ...]):
     def deco(make: Callable[[dict[str, int], int], Handler]) -> Callable:
         msgid, _, idx = _layout(name)
         HANDLERS[msgid] = Spec(name, make(idx, msgid), produces)
@@ -534,7 +536,7 @@ def _normalize(types: Iterable[type | str]) -> set[type]:
     for x in types:
         if isinstance(x, str):
             if x not in by_tag:
-                raise ValueError(f"unknown sample type {x!r}; known: {sorted(by_tag)}")
+                raise ValueError(f"unknown sample type {x!r}; known: {sorted(map(str, by_tag))}")
             out.add(by_tag[x])
         else:
             out.add(x)

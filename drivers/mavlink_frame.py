@@ -23,6 +23,7 @@ pure-Python loop.
 from __future__ import annotations
 
 import binascii
+import mmap
 import re
 
 from pymavlink.dialects.v20 import ardupilotmega as _dialect
@@ -67,7 +68,7 @@ def x25crc(data: bytes | bytearray, crc_extra: int | None = None) -> int:
     return BIT_REVERSED_HIGH[c & 0xFF] | BIT_REVERSED[c >> 8]
 
 
-def header_at(buf: bytes | bytearray, j: int, n: int) -> Header | None:
+def header_at(buf: bytes | bytearray | mmap.mmap, j: int, n: int) -> Header | None:
     """The header of the frame whose start byte is ``buf[j]``, read from ``buf[:n]``.
 
     Returns (header length, payload length, incompatibility flags (0 for MAVLink 1),
@@ -93,7 +94,7 @@ def header_at(buf: bytes | bytearray, j: int, n: int) -> Header | None:
     return None
 
 
-def crc_matches(buf: bytes | bytearray, j: int, header_len: int, payload_len: int,
+def crc_matches(buf: bytes | bytearray | mmap.mmap, j: int, header_len: int, payload_len: int,
                 crc_extra: int) -> bool:
     """True when the CRC of the frame starting at ``buf[j]`` is right for ``crc_extra``
     (the frame's bytes up to its CRC must be in ``buf``)."""

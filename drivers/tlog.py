@@ -32,7 +32,10 @@ from collections import Counter
 from pathlib import Path
 from typing import BinaryIO, Iterable, Iterator
 
-from onboard.drivers.base import RELEASE_BYTES, TIME_JUMP_S, MappedLog, ReadStats, UnreadableLog
+from mypy_extensions import mypyc_attr
+
+from onboard.drivers.base import (
+    RELEASE_BYTES, TIME_JUMP_S, LogBytes, MappedLog, ReadStats, UnreadableLog)
 from onboard.drivers.mavlink import (
     DecodeContext,
     Spec,
@@ -68,7 +71,7 @@ _RESYNC_BACK_US = 1_000_000
 _RESYNC_AHEAD_US = 86_400_000_000
 
 
-def _frame_at(data: bytes, p: int, n: int) -> tuple[int, int, int, int, int, bool] | None:
+def _frame_at(data: LogBytes, p: int, n: int) -> tuple[int, int, int, int, int, bool] | None:
     """Framing of the record starting at ``p``: (end, msgid, payload start, payload length,
     incompat flags, v2), or None when the bytes there cannot be a complete record (a time
     stamp of 2^56 us or more, no start byte, a frame running past ``n``)."""
@@ -83,7 +86,7 @@ def _frame_at(data: bytes, p: int, n: int) -> tuple[int, int, int, int, int, boo
     return end, msgid, p + TIMESTAMP_LEN + hdr, plen, inc, hdr == HEADER_LEN_V2
 
 
-def _crc_ok(data: bytes, p: int, msgid: int, plen: int, v2: bool) -> bool | None:
+def _crc_ok(data: LogBytes, p: int, msgid: int, plen: int, v2: bool) -> bool | None:
     """CRC of the frame of the record at ``p``: True/False, None when the id is unknown."""
     extra = CRC_EXTRA.get(msgid)
     if extra is None:
@@ -99,7 +102,7 @@ _BACK_US = int(TIME_JUMP_S * 1e6)
 """A record further back than this (us) is passed on for the engine's time line."""
 
 
-def _plausible(data: bytes, p: int, n: int, lo: int, hi: int) -> int:
+def _plausible(data: LogBytes, p: int, n: int, lo: int, hi: int) -> int:
     """End of a believable record at ``p``, else -1: framing and a valid CRC, whatever
     its time stamp (which the CRC does not cover: a damaged one must not make the reader
     skip the rest of the file), or, for an id outside the dialect (no CRC to check), a
@@ -118,7 +121,7 @@ def _plausible(data: bytes, p: int, n: int, lo: int, hi: int) -> int:
     return end if ok else -1
 
 
-def _resync(data: bytes, start: int, n: int, lo: int, hi: int) -> int:
+def _resync(data: LogBytes, start: int, n: int, lo: int, hi: int) -> int:
     """Start of the first believable record at or after ``start``, or -1."""
     for m in START_BYTES.finditer(data, start + TIMESTAMP_LEN):
         p = m.start() - TIMESTAMP_LEN
@@ -127,6 +130,7 @@ def _resync(data: bytes, start: int, n: int, lo: int, hi: int) -> int:
     return -1
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class TlogReader:
     """Samples of a MAVLink telemetry log, in time order (see the module docstring).
 
@@ -281,7 +285,7 @@ class TlogReader:
                                     res = spec.handler(values, ts / 1e6, data[f + 3], data[f + 4],
                                                        msgid, False, ctx)
                                 if res is not None:
-                                    if type(res) is list:
+                                    if isinstance(res, list):
                                         for s in res:
                                             if want is None or isinstance(s, want):
                                                 n_samples += 1

@@ -129,3 +129,30 @@ def test_a_real_log_replays_compiled_as_pure(venv, tmp_path, shared_data):
     assert r.returncode == 0, r.stderr
     assert cli_main(["replay", str(log), "--out", str(tmp_path / "pure"), "--no-plot"]) == 0
     assert _estimates(tmp_path / "compiled") == _estimates(tmp_path / "pure")
+
+
+PUBLISHED_FACTORS_FOLLOW_A_COPY = """
+import copy, functools, json
+from onboard.core.config import from_dict
+from onboard.pipelines import aie, current
+
+def owner(factor):
+    return factor.args[0] if isinstance(factor, functools.partial) else factor.__self__
+
+cfg = from_dict({"vehicle": {"class": "rudder-boat"}})
+cur, boat = current.create(cfg), aie.create(cfg)
+cur_fork, boat_fork = copy.deepcopy(cur), copy.deepcopy(boat)
+print(json.dumps([owner(cur_fork.noise.published["velocity"]) is cur_fork]
+                 + [owner(f) is boat_fork.surge for f in boat_fork.noise.published.values()]))
+"""
+
+
+def test_a_copied_pipeline_publishes_its_own_noise_factor(venv):
+    """The factor a published sigma takes (``ChannelNoise.published``) is read from the
+    pipeline's own state: in a deep copy (the GNSS latency's forks) from the copy's. A
+    method bound to a compiled object is copied as it is, still the original's; the pure
+    build rebinds it, so only the compiled build can fail this."""
+    r = subprocess.run([str(venv / "bin" / "python"), "-c", PUBLISHED_FACTORS_FOLLOW_A_COPY],
+                       cwd=venv, env=clean_env(), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout) == [True, True, True]

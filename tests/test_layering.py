@@ -21,7 +21,8 @@ The rooms, from the bottom up (docs/architecture.md §2 has the picture):
   corrections, depth, sources, inputs) on the core alone; the GNSS latency's horizon on the
   pipelines; the engine itself (queue and tick) on all of them and the monitors.
 * ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
-* ``onboard.offline``: the offline commands: replay, autodetection, exports, the track
+* ``onboard.offline``: the offline commands: replay (its estimates.csv writer on the engine),
+  autodetection, exports, the track
   figure; the model closure above them and ``onboard diagnose`` above it.
 * ``onboard.fleet``: the fleet's current field (shore side), pure on the core; its Zenoh
   service (``onboard.fleet.service``) also on the Zenoh session's configuration, the web
@@ -48,8 +49,8 @@ MONITOR = CORE | {"onboard.monitor"}
 ENGINE = PIPELINES | MONITOR | {"onboard.engine"}
 SERVICE = ENGINE | {"onboard.drivers", "onboard.service"}
 OFFLINE = ENGINE | {"onboard.drivers", "onboard.service.recorder", "onboard.offline.replay",
-                    "onboard.offline.autodetect", "onboard.offline.exports",
-                    "onboard.offline.plots"}
+                    "onboard.offline.estimates_csv", "onboard.offline.autodetect",
+                    "onboard.offline.exports", "onboard.offline.plots"}
 CLOSURE = OFFLINE | {"onboard.offline.closure"}
 EVERYTHING = SERVICE | CLOSURE | {"onboard.offline", "onboard.apps", "onboard.cli",
                                   "onboard.sitl", "onboard.fleet"}
@@ -67,6 +68,7 @@ ROOMS: dict[str, set[str]] = {
     "onboard.engine.engine": ENGINE,
     "onboard.service": SERVICE,
     "onboard.offline": set(),  # the package's docstring
+    "onboard.offline.estimates_csv": ENGINE,
     "onboard.offline.autodetect": CORE,
     "onboard.offline.exports": CORE,
     "onboard.offline.plots": set(),

@@ -730,7 +730,7 @@ def compiled_modules() -> list[str]:
     package = Path(__file__).resolve().parents[1]  # onboard/, this module in onboard/apps/
     names = []
     for m in pkgutil.walk_packages([str(package)], "onboard."):
-        if m.ispkg or m.name.startswith(("onboard.sitl", "onboard.drivers")):
+        if m.ispkg or m.name.startswith("onboard.sitl"):
             continue
         spec = importlib.util.find_spec(m.name)
         origin = spec.origin if spec else None

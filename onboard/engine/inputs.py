@@ -7,7 +7,10 @@ the normalized command, so the same estimator serves a Jaiabot, a BlueBoat or a 
 
 from __future__ import annotations
 
+from typing import Any
+
 import msgspec
+from mypy_extensions import mypyc_attr
 
 from onboard.core.config import ChannelMap, Inputs
 from onboard.core.messages import (
@@ -38,13 +41,13 @@ def remap(inputs: Inputs, functions: dict[int, int]) -> tuple[Inputs, list[str]]
     (``functions``: output channel -> SERVOn_FUNCTION; the lowest channel when several);
     roles whose function no output has keep their channel. Also the changes, as text."""
     by_function: dict[int, int] = {}
-    for ch in sorted(functions, reverse=True):
-        by_function[functions[ch]] = ch
+    for out in sorted(functions, reverse=True):
+        by_function[functions[out]] = out
     changes: list[str] = []
     kw: dict = {}
     for role, funcs in ROLE_FUNCTIONS.items():
         m = getattr(inputs, role)
-        ch = next((by_function[f] for f in funcs if f in by_function), None)
+        ch: int | None = next((by_function[f] for f in funcs if f in by_function), None)
         if m is None or m.source != "servo" or ch is None or ch == m.channel:
             continue
         kw[role] = msgspec.structs.replace(m, channel=ch)
@@ -80,6 +83,7 @@ def normalize_pwm(pwm_us: float, m: ChannelMap) -> float:
     return x * m.full_scale
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class InputMapper:
     """Turns ActuatorOutputs / RcChannels / PropellerRpm / ActuatorColumn samples into
     ActuatorCommand.
@@ -162,7 +166,7 @@ class InputMapper:
                 changed = True
         if not changed:
             return None
-        kw = {_FIELD.get(r, r): v for r, v in self._latest.items()}
+        kw: dict[str, Any] = {_FIELD.get(r, r): v for r, v in self._latest.items()}
         if self.inputs.thrusters:
             kw["thrusters"] = tuple(self._thrusters)
         return ActuatorCommand(t=sample.t, source="mapped:" + sample.source, **kw)

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from typing import Literal, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from onboard.core.geo import wrap_pi
 from onboard.core.messages import ActuatorCommand
@@ -226,13 +227,11 @@ def axis_commands(cmd: ActuatorCommand, mode: InputMode = "auto") -> tuple[float
 Signal = Literal["increment", "rate"]
 
 
-def resample(t: Sequence[float], x: Sequence[float], dt: float) -> tuple[np.ndarray,
-                                                                         np.ndarray]:
+def resample(t: ArrayLike, x: ArrayLike, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Linear interpolation of ``x(t)`` onto the grid ``t0 + k dt`` (s)."""
-    t = np.asarray(t, float)
-    x = np.asarray(x, float)
-    grid = np.arange(t[0], t[-1] + 1e-9, dt)
-    return grid, np.interp(grid, t, x)
+    ts = np.asarray(t, float)
+    grid = np.arange(ts[0], ts[-1] + 1e-9, dt)
+    return grid, np.interp(grid, ts, np.asarray(x, float))
 
 
 def _regress(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
@@ -247,13 +246,13 @@ def _fit_arx(segs: list[tuple[np.ndarray, np.ndarray]], dt: float, signal: Signa
     rows, rhs = [], []
     for y, c in segs:
         if signal == "rate":  # x_{k+1} = alpha x_k + c1 (g c_k + o)
-            X = [y[:-1], c[:-1]] + ([np.ones(len(y) - 1)] if offset else [])
-            rows.append(np.column_stack(X))
+            cols = [y[:-1], c[:-1]] + ([np.ones(len(y) - 1)] if offset else [])
+            rows.append(np.column_stack(cols))
             rhs.append(y[1:])
         else:  # y_{k+1} = alpha y_k + beta0 u_k + beta1 u_{k-1}, u_k feeds y_{k+1}
             # indices: y[k+1] ~ y[k], c[k], c[k-1]  (c[k] is the command over (k, k+1])
-            X = [y[1:-1], c[1:-1], c[:-2]] + ([np.ones(len(y) - 2)] if offset else [])
-            rows.append(np.column_stack(X))
+            cols = [y[1:-1], c[1:-1], c[:-2]] + ([np.ones(len(y) - 2)] if offset else [])
+            rows.append(np.column_stack(cols))
             rhs.append(y[2:])
     X = np.vstack(rows)
     yy = np.concatenate(rhs)
@@ -343,7 +342,7 @@ def _fit_oe(segs: list[tuple[np.ndarray, np.ndarray]], dt: float, signal: Signal
     return AxisModel(a, gain, off, rmse, 1.0 - rmse * rmse / var)
 
 
-def fit_axis(segments: Sequence[tuple[Sequence[float], Sequence[float]]], dt: float,
+def fit_axis(segments: Sequence[tuple[ArrayLike, ArrayLike]], dt: float,
              signal: Signal = "increment", method: Literal["arx", "oe"] = "oe",
              offset: bool = False) -> AxisModel:
     """Identify one axis from uniformly sampled segments (one per run).
@@ -362,10 +361,10 @@ def fit_axis(segments: Sequence[tuple[Sequence[float], Sequence[float]]], dt: fl
     Returns:
         The identified :class:`AxisModel` (``rmse`` in the unit of ``y``).
     """
-    segs = []
-    for y, c in segments:
-        y = np.asarray(y, float)
-        c = np.asarray(c, float)
+    segs: list[tuple[np.ndarray, np.ndarray]] = []
+    for y_seg, c_seg in segments:
+        y = np.asarray(y_seg, float)
+        c = np.asarray(c_seg, float)
         ok = np.isfinite(y) & np.isfinite(c)
         if not ok.all():  # split at gaps
             idx = np.flatnonzero(~ok)
@@ -392,18 +391,15 @@ def identify_axis(t: Sequence[float], y: Sequence[float], command: Sequence[floa
     increments are re-formed on the grid from the cumulative sum (so pass increments of
     consecutive samples). See :func:`fit_axis`.
     """
-    t = np.asarray(t, float)
-    y = np.asarray(y, float)
-    c = np.asarray(command, float)
     if dt is None:
-        dt = float(np.median(np.diff(t)))
+        dt = float(np.median(np.diff(np.asarray(t, float))))
     if signal == "increment":
-        s = np.concatenate(([0.0], np.cumsum(y[1:])))
-        _, sg = resample(t, s, dt)
+        ya = np.asarray(y, float)
+        _, sg = resample(t, np.concatenate(([0.0], np.cumsum(ya[1:]))), dt)
         yg = np.concatenate(([0.0], np.diff(sg)))
     else:
         _, yg = resample(t, y, dt)
-    _, cg = resample(t, c, dt)
+    _, cg = resample(t, command, dt)
     return fit_axis([(yg, cg)], dt, signal, method, offset)
 
 

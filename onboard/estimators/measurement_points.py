@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import math
 
+from mypy_extensions import mypyc_attr
+
 from onboard.core.geo import wrap_pi
 
 COMMANDS_KEPT = 4096
 """Commands held without a measurement point to trim them; beyond, the oldest half goes."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class Window:
     """Running sums of one measurement window (fixes, Doppler speeds, headings).
 
@@ -88,6 +91,7 @@ class Window:
         return self.st_h / self.n_h, self.sh / self.n_h
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class CommandHistory:
     """The normalized commands of both axes in time order, held (zero-order) until the
     next one: ``(t, surge_command, yaw_command)``, either command None when unknown."""
@@ -137,6 +141,7 @@ class CommandHistory:
             del self._cmds[:keep]
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class HeadingUnwrapper:
     """Headings made continuous (rad): each new one within pi of the previous."""
 

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import math
 
+from mypy_extensions import mypyc_attr
+
 from onboard.core.geo import wrap_2pi
 from onboard.estimators.axis_model import Discretization
 from onboard.estimators.dead_reckoning import DeadReckoner
@@ -40,6 +42,7 @@ Point = tuple[float, float, float, float]
 """A surge measurement point: time (s), north, east (m), heading (rad; NaN without one)."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class TrackReconstruction:
     """The reconstructed track (§2.11) of a surge and a heading filter, and its estimates.
 

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 from collections import deque
 
+from mypy_extensions import mypyc_attr
+
 RESOLVE_WINDOW_S = 600.0
 """The current's resolution is judged over this long (s): several times the memory of a
 current filter (tens of seconds), and a glider's dive and climb."""
@@ -38,6 +40,7 @@ pipeline publishes a component as unknown (``[pipelines.current] unknown_above_s
 its default)."""
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class AxisResolution:
     """One component's window of squared values and squared one-sigmas (m^2/s^2).
 
@@ -77,6 +80,7 @@ class AxisResolution:
         return self.unresolved
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class CurrentResolution:
     """Per component (north, east) of one pipeline's current, whether the data resolve
     it (module docstring)."""

@@ -65,6 +65,7 @@ import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -192,7 +193,9 @@ class CurrentPipeline(PipelineDefaults):
         self.noise = _learned_noise(self.kf, cfg, sensors)
         """The learned noise of the velocity channels (algorithms.md §9), and the factor
         the published current's sigma takes from the velocity over ground (§9.1)."""
-        self.noise.published[CHANNELS["earth"]] = self.published_factor
+        # a partial of the class's function, not a method bound to this object: a copy
+        # of the pipeline (the GNSS latency's fork) then takes its own copy's factor
+        self.noise.published[CHANNELS["earth"]] = partial(type(self).published_factor, self)
         self.events: list[str] = []
         """Human-readable events not yet taken (:meth:`take_events`): a restored current
         discarded or confirmed, a start contradicted."""

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from functools import partial
 from typing import Any, Callable, Literal, Mapping, Sequence
 
 import msgspec
@@ -263,8 +264,9 @@ class SurgeHeadingPipeline(PipelineDefaults):
             else "[sensors.compass] heading_std_rad"), self.sigma_h, "rad", narrows=True)
         yaw.process = ProcessScale()   # the heading's input error, algorithms.md §9.3
         # the published speed's sigma takes the surge filter's factor (its Doppler row's,
-        # else its increment row's): both rows are judged against it
-        rate_factor = surge.published_rate_factor
+        # else its increment row's): both rows are judged against it; a partial of the
+        # class's function, so that a copy of the pipeline takes its own copy's factor
+        rate_factor = partial(type(surge).published_rate_factor, surge)
         return ChannelNoise([surge.noise, surge.rate_noise, yaw.noise], published={
             surge.noise.channel: rate_factor, surge.rate_noise.channel: rate_factor},
             processes={yaw.noise.channel: yaw.process})
