@@ -3,10 +3,11 @@ hot path with mypyc (docs/performance.md, "The compiled build").
 
 The modules are the readable Python as written: mypyc compiles them to C extensions from
 their type annotations, and the estimates are the pure build's to the byte
-(tests/test_compiled.py). The estimators' and the pipelines' classes, each subclass too
-(it is not inherited), carry ``@mypyc_attr(allow_interpreted_subclasses=True)`` (a no-op
-in Python): compiled, they can then be deep-copied (the GNSS latency's fixed-lag forks,
-onboard/engine/latency.py) and subclassed by Python code (the tests' doubles). Without
+(tests/test_compiled.py). The compiled modules' classes that are copied or subclassed,
+each subclass too (it is not inherited), carry
+``@mypyc_attr(allow_interpreted_subclasses=True)`` (a no-op in Python): compiled, they can
+then be deep-copied (the GNSS latency's fixed-lag forks, onboard/engine/latency.py) and
+subclassed by Python code (the tests' doubles, the MCAP reader's tlog reader). Without
 ``ONBOARD_COMPILE=1`` the wheel is pure Python, as the vehicle's install from source and
 the editable development install are (do not set it for an editable install: its
 extensions would shadow the edited ``.py`` files). Everything else about the package is in
@@ -59,16 +60,17 @@ COMPILED_MODULES = [
     "onboard/monitor/innovations.py",
     "onboard/monitor/track_course.py",
     "onboard/monitor/current_resolution.py",
-    # the replay's estimates.csv
-    "onboard/offline/estimates_csv.py",
-    # the tlog reader and its MAVLink decoders (drivers/, installed as onboard/drivers)
-    "onboard/drivers/tlog.py",
-    "onboard/drivers/mavlink.py",
-    "onboard/drivers/logclock.py",
     "onboard/core/stats.py",
     "onboard/core/so3.py",
     "onboard/core/geo.py",
+    # the replay's own: the tlog reader and its MAVLink decoders, estimates.csv
+    "onboard/drivers/tlog.py",
+    "onboard/drivers/mavlink.py",
+    "onboard/drivers/logclock.py",
+    "onboard/offline/estimates_csv.py",
 ]
+"""The compiled modules, by their paths as installed (the checkout's drivers/ is
+``onboard/drivers``, :data:`PACKAGE_DIRS`)."""
 
 MYPY_OPTIONS = ["--follow-imports=silent", "--ignore-missing-imports"]
 """The compiled modules are type-checked; the modules they import are read for their
