@@ -21,9 +21,9 @@ The rooms, from the bottom up (docs/architecture.md §2 has the picture):
   corrections, depth, sources, inputs) on the core alone; the GNSS latency's horizon on the
   pipelines; the engine itself (queue and tick) on all of them and the monitors.
 * ``onboard.service``: the asyncio daemon, intake, recorder, publishers.
-* ``onboard.offline``: the offline commands: replay (its estimates.csv writer on the engine),
-  autodetection, exports, the track
-  figure; the model closure above them and ``onboard diagnose`` above it.
+* ``onboard.offline``: the offline commands: replay (its estimates.csv writer on the
+  engine), autodetection, exports, the track figure; the model closure above them and
+  ``onboard diagnose`` above it.
 * ``onboard.fleet``: the fleet's current field (shore side), pure on the core; its Zenoh
   service (``onboard.fleet.service``) also on the Zenoh session's configuration, the web
   page and the drivers' MCAP import.
