@@ -17,6 +17,7 @@ pyproject.toml.
     ONBOARD_COMPILE=1 pip wheel --no-build-isolation --no-deps -w dist .
 """
 
+import importlib.util
 import os
 import shutil
 
@@ -72,6 +73,15 @@ COMPILED_MODULES = [
 """The compiled modules, by their paths as installed (the checkout's drivers/ is
 ``onboard/drivers``, :data:`PACKAGE_DIRS`)."""
 
+GENERATED_MODULES = {
+    # the RCIE's straight-line kernels, which onboard/estimators/rcie.py otherwise
+    # generates and compiles into Python at run time
+    "onboard/estimators/rcie_kernels.py": ("onboard/estimators/rcie.py",
+                                           "compiled_kernels_source"),
+}
+"""Modules of the compiled build alone, written from a function of the package: path ->
+(the module defining it, its name)."""
+
 MYPY_OPTIONS = ["--follow-imports=silent", "--ignore-missing-imports"]
 """The compiled modules are type-checked; the modules they import are read for their
 types only, and numpy, scipy and msgspec are taken as they declare themselves."""
@@ -95,11 +105,17 @@ C_FLAGS = [
 
 def staged(modules: list[str]) -> list[str]:
     """The paths of ``modules`` (as installed) in a copy of the package laid out as
-    installed (:data:`STAGE`)."""
+    installed (:data:`STAGE`), with :data:`GENERATED_MODULES` written into it."""
     shutil.rmtree(STAGE, ignore_errors=True)
     skip = shutil.ignore_patterns("__pycache__", "*.so")
     for package, source in sorted(PACKAGE_DIRS.items()):
         shutil.copytree(source, os.path.join(STAGE, package), ignore=skip, dirs_exist_ok=True)
+    for path, (module, function) in GENERATED_MODULES.items():
+        spec = importlib.util.spec_from_file_location("_generator", module)
+        generator = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(generator)
+        with open(os.path.join(STAGE, path), "w", encoding="utf-8") as f:
+            f.write(getattr(generator, function)())
     return [os.path.join(STAGE, m) for m in modules]
 
 
@@ -113,7 +129,8 @@ def ext_modules() -> list:
         raise SystemExit(
             f"ONBOARD_COMPILE=1 needs mypyc in the build environment: pip install "
             f"'mypy=={MYPYC_VERSION}', then build with --no-build-isolation") from err
-    exts = mypycify([*MYPY_OPTIONS, *staged(COMPILED_MODULES)], opt_level="3")
+    exts = mypycify([*MYPY_OPTIONS, *staged([*COMPILED_MODULES, *GENERATED_MODULES])],
+                    opt_level="3")
     for ext in exts:
         ext.extra_compile_args = [*ext.extra_compile_args, *C_FLAGS]
     return exts

@@ -44,7 +44,8 @@ def setup_constant(name: str) -> object:
 
 
 COMPILED = [p.removesuffix(".py").replace("/", ".")
-            for p in setup_constant("COMPILED_MODULES")]  # type: ignore[union-attr]
+            for p in [*setup_constant("COMPILED_MODULES"),  # type: ignore[misc]
+                      *setup_constant("GENERATED_MODULES")]]
 
 
 def test_the_test_extra_pins_the_mypyc_that_setup_py_names():
@@ -156,3 +157,38 @@ def test_a_copied_pipeline_publishes_its_own_noise_factor(venv):
                        cwd=venv, env=clean_env(), capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout) == [True, True, True]
+
+
+RCIE_KERNELS_COMPILED_AS_GENERATED = """
+import json, random
+from onboard.estimators.rcie import (COMPILED_KERNEL_ORDERS, compile_kernel, packed_index,
+                                     rcie_kernel, rcie_kernel_lines)
+
+random.seed(7)
+out = []
+for n in COMPILED_KERNEL_ORDERS:
+    for rate in (False, True):
+        compiled = rcie_kernel(n, rate)
+        python = compile_kernel(rcie_kernel_lines(n, rate), "python")
+        same = type(compiled).__name__ != "function"
+        for _ in range(20):
+            P = [random.uniform(-0.1, 0.1) for _ in range(n * (n + 1) // 2)]
+            for i in range(n):
+                P[packed_index(n)[(i, i)]] = random.uniform(0.5, 2.0)
+            v = [[random.gauss(0.0, 1.0) for _ in range(n)] for _ in range(4)]
+            args = (P, random.uniform(0.5, 2.0), v[0], v[1], random.gauss(0.0, 1.0), v[2],
+                    v[3], random.gauss(0.0, 1.0), 0.99, random.choice([0.0, 0.5]), 0.99)
+            same = same and repr(compiled(*args)) == repr(python(*args))
+        out.append(same)
+print(json.dumps(out))
+"""
+
+
+def test_the_rcie_kernels_are_compiled_and_compute_the_generated_lines(venv):
+    """The compiled build's RCIE kernels (setup.py's ``GENERATED_MODULES``) are extension
+    functions, and each gives the run-time generated Python's results to the last bit
+    (``repr``), diverged (None) or not, on random covariances and rows."""
+    r = subprocess.run([str(venv / "bin" / "python"), "-c", RCIE_KERNELS_COMPILED_AS_GENERATED],
+                       cwd=venv, env=clean_env(), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout) == [True] * 12

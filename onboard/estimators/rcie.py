@@ -159,6 +159,54 @@ RcieKernel = Callable[..., "tuple[list[float], float, list[float], float, float]
 g . theta+)`` or None: see :func:`rcie_kernel`."""
 
 
+COMPILED_KERNEL_ORDERS = tuple(2 * n_c + 1 for n_c in range(6))
+"""The ``l_theta`` (``n_c`` 0-5) whose kernels the compiled build compiles ahead of time
+(:func:`compiled_kernels_source`); another order's is generated at run time."""
+
+
+def kernel_name(n: int, rate_penalty: bool) -> str:
+    """The name of the kernel for ``l_theta = n`` in :func:`compiled_kernels_source`."""
+    return f"kernel_{n}_{'rate' if rate_penalty else 'size'}"
+
+
+def rcie_kernel_lines(n: int, rate_penalty: bool, name: str = "kernel",
+                      typed: bool = False) -> list[str]:
+    """The source of :func:`rcie_kernel`'s function, named ``name``; ``typed``: with the
+    argument and result types, for the compiled build."""
+    r = range(n)
+    if typed:
+        src = [f"def {name}(P: list[float], sc: float, th: list[float], s: list[float], "
+               "h: float, f: list[float], g: list[float], e1: float, wa: float, wb: float, "
+               "lam: float) -> tuple[list[float], float, list[float], float, float] | None:"]
+    else:
+        src = [f"def {name}(P, sc, th, s, h, f, g, e1, wa, wb, lam):"]
+    src += [unpack_line("p", n * (n + 1) // 2, "P"), unpack_line("t", n, "th"),
+            unpack_line("s", n, "s"), unpack_line("g", n, "g")]
+    src += [f"    a{i} = h*s{i}" for i in r]
+    if rate_penalty:
+        src.append(unpack_line("f", n, "f"))
+        src += [f"    b{i} = g{i} - f{i}" for i in r]
+    else:
+        src += [f"    b{i} = g{i}" for i in r]
+    src += two_row_update_lines(n)
+    src.append("    d = " + " + ".join(f"g{i}*n{i}" for i in r))
+    src.append("    return Q, sn, [" + ", ".join(f"n{i}" for i in r) + "], tr, d")
+    return src
+
+
+def compiled_kernels_source() -> str:
+    """The module of the kernels of :data:`COMPILED_KERNEL_ORDERS`, both penalties, typed:
+    the compiled build compiles it as ``onboard.estimators.rcie_kernels`` (setup.py), the
+    same lines :func:`rcie_kernel` runs, ahead of time."""
+    lines = ['"""The RCIE kernels compiled ahead of time (onboard.estimators.rcie)."""',
+             "", "from __future__ import annotations"]
+    for n in COMPILED_KERNEL_ORDERS:
+        for rate_penalty in (False, True):
+            lines += ["", ""] + rcie_kernel_lines(n, rate_penalty,
+                                                  kernel_name(n, rate_penalty), typed=True)
+    return "\n".join(lines) + "\n"
+
+
 @cache
 def rcie_kernel(n: int, rate_penalty: bool) -> RcieKernel:
     """The RCIE update (§2.6-§2.7 step 5) for ``l_theta = n``, as straight-line float code:
@@ -170,21 +218,26 @@ def rcie_kernel(n: int, rate_penalty: bool) -> RcieKernel:
     rows ``a = h s`` (``phi_f``, weight ``R_z``; ``e1 = z_k - d_hat_f,k``) and ``b = g - f``
     (rate penalty) or ``b = g`` (size penalty; weight ``R_d``), ``g = phi_k`` and
     ``f = phi_{k-1}``; ``w_a = lambda / R_z``, ``w_b = lambda / R_d``.
+
+    The compiled build has the kernels of :data:`COMPILED_KERNEL_ORDERS` compiled (the
+    module ``rcie_kernels``, :func:`compiled_kernels_source`); otherwise, and for another
+    order, the lines are compiled here into Python.
     """
-    r = range(n)
-    src = ["def kernel(P, sc, th, s, h, f, g, e1, wa, wb, lam):",
-           unpack_line("p", n * (n + 1) // 2, "P"), unpack_line("t", n, "th"),
-           unpack_line("s", n, "s"), unpack_line("g", n, "g")]
-    src += [f"    a{i} = h*s{i}" for i in r]
-    if rate_penalty:
-        src.append(unpack_line("f", n, "f"))
-        src += [f"    b{i} = g{i} - f{i}" for i in r]
-    else:
-        src += [f"    b{i} = g{i}" for i in r]
-    src += two_row_update_lines(n)
-    src.append("    d = " + " + ".join(f"g{i}*n{i}" for i in r))
-    src.append("    return Q, sn, [" + ", ".join(f"n{i}" for i in r) + "], tr, d")
-    return compile_kernel(src, f"rcie_kernel({n}, {rate_penalty})")
+    kernel = _compiled_kernel(n, rate_penalty)
+    if kernel is not None:
+        return kernel
+    return compile_kernel(rcie_kernel_lines(n, rate_penalty),
+                          f"rcie_kernel({n}, {rate_penalty})")
+
+
+def _compiled_kernel(n: int, rate_penalty: bool) -> RcieKernel | None:
+    """The compiled build's kernel for ``l_theta = n``, None in the pure build or for an
+    order it has not compiled."""
+    try:
+        import onboard.estimators.rcie_kernels as kernels
+    except ImportError:  # the pure build
+        return None
+    return getattr(kernels, kernel_name(n, rate_penalty), None)
 
 
 @mypyc_attr(allow_interpreted_subclasses=True)
