@@ -75,11 +75,16 @@ FINE_SLEEP_S = 0.0012
 slept in ``time.sleep`` (epoll, under asyncio, only wakes with millisecond granularity,
 rounded up; this removes ~0.5 ms of average lateness at the cost of blocking the loop for
 < 1.2 ms per tick)."""
+ARRIVAL_MARGIN_S = 0.0005
+"""A tick that waits for a fresh sample wakes this long (service s) after that sample's
+predicted arrival: the previous tick's, as far after its own grid time (the inputs' phase
+against the grid is steady). Later, the tick waits longer than it must; earlier, the
+sample is not there yet and the tick watches the inputs for it: a second wake-up."""
 MAX_TICK_LAG_S = 1.0
+"""A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 SESSION_POLL_S = 0.1
 """The MAVLink sessions are polled by the tick loop, after the tick, every this many
 service seconds (every tick at rate_hz <= 10)."""
-"""A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 
 
 class ServiceClock:
@@ -145,8 +150,11 @@ class ServiceStats:
     tick_compute_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
     """Wall time of each tick's work (s): push, pipelines, publishing."""
     tick_late_max_s: float = 0.0
-    """The largest delay (service s) between a tick's grid time and the end of its wait
-    for the grid (the loop busy or starved of CPU), skipped stalls included."""
+    """The largest delay (service s) between a tick's timer and its callback (the loop
+    busy or starved of CPU), skipped stalls included."""
+    tick_watches: int = 0
+    """Ticks that found no fresh sample at their timer and watched the inputs for one
+    (``_Ticker``: a second wake-up, or more)."""
 
 
 def resolve_dirs(args_state_dir: str | None) -> tuple[Path, Path | None]:
@@ -641,9 +649,15 @@ class _Ticker:
     ``k / rate_hz``; with ``tick_wait_s`` > 0 the UDP inputs are drained then and, unless
     the chunks received queued a sample stamped after the grid time, the inputs are watched
     until one does (:meth:`arrival`) or the wait ends; then the tick and what is due after
-    it (the tick's newest sample is then milliseconds old, not up to a period). A tick
-    costs the loop its timer and one wake-up per arrival while it waits: no task step,
-    future or coroutine per tick.
+    it (the tick's newest sample is then milliseconds old, not up to a period).
+
+    A tick that waited for its fresh sample predicts the next one's: the timer of the next
+    grid time is set ``ARRIVAL_MARGIN_S`` after the same delay past it (:attr:`phase`), so
+    that the drain then normally finds the sample and ticks at once, on one wake-up. When
+    it does not, the tick watches the inputs as above; a wait that ends without a fresh
+    sample drops the prediction (the next timer is at the grid time). A tick costs the loop
+    its timer and, when the prediction misses, one wake-up per arrival while it waits: no
+    task step, future or coroutine per tick.
 
     A grid time more than ``MAX_TICK_LAG_S`` past (the loop stalled) skips the missed
     ticks. An exception in a tick is counted and logged and the next tick scheduled; one
@@ -659,6 +673,11 @@ class _Ticker:
         self.k = math.ceil(now / self.period)
         self.t = self.k * self.period
         """The grid time of the coming tick (service s)."""
+        self.phase: float | None = None
+        """Service s from the grid time to the receipt of the chunk that ended the previous
+        tick's wait (None: no prediction, wake at the grid time)."""
+        self.t_wake = self.t
+        """When the coming tick's timer is due (service s)."""
         self.waiting = False
         self.handle: asyncio.TimerHandle | None = None
         save_every = svc.cfg.service.state_save_interval_s
@@ -677,10 +696,17 @@ class _Ticker:
         self.svc._ticker = None
 
     def _schedule(self) -> None:
-        """The timer of the next grid time (waking ``FINE_SLEEP_S`` early to sleep the
-        rest precisely when ticks do not wait for a sample)."""
+        """The timer of the next grid time: at the predicted arrival of its fresh sample
+        when there is one (:attr:`phase`), else at the grid time (waking ``FINE_SLEEP_S``
+        early to sleep the rest precisely when ticks do not wait for a sample)."""
         self.t = self.k * self.period
-        d = self.svc.clock.wall_delay(self.t) - (FINE_SLEEP_S if self.wait == 0 else 0.0)
+        if self.wait == 0:
+            self.t_wake = self.t
+            d = self.svc.clock.wall_delay(self.t) - FINE_SLEEP_S
+        else:
+            ahead = 0.0 if self.phase is None else min(self.phase + ARRIVAL_MARGIN_S, self.wait)
+            self.t_wake = self.t + ahead
+            d = self.svc.clock.wall_delay(self.t_wake)
         self.handle = self.loop.call_later(max(d, 0.0), self._on_grid)
 
     def _on_grid(self) -> None:
@@ -698,7 +724,7 @@ class _Ticker:
             if d > 0:
                 time.sleep(min(d, FINE_SLEEP_S))
         now = clock.now()
-        svc.stats.tick_late_max_s = max(svc.stats.tick_late_max_s, now - t)
+        svc.stats.tick_late_max_s = max(svc.stats.tick_late_max_s, now - self.t_wake)
         if -clock.wall_delay(t) > MAX_TICK_LAG_S:
             k_new = math.floor(now / self.period)
             svc.stats.tick_skips += k_new - self.k
@@ -711,15 +737,25 @@ class _Ticker:
             self._fire(t, now, drain=True)
             return
         svc.poller.drain()
-        if not svc.intake.parse(after=t):
+        if svc.intake.parse(after=t):
+            self._predict()
+        else:
             delay = clock.wall_delay(t + self.wait)
             if delay > 0:
                 self.waiting = True
+                svc.stats.tick_watches += 1
                 svc.poller.watch(self.arrival)
                 self.handle = self.loop.call_later(delay, self._end_wait)
                 return
+            self.phase = None
         now = clock.now()
         self._fire(max(t, now), now, drain=False)
+
+    def _predict(self) -> None:
+        """A fresh sample ended the wait: the next tick expects its own as far past its
+        grid time as this one's chunk was received past this grid time."""
+        t_rx = self.svc.intake.fresh_rx
+        self.phase = max(t_rx - self.t, 0.0) if t_rx is not None else None
 
     def arrival(self) -> None:
         """Chunks arrived while the tick waits: parse them; a sample queued that is
@@ -727,12 +763,17 @@ class _Ticker:
         if self.waiting and self.svc.intake.parse(after=self.t):
             if self.handle is not None:
                 self.handle.cancel()
-            self._end_wait()
+            self._predict()
+            self._end_wait(fresh=True)
 
-    def _end_wait(self) -> None:
+    def _end_wait(self, fresh: bool = False) -> None:
+        """The wait ends: on a fresh sample (``fresh``) or at its deadline (the next
+        timer is then at the grid time)."""
         try:
             self.waiting = False
             self.svc.poller.unwatch()
+            if not fresh:
+                self.phase = None
             now = self.svc.clock.now()
             self._fire(max(self.t, now), now, drain=False)
         except Exception as err:  # noqa: BLE001 - as in _on_grid
