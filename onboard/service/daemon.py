@@ -75,11 +75,15 @@ FINE_SLEEP_S = 0.0012
 slept in ``time.sleep`` (epoll, under asyncio, only wakes with millisecond granularity,
 rounded up; this removes ~0.5 ms of average lateness at the cost of blocking the loop for
 < 1.2 ms per tick)."""
-ARRIVAL_MARGIN_S = 0.0005
+ARRIVAL_MARGIN_S = 0.0002
 """A tick that waits for a fresh sample wakes this long (service s) after that sample's
-predicted arrival: the previous tick's, as far after its own grid time (the inputs' phase
-against the grid is steady). Later, the tick waits longer than it must; earlier, the
-sample is not there yet and the tick watches the inputs for it: a second wake-up."""
+predicted arrival (``PHASE_WINDOW``; the event loop's timers add up to a millisecond:
+epoll's resolution, rounded up). Later, the tick waits longer than it must; earlier,
+the sample is not there yet and the tick watches the inputs for it: a second wake-up."""
+PHASE_WINDOW = 10
+"""A tick's fresh sample is predicted to arrive as far after its grid time as the earliest
+of the last this many ticks' did (the inputs' phase against the grid is steady: one late
+arrival does not delay the next wake-ups, an early one costs one wake-up)."""
 MAX_TICK_LAG_S = 1.0
 """A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 SESSION_POLL_S = 0.1
@@ -651,13 +655,14 @@ class _Ticker:
     until one does (:meth:`arrival`) or the wait ends; then the tick and what is due after
     it (the tick's newest sample is then milliseconds old, not up to a period).
 
-    A tick that waited for its fresh sample predicts the next one's: the timer of the next
-    grid time is set ``ARRIVAL_MARGIN_S`` after the same delay past it (:attr:`phase`), so
-    that the drain then normally finds the sample and ticks at once, on one wake-up. When
-    it does not, the tick watches the inputs as above; a wait that ends without a fresh
-    sample drops the prediction (the next timer is at the grid time). A tick costs the loop
-    its timer and, when the prediction misses, one wake-up per arrival while it waits: no
-    task step, future or coroutine per tick.
+    The ticks predict their fresh sample's arrival: the timer of a grid time is set
+    ``ARRIVAL_MARGIN_S`` after the earliest delay past their grid times at which the last
+    ticks' fresh samples were received (:attr:`phases`), so that the drain then normally
+    finds the sample and ticks at once, on one wake-up. When it does not, the tick watches
+    the inputs as above; a wait that ends without a fresh sample drops the prediction (the
+    next timer is at the grid time). A tick costs the loop its timer and, when the
+    prediction misses, one wake-up per arrival while it waits: no task step, future or
+    coroutine per tick.
 
     A grid time more than ``MAX_TICK_LAG_S`` past (the loop stalled) skips the missed
     ticks. An exception in a tick is counted and logged and the next tick scheduled; one
@@ -673,9 +678,10 @@ class _Ticker:
         self.k = math.ceil(now / self.period)
         self.t = self.k * self.period
         """The grid time of the coming tick (service s)."""
-        self.phase: float | None = None
-        """Service s from the grid time to the receipt of the chunk that ended the previous
-        tick's wait (None: no prediction, wake at the grid time)."""
+        self.phases: deque[float] = deque(maxlen=PHASE_WINDOW)
+        """Service s from the grid time to the receipt of the chunk that ended the wait, of
+        the last ticks that had a fresh sample (empty: no prediction, wake at the grid
+        time)."""
         self.t_wake = self.t
         """When the coming tick's timer is due (service s)."""
         self.waiting = False
@@ -697,14 +703,15 @@ class _Ticker:
 
     def _schedule(self) -> None:
         """The timer of the next grid time: at the predicted arrival of its fresh sample
-        when there is one (:attr:`phase`), else at the grid time (waking ``FINE_SLEEP_S``
+        when there is one (:attr:`phases`), else at the grid time (waking ``FINE_SLEEP_S``
         early to sleep the rest precisely when ticks do not wait for a sample)."""
         self.t = self.k * self.period
         if self.wait == 0:
             self.t_wake = self.t
             d = self.svc.clock.wall_delay(self.t) - FINE_SLEEP_S
         else:
-            ahead = 0.0 if self.phase is None else min(self.phase + ARRIVAL_MARGIN_S, self.wait)
+            phases = self.phases
+            ahead = min(min(phases) + ARRIVAL_MARGIN_S, self.wait) if phases else 0.0
             self.t_wake = self.t + ahead
             d = self.svc.clock.wall_delay(self.t_wake)
         self.handle = self.loop.call_later(max(d, 0.0), self._on_grid)
@@ -747,15 +754,16 @@ class _Ticker:
                 svc.poller.watch(self.arrival)
                 self.handle = self.loop.call_later(delay, self._end_wait)
                 return
-            self.phase = None
+            self.phases.clear()
         now = clock.now()
         self._fire(max(t, now), now, drain=False)
 
     def _predict(self) -> None:
-        """A fresh sample ended the wait: the next tick expects its own as far past its
-        grid time as this one's chunk was received past this grid time."""
+        """A fresh sample ended the wait: note how far past the grid time its chunk was
+        received."""
         t_rx = self.svc.intake.fresh_rx
-        self.phase = max(t_rx - self.t, 0.0) if t_rx is not None else None
+        if t_rx is not None:
+            self.phases.append(max(t_rx - self.t, 0.0))
 
     def arrival(self) -> None:
         """Chunks arrived while the tick waits: parse them; a sample queued that is
@@ -773,7 +781,7 @@ class _Ticker:
             self.waiting = False
             self.svc.poller.unwatch()
             if not fresh:
-                self.phase = None
+                self.phases.clear()
             now = self.svc.clock.now()
             self._fire(max(self.t, now), now, drain=False)
         except Exception as err:  # noqa: BLE001 - as in _on_grid
