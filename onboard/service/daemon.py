@@ -75,15 +75,18 @@ FINE_SLEEP_S = 0.0012
 slept in ``time.sleep`` (epoll, under asyncio, only wakes with millisecond granularity,
 rounded up; this removes ~0.5 ms of average lateness at the cost of blocking the loop for
 < 1.2 ms per tick)."""
-ARRIVAL_MARGIN_S = 0.0002
-"""A tick that waits for a fresh sample wakes this long (service s) after that sample's
-predicted arrival (``PHASE_WINDOW``; the event loop's timers add up to a millisecond:
-epoll's resolution, rounded up). Later, the tick waits longer than it must; earlier,
-the sample is not there yet and the tick watches the inputs for it: a second wake-up."""
 PHASE_WINDOW = 10
 """A tick's fresh sample is predicted to arrive as far after its grid time as the earliest
 of the last this many ticks' did (the inputs' phase against the grid is steady: one late
-arrival does not delay the next wake-ups, an early one costs one wake-up)."""
+arrival does not delay the next wake-ups)."""
+ARRIVAL_LEAD_S = 0.001
+"""A tick whose fresh sample is predicted wakes this long (service s) before the
+predicted arrival: the resolution of the event loop's timers (epoll's millisecond,
+rounded up), so that the wake-up is not after the arrival."""
+ARRIVAL_SLACK_S = 0.001
+"""It then waits for the sample on the UDP sockets themselves (``Poller.wait``: the loop
+blocked, no wake-up of its own) until this long (service s) after the predicted arrival;
+past that, it watches the inputs from the loop (a second wake-up)."""
 MAX_TICK_LAG_S = 1.0
 """A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 SESSION_POLL_S = 0.1
@@ -655,14 +658,16 @@ class _Ticker:
     until one does (:meth:`arrival`) or the wait ends; then the tick and what is due after
     it (the tick's newest sample is then milliseconds old, not up to a period).
 
-    The ticks predict their fresh sample's arrival: the timer of a grid time is set
-    ``ARRIVAL_MARGIN_S`` after the earliest delay past their grid times at which the last
-    ticks' fresh samples were received (:attr:`phases`), so that the drain then normally
-    finds the sample and ticks at once, on one wake-up. When it does not, the tick watches
-    the inputs as above; a wait that ends without a fresh sample drops the prediction (the
-    next timer is at the grid time). A tick costs the loop its timer and, when the
-    prediction misses, one wake-up per arrival while it waits: no task step, future or
-    coroutine per tick.
+    The ticks predict their fresh sample's arrival: the earliest delay past their grid
+    times at which the last ticks' fresh samples were received (:attr:`phases`). The timer
+    of a grid time is then set ``ARRIVAL_LEAD_S`` before that arrival, and after the drain
+    the tick blocks on the UDP sockets (:meth:`drivers.transports.Poller.wait`) until the
+    sample is there, at most ``ARRIVAL_SLACK_S`` past its prediction: the tick fires at the
+    arrival on one wake-up of the loop. When the sample is later, the tick watches the
+    inputs as above; a wait that ends without a fresh sample drops the prediction (the next
+    timer is at the grid time). A tick costs the loop its timer and, when the prediction
+    misses, one wake-up per arrival while it waits: no task step, future or coroutine per
+    tick.
 
     A grid time more than ``MAX_TICK_LAG_S`` past (the loop stalled) skips the missed
     ticks. An exception in a tick is counted and logged and the next tick scheduled; one
@@ -711,7 +716,7 @@ class _Ticker:
             d = self.svc.clock.wall_delay(self.t) - FINE_SLEEP_S
         else:
             phases = self.phases
-            ahead = min(min(phases) + ARRIVAL_MARGIN_S, self.wait) if phases else 0.0
+            ahead = min(max(min(phases) - ARRIVAL_LEAD_S, 0.0), self.wait) if phases else 0.0
             self.t_wake = self.t + ahead
             d = self.svc.clock.wall_delay(self.t_wake)
         self.handle = self.loop.call_later(max(d, 0.0), self._on_grid)
@@ -744,7 +749,7 @@ class _Ticker:
             self._fire(t, now, drain=True)
             return
         svc.poller.drain()
-        if svc.intake.parse(after=t):
+        if svc.intake.parse(after=t) or self._await_predicted():
             self._predict()
         else:
             delay = clock.wall_delay(t + self.wait)
@@ -757,6 +762,20 @@ class _Ticker:
             self.phases.clear()
         now = clock.now()
         self._fire(max(t, now), now, drain=False)
+
+    def _await_predicted(self) -> bool:
+        """Block for the predicted fresh sample on the UDP sockets, at most until
+        ``ARRIVAL_SLACK_S`` after its predicted arrival (and the wait's end); return
+        whether it came."""
+        if not self.phases:
+            return False
+        svc, clock = self.svc, self.svc.clock
+        end = self.t + min(min(self.phases) + ARRIVAL_SLACK_S, self.wait)
+        while svc.poller.wait(clock.wall_delay(end)):
+            svc.poller.drain()
+            if svc.intake.parse(after=self.t):
+                return True
+        return False
 
     def _predict(self) -> None:
         """A fresh sample ended the wait: note how far past the grid time its chunk was
