@@ -663,7 +663,9 @@ class _Ticker:
     of a grid time is then set ``ARRIVAL_LEAD_S`` before that arrival, and after the drain
     the tick blocks on the UDP sockets (:meth:`drivers.transports.Poller.wait`) until the
     sample is there, at most ``ARRIVAL_SLACK_S`` past its prediction: the tick fires at the
-    arrival on one wake-up of the loop. When the sample is later, the tick watches the
+    arrival on one wake-up of the loop. Only when the poller reads every input: the loop
+    it blocks would read the others' bytes, and stamp them, late. When the sample is
+    later, or the loop may not block, the tick watches the
     inputs as above; a wait that ends without a fresh sample drops the prediction (the next
     timer is at the grid time). A tick costs the loop its timer and, when the prediction
     misses, one wake-up per arrival while it waits: no task step, future or coroutine per
@@ -689,6 +691,10 @@ class _Ticker:
         time)."""
         self.t_wake = self.t
         """When the coming tick's timer is due (service s)."""
+        self.may_block = bool(svc.inputs) and all(
+            inp.transport.drained_by(svc.poller) for inp in svc.inputs)
+        """Whether the tick may block the loop for its predicted sample: every input is
+        read by the poller's drains, none by the loop."""
         self.waiting = False
         self.handle: asyncio.TimerHandle | None = None
         save_every = svc.cfg.service.state_save_interval_s
@@ -767,7 +773,7 @@ class _Ticker:
         """Block for the predicted fresh sample on the UDP sockets, at most until
         ``ARRIVAL_SLACK_S`` after its predicted arrival (and the wait's end); return
         whether it came."""
-        if not self.phases:
+        if not (self.phases and self.may_block):
             return False
         svc, clock = self.svc, self.svc.clock
         end = self.t + min(min(self.phases) + ARRIVAL_SLACK_S, self.wait)
