@@ -663,13 +663,12 @@ class _Ticker:
     of a grid time is then set ``ARRIVAL_LEAD_S`` before that arrival, and after the drain
     the tick blocks on the UDP sockets (:meth:`drivers.transports.Poller.wait`) until the
     sample is there, at most ``ARRIVAL_SLACK_S`` past its prediction: the tick fires at the
-    arrival on one wake-up of the loop. Only when the poller reads every input: the loop
-    it blocks would read the others' bytes, and stamp them, late. When the sample is
-    later, or the loop may not block, the tick watches the
-    inputs as above; a wait that ends without a fresh sample drops the prediction (the next
-    timer is at the grid time). A tick costs the loop its timer and, when the prediction
-    misses, one wake-up per arrival while it waits: no task step, future or coroutine per
-    tick.
+    arrival on one wake-up of the loop. It blocks only when the poller reads every input:
+    the loop would read the others' bytes, and stamp them, late. When the sample is later,
+    or the loop may not block, the tick watches the inputs as above; a wait that ends
+    without a fresh sample drops the prediction (the next timer is at the grid time). A
+    tick costs the loop its timer and, when the prediction misses, one wake-up per arrival
+    while it waits: no task step, future or coroutine per tick.
 
     A grid time more than ``MAX_TICK_LAG_S`` past (the loop stalled) skips the missed
     ticks. An exception in a tick is counted and logged and the next tick scheduled; one
