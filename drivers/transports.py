@@ -49,9 +49,11 @@ stays in the kernel's queue until the consumer calls :meth:`Poller.drain` (the s
 each tick), which reads every queued datagram with non-blocking ``recvmsg`` until there is
 none, each stamped with the time the kernel received it (``SO_TIMESTAMPNS``) on the
 transport's clock; between :meth:`Poller.watch` and :meth:`Poller.unwatch` a datagram wakes
-the loop, which drains at once (the service: while a tick waits for a fresh sample). One
-wake-up then serves every datagram queued since the last, and the stamps are the same as
-if each had been read the moment it arrived (closer: they leave out the wake-up's delay).
+the loop, which drains at once (the service: while a tick waits for a fresh sample);
+:meth:`Poller.wait` blocks for a datagram, the loop with it, for a bounded time (the
+service: for a sample due within a millisecond or two). One wake-up then serves every
+datagram queued since the last, and the stamps are the same as if each had been read the
+moment it arrived (closer: they leave out the wake-up's delay).
 
 :meth:`Transport.send` writes back on the open connection (the service asks the autopilot
 for its streams): to the serial port, to the TCP server, or to the address the last
@@ -65,8 +67,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import errno
+import math
 import os
 import platform
+import select
 import socket
 import struct
 import sys
@@ -744,10 +748,13 @@ class Poller:
         self.sockets: list[_PolledSocket] = []
         self.watching = False
         self.on_data: Callable[[], None] | None = None
+        self._poll = select.poll()
+        """The sockets, for :meth:`wait`."""
 
     def add(self, polled: _PolledSocket) -> None:
         """Read ``polled`` from now on."""
         self.sockets.append(polled)
+        self._poll.register(polled.fd, select.POLLIN)
         if self.watching:
             asyncio.get_running_loop().add_reader(polled.fd, self._readable)
 
@@ -755,8 +762,17 @@ class Poller:
         """Stop reading ``polled`` (its transport closes it)."""
         if polled in self.sockets:
             self.sockets.remove(polled)
+            self._poll.unregister(polled.fd)
             if self.watching:
                 asyncio.get_running_loop().remove_reader(polled.fd)
+
+    def wait(self, timeout_s: float) -> bool:
+        """Block until a socket has a datagram queued or ``timeout_s`` (wall s, rounded up
+        to the millisecond) has passed, the caller's event loop with it; return whether one
+        has. Without sockets, return False at once."""
+        if not self.sockets or timeout_s <= 0:
+            return False
+        return bool(self._poll.poll(math.ceil(timeout_s * 1000.0)))
 
     def drain(self) -> int:
         """Read every queued datagram of every socket and deliver them, oldest first;

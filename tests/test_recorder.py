@@ -238,3 +238,23 @@ def test_receive_then_parse_gives_what_chunk_gives_in_the_same_order(tmp_path):
     assert a[1] == b[1] and len(a[1]) > 300  # every push, same sample, same order
     assert a[0] == b[0] and a[2] == b[2] and a[3] == b[3]
     assert a[4] == b[4]
+
+
+def test_parse_after_counts_the_samples_stamped_after_it_and_when_the_first_came():
+    """``parse(after=T)`` returns how many queued samples are stamped after ``T`` and sets
+    ``fresh_rx`` to the receive time of the first chunk that queued one (the service
+    predicts the next tick's wake-up from it); a chunk of older samples does not count."""
+    def imu(t: float) -> bytes:
+        return encode_sample(Imu(t=t, accel_x=0, accel_y=0, accel_z=-9.8, gyro_x=0, gyro_y=0,
+                                 gyro_z=0))
+
+    intake = Intake(Engine(_cfg()))
+    intake.receive("imu", "sample", imu(0.99), 1.001)  # received after 1.0, stamped before
+    intake.receive("gps", "nmea", encode_hdt(0.5), 1.002)  # stamped at its receipt
+    intake.receive("imu", "sample", imu(1.01), 1.011)
+    assert intake.parse(after=1.0) == 2
+    assert intake.fresh_rx == 1.002 and len(intake.pending) == 3
+    intake.receive("imu", "sample", imu(0.98), 1.02)
+    assert intake.parse(after=1.0) == 0 and intake.fresh_rx is None
+    intake.receive("imu", "sample", imu(1.03), 1.03)
+    assert intake.parse() == 1 and len(intake.pending) == 5  # all, without ``after``

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import os
 import socket
+import threading
 
 import pytest
 
@@ -280,6 +281,48 @@ def test_polled_udp_inputs_are_read_at_the_drain_in_the_order_and_at_the_time_re
         assert t_sent <= t_rx < t_sent + 0.01 < t_drain - 0.03
     assert answered and reply == b"reply"
     assert got[6][0] == b"w" and after_unwatch == 7 and got[7][0] == b"late"
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(not KERNEL_STAMPS, reason="datagrams carry no kernel receive time here")
+def test_poller_wait_blocks_until_a_datagram_is_queued_or_the_timeout():
+    """``Poller.wait``: False at once without sockets; with nothing queued, False after
+    the timeout (blocking); True as soon as a datagram is queued, which it leaves for the
+    drain."""
+    import time
+
+    from onboard.drivers.transports import Poller
+
+    port = free_udp_port()
+    got: list[bytes] = []
+
+    async def main():
+        poller = Poller(time.monotonic)
+        t0 = time.monotonic()
+        empty = poller.wait(0.5)
+        t_empty = time.monotonic() - t0
+        tr = open_transport(f"udp:127.0.0.1:{port}")
+        pump = asyncio.create_task(tr.pump(lambda d, t: got.append(d), poller))
+        while not tr.stats.connected:
+            await asyncio.sleep(0.01)
+        t0 = time.monotonic()
+        idle = poller.wait(0.02)
+        t_idle = time.monotonic() - t0
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            threading.Timer(0.01, tx.sendto, (b"x", ("127.0.0.1", port))).start()
+            t0 = time.monotonic()
+            ready = poller.wait(TIMEOUT)
+            t_ready = time.monotonic() - t0
+            unread = list(got)
+            n = poller.drain()
+        pump.cancel()
+        await asyncio.gather(pump, return_exceptions=True)
+        return empty, t_empty, idle, t_idle, ready, t_ready, unread, n
+
+    empty, t_empty, idle, t_idle, ready, t_ready, unread, n = run(main())
+    assert not empty and t_empty < 0.1
+    assert not idle and t_idle >= 0.019
+    assert ready and t_ready < TIMEOUT / 2 and unread == [] and n == 1 and got == [b"x"]
 
 
 @pytest.mark.integration

@@ -75,11 +75,23 @@ FINE_SLEEP_S = 0.0012
 slept in ``time.sleep`` (epoll, under asyncio, only wakes with millisecond granularity,
 rounded up; this removes ~0.5 ms of average lateness at the cost of blocking the loop for
 < 1.2 ms per tick)."""
+PHASE_WINDOW = 10
+"""A tick's fresh sample is predicted to arrive as far after its grid time as the earliest
+of the last this many ticks' did (the inputs' phase against the grid is steady: one late
+arrival does not delay the next wake-ups)."""
+ARRIVAL_LEAD_S = 0.001
+"""A tick whose fresh sample is predicted wakes this long (service s) before the
+predicted arrival: the resolution of the event loop's timers (epoll's millisecond,
+rounded up), so that the wake-up is not after the arrival."""
+ARRIVAL_SLACK_S = 0.001
+"""It then waits for the sample on the UDP sockets themselves (``Poller.wait``: the loop
+blocked, no wake-up of its own) until this long (service s) after the predicted arrival;
+past that, it watches the inputs from the loop (a second wake-up)."""
 MAX_TICK_LAG_S = 1.0
+"""A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 SESSION_POLL_S = 0.1
 """The MAVLink sessions are polled by the tick loop, after the tick, every this many
 service seconds (every tick at rate_hz <= 10)."""
-"""A tick more than this late (wall s) means the loop stalled: the missed ticks are skipped."""
 
 
 class ServiceClock:
@@ -145,8 +157,11 @@ class ServiceStats:
     tick_compute_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
     """Wall time of each tick's work (s): push, pipelines, publishing."""
     tick_late_max_s: float = 0.0
-    """The largest delay (service s) between a tick's grid time and the end of its wait
-    for the grid (the loop busy or starved of CPU), skipped stalls included."""
+    """The largest delay (service s) between a tick's timer and its callback (the loop
+    busy or starved of CPU), skipped stalls included."""
+    tick_watches: int = 0
+    """Ticks that found no fresh sample at their timer and watched the inputs for one
+    (``_Ticker``: a second wake-up, or more)."""
 
 
 def resolve_dirs(args_state_dir: str | None) -> tuple[Path, Path | None]:
@@ -641,9 +656,19 @@ class _Ticker:
     ``k / rate_hz``; with ``tick_wait_s`` > 0 the UDP inputs are drained then and, unless
     the chunks received queued a sample stamped after the grid time, the inputs are watched
     until one does (:meth:`arrival`) or the wait ends; then the tick and what is due after
-    it (the tick's newest sample is then milliseconds old, not up to a period). A tick
-    costs the loop its timer and one wake-up per arrival while it waits: no task step,
-    future or coroutine per tick.
+    it (the tick's newest sample is then milliseconds old, not up to a period).
+
+    The ticks predict their fresh sample's arrival: the earliest delay past their grid
+    times at which the last ticks' fresh samples were received (:attr:`phases`). The timer
+    of a grid time is then set ``ARRIVAL_LEAD_S`` before that arrival, and after the drain
+    the tick blocks on the UDP sockets (:meth:`drivers.transports.Poller.wait`) until the
+    sample is there, at most ``ARRIVAL_SLACK_S`` past its prediction: the tick fires at the
+    arrival on one wake-up of the loop. It blocks only when the poller reads every input:
+    the loop would read the others' bytes, and stamp them, late. When the sample is later,
+    or the loop may not block, the tick watches the inputs as above; a wait that ends
+    without a fresh sample drops the prediction (the next timer is at the grid time). A
+    tick costs the loop its timer and, when the prediction misses, one wake-up per arrival
+    while it waits: no task step, future or coroutine per tick.
 
     A grid time more than ``MAX_TICK_LAG_S`` past (the loop stalled) skips the missed
     ticks. An exception in a tick is counted and logged and the next tick scheduled; one
@@ -659,6 +684,16 @@ class _Ticker:
         self.k = math.ceil(now / self.period)
         self.t = self.k * self.period
         """The grid time of the coming tick (service s)."""
+        self.phases: deque[float] = deque(maxlen=PHASE_WINDOW)
+        """Service s from the grid time to the receipt of the chunk that ended the wait, of
+        the last ticks that had a fresh sample (empty: no prediction, wake at the grid
+        time)."""
+        self.t_wake = self.t
+        """When the coming tick's timer is due (service s)."""
+        self.may_block = bool(svc.inputs) and all(
+            inp.transport.drained_by(svc.poller) for inp in svc.inputs)
+        """Whether the tick may block the loop for its predicted sample: every input is
+        read by the poller's drains, none by the loop."""
         self.waiting = False
         self.handle: asyncio.TimerHandle | None = None
         save_every = svc.cfg.service.state_save_interval_s
@@ -677,10 +712,18 @@ class _Ticker:
         self.svc._ticker = None
 
     def _schedule(self) -> None:
-        """The timer of the next grid time (waking ``FINE_SLEEP_S`` early to sleep the
-        rest precisely when ticks do not wait for a sample)."""
+        """The timer of the next grid time: at the predicted arrival of its fresh sample
+        when there is one (:attr:`phases`), else at the grid time (waking ``FINE_SLEEP_S``
+        early to sleep the rest precisely when ticks do not wait for a sample)."""
         self.t = self.k * self.period
-        d = self.svc.clock.wall_delay(self.t) - (FINE_SLEEP_S if self.wait == 0 else 0.0)
+        if self.wait == 0:
+            self.t_wake = self.t
+            d = self.svc.clock.wall_delay(self.t) - FINE_SLEEP_S
+        else:
+            phases = self.phases
+            ahead = min(max(min(phases) - ARRIVAL_LEAD_S, 0.0), self.wait) if phases else 0.0
+            self.t_wake = self.t + ahead
+            d = self.svc.clock.wall_delay(self.t_wake)
         self.handle = self.loop.call_later(max(d, 0.0), self._on_grid)
 
     def _on_grid(self) -> None:
@@ -698,7 +741,7 @@ class _Ticker:
             if d > 0:
                 time.sleep(min(d, FINE_SLEEP_S))
         now = clock.now()
-        svc.stats.tick_late_max_s = max(svc.stats.tick_late_max_s, now - t)
+        svc.stats.tick_late_max_s = max(svc.stats.tick_late_max_s, now - self.t_wake)
         if -clock.wall_delay(t) > MAX_TICK_LAG_S:
             k_new = math.floor(now / self.period)
             svc.stats.tick_skips += k_new - self.k
@@ -711,15 +754,40 @@ class _Ticker:
             self._fire(t, now, drain=True)
             return
         svc.poller.drain()
-        if not svc.intake.parse(after=t):
+        if svc.intake.parse(after=t) or self._await_predicted():
+            self._predict()
+        else:
             delay = clock.wall_delay(t + self.wait)
             if delay > 0:
                 self.waiting = True
+                svc.stats.tick_watches += 1
                 svc.poller.watch(self.arrival)
                 self.handle = self.loop.call_later(delay, self._end_wait)
                 return
+            self.phases.clear()
         now = clock.now()
         self._fire(max(t, now), now, drain=False)
+
+    def _await_predicted(self) -> bool:
+        """Block for the predicted fresh sample on the UDP sockets, at most until
+        ``ARRIVAL_SLACK_S`` after its predicted arrival (and the wait's end); return
+        whether it came."""
+        if not (self.phases and self.may_block):
+            return False
+        svc, clock = self.svc, self.svc.clock
+        end = self.t + min(min(self.phases) + ARRIVAL_SLACK_S, self.wait)
+        while svc.poller.wait(clock.wall_delay(end)):
+            svc.poller.drain()
+            if svc.intake.parse(after=self.t):
+                return True
+        return False
+
+    def _predict(self) -> None:
+        """A fresh sample ended the wait: note how far past the grid time its chunk was
+        received."""
+        t_rx = self.svc.intake.fresh_rx
+        if t_rx is not None:
+            self.phases.append(max(t_rx - self.t, 0.0))
 
     def arrival(self) -> None:
         """Chunks arrived while the tick waits: parse them; a sample queued that is
@@ -727,12 +795,17 @@ class _Ticker:
         if self.waiting and self.svc.intake.parse(after=self.t):
             if self.handle is not None:
                 self.handle.cancel()
-            self._end_wait()
+            self._predict()
+            self._end_wait(fresh=True)
 
-    def _end_wait(self) -> None:
+    def _end_wait(self, fresh: bool = False) -> None:
+        """The wait ends: on a fresh sample (``fresh``) or at its deadline (the next
+        timer is then at the grid time)."""
         try:
             self.waiting = False
             self.svc.poller.unwatch()
+            if not fresh:
+                self.phases.clear()
             now = self.svc.clock.now()
             self._fire(max(self.t, now), now, drain=False)
         except Exception as err:  # noqa: BLE001 - as in _on_grid

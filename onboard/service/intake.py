@@ -108,6 +108,10 @@ class Intake:
     max_backlog: int = 256
     """A :meth:`receive` that finds this many chunks waiting parses them at once (a
     bound on the memory they hold while the ticks are late)."""
+    fresh_rx: float | None = None
+    """After :meth:`parse` with ``after``: the receive time (s) of the first chunk that
+    queued a sample stamped after it, or None (the service predicts the next tick's
+    wake-up from it)."""
 
     def add_source(self, name: str, kind: str) -> SourceState:
         """Register an input named ``name`` speaking protocol ``kind``."""
@@ -160,26 +164,32 @@ class Intake:
     def parse(self, after: float = -math.inf) -> int:
         """Record, parse and queue the chunks kept by :meth:`receive`, in the order
         received; return the number of samples queued that are stamped after ``after``
-        (s; all by default)."""
+        (s; all by default). With ``after`` given, :attr:`fresh_rx` is then the receive
+        time of the first chunk that queued such a sample (None if none did)."""
         backlog = self.backlog
-        queued = 0
         parse = self._parse
-        n0 = len(self.pending)
+        pending = self.pending
         rec = self.recorder
-        if rec is not None and self.verifier is None and backlog:
-            # every chunk recorded before parsing, in one write (no input records after its
-            # parse: none verifies signatures)
+        # every chunk recorded before parsing, in one write, unless an input records after
+        # its parse (signatures verified: each chunk with its verdicts)
+        recorded = rec is not None and self.verifier is None
+        if rec is not None and recorded and backlog:
             rec.write(*[RawRecord(t=t_rx, source=name, kind=st.kind, data=bytes(data))
                         for name, st, data, t_rx in backlog])
-            while backlog:
-                name, st, data, t_rx = backlog.popleft()
-                queued += parse(name, st, data, t_rx, None, recorded=True)
+        queued = fresh = 0
+        counting = after > -math.inf
+        self.fresh_rx = None
         while backlog:
             name, st, data, t_rx = backlog.popleft()
-            queued += parse(name, st, data, t_rx, None)
-        if queued and after > -math.inf:
-            return sum(s.t > after for s in islice(self.pending, n0, None))
-        return queued
+            n0 = len(pending)
+            q = parse(name, st, data, t_rx, None, recorded=recorded)
+            if q and counting:
+                f = sum(s.t > after for s in islice(pending, n0, None))
+                if f and not fresh:
+                    self.fresh_rx = t_rx
+                fresh += f
+            queued += q
+        return fresh if counting else queued
 
     def _received(self, name: str, kind: str, data: bytes, t_rx: float) -> SourceState:
         """Count a chunk; return its input's state."""

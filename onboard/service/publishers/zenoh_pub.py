@@ -49,7 +49,14 @@ log = logging.getLogger(__name__)
 DEFAULT_ROUTER_ENDPOINT = "tcp/127.0.0.1:7447"
 JSON_ENCODING = "application/json"
 """The MIME type of every payload; the encoding adds the schema name (``;<schema>``).
-Publishers are declared ``express`` (no batching: each record leaves at once)."""
+
+Publishers are not declared ``express``: the records of a tick, put one after the other,
+leave in the batches Zenoh's transmit thread finds queued when it wakes, instead of one
+wake-up of that thread per put (and the main thread's sleeps on the locks they share:
+~10 a second fewer in the bench, docs/performance.md). Zenoh
+holds a message back for batching only under back-pressure (its
+``transport/link/tx/queue/batching``); otherwise each batch leaves at once: the bench's
+tick-to-subscriber latency is the same either way (docs/performance.md)."""
 
 
 def session_config(mode: str = "peer", connect: Iterable[str] = (), listen: Iterable[str] = (),
@@ -176,7 +183,7 @@ class ZenohPublisher:
 
             pub = self._pubs[suffix] = self.session.declare_publisher(  # type: ignore[union-attr]
                 f"{self.base}/{suffix}", encoding=zenoh.Encoding(wire.encoding(schema)),
-                express=True)
+                express=False)
         return pub
 
     def _put(self, suffix: str, payload: bytes, schema: str) -> None:
