@@ -248,7 +248,7 @@ def test_a_figure_that_fails_is_named_and_the_summary_kept(tmp_path, capsys, mon
 
 def test_estimates_csv_that_cannot_be_written_is_one_line_and_status_1(
         tmp_path, capsys, monkeypatch):
-    import onboard.offline.replay as replay_mod
+    import onboard.offline.estimates_csv as estimates_csv
 
     class Full:
         def __init__(self, f):
@@ -263,7 +263,7 @@ def test_estimates_csv_that_cannot_be_written_is_one_line_and_status_1(
         def close(self):
             self.f.close()
 
-    monkeypatch.setattr(replay_mod, "open", lambda *a, **k: Full(open(*a, **k)),
+    monkeypatch.setattr(estimates_csv, "open", lambda *a, **k: Full(open(*a, **k)),
                         raising=False)
     rc, _, err = run(["replay", str(JAIABOT), "--out", str(tmp_path / "o"), "--no-plot"],
                      capsys)
