@@ -31,7 +31,8 @@ as its packed upper triangle times a scalar, ``P = sc Q``, so that forgetting is
 multiplication). It is the one generated kernel left: an AIE axis step stays within half
 of a textbook Kalman filter step (``onboard bench``, ``aie_step_vs_filterpy_kf``) only with
 it; docs/performance.md, "Fast paths", has the figures. The tests compare the two forms
-on random inputs (tests/test_primitives.py).
+on random inputs (tests/test_primitives.py). The compiled build (setup.py) compiles the
+same lines ahead of time (:func:`compiled_kernels_source`).
 """
 
 from __future__ import annotations
