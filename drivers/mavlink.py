@@ -66,7 +66,7 @@ from onboard.core.messages import (
 
 if TYPE_CHECKING:
     from onboard.drivers.mavlink_link import AutopilotLink
-    from onboard.drivers.mavlink_signing import SignatureVerifier
+    from onboard.drivers.mavlink_signing import FrameVerifier
 
 GRAVITY_MSS = 9.80665
 """Standard gravity (m/s^2); ArduPilot scales mg with this constant (``GRAVITY_MSS``)."""
@@ -588,7 +588,7 @@ class MavlinkParser:
     """
 
     def __init__(self, *, types: Iterable[type | str] | None = None, include_gcs: bool = False,
-                 verifier: "SignatureVerifier | None" = None,
+                 verifier: "FrameVerifier | None" = None,
                  link: "AutopilotLink | None" = None) -> None:
         self.verifier = verifier
         self.link = link

@@ -42,7 +42,7 @@ import hashlib
 import hmac
 import time
 import zlib
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Callable, Protocol
 
 from onboard.drivers.mavlink_frame import IFLAG_SIGNED, SIGNATURE_LEN
 from onboard.drivers.verdicts import Verdicts
@@ -65,6 +65,16 @@ REASONS = frozenset(("unsigned", "signature", "sig_replay", "sig_stale", "sig_fu
 
 StreamKey = tuple[int, int, int]
 """(link id, system id, component id)."""
+
+
+class FrameVerifier(Protocol):
+    """What a MAVLink parser asks of its verifier: :class:`SignatureVerifier` live, the
+    :class:`VerdictLog` around it that notes its rejections, :class:`VerdictPlayer` in a
+    replay."""
+
+    def check(self, buf: bytes | bytearray, start: int, crc_end: int, sysid: int,
+              compid: int, inc_flags: int) -> str | None:
+        """None if the frame is accepted, else the rejection reason."""
 
 
 def signing_timestamp(unix_s: float) -> int:

@@ -32,7 +32,7 @@ from onboard.core.messages import AnySample, Sample
 
 if TYPE_CHECKING:
     from onboard.drivers.mavlink_link import AutopilotLink
-    from onboard.drivers.mavlink_signing import SignatureVerifier
+    from onboard.drivers.mavlink_signing import FrameVerifier
 
 KINDS: tuple[str, ...] = ("mavlink", "nmea", "dvl-json", "pd6", "gpsd", "sample")
 """Protocols a source (or a raw record of a recording) may have."""
@@ -102,7 +102,7 @@ def encode_sample(sample: Sample) -> bytes:
     return msgspec.msgpack.encode(sample)
 
 
-def parser_for(kind: str, source: str = "", *, verifier: "SignatureVerifier | None" = None,
+def parser_for(kind: str, source: str = "", *, verifier: "FrameVerifier | None" = None,
                link: "AutopilotLink | None" = None) -> StreamParser:
     """A new stream parser for ``kind``; ``source`` names its samples where the protocol
     lets the parser choose (MAVLink names sources by system id and message itself).
