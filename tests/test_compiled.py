@@ -76,14 +76,19 @@ def venv(tmp_path_factory) -> Path:
     return venv
 
 
-def test_the_listed_modules_and_only_they_are_compiled(venv):
-    """What ``onboard bench`` reports of the installed package (``compiled_modules``)."""
-    probe = ("import json, onboard; from onboard.apps.bench import compiled_modules; "
-             "print(json.dumps([onboard.__file__, compiled_modules()]))")
-    r = subprocess.run([str(venv / "bin" / "python"), "-c", probe], cwd=venv,
+def probe(venv: Path, code: str) -> object:
+    """What ``code``, run by the venv's Python outside the checkout, prints as JSON."""
+    r = subprocess.run([str(venv / "bin" / "python"), "-c", code], cwd=venv,
                        env=clean_env(), capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
-    package, compiled = json.loads(r.stdout)
+    return json.loads(r.stdout)
+
+
+def test_the_listed_modules_and_only_they_are_compiled(venv):
+    """What ``onboard bench`` reports of the installed package (``compiled_modules``)."""
+    package, compiled = probe(venv, (  # type: ignore[misc]
+        "import json, onboard; from onboard.apps.bench import compiled_modules; "
+        "print(json.dumps([onboard.__file__, compiled_modules()]))"))
     assert package.startswith(str(site_packages(venv).resolve())), package
     assert compiled == sorted(COMPILED)
 
@@ -153,10 +158,7 @@ def test_a_copied_pipeline_publishes_its_own_noise_factor(venv):
     pipeline's own state: in a deep copy (the GNSS latency's forks) from the copy's. A
     method bound to a compiled object is copied as it is, still the original's; the pure
     build rebinds it, so only the compiled build can fail this."""
-    r = subprocess.run([str(venv / "bin" / "python"), "-c", PUBLISHED_FACTORS_FOLLOW_A_COPY],
-                       cwd=venv, env=clean_env(), capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout) == [True, True, True]
+    assert probe(venv, PUBLISHED_FACTORS_FOLLOW_A_COPY) == [True, True, True]
 
 
 RCIE_KERNELS_COMPILED_AS_GENERATED = """
@@ -171,10 +173,11 @@ for n in COMPILED_KERNEL_ORDERS:
         compiled = rcie_kernel(n, rate)
         python = compile_kernel(rcie_kernel_lines(n, rate), "python")
         same = type(compiled).__name__ != "function"
+        diagonal = [packed_index(n)[(i, i)] for i in range(n)]
         for _ in range(20):
             P = [random.uniform(-0.1, 0.1) for _ in range(n * (n + 1) // 2)]
-            for i in range(n):
-                P[packed_index(n)[(i, i)]] = random.uniform(0.5, 2.0)
+            for k in diagonal:
+                P[k] = random.uniform(0.5, 2.0)
             v = [[random.gauss(0.0, 1.0) for _ in range(n)] for _ in range(4)]
             args = (P, random.uniform(0.5, 2.0), v[0], v[1], random.gauss(0.0, 1.0), v[2],
                     v[3], random.gauss(0.0, 1.0), 0.99, random.choice([0.0, 0.5]), 0.99)
@@ -188,7 +191,4 @@ def test_the_rcie_kernels_are_compiled_and_compute_the_generated_lines(venv):
     """The compiled build's RCIE kernels (setup.py's ``GENERATED_MODULES``) are extension
     functions, and each gives the run-time generated Python's results to the last bit
     (``repr``), diverged (None) or not, on random covariances and rows."""
-    r = subprocess.run([str(venv / "bin" / "python"), "-c", RCIE_KERNELS_COMPILED_AS_GENERATED],
-                       cwd=venv, env=clean_env(), capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout) == [True] * 12
+    assert probe(venv, RCIE_KERNELS_COMPILED_AS_GENERATED) == [True] * 12

@@ -153,7 +153,7 @@ class PipelineDefaults:
     frame_offset: tuple[float, float] | None = None
 
     def take_events(self) -> list[str]:
-        """None (:meth:`Pipeline.take_events`)."""
+        """No events (:meth:`Pipeline.take_events`)."""
         return []
 
 
