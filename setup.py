@@ -41,6 +41,7 @@ COMPILED_MODULES = [
     "onboard/estimators/input_models.py",
     "onboard/estimators/reconstruction.py",
     "onboard/estimators/measurement_points.py",
+    "onboard/estimators/axis_model.py",
     "onboard/pipelines/surge_heading.py",
     "onboard/pipelines/aie.py",
     "onboard/pipelines/kf.py",

@@ -68,9 +68,10 @@ def _float_fields(cls: type) -> tuple[list[str], list[str]]:
 def _make_checker(cls: type) -> Callable[[Sample], str | None]:
     """The finiteness and bounds check of one sample type: every number finite, tested by
     one left-to-right sum (NaN and infinities propagate through addition, and a sum that
-    overflows is rejected too), then the type's physical bounds."""
+    overflows is rejected too), then the type's physical bounds (each bounded field is
+    one of the float fields, read once for both)."""
     floats, tuples = _float_fields(cls)
-    get_floats: Callable[[Sample], tuple]
+    get_floats: Callable[[Sample], tuple[float | None, ...]]
     if len(floats) > 1:
         get_floats = attrgetter(*floats)
     elif floats:
@@ -79,12 +80,14 @@ def _make_checker(cls: type) -> Callable[[Sample], str | None]:
     else:
         get_floats = (lambda s: ())
     get_tuples = [attrgetter(n) for n in tuples]
-    bounds = [(attrgetter(n), lo, hi) for n, lo, hi in _BOUNDS.get(cls, ())]
+    bounds: list[tuple[int, float, float]] = [
+        (floats.index(n), lo, hi) for n, lo, hi in _BOUNDS.get(cls, ())]
     isfinite = math.isfinite
 
     def check(sample: Sample) -> str | None:
+        values = get_floats(sample)
         total = 0.0
-        for v in get_floats(sample):
+        for v in values:
             if v is not None:
                 total += v
         for g in get_tuples:
@@ -93,9 +96,9 @@ def _make_checker(cls: type) -> Callable[[Sample], str | None]:
                 total += sum(tup)
         if not isfinite(total):
             return "nan"
-        for g, lo, hi in bounds:
-            v = g(sample)
-            if v is not None and not lo <= v <= hi:
+        for i, lo, hi in bounds:
+            b = values[i]
+            if b is not None and not lo <= b <= hi:
                 return "range"
         return None
 

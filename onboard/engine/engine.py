@@ -534,7 +534,7 @@ class Engine:
                    ) -> Mapping[str, float]:
         """``p``'s values at ``t`` as published: non-finite ones and those the integrity
         monitor withholds left out, those it amends (a widened sigma) amended."""
-        if not all(map(math.isfinite, values.values())):
+        if not math.isfinite(sum(values.values())):  # NaN and infinities propagate
             values = self._finite(p.name, values)
         integrity = self.integrity
         if integrity.amends:

@@ -68,6 +68,10 @@ class AxisModel:
         return {"a": self.a, "gain": self.gain, "offset": self.offset,
                 "rmse": self.rmse, "fit_ratio": self.fit_ratio}
 
+    def __deepcopy__(self, memo: dict) -> AxisModel:
+        """Itself: it is immutable (a copy of a pipeline shares it)."""
+        return self
+
 
 @dataclass(frozen=True, slots=True)
 class Discrete:
@@ -81,6 +85,10 @@ class Discrete:
     alpha: float
     c1: float
     c2: float
+
+    def __deepcopy__(self, memo: dict) -> Discrete:
+        """Itself: it is immutable (a copy of a pipeline shares it)."""
+        return self
 
 
 def discretize(a: float, dt: float) -> Discrete:

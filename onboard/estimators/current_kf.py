@@ -480,7 +480,7 @@ class CurrentKalmanFilter:
         ident = self.identification
         keep = slice(0, 2 * self.nd) if ident.n_theta and not ident.identifying else None
         std = self.noise_std(kind, std)
-        up = kalman.update(self.x, self.P, z, std * std * np.eye(m),
+        up = kalman.update(self.x, self.P, z, std * std * kalman.identity(m),
                            self._measurement_matrix(kind, m, rot), keep=keep)
         self.y, self.S, self.nis = up.y, up.S, up.nis
         if up.K is None:

@@ -83,8 +83,9 @@ def inv_small(S: Array) -> np.ndarray | None:
 
 
 @functools.lru_cache(maxsize=16)
-def _identity(n: int) -> Array:
-    """The ``n`` x ``n`` identity of :func:`update`, made once per size (read-only)."""
+def identity(n: int) -> Array:
+    """The ``n`` x ``n`` identity, made once per size (read-only): :func:`update`'s, and a
+    measurement noise ``r I`` without ``np.eye``'s call each time."""
     return frozen_eye(n)
 
 
@@ -142,7 +143,7 @@ def update(x: Array, P: Array, z: Array, R: Array, H: Array, *,
         kept = K[keep].copy()
         K = np.zeros_like(K)
         K[keep] = kept
-    IKH = _identity(len(x)) - K @ H
+    IKH = identity(len(x)) - K @ H
     return KalmanUpdate(x + K @ y, IKH @ P @ IKH.T + K @ R @ K.T, y, S, K, nis)
 
 VARIANCE_FLOOR = 1e-300

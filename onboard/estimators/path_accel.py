@@ -40,8 +40,6 @@ from mypy_extensions import mypyc_attr
 GRAVITY = 9.80665
 """Standard gravity (m/s^2)."""
 
-_sin, _cos, _isfinite = math.sin, math.cos, math.isfinite  # module-level: one lookup each
-
 
 @mypyc_attr(allow_interpreted_subclasses=True)
 class PathAccelerometer:
@@ -105,25 +103,26 @@ class PathAccelerometer:
     def add(self, t: float, fx: float, fy: float, p: float, q: float, r: float) -> bool:
         """One IMU sample at ``t`` (s): specific force ``fx``, ``fy`` (m/s^2) and body
         rates ``p``, ``q``, ``r`` (rad/s), FRD. Returns False (integral broken) when no
-        attitude is recent enough or the sample is not finite."""
+        attitude is recent enough or the sample is not finite (their sum is not: NaN and
+        infinities propagate through it, and only values beyond 1e307, far outside the
+        engine's bounds, could overflow it)."""
         t_att = self._t_att
-        if not (t - t_att <= self.max_attitude_age_s and _isfinite(fx) and _isfinite(fy)
-                and _isfinite(p) and _isfinite(q) and _isfinite(r)):
+        if not (t - t_att <= self.max_attitude_age_s and math.isfinite(fx + fy + p + q + r)):
             self._break()
             return False
         # attitude propagated from its time to t with the gyro (ZYX Euler rates)
         dt_a = t - t_att
         phi, th = self._roll, self._pitch
         if dt_a > 0.0:
-            sp, cp = _sin(phi), _cos(phi)
-            ct = _cos(th)
-            tt = _sin(th) / ct if abs(ct) > 1e-3 else 0.0
+            sp, cp = math.sin(phi), math.cos(phi)
+            ct = math.cos(th)
+            tt = math.sin(th) / ct if abs(ct) > 1e-3 else 0.0
             phi += (p + (q * sp + r * cp) * tt) * dt_a
             th += (q * cp - r * sp) * dt_a
             self._roll, self._pitch, self._t_att = phi, th, t
         g = self.gravity
-        ax = fx - g * _sin(th)
-        ay = fy + g * _sin(phi) * _cos(th)
+        ax = fx - g * math.sin(th)
+        ay = fy + g * math.sin(phi) * math.cos(th)
         a = ax * self._cb + ay * self._sb
         ts, V, S, acc = self._t, self._V, self._S, self._a
         t_last = self._t_last

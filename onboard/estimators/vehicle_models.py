@@ -26,8 +26,7 @@ Symbols: ``u, v, w`` (m/s) through-water velocity, ``p, q, r`` (rad/s) body rate
 from __future__ import annotations
 
 import math
-import operator
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import NamedTuple
 
 from mypy_extensions import mypyc_attr
@@ -66,9 +65,13 @@ def _sq(x: float) -> float:
     return x * abs(x)
 
 
-def _dot(a: Iterable[float], b: Iterable[float]) -> float:
-    """``a . b`` summed left to right in plain floats."""
-    return sum(map(operator.mul, a, b))
+def _dot(a: Sequence[float], b: Sequence[float] | np.ndarray) -> float:
+    """``a . b`` summed left to right in plain floats from 0 (``sum``'s order up to
+    Python 3.11; an indexed loop, on which the compiled build adds unboxed floats)."""
+    total = 0.0
+    for i in range(min(len(a), len(b))):
+        total += a[i] * b[i]
+    return total
 
 
 NET_WEIGHT_REGRESSORS = ("sin(theta)", "cos(theta)sin(phi)")
