@@ -94,7 +94,8 @@ def _same_state(ref: EsesoFilter, fast: EsesoFilter) -> None:
             setattr(fast, name, copy.deepcopy(value))
 
 
-ADAPTED = ("disturbance_excess", "_excess_ratio", "_excess_ratio_slow", "R_tau")
+ADAPTED = ("disturbance_excess", "_excess_ratio", "_excess_ratio_slow", "_excess_lag",
+           "_last_thrust_u", "R_tau")
 """What an update adapts besides the state (the thrust's noise and published excess)."""
 
 
@@ -229,6 +230,8 @@ def test_compiled_thrust_update_agrees_with_the_reference(states: str) -> None:
         ref._model_terms = None if i % 10 == 0 else rng.normal(0.0, 20.0, (2, 3))
         ref._excess_ratio = rng.uniform(0.2, 5.0, 3)
         ref._excess_ratio_slow = rng.uniform(0.2, 5.0, 3)
+        ref._excess_lag = rng.uniform(-1.0, 3.0, 3)
+        ref._last_thrust_u = rng.normal(0.0, 2.0, 3)
         ref._noise_mean = {"thrust": float(rng.uniform(0.5, 5.0))}
         ref.process_scale = float(rng.uniform(1.0, 3.0))
         _same_state(ref, fast)

@@ -521,6 +521,8 @@ class EsesoFilter:
         self.disturbance_excess = np.zeros(3)
         self._excess_ratio = np.ones(3)  # E[y_i^2] / S_ii of the thrust innovations
         self._excess_ratio_slow = np.ones(3)  # the same over NARROWING_MEMORY times longer
+        self._excess_lag = np.zeros(3)  # the same of u_k u_(k-1), u = y_i / sqrt(S_ii)
+        self._last_thrust_u = np.zeros(3)  # the last thrust update's u
         # thrust-update noise (N^2), :meth:`thrust_noise`; updated at every thrust update
         self.R_tau = self.thrust_noise(None)
         # the compiled thrust update's constants (eseso_kernel.thrust_constants), once
@@ -769,23 +771,36 @@ class EsesoFilter:
         :data:`NOISE_SAMPLE_CAP`; a ratio, so the start, whose ``S`` is the initial
         disturbance sigma's 1600 N^2, weighs no more than any other update): over
         ``noise.adapt_updates`` updates where it is above 1, over
-        :data:`NARROWING_MEMORY` times as many where it is below; the excess is
-        ``(max(r_fast - 1, 0) + min(r_slow - 1, 0)) S_ii`` at this update. With
-        :attr:`compiled`, the same in :func:`.eseso_kernel.learn_excess` (the means and
-        the excess written in place)."""
+        :data:`NARROWING_MEMORY` times as many where it is below.
+
+        An excess of ``E[y_i^2]`` is the disturbance's only as far as successive
+        innovations share it: an error of ``xi`` that ``P`` does not carry persists from
+        one update to the next, while sensor noise beyond ``R_tau`` is white and shows in
+        ``E[y_i^2]`` alone (Mehra 1970's correlation method: ``R`` enters only the lag-0
+        covariance). So the widening is at most ``c_i``, the exponential mean (over
+        ``noise.adapt_updates``) of the lag-1 products ``u_k u_(k-1)`` of ``u = y_i /
+        sqrt(S_ii)`` (each within +-:data:`NOISE_SAMPLE_CAP`): the excess is ``(min(max(r_fast
+        - 1, 0), max(c, 0)) + min(r_slow - 1, 0)) S_ii`` at this update. With
+        :attr:`compiled`, the same in :func:`.eseso_kernel.learn_excess` (the means, the
+        last ``u`` and the excess written in place)."""
+        n = self.params.noise.adapt_updates
         if self.compiled:
-            n = self.params.noise.adapt_updates
             _kernel().learn_excess(y, S_model, self._excess_ratio, self._excess_ratio_slow,
+                                   self._excess_lag, self._last_thrust_u,
                                    self.disturbance_excess, n, NARROWING_MEMORY * n,
                                    NOISE_SAMPLE_CAP)
             return
         S_ii = S_model.diagonal()
         sample = np.minimum(y * y / np.maximum(S_ii, 1e-300), NOISE_SAMPLE_CAP)
-        self._excess_ratio += (sample - self._excess_ratio) / self.params.noise.adapt_updates
-        self._excess_ratio_slow += (sample - self._excess_ratio_slow) / (
-            NARROWING_MEMORY * self.params.noise.adapt_updates)
-        self.disturbance_excess = (np.maximum(self._excess_ratio - 1.0, 0.0)
-                                   + np.minimum(self._excess_ratio_slow - 1.0, 0.0)) * S_ii
+        self._excess_ratio += (sample - self._excess_ratio) / n
+        self._excess_ratio_slow += (sample - self._excess_ratio_slow) / (NARROWING_MEMORY * n)
+        u = y / np.sqrt(np.maximum(S_ii, 1e-300))
+        lag = np.clip(u * self._last_thrust_u, -NOISE_SAMPLE_CAP, NOISE_SAMPLE_CAP)
+        self._last_thrust_u = u
+        self._excess_lag += (lag - self._excess_lag) / n
+        wider = np.minimum(np.maximum(self._excess_ratio - 1.0, 0.0),
+                           np.maximum(self._excess_lag, 0.0))
+        self.disturbance_excess = (wider + np.minimum(self._excess_ratio_slow - 1.0, 0.0)) * S_ii
 
     def published_disturbance_var(self) -> Array:
         """Variance (N^2, body, per axis) of the published lumped disturbance: the

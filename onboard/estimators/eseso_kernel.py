@@ -742,19 +742,30 @@ def thrust_update(x, P, f_m, w_m, wdot, wdot_dt, tau, vehicle, k, model_terms, h
 
 
 @njit(cache=True)
-def learn_excess(y, S_model, excess_ratio, excess_slow, excess, adapt_n, slow_n, cap) -> None:
+def learn_excess(y, S_model, excess_ratio, excess_slow, excess_lag, last_u, excess, adapt_n,
+                 slow_n, cap) -> None:
     """:meth:`EsesoFilter._learn_disturbance_excess` in place: the thrust innovation
     ``y``'s exponential means ``excess_ratio`` (over ``adapt_n`` updates) and
-    ``excess_slow`` (over ``slow_n``) of ``y_i^2 / S_ii`` (each sample capped at ``cap``)
-    and the ``excess`` they make."""
+    ``excess_slow`` (over ``slow_n``) of ``y_i^2 / S_ii`` (each sample capped at ``cap``),
+    ``excess_lag`` (over ``adapt_n``) of ``u_i`` times ``last_u_i`` (``u = y_i /
+    sqrt(S_ii)``, within +-``cap``; ``last_u`` then set to ``u``) and the ``excess`` they
+    make."""
     for i in range(3):
         S_ii = S_model[i, i]
         sample = y[i] * y[i] / _floor(S_ii, 1e-300)
         sample = cap if sample > cap else sample  # np.minimum: NaN kept
         excess_ratio[i] += (sample - excess_ratio[i]) / adapt_n
         excess_slow[i] += (sample - excess_slow[i]) / slow_n
-        wider, narrower = excess_ratio[i] - 1.0, excess_slow[i] - 1.0
-        excess[i] = (_floor(wider, 0.0) + (0.0 if narrower > 0.0 else narrower)) * S_ii
+        u = y[i] / math.sqrt(_floor(S_ii, 1e-300))
+        lag = u * last_u[i]
+        lag = cap if lag > cap else (-cap if lag < -cap else lag)  # np.clip: NaN kept
+        last_u[i] = u
+        excess_lag[i] += (lag - excess_lag[i]) / adapt_n
+        wider = _floor(excess_ratio[i] - 1.0, 0.0)
+        shared = _floor(excess_lag[i], 0.0)
+        wider = shared if shared < wider or shared != shared else wider  # np.minimum
+        narrower = excess_slow[i] - 1.0
+        excess[i] = (wider + (0.0 if narrower > 0.0 else narrower)) * S_ii
 
 
 @njit(cache=True)
