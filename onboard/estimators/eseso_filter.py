@@ -521,7 +521,7 @@ class EsesoFilter:
         self.disturbance_excess = np.zeros(3)
         self._excess_ratio = np.ones(3)  # E[y_i^2] / S_ii of the thrust innovations
         self._excess_ratio_slow = np.ones(3)  # the same over NARROWING_MEMORY times longer
-        self._excess_lag = np.zeros(3)  # the same of u_k u_(k-1), u = y_i / sqrt(S_ii)
+        self._excess_lag = np.zeros(3)  # E[u_k u_(k-1)], u_k = y_i / sqrt(S_ii) at update k
         self._last_thrust_u = np.zeros(3)  # the last thrust update's u
         # thrust-update noise (N^2), :meth:`thrust_noise`; updated at every thrust update
         self.R_tau = self.thrust_noise(None)
