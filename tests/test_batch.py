@@ -164,6 +164,28 @@ def test_names_that_collide_get_their_own_folders():
     assert batch.folder_names(["a.tlog", "a.tlog"]) == ["a.tlog", "a.tlog-2"]
 
 
+def test_a_folder_of_csv_runs_is_one_log_and_of_different_csvs_is_searched(tmp_path):
+    """CSV files with one header are the runs of one log; a vehicle log beside a table of
+    another kind (the Kolumbo glider's log and its DVL current profile) are two files, each
+    its own log; a README quoting an NMEA sentence is a document, not a log."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    for i in (1, 2):
+        (runs / f"run{i}.csv").write_text("time,lat,lon\n0,41.5,-71.4\n")
+    (runs / "README.md").write_text("# runs\n")
+    assert batch.find_logs([str(runs)]).logs == [str(runs)]
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    (mixed / "glider.csv").write_text("time,lat,lon\n0,41.5,-71.4\n")
+    (mixed / "profile.csv").write_text(",z,N,E,D\n0,5,0.1,0.2,0\n")
+    (mixed / "README_upstream.md").write_text(
+        "Data sample:\n\n$GPGGA,022718.80,2234.03506362,N,11431.92532083,E,4,19,0.9,"
+        "3.4038,M,-1.3415,M,00,0000*7F\n")
+    found = batch.find_logs([str(mixed)])
+    assert found.logs == [str(mixed / "glider.csv"), str(mixed / "profile.csv")]
+    assert found.skipped == [(str(mixed / "README_upstream.md"), "a document (.md)")]
+
+
 def test_a_worker_that_dies_fails_its_log_alone(season):
     from concurrent.futures import ProcessPoolExecutor
 
@@ -243,7 +265,8 @@ def test_diagnose_writes_the_season_report(season, tmp_path):
     assert short["status"] == "ok" and not short["diagnosed"]
     assert "too short" in short["diagnose_error"]
     report = (out / "season.md").read_text()
-    assert report in r.stdout and "| rudder-boat |" in report
+    # the config was detected (its id is the class's): the vehicle is named with its folder
+    assert report in r.stdout and "| rudder-boat (season) |" in report
 
 
 def test_season_report_per_vehicle_and_effect():
@@ -264,6 +287,28 @@ def test_season_report_per_vehicle_and_effect():
     report = batch_tables.season_report(rows)
     assert "| boat | heading_bias | 2 of 3 | bias | 2 | 1.41 | 1 | 3 | 1 -> 3 |" in report
     assert "| glider | none | 0 of 1 |" in report
+
+
+def test_season_report_tells_apart_vehicles_a_detected_config_does_not_name():
+    """Logs replayed with a config detected from them (or fitted to their CSV header)
+    carry its id, the class's or the generic ``vehicle``: two boats in two folders are
+    two vehicles in the report, not one with two compasses."""
+    def row(log, config, bias):
+        r = batch_tables.empty_row(log, Path(log).name)
+        r.update(vehicle_id="vehicle", config=config, diagnosed=True,
+                 effects=["heading_bias"], effect_params={"heading_bias.bias": bias})
+        return r
+
+    detected = "detected: no vehicle evidence in a text log; generic config"
+    rows = [row("/logs/usv/a.txt", detected, 2.0), row("/logs/usv/b.txt", detected, 2.2),
+            row("/logs/survey/c.txt", detected, -1.0),
+            row("/logs/x/d.csv", f"from blueboat-ntnu-csv {batch_tables.FITTED_CONFIG}", 5.0),
+            row("/logs/y/e.txt", "from boat1.toml", 7.0)]
+    report = batch_tables.season_report(rows)
+    assert "| vehicle (usv) | heading_bias | 2 of 2 | bias | 2.1 |" in report
+    assert "| vehicle (survey) | heading_bias | 1 of 1 |" in report
+    assert "| vehicle (x) | heading_bias | 1 of 1 |" in report
+    assert "| vehicle | heading_bias | 1 of 1 | bias | 7 |" in report  # named by --config
 
 
 def test_the_docs_queries_run_on_the_tables(local, monkeypatch, capsys):
@@ -292,6 +337,21 @@ def test_the_vehicle_install_stays_lean():
 
 @pytest.mark.data
 @pytest.mark.slow   # 16 s; each of these logs is replayed alone by tests/test_real_logs.py
+def test_a_current_without_utc_has_rows_without_utc():
+    """A log without UTC (the BlueBoat CSVs' time since boot) whose current is published:
+    its rows carry a null ``utc``, not a failed log (a clock with no offsets says None)."""
+    import numpy as np
+
+    from onboard.drivers.logclock import LogClock
+
+    cols = {"t": np.array([0.0, 0.1]), "current.north": np.array([0.1, 0.2]),
+            "current.east": np.array([0.0, np.nan])}
+    summary = {"origin": None, "warnings": [],
+               "time_span": {"start": 1444.2, "segments": [{"start": 1444.2}]}}
+    rows = batch_tables.current_rows(cols, summary, LogClock("no UTC", ()))
+    assert rows["utc"] == [None] and rows["north"] == [0.1] and rows["t_s"] == [0.0]
+
+
 def test_real_logs_beside_notes(shared_data, tmp_path):
     """A folder of real logs (a tlog, a DataFlash .bin, an NMEA capture) and its
     SOURCE.md: every log replayed as a single replay would, the notes skipped."""

@@ -46,6 +46,9 @@ BATCH_WRITES = ("runs.parquet", "current.parquet", "season.md")
 LOG_SUFFIXES = frozenset({".tlog", ".bin", ".mcap", ".onbrec"})
 """File name endings that mark a log: such a file that cannot be read fails (a broken
 log), where any other file the readers do not recognise is skipped (not a log)."""
+DOCUMENT_SUFFIXES = frozenset({".md", ".rst", ".adoc", ".htm", ".html", ".tex"})
+"""File name endings of documents: in a folder searched for logs they are skipped, even
+when they quote a few log lines (a data set's README with a sample NMEA sentence)."""
 EXIT_SOME_FAILED = 3
 """Exit status when some logs failed and the others were replayed."""
 PROGRESS_EVERY_S = 1.0
@@ -119,26 +122,33 @@ def _search(folder: Path, found: Found) -> None:
 
 def is_log_dir(p: Path) -> bool:
     """A folder that is one log, as ``onboard replay`` reads it: it holds ``.onbrec``
-    files (a service recording), or ``.csv`` files (runs of one CSV log) and no other
-    file the readers recognise (a README beside them is fine; a folder of CSV files and
-    tlogs is searched instead, each CSV file a log)."""
+    files (a service recording), or ``.csv`` files with one header (runs of one CSV log)
+    and no other file the readers recognise (a README beside them is fine; a folder of
+    CSV files and tlogs, or of CSV files with different headers, is searched instead,
+    each CSV file a log)."""
+    from onboard.drivers.csvlog import csv_header
+
     if not p.is_dir():
         return False
     if any(p.glob("*.onbrec")):
         return True
-    if not any(p.glob("*.csv")):
+    runs = sorted(p.glob("*.csv"))
+    if not runs or len({tuple(csv_header(f)) for f in runs}) > 1:
         return False
     return all(is_log(f) for f in p.iterdir() if f.is_file() and f.suffix.lower() != ".csv")
 
 
 def is_log(path: Path) -> str:
     """Empty when the readers recognise ``path`` as a log (or its name says it is one,
-    :data:`LOG_SUFFIXES`); else why it is not one."""
+    :data:`LOG_SUFFIXES`); else why it is not one (a document, :data:`DOCUMENT_SUFFIXES`,
+    never is)."""
     from onboard.drivers.base import UnreadableLog
     from onboard.drivers.logs import sniff
 
     if path.suffix.lower() in LOG_SUFFIXES:
         return ""
+    if path.suffix.lower() in DOCUMENT_SUFFIXES:
+        return f"a document ({path.suffix.lower()})"
     try:
         fmt = sniff(path)
     except UnreadableLog as err:
@@ -279,6 +289,7 @@ def _config(task: Task):
     header best (:func:`onboard.drivers.csvlog.fitting_configs`), else fails naming what
     to write."""
     from onboard.drivers.logs import sniff
+    from onboard.offline import batch_tables
     from onboard.offline.replay import choose_config
 
     if not task.configs and sniff(task.log) in ("csv", "csv-dir"):
@@ -287,7 +298,7 @@ def _config(task: Task):
         fits = fitting_configs(csv_header(task.log))
         if fits:
             cfg, _ = choose_config(task.log, [fits[0]])
-            return cfg, f"from {fits[0]} (its header fits this bundled config)"
+            return cfg, f"from {fits[0]} {batch_tables.FITTED_CONFIG}"
     return choose_config(task.log, list(task.configs) or None)
 
 

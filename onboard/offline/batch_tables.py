@@ -38,6 +38,12 @@ ROW_KEYS = ("log", "name", "status", "error", "format", "vehicle_id", "vehicle_c
             "diagnose_error", "effects", "effect_params", "holdout_metric",
             "holdout_error_before", "holdout_error_after", "cpu_s", "wall_s")
 """The columns of runs.parquet, in order (docs/batch.md)."""
+FITTED_CONFIG = "(its header fits this bundled config)"
+"""The end of runs.parquet's ``config`` for a CSV log given no ``--config``, replayed with
+the bundled config its header fits (``onboard.offline.batch``)."""
+DETECTED_CONFIG = "detected:"
+"""The start of ``config`` for a log given no ``--config``, replayed with the config
+detected from it (``onboard.offline.replay.choose_config``)."""
 
 
 def require_pyarrow() -> None:
@@ -183,7 +189,8 @@ def current_rows(cols: dict[str, np.ndarray], summary: dict, clock) -> dict[str,
     spans = _flag_spans(summary["warnings"])
     for i in np.flatnonzero(np.isfinite(cn) & np.isfinite(ce)):
         t = float(cols["t"][i])
-        utc = round(1000.0 * clock.to_utc(t0 + t)) if clock is not None else None  # ms
+        utc_s = clock.to_utc(t0 + t) if clock is not None else None
+        utc = round(1000.0 * utc_s) if utc_s is not None else None  # ms
         lat = lon = None
         for p in where:
             n, e = cols[p + ".north"][i], cols[p + ".east"][i]
@@ -309,7 +316,7 @@ def season_report(rows: Sequence[dict]) -> str:
     by_vehicle: dict[str, list[dict]] = {}
     for r in rows:
         if r["status"] == "ok" and r.get("diagnosed"):
-            by_vehicle.setdefault(str(r["vehicle_id"]), []).append(r)
+            by_vehicle.setdefault(season_vehicle(r), []).append(r)
     for vehicle, logs in sorted(by_vehicle.items()):
         logs = sorted(logs, key=lambda r: (r.get("utc_start") is None,
                                            r.get("utc_start") or "", r["name"]))
@@ -322,6 +329,21 @@ def season_report(rows: Sequence[dict]) -> str:
     if not by_vehicle:
         lines.append("| | no log diagnosed | | | | | | | |")
     return "\n".join(lines) + "\n"
+
+
+def season_vehicle(row: dict) -> str:
+    """The vehicle a log counts for in the season report: the id of the configuration it
+    was replayed with, when that names the vehicle (a ``--config``, or the service's own
+    recording); for a config detected from the log or fitted to its CSV header, whose id
+    is its class's or the generic ``vehicle`` (every BlueROV2 or every unknown boat
+    alike), that id and the log's folder (the log itself when it is a folder, CSV runs
+    or a recording), ``bluerov2 (rov-a)``: a season's logs are usually kept a folder per
+    vehicle, and two boats' compasses are not one compass."""
+    note = row.get("config") or ""
+    if note.startswith(DETECTED_CONFIG) or note.endswith(FITTED_CONFIG):
+        log = Path(row["log"])
+        return f"{row['vehicle_id']} ({(log if log.is_dir() else log.parent).name})"
+    return str(row["vehicle_id"])
 
 
 def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int) -> list[str]:
