@@ -65,6 +65,18 @@ def test_a_file_in_a_missing_directory_is_refused_and_the_directory_not_created(
     assert not (tmp_path / "nodir").exists()
 
 
+def test_a_file_in_the_directory_output_the_command_creates_is_fine(tmp_path):
+    """``--out d --write-config d/overlay.toml``: the directory is the command's own
+    output, created before the file is written (one path named twice, not a typo); a file
+    in any other missing directory is still refused, and nothing is created by checking."""
+    out = tmp_path / "d"
+    check([Output("--out", out, "dir", ("diagnosis.json",)),
+           Output("--write-config", out / "overlay.toml")])
+    with pytest.raises(UsageError, match="does not exist"):
+        check([Output("--out", out, "dir"), Output("--write-config", tmp_path / "e" / "o.toml")])
+    assert not out.exists() and not (tmp_path / "e").exists()
+
+
 def test_a_file_where_a_directory_is_and_a_directory_where_a_file_is_are_refused(tmp_path):
     (tmp_path / "f").write_text("x")
     with pytest.raises(UsageError, match="is a directory; give a file name"):

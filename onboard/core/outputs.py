@@ -8,7 +8,9 @@ out``, exit status 2), before any log is read or any simulation flown. The rules
 
 * **A file** (``--mcap FILE``, ``--write-config FILE``, ``--tlog FILE`` ...): its
   directory exists and is writable (a file is never written into a directory the command
-  would have to invent: a typo there is refused, not created); it is not a directory; it
+  would have to invent: a typo there is refused, not created), or is the same command's
+  directory output, which it creates first (``--out d --write-config d/overlay.toml``:
+  one path, named twice); it is not a directory; it
   exists already only with ``--force``, which replaces it (unless the command replaces it
   by design: ``replace``).
 * **A directory** (``--out DIR``, ``--state-dir DIR``): not a file; created with its
@@ -74,11 +76,12 @@ def check(outputs: Iterable[Output], *, force: bool = False,
     outs = list(outputs)
     _not_inputs(outs, inputs)
     _not_twice(outs)
+    made = {out.path.absolute() for out in outs if out.kind == "dir"}
     for out in outs:
         if out.kind == "dir":
             _check_dir(out, force)
-        else:
-            _check_file(out, force)
+        elif not (out.path.parent.absolute() in made and not out.path.parent.exists()):
+            _check_file(out, force)   # else: in a directory output, created and checked
 
 
 def existing(paths: Iterable[str | Path] | None) -> list[Path]:
