@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 import subprocess
 import sys
 
@@ -137,6 +138,39 @@ def test_a_log_without_a_heading_says_why_it_gives_no_estimate(tmp_path, capsys)
     assert "needs a heading" in none["current"] and "dvl (8)" in none["current"]
     out = capsys.readouterr().out
     assert "4 warnings:" in out and "current gave no estimate" in out
+
+
+def test_fixes_without_speed_and_course_are_named_as_what_the_current_lacks(tmp_path):
+    """An NMEA capture of positions (GGA) and a heading (HDT), no RMC or VTG: the current
+    gives nothing, and says its GNSS fixes carry no speed and course (not that its inputs
+    never lined up); with RMC's speed and course beside them it estimates."""
+    from onboard.drivers.nmea import encode_gga, encode_hdt, encode_rmc
+
+    def capture(name: str, rmc: bool) -> Path:
+        lines = []
+        for k in range(600):   # 2 min at 5 Hz, heading north at 1 m/s
+            t = 1_767_225_600.0 + 0.2 * k
+            lat = 41.49 + k * 0.2 / 111_000.0
+            lines.append(encode_gga(t, lat, -71.42))
+            if rmc:
+                lines.append(encode_rmc(t, lat, -71.42, 1.0, 0.0))
+            lines.append(encode_hdt(0.0))
+        log = tmp_path / name
+        log.write_bytes(b"".join(lines))
+        return log
+
+    out = tmp_path / "gga"
+    assert cli_main(["replay", str(capture("gga.nmea", False)), "--out", str(out),
+                     "--no-plot"]) == 0
+    none = {w["pipeline"]: w["message"] for w in
+            json.loads((out / "summary.json").read_text())["warnings"]
+            if w["code"] == "no_estimate"}
+    assert re.search(r"the log's 59\d GNSS fixes carry no speed and course", none["current"])
+    out = tmp_path / "rmc"
+    assert cli_main(["replay", str(capture("rmc.nmea", True)), "--out", str(out),
+                     "--no-plot"]) == 0
+    assert not [w for w in json.loads((out / "summary.json").read_text())["warnings"]
+                if w["code"] == "no_estimate" and w["pipeline"] == "current"]
 
 
 @pytest.mark.data

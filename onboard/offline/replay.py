@@ -456,7 +456,9 @@ def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
             continue
         needs, groups = NEEDS.get(p.name, ("inputs this log lacks", ()))
         missing = [g for g in groups if not g & have]
-        why = f"it needs {needs}" if missing or not groups else "its inputs never lined up"
+        lacks = p.lacks()
+        why = (f"it needs {needs}" if missing or not groups
+               else f"it needs {lacks}" if lacks else "its inputs never lined up")
         alerts.warn("no_estimate", f"{p.name} gave no estimate: {why}; the log has "
                     f"{log_has}; [pipelines.{p.name}] enabled = false leaves it out",
                     pipeline=p.name, details=(

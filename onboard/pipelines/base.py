@@ -128,6 +128,12 @@ class Pipeline(Protocol):
         pipeline's numbers beside its innovations."""
         ...
 
+    def lacks(self) -> str:
+        """What it lacked in the samples it was given, in words ("a velocity over ground:
+        ..."), for the warning of a pipeline that gave no estimate; empty when it cannot
+        say (the default)."""
+        ...
+
     def get_state(self) -> dict[str, Any]:
         """Adaptive state worth keeping across a restart (JSON-serializable)."""
         ...
@@ -155,6 +161,10 @@ class PipelineDefaults:
     def take_events(self) -> list[str]:
         """No events (:meth:`Pipeline.take_events`)."""
         return []
+
+    def lacks(self) -> str:
+        """Nothing it can name (:meth:`Pipeline.lacks`)."""
+        return ""
 
 
 def unused_measurement(channel: str, t: float, dof: int, reason: str,

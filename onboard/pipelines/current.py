@@ -664,6 +664,16 @@ class CurrentPipeline(PipelineDefaults):
         out, self.events = self.events, []
         return out
 
+    def lacks(self) -> str:
+        """A velocity over ground, when it fused none and the GNSS fixes it was given
+        carried no speed and course (:meth:`Pipeline.lacks`)."""
+        no_speed = self.samples.counters.gnss_without_velocity
+        if self.kf.counters.updates or not no_speed:
+            return ""
+        return (f"a velocity over ground: the log's {no_speed} GNSS fixes carry no speed "
+                "and course (a receiver or logger that writes positions alone, e.g. GGA "
+                "without RMC or VTG) and it has no INS or DVL velocity")
+
     def health(self) -> CurrentHealth:
         """The counters of the pipeline, its sample adapter, joint filter, model
         identification and observers; the calibration's ``q_scale``, the GNSS velocity

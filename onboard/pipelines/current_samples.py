@@ -111,6 +111,9 @@ class SampleCounters:
     """Samples with a value that is not finite."""
     glider_measurements: int = 0
     """Through-water velocities of the glider model."""
+    gnss_without_velocity: int = 0
+    """GNSS fixes without a speed and course over ground (a GGA-only receiver or logger),
+    which give the current no velocity."""
 
 
 @mypyc_attr(allow_interpreted_subclasses=True)
@@ -358,6 +361,8 @@ class CurrentSamples:
 
     def _on_gnss(self, s: GnssFix, meas: list) -> None:
         if s.sog_mps is None or s.cog_rad is None or s.fix_quality == 0:
+            if s.fix_quality != 0:
+                self.counters.gnss_without_velocity += 1
             return
         if self.depth is not None and self.depth > self.surface_depth:
             return
