@@ -226,6 +226,27 @@ def mapped_columns(fmt: CsvFormat, actuator_columns: Sequence[str] = ()) -> list
     return [c for c in cols if c]
 
 
+def run_files(folder: str | Path) -> list[Path]:
+    """The CSV files of a folder of runs, in name order; :class:`UnreadableLog` when there
+    are none, or when their headers differ (the folder is not one logger's runs: a
+    vehicle log beside a table of another kind, each its own log)."""
+    folder = Path(folder)
+    files = sorted(folder.glob("*.csv"))
+    if not files:
+        raise UnreadableLog(f"{folder}: a directory with no .csv files")
+    headers: dict[tuple[str, ...], Path] = {}
+    for f in files:
+        headers.setdefault(tuple(csv_header(f)), f)
+    if len(headers) > 1:
+        (a, fa), (b, fb) = list(headers.items())[:2]
+        raise UnreadableLog(
+            f"{folder}: its .csv files are not runs of one log, their headers differ "
+            f"({fa.name}: {', '.join(a[:6])}{', ...' if len(a) > 6 else ''}; {fb.name}: "
+            f"{', '.join(b[:6])}{', ...' if len(b) > 6 else ''}): replay each file, or keep "
+            "one logger's runs in a folder of their own")
+    return files
+
+
 def csv_header(path: str | Path) -> list[str]:
     """The header of a CSV log (of its first file, for a directory of runs); empty when
     there is none to read."""
@@ -336,9 +357,7 @@ class CsvReader:
         self.stats = ReadStats(time_source=f'[csv] time = "{fmt.time}" with time_scale = '
                                f"{fmt.time_scale:g}")
         if self.path.is_dir():
-            files = sorted(self.path.glob("*.csv"))
-            if not files:
-                raise UnreadableLog(f"{self.path}: a directory with no .csv files")
+            files = run_files(self.path)
         elif self.path.is_file():
             files = [self.path]
         else:

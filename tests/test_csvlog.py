@@ -97,6 +97,23 @@ def test_directory_of_runs_joined_in_name_order(tmp_path: Path):
     assert {s.source for s in out} == {"csv:run_a", "csv:run_b"}
 
 
+def test_a_directory_of_csv_files_with_different_headers_is_not_one_log(tmp_path: Path):
+    """A vehicle log beside a table of another kind (the Kolumbo glider's log and its DVL
+    current profile): one line naming both headers, before any row is read, whichever
+    config is given."""
+    d = tmp_path / "glider"
+    d.mkdir()
+    write(d / "glider.csv", ["5000,63.4,10.3,0,0,1,0,0,1500,1500"])
+    (d / "profile.csv").write_text(",z,N,E,D\n0,5,0.1,0.2,0\n")
+    with pytest.raises(UnreadableLog, match=r"not runs of one log, their headers differ "
+                                            r"\(glider\.csv: .*; profile\.csv: , z, N, E, D\)"):
+        CsvReader(d, FMT)
+    from onboard.cli import main as cli_main
+
+    assert cli_main(["replay", str(d), "--out", str(tmp_path / "out")]) == 2
+    assert not (tmp_path / "out").exists()
+
+
 def test_run_column_splits_one_file(tmp_path: Path):
     fmt = CsvFormat(time="t", lat_deg="lat", lon_deg="lon", run_column="run")
     f = write(tmp_path / "all.csv", ["r1,0,1,2", "r1,1,1,2", "r2,0,1,2"], header="run,t,lat,lon")

@@ -126,14 +126,16 @@ def is_log_dir(p: Path) -> bool:
     and no other file the readers recognise (a README beside them is fine; a folder of
     CSV files and tlogs, or of CSV files with different headers, is searched instead,
     each CSV file a log)."""
-    from onboard.drivers.csvlog import csv_header
+    from onboard.drivers.base import UnreadableLog
+    from onboard.drivers.csvlog import run_files
 
     if not p.is_dir():
         return False
     if any(p.glob("*.onbrec")):
         return True
-    runs = sorted(p.glob("*.csv"))
-    if not runs or len({tuple(csv_header(f)) for f in runs}) > 1:
+    try:
+        run_files(p)
+    except UnreadableLog:   # no .csv, or not one logger's runs
         return False
     return all(is_log(f) for f in p.iterdir() if f.is_file() and f.suffix.lower() != ".csv")
 

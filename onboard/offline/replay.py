@@ -107,11 +107,15 @@ def _needs_csv_mapping(log: str, cfg: Config | None, given: str) -> None:
     """A CSV log read without a ``[csv]`` column mapping (no ``--config``, or ``given``
     configs with none) is :class:`UnreadableLog`, naming the bundled config that fits
     its header (:func:`onboard.drivers.csvlog.fitting_note`)."""
-    if sniff(log) not in ("csv", "csv-dir"):
+    fmt = sniff(log)
+    if fmt not in ("csv", "csv-dir"):
         return
+    from onboard.drivers.csvlog import csv_header, fitting_note, run_files
+
+    if fmt == "csv-dir":
+        run_files(log)   # one logger's runs, or a one-line refusal
     if cfg is not None and (cfg.csv.lat_deg or cfg.csv.north_m):
         return
-    from onboard.drivers.csvlog import csv_header, fitting_note
 
     lacks = f"{given} has no [csv] column mapping" if given else \
         "a CSV log needs a [csv] column mapping (--config)"
