@@ -106,7 +106,9 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
 def _needs_csv_mapping(log: str, cfg: Config | None, given: str) -> None:
     """A CSV log read without a ``[csv]`` column mapping (no ``--config``, or ``given``
     configs with none) is :class:`UnreadableLog`, naming the bundled config that fits
-    its header (:func:`onboard.drivers.csvlog.fitting_note`)."""
+    its header (:func:`onboard.drivers.csvlog.fitting_note`); so is a folder whose CSV
+    files are not one logger's runs (:func:`onboard.drivers.csvlog.run_files`), with or
+    without a mapping."""
     fmt = sniff(log)
     if fmt not in ("csv", "csv-dir"):
         return
