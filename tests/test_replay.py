@@ -140,10 +140,11 @@ def test_a_log_without_a_heading_says_why_it_gives_no_estimate(tmp_path, capsys)
     assert "4 warnings:" in out and "current gave no estimate" in out
 
 
-def test_fixes_without_speed_and_course_are_named_as_what_the_current_lacks(tmp_path):
+def test_a_capture_of_fixes_without_speed_and_course(tmp_path):
     """An NMEA capture of positions (GGA) and a heading (HDT), no RMC or VTG: the current
     gives nothing, and says its GNSS fixes carry no speed and course (not that its inputs
-    never lined up); with RMC's speed and course beside them it estimates."""
+    never lined up), while aie and kf track the positions; with RMC's speed and course
+    beside them the current estimates."""
     from onboard.drivers.nmea import encode_gga, encode_hdt, encode_rmc
 
     def capture(name: str, rmc: bool) -> Path:
@@ -166,6 +167,13 @@ def test_fixes_without_speed_and_course_are_named_as_what_the_current_lacks(tmp_
             json.loads((out / "summary.json").read_text())["warnings"]
             if w["code"] == "no_estimate"}
     assert re.search(r"the log's 59\d GNSS fixes carry no speed and course", none["current"])
+    # the first heading came between the first two fixes: the track's step from a point
+    # without a heading once made the aie/kf positions NaN for the rest of the run
+    summary = json.loads((out / "summary.json").read_text())
+    assert not {k: n for k, n in summary["withheld"].items() if k.endswith(":nonfinite")}
+    last = list(csv.DictReader(open(out / "estimates.csv")))[-1]
+    assert float(last["aie.north"]) == pytest.approx(119.8, abs=3.0)
+    assert float(last["kf.north"]) == pytest.approx(119.8, abs=3.0)
     out = tmp_path / "rmc"
     assert cli_main(["replay", str(capture("rmc.nmea", True)), "--out", str(out),
                      "--no-plot"]) == 0

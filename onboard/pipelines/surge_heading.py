@@ -556,6 +556,7 @@ class SurgeHeadingPipeline(PipelineDefaults):
             psi_prev = psi if math.isnan(pp[3]) else pp[3]
             dpsi = wrap_pi(psi - psi_prev)
             y = path_increment(n - pp[1], e - pp[2], psi_prev, dpsi)
+            pp = (pp[0], pp[1], pp[2], psi_prev)   # the track's mid heading reads it
         cmd = self.commands.mean(pp[0], tp, 1)
         y_v, R_v = w.speed_point(self.sigma_v)
         surge = self.surge
