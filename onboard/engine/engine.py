@@ -478,8 +478,8 @@ class Engine:
             self.integrity.observe(chosen)
             if type(chosen) is GnssFix:
                 self.whereabouts.observe(chosen)  # type: ignore[arg-type]
-        elif type(chosen) is VelocityOverGround:
-            self.whereabouts.observe_velocity(chosen)  # type: ignore[arg-type]
+            elif type(chosen) is VelocityOverGround:
+                self.whereabouts.observe_velocity(chosen)  # type: ignore[arg-type]
         cls = type(raw)
         if cls in _RAW_ACTUATORS and self.mapper.active:
             cmd = self.mapper.map(raw)

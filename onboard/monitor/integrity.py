@@ -74,6 +74,12 @@ honesty"):
   it exceeds :data:`DEVIATION_MIN_RAD`. Under ``heading_course_mismatch`` the aie/kf
   heading and positions (``heading_estimate``, ``position``) are withheld too, and the
   warning quotes the worst window's angle beside the fastest's.
+* **heading against the navigation solution's own** (:class:`HeadingSourceCheck`): the
+  selected heading against the heading of the solution that gives the velocity over
+  ground (``VelocityOverGround.heading_rad``, a DVL-aided INS's), interpolated to its
+  time, averaged over :data:`HEADING_WINDOW_S`; beyond :data:`HEADING_SOURCE_BOUND_RAD`
+  ``heading_source_mismatch`` withholds the aie/kf heading and positions; below it the
+  heading sigma is widened to the offset where it exceeds it (:meth:`IntegrityMonitor.amend`).
 * **idle drift** (:class:`IdleDriftCheck`): with every thruster idle, the published
   current (``current_estimate``) against the slope of the fixes; ``current_idle_drift``
   withholds it while they disagree.
@@ -113,7 +119,7 @@ from onboard.monitor.compass_deviation import CompassDeviation
 from onboard.monitor.current_resolution import (RESOLVE_MIN_STD_MPS, RESOLVE_WINDOW_S,
                                                 CurrentResolution)
 from onboard.monitor.track_course import TrackCourse
-from onboard.core.geo import LocalFrame
+from onboard.core.geo import LocalFrame, wrap_pi
 from onboard.core.stats import chi2_mean_band
 from onboard.core.messages import (
     ActuatorCommand,
@@ -124,6 +130,7 @@ from onboard.core.messages import (
     Heading,
     Innovation,
     Sample,
+    VelocityOverGround,
 )
 
 HEADING_MIN_SPEED_MPS = 0.5
@@ -135,6 +142,13 @@ HEADING_MIN_FIXES = 5
 """Moving fixes needed in a window before it is judged."""
 HEADING_FRESH_S = 1.0
 """A heading older than this (s) at a fix is not compared with its course."""
+HEADING_SOURCE_BOUND_RAD = math.radians(2.0)
+"""The least mean difference (rad) between the heading the pipelines use and the heading
+of the navigation solution that resolved the velocity over ground (a DVL-aided INS's, in
+GLOBAL_POSITION_INT's ``hdg``) that is a mismatch: two headings of one vehicle 2 deg apart
+on average over :data:`HEADING_WINDOW_S` put one of them at least 1 deg off, more than a
+calibrated compass's error (one autopilot's EKF gives both: 0.02 deg apart at most on the
+ArduSub log of ../shared/data)."""
 HEADING_BOUND_RAD = math.radians(25.0)
 """The least heading/course difference (rad) that is a mismatch: a boat's crab angle in a
 turn or a cross wind is a few degrees."""
@@ -439,6 +453,79 @@ class HeadingCourseCheck:
         times = self._t
         while times and times[0] < t:
             for column in (times, self._sin, self._cos, self._sog):
+                column.popleft()
+
+
+class HeadingSourceCheck:
+    """The heading the pipelines use against the heading of the navigation solution that
+    resolved the velocity over ground (module docstring), both of one vehicle at one
+    instant: the selected heading interpolated (or held) to the time of each velocity
+    that carries its own heading, the circular mean of their difference over
+    :data:`HEADING_WINDOW_S`.
+
+    Attributes:
+        offset_rad: the newest judged window's mean ``selected - solution`` (rad).
+        mismatch: whether it was beyond :data:`HEADING_SOURCE_BOUND_RAD`.
+        worst: the largest offset (rad) of the present mismatch.
+    """
+
+    def __init__(self) -> None:
+        self._selected: deque[tuple[float, float]] = deque(maxlen=2)  # (t, rad unwrapped)
+        self._t: deque[float] = deque()
+        self._sin: deque[float] = deque()
+        self._cos: deque[float] = deque()
+        self.offset_rad: float | None = None
+        self.mismatch = False
+        self.worst: float | None = None
+        self.t_judged = -math.inf
+        """When (s) the newest window was judged."""
+
+    def offset_at(self, t: float) -> float | None:
+        """The newest judged offset (rad) while it is recent at ``t`` (s): judged
+        within :data:`HEADING_WINDOW_S`; else None (the solution's heading stopped)."""
+        return self.offset_rad if t - self.t_judged <= HEADING_WINDOW_S else None
+
+    def selected(self, t: float, heading_rad: float) -> None:
+        """The heading the pipelines are given (rad, true) at ``t`` (s)."""
+        sel = self._selected
+        if sel and t <= sel[-1][0]:
+            sel.clear()   # out of order or repeated: start the pair again
+        if sel:
+            heading_rad = sel[-1][1] + wrap_pi(heading_rad - sel[-1][1])
+        sel.append((t, heading_rad))
+
+    def solution(self, t: float, heading_rad: float) -> bool | None:
+        """Compare the solution's heading (rad) at ``t`` (s) with the selected one
+        there; return the window's verdict (True: mismatch), or None when it cannot be
+        judged (no selected heading within :data:`HEADING_FRESH_S`, too few samples)."""
+        self._drop_before(t - HEADING_WINDOW_S)
+        sel = self._selected
+        if not sel or abs(t - sel[-1][0]) > HEADING_FRESH_S:
+            return None
+        if len(sel) == 2 and sel[1][0] - sel[0][0] <= HEADING_FRESH_S:
+            (ta, a), (tb, b) = sel
+            psi = a + (b - a) * (t - ta) / (tb - ta)   # the turn between them, not a lag
+        else:
+            psi = sel[-1][1]
+        diff = wrap_pi(psi - heading_rad)
+        self._t.append(t)
+        self._sin.append(math.sin(diff))
+        self._cos.append(math.cos(diff))
+        if len(self._t) < HEADING_MIN_FIXES or t - self._t[0] < 0.8 * HEADING_WINDOW_S:
+            return None
+        self.offset_rad = math.atan2(sum(self._sin), sum(self._cos))
+        self.t_judged = t
+        self.mismatch = abs(self.offset_rad) > HEADING_SOURCE_BOUND_RAD
+        if not self.mismatch:
+            self.worst = None
+        elif self.worst is None or abs(self.offset_rad) > abs(self.worst):
+            self.worst = self.offset_rad
+        return self.mismatch
+
+    def _drop_before(self, t: float) -> None:
+        times = self._t
+        while times and times[0] < t:
+            for column in (times, self._sin, self._cos):
                 column.popleft()
 
 
@@ -846,7 +933,8 @@ REORIGINED = ("; its own local frame is no longer about the first fix (a restart
 """Added to ``position_residual`` when the pipeline's frame moved."""
 WARN_EVERY_S = 1.0
 """A condition that lasts is re-raised at most this often (s) (one warning spans it)."""
-WATCHED = frozenset({GnssFix, Heading, Attitude, DvlVelocity, ActuatorCommand})
+WATCHED = frozenset({GnssFix, Heading, Attitude, DvlVelocity, ActuatorCommand,
+                     VelocityOverGround})
 """The sample types the monitor reads (the engine hands it only these)."""
 
 
@@ -936,6 +1024,8 @@ class IntegrityMonitor:
         self._speed_refs: list[tuple[float, float, float, str]] = []
         """Measured speeds since the previous tick: (t, m/s, variance, reference)."""
         self.heading = None if holonomic else HeadingCourseCheck()
+        self.sources = HeadingSourceCheck()
+        """The selected heading against the navigation solution's own."""
         self.deviation = None if holonomic else CompassDeviationCheck()
         self.idle = IdleDriftCheck()
         self.track = TrackCourse()
@@ -993,16 +1083,49 @@ class IntegrityMonitor:
             self.idle.command(s.t, _idle(s))  # type: ignore[arg-type]
             if _astern(s):  # type: ignore[arg-type]
                 self.track.astern(s.t)
-        elif hc is None:
-            return
+        elif cls is VelocityOverGround:
+            psi = s.heading_rad  # type: ignore[attr-defined]
+            if psi is not None and math.isfinite(psi):
+                self._source_verdict(self.sources.solution(s.t, psi), s.t)
         elif cls is Heading:
-            hc.heading(s.t, s.heading_rad)  # type: ignore
-            if self.track.active:
-                self.track.heading(s.t, s.heading_rad)  # type: ignore
+            self._heading_sample(s.t, s.heading_rad)  # type: ignore[attr-defined]
         elif cls is Attitude and s.yaw_selected:  # type: ignore[attr-defined]
-            hc.heading(s.t, s.yaw_rad)  # type: ignore[attr-defined]
-            if self.track.active:
-                self.track.heading(s.t, s.yaw_rad)  # type: ignore[attr-defined]
+            self._heading_sample(s.t, s.yaw_rad)  # type: ignore[attr-defined]
+
+    def _heading_sample(self, t: float, psi: float) -> None:
+        """The heading the pipelines are given (rad) at ``t`` (s), into the checks."""
+        self.sources.selected(t, psi)
+        hc = self.heading
+        if hc is None:
+            return
+        hc.heading(t, psi)
+        if self.track.active:
+            self.track.heading(t, psi)
+
+    def _source_verdict(self, verdict: bool | None, t: float) -> None:
+        """Set or clear ``heading_source_mismatch`` on the pipelines that publish a
+        heading, and warn while it holds."""
+        if verdict is None:
+            return
+        code = "heading_source_mismatch"
+        own = [n for n, p in self.watched.items() if getattr(p, "heading_estimate", ())]
+        for name in own:
+            self._flag(name, code, verdict)
+        if verdict and own:
+            worst = self.sources.worst
+            assert worst is not None
+            self._warn(code, "", t, (
+                f"the heading the estimators use disagrees with the heading of the "
+                f"navigation solution that gives the velocity over ground by up to "
+                f"{math.degrees(worst):.1f} deg (bound "
+                f"{math.degrees(HEADING_SOURCE_BOUND_RAD):.0f} deg): "
+                + ", ".join(f"{n} heading and position" for n in own)
+                + " withheld until they agree again; [sources] heading chooses the source"),
+                details=(f"the circular mean over {HEADING_WINDOW_S:.0f} s of the selected "
+                         "heading, interpolated to each velocity's time, minus the "
+                         "velocity's own heading (GLOBAL_POSITION_INT hdg); an AHRS's "
+                         "magnetic yaw beside a DVL-aided INS, or a misaligned compass; "
+                         "the current turns the velocity with the solution's own heading"))
 
     def _course(self, s: GnssFix) -> bool | None:
         """The heading/course verdict at fix ``s``: against its own course, or, when it
@@ -1176,6 +1299,9 @@ class IntegrityMonitor:
             out = p.heading_dependent + own + tuple("std_" + q for q in own)
         elif "compass_deviation" in flags:
             out = p.heading_dependent
+        if "heading_source_mismatch" in flags:
+            own = tuple(getattr(p, "heading_estimate", ())) + tuple(p.position)
+            out += tuple(q for q in own + tuple("std_" + q for q in own) if q not in out)
         if "current_idle_drift" in flags:
             out += tuple(q for q in getattr(p, "current_estimate", ()) if q not in out)
         if "current_unresolved" in flags:
@@ -1189,14 +1315,18 @@ class IntegrityMonitor:
         idle span or while the compass deviation is significant."""
         dc = self.deviation
         return (self._resolving or self.idle.idle_since is not None
-                or (dc is not None and dc.deviated))
+                or (dc is not None and dc.deviated) or self.sources.offset_rad is not None)
 
     def amend(self, pipeline: str, t: float, values: dict[str, float]) -> None:
         """A pipeline's values at ``t`` (s) before its record is made: its current (the
         ``current_estimate`` role) judged for its resolution (:class:`CurrentResolution`)
         and against the idle drift at a tick after a fix of an idle span, and the sigma of its heading (``heading_estimate``) widened in
         ``values`` by the compass deviation at that heading while the deviation exceeds
-        the sigma (``compass_deviation`` on the pipeline): ``std <- hypot(std, d(psi))``."""
+        the sigma (``compass_deviation`` on the pipeline): ``std <- hypot(std, d(psi))``;
+        likewise by the mean difference between the selected heading and the navigation
+        solution's own (:class:`HeadingSourceCheck`) while it exceeds the sigma (below
+        :data:`HEADING_SOURCE_BOUND_RAD`, where ``heading_source_mismatch`` withholds the
+        heading)."""
         p = self.watched.get(pipeline)
         if p is None:
             return
@@ -1206,8 +1336,12 @@ class IntegrityMonitor:
         if self._fix_new and self.idle.idle_since is not None:
             self._idle_current(pipeline, tuple(getattr(p, "current_estimate", ())), t,
                                values)
-        dc = self.deviation
         qs = getattr(p, "heading_estimate", ())
+        offset = self.sources.offset_at(t)
+        if qs and offset is not None and ("std_" + qs[0]) in values \
+                and abs(offset) > values["std_" + qs[0]]:
+            values["std_" + qs[0]] = math.hypot(values["std_" + qs[0]], offset)
+        dc = self.deviation
         if dc is None or not qs or not dc.deviated:
             return
         q, sq = qs[0], "std_" + qs[0]

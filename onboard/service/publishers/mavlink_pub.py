@@ -24,7 +24,8 @@ ESTIMATOR_STATUS   health: test ratios sqrt(NIS)/3 (1 = a 3-sigma innovation) of
                    (pos_vert_ratio) and heading (mag_ratio) channels; flags
                    VELOCITY_HORIZ / POS_HORIZ_REL when estimating (not while a
                    pipeline fails speed_mismatch / position_residual or
-                   heading_course_mismatch, which withholds the headings and
+                   heading_course_mismatch or heading_source_mismatch, which
+                   withhold the headings and
                    positions), GPS_GLITCH when
                    GNSS fixes were rejected since the last report
 STATUSTEXT         events (source lost or silent, state restored or corrupt),   <= 1 per
@@ -200,7 +201,7 @@ def ratio_kind(channel: str) -> str | None:
     return None
 
 
-POSITION_FLAGS = ("position_residual", "heading_course_mismatch")
+POSITION_FLAGS = ("position_residual", "heading_course_mismatch", "heading_source_mismatch")
 """Integrity flags (:mod:`onboard.monitor.integrity`) under which ESTIMATOR_STATUS
 claims no horizontal position: a position off the fixes, or positions withheld while
 the heading disagrees with the course over ground."""
