@@ -149,6 +149,10 @@ GLOBAL_POSITION_INT's ``hdg``) that is a mismatch: two headings of one vehicle 2
 on average over :data:`HEADING_WINDOW_S` put one of them at least 1 deg off, more than a
 calibrated compass's error (one autopilot's EKF gives both: 0.02 deg apart at most on the
 ArduSub log of ../shared/data)."""
+HEADING_SOURCE_WIDEN_MIN_RAD = math.radians(0.1)
+"""A mean offset between the two headings below this (rad) widens nothing: their
+resolution (GLOBAL_POSITION_INT's ``hdg`` is in 0.01 deg) and interpolation, not an
+error; the records are then not amended for it."""
 HEADING_BOUND_RAD = math.radians(25.0)
 """The least heading/course difference (rad) that is a mismatch: a boat's crab angle in a
 turn or a cross wind is a few degrees."""
@@ -479,6 +483,12 @@ class HeadingSourceCheck:
         self.worst: float | None = None
         self.t_judged = -math.inf
         """When (s) the newest window was judged."""
+
+    @property
+    def widens(self) -> bool:
+        """Whether the newest offset may widen a heading sigma (beyond
+        :data:`HEADING_SOURCE_WIDEN_MIN_RAD`)."""
+        return self.offset_rad is not None and abs(self.offset_rad) > HEADING_SOURCE_WIDEN_MIN_RAD
 
     def offset_at(self, t: float) -> float | None:
         """The newest judged offset (rad) while it is recent at ``t`` (s): judged
@@ -1315,7 +1325,7 @@ class IntegrityMonitor:
         idle span or while the compass deviation is significant."""
         dc = self.deviation
         return (self._resolving or self.idle.idle_since is not None
-                or (dc is not None and dc.deviated) or self.sources.offset_rad is not None)
+                or (dc is not None and dc.deviated) or self.sources.widens)
 
     def amend(self, pipeline: str, t: float, values: dict[str, float]) -> None:
         """A pipeline's values at ``t`` (s) before its record is made: its current (the
@@ -1338,7 +1348,7 @@ class IntegrityMonitor:
                                values)
         qs = getattr(p, "heading_estimate", ())
         offset = self.sources.offset_at(t)
-        if qs and offset is not None and ("std_" + qs[0]) in values \
+        if qs and offset is not None and self.sources.widens and ("std_" + qs[0]) in values \
                 and abs(offset) > values["std_" + qs[0]]:
             values["std_" + qs[0]] = math.hypot(values["std_" + qs[0]], offset)
         dc = self.deviation
