@@ -111,8 +111,8 @@ def sniff_text(head: bytes) -> str:
             continue
         if b"/cmd motors l,r are" in ln or b"/GPS [" in ln or b"/GPS timeout" in ln:
             n_ddboat += 1
-        elif ln.startswith(b"{"):
-            n_json += 1
+        elif ln.startswith(b"{") and ln.endswith(b"}"):   # one object per line, not a
+            n_json += 1                                     # pretty-printed document
         elif _PD6.match(ln):
             n_pd6 += 1
         elif _NMEA.search(ln):

@@ -332,6 +332,10 @@ def test_sniff_and_unreadable(tmp_path: Path):
         open_text_log(prose)
     with pytest.raises(UnreadableLog):
         open_text_log(tmp_path / "missing.txt")
+    # a pretty-printed JSON document (onboard sitl --tlog's X.scenario.json beside its
+    # log) is no DVL capture: its lines are not objects, one per line
+    document = b'{\n  "scenario": "effect-waves",\n  "sensors": {\n    "gnss": {}\n  }\n}\n'
+    assert sniff_text(document) == ""
 
 
 def test_mixed_capture_rows_are_timed_between_gps_epochs(tmp_path: Path):
