@@ -193,3 +193,16 @@ def test_an_ardusub_log_replayed_as_a_boat_says_so(shared_data, tmp_path) -> Non
                      "--config", "rudder-boat"]) == 0
     codes = {w["code"] for w in json.loads((tmp_path / "summary.json").read_text())["warnings"]}
     assert {"class_mismatch", "no_position_source"} <= codes
+
+
+def test_progress_says_how_far_into_the_log_not_its_raw_stamp(capsys):
+    """A glider's CSV stamps its rows with the date (1.57e9 s): the progress line counts
+    from the first sample."""
+    from onboard.core.messages import Heading
+    from onboard.offline.replay import _Progress
+
+    progress = _Progress(True)
+    samples = (Heading(t=1_574_790_000.0 + k, source="c", heading_rad=0.0) for k in range(1100))
+    assert sum(1 for _ in progress.wrap(samples)) == 1100
+    err = capsys.readouterr().err
+    assert "1,024 samples, 1,023 s into the log" in err and "1574" not in err

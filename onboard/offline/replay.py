@@ -49,22 +49,27 @@ from onboard.offline.estimates_csv import EstimatesCsv, Runs
 
 
 class _Progress:
-    """Progress on a terminal (stderr), at most twice a second; silent otherwise."""
+    """Progress on a terminal (stderr), at most twice a second; silent otherwise: the
+    samples read and how far into the log (s from its first sample; a log's own stamps
+    may be a date or a time since boot)."""
 
     def __init__(self, enabled: bool) -> None:
         self.enabled = enabled
         self.last = 0.0
         self.n = 0
+        self.t_first: float | None = None
 
     def wrap(self, samples: Iterable[Sample]) -> Iterator[Sample]:
         for s in samples:
             self.n += 1
+            if self.t_first is None:
+                self.t_first = s.t
             if self.enabled and (self.n & 1023) == 0:
                 now = time.monotonic()
                 if now - self.last > 0.5:
                     self.last = now
-                    print(f"\r  {self.n:,} samples, log time {s.t:.1f} s", end="",
-                          file=sys.stderr, flush=True)
+                    print(f"\r  {self.n:,} samples, {s.t - self.t_first:,.0f} s into the log",
+                          end="", file=sys.stderr, flush=True)
             yield s
 
     def done(self) -> None:
