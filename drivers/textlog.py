@@ -102,6 +102,11 @@ def prefix_time(line: bytes) -> tuple[float, int] | None:
     return float(t), m.end()
 
 
+_DVL_KEYS = re.compile(rb'"vx"|"position_local"')
+"""What makes a JSON line a Water Linked DVL report (:mod:`drivers.dvl_json`): a velocity
+(``vx``, every generation of the protocol) or a dead reckoning (``position_local``)."""
+
+
 def sniff_text(head: bytes) -> str:
     """The kind of a text capture from its first bytes (see the module docstring), or ``""``."""
     lines = [ln.strip() for ln in head.splitlines()[:-1] or head.splitlines()]
@@ -111,8 +116,8 @@ def sniff_text(head: bytes) -> str:
             continue
         if b"/cmd motors l,r are" in ln or b"/GPS [" in ln or b"/GPS timeout" in ln:
             n_ddboat += 1
-        elif ln.startswith(b"{") and ln.endswith(b"}"):   # one object per line, not a
-            n_json += 1                                     # pretty-printed document
+        elif ln.startswith(b"{") and ln.endswith(b"}") and _DVL_KEYS.search(ln):
+            n_json += 1   # one report per line: not a JSON document, nor other JSON lines
         elif _PD6.match(ln):
             n_pd6 += 1
         elif _NMEA.search(ln):

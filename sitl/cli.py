@@ -79,7 +79,7 @@ def run_fleet(args: argparse.Namespace) -> int:
     duration = fleet.duration_s if args.duration is None else float(args.duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
-    check_outputs([Output("--out", Path(args.out) / "fleet.json")],
+    check_outputs([Output("--out", Path(args.out), "dir", ("fleet.json",))],
                   force=bool(getattr(args, "force", False)))
     t0 = time.process_time()
     manifest = write_fleet(fleet, args.out, args.seed, duration)

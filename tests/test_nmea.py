@@ -336,6 +336,9 @@ def test_sniff_and_unreadable(tmp_path: Path):
     # log) is no DVL capture: its lines are not objects, one per line
     document = b'{\n  "scenario": "effect-waves",\n  "sensors": {\n    "gnss": {}\n  }\n}\n'
     assert sniff_text(document) == ""
+    # nor are other JSON lines (onboard sitl --fleet's truth, t/north/east/u/v per line)
+    assert sniff_text(b'{"t":0.0,"north":-50.0,"u":1.43,"v":0.18}\n') == ""
+    assert sniff_text(b'{"type":"position_local","ts":1.0,"x":0,"y":0,"z":0}\n') == "dvl-json"
 
 
 def test_mixed_capture_rows_are_timed_between_gps_epochs(tmp_path: Path):

@@ -111,12 +111,17 @@ def test_cli_lists_and_writes_a_fleet(tmp_path, capsys):
     assert "fleet-channel" in capsys.readouterr().out
     assert main(["sitl", "--fleet", "fleet-channel"]) == 2  # offline needs --out
     assert "give --out DIR" in capsys.readouterr().err
-    assert main(["sitl", "--fleet", "fleet-channel", "--out", str(tmp_path), "--duration",
+    out_dir = tmp_path / "fleet"   # created, as every --out DIR
+    assert main(["sitl", "--fleet", "fleet-channel", "--out", str(out_dir), "--duration",
                  "3", "--seed", "2"]) == 0
     out = capsys.readouterr().out
     assert "onboard replay" in out and "boat-1.tlog" in out
     # the others launch after 3 s
-    assert [v["id"] for v in read_manifest(tmp_path)["vehicles"]] == ["boat-1"]
+    assert [v["id"] for v in read_manifest(out_dir)["vehicles"]] == ["boat-1"]
+    # a previous fleet's folder is written over only with --force
+    assert main(["sitl", "--fleet", "fleet-channel", "--out", str(out_dir), "--duration",
+                 "3"]) == 2
+    assert "--force" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- replayed
