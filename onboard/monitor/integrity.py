@@ -490,10 +490,12 @@ class HeadingSourceCheck:
         :data:`HEADING_SOURCE_WIDEN_MIN_RAD`)."""
         return self.offset_rad is not None and abs(self.offset_rad) > HEADING_SOURCE_WIDEN_MIN_RAD
 
-    def offset_at(self, t: float) -> float | None:
-        """The newest judged offset (rad) while it is recent at ``t`` (s): judged
-        within :data:`HEADING_WINDOW_S`; else None (the solution's heading stopped)."""
-        return self.offset_rad if t - self.t_judged <= HEADING_WINDOW_S else None
+    def widening_at(self, t: float) -> float | None:
+        """The newest judged offset (rad) while it :attr:`widens` and is recent at ``t``
+        (s): judged within :data:`HEADING_WINDOW_S`; else None (the two agree, or the
+        solution's heading stopped)."""
+        return self.offset_rad if self.widens and t - self.t_judged <= HEADING_WINDOW_S \
+            else None
 
     def selected(self, t: float, heading_rad: float) -> None:
         """The heading the pipelines are given (rad, true) at ``t`` (s)."""
@@ -1304,14 +1306,14 @@ class IntegrityMonitor:
         if not flags or p is None:
             return ()
         out: tuple[str, ...] = ()
+        own = tuple(getattr(p, "heading_estimate", ())) + tuple(p.position)
+        own += tuple("std_" + q for q in own)   # its heading and position, with sigmas
         if "heading_course_mismatch" in flags:
-            own = tuple(getattr(p, "heading_estimate", ())) + tuple(p.position)
-            out = p.heading_dependent + own + tuple("std_" + q for q in own)
+            out = p.heading_dependent + own
         elif "compass_deviation" in flags:
             out = p.heading_dependent
         if "heading_source_mismatch" in flags:
-            own = tuple(getattr(p, "heading_estimate", ())) + tuple(p.position)
-            out += tuple(q for q in own + tuple("std_" + q for q in own) if q not in out)
+            out += tuple(q for q in own if q not in out)
         if "current_idle_drift" in flags:
             out += tuple(q for q in getattr(p, "current_estimate", ()) if q not in out)
         if "current_unresolved" in flags:
@@ -1347,15 +1349,14 @@ class IntegrityMonitor:
             self._idle_current(pipeline, tuple(getattr(p, "current_estimate", ())), t,
                                values)
         qs = getattr(p, "heading_estimate", ())
-        offset = self.sources.offset_at(t)
-        if qs and offset is not None and self.sources.widens and ("std_" + qs[0]) in values \
-                and abs(offset) > values["std_" + qs[0]]:
-            values["std_" + qs[0]] = math.hypot(values["std_" + qs[0]], offset)
-        dc = self.deviation
-        if dc is None or not qs or not dc.deviated:
+        if not qs:
             return
         q, sq = qs[0], "std_" + qs[0]
-        if q not in values or sq not in values:
+        offset = self.sources.widening_at(t)
+        if offset is not None and sq in values and abs(offset) > values[sq]:
+            values[sq] = math.hypot(values[sq], offset)
+        dc = self.deviation
+        if dc is None or not dc.deviated or q not in values or sq not in values:
             return
         rms = dc.rms()
         on = rms > values[sq]

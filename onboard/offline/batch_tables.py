@@ -41,9 +41,6 @@ ROW_KEYS = ("log", "name", "status", "error", "format", "vehicle_id", "vehicle_c
 FITTED_CONFIG = "(its header fits this bundled config)"
 """The end of runs.parquet's ``config`` for a CSV log given no ``--config``, replayed with
 the bundled config its header fits (``onboard.offline.batch``)."""
-DETECTED_CONFIG = "detected:"
-"""The start of ``config`` for a log given no ``--config``, replayed with the config
-detected from it (``onboard.offline.replay.choose_config``)."""
 
 
 def require_pyarrow() -> None:
@@ -339,6 +336,8 @@ def season_vehicle(row: dict) -> str:
     alike), that id and the log's folder (the log itself when it is a folder, CSV runs
     or a recording), ``bluerov2 (rov-a)``: a season's logs are usually kept a folder per
     vehicle, and two boats' compasses are not one compass."""
+    from onboard.offline.replay import DETECTED_CONFIG
+
     note = row.get("config") or ""
     if note.startswith(DETECTED_CONFIG) or note.endswith(FITTED_CONFIG):
         log = Path(row["log"])

@@ -77,6 +77,11 @@ class _Progress:
             print(file=sys.stderr)
 
 
+DETECTED_CONFIG = "detected:"
+"""The start of the config note (summary.json ``config``) of a config detected from the
+log, not given (:func:`choose_config`)."""
+
+
 def choose_config(log: str, config_path: str | Sequence[str] | None
                   ) -> tuple[Config, str]:
     """The config to use: the given file, or several applied in order
@@ -105,7 +110,7 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
         cfg, why = detect(header)
     else:
         cfg, why = configmod.Config(), "no vehicle evidence in a text log; generic config"
-    return cfg, f"detected: {why}"
+    return cfg, f"{DETECTED_CONFIG} {why}"
 
 
 def _needs_csv_mapping(log: str, cfg: Config | None, given: str) -> None:
