@@ -165,9 +165,9 @@ def test_names_that_collide_get_their_own_folders():
 
 
 def test_a_folder_of_csv_runs_is_one_log_and_of_different_csvs_is_searched(tmp_path):
-    """CSV files with one header are the runs of one log; a vehicle log beside a table of
-    another kind (the Kolumbo glider's log and its DVL current profile) are two files, each
-    its own log; a README quoting an NMEA sentence is a document, not a log."""
+    """CSV files with one header are the runs of one log; beside a vehicle log, a table of
+    another kind without a time column (the Kolumbo glider's DVL current profile) is not a
+    log; a README quoting an NMEA sentence is a document, not a log."""
     runs = tmp_path / "runs"
     runs.mkdir()
     for i in (1, 2):
@@ -182,8 +182,18 @@ def test_a_folder_of_csv_runs_is_one_log_and_of_different_csvs_is_searched(tmp_p
         "Data sample:\n\n$GPGGA,022718.80,2234.03506362,N,11431.92532083,E,4,19,0.9,"
         "3.4038,M,-1.3415,M,00,0000*7F\n")
     found = batch.find_logs([str(mixed)])
-    assert found.logs == [str(mixed / "glider.csv"), str(mixed / "profile.csv")]
-    assert found.skipped == [(str(mixed / "README_upstream.md"), "a document (.md)")]
+    assert found.logs == [str(mixed / "glider.csv")]
+    assert found.skipped[0] == (str(mixed / "README_upstream.md"), "a document (.md)")
+    assert found.skipped[1][0] == str(mixed / "profile.csv")
+    assert found.skipped[1][1].startswith("a CSV table with no time column (, z, N, E, D)")
+    # named, it is a log (and fails with its reason); a config's time column makes it one
+    assert batch.find_logs([str(mixed / "profile.csv")]).logs == [str(mixed / "profile.csv")]
+    assert str(mixed / "profile.csv") in batch.find_logs([str(mixed)], ["Z"]).logs
+    tables = tmp_path / "tables"
+    tables.mkdir()
+    for i in (1, 2):
+        (tables / f"profile{i}.csv").write_text(",z,N,E,D\n0,5,0.1,0.2,0\n")
+    assert not batch.is_log_dir(tables) and batch.find_logs([str(tables)]).logs == []
 
 
 def test_a_worker_that_dies_fails_its_log_alone(season):

@@ -49,6 +49,11 @@ log), where any other file the readers do not recognise is skipped (not a log)."
 DOCUMENT_SUFFIXES = frozenset({".md", ".rst", ".adoc", ".htm", ".html", ".tex"})
 """File name endings of documents: in a folder searched for logs they are skipped, even
 when they quote a few log lines (a data set's README with a sample NMEA sentence)."""
+TIME_NAMES = frozenset({"t", "ts", "utc", "date", "datetime", "epoch", "sec", "secs",
+                        "seconds", "ms", "tow"})
+"""CSV column names (lower case) that name a time; so does any name with ``time`` or
+``stamp`` in it, and the ``[csv] time`` of a ``--config``. A CSV file found in a folder
+with none of them is a table, not a log (a log is a time series)."""
 EXIT_SOME_FAILED = 3
 """Exit status when some logs failed and the others were replayed."""
 PROGRESS_EVERY_S = 1.0
@@ -82,50 +87,53 @@ class Task:
     force: bool = False
 
 
-def find_logs(paths: Sequence[str]) -> Found:
+def find_logs(paths: Sequence[str], time_columns: Iterable[str] = ()) -> Found:
     """The logs among ``paths``: a file given is a log (it fails if it cannot be read);
     a folder that is one log (:func:`is_log_dir`: CSV runs, a service recording) is one;
     any other folder is searched, in name order, for the files the readers recognise
     (:func:`is_log`) and the folders that are logs, the other files listed as skipped.
-    A log found twice (given, and in a folder given) is listed once."""
+    A log found twice (given, and in a folder given) is listed once. ``time_columns``:
+    the ``[csv] time`` columns of the configs given, time columns besides
+    :data:`TIME_NAMES`."""
     found = Found()
+    times = frozenset(c.lower() for c in time_columns)
     for arg in paths:
         p = Path(arg)
         if not p.exists():
             raise UsageError(f"{arg}: no such file or directory")
-        if p.is_file() or is_log_dir(p):
+        if p.is_file() or is_log_dir(p, times):
             found.logs.append(str(p))
         else:
-            _search(p, found)
+            _search(p, found, times)
     seen: set[Path] = set()
     unique = [log for log in found.logs
               if not (Path(log).resolve() in seen or seen.add(Path(log).resolve()))]
     return Found(unique, found.skipped)
 
 
-def _search(folder: Path, found: Found) -> None:
+def _search(folder: Path, found: Found, times: frozenset[str]) -> None:
     """Add the logs in ``folder`` and its sub-folders to ``found``, and the files that
     are not logs to its ``skipped``."""
     for f in sorted(folder.iterdir()):
         if f.is_dir():
-            if is_log_dir(f):
+            if is_log_dir(f, times):
                 found.logs.append(str(f))
             else:
-                _search(f, found)
+                _search(f, found, times)
             continue
-        why = is_log(f)
+        why = is_log(f, times)
         if why:
             found.skipped.append((str(f), why))
         else:
             found.logs.append(str(f))
 
 
-def is_log_dir(p: Path) -> bool:
+def is_log_dir(p: Path, times: frozenset[str] = frozenset()) -> bool:
     """A folder that is one log, as ``onboard replay`` reads it: it holds ``.onbrec``
-    files (a service recording), or ``.csv`` files with one header (runs of one CSV log)
-    and no other file the readers recognise (a README beside them is fine; a folder of
-    CSV files and tlogs, or of CSV files with different headers, is searched instead,
-    each CSV file a log)."""
+    files (a service recording), or ``.csv`` files with one header that has a time
+    column (runs of one CSV log) and no other file the readers recognise (a README
+    beside them is fine; a folder of CSV files and tlogs, or of CSV files with different
+    headers, is searched instead, each CSV file a log)."""
     from onboard.drivers.base import UnreadableLog
     from onboard.drivers.csvlog import run_files
 
@@ -134,16 +142,17 @@ def is_log_dir(p: Path) -> bool:
     if any(p.glob("*.onbrec")):
         return True
     try:
-        run_files(p)
+        first = run_files(p)[0]
     except UnreadableLog:   # no .csv, or not one logger's runs
         return False
-    return all(is_log(f) for f in p.iterdir() if f.is_file() and f.suffix.lower() != ".csv")
+    return not _untimed(first, times) and all(
+        is_log(f, times) for f in p.iterdir() if f.is_file() and f.suffix.lower() != ".csv")
 
 
-def is_log(path: Path) -> str:
+def is_log(path: Path, times: frozenset[str] = frozenset()) -> str:
     """Empty when the readers recognise ``path`` as a log (or its name says it is one,
     :data:`LOG_SUFFIXES`); else why it is not one (a document, :data:`DOCUMENT_SUFFIXES`,
-    never is)."""
+    never is; nor is a CSV table without a time column, :data:`TIME_NAMES`, ``times``)."""
     from onboard.drivers.base import UnreadableLog
     from onboard.drivers.logs import sniff
 
@@ -155,6 +164,8 @@ def is_log(path: Path) -> str:
         fmt = sniff(path)
     except UnreadableLog as err:
         return _reason(err, path)
+    if fmt == "csv":
+        return _untimed(path, times)
     if fmt != "text":
         return ""
     from onboard.drivers.textlog import open_text_log
@@ -164,6 +175,21 @@ def is_log(path: Path) -> str:
     except UnreadableLog as err:
         return _reason(err, path)
     return ""
+
+
+def _untimed(path: Path, times: frozenset[str]) -> str:
+    """Why the CSV file ``path`` is a table and not a log: its header names no time
+    (:data:`TIME_NAMES`, ``times``); empty when it names one."""
+    from onboard.drivers.csvlog import csv_header
+
+    header = csv_header(path)
+    for name in header:
+        n = name.lower()
+        if n in TIME_NAMES or n in times or "time" in n or "stamp" in n:
+            return ""
+    shown = ", ".join(header[:6]) + (", ..." if len(header) > 6 else "")
+    return (f"a CSV table with no time column ({shown}); a CSV log's time column is its "
+            "config's [csv] time, give it with --config")
 
 
 def _reason(err: BaseException, path: Path | str) -> str:
@@ -494,7 +520,16 @@ def plan(args) -> tuple[list[Task], Found]:
 
     if args.jobs is not None and args.jobs < 1:
         raise UsageError(f"--jobs {args.jobs}: give 1 or more")
-    found = find_logs(args.logs)
+    time_columns = []
+    if args.config:   # a config that does not load is bad usage, said before any work
+        from onboard.core import config as configmod
+
+        try:
+            time_columns.append(configmod.load_all(args.config).csv.time)
+        except Exception as err:  # noqa: BLE001 - whatever the loader refuses
+            raise UsageError(f"--config {' '.join(args.config)}: {one_line(str(err))}"
+                             ) from None
+    found = find_logs(args.logs, time_columns)
     if not found.logs:
         raise UsageError("no log found in " + ", ".join(args.logs) + (
             f" ({len(found.skipped)} file(s) skipped as not logs)" if found.skipped else ""))
@@ -504,14 +539,6 @@ def plan(args) -> tuple[list[Task], Found]:
     # the logs' folders are checked by their tasks (resuming reuses them)
     check([Output("--out", out, "dir", ())], inputs=inputs)
     check([Output("--out", out / n, "dir", ()) for n in names], inputs=inputs)
-    if args.config:   # a config that does not load is bad usage, said before any work
-        from onboard.core import config as configmod
-
-        try:
-            configmod.load_all(args.config)
-        except Exception as err:  # noqa: BLE001 - whatever the loader refuses
-            raise UsageError(f"--config {' '.join(args.config)}: {one_line(str(err))}"
-                             ) from None
     tasks = [Task(str(log), str(out / n), n, tuple(args.config or ()),
                   bool(args.diagnose), bool(args.force))
              for log, n in zip(found.logs, names)]
