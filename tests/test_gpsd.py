@@ -213,16 +213,18 @@ def test_gpsd_urls():
 
 
 @pytest.mark.integration
-def test_the_real_gpsd_fed_by_gpsfake_gives_the_logged_fixes():
+def test_the_real_gpsd_fed_by_gpsfake_gives_the_logged_fixes(tmp_path):
     """gpsfake runs a real gpsd on boat.nmea (a sentence per 0.05 s); the transport asks
     it for JSON and every fix is one of the log's positions, with gpsd's error estimates
-    as its accuracy; the fix lost for three epochs gives no position."""
+    as its accuracy; the fix lost for three epochs gives no position. gpsd's control
+    socket goes in the test's own folder (``TMPDIR``: gpsfake killed leaves it behind)."""
     if shutil.which("gpsfake") is None or shutil.which("gpsd") is None:
         pytest.skip(INSTALL)
     port = free_tcp_port()
     fake = subprocess.Popen(["gpsfake", "-q", "-1", "-c", "0.05", "-P", str(port),
                              str(DATA / "boat.nmea")], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, start_new_session=True)
+                            stderr=subprocess.PIPE, start_new_session=True,
+                            env=dict(os.environ, TMPDIR=str(tmp_path)))
 
     async def main():
         tr = GpsdTransport(parse_url(f"gpsd://127.0.0.1:{port}"), backoff_initial_s=0.1,

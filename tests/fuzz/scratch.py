@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import atexit
+import shutil
 import tempfile
 from pathlib import Path
 
 SCRATCH = Path(tempfile.mkdtemp(prefix="onboard-fuzz-"))
-"""A fresh temporary directory per test process; its files are overwritten per input."""
+"""A fresh temporary directory per test process; its files are overwritten per input,
+and it is removed when the process exits."""
+atexit.register(shutil.rmtree, SCRATCH, ignore_errors=True)
