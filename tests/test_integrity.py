@@ -18,6 +18,8 @@ from onboard.monitor.integrity import (
     HeadingCourseCheck,
     IntegrityMonitor,
     NIS_BLOCK_UPDATES,
+    NIS_SETTLE_S,
+    NIS_SUSTAIN_BLOCKS,
     NisCheck,
     PositionCheck,
     SPEED_FLOOR_MPS,
@@ -198,7 +200,7 @@ def test_a_consistent_channel_stays_in_band_and_an_overconfident_one_does_not() 
     ok = NisCheck(2)
     assert not any(ok.add(float(x)) for x in rng.chisquare(2, 2000))
     bad = NisCheck(2)
-    assert any(bad.add(float(x)) for x in 4.0 * rng.chisquare(2, 2 * NIS_BLOCK_UPDATES))
+    assert any(bad.add(float(x)) for x in 4.0 * rng.chisquare(2, NIS_SUSTAIN_BLOCKS * NIS_BLOCK_UPDATES))
 
 
 def test_a_timid_channel_at_half_its_nis_is_flagged_below() -> None:
@@ -237,7 +239,7 @@ def test_nis_out_of_band_flags_the_pipeline_and_names_the_channel() -> None:
     alerts = Alerts()
     m = IntegrityMonitor(alerts)
     recs = [Innovation(channel="velocity", t=0.1 * k, z=(1.0, 1.0), S=(0.1, 0, 0, 0.1),
-                       nis=20.0, dof=2) for k in range(2 * NIS_BLOCK_UPDATES)]
+                       nis=20.0, dof=2) for k in range(NIS_SUSTAIN_BLOCKS * NIS_BLOCK_UPDATES)]
     m.innovations("current", recs)
     assert m.active() == {"current": ["nis_out_of_band"]}
     assert "velocity" in next(iter(alerts)).message
@@ -449,7 +451,9 @@ def test_a_channel_is_judged_against_the_sigma_its_pipeline_publishes() -> None:
     from onboard.estimators.noise_learning import ChannelNoise
 
     rng = np.random.default_rng(5)
-    nis = (0.25 * rng.chisquare(2, 4 * NIS_BLOCK_UPDATES)).tolist()
+    # 2 Hz: the settling (below the band is judged after it), then NIS_SUSTAIN_BLOCKS
+    blocks = math.ceil(NIS_SETTLE_S / (0.5 * NIS_BLOCK_UPDATES)) + NIS_SUSTAIN_BLOCKS
+    nis = (0.25 * rng.chisquare(2, blocks * NIS_BLOCK_UPDATES)).tolist()
     recs = [Innovation(channel="velocity", t=0.5 * k, z=(0.1, 0.1), S=(0.1, 0, 0, 0.1),
                        nis=x, dof=2) for k, x in enumerate(nis)]
     for published, flagged in (({"velocity": lambda: 0.25}, False), ({}, True)):

@@ -12,7 +12,9 @@ import pytest
 from onboard.core.messages import Innovation
 from onboard.monitor.alerts import Alerts
 from onboard.monitor.integrity import (
+    NIS_BLOCK_UPDATES,
     NIS_SETTLE_S,
+    NIS_SUSTAIN_BLOCKS,
     IntegrityMonitor,
     NisCheck,
     _nis_vs_band,
@@ -56,17 +58,20 @@ def test_a_timid_filter_is_not_judged_below_while_it_settles_but_is_once_settled
     (msg,) = _codes(alerts)
     assert "velocity: mean NIS" in msg and "smaller than the filter expects" in msg
     (warning,) = [a for a in alerts if a.code == "nis_out_of_band"]
-    # two blocks of 10 s after the settling, the first of them starting at 120 s
-    assert warning.t_start == pytest.approx(NIS_SETTLE_S + 19.9, abs=0.2)
+    # NIS_SUSTAIN_BLOCKS blocks of 10 s after the settling, the first starting at 120 s
+    block_s = NIS_BLOCK_UPDATES / RATE_HZ
+    assert warning.t_start == pytest.approx(
+        NIS_SETTLE_S + NIS_SUSTAIN_BLOCKS * block_s - 0.1, abs=0.2)
 
 
 def test_an_overconfident_filter_is_judged_from_its_start() -> None:
     # three times its NIS within the first minute: overconfidence while converging is a
-    # miss, warned at the second block (20 s)
+    # miss, warned at the end of the NIS_SUSTAIN_BLOCKS-th block (30 s)
     alerts, m = _monitor()
     m.innovations("current", _stream(3.0, 60.0))
     (warning,) = [a for a in alerts if a.code == "nis_out_of_band"]
-    assert warning.t_start == pytest.approx(19.9, abs=0.2)
+    assert warning.t_start == pytest.approx(
+        NIS_SUSTAIN_BLOCKS * NIS_BLOCK_UPDATES / RATE_HZ - 0.1, abs=0.2)
     assert "larger than the filter expects" in warning.message
 
 

@@ -155,9 +155,13 @@ def _nis_alerts(scale: NoiseScale, nis: float, unpublished: tuple[str, ...] = ()
     pipe.calibrating_channels = calibrating
     mon.watch([pipe])
     from onboard.core.messages import Innovation
+    # 2 Hz updates for the settling and then NIS_SUSTAIN_BLOCKS blocks (a block below its
+    # band is judged once settled)
+    from onboard.monitor.integrity import NIS_BLOCK_UPDATES, NIS_SETTLE_S, NIS_SUSTAIN_BLOCKS
+    blocks = math.ceil(NIS_SETTLE_S / (0.5 * NIS_BLOCK_UPDATES)) + NIS_SUSTAIN_BLOCKS
     mon.innovations("aie", [Innovation(channel="x", t=0.5 * i, z=(0.0,), S=(1.0,), nis=nis,
                                        dof=1, gate=400.0, accepted=True)
-                            for i in range(400)])
+                            for i in range(blocks * NIS_BLOCK_UPDATES)])
     return alerts, mon
 
 
@@ -177,6 +181,20 @@ def test_the_nis_warning_waits_for_the_adaptation_and_names_the_key() -> None:
     between = _learn(1.0, 0.0)
     (msg,) = _nis_warnings(between, 5.0)
     assert "the rest is the forecast's" in msg, msg
+
+
+def test_an_excess_no_forecast_tuning_explains_names_no_key() -> None:
+    # innovations 10 times their S where the forecast is a tenth of S (a survey boat's
+    # compass 69-124 deg off its course): the forecast would have to be ~90 times wider,
+    # not a tuning; the remedy says so and names no key. Negative control: an excess a
+    # forecast 5 times wider explains names its key's value.
+    beyond = _learn(1.0, 0.11)
+    (msg,) = _nis_warnings(beyond, 10.0)
+    assert msg.count("no key's value explains it") == 1 and " set " not in msg, msg
+    assert "would have to be" in msg and "times wider" in msg, msg
+    within = _learn(1.0, 0.0)
+    (msg,) = _nis_warnings(within, 5.0)
+    assert "no key's value" not in msg and "times 5 brings the NIS to 1" in msg, msg
 
 
 def test_a_narrowed_noise_the_filter_does_not_take_is_named_with_its_value() -> None:
