@@ -29,9 +29,11 @@ KNOWN_COLS = 3
 """The west half of the grid knows the field (0.3 m/s towards north), the east half not."""
 
 
-def synthetic_grid(utc: float, *, known_cols: int = KNOWN_COLS) -> dict:
+def synthetic_grid(utc: float, *, known_cols: int = KNOWN_COLS, unplaced: bool = False
+                   ) -> dict:
     """A 6 x 6 grid of 200 m cells about (43 N, 5 E): the first ``known_cols`` columns
-    (west) known, the rest null; two vehicles moving north in the west half."""
+    (west) known, the rest null; two vehicles moving north in the west half (and with
+    ``unplaced`` a third whose records carry no position: an AUV before any fix)."""
     m_lat, m_lon = 111132.95, 111319.49 * 0.7313537  # cos(43 deg)
     cells = []
     for i in range(ROWS):
@@ -49,15 +51,18 @@ def synthetic_grid(utc: float, *, known_cols: int = KNOWN_COLS) -> dict:
                  "lon": LON0 - (250.0 + 150.0 * k) / m_lon,
                  "north": 0.28, "east": 0.02, "std_north": 0.03, "std_east": 0.03}
                 for k in range(2)]
+    if unplaced:
+        vehicles.append({"vehicle": "auv", "utc": utc, "lat": None, "lon": None,
+                         "north": 0.25, "east": 0.05, "std_north": 0.04, "std_east": 0.04})
     return {"schema": 1, "utc": utc, "spacing_m": SPACING_M, "cells": cells, "vehicles": vehicles}
 
 
-def fleet_view(known_cols: int = KNOWN_COLS, n: int = 12) -> LiveView:
+def fleet_view(known_cols: int = KNOWN_COLS, n: int = 12, unplaced: bool = False) -> LiveView:
     """A LiveView fed ``n`` grids 5 s apart on the grid's key, as the shore receives them."""
     view = LiveView()
     for k in range(n):
-        view.feed_zenoh(GRID_KEY, json.dumps(synthetic_grid(1000.0 + 5.0 * k,
-                                                            known_cols=known_cols)).encode())
+        view.feed_zenoh(GRID_KEY, json.dumps(synthetic_grid(
+            1000.0 + 5.0 * k, known_cols=known_cols, unplaced=unplaced)).encode())
     return view
 
 
@@ -121,6 +126,25 @@ def test_the_page_draws_arrows_where_the_field_is_known_and_nothing_where_it_is_
     assert purple_tinted(east) == 0  # the null cells: nothing, not even faded
     if os.environ.get("ONBOARD_FLEET_SCREENSHOT"):
         shutil.copyfile(out, os.environ["ONBOARD_FLEET_SCREENSHOT"])
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")
+def test_a_vehicle_without_a_position_is_counted_not_drawn_at_0_0(tmp_path):
+    """An AUV that never had a fix is listed in the grid without a position: the panel
+    names it, and the map keeps the fleet's extent (drawn at lat 0, lon 0, it put the
+    fleet 5,000 km away and every arrow under a pixel)."""
+    mpimg = pytest.importorskip("matplotlib.image")
+    out = tmp_path / "fleet.png"
+    with ServerThread(view=fleet_view(unplaced=True)) as srv:
+        dom = dump_dom(srv.url + "/?tiles=0", tmp_path / "profile")
+        run = screenshot(srv.url + "/?tiles=0", out, tmp_path / "profile2")
+    text = re.search(r'id="fleet"[^>]*>([^<]*)<', dom)
+    assert text and "3 vehicles (auv without a position) · 200 m cells" in text.group(1), \
+        dom[:2000]
+    assert run.returncode == 0 and out.exists(), run.stderr[-2000:]
+    img = mpimg.imread(out)
+    assert pixels_near(img[40:, :345], FLEET_RGB) > 300  # the arrows as without it
 
 
 @pytest.mark.integration

@@ -78,7 +78,7 @@ async function pollFleet() {
       fleet.tracks = f.tracks;
       fleet.vehicles = f.vehicles;
       if (!fleet.origin && fleet.grid && fleet.grid.cells.length) fleet.origin = centre(fleet.grid.cells);
-      if (!fleet.origin && fleet.vehicles.length) fleet.origin = centre(fleet.vehicles);
+      if (!fleet.origin && fleet.vehicles.some(placed)) fleet.origin = centre(fleet.vehicles.filter(placed));
       if (fleet.grid || fleet.vehicles.length) { fleetPanel(); draw(); }
     }
   } catch (err) { /* an older service without api/fleet: no fleet layer */ }
@@ -94,15 +94,18 @@ function centre(cells) {
 function fleetPanel() {
   const g = fleet.grid;
   $('fleet-box').hidden = false;
-  const n = fleet.vehicles.length, vehicles = `${n} vehicle${n === 1 ? '' : 's'}`;
+  const n = fleet.vehicles.length, lost = fleet.vehicles.filter((b) => !placed(b)).map((b) => b.vehicle);
+  const vehicles = `${n} vehicle${n === 1 ? '' : 's'}` + (lost.length ? ` (${lost.join(', ')} without a position)` : '');
   if (!g) { $('fleet').textContent = `${vehicles} more · no fleet field`; return; }
   const known = g.cells.filter(known_cell).length;
   const t = new Date(g.utc * 1000).toISOString().slice(11, 19);
   $('fleet').textContent = `${known} cells known · ${g.cells.length - known} unknown · ` +
-    `${vehicles} · ${g.spacing_m} m cells · ${t} UTC`;
+    `${vehicles} · ${Math.round(g.spacing_m)} m cells · ${t} UTC`;
 }
 
 const known_cell = (c) => c.north !== null && c.east !== null && c.north !== undefined && c.east !== undefined;
+// A vehicle whose records carry no position (an AUV before any fix) is counted, not drawn.
+const placed = (b) => Number.isFinite(b.lat) && Number.isFinite(b.lon);
 
 function panel(s) {
   if (s.t === null) { $('status').textContent = `waiting for ${s.vehicle || 'a vehicle'} ...`; return; }
@@ -295,7 +298,7 @@ function fleetPoints() {
   // Every place of the fleet layer in local metres (the extent shown holds them all).
   if (!mapOrigin()) return [];
   const pts = fleet.grid ? fleet.grid.cells.map((c) => local(c.lat, c.lon)) : [];
-  for (const b of fleet.vehicles) pts.push(local(b.lat, b.lon));
+  for (const b of fleet.vehicles.filter(placed)) pts.push(local(b.lat, b.lon));
   for (const tr of Object.values(fleet.tracks)) for (const [, lat, lon] of tr) pts.push(local(lat, lon));
   return pts;
 }
@@ -326,7 +329,7 @@ function drawFleet(ctx, v) {
     ctx.stroke();
   }
   ctx.setLineDash([]);
-  for (const b of fleet.vehicles) {
+  for (const b of fleet.vehicles.filter(placed)) {
     const [x, y] = v.px(...local(b.lat, b.lon));
     if (known_cell(b))
       currentArrow(ctx, x, y, b.north, b.east, b.std_north, b.std_east, scale, FLEET_VEHICLE_COLOUR, 'rgba(239, 108, 0, 0.15)', 3, 9);
