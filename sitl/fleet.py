@@ -249,11 +249,11 @@ CHANNEL_VEHICLES = (
 DEMO_VEHICLES = (
     dataclasses.replace(CHANNEL_VEHICLES[0], leg_s=40.0, step_s=15.0),
     dataclasses.replace(CHANNEL_VEHICLES[1], leg_s=45.0, start_delay_s=10.0),
-    dataclasses.replace(CHANNEL_VEHICLES[2], start_delay_s=20.0, surface_s=0.0),
+    dataclasses.replace(CHANNEL_VEHICLES[2], start_delay_s=20.0, surface_s=10.0),
 )
 """fleet-demo's vehicles: fleet-channel's with shorter lines and launches 10 s apart, so
-that every current is known within the first two minutes of a demo (its AUV starts at
-its depth, without the half minute afloat for a fix)."""
+that every current is known within the first two minutes of a demo (its AUV 10 s afloat
+for a fix, not 30: placed, so that the demo's field has it)."""
 
 
 def survey_sea(origin: tuple[float, float], utc0: float) -> SeaField:
