@@ -269,6 +269,12 @@ def test_a_speed_of_2_m_s_against_a_doppler_1_2_m_s_is_a_speed_mismatch() -> Non
     assert "speed_mismatch" in alerts.codes()
     assert m.active() == {"aie": ["speed_mismatch"]}
     assert "0.80 m/s from the GNSS Doppler speed" in next(iter(alerts)).message
+    # published as unknown while flagged, its sigma too (a frozen speed with a confident
+    # sigma: a submerged AUV's aie at 0.11 +- 0.28 m/s while it cruises at 1.5)
+    assert set(m.withheld("aie")) == {"speed", "std_speed"}
+    assert m.withheld("kf") == ()
+    _, ok = _speeds("aie", {"speed": 1.3}, sog=1.2)
+    assert ok.withheld("aie") == ()
 
 
 def test_a_speed_within_its_sigma_of_the_doppler_speed_passes() -> None:
@@ -289,6 +295,7 @@ def test_an_eseso_running_away_from_the_dvl_bottom_track_is_flagged() -> None:
     alerts, m = _speeds("eseso", {"u": 6.2, "v": 0.0}, dvl_vx=0.0, std=1.25)
     assert m.active() == {"eseso": ["speed_mismatch"]}
     assert "DVL" in next(iter(alerts)).message
+    assert set(m.withheld("eseso")) == {"u", "v", "std_u", "std_v"}
 
 
 def test_an_eseso_following_the_dvl_passes() -> None:

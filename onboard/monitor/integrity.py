@@ -1309,7 +1309,8 @@ class IntegrityMonitor:
         """The quantities of ``pipeline`` to publish as unknown now: its heading-
         dependent outputs while the heading disagrees with the course or the compass
         deviates (and its heading and position, each with its ``std_``, while the
-        heading disagrees with the course); its current while it disagrees with the idle
+        heading disagrees with the course); its speed with its ``std_`` while it
+        disagrees with the measured speed; its current while it disagrees with the idle
         drift, and the components of its current the data do not resolve."""
         flags = self.flags.get(pipeline)
         p = self.watched.get(pipeline)
@@ -1324,6 +1325,9 @@ class IntegrityMonitor:
             out = p.heading_dependent
         if "heading_source_mismatch" in flags:
             out += tuple(q for q in own if q not in out)
+        if "speed_mismatch" in flags:
+            out += tuple(q for q in (*p.speed, *("std_" + q for q in p.speed))
+                         if q not in out)
         if "current_idle_drift" in flags:
             out += tuple(q for q in getattr(p, "current_estimate", ()) if q not in out)
         if "current_unresolved" in flags:
