@@ -500,6 +500,7 @@ class Engine:
         queue = self.queue
         queue.open_tick(t, len(self.pipelines))
         stepped = []
+        computed = []   # (name, values) as stepped, before any is withheld
         monitor, integrity = self.monitor, self.integrity
         for i, p in enumerate(self.pipelines):
             values: Mapping[str, float] | None
@@ -516,11 +517,12 @@ class Engine:
                 integrity.innovations(p.name, innovations)
             if values:
                 stepped.append((p, self._published(p, t, values), queue.t_sensor))
+                computed.append((p.name, values))
         queue.close_tick()
         integrity.counters_at(t)
         records = self._records(t, stepped)
         integrity.positions_at(t, records)
-        integrity.speeds_at(t, records)
+        integrity.speeds_at(t, computed)   # a withheld speed is still judged
         return records
 
     def _take_events(self, p: Pipeline) -> None:

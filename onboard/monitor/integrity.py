@@ -112,7 +112,7 @@ from __future__ import annotations
 import functools
 import math
 from collections import deque
-from typing import Iterable, Protocol, Sequence
+from typing import Iterable, Mapping, Protocol, Sequence
 
 from onboard.monitor.alerts import Alerts
 from onboard.monitor.compass_deviation import CompassDeviation
@@ -783,20 +783,20 @@ class SpeedCheck:
         return xs[len(xs) // 2] if xs else math.nan
 
 
-def _published_speed(qs: tuple[str, ...], rec: EstimateRecord, forward_only: bool
-                     ) -> tuple[float, float] | None:
-    """``rec``'s speed (m/s) and its variance (m^2/s^2) as compared with a measurement,
-    ``qs`` its forward speed and maybe its sideways speed: the forward speed (signed,
-    ``forward_only``) or the horizontal speed (a magnitude); None when it is not
-    published with its sigma."""
-    v, sd = rec.values, rec.std
+def _computed_speed(qs: tuple[str, ...], values: Mapping[str, float], forward_only: bool
+                    ) -> tuple[float, float] | None:
+    """A pipeline's speed (m/s) and its variance (m^2/s^2) as compared with a measurement,
+    from its ``values`` of a tick (each quantity ``q`` with its ``std_q``), ``qs`` its
+    forward speed and maybe its sideways speed: the forward speed (signed,
+    ``forward_only``) or the horizontal speed (a magnitude); None when it has no finite
+    one with its sigma."""
+    qs = qs[:1] if forward_only else qs
+    got = [(values.get(q, math.nan), values.get("std_" + q, math.nan)) for q in qs]
+    if not all(math.isfinite(v) and math.isfinite(sd) for v, sd in got):
+        return None
     if forward_only:
-        q = qs[0]
-        return (v[q], sd[q] ** 2) if q in v and q in sd else None
-    for q in qs:
-        if q not in v or q not in sd:
-            return None
-    return math.hypot(*[v[q] for q in qs]), sum([sd[q] ** 2 for q in qs])
+        return got[0][0], got[0][1] ** 2
+    return math.hypot(*[v for v, _ in got]), sum([sd * sd for _, sd in got])
 
 
 class NisCheck:
@@ -1497,43 +1497,47 @@ class IntegrityMonitor:
         std = fom if fom is not None and fom > 0 and math.isfinite(fom) else self.dvl_std_mps
         self._speed_refs.append((s.t, s.vx, std * std, "DVL"))
 
-    def speeds_at(self, t: float, records: Sequence[EstimateRecord]) -> None:
-        """Compare the published speeds with the newest measurement of each kind since
-        the previous tick (at most :data:`FIX_MAX_AGE_S` old)."""
+    def speeds_at(self, t: float, computed: Sequence[tuple[str, Mapping[str, float]]]
+                  ) -> None:
+        """Compare the pipelines' speeds at the tick at ``t`` (``computed``: each
+        pipeline's name and values as it stepped, before any is withheld, so that a
+        speed withheld for this check is still judged and its flag can clear) with the
+        newest measurement of each kind since the previous tick (at most
+        :data:`FIX_MAX_AGE_S` old)."""
         refs = self._speed_refs
         if not refs:
             return
         newest = {ref[3]: ref for ref in refs if t - ref[0] <= FIX_MAX_AGE_S}
         refs.clear()
         watched = self.watched
-        for rec in records:
-            p = watched.get(rec.pipeline)
+        for name, values in computed:
+            p = watched.get(name)
             if p is not None and p.speed:
                 for ref in newest.values():
-                    self._speed(rec, p.speed, ref)
+                    self._speed(name, t, values, p.speed, ref)
 
-    def _speed(self, rec: EstimateRecord, qs: tuple[str, ...],
-               ref: tuple[float, float, float, str]) -> None:
+    def _speed(self, pipeline: str, t: float, values: Mapping[str, float],
+               qs: tuple[str, ...], ref: tuple[float, float, float, str]) -> None:
         """One pipeline's comparison with one measured speed; ``qs``: its speed role."""
         _, measured, var_ref, what = ref
         dvl = what == "DVL"
-        pub = _published_speed(qs, rec, forward_only=dvl)
+        pub = _computed_speed(qs, values, forward_only=dvl)
         if pub is None:
             return
         speed = pub[0] if dvl else abs(pub[0])
-        per = self.speeds.setdefault(rec.pipeline, {})
+        per = self.speeds.setdefault(pipeline, {})
         check = per.get(what)
         if check is None:
             check = per[what] = SpeedCheck()
-        verdict = check.add(rec.t, speed - measured, pub[1] + var_ref)
+        verdict = check.add(t, speed - measured, pub[1] + var_ref)
         if verdict is None:
             return
-        self._flag(rec.pipeline, "speed_mismatch", any(c.failing for c in per.values()))
-        if verdict and self._due("speed_mismatch", rec.pipeline, rec.t):
-            self._warn("speed_mismatch", rec.pipeline, rec.t, (
-                f"{rec.pipeline} speed is {check.median_mps():.2f} m/s from the {what} speed: "
+        self._flag(pipeline, "speed_mismatch", any(c.failing for c in per.values()))
+        if verdict and self._due("speed_mismatch", pipeline, t):
+            self._warn("speed_mismatch", pipeline, t, (
+                f"{pipeline} speed is {check.median_mps():.2f} m/s from the {what} speed: "
                 "its speed and sigma are not to be trusted; onboard diagnose LOG names what "
-                f"its model lacks, [pipelines.{rec.pipeline}] sets its noise "
+                f"its model lacks, [pipelines.{pipeline}] sets its noise "
                 "(docs/integrity.md)"), details=(
                 f"the median over {SPEED_WINDOW_S:.0f} s, with its stated "
                 f"{math.sqrt(pub[1]):.2f} m/s and the measurement's "
