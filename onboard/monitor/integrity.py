@@ -1521,15 +1521,15 @@ class IntegrityMonitor:
         """One pipeline's comparison with one measured speed; ``qs``: its speed role."""
         _, measured, var_ref, what = ref
         dvl = what == "DVL"
-        pub = _computed_speed(qs, values, forward_only=dvl)
-        if pub is None:
+        own = _computed_speed(qs, values, forward_only=dvl)
+        if own is None:
             return
-        speed = pub[0] if dvl else abs(pub[0])
+        speed = own[0] if dvl else abs(own[0])
         per = self.speeds.setdefault(pipeline, {})
         check = per.get(what)
         if check is None:
             check = per[what] = SpeedCheck()
-        verdict = check.add(t, speed - measured, pub[1] + var_ref)
+        verdict = check.add(t, speed - measured, own[1] + var_ref)
         if verdict is None:
             return
         self._flag(pipeline, "speed_mismatch", any(c.failing for c in per.values()))
@@ -1540,7 +1540,7 @@ class IntegrityMonitor:
                 f"its model lacks, [pipelines.{pipeline}] sets its noise "
                 "(docs/integrity.md)"), details=(
                 f"the median over {SPEED_WINDOW_S:.0f} s, with its stated "
-                f"{math.sqrt(pub[1]):.2f} m/s and the measurement's "
+                f"{math.sqrt(own[1]):.2f} m/s and the measurement's "
                 f"{math.sqrt(var_ref):.2f} m/s"))
 
     # ------------------------------------------------------------------ innovations
