@@ -25,9 +25,8 @@ ESTIMATOR_STATUS   health: test ratios sqrt(NIS)/3 (1 = a 3-sigma innovation) of
                    VELOCITY_HORIZ / POS_HORIZ_REL when estimating (not while a
                    pipeline fails speed_mismatch / position_residual or
                    heading_course_mismatch or heading_source_mismatch, which
-                   withhold the headings and
-                   positions), GPS_GLITCH when
-                   GNSS fixes were rejected since the last report
+                   withhold the headings and positions), GPS_GLITCH when GNSS
+                   fixes were rejected since the last report
 STATUSTEXT         events (source lost or silent, state restored or corrupt),   <= 1 per
                    rate-limited by a token bucket (burst 5); the number           2 s avg
                    suppressed is reported when the bucket refills
