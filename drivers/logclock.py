@@ -21,6 +21,7 @@ time elsewhere. :func:`log_clock` says which, as a :class:`LogClock`:
   after its last jump (``MixedCaptureReader.utc_offset_s``).
 * DVL JSON: ``time_of_validity`` or ``ts`` (Unix time), else the sum of json_v1 ``time``
   since the first report; UTC as is.
+* Slocum glider binary log: ``m_present_time``, POSIX seconds; UTC as is.
 * PD6: the TS lines' time (taken as UTC); DDBoat log: the lines' wall-clock stamps (taken
   as UTC); UTC as is.
 
@@ -128,6 +129,7 @@ POSIX_CLOCKS: dict[str, tuple[str, str | None]] = {
                          "intervals since the first report)"),
     "Pd6LogReader": ("the PD6 TS lines' time (taken as UTC)", None),
     "DdboatLogReader": ("the lines' wall-clock stamps (the boat's clock, taken as UTC)", None),
+    "SlocumReader": ("the glider's m_present_time (POSIX s)", None),
 }
 """Reader class -> (its clock in words, why it has no UTC when its stamps are no date, or
 None for the words of :data:`NO_DATE`), for the readers whose stamps are UTC when they are

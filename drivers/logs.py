@@ -1,8 +1,9 @@
 """Open any supported log by sniffing its content, not trusting its name alone.
 
 Supported: MAVLink telemetry logs (``.tlog``), ArduPilot DataFlash (``.bin``), MCAP
-recordings of BlueOS's MAVLink (``.mcap``), the service's own recordings, NMEA / Water Linked DVL JSON / PD6 text captures, and CSV (one
-file or a directory of runs, which needs a ``[csv]`` mapping in the config).
+recordings of BlueOS's MAVLink (``.mcap``), Slocum glider binary logs (:mod:`drivers.slocum`),
+the service's own recordings, NMEA / Water Linked DVL JSON / PD6 text captures, and CSV
+(one file or a directory of runs, which needs a ``[csv]`` mapping in the config).
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def sniff(path: str | Path) -> str:
-    """The format of ``path``: tlog, dataflash, recording, mcap, csv, csv-dir or text."""
+    """The format of ``path``: tlog, dataflash, recording, mcap, slocum, csv, csv-dir or
+    text."""
     p = Path(path)
     if p.is_dir():
         if any(p.glob("*.onbrec")):
@@ -43,6 +45,10 @@ def sniff(path: str | Path) -> str:
         return "mcap"
     from onboard.drivers.mavlink_frame import MAGIC_V1, MAGIC_V2
 
+    from onboard.drivers.slocum import is_slocum
+
+    if is_slocum(head, p):
+        return "slocum"
     suffix = p.suffix.lower()
     if suffix == ".tlog" or (len(head) > 9 and head[8] in (MAGIC_V1, MAGIC_V2)):
         return "tlog"
@@ -60,6 +66,10 @@ def open_log(path: str | Path, csv_format=None,
     by the CSV reader as ``ActuatorColumn`` samples (other formats have no columns:
     :class:`UnreadableLog`)."""
     fmt = sniff(path)
+    if fmt == "slocum":
+        from onboard.drivers.slocum import SlocumReader
+
+        return fmt, SlocumReader(path)
     if actuator_columns and fmt not in ("csv", "csv-dir"):
         raise UnreadableLog(
             f"{path}: [inputs] reads column(s) {', '.join(map(repr, actuator_columns))} "

@@ -108,6 +108,10 @@ CASES: list[tuple[str, str, str | None, set[str], set[str]]] = [
      {"current_unresolved:current"},
      (CONSISTENT - {"current_unresolved"}) | HONESTY | {"no_estimate:current",
                                                          "heading_course_mismatch"}),
+    # a Slocum's own binary log (drivers/slocum.py): GPS fixes only at the surface, with no
+    # speed or course, so no current (its dead reckoning is not a measurement), said so
+    ("glider-dbd", "slocum_glider_dbd_samples/amadeus-2014-204-05-000.dbd", None,
+     {"no_estimate:current"}, CONSISTENT),
     ("dvl-circle", "waterlinked_dvl_a50_json_tank/out20210528_circle.txt", None,
      NO_ESTIMATE_ALL, CONSISTENT),
     ("dvl-still", "waterlinked_dvl_a50_json_tank/out_still_60s.txt", None,
@@ -117,7 +121,8 @@ CASES: list[tuple[str, str, str | None, set[str], set[str]]] = [
 UNREADABLE: list[tuple[str, str, str]] = [
     # (id, path, what the one line says)
     ("survey-notes", "survey_boat_arduino_rc/Notes_Test.txt", "no NMEA"),
-    ("glider-dbd", "slocum_glider_dbd_samples/01600001.dbd", "binary data in no format"),
+    ("glider-science", "slocum_glider_dbd_samples/sebastian-2014-204-05-000.ebd",
+     "science-bay file"),
 ]
 
 

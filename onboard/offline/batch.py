@@ -160,6 +160,10 @@ def is_log(path: Path, times: frozenset[str] = frozenset()) -> str:
         return ""
     if path.suffix.lower() in DOCUMENT_SUFFIXES:
         return f"a document ({path.suffix.lower()})"
+    from onboard.drivers.slocum import not_a_log
+
+    if not_a_log(path):
+        return not_a_log(path)
     try:
         fmt = sniff(path)
     except UnreadableLog as err:

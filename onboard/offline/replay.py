@@ -78,6 +78,9 @@ class _Progress:
 
 
 DETECTED_CONFIG = "detected:"
+SLOCUM_CONFIG = "slocum-glider"
+"""The bundled config a Slocum glider's binary log is replayed with (its sensors have the
+same names on every Slocum)."""
 """The start of the config note (summary.json ``config``) of a config detected from the
 log, not given (:func:`choose_config`)."""
 
@@ -105,6 +108,8 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
 
         infos, params = scan_header(log)
         cfg, why = detect([*infos, *params])
+    elif fmt == "slocum":
+        cfg, why = configmod.load(SLOCUM_CONFIG), f"a Slocum glider's log: {SLOCUM_CONFIG}"
     elif fmt in ("dataflash", "recording", "mcap"):
         header = [s for s in reader if isinstance(s, (Parameter, VehicleInfo))]
         cfg, why = detect(header)

@@ -1,0 +1,169 @@
+"""Slocum glider binary logs (drivers/slocum.py): a file written here from the layout of
+the module docstring, and the real gliders' files of ../shared/data."""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from pathlib import Path
+
+import pytest
+
+from onboard.cli import main as cli_main
+from onboard.core.messages import ActuatorColumn, Attitude, Depth, GnssFix, Heading
+from onboard.drivers.base import UnreadableLog
+from onboard.drivers.logs import open_log, sniff
+from onboard.drivers.slocum import NO_VALUE, SlocumReader, not_a_log
+
+SENSORS = [  # (name, units, bytes)
+    ("m_present_time", "timestamp", 8), ("m_gps_lat", "lat", 8), ("m_gps_lon", "lon", 8),
+    ("m_heading", "rad", 4), ("m_pitch", "rad", 4), ("m_roll", "rad", 4),
+    ("m_depth", "m", 4), ("c_fin", "rad", 4), ("m_battpos", "in", 4), ("x_unused", "nodim", 1),
+]
+FMT = {1: "b", 2: "h", 4: "f", 8: "d"}
+
+
+def write_dbd(path: Path, cycles: list[dict[str, float | None]], order: str = ">",
+              factored_into: Path | None = None, truncate: int = 0) -> None:
+    """A flight file of :data:`SENSORS` with ``cycles`` (name -> new value, or None for
+    "updated, the same value"; absent: not updated), its sensor list in the file or in
+    ``factored_into``/<crc>.cac."""
+    lines = [f"s: T {i} {i} {size} {name} {units}\n" for i, (name, units, size)
+             in enumerate(SENSORS)]
+    n = len(SENSORS)
+    tags = {"dbd_label": "DBD(dinkum_binary_data)file", "encoding_ver": "5",
+            "num_ascii_tags": "0", "all_sensors": "T", "the8x3_filename": "00010000",
+            "full_filename": "test-2026-1-0-0", "filename_extension": "dbd",
+            "sensors_per_cycle": str(n), "total_num_sensors": str(n),
+            "state_bytes_per_cycle": str((n + 3) // 4), "sensor_list_crc": "abcd1234",
+            "sensor_list_factored": "1" if factored_into else "0"}
+    tags["num_ascii_tags"] = str(len(tags))
+    out = bytearray("".join(f"{k}: {v}\n" for k, v in tags.items()).encode())
+    if factored_into:
+        (factored_into / "abcd1234.cac").write_text("".join(lines))
+    else:
+        out += "".join(lines).encode()
+    out += b"sa" + struct.pack(order + "hfd", 0x1234, 123.456, 123456789.12345)
+    for cyc in cycles:
+        state = bytearray((n + 3) // 4)
+        values = bytearray()
+        for k, (name, _, size) in enumerate(SENSORS):
+            if name not in cyc:
+                continue
+            bits = 1 if cyc[name] is None else 2
+            state[k >> 2] |= bits << (6 - 2 * (k & 3))
+            if bits == 2:
+                v = cyc[name]
+                values += struct.pack(order + FMT[size], int(v) if size < 4 else v)
+        out += b"d" + state + values
+    out += b"X"
+    path.write_bytes(bytes(out[:len(out) - truncate]))
+
+
+T0 = 1780000000.0
+OPENING = {name: 0.0 for name, _, _ in SENSORS}   # the dump of every value
+CYCLES = [
+    OPENING,
+    {"m_present_time": T0, "m_heading": 1.0, "m_pitch": -0.4, "m_roll": 0.02,
+     "m_depth": 12.5, "c_fin": 0.1},
+    {"m_present_time": T0 + 4, "m_heading": None, "m_depth": 14.0, "m_battpos": 0.5},
+    {"m_present_time": T0 + 8, "m_gps_lat": 5415.5979, "m_gps_lon": -726.7404},
+    {"m_present_time": T0 + 12, "m_gps_lat": NO_VALUE, "m_gps_lon": NO_VALUE},
+    {"m_depth": 20.0},                                   # no time: rejected
+]
+
+
+@pytest.mark.parametrize("order", [">", "<"])
+def test_a_file_decodes_cycle_by_cycle_in_either_byte_order(tmp_path: Path, order: str):
+    f = tmp_path / "test.dbd"
+    write_dbd(f, CYCLES, order)
+    assert sniff(f) == "slocum"
+    r = SlocumReader(f)
+    got = list(r)
+    # the opening dump gives nothing; the heading repeated (state 1) is the same heading
+    heads = [s for s in got if isinstance(s, Heading)]
+    assert [s.t for s in heads] == [T0, T0 + 4]
+    assert heads[1].heading_rad == pytest.approx(1.0)
+    att = [s for s in got if isinstance(s, Attitude)][0]
+    assert (att.pitch_rad, att.roll_rad) == pytest.approx((-0.4, 0.02))
+    assert [s.depth_m for s in got if isinstance(s, Depth)] == [12.5, 14.0]
+    cols = {s.column: s.value for s in got if isinstance(s, ActuatorColumn)}
+    assert cols == {"c_fin": pytest.approx(0.1), "m_battpos": 0.5}
+    fix, = [s for s in got if isinstance(s, GnssFix)]
+    # DDMM.MMMM: 54 deg 15.5979 min north, 7 deg 26.7404 min west
+    assert (fix.lat_deg, fix.lon_deg) == pytest.approx((54.259965, -7.44567333))
+    assert fix.t == T0 + 8
+    assert r.stats.rejected == {"no_fix": 1, "no_time": 1}
+    assert r.stats.used_bytes == r.stats.size_bytes
+
+
+def test_a_cut_file_keeps_its_whole_cycles_and_counts_the_cut(tmp_path: Path):
+    f = tmp_path / "cut.sbd"
+    write_dbd(f, CYCLES[:3], truncate=3)   # the last cycle's depth cut
+    r = SlocumReader(f)
+    assert [s.t for s in r if isinstance(s, Depth)] == [T0]
+    assert r.stats.rejected == {"truncated": 1}
+
+
+def test_a_factored_sensor_list_is_read_from_the_cache_or_named(tmp_path: Path):
+    (tmp_path / "cac").mkdir()
+    f = tmp_path / "f.dbd"
+    write_dbd(f, CYCLES[:2], factored_into=tmp_path / "cac")
+    assert len([s for s in SlocumReader(f) if isinstance(s, Depth)]) == 1
+    (tmp_path / "cac" / "abcd1234.cac").unlink()
+    with pytest.raises(UnreadableLog, match="cache file abcd1234.cac"):
+        SlocumReader(f)
+
+
+def test_science_files_and_caches_are_not_logs(tmp_path: Path):
+    assert "science-bay" in not_a_log(Path("unit_1-2021-1-0-0.tbd"))
+    assert ".sbd" in not_a_log(Path("unit_1-2021-1-0-0.tbd"))
+    assert "cache" in not_a_log(Path("cac/0f682cb2.cac"))
+    assert not_a_log(Path("unit_1-2021-1-0-0.sbd")) == ""
+
+
+# --------------------------------------------------------------------------- real files
+
+GLIDERS = "slocum_glider_dbd_samples"
+
+
+@pytest.mark.data
+def test_the_amadeus_dive_reads_as_dbdreader_read_it(shared_data: Path):
+    """SOURCE.md's values, read there with dbdreader (an independent decoder): the
+    glider's depth-averaged current at 18:05 UTC, vx 0.374, vy -0.257 m/s."""
+    r = SlocumReader(shared_data / GLIDERS / "amadeus-2014-204-05-000.dbd")
+    assert len(r.sensors) == 2027 and r.tags["full_filename"] == "amadeus-2014-204-5-0"
+    i = {s.name: k for k, s in enumerate(r.sensors)}
+    dac = [(v[i["m_present_time"]], v[i["m_water_vx"]], v[i["m_water_vy"]])
+           for v, up in r.cycles() if i["m_water_vx"] in up and v[i["m_water_vx"]] != 0.0]
+    t, vx, vy = dac[0]
+    assert 1406225100 < t < 1406225160   # 2014-07-24 18:05 UTC
+    assert (vx, vy) == pytest.approx((0.374, -0.257), abs=5e-4)
+    fixes = [s for s in SlocumReader(r.path) if isinstance(s, GnssFix)]
+    assert len(fixes) == 25   # at the surface; the German Bight
+    assert all(54.2 < s.lat_deg < 54.3 and 7.4 < s.lon_deg < 7.5 for s in fixes)
+
+
+@pytest.mark.data
+def test_a_compressed_file_reads_as_its_uncompressed_twin(shared_data: Path):
+    pytest.importorskip("lz4", reason="pip install lz4 (a compressed Slocum file)")
+    plain = list(open_log(shared_data / GLIDERS / "01600001.dbd")[1])
+    packed = list(open_log(shared_data / GLIDERS / "01600001.dcd")[1])
+    assert len(plain) > 1000 and packed == plain
+
+
+@pytest.mark.data
+def test_a_glider_log_replays_with_the_slocum_config_and_says_what_it_lacks(
+        shared_data: Path, tmp_path: Path):
+    log = shared_data / GLIDERS / "amadeus-2014-204-05-000.dbd"
+    assert cli_main(["replay", str(log), "--out", str(tmp_path), "--no-plot"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert "slocum-glider" in summary["config"]
+    assert summary["utc"]["start"].startswith("2014-07-24T17:04")
+    lacks = [w for w in summary["warnings"] if w["code"] == "no_estimate"
+             and w["pipeline"] == "current"]
+    assert lacks and "velocity over ground" in lacks[0]["message"]
+    assert not any(w["code"] == "time_outlier" for w in summary["warnings"])
+    rows = (tmp_path / "estimates.csv").read_text().splitlines()
+    assert len(rows) > 1000 and math.isfinite(float(rows[-1].split(",")[0]))
