@@ -185,9 +185,12 @@ def _sensor_lines(text: bytes, count: int, path: str | os.PathLike
             raise UnreadableLog(f"{path}: the Slocum sensor list ends early")
         parts = text[pos:end].decode("ascii", "replace").split()
         pos = end + 1
-        if len(parts) < 6 or parts[0] != "s:":
-            raise UnreadableLog(f"{path}: not a Slocum sensor line: {parts[:3]}")
-        in_use, index, size = parts[1] == "T", int(parts[3]), int(parts[4])
+        try:
+            if len(parts) < 6 or parts[0] != "s:":
+                raise ValueError
+            in_use, index, size = parts[1] == "T", int(parts[3]), int(parts[4])
+        except ValueError:
+            raise UnreadableLog(f"{path}: not a Slocum sensor line: {parts[:3]}") from None
         if in_use and index >= 0:
             if size not in _VALUE_FORMATS:
                 raise UnreadableLog(f"{path}: sensor {parts[5]} of {size} bytes")
@@ -264,9 +267,8 @@ class SlocumReader:
         i_time = wanted.get("m_present_time")
         if i_time is None:
             raise UnreadableLog(
-                f"{self.path}: a Slocum {'science' if 'sci_m_present_time' in wanted else ''}"
-                f" file without m_present_time: no navigation (its flight file, .dbd, .sbd "
-                f"or .mbd, is the log)")
+                f"{self.path}: a Slocum file without m_present_time: no navigation (a "
+                f"flight file, .dbd, .sbd or .mbd, is a glider's log)")
         for values, updated in self.cycles():
             if i_time not in updated:
                 stats.reject("no_time")
