@@ -40,9 +40,11 @@ Samples, each stamped with the cycle's ``m_present_time`` (POSIX s: UTC as is):
                                     was updated. The heading is taken as true north
                                     (:data:`HEADING_REFERENCE`).
 ``m_depth``                         Depth (m).
-``c_fin``, ``m_de_oil_vol``,        ActuatorColumn, each under its own name, in the
-``m_battpos``                       glider's units (rad, cm^3, inches): the config's
-                                    ``[inputs]`` maps them (``source = "column"``).
+``c_fin``, ``m_battpos``,           ActuatorColumn, in the glider's units (rad, inches,
+``m_de_oil_vol`` or                 cm^3), the pump's under column ``pump`` (a deep
+``m_ballast_pumped``                glider's oil volume or a shallow one's ballast):
+                                    the config's ``[inputs]`` maps them
+                                    (``source = "column"``).
 ==================================  ===================================================
 
 The glider's own depth-averaged current (``m_water_vx``, ``m_water_vy``) is not a sample:
@@ -88,8 +90,11 @@ ammonite 2008-028-01-000, where the WMM declination is +1.3 and +0.8 deg: an off
 glider applies, not the declination."""
 SOURCE = "slocum"
 """The samples' ``source``."""
-COLUMNS = ("c_fin", "m_de_oil_vol", "m_battpos")
-"""Sensors read as :class:`ActuatorColumn` samples."""
+COLUMNS = {"c_fin": "c_fin", "m_battpos": "m_battpos", "m_de_oil_vol": "pump",
+           "m_ballast_pumped": "pump"}
+"""Sensors read as :class:`ActuatorColumn` samples, by the column each is read as: the
+buoyancy pump's volume is ``m_de_oil_vol`` on a deep glider and ``m_ballast_pumped`` on a
+shallow one (a file has one of them), column ``pump`` either way."""
 KNOWN_INT = 0x1234
 """The integer of the known bytes."""
 
@@ -350,9 +355,9 @@ class SlocumReader:
                               reference=HEADING_REFERENCE)
         if new("m_depth") and math.isfinite(value("m_depth")):
             yield Depth(t=t, source=SOURCE, depth_m=value("m_depth"))
-        for name in COLUMNS:
+        for name, column in COLUMNS.items():
             if new(name) and math.isfinite(value(name)):
-                yield ActuatorColumn(t=t, source=SOURCE, column=name, value=value(name))
+                yield ActuatorColumn(t=t, source=SOURCE, column=column, value=value(name))
 
 
 def _valid_ddmm(x: float, max_deg: float) -> bool:

@@ -108,10 +108,11 @@ CASES: list[tuple[str, str, str | None, set[str], set[str]]] = [
      {"current_unresolved:current"},
      (CONSISTENT - {"current_unresolved"}) | HONESTY | {"no_estimate:current",
                                                          "heading_course_mismatch"}),
-    # a Slocum's own binary log (drivers/slocum.py): GPS fixes only at the surface, with no
-    # speed or course, so no current (its dead reckoning is not a measurement), said so
-    ("glider-dbd", "slocum_glider_dbd_samples/amadeus-2014-204-05-000.dbd", None,
-     {"no_estimate:current"}, CONSISTENT),
+    # a Slocum's own binary log (drivers/slocum.py): GPS fixes only at the surface; the
+    # dive's depth-averaged current (pipeline dac) against the glider's own in
+    # tests/test_slocum.py
+    ("glider-dbd", "slocum_glider_dbd_samples/amadeus-2014-204-05-000.dbd", None, set(),
+     CONSISTENT | {"no_estimate:dac"}),
     ("dvl-circle", "waterlinked_dvl_a50_json_tank/out20210528_circle.txt", None,
      NO_ESTIMATE_ALL, CONSISTENT),
     ("dvl-still", "waterlinked_dvl_a50_json_tank/out_still_60s.txt", None,

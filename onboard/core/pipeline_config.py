@@ -791,6 +791,17 @@ class EsesoConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """``[pipelines.eseso.initial]``."""
 
 
+class DacConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
+    """``[pipelines.dac]``: a glider's depth-averaged current, dive by dive
+    (onboard/pipelines/dac.py, algorithms.md §3.7). Its glider model is
+    ``[pipelines.current.glider]``."""
+
+    enabled: bool = False
+    """True: the pipeline is built (a glider's config: config/slocum-glider.toml)."""
+    min_dive_s: Annotated[float, msgspec.Meta(gt=0.0)] = 600.0
+    """A dive shorter than this (s) between its two surface fixes gives no current."""
+
+
 class Pipelines(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
     """``[pipelines]``: one table per pipeline of :data:`onboard.pipelines.MODULES`."""
 
@@ -802,5 +813,7 @@ class Pipelines(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     """``[pipelines.kf]``."""
     current: CurrentConfig = msgspec.field(default_factory=CurrentConfig)
     """``[pipelines.current]``."""
+    dac: DacConfig = msgspec.field(default_factory=DacConfig)
+    """``[pipelines.dac]``."""
     eseso: EsesoConfig = msgspec.field(default_factory=EsesoConfig)
     """``[pipelines.eseso]``."""

@@ -11,7 +11,7 @@ import importlib
 from onboard.core.config import Config
 from onboard.pipelines.base import Pipeline
 
-MODULES: tuple[str, ...] = ("nav", "aie", "kf", "current", "eseso")
+MODULES: tuple[str, ...] = ("nav", "aie", "kf", "current", "dac", "eseso")
 """Pipeline modules in the order their columns appear in estimates.csv."""
 
 
