@@ -101,8 +101,9 @@ def test_current_table_holds_every_published_current(local):
     _, out = local
     table = pq.read_table(out / "current.parquet")
     assert table.column_names == ["name", "vehicle", "t_s", "utc", "lat", "lon", "north",
-                                  "east", "std_north", "std_east", "flags"]
+                                  "east", "std_north", "std_east", "flags", "pipeline"]
     rows = [r for r in table.to_pylist() if r["name"] == "current.tlog"]
+    assert {r["pipeline"] for r in rows} == {"current"}
     est = batch_tables.read_estimates(out / "current.tlog" / "estimates.csv")
     import numpy as np
 

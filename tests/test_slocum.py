@@ -185,6 +185,18 @@ def test_a_dive_current_agrees_with_the_gliders_own_within_its_sigma(
     assert float(d["dac.dive_end"]) - float(d["dac.dive_start"]) > 3000   # an hour's dive
 
 
+def test_the_dive_pipeline_is_built_where_a_config_enables_it():
+    from onboard.core import config as configmod
+    from onboard.pipelines import dac
+
+    assert dac.create(configmod.Config()) is None
+    cfg = configmod.from_dict({"pipelines": {"dac": {"enabled": True, "min_dive_s": 1200.0},
+                                             "current": {"glider": {"drag_kd0": 7.72}}}})
+    p = dac.create(cfg)
+    assert p is not None and p.dac.min_dive_s == 1200.0 and p.dac.model.k_d0 == 7.72
+    assert p.step(0.0, []) == {} and "fix at the surface" in p.lacks()
+
+
 def test_a_dive_in_a_known_current_gives_it_back():
     """A glider flying the model's own glide (so that only the bookkeeping is tested)
     in a current of (0.1, -0.2) m/s: the current from the fixes and the depth samples; a
@@ -218,3 +230,30 @@ def test_a_dive_in_a_known_current_gives_it_back():
     dac.depth(t + 4, 5.0, -0.45, psi, -200.0)
     dac.depth(t + 8, 0.2, 0.45, psi, 200.0)
     assert dac.fix(t + 12, n, e) is None and dac.latest is got
+    # a long one with no heading logged (a sparse .sbd): followed for none of it, none
+    t += 12
+    for k in range(300):
+        dac.depth(t + 4 * k, 20.0 + 10.0 * math.sin(k / 20.0), -0.45, math.nan, -200.0)
+    dac.depth(t + 1204, 0.0, 0.45, math.nan, 200.0)
+    assert dac.fix(t + 1208, n + 100.0, e) is None and dac.unfollowed == 1
+
+
+@pytest.mark.data
+def test_a_season_of_glider_logs_has_a_current_row_per_dive(shared_data: Path, tmp_path: Path):
+    """`onboard batch` on the glider folder: the flight logs replayed, the science files
+    and caches skipped, a row per dive in current.parquet at its middle in time and place."""
+    pd = pytest.importorskip("pandas", reason="pip install 'onboard[batch]' pandas")
+    src = tmp_path / "season"
+    src.mkdir()
+    for name in ("amadeus-2014-204-05-000.dbd", "amadeus-2014-204-05-000.ebd"):
+        (src / name).symlink_to(shared_data / GLIDERS / name)
+    (src / "cac").symlink_to(shared_data / GLIDERS / "cac")
+    assert cli_main(["batch", str(src), "--out", str(tmp_path / "out"), "--jobs", "1"]) == 0
+    runs = pd.read_parquet(tmp_path / "out" / "runs.parquet")
+    assert list(runs.name) == ["amadeus-2014-204-05-000.dbd"]
+    cur = pd.read_parquet(tmp_path / "out" / "current.parquet")
+    dive, = cur.itertuples()
+    assert dive.pipeline == "dac" and dive.flags.tolist() == []
+    assert str(dive.utc).startswith("2014-07-24 17:3")   # the dive's middle, 17:04-18:05
+    assert 54.2 < dive.lat < 54.3 and 7.4 < dive.lon < 7.5
+    assert abs(dive.north + 0.257) < 2 * dive.std_north   # the glider's own, above

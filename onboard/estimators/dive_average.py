@@ -19,8 +19,10 @@ wrong for every yo alike), so its one-sigmas add linearly over the dive::
 
     sigma^2 = 2 sigma_p^2 / T^2 + (sum of sigma_u dt / T)^2
 
-Where the model gives no speed (an inflection, a pitch below its least glide angle) the
-last speed is carried, with a one-sigma of the speed itself.
+Where the model gives no speed (an inflection, a pitch below its least glide angle, a
+pitch or heading not measured within :data:`MAX_DEPTH_INTERVAL_S`) the last speed is
+carried, with a one-sigma of the speed itself; a dive unmodelled for more than
+:data:`MAX_UNMODELLED_SHARE` of its time under water gives none.
 """
 
 from __future__ import annotations
@@ -34,8 +36,11 @@ MIN_DIVE_S = 600.0
 """A dive shorter than this (s) between its two fixes gives no current: the fixes'
 errors over a few minutes outweigh the water's displacement."""
 MAX_DEPTH_INTERVAL_S = 30.0
-"""Depth samples further apart than this (s) give no depth rate: the time between them
-is counted unmodelled."""
+"""Depth samples further apart than this (s) give no depth rate, and a pitch or heading
+older than this is none: the time between them is counted unmodelled."""
+MAX_UNMODELLED_SHARE = 0.25
+"""A dive whose time under water was unmodelled for more than this share gives no
+current (a log too sparse to follow the flight: a Slocum's ``.sbd``)."""
 
 
 class DiveCurrent(NamedTuple):
@@ -53,6 +58,8 @@ class DiveCurrent(NamedTuple):
     """One-sigma of each component (m/s)."""
     unmodelled_s: float
     """Time (s) under water where the model gave no speed (the last one carried)."""
+    place: tuple[float, float]
+    """Where it applies: the midpoint of the two fixes (north, east; m, their frame)."""
 
 
 class DiveAverage:
@@ -68,13 +75,16 @@ class DiveAverage:
         self.min_dive_s = min_dive_s
         self.latest: DiveCurrent | None = None
         self.dives = 0
+        self.unfollowed = 0
+        """Dives left without a current for :data:`MAX_UNMODELLED_SHARE`."""
         self._anchor: tuple[float, float, float] | None = None  # (t, north, east)
         self._dived = False
         self._depth: tuple[float, float] | None = None  # (t, depth) of the last sample
         self._disp = [0.0, 0.0]       # through-water displacement (m) since the anchor
         self._disp_std = 0.0          # its one-sigma (m), added linearly
+        self._under = 0.0             # time (s) under water since the anchor
         self._unmodelled = 0.0
-        self._u_last = 0.0
+        self._u_last = self._psi_last = 0.0
 
     def fix(self, t: float, north: float, east: float) -> DiveCurrent | None:
         """A GNSS fix at ``t`` (s), ``north``/``east`` (m): it ends a dive (returning its
@@ -83,13 +93,15 @@ class DiveAverage:
         a = self._anchor
         if a is not None and self._dived and self._at_surface():
             duration = t - a[0]
-            if duration >= self.min_dive_s:
+            if self._unmodelled > MAX_UNMODELLED_SHARE * self._under:
+                self.unfollowed += 1
+            elif duration >= self.min_dive_s:
                 out = self._close(t, north, east, duration)
         if out is not None or not self._dived or self._at_surface():
             self._anchor = (t, north, east)
             self._dived = False
             self._disp = [0.0, 0.0]
-            self._disp_std = self._unmodelled = 0.0
+            self._disp_std = self._unmodelled = self._under = 0.0
         return out
 
     def depth(self, t: float, depth_m: float, pitch: float, heading: float,
@@ -104,18 +116,17 @@ class DiveAverage:
             return
         self._dived = True
         dt = t - prev[0]
+        self._under += dt
         glide = None
-        if dt <= MAX_DEPTH_INTERVAL_S:
+        if dt <= MAX_DEPTH_INTERVAL_S and math.isfinite(heading):
             glide = self.model.glide_from_depth_rate(pitch, (depth_m - prev[1]) / dt,
                                                      pump_cc)
         if glide is not None and math.isfinite(glide.std_u_h):
             u, sd = glide.u_h, glide.std_u_h
-            self._u_last = u
-        else:
-            u, sd = self._u_last, self._u_last
+            self._u_last, self._psi_last = u, heading
+        else:  # the last speed along the last heading, its one-sigma the speed itself
+            u, sd, heading = self._u_last, self._u_last, self._psi_last
             self._unmodelled += dt
-        if not math.isfinite(heading):
-            return
         self._disp[0] += u * math.cos(heading) * dt
         self._disp[1] += u * math.sin(heading) * dt
         self._disp_std += sd * dt
@@ -130,5 +141,6 @@ class DiveAverage:
         ve = (east - a[2] - self._disp[1]) / duration
         std = math.hypot(math.sqrt(2.0) * self.position_std_m, self._disp_std) / duration
         self.dives += 1
-        self.latest = DiveCurrent(a[0], t, vn, ve, std, self._unmodelled)
+        self.latest = DiveCurrent(a[0], t, vn, ve, std, self._unmodelled,
+                                  (0.5 * (a[1] + north), 0.5 * (a[2] + east)))
         return self.latest

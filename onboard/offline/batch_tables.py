@@ -173,12 +173,14 @@ def current_rows(cols: dict[str, np.ndarray], summary: dict, clock) -> dict[str,
     from onboard.core.geo import LocalFrame
 
     cn, ce = cols.get("current.north"), cols.get("current.east")
-    keys = ("t_s", "utc", "lat", "lon", "north", "east", "std_north", "std_east", "flags")
+    keys = ("t_s", "utc", "lat", "lon", "north", "east", "std_north", "std_east", "flags",
+            "pipeline")
     out: dict[str, list] = {k: [] for k in keys}
-    if cn is None or ce is None:
-        return out
     origin = summary.get("origin")
     frame = LocalFrame(origin["lat_deg"], origin["lon_deg"]) if origin else None
+    _dive_rows(cols, summary, clock, frame, out)
+    if cn is None or ce is None:
+        return out
     where = [p for p in POSITION_PIPELINES if p + ".north" in cols and p + ".east" in cols]
     sn = cols.get("current.std_north", np.full_like(cn, np.nan))
     se = cols.get("current.std_east", np.full_like(cn, np.nan))
@@ -196,9 +198,37 @@ def current_rows(cols: dict[str, np.ndarray], summary: dict, clock) -> dict[str,
                 break
         for k, v in zip(keys, (t, utc, lat, lon, float(cn[i]), float(ce[i]),
                                _num(sn[i]), _num(se[i]),
-                               sorted({c for c, a, b in spans if a <= t0 + t <= b}))):
+                               sorted({c for c, a, b in spans if a <= t0 + t <= b}),
+                               "current")):
             out[k].append(v)
     return out
+
+
+def _dive_rows(cols: dict[str, np.ndarray], summary: dict, clock, frame,
+               out: dict[str, list]) -> None:
+    """A row per dive of a glider's ``dac`` pipeline (algorithms.md §3.7) into ``out``:
+    at the dive's middle in time (``t_s``, ``utc``) and place (``lat``, ``lon``: the
+    midpoint of its two fixes), pipeline ``dac``, no flags."""
+    end = cols.get("dac.dive_end")
+    if end is None:
+        return
+    t0 = _t0(summary)
+    seen: set[float] = set()
+    for i in np.flatnonzero(np.isfinite(end)):
+        if float(end[i]) in seen:
+            continue
+        seen.add(float(end[i]))
+        mid = 0.5 * (float(cols["dac.dive_start"][i]) + float(end[i]))
+        utc_s = clock.to_utc(mid) if clock is not None else None
+        lat = lon = None
+        if frame is not None:
+            lat, lon = frame.to_latlon(float(cols["dac.place_north"][i]),
+                                       float(cols["dac.place_east"][i]))
+        row = (mid - t0, round(1000.0 * utc_s) if utc_s is not None else None, lat, lon,
+               float(cols["dac.north"][i]), float(cols["dac.east"][i]),
+               _num(cols["dac.std_north"][i]), _num(cols["dac.std_east"][i]), [], "dac")
+        for k, v in zip(out, row):
+            out[k].append(v)
 
 
 def _num(x: float) -> float | None:
@@ -240,7 +270,8 @@ def current_schema():
     return pa.schema([("name", pa.string()), ("vehicle", pa.string()), ("t_s", f64),
                       ("utc", pa.timestamp("ms", tz="UTC")), ("lat", f64), ("lon", f64),
                       ("north", f64), ("east", f64), ("std_north", f64),
-                      ("std_east", f64), ("flags", pa.list_(pa.string()))])
+                      ("std_east", f64), ("flags", pa.list_(pa.string())),
+                      ("pipeline", pa.string())])
 
 
 def runs_schema():

@@ -9,7 +9,8 @@ coefficients, where the config has none).
 
 ``columns``: north, east (m/s) of the newest dive's depth-averaged current and their
 ``std_*``; ``dive_start``, ``dive_end``: the times (s, the log's clock) of the two fixes
-that bound it. Nothing before the first dive has ended.
+that bound it; ``place_north``, ``place_east``: their midpoint (m from the first fix),
+where the dive's current applies. Nothing before the first dive has ended.
 """
 
 from __future__ import annotations
@@ -17,26 +18,42 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping, Sequence
 
+import msgspec
+
 from onboard.core.config import Config
 from onboard.core.geo import LocalFrame
 from onboard.core.messages import ActuatorCommand, Attitude, Depth, GnssFix, Heading, Sample
 from onboard.core.pipeline_config import GliderModelConfig
-from onboard.estimators.dive_average import DiveAverage
-from onboard.pipelines.base import NoHealth, PipelineDefaults
+from onboard.estimators.dive_average import MAX_DEPTH_INTERVAL_S, DiveAverage
+from onboard.pipelines.base import PipelineDefaults
 from onboard.pipelines.current_samples import glider_model
+
+
+class DacHealth(msgspec.Struct, frozen=True):
+    """The dives so far (:class:`DiveAveragePipeline.health`)."""
+
+    dives: int
+    """Dives that gave a current."""
+    unfollowed: int
+    """Dives the log was too sparse to follow (no current)."""
+
+    def flat(self) -> dict[str, float]:
+        """``dives``, ``unfollowed``."""
+        return {"dives": float(self.dives), "unfollowed": float(self.unfollowed)}
 
 
 class DiveAveragePipeline(PipelineDefaults):
     """Pipeline ``dac`` (module docstring)."""
 
     name = "dac"
-    columns = ("north", "east", "std_north", "std_east", "dive_start", "dive_end")
+    columns = ("north", "east", "std_north", "std_east", "dive_start", "dive_end",
+               "place_north", "place_east")
 
     def __init__(self, dac: DiveAverage) -> None:
         self.dac = dac
         self.frame: LocalFrame | None = None
-        self._pitch = math.nan
-        self._heading = math.nan
+        self._pitch = (-math.inf, math.nan)     # (t, value)
+        self._heading = (-math.inf, math.nan)
         self._pump = 0.0
 
     def step(self, t: float, samples: Sequence[Sample]) -> Mapping[str, float]:
@@ -48,35 +65,44 @@ class DiveAveragePipeline(PipelineDefaults):
                     self.frame = LocalFrame(s.lat_deg, s.lon_deg)
                 dac.fix(s.t, *self.frame.to_ne(s.lat_deg, s.lon_deg))
             elif isinstance(s, Heading):
-                self._heading = s.heading_rad
+                self._heading = (s.t, s.heading_rad)
             elif isinstance(s, Attitude):
-                self._pitch = s.pitch_rad
-                if s.yaw_selected and not math.isfinite(self._heading):
-                    self._heading = s.yaw_rad
+                self._pitch = (s.t, s.pitch_rad)
+                if s.yaw_selected and s.t - self._heading[0] > MAX_DEPTH_INTERVAL_S:
+                    self._heading = (s.t, s.yaw_rad)
             elif isinstance(s, ActuatorCommand) and s.pump_cc is not None:
                 self._pump = s.pump_cc
             elif isinstance(s, Depth):
-                dac.depth(s.t, s.depth_m, self._pitch, self._heading, self._pump)
+                dac.depth(s.t, s.depth_m, self._fresh(self._pitch, s.t),
+                          self._fresh(self._heading, s.t), self._pump)
         d = dac.latest
         if d is None:
             return {}
         return {"north": d.north, "east": d.east, "std_north": d.std, "std_east": d.std,
-                "dive_start": d.t_start, "dive_end": d.t_end}
+                "dive_start": d.t_start, "dive_end": d.t_end,
+                "place_north": d.place[0], "place_east": d.place[1]}
+
+    @staticmethod
+    def _fresh(measured: tuple[float, float], t: float) -> float:
+        """The value of ``measured`` (its time, value) at ``t``: NaN when older than
+        :data:`.dive_average.MAX_DEPTH_INTERVAL_S`."""
+        return measured[1] if t - measured[0] <= MAX_DEPTH_INTERVAL_S else math.nan
 
     def lacks(self) -> str:
         """What kept every dive from giving a current."""
         if self.frame is None:
             return "a GNSS fix at the surface before and after a dive: the log has none"
-        return (f"a dive of at least {self.dac.min_dive_s:.0f} s between two surface fixes "
-                "with depth samples under water")
+        return (f"a dive of at least {self.dac.min_dive_s:.0f} s between two surface fixes, "
+                f"its flight followed by depth, pitch and heading samples "
+                f"({self.dac.unfollowed} dive(s) too sparsely logged)")
 
     def innovations(self) -> list:
         """None: a dive's current is computed, not a filter's update."""
         return []
 
-    def health(self) -> NoHealth:
-        """Nothing beyond its estimates."""
-        return NoHealth()
+    def health(self) -> DacHealth:
+        """Its dives so far."""
+        return DacHealth(self.dac.dives, self.dac.unfollowed)
 
     def get_state(self) -> dict[str, Any]:
         """Nothing: each dive stands alone."""
