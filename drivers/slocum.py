@@ -25,8 +25,9 @@ The layout, as each file declares it (encoding version 5):
 
 The first cycles of a file carry every sensor's value as the glider had it when the
 file was opened, fresh or hours old: the first cycle, and any that updates every sensor,
-starts the values that later cycles repeat and gives no sample. A compressed file is a sequence of LZ4 blocks, each after its length
-(two bytes, big-endian); it needs the ``lz4`` package.
+starts the values that later cycles repeat and gives no sample. A compressed file is a
+sequence of LZ4 blocks, each after its length (two bytes, big-endian); it needs the
+``lz4`` package.
 
 Samples, each stamped with the cycle's ``m_present_time`` (POSIX s: UTC as is):
 
@@ -48,7 +49,8 @@ Samples, each stamped with the cycle's ``m_present_time`` (POSIX s: UTC as is):
 ==================================  ===================================================
 
 The glider's own depth-averaged current (``m_water_vx``, ``m_water_vy``) is not a sample:
-it is the glider's estimate, not a measurement.
+it is the glider's estimate, not a measurement (pipeline ``dac`` makes its own, and
+tests/test_slocum.py compares the two).
 
 Rejections: ``"no_time"`` a cycle without ``m_present_time``; ``"truncated"`` a cycle
 cut off by the end of the file; ``"garbage"`` a byte where a cycle's ``d`` should be (the
@@ -60,6 +62,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -95,6 +98,8 @@ COLUMNS = {"c_fin": "c_fin", "m_battpos": "m_battpos", "m_de_oil_vol": "pump",
 """Sensors read as :class:`ActuatorColumn` samples, by the column each is read as: the
 buoyancy pump's volume is ``m_de_oil_vol`` on a deep glider and ``m_ballast_pumped`` on a
 shallow one (a file has one of them), column ``pump`` either way."""
+GLIDER_NAME = re.compile(r"^(.+)-\d{4}-\d+-\d+-\d+$")
+"""A file's full name: the glider's name, the year, the day, the mission and segment."""
 KNOWN_INT = 0x1234
 """The integer of the known bytes."""
 
@@ -254,6 +259,14 @@ class SlocumReader:
             raise UnreadableLog(f"{path}: {len(self.sensors)} sensors in cycle where the "
                                 f"header says {n_cycle}")
         self._start = self._known_bytes(pos)
+
+    @property
+    def glider(self) -> str:
+        """The glider's name, from the header's ``full_filename`` (``<glider>-<year>-<day>-
+        <mission>-<segment>``, e.g. ``amadeus`` of ``amadeus-2014-204-5-0``); empty where
+        the header has none."""
+        m = GLIDER_NAME.match(self.tags.get("full_filename", ""))
+        return m.group(1) if m else ""
 
     def _known_bytes(self, pos: int) -> int:
         """Read the byte order from the known bytes at ``pos``; the offset after them."""

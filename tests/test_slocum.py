@@ -251,6 +251,9 @@ def test_a_season_of_glider_logs_has_a_current_row_per_dive(shared_data: Path, t
     assert cli_main(["batch", str(src), "--out", str(tmp_path / "out"), "--jobs", "1"]) == 0
     runs = pd.read_parquet(tmp_path / "out" / "runs.parquet")
     assert list(runs.name) == ["amadeus-2014-204-05-000.dbd"]
+    assert list(runs.vehicle_id) == ["amadeus"]   # the glider's name, from its header
+    from onboard.offline.batch_tables import season_vehicle
+    assert season_vehicle(runs.iloc[0].to_dict()) == "amadeus"
     cur = pd.read_parquet(tmp_path / "out" / "current.parquet")
     dive, = cur.itertuples()
     assert dive.pipeline == "dac" and dive.flags.tolist() == []

@@ -75,8 +75,7 @@ class DiveAverage:
         self.min_dive_s = min_dive_s
         self.latest: DiveCurrent | None = None
         self.dives = 0
-        self.unfollowed = 0
-        """Dives left without a current for :data:`MAX_UNMODELLED_SHARE`."""
+        self.unfollowed = 0   # dives left without a current (MAX_UNMODELLED_SHARE)
         self._anchor: tuple[float, float, float] | None = None  # (t, north, east)
         self._dived = False
         self._depth: tuple[float, float] | None = None  # (t, depth) of the last sample
@@ -91,12 +90,12 @@ class DiveAverage:
         current) or becomes the start of the next."""
         out = None
         a = self._anchor
-        if a is not None and self._dived and self._at_surface():
-            duration = t - a[0]
+        ended = a is not None and self._dived and self._at_surface()
+        if ended and t - a[0] >= self.min_dive_s:
             if self._unmodelled > MAX_UNMODELLED_SHARE * self._under:
                 self.unfollowed += 1
-            elif duration >= self.min_dive_s:
-                out = self._close(t, north, east, duration)
+            else:
+                out = self._close(t, north, east, t - a[0])
         if out is not None or not self._dived or self._at_surface():
             self._anchor = (t, north, east)
             self._dived = False

@@ -162,8 +162,9 @@ def is_log(path: Path, times: frozenset[str] = frozenset()) -> str:
         return f"a document ({path.suffix.lower()})"
     from onboard.drivers.slocum import not_a_log
 
-    if not_a_log(path):
-        return not_a_log(path)
+    glider_file = not_a_log(path)   # a glider's science file or sensor cache
+    if glider_file:
+        return glider_file
     try:
         fmt = sniff(path)
     except UnreadableLog as err:

@@ -78,11 +78,11 @@ class _Progress:
 
 
 DETECTED_CONFIG = "detected:"
+"""The start of the config note (summary.json ``config``) of a config detected from the
+log, not given (:func:`choose_config`)."""
 SLOCUM_CONFIG = "slocum-glider"
 """The bundled config a Slocum glider's binary log is replayed with (its sensors have the
 same names on every Slocum)."""
-"""The start of the config note (summary.json ``config``) of a config detected from the
-log, not given (:func:`choose_config`)."""
 
 
 def choose_config(log: str, config_path: str | Sequence[str] | None
@@ -110,6 +110,11 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
         cfg, why = detect([*infos, *params])
     elif fmt == "slocum":
         cfg, why = configmod.load(SLOCUM_CONFIG), f"a Slocum glider's log: {SLOCUM_CONFIG}"
+        glider = reader.glider  # type: ignore[attr-defined]
+        if glider:   # the glider names itself: the vehicle is it, not its class
+            vehicle = msgspec.structs.replace(cfg.vehicle, id=glider)
+            return (msgspec.structs.replace(cfg, vehicle=vehicle),
+                    f"the glider's own name in its log ({glider}) with {SLOCUM_CONFIG}")
     elif fmt in ("dataflash", "recording", "mcap"):
         header = [s for s in reader if isinstance(s, (Parameter, VehicleInfo))]
         cfg, why = detect(header)
