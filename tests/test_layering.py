@@ -71,7 +71,7 @@ ROOMS: dict[str, set[str]] = {
     "onboard.offline.estimates_csv": ENGINE,
     "onboard.offline.autodetect": CORE,
     "onboard.offline.exports": CORE,
-    "onboard.offline.plots": set(),
+    "onboard.offline.plots": CORE,
     "onboard.offline.replay": OFFLINE,
     "onboard.offline.closure": CLOSURE,
     "onboard.offline.diagnose": CLOSURE,

@@ -802,6 +802,11 @@ class DacConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     """A dive shorter than this (s) between its two surface fixes gives no current."""
 
 
+VELOCITY_PIPELINES = frozenset({"current", "dac"})
+"""Pipelines whose ``north``/``east`` are a water velocity (m/s), not a position: no track
+is drawn or exported from them (onboard/offline/plots.py, exports.py)."""
+
+
 class Pipelines(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen=True):
     """``[pipelines]``: one table per pipeline of :data:`onboard.pipelines.MODULES`."""
 

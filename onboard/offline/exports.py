@@ -48,6 +48,7 @@ from onboard.core import wire
 from onboard.core.geo import LocalFrame
 from onboard.core.messages import EstimateRecord
 from onboard.core.wire import LocationFix
+from onboard.core.pipeline_config import VELOCITY_PIPELINES
 
 ARROW_EVERY_S = 10.0
 """One current arrow per this many seconds of the replay (s)."""
@@ -55,8 +56,6 @@ ARROW_SCALE_S = 60.0
 """An arrow is as long as the water moves in this long (s): 0.5 m/s draws 30 m."""
 ARROW_TRACKS = ("nav", "kf", "aie", "eseso")
 """Where an arrow starts: the first of these with a position at its row (GNSS first)."""
-TRACK_EXCLUDED = frozenset({"current"})
-"""Pipelines whose ``north``/``east`` are a velocity (m/s), not a position."""
 DECIMALS = 7
 """Decimals of a coordinate in degrees (1e-7 deg is 1.1 cm of latitude)."""
 MS_PER_S = 1000
@@ -76,7 +75,7 @@ def _lonlat(frame: LocalFrame, north_m: float, east_m: float) -> list[float]:
 def _pipelines(cols: dict[str, list[float]]) -> list[str]:
     """The pipelines with a ``north``/``east`` position in ``cols``, in column order."""
     return [c[:-6] for c in cols if c.endswith(".north") and c[:-6] + ".east" in cols
-            and c[:-6] not in TRACK_EXCLUDED]
+            and c[:-6] not in VELOCITY_PIPELINES]
 
 
 def _runs(cols: dict[str, list[float]]) -> list[int]:

@@ -18,6 +18,8 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from onboard.core.pipeline_config import VELOCITY_PIPELINES
+
 GAP_FACTOR = 3.0
 """A time step longer than this many median steps is a gap: plotted lines break there."""
 MAX_POINTS = 4000
@@ -39,8 +41,6 @@ DPI = 110
 UNKNOWN_GREY = "0.85"
 """The shade of the spans where the current was unknown."""
 
-VELOCITY_PIPELINES = frozenset({"current"})
-"""Pipelines whose ``north``/``east`` are a velocity (m/s), not a position: not a track."""
 ARROW_TRACKS = ("nav", "kf", "aie", "eseso")
 """Where a current arrow starts: the first of these with a position at its row."""
 CURRENT_COLUMNS = ("current.north", "current.east", "current.std_north", "current.std_east")

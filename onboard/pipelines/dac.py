@@ -51,7 +51,7 @@ class DiveAveragePipeline(PipelineDefaults):
 
     def __init__(self, dac: DiveAverage) -> None:
         self.dac = dac
-        self.frame: LocalFrame | None = None
+        self._frame: LocalFrame | None = None
         self._pitch = (-math.inf, math.nan)     # (t, value)
         self._heading = (-math.inf, math.nan)
         self._pump = 0.0
@@ -61,9 +61,9 @@ class DiveAveragePipeline(PipelineDefaults):
         dac = self.dac
         for s in samples:
             if isinstance(s, GnssFix):
-                if self.frame is None:
-                    self.frame = LocalFrame(s.lat_deg, s.lon_deg)
-                dac.fix(s.t, *self.frame.to_ne(s.lat_deg, s.lon_deg))
+                if self._frame is None:
+                    self._frame = LocalFrame(s.lat_deg, s.lon_deg)
+                dac.fix(s.t, *self._frame.to_ne(s.lat_deg, s.lon_deg))
             elif isinstance(s, Heading):
                 self._heading = (s.t, s.heading_rad)
             elif isinstance(s, Attitude):
@@ -90,7 +90,7 @@ class DiveAveragePipeline(PipelineDefaults):
 
     def lacks(self) -> str:
         """What kept every dive from giving a current."""
-        if self.frame is None:
+        if self._frame is None:
             return "a GNSS fix at the surface before and after a dive: the log has none"
         return (f"a dive of at least {self.dac.min_dive_s:.0f} s between two surface fixes, "
                 f"its flight followed by depth, pitch and heading samples "
