@@ -183,3 +183,30 @@ def test_plot_track_writes_the_png(tmp_path):
     p.write_text("\n".join(rows) + "\n")
     out = plot_track(p, tmp_path / "track.png", "log", "GNSS fixes")
     assert out == str(tmp_path / "track.png") and Path(out).stat().st_size > 20_000
+
+
+def test_a_gliders_dive_current_is_an_arrow_from_the_middle_of_its_fixes():
+    """Pipeline dac's newest dive repeated on every row: one arrow per dive, from the
+    midpoint of its fixes, pointing where the water went, inside the map with its key;
+    no dive columns, no dive arrow."""
+    from matplotlib.quiver import Quiver, QuiverKey
+
+    n = 400
+    cols = {k: v for k, v in _cols(n).items() if not k.startswith("current")}
+    nan = [math.nan] * (n // 4)
+    for name, dive1, dive2 in (("dac.north", 0.1, -0.2), ("dac.east", 0.3, 0.05),
+                               ("dac.std_north", 0.04, 0.05), ("dac.dive_end", 100.0, 300.0),
+                               ("dac.place_north", 5.0, -5.0), ("dac.place_east", 2.0, 8.0)):
+        cols[name] = nan + [dive1] * (n // 4) + [dive2] * (n // 2)
+    fig = track_figure(cols, "glider")
+    renderer = _draw(fig)
+    dives = [q for q in fig.findobj(Quiver) if len(q.U) == 2]
+    assert len(dives) == 1
+    q = dives[0]
+    assert np.allclose(q.X, [2.0, 8.0]) and np.allclose(q.Y, [5.0, -5.0])
+    assert np.allclose(q.U, [0.3, 0.05]) and np.allclose(q.V, [0.1, -0.2])
+    key, = [k for k in fig.findobj(QuiverKey) if "dive" in k.text.get_text()]
+    b = key.text.get_window_extent(renderer)
+    assert _inside((b.x0, b.y0), (b.x1, b.y1), key.axes.bbox)
+    bare = track_figure({k: v for k, v in cols.items() if not k.startswith("dac")}, "boat")
+    assert not [k for k in bare.findobj(QuiverKey) if "dive" in k.text.get_text()]

@@ -45,6 +45,8 @@ ARROW_TRACKS = ("nav", "kf", "aie", "eseso")
 """Where a current arrow starts: the first of these with a position at its row."""
 CURRENT_COLUMNS = ("current.north", "current.east", "current.std_north", "current.std_east")
 """The current's columns the figure reads."""
+DIVE_COLUMNS = ("dac.dive_end", "dac.place_north", "dac.place_east", "dac.std_north")
+"""A glider's dive currents' columns the figure reads (with ``dac.north``, ``dac.east``)."""
 POSITION_LABELS = {
     "gnss": "GNSS fixes",
     "navigation": "logged navigation track",
@@ -134,7 +136,7 @@ def read_columns(path: Path, wanted: Callable[[str], bool] | None = None
 
 def _drawn(name: str) -> bool:
     """Whether track.png reads column ``name``: time, run, positions and the current."""
-    return (name in ("t", "run") or name in CURRENT_COLUMNS
+    return (name in ("t", "run") or name in CURRENT_COLUMNS or name in DIVE_COLUMNS
             or name.endswith((".north", ".east")))
 
 
@@ -193,6 +195,7 @@ def track_figure(cols: dict[str, list[float]], title: str,
             ax.plot(east, north, lw=1.2, label=name)
     if current is not None:
         _current_arrows(ax, cols, pairs)
+    _dive_arrows(ax, cols, pairs)
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
     ax.set_aspect("equal", adjustable="datalim")
@@ -265,6 +268,35 @@ def _plot_current(ax, cur: _Current) -> None:
     ax.grid(True, alpha=0.3)
     ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.22),
               ncols=len(labels), fontsize="small", frameon=False)
+
+
+def _dive_arrows(ax, cols: dict[str, list[float]],
+                 pairs: Iterable[tuple[str, str, str]]) -> None:
+    """Each dive's depth-averaged current (pipeline ``dac``) as an arrow from the middle
+    of the two fixes that bound the dive, labelled with its one-sigma, on the scale of
+    :func:`_current_arrows`."""
+    if "dac.dive_end" not in cols:
+        return
+    end = np.asarray(cols["dac.dive_end"], float)
+    _, rows = np.unique(end, return_index=True)
+    rows = [i for i in rows if np.isfinite(end[i])]
+    if not rows:
+        return
+
+    def at(name: str) -> np.ndarray:
+        return np.asarray(cols[name], float)[rows]
+
+    extent = max([1.0] + [np.nanmax(cols[c]) - np.nanmin(cols[c])
+                          for _, n, e in pairs for c in (n, e)])
+    scale = ARROW_KEY_MPS / (ARROW_SHARE * extent)
+    q = ax.quiver(at("dac.place_east"), at("dac.place_north"), at("dac.east"),
+                  at("dac.north"), angles="xy", scale_units="xy", scale=scale,
+                  width=0.006, color="tab:green", zorder=4)
+    for x, y, s in zip(at("dac.place_east"), at("dac.place_north"), at("dac.std_north")):
+        ax.annotate(f"± {s:.2f} m/s", (x, y), textcoords="offset points", xytext=(4, -10),
+                    fontsize="x-small", color="tab:green")
+    ax.quiverkey(q, 0.12, 0.05, ARROW_KEY_MPS, f"dive current {ARROW_KEY_MPS:g} m/s",
+                 labelpos="N", coordinates="axes", fontproperties={"size": "small"})
 
 
 def _current_arrows(ax, cols: dict[str, list[float]],
