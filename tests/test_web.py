@@ -70,6 +70,24 @@ def test_the_view_keeps_one_track_point_a_second_and_the_newest_values_in_displa
     assert h["rejected"] == 3 and h["events"] == ["gnss: stale"]
 
 
+def test_a_speed_whose_sigma_says_nothing_gives_way_to_the_next_pipelines():
+    """An AUV under water (the fleet demo's): its aie speed withheld, its kf speed dead
+    reckoned to 1.25 +- 10.62 m/s; the measured speed is shown. A kf sigma of 0.2 is
+    shown; when every pipeline's says nothing, the best one's is."""
+    view = LiveView()
+    view.feed_estimates([rec("kf", 1.0, vehicle="auv", speed=1.25, std_speed=10.62,
+                             heading=1.0, std_heading=0.01),
+                         rec("nav", 1.0, vehicle="auv", speed=1.5, heading=1.02)])
+    s = view.state("auv")
+    assert s["speed"] == {"value": 1.5, "std": None, "pipeline": "nav"}
+    assert s["heading"]["pipeline"] == "kf"
+    view.feed_estimates([rec("kf", 2.0, vehicle="auv", speed=1.25, std_speed=0.2)])
+    assert view.state("auv")["speed"]["pipeline"] == "kf"
+    lone = LiveView()
+    lone.feed_estimates([rec("kf", 1.0, vehicle="auv", speed=1.25, std_speed=10.62)])
+    assert lone.state("auv")["speed"] == {"value": 1.25, "std": 10.62, "pipeline": "kf"}
+
+
 def test_the_view_sends_only_newer_points_unless_the_track_started_again():
     view = fed_view()
     first = view.state()

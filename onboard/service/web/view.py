@@ -45,6 +45,11 @@ TRACK_PIPELINES = ("nav", "aie", "kf", "eseso")
 """Pipelines whose ``north``/``east`` make the track, best first."""
 MOTION_PIPELINES = ("aie", "kf", "nav")
 """Pipelines whose ``speed`` and ``heading`` are shown, best first."""
+SPEED_STD_FLOOR_MPS = 0.1
+"""A speed's one-sigma wider than the speed itself, or than this (m/s), tells nothing at a
+glance (:func:`_says_nothing`)."""
+HEADING_STD_MAX_RAD = 0.5 * math.pi
+"""A heading's one-sigma beyond a quarter turn tells nothing at a glance."""
 CURRENT_PIPELINE = "current"
 TRACK_PERIOD_S = 1.0
 """Vehicle seconds between two track points."""
@@ -295,18 +300,31 @@ def _position(v: _Vehicle) -> dict | None:
             "std_north_m": rec.std.get("north"), "std_east_m": rec.std.get("east")}
 
 
+def _says_nothing(q: str, value: float, std: float | None) -> bool:
+    """Whether the one-sigma ``std`` of ``q`` (speed m/s, heading rad) tells nothing at a
+    glance: the next pipeline's value is shown instead (an AUV's dead-reckoned kf speed
+    of 1.25 +- 10.62 m/s under water, where the measured speed is 1.5)."""
+    if std is None:
+        return False
+    if q == "speed":
+        return std > max(abs(value), SPEED_STD_FLOOR_MPS)
+    return std > HEADING_STD_MAX_RAD
+
+
 def _motion(v: _Vehicle, q: str, scale: float | Callable[[float], float]) -> dict | None:
-    """The newest ``q`` (speed m/s, heading deg) of the best motion pipeline."""
+    """The newest ``q`` (speed m/s, heading deg) of the best motion pipeline whose sigma
+    says something (:func:`_says_nothing`; the best one with a value when none does)."""
     conv = scale if callable(scale) else (lambda x: x * scale)
-    for p in MOTION_PIPELINES:
-        rec = v.estimates.get(p)
-        if rec is not None and q in rec.values:
-            value = conv(rec.values[q])
-            std = rec.std.get(q)
-            if q == "heading":
-                value %= 360.0
-            return {"value": value, "std": None if std is None else conv(std), "pipeline": p}
-    return None
+    shown = [(p, rec) for p in MOTION_PIPELINES
+             if (rec := v.estimates.get(p)) is not None and q in rec.values]
+    if not shown:
+        return None
+    p, rec = next(((p, r) for p, r in shown
+                   if not _says_nothing(q, r.values[q], r.std.get(q))), shown[0])
+    value, std = conv(rec.values[q]), rec.std.get(q)
+    if q == "heading":
+        value %= 360.0
+    return {"value": value, "std": None if std is None else conv(std), "pipeline": p}
 
 
 def _current(rec: EstimateRecord | None) -> dict | None:
