@@ -185,6 +185,20 @@ def test_a_dive_current_agrees_with_the_gliders_own_within_its_sigma(
     assert float(d["dac.dive_end"]) - float(d["dac.dive_start"]) > 3000   # an hour's dive
 
 
+@pytest.mark.data
+def test_a_sparse_sbd_is_read_whole_on_the_gliders_time_jump_span(shared_data: Path,
+                                                                   tmp_path: Path):
+    """The short file a glider sends home at each surfacing, a cycle every 4-60 s: read
+    whole with the Slocum config's ``time_jump_s = 120`` (26 % at the default 10 s)."""
+    log = shared_data / GLIDERS / "amadeus-2014-204-05-000.sbd"
+    assert cli_main(["replay", str(log), "--out", str(tmp_path), "--no-plot"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    codes = {w["code"] for w in summary["warnings"]}
+    assert "log_mostly_unread" not in codes and "time_jump" not in codes
+    assert summary["read"]["samples"] - sum(summary["rejected"].values()) >= 170
+    assert summary["time_span"]["duration_s"] > 3600   # one segment: the whole dive
+
+
 def test_the_dive_pipeline_is_built_where_a_config_enables_it():
     from onboard.core import config as configmod
     from onboard.pipelines import dac

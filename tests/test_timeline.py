@@ -56,6 +56,19 @@ def test_a_single_stamp_far_ahead_is_an_outlier_and_the_later_samples_are_kept()
     assert len(tl.segments) == 1 and tl.duration_s == pytest.approx(0.4)
 
 
+def test_a_sparse_log_is_one_segment_where_its_jump_span_covers_its_silences():
+    """A glider's .sbd logs a cycle every 4-60 s: with ``[engine] time_jump_s = 120`` a
+    run of stamps 45 s apart is one segment and none is an outlier; with the default
+    10 s most of them were outliers (the amadeus .sbd: 26 % used). A silence beyond the
+    span is still a jump."""
+    stamps = [45.0 * k for k in range(20)] + [45.0 * 19 + 300.0 + 45.0 * k for k in range(5)]
+    wide = Timeline(jump_s=120.0)
+    assert admit_all(wide, stamps) == stamps and not wide.outliers
+    assert len(wide.segments) == 2
+    narrow = Timeline()
+    assert len(admit_all(narrow, stamps)) < len(stamps) // 2
+
+
 def test_a_single_stamp_far_back_is_an_outlier_too():
     tl = Timeline()
     assert admit_all(tl, [500.0, 500.1, 0.0, 500.2, 500.3]) == [500.0, 500.1, 500.2, 500.3]

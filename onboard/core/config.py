@@ -82,6 +82,10 @@ class EngineConfig(_Strict):
     """Rate (Hz) of the tick at which the pipelines give estimates."""
     max_sample_age_s: float = 2.0
     """Samples older than this relative to the newest one are rejected as late."""
+    time_jump_s: Annotated[float, msgspec.Meta(gt=0.0)] = 10.0
+    """A log's stamp this far (s) from the newest, either way, is a jump or an outlier, not
+    the next sample (onboard/engine/timeline.py); a log that is silent longer between
+    samples in its normal course (a Slocum's ``.sbd``, a cycle every 40-60 s) needs more."""
 
 
 class ChannelMap(_Strict):

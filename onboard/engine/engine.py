@@ -250,7 +250,7 @@ class Engine:
         """One source per quantity (``[sources]``); its switches are events."""
         self.stale: set[tuple[str, str]] = set()
         """The sample streams now stale (see :data:`STALE_AFTER_S`)."""
-        self.timeline = Timeline()
+        self.timeline = Timeline(cfg.engine.time_jump_s)
         """The segments of the run and its outliers (:meth:`admit`)."""
 
     def local_frame(self, name: str) -> tuple[LocalFrame, tuple[float, float]] | None:

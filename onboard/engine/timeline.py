@@ -51,7 +51,8 @@ from onboard.core.stamps import Anchor
 
 TIME_JUMP_S = 10.0
 """A stamp this far (s) from the newest released one, either way, is held until the
-samples after it say whether it is an outlier or a jump (the engine's default ``gap_s``)."""
+samples after it say whether it is an outlier or a jump (the engine's default ``gap_s``;
+the default of ``[engine] time_jump_s``, a :class:`Timeline`'s ``jump_s``)."""
 CONFIRM_STAMPS = 2
 """Distinct stamps that confirm a side: the held samples' side (a jump) or the current
 segment's (the held samples are outliers). Two: a corrupted stamp is one stamp (all the
@@ -157,12 +158,14 @@ class Timeline:
         jump: the jump confirmed by the last :meth:`admit`, None if it confirmed none.
     """
 
-    def __init__(self) -> None:
-        """An empty time line."""
+    def __init__(self, jump_s: float = TIME_JUMP_S) -> None:
+        """An empty time line whose jumps are stamps more than ``jump_s`` (s) apart
+        (:data:`TIME_JUMP_S`; ``[engine] time_jump_s``)."""
+        self.jump_s = jump_s
         self.segments: list[Segment] = []
         self.outliers: list[Sample] = []
         self.jump: Jump | None = None
-        self._anchor: Anchor[Sample] = Anchor(TIME_JUMP_S)
+        self._anchor: Anchor[Sample] = Anchor(jump_s)
         self._held: list[Sample] = []
         self._held_stamps: set[float] = set()
         self._held_newest = 0.0
@@ -188,9 +191,9 @@ class Timeline:
         if not self._anchor.decided:
             return self._start(*self._anchor.push(t, sample))
         seg = self.segments[-1]
-        if self._held and abs(t - self._held_newest) <= TIME_JUMP_S:
+        if self._held and abs(t - self._held_newest) <= self.jump_s:
             return self._hold(sample)
-        if abs(t - seg.end) <= TIME_JUMP_S:
+        if abs(t - seg.end) <= self.jump_s:
             if t > seg.end:
                 seg.end = t
             elif t < seg.start:
@@ -208,7 +211,7 @@ class Timeline:
         when it is an outlier (more than :data:`TIME_JUMP_S` from ``now``; listed in
         :attr:`outliers`). One segment, on the receive clock."""
         t = sample.t
-        if abs(t - now) > TIME_JUMP_S:
+        if abs(t - now) > self.jump_s:
             self.outliers.append(sample)
             return []
         if not self.segments:

@@ -442,6 +442,8 @@ NEEDS: dict[str, tuple[str, tuple[frozenset[str], ...]]] = {
     "current": ("a heading (compass or AHRS yaw) to put velocities in the earth frame, and a "
                 "velocity over ground (GNSS speed and course, INS velocity, DVL bottom track)",
                 (frozenset({"heading", "attitude"}), frozenset({"gnss", "vog", "dvl"}))),
+    "dac": ("GNSS fixes at the surface, depth, and the heading and pitch under water",
+            (frozenset({"gnss"}), frozenset({"depth"}), frozenset({"heading", "attitude"}))),
     "eseso": ("the IMU and the attitude", (frozenset({"imu"}), frozenset({"attitude"}))),
 }
 """Per pipeline: what it needs to give any estimate, in words, and as groups of sample
