@@ -83,9 +83,10 @@ class EngineConfig(_Strict):
     max_sample_age_s: float = 2.0
     """Samples older than this relative to the newest one are rejected as late."""
     time_jump_s: Annotated[float, msgspec.Meta(gt=0.0)] = 10.0
-    """A log's stamp this far (s) from the newest, either way, is a jump or an outlier, not
-    the next sample (onboard/engine/timeline.py); a log that is silent longer between
-    samples in its normal course (a Slocum's ``.sbd``, a cycle every 40-60 s) needs more."""
+    """A stamp this far (s) from the newest in a log, or from its receive time live, either
+    way, is a jump or an outlier, not the next sample (onboard/engine/timeline.py); a log
+    silent longer between samples in its normal course (a Slocum's ``.sbd``, a cycle every
+    4-60 s) needs more."""
 
 
 class ChannelMap(_Strict):
