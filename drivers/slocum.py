@@ -68,6 +68,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
+from onboard.core.geo import wrap_2pi
 from onboard.core.messages import ActuatorColumn, Attitude, Depth, GnssFix, Heading, Sample
 from onboard.drivers.base import ReadStats, UnreadableLog
 
@@ -75,11 +76,11 @@ LABEL = b"dbd_label:"
 """The first bytes of every (uncompressed) Slocum binary file."""
 COMPRESSED_SUFFIXES = (".dcd", ".ecd", ".scd", ".tcd", ".mcd", ".ncd")
 """The LZ4-compressed files' suffixes (lower case)."""
-SCIENCE_SUFFIXES = (".ebd", ".tbd", ".nbd", ".ecd", ".tcd", ".ncd")
-"""The science bay's files (CTD and other science sensors, stamped ``sci_m_present_time``):
-no navigation, not a log of the vehicle; the flight file of the same name is."""
 FLIGHT_OF_SCIENCE = {".ebd": ".dbd", ".tbd": ".sbd", ".nbd": ".mbd", ".ecd": ".dcd",
                      ".tcd": ".scd", ".ncd": ".mcd"}
+"""The science bay's files by suffix (CTD and other science sensors, stamped
+``sci_m_present_time``: no navigation, not a log of the vehicle) and the suffix of the
+flight file of the same name, which is."""
 CACHE_ENV = "ONBOARD_SLOCUM_CACHE"
 """An environment variable naming one more folder of sensor-list cache files."""
 NO_VALUE = 69696969.0
@@ -102,6 +103,10 @@ GLIDER_NAME = re.compile(r"^(.+)-\d{4}-\d+-\d+-\d+$")
 """A file's full name: the glider's name, the year, the day, the mission and segment."""
 KNOWN_INT = 0x1234
 """The integer of the known bytes."""
+
+LZ4_BLOCK_MAX = 1 << 16
+"""The largest decompressed block (bytes) the buffer takes: a block's compressed length is
+two bytes, and the glider's blocks decompress to less."""
 
 _VALUE_FORMATS = {1: "b", 2: "h", 4: "f", 8: "d"}
 
@@ -129,7 +134,7 @@ def _lz4_blocks(data: bytes, path: str | os.PathLike) -> bytes:
         (n,) = struct.unpack_from(">H", data, i)
         i += 2
         try:
-            out += lz4.block.decompress(data[i:i + n], uncompressed_size=1 << 16)
+            out += lz4.block.decompress(data[i:i + n], uncompressed_size=LZ4_BLOCK_MAX)
         except lz4.block.LZ4BlockError:
             raise UnreadableLog(f"{path}: a damaged LZ4 block at byte {i - 2}") from None
         i += n
@@ -158,7 +163,7 @@ def not_a_log(path: str | os.PathLike) -> str:
     suffix = Path(path).suffix.lower()
     if suffix in (".cac", ".ccc"):
         return "a Slocum sensor-list cache file (the binary logs' sensor names)"
-    if suffix not in SCIENCE_SUFFIXES:
+    if suffix not in FLIGHT_OF_SCIENCE:
         return ""
     return (f"a Slocum science-bay file ({suffix}: CTD and other science sensors, no "
             f"navigation); the flight file of the same name ({FLIGHT_OF_SCIENCE[suffix]}) "
@@ -359,13 +364,11 @@ class SlocumReader:
             else:
                 yield GnssFix(t=t, source=SOURCE, lat_deg=_degrees(lat), lon_deg=_degrees(lon))
         if new("m_heading") or new("m_pitch") or new("m_roll"):
-            psi, pitch, roll = value("m_heading"), value("m_pitch"), value("m_roll")
+            psi, pitch, roll = wrap_2pi(value("m_heading")), value("m_pitch"), value("m_roll")
             if math.isfinite(psi) and math.isfinite(pitch) and math.isfinite(roll):
-                yield Attitude(t=t, source=SOURCE, roll_rad=roll, pitch_rad=pitch,
-                               yaw_rad=psi % (2.0 * math.pi))
+                yield Attitude(t=t, source=SOURCE, roll_rad=roll, pitch_rad=pitch, yaw_rad=psi)
             if new("m_heading") and math.isfinite(psi):
-                yield Heading(t=t, source=SOURCE, heading_rad=psi % (2.0 * math.pi),
-                              reference=HEADING_REFERENCE)
+                yield Heading(t=t, source=SOURCE, heading_rad=psi, reference=HEADING_REFERENCE)
         if new("m_depth") and math.isfinite(value("m_depth")):
             yield Depth(t=t, source=SOURCE, depth_m=value("m_depth"))
         for name, column in COLUMNS.items():

@@ -188,8 +188,7 @@ def current_rows(cols: dict[str, np.ndarray], summary: dict, clock) -> dict[str,
     spans = _flag_spans(summary["warnings"])
     for i in np.flatnonzero(np.isfinite(cn) & np.isfinite(ce)):
         t = float(cols["t"][i])
-        utc_s = clock.to_utc(t0 + t) if clock is not None else None
-        utc = round(1000.0 * utc_s) if utc_s is not None else None  # ms
+        utc = _utc_ms(clock, t0 + t)
         lat = lon = None
         for p in where:
             n, e = cols[p + ".north"][i], cols[p + ".east"][i]
@@ -219,16 +218,22 @@ def _dive_rows(cols: dict[str, np.ndarray], summary: dict, clock, frame,
             continue
         seen.add(float(end[i]))
         mid = 0.5 * (float(cols["dac.dive_start"][i]) + float(end[i]))
-        utc_s = clock.to_utc(mid) if clock is not None else None
         lat = lon = None
         if frame is not None:
             lat, lon = frame.to_latlon(float(cols["dac.place_north"][i]),
                                        float(cols["dac.place_east"][i]))
-        row = (mid - t0, round(1000.0 * utc_s) if utc_s is not None else None, lat, lon,
+        row = (mid - t0, _utc_ms(clock, mid), lat, lon,
                float(cols["dac.north"][i]), float(cols["dac.east"][i]),
                _num(cols["dac.std_north"][i]), _num(cols["dac.std_east"][i]), [], "dac")
         for k, v in zip(out, row):
             out[k].append(v)
+
+
+def _utc_ms(clock, t: float) -> int | None:
+    """The UTC (ms) of log time ``t`` (s) on ``clock``; None without one, or where the log
+    has no UTC."""
+    utc_s = clock.to_utc(t) if clock is not None else None
+    return round(1000.0 * utc_s) if utc_s is not None else None
 
 
 def _num(x: float) -> float | None:

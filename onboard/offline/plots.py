@@ -270,6 +270,12 @@ def _plot_current(ax, cur: _Current) -> None:
               ncols=len(labels), fontsize="small", frameon=False)
 
 
+def _arrow_scale(extent_m: float) -> float:
+    """The arrows' scale (m/s per metre of map) on a map ``extent_m`` (m, at least 1 m)
+    across: the :data:`ARROW_KEY_MPS` key as long as :data:`ARROW_SHARE` of it."""
+    return ARROW_KEY_MPS / (ARROW_SHARE * max(extent_m, 1.0))
+
+
 def _dive_arrows(ax, cols: dict[str, list[float]],
                  pairs: Iterable[tuple[str, str, str]]) -> None:
     """Each dive's depth-averaged current (pipeline ``dac``) as an arrow from the middle
@@ -286,11 +292,9 @@ def _dive_arrows(ax, cols: dict[str, list[float]],
     def at(name: str) -> np.ndarray:
         return np.asarray(cols[name], float)[rows]
 
-    extent = max([1.0] + [np.nanmax(cols[c]) - np.nanmin(cols[c])
-                          for _, n, e in pairs for c in (n, e)])
-    scale = ARROW_KEY_MPS / (ARROW_SHARE * extent)
+    extent = max(np.nanmax(cols[c]) - np.nanmin(cols[c]) for _, n, e in pairs for c in (n, e))
     q = ax.quiver(at("dac.place_east"), at("dac.place_north"), at("dac.east"),
-                  at("dac.north"), angles="xy", scale_units="xy", scale=scale,
+                  at("dac.north"), angles="xy", scale_units="xy", scale=_arrow_scale(extent),
                   width=0.006, color="tab:green", zorder=4)
     for x, y, s in zip(at("dac.place_east"), at("dac.place_north"), at("dac.std_north")):
         ax.annotate(f"± {s:.2f} m/s", (x, y), textcoords="offset points", xytext=(4, -10),
@@ -318,10 +322,9 @@ def _current_arrows(ax, cols: dict[str, list[float]],
         return
     rows = rows[np.unique(np.linspace(0, len(rows) - 1, min(CURRENT_ARROWS, len(rows)))
                           .astype(int))]
-    extent = max(np.nanmax(north) - np.nanmin(north), np.nanmax(east) - np.nanmin(east), 1.0)
-    scale = ARROW_KEY_MPS / (ARROW_SHARE * extent)  # m/s per metre of map
+    extent = max(np.nanmax(north) - np.nanmin(north), np.nanmax(east) - np.nanmin(east))
     q = ax.quiver(east[rows], north[rows], cur.east[rows], cur.north[rows], angles="xy",
-                  scale_units="xy", scale=scale, width=0.004, color="tab:purple",
-                  alpha=0.8, zorder=3)
+                  scale_units="xy", scale=_arrow_scale(extent), width=0.004,
+                  color="tab:purple", alpha=0.8, zorder=3)
     ax.quiverkey(q, 0.88, 0.05, ARROW_KEY_MPS, f"current {ARROW_KEY_MPS:g} m/s",
                  labelpos="N", coordinates="axes", fontproperties={"size": "small"})
