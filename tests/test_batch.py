@@ -228,7 +228,7 @@ def test_bad_usage_and_nothing_readable_exit_2(season, tmp_path):
 
 
 def test_on_a_dask_local_cluster(season, local, tmp_path):
-    distributed = pytest.importorskip("distributed")
+    distributed = pytest.importorskip("distributed", reason="pip install 'onboard[batch]'")
     _, local_out = local
     logs = tmp_path / "logs"
     logs.mkdir()
@@ -253,7 +253,7 @@ def test_on_a_dask_local_cluster(season, local, tmp_path):
 
 
 def test_an_unreachable_scheduler_is_bad_usage(season, tmp_path):
-    pytest.importorskip("distributed")
+    pytest.importorskip("distributed", reason="pip install 'onboard[batch]'")
     r = onboard("batch", str(season / "gnss-compass.nmea"), "--out", str(tmp_path / "o"),
                 "--scheduler", "tcp://127.0.0.1:9")
     assert r.returncode == 2 and "--scheduler tcp://127.0.0.1:9: cannot connect" in r.stderr
@@ -324,8 +324,8 @@ def test_season_report_tells_apart_vehicles_a_detected_config_does_not_name():
 
 def test_the_docs_queries_run_on_the_tables(local, monkeypatch, capsys):
     """Every Python block of docs/batch.md runs on the tables (``season-out``)."""
-    pytest.importorskip("duckdb")
-    pytest.importorskip("pandas")
+    pytest.importorskip("duckdb", reason="pip install duckdb")
+    pytest.importorskip("pandas", reason="pip install pandas")
     _, out = local
     monkeypatch.chdir(out.parent)
     blocks = re.findall(r"```python\n(.*?)```", (REPO / "docs" / "batch.md").read_text(),

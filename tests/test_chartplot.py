@@ -39,7 +39,7 @@ def test_set_is_where_the_current_flows_to_clockwise_from_north_and_drift_its_sp
 
 
 def test_the_vdr_sentence_reads_back_with_pynmeagps_set_magnetic_and_knots():
-    pynmeagps = pytest.importorskip("pynmeagps")
+    pynmeagps = pytest.importorskip("pynmeagps", reason="pip install 'onboard[sim]'")
     sd = set_drift(-0.25, 0.4, declination_deg=-3.5)  # 0.47 m/s towards 122.0 T, 125.5 M
     line = vdr_sentence(sd)
     assert line.endswith("\r\n") and line.startswith("$IIVDR,")
@@ -52,7 +52,7 @@ def test_the_vdr_sentence_reads_back_with_pynmeagps_set_magnetic_and_knots():
 
 
 def test_a_vdr_without_declination_has_an_empty_magnetic_field_and_a_wrong_checksum_fails():
-    pynmeagps = pytest.importorskip("pynmeagps")
+    pynmeagps = pytest.importorskip("pynmeagps", reason="pip install 'onboard[sim]'")
     line = vdr_sentence(set_drift(0.1, 0.0))
     assert line == "$IIVDR,0.0,T,,M,0.19,N*" + nmea_checksum("IIVDR,0.0,T,,M,0.19,N") + "\r\n"
     msg = pynmeagps.NMEAReader.parse(line.encode(), validate=pynmeagps.VALCKSUM)

@@ -73,7 +73,7 @@ def test_a_replay_carries_the_logs_utc_and_position_and_summary_json_its_clock(t
     """An NMEA capture is on the RMC sentences' UTC: every record in the MCAP carries its
     tick's UTC (the MCAP's log time) and the GNSS position; summary.json's ``utc`` holds
     the clock that batch reads instead of reopening the log."""
-    pytest.importorskip("mcap")
+    pytest.importorskip("mcap", reason="pip install 'onboard[mcap]'")
     from mcap.reader import make_reader
 
     out = tmp_path / "out"

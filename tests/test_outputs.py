@@ -203,7 +203,7 @@ def test_an_export_that_fails_while_written_leaves_the_others_and_says_which(
         tmp_path, capsys):
     """/dev/full accepts the open and fails every write (ENOSPC): the GPX fails, the
     GeoJSON, the MCAP, estimates.csv and summary.json are written, exit status 1."""
-    pytest.importorskip("mcap")
+    pytest.importorskip("mcap", reason="pip install 'onboard[mcap]'")
     out = tmp_path / "out"
     rc, lines, _ = run(["replay", str(JAIABOT), "--out", str(out), "--no-plot", "--force",
                         "--gpx", "/dev/full", "--geojson", str(tmp_path / "t.geojson"),
@@ -221,7 +221,7 @@ def test_an_export_that_fails_while_written_leaves_the_others_and_says_which(
 
 def test_an_mcap_writer_that_fails_mid_run_stops_only_the_mcap(tmp_path, capsys,
                                                                 monkeypatch):
-    pytest.importorskip("mcap")
+    pytest.importorskip("mcap", reason="pip install 'onboard[mcap]'")
     from onboard.drivers import mcap_out
 
     real, calls = mcap_out.McapRecordWriter.write, []

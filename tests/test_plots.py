@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("matplotlib")
+pytest.importorskip("matplotlib", reason="pip install 'onboard[plot]'")
 
 from onboard.offline import plots  # noqa: E402
 from onboard.offline.plots import (MAX_POINTS, SIGMA_BAND, decimate, plot_track,  # noqa: E402

@@ -49,7 +49,7 @@ def pixels_near(img, rgb: tuple[int, int, int], tol: int = 12) -> int:
 
 @pytest.mark.parametrize("query", ["", "?widget=1"], ids=["page", "cockpit-widget"])
 def test_the_page_shows_the_track_and_the_current_arrow(view, tmp_path, query):
-    mpimg = pytest.importorskip("matplotlib.image")
+    mpimg = pytest.importorskip("matplotlib.image", reason="pip install 'onboard[plot]'")
     out = tmp_path / "page.png"
     with ServerThread(view=view) as srv:
         run = screenshot(srv.url + "/" + query, out, tmp_path / "profile")
@@ -165,7 +165,7 @@ def tile_of(lat: float, lon: float, z: int) -> tuple[int, int]:
 
 
 def test_online_the_track_is_drawn_over_the_map_tiles_of_its_place(view, tmp_path):
-    mpimg = pytest.importorskip("matplotlib.image")
+    mpimg = pytest.importorskip("matplotlib.image", reason="pip install 'onboard[plot]'")
     tiles = TileServer()
     out = tmp_path / "tiles.png"
     with ServerThread(view=view) as srv, ServerThread(tiles):

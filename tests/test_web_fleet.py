@@ -108,7 +108,7 @@ def purple_tinted(img) -> int:
 @pytest.mark.integration
 @pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")
 def test_the_page_draws_arrows_where_the_field_is_known_and_nothing_where_it_is_null(tmp_path):
-    mpimg = pytest.importorskip("matplotlib.image")
+    mpimg = pytest.importorskip("matplotlib.image", reason="pip install 'onboard[plot]'")
     out = tmp_path / "fleet.png"
     with ServerThread(view=fleet_view()) as srv:
         run = screenshot(srv.url + "/?tiles=0", out, tmp_path / "profile")
@@ -134,7 +134,7 @@ def test_a_vehicle_without_a_position_is_counted_not_drawn_at_0_0(tmp_path):
     """An AUV that never had a fix is listed in the grid without a position: the panel
     names it, and the map keeps the fleet's extent (drawn at lat 0, lon 0, it put the
     fleet 5,000 km away and every arrow under a pixel)."""
-    mpimg = pytest.importorskip("matplotlib.image")
+    mpimg = pytest.importorskip("matplotlib.image", reason="pip install 'onboard[plot]'")
     out = tmp_path / "fleet.png"
     with ServerThread(view=fleet_view(unplaced=True)) as srv:
         dom = dump_dom(srv.url + "/?tiles=0", tmp_path / "profile")
@@ -232,7 +232,7 @@ def test_without_a_fleet_service_the_other_vehicles_are_the_fleet_layer():
 @pytest.mark.integration
 @pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")
 def test_the_page_draws_the_other_vehicles_track_and_current(tmp_path):
-    mpimg = pytest.importorskip("matplotlib.image")
+    mpimg = pytest.importorskip("matplotlib.image", reason="pip install 'onboard[plot]'")
     out = tmp_path / "two.png"
     with ServerThread(view=two_vehicle_view()) as srv:
         run = screenshot(srv.url + "/?tiles=0&vehicle=alpha", out, tmp_path / "profile")
