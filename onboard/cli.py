@@ -82,9 +82,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", help="scenario name (see --list)")
     p.add_argument("--fleet", metavar="NAME",
                    help="several vehicles in a current field (see --list), written with --out")
+    p.add_argument("--glider", action="store_true",
+                   help="a Slocum glider's dives, its .dbd flight log and the truth of each "
+                        "dive's depth-averaged current, written with --out")
+    p.add_argument("--dives", type=int, default=4, help="with --glider: how many dives")
     p.add_argument("--out", metavar="DIR",
                    help="with --fleet: one log, truth, capture and config per vehicle, the "
-                        "truth of the field and fleet.json in DIR")
+                        "truth of the field and fleet.json in DIR; with --glider: the "
+                        ".dbd and its .truth.json")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--tlog", metavar="FILE", help="write the MAVLink stream to this .tlog "

@@ -10,6 +10,7 @@ Examples::
         --dvl tcp:0.0.0.0:16171                           # Water Linked DVL JSON server
     onboard sitl --scenario gavia-tidal --realtime --link pty --nmea-pty --dvl pty
     onboard sitl --fleet fleet-channel --out fleet-out --seed 1  # a fleet, offline (sitl.fleet)
+    onboard sitl --glider --out glider-out --seed 1 --dives 4  # a Slocum's .dbd (sitl.glider)
 
 On ``--link`` the simulated autopilot behaves as ArduPilot's MAVLink side
 (:mod:`sitl.autopilot`): HEARTBEAT only until the receiver asks for streams
@@ -95,6 +96,33 @@ def run_fleet(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_glider(args: argparse.Namespace) -> int:
+    """``onboard sitl --glider --out DIR``: a Slocum glider's dives as its ``.dbd`` flight
+    log and the truth of each dive's depth-averaged current (:func:`sitl.glider.fly`)."""
+    from onboard.sitl.glider import fly, log_stem
+
+    if not args.out:
+        raise UsageError("--glider writes the glider's .dbd offline: give --out DIR")
+    if args.scenario or args.fleet or args.tlog or args.truth or args.link \
+            or args.nmea_pty or args.dvl or args.duration is not None:
+        raise UsageError("--glider takes --out, --dives and --seed only")
+    if not 1 <= args.dives <= 1000:
+        raise UsageError(f"--dives must be 1 to 1000, got {args.dives}")
+    stem = log_stem(args.seed)
+    check_outputs([Output("--out", Path(args.out), "dir",
+                          (f"{stem}.dbd", f"{stem}.truth.json"))],
+                  force=bool(getattr(args, "force", False)))
+    t0 = time.process_time()
+    run = fly(args.out, args.seed, dives=args.dives)
+    cpu = time.process_time() - t0
+    for d in run.dives:
+        print(f"dive {d['t_start']:.0f}-{d['t_end']:.0f} UTC: true depth-averaged current "
+              f"{d['north']:+.3f} north, {d['east']:+.3f} east (m/s)", flush=True)
+    print(f"{run.path}: {len(run.dives)} dives, {cpu:.1f} s CPU -> onboard replay "
+          f"{run.path}; truth in {run.path.with_suffix('.truth.json')}", flush=True)
+    return 0
+
+
 def make_controller(name: str, sc: Scenario) -> Controller:
     """The closed-loop controller ``name`` (``pid``, ``nmpc``, ``nmpc-of``, ``ampc``) for scenario ``sc``:
     :class:`sitl.closed_loop.EsesoPolicy`, the controller fed by the ESESO running on the
@@ -140,6 +168,8 @@ def main(args: argparse.Namespace) -> int:
         return 0
     if getattr(args, "fleet", None):
         return run_fleet(args)
+    if getattr(args, "glider", False):
+        return run_glider(args)
     if not args.scenario:
         raise UsageError("give --scenario NAME (see --list)")
     sc = get(args.scenario)

@@ -141,7 +141,8 @@ NO_UNIT_SUFFIX: dict[str, str] = {
         "model_rel_std", "net_weight_std", "forgetting", "heading_diversity",
         "turn_accel_gain", "yaw_forgetting", "calibrate_block", "restore_check_p",
         "gate_sigma", "max_consecutive_rejects", "thrust_huber", "allocation", "exponent",
-        "deadband", "damping_rel_std", "thrust_rel_std", "adapt_updates", "scale_max",
+        "deadband", "damping_rel_std", "thrust_rel_std", "lift_rel_std", "adapt_updates",
+        "scale_max",
         "thrust_scale_max"), "dimensionless"),
     **dict.fromkeys((
         "a", "gain", "offset", "u_max", "u_scale", "v_d", "q_v", "bias_q", "gamma",

@@ -23,6 +23,16 @@ def test_published_coefficients_at_aegean_density():
     assert k_d == pytest.approx(539.8, abs=0.1)
 
 
+def test_the_config_defaults_are_the_published_coefficients_at_the_default_density():
+    from onboard.core.pipeline_config import GliderModelConfig
+
+    c = GliderModelConfig()
+    k_l, k_d0, k_d = merckelbach_coefficients(c.water_density_kgm3)
+    assert (c.lift_kl, c.drag_kd0, c.drag_kd) == pytest.approx((k_l, k_d0, k_d), abs=0.05)
+    g = GliderModel()
+    assert (g.k_l, g.k_d0, g.k_d) == (k_l, k_d0, k_d)
+
+
 @pytest.mark.parametrize("sign", [-1.0, 1.0])
 def test_unpowered_glide_solves_both_routes_alike(sign):
     """The speed from the buoyancy (drag balance) and the speed from the depth rate that

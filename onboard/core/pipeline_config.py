@@ -356,16 +356,17 @@ class GliderModelConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
     model"). When present, the current pipeline takes the glider's through-water velocity
     from its pitch, depth rate and pump volume (``[inputs] pump``) as a water-track
     measurement at each new depth sample. Defaults: the Slocum's published coefficients
-    (Graver 2005: ``vehicle_models.SLOCUM_LIFT_KL``, ``SLOCUM_DRAG_KD0``, ``SLOCUM_DRAG_KD``,
-    the same numbers)."""
+    (Merckelbach et al. 2019 at 1027 kg/m^3, calibrated against a profiling DVL:
+    ``vehicle_models.SLOCUM_LIFT_KL``, ``SLOCUM_DRAG_KD0``, ``SLOCUM_DRAG_KD``, the same
+    numbers)."""
 
-    lift_kl: float = 132.5
+    lift_kl: float = 386.9
     """Lift per angle of attack ``K_L`` (kg/(m rad)): ``L = (K_L0 + K_L alpha) U^2``."""
     lift_kl0: float = 0.0
     """Lift at zero angle of attack ``K_L0`` (kg/m)."""
-    drag_kd0: float = 2.15
+    drag_kd0: float = 7.70
     """Parasite drag ``K_D0`` (kg/m): ``D = (K_D0 + K_D alpha^2) U^2``."""
-    drag_kd: float = 25.0
+    drag_kd: float = 538.8
     """Induced drag ``K_D`` (kg/(m rad^2))."""
     water_density_kgm3: Annotated[float, msgspec.Meta(gt=0.0)] = 1027.0
     """Sea-water density (kg/m^3)."""
@@ -800,6 +801,15 @@ class DacConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     """True: the pipeline is built (a glider's config: config/slocum-glider.toml)."""
     min_dive_s: Annotated[float, msgspec.Meta(gt=0.0)] = 600.0
     """A dive shorter than this (s) between its two surface fixes gives no current."""
+    lift_rel_std: Annotated[float, msgspec.Meta(ge=0.0)] = 0.25
+    """Relative one-sigma of the glide model's lift, one error for a whole dive (a hull,
+    its fouling and trim against ``[pipelines.current.glider] lift_kl``)."""
+    pitch_bias_std_rad: Annotated[float, msgspec.Meta(ge=0.0)] = 0.0087
+    """One-sigma (rad; 0.0087 = 0.5 deg) of the pitch sensor's bias over a dive. The
+    compass's error is ``[sensors.compass] heading_std_rad``."""
+    vertical_water_time_s: Annotated[float, msgspec.Meta(gt=0.0)] = 300.0
+    """Correlation time (s) of the vertical water velocity (``[pipelines.current.glider]
+    vertical_water_std_mps``; internal waves)."""
 
 
 VELOCITY_PIPELINES = frozenset({"current", "dac"})

@@ -78,7 +78,8 @@ class DiveAveragePipeline(PipelineDefaults):
         d = dac.latest
         if d is None:
             return {}
-        return {"north": d.north, "east": d.east, "std_north": d.std, "std_east": d.std,
+        return {"north": d.north, "east": d.east, "std_north": d.std_north,
+                "std_east": d.std_east,
                 "dive_start": d.t_start, "dive_end": d.t_end,
                 "place_north": d.place[0], "place_east": d.place[1]}
 
@@ -121,4 +122,7 @@ def create(cfg: Config) -> DiveAveragePipeline | None:
     glider = cfg.pipelines.current.glider or GliderModelConfig()
     return DiveAveragePipeline(DiveAverage(
         glider_model(glider), surface_depth_m=cfg.sensors.depth.surface_depth_m,
-        position_std_m=cfg.sensors.gnss.position_std_m, min_dive_s=pc.min_dive_s))
+        position_std_m=cfg.sensors.gnss.position_std_m, min_dive_s=pc.min_dive_s,
+        heading_std=cfg.sensors.compass.heading_std_rad,
+        lift_rel_std=pc.lift_rel_std, pitch_bias_std=pc.pitch_bias_std_rad,
+        vertical_water_time_s=pc.vertical_water_time_s))
