@@ -137,7 +137,8 @@ class GliderRun:
     path: Path
     dives: list[dict[str, float]] = field(default_factory=list)
     """Per dive: ``t_start``, ``t_end`` (UTC of its bounding fixes), ``north``, ``east``
-    (m/s: the water's velocity at the glider averaged over them)."""
+    (m/s: the water's velocity at the glider averaged over them), ``lat_mid``,
+    ``lon_mid`` (deg: the midpoint of the glider's true places at the two fixes)."""
     errors: GliderErrors | None = None
 
 
@@ -171,7 +172,7 @@ def fly(out_dir: Path | str, seed: int, dives: int = 4, yos: int = 3,
     last_pump = math.nan
     cycles: list[dict[str, float | None]] = []
     water_t: list[tuple[float, float, float]] = []   # (t, north, east) at each step
-    fixes: list[float] = []
+    fixes: list[tuple[float, float, float]] = []   # (t, north, east) true
     next_cycle = 0.0
     done = 0
     while done < dives or phase != "surface" or t - surfaced_at < surface_s:
@@ -218,7 +219,7 @@ def fly(out_dir: Path | str, seed: int, dives: int = 4, yos: int = 3,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = DbdWriter(SENSORS, stem).write(out / f"{stem}.dbd", cycles)
-    run = GliderRun(path, _true_dives(np.array(water_t), fixes), err)
+    run = GliderRun(path, _true_dives(np.array(water_t), fixes, geo), err)
     (out / f"{stem}.truth.json").write_text(json.dumps(
         {"seed": seed, "errors": err.__dict__, "field": water.describe(),
          "dives": run.dives}, indent=1))
@@ -228,8 +229,9 @@ def fly(out_dir: Path | str, seed: int, dives: int = 4, yos: int = 3,
 def _cycle(t: float, glider: SlocumGlider, heading: float, err: GliderErrors,
            noise: np.random.Generator, geo: GeoOrigin, north: float, east: float,
            fixing: bool, pump_set: float, last_pump: float,
-           fixes: list[float]) -> dict[str, float | None]:
-    """One log cycle's values (module docstring), a fix's time into ``fixes``."""
+           fixes: list[tuple[float, float, float]]) -> dict[str, float | None]:
+    """One log cycle's values (module docstring), a fix's time and true place into
+    ``fixes``."""
     deviation = err.deviation_rad * math.sin(heading + err.deviation_phase)
     measured = heading + deviation + noise.normal(0, math.radians(1.0))
     c: dict[str, float | None] = {
@@ -248,21 +250,24 @@ def _cycle(t: float, glider: SlocumGlider, heading: float, err: GliderErrors,
         e = east + noise.normal(0, err.gps_std_m)
         lat, lon = geo.to_latlon(n, e)
         c["m_gps_lat"], c["m_gps_lon"] = ddmm(lat), ddmm(lon)
-        fixes.append(t)
+        fixes.append((t, north, east))
     return c
 
 
-def _true_dives(water: np.ndarray, fixes: list[float]) -> list[dict[str, float]]:
+def _true_dives(water: np.ndarray, fixes: list[tuple[float, float, float]],
+                geo: GeoOrigin) -> list[dict[str, float]]:
     """Each dive between consecutive fixes more than a cycle apart: the water's mean
-    velocity at the glider from the earlier fix to the later."""
+    velocity at the glider from the earlier fix to the later, and the midpoint of its
+    places at the two."""
     out = []
     t = water[:, 0]
-    for a, b in zip(fixes, fixes[1:]):
+    for (a, na, ea), (b, nb, eb) in zip(fixes, fixes[1:]):
         if b - a <= CYCLE_S + 1e-6:
             continue
         sel = (t >= a) & (t < b)
+        lat, lon = geo.to_latlon(0.5 * (na + nb), 0.5 * (ea + eb))
         out.append({"t_start": T0_UTC + a, "t_end": T0_UTC + b,
                     "north": float(water[sel, 1].mean()),
-                    "east": float(water[sel, 2].mean())})
+                    "east": float(water[sel, 2].mean()), "lat_mid": lat, "lon_mid": lon})
     return out
 

@@ -102,6 +102,41 @@ def test_each_dive_current_is_within_its_sigma_of_the_truth(tmp_path: Path):
     assert np.max(np.abs(z_graver)) > 3.0
 
 
+def test_a_season_of_two_gliders_in_batch_gives_each_dive_where_and_when_it_was(
+        tmp_path: Path):
+    """`onboard batch` on two simulated gliders' logs: a row per dive in
+    current.parquet, its current within its sigmas of the truth, its place the midpoint
+    of the glider's true places at its two fixes (within the fixes' noise), its time the
+    middle of the dive."""
+    pd = pytest.importorskip("pandas", reason="pip install 'onboard[batch]' pandas")
+    pytest.importorskip("pyarrow", reason="pip install 'onboard[batch]'")
+    season = tmp_path / "season"
+    runs = {name: fly(season, seed=seed, dives=2, name=name)
+            for seed, name in ((201, "unit_201"), (202, "unit_202"))}
+    assert cli_main(["batch", str(season), "--out", str(tmp_path / "out"),
+                     "--jobs", "1"]) == 0
+    table = pd.read_parquet(tmp_path / "out" / "runs.parquet")
+    assert sorted(table.vehicle_id) == ["unit_201", "unit_202"]
+    for r in table.itertuples():   # the season's figures are the dives'
+        true_speed = [math.hypot(d["north"], d["east"]) for d in runs[r.vehicle_id].dives]
+        assert r.current_fraction > 0.3
+        assert r.current_speed_median_mps == pytest.approx(np.median(true_speed), abs=0.03)
+        assert 0.003 < r.current_std_median_mps < 0.03
+    cur = pd.read_parquet(tmp_path / "out" / "current.parquet")
+    dives = cur[cur.pipeline == "dac"]
+    assert len(dives) == 4
+    for row in dives.itertuples():
+        truth = runs[row.vehicle].dives
+        utc = row.utc.timestamp() if hasattr(row.utc, "timestamp") else row.utc / 1000.0
+        d, = [d for d in truth if d["t_start"] < utc < d["t_end"]]
+        assert utc == pytest.approx(0.5 * (d["t_start"] + d["t_end"]), abs=1.0)
+        assert abs(row.north - d["north"]) < 3 * row.std_north
+        assert abs(row.east - d["east"]) < 3 * row.std_east
+        dn = (row.lat - d["lat_mid"]) * 111_000.0
+        de = (row.lon - d["lon_mid"]) * 111_000.0 * math.cos(math.radians(d["lat_mid"]))
+        assert math.hypot(dn, de) < 15.0
+
+
 @pytest.mark.slow
 def test_the_dive_sigma_is_calibrated_over_held_out_gliders(tmp_path: Path):
     """Seeds 9-24, four dives each (measured 2026-11-30: RMS 0.007 m/s, 1-sigma coverage

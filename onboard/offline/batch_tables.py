@@ -120,14 +120,13 @@ def _estimate_figures(cols: dict[str, np.ndarray], pipelines: Sequence[str]) -> 
         mine = [v for k, v in cols.items() if k.startswith(p + ".")]
         have = np.any([np.isfinite(v) for v in mine], axis=0) if mine and n else []
         out["availability"][p] = float(np.mean(have)) if n and mine else 0.0
-    cn, ce = cols.get("current.north"), cols.get("current.east")
-    if cn is not None and ce is not None and n:
-        known = np.isfinite(cn) & np.isfinite(ce)
-        out["current_fraction"] = float(np.mean(known))
+    velocity = _published_current(cols)
+    if velocity is not None and n:
+        fraction, cn, ce, sn, se = velocity
+        out["current_fraction"] = fraction
         out["current_speed_median_mps"] = _median(np.hypot(cn, ce))
         out["current_north_median_mps"] = _median(cn)
         out["current_east_median_mps"] = _median(ce)
-        sn, se = cols.get("current.std_north"), cols.get("current.std_east")
         if sn is not None and se is not None:
             out["current_std_median_mps"] = _median(np.sqrt((sn ** 2 + se ** 2) / 2.0))
     else:
@@ -138,6 +137,27 @@ def _estimate_figures(cols: dict[str, np.ndarray], pipelines: Sequence[str]) -> 
         diff = np.degrees(np.angle(np.exp(1j * (hd[moving] - co[moving]))))
         out["heading_minus_course_median_deg"] = _median(diff)
     return out
+
+
+def _published_current(cols: dict[str, np.ndarray]) -> tuple | None:
+    """The current a log published, for its key figures: (the fraction of rows with
+    one, north, east, std north, std east) of pipeline ``current``'s rows, or, where it
+    published none and a glider's ``dac`` did, of its dives (each once: its rows repeat
+    the newest dive); None where neither has columns."""
+    cn, ce = cols.get("current.north"), cols.get("current.east")
+    end = cols.get("dac.dive_end")
+    if end is not None and np.isfinite(end).any() and \
+            (cn is None or ce is None or not np.isfinite(cn).any()):
+        known = np.isfinite(end)
+        _, first = np.unique(end[known], return_index=True)
+        rows = np.flatnonzero(known)[first]
+        return (float(np.mean(known)),) + tuple(cols[f"dac.{k}"][rows] for k in (
+            "north", "east", "std_north", "std_east"))
+    if cn is None or ce is None:
+        return None
+    known = np.isfinite(cn) & np.isfinite(ce)
+    return (float(np.mean(known)), cn, ce, cols.get("current.std_north"),
+            cols.get("current.std_east"))
 
 
 def diagnosis_figures(doc: dict) -> dict:
