@@ -534,9 +534,36 @@ def _diagnose_figures() -> list[Figure]:
     return out
 
 
+def _dac_figures() -> list[Figure]:
+    """A simulated glider's dive currents against their truth (docs/current.md, "A
+    glider's depth-averaged current"), pooled over each set's seeds."""
+    out: list[Figure] = []
+    sets = (("dev", runs.GLIDER_DEV_SEEDS, False,
+             "the seeds the error model was written on"),
+            ("held_out", runs.GLIDER_HELD_OUT_SEEDS, False, "held-out seeds"),
+            ("graver", runs.GLIDER_HELD_OUT_SEEDS, True,
+             "held-out seeds, Graver's (2005) lift, the default before"))
+    quantities = (("rms", "m/s", "RMS error", SITL, 3),
+                  ("cover1", "1", "the share within 1 sigma", FRACTION, 2),
+                  ("cover2", "1", "the share within 1.96 sigma", FRACTION, 3),
+                  ("z_median", "1", "the median |error| / sigma", Tolerance(rel=0.05), 2),
+                  ("dives", "count", "dives", COUNT, 0))
+    for key, seeds, graver, what in sets:
+        for q, unit, text, tol, digits in quantities:
+            out.append(Figure(
+                f"dac.sim_glider.{key}.{q}", unit,
+                f"onboard sitl --glider, seeds {seeds[0]}-{seeds[-1]} ({what}), four dives "
+                f"each, pipeline dac against the truth, north and east pooled: {text}",
+                lambda s, seeds=seeds, graver=graver, q=q:
+                    runs.glider_dac(seeds[0], seeds[-1], graver)[q],
+                (), tol, digits=digits))
+    return out
+
+
 def registry() -> dict[str, Figure]:
     """Every figure, by name, in the order ``python -m validation figures`` runs them."""
-    figs = _aie_figures() + _current_figures() + _eseso_figures() + _diagnose_figures()
+    figs = _aie_figures() + _current_figures() + _eseso_figures() + _diagnose_figures() + \
+        _dac_figures()
     return {f.name: f for f in figs}
 
 

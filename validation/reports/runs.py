@@ -449,3 +449,53 @@ def usv_heading_offset_deg() -> float:
     if "heading_bias" not in found:
         return float("nan")
     return abs(math.degrees(found["heading_bias"]["params"]["bias"]))
+
+
+# ----------------------------------------------------------------------------- gliders
+
+GLIDER_DEV_SEEDS = tuple(range(1, 9))
+"""Seeds of ``onboard sitl --glider`` the dive current's error model was written on."""
+GLIDER_HELD_OUT_SEEDS = tuple(range(9, 25))
+"""Seeds held out from it (docs/current.md, "A glider's depth-averaged current")."""
+GRAVER_LIFT = {"lift_kl": 132.5, "drag_kd0": 2.15, "drag_kd": 25.0}
+"""Graver's (2005) Slocum coefficients, the glide model's defaults before Merckelbach et
+al.'s (2019)."""
+
+
+@cache
+def glider_dac(first: int, last: int, graver: bool = False) -> dict[str, float]:
+    """Each dive's ``dac`` current of the simulated gliders of seeds ``first``-``last``
+    (four dives each, :func:`sitl.glider.fly`, replayed with config/slocum-glider.toml;
+    with ``graver`` Graver's lift instead) against its truth, pooled over north and east:
+    ``rms`` (m/s), ``cover1``, ``cover2`` (within 1 and 1.96 sigma), ``z_median``
+    (median |error| / sigma), ``dives``."""
+    import csv
+
+    from onboard.core import config as config_mod
+    from onboard.offline.replay import choose_config, replay
+    from onboard.sitl.glider import fly
+
+    err, z, dives = [], [], 0
+    with tempfile.TemporaryDirectory(prefix="onboard-figures-") as tmp:
+        overlay = Path(tmp) / "graver.toml"
+        overlay.write_text("[pipelines.current.glider]\n" + "".join(
+            f"{k} = {v}\n" for k, v in GRAVER_LIFT.items()))
+        for seed in range(first, last + 1):
+            run = fly(Path(tmp) / f"glider-{seed}", seed)
+            configs = [str(config_mod.resolve("slocum-glider")), str(overlay)] \
+                if graver else None
+            cfg, _ = choose_config(str(run.path), configs)
+            out = Path(tmp) / f"replay-{seed}"
+            replay(str(run.path), cfg, out, plot=False)
+            with open(out / "estimates.csv") as f:
+                est = {r["dac.dive_end"]: r for r in csv.DictReader(f) if r["dac.north"]}
+            for d, truth in zip(est.values(), run.dives):
+                dives += 1
+                for c in ("north", "east"):
+                    e = float(d[f"dac.{c}"]) - truth[c]
+                    err.append(e)
+                    z.append(abs(e) / float(d[f"dac.std_{c}"]))
+    e_arr, z_arr = np.array(err), np.array(z)
+    return {"rms": float(np.sqrt(np.mean(e_arr ** 2))), "cover1": float(np.mean(z_arr < 1.0)),
+            "cover2": float(np.mean(z_arr < 1.96)), "z_median": float(np.median(z_arr)),
+            "dives": float(dives)}
