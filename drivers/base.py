@@ -14,6 +14,7 @@ raises :class:`UnreadableLog`.
 
 from __future__ import annotations
 
+import math
 import mmap
 import os
 from collections import Counter
@@ -51,6 +52,20 @@ records read whole, times the share of those records its time rules kept. Half: 
 use 98.3 % (``nmea_log.txt``, its logger's own lines) to 100 %; a tlog with a tenth of
 its bytes randomised 4-7 %; a README with four NMEA sentences in its prose 12.6 %. A
 smaller loss is in the counts (``read.rejected``, ``read.used_bytes``), not warned of."""
+
+
+def ddmm_degrees(ddmm: float) -> float | None:
+    """Decimal degrees of a position written as degrees and decimal minutes,
+    ``DDDMM.MMMM`` (NMEA 0183, a Slocum's ``m_gps_lat``), its sign kept; None where it
+    is not a number or its minutes are 60 or more."""
+    if not math.isfinite(ddmm):
+        return None
+    a = abs(ddmm)
+    deg = math.floor(a / 100.0)
+    minutes = a - 100.0 * deg
+    if minutes >= 60.0:
+        return None
+    return math.copysign(deg + minutes / 60.0, ddmm)
 
 
 class UnreadableLog(Exception):

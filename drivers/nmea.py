@@ -79,7 +79,7 @@ import time as _time
 from dataclasses import dataclass, field
 from typing import Literal
 
-from onboard.drivers.base import TIME_JUMP_S, LineAssembler, ReadStats
+from onboard.drivers.base import TIME_JUMP_S, LineAssembler, ReadStats, ddmm_degrees
 from onboard.drivers.sender_clock import SenderClock
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import GnssFix, Heading, Sample
@@ -182,11 +182,9 @@ def _latlon(value: str, hemi: str, is_lat: bool) -> float | None:
         return None
     if v < 0:
         raise NmeaError("out_of_range", "negative coordinate")
-    deg = math.floor(v / 100.0)
-    minutes = v - 100.0 * deg
-    if minutes >= 60.0:
+    d = ddmm_degrees(v)
+    if d is None:
         raise NmeaError("out_of_range", "minutes >= 60")
-    d = deg + minutes / 60.0
     if d > (90.0 if is_lat else 180.0):
         raise NmeaError("out_of_range", "coordinate beyond the pole/antimeridian")
     if hemi in ("S", "W"):

@@ -70,7 +70,7 @@ from typing import Iterator
 
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import ActuatorColumn, Attitude, Depth, GnssFix, Heading, Sample
-from onboard.drivers.base import ReadStats, UnreadableLog
+from onboard.drivers.base import ReadStats, UnreadableLog, ddmm_degrees
 
 LABEL = b"dbd_label:"
 """The first bytes of every (uncompressed) Slocum binary file."""
@@ -358,11 +358,11 @@ class SlocumReader:
             return values[i] if i is not None else math.nan
 
         if new("m_gps_lat") or new("m_gps_lon"):
-            lat, lon = value("m_gps_lat"), value("m_gps_lon")
-            if not (_valid_ddmm(lat, 90.0) and _valid_ddmm(lon, 180.0)):
+            lat, lon = _degrees(value("m_gps_lat"), 90.0), _degrees(value("m_gps_lon"), 180.0)
+            if lat is None or lon is None:
                 self.stats.reject("no_fix")
             else:
-                yield GnssFix(t=t, source=SOURCE, lat_deg=_degrees(lat), lon_deg=_degrees(lon))
+                yield GnssFix(t=t, source=SOURCE, lat_deg=lat, lon_deg=lon)
         if new("m_heading") or new("m_pitch") or new("m_roll"):
             psi, pitch, roll = wrap_2pi(value("m_heading")), value("m_pitch"), value("m_roll")
             if math.isfinite(psi) and math.isfinite(pitch) and math.isfinite(roll):
@@ -376,14 +376,8 @@ class SlocumReader:
                 yield ActuatorColumn(t=t, source=SOURCE, column=column, value=value(name))
 
 
-def _valid_ddmm(x: float, max_deg: float) -> bool:
-    """Whether ``x`` (DDMM.MMMM) is a position, not the glider's "no value"."""
-    return math.isfinite(x) and x != NO_VALUE and abs(x) <= max_deg * 100.0 \
-        and abs(x) % 100.0 < 60.0
-
-
-def _degrees(ddmm: float) -> float:
-    """Degrees of a signed ``DDMM.MMMM``."""
-    a = abs(ddmm)
-    deg = math.floor(a / 100.0)
-    return math.copysign(deg + (a - 100.0 * deg) / 60.0, ddmm)
+def _degrees(ddmm: float, max_deg: float) -> float | None:
+    """Degrees of a signed ``DDMM.MMMM``; None where it is no position (the glider's
+    "no value", minutes of 60 or more, beyond ``max_deg``)."""
+    d = ddmm_degrees(ddmm) if ddmm != NO_VALUE else None
+    return d if d is not None and abs(d) <= max_deg else None

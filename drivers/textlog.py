@@ -72,7 +72,8 @@ from typing import Iterable, Iterator
 
 import msgspec
 
-from onboard.drivers.base import LogReader, ReadStats, TimeOrder, UnreadableLog, counted_lines
+from onboard.drivers.base import (LogReader, ReadStats, TimeOrder, UnreadableLog,
+                                  counted_lines, ddmm_degrees)
 from onboard.drivers.nmea import NmeaError, NmeaParser, parse_gga, parse_rmc, split_sentence
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
@@ -537,12 +538,9 @@ class DdboatLogReader:
 
 def _ddmm(value: str, hemi: str) -> float | None:
     try:
-        v = float(value)
+        d = ddmm_degrees(float(value))
     except ValueError:
         return None
-    deg = math.floor(v / 100.0)
-    minutes = v - 100.0 * deg
-    if minutes >= 60.0 or not math.isfinite(v):
+    if d is None:
         return None
-    d = deg + minutes / 60.0
     return -d if hemi in ("S", "W") else d

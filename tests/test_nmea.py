@@ -554,3 +554,14 @@ def test_capture_starting_just_before_midnight_gets_the_right_day(tmp_path: Path
     path.write_bytes(b"".join(lines))
     out = list(open_text_log(path))
     assert [s.t - DAY for s in out] == pytest.approx([86399.5, 86400.5])
+
+
+def test_degrees_and_decimal_minutes_one_conversion_for_every_driver():
+    """drivers.base.ddmm_degrees: NMEA's, the text loggers' and a Slocum's DDMM.MMMM."""
+    from onboard.drivers.base import ddmm_degrees
+
+    assert ddmm_degrees(5415.5979) == pytest.approx(54.259965)
+    assert ddmm_degrees(-726.7404) == pytest.approx(-7.44567333)
+    assert ddmm_degrees(12000.0) == 120.0 and ddmm_degrees(0.0) == 0.0
+    assert ddmm_degrees(4960.0) is None            # 60 minutes
+    assert ddmm_degrees(math.nan) is None and ddmm_degrees(math.inf) is None
