@@ -77,7 +77,7 @@ class GliderErrors:
     deviation_rad: float
     deviation_phase: float
     gps_std_m: float
-    internal_wave_mps: float
+    internal_wave_m: float
     wave_periods_s: tuple[float, float]
     wave_lengths_m: tuple[float, float]
     wave_phases: tuple[float, float]
@@ -87,8 +87,8 @@ class GliderErrors:
         """A glider: drag 0.12-0.20, hull lift 2.8-4.8 /rad, compressibility 3-7e-10
         /Pa (Merckelbach et al.'s 0.15, 3.8 and 5e-10 within), trim +-15 cm^3 (one
         sigma), pitch bias 0.5 deg, compass deviation up to 4 deg, GPS 2-6 m, internal
-        waves of 0.3-2 cm/s RMS in two modes (periods 5-30 min, vertical wavelengths
-        50-200 m)."""
+        waves that displace the water by 1-8 m RMS in two modes (periods 20-120 min,
+        vertical wavelengths 50-200 m)."""
         return cls(cd0=float(rng.uniform(0.12, 0.20)), hull_lift=float(rng.uniform(2.8, 4.8)),
                    compressibility=float(rng.uniform(3e-10, 7e-10)),
                    trim_cc=float(rng.normal(0, 15.0)),
@@ -96,16 +96,18 @@ class GliderErrors:
                    deviation_rad=float(rng.uniform(0, math.radians(4.0))),
                    deviation_phase=float(rng.uniform(0, 2 * math.pi)),
                    gps_std_m=float(rng.uniform(2.0, 6.0)),
-                   internal_wave_mps=float(rng.uniform(0.003, 0.02)),
-                   wave_periods_s=_pair(rng.uniform(300.0, 1800.0, 2)),
+                   internal_wave_m=float(rng.uniform(1.0, 8.0)),
+                   wave_periods_s=_pair(rng.uniform(1200.0, 7200.0, 2)),
                    wave_lengths_m=_pair(rng.uniform(50.0, 200.0, 2)),
                    wave_phases=_pair(rng.uniform(0.0, 2 * math.pi, 2)))
 
     def vertical_water(self, t: float, depth: float) -> float:
         """The internal waves' vertical velocity (m/s, up) at ``t`` (s) and ``depth``
-        (m): two modes, each of amplitude ``internal_wave_mps`` (their sum's RMS)."""
-        return self.internal_wave_mps * sum(
-            math.sin(2 * math.pi * (t / p + depth / length) + phase)
+        (m): two modes, each displacing the water by ``internal_wave_m`` in amplitude
+        (their sum's RMS), ``eta = a sin(2 pi (t / P + z / L) + phi)``, ``w = d eta /
+        dt``."""
+        return self.internal_wave_m * sum(
+            2 * math.pi / p * math.cos(2 * math.pi * (t / p + depth / length) + phase)
             for p, length, phase in zip(self.wave_periods_s, self.wave_lengths_m,
                                         self.wave_phases))
 

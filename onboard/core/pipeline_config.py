@@ -377,7 +377,9 @@ class GliderModelConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
     the depth rate cannot tell from the glider's own sinking or rising."""
     glide_angle_std_rad: Annotated[float, msgspec.Meta(ge=0.0)] = 0.035
     """One-sigma (rad) of the flight-path angle: the pitch sensor's error and the angle
-    of attack's (0.035 rad = 2 deg)."""
+    of attack's (0.035 rad = 2 deg), for the current pipeline's through-water velocity.
+    A dive's current (pipeline ``dac``) takes them apart: ``[pipelines.dac]
+    lift_rel_std`` and ``pitch_bias_std_rad``."""
     min_glide_angle_rad: Annotated[float, msgspec.Meta(gt=0.0)] = 0.21
     """Below this pitch (rad; 0.21 = 12 deg) the depth rate says nothing usable about the
     horizontal speed (``u_h = dz/dt / tan(gamma)``): no measurement."""
@@ -807,9 +809,17 @@ class DacConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, frozen
     pitch_bias_std_rad: Annotated[float, msgspec.Meta(ge=0.0)] = 0.0087
     """One-sigma (rad; 0.0087 = 0.5 deg) of the pitch sensor's bias over a dive. The
     compass's error is ``[sensors.compass] heading_std_rad``."""
-    vertical_water_time_s: Annotated[float, msgspec.Meta(gt=0.0)] = 300.0
-    """Correlation time (s) of the vertical water velocity (``[pipelines.current.glider]
-    vertical_water_std_mps``; internal waves)."""
+    trim_std_cc: Annotated[float, msgspec.Meta(ge=0.0)] = 30.0
+    """One-sigma (cm^3) of the neutral pump volume against ``[pipelines.current.glider]
+    neutral_pump_cc`` over a dive: the ballasting's error, and water of another density
+    than the ballasting's (0.5 kg/m^3 on a 60-L hull)."""
+    vertical_displacement_std_m: Annotated[float, msgspec.Meta(ge=0.0)] = 5.0
+    """One-sigma (m) of the water's vertical displacement by internal waves at each of a
+    dive's inflections (algorithms.md §3.7; the Garrett-Munk spectrum's is about 7 m in
+    the deep thermocline, less on a shelf)."""
+    vertical_displacement_time_s: Annotated[float, msgspec.Meta(gt=0.0)] = 600.0
+    """Its correlation time (s) between inflections: a shallow glider's yos, minutes
+    apart, see nearly the same displacement."""
 
 
 VELOCITY_PIPELINES = frozenset({"current", "dac"})

@@ -19,9 +19,10 @@ Its error, per axis, is what each source leaves over the dive (the covariance of
     C = 2 sigma_p^2 I                                  the two fixes
       + sigma_L^2 S_a S_a^T                            the lift (angle of attack), per dive
       + sigma_b^2 S_b S_b^T                            the pitch sensor's bias, per dive
+      + sigma_t^2 S_t S_t^T                            the ballast's trim, per dive
       + sigma_psi^2 / 2 (D_perp D_perp^T               the compass's error, per dive:
                          + P_c P_c^T + P_s P_s^T)      constant, and one cycle in heading
-      + sum (sigma_w / tan|gamma|)^2 min(2 tau_w, dt) dt e e^T    the vertical water
+      + sigma_z^2 sum_jk rho_jk c_j c_k^T              the water's vertical displacement
       + S_c S_c^T                                      where the last speed was carried
 
 with ``e = (cos psi, sin psi)``, ``g = |gamma|`` and ``k = u_h / (sin g cos g)`` the
@@ -29,16 +30,28 @@ horizontal speed's change per radian of the flight-path angle. An error that is 
 same all dive adds linearly, as a sum of its effects: the lift's relative error
 ``sigma_L`` scales every angle of attack alike, ``S_a = sum |alpha| k e dt``; a pitch
 sensor's bias steepens the glide on one cast and flattens it on the other, so its
-effects cancel over the yos, ``S_b = sum sign(pitch) k e dt``; a compass's error
+effects cancel over the yos, ``S_b = sum sign(pitch) k e dt``; so does a trim error
+``sigma_t`` (cm^3: the neutral pump volume off the config's, a ballast error or water
+of another density than the ballasting's), which adds buoyancy on one cast and takes it
+on the other, the angle of attack in proportion, ``S_t = sum sign(pitch) |alpha| /
+|V_pump - V_neutral| k e dt``; a compass's error
 ``delta(psi) = c + a cos psi + b sin psi`` (a constant bias and the one-cycle deviation
 of iron that moves with the glider, ``c``, ``a``, ``b`` each of variance ``sigma_psi^2 /
 2``: ``sigma_psi`` the compass's one-sigma at a heading) turns each step's displacement
 ``u_h dt e`` by ``delta``: ``D_perp = sum u_h e_perp dt`` (the whole displacement turned,
 ``(-D_e, D_n)``), ``P_c = sum cos(psi) u_h e_perp dt`` and ``P_s`` with ``sin``, ``e_perp =
 (-sin psi, cos psi)``. A constant bias cancels where the glider turns back; a deviation
-does not, the reciprocal legs' errors add. The vertical water
-velocity (internal waves, ``sigma_w``) is random, correlated over ``tau_w``: its
-variance adds over the dive. Where the model gives no speed (an inflection, a pitch
+does not, the reciprocal legs' errors add. Internal waves lift and lower the water the
+glider flies through: the depth rate counts the water's vertical displacement ``eta`` as
+the glider's own, a cast from ``eta_a`` to ``eta_b`` travels ``(eta_b - eta_a) /
+tan|gamma|`` too far or too short. The displacement is bounded (a few metres, 0 at the
+surface), so its error does not grow with the dive: it is the displacement at each
+inflection, ``eta_j`` of one-sigma ``sigma_z``, correlated ``rho_jk = exp(-|t_j - t_k| /
+tau_z)`` between inflections, weighted ``c_j = v_k - v_(k+1)`` by the two casts it joins,
+``v = s e / tan|gamma|`` averaged over a cast, ``s`` +1 down, -1 up (a descent then a
+climb on one heading: ``2 e / tan|gamma|``, the next turn ``-2 e / tan|gamma|``: where the
+water heaves slowly against the yos their errors cancel). Where the
+model gives no speed (an inflection, a pitch
 below its least glide angle, a pitch or heading not measured within
 :data:`MAX_DEPTH_INTERVAL_S`) the last speed is carried, with a one-sigma of the speed
 itself, ``S_c = sum u_h e dt`` over those steps; a dive unmodelled for more than
@@ -64,9 +77,18 @@ LIFT_REL_STD = 0.25
 PITCH_BIAS_STD_RAD = math.radians(0.5)
 """One-sigma (rad) of the pitch sensor's bias: its calibration and its mounting in the
 hull."""
-VERTICAL_WATER_TIME_S = 300.0
-"""Correlation time (s) of the vertical water velocity a glider meets: internal waves
-near the buoyancy frequency, periods of minutes to tens of minutes."""
+VERTICAL_DISPLACEMENT_STD_M = 5.0
+"""One-sigma (m) of the water's vertical displacement by internal waves where a glider
+turns: the Garrett-Munk spectrum's is about 7 m in the deep ocean's thermocline (Munk
+1981), less in a shelf sea's."""
+VERTICAL_DISPLACEMENT_TIME_S = 600.0
+"""Correlation time (s) of that displacement: internal waves' periods, from the buoyancy
+period's minutes to hours. The inflections of a shallow glider's yos, minutes apart, see
+nearly the same displacement, whose errors then cancel (a descent's against the climb's);
+a deep glider's, half an hour apart, independent ones."""
+TRIM_STD_CC = 30.0
+"""One-sigma (cm^3) of the neutral pump volume against the config's: the ballasting's
+error, and the water's density against the ballasting's (0.5 kg/m^3 on a 60-L hull)."""
 MAX_UNMODELLED_SHARE = 0.25
 """A dive whose time under water was unmodelled for more than this share gives no
 current (a log too sparse to follow the flight: a Slocum's ``.sbd``)."""
@@ -99,14 +121,15 @@ class DiveAverage:
     time; :attr:`latest` is the newest dive's current.
 
     ``heading_std`` (rad): the compass's error at a heading; ``lift_rel_std``,
-    ``pitch_bias_std`` (rad), ``vertical_water_time_s`` (s): the other error sources'
-    (module docstring; the vertical water's one-sigma is the model's)."""
+    ``pitch_bias_std`` (rad), ``trim_std`` (cm^3), ``vertical_displacement_std`` (m) and
+    ``vertical_displacement_time_s`` (s): the other error sources' (module docstring)."""
 
     def __init__(self, model: GliderModel, surface_depth_m: float,
                  position_std_m: float, min_dive_s: float = MIN_DIVE_S,
                  heading_std: float = 0.0, lift_rel_std: float = LIFT_REL_STD,
-                 pitch_bias_std: float = PITCH_BIAS_STD_RAD,
-                 vertical_water_time_s: float = VERTICAL_WATER_TIME_S) -> None:
+                 pitch_bias_std: float = PITCH_BIAS_STD_RAD, trim_std: float = TRIM_STD_CC,
+                 vertical_displacement_std: float = VERTICAL_DISPLACEMENT_STD_M,
+                 vertical_displacement_time_s: float = VERTICAL_DISPLACEMENT_TIME_S) -> None:
         self.model = model
         self.surface_depth_m = surface_depth_m
         self.position_std_m = position_std_m
@@ -114,7 +137,9 @@ class DiveAverage:
         self.heading_std = heading_std
         self.lift_rel_std = lift_rel_std
         self.pitch_bias_std = pitch_bias_std
-        self.vertical_water_time_s = vertical_water_time_s
+        self.trim_std = trim_std
+        self.vertical_displacement_std = vertical_displacement_std
+        self.vertical_displacement_time_s = vertical_displacement_time_s
         self.latest: DiveCurrent | None = None
         self.dives = 0
         self.unfollowed = 0   # dives left without a current (MAX_UNMODELLED_SHARE)
@@ -129,11 +154,15 @@ class DiveAverage:
         self._disp = [0.0, 0.0]       # through-water displacement D (m) since the anchor
         self._lift = [0.0, 0.0]       # S_a (m/rad)
         self._pitch_bias = [0.0, 0.0]  # S_b (m/rad)
+        self._trim = [0.0, 0.0]       # S_t (m/cm^3)
         self._carried = [0.0, 0.0]    # S_c (m)
         self._dev_cos = [0.0, 0.0]    # P_c (m)
         self._dev_sin = [0.0, 0.0]    # P_s (m)
-        self._random = 0.0            # the vertical water's variance (m^2), along e e^T ...
-        self._random_nn = self._random_ne = 0.0   # ... its north-north, north-east parts
+        self._inflections: list[tuple[float, float, float]] = []   # (t_j, c_j north, east)
+        self._cast = [0.0, 0.0, 0.0]  # this cast's sum of s e / tan|gamma| dt, and of dt
+        self._cast_sign = 0.0         # s of this cast (0: none yet)
+        self._cast_t0 = 0.0           # when it began (s)
+        self._cast_prev: tuple[float, float] | None = None   # v of the previous cast
         self._under = 0.0             # time (s) under water since the anchor
         self._unmodelled = 0.0
 
@@ -196,11 +225,40 @@ class DiveAverage:
         b = math.copysign(k, pitch)
         self._pitch_bias[0] += b * c
         self._pitch_bias[1] += b * s
-        w = self.model.vertical_water_std / math.tan(g)
-        v = w * w * min(2.0 * self.vertical_water_time_s, dt) * dt
-        self._random += v
-        self._random_nn += v * c * c
-        self._random_ne += v * c * s
+        excess = abs(pump_cc - self.model.neutral_pump_cc)
+        if excess > 0.0:
+            t = b * abs(glide.alpha) / excess
+            self._trim[0] += t * c
+            self._trim[1] += t * s
+        down = -math.copysign(1.0, pitch)   # s: nose down, sinking
+        if down != self._cast_sign:
+            self._end_cast()
+            self._cast_sign, self._cast_t0 = down, prev[0]
+        f = down / math.tan(g) * dt
+        self._cast[0] += f * c
+        self._cast[1] += f * s
+        self._cast[2] += dt
+
+    def _end_cast(self) -> None:
+        """The cast so far ends at an inflection: its ``v``, and the inflection where it
+        began, ``c_j``, with the previous cast's."""
+        c = self._inflection()
+        if c is None:
+            return
+        if self._cast_prev is not None:
+            self._inflections.append(c)
+        n, e, dt = self._cast
+        self._cast_prev = (n / dt, e / dt)
+        self._cast = [0.0, 0.0, 0.0]
+
+    def _inflection(self) -> tuple[float, float, float] | None:
+        """The inflection where the cast under way began: ``(t_j, c_j)``; None before
+        the cast has a sample (its ``c_j`` needs the previous cast, else it is 0)."""
+        n, e, dt = self._cast
+        if dt <= 0.0:
+            return None
+        prev = self._cast_prev or (n / dt, e / dt)
+        return (self._cast_t0, prev[0] - n / dt, prev[1] - e / dt)
 
     def _at_surface(self) -> bool:
         return self._depth is not None and self._depth[1] <= self.surface_depth_m
@@ -212,16 +270,23 @@ class DiveAverage:
         d_perp = (-self._disp[1], self._disp[0])
         half = self.heading_std / math.sqrt(2.0)
         for scale, v in ((self.lift_rel_std, self._lift),
-                         (self.pitch_bias_std, self._pitch_bias), (half, d_perp),
+                         (self.pitch_bias_std, self._pitch_bias),
+                         (self.trim_std, self._trim), (half, d_perp),
                          (half, self._dev_cos), (half, self._dev_sin),
                          (1.0, self._carried)):
             x, y = scale * v[0], scale * v[1]
             cov[0] += x * x
             cov[1] += y * y
             cov[2] += x * y
-        cov[0] += self._random_nn
-        cov[1] += self._random - self._random_nn
-        cov[2] += self._random_ne
+        pending = self._inflection()   # the cast under way joins the previous one
+        joints = self._inflections + ([pending] if pending and self._cast_prev else [])
+        z2, tau = self.vertical_displacement_std ** 2, self.vertical_displacement_time_s
+        for tj, nj, ej in joints:
+            for tk, nk, ek in joints:
+                r = z2 * math.exp(-abs(tj - tk) / tau)
+                cov[0] += r * nj * nk
+                cov[1] += r * ej * ek
+                cov[2] += r * nj * ek
         return cov[0], cov[1], cov[2]
 
     def _close(self, t: float, north: float, east: float, duration: float) -> DiveCurrent:

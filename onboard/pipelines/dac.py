@@ -125,4 +125,6 @@ def create(cfg: Config) -> DiveAveragePipeline | None:
         position_std_m=cfg.sensors.gnss.position_std_m, min_dive_s=pc.min_dive_s,
         heading_std=cfg.sensors.compass.heading_std_rad,
         lift_rel_std=pc.lift_rel_std, pitch_bias_std=pc.pitch_bias_std_rad,
-        vertical_water_time_s=pc.vertical_water_time_s))
+        trim_std=pc.trim_std_cc,
+        vertical_displacement_std=pc.vertical_displacement_std_m,
+        vertical_displacement_time_s=pc.vertical_displacement_time_s))
