@@ -85,7 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--glider", action="store_true",
                    help="a Slocum glider's dives, its .dbd flight log and the truth of each "
                         "dive's depth-averaged current, written with --out")
-    p.add_argument("--dives", type=int, default=4, help="with --glider: how many dives")
+    p.add_argument("--dives", type=int, default=None,
+                   help="with --glider: how many dives (default 4)")
     p.add_argument("--out", metavar="DIR",
                    help="with --fleet: one log, truth, capture and config per vehicle, the "
                         "truth of the field and fleet.json in DIR; with --glider: the "

@@ -106,14 +106,15 @@ def run_glider(args: argparse.Namespace) -> int:
     if args.scenario or args.fleet or args.tlog or args.truth or args.link \
             or args.nmea_pty or args.dvl or args.duration is not None:
         raise UsageError("--glider takes --out, --dives and --seed only")
-    if not 1 <= args.dives <= 1000:
-        raise UsageError(f"--dives must be 1 to 1000, got {args.dives}")
+    dives = 4 if args.dives is None else args.dives
+    if not 1 <= dives <= 1000:
+        raise UsageError(f"--dives must be 1 to 1000, got {dives}")
     stem = log_stem(args.seed)
     check_outputs([Output("--out", Path(args.out), "dir",
                           (f"{stem}.dbd", f"{stem}.truth.json"))],
                   force=bool(getattr(args, "force", False)))
     t0 = time.process_time()
-    run = fly(args.out, args.seed, dives=args.dives)
+    run = fly(args.out, args.seed, dives=dives)
     cpu = time.process_time() - t0
     for d in run.dives:
         print(f"dive {d['t_start']:.0f}-{d['t_end']:.0f} UTC: true depth-averaged current "
@@ -170,6 +171,8 @@ def main(args: argparse.Namespace) -> int:
         return run_fleet(args)
     if getattr(args, "glider", False):
         return run_glider(args)
+    if getattr(args, "dives", None) is not None:
+        raise UsageError("--dives goes with --glider")
     if not args.scenario:
         raise UsageError("give --scenario NAME (see --list)")
     sc = get(args.scenario)

@@ -62,6 +62,7 @@ def test_onboard_sitl_glider_writes_the_log_and_its_truth_or_says_why_not(tmp_pa
     assert "--out" in capsys.readouterr().err
     assert cli_main(["sitl", "--glider", "--out", str(tmp_path), "--dives", "0"]) == 2
     assert cli_main(["sitl", "--glider", "--out", str(tmp_path), "--duration", "60"]) == 2
+    assert cli_main(["sitl", "--scenario", "clean", "--dives", "2"]) == 2
     assert cli_main(["sitl", "--glider", "--out", str(tmp_path), "--seed", "3",
                      "--dives", "1"]) == 0
     out = capsys.readouterr().out
