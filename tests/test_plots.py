@@ -195,7 +195,8 @@ def test_a_gliders_dive_current_is_an_arrow_from_the_middle_of_its_fixes():
     cols = {k: v for k, v in _cols(n).items() if not k.startswith("current")}
     nan = [math.nan] * (n // 4)
     for name, dive1, dive2 in (("dac.north", 0.1, -0.2), ("dac.east", 0.3, 0.05),
-                               ("dac.std_north", 0.04, 0.05), ("dac.dive_end", 100.0, 300.0),
+                               ("dac.std_north", 0.04, 0.05), ("dac.std_east", 0.02, 0.07),
+                               ("dac.dive_end", 100.0, 300.0),
                                ("dac.place_north", 5.0, -5.0), ("dac.place_east", 2.0, 8.0)):
         cols[name] = nan + [dive1] * (n // 4) + [dive2] * (n // 2)
     fig = track_figure(cols, "glider")
@@ -205,6 +206,8 @@ def test_a_gliders_dive_current_is_an_arrow_from_the_middle_of_its_fixes():
     q = dives[0]
     assert np.allclose(q.X, [2.0, 8.0]) and np.allclose(q.Y, [5.0, -5.0])
     assert np.allclose(q.U, [0.3, 0.05]) and np.allclose(q.V, [0.1, -0.2])
+    labels = sorted(t.get_text() for t in fig.axes[0].texts if t.get_text().startswith("±"))
+    assert labels == ["± 0.04 m/s", "± 0.07 m/s"]   # the larger of north's and east's
     key, = [k for k in fig.findobj(QuiverKey) if "dive" in k.text.get_text()]
     b = key.text.get_window_extent(renderer)
     assert _inside((b.x0, b.y0), (b.x1, b.y1), key.axes.bbox)

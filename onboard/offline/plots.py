@@ -45,7 +45,8 @@ ARROW_TRACKS = ("nav", "kf", "aie", "eseso")
 """Where a current arrow starts: the first of these with a position at its row."""
 CURRENT_COLUMNS = ("current.north", "current.east", "current.std_north", "current.std_east")
 """The current's columns the figure reads."""
-DIVE_COLUMNS = ("dac.dive_end", "dac.place_north", "dac.place_east", "dac.std_north")
+DIVE_COLUMNS = ("dac.dive_end", "dac.place_north", "dac.place_east", "dac.std_north",
+                "dac.std_east")
 """A glider's dive currents' columns the figure reads (with ``dac.north``, ``dac.east``)."""
 POSITION_LABELS = {
     "gnss": "GNSS fixes",
@@ -279,8 +280,8 @@ def _arrow_scale(extent_m: float) -> float:
 def _dive_arrows(ax, cols: dict[str, list[float]],
                  pairs: Iterable[tuple[str, str, str]]) -> None:
     """Each dive's depth-averaged current (pipeline ``dac``) as an arrow from the middle
-    of the two fixes that bound the dive, labelled with its one-sigma, on the scale of
-    :func:`_current_arrows`."""
+    of the two fixes that bound the dive, labelled with its one-sigma (the larger of north's
+    and east's), on the scale of :func:`_current_arrows`."""
     if "dac.dive_end" not in cols:
         return
     end = np.asarray(cols["dac.dive_end"], float)
@@ -296,7 +297,8 @@ def _dive_arrows(ax, cols: dict[str, list[float]],
     q = ax.quiver(at("dac.place_east"), at("dac.place_north"), at("dac.east"),
                   at("dac.north"), angles="xy", scale_units="xy", scale=_arrow_scale(extent),
                   width=0.006, color="tab:green", zorder=4)
-    for x, y, s in zip(at("dac.place_east"), at("dac.place_north"), at("dac.std_north")):
+    sigma = np.maximum(at("dac.std_north"), at("dac.std_east"))
+    for x, y, s in zip(at("dac.place_east"), at("dac.place_north"), sigma):
         ax.annotate(f"± {s:.2f} m/s", (x, y), textcoords="offset points", xytext=(4, -10),
                     fontsize="x-small", color="tab:green")
     ax.quiverkey(q, 0.12, 0.05, ARROW_KEY_MPS, f"dive current {ARROW_KEY_MPS:g} m/s",
