@@ -55,7 +55,8 @@ DEFAULT_LINK = "udp:127.0.0.1:14550"
 
 def list_scenarios() -> str:
     """One line per scenario: name, vehicle class, default duration, description; then one
-    per fleet (:mod:`sitl.fleet`): name, vehicles, duration, description."""
+    per fleet (:mod:`sitl.fleet`): name, vehicles, duration, description; then the glider
+    (:mod:`sitl.glider`)."""
     from onboard.sitl.fleet import FLEETS
 
     w = max(len(n) for n in SCENARIOS)
@@ -63,6 +64,9 @@ def list_scenarios() -> str:
              f"{sc.description}" for sc in SCENARIOS.values()]
     lines += [f"{f.name:<{w}}  {len(f.vehicles)} vehicles{'':<8}  {f.duration_s:5.0f} s  "
               f"fleet (--fleet): {f.description}" for f in FLEETS.values()]
+    lines.append(f"{'slocum-glider':<{w}}  {'glider':<18}  {'':>7}  --glider --out DIR "
+                 "[--dives N]: a Slocum's dives as its own .dbd flight log, each dive's "
+                 "true depth-averaged current beside it")
     return "\n".join(lines)
 
 

@@ -58,6 +58,8 @@ def test_a_mission_log_is_a_slocum_flight_file_with_fixes_only_at_the_surface(
 
 def test_onboard_sitl_glider_writes_the_log_and_its_truth_or_says_why_not(tmp_path: Path,
                                                                          capsys):
+    assert cli_main(["sitl", "--list"]) == 0
+    assert "--glider --out DIR" in capsys.readouterr().out
     assert cli_main(["sitl", "--glider", "--seed", "3"]) == 2           # no --out
     assert "--out" in capsys.readouterr().err
     assert cli_main(["sitl", "--glider", "--out", str(tmp_path), "--dives", "0"]) == 2
