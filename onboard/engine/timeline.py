@@ -1,18 +1,19 @@
 """The time line of a run: single bad stamps are outliers, real clock jumps start segments.
 
 A log's stamps are trusted only when they agree with each other. Every sample passes
-:meth:`Timeline.admit` before the engine's other time checks:
+:meth:`Timeline.admit` before the engine's other time checks; ``jump_s`` below is the time
+line's jump span (:data:`TIME_JUMP_S` unless ``[engine] time_jump_s`` says otherwise):
 
 * the log starts where its first stamps agree, not on its first one
   (:class:`onboard.core.stamps.Anchor`): the first samples are held until
   :data:`~onboard.core.stamps.ANCHOR_STAMPS` distinct stamps (or the end, :meth:`flush`),
-  the largest group of them that chain within :data:`TIME_JUMP_S` is released as the
+  the largest group of them that chain within ``jump_s`` is released as the
   first segment and the others are outliers;
-* after that, a sample within :data:`TIME_JUMP_S` of the newest released time (either side) continues
+* after that, a sample within ``jump_s`` of the newest released time (either side) continues
   the current segment and is released at once (the engine's ``backwards`` and ``late``
   checks still apply to it);
 * a sample further away is *held*, with the samples that agree with it (within
-  :data:`TIME_JUMP_S` of the newest held one), until one side is confirmed by
+  ``jump_s`` of the newest held one), until one side is confirmed by
   :data:`CONFIRM_STAMPS` distinct stamps:
 
   - the held side first: a real **jump** (a reboot, a clock step, a gap in the log). A
@@ -33,7 +34,7 @@ two stamps, however far apart.
 
 Live (:meth:`Timeline.admit_at`), the receive clock is the time line: it is monotonic and
 every sample is stamped on it or mapped onto it, so nothing on it can confirm a jump. A
-stamp more than :data:`TIME_JUMP_S` from the receive time of its tick, either way, is an
+stamp more than ``jump_s`` from the receive time of its tick, either way, is an
 outlier at once (a source's clock that stepped: an autopilot that rebooted before its
 time was mapped again, a GNSS receiver's UTC before its first fix), counted and warned of
 like a log's.
@@ -208,7 +209,7 @@ class Timeline:
 
     def admit_at(self, sample: Sample, now: float) -> list[Sample]:
         """Live: take one sample at the receive time ``now`` (s); return it, or nothing
-        when it is an outlier (more than :data:`TIME_JUMP_S` from ``now``; listed in
+        when it is an outlier (more than ``jump_s`` from ``now``; listed in
         :attr:`outliers`). One segment, on the receive clock."""
         t = sample.t
         if abs(t - now) > self.jump_s:
