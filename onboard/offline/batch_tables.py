@@ -21,6 +21,7 @@ from typing import Sequence
 import numpy as np
 
 from onboard.core.errors import UsageError
+from onboard.offline.plots import dive_rows
 
 LOG_CURRENT = "current.parquet"
 """A log's current in its own folder, gathered into ``DIR/current.parquet``."""
@@ -148,11 +149,9 @@ def _published_current(cols: dict[str, np.ndarray]) -> tuple | None:
     end = cols.get("dac.dive_end")
     if end is not None and np.isfinite(end).any() and \
             (cn is None or ce is None or not np.isfinite(cn).any()):
-        known = np.isfinite(end)
-        _, first = np.unique(end[known], return_index=True)
-        rows = np.flatnonzero(known)[first]
-        return (float(np.mean(known)),) + tuple(cols[f"dac.{k}"][rows] for k in (
-            "north", "east", "std_north", "std_east"))
+        rows = dive_rows(end)
+        return (float(np.mean(np.isfinite(end))),) + tuple(
+            cols[f"dac.{k}"][rows] for k in ("north", "east", "std_north", "std_east"))
     if cn is None or ce is None:
         return None
     known = np.isfinite(cn) & np.isfinite(ce)
@@ -232,11 +231,7 @@ def _dive_rows(cols: dict[str, np.ndarray], summary: dict, clock, frame,
     if end is None:
         return
     t0 = _t0(summary)
-    seen: set[float] = set()
-    for i in np.flatnonzero(np.isfinite(end)):
-        if float(end[i]) in seen:
-            continue
-        seen.add(float(end[i]))
+    for i in dive_rows(end):
         mid = 0.5 * (float(cols["dac.dive_start"][i]) + float(end[i]))
         lat = lon = None
         if frame is not None:

@@ -277,6 +277,15 @@ def _arrow_scale(extent_m: float) -> float:
     return ARROW_KEY_MPS / (ARROW_SHARE * max(extent_m, 1.0))
 
 
+def dive_rows(end) -> np.ndarray:
+    """The rows of pipeline ``dac``'s columns where each dive first appears, in time order
+    (its rows repeat the newest dive until the next); ``end`` its ``dac.dive_end``."""
+    end = np.asarray(end, float)
+    known = np.flatnonzero(np.isfinite(end))
+    _, first = np.unique(end[known], return_index=True)
+    return known[first]
+
+
 def _dive_arrows(ax, cols: dict[str, list[float]],
                  pairs: Iterable[tuple[str, str, str]]) -> None:
     """Each dive's depth-averaged current (pipeline ``dac``) as an arrow from the middle
@@ -284,10 +293,8 @@ def _dive_arrows(ax, cols: dict[str, list[float]],
     and east's), on the scale of :func:`_current_arrows`."""
     if "dac.dive_end" not in cols:
         return
-    end = np.asarray(cols["dac.dive_end"], float)
-    _, rows = np.unique(end, return_index=True)
-    rows = [i for i in rows if np.isfinite(end[i])]
-    if not rows:
+    rows = dive_rows(cols["dac.dive_end"])
+    if not rows.size:
         return
 
     def at(name: str) -> np.ndarray:
