@@ -227,9 +227,9 @@ class DiveAverage:
         self._pitch_bias[1] += b * s
         excess = abs(pump_cc - self.model.neutral_pump_cc)
         if excess > 0.0:
-            t = b * abs(glide.alpha) / excess
-            self._trim[0] += t * c
-            self._trim[1] += t * s
+            trim = b * abs(glide.alpha) / excess
+            self._trim[0] += trim * c
+            self._trim[1] += trim * s
         down = -math.copysign(1.0, pitch)   # s: nose down, sinking
         if down != self._cast_sign:
             self._end_cast()
@@ -240,24 +240,25 @@ class DiveAverage:
         self._cast[2] += dt
 
     def _end_cast(self) -> None:
-        """The cast so far ends at an inflection: its ``v``, and the inflection where it
-        began, ``c_j``, with the previous cast's."""
-        c = self._inflection()
-        if c is None:
-            return
-        if self._cast_prev is not None:
-            self._inflections.append(c)
+        """The cast so far ends at an inflection: the inflection where it began, and its
+        ``v`` for the next one's."""
         n, e, dt = self._cast
+        if dt <= 0.0:
+            return
+        joint = self._inflection()
+        if joint is not None:
+            self._inflections.append(joint)
         self._cast_prev = (n / dt, e / dt)
         self._cast = [0.0, 0.0, 0.0]
 
     def _inflection(self) -> tuple[float, float, float] | None:
-        """The inflection where the cast under way began: ``(t_j, c_j)``; None before
-        the cast has a sample (its ``c_j`` needs the previous cast, else it is 0)."""
+        """The inflection where the cast under way began: ``(t_j, c_j)``; None before the
+        cast has a sample, or where no cast came before it (the dive began at the
+        surface, where the water's heave is nil)."""
         n, e, dt = self._cast
-        if dt <= 0.0:
+        if dt <= 0.0 or self._cast_prev is None:
             return None
-        prev = self._cast_prev or (n / dt, e / dt)
+        prev = self._cast_prev
         return (self._cast_t0, prev[0] - n / dt, prev[1] - e / dt)
 
     def _at_surface(self) -> bool:
@@ -279,7 +280,7 @@ class DiveAverage:
             cov[1] += y * y
             cov[2] += x * y
         pending = self._inflection()   # the cast under way joins the previous one
-        joints = self._inflections + ([pending] if pending and self._cast_prev else [])
+        joints = self._inflections + ([pending] if pending else [])
         z2, tau = self.vertical_displacement_std ** 2, self.vertical_displacement_time_s
         for tj, nj, ej in joints:
             for tk, nk, ek in joints:
