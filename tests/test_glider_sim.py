@@ -9,7 +9,6 @@ error model; 101-102 and 9-24 are held out."""
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from pathlib import Path
@@ -76,17 +75,11 @@ def test_onboard_sitl_glider_writes_the_log_and_its_truth_or_says_why_not(tmp_pa
 
 
 def _replayed_errors(log: Path, out: Path, truth: list[dict], *config: str) -> np.ndarray:
-    """(error / sigma) per dive and axis of ``onboard replay`` against the truth."""
-    extra = [a for c in config for a in ("--config", c)]
-    assert cli_main(["replay", str(log), "--out", str(out), "--no-plot"] + extra) == 0
-    with open(out / "estimates.csv") as f:
-        dives = {r["dac.dive_end"]: r for r in csv.DictReader(f) if r["dac.north"]}
-    assert len(dives) == len(truth)
-    z = []
-    for d, tr in zip(dives.values(), truth):
-        z.append([(float(d["dac.north"]) - tr["north"]) / float(d["dac.std_north"]),
-                  (float(d["dac.east"]) - tr["east"]) / float(d["dac.std_east"])])
-    return np.array(z)
+    """(error / sigma) per dive and axis of the log's replay against the truth."""
+    from validation.reports import runs
+
+    a = runs.dive_errors(log, truth, out, list(config) or None)
+    return a[:, :2] / a[:, 2:]
 
 
 def test_each_dive_current_is_within_its_sigma_of_the_truth(tmp_path: Path):
@@ -96,12 +89,11 @@ def test_each_dive_current_is_within_its_sigma_of_the_truth(tmp_path: Path):
     run = fly(tmp_path / "sim", seed=101, dives=3)
     z = _replayed_errors(run.path, tmp_path / "ours", run.dives)
     assert np.all(np.abs(z) < 2.5)
-    graver = tmp_path / "graver.toml"
-    graver.write_text("[pipelines.current.glider]\nlift_kl = 132.5\ndrag_kd0 = 2.15\n"
-                      "drag_kd = 25.0\n")
-    bundled = configmod.resolve("slocum-glider")
-    z_graver = _replayed_errors(run.path, tmp_path / "graver", run.dives, str(bundled),
-                                str(graver))
+    from validation.reports import runs
+
+    z_graver = _replayed_errors(run.path, tmp_path / "graver", run.dives,
+                                str(configmod.resolve("slocum-glider")),
+                                str(runs.graver_overlay(tmp_path)))
     assert np.max(np.abs(z_graver)) > 3.0
 
 

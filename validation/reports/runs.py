@@ -462,40 +462,55 @@ GRAVER_LIFT = {"lift_kl": 132.5, "drag_kd0": 2.15, "drag_kd": 25.0}
 al.'s (2019)."""
 
 
+def graver_overlay(folder: Path) -> Path:
+    """``folder/graver.toml``: a config overlay of Graver's lift (:data:`GRAVER_LIFT`)."""
+    path = folder / "graver.toml"
+    path.write_text("[pipelines.current.glider]\n" + "".join(
+        f"{k} = {v}\n" for k, v in GRAVER_LIFT.items()))
+    return path
+
+
+def dive_errors(log: Path, truth: list[dict], out: Path,
+                configs: list[str] | None = None) -> np.ndarray:
+    """Each dive's ``dac`` current of a simulated glider's log, replayed into ``out`` with
+    its own config (or ``configs``, applied in order), against ``truth`` (its dives,
+    :func:`sitl.glider.fly`): a row per dive, the error north and east and the sigma
+    north and east (m/s). ValueError where the replay's dives are not the truth's."""
+    import csv
+
+    from onboard.offline.replay import choose_config, replay
+
+    cfg, _ = choose_config(str(log), configs)
+    replay(str(log), cfg, out, plot=False)
+    with open(out / "estimates.csv") as f:
+        est = {r["dac.dive_end"]: r for r in csv.DictReader(f) if r["dac.north"]}
+    if len(est) != len(truth):
+        raise ValueError(f"{log}: {len(est)} dive currents for {len(truth)} true dives")
+    return np.array([[float(d["dac.north"]) - tr["north"], float(d["dac.east"]) - tr["east"],
+                      float(d["dac.std_north"]), float(d["dac.std_east"])]
+                     for d, tr in zip(est.values(), truth)])
+
+
 @cache
 def glider_dac(first: int, last: int, graver: bool = False) -> dict[str, float]:
     """Each dive's ``dac`` current of the simulated gliders of seeds ``first``-``last``
     (four dives each, :func:`sitl.glider.fly`, replayed with config/slocum-glider.toml;
-    with ``graver`` Graver's lift instead) against its truth, pooled over north and east:
-    ``rms`` (m/s), ``cover1``, ``cover2`` (within 1 and 1.96 sigma), ``z_median``
-    (median |error| / sigma), ``dives``."""
-    import csv
-
+    with ``graver`` Graver's lift instead) against its truth, pooled over north and east
+    (:func:`dive_errors`): ``rms`` (m/s), ``cover1``, ``cover2`` (within 1 and 1.96
+    sigma), ``z_median`` (median |error| / sigma), ``dives``."""
     from onboard.core import config as config_mod
-    from onboard.offline.replay import choose_config, replay
     from onboard.sitl.glider import fly
 
-    err, z, dives = [], [], 0
+    rows = []
     with tempfile.TemporaryDirectory(prefix="onboard-figures-") as tmp:
-        overlay = Path(tmp) / "graver.toml"
-        overlay.write_text("[pipelines.current.glider]\n" + "".join(
-            f"{k} = {v}\n" for k, v in GRAVER_LIFT.items()))
+        configs = [str(config_mod.resolve("slocum-glider")),
+                   str(graver_overlay(Path(tmp)))] if graver else None
         for seed in range(first, last + 1):
             run = fly(Path(tmp) / f"glider-{seed}", seed)
-            configs = [str(config_mod.resolve("slocum-glider")), str(overlay)] \
-                if graver else None
-            cfg, _ = choose_config(str(run.path), configs)
-            out = Path(tmp) / f"replay-{seed}"
-            replay(str(run.path), cfg, out, plot=False)
-            with open(out / "estimates.csv") as f:
-                est = {r["dac.dive_end"]: r for r in csv.DictReader(f) if r["dac.north"]}
-            for d, truth in zip(est.values(), run.dives):
-                dives += 1
-                for c in ("north", "east"):
-                    e = float(d[f"dac.{c}"]) - truth[c]
-                    err.append(e)
-                    z.append(abs(e) / float(d[f"dac.std_{c}"]))
-    e_arr, z_arr = np.array(err), np.array(z)
+            rows.append(dive_errors(run.path, run.dives, Path(tmp) / f"replay-{seed}",
+                                    configs))
+    a = np.concatenate(rows)
+    e_arr, z_arr = a[:, :2].ravel(), (np.abs(a[:, :2]) / a[:, 2:]).ravel()
     return {"rms": float(np.sqrt(np.mean(e_arr ** 2))), "cover1": float(np.mean(z_arr < 1.0)),
             "cover2": float(np.mean(z_arr < 1.96)), "z_median": float(np.median(z_arr)),
-            "dives": float(dives)}
+            "dives": float(len(a))}
