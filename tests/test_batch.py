@@ -5,6 +5,7 @@ statuses; the season report; the docs' queries (docs/batch.md) run on the tables
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import shutil
@@ -288,16 +289,37 @@ def test_season_report_per_vehicle_and_effect():
         return r
 
     rows = [row("l2", "boat", "2026-06-02T00:00:00.000Z", ["heading_bias"],
-                {"heading_bias.bias": 3.0}),
+                {"heading_bias.bias": math.radians(6.0)}),
             row("l1", "boat", "2026-06-01T00:00:00.000Z", ["heading_bias"],
-                {"heading_bias.bias": 1.0}),
+                {"heading_bias.bias": math.radians(2.0)}),
             row("l3", "boat", "2026-06-03T00:00:00.000Z", [], {}),
             row("l4", "boat", None, ["heading_bias"], {"heading_bias.bias": 9.0},
                 diagnosed=False),
             row("g1", "glider", None, [], {})]
     report = batch_tables.season_report(rows)
-    assert "| boat | heading_bias | 2 of 3 | bias | 2 | 1.41 | 1 | 3 | 1 -> 3 |" in report
+    # in the unit diagnose's report shows (deg), not diagnosis.json's rad
+    assert "| boat | heading_bias | 2 of 3 | bias (deg) | 4 | 2.83 | 2 | 6 | 2 -> 6 |" in report
     assert "| glider | none | 0 of 1 |" in report
+
+
+def test_season_report_averages_angles_on_the_circle():
+    """A compass mounted backwards: biases of 179 and -179 deg are 180 deg on average
+    (0 arithmetically), 1.4 deg apart; a deviation's amplitude is no angle on the
+    circle."""
+    def row(name, bias, amplitude):
+        r = batch_tables.empty_row(name, name)
+        r.update(vehicle_id="boat", diagnosed=True,
+                 effects=["heading_bias", "compass_deviation"],
+                 effect_params={"heading_bias.bias": math.radians(bias),
+                                "compass_deviation.amplitude": math.radians(amplitude),
+                                "compass_deviation.phase": math.radians(bias)})
+        return r
+
+    report = batch_tables.season_report([row("a", 179.0, 2.0), row("b", -179.0, 4.0)])
+    assert "| boat | heading_bias | 2 of 2 | bias (deg) | 180 | 1.41 | -179 | 179 | " \
+        "179 -> -179 |" in report
+    assert "| phase (deg) | 180 | 1.41 |" in report
+    assert "| amplitude (deg) | 3 | 1.41 | 2 | 4 | 2 -> 4 |" in report
 
 
 def test_season_report_tells_apart_vehicles_a_detected_config_does_not_name():
@@ -313,13 +335,13 @@ def test_season_report_tells_apart_vehicles_a_detected_config_does_not_name():
     detected = "detected: no vehicle evidence in a text log; generic config"
     rows = [row("/logs/usv/a.txt", detected, 2.0), row("/logs/usv/b.txt", detected, 2.2),
             row("/logs/survey/c.txt", detected, -1.0),
-            row("/logs/x/d.csv", f"from blueboat-ntnu-csv {batch_tables.FITTED_CONFIG}", 5.0),
-            row("/logs/y/e.txt", "from boat1.toml", 7.0)]
+            row("/logs/x/d.csv", f"from blueboat-ntnu-csv {batch_tables.FITTED_CONFIG}", 0.5),
+            row("/logs/y/e.txt", "from boat1.toml", 1.5)]
     report = batch_tables.season_report(rows)
-    assert "| vehicle (usv) | heading_bias | 2 of 2 | bias | 2.1 |" in report
+    assert "| vehicle (usv) | heading_bias | 2 of 2 | bias (deg) | 120.3 |" in report
     assert "| vehicle (survey) | heading_bias | 1 of 1 |" in report
     assert "| vehicle (x) | heading_bias | 1 of 1 |" in report
-    assert "| vehicle | heading_bias | 1 of 1 | bias | 7 |" in report  # named by --config
+    assert "| vehicle | heading_bias | 1 of 1 | bias (deg) | 85.94 |" in report  # --config
 
 
 def test_the_docs_queries_run_on_the_tables(local, monkeypatch, capsys):

@@ -40,6 +40,11 @@ ROW_KEYS = ("log", "name", "status", "error", "format", "vehicle_id", "vehicle_c
             "holdout_error_before", "holdout_error_after", "cpu_s", "wall_s")
 """The columns of runs.parquet, in order (docs/batch.md)."""
 FITTED_CONFIG = "(its header fits this bundled config)"
+CIRCULAR_PARAMS = {("compass_deviation", "phase"), ("heading_bias", "bias"),
+                   ("wave_oscillation", "direction")}
+"""Effect parameters that are angles on the circle: the season report takes their
+circular mean and standard deviation (a bias of 179 deg and one of -179 deg average to
+180, not 0) and shows each value within (-180, 180] deg."""
 """The end of runs.parquet's ``config`` for a CSV log given no ``--config``, replayed with
 the bundled config its header fits (``onboard.offline.batch``)."""
 
@@ -397,7 +402,11 @@ def season_vehicle(row: dict) -> str:
 
 
 def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int) -> list[str]:
-    """The report's lines of one vehicle's effect: one per parameter (one without)."""
+    """The report's lines of one vehicle's effect: one per parameter (one without), in
+    the unit diagnose's report shows it in (``amplitude (deg)``; diagnosis.json and
+    runs.parquet keep SI, docs/diagnose.md "Parameters and units")."""
+    from onboard.offline.closure.report import unit_of
+
     keys = sorted({k for r in found for k in r["effect_params"]
                    if k.startswith(effect + ".")})
     head = f"| {vehicle} | {effect} | {len(found)} of {n_logs} |"
@@ -405,8 +414,31 @@ def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int) -> 
         return [head + " | | | | | |"]
     out = []
     for k in keys:
+        param = k[len(effect) + 1:]
+        unit, scale = unit_of(effect, param)
         x = [r["effect_params"][k] for r in found if k in r["effect_params"]]
-        std = statistics.stdev(x) if len(x) > 1 else 0.0
-        out.append(f"{head} {k[len(effect) + 1:]} | {statistics.fmean(x):.4g} | "
-                   f"{std:.3g} | {min(x):.4g} | {max(x):.4g} | {x[0]:.4g} -> {x[-1]:.4g} |")
+        if (effect, param) in CIRCULAR_PARAMS:
+            mean, std = _circular_mean_std(x)
+            x = [math.remainder(a, 2.0 * math.pi) for a in x]
+        else:
+            mean, std = statistics.fmean(x), statistics.stdev(x) if len(x) > 1 else 0.0
+        s = scale
+        name = f"{param} ({unit})" if unit else param
+        out.append(f"{head} {name} | {mean * s:.4g} | {std * s:.3g} | {min(x) * s:.4g} | "
+                   f"{max(x) * s:.4g} | {x[0] * s:.4g} -> {x[-1] * s:.4g} |")
     return out
+
+
+def _circular_mean_std(angles: Sequence[float]) -> tuple[float, float]:
+    """The circular mean (rad, in (-pi, pi]) of ``angles`` and their circular standard
+    deviation ``sqrt(-2 ln R n / (n - 1))``, ``R`` the mean resultant length (Mardia &
+    Jupp 2000, §2.3, with the sample's ``n / (n - 1)``): for angles close together the
+    sample standard deviation the other parameters get; 0 for one angle."""
+    n = len(angles)
+    c = statistics.fmean(math.cos(a) for a in angles)
+    s = statistics.fmean(math.sin(a) for a in angles)
+    r = min(math.hypot(c, s), 1.0)
+    if n < 2:
+        return math.atan2(s, c), 0.0
+    return math.atan2(s, c), (math.sqrt(-2.0 * math.log(r) * n / (n - 1)) if r > 0.0
+                              else math.inf)

@@ -72,7 +72,9 @@ def effect_table_markdown() -> str:
     return "\n".join(rows) + "\n"
 
 
-def _unit_of(effect: str, param: str) -> tuple[str, float]:
+def unit_of(effect: str, param: str) -> tuple[str, float]:
+    """The unit ``effect``'s parameter ``param`` is shown in and the factor from its SI
+    value in diagnosis.json (:data:`PARAM_UNITS`); ``("", 1.0)`` for one not listed."""
     for p, _, shown, scale in PARAM_UNITS.get(effect, ()):
         if p == param:
             return shown, scale
@@ -87,7 +89,7 @@ def format_param(effect: str, param: str, value, std=None) -> str:
         return "n/a"
     if not isinstance(value, (int, float)):
         return str(value)
-    unit, scale = _unit_of(effect, param)
+    unit, scale = unit_of(effect, param)
     text = f"{value * scale:.3g}"
     if isinstance(std, (int, float)) and math.isfinite(std):
         text += f" ± {std * scale:.2g}"
