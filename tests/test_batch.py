@@ -18,6 +18,7 @@ import pytest
 
 from onboard.cli import main as cli_main
 from onboard.offline import batch, batch_tables
+from onboard.offline.closure.report import unit_of
 from onboard.sitl.runner import run_to_tlog
 
 pa = pytest.importorskip("pyarrow", reason="onboard batch needs the batch extra")
@@ -279,6 +280,8 @@ def test_diagnose_writes_the_season_report(season, tmp_path):
     report = (out / "season.md").read_text()
     # the config was detected (its id is the class's): the vehicle is named with its folder
     assert report in r.stdout and "| rudder-boat (season) |" in report
+    assert "water_current" in found   # each parameter named with its unit
+    assert "| north (m/s) |" in report and "| east (m/s) |" in report
 
 
 def test_season_report_per_vehicle_and_effect():
@@ -296,7 +299,7 @@ def test_season_report_per_vehicle_and_effect():
             row("l4", "boat", None, ["heading_bias"], {"heading_bias.bias": 9.0},
                 diagnosed=False),
             row("g1", "glider", None, [], {})]
-    report = batch_tables.season_report(rows)
+    report = batch_tables.season_report(rows, unit_of)
     # in the unit diagnose's report shows (deg), not diagnosis.json's rad
     assert "| boat | heading_bias | 2 of 3 | bias (deg) | 4 | 2.83 | 2 | 6 | 2 -> 6 |" in report
     assert "| glider | none | 0 of 1 |" in report
@@ -315,7 +318,8 @@ def test_season_report_averages_angles_on_the_circle():
                                 "compass_deviation.phase": math.radians(bias)})
         return r
 
-    report = batch_tables.season_report([row("a", 179.0, 2.0), row("b", -179.0, 4.0)])
+    report = batch_tables.season_report([row("a", 179.0, 2.0), row("b", -179.0, 4.0)],
+                                         unit_of)
     assert "| boat | heading_bias | 2 of 2 | bias (deg) | 180 | 1.41 | -179 | 179 | " \
         "179 -> -179 |" in report
     assert "| phase (deg) | 180 | 1.41 |" in report
@@ -337,7 +341,7 @@ def test_season_report_tells_apart_vehicles_a_detected_config_does_not_name():
             row("/logs/survey/c.txt", detected, -1.0),
             row("/logs/x/d.csv", f"from blueboat-ntnu-csv {batch_tables.FITTED_CONFIG}", 0.5),
             row("/logs/y/e.txt", "from boat1.toml", 1.5)]
-    report = batch_tables.season_report(rows)
+    report = batch_tables.season_report(rows, unit_of)
     assert "| vehicle (usv) | heading_bias | 2 of 2 | bias (deg) | 120.3 |" in report
     assert "| vehicle (survey) | heading_bias | 1 of 1 |" in report
     assert "| vehicle (x) | heading_bias | 1 of 1 |" in report

@@ -571,7 +571,9 @@ def main(args) -> int:
     for path, why in found.skipped:
         print(f"skipped {path}: not a log ({why})")
     if args.diagnose:
-        report = batch_tables.season_report(rows)
+        from onboard.offline.closure.report import unit_of
+
+        report = batch_tables.season_report(rows, unit_of)
         (out / "season.md").write_text(report)
         written.append(str(out / "season.md"))
         print(report)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import statistics
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -40,6 +40,9 @@ ROW_KEYS = ("log", "name", "status", "error", "format", "vehicle_id", "vehicle_c
             "holdout_error_before", "holdout_error_after", "cpu_s", "wall_s")
 """The columns of runs.parquet, in order (docs/batch.md)."""
 FITTED_CONFIG = "(its header fits this bundled config)"
+Units = Callable[[str, str], tuple[str, float]]
+"""``units(effect, parameter)``: the unit a parameter is shown in and the factor from its
+SI value ("" and 1 for a number without one)."""
 CIRCULAR_PARAMS = {("compass_deviation", "phase"), ("heading_bias", "bias"),
                    ("wave_oscillation", "direction")}
 """Effect parameters that are angles on the circle: the season report takes their
@@ -358,11 +361,12 @@ def table_text(rows: Sequence[dict]) -> str:
     return "\n".join(lines)
 
 
-def season_report(rows: Sequence[dict]) -> str:
+def season_report(rows: Sequence[dict], units: Units) -> str:
     """The season report of a ``--diagnose`` batch (Markdown): per vehicle and effect, in
     how many of its diagnosed logs it was found, and per parameter its mean, standard
     deviation, range and its first and last value in UTC order (a compass deviation that
-    drifts, a thruster that weakens)."""
+    drifts, a thruster that weakens), in the unit ``units(effect, parameter)`` gives with
+    its factor from SI (diagnose's report's: ``closure.report.unit_of``)."""
     lines = ["# Season report", "",
              "| vehicle | effect | found in | parameter | mean | std | min | max | "
              "first -> last |", "|---|---|---|---|---|---|---|---|---|"]
@@ -378,7 +382,7 @@ def season_report(rows: Sequence[dict]) -> str:
             lines.append(f"| {vehicle} | none | 0 of {len(logs)} | | | | | | |")
         for effect in effects:
             found = [r for r in logs if effect in r["effects"]]
-            lines.extend(_effect_lines(vehicle, effect, found, len(logs)))
+            lines.extend(_effect_lines(vehicle, effect, found, len(logs), units))
     if not by_vehicle:
         lines.append("| | no log diagnosed | | | | | | | |")
     return "\n".join(lines) + "\n"
@@ -401,12 +405,11 @@ def season_vehicle(row: dict) -> str:
     return str(row["vehicle_id"])
 
 
-def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int) -> list[str]:
+def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int,
+                  units: Units) -> list[str]:
     """The report's lines of one vehicle's effect: one per parameter (one without), in
-    the unit diagnose's report shows it in (``amplitude (deg)``; diagnosis.json and
-    runs.parquet keep SI, docs/diagnose.md "Parameters and units")."""
-    from onboard.offline.closure.report import unit_of
-
+    the unit ``units`` gives (``amplitude (deg)``; diagnosis.json and runs.parquet keep
+    SI, docs/diagnose.md "Parameters and units")."""
     keys = sorted({k for r in found for k in r["effect_params"]
                    if k.startswith(effect + ".")})
     head = f"| {vehicle} | {effect} | {len(found)} of {n_logs} |"
@@ -415,7 +418,7 @@ def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int) -> 
     out = []
     for k in keys:
         param = k[len(effect) + 1:]
-        unit, scale = unit_of(effect, param)
+        unit, scale = units(effect, param)
         x = [r["effect_params"][k] for r in found if k in r["effect_params"]]
         if (effect, param) in CIRCULAR_PARAMS:
             mean, std = _circular_mean_std(x)
