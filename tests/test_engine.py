@@ -348,6 +348,32 @@ def test_the_speed_check_follows_the_declared_role_not_the_name():
     assert flags == {"_Undeclared": {}, "_Renamed": {"mine": ["speed_mismatch"]}}
 
 
+class _FarAie(_FastAie):
+    """An ``aie`` whose declared position is 50 m north of every fix, stated to 1 m."""
+
+    columns = ("north", "east", "std_north", "std_east")
+    speed = ()
+    position = ("north", "east")
+    frame = LocalFrame(48.0, -124.0)
+
+    def step(self, t, samples):
+        return {"north": 50.0, "east": 0.0, "std_north": 1.0, "std_east": 1.0}
+
+
+def test_a_position_withheld_by_another_check_is_still_judged(monkeypatch):
+    """The position check reads the positions as computed, as the speed check reads the
+    speeds: while a heading mismatch withholds them (here any check: ``withheld``
+    patched), a position 50 m off the fixes with a 1 m sigma is still found out, and its
+    flag can clear or stand on what the pipeline computes, not on the absence of it."""
+    eng = Engine(Config(), pipelines=[_FarAie()])
+    monkeypatch.setattr(eng.integrity, "withheld",
+                        lambda name: ("north", "east", "std_north", "std_east"))
+    published = []
+    run(eng, [fix(0.5 * k) for k in range(80)], lambda t, recs: published.extend(recs))
+    assert published and all("north" not in r.values for r in published)
+    assert "position_residual" in eng.health(40.0).flags["aie"]
+
+
 class _Eventful(Recorder):
     """A pipeline that reports one event at its second tick."""
 

@@ -11,7 +11,7 @@ import pytest
 
 from onboard.monitor.alerts import Alerts
 from onboard.core.geo import LocalFrame
-from onboard.core.messages import DvlVelocity, EstimateRecord, GnssFix, Heading, Innovation
+from onboard.core.messages import DvlVelocity, GnssFix, Heading, Innovation
 from onboard.monitor.integrity import (
     HEADING_BOUND_RAD,
     POSITION_SIGMA_BOUND,
@@ -157,10 +157,8 @@ def _positions(error_m: float, std_m: float) -> tuple[Alerts, IntegrityMonitor]:
         t = float(k)
         lat, lon = FRAME.to_latlon(0.0, 0.0)
         m.observe(GnssFix(t=t, lat_deg=lat, lon_deg=lon, sog_mps=0.0, cog_rad=0.0))
-        rec = EstimateRecord(vehicle="v", pipeline="aie", t=t + 0.05,
-                             values={"north": error_m, "east": 0.0},
-                             std={"north": std_m, "east": std_m})
-        m.positions_at(t + 0.05, [rec])
+        m.positions_at(t + 0.05, [("aie", {"north": error_m, "east": 0.0,
+                                           "std_north": std_m, "std_east": std_m})])
     return alerts, m
 
 
@@ -385,10 +383,8 @@ def test_a_failing_window_composes_its_warning_at_most_once_a_second(monkeypatch
     for k in range(200):  # 40 s at 5 Hz, 14 m off with a stated 1.9 m
         t = 0.2 * k
         m.observe(GnssFix(t=t, lat_deg=lat, lon_deg=lon, sog_mps=0.0, cog_rad=0.0))
-        rec = EstimateRecord(vehicle="v", pipeline="aie", t=t + 0.05,
-                             values={"north": 14.0, "east": 0.0},
-                             std={"north": 1.9, "east": 1.9})
-        m.positions_at(t + 0.05, [rec])
+        m.positions_at(t + 0.05, [("aie", {"north": 14.0, "east": 0.0,
+                                           "std_north": 1.9, "std_east": 1.9})])
     warning = next(iter(alerts))
     assert warning.code == "position_residual" and warning.n == len(composed)
     assert len(composed) <= 40  # 40 of the 196 failing comparisons
@@ -418,10 +414,8 @@ def _positions_of(p: SimpleNamespace, error_m: float) -> IntegrityMonitor:
     for k in range(40):
         t = float(k)
         m.observe(GnssFix(t=t, lat_deg=lat, lon_deg=lon, sog_mps=0.0, cog_rad=0.0))
-        rec = EstimateRecord(vehicle="v", pipeline=p.name, t=t + 0.05,
-                             values={qn: off_n + error_m, qe: off_e},
-                             std={qn: 1.9, qe: 1.9})
-        m.positions_at(t + 0.05, [rec])
+        m.positions_at(t + 0.05, [(p.name, {qn: off_n + error_m, qe: off_e,
+                                            f"std_{qn}": 1.9, f"std_{qe}": 1.9})])
     return m
 
 

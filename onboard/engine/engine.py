@@ -521,8 +521,8 @@ class Engine:
         queue.close_tick()
         integrity.counters_at(t)
         records = self._records(t, stepped)
-        integrity.positions_at(t, records)
-        integrity.speeds_at(t, computed)   # a withheld speed is still judged
+        integrity.positions_at(t, computed)   # a withheld position or speed is still
+        integrity.speeds_at(t, computed)      # judged
         return records
 
     def _take_events(self, p: Pipeline) -> None:

@@ -125,7 +125,6 @@ from onboard.core.messages import (
     ActuatorCommand,
     Attitude,
     DvlVelocity,
-    EstimateRecord,
     GnssFix,
     Heading,
     Innovation,
@@ -1387,9 +1386,12 @@ class IntegrityMonitor:
         if n:
             self.withheld_rows[pipeline] = self.withheld_rows.get(pipeline, 0) + 1
 
-    def positions_at(self, t: float, records: Sequence[EstimateRecord]) -> None:
-        """At the first tick after a fix, compare the published positions (the
-        ``position`` of each watched pipeline, in its frame) with it."""
+    def positions_at(self, t: float, computed: Sequence[tuple[str, Mapping[str, float]]]
+                     ) -> None:
+        """At the first tick (at ``t``) after a fix, compare each watched pipeline's
+        ``position`` (in its frame, with its ``std_`` columns) with it; ``computed``: each
+        pipeline's name and values as it stepped, before any is withheld, so that a
+        position withheld while the heading is contradicted is still judged."""
         fix = self._fix
         if not self._fix_new or fix is None or self.frame is None:
             return
@@ -1406,20 +1408,21 @@ class IntegrityMonitor:
                    else self.fix_std_m ** 2)
         in_frame: dict[LocalFrame, tuple[float, float]] = {}  # the fix, once per frame
         watched = self.watched
-        for rec in records:
-            p = watched.get(rec.pipeline)
+        for name, values in computed:
+            p = watched.get(name)
             if p is not None and p.position:
-                self._position(rec, p, fix, (dn, de), var_fix, in_frame)
+                self._position(name, t, values, p, fix, (dn, de), var_fix, in_frame)
 
-    def _position(self, rec: EstimateRecord, p: Declared, fix: GnssFix,
-                  moved: tuple[float, float], var_fix: float,
+    def _position(self, pipeline: str, t: float, v: Mapping[str, float], p: Declared,
+                  fix: GnssFix, moved: tuple[float, float], var_fix: float,
                   in_frame: dict[LocalFrame, tuple[float, float]]) -> None:
-        """One pipeline's comparison with ``fix``, moved by ``moved`` (m) to the tick;
-        ``in_frame`` holds the fix's north/east (m) in the frames converted so far."""
+        """One pipeline's comparison (its values ``v`` at ``t``) with ``fix``, moved by
+        ``moved`` (m) to the tick; ``in_frame`` holds the fix's north/east (m) in the
+        frames converted so far."""
         own = p.frame
         qn, qe = p.position
-        v, sd = rec.values, rec.std
-        if own is None or qn not in v or qe not in v or qn not in sd or qe not in sd:
+        sn, se = "std_" + qn, "std_" + qe
+        if own is None or not all(k in v and math.isfinite(v[k]) for k in (qn, qe, sn, se)):
             return
         offset = p.frame_offset
         frame = own if offset is not None else self.frame
@@ -1430,53 +1433,54 @@ class IntegrityMonitor:
             ne = in_frame[frame] = frame.to_ne(fix.lat_deg, fix.lon_deg)
         fn, fe = ne
         res = (v[qn] - (fn + off_n + moved[0]), v[qe] - (fe + off_e + moved[1]))
-        var = (sd[qn] ** 2 + var_fix, sd[qe] ** 2 + var_fix)
-        self._position_nees(rec, res, var, var_fix)
-        check = self.positions.get(rec.pipeline)
+        var = (v[sn] ** 2 + var_fix, v[se] ** 2 + var_fix)
+        self._position_nees(pipeline, t, res, var, var_fix)
+        check = self.positions.get(pipeline)
         if check is None:
-            check = self.positions[rec.pipeline] = PositionCheck()
-        verdict = check.add(rec.t, res, var)
+            check = self.positions[pipeline] = PositionCheck()
+        verdict = check.add(t, res, var)
         if verdict is None:
             return
-        self._flag(rec.pipeline, "position_residual", verdict)
-        if verdict and self._due("position_residual", rec.pipeline, rec.t):
-            self._warn("position_residual", rec.pipeline, rec.t, (
-                f"{rec.pipeline} position is {check.median_m():.1f} m from GNSS "
+        self._flag(pipeline, "position_residual", verdict)
+        if verdict and self._due("position_residual", pipeline, t):
+            self._warn("position_residual", pipeline, t, (
+                f"{pipeline} position is {check.median_m():.1f} m from GNSS "
                 f"({check.median_sigma():.1f} sigma): its position and sigma are not to be "
                 f"trusted; the fix's sigma is [sensors.gnss] position_std_m when it reports "
-                f"none, the filter's noise in [pipelines.{rec.pipeline}] (docs/integrity.md)"),
+                f"none, the filter's noise in [pipelines.{pipeline}] (docs/integrity.md)"),
                 details=(f"the median over {POSITION_WINDOW_S:.0f} s, with its stated "
-                         f"{math.sqrt(sd[qn] ** 2 + sd[qe] ** 2):.1f} m and the fix's "
+                         f"{math.sqrt(v[sn] ** 2 + v[se] ** 2):.1f} m and the fix's "
                          f"{math.sqrt(var_fix):.1f} m"
                          + (REORIGINED if own is not frame and (own.lat0, own.lon0)
                             != (frame.lat0, frame.lon0) else "")))
 
-    def _position_nees(self, rec: EstimateRecord, res: tuple[float, float],
+    def _position_nees(self, pipeline: str, t: float, res: tuple[float, float],
                        var: tuple[float, float], var_fix: float) -> None:
-        """The position NEES of ``rec`` against a fix of variance ``var_fix`` (m^2) better
-        than the estimate on both axes (``var`` the sum of both, per axis);
-        ``position_inconsistent`` while its :class:`PositionNeesCheck` fails."""
+        """The position NEES of ``pipeline`` at ``t`` against a fix of variance
+        ``var_fix`` (m^2) better than the estimate on both axes (``var`` the sum of both,
+        per axis); ``position_inconsistent`` while its :class:`PositionNeesCheck`
+        fails."""
         lim = (1.0 + POSITION_NEES_FIX_RATIO) * var_fix
         if not (var[0] > lim and var[1] > lim):
             return
-        check = self.position_nees.get(rec.pipeline)
+        check = self.position_nees.get(pipeline)
         if check is None:
-            check = self.position_nees[rec.pipeline] = PositionNeesCheck()
+            check = self.position_nees[pipeline] = PositionNeesCheck()
         was = check.failing
         now = check.add(res[0] * res[0] / var[0] + res[1] * res[1] / var[1])
         if now and check.first_failed is None:
-            check.first_failed = rec.t
-        if now and self._due("position_inconsistent", rec.pipeline, rec.t):
+            check.first_failed = t
+        if now and self._due("position_inconsistent", pipeline, t):
             lo, hi = check.band
-            self._warn("position_inconsistent", rec.pipeline, rec.t, (
-                f"{rec.pipeline} position: mean NEES {check.mean:.2f} against the fixes "
+            self._warn("position_inconsistent", pipeline, t, (
+                f"{pipeline} position: mean NEES {check.mean:.2f} against the fixes "
                 f"better than it, outside [{lo:.2f}, {hi:.2f}]: its position sigma "
                 + ("is too small" if check.mean > hi else "is larger than its error")
                 + " (docs/integrity.md)"), details=(
                 f"each block of {NIS_BLOCK_UPDATES} comparisons (dof 2; lag-1 "
                 f"autocorrelation {check.rho:.2f})"), t_start=check.first_failed)
         if now != was:
-            self._flag(rec.pipeline, "position_inconsistent", now)
+            self._flag(pipeline, "position_inconsistent", now)
 
     # ------------------------------------------------------------------ speeds
     def _doppler(self, s: GnssFix) -> None:
