@@ -521,8 +521,9 @@ class Engine:
         queue.close_tick()
         integrity.counters_at(t)
         records = self._records(t, stepped)
-        integrity.positions_at(t, computed)   # a withheld position or speed is still
-        integrity.speeds_at(t, computed)      # judged
+        # judged as computed: a position or speed withheld from the records still is
+        integrity.positions_at(t, computed)
+        integrity.speeds_at(t, computed)
         return records
 
     def _take_events(self, p: Pipeline) -> None:

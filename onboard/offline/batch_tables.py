@@ -40,6 +40,8 @@ ROW_KEYS = ("log", "name", "status", "error", "format", "vehicle_id", "vehicle_c
             "holdout_error_before", "holdout_error_after", "cpu_s", "wall_s")
 """The columns of runs.parquet, in order (docs/batch.md)."""
 FITTED_CONFIG = "(its header fits this bundled config)"
+"""The end of runs.parquet's ``config`` for a CSV log given no ``--config``, replayed with
+the bundled config its header fits (``onboard.offline.batch``)."""
 Units = Callable[[str, str], tuple[str, float]]
 """``units(effect, parameter)``: the unit a parameter is shown in and the factor from its
 SI value ("" and 1 for a number without one)."""
@@ -48,8 +50,6 @@ CIRCULAR_PARAMS = {("compass_deviation", "phase"), ("heading_bias", "bias"),
 """Effect parameters that are angles on the circle: the season report takes their
 circular mean and standard deviation (a bias of 179 deg and one of -179 deg average to
 180, not 0) and shows each value within (-180, 180] deg."""
-"""The end of runs.parquet's ``config`` for a CSV log given no ``--config``, replayed with
-the bundled config its header fits (``onboard.offline.batch``)."""
 
 
 def require_pyarrow() -> None:
@@ -425,10 +425,10 @@ def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int,
             x = [math.remainder(a, 2.0 * math.pi) for a in x]
         else:
             mean, std = statistics.fmean(x), statistics.stdev(x) if len(x) > 1 else 0.0
-        s = scale
+        x = [a * scale for a in x]
         name = f"{param} ({unit})" if unit else param
-        out.append(f"{head} {name} | {mean * s:.4g} | {std * s:.3g} | {min(x) * s:.4g} | "
-                   f"{max(x) * s:.4g} | {x[0] * s:.4g} -> {x[-1] * s:.4g} |")
+        out.append(f"{head} {name} | {mean * scale:.4g} | {std * scale:.3g} | "
+                   f"{min(x):.4g} | {max(x):.4g} | {x[0]:.4g} -> {x[-1]:.4g} |")
     return out
 
 
