@@ -135,6 +135,18 @@ def test_compass_deviation_is_not_mistaken_for_a_current():
     assert p["phase"] == pytest.approx(math.atan2(0.03, 0.05), abs=0.1)
 
 
+def test_a_large_deviation_is_a_deviation_and_one_beyond_90_deg_is_none():
+    """A 38 deg deviation (a compass beside a motor) is still found as one; the bound is
+    a compass's physics (a hull's field turns the needle by at most 90 deg), not the
+    small-angle model's range."""
+    _, found = detected(synth(dev=(0.6, 0.3)))
+    assert set(found) - {"unexplained"} == {"compass_deviation"}
+    # measured: amplitude 0.727 rad for a true 0.671 (the small-angle model reads high)
+    assert found["compass_deviation"]["params"]["amplitude"] == pytest.approx(0.67, abs=0.1)
+    e = ALL["compass_deviation"]
+    assert e.physical(np.array([1.0, 1.0])) and not e.physical(np.array([1.5, 0.6]))
+
+
 def test_gyro_bias():
     _, found = detected(synth(gyro_bias=0.01))
     assert set(found) == {"gyro_bias"}

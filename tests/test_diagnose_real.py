@@ -41,6 +41,22 @@ def test_shenzhen_dual_antenna_heading_offset(shared_data, tmp_path):
     assert doc["holdout_error_after"] < 0.3 * doc["holdout_error_before"]
 
 
+def test_a_deviation_beyond_any_compass_is_rejected_not_reported(shared_data, tmp_path):
+    """Survey boat Test6 (117 s, its heading 100-150 deg off the course): a one-cycle
+    deviation chosen on the selection part refits to 104 deg of amplitude, more than a
+    hull's magnetism can turn a compass (90 deg): it is tried and rejected as unphysical,
+    its refitted parameters kept in the evidence, not reported as found."""
+    log = shared_data / "survey_boat_arduino_rc" / "Test6_slow.txt"
+    if not log.exists():
+        pytest.skip(f"{log} not in the shared data")
+    cfg, _ = choose_config(str(log), str(REPO / "config" / "survey-boat-csv.toml"))
+    doc = diagnose(str(log), cfg, tmp_path)
+    assert "compass_deviation" not in _found(doc)
+    (rej,) = [r for r in doc["rejected_on_test"] if r["name"] == "compass_deviation"]
+    # measured: 1.812 rad (104 deg), phase 1.868 rad
+    assert rej["unphysical"] and rej["params"]["amplitude"] > math.pi / 2
+
+
 def test_blueboat_runs_with_the_configured_thruster_mapping(shared_data, tmp_path):
     runs = shared_data / "blueboat_sysid_ntnu"
     if not runs.is_dir():

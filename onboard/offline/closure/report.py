@@ -117,6 +117,13 @@ def summary_text(doc: dict) -> str:
     else:
         text = f"No effect of the catalog is needed to explain this log; {err}."
     for r in doc.get("rejected_on_test") or ():
+        if r.get("unphysical"):
+            fitted = ", ".join(f"{k} {format_param(r['name'], k, v)}"
+                               for k, v in (r.get("params") or {}).items())
+            text += (f" Tried and rejected: {r['name'].replace('_', ' ')} (chosen on the "
+                     "selection part; refitted on the fit and selection parts, its "
+                     f"parameters are not physical: {fitted}).")
+            continue
         text += (f" Tried and rejected: {r['name'].replace('_', ' ')} (chosen on the "
                  f"selection part, it made the test part worse: {r['test_error_without']:.3g}"
                  f" -> {r['test_error_with']:.3g} {unit})."

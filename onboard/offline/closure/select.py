@@ -367,7 +367,9 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
         else:
             break
     # The final score: both models refitted on fit + selection, scored on the test part;
-    # an effect that makes the test part worse than the model without it is rejected.
+    # an effect that makes the test part worse than the model without it is rejected, and
+    # so is one whose refitted parameters are not physical (its fit on the selection part
+    # was).
     test = sp.test if sp.test is not None and len(sp.test) else sp.holdout
     base_final = M.fit(concat([sp.fit, sp.holdout]), declared, sigma, ctx, known=known)
     before = M.score(test, base_final, metric)
@@ -380,12 +382,20 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
         both = concat([fit_data, hold_data])
         final = M.fit(both, _model_effects((*declared, *chosen)), sigma, ctx, known=known)
         after = M.score(test_data, final, metric)
-        if not chosen or not _worse_on_test(after, before):
+        unphysical = [n for n in _model_effects(chosen) if not ALL[n].physical(final.theta[n])]
+        entry: dict = {}
+        if unphysical:
+            name = unphysical[-1]
+            chosen.remove(name)
+            entry = {"unphysical": True,
+                     "params": ALL[name].describe(final.theta[name], final.std[name])[0]}
+        elif not chosen or not _worse_on_test(after, before):
             break
-        name = chosen.pop()
-        transformed.pop(name, None)
+        else:
+            name = chosen.pop()
+            transformed.pop(name, None)
         rejected.append({"name": name, "test_error_without": before.headline,
-                         "test_error_with": after.headline})
+                         "test_error_with": after.headline, **entry})
     if rejected:
         current_fit = M.fit(fit_data, _model_effects((*declared, *chosen)), sigma, ctx,
                             known=known)

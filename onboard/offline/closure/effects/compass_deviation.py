@@ -18,6 +18,16 @@ import numpy as np
 from onboard.offline.closure.dataset import segment_starts
 from onboard.offline.closure.effects.base import Context, Effect, speed
 
+AMPLITUDE_MAX_RAD = math.pi / 2.0
+"""The largest amplitude (rad) a compass's deviation can have. The hull's hard iron, a
+field ``b`` times the earth's horizontal one, turns the needle by ``atan2(b sin(theta),
+1 + b cos(theta))``, at most ``arcsin(b)`` while ``b < 1``; at ``b >= 1`` the needle
+follows the hull and the error takes every value, no deviation curve at all. A larger
+fitted amplitude (the survey boat's 104 deg on its 117 s ``Test6_slow`` run, whose
+heading is 100-150 deg off the course) is a heading that is not a compass's, which
+``heading_bias`` measures and the replay's ``heading_course_mismatch`` flags: evidence of
+that, not of a deviation."""
+
 
 class CompassDeviation(Effect):
     """The compass deviation ``a sin(psi) + b cos(psi)`` (module docstring); reported as
@@ -34,6 +44,9 @@ class CompassDeviation(Effect):
             s0 = segment_starts(ds)
             cols["heading"] = np.column_stack([s - s[s0], c - c[s0]])
         return cols
+
+    def physical(self, theta):
+        return bool(math.hypot(float(theta[0]), float(theta[1])) <= AMPLITUDE_MAX_RAD)
 
     def describe(self, theta, std):
         a, b = float(theta[0]), float(theta[1])
