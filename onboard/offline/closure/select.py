@@ -368,8 +368,7 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
             break
     # The final score: both models refitted on fit + selection, scored on the test part;
     # an effect that makes the test part worse than the model without it is rejected, and
-    # so is one whose refitted parameters are not physical (its fit on the selection part
-    # was).
+    # so is one whose parameters, physical as fitted on the fit part, are not once refitted.
     test = sp.test if sp.test is not None and len(sp.test) else sp.holdout
     base_final = M.fit(concat([sp.fit, sp.holdout]), declared, sigma, ctx, known=known)
     before = M.score(test, base_final, metric)
