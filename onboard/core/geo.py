@@ -24,6 +24,7 @@ ellipsoid's meridional and prime-vertical radii for the metres-per-degree scale.
 from __future__ import annotations
 
 import math
+from typing import Sequence
 
 from mypy_extensions import mypyc_attr
 import numpy as np
@@ -66,6 +67,17 @@ def wrap_2pi(angle: float) -> float:
         a += TWO_PI
         return a if a < TWO_PI else 0.0
     return a + 0.0  # -0.0 + 0.0 is +0.0; any other value is unchanged
+
+
+def circular_stats(angles: Sequence[float]) -> tuple[float, float]:
+    """The circular mean (rad, in ``(-pi, pi]``) of ``angles`` (rad) and their circular
+    standard deviation ``sqrt(-2 ln R)`` (rad), ``R`` the mean resultant length (Mardia &
+    Jupp 2000, §2.3): about the standard deviation for angles close together, infinite
+    for angles that cancel."""
+    s = sum(map(math.sin, angles))
+    c = sum(map(math.cos, angles))
+    r = min(math.hypot(s, c) / len(angles), 1.0)
+    return math.atan2(s, c), math.sqrt(-2.0 * math.log(r)) if r > 0.0 else math.inf
 
 
 WGS84_A_M = 6378137.0

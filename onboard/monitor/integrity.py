@@ -119,7 +119,7 @@ from onboard.monitor.compass_deviation import CompassDeviation
 from onboard.monitor.current_resolution import (RESOLVE_MIN_STD_MPS, RESOLVE_WINDOW_S,
                                                 CurrentResolution)
 from onboard.monitor.track_course import TrackCourse
-from onboard.core.geo import LocalFrame, wrap_pi
+from onboard.core.geo import LocalFrame, circular_stats, wrap_pi
 from onboard.core.stats import chi2_mean_band
 from onboard.core.messages import (
     ActuatorCommand,
@@ -582,8 +582,8 @@ class CompassDeviationCheck:
         leg.append((t, psi, chi, sog))
         if t - leg[0][0] < LEG_S:
             return False
-        mean_psi, straight_psi = _circular_stats([p for _, p, _, _ in leg])
-        mean_chi, straight_chi = _circular_stats([c for _, _, c, _ in leg])
+        mean_psi, straight_psi = circular_stats([p for _, p, _, _ in leg])
+        mean_chi, straight_chi = circular_stats([c for _, _, c, _ in leg])
         sog_mean = sum(v for _, _, _, v in leg) / len(leg)
         leg.clear()
         if max(straight_psi, straight_chi) > LEG_STRAIGHT_RAD:
@@ -595,15 +595,6 @@ class CompassDeviationCheck:
     def rms(self) -> float:
         """The deviation's RMS over a turn (rad) when it is significant, else 0."""
         return self.fit.rms() if self.deviated else 0.0
-
-
-def _circular_stats(angles: Sequence[float]) -> tuple[float, float]:
-    """The circular mean (rad) of ``angles`` and their circular standard deviation
-    ``sqrt(-2 ln R)`` (rad), R the mean resultant length."""
-    s = sum(map(math.sin, angles))
-    c = sum(map(math.cos, angles))
-    r = min(math.hypot(s, c) / len(angles), 1.0)
-    return math.atan2(s, c), math.sqrt(-2.0 * math.log(r)) if r > 0.0 else math.inf
 
 
 class IdleDriftCheck:

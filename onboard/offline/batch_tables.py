@@ -21,6 +21,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from onboard.core.errors import UsageError
+from onboard.core.geo import circular_stats
 from onboard.offline.plots import dive_rows
 
 LOG_CURRENT = "current.parquet"
@@ -420,8 +421,9 @@ def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int,
         param = k[len(effect) + 1:]
         unit, scale = units(effect, param)
         x = [r["effect_params"][k] for r in found if k in r["effect_params"]]
-        if (effect, param) in CIRCULAR_PARAMS:
-            mean, std = _circular_mean_std(x)
+        if (effect, param) in CIRCULAR_PARAMS:   # the sample's n / (n - 1) on the variance
+            mean, std = circular_stats(x)
+            std = std * math.sqrt(len(x) / (len(x) - 1)) if len(x) > 1 else 0.0
             x = [math.remainder(a, 2.0 * math.pi) for a in x]
         else:
             mean, std = statistics.fmean(x), statistics.stdev(x) if len(x) > 1 else 0.0
@@ -431,17 +433,3 @@ def _effect_lines(vehicle: str, effect: str, found: list[dict], n_logs: int,
                    f"{min(x):.4g} | {max(x):.4g} | {x[0]:.4g} -> {x[-1]:.4g} |")
     return out
 
-
-def _circular_mean_std(angles: Sequence[float]) -> tuple[float, float]:
-    """The circular mean (rad, in (-pi, pi]) of ``angles`` and their circular standard
-    deviation ``sqrt(-2 ln R n / (n - 1))``, ``R`` the mean resultant length (Mardia &
-    Jupp 2000, §2.3, with the sample's ``n / (n - 1)``): for angles close together the
-    sample standard deviation the other parameters get; 0 for one angle."""
-    n = len(angles)
-    c = statistics.fmean(math.cos(a) for a in angles)
-    s = statistics.fmean(math.sin(a) for a in angles)
-    r = min(math.hypot(c, s), 1.0)
-    if n < 2:
-        return math.atan2(s, c), 0.0
-    return math.atan2(s, c), (math.sqrt(-2.0 * math.log(r) * n / (n - 1)) if r > 0.0
-                              else math.inf)
