@@ -130,8 +130,10 @@ def ext_modules() -> list:
         raise SystemExit(
             f"ONBOARD_COMPILE=1 needs mypyc in the build environment: pip install "
             f"'mypy=={MYPYC_VERSION}', then build with --no-build-isolation") from err
+    # a C file per module: gcc on one file of every module took twice the CPU
+    # (docs/performance.md, "The compiled build")
     exts = mypycify([*MYPY_OPTIONS, *staged([*COMPILED_MODULES, *GENERATED_MODULES])],
-                    opt_level="3")
+                    opt_level="3", multi_file=True)
     for ext in exts:
         ext.extra_compile_args = [*ext.extra_compile_args, *C_FLAGS]
     return exts
