@@ -210,6 +210,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--web", default="", metavar="HOST:PORT",
                    help="serve the web page there: the field as arrows with their "
                         "uncertainty over the map, each vehicle's track and estimate")
+    p.add_argument("--history", action="append", default=[], metavar="FILE",
+                   help="first add the currents of an onboard batch table "
+                        "(current.parquet, docs/batch.md), as if received live "
+                        "(repeatable; needs the batch extra)")
     p.set_defaults(handler="onboard.fleet.service:main")
 
     p = sub.add_parser("bench", help="performance figures")

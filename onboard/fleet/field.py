@@ -421,7 +421,7 @@ class CurrentField:
         """Take one observation (late and out of order as well); False when it is older
         than the history kept (counted ``too_old``)."""
         if obs.utc < self.newest_utc - self.history_s:
-            self._reject("too_old")
+            self.reject("too_old")
             return False
         if self.plane is None:
             self.plane, self.t_ref = Plane(obs.lat_deg, obs.lon_deg), obs.utc
@@ -462,11 +462,12 @@ class CurrentField:
         in :attr:`rejected`) when it makes none."""
         obs, why = observation(rec)
         if obs is None:
-            self._reject(why)
+            self.reject(why)
             return False
         return self.add(obs)
 
-    def _reject(self, why: str, n: int = 1) -> None:
+    def reject(self, why: str, n: int = 1) -> None:
+        """Count ``n`` observations left out for ``why`` (:attr:`rejected`)."""
         self.rejected[why] = self.rejected.get(why, 0) + n
 
     # ------------------------------------------------------------------ fit
@@ -567,7 +568,7 @@ class CurrentField:
                     out.append(i)
                     self._outliers.add(key)
         if out:
-            self._reject("outlier", len(out))
+            self.reject("outlier", len(out))
         return np.array(out, dtype=int)
 
     # ------------------------------------------------------------------ predict

@@ -19,7 +19,10 @@ position, is counted and skipped), and
   time; the hyperparameters are fitted again every ``--refit`` seconds;
 * with ``--mcap FILE`` writes each grid into an MCAP file for Foxglove: the ``FleetGrid``
   on ``<prefix>/fleet/current/grid`` and the same field as arrows on
-  ``<prefix>/fleet/current/geojson`` (``foxglove.GeoJSON``, for the Map panel).
+  ``<prefix>/fleet/current/geojson`` (``foxglove.GeoJSON``, for the Map panel);
+* with ``--history FILE`` first adds the currents of an ``onboard batch`` table
+  (``current.parquet``, docs/batch.md) as if they had been received
+  (:meth:`FleetService.load_history`): yesterday's survey, replayed, served as a field.
 
 The field is fitted on its own thread (:meth:`FleetService.step`); a query reads the
 field the last fit left (:class:`onboard.fleet.field.Fitted`) and never waits for the
@@ -66,6 +69,9 @@ MIN_SPACING_M = 50.0
 """The grid's cells are at least this large (m)."""
 ARROW_S = 600.0
 """An arrow of the GeoJSON map is as long as the water moves in this time (s)."""
+HISTORY_COLUMNS = ["vehicle", "t_s", "utc", "lat", "lon", "north", "east", "std_north",
+                   "std_east", "pipeline"]
+"""The columns of ``current.parquet`` (docs/batch.md) ``--history`` reads."""
 
 
 class FleetService:
@@ -149,6 +155,57 @@ class FleetService:
             vehicle=rec.vehicle, utc=rec.utc, lat=rec.lat_deg, lon=rec.lon_deg,
             north=v.get("north"), east=v.get("east"), std_north=sd.get("north"),
             std_east=sd.get("east"), down=v.get("down"), std_down=sd.get("down"))
+
+    def load_history(self, path: str | Path) -> dict[str, int]:
+        """Add the currents of an ``onboard batch`` table ``path`` (``current.parquet``,
+        docs/batch.md) as the records they were published as: a row of the ``current``
+        pipeline is the record of its vehicle at its ``utc``, ``lat``, ``lon``, taken by
+        the same :meth:`.CurrentField.add_record` as a record received live (a row without
+        a time or a converged sigma is rejected for the same reason), in the order of their
+        time, as they were received; a row older than the field's history before the
+        file's newest is counted ``too_old``, as a record received that late is. A
+        glider's dive (pipeline ``dac``) is an average over its whole dive,
+        kilometres and hours, not the water at a place and time: counted ``dive_average``
+        and left out. Returns the rows read, added and left out by reason (this file's).
+        Raises :class:`UsageError` for a file that is not such a table, or without
+        pyarrow (the ``batch`` extra)."""
+        try:
+            import pyarrow.parquet as pq
+        except ImportError:
+            raise UsageError("--history reads Parquet with pyarrow: pip install "
+                             "'onboard[batch]'") from None
+        try:
+            table = pq.read_table(path, columns=HISTORY_COLUMNS)
+        except (OSError, ValueError, KeyError) as err:   # pyarrow's errors derive from these
+            raise UsageError(f"--history {path}: not a current.parquet of onboard batch "
+                             f"({str(err).splitlines()[0]})") from None
+        rows = table.to_pydict()
+        utc_s = [None if u is None else u.timestamp() for u in rows["utc"]]
+        order = sorted(range(table.num_rows), key=lambda i: (utc_s[i] is None, utc_s[i] or 0.0))
+        field = self.field
+        oldest = max((u for u in utc_s if u is not None), default=0.0) - field.history_s
+        before, added = dict(field.rejected), 0
+        for i in order:
+            if rows["pipeline"][i] != "current":
+                field.reject("dive_average")
+                continue
+            if utc_s[i] is not None and utc_s[i] < oldest:
+                field.reject("too_old")
+                continue
+            std = {k: v for k in ("north", "east")
+                   if (v := rows[f"std_{k}"][i]) is not None}
+            rec = EstimateRecord(vehicle=rows["vehicle"][i], pipeline="current",
+                                 t=rows["t_s"][i],
+                                 values={"north": rows["north"][i], "east": rows["east"][i]},
+                                 std=std, utc=utc_s[i], lat_deg=rows["lat"][i],
+                                 lon_deg=rows["lon"][i])
+            self._count("history")
+            with self.lock:
+                self._note(rec)
+                added += field.add_record(rec)
+        left = {k: n - before.get(k, 0) for k, n in field.rejected.items()
+                if n > before.get(k, 0)}
+        return {"rows": table.num_rows, "added": added, **left}
 
     # ----------------------------------------------------------------- the field
     def step(self, refit: bool | None = None) -> FleetGrid | None:
@@ -331,7 +388,8 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
 
 def main(args: argparse.Namespace) -> int:
     """``onboard fleet [--connect E] [--listen E] [--mode M] [--zenoh-config FILE]
-    [--prefix P] [--period S] [--refit S] [--mcap FILE] [--web HOST:PORT]``."""
+    [--prefix P] [--period S] [--refit S] [--mcap FILE] [--web HOST:PORT]
+    [--history FILE]...``."""
     if not args.period > 0 or not args.refit > 0:
         raise UsageError("--period and --refit are positive seconds")
     session = open_session(args.connect, args.listen, args.mode,
@@ -339,6 +397,18 @@ def main(args: argparse.Namespace) -> int:
     service = FleetService(session, args.prefix, mcap=args.mcap, refit_s=args.refit)
     page = None
     stop = threading.Event()
+    history = getattr(args, "history", None) or []
+    try:
+        for path in history:
+            counts = service.load_history(path)
+            left = ", ".join(f"{k} {n:,}" for k, n in counts.items()
+                             if k not in ("rows", "added"))
+            print(f"onboard fleet: {path}: {counts['added']:,} of {counts['rows']:,} "
+                  f"currents added" + (f" (left out: {left})" if left else ""), flush=True)
+    except UsageError:
+        service.close()
+        session.close()
+        raise
     print(f"onboard fleet: fusing {args.prefix}/*/est/current; ask "
           f"{current_key(args.prefix)}?lat=..;lon=..;utc=..; grid on "
           f"{grid_key(args.prefix)} every {args.period:g} s", flush=True)
@@ -348,7 +418,9 @@ def main(args: argparse.Namespace) -> int:
 
             page = PageOnThread(session, [f"{args.prefix}/**"], args.web)
             print(f"onboard fleet: the page is on {page.url}", flush=True)
-        while not stop.wait(args.period):
+        wait = 0.0 if history else args.period   # a history is a field at once
+        while not stop.wait(wait):
+            wait = args.period
             grid = service.step()
             if grid is not None and page is not None:
                 page.view.feed_grid(msgspec.to_builtins(grid))

@@ -1,0 +1,147 @@
+"""``onboard fleet --history``: the currents of an ``onboard batch`` table
+(``current.parquet``, docs/batch.md) added as the records they were published as, so that
+yesterday's survey, replayed, is served as a field (docs/fleet.md)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import msgspec
+import numpy as np
+import pytest
+
+from onboard.core.errors import UsageError
+from onboard.fleet.field import HISTORY_S
+from onboard.fleet.service import FleetService
+from tests.helpers.fleet_scenarios import UTC0, eddy, fleet
+
+pa = pytest.importorskip("pyarrow", reason="the batch extra: pip install -e '.[batch]'")
+pq = pytest.importorskip("pyarrow.parquet")
+
+
+def write_table(path, recs, extra=()):
+    """``recs`` (EstimateRecords of ``current``) as rows of current.parquet, with the
+    batch's own schema, plus the rows ``extra`` (dicts of columns)."""
+    from onboard.offline.batch_tables import current_schema
+
+    rows = [{"name": "log", "vehicle": r.vehicle, "t_s": r.t,
+             "utc": None if r.utc is None else round(r.utc * 1000.0),
+             "lat": r.lat_deg, "lon": r.lon_deg, "north": r.values["north"],
+             "east": r.values["east"], "std_north": r.std.get("north"),
+             "std_east": r.std.get("east"), "flags": [], "pipeline": "current"}
+            for r in recs] + list(extra)
+    schema = current_schema()
+    pq.write_table(pa.table({k: [row[k] for row in rows] for k in schema.names},
+                            schema=schema), path)
+
+
+def ms_record(rec):
+    """``rec`` with its UTC rounded to the table's millisecond."""
+    return msgspec.structs.replace(rec, utc=round(rec.utc * 1000.0) / 1000.0)
+
+
+@pytest.fixture(scope="module")
+def survey():
+    return fleet("eddy", seed=31, vehicles=4, duration_s=900.0, rate_hz=1.0)
+
+
+def test_a_batch_table_makes_the_field_its_records_make_live(survey, tmp_path):
+    recs = [survey.record(i) for i in range(len(survey.t))]
+    dive = {"name": "glider", "vehicle": "glider-1", "t_s": 3600.0,
+            "utc": round(UTC0 * 1000.0), "lat": recs[0].lat_deg, "lon": recs[0].lon_deg,
+            "north": 0.1, "east": 0.0, "std_north": 0.01, "std_east": 0.01, "flags": [],
+            "pipeline": "dac"}
+    no_time = dict(dive, vehicle="boat-x", pipeline="current", utc=None)
+    path = tmp_path / "current.parquet"
+    write_table(path, recs, [dive, no_time])
+
+    history = FleetService()
+    counts = history.load_history(path)
+    assert counts == {"rows": len(recs) + 2, "added": len(recs), "dive_average": 1,
+                      "no_time": 1}
+    assert history.received == {"history": len(recs) + 1}
+    assert sorted(history.newest) == sorted({r.vehicle for r in recs})
+
+    live = FleetService()
+    enc = msgspec.json.Encoder()
+    for r in sorted(recs, key=lambda r: r.utc):   # as they were received
+        assert live.feed(enc.encode(ms_record(r)), "application/json;onboard.Estimate.v2")
+    a, b = history.step(refit=True), live.step(refit=True)
+    assert a is not None and b is not None
+    assert history.field.hyper == pytest.approx(live.field.hyper, rel=1e-9)
+    lat, lon = survey.plane.to_latlon(100.0, -200.0)
+    got = history.answer(lat, lon, UTC0 + 600.0)
+    want = live.answer(lat, lon, UTC0 + 600.0)
+    assert got.north == pytest.approx(want.north, abs=1e-12)
+    assert got.std_east == pytest.approx(want.std_east, abs=1e-12)
+    truth = eddy(np.array(100.0), np.array(-200.0), 600.0)
+    assert abs(got.north - float(truth[0])) < 3 * got.std_north + 0.01
+    assert abs(got.east - float(truth[1])) < 3 * got.std_east + 0.01
+
+
+def test_rows_older_than_the_history_before_the_newest_are_counted(survey, tmp_path):
+    recs = [survey.record(i) for i in range(0, len(survey.t), 10)]
+    old = [msgspec.structs.replace(r, utc=r.utc - HISTORY_S - 1000.0) for r in recs[:5]]
+    path = tmp_path / "current.parquet"
+    write_table(path, old + recs)
+    counts = FleetService().load_history(path)
+    assert counts == {"rows": len(recs) + 5, "added": len(recs), "too_old": 5}
+
+
+def test_a_file_that_is_not_a_batch_table_is_a_usage_error(tmp_path):
+    with pytest.raises(UsageError, match="no-such.parquet: not a current.parquet"):
+        FleetService().load_history(tmp_path / "no-such.parquet")
+    other = tmp_path / "runs.parquet"
+    pq.write_table(pa.table({"log": ["a"], "status": ["ok"]}), other)
+    with pytest.raises(UsageError, match="runs.parquet: not a current.parquet"):
+        FleetService().load_history(other)
+
+
+@pytest.mark.integration
+def test_onboard_fleet_serves_a_batch_table_on_zenoh(survey, tmp_path):
+    """The command: a peer listening on a port, the table's field answering a query
+    before any vehicle publishes."""
+    import zenoh
+
+    from onboard.apps.service_bench import free_tcp_port
+    from onboard.service.publishers.zenoh_pub import session_config
+
+    recs = [survey.record(i) for i in range(len(survey.t))]
+    path = tmp_path / "current.parquet"
+    write_table(path, recs)
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    proc = subprocess.Popen([sys.executable, "-m", "onboard", "fleet", "--mode", "peer",
+                             "--listen", endpoint, "--history", str(path), "--period", "0.5"],
+                            stdout=subprocess.PIPE, text=True)
+    shore = None
+    try:
+        first = proc.stdout.readline()
+        assert f"{path}: {len(recs):,} of {len(recs):,} currents added" in first, first
+        while "vehicles" not in proc.stdout.readline():   # the first grid is made
+            assert proc.poll() is None, "onboard fleet ended"
+        shore = zenoh.open(session_config("client", connect=[endpoint]))
+        lat, lon = survey.plane.to_latlon(100.0, -200.0)
+        replies = list(shore.get(
+            f"onboard/fleet/current?lat={lat};lon={lon};utc={UTC0 + 600.0}", timeout=10.0))
+        assert len(replies) == 1 and replies[0].ok is not None
+        doc = json.loads(replies[0].ok.payload.to_bytes())
+        truth = eddy(np.array(100.0), np.array(-200.0), 600.0)
+        assert doc["n_obs"] > 0
+        assert abs(doc["north"] - float(truth[0])) < 3 * doc["std_north"] + 0.01
+    finally:
+        if shore is not None:
+            shore.close()
+        proc.terminate()
+        proc.wait(timeout=10.0)
+
+
+def test_a_missing_history_file_is_one_line_and_exit_2(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "onboard", "fleet", "--mode", "peer",
+                        "--listen", "tcp/127.0.0.1:0", "--history",
+                        str(tmp_path / "none.parquet")], capture_output=True, text=True,
+                       timeout=60.0)
+    assert r.returncode == 2, r.stderr
+    assert "none.parquet: not a current.parquet of onboard batch" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
