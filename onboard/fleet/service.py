@@ -405,14 +405,9 @@ def main(args: argparse.Namespace) -> int:
                              if k not in ("rows", "added"))
             print(f"onboard fleet: {path}: {counts['added']:,} of {counts['rows']:,} "
                   f"currents added" + (f" (left out: {left})" if left else ""), flush=True)
-    except UsageError:
-        service.close()
-        session.close()
-        raise
-    print(f"onboard fleet: fusing {args.prefix}/*/est/current; ask "
-          f"{current_key(args.prefix)}?lat=..;lon=..;utc=..; grid on "
-          f"{grid_key(args.prefix)} every {args.period:g} s", flush=True)
-    try:
+        print(f"onboard fleet: fusing {args.prefix}/*/est/current; ask "
+              f"{current_key(args.prefix)}?lat=..;lon=..;utc=..; grid on "
+              f"{grid_key(args.prefix)} every {args.period:g} s", flush=True)
         if getattr(args, "web", ""):
             from onboard.service.web.app import PageOnThread
 
