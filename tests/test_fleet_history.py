@@ -63,6 +63,8 @@ def test_a_batch_table_makes_the_field_its_records_make_live(survey, tmp_path):
                       "no_time": 1}
     assert history.received == {"history": len(recs) + 1}
     assert sorted(history.newest) == sorted({r.vehicle for r in recs})
+    for vehicle, track in history.tracks.items():   # a point per 5 s of its 900 s
+        assert 170 <= len(track) <= 181 and np.all(np.diff([p[0] for p in track]) >= 5.0)
 
     live = FleetService()
     enc = msgspec.json.Encoder()
@@ -102,7 +104,9 @@ def test_a_file_that_is_not_a_batch_table_is_a_usage_error(tmp_path):
 @pytest.mark.integration
 def test_onboard_fleet_serves_a_batch_table_on_zenoh(survey, tmp_path):
     """The command: a peer listening on a port, the table's field answering a query
-    before any vehicle publishes."""
+    before any vehicle publishes, and its page drawing the vehicles' tracks."""
+    import urllib.request
+
     import zenoh
 
     from onboard.apps.service_bench import free_tcp_port
@@ -113,14 +117,20 @@ def test_onboard_fleet_serves_a_batch_table_on_zenoh(survey, tmp_path):
     write_table(path, recs)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     proc = subprocess.Popen([sys.executable, "-m", "onboard", "fleet", "--mode", "peer",
-                             "--listen", endpoint, "--history", str(path), "--period", "0.5"],
-                            stdout=subprocess.PIPE, text=True)
+                             "--listen", endpoint, "--history", str(path), "--period", "0.5",
+                             "--web", "127.0.0.1:0"], stdout=subprocess.PIPE, text=True)
     shore = None
     try:
         first = proc.stdout.readline()
         assert f"{path}: {len(recs):,} of {len(recs):,} currents added" in first, first
-        while "vehicles" not in proc.stdout.readline():   # the first grid is made
+        url = ""
+        while "vehicles" not in (line := proc.stdout.readline()):   # the first grid
             assert proc.poll() is None, "onboard fleet ended"
+            url = line.split("the page is on ")[1].strip() if "the page is on " in line else url
+        with urllib.request.urlopen(url + "api/fleet", timeout=5.0) as r:
+            layer = json.loads(r.read())
+        assert sorted(layer["tracks"]) == sorted({r.vehicle for r in recs})
+        assert all(len(track) > 100 for track in layer["tracks"].values())
         shore = zenoh.open(session_config("client", connect=[endpoint]))
         lat, lon = survey.plane.to_latlon(100.0, -200.0)
         replies = list(shore.get(

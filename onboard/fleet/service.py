@@ -55,6 +55,7 @@ from onboard.fleet.messages import (
     current_key,
     grid_key,
 )
+from onboard.service.web.view import FLEET_TRACK_PERIOD_S
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 GRID_PERIOD_S = 5.0
@@ -81,8 +82,12 @@ class FleetService:
     Attributes:
         field: the :class:`CurrentField`.
         newest: each vehicle's newest record (:class:`VehicleCurrent`).
-        received: records received, by schema (``est.v1``, ``est.v2``) and ``bad``.
+        received: records received, by schema (``est.v1``, ``est.v2``) and ``bad``, and
+            ``history`` (rows of :meth:`load_history`).
         grids: grids published.
+        tracks: each vehicle's track in the rows :meth:`load_history` added, ``(utc,
+            lat, lon)``, a point per ``FLEET_TRACK_PERIOD_S`` (for the page's fleet
+            layer, which draws the live ones from the grids).
     """
 
     def __init__(self, session: Any = None, prefix: str = "onboard",
@@ -94,6 +99,7 @@ class FleetService:
         self.newest: dict[str, VehicleCurrent] = {}
         self.received: dict[str, int] = {}
         self.grids = 0
+        self.tracks: dict[str, list[tuple[float, float, float]]] = {}
         self.lock = threading.Lock()
         self._dec = msgspec.json.Decoder(EstimateRecord)
         self._enc = msgspec.json.Encoder()
@@ -202,10 +208,19 @@ class FleetService:
             self._count("history")
             with self.lock:
                 self._note(rec)
-                added += field.add_record(rec)
+                if field.add_record(rec):
+                    added += 1
+                    self._track_point(rec)
         left = {k: n - before.get(k, 0) for k, n in field.rejected.items()
                 if n > before.get(k, 0)}
         return {"rows": table.num_rows, "added": added, **left}
+
+    def _track_point(self, rec: EstimateRecord) -> None:
+        """Extend :attr:`tracks` with ``rec``'s place (an added record: it has a time and
+        a position), a point per ``FLEET_TRACK_PERIOD_S``."""
+        track = self.tracks.setdefault(rec.vehicle, [])
+        if not track or rec.utc - track[-1][0] >= FLEET_TRACK_PERIOD_S:
+            track.append((rec.utc, rec.lat_deg, rec.lon_deg))
 
     # ----------------------------------------------------------------- the field
     def step(self, refit: bool | None = None) -> FleetGrid | None:
@@ -412,6 +427,8 @@ def main(args: argparse.Namespace) -> int:
             from onboard.service.web.app import PageOnThread
 
             page = PageOnThread(session, [f"{args.prefix}/**"], args.web)
+            for vehicle, points in service.tracks.items():
+                page.view.feed_fleet_track(vehicle, points)
             print(f"onboard fleet: the page is on {page.url}", flush=True)
         wait = 0.0 if history else args.period   # a history is a field at once
         while not stop.wait(wait):

@@ -160,6 +160,15 @@ class LiveView:
             for v in grid.get("vehicles") or []:
                 self._fleet_point(v)
 
+    def feed_fleet_track(self, vehicle: str, points: list[tuple[float, float, float]]
+                         ) -> None:
+        """Earlier points ``(utc, lat, lon)`` of ``vehicle``'s track on the fleet layer,
+        oldest first (a fleet service started from a history: ``onboard fleet
+        --history``), kept as a grid's vehicles are."""
+        with self.lock:
+            for utc, lat, lon in points:
+                self._fleet_point({"vehicle": vehicle, "utc": utc, "lat": lat, "lon": lon})
+
     def _fleet_point(self, v: Any) -> None:
         if not isinstance(v, dict) or not all(_finite(v.get(k)) for k in ("utc", "lat", "lon")):
             return
