@@ -212,8 +212,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "uncertainty over the map, each vehicle's track and estimate")
     p.add_argument("--history", action="append", default=[], metavar="FILE",
                    help="first add the currents of an onboard batch table "
-                        "(current.parquet, docs/batch.md), as if received live "
-                        "(repeatable; needs the batch extra)")
+                        "(current.parquet, or the --out folder that holds it; "
+                        "docs/batch.md), as if received live (repeatable; needs the "
+                        "batch extra)")
     p.set_defaults(handler="onboard.fleet.service:main")
 
     p = sub.add_parser("bench", help="performance figures")

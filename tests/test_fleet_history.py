@@ -88,7 +88,7 @@ def test_rows_older_than_the_history_before_the_newest_are_counted(survey, tmp_p
     old = [msgspec.structs.replace(r, utc=r.utc - HISTORY_S - 1000.0) for r in recs[:5]]
     path = tmp_path / "current.parquet"
     write_table(path, old + recs)
-    counts = FleetService().load_history(path)
+    counts = FleetService().load_history(tmp_path)   # a folder: its current.parquet
     assert counts == {"rows": len(recs) + 5, "added": len(recs), "too_old": 5}
 
 

@@ -172,7 +172,8 @@ class FleetService:
         file's newest is counted ``too_old``, as a record received that late is. A
         glider's dive (pipeline ``dac``) is an average over its whole dive,
         kilometres and hours, not the water at a place and time: counted ``dive_average``
-        and left out. Returns the rows read, added and left out by reason (this file's).
+        and left out. A folder is read as the ``current.parquet`` in it (``onboard batch``'s
+        ``--out``). Returns the rows read, added and left out by reason (this file's).
         Raises :class:`UsageError` for a file that is not such a table, or without
         pyarrow (the ``batch`` extra)."""
         try:
@@ -180,6 +181,8 @@ class FleetService:
         except ImportError:
             raise UsageError("--history reads Parquet with pyarrow: pip install "
                              "'onboard[batch]'") from None
+        if Path(path).is_dir():
+            path = Path(path) / "current.parquet"
         try:
             table = pq.read_table(path, columns=HISTORY_COLUMNS)
         except (OSError, ValueError, KeyError) as err:   # pyarrow's errors derive from these
