@@ -103,7 +103,8 @@ def test_current_table_holds_every_published_current(local):
     _, out = local
     table = pq.read_table(out / "current.parquet")
     assert table.column_names == ["name", "vehicle", "t_s", "utc", "lat", "lon", "north",
-                                  "east", "std_north", "std_east", "flags", "pipeline"]
+                                  "east", "std_north", "std_east", "flags", "pipeline",
+                                  "position_std_m"]   # additive (2026-11-30)
     rows = [r for r in table.to_pylist() if r["name"] == "current.tlog"]
     assert {r["pipeline"] for r in rows} == {"current"}
     est = batch_tables.read_estimates(out / "current.tlog" / "estimates.csv")
@@ -119,6 +120,8 @@ def test_current_table_holds_every_published_current(local):
     assert len({r["utc"] for r in rows[:20]}) == len(rows[:20])  # 0.1 s apart, all distinct
     assert all(r["lat"] is not None and abs(r["lat"] - 41.49) < 0.1 for r in rows)
     assert rows[0]["north"] == pytest.approx(est["current.north"][published][0])
+    # the place the records carried: a fresh fix's accuracy (the simulated receiver's)
+    assert all(0.0 < r["position_std_m"] < 10.0 for r in rows)
 
 
 def test_every_good_log_identical_to_a_single_replay(local, tmp_path):
@@ -385,7 +388,8 @@ def test_a_current_without_utc_has_rows_without_utc():
             "current.east": np.array([0.0, np.nan])}
     summary = {"origin": None, "warnings": [],
                "time_span": {"start": 1444.2, "segments": [{"start": 1444.2}]}}
-    rows = batch_tables.current_rows(cols, summary, LogClock("no UTC", ()))
+    rows = batch_tables.current_rows(cols, summary, LogClock("no UTC", ()),
+                                     [(None, None, None)] * 2)
     assert rows["utc"] == [None] and rows["north"] == [0.1] and rows["t_s"] == [0.0]
 
 

@@ -6,8 +6,10 @@ A log's row is computed where it was replayed, from its summary.json, estimates.
 diagnosis.json (:func:`replay_figures`, :func:`diagnosis_figures`), and kept as JSON in
 its folder; its current goes into ``current.parquet`` in its folder
 (:func:`write_log_current`); :func:`write_tables` gathers them. UTC comes from the log's
-clock as the replay recorded it in summary.json's ``utc`` (:func:`clock_of`), positions
-from estimates.csv's ``north``/``east`` about summary.json's ``origin`` (:class:`onboard.core.geo.LocalFrame`).
+clock as the replay recorded it in summary.json's ``utc`` (:func:`clock_of`); a current's
+place is the one its record carried (:func:`place_of`: the vehicle's best position,
+:mod:`onboard.engine.whereabouts`, as the fleet receives it live), a dive's the midpoint
+of its fixes about summary.json's ``origin`` (:class:`onboard.core.geo.LocalFrame`).
 pyarrow is imported only here (the ``batch`` extra).
 """
 
@@ -26,8 +28,8 @@ from onboard.offline.plots import dive_rows
 
 LOG_CURRENT = "current.parquet"
 """A log's current in its own folder, gathered into ``DIR/current.parquet``."""
-POSITION_PIPELINES = ("nav", "kf", "aie", "eseso")
-"""Where a current row is located: the first of these with a position at that row."""
+Place = tuple["float | None", "float | None", "float | None"]
+"""Where a tick's records put the vehicle: ``(lat_deg, lon_deg, position_std_m)``."""
 MOVING_MPS = 0.5
 """Speed over ground above which heading minus course is counted (m/s): below it the
 course of a GNSS is noise."""
@@ -195,38 +197,41 @@ def _flat(key: str, v) -> list[tuple[str, float]]:
     return []
 
 
-def current_rows(cols: dict[str, np.ndarray], summary: dict, clock) -> dict[str, list]:
+def place_of(records: Sequence) -> Place:
+    """Where a tick's records (:class:`~onboard.core.messages.EstimateRecord`) put the
+    vehicle: every record of a tick carries the same place."""
+    for rec in records:
+        return rec.lat_deg, rec.lon_deg, rec.position_std_m
+    return None, None, None
+
+
+def current_rows(cols: dict[str, np.ndarray], summary: dict, clock,
+                 places: Sequence[Place]) -> dict[str, list]:
     """The current.parquet columns of one log: a row per row of estimates.csv with a
-    published current (module docstring of docs/batch.md)."""
+    published current (module docstring of docs/batch.md), at ``places[i]``, the place
+    the records of row ``i`` carried (:func:`place_of`)."""
     from onboard.core.geo import LocalFrame
 
     cn, ce = cols.get("current.north"), cols.get("current.east")
     keys = ("t_s", "utc", "lat", "lon", "north", "east", "std_north", "std_east", "flags",
-            "pipeline")
+            "pipeline", "position_std_m")
     out: dict[str, list] = {k: [] for k in keys}
     origin = summary.get("origin")
     frame = LocalFrame(origin["lat_deg"], origin["lon_deg"]) if origin else None
     _dive_rows(cols, summary, clock, frame, out)
     if cn is None or ce is None:
         return out
-    where = [p for p in POSITION_PIPELINES if p + ".north" in cols and p + ".east" in cols]
     sn = cols.get("current.std_north", np.full_like(cn, np.nan))
     se = cols.get("current.std_east", np.full_like(cn, np.nan))
     t0 = _t0(summary)
     spans = _flag_spans(summary["warnings"])
     for i in np.flatnonzero(np.isfinite(cn) & np.isfinite(ce)):
         t = float(cols["t"][i])
-        utc = _utc_ms(clock, t0 + t)
-        lat = lon = None
-        for p in where:
-            n, e = cols[p + ".north"][i], cols[p + ".east"][i]
-            if frame is not None and np.isfinite(n) and np.isfinite(e):
-                lat, lon = frame.to_latlon(float(n), float(e))
-                break
-        for k, v in zip(keys, (t, utc, lat, lon, float(cn[i]), float(ce[i]),
-                               _num(sn[i]), _num(se[i]),
+        lat, lon, position_std = places[i]
+        for k, v in zip(keys, (t, _utc_ms(clock, t0 + t), lat, lon, float(cn[i]),
+                               float(ce[i]), _num(sn[i]), _num(se[i]),
                                sorted({c for c, a, b in spans if a <= t0 + t <= b}),
-                               "current")):
+                               "current", position_std)):
             out[k].append(v)
     return out
 
@@ -248,7 +253,8 @@ def _dive_rows(cols: dict[str, np.ndarray], summary: dict, clock, frame,
                                        float(cols["dac.place_east"][i]))
         row = (mid - t0, _utc_ms(clock, mid), lat, lon,
                float(cols["dac.north"][i]), float(cols["dac.east"][i]),
-               _num(cols["dac.std_north"][i]), _num(cols["dac.std_east"][i]), [], "dac")
+               _num(cols["dac.std_north"][i]), _num(cols["dac.std_east"][i]), [], "dac",
+               None)
         for k, v in zip(out, row):
             out[k].append(v)
 
@@ -277,13 +283,14 @@ def _flag_spans(warnings: Sequence[dict]) -> list[tuple[str, float, float]]:
     return spans
 
 
-def write_log_current(out: Path, summary: dict, est: dict[str, np.ndarray], clock) -> None:
+def write_log_current(out: Path, summary: dict, est: dict[str, np.ndarray], clock,
+                      places: Sequence[Place]) -> None:
     """``out/current.parquet``: the log's current rows (:func:`current_rows` of its
-    estimates.csv ``est``), with its vehicle and folder name."""
+    estimates.csv ``est`` and its rows' ``places``), with its vehicle and folder name."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    cols = current_rows(est, summary, clock)
+    cols = current_rows(est, summary, clock, places)
     n = len(cols["t_s"])
     table = pa.table({"name": [out.name] * n, "vehicle": [summary["vehicle_id"]] * n,
                       **{k: v for k, v in cols.items()}}, schema=current_schema())
@@ -300,7 +307,7 @@ def current_schema():
                       ("utc", pa.timestamp("ms", tz="UTC")), ("lat", f64), ("lon", f64),
                       ("north", f64), ("east", f64), ("std_north", f64),
                       ("std_east", f64), ("flags", pa.list_(pa.string())),
-                      ("pipeline", pa.string())])
+                      ("pipeline", pa.string()), ("position_std_m", f64)])
 
 
 def runs_schema():

@@ -25,7 +25,7 @@ import sys
 import time
 import traceback
 from pathlib import Path
-from typing import Iterable, Iterator, Mapping, Sequence
+from typing import Callable, Iterable, Iterator, Mapping, Sequence
 
 import msgspec
 
@@ -147,11 +147,15 @@ def _needs_csv_mapping(log: str, cfg: Config | None, given: str) -> None:
 def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
            plot: bool = True, progress: bool = False, mcap: Path | None = None,
            geojson: Path | None = None, gpx: Path | None = None,
-           foxglove_layout: Path | None = None) -> dict:
+           foxglove_layout: Path | None = None,
+           on_records: Callable[[float, Sequence[EstimateRecord]], None] | None = None
+           ) -> dict:
     """Run the pipelines over ``log``; write the outputs into ``out_dir`` (and the
     estimates as MCAP into ``mcap`` when given; with ``geojson`` the tracks and current
     arrows there, with ``gpx`` the tracks, with ``foxglove_layout`` a Foxglove layout of
-    the topics published, :mod:`onboard.offline.exports`); return the summary. MCAP and
+    the topics published, :mod:`onboard.offline.exports`); ``on_records`` is called with
+    each tick's time and records, as estimates.csv gets a row (``onboard batch``'s
+    current.parquet takes the records' place from them); return the summary. MCAP and
     GPX are stamped in UTC where the log knows it (:mod:`drivers.logclock`). Each export
     is written on its own: one that fails is listed in the summary's ``failed`` and the
     others, summary.json included, are still written; track.png is drawn last, after
@@ -179,6 +183,8 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
 
     def on_tick(t: float, records: Sequence[EstimateRecord]) -> None:
         csv.write(t, records)
+        if on_records is not None:
+            on_records(t, records)
         if mcap_out is not None or published is not None:
             fixes = engine.location_fixes(records)
             if mcap_out is not None:
