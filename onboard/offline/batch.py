@@ -295,10 +295,8 @@ def _replay_and_diagnose(task: Task, out: Path) -> dict:
     for stale in (RUN_FILE, batch_tables.LOG_CURRENT):
         (out / stale).unlink(missing_ok=True)
     cfg, note = _config(task)
-    places: list[batch_tables.Place] = []   # each row's, as its records carried it
-    summary = replay(task.log, cfg, out, config_note=note, plot=False,
-                     on_records=lambda t, records: places.append(
-                         batch_tables.place_of(records)))
+    places = batch_tables.Places()   # each row's, as its records carried it
+    summary = replay(task.log, cfg, out, config_note=note, plot=False, on_records=places)
     clock = batch_tables.clock_of(summary)
     est = batch_tables.read_estimates(out / "estimates.csv")
     figures = batch_tables.replay_figures(summary, est, clock)

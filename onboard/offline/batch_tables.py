@@ -7,7 +7,7 @@ diagnosis.json (:func:`replay_figures`, :func:`diagnosis_figures`), and kept as 
 its folder; its current goes into ``current.parquet`` in its folder
 (:func:`write_log_current`); :func:`write_tables` gathers them. UTC comes from the log's
 clock as the replay recorded it in summary.json's ``utc`` (:func:`clock_of`); a current's
-place is the one its record carried (:func:`place_of`: the vehicle's best position,
+place is the one its record carried (:class:`Places`: the vehicle's best position,
 :mod:`onboard.engine.whereabouts`, as the fleet receives it live), a dive's the midpoint
 of its fixes about summary.json's ``origin`` (:class:`onboard.core.geo.LocalFrame`).
 pyarrow is imported only here (the ``batch`` extra).
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import statistics
+from array import array
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -28,8 +29,6 @@ from onboard.offline.plots import dive_rows
 
 LOG_CURRENT = "current.parquet"
 """A log's current in its own folder, gathered into ``DIR/current.parquet``."""
-Place = tuple["float | None", "float | None", "float | None"]
-"""Where a tick's records put the vehicle: ``(lat_deg, lon_deg, position_std_m)``."""
 MOVING_MPS = 0.5
 """Speed over ground above which heading minus course is counted (m/s): below it the
 course of a GNSS is noise."""
@@ -197,19 +196,32 @@ def _flat(key: str, v) -> list[tuple[str, float]]:
     return []
 
 
-def place_of(records: Sequence) -> Place:
-    """Where a tick's records (:class:`~onboard.core.messages.EstimateRecord`) put the
-    vehicle: every record of a tick carries the same place."""
-    for rec in records:
-        return rec.lat_deg, rec.lon_deg, rec.position_std_m
-    return None, None, None
+class Places:
+    """Where each tick's records (:class:`~onboard.core.messages.EstimateRecord`) put the
+    vehicle, a row per tick as estimates.csv has (every record of a tick carries the same
+    place; NaN where unknown): called with each tick's records (``replay``'s
+    ``on_records``). Three floats a tick: a vehicle-day at 10 Hz is 7 MB."""
+
+    def __init__(self) -> None:
+        self.lat, self.lon, self.std = array("d"), array("d"), array("d")
+
+    def __call__(self, t: float, records: Sequence) -> None:
+        lat = lon = std = None
+        if records:
+            lat, lon, std = records[0].lat_deg, records[0].lon_deg, records[0].position_std_m
+        for column, value in ((self.lat, lat), (self.lon, lon), (self.std, std)):
+            column.append(math.nan if value is None else value)
+
+    def __getitem__(self, i: int) -> tuple[float | None, float | None, float | None]:
+        """Row ``i``'s ``(lat_deg, lon_deg, position_std_m)``, None where unknown."""
+        return _num(self.lat[i]), _num(self.lon[i]), _num(self.std[i])
 
 
 def current_rows(cols: dict[str, np.ndarray], summary: dict, clock,
-                 places: Sequence[Place]) -> dict[str, list]:
+                 places: Places | Sequence) -> dict[str, list]:
     """The current.parquet columns of one log: a row per row of estimates.csv with a
     published current (module docstring of docs/batch.md), at ``places[i]``, the place
-    the records of row ``i`` carried (:func:`place_of`)."""
+    the records of row ``i`` carried (:class:`Places`)."""
     from onboard.core.geo import LocalFrame
 
     cn, ce = cols.get("current.north"), cols.get("current.east")
@@ -284,7 +296,7 @@ def _flag_spans(warnings: Sequence[dict]) -> list[tuple[str, float, float]]:
 
 
 def write_log_current(out: Path, summary: dict, est: dict[str, np.ndarray], clock,
-                      places: Sequence[Place]) -> None:
+                      places: Places) -> None:
     """``out/current.parquet``: the log's current rows (:func:`current_rows` of its
     estimates.csv ``est`` and its rows' ``places``), with its vehicle and folder name."""
     import pyarrow as pa
