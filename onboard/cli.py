@@ -205,7 +205,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds between two fits of the field's hyperparameters "
                         "(default: 60)")
     p.add_argument("--mcap", metavar="FILE",
-                   help="also write every grid into FILE (MCAP, for Foxglove; needs the "
+                   help="also write every new grid into FILE (MCAP, for Foxglove; needs the "
                         "mcap extra)")
     p.add_argument("--web", default="", metavar="HOST:PORT",
                    help="serve the web page there: the field as arrows with their "

@@ -85,6 +85,18 @@ def test_a_batch_table_makes_the_field_its_records_make_live(survey, tmp_path):
     assert abs(got.east - float(truth[1])) < 3 * got.std_east + 0.01
 
 
+def test_a_field_served_from_its_history_is_written_to_the_mcap_once(survey, tmp_path):
+    pytest.importorskip("mcap", reason="the mcap extra: pip install -e '.[mcap]'")
+    path = tmp_path / "current.parquet"
+    write_table(path, [survey.record(i) for i in range(0, len(survey.t), 10)])
+    service = FleetService(mcap=tmp_path / "field.mcap")
+    service.load_history(path)
+    for _ in range(3):   # nothing new between the grids
+        assert service.step() is not None
+    service.close()
+    assert service.grids == 3 and service.mcap.messages == 2   # one grid, its arrows
+
+
 def test_rows_older_than_the_history_before_the_newest_are_counted(survey, tmp_path):
     recs = [survey.record(i) for i in range(0, len(survey.t), 10)]
     old = [msgspec.structs.replace(r, utc=r.utc - HISTORY_S - 1000.0) for r in recs[:5]]

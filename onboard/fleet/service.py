@@ -356,7 +356,8 @@ GEOJSON_SCHEMA = {"type": "object", "properties": {"geojson": {"type": "string"}
 
 class _McapGrid:
     """``--mcap``: every grid as a ``FleetGrid`` and as ``foxglove.GeoJSON`` arrows, at
-    the grid's UTC."""
+    the grid's UTC; a grid no newer than the last one written (no record came since: an
+    idle fleet, a field served from its history) is not written again."""
 
     def __init__(self, path: str | Path, prefix: str) -> None:
         from onboard.drivers.mcap_log import mcap_module
@@ -375,8 +376,12 @@ class _McapGrid:
         self.geo_channel = self.writer.register_channel(f"{current_key(prefix)}/geojson",
                                                         "json", geo_schema)
         self.messages = 0
+        self._utc = -math.inf
 
     def write(self, grid: FleetGrid, payload: bytes) -> None:
+        if grid.utc <= self._utc:
+            return
+        self._utc = grid.utc
         t_ns = max(0, round(grid.utc * 1e9))
         self.writer.add_message(self.grid_channel, log_time=t_ns, publish_time=t_ns,
                                 data=payload)
