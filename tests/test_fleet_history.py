@@ -109,15 +109,18 @@ def test_rows_older_than_the_history_before_the_newest_are_counted(survey, tmp_p
 def test_a_table_written_before_its_position_sigma_places_its_rows_exactly(survey, tmp_path):
     recs = [survey.record(i) for i in range(0, len(survey.t), 10)]
     path = tmp_path / "current.parquet"
-    write_table(path, recs)
-    table = pq.read_table(path)
-    pq.write_table(table.drop(["position_std_m"]), path)
+    write_table(path, [msgspec.structs.replace(r, position_std_m=50.0) for r in recs])
+    placed = FleetService()
+    placed.load_history(path)
+    pq.write_table(pq.read_table(path).drop(["position_std_m"]), path)
     service = FleetService()
     assert service.load_history(path) == {"rows": len(recs), "added": len(recs)}
     live = FleetService()
     for r in sorted(recs, key=lambda r: r.utc):   # live records without a position sigma
         live.field.add_record(ms_record(r))
-    assert service.field.gather().place == pytest.approx(live.field.gather().place, abs=1e-9)
+    place = service.field.gather().place
+    assert place == pytest.approx(live.field.gather().place, abs=1e-9)
+    assert np.all(placed.field.gather().place > place + 10.0)   # the column's 50 m
 
 
 def test_a_file_that_is_not_a_batch_table_is_a_usage_error(tmp_path):
