@@ -104,7 +104,7 @@ def test_current_table_holds_every_published_current(local):
     table = pq.read_table(out / "current.parquet")
     assert table.column_names == ["name", "vehicle", "t_s", "utc", "lat", "lon", "north",
                                   "east", "std_north", "std_east", "flags", "pipeline",
-                                  "position_std_m"]   # additive (2026-11-30)
+                                  "position_std_m", "down", "std_down"]   # additive, 2026-11-30
     rows = [r for r in table.to_pylist() if r["name"] == "current.tlog"]
     assert {r["pipeline"] for r in rows} == {"current"}
     est = batch_tables.read_estimates(out / "current.tlog" / "estimates.csv")

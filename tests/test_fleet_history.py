@@ -31,11 +31,21 @@ def write_table(path, recs, extra=()):
              "lat": r.lat_deg, "lon": r.lon_deg, "north": r.values["north"],
              "east": r.values["east"], "std_north": r.std.get("north"),
              "std_east": r.std.get("east"), "flags": [], "pipeline": "current",
-             "position_std_m": r.position_std_m}
-            for r in recs] + list(extra)
+             "position_std_m": r.position_std_m, "down": r.values.get("down"),
+             "std_down": r.std.get("down")}
+            for r in recs] + [dict({"down": None, "std_down": None}, **row) for row in extra]
     schema = current_schema()
     pq.write_table(pa.table({k: [row[k] for row in rows] for k in schema.names},
                             schema=schema), path)
+
+
+def with_down(rec):
+    """``rec`` with a down current, as an underwater vehicle's record has, for two of the
+    fleet's vehicles (boats' records have none)."""
+    if rec.vehicle not in ("v0", "v1"):
+        return rec
+    return msgspec.structs.replace(rec, values={**rec.values, "down": -0.02},
+                                   std={**rec.std, "down": 0.01})
 
 
 def ms_record(rec):
@@ -49,7 +59,7 @@ def survey():
 
 
 def test_a_batch_table_makes_the_field_its_records_make_live(survey, tmp_path):
-    recs = [msgspec.structs.replace(survey.record(i), position_std_m=float(2 + i % 7))
+    recs = [with_down(msgspec.structs.replace(survey.record(i), position_std_m=float(2 + i % 7)))
             for i in range(len(survey.t))]   # places as sure as dead reckoning says
     dive = {"name": "glider", "vehicle": "glider-1", "t_s": 3600.0,
             "utc": round(UTC0 * 1000.0), "lat": recs[0].lat_deg, "lon": recs[0].lon_deg,
@@ -80,6 +90,7 @@ def test_a_batch_table_makes_the_field_its_records_make_live(survey, tmp_path):
     want = live.answer(lat, lon, UTC0 + 600.0)
     assert got.north == pytest.approx(want.north, abs=1e-12)
     assert got.std_east == pytest.approx(want.std_east, abs=1e-12)
+    assert got.down is not None and got.down == pytest.approx(want.down, abs=1e-12)
     truth = eddy(np.array(100.0), np.array(-200.0), 600.0)
     assert abs(got.north - float(truth[0])) < 3 * got.std_north + 0.01
     assert abs(got.east - float(truth[1])) < 3 * got.std_east + 0.01
@@ -106,13 +117,13 @@ def test_rows_older_than_the_history_before_the_newest_are_counted(survey, tmp_p
     assert counts == {"rows": len(recs) + 5, "added": len(recs), "too_old": 5}
 
 
-def test_a_table_written_before_its_position_sigma_places_its_rows_exactly(survey, tmp_path):
+def test_a_table_written_before_its_added_columns_places_its_rows_exactly(survey, tmp_path):
     recs = [survey.record(i) for i in range(0, len(survey.t), 10)]
     path = tmp_path / "current.parquet"
     write_table(path, [msgspec.structs.replace(r, position_std_m=50.0) for r in recs])
     placed = FleetService()
     placed.load_history(path)
-    pq.write_table(pq.read_table(path).drop(["position_std_m"]), path)
+    pq.write_table(pq.read_table(path).drop(["position_std_m", "down", "std_down"]), path)
     service = FleetService()
     assert service.load_history(path) == {"rows": len(recs), "added": len(recs)}
     live = FleetService()

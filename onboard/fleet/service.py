@@ -72,8 +72,10 @@ ARROW_S = 600.0
 """An arrow of the GeoJSON map is as long as the water moves in this time (s)."""
 HISTORY_COLUMNS = ["vehicle", "t_s", "utc", "lat", "lon", "north", "east", "std_north",
                    "std_east", "pipeline"]
-"""The columns of ``current.parquet`` (docs/batch.md) ``--history`` reads; also
-``position_std_m`` where the table has it (since 2026-11-30)."""
+"""The columns of ``current.parquet`` (docs/batch.md) ``--history`` reads; also those of
+:data:`HISTORY_COLUMNS_ADDED` where the table has them."""
+HISTORY_COLUMNS_ADDED = ["position_std_m", "down", "std_down"]
+"""Columns of ``current.parquet`` added on 2026-11-30: a table written before has none."""
 
 
 class FleetService:
@@ -166,8 +168,9 @@ class FleetService:
     def load_history(self, path: str | Path) -> dict[str, int]:
         """Add the currents of an ``onboard batch`` table ``path`` (``current.parquet``,
         docs/batch.md) as the records they were published as: a row of the ``current``
-        pipeline is the record of its vehicle at its ``utc``, ``lat``, ``lon`` and
-        ``position_std_m`` (a table without that column: null), taken by
+        pipeline is the record of its vehicle at its ``utc``, ``lat``, ``lon``,
+        ``position_std_m`` and current (``down`` where given; a table without the columns
+        of :data:`HISTORY_COLUMNS_ADDED`: null), taken by
         the same :meth:`.CurrentField.add_record` as a record received live (a row without
         a time or a converged sigma is rejected for the same reason), in the order of their
         time, as they were received; a row older than the field's history before the
@@ -186,13 +189,15 @@ class FleetService:
         if Path(path).is_dir():
             path = Path(path) / "current.parquet"
         try:
-            placed = "position_std_m" in pq.read_schema(path).names
-            table = pq.read_table(path, columns=HISTORY_COLUMNS + ["position_std_m"] * placed)
+            names = pq.read_schema(path).names
+            table = pq.read_table(path, columns=HISTORY_COLUMNS + [
+                c for c in HISTORY_COLUMNS_ADDED if c in names])
         except (OSError, ValueError, KeyError) as err:   # pyarrow's errors derive from these
             raise UsageError(f"--history {path}: not a current.parquet of onboard batch "
                              f"({str(err).splitlines()[0]})") from None
         rows = table.to_pydict()
-        position_std = rows.get("position_std_m", [None] * table.num_rows)
+        for c in HISTORY_COLUMNS_ADDED:
+            rows.setdefault(c, [None] * table.num_rows)
         utc_s = [None if u is None else u.timestamp() for u in rows["utc"]]
         order = sorted(range(table.num_rows), key=lambda i: (utc_s[i] is None, utc_s[i] or 0.0))
         field = self.field
@@ -205,13 +210,13 @@ class FleetService:
             if utc_s[i] is not None and utc_s[i] < oldest:
                 field.reject("too_old")
                 continue
-            std = {k: v for k in ("north", "east")
+            values = {k: v for k in ("north", "east", "down") if (v := rows[k][i]) is not None}
+            std = {k: v for k in ("north", "east", "down")
                    if (v := rows[f"std_{k}"][i]) is not None}
             rec = EstimateRecord(vehicle=rows["vehicle"][i], pipeline="current",
-                                 t=rows["t_s"][i],
-                                 values={"north": rows["north"][i], "east": rows["east"][i]},
-                                 std=std, utc=utc_s[i], lat_deg=rows["lat"][i],
-                                 lon_deg=rows["lon"][i], position_std_m=position_std[i])
+                                 t=rows["t_s"][i], values=values, std=std, utc=utc_s[i],
+                                 lat_deg=rows["lat"][i], lon_deg=rows["lon"][i],
+                                 position_std_m=rows["position_std_m"][i])
             self._count("history")
             with self.lock:
                 self._note(rec)

@@ -226,15 +226,16 @@ def current_rows(cols: dict[str, np.ndarray], summary: dict, clock,
 
     cn, ce = cols.get("current.north"), cols.get("current.east")
     keys = ("t_s", "utc", "lat", "lon", "north", "east", "std_north", "std_east", "flags",
-            "pipeline", "position_std_m")
+            "pipeline", "position_std_m", "down", "std_down")
     out: dict[str, list] = {k: [] for k in keys}
     origin = summary.get("origin")
     frame = LocalFrame(origin["lat_deg"], origin["lon_deg"]) if origin else None
     _dive_rows(cols, summary, clock, frame, out)
     if cn is None or ce is None:
         return out
-    sn = cols.get("current.std_north", np.full_like(cn, np.nan))
-    se = cols.get("current.std_east", np.full_like(cn, np.nan))
+    nan = np.full_like(cn, np.nan)
+    sn, se = cols.get("current.std_north", nan), cols.get("current.std_east", nan)
+    down, sd = cols.get("current.down", nan), cols.get("current.std_down", nan)
     t0 = _t0(summary)
     spans = _flag_spans(summary["warnings"])
     for i in np.flatnonzero(np.isfinite(cn) & np.isfinite(ce)):
@@ -243,7 +244,7 @@ def current_rows(cols: dict[str, np.ndarray], summary: dict, clock,
         for k, v in zip(keys, (t, _utc_ms(clock, t0 + t), lat, lon, float(cn[i]),
                                float(ce[i]), _num(sn[i]), _num(se[i]),
                                sorted({c for c, a, b in spans if a <= t0 + t <= b}),
-                               "current", position_std)):
+                               "current", position_std, _num(down[i]), _num(sd[i]))):
             out[k].append(v)
     return out
 
@@ -266,7 +267,7 @@ def _dive_rows(cols: dict[str, np.ndarray], summary: dict, clock, frame,
         row = (mid - t0, _utc_ms(clock, mid), lat, lon,
                float(cols["dac.north"][i]), float(cols["dac.east"][i]),
                _num(cols["dac.std_north"][i]), _num(cols["dac.std_east"][i]), [], "dac",
-               None)
+               None, None, None)
         for k, v in zip(out, row):
             out[k].append(v)
 
@@ -319,7 +320,8 @@ def current_schema():
                       ("utc", pa.timestamp("ms", tz="UTC")), ("lat", f64), ("lon", f64),
                       ("north", f64), ("east", f64), ("std_north", f64),
                       ("std_east", f64), ("flags", pa.list_(pa.string())),
-                      ("pipeline", pa.string()), ("position_std_m", f64)])
+                      ("pipeline", pa.string()), ("position_std_m", f64), ("down", f64),
+                      ("std_down", f64)])
 
 
 def runs_schema():
