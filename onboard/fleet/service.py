@@ -167,20 +167,18 @@ class FleetService:
 
     def load_history(self, path: str | Path) -> dict[str, int]:
         """Add the currents of an ``onboard batch`` table ``path`` (``current.parquet``,
-        docs/batch.md) as the records they were published as: a row of the ``current``
-        pipeline is the record of its vehicle at its ``utc``, ``lat``, ``lon``,
-        ``position_std_m`` and current (``down`` where given; a table without the columns
-        of :data:`HISTORY_COLUMNS_ADDED`: null), taken by
-        the same :meth:`.CurrentField.add_record` as a record received live (a row without
-        a time or a converged sigma is rejected for the same reason), in the order of their
-        time, as they were received; a row older than the field's history before the
-        file's newest is counted ``too_old``, as a record received that late is. A
-        glider's dive (pipeline ``dac``) is an average over its whole dive,
-        kilometres and hours, not the water at a place and time: counted ``dive_average``
-        and left out. A folder is read as the ``current.parquet`` in it (``onboard batch``'s
-        ``--out``). Returns the rows read, added and left out by reason (this file's).
-        Raises :class:`UsageError` for a file that is not such a table, or without
-        pyarrow (the ``batch`` extra)."""
+        docs/batch.md; a folder: the one in it) as the records they were published as.
+
+        A row of the ``current`` pipeline is its vehicle's record at its ``utc``, ``lat``,
+        ``lon`` and ``position_std_m``, with its current (``down`` where given; a table
+        written before :data:`HISTORY_COLUMNS_ADDED` has none of them), added by the same
+        :meth:`.CurrentField.add_record` as a live record (rejected for the same reasons)
+        in the order of their time, as they were received. A row older than the field's
+        history before the file's newest is counted ``too_old``, as a record that late
+        is; a glider's dive (pipeline ``dac``), an average over kilometres and hours and
+        not the water at a place and time, ``dive_average``. Returns the rows read, added
+        and left out by reason (this file's). Raises :class:`UsageError` for a file that
+        is not such a table, or without pyarrow (the ``batch`` extra)."""
         try:
             import pyarrow.parquet as pq
         except ImportError:
