@@ -385,14 +385,14 @@ def select(ds: Dataset, *, declared: tuple[str, ...] = (), metric: str | None = 
         entry: dict = {}
         if unphysical:
             name = unphysical[-1]
-            chosen.remove(name)
             entry = {"unphysical": True,
                      "params": ALL[name].describe(final.theta[name], final.std[name])[0]}
         elif not chosen or not _worse_on_test(after, before):
             break
         else:
-            name = chosen.pop()
-            transformed.pop(name, None)
+            name = chosen[-1]
+        chosen.remove(name)
+        transformed.pop(name, None)
         rejected.append({"name": name, "test_error_without": before.headline,
                          "test_error_with": after.headline, **entry})
     if rejected:
