@@ -14,13 +14,16 @@ runner, the sensors and the encoders are the single-vehicle simulator's.
 telemetry log, truth file, native-protocol capture and onboard config per vehicle, the
 truth of the current at every vehicle (``truth-current.csv``), the field on a grid
 (``field-grid.json``) and ``fleet.json`` tying them together (docs/sitl.md "A fleet").
-:func:`live_plans` gives what the live mode needs per vehicle (``onboard demo --fleet``).
+:func:`vehicle_scenario` is also what the live mode runs per vehicle (``onboard demo
+--fleet``).
 
 Named fleets: :data:`FLEETS` (``fleet-channel``: two boats and a torpedo AUV in a tidal
 channel with a drifting eddy and a moving front, 600 s; ``fleet-demo``: the same sea with
 its tide compressed to a 20 min period, so that a short demo sees it turn, and the
 vehicles on shorter lines, launched 10 s apart; ``fleet-survey``: six vehicles an operator
-would fly to survey a box of a tidal channel, interleaved, for 15 minutes).
+would fly to survey a box of a tidal channel, interleaved, for 15 minutes;
+``fleet-survey-seas``: the same vehicles in a sea drawn from the seed, so that many seeds
+measure the field on many seas, not on one).
 """
 
 from __future__ import annotations
@@ -114,6 +117,15 @@ class Fleet:
     vehicles: tuple[FleetVehicle, ...]
     duration_s: float = 600.0
     utc0: float = DEFAULT_EPOCH_S
+    draw_sea: Callable[[int], SeaField] | None = None
+    """A sea per seed (None: :attr:`sea` for every seed); :attr:`sea` is seed 0's."""
+
+    def at_seed(self, seed: int) -> Fleet:
+        """The fleet as seed ``seed`` flies it: its sea drawn from the seed where it has
+        :attr:`draw_sea`, else itself."""
+        if self.draw_sea is None:
+            return self
+        return dataclasses.replace(self, sea=self.draw_sea(seed))
 
     def vehicle(self, vid: str) -> FleetVehicle:
         """The vehicle called ``vid``."""
@@ -275,6 +287,52 @@ def survey_sea(origin: tuple[float, float], utc0: float) -> SeaField:
     ))
 
 
+SEA_DRAW_STREAM = 0x5EA
+"""Mixed into a seed for the drawn seas' generator, apart from the vehicles' (seed + i)."""
+SURVEY_BOX_CENTRE_M = (0.0, -50.0)
+"""fleet-survey's box centre (north, east; m from the origin), about which a drawn sea's
+eddy and front are placed."""
+
+
+def drawn_survey_sea(origin: tuple[float, float], utc0: float) -> Callable[[int], SeaField]:
+    """fleet-survey-seas' sea for a seed: fleet-survey's kind of sea (a tidal channel with
+    its shear, an eddy, a front, a drift), each feature's size, place and motion drawn
+    uniformly from the ranges below, so that where the field's errors fall is not a
+    choice of ours. Ranges (about fleet-survey's own values): the channel's flood 0.3-0.7
+    m/s toward 10-50 deg, 0.8-1.6 km wide, its axis 0-300 m west of the box, at any phase
+    of its M2 tide; the eddy's peak 0.08-0.20 m/s either way round, its core 80-200 m,
+    its centre anywhere within 150 m of the box centre, drifting at up to 5 cm/s per axis;
+    the front's jump 0.06-0.15 m/s toward any direction, its line at any angle within 150 m
+    of the box centre, 25-80 m half-width, moving at up to 3 cm/s; a drift of up to 5 cm/s
+    per axis."""
+    cn, ce = SURVEY_BOX_CENTRE_M
+
+    def draw(seed: int) -> SeaField:
+        rng = np.random.default_rng([seed, SEA_DRAW_STREAM])
+        u = rng.uniform
+        jump, jump_dir, normal = u(0.06, 0.15), u(0.0, 2 * math.pi), u(0.0, 2 * math.pi)
+        offset = u(-150.0, 150.0)
+        eddy_r, eddy_a = 150.0 * math.sqrt(u(0.0, 1.0)), u(0.0, 2 * math.pi)
+        turn = float(rng.choice((-1.0, 1.0)))
+        return SeaField(origin, (
+            TidalChannel(amplitude=u(0.3, 0.7), direction=u(10.0, 50.0) * DEG,
+                         width=u(800.0, 1600.0), centre_east=ce - u(0.0, 300.0),
+                         centre_north=cn, period=12.4206012 * 3600.0,
+                         phase=u(-math.pi, math.pi), t_ref=utc0, water_depth=12.0),
+            LambOseenEddy.with_peak(turn * u(0.08, 0.20), u(80.0, 200.0),
+                                    north0=cn + eddy_r * math.cos(eddy_a),
+                                    east0=ce + eddy_r * math.sin(eddy_a), t_ref=utc0,
+                                    drift_north=u(-0.05, 0.05), drift_east=u(-0.05, 0.05)),
+            TanhFront(b_north=jump * math.cos(jump_dir), b_east=jump * math.sin(jump_dir),
+                      normal=normal, half_width=u(25.0, 80.0),
+                      north0=cn + offset * math.cos(normal),
+                      east0=ce + offset * math.sin(normal), t_ref=utc0,
+                      speed=u(-0.03, 0.03)),
+            UniformFlow(north=u(-0.05, 0.05), east=u(-0.05, 0.05)),
+        ))
+    return draw
+
+
 SURVEY_VEHICLES = (
     FleetVehicle("boat-1", "rudder-boat", "lawnmower", 21, start_north=-75.0,
                  start_east=-150.0, heading=0.0, leg_s=100.0, step_s=20.0, speed=1.5,
@@ -314,6 +372,10 @@ def _build() -> dict[str, Fleet]:
         Fleet("fleet-survey", "six vehicles surveying a box of a tidal channel with an eddy "
               "and a front: interleaved lawnmowers, a station-keeper, two AUV transects",
               survey_sea(origin, utc0), SURVEY_VEHICLES, 900.0, utc0),
+        Fleet("fleet-survey-seas", "fleet-survey's vehicles in a sea drawn from the seed: "
+              "the channel, eddy, front and drift of fleet-survey's kind, each placed and "
+              "sized at random", drawn_survey_sea(origin, utc0)(0), SURVEY_VEHICLES, 900.0,
+              utc0, draw_sea=drawn_survey_sea(origin, utc0)),
     )}
 
 
@@ -386,13 +448,15 @@ def write_fleet(fleet: Fleet, out: str | Path, seed: int = 0,
                 only: tuple[str, ...] = ()) -> dict[str, Any]:
     """The offline mode: every vehicle (or those named in ``only``) into ``out`` (see the
     module docstring), then ``truth-current.csv``, ``field-grid.json`` and
-    ``fleet.json``, whose content is returned. Vehicle i runs with seed ``seed + i``:
-    byte-identical for the same arguments. A vehicle launched after ``duration_s`` is
+    ``fleet.json``, whose content is returned. Vehicle i runs with seed ``seed + i`` in
+    the fleet's sea for ``seed`` (:meth:`Fleet.at_seed`): byte-identical for the same
+    arguments. A vehicle launched after ``duration_s`` is
     left out."""
     from onboard.sitl.runner import jsonable
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    fleet = fleet.at_seed(seed)
     dur = fleet.duration_s if duration_s is None else float(duration_s)
     entries = [write_vehicle(fleet, v, out, seed + i, dur)
                for i, v in enumerate(fleet.vehicles)

@@ -201,3 +201,62 @@ def test_fleet_channel_replayed_each_vehicle_near_its_truth(tmp_path):
             ok = np.isfinite(res["north"]) & (res["t"] > 60.0)
             flat = res["north"][ok] - res["true_north"][ok].mean()
             assert np.sqrt(np.mean(flat**2)) > 3 * 0.0127
+
+
+SEAS = FLEETS["fleet-survey-seas"]
+
+
+def _parts(sea) -> dict[str, dict]:
+    return {d["kind"]: d for d in sea.describe()}
+
+
+def test_a_drawn_sea_is_the_seeds_own_and_within_its_ranges():
+    # sitl.fleet.drawn_survey_sea's docstring: the ranges each feature is drawn from
+    assert SEAS.at_seed(4).sea.describe() == SEAS.at_seed(4).sea.describe()
+    assert SEAS.at_seed(4).sea.describe() != SEAS.at_seed(5).sea.describe()
+    assert SEAS.at_seed(0).sea.describe() == SEAS.sea.describe()
+    assert FLEETS["fleet-survey"].at_seed(7) is FLEETS["fleet-survey"]
+    cn, ce = 0.0, -50.0
+    turns = set()
+    for seed in range(60):
+        p = _parts(SEAS.at_seed(seed).sea)
+        ch, eddy, front, drift = (p["TidalChannel"], p["LambOseenEddy"], p["TanhFront"],
+                                  p["UniformFlow"])
+        assert 0.3 <= ch["amplitude"] <= 0.7 and 800.0 <= ch["width"] <= 1600.0
+        assert 10.0 <= math.degrees(ch["direction"]) <= 50.0
+        assert ce - 300.0 <= ch["centre_east"] <= ce
+        assert 80.0 <= eddy["core_radius"] <= 200.0
+        assert math.hypot(eddy["north0"] - cn, eddy["east0"] - ce) <= 150.0
+        turns.add(math.copysign(1.0, eddy["circulation"]))
+        jump = math.hypot(front["b_north"], front["b_east"])
+        assert 0.06 <= jump <= 0.15 and 25.0 <= front["half_width"] <= 80.0
+        assert math.hypot(front["north0"] - cn, front["east0"] - ce) <= 150.0
+        assert abs(front["speed"]) <= 0.03
+        assert max(abs(drift["north"]), abs(drift["east"])) <= 0.05
+    assert turns == {-1.0, 1.0}
+
+
+def test_a_fleet_written_with_a_seed_flies_and_records_that_seeds_sea(tmp_path):
+    m = write_fleet(replace_vehicles(SEAS, (SEAS.vehicle("keeper"),)), tmp_path, seed=3,
+                    duration_s=8.0)
+    assert [v["id"] for v in m["vehicles"]] == ["keeper"]
+    assert read_sea(tmp_path).describe() == SEAS.at_seed(3).sea.describe()
+    rows = list(csv.DictReader(open(tmp_path / "truth-current.csv")))
+    lat, lon, depth, utc, vn, ve = (np.array([float(r[k]) for r in rows]) for k in (
+        "lat_deg", "lon_deg", "depth_m", "utc", "current_north", "current_east"))
+    fn, fe = SEAS.at_seed(3).sea.at(lat, lon, depth, utc)
+    np.testing.assert_allclose(fn, vn, atol=2e-6)
+    np.testing.assert_allclose(fe, ve, atol=2e-6)
+    other = SEAS.at_seed(4).sea.at(lat, lon, depth, utc)[0]
+    assert np.abs(other - vn).max() > 0.01  # another seed's sea is not this one
+
+
+def test_the_live_demo_flies_every_vehicle_in_the_fleets_sea_not_its_own_seeds():
+    from onboard.apps.demo import LinkPlan, _child_simulation
+
+    plan = LinkPlan(scenario="auv-2", duration_s=1.0, seed=9, speed=1.0,
+                    mavlink_udp_port=0, dvl_tcp_port=None, truth_path="",
+                    fleet="fleet-survey-seas", fleet_seed=3)
+    sim, _ = _child_simulation(plan)
+    current = sim.scenario.environment().current
+    assert current.sea.describe() == SEAS.at_seed(3).sea.describe()

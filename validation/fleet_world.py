@@ -9,11 +9,12 @@ vehicle's track, against the true field.
                                      [--out DIR] [--every N]
 
 Prints per seed and vehicle left out: the points predicted, the field's RMS error per
-component, the share within 1.96 of its sigma, and the vehicle's own estimate's RMS at
+component, the share within 1.96 of its sigma (with its 95 % interval: how precisely a
+track's correlated errors measure it, validation/coverage.py), and the vehicle's own estimate's RMS at
 the same points (what the field is up against); the field's down at the vehicles that
 give one (fitted with every vehicle: no other gives a down) against the true field's
 (none: the simulator's field is horizontal); then, over the seeds, each figure's median
-and range. ``--without ID`` scores the same logs again with vehicle ``ID`` left out of
+and range, with a seed's coverage interval. ``--without ID`` scores the same logs again with vehicle ``ID`` left out of
 every fit (the field without it); a vehicle whose records have no position (an AUV that
 never had a GNSS fix) can be neither fused nor scored: it is named so.
 """
@@ -28,6 +29,8 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from validation.coverage import interval
 
 
 def replay_fleet(root: Path, manifest: dict, reuse: bool = False) -> dict[str, Path]:
@@ -196,8 +199,9 @@ def score(sea, depth, obs: dict[str, list], vehicle: str, leave: set[str], every
     r = left_out(sea, depth, obs, vehicle, leave, every)
     if not len(r["err"]):
         return None
+    hits = [r["z"][:, 0] < 1.96, r["z"][:, 1] < 1.96]
     return {"points": len(r["err"]), "rms": np.sqrt((r["err"] ** 2).mean(axis=0)),
-            "coverage": float((r["z"] < 1.96).mean()),
+            "coverage": float((r["z"] < 1.96).mean()), "hits": hits,
             "own": np.sqrt((r["own"] ** 2).mean(axis=0))}
 
 
@@ -206,13 +210,16 @@ def describe(fig: dict | None) -> str:
     if fig is None:
         return "no record with a position, or the field knows nothing along its track"
     return (f"{fig['points']} points; field RMS north {fig['rms'][0]:.3f}, east "
-            f"{fig['rms'][1]:.3f} m/s, {fig['coverage']:.2f} within 1.96 sigma; its own "
+            f"{fig['rms'][1]:.3f} m/s, {interval(fig['hits']).text()} within 1.96 sigma "
+            f"(95 % interval); its own "
             f"estimate {fig['own'][0]:.3f}, {fig['own'][1]:.3f} m/s")
 
 
 def spread(per_seed: list[dict]) -> None:
     """Each vehicle's figures over the seeds: median and range (a seed changes the
-    sensors' noise and so each vehicle's own error, not the sea or the tracks)."""
+    sensors' noise and so each vehicle's own error, not the sea or the tracks), and how
+    precisely one seed measures the coverage (its 95 % interval: the seeds share the sea's
+    structure, so their agreement is not a measure of another sea's)."""
     for key in sorted({k for f in per_seed for k in f}):
         got = [f[key] for f in per_seed if key in f]
         rms = np.array([np.atleast_1d(g["rms"]) for g in got])
@@ -222,6 +229,12 @@ def spread(per_seed: list[dict]) -> None:
             parts.append(f"RMS {name} {np.median(rms[:, k]):.3f} "
                          f"({rms[:, k].min():.3f}-{rms[:, k].max():.3f}) m/s")
         parts.append(f"coverage {np.median(cov):.2f} ({cov.min():.2f}-{cov.max():.2f})")
+        if all("hits" in g for g in got):
+            each = [interval(g["hits"]) for g in got]
+            parts.append(f"a seed's 95 % interval {np.median([c.low for c in each]):.2f}-"
+                         f"{np.median([c.high for c in each]):.2f} (median; "
+                         f"{np.median([c.n_eff for c in each]):.0f} effective samples of "
+                         f"{np.median([c.n for c in each]):.0f})")
         print(f"over the seeds, {key[0]}, {key[1]}: " + ", ".join(parts))
 
 

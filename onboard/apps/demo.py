@@ -178,6 +178,9 @@ class LinkPlan:
     """A fleet's name (:mod:`sitl.fleet`): ``scenario`` is then the id of one of its
     vehicles, stamped with its own UTC, its truth flushed record by record (the fleet
     demo reads it live)."""
+    fleet_seed: int = 0
+    """The fleet's seed (its sea where the fleet draws one: ``Fleet.at_seed``); ``seed``
+    is the vehicle's own."""
 
 
 def _route(sample: Any, dvl: bool, nmea: bool) -> str:
@@ -267,7 +270,7 @@ def _child_simulation(plan: LinkPlan) -> tuple[Any, float]:
         return Simulation(plan.scenario, plan.seed), DEFAULT_EPOCH_S
     from onboard.sitl.fleet import get_fleet, vehicle_scenario
 
-    fleet = get_fleet(plan.fleet)
+    fleet = get_fleet(plan.fleet).at_seed(plan.fleet_seed)
     v = fleet.vehicle(plan.scenario)
     return Simulation(vehicle_scenario(fleet, v), plan.seed), fleet.utc_start(v)
 

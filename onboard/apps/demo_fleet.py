@@ -297,8 +297,8 @@ def vehicle_config(fleet: Any, v: Any) -> Config:
     return msgspec.structs.replace(base, vehicle=ident)
 
 
-async def _vehicle_members(fleet: Any, v: Any, *, seed: int, speed: float, duration_s: float,
-                           endpoint: str, out_dir: Path, state_root: Path
+async def _vehicle_members(fleet: Any, v: Any, *, seed: int, fleet_seed: int, speed: float,
+                           duration_s: float, endpoint: str, out_dir: Path, state_root: Path
                            ) -> tuple[SimulatorMember, ServiceMember]:
     dur = max(1.0, duration_s - v.start_delay_s)
     dvl = v.kind == "torpedo-auv"
@@ -306,7 +306,8 @@ async def _vehicle_members(fleet: Any, v: Any, *, seed: int, speed: float, durat
                     mavlink_udp_port=_free_port(socket.SOCK_DGRAM),
                     dvl_tcp_port=_free_port(socket.SOCK_STREAM) if dvl else None,
                     truth_path=str(out_dir / f"{v.id}.truth.jsonl"),
-                    nmea=v.kind == "rudder-boat", fleet=fleet.name)
+                    nmea=v.kind == "rudder-boat", fleet=fleet.name,
+                    fleet_seed=fleet_seed)
     sim = SimulatorMember(plan, v.start_delay_s, speed, name=f"{v.id} simulator")
     hello = await sim.spawn()
     cfg = demo_config(vehicle_config(fleet, v), mav_port=plan.mavlink_udp_port,
@@ -337,7 +338,7 @@ async def run_fleet_demo(fleet_name: str = DEFAULT_FLEET, duration_s: float = FL
         if out is not None:
             print(text, file=out, flush=True)
 
-    fleet = get_fleet(fleet_name)
+    fleet = get_fleet(fleet_name).at_seed(seed)
     out_dir = Path(out_dir)
     shutil.rmtree(out_dir, ignore_errors=True)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -354,8 +355,9 @@ async def run_fleet_demo(fleet_name: str = DEFAULT_FLEET, duration_s: float = FL
         shore = open_session([endpoint], None, "client")
         sub = shore.declare_subscriber("onboard/**", view.on_sample)
         for i, v in enumerate(fleet.vehicles):
-            members += await _vehicle_members(fleet, v, seed=seed + i, speed=speed,
-                                              duration_s=duration_s, endpoint=endpoint,
+            members += await _vehicle_members(fleet, v, seed=seed + i, fleet_seed=seed,
+                                              speed=speed, duration_s=duration_s,
+                                              endpoint=endpoint,
                                               out_dir=out_dir, state_root=state_root)
         for m in extra:
             if isinstance(m, CommandMember):

@@ -6,7 +6,7 @@ each noise-scale scenario (``sitl.scenarios.noise_scaled``: every sensor's true 
 0.3, 1 or 3 times what the bundled config declares) flown on held-out seeds through the
 ``aie``, ``kf`` and ``current`` pipelines of that unchanged config; per scenario, pooled
 over the seeds after :data:`AFTER_S`, the 1- and 2-sigma coverage of speed, heading and
-current, each channel's mean NIS and the learned noise against the true and the declared,
+current (with how precisely the seeds measure it: validation/coverage.py), each channel's mean NIS and the learned noise against the true and the declared,
 and the ``nis_out_of_band`` warnings; printed as the page's Markdown tables. With
 ``--summaries DIR/*/replay/summary.json`` (replays of the real logs): the real-log table,
 what each log's channels learned and whether the NIS check still warns.
@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
+
+from validation.coverage import Coverage, interval
 
 AFTER_S = 120.0
 """Coverage is pooled over the ticks after this (s): the filters' start is not judged."""
@@ -44,12 +46,11 @@ class Pooled:
         ok = np.isfinite(err) & np.isfinite(sd) & (sd > 0)
         self.z.setdefault(q, []).append(np.abs(err[ok]) / sd[ok])
 
-    def coverage(self, q: str) -> tuple[float, float, int]:
-        """(1-sigma, 2-sigma coverage, samples) of quantity ``q``."""
-        zz = np.concatenate(self.z.get(q, [np.zeros(0)]))
-        if not len(zz):
-            return math.nan, math.nan, 0
-        return float(np.mean(zz < 1.0)), float(np.mean(zz < 2.0)), len(zz)
+    def coverage(self, q: str) -> tuple[Coverage, Coverage]:
+        """The 1- and 2-sigma coverage of quantity ``q``, each with its effective sample
+        count and 95 % interval over the runs (validation/coverage.py)."""
+        runs = self.z.get(q, [])
+        return interval([z < 1.0 for z in runs]), interval([z < 2.0 for z in runs])
 
 
 def family(name: str) -> str:
@@ -138,12 +139,13 @@ def run_family(seeds: Sequence[int], duration: float | None,
 
 def coverage_rows(results: dict[str, Pooled]) -> list[str]:
     """The coverage table: per scenario and quantity, 1- and 2-sigma coverage."""
-    lines = ["| scenario | quantity | 1σ coverage | 2σ coverage | samples |",
-             "|---|---|---|---|---|"]
+    lines = ["| scenario | quantity | 1σ coverage (95 % interval) | 2σ coverage (95 % "
+             "interval) | samples (effective, 1σ / 2σ) |", "|---|---|---|---|---|"]
     for sc, pooled in results.items():
         for q in sorted(pooled.z):
-            c1, c2, n = pooled.coverage(q)
-            lines.append(f"| {sc} | {q} | {c1:.2f} | {c2:.3f} | {n} |")
+            c1, c2 = pooled.coverage(q)
+            lines.append(f"| {sc} | {q} | {c1.text()} | {c2.fraction:.3f} ({c2.low:.3f}-"
+                         f"{c2.high:.3f}) | {c1.n} ({c1.n_eff:.0f} / {c2.n_eff:.0f}) |")
     return lines
 
 
