@@ -121,6 +121,47 @@ def test_an_overconfident_field_is_widened_by_the_fleets_own_misses():
     assert calibrated > plain + 0.4, (plain, calibrated)
 
 
+def test_the_misses_give_the_fields_scale_and_floor_apart_from_the_windows_own():
+    """calibration's likelihood (algorithms.md §8.10) on misses drawn from its model: the
+    field's variance ``v_f`` scaled by 2, a floor of (0.01 m/s)^2, the windows' own ``v_o``:
+    both found (within the spread of 3,000 misses), and the published sigma is ``k v_f +
+    b``. Without the floor the dense windows' misses (small ``v_f``) would be credited to
+    the scale alone."""
+    from onboard.fleet.field import SigmaCalibration, _ml_scale
+
+    rng = np.random.default_rng(3)
+    n = 3000
+    v_f = rng.uniform(1e-5, 4e-4, n)   # dense cover to a place between vehicles
+    v_o = rng.uniform(5e-5, 2e-4, n)
+    r = rng.normal(0.0, np.sqrt(2.0 * v_f + 1e-4 + v_o))
+    k, b = _ml_scale(r, v_f, v_o)
+    assert k == pytest.approx(2.0, rel=0.25) and math.sqrt(b) == pytest.approx(0.01, rel=0.25)
+    assert SigmaCalibration(k, b).std(0.02) == pytest.approx(math.sqrt(k * 4e-4 + b))
+    # misses the field's own variance explains: neither widened
+    k, b = _ml_scale(rng.normal(0.0, np.sqrt(v_f + v_o)), v_f, v_o)
+    assert k < 1.15 and math.sqrt(b) < 0.004
+
+
+def test_the_crossings_measure_the_windows_own_error():
+    """own_scale (algorithms.md §8.10): where two vehicles' windows nearly meet, their
+    difference is their own errors. The synthetic estimates remember nothing of their
+    track; a field that takes them to remember 120 s of it (a 180-m place at 1.5 m/s)
+    overstates each window's own variance, and the crossings say so (measured 0.32 and
+    0.19, north and east); one that takes the memory they have is told about as much as it
+    assumes (measured 1.2-2.3 with the field's 20 s against the estimates' 10 s)."""
+    def own(memory_field_s: float, memory_world_s: float) -> tuple[float, float]:
+        f = fleet("eddy", seed=11, vehicles=6, duration_s=1200.0, memory_s=memory_world_s)
+        field = CurrentField(hyper=Hyper(), memory_s=memory_field_s)
+        for o in f.observations(skip=0):
+            field.add(o)
+        field.fit()
+        north, east = field.sigma_calibration
+        return north.own, east.own
+
+    assert max(own(120.0, 0.0)) < 0.5
+    assert min(own(ESTIMATE_MEMORY_S, 10.0)) > 0.7
+
+
 def test_late_and_out_of_order_records_give_the_same_field():
     f = fleet("front", seed=5, vehicles=4, duration_s=300.0, rate_hz=2.0)
     recs = [f.record(i) for i in range(len(f.t))]

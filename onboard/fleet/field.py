@@ -104,6 +104,19 @@ Gaussian process gives it."""
 VARIANCE_SCALE_BOUNDS = (1.0, 25.0)
 """Bounds of the learned scale of the field's predictive variance (:func:`calibration`):
 its sigma never narrowed, at most five times wider."""
+FLOOR_STD_BOUNDS = (1e-4, 0.1)
+"""Bounds (m/s) of the learned floor of the field's predictive sigma (:func:`calibration`:
+what a stationary field misses where its windows are dense)."""
+OWN_SCALE_BOUNDS = (0.05, 20.0)
+"""Bounds of the learned scale of a window's own variance, from the crossings
+(:func:`own_scale`)."""
+FLOOR_STD_START = 1e-3
+"""Where the floor's fit starts (m/s)."""
+CROSSING_RADIUS = 0.15
+"""Two windows of different vehicles nearer than this in the scaled space and time (the
+length and time scales as units: about 30 m and 5 minutes on fleet-survey) are a
+crossing: the water differs little between them, so their difference measures their own
+errors (:func:`own_scale`)."""
 MAX_STD_MPS = 0.5
 """A component whose sigma exceeds this (m/s) is not converged: not observed."""
 MAX_SPEED_MPS = 6.0
@@ -389,9 +402,9 @@ class CurrentField:
         memory_s: how far back along its track a vehicle's estimate reaches (s;
             :data:`ESTIMATE_MEMORY_S`; 0: the water where the vehicle is).
         calibrate: whether the field's sigma is calibrated on the fleet's own data.
-        variance_scale: the scale of the predictive variance (north, east), learned
-            with the hyperparameters and at the first fit (:func:`calibration`; 1 when
-            not calibrated).
+        sigma_calibration: the calibration of the predictive variance (north, east:
+            :class:`SigmaCalibration`), learned with the hyperparameters and at the first
+            fit (:func:`calibration`; none when not calibrated).
     """
 
     def __init__(self, hyper: Hyper = Hyper(), thin_s: float = THIN_S,
@@ -408,7 +421,7 @@ class CurrentField:
         self.added = 0
         self.rejected: dict[str, int] = {}
         self.log_likelihood: float | None = None
-        self.variance_scale = (1.0, 1.0)
+        self.sigma_calibration = (SigmaCalibration(), SigmaCalibration())
         self.newest_utc = -math.inf
         self._bins: dict[tuple[str, int], list[float]] = {}
         self._vehicles: dict[str, int] = {}
@@ -537,7 +550,7 @@ class CurrentField:
             keep[out] = False
             fitted = self._fitted(obs.take(keep), mean, averaged)
         if self.calibrate and (hyperparameters or self.fitted is None):
-            self.variance_scale = calibration(fitted)   # learned with the hyperparameters
+            self.sigma_calibration = calibration(fitted)   # learned with the hyperparameters
         self.fitted = fitted
 
     def _fitted(self, obs: SuperObs, mean: np.ndarray, averaged: bool
@@ -582,25 +595,40 @@ class CurrentField:
         p = fitted.predict(np.array([float(n), float(e), utc - self.t_ref]))
         if p.north is None:
             return p
-        k_n, k_e = self.variance_scale
-        return p._replace(std_north=p.std_north * math.sqrt(k_n),
-                          std_east=p.std_east * math.sqrt(k_e))
+        north, east = self.sigma_calibration
+        return p._replace(std_north=north.std(p.std_north), std_east=east.std(p.std_east))
 
 
-def calibration(fitted: "Fitted | Averaged") -> tuple[float, float]:
-    """The scale of the field's predictive variance (north, east) learned from the
-    fleet's own data (docs/algorithms.md §8.10): at :data:`CALIBRATION_SAMPLE`
+class SigmaCalibration(NamedTuple):
+    """How one component's predictive variance is calibrated on the fleet's own misses
+    (docs/algorithms.md §8.10): the published variance is ``scale max(own, 1) v_f +
+    floor``."""
+
+    scale: float = 1.0   # k, the Gaussian process's predictive variance's factor
+    floor: float = 0.0   # b, (m/s)^2 added to it
+    own: float = 1.0     # c, the windows' own variance's factor, from the crossings
+
+    def std(self, std_f: float) -> float:
+        """The published sigma (m/s) of a prediction whose process sigma is ``std_f``."""
+        return math.sqrt(self.scale * max(self.own, 1.0) * std_f ** 2 + self.floor)
+
+
+def calibration(fitted: "Fitted | Averaged") -> tuple[SigmaCalibration, SigmaCalibration]:
+    """The calibration of the field's predictive variance (north, east) learned from the
+    fleet's own data (docs/algorithms.md §8.10). At :data:`CALIBRATION_SAMPLE`
     super-observations spread evenly over the history, the field predicted from the other
     vehicles (``exclude``, as :meth:`Fitted.is_outlier` does) misses the window by ``r``,
-    whose variance is the field's ``k v_f`` (its predictive variance, scaled) plus the
-    window's own ``v_o`` (its estimate's scaled sigma, the white error and its place
-    term). ``k`` is the maximum-likelihood value of ``sum log(k v_f + v_o) + r^2 / (k v_f
-    + v_o)`` within :data:`VARIANCE_SCALE_BOUNDS`; 1 with fewer than
-    :data:`CALIBRATION_MIN` predictions."""
+    whose variance is the field's ``k max(c, 1) v_f + b`` (its predictive variance,
+    scaled, and a floor) plus the window's own ``c v_o`` (its estimate's scaled sigma, the
+    white error and its place term; ``c`` measured on the crossings, :func:`own_scale`:
+    windows worse than the model says make the field's variance too small too). ``k`` and
+    ``b`` are the maximum-likelihood values within :data:`VARIANCE_SCALE_BOUNDS` and
+    :data:`FLOOR_STD_BOUNDS`; none with fewer than :data:`CALIBRATION_MIN` predictions."""
     obs, h = fitted.obs, fitted.hyper
     central = fitted.central if isinstance(fitted, Averaged) else fitted
     pick = np.unique(np.linspace(0, len(obs.y) - 1, CALIBRATION_SAMPLE).astype(int))
     rows: list[tuple[float, float, float, float, float, float]] = []
+    judged: list[int] = []
     for i in pick:
         others = central.neighbourhood(obs.x[i], exclude=int(obs.vehicle[i]))
         if len(set(obs.vehicle[others].tolist())) < JUDGES:
@@ -608,29 +636,72 @@ def calibration(fitted: "Fitted | Averaged") -> tuple[float, float]:
         p = fitted.predict(obs.x[i], exclude=int(obs.vehicle[i]))
         if p.north is None:
             continue
+        judged.append(int(i))
         rows.append((obs.y[i, NORTH] - p.north, p.std_north ** 2,
                      _own_variance(h, obs, i, NORTH),
                      obs.y[i, EAST] - p.east, p.std_east ** 2,
                      _own_variance(h, obs, i, EAST)))
     a = np.array(rows).reshape(-1, 6)
-    scales = []
-    for part in (a[:, 0:3], a[:, 3:6]):   # a window without the component: NaN
-        part = part[np.isfinite(part[:, 0])]
-        scales.append(_ml_scale(*part.T) if len(part) >= CALIBRATION_MIN else 1.0)
-    return scales[0], scales[1]
+    out = []
+    for c, part in ((NORTH, a[:, 0:3]), (EAST, a[:, 3:6])):
+        part = part[np.isfinite(part[:, 0])]   # a window without the component: NaN
+        if len(part) < CALIBRATION_MIN:
+            out.append(SigmaCalibration())
+            continue
+        own = own_scale(central, judged, c)
+        k, b = _ml_scale(part[:, 0], max(own, 1.0) * part[:, 1], own * part[:, 2])
+        out.append(SigmaCalibration(k, b, own))
+    return out[0], out[1]
 
 
-def _ml_scale(r: np.ndarray, v_f: np.ndarray, v_o: np.ndarray) -> float:
-    """The ``k`` within :data:`VARIANCE_SCALE_BOUNDS` that maximizes the likelihood of the
-    misses ``r``, normal of variance ``k v_f + v_o``."""
+def own_scale(fitted: "Fitted", windows: list[int], c: int) -> float:
+    """How far the windows' own variance ``v_o`` of component ``c`` is to be taken (the
+    ``c`` of docs/algorithms.md §8.10), measured on the crossings of ``windows`` with the
+    other vehicles' windows (:data:`CROSSING_RADIUS`): the difference of two windows at
+    nearly one place and time is their two errors, of variance ``c (v_o,i + v_o,j)``,
+    plus the little the water differs between them, ``2 sigma_c^2 (1 - rho_ij)``. The
+    maximum-likelihood ``c`` within :data:`OWN_SCALE_BOUNDS`; 1 with fewer than
+    :data:`CALIBRATION_MIN` crossings."""
     from scipy.optimize import minimize_scalar
 
-    def nll(log_k: float) -> float:
-        v = math.exp(log_k) * v_f + v_o
+    obs, h = fitted.obs, fitted.hyper
+    sigma_f = h.sigma_north if c == NORTH else h.sigma_east
+    d2, v_o, v_w = [], [], []
+    for i in windows:
+        for j in fitted.tree.query_ball_point(obs.x[i] / fitted.scale, CROSSING_RADIUS):
+            if obs.vehicle[j] == obs.vehicle[i] or not np.isfinite(obs.y[i, c] + obs.y[j, c]):
+                continue
+            rho = math.exp(-0.5 * float((((obs.x[i] - obs.x[j]) / fitted.scale) ** 2).sum()))
+            d2.append((obs.y[i, c] - obs.y[j, c]) ** 2)
+            v_o.append(_own_variance(h, obs, i, c) + _own_variance(h, obs, j, c))
+            v_w.append(2.0 * sigma_f ** 2 * (1.0 - rho))
+    if len(d2) < CALIBRATION_MIN:
+        return 1.0
+    d2a, v_oa, v_wa = np.array(d2), np.array(v_o), np.array(v_w)
+
+    def nll(log_c: float) -> float:
+        v = math.exp(log_c) * v_oa + v_wa
+        return float(np.sum(np.log(v) + d2a / v))
+
+    lo, hi = np.log(OWN_SCALE_BOUNDS)
+    return math.exp(minimize_scalar(nll, bounds=(lo, hi), method="bounded").x)
+
+
+def _ml_scale(r: np.ndarray, v_f: np.ndarray, v_o: np.ndarray) -> tuple[float, float]:
+    """The ``k`` within :data:`VARIANCE_SCALE_BOUNDS` and the ``b`` within
+    :data:`FLOOR_STD_BOUNDS` (squared) that maximize the likelihood of the misses ``r``,
+    normal of variance ``k v_f + b + v_o``."""
+    from scipy.optimize import minimize
+
+    def nll(theta: np.ndarray) -> float:
+        v = math.exp(theta[0]) * v_f + math.exp(2.0 * theta[1]) + v_o
         return float(np.sum(np.log(v) + r * r / v))
 
-    lo, hi = np.log(VARIANCE_SCALE_BOUNDS)
-    return math.exp(minimize_scalar(nll, bounds=(lo, hi), method="bounded").x)
+    bounds = [tuple(np.log(VARIANCE_SCALE_BOUNDS)), tuple(np.log(FLOOR_STD_BOUNDS))]
+    start = np.array([bounds[0][0], math.log(FLOOR_STD_START)])
+    res = minimize(nll, start, bounds=bounds, method="L-BFGS-B")
+    k, floor_std = np.exp(res.x)
+    return float(k), float(floor_std) ** 2
 
 
 def _own_variance(h: Hyper, obs: SuperObs, i: int, c: int) -> float:
