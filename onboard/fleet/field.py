@@ -601,16 +601,15 @@ class CurrentField:
 
 class SigmaCalibration(NamedTuple):
     """How one component's predictive variance is calibrated on the fleet's own misses
-    (docs/algorithms.md §8.10): the published variance is ``scale max(own, 1) v_f +
-    floor``."""
+    (docs/algorithms.md §8.10): the published variance is ``scale v_f + floor``."""
 
-    scale: float = 1.0   # k, the Gaussian process's predictive variance's factor
+    scale: float = 1.0   # k (with the windows' spread, :func:`noise_spread`), v_f's factor
     floor: float = 0.0   # b, (m/s)^2 added to it
     own: float = 1.0     # c, the windows' own variance's factor, from the crossings
 
     def std(self, std_f: float) -> float:
         """The published sigma (m/s) of a prediction whose process sigma is ``std_f``."""
-        return math.sqrt(self.scale * max(self.own, 1.0) * std_f ** 2 + self.floor)
+        return math.sqrt(self.scale * std_f ** 2 + self.floor)
 
 
 def calibration(fitted: "Fitted | Averaged") -> tuple[SigmaCalibration, SigmaCalibration]:
@@ -618,17 +617,18 @@ def calibration(fitted: "Fitted | Averaged") -> tuple[SigmaCalibration, SigmaCal
     fleet's own data (docs/algorithms.md §8.10). At :data:`CALIBRATION_SAMPLE`
     super-observations spread evenly over the history, the field predicted from the other
     vehicles (``exclude``, as :meth:`Fitted.is_outlier` does) misses the window by ``r``,
-    whose variance is the field's ``k max(c, 1) v_f + b`` (its predictive variance,
-    scaled, and a floor) plus the window's own ``c v_o`` (its estimate's scaled sigma, the
-    white error and its place term; ``c`` measured on the crossings, :func:`own_scale`:
-    windows worse than the model says make the field's variance too small too). ``k`` and
+    whose variance is the field's ``k g v_f + b`` (its predictive variance, scaled, and a
+    floor) plus the window's own ``c v_o`` (its estimate's scaled sigma, the white error
+    and its place term; ``c`` measured on the crossings, :func:`own_scale`; ``g`` what
+    windows worse than the model says add to the field's variance, :func:`noise_spread`).
+    The published scale is ``k g``. ``k`` and
     ``b`` are the maximum-likelihood values within :data:`VARIANCE_SCALE_BOUNDS` and
     :data:`FLOOR_STD_BOUNDS`; none with fewer than :data:`CALIBRATION_MIN` predictions."""
     obs, h = fitted.obs, fitted.hyper
     central = fitted.central if isinstance(fitted, Averaged) else fitted
     pick = np.unique(np.linspace(0, len(obs.y) - 1, CALIBRATION_SAMPLE).astype(int))
     rows: list[tuple[float, float, float, float, float, float]] = []
-    judged: list[int] = []
+    judged: list[tuple[int, np.ndarray]] = []
     for i in pick:
         others = central.neighbourhood(obs.x[i], exclude=int(obs.vehicle[i]))
         if len(set(obs.vehicle[others].tolist())) < JUDGES:
@@ -636,7 +636,7 @@ def calibration(fitted: "Fitted | Averaged") -> tuple[SigmaCalibration, SigmaCal
         p = fitted.predict(obs.x[i], exclude=int(obs.vehicle[i]))
         if p.north is None:
             continue
-        judged.append(int(i))
+        judged.append((int(i), others))
         rows.append((obs.y[i, NORTH] - p.north, p.std_north ** 2,
                      _own_variance(h, obs, i, NORTH),
                      obs.y[i, EAST] - p.east, p.std_east ** 2,
@@ -644,14 +644,39 @@ def calibration(fitted: "Fitted | Averaged") -> tuple[SigmaCalibration, SigmaCal
     a = np.array(rows).reshape(-1, 6)
     out = []
     for c, part in ((NORTH, a[:, 0:3]), (EAST, a[:, 3:6])):
-        part = part[np.isfinite(part[:, 0])]   # a window without the component: NaN
-        if len(part) < CALIBRATION_MIN:
+        given = np.isfinite(part[:, 0])   # a window without the component: NaN
+        if given.sum() < CALIBRATION_MIN:
             out.append(SigmaCalibration())
             continue
-        own = own_scale(central, judged, c)
-        k, b = _ml_scale(part[:, 0], max(own, 1.0) * part[:, 1], own * part[:, 2])
-        out.append(SigmaCalibration(k, b, own))
+        own = own_scale(central, [i for i, _ in judged], c)
+        spread = noise_spread(central, [w for w, g in zip(judged, given) if g], c, own)
+        r, v_f, v_o = part[given].T
+        k, b = _ml_scale(r, spread * v_f, own * v_o)
+        out.append(SigmaCalibration(k * spread, b, own))
     return out[0], out[1]
+
+
+def noise_spread(fitted: "Fitted", judged: list[tuple[int, np.ndarray]], c: int,
+                 own: float) -> float:
+    """How much more the field's predictive variance of component ``c`` is when the
+    windows' own covariance is ``own`` times the model's (``own`` > 1: windows worse than
+    the model says; 1 otherwise, the variance never narrowed by it): the median, over the
+    ``judged`` windows (index, the other vehicles' windows near it), of the variance
+    kriged with that covariance over the variance kriged with the model's."""
+    if own <= 1.0:
+        return 1.0
+    obs, h = fitted.obs, fitted.hyper
+    sigma_f = h.sigma_north if c == NORTH else h.sigma_east
+    ratios = []
+    for i, others in judged:
+        idx = others[np.isfinite(obs.y[others, c])]
+        if not idx.size:
+            continue
+        _, s1 = fitted.krige_component(obs.x[i], idx, c, sigma_f)
+        _, s_own = fitted.krige_component(obs.x[i], idx, c, sigma_f, noise_scale=own)
+        if s1 > 0.0:
+            ratios.append((s_own / s1) ** 2)
+    return float(np.median(ratios)) if ratios else own
 
 
 def own_scale(fitted: "Fitted", windows: list[int], c: int) -> float:
@@ -778,12 +803,13 @@ class Fitted:
         return Prediction(n, e, s_n, s_e, int(idx.size))
 
     def krige_component(self, x: np.ndarray, idx: np.ndarray, c: int, sigma_f: float,
-                        corr: tuple[np.ndarray, np.ndarray] | None = None
-                        ) -> tuple[float, float]:
+                        corr: tuple[np.ndarray, np.ndarray] | None = None,
+                        noise_scale: float = 1.0) -> tuple[float, float]:
         """Component ``c`` (:data:`NORTH`, :data:`EAST`, :data:`DOWN`) of spread
         ``sigma_f`` at ``x`` from the super-observations ``idx``: its mean and sigma
         (down's mean unknown: :func:`gls_mean`); ``corr``: the signal correlations among
-        them and with ``x`` when already computed."""
+        them and with ``x`` when already computed; ``noise_scale``: the windows' own
+        covariance scaled (:func:`calibration`)."""
         from scipy.linalg import cho_factor, cho_solve
 
         obs, h = self.obs, self.hyper
@@ -795,7 +821,7 @@ class Fitted:
         kc, ks = sigma_f ** 2 * corr[0], sigma_f ** 2 * corr[1]
         ke = error_cov(h, xs[:, 2], obs.vehicle[idx], obs.s[idx, c]) + \
             np.diag(place_variance(sigma_f, h.length_m, obs.place[idx]))
-        factor = cho_factor(kc + ke, lower=True)
+        factor = cho_factor(kc + noise_scale * ke, lower=True)
         y, mean, var_mean = obs.y[idx, c], self.mean[c], 0.0
         if c == DOWN:
             mean, var_mean = gls_mean(factor, ks, y)
