@@ -389,3 +389,18 @@ def test_a_position_sigma_adds_the_fields_mean_square_difference_over_it():
     assert place_variance(sigma_f, length, np.zeros(1))[0] == 0.0
     assert place_variance(sigma_f, length, np.array([1e6]))[0] == \
         pytest.approx(2 * sigma_f ** 2, rel=1e-6)
+
+
+def test_what_the_fit_learned_is_said_in_a_line():
+    """``onboard fleet``'s line per grid ends with the fit's scales and the sigma's
+    calibration (algorithms.md §8.10); nothing before a fit."""
+    f = fleet("eddy", seed=11, vehicles=6, duration_s=1200.0)
+    field = CurrentField()
+    assert field.learned() == ""
+    for o in f.observations(skip=-1):
+        field.add(o)
+    field.fit()
+    north, east = field.sigma_calibration
+    text = field.learned()
+    assert text.startswith(f"{field.fitted.hyper.length_m:.0f} m, ")
+    assert f"sigma x{math.sqrt(north.scale):.2f} + " in text and text.endswith("cm/s east")

@@ -585,6 +585,17 @@ class CurrentField:
         return np.array(out, dtype=int)
 
     # ------------------------------------------------------------------ predict
+    def learned(self) -> str:
+        """What the last fit learned, in a few words: the length and time scales and how
+        the sigma is calibrated per component (its factor and its floor); empty before
+        the first fit."""
+        if self.fitted is None:
+            return ""
+        h = self.fitted.hyper
+        cal = ", ".join(f"x{math.sqrt(c.scale):.2f} + {100 * math.sqrt(c.floor):.1f} cm/s {name}"
+                        for name, c in zip(("north", "east"), self.sigma_calibration))
+        return f"{h.length_m:.0f} m, {h.length_s / 60:.0f} min; sigma {cal}"
+
     def predict(self, lat_deg: float, lon_deg: float, utc: float) -> Prediction:
         """The field at ``lat_deg``, ``lon_deg`` (deg) and ``utc`` (POSIX s) as of the
         last :meth:`fit` (:data:`UNKNOWN` where no super-observation is near)."""

@@ -452,8 +452,10 @@ def main(args: argparse.Namespace) -> int:
             if grid is not None and page is not None:
                 page.view.feed_grid(msgspec.to_builtins(grid))
             known = sum(c.north is not None for c in grid.cells) if grid else 0
+            learned = service.field.learned()
             print(f"{time.strftime('%H:%M:%S')} {len(service.newest)} vehicles, "
-                  f"{service.field.added:,} records, {known} cells known", flush=True)
+                  f"{service.field.added:,} records, {known} cells known"
+                  + (f"; {learned}" if learned else ""), flush=True)
     except KeyboardInterrupt:
         return 0
     finally:
