@@ -364,6 +364,7 @@ lawnmower fleet-channel's AUV flies)."""
 def _build() -> dict[str, Fleet]:
     origin = (50.3500, -4.1500)  # Plymouth Sound
     utc0 = DEFAULT_EPOCH_S
+    draw = drawn_survey_sea(origin, utc0)
     return {f.name: f for f in (
         Fleet("fleet-channel", "a tidal channel (M2) with a drifting eddy and a moving front",
               channel_sea(origin, utc0, 12.4206012 * 3600.0), CHANNEL_VEHICLES, 600.0, utc0),
@@ -374,8 +375,7 @@ def _build() -> dict[str, Fleet]:
               survey_sea(origin, utc0), SURVEY_VEHICLES, 900.0, utc0),
         Fleet("fleet-survey-seas", "fleet-survey's vehicles in a sea drawn from the seed: "
               "the channel, eddy, front and drift of fleet-survey's kind, each placed and "
-              "sized at random", drawn_survey_sea(origin, utc0)(0), SURVEY_VEHICLES, 900.0,
-              utc0, draw_sea=drawn_survey_sea(origin, utc0)),
+              "sized at random", draw(0), SURVEY_VEHICLES, 900.0, utc0, draw_sea=draw),
     )}
 
 

@@ -10,13 +10,14 @@ vehicle's track, against the true field.
 
 Prints per seed and vehicle left out: the points predicted, the field's RMS error per
 component, the share within 1.96 of its sigma (with its 95 % interval: how precisely a
-track's correlated errors measure it, validation/coverage.py), and the vehicle's own estimate's RMS at
-the same points (what the field is up against); the field's down at the vehicles that
-give one (fitted with every vehicle: no other gives a down) against the true field's
-(none: the simulator's field is horizontal); then, over the seeds, each figure's median
-and range, with a seed's coverage interval. ``--without ID`` scores the same logs again with vehicle ``ID`` left out of
-every fit (the field without it); a vehicle whose records have no position (an AUV that
-never had a GNSS fix) can be neither fused nor scored: it is named so.
+track's correlated errors measure it, validation/coverage.py), and the vehicle's own
+estimate's RMS at the same points (what the field is up against); the field's down at
+the vehicles that give one (fitted with every vehicle: no other gives a down) against
+the true field's (none: the simulator's field is horizontal); then, over the seeds, each
+figure's median and range, with a seed's coverage interval. ``--without ID`` scores the
+same logs again with vehicle ``ID`` left out of every fit (the field without it); a
+vehicle whose records have no position (an AUV that never had a GNSS fix) can be neither
+fused nor scored: it is named so.
 """
 
 from __future__ import annotations

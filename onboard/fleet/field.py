@@ -592,8 +592,8 @@ class CurrentField:
         if self.fitted is None:
             return ""
         h = self.fitted.hyper
-        cal = ", ".join(f"x{math.sqrt(c.scale):.2f} + {100 * math.sqrt(c.floor):.1f} cm/s {name}"
-                        for name, c in zip(("north", "east"), self.sigma_calibration))
+        cal = ", ".join(f"x{math.sqrt(c.scale):.2f} + {100 * math.sqrt(c.floor):.1f} cm/s "
+                        f"{name}" for name, c in zip(("north", "east"), self.sigma_calibration))
         return f"{h.length_m:.0f} m, {h.length_s / 60:.0f} min; sigma {cal}"
 
     def predict(self, lat_deg: float, lon_deg: float, utc: float) -> Prediction:
@@ -632,9 +632,9 @@ def calibration(fitted: "Fitted | Averaged") -> tuple[SigmaCalibration, SigmaCal
     floor) plus the window's own ``c v_o`` (its estimate's scaled sigma, the white error
     and its place term; ``c`` measured on the crossings, :func:`own_scale`; ``g`` what
     windows worse than the model says add to the field's variance, :func:`noise_spread`).
-    The published scale is ``k g``. ``k`` and
-    ``b`` are the maximum-likelihood values within :data:`VARIANCE_SCALE_BOUNDS` and
-    :data:`FLOOR_STD_BOUNDS`; none with fewer than :data:`CALIBRATION_MIN` predictions."""
+    ``k`` and ``b`` are the maximum-likelihood values within :data:`VARIANCE_SCALE_BOUNDS`
+    and :data:`FLOOR_STD_BOUNDS`, and the published scale is ``k g``; none with fewer than
+    :data:`CALIBRATION_MIN` predictions."""
     obs, h = fitted.obs, fitted.hyper
     central = fitted.central if isinstance(fitted, Averaged) else fitted
     pick = np.unique(np.linspace(0, len(obs.y) - 1, CALIBRATION_SAMPLE).astype(int))

@@ -6,8 +6,9 @@ each noise-scale scenario (``sitl.scenarios.noise_scaled``: every sensor's true 
 0.3, 1 or 3 times what the bundled config declares) flown on held-out seeds through the
 ``aie``, ``kf`` and ``current`` pipelines of that unchanged config; per scenario, pooled
 over the seeds after :data:`AFTER_S`, the 1- and 2-sigma coverage of speed, heading and
-current (with how precisely the seeds measure it: validation/coverage.py), each channel's mean NIS and the learned noise against the true and the declared,
-and the ``nis_out_of_band`` warnings; printed as the page's Markdown tables. With
+current (with how precisely the seeds measure it: validation/coverage.py), each
+channel's mean NIS and the learned noise against the true and the declared, and the
+``nis_out_of_band`` warnings; printed as the page's Markdown tables. With
 ``--summaries DIR/*/replay/summary.json`` (replays of the real logs): the real-log table,
 what each log's channels learned and whether the NIS check still warns.
 """
