@@ -704,13 +704,18 @@ def own_scale(fitted: "Fitted", windows: list[int], c: int) -> float:
     sigma_f = h.sigma_north if c == NORTH else h.sigma_east
     d2, v_o, v_w = [], [], []
     for i in windows:
-        for j in fitted.tree.query_ball_point(obs.x[i] / fitted.scale, CROSSING_RADIUS):
-            if obs.vehicle[j] == obs.vehicle[i] or not np.isfinite(obs.y[i, c] + obs.y[j, c]):
-                continue
-            rho = math.exp(-0.5 * float((((obs.x[i] - obs.x[j]) / fitted.scale) ** 2).sum()))
-            d2.append((obs.y[i, c] - obs.y[j, c]) ** 2)
-            v_o.append(_own_variance(h, obs, i, c) + _own_variance(h, obs, j, c))
-            v_w.append(2.0 * sigma_f ** 2 * (1.0 - rho))
+        if not np.isfinite(obs.y[i, c]):
+            continue
+        near = np.array([j for j in fitted.tree.query_ball_point(obs.x[i] / fitted.scale,
+                                                                CROSSING_RADIUS)
+                         if obs.vehicle[j] != obs.vehicle[i] and np.isfinite(obs.y[j, c])],
+                        dtype=int)
+        if not near.size:
+            continue
+        own_i = _own_variance(h, obs, i, c)
+        d2.extend((obs.y[i, c] - obs.y[near, c]) ** 2)
+        v_o.extend(own_i + _own_variance(h, obs, j, c) for j in near)
+        v_w.extend(2.0 * sigma_f ** 2 * (1.0 - signal_corr(h, obs.x[[i]], obs.x[near])[0]))
     if len(d2) < CALIBRATION_MIN:
         return 1.0
     d2a, v_oa, v_wa = np.array(d2), np.array(v_o), np.array(v_w)
