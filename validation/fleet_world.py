@@ -11,11 +11,13 @@ vehicle's track, against the true field.
 Prints per seed and vehicle left out: the points predicted, the field's RMS error per
 component, the share within 1.96 of its sigma (with its 95 % interval: how precisely a
 track's correlated errors measure it, validation/coverage.py), and the vehicle's own
-estimate's RMS at the same points (what the field is up against); the field's down at
-the vehicles that give one (fitted with every vehicle: no other gives a down) against
-the true field's (none: the simulator's field is horizontal); then, over the seeds, each
-figure's median and range, with a seed's coverage interval. ``--without ID`` scores the
-same logs again with vehicle ``ID`` left out of every fit (the field without it); a
+estimate's RMS at the same points (what the field is up against), and the RMS and
+coverage apart where another vehicle's window is within :data:`REACH` (the field
+interpolates) and beyond (it extrapolates); the field's down at the vehicles that give
+one (fitted with every vehicle: no other gives a down) against the true field's (none:
+the simulator's field is horizontal); then, over the seeds, each figure's median and
+range, with a seed's coverage interval and the RMS within reach. ``--without ID`` scores
+the same logs again with vehicle ``ID`` left out of every fit (the field without it); a
 vehicle whose records have no position (an AUV that never had a GNSS fix) can be neither
 fused nor scored: it is named so.
 """
@@ -32,6 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from validation.coverage import interval
+
+REACH = 0.5
+"""A point is within the others' reach where another vehicle's window is nearer than this
+in the field's scaled space and time (the fitted length and time scales as units: the
+field's signal correlation with that window at least ``exp(-REACH^2 / 2)`` = 0.88); beyond
+it the field extrapolates, and its RMS there is reported apart."""
 
 
 def replay_fleet(root: Path, manifest: dict, reuse: bool = False) -> dict[str, Path]:
@@ -115,7 +123,8 @@ def left_out(sea, depth, obs: dict[str, list], vehicle: str, without: set[str],
     from onboard.fleet.field import one_blas_thread
 
     field = fused(obs, without | {vehicle})
-    err, own, z = [], [], []
+    fitted = getattr(field.fitted, "central", field.fitted)   # an Averaged field's scales
+    err, own, z, reach = [], [], [], []
     t_d, d = depth[vehicle]
     with one_blas_thread():
         for o in complete(obs[vehicle])[::every]:
@@ -127,8 +136,10 @@ def left_out(sea, depth, obs: dict[str, list], vehicle: str, without: set[str],
             err.append(e)
             own.append([o.north - tn, o.east - te])
             z.append(np.abs(e) / np.array([p.std_north, p.std_east]))
+            x = np.array([*field.plane.to_ne(o.lat_deg, o.lon_deg), o.utc - field.t_ref])
+            reach.append(fitted.tree.query(x / fitted.scale)[0])
     return {"err": np.reshape(err, (-1, 2)), "own": np.reshape(own, (-1, 2)),
-            "z": np.reshape(z, (-1, 2))}
+            "z": np.reshape(z, (-1, 2)), "reach": np.array(reach)}
 
 
 def down_at(obs: dict[str, list], without: set[str], every: int) -> dict[str, np.ndarray]:
@@ -201,19 +212,29 @@ def score(sea, depth, obs: dict[str, list], vehicle: str, leave: set[str], every
     if not len(r["err"]):
         return None
     hits = [r["z"][:, 0] < 1.96, r["z"][:, 1] < 1.96]
+    near = r["reach"] <= REACH
+    parts = {name: {"points": int(m.sum()), "rms": np.sqrt((r["err"][m] ** 2).mean(axis=0)),
+                    "coverage": float((r["z"][m] < 1.96).mean())}
+             for name, m in (("near", near), ("far", ~near)) if m.any()}
     return {"points": len(r["err"]), "rms": np.sqrt((r["err"] ** 2).mean(axis=0)),
             "coverage": float((r["z"] < 1.96).mean()), "hits": hits,
-            "own": np.sqrt((r["own"] ** 2).mean(axis=0))}
+            "own": np.sqrt((r["own"] ** 2).mean(axis=0)), **parts}
 
 
 def describe(fig: dict | None) -> str:
     """A vehicle's figures in words."""
     if fig is None:
         return "no record with a position, or the field knows nothing along its track"
-    return (f"{fig['points']} points; field RMS north {fig['rms'][0]:.3f}, east "
+    text = (f"{fig['points']} points; field RMS north {fig['rms'][0]:.3f}, east "
             f"{fig['rms'][1]:.3f} m/s, {interval(fig['hits']).text()} within 1.96 sigma "
             f"(95 % interval); its own "
             f"estimate {fig['own'][0]:.3f}, {fig['own'][1]:.3f} m/s")
+    for name, words in (("near", "within the others' reach"), ("far", "beyond it")):
+        if name in fig:
+            f = fig[name]
+            text += (f"; {words} {f['points']}: RMS {f['rms'][0]:.3f}, {f['rms'][1]:.3f} "
+                     f"m/s, {f['coverage']:.2f} within 1.96 sigma")
+    return text
 
 
 def spread(per_seed: list[dict]) -> None:
@@ -230,6 +251,11 @@ def spread(per_seed: list[dict]) -> None:
             parts.append(f"RMS {name} {np.median(rms[:, k]):.3f} "
                          f"({rms[:, k].min():.3f}-{rms[:, k].max():.3f}) m/s")
         parts.append(f"coverage {np.median(cov):.2f} ({cov.min():.2f}-{cov.max():.2f})")
+        near = np.array([g["near"]["rms"] for g in got if "near" in g]).reshape(-1, 2)
+        if len(near):
+            parts.append(f"within the others' reach RMS north {np.median(near[:, 0]):.3f}, "
+                         f"east {np.median(near[:, 1]):.3f} m/s (median of {len(near)}; "
+                         f"both <= 0.03 in {int((near.max(axis=1) <= 0.03).sum())})")
         if all("hits" in g for g in got):
             each = [interval(g["hits"]) for g in got]
             parts.append(f"a seed's 95 % interval {np.median([c.low for c in each]):.2f}-"

@@ -350,6 +350,16 @@ def error_cov(h: Hyper, t: np.ndarray, vehicle: np.ndarray, s: np.ndarray) -> np
     return (h.scale ** 2) * np.outer(s, s) * corr * same + h.white ** 2 * np.eye(len(t))
 
 
+def down_bias_variance(h: Hyper, s: np.ndarray) -> float:
+    """The variance (m^2/s^2) of one error common to every window that gives a down, of
+    any vehicle and at any time: ``(max(a, 1) median(s))^2`` for the windows' sigmas ``s``
+    (docs/algorithms.md §8.7: a diving vehicle's down is biased for a whole run by its
+    model's through-water heave, alike on vehicles of one kind, and no other vehicle checks
+    it, so neither time nor a second vehicle averages it away; a constant, it is one with
+    the unknown mean and adds to the prediction's variance whole)."""
+    return (max(h.scale, 1.0) * float(np.median(s))) ** 2
+
+
 def place_variance(sigma_f: float, length_m: float, place: np.ndarray) -> np.ndarray:
     """The variance (m^2/s^2) a position sigma ``place`` (m per axis) adds to an
     observation of a component of spread ``sigma_f`` (m/s) and length scale ``length_m``:
@@ -841,6 +851,7 @@ class Fitted:
         y, mean, var_mean = obs.y[idx, c], self.mean[c], 0.0
         if c == DOWN:
             mean, var_mean = gls_mean(factor, ks, y)
+            var_mean += down_bias_variance(h, obs.s[idx, c])
         alpha = cho_solve(factor, y - mean)
         var = max(sigma_f ** 2 - float(ks @ cho_solve(factor, ks)), 0.0) + var_mean
         return float(mean + ks @ alpha), math.sqrt(var)
