@@ -42,7 +42,8 @@ super-observation within :data:`KNOWN_WITHIN` the field knows nothing there (``N
 The vertical current ``down``, where a record gives one (an underwater vehicle's; a
 boat's has none, which is not a down of 0), is the same process with its own mean and
 spread ``sigma_down`` (fitted by its own marginal likelihood, :func:`fit_sigma_down`), the
-scales and the error model of north and east, predicted from the super-observations that
+scales and the error model of north and east and one error common to every window that
+gives a down (:func:`down_bias_variance`), predicted from the super-observations that
 have one (None where none is near); depth is not a coordinate.
 
 A vehicle's estimate is a memory of the water along its track, not the water where it is:
