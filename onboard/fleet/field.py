@@ -166,6 +166,11 @@ class Hyper(NamedTuple):
     tau_s: float = 60.0       # s, the correlation time of a vehicle's error
     white: float = 0.005      # m/s, the white floor sigma_w
 
+    def spread(self, c: int) -> float:
+        """The field's spread (m/s) of horizontal component ``c`` (:data:`NORTH` or
+        :data:`EAST`)."""
+        return self.sigma_north if c == NORTH else self.sigma_east
+
     @staticmethod
     def bounds() -> list[tuple[float, float]]:
         """Bounds of each hyperparameter (SI), for the fit (in logarithms)."""
@@ -688,7 +693,7 @@ def noise_spread(fitted: "Fitted", judged: list[tuple[int, np.ndarray]], c: int,
     if own <= 1.0:
         return 1.0
     obs, h = fitted.obs, fitted.hyper
-    sigma_f = h.sigma_north if c == NORTH else h.sigma_east
+    sigma_f = h.spread(c)
     ratios = []
     for i, others in judged:
         idx = others[np.isfinite(obs.y[others, c])]
@@ -712,7 +717,7 @@ def own_scale(fitted: "Fitted", windows: list[int], c: int) -> float:
     from scipy.optimize import minimize_scalar
 
     obs, h = fitted.obs, fitted.hyper
-    sigma_f = h.sigma_north if c == NORTH else h.sigma_east
+    sigma_f = h.spread(c)
     d2, v_o, v_w = [], [], []
     for i in windows:
         if not np.isfinite(obs.y[i, c]):
@@ -759,7 +764,7 @@ def _ml_scale(r: np.ndarray, v_f: np.ndarray, v_o: np.ndarray) -> tuple[float, f
 def _own_variance(h: Hyper, obs: SuperObs, i: int, c: int) -> float:
     """The variance of super-observation ``i``'s component ``c`` about the water at its
     place (its estimate's sigma scaled, the white error, its place term)."""
-    sigma_f = h.sigma_north if c == NORTH else h.sigma_east
+    sigma_f = h.spread(c)
     return (h.scale * obs.s[i, c]) ** 2 + h.white ** 2 + \
         float(place_variance(sigma_f, h.length_m, obs.place[i]))
 
