@@ -95,6 +95,11 @@ STAGE = "build/mypyc-src"
 """The compiled modules' sources laid out as installed, for mypyc to name them as they are
 imported (drivers/tlog.py is ``onboard.drivers.tlog``)."""
 
+OPT_LEVEL = os.environ.get("ONBOARD_COMPILE_OPT", "3")
+"""gcc's optimisation level: ``-O3`` for the wheel a vehicle installs; ``0`` builds the
+same C in about half the time, for checking what mypyc generates (the default test suite's
+build, tests/test_compiled.py; gcc keeps IEEE arithmetic at every level, ``C_FLAGS``)."""
+
 C_FLAGS = [
     # the same rounding on every architecture: no fused multiply-add where the Python
     # source has a multiplication and an addition (aarch64's compilers fuse by default)
@@ -133,7 +138,7 @@ def ext_modules() -> list:
     # a C file per module: gcc on one file of every module took twice the CPU
     # (docs/performance.md, "The compiled build")
     exts = mypycify([*MYPY_OPTIONS, *staged([*COMPILED_MODULES, *GENERATED_MODULES])],
-                    opt_level="3", multi_file=True)
+                    opt_level=OPT_LEVEL, multi_file=True)
     for ext in exts:
         ext.extra_compile_args = [*ext.extra_compile_args, *C_FLAGS]
     return exts

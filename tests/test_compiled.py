@@ -3,7 +3,9 @@ compiled by mypyc from the same Python, installed from their wheel into a fresh 
 the pure build's estimates to the byte.
 
 The wheel is built as ``make install`` builds it, offline with this venv's mypyc
-(tests/helpers/installed.py). What is checked: every module of setup.py's list is an
+(tests/helpers/installed.py), with gcc at ``-O0`` (the C is mypyc's either way; gcc
+keeps IEEE arithmetic at every level); the release build, ``-O3``, replays a log in the
+slow suite. What is checked: every module of setup.py's list is an
 extension module in the installed package (and none of the others is), and a replay of a
 boat, an ROV and an AUV log, of the boat's with a GNSS latency correction (whose forks
 copy the compiled objects) and of a real log writes the checkout's estimates.csv and
@@ -56,15 +58,15 @@ def test_the_test_extra_pins_the_mypyc_that_setup_py_names():
     assert f"mypy=={setup_constant('MYPYC_VERSION')}" in extras
 
 
-@pytest.fixture(scope="module")
-def venv(tmp_path_factory) -> Path:
-    """The compiled wheel installed into a fresh venv outside the checkout."""
+def compiled_venv(work: Path, opt_level: str) -> Path:
+    """The compiled wheel, built at gcc's ``-O<opt_level>``, installed into a fresh venv
+    outside the checkout."""
     from onboard.apps.install import build_wheel, make_venv
     from tests.helpers.installed import OFFLINE_BUILD, fresh_venv
 
-    work = tmp_path_factory.mktemp("compiled")
     mp = pytest.MonkeyPatch()
     mp.setenv("ONBOARD_COMPILE", "1")
+    mp.setenv("ONBOARD_COMPILE_OPT", opt_level)
     try:
         wheel = build_wheel(REPO, work / "dist", sys.executable, OFFLINE_BUILD)
     finally:
@@ -74,6 +76,13 @@ def venv(tmp_path_factory) -> Path:
     fresh_venv(venv, dependency_view(work / "deps"))
     make_venv(venv, sys.executable, ["--no-index"], wheel)
     return venv
+
+
+@pytest.fixture(scope="module")
+def venv(tmp_path_factory) -> Path:
+    """The compiled build at ``-O0``: mypyc's C as the release wheel has it, compiled in
+    half the time (setup.py's ``OPT_LEVEL``; the release build's own test is slow)."""
+    return compiled_venv(tmp_path_factory.mktemp("compiled"), "0")
 
 
 def probe(venv: Path, code: str) -> object:
@@ -192,3 +201,13 @@ def test_the_rcie_kernels_are_compiled_and_compute_the_generated_lines(venv):
     functions, and each gives the run-time generated Python's results to the last bit
     (``repr``), diverged (None) or not, on random covariances and rows."""
     assert probe(venv, RCIE_KERNELS_COMPILED_AS_GENERATED) == [True] * 12
+
+
+@pytest.mark.slow
+def test_the_release_build_replays_as_pure(tmp_path_factory, tmp_path, monkeypatch):
+    """The wheel a vehicle installs (``-O3``): the listed modules compiled, and the boat's
+    golden log replayed to the pure build's estimates to the byte."""
+    monkeypatch.setenv("ONBOARD_ESESO_KERNEL", "0")
+    venv = compiled_venv(tmp_path_factory.mktemp("release"), "3")
+    test_the_listed_modules_and_only_they_are_compiled(venv)
+    test_the_gnss_latency_forks_replay_compiled_as_pure(venv, tmp_path)
