@@ -406,3 +406,44 @@ def test_the_kernels_blocks_are_the_filters() -> None:
     for name in ("P", "V", "R", "BA", "BG", "G", "XI", "BI"):  # the nominal state's array
         assert getattr(eseso_kernel, "_X" + name) == getattr(eseso_filter, "X_" + name).start
     assert eseso_kernel._NX == eseso_filter.N_NOMINAL
+
+
+WARM_THEN_REPLAY = """
+import json, sys
+from numba.core.registry import CPUDispatcher
+from onboard.cli import main
+from onboard.core.config import from_dict
+from onboard.estimators import eseso_kernel
+from onboard.pipelines.eseso import create
+
+def signatures():
+    return {name: len(f.signatures) for name, f in vars(eseso_kernel).items()
+            if isinstance(f, CPUDispatcher)}
+
+create(from_dict({"vehicle": {"class": "bluerov2"}}))
+warm = signatures()
+main(["replay", sys.argv[1], "--out", sys.argv[2], "--no-plot"])
+print(json.dumps([warm, signatures()]))
+"""
+
+
+def test_a_pipeline_made_runs_its_replay_without_loading_another_kernel(tmp_path):
+    """Making the ESESO pipeline loads (from numba's cache, or compiles) every kernel a
+    replay then calls, with the types it calls them with (``warm_kernels``): a live
+    service's ticks never wait on numba. In a fresh process, so that nothing is loaded
+    before."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from tests.helpers.imports import REPO
+
+    r = subprocess.run([sys.executable, "-c", WARM_THEN_REPLAY,
+                        str(REPO / "tests" / "data" / "replay" / "bluerov2-circle.tlog"),
+                        str(tmp_path / "out")], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=300, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert r.returncode == 0, r.stderr
+    warm, after = json.loads(r.stdout.strip().splitlines()[-1])
+    assert sum(warm.values()) >= 7, warm
+    assert after == warm

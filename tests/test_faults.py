@@ -353,13 +353,8 @@ def test_gnss_under_water_is_rejected_and_counted_estimates_continue(tmp_path):
 
 @pytest.fixture(scope="module")
 def rov_dvl_lock_loss(tmp_path_factory):
-    """fault-dvl-lock-loss-rov flown once for the tests below, the ESESO on its numpy
-    reference: numba's first call of each compiled twin, loaded from its cache, holds the
-    in-process service's first tick ~0.5 s, 5 simulated s at 10x (what is tested is the
-    DVL's rejection, which the twins compute alike: tests/test_eseso_kernel.py)."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("ONBOARD_ESESO_KERNEL", "0")
-        return _fly("fault-dvl-lock-loss-rov", 80.0, tmp_path_factory.mktemp("rov"))
+    """fault-dvl-lock-loss-rov flown once for the tests below."""
+    return _fly("fault-dvl-lock-loss-rov", 80.0, tmp_path_factory.mktemp("rov"))
 
 
 def _v_ned(tr) -> tuple[float, float]:

@@ -445,6 +445,31 @@ def compiled_kernel() -> ModuleType | None:
     return _import_kernel()
 
 
+def warm_kernels(params: EsesoParams) -> None:
+    """Each compiled twin called once, on a throwaway filter at rest with ``params``, so
+    that a filter made afterwards runs without a pause: numba loads each kernel from its
+    cache at its first call (0.55 s for them all here, docs/performance.md), which a
+    live service would otherwise spend inside its first ticks. Once a process; nothing
+    without the compiled kernels."""
+    global _kernels_warm
+    if _kernels_warm or compiled_kernel() is None:
+        return
+    f = EsesoFilter(params)
+    f.initialize(np.eye(3), np.zeros(3))
+    rest, still = -f.g, np.zeros(3)  # the specific force and rate of a vehicle at rest
+    f.propagate(rest, still, 0.02)
+    f.update_attitude(np.eye(3), 0.0, 0.0, 1e-4, 1e-3)
+    f.update_depth(0.0, 1e-2)
+    f.update_body_velocity(still, 1e-2)
+    f.update_thrust(rest, still, still, still, wdot_dt=0.02)
+    f.finite()
+    _kernel().estimates(f.x, f.P, still, f.disturbance_excess, 0.0)
+    _kernels_warm = True
+
+
+_kernels_warm = False
+
+
 class EsesoFilter:
     """The ESESO error-state Kalman filter (module docstring).
 

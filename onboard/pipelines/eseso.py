@@ -100,6 +100,7 @@ from onboard.estimators.eseso_filter import (
     EsesoFilter,
     EsesoParams,
     Outcome,
+    warm_kernels,
 )
 from onboard.pipelines.base import PipelineDefaults, unused_measurement
 
@@ -298,6 +299,8 @@ class Eseso(PipelineDefaults):
         self.gnss_max_depth = _or(c.gnss_max_depth_m, s.depth.surface_depth_m if s else 0.3)
 
         self.filter = EsesoFilter(filter_params(c, s))
+        # numba's cache loaded now, not in the service's first ticks
+        warm_kernels(self.filter.params)
         self.counters = EsesoCounters()
         self.frame: LocalFrame | None = None
         self._gnss_offset = np.zeros(2)
