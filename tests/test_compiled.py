@@ -204,10 +204,10 @@ def test_the_rcie_kernels_are_compiled_and_compute_the_generated_lines(venv):
 
 
 @pytest.mark.slow
-def test_the_release_build_replays_as_pure(tmp_path_factory, tmp_path, monkeypatch):
+def test_the_release_build_replays_as_pure(tmp_path_factory, tmp_path):
     """The wheel a vehicle installs (``-O3``): the listed modules compiled, and the boat's
-    golden log replayed to the pure build's estimates to the byte."""
-    monkeypatch.setenv("ONBOARD_ESESO_KERNEL", "0")
+    golden log with a GNSS latency (its forks copy the compiled objects) replayed to the
+    pure build's estimates to the byte."""
     venv = compiled_venv(tmp_path_factory.mktemp("release"), "3")
     test_the_listed_modules_and_only_they_are_compiled(venv)
     test_the_gnss_latency_forks_replay_compiled_as_pure(venv, tmp_path)

@@ -14,6 +14,10 @@ entry's scale: a vector's largest component, and for a covariance ``sqrt(P_ii P_
 from __future__ import annotations
 
 import copy
+import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import msgspec
@@ -36,6 +40,7 @@ from onboard.estimators.eseso_filter import (  # noqa: E402
     reset_covariance,
 )
 from onboard.pipelines.eseso import Eseso, filter_params  # noqa: E402
+from tests.helpers.imports import REPO  # noqa: E402
 
 TOL = 1e-12
 """Largest difference allowed, relative to the entry's scale (module docstring). Measured
@@ -432,13 +437,6 @@ def test_a_pipeline_made_runs_its_replay_without_loading_another_kernel(tmp_path
     replay then calls, with the types it calls them with (``warm_kernels``): a live
     service's ticks never wait on numba. In a fresh process, so that nothing is loaded
     before."""
-    import json
-    import os
-    import subprocess
-    import sys
-
-    from tests.helpers.imports import REPO
-
     r = subprocess.run([sys.executable, "-c", WARM_THEN_REPLAY,
                         str(REPO / "tests" / "data" / "replay" / "bluerov2-circle.tlog"),
                         str(tmp_path / "out")], cwd=tmp_path, capture_output=True, text=True,

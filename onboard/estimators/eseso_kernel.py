@@ -45,9 +45,9 @@ around the ESESO's kernels").
 Compiled on first call, not at import (~11 s of CPU here, docs/performance.md), and
 cached beside this module (``cache=True``), so a machine compiles once; a process then
 pays numba's start, ~0.6 s, when the pipeline is made (``eseso_filter.warm_kernels``: each
-kernel called once on a throwaway filter, not in a live service's first ticks). Loops only: numba compiles array
-expressions, slice assignments and transposed views two to four times slower, and BLAS's
-call costs more than these 3- and 23-row products.
+kernel called once on a throwaway filter, not in a live service's first ticks). Loops
+only: numba compiles array expressions, slice assignments and transposed views two to
+four times slower, and BLAS's call costs more than these 3- and 23-row products.
 """
 
 from __future__ import annotations
