@@ -240,3 +240,23 @@ def test_the_current_story_tells_unknown_then_known_against_the_simulated_curren
         in story[1]
     assert "until t=10 s" in story[2] and f"from t={10 + CURRENT_SETTLE_S:.0f} s" in story[2]
     assert current_story([], truth, 0.3) == []
+
+
+def test_an_unknown_current_is_blamed_on_too_few_turns_only_where_there_were_few():
+    """The story's reason for a current never published: a vehicle that held one heading
+    did not turn enough; one that went round a circle did (an ROV without a surge model)."""
+    from onboard.apps.demo_truth import current_story, headings_held
+
+    assert headings_held([0.0] * 5) == 0.0
+    assert headings_held([0.1 * k for k in range(63)]) > 350.0
+    assert headings_held([math.radians(d) for d in (350.0, 10.0, 40.0)]) == pytest.approx(50.0)
+
+    def truth(yaw):
+        return TruthRecord(t=0.0, north=0.0, east=0.0, down=0.0, roll=0.0, pitch=0.0, yaw=yaw,
+                           u=1.0, v=0.0, w=0.0, p=0.0, q=0.0, r=0.0, u_r=1.0, v_r=0.0,
+                           w_r=0.0, current_north=0.0, current_east=0.0)
+    hist = [_current_rec(0.1 * k, {}, {"north": 1.0, "east": 0.9}) for k in range(100)]
+    straight = current_story(hist, [truth(0.3)] * 100, 0.3)[1]
+    assert "did not turn enough" in straight and "run longer" in straight
+    circle = current_story(hist, [truth(0.1 * k) for k in range(100)], 0.3)[1]
+    assert "turned through 354°" in circle and "did not turn enough" not in circle

@@ -372,10 +372,16 @@ def current_story(history: list[EstimateRecord], truth: list[Any],
     published = [r for r in recs if "north" in r.values and "east" in r.values]
     if not published:
         sd = min(_horizontal_std(r) for r in recs)
+        arc = headings_held([tr.yaw for tr in truth])
+        why = ("the vehicle did not turn enough for the current along its track to be told "
+               "from its own speed; run longer (--duration) or a scenario with turns"
+               if arc < TURNED_DEG else
+               f"the vehicle turned through {arc:.0f}° of heading, so turning is not what "
+               "it lacked: its model, as configured, does not tell the current from its "
+               "own motion through the water (the current's health: observable.*, "
+               "theta.std_max)")
         out.append(f"estimated: unknown for all {recs[-1].t - recs[0].t:.0f} s (its sigma "
-                   f"never below {sd:.2f} m/s together on both axes): the boat did not "
-                   "turn enough for the current along its track to be told from its own "
-                   "speed; run longer (--duration) or a scenario with turns")
+                   f"never below {sd:.2f} m/s together on both axes): {why}")
         return out
     last = published[-1]
     n, e = last.values["north"], last.values["east"]
@@ -391,6 +397,21 @@ def current_story(history: list[EstimateRecord], truth: list[Any],
                "be told from the boat's own speed through the water until it has turned "
                f"enough (heading diversity); {known}")
     return out
+
+
+TURNED_DEG = 90.0
+"""Headings held over an arc at least this wide (deg) are a turn: the current along one
+leg is then told from the other legs, where the model and the speed allow it."""
+
+
+def headings_held(yaws: list[float]) -> float:
+    """The arc of headings (deg) that ``yaws`` (rad) cover: 360 less the widest gap between
+    them around the circle (0 for one heading; 355 for a circle sampled every 5 deg)."""
+    if not yaws:
+        return 0.0
+    deg = sorted(math.degrees(y) % 360.0 for y in yaws)
+    gaps = [b - a for a, b in zip(deg, deg[1:])] + [deg[0] + 360.0 - deg[-1]]
+    return 360.0 - max(gaps)
 
 
 def _flow(north: float, east: float) -> str:
