@@ -161,6 +161,12 @@ class GnssNoise(_Strict):
     path increment. The ``aie``/``kf`` increment filters take the rest, white, as a fix's
     noise; positions keep the whole. 0: all of it white. The simulator's consumer
     receiver: 1.0 m white and 1.1 m drift per axis, ``1.1^2 / (1.0^2 + 1.1^2) = 0.55``."""
+    drift_tau_s: Annotated[float, msgspec.Meta(gt=0.0)] = 120.0
+    """Correlation time (s) of that wandering share (a first-order Gauss-Markov error):
+    its change over a surge step of ``dt`` s, of variance ``2 drift_share R (1 -
+    exp(-dt / drift_tau_s))``, is part of each path increment's noise and does not carry
+    to the next (algorithms.md §2.2). Unused with ``drift_share = 0``. The simulator's
+    consumer receiver: 120 s."""
 
 
 class ImuNoise(_Strict):

@@ -132,19 +132,22 @@ class IncrementFilter:
 
     def step(self, k: Discrete, y: float, R: float, R_prev: float,
              command: float | None, y_v: float | None = None, R_v: float = 0.0, *,
-             t: float = math.nan, source: str = "") -> None:
+             t: float = math.nan, source: str = "", R_drift: float = 0.0) -> None:
         """One step over ``k.dt`` (§2.7).
 
         ``y``: the increment (m or rad) between two points of noise variances ``R`` and
         ``R_prev``; ``command``: the mean normalized command over the step (None if
         unknown); ``y_v``: the rate measured at the newer point (m/s, the window's mean
         Doppler speed; None without one), of noise variance ``R_v``; ``t``, ``source``:
-        the newer point's time (s) and sample source, for the innovation records. The
+        the newer point's time (s) and sample source, for the innovation records;
+        ``R_drift``: the variance of the receiver's drift's change over the step, part of
+        the increment's noise that does not carry to the next (``IncrementKF``). The
         variances are the declared ones: the learned scales multiply them.
         """
         kf = self.kf
         s = self.noise.applied
         R, R_prev, R_v = s * R, s * R_prev, self.rate_noise.applied * R_v
+        q_drift = s * R_drift
         self.last_command = command
         kf.R = R if kf.correlated else R + R_prev
         if not kf.initialized:
@@ -153,7 +156,7 @@ class IncrementFilter:
         kf.forecast(k, self.input.forecast_input(kf, self._u_known(command), y_v is not None),
                     self.forecast_var_u)
         self.rate_z = None if y_v is None else self._rate_innovation(k, y_v, R_v)
-        kf.innovation(y)
+        kf.innovation(y, q_drift)
         gate = (self.gate_nis if self._consecutive_rejects < MAX_CONSECUTIVE_REJECTS
                 else math.inf)
         accepted = not kf.nis > gate

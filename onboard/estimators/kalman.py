@@ -167,6 +167,17 @@ class IncrementKF:
     with white noise: the velocity error roughly halves against treating the increments as
     white (the simpler filter, ``correlated=False``, with ``R`` the increment variance).
 
+    A receiver's drift (an error that wanders slowly, the same in consecutive points but
+    for its change ``delta`` over the step) adds ``delta`` to the increment: ``y_k = d_k -
+    e_k + w_k + delta_k``, ``Var(delta_k) = q`` (:meth:`innovation`'s ``q_drift``), of
+    which only the white ``w_k`` is the next step's ``e``. ``S`` takes ``q``; the forecast
+    carries the white part of the point's estimated noise ``n = w + delta``: ``w`` and
+    ``delta`` enter the data only as their sum, so ``E[w | n] = rho n`` with ``rho = R /
+    (R + q)`` and ``Var(w | n) = rho q``: ``e+ = rho n``, its covariances ``rho`` times
+    ``n``'s, its variance ``rho^2 Var(n) + rho q``. With ``q = 0`` the drift's changes
+    would stay in ``e`` and the innovations would carry the drift accumulated since the
+    filter's start (docs/integrity.md, "The receiver's drift in the innovations").
+
     Attributes (filterpy-style, read them to debug):
         d, v, e: the estimate after :meth:`update` (increment over the last step in m or
             rad; rate in m/s or rad/s; noise of the previous point, m or rad).
@@ -175,10 +186,11 @@ class IncrementKF:
         z_v, S_v: the same of the last rate measurement (:meth:`update_rate`).
         Ld, Lv: the gains of ``d`` and ``v`` in the last update.
         R: variance of one point's noise (correlated) or of the increment (white).
+        q_drift: variance of the drift's change over the last increment (0: none).
     """
 
     __slots__ = ("d", "v", "e", "P", "z", "S", "nis", "z_v", "S_v", "Ld", "Lv", "R", "q_v",
-                 "correlated", "initialized", "_y", "_skipped")
+                 "q_drift", "correlated", "initialized", "_y", "_skipped")
 
     def __init__(self, R: float, q_v: float = 0.0, correlated: bool = True) -> None:
         """``R``: measurement variance (see the class doc); ``q_v``: extra rate random
@@ -193,6 +205,7 @@ class IncrementKF:
         self.nis = 0.0
         self.z_v = self.S_v = 0.0
         self.Ld = self.Lv = 0.0
+        self.q_drift = 0.0
         self.initialized = False
         self._y = 0.0
         self._skipped = False
@@ -222,7 +235,8 @@ class IncrementKF:
         ``V_u`` (§2.2: ``x_fc = A x_da + B u``, ``P_f = A P A^T + V_u B B^T + Q_w``).
 
         First the last point's noise ``n = y - d + e`` replaces ``e`` (a linear map of
-        the error), then ``d+ = c1 v + c2 u``, ``v+ = alpha v + c1 u``, ``e+ = n``.
+        the error; its white part where the increment carried a drift, the class doc),
+        then ``d+ = c1 v + c2 u``, ``v+ = alpha v + c1 u``, ``e+ = n``.
         """
         c1, c2, al = k.c1, k.c2, k.alpha
         dd, dv, de, vv, ve, ee = self.P
@@ -234,6 +248,12 @@ class IncrementKF:
             # error of n = -err(d) + err(e): covariances with v and n
             vn = ve - dv
             nn = dd - 2.0 * de + ee
+            q = self.q_drift
+            if q > 0.0:   # n = w + delta: its white part w carries
+                rho = self.R / (self.R + q)
+                self.e *= rho
+                vn *= rho
+                nn = rho * rho * nn + rho * q
         else:
             self.e = 0.0
             vn = nn = 0.0
@@ -247,11 +267,15 @@ class IncrementKF:
                   al * vn,
                   nn]
 
-    def innovation(self, y: float) -> float:
-        """Set and return ``z = (d - e)_fc - y``, ``S`` and ``nis`` before the update."""
+    def innovation(self, y: float, q_drift: float = 0.0) -> float:
+        """Set and return ``z = (d - e)_fc - y``, ``S`` and ``nis`` before the update;
+        ``q_drift``: the variance of the drift's change over this increment (class doc)."""
         dd, dv, de, vv, ve, ee = self.P
         z = self.d - self.e - y
         S = dd - 2.0 * de + ee + self.R
+        if q_drift > 0.0:
+            S += q_drift
+        self.q_drift = q_drift
         self._y = y
         self.z = z
         self.S = S
@@ -387,6 +411,13 @@ class BiasIncrementKF(IncrementKF):
             vn = ve - dv
             nn = dd - 2.0 * de + ee
             bn = eb - db
+            q = self.q_drift
+            if q > 0.0:   # the white part carries (IncrementKF's doc)
+                rho = self.R / (self.R + q)
+                self.e *= rho
+                vn *= rho
+                bn *= rho
+                nn = rho * rho * nn + rho * q
         else:
             self.e = 0.0
             vn = nn = bn = 0.0
@@ -446,8 +477,15 @@ class ReferenceIncrementKF:
     by :func:`update`; the scalar filters are this one unrolled (tests/test_kf.py
     compares them step by step).
 
+    An increment with a drift (``q_drift > 0``) is taken the long way, without the
+    scalar filters' split: the new point's white noise ``w`` is a further state (prior
+    ``N(0, R)``) from the innovation through the updates, the increment row ``[1, 0, -1(,
+    0), 1]`` of noise ``q_drift``, and the forecast makes ``w`` the next ``e``.
+
     Attributes: ``x``, ``P`` (full matrix), ``z``, ``S``, ``nis`` as the scalar filters';
-    ``y`` the last increment and ``skipped`` whether it was used.
+    ``y`` the last increment and ``skipped`` whether it was used; ``aug`` the state and
+    covariance with ``w`` between an innovation with a drift and the next forecast (None
+    otherwise).
     """
 
     def __init__(self, R: float, q_v: float = 0.0, correlated: bool = True,
@@ -458,14 +496,22 @@ class ReferenceIncrementKF:
         self.x, self.P = np.zeros(self.n), np.zeros((self.n, self.n))
         self.y, self.skipped = 0.0, False
         self.z = self.S = self.nis = 0.0
+        self.q_drift = 0.0
+        self.aug: tuple[np.ndarray, np.ndarray] | None = None
 
     def forecast(self, k: Discrete, u: float, V_u: float) -> None:
-        """``e <- n = y - d + e`` (map ``M``), then ``x+ = F x + G u``,
-        ``P+ = F M P M^T F^T + V_u G G^T + Q``."""
+        """``e <- n = y - d + e`` (map ``M``), or ``e <- w`` after an increment with a
+        drift, then ``x+ = F x + G u``, ``P+ = F M P M^T F^T + V_u G G^T + Q``."""
         n, E = self.n, 2
         M = np.eye(n)
         x, P = self.x.copy(), self.P.copy()
-        if self.correlated and not self.skipped:
+        if self.correlated and not self.skipped and self.aug is not None:
+            xa, Pa = self.aug                             # [x, w]: w becomes e
+            x, P = xa[:n].copy(), Pa[:n, :n].copy()
+            x[E] = xa[n]
+            P[E, :], P[:, E] = Pa[n, :n], Pa[:n, n]
+            P[E, E] = Pa[n, n]
+        elif self.correlated and not self.skipped:
             M[E, 0] = -1.0                                # err(n) = err(e) - err(d)
             x[E] = self.y - x[0] + x[E]                   # n = y - d + e
             P = M @ P @ M.T
@@ -473,6 +519,7 @@ class ReferenceIncrementKF:
             x[E] = 0.0
             P[E, :] = P[:, E] = 0.0
             P[E, E] = self.R if self.correlated else 0.0
+        self.aug = None
         F = np.zeros((n, n))
         F[0, 1], F[1, 1], F[E, E] = k.c1, k.alpha, 1.0    # d+ = c1 v, v+ = alpha v, e+ = n
         G = np.zeros(n)
@@ -486,38 +533,58 @@ class ReferenceIncrementKF:
         self.P = F @ P @ F.T + V_u * np.outer(G, G) + Q
         self.skipped = False
 
-    def innovation(self, y: float) -> float:
-        """``z = C x - y``, ``S = C P C^T + R`` with ``C = [1, 0, -1(, 0)]``."""
-        C = np.zeros(self.n)
+    def _row(self) -> np.ndarray:
+        """The increment row on ``x`` (``[1, 0, -1(, 0)]``), or on ``[x, w]`` with a
+        drift (``w``'s coefficient 1)."""
+        C = np.zeros(self.n + (self.aug is not None))
         C[0], C[2] = 1.0, -1.0
-        self.y = y
-        self.z = float(C @ self.x - y)
-        self.S = float(C @ self.P @ C + self.R)
+        if self.aug is not None:
+            C[self.n] = 1.0
+        return C
+
+    def innovation(self, y: float, q_drift: float = 0.0) -> float:
+        """``z = C x - y``, ``S = C P C^T + R + q_drift``; with a drift on the correlated
+        filter, ``C`` and ``P`` of ``[x, w]`` and ``S = C P C^T + q_drift``."""
+        self.y, self.q_drift = y, q_drift
+        x, P, R = self.x, self.P, self.R + q_drift
+        if self.correlated and q_drift > 0.0:
+            x = np.append(self.x, 0.0)
+            P = np.zeros((self.n + 1, self.n + 1))
+            P[:self.n, :self.n], P[self.n, self.n] = self.P, self.R
+            self.aug, R = (x, P), q_drift
+        C = self._row()
+        self.z = float(C @ x - y)
+        self.S = float(C @ P @ C + R)
         self.nis = self.z * self.z / self.S
         return self.z
 
     def update(self) -> None:
-        """The increment row ``C = [1, 0, -1(, 0)]`` through :func:`update` (``x + K (y -
-        C x) = x - K z``)."""
-        C = np.zeros(self.n)
-        C[0], C[2] = 1.0, -1.0
-        self._apply(C, self.y, self.R)
+        """The increment row (:meth:`_row`) through :func:`update` (``x + K (y - C x) =
+        x - K z``)."""
+        self._apply(self._row(), self.y,
+                    self.q_drift if self.aug is not None else self.R + self.q_drift)
 
     def skip(self) -> None:
         """Keep the forecast; the last point's noise is then prior at the next step."""
         self.skipped = True
 
     def update_rate(self, y_v: float, R_v: float) -> float:
-        """The rate row ``C_v = [0, 1, 0(, 0)]``, ``Var = R_v``; returns the NIS."""
-        C = np.zeros(self.n)
+        """The rate row ``C_v = [0, 1, 0(, 0)(, 0)]``, ``Var = R_v``; returns the NIS."""
+        C = np.zeros(self.n + (self.aug is not None))
         C[1] = 1.0
         return self._apply(C, y_v, R_v)
 
     def _apply(self, C: np.ndarray, y: float, R: float) -> float:
         """The scalar row ``y = C x + n``, ``Var(n) = R``, through :func:`update` (Joseph
-        form), then the rate (and bias) variance floored; returns the NIS."""
-        up = update(self.x, self.P, np.array([y]), np.array([[R]]), C[None, :])
-        self.x, self.P = up.x, up.P
+        form) on ``x`` or ``[x, w]``, then the rate (and bias) variance floored; returns
+        the NIS."""
+        x, P = self.aug if self.aug is not None else (self.x, self.P)
+        up = update(x, P, np.array([y]), np.array([[R]]), C[None, :])
         for i in (1, 3) if self.n == 4 else (1,):
-            self.P[i, i] = max(self.P[i, i], VARIANCE_FLOOR)
+            up.P[i, i] = max(up.P[i, i], VARIANCE_FLOOR)
+        if self.aug is not None:
+            self.aug = (up.x, up.P)
+            self.x, self.P = up.x[:self.n], up.P[:self.n, :self.n]
+        else:
+            self.x, self.P = up.x, up.P
         return up.nis

@@ -53,12 +53,13 @@ def retune(f: IncrementFilter, c: AxisConfig, doppler: bool) -> None:
 
 
 def build(cfg: AieConfig, gnss_position_std_m: float = 1.5, heading_std_rad: float = 0.03,
-          gnss_velocity_std_mps: float = 0.1, gnss_drift_share: float = 0.0
-          ) -> SurgeHeadingPipeline:
+          gnss_velocity_std_mps: float = 0.1, gnss_drift_share: float = 0.0,
+          gnss_drift_tau_s: float = 120.0) -> SurgeHeadingPipeline:
     """An AIE pipeline from an :class:`AieConfig` (for code and tests)."""
     return SurgeHeadingPipeline("aie", COLUMNS, cfg, gnss_position_std_m, heading_std_rad,
                                 axis_filter, gnss_velocity_std_mps, retune=retune,
-                                gnss_drift_share=gnss_drift_share)
+                                gnss_drift_share=gnss_drift_share,
+                                gnss_drift_tau_s=gnss_drift_tau_s)
 
 
 def create(cfg: Config) -> SurgeHeadingPipeline | None:

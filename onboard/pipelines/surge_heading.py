@@ -197,12 +197,13 @@ class SurgeHeadingPipeline(PipelineDefaults):
     def __init__(self, name: str, columns: tuple[str, ...], cfg: AieConfig | KfConfig,
                  gnss_position_std_m: float, heading_std_rad: float, factory: AxisFactory,
                  gnss_velocity_std_mps: float = 0.1, *, retune: AxisRetune,
-                 gnss_drift_share: float = 0.0) -> None:
+                 gnss_drift_share: float = 0.0, gnss_drift_tau_s: float = 120.0) -> None:
         """``cfg``: the pipeline's table (``[pipelines.aie]`` or ``[pipelines.kf]``);
         ``gnss_position_std_m``, ``heading_std_rad`` and ``gnss_velocity_std_mps``: the
         ``[sensors]`` noise, unless ``cfg`` sets its own; ``gnss_drift_share``: the
         slowly wandering share of a fix's noise variance (``[sensors.gnss]
-        drift_share``), left out of the increments' noise; ``factory`` builds each axis filter with its input
+        drift_share``), left out of the increments' noise but for its change over a step,
+        of correlation time ``gnss_drift_tau_s`` (``drift_tau_s``); ``factory`` builds each axis filter with its input
         model, ``retune`` switches its measurement set."""
         if not 0.0 < cfg.gnss_accuracy_min_m <= cfg.gnss_accuracy_max_m:
             raise ValueError(f"[pipelines.{name}] needs 0 < gnss_accuracy_min_m <= "
@@ -220,6 +221,8 @@ class SurgeHeadingPipeline(PipelineDefaults):
         """Noise of one heading (rad)."""
         self.drift_share = gnss_drift_share
         """Slowly wandering share of a fix's noise variance: not in an increment."""
+        self.drift_tau_s = gnss_drift_tau_s
+        """Its correlation time (s): its change over a step is in the increment."""
         s, h = cfg.surge, cfg.heading
         self.surge = factory(AxisModel(s.a, s.gain, s.offset), s, cfg, "surge")
         self.yaw = factory(AxisModel(h.a, h.gain, h.offset), h, cfg, "heading")
@@ -561,8 +564,10 @@ class SurgeHeadingPipeline(PipelineDefaults):
         y_v, R_v = w.speed_point(self.sigma_v)
         surge = self.surge
         v_prev = surge.kf.v if surge.kf.initialized else None
-        surge.step(self._disc(surge.damping(cmd), tp - pp[0]), y, R_inc[0], R_inc[1], cmd,
-                   y_v, R_v, t=tp, source=w.fix_source)
+        dt = tp - pp[0]
+        surge.step(self._disc(surge.damping(cmd), dt), y, R_inc[0], R_inc[1], cmd,
+                   y_v, R_v, t=tp, source=w.fix_source,
+                   R_drift=drift_change_variance(R_s, self.drift_share, self.drift_tau_s, dt))
         if self.track.imu is not None and v_prev is not None and y_v is not None:
             self.track.learn_imu_forecast(pp[0], tp, v_prev, y_v)
         self.track.surge_step(pp, point, R_s, self._anchor_gain(w, R_s, course_mode),
@@ -673,12 +678,12 @@ def _restored_model(m: object) -> AxisModel | None:
     return None
 
 
-def sensor_noise(cfg: Config) -> tuple[float, float, float, float]:
-    """``(gnss_position_std_m, heading_std_rad, gnss_velocity_std_mps, gnss_drift_share)`` from
-    ``[sensors]``."""
+def sensor_noise(cfg: Config) -> tuple[float, float, float, float, float]:
+    """``(gnss_position_std_m, heading_std_rad, gnss_velocity_std_mps, gnss_drift_share,
+    gnss_drift_tau_s)`` from ``[sensors]``."""
     g = cfg.sensors.gnss
     return (g.position_std_m, cfg.sensors.compass.heading_std_rad, g.velocity_std_mps,
-            g.drift_share)
+            g.drift_share, g.drift_tau_s)
 
 
 def increment_variance(R: float, drift_share: float) -> float:
@@ -686,3 +691,12 @@ def increment_variance(R: float, drift_share: float) -> float:
     sees it: ``R`` less the slowly wandering share ``drift_share`` (``[sensors.gnss]
     drift_share``, the same share of every fix's variance, so of the window mean's too)."""
     return R * (1.0 - drift_share)
+
+
+def drift_change_variance(R: float, drift_share: float, drift_tau_s: float,
+                          dt: float) -> float:
+    """The variance (m^2) of the drift's change over a step of ``dt`` s at a point of
+    noise variance ``R``: the wandering share ``drift_share R`` as a first-order
+    Gauss-Markov error of correlation time ``drift_tau_s``, ``2 drift_share R (1 -
+    exp(-dt / drift_tau_s))`` (``[sensors.gnss] drift_share``, ``drift_tau_s``)."""
+    return 2.0 * drift_share * R * -math.expm1(-dt / drift_tau_s)
