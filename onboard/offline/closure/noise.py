@@ -27,6 +27,24 @@ Two checks decide whether a figure is usable:
 
 Only triples of samples evenly spaced (their two intervals within
 :data:`EVEN_SPACING` of each other) and closer than :data:`MAX_GAP_S` are used.
+
+**The receiver's drift** (:func:`receiver_drift`), where the fixes carry a velocity over
+ground: the fixes less their own velocity integrated (trapezoids between fixes) leave the
+fixes' error, white ``w`` plus a wandering ``b``, and the integrated velocity noise. The
+variance of that residual's change over a lag ``T``, per axis (its structure function),
+is then::
+
+    D(T) = A + 2 s_b^2 (1 - exp(-T / tau)) + s_v^2 dt T
+
+``A`` the white part (``2 s_w^2``), ``s_b`` and ``tau`` the drift's size and correlation
+time (a first-order Gauss-Markov error), ``s_v`` the velocity's white noise (identified
+above) and ``dt`` the fixes' interval. ``A``, ``s_b`` and ``tau`` are fitted on lags from
+one fix to a quarter of the log, in logarithms, each lag weighted by the square root of
+the independent spans it holds. What the increment filters need is the drift's rate of
+change ``2 s_b^2 / tau`` (m^2/s: algorithms.md §2.2), better determined by a short log
+than ``s_b`` and ``tau`` apart; with the fixes' reported accuracy ``h`` and the
+``drift_share`` it gives, the config's ``drift_tau_s = 2 drift_share h^2 / rate`` makes
+the filter's rate the measured one.
 """
 
 from __future__ import annotations
@@ -34,6 +52,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.optimize import least_squares
 
 MIN_TRIPLES = 50
 """Least evenly spaced triples of samples for a figure."""
@@ -58,6 +77,14 @@ SIGNAL_RATIO_MAX = 1.3
 motion is taken to leak into them."""
 MAD_TO_STD = 1.4826
 """Normal one-sigma per median absolute deviation."""
+DRIFT_MIN_S = 300.0
+"""Shortest stretch of fixes with a velocity (s) whose drift is fitted."""
+DRIFT_LAGS = 24
+"""Lags of the structure function, on a geometric grid from one fix to a quarter of the
+log."""
+DRIFT_TAU_RANGE_S = (10.0, 3600.0)
+"""The drift's correlation time is fitted from the first (a faster wander is the white
+noise's business), and the ``drift_tau_s`` written is kept within both (s)."""
 
 
 def _robust_std(x: np.ndarray) -> float:
@@ -135,11 +162,83 @@ def _axes(rows, cols: tuple[int, ...]) -> dict | None:
             "samples": min(p["samples"] for p in per), "white": all(p["white"] for p in per)}
 
 
+def _segments(t: np.ndarray) -> list[np.ndarray]:
+    """Index runs of samples closer than :data:`MAX_GAP_S`, each longer than
+    :data:`DRIFT_MIN_S`."""
+    cut = np.flatnonzero((np.diff(t) <= 0) | (np.diff(t) >= MAX_GAP_S)) + 1
+    return [k for k in np.split(np.arange(len(t)), cut)
+            if len(k) > 2 and t[k[-1]] - t[k[0]] >= DRIFT_MIN_S]
+
+
+def receiver_drift(fixes, velocity, velocity_std: float) -> dict | None:
+    """The wandering part of the fixes' error (module docstring): ``rate_m2_per_s`` (``2
+    s_b^2 / tau`` per axis), ``std`` (``s_b``, m), ``tau_s``, ``white_std`` (``sqrt(A /
+    2)``, m), ``span_s`` (the stretches fitted); None without :data:`DRIFT_MIN_S` of
+    fixes with a velocity, or when the fit fails. ``fixes`` are ``(t, north, east)``,
+    ``velocity`` ``(t, v_north, v_east)`` rows at the same times."""
+    at = {float(r[0]): r for r in fixes}
+    rows = [(t, at[float(t)][1], at[float(t)][2], vn, ve) for t, vn, ve in velocity
+            if float(t) in at]
+    if len(rows) < MIN_TRIPLES:
+        return None
+    a = np.asarray(rows, float)
+    a = a[np.all(np.isfinite(a), axis=1)]
+    t = a[:, 0]
+    segs = _segments(t)
+    if not segs:
+        return None
+    dt = float(np.median(np.diff(t)))
+    longest = max(len(k) for k in segs)
+    lags = np.unique(np.round(np.geomspace(1, max(longest // 4, 2), DRIFT_LAGS)).astype(int))
+    res = []
+    for k in segs:
+        tk = t[k]
+        v = a[k, 3:5]
+        integral = np.vstack([np.zeros(2), np.cumsum(0.5 * (v[1:] + v[:-1])
+                                                     * np.diff(tk)[:, None], axis=0)])
+        res.append(a[k, 1:3] - integral)
+    D, w, T = [], [], []
+    n_all = sum(len(k) for k in segs)
+    for m in lags:
+        d = [r[m:] - r[:-m] for r in res if len(r) > m]
+        if not d:
+            continue
+        d = np.vstack(d)
+        D.append(float(np.mean([_robust_std(d[:, i]) ** 2 for i in (0, 1)])))
+        w.append(math.sqrt(n_all / m))
+        T.append(m * dt)
+    if len(T) < 4:
+        return None
+    D_, w_, T_ = np.array(D), np.array(w), np.array(T)
+    c_v = velocity_std ** 2 * dt
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        model = math.exp(p[0]) + math.exp(p[1]) * -np.expm1(-T_ / math.exp(p[2])) + c_v * T_
+        return w_ * (np.log(model) - np.log(D_))
+
+    lo = [math.log(1e-8), math.log(1e-8), math.log(DRIFT_TAU_RANGE_S[0])]
+    hi = [math.log(1e4), math.log(1e4), math.log(1e6)]
+    start = np.clip([math.log(max(D_[0], 1e-8)), math.log(max(D_[-1] - D_[0], 1e-6)),
+                     math.log(T_[len(T_) // 2])], lo, hi)
+    try:
+        fit = least_squares(residual, start, bounds=(lo, hi))
+    except (ValueError, FloatingPointError):
+        return None
+    A, two_sb2, tau = (math.exp(x) for x in fit.x)
+    if not (fit.success and all(math.isfinite(x) for x in (A, two_sb2, tau))):
+        return None
+    return {"rate_m2_per_s": two_sb2 / tau, "std": math.sqrt(0.5 * two_sb2), "tau_s": tau,
+            "white_std": math.sqrt(0.5 * A), "span_s": float(sum(t[k[-1]] - t[k[0]]
+                                                                   for k in segs))}
+
+
 def identify(raw: dict) -> dict:
     """Every channel's white noise from the log's measurements (``Dataset.raw``):
     ``gnss_position`` (m per axis), ``gnss_velocity`` (m/s per axis), ``compass`` (rad),
-    ``dvl`` (m/s per axis), each with its method and checks; ``gnss_drift_share`` where
-    the fixes report their accuracy. Channels the log lacks are left out."""
+    ``dvl`` (m/s per axis), each with its method and checks; the position's
+    ``drift_share`` where the fixes report their accuracy, its ``drift`` where they carry
+    a velocity (:func:`receiver_drift`) and, with both, the ``drift_tau_s`` that gives the
+    filter the measured rate. Channels the log lacks are left out."""
     out: dict = {}
     pos = _axes(raw.get("fixes") or [], (1, 2))
     if pos is not None:
@@ -166,6 +265,17 @@ def identify(raw: dict) -> dict:
         h_acc = float(np.median(acc))
         out["gnss_position"]["reported_std"] = h_acc
         out["gnss_position"]["drift_share"] = max(0.0, 1.0 - pos["std"] ** 2 / h_acc ** 2)
+    if pos is not None and vel is not None:
+        drift = receiver_drift(raw.get("fixes") or [], raw.get("gnss_velocity") or [],
+                               vel["std"])
+        if drift is not None:
+            out["gnss_position"]["drift"] = drift
+            share = out["gnss_position"].get("drift_share", 0.0)
+            if share > 0.0 and drift["rate_m2_per_s"] > 0.0:
+                lo, hi = DRIFT_TAU_RANGE_S
+                tau = 2.0 * share * out["gnss_position"]["reported_std"] ** 2 \
+                    / drift["rate_m2_per_s"]
+                out["gnss_position"]["drift_tau_s"] = min(max(tau, lo), hi)
     for v in out.values():
         v["method"] = "second differences (robust), white-noise checked"
     return out

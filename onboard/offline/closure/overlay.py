@@ -243,7 +243,9 @@ def sensor_noise(doc: dict, cfg: Config) -> tuple[dict[str, dict[str, Any]], lis
     (``doc["sensor_noise"]``, :mod:`onboard.offline.closure.noise`): a channel whose
     noise is not white (a filtered output) is noted, not written. Fixes that report
     their accuracy keep it, and the overlay writes the share of it that wanders
-    (``drift_share``) instead of ``position_std_m``."""
+    (``drift_share``) instead of ``position_std_m``, with the correlation time that gives
+    the drift's measured rate of change (``drift_tau_s``) where the fixes carry a
+    velocity."""
     from onboard.offline.closure.noise import CONFIG_KEYS
 
     found = doc.get("sensor_noise") or {}
@@ -262,6 +264,13 @@ def sensor_noise(doc: dict, cfg: Config) -> tuple[dict[str, dict[str, Any]], lis
             tables.setdefault(table, {})["drift_share"] = share
             notes.append(line + f"; the fixes report {fig['reported_std']:.3g} m: "
                          f"drift_share {share}")
+            if share > 0.0 and "drift_tau_s" in fig:
+                tau = float(f"{float(fig['drift_tau_s']):.3g}")
+                tables[table]["drift_tau_s"] = tau
+                notes.append(f"gnss_position: the drift changes by "
+                             f"{fig['drift']['rate_m2_per_s']:.3g} m^2/s per axis (the "
+                             f"fixes against their own velocity, "
+                             f"{fig['drift']['span_s']:.0f} s): drift_tau_s {tau:g}")
             continue
         tables.setdefault(table, {})[key] = float(f"{std:.3g}")
         notes.append(line)
