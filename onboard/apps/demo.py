@@ -116,7 +116,8 @@ def with_sensor_noise(base: Config, sensors: Any) -> Config:
     """``base`` with its ``[sensors]`` GNSS, IMU and compass noise and rates those of the
     simulator's sensor suite ``sensors`` (``sitl.sensors.SensorSuiteConfig``; a sensor it
     lacks keeps the config's figures): the GNSS position one-sigma is the white and the
-    drift part together, ``drift_share`` the drift's share of its variance."""
+    drift part together, ``drift_share`` the drift's share of its variance and
+    ``drift_tau_s`` its correlation time."""
     s = base.sensors
     gnss, imu, compass = s.gnss, s.imu, s.compass
     if sensors.gnss is not None:
@@ -125,7 +126,7 @@ def with_sensor_noise(base: Config, sensors: Any) -> Config:
         share = min(MAX_DRIFT_SHARE, (g.drift_std_m / total) ** 2) if total > 0 else 0.0
         gnss = msgspec.structs.replace(
             gnss, position_std_m=total, velocity_std_mps=g.velocity_std_mps,
-            rate_hz=g.rate_hz, drift_share=share)
+            rate_hz=g.rate_hz, drift_share=share, drift_tau_s=g.drift_tau_s)
     if sensors.imu is not None:
         i = sensors.imu
         imu = msgspec.structs.replace(imu, accel_std_mps2=i.accel_noise_std,
