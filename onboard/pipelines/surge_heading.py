@@ -203,8 +203,8 @@ class SurgeHeadingPipeline(PipelineDefaults):
         ``[sensors]`` noise, unless ``cfg`` sets its own; ``gnss_drift_share``: the
         slowly wandering share of a fix's noise variance (``[sensors.gnss]
         drift_share``), left out of the increments' noise but for its change over a step,
-        of correlation time ``gnss_drift_tau_s`` (``drift_tau_s``); ``factory`` builds each axis filter with its input
-        model, ``retune`` switches its measurement set."""
+        of correlation time ``gnss_drift_tau_s`` (``drift_tau_s``); ``factory`` builds
+        each axis filter with its input model, ``retune`` switches its measurement set."""
         if not 0.0 < cfg.gnss_accuracy_min_m <= cfg.gnss_accuracy_max_m:
             raise ValueError(f"[pipelines.{name}] needs 0 < gnss_accuracy_min_m <= "
                              f"gnss_accuracy_max_m, got {cfg.gnss_accuracy_min_m}, "

@@ -52,6 +52,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import least_squares
 
 MIN_TRIPLES = 50
@@ -190,13 +191,8 @@ def receiver_drift(fixes, velocity, velocity_std: float) -> dict | None:
     dt = float(np.median(np.diff(t)))
     longest = max(len(k) for k in segs)
     lags = np.unique(np.round(np.geomspace(1, max(longest // 4, 2), DRIFT_LAGS)).astype(int))
-    res = []
-    for k in segs:
-        tk = t[k]
-        v = a[k, 3:5]
-        integral = np.vstack([np.zeros(2), np.cumsum(0.5 * (v[1:] + v[:-1])
-                                                     * np.diff(tk)[:, None], axis=0)])
-        res.append(a[k, 1:3] - integral)
+    res = [a[k, 1:3] - cumulative_trapezoid(a[k, 3:5], t[k], axis=0, initial=0.0)
+           for k in segs]
     D, w, T = [], [], []
     n_all = sum(len(k) for k in segs)
     for m in lags:
