@@ -64,6 +64,32 @@ def test_a_timid_filter_is_not_judged_below_while_it_settles_but_is_once_settled
         NIS_SETTLE_S + NIS_SUSTAIN_BLOCKS * block_s - 0.1, abs=0.2)
 
 
+def test_a_timid_nis_is_not_judged_while_slow_errors_hold_the_published_sigma() -> None:
+    # the filter's own NIS a third of a consistent one's, settled, while its published
+    # sigma is held by errors slower than the innovations show (the current's block-mean
+    # NIS above its rows' consistency factor): not judged below its band; the hold
+    # released for the last 60 s, the same innovations are warned there (negative
+    # control: never held, warned from the end of the settling)
+    from onboard.estimators.noise_learning import ChannelNoise
+
+    recs = _stream(0.33, NIS_SETTLE_S + 180.0)
+    held = {"now": True}
+    noise = ChannelNoise([])
+    noise.slow["velocity"] = lambda: held["now"]
+    alerts, m = _monitor(noise=noise)
+    m.innovations("current", [r for r in recs if r.t < NIS_SETTLE_S + 120.0])
+    assert _codes(alerts) == []
+    held["now"] = False
+    m.innovations("current", [r for r in recs if r.t >= NIS_SETTLE_S + 120.0])
+    (warning,) = [a for a in alerts if a.code == "nis_out_of_band"]
+    assert warning.t_start >= NIS_SETTLE_S + 120.0 + NIS_SUSTAIN_BLOCKS * NIS_BLOCK_UPDATES \
+        / RATE_HZ - 0.2
+    alerts, m = _monitor(noise=ChannelNoise([]))
+    m.innovations("current", recs)
+    (warning,) = [a for a in alerts if a.code == "nis_out_of_band"]
+    assert warning.t_start < NIS_SETTLE_S + 60.0
+
+
 def test_an_overconfident_filter_is_judged_from_its_start() -> None:
     # three times its NIS within the first minute: overconfidence while converging is a
     # miss, warned at the end of the NIS_SUSTAIN_BLOCKS-th block (30 s)

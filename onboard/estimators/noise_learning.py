@@ -390,6 +390,10 @@ class ChannelNoise:
         self.published = dict(published or {})
         """Per channel, the variance factor its pipeline's published sigma applies
         (algorithms.md §9.1), for the channels whose factor a published sigma takes."""
+        self.slow: dict[str, Callable[[], bool]] = {}
+        """Per channel, whether the published sigma is held up by errors slower than the
+        channel's innovations show (§9.1: the current's block-mean NIS above the factor
+        its innovations give), for the channels whose published sigma has such a floor."""
         self.processes = dict(processes or {})
         """Per channel, the learned scale of the process noise of the filter it updates
         (algorithms.md §9.3), for the channels that learn one."""
@@ -442,3 +446,11 @@ class ChannelNoise:
         is scaled by."""
         factor = self.published.get(channel)
         return 1.0 if factor is None else factor()
+
+    def slow_error_holds(self, channel: str) -> bool:
+        """Whether the published sigma of what ``channel`` measures is held up by errors
+        slower than its innovations show: they are then small against that sigma without
+        the sigma being larger than the errors (the integrity monitor does not judge them
+        below their band, docs/integrity.md)."""
+        holds = self.slow.get(channel)
+        return holds is not None and holds()

@@ -31,7 +31,10 @@ published records and the innovation records, and runs these checks:
   ``nis_out_of_band`` after :data:`NIS_SUSTAIN_BLOCKS` blocks in a row outside it on the
   same side (too large: sigmas too small; too small: sigmas too large); below the band,
   not judged within :data:`NIS_SETTLE_S` of the channel's filter's start or restart (a
-  filter converging from a wide prior; above it is judged from the start). A channel whose
+  filter converging from a wide prior; above it is judged from the start), nor while the
+  published sigma of what the channel measures is held up by errors slower than its
+  innovations show (``ChannelNoise.slow_error_holds``: the current's block-mean NIS above
+  its velocity rows' own consistency factor, algorithms.md §9.1). A channel whose
   pipeline learns its measurement noise (the pipeline's ``noise``,
   :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
   is learned: an NIS out of band first drives the adaptation, and the warning says what
@@ -836,6 +839,11 @@ class NisCheck:
         the same side."""
         return abs(self.outside) >= NIS_SUSTAIN_BLOCKS
 
+    @property
+    def judges_next(self) -> bool:
+        """Whether the next :meth:`add` ends a block (and so judges it)."""
+        return self._n + 1 >= NIS_BLOCK_UPDATES
+
     def add(self, nis: float, settling: bool = False) -> bool:
         """One accepted update's NIS; ``settling``: the filter still settles from its
         prior (a block that ends so is not judged below its band). Returns
@@ -1559,7 +1567,9 @@ class IntegrityMonitor:
                 check.t_start = rec.t
             was = self._failing(pipeline, rec.channel, check)
             check.add(nis / self._published_factor(pipeline, rec.channel),
-                      rec.t - check.t_start < NIS_SETTLE_S)
+                      check.judges_next and (
+                          rec.t - check.t_start < NIS_SETTLE_S
+                          or self._slow_error_holds(pipeline, rec.channel)))
             if not check._n:  # a block was judged: its mean into the run's
                 self._run_mean(pipeline, rec.channel, check, rec.t)
             now = (self._failing(pipeline, rec.channel, check)
@@ -1644,6 +1654,14 @@ class IntegrityMonitor:
         noise = getattr(self.watched.get(pipeline), "noise", None)
         published = getattr(noise, "published_factor", None)
         return published(channel) if published is not None else 1.0
+
+    def _slow_error_holds(self, pipeline: str, channel: str) -> bool:
+        """Whether the published sigma of what ``channel`` measures is held up by errors
+        slower than its innovations show (``ChannelNoise.slow_error_holds``): its NIS is
+        then not judged below its band."""
+        noise = getattr(self.watched.get(pipeline), "noise", None)
+        holds = getattr(noise, "slow_error_holds", None)
+        return holds is not None and holds(channel)
 
     def _adapted(self, pipeline: str, channel: str) -> bool:
         """Whether the channel's NIS may be judged: its noise is not learned, has had its

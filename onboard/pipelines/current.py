@@ -196,6 +196,7 @@ class CurrentPipeline(PipelineDefaults):
         # a partial of the class's function, not a method bound to this object: a copy
         # of the pipeline (the GNSS latency's fork) then takes its own copy's factor
         self.noise.published[CHANNELS["earth"]] = partial(type(self).published_factor, self)
+        self.noise.slow[CHANNELS["earth"]] = partial(type(self).slow_error_holds, self)
         self.events: list[str] = []
         """Human-readable events not yet taken (:meth:`take_events`): a restored current
         discarded or confirmed, a start contradicted."""
@@ -632,6 +633,12 @@ class CurrentPipeline(PipelineDefaults):
         (:meth:`_published_std`): the velocity-over-ground rows' consistency factor, at
         least the filter's block-mean NIS per dimension, at most 1."""
         return min(max(self.kf.noise["earth"].published_factor, self.kf.nis_avg), 1.0)
+
+    def slow_error_holds(self) -> bool:
+        """Whether the published current's sigma is held by the filter's block-mean NIS
+        (an error slower than a block, which the velocity-over-ground rows' innovations
+        do not show one by one) above their own consistency factor."""
+        return self.kf.nis_avg > self.kf.noise["earth"].published_factor
 
     def _published_std(self, std: list[float]) -> list[float]:
         """The joint filter's current one-sigma ``std`` (m/s) as published: times the
