@@ -58,7 +58,9 @@ What is published (:class:`Consistency`, algorithms.md §9.1): where the filter 
 declared noise and its innovations are white and smaller than their ``S``, a sigma
 published from the filter is scaled by their windowed mean ratio ``z^T z / tr(S)``
 (:attr:`NoiseScale.published_factor`, at most 1, never below what the learned noise
-supports), apart from the gain: the estimates, the gain and ``P`` are unchanged.
+supports), or, where the measurement noise is taken as the filter's, by the factor of the
+forecast's part of ``S`` alone (:meth:`Consistency.forecast_factor`: the current's),
+apart from the gain: the estimates, the gain and ``P`` are unchanged.
 
 The process noise (:class:`ProcessScale`, algorithms.md §9.3): where a channel's
 innovations are smaller than the forecast's share alone (the noise not identified), a
@@ -119,6 +121,10 @@ standard errors of a :data:`WINDOW`-update mean of white innovations (``1 / sqrt
 their first minute); the BlueROV2's INS velocity rows stay at -0.26..-0.42, where the
 current's error is an external push that no innovation sees (fault-dvl-lock-loss-rov,
 live: 0.19 m/s at 2.7 published sigmas with the factor, 1.3 without)."""
+SHARE_MIN = 0.1
+"""A forecast's factor is taken only while the forecast is at least this share of ``S``:
+below it the innovations hardly see the forecast (the factor's error is the ratio's over
+the share: 0.07 / 0.1, for 200 white updates of 2 degrees of freedom)."""
 CAP = 9.0
 """An innovation enters a sample at most as ``z^T z = CAP tr(S)``: 3 sigma."""
 
@@ -151,18 +157,21 @@ class Consistency:
         n: updates taken (capped at :data:`WINDOW`).
         ratio: the windowed mean of ``r_k``.
         lag: the windowed mean of ``z_k . z_{k-1} / sqrt(tr(S_k) tr(S_{k-1}))``.
+        share: the windowed mean of the forecast's share of ``S``,
+            ``s_k = tr(S_k - R_k) / tr(S_k)``.
     """
 
-    __slots__ = ("n", "ratio", "lag", "_prev")
+    __slots__ = ("n", "ratio", "lag", "share", "_prev")
 
     def __init__(self) -> None:
         self.n = 0
         self.ratio = 1.0
         self.lag = 0.0
+        self.share = 1.0
         self._prev: np.ndarray | float | None = None
 
-    def observe(self, z: float | np.ndarray, S_trace: float) -> None:
-        """One accepted update: innovation ``z`` and ``tr(S)`` as made."""
+    def observe(self, z: float | np.ndarray, S_trace: float, R_trace: float = 0.0) -> None:
+        """One accepted update: innovation ``z``, ``tr(S)`` and ``tr(R)`` as made."""
         power = _dot(z, z)
         if not (S_trace > 0.0 and math.isfinite(power)):
             self._prev = None
@@ -175,6 +184,7 @@ class Consistency:
         gain = 1.0 / self.n
         self.ratio += gain * (min(power / S_trace, CAP) - self.ratio)
         self.lag += gain * (max(-CAP, min(lag, CAP)) - self.lag)
+        self.share += gain * (max(S_trace - R_trace, 0.0) / S_trace - self.share)
 
     @property
     def lag1(self) -> float:
@@ -185,10 +195,25 @@ class Consistency:
         """The variance factor of the published sigma: ``ratio`` within ``[floor, 1]``
         once :data:`MIN_UPDATES` updates are in and the innovations are white (lag-1
         between :data:`PUBLISHED_LAG1_MIN` and :data:`WHITE_LAG1_MAX`); else 1."""
-        if (self.n < MIN_UPDATES
-                or not PUBLISHED_LAG1_MIN <= self.lag1 <= WHITE_LAG1_MAX):
+        if not self.white:
             return 1.0
         return min(max(self.ratio, floor), 1.0)
+
+    def forecast_factor(self, floor: float) -> float:
+        """The variance factor of the forecast's part of ``S`` (``H P_f H^T``), the
+        measurement noise taken as the filter's: ``E[r_k] = (1 - s) + a s`` gives
+        ``a = 1 - (1 - ratio) / share``, within ``[floor, 1]``, under the conditions of
+        :meth:`factor` and while the forecast is at least :data:`SHARE_MIN` of ``S``;
+        else 1."""
+        if not self.white or self.share < SHARE_MIN:
+            return 1.0
+        return min(max(1.0 - (1.0 - self.ratio) / self.share, floor), 1.0)
+
+    @property
+    def white(self) -> bool:
+        """Whether :data:`MIN_UPDATES` updates are in and the innovations are white (lag-1
+        between :data:`PUBLISHED_LAG1_MIN` and :data:`WHITE_LAG1_MAX`)."""
+        return self.n >= MIN_UPDATES and PUBLISHED_LAG1_MIN <= self.lag1 <= WHITE_LAG1_MAX
 
 
 @mypyc_attr(allow_interpreted_subclasses=True)
@@ -228,7 +253,7 @@ class NoiseScale:
         """One accepted update: the innovation ``z`` (a number or a vector), ``S_trace =
         tr(S)`` and ``R_trace = tr(R)`` of the update as made (``R`` already scaled by
         :attr:`applied`)."""
-        self.consistency.observe(z, S_trace)
+        self.consistency.observe(z, S_trace, R_trace)
         R0 = R_trace / self.applied
         power = _dot(z, z)
         forecast = S_trace - R_trace

@@ -88,7 +88,7 @@ from onboard.estimators.model_identification import (
     VelocityRls,
     floor_along_track,
 )
-from onboard.estimators.noise_learning import ChannelNoise, NoiseScale
+from onboard.estimators.noise_learning import FLOOR, ChannelNoise, NoiseScale
 from onboard.estimators.restored_current import RestoredCurrentCheck
 from onboard.estimators.vehicle_models import RegressionModel, kind_for_class
 from onboard.pipelines.base import LateSampleHold, PipelineDefaults, unused_measurement
@@ -195,7 +195,7 @@ class CurrentPipeline(PipelineDefaults):
         the published current's sigma takes from the velocity over ground (§9.1)."""
         # a partial of the class's function, not a method bound to this object: a copy
         # of the pipeline (the GNSS latency's fork) then takes its own copy's factor
-        self.noise.published[CHANNELS["earth"]] = partial(type(self).published_factor, self)
+        self.noise.published[CHANNELS["earth"]] = partial(type(self).innovation_factor, self)
         self.noise.slow[CHANNELS["earth"]] = partial(type(self).slow_error_holds, self)
         self.events: list[str] = []
         """Human-readable events not yet taken (:meth:`take_events`): a restored current
@@ -630,20 +630,36 @@ class CurrentPipeline(PipelineDefaults):
 
     def published_factor(self) -> float:
         """The variance factor of the joint filter's published current sigma
-        (:meth:`_published_std`): the velocity-over-ground rows' consistency factor, at
-        least the filter's block-mean NIS per dimension, at most 1."""
-        return min(max(self.kf.noise["earth"].published_factor, self.kf.nis_avg), 1.0)
+        (:meth:`_published_std`): the factor of the velocity-over-ground rows' forecast
+        their innovations give, at least the filter's block-mean NIS per dimension, at
+        most 1."""
+        return min(max(self._rows_factor(), self.kf.nis_avg), 1.0)
+
+    def innovation_factor(self) -> float:
+        """The variance factor the published current's sigma implies for the
+        velocity-over-ground rows' innovations (what the integrity monitor judges them
+        against): their measurement noise as the filter's and their forecast times
+        :meth:`published_factor`, ``(1 - s) + s f`` with ``s`` the forecast's windowed
+        share of ``S``."""
+        s = self.kf.noise["earth"].consistency.share
+        return (1.0 - s) + s * self.published_factor()
+
+    def _rows_factor(self) -> float:
+        """The variance factor of the velocity-over-ground rows' forecast their
+        innovations give (:meth:`.Consistency.forecast_factor`), the measurement noise
+        taken as the filter's."""
+        return self.kf.noise["earth"].consistency.forecast_factor(FLOOR)
 
     def slow_error_holds(self) -> bool:
         """Whether the published current's sigma is held by the filter's block-mean NIS
         (an error slower than a block, which the velocity-over-ground rows' innovations
-        do not show one by one) above their own consistency factor."""
-        return self.kf.nis_avg > self.kf.noise["earth"].published_factor
+        do not show one by one) above the factor their own innovations give."""
+        return self.kf.nis_avg > self._rows_factor()
 
     def _published_std(self, std: list[float]) -> list[float]:
         """The joint filter's current one-sigma ``std`` (m/s) as published: times the
-        square root of the velocity-over-ground rows' consistency factor, apart from the
-        gain (algorithms.md §9.1; :attr:`.NoiseScale.published_factor`), at least the
+        square root of the factor of the velocity-over-ground rows' forecast, apart from
+        the gain (algorithms.md §9.1; :meth:`.Consistency.forecast_factor`), at least the
         filter's block-mean NIS per dimension (``kf.nis_avg``: an error slower than a
         block, a current that changes, survives the block mean), never above ``std``.
         Whether a component is known is decided on ``std`` itself, so the factor changes
