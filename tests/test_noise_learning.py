@@ -497,3 +497,27 @@ def test_a_clean_boats_current_is_not_warned_while_its_slow_error_holds_the_sigm
     monkeypatch.setattr(CurrentPipeline, "slow_error_holds", lambda self: False)
     warnings, _ = _current_warnings("noise-boat-1x", 3, 240.0)
     assert len(warnings) == 1 and "current velocity: mean NIS" in warnings[0], warnings
+
+
+def test_a_diving_vehicles_down_keeps_the_rows_common_scale() -> None:
+    """The torpedo AUV (``noise-auv-1x``, seed 2, 200 s): its horizontal current takes the
+    velocity rows' forecast factor (0.2-0.3 here), its down their common scale (1 here):
+    a diving vehicle's down errs by its heave prior's bias, which no row shows, and the
+    forecast's factor narrowed the fleet's AUVs' own down to a third of that bias
+    (algorithms.md §9.1)."""
+    from onboard.pipelines import current as current_mod
+
+    cfg = config_mod.load("torpedo-auv")
+    pipe = current_mod.create(cfg)
+    assert pipe is not None
+    eng = Engine(cfg, pipelines=[pipe])
+    apart = 0
+    for t, records, _ in engine_ticks(eng, simulate("noise-auv-1x", duration=200.0, seed=2)):
+        v = {r.pipeline: r.values for r in records}.get("current", {})
+        if "std_down" not in v or t < 60.0:
+            continue
+        f_h, f_d = pipe.published_factor(), pipe.down_factor()
+        own = math.sqrt(pipe.kf.current_cov()[2, 2])
+        assert v["std_down"] == pytest.approx(min(own, own * math.sqrt(f_d)), rel=1e-9)
+        apart += f_h < 0.9 * f_d
+    assert apart > 1000   # the two factors differ on most ticks (measured 0.22-0.37 vs 1)

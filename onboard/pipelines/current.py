@@ -665,14 +665,26 @@ class CurrentPipeline(PipelineDefaults):
         Whether a component is known is decided on ``std`` itself, so the factor changes
         sigmas only, and of the known components only (an unknown one is published with
         ``std``, above ``unknown_above_std_mps``). The along-track floor of a model without
-        surge is kept."""
-        f = self.published_factor()
-        if f >= 1.0:
+        surge is kept. The down takes the rows' common scale instead
+        (:meth:`down_factor`)."""
+        f = [self.published_factor()] * 2 + [self.down_factor()] * (len(std) - 2)
+        if min(f) >= 1.0:
             return std
         if self._surge_unobservable():   # floored after the factor, never above ``std``
+            d = np.sqrt(f)
             return [min(a, b) for a, b in zip(std, floor_along_track(
-                f * self.kf.current_cov(), self.yaw or 0.0, self.cfg.initial_current_std_mps))]
-        return [x * math.sqrt(f) for x in std]
+                self.kf.current_cov() * np.outer(d, d), self.yaw or 0.0,
+                self.cfg.initial_current_std_mps))]
+        return [x * math.sqrt(k) for x, k in zip(std, f)]
+
+    def down_factor(self) -> float:
+        """The variance factor of the published down current's sigma: the
+        velocity-over-ground rows' one common scale of ``S`` (:attr:`.NoiseScale.
+        published_factor`), at least the block-mean NIS, at most 1. Not their forecast's
+        factor: a diving vehicle's down errs by its through-water heave's prior
+        (``w_r``), a bias no row shows, which that factor, small where the horizontal
+        forecast is timid, would claim known (docs/fleet.md, algorithms.md §9.1)."""
+        return min(max(self.kf.noise["earth"].published_factor, self.kf.nis_avg), 1.0)
 
     def innovations(self) -> list[Innovation]:
         """The records of the measurement updates since the last call (channels in the
