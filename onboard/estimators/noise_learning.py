@@ -171,7 +171,8 @@ class Consistency:
         self._prev: np.ndarray | float | None = None
 
     def observe(self, z: float | np.ndarray, S_trace: float, R_trace: float = 0.0) -> None:
-        """One accepted update: innovation ``z``, ``tr(S)`` and ``tr(R)`` as made."""
+        """One accepted update: innovation ``z``, ``tr(S)`` and ``tr(R)`` as made (``R``
+        not given: the forecast's share taken as 1, its factor the common scale's)."""
         power = _dot(z, z)
         if not (S_trace > 0.0 and math.isfinite(power)):
             self._prev = None
@@ -413,8 +414,10 @@ class ChannelNoise:
                  processes: Mapping[str, ProcessScale] | None = None) -> None:
         self.scales = {s.channel: s for s in scales}
         self.published = dict(published or {})
-        """Per channel, the variance factor its pipeline's published sigma applies
-        (algorithms.md §9.1), for the channels whose factor a published sigma takes."""
+        """Per channel, the variance factor of its ``S`` that its pipeline's published
+        sigma implies (algorithms.md §9.1: the common scale itself, or for the current
+        ``(1 - s) + s a`` of its forecast's factor ``a``), for the channels whose factor a
+        published sigma takes."""
         self.slow: dict[str, Callable[[], bool]] = {}
         """Per channel, whether the published sigma is held up by errors slower than the
         channel's innovations show (§9.1: the current's block-mean NIS above the factor

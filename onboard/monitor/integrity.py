@@ -34,7 +34,7 @@ published records and the innovation records, and runs these checks:
   filter converging from a wide prior; above it is judged from the start), nor while the
   published sigma of what the channel measures is held up by errors slower than its
   innovations show (``ChannelNoise.slow_error_holds``: the current's block-mean NIS above
-  its velocity rows' own consistency factor, algorithms.md §9.1). A channel whose
+  the factor its velocity rows' innovations give, algorithms.md §9.1). A channel whose
   pipeline learns its measurement noise (the pipeline's ``noise``,
   :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
   is learned: an NIS out of band first drives the adaptation, and the warning says what

@@ -191,8 +191,9 @@ class CurrentPipeline(PipelineDefaults):
         self.identification = _identification(cfg, self.model)
         self.kf = _joint_filter(cfg, self.identification)
         self.noise = _learned_noise(self.kf, cfg, sensors)
-        """The learned noise of the velocity channels (algorithms.md §9), and the factor
-        the published current's sigma takes from the velocity over ground (§9.1)."""
+        """The learned noise of the velocity channels (algorithms.md §9), what the
+        published current's sigma implies for the velocity-over-ground rows and whether
+        its slow error holds it (§9.1)."""
         # a partial of the class's function, not a method bound to this object: a copy
         # of the pipeline (the GNSS latency's fork) then takes its own copy's factor
         self.noise.published[CHANNELS["earth"]] = partial(type(self).innovation_factor, self)
