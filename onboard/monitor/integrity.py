@@ -844,10 +844,10 @@ class NisCheck:
         """Whether the next :meth:`add` ends a block (and so judges it)."""
         return self._n + 1 >= NIS_BLOCK_UPDATES
 
-    def add(self, nis: float, settling: bool = False) -> bool:
-        """One accepted update's NIS; ``settling``: the filter still settles from its
-        prior (a block that ends so is not judged below its band). Returns
-        :attr:`failing`."""
+    def add(self, nis: float, unjudged_below: bool = False) -> bool:
+        """One accepted update's NIS; ``unjudged_below``: a block that ends with it is not
+        judged below its band (the filter still settles from its prior, or slow errors
+        hold its published sigma: module docstring). Returns :attr:`failing`."""
         if self._n:
             self._sxy += nis * self._prev
         else:
@@ -857,11 +857,11 @@ class NisCheck:
         self._sxx += nis * nis
         self._prev = nis
         if self._n >= NIS_BLOCK_UPDATES:
-            self._judge(settling)
+            self._judge(unjudged_below)
         return abs(self.outside) >= NIS_SUSTAIN_BLOCKS
 
-    def _judge(self, settling: bool = False) -> None:
-        """The block's mean against its band (below it not judged while ``settling``:
+    def _judge(self, unjudged_below: bool = False) -> None:
+        """The block's mean against its band (below it not judged with ``unjudged_below``:
         such a block neither counts towards :data:`NIS_SUSTAIN_BLOCKS` nor extends a run
         below); the next block starts."""
         n, sx = self._n, self._sx
@@ -873,7 +873,7 @@ class NisCheck:
         self.rho = self._sc / self._sv if self._sv > 0.0 else 0.0
         self.band = lo, hi = nis_band(self.dof, effective_count(n, self.rho))
         self.mean = m
-        side = 1 if m > hi else -1 if m < lo and not settling else 0
+        side = 1 if m > hi else -1 if m < lo and not unjudged_below else 0
         self.outside = (self.outside + side if side and self.outside * side >= 0
                         else side)
         self._reset()

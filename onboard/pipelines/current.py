@@ -668,7 +668,9 @@ class CurrentPipeline(PipelineDefaults):
         ``std``, above ``unknown_above_std_mps``). The along-track floor of a model without
         surge is kept. The down takes the rows' common scale instead
         (:meth:`down_factor`)."""
-        f = [self.published_factor()] * 2 + [self.down_factor()] * (len(std) - 2)
+        f = [self.published_factor()] * 2
+        if len(std) == 3:
+            f.append(self.down_factor())
         if min(f) >= 1.0:
             return std
         if self._surge_unobservable():   # floored after the factor, never above ``std``
