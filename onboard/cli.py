@@ -215,6 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(current.parquet, or the --out folder that holds it; "
                         "docs/batch.md), as if received live (repeatable; needs the "
                         "batch extra)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(handler="onboard.fleet.service:main")
 
     p = sub.add_parser("bench", help="performance figures")

@@ -57,6 +57,8 @@ def test_a_vdr_without_declination_has_an_empty_magnetic_field_and_a_wrong_check
     assert line == "$IIVDR,0.0,T,,M,0.19,N*" + nmea_checksum("IIVDR,0.0,T,,M,0.19,N") + "\r\n"
     msg = pynmeagps.NMEAReader.parse(line.encode(), validate=pynmeagps.VALCKSUM)
     assert msg.dirM == ""
+    # a set within 0.05 deg west of north reads 0.0, never 360.0 (the field is [0, 360))
+    assert vdr_sentence(set_drift(1.0, -1e-4)).startswith("$IIVDR,0.0,T,")
     bad = line.replace("0.19", "0.18")  # negative control: the checksum no longer matches
     with pytest.raises(pynmeagps.NMEAParseError):
         pynmeagps.NMEAReader.parse(bad.encode(), validate=pynmeagps.VALCKSUM)

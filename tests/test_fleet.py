@@ -207,17 +207,96 @@ def test_records_that_make_no_observation_are_counted_by_reason():
                 lon_deg=5.0, values={"north": 0.1, "east": 0.2},
                 std={"north": 0.02, "east": 0.02})
     cases = {"no_time": dict(utc=None), "no_position": dict(lat_deg=None),
+             "bad_time": dict(utc=5.0),       # a clock never set
+             "bad_position": dict(lat_deg=1.7e308),
              "no_current": dict(values={}),   # both withheld (flagged)
              "no_std": dict(std={}), "not_converged": dict(std={"north": 2.0, "east": 2.0}),
              "too_fast": dict(values={"north": 9.0, "east": 0.0})}
     for why, change in cases.items():
         assert observation(EstimateRecord(**{**base, **change})) == (None, why)
+    for change in (dict(utc=math.nan), dict(lat_deg=95.0), dict(lon_deg=500.0),
+                   dict(lat_deg=math.nan), dict(lat_deg=0.0, lon_deg=0.0)):
+        assert observation(EstimateRecord(**{**base, **change}))[1].startswith("bad_")
     assert observation(EstimateRecord(**base))[0] is not None
     # one component known (the other withheld as unknown, or its sigma not converged):
     # an observation of that component alone
     for change in (dict(values={"north": 0.1}), dict(std={"north": 0.02, "east": 2.0})):
         o, why = observation(EstimateRecord(**{**base, **change}))
         assert why == "" and (o.north, o.std_north, o.east, o.std_east) == (0.1, 0.02, None, None)
+
+
+def test_a_bad_record_is_left_out_by_reason_and_shapes_nothing():
+    """One record from any publisher can neither stop the service nor move its field: a
+    position out of range or never fixed, a time in milliseconds or far ahead of this
+    machine's clock, a record on another vehicle's key, a wrong encoding or schema, each
+    is counted by its reason and leaves the grid (its box, its time, its vehicles) as it
+    was. Negative control: the same records unchecked (as before) put the grid's time
+    at 1.8e12 s and its box 22 km wide."""
+    f = fleet("tidal_channel", seed=4, vehicles=3, duration_s=600.0, rate_hz=0.5)
+    enc = msgspec.json.Encoder()
+    now = UTC0 + 600.0
+    service = FleetService(clock=lambda: now)
+    for i in range(len(f.t)):
+        rec = f.record(i)
+        assert service.feed(enc.encode(rec), "application/json;onboard.Estimate.v2",
+                            f"onboard/{rec.vehicle}/est/current")
+    good = service.step(refit=True)
+    last = f.record(len(f.t) - 1)
+
+    def bad(**change):
+        return enc.encode(msgspec.structs.replace(last, **change))
+    v2, key = "application/json;onboard.Estimate.v2", f"onboard/{last.vehicle}/est/current"
+    for payload, enc_, key_, why in (
+            (bad(lat_deg=1.7e308), v2, key, "bad_position"),
+            (bad(lat_deg=95.0, lon_deg=500.0), v2, key, "bad_position"),
+            (bad(lat_deg=0.0, lon_deg=0.0), v2, key, "bad_position"),
+            (bad(utc=now * 1000.0), v2, key, "future"),
+            (bad(utc=1e300), v2, key, "future"),
+            (bad(lat_deg=43.3, position_std_m=500.0), v2, key, "position_uncertain"),
+            (bad(vehicle="v9"), v2, key, "vehicle_mismatch"),
+            (bad(), v2, "onboard/v9/est/current", "vehicle_mismatch"),
+            (bad(), "text/plain", key, "bad"), (bad(), "zenoh/bytes", key, "bad"),
+            (bad(schema=9), "application/json;onboard.Estimate.v2", key, "bad")):
+        before = service.left_out().get(why, 0)
+        assert not service.feed(payload, enc_, key_)
+        assert service.left_out()[why] == before + 1, why
+    after = service.step(refit=True)
+    assert (after.utc, after.spacing_m, len(after.cells)) == \
+        (good.utc, good.spacing_m, len(good.cells))
+    assert [v.vehicle for v in after.vehicles] == ["v0", "v1", "v2"]
+    # the service keeps taking the vehicles' records
+    assert service.feed(enc.encode(msgspec.structs.replace(last, utc=last.utc + 1.0)), v2, key)
+    # a record whose current is not known yet still says where its vehicle is
+    unknown = msgspec.structs.replace(last, vehicle="v3", values={}, utc=last.utc + 2.0)
+    assert not service.feed(enc.encode(unknown), v2, "onboard/v3/est/current")
+    assert "v3" in service.newest and service.left_out()["no_current"] == 1
+    # negative control: unchecked, the same two records move the grid's time and box
+    unchecked = FleetService()
+    for i in range(len(f.t)):
+        unchecked.feed(enc.encode(f.record(i)))
+    unchecked._note(msgspec.structs.replace(last, utc=now * 1000.0))
+    unchecked._note(msgspec.structs.replace(last, vehicle="v8", lat_deg=43.3))
+    control = unchecked.step(refit=True)
+    assert control.utc > 1e12 and control.spacing_m > 1000.0
+
+
+def test_the_grid_covers_the_box_of_its_vehicles():
+    """The grid's rows and columns cover the vehicles' box and its margin, centred on it,
+    in at most ``GRID_CELLS`` cells along its longer side."""
+    from onboard.fleet.field import Plane
+    from onboard.fleet.service import GRID_CELLS, GRID_MARGIN_M, grid_points
+
+    plane = Plane(43.1, 5.9)
+    lats, lons = zip(*(plane.to_latlon(n, e) for n, e in ((0.0, 0.0), (213.0, 1130.0))))
+    rows, cols, spacing = grid_points(plane, list(lats), list(lons))
+    north = [float(plane.to_ne(la, 5.9)[0]) for la in rows]
+    east = [float(plane.to_ne(43.1, lo)[1]) for lo in cols]
+    assert len(cols) == GRID_CELLS and len(rows) < GRID_CELLS
+    for centres, lo, hi in ((north, 0.0, 213.0), (east, 0.0, 1130.0)):
+        assert centres[0] - spacing / 2 <= lo - GRID_MARGIN_M + 1e-6
+        assert centres[-1] + spacing / 2 >= hi + GRID_MARGIN_M - 1e-6
+        assert np.allclose(np.diff(centres), spacing)
+        assert (centres[0] + centres[-1]) / 2 == pytest.approx((lo + hi) / 2, abs=1e-6)
 
 
 def test_a_record_of_one_component_informs_that_component_alone():
@@ -268,10 +347,15 @@ def test_a_place_far_from_every_vehicle_is_unknown():
 def test_the_query_parameters_are_checked():
     assert parse_query({"lat": "43.1", "lon": "-5.9", "utc": "1780000000"}) == \
         (43.1, -5.9, 1780000000.0)
+    assert parse_query({"lat": "-.5", "lon": "+1.", "utc": "1.78e9"}) == (-0.5, 1.0, 1.78e9)
     for bad, words in (({"lon": "1", "utc": "1"}, "lat is missing"),
                        ({"lat": "x", "lon": "1", "utc": "1"}, "not a number"),
                        ({"lat": "91", "lon": "1", "utc": "1"}, "out of range"),
-                       ({"lat": "1", "lon": "1", "utc": "nan"}, "out of range")):
+                       ({"lat": "1", "lon": "1", "utc": "1e400"}, "out of range"),
+                       ({"lat": "1", "lon": "1", "utc": "nan"}, "not a number"),
+                       ({"lat": "1_0", "lon": "1", "utc": "1"}, "not a number"),
+                       ({"lat": " 1", "lon": "1", "utc": "1"}, "not a number"),
+                       ({"lat": "1&lon=2&utc=3"}, "separates its parameters with ';'")):
         with pytest.raises(ValueError, match=words):
             parse_query(bad)
 

@@ -146,7 +146,8 @@ def test_a_file_that_is_not_a_batch_table_is_a_usage_error(tmp_path):
 @pytest.mark.integration
 def test_onboard_fleet_serves_a_batch_table_on_zenoh(survey, tmp_path):
     """The command: a peer listening on a port, the table's field answering a query
-    before any vehicle publishes, and its page drawing the vehicles' tracks."""
+    before any vehicle publishes, its page drawing the vehicles' tracks, and its MCAP
+    file finished when it is stopped as systemd stops it (SIGTERM)."""
     import urllib.request
 
     import zenoh
@@ -160,7 +161,8 @@ def test_onboard_fleet_serves_a_batch_table_on_zenoh(survey, tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     proc = subprocess.Popen([sys.executable, "-m", "onboard", "fleet", "--mode", "peer",
                              "--listen", endpoint, "--history", str(path), "--period", "0.5",
-                             "--web", "127.0.0.1:0"], stdout=subprocess.PIPE, text=True)
+                             "--web", "127.0.0.1:0", "--mcap", str(tmp_path / "field.mcap")],
+                            stdout=subprocess.PIPE, text=True)
     shore = None
     try:
         first = proc.stdout.readline()
@@ -186,7 +188,29 @@ def test_onboard_fleet_serves_a_batch_table_on_zenoh(survey, tmp_path):
         if shore is not None:
             shore.close()
         proc.terminate()
-        proc.wait(timeout=10.0)
+        rc = proc.wait(timeout=10.0)
+    assert rc == 0
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "field.mcap", "rb") as f:   # finished: its summary is there
+        stats = make_reader(f).get_summary().statistics
+    assert stats.message_count == 2      # the history's one grid, as FleetGrid and GeoJSON
+
+
+def test_the_mcap_path_is_checked_before_zenoh_opens(tmp_path):
+    """``--mcap`` follows the output rules of architecture.md §4.1: one line and exit 2 for
+    a directory that does not exist or a file that exists (without ``--force``), before
+    any Zenoh session; the existing file is left as it was."""
+    existing = tmp_path / "old.mcap"
+    existing.write_bytes(b"yesterday's field")
+    for mcap, words in ((tmp_path / "none" / "x.mcap", "does not exist"),
+                        (existing, "exists; --force replaces it")):
+        r = subprocess.run([sys.executable, "-m", "onboard", "fleet", "--connect",
+                            "tcp/127.0.0.1:9", "--mcap", str(mcap)],
+                           capture_output=True, text=True, timeout=60.0)
+        assert r.returncode == 2 and words in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert existing.read_bytes() == b"yesterday's field"
 
 
 def test_a_missing_history_file_is_one_line_and_exit_2(tmp_path):

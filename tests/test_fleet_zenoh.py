@@ -72,7 +72,7 @@ def test_records_from_several_vehicles_become_a_field_that_answers_queries(tmp_p
         assert str(ok.encoding) == "application/json;onboard.FleetCurrent.v1"
         doc = json.loads(ok.payload.to_bytes())
         assert list(doc) == ["lat", "lon", "utc", "north", "east", "std_north", "std_east",
-                             "n_obs", "down", "std_down"]   # down: additive (issue 33)
+                             "n_obs"]   # exactly issue 33's fields (the grid adds the down)
         got = msgspec.json.decode(ok.payload.to_bytes(), type=FleetCurrent)
         truth = eddy(np.array(100.0), np.array(-200.0), 600.0)
         assert got.n_obs > 0 and got.utc == utc

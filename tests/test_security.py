@@ -827,6 +827,62 @@ def test_a_vehicle_putting_on_another_vehicles_key_is_not_delivered(acl_router):
 
 
 @pytest.mark.integration
+def test_the_fleet_serves_the_vehicles_through_the_router_and_trusts_the_key_not_the_payload(
+        acl_router):
+    """``onboard fleet`` run as the shore user fuses what boat1 puts on its own key, a
+    vehicle receives the field's grid and the answer to its query (onboard/fleet/**), and
+    a record boat1 puts on its own key in boat2's name is left out (the router vouches for
+    the key, not for the payload)."""
+    import msgspec
+
+    from onboard.core.messages import EstimateRecord
+    from onboard.fleet.service import FleetService
+    from tests.helpers.fleet_scenarios import UTC0
+
+    creds = _credentials()
+    shore = _session(acl_router, str(ZENOH_DIR / "shore.json5"))
+    boat1 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"), "boat1", creds["boat1"])
+    boat2 = _session(acl_router, str(ZENOH_DIR / "vehicle-boat1.json5"), "boat2", creds["boat2"])
+    service = FleetService(shore, "onboard")
+    grids: list[bytes] = []
+    sub = boat2.declare_subscriber("onboard/fleet/current/grid",
+                                   lambda s: grids.append(s.payload.to_bytes()))
+    enc = msgspec.json.Encoder()
+
+    def record(i: int, vehicle: str = "boat1") -> bytes:
+        return enc.encode(EstimateRecord(
+            vehicle=vehicle, pipeline="current", t=float(i), utc=UTC0 + 10.0 * i,
+            lat_deg=43.1 + 1e-4 * i, lon_deg=5.9, values={"north": 0.2, "east": -0.1},
+            std={"north": 0.02, "east": 0.02}))
+    try:
+        put = boat1.declare_publisher("onboard/boat1/est/current",
+                                      encoding="application/json;onboard.Estimate.v2")
+        n = 0
+
+        def fed() -> bool:
+            nonlocal n
+            put.put(record(n))
+            n += 1
+            return service.field.added >= 20
+        assert wait_until(fed, 10.0)
+        put.put(record(n, vehicle="boat2"))
+        assert wait_until(lambda: service.field.rejected.get("vehicle_mismatch") == 1, 5.0)
+        assert "boat2" not in service.newest
+        assert wait_until(lambda: (service.step(refit=True), bool(grids))[1], 10.0)
+        replies = [r.ok for r in boat2.get(f"onboard/fleet/current?lat=43.1005;lon=5.9;"
+                                           f"utc={UTC0 + 50.0}", timeout=5.0)
+                   if r.ok is not None]
+        assert len(replies) == 1
+        got = msgspec.json.decode(replies[0].payload.to_bytes())
+        assert got["north"] == pytest.approx(0.2, abs=0.05) and got["n_obs"] > 0
+    finally:
+        sub.undeclare()
+        service.close()
+        for s in (boat1, boat2, shore):
+            s.close()
+
+
+@pytest.mark.integration
 def test_onboard_shore_reads_through_the_access_controlled_router_with_its_config(acl_router, capsys,
                                                                                  tmp_path):
     import argparse

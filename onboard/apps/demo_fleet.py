@@ -48,7 +48,7 @@ from onboard.apps import demo
 from onboard.apps.demo import (LIVE_LINES, LinkPlan, _free_port, _port_free, _read_json,
                                DEFAULT_ROUTER, demo_config)
 from onboard.core.config import Config, load
-from onboard.core.errors import UsageError
+from onboard.core.errors import UsageError, stop_on_sigterm
 from onboard.core.outputs import Output, check as check_outputs
 
 DEFAULT_FLEET = "fleet-demo"
@@ -437,6 +437,11 @@ def main(args: argparse.Namespace) -> int:
                             "--web", page], name="fleet", log=demo.OUT_DIR / "fleet-service.log")
     print(f"the fleet's current field (onboard fleet): http://{page}/, its log "
           f"{fusion.log}", flush=True)
-    res = asyncio.run(run_fleet_demo(args.fleet, duration, out_dir=out_dir, extra=[fusion],
-                                     speed=1.0 if args.realtime else FLEET_SPEED))
+    terminate = stop_on_sigterm()   # its members stopped, as on Ctrl-C
+    try:
+        res = asyncio.run(run_fleet_demo(args.fleet, duration, out_dir=out_dir,
+                                         extra=[fusion],
+                                         speed=1.0 if args.realtime else FLEET_SPEED))
+    finally:
+        terminate.restore()
     return 0 if any(r["estimates"] for r in res.values()) else 1

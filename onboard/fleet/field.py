@@ -140,6 +140,9 @@ hyperparameters are kept as they are."""
 MAX_POSITION_STD_M = 200.0
 """A record whose position sigma exceeds this (m per axis; an AUV dead reckoned for
 hours) is not placed: not an observation."""
+UTC_MIN = 946_684_800.0
+"""2000-01-01T00:00:00Z: a record stamped before it (a clock never set, a simulator's
+seconds since its start) has no time (``bad_time``)."""
 ESTIMATE_MEMORY_S = 20.0
 """How far back along its own track (s) a vehicle's current estimate reaches: a current
 estimator's estimate is a memory of the water it crossed, not of the water where it is
@@ -236,7 +239,9 @@ class Observation:
 
 def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
     """The observation a ``current`` record makes, or None and why not (``no_time``,
-    ``no_position``, ``position_uncertain`` (its ``position_std_m`` above
+    ``bad_time`` (not finite, or before :data:`UTC_MIN`), ``no_position``,
+    ``bad_position`` (not finite, outside +-90 deg of latitude or +-180 of longitude, or
+    exactly 0, 0: a fix never made), ``position_uncertain`` (its ``position_std_m`` above
     :data:`MAX_POSITION_STD_M`), ``no_current``, ``no_std``, ``not_converged``,
     ``too_fast``). A horizontal component is observed where the record gives a finite
     value with a sigma in (0, :data:`MAX_STD_MPS`]; a record observes at least one (a
@@ -248,8 +253,13 @@ def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
     v, sd = rec.values, rec.std
     if rec.utc is None:
         return None, "no_time"
-    if rec.lat_deg is None or rec.lon_deg is None:
+    if not (math.isfinite(rec.utc) and rec.utc >= UTC_MIN):
+        return None, "bad_time"
+    lat, lon = rec.lat_deg, rec.lon_deg
+    if lat is None or lon is None:
         return None, "no_position"
+    if not (abs(lat) <= 90.0 and abs(lon) <= 180.0) or lat == lon == 0.0:
+        return None, "bad_position"
     p = rec.position_std_m
     if p is not None and not p <= MAX_POSITION_STD_M:
         return None, "position_uncertain"
@@ -489,11 +499,16 @@ class CurrentField:
     def add_record(self, rec: EstimateRecord) -> bool:
         """:meth:`add` the observation of a ``current`` record; False (the reason counted
         in :attr:`rejected`) when it makes none."""
+        return not self.take(rec)
+
+    def take(self, rec: EstimateRecord) -> str:
+        """:meth:`add_record`, returning ``""`` when the record was added, else why not
+        (the reason counted in :attr:`rejected`: :func:`observation`'s, ``too_old``)."""
         obs, why = observation(rec)
         if obs is None:
             self.reject(why)
-            return False
-        return self.add(obs)
+            return why
+        return "" if self.add(obs) else "too_old"
 
     def reject(self, why: str, n: int = 1) -> None:
         """Count ``n`` observations left out for ``why`` (:attr:`rejected`)."""

@@ -8,7 +8,7 @@ key                                encoding                                   pa
 =================================  =========================================  ==============
 
 A query of ``<prefix>/fleet/current?lat=<deg>;lon=<deg>;utc=<s>`` gets ONE
-:class:`FleetCurrent`; one with a missing or bad parameter gets an error reply (a JSON
+:class:`FleetCurrent` (exactly its eight fields; the grid's cells add the down); one with a missing or bad parameter gets an error reply (a JSON
 object ``{"error": ...}`` saying which parameter and why).
 
 A current's set and drift, as NMEA VDR and Signal K's ``environment.current`` carry them,
@@ -38,13 +38,11 @@ def grid_key(prefix: str) -> str:
 
 
 class FleetCurrent(msgspec.Struct, frozen=True, kw_only=True):
-    """The field at one place and time: ``lat``, ``lon`` (deg), ``utc`` (POSIX s), the
-    current ``north``, ``east`` (m/s, the direction the water flows toward; null where
-    the field knows nothing there), their one-sigma ``std_north``, ``std_east`` (m/s; null
-    there too), ``n_obs``, the super-observations the answer rests on (0: none), and the
-    vertical current ``down`` (m/s, positive down) with its one-sigma ``std_down``: null
-    where no vehicle that gives one (an underwater vehicle) was near (added in issue 33,
-    after ``n_obs``)."""
+    """The reply to a query, exactly these fields: ``lat``, ``lon`` (deg), ``utc`` (POSIX
+    s), the current ``north``, ``east`` (m/s, the direction the water flows toward; null
+    where the field knows nothing there), their one-sigma ``std_north``, ``std_east``
+    (m/s; null there too) and ``n_obs``, the super-observations the answer rests on (0:
+    none)."""
 
     lat: float
     lon: float
@@ -54,8 +52,19 @@ class FleetCurrent(msgspec.Struct, frozen=True, kw_only=True):
     std_north: float | None
     std_east: float | None
     n_obs: int
+
+
+class FleetCell(FleetCurrent, frozen=True, kw_only=True):
+    """A cell of the grid: a :class:`FleetCurrent` and the vertical current ``down``
+    (m/s, positive down) with its one-sigma ``std_down``, null where no vehicle that
+    gives one (an underwater vehicle) was near."""
+
     down: float | None = None
     std_down: float | None = None
+
+    def reply(self) -> FleetCurrent:
+        """The query's reply at this place: the cell without its down."""
+        return FleetCurrent(**{f: getattr(self, f) for f in FleetCurrent.__struct_fields__})
 
 
 class VehicleCurrent(msgspec.Struct, frozen=True, kw_only=True):
@@ -79,13 +88,13 @@ class VehicleCurrent(msgspec.Struct, frozen=True, kw_only=True):
 class FleetGrid(msgspec.Struct, frozen=True, kw_only=True):
     """The field on a grid at one time: ``schema`` (:data:`GRID_SCHEMA_VERSION`), ``utc``
     (POSIX s, the grid's time: the newest record's), ``spacing_m`` (the cells' size, m),
-    ``cells`` (one :class:`FleetCurrent` per cell centre, row by row from the south-west)
+    ``cells`` (one :class:`FleetCell` per cell centre, row by row from the south-west)
     and ``vehicles`` (each vehicle's newest record, :class:`VehicleCurrent`)."""
 
     schema: int = GRID_SCHEMA_VERSION
     utc: float
     spacing_m: float
-    cells: list[FleetCurrent]
+    cells: list[FleetCell]
     vehicles: list[VehicleCurrent]
 
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import threading
 import time
 from pathlib import Path
@@ -41,20 +42,23 @@ from typing import Any, Mapping
 
 import msgspec
 
-from onboard.core.errors import UsageError
+from onboard.core.errors import UsageError, stop_on_sigterm
 from onboard.core.messages import EstimateRecord
-from onboard.core.wire import ESTIMATE_SCHEMAS, encoding
+from onboard.core.outputs import Output, existing
+from onboard.core.outputs import check as check_outputs
+from onboard.core.wire import ESTIMATE_SCHEMAS, JSON_MIME, encoding
 from onboard.fleet.field import CurrentField, Plane, one_blas_thread
 from onboard.fleet.messages import (
     FLEET_CURRENT_SCHEMA,
     FLEET_GRID_SCHEMA,
-    FleetCurrent,
+    FleetCell,
     FleetGrid,
     QueryError,
     VehicleCurrent,
     current_key,
     grid_key,
 )
+from onboard.service.web.http import parse_listen
 from onboard.service.web.view import FLEET_TRACK_PERIOD_S
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -68,6 +72,13 @@ GRID_MARGIN_M = 500.0
 """Margin (m) about the vehicles' positions the grid covers."""
 MIN_SPACING_M = 50.0
 """The grid's cells are at least this large (m)."""
+FUTURE_S = 3600.0
+"""A record stamped more than this (s) after this machine's clock is left out
+(``future``): a vehicle's clock that is wrong, or a time in the wrong unit, would
+otherwise make every later record look older than the history the field keeps."""
+UNKNOWN_CURRENT = frozenset({"no_current", "no_std", "not_converged"})
+"""Reasons a record makes no observation although its time and place are good: the
+vehicle is still shown where it is (:attr:`FleetService.newest`)."""
 ARROW_S = 600.0
 """An arrow of the GeoJSON map is as long as the water moves in this time (s)."""
 HISTORY_COLUMNS = ["vehicle", "t_s", "utc", "lat", "lon", "north", "east", "std_north",
@@ -85,8 +96,11 @@ class FleetService:
     Attributes:
         field: the :class:`CurrentField`.
         newest: each vehicle's newest record (:class:`VehicleCurrent`).
-        received: records received, by schema (``est.v1``, ``est.v2``) and ``bad``, and
-            ``history`` (rows of :meth:`load_history`).
+        received: records received, by schema (``est.v1``, ``est.v2``) and ``bad`` (not
+            an ``application/json`` Estimate of a schema this version reads, or not
+            decodable), and ``history`` (rows of :meth:`load_history`); a record decoded
+            but left out is counted by its reason in the field's ``rejected``
+            (``vehicle_mismatch``, ``future`` and :meth:`.CurrentField.take`'s).
         grids: grids published.
         tracks: each vehicle's track in the rows :meth:`load_history` added, ``(utc,
             lat, lon)``, a point per ``FLEET_TRACK_PERIOD_S`` (for the page's fleet
@@ -95,8 +109,9 @@ class FleetService:
 
     def __init__(self, session: Any = None, prefix: str = "onboard",
                  field: CurrentField | None = None, mcap: str | Path | None = None,
-                 refit_s: float = REFIT_PERIOD_S) -> None:
+                 refit_s: float = REFIT_PERIOD_S, clock: Any = time.time) -> None:
         self.session, self.prefix, self.refit_s = session, prefix, refit_s
+        self.clock = clock
         self._one_thread = one_blas_thread()   # queries' small Cholesky on one thread
         self.field = field if field is not None else CurrentField()
         self.newest: dict[str, VehicleCurrent] = {}
@@ -132,13 +147,20 @@ class FleetService:
     # ----------------------------------------------------------------- records in
     def on_sample(self, sample: Any) -> None:
         """Zenoh subscriber callback."""
-        self.feed(sample.payload.to_bytes(), str(sample.encoding))
+        self.feed(sample.payload.to_bytes(), str(sample.encoding), str(sample.key_expr))
 
-    def feed(self, payload: bytes, enc: str = "") -> bool:
+    def feed(self, payload: bytes, enc: str | None = None, key: str | None = None) -> bool:
         """One ``est/current`` record; False when it is not one this version reads or
-        makes no observation (counted in :attr:`received` and the field's ``rejected``)."""
-        schema = enc.partition(";")[2]
-        if schema and schema not in ESTIMATE_SCHEMAS:
+        makes no observation (counted in :attr:`received` and the field's ``rejected``).
+
+        ``enc``: its Zenoh encoding, which must be ``application/json;<an Estimate schema
+        this version reads>`` (None: not checked, a caller that decoded nothing from the
+        network). ``key``: the key it was put on, ``<prefix>/<vehicle>/est/current``,
+        whose vehicle the record must name (a router's access control vouches for the
+        key, not for the payload: docs/security.md). A record stamped more than
+        :data:`FUTURE_S` after :attr:`clock` is left out."""
+        mime, _, schema = (enc or "").partition(";")
+        if enc is not None and (mime != JSON_MIME or schema not in ESTIMATE_SCHEMAS):
             self._count("bad")
             return False
         try:
@@ -146,18 +168,29 @@ class FleetService:
         except msgspec.DecodeError:
             self._count("bad")
             return False
+        if f"onboard.Estimate.v{rec.schema}" not in ESTIMATE_SCHEMAS:
+            self._count("bad")
+            return False
         self._count(f"est.v{rec.schema}")
         with self.lock:
-            self._note(rec)
-            return self.field.add_record(rec)
+            if key is not None and key_vehicle(key, self.prefix) != rec.vehicle:
+                self.field.reject("vehicle_mismatch")
+                return False
+            if rec.utc is not None and rec.utc > self.clock() + FUTURE_S:
+                self.field.reject("future")
+                return False
+            why = self.field.take(rec)
+            if why in ("", *UNKNOWN_CURRENT):
+                self._note(rec)
+            return not why
 
     def _count(self, what: str) -> None:
         self.received[what] = self.received.get(what, 0) + 1
 
     def _note(self, rec: EstimateRecord) -> None:
-        """Keep ``rec`` as its vehicle's newest (by ``utc``) when it has a time."""
+        """Keep ``rec``, of a good time and place, as its vehicle's newest (by ``utc``)."""
         old = self.newest.get(rec.vehicle)
-        if rec.utc is None or (old is not None and old.utc is not None and old.utc > rec.utc):
+        if old is not None and old.utc is not None and old.utc > rec.utc:
             return
         v, sd = rec.values, rec.std
         self.newest[rec.vehicle] = VehicleCurrent(
@@ -217,8 +250,10 @@ class FleetService:
                                  position_std_m=rows["position_std_m"][i])
             self._count("history")
             with self.lock:
-                self._note(rec)
-                if field.add_record(rec):
+                why = field.take(rec)
+                if why in ("", *UNKNOWN_CURRENT):
+                    self._note(rec)
+                if not why:
                     added += 1
                     self._track_point(rec)
         left = {k: n - before.get(k, 0) for k, n in field.rejected.items()
@@ -265,12 +300,19 @@ class FleetService:
         return FleetGrid(utc=utc, spacing_m=spacing, cells=cells,
                          vehicles=sorted(vehicles, key=lambda v: v.vehicle))
 
-    def answer(self, lat: float, lon: float, utc: float) -> FleetCurrent:
-        """The field at ``lat``, ``lon`` (deg) and ``utc`` (s) as a :class:`FleetCurrent`."""
+    def answer(self, lat: float, lon: float, utc: float) -> FleetCell:
+        """The field at ``lat``, ``lon`` (deg) and ``utc`` (s) as a :class:`FleetCell`
+        (a query's reply is its :meth:`.FleetCell.reply`)."""
         p = self.field.predict(lat, lon, utc)
-        return FleetCurrent(lat=lat, lon=lon, utc=utc, north=p.north, east=p.east,
-                            std_north=p.std_north, std_east=p.std_east, n_obs=p.n_obs,
-                            down=p.down, std_down=p.std_down)
+        return FleetCell(lat=lat, lon=lon, utc=utc, north=p.north, east=p.east,
+                         std_north=p.std_north, std_east=p.std_east, n_obs=p.n_obs,
+                         down=p.down, std_down=p.std_down)
+
+    def left_out(self) -> dict[str, int]:
+        """Records left out so far, by reason: ``bad`` (:attr:`received`) and the
+        field's ``rejected``."""
+        bad = self.received.get("bad", 0)
+        return ({"bad": bad} if bad else {}) | dict(self.field.rejected)
 
     def _publish(self, grid: FleetGrid) -> None:
         payload = self._enc.encode(grid)
@@ -298,7 +340,12 @@ class FleetService:
             lat, lon, utc = parse_query(params)
         except ValueError as err:
             return self._enc.encode(QueryError(str(err))), False
-        return self._enc.encode(self.answer(lat, lon, utc)), True
+        return self._enc.encode(self.answer(lat, lon, utc).reply()), True
+
+
+NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+"""A query parameter's number: decimal digits, a point, an exponent (no spaces,
+underscores, ``inf`` or ``nan``, which Python's ``float`` would also read)."""
 
 
 def parse_query(params: Mapping[str, str]) -> tuple[float, float, float]:
@@ -310,14 +357,27 @@ def parse_query(params: Mapping[str, str]) -> tuple[float, float, float]:
         if text is None:
             raise ValueError(f"parameter {name} is missing: ask "
                              f"fleet/current?lat=<deg>;lon=<deg>;utc=<POSIX s>")
-        try:
-            value = float(text)
-        except ValueError:
-            raise ValueError(f"parameter {name}={text!r} is not a number") from None
+        if "&" in text:
+            raise ValueError(f"parameter {name}={text!r}: a Zenoh selector separates its "
+                             f"parameters with ';': fleet/current?lat=<deg>;lon=<deg>;"
+                             f"utc=<POSIX s>")
+        if not NUMBER.fullmatch(text):
+            raise ValueError(f"parameter {name}={text!r} is not a number")
+        value = float(text)
         if not math.isfinite(value) or abs(value) > limit:
             raise ValueError(f"parameter {name}={text!r} is out of range")
         out.append(value)
     return out[0], out[1], out[2]
+
+
+def key_vehicle(key: str, prefix: str) -> str | None:
+    """The vehicle of a record's key ``<prefix>/<vehicle>/est/current`` (None for a key
+    of another form)."""
+    head, _, rest = key.partition(f"{prefix}/")
+    parts = rest.split("/")
+    if head or len(parts) != 3 or parts[1:] != ["est", "current"]:
+        return None
+    return parts[0]
 
 
 def grid_points(plane: Plane, lats: list[float], lons: list[float]
@@ -329,11 +389,18 @@ def grid_points(plane: Plane, lats: list[float], lons: list[float]
     n0, n1 = float(min(north)) - GRID_MARGIN_M, float(max(north)) + GRID_MARGIN_M
     e0, e1 = float(min(east)) - GRID_MARGIN_M, float(max(east)) + GRID_MARGIN_M
     spacing = max(max(n1 - n0, e1 - e0) / GRID_CELLS, MIN_SPACING_M)
-    rows = [n0 + spacing * (k + 0.5) for k in range(max(1, round((n1 - n0) / spacing)))]
-    cols = [e0 + spacing * (k + 0.5) for k in range(max(1, round((e1 - e0) / spacing)))]
+    rows, cols = _centres(n0, n1, spacing), _centres(e0, e1, spacing)
     lat_rows = [float(plane.to_latlon(n, 0.0)[0]) for n in rows]
     lon_cols = [float(plane.to_latlon(0.0, e)[1]) for e in cols]
     return lat_rows, lon_cols, spacing
+
+
+def _centres(lo: float, hi: float, spacing: float) -> list[float]:
+    """The centres of the fewest cells of ``spacing`` that cover ``[lo, hi]``, centred on
+    it."""
+    n = max(1, math.ceil((hi - lo) / spacing - 1e-9))
+    start = 0.5 * (lo + hi) - 0.5 * n * spacing
+    return [start + spacing * (k + 0.5) for k in range(n)]
 
 
 def geojson_arrows(grid: FleetGrid) -> dict:
@@ -418,16 +485,25 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
 
 def main(args: argparse.Namespace) -> int:
     """``onboard fleet [--connect E] [--listen E] [--mode M] [--zenoh-config FILE]
-    [--prefix P] [--period S] [--refit S] [--mcap FILE] [--web HOST:PORT]
-    [--history FILE]...``."""
+    [--prefix P] [--period S] [--refit S] [--mcap FILE [--force]] [--web HOST:PORT]
+    [--history FILE]...``; SIGTERM stops it as Ctrl-C does (the MCAP file finished)."""
     if not args.period > 0 or not args.refit > 0:
         raise UsageError("--period and --refit are positive seconds")
+    history = getattr(args, "history", None) or []
+    if args.mcap:
+        check_outputs([Output("--mcap", Path(args.mcap))], force=args.force,
+                      inputs=existing(history))
+    if getattr(args, "web", ""):
+        try:
+            parse_listen(args.web)
+        except ValueError as err:
+            raise UsageError(f"--web {err}") from None
     session = open_session(args.connect, args.listen, args.mode,
                            getattr(args, "zenoh_config", "") or "")
     service = FleetService(session, args.prefix, mcap=args.mcap, refit_s=args.refit)
     page = None
     stop = threading.Event()
-    history = getattr(args, "history", None) or []
+    terminate = stop_on_sigterm()
     try:
         for path in history:
             counts = service.load_history(path)
@@ -453,8 +529,10 @@ def main(args: argparse.Namespace) -> int:
                 page.view.feed_grid(msgspec.to_builtins(grid))
             known = sum(c.north is not None for c in grid.cells) if grid else 0
             learned = service.field.learned()
+            left = ", ".join(f"{k} {n:,}" for k, n in sorted(service.left_out().items()))
             print(f"{time.strftime('%H:%M:%S')} {len(service.newest)} vehicles, "
                   f"{service.field.added:,} records, {known} cells known"
+                  + (f"; left out: {left}" if left else "")
                   + (f"; {learned}" if learned else ""), flush=True)
     except KeyboardInterrupt:
         return 0
@@ -463,4 +541,5 @@ def main(args: argparse.Namespace) -> int:
             page.close()
         service.close()
         session.close()
+        terminate.restore()
     return 0

@@ -96,10 +96,14 @@ def nmea_checksum(body: str) -> str:
 def vdr_sentence(sd: SetDrift, talker: str = VDR_TALKER) -> str:
     """The ``VDR`` sentence of ``sd`` with its checksum and CR LF: set to 0.1 degree,
     drift to 0.01 knot, the magnetic set empty where unknown."""
-    mag = "" if sd.set_magnetic_rad is None else f"{math.degrees(sd.set_magnetic_rad):.1f}"
-    body = (f"{talker}VDR,{math.degrees(sd.set_true_rad):.1f},T,{mag},M,"
-            f"{sd.drift_kn:.2f},N")
+    mag = "" if sd.set_magnetic_rad is None else _degrees(sd.set_magnetic_rad)
+    body = f"{talker}VDR,{_degrees(sd.set_true_rad)},T,{mag},M,{sd.drift_kn:.2f},N"
     return f"${body}*{nmea_checksum(body)}\r\n"
+
+
+def _degrees(rad: float) -> str:
+    """An angle in [0, 2 pi) as degrees to 0.1 in [0, 360): 359.96 deg is ``0.0``."""
+    return f"{round(math.degrees(rad), 1) % 360.0:.1f}"
 
 
 def iso8601(utc_s: float) -> str:
