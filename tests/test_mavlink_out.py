@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import math
 import os
 import socket
 
+import msgspec
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -150,6 +152,30 @@ def test_each_innovation_channel_feeds_the_estimator_status_ratio_of_its_kind(ch
     from onboard.service.publishers.mavlink_pub import ratio_kind
 
     assert ratio_kind(channel) == kind
+
+
+@pytest.mark.integration
+def test_the_position_accuracy_is_a_positions_never_the_currents(listener):
+    """``pos_horiz_accuracy`` (m) is the largest position sigma of the pipelines that
+    publish a position; the current's ``north``/``east`` are m/s and never count. With
+    no position published (withheld, or none), no relative position is claimed and its
+    accuracy is NaN, not 0."""
+    port = listener.getsockname()[1]
+    pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), system_id=7,
+                           clock=lambda: 10.0)
+    pub.start()
+    cur, aie, _ = _records()
+    cur = msgspec.structs.replace(cur, std={"north": 0.3, "east": 0.4})
+    placed = msgspec.structs.replace(aie, std={"north": 2.5, "east": 1.5})
+    withheld = msgspec.structs.replace(aie, values={"speed": 1.4}, std={"north": 2.5})
+    for t, recs in ((10.0, [cur, placed]), (11.0, [cur, withheld])):
+        pub.publish_estimates(recs, now=t)
+        pub.publish_health(HealthRecord(vehicle="b", t=t), now=t)
+    pub.close()
+    st = [m for m in receive_mavlink(listener) if m.get_type() == "ESTIMATOR_STATUS"]
+    assert st[0].flags & mavlink2.ESTIMATOR_POS_HORIZ_REL and st[0].pos_horiz_accuracy == 2.5
+    assert not st[1].flags & mavlink2.ESTIMATOR_POS_HORIZ_REL
+    assert math.isnan(st[1].pos_horiz_accuracy)
 
 
 @pytest.mark.integration

@@ -34,16 +34,57 @@ def test_a_corrupt_file_is_reported_ignored_and_kept_aside(tmp_path):
     assert StateFile(p, "boat1").load().ok
 
 
-def test_other_versions_vehicles_and_classes_are_ignored_with_a_reason(tmp_path):
+def test_other_versions_vehicles_and_classes_are_ignored_with_a_reason_and_kept(tmp_path):
+    """Another vehicle's (or class's, or version's) learned state is not this vehicle's
+    to overwrite: it is moved aside, and the next save writes a file of its own."""
     p = tmp_path / "s.json"
     base = {"format": "onboard-state", "version": STATE_VERSION, "vehicle": "boat1",
             "vehicle_class": "rudder-boat", "saved_at": 0, "pipelines": {"aie": {"x": 1}}}
-    for change, word in (({"version": 99}, "version"), ({"vehicle": "boat2"}, "belongs"),
-                         ({"vehicle_class": "bluerov2"}, "not a"),
-                         ({"format": "other"}, "not an onboard")):
+    for change, word, aside in (({"version": 99}, "version", "version"),
+                                ({"vehicle": "boat2"}, "belongs", "other-vehicle"),
+                                ({"vehicle_class": "bluerov2"}, "not a", "other-vehicle"),
+                                ({"format": "other"}, "not an onboard", "corrupt")):
         p.write_text(json.dumps(dict(base, **change)))
         res = StateFile(p, "boat1", "rudder-boat").load()
         assert res.state is None and not res.ok and word in res.message
+        kept = list(tmp_path.glob(f"s.json.{aside}-*"))
+        assert not p.exists() and len(kept) == 1 and kept[0].name in res.message
+        assert json.loads(kept[0].read_text()) == dict(base, **change)
+        StateFile(p, "boat1", "rudder-boat").save({"aie": {}})
+        assert json.loads(kept[0].read_text()) == dict(base, **change)
+        kept[0].unlink()
+
+
+def test_a_malformed_entry_does_not_stop_the_service_and_its_file_is_kept(tmp_path):
+    """A state file that parses but whose ``current`` entry is malformed (coefficients
+    that are not a table; a sigma whose square overflows): the other pipelines are
+    restored, the current starts as without a file, the file is moved aside, and the
+    event names the pipeline."""
+    import numpy as np
+
+    from onboard.core import config as configmod
+    from onboard.engine import Engine
+    from onboard.pipelines import aie as aie_mod
+    from onboard.pipelines import current as current_mod
+
+    cfg = configmod.load("rudder-boat")
+
+    def engine() -> Engine:
+        return Engine(cfg, pipelines=[aie_mod.create(cfg), current_mod.create(cfg)])
+    fresh = engine()
+    saved = fresh.get_state()
+    assert fresh.set_state(saved) == []
+    for bad in ({"thetas": "junk"}, {"current": [0.1, 0.2], "current_std": [1e308, 1e308]}):
+        eng = engine()
+        entry = dict(saved["current"], **bad)
+        failed = eng.set_state({**saved, "current": entry})
+        cur = eng.pipelines[1]
+        assert np.all(np.isfinite(cur.kf.P)) and np.all(np.isfinite(cur.kf.x))
+        if "thetas" in bad:
+            assert failed == ["current (AttributeError: 'str' object has no attribute "
+                              "'items')"]
+        else:
+            assert failed == [] and not np.any(cur.kf.x[2:4])   # the current left unrestored
 
 
 def test_non_finite_values_and_numpy_arrays_are_saved_as_json(tmp_path):

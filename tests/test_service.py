@@ -238,6 +238,14 @@ def test_adaptive_state_is_saved_on_stop_and_restored_on_start_corrupt_is_ignore
     third = asyncio.run(asyncio.wait_for(once(), TIMEOUT))
     assert any("corrupt" in e for e in third.events)
     assert third.stats.ticks > 0  # and it ran anyway
+    # a file that parses with one malformed entry: the service starts and says which
+    doc["pipelines"]["current"]["thetas"] = "junk"
+    (tmp_path / "st" / "adaptive.json").write_text(json.dumps(doc))
+    fourth = asyncio.run(asyncio.wait_for(once(), TIMEOUT))
+    said = [e for e in fourth.events if "not restored: current (AttributeError" in e]
+    assert len(said) == 1 and fourth.stats.ticks > 0
+    kept = [p.name for p in (tmp_path / "st").iterdir() if ".corrupt-" in p.name]
+    assert len(kept) == 2 and any(k in said[0] for k in kept)
 
 
 @pytest.mark.integration

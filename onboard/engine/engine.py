@@ -681,13 +681,21 @@ class Engine:
         """Adaptive state of every pipeline, for persistence across restarts."""
         return {p.name: p.get_state() for p in self.pipelines}
 
-    def set_state(self, state: dict) -> None:
+    def set_state(self, state: dict) -> list[str]:
         """Restore what :meth:`get_state` returned, pipeline by pipeline (a pipeline
-        missing from ``state`` keeps its fresh state)."""
+        missing from ``state`` keeps its fresh state). A saved state is input: a pipeline
+        that cannot take its entry (a malformed or foreign one) is left as its
+        ``set_state`` left it, and named in the returned lines (``"current
+        (AttributeError: ...)"``); none when every entry was taken."""
         self.queue.reset()
+        failed = []
         for p in self.pipelines:
             if isinstance(state.get(p.name), dict):
-                p.set_state(state[p.name])
+                try:
+                    p.set_state(state[p.name])
+                except Exception as err:  # noqa: BLE001 - whatever a bad file makes it raise
+                    failed.append(f"{p.name} ({type(err).__name__}: {str(err)[:60]})")
+        return failed
 
 
 

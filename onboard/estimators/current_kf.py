@@ -278,16 +278,18 @@ class CurrentKalmanFilter:
 
     def restore_current(self, current: object, std: object) -> None:
         """Restart the current (m/s) from a saved value with its saved one-sigma ``std``
-        (m/s) floored at ``RESTORED_CURRENT_STD_FLOOR_MPS``; ignored unless finite and of
-        the state's dimension. Raises ValueError or TypeError on non-numbers."""
+        (m/s) floored at ``RESTORED_CURRENT_STD_FLOOR_MPS``; ignored unless both are
+        finite (the variance too) and of the state's dimension. Raises ValueError or
+        TypeError on non-numbers."""
         nd, o = self.nd, 2 * self.nd
         c = np.asarray(current, float)
-        if c.shape == (nd,) and np.all(np.isfinite(c)):
+        with np.errstate(over="ignore"):   # an absurd saved sigma: inf, then ignored
+            var = np.maximum(np.asarray(std, float), RESTORED_CURRENT_STD_FLOOR_MPS) ** 2
+        if c.shape == var.shape == (nd,) and np.all(np.isfinite(c)) and np.all(np.isfinite(var)):
             self.x[nd:o] = c
-            sd = np.asarray(std, float)
             self.P[nd:o, :] = 0.0
             self.P[:, nd:o] = 0.0
-            self.P[nd:o, nd:o] = np.diag(np.maximum(sd, RESTORED_CURRENT_STD_FLOOR_MPS) ** 2)
+            self.P[nd:o, nd:o] = np.diag(var)
 
     def inflate_current_along(self, direction: list[float], var_min: float) -> None:
         """Raise the current's variance along the unit vector ``direction`` (earth axes) to

@@ -264,8 +264,13 @@ class Service:
             await asyncio.get_running_loop().run_in_executor(None, self.signing.reserve_now)
         loaded = self.state_file.load()
         if loaded.state is not None:
-            self.engine.set_state(loaded.state)
+            failed = self.engine.set_state(loaded.state)
             self.restored = loaded.state
+            if failed:
+                aside = self.state_file.move_aside()
+                loaded.message += (f"; not restored: {', '.join(failed)}: the file kept as "
+                                   f"{aside}")
+                loaded.ok = False
         if loaded.state is not None or not loaded.ok:
             self.event(loaded.message)
         else:

@@ -13,10 +13,13 @@ renamed over the old one, and the directory is ``fsync``'ed, so a crash or power
 leaves either the old state or the new one, never a torn file.
 
 Loading never fails the service. A missing file is a cold start. A file that does not
-parse, has another format or version, or belongs to another vehicle is reported (the
-message goes to the log, the health events and STATUSTEXT) and ignored; an unreadable or
-corrupt file is moved aside as ``<name>.corrupt-<UTC time>`` so the evidence is kept and
-the next save does not trip over it.
+parse, has another format or version, or belongs to another vehicle or class is reported
+(the message goes to the log, the health events and STATUSTEXT), ignored and moved aside
+as ``<name>.<why>-<UTC time>`` (``corrupt``, ``version``, ``other-vehicle``), so that the
+next save neither trips over it nor overwrites it: another vehicle's learned state, or a
+newer version's, is kept for whoever it belongs to. So is a file one of whose pipelines
+could not take its entry (the service then starts that pipeline as it would without a
+file: :meth:`onboard.engine.Engine.set_state`).
 """
 
 from __future__ import annotations
@@ -87,25 +90,29 @@ class StateFile:
         try:
             doc = json.loads(raw)
         except (ValueError, UnicodeDecodeError) as err:
-            aside = self._move_aside()
+            aside = self.move_aside()
             return LoadResult(None, f"state file {p} is corrupt ({err.__class__.__name__}: "
                               f"{str(err)[:80]}): ignored, kept as {aside}", False)
         if not isinstance(doc, dict) or doc.get("format") != STATE_FORMAT:
-            aside = self._move_aside()
+            aside = self.move_aside()
             return LoadResult(None, f"state file {p} is not an onboard state file: ignored, "
                               f"kept as {aside}", False)
         if doc.get("version") != STATE_VERSION:
+            aside = self.move_aside("version")
             return LoadResult(None, f"state file {p} has version {doc.get('version')!r}, "
-                              f"this service reads {STATE_VERSION}: ignored", False)
+                              f"this service reads {STATE_VERSION}: ignored, kept as {aside}",
+                              False)
         if doc.get("vehicle") != self.vehicle:
+            aside = self.move_aside("other-vehicle")
             return LoadResult(None, f"state file {p} belongs to vehicle {doc.get('vehicle')!r}, "
-                              f"not {self.vehicle!r}: ignored", False)
+                              f"not {self.vehicle!r}: ignored, kept as {aside}", False)
         if self.vehicle_class and doc.get("vehicle_class") not in ("", None, self.vehicle_class):
+            aside = self.move_aside("other-vehicle")
             return LoadResult(None, f"state file {p} is for a {doc.get('vehicle_class')}, "
-                              f"not a {self.vehicle_class}: ignored", False)
+                              f"not a {self.vehicle_class}: ignored, kept as {aside}", False)
         pipelines = doc.get("pipelines")
         if not isinstance(pipelines, dict):
-            aside = self._move_aside()
+            aside = self.move_aside()
             return LoadResult(None, f"state file {p} has no pipelines table: ignored, kept as "
                               f"{aside}", False)
         age = time.time() - float(doc.get("saved_at", 0.0) or 0.0)
@@ -113,9 +120,16 @@ class StateFile:
         return LoadResult(pipelines, f"restored adaptive state ({names}) saved "
                           f"{age / 3600.0:.1f} h ago", True)
 
-    def _move_aside(self) -> str:
+    def move_aside(self, why: str = "corrupt") -> str:
+        """Rename the file ``<name>.<why>-<UTC time>`` (``-2``, ``-3`` ... after it when
+        that name is taken: two restarts within a second keep both); its new name, or a
+        note that it could not be moved."""
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-        aside = self.path.with_name(f"{self.path.name}.corrupt-{stamp}")
+        aside = self.path.with_name(f"{self.path.name}.{why}-{stamp}")
+        k = 1
+        while aside.exists():
+            k += 1
+            aside = self.path.with_name(f"{self.path.name}.{why}-{stamp}-{k}")
         try:
             os.replace(self.path, aside)
         except OSError:

@@ -200,6 +200,9 @@ def ratio_kind(channel: str) -> str | None:
     return None
 
 
+POSITION_PIPELINES = ("aie", "kf", "eseso", "nav")
+"""The pipelines whose ``north``, ``east`` are a position (m): the current's and a
+glider's dive current's are the water's velocity (m/s)."""
 POSITION_FLAGS = ("position_residual", "heading_course_mismatch", "heading_source_mismatch")
 """Integrity flags (:mod:`onboard.monitor.integrity`) under which ESTIMATOR_STATUS
 claims no horizontal position: a position off the fixes, or positions withheld while
@@ -362,14 +365,16 @@ class MavlinkPublisher:
             flags |= mavlink2.ESTIMATOR_VELOCITY_HORIZ
         position_flagged = any(code in f for f in health.flags.values()
                                for code in POSITION_FLAGS)
-        if {"north", "east"} <= vals and not position_flagged:
+        placed = [r for p, r in self._latest.items() if p in POSITION_PIPELINES
+                  and {"north", "east"} <= r.values.keys()]   # a withheld one has none
+        if placed and not position_flagged:
             flags |= mavlink2.ESTIMATOR_POS_HORIZ_REL
         gnss_rej = sum(n for k, n in health.rejected.items() if k.startswith("gnss:"))
         if gnss_rej > self._gnss_rejected:
             flags |= mavlink2.ESTIMATOR_GPS_GLITCH
         self._gnss_rejected = gnss_rej
-        acc = [r.std[q] for r in self._latest.values() for q in ("north", "east") if q in r.std]
-        h_acc = max(acc) if acc else 0.0
+        acc = [r.std[q] for r in placed for q in ("north", "east") if q in r.std]
+        h_acc = max(acc) if acc and not position_flagged else math.nan   # unknown, not 0
         self._send(mavlink2.MAVLink_estimator_status_message(
             int(now * 1e6), flags, ratios["velocity"], ratios["position"], ratios["depth"],
             ratios["heading"], 0.0, 0.0, float(h_acc), 0.0))
