@@ -5,10 +5,12 @@ statuses; the season report; the docs' queries (docs/batch.md) run on the tables
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
 import shutil
+import socket
 import subprocess
 import sys
 import tomllib
@@ -33,9 +35,9 @@ CURRENT_SIM_S = 120.0
 BROKEN = b"this is no telemetry log\n" * 100
 
 
-def onboard(*args: str) -> subprocess.CompletedProcess:
+def onboard(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "onboard", *args], capture_output=True,
-                          text=True, timeout=600)
+                          text=True, timeout=600, cwd=cwd)
 
 
 @pytest.fixture(scope="module")
@@ -94,6 +96,14 @@ def test_runs_table_has_a_row_per_log(local, season):
     assert cur["duration_s"] == pytest.approx(CURRENT_SIM_S, abs=0.5)
     assert cur["utc_start"] is not None and cur["samples"] > 0
     assert 0.0 < cur["current_fraction"] <= 1.0 and cur["current_speed_median_mps"] > 0.0
+    # the sigma of the current published, not of the rows where it was withheld
+    import numpy as np
+
+    est = batch_tables.read_estimates(out / "current.tlog" / "estimates.csv")
+    known = np.isfinite(est["current.north"]) & np.isfinite(est["current.east"])
+    rms = np.sqrt((est["current.std_north"] ** 2 + est["current.std_east"] ** 2) / 2.0)
+    assert cur["current_std_median_mps"] == pytest.approx(np.median(rms[known]))
+    assert cur["current_std_median_mps"] < 0.5 * np.median(rms)   # what it said before
     assert dict(cur["availability"])["current"] > 0.0
     assert dict(rows["b__run.tlog"]["warnings"])["no_position_source"] == 1
     assert rows["blueboat-run.csv"]["config"].startswith("from blueboat-ntnu-csv")
@@ -150,6 +160,23 @@ def test_resumes_and_force_redoes(season, tmp_path):
     forced = onboard("batch", *logs, "--out", str(out), "--force")
     assert forced.returncode == 0 and "skipped" not in forced.stderr
     assert all(p.stat().st_mtime_ns != t for p, t in done.items())
+    # a batch killed in a log's replay: its folder says so, the next run redoes that log
+    killed = out / "gnss-compass.nmea"
+    (killed / "run.json").write_text(json.dumps({"log": logs[0], "status": "running"}))
+    resumed = onboard("batch", *logs, "--out", str(out))
+    assert resumed.returncode == 0 and resumed.stderr.count("skipped (done before)") == 1
+    assert json.loads((killed / "run.json").read_text())["status"] == "ok"
+    # other configs are other inputs: those logs are redone, no --force needed
+    overlay = tmp_path / "overlay.toml"
+    overlay.write_text("[sensors.gnss]\nposition_std_m = 2.0\n")
+    other = onboard("batch", logs[0], "--out", str(out), "--config", "rudder-boat",
+                    "--config", str(overlay))
+    assert other.returncode == 0 and "skipped" not in other.stderr
+    assert onboard("batch", logs[0], "--out", str(out), "--config", "rudder-boat",
+                   "--config", str(overlay)).stderr.count("skipped (done before)") == 1
+    overlay.write_text("[sensors.gnss]\nposition_std_m = 3.0\n")   # the same file, edited
+    assert "skipped" not in onboard("batch", logs[0], "--out", str(out), "--config",
+                                    "rudder-boat", "--config", str(overlay)).stderr
 
 
 def test_a_folder_of_another_command_is_not_overwritten(season, tmp_path):
@@ -168,6 +195,14 @@ def test_names_that_collide_get_their_own_folders():
     assert batch.folder_names(["p/a/run.tlog", "q/a/run.tlog"]) == \
         ["p__a__run.tlog", "q__a__run.tlog"]
     assert batch.folder_names(["a.tlog", "a.tlog"]) == ["a.tlog", "a.tlog-2"]
+    # found in a folder given: its path below that folder, whatever else is added there
+    assert batch.folder_names(["s/one/run.tlog"], ["s"]) == ["one__run.tlog"]
+    assert batch.folder_names(["s/one/run.tlog", "s/two/run.tlog"], ["s", "s"]) == \
+        ["one__run.tlog", "two__run.tlog"]
+    # names the joining makes alike are numbered, never the machine's path
+    assert batch.folder_names(["/abs/s/a__run.tlog", "/abs/s/a/run.tlog", "/abs/s/b/run.tlog"],
+                              ["/abs/s"] * 3) == ["a__run.tlog", "a__run.tlog-2",
+                                                  "b__run.tlog"]
 
 
 def test_a_folder_of_csv_runs_is_one_log_and_of_different_csvs_is_searched(tmp_path):
@@ -242,8 +277,9 @@ def test_on_a_dask_local_cluster(season, local, tmp_path):
     out = tmp_path / "out"
     with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
                                   dashboard_address=None) as cluster:
-        r = onboard("batch", str(logs), "--out", str(out), "--scheduler",
-                    cluster.scheduler_address)
+        # paths relative to a folder the workers do not run in: sent absolute
+        r = onboard("batch", "logs", "--out", "out", "--scheduler",
+                    cluster.scheduler_address, cwd=tmp_path)
     assert r.returncode == 3, r.stderr
     assert r.stdout.strip().splitlines()[-1].startswith(f"failed {logs / 'broken.tlog'}")
     rows = _rows(out)
@@ -257,11 +293,23 @@ def test_on_a_dask_local_cluster(season, local, tmp_path):
              if r["name"] == "current.tlog"])
 
 
-def test_an_unreachable_scheduler_is_bad_usage(season, tmp_path):
+def test_an_unreachable_scheduler_is_bad_usage(season, tmp_path, monkeypatch, capsys):
+    """Nothing listening, or a server that accepts and never answers as Dask does: one
+    line, exit 2, within :data:`batch.SCHEDULER_CONNECT_S`, and no ``--out`` made."""
     pytest.importorskip("distributed", reason="pip install 'onboard[batch]'")
     r = onboard("batch", str(season / "gnss-compass.nmea"), "--out", str(tmp_path / "o"),
                 "--scheduler", "tcp://127.0.0.1:9")
     assert r.returncode == 2 and "--scheduler tcp://127.0.0.1:9: cannot connect" in r.stderr
+    silent = socket.create_server(("127.0.0.1", 0))   # accepts, says nothing
+    monkeypatch.setattr(batch, "SCHEDULER_CONNECT_S", 2.0)
+    address = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
+    try:
+        assert cli_main(["batch", str(season / "gnss-compass.nmea"), "--out",
+                         str(tmp_path / "o"), "--scheduler", address]) == 2
+    finally:
+        silent.close()
+    assert "no Dask scheduler answered within 2 s" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 def test_diagnose_writes_the_season_report(season, tmp_path):

@@ -62,6 +62,8 @@ SECONDS_PER_HOUR = 3600.0
 SCHEDULER_PROBE_S = 2.0
 """Seconds a first plain TCP connection to a ``tcp://`` scheduler may take: refused, the
 batch stops at once (exit 2); else distributed's client tries for 10 s."""
+SCHEDULER_CONNECT_S = 15.0
+"""Seconds the client may take to reach the scheduler, its handshake included."""
 
 
 @dataclass(frozen=True)
@@ -71,6 +73,8 @@ class Found:
 
     logs: list[str] = field(default_factory=list)
     skipped: list[tuple[str, str]] = field(default_factory=list)
+    bases: list[str | None] = field(default_factory=list)
+    """Per log, the folder given that it was found in (None: given itself)."""
 
 
 @dataclass(frozen=True)
@@ -85,6 +89,19 @@ class Task:
     configs: tuple[str, ...] = ()
     diagnose: bool = False
     force: bool = False
+
+    @property
+    def inputs(self) -> str:
+        """What the task's outputs depend on besides its log, as its ``run.json`` records
+        it (``inputs``): the configs given, with a digest of their files' contents (a
+        bundled config by its name); a run of other inputs is not complete."""
+        import hashlib
+
+        h = hashlib.sha256()
+        for c in self.configs:
+            h.update(c.encode() + b"\0")
+            h.update(Path(c).read_bytes() if Path(c).is_file() else b"")
+        return f"{' '.join(self.configs) or 'detected'} sha256:{h.hexdigest()[:16]}"
 
 
 def find_logs(paths: Sequence[str], time_columns: Iterable[str] = ()) -> Found:
@@ -103,29 +120,33 @@ def find_logs(paths: Sequence[str], time_columns: Iterable[str] = ()) -> Found:
             raise UsageError(f"{arg}: no such file or directory")
         if p.is_file() or is_log_dir(p, times):
             found.logs.append(str(p))
+            found.bases.append(None)
         else:
-            _search(p, found, times)
+            _search(p, found, times, str(p))
     seen: set[Path] = set()
-    unique = [log for log in found.logs
-              if not (Path(log).resolve() in seen or seen.add(Path(log).resolve()))]
-    return Found(unique, found.skipped)
+    keep = [not (Path(log).resolve() in seen or seen.add(Path(log).resolve()))
+            for log in found.logs]
+    return Found([x for x, k in zip(found.logs, keep) if k], found.skipped,
+                 [b for b, k in zip(found.bases, keep) if k])
 
 
-def _search(folder: Path, found: Found, times: frozenset[str]) -> None:
-    """Add the logs in ``folder`` and its sub-folders to ``found``, and the files that
-    are not logs to its ``skipped``."""
+def _search(folder: Path, found: Found, times: frozenset[str], base: str) -> None:
+    """Add the logs in ``folder`` and its sub-folders to ``found`` (found in ``base``),
+    and the files that are not logs to its ``skipped``."""
     for f in sorted(folder.iterdir()):
         if f.is_dir():
             if is_log_dir(f, times):
                 found.logs.append(str(f))
+                found.bases.append(base)
             else:
-                _search(f, found, times)
+                _search(f, found, times, base)
             continue
         why = is_log(f, times)
         if why:
             found.skipped.append((str(f), why))
         else:
             found.logs.append(str(f))
+            found.bases.append(base)
 
 
 def is_log_dir(p: Path, times: frozenset[str] = frozenset()) -> bool:
@@ -209,27 +230,40 @@ def one_line(text: str) -> str:
     return "; ".join(line.strip() for line in text.strip().splitlines() if line.strip())
 
 
-def folder_names(logs: Sequence[str]) -> list[str]:
-    """A folder name per log, unique among them and the same run after run: the log's
-    file name, prefixed with as many parent folders (joined with ``__``) as it takes to
-    tell apart logs of the same name (``a__run.tlog``, ``b__run.tlog``)."""
-    parts = [Path(log).absolute().parts for log in logs]
-    depth = [1] * len(logs)
-    while True:
-        names = ["__".join(p[-d:]).lstrip("/") for p, d in zip(parts, depth)]
-        seen: dict[str, list[int]] = {}
-        for i, n in enumerate(names):
-            seen.setdefault(n, []).append(i)
-        clash = [i for group in seen.values() if len({parts[j] for j in group}) > 1
-                 for i in group if depth[i] < len(parts[i])]
-        if not clash:
-            return _numbered(names)
-        for i in clash:
-            depth[i] += 1
+def folder_names(logs: Sequence[str], bases: Sequence[str | None] | None = None
+                 ) -> list[str]:
+    """A folder name per log, unique among them and the same run after run whatever
+    logs are added to the folders searched: a log found in a folder given (``bases``)
+    is named by its path below that folder, its folders joined with ``__``
+    (``a__run.tlog`` for ``season/a/run.tlog`` found in ``season``); a log given itself
+    (base None) by its file name, prefixed with as many of its parent folders as tell
+    it apart from the others given of that name (``p__a__run.tlog``, ``q__a__run.tlog``),
+    never above their common folder. Names still shared (``season/a__run.tlog`` beside
+    ``season/a/run.tlog``, one path given twice) are numbered ``-2``, ... in order."""
+    bases = bases or [None] * len(logs)
+    paths = [Path(log).absolute() for log in logs]
+    names = ["__".join(p.relative_to(Path(b).absolute()).parts) if b else p.name
+             for p, b in zip(paths, bases)]
+    given: dict[str, list[int]] = {}
+    for i, b in enumerate(bases):
+        if b is None:
+            given.setdefault(names[i], []).append(i)
+    for group in given.values():
+        distinct = {paths[i] for i in group}
+        if len(distinct) < 2:
+            continue
+        common = Path(os.path.commonpath([str(p) for p in distinct]))
+        parts = [paths[i].relative_to(common).parts for i in group]
+        depth = 1
+        while len({p[-depth:] for p in parts}) < len(distinct):
+            depth += 1
+        for i, p in zip(group, parts):
+            names[i] = "__".join(p[-depth:])
+    return _numbered(names)
 
 
 def _numbered(names: list[str]) -> list[str]:
-    """``names`` with any left duplicate (the same path given twice) numbered ``-2``, ..."""
+    """``names`` with any duplicate numbered ``-2``, ... after its first."""
     out, count = [], {}
     for n in names:
         count[n] = count.get(n, 0) + 1
@@ -247,6 +281,7 @@ def run_log(task: Task) -> dict:
     cpu0, wall0 = time.process_time(), time.perf_counter()
     out = Path(task.out)
     row = batch_tables.empty_row(task.log, task.name)
+    row["inputs"] = task.inputs
     try:
         with contextlib.redirect_stdout(io.StringIO()):
             row.update(_replay_and_diagnose(task, out))
@@ -292,8 +327,10 @@ def _replay_and_diagnose(task: Task, out: Path) -> dict:
 
         outs.append(Output("--out", out / DIAGNOSE_DIR, "dir", DIAGNOSE_WRITES))
     check(outs, force=task.force or _ours(task), inputs=[task.log, *existing(task.configs)])
-    for stale in (RUN_FILE, batch_tables.LOG_CURRENT):
-        (out / stale).unlink(missing_ok=True)
+    (out / batch_tables.LOG_CURRENT).unlink(missing_ok=True)
+    out.mkdir(parents=True, exist_ok=True)   # the folder is the batch's from now on
+    (out / RUN_FILE).write_text(json.dumps({"log": task.log, "name": task.name,
+                                            "status": "running"}) + "\n")
     cfg, note = _config(task)
     places = batch_tables.Places()   # each row's, as its records carried it
     summary = replay(task.log, cfg, out, config_note=note, plot=False, on_records=places)
@@ -308,7 +345,8 @@ def _replay_and_diagnose(task: Task, out: Path) -> dict:
 
 def _ours(task: Task) -> bool:
     """True when ``task``'s folder holds what a batch wrote for the same log (an
-    unfinished or failed run, redone without ``--force``); a folder holding another
+    unfinished run, a killed one included: its ``run.json`` says ``running``, or a failed
+    one, or one of other inputs: redone without ``--force``); a folder holding another
     log's or another command's outputs is reused only with ``--force``."""
     try:
         row = json.loads((Path(task.out) / RUN_FILE).read_text())
@@ -351,7 +389,8 @@ def _diagnose(task: Task, cfg, out: Path) -> dict:
 
 def is_complete(task: Task) -> dict | None:
     """The row of ``task``'s previous run when its outputs are complete (replayed, and
-    diagnosed when asked, of the same log), else None."""
+    diagnosed when asked, of the same log and the same :attr:`Task.inputs`; a row
+    written before ``inputs`` was recorded counts as of the same), else None."""
     from onboard.offline import batch_tables
 
     out = Path(task.out)
@@ -359,7 +398,8 @@ def is_complete(task: Task) -> dict | None:
         row = json.loads((out / RUN_FILE).read_text())
     except (OSError, ValueError):
         return None
-    same = Path(row.get("log", "")).absolute() == Path(task.log).absolute()
+    same = Path(row.get("log", "")).absolute() == Path(task.log).absolute() and \
+        row.get("inputs", task.inputs) == task.inputs
     done = row.get("status") == "ok" and (not task.diagnose or row.get("diagnosed")
                                           or row.get("diagnose_error"))
     files = all((out / n).exists() for n in ("estimates.csv", "summary.json",
@@ -377,10 +417,18 @@ def run_local(tasks: Sequence[Task], jobs: int) -> Iterator[dict]:
         for t in tasks:
             yield run_log(t)
         return
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)))
+    try:
         futures = {pool.submit(run_log, t): t for t in tasks}
         for f in as_completed(futures):
             yield _result(f, futures[f])
+    except BaseException:   # Ctrl-C or SIGTERM of this process alone: its workers stop too
+        workers = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in workers:
+            proc.terminate()
+        raise
+    pool.shutdown()
 
 
 def _result(future, task: Task) -> dict:
@@ -412,30 +460,52 @@ def _refused(address: str) -> bool:
     return False
 
 
-def run_dask(tasks: Sequence[Task], address: str) -> Iterator[dict]:
-    """The rows of ``tasks`` run on the Dask distributed cluster at ``address``, as they
-    finish; a scheduler that cannot be reached is a :class:`UsageError`."""
+def connect(address: str):
+    """A ``distributed.Client`` of the scheduler at ``address``; :class:`UsageError` when
+    none answers there within :data:`SCHEDULER_CONNECT_S` (nothing listening, a host
+    that does not resolve, a server that is not a Dask scheduler: whatever the client
+    raises, or a handshake that never ends)."""
+    import threading
+
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError:
         raise UsageError("--scheduler needs dask distributed: pip install "
                          "'onboard[batch]'") from None
     if _refused(address):
         raise UsageError(f"--scheduler {address}: cannot connect: connection refused")
-    try:
-        client = Client(address, timeout="10s")
-    except (OSError, TimeoutError, ValueError) as err:
-        raise UsageError(f"--scheduler {address}: cannot connect: {one_line(str(err))}"
-                         ) from None
-    with client:
-        import uuid
+    got: list = []
 
-        run = uuid.uuid4().hex[:8]   # two batches on one cluster keep their tasks apart
-        futures = client.map(run_log, tasks, pure=False,
-                             key=[f"onboard-batch-{run}-{t.name}" for t in tasks])
-        task_of = dict(zip((f.key for f in futures), tasks))
-        for f in as_completed(futures):
-            yield _result(f, task_of[f.key])
+    def attempt() -> None:
+        try:
+            got.append(Client(address, timeout="10s"))
+        except Exception as err:  # noqa: BLE001 - what a peer that is not Dask makes it raise
+            got.append(err)
+    thread = threading.Thread(target=attempt, name="dask-connect", daemon=True)
+    thread.start()
+    thread.join(SCHEDULER_CONNECT_S)
+    if not got:
+        raise UsageError(f"--scheduler {address}: no Dask scheduler answered within "
+                         f"{SCHEDULER_CONNECT_S:g} s")
+    if isinstance(got[0], Exception):
+        raise UsageError(f"--scheduler {address}: cannot connect: "
+                         f"{one_line(str(got[0])) or type(got[0]).__name__}") from None
+    return got[0]
+
+
+def run_dask(tasks: Sequence[Task], client) -> Iterator[dict]:
+    """The rows of ``tasks`` run on the Dask distributed cluster of ``client``
+    (:func:`connect`), as they finish."""
+    import uuid
+
+    from distributed import as_completed
+
+    run = uuid.uuid4().hex[:8]   # two batches on one cluster keep their tasks apart
+    futures = client.map(run_log, tasks, pure=False,
+                         key=[f"onboard-batch-{run}-{t.name}" for t in tasks])
+    task_of = dict(zip((f.key for f in futures), tasks))
+    for f in as_completed(futures):
+        yield _result(f, task_of[f.key])
 
 
 class Progress:
@@ -493,13 +563,13 @@ class Progress:
                 print(file=sys.stderr)
 
 
-def run_batch(tasks: Sequence[Task], jobs: int, scheduler: str | None,
+def run_batch(tasks: Sequence[Task], jobs: int, scheduler,
               on_row: Callable[[dict, bool], None] = lambda row, skipped: None
               ) -> list[dict]:
     """Every task's row, in the order of ``tasks``: a complete previous one for a task
-    without ``force`` (:func:`is_complete`), else the task run on the cluster at
-    ``scheduler`` or on ``jobs`` local processes; ``on_row`` is told of each (and whether
-    it was skipped) as it comes."""
+    without ``force`` (:func:`is_complete`), else the task run on the cluster of
+    ``scheduler`` (a client, :func:`connect`) or on ``jobs`` local processes; ``on_row``
+    is told of each (and whether it was skipped) as it comes."""
     rows: dict[str, dict] = {}
     todo = []
     for t in tasks:
@@ -509,8 +579,8 @@ def run_batch(tasks: Sequence[Task], jobs: int, scheduler: str | None,
             on_row(previous, True)
         else:
             todo.append(t)
-    results: Iterable[dict] = run_dask(todo, scheduler) if scheduler and todo else \
-        run_local(todo, jobs)
+    results: Iterable[dict] = run_dask(todo, scheduler) if scheduler is not None and \
+        todo else run_local(todo, jobs)
     for row in results:
         rows[row["name"]] = row
         on_row(row, False)
@@ -540,12 +610,15 @@ def plan(args) -> tuple[list[Task], Found]:
         raise UsageError("no log found in " + ", ".join(args.logs) + (
             f" ({len(found.skipped)} file(s) skipped as not logs)" if found.skipped else ""))
     out = Path(args.out)
-    names = folder_names(found.logs)
+    names = folder_names(found.logs, found.bases)
     inputs = [*map(Path, args.logs), *map(Path, found.logs), *existing(args.config)]
     # the logs' folders are checked by their tasks (resuming reuses them)
     check([Output("--out", out, "dir", ())], inputs=inputs)
     check([Output("--out", out / n, "dir", ()) for n in names], inputs=inputs)
-    tasks = [Task(str(log), str(out / n), n, tuple(args.config or ()),
+    # absolute: a cluster's workers do not share this process's working directory
+    configs = tuple(str(Path(c).absolute()) if Path(c).is_file() else c
+                    for c in args.config or ())
+    tasks = [Task(str(Path(log).absolute()), str((out / n).absolute()), n, configs,
                   bool(args.diagnose), bool(args.force))
              for log, n in zip(found.logs, names)]
     return tasks, found
@@ -559,14 +632,17 @@ def main(args) -> int:
 
     batch_tables.require_pyarrow()
     tasks, found = plan(args)
+    client = connect(args.scheduler) if args.scheduler else None
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     progress = Progress(len(tasks), sys.stderr.isatty())
     jobs = args.jobs or os.cpu_count() or 1
     try:
-        rows = run_batch(tasks, jobs, args.scheduler, progress.add)
+        rows = run_batch(tasks, jobs, client, progress.add)
     finally:
         progress.close()
+        if client is not None:
+            client.close()
     written = batch_tables.write_tables(out, rows)
     print(batch_tables.table_text(rows))
     for path, why in found.skipped:

@@ -152,7 +152,9 @@ def _estimate_figures(cols: dict[str, np.ndarray], pipelines: Sequence[str]) -> 
 
 def _published_current(cols: dict[str, np.ndarray]) -> tuple | None:
     """The current a log published, for its key figures: (the fraction of rows with
-    one, north, east, std north, std east) of pipeline ``current``'s rows, or, where it
+    one, and on those rows north, east, std north, std east) of pipeline ``current``'s
+    rows (a row whose current is withheld as unknown keeps its sigma, which is not the
+    published current's), or, where it
     published none and a glider's ``dac`` did, of its dives (each once: its rows repeat
     the newest dive); None where neither has columns."""
     cn, ce = cols.get("current.north"), cols.get("current.east")
@@ -164,9 +166,10 @@ def _published_current(cols: dict[str, np.ndarray]) -> tuple | None:
             cols[f"dac.{k}"][rows] for k in ("north", "east", "std_north", "std_east"))
     if cn is None or ce is None:
         return None
-    known = np.isfinite(cn) & np.isfinite(ce)
-    return (float(np.mean(known)), cn, ce, cols.get("current.std_north"),
-            cols.get("current.std_east"))
+    known = np.isfinite(cn) & np.isfinite(ce)   # a withheld row's sigma is not the current's
+    sn, se = cols.get("current.std_north"), cols.get("current.std_east")
+    return (float(np.mean(known)), cn[known], ce[known],
+            None if sn is None else sn[known], None if se is None else se[known])
 
 
 def diagnosis_figures(doc: dict) -> dict:
@@ -364,6 +367,15 @@ def write_tables(out: Path, rows: Sequence[dict]) -> list[str]:
     return [str(out / "runs.parquet"), str(out / "current.parquet")]
 
 
+def _cut(name: str, width: int = 32) -> str:
+    """``name`` in ``width`` characters: its start and its end about a ``~`` when
+    longer (folder names differ at either end: ``a__run.tlog``, ``a__run.tlog-2``)."""
+    if len(name) <= width:
+        return name
+    head = (width - 1) // 2
+    return f"{name[:head]}~{name[-(width - 1 - head):]}"
+
+
 def table_text(rows: Sequence[dict]) -> str:
     """The table printed at the end of a batch: a line per log (status, vehicle, log
     time, rows, warnings, current, effects found; the reason of a failed one)."""
@@ -371,13 +383,13 @@ def table_text(rows: Sequence[dict]) -> str:
              f"{'warn':>4} {'current':>8}  effects / error"]
     for r in rows:
         if r["status"] != "ok":
-            lines.append(f"{r['name'][:32]:<32} {'failed':<7} {'':<16} {'':>8} {'':>8} "
+            lines.append(f"{_cut(r['name']):<32} {'failed':<7} {'':<16} {'':>8} {'':>8} "
                          f"{'':>4} {'':>8}  {r['error']}")
             continue
         cur = r.get("current_speed_median_mps")
         effects = ", ".join(r.get("effects") or []) if r.get("diagnosed") else \
             (f"not diagnosed: {r['diagnose_error']}" if r.get("diagnose_error") else "")
-        lines.append(f"{r['name'][:32]:<32} {'ok':<7} {str(r['vehicle_id'])[:16]:<16} "
+        lines.append(f"{_cut(r['name']):<32} {'ok':<7} {str(r['vehicle_id'])[:16]:<16} "
                      f"{r['duration_s']:>8.0f} {r['rows']:>8,} {r['n_warnings']:>4} "
                      f"{(f'{cur:.2f}m/s' if cur is not None else '-'):>8}  {effects}")
     return "\n".join(lines)
