@@ -211,6 +211,11 @@ class Consistency:
         return min(max(1.0 - (1.0 - self.ratio) / self.share, floor), 1.0)
 
     @property
+    def full(self) -> bool:
+        """Whether its window holds :data:`WINDOW` updates."""
+        return self.n >= WINDOW
+
+    @property
     def white(self) -> bool:
         """Whether :data:`MIN_UPDATES` updates are in and the innovations are white (lag-1
         between :data:`PUBLISHED_LAG1_MIN` and :data:`WHITE_LAG1_MAX`)."""
@@ -439,6 +444,18 @@ class ChannelNoise:
             if q is not None and q.scale != 1.0:
                 out[f"noise.{ch}.process_scale"] = q.scale
         return out
+
+    def summary(self) -> dict[str, dict[str, object]]:
+        """Per channel, for a reader (summary.json's ``noise``): the configuration
+        ``key`` that declares its noise, its ``unit``, the ``declared`` one-sigma, the
+        ``learned`` one (null before a sample), the ``samples`` taken, the variance
+        scale the filter ``applied`` (the learned one only where it is applied: module
+        docstring) and whether the innovations ``identified`` the sensor's noise (the
+        forecast small enough to tell it apart)."""
+        return {ch: {"key": s.key, "unit": s.unit, "declared": s.declared,
+                     "learned": s.std if s.n else None, "samples": s.n,
+                     "applied": s.applied, "identified": s.identified}
+                for ch, s in self.scales.items()}
 
     def get_state(self) -> dict[str, dict[str, float]]:
         """Per channel its :meth:`NoiseScale.get_state`, with ``process_scale`` where the

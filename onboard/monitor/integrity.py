@@ -37,8 +37,9 @@ published records and the innovation records, and runs these checks:
   the factor its velocity rows' innovations give, algorithms.md §9.1). A channel whose
   pipeline learns its measurement noise (the pipeline's ``noise``,
   :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
-  is learned: an NIS out of band first drives the adaptation, and the warning says what
-  is still inconsistent after it (the learned noise at its bound: the configuration key
+  is learned (or has given no sample in a full window of updates: nothing to learn from),
+  and from then on: the blocks judged before are dropped. An NIS out of band first drives
+  the adaptation, and the warning says what is still inconsistent after it (the learned noise at its bound: the configuration key
   to change and the learned value; a noise learned below the declared that the update
   does not take, the same; else the process-noise key the pipeline names for the
   channel's forecast, ``forecast_noise``, with the value that brings the NIS to 1 from
@@ -813,7 +814,7 @@ class NisCheck:
     """
 
     __slots__ = ("dof", "mean", "rho", "band", "outside", "first_failed", "t_start",
-                 "_n", "_sx", "_sxx", "_sxy", "_first", "_prev", "_sv", "_sc")
+                 "adapted", "_n", "_sx", "_sxx", "_sxy", "_first", "_prev", "_sv", "_sc")
 
     def __init__(self, dof: int) -> None:
         self.dof = dof
@@ -825,6 +826,9 @@ class NisCheck:
         self.t_start: float | None = None
         """When (s) the channel's filter started (or restarted): the monitor's settling
         clock (:data:`NIS_SETTLE_S`); None before its first accepted update."""
+        self.adapted = False
+        """Whether the channel's noise had adapted when the newest update came
+        (:meth:`IntegrityMonitor._adapted`)."""
         self._sv = self._sc = 0.0   # pooled deviation power and lag-1 product
         self._reset()
 
@@ -832,6 +836,13 @@ class NisCheck:
         self._n = 0
         self._sx = self._sxx = self._sxy = 0.0
         self._first = self._prev = 0.0
+
+    def restart(self) -> None:
+        """Judge from the next update on as from the start: the block in progress and
+        the run of blocks outside the band are dropped (they measured a filter whose
+        noise was still adapting); the NIS's autocorrelation is kept."""
+        self._reset()
+        self.outside = 0
 
     @property
     def failing(self) -> bool:
@@ -1565,6 +1576,10 @@ class IntegrityMonitor:
                 check = per[rec.channel] = NisCheck(rec.dof)
             if check.t_start is None:
                 check.t_start = rec.t
+            adapted = self._adapted(pipeline, rec.channel)
+            if adapted and not check.adapted:   # its blocks so far judged another filter
+                check.restart()
+            check.adapted = adapted
             was = self._failing(pipeline, rec.channel, check)
             check.add(nis / self._published_factor(pipeline, rec.channel),
                       check.judges_next and (
@@ -1572,14 +1587,13 @@ class IntegrityMonitor:
                           or self._slow_error_holds(pipeline, rec.channel)))
             if not check._n:  # a block was judged: its mean into the run's
                 self._run_mean(pipeline, rec.channel, check, rec.t)
-            now = (self._failing(pipeline, rec.channel, check)
-                   and self._adapted(pipeline, rec.channel))
+            now = self._failing(pipeline, rec.channel, check) and adapted
             if now:
                 if check.first_failed is None:
                     check.first_failed = rec.t
                 if self._due("nis_out_of_band", pipeline, rec.t, rec.channel):
                     self._nis_warning(pipeline, rec.channel, check, rec.t)
-            elif check.failing and self._adapted(pipeline, rec.channel):
+            elif check.failing and adapted:
                 self._band_note(pipeline, rec.channel, check, rec.t)
             if now != was:
                 self._flag(pipeline, "nis_out_of_band", any(
@@ -1665,11 +1679,15 @@ class IntegrityMonitor:
 
     def _adapted(self, pipeline: str, channel: str) -> bool:
         """Whether the channel's NIS may be judged: its noise is not learned, has had its
-        samples, or had none to learn from (an NIS out of band first drives the
-        adaptation; a channel whose forecast always dominates adapts nothing)."""
+        samples, or had none to learn from in a full window of updates (an NIS out of
+        band first drives the adaptation; a channel whose forecast always dominates
+        adapts nothing). Blocks judged before it adapted are dropped when it does
+        (:meth:`NisCheck.restart`): the warning is about the adapted filter."""
         learned = self._learned(pipeline, channel)
-        return (learned is None or bool(getattr(learned, "learned", True))
-                or getattr(learned, "n", 0) == 0)
+        if learned is None or bool(getattr(learned, "learned", True)):
+            return True
+        return getattr(learned, "n", 0) == 0 and bool(
+            getattr(getattr(learned, "consistency", None), "full", True))
 
     def _is_information(self, pipeline: str, channel: str, above: bool) -> bool:
         """Whether ``channel``'s NIS out of its band on that side is information: either

@@ -32,6 +32,7 @@ import msgspec
 from onboard.drivers.base import ReadStats, UnreadableLog, shortfall
 from onboard.drivers.logclock import LogClock, log_clock
 from onboard.drivers.logs import open_log, sniff
+from onboard.estimators.noise_learning import ChannelNoise
 from onboard.monitor.alerts import Alerts
 from onboard.offline import exports
 from onboard.offline.autodetect import consistency, detect
@@ -313,6 +314,8 @@ def _summary(log: str, fmt: str, cfg: Config, engine: Engine, csv: EstimatesCsv,
             Path(log).name), key=lambda a: a.code != "log_mostly_unread")),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
+        "noise": {p.name: p.noise.summary() for p in engine.pipelines
+                  if isinstance(getattr(p, "noise", None), ChannelNoise)},
         "declination": msgspec.to_builtins(engine.declination.report),
     }
 
