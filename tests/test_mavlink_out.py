@@ -105,6 +105,31 @@ def test_statustext_is_rate_limited_and_suppressions_are_reported(listener):
 
 
 @pytest.mark.integration
+def test_a_long_event_reaches_the_ground_station_whole_in_chunks(listener):
+    """A warning with its remedy is longer than STATUSTEXT's 50 bytes: it is sent as
+    MAVLink's long statustext (chunks of one ``id``, ``chunk_seq`` 0, 1, ...), which
+    joined give the event, key and value included; a short one is one message, id 0."""
+    port = listener.getsockname()[1]
+    pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), 1)
+    pub.start()
+    long = ("nis_out_of_band: current velocity: mean NIS 6.05 outside [1.22, 2.82]; "
+            "set [sensors.gnss] velocity_std_mps = 0.275 (declared 0.1 m/s)")
+    exact = "x" * 100                                  # a multiple of 50: an empty chunk ends it
+    assert pub.event(long, now=0.0) and pub.event("short", now=0.0)
+    assert pub.event(exact, now=0.0)
+    pub.close()
+    msgs = [m for m in receive_mavlink(listener) if m.get_type() == "STATUSTEXT"]
+    by_id: dict[int, list] = {}
+    for m in msgs:
+        by_id.setdefault(m.id, []).append(m)
+    assert [m.text for m in by_id[0]] == ["short"]
+    joined = {i: "".join(m.text for m in sorted(ms, key=lambda m: m.chunk_seq))
+              for i, ms in by_id.items() if i}
+    assert sorted(joined.values()) == sorted([long, exact])
+    assert [m.chunk_seq for m in by_id[2]] == [0, 1, 2]
+
+
+@pytest.mark.integration
 def test_frames_are_signed_when_a_key_file_is_configured(listener, tmp_path):
     port = listener.getsockname()[1]
     key_file = tmp_path / "mav.key"

@@ -29,7 +29,10 @@ ESTIMATOR_STATUS   health: test ratios sqrt(NIS)/3 (1 = a 3-sigma innovation) of
                    fixes were rejected since the last report
 STATUSTEXT         events (source lost or silent, state restored or corrupt),   <= 1 per
                    rate-limited by a token bucket (burst 5); the number           2 s avg
-                   suppressed is reported when the bucket refills
+                   suppressed is reported when the bucket refills; an event
+                   longer than 50 bytes is sent in chunks of one ``id``
+                   (``chunk_seq`` 0, 1, ...; at most STATUSTEXT_MAX_CHUNKS),
+                   which ground stations join
 ODOMETRY           only with ``odometry = true``: position NED (m, from the     rate_hz
                    first fix), heading, body-frame surge speed
 =================  ===========================================================  =========
@@ -200,6 +203,11 @@ def ratio_kind(channel: str) -> str | None:
     return None
 
 
+STATUSTEXT_BYTES = 50
+"""The text of one STATUSTEXT (MAVLink's ``char[50]``)."""
+STATUSTEXT_MAX_CHUNKS = 8
+"""An event is sent in at most this many STATUSTEXT chunks (400 bytes: a warning with its
+remedy, the configuration key and value, fits), for one token of the rate limit."""
 POSITION_PIPELINES = ("aie", "kf", "eseso", "nav")
 """The pipelines whose ``north``, ``east`` are a position (m): the current's and a
 glider's dive current's are the water's velocity (m/s)."""
@@ -256,6 +264,7 @@ class MavlinkPublisher:
         self._est_period = 1.0 / cfg.rate_hz if cfg.rate_hz > 0 else 0.2
         self._tokens = 5.0
         self._t_tokens = self.t_start
+        self._text_id = 0
         self._gnss_rejected = 0
         self.signing = False
 
@@ -403,9 +412,25 @@ class MavlinkPublisher:
             self._send(mavlink2.MAVLink_statustext_message(
                 mavlink2.MAV_SEVERITY_NOTICE, f"onboard: {self.suppressed} msgs suppressed".encode()))
             self.suppressed = 0
-        self._send(mavlink2.MAVLink_statustext_message(
-            severity, text.encode("utf-8", "replace")[:50]))
+        self._statustext(severity, text.encode("utf-8", "replace"))
         return True
+
+    def _statustext(self, severity: int, data: bytes) -> None:
+        """``data`` as one STATUSTEXT, or, longer than :data:`STATUSTEXT_BYTES`, as chunks
+        of one non-zero ``id`` (MAVLink's long-statustext: ``chunk_seq`` from 0, the last
+        chunk the one with a null byte, so a chunk of exactly 50 bytes is followed by an
+        empty one), at most :data:`STATUSTEXT_MAX_CHUNKS`."""
+        n = STATUSTEXT_BYTES
+        if len(data) <= n:
+            self._send(mavlink2.MAVLink_statustext_message(severity, data))
+            return
+        chunks = [data[i:i + n] for i in range(0, min(len(data), n * STATUSTEXT_MAX_CHUNKS), n)]
+        if len(chunks[-1]) == n and len(chunks) < STATUSTEXT_MAX_CHUNKS:
+            chunks.append(b"")
+        self._text_id = self._text_id % 0xFFFF + 1
+        for k, chunk in enumerate(chunks):
+            self._send(mavlink2.MAVLink_statustext_message(severity, chunk, id=self._text_id,
+                                                           chunk_seq=k))
 
     def close(self) -> None:
         """Close the link; publishing afterwards sends nothing."""
