@@ -16,8 +16,8 @@ Which declination (``[corrections] declination_deg``):
     ``Heading.declination_rad``; ``sensor``);
   - else the World Magnetic Model (:func:`wmm_declination`, the package ``pygeomag``)
     at the first GNSS fix's position, on the date of that fix when its time stamp is a
-    UTC time (a log's clock: NMEA UTC, a tlog's receive time), else on today's date (the
-    live service's monotonic clock, a DataFlash boot time) (``wmm``);
+    UTC time (a log's clock: NMEA UTC, a tlog's receive time), else on today's date, at
+    midnight UTC (the live service's monotonic clock, a DataFlash boot time) (``wmm``);
   - before the first fix: the heading is rejected (``no_declination``), for at most
     :data:`WAIT_FOR_FIX_S` after the first magnetic heading; after that it is used as it
     is (``none``) and the engine warns (``no_declination``): a vehicle without GNSS needs
@@ -51,6 +51,7 @@ UTC_MIN_S = 946684800.0
 """A time stamp at or after this (POSIX s, 2000-01-01) is taken as a UTC time."""
 UTC_MAX_S = 4102444800.0
 """... and before this (2100-01-01); outside, the date is today's."""
+DAY_S = 86400.0
 MODEL_YEARS = (2010, 2029)
 """The years the package's models cover (WMM-2010 to WMM-2025); a date outside is
 extrapolated from the nearest."""
@@ -131,7 +132,9 @@ class DeclinationCorrector:
         if not self.needs_fix:
             return None
         utc = UTC_MIN_S <= fix.t < UTC_MAX_S
-        t_date = fix.t if utc else self._today()
+        # today's date at midnight UTC: two replays of a log without UTC on one day agree
+        # to the bit, not only to the model's accuracy
+        t_date = fix.t if utc else DAY_S * math.floor(self._today() / DAY_S)
         year = decimal_year(t_date)
         deg, model, h_nt = wmm_declination(fix.lat_deg, fix.lon_deg, year)
         self._wmm_rad = math.radians(deg)
