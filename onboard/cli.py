@@ -233,7 +233,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default ``sys.argv[1:]``), import the command's module and run it;
-    return the exit status (a :class:`UsageError` prints one line and gives 2, an
+    return the exit status (a :class:`UsageError` prints one line and gives 2, as does an
+    ImportError that names its ``pip install`` (an optional extra missing), an
     :class:`OutputFailed` one line and 1, Ctrl-C gives 130)."""
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -249,6 +250,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except ImportError as err:   # an optional extra missing: its message names the install
+        if "pip install" not in str(err):
+            raise
+        print(f"onboard {args.command}: {err}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

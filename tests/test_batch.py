@@ -155,6 +155,7 @@ def test_resumes_and_force_redoes(season, tmp_path):
     assert len(done) == 2
     again = onboard("batch", *logs, "--out", str(out))
     assert again.returncode == 0 and again.stderr.count("skipped (done before)") == 2
+    assert "2 of 2 logs replayed (2 of them by a run before: skipped)" in again.stdout
     assert {p: p.stat().st_mtime_ns for p in out.glob("*/run.json")} == done
     assert len(pq.read_table(out / "runs.parquet")) == 2
     forced = onboard("batch", *logs, "--out", str(out), "--force")

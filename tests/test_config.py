@@ -59,6 +59,27 @@ def test_config_error_is_a_usage_error_so_the_cli_exits_2():
     assert issubclass(ConfigError, UsageError)
 
 
+def test_a_missing_extra_is_one_line_and_exit_2(monkeypatch, capsys):
+    """A command whose optional extra is not installed (its import names the ``pip
+    install``): one line, exit 2, no traceback; any other ImportError is a bug, raised."""
+    import importlib
+
+    from onboard.cli import main as cli_main
+
+    def missing(name: str):
+        raise ImportError("the simulator needs pymap3d: pip install 'onboard[sim]'")
+    monkeypatch.setattr(importlib, "import_module", missing)
+    assert cli_main(["sitl", "--list"]) == 2
+    err = capsys.readouterr().err
+    assert err == "onboard sitl: the simulator needs pymap3d: pip install 'onboard[sim]'\n"
+
+    def broken(name: str):
+        raise ImportError("cannot import name 'x' from 'onboard.sitl'")
+    monkeypatch.setattr(importlib, "import_module", broken)
+    with pytest.raises(ImportError):
+        cli_main(["sitl", "--list"])
+
+
 def test_missing_file_is_reported():
     with pytest.raises(ConfigError, match="no such config file"):
         config.load("/nonexistent/x.toml")

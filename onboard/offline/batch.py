@@ -521,7 +521,7 @@ class Progress:
         import threading
 
         self.total, self.tty = total, tty
-        self.done = self.failed = 0
+        self.done = self.failed = self.skipped = 0
         self.log_s = 0.0
         self.t0 = time.monotonic()
         self._lock = threading.Lock()
@@ -534,6 +534,7 @@ class Progress:
         with self._lock:
             self.done += 1
             self.failed += row["status"] != "ok"
+            self.skipped += skipped
             self.log_s += row.get("duration_s") or 0.0
         if self.tty:
             self._draw()
@@ -656,7 +657,8 @@ def main(args) -> int:
         print(report)
     failed = [r for r in rows if r["status"] != "ok"]
     ok = len(rows) - len(failed)
-    print(f"{ok} of {len(rows)} logs replayed; wrote {', '.join(written)}")
+    before = f" ({progress.skipped} of them by a run before: skipped)" if progress.skipped else ""
+    print(f"{ok} of {len(rows)} logs replayed{before}; wrote {', '.join(written)}")
     for r in failed:
         print(f"failed {_named(r)}")
     if not ok:
