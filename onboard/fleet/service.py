@@ -179,13 +179,19 @@ class FleetService:
             if rec.utc is not None and rec.utc > self.clock() + FUTURE_S:
                 self.field.reject("future")
                 return False
-            why = self.field.take(rec)
-            if why in ("", *UNKNOWN_CURRENT):
-                self._note(rec)
-            return not why
+            return not self._take(rec)
 
     def _count(self, what: str) -> None:
         self.received[what] = self.received.get(what, 0) + 1
+
+    def _take(self, rec: EstimateRecord) -> str:
+        """``rec`` into the field (:meth:`.CurrentField.take`: ``""`` when added, else why
+        not) and, when its time and place are good (added, or its current not known
+        yet), as its vehicle's newest."""
+        why = self.field.take(rec)
+        if why in ("", *UNKNOWN_CURRENT):
+            self._note(rec)
+        return why
 
     def _note(self, rec: EstimateRecord) -> None:
         """Keep ``rec``, of a good time and place, as its vehicle's newest (by ``utc``)."""
@@ -250,10 +256,7 @@ class FleetService:
                                  position_std_m=rows["position_std_m"][i])
             self._count("history")
             with self.lock:
-                why = field.take(rec)
-                if why in ("", *UNKNOWN_CURRENT):
-                    self._note(rec)
-                if not why:
+                if not self._take(rec):
                     added += 1
                     self._track_point(rec)
         left = {k: n - before.get(k, 0) for k, n in field.rejected.items()
