@@ -535,3 +535,30 @@ def test_a_diving_vehicles_down_keeps_the_rows_common_scale() -> None:
         assert v["std_down"] == pytest.approx(min(own, own * math.sqrt(f_d)), rel=1e-9)
         apart += f_h < 0.9 * f_d
     assert apart > 1000   # the two factors differ on most ticks (measured 0.22-0.37 vs 1)
+
+
+def test_the_position_noise_is_named_against_the_accuracy_the_fixes_report(tmp_path) -> None:
+    """A tlog whose fixes report their accuracy (``h_acc``), which the update takes: the
+    position increments' learned noise is relative to that accuracy (its root mean square)
+    and named by the keys that would give every fix the learned value; summary.json says
+    so. Negative control: with ``gnss_accuracy = false`` the configuration's
+    ``position_std_m`` is the noise, and its key alone is named."""
+    import json
+    from pathlib import Path
+
+    from onboard.cli import main as cli_main
+
+    log = Path(__file__).parent / "data" / "replay" / "jaiabot-turns.tlog"
+    assert cli_main(["replay", str(log), "--out", str(tmp_path / "a"), "--no-plot"]) == 0
+    got = json.loads((tmp_path / "a" / "summary.json").read_text())["noise"]
+    inc = got["aie"]["surge.increment"]
+    assert inc["basis"] == "reported" and inc["declared"] == pytest.approx(1.487, abs=0.01)
+    assert inc["key"] == "[pipelines.aie] gnss_accuracy = false, [sensors.gnss] position_std_m"
+    assert got["aie"]["surge.rate"]["basis"] == "declared"
+    overlay = tmp_path / "own.toml"
+    overlay.write_text("[pipelines.aie]\ngnss_accuracy = false\n")
+    assert cli_main(["replay", str(log), "--out", str(tmp_path / "b"), "--no-plot",
+                     "--config", "sitl-rudder-boat", "--config", str(overlay)]) == 0
+    inc = json.loads((tmp_path / "b" / "summary.json").read_text())["noise"]["aie"][
+        "surge.increment"]
+    assert inc["basis"] == "declared" and inc["key"] == "[sensors.gnss] position_std_m"

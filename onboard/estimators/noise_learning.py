@@ -237,14 +237,18 @@ class NoiseScale:
         forecast: the windowed mean of the forecast's share ``f_k``.
     """
 
-    __slots__ = ("channel", "key", "declared", "unit", "narrows", "scale", "n", "mean",
-                 "forecast", "power", "lag", "_start", "_prev", "consistency")
+    __slots__ = ("channel", "key", "declared", "basis", "unit", "narrows", "scale", "n",
+                 "mean", "forecast", "power", "lag", "_start", "_prev", "consistency")
 
     def __init__(self, channel: str, key: str, declared: float, unit: str, *,
                  narrows: bool = False) -> None:
         self.channel = channel
         self.key = key
         self.declared = declared
+        self.basis = "declared"
+        """What :attr:`declared` is: the configuration's value (``declared``), or the
+        sensor's own reported accuracy that the update takes instead (``reported``: a GNSS
+        receiver's, the root mean square of its fixes' over the window)."""
         self.unit = unit
         self.narrows = narrows
         self.scale = self._start = 1.0
@@ -447,12 +451,13 @@ class ChannelNoise:
 
     def summary(self) -> dict[str, dict[str, object]]:
         """Per channel, for a reader (summary.json's ``noise``): the configuration
-        ``key`` that declares its noise, its ``unit``, the ``declared`` one-sigma, the
+        ``key`` that declares its noise, its ``unit``, the ``declared`` one-sigma (its
+        ``basis``: the config's, or the sensor's reported accuracy the update takes), the
         ``learned`` one (null before a sample), the ``samples`` taken, the variance
         scale the filter ``applied`` (the learned one only where it is applied: module
         docstring) and whether the innovations ``identified`` the sensor's noise (the
         forecast small enough to tell it apart)."""
-        return {ch: {"key": s.key, "unit": s.unit, "declared": s.declared,
+        return {ch: {"key": s.key, "unit": s.unit, "declared": s.declared, "basis": s.basis,
                      "learned": s.std if s.n else None, "samples": s.n,
                      "applied": s.applied, "identified": s.identified}
                 for ch, s in self.scales.items()}

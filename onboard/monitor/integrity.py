@@ -366,9 +366,15 @@ def _nis_vs_band(check: NisCheck, word: str = "outside") -> str:
 
 
 def _learned_key(n: object) -> str:
-    """``<key> = <learned one-sigma> (declared <value> <unit>)`` of a learned noise."""
-    return (f"{n.key} = {n.std:.3g} (declared {n.declared:.3g} "  # type: ignore[attr-defined]
+    """``<key> = <learned one-sigma> (declared <value> <unit>)`` of a learned noise
+    (``reported`` where the sensor's own accuracy is the noise the update takes)."""
+    return (f"{n.key} = {n.std:.3g} ({_basis(n)} {n.declared:.3g} "  # type: ignore[attr-defined]
             f"{n.unit})")  # type: ignore[attr-defined]
+
+
+def _basis(n: object) -> str:
+    """What a learned noise's ``declared`` value is: ``declared``, or ``reported``."""
+    return str(getattr(n, "basis", "declared"))
 
 
 def _forecast_share(n: object | None) -> float:
@@ -1820,7 +1826,7 @@ class IntegrityMonitor:
             s = r / (1.0 - phi)
             quiet = (f"; the innovations are smaller than its measurement noise alone "
                      f"({s:.2g} of its variance): set {n.key} = "  # type: ignore[attr-defined]
-                     f"{n.declared * math.sqrt(n.applied * s):.3g} (declared "  # type: ignore[attr-defined]
+                     f"{n.declared * math.sqrt(n.applied * s):.3g} ({_basis(n)} "  # type: ignore[attr-defined]
                      f"{n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
         c = max(c, FORECAST_FACTOR_MIN)
         how = (f"the forecast's variance times {c:.2g} brings the NIS to 1 (the filter's "

@@ -69,6 +69,7 @@ from onboard.estimators.measurement_points import (
     clamp,
     finite_positive,
 )
+from onboard.estimators.noise_learning import WINDOW as NOISE_WINDOW
 from onboard.estimators.noise_learning import ChannelNoise, NoiseScale, ProcessScale
 from onboard.estimators.reconstruction import Point, TrackReconstruction
 from onboard.pipelines.base import PipelineDefaults, unused_measurement
@@ -247,6 +248,7 @@ class SurgeHeadingPipeline(PipelineDefaults):
         self._disc = Discretization()
         self._unwrap = HeadingUnwrapper()
         self._acc_bad = 0                    # fixes whose reported accuracy was not > 0
+        self._n_reported = 0                 # fixes whose own accuracy was their noise
         self._init_windows()
 
     def _learned_noise(self) -> ChannelNoise:
@@ -405,10 +407,26 @@ class SurgeHeadingPipeline(PipelineDefaults):
         cfg = self.cfg
         if cfg.gnss_accuracy and finite_positive(acc):
             acc = clamp(acc, cfg.gnss_accuracy_min_m, cfg.gnss_accuracy_max_m)  # type: ignore
+            self._reported_accuracy(acc)
             return acc * acc
         if acc is not None and cfg.gnss_accuracy:
             self._acc_bad += 1
         return self.sigma_p ** 2
+
+    def _reported_accuracy(self, acc: float) -> None:
+        """A fix's own accuracy ``acc`` (m) is its noise, not ``sigma_p``: the position
+        increments' learned noise is named against the fixes' reported accuracy (its root
+        mean square over the learning's window) and by the keys that would give every fix
+        the learned value (``gnss_accuracy = false`` and the position noise key): a
+        remedy on ``position_std_m`` alone changes nothing while fixes report their own."""
+        n = self.surge.noise
+        if n.basis != "reported":
+            n.basis, n.declared = "reported", acc
+            n.key = f"[pipelines.{self.name}] gnss_accuracy = false, {n.key}"
+            self._n_reported = 0
+        self._n_reported = min(self._n_reported + 1, NOISE_WINDOW)
+        var = n.declared * n.declared
+        n.declared = math.sqrt(var + (acc * acc - var) / self._n_reported)
 
     def _add_speed(self, s: GnssFix) -> None:
         """The fix's speed over ground as the signed path speed (astern when the course
