@@ -156,3 +156,26 @@ def test_the_overlay_writes_the_correlation_time_that_gives_the_measured_rate() 
     tables, notes = overlay.sensor_noise({"sensor_noise": found}, load_all(["rudder-boat"]))
     assert tables["sensors.gnss"]["drift_tau_s"] == float(f"{g['drift_tau_s']:.3g}")
     assert any("drift_tau_s" in n for n in notes)
+
+
+def test_a_receiver_that_understates_its_accuracy_is_set_aside_for_the_noise_measured() -> None:
+    """Fixes whose white noise alone (3.06 m) is twice the accuracy they report (1.49 m,
+    the noise-boat-3x receiver's): the reported accuracy is no basis for their noise, and
+    ``drift_share`` would clip to 0 and write nothing. The overlay sets it aside in every
+    position pipeline and writes the noise measured, white and drift together. Negative
+    control: a receiver whose reported accuracy holds its white part keeps it."""
+    fig = {"std": 3.06, "unit": "m", "lag1": -0.67, "samples": 2999, "white": True,
+           "reported_std": 1.49, "drift_share": 0.0, "reported_understates": True,
+           "drift": {"std": 3.3, "tau_s": 120.0, "rate_m2_per_s": 0.18, "span_s": 600.0}}
+    tables, notes = overlay.sensor_noise({"sensor_noise": {"gnss_position": fig}},
+                                         load_all(["rudder-boat"]))
+    assert tables == {"pipelines.aie": {"gnss_accuracy": False},
+                      "pipelines.kf": {"gnss_accuracy": False},
+                      "sensors.gnss": {"position_std_m": 4.5, "drift_share": 0.538,
+                                       "drift_tau_s": 120.0}}
+    assert any("set aside" in n for n in notes)
+    holds = dict(fig, std=1.2, drift_share=0.35, reported_understates=False)
+    tables, _ = overlay.sensor_noise({"sensor_noise": {"gnss_position": holds}},
+                                     load_all(["rudder-boat"]))
+    assert tables == {"sensors.gnss": {"drift_share": 0.35}}
+    assert noise.UNDERSTATES * 1.49 < 3.06

@@ -83,6 +83,10 @@ DRIFT_MIN_S = 300.0
 DRIFT_LAGS = 24
 """Lags of the structure function, on a geometric grid from one fix to a quarter of the
 log."""
+UNDERSTATES = 1.25
+"""A receiver whose fixes' white noise alone exceeds this many times the accuracy they
+report understates it: its reported accuracy is no basis for the fixes' noise (the
+overlay sets it aside and writes the noise measured, white and drift)."""
 DRIFT_TAU_RANGE_S = (10.0, 3600.0)
 """The drift's correlation time is fitted from the first (a faster wander is the white
 noise's business), and the ``drift_tau_s`` written is kept within both (s)."""
@@ -232,7 +236,8 @@ def identify(raw: dict) -> dict:
     """Every channel's white noise from the log's measurements (``Dataset.raw``):
     ``gnss_position`` (m per axis), ``gnss_velocity`` (m/s per axis), ``compass`` (rad),
     ``dvl`` (m/s per axis), each with its method and checks; the position's
-    ``drift_share`` where the fixes report their accuracy, its ``drift`` where they carry
+    ``drift_share`` where the fixes report their accuracy (and ``reported_understates``
+    where their white noise alone is :data:`UNDERSTATES` times it), its ``drift`` where they carry
     a velocity (:func:`receiver_drift`) and, with both, the ``drift_tau_s`` that gives the
     filter the measured rate. Channels the log lacks are left out."""
     out: dict = {}
@@ -261,6 +266,7 @@ def identify(raw: dict) -> dict:
         h_acc = float(np.median(acc))
         out["gnss_position"]["reported_std"] = h_acc
         out["gnss_position"]["drift_share"] = max(0.0, 1.0 - pos["std"] ** 2 / h_acc ** 2)
+        out["gnss_position"]["reported_understates"] = pos["std"] > UNDERSTATES * h_acc
     if pos is not None and vel is not None:
         drift = receiver_drift(raw.get("fixes") or [], raw.get("gnss_velocity") or [],
                                vel["std"])

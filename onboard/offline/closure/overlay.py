@@ -259,6 +259,12 @@ def sensor_noise(doc: dict, cfg: Config) -> tuple[dict[str, dict[str, Any]], lis
         if not fig["white"] or not std > 0:
             notes.append(line + "; not white (a filtered output): not written")
             continue
+        if channel == "gnss_position" and fig.get("reported_understates"):
+            tables.update(_receiver_set_aside(fig, std, cfg))
+            notes.append(line + f"; the fixes report {fig['reported_std']:.3g} m, less than "
+                         f"their white noise alone: their reported accuracy set aside "
+                         f"(gnss_accuracy = false), the noise measured in its place (white and drift)")
+            continue
         if channel == "gnss_position" and "reported_std" in fig:
             share = round(min(0.9, float(fig["drift_share"])), 3)
             tables.setdefault(table, {})["drift_share"] = share
@@ -275,6 +281,26 @@ def sensor_noise(doc: dict, cfg: Config) -> tuple[dict[str, dict[str, Any]], lis
         tables.setdefault(table, {})[key] = float(f"{std:.3g}")
         notes.append(line)
     return tables, notes
+
+
+def _receiver_set_aside(fig: dict, white: float, cfg: Config) -> dict[str, dict[str, Any]]:
+    """The tables for a receiver that understates its accuracy (``fig`` of
+    ``gnss_position``, ``white`` its white noise, m): every position pipeline of ``cfg``
+    with ``gnss_accuracy = false``, and ``[sensors.gnss]`` the noise measured, the white
+    and the drift (:func:`onboard.offline.closure.noise.receiver_drift`) together as
+    ``position_std_m``, the drift's share and correlation time where it was fitted."""
+    out: dict[str, dict[str, Any]] = {
+        f"pipelines.{name}": {"gnss_accuracy": False}
+        for name in ("aie", "kf") if getattr(cfg.pipelines, name).enabled}
+    drift = fig.get("drift") or {}
+    s_b = float(drift.get("std", 0.0))
+    total = math.hypot(white, s_b)
+    gnss: dict[str, Any] = {"position_std_m": float(f"{total:.3g}"),
+                            "drift_share": round(s_b * s_b / (total * total), 3)}
+    if s_b > 0.0:
+        gnss["drift_tau_s"] = float(f"{float(drift['tau_s']):.3g}")
+    out["sensors.gnss"] = gnss
+    return out
 
 
 @dataclass
