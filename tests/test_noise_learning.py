@@ -192,7 +192,7 @@ def test_the_nis_warning_waits_for_the_adaptation_and_names_the_key() -> None:
     assert len(_nis_warnings(_idle(), 0.05)) == 1                   # nothing to learn from
     at_floor = _learn(0.01, 0.0)
     (msg,) = _nis_warnings(at_floor, 0.05)
-    assert "at its floor: set [sensors.x] std = 0.2" in msg, msg
+    assert "at its floor: set [sensors.x] std <= 0.2" in msg, msg
     between = _learn(1.0, 0.0)
     (msg,) = _nis_warnings(between, 5.0)
     assert "the rest is the forecast's" in msg, msg

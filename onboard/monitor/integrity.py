@@ -365,10 +365,12 @@ def _nis_vs_band(check: NisCheck, word: str = "outside") -> str:
     return f"{m:.{d}f} {word} [{lo:.{d}f}, {hi:.{d}f}]"
 
 
-def _learned_key(n: object) -> str:
+def _learned_key(n: object, bound: str = "=") -> str:
     """``<key> = <learned one-sigma> (declared <value> <unit>)`` of a learned noise
-    (``reported`` where the sensor's own accuracy is the noise the update takes)."""
-    return (f"{n.key} = {n.std:.3g} ({_basis(n)} {n.declared:.3g} "  # type: ignore[attr-defined]
+    (``reported`` where the sensor's own accuracy is the noise the update takes);
+    ``bound`` ``<=`` for a noise learned at its floor, ``>=`` at its ceiling: the truth
+    lies beyond the learning's range, the value is a limit."""
+    return (f"{n.key} {bound} {n.std:.3g} ({_basis(n)} {n.declared:.3g} "  # type: ignore[attr-defined]
             f"{n.unit})")  # type: ignore[attr-defined]
 
 
@@ -1769,7 +1771,7 @@ class IntegrityMonitor:
         if n is not None and n.learned and (above or n.identified):  # type: ignore[attr-defined]
             if n.at_bound == (1 if above else -1):  # type: ignore[attr-defined]
                 return (f"its learned noise is at its {'ceiling' if above else 'floor'}: "
-                        f"set {_learned_key(n)}")
+                        f"set {_learned_key(n, '>=' if above else '<=')}")
             if not above and n.scale < 1.0 and n.applied == 1.0:  # type: ignore[attr-defined]
                 return ("its noise is learned below the declared and not applied (the "
                         f"filter keeps the declared): set {_learned_key(n)}")
