@@ -45,10 +45,8 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
-UTC_MIN_S = float(calendar.timegm((2000, 1, 1, 0, 0, 0)))
-"""Earliest stamp taken as a date (POSIX s, 2000-01-01T00:00:00Z)."""
-UTC_MAX_S = float(calendar.timegm((2100, 1, 1, 0, 0, 0)))
-"""Stamps from this one on are no date (POSIX s, 2100-01-01T00:00:00Z)."""
+from onboard.core.stamps import UTC_MAX_S, UTC_MIN_S
+
 GPS_EPOCH_S = float(calendar.timegm((1980, 1, 6, 0, 0, 0)))
 """The start of GPS week 0 (POSIX s, 1980-01-06T00:00:00Z)."""
 SECONDS_PER_WEEK = 604800.0

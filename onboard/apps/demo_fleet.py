@@ -48,7 +48,7 @@ from onboard.apps import demo
 from onboard.apps.demo import (LIVE_LINES, LinkPlan, _free_port, _port_free, _read_json,
                                DEFAULT_ROUTER, demo_config)
 from onboard.core.config import Config, load
-from onboard.core.errors import UsageError, stop_on_sigterm
+from onboard.core.errors import SigtermAsInterrupt, UsageError
 from onboard.core.outputs import Output, check as check_outputs
 
 DEFAULT_FLEET = "fleet-demo"
@@ -437,7 +437,7 @@ def main(args: argparse.Namespace) -> int:
                             "--web", page], name="fleet", log=demo.OUT_DIR / "fleet-service.log")
     print(f"the fleet's current field (onboard fleet): http://{page}/, its log "
           f"{fusion.log}", flush=True)
-    terminate = stop_on_sigterm()   # its members stopped, as on Ctrl-C
+    terminate = SigtermAsInterrupt()   # its members stopped, as on Ctrl-C
     try:
         res = asyncio.run(run_fleet_demo(args.fleet, duration, out_dir=out_dir,
                                          extra=[fusion],

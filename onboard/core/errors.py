@@ -33,9 +33,3 @@ class SigtermAsInterrupt:
         if self._previous is not None:
             signal.signal(signal.SIGTERM, self._previous)
             self._previous = None
-
-
-def stop_on_sigterm() -> SigtermAsInterrupt:
-    """SIGTERM raises :class:`KeyboardInterrupt` until the returned object's
-    :meth:`~SigtermAsInterrupt.restore` (:class:`SigtermAsInterrupt`)."""
-    return SigtermAsInterrupt()

@@ -22,6 +22,11 @@ from typing import Generic, TypeVar
 
 T = TypeVar("T")
 
+UTC_MIN_S = 946_684_800.0
+"""Earliest stamp taken as a date (POSIX s, 2000-01-01T00:00:00Z): earlier ones are
+seconds on a log's own clock (since a boot, a simulator's start) or a clock never set."""
+UTC_MAX_S = 4_102_444_800.0
+"""Stamps from this one on are no date (POSIX s, 2100-01-01T00:00:00Z)."""
 ANCHOR_STAMPS = 5
 """Distinct stamps the start of a time line is chosen from: up to two bad ones among the
 first five, far ahead or far back, agreeing with each other or not, are outliers. A log

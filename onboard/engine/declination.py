@@ -43,14 +43,11 @@ import msgspec
 
 from onboard.core.geo import wrap_2pi
 from onboard.core.messages import DeclinationReport, GnssFix, Heading
+from onboard.core.stamps import UTC_MAX_S, UTC_MIN_S
 
 WAIT_FOR_FIX_S = 30.0
 """Longest a magnetic heading waits (s after the first one) for a fix that gives the
 model its position; meanwhile magnetic headings are rejected (``no_declination``)."""
-UTC_MIN_S = 946684800.0
-"""A time stamp at or after this (POSIX s, 2000-01-01) is taken as a UTC time."""
-UTC_MAX_S = 4102444800.0
-"""... and before this (2100-01-01); outside, the date is today's."""
 DAY_S = 86400.0
 MODEL_YEARS = (2010, 2029)
 """The years the package's models cover (WMM-2010 to WMM-2025); a date outside is

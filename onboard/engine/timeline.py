@@ -48,7 +48,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from onboard.core.messages import Sample
-from onboard.core.stamps import Anchor
+from onboard.core.stamps import UTC_MAX_S, UTC_MIN_S, Anchor
 
 TIME_JUMP_S = 10.0
 """A stamp this far (s) from the newest released one, either way, is held until the
@@ -125,7 +125,7 @@ def outlier_words(n: int, t: float, ref: float | None) -> str:
     return f"samples stamped far from their neighbours were dropped, {n:,} so far{where}"
 
 
-EPOCH_STAMPS_S = (946_684_800.0, 4_102_444_800.0)
+EPOCH_STAMPS_S = (UTC_MIN_S, UTC_MAX_S)
 """Stamps in this range (s) are read as POSIX time (2000-01-01 to 2100-01-01 UTC) when a
 warning names them; others are seconds on the log's own clock (since a boot, say)."""
 _UNITS_S = ((365.25 * 86400.0, "years"), (86400.0, "days"), (3600.0, "h"), (60.0, "min"))

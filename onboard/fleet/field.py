@@ -72,6 +72,7 @@ import numpy as np
 
 from onboard.core.geo import radii_of_curvature
 from onboard.core.messages import EstimateRecord
+from onboard.core.stamps import UTC_MIN_S
 
 THIN_S = 30.0
 """Length (s) of the windows a vehicle's records are averaged in (one super-observation
@@ -140,9 +141,6 @@ hyperparameters are kept as they are."""
 MAX_POSITION_STD_M = 200.0
 """A record whose position sigma exceeds this (m per axis; an AUV dead reckoned for
 hours) is not placed: not an observation."""
-UTC_MIN = 946_684_800.0
-"""2000-01-01T00:00:00Z: a record stamped before it (a clock never set, a simulator's
-seconds since its start) has no time (``bad_time``)."""
 ESTIMATE_MEMORY_S = 20.0
 """How far back along its own track (s) a vehicle's current estimate reaches: a current
 estimator's estimate is a memory of the water it crossed, not of the water where it is
@@ -239,7 +237,8 @@ class Observation:
 
 def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
     """The observation a ``current`` record makes, or None and why not (``no_time``,
-    ``bad_time`` (not finite, or before :data:`UTC_MIN`), ``no_position``,
+    ``bad_time`` (not finite, or before 2000, ``core.stamps.UTC_MIN_S``: a clock never set,
+    a simulator's seconds since its start), ``no_position``,
     ``bad_position`` (not finite, outside +-90 deg of latitude or +-180 of longitude, or
     exactly 0, 0: a fix never made), ``position_uncertain`` (its ``position_std_m`` above
     :data:`MAX_POSITION_STD_M`), ``no_current``, ``no_std``, ``not_converged``,
@@ -253,7 +252,7 @@ def observation(rec: EstimateRecord) -> tuple[Observation | None, str]:
     v, sd = rec.values, rec.std
     if rec.utc is None:
         return None, "no_time"
-    if not (math.isfinite(rec.utc) and rec.utc >= UTC_MIN):
+    if not (math.isfinite(rec.utc) and rec.utc >= UTC_MIN_S):
         return None, "bad_time"
     lat, lon = rec.lat_deg, rec.lon_deg
     if lat is None or lon is None:

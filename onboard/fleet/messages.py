@@ -8,8 +8,9 @@ key                                encoding                                   pa
 =================================  =========================================  ==============
 
 A query of ``<prefix>/fleet/current?lat=<deg>;lon=<deg>;utc=<s>`` gets ONE
-:class:`FleetCurrent` (exactly its eight fields; the grid's cells add the down); one with a missing or bad parameter gets an error reply (a JSON
-object ``{"error": ...}`` saying which parameter and why).
+:class:`FleetCurrent` (exactly its eight fields; the grid's cells add the down); one
+with a missing or bad parameter gets an error reply (a JSON object ``{"error": ...}``
+saying which parameter and why).
 
 A current's set and drift, as NMEA VDR and Signal K's ``environment.current`` carry them,
 come from :func:`onboard.service.publishers.set_drift.set_drift`.

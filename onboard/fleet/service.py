@@ -42,7 +42,7 @@ from typing import Any, Mapping
 
 import msgspec
 
-from onboard.core.errors import UsageError, stop_on_sigterm
+from onboard.core.errors import SigtermAsInterrupt, UsageError
 from onboard.core.messages import EstimateRecord
 from onboard.core.outputs import Output, existing
 from onboard.core.outputs import check as check_outputs
@@ -506,7 +506,7 @@ def main(args: argparse.Namespace) -> int:
     service = FleetService(session, args.prefix, mcap=args.mcap, refit_s=args.refit)
     page = None
     stop = threading.Event()
-    terminate = stop_on_sigterm()
+    terminate = SigtermAsInterrupt()
     try:
         for path in history:
             counts = service.load_history(path)

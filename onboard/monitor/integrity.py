@@ -39,8 +39,8 @@ published records and the innovation records, and runs these checks:
   :class:`onboard.estimators.noise_learning.ChannelNoise`) is judged only once the noise
   is learned (or has given no sample in a full window of updates: nothing to learn from),
   and from then on: the blocks judged before are dropped. An NIS out of band first drives
-  the adaptation, and the warning says what is still inconsistent after it (the learned noise at its bound: the configuration key
-  to change and the learned value; a noise learned below the declared that the update
+  the adaptation, and the warning says what is still inconsistent after it (the learned
+  noise at its bound: the configuration key to change and the learned value, a limit; a noise learned below the declared that the update
   does not take, the same; else the process-noise key the pipeline names for the
   channel's forecast, ``forecast_noise``, with the value that brings the NIS to 1 from
   its mean and the forecast's share of ``S``). A channel whose factor a
@@ -365,18 +365,16 @@ def _nis_vs_band(check: NisCheck, word: str = "outside") -> str:
     return f"{m:.{d}f} {word} [{lo:.{d}f}, {hi:.{d}f}]"
 
 
-def _learned_key(n: object, bound: str = "=") -> str:
-    """``<key> = <learned one-sigma> (declared <value> <unit>)`` of a learned noise
-    (``reported`` where the sensor's own accuracy is the noise the update takes);
-    ``bound`` ``<=`` for a noise learned at its floor, ``>=`` at its ceiling: the truth
-    lies beyond the learning's range, the value is a limit."""
-    return (f"{n.key} {bound} {n.std:.3g} ({_basis(n)} {n.declared:.3g} "  # type: ignore[attr-defined]
+def _learned_key(n: object, bound: str = "=", value: float | None = None) -> str:
+    """``<key> = <value> (declared <value> <unit>)`` of a learned noise ``n``, the value
+    its learned one-sigma unless given (``reported`` for ``declared`` where the sensor's
+    own accuracy is the noise the update takes); ``bound`` ``<=`` for a noise learned at
+    its floor, ``>=`` at its ceiling: the truth lies beyond the learning's range, the
+    value is a limit."""
+    v = n.std if value is None else value  # type: ignore[attr-defined]
+    basis = getattr(n, "basis", "declared")
+    return (f"{n.key} {bound} {v:.3g} ({basis} {n.declared:.3g} "  # type: ignore[attr-defined]
             f"{n.unit})")  # type: ignore[attr-defined]
-
-
-def _basis(n: object) -> str:
-    """What a learned noise's ``declared`` value is: ``declared``, or ``reported``."""
-    return str(getattr(n, "basis", "declared"))
 
 
 def _forecast_share(n: object | None) -> float:
@@ -1827,9 +1825,8 @@ class IntegrityMonitor:
         if c < FORECAST_FACTOR_MIN and n is not None and phi < 1.0:
             s = r / (1.0 - phi)
             quiet = (f"; the innovations are smaller than its measurement noise alone "
-                     f"({s:.2g} of its variance): set {n.key} = "  # type: ignore[attr-defined]
-                     f"{n.declared * math.sqrt(n.applied * s):.3g} ({_basis(n)} "  # type: ignore[attr-defined]
-                     f"{n.declared:.3g} {n.unit})")  # type: ignore[attr-defined]
+                     f"({s:.2g} of its variance): set "
+                     f"{_learned_key(n, value=n.declared * math.sqrt(n.applied * s))}")  # type: ignore[attr-defined]
         c = max(c, FORECAST_FACTOR_MIN)
         how = (f"the forecast's variance times {c:.2g} brings the NIS to 1 (the filter's "
                f"own NIS {r:.3g} per degree of freedom, the forecast {phi:.0%} of S)")

@@ -237,8 +237,8 @@ def identify(raw: dict) -> dict:
     ``gnss_position`` (m per axis), ``gnss_velocity`` (m/s per axis), ``compass`` (rad),
     ``dvl`` (m/s per axis), each with its method and checks; the position's
     ``drift_share`` where the fixes report their accuracy (and ``reported_understates``
-    where their white noise alone is :data:`UNDERSTATES` times it), its ``drift`` where they carry
-    a velocity (:func:`receiver_drift`) and, with both, the ``drift_tau_s`` that gives the
+    where their white noise alone is :data:`UNDERSTATES` times it), its ``drift`` where
+    they carry a velocity (:func:`receiver_drift`) and, with both, the ``drift_tau_s`` that gives the
     filter the measured rate. Channels the log lacks are left out."""
     out: dict = {}
     pos = _axes(raw.get("fixes") or [], (1, 2))

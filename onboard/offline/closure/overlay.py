@@ -262,8 +262,9 @@ def sensor_noise(doc: dict, cfg: Config) -> tuple[dict[str, dict[str, Any]], lis
         if channel == "gnss_position" and fig.get("reported_understates"):
             tables.update(_receiver_set_aside(fig, std, cfg))
             notes.append(line + f"; the fixes report {fig['reported_std']:.3g} m, less than "
-                         f"their white noise alone: their reported accuracy set aside "
-                         f"(gnss_accuracy = false), the noise measured in its place (white and drift)")
+                         "their white noise alone: their reported accuracy set aside "
+                         "(gnss_accuracy = false), the noise measured in its place (white "
+                         "and drift)")
             continue
         if channel == "gnss_position" and "reported_std" in fig:
             share = round(min(0.9, float(fig["drift_share"])), 3)
