@@ -215,6 +215,18 @@ def build_parser() -> argparse.ArgumentParser:
                         "(current.parquet, or the --out folder that holds it; "
                         "docs/batch.md), as if received live (repeatable; needs the "
                         "batch extra)")
+    p.add_argument("--at", metavar="LAT,LON|signalk:URL",
+                   help="send the field's current here as set and drift (--vdr, --signalk): "
+                        "a fixed place, or the own vessel's position on a Signal K server "
+                        "(signalk:http://HOST:PORT; docs/chartplotters.md)")
+    p.add_argument("--vdr", metavar="udp:HOST:PORT",
+                   help="with --at: NMEA 0183 VDR sentences there, once a second")
+    p.add_argument("--signalk", metavar="udp:HOST:PORT",
+                   help="with --at: Signal K environment.current deltas there (a Signal K "
+                        "server's Signal K UDP input), once a second")
+    p.add_argument("--max-std", type=float, default=0.0, metavar="M/S",
+                   help="with --at: send nothing while the larger one-sigma of the current "
+                        "there is above this (default: 0, no bound)")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(handler="onboard.fleet.service:main")
 

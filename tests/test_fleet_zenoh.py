@@ -99,20 +99,31 @@ def test_records_from_several_vehicles_become_a_field_that_answers_queries(tmp_p
     assert topics == ["onboard/fleet/current/grid", "onboard/fleet/current/geojson"]
 
 
-def test_onboard_fleet_serves_its_field_on_the_web_page():
+def test_onboard_fleet_serves_its_field_on_the_web_page_and_to_a_chart_plotter():
     """``onboard fleet --web``: the page's ``/api/fleet`` holds the grid the service made
-    from the vehicles' records, known cells with their sigmas."""
+    from the vehicles' records, known cells with their sigmas; with ``--at`` (a vehicle's
+    last place) and ``--vdr``, VDR sentences of the field there reach a UDP listener and
+    each grid's line counts them."""
+    import socket
     import subprocess
     import sys
     import urllib.request
 
     import zenoh
 
+    f = fleet("eddy", seed=22, vehicles=3, duration_s=600.0, rate_hz=1.0)
+    shift = time.time() - (UTC0 + 600.0)   # the records end now: the field is asked now
+    lat, lon = f.plane.to_latlon(f.north_m[-1], f.east_m[-1])
+    plotter = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    plotter.bind(("127.0.0.1", 0))
+    plotter.settimeout(60.0)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     router = open_router(endpoint)
     vehicles = zenoh.open(session_config("client", connect=[endpoint]))
     proc = subprocess.Popen([sys.executable, "-m", "onboard", "fleet", "--connect", endpoint,
-                             "--period", "1", "--web", "127.0.0.1:0"],
+                             "--period", "1", "--web", "127.0.0.1:0",
+                             "--at", f"{lat:.7f},{lon:.7f}",
+                             "--vdr", f"udp:127.0.0.1:{plotter.getsockname()[1]}"],
                             stdout=subprocess.PIPE, text=True)
     try:
         url = ""
@@ -121,11 +132,10 @@ def test_onboard_fleet_serves_its_field_on_the_web_page():
             assert line, "onboard fleet ended before serving its page"
             if "the page is on " in line:
                 url = line.split("the page is on ")[1].strip()
-        f = fleet("eddy", seed=22, vehicles=3, duration_s=600.0, rate_hz=1.0)
         enc = msgspec.json.Encoder()
         pubs = {}
         for i in range(len(f.t)):
-            rec = f.record(i)
+            rec = msgspec.structs.replace(f.record(i), utc=f.record(i).utc + shift)
             key = f"onboard/{rec.vehicle}/est/current"
             if key not in pubs:
                 pubs[key] = vehicles.declare_publisher(
@@ -140,8 +150,18 @@ def test_onboard_fleet_serves_its_field_on_the_web_page():
         assert wait_for(lambda: (grid() or {}).get("cells"), timeout=60.0)
         known = [c for c in grid()["cells"] if c["north"] is not None]
         assert known and all(c["std_north"] > 0 for c in known)
+        sentence = plotter.recv(200).decode("ascii")
+        assert sentence.startswith("$IIVDR,") and sentence.endswith("*" + sentence[-4:-2]
+                                                                     + "\r\n")
+        counted = []   # the lines' counts, the first before the field was known
+        while not counted or counted[-1] == "0":
+            line = proc.stdout.readline()
+            assert line and len(counted) < 60, f"no set and drift counted: {line!r}"
+            if "set and drift: " in line:
+                counted.append(line.split("set and drift: ")[1].split()[0])
     finally:
         proc.terminate()
         proc.wait(20.0)
+        plotter.close()
         vehicles.close()
         router.close()

@@ -26,7 +26,8 @@ The rooms, from the bottom up (docs/architecture.md §2 has the picture):
   ``onboard diagnose`` above it.
 * ``onboard.fleet``: the fleet's current field (shore side), pure on the core; its Zenoh
   service (``onboard.fleet.service``) also on the Zenoh session's configuration, the web
-  page and the drivers' MCAP import.
+  page and the drivers' MCAP import; its set and drift for chart plotters
+  (``onboard.fleet.chartplot``) on the vehicles' UDP senders and formats.
 * ``onboard.cli``: parses arguments, dispatches by module name.
 * ``onboard.apps``: demo, shore view, benchmarks, gain design, installer; may use
   everything, the simulator included.
@@ -79,6 +80,7 @@ ROOMS: dict[str, set[str]] = {
                                         "onboard.offline.batch_tables"},
     "onboard.offline.batch_tables": OFFLINE,
     "onboard.fleet": CORE | {"onboard.fleet"},  # the fleet's field, pure
+    "onboard.fleet.chartplot": CORE | {"onboard.fleet", "onboard.service.publishers"},
     "onboard.fleet.service": CORE | {"onboard.fleet", "onboard.service.publishers",
                                      "onboard.service.web", "onboard.drivers"},
     "onboard.cli": CORE | {"onboard"},

@@ -11,15 +11,26 @@ import json
 import math
 import os
 import shutil
+import socket
 import subprocess
+import time
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from onboard.core.config import NmeaVdrOut, SignalKOut
 from onboard.core.messages import EstimateRecord
+from onboard.fleet.chartplot import FieldSetDrift, SignalKPlace, udp_output
+from onboard.fleet.service import FleetService
 from onboard.service.publishers.chartplot import NmeaVdrPublisher, SignalKPublisher
-from onboard.service.publishers.set_drift import KNOT_MPS, set_drift, signalk_delta
+from onboard.service.publishers.set_drift import (
+    KNOT_MPS,
+    nmea_checksum,
+    set_drift,
+    signalk_delta,
+)
+from tests.helpers.fleet_scenarios import UTC0, fleet
 from tests.helpers.signalk import SIGNALK_INSTALL, SignalKServer, signalk_server
 
 pytestmark = [pytest.mark.integration,
@@ -74,6 +85,53 @@ def test_the_server_shows_the_set_and_drift_of_the_signalk_deltas(server):
     assert got["value"]["setTrue"] == pytest.approx(math.atan2(-0.3, 0.1) % math.tau)
     assert got["value"]["drift"] == pytest.approx(math.hypot(0.1, -0.3))
     assert "setMagnetic" not in got["value"]  # no declination: left out, not guessed
+
+
+def rmc(lat: float, lon: float, utc: float) -> bytes:
+    """An NMEA 0183 RMC sentence of a fix at ``lat``, ``lon`` (deg) at ``utc``."""
+    t = time.gmtime(utc)
+    la, lo = abs(lat), abs(lon)
+    body = (f"GPRMC,{time.strftime('%H%M%S', t)}.00,A,{int(la):02d}{(la % 1) * 60:08.5f},"
+            f"{'N' if lat >= 0 else 'S'},{int(lo):03d}{(lo % 1) * 60:08.5f},"
+            f"{'E' if lon >= 0 else 'W'},0.5,45.0,{time.strftime('%d%m%y', t)},,,A")
+    return f"${body}*{nmea_checksum(body)}\r\n".encode("ascii")
+
+
+def test_the_fleets_current_where_the_server_says_its_vessel_is(server):
+    """``onboard fleet --at signalk:http://... --signalk udp:...``: the fleet reads the own
+    vessel's position from the server (given to it here as an RMC sentence), and the
+    server then shows the field's set and drift there."""
+    f = fleet("tidal_channel", seed=4, vehicles=4, duration_s=600.0, rate_hz=1.0)
+    service = FleetService()
+    enc = msgspec.json.Encoder()
+    for i in range(len(f.t)):
+        service.feed(enc.encode(f.record(i)), "application/json;onboard.Estimate.v2")
+    service.step(refit=True)
+    utc = UTC0 + float(f.t[-1])
+    place = SignalKPlace(f"http://127.0.0.1:{server.http_port}", period_s=0.2)
+    chart = FieldSetDrift(service.answer, place, signalk=udp_output(
+        f"udp:127.0.0.1:{server.sk_port}", "--signalk"), clock=lambda: utc)
+    chart.start()
+    try:
+        assert chart.send() == "no_place"   # negative control: the server knows no position
+        lat, lon = (float(x) for x in f.plane.to_latlon(f.north_m[-1], f.east_m[-1]))
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as gps:
+            gps.sendto(rmc(lat, lon, time.time()), ("127.0.0.1", server.nmea_port))
+        deadline = time.monotonic() + 20.0
+        while place.where() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        at = place.where()
+        assert at is not None, place.problem
+        assert at == pytest.approx((lat, lon), abs=1e-6)   # RMC's 1e-5 minute
+        assert chart.send() == "sent"
+    finally:
+        chart.close()
+    here = service.answer(*at, utc)
+    drift = math.hypot(here.north, here.east)   # 0.61 m/s: no other test's
+    got = server.wait_for(CURRENT, lambda g: g["value"]["drift"] == pytest.approx(drift))
+    assert got is not None and got["$source"].startswith("onboard-sk."), got
+    assert got["value"]["setTrue"] == pytest.approx(math.atan2(here.east, here.north) % math.tau)
+    assert got["value"]["drift"] == pytest.approx(math.hypot(here.north, here.east))
 
 
 SCHEMA_CHECK = r"""

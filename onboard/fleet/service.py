@@ -20,6 +20,9 @@ position, is counted and skipped), and
 * with ``--mcap FILE`` writes each grid into an MCAP file for Foxglove: the ``FleetGrid``
   on ``<prefix>/fleet/current/grid`` and the same field as arrows on
   ``<prefix>/fleet/current/geojson`` (``foxglove.GeoJSON``, for the Map panel);
+* with ``--at`` and ``--vdr`` or ``--signalk`` sends the field's current at a place (a
+  fixed one, or the own vessel's on a Signal K server) as set and drift to a chart plotter
+  once a second (:mod:`onboard.fleet.chartplot`);
 * with ``--history FILE`` first adds the currents of an ``onboard batch`` table
   (``current.parquet``, docs/batch.md) as if they had been received
   (:meth:`FleetService.load_history`): yesterday's survey, replayed, served as a field.
@@ -47,6 +50,7 @@ from onboard.core.messages import EstimateRecord
 from onboard.core.outputs import Output, existing
 from onboard.core.outputs import check as check_outputs
 from onboard.core.wire import ESTIMATE_SCHEMAS, JSON_MIME, encoding
+from onboard.fleet.chartplot import CHART_PERIOD_S, FieldSetDrift, parse_place, udp_output
 from onboard.fleet.field import CurrentField, Plane, one_blas_thread
 from onboard.fleet.messages import (
     FLEET_CURRENT_SCHEMA,
@@ -486,10 +490,33 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
                          f"{str(err).split(' at ')[0]}") from None
 
 
+def set_drift_flags(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The arguments of a :class:`FieldSetDrift` but its ``predict``: the place of
+    ``--at``, the outputs of ``--vdr`` and ``--signalk`` and ``--max-std``; None without
+    them; UsageError for a bad or incomplete set of flags."""
+    at, vdr, signalk = (getattr(args, k, None) for k in ("at", "vdr", "signalk"))
+    max_std = getattr(args, "max_std", 0.0)
+    if not at and not vdr and not signalk:
+        return None
+    if not at or not (vdr or signalk):
+        raise UsageError("--at and one of --vdr, --signalk go together: where the current "
+                         "is wanted and where its set and drift are sent")
+    if not max_std >= 0.0:
+        raise UsageError("--max-std is a sigma in m/s, 0 or more")
+    try:
+        outputs = [udp_output(url, flag) if url else None
+                   for url, flag in ((vdr, "--vdr"), (signalk, "--signalk"))]
+        place = parse_place(at)
+    except ValueError as err:
+        raise UsageError(f"--at, --vdr, --signalk: {err}") from None
+    return {"place": place, "vdr": outputs[0], "signalk": outputs[1], "max_std_mps": max_std}
+
+
 def main(args: argparse.Namespace) -> int:
     """``onboard fleet [--connect E] [--listen E] [--mode M] [--zenoh-config FILE]
     [--prefix P] [--period S] [--refit S] [--mcap FILE [--force]] [--web HOST:PORT]
-    [--history FILE]...``; SIGTERM stops it as Ctrl-C does (the MCAP file finished)."""
+    [--history FILE]... [--at PLACE (--vdr URL | --signalk URL)... [--max-std M/S]]``;
+    SIGTERM stops it as Ctrl-C does (the MCAP file finished)."""
     if not args.period > 0 or not args.refit > 0:
         raise UsageError("--period and --refit are positive seconds")
     history = getattr(args, "history", None) or []
@@ -501,9 +528,11 @@ def main(args: argparse.Namespace) -> int:
             parse_listen(args.web)
         except ValueError as err:
             raise UsageError(f"--web {err}") from None
+    chart_flags = set_drift_flags(args)
     session = open_session(args.connect, args.listen, args.mode,
                            getattr(args, "zenoh_config", "") or "")
     service = FleetService(session, args.prefix, mcap=args.mcap, refit_s=args.refit)
+    chart = None if chart_flags is None else FieldSetDrift(service.answer, **chart_flags)
     page = None
     stop = threading.Event()
     terminate = SigtermAsInterrupt()
@@ -524,9 +553,26 @@ def main(args: argparse.Namespace) -> int:
             for vehicle, points in service.tracks.items():
                 page.view.feed_fleet_track(vehicle, points)
             print(f"onboard fleet: the page is on {page.url}", flush=True)
-        wait = 0.0 if history else args.period   # a history is a field at once
-        while not stop.wait(wait):
-            wait = args.period
+        if chart is not None:
+            chart.start()
+            print(f"onboard fleet: set and drift at {chart.place} to "
+                  + " and ".join(f"{name} {url}" for name, url in
+                                 (("VDR", args.vdr), ("Signal K", args.signalk)) if url),
+                  flush=True)
+        now = time.monotonic()
+        grid_due = now if history else now + args.period   # a history is a field at once
+        chart_due = now
+        while True:
+            due = grid_due if chart is None else min(grid_due, chart_due)
+            if stop.wait(max(0.0, due - time.monotonic())):
+                break
+            now = time.monotonic()
+            if chart is not None and now >= chart_due:
+                chart.send()
+                chart_due = max(chart_due + CHART_PERIOD_S, now)
+            if now < grid_due:
+                continue
+            grid_due = now + args.period
             grid = service.step()
             if grid is not None and page is not None:
                 page.view.feed_grid(msgspec.to_builtins(grid))
@@ -536,10 +582,13 @@ def main(args: argparse.Namespace) -> int:
             print(f"{time.strftime('%H:%M:%S')} {len(service.newest)} vehicles, "
                   f"{service.field.added:,} records, {known} cells known"
                   + (f"; left out: {left}" if left else "")
-                  + (f"; {learned}" if learned else ""), flush=True)
+                  + (f"; {learned}" if learned else "")
+                  + (f"; {chart.summary()}" if chart is not None else ""), flush=True)
     except KeyboardInterrupt:
         return 0
     finally:
+        if chart is not None:
+            chart.close()
         if page is not None:
             page.close()
         service.close()
