@@ -526,3 +526,39 @@ def test_what_the_fit_learned_is_said_in_a_line():
     text = field.learned()
     assert text.startswith(f"{field.fitted.hyper.length_m:.0f} m, ")
     assert f"sigma x{math.sqrt(north.scale):.2f} + " in text and text.endswith("cm/s east")
+
+
+def far_first_field(degrees_off: float) -> CurrentField:
+    """The eddy's fleet fused after one record of another vehicle ``degrees_off`` north
+    and east of it (a boat at its home port, a record from last week's site)."""
+    f = fleet("eddy", seed=21, vehicles=4, duration_s=900.0, rate_hz=1.0)
+    obs = list(f.observations())
+    field = CurrentField()
+    first = obs[0]
+    field.add(dataclasses.replace(first, vehicle="far", lat_deg=first.lat_deg + degrees_off,
+                                  lon_deg=first.lon_deg + degrees_off))
+    for o in obs:
+        field.add(o)
+    field.fit()
+    places = [f.plane.to_latlon(n, e) for n, e in ((100.0, -200.0), (-300.0, 100.0),
+                                                    (400.0, 400.0))]
+    field.answers = [field.predict(float(la), float(lo), UTC0 + 800.0) for la, lo in places]
+    return field
+
+
+def test_the_plane_follows_the_fleet_not_its_first_record(monkeypatch):
+    """A first record 330 or 1,100 km from the fleet (3 or 10 degrees) leaves the field
+    where the fleet is the same to the digit: the plane moves to the windows' middle.
+    The negative control, the plane kept at the first record: the stretched plane shifts
+    the fitted length scale (536 -> 522 and 484 m) and the answers by up to 0.025 m/s."""
+    near, far = far_first_field(3.0), far_first_field(10.0)
+    assert math.hypot(*near.plane.to_ne(far.plane.lat0, far.plane.lon0)) < 1.0
+    for a, b in zip(near.answers, far.answers):
+        assert a.north == pytest.approx(b.north, abs=1e-9)
+        assert a.east == pytest.approx(b.east, abs=1e-9)
+        assert a.std_north == pytest.approx(b.std_north, abs=1e-9)
+    monkeypatch.setattr("onboard.fleet.field.PLANE_RECENTRE_M", math.inf)
+    near, far = far_first_field(3.0), far_first_field(10.0)
+    shift = max(abs(a.north - b.north) + abs(a.east - b.east)
+                for a, b in zip(near.answers, far.answers))
+    assert shift > 0.01, shift

@@ -136,7 +136,7 @@ def left_out(sea, depth, obs: dict[str, list], vehicle: str, without: set[str],
             err.append(e)
             own.append([o.north - tn, o.east - te])
             z.append(np.abs(e) / np.array([p.std_north, p.std_east]))
-            x = np.array([*field.plane.to_ne(o.lat_deg, o.lon_deg), o.utc - field.t_ref])
+            x = np.array([*fitted.obs.plane.to_ne(o.lat_deg, o.lon_deg), o.utc - field.t_ref])
             reach.append(fitted.tree.query(x / fitted.scale)[0])
     return {"err": np.reshape(err, (-1, 2)), "own": np.reshape(own, (-1, 2)),
             "z": np.reshape(z, (-1, 2)), "reach": np.array(reach)}

@@ -79,6 +79,12 @@ THIN_S = 30.0
 per vehicle and window)."""
 HISTORY_S = 6 * 3600.0
 """Super-observations older than this (s) before the newest are forgotten."""
+PLANE_RECENTRE_M = 10_000.0
+"""The local plane moves to the kept windows' middle when that lies further than this (m)
+from its origin: the equirectangular :class:`Plane` keeps distances within about 0.1 %
+over 10 km of its origin, and a service that runs for weeks from one survey site to the
+next, or whose first record came from far off, would otherwise fit its field on a plane
+stretched by several per cent."""
 NEIGHBOURS = 64
 """Super-observations a prediction uses (the nearest in scaled distance)."""
 KNOWN_WITHIN = 3.0
@@ -333,7 +339,7 @@ class SuperObs(NamedTuple):
     id, window number) of each; ``place`` (n,) how far the water it observed may be
     from its place (m per axis): the RMS of its records' position sigmas (0 where they
     gave none) and its estimate's memory along the track (:func:`memory_place`) in
-    quadrature."""
+    quadrature; ``plane`` the :class:`Plane` ``x`` is on."""
 
     x: np.ndarray
     y: np.ndarray
@@ -342,12 +348,14 @@ class SuperObs(NamedTuple):
     utc: np.ndarray
     keys: list[tuple[str, int]]
     place: np.ndarray
+    plane: Plane | None = None
 
     def take(self, pick: np.ndarray) -> "SuperObs":
         """The super-observations ``pick`` selects (a boolean mask or indices)."""
         idx = np.flatnonzero(pick) if pick.dtype == bool else pick
         return SuperObs(self.x[idx], self.y[idx], self.s[idx], self.vehicle[idx],
-                        self.utc[idx], [self.keys[i] for i in idx], self.place[idx])
+                        self.utc[idx], [self.keys[i] for i in idx], self.place[idx],
+                        self.plane)
 
 
 def signal_corr(h: Hyper, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
@@ -535,7 +543,8 @@ class CurrentField:
         acc = np.array([self._bins[k] for k in keys])
         n = acc[:, :1]
         mean = acc[:, 1:4] / n
-        north, east = self.plane.to_ne(mean[:, 1], mean[:, 2])
+        plane = self._plane_about(mean[:, 1], mean[:, 2])
+        north, east = plane.to_ne(mean[:, 1], mean[:, 2])
         x = np.column_stack([north, east, mean[:, 0] - self.t_ref])
         n_horizontal, n_down = acc[:, 16:18], acc[:, 8:9]
         with np.errstate(invalid="ignore", divide="ignore"):   # NaN: none in the window
@@ -545,9 +554,18 @@ class CurrentField:
         y = np.column_stack([horizontal[:, :2], down[:, 0]])
         s = np.column_stack([np.sqrt(horizontal[:, 2:]), np.sqrt(down[:, 1])])
         place = np.hypot(np.sqrt(acc[:, 11] / n[:, 0]),
-                         memory_place(window_speed(acc, self.plane), self.memory_s))
+                         memory_place(window_speed(acc, plane), self.memory_s))
         return SuperObs(x, y, s, np.array([self._vehicles[k[0]] for k in keys]), mean[:, 0],
-                        keys, place)
+                        keys, place, plane)
+
+    def _plane_about(self, lat_deg: np.ndarray, lon_deg: np.ndarray) -> Plane:
+        """The plane the windows at ``lat_deg``, ``lon_deg`` are fitted on: the one in use,
+        or one about their median place when that is more than :data:`PLANE_RECENTRE_M`
+        from its origin (then :attr:`plane` from now on)."""
+        lat, lon = float(np.median(lat_deg)), float(np.median(lon_deg))
+        if math.hypot(*self.plane.to_ne(lat, lon)) > PLANE_RECENTRE_M:
+            self.plane = Plane(lat, lon)
+        return self.plane
 
     def update(self, obs: SuperObs | None, hyperparameters: bool = True) -> None:
         """Fit the hyperparameters to ``obs`` by marginal likelihood when asked and there
@@ -632,7 +650,7 @@ class CurrentField:
         fitted = self.fitted
         if fitted is None or self.plane is None:
             return UNKNOWN
-        n, e = self.plane.to_ne(lat_deg, lon_deg)
+        n, e = (fitted.obs.plane or self.plane).to_ne(lat_deg, lon_deg)
         p = fitted.predict(np.array([float(n), float(e), utc - self.t_ref]))
         if p.north is None:
             return p
