@@ -354,11 +354,13 @@ def test_a_section_that_lowers_the_held_out_error_is_written_one_that_raises_it_
     ]
     v = {x.section: x for x in overlay_check.check(sections, GOLDEN_LOG, base,
                                                    _whole_log_selection())}
-    # measured: aie 0.168 -> 0.071 m/s, kf 0.124 -> 0.027 m/s
+    # measured (each filter's speed predicted for the next fix): aie 0.192 -> 0.111
+    # m/s, kf 0.211 -> 0.125 m/s (0.168 -> 0.071 and 0.124 -> 0.027 against the speed
+    # after each fix, before 2026-12-01)
     assert v["good"].written
     assert v["good"].after["aie"] < v["good"].before["aie"] - 0.05
     assert v["good"].after["kf"] < v["good"].before["kf"] - 0.05
-    # judged on top of the good one: aie 0.071 -> 0.168 m/s
+    # judged on top of the good one: aie 0.111 -> 0.192 m/s
     assert not v["bad"].written and "raises" in v["bad"].reason
     assert v["bad"].before == v["good"].after
     assert not v["implausible"].written and "time constant" in v["implausible"].reason
@@ -366,6 +368,24 @@ def test_a_section_that_lowers_the_held_out_error_is_written_one_that_raises_it_
     entry = v["bad"].as_dict()
     assert set(entry) == {"section", "written", "reason", "speed_rmse_before_mps",
                           "speed_rmse_after_mps"}
+
+
+def test_a_noise_that_makes_the_filters_follow_the_receiver_is_refused():
+    """The golden log's Doppler noise is 0.1 m/s, as its config declares. A section that
+    declares it ten times smaller makes aie and kf follow each fix: their speed after the
+    fix is then 0.084 -> 0.019 m/s (aie) and 0.111 -> 0.042 (kf) from the fix's, which a
+    score against the fix they fused (the check before 2026-12-01) took for a better
+    filter. Their speed predicted before each fix is worse, aie 0.111 -> 0.128 m/s:
+    refused. Declaring it five times larger is refused too (kf 0.125 -> 0.204)."""
+    base, _ = choose_config(GOLDEN_LOG, None)
+    assert base.sensors.gnss.velocity_std_mps == 0.1
+    sections = [overlay.Section("understated", {"sensors.gnss": {"velocity_std_mps": 0.01}}),
+                overlay.Section("overstated", {"sensors.gnss": {"velocity_std_mps": 0.5}})]
+    v = {x.section: x for x in overlay_check.check(sections, GOLDEN_LOG, base,
+                                                   _whole_log_selection())}
+    assert not v["understated"].written and "aie" in v["understated"].reason
+    assert v["understated"].after["aie"] > v["understated"].before["aie"] + 0.01
+    assert not v["overstated"].written and "kf" in v["overstated"].reason
 
 
 def test_a_section_is_judged_together_with_the_section_fitted_on_it():
