@@ -12,7 +12,6 @@ import socket
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
-import msgspec
 import pytest
 
 from onboard.cli import main as cli_main
@@ -24,7 +23,6 @@ from onboard.fleet.chartplot import (
     parse_place,
     udp_output,
 )
-from onboard.fleet.service import FleetService
 from onboard.service.publishers.set_drift import KNOT_MPS
 from tests.helpers.fleet_scenarios import UTC0, fleet
 
@@ -32,11 +30,7 @@ from tests.helpers.fleet_scenarios import UTC0, fleet
 @pytest.fixture(scope="module")
 def service():
     f = fleet("tidal_channel", seed=4, vehicles=4, duration_s=600.0, rate_hz=1.0)
-    svc = FleetService()
-    enc = msgspec.json.Encoder()
-    for i in range(len(f.t)):
-        svc.feed(enc.encode(f.record(i)), "application/json;onboard.Estimate.v2")
-    svc.step(refit=True)
+    svc = f.fitted_service()
     last = len(f.t) - 1
     svc.place = f.plane.to_latlon(f.north_m[last], f.east_m[last])   # a vehicle's last
     svc.utc = UTC0 + float(f.t[last])

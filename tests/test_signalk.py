@@ -16,13 +16,11 @@ import subprocess
 import time
 from pathlib import Path
 
-import msgspec
 import pytest
 
 from onboard.core.config import NmeaVdrOut, SignalKOut
 from onboard.core.messages import EstimateRecord
 from onboard.fleet.chartplot import FieldSetDrift, SignalKPlace, udp_output
-from onboard.fleet.service import FleetService
 from onboard.service.publishers.chartplot import NmeaVdrPublisher, SignalKPublisher
 from onboard.service.publishers.set_drift import (
     KNOT_MPS,
@@ -102,11 +100,7 @@ def test_the_fleets_current_where_the_server_says_its_vessel_is(server):
     vessel's position from the server (given to it here as an RMC sentence), and the
     server then shows the field's set and drift there."""
     f = fleet("tidal_channel", seed=4, vehicles=4, duration_s=600.0, rate_hz=1.0)
-    service = FleetService()
-    enc = msgspec.json.Encoder()
-    for i in range(len(f.t)):
-        service.feed(enc.encode(f.record(i)), "application/json;onboard.Estimate.v2")
-    service.step(refit=True)
+    service = f.fitted_service()
     utc = UTC0 + float(f.t[-1])
     place = SignalKPlace(f"http://127.0.0.1:{server.http_port}", period_s=0.2)
     chart = FieldSetDrift(service.answer, place, signalk=udp_output(

@@ -27,10 +27,12 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
+import msgspec
 import numpy as np
 
 from onboard.core.messages import EstimateRecord
 from onboard.fleet.field import Observation, Plane
+from onboard.fleet.service import FleetService
 
 LAT0, LON0 = 43.10, 5.90
 """Where the synthetic area is (deg)."""
@@ -104,6 +106,16 @@ class Fleet:
                               values={"north": float(self.est[i, 0]),
                                       "east": float(self.est[i, 1])},
                               std={"north": self.sigma, "east": self.sigma})
+
+    def fitted_service(self) -> FleetService:
+        """A fleet service that has taken every record, as received over Zenoh, and
+        fitted its field on them."""
+        service = FleetService()
+        enc = msgspec.json.Encoder()
+        for i in range(len(self.t)):
+            service.feed(enc.encode(self.record(i)), "application/json;onboard.Estimate.v2")
+        service.step(refit=True)
+        return service
 
 
 def tracks(rng: np.random.Generator, vehicles: int, duration_s: float, rate_hz: float,
