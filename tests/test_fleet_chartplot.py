@@ -145,9 +145,10 @@ def test_a_signalk_position_is_followed_and_not_used_once_it_stops_moving(positi
     now[0] += 2.0                                       # 11 s since its stamp moved
     place.read()
     assert place.where() is None                        # stale: not used
+    assert place.problem == "its position not updated for 11 s"
     Position.answer = answer(43.1002, 5.9, "2026-12-01T10:00:11.000Z")
     place.read()
-    assert place.where() == (43.1002, 5.9)
+    assert place.where() == (43.1002, 5.9) and place.problem is None
     Position.answer = {"value": None, "timestamp": "x"}  # the boat lost its position
     place.read()
     assert "no position" in place.problem

@@ -128,8 +128,10 @@ class SignalKPlace(Place):
             if stamp != self._stamp or self._position is None:
                 self._stamp, self._moved = stamp, self.clock()
             self._position = pos
+            still = self.clock() - self._moved
         self.reads += 1
-        self.problem = None
+        self.problem = (f"its position not updated for {still:.0f} s"
+                        if still > self.stale_s else None)
 
     def _poll(self) -> None:
         while True:
