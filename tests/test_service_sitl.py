@@ -13,6 +13,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 import onboard.pipelines as pipelines_pkg
 from onboard.apps.demo import run_demo
 from onboard.apps.service_bench import free_tcp_port
+from onboard.core import config
+from onboard.pipelines import eseso
 
 pytestmark = pytest.mark.integration
 
@@ -28,6 +30,14 @@ CASES = [
      "nav.depth"),
     ("spheroid-sawtooth", "spheroid", None, "nav.heading"),
 ]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def eseso_kernels_compiled() -> None:
+    """The ESESO's kernels compiled (and cached) before the runs: in a fresh checkout
+    numba compiles them at their first use, 40 s of CPU on a slow 2-core VM and more beside
+    another test, which the runs' 120-s bound (for a service that hangs) should not hold."""
+    eseso.create(config.load("bluerov2"))
 
 
 @pytest.mark.parametrize("scenario, vclass, sources, must", CASES, ids=[c[0] for c in CASES])

@@ -173,8 +173,7 @@ def prediction_errors(log: str, cfg: Config, ranges: Sequence[tuple[float, float
     each filter predicted it before the fix reached it, minus the fix's measured speed
     over ground (:func:`signed_ground_speed` of the same replay's ``nav``; NaN where a
     filter gave no speed), replaying only those ranges (plus :data:`WARMUP_S` before
-    each) through the onboard engine under ``cfg``; also ``arrival``, the tick time
-    each fix arrived at (the same fix under any configuration).
+    each) through the onboard engine under ``cfg``.
 
     The prediction, not the estimate after the fix: a filter's speed after it fused a
     fix has taken part of that fix's own noise, so scoring it against the fix rewards
@@ -214,10 +213,7 @@ def prediction_errors(log: str, cfg: Config, ranges: Sequence[tuple[float, float
     before = np.minimum(arrival - 1, np.searchsorted(t_arr, instant, side="right") - 1)
     keep = np.array([any(a <= t <= b for a, b in ranges) for t in instant], dtype=bool)
     keep &= before >= 0
-    out = {"arrival": t_arr[arrival[keep]]}
-    for k in FILTERS:
-        out[k] = np.asarray(est[k])[before[keep]] - ref[arrival[keep]]
-    return out
+    return {k: np.asarray(est[k])[before[keep]] - ref[arrival[keep]] for k in FILTERS}
 
 
 def rmse(d: np.ndarray) -> float | None:
@@ -238,12 +234,12 @@ def with_layer(cfg: Config, layer: dict[str, Any]) -> Config:
     return from_dict(merge(to_dict(cfg), layer), "<overlay section>")
 
 
-def _worse(before: dict[str, np.ndarray], after: dict[str, np.ndarray]) -> list[str]:
-    """The filters whose RMS prediction error (:func:`prediction_errors`) ``after`` is
-    more than :data:`TIE_MPS` above ``before``, or that stopped predicting."""
+def _worse(before: dict[str, float | None], after: dict[str, float | None]) -> list[str]:
+    """The filters whose :func:`speed_errors` ``after`` is more than :data:`TIE_MPS` above
+    ``before``, or that stopped predicting."""
     out = []
     for k in FILTERS:
-        b, a = rmse(before[k]), rmse(after[k])
+        b, a = before[k], after[k]
         if b is not None and (a is None or a > b + TIE_MPS):
             out.append(f"{k} {_f(b)} -> {_f(a)} m/s")
     return out
@@ -266,7 +262,7 @@ def check(sections: Sequence[Any], log: str, cfg: Config, sel: Any) -> list[Verd
     ranges = held_out_ranges(sel)
     todo = [s for s in sections if s.tables]
     current = cfg
-    base_err: dict[str, np.ndarray] | None = None
+    base_err: dict[str, float | None] | None = None
     written: set[str] = set()
     judged: set[str] = set()
     out = []
@@ -308,18 +304,16 @@ def check(sections: Sequence[Any], log: str, cfg: Config, sel: Any) -> list[Verd
             out.extend(Verdict(n, False, "no test part to replay") for n in names)
             continue
         if base_err is None:
-            base_err = prediction_errors(log, current, ranges)
-        err = prediction_errors(log, cand, ranges)
+            base_err = speed_errors(log, current, ranges)
+        err = speed_errors(log, cand, ranges)
         worse = _worse(base_err, err)
-        before = {k: rmse(base_err[k]) for k in FILTERS}
-        after = {k: rmse(err[k]) for k in FILTERS}
         if worse:
             out.extend(Verdict(n, False, "raises the test-part speed error: "
-                               + "; ".join(worse) + together, before, after)
+                               + "; ".join(worse) + together, dict(base_err), err)
                        for n in names)
             continue
         out.extend(Verdict(n, True, "does not raise the test-part speed error of aie or "
-                           "kf" + together, before, after) for n in names)
+                           "kf" + together, dict(base_err), err) for n in names)
         written.update(names)
         current, base_err = cand, err
     order = {s.name: k for k, s in enumerate(todo)}
