@@ -25,6 +25,7 @@ from onboard.estimators.model_identification import (
     StateVariableFilter,
     floor_along_track,
 )
+from onboard.estimators.noise_learning import FLOOR, WINDOW, Consistency
 from onboard.estimators.vehicle_models import ModelInputs, RegressionModel
 from tests.helpers.current_plants import (
     BOAT_TRUE,
@@ -589,3 +590,26 @@ def test_the_hgo_rls_keeps_a_damped_model():
     assert rls.n_rejected > 0
     assert np.all(np.isfinite(np.concatenate(rls.thetas)))
     assert not np.array_equal(before[0], rls.thetas[0]) or rls.n_rejected >= 50
+
+
+def test_the_published_factor_weighs_every_direction_of_s_alike():
+    """The current's published factor (algorithms.md §9.1) is read from the velocity rows'
+    innovations whitened by their ``S``. A current known loosely along the track and well
+    across it: ``S = diag(1, 0.01)``, the forecast timid along (true factor 0.2) and right
+    across (1). By the trace, ``z^T z / tr S`` is the wide direction's and the factor 0.21
+    would narrow the well-known component five times below its errors; whitened, every
+    direction weighs alike (the NIS per dimension 0.60, the factor 0.58)."""
+    kf = CurrentKalmanFilter(_identification(identify=False), **FILTER)
+    r_var = 0.001
+    S = np.diag([1.0, 0.01])
+    forecast = S - r_var * np.eye(2)
+    truth = r_var * np.eye(2) + np.diag([0.2, 1.0]) @ forecast   # what the innovations are
+    rng = np.random.default_rng(3)
+    by_trace = Consistency()
+    for _ in range(WINDOW):
+        y = rng.multivariate_normal(np.zeros(2), truth)
+        kf._observe_whitened(y, S, r_var)
+        by_trace.observe(y, float(np.trace(S)), 2 * r_var)
+    expected = 1.0 - (1.0 - 0.5 * (0.2008 + 1.0)) / (0.5 * (0.999 + 0.9))
+    assert kf.earth_whitened.forecast_factor(FLOOR) == pytest.approx(expected, abs=0.08)
+    assert by_trace.forecast_factor(FLOOR) == pytest.approx(0.21, abs=0.05)   # the control

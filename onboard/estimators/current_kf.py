@@ -54,7 +54,7 @@ import numpy as np
 
 from onboard.estimators import kalman
 from onboard.estimators.model_identification import ModelIdentification
-from onboard.estimators.noise_learning import NoiseScale
+from onboard.estimators.noise_learning import Consistency, NoiseScale
 from onboard.estimators.vehicle_models import ModelInputs
 
 MeasurementKind = Literal["earth", "bottom", "water"]
@@ -200,6 +200,9 @@ class CurrentKalmanFilter:
         self.noise: dict[str, NoiseScale] = {
             k: NoiseScale(k, "", 0.0, "m/s") for k in ("earth", "bottom", "water")}
         self.learn_noise = True
+        self.earth_whitened = Consistency()
+        """The velocity-over-ground rows' innovations whitened by their ``S``
+        (:meth:`_observe_whitened`): what the published current's factor is read from."""
         self._blk_y, self._blk_S, self._blk_n = np.zeros(nd), np.zeros((nd, nd)), 0
         self._eye_n = np.eye(n)
         self._H0 = _unrotated_measurement_matrices(nd, n)
@@ -502,9 +505,21 @@ class CurrentKalmanFilter:
         if self.learn_noise and self.started and self.counters.updates > START_UPDATES:
             self.noise[kind].observe(up.y.copy(), float(np.trace(up.S)),
                                      m * std * std)
+            if kind == "earth":
+                self._observe_whitened(up.y, up.S, std * std)
         if self.calibrate and self.started and m == self.nd:
             self._calibrate(up.y, up.S)
         return "accepted"
+
+    def _observe_whitened(self, y: np.ndarray, S: np.ndarray, r_var: float) -> None:
+        """Observe the innovation ``y`` whitened, ``w = L^-1 y`` with ``S = L L^T``, into
+        :attr:`earth_whitened`: its ``S`` is the identity and its measurement noise
+        ``L^-1 R L^-T`` (``R = r_var I``, of trace ``r_var |L^-1|_F^2``). Its ratio is then
+        the NIS per dimension and its forecast share ``tr(S^-1 H P_f H^T) / m``: every
+        direction of ``S`` weighs alike, where ``y^T y / tr S`` is the widest direction's
+        (a current well known across the track and loosely along it)."""
+        L_inv = np.linalg.inv(np.linalg.cholesky(S))
+        self.earth_whitened.observe(L_inv @ y, float(len(y)), r_var * float(np.sum(L_inv ** 2)))
 
     def noise_std(self, kind: MeasurementKind, std: float) -> float:
         """The one-sigma (m/s) a ``kind`` measurement declared at ``std`` is taken with:

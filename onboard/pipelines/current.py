@@ -641,15 +641,17 @@ class CurrentPipeline(PipelineDefaults):
         velocity-over-ground rows' innovations (what the integrity monitor judges them
         against): their measurement noise as the filter's and their forecast times
         :meth:`published_factor`, ``(1 - s) + s f`` with ``s`` the forecast's windowed
-        share of ``S``."""
-        s = self.kf.noise["earth"].consistency.share
+        share of ``S``, whitened (:meth:`.CurrentKalmanFilter._observe_whitened`): the
+        monitor judges their NIS."""
+        s = self.kf.earth_whitened.share
         return (1.0 - s) + s * self.published_factor()
 
     def _rows_factor(self) -> float:
         """The variance factor of the velocity-over-ground rows' forecast their
         innovations give (:meth:`.Consistency.forecast_factor`), the measurement noise
-        taken as the filter's."""
-        return self.kf.noise["earth"].consistency.forecast_factor(FLOOR)
+        taken as the filter's, from the innovations whitened by ``S`` (their NIS per
+        dimension and the forecast's whitened share)."""
+        return self.kf.earth_whitened.forecast_factor(FLOOR)
 
     def slow_error_holds(self) -> bool:
         """Whether the published current's sigma is held by the filter's block-mean NIS
