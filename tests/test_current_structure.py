@@ -613,3 +613,6 @@ def test_the_published_factor_weighs_every_direction_of_s_alike():
     expected = 1.0 - (1.0 - 0.5 * (0.2008 + 1.0)) / (0.5 * (0.999 + 0.9))
     assert kf.earth_whitened.forecast_factor(FLOOR) == pytest.approx(expected, abs=0.08)
     assert by_trace.forecast_factor(FLOOR) == pytest.approx(0.21, abs=0.05)   # the control
+    ratio = kf.earth_whitened.ratio
+    kf._observe_whitened(np.ones(2), np.diag([1.0, -1e-12]), r_var)   # not positive definite
+    assert kf.earth_whitened.ratio == ratio                             # no sample, no error

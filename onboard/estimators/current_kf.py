@@ -517,8 +517,12 @@ class CurrentKalmanFilter:
         ``L^-1 R L^-T`` (``R = r_var I``, of trace ``r_var |L^-1|_F^2``). Its ratio is then
         the NIS per dimension and its forecast share ``tr(S^-1 H P_f H^T) / m``: every
         direction of ``S`` weighs alike, where ``y^T y / tr S`` is the widest direction's
-        (a current well known across the track and loosely along it)."""
-        L_inv = np.linalg.inv(np.linalg.cholesky(S))
+        (a current well known across the track and loosely along it). An ``S`` that
+        rounding left not positive definite gives no sample."""
+        try:
+            L_inv = np.linalg.inv(np.linalg.cholesky(S))
+        except np.linalg.LinAlgError:
+            return
         self.earth_whitened.observe(L_inv @ y, float(len(y)), r_var * float(np.sum(L_inv ** 2)))
 
     def noise_std(self, kind: MeasurementKind, std: float) -> float:
