@@ -40,6 +40,7 @@ from onboard.core.messages import Sample
 from onboard.drivers.logs import open_log
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
+from onboard.offline.closure import model as M
 
 TIME_CONSTANT_BOUNDS_S: dict[str, tuple[float, float]] = {
     "surge": (0.2, 30.0), "heading": (0.05, 30.0)}
@@ -216,17 +217,12 @@ def prediction_errors(log: str, cfg: Config, ranges: Sequence[tuple[float, float
     return {k: np.asarray(est[k])[before[keep]] - ref[arrival[keep]] for k in FILTERS}
 
 
-def rmse(d: np.ndarray) -> float | None:
-    """Root mean square of the finite entries of ``d``; None without any."""
-    d = d[np.isfinite(d)]
-    return float(np.sqrt(np.mean(d ** 2))) if d.size else None
-
-
 def speed_errors(log: str, cfg: Config, ranges: Sequence[tuple[float, float]]
                  ) -> dict[str, float | None]:
-    """The RMS (m/s) of each filter's :func:`prediction_errors`."""
-    errors = prediction_errors(log, cfg, ranges)
-    return {k: rmse(errors[k]) for k in FILTERS}
+    """The RMS (m/s) of each filter's :func:`prediction_errors` (None where it predicted
+    none)."""
+    rms = {k: M.rms(d) for k, d in prediction_errors(log, cfg, ranges).items()}
+    return {k: v if math.isfinite(v) else None for k, v in rms.items()}
 
 
 def with_layer(cfg: Config, layer: dict[str, Any]) -> Config:
