@@ -294,6 +294,68 @@ def test_a_doppler_speed_at_rest_is_not_judged_below_the_floor() -> None:
     assert not alerts.codes()
 
 
+def test_fixes_stamped_back_by_the_gnss_latency_are_still_compared() -> None:
+    """With ``[corrections] gnss_latency_s`` a fix is stamped the latency before its
+    arrival, so at the tick after it arrives it is older than :data:`FIX_MAX_AGE_S`: its
+    age is counted from its arrival (Shenzhen 1751 with its diagnosed 1.25 s latency had
+    no speed or position compared on any of its 2,897 fixes)."""
+    def run(latency: float) -> IntegrityMonitor:
+        m = IntegrityMonitor(Alerts(), gnss_latency_s=latency)
+        m.watch([AIE])
+        for k in range(40):
+            t = float(k)   # arrived at t + 1.25, the tick at t + 1.3
+            m.observe(GnssFix(t=t, lat_deg=LAT0, lon_deg=LON0, sog_mps=1.2, cog_rad=0.0))
+            m.speeds_at(t + 1.3, [("aie", {"speed": 2.0, "std_speed": 0.05})])
+        return m
+    assert run(1.25).active() == {"aie": ["speed_mismatch"]}
+    assert run(0.0).active() == {}   # the fixes taken as 1.3 s old: never compared
+
+
+def _oscillating(amplitude: float, std: float, t_end: float = 60.0
+                 ) -> tuple[Alerts, IntegrityMonitor, list[float]]:
+    """A boat at rest (Doppler 0.02 m/s, 5 Hz) whose published speed swings
+    ``amplitude * sin(2 pi t / 5 s)`` from t = 20 to 35 s, with sigma ``std``; the times
+    at which the speed was flagged."""
+    alerts = Alerts()
+    m = monitor(alerts)
+    flagged = []
+    for k in range(int(t_end * 5)):
+        t = 0.2 * k
+        m.observe(GnssFix(t=t, lat_deg=LAT0, lon_deg=LON0, sog_mps=0.02, cog_rad=0.0))
+        speed = amplitude * math.sin(2.0 * math.pi * t / 5.0) if 20.0 <= t < 35.0 else 0.0
+        m.speeds_at(t + 0.05, [("aie", {"speed": speed, "std_speed": std})])
+        if m.active().get("aie"):
+            flagged.append(t)
+    return alerts, m, flagged
+
+
+def test_a_speed_swinging_through_many_sigmas_is_flagged_within_seconds() -> None:
+    """An input estimator oscillating at rest (Shenzhen 1751 with the overlay diagnose
+    wrote: 4.5 m/s swings with sigma 0.2-0.7 for 10 s) passes near zero twice a period,
+    so half the 30-s window never fails; the gross rule flags it within the 10-s window,
+    names the RMS, and clears once it is over."""
+    alerts, m, flagged = _oscillating(3.0, 0.3)
+    assert flagged and 20.0 < flagged[0] < 27.0
+    assert 35.0 < flagged[-1] < 45.0   # cleared within the 10-s window after the swings
+    warning = next(a for a in alerts if a.code == "speed_mismatch")
+    assert "m/s RMS from the GNSS Doppler speed" in warning.message
+    assert "sigma RMS" in warning.details
+    # within its sigma (0.5 m/s swings, sigma 0.3) nothing is flagged; a swing the
+    # fraction rule alone judges (3 m/s against sigma 2.5: 1.2 sigma RMS) neither
+    assert not _oscillating(0.5, 0.3)[2] and not _oscillating(3.0, 2.5)[2]
+
+
+def test_one_wild_doppler_speed_does_not_flag_a_good_estimate() -> None:
+    alerts = Alerts()
+    m = monitor(alerts)
+    for k in range(200):
+        t = 0.2 * k
+        sog = 30.0 if k == 100 else 1.0   # one glitch: 29 m/s, hundreds of sigmas
+        m.observe(GnssFix(t=t, lat_deg=LAT0, lon_deg=LON0, sog_mps=sog, cog_rad=0.0))
+        m.speeds_at(t + 0.05, [("aie", {"speed": 1.0, "std_speed": 0.05})])
+        assert not m.active()
+
+
 def test_an_eseso_running_away_from_the_dvl_bottom_track_is_flagged() -> None:
     # small.BIN before the zero-velocity update: u 6.2 m/s on a bench (DVL 0 m/s)
     alerts, m = _speeds("eseso", {"u": 6.2, "v": 0.0}, dvl_vx=0.0, std=1.25)

@@ -240,7 +240,8 @@ class Engine:
         self.integrity = IntegrityMonitor(self.alerts, holonomic,
                                           cfg.sensors.gnss.position_std_m,
                                           cfg.sensors.gnss.velocity_std_mps,
-                                          cfg.sensors.dvl.velocity_std_mps)
+                                          cfg.sensors.dvl.velocity_std_mps,
+                                          cfg.corrections.gnss_latency_s)
         """Each estimate against the independent measurements (:mod:`onboard.monitor.integrity`):
         warnings, flags, and the values it withholds; it reads the pipelines' roles."""
         self.integrity.watch(self.pipelines)

@@ -64,8 +64,10 @@ published records and the innovation records, and runs these checks:
   speed over ground, its signed forward speed against the DVL's forward ``vx``. Normalized
   by the published one-sigma and the measurement's own; ``speed_mismatch`` when more than
   :data:`SPEED_FRACTION` of the comparisons of the last :data:`SPEED_WINDOW_S` are beyond
-  :data:`SPEED_SIGMA_BOUND` and :data:`SPEED_FLOOR_MPS`. The pipeline is flagged, its
-  values kept.
+  :data:`SPEED_SIGMA_BOUND` and :data:`SPEED_FLOOR_MPS`, or at once when the same holds
+  over the last :data:`SPEED_GROSS_WINDOW_S` with an RMS normalized residual beyond
+  :data:`SPEED_GROSS_RMS_SIGMA` (a gross miss). The pipeline is flagged, its speed
+  withheld while it lasts.
 
 Issue 32 adds, each its own class (docs/integrity.md, "Heading honesty", "Current
 honesty"):
@@ -216,7 +218,9 @@ POSITION_MIN_CHECKS = 5
 POSITION_FRACTION = 0.5
 """Share of failed comparisons in a window that raises ``position_residual``."""
 FIX_MAX_AGE_S = 1.0
-"""A fix older than this (s) at the tick is not compared."""
+"""A fix that arrived longer ago than this (s) at the tick is not compared (its time
+stamp, the instant it measured, is ``[corrections] gnss_latency_s`` before its
+arrival)."""
 DEFAULT_FIX_STD_M = 2.0
 """One-sigma (m) of a fix that reports no accuracy and has no configured one."""
 
@@ -232,6 +236,19 @@ SPEED_MIN_CHECKS = 5
 """Speed comparisons needed in a window before it is judged."""
 SPEED_FRACTION = 0.5
 """Share of failed speed comparisons in a window that raises ``speed_mismatch``."""
+SPEED_GROSS_WINDOW_S = 10.0
+"""The shorter window of the gross-miss rule (s): an estimate that swings through many
+sigmas for seconds (an input estimator oscillating at rest) fails there before the
+:data:`SPEED_WINDOW_S` window has half its comparisons failed."""
+SPEED_GROSS_RMS_SIGMA = 5.0
+"""RMS normalized residual over :data:`SPEED_GROSS_WINDOW_S` beyond which a window with
+more than :data:`SPEED_FRACTION` of its comparisons failed fails at once. A consistent
+estimate's normalized residuals, however correlated in time, have a mean square above 25
+about as rarely as a single draw does (P(chi2_1 > 25) = 6e-7); a comparison below
+:data:`SPEED_FLOOR_MPS` counts as zero, and a single wild measurement cannot move the
+rule, which needs most of the window failed."""
+GNSS_DOPPLER = "GNSS Doppler"
+"""The speed reference of a fix's speed over ground (the other: ``"DVL"``)."""
 DEFAULT_SPEED_STD_MPS = 0.1
 """One-sigma (m/s) of a Doppler speed over ground that reports no accuracy."""
 DEFAULT_DVL_STD_MPS = 0.01
@@ -759,7 +776,12 @@ class SpeedCheck:
         self.failed = 0
         """Failed comparisons in the window (a count kept as they come and go: an
         integer, exact)."""
+        self._gross: deque[tuple[float, float, float, bool]] = deque()  # (t, |r|, z^2, failed)
+        self._gross_failed = 0
         self.failing = False
+        self.gross_rms: float | None = None
+        """The RMS normalized residual over :data:`SPEED_GROSS_WINDOW_S` when the newest
+        judged window failed by the gross-miss rule alone, else None."""
 
     def add(self, t: float, residual_mps: float, var: float) -> bool | None:
         """One comparison at ``t`` (s): the residual (m/s) and its variance (m^2/s^2,
@@ -772,15 +794,32 @@ class SpeedCheck:
         self.failed += failed
         while win[0][0] < t - SPEED_WINDOW_S:
             self.failed -= win.popleft()[2]
+        gross = self._gross
+        gross.append((t, r, r * r / var if r > SPEED_FLOOR_MPS and var > 0.0 else 0.0,
+                      failed))
+        self._gross_failed += failed
+        while gross[0][0] < t - SPEED_GROSS_WINDOW_S:
+            self._gross_failed -= gross.popleft()[3]
         if len(win) < SPEED_MIN_CHECKS:
             return None
         self.failing = self.failed > SPEED_FRACTION * len(win)
+        self.gross_rms = None
+        if not self.failing and len(gross) >= SPEED_MIN_CHECKS \
+                and self._gross_failed > SPEED_FRACTION * len(gross):
+            rms = math.sqrt(sum([z2 for _, _, z2, _ in gross]) / len(gross))
+            if rms > SPEED_GROSS_RMS_SIGMA:
+                self.failing, self.gross_rms = True, rms
         return self.failing
 
     def median_mps(self) -> float:
         """Median speed difference (m/s) in the window."""
         xs = sorted(r for _, r, _ in self._window)
         return xs[len(xs) // 2] if xs else math.nan
+
+    def gross_rms_mps(self) -> float:
+        """RMS speed difference (m/s) over :data:`SPEED_GROSS_WINDOW_S`."""
+        g = self._gross
+        return math.sqrt(sum([r * r for _, r, _, _ in g]) / len(g)) if g else math.nan
 
 
 def _computed_speed(qs: tuple[str, ...], values: Mapping[str, float], forward_only: bool
@@ -1046,14 +1085,19 @@ class IntegrityMonitor:
     def __init__(self, alerts: Alerts, holonomic: bool = False,
                  fix_std_m: float = DEFAULT_FIX_STD_M,
                  speed_std_mps: float = DEFAULT_SPEED_STD_MPS,
-                 dvl_std_mps: float = DEFAULT_DVL_STD_MPS) -> None:
+                 dvl_std_mps: float = DEFAULT_DVL_STD_MPS,
+                 gnss_latency_s: float = 0.0) -> None:
         """Raise warnings into ``alerts``; ``holonomic``: the vehicle moves sideways by
         design (:attr:`onboard.core.vehicles.VehicleTraits.holonomic`: no heading/course
         check); ``fix_std_m`` is the one-sigma (m) of a fix that
         reports no accuracy (``[sensors.gnss] position_std_m``), ``speed_std_mps`` of its
         speed over ground (``[sensors.gnss] velocity_std_mps``), ``dvl_std_mps`` of a DVL
-        velocity with no figure of merit (``[sensors.dvl] velocity_std_mps``)."""
+        velocity with no figure of merit (``[sensors.dvl] velocity_std_mps``);
+        ``gnss_latency_s`` (``[corrections] gnss_latency_s``) how long before its arrival
+        a fix's time stamp is: a fix is compared while it arrived at most
+        :data:`FIX_MAX_AGE_S` before the tick."""
         self.alerts = alerts
+        self.fix_max_age_s = FIX_MAX_AGE_S + gnss_latency_s
         self.fix_std_m = fix_std_m
         self.speed_std_mps = speed_std_mps
         self.dvl_std_mps = dvl_std_mps
@@ -1413,7 +1457,7 @@ class IntegrityMonitor:
             return
         self._fix_new = False
         dt = t - fix.t
-        if dt > FIX_MAX_AGE_S:
+        if dt > self.fix_max_age_s:
             return
         dn = de = 0.0
         if fix.sog_mps is not None and fix.cog_rad is not None:
@@ -1507,7 +1551,7 @@ class IntegrityMonitor:
         acc = s.speed_acc_mps
         std = acc if acc is not None and acc > 0 and math.isfinite(acc) \
             else self.speed_std_mps
-        self._speed_refs.append((s.t, sog, std * std, "GNSS Doppler"))
+        self._speed_refs.append((s.t, sog, std * std, GNSS_DOPPLER))
 
     def _dvl(self, s: DvlVelocity) -> None:
         """A valid bottom-track report's forward speed, to compare at the next tick."""
@@ -1522,12 +1566,14 @@ class IntegrityMonitor:
         """Compare the pipelines' speeds at the tick at ``t`` (``computed``: each
         pipeline's name and values as it stepped, before any is withheld, so that a
         speed withheld for this check is still judged and its flag can clear) with the
-        newest measurement of each kind since the previous tick (at most
-        :data:`FIX_MAX_AGE_S` old)."""
+        newest measurement of each kind since the previous tick (arrived at most
+        :data:`FIX_MAX_AGE_S` before it)."""
         refs = self._speed_refs
         if not refs:
             return
-        newest = {ref[3]: ref for ref in refs if t - ref[0] <= FIX_MAX_AGE_S}
+        newest = {ref[3]: ref for ref in refs
+                  if t - ref[0] <= (self.fix_max_age_s if ref[3] == GNSS_DOPPLER
+                                    else FIX_MAX_AGE_S)}
         refs.clear()
         watched = self.watched
         for name, values in computed:
@@ -1555,12 +1601,16 @@ class IntegrityMonitor:
         self._flag(pipeline, "speed_mismatch", any(c.failing for c in per.values()))
         if verdict and self._due("speed_mismatch", pipeline, t):
             self._warn("speed_mismatch", pipeline, t, (
-                f"{pipeline} speed is {check.median_mps():.2f} m/s from the {what} speed: "
+                f"{pipeline} speed is " + (
+                    f"{check.median_mps():.2f} m/s" if check.gross_rms is None else
+                    f"{check.gross_rms_mps():.2f} m/s RMS") + f" from the {what} speed: "
                 "its speed and sigma are not to be trusted; onboard diagnose LOG names what "
                 f"its model lacks, [pipelines.{pipeline}] sets its noise "
                 "(docs/integrity.md)"), details=(
-                f"the median over {SPEED_WINDOW_S:.0f} s, with its stated "
-                f"{math.sqrt(own[1]):.2f} m/s and the measurement's "
+                (f"the median over {SPEED_WINDOW_S:.0f} s" if check.gross_rms is None else
+                 f"over the last {SPEED_GROSS_WINDOW_S:.0f} s, {check.gross_rms:.1f} sigma "
+                 "RMS")
+                + f", with its stated {math.sqrt(own[1]):.2f} m/s and the measurement's "
                 f"{math.sqrt(var_ref):.2f} m/s"))
 
     # ------------------------------------------------------------------ innovations
