@@ -56,9 +56,24 @@ def test_shenzhen_headline_counts_withheld_outputs_apart_from_rejected_inputs(
     # too, on the same rows
     w = summary["withheld_rows"]
     assert w["aie"] == w["kf"] == rows
+    unknown = int(summary["pipeline_health"]["current"]["unknown"])
+    assert 0 < unknown < 5793
     assert lines[0].startswith("text log, 579.2 s, 5,794 samples, 0 rejected; "
                                f"5,793 rows (aie withheld on {rows:,}; current withheld on "
-                               f"{rows:,}; kf withheld on {rows:,}) -> ")
+                               f"{rows:,}; kf withheld on {rows:,}; current unknown on "
+                               f"{unknown:,}) -> ")
+
+
+@pytest.mark.data
+def test_a_current_the_log_cannot_resolve_is_counted_in_the_headline(
+        shared_data, tmp_path, capsys):
+    """Shenzhen 1037 (generic config, no surge model, no DVL): the current is unknown on
+    every row, its sigma above 0.3 m/s; the headline said nothing was left out."""
+    log = data_log(shared_data, "usv_rtk_gnss_heading_nmea_shenzhen/202412051037.txt")
+    rc, summary, lines = replay(log, tmp_path, capsys)
+    assert rc == 0 and summary["rows"] == 6459
+    assert summary["pipeline_health"]["current"]["unknown"] == 6459
+    assert "rows (current unknown on 6,459) -> " in lines[0]
 
 
 def test_the_headline_sums_reader_and_engine_rejections_but_not_pipeline_failures():

@@ -697,9 +697,14 @@ def headline(summary: dict, csv_path: Path) -> str:
 
 def _withheld_note(summary: dict) -> str:
     """`` (current withheld on 3,217)``: per pipeline, the rows on which the integrity
-    monitor withheld estimates, and the values left out as not finite; empty without."""
+    monitor withheld estimates, the rows on which the current was unknown (its sigma
+    above ``unknown_above_std_mps``: what the log cannot resolve), and the values left
+    out as not finite; empty without."""
     parts = [f"{p} withheld on {n:,}" for p, n in summary.get("withheld_rows", {}).items()
              if n]
+    parts += [f"{p} unknown on {int(h['unknown']):,}"
+              for p, h in summary.get("pipeline_health", {}).items()
+              if isinstance(h, dict) and h.get("unknown")]
     parts += [f"{n:,} {k.split(':')[1]} values not finite"
               for k, n in summary.get("withheld", {}).items() if k.endswith(":nonfinite") and n]
     return f" ({'; '.join(parts)})" if parts else ""

@@ -599,6 +599,8 @@ class CurrentPipeline(PipelineDefaults):
             obs[i] = sane and std[i] <= thr and math.isfinite(c[i])
             if obs[i]:
                 out[ax] = float(c[i])
+        if not (obs[0] or obs[1]):
+            self.counters.unknown += 1
         # an unknown component keeps the sigma that made it unknown
         std = [p if known else s for p, known, s in zip(published, obs, std)]
         out.update(std_north=float(std[0]), std_east=float(std[1]),

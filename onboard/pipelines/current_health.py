@@ -34,6 +34,9 @@ class PipelineCounters:
     """Restored currents the data contradicted."""
     restore_confirmed: int = 0
     """Restored currents the data confirmed."""
+    unknown: int = 0
+    """Ticks published with neither horizontal component known (each one-sigma above
+    ``unknown_above_std_mps``, or the model ran away)."""
 
 
 class LateHold(msgspec.Struct, frozen=True):
@@ -113,7 +116,8 @@ class CurrentHealth(msgspec.Struct, frozen=True, kw_only=True):
         if p.hgo_rls_rejected is not None:
             h["hgo_rls_rejected"] = p.hgo_rls_rejected
         h.update((k, v) for k, v in (("restore_discarded", p.restore_discarded),
-                                     ("restore_confirmed", p.restore_confirmed)) if v)
+                                     ("restore_confirmed", p.restore_confirmed),
+                                     ("unknown", p.unknown)) if v)
         h["q_scale"] = self.q_scale
         h["velocity.gnss_std"] = self.gnss_velocity_std
         _put(h, "theta.std_max", self.theta_std_max)
