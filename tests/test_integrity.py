@@ -111,6 +111,45 @@ def test_a_stopped_boat_is_not_judged_and_an_rov_never() -> None:
     assert rov.heading is None and not alerts.codes()
 
 
+def _first_mismatch(offset_deg: float, sog: float) -> float | None:
+    """The time (s) of the first fix at which a boat whose heading is ``offset_deg`` off
+    its course at ``sog``, fixes and headings at 5 Hz from t = 0, is judged a mismatch."""
+    check = HeadingCourseCheck()
+    cog = math.radians(30.0)
+    for k in range(60):
+        t = 0.2 * k
+        check.heading(t - 0.05, cog + math.radians(offset_deg))
+        if check.course(t, cog + math.radians(offset_deg), sog, cog):
+            return t
+    return None
+
+
+def test_a_heading_behind_the_course_at_speed_is_judged_before_the_window_fills() -> None:
+    """Survey boat Test4: its compass 150 deg off the course at 2-3 m/s, and the aie
+    speed -2.6 m/s (sigma 0.1) along that heading for 8 s before the 10-s window was
+    judged. Beyond 90 deg at more than 1 m/s over ground it is judged after 3 s."""
+    assert _first_mismatch(150.0, 2.5) == pytest.approx(3.0)
+    # below 90 deg, or drifting in a current at 0.8 m/s: judged when the window has
+    # filled (8 s), as before
+    assert _first_mismatch(60.0, 2.5) == pytest.approx(8.0)
+    assert _first_mismatch(150.0, 0.8) == pytest.approx(8.0)
+
+
+def test_a_path_speed_along_a_heading_behind_the_course_is_withheld() -> None:
+    """The aie/kf path speed is signed along the heading: with the heading more than
+    90 deg off the course at speed its sign is wrong (Test4: -2.6 m/s while the boat
+    went ahead at 2.6), so it is withheld with the heading; at 73.5 deg (Shenzhen 1751)
+    the heading is withheld and the speed, right, is kept."""
+    aie = declared("aie", position=("north", "east"), speed=("speed",), frame=FRAME)
+    aie.heading_estimate = ("heading",)
+    for offset, speed_withheld in ((150.0, True), (73.5, False)):
+        m = IntegrityMonitor(Alerts())
+        m.watch([aie])
+        _boat(m, offset, 1.8)
+        assert {"heading", "std_heading", "north"} <= set(m.withheld("aie"))
+        assert ({"speed", "std_speed"} <= set(m.withheld("aie"))) is speed_withheld
+
+
 def test_the_mismatch_clears_when_the_heading_agrees_again() -> None:
     m = monitor(Alerts())
     _boat(m, 73.5, 1.8)

@@ -163,8 +163,9 @@ def test_a_heading_off_the_course_withholds_the_aie_kf_heading_and_positions(
         shared_data: Path, tmp_path: Path, case: str, path: str, config: str | None) -> None:
     """Issue 32: while the heading disagrees with the course the aie/kf heading and
     positions are published as unknown (before: with their 2-3 deg and metre sigmas,
-    69-124 deg off and 6-12 m from the fixes); their speed, which no heading enters, is
-    kept."""
+    69-124 deg off and 6-12 m from the fixes); their path speed is kept but where the
+    course is judged behind the heading at speed (its sign is the heading's: Test2 on
+    40 of the 570 rows, 1751 on none)."""
     log = shared_data / path
     if not log.exists():
         pytest.skip(f"{log} not present")
@@ -175,9 +176,11 @@ def test_a_heading_off_the_course_withholds_the_aie_kf_heading_and_positions(
     for p in ("aie", "kf"):
         # measured: 1751 5,711 of 5,793 rows; Test2 530
         assert summary["withheld_rows"][p] > 0.5 * summary["withheld_rows"]["current"]
-        held = [r for r in rows if r[f"{p}.speed"] and not r[f"{p}.heading"]]
+        held = [r for r in rows if r[f"{p}.yaw_rate"] and not r[f"{p}.heading"]]
         assert len(held) == summary["withheld_rows"][p]
         assert all(not r[f"{p}.north"] and not r[f"{p}.std_heading"] for r in held)
+        kept = sum(1 for r in held if r[f"{p}.speed"])
+        assert kept > 0.9 * len(held), (kept, len(held))
 
 
 @pytest.mark.parametrize("case,path,says", UNREADABLE, ids=[c[0] for c in UNREADABLE])

@@ -164,6 +164,16 @@ turn or a cross wind is a few degrees."""
 PLAUSIBLE_CURRENT_MPS = 0.5
 """A current this strong (m/s) across the track makes a crab angle of ``asin(c / sog)``
 at speed over ground ``sog``: the bound widens with it at low speed."""
+HEADING_GROSS_RAD = math.radians(90.0)
+"""A heading/course difference beyond this (rad) at :data:`HEADING_GROSS_MIN_SPEED_MPS`
+is judged before the window has filled: the vehicle would be going backwards through the
+water, or its heading is wrong."""
+HEADING_GROSS_MIN_SPEED_MPS = 2.0 * PLAUSIBLE_CURRENT_MPS
+"""Mean speed over ground (m/s) of a window judged early: with a current of at most
+:data:`PLAUSIBLE_CURRENT_MPS` the course is then within 30 deg of the velocity through
+the water."""
+HEADING_GROSS_MIN_S = 3.0
+"""The least span (s) of moving fixes of a window judged early."""
 
 LEG_S = 5.0
 """A straight leg of the compass-deviation fit lasts this long (s)."""
@@ -426,6 +436,11 @@ class HeadingCourseCheck:
         self._sog: deque[float] = deque()  # m/s
         self.offset_rad: float | None = None
         self.mismatch = False
+        self.behind = False
+        """Whether the newest judged window's course was more than
+        :data:`HEADING_GROSS_RAD` off the heading at more than
+        :data:`HEADING_GROSS_MIN_SPEED_MPS`: a path speed signed along that heading has
+        the wrong sign, or the vehicle goes astern."""
         self.worst: tuple[float, float] | None = None
         """(offset rad, mean speed m/s) of the window of the present mismatch whose
         offset is the largest: the angle an operator must allow for."""
@@ -459,13 +474,19 @@ class HeadingCourseCheck:
             return None
         self._append(t, heading_rad - cog, sog)
         n = len(self._t)
-        if n < HEADING_MIN_FIXES or t - self._t[0] < 0.8 * HEADING_WINDOW_S:
+        span = t - self._t[0]
+        if n < HEADING_MIN_FIXES or span < HEADING_GROSS_MIN_S:
             return None
         # the circular mean of the window's differences, from the sines and cosines kept
         # (tests/test_integrity.py)
-        self.offset_rad = math.atan2(sum(self._sin), sum(self._cos))
+        offset = math.atan2(sum(self._sin), sum(self._cos))
         sog_mean = sum(self._sog) / n
-        self.mismatch = abs(self.offset_rad) > crab_bound(sog_mean)
+        if span < 0.8 * HEADING_WINDOW_S and not (
+                abs(offset) > HEADING_GROSS_RAD and sog_mean > HEADING_GROSS_MIN_SPEED_MPS):
+            return None   # not judged before the window has filled, unless gross
+        self.offset_rad = offset
+        self.mismatch = abs(offset) > crab_bound(sog_mean)
+        self.behind = abs(offset) > HEADING_GROSS_RAD and sog_mean > HEADING_GROSS_MIN_SPEED_MPS
         if not self.mismatch:
             self.worst = self.fastest = None
             return False
@@ -1369,7 +1390,8 @@ class IntegrityMonitor:
         dependent outputs while the heading disagrees with the course or the compass
         deviates (and its heading and position, each with its ``std_``, while the
         heading disagrees with the course); its speed with its ``std_`` while it
-        disagrees with the measured speed; its current while it disagrees with the idle
+        disagrees with the measured speed or the course is behind the heading at speed
+        (:attr:`HeadingCourseCheck.behind`); its current while it disagrees with the idle
         drift, and the components of its current the data do not resolve."""
         flags = self.flags.get(pipeline)
         p = self.watched.get(pipeline)
@@ -1384,7 +1406,9 @@ class IntegrityMonitor:
             out = p.heading_dependent
         if "heading_source_mismatch" in flags:
             out += tuple(q for q in own if q not in out)
-        if "speed_mismatch" in flags:
+        hc = self.heading
+        if "speed_mismatch" in flags or (
+                "heading_course_mismatch" in flags and hc is not None and hc.behind):
             out += tuple(q for q in (*p.speed, *("std_" + q for q in p.speed))
                          if q not in out)
         if "current_idle_drift" in flags:
