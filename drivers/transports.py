@@ -651,13 +651,25 @@ class UdpTransport(Transport):
             sock.close()
 
     def _socket(self) -> socket.socket:
-        """A non-blocking datagram socket bound to the transport's address."""
+        """A non-blocking datagram socket bound to the transport's address.
+
+        The address is the transport's alone: no SO_REUSEADDR (a unicast listener needs
+        none, and with it a second process would bind the same port and take the
+        datagrams), so a port another socket holds fails with EADDRINUSE, which the
+        reconnect loop reports once as ``cannot open (EADDRINUSE: ...)``.
+        """
         family = socket.AF_INET6 if ":" in self.spec.host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_DGRAM)
         try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-            sock.bind((self.spec.host, self.spec.port))
+            try:
+                sock.bind((self.spec.host, self.spec.port))
+            except OSError as err:
+                if err.errno == errno.EADDRINUSE:
+                    raise OSError(errno.EADDRINUSE,
+                                  f"Address already in use: another process listens on "
+                                  f"UDP port {self.spec.port}") from None
+                raise
             sock.setblocking(False)
         except OSError:
             sock.close()

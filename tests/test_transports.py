@@ -176,6 +176,45 @@ def test_a_missing_serial_port_is_retried_not_fatal(tmp_path):
     assert len(events) == 1 and "cannot open" in events[0]  # said once, not every retry
 
 
+@pytest.mark.integration
+def test_a_second_udp_listener_on_a_taken_port_fails_and_says_so():
+    """A UDP input's port is its own: a second transport (a second ``onboard run``) on
+    the same address cannot bind it (EADDRINUSE), says so once, and the datagrams keep
+    going to the first."""
+    port = free_udp_port()
+    events: list[str] = []
+    got: list[bytes] = []
+
+    async def main():
+        first = open_transport(f"udp:127.0.0.1:{port}")
+        second = open_transport(f"udp:127.0.0.1:{port}", backoff_initial_s=0.01,
+                                backoff_max_s=0.02, on_event=events.append)
+        pumps = [asyncio.create_task(first.pump(lambda d, t: got.append(d)))]
+        while not first.stats.connected:
+            await asyncio.sleep(0.01)
+        pumps.append(asyncio.create_task(second.pump(lambda d, t: got.append(b"2" + d))))
+        while not second.stats.last_error:
+            await asyncio.sleep(0.01)
+        await asyncio.sleep(0.1)  # several retries
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for i in range(3):
+            s.sendto(b"msg%d" % i, ("127.0.0.1", port))
+        s.close()
+        while len(got) < 3:
+            await asyncio.sleep(0.01)
+        for p in pumps:
+            p.cancel()
+        await asyncio.gather(*pumps, return_exceptions=True)
+        return second.stats
+
+    stats = run(main())
+    assert got == [b"msg0", b"msg1", b"msg2"]
+    assert not stats.connected and stats.connects == 0
+    assert stats.last_error.startswith("EADDRINUSE: Address already in use")
+    assert events == [f"udp:127.0.0.1:{port}: cannot open (EADDRINUSE: Address already in "
+                      f"use: another process listens on UDP port {port}); retrying"]
+
+
 def test_serial_paths_with_colons_keep_the_default_baud():
     u = parse_url("serial:/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0")
     assert u.path == "/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0"
