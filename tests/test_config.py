@@ -42,6 +42,9 @@ def test_torpedo_auv_convention():
         ("[vehicle]\nclas = 'x'\n", "vehicle.clas: unknown key"),
         ("[vehicle]\nclass = 'boat'\n", "expected one of rudder-boat"),
         ("[engine]\nrate_hz = 'fast'\n", "engine.rate_hz: expected float"),
+        ("[engine]\nrate_hz = 0\n", "engine.rate_hz: expected float > 0.0"),
+        ("[service.mavlink]\nrate_hz = -5\n", "service.mavlink.rate_hz: expected float > 0.0"),
+        ("[service]\nstate_save_interval_s = -1\n", "service.state_save_interval_s: expected float >= 0.0"),
         ("[[service.sources]]\nkind = 'nmea'\n", "service.sources[0]: object missing required field url"),
         ("[vehicle\n", "not valid TOML"),
     ],
@@ -57,6 +60,24 @@ def test_bad_file_names_the_key(tmp_path, text, expected):
 
 def test_config_error_is_a_usage_error_so_the_cli_exits_2():
     assert issubclass(ConfigError, UsageError)
+
+
+@pytest.mark.parametrize("text, key", [("[engine]\nrate_hz = 0\n", "engine.rate_hz"),
+                                       ("[engine]\nrate_hz = -5\n", "engine.rate_hz"),
+                                       ("[service.mavlink]\nrate_hz = 0\n",
+                                        "service.mavlink.rate_hz")])
+def test_a_service_with_a_rate_of_zero_or_below_is_refused_before_it_starts(tmp_path, capsys,
+                                                                            text, key):
+    """A tick or output rate <= 0 (a service that says ready and never ticks, or one that
+    ticks on every loop) is a config error: one line, exit 2, nothing started."""
+    from onboard.cli import main as cli_main
+
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    assert cli_main(["run", "--config", str(p), "--state-dir", str(tmp_path / "st")]) == 2
+    out = capsys.readouterr()
+    assert out.err == f"onboard run: {p}: {key}: expected float > 0.0\n"
+    assert out.out == "" and not (tmp_path / "st").exists()
 
 
 def test_a_missing_extra_is_one_line_and_exit_2(monkeypatch, capsys):

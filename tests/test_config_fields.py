@@ -221,3 +221,47 @@ def test_negative_control_an_unexercised_field_is_caught():
     corpus = 'cfg = {"with_docstring": 1.0}\nx.in_class_doc\n'
     assert unexercised_fields(_Fake, corpus) == ["bare"]
     assert unexercised_fields(_Fake, corpus + "bare = 2\n") == []
+
+
+RATE_OR_PERIOD = re.compile(r"(_hz|(^|_)(interval|period)_s)$")
+"""Field names of a frequency or a period: none is meaningful below zero (a rate of 0
+never fires, a negative rate or period fires on every loop, a filter's cut-off of 0
+passes nothing)."""
+
+
+def unbounded_rates(cls: type) -> list[str]:
+    """The frequency and period fields of Struct ``cls`` (:data:`RATE_OR_PERIOD`) whose
+    type carries no lower bound (``msgspec.Meta(gt=...)`` or ``ge=...``) at or above 0."""
+    out = []
+    hints = typing.get_type_hints(cls, include_extras=True)
+    for f in msgspec.structs.fields(cls):
+        if not RATE_OR_PERIOD.search(f.name):
+            continue
+        metas = []
+
+        def collect(tp: object) -> None:
+            if typing.get_origin(tp) is typing.Annotated:
+                metas.extend(m for m in tp.__metadata__ if isinstance(m, msgspec.Meta))
+            for arg in typing.get_args(tp):
+                collect(arg)
+        collect(hints[f.name])
+        if not any((m.gt is not None and m.gt >= 0) or (m.ge is not None and m.ge >= 0)
+                   for m in metas):
+            out.append(f.name)
+    return out
+
+
+@pytest.mark.parametrize("cls", STRUCTS, ids=lambda c: c.__name__)
+def test_every_rate_and_period_is_bounded_below(cls):
+    assert unbounded_rates(cls) == []
+
+
+def test_negative_control_an_unbounded_rate_is_caught():
+    class Loose(msgspec.Struct):
+        rate_hz: float = 1.0
+        """A rate."""
+        flush_interval_s: typing.Annotated[float, msgspec.Meta(ge=0.0)] = 0.5
+        """A bounded period."""
+        send_rate_hz: typing.Annotated[float, msgspec.Meta(gt=-1.0)] = 1.0
+        """A rate bounded below zero."""
+    assert unbounded_rates(Loose) == ["rate_hz", "send_rate_hz"]

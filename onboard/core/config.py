@@ -78,7 +78,7 @@ class Vehicle(_Strict):
 class EngineConfig(_Strict):
     """``[engine]``: the fixed-rate tick that drives the pipelines."""
 
-    rate_hz: float = 10.0
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 10.0
     """Rate (Hz) of the tick at which the pipelines give estimates."""
     max_sample_age_s: float = 2.0
     """Samples older than this relative to the newest one are rejected as late."""
@@ -152,7 +152,7 @@ class GnssNoise(_Strict):
     """Position noise, one sigma (m)."""
     velocity_std_mps: float = 0.1
     """Velocity noise, one sigma (m/s)."""
-    rate_hz: float = 5.0
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 5.0
     """Fix rate (Hz)."""
     drift_share: Annotated[float, msgspec.Meta(ge=0.0, le=0.9)] = 0.0
     """The share of a fix's position noise variance (``position_std_m`` squared, or its
@@ -177,7 +177,7 @@ class ImuNoise(_Strict):
     """Accelerometer noise, one sigma (m/s^2)."""
     gyro_std_rps: float = 0.005
     """Gyro noise, one sigma (rad/s)."""
-    rate_hz: float = 50.0
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 50.0
     """Sample rate (Hz)."""
 
 
@@ -186,7 +186,7 @@ class CompassNoise(_Strict):
 
     heading_std_rad: float = 0.02
     """Heading noise, one sigma (rad)."""
-    rate_hz: float = 10.0
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 10.0
     """Sample rate (Hz)."""
 
 
@@ -200,7 +200,7 @@ class DvlNoise(_Strict):
     """Reports with a larger figure of merit are not fused."""
     max_altitude_m: float = 50.0
     """Reports from higher above the bottom (m) are not fused."""
-    rate_hz: float = 5.0
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 5.0
     """Report rate (Hz)."""
 
 
@@ -348,7 +348,7 @@ class MavlinkOut(_Strict):
     ``[service.zenoh]`` session, for BlueOS's mavlink-server)."""
     component_id: int = 191
     """Our MAVLink component id."""
-    rate_hz: float = 5.0
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 5.0
     """Rate (Hz) of the MAVLink estimate messages."""
     signing_key_file: str = ""
     """The 32-byte secret (raw, 64 hex digits or a passphrase), mode 0600 or stricter:
@@ -408,8 +408,8 @@ class RecorderConfig(_Strict):
     """Record every input."""
     directory: str = "recordings"
     """Where (relative to the state directory)."""
-    flush_interval_s: float = 0.5
-    """Flush interval (s)."""
+    flush_interval_s: Annotated[float, msgspec.Meta(ge=0.0)] = 0.5
+    """Flush interval (s); 0 flushes every record as it is written."""
     rotate_mb: float = 64.0
     """A new file after this size (MB)."""
     max_total_mb: float = 2048.0
@@ -493,8 +493,9 @@ class ServiceConfig(_Strict):
     state_file: str = "state/adaptive.json"
     """Where the adaptive state is kept across restarts (relative to the state
     directory)."""
-    state_save_interval_s: float = 30.0
-    """Interval (s) between saves of the adaptive state."""
+    state_save_interval_s: Annotated[float, msgspec.Meta(ge=0.0)] = 30.0
+    """Interval (s) between saves of the adaptive state; 0: saved only when the service
+    stops."""
     queue_size: int = 4096
     """Bound of the samples waiting for the next tick (and of each input's queue);
     beyond it new samples are dropped and counted."""
@@ -607,7 +608,7 @@ class DiagnoseConfig(_Strict):
     holdout_metric: str = ""
     """``surge_speed_open_loop_rmse_mps``, ``ground_velocity_rmse_mps`` or
     ``lateral_velocity_rmse_mps``; default: the ground velocity when commands exist."""
-    rate_hz: float = 10.0
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 10.0
     """Rate (Hz) of the grid the log is resampled on for the fits."""
     base_terms: list[str] = []
     """The base model's optional terms to use (onboard.offline.closure.dataset.BASE_TERMS:

@@ -472,7 +472,7 @@ class CurrentConfig(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     variable-rate: none once the covariance is back at its prior (bounded, rls.py)."""
     rpm_scale: float = 1000.0
     """Propeller rpm divided by this gives the normalized propulsion ``n``."""
-    svf_cutoff_hz: float = 0.3
+    svf_cutoff_hz: Annotated[float, msgspec.Meta(gt=0.0)] = 0.3
     """State-variable filter cut-off for the yaw-channel RLS (algorithms.md §3.4)."""
     current_walk_mps_rts: float = 0.01
     """Random walk of the current, m/s per sqrt(s), before calibration (0.01: 0.08 m/s in a
