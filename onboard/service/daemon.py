@@ -54,6 +54,7 @@ from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.outputs import Output, check as check_outputs
 from onboard.core.stats import preload as preload_chi2
 from onboard.engine import Engine
+from onboard.service.events import log_level, severity as event_severity
 from onboard.service.config_check import check_config
 from onboard.service.intake import Intake
 from onboard.service.persistence import StateFile, plain
@@ -250,8 +251,10 @@ class Service:
         return q if q.is_absolute() else self.state_dir / q
 
     def event(self, text: str) -> None:
-        """Record an event: log, health ``events`` (next 1 Hz record), STATUSTEXT."""
-        log.info("%s", text)
+        """Record an event: log, health ``events`` (next 1 Hz record), STATUSTEXT; logged
+        at its STATUSTEXT severity's level (:mod:`onboard.service.events`: WARNING for a
+        loss, failure or error, INFO otherwise)."""
+        log.log(log_level(event_severity(text)), "%s", text)
         self.events.append(text)
         self._health_events.append(text)
 

@@ -68,6 +68,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from onboard.drivers.mavlink_signing import SIGNING_EPOCH, signing_timestamp
 from onboard.core.config import MavlinkOut
 from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.service.events import severity as event_severity
 from onboard.service.signing import check_signing, load_signing_key
 
 if TYPE_CHECKING:
@@ -393,7 +394,8 @@ class MavlinkPublisher:
     def event(self, text: str, severity: int | None = None, now: float | None = None) -> bool:
         """STATUSTEXT ``text`` (first 50 characters) if the rate limit allows; else count it.
 
-        Default severity: WARNING for losses and errors, INFO otherwise.
+        Default severity: the event's (:func:`onboard.service.events.severity`: WARNING for
+        losses, failures and errors, INFO otherwise), as the service's log has it.
         """
         now = self.clock() if now is None else now
         self._tokens = min(5.0, self._tokens + max(0.0, now - self._t_tokens) * 0.5)
@@ -403,10 +405,7 @@ class MavlinkPublisher:
             return False
         self._tokens -= 1.0
         if severity is None:
-            low = text.lower()
-            bad = any(w in low for w in ("lost", "silent", "corrupt", "error", "fail", "drop",
-                                         "disk full", "low disk"))
-            severity = mavlink2.MAV_SEVERITY_WARNING if bad else mavlink2.MAV_SEVERITY_INFO
+            severity = event_severity(text)
         if self.suppressed and self._tokens >= 1.0:
             self._tokens -= 1.0
             self._send(mavlink2.MAVLink_statustext_message(
