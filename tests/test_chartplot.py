@@ -131,6 +131,25 @@ def test_the_vdr_publisher_sends_the_known_current_at_its_rate_and_nothing_unkno
     assert pub.held_back == 10  # the second second: no north, nothing sent
 
 
+def test_the_vdr_publisher_keeps_its_rate_on_a_jittered_tick(listener):
+    """10 Hz ticks up to 10 ms early or late: one VDR a second over 120 s (a tick a little
+    before the due time does not push the next by a whole tick)."""
+    import random
+
+    rng = random.Random(2)
+    port = listener.getsockname()[1]
+    pub = NmeaVdrPublisher(NmeaVdrOut(enabled=True, url=f"udp:127.0.0.1:{port}", rate_hz=1.0))
+    pub.start()
+    try:
+        for k in range(1200):
+            t = 0.1 * k + rng.uniform(-0.01, 0.01)
+            pub.publish_estimates([current_record(t, 0.3, 0.1)], now=t)
+        got = received(listener)
+    finally:
+        pub.close()
+    assert len(got) == 120
+
+
 def test_the_signalk_publisher_holds_back_a_current_whose_sigma_is_above_its_bound(listener):
     port = listener.getsockname()[1]
     cfg = SignalKOut(enabled=True, url=f"udp:127.0.0.1:{port}", rate_hz=10.0, max_std_mps=0.1)

@@ -223,3 +223,49 @@ def test_an_estimate_flagged_by_the_integrity_checks_is_not_claimed(listener, fl
     st = [m for m in receive_mavlink(listener) if m.get_type() == "ESTIMATOR_STATUS"]
     assert st[0].flags & claim
     assert not st[1].flags & claim
+
+
+
+def _count_sends(pub: MavlinkPublisher) -> dict[str, list[float]]:
+    """Wrap the publisher's estimate and heartbeat senders: their send times (its clock)."""
+    sent: dict[str, list[float]] = {"est": [], "hb": []}
+    send_est, heartbeat = pub._send_estimates, pub._heartbeat
+
+    def est(now: float) -> None:
+        sent["est"].append(now)
+        send_est(now)
+
+    def hb() -> None:
+        sent["hb"].append(pub.clock())
+        heartbeat()
+    pub._send_estimates = est  # type: ignore[method-assign]
+    pub._heartbeat = hb  # type: ignore[method-assign]
+    return sent
+
+
+def test_estimates_and_heartbeat_keep_their_rates_on_a_jittered_tick():
+    """Called from a 10 Hz tick loop whose ticks come up to 10 ms early or late, the
+    estimates go out at ``rate_hz`` (5 Hz) and HEARTBEAT at 1 Hz over a minute, not less
+    (a tick a little before the due time does not push the schedule by a whole tick);
+    after a 5 s gap the schedule starts again from the first tick, without a burst."""
+    import random
+
+    rng = random.Random(1)
+    now = [0.0]
+    pub = MavlinkPublisher(MavlinkOut(rate_hz=5.0), 1, clock=lambda: now[0])  # not started
+    sent = _count_sends(pub)
+    recs = _records()
+    duration = 60.0
+    for k in range(int(duration * 10)):
+        now[0] = 100.0 + 0.1 * k + rng.uniform(-0.01, 0.01)
+        pub.publish_estimates(recs)
+    assert len(sent["est"]) == pytest.approx(5.0 * duration, abs=1)
+    assert len(sent["hb"]) == pytest.approx(duration, abs=1)
+    gaps = [b - a for a, b in zip(sent["est"], sent["est"][1:])]
+    assert max(gaps) < 0.2 + 0.1 + 0.02 and min(gaps) > 0.2 - 0.1 - 0.02
+
+    n_est, n_hb = len(sent["est"]), len(sent["hb"])
+    for k in range(10):  # 1 s of ticks after the gap
+        now[0] = 100.0 + duration + 5.0 + 0.1 * k
+        pub.publish_estimates(recs)
+    assert len(sent["est"]) - n_est == 5 and len(sent["hb"]) - n_hb == 1

@@ -37,6 +37,7 @@ from typing import Callable, Sequence
 
 from onboard.core.config import ConfigError, NmeaVdrOut, SignalKOut
 from onboard.core.messages import EstimateRecord, HealthRecord
+from onboard.service.publishers.pacing import next_due
 from onboard.service.publishers.set_drift import (
     SetDrift,
     current_of,
@@ -184,7 +185,7 @@ class SetDriftPublisher(ABC):
         if ne is None or self.flags or not self._precise(rec):
             self.held_back += 1
             return
-        self._next = now + self.period_s
+        self._next = next_due(self._next, now, self.period_s)
         sd = set_drift(*ne, declination_deg=self.declination())
         self.udp.send(self.payload(sd, rec))
 

@@ -69,6 +69,7 @@ from onboard.drivers.mavlink_signing import SIGNING_EPOCH, signing_timestamp
 from onboard.core.config import MavlinkOut
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.service.events import severity as event_severity
+from onboard.service.publishers.pacing import next_due
 from onboard.service.signing import check_signing, load_signing_key
 
 if TYPE_CHECKING:
@@ -218,6 +219,10 @@ claims no horizontal position: a position off the fixes, or positions withheld w
 the heading disagrees with the course over ground."""
 
 
+HEARTBEAT_PERIOD_S = 1.0
+"""Period (s) of HEARTBEAT."""
+
+
 def estimator_test_ratios(health: HealthRecord) -> dict[str, float]:
     """Per ESTIMATOR_STATUS ratio, the largest test ratio (NIS over its gate; above 1 a
     measurement is rejected) among the channels that feed it since the previous health
@@ -306,10 +311,10 @@ class MavlinkPublisher:
         for r in records:
             self._latest[r.pipeline] = r
         if now >= self._next_hb:
-            self._next_hb = now + 1.0
+            self._next_hb = next_due(self._next_hb, now, HEARTBEAT_PERIOD_S)
             self._heartbeat()
         if now >= self._next_est and self._latest:
-            self._next_est = now + self._est_period
+            self._next_est = next_due(self._next_est, now, self._est_period)
             self._send_estimates(now)
 
     def _heartbeat(self) -> None:
