@@ -198,3 +198,30 @@ def test_shore_decodes_its_schema_versions_and_counts_another_as_bad():
     assert view.received["est"] == 3 and view.bad == 1
     view.feed("onboard/b/fix/kf", b"{}", "application/json;foxglove.LocationFix")
     assert view.bad == 1  # a fix is not decoded by the table, and not bad
+
+
+SCHEMA_NAME = r"onboard\.(Estimate|Health)\.v(\d+)"
+HISTORY = {("docs/architecture.md", "onboard.Health.v2")}
+"""(page, schema name) of a past name a page cites as such (a dated correction)."""
+
+
+def test_the_docs_name_the_schemas_the_wire_carries():
+    """Every ``onboard.Estimate.vN`` / ``onboard.Health.vN`` in the README, the docs and the
+    package's docstrings is the encoding the service sends (onboard/core/wire.py), but for
+    the past names :data:`HISTORY` lists."""
+    import re
+    from pathlib import Path
+
+    from onboard.core.wire import ESTIMATE_SCHEMA, HEALTH_SCHEMA
+
+    root = Path(__file__).resolve().parent.parent
+    current = {"Estimate": ESTIMATE_SCHEMA, "Health": HEALTH_SCHEMA}
+    pages = [root / "README.md", *sorted((root / "docs").glob("*.md")),
+             *sorted((root / "onboard").rglob("*.py")), *sorted((root / "drivers").glob("*.py"))]
+    wrong = []
+    for page in pages:
+        rel = page.relative_to(root).as_posix()
+        for m in re.finditer(SCHEMA_NAME, page.read_text(encoding="utf-8")):
+            if m.group(0) != current[m.group(1)] and (rel, m.group(0)) not in HISTORY:
+                wrong.append(f"{rel}: {m.group(0)}")
+    assert wrong == []

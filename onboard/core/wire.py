@@ -5,7 +5,7 @@ JSON object whose Zenoh encoding (and MCAP schema name) names its schema and ver
 (architecture.md §4.4)::
 
     application/json;onboard.Estimate.v2   EstimateRecord (SCHEMA_VERSION)
-    application/json;onboard.Health.v2     HealthRecord (HEALTH_SCHEMA_VERSION)
+    application/json;onboard.Health.v3     HealthRecord (HEALTH_SCHEMA_VERSION)
     application/json;foxglove.LocationFix  a position as Foxglove's LocationFix
 
 BlueOS's recorder (bluerobotics/blueos-recorder ``src/channel_descriptor.rs``) records
