@@ -69,8 +69,10 @@ def test_heartbeat_estimates_and_health_from_component_191(listener):
     vec = {m.name: (m.x, m.y, m.z) for m in by["DEBUG_VECT"]}
     assert vec["DIST"] == (1.0, 2.0, 3.0) and vec["DIST_NED"] == (4.0, 5.0, 6.0)
     w = by["WIND_COV"][0]  # the water current, drawn by ground stations as wind
-    assert (w.wind_x, w.wind_y) == pytest.approx((0.3, -0.2))
+    assert (w.wind_x, w.wind_y, w.wind_z) == pytest.approx((0.3, -0.2, 0.0))
     assert w.var_horiz == pytest.approx(0.05 ** 2 + 0.04 ** 2)
+    assert w.horiz_accuracy == pytest.approx(math.hypot(0.05, 0.04))
+    assert math.isnan(w.var_vert) and w.vert_accuracy == 0.0  # no sigma of the down
     st = by["ESTIMATOR_STATUS"][0]
     assert st.vel_ratio == pytest.approx(1.0)  # the worst velocity channel: at its gate
     assert st.mag_ratio == pytest.approx(0.5)
@@ -269,3 +271,31 @@ def test_estimates_and_heartbeat_keep_their_rates_on_a_jittered_tick():
         now[0] = 100.0 + duration + 5.0 + 0.1 * k
         pub.publish_estimates(recs)
     assert len(sent["est"]) - n_est == 5 and len(sent["hb"]) - n_hb == 1
+
+
+@pytest.mark.integration
+def test_wind_cov_says_unknown_as_common_xml_does(listener):
+    """A surface boat's current has no down: ``wind_z`` and ``var_vert`` NaN ("NAN if
+    unknown"), ``vert_accuracy`` 0 ("0 if unknown"); an underwater vehicle's down and its
+    sigma are sent; a horizontal sigma not known yet: ``var_horiz`` NaN, accuracy 0."""
+    port = listener.getsockname()[1]
+    pub = MavlinkPublisher(MavlinkOut(url=f"udpout:127.0.0.1:{port}"), 1)
+    pub.start()
+    boat = EstimateRecord(vehicle="b", pipeline="current", t=1.0,
+                          values={"north": 0.3, "east": -0.2},
+                          std={"north": 0.05, "east": 0.04})
+    auv = EstimateRecord(vehicle="b", pipeline="current", t=2.0,
+                         values={"north": 0.3, "east": -0.2, "down": 0.01},
+                         std={"north": 0.05, "east": 0.04, "down": 0.02})
+    fresh = EstimateRecord(vehicle="b", pipeline="current", t=3.0,
+                           values={"north": 0.0, "east": 0.0}, std={})
+    for i, rec in enumerate((boat, auv, fresh)):
+        pub.publish_estimates([rec], now=1.0 * i)
+    pub.close()
+    w = [m for m in receive_mavlink(listener) if m.get_type() == "WIND_COV"]
+    assert len(w) == 3
+    assert math.isnan(w[0].wind_z) and math.isnan(w[0].var_vert) and w[0].vert_accuracy == 0.0
+    assert w[0].horiz_accuracy == pytest.approx(math.hypot(0.05, 0.04))
+    assert w[1].wind_z == pytest.approx(0.01) and w[1].var_vert == pytest.approx(0.02 ** 2)
+    assert w[1].vert_accuracy == pytest.approx(0.02)
+    assert math.isnan(w[2].var_horiz) and w[2].horiz_accuracy == 0.0

@@ -16,8 +16,12 @@ NAMED_VALUE_FLOAT  ``CUR_N``, ``CUR_E``, ``CUR_D`` water current (m/s, NED);    
 DEBUG_VECT         ``DIST`` ESESO disturbance force, body FRD (N);               rate_hz
                    ``DIST_NED`` the same in NED (N)
 WIND_COV           the **water current** (not wind): wind_x/y/z = current        rate_hz
-                   north/east/down (m/s, the direction it flows to), var_horiz =
-                   std_north^2 + std_east^2, var_vert = std_down^2 (m^2/s^2), so
+                   north/east/down (m/s, the direction it flows to; wind_z NaN
+                   where the down is not estimated, a boat), var_horiz =
+                   std_north^2 + std_east^2, var_vert = std_down^2 (m^2/s^2,
+                   variances as PX4 sends them, not common.xml's 1-STD;
+                   NaN if unknown), horiz_accuracy = hypot(std_north,
+                   std_east), vert_accuracy = std_down (m/s, 0 if unknown), so
                    ground stations draw it with their wind widget
 ESTIMATOR_STATUS   health: test ratios sqrt(NIS)/3 (1 = a 3-sigma innovation) of    1 Hz
                    the velocity (vel_ratio), position (pos_horiz_ratio), depth
@@ -221,6 +225,9 @@ the heading disagrees with the course over ground."""
 
 HEARTBEAT_PERIOD_S = 1.0
 """Period (s) of HEARTBEAT."""
+ACCURACY_UNKNOWN = 0.0
+"""WIND_COV's ``horiz_accuracy`` / ``vert_accuracy`` (m/s) when the sigma is not known
+(common.xml: "0 if unknown"; its other fields are NaN if unknown)."""
 
 
 def estimator_test_ratios(health: HealthRecord) -> dict[str, float]:
@@ -345,9 +352,12 @@ class MavlinkPublisher:
             v, s = cur.values, cur.std
             sn, se = s.get("north", math.nan), s.get("east", math.nan)
             sd = s.get("down", math.nan)
+            h_acc = math.hypot(sn, se)
             self._send(mavlink2.MAVLink_wind_cov_message(
-                usec, float(v["north"]), float(v["east"]), float(v.get("down", 0.0)),
-                sn * sn + se * se, sd * sd, 0.0, math.hypot(sn, se), abs(sd)))
+                usec, float(v["north"]), float(v["east"]), float(v.get("down", math.nan)),
+                sn * sn + se * se, sd * sd, 0.0,
+                h_acc if math.isfinite(h_acc) else ACCURACY_UNKNOWN,
+                abs(sd) if math.isfinite(sd) else ACCURACY_UNKNOWN))
         if self.cfg.odometry:
             self._odometry(usec)
 
