@@ -218,6 +218,39 @@ def test_a_message_the_autopilot_never_sends_is_reported_absent():
         assert abs(rates[f"autopilot/{name}:received"] - hz) <= 0.1 * hz, (name, rates)
 
 
+def test_a_message_that_arrives_below_its_rate_is_reported_at_the_rate_it_arrives():
+    """ATTITUDE asked at 25 Hz from an autopilot that sends it at 10 Hz (as a router like
+    MAVProxy sends its own rate): after the repeated requests the event says the rate it
+    arrives at, below the rate asked, not that the autopilot does not send it; a message
+    none of which arrived (the BlueROV2's GPS_RAW_INT) is still reported as not sent."""
+    sim = Simulation("bluerov2-circle", 1)
+    loop = Loop()
+    ap = autopilot_for(sim, [loop])
+    link = AutopilotLink()
+    parser = MavlinkParser(link=link)
+    events: list[str] = []
+    now = [0.0]
+    src = SourceConfig(kind="mavlink", url="udp:x:1", streams={"ATTITUDE": 25.0})
+    sess = MavlinkSession("autopilot", load("bluerov2"), src, link, loop, lambda: now[0],
+                          events.append)  # type: ignore[arg-type]
+    for t, samples, _ in sim.steps(60.0):
+        now[0] = t
+        ap.emit(t, samples)
+        for f in loop.out:
+            parser.feed(f, t + 0.01)
+        loop.out.clear()
+        sess.poll(t)
+        ap.poll(t)
+    att = [e for e in events if "ATTITUDE" in e and "no longer asked" in e]
+    assert len(att) == 1, events
+    assert att[0].startswith("autopilot: ATTITUDE arrives at 10.0 Hz, below the 25 Hz "
+                             "requested (asked 4 times)"), att
+    assert "not sent" not in att[0]
+    assert sess.streams["ATTITUDE"].state == "slow"
+    assert sess.streams["GPS_RAW_INT"].state == "absent"
+    assert any("GPS_RAW_INT not sent by the autopilot" in e for e in events), events
+
+
 def test_a_vehicle_type_that_does_not_match_the_class_is_reported():
     """A BlueROV2 configuration (class bluerov2) on the rudder boat's autopilot
     (MAV_TYPE_SURFACE_BOAT 11): an event names both."""

@@ -20,7 +20,8 @@ on USB and most TELEM ports) until a ground station asks. For each MAVLink input
 4. confirms that the streams arrive: every ``RATE_WINDOW_S`` the rate received per
    message; a message below half its requested rate ``CHECK_AFTER_S`` after it was
    accepted is asked for again (and reported once), up to ``MAX_REASKS`` times, then
-   reported absent (a GNSS-less ROV's GPS_RAW_INT);
+   reported with the rate it arrives at (a router or link that thins it), or as not sent
+   when none arrived (a GNSS-less ROV's GPS_RAW_INT), and no longer asked for;
 5. sends TIMESYNC requests (``tc1`` 0, ``ts1`` the service clock in ns); the autopilot's
    answers let :class:`drivers.sender_clock.SenderClock` map its boot clock without the
    one-way link delay;
@@ -60,8 +61,9 @@ CHECK_AFTER_S = 5.0
 RATE_WINDOW_S = 2.0
 LINK_LOST_S = 5.0
 MAX_REASKS = 3
-"""A message still missing after this many repeated requests is reported absent and no
-longer asked for (until the next reboot or reconnection)."""
+"""A message still missing or slow after this many repeated requests is reported (not
+sent, or the rate it arrives at) and no longer asked for (until the next reboot or
+reconnection)."""
 POLL_S = 0.1
 SYNC_FIRST_S = 1.0
 SYNC_PERIOD_S = 10.0
@@ -142,7 +144,8 @@ class StreamState:
     rate_hz: float
     state: str = "pending"
     """``pending`` (not asked yet), ``asked`` (waiting for the ACK), ``accepted``,
-    ``legacy`` (asked with REQUEST_DATA_STREAM), ``absent`` (never arrived: given up)."""
+    ``legacy`` (asked with REQUEST_DATA_STREAM), ``absent`` (none arrived: given up),
+    ``slow`` (arrives below half the rate asked: given up asking)."""
     tries: int = 0
     t_sent: float = -math.inf
     t_accepted: float | None = None
@@ -319,9 +322,16 @@ class MavlinkSession:
                     and now - st.t_accepted > CHECK_AFTER_S and st.t_window >= st.t_accepted \
                     and st.received_hz < 0.5 * st.rate_hz:
                 if st.reasks >= MAX_REASKS:
-                    st.state = "absent"
-                    self.on_event(f"{self.name}: {st.name} not sent by the autopilot "
-                                  f"(asked {st.reasks + 1} times); no longer asked")
+                    if st.received_hz > 0.0:
+                        st.state = "slow"
+                        self.on_event(f"{self.name}: {st.name} arrives at "
+                                      f"{st.received_hz:.1f} Hz, below the {st.rate_hz:g} Hz "
+                                      f"requested (asked {st.reasks + 1} times); no longer "
+                                      f"asked")
+                    else:
+                        st.state = "absent"
+                        self.on_event(f"{self.name}: {st.name} not sent by the autopilot "
+                                      f"(asked {st.reasks + 1} times); no longer asked")
                     continue
                 if not st.warned:
                     st.warned = True
