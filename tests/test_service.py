@@ -368,7 +368,12 @@ url = "udpout:127.0.0.1:{free_udp_port()}"
 
 
 @pytest.mark.integration
-def test_onboard_run_notifies_ready_and_stops_cleanly_on_sigterm(tmp_path):
+@pytest.mark.parametrize("sig, status", [(signal.SIGTERM, 0), (signal.SIGINT, 130)],
+                         ids=["sigterm", "sigint"])
+def test_onboard_run_notifies_ready_and_stops_cleanly_on_sigterm(tmp_path, sig, status):
+    """READY=1, watchdog pings, then a graceful stop (STOPPING=1, recording and state
+    written) on SIGTERM, exit 0 (systemd's stop), and on SIGINT, exit 130 (Ctrl-C, as
+    every command, architecture.md §4.1)."""
     cfg_path = tmp_path / "boat.toml"
     port = free_udp_port()
     _write_config(cfg_path, port)
@@ -392,7 +397,7 @@ def test_onboard_run_notifies_ready_and_stops_cleanly_on_sigterm(tmp_path):
         tx.close()
         while b"WATCHDOG=1" not in msgs:
             msgs.append(notify.recv(4096))
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(sig)
         rc = proc.wait(TIMEOUT)
         while not msgs[-1].startswith(b"STOPPING=1"):
             msgs.append(notify.recv(4096))
@@ -404,7 +409,8 @@ def test_onboard_run_notifies_ready_and_stops_cleanly_on_sigterm(tmp_path):
         proc.stdout.close()
         proc.stderr.close()
         notify.close()
-    assert rc == 0, err
+    assert rc == status, err
+    assert "Traceback" not in err, err
     recs = list((tmp_path / "state" / "recordings").glob("*.onbrec"))
     assert len(recs) == 1
     kinds = [r.kind for r in read_records(recs[0])]

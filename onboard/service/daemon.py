@@ -847,18 +847,30 @@ class _Ticker:
             self._schedule()
 
 
+EXIT_INTERRUPTED = 130
+"""Exit status of ``onboard run`` stopped by SIGINT (Ctrl-C), as every command's
+(architecture.md §4.1); stopped by SIGTERM (systemd's stop) it is 0."""
+
+
 async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None,
                       config_paths: Sequence[str | Path] = ()) -> int:
-    """Run until SIGTERM/SIGINT; return the exit status."""
+    """Run until SIGTERM/SIGINT, then stop gracefully; return the exit status: 0 after
+    SIGTERM, :data:`EXIT_INTERRUPTED` after SIGINT (the first signal decides)."""
     svc = Service(cfg, state_dir=state_dir, logs_dir=logs_dir, config_paths=config_paths)
     loop = asyncio.get_running_loop()
+    stopped_by: list[int] = []
+
+    def stop(sig: int) -> None:
+        stopped_by.append(sig)
+        svc.request_stop()
+
     for sig in (signal.SIGTERM, signal.SIGINT):
         try:
-            loop.add_signal_handler(sig, svc.request_stop)
+            loop.add_signal_handler(sig, stop, sig)
         except (NotImplementedError, RuntimeError):
             pass
     await svc.run()
-    return 0
+    return EXIT_INTERRUPTED if stopped_by[:1] == [signal.SIGINT] else 0
 
 
 def main(args: argparse.Namespace) -> int:
