@@ -405,6 +405,16 @@ def test_recorder_errors_reach_health_and_statustext_and_no_fsync_runs_on_the_lo
 
 # --------------------------------------------------------------------------- make install
 
+def documentation_paths(unit: str) -> list[str]:
+    """The paths of the ``file://`` URIs of a unit's ``Documentation=`` lines."""
+    out = []
+    for line in unit.splitlines():
+        if line.startswith("Documentation="):
+            out += [u[len("file://"):] for u in line.split("=", 1)[1].split()
+                    if u.startswith("file://")]
+    return out
+
+
 def test_a_staged_install_puts_config_unit_and_credential_store_in_place_and_keeps_local_edits(tmp_path):
     from onboard.apps.install import main
 
@@ -418,6 +428,12 @@ def test_a_staged_install_puts_config_unit_and_credential_store_in_place_and_kee
     assert (stage / "etc" / "credstore").stat().st_mode & 0o777 == 0o700
     for f in ("onboard.toml", "onboard.env", "zenoh-vehicle.json5"):
         assert (etc / f).stat().st_mode & 0o777 == 0o644
+    docs = documentation_paths(unit)
+    assert docs, "the unit names no documentation"
+    for path in docs:  # each page the unit's Documentation= names is installed
+        assert (stage / path.lstrip("/")).read_text().startswith("# "), path
+    assert (stage / "opt" / "onboard" / "doc" / "service.md").read_text() == \
+        (REPO / "docs" / "service.md").read_text()
     (etc / "onboard.toml").write_text("# my boat\n")
     assert main(["--destdir", str(stage), "--no-venv"]) == 0
     assert (etc / "onboard.toml").read_text() == "# my boat\n"  # never overwritten
@@ -462,6 +478,8 @@ def test_make_install_into_a_prefix_gives_a_venv_with_bundled_data_and_a_verifie
     assert f"\nExecStart={venv_python} -m onboard run --config ${{ONBOARD_CONFIG}}\n" in text
     assert f"\nEnvironment=ONBOARD_CONFIG={p['etc']}/onboard.toml\n" in text
     assert "\nLoadCredential=onboard-zenoh-user\n" in text and "\nDynamicUser=yes\n" in text
+    docs = documentation_paths(text)
+    assert docs and all(d.startswith(p["opt"] + "/doc/") and Path(d).is_file() for d in docs), docs
     assert load(Path(p["etc"]) / "onboard.toml").service.zenoh.config_file == f"{p['etc']}/zenoh-vehicle.json5"
     exe = shutil.which("systemd-analyze")
     if exe is None:

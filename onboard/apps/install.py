@@ -21,6 +21,9 @@ What goes where (each path under ``DESTDIR`` when given):
 ``SYSCONFDIR/onboard.env``                  systemd/onboard.env.example, only if absent
 ``SYSCONFDIR/zenoh-vehicle.json5``          config/zenoh/vehicle-boat1.json5 (no secret),
                                             only if absent
+``PREFIX/doc/``                             docs/service.md and docs/security.md, which
+                                            the unit's ``Documentation=`` names (``systemctl
+                                            help onboard``); always replaced
 ``UNITDIR/onboard.service``                 systemd/onboard.service with PREFIX and
                                             SYSCONFDIR put in; always replaced
 ``CREDSTORE/``                              created mode 0700 if absent: the secrets go
@@ -51,6 +54,9 @@ SOURCE = Path(__file__).resolve().parents[2]
 UNIT_PREFIX = "/opt/onboard"
 UNIT_SYSCONFDIR = "/etc/onboard"
 """The paths written in systemd/onboard.service, replaced by the ones installed to."""
+DOCS = ("service.md", "security.md")
+"""The pages of docs/ installed into ``PREFIX/doc/``: the service's and its hardening's,
+the unit's ``Documentation=``."""
 
 
 def _stage(destdir: str, path: str) -> Path:
@@ -167,6 +173,9 @@ def main(argv: list[str] | None = None) -> int:
                       (SOURCE / "config" / "zenoh" / "vehicle-boat1.json5", "zenoh-vehicle.json5")):
         text = src.read_text().replace(UNIT_SYSCONFDIR + "/", a.sysconfdir.rstrip("/") + "/")
         _say(install_file(src, etc / name, 0o644, keep=True, text=text))
+    doc = _stage(d, a.prefix) / "doc"
+    for name in DOCS:
+        _say(install_file(SOURCE / "docs" / name, doc / name, 0o644, keep=False))
     unit = _stage(d, a.unitdir) / "onboard.service"
     _say(install_file(unit, unit, 0o644, keep=False, text=unit_text(a.prefix, a.sysconfdir)))
     cred = _stage(d, a.credstore)
