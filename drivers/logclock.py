@@ -22,8 +22,10 @@ time elsewhere. :func:`log_clock` says which, as a :class:`LogClock`:
 * DVL JSON: ``time_of_validity`` or ``ts`` (Unix time), else the sum of json_v1 ``time``
   since the first report; UTC as is.
 * Slocum glider binary log: ``m_present_time``, POSIX seconds; UTC as is.
-* PD6: the TS lines' time (taken as UTC); DDBoat log: the lines' wall-clock stamps (taken
-  as UTC); UTC as is.
+* PD6: the TS lines' time (taken as UTC); UTC as is.
+* DDBoat log: the lines' wall-clock stamps (the boat's clock), UTC from its GPS lines' time
+  of day on the lines' date (the median of their difference: the boat's clock may be off
+  or in local time), as is without any GPS time.
 
 "as is" holds only where the stamps are a date: a clock that reads before
 :data:`UTC_MIN_S` (2000-01-01) is a time since boot or since the start (no boot or run lasts
@@ -51,6 +53,7 @@ GPS_EPOCH_S = float(calendar.timegm((1980, 1, 6, 0, 0, 0)))
 """The start of GPS week 0 (POSIX s, 1980-01-06T00:00:00Z)."""
 SECONDS_PER_WEEK = 604800.0
 SECONDS_PER_HOUR = 3600.0
+SECONDS_PER_DAY = 86400.0
 MS_PER_S = 1000.0
 LEAP_SECONDS: tuple[tuple[float, int], ...] = tuple(
     (float(calendar.timegm((y, m, 1, 0, 0, 0))), n) for n, (y, m) in enumerate((
@@ -126,7 +129,6 @@ POSIX_CLOCKS: dict[str, tuple[str, str | None]] = {
                          "the DVL reports carry no time (json_v1: the sum of their "
                          "intervals since the first report)"),
     "Pd6LogReader": ("the PD6 TS lines' time (taken as UTC)", None),
-    "DdboatLogReader": ("the lines' wall-clock stamps (the boat's clock, taken as UTC)", None),
     "SlocumReader": ("the glider's m_present_time (POSIX s)", None),
 }
 """Reader class -> (its clock in words, why it has no UTC when its stamps are no date, or
@@ -151,6 +153,8 @@ def log_clock(fmt: str, reader: object, path: str | os.PathLike, t_first: float)
         return _mixed_clock(reader, t_first)
     if name == "NmeaCaptureReader" and getattr(reader, "receive_times", False):
         return _prefixed_nmea_clock(path, t_first)
+    if name == "DdboatLogReader":
+        return _ddboat_clock(path, t_first)
     if name == "NmeaCaptureReader":
         return _posix("the NMEA sentences' UTC time and the capture's first RMC date",
                       t_first, no_date="the NMEA sentences give a time of day, and the "
@@ -194,6 +198,40 @@ def _prefixed_nmea_clock(path: str | os.PathLike, t_first: float) -> LogClock:
     return _posix("the RMC sentences' date and time (the capture's wall-clock line "
                   f"prefixes are {-offset / SECONDS_PER_HOUR:+.2f} h from UTC: their "
                   "time zone, or their computer's clock error)", t_first, offset)
+
+
+def _ddboat_clock(path: str | os.PathLike, t_first: float) -> LogClock:
+    """The DDBoat's wall-clock line stamps put on UTC by its GPS lines: the median of (the
+    GPS time of day, ``hhmmss`` UTC, on the line's date, less the line's stamp) over the
+    lines with a fix and a GPS time not seen on the line before (a repeated time is an old
+    fix); a difference of 12 h or more is the day before or after. The stamps as UTC
+    without any GPS time."""
+    from onboard.drivers.textlog import ddboat_gps_times
+
+    offsets = [_within_half_a_day(stamp - stamp % SECONDS_PER_DAY + tod - stamp)
+               for stamp, tod in ddboat_gps_times(path)]
+    words = "the lines' wall-clock stamps (the boat's clock"
+    if not offsets:
+        return _posix(f"{words}, taken as UTC: no GPS line with a fix gives the time)",
+                      t_first)
+    offset = statistics.median(offsets)
+    return _posix("the GPS lines' time of day (hhmmss) on the lines' date (the boat's "
+                  f"wall-clock line stamps are {-offset / SECONDS_PER_HOUR:+.2f} h, "
+                  f"{_hms(-offset)}, from UTC: its time zone, or its clock's error)",
+                  t_first, offset)
+
+
+def _within_half_a_day(seconds: float) -> float:
+    """``seconds`` less the whole days that bring it into [-12 h, 12 h)."""
+    half = SECONDS_PER_DAY / 2
+    return (seconds + half) % SECONDS_PER_DAY - half
+
+
+def _hms(seconds: float) -> str:
+    """``+H:MM:SS`` of a signed number of seconds, rounded to the second."""
+    sign = "-" if seconds < 0 else "+"
+    m, s = divmod(round(abs(seconds)), 60)
+    return f"{sign}{m // 60}:{m % 60:02d}:{s:02d}"
 
 
 def _dataflash_clock(path: str | os.PathLike) -> LogClock:

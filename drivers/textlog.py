@@ -536,6 +536,37 @@ class DdboatLogReader:
                        heading_rad=wrap_2pi(0.5 * math.pi - theta), reference="magnetic")
 
 
+def ddboat_gps_times(path: str | Path) -> Iterator[tuple[float, float]]:
+    """(line stamp, GPS time of day) of each DDBoat GPS line with a fix and a GPS time not
+    seen before (the fixes :class:`DdboatLogReader` reads): the stamp POSIX s on the
+    boat's clock, the time of day s since midnight UTC (``hhmmss``)."""
+    last: str | None = None
+    for ln in _read_lines(Path(path)):
+        if b"/GPS [" not in ln:
+            continue
+        pt = prefix_time(ln.strip())
+        m = _DD_GPS.search(ln.decode("utf-8", "replace"))
+        if pt is None or m is None or m.group(6) != "A" or m.group(5) == last:
+            continue
+        last = m.group(5)
+        tod = _hhmmss(m.group(5))
+        if tod is not None:
+            yield pt[0], tod
+
+
+def _hhmmss(value: str) -> float | None:
+    """Seconds since midnight of ``hhmmss[.ss]``; None when it is no time of day."""
+    try:
+        v = float(value)
+    except ValueError:
+        return None
+    h, rest = divmod(v, 10000.0)
+    m, s = divmod(rest, 100.0)
+    if not (math.isfinite(v) and 0.0 <= v and h < 24.0 and m < 60.0 and s < 61.0):
+        return None
+    return h * 3600.0 + m * 60.0 + s
+
+
 def _ddmm(value: str, hemi: str) -> float | None:
     try:
         d = ddmm_degrees(float(value))

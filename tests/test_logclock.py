@@ -102,6 +102,58 @@ def test_a_clock_that_reads_before_2000_is_no_date(tmp_path):
     assert clock.summary(first.t) == {"utc": False, "source": clock.source, "start": None}
 
 
+DDBOAT_GPS_LINE = ("{stamp} - INFO - Temperature l,r are 24 26 deg.C /cmd motors l,r are "
+                   "b'dirl: 1, motl: 0, dirr: 1, motr: 0\\r' /GPS [4825.0835, 'N', 428.4051, "
+                   "'W', {hhmmss}, 'A'] /IMU: MAG [225, -3715, 1858] /\n")
+
+
+def _ddboat(tmp_path: Path, lines: list[tuple[str, str]]) -> Path:
+    """A DDBoat log of GPS lines, each (line stamp, GPS hhmmss)."""
+    path = tmp_path / "ddboat.log"
+    path.write_text("".join(DDBOAT_GPS_LINE.format(stamp=a, hhmmss=b) for a, b in lines))
+    return path
+
+
+def test_a_ddboat_log_is_put_on_utc_by_its_gps_time_of_day(tmp_path):
+    """The boat's clock 53 min 54 s behind its GPS (as DDBOAT8_t_2022_9_2_0_0.log): UTC
+    is the GPS time of day on the lines' date, the offset said in the source; a repeated
+    GPS time (an old fix) is not counted."""
+    path = _ddboat(tmp_path, [("2022-09-02 11:41:14,000", "123508.0"),
+                              ("2022-09-02 11:41:15,000", "123509.0"),
+                              ("2022-09-02 11:41:15,500", "123509.0"),
+                              ("2022-09-02 11:41:16,000", "123510.0")])
+    fmt, reader, first = _first(path)
+    clock = log_clock(fmt, reader, path, first.t)
+    assert clock.utc and clock.offsets == ((first.t, 3234.0),)
+    assert clock.summary(first.t)["start"] == "2022-09-02T12:35:08.000Z"
+    assert "GPS" in clock.source and "-0.90 h, -0:53:54, from UTC" in clock.source
+
+
+def test_a_ddboat_gps_time_across_midnight_is_of_the_day_it_reads(tmp_path):
+    """A GPS time of day 12 h or more from the line's stamp is of the day before or after
+    the line's date: a boat clock on UTC+2 across its midnight (its GPS still on the day
+    before), one on UTC-2 before its midnight (its GPS on the next day)."""
+    path = _ddboat(tmp_path, [("2022-09-02 23:59:58,000", "215958.0"),
+                              ("2022-09-03 00:00:01,000", "220001.0")])
+    fmt, reader, first = _first(path)
+    clock = log_clock(fmt, reader, path, first.t)
+    assert clock.offsets == ((first.t, -7200.0),)
+    assert clock.summary(first.t)["start"] == "2022-09-02T21:59:58.000Z"
+    late = _ddboat(tmp_path, [("2022-09-02 23:59:58,000", "015958.0")])
+    fmt, reader, first = _first(late)
+    assert log_clock(fmt, reader, late, first.t).summary(first.t)["start"] == \
+        "2022-09-03T01:59:58.000Z"
+
+
+def test_a_ddboat_log_without_a_gps_fix_keeps_its_stamps_as_utc(tmp_path):
+    path = tmp_path / "ddboat.log"
+    path.write_text(DDBOAT_GPS_LINE.format(stamp="2022-09-02 11:41:14,000", hhmmss="123508.0")
+                    .replace("'A']", "'V']"))
+    fmt, reader, first = _first(path)
+    clock = log_clock(fmt, reader, path, first.t)
+    assert clock.offsets == ((first.t, 0.0),) and "taken as UTC" in clock.source
+
+
 def _posix_csv_runs(tmp_path: Path, starts_ms: tuple[float, ...]) -> Path:
     """Copies of the BlueBoat run whose time column is POSIX ms from ``starts_ms``."""
     import csv
@@ -169,13 +221,16 @@ def test_real_logs_with_and_without_utc(shared_data):
     """Measured: the ArduSub tlog from 2023-05-04 17:15 (the topside's clock), its NMEA
     capture from 2023-09-01 22:56 (the RMC sentences; the lines' prefixes are 7 h off), the
     Shenzhen NMEA from 2024-12-05 02:27 (RMC date and time), the survey boat's Test1 from
-    2018-04-18 (its GPS started on a default date in 2009 and jumped twice); the ArduSub
+    2018-04-18 (its GPS started on a default date in 2009 and jumped twice), the DDBoat
+    from 2022-09-02 12:35 (its GPS time; the boat's clock read 11:41); the ArduSub
     DataFlash (no GPS records) and the BlueBoat CSV (ms since boot) have no UTC."""
     want = {"ardusub_small_logs/small.tlog": "2023-05-04T17:15",
             # its line prefixes read 15:56, local time: the RMC sentences say 22:56 UTC
             "ardusub_small_logs/nmea_log.txt": "2023-09-01T22:56",
             "usv_rtk_gnss_heading_nmea_shenzhen/202412051037.txt": "2024-12-05T02:27",
             "survey_boat_arduino_rc/Test1_counterclockwise.TXT": "2018-04-18T17:4",
+            # its lines read 11:41:14, its first GPS line 12:35:08 (UTC)
+            "ddboat_ensta_log/DDBOAT8_t_2022_9_2_0_0.log": "2022-09-02T12:35:0",
             "ardusub_small_logs/small.BIN": None}
     for name, start in want.items():
         log = shared_data / name
