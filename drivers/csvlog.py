@@ -259,6 +259,46 @@ def csv_header(path: str | Path) -> list[str]:
         return []
 
 
+TABLE_ROWS = 20
+"""Rows after the header that :func:`looks_like_table` compares with it."""
+TABLE_SHARE_MIN = 0.8
+"""Share of those rows that must have the header's number of cells."""
+NOT_A_HEADER = ("{", "[", "$", "!", ":")
+"""First characters of a line that is a record, not a CSV header: JSON, an NMEA sentence,
+a PD6 line."""
+
+
+def looks_like_table(head: bytes) -> bool:
+    """Whether the first bytes of a file, ``head``, are a CSV table: a header row of two or
+    more names (none a number; a pandas index column's empty name is one) over rows of
+    which most (:data:`TABLE_SHARE_MIN` of the first :data:`TABLE_ROWS`) have as many
+    cells, a number among them. An NMEA sentence, a JSON line or a PD6 line is no header,
+    and lines of prose with commas are no table (no row holds a number)."""
+    text = head.decode("utf-8", "replace").splitlines()
+    lines = [ln for ln in (text[:-1] if len(text) > 1 else text) if ln.strip()]
+    if not lines or lines[0].lstrip()[:1] in NOT_A_HEADER:
+        return False
+    try:
+        rows = list(csv.reader(lines[:TABLE_ROWS + 1]))
+    except csv.Error:
+        return False
+    if len(rows) < 2 or len(rows[0]) < 2:
+        return False
+    names = [c.strip() for c in rows[0]]
+    if any(_number(c) for c in names) or not any(c[:1].isalpha() for c in names):
+        return False
+    fit = sum(len(r) == len(names) and any(_number(c) for c in r) for r in rows[1:])
+    return fit >= TABLE_SHARE_MIN * (len(rows) - 1)
+
+
+def _number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
 def fitting_configs(header: Sequence[str]) -> list[str]:
     """The bundled configs (``onboard.core.config.bundled``) with a ``[csv]`` mapping whose
     every column, and every column its ``[inputs]`` read, is in ``header``; the one

@@ -16,11 +16,27 @@ from onboard.drivers.base import LogReader, UnreadableLog
 DATAFLASH_MAGIC = b"\xa3\x95"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 """The first bytes of an MCAP file (a BlueOS 1.5 recording: :mod:`drivers.mcap_log`)."""
+HEAD_BYTES = 4096
+"""Bytes a file's binary headers are looked for in."""
+TEXT_HEAD_BYTES = 65536
+"""Bytes of a file without a NUL in its first :data:`HEAD_BYTES` that its text is judged
+by (a capture's kind, a CSV table)."""
+TLOG_STAMP_BYTES = 8
+"""The time stamp before each frame of a tlog (us since the epoch, big-endian)."""
 
 
 def sniff(path: str | Path) -> str:
     """The format of ``path``: tlog, dataflash, recording, mcap, slocum, csv, csv-dir or
-    text."""
+    text.
+
+    The content decides: a recording's, DataFlash's, MCAP's or Slocum's header; a MAVLink
+    frame with a good checksum after a tlog's 8-byte time stamp (:func:`tlog_head`); text
+    that a text capture's reader recognises (:func:`drivers.textlog.sniff_text`) or a CSV
+    table (:func:`drivers.csvlog.looks_like_table`). The name breaks the ties: a ``.csv``
+    file that is a table as well as a capture is read as CSV; content that is none of
+    these is a tlog when its name ends ``.tlog`` or a start byte follows its first 8 bytes
+    (a tlog damaged from its first record), CSV when it ends ``.csv`` (the CSV reader says
+    what it lacks), else text (the text reader says what it looked for)."""
     p = Path(path)
     if p.is_dir():
         if any(p.glob("*.onbrec")):
@@ -30,7 +46,8 @@ def sniff(path: str | Path) -> str:
         raise UnreadableLog(f"{p}: a directory with no .csv or .onbrec files")
     try:
         with open(p, "rb") as f:
-            head = f.read(4096)
+            head = f.read(HEAD_BYTES)
+            text_head = b"" if b"\x00" in head else head + f.read(TEXT_HEAD_BYTES - len(head))
     except OSError as err:
         raise UnreadableLog(f"{p}: {err.strerror or err}") from None
     if not head:
@@ -44,19 +61,57 @@ def sniff(path: str | Path) -> str:
     if head.startswith(MCAP_MAGIC):
         return "mcap"
     from onboard.drivers.mavlink_frame import MAGIC_V1, MAGIC_V2
-
     from onboard.drivers.slocum import is_slocum
 
     if is_slocum(head, p):
         return "slocum"
+    if tlog_head(head):
+        return "tlog"
     suffix = p.suffix.lower()
-    if suffix == ".tlog" or (len(head) > 9 and head[8] in (MAGIC_V1, MAGIC_V2)):
+    if text_head:
+        kind = _text_kind(text_head, suffix)
+        if kind:
+            return kind
+    if suffix == ".tlog" or (len(head) > TLOG_STAMP_BYTES + 1
+                             and head[TLOG_STAMP_BYTES] in (MAGIC_V1, MAGIC_V2)):
         return "tlog"
     if suffix == ".csv":
         return "csv"
     if b"\x00" in head:
         raise UnreadableLog(f"{p}: binary data in no format this tool reads")
     return "text"
+
+
+def tlog_head(head: bytes) -> bool:
+    """Whether ``head``, a file's first bytes, starts as a tlog: an 8-byte time stamp, then
+    a MAVLink 1 or 2 frame of an id in the dialect with a good checksum, or, for an id
+    outside it, followed by the next record's start byte (or the end of ``head``)."""
+    from onboard.drivers.mavlink_frame import (CRC_EXTRA, MAGIC_V1, MAGIC_V2, crc_matches,
+                                               header_at)
+
+    j = TLOG_STAMP_BYTES
+    hdr = header_at(head, j, len(head)) if len(head) > j else None
+    if hdr is None:
+        return False
+    header_len, payload_len, _, _, _, msgid, end = hdr
+    if msgid in CRC_EXTRA:
+        return end <= len(head) and crc_matches(head, j, header_len, payload_len,
+                                                CRC_EXTRA[msgid])
+    nxt = end + TLOG_STAMP_BYTES
+    return nxt >= len(head) or head[nxt] in (MAGIC_V1, MAGIC_V2)
+
+
+def _text_kind(head: bytes, suffix: str) -> str:
+    """``text`` or ``csv`` for the first bytes of a file without a NUL, by content (the
+    name ``suffix`` breaks a tie: a ``.csv`` table that a capture's reader would also
+    take is CSV); empty when it is neither."""
+    from onboard.drivers.csvlog import looks_like_table
+    from onboard.drivers.textlog import sniff_text
+
+    table = looks_like_table(head)
+    if sniff_text(head) and not (table and suffix == ".csv"):
+        return "text"
+    return "csv" if table else ""
 
 
 def open_log(path: str | Path, csv_format=None,
