@@ -1,6 +1,7 @@
 """Text captures: sniff the content and read it as NMEA, DVL JSON, PD6 or a mixed capture.
 
-:func:`open_text_log` looks at the first 64 kB of a text file and returns a log reader:
+:func:`open_text_log` looks at the first 64 kB of a text file (and on, 64 kB at a time, up to
+16 MB, until it recognises one of these) and returns a log reader:
 
 ``nmea``
     NMEA 0183 sentences, one per line (:class:`NmeaCaptureReader`). Lines may carry a
@@ -79,6 +80,12 @@ from onboard.core.geo import wrap_2pi
 from onboard.core.messages import ActuatorCommand, GnssFix, Heading, Imu, RcChannels, Sample
 
 SNIFF_BYTES = 65536
+"""Bytes of a text capture :func:`open_text_log` judges at a time (a window)."""
+SNIFF_MAX_BYTES = 16 << 20
+"""Bytes into a text capture :func:`open_text_log` looks for its first record: a logger's
+status lines before its first sentence are passed over up to this far (a few seconds of
+sniffing at most); a file with none in them is refused, the message saying how far it
+looked."""
 _PREFIX = re.compile(rb"^(\d{4})-(\d{2})-(\d{2})[ T](\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,6}))?")
 _NMEA = re.compile(rb"[$!][A-Z]{2}[A-Z0-9]{2,4},[^*\r\n]*\*[0-9A-Fa-f]{2}")
 _PD6 = re.compile(rb"^:[A-Z]{2},")
@@ -134,16 +141,31 @@ def sniff_text(head: bytes) -> str:
 
 
 def open_text_log(path: str | Path) -> LogReader:
-    """A reader for the text capture at ``path``; UnreadableLog if it is none we know."""
+    """A reader for the text capture at ``path``; UnreadableLog if it is none we know.
+
+    The kind is that of the first window of :data:`SNIFF_BYTES` (the first, then each next
+    one, whole lines carried over) in which :func:`sniff_text` recognises one, up to
+    :data:`SNIFF_MAX_BYTES` into the file: a logger's status lines before its first
+    sentence do not hide the capture, and one window is in memory at a time."""
     p = Path(path)
+    looked = 0
     try:
         with open(p, "rb") as fh:
-            head = fh.read(SNIFF_BYTES)
+            window = fh.read(SNIFF_BYTES)
+            if not window.strip() and len(window) < SNIFF_BYTES:
+                raise UnreadableLog(f"{p}: empty file")
+            kind = sniff_text(window)
+            looked = len(window)
+            while not kind and looked < SNIFF_MAX_BYTES:
+                chunk = fh.read(SNIFF_BYTES)
+                if not chunk:
+                    break
+                looked += len(chunk)
+                carry = window[window.rfind(b"\n") + 1:] if b"\n" in window else b""
+                window = (carry if len(carry) < SNIFF_BYTES else b"") + chunk
+                kind = sniff_text(window)
     except OSError as err:
         raise UnreadableLog(f"{p}: {err.strerror or err}") from None
-    if not head.strip():
-        raise UnreadableLog(f"{p}: empty file")
-    kind = sniff_text(head)
     if kind == "nmea":
         return NmeaCaptureReader(p)
     if kind == "dvl-json":
@@ -158,8 +180,14 @@ def open_text_log(path: str | Path) -> LogReader:
         return MixedCaptureReader(p)
     if kind == "ddboat":
         return DdboatLogReader(p)
-    raise UnreadableLog(f"{p}: no NMEA, DVL JSON, PD6 or known logger lines in the first "
-                        f"{SNIFF_BYTES // 1024} kB")
+    where = (f"in the first {_kb(looked)} (it looks no further)" if looked >= SNIFF_MAX_BYTES
+             else f"in the whole file ({_kb(looked)})")
+    raise UnreadableLog(f"{p}: no NMEA, DVL JSON, PD6 or known logger lines {where}")
+
+
+def _kb(n: int) -> str:
+    """``n`` bytes in kB (MB from 10 MB on), for a message."""
+    return f"{n / (1 << 20):,.0f} MB" if n >= 10 << 20 else f"{max(1, round(n / 1024)):,} kB"
 
 
 LINE_CHUNK_BYTES = 1 << 20
@@ -220,13 +248,21 @@ def first_rmc_date(lines: Iterable[bytes]) -> float | None:
     return None
 
 
+HEAD_LINES = 500
+"""Lines of an NMEA capture whose prefixes decide whether it carries receive times: its
+first ones, or its first with a sentence when those have none."""
+
+
 class NmeaCaptureReader:
     """An NMEA text capture, with or without wall-clock receive-time prefixes."""
 
     def __init__(self, path: str | Path, source: str = "nmea") -> None:
         self.path = Path(path)
         self.source = source
-        head = list(itertools.islice(_read_lines(self.path), 500))
+        head = list(itertools.islice(_read_lines(self.path), HEAD_LINES))
+        if not any(b"$" in ln for ln in head):   # status lines first: judge the sentences
+            head = list(itertools.islice((ln for ln in _read_lines(self.path) if b"$" in ln),
+                                         HEAD_LINES))
         stamped = sum(1 for ln in head if _PREFIX.match(ln) and b"$" in ln)
         nmea = sum(1 for ln in head if b"$" in ln)
         self.receive_times = nmea > 0 and stamped >= nmea / 2

@@ -526,6 +526,53 @@ def test_ddboat_log(shared_data):
     assert len(ex) == 24 + 13   # 24 motor commands, 13 THETA headings
 
 
+STATUS_LINE = b"2024-12-05 10:37:%02d INFO status: waiting for the GNSS receiver, battery 12.%d V\n"
+"""A logger's status line, prefixed, without a sentence (about 80 bytes)."""
+SAMPLE_NMEA = Path(__file__).resolve().parent / "data" / "nmea" / "gnss-compass.nmea"
+
+
+def _status_lines(n: int) -> bytes:
+    return b"".join(STATUS_LINE % (i % 60, i % 10) for i in range(n))
+
+
+def test_status_lines_past_the_first_window_do_not_hide_the_sentences(tmp_path):
+    """1,500 status lines (117 kB) before the first sentence: read as the capture alone
+    is, the status lines counted as garbage."""
+    log = tmp_path / "late.txt"
+    log.write_bytes(_status_lines(1500) + SAMPLE_NMEA.read_bytes())
+    assert log.stat().st_size > 64 * 1024
+    r = open_text_log(log)
+    assert isinstance(r, NmeaCaptureReader) and not r.receive_times
+    alone = [(type(s), s.t) for s in open_text_log(SAMPLE_NMEA)]
+    assert [(type(s), s.t) for s in r] == alone and alone
+    assert r.stats.rejected["garbage"] == 1500
+
+
+def test_late_sentences_with_receive_times_are_read_with_them(tmp_path):
+    """Sentences after 1,500 prefixed status lines carry their receive times too."""
+    sentences = [ln for ln in SAMPLE_NMEA.read_bytes().splitlines() if ln]
+    log = tmp_path / "late.txt"
+    log.write_bytes(_status_lines(1500) + b"".join(
+        b"2024-05-01 12:00:%02d.000 | DEBUG | gps - %s\n" % (i // 4, ln)
+        for i, ln in enumerate(sentences)))
+    r = open_text_log(log)
+    assert isinstance(r, NmeaCaptureReader) and r.receive_times
+
+
+def test_a_text_file_without_records_says_how_far_it_looked(tmp_path, monkeypatch):
+    from onboard.drivers import textlog
+
+    monkeypatch.setattr(textlog, "SNIFF_MAX_BYTES", 256 * 1024)
+    log = tmp_path / "status.txt"
+    log.write_bytes(_status_lines(4000) + SAMPLE_NMEA.read_bytes())   # 312 kB, then NMEA
+    with pytest.raises(UnreadableLog, match=r"in the first 256 kB \(it looks no further\)"):
+        open_text_log(log)
+    short = tmp_path / "short.txt"
+    short.write_bytes(_status_lines(100))
+    with pytest.raises(UnreadableLog, match=r"no NMEA.* in the whole file \(8 kB\)"):
+        open_text_log(short)
+
+
 @pytest.mark.data
 def test_notes_file_is_unreadable(shared_data):
     with pytest.raises(UnreadableLog):
