@@ -74,3 +74,29 @@ def test_five_of_six_rov_motors_is_an_incomplete_mapping():
     assert code == "actuator_mapping_incomplete" and "[6]" in message
     six = five + [p("SERVO6_FUNCTION", 38)]
     assert consistency(config.load("bluerov2"), six) == []
+
+
+def test_a_survey_boat_arduino_capture_is_replayed_with_its_bundled_config(tmp_path):
+    """The survey boat's Arduino capture (IMU and RC rows between NMEA, that boat's logger
+    alone) takes config/survey-boat-csv.toml without --config, named in the note, and
+    replays as with it given; an NMEA capture has no vehicle evidence still."""
+    from pathlib import Path
+
+    from onboard.cli import main as cli_main
+    from onboard.core.config import CONFIG_DIR
+    from onboard.offline.replay import choose_config
+
+    data = Path(__file__).resolve().parent / "data"
+    capture = data / "survey_boat" / "arduino-gps.txt"
+    cfg, note = choose_config(str(capture), None)
+    assert cfg.vehicle.id == "survey-boat" and cfg.vehicle.vehicle_class == "rudder-boat"
+    assert note.startswith("detected:") and note.endswith(": survey-boat-csv")
+    assert cfg.inputs.throttle.channel == 1 and cfg.inputs.rudder.channel == 2
+    cfg, note = choose_config(str(data / "nmea" / "gnss-compass.nmea"), None)
+    assert cfg.vehicle.id == "vehicle" and "generic config" in note
+    given = str(CONFIG_DIR / "survey-boat-csv.toml")
+    for out, extra in (("detected", []), ("given", ["--config", given])):
+        assert cli_main(["replay", str(capture), "--out", str(tmp_path / out),
+                         "--no-plot", *extra]) == 0
+    assert (tmp_path / "detected" / "estimates.csv").read_bytes() == \
+        (tmp_path / "given" / "estimates.csv").read_bytes()

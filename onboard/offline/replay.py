@@ -84,6 +84,10 @@ log, not given (:func:`choose_config`)."""
 SLOCUM_CONFIG = "slocum-glider"
 """The bundled config a Slocum glider's binary log is replayed with (its sensors have the
 same names on every Slocum)."""
+SURVEY_BOAT_CONFIG = "survey-boat-csv"
+"""The bundled config a survey-boat Arduino capture (:class:`drivers.textlog.MixedCaptureReader`)
+is replayed with: the capture's rows are that logger's, its RC channels that boat's
+throttle and rudder."""
 
 
 def choose_config(log: str, config_path: str | Sequence[str] | None
@@ -119,6 +123,10 @@ def choose_config(log: str, config_path: str | Sequence[str] | None
     elif fmt in ("dataflash", "recording", "mcap"):
         header = [s for s in reader if isinstance(s, (Parameter, VehicleInfo))]
         cfg, why = detect(header)
+    elif type(reader).__name__ == "MixedCaptureReader":
+        cfg, why = configmod.load(SURVEY_BOAT_CONFIG), (
+            f"the survey boat's Arduino capture (its IMU and RC rows between the GPS's NMEA, "
+            f"a logger of that boat alone): {SURVEY_BOAT_CONFIG}")
     else:
         cfg, why = configmod.Config(), "no vehicle evidence in a text log; generic config"
     return cfg, f"{DETECTED_CONFIG} {why}"
