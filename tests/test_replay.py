@@ -206,3 +206,39 @@ def test_progress_says_how_far_into_the_log_not_its_raw_stamp(capsys):
     assert sum(1 for _ in progress.wrap(samples)) == 1100
     err = capsys.readouterr().err
     assert "1,024 samples, 1,023 s into the log" in err and "1574" not in err
+
+
+def test_a_folder_of_csv_runs_names_the_logs_it_does_not_read(tmp_path, capsys):
+    """A day's folder holding a CSV run, a tlog, an NMEA capture and a README, replayed
+    with a [csv] mapping: the CSV run is replayed as alone, and the tlog and the NMEA
+    capture, which a folder's replay does not read, are named in summary.json's
+    read.skipped_files and in a ``logs_not_read`` warning listed first (the README
+    named as no log, with no warning)."""
+    import shutil
+
+    data = Path(__file__).resolve().parent / "data"
+    config = str(Path(__file__).resolve().parents[1] / "config" / "blueboat-ntnu-csv.toml")
+    day = tmp_path / "day1"
+    day.mkdir()
+    shutil.copyfile(data / "csv" / "blueboat-run.csv", day / "blueboat-run.csv")
+    shutil.copyfile(data / "replay" / "jaiabot-turns.tlog", day / "jaiabot.tlog")
+    shutil.copyfile(data / "nmea" / "gnss-compass.nmea", day / "gnss.txt")
+    (day / "README.md").write_text("# day 1\n")
+    for log, out in ((day, "folder"), (day / "blueboat-run.csv", "alone")):
+        assert cli_main(["replay", str(log), "--config", config, "--out",
+                         str(tmp_path / out), "--no-plot"]) == 0
+    printed = capsys.readouterr().out
+    assert (tmp_path / "folder" / "estimates.csv").read_bytes() == \
+        (tmp_path / "alone" / "estimates.csv").read_bytes()
+    read = json.loads((tmp_path / "folder" / "summary.json").read_text())["read"]
+    assert read["skipped"] == {"log_file": 2, "other_file": 1}
+    assert [(f["file"], f["why"].split(",")[0]) for f in read["skipped_files"]] == [
+        ("README.md", "not a log (a document (.md))"), ("gnss.txt", "a text capture"),
+        ("jaiabot.tlog", "a MAVLink telemetry log (tlog)")]
+    warnings = json.loads((tmp_path / "folder" / "summary.json").read_text())["warnings"]
+    assert warnings[0]["code"] == "logs_not_read"
+    assert "gnss.txt, jaiabot.tlog" in warnings[0]["message"]
+    assert "onboard batch day1" in warnings[0]["message"]
+    assert "logs_not_read: 2 log(s) in day1 not read: gnss.txt, jaiabot.tlog" in printed
+    alone = json.loads((tmp_path / "alone" / "summary.json").read_text())
+    assert "skipped_files" not in alone["read"] and "skipped" not in alone["read"]

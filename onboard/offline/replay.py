@@ -171,6 +171,9 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     summary.json (:func:`add_figure`)."""
     wall0 = time.perf_counter()
     fmt, reader = open_log(log, cfg.csv, column_names(cfg.inputs))
+    not_read = files_not_read(log, fmt)
+    for f in not_read:
+        reader.stats.skipped["log_file" if f["log"] else "other_file"] += 1
     out_dir.mkdir(parents=True, exist_ok=True)
     engine = Engine(cfg)
     samples = iter(reader)
@@ -218,7 +221,7 @@ def replay(log: str, cfg: Config, out_dir: Path, *, config_note: str = "",
     csv.close()
     meter.done()
     summary = _summary(log, fmt, cfg, engine, csv, reader, first.t, ticks, header,
-                       config_note)
+                       config_note, not_read)
     summary["wall_time_s"] = round(time.perf_counter() - wall0, 3)
     summary["utc"] = utc_summary(clock, summary["time_span"]["start"])
     if mcap_out is not None:
@@ -283,9 +286,11 @@ def _replay_recording(log: str, engine: Engine, on_tick, reader) -> int:
 
 
 def _summary(log: str, fmt: str, cfg: Config, engine: Engine, csv: EstimatesCsv, reader,
-             t_first: float, ticks: int, header: Sequence[Sample], config_note: str) -> dict:
+             t_first: float, ticks: int, header: Sequence[Sample], config_note: str,
+             not_read: Sequence[dict] = ()) -> dict:
     """summary.json's content (architecture.md §4.2) but for the exports and the wall
-    time."""
+    time; ``not_read``: the files of a folder log its reader left out
+    (:func:`files_not_read`), in ``read.skipped_files``."""
     time_span = _time_span(engine, t_first)
     span = time_span["duration_s"]
     kinds: dict[str, int] = {}
@@ -302,7 +307,9 @@ def _summary(log: str, fmt: str, cfg: Config, engine: Engine, csv: EstimatesCsv,
         "time_span": time_span,
         "origin": _origin(engine),
         "runs": csv.runs,
-        "read": reader.stats.as_dict(),
+        "read": {**reader.stats.as_dict(),
+                 **({"skipped_files": [{k: f[k] for k in ("file", "why")} for f in not_read]}
+                    if not_read else {})},
         "samples_accepted_by_type": dict(sorted(kinds.items())),
         "rates_hz": {k: (n / span if span > 0 else None) for k, n in sorted(kinds.items())},
         "accepted": {f"{k}:{src}": n for (k, src), n in sorted(engine.accepted.items())},
@@ -319,7 +326,7 @@ def _summary(log: str, fmt: str, cfg: Config, engine: Engine, csv: EstimatesCsv,
         "rate_hz": cfg.engine.rate_hz,
         "warnings": msgspec.to_builtins(sorted(run_warnings(   # a log mostly unread first
             engine, kinds, cfg, header, reader.stats.rejected, fmt, reader.stats,
-            Path(log).name), key=lambda a: a.code != "log_mostly_unread")),
+            Path(log).name, not_read), key=lambda a: a.code not in FIRST_WARNINGS)),
         "innovations": msgspec.to_builtins(engine.monitor.snapshot(reset_max=False)),
         "pipeline_health": engine.counters(),
         "noise": {p.name: p.noise.summary() for p in engine.pipelines
@@ -470,10 +477,12 @@ kinds of which the log must have one each."""
 def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
                  header: Sequence[Sample] = (),
                  read_rejected: Mapping[str, int] | None = None, fmt: str = "",
-                 read: ReadStats | None = None, log_name: str = "log") -> Alerts:
+                 read: ReadStats | None = None, log_name: str = "log",
+                 not_read: Sequence[dict] = ()) -> Alerts:
     """The engine's warnings and those of the whole run: a log of which little could be
-    used (``read``: the reader's counts, :func:`onboard.drivers.base.shortfall`), the log's
-    HEARTBEAT and servo
+    used (``read``: the reader's counts, :func:`onboard.drivers.base.shortfall`), the logs
+    of a folder log that its reader left out (``not_read``, :func:`files_not_read`), the
+    log's HEARTBEAT and servo
     functions against ``cfg`` (:func:`onboard.offline.autodetect.consistency`), records the
     reader dropped as time outliers and MCAP messages it could not read
     (``read_rejected``: its rejections by reason), no position source, and every pipeline
@@ -483,6 +492,7 @@ def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
     little = read and shortfall(read, log_name, engine.time_outliers())
     if little:
         alerts.warn("log_mostly_unread", little)
+    _not_read_warning(alerts, log_name, fmt, not_read)
     for code, message in consistency(cfg, header):
         alerts.warn(code, message)
     _reader_warnings(alerts, read_rejected or {})
@@ -510,6 +520,67 @@ def run_warnings(engine: Engine, kinds: dict[str, int], cfg: Config,
                         "a CSV log maps its columns to samples in [csv] (docs/formats-text.md)"
                         if csv else ""))
     return alerts
+
+
+FIRST_WARNINGS = frozenset({"log_mostly_unread", "logs_not_read"})
+"""Warnings listed before the others: much of what was given was not read."""
+FORMAT_WORDS = {"tlog": "MAVLink telemetry log (tlog)", "dataflash": "DataFlash log",
+                "mcap": "MCAP recording", "slocum": "Slocum glider log", "csv": "CSV log",
+                "recording": "service recording", "text": "text capture"}
+"""Each format of :func:`drivers.logs.sniff` in words."""
+FOLDER_READS = {"csv-dir": (".csv", "CSV runs"), "recording": (".onbrec", "recording files")}
+"""Per format of a folder log: the files its reader reads (by name ending) and what they
+are, in words."""
+
+
+def files_not_read(log: str, fmt: str) -> list[dict]:
+    """The files of the folder ``log`` (of format ``fmt``) that its reader leaves out, in
+    name order (hidden files and sub-folders aside): each ``file`` (its name), ``why``
+    (in words), ``log`` (whether the readers recognise it as a log, as ``onboard batch``
+    judges it: :func:`onboard.offline.batch.is_log`) and ``bytes``; empty for a file log."""
+    p = Path(log)
+    if not p.is_dir() or fmt not in FOLDER_READS:
+        return []
+    from onboard.offline.batch import is_log
+
+    suffix, runs = FOLDER_READS[fmt]
+    out = []
+    for f in sorted(p.iterdir()):
+        if not f.is_file() or f.name.startswith(".") or f.suffix.lower() == suffix:
+            continue
+        not_a_log = is_log(f)
+        if not_a_log:
+            why = f"not a log ({not_a_log})"
+        else:
+            try:
+                kind = FORMAT_WORDS.get(sniff(f), "log")
+            except UnreadableLog:
+                kind = "log"
+            why = f"a {kind}, not one of the folder's {runs}"
+        out.append({"file": f.name, "why": why, "log": not not_a_log,
+                    "bytes": f.stat().st_size})
+    return out
+
+
+def _not_read_warning(alerts: Alerts, log_name: str, fmt: str,
+                      not_read: Sequence[dict]) -> None:
+    """``logs_not_read``: the logs in a folder log that its reader left out, named, with
+    what reads them."""
+    logs = [f for f in not_read if f["log"]]
+    if not logs:
+        return
+    _, runs = FOLDER_READS[fmt]
+    names = ", ".join(f["file"] for f in logs[:NAMED_FILES]) + (
+        f" and {len(logs) - NAMED_FILES} more" if len(logs) > NAMED_FILES else "")
+    alerts.warn("logs_not_read", f"{len(logs)} log(s) in {log_name} not read: {names}; "
+                f"a folder replays as its {runs} alone: replay each other log on its own, "
+                f"or onboard batch {log_name} for every log in it",
+                details="; ".join(f"{f['file']}: {f['why']} ({f['bytes']:,} bytes)"
+                                  for f in logs) + "; summary.json read.skipped_files")
+
+
+NAMED_FILES = 5
+"""Files a ``logs_not_read`` warning names in its line (its details name them all)."""
 
 
 def _reader_warnings(alerts: Alerts, read_rejected: Mapping[str, int]) -> None:
