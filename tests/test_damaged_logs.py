@@ -32,7 +32,7 @@ REPO = Path(__file__).resolve().parents[1]
 TLOG = REPO / "tests/data/replay/jaiabot-turns.tlog"
 """A committed 40 s simulator log (136 kB)."""
 BLUEBOAT = REPO / "config/blueboat-ntnu-csv.toml"
-SPAN = re.compile(r"\[(-?[\d.]+)-(-?[\d.]+) s\]")
+SPAN = re.compile(r"\[(-?[\d.]+)-(-?[\d.]+) s[;\]]")
 """A printed warning's span, ``[12.3-45.6 s]``."""
 
 
@@ -195,7 +195,9 @@ def test_a_clock_reset_prints_where_it_happened_and_from_what_stamp_to_what(
     log = write_reset_tlog(tmp_path / "reset.tlog")
     s, printed = replay(tmp_path, log, capsys)
     (line,) = [ln for ln in printed.splitlines() if "time_jump" in ln]
-    assert line.startswith("  time_jump [9.9-9.9 s]: the log's clock went back 1,010 s "
+    # its rows in estimates.csv, whose t counts from the first segment, named beside
+    assert line.startswith("  time_jump [9.9-9.9 s; estimates.csv t -1000.0 to -1000.0]: "
+                           "the log's clock went back 1,010 s "
                            "(16.8 min), from 2023-11-14 22:13:29.9 UTC to "
                            "2023-11-14 21:56:40.0 UTC")
     assert_spans_sane(s, printed)

@@ -187,6 +187,21 @@ def test_log_time_counts_the_segments_never_negative():
     assert log_time([], 5.0) == 0.0
 
 
+def test_a_warning_after_a_gap_names_its_span_in_estimates_csv_too(capsys):
+    """After a 109-s gap (small.BIN) the span along the segments (26.6 s: the gap not
+    counted) is not where the rows are in estimates.csv (t 135.6): the printed span says
+    both; without a gap, one."""
+    from onboard.offline.replay import print_warnings
+
+    segments = [{"start": 265.6, "end": 292.2}, {"start": 401.2, "end": 401.3}]
+    warnings = [{"code": "time_jump", "t_start": 401.2, "t_end": 401.2, "message": "m"},
+                {"code": "x", "t_start": 270.0, "t_end": 280.0, "message": "m"}]
+    print_warnings(warnings, 0.0, segments)
+    out = capsys.readouterr().out
+    assert "time_jump [26.6-26.6 s; estimates.csv t 135.6 to 135.6]: m" in out
+    assert "x [4.4-14.4 s]: m" in out
+
+
 # --------------------------------------------------------------- replays of a CSV log
 
 def moved_csv(tmp_path: Path, shift_ms: float, rows: range = range(BAD_ROW, BAD_ROW + 1)) -> Path:

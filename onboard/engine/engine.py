@@ -710,7 +710,7 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
     segment's first stamp. Ticks fall on the grid ``t0 + k / rate_hz`` from the (segment's)
     first sample's time ``t0``; each tick at time ``T`` sees exactly the samples with
     ``t <= T``. Across a gap in the log longer than ``gap_s`` seconds the grid jumps
-    forward instead of ticking through empty time. With ``tick_times`` (a recording of
+    forward to the first sample after it instead of ticking through empty time. With ``tick_times`` (a recording of
     live ticks) those times are used instead of the grid and the time line, which
     reproduces a live run exactly.
     """
@@ -751,9 +751,11 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
                 k = 0
             if s.t > next_t:
                 if s.t - next_t > gap_s:
+                    # the last tick before the gap, then the grid's first time at or
+                    # after the sample: no tick falls in the gap
                     on_tick(next_t, engine.tick(next_t))
                     ticks += 1
-                    k = math.floor((s.t - t0) / period)
+                    k = math.ceil((s.t - t0) / period)
                     next_t = t0 + k * period
                 while s.t > next_t:
                     on_tick(next_t, engine.tick(next_t))

@@ -44,8 +44,8 @@ from onboard.core.messages import EstimateRecord, Parameter, Sample, VehicleInfo
 from onboard.core.wire import LocationFix
 from onboard.engine import Engine, run
 from onboard.engine.inputs import column_names
-from onboard.engine.timeline import log_time
 from onboard.engine.sources import QUANTITIES
+from onboard.engine.timeline import log_time
 from onboard.offline.estimates_csv import EstimatesCsv, Runs
 
 
@@ -605,10 +605,14 @@ def print_warnings(warnings: list[dict], t0: float,
                    segments: Sequence[Mapping] = ()) -> None:
     """The warnings, one line each, times from the start of the log (s): along the time
     line's ``segments`` (summary.json ``time_span.segments``; the time between them not
-    counted, :func:`onboard.engine.timeline.log_time`), else from ``t0``."""
+    counted, :func:`onboard.engine.timeline.log_time`), else from ``t0``. Where that
+    differs from estimates.csv's ``t`` (after a gap or a clock that went back: ``t``
+    counts from the first segment's start), the span in ``t`` follows, so that it finds
+    its rows."""
     if not warnings:
         return
     spans = [(g["start"], g["end"]) for g in segments]
+    origin = spans[0][0] if spans else t0
 
     def at(t: float) -> float:
         return log_time(spans, t) if spans else t - t0
@@ -617,7 +621,11 @@ def print_warnings(warnings: list[dict], t0: float,
     for w in warnings:
         span = ""
         if w["t_start"] is not None:
-            span = f" [{at(w['t_start']):.1f}-{at(w['t_end']):.1f} s]"
+            a, b = at(w["t_start"]), at(w["t_end"])
+            ta, tb = w["t_start"] - origin, w["t_end"] - origin
+            span = f" [{a:.1f}-{b:.1f} s" + (
+                f"; estimates.csv t {ta:.1f} to {tb:.1f}]"
+                if max(abs(ta - a), abs(tb - b)) >= 0.05 else "]")
         print(f"  {w['code']}{span}: {w['message']}")
         if w.get("details"):
             print(f"      {w['details']}")
