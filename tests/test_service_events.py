@@ -101,3 +101,30 @@ def test_the_service_logs_each_event_at_the_level_of_its_statustext(tmp_path, ca
     sent = {"".join(m.text for m in sorted(ms, key=lambda m: m.chunk_seq)): ms[0].severity
             for ms in by_id.values()}
     assert {t: events.log_level(s) for t, s in sent.items()} == logged
+
+
+@pytest.mark.integration
+def test_the_engines_own_events_reach_the_log_too(tmp_path, caplog):
+    """The engine's events (a source switch, a stale stream, a time jump, an integrity
+    warning) went to the health record and STATUSTEXT but never to the log: now each is
+    logged once, when its health record is made, at its STATUSTEXT severity's level."""
+    from onboard.service.daemon import Service
+
+    cfg = from_dict({"vehicle": {"id": "b", "class": "rudder-boat"},
+                     "service": {"zenoh": {"enabled": False}, "mavlink": {"enabled": False},
+                                 "recorder": {"enabled": False}}})
+    svc = Service(cfg, state_dir=tmp_path)
+    caplog.set_level(logging.INFO, logger="onboard.service")
+    svc.event("autopilot found")
+    svc.engine.events.append("gnss stream stale: no sample for 3 s")
+    svc.engine.events.append("heading source: compass -> autopilot")
+    h = svc.health(1.0)
+    assert h.events == ["autopilot found", "gnss stream stale: no sample for 3 s",
+                        "heading source: compass -> autopilot"]
+    logged = [(r.getMessage(), r.levelno) for r in caplog.records
+              if r.name == "onboard.service"]
+    assert logged == [("autopilot found", logging.INFO),
+                      ("gnss stream stale: no sample for 3 s", logging.WARNING),
+                      ("heading source: compass -> autopilot", logging.INFO)]
+    svc.health(2.0)  # nothing new: nothing logged again
+    assert len([r for r in caplog.records if r.name == "onboard.service"]) == 3

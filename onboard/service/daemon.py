@@ -599,6 +599,8 @@ class Service:
             rates.update(sess.rates())
         events, self._health_events = self._health_events[-20:], []
         h = self.engine.health(now, rates, events)
+        for text in h.events[len(events):]:  # the engine's own (sources, streams, alerts)
+            log.log(log_level(event_severity(text)), "%s", text)
         dropped = dict(self.intake.dropped)
         for inp in self.inputs:
             if inp.transport.stats.dropped_chunks:
