@@ -258,3 +258,22 @@ def test_parse_after_counts_the_samples_stamped_after_it_and_when_the_first_came
     assert intake.parse(after=1.0) == 0 and intake.fresh_rx is None
     intake.receive("imu", "sample", imu(1.03), 1.03)
     assert intake.parse() == 1 and len(intake.pending) == 5  # all, without ``after``
+
+
+def test_an_event_is_logged_once_whoever_takes_it(tmp_path, caplog):
+    """The service logs the events it is handed (``on_event``): the recorder logs one
+    itself only when nobody takes it (before: twice in the service's journal)."""
+    import logging
+
+    caplog.set_level(logging.INFO, logger="onboard.service.recorder")
+    taken: list[str] = []
+    rec = Recorder(tmp_path, clock=FakeClock(), on_event=taken.append)
+    rec._note("recorder: disk full")
+    rec.poll(0.0)
+    rec.close()
+    alone = Recorder(tmp_path / "b", clock=FakeClock())
+    alone._note("recorder: write failed")
+    alone.close()
+    logged = [r.getMessage() for r in caplog.records if r.name == "onboard.service.recorder"]
+    assert taken == ["recorder: disk full"]
+    assert "recorder: disk full" not in logged and "recorder: write failed" in logged

@@ -278,8 +278,10 @@ class Recorder:
     # ------------------------------------------------------------------ worker thread
 
     def _note(self, text: str) -> None:
-        """Queue an event for :meth:`poll` (any thread) and log it."""
-        log.warning("%s", text)
+        """Queue an event for :meth:`poll` (any thread); log it when no ``on_event``
+        takes it (the service's logs its events itself)."""
+        if self.on_event is None:
+            log.warning("%s", text)
         self._events.append(text)
 
     def _switch_job(self, path: Path | None, version: int) -> None:
