@@ -159,3 +159,91 @@ def open_log(path: str | Path, csv_format=None,
     from onboard.drivers.textlog import open_text_log
 
     return fmt, open_text_log(path)
+
+
+# ---------------------------------------------------------------- which files are logs
+
+LOG_SUFFIXES = frozenset({".tlog", ".bin", ".mcap", ".onbrec"})
+"""File name endings that mark a log: such a file that cannot be read fails (a broken
+log), where any other file the readers do not recognise is skipped (not a log)."""
+DOCUMENT_SUFFIXES = frozenset({".md", ".rst", ".adoc", ".htm", ".html", ".tex"})
+"""File name endings of documents: in a folder searched for logs they are skipped, even
+when they quote a few log lines (a data set's README with a sample NMEA sentence)."""
+TIME_NAMES = frozenset({"t", "ts", "utc", "date", "datetime", "epoch", "sec", "secs",
+                        "seconds", "ms", "tow"})
+"""CSV column names (lower case) that name a time; so does any name with ``time`` or
+``stamp`` in it, and the ``[csv] time`` of a ``--config``. A CSV file found in a folder
+with none of them is a table, not a log (a log is a time series)."""
+
+
+def is_log_dir(p: Path, times: frozenset[str] = frozenset()) -> bool:
+    """A folder that is one log, as ``onboard replay`` reads it: it holds ``.onbrec``
+    files (a service recording), or ``.csv`` files with one header that has a time
+    column (runs of one CSV log) and no other file the readers recognise (a README
+    beside them is fine; a folder of CSV files and tlogs, or of CSV files with different
+    headers, is searched instead, each CSV file a log)."""
+    from onboard.drivers.csvlog import run_files
+
+    if not p.is_dir():
+        return False
+    if any(p.glob("*.onbrec")):
+        return True
+    try:
+        first = run_files(p)[0]
+    except UnreadableLog:   # no .csv, or not one logger's runs
+        return False
+    return not _untimed(first, times) and all(
+        is_log(f, times) for f in p.iterdir() if f.is_file() and f.suffix.lower() != ".csv")
+
+
+def is_log(path: Path, times: frozenset[str] = frozenset()) -> str:
+    """Empty when the readers recognise ``path`` as a log (or its name says it is one,
+    :data:`LOG_SUFFIXES`); else why it is not one (a document, :data:`DOCUMENT_SUFFIXES`,
+    never is; nor is a CSV table without a time column, :data:`TIME_NAMES`, ``times``)."""
+    if path.suffix.lower() in LOG_SUFFIXES:
+        return ""
+    if path.suffix.lower() in DOCUMENT_SUFFIXES:
+        return f"a document ({path.suffix.lower()})"
+    from onboard.drivers.slocum import not_a_log
+
+    glider_file = not_a_log(path)   # a glider's science file or sensor cache
+    if glider_file:
+        return glider_file
+    try:
+        fmt = sniff(path)
+    except UnreadableLog as err:
+        return _reason(err, path)
+    if fmt == "csv":
+        return _untimed(path, times)
+    if fmt != "text":
+        return ""
+    from onboard.drivers.textlog import open_text_log
+
+    try:
+        open_text_log(path)
+    except UnreadableLog as err:
+        return _reason(err, path)
+    return ""
+
+
+def _untimed(path: Path, times: frozenset[str]) -> str:
+    """Why the CSV file ``path`` is a table and not a log: its header names no time
+    (:data:`TIME_NAMES`, ``times``); empty when it names one."""
+    from onboard.drivers.csvlog import csv_header
+
+    header = csv_header(path)
+    for name in header:
+        n = name.lower()
+        if n in TIME_NAMES or n in times or "time" in n or "stamp" in n:
+            return ""
+    shown = ", ".join(header[:6]) + (", ..." if len(header) > 6 else "")
+    return (f"a CSV table with no time column ({shown}); a CSV log's time column is its "
+            "config's [csv] time, give it with --config")
+
+
+def _reason(err: BaseException, path: Path | str) -> str:
+    """The one-line reason of ``err``, without the path it names (its lines joined with
+    ``; ``)."""
+    text = "; ".join(ln.strip() for ln in str(err).strip().splitlines() if ln.strip())
+    prefix = f"{path}: "
+    return text[len(prefix):] if text.startswith(prefix) else text

@@ -66,6 +66,7 @@ from __future__ import annotations
 import calendar
 import itertools
 import math
+import os
 import re
 import statistics
 from pathlib import Path
@@ -572,7 +573,7 @@ class DdboatLogReader:
                        heading_rad=wrap_2pi(0.5 * math.pi - theta), reference="magnetic")
 
 
-def ddboat_gps_times(path: str | Path) -> Iterator[tuple[float, float]]:
+def ddboat_gps_times(path: str | os.PathLike) -> Iterator[tuple[float, float]]:
     """(line stamp, GPS time of day) of each DDBoat GPS line with a fix and a GPS time not
     seen before (the fixes :class:`DdboatLogReader` reads): the stamp POSIX s on the
     boat's clock, the time of day s since midnight UTC (``hhmmss``)."""

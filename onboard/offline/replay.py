@@ -537,11 +537,11 @@ def files_not_read(log: str, fmt: str) -> list[dict]:
     """The files of the folder ``log`` (of format ``fmt``) that its reader leaves out, in
     name order (hidden files and sub-folders aside): each ``file`` (its name), ``why``
     (in words), ``log`` (whether the readers recognise it as a log, as ``onboard batch``
-    judges it: :func:`onboard.offline.batch.is_log`) and ``bytes``; empty for a file log."""
+    judges it: :func:`onboard.drivers.logs.is_log`) and ``bytes``; empty for a file log."""
     p = Path(log)
     if not p.is_dir() or fmt not in FOLDER_READS:
         return []
-    from onboard.offline.batch import is_log
+    from onboard.drivers.logs import is_log
 
     suffix, runs = FOLDER_READS[fmt]
     out = []
