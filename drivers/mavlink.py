@@ -152,13 +152,15 @@ class DecodeContext:
     ``include_gcs`` keeps ground-station heartbeats.
     """
 
-    __slots__ = ("stats", "autopilot", "include_gcs", "_sources")
+    __slots__ = ("stats", "autopilot", "include_gcs", "_sources", "fix_times")
 
     def __init__(self, stats: ReadStats, include_gcs: bool = False) -> None:
         self.stats = stats
         self.autopilot: dict[int, int] = {}
         self.include_gcs = include_gcs
         self._sources: dict[int, str] = {}
+        self.fix_times: dict[str, int] = {}
+        """Per GNSS source, the ``time_usec`` of its newest fix (a resent fix has it)."""
 
     def source(self, sysid: int, compid: int, msgid: int) -> str:
         """The ``Sample.source`` string of a frame (cached)."""
@@ -204,6 +206,12 @@ def _register(name: str, produces: tuple[type[msgspec.Struct], ...]):
 # --------------------------------------------------------------------------- handlers
 
 def _gps(idx: dict[str, int], msgid: int) -> Handler:
+    """GPS_RAW_INT / GPS2_RAW -> GnssFix. ArduPilot sends its newest fix at the rate it
+    is asked for, so a receiver slower than that rate has each fix sent again with the same
+    ``time_usec`` (40 of the 528 of the ArduSub tlog of ../shared/data): a repeat is one
+    fix, not two independent measurements, and is dropped, counted ``repeated_fix``. A
+    ``time_usec`` of 0 (unknown) is never taken as a repeat."""
+    i_time = idx["time_usec"]
     i_lat, i_lon, i_alt = idx["lat"], idx["lon"], idx["alt"]
     i_eph, i_vel, i_cog = idx["eph"], idx["vel"], idx["cog"]
     i_fix, i_sat, i_hacc, i_vacc = idx["fix_type"], idx["satellites_visible"], idx["h_acc"], idx["v_acc"]
@@ -216,9 +224,16 @@ def _gps(idx: dict[str, int], msgid: int) -> Handler:
         if q is None:
             ctx.stats.reject("no_fix")
             return None
+        src = ctx.source(sysid, compid, mid)
+        stamp = v[i_time]
+        if stamp:
+            if ctx.fix_times.get(src) == stamp:
+                ctx.stats.reject("repeated_fix")
+                return None
+            ctx.fix_times[src] = stamp
         eph, vel, cog, sat, hacc, vacc = v[i_eph], v[i_vel], v[i_cog], v[i_sat], v[i_hacc], v[i_vacc]
         return GnssFix(
-            t=t, source=ctx.source(sysid, compid, mid),
+            t=t, source=src,
             lat_deg=v[i_lat] * 1e-7, lon_deg=v[i_lon] * 1e-7,
             alt_m=v[i_alt] * 1e-3 if v[i_fix] >= 3 else None,
             fix_quality=q,

@@ -10,7 +10,12 @@ CRC-checked frame before decoding it. The link
   system but 255 are decoded; after it, only the locked component's. Every other frame (a
   ground station at system 255, a camera or gimbal component, a companion computer's own
   component 191 echoed back by a router) is counted in :attr:`ignored` and its samples
-  are dropped: they are look-alikes, not the vehicle's sensors.
+  are dropped: they are look-alikes, not the vehicle's sensors. The exception are the
+  messages a companion computer's driver sends *to* the autopilot
+  (:data:`COMPANION_INPUT_IDS`: a DVL's VISION_POSITION_DELTA, which BlueOS's Water
+  Linked DVL extension posts through mavlink2rest as system 255, component 0): the
+  autopilot never sends them, so they are taken from whichever sender sends them,
+  stamped on arrival and counted in :attr:`companion`.
 * **maps the autopilot's boot clock to the receiver's clock**: ``time_boot_ms`` (or the
   microseconds since boot of SERVO_OUTPUT_RAW / RAW_IMU / HIGHRES_IMU) plus a filtered
   offset, which stamps the samples with the time they were measured instead of the time
@@ -46,6 +51,9 @@ HEARTBEAT_ID = 0
 COMMAND_ACK_ID = 77
 PARAM_VALUE_ID = 22
 TIMESYNC_ID = 111
+COMPANION_INPUT_IDS = frozenset({_dialect.MAVLINK_MSG_ID_VISION_POSITION_DELTA})
+"""Messages a companion computer's sensor driver sends to the autopilot, taken from any
+sender (the module docstring): the vehicle's own sensors, though not from the autopilot."""
 def _boot_fields() -> dict[int, tuple[int, str, float]]:
     """message id -> (byte offset in the payload, struct code, seconds per unit) of the
     message's time-since-boot field, from pymavlink's wire layout."""
@@ -110,6 +118,9 @@ class AutopilotLink:
     """Frames from the autopilot per message id."""
     ignored: Counter[str] = field(default_factory=Counter)
     """Frames of other systems and components, by ``"<sysid>.<compid>"``."""
+    companion: Counter[str] = field(default_factory=Counter)
+    """Frames of :data:`COMPANION_INPUT_IDS` taken from other senders, by
+    ``"<sysid>.<compid>"``."""
     acks: deque[tuple[int, int]] = field(default_factory=lambda: deque(maxlen=64))
     """(command, result) of the autopilot's COMMAND_ACKs, oldest first (the session
     consumes them)."""
@@ -144,6 +155,9 @@ class AutopilotLink:
             mine = sysid != GCS_SYSTEM_ID and compid == MAV_COMP_ID_AUTOPILOT1
         if not mine:
             if not self.filter_components:
+                return t_rx
+            if msgid in COMPANION_INPUT_IDS:
+                self.companion[f"{sysid}.{compid}"] += 1
                 return t_rx
             self.ignored[f"{sysid}.{compid}"] += 1
             return None

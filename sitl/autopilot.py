@@ -48,7 +48,7 @@ from typing import Sequence
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from onboard.core.messages import Imu, Parameter, Sample, VehicleInfo
-from onboard.sitl.emitters import MavlinkEncoder, Sink
+from onboard.sitl.emitters import DVL_DRIVER_COMPONENT, DVL_DRIVER_SYSTEM, MavlinkEncoder, Sink
 
 REBOOT_S = 2.0
 """How long (s) the autopilot is silent while it reboots."""
@@ -79,8 +79,10 @@ SR_PARAMS = {1: "SR0_RAW_SENS", 2: "SR0_EXT_STAT", 3: "SR0_RC_CHAN", 6: "SR0_POS
 """The stream-rate parameter of each group on port 0."""
 _ID = {cls.msgname: mid for mid, cls in mavlink2.mavlink_map.items()}
 STREAMABLE = {_ID[n] for ms in STREAM_GROUP_MESSAGES.values() for n in ms} | {
-    _ID["SCALED_IMU"], _ID["VISION_POSITION_DELTA"]}
-"""Message ids this autopilot sends when asked (SCALED_IMU by id only)."""
+    _ID["SCALED_IMU"]}
+"""Message ids this autopilot sends when asked (SCALED_IMU by id only). The DVL's
+VISION_POSITION_DELTA is not one: the companion's DVL driver sends it, unasked, at the
+DVL's rate (:data:`sitl.emitters.DVL_DRIVER_SYSTEM`)."""
 HEARTBEAT_ID = _ID["HEARTBEAT"]
 SCALED_IMU_ID = _ID["SCALED_IMU"]
 RAW_IMU_ID = _ID["RAW_IMU"]
@@ -94,6 +96,11 @@ multiples of the sensor periods up to float rounding."""
 def _msgid(frame: bytes) -> int:
     """The message id of a MAVLink 2 frame."""
     return frame[7] | (frame[8] << 8) | (frame[9] << 16)
+
+
+def _from_dvl_driver(frame: bytes) -> bool:
+    """Whether a MAVLink 2 frame is the companion's DVL driver's, not the autopilot's."""
+    return frame[5] == DVL_DRIVER_SYSTEM and frame[6] == DVL_DRIVER_COMPONENT
 
 
 class SimAutopilot:
@@ -236,7 +243,7 @@ class SimAutopilot:
             if isinstance(s, Imu):
                 self.enc.raw_imu = RAW_IMU_ID in self.intervals and SCALED_IMU_ID not in self.intervals
             for f in self.enc.encode([s]):
-                if self._due(t, _msgid(f)):
+                if _from_dvl_driver(f) or self._due(t, _msgid(f)):
                     self._write(t, f)
                     n += 1
         if self._due(t, SYSTEM_TIME_ID):

@@ -98,6 +98,11 @@ GRAVITY_MSS = 9.80665
 """ArduPilot's mg scaling constant (m/s^2 per 1000 mg)."""
 EARTH_FIELD_GAUSS = (0.2, 0.0, 0.4)
 """A mid-latitude magnetic field in NED (gauss), for SCALED_IMU's magnetometer fields."""
+DVL_DRIVER_SYSTEM, DVL_DRIVER_COMPONENT = 255, 0
+"""The MAVLink sender of the DVL's VISION_POSITION_DELTA: BlueOS's Water Linked DVL
+extension posts it through mavlink2rest with this header (bluerobotics/
+BlueOS-Water-Linked-DVL, ``mavlink2resthelper.py``), ``time_usec`` 0; the autopilot only
+receives it."""
 DVL_POSITION_STD_M = 0.1
 """Standard deviation of a dead-reckoned DVL position that gives none (m)."""
 PD6_TEMPERATURE_C = 10.0
@@ -126,6 +131,9 @@ class MavlinkEncoder:
                  dvl_max_altitude_m: float = 50.0, vfr_hud_hz: float = 2.0,
                  epoch_s: float = DEFAULT_EPOCH_S) -> None:
         self.mav = mavlink2.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.dvl_driver = mavlink2.MAVLink(None, srcSystem=DVL_DRIVER_SYSTEM,
+                                           srcComponent=DVL_DRIVER_COMPONENT)
+        """The companion's DVL driver, the sender of VISION_POSITION_DELTA."""
         self.mav_type = mav_type
         self.custom_mode = custom_mode
         self._geo = GeoOrigin(*origin)
@@ -152,9 +160,11 @@ class MavlinkEncoder:
         self.raw_imu = False
         """Send Imu samples as RAW_IMU (ArduPilot's RAW_SENSORS stream) instead of SCALED_IMU."""
 
-    def _pack(self, msg) -> bytes:
-        buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
+    def _pack(self, msg, sender=None) -> bytes:
+        """``msg`` packed by ``sender`` (a MAVLink instance; default the autopilot's)."""
+        mav = self.mav if sender is None else sender
+        buf = msg.pack(mav)
+        mav.seq = (mav.seq + 1) % 256
         self.frames += 1
         return buf
 
@@ -290,8 +300,8 @@ class MavlinkEncoder:
             conf = 100.0 if s.fom_mps is None else max(1.0, min(100.0, 100.0 - 1000.0 * s.fom_mps))
         else:
             pos, conf = [0.0, 0.0, 0.0], 0.0
-        out = [self._pack(self.mav.vision_position_delta_encode(
-            int(round((self.epoch_s + t) * 1e6)), dt_us, ang, pos, conf))]
+        out = [self._pack(self.dvl_driver.vision_position_delta_encode(
+            0, dt_us, ang, pos, conf), self.dvl_driver)]
         if s.valid and s.altitude_m is not None:
             out.append(self._pack(self.mav.distance_sensor_encode(
                 ms, 5, self.dvl_max_cm, _u16(s.altitude_m * 100.0),

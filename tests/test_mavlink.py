@@ -327,3 +327,18 @@ def test_types_filter():
     assert [type(s) for s in out] == [Imu]
     out, _ = parse(*frames, types=[Attitude, VehicleInfo])
     assert [type(s) for s in out] == [VehicleInfo, Attitude]
+
+
+def test_a_fix_sent_again_with_its_time_is_one_fix():
+    """ArduPilot sends its newest fix at the rate asked; a slower receiver's fix goes out
+    again with the same time_usec, which is one measurement, not two. A time_usec of 0
+    (unknown) is never a repeat."""
+    m = link()
+
+    def fix(time_usec: int, lat: int = 480000000) -> bytes:
+        return m.gps_raw_int_encode(time_usec, 3, lat, -40000000, 10000, 120, 65535, 150,
+                                    9000, 9).pack(m)
+
+    out, p = parse(fix(1_000_000) + fix(1_000_000) + fix(1_200_000) + fix(0) + fix(0))
+    assert [type(s).__name__ for s in out] == ["GnssFix"] * 4
+    assert p.stats.rejected == {"repeated_fix": 1}

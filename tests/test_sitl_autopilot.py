@@ -161,6 +161,31 @@ def test_the_link_ignores_other_components_and_maps_the_boot_clock():
     assert max(errs) < 1e-3, max(errs)  # measured 0.0 (ms rounding of time_boot_ms)
 
 
+def test_the_dvl_drivers_frames_are_taken_from_the_companion_not_the_autopilot():
+    """BlueOS's Water Linked DVL extension posts VISION_POSITION_DELTA through mavlink2rest
+    as system 255, component 0; the autopilot only receives it. The simulator sends it so,
+    unasked, and the link locked on the autopilot takes it (with the ground station's and
+    the camera's look-alikes still ignored): before, the simulator sent it as the
+    autopilot, and a live service would have dropped every DVL frame of a real vehicle."""
+    sim = Simulation("bluerov2-circle", 1)
+    sink = LoopSink()
+    ap = autopilot_for(sim, [sink], stream_unasked=False, others=True)
+    for t, samples, _ in sim.steps(10.0):
+        ap.emit(t, samples)
+    senders = Counter((f[5], f[6]) for _, f in sink.out
+                      if (f[7] | (f[8] << 8) | (f[9] << 16))
+                      == mavlink2.MAVLINK_MSG_ID_VISION_POSITION_DELTA)
+    assert set(senders) == {(255, 0)} and senders[(255, 0)] >= 45   # 5 Hz, unasked
+    link = AutopilotLink()
+    parser = MavlinkParser(link=link)
+    out = []
+    for t, f in sink.out:
+        out += parser.feed(f, t + 0.03)
+    dvl = [s for s in out if type(s).__name__ == "DvlVelocity"]
+    assert len(dvl) >= 0.9 * senders[(255, 0)] and link.companion["255.0"] == senders[(255, 0)]
+    assert link.ignored["255.190"] > 0 and "255.0" not in link.ignored
+
+
 def test_boot_clock_reboot_and_jump():
     c = SenderClock()
     for k in range(100):

@@ -197,7 +197,9 @@ def test_real_tlog_counts_and_rejections(small_samples):
     kinds = Counter(type(s).__name__ for s in out)
     assert kinds["Attitude"] == 5245
     assert kinds["ActuatorOutputs"] == 528
-    assert kinds["GnssFix"] == 528 - stats.rejected["no_fix"]
+    # a fix ArduSub sent again (the same time_usec) is one fix: 2 here
+    assert stats.rejected["repeated_fix"] == 2
+    assert kinds["GnssFix"] == 528 - stats.rejected["no_fix"] - stats.rejected["repeated_fix"]
     assert kinds["Imu"] == 528 - stats.rejected["unknown_scaling"]  # RAW_IMU; SCALED_IMU2 empty
     assert stats.rejected["empty"] == 528  # ArduSub's SCALED_IMU2 is all zeros
     assert stats.by_type["VFR_HUD"] == 3060 and stats.by_type["HEARTBEAT"] == 1056
