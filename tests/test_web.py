@@ -122,6 +122,25 @@ def test_the_shore_view_decodes_zenoh_json_by_key_and_takes_the_origin_from_a_lo
     assert s["origin"]["lon_deg"] == pytest.approx(5.0 + 50.0 / 81540.0, abs=2e-6)
 
 
+def test_a_record_naming_another_vehicle_than_its_key_is_left_out():
+    """A router's access control vouches for the key, not for the payload: the page and
+    the shore's table take a record only on its own vehicle's key (as onboard fleet)."""
+    from onboard.apps.shore import ShoreView
+
+    enc = msgspec.json.encode
+    view, table = LiveView(), ShoreView()
+    for feed in (view.feed_zenoh, table.feed):
+        feed("onboard/boat9/est/nav", enc(rec("nav", 1.0, vehicle="boat1", north=1.0, east=2.0)))
+        feed("onboard/boat9/health", enc(HealthRecord(vehicle="boat1", t=1.0)))
+    assert view.vehicles == {} and view.vehicle_mismatch == 2
+    assert table.vehicles() == [] and table.vehicle_mismatch == 2
+    for feed in (view.feed_zenoh, table.feed):
+        feed("onboard/boat9/est/nav", enc(rec("nav", 2.0, vehicle="boat9", north=1.0, east=2.0)))
+        feed("onboard/boat9/health", enc(HealthRecord(vehicle="boat9", t=2.0)))
+    assert view.state()["vehicle"] == "boat9" and view.state()["health"] is not None
+    assert table.vehicles() == ["boat9"] and table.health["boat9"].t == 2.0
+
+
 def test_blueos_metadata_has_every_field_the_helper_reads_and_points_at_the_cockpit_widget():
     meta = register_service()
     for key in ("name", "description", "icon", "company", "version", "webpage", "api"):

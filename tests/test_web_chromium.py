@@ -17,9 +17,12 @@ import struct
 import zlib
 from pathlib import Path
 
+import msgspec
 import pytest
 
+from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.service.web.app import routes
+from onboard.service.web.view import LiveView
 from onboard.service.web.config_edit import ConfigEditor
 from onboard.service.web.http import HttpServer
 from tests.helpers.web import (CHROMIUM_INSTALL, ServerThread, chromium, dump_dom, replay_view,
@@ -183,3 +186,34 @@ def test_online_the_track_is_drawn_over_the_map_tiles_of_its_place(view, tmp_pat
     xs = {x for zz, x, _ in tiles.requested if zz == z}
     ys = {y for zz, _, y in tiles.requested if zz == z}
     assert x0 in xs and y0 in ys  # the first fix's tile is among those drawn
+
+
+def injection(where: str) -> str:
+    """Markup that, put into the page as HTML, runs a script naming ``where`` in the
+    page's title (its image's source is missing: the error handler runs)."""
+    return f"x<img src=x onerror=\"document.title='XSS {where}'\">"
+
+
+def test_vehicle_ids_flags_and_events_from_zenoh_are_shown_as_text_never_run(tmp_path):
+    """Any Zenoh publisher the shore hears writes the vehicle id, the flags and the
+    events the page shows: they are text, and the markup in them does not run."""
+    vid = injection("vehicle")
+    view = LiveView()
+    enc = msgspec.json.encode
+    for t in (1.0, 2.0):
+        view.feed_zenoh(f"onboard/{vid}/est/nav", enc(EstimateRecord(
+            vehicle=vid, pipeline="nav", t=t, values={"north": t, "east": 0.0, "speed": 1.0})))
+    view.feed_zenoh(f"onboard/{vid}/health", enc(HealthRecord(
+        vehicle=vid, t=2.0, flags={"aie": [injection("flag")]}, events=[injection("event")])))
+    with ServerThread(view=view) as srv:
+        dom = dump_dom(srv.url + "/", tmp_path / "profile")
+        widget = dump_dom(srv.url + "/?widget=1&vehicle=" + injection("query").replace(" ", "%20"),
+                          tmp_path / "profile2")
+    title = re.search(r"<title>.*?</title>", dom).group(0)
+    assert title == "<title>onboard</title>", title
+    assert "<img" not in dom
+    status = re.search(r'id="status"[^>]*>(.*?)</div>', dom).group(1)
+    name = "<b>x&lt;img src=x onerror=\"document.title='XSS vehicle'\"&gt;</b>"
+    assert status.startswith(name), status
+    assert "aie: x&lt;img" in dom and "<li>x&lt;img" in dom
+    assert "<title>onboard</title>" in widget and "<img" not in widget

@@ -81,6 +81,8 @@ class ShoreView:
         self.keep_history = keep_history
         self.received: Counter[str] = Counter()
         self.bad = 0
+        self.vehicle_mismatch = 0
+        """Records left out because they name another vehicle than their key's."""
         self.events: deque[tuple[str, str]] = deque(maxlen=20)
         self.lock = threading.Lock()
         self._dec_est = msgspec.json.Decoder(EstimateRecord)
@@ -89,7 +91,9 @@ class ShoreView:
     def feed(self, key: str, payload: bytes, encoding: str = "") -> None:
         """One Zenoh sample or query reply on ``key``; a schema name in its ``encoding``
         (``application/json;<schema>``) other than the one this version reads for the
-        key (another schema version) is counted in ``bad`` and skipped."""
+        key (another schema version) is counted in ``bad`` and skipped, a record naming
+        another vehicle than its key's in ``vehicle_mismatch`` (a router's access control
+        vouches for the key, not for the payload: docs/security.md)."""
         parts = key.split("/")
         schema = encoding.partition(";")[2]
         if schema and len(parts) >= 3 and schema not in EXPECTED.get(parts[2], (schema,)):
@@ -99,6 +103,9 @@ class ShoreView:
             if len(parts) >= 4 and parts[2] == "est":
                 rec = self._dec_est.decode(payload)
                 with self.lock:
+                    if rec.vehicle != parts[1]:
+                        self.vehicle_mismatch += 1
+                        return
                     self.estimates[(rec.vehicle, rec.pipeline)] = rec
                     if self.keep_history:
                         self.history.append(rec)
@@ -107,6 +114,9 @@ class ShoreView:
             elif len(parts) >= 3 and parts[2] == "health":
                 h = self._dec_health.decode(payload)
                 with self.lock:
+                    if h.vehicle != parts[1]:
+                        self.vehicle_mismatch += 1
+                        return
                     self.health[h.vehicle] = h
                     self.received["health"] += 1
                     for e in h.events:

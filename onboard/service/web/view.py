@@ -100,6 +100,8 @@ class LiveView:
         self.vehicles: dict[str, _Vehicle] = {}
         self.bad = 0
         """Zenoh payloads that could not be decoded (another schema, a foreign publisher)."""
+        self.vehicle_mismatch = 0
+        """Zenoh records left out because they name another vehicle than their key's."""
         self._dec_est = msgspec.json.Decoder(EstimateRecord)
         self._dec_health = msgspec.json.Decoder(HealthRecord)
         self.grid: dict | None = None
@@ -126,7 +128,10 @@ class LiveView:
     def feed_zenoh(self, key: str, payload: bytes) -> None:
         """One Zenoh sample on ``<prefix>/<vehicle>/...``: ``est/<pipeline>`` is an
         EstimateRecord, ``health`` a HealthRecord; any other JSON object of the vehicle
-        with ``latitude`` and ``longitude`` (a LocationFix) places the track on the map."""
+        with ``latitude`` and ``longitude`` (a LocationFix) places the track on the map.
+        A record that names another vehicle than its key's is left out (counted in
+        :attr:`vehicle_mismatch`): a router's access control vouches for the key, not
+        for the payload (docs/security.md), as ``onboard fleet`` takes them."""
         if key.endswith(FLEET_GRID_SUFFIX):
             try:
                 self.feed_grid(msgspec.json.decode(payload))
@@ -138,13 +143,25 @@ class LiveView:
             return
         try:
             if parts[2] == "est" and len(parts) == 4:
-                self.feed_estimates([self._dec_est.decode(payload)])
+                rec = self._dec_est.decode(payload)
+                if self._named(rec.vehicle, parts[1]):
+                    self.feed_estimates([rec])
             elif parts[2] == "health" and len(parts) == 3:
-                self.feed_health(self._dec_health.decode(payload))
+                h = self._dec_health.decode(payload)
+                if self._named(h.vehicle, parts[1]):
+                    self.feed_health(h)
             else:
                 self._location(parts[1], msgspec.json.decode(payload))
         except (msgspec.DecodeError, msgspec.ValidationError):
             self.bad += 1
+
+    def _named(self, vehicle: str, key_vehicle: str) -> bool:
+        """Whether a record naming ``vehicle`` came on its own key; counted when not."""
+        if vehicle == key_vehicle:
+            return True
+        with self.lock:
+            self.vehicle_mismatch += 1
+        return False
 
     def feed_grid(self, grid: Any) -> None:
         """One fleet grid (the decoded JSON): kept when it is newer than the one held (a

@@ -42,6 +42,14 @@ let tilesLoaded = 0;
 let fleet = {grid: null, vehicles: [], tracks: {}, origin: null};  // origin: the first grid's centre
 
 const $ = (id) => document.getElementById(id);
+// What the page shows of the records (vehicle ids, flags, events: whatever a Zenoh
+// publisher put there) goes in as text, never as HTML.
+function element(tag, cls, text) {
+  const el = document.createElement(tag);
+  if (cls) el.className = cls;
+  el.textContent = text;
+  return el;
+}
 const fmt = (x, d) => (x === null || x === undefined) ? '?' : x.toFixed(d);
 const pm = (v, s, d, unit) => `${fmt(v, d)}${s === null || s === undefined ? '' : ' ± ' + fmt(s, d)} ${unit}`;
 
@@ -110,7 +118,9 @@ const placed = (b) => Number.isFinite(b.lat) && Number.isFinite(b.lon);
 function panel(s) {
   if (s.t === null) { $('status').textContent = `waiting for ${s.vehicle || 'a vehicle'} ...`; return; }
   const age = s.age_s === null ? '' : (s.age_s > 3 ? ` · stale ${s.age_s.toFixed(0)} s` : ' · live');
-  $('status').innerHTML = `<b>${s.vehicle}</b> · t ${s.t.toFixed(1)} s${age}`;
+  const name = document.createElement('b');
+  name.textContent = s.vehicle;
+  $('status').replaceChildren(name, ` · t ${s.t.toFixed(1)} s${age}`);
   $('speed').textContent = s.speed ? pm(s.speed.value, s.speed.std, 2, 'm/s') : '-';
   $('heading').textContent = s.heading ? pm(s.heading.value, s.heading.std, 1, '°') : '-';
   const c = s.current;
@@ -124,12 +134,12 @@ function panel(s) {
   }
   const h = s.health;
   const flags = h ? Object.entries(h.flags) : [];
-  $('flags').innerHTML = !h ? '-' : flags.length === 0 ? '<span class="ok">no integrity flag</span>'
-    : flags.map(([p, f]) => `<div class="warn">${p}: ${f.join(', ')}</div>`).join('');
+  $('flags').replaceChildren(...(!h ? ['-'] : flags.length === 0 ? [element('span', 'ok', 'no integrity flag')]
+    : flags.map(([p, f]) => element('div', 'warn', `${p}: ${f.join(', ')}`))));
   if (h) {
     const nis = Object.entries(h.nis).map(([k, [v, dof]]) => `${k} ${v.toFixed(2)}/${dof}`).join(' · ');
     $('health').textContent = `mode ${h.mode || '-'} · rejected ${h.rejected} · dropped ${h.dropped}` + (nis ? ` · NIS ${nis}` : '');
-    $('events').innerHTML = h.events.slice(-8).map((e) => `<li>${e.replace(/</g, '&lt;')}</li>`).join('');
+    $('events').replaceChildren(...h.events.slice(-8).map((e) => element('li', '', e)));
   }
 }
 
