@@ -70,3 +70,27 @@ def test_records_reach_foxglove_channels_named_as_their_keys_with_their_schemas(
         "onboard/boat1/health": (f"onboard.Health.v{HEALTH_SCHEMA_VERSION}", "jsonschema", "json")}
     assert "values" in seen["onboard/boat1/est/kf"][3]["properties"]
     assert relay.skipped == 0
+
+
+@pytest.mark.integration
+def test_a_busy_foxglove_port_is_one_line_and_exit_2_as_a_busy_web_port():
+    import socket
+    import subprocess
+    import sys
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_router(endpoint)
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    port = busy.getsockname()[1]
+    try:
+        run = subprocess.run([sys.executable, "-m", "onboard", "shore", "--connect", endpoint,
+                              "--foxglove", f"127.0.0.1:{port}"],
+                             capture_output=True, text=True, timeout=60)
+    finally:
+        busy.close()
+        router.close()
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.strip().splitlines() == [
+        f"onboard shore: --foxglove 127.0.0.1:{port}: Address already in use"], run.stderr

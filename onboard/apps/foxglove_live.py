@@ -13,6 +13,7 @@ Zenoh key, JSON messages with that schema name and its JSON schema, through the
 from __future__ import annotations
 
 import json
+import re
 import threading
 from typing import Any
 
@@ -74,12 +75,25 @@ class FoxgloveRelay:
         self.relayed += 1
 
 
+def start_server(fg: Any, host: str, port: int, listen: str) -> Any:
+    """The SDK's WebSocket server on ``host:port``; a port that cannot be bound (in use,
+    an unknown host) is a UsageError naming ``--foxglove`` and why, as ``--web``'s."""
+    try:
+        return fg.start_server(name="onboard", host=host, port=port)
+    except RuntimeError as err:  # the SDK's FoxgloveError
+        text = str(err)
+        if "bind" not in text:
+            raise
+        why = re.sub(r"\s*\(os error \d+\)$", "", text.rpartition("port: ")[2] or text)
+        raise UsageError(f"--foxglove {listen}: {why}") from None
+
+
 def start(session: Any, vehicle: str, listen: str) -> tuple[Any, Any, FoxgloveRelay]:
     """Start the WebSocket server on ``listen`` and relay ``onboard/<vehicle>/**`` from
     ``session``; returns (server, subscriber, relay) for the caller to stop."""
     fg = foxglove_module()
     host, port = parse_listen(listen)
     relay = FoxgloveRelay()
-    server = fg.start_server(name="onboard", host=host, port=port)
+    server = start_server(fg, host, port, listen)
     sub = session.declare_subscriber(f"onboard/{vehicle}/**", relay.on_sample)
     return server, sub, relay
