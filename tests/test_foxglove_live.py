@@ -5,6 +5,7 @@ WebSocket client would be sent)."""
 from __future__ import annotations
 
 import json
+import threading
 import time
 
 import pytest
@@ -94,3 +95,35 @@ def test_a_busy_foxglove_port_is_one_line_and_exit_2_as_a_busy_web_port():
     assert run.returncode == 2, run.stderr
     assert run.stderr.strip().splitlines() == [
         f"onboard shore: --foxglove 127.0.0.1:{port}: Address already in use"], run.stderr
+
+
+@pytest.mark.integration
+def test_with_web_and_foxglove_the_page_and_the_foxglove_server_both_run():
+    import socket
+    import subprocess
+    import sys
+    import urllib.request
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_router(endpoint)
+    web, fox = free_tcp_port(), free_tcp_port()
+    shore = subprocess.Popen([sys.executable, "-m", "onboard", "shore", "--connect", endpoint,
+                              "--web", f"127.0.0.1:{web}", "--foxglove", f"127.0.0.1:{fox}"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(shore.stdout), daemon=True)
+    reader.start()
+    try:
+        deadline = time.monotonic() + 30
+        while len(lines) < 2 and shore.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert any(f"ws://127.0.0.1:{fox}" in line for line in lines), lines
+        assert any("the page is on" in line for line in lines), lines
+        with urllib.request.urlopen(f"http://127.0.0.1:{web}/api/state", timeout=10) as r:
+            assert r.status == 200
+        with socket.create_connection(("127.0.0.1", fox), timeout=10):
+            pass
+    finally:
+        shore.terminate()
+        shore.wait(10)
+        router.close()

@@ -16,7 +16,8 @@ recent events. With ``--web HOST:PORT`` it serves the service's web page instead
 the same subscription (:func:`serve_web`), with the fleet service's current field
 (``onboard/fleet/current/grid``) as its fleet layer.
 ``--foxglove [HOST:]PORT`` also serves the records to Foxglove on a
-WebSocket server (:mod:`onboard.apps.foxglove_live`, docs/foxglove.md).
+WebSocket server (:mod:`onboard.apps.foxglove_live`, docs/foxglove.md), beside the table
+or the page.
 
 :class:`ShoreView` (the subscriber and the formatting) is reused by ``onboard demo``.
 """
@@ -252,6 +253,11 @@ def main(args: argparse.Namespace) -> int:
     vehicle = args.vehicle or "*"
     if "/" in vehicle:
         raise UsageError(f"--vehicle {vehicle!r}: a vehicle id has no '/'")
+    if getattr(args, "foxglove", None):
+        from onboard.apps.foxglove_live import foxglove_module, parse_listen
+
+        parse_listen(args.foxglove)
+        foxglove_module()
     session = open_session(args.connect, args.listen, args.mode,
                            getattr(args, "zenoh_config", "") or "")
     view = ShoreView()
@@ -259,12 +265,19 @@ def main(args: argparse.Namespace) -> int:
     token_sub = None
     extra: tuple[Any, ...] = ()
     try:
-        if getattr(args, "web", ""):
-            return serve_web(session, vehicle, args.web)
         if args.once:
             snapshot(session, view, vehicle)
             print(view.table(vehicle))
             return 0 if view.vehicles() else 1
+        if getattr(args, "foxglove", None):
+            from onboard.apps.foxglove_live import parse_listen, start
+
+            server, relay_sub, _ = start(session, vehicle, args.foxglove)
+            extra = (relay_sub, server)
+            host, port = parse_listen(args.foxglove)
+            print(f"Foxglove: open connection ws://{host}:{port}", flush=True)
+        if getattr(args, "web", ""):
+            return serve_web(session, vehicle, args.web)
 
         def on_token(sample: Any) -> None:
             v = str(sample.key_expr).split("/")[1]
@@ -277,13 +290,6 @@ def main(args: argparse.Namespace) -> int:
 
         token_sub = session.liveliness().declare_subscriber(f"onboard/{vehicle}/alive", on_token)
         sub = session.declare_subscriber(f"onboard/{vehicle}/**", view.on_sample)
-        if getattr(args, "foxglove", None):
-            from onboard.apps.foxglove_live import parse_listen, start
-
-            server, relay_sub, _ = start(session, vehicle, args.foxglove)
-            extra = (relay_sub, server)
-            host, port = parse_listen(args.foxglove)
-            print(f"Foxglove: open connection ws://{host}:{port}", flush=True)
         snapshot(session, view, vehicle)
         tty = sys.stdout.isatty()
         while True:
