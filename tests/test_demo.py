@@ -260,3 +260,16 @@ def test_an_unknown_current_is_blamed_on_too_few_turns_only_where_there_were_few
     assert "did not turn enough" in straight and "run longer" in straight
     circle = current_story(hist, [truth(0.1 * k) for k in range(100)], 0.3)[1]
     assert "turned through 354°" in circle and "did not turn enough" not in circle
+
+
+def test_headings_are_rounded_then_wrapped_never_360():
+    from onboard.apps.demo import live_line
+    from onboard.apps.shore import ShoreView, fmt_bearing, fmt_value
+
+    assert fmt_bearing(359.97, 1) == "0.0" and fmt_bearing(359.6, 0) == "0"
+    assert fmt_bearing(-0.2, 0) == "0" and fmt_bearing(359.4, 0) == "359"
+    view = ShoreView()
+    view.estimates[("v", "aie")] = EstimateRecord(vehicle="v", pipeline="aie", t=1.0,
+                                                  values={"speed": 1.0, "heading": -0.001})
+    assert "aie 1.00 m/s 0°" in live_line(view, "v", 150.0)
+    assert fmt_value("heading", math.radians(359.99)) == "heading=0.0°"

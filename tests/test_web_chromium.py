@@ -217,3 +217,20 @@ def test_vehicle_ids_flags_and_events_from_zenoh_are_shown_as_text_never_run(tmp
     assert status.startswith(name), status
     assert "aie: x&lt;img" in dom and "<li>x&lt;img" in dom
     assert "<title>onboard</title>" in widget and "<img" not in widget
+
+
+def test_a_heading_and_a_current_bearing_just_below_360_are_shown_as_0(tmp_path):
+    view = LiveView()
+    view.feed_estimates([
+        EstimateRecord(vehicle="boat", pipeline="aie", t=1.0,
+                       values={"north": 0.0, "east": 0.0, "speed": 1.0,
+                               "heading": math.radians(359.97)},
+                       std={"speed": 0.05, "heading": math.radians(0.2)}),
+        EstimateRecord(vehicle="boat", pipeline="current", t=1.0,
+                       values={"north": 0.3, "east": -0.002},
+                       std={"north": 0.02, "east": 0.02})])
+    with ServerThread(view=view) as srv:
+        dom = dump_dom(srv.url + "/", tmp_path / "profile")
+    heading = re.search(r'id="heading"[^>]*>([^<]*)<', dom).group(1)
+    current = re.search(r'id="current"[^>]*>([^<]*)<', dom).group(1)
+    assert heading == "0.0 ± 0.2 °" and current == "0.30 m/s → 0°", (heading, current)

@@ -71,6 +71,7 @@ import msgspec
 from onboard.apps.demo_truth import (CURRENT_KNOWN_STD, CURRENT_SETTLE_S, LEGEND, ScoreRow,
                                      current_known, current_story, format_scores, notes,
                                      score)
+from onboard.apps.shore import fmt_bearing
 from onboard.core.config import Config, SourceConfig, load
 from onboard.core.errors import UsageError
 from onboard.core.outputs import Output, check as check_outputs
@@ -358,7 +359,7 @@ def _live_speed_heading(rec: EstimateRecord) -> str:
     v = rec.values
     parts = [f"{v['speed']:.2f} m/s"] if "speed" in v else []
     if "heading" in v:
-        parts.append(f"{math.degrees(v['heading']) % 360.0:.0f}°")
+        parts.append(f"{fmt_bearing(math.degrees(v['heading']), 0)}°")
     return f"{rec.pipeline} " + " ".join(parts) if parts else ""
 
 

@@ -52,12 +52,18 @@ ANGLE_RATES = {"yaw_rate", "rate_p", "rate_q", "rate_r"}
 """Quantities shown in degrees per second."""
 
 
+def fmt_bearing(deg: float, decimals: int) -> str:
+    """A heading or bearing in degrees, rounded to ``decimals`` and then wrapped into
+    [0, 360): 359.97 shown with one decimal is 0.0, never 360.0."""
+    return f"{round(deg % 360.0, decimals) % 360.0:.{decimals}f}"
+
+
 def fmt_value(name: str, v: float) -> str:
     """A compact human form of one quantity (degrees for angles)."""
     if not math.isfinite(v):
         return f"{name}=nan"
     if name in ANGLES:
-        return f"{name}={math.degrees(v) % 360.0:.1f}°"
+        return f"{name}={fmt_bearing(math.degrees(v), 1)}°"
     if name in ANGLE_RATES:
         return f"{name}={math.degrees(v):+.1f}°/s"
     return f"{name}={v:+.3g}" if abs(v) < 1000 else f"{name}={v:+.0f}"

@@ -51,6 +51,8 @@ function element(tag, cls, text) {
   return el;
 }
 const fmt = (x, d) => (x === null || x === undefined) ? '?' : x.toFixed(d);
+// A heading or bearing (degrees) rounded to d decimals, then wrapped: 359.97 is 0.0, not 360.0.
+const bearing = (x, d) => (x === null || x === undefined) ? x : (Number(x.toFixed(d)) % 360 + 360) % 360;
 const pm = (v, s, d, unit) => `${fmt(v, d)}${s === null || s === undefined ? '' : ' ± ' + fmt(s, d)} ${unit}`;
 
 if (WIDGET) document.body.classList.add('widget');
@@ -122,11 +124,11 @@ function panel(s) {
   name.textContent = s.vehicle;
   $('status').replaceChildren(name, ` · t ${s.t.toFixed(1)} s${age}`);
   $('speed').textContent = s.speed ? pm(s.speed.value, s.speed.std, 2, 'm/s') : '-';
-  $('heading').textContent = s.heading ? pm(s.heading.value, s.heading.std, 1, '°') : '-';
+  $('heading').textContent = s.heading ? pm(bearing(s.heading.value, 1), s.heading.std, 1, '°') : '-';
   const c = s.current;
   if (!c) { $('current').textContent = '-'; $('current-sub').textContent = ''; }
   else if (c.known) {
-    $('current').textContent = `${fmt(c.speed_mps, 2)} m/s → ${fmt(c.towards_deg, 0)}°`;
+    $('current').textContent = `${fmt(c.speed_mps, 2)} m/s → ${fmt(bearing(c.towards_deg, 0), 0)}°`;
     $('current-sub').textContent = `N ${pm(c.north_mps, c.std_north_mps, 2, '')} · E ${pm(c.east_mps, c.std_east_mps, 2, 'm/s')}`;
   } else {
     $('current').textContent = 'unknown';
