@@ -102,3 +102,14 @@ def test_fleet_demo_runs_every_vehicle_on_its_own_service(tmp_path):
     for vid, r in res.items():
         assert r["estimates"] and all(e.vehicle == vid for e in r["estimates"])
         assert r["truth"]
+
+
+def test_an_unknown_fleet_is_refused_before_anything_is_printed_or_started(tmp_path):
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-m", "onboard", "demo", "--fleet", "nosuch"],
+                         capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert run.returncode == 2 and run.stdout == "", (run.stdout, run.stderr)
+    assert run.stderr.startswith("onboard demo: unknown fleet 'nosuch'; fleets: ")
+    assert len(run.stderr.strip().splitlines()) == 1 and not (tmp_path / "demo-out").exists()

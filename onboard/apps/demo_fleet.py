@@ -430,6 +430,9 @@ def main(args: argparse.Namespace) -> int:
     duration = FLEET_DURATION_S if args.duration is None else float(args.duration)
     if not (duration > 0 and math.isfinite(duration)):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
+    from onboard.sitl.fleet import get_fleet
+
+    get_fleet(args.fleet)   # an unknown name: one line, exit 2, before anything starts
     check_outputs([Output("the demo's folder", demo.OUT_DIR, "dir")])
     out_dir = demo.OUT_DIR / "fleet"
     page = f"127.0.0.1:{_free_port(socket.SOCK_STREAM)}"
