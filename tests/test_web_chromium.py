@@ -234,3 +234,13 @@ def test_a_heading_and_a_current_bearing_just_below_360_are_shown_as_0(tmp_path)
     heading = re.search(r'id="heading"[^>]*>([^<]*)<', dom).group(1)
     current = re.search(r'id="current"[^>]*>([^<]*)<', dom).group(1)
     assert heading == "0.0 ± 0.2 °" and current == "0.30 m/s → 0°", (heading, current)
+
+
+def test_a_single_vehicle_page_without_a_fleet_service_shows_no_fleet_box(view, tmp_path):
+    """The page's first api/fleet poll leaves before it knows its vehicle: that vehicle is
+    not 'one vehicle more', and the box stays hidden while there is nothing to tell."""
+    assert view.fleet()["vehicles"] == []
+    with ServerThread(view=view) as srv:
+        dom = dump_dom(srv.url + "/", tmp_path / "profile")
+    box = re.search(r'<div id="fleet-box"[^>]*>', dom).group(0)
+    assert "hidden" in box, re.search(r'id="fleet-box".*?</div></div>', dom, re.S).group(0)

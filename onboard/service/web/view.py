@@ -276,8 +276,10 @@ class LiveView:
         vehicle time) and ``tracks`` (vehicle -> [[time, lat, lon], ...]: from the grids,
         else one point per :data:`FLEET_TRACK_PERIOD_S` of the vehicle's own track). The
         vehicle ``shown`` (the page's own layer draws it) is left out of those this view
-        follows, so the service's page, whose only vehicle is its own, costs nothing here."""
+        follows, so the service's page, whose only vehicle is its own, costs nothing here;
+        without ``shown``, the vehicle :meth:`state` shows by default is left out."""
         with self.lock:
+            shown = shown or self.default_vehicle or min(self.vehicles, default="")
             grid = self.grid if self.grid is not None and self.grid["utc"] > since else None
             tracks = {vid: [list(p) for p in tr] for vid, tr in self.fleet_tracks.items()}
             vehicles = [dict(v) for v in (self.grid or {}).get("vehicles") or []

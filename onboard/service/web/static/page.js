@@ -80,7 +80,7 @@ async function poll() {
 async function pollFleet() {
   try {
     const since = fleet.grid ? fleet.grid.utc : -1e300;
-    const q = new URLSearchParams({since: String(since), vehicle: (state && state.vehicle) || ''});
+    const q = new URLSearchParams({since: String(since), vehicle: (state && state.vehicle) || params.get('vehicle') || ''});
     const r = await fetch('api/fleet?' + q, {cache: 'no-store'});
     if (r.ok) {
       const f = await r.json();
@@ -89,7 +89,8 @@ async function pollFleet() {
       fleet.vehicles = f.vehicles;
       if (!fleet.origin && fleet.grid && fleet.grid.cells.length) fleet.origin = centre(fleet.grid.cells);
       if (!fleet.origin && fleet.vehicles.some(placed)) fleet.origin = centre(fleet.vehicles.filter(placed));
-      if (fleet.grid || fleet.vehicles.length) { fleetPanel(); draw(); }
+      fleetPanel();
+      draw();
     }
   } catch (err) { /* an older service without api/fleet: no fleet layer */ }
   setTimeout(pollFleet, FLEET_POLL_MS);
@@ -102,8 +103,10 @@ function centre(cells) {
 }
 
 function fleetPanel() {
+  // Hidden while there is neither a grid nor another vehicle to tell of.
   const g = fleet.grid;
-  $('fleet-box').hidden = false;
+  $('fleet-box').hidden = !g && !fleet.vehicles.length;
+  if (!g && !fleet.vehicles.length) return;
   const n = fleet.vehicles.length, lost = fleet.vehicles.filter((b) => !placed(b)).map((b) => b.vehicle);
   const vehicles = `${n} vehicle${n === 1 ? '' : 's'}` + (lost.length ? ` (${lost.join(', ')} without a position)` : '');
   if (!g) { $('fleet').textContent = `${vehicles} more · no fleet field`; return; }
