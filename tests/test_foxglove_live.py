@@ -127,3 +127,34 @@ def test_with_web_and_foxglove_the_page_and_the_foxglove_server_both_run():
         shore.terminate()
         shore.wait(10)
         router.close()
+
+
+def websocket_handshake(port: int, protocols: str | None) -> str:
+    """The status line a WebSocket upgrade offering ``protocols`` gets on ``port``."""
+    import base64
+    import os
+    import socket
+
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        head = (f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+                "Connection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
+                f"Sec-WebSocket-Key: {base64.b64encode(os.urandom(16)).decode()}\r\n"
+                + (f"Sec-WebSocket-Protocol: {protocols}\r\n" if protocols else "") + "\r\n")
+        s.sendall(head.encode())
+        return s.recv(4096).decode("latin-1").split("\r\n")[0]
+
+
+@pytest.mark.integration
+def test_the_server_speaks_foxglove_sdk_v1_as_docs_foxglove_md_says():
+    import foxglove
+
+    from onboard.apps.foxglove_live import start_server
+
+    port = free_tcp_port()
+    server = start_server(foxglove, "127.0.0.1", port, str(port))
+    try:
+        assert " 101 " in websocket_handshake(port, "foxglove.sdk.v1")
+        assert " 101 " in websocket_handshake(port, "foxglove.websocket.v1, foxglove.sdk.v1")
+        assert " 400 " in websocket_handshake(port, "foxglove.websocket.v1")
+    finally:
+        server.stop()
