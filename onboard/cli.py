@@ -184,6 +184,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("shore", help="live view of a vehicle's estimates from Zenoh")
     _add_zenoh_flags(p)
+    p.add_argument("--prefix", default="onboard",
+                   help="the key prefix the vehicles publish under, [service.zenoh] "
+                        "key_prefix (default: onboard)")
     p.add_argument("--vehicle", default="*", help="vehicle id (default: all)")
     p.add_argument("--once", action="store_true", help="print one snapshot and exit")
     p.add_argument("--web", default="", metavar="HOST:PORT",

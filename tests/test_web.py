@@ -355,3 +355,62 @@ def test_idle_connections_beyond_the_limit_are_closed_and_the_page_still_answers
             s.close()
         time.sleep(0.2)
         assert get(srv.url + "/")[0] == 200 and srv.server.refused == 1
+
+
+def test_views_with_a_key_prefix_read_its_keys_only_whatever_its_segments():
+    from onboard.apps.shore import ShoreView
+
+    enc = msgspec.json.encode
+    view, table = LiveView(prefix="region/north"), ShoreView(prefix="region/north")
+    for feed in (view.feed_zenoh, table.feed):
+        feed("region/north/boat2/est/nav",
+             enc(rec("nav", 1.0, vehicle="boat2", north=1.0, east=2.0)))
+        feed("onboard/boat3/est/nav", enc(rec("nav", 1.0, vehicle="boat3", north=1.0, east=2.0)))
+    assert sorted(view.vehicles) == ["boat2"] and table.vehicles() == ["boat2"]
+    assert view.vehicle_mismatch == 0 and table.vehicle_mismatch == 0
+
+
+@pytest.mark.integration
+def test_onboard_shore_prefix_follows_the_vehicles_and_the_fleet_grid_under_it(tmp_path):
+    import subprocess
+    import sys
+
+    import zenoh
+
+    from onboard.service.publishers.zenoh_pub import open_router, session_config
+    from onboard.apps.service_bench import free_tcp_port
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    web_port = free_tcp_port()
+    router = open_router(endpoint)
+    pub = zenoh.open(session_config("client", [endpoint]))
+    shore = subprocess.Popen([sys.executable, "-m", "onboard", "shore", "--connect", endpoint,
+                              "--prefix", "region-a", "--web", f"127.0.0.1:{web_port}"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    grid = {"schema": 1, "utc": 1.0e9, "spacing_m": 100.0, "vehicles": [],
+            "cells": [{"lat": LAT0, "lon": LON0, "north": 0.1, "east": 0.0,
+                       "std_north": 0.01, "std_east": 0.01, "n_obs": 3}]}
+    try:
+        assert "the page is on" in shore.stdout.readline()
+        state: dict = {}
+        fleet: dict = {}
+        deadline = time.monotonic() + 15
+        k = 0
+        while not (state.get("t") and fleet.get("grid")):
+            assert time.monotonic() < deadline, (state, fleet)
+            k += 1
+            for prefix, vid in (("region-a", "boat-a"), ("onboard", "boat-o")):
+                est = rec("nav", float(k), vehicle=vid, north=float(k), east=0.0)
+                pub.put(f"{prefix}/{vid}/est/nav", msgspec.json.encode(est),
+                        encoding="application/json;onboard.Estimate.v2")
+            pub.put("region-a/fleet/current/grid", json.dumps(grid).encode(),
+                    encoding="application/json;onboard.FleetGrid.v1")
+            time.sleep(0.2)
+            state = json.loads(get(f"http://127.0.0.1:{web_port}/api/state")[1])
+            fleet = json.loads(get(f"http://127.0.0.1:{web_port}/api/fleet")[1])
+        assert state["vehicle"] == "boat-a" and state["vehicles"] == ["boat-a"]
+    finally:
+        shore.terminate()
+        shore.wait(10)
+        pub.close()
+        router.close()

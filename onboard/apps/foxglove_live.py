@@ -1,13 +1,13 @@
 """``onboard shore --foxglove [HOST:]PORT``: the vehicles' Zenoh records, live in Foxglove.
 
 Foxglove reads live data from a Foxglove WebSocket server, not from Zenoh. The relay
-subscribes to ``onboard/<vehicle>/**`` and logs every record whose encoding names one of
-our schemas (``application/json;onboard.Estimate.v2``, ``onboard.Health.v3``,
-``foxglove.LocationFix``: :mod:`onboard.core.wire`) on a channel of the same name as its
-Zenoh key, JSON messages with that schema name and its JSON schema, through the
-``foxglove-sdk`` package (the ``foxglove`` extra). In Foxglove: *Open connection* →
-*Foxglove WebSocket* → ``ws://HOST:PORT``, then import the vehicle's layout (written by
-``onboard replay --foxglove-layout``, docs/foxglove.md).
+subscribes to ``<prefix>/<vehicle>/**`` (``onboard`` unless ``--prefix``) and logs every
+record whose encoding names one of our schemas (``application/json;onboard.Estimate.v2``,
+``onboard.Health.v3``, ``foxglove.LocationFix``: :mod:`onboard.core.wire`) on a channel
+of the same name as its Zenoh key, JSON messages with that schema name and its JSON
+schema, through the ``foxglove-sdk`` package (the ``foxglove`` extra). In Foxglove: *Open
+connection* → *Foxglove WebSocket* → ``ws://HOST:PORT``, then import the vehicle's layout
+(written by ``onboard replay --foxglove-layout``, docs/foxglove.md).
 """
 
 from __future__ import annotations
@@ -88,12 +88,13 @@ def start_server(fg: Any, host: str, port: int, listen: str) -> Any:
         raise UsageError(f"--foxglove {listen}: {why}") from None
 
 
-def start(session: Any, vehicle: str, listen: str) -> tuple[Any, Any, FoxgloveRelay]:
-    """Start the WebSocket server on ``listen`` and relay ``onboard/<vehicle>/**`` from
+def start(session: Any, vehicle: str, listen: str, prefix: str = "onboard"
+          ) -> tuple[Any, Any, FoxgloveRelay]:
+    """Start the WebSocket server on ``listen`` and relay ``<prefix>/<vehicle>/**`` from
     ``session``; returns (server, subscriber, relay) for the caller to stop."""
     fg = foxglove_module()
     host, port = parse_listen(listen)
     relay = FoxgloveRelay()
     server = start_server(fg, host, port, listen)
-    sub = session.declare_subscriber(f"onboard/{vehicle}/**", relay.on_sample)
+    sub = session.declare_subscriber(f"{prefix}/{vehicle}/**", relay.on_sample)
     return server, sub, relay

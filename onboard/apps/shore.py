@@ -8,13 +8,14 @@ Runs on any shore machine that reaches the vehicle's Zenoh network::
 
 On start it asks the vehicles' queryables for their latest values (so ``--once`` prints a
 snapshot at once) and the liveliness tokens for who is alive, then follows
-``onboard/<vehicle>/est/*`` and ``onboard/<vehicle>/health``. The table is redrawn every
-second: one row per pipeline with its newest values (angles in degrees, everything else
-in SI units), then the vehicle's mode, input rates, rejections with reasons, drops and
-recent events. With ``--web HOST:PORT`` it serves the service's web page instead
-(:mod:`onboard.service.web`: live map, current, speed, heading, flags, health), fed from
-the same subscription (:func:`serve_web`), with the fleet service's current field
-(``onboard/fleet/current/grid``) as its fleet layer.
+``<prefix>/<vehicle>/est/*`` and ``<prefix>/<vehicle>/health`` (``<prefix>`` is
+``onboard`` unless ``--prefix``: the vehicles' ``[service.zenoh] key_prefix``). The table
+is redrawn every second: one row per pipeline with its newest values (angles in degrees,
+everything else in SI units), then the vehicle's mode, input rates, rejections with
+reasons, drops and recent events. With ``--web HOST:PORT`` it serves the service's web
+page instead (:mod:`onboard.service.web`: live map, current, speed, heading, flags,
+health), fed from the same subscription (:func:`serve_web`), with the fleet service's
+current field (``<prefix>/fleet/current/grid``) as its fleet layer.
 ``--foxglove [HOST:]PORT`` also serves the records to Foxglove on a
 WebSocket server (:mod:`onboard.apps.foxglove_live`, docs/foxglove.md), beside the table
 or the page.
@@ -38,10 +39,15 @@ import msgspec
 from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.wire import ESTIMATE_SCHEMAS, HEALTH_SCHEMA, LOCATION_FIX_SCHEMA
+from onboard.service.web.view import key_parts
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
-FLEET_GRID_KEY = "onboard/fleet/current/grid"
-"""The fleet service's grid (``onboard fleet``), drawn by ``--web`` as the fleet layer."""
+DEFAULT_PREFIX = "onboard"
+FLEET_GRID_SUFFIX = "fleet/current/grid"
+"""The fleet service's grid (``onboard fleet``) is on ``<prefix>/fleet/current/grid``,
+drawn by ``--web`` as the fleet layer."""
+KEY_SPECIALS = frozenset("*$?#")
+"""Characters a key prefix cannot hold (Zenoh's wildcards and selector marks)."""
 EXPECTED = {"est": ESTIMATE_SCHEMAS, "health": frozenset({HEALTH_SCHEMA}),
             "fix": frozenset({LOCATION_FIX_SCHEMA})}
 """Third key segment -> the schema names this version decodes there (every version of
@@ -80,7 +86,9 @@ class ShoreView:
             version, ``est.v1``, ``est.v2``).
     """
 
-    def __init__(self, keep_history: bool = False) -> None:
+    def __init__(self, keep_history: bool = False, prefix: str = "") -> None:
+        self.prefix = prefix
+        """The key prefix of :meth:`feed`'s keys (empty: their first segment)."""
         self.estimates: dict[tuple[str, str], EstimateRecord] = {}
         self.health: dict[str, HealthRecord] = {}
         self.alive: set[str] = set()
@@ -101,7 +109,9 @@ class ShoreView:
         key (another schema version) is counted in ``bad`` and skipped, a record naming
         another vehicle than its key's in ``vehicle_mismatch`` (a router's access control
         vouches for the key, not for the payload: docs/security.md)."""
-        parts = key.split("/")
+        parts = key_parts(key, self.prefix)
+        if parts is None:
+            return
         schema = encoding.partition(";")[2]
         if schema and len(parts) >= 3 and schema not in EXPECTED.get(parts[2], (schema,)):
             self.bad += 1
@@ -223,26 +233,42 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
                          f"{str(err).split(' at ')[0]}") from None
 
 
+def check_prefix(prefix: str) -> str:
+    """``prefix`` when it can start a key (segments joined by ``/``, none empty, no
+    wildcard), else UsageError naming ``--prefix``."""
+    if not prefix or any(not seg for seg in prefix.split("/")) or KEY_SPECIALS & set(prefix):
+        raise UsageError(f"--prefix {prefix!r}: a key prefix such as onboard or "
+                         "region/north (no empty segment, no * $ ? #)")
+    return prefix
+
+
+def _token_vehicle(view: ShoreView, key: str) -> str | None:
+    parts = key_parts(key, view.prefix)
+    return parts[1] if parts and len(parts) > 2 else None
+
+
 def snapshot(session: Any, view: ShoreView, vehicle: str = "*", timeout_s: float = 3.0) -> None:
-    """Fill ``view`` from the vehicles' queryables and liveliness tokens."""
-    for rep in session.liveliness().get(f"onboard/{vehicle}/alive", timeout=timeout_s):
-        if rep.ok is not None:
+    """Fill ``view`` from the vehicles' queryables and liveliness tokens (under the
+    view's prefix, ``onboard`` when it has none)."""
+    prefix = view.prefix or DEFAULT_PREFIX
+    for rep in session.liveliness().get(f"{prefix}/{vehicle}/alive", timeout=timeout_s):
+        if rep.ok is not None and (v := _token_vehicle(view, str(rep.ok.key_expr))):
             with view.lock:
-                view.alive.add(str(rep.ok.key_expr).split("/")[1])
-    for rep in session.get(f"onboard/{vehicle}/**", timeout=timeout_s):
+                view.alive.add(v)
+    for rep in session.get(f"{prefix}/{vehicle}/**", timeout=timeout_s):
         if rep.ok is not None:
             view.feed(str(rep.ok.key_expr), rep.ok.payload.to_bytes(), str(rep.ok.encoding))
 
 
-def serve_web(session: Any, vehicle: str, listen: str) -> int:
-    """Serve the web page on ``listen`` (``HOST:PORT``) from the vehicles' samples until
-    Ctrl-C: the queryables' latest values first, then every sample, and the fleet
-    service's grids (the fleet layer)."""
+def serve_web(session: Any, vehicle: str, listen: str, prefix: str = DEFAULT_PREFIX) -> int:
+    """Serve the web page on ``listen`` (``HOST:PORT``) from the vehicles' samples under
+    ``prefix`` until Ctrl-C: the queryables' latest values first, then every sample, and
+    the fleet service's grids (the fleet layer)."""
     from onboard.service.web.app import PageOnThread
 
-    key = f"onboard/{vehicle}/**"
-    page = PageOnThread(session, [key, FLEET_GRID_KEY], listen,
-                        vehicle="" if vehicle == "*" else vehicle, prime=[key])
+    key = f"{prefix}/{vehicle}/**"
+    page = PageOnThread(session, [key, f"{prefix}/{FLEET_GRID_SUFFIX}"], listen,
+                        vehicle="" if vehicle == "*" else vehicle, prime=[key], prefix=prefix)
     print(f"onboard shore: the page is on {page.url}", flush=True)
     try:
         threading.Event().wait()
@@ -255,10 +281,11 @@ def serve_web(session: Any, vehicle: str, listen: str) -> int:
 
 def main(args: argparse.Namespace) -> int:
     """``onboard shore [--connect E] [--listen E] [--mode M] [--zenoh-config FILE]
-    [--vehicle ID] [--once] [--web HOST:PORT] [--foxglove [HOST:]PORT]``."""
+    [--prefix P] [--vehicle ID] [--once] [--web HOST:PORT] [--foxglove [HOST:]PORT]``."""
     vehicle = args.vehicle or "*"
     if "/" in vehicle:
         raise UsageError(f"--vehicle {vehicle!r}: a vehicle id has no '/'")
+    prefix = check_prefix(getattr(args, "prefix", None) or DEFAULT_PREFIX)
     if getattr(args, "foxglove", None):
         from onboard.apps.foxglove_live import foxglove_module, parse_listen
 
@@ -266,7 +293,7 @@ def main(args: argparse.Namespace) -> int:
         foxglove_module()
     session = open_session(args.connect, args.listen, args.mode,
                            getattr(args, "zenoh_config", "") or "")
-    view = ShoreView()
+    view = ShoreView(prefix=prefix)
     sub = None
     token_sub = None
     extra: tuple[Any, ...] = ()
@@ -278,15 +305,17 @@ def main(args: argparse.Namespace) -> int:
         if getattr(args, "foxglove", None):
             from onboard.apps.foxglove_live import parse_listen, start
 
-            server, relay_sub, _ = start(session, vehicle, args.foxglove)
+            server, relay_sub, _ = start(session, vehicle, args.foxglove, prefix)
             extra = (relay_sub, server)
             host, port = parse_listen(args.foxglove)
             print(f"Foxglove: open connection ws://{host}:{port}", flush=True)
         if getattr(args, "web", ""):
-            return serve_web(session, vehicle, args.web)
+            return serve_web(session, vehicle, args.web, prefix)
 
         def on_token(sample: Any) -> None:
-            v = str(sample.key_expr).split("/")[1]
+            v = _token_vehicle(view, str(sample.key_expr))
+            if v is None:
+                return
             with view.lock:
                 if str(sample.kind).endswith("DELETE"):
                     view.alive.discard(v)
@@ -294,8 +323,8 @@ def main(args: argparse.Namespace) -> int:
                 else:
                     view.alive.add(v)
 
-        token_sub = session.liveliness().declare_subscriber(f"onboard/{vehicle}/alive", on_token)
-        sub = session.declare_subscriber(f"onboard/{vehicle}/**", view.on_sample)
+        token_sub = session.liveliness().declare_subscriber(f"{prefix}/{vehicle}/alive", on_token)
+        sub = session.declare_subscriber(f"{prefix}/{vehicle}/**", view.on_sample)
         snapshot(session, view, vehicle)
         tty = sys.stdout.isatty()
         while True:

@@ -549,7 +549,7 @@ def main(args: argparse.Namespace) -> int:
         if getattr(args, "web", ""):
             from onboard.service.web.app import PageOnThread
 
-            page = PageOnThread(session, [f"{args.prefix}/**"], args.web)
+            page = PageOnThread(session, [f"{args.prefix}/**"], args.web, prefix=args.prefix)
             for vehicle, points in service.tracks.items():
                 page.view.feed_fleet_track(vehicle, points)
             print(f"onboard fleet: the page is on {page.url}", flush=True)

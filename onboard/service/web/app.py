@@ -172,15 +172,16 @@ class PageOnThread:
 
     A bad ``listen`` or a port that cannot be bound is a :class:`UsageError` naming
     ``--web``. ``prime``: answers of a Zenoh ``get`` on these key expressions fed first
-    (a shore's queryables' latest values)."""
+    (a shore's queryables' latest values). ``prefix``: the key prefix the vehicles
+    publish under (:class:`.view.LiveView`)."""
 
     def __init__(self, session: Any, keys: Sequence[str], listen: str, *, vehicle: str = "",
-                 prime: Sequence[str] = ()) -> None:
+                 prime: Sequence[str] = (), prefix: str = "") -> None:
         try:
             parse_listen(listen)
         except ValueError as err:
             raise UsageError(f"--web {err}") from None
-        self.view = LiveView(vehicle=vehicle)
+        self.view = LiveView(vehicle=vehicle, prefix=prefix)
         for key in prime:
             for rep in session.get(key, timeout=PRIME_TIMEOUT_S):
                 if rep.ok is not None:

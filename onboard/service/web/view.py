@@ -64,6 +64,17 @@ FLEET_TRACK_PERIOD_S = 5.0
 FLEET_TRACK_MAX_POINTS = 1440
 """Fleet track points kept per vehicle (2 h at one every 5 s)."""
 
+def key_parts(key: str, prefix: str = "") -> list[str] | None:
+    """A Zenoh key ``<prefix>/<vehicle>/...`` split as ``[prefix, vehicle, ...]`` (the
+    prefix may have several segments); None for a key outside ``prefix``. Without a
+    prefix, the key's first segment is taken for it."""
+    if not prefix:
+        return key.split("/")
+    if not key.startswith(prefix + "/"):
+        return None
+    return [prefix, *key[len(prefix) + 1:].split("/")]
+
+
 OriginFn = Callable[[str], "tuple[float, float] | None"]
 """(lat, lon) in degrees of the local origin of a pipeline's positions, or None."""
 
@@ -91,11 +102,15 @@ class LiveView:
     Parameters:
         origin: the service's callable giving a pipeline's origin (None on the shore).
         vehicle: the vehicle :meth:`state` shows by default (empty: the first seen).
+        prefix: the Zenoh key prefix of :meth:`feed_zenoh`'s keys (empty: their first
+            segment, whatever it is).
     """
 
-    def __init__(self, origin: OriginFn | None = None, vehicle: str = "") -> None:
+    def __init__(self, origin: OriginFn | None = None, vehicle: str = "",
+                 prefix: str = "") -> None:
         self.origin_fn = origin
         self.default_vehicle = vehicle
+        self.prefix = prefix
         self.lock = threading.Lock()
         self.vehicles: dict[str, _Vehicle] = {}
         self.bad = 0
@@ -138,8 +153,8 @@ class LiveView:
             except (msgspec.DecodeError, ValueError):
                 self.bad += 1
             return
-        parts = key.split("/")
-        if len(parts) < 3:
+        parts = key_parts(key, self.prefix)
+        if parts is None or len(parts) < 3:
             return
         try:
             if parts[2] == "est" and len(parts) == 4:
