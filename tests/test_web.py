@@ -112,9 +112,9 @@ def test_the_shore_view_decodes_zenoh_json_by_key_and_takes_the_origin_from_a_lo
     view.feed_zenoh("onboard/boat/health", enc(HealthRecord(vehicle="boat", t=1.0)))
     view.feed_zenoh("onboard/boat/est/nav", b"not json")  # counted, skipped
     view.feed_zenoh("onboard/boat/est/nav/x", b"{}")  # another key shape: not an estimate
-    fix = {"timestamp": {"sec": 1, "nsec": 0}, "frame_id": "boat", "latitude": 43.001,
+    fix = {"timestamp": {"sec": 1, "nsec": 0}, "frame_id": "nav", "latitude": 43.001,
            "longitude": 5.0, "altitude": 0.0}
-    view.feed_zenoh("onboard/boat/location/nav", json.dumps(fix).encode())
+    view.feed_zenoh("onboard/boat/fix/nav", json.dumps(fix).encode())
     s = view.state()
     assert view.bad == 1 and s["health"] is not None
     # 100 m north of the origin at 43 deg: 100 / 111,132 m per degree = 0.0009 deg
@@ -321,8 +321,9 @@ def test_onboard_shore_web_serves_the_page_from_zenoh_whatever_the_encodings_sch
             est = rec("nav", float(k), vehicle="shoreboat", north=float(k), east=0.0)
             pub.put("onboard/shoreboat/est/nav", msgspec.json.encode(est),
                     encoding="application/json;onboard.Estimate.v1")
-            fix = {"latitude": LAT0 + k / 111132.0, "longitude": LON0}
-            pub.put("onboard/shoreboat/location", json.dumps(fix).encode(),
+            fix = {"timestamp": {"sec": k, "nsec": 0}, "frame_id": "nav",
+                   "latitude": LAT0 + k / 111132.0, "longitude": LON0}
+            pub.put("onboard/shoreboat/fix/nav", json.dumps(fix).encode(),
                     encoding="application/json;foxglove.LocationFix")
             time.sleep(0.2)
             state = json.loads(get(f"http://127.0.0.1:{web_port}/api/state")[1])
@@ -414,3 +415,111 @@ def test_onboard_shore_prefix_follows_the_vehicles_and_the_fleet_grid_under_it(t
         shore.wait(10)
         pub.close()
         router.close()
+
+
+def shore_feed(view: LiveView, origin: tuple[float, float], t: float, places: dict,
+               order: str = "est-first") -> None:
+    """One tick of a vehicle's service as the shore hears it: each pipeline's estimate at
+    ``places[pipeline]`` (north, east; metres from ``origin``, the service's first fix)
+    and its LocationFix, estimates first (as the service puts them) or fixes first (as a
+    startup query may answer)."""
+    from onboard.core.geo import LocalFrame
+    from onboard.core.wire import location_fix
+
+    enc = msgspec.json.encode
+    frame = LocalFrame(*origin)
+    recs = [EstimateRecord(vehicle="boat", pipeline=p, t=t, utc=1.8e9 + t,
+                           values={"north": n, "east": e}, std={"north": 1.0, "east": 1.0})
+            for p, (n, e) in places.items()]
+    ests = [(f"onboard/boat/est/{r.pipeline}", enc(r)) for r in recs]
+    fixes = [(f"onboard/boat/fix/{r.pipeline}", enc(location_fix(r, frame))) for r in recs]
+    for key, payload in (ests + fixes if order == "est-first" else fixes[::-1] + ests[::-1]):
+        view.feed_zenoh(key, payload)
+
+
+def test_the_shore_map_follows_the_services_origin_across_a_restart():
+    """A boat going east at 1 m/s from (43 N, 5 E); its service restarts at t = 60 s
+    (service time goes on) and counts from its new first fix, 61 m east and 0 m north
+    of the first: the track goes on where the boat is, the origin stays put."""
+    from onboard.core.geo import LocalFrame
+
+    o1 = (LAT0, LON0)
+    o2 = LocalFrame(*o1).to_latlon(0.0, 61.0)
+    view = LiveView()
+    for k in range(60):
+        shore_feed(view, o1, float(k), {"nav": (0.0, float(k))})
+    first = view.state()
+    assert first["origin"]["lat_deg"] == pytest.approx(LAT0, abs=1e-9)
+    assert first["origin"]["lon_deg"] == pytest.approx(LON0, abs=1e-9)
+    for k in range(61, 90):
+        shore_feed(view, o2, float(k), {"nav": (0.0, float(k) - 61.0)})
+    s = view.state(since=first["track"]["points"][-1][0], epoch=first["epoch"])
+    assert s["origin"] == first["origin"]
+    pts = view.state()["track"]["points"]
+    assert [round(t) for t, _, _ in pts] == list(range(60)) + list(range(61, 90))
+    for t, n, e in pts:  # every point where the boat was, 1 m a second east of o1
+        assert (n, e) == (pytest.approx(0.0, abs=0.01), pytest.approx(t, abs=0.01))
+    assert s["position"]["east_m"] == pytest.approx(89.0, abs=0.01)
+    assert s["epoch"] != first["epoch"]  # the restart's first point was placed again
+
+
+def test_a_startup_query_answering_fixes_first_pairs_each_fix_with_its_own_pipeline():
+    """The queryables answer fix/aie and fix/nav before est/aie and est/nav; aie's
+    position is 5 m from nav's: the origin is the service's, to the millimetre."""
+    view = LiveView()
+    shore_feed(view, (LAT0, LON0), 100.0, {"nav": (200.0, -80.0), "aie": (205.0, -80.0)},
+               order="fix-first")
+    s = view.state()
+    assert s["origin"]["lat_deg"] == pytest.approx(LAT0, abs=1e-8)  # 1 mm
+    assert s["origin"]["lon_deg"] == pytest.approx(LON0, abs=1e-8)
+    assert s["position"]["north_m"] == pytest.approx(200.0)
+
+
+def test_an_auv_under_water_keeps_its_place_from_aie_once_nav_has_no_position():
+    """An AUV's nav loses north/east with GNSS: the position and the track go on with
+    aie (then kf), in the same metres; nav makes them again when it has a fix."""
+    view = LiveView()
+    for k in range(10):
+        shore_feed(view, (LAT0, LON0), float(k), {"nav": (float(k), 0.0), "aie": (float(k), 0.1)})
+    enc = msgspec.json.encode
+    for k in range(10, 20):
+        view.feed_zenoh("onboard/boat/est/nav", enc(EstimateRecord(
+            vehicle="boat", pipeline="nav", t=float(k), values={"speed": 1.0})))
+        shore_feed(view, (LAT0, LON0), float(k), {"aie": (float(k), 0.1), "kf": (float(k), 0.2)})
+    s = view.state()
+    assert s["position"]["pipeline"] == "aie" and s["position"]["north_m"] == 19.0
+    assert s["track"]["pipeline"] == "aie" and len(s["track"]["points"]) == 20
+    shore_feed(view, (LAT0, LON0), 20.0, {"nav": (20.0, 0.0), "aie": (20.0, 0.1)})
+    s = view.state()
+    assert s["position"]["pipeline"] == "nav" and s["track"]["points"][-1] == [20.0, 20.0, 0.0]
+
+
+@pytest.mark.integration
+def test_a_diving_auv_replayed_into_the_shore_view_keeps_its_place(tmp_path):
+    """fault-gnss-submerged (an AUV that dives and loses GNSS) replayed into MCAP, the
+    channels fed to the page's model as the shore hears them: nav has no position under
+    water, and the page shows aie's, in the metres of the track."""
+    import subprocess
+    import sys
+
+    mcap_reader = pytest.importorskip("mcap.reader", reason="pip install 'onboard[mcap]'")
+    onboard = [sys.executable, "-m", "onboard"]
+    tlog, mcap = tmp_path / "auv.tlog", tmp_path / "auv.mcap"
+    for argv in (["sitl", "--scenario", "fault-gnss-submerged", "--duration", "40",
+                  "--tlog", str(tlog)],
+                 ["replay", str(tlog), "--mcap", str(mcap), "--no-plot", "--out",
+                  str(tmp_path / "out")]):
+        run = subprocess.run(onboard + argv, capture_output=True, text=True, timeout=120)
+        assert run.returncode == 0, run.stderr[-2000:]
+    view = LiveView()
+    without_nav = 0
+    with open(mcap, "rb") as f:
+        for _, channel, msg in mcap_reader.make_reader(f).iter_messages(log_time_order=True):
+            view.feed_zenoh(channel.topic, msg.data)
+            if channel.topic.endswith("/est/nav") and "north" not in json.loads(msg.data)["values"]:
+                without_nav += 1
+                s = view.state()
+                assert s["position"] is not None and s["position"]["pipeline"] in ("aie", "kf")
+    assert without_nav > 100  # 10 s and more under water
+    s = view.state()
+    assert s["origin"] is not None and s["track"]["points"][-1][0] == pytest.approx(s["t"], abs=1.0)

@@ -9,12 +9,17 @@ current with their one-sigma, the integrity flags and the health summary. Units 
 names: metres, m/s, degrees (angles are shown, not computed with).
 
 The track is one point per :data:`TRACK_PERIOD_S` of vehicle time, north/east metres of
-the first pipeline of :data:`TRACK_PIPELINES` that publishes a position, about its local
-origin (the vehicle's first GNSS fix). The origin (lat, lon) puts the track on map tiles:
-the service asks its pipeline for it (``origin`` callable); the shore derives it from any
-sample of the vehicle that carries ``latitude`` and ``longitude`` (Foxglove's
-LocationFix) and the track point of that moment. Without an origin the page draws a
-metric grid.
+the first pipeline of :data:`TRACK_PIPELINES` whose newest record has a position (an AUV
+under water: ``aie``, ``kf`` or ``eseso`` once ``nav`` has none), about the track's
+origin; the position shown is that pipeline's newest. Each pipeline counts its metres from
+its own origin (its first GNSS fix; a restarted service counts from its new first fix):
+the service asks its pipelines for theirs (``origin`` callable); the shore derives each
+pipeline's from the LocationFix it publishes on ``<prefix>/<vehicle>/fix/<pipeline>``
+paired with that pipeline's estimate of the same time (:func:`frame_origin`), and follows
+it when it moves by more than :data:`ORIGIN_MOVED_M`. The track's origin (lat, lon) is
+the first one known of the pipeline making the track, and puts the track on map tiles;
+positions counted from another origin are moved to it, so the track goes on where the
+vehicle is across a service's restart. Without an origin the page draws a metric grid.
 
 The fleet layer: the fleet service's grid (``<prefix>/fleet/current/grid``, JSON
 ``onboard.FleetGrid.v1``: ``utc``, ``spacing_m``, ``cells`` with ``lat``, ``lon``,
@@ -38,11 +43,20 @@ from typing import Any, Callable
 
 import msgspec
 
-from onboard.core.geo import metres_per_degree
+from onboard.core.geo import LocalFrame, metres_per_degree
 from onboard.core.messages import EstimateRecord, HealthRecord
 
 TRACK_PIPELINES = ("nav", "aie", "kf", "eseso")
 """Pipelines whose ``north``/``east`` make the track, best first."""
+TRACK_STALE_S = 2.0
+"""A pipeline whose newest position is this much older (vehicle s) than another's no
+longer makes the track."""
+ORIGIN_MOVED_M = 1.0
+"""A pipeline's origin derived again this far (m) from the one held has moved: the
+service restarted and counts from a new first fix."""
+FIX_PAIR_S = 1e-3
+"""A LocationFix and an estimate of one pipeline are of the same tick when their times
+are this close (s; the fix's is the record's ``utc``, else ``t``, to the nanosecond)."""
 MOTION_PIPELINES = ("aie", "kf", "nav")
 """Pipelines whose ``speed`` and ``heading`` are shown, best first."""
 SPEED_STD_FLOOR_MPS = 0.1
@@ -88,9 +102,15 @@ class _Vehicle:
     track: deque[tuple[float, float, float]] = field(
         default_factory=lambda: deque(maxlen=TRACK_MAX_POINTS))
     track_pipeline: str = ""
+    """The pipeline of the newest track point."""
     epoch: int = 0
-    """Incremented when the track starts again (time went back, another pipeline)."""
+    """Incremented when the track starts again (time went back) or a point is moved."""
     origin: tuple[float, float] | None = None
+    """The track's origin (lat, lon): its points are metres from it."""
+    origins: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """Each pipeline's own origin, as known."""
+    fixes: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    """Each pipeline's newest LocationFix (time, lat, lon) not yet paired with its estimate."""
     events: deque[str] = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))
     wall_rx: float | None = None
     """time.monotonic() of the newest record."""
@@ -119,6 +139,8 @@ class LiveView:
         """Zenoh records left out because they name another vehicle than their key's."""
         self._dec_est = msgspec.json.Decoder(EstimateRecord)
         self._dec_health = msgspec.json.Decoder(HealthRecord)
+        self._fixes: dict[tuple[str, str], tuple[float, float, float]] = {}
+        """(vehicle, pipeline) -> a LocationFix heard before any record of its vehicle."""
         self.grid: dict | None = None
         """The newest fleet grid, as published."""
         self.fleet_tracks: dict[str, deque[tuple[float, float, float]]] = {}
@@ -142,8 +164,9 @@ class LiveView:
 
     def feed_zenoh(self, key: str, payload: bytes) -> None:
         """One Zenoh sample on ``<prefix>/<vehicle>/...``: ``est/<pipeline>`` is an
-        EstimateRecord, ``health`` a HealthRecord; any other JSON object of the vehicle
-        with ``latitude`` and ``longitude`` (a LocationFix) places the track on the map.
+        EstimateRecord, ``health`` a HealthRecord, ``fix/<pipeline>`` that pipeline's
+        position as a LocationFix, which gives the pipeline's origin (see the module's
+        docstring).
         A record that names another vehicle than its key's is left out (counted in
         :attr:`vehicle_mismatch`): a router's access control vouches for the key, not
         for the payload (docs/security.md), as ``onboard fleet`` takes them."""
@@ -165,8 +188,8 @@ class LiveView:
                 h = self._dec_health.decode(payload)
                 if self._named(h.vehicle, parts[1]):
                     self.feed_health(h)
-            else:
-                self._location(parts[1], msgspec.json.decode(payload))
+            elif parts[2] == "fix" and len(parts) == 4:
+                self._location(parts[1], parts[3], msgspec.json.decode(payload))
         except (msgspec.DecodeError, msgspec.ValidationError):
             self.bad += 1
 
@@ -223,39 +246,74 @@ class LiveView:
         v = self._vehicle(rec.vehicle)
         v.estimates[rec.pipeline] = rec
         v.wall_rx = time.monotonic()
-        if rec.pipeline not in TRACK_PIPELINES:
+        p = rec.pipeline
+        if p not in TRACK_PIPELINES:
             return
         n, e = rec.values.get("north"), rec.values.get("east")
         if n is None or e is None:
             return
-        rank = TRACK_PIPELINES.index(rec.pipeline)
-        if v.track_pipeline and TRACK_PIPELINES.index(v.track_pipeline) < rank:
-            return  # a better pipeline makes the track
-        if rec.pipeline != v.track_pipeline or (v.track and rec.t < v.track[-1][0]):
-            v.track.clear()
+        if v.track and rec.t < v.track[-1][0] and _track_source(v, rec.t) == p:
+            v.track.clear()  # time went back: the vehicle's computer started again
             v.epoch += 1
-            v.track_pipeline = rec.pipeline
             v.origin = None
+            v.origins.clear()
+        if p not in v.origins and self.origin_fn is not None:
+            o = self.origin_fn(p)
+            if o is not None:
+                v.origins[p] = o
+        pending = self._fixes.pop((rec.vehicle, p), None)
+        if pending is not None:
+            v.fixes[p] = pending
+        self._pair(v, p)
+        if _track_source(v, rec.t) != p:
+            return  # a better pipeline makes the track
+        if v.origin is None and not v.track:
+            v.origin = v.origins.get(p)
+        v.track_pipeline = p
         if not v.track or rec.t - v.track[-1][0] >= TRACK_PERIOD_S:
-            v.track.append((rec.t, n, e))
-        if v.origin is None and self.origin_fn is not None:
-            v.origin = self.origin_fn(rec.pipeline)
+            v.track.append((rec.t, *_on_track(v, p, n, e)))
 
-    def _location(self, vid: str, obj: Any) -> None:
-        """Derive the origin from a sample with latitude/longitude (deg) and the newest
-        track point: origin = fix - (north, east) at the fix's latitude."""
-        if not isinstance(obj, dict):
+    def _location(self, vid: str, pipeline: str, obj: Any) -> None:
+        """A LocationFix of ``pipeline``: kept until it pairs with the pipeline's estimate
+        of the same time (:meth:`_pair`)."""
+        if not isinstance(obj, dict) or pipeline not in TRACK_PIPELINES:
             return
-        lat, lon = obj.get("latitude"), obj.get("longitude")
-        if not all(isinstance(x, (int, float)) and math.isfinite(x) for x in (lat, lon)):
+        lat, lon, stamp = obj.get("latitude"), obj.get("longitude"), obj.get("timestamp")
+        if not (_finite(lat) and _finite(lon) and isinstance(stamp, dict)
+                and _finite(stamp.get("sec")) and _finite(stamp.get("nsec"))):
             return
+        fix = (stamp["sec"] + stamp["nsec"] * 1e-9, float(lat), float(lon))
         with self.lock:
             v = self.vehicles.get(vid)
-            if v is None or not v.track or v.origin is not None:
+            if v is None:
+                self._fixes[(vid, pipeline)] = fix  # its estimate comes later
                 return
-            _, n, e = v.track[-1]
-            m_lat, m_lon = metres_per_degree(lat)
-            v.origin = (lat - n / m_lat, lon - e / m_lon)
+            v.fixes[pipeline] = fix
+            self._pair(v, pipeline)
+
+    def _pair(self, v: _Vehicle, p: str) -> None:
+        """The origin of ``p`` from its waiting LocationFix and its newest estimate, when
+        they are of the same tick; a moved origin (the service restarted) replaces the
+        one held, and the newest track point, placed from the old one, is placed again."""
+        fix, rec = v.fixes.get(p), v.estimates.get(p)
+        if fix is None or rec is None:
+            return
+        n, e = rec.values.get("north"), rec.values.get("east")
+        if n is None or e is None:
+            return
+        if abs(fix[0] - (rec.t if rec.utc is None else rec.utc)) > FIX_PAIR_S:
+            return
+        del v.fixes[p]
+        o = frame_origin(fix[1], fix[2], n, e)
+        old = v.origins.get(p)
+        if old is not None and _metres_apart(old, o) <= ORIGIN_MOVED_M:
+            return
+        v.origins[p] = o
+        if v.origin is None and v.track_pipeline in ("", p):
+            v.origin = o
+        elif old is not None and v.track and v.track_pipeline == p and v.track[-1][0] == rec.t:
+            v.track[-1] = (rec.t, *_on_track(v, p, n, e))
+            v.epoch += 1  # the page fetches the whole track again
 
     # ------------------------------------------------------------------ reading
 
@@ -335,11 +393,56 @@ def _finite(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
+def frame_origin(lat: float, lon: float, north_m: float, east_m: float
+                 ) -> tuple[float, float]:
+    """The origin (lat, lon) of the local frame (:class:`onboard.core.geo.LocalFrame`) in
+    which the point at (``lat``, ``lon``) is ``north_m``, ``east_m``: a pipeline's
+    origin from its LocationFix and its estimate of the same tick (to a millimetre
+    within kilometres)."""
+    m_lat, m_lon = metres_per_degree(lat)
+    o = (lat - north_m / m_lat, lon - east_m / m_lon)
+    for _ in range(2):
+        la, lo = LocalFrame(*o).to_latlon(north_m, east_m)
+        o = (o[0] + lat - la, o[1] + lon - lo)
+    return o
+
+
+def _metres_apart(a: tuple[float, float], b: tuple[float, float]) -> float:
+    m_lat, m_lon = metres_per_degree(a[0])
+    return math.hypot((b[0] - a[0]) * m_lat, (b[1] - a[1]) * m_lon)
+
+
+def _on_track(v: _Vehicle, p: str, north_m: float, east_m: float) -> tuple[float, float]:
+    """``p``'s position (m from its own origin) in metres from the track's origin."""
+    o = v.origins.get(p)
+    if o is None or v.origin is None or o == v.origin:
+        return north_m, east_m
+    m_lat, m_lon = metres_per_degree(v.origin[0])
+    return (north_m + (o[0] - v.origin[0]) * m_lat, east_m + (o[1] - v.origin[1]) * m_lon)
+
+
+def _track_source(v: _Vehicle, t: float) -> str | None:
+    """The first of :data:`TRACK_PIPELINES` whose newest record has a position no more
+    than :data:`TRACK_STALE_S` older than ``t``."""
+    for p in TRACK_PIPELINES:
+        rec = v.estimates.get(p)
+        if (rec is not None and "north" in rec.values and "east" in rec.values
+                and t - rec.t <= TRACK_STALE_S):
+            return p
+    return None
+
+
 def _position(v: _Vehicle) -> dict | None:
-    rec = v.estimates.get(v.track_pipeline)
-    if rec is None or "north" not in rec.values or "east" not in rec.values:
+    """The newest position of the pipeline that makes the track now, in metres from the
+    track's origin."""
+    t = max((r.t for p in TRACK_PIPELINES if (r := v.estimates.get(p)) is not None),
+            default=None)
+    p = None if t is None else _track_source(v, t)
+    if p is None:
         return None
-    return {"north_m": rec.values["north"], "east_m": rec.values["east"],
+    rec = v.estimates[p]
+    north, east = _on_track(v, p, rec.values["north"], rec.values["east"])
+    return {"north_m": north, "east_m": east, "pipeline": p,
             "std_north_m": rec.std.get("north"), "std_east_m": rec.std.get("east")}
 
 
