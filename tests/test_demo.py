@@ -9,6 +9,7 @@ import io
 import math
 import re
 import socket
+import time
 from pathlib import Path
 
 import pytest
@@ -273,3 +274,126 @@ def test_headings_are_rounded_then_wrapped_never_360():
                                                   values={"speed": 1.0, "heading": -0.001})
     assert "aie 1.00 m/s 0°" in live_line(view, "v", 150.0)
     assert fmt_value("heading", math.radians(359.99)) == "heading=0.0°"
+
+
+def test_a_stopping_service_task_that_lost_its_cancellation_is_cancelled_again():
+    """Python 3.11's asyncio.wait_for drops a cancellation that arrives with its result
+    (a TCP input reading while data flows): the demo cancels such a task again, and the
+    service stops instead of being left behind."""
+    import asyncio
+
+    from onboard.apps.demo import RECANCEL_S, stop_service
+
+    class Service:
+        """Shuts down as onboard's does: cancel its tasks once, wait for them all."""
+
+        def __init__(self) -> None:
+            self._tasks: list[asyncio.Task] = []
+
+        def request_stop(self) -> None:
+            pass
+
+        async def shutdown(self) -> None:
+            for t in self._tasks:
+                t.cancel()
+            await asyncio.gather(*self._tasks, return_exceptions=True)
+            self._tasks.clear()
+
+    async def reader(lost: list[int]) -> None:
+        while True:
+            try:
+                await asyncio.sleep(0.01)
+            except asyncio.CancelledError:
+                if lost[0]:
+                    raise
+                lost[0] = 1  # the first cancellation is lost
+
+    async def run() -> tuple[bool, float]:
+        svc, lost = Service(), [0]
+        svc._tasks.append(asyncio.create_task(reader(lost)))
+        await asyncio.sleep(0.05)
+        t0 = time.monotonic()
+        ok = await stop_service(svc, 10.0)
+        return ok and lost[0] == 1, time.monotonic() - t0
+
+    ok, took = asyncio.run(run())
+    assert ok and took < RECANCEL_S + 1.0
+
+
+def _ctrl_c(argv: list[str], cwd, ready: str, timeout_s: float = 120.0):
+    """Run ``onboard`` with ``argv`` in ``cwd`` in a session of its own, send Ctrl-C
+    (SIGINT) to its whole process group once a stdout line holds ``ready``; return the
+    process, its stdout and stderr, the wall seconds it took to stop, and the processes
+    still running in ``cwd``."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import threading
+
+    proc = subprocess.Popen([sys.executable, "-m", "onboard", *argv], cwd=cwd,
+                            start_new_session=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    out: list[str] = []
+    seen = threading.Event()
+
+    def read() -> None:
+        for line in proc.stdout:
+            out.append(line)
+            if ready in line:
+                seen.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    try:
+        assert seen.wait(timeout_s), "".join(out)[-3000:]
+        os.killpg(proc.pid, signal.SIGINT)
+        t0 = time.monotonic()
+        try:
+            proc.wait(60)
+        except subprocess.TimeoutExpired:
+            pass
+        took = time.monotonic() - t0
+        time.sleep(1.0)
+        left = {pid: cmd for pid, cmd in _running_in(cwd).items() if pid != proc.pid}
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        for pid in _running_in(cwd):  # what this test started and left (a failure)
+            os.kill(pid, signal.SIGKILL)
+    return proc, "".join(out), proc.stderr.read(), took, list(left.values())
+
+
+def _running_in(cwd) -> dict[int, str]:
+    """The processes (pid -> command line) whose working directory is ``cwd``."""
+    import os
+
+    found = {}
+    for pid in os.listdir("/proc"):
+        try:
+            if pid.isdigit() and os.readlink(f"/proc/{pid}/cwd") == str(cwd):
+                with open(f"/proc/{pid}/cmdline") as f:
+                    found[int(pid)] = f.read().replace("\0", " ")
+        except OSError:
+            pass
+    return found
+
+
+@pytest.mark.integration
+def test_ctrl_c_stops_the_demo_and_its_simulator_without_a_traceback(tmp_path):
+    proc, out, err, took, left = _ctrl_c(["demo", "--duration", "120"], tmp_path, "t=  ")
+    assert proc.returncode == 130, (out[-2000:], err[-2000:])
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err[-3000:]
+    assert left == [] and took < 20.0
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+def test_ctrl_c_stops_the_fleet_demo_every_vehicle_and_the_fleet_service(tmp_path):
+    """Ctrl-C to the fleet demo's process group once the AUV publishes (its DVL over
+    TCP): every service and simulator stopped, the fleet service too, exit 130."""
+    proc, out, err, took, left = _ctrl_c(["demo", "--fleet", "--duration", "200"], tmp_path,
+                                         "auv-1 | t=")
+    assert proc.returncode == 130, (out[-2000:], err[-2000:])
+    assert "Traceback" not in err and "left behind" not in err, err[-3000:]
+    assert left == [] and took < 30.0, (left, took)

@@ -56,6 +56,7 @@ import dataclasses
 import json
 import math
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -242,10 +243,10 @@ def sitl_child(plan: LinkPlan, inp: TextIO = sys.stdin, outp: TextIO = sys.stdou
             delay = start + t / plan.speed - time.monotonic()
             if -delay > late:
                 late = -delay
-            if delay > 0:
-                r, _, _ = select.select([fd], [], [], delay)
-                if r and not os.read(fd, 4096):
-                    break  # the parent closed stdin: stop
+            # stdin is watched also when behind the clock (delay <= 0: not waiting)
+            r, _, _ = select.select([fd], [], [], max(delay, 0.0))
+            if r and not os.read(fd, 4096):
+                break  # the parent closed stdin: stop
             if samples:
                 split: dict[str, list] = {}
                 for s in samples:
@@ -539,8 +540,7 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAULT
                 say("  " + live_line(view, vid, duration_s))
             await asyncio.sleep(0.05)
         await asyncio.sleep(max(0.3, 2.0 / speed))  # the last ticks reach the shore
-        svc.request_stop()
-        await svc.shutdown()
+        await stop_service(svc, STOP_TIMEOUT_S)
         health = svc.latest_health
         events = list(svc.events)
         rec_files = [str(p) for p in (svc.recorder.files if svc.recorder else [])]
@@ -548,9 +548,9 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAULT
         service_late = svc.stats.tick_late_max_s
         svc = None
     finally:
-        if svc is not None:
-            svc.request_stop()
-            await svc.shutdown()
+        if svc is not None and not await stop_service(svc, STOP_TIMEOUT_S):
+            print(f"the service: not stopped after {STOP_TIMEOUT_S:g} s, left behind",
+                  file=sys.stderr, flush=True)
         if proc is not None:
             try:
                 if proc.stdin is not None:
@@ -591,6 +591,33 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAULT
                       sim_late_s=sim_late, service_late_s=service_late)
 
 
+STOP_TIMEOUT_S = 20.0
+"""Wall seconds the service is given to shut down."""
+RECANCEL_S = 1.0
+"""Wall seconds between two cancellations of a stopping service's tasks (:func:`stop_service`)."""
+
+
+async def stop_service(svc: Any, timeout_s: float) -> bool:
+    """Stop ``svc`` (:meth:`Service.shutdown`) within ``timeout_s`` wall seconds; False
+    when it did not. A task of the service still running :data:`RECANCEL_S` after it was
+    cancelled is cancelled again: under Python 3.11 ``asyncio.wait_for`` drops a
+    cancellation that arrives with its result (a TCP input's read while data flows: the
+    fleet demo's DVL), and that task would read on for ever."""
+    svc.request_stop()
+    done = asyncio.ensure_future(svc.shutdown())
+    deadline = time.monotonic() + timeout_s
+    while not done.done() and time.monotonic() < deadline:
+        await asyncio.wait([done], timeout=min(RECANCEL_S, max(0.0, deadline - time.monotonic())))
+        for task in list(getattr(svc, "_tasks", ())):
+            if not task.done():
+                task.cancel()
+    if not done.done():
+        done.cancel()
+        return False
+    done.result()
+    return True
+
+
 async def _read_json(proc: subprocess.Popen, timeout_s: float) -> dict | None:
     """The next JSON line from the child's stdout (None on EOF, timeout or garbage)."""
     loop = asyncio.get_running_loop()
@@ -623,6 +650,9 @@ def main(args: argparse.Namespace) -> int:
 
 if __name__ == "__main__":  # pragma: no cover - the simulator child of run_demo
     if len(sys.argv) == 3 and sys.argv[1] == "--sitl-child":
+        # Ctrl-C reaches the whole process group: the parent stops the child (it closes
+        # its stdin) after the service the child feeds, so the child ignores it
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         sitl_child(LinkPlan(**json.loads(sys.argv[2])))
     else:
         print("usage: onboard demo [--duration S] [--scenario NAME] [--realtime] [--keep-state]",

@@ -159,10 +159,7 @@ class ServiceMember:
         """Shut the service down (given :data:`STOP_TIMEOUT_S`)."""
         if self.svc is not None:
             svc, self.svc = self.svc, None
-            svc.request_stop()
-            try:
-                await asyncio.wait_for(svc.shutdown(), STOP_TIMEOUT_S)
-            except asyncio.TimeoutError:
+            if not await demo.stop_service(svc, STOP_TIMEOUT_S):
                 print(f"{self.name}: not stopped after {STOP_TIMEOUT_S:g} s, left behind",
                       file=sys.stderr, flush=True)
 
@@ -179,9 +176,11 @@ class CommandMember:
     proc: subprocess.Popen | None = None
 
     async def start(self, start: float) -> None:
-        """Start the command."""
+        """Start the command, in a process group of its own: Ctrl-C at the terminal
+        reaches the demo, which stops the command (:meth:`stop`) in its turn."""
         out = None if self.log is None else open(self.log, "w")  # noqa: SIM115 - the child's
-        self.proc = subprocess.Popen(self.argv, stdout=out, stderr=subprocess.STDOUT if out else None)
+        self.proc = subprocess.Popen(self.argv, stdout=out,
+                                     stderr=subprocess.STDOUT if out else None, process_group=0)
         if out is not None:
             out.close()
 
