@@ -394,9 +394,13 @@ class Transport:
     async def _idle(self, aw: Awaitable[T]) -> T:
         """Await ``aw`` for at most ``idle_timeout_s`` (when set); raise IdleTimeout."""
         if self.idle_timeout_s > 0:
+            # asyncio.timeout, not wait_for: Python 3.11's wait_for can swallow a
+            # cancellation that comes as the data does, and the service's stop would wait
+            # on this read (CPython gh-86296)
             try:
-                return await asyncio.wait_for(aw, self.idle_timeout_s)
-            except asyncio.TimeoutError:
+                async with asyncio.timeout(self.idle_timeout_s):
+                    return await aw
+            except TimeoutError:
                 raise IdleTimeout(errno.ETIMEDOUT,
                                   f"idle: no data for {self.idle_timeout_s:g} s") from None
         return await aw
@@ -854,8 +858,8 @@ class TcpTransport(Transport):
     """Bytes sent on every new connection (the gpsd transport's WATCH request)."""
 
     async def _session(self) -> AsyncIterator[Chunk]:
-        reader, writer = await asyncio.wait_for(
-            asyncio.open_connection(self.spec.host, self.spec.port), self.connect_timeout_s)
+        async with asyncio.timeout(self.connect_timeout_s):
+            reader, writer = await asyncio.open_connection(self.spec.host, self.spec.port)
         sock = writer.get_extra_info("socket")
         if sock is not None:
             set_keepalive(sock)
@@ -869,7 +873,8 @@ class TcpTransport(Transport):
         try:
             if self.greeting:
                 writer.write(self.greeting)
-                await asyncio.wait_for(writer.drain(), self.connect_timeout_s)
+                async with asyncio.timeout(self.connect_timeout_s):
+                    await writer.drain()
             self._tx = tx
             self._connected()
             while True:
@@ -881,8 +886,9 @@ class TcpTransport(Transport):
             self._tx = None
             writer.close()
             try:
-                await asyncio.wait_for(writer.wait_closed(), 1.0)
-            except (OSError, asyncio.TimeoutError):
+                async with asyncio.timeout(1.0):
+                    await writer.wait_closed()
+            except (OSError, TimeoutError):
                 pass
 
 

@@ -405,3 +405,28 @@ def test_pump_reopens_a_pty_that_disappears_and_times_out_an_idle_one(tmp_path):
     assert got[0].startswith(b"$GPHDT") and b"".join(got[1:]).startswith(b"again")
     assert any("lost (EIO" in e or "lost (end of file" in e or "lost" in e for e in events)
     assert stats.disconnects >= 2 and not stats.connected
+
+
+def test_a_read_cancelled_as_its_data_comes_is_cancelled():
+    """A TCP input's read is cancelled (the service stopping) in the same turn of the loop
+    as its data arrives: the cancellation wins. With asyncio.wait_for, Python 3.11
+    returned the data and dropped the cancellation, so the input read on and the
+    service's stop (onboard demo --fleet's DVL, a systemctl stop) never ended."""
+    import asyncio
+
+    from onboard.drivers.transports import TcpTransport
+
+    async def run() -> bool:
+        tr = TcpTransport(parse_url("tcp:127.0.0.1:9"), idle_timeout_s=10.0)
+        data: asyncio.Future[bytes] = asyncio.get_running_loop().create_future()
+        task = asyncio.create_task(tr._idle(data))
+        await asyncio.sleep(0)          # the read waits
+        data.set_result(b"$GPGGA")      # the data comes ...
+        task.cancel()                   # ... and the stop, in one turn
+        try:
+            await task
+        except asyncio.CancelledError:
+            return True
+        return False
+
+    assert asyncio.run(run())

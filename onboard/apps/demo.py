@@ -593,28 +593,16 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAULT
 
 STOP_TIMEOUT_S = 20.0
 """Wall seconds the service is given to shut down."""
-RECANCEL_S = 1.0
-"""Wall seconds between two cancellations of a stopping service's tasks (:func:`stop_service`)."""
-
-
 async def stop_service(svc: Any, timeout_s: float) -> bool:
     """Stop ``svc`` (:meth:`Service.shutdown`) within ``timeout_s`` wall seconds; False
-    when it did not. A task of the service still running :data:`RECANCEL_S` after it was
-    cancelled is cancelled again: under Python 3.11 ``asyncio.wait_for`` drops a
-    cancellation that arrives with its result (a TCP input's read while data flows: the
-    fleet demo's DVL), and that task would read on for ever."""
+    when it did not (its inputs' reads end on cancellation:
+    :meth:`drivers.transports.Transport._idle`)."""
     svc.request_stop()
-    done = asyncio.ensure_future(svc.shutdown())
-    deadline = time.monotonic() + timeout_s
-    while not done.done() and time.monotonic() < deadline:
-        await asyncio.wait([done], timeout=min(RECANCEL_S, max(0.0, deadline - time.monotonic())))
-        for task in list(getattr(svc, "_tasks", ())):
-            if not task.done():
-                task.cancel()
-    if not done.done():
-        done.cancel()
+    try:
+        async with asyncio.timeout(timeout_s):
+            await svc.shutdown()
+    except TimeoutError:
         return False
-    done.result()
     return True
 
 
