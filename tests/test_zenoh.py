@@ -225,3 +225,21 @@ def test_the_docs_name_the_schemas_the_wire_carries():
             if m.group(0) != current[m.group(1)] and (rel, m.group(0)) not in HISTORY:
                 wrong.append(f"{rel}: {m.group(0)}")
     assert wrong == []
+
+
+def test_the_shore_table_shows_a_records_control_characters_not_acts_on_them():
+    """A vehicle id or an event with an escape sequence (clear the screen, retitle the
+    terminal) is printed as \\xNN, each line still one line."""
+    import msgspec
+
+    from onboard.apps.shore import ShoreView
+    from onboard.core.messages import HealthRecord
+
+    view = ShoreView()
+    evil = "b\x1b[2J\x1b]0;pwned\x07"
+    view.feed(f"onboard/{evil}/health",
+              msgspec.json.encode(HealthRecord(vehicle=evil, t=1.0,
+                                               events=["gnss lost\x1b[31m\r\nfake line"])))
+    table = view.table()
+    assert "\x1b" not in table and "\x07" not in table and "\r" not in table
+    assert "b\\x1b[2J\\x1b]0;pwned\\x07" in table and "gnss lost\\x1b[31m\\x0d\\x0afake" in table

@@ -75,6 +75,14 @@ def fmt_value(name: str, v: float) -> str:
     return f"{name}={v:+.3g}" if abs(v) < 1000 else f"{name}={v:+.0f}"
 
 
+CONTROL_SHOWN = {c: f"\\x{c:02x}" for c in (*range(32), *range(127, 160))}
+"""The control characters a record's text may carry (a vehicle id, an event, a key),
+shown as ``\\xNN`` on the terminal rather than acted on (an escape sequence would move
+the cursor, retitle or clear the operator's terminal; a newline would forge a line)."""
+TABLE_SHOWN = {c: s for c, s in CONTROL_SHOWN.items() if c != 10}
+"""The same for a whole table, its own newlines kept."""
+
+
 class ShoreView:
     """The shore's picture of one or more vehicles, fed by Zenoh samples (any thread).
 
@@ -186,7 +194,8 @@ class ShoreView:
                 alive = v in self.alive
             t_ref = max([r.t for _, r in est] + ([h.t] if h else []), default=0.0)
             flag = "alive" if alive else "no liveliness token"
-            out.append(f"== {v} ({flag})" + (f", mode {h.mode}" if h and h.mode else ""))
+            out.append(f"== {v.translate(CONTROL_SHOWN)} ({flag})"
+                       + (f", mode {h.mode}" if h and h.mode else ""))
             for p, r in est:
                 vals = "  ".join(fmt_value(q, x) for q, x in r.values.items()
                                  if not q.startswith("std_"))
@@ -207,11 +216,12 @@ class ShoreView:
                 if nis:
                     out.append("  NIS/dof    " + "  ".join(nis))
         with self.lock:
-            evs = [f"  {v}: {e}" for v, e in self.events if vehicle in ("*", v)]
+            evs = [f"  {v.translate(CONTROL_SHOWN)}: {e.translate(CONTROL_SHOWN)}"
+                   for v, e in self.events if vehicle in ("*", v)]
         if evs:
             out.append("events:")
             out.extend(evs[-8:])
-        return "\n".join(out) if out else "no vehicle seen yet"
+        return "\n".join(out).translate(TABLE_SHOWN) if out else "no vehicle seen yet"
 
 
 def open_session(connect: list[str] | None, listen: list[str] | None, mode: str | None,
