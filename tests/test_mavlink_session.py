@@ -243,9 +243,11 @@ def test_a_message_that_arrives_below_its_rate_is_reported_at_the_rate_it_arrive
         ap.poll(t)
     att = [e for e in events if "ATTITUDE" in e and "no longer asked" in e]
     assert len(att) == 1, events
-    assert att[0].startswith("autopilot: ATTITUDE arrives at 10.0 Hz, below the 25 Hz "
+    assert att[0].startswith("autopilot: ATTITUDE arrives at 10.0 Hz, too slow for the 25 Hz "
                              "requested (asked 4 times)"), att
     assert "not sent" not in att[0]
+    from onboard.service import events as service_events
+    assert service_events.severity(att[0]) == service_events.MAV_SEVERITY_WARNING
     assert sess.streams["ATTITUDE"].state == "slow"
     assert sess.streams["GPS_RAW_INT"].state == "absent"
     assert any("GPS_RAW_INT not sent by the autopilot" in e for e in events), events
