@@ -289,11 +289,14 @@ def test_wind_cov_says_unknown_as_common_xml_does(listener):
                          std={"north": 0.05, "east": 0.04, "down": 0.02})
     fresh = EstimateRecord(vehicle="b", pipeline="current", t=3.0,
                            values={"north": 0.0, "east": 0.0}, std={})
+    dived = EstimateRecord(vehicle="b", pipeline="nav", t=2.0, values={"depth": 12.5})
     for i, rec in enumerate((boat, auv, fresh)):
-        pub.publish_estimates([rec], now=1.0 * i)
+        pub.publish_estimates([rec] + ([dived] if rec is auv else []), now=1.0 * i)
     pub.close()
     w = [m for m in receive_mavlink(listener) if m.get_type() == "WIND_COV"]
     assert len(w) == 3
+    # wind_alt, the altitude (MSL) it was measured at: the surface, then 12.5 m down
+    assert w[0].wind_alt == 0.0 and w[1].wind_alt == pytest.approx(-12.5)
     assert math.isnan(w[0].wind_z) and math.isnan(w[0].var_vert) and w[0].vert_accuracy == 0.0
     assert w[0].horiz_accuracy == pytest.approx(math.hypot(0.05, 0.04))
     assert w[1].wind_z == pytest.approx(0.01) and w[1].var_vert == pytest.approx(0.02 ** 2)

@@ -21,8 +21,9 @@ WIND_COV           the **water current** (not wind): wind_x/y/z = current       
                    std_north^2 + std_east^2, var_vert = std_down^2 (m^2/s^2,
                    variances as PX4 sends them, not common.xml's 1-STD;
                    NaN if unknown), horiz_accuracy = hypot(std_north,
-                   std_east), vert_accuracy = std_down (m/s, 0 if unknown), so
-                   ground stations draw it with their wind widget
+                   std_east), vert_accuracy = std_down (m/s, 0 if unknown),
+                   wind_alt = -depth (m MSL; 0, the surface, without a depth),
+                   so ground stations draw it with their wind widget
 ESTIMATOR_STATUS   health: test ratios sqrt(NIS)/3 (1 = a 3-sigma innovation) of    1 Hz
                    the velocity (vel_ratio), position (pos_horiz_ratio), depth
                    (pos_vert_ratio) and heading (mag_ratio) channels; flags
@@ -353,9 +354,12 @@ class MavlinkPublisher:
             sn, se = s.get("north", math.nan), s.get("east", math.nan)
             sd = s.get("down", math.nan)
             h_acc = math.hypot(sn, se)
+            nav = lat.get("nav")
+            depth = nav.values.get("depth") if nav is not None else None
+            alt = -float(depth) if depth is not None else 0.0  # MSL: the surface, or -depth
             self._send(mavlink2.MAVLink_wind_cov_message(
                 usec, float(v["north"]), float(v["east"]), float(v.get("down", math.nan)),
-                sn * sn + se * se, sd * sd, 0.0,
+                sn * sn + se * se, sd * sd, alt,
                 h_acc if math.isfinite(h_acc) else ACCURACY_UNKNOWN,
                 abs(sd) if math.isfinite(sd) else ACCURACY_UNKNOWN))
         if self.cfg.odometry:
