@@ -54,6 +54,7 @@ from onboard.sitl.emitters import DVL_DRIVER_COMPONENT, DVL_DRIVER_SYSTEM, Mavli
 REBOOT_S = 2.0
 """How long (s) the autopilot is silent while it reboots."""
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_GET_MESSAGE_INTERVAL = 510
 MAV_RESULT_ACCEPTED = 0
 MAV_RESULT_UNSUPPORTED = 3
 MAV_RESULT_FAILED = 4
@@ -132,6 +133,7 @@ class SimAutopilot:
         self.params: dict[str, tuple[float, int]] = {
             p.name: (float(p.value), MAV_PARAM_TYPE_INT16) for p in params}
         self.params["FRAME_CLASS"] = (float(frame_class), MAV_PARAM_TYPE_INT8)
+        self.params["SYSID_THISMAV"] = (float(encoder.mav.srcSystem), MAV_PARAM_TYPE_INT16)
         for name in SR_PARAMS.values():
             self.params[name] = (0.0, MAV_PARAM_TYPE_INT16)
         self.intervals: dict[int, float] = {}
@@ -176,11 +178,16 @@ class SimAutopilot:
         if target[0] not in (0, me_sys) or target[1] not in (0, me_comp):
             return
         if typ == "COMMAND_LONG" and msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = (self._set_interval(int(msg.param1), int(msg.param2))
+            self._ack(t, msg, self._set_interval(int(msg.param1), int(msg.param2))
                       if self.message_interval else MAV_RESULT_UNSUPPORTED)
-            self._write(t, self._pack(self.enc.mav.command_ack_encode(
-                MAV_CMD_SET_MESSAGE_INTERVAL, result, 0, 0, msg.get_srcSystem(),
-                msg.get_srcComponent())))
+        elif typ == "COMMAND_LONG" and msg.command == MAV_CMD_GET_MESSAGE_INTERVAL:
+            mid = int(msg.param1)
+            iv = self.intervals.get(mid)
+            self._write(t, self._pack(self.enc.mav.message_interval_encode(
+                mid, int(round(iv * 1e6)) if iv is not None else -1)))
+            self._ack(t, msg, MAV_RESULT_ACCEPTED)
+        elif typ == "COMMAND_LONG":   # what this autopilot does not model: said so
+            self._ack(t, msg, MAV_RESULT_UNSUPPORTED)
         elif typ == "REQUEST_DATA_STREAM":
             groups = list(STREAM_GROUP_MESSAGES) if msg.req_stream_id == 0 else [msg.req_stream_id]
             for g in groups:
@@ -203,6 +210,11 @@ class SimAutopilot:
         elif typ == "TIMESYNC" and msg.tc1 == 0:  # answered with our boot time in ns
             self._write(t, self._pack(self.enc.mav.timesync_encode(
                 int(round((t - self.enc.boot_t0) * 1e9)), msg.ts1)))
+
+    def _ack(self, t: float, msg, result: int) -> None:
+        """COMMAND_ACK of ``msg``'s command with ``result``, to its sender."""
+        self._write(t, self._pack(self.enc.mav.command_ack_encode(
+            msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())))
 
     def _set_interval(self, msgid: int, interval_us: int) -> int:
         if msgid not in STREAMABLE:

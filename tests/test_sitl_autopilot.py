@@ -268,3 +268,26 @@ def test_the_autopilots_frames_are_numbered_as_sent_and_parse_whole():
     mav = mavlink2.MAVLink(None)
     parsed = [m for f in mine for m in (mav.parse_buffer(f) or [])]
     assert len(parsed) == len(mine) and not any(m.get_type() == "BAD_DATA" for m in parsed)
+
+
+def test_every_command_is_answered_as_ardupilot_answers():
+    """GET_MESSAGE_INTERVAL gets MESSAGE_INTERVAL (-1: not streamed) and an ACK; a command
+    this autopilot does not model gets COMMAND_ACK UNSUPPORTED, not silence; SYSID_THISMAV
+    is a parameter, as on every ArduPilot."""
+    sim = Simulation("jaiabot-turns", 1)
+    sink = LoopSink()
+    ap = autopilot_for(sim, [sink], stream_unasked=False)
+    send(sink, GCS.command_long_encode(1, 1, 511, 0, 30, 200_000, 0, 0, 0, 0, 0))
+    send(sink, GCS.command_long_encode(1, 1, 510, 0, 30, 0, 0, 0, 0, 0, 0))
+    send(sink, GCS.command_long_encode(1, 1, 510, 0, 24, 0, 0, 0, 0, 0, 0))
+    send(sink, GCS.command_long_encode(1, 1, 246, 0, 1, 0, 0, 0, 0, 0, 0))   # reboot
+    send(sink, GCS.param_request_read_encode(1, 1, b"SYSID_THISMAV", -1))
+    for t, samples, _ in sim.steps(0.5):
+        ap.emit(t, samples)
+    got = decoded(sink)
+    acks = [(m.command, m.result) for m in got if m.get_type() == "COMMAND_ACK"]
+    assert acks == [(511, 0), (510, 0), (510, 0), (246, 3)], acks
+    ivs = [(m.message_id, m.interval_us) for m in got if m.get_type() == "MESSAGE_INTERVAL"]
+    assert ivs == [(30, 200_000), (24, -1)]
+    assert [m.param_value for m in got if m.get_type() == "PARAM_VALUE"
+            and m.param_id == "SYSID_THISMAV"] == [1.0]
