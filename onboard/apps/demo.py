@@ -593,6 +593,8 @@ async def run_demo(scenario: str = DEFAULT_SCENARIO, duration_s: float = DEFAULT
 
 STOP_TIMEOUT_S = 20.0
 """Wall seconds the service is given to shut down."""
+
+
 async def stop_service(svc: Any, timeout_s: float) -> bool:
     """Stop ``svc`` (:meth:`Service.shutdown`) within ``timeout_s`` wall seconds; False
     when it did not (its inputs' reads end on cancellation:

@@ -57,8 +57,6 @@ FLEET_DURATION_S = 300.0
 FLEET_SPEED = 5.0
 """Clock speed-up of the fleet demo (several simulators and services share the CPU)."""
 Z95 = 1.96
-STOP_TIMEOUT_S = 20.0
-"""Wall seconds a member's service is given to shut down."""
 
 
 class FleetMember(Protocol):
@@ -156,11 +154,11 @@ class ServiceMember:
         await self.svc.start()
 
     async def stop(self) -> None:
-        """Shut the service down (given :data:`STOP_TIMEOUT_S`)."""
+        """Shut the service down (given :data:`onboard.apps.demo.STOP_TIMEOUT_S`)."""
         if self.svc is not None:
             svc, self.svc = self.svc, None
-            if not await demo.stop_service(svc, STOP_TIMEOUT_S):
-                print(f"{self.name}: not stopped after {STOP_TIMEOUT_S:g} s, left behind",
+            if not await demo.stop_service(svc, demo.STOP_TIMEOUT_S):
+                print(f"{self.name}: not stopped after {demo.STOP_TIMEOUT_S:g} s, left behind",
                       file=sys.stderr, flush=True)
 
 

@@ -710,9 +710,9 @@ def run(engine: Engine, samples: Iterable[Sample], on_tick: TickCallback,
     segment's first stamp. Ticks fall on the grid ``t0 + k / rate_hz`` from the (segment's)
     first sample's time ``t0``; each tick at time ``T`` sees exactly the samples with
     ``t <= T``. Across a gap in the log longer than ``gap_s`` seconds the grid jumps
-    forward to the first sample after it instead of ticking through empty time. With ``tick_times`` (a recording of
-    live ticks) those times are used instead of the grid and the time line, which
-    reproduces a live run exactly.
+    forward to the first sample after it instead of ticking through empty time. With
+    ``tick_times`` (a recording of live ticks) those times are used instead of the grid
+    and the time line, which reproduces a live run exactly.
     """
     period = 1.0 / engine.cfg.engine.rate_hz
     ticks = 0

@@ -481,12 +481,12 @@ class HeadingCourseCheck:
         # (tests/test_integrity.py)
         offset = math.atan2(sum(self._sin), sum(self._cos))
         sog_mean = sum(self._sog) / n
-        if span < 0.8 * HEADING_WINDOW_S and not (
-                abs(offset) > HEADING_GROSS_RAD and sog_mean > HEADING_GROSS_MIN_SPEED_MPS):
+        behind = abs(offset) > HEADING_GROSS_RAD and sog_mean > HEADING_GROSS_MIN_SPEED_MPS
+        if span < 0.8 * HEADING_WINDOW_S and not behind:
             return None   # not judged before the window has filled, unless gross
         self.offset_rad = offset
         self.mismatch = abs(offset) > crab_bound(sog_mean)
-        self.behind = abs(offset) > HEADING_GROSS_RAD and sog_mean > HEADING_GROSS_MIN_SPEED_MPS
+        self.behind = behind
         if not self.mismatch:
             self.worst = self.fastest = None
             return False

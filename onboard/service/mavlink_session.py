@@ -325,9 +325,9 @@ class MavlinkSession:
                     if st.received_hz > 0.0:
                         st.state = "slow"
                         self.on_event(f"{self.name}: {st.name} arrives at "
-                                      f"{st.received_hz:.1f} Hz, too slow for the {st.rate_hz:g} Hz "
-                                      f"requested (asked {st.reasks + 1} times); no longer "
-                                      f"asked")
+                                      f"{st.received_hz:.1f} Hz, too slow for the "
+                                      f"{st.rate_hz:g} Hz requested (asked "
+                                      f"{st.reasks + 1} times); no longer asked")
                     else:
                         st.state = "absent"
                         self.on_event(f"{self.name}: {st.name} not sent by the autopilot "
