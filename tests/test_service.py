@@ -29,7 +29,9 @@ from onboard.engine import Engine
 from onboard.service.daemon import Service
 from onboard.service.publishers.zenoh_pub import open_router
 from onboard.service.recorder import replay_recording
-from onboard.apps.service_bench import TrafficGenerator, free_tcp_port, free_udp_port
+from onboard.sitl.link import ARDUSUB_TETHER
+from onboard.apps.service_bench import (
+    LinkedTraffic, TrafficGenerator, free_tcp_port, free_udp_port)
 from tests.helpers.service_config import service_config
 
 REPO = Path(__file__).resolve().parent.parent
@@ -346,6 +348,54 @@ def test_ticks_fed_at_a_steady_phase_wake_once_at_the_predicted_arrival(tmp_path
     # watches); the bound leaves room for a loaded machine
     assert svc.stats.tick_watches < svc.stats.ticks / 2, (svc.stats.tick_watches, svc.stats.ticks)
     after_grid = sum(ts > math.floor(t * 10.0 + 1e-9) / 10.0 for t, ts in fed) / len(fed)
+    assert after_grid > 0.5, after_grid
+
+
+def test_ticks_over_a_link_whose_delay_wanders_still_fire_once_per_grid_time(tmp_path):
+    """The autopilot's frames and the NMEA late by a delay that wanders as the ArduSub
+    tlog's did (``sitl.link.ARDUSUB_TETHER``: 8 ms, spread 7 ms, 0.25 s of memory; the
+    receiver on a phase of its own): the predictions miss more often, and still every grid
+    time gets one tick within the wait, none carries a sample measured after it fired, and
+    most carry one measured after their grid time."""
+    port, nmea_port = free_udp_port(), free_udp_port()
+    cfg = service_config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}"},
+                                  {"kind": "nmea", "url": f"udp:127.0.0.1:{nmea_port}"}],
+                         zenoh={"enabled": False}, mavlink={"enabled": False},
+                         recorder={"enabled": False})
+    ticks: list[tuple[float, float | None]] = []
+    traffic = LinkedTraffic(port, nmea_port, ARDUSUB_TETHER)
+    stop = threading.Event()
+
+    def send() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+            t0 = time.monotonic()
+            for t, to, f in traffic.until(4.0):
+                time.sleep(max(0.0, t0 + t - time.monotonic()))
+                if stop.is_set():
+                    return
+                udp.sendto(f, ("127.0.0.1", to))
+
+    async def main() -> Service:
+        svc = Service(cfg, state_dir=tmp_path, on_tick=lambda t, recs: ticks.append(
+            (t, recs[0].t_sensor if recs else None)))
+        await svc.start()
+        sender = threading.Thread(target=send, daemon=True)
+        sender.start()
+        await asyncio.sleep(3.5)
+        stop.set()
+        sender.join()
+        svc.request_stop()
+        await svc.shutdown()
+        return svc
+
+    svc = asyncio.run(asyncio.wait_for(main(), TIMEOUT))
+    fed = [(t, ts) for t, ts in ticks if ts is not None]
+    assert len(fed) > 20 and svc.stats.tick_skips == 0
+    grid = [math.floor(t * 10.0 + 1e-9) / 10.0 for t, _ in fed]
+    assert len(set(grid)) == len(grid)  # one tick per grid time
+    assert all(0.0 <= t - g <= 0.05 + 1e-9 for (t, _), g in zip(fed, grid))
+    assert all(ts <= t for t, ts in fed)
+    after_grid = sum(ts > g for (_, ts), g in zip(fed, grid)) / len(fed)
     assert after_grid > 0.5, after_grid
 
 

@@ -27,7 +27,10 @@ reports:
 
 from __future__ import annotations
 
+import dataclasses
 import gc
+import heapq
+import itertools
 import json
 import math
 import os
@@ -40,18 +43,23 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Iterator
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from onboard.core.geo import LocalFrame
 from onboard.drivers.nmea import encode_gga, encode_hdt, encode_rmc
+from onboard.sitl.link import DelayedClock, LinkDelay
 
 EPOCH_S = 1_767_225_600.0
 """UTC of t = 0 in the generated NMEA (2026-01-01)."""
 ORIGIN = (41.49, -71.42)
 ORIGIN_FRAME = LocalFrame(*ORIGIN)
 """The traffic's local frame (deg origin)."""
+GNSS_PHASE_S = 0.0113
+"""Over a real link, the GNSS receiver's epochs lie this far (s) after the autopilot's
+50 Hz grid: two devices on clocks of their own (any phase but 0 and 10 ms would do)."""
 
 
 class TrafficGenerator:
@@ -107,6 +115,41 @@ class TrafficGenerator:
         if k % 5 == 0:
             out.append(encode_hdt(hdg))
         return out
+
+
+class LinkedTraffic:
+    """:class:`TrafficGenerator`'s frames as they reach a service on two UDP ports
+    (``mav_port``, ``nmea_port``) over ``link`` (:mod:`sitl.link`: the autopilot's frames
+    and the NMEA each late by a wandering delay of its own, the receiver's epochs
+    :data:`GNSS_PHASE_S` off the autopilot's grid), or on their grid times (None)."""
+
+    def __init__(self, mav_port: int, nmea_port: int, link: LinkDelay | None = None) -> None:
+        self.gen = TrafficGenerator()
+        self.ports = (mav_port, nmea_port)
+        self.arrival: tuple[Callable[[float], float], Callable[[float], float]]
+        if link is None:
+            self.arrival = (lambda t: t), (lambda t: t)
+        else:
+            mav = DelayedClock(link, np.random.default_rng(1))
+            gnss = DelayedClock(link, np.random.default_rng(2))
+            self.arrival = mav.arrival, (lambda t: gnss.arrival(t + GNSS_PHASE_S))
+        self._due: list[tuple[float, int, int, bytes]] = []
+        self._order = itertools.count()
+        self._k = 0
+
+    def until(self, t_end: float) -> Iterator[tuple[float, int, bytes]]:
+        """``(arrival s, port, frame)`` of every frame arriving before ``t_end`` (s, from
+        the traffic's t = 0) not yielded before, in the order they arrive."""
+        while self._k / 50.0 < t_end:
+            t = self._k / 50.0
+            for port, frames, arrival in zip(self.ports, (self.gen.mavlink(t), self.gen.nmea(t)),
+                                             self.arrival):
+                for f in frames:
+                    heapq.heappush(self._due, (arrival(t), next(self._order), port, f))
+            self._k += 1
+        while self._due and self._due[0][0] < t_end:
+            t_arrival, _, port, f = heapq.heappop(self._due)
+            yield t_arrival, port, f
 
 
 def free_udp_port() -> int:
@@ -337,7 +380,7 @@ def _profile_window(lines: list[dict[str, Any]], wall_s: float) -> dict[str, Any
 
 def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
             pipelines: tuple[str, ...] | None = None, nice: int = -5,
-            profile: bool = False) -> dict[str, Any]:
+            profile: bool = False, link: LinkDelay | None = None) -> dict[str, Any]:
     """Run the service under nominal load for ``duration_s`` wall seconds (after
     ``warmup_s``); return the figures of the module docstring (and a few more).
 
@@ -347,7 +390,8 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
     permitted (root or CAP_SYS_NICE), else ignored; ``nice_applied`` says which.
     ``profile``: the child is :func:`profiled_run` and ``profile`` in the result has its
     main thread's CPU per component over the window (the timing adds ~1 µs per profiled
-    call to the figures).
+    call to the figures). ``link``: the traffic reaches the service as over that link
+    (:class:`LinkedTraffic`); None sends every frame on its grid time.
     """
     from onboard.service.publishers.zenoh_pub import open_router
 
@@ -417,32 +461,23 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
                 break
         if proc.poll() is not None:
             raise RuntimeError("service exited: " + proc.stderr.read().decode()[-500:])  # type: ignore[union-attr]
-        gen = TrafficGenerator()
         tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         t0 = time.monotonic()
-        k = 0
         cpu0 = wall0 = None
         threads0: dict[str, float] | None = None
-        total = warmup_s + duration_s
-        while True:
-            t = k / 50.0
-            if t > total:
-                break
-            delay = t0 + t - time.monotonic()
+        for t_send, port, f in LinkedTraffic(mav_port, nmea_port, link).until(
+                warmup_s + duration_s):
+            delay = t0 + t_send - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            if cpu0 is None and t >= warmup_s:
+            if cpu0 is None and t_send >= warmup_s:
                 cpu0, wall0 = _proc_cpu_s(proc.pid), time.monotonic()
                 threads0 = _threads_cpu_s(proc.pid)
                 switches0 = _switches(proc.pid)
                 if profile:
                     proc.send_signal(signal.SIGUSR1)
                 measuring.set()
-            for f in gen.mavlink(t):
-                tx.sendto(f, ("127.0.0.1", mav_port))
-            for f in gen.nmea(t):
-                tx.sendto(f, ("127.0.0.1", nmea_port))
-            k += 1
+            tx.sendto(f, ("127.0.0.1", port))
         measuring.clear()
         cpu1, wall1 = _proc_cpu_s(proc.pid), time.monotonic()
         threads1 = _threads_cpu_s(proc.pid)
@@ -472,6 +507,7 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
             "nice_applied": nice if nice_ok else 0,
             "loadavg_1min": os.getloadavg()[0],
             "duration_s": wall1 - wall0,
+            "link": None if link is None else dataclasses.asdict(link),
                         "load": "IMU 50 Hz, servo 10 Hz, heartbeat 1 Hz (MAVLink/UDP); GNSS 5 Hz, "
                     "heading 10 Hz (NMEA/UDP)",
         }
