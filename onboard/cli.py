@@ -111,6 +111,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reboot the simulated autopilot at S seconds (repeatable)")
     p.add_argument("--other-components", action="store_true",
                    help="a ground station and a camera share the --link")
+    p.add_argument("--link-delay", choices=("none", "tether"), default="none",
+                   help="with --realtime: the live outputs' frames late by a delay that "
+                        "wanders as a real link's (tether: the ArduSub tlog's, sitl.link); "
+                        "default none: each frame on its simulation time")
     p.set_defaults(handler="onboard.sitl.cli:main")
 
     p = sub.add_parser("replay", help="run the pipelines over a recorded log")

@@ -17,7 +17,9 @@ On ``--link`` the simulated autopilot behaves as ArduPilot's MAVLink side
 (SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM), parameters on request. ``--stream-unasked``
 streams everything unasked instead; ``--reboot-at S`` reboots the autopilot at S seconds
 (repeatable); ``--other-components`` adds a ground station (system 255) and a camera
-(component 100) sending look-alike messages on the same link.
+(component 100) sending look-alike messages on the same link. The live outputs send each
+frame on its simulation time; ``--link-delay tether`` sends them late as over a real link
+(:mod:`sitl.link`: a delay that wanders as the ArduSub tlog's did, each output its own).
 
 Outputs: ``--tlog`` (MAVLink telemetry log; the scenario metadata an estimator may read is
 written beside it as ``<name>.scenario.json``), ``--truth`` (hidden truth, JSON lines),
@@ -43,10 +45,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from onboard.core.errors import OutputFailed, UsageError
 from onboard.core.outputs import Output, check as check_outputs
 from onboard.sitl.emitters import PtySink, Sink, TcpServerSink, TlogSink, open_link
 from onboard.sitl.guidance import Controller
+from onboard.sitl.link import ARDUSUB_TETHER, DelayedSink
 from onboard.sitl.runner import jsonable, run
 from onboard.sitl.scenarios import SCENARIOS, Scenario, get
 
@@ -235,6 +240,13 @@ def main(args: argparse.Namespace) -> int:
                     raise UsageError(f"--dvl: cannot listen on {args.dvl}: {err}") from None
                 dvl_json.append(srv)
                 print(f"DVL JSON TCP server on port {srv.port}", flush=True)
+        if getattr(args, "link_delay", "none") == "tether":
+            if not args.realtime:
+                raise UsageError("--link-delay goes with --realtime")
+            rng = np.random.default_rng(args.seed)
+            live, nmea, dvl_json, pd6 = ([DelayedSink(s, ARDUSUB_TETHER, rng.spawn(1)[0])
+                                         for s in sinks]
+                                        for sinks in (live, nmea, dvl_json, pd6))
         options = {"stream_unasked": bool(getattr(args, "stream_unasked", False)),
                    "others": bool(getattr(args, "other_components", False)),
                    "reboot_at": list(getattr(args, "reboot_at", None) or [])}

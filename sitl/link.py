@@ -20,14 +20,19 @@ computer on the autopilot's serial line sees at most that (it is one hop before 
 topside); a receiver's NMEA on a serial line adds the sentences' transmission time.
 
 The simulator's devices otherwise send exactly on their grid, so a service they feed
-never meets an input whose phase wanders; :class:`LinkDelay` is what the service bench
-(``onboard.apps.service_bench``) puts between its traffic and the service.
+never meets an input whose phase wanders; :class:`DelayedSink` puts such a link between a
+live output of ``onboard sitl --realtime`` and its reader (``--link-delay tether``), and the
+service bench (``onboard.apps.service_bench``) between its traffic and the service.
 """
 
 from __future__ import annotations
 
 import math
+import queue
+import threading
+import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -71,3 +76,53 @@ class DelayedClock:
         self._t = t
         self._last = max(self._last, t + max(0.0, d.mean_s + self._x))
         return self._last
+
+
+class DelayedSink:
+    """A live output (``sitl.emitters``' UDP, TCP server or pseudo-terminal sink) whose
+    frames leave as over a link of delay ``delay``: a frame written at simulation time
+    ``t`` is sent ``DelayedClock.arrival(t) - t`` later than it was written, in order, from
+    a thread of its own (the simulation never waits for it). What the reader sends back
+    (:meth:`read`) is read at once. Every other attribute is the wrapped sink's."""
+
+    def __init__(self, sink: Any, delay: LinkDelay, rng: np.random.Generator) -> None:
+        self.sink = sink
+        self._clock = DelayedClock(delay, rng)
+        self._queue: queue.SimpleQueue[tuple[float, float, bytes] | None] = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._base: float | None = None
+        self._thread = threading.Thread(target=self._send, name="sitl-link", daemon=True)
+        self._thread.start()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.sink, name)
+
+    def write(self, t: float, frame: bytes) -> None:
+        """Queue ``frame`` of simulation time ``t`` (s) for its arrival time."""
+        now = time.monotonic()
+        if self._base is None:
+            self._base = now - t
+        self._queue.put((max(now, self._base + self._clock.arrival(t)), t, frame))
+
+    def read(self) -> bytes:
+        """What the reader sent back (never blocks; empty for a sink that reads nothing)."""
+        read = getattr(self.sink, "read", None)
+        if read is None:
+            return b""
+        with self._lock:
+            return read()
+
+    def _send(self) -> None:
+        while (item := self._queue.get()) is not None:
+            due, t, frame = item
+            wait = due - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            with self._lock:
+                self.sink.write(t, frame)
+
+    def close(self) -> None:
+        """Send what is queued, then close the wrapped sink."""
+        self._queue.put(None)
+        self._thread.join()
+        self.sink.close()
