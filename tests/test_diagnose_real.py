@@ -109,3 +109,25 @@ def test_blueboat_literal_columns_find_the_thruster_mapping(shared_data, tmp_pat
     assert f["actuator_mapping"]["evidence"]["held_out_gain"] > 0.3
     assert doc["holdout_error_before"] > 0.7
     assert doc["holdout_error_after"] < 0.25
+
+
+@pytest.mark.parametrize("name, says", [
+    ("survey_boat_arduino_rc/Test4_fast.txt",
+     # measured: the offset fitted on the selection part took the test part 0.168 -> 0.267
+     "tried a compass deviation (compass_deviation) and a constant offset (heading_bias) "
+     "and kept neither (the offset fitted made the test part worse"),
+    ("usv_rtk_gnss_heading_nmea_shenzhen/202412051751.txt",
+     "this diagnosis measured a constant offset of -73."),
+], ids=["survey-test4", "shenzhen-1751"])
+def test_the_heading_mismatch_warning_says_what_this_diagnosis_found(shared_data, tmp_path,
+                                                                     name, says):
+    """In diagnose's own output the heading/course warning does not send the user back to
+    ``onboard diagnose``: it says what this diagnosis measured, or that it tried an
+    offset and a deviation and kept neither."""
+    log = shared_data / name
+    if not log.exists():
+        pytest.skip(f"{log} not in the shared data")
+    cfg, _ = choose_config(str(log), None)
+    doc = diagnose(str(log), cfg, tmp_path)
+    msgs = [w["message"] for w in doc["warnings"] if w["code"] == "heading_course_mismatch"]
+    assert msgs and all(says in m and "measured by onboard diagnose" not in m for m in msgs)

@@ -175,6 +175,11 @@ the water."""
 HEADING_GROSS_MIN_S = 3.0
 """The least span (s) of moving fixes of a window judged early."""
 
+HEADING_OFFSET_HINT = ("a constant offset is measured by onboard diagnose LOG --write-config "
+                       "FILE ([corrections] heading_offset_rad)")
+"""How ``heading_course_mismatch`` ends: where the offset is measured. ``onboard
+diagnose`` replaces it in its own output with what its diagnosis found."""
+
 LEG_S = 5.0
 """A straight leg of the compass-deviation fit lasts this long (s)."""
 LEG_GAP_S = 2.0
@@ -1275,8 +1280,7 @@ class IntegrityMonitor:
                 f"{math.degrees(hc.fastest[0]):.1f} deg at its fastest, "
                 f"{hc.fastest[1]:.1f} m/s): "
                 + (f"{held.lstrip(', ')} withheld until they agree again; " if held else "")
-                + "a constant offset is measured by onboard diagnose LOG --write-config "
-                "FILE ([corrections] heading_offset_rad)"), details=(
+                + HEADING_OFFSET_HINT), details=(
                 f"the median over {HEADING_WINDOW_S:.0f} s; a misaligned compass or antenna "
                 "baseline, or a heading from another vehicle; the rows withheld: "
                 "summary.json withheld_rows"))

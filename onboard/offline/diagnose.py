@@ -13,7 +13,9 @@ Options in the config's ``[diagnose]`` table (:class:`onboard.core.config.Diagno
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
+from typing import Any
 
 import msgspec
 
@@ -23,6 +25,7 @@ from onboard.offline.closure.effects import ALL
 from onboard.offline.closure.select import select
 from onboard.core.errors import OutputFailed, UsageError
 from onboard.core.outputs import Output, check as check_outputs, existing
+from onboard.monitor.integrity import HEADING_OFFSET_HINT
 from onboard.offline.replay import choose_config, print_warnings
 
 
@@ -68,7 +71,7 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
     doc = report.write(sel, log, out_dir)
     doc["sensor_noise"] = noise.identify(ds.raw)
     if ds.warnings:   # what reading the log raised (time outliers, jumps), beside the fit
-        doc["warnings"] = msgspec.to_builtins(ds.warnings)
+        doc["warnings"] = [_answered(w, doc) for w in msgspec.to_builtins(ds.warnings)]
         doc["log_start_s"] = float(ds.t[0])
     doc = report._clean(doc)
     (out_dir / "diagnosis.json").write_text(json.dumps(doc, indent=2) + "\n")
@@ -84,6 +87,40 @@ def diagnose(log: str, cfg, out_dir: Path, declared: tuple[str, ...] = (), *,
             raise OutputFailed(f"--write-config {write_config}: cannot write: "
                                f"{err.strerror}; diagnosis.json is written") from None
     return doc
+
+
+def _answered(warning: dict[str, Any], doc: dict[str, Any]) -> dict[str, Any]:
+    """``warning`` with its pointer to ``onboard diagnose`` replaced by what this
+    diagnosis (``doc``) found: a heading/course mismatch says whether a constant offset or
+    a compass deviation was measured, or that both were tried and neither kept (and what
+    the offset did to the test part)."""
+    msg = warning.get("message", "")
+    if warning.get("code") != "heading_course_mismatch" or HEADING_OFFSET_HINT not in msg:
+        return warning
+    heading = {"heading_bias": "a constant offset (heading_bias)",
+               "compass_deviation": "a compass deviation (compass_deviation)"}
+    tried = [e for e in doc.get("effects", []) if e.get("name") in heading]
+    found = [e["name"] for e in tried if e.get("detected")]
+    if not tried:
+        return warning
+    if found:
+        bias = next((e["params"].get("bias") for e in tried
+                     if e["name"] == "heading_bias" and e.get("detected")), None)
+        if bias is not None:
+            heading["heading_bias"] = f"a constant offset of {math.degrees(bias):.1f} deg (heading_bias)"
+        answer = (f"this diagnosis measured {' and '.join(heading[n] for n in found)}: "
+                  "diagnosis.json; --write-config FILE writes it")
+    else:
+        answer = (f"this diagnosis tried {' and '.join(heading[e['name']] for e in tried)} "
+                  f"and kept {'neither' if len(tried) > 1 else 'nothing'}")
+        worse = next((r for r in doc.get("rejected_on_test", [])
+                      if r.get("name") == "heading_bias"), None)
+        if worse is not None:
+            answer += (f" (the offset fitted made the test part worse: {doc['holdout_metric']} "
+                       f"{worse['test_error_without']:.3g} -> {worse['test_error_with']:.3g})")
+        answer += ("; the heading is off the course by more than that explains: check the "
+                   "compass's mounting and calibration, and whose heading it is")
+    return {**warning, "message": msg.replace(HEADING_OFFSET_HINT, answer)}
 
 
 DIAGNOSE_WRITES = ("diagnosis.json", "report.html")
