@@ -10,6 +10,7 @@ import math
 import os
 import re
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -478,3 +479,58 @@ def test_progress_redraws_one_line_on_a_terminal_and_prints_a_line_per_log_other
     p.add({"status": "failed", "name": "y", "error": "bad"})
     p.close()
     assert capsys.readouterr().err == "[1/2] skipped (done before) x\n[2/2] failed y: bad\n"
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (Linux /proc)."""
+    kids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            kids.append(int(stat.parent.name))
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_to_the_batch_alone_stops_its_workers_and_exits_130(season, tmp_path,
+                                                                     signum):
+    """SIGTERM or SIGINT to the batch process alone (not its process group): exit 130,
+    its local workers gone, the logs they ran left ``running`` for the next run."""
+    import time
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for k in range(6):
+        shutil.copy(season / "current.tlog", logs / f"run{k}.tlog")
+    out = tmp_path / "out"
+    p = subprocess.Popen([sys.executable, "-m", "onboard", "batch", str(logs), "--out",
+                          str(out), "--jobs", "2"], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL,   # a worker left would hold a pipe
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not any(
+            '"running"' in f.read_text() for f in out.glob("*/run.json")):
+        time.sleep(0.01)
+    workers = _children(p.pid)
+    assert workers, "no worker started"
+    p.send_signal(signum)
+    try:
+        assert p.wait(timeout=30) == 130
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and any(map(_alive, workers)):
+            time.sleep(0.05)
+        assert not [w for w in workers if _alive(w)], "workers left running"
+    finally:
+        for w in filter(_alive, workers):
+            os.kill(w, signal.SIGKILL)

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Iterator, Sequence
 
-from onboard.core.errors import OutputFailed, UsageError
+from onboard.core.errors import OutputFailed, SigtermAsInterrupt, UsageError
 from onboard.drivers.logs import TIME_NAMES, is_log, is_log_dir
 
 RUN_FILE = "run.json"
@@ -331,7 +331,7 @@ def run_local(tasks: Sequence[Task], jobs: int) -> Iterator[dict]:
         for t in tasks:
             yield run_log(t)
         return
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)))
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), initializer=_worker_signals)
     try:
         futures = {pool.submit(run_log, t): t for t in tasks}
         for f in as_completed(futures):
@@ -343,6 +343,14 @@ def run_local(tasks: Sequence[Task], jobs: int) -> Iterator[dict]:
             proc.terminate()
         raise
     pool.shutdown()
+
+
+def _worker_signals() -> None:
+    """A local worker ends at SIGTERM (the batch's ``terminate`` when it is stopped),
+    whatever handler it inherited from the batch."""
+    import signal
+
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _result(future, task: Task) -> dict:
@@ -552,9 +560,11 @@ def main(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     progress = Progress(len(tasks), sys.stderr.isatty())
     jobs = args.jobs or os.cpu_count() or 1
+    terminate = SigtermAsInterrupt()   # SIGTERM stops the workers and exits 130, as Ctrl-C
     try:
         rows = run_batch(tasks, jobs, client, progress.add)
     finally:
+        terminate.restore()
         progress.close()
         if client is not None:
             client.close()
