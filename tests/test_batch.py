@@ -181,6 +181,28 @@ def test_resumes_and_force_redoes(season, tmp_path):
                                     "rudder-boat", "--config", str(overlay)).stderr
 
 
+def test_resumes_whatever_path_names_the_season(tmp_path):
+    """The season given again by another path to the same folder (relative from another
+    folder, through ``..``, through a symbolic link): its logs are the same logs, skipped,
+    not refused as another command's outputs; ``log`` is the absolute path without
+    ``..``."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    shutil.copy(DATA / "nmea" / "gnss-compass.nmea", logs)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "link").symlink_to(logs)
+    first = onboard("batch", "../logs", "--out", "../out", "--jobs", "1",
+                    cwd=tmp_path / "sub")
+    assert first.returncode == 0, first.stdout + first.stderr
+    assert _rows(tmp_path / "out")["gnss-compass.nmea"]["log"] == \
+        str(logs / "gnss-compass.nmea")
+    for args, cwd in ((("logs", "--out", "out"), tmp_path),
+                      ((str(tmp_path / "link"), "--out", str(tmp_path / "out")), None)):
+        again = onboard("batch", *args, cwd=cwd)
+        assert again.returncode == 0, again.stdout + again.stderr
+        assert again.stderr.count("skipped (done before)") == 1
+
+
 def test_a_folder_of_another_command_is_not_overwritten(season, tmp_path):
     out = tmp_path / "out"
     (out / "gnss-compass.nmea").mkdir(parents=True)

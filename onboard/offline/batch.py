@@ -155,8 +155,8 @@ def folder_names(logs: Sequence[str], bases: Sequence[str | None] | None = None
     never above their common folder. Names still shared (``season/a__run.tlog`` beside
     ``season/a/run.tlog``, one path given twice) are numbered ``-2``, ... in order."""
     bases = bases or [None] * len(logs)
-    paths = [Path(log).absolute() for log in logs]
-    names = ["__".join(p.relative_to(Path(b).absolute()).parts) if b else p.name
+    paths = [Path(os.path.abspath(log)) for log in logs]
+    names = ["__".join(p.relative_to(os.path.abspath(b)).parts) if b else p.name
              for p, b in zip(paths, bases)]
     given: dict[str, list[int]] = {}
     for i, b in enumerate(bases):
@@ -266,7 +266,16 @@ def _ours(task: Task) -> bool:
         row = json.loads((Path(task.out) / RUN_FILE).read_text())
     except (OSError, ValueError):
         return False
-    return Path(row.get("log", "")).absolute() == Path(task.log).absolute()
+    return same_log(row.get("log", ""), task.log)
+
+
+def same_log(a: str, b: str) -> bool:
+    """Whether paths ``a`` and ``b`` name the same log, however each was written
+    (relative, through ``..`` or a symbolic link)."""
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except (OSError, RuntimeError):   # a loop of links
+        return os.path.abspath(a) == os.path.abspath(b)
 
 
 def _config(task: Task):
@@ -312,7 +321,7 @@ def is_complete(task: Task) -> dict | None:
         row = json.loads((out / RUN_FILE).read_text())
     except (OSError, ValueError):
         return None
-    same = Path(row.get("log", "")).absolute() == Path(task.log).absolute() and \
+    same = same_log(row.get("log", ""), task.log) and \
         row.get("inputs", task.inputs) == task.inputs
     done = row.get("status") == "ok" and (not task.diagnose or row.get("diagnosed")
                                           or row.get("diagnose_error"))
@@ -539,9 +548,9 @@ def plan(args) -> tuple[list[Task], Found]:
     check([Output("--out", out, "dir", ())], inputs=inputs)
     check([Output("--out", out / n, "dir", ()) for n in names], inputs=inputs)
     # absolute: a cluster's workers do not share this process's working directory
-    configs = tuple(str(Path(c).absolute()) if Path(c).is_file() else c
+    configs = tuple(os.path.abspath(c) if Path(c).is_file() else c
                     for c in args.config or ())
-    tasks = [Task(str(Path(log).absolute()), str((out / n).absolute()), n, configs,
+    tasks = [Task(os.path.abspath(log), os.path.abspath(out / n), n, configs,
                   bool(args.diagnose), bool(args.force))
              for log, n in zip(found.logs, names)]
     return tasks, found
