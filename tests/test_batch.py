@@ -261,6 +261,19 @@ def test_a_folder_of_csv_runs_is_one_log_and_of_different_csvs_is_searched(tmp_p
     assert not batch.is_log_dir(tables) and batch.find_logs([str(tables)]).logs == []
 
 
+def test_a_link_to_a_folder_searched_already_is_not_followed_again(tmp_path):
+    """A season holding a symbolic link to a folder above it (a loop): its logs found
+    once, at their own path, not at the deepest path the links allow (its folder name too
+    long to write; with two such links the search never ended)."""
+    season = tmp_path / "season"
+    (season / "x").mkdir(parents=True)
+    (season / "x" / "run.tlog").write_bytes(BROKEN)
+    (season / "x" / "back").symlink_to(season)
+    found = batch.find_logs([str(season)])
+    assert found.logs == [str(season / "x" / "run.tlog")]
+    assert batch.folder_names(found.logs, found.bases) == ["x__run.tlog"]
+
+
 def test_a_worker_that_dies_fails_its_log_alone(season):
     from concurrent.futures import ProcessPoolExecutor
 

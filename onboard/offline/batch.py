@@ -112,7 +112,7 @@ def find_logs(paths: Sequence[str], time_columns: Iterable[str] = ()) -> Found:
             found.logs.append(str(p))
             found.bases.append(None)
         else:
-            _search(p, found, times, str(p))
+            _search(p, found, times, str(p), set())
     seen: set[Path] = set()
     keep = [not (Path(log).resolve() in seen or seen.add(Path(log).resolve()))
             for log in found.logs]
@@ -120,16 +120,23 @@ def find_logs(paths: Sequence[str], time_columns: Iterable[str] = ()) -> Found:
                  [b for b, k in zip(found.bases, keep) if k])
 
 
-def _search(folder: Path, found: Found, times: frozenset[str], base: str) -> None:
+def _search(folder: Path, found: Found, times: frozenset[str], base: str,
+            searched: set[Path]) -> None:
     """Add the logs in ``folder`` and its sub-folders to ``found`` (found in ``base``),
-    and the files that are not logs to its ``skipped``."""
+    and the files that are not logs to its ``skipped``; a folder already ``searched``
+    (reached again through a symbolic link, a link to a folder above it included) is
+    not searched again."""
+    real = folder.resolve()
+    if real in searched:
+        return
+    searched.add(real)
     for f in sorted(folder.iterdir()):
         if f.is_dir():
             if is_log_dir(f, times):
                 found.logs.append(str(f))
                 found.bases.append(base)
             else:
-                _search(f, found, times, base)
+                _search(f, found, times, base, searched)
             continue
         why = is_log(f, times)
         if why:
