@@ -168,6 +168,14 @@ def test_resumes_and_force_redoes(season, tmp_path):
     resumed = onboard("batch", *logs, "--out", str(out))
     assert resumed.returncode == 0 and resumed.stderr.count("skipped (done before)") == 1
     assert json.loads((killed / "run.json").read_text())["status"] == "ok"
+    # a run.json cut short (a crash or a power loss while it was written): redone too
+    for cut in ("", '{"log": "'):
+        (killed / "run.json").write_text(cut)
+        resumed = onboard("batch", *logs, "--out", str(out))
+        assert resumed.returncode == 0, resumed.stdout
+        assert resumed.stderr.count("skipped (done before)") == 1
+        assert json.loads((killed / "run.json").read_text())["status"] == "ok"
+    assert not list(out.glob("*/run.json.part"))
     # other configs are other inputs: those logs are redone, no --force needed
     overlay = tmp_path / "overlay.toml"
     overlay.write_text("[sensors.gnss]\nposition_std_m = 2.0\n")

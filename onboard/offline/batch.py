@@ -212,11 +212,19 @@ def run_log(task: Task) -> dict:
     row["wall_s"] = time.perf_counter() - wall0
     try:
         out.mkdir(parents=True, exist_ok=True)
-        (out / RUN_FILE).write_text(json.dumps(row, indent=1, default=str) + "\n")
+        _write_run(out, json.dumps(row, indent=1, default=str) + "\n")
     except OSError as err:
         row.update(status="failed", error=f"{out / RUN_FILE}: cannot write: "
                    f"{err.strerror or err}")
     return row
+
+
+def _write_run(out: Path, text: str) -> None:
+    """``out/run.json`` replaced by ``text`` at once (written beside it, then renamed): a
+    batch stopped while writing it leaves the previous one whole."""
+    part = out / f"{RUN_FILE}.part"
+    part.write_text(text)
+    os.replace(part, out / RUN_FILE)
 
 
 def _named(row: dict) -> str:
@@ -250,8 +258,8 @@ def _replay_and_diagnose(task: Task, out: Path) -> dict:
     check(outs, force=task.force or _ours(task), inputs=[task.log, *existing(task.configs)])
     (out / batch_tables.LOG_CURRENT).unlink(missing_ok=True)
     out.mkdir(parents=True, exist_ok=True)   # the folder is the batch's from now on
-    (out / RUN_FILE).write_text(json.dumps({"log": task.log, "name": task.name,
-                                            "status": "running"}) + "\n")
+    _write_run(out, json.dumps({"log": task.log, "name": task.name,
+                                "status": "running"}) + "\n")
     cfg, note = _config(task)
     places = batch_tables.Places()   # each row's, as its records carried it
     summary = replay(task.log, cfg, out, config_note=note, plot=False, on_records=places)
@@ -268,12 +276,16 @@ def _ours(task: Task) -> bool:
     """True when ``task``'s folder holds what a batch wrote for the same log (an
     unfinished run, a killed one included: its ``run.json`` says ``running``, or a failed
     one, or one of other inputs: redone without ``--force``); a folder holding another
-    log's or another command's outputs is reused only with ``--force``."""
+    log's or another command's outputs is reused only with ``--force``. A ``run.json``
+    that cannot be read as a row (empty, cut short: a crash, a power loss) is a batch's
+    unfinished run: only a batch writes that file."""
     try:
         row = json.loads((Path(task.out) / RUN_FILE).read_text())
-    except (OSError, ValueError):
+    except OSError:
         return False
-    return same_log(row.get("log", ""), task.log)
+    except ValueError:
+        return True
+    return not isinstance(row, dict) or same_log(row.get("log", ""), task.log)
 
 
 def same_log(a: str, b: str) -> bool:
@@ -327,6 +339,8 @@ def is_complete(task: Task) -> dict | None:
     try:
         row = json.loads((out / RUN_FILE).read_text())
     except (OSError, ValueError):
+        return None
+    if not isinstance(row, dict):
         return None
     same = same_log(row.get("log", ""), task.log) and \
         row.get("inputs", task.inputs) == task.inputs
