@@ -228,9 +228,17 @@ def is_log(path: Path, times: frozenset[str] = frozenset()) -> str:
 
 def _untimed(path: Path, times: frozenset[str]) -> str:
     """Why the CSV file ``path`` is a table and not a log: its header names no time
-    (:data:`TIME_NAMES`, ``times``); empty when it names one."""
+    (:data:`TIME_NAMES`, ``times``), or holds control characters (binary data named
+    ``.csv``); empty when it names a time."""
     from onboard.drivers.csvlog import csv_header
 
+    try:
+        with open(path, "rb") as f:
+            first = f.read(HEAD_BYTES).split(b"\n", 1)[0]
+    except OSError as err:
+        return err.strerror or str(err)
+    if any(b < 32 and b not in b"\t\r" for b in first):
+        return "binary data in no format this tool reads"
     header = csv_header(path)
     for name in header:
         n = name.lower()

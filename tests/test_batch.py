@@ -282,6 +282,19 @@ def test_a_link_to_a_folder_searched_already_is_not_followed_again(tmp_path):
     assert batch.folder_names(found.logs, found.bases) == ["x__run.tlog"]
 
 
+def test_binary_data_named_csv_is_skipped_as_binary(tmp_path):
+    """A binary file named ``.csv`` in a folder searched: skipped as binary data, its
+    bytes (terminal escapes among them) not printed as a CSV header."""
+    (tmp_path / "s").mkdir()
+    for name, data in (("escapes.csv", b"\x1b[2J\x8f\x01\x9aPK\x03\x04" * 50),
+                       ("nul.csv", b"PK\x03\x04\x14\x00\x00\x00" * 50)):
+        (tmp_path / "s" / name).write_bytes(data)
+    found = batch.find_logs([str(tmp_path / "s")])
+    assert found.logs == []
+    assert [why for _, why in found.skipped] == \
+        ["binary data in no format this tool reads"] * 2
+
+
 def test_a_worker_that_dies_fails_its_log_alone(season):
     from concurrent.futures import ProcessPoolExecutor
 
