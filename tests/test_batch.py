@@ -237,6 +237,23 @@ def test_names_that_collide_get_their_own_folders():
                                                   "b__run.tlog"]
 
 
+def test_a_name_too_long_for_a_folder_is_shortened_alike_run_after_run():
+    """A log deep in long-named folders: its folder's name fits a file system's 255
+    bytes (it failed, "File name too long"), ends with its file name and is the same
+    every run; two such logs keep apart."""
+    deep = "s/" + "/".join(f"a_long_folder_name_of_a_survey_session_{k:02d}_ü"
+                           for k in range(8))
+    logs = [f"{deep}/x/run.tlog", f"{deep}/y/run.tlog", "s/short/run.tlog"]
+    names = batch.folder_names(logs, ["s"] * 3)
+    assert all(len(n.encode()) <= batch.NAME_MAX_BYTES for n in names)
+    assert names[0].startswith("~") and names[0].endswith("__x__run.tlog")
+    assert names[0] != names[1] and names[2] == "short__run.tlog"
+    assert batch.folder_names(logs[:1], ["s"]) == names[:1]
+    long_file = "s/" + "b" * 300 + ".tlog"
+    name = batch.folder_names([long_file], ["s"])[0]
+    assert len(name.encode()) <= batch.NAME_MAX_BYTES and name.endswith("bbb.tlog")
+
+
 def test_a_folder_of_csv_runs_is_one_log_and_of_different_csvs_is_searched(tmp_path):
     """CSV files with one header are the runs of one log; beside a vehicle log, a table of
     another kind without a time column (the Kolumbo glider's DVL current profile) is not a

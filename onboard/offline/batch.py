@@ -44,6 +44,9 @@ DIAGNOSE_DIR = "diagnose"
 """The sub-folder of a log's folder that ``--diagnose`` writes diagnosis.json into."""
 BATCH_WRITES = ("runs.parquet", "current.parquet", "season.md")
 """What ``onboard batch`` writes in ``--out DIR`` besides the logs' folders."""
+NAME_MAX_BYTES = 200
+"""The longest name of a log's folder (bytes of UTF-8): file systems take 255, and its
+numbering (``-2``) must fit too; a longer one is shortened (:func:`_fitted`)."""
 EXIT_SOME_FAILED = 3
 """Exit status when some logs failed and the others were replayed."""
 PROGRESS_EVERY_S = 1.0
@@ -180,7 +183,26 @@ def folder_names(logs: Sequence[str], bases: Sequence[str | None] | None = None
             depth += 1
         for i, p in zip(group, parts):
             names[i] = "__".join(p[-depth:])
-    return _numbered(names)
+    return _numbered([_fitted(n) for n in names])
+
+
+def _fitted(name: str) -> str:
+    """``name`` as a folder name the file systems take: itself when it has at most
+    :data:`NAME_MAX_BYTES` bytes, else ``~`` and 8 hex digits of its digest (the same for
+    the same name) before as many of its last parts (``__``-joined) as fit, the end of
+    its file name at least."""
+    if len(name.encode()) <= NAME_MAX_BYTES:
+        return name
+    import hashlib
+
+    head = f"~{hashlib.sha256(name.encode()).hexdigest()[:8]}"
+    parts = name.split("__")
+    tail = parts.pop()
+    while parts and len(f"{head}__{parts[-1]}__{tail}".encode()) <= NAME_MAX_BYTES:
+        tail = f"{parts.pop()}__{tail}"
+    while len(f"{head}__{tail}".encode()) > NAME_MAX_BYTES:
+        tail = tail[1:]
+    return f"{head}__{tail}"
 
 
 def _numbered(names: list[str]) -> list[str]:
