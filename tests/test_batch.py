@@ -221,6 +221,23 @@ def test_a_folder_of_another_command_is_not_overwritten(season, tmp_path):
                    "--force").returncode == 0
 
 
+def test_a_log_refused_a_folder_leaves_its_owner_s_run_alone(tmp_path):
+    """Two seasons into one ``--out``, a log of each with the same name: the second is
+    refused its folder (another log's outputs) and fails without writing there, so the
+    first season still resumes that log."""
+    for season in ("sA", "sB"):
+        (tmp_path / season).mkdir()
+        shutil.copy(DATA / "nmea" / "gnss-compass.nmea", tmp_path / season)
+    out = tmp_path / "out"
+    assert onboard("batch", str(tmp_path / "sA"), "--out", str(out)).returncode == 0
+    run = (out / "gnss-compass.nmea" / "run.json").read_bytes()
+    other = onboard("batch", str(tmp_path / "sB"), "--out", str(out))
+    assert other.returncode == 2 and "holds a previous run's" in other.stdout
+    assert (out / "gnss-compass.nmea" / "run.json").read_bytes() == run
+    again = onboard("batch", str(tmp_path / "sA"), "--out", str(out))
+    assert again.returncode == 0 and "skipped (done before)" in again.stderr
+
+
 def test_names_that_collide_get_their_own_folders():
     assert batch.folder_names(["x/a/run.tlog", "x/b/run.tlog", "y.bin"]) == \
         ["a__run.tlog", "b__run.tlog", "y.bin"]

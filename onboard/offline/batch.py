@@ -228,6 +228,10 @@ def run_log(task: Task) -> dict:
     try:
         with contextlib.redirect_stdout(io.StringIO()):
             row.update(_replay_and_diagnose(task, out))
+    except _FolderRefused as err:   # another log's or command's: its run.json left alone
+        row.update(status="failed", error=_failure(err.__cause__ or err),
+                   cpu_s=time.process_time() - cpu0, wall_s=time.perf_counter() - wall0)
+        return row
     except Exception as err:  # noqa: BLE001 - one log fails, not the batch
         row.update(status="failed", error=_failure(err))
     row["cpu_s"] = time.process_time() - cpu0
@@ -247,6 +251,12 @@ def _write_run(out: Path, text: str) -> None:
     part = out / f"{RUN_FILE}.part"
     part.write_text(text)
     os.replace(part, out / RUN_FILE)
+
+
+class _FolderRefused(Exception):
+    """A log's folder that the task may not write (another log's or another command's
+    outputs, a path that cannot be written): the log fails without writing there; the
+    reason is its ``__cause__``."""
 
 
 def _named(row: dict) -> str:
@@ -277,7 +287,11 @@ def _replay_and_diagnose(task: Task, out: Path) -> dict:
         from onboard.offline.diagnose import DIAGNOSE_WRITES
 
         outs.append(Output("--out", out / DIAGNOSE_DIR, "dir", DIAGNOSE_WRITES))
-    check(outs, force=task.force or _ours(task), inputs=[task.log, *existing(task.configs)])
+    try:
+        check(outs, force=task.force or _ours(task),
+              inputs=[task.log, *existing(task.configs)])
+    except UsageError as err:
+        raise _FolderRefused() from err
     (out / batch_tables.LOG_CURRENT).unlink(missing_ok=True)
     out.mkdir(parents=True, exist_ok=True)   # the folder is the batch's from now on
     _write_run(out, json.dumps({"log": task.log, "name": task.name,
