@@ -404,3 +404,17 @@ def test_the_local_frame_of_a_pipeline_is_its_declared_frame_and_offset():
     assert eng.local_frame("offset") == (_Offset.frame, (5.0, -3.0))
     assert eng.local_frame("rec") is None  # no frame declared
     assert eng.local_frame("absent") is None
+
+
+def test_a_parameter_sent_once_is_never_reported_stale_a_stream_that_stops_is():
+    """An autopilot sends its parameters when asked, once: no ``stale`` event for them,
+    however long ago; an IMU that stops is stale after ``STALE_AFTER_S`` (the control)."""
+    from onboard.core.messages import Parameter
+    from onboard.engine.engine import STALE_AFTER_S
+
+    eng = Engine(Config(), [Recorder()])
+    assert eng.push(Parameter(t=1.0, name="SERVO1_FUNCTION", value=26.0, source="mavlink:1"))
+    assert eng.push(imu(1.0))
+    events = [e for k in range(1, int(STALE_AFTER_S + 30)) for e in eng.health(1.0 + k).events]
+    stale = [e for e in events if "stale" in e]
+    assert stale and all(e.startswith("imu:") for e in stale), events

@@ -84,8 +84,9 @@ with their adaptive state (:meth:`Engine.start_segment`): their state is not car
 across that much unseen time, and none of them walks across it. Shorter forward jumps
 are gaps the pipelines bridge themselves (the aie/kf restart their chains past
 ``max_gap_s``; the current filter predicts across them)."""
-_NEVER_STALE = {"parameter"}
-"""Streams sent once, not periodically."""
+_NEVER_STALE = {str(Parameter.__struct_config__.tag)}  # type: ignore[attr-defined]
+"""The tags of streams sent once, not periodically (an autopilot's parameters, sent when
+asked)."""
 
 _DEPTH_OR_GNSS = {Pressure, Depth, GnssFix}
 _RAW_ACTUATORS = {ActuatorOutputs, RcChannels, PropellerRpm, ActuatorColumn}
