@@ -39,6 +39,7 @@ import msgspec
 from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.wire import ESTIMATE_SCHEMAS, HEALTH_SCHEMA, LOCATION_FIX_SCHEMA
+from onboard.service.publishers.zenoh_pub import valid_prefix
 from onboard.service.web.view import key_parts
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -46,8 +47,6 @@ DEFAULT_PREFIX = "onboard"
 FLEET_GRID_SUFFIX = "fleet/current/grid"
 """The fleet service's grid (``onboard fleet``) is on ``<prefix>/fleet/current/grid``,
 drawn by ``--web`` as the fleet layer."""
-KEY_SPECIALS = frozenset("*$?#")
-"""Characters a key prefix cannot hold (Zenoh's wildcards and selector marks)."""
 EXPECTED = {"est": ESTIMATE_SCHEMAS, "health": frozenset({HEALTH_SCHEMA}),
             "fix": frozenset({LOCATION_FIX_SCHEMA})}
 """Third key segment -> the schema names this version decodes there (every version of
@@ -246,7 +245,7 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
 def check_prefix(prefix: str) -> str:
     """``prefix`` when it can start a key (segments joined by ``/``, none empty, no
     wildcard), else UsageError naming ``--prefix``."""
-    if not prefix or any(not seg for seg in prefix.split("/")) or KEY_SPECIALS & set(prefix):
+    if not valid_prefix(prefix):
         raise UsageError(f"--prefix {prefix!r}: a key prefix such as onboard or "
                          "region/north (no empty segment, no * $ ? #)")
     return prefix

@@ -62,6 +62,7 @@ from onboard.fleet.messages import (
     current_key,
     grid_key,
 )
+from onboard.service.publishers.zenoh_pub import valid_prefix
 from onboard.service.web.http import parse_listen
 from onboard.service.web.view import FLEET_TRACK_PERIOD_S
 
@@ -517,8 +518,11 @@ def main(args: argparse.Namespace) -> int:
     [--prefix P] [--period S] [--refit S] [--mcap FILE [--force]] [--web HOST:PORT]
     [--history FILE]... [--at PLACE (--vdr URL | --signalk URL)... [--max-std M/S]]``;
     SIGTERM stops it as Ctrl-C does (the MCAP file finished)."""
-    if not args.period > 0 or not args.refit > 0:
+    if not (0 < args.period < math.inf and 0 < args.refit < math.inf):
         raise UsageError("--period and --refit are positive seconds")
+    if not valid_prefix(args.prefix):
+        raise UsageError(f"--prefix {args.prefix!r}: a key prefix such as onboard or "
+                         "region/north (no empty segment, no * $ ? #)")
     history = getattr(args, "history", None) or []
     if args.mcap:
         check_outputs([Output("--mcap", Path(args.mcap))], force=args.force,

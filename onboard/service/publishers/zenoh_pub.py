@@ -79,6 +79,16 @@ def session_config(mode: str = "peer", connect: Iterable[str] = (), listen: Iter
     return conf
 
 
+KEY_SPECIALS = frozenset("*$?#")
+"""Characters a key prefix cannot hold (Zenoh's wildcards and selector marks)."""
+
+
+def valid_prefix(prefix: str) -> bool:
+    """Whether ``prefix`` can start a key: segments joined by ``/``, none empty, no
+    wildcard or selector mark (:data:`KEY_SPECIALS`)."""
+    return bool(prefix) and all(prefix.split("/")) and not KEY_SPECIALS & set(prefix)
+
+
 def secret_settings(cfg: ZenohOut) -> dict[str, str]:
     """The Zenoh settings (key -> JSON value) that the secrets of ``[service.zenoh]``
     add on top of ``config_file``: the CA certificate, this vehicle's TLS key and
