@@ -25,3 +25,39 @@ def test_a_bad_prefix_or_period_stops_the_fleet_before_it_connects(flags, words,
     assert rc == 2
     assert words in err and "cannot reach" not in err, err
     assert len(err.strip().splitlines()) == 1, err
+
+
+@pytest.mark.parametrize("module", ["onboard.fleet.service", "onboard.apps.shore"])
+def test_the_zenoh_configs_endpoints_are_used_without_connect(module, tmp_path):
+    """``--zenoh-config shore.json5`` alone (docs/security.md) connects where the file
+    says, not to the default local router; ``--connect`` still wins over the file."""
+    import importlib
+
+    from onboard.core.errors import UsageError
+
+    open_session = importlib.import_module(module).open_session
+    conf = tmp_path / "shore.json5"
+    conf.write_text('{ connect: { endpoints: ["tcp/127.0.0.1:2"] } }\n')
+    with pytest.raises(UsageError, match=r"tcp/127\.0\.0\.1:2\b"):
+        open_session(None, None, None, str(conf))
+    with pytest.raises(UsageError, match=r"tcp/127\.0\.0\.1:3\b"):
+        open_session(["tcp/127.0.0.1:3"], None, None, str(conf))
+    with pytest.raises(UsageError, match=r"tcp/127\.0\.0\.1:7447"):
+        open_session(None, None, None, "")
+
+
+@pytest.mark.integration
+def test_a_zenoh_config_alone_reaches_its_router(tmp_path):
+    from onboard.apps.service_bench import free_tcp_port
+    from onboard.fleet.service import open_session
+    from onboard.service.publishers.zenoh_pub import open_router
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_router(endpoint)
+    conf = tmp_path / "shore.json5"
+    conf.write_text(f'{{ connect: {{ endpoints: ["{endpoint}"] }} }}\n')
+    try:
+        session = open_session(None, None, None, str(conf))
+        session.close()
+    finally:
+        router.close()

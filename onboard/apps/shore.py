@@ -227,18 +227,20 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
                  config_file: str = "") -> Any:
     """A shore Zenoh session (client by default, multicast scouting off); ``config_file``
     (JSON5) carries TLS and credentials for a router with access control
-    (docs/security.md)."""
+    (docs/security.md), and the endpoints to connect to where ``connect`` gives none
+    (:data:`DEFAULT_CONNECT` where neither does)."""
     import zenoh
 
-    from onboard.service.publishers.zenoh_pub import session_config
+    from onboard.service.publishers.zenoh_pub import config_endpoints, session_config
 
     m = mode or "client"
     if config_file and not Path(config_file).is_file():
         raise UsageError(f"--zenoh-config {config_file}: no such file")
     try:
-        return zenoh.open(session_config(m, connect or [DEFAULT_CONNECT], listen or [], config_file))
+        connect = connect or config_endpoints(config_file) or [DEFAULT_CONNECT]
+        return zenoh.open(session_config(m, connect, listen or [], config_file))
     except Exception as err:  # noqa: BLE001 - zenoh.ZError
-        raise UsageError(f"cannot reach Zenoh at {', '.join(connect or [DEFAULT_CONNECT])}: "
+        raise UsageError(f"cannot reach Zenoh at {', '.join(connect or [config_file])}: "
                          f"{str(err).split(' at ')[0]}") from None
 
 

@@ -89,6 +89,16 @@ def valid_prefix(prefix: str) -> bool:
     return bool(prefix) and all(prefix.split("/")) and not KEY_SPECIALS & set(prefix)
 
 
+def config_endpoints(config_file: str, what: str = "connect") -> list[str]:
+    """The ``<what>/endpoints`` of a Zenoh JSON5 configuration file (``[]`` when it gives
+    none, or for no file)."""
+    import zenoh
+
+    if not config_file:
+        return []
+    return list(json.loads(zenoh.Config.from_file(config_file).get_json(f"{what}/endpoints")))
+
+
 def secret_settings(cfg: ZenohOut) -> dict[str, str]:
     """The Zenoh settings (key -> JSON value) that the secrets of ``[service.zenoh]``
     add on top of ``config_file``: the CA certificate, this vehicle's TLS key and
