@@ -355,9 +355,14 @@ def test_the_query_parameters_are_checked():
                        ({"lat": "1", "lon": "1", "utc": "nan"}, "not a number"),
                        ({"lat": "1_0", "lon": "1", "utc": "1"}, "not a number"),
                        ({"lat": " 1", "lon": "1", "utc": "1"}, "not a number"),
-                       ({"lat": "1&lon=2&utc=3"}, "separates its parameters with ';'")):
+                       ({"lat": "1&lon=x&utc=3"}, "lon='x' is not a number"),
+                       ({"utc": "1&lat=1"}, "lon is missing")):
         with pytest.raises(ValueError, match=words):
             parse_query(bad)
+    # '&' separates parameters as ';' does (a URL's query, Zenoh before 1.0), in any order
+    for params in ({"lat": "1&lon=2&utc=3"}, {"utc": "3&lat=1&lon=2"},
+                   {"lat": "1&lon=2", "utc": "3"}, {"lon": "2", "utc": "3&lat=1"}):
+        assert parse_query(params) == (1.0, 2.0, 3.0), params
 
 
 def test_the_grid_covers_the_vehicles_with_the_contracts_objects():

@@ -78,6 +78,10 @@ def test_records_from_several_vehicles_become_a_field_that_answers_queries(tmp_p
         assert got.n_obs > 0 and got.utc == utc
         assert abs(got.north - float(truth[0])) < 3 * got.std_north + 0.01
         assert abs(got.east - float(truth[1])) < 3 * got.std_east + 0.01
+        amp = list(shore.get(f"onboard/fleet/current?utc={utc}&lat={lat}&lon={lon}",
+                             timeout=10.0))   # '&' as a URL's query writes it
+        assert len(amp) == 1 and amp[0].ok is not None
+        assert amp[0].ok.payload.to_bytes() == ok.payload.to_bytes()
         bad = list(shore.get("onboard/fleet/current?lat=43;utc=1", timeout=10.0))
         assert len(bad) == 1 and bad[0].err is not None
         assert "lon is missing" in json.loads(bad[0].err.payload.to_bytes())["error"]

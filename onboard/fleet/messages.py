@@ -7,7 +7,8 @@ key                                encoding                                   pa
 ``<prefix>/fleet/current/grid``    ``application/json;onboard.FleetGrid.v1``     :class:`FleetGrid`, every few seconds
 =================================  =========================================  ==============
 
-A query of ``<prefix>/fleet/current?lat=<deg>;lon=<deg>;utc=<s>`` gets ONE
+A query of ``<prefix>/fleet/current?lat=<deg>;lon=<deg>;utc=<s>`` (or with ``&`` between
+the parameters) gets ONE
 :class:`FleetCurrent` (exactly its eight fields; the grid's cells add the down); one
 with a missing or bad parameter gets an error reply (a JSON object ``{"error": ...}``
 saying which parameter and why).

@@ -358,17 +358,16 @@ underscores, ``inf`` or ``nan``, which Python's ``float`` would also read)."""
 
 def parse_query(params: Mapping[str, str]) -> tuple[float, float, float]:
     """``(lat, lon, utc)`` of a query's parameters; ValueError saying which is missing or
-    bad (a latitude within +-90 deg, a longitude within +-180, a finite time)."""
+    bad (a latitude within +-90 deg, a longitude within +-180, a finite time). The
+    parameters may be separated by ``&`` as well as by Zenoh's ``;``
+    (:func:`selector_parameters`)."""
+    params = selector_parameters(params)
     out = []
     for name, limit in (("lat", 90.0), ("lon", 180.0), ("utc", math.inf)):
         text = params.get(name)
         if text is None:
             raise ValueError(f"parameter {name} is missing: ask "
                              f"fleet/current?lat=<deg>;lon=<deg>;utc=<POSIX s>")
-        if "&" in text:
-            raise ValueError(f"parameter {name}={text!r}: a Zenoh selector separates its "
-                             f"parameters with ';': fleet/current?lat=<deg>;lon=<deg>;"
-                             f"utc=<POSIX s>")
         if not NUMBER.fullmatch(text):
             raise ValueError(f"parameter {name}={text!r} is not a number")
         value = float(text)
@@ -376,6 +375,20 @@ def parse_query(params: Mapping[str, str]) -> tuple[float, float, float]:
             raise ValueError(f"parameter {name}={text!r} is out of range")
         out.append(value)
     return out[0], out[1], out[2]
+
+
+def selector_parameters(params: Mapping[str, str]) -> dict[str, str]:
+    """A selector's parameters as Zenoh parsed them (separated by ``;``), each ``&`` in
+    them read as a separator too: ``lat=43.1&lon=5.9&utc=..``, as a URL's query and Zenoh
+    before 1.0 write it, gives the same ``lat``, ``lon`` and ``utc`` as
+    ``lat=43.1;lon=5.9;utc=..``. A name given twice has its last value."""
+    out: dict[str, str] = {}
+    for key, value in params.items():
+        for part in f"{key}={value}".split("&"):
+            name, _, text = part.partition("=")
+            if name:
+                out[name] = text
+    return out
 
 
 def key_vehicle(key: str, prefix: str) -> str | None:
