@@ -567,3 +567,44 @@ def test_the_plane_follows_the_fleet_not_its_first_record(monkeypatch):
     shift = max(abs(a.north - b.north) + abs(a.east - b.east)
                 for a, b in zip(near.answers, far.answers))
     assert shift > 0.01, shift
+
+
+def fleet_at(lon0: float) -> tuple[FleetService, object]:
+    """The eddy's fleet (6 vehicles, 10 min at 1 Hz) about (17 S, ``lon0``), its records'
+    longitudes within [-180, 180] as a GNSS gives them, fused and fitted."""
+    from onboard.fleet.field import Plane
+
+    f = fleet("eddy", seed=21, vehicles=6, duration_s=600.0, rate_hz=1.0)
+    f = dataclasses.replace(f, plane=Plane(-17.0, lon0))
+    service, enc = FleetService(), msgspec.json.Encoder()
+    for i in range(len(f.t)):
+        rec = f.record(i)
+        rec = msgspec.structs.replace(rec, lon_deg=(rec.lon_deg + 180.0) % 360.0 - 180.0)
+        service.feed(enc.encode(rec), "application/json;onboard.Estimate.v2")
+    service.step(refit=True)
+    return service, f
+
+
+def test_a_fleet_across_the_antimeridian_is_the_field_it_is_anywhere_else():
+    """Off Fiji the vehicles' longitudes jump from 179.99 to -179.99: the field, its
+    answers on either side and its grid are those of the same fleet at 5.9 E (a window's
+    places were averaged to about 0 deg and the two sides taken 40 000 km apart: the
+    side past the antimeridian answered from its own few windows, and the grid's
+    longitudes went past 180, which a query cannot ask)."""
+    here, f_here = fleet_at(5.9)
+    there, f_there = fleet_at(179.998)
+    assert there.field.added == here.field.added == len(f_here.t)
+    crossed = 0
+    for north_m, east_m in ((100.0, -300.0), (100.0, 0.0), (-200.0, 400.0), (100.0, 800.0)):
+        a = here.answer(*map(float, f_here.plane.to_latlon(north_m, east_m)), UTC0 + 300.0)
+        lat, lon = map(float, f_there.plane.to_latlon(north_m, east_m))
+        crossed += lon < 0.0
+        b = there.answer(lat, lon, UTC0 + 300.0)
+        assert b.n_obs == a.n_obs
+        for k in ("north", "east", "std_north", "std_east"):
+            assert getattr(b, k) == pytest.approx(getattr(a, k), abs=1e-5), (k, east_m)
+    assert crossed == 2   # two of the places are past the antimeridian
+    grid = there.grid(list(there.newest.values()))
+    assert all(-180.0 <= c.lon <= 180.0 for c in grid.cells)
+    assert sum(c.north is not None for c in grid.cells) == \
+        sum(c.north is not None for c in here.grid(list(here.newest.values())).cells)

@@ -29,8 +29,8 @@ KNOWN_COLS = 3
 """The west half of the grid knows the field (0.3 m/s towards north), the east half not."""
 
 
-def synthetic_grid(utc: float, *, known_cols: int = KNOWN_COLS, unplaced: bool = False
-                   ) -> dict:
+def synthetic_grid(utc: float, *, known_cols: int = KNOWN_COLS, unplaced: bool = False,
+                   lon0: float = LON0) -> dict:
     """A 6 x 6 grid of 200 m cells about (43 N, 5 E): the first ``known_cols`` columns
     (west) known, the rest null; two vehicles moving north in the west half (and with
     ``unplaced`` a third whose records carry no position: an AUV before any fix)."""
@@ -39,7 +39,7 @@ def synthetic_grid(utc: float, *, known_cols: int = KNOWN_COLS, unplaced: bool =
     for i in range(ROWS):
         for j in range(COLS):
             lat = LAT0 + (i - (ROWS - 1) / 2) * SPACING_M / m_lat
-            lon = LON0 + (j - (COLS - 1) / 2) * SPACING_M / m_lon
+            lon = wrap(lon0 + (j - (COLS - 1) / 2) * SPACING_M / m_lon)
             known = j < known_cols
             std = 0.01 if i % 2 == 0 else 0.2  # every other row uncertain: drawn faded
             cells.append({"lat": lat, "lon": lon, "utc": utc,
@@ -48,7 +48,7 @@ def synthetic_grid(utc: float, *, known_cols: int = KNOWN_COLS, unplaced: bool =
                           "n_obs": 12 if known else 0})
     vehicles = [{"vehicle": f"bot{k}", "utc": utc,
                  "lat": LAT0 + ((utc - 1000.0) * 4.0 - 450.0) / m_lat,
-                 "lon": LON0 - (250.0 + 150.0 * k) / m_lon,
+                 "lon": wrap(lon0 - (250.0 + 150.0 * k) / m_lon),
                  "north": 0.28, "east": 0.02, "std_north": 0.03, "std_east": 0.03}
                 for k in range(2)]
     if unplaced:
@@ -57,12 +57,18 @@ def synthetic_grid(utc: float, *, known_cols: int = KNOWN_COLS, unplaced: bool =
     return {"schema": 1, "utc": utc, "spacing_m": SPACING_M, "cells": cells, "vehicles": vehicles}
 
 
-def fleet_view(known_cols: int = KNOWN_COLS, n: int = 12, unplaced: bool = False) -> LiveView:
+def wrap(lon: float) -> float:
+    """A longitude within [-180, 180), as a GNSS gives it."""
+    return (lon + 180.0) % 360.0 - 180.0
+
+
+def fleet_view(known_cols: int = KNOWN_COLS, n: int = 12, unplaced: bool = False,
+               lon0: float = LON0) -> LiveView:
     """A LiveView fed ``n`` grids 5 s apart on the grid's key, as the shore receives them."""
     view = LiveView()
     for k in range(n):
         view.feed_zenoh(GRID_KEY, json.dumps(synthetic_grid(
-            1000.0 + 5.0 * k, known_cols=known_cols, unplaced=unplaced)).encode())
+            1000.0 + 5.0 * k, known_cols=known_cols, unplaced=unplaced, lon0=lon0)).encode())
     return view
 
 
@@ -126,6 +132,24 @@ def test_the_page_draws_arrows_where_the_field_is_known_and_nothing_where_it_is_
     assert purple_tinted(east) == 0  # the null cells: nothing, not even faded
     if os.environ.get("ONBOARD_FLEET_SCREENSHOT"):
         shutil.copyfile(out, os.environ["ONBOARD_FLEET_SCREENSHOT"])
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")
+def test_a_grid_across_the_antimeridian_is_drawn_as_anywhere_else(tmp_path):
+    """The same grid with its middle column on 180 deg (its east cells at -179.99): the
+    page draws it as at 5 E (its centre was the mean longitude, about 0, and the cells
+    past the antimeridian 40 000 km west of the others: every arrow off the map)."""
+    mpimg = pytest.importorskip("matplotlib.image", reason="pip install 'onboard[plot]'")
+    out = tmp_path / "fleet.png"
+    with ServerThread(view=fleet_view(lon0=179.999)) as srv:
+        run = screenshot(srv.url + "/?tiles=0", out, tmp_path / "profile")
+    assert run.returncode == 0 and out.exists(), run.stderr[-2000:]
+    img = mpimg.imread(out)
+    west, east = img[40:, :345], img[40:, 365:700]
+    assert pixels_near(west, FLEET_RGB) > 300
+    assert pixels_near(west, FLEET_TRACK_RGB) > 60
+    assert purple_tinted(east) == 0
 
 
 @pytest.mark.integration

@@ -321,14 +321,24 @@ class Plane:
         self.m_per_rad_lon = n * math.cos(math.radians(lat0_deg))
 
     def to_ne(self, lat_deg, lon_deg):
-        """(north, east) in m of latitude and longitude (deg; scalars or arrays)."""
+        """(north, east) in m of latitude and longitude (deg; scalars or arrays); east
+        the shorter way round (a place across the antimeridian is a few metres east, not
+        40 000 km west)."""
         return (np.radians(np.asarray(lat_deg) - self.lat0) * self.m_per_rad_lat,
-                np.radians(np.asarray(lon_deg) - self.lon0) * self.m_per_rad_lon)
+                np.radians(wrap_lon(np.asarray(lon_deg) - self.lon0)) * self.m_per_rad_lon)
 
     def to_latlon(self, north_m, east_m):
-        """(lat, lon) in deg of a position on the plane (m; scalars or arrays)."""
+        """(lat, lon) in deg of a position on the plane (m; scalars or arrays), the
+        longitude within [-180, 180]."""
         return (self.lat0 + np.degrees(np.asarray(north_m) / self.m_per_rad_lat),
-                self.lon0 + np.degrees(np.asarray(east_m) / self.m_per_rad_lon))
+                wrap_lon(self.lon0 + np.degrees(np.asarray(east_m) / self.m_per_rad_lon)))
+
+
+def wrap_lon(lon_deg):
+    """A longitude (or a difference of two; deg, scalar or array) within [-180, 180]:
+    360 added or taken where it is beyond, a value within left exactly as it is."""
+    lon = np.asarray(lon_deg)
+    return np.where(lon > 180.0, lon - 360.0, np.where(lon < -180.0, lon + 360.0, lon))[()]
 
 
 class SuperObs(NamedTuple):
@@ -472,6 +482,9 @@ class CurrentField:
         if self.plane is None:
             self.plane, self.t_ref = Plane(obs.lat_deg, obs.lon_deg), obs.utc
         self.newest_utc = max(self.newest_utc, obs.utc)
+        # within 180 deg of the plane's longitude: a window across the antimeridian
+        # averages places a few metres apart, not 360 deg apart
+        lon = obs.lon_deg + 360.0 * round((self.plane.lon0 - obs.lon_deg) / 360.0)
         key = (obs.vehicle, math.floor(obs.utc / self.thin_s))
         acc = self._bins.get(key)
         if acc is None:
@@ -480,7 +493,7 @@ class CurrentField:
         acc[0] += 1.0
         acc[1] += obs.utc
         acc[2] += obs.lat_deg
-        acc[3] += obs.lon_deg
+        acc[3] += lon
         if obs.north is not None:
             acc[16] += 1.0
             acc[4] += obs.north
@@ -499,7 +512,7 @@ class CurrentField:
         acc[12] += u
         acc[13] += u * u
         acc[14] += obs.lat_deg * u
-        acc[15] += obs.lon_deg * u
+        acc[15] += lon * u
         self.added += 1
         return True
 

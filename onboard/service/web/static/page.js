@@ -97,10 +97,14 @@ async function pollFleet() {
 }
 
 function centre(cells) {
+  // The mean place, its longitude taken about the first one's (a fleet across the antimeridian).
   const lat = cells.reduce((a, c) => a + c.lat, 0) / cells.length;
-  const lon = cells.reduce((a, c) => a + c.lon, 0) / cells.length;
-  return {lat_deg: lat, lon_deg: lon};
+  const lon = cells[0].lon + cells.reduce((a, c) => a + wrapLon(c.lon - cells[0].lon), 0) / cells.length;
+  return {lat_deg: lat, lon_deg: wrapLon(lon)};
 }
+
+// A longitude or a difference of two (deg) within [-180, 180]: east the shorter way round.
+const wrapLon = (d) => (d > 180 ? d - 360 : d < -180 ? d + 360 : d);
 
 function fleetPanel() {
   // Hidden while there is neither a grid nor another vehicle to tell of.
@@ -225,9 +229,10 @@ function drawTiles(ctx, v, origin) {
   const [X, Y] = mercator(lat, lon, z);
   const t0x = Math.floor((X - v.w / 2 / k) / 256), t1x = Math.floor((X + v.w / 2 / k) / 256);
   const t0y = Math.floor((Y - v.h / 2 / k) / 256), t1y = Math.floor((Y + v.h / 2 / k) / 256);
+  const n = Math.pow(2, z);  // tiles round the world: past the antimeridian they wrap
   for (let tx = t0x; tx <= t1x; tx++) {
     for (let ty = t0y; ty <= t1y; ty++) {
-      const t = tile(z, tx, ty);
+      const t = tile(z, ((tx % n) + n) % n, ty);
       if (t.ok) ctx.drawImage(t.img, v.w / 2 + (tx * 256 - X) * k, v.h / 2 + (ty * 256 - Y) * k, 256 * k + 1, 256 * k + 1);
     }
   }
@@ -306,7 +311,7 @@ function mapOrigin() {
 function local(lat, lon) {
   // (north, east) metres of (lat, lon) about the map's origin (the page's flat-earth scale).
   const o = mapOrigin();
-  return [(lat - o.lat_deg) * M_PER_DEG_LAT, (lon - o.lon_deg) * M_PER_DEG_LON_EQ * Math.cos(o.lat_deg * Math.PI / 180)];
+  return [(lat - o.lat_deg) * M_PER_DEG_LAT, wrapLon(lon - o.lon_deg) * M_PER_DEG_LON_EQ * Math.cos(o.lat_deg * Math.PI / 180)];
 }
 
 function fleetPoints() {
