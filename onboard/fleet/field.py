@@ -464,6 +464,10 @@ class CurrentField:
         self.added = 0
         self.rejected: dict[str, int] = {}
         self.log_likelihood: float | None = None
+        self.averaged = False
+        """Whether the last fit of the hyperparameters found the fleet too sparse to fit
+        and averaged the field over the prior instead; a refresh without a fit
+        (``hyperparameters=False``) makes the same kind of field."""
         self.sigma_calibration = (SigmaCalibration(), SigmaCalibration())
         self.newest_utc = -math.inf
         self._bins: dict[tuple[str, int], list[float]] = {}
@@ -603,7 +607,9 @@ class CurrentField:
             self.sigma_down = fit_sigma_down(
                 self.hyper, _fitting_sample(obs.take(has_down), self._rng), mean[2],
                 self.sigma_down)
-        averaged = hyperparameters and sparse and self.prior is not None
+        if hyperparameters:
+            self.averaged = sparse and self.prior is not None
+        averaged = self.averaged
         fitted = self._fitted(obs, mean, averaged)
         out = self._outliers_in(fitted)
         if out.size:
