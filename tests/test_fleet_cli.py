@@ -61,3 +61,22 @@ def test_a_zenoh_config_alone_reaches_its_router(tmp_path):
         session.close()
     finally:
         router.close()
+
+
+def test_the_first_records_are_fitted_at_once_not_a_refit_period_after_the_start():
+    """The service starts before its vehicles publish: its first refresh, empty, does not
+    use up the hyperparameters' fit (the first minute of records was served on the
+    default hyperparameters, 1 km and 1 h)."""
+    import msgspec
+
+    from onboard.fleet.service import FleetService
+    from tests.helpers.fleet_scenarios import fleet
+
+    service = FleetService(refit_s=60.0)
+    assert service.step() is None   # nothing yet
+    f = fleet("eddy", seed=21, vehicles=4, duration_s=300.0, rate_hz=1.0)
+    enc = msgspec.json.Encoder()
+    for i in range(len(f.t)):
+        service.feed(enc.encode(f.record(i)), "application/json;onboard.Estimate.v2")
+    assert service.step() is not None
+    assert service.field.log_likelihood is not None   # fitted on these records

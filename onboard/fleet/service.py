@@ -280,15 +280,17 @@ class FleetService:
     def step(self, refit: bool | None = None) -> FleetGrid | None:
         """Refresh the field (the hyperparameters too when ``refit``, by default every
         ``refit_s``), then publish the grid (and write it to the MCAP);
-        return it (None before the first observation)."""
+        return it (None before the first observation). A refresh without any observation
+        fits nothing: the first fit of the hyperparameters is the first refresh's with
+        observations, not ``refit_s`` after the service started."""
         now = time.monotonic()
-        if refit is None:
-            refit = now >= self._refit_due
-        if refit:
-            self._refit_due = now + self.refit_s
         with self.lock:
             obs = self.field.gather()
             vehicles = list(self.newest.values())
+        if refit is None:
+            refit = now >= self._refit_due
+        if refit and obs is not None:
+            self._refit_due = now + self.refit_s
         self.field.update(obs, hyperparameters=refit)
         grid = self.grid(vehicles)
         if grid is not None:
