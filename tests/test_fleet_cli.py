@@ -80,3 +80,37 @@ def test_the_first_records_are_fitted_at_once_not_a_refit_period_after_the_start
         service.feed(enc.encode(f.record(i)), "application/json;onboard.Estimate.v2")
     assert service.step() is not None
     assert service.field.log_likelihood is not None   # fitted on these records
+
+
+def test_a_vehicle_silent_longer_than_the_history_leaves_the_grid():
+    """A boat heard once at its base 10 km away, then silent for 7 h while three others
+    survey: the grid covers the survey (cells of about 100 m) and lists the three (the
+    base's boat stretched the box to 11 km, cells of 700 m, for as long as the service
+    ran, though the field had forgotten its records)."""
+    import msgspec
+
+    from onboard.core.messages import EstimateRecord
+    from onboard.fleet.field import Plane
+    from onboard.fleet.service import FleetService
+    from tests.helpers.fleet_scenarios import LAT0, LON0, UTC0
+
+    plane, enc = Plane(LAT0, LON0), msgspec.json.Encoder()
+    service = FleetService()
+
+    def put(vehicle, utc, north_m, east_m):
+        lat, lon = map(float, plane.to_latlon(north_m, east_m))
+        service.feed(enc.encode(EstimateRecord(
+            vehicle=vehicle, pipeline="current", t=0.0, utc=utc, lat_deg=lat, lon_deg=lon,
+            values={"north": 0.1, "east": 0.0}, std={"north": 0.03, "east": 0.03})),
+            "application/json;onboard.Estimate.v2")
+
+    put("base", UTC0, 10_000.0, 0.0)
+    assert service.step() is not None
+    t0 = UTC0 + 7 * 3600.0
+    for k in range(60):
+        for j, vehicle in enumerate(("a", "b", "c")):
+            put(vehicle, t0 + 5.0 * k, 300.0 * j, 2.0 * k)
+    grid = service.step()
+    assert [v.vehicle for v in grid.vehicles] == ["a", "b", "c"]
+    assert grid.spacing_m < 150.0, grid.spacing_m
+    assert sorted(service.newest) == ["a", "b", "c"]

@@ -101,7 +101,10 @@ class FleetService:
 
     Attributes:
         field: the :class:`CurrentField`.
-        newest: each vehicle's newest record (:class:`VehicleCurrent`).
+        newest: each vehicle's newest record (:class:`VehicleCurrent`); a vehicle not
+            heard within the field's history (6 h before the newest record) is
+            forgotten at the next :meth:`step`, as its records are: it no longer
+            stretches the grid's box nor is listed in it.
         received: records received, by schema (``est.v1``, ``est.v2``) and ``bad`` (not
             an ``application/json`` Estimate of a schema this version reads, or not
             decodable), and ``history`` (rows of :meth:`load_history`); a record decoded
@@ -286,6 +289,9 @@ class FleetService:
         now = time.monotonic()
         with self.lock:
             obs = self.field.gather()
+            oldest = self.field.newest_utc - self.field.history_s
+            for gone in [k for k, v in self.newest.items() if v.utc < oldest]:
+                del self.newest[gone]   # not heard within the field's history
             vehicles = list(self.newest.values())
         if refit is None:
             refit = now >= self._refit_due
