@@ -134,6 +134,32 @@ def test_a_table_written_before_its_added_columns_places_its_rows_exactly(survey
     assert np.all(placed.field.gather().place > place + 10.0)   # the column's 50 m
 
 
+def test_a_table_whose_times_have_no_zone_is_read_in_utc(survey, tmp_path, monkeypatch):
+    """A day written out by another tool with its ``utc`` column's zone dropped (a
+    timestamp without a zone) is read as UTC, not as the shore machine's local time (on
+    a laptop in Paris the field stood an hour or two from its records' times)."""
+    import time
+
+    recs = [survey.record(i) for i in range(0, len(survey.t), 10)]
+    path = tmp_path / "current.parquet"
+    write_table(path, recs)
+    table = pq.read_table(path)
+    i = table.schema.get_field_index("utc")
+    naive = table.set_column(i, "utc", table["utc"].cast(pa.timestamp("ms")))
+    pq.write_table(naive, tmp_path / "naive.parquet")
+    monkeypatch.setenv("TZ", "Europe/Paris")
+    time.tzset()
+    try:
+        aware, local = FleetService(), FleetService()
+        aware.load_history(path)
+        local.load_history(tmp_path / "naive.parquet")
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+    assert local.field.newest_utc == aware.field.newest_utc == \
+        max(round(r.utc * 1000.0) / 1000.0 for r in recs)
+
+
 def test_a_file_that_is_not_a_batch_table_is_a_usage_error(tmp_path):
     with pytest.raises(UsageError, match="no-such.parquet: not a current.parquet"):
         FleetService().load_history(tmp_path / "no-such.parquet")

@@ -40,6 +40,7 @@ import math
 import re
 import threading
 import time
+from datetime import timezone
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -244,7 +245,9 @@ class FleetService:
         rows = table.to_pydict()
         for c in HISTORY_COLUMNS_ADDED:
             rows.setdefault(c, [None] * table.num_rows)
-        utc_s = [None if u is None else u.timestamp() for u in rows["utc"]]
+        # a time without a zone (a table another tool wrote) is UTC, not this machine's
+        utc_s = [None if u is None else u.replace(tzinfo=u.tzinfo or timezone.utc).timestamp()
+                 for u in rows["utc"]]
         order = sorted(range(table.num_rows), key=lambda i: (utc_s[i] is None, utc_s[i] or 0.0))
         field = self.field
         oldest = max((u for u in utc_s if u is not None), default=0.0) - field.history_s
