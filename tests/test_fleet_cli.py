@@ -114,3 +114,31 @@ def test_a_vehicle_silent_longer_than_the_history_leaves_the_grid():
     assert [v.vehicle for v in grid.vehicles] == ["a", "b", "c"]
     assert grid.spacing_m < 150.0, grid.spacing_m
     assert sorted(service.newest) == ["a", "b", "c"]
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("module", ["onboard.fleet.service", "onboard.apps.shore"])
+def test_a_listening_peer_dials_nobody(module, monkeypatch):
+    """``--mode peer --listen E`` (docs/fleet.md's history example): the vehicles connect to
+    it; it joined whatever Zenoh network answered on the default local endpoint as well
+    (another service's router on 127.0.0.1:7447). A client still dials the default."""
+    import importlib
+    import time
+
+    from onboard.apps.service_bench import free_tcp_port
+    from onboard.service.publishers.zenoh_pub import open_router
+
+    mod = importlib.import_module(module)
+    default = f"tcp/127.0.0.1:{free_tcp_port()}"
+    monkeypatch.setattr(mod, "DEFAULT_CONNECT", default)
+    router = open_router(default)
+    try:
+        peer = mod.open_session(None, [f"tcp/127.0.0.1:{free_tcp_port()}"], "peer", "")
+        client = mod.open_session(None, None, None, "")
+        time.sleep(0.5)
+        assert list(peer.info.routers_zid()) == []
+        assert len(list(client.info.routers_zid())) == 1
+        peer.close()
+        client.close()
+    finally:
+        router.close()

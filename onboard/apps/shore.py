@@ -228,7 +228,8 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
     """A shore Zenoh session (client by default, multicast scouting off); ``config_file``
     (JSON5) carries TLS and credentials for a router with access control
     (docs/security.md), and the endpoints to connect to where ``connect`` gives none
-    (:data:`DEFAULT_CONNECT` where neither does)."""
+    (:data:`DEFAULT_CONNECT` where neither does, but for a peer that listens: it dials
+    nobody)."""
     import zenoh
 
     from onboard.service.publishers.zenoh_pub import config_endpoints, session_config
@@ -236,11 +237,13 @@ def open_session(connect: list[str] | None, listen: list[str] | None, mode: str 
     m = mode or "client"
     if config_file and not Path(config_file).is_file():
         raise UsageError(f"--zenoh-config {config_file}: no such file")
+    default = [] if listen and m == "peer" else [DEFAULT_CONNECT]   # a listening peer dials none
     try:
-        connect = connect or config_endpoints(config_file) or [DEFAULT_CONNECT]
+        connect = connect or config_endpoints(config_file) or default
         return zenoh.open(session_config(m, connect, listen or [], config_file))
     except Exception as err:  # noqa: BLE001 - zenoh.ZError
-        raise UsageError(f"cannot reach Zenoh at {', '.join(connect or [config_file])}: "
+        where = ", ".join(connect or listen or [config_file])
+        raise UsageError(f"cannot reach Zenoh at {where}: "
                          f"{str(err).split(' at ')[0]}") from None
 
 

@@ -523,19 +523,22 @@ class _McapGrid:
 def open_session(connect: list[str] | None, listen: list[str] | None, mode: str | None,
                  config_file: str = "") -> Any:
     """A shore Zenoh session (client by default), as ``onboard shore`` opens one: to the
-    endpoints of ``connect``, else of ``config_file``, else :data:`DEFAULT_CONNECT`."""
+    endpoints of ``connect``, else of ``config_file``, else :data:`DEFAULT_CONNECT` (a
+    peer that listens, with none of them, dials nobody: the vehicles connect to it)."""
     import zenoh
 
     from onboard.service.publishers.zenoh_pub import config_endpoints, session_config
 
     if config_file and not Path(config_file).is_file():
         raise UsageError(f"--zenoh-config {config_file}: no such file")
+    mode = mode or "client"
+    default = [] if listen and mode == "peer" else [DEFAULT_CONNECT]   # a listening peer dials none
     try:
-        connect = connect or config_endpoints(config_file) or [DEFAULT_CONNECT]
-        return zenoh.open(session_config(mode or "client", connect, listen or [],
-                                         config_file))
+        connect = connect or config_endpoints(config_file) or default
+        return zenoh.open(session_config(mode, connect, listen or [], config_file))
     except Exception as err:  # noqa: BLE001 - zenoh.ZError
-        raise UsageError(f"cannot reach Zenoh at {', '.join(connect or [config_file])}: "
+        where = ", ".join(connect or listen or [config_file])
+        raise UsageError(f"cannot reach Zenoh at {where}: "
                          f"{str(err).split(' at ')[0]}") from None
 
 
