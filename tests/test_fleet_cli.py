@@ -142,3 +142,26 @@ def test_a_listening_peer_dials_nobody(module, monkeypatch):
         client.close()
     finally:
         router.close()
+
+
+def test_vehicles_whose_currents_are_not_known_yet_are_in_a_grid_of_unknown_cells():
+    """The fleet's first minutes: every vehicle publishes its place, its current not
+    converged yet (withheld). The grid is published every period all the same, the
+    vehicles listed and every cell unknown (nothing was published, so the page and a
+    vehicle subscribed to the grid saw no fleet at all, and the MCAP began later)."""
+    import msgspec
+
+    from onboard.core.messages import EstimateRecord
+    from onboard.fleet.service import FleetService
+    from tests.helpers.fleet_scenarios import LAT0, LON0, UTC0
+
+    service, enc = FleetService(), msgspec.json.Encoder()
+    for k, vehicle in enumerate(("a", "b")):
+        service.feed(enc.encode(EstimateRecord(
+            vehicle=vehicle, pipeline="current", t=0.0, utc=UTC0 + k, lat_deg=LAT0 + 0.001 * k,
+            lon_deg=LON0, values={}, std={})), "application/json;onboard.Estimate.v2")
+    grid = service.step()
+    assert grid is not None and [v.vehicle for v in grid.vehicles] == ["a", "b"]
+    assert grid.utc == UTC0 + 1 and grid.cells
+    assert all(c.north is None and c.n_obs == 0 for c in grid.cells)
+    assert service.left_out() == {"no_current": 2}

@@ -286,7 +286,7 @@ class FleetService:
     def step(self, refit: bool | None = None) -> FleetGrid | None:
         """Refresh the field (the hyperparameters too when ``refit``, by default every
         ``refit_s``), then publish the grid (and write it to the MCAP);
-        return it (None before the first observation). A refresh without any observation
+        return it (None before a vehicle with a position). A refresh without any observation
         fits nothing: the first fit of the hyperparameters is the first refresh's with
         observations, not ``refit_s`` after the service started."""
         now = time.monotonic()
@@ -308,14 +308,15 @@ class FleetService:
 
     def grid(self, vehicles: list[VehicleCurrent]) -> FleetGrid | None:
         """The field on the grid about ``vehicles`` (module docstring), None without a
-        fitted field or a vehicle with a position."""
-        field = self.field
+        vehicle with a position. Before the field has an observation (the vehicles'
+        currents not known yet) the grid still lists them, its cells unknown."""
         placed = [v for v in vehicles if v.lat is not None and v.lon is not None]
-        if field.fitted is None or not placed or field.plane is None:
+        if not placed:
             return None
+        lat, lon = ([v.lat for v in placed], [v.lon for v in placed])
+        plane = self.field.plane or Plane(lat[0], lon[0])
         utc = max(v.utc for v in placed if v.utc is not None)
-        lats, lons, spacing = grid_points(field.plane, [v.lat for v in placed],
-                                          [v.lon for v in placed])
+        lats, lons, spacing = grid_points(plane, lat, lon)
         cells = [self.answer(la, lo, utc) for la in lats for lo in lons]
         return FleetGrid(utc=utc, spacing_m=spacing, cells=cells,
                          vehicles=sorted(vehicles, key=lambda v: v.vehicle))
