@@ -154,6 +154,26 @@ def test_a_grid_across_the_antimeridian_is_drawn_as_anywhere_else(tmp_path):
 
 @pytest.mark.integration
 @pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")
+def test_a_long_vehicle_id_is_cut_on_the_map(tmp_path):
+    """A vehicle id of 300 characters (any id a key can carry) is drawn as a label of 16:
+    the whole id ran across the map over the east half's cells."""
+    mpimg = pytest.importorskip("matplotlib.image", reason="pip install 'onboard[plot]'")
+    view = LiveView()
+    for k in range(12):
+        grid = synthetic_grid(1000.0 + 5.0 * k)
+        grid["vehicles"][0]["vehicle"] = "x" * 300
+        view.feed_zenoh(GRID_KEY, json.dumps(grid).encode())
+    out = tmp_path / "fleet.png"
+    with ServerThread(view=view) as srv:
+        run = screenshot(srv.url + "/?tiles=0", out, tmp_path / "profile")
+    assert run.returncode == 0 and out.exists(), run.stderr[-2000:]
+    img = mpimg.imread(out)
+    assert pixels_near(img[40:, :345], FLEET_VEHICLE_RGB) > 100   # the vehicles, labelled
+    assert pixels_near(img[40:, 365:700], FLEET_VEHICLE_RGB, tol=40) == 0
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(chromium() is None, reason=f"needs Chromium: {CHROMIUM_INSTALL}")
 def test_a_vehicle_without_a_position_is_counted_not_drawn_at_0_0(tmp_path):
     """An AUV that never had a fix is listed in the grid without a position: the panel
     names it, and the map keeps the fleet's extent (drawn at lat 0, lon 0, it put the

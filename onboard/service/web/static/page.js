@@ -31,6 +31,7 @@ const FLEET_VEHICLE_COLOUR = '#ef6c00';  // each vehicle's own estimate
 const FLEET_STD_FULL = 0.05;   // m/s: a cell this certain or better is drawn opaque
 const FLEET_ALPHA_MIN = 0.15;  // the faintest cell drawn
 const FLEET_ARROW_OF_SPACING = 0.9;  // the fastest cell's arrow spans this much of a cell
+const FLEET_LABEL_CHARS = 16;  // a vehicle's label on the map is cut to this many characters
 const M_PER_DEG_LAT = 111132.95, M_PER_DEG_LON_EQ = 111319.49;
 
 let track = [];          // [t, north_m, east_m]
@@ -102,6 +103,9 @@ function centre(cells) {
   const lon = cells[0].lon + cells.reduce((a, c) => a + wrapLon(c.lon - cells[0].lon), 0) / cells.length;
   return {lat_deg: lat, lon_deg: wrapLon(lon)};
 }
+
+// A vehicle's id as its label on the map: at most FLEET_LABEL_CHARS characters, the rest cut.
+const shortLabel = (id) => (String(id).length > FLEET_LABEL_CHARS ? String(id).slice(0, FLEET_LABEL_CHARS - 1) + '…' : String(id));
 
 // A longitude or a difference of two (deg) within [-180, 180]: east the shorter way round.
 const wrapLon = (d) => (d > 180 ? d - 360 : d < -180 ? d + 360 : d);
@@ -354,7 +358,7 @@ function drawFleet(ctx, v) {
     if (known_cell(b))
       currentArrow(ctx, x, y, b.north, b.east, b.std_north, b.std_east, scale, FLEET_VEHICLE_COLOUR, 'rgba(239, 108, 0, 0.15)', 3, 9);
     ctx.fillStyle = FLEET_VEHICLE_COLOUR; ctx.beginPath(); ctx.arc(x, y, 4, 0, 2 * Math.PI); ctx.fill();
-    ctx.font = '11px sans-serif'; ctx.fillText(b.vehicle, x + 6, y + 12);
+    ctx.font = '11px sans-serif'; ctx.fillText(shortLabel(b.vehicle), x + 6, y + 12);
   }
   if (!g) return;
   ctx.fillStyle = FLEET_COLOUR; ctx.font = '11px sans-serif';
