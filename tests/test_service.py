@@ -647,3 +647,16 @@ def test_a_killed_service_leaves_a_readable_recording_missing_at_most_the_flush_
     frames = [r for r in read_records(rec, stats) if r.kind == "mavlink"]
     assert len(frames) == sent  # all of it: the last datagram came 1.5 s before the kill
     assert sum(stats.rejected.values()) <= 1
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("level, ok", [("warning", True), ("VERBOSE", False)])
+def test_onboard_log_level_is_read_in_any_case_and_a_bad_one_is_one_line(tmp_path, level, ok):
+    p = tmp_path / "bad.toml"
+    p.write_text("[vehicle]\nid = 3\n")  # refused after the log level is read
+    r = subprocess.run([sys.executable, "-m", "onboard", "run", "--config", str(p),
+                        "--state-dir", str(tmp_path)], capture_output=True, text=True,
+                       timeout=TIMEOUT, env={**os.environ, "ONBOARD_LOG_LEVEL": level})
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert ("vehicle.id" in r.stderr) == ok and ("ONBOARD_LOG_LEVEL" in r.stderr) != ok

@@ -875,10 +875,24 @@ async def run_service(cfg: Config, state_dir: Path, logs_dir: Path | None = None
     return EXIT_INTERRUPTED if stopped_by[:1] == [signal.SIGINT] else 0
 
 
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
+"""The values ``ONBOARD_LOG_LEVEL`` takes (any case; empty or unset: INFO)."""
+
+
+def env_log_level(value: str) -> str:
+    """The logging level named by ``ONBOARD_LOG_LEVEL`` (``value``), upper-cased; empty:
+    INFO. Any other name is a :class:`ConfigError` that lists the levels."""
+    level = value.strip().upper() or "INFO"
+    if level not in LOG_LEVELS:
+        raise ConfigError(f"ONBOARD_LOG_LEVEL={value!r}: expected one of "
+                          f"{', '.join(LOG_LEVELS)}")
+    return level
+
+
 def main(args: argparse.Namespace) -> int:
     """``onboard run --config FILE [--config OVERLAY ...] [--state-dir DIR]``: the
     files are applied in order (:func:`onboard.core.config.load_all`)."""
-    logging.basicConfig(level=os.environ.get("ONBOARD_LOG_LEVEL", "INFO"),
+    logging.basicConfig(level=env_log_level(os.environ.get("ONBOARD_LOG_LEVEL", "")),
                         format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
     paths = [args.config] if isinstance(args.config, str) else list(args.config)
     cfg = load_all(paths)
