@@ -442,6 +442,28 @@ def test_a_staged_install_puts_config_unit_and_credential_store_in_place_and_kee
         main(["--prefix", "relative/path", "--no-venv"])
 
 
+def test_a_staged_venv_names_the_prefix_it_runs_from_not_the_staging_directory(tmp_path):
+    """With DESTDIR the venv is made under the staging directory; its scripts, activate
+    and pyvenv.cfg are rewritten to name PREFIX/venv (the python symlinks stay)."""
+    from onboard.apps.install import relocate_venv
+
+    venv = tmp_path / "stage" / "opt" / "onboard" / "venv"
+    (venv / "bin").mkdir(parents=True)
+    script = venv / "bin" / "onboard"
+    script.write_text(f"#!{venv}/bin/python\nimport sys\n")
+    script.chmod(0o755)
+    (venv / "bin" / "activate").write_text(f'VIRTUAL_ENV="{venv}"\n')
+    (venv / "bin" / "python").symlink_to("/usr/bin/python3")
+    (venv / "pyvenv.cfg").write_text(f"home = /usr/bin\ncommand = python3 -m venv {venv}\n")
+    changed = relocate_venv(venv, "/opt/onboard/venv")
+    assert sorted(p.name for p in changed) == ["activate", "onboard", "pyvenv.cfg"]
+    assert script.read_text() == "#!/opt/onboard/venv/bin/python\nimport sys\n"
+    assert script.stat().st_mode & 0o777 == 0o755
+    assert (venv / "bin" / "activate").read_text() == 'VIRTUAL_ENV="/opt/onboard/venv"\n'
+    assert os.readlink(venv / "bin" / "python") == "/usr/bin/python3"
+    assert str(tmp_path) not in (venv / "pyvenv.cfg").read_text()
+
+
 @pytest.mark.integration
 def test_make_install_into_a_prefix_gives_a_venv_with_bundled_data_and_a_verified_unit(
         tmp_path):

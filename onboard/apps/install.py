@@ -16,7 +16,10 @@ What goes where (each path under ``DESTDIR`` when given):
                                             pip, or ``WHEEL``) installed, as any user
                                             installs it, bundled configs and gains
                                             inside; the unit runs
-                                            ``PREFIX/venv/bin/python -m onboard``
+                                            ``PREFIX/venv/bin/python -m onboard``; with
+                                            ``DESTDIR`` its scripts (``bin/onboard``,
+                                            ``bin/pip``, ``activate``) name
+                                            ``PREFIX/venv``, not the staged path
 ``SYSCONFDIR/onboard.toml``                 config/deploy-example.toml, only if absent
 ``SYSCONFDIR/onboard.env``                  systemd/onboard.env.example, only if absent
 ``SYSCONFDIR/zenoh-vehicle.json5``          config/zenoh/vehicle-boat1.json5 (no secret),
@@ -136,6 +139,27 @@ def make_venv(venv: Path, python: str, pip_args: list[str], wheel: Path | None) 
         _say(f"{wheel.name} installed into {venv}")
 
 
+def relocate_venv(venv: Path, final: str) -> list[Path]:
+    """Point a venv made at ``venv`` (under ``DESTDIR``) to where it will run, ``final``:
+    the first lines of its ``bin/`` scripts (``#!VENV/bin/python``), ``activate``'s
+    ``VIRTUAL_ENV`` and ``pyvenv.cfg`` name ``final`` instead of ``venv``. Symbolic links
+    are left alone. Returns the files changed."""
+    old, new = str(venv).encode(), final.rstrip("/").encode()
+    changed = []
+    for path in [*sorted((venv / "bin").iterdir()), venv / "pyvenv.cfg"]:
+        if path.is_symlink() or not path.is_file():
+            continue
+        data = path.read_bytes()
+        if old in data:
+            mode = path.stat().st_mode & 0o7777
+            tmp = path.with_name(f".{path.name}.tmp")
+            tmp.write_bytes(data.replace(old, new))
+            tmp.chmod(mode)
+            os.replace(tmp, path)
+            changed.append(path)
+    return changed
+
+
 def verify_unit(unit: Path) -> str | None:
     """``systemd-analyze verify`` of ``unit`` (None: passed, or no systemd-analyze here);
     else its complaint."""
@@ -165,8 +189,13 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(f"--{name} must be an absolute path")
     d = a.destdir
     if not a.no_venv:
-        make_venv(_stage(d, a.prefix) / "venv", a.python, a.pip_args.split(),
+        venv = _stage(d, a.prefix) / "venv"
+        make_venv(venv, a.python, a.pip_args.split(),
                   Path(a.wheel).resolve() if a.wheel else None)
+        if d:
+            final = a.prefix.rstrip("/") + "/venv"
+            relocate_venv(venv, final)
+            _say(f"{venv}: its scripts name {final}, where it runs once installed")
     etc = _stage(d, a.sysconfdir)
     for src, name in ((SOURCE / "config" / "deploy-example.toml", "onboard.toml"),
                       (SOURCE / "systemd" / "onboard.env.example", "onboard.env"),
