@@ -99,7 +99,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write the hidden truth (JSON lines) to this file")
     p.add_argument("--link", help="udp:HOST:PORT, tcp:HOST:PORT or pty")
     p.add_argument("--nmea-pty", action="store_true", help="emit NMEA on a pseudo-terminal")
-    p.add_argument("--dvl", metavar="tcp:HOST:PORT", help="serve Water Linked DVL JSON")
+    p.add_argument("--dvl", metavar="tcp:HOST:PORT|pty",
+                   help="serve Water Linked DVL JSON on a TCP server, or Teledyne PD6 on a "
+                        "pseudo-terminal (pty)")
     p.add_argument("--realtime", action="store_true", help="run at wall-clock speed")
     p.add_argument("--controller", choices=("pid", "nmpc", "nmpc-of", "ampc"), default=None,
                    help="closed-loop controller (bluerov2-circle)")

@@ -511,6 +511,18 @@ def test_the_help_text_names_every_subcommand() -> None:
     assert all(re.search(rf"^\s+{name}\s", text, re.MULTILINE) for name in cli_commands())
 
 
+def test_the_sitl_help_names_both_forms_of_dvl() -> None:
+    """``--dvl`` takes ``tcp:HOST:PORT`` (Water Linked JSON) or ``pty`` (PD6), as
+    docs/sitl.md's emitter table says; its help names both."""
+    import argparse
+
+    from onboard.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    text = " ".join(sub.choices["sitl"].format_help().split())
+    assert "tcp:HOST:PORT|pty" in text and "PD6" in text, text
+
+
 def test_the_command_table_check_sees_a_missing_row() -> None:
     """Negative control: a table without ``bench`` differs from the CLI."""
     rows = "\n".join(f"| `onboard {c} ...` | x |" for c in sorted(cli_commands() - {"bench"}))
