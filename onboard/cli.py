@@ -30,11 +30,12 @@ LOG_HELP = ("the log to read: .tlog, DataFlash .bin, .mcap (a BlueOS recording),
 def _add_zenoh_flags(p: argparse.ArgumentParser) -> None:
     """The Zenoh connection flags shared by every command that talks Zenoh."""
     p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
-                   help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+                   help="Zenoh endpoint to connect to (repeatable; default: those of "
+                        "--zenoh-config, else tcp/127.0.0.1:7447)")
     p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
                    help="Zenoh endpoint to listen on (repeatable)")
     p.add_argument("--mode", choices=("peer", "client"), default=None,
-                   help="Zenoh session mode")
+                   help="Zenoh session mode (default: that of --zenoh-config, else client)")
     p.add_argument("--zenoh-config", default="", metavar="FILE",
                    help="Zenoh JSON5 config: TLS, user/password (config/zenoh/shore.json5)")
 

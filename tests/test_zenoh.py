@@ -243,3 +243,27 @@ def test_the_shore_table_shows_a_records_control_characters_not_acts_on_them():
     table = view.table()
     assert "\x1b" not in table and "\x07" not in table and "\r" not in table
     assert "b\\x1b[2J\\x1b]0;pwned\\x07" in table and "gnss lost\\x1b[31m\\x0d\\x0afake" in table
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("opener", ["onboard.apps.shore", "onboard.fleet.service"])
+def test_a_zenoh_config_file_gives_the_endpoints_and_mode_when_the_flags_do_not(
+        router, tmp_path, opener):
+    """``--zenoh-config FILE`` without ``--connect``/``--mode`` connects where FILE says
+    (docs/security.md: ``onboard shore --once --zenoh-config shore.json5``), not to the
+    default tcp/127.0.0.1:7447; ``--connect`` still wins over the file."""
+    import importlib
+
+    from onboard.core.errors import UsageError
+
+    open_session = importlib.import_module(opener).open_session
+    endpoint, _ = router
+    good = tmp_path / "good.json5"
+    good.write_text(f'{{ mode: "client", connect: {{ endpoints: ["{endpoint}"] }} }}\n')
+    open_session(None, None, None, str(good)).close()
+    nowhere = f"tcp/127.0.0.1:{free_tcp_port()}"
+    bad = tmp_path / "bad.json5"
+    bad.write_text(f'{{ mode: "client", connect: {{ endpoints: ["{nowhere}"] }} }}\n')
+    with pytest.raises(UsageError, match=f"cannot reach Zenoh at {nowhere}:"):
+        open_session(None, None, None, str(bad))
+    open_session([endpoint], None, None, str(bad)).close()

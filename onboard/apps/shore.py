@@ -39,10 +39,9 @@ import msgspec
 from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.wire import ESTIMATE_SCHEMAS, HEALTH_SCHEMA, LOCATION_FIX_SCHEMA
-from onboard.service.publishers.zenoh_pub import valid_prefix
+from onboard.service.publishers.zenoh_pub import open_shore_session as open_session, valid_prefix
 from onboard.service.web.view import key_parts
 
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 DEFAULT_PREFIX = "onboard"
 FLEET_GRID_SUFFIX = "fleet/current/grid"
 """The fleet service's grid (``onboard fleet``) is on ``<prefix>/fleet/current/grid``,
@@ -221,30 +220,6 @@ class ShoreView:
             out.append("events:")
             out.extend(evs[-8:])
         return "\n".join(out).translate(TABLE_SHOWN) if out else "no vehicle seen yet"
-
-
-def open_session(connect: list[str] | None, listen: list[str] | None, mode: str | None,
-                 config_file: str = "") -> Any:
-    """A shore Zenoh session (client by default, multicast scouting off); ``config_file``
-    (JSON5) carries TLS and credentials for a router with access control
-    (docs/security.md), and the endpoints to connect to where ``connect`` gives none
-    (:data:`DEFAULT_CONNECT` where neither does, but for a peer that listens: it dials
-    nobody)."""
-    import zenoh
-
-    from onboard.service.publishers.zenoh_pub import config_endpoints, session_config
-
-    m = mode or "client"
-    if config_file and not Path(config_file).is_file():
-        raise UsageError(f"--zenoh-config {config_file}: no such file")
-    default = [] if listen and m == "peer" else [DEFAULT_CONNECT]   # a listening peer dials none
-    try:
-        connect = connect or config_endpoints(config_file) or default
-        return zenoh.open(session_config(m, connect, listen or [], config_file))
-    except Exception as err:  # noqa: BLE001 - zenoh.ZError
-        where = ", ".join(connect or listen or [config_file])
-        raise UsageError(f"cannot reach Zenoh at {where}: "
-                         f"{str(err).split(' at ')[0]}") from None
 
 
 def check_prefix(prefix: str) -> str:

@@ -64,11 +64,10 @@ from onboard.fleet.messages import (
     current_key,
     grid_key,
 )
-from onboard.service.publishers.zenoh_pub import valid_prefix
+from onboard.service.publishers.zenoh_pub import open_shore_session as open_session, valid_prefix
 from onboard.service.web.http import parse_listen
 from onboard.service.web.view import FLEET_TRACK_PERIOD_S
 
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 GRID_PERIOD_S = 5.0
 """Seconds between two grids (and two refreshes of the field)."""
 REFIT_PERIOD_S = 60.0
@@ -519,28 +518,6 @@ class _McapGrid:
             self.writer.finish()
         finally:
             self._f.close()
-
-
-def open_session(connect: list[str] | None, listen: list[str] | None, mode: str | None,
-                 config_file: str = "") -> Any:
-    """A shore Zenoh session (client by default), as ``onboard shore`` opens one: to the
-    endpoints of ``connect``, else of ``config_file``, else :data:`DEFAULT_CONNECT` (a
-    peer that listens, with none of them, dials nobody: the vehicles connect to it)."""
-    import zenoh
-
-    from onboard.service.publishers.zenoh_pub import config_endpoints, session_config
-
-    if config_file and not Path(config_file).is_file():
-        raise UsageError(f"--zenoh-config {config_file}: no such file")
-    mode = mode or "client"
-    default = [] if listen and mode == "peer" else [DEFAULT_CONNECT]   # a listening peer dials none
-    try:
-        connect = connect or config_endpoints(config_file) or default
-        return zenoh.open(session_config(mode, connect, listen or [], config_file))
-    except Exception as err:  # noqa: BLE001 - zenoh.ZError
-        where = ", ".join(connect or listen or [config_file])
-        raise UsageError(f"cannot reach Zenoh at {where}: "
-                         f"{str(err).split(' at ')[0]}") from None
 
 
 def set_drift_flags(args: argparse.Namespace) -> dict[str, Any] | None:

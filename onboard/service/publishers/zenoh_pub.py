@@ -36,12 +36,13 @@ import json
 import logging
 import threading
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import msgspec
 
 from onboard.core import wire
 from onboard.core.config import ZenohOut
+from onboard.core.errors import UsageError
 from onboard.core.messages import EstimateRecord, HealthRecord
 
 log = logging.getLogger(__name__)
@@ -97,6 +98,44 @@ def config_endpoints(config_file: str, what: str = "connect") -> list[str]:
     if not config_file:
         return []
     return list(json.loads(zenoh.Config.from_file(config_file).get_json(f"{what}/endpoints")))
+
+
+def config_mode(config_file: str) -> str | None:
+    """The ``mode`` of a Zenoh JSON5 configuration file (None when it gives none, or for
+    no file)."""
+    import zenoh
+
+    if not config_file:
+        return None
+    return json.loads(zenoh.Config.from_file(config_file).get_json("mode") or "null")
+
+
+SHORE_CONNECT = "tcp/127.0.0.1:7447"
+"""Where a shore session connects when neither its flags nor its config file say: a
+router on this machine."""
+
+
+def open_shore_session(connect: Sequence[str] | None, listen: Sequence[str] | None,
+                       mode: str | None, config_file: str = "") -> Any:
+    """A shore Zenoh session (``onboard shore``, ``onboard fleet``; multicast scouting
+    off): in ``mode``, else ``config_file``'s, else client; to ``connect``, else
+    ``config_file``'s endpoints, else :data:`SHORE_CONNECT` (a peer that listens, with none
+    of them, dials nobody: the vehicles connect to it). ``config_file`` (JSON5) also
+    carries TLS and credentials for a router with access control (docs/security.md). A
+    missing file or an unreachable router is a :class:`UsageError` of one line."""
+    import zenoh
+
+    if config_file and not Path(config_file).is_file():
+        raise UsageError(f"--zenoh-config {config_file}: no such file")
+    m = mode or config_mode(config_file) or "client"
+    default = [] if listen and m == "peer" else [SHORE_CONNECT]
+    endpoints = list(connect or config_endpoints(config_file) or default)
+    try:
+        return zenoh.open(session_config(m, endpoints, list(listen or []), config_file))
+    except Exception as err:  # noqa: BLE001 - zenoh.ZError
+        where = ", ".join(endpoints or list(listen or []) or [config_file])
+        raise UsageError(f"cannot reach Zenoh at {where}: "
+                         f"{str(err).split(' at ')[0]}") from None
 
 
 def secret_settings(cfg: ZenohOut) -> dict[str, str]:
