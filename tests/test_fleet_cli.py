@@ -128,9 +128,11 @@ def test_a_listening_peer_dials_nobody(module, monkeypatch):
     from onboard.apps.service_bench import free_tcp_port
     from onboard.service.publishers.zenoh_pub import open_router
 
+    from onboard.service.publishers import zenoh_pub
+
     mod = importlib.import_module(module)
     default = f"tcp/127.0.0.1:{free_tcp_port()}"
-    monkeypatch.setattr(mod, "DEFAULT_CONNECT", default)
+    monkeypatch.setattr(zenoh_pub, "SHORE_CONNECT", default)
     router = open_router(default)
     try:
         peer = mod.open_session(None, [f"tcp/127.0.0.1:{free_tcp_port()}"], "peer", "")
