@@ -170,3 +170,20 @@ def test_report_figures_per_channel_from_a_selection(tmp_path):
     assert png.stat().st_size > 10_000
     assert base64.b64encode(png.read_bytes()).decode()[:200] in page
     assert "The log is explained by" in page and "deg/s" in page
+
+
+def test_the_last_line_says_when_report_html_has_no_figures(monkeypatch):
+    """Without matplotlib (the plot extra) report.html is written without figures; the
+    last line says so and names the extra, as onboard replay does for track.png."""
+    import sys
+    from types import SimpleNamespace
+
+    from onboard.offline.diagnose import _last_line
+
+    args = SimpleNamespace(out="diag", write_config=None, config=None)
+    assert "matplotlib" not in _last_line(args, 0)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # not importable
+    line = _last_line(args, 2)
+    assert line.startswith("wrote diagnosis.json, report.html in diag; no figures in "
+                           "report.html: matplotlib is missing (pip install 'onboard[plot]')")
+    assert line.endswith("(2 warnings above)")

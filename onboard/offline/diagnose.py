@@ -12,6 +12,7 @@ Options in the config's ``[diagnose]`` table (:class:`onboard.core.config.Diagno
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 from pathlib import Path
@@ -166,8 +167,11 @@ def main(args) -> int:
 
 
 def _last_line(args, n_warnings: int) -> str:
-    """What was written, and how to use the overlay."""
+    """What was written (report.html without figures when matplotlib, the ``plot`` extra,
+    is missing), and how to use the overlay."""
     line = f"wrote diagnosis.json, report.html in {args.out}"
+    if importlib.util.find_spec("matplotlib") is None:  # report.write draws no figure
+        line += "; no figures in report.html: matplotlib is missing (pip install 'onboard[plot]')"
     if getattr(args, "write_config", None):
         base = " ".join(f"--config {c}" for c in args.config or [])
         line += (f", and the config overlay {args.write_config} (use: "
