@@ -280,6 +280,36 @@ def test_a_bad_record_is_left_out_by_reason_and_shapes_nothing():
     assert control.utc > 1e12 and control.spacing_m > 1000.0
 
 
+def test_a_current_its_vehicle_doubts_is_left_out_until_its_health_clears_it():
+    """A vehicle's health record flagging its ``current`` pipeline (``nis_out_of_band``:
+    values kept, doubted) holds its records back (``doubted``), as its own chart-plotter
+    output does; a clear health record lets them in again. A health record on another
+    vehicle's key, or of another encoding, changes nothing."""
+    from onboard.core.messages import HealthRecord
+    from onboard.core.wire import HEALTH_SCHEMA
+
+    f = fleet("tidal_channel", seed=4, vehicles=2, duration_s=120.0, rate_hz=0.5)
+    enc = msgspec.json.Encoder()
+    service = FleetService(clock=lambda: UTC0 + 120.0)
+    v2, h3 = "application/json;onboard.Estimate.v2", f"application/json;{HEALTH_SCHEMA}"
+    recs = [f.record(i) for i in range(len(f.t))]
+    rec = next(r for r in recs if r.vehicle == "v0")
+    key = "onboard/v0/est/current"
+
+    def health(flags, vehicle="v0"):
+        return enc.encode(HealthRecord(vehicle=vehicle, t=rec.t, flags=flags))
+    assert service.feed(enc.encode(rec), v2, key)
+    doubt = {"current": ["nis_out_of_band"]}
+    assert not service.feed_health(health(doubt), h3, "onboard/v1/health")  # wrong key
+    assert not service.feed_health(health(doubt), "text/plain", "onboard/v0/health")
+    assert service.feed(enc.encode(rec), v2, key)
+    assert service.feed_health(health(doubt), h3, "onboard/v0/health")
+    assert not service.feed(enc.encode(rec), v2, key)
+    assert service.left_out()["doubted"] == 1
+    assert service.feed_health(health({"aie": ["speed_mismatch"]}), h3, "onboard/v0/health")
+    assert service.feed(enc.encode(rec), v2, key)
+
+
 def test_the_grid_covers_the_box_of_its_vehicles():
     """The grid's rows and columns cover the vehicles' box and its margin, centred on it,
     in at most ``GRID_CELLS`` cells along its longer side."""

@@ -47,11 +47,11 @@ from typing import Any, Mapping
 import msgspec
 
 from onboard.core.errors import SigtermAsInterrupt, UsageError
-from onboard.core.messages import EstimateRecord
+from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.outputs import Output, existing
 from onboard.core.outputs import check as check_outputs
 from onboard.core import wire
-from onboard.core.wire import ESTIMATE_SCHEMAS, JSON_MIME, encoding
+from onboard.core.wire import ESTIMATE_SCHEMAS, HEALTH_SCHEMA, JSON_MIME, encoding
 from onboard.fleet.chartplot import CHART_PERIOD_S, FieldSetDrift, parse_place, udp_output
 from onboard.fleet.field import CurrentField, Plane, one_blas_thread
 from onboard.fleet.messages import (
@@ -68,6 +68,8 @@ from onboard.service.publishers.zenoh_pub import open_shore_session as open_sess
 from onboard.service.web.http import parse_listen
 from onboard.service.web.view import FLEET_TRACK_PERIOD_S
 
+CURRENT_PIPELINE = "current"
+"""The vehicles' pipeline whose records the field fuses (``<prefix>/<vehicle>/est/current``)."""
 GRID_PERIOD_S = 5.0
 """Seconds between two grids (and two refreshes of the field)."""
 REFIT_PERIOD_S = 60.0
@@ -114,6 +116,11 @@ class FleetService:
         tracks: each vehicle's track in the rows :meth:`load_history` added, ``(utc,
             lat, lon)``, a point per ``FLEET_TRACK_PERIOD_S`` (for the page's fleet
             layer, which draws the live ones from the grids).
+        doubted: each vehicle's integrity flags on its ``current`` pipeline in the newest
+            health record heard from it (``<prefix>/<vehicle>/health``): while it has any
+            (a check that keeps the values but doubts them, ``nis_out_of_band``), its
+            records are left out (``doubted``), as its own chart-plotter output holds
+            them back (docs/service.md).
     """
 
     def __init__(self, session: Any = None, prefix: str = "onboard",
@@ -127,8 +134,10 @@ class FleetService:
         self.received: dict[str, int] = {}
         self.grids = 0
         self.tracks: dict[str, list[tuple[float, float, float]]] = {}
+        self.doubted: dict[str, list[str]] = {}
         self.lock = threading.Lock()
         self._dec = msgspec.json.Decoder(EstimateRecord)
+        self._dec_health = msgspec.json.Decoder(HealthRecord)
         self._enc = msgspec.json.Encoder()
         self._refit_due = 0.0
         self.mcap = _McapGrid(mcap, prefix) if mcap is not None else None
@@ -140,7 +149,9 @@ class FleetService:
         self._grid_pub = session.declare_publisher(grid_key(self.prefix),
                                                    encoding=encoding(FLEET_GRID_SCHEMA))
         self._declared = [
-            session.declare_subscriber(f"{self.prefix}/*/est/current", self.on_sample),
+            session.declare_subscriber(f"{self.prefix}/*/est/{CURRENT_PIPELINE}",
+                                       self.on_sample),
+            session.declare_subscriber(f"{self.prefix}/*/health", self.on_health),
             session.declare_queryable(current_key(self.prefix), self.on_query),
             self._grid_pub]
 
@@ -188,7 +199,32 @@ class FleetService:
             if rec.utc is not None and rec.utc > self.clock() + FUTURE_S:
                 self.field.reject("future")
                 return False
+            if self.doubted.get(rec.vehicle):
+                self.field.reject("doubted")
+                return False
             return not self._take(rec)
+
+    def on_health(self, sample: Any) -> None:
+        """Zenoh subscriber callback of the vehicles' health records."""
+        self.feed_health(sample.payload.to_bytes(), str(sample.encoding), str(sample.key_expr))
+
+    def feed_health(self, payload: bytes, enc: str | None = None, key: str | None = None
+                    ) -> bool:
+        """One vehicle's health record: its ``current`` pipeline's flags become
+        :attr:`doubted`. False (and nothing changed) for one that is not an
+        ``application/json`` Health of this version's schema, or names another vehicle
+        than its ``key``."""
+        if enc is not None and enc != f"{JSON_MIME};{HEALTH_SCHEMA}":
+            return False
+        try:
+            h = self._dec_health.decode(payload)
+        except msgspec.DecodeError:
+            return False
+        if key is not None and key_vehicle(key, self.prefix, ("health",)) != h.vehicle:
+            return False
+        with self.lock:
+            self.doubted[h.vehicle] = list(h.flags.get(CURRENT_PIPELINE, ()))
+        return True
 
     def _count(self, what: str) -> None:
         self.received[what] = self.received.get(what, 0) + 1
@@ -252,7 +288,7 @@ class FleetService:
         oldest = max((u for u in utc_s if u is not None), default=0.0) - field.history_s
         before, added = dict(field.rejected), 0
         for i in order:
-            if rows["pipeline"][i] != "current":
+            if rows["pipeline"][i] != CURRENT_PIPELINE:
                 field.reject("dive_average")
                 continue
             if utc_s[i] is not None and utc_s[i] < oldest:
@@ -261,7 +297,7 @@ class FleetService:
             values = {k: v for k in ("north", "east", "down") if (v := rows[k][i]) is not None}
             std = {k: v for k in ("north", "east", "down")
                    if (v := rows[f"std_{k}"][i]) is not None}
-            rec = EstimateRecord(vehicle=rows["vehicle"][i], pipeline="current",
+            rec = EstimateRecord(vehicle=rows["vehicle"][i], pipeline=CURRENT_PIPELINE,
                                  t=rows["t_s"][i], values=values, std=std, utc=utc_s[i],
                                  lat_deg=rows["lat"][i], lon_deg=rows["lon"][i],
                                  position_std_m=rows["position_std_m"][i])
@@ -403,12 +439,13 @@ def selector_parameters(params: Mapping[str, str]) -> dict[str, str]:
     return out
 
 
-def key_vehicle(key: str, prefix: str) -> str | None:
-    """The vehicle of a record's key ``<prefix>/<vehicle>/est/current`` (None for a key
-    of another form)."""
+def key_vehicle(key: str, prefix: str, tail: tuple[str, ...] = ("est", CURRENT_PIPELINE)
+                ) -> str | None:
+    """The vehicle of a key ``<prefix>/<vehicle>/<tail>`` (a current's record by default;
+    None for a key of another form)."""
     head, _, rest = key.partition(f"{prefix}/")
     parts = rest.split("/")
-    if head or len(parts) != 3 or parts[1:] != ["est", "current"]:
+    if head or len(parts) != 1 + len(tail) or tuple(parts[1:]) != tail:
         return None
     return parts[0]
 
