@@ -11,32 +11,7 @@ import pytest
 
 from onboard.fleet.service import FleetService
 from tests.helpers.fleet_scenarios import UTC0, fleet
-
-SCALARS = {"boolean", "number", "integer"}
-
-
-def foxglove_parses(schema: dict, name: str) -> None:
-    """Raise ValueError where Foxglove's ``parseJsonSchema`` (@foxglove/mcap-support,
-    which Foxglove and Lichtblick run on a ``jsonschema`` channel) throws: a schema that
-    is not ``"type": "object"`` (a ``$ref`` at its root), a field without exactly one
-    type (an ``anyOf``, a ``"null"``), an array of such items."""
-    if schema.get("type") != "object":
-        raise ValueError(f'{name}: expected "type": "object", got {schema.get("type")!r}')
-    for field, sub in (schema.get("properties") or {}).items():
-        where, t = f"{name}.{field}", sub.get("type")
-        if t in SCALARS or (t == "string" and sub.get("contentEncoding") in (None, "base64")):
-            continue
-        if t == "object":
-            foxglove_parses(sub, where)
-        elif t == "array":
-            item = sub.get("items") or {}
-            if item.get("type") == "object":
-                foxglove_parses(item, where)
-            elif not (item.get("type") in SCALARS or
-                      (item.get("type") == "string" and "contentEncoding" not in item)):
-                raise ValueError(f"{where}: unsupported array item type {item.get('type')!r}")
-        else:
-            raise ValueError(f"{where}: unsupported field type {t!r}")
+from tests.helpers.foxglove_schema import foxglove_parses
 
 
 def test_the_mcaps_schemas_are_ones_foxglove_reads_and_its_times_are_the_grids(tmp_path):

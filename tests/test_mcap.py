@@ -29,6 +29,7 @@ from onboard.drivers.mavlink_json import JsonFrameError, frame_from_json, parse 
 from onboard.drivers.mcap_log import McapReader  # noqa: E402
 from onboard.drivers.tlog import TlogReader  # noqa: E402
 from tests.helpers.blueos_mcap import BlueosRecorder, blueos_mcap_from_tlog, to_serde  # noqa: E402
+from tests.helpers.foxglove_schema import foxglove_parses  # noqa: E402
 from tests.helpers.nmea_times import rmc_times  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
@@ -154,6 +155,13 @@ def test_replay_writes_the_live_zenoh_channels_and_schemas_as_mcap(tmp_path):
     for topic, enc, schema, schema_enc, data in msgs:
         assert enc == "json" and schema_enc == "jsonschema"
         by_schema.setdefault(schema, []).append((topic, data))
+    # each channel's schema is one Foxglove's MCAP reader parses (msgspec's own, with a
+    # nullable field as anyOf [number, null], is not: the control)
+    for name, schema in _schemas(out).items():
+        foxglove_parses(schema, name)
+    with pytest.raises(ValueError, match="unsupported field type None"):
+        foxglove_parses(msgspec.json.schema(EstimateRecord)["$defs"]["EstimateRecord"],
+                        "raw")
     assert set(by_schema) == {"onboard.Estimate.v2", "foxglove.LocationFix"}
     recs = [msgspec.json.decode(d, type=EstimateRecord) for _, d in by_schema["onboard.Estimate.v2"]]
     assert {r.vehicle for r in recs} == {vid}
@@ -170,6 +178,14 @@ def test_replay_writes_the_live_zenoh_channels_and_schemas_as_mcap(tmp_path):
     with pytest.raises(UnreadableLog, match="estimates, not sensor data"):
         McapReader(out)
     assert cli_main(["replay", str(out), "--out", str(tmp_path / "again")]) == 2
+
+
+def _schemas(path: Path) -> dict[str, dict]:
+    """Each schema of an MCAP file, by name, as JSON."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        return {s.name: json.loads(s.data) for s in make_reader(f).get_summary().schemas.values()}
 
 
 def _read(path: Path) -> tuple[list, dict[str, dict[str, str]]]:

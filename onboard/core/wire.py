@@ -153,11 +153,29 @@ def _inline(node: Any, defs: Mapping[str, Any], within: frozenset[str] = frozens
     return node
 
 
+def _one_type(node: Any) -> Any:
+    """``node`` with each nullable field (``anyOf`` a type and ``null``) of its one type,
+    described as null where unknown."""
+    if isinstance(node, list):
+        return [_one_type(x) for x in node]
+    if not isinstance(node, dict):
+        return node
+    alts = node.get("anyOf")
+    if isinstance(alts, list) and len(alts) == 2 and {"type": "null"} in alts:
+        (kept,) = [a for a in alts if a != {"type": "null"}]
+        node = {k: v for k, v in node.items() if k != "anyOf"} | kept
+        node.setdefault("description", "null where unknown")
+    return {k: _one_type(v) for k, v in node.items()}
+
+
 def json_schema(kind: type) -> dict[str, Any]:
-    """The JSON schema (draft 2020-12, references inlined, as Foxglove reads MCAP
-    ``jsonschema`` schemas) of one of the records above."""
+    """The JSON schema of one of the records above as Foxglove's MCAP reader takes a
+    ``jsonschema`` channel's (``parseJsonSchema`` of @foxglove/mcap-support, which
+    Foxglove and Lichtblick run): draft 2020-12 with its references inlined (the root an
+    object) and each nullable field of its one type, described as null where unknown (the
+    reader takes a field of exactly one type, not an ``anyOf``)."""
     raw = msgspec.json.schema(kind)
-    out = _inline(raw, raw.get("$defs", {}))
+    out = _one_type(_inline(raw, raw.get("$defs", {})))
     out.pop("$schema", None)
     return out
 

@@ -494,27 +494,6 @@ GEOJSON_SCHEMA = {"type": "object", "properties": {"geojson": {"type": "string"}
 """Foxglove's ``foxglove.GeoJSON`` as a JSON schema."""
 
 
-def foxglove_schema(kind: type) -> dict:
-    """The JSON schema of ``kind`` as Foxglove reads an MCAP channel's ``jsonschema``: its
-    references inlined (:func:`onboard.core.wire.json_schema`; the root an object), and
-    each nullable field of its one type (Foxglove takes a field of exactly one type,
-    not an ``anyOf``), described as null where unknown."""
-
-    def one_type(node: Any) -> Any:
-        if isinstance(node, list):
-            return [one_type(x) for x in node]
-        if not isinstance(node, dict):
-            return node
-        alts = node.get("anyOf")
-        if isinstance(alts, list) and len(alts) == 2 and {"type": "null"} in alts:
-            (kept,) = [a for a in alts if a != {"type": "null"}]
-            node = {k: v for k, v in node.items() if k != "anyOf"} | kept
-            node.setdefault("description", "null where unknown")
-        return {k: one_type(v) for k, v in node.items()}
-
-    return one_type(wire.json_schema(kind))
-
-
 class _McapGrid:
     """``--mcap``: every grid as a ``FleetGrid`` and as ``foxglove.GeoJSON`` arrows, at
     the grid's UTC; a grid no newer than the last one written (no record came since: an
@@ -530,7 +509,7 @@ class _McapGrid:
         self.writer = Writer(self._f)
         self.writer.start(profile="", library="onboard fleet")
         grid_schema = self.writer.register_schema(
-            FLEET_GRID_SCHEMA, "jsonschema", json.dumps(foxglove_schema(FleetGrid)).encode())
+            FLEET_GRID_SCHEMA, "jsonschema", json.dumps(wire.json_schema(FleetGrid)).encode())
         geo_schema = self.writer.register_schema("foxglove.GeoJSON", "jsonschema",
                                                  json.dumps(GEOJSON_SCHEMA).encode())
         self.grid_channel = self.writer.register_channel(grid_key(prefix), "json", grid_schema)
