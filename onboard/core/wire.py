@@ -155,7 +155,8 @@ def _inline(node: Any, defs: Mapping[str, Any], within: frozenset[str] = frozens
 
 def _one_type(node: Any) -> Any:
     """``node`` with each nullable field (``anyOf`` a type and ``null``) of its one type,
-    described as null where unknown."""
+    described as null where unknown, each enumeration of strings typed ``string``, and
+    each map (an object with no properties of its own) given an empty ``properties``."""
     if isinstance(node, list):
         return [_one_type(x) for x in node]
     if not isinstance(node, dict):
@@ -165,6 +166,11 @@ def _one_type(node: Any) -> Any:
         (kept,) = [a for a in alts if a != {"type": "null"}]
         node = {k: v for k, v in node.items() if k != "anyOf"} | kept
         node.setdefault("description", "null where unknown")
+    values = node.get("enum")
+    if isinstance(values, list) and "type" not in node and all(isinstance(v, str) for v in values):
+        node = {**node, "type": "string"}
+    if node.get("type") == "object" and "properties" not in node:
+        node = {**node, "properties": {}}   # a map: its keys are the messages' own
     return {k: _one_type(v) for k, v in node.items()}
 
 
@@ -172,8 +178,10 @@ def json_schema(kind: type) -> dict[str, Any]:
     """The JSON schema of one of the records above as Foxglove's MCAP reader takes a
     ``jsonschema`` channel's (``parseJsonSchema`` of @foxglove/mcap-support, which
     Foxglove and Lichtblick run): draft 2020-12 with its references inlined (the root an
-    object) and each nullable field of its one type, described as null where unknown (the
-    reader takes a field of exactly one type, not an ``anyOf``)."""
+    object) and each field of exactly one type, which the reader needs (a nullable one
+    described as null where unknown, not an ``anyOf``; an enumeration of strings a
+    ``string``) and every object with its ``properties``, empty for a map (the reader
+    walks them; a map's keys are then the messages' own)."""
     raw = msgspec.json.schema(kind)
     out = _one_type(_inline(raw, raw.get("$defs", {})))
     out.pop("$schema", None)

@@ -9,10 +9,14 @@ def foxglove_parses(schema: dict, name: str) -> None:
     """Raise ValueError where Foxglove's ``parseJsonSchema`` (@foxglove/mcap-support,
     which Foxglove and Lichtblick run on a ``jsonschema`` channel) throws: a schema that
     is not ``"type": "object"`` (a ``$ref`` at its root), a field without exactly one
-    type (an ``anyOf``, a ``"null"``), an array of such items."""
+    type (an ``anyOf``, a ``"null"``, an enumeration without its type), an object without
+    ``properties`` (a map: the reader iterates them), an array of such items (its
+    ``addFieldsRecursive``, read in foxglove/studio's ``parseJsonSchema.ts``)."""
     if schema.get("type") != "object":
         raise ValueError(f'{name}: expected "type": "object", got {schema.get("type")!r}')
-    for field, sub in (schema.get("properties") or {}).items():
+    if not isinstance(schema.get("properties"), dict):   # Object.entries(undefined) throws
+        raise ValueError(f"{name}: an object without properties")
+    for field, sub in schema["properties"].items():
         where, t = f"{name}.{field}", sub.get("type")
         if t in SCALARS or (t == "string" and sub.get("contentEncoding") in (None, "base64")):
             continue
