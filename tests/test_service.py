@@ -303,30 +303,27 @@ def test_ticks_fire_on_the_grid_or_on_the_first_sample_after_it(tmp_path, wait_s
         assert after_grid > 0.2, after_grid
 
 
-def test_ticks_fed_at_a_steady_phase_wake_once_at_the_predicted_arrival(tmp_path):
-    """A 50 Hz input sent from its own thread keeps its phase against the tick grid: after
-    the first tick, a tick's timer is set at the predicted arrival of its fresh sample and
-    finds it there, so few ticks watch the inputs for it (a second wake-up); the ticks
-    still carry a sample received after their grid time."""
+def _ticks_fed(tmp_path: Path, link, seconds: float) -> tuple[Service, list]:
+    """A service reading the bench's traffic (:class:`LinkedTraffic`, over ``link`` or on
+    its grid) sent from a thread of its own for ``seconds``: the service and its ticks
+    ``(t, t_sensor)``."""
     port, nmea_port = free_udp_port(), free_udp_port()
     cfg = service_config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}"},
                                   {"kind": "nmea", "url": f"udp:127.0.0.1:{nmea_port}"}],
                          zenoh={"enabled": False}, mavlink={"enabled": False},
                          recorder={"enabled": False})
     ticks: list[tuple[float, float | None]] = []
-    gen = TrafficGenerator(system_id=1)
+    traffic = LinkedTraffic(port, nmea_port, link)
     stop = threading.Event()
 
     def send() -> None:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
-            t0, k = time.monotonic(), 0
-            while not stop.is_set():
-                time.sleep(max(0.0, t0 + k / 50.0 - time.monotonic()))
-                for f in gen.mavlink(k / 50.0):
-                    udp.sendto(f, ("127.0.0.1", port))
-                for f in gen.nmea(k / 50.0):
-                    udp.sendto(f, ("127.0.0.1", nmea_port))
-                k += 1
+            t0 = time.monotonic()
+            for t, to, f in traffic.until(seconds + 1.0):
+                time.sleep(max(0.0, t0 + t - time.monotonic()))
+                if stop.is_set():
+                    return
+                udp.sendto(f, ("127.0.0.1", to))
 
     async def main() -> Service:
         svc = Service(cfg, state_dir=tmp_path, on_tick=lambda t, recs: ticks.append(
@@ -334,7 +331,7 @@ def test_ticks_fed_at_a_steady_phase_wake_once_at_the_predicted_arrival(tmp_path
         await svc.start()
         sender = threading.Thread(target=send, daemon=True)
         sender.start()
-        await asyncio.sleep(3.0)
+        await asyncio.sleep(seconds)
         stop.set()
         sender.join()
         svc.request_stop()
@@ -342,7 +339,15 @@ def test_ticks_fed_at_a_steady_phase_wake_once_at_the_predicted_arrival(tmp_path
         return svc
 
     svc = asyncio.run(asyncio.wait_for(main(), TIMEOUT))
-    fed = [(t, ts) for t, ts in ticks if ts is not None]
+    return svc, [(t, ts) for t, ts in ticks if ts is not None]
+
+
+def test_ticks_fed_at_a_steady_phase_wake_once_at_the_predicted_arrival(tmp_path):
+    """A 50 Hz input sent from its own thread keeps its phase against the tick grid: after
+    the first tick, a tick's timer is set at the predicted arrival of its fresh sample and
+    finds it there, so few ticks watch the inputs for it (a second wake-up); the ticks
+    still carry a sample received after their grid time."""
+    svc, fed = _ticks_fed(tmp_path, None, 3.0)
     assert len(fed) > 20 and svc.stats.ticks >= len(fed)
     # measured 1-6 watches in 30 ticks (load 1-2; without the prediction every tick
     # watches); the bound leaves room for a loaded machine
@@ -357,39 +362,7 @@ def test_ticks_over_a_link_whose_delay_wanders_still_fire_once_per_grid_time(tmp
     receiver on a phase of its own): the predictions miss more often, and still every grid
     time gets one tick within the wait, none carries a sample measured after it fired, and
     most carry one measured after their grid time."""
-    port, nmea_port = free_udp_port(), free_udp_port()
-    cfg = service_config(sources=[{"kind": "mavlink", "url": f"udp:127.0.0.1:{port}"},
-                                  {"kind": "nmea", "url": f"udp:127.0.0.1:{nmea_port}"}],
-                         zenoh={"enabled": False}, mavlink={"enabled": False},
-                         recorder={"enabled": False})
-    ticks: list[tuple[float, float | None]] = []
-    traffic = LinkedTraffic(port, nmea_port, ARDUSUB_TETHER)
-    stop = threading.Event()
-
-    def send() -> None:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
-            t0 = time.monotonic()
-            for t, to, f in traffic.until(4.0):
-                time.sleep(max(0.0, t0 + t - time.monotonic()))
-                if stop.is_set():
-                    return
-                udp.sendto(f, ("127.0.0.1", to))
-
-    async def main() -> Service:
-        svc = Service(cfg, state_dir=tmp_path, on_tick=lambda t, recs: ticks.append(
-            (t, recs[0].t_sensor if recs else None)))
-        await svc.start()
-        sender = threading.Thread(target=send, daemon=True)
-        sender.start()
-        await asyncio.sleep(3.5)
-        stop.set()
-        sender.join()
-        svc.request_stop()
-        await svc.shutdown()
-        return svc
-
-    svc = asyncio.run(asyncio.wait_for(main(), TIMEOUT))
-    fed = [(t, ts) for t, ts in ticks if ts is not None]
+    svc, fed = _ticks_fed(tmp_path, ARDUSUB_TETHER, 3.5)
     assert len(fed) > 20 and svc.stats.tick_skips == 0
     grid = [math.floor(t * 10.0 + 1e-9) / 10.0 for t, _ in fed]
     assert len(set(grid)) == len(grid)  # one tick per grid time
