@@ -310,6 +310,30 @@ def test_a_current_its_vehicle_doubts_is_left_out_until_its_health_clears_it():
     assert service.feed(enc.encode(rec), v2, key)
 
 
+def test_a_vehicle_with_a_fast_clock_does_not_set_the_grids_time():
+    """One vehicle's clock 30 min ahead (records within the hour ``future`` allows): the
+    grid stays at the others' newest time; when every vehicle is ahead of this machine's
+    clock (this machine's is slow), the grid follows them (the control)."""
+    f = fleet("tidal_channel", seed=4, vehicles=3, duration_s=300.0, rate_hz=0.5)
+    enc = msgspec.json.Encoder()
+    v2 = "application/json;onboard.Estimate.v2"
+    now = UTC0 + 300.0
+    service = FleetService(clock=lambda: now)
+    for i in range(len(f.t)):
+        rec = f.record(i)
+        if rec.vehicle == "v2":
+            rec = msgspec.structs.replace(rec, utc=rec.utc + 1800.0)
+        service.feed(enc.encode(rec), v2, f"onboard/{rec.vehicle}/est/current")
+    grid = service.step(refit=True)
+    assert grid.utc <= now and grid.utc == max(
+        v.utc for v in service.newest.values() if v.vehicle != "v2")
+    slow = FleetService(clock=lambda: UTC0 - 3000.0)   # every record 'ahead'
+    for i in range(len(f.t)):
+        rec = f.record(i)
+        slow.feed(enc.encode(rec), v2, f"onboard/{rec.vehicle}/est/current")
+    assert slow.step(refit=True).utc == max(v.utc for v in slow.newest.values())
+
+
 def test_the_grid_covers_the_box_of_its_vehicles():
     """The grid's rows and columns cover the vehicles' box and its margin, centred on it,
     in at most ``GRID_CELLS`` cells along its longer side."""

@@ -84,6 +84,11 @@ FUTURE_S = 3600.0
 """A record stamped more than this (s) after this machine's clock is left out
 (``future``): a vehicle's clock that is wrong, or a time in the wrong unit, would
 otherwise make every later record look older than the history the field keeps."""
+GRID_CLOCK_SLACK_S = 60.0
+"""A vehicle whose newest record is more than this (s) ahead of this machine's clock does
+not set the grid's time (:meth:`FleetService.grid`), unless every vehicle is: one fast
+clock would put the grid, its predictions and the page ahead of the fleet by as much,
+and hold the MCAP's later grids back until the real time caught up."""
 UNKNOWN_CURRENT = frozenset({"no_current", "no_std", "not_converged"})
 """Reasons a record makes no observation although its time and place are good: the
 vehicle is still shown where it is (:attr:`FleetService.newest`)."""
@@ -342,15 +347,18 @@ class FleetService:
         return grid
 
     def grid(self, vehicles: list[VehicleCurrent]) -> FleetGrid | None:
-        """The field on the grid about ``vehicles`` (module docstring), None without a
-        vehicle with a position. Before the field has an observation (the vehicles'
+        """The field on the grid about ``vehicles`` (module docstring) at their newest
+        record's time (of those not :data:`GRID_CLOCK_SLACK_S` ahead of this machine's
+        clock, while there are any), None without a vehicle with a position. Before the field has an observation (the vehicles'
         currents not known yet) the grid still lists them, its cells unknown."""
         placed = [v for v in vehicles if v.lat is not None and v.lon is not None]
         if not placed:
             return None
         lat, lon = ([v.lat for v in placed], [v.lon for v in placed])
         plane = self.field.plane or Plane(lat[0], lon[0])
-        utc = max(v.utc for v in placed if v.utc is not None)
+        times = [v.utc for v in placed if v.utc is not None]
+        latest = self.clock() + GRID_CLOCK_SLACK_S
+        utc = max([u for u in times if u <= latest] or times)
         lats, lons, spacing = grid_points(plane, lat, lon)
         cells = [self.answer(la, lo, utc) for la in lats for lo in lons]
         return FleetGrid(utc=utc, spacing_m=spacing, cells=cells,
