@@ -271,7 +271,8 @@ def test_a_bad_record_is_left_out_by_reason_and_shapes_nothing():
     assert not service.feed(enc.encode(unknown), v2, "onboard/v3/est/current")
     assert "v3" in service.newest and service.left_out()["no_current"] == 1
     # negative control: unchecked, the same two records move the grid's time and box
-    unchecked = FleetService()
+    # (a clock that takes milliseconds for seconds: the grid's time follows its vehicles)
+    unchecked = FleetService(clock=lambda: now * 1000.0)
     for i in range(len(f.t)):
         unchecked.feed(enc.encode(f.record(i)))
     unchecked._note(msgspec.structs.replace(last, utc=now * 1000.0))
