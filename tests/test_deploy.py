@@ -442,6 +442,22 @@ def test_a_staged_install_puts_config_unit_and_credential_store_in_place_and_kee
         main(["--prefix", "relative/path", "--no-venv"])
 
 
+def test_the_installer_run_from_an_installed_package_says_to_use_a_clone(tmp_path, monkeypatch,
+                                                                         capsys):
+    """``python -m onboard.apps.install`` ships in the wheel, but installs from the source
+    tree (the unit, the example config, the docs): run from an installed package it stops
+    with one line saying so (exit 2) before it makes anything, not a traceback."""
+    from onboard.apps import install
+
+    monkeypatch.setattr(install, "SOURCE", tmp_path / "site-packages")
+    stage = tmp_path / "stage"
+    with pytest.raises(SystemExit) as err:
+        install.main(["--destdir", str(stage), "--no-venv"])
+    assert err.value.code == 2
+    assert "run 'sudo make install' in a clone of the repository" in capsys.readouterr().err
+    assert not stage.exists()
+
+
 def test_a_staged_venv_names_the_prefix_it_runs_from_not_the_staging_directory(tmp_path):
     """With DESTDIR the venv is made under the staging directory; its scripts, activate
     and pyvenv.cfg are rewritten to name PREFIX/venv (the python symlinks stay)."""

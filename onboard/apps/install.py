@@ -95,6 +95,10 @@ def unit_text(prefix: str, sysconfdir: str) -> str:
         UNIT_SYSCONFDIR + "/", sysconfdir.rstrip("/") + "/")
 
 
+SOURCE_NEEDS = ("systemd/onboard.service", "systemd/onboard.env.example",
+                "config/deploy-example.toml", "config/zenoh/vehicle-boat1.json5",
+                "docs/service.md", "docs/security.md")
+"""What the install takes from the source tree besides the wheel."""
 PACKAGE_FILES = ("pyproject.toml", "setup.py", "README.md", "onboard", "drivers", "sitl", "config")
 """What the wheel is built from (pyproject.toml maps drivers/, sitl/ and config/ into it)."""
 WHEEL_GLOB = "onboard-*.whl"
@@ -187,6 +191,11 @@ def main(argv: list[str] | None = None) -> int:
     for name in ("prefix", "sysconfdir", "unitdir", "credstore"):
         if not os.path.isabs(getattr(a, name)):
             ap.error(f"--{name} must be an absolute path")
+    missing = [p for p in SOURCE_NEEDS if not (SOURCE / p).exists()]
+    if missing:
+        ap.error(f"installs from the source tree, and {SOURCE} is not one (no "
+                 f"{', '.join(missing)}): run 'sudo make install' in a clone of the "
+                 "repository (docs/service.md, Install)")
     d = a.destdir
     if not a.no_venv:
         venv = _stage(d, a.prefix) / "venv"
