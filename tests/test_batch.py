@@ -563,7 +563,14 @@ def test_progress_redraws_one_line_on_a_terminal_and_prints_a_line_per_log_other
     p.close()
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.count("\r") >= 3
-    assert err.rstrip().endswith("2/2 logs, 1 failed, 0.50 log-h, 0 s")
+    assert err.rstrip().endswith("2/2 logs, 1 failed, 0.50 log-h replayed, 0 s")
+    # a log a run before replayed is counted done, its hours not as replayed now
+    p = batch.Progress(2, tty=True)
+    p.add({"status": "ok", "name": "x", "duration_s": 3600.0}, skipped=True)
+    p.add({"status": "ok", "name": "y", "duration_s": 1800.0})
+    p.close()
+    assert capsys.readouterr().err.rstrip().endswith(
+        "2/2 logs (1 done before), 0 failed, 0.50 log-h replayed, 0 s")
     p = batch.Progress(2, tty=False)
     p.add({"status": "ok", "name": "x"}, skipped=True)
     p.add({"status": "failed", "name": "y", "error": "bad"})

@@ -498,7 +498,8 @@ def run_dask(tasks: Sequence[Task], client) -> Iterator[dict]:
 
 class Progress:
     """The batch's progress on stderr: on a terminal one line redrawn in place (a bar,
-    logs done of all, failed, log-hours replayed, elapsed), every
+    logs done of all and how many of them a run before did, failed, log-hours replayed by
+    this run, elapsed), every
     :data:`PROGRESS_EVERY_S` while logs run (a long log shows its time passing) and at
     each log done; otherwise a line per log as it finishes."""
 
@@ -523,7 +524,8 @@ class Progress:
             self.done += 1
             self.failed += row["status"] != "ok"
             self.skipped += skipped
-            self.log_s += row.get("duration_s") or 0.0
+            if not skipped:   # the hours replayed by this run, not by a run before
+                self.log_s += row.get("duration_s") or 0.0
         if self.tty:
             self._draw()
             return
@@ -540,8 +542,9 @@ class Progress:
         with self._lock:
             filled = round(self.BAR_WIDTH * self.done / max(self.total, 1))
             print(f"\r[{'#' * filled}{'.' * (self.BAR_WIDTH - filled)}] {self.done}/"
-                  f"{self.total} logs, {self.failed} failed, "
-                  f"{self.log_s / SECONDS_PER_HOUR:.2f} log-h, "
+                  f"{self.total} logs" + (f" ({self.skipped} done before)" if self.skipped
+                                          else "") + f", {self.failed} failed, "
+                  f"{self.log_s / SECONDS_PER_HOUR:.2f} log-h replayed, "
                   f"{time.monotonic() - self.t0:.0f} s", end="", file=sys.stderr, flush=True)
 
     def close(self) -> None:
