@@ -219,7 +219,7 @@ class FleetService:
         :attr:`doubted`. False (and nothing changed) for one that is not an
         ``application/json`` Health of this version's schema, or names another vehicle
         than its ``key``."""
-        if enc is not None and enc != f"{JSON_MIME};{HEALTH_SCHEMA}":
+        if enc is not None and enc != encoding(HEALTH_SCHEMA):
             return False
         try:
             h = self._dec_health.decode(payload)
