@@ -282,11 +282,13 @@ def test_a_bad_record_is_left_out_by_reason_and_shapes_nothing():
 
 
 def test_a_current_its_vehicle_doubts_is_left_out_until_its_health_clears_it():
-    """A vehicle's health record flagging its ``current`` pipeline (``nis_out_of_band``:
-    values kept, doubted) holds its records back (``doubted``), as its own chart-plotter
-    output does; a clear health record lets them in again. A health record on another
-    vehicle's key, or of another encoding, changes nothing."""
-    from onboard.core.messages import HealthRecord
+    """A vehicle's health record flagging its ``current`` pipeline ``nis_out_of_band``
+    with its innovations above their dimension (its sigma claims too much) holds its
+    records back (``doubted``); a clear health record lets them in again, and so does the
+    same flag with the innovations below (its sigma too large: the values are not in
+    doubt). A health record on another vehicle's key, or of another encoding, changes
+    nothing."""
+    from onboard.core.messages import ChannelHealth, HealthRecord
     from onboard.core.wire import HEALTH_SCHEMA
 
     f = fleet("tidal_channel", seed=4, vehicles=2, duration_s=120.0, rate_hz=0.5)
@@ -297,8 +299,10 @@ def test_a_current_its_vehicle_doubts_is_left_out_until_its_health_clears_it():
     rec = next(r for r in recs if r.vehicle == "v0")
     key = "onboard/v0/est/current"
 
-    def health(flags, vehicle="v0"):
-        return enc.encode(HealthRecord(vehicle=vehicle, t=rec.t, flags=flags))
+    def health(flags, vehicle="v0", nis=5.0):
+        velocity = ChannelHealth(n=100, dof=2, nis_recent=nis)
+        return enc.encode(HealthRecord(vehicle=vehicle, t=rec.t, flags=flags,
+                                       innovations={"current": {"velocity": velocity}}))
     assert service.feed(enc.encode(rec), v2, key)
     doubt = {"current": ["nis_out_of_band"]}
     assert not service.feed_health(health(doubt), h3, "onboard/v1/health")  # wrong key
@@ -308,6 +312,8 @@ def test_a_current_its_vehicle_doubts_is_left_out_until_its_health_clears_it():
     assert not service.feed(enc.encode(rec), v2, key)
     assert service.left_out()["doubted"] == 1
     assert service.feed_health(health({"aie": ["speed_mismatch"]}), h3, "onboard/v0/health")
+    assert service.feed(enc.encode(rec), v2, key)
+    assert service.feed_health(health(doubt, nis=0.6), h3, "onboard/v0/health")   # timid
     assert service.feed(enc.encode(rec), v2, key)
 
 

@@ -122,10 +122,11 @@ class FleetService:
             lat, lon)``, a point per ``FLEET_TRACK_PERIOD_S`` (for the page's fleet
             layer, which draws the live ones from the grids).
         doubted: each vehicle's integrity flags on its ``current`` pipeline in the newest
-            health record heard from it (``<prefix>/<vehicle>/health``): while it has any
-            (a check that keeps the values but doubts them, ``nis_out_of_band``), its
-            records are left out (``doubted``), as its own chart-plotter output holds
-            them back (docs/service.md).
+            health record heard from it (``<prefix>/<vehicle>/health``) that say its
+            sigma claims too much (:func:`overconfident_flags`): while it has any, its
+            records are left out (``doubted``). A sigma larger than its errors (the NIS
+            below its band) is no reason: the field weighs such records less, and
+            calibrates its own sigma on the fleet's misses.
     """
 
     def __init__(self, session: Any = None, prefix: str = "onboard",
@@ -228,7 +229,7 @@ class FleetService:
         if key is not None and key_vehicle(key, self.prefix, ("health",)) != h.vehicle:
             return False
         with self.lock:
-            self.doubted[h.vehicle] = list(h.flags.get(CURRENT_PIPELINE, ()))
+            self.doubted[h.vehicle] = overconfident_flags(h)
         return True
 
     def _count(self, what: str) -> None:
@@ -445,6 +446,19 @@ def selector_parameters(params: Mapping[str, str]) -> dict[str, str]:
             if name:
                 out[name] = text
     return out
+
+
+def overconfident_flags(h: HealthRecord) -> list[str]:
+    """The integrity flags of ``h``'s ``current`` pipeline that doubt its values or say
+    its sigma is too small: every flag but ``nis_out_of_band`` while the current's
+    channels' recent NIS is at most their dimension (the innovations smaller than the
+    filter expects: its sigma too large, its values not in doubt)."""
+    flags = list(h.flags.get(CURRENT_PIPELINE, ()))
+    if "nis_out_of_band" in flags:
+        channels = h.innovations.get(CURRENT_PIPELINE, {}).values()
+        if not any(c.nis_recent is not None and c.nis_recent > c.dof for c in channels):
+            flags.remove("nis_out_of_band")
+    return flags
 
 
 def key_vehicle(key: str, prefix: str, tail: tuple[str, ...] = ("est", CURRENT_PIPELINE)
