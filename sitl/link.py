@@ -2,9 +2,10 @@
 
 A device on a schedule (an autopilot's streams, a GNSS receiver's epochs) sends on time to
 within a millisecond; what reaches the computer that reads it has crossed a serial line, a
-router or a tether, and arrives late by a delay that is never negative, fills and drains
-like a queue (consecutive frames are late together) and now and then jumps. A frame sent
-at ``t`` arrives at ``t + d(t)``, never before the frame sent before it:
+router or a tether, and arrives late by a delay that is never negative and fills and
+drains like a queue (consecutive frames are late together; the real one also pauses now
+and then, which this model leaves out). A frame sent at ``t`` arrives at ``t + d(t)``,
+never before the frame sent before it:
 
     d(t) = max(0, mean + x(t)),   x a Gauss-Markov process of spread ``std`` and time
                                   constant ``tau`` (exact discretisation between frames)

@@ -503,14 +503,25 @@ _SERVICE_ALIASES: dict[str, tuple[str, ...]] = {
 }
 
 
-def bench_service(s: Settings, rep: Report) -> None:
-    """The service figures from :func:`onboard.apps.service_bench.measure`."""
+def _service_run(s: Settings, **kw: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """One :func:`onboard.apps.service_bench.measure` run of ``s.service_s`` seconds with
+    ``kw`` (a short warm-up when fast): its figures, and those of them JSON can hold (the
+    report's detail)."""
     import inspect
 
     fn = _import("onboard.apps.service_bench", "measure")
-    kw = {"warmup_s": 0.5} if s.fast and "warmup_s" in inspect.signature(fn).parameters else {}
+    params = inspect.signature(fn).parameters
+    if any(k not in params for k in kw):
+        raise NotAvailable(f"service_bench.measure takes no {', '.join(kw)}")
+    if s.fast and "warmup_s" in params:
+        kw["warmup_s"] = 0.5
     res = _quiet(lambda: fn(s.service_s, **kw))
-    rep.detail["service"] = {k: v for k, v in res.items() if _jsonable(v)}
+    return res, {k: v for k, v in res.items() if _jsonable(v)}
+
+
+def bench_service(s: Settings, rep: Report) -> None:
+    """The service figures from :func:`onboard.apps.service_bench.measure`."""
+    res, rep.detail["service"] = _service_run(s)
     for key in SERVICE_KEYS:
         v = next((res[a] for a in _SERVICE_ALIASES[key] if a in res), None)
         if v is None or not _finite(v):
@@ -522,18 +533,9 @@ def bench_service(s: Settings, rep: Report) -> None:
 def bench_service_real_link(s: Settings, rep: Report) -> None:
     """``service_cpu_fraction_real_link``: :func:`bench_service`'s run with the traffic over
     ``sitl.link.ARDUSUB_TETHER``."""
-    import inspect
-
-    fn = _import("onboard.apps.service_bench", "measure")
-    if "link" not in inspect.signature(fn).parameters:
-        raise NotAvailable("service_bench.measure has no link")
     from onboard.sitl.link import ARDUSUB_TETHER
 
-    kw: dict[str, Any] = {"link": ARDUSUB_TETHER}
-    if s.fast:
-        kw["warmup_s"] = 0.5
-    res = _quiet(lambda: fn(s.service_s, **kw))
-    rep.detail["service_real_link"] = {k: v for k, v in res.items() if _jsonable(v)}
+    res, rep.detail["service_real_link"] = _service_run(s, link=ARDUSUB_TETHER)
     v = res.get("service_cpu_fraction")
     if v is None or not _finite(v):
         raise NotAvailable("service_bench.measure gave no service_cpu_fraction")

@@ -50,8 +50,7 @@ from onboard.core.errors import SigtermAsInterrupt, UsageError
 from onboard.core.messages import EstimateRecord, HealthRecord
 from onboard.core.outputs import Output, existing
 from onboard.core.outputs import check as check_outputs
-from onboard.core import wire
-from onboard.core.wire import ESTIMATE_SCHEMAS, HEALTH_SCHEMA, JSON_MIME, encoding
+from onboard.core.wire import ESTIMATE_SCHEMAS, HEALTH_SCHEMA, JSON_MIME, encoding, json_schema
 from onboard.fleet.chartplot import CHART_PERIOD_S, FieldSetDrift, parse_place, udp_output
 from onboard.fleet.field import CurrentField, Plane, one_blas_thread
 from onboard.fleet.messages import (
@@ -350,8 +349,9 @@ class FleetService:
     def grid(self, vehicles: list[VehicleCurrent]) -> FleetGrid | None:
         """The field on the grid about ``vehicles`` (module docstring) at their newest
         record's time (of those not :data:`GRID_CLOCK_SLACK_S` ahead of this machine's
-        clock, while there are any), None without a vehicle with a position. Before the field has an observation (the vehicles'
-        currents not known yet) the grid still lists them, its cells unknown."""
+        clock, while there are any), None without a vehicle with a position. Before the
+        field has an observation (the vehicles' currents not known yet) the grid still
+        lists them, its cells unknown."""
         placed = [v for v in vehicles if v.lat is not None and v.lon is not None]
         if not placed:
             return None
@@ -531,7 +531,7 @@ class _McapGrid:
         self.writer = Writer(self._f)
         self.writer.start(profile="", library="onboard fleet")
         grid_schema = self.writer.register_schema(
-            FLEET_GRID_SCHEMA, "jsonschema", json.dumps(wire.json_schema(FleetGrid)).encode())
+            FLEET_GRID_SCHEMA, "jsonschema", json.dumps(json_schema(FleetGrid)).encode())
         geo_schema = self.writer.register_schema("foxglove.GeoJSON", "jsonschema",
                                                  json.dumps(GEOJSON_SCHEMA).encode())
         self.grid_channel = self.writer.register_channel(grid_key(prefix), "json", grid_schema)

@@ -108,7 +108,8 @@ def _answered(warning: dict[str, Any], doc: dict[str, Any]) -> dict[str, Any]:
         bias = next((e["params"].get("bias") for e in tried
                      if e["name"] == "heading_bias" and e.get("detected")), None)
         if bias is not None:
-            heading["heading_bias"] = f"a constant offset of {math.degrees(bias):.1f} deg (heading_bias)"
+            heading["heading_bias"] = (f"a constant offset of {math.degrees(bias):.1f} deg "
+                                       "(heading_bias)")
         answer = (f"this diagnosis measured {' and '.join(heading[n] for n in found)}: "
                   "diagnosis.json; --write-config FILE writes it")
     else:
