@@ -111,15 +111,19 @@ def test_a_stopped_boat_is_not_judged_and_an_rov_never() -> None:
     assert rov.heading is None and not alerts.codes()
 
 
-def _first_mismatch(offset_deg: float, sog: float) -> float | None:
+def _first_mismatch(offset_deg: float, sog: float, period_s: float = 0.2,
+                    first_offset_deg: float | None = None) -> float | None:
     """The time (s) of the first fix at which a boat whose heading is ``offset_deg`` off
-    its course at ``sog``, fixes and headings at 5 Hz from t = 0, is judged a mismatch."""
+    its course at ``sog`` (``first_offset_deg`` at its first fix), fixes and headings
+    every ``period_s`` from t = 0, is judged a mismatch."""
     check = HeadingCourseCheck()
     cog = math.radians(30.0)
-    for k in range(60):
-        t = 0.2 * k
-        check.heading(t - 0.05, cog + math.radians(offset_deg))
-        if check.course(t, cog + math.radians(offset_deg), sog, cog):
+    for k in range(int(12.0 / period_s)):
+        t = period_s * k
+        off = math.radians(first_offset_deg if k == 0 and first_offset_deg is not None
+                           else offset_deg)
+        check.heading(t - 0.05, cog + off)
+        if check.course(t, cog + off, sog, cog):
             return t
     return None
 
@@ -127,8 +131,13 @@ def _first_mismatch(offset_deg: float, sog: float) -> float | None:
 def test_a_heading_behind_the_course_at_speed_is_judged_before_the_window_fills() -> None:
     """Survey boat Test4: its compass 150 deg off the course at 2-3 m/s, and the aie
     speed -2.6 m/s (sigma 0.1) along that heading for 8 s before the 10-s window was
-    judged. Beyond 90 deg at more than 1 m/s over ground it is judged after 3 s."""
-    assert _first_mismatch(150.0, 2.5) == pytest.approx(3.0)
+    judged. Every fix beyond 90 deg at more than 1 m/s over ground: judged at the second
+    fix 1 s after the first (Test4's 1 Hz receiver: at 20.7 s, where the window of 5
+    fixes over 3 s judged it at 23.7 s and 30 rows more gave the speed's wrong sign)."""
+    assert _first_mismatch(150.0, 2.5) == pytest.approx(1.0)
+    assert _first_mismatch(150.0, 2.5, period_s=1.0) == pytest.approx(1.0)
+    # one fix of the window not behind: the circular mean of 5 fixes over 3 s
+    assert _first_mismatch(150.0, 2.5, first_offset_deg=60.0) == pytest.approx(3.0)
     # below 90 deg, or drifting in a current at 0.8 m/s: judged when the window has
     # filled (8 s), as before
     assert _first_mismatch(60.0, 2.5) == pytest.approx(8.0)

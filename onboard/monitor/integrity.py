@@ -174,6 +174,12 @@ HEADING_GROSS_MIN_SPEED_MPS = 2.0 * PLAUSIBLE_CURRENT_MPS
 the water."""
 HEADING_GROSS_MIN_S = 3.0
 """The least span (s) of moving fixes of a window judged early."""
+HEADING_GROSS_FIRST_S = 1.0
+"""A window whose every fix, at least two spanning this long (s), has its course beyond
+:data:`HEADING_GROSS_RAD` off the heading at more than :data:`HEADING_GROSS_MIN_SPEED_MPS`
+is judged at once: for a heading within its sigma of the water's direction (a crab of at
+most 30 deg at that speed) each such fix is a miss of 60 deg or more, beyond 3 sigma of
+a compass as loud as 20 deg, and two of them in a row rarer than one in 10^5."""
 
 HEADING_OFFSET_HINT = ("a constant offset is measured by onboard diagnose LOG --write-config "
                        "FILE ([corrections] heading_offset_rad)")
@@ -480,7 +486,8 @@ class HeadingCourseCheck:
         self._append(t, heading_rad - cog, sog)
         n = len(self._t)
         span = t - self._t[0]
-        if n < HEADING_MIN_FIXES or span < HEADING_GROSS_MIN_S:
+        if ((n < HEADING_MIN_FIXES or span < HEADING_GROSS_MIN_S)
+                and not self._every_fix_behind(span)):
             return None
         # the circular mean of the window's differences, from the sines and cosines kept
         # (tests/test_integrity.py)
@@ -500,6 +507,14 @@ class HeadingCourseCheck:
         if self.fastest is None or sog_mean > self.fastest[1]:
             self.fastest = (self.offset_rad, sog_mean)
         return True
+
+    def _every_fix_behind(self, span: float) -> bool:
+        """Whether the window, at least two fixes over :data:`HEADING_GROSS_FIRST_S`, has
+        every course beyond :data:`HEADING_GROSS_RAD` off its heading at more than
+        :data:`HEADING_GROSS_MIN_SPEED_MPS` over ground."""
+        return (len(self._t) >= 2 and span >= HEADING_GROSS_FIRST_S
+                and max(self._cos) < math.cos(HEADING_GROSS_RAD)
+                and min(self._sog) > HEADING_GROSS_MIN_SPEED_MPS)
 
     def speed(self) -> float:
         """Mean speed over ground (m/s) of the window."""
