@@ -131,17 +131,38 @@ def _first_mismatch(offset_deg: float, sog: float, period_s: float = 0.2,
 def test_a_heading_behind_the_course_at_speed_is_judged_before_the_window_fills() -> None:
     """Survey boat Test4: its compass 150 deg off the course at 2-3 m/s, and the aie
     speed -2.6 m/s (sigma 0.1) along that heading for 8 s before the 10-s window was
-    judged. Every fix beyond 90 deg at more than 1 m/s over ground: judged at the second
-    fix 1 s after the first (Test4's 1 Hz receiver: at 20.7 s, where the window of 5
-    fixes over 3 s judged it at 23.7 s and 30 rows more gave the speed's wrong sign)."""
+    judged. Fixes in a row beyond 90 deg at more than 1 m/s over ground: judged at the
+    one 1 s after the first of them (Test4's 1 Hz receiver: at 20.7 s, where the window
+    of 5 fixes over 3 s judged it at 23.7 s and 30 rows more gave the speed's wrong
+    sign)."""
     assert _first_mismatch(150.0, 2.5) == pytest.approx(1.0)
     assert _first_mismatch(150.0, 2.5, period_s=1.0) == pytest.approx(1.0)
-    # one fix of the window not behind: the circular mean of 5 fixes over 3 s
-    assert _first_mismatch(150.0, 2.5, first_offset_deg=60.0) == pytest.approx(3.0)
+    # the first fix not behind: judged on the fixes after it, 1 s after the second
+    assert _first_mismatch(150.0, 2.5, first_offset_deg=60.0) == pytest.approx(1.2)
     # below 90 deg, or drifting in a current at 0.8 m/s: judged when the window has
     # filled (8 s), as before
     assert _first_mismatch(60.0, 2.5) == pytest.approx(8.0)
     assert _first_mismatch(150.0, 0.8) == pytest.approx(8.0)
+
+
+def test_a_heading_that_turns_behind_the_course_is_judged_on_its_newest_fixes() -> None:
+    """A compass right for 6 s at 2.5 m/s, then 150 deg off (survey boat Test3, whose
+    compass error follows the heading: its aie speed -0.4 to -1.0 m/s while it went
+    ahead at 1.0-1.6 m/s). The window's mean would cross 90 deg only once the flipped
+    fixes outweigh the right ones; its newest fixes, each behind at speed over 1 s, are
+    judged at once, the offset theirs."""
+    check = HeadingCourseCheck()
+    cog = math.radians(30.0)
+    verdicts = []
+    for k in range(60):
+        t = 0.2 * k
+        off = math.radians(0.0 if t < 6.0 else 150.0)
+        check.heading(t - 0.05, cog + off)
+        verdicts.append((t, check.course(t, cog + off, 2.5, cog), check.behind))
+    first = next(t for t, mismatch, behind in verdicts if mismatch)
+    assert first == pytest.approx(7.0)
+    assert check.behind and math.degrees(check.offset_rad) == pytest.approx(150.0)
+    assert all(not mismatch for t, mismatch, behind in verdicts if t < 7.0)
 
 
 def test_a_path_speed_along_a_heading_behind_the_course_is_withheld() -> None:

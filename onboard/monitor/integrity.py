@@ -118,6 +118,7 @@ from __future__ import annotations
 import functools
 import math
 from collections import deque
+from itertools import islice
 from typing import Iterable, Mapping, Protocol, Sequence
 
 from onboard.monitor.alerts import Alerts
@@ -174,12 +175,13 @@ HEADING_GROSS_MIN_SPEED_MPS = 2.0 * PLAUSIBLE_CURRENT_MPS
 the water."""
 HEADING_GROSS_MIN_S = 3.0
 """The least span (s) of moving fixes of a window judged early."""
-HEADING_GROSS_FIRST_S = 1.0
-"""A window whose every fix, at least two spanning this long (s), has its course beyond
-:data:`HEADING_GROSS_RAD` off the heading at more than :data:`HEADING_GROSS_MIN_SPEED_MPS`
-is judged at once: for a heading within its sigma of the water's direction (a crab of at
-most 30 deg at that speed) each such fix is a miss of 60 deg or more, beyond 3 sigma of
-a compass as loud as 20 deg, and two of them in a row rarer than one in 10^5."""
+HEADING_GROSS_RUN_S = 1.0
+"""The newest fixes of a window, at least two spanning this long (s), each with its
+course beyond :data:`HEADING_GROSS_RAD` off the heading at more than
+:data:`HEADING_GROSS_MIN_SPEED_MPS`, judge the heading behind at once: for a heading
+within its sigma of the water's direction (a crab of at most 30 deg at that speed) each
+such fix is a miss of 60 deg or more, beyond 3 sigma of a compass as loud as 20 deg, and
+two of them in a row rarer than one in 10^5."""
 
 HEADING_OFFSET_HINT = ("a constant offset is measured by onboard diagnose LOG --write-config "
                        "FILE ([corrections] heading_offset_rad)")
@@ -486,14 +488,20 @@ class HeadingCourseCheck:
         self._append(t, heading_rad - cog, sog)
         n = len(self._t)
         span = t - self._t[0]
-        if ((n < HEADING_MIN_FIXES or span < HEADING_GROSS_MIN_S)
-                and not self._every_fix_behind(span)):
+        run = self._newest_fixes_behind()
+        if run:  # judged on those fixes alone: the window's older ones may predate it
+            offset = math.atan2(sum(islice(reversed(self._sin), run)),
+                                sum(islice(reversed(self._cos), run)))
+            sog_mean = sum(islice(reversed(self._sog), run)) / run
+            behind = True
+        elif n < HEADING_MIN_FIXES or span < HEADING_GROSS_MIN_S:
             return None
-        # the circular mean of the window's differences, from the sines and cosines kept
-        # (tests/test_integrity.py)
-        offset = math.atan2(sum(self._sin), sum(self._cos))
-        sog_mean = sum(self._sog) / n
-        behind = abs(offset) > HEADING_GROSS_RAD and sog_mean > HEADING_GROSS_MIN_SPEED_MPS
+        else:
+            # the circular mean of the window's differences, from the sines and cosines
+            # kept (tests/test_integrity.py)
+            offset = math.atan2(sum(self._sin), sum(self._cos))
+            sog_mean = sum(self._sog) / n
+            behind = abs(offset) > HEADING_GROSS_RAD and sog_mean > HEADING_GROSS_MIN_SPEED_MPS
         if span < 0.8 * HEADING_WINDOW_S and not behind:
             return None   # not judged before the window has filled, unless gross
         self.offset_rad = offset
@@ -508,13 +516,18 @@ class HeadingCourseCheck:
             self.fastest = (self.offset_rad, sog_mean)
         return True
 
-    def _every_fix_behind(self, span: float) -> bool:
-        """Whether the window, at least two fixes over :data:`HEADING_GROSS_FIRST_S`, has
-        every course beyond :data:`HEADING_GROSS_RAD` off its heading at more than
-        :data:`HEADING_GROSS_MIN_SPEED_MPS` over ground."""
-        return (len(self._t) >= 2 and span >= HEADING_GROSS_FIRST_S
-                and max(self._cos) < math.cos(HEADING_GROSS_RAD)
-                and min(self._sog) > HEADING_GROSS_MIN_SPEED_MPS)
+    def _newest_fixes_behind(self) -> int:
+        """How many of the window's newest fixes in a row have their course beyond
+        :data:`HEADING_GROSS_RAD` off the heading at more than
+        :data:`HEADING_GROSS_MIN_SPEED_MPS` over ground, when they span at least
+        :data:`HEADING_GROSS_RUN_S`; else 0."""
+        run, first = 0, math.nan
+        cos_gross = math.cos(HEADING_GROSS_RAD)
+        for t, c, sog in zip(reversed(self._t), reversed(self._cos), reversed(self._sog)):
+            if not (c < cos_gross and sog > HEADING_GROSS_MIN_SPEED_MPS):
+                break
+            run, first = run + 1, t
+        return run if self._t[-1] - first >= HEADING_GROSS_RUN_S else 0
 
     def speed(self) -> float:
         """Mean speed over ground (m/s) of the window."""
