@@ -90,7 +90,17 @@ MAV_TYPE_SUBMARINE = 12
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_STATE_ACTIVE = 4
 MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_MODE_FLAG_MANUAL_INPUT_ENABLED = 64
+MAV_MODE_FLAG_STABILIZE_ENABLED = 16
+MAV_MODE_FLAG_GUIDED_ENABLED = 8
 MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
+ROVER_MANUAL_INPUT_MODES = frozenset({0, 1, 3})
+"""Rover's modes (custom_mode) that take the pilot's sticks: MANUAL, ACRO, STEERING."""
+ROVER_AUTOPILOT_MODES = frozenset({5, 6, 7, 8, 9, 10, 11, 12, 15})
+"""Rover's modes that steer themselves: LOITER, FOLLOW, SIMPLE, DOCK, CIRCLE, AUTO, RTL,
+SMART_RTL, GUIDED."""
+SUB_GUIDED_MODES = frozenset({3, 4, 7, 16})
+"""ArduSub's modes flagged guided: AUTO, GUIDED, CIRCLE, POSHOLD."""
 MAV_PARAM_TYPE_INT16 = 4
 MAV_SENSOR_ROTATION_PITCH_270 = 25
 MAV_DISTANCE_SENSOR_ULTRASOUND = 1
@@ -115,6 +125,24 @@ def _i16(x: float) -> int:
 
 def _u16(x: float) -> int:
     return max(0, min(65535, int(round(x))))
+
+
+def heartbeat_base_mode(mav_type: int, custom_mode: int, armed: bool = True) -> int:
+    """HEARTBEAT ``base_mode`` as ArduPilot's firmware sets it for a vehicle of
+    ``mav_type`` in mode ``custom_mode`` (``GCS_MAVLINK_Sub::base_mode``,
+    ``GCS_MAVLINK_Rover::base_mode``): ArduSub armed in STABILIZE sends 209 (the ArduSub
+    tlog of ../shared/data), a Rover armed in AUTO 137."""
+    mode = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    if mav_type == MAV_TYPE_SUBMARINE:
+        mode |= MAV_MODE_FLAG_STABILIZE_ENABLED | MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+        if custom_mode in SUB_GUIDED_MODES:
+            mode |= MAV_MODE_FLAG_GUIDED_ENABLED
+    else:
+        if custom_mode in ROVER_MANUAL_INPUT_MODES:
+            mode |= MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+        if custom_mode in ROVER_AUTOPILOT_MODES:
+            mode |= MAV_MODE_FLAG_GUIDED_ENABLED
+    return mode | (MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
 
 
 class MavlinkEncoder:
@@ -240,7 +268,7 @@ class MavlinkEncoder:
             elif isinstance(s, VehicleInfo):
                 out.append(self._pack(m.heartbeat_encode(
                     self.mav_type, MAV_AUTOPILOT_ARDUPILOTMEGA,
-                    MAV_MODE_FLAG_SAFETY_ARMED | MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                    heartbeat_base_mode(self.mav_type, self.custom_mode),
                     self.custom_mode, MAV_STATE_ACTIVE, 3)))
             elif isinstance(s, Parameter):
                 names = [p.name for p in self._params]

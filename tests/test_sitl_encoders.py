@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from pynmeagps import NMEAReader
 from scipy.spatial.transform import Rotation
 
@@ -26,13 +28,22 @@ from onboard.core.messages import (
     DvlVelocity,
     GnssFix,
     Heading,
+    VehicleInfo,
     VelocityOverGround,
 )
 from onboard.drivers.dvl_json import DvlJsonParser, report_time
 from onboard.drivers.nmea import KNOT_MPS, NmeaParser
 from onboard.drivers.pd6 import Pd6Parser
 from onboard.sitl import dvl_json_out, nmea_out, pd6_out
-from onboard.sitl.emitters import DvlJsonEncoder, NmeaEncoder, Pd6Encoder
+from onboard.sitl.emitters import (
+    MAV_TYPE_SUBMARINE,
+    MAV_TYPE_SURFACE_BOAT,
+    DvlJsonEncoder,
+    MavlinkEncoder,
+    NmeaEncoder,
+    Pd6Encoder,
+    heartbeat_base_mode,
+)
 
 PUBLISHED_T = calendar.timegm((1994, 3, 23, 12, 35, 19))
 """12:35:19 UTC on 23 March 1994, the time of the published GGA and RMC examples."""
@@ -316,3 +327,29 @@ def test_the_distance_made_good_sums_the_earth_velocity():
     assert last_bd[0] == b":BD"
     east, north, up = (float(x) for x in last_bd[1:4])
     assert (east, north, up) == pytest.approx((2.0, 0.0, 0.0), abs=0.005)  # 1 m/s east, 2 s
+
+
+def test_the_heartbeat_base_mode_is_the_firmware_s(shared_data) -> None:
+    """HEARTBEAT's base_mode as ArduPilot sets it (GCS_MAVLINK_Sub::base_mode,
+    GCS_MAVLINK_Rover::base_mode), checked against the ArduSub tlog of ../shared/data,
+    whose autopilot sends 81 disarmed and 209 armed in MANUAL (19); the simulator sent
+    129 (armed, custom mode) for every vehicle and mode."""
+    log = shared_data / "ardusub_small_logs" / "small.tlog"
+    if not log.exists():
+        pytest.skip(f"{log} not present")
+    conn = mavutil.mavlink_connection(str(log))
+    seen = set()
+    while (hb := conn.recv_match(type="HEARTBEAT")) is not None:
+        if hb.get_srcComponent() == 1:
+            seen.add((hb.type, hb.custom_mode, hb.base_mode))
+    assert seen == {(MAV_TYPE_SUBMARINE, 19, heartbeat_base_mode(MAV_TYPE_SUBMARINE, 19, a))
+                    for a in (False, True)}
+    assert heartbeat_base_mode(MAV_TYPE_SUBMARINE, 4) == 217  # GUIDED: guided flag too
+    assert heartbeat_base_mode(MAV_TYPE_SURFACE_BOAT, 10) == 137  # Rover AUTO
+    assert heartbeat_base_mode(MAV_TYPE_SURFACE_BOAT, 0) == 193  # Rover MANUAL
+    enc = MavlinkEncoder(mav_type=MAV_TYPE_SURFACE_BOAT, custom_mode=10)
+    frames = enc.encode([VehicleInfo(t=0.0, system_id=1, component_id=1,
+                                     mav_type=MAV_TYPE_SURFACE_BOAT, autopilot=3)])
+    parser = mavlink2.MAVLink(None)
+    msgs = [m for f in frames for m in (parser.parse_buffer(f) or [])]
+    assert [(m.get_type(), m.base_mode) for m in msgs] == [("HEARTBEAT", 137)]
