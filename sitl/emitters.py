@@ -230,8 +230,11 @@ class MavlinkEncoder:
                 cog = 65535 if s.cog_rad is None else _u16(
                     math.degrees(s.cog_rad) % 360.0 * 100.0) % 36000
                 alt_mm = int(round((s.alt_m or 0.0) * 1000.0))
+                # time_usec: the fix's boot time, as AP_GPS sends it (last_fix_time_ms;
+                # 689,065,000 at the ArduSub tlog's first), not Unix time
                 out.append(self._pack(m.gps_raw_int_encode(
-                    int(round((self.epoch_s + t) * 1e6)), 3 if s.fix_quality == 1 else 4,
+                    max(0, int(round((t - self.boot_t0) * 1e6))),
+                    3 if s.fix_quality == 1 else 4,
                     int(round(s.lat_deg * 1e7)), int(round(s.lon_deg * 1e7)), alt_mm,
                     _u16((s.hdop or 0.0) * 100.0) if s.hdop is not None else 65535, 65535,
                     _u16((s.sog_mps or 0.0) * 100.0), cog, s.num_sats or 255, alt_mm,
