@@ -27,6 +27,10 @@ module reproduces:
 * A message goes out on the first sensor sample at or after its next due time, due times
   spaced by its interval, from the samples the simulated sensors produce (a 50 Hz IMU asked
   at 20 Hz averages 20 Hz; asked faster than the sensor, at the sensor's rate).
+* **GPS_RAW_INT at the rate asked, fix or not**: asked faster than the receiver gives
+  fixes, the newest fix is sent again, its ``time_usec`` unchanged (2 of the ArduSub
+  tlog's 528 fixes); with no fix for :data:`GNSS_LOST_S` (an outage, a dive), fix_type
+  NO_FIX at the last fix's place, as ArduPilot keeps its receiver's last location.
 * **Reboot** (:meth:`SimAutopilot.reboot`): silent for ``REBOOT_S``, then heartbeats
   again with ``time_boot_ms`` counting from the reboot and every stream off until asked
   again.
@@ -48,7 +52,7 @@ from typing import Sequence
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from pymavlink.generator.mavcrc import x25crc
 
-from onboard.core.messages import Imu, Parameter, Sample, VehicleInfo
+from onboard.core.messages import GnssFix, Imu, Parameter, Sample, VehicleInfo
 from onboard.sitl.emitters import DVL_DRIVER_COMPONENT, DVL_DRIVER_SYSTEM, MavlinkEncoder, Sink
 
 REBOOT_S = 2.0
@@ -92,6 +96,16 @@ SCALED_IMU_ID = _ID["SCALED_IMU"]
 RAW_IMU_ID = _ID["RAW_IMU"]
 SYSTEM_TIME_ID = _ID["SYSTEM_TIME"]
 PARAM_VALUE_ID = _ID["PARAM_VALUE"]
+GPS_RAW_INT_ID = _ID["GPS_RAW_INT"]
+GPS_FIX_TYPE_NO_FIX = 1
+UINT16_UNKNOWN = 65535
+GNSS_LOST_S = 1.0
+"""Without a new fix for this long (s) the receiver reports no fix: a receiver at 1-10 Hz
+has then missed at least one epoch."""
+RESEND_AFTER = 1.5
+"""A GPS_RAW_INT due this many of its intervals after the newest fix is that fix sent
+again: later than a fix on time (the receiver at the rate asked, its epochs jittered by
+up to half an interval) would come."""
 TOLERANCE_S = 1e-3
 """Slack when comparing a message's age with its interval (s): sample times are exact
 multiples of the sensor periods up to float rounding."""
@@ -142,7 +156,10 @@ class SimAutopilot:
         """The sequence number of the autopilot's next frame sent (:meth:`_write`)."""
         self._last: dict[int, float] = {}
         """Message id -> when it is next due (s)."""
-        self._last: dict[int, float] = {}
+        self._fix: tuple[float, GnssFix, bytes] | None = None
+        """(t, sample, frame) of the newest fix, sent or not."""
+        self._gps_sent = -math.inf
+        """When the newest GPS_RAW_INT went out (s)."""
         self._down_until = -math.inf
         self._rx = mavlink2.MAVLink(None)
         self._rx.robust_parsing = True
@@ -239,6 +256,7 @@ class SimAutopilot:
         self._down_until = t + REBOOT_S
         self.intervals.clear()
         self._last.clear()
+        self._fix = None
         self.enc.boot_t0 = t
 
     def emit(self, t: float, samples: Sequence[Sample]) -> int:
@@ -260,9 +278,15 @@ class SimAutopilot:
             if isinstance(s, Imu):
                 self.enc.raw_imu = RAW_IMU_ID in self.intervals and SCALED_IMU_ID not in self.intervals
             for f in self.enc.encode([s]):
-                if _from_dvl_driver(f) or self._due(t, _msgid(f)):
+                mid = _msgid(f)
+                if isinstance(s, GnssFix) and mid == GPS_RAW_INT_ID:
+                    self._fix = (t, s, f)
+                if _from_dvl_driver(f) or self._due(t, mid):
                     self._write(t, f)
                     n += 1
+                    if mid == GPS_RAW_INT_ID:
+                        self._gps_sent = t
+        n += self._gps_between_fixes(t)
         if self._due(t, SYSTEM_TIME_ID):
             self._write(t, self._pack(self.enc.mav.system_time_encode(
                 int(round((self.epoch_s + t) * 1e6)),
@@ -271,6 +295,24 @@ class SimAutopilot:
         if self.others:
             n += self._emit_others(t)
         return n
+
+    def _gps_between_fixes(self, t: float) -> int:
+        """GPS_RAW_INT when due without a new fix (module docstring): the newest fix sent
+        again, or NO_FIX :data:`GNSS_LOST_S` after it; the number of frames sent."""
+        iv = self.intervals.get(GPS_RAW_INT_ID)
+        if iv is None or self._fix is None or self.stream_unasked:
+            return 0
+        t_fix, fix, frame = self._fix
+        if t - t_fix < RESEND_AFTER * iv or t - self._gps_sent < iv - TOLERANCE_S:
+            return 0
+        if t - t_fix >= GNSS_LOST_S:
+            frame = self._pack(self.enc.mav.gps_raw_int_encode(
+                int(round((t - self.enc.boot_t0) * 1e6)), GPS_FIX_TYPE_NO_FIX,
+                int(round(fix.lat_deg * 1e7)), int(round(fix.lon_deg * 1e7)), 0,
+                UINT16_UNKNOWN, UINT16_UNKNOWN, 0, UINT16_UNKNOWN, 0))
+        self._write(t, frame)
+        self._gps_sent = t
+        return 1
 
     def _due(self, t: float, msgid: int) -> bool:
         if self.stream_unasked and msgid != SYSTEM_TIME_ID:

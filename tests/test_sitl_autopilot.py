@@ -10,6 +10,7 @@ from collections import Counter
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from onboard.core.messages import GnssFix
 from onboard.drivers.mavlink import MavlinkParser
 from onboard.drivers.mavlink_link import AutopilotLink
 from onboard.drivers.sender_clock import SenderClock
@@ -291,3 +292,34 @@ def test_every_command_is_answered_as_ardupilot_answers():
     assert ivs == [(30, 200_000), (24, -1)]
     assert [m.param_value for m in got if m.get_type() == "PARAM_VALUE"
             and m.param_id == "SYSID_THISMAV"] == [1.0]
+
+
+def test_gps_raw_int_goes_out_at_the_rate_asked_fix_or_not() -> None:
+    """ArduPilot sends GPS_RAW_INT at the rate asked whatever its receiver gives: asked
+    faster than the receiver's fixes, the newest fix again with its time_usec (as 2 of
+    the ArduSub tlog's 528), which the service's parser drops as one measurement; in an
+    outage, NO_FIX at the last fix's place, which it rejects as no fix. The simulator
+    sent fixes only as the receiver made them, and nothing at all in an outage."""
+    sim = Simulation("fault-gnss-outage", 1)   # no fix from 30 s to 150 s
+    sink = LoopSink()
+    ap = autopilot_for(sim, [sink])
+    steps = sim.steps(45.0)
+    fly(ap, sim, 0, 1.0, steps)
+    fixes_hz = sim.scenario.sensors.gnss.rate_hz
+    send(sink, GCS.command_long_encode(1, 1, 511, 0, 24, int(1e6 / (2 * fixes_hz)),
+                                       0, 0, 0, 0, 0))
+    fly(ap, sim, 1.0, 45.0, steps)
+    gps = [m for m in decoded(sink, 2.0, 28.0) if m.get_type() == "GPS_RAW_INT"]
+    assert len(gps) / 26.0 == pytest.approx(2 * fixes_hz, rel=0.05)
+    assert len({m.time_usec for m in gps}) / 26.0 == pytest.approx(fixes_hz, rel=0.05)
+    assert {m.fix_type for m in gps} == {3}
+    lost = [m for m in decoded(sink, 31.5, 45.0) if m.get_type() == "GPS_RAW_INT"]
+    assert len(lost) / 13.5 == pytest.approx(2 * fixes_hz, rel=0.05)
+    assert {m.fix_type for m in lost} == {1} and all(m.lat != 0 for m in lost)
+    parser = MavlinkParser()
+    fixes = [x for t, f in sink.out for x in parser.feed(f, t) if isinstance(x, GnssFix)]
+    sent = [m for m in decoded(sink) if m.get_type() == "GPS_RAW_INT"]
+    assert len(fixes) == len({m.time_usec for m in sent if m.fix_type == 3})
+    assert parser.stats.rejected["no_fix"] == sum(1 for m in sent if m.fix_type == 1)
+    assert parser.stats.rejected["repeated_fix"] == len(sent) - len(fixes) - len(
+        [m for m in sent if m.fix_type == 1])
