@@ -165,6 +165,23 @@ def test_a_heading_that_turns_behind_the_course_is_judged_on_its_newest_fixes() 
     assert all(not mismatch for t, mismatch, behind in verdicts if t < 7.0)
 
 
+def test_one_fix_behind_the_course_at_speed_withholds_the_speed_until_the_next() -> None:
+    """A single fix whose course is beyond 90 deg off the heading at more than 1 m/s is
+    no verdict, but the path speed's sign is then in doubt: withheld until a fix agrees
+    (survey boat Test4: 19.7 s, a second before the window of two fixes flags it)."""
+    aie = declared("aie", position=("north", "east"), speed=("speed",), frame=FRAME)
+    aie.heading_estimate = ("heading",)
+    m = IntegrityMonitor(Alerts())
+    m.watch([aie])
+    cog = math.radians(30.0)
+    for k, off in enumerate((0.0, 0.0, 150.0, 0.0)):
+        m.observe(Heading(t=k - 0.05, heading_rad=cog + math.radians(off)))
+        m.observe(GnssFix(t=float(k), lat_deg=LAT0, lon_deg=LON0, sog_mps=2.0, cog_rad=cog))
+        held = set(m.withheld("aie"))
+        assert ({"speed", "std_speed"} <= held) is (off == 150.0), (k, held)
+        assert "heading" not in held and not m.alerts.codes()
+
+
 def test_a_path_speed_along_a_heading_behind_the_course_is_withheld() -> None:
     """The aie/kf path speed is signed along the heading: with the heading more than
     90 deg off the course at speed its sign is wrong (Test4: -2.6 m/s while the boat

@@ -164,8 +164,9 @@ def test_a_heading_off_the_course_withholds_the_aie_kf_heading_and_positions(
     """Issue 32: while the heading disagrees with the course the aie/kf heading and
     positions are published as unknown (before: with their 2-3 deg and metre sigmas,
     69-124 deg off and 6-12 m from the fixes); their path speed is kept but where the
-    course is judged behind the heading at speed (its sign is the heading's: Test2 on
-    40 of the 570 rows, 1751 on none)."""
+    course is judged behind the heading at speed, or a fix is (its sign is the heading's:
+    Test2 on 80 of the 580 rows, 40 of 570 before the rules of a run and of one fix
+    behind; 1751 on none)."""
     log = shared_data / path
     if not log.exists():
         pytest.skip(f"{log} not present")
@@ -177,28 +178,34 @@ def test_a_heading_off_the_course_withholds_the_aie_kf_heading_and_positions(
         # measured: 1751 5,711 of 5,793 rows; Test2 530
         assert summary["withheld_rows"][p] > 0.5 * summary["withheld_rows"]["current"]
         held = [r for r in rows if r[f"{p}.yaw_rate"] and not r[f"{p}.heading"]]
-        assert len(held) == summary["withheld_rows"][p]
+        # the rest withhold the speed alone (a fix behind the course before the verdict;
+        # Test2 10), among the rows without a speed (the first second's too: not yet one)
+        speed_only = [r for r in rows if r[f"{p}.yaw_rate"] and r[f"{p}.heading"]
+                      and not r[f"{p}.speed"]]
+        assert len(held) <= summary["withheld_rows"][p] <= len(held) + len(speed_only)
         assert all(not r[f"{p}.north"] and not r[f"{p}.std_heading"] for r in held)
         kept = sum(1 for r in held if r[f"{p}.speed"])
-        assert kept > 0.9 * len(held), (kept, len(held))
+        assert kept > 0.8 * len(held), (kept, len(held))
 
 
 WRONG_SIGN = [
     # (log, the most rows with an aie / kf path speed below -0.3 m/s while the boat went
-    # ahead at more than 1 m/s over ground); measured before -> after the run rule:
-    # Test4 35 -> 5 and 1 -> 0, Test3 90 -> 20 and 49 -> 7
-    ("Test4_fast.txt", 5, 0),
-    ("Test3_slow.txt", 20, 7),
+    # ahead at more than 1 m/s over ground); measured before the run rule -> with it ->
+    # with the speed withheld from the first fix behind: Test4 35 -> 5 -> 0 and 1 -> 0
+    # -> 0, Test3 90 -> 20 -> 0 and 49 -> 7 -> 1
+    ("Test4_fast.txt", 0, 0),
+    ("Test3_slow.txt", 0, 1),
 ]
 
 
 @pytest.mark.parametrize("name,aie_most,kf_most", WRONG_SIGN, ids=[c[0] for c in WRONG_SIGN])
-def test_a_path_speed_of_the_wrong_sign_is_withheld_from_the_second_fix(
+def test_a_path_speed_of_the_wrong_sign_is_withheld_at_speed(
         shared_data: Path, tmp_path: Path, name: str, aie_most: int, kf_most: int) -> None:
     """Survey boat Test3/Test4, their compass 100-175 deg off the course at 1-3 m/s: the
-    aie/kf path speed, signed along that heading, is withheld from the second fix in a
-    row behind the course (Test4's 1 Hz receiver: from 20.7 s, 23.7 s before); what is
-    left is the first second of each such run and courses 81-96 deg off."""
+    aie/kf path speed, signed along that heading, is withheld from the first fix behind
+    the course at speed until a fix is not, and the heading judged behind from the
+    second in a row (Test4's 1 Hz receiver: the speed withheld from 19.7 s, the heading
+    flagged from 20.7 s; 23.7 s before)."""
     log = shared_data / "survey_boat_arduino_rc" / name
     if not log.exists():
         pytest.skip(f"{log} not present")

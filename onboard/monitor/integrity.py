@@ -454,6 +454,10 @@ class HeadingCourseCheck:
         :data:`HEADING_GROSS_RAD` off the heading at more than
         :data:`HEADING_GROSS_MIN_SPEED_MPS`: a path speed signed along that heading has
         the wrong sign, or the vehicle goes astern."""
+        self.suspect = False
+        """Whether the newest fix alone has its course beyond :data:`HEADING_GROSS_RAD`
+        off the heading at more than :data:`HEADING_GROSS_MIN_SPEED_MPS`: not a verdict
+        (one fix), but the path speed's sign is in doubt until the next fix."""
         self.worst: tuple[float, float] | None = None
         """(offset rad, mean speed m/s) of the window of the present mismatch whose
         offset is the largest: the angle an operator must allow for."""
@@ -471,6 +475,7 @@ class HeadingCourseCheck:
         h = self._heading
         if h is None or s.t - h[0] > HEADING_FRESH_S:
             self._drop_before(s.t - HEADING_WINDOW_S)
+            self.suspect = False
             return None
         return self.course(s.t, h[1], s.sog_mps, s.cog_rad)
 
@@ -482,10 +487,13 @@ class HeadingCourseCheck:
         :class:`onboard.monitor.track_course.TrackCourse`); return the window's verdict
         (True: mismatch), or None when the window cannot be judged."""
         self._drop_before(t - HEADING_WINDOW_S)
+        self.suspect = False
         if (sog is None or cog is None or not sog > HEADING_MIN_SPEED_MPS
                 or not math.isfinite(cog)):
             return None
         self._append(t, heading_rad - cog, sog)
+        self.suspect = (self._cos[-1] < math.cos(HEADING_GROSS_RAD)
+                        and sog > HEADING_GROSS_MIN_SPEED_MPS)
         n = len(self._t)
         span = t - self._t[0]
         run = self._newest_fixes_behind()
@@ -1423,11 +1431,14 @@ class IntegrityMonitor:
         deviates (and its heading and position, each with its ``std_``, while the
         heading disagrees with the course); its speed with its ``std_`` while it
         disagrees with the measured speed or the course is behind the heading at speed
-        (:attr:`HeadingCourseCheck.behind`); its current while it disagrees with the idle
+        (:attr:`HeadingCourseCheck.behind`, or the newest fix's alone,
+        :attr:`HeadingCourseCheck.suspect`); its current while it disagrees with the idle
         drift, and the components of its current the data do not resolve."""
-        flags = self.flags.get(pipeline)
+        flags = self.flags.get(pipeline) or set()
         p = self.watched.get(pipeline)
-        if not flags or p is None:
+        hc = self.heading
+        suspect = hc is not None and hc.suspect
+        if (not flags and not suspect) or p is None:
             return ()
         out: tuple[str, ...] = ()
         own = tuple(getattr(p, "heading_estimate", ())) + tuple(p.position)
@@ -1438,8 +1449,7 @@ class IntegrityMonitor:
             out = p.heading_dependent
         if "heading_source_mismatch" in flags:
             out += tuple(q for q in own if q not in out)
-        hc = self.heading
-        if "speed_mismatch" in flags or (
+        if "speed_mismatch" in flags or suspect or (
                 "heading_course_mismatch" in flags and hc is not None and hc.behind):
             out += tuple(q for q in (*p.speed, *("std_" + q for q in p.speed))
                          if q not in out)
