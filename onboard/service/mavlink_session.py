@@ -195,6 +195,9 @@ class MavlinkSession:
     _syncs: int = 0
     _params_asked: dict[str, tuple[float, int]] = field(default_factory=dict)
     """Parameter -> (when last asked, requests sent) since the session (re)started."""
+    _params_open: tuple[str, ...] = PARAMETERS
+    """The parameters that may still be asked: not yet asked, or neither answered nor
+    asked :data:`PARAM_TRIES` times (the autopilot's answers are never forgotten)."""
 
     def __post_init__(self) -> None:
         self._mav = mavlink2.MAVLink(None, srcSystem=self.cfg.vehicle.system_id,
@@ -263,6 +266,7 @@ class MavlinkSession:
             self.on_event(f"{self.name}: the autopilot says MAV_TYPE {link.mav_type}, "
                           f"the configuration class {vclass} (expected {sorted(expect)})")
         self._params_asked.clear()
+        self._params_open = PARAMETERS
         if self.src.request_streams:
             self._read_params(now)
         else:
@@ -274,13 +278,18 @@ class MavlinkSession:
         if not self.src.request_streams:
             return
         link = self.link
-        for name in PARAMETERS:
+        still_open = []
+        for name in self._params_open:
             t_sent, tries = self._params_asked.get(name, (-math.inf, 0))
             if tries == 0 or (name not in link.params and tries < PARAM_TRIES
                               and now - t_sent >= PARAM_RETRY_S):
-                self._params_asked[name] = (now, tries + 1)
+                tries += 1
+                self._params_asked[name] = (now, tries)
                 self._send(self._mav.param_request_read_encode(  # type: ignore[union-attr]
                     link.system_id, link.component_id, name.encode(), -1))
+            if name not in link.params and tries < PARAM_TRIES:
+                still_open.append(name)
+        self._params_open = tuple(still_open)
 
     def _acks(self) -> None:
         acks = self.link.acks
