@@ -13,8 +13,11 @@ published records and the innovation records, and runs these checks:
   ``heading_course_mismatch`` is raised naming the angle, and
   the estimates that turn a velocity with the heading (each pipeline's
   ``heading_dependent`` outputs: the ``current`` pipeline's current and through-water
-  velocity) are published as unknown while it lasts. Vehicles that move sideways by
-  design (:attr:`onboard.core.vehicles.VehicleTraits.holonomic`) are not checked.
+  velocity) are published as unknown while it lasts. Courses behind the heading (beyond
+  :data:`HEADING_GROSS_RAD` at more than :data:`HEADING_GROSS_MIN_SPEED_MPS`) are judged
+  early, from two fixes in a row over :data:`HEADING_GROSS_RUN_S`, and withhold the path
+  speeds signed along that heading, from the first such fix. Vehicles that move sideways
+  by design (:attr:`onboard.core.vehicles.VehicleTraits.holonomic`) are not checked.
 * **position against GNSS** (:class:`PositionCheck`): at the first tick after each fix,
   each pipeline's published ``position`` against the fix (in the frame about the first
   fix, as documented; a pipeline with a ``frame_offset``, the ESESO, in its own frame),
