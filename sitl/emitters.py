@@ -130,8 +130,8 @@ def _u16(x: float) -> int:
 def heartbeat_base_mode(mav_type: int, custom_mode: int, armed: bool = True) -> int:
     """HEARTBEAT ``base_mode`` as ArduPilot's firmware sets it for a vehicle of
     ``mav_type`` in mode ``custom_mode`` (``GCS_MAVLINK_Sub::base_mode``,
-    ``GCS_MAVLINK_Rover::base_mode``): ArduSub armed in STABILIZE sends 209 (the ArduSub
-    tlog of ../shared/data), a Rover armed in AUTO 137."""
+    ``GCS_MAVLINK_Rover::base_mode``): ArduSub armed in MANUAL or STABILIZE sends 209 (in
+    MANUAL in the ArduSub tlog of ../shared/data), a Rover armed in AUTO 137."""
     mode = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     if mav_type == MAV_TYPE_SUBMARINE:
         mode |= MAV_MODE_FLAG_STABILIZE_ENABLED | MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
