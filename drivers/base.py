@@ -141,6 +141,28 @@ class MappedLog:
             self.data.close()
 
 
+BY_TYPE_KEYS = 1024
+"""Record types (count) that :attr:`ReadStats.by_type` counts each under its own name;
+further names are counted together under :data:`OTHER_TYPES`. The names come from the
+bytes (an unknown MAVLink id, an NMEA sentence's address, a gpsd class, a DVL report's
+type), so a noisy or hostile stream can bring a new one with every record, and a service
+reads its inputs for days; a log or a link has a few dozen (a whole MAVLink dialect is
+about 300)."""
+OTHER_TYPES = "other_types"
+"""The :attr:`ReadStats.by_type` key of the records of types beyond :data:`BY_TYPE_KEYS`."""
+
+
+class TypeCounts(Counter):
+    """A :class:`~collections.Counter` of at most :data:`BY_TYPE_KEYS` names (and
+    :data:`OTHER_TYPES`): a count of a name it has no room for goes to :data:`OTHER_TYPES`."""
+
+    def __setitem__(self, key: str, value: int) -> None:
+        if len(self) >= BY_TYPE_KEYS and key not in self and key != OTHER_TYPES:
+            # ``c[key] += n`` sets a new key to its count from zero
+            key, value = OTHER_TYPES, self[OTHER_TYPES] + value
+        super().__setitem__(key, value)
+
+
 @dataclass
 class ReadStats:
     """Counters a reader or parser keeps: what it saw, what it produced, what it rejected."""
@@ -151,8 +173,9 @@ class ReadStats:
     """Typed samples produced."""
     rejected: Counter[str] = field(default_factory=Counter)
     """Rejected records by reason."""
-    by_type: Counter[str] = field(default_factory=Counter)
-    """Records by message type (MAVLink name, NMEA sentence, ...), for summaries."""
+    by_type: Counter[str] = field(default_factory=TypeCounts)
+    """Records by message type (MAVLink name, NMEA sentence, ...), for summaries; at most
+    :data:`BY_TYPE_KEYS` names, the rest under :data:`OTHER_TYPES`."""
     skipped: Counter[str] = field(default_factory=Counter)
     """Records left out by design, not for a fault, by reason (an MCAP's channels that
     are not the MAVLink read: :mod:`drivers.mcap_log`)."""

@@ -1,0 +1,57 @@
+"""What the service keeps for as long as it runs stays bounded, whatever its inputs send:
+the parsers' counts by record type (names read from the bytes) (docs/service.md, "Memory
+over a long run")."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import pytest
+
+from onboard.drivers.base import BY_TYPE_KEYS, OTHER_TYPES
+from onboard.drivers.nmea import checksum
+from onboard.drivers.protocols import parser_for
+
+N = 3 * BY_TYPE_KEYS
+"""Distinct type names sent: more than the counts keep."""
+
+
+def _nmea(i: int) -> bytes:
+    body = f"PX{i:05d},1"
+    return f"${body}*{checksum(body):02X}\r\n".encode()
+
+
+def _mavlink_unknown_id(i: int) -> bytes:
+    """A MAVLink 2 frame of an id outside every dialect (no CRC to check it against)."""
+    msgid = 0x800000 + i
+    payload = bytes(4)
+    head = struct.pack("<BBBBBBB", 0xFD, len(payload), 0, 0, i & 0xFF, 1, 1)
+    return head + msgid.to_bytes(3, "little") + payload + b"\x00\x00"
+
+
+@pytest.mark.parametrize("kind, line", [
+    ("nmea", _nmea),
+    ("gpsd", lambda i: json.dumps({"class": f"C{i}"}).encode() + b"\n"),
+    ("dvl-json", lambda i: json.dumps({"type": f"t{i}"}).encode() + b"\n"),
+    ("mavlink", _mavlink_unknown_id),
+])
+def test_counts_by_type_keep_a_bounded_number_of_names(kind, line):
+    parser = parser_for(kind, kind)
+    for i in range(N):
+        parser.feed(line(i), float(i))
+    parser.feed(line(N), float(N))  # a MAVLink frame of unknown id counts once the next starts
+    by_type = parser.stats.by_type
+    assert len(by_type) <= BY_TYPE_KEYS + 1
+    assert by_type[OTHER_TYPES] > 0
+    # every record is still counted, the names beyond the bound together
+    named = sum(n for k, n in by_type.items() if k not in ("ignored", "unknown"))
+    assert named >= N
+
+
+def test_counts_by_type_below_the_bound_are_by_name():
+    parser = parser_for("nmea", "gps")
+    for i in range(10):
+        parser.feed(_nmea(i) * 2, float(i))
+    assert OTHER_TYPES not in parser.stats.by_type
+    assert parser.stats.by_type["PX00003"] == 2
