@@ -1,6 +1,6 @@
 """What the service keeps for as long as it runs stays bounded, whatever its inputs send:
-the parsers' counts by record type (names read from the bytes) (docs/service.md, "Memory
-over a long run")."""
+the parsers' counts by record type (names read from the bytes) and the recorder's lists of
+file names (docs/service.md, "Memory over a long run")."""
 
 from __future__ import annotations
 
@@ -12,6 +12,9 @@ import pytest
 from onboard.drivers.base import BY_TYPE_KEYS, OTHER_TYPES
 from onboard.drivers.nmea import checksum
 from onboard.drivers.protocols import parser_for
+from onboard.drivers.recording import RawRecord
+from onboard.service import recorder as recorder_mod
+from onboard.service.recorder import Recorder
 
 N = 3 * BY_TYPE_KEYS
 """Distinct type names sent: more than the counts keep."""
@@ -55,3 +58,16 @@ def test_counts_by_type_below_the_bound_are_by_name():
         parser.feed(_nmea(i) * 2, float(i))
     assert OTHER_TYPES not in parser.stats.by_type
     assert parser.stats.by_type["PX00003"] == 2
+
+
+def test_recorder_lists_the_newest_file_names(tmp_path, monkeypatch):
+    monkeypatch.setattr(recorder_mod, "FILES_LISTED", 8)
+    rec = Recorder(tmp_path, rotate_mb=0.004, max_total_mb=0.010, fsync=False)
+    for i in range(40):
+        rec.write(RawRecord(t=float(i), source="imu", kind="mavlink", data=bytes(200)))
+        rec.rotate()
+    rec.close()
+    assert rec.part == 40
+    assert len(rec.files) == 8 and rec.path == rec.files[-1] and rec.path.exists()
+    assert rec.files[0].name.endswith("-0033.onbrec")
+    assert 0 < len(rec.deleted) <= 8

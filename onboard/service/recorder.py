@@ -59,6 +59,11 @@ SUFFIX = ".onbrec"
 """File name suffix of recordings."""
 META_FORMAT = 1
 """Version of the JSON in ``meta`` records."""
+FILES_LISTED = 256
+"""Newest file names (count) :attr:`Recorder.files` and :attr:`Recorder.deleted` keep: a
+service that records for weeks rotates a part every hour or so, and the older names are in
+the log (deleted ones) or on the disk; 256 parts of the default 64 MB are eight times the
+default size cap."""
 
 
 def free_bytes(directory: Path) -> int:
@@ -133,7 +138,11 @@ class Recorder:
         self.records = 0
         """Records accepted by :meth:`write` (handed to the worker)."""
         self.files: list[Path] = []
+        """The parts written by this recorder, oldest first (the newest
+        :data:`FILES_LISTED`)."""
         self.deleted: list[Path] = []
+        """The recordings the size cap or the disk space deleted, oldest first (the newest
+        :data:`FILES_LISTED`)."""
         self.write_errors = 0
         """Disk errors (write, fsync, open, close), counted by the worker."""
         self.lost_records = 0
@@ -178,6 +187,8 @@ class Recorder:
             n += 1
             path = self.directory / f"onboard-{self.run_id}-{self.part:04d}.{n}{SUFFIX}"
         self.files.append(path)
+        if len(self.files) > FILES_LISTED:
+            del self.files[:-FILES_LISTED]
         self._file_bytes = 0
         self._submit(self._switch_job, path, self.version)
         meta = dict(self.meta, format=META_FORMAT, part=self.part, run=self.run_id,
@@ -389,6 +400,8 @@ class Recorder:
             total -= sizes[p]
             freed += sizes[p]
             self.deleted.append(p)
+            if len(self.deleted) > FILES_LISTED:
+                del self.deleted[:-FILES_LISTED]
             log.info("recorder: deleted %s (%s)", p.name,
                      "low disk space" if need else f"size cap {self.max_total_bytes / 1e6:.0f} MB")
         return freed
