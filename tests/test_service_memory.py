@@ -71,3 +71,72 @@ def test_recorder_lists_the_newest_file_names(tmp_path, monkeypatch):
     assert len(rec.files) == 8 and rec.path == rec.files[-1] and rec.path.exists()
     assert rec.files[0].name.endswith("-0033.onbrec")
     assert 0 < len(rec.deleted) <= 8
+
+
+def _resolution_reference(samples):
+    """The resolution check's window as tuples in a deque (what the arrays replace), for
+    the verdicts and RMS figures it gives."""
+    from collections import deque
+
+    from onboard.monitor.current_resolution import (RESOLVE_MIN_SPAN, RESOLVE_MIN_STD_MPS,
+                                                    RESOLVE_SNR, RESOLVE_WINDOW_S)
+
+    win: deque = deque()
+    sx = s_s = 0.0
+    out = []
+    unresolved, rms, sigma = False, 0.0, 0.0
+    for t, v, sd in samples:
+        x2, s2 = v * v, sd * sd
+        win.append((t, x2, s2))
+        sx += x2
+        s_s += s2
+        while win[0][0] < t - RESOLVE_WINDOW_S:
+            _, ox, os = win.popleft()
+            sx -= ox
+            s_s -= os
+        if t - win[0][0] >= RESOLVE_MIN_SPAN * RESOLVE_WINDOW_S:
+            n = len(win)
+            rms, sigma = (max(sx, 0.0) / n) ** 0.5, (max(s_s, 0.0) / n) ** 0.5
+            unresolved = sigma > RESOLVE_MIN_STD_MPS and rms < RESOLVE_SNR * sigma
+        out.append((unresolved, rms, sigma))
+    return out
+
+
+def _ticks(n: int, rate_hz: float = 20.0, seed: int = 3):
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    v = rng.normal(0.0, 0.2, n).cumsum() * 0.01
+    sd = 0.1 + 0.1 * rng.random(n)
+    return [(1000.0 + k / rate_hz, float(v[k]), float(sd[k])) for k in range(n)]
+
+
+def test_current_resolution_window_gives_the_same_verdicts_in_arrays():
+    from onboard.monitor.current_resolution import AxisResolution
+
+    samples = _ticks(40_000)
+    ax = AxisResolution()
+    got = []
+    for t, v, sd in samples:
+        got.append((ax.add(t, v, sd), ax.rms, ax.sigma))
+    assert got == _resolution_reference(samples)  # to the bit
+
+
+def test_current_resolution_window_holds_24_bytes_a_tick():
+    """A full window at 20 ticks a second (12 000 entries) holds about 24 B an entry, not
+    the ~140 B of a tuple of three floats in a deque."""
+    import tracemalloc
+
+    from onboard.monitor.current_resolution import AxisResolution, RESOLVE_WINDOW_S
+
+    samples = _ticks(30_000)
+    ax = AxisResolution()
+    tracemalloc.start()
+    try:
+        for t, v, sd in samples:
+            ax.add(t, v, sd)
+        held, _ = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    entries = RESOLVE_WINDOW_S * 20.0
+    assert held / entries < 40.0, held / entries

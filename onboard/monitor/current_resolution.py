@@ -20,7 +20,7 @@ north current, docs/integrity.md "The current not resolved").
 
 from __future__ import annotations
 
-from collections import deque
+from array import array
 
 from mypy_extensions import mypyc_attr
 
@@ -38,11 +38,16 @@ RESOLVE_MIN_STD_MPS = 0.15
 whatever its value: its two-sigma is then within the 0.3 m/s beyond which the current
 pipeline publishes a component as unknown (``[pipelines.current] unknown_above_std_mps``,
 its default)."""
+WINDOW_SHIFT_ENTRIES = 1024
+"""Entries (count) that leave a window's front before its arrays are shifted down over
+them: a shift moves the whole window (12 000 entries a component at 20 ticks a second), so
+it runs once per this many ticks, for at most this many stale entries (24 kB) kept."""
 
 
 @mypyc_attr(allow_interpreted_subclasses=True)
 class AxisResolution:
-    """One component's window of squared values and squared one-sigmas (m^2/s^2).
+    """One component's window of squared values and squared one-sigmas (m^2/s^2), one
+    entry per tick, held as three arrays of doubles (24 B an entry) from index ``_first``.
 
     Attributes:
         unresolved: the newest verdict (False before the window is judged).
@@ -50,29 +55,41 @@ class AxisResolution:
         sigma: RMS (m/s) of its one-sigma there.
     """
 
-    __slots__ = ("unresolved", "rms", "sigma", "_win", "_sx", "_ss")
+    __slots__ = ("unresolved", "rms", "sigma", "_t", "_x2", "_s2", "_first", "_sx", "_ss")
 
     def __init__(self) -> None:
         self.unresolved = False
         self.rms = self.sigma = 0.0
-        self._win: deque[tuple[float, float, float]] = deque()  # t, x^2, sigma^2
+        self._t = array("d")  # s
+        self._x2 = array("d")  # value^2
+        self._s2 = array("d")  # sigma^2
+        self._first = 0
         self._sx = self._ss = 0.0
 
     def add(self, t: float, value: float, std: float) -> bool:
         """The published ``value`` (m/s) and its one-sigma ``std`` at ``t`` (s); returns
         :attr:`unresolved`."""
-        win = self._win
+        ts, xs, ss = self._t, self._x2, self._s2
         x2, s2 = value * value, std * std
-        win.append((t, x2, s2))
+        ts.append(t)
+        xs.append(x2)
+        ss.append(s2)
         self._sx += x2
         self._ss += s2
-        while win[0][0] < t - RESOLVE_WINDOW_S:
-            _, ox, os = win.popleft()
-            self._sx -= ox
-            self._ss -= os
-        if t - win[0][0] < RESOLVE_MIN_SPAN * RESOLVE_WINDOW_S:
+        i = self._first
+        while ts[i] < t - RESOLVE_WINDOW_S:
+            self._sx -= xs[i]
+            self._ss -= ss[i]
+            i += 1
+        if i >= WINDOW_SHIFT_ENTRIES:
+            del ts[:i]
+            del xs[:i]
+            del ss[:i]
+            i = 0
+        self._first = i
+        if t - ts[i] < RESOLVE_MIN_SPAN * RESOLVE_WINDOW_S:
             return self.unresolved
-        n = len(win)
+        n = len(ts) - i
         self.rms = (max(self._sx, 0.0) / n) ** 0.5
         self.sigma = (max(self._ss, 0.0) / n) ** 0.5
         self.unresolved = (self.sigma > RESOLVE_MIN_STD_MPS
