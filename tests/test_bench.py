@@ -40,6 +40,8 @@ def test_bench_json_prints_exactly_the_contract_keys():
     # the replay ratio needs only the readers, the engine and pymavlink: always there
     assert out["replay_vs_pymavlink_parse"] is not None
     assert out["boat_replay_x_realtime"] is not None
+    # the machine's speed beside the absolute figures: always measured
+    assert out["machine_reference_s"] > 0.0
     # the service, Zenoh and the service bench are core parts: their figures are always
     # there (a subscriber on the wrong key gives null latencies)
     for key in ("service_cpu_fraction", "sensor_to_zenoh_p50_ms", "sensor_to_zenoh_p99_ms",
@@ -62,6 +64,12 @@ def test_table_names_every_figure_and_its_goal(monkeypatch):
     assert "not available: module onboard.apps.service_bench missing" in text
     assert "<= 3" in text and "<= 0.015" in text and "< 50" in text and "<= 1.5" in text
     assert ">= 500" in text
+
+
+def test_machine_reference_is_the_least_loop_and_scales_with_its_steps():
+    assert bench.machine_reference_s([0.91, 0.62, 0.75, 0.64]) == 0.62
+    short, long = (min(bench.reference_loop_s(n) for _ in range(3)) for n in (10**5, 10**6))
+    assert 0.0 < short < long   # the loop does its work: ten times the steps, more CPU
 
 
 def test_missing_module_gives_null_with_reason(monkeypatch):

@@ -65,6 +65,14 @@ key                             what                                            
                                 counts the link's delay beyond its least, which is the
                                 data's age, not the service's. Added by issue 29
                                 (additive).
+``machine_reference_s``         CPU seconds of a plain Python loop of                      context
+                                :data:`REFERENCE_STEPS` integer additions, the least of
+                                :data:`REFERENCE_REPEATS` before and as many after the
+                                other figures: the machine's speed for pure Python. The
+                                real-time factors and CPU fractions move with it from
+                                one machine to another (a VM twice as slow halves a
+                                real-time factor); the ratios above do not. Added
+                                2026-12-03 (additive).
 ==============================  =========================================================  =========
 
 A piece whose module has not landed (or fails) gives ``null`` in the JSON and
@@ -120,6 +128,7 @@ KEYS: tuple[str, ...] = (
     "fleet_query_p99_ms_100",
     "service_wakeups_per_s",
     "service_cpu_fraction_real_link",
+    "machine_reference_s",
 )
 """The JSON keys of ``onboard bench --json``, in table order (a contract: tools
 reading the JSON rely on these names)."""
@@ -145,6 +154,7 @@ GOALS: dict[str, tuple[str, float | None]] = {
     "fleet_query_p99_ms_100": ("<", 100.0),
     "service_wakeups_per_s": ("<=", 40.0),
     "service_cpu_fraction_real_link": ("<=", 0.015),
+    "machine_reference_s": ("", None),
 }
 """Goal of each figure: (comparison, bound); None = context only."""
 
@@ -755,6 +765,29 @@ def bench_batch(s: Settings, workdir: Path, rep: Report) -> None:
                  for j, rs in runs.items()}}
 
 
+REFERENCE_STEPS = 10_000_000
+"""Integer additions of :func:`reference_loop_s`'s loop (0.43 s of CPU on the 2-core
+development VM of 2026-12-03)."""
+REFERENCE_REPEATS = 3
+"""Loops timed at the bench's start and as many at its end (1 each when fast)."""
+
+
+def reference_loop_s(steps: int = REFERENCE_STEPS) -> float:
+    """CPU seconds of ``steps`` integer additions in a plain Python loop, interpreted in
+    either build (this module is not among setup.py's compiled ones)."""
+    c = time.process_time()
+    x = 0
+    for i in range(steps):
+        x += i
+    return time.process_time() - c
+
+
+def machine_reference_s(times: list[float]) -> float:
+    """``machine_reference_s`` from the loops' CPU times: the least, the run least
+    disturbed by the rest of the machine."""
+    return round(min(times), 3)
+
+
 def compiled_modules() -> list[str]:
     """The modules of this package that are extension modules: the replay's hot path when
     the package was built with ``ONBOARD_COMPILE=1`` (setup.py), none in the pure build."""
@@ -780,6 +813,8 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
     rep = Report()
     rep.detail["settings"] = {"fast": s.fast, "minutes": s.minutes, "repeats": s.repeats}
     rep.detail["compiled_modules"] = compiled_modules()
+    loops = 1 if s.fast else REFERENCE_REPEATS
+    reference = [reference_loop_s() for _ in range(loops)]
     with tempfile.TemporaryDirectory(prefix="onboard-bench-") as tmp:
         steps: list[tuple[str, tuple[str, ...], Callable[[], None]]] = [
             ("replay vs pymavlink", ("replay_vs_pymavlink_parse",),
@@ -810,6 +845,9 @@ def collect(s: Settings | None = None, progress: Callable[[str], None] | None = 
             except Exception as err:  # noqa: BLE001 - one broken piece must not hide the rest
                 rep.missing(keys, f"failed: {type(err).__name__}: {err}")
             rep.detail.setdefault("bench_wall_s", {})[label] = round(time.perf_counter() - t0, 2)
+    reference += [reference_loop_s() for _ in range(loops)]
+    rep.values["machine_reference_s"] = machine_reference_s(reference)
+    rep.detail["machine_reference_loops_s"] = [round(x, 3) for x in reference]
     return rep
 
 
@@ -982,6 +1020,12 @@ def table(rep: Report) -> str:
                                                 bt["per_wall_minute"].items())
                      + f" (speed-up {bt['speedup']:g}); "
                      f"{bt['workers_cpu_s_per_log_hour']:g} s CPU per log-hour")
+    loops = rep.detail.get("machine_reference_loops_s")
+    if loops:
+        lines.append(f"machine: {REFERENCE_STEPS:,} additions in a Python loop, "
+                     f"{min(loops):.2f} s CPU at the least of {len(loops)} (start and end: "
+                     + ", ".join(f"{x:.2f}" for x in loops) + "); the real-time factors and "
+                     "CPU fractions scale with it, the ratios do not")
     compiled = rep.detail.get("compiled_modules")
     lines.append(f"build: compiled, {len(compiled)} modules (setup.py, ONBOARD_COMPILE=1)"
                  if compiled else "build: pure Python (`make bench-compiled` measures the "
