@@ -27,6 +27,21 @@ VTG        course over ground true (0.01 deg) ``T``, magnetic (empty) ``M``, spe
 HDT        true heading (0.01 deg), ``T``
 =========  ========================================================================
 
+An epoch without a fix (an outage, the antenna under water) is sent as a receiver sends
+it, every epoch, with the position, speed and course empty (the survey boat's receiver
+in ``../shared/data/survey_boat_arduino_rc``, Test1: ``$GPGGA,174822.160,,,,,0,00,,,M,
+0.0,M,,0000``, ``$GPRMC,174822.160,V,,,,,,,180209,,,N``):
+
+=========  ========================================================================
+sentence   fields of an epoch without a fix
+=========  ========================================================================
+GGA        UTC time, empty position, fix quality 0, satellites ``00``, empty HDOP
+           and altitude, ``M``, geoid separation (0 m), ``M``, no differential data
+RMC        UTC time, status ``V``, empty position, speed and course, date, no
+           magnetic variation, mode ``N`` (not valid), navigational status ``V``
+VTG        empty course and speed with their unit letters, mode ``N``
+=========  ========================================================================
+
 The high-precision position makes GGA and RMC about 90 characters long, beyond the
 standard's 82, as an RTK receiver's are. Times are POSIX seconds (UTC); they are rounded
 to the hundredth of a second once, and the time of day and the RMC date are both taken
@@ -118,6 +133,27 @@ def vtg(sog_mps: float, cog_rad: float | None, talker: str = "GP") -> bytes:
     return sentence(talker, "VTG", [
         "" if cog_rad is None else degrees_0_360(cog_rad, 2), "T", "", "M",
         f"{sog_mps / KNOT_MPS:.3f}", "N", f"{sog_mps / KMH_MPS:.3f}", "K", "A"])
+
+
+def gga_no_fix(t_utc: float, talker: str = "GP") -> bytes:
+    """A GGA sentence of an epoch without a fix: the time, fix quality 0, no position."""
+    return sentence(talker, "GGA", [
+        time2str(utc(t_utc).time()), "", "", "", "", "0", "00", "", "", "M", "0.000", "M",
+        "", ""])
+
+
+def rmc_no_fix(t_utc: float, talker: str = "GP") -> bytes:
+    """An RMC sentence of an epoch without a fix: the time and date, status ``V``, mode
+    ``N``, the position, speed and course empty."""
+    stamp = utc(t_utc)
+    return sentence(talker, "RMC", [
+        time2str(stamp.time()), "V", "", "", "", "", "", "", date2str(stamp.date(), "DT"),
+        "", "", "N", "V"])
+
+
+def vtg_no_fix(talker: str = "GP") -> bytes:
+    """A VTG sentence of an epoch without a fix: course and speed empty, mode ``N``."""
+    return sentence(talker, "VTG", ["", "T", "", "M", "", "N", "", "K", "N"])
 
 
 def hdt(heading_rad: float, talker: str = "HE") -> bytes:

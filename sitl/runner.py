@@ -29,6 +29,12 @@ whole ticks (a 7 Hz GNSS beside a 200 Hz IMU reports at 200/29 = 6.9 Hz).
 
 Same scenario, duration and seed: the same samples and, through the emitters, the same
 bytes.
+
+``Simulation(..., invalid_epochs=True)`` also yields the receivers' epochs without a
+fix (:class:`sitl.sensors.GnssNoFix`), for the NMEA output, which sends them (GGA quality
+0, RMC ``V``, VTG ``N``; :func:`run` asks for them when it has NMEA sinks).
+They draw no random number and never reach the controller, so the samples, the truth and
+the other outputs are the same with and without them.
 """
 
 from __future__ import annotations
@@ -69,7 +75,13 @@ from onboard.sitl.emitters import MAV_TYPE_SURFACE_BOAT
 from onboard.sitl.guidance import ControlInput, Controller
 from onboard.sitl.plants.base import Command
 from onboard.sitl.scenarios import Scenario, get
-from onboard.sitl.sensors import GeoOrigin, Sensor, WorldView, build_sensors
+from onboard.sitl.sensors import (
+    GeoOrigin,
+    GnssNoFix,
+    Sensor,
+    WorldView,
+    build_sensors,
+)
 from onboard.sitl.truth import TruthRecord
 
 Step = tuple[float, list[Sample], "TruthRecord | None"]
@@ -95,6 +107,10 @@ def _tick_rate(rates: Sequence[float]) -> int:
         if lcm <= MAX_TICK_HZ:
             return lcm
     return max(100, int(math.ceil(max(rates) - 1e-9)))
+
+
+INVALID_EPOCHS = (GnssNoFix,)
+"""The simulator-only samples of epochs without a fix (``invalid_epochs``)."""
 
 
 class _Heartbeat:
@@ -129,10 +145,11 @@ class Simulation:
 
     def __init__(self, scenario: Scenario | str, seed: int = 0, *,
                  controller: Controller | None = None, truth_rate_hz: float = 10.0,
-                 truth_latlon: bool = True) -> None:
+                 truth_latlon: bool = True, invalid_epochs: bool = False) -> None:
         """``truth_latlon``: :meth:`steps` fills each emitted truth record's latitude and
         longitude (one pymap3d call each); False leaves them None for the caller to fill
-        in batches (:func:`with_truth_latlon`)."""
+        in batches (:func:`with_truth_latlon`). ``invalid_epochs``: also yield the
+        receivers' epochs without a fix (module docstring)."""
         sc = get(scenario) if isinstance(scenario, str) else scenario
         self.scenario = sc
         self.seed = seed
@@ -150,6 +167,10 @@ class Simulation:
         self.geo = GeoOrigin(*sc.origin)
         self.truth_latlon = truth_latlon
         sensors, self.actuators = build_sensors(self.sensor_config, self.geo, seed)
+        self.invalid_epochs = invalid_epochs
+        for sensor in sensors:
+            if hasattr(sensor, "report_invalid"):
+                sensor.report_invalid = invalid_epochs  # type: ignore[attr-defined]
         self.heartbeat = _Heartbeat(sc)
         self.sensors: list[Sensor] = [self.heartbeat, *sensors]
         self.controller = controller if controller is not None else sc.controller()
@@ -219,7 +240,10 @@ class Simulation:
                     truth.lat_deg, truth.lon_deg = self.geo.to_latlon(truth.north, truth.east)
                 out_truth = truth
             if samples:
-                pending.extend(samples)
+                if self.invalid_epochs:
+                    pending.extend(s for s in samples if type(s) not in INVALID_EPOCHS)
+                else:
+                    pending.extend(samples)
             if samples or out_truth is not None:
                 yield t, samples, out_truth
             if k < n_ticks:
@@ -385,7 +409,7 @@ def run(scenario: Scenario | str, duration: float | None = None, seed: int = 0, 
     booted that long before t = 0 (the logged ``time_boot_ms``). Sinks are closed at the end.
     """
     sim = Simulation(scenario, seed, controller=controller, truth_rate_hz=truth_rate_hz,
-                     truth_latlon=False)
+                     truth_latlon=False, invalid_epochs=bool(nmea))
     sc = sim.scenario
     dur = sc.duration_s if duration is None else float(duration)
     summary = RunSummary(scenario=sc.name, seed=seed, duration_s=dur)

@@ -14,7 +14,9 @@ Error models (all one-sigma figures, per axis unless said otherwise):
   ``velocity_std_mps``; a fixed ``latency_s`` between the instant measured and the instant
   reported; outages (Poisson onset ``outage_rate_hz``, exponential length of mean
   ``outage_mean_s``); scheduled outages ``outage_windows`` (the ``gnss_outage`` fault);
-  no fix at all deeper than ``max_depth_m`` (0.3 m).
+  no fix at all deeper than ``max_depth_m`` (0.3 m). Without a fix a receiver still
+  reports each epoch: with ``report_invalid`` set (the runner sets it for the NMEA outputs)
+  such an epoch is a :class:`GnssNoFix`, which no driver turns into a sample.
 * **IMU** (:class:`Imu`): specific force and angular rate (body FRD) + turn-on bias +
   random-walk bias + white noise; an injected constant gyro bias on top.
 * **Compass/AHRS** (:class:`Compass`): heading error
@@ -69,6 +71,13 @@ from onboard.sitl.truth import TruthRecord
 
 GRAVITY = 9.80665
 """Standard gravity (m/s^2)."""
+
+
+class GnssNoFix(Sample, frozen=True, tag="sim_gnss_no_fix"):
+    """A receiver epoch without a fix (an outage, the antenna under water): what the
+    receiver still sends on its protocol outputs (GGA quality 0, RMC status ``V``, VTG
+    mode ``N``). Simulator-only: the drivers reject those sentences, so no estimator input
+    is one; only simulations asked for them yield it."""
 
 
 def sensor_rng(seed: int, name: str) -> np.random.Generator:
@@ -292,9 +301,12 @@ class Gnss(_Base):
         self.origin = origin
         self.drift = cfg.drift_std_m * rng.standard_normal(2)
         self._t_last: float | None = None
-        self._queue: deque[tuple[float, GnssFix]] = deque()
+        self._queue: deque[tuple[float, Sample]] = deque()
         self._outages = _Outages(cfg.outage_rate_hz, cfg.outage_mean_s, rng)
         self._out = False
+        self.report_invalid = False
+        """Report each epoch without a fix as a :class:`GnssNoFix` (after ``latency_s``,
+        in order with the fixes); False: nothing."""
 
     def measure(self, world: WorldView) -> list[Sample]:
         c = self.cfg
@@ -308,6 +320,9 @@ class Gnss(_Base):
         self._out = out
         tr = world.truth
         if out or tr.down > c.max_depth_m:
+            if self.report_invalid:
+                self._enqueue(t, t + c.latency_s, GnssNoFix(t=t + c.latency_s,
+                                                            source=self.name))
             return self.due(t)
         pos_std = c.position_std_m
         for start, dur, factor in c.degraded_windows:
@@ -331,10 +346,14 @@ class Gnss(_Base):
                      else c.reported_accuracy_m),
             v_acc_m=c.altitude_std_m,
         )
-        # delivered in order, and never before the instant measured
-        due = max(t_report, t, self._queue[-1][0] if self._queue else -math.inf)
-        self._queue.append((due, fix))
+        self._enqueue(t, t_report, fix)
         return self.due(t)
+
+    def _enqueue(self, t: float, t_report: float, sample: Sample) -> None:
+        """Queue ``sample`` reported at ``t_report``: delivered in order, and never before
+        the instant ``t`` measured."""
+        due = max(t_report, t, self._queue[-1][0] if self._queue else -math.inf)
+        self._queue.append((due, sample))
 
     def due(self, t: float) -> list[Sample]:
         q = self._queue

@@ -17,7 +17,7 @@ from onboard.drivers.nmea import NmeaParser
 from onboard.drivers.pd6 import Pd6Parser
 from onboard.core.messages import DvlVelocity, GnssFix, Heading
 from onboard.sitl.emitters import PtySink, TcpServerSink, UdpSink
-from onboard.sitl.runner import run
+from onboard.sitl.runner import run, run_to_tlog
 
 pytestmark = pytest.mark.integration
 
@@ -87,6 +87,34 @@ def test_nmea_through_a_pty_has_right_checksums():
     assert len(fixes) == summary.samples["GnssFix"] == 51
     assert sum(isinstance(s, Heading) for s in samples) == 101
     assert all(f.sog_mps is not None and f.cog_rad is not None for f in fixes)
+
+
+def test_the_nmea_output_goes_on_every_epoch_through_a_gnss_outage(tmp_path):
+    """fault-gnss-outage loses the fix from 30 s: the receiver still sends GGA, RMC and
+    VTG every 0.2 s, quality 0, ``V`` and ``N`` from 30 s on; the driver counts each such
+    epoch as ``no_fix`` and takes no fix from it; the tlog is the same with or without the
+    NMEA output (its epochs without a fix draw nothing and reach no controller)."""
+    nmea = tmp_path / "run.nmea"
+    summary = run_to_tlog("fault-gnss-outage", tmp_path / "a.tlog", duration=34.0, seed=1,
+                          nmea_path=nmea)
+    run_to_tlog("fault-gnss-outage", tmp_path / "b.tlog", duration=34.0, seed=1)
+    assert (tmp_path / "a.tlog").read_bytes() == (tmp_path / "b.tlog").read_bytes()
+    lines = nmea.read_bytes().splitlines()
+    gga = [ln.split(b",") for ln in lines if ln.startswith(b"$GPGGA")]
+    rmc = [ln.split(b",") for ln in lines if ln.startswith(b"$GPRMC")]
+    vtg = [ln for ln in lines if ln.startswith(b"$GPVTG")]
+    assert len(gga) == len(rmc) == len(vtg) == 5 * 34 + 1  # every epoch, fix or not
+    tod = [float(g[1]) for g in gga]
+    assert tod == pytest.approx([k * 0.2 for k in range(171)])  # 00:00:00.00 on
+    lost = [g[6] == b"0" for g in gga]
+    assert lost == [k >= 150 for k in range(171)]  # from 30 s
+    assert all((r[2] == b"V") == k for r, k in zip(rmc, lost))
+    assert sum(v.split(b"*")[0].endswith(b",N") for v in vtg) == 21
+    assert summary.samples["GnssFix"] == 150 and summary.samples["GnssNoFix"] == 21
+    parser = NmeaParser(time_base="utc")
+    samples = parser.feed(nmea.read_bytes(), 0.0) + parser.flush()
+    assert sum(isinstance(s, GnssFix) for s in samples) == 150
+    assert parser.stats.rejected == {"no_fix": 2 * 21}  # each epoch, and its VTG
 
 
 def test_pd6_through_a_pty_parses():

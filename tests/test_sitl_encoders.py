@@ -35,6 +35,7 @@ from onboard.drivers.dvl_json import DvlJsonParser, report_time
 from onboard.drivers.nmea import KNOT_MPS, NmeaParser
 from onboard.drivers.pd6 import Pd6Parser
 from onboard.sitl import dvl_json_out, nmea_out, pd6_out
+from onboard.sitl.sensors import GnssNoFix
 from onboard.sitl.emitters import (
     MAV_TYPE_SUBMARINE,
     MAV_TYPE_SURFACE_BOAT,
@@ -158,6 +159,33 @@ def test_the_nmea_encoder_sends_gga_rmc_vtg_per_fix_and_hdt_per_heading():
     assert fix.t == head.t == pytest.approx(PUBLISHED_T + 0.2)
     assert (fix.lat_deg, fix.lon_deg) == pytest.approx((-12.5, 130.8), abs=POSITION_TOL_DEG)
     assert head.heading_rad == pytest.approx(1.1, abs=math.radians(0.005))
+
+
+def test_an_epoch_without_a_fix_is_sent_as_the_survey_boats_receiver_sends_it():
+    """GGA quality 0, RMC ``V`` and VTG ``N`` with the position, speed and course empty
+    (the field layout of ../shared/data/survey_boat_arduino_rc's receiver); pynmeagps
+    reads them; the driver rejects each as ``no_fix``, counted, and takes no fix from
+    them, but its UTC clock goes on."""
+    t = PUBLISHED_T + 0.2
+    gga, rmc, vtg = nmea_out.gga_no_fix(t), nmea_out.rmc_no_fix(t), nmea_out.vtg_no_fix()
+    assert gga.split(b"*")[0] == b"$GPGGA,123519.20,,,,,0,00,,,M,0.000,M,,"
+    assert rmc.split(b"*")[0] == b"$GPRMC,123519.20,V,,,,,,,230394,,,N,V"
+    assert vtg.split(b"*")[0] == b"$GPVTG,,T,,M,,N,,K,N"
+    g, r, v = (NMEAReader.parse(x) for x in (gga, rmc, vtg))
+    assert (g.quality, g.lat, g.lon) == (0, "", "")
+    assert (r.status, r.posMode, r.lat, r.spd) == ("V", "N", "", "")
+    assert (v.posMode, v.cogt, v.sogn) == ("N", "", "")
+    parser = NmeaParser(time_base="utc")
+    out = parser.feed(gga + rmc + vtg, 0.0) + parser.flush()
+    assert out == [] and parser.stats.rejected == {"no_fix": 2}
+    assert parser.utc_time == pytest.approx(t)
+
+
+def test_the_nmea_encoder_sends_an_epoch_without_a_fix():
+    frames = NmeaEncoder(epoch_s=PUBLISHED_T).encode([GnssNoFix(t=0.4, source="gnss")])
+    assert [f[:6] for f in frames] == [b"$GPGGA", b"$GPRMC", b"$GPVTG"]
+    assert frames == [nmea_out.gga_no_fix(PUBLISHED_T + 0.4),
+                      nmea_out.rmc_no_fix(PUBLISHED_T + 0.4), nmea_out.vtg_no_fix()]
 
 
 # --------------------------------------------------------------------------- Water Linked JSON

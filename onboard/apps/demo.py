@@ -188,8 +188,9 @@ class LinkPlan:
 
 def _route(sample: Any, dvl: bool, nmea: bool) -> str:
     from onboard.core.messages import DvlPosition, DvlVelocity, GnssFix, Heading
+    from onboard.sitl.runner import INVALID_EPOCHS
 
-    if nmea and isinstance(sample, (GnssFix, Heading)):
+    if nmea and isinstance(sample, (GnssFix, Heading, *INVALID_EPOCHS)):
         return "nmea"
     if dvl and isinstance(sample, (DvlVelocity, DvlPosition)):
         return "dvl"
@@ -270,12 +271,13 @@ def _child_simulation(plan: LinkPlan) -> tuple[Any, float]:
     from onboard.sitl.runner import Simulation
 
     if not plan.fleet:
-        return Simulation(plan.scenario, plan.seed), DEFAULT_EPOCH_S
+        return Simulation(plan.scenario, plan.seed, invalid_epochs=plan.nmea), DEFAULT_EPOCH_S
     from onboard.sitl.fleet import get_fleet, vehicle_scenario
 
     fleet = get_fleet(plan.fleet).at_seed(plan.fleet_seed)
     v = fleet.vehicle(plan.scenario)
-    return Simulation(vehicle_scenario(fleet, v), plan.seed), fleet.utc_start(v)
+    return (Simulation(vehicle_scenario(fleet, v), plan.seed, invalid_epochs=plan.nmea),
+            fleet.utc_start(v))
 
 
 # --------------------------------------------------------------------------- the demo
