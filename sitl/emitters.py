@@ -81,7 +81,7 @@ from onboard.core.messages import (
 )
 from onboard.sitl import dvl_json_out, nmea_out, pd6_out
 from onboard.sitl.frames import GeoOrigin, body_to_ned_fast, ned_to_body_fast
-from onboard.sitl.sensors import GnssNoFix
+from onboard.sitl.sensors import GnssNoFix, HeadingInvalid
 
 DEFAULT_EPOCH_S = 1_767_225_600.0
 """Unix time of simulation t = 0 in logs: 2026-01-01T00:00:00Z (fixed, for determinism)."""
@@ -344,8 +344,9 @@ class MavlinkEncoder:
 
 class NmeaEncoder:
     """GnssFix -> GGA, RMC, VTG (talker GP); GnssNoFix (a receiver epoch without a fix)
-    -> GGA of quality 0, RMC ``V``, VTG ``N``; Heading -> HDT (talker HE), sentences by
-    :mod:`sitl.nmea_out` (pynmeagps). Time of day and date from ``epoch_s + t``."""
+    -> GGA of quality 0, RMC ``V``, VTG ``N``; Heading -> HDT (talker HE); HeadingInvalid
+    -> an empty HDT; sentences by :mod:`sitl.nmea_out` (pynmeagps). Time of day and date
+    from ``epoch_s + t``."""
 
     def __init__(self, epoch_s: float = DEFAULT_EPOCH_S) -> None:
         self.epoch_s = epoch_s
@@ -368,6 +369,8 @@ class NmeaEncoder:
                 out += [nmea_out.gga_no_fix(tu), nmea_out.rmc_no_fix(tu), nmea_out.vtg_no_fix()]
             elif isinstance(s, Heading):
                 out.append(nmea_out.hdt(s.heading_rad))
+            elif isinstance(s, HeadingInvalid):
+                out.append(nmea_out.hdt(None))
         return out
 
 

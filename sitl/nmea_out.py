@@ -42,6 +42,10 @@ RMC        UTC time, status ``V``, empty position, speed and course, date, no
 VTG        empty course and speed with their unit letters, mode ``N``
 =========  ========================================================================
 
+A heading epoch without a heading is an HDT with the heading empty, ``$HEHDT,,T``, as the
+Shenzhen USV's dual-antenna receiver (``../shared/data/usv_rtk_gnss_heading_nmea_shenzhen``)
+sends ``$GPHDT,,T*1B``.
+
 The high-precision position makes GGA and RMC about 90 characters long, beyond the
 standard's 82, as an RTK receiver's are. Times are POSIX seconds (UTC); they are rounded
 to the hundredth of a second once, and the time of day and the RMC date are both taken
@@ -156,6 +160,8 @@ def vtg_no_fix(talker: str = "GP") -> bytes:
     return sentence(talker, "VTG", ["", "T", "", "M", "", "N", "", "K", "N"])
 
 
-def hdt(heading_rad: float, talker: str = "HE") -> bytes:
-    """An HDT sentence: true heading (rad, sent in degrees)."""
-    return sentence(talker, "HDT", [degrees_0_360(heading_rad, 2), "T"])
+def hdt(heading_rad: float | None, talker: str = "HE") -> bytes:
+    """An HDT sentence: true heading (rad, sent in degrees; None: empty, no valid
+    heading)."""
+    return sentence(talker, "HDT", [
+        "" if heading_rad is None else degrees_0_360(heading_rad, 2), "T"])

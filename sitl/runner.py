@@ -31,8 +31,9 @@ Same scenario, duration and seed: the same samples and, through the emitters, th
 bytes.
 
 ``Simulation(..., invalid_epochs=True)`` also yields the receivers' epochs without a
-fix (:class:`sitl.sensors.GnssNoFix`), for the NMEA output, which sends them (GGA quality
-0, RMC ``V``, VTG ``N``; :func:`run` asks for them when it has NMEA sinks).
+fix (:class:`sitl.sensors.GnssNoFix`) and the heading epochs without a heading
+(:class:`sitl.sensors.HeadingInvalid`), for the NMEA output, which sends them (GGA quality
+0, RMC ``V``, VTG ``N``, an empty HDT; :func:`run` asks for them when it has NMEA sinks).
 They draw no random number and never reach the controller, so the samples, the truth and
 the other outputs are the same with and without them.
 """
@@ -78,6 +79,7 @@ from onboard.sitl.scenarios import Scenario, get
 from onboard.sitl.sensors import (
     GeoOrigin,
     GnssNoFix,
+    HeadingInvalid,
     Sensor,
     WorldView,
     build_sensors,
@@ -109,8 +111,8 @@ def _tick_rate(rates: Sequence[float]) -> int:
     return max(100, int(math.ceil(max(rates) - 1e-9)))
 
 
-INVALID_EPOCHS = (GnssNoFix,)
-"""The simulator-only samples of epochs without a fix (``invalid_epochs``)."""
+INVALID_EPOCHS = (GnssNoFix, HeadingInvalid)
+"""The simulator-only samples of epochs without a fix or heading (``invalid_epochs``)."""
 
 
 class _Heartbeat:
@@ -149,7 +151,7 @@ class Simulation:
         """``truth_latlon``: :meth:`steps` fills each emitted truth record's latitude and
         longitude (one pymap3d call each); False leaves them None for the caller to fill
         in batches (:func:`with_truth_latlon`). ``invalid_epochs``: also yield the
-        receivers' epochs without a fix (module docstring)."""
+        receivers' epochs without a fix or heading (module docstring)."""
         sc = get(scenario) if isinstance(scenario, str) else scenario
         self.scenario = sc
         self.seed = seed

@@ -23,7 +23,9 @@ Error models (all one-sigma figures, per axis unless said otherwise):
   ``c + A1 sin(psi + phi1) + A2 sin(2 psi + phi2) + k_motor * thrust`` (hard iron, soft iron,
   constant offset, motor interference) plus white noise, plus scheduled steps ``steps``
   (the ``compass_step`` fault: a magnetic disturbance); the AHRS attitude carries the same
-  yaw, roll and pitch with small noise, and the gyro rates.
+  yaw, roll and pitch with small noise, and the gyro rates; no heading in scheduled
+  ``invalid_windows`` (a heading receiver without a solution; with ``report_invalid`` a
+  :class:`HeadingInvalid` per heading epoch there, for the NMEA output's empty HDT).
 * **DVL** (:class:`Dvl`): bottom-track velocity over ground and (optionally) water-track
   velocity through water, in the instrument = body frame; white noise growing with
   altitude; a figure of merit; lock lost above ``max_altitude_m``, below
@@ -78,6 +80,11 @@ class GnssNoFix(Sample, frozen=True, tag="sim_gnss_no_fix"):
     receiver still sends on its protocol outputs (GGA quality 0, RMC status ``V``, VTG
     mode ``N``). Simulator-only: the drivers reject those sentences, so no estimator input
     is one; only simulations asked for them yield it."""
+
+
+class HeadingInvalid(Sample, frozen=True, tag="sim_heading_invalid"):
+    """A heading epoch without a valid heading: what a heading receiver still sends
+    (an empty HDT). Simulator-only, as :class:`GnssNoFix`."""
 
 
 def sensor_rng(seed: int, name: str) -> np.random.Generator:
@@ -470,6 +477,11 @@ class CompassConfig:
     """Scheduled heading steps ``(start_s, duration_s, radians)``: the heading reads
     ``radians`` more while in the window (the ``compass_step`` fault: a magnetic
     disturbance, a steel hull alongside; ``duration_s`` inf = permanent)."""
+    invalid_windows: tuple[tuple[float, float], ...] = ()
+    """Scheduled windows ``(start_s, duration_s)`` without a valid heading: no
+    :class:`Heading` in them (the AHRS attitude goes on), on the NMEA output an empty HDT
+    per epoch, as the Shenzhen USV's dual-antenna receiver in ``../shared/data`` sends
+    ``$GPHDT,,T`` for 4 of its 3230 epochs (once 3 in a row). No scenario sets it."""
 
 
 class Compass(_Base):
@@ -487,6 +499,9 @@ class Compass(_Base):
         self.cfg = cfg
         self.imu = imu
         self.last_error = 0.0
+        self.report_invalid = False
+        """Report each heading epoch in ``invalid_windows`` as a :class:`HeadingInvalid`;
+        False: nothing."""
 
     def deviation(self, psi: float, thrust: float) -> float:
         """Deterministic heading error (rad) at true heading ``psi`` and ``thrust``."""
@@ -505,7 +520,11 @@ class Compass(_Base):
                 err += rad
         self.last_error = err
         psi = wrap_2pi(tr.yaw + err)
-        out: list[Sample] = [Heading(t=world.t, source=self.name, heading_rad=psi)]
+        out: list[Sample] = []
+        if not in_windows(world.t, c.invalid_windows):
+            out.append(Heading(t=world.t, source=self.name, heading_rad=psi))
+        elif self.report_invalid:
+            out.append(HeadingInvalid(t=world.t, source=self.name))
         if c.emit_attitude:
             w = world.angular_rate
             if self.imu is not None:

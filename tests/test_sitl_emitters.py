@@ -3,6 +3,7 @@ pymavlink and the project's own parsers, every frame and every checksum right.""
 
 from __future__ import annotations
 
+import dataclasses as dc
 import os
 import select
 import socket
@@ -16,8 +17,9 @@ from onboard.drivers.dvl_json import DvlJsonParser
 from onboard.drivers.nmea import NmeaParser
 from onboard.drivers.pd6 import Pd6Parser
 from onboard.core.messages import DvlVelocity, GnssFix, Heading
-from onboard.sitl.emitters import PtySink, TcpServerSink, UdpSink
-from onboard.sitl.runner import run, run_to_tlog
+from onboard.sitl.emitters import FileSink, PtySink, TcpServerSink, UdpSink
+from onboard.sitl import scenarios
+from onboard.sitl.runner import run, run_to_tlog, simulate
 
 pytestmark = pytest.mark.integration
 
@@ -115,6 +117,27 @@ def test_the_nmea_output_goes_on_every_epoch_through_a_gnss_outage(tmp_path):
     samples = parser.feed(nmea.read_bytes(), 0.0) + parser.flush()
     assert sum(isinstance(s, GnssFix) for s in samples) == 150
     assert parser.stats.rejected == {"no_fix": 2 * 21}  # each epoch, and its VTG
+
+
+def test_the_nmea_output_sends_an_empty_hdt_while_the_heading_is_invalid(tmp_path):
+    """jaiabot-turns with the compass's ``invalid_windows`` option (2.0-2.5 s): an empty
+    HDT every 0.1 s in the window, which the driver counts as ``empty``; the headings of
+    ``simulate`` skip the window."""
+    base = scenarios.get("jaiabot-turns")
+    sc = dc.replace(base, sensors=dc.replace(base.sensors, compass=dc.replace(
+        base.sensors.compass, invalid_windows=((2.0, 0.5),))))
+    nmea = tmp_path / "run.nmea"
+    run(sc, 4.0, seed=1, nmea=[FileSink(nmea)])
+    hdt = [ln.split(b"*")[0] for ln in nmea.read_bytes().splitlines() if b"HDT" in ln]
+    assert len(hdt) == 41
+    assert [h == b"$HEHDT,,T" for h in hdt] == [20 <= k < 25 for k in range(41)]
+    parser = NmeaParser()
+    samples = parser.feed(nmea.read_bytes(), 0.0) + parser.flush()
+    assert sum(isinstance(s, Heading) for s in samples) == 36
+    assert parser.stats.rejected == {"empty": 5}
+    t_head = [round(s.t, 1) for _, ss, _ in simulate(sc, 4.0, seed=1) for s in ss
+              if isinstance(s, Heading)]
+    assert t_head == [k / 10 for k in range(41) if not 20 <= k < 25]
 
 
 def test_pd6_through_a_pty_parses():

@@ -35,7 +35,7 @@ from onboard.drivers.dvl_json import DvlJsonParser, report_time
 from onboard.drivers.nmea import KNOT_MPS, NmeaParser
 from onboard.drivers.pd6 import Pd6Parser
 from onboard.sitl import dvl_json_out, nmea_out, pd6_out
-from onboard.sitl.sensors import GnssNoFix
+from onboard.sitl.sensors import GnssNoFix, HeadingInvalid
 from onboard.sitl.emitters import (
     MAV_TYPE_SUBMARINE,
     MAV_TYPE_SURFACE_BOAT,
@@ -186,6 +186,21 @@ def test_the_nmea_encoder_sends_an_epoch_without_a_fix():
     assert [f[:6] for f in frames] == [b"$GPGGA", b"$GPRMC", b"$GPVTG"]
     assert frames == [nmea_out.gga_no_fix(PUBLISHED_T + 0.4),
                       nmea_out.rmc_no_fix(PUBLISHED_T + 0.4), nmea_out.vtg_no_fix()]
+
+
+def test_a_heading_epoch_without_a_heading_is_the_shenzhen_receivers_empty_hdt(shared_data):
+    """An empty HDT is byte for byte the dual-antenna receiver's ``$GPHDT,,T*1B`` of the
+    Shenzhen USV capture; the encoder sends one per HeadingInvalid; the driver rejects it
+    as ``empty``, counted, and pynmeagps reads an empty heading."""
+    ours = nmea_out.hdt(None, talker="GP")
+    assert ours == b"$GPHDT,,T*1B\r\n"
+    capture = shared_data / "usv_rtk_gnss_heading_nmea_shenzhen" / "202412051037.txt"
+    assert capture.read_bytes().count(ours) == 4
+    frames = NmeaEncoder(epoch_s=PUBLISHED_T).encode([HeadingInvalid(t=0.1, source="compass")])
+    assert frames == [b"$HEHDT,,T*01\r\n"]
+    assert NMEAReader.parse(frames[0]).headingT == ""
+    parser = NmeaParser()
+    assert parser.feed(frames[0], 0.0) == [] and parser.stats.rejected == {"empty": 1}
 
 
 # --------------------------------------------------------------------------- Water Linked JSON

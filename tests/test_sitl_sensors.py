@@ -21,6 +21,7 @@ from onboard.sitl.sensors import (
     GeoOrigin,
     Gnss,
     GnssConfig,
+    HeadingInvalid,
     ImuConfig,
     PwmChannel,
     WorldView,
@@ -157,6 +158,25 @@ def test_compass_motor_interference_grows_with_thrust():
                 sensor_rng(0, "compass"))
     h = c.measure(_view(0.0, _truth(yaw=1.0), thrust=0.8))[0]
     assert h.heading_rad - 1.0 == pytest.approx(0.04)
+
+
+def test_compass_sends_no_heading_in_its_invalid_windows_and_the_same_ones_after():
+    """In ``invalid_windows`` no Heading (a HeadingInvalid per epoch when asked), the AHRS
+    attitude goes on; the headings after the window are those of a compass without it."""
+    cfg = CompassConfig(invalid_windows=((0.5, 0.3),))
+    plain = Compass(CompassConfig(), sensor_rng(4, "compass"))
+    gappy = Compass(cfg, sensor_rng(4, "compass"))
+    asked = Compass(cfg, sensor_rng(4, "compass"))
+    asked.report_invalid = True
+    for k in range(15):
+        v = _view(k / 10.0, _truth(yaw=1.0))
+        a, b, c = plain.measure(v), gappy.measure(v), asked.measure(v)
+        if 5 <= k < 8:
+            assert [type(s) for s in b] == [Attitude]
+            assert [type(s) for s in c] == [HeadingInvalid, Attitude]
+            assert b[0] == a[1]
+        else:
+            assert a == b == c and isinstance(a[0], Heading)
 
 
 def test_dvl_reports_invalid_not_zero_when_lock_is_lost():
