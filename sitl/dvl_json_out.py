@@ -21,7 +21,10 @@ documents' field names, units and order:
 
 What the documents leave open, the simulator chooses: without lock the velocities are
 sent as 0 and the altitude as -1, as a transducer that decoded nothing sends distance -1
-and velocity 0; the four beams are tilted :data:`BEAM_TILT_RAD` from z at the azimuths
+and velocity 0; a report flagged invalid while locked (``locked``) carries its
+velocity and altitude with every beam valid, as the A50 in
+``../shared/data/waterlinked_dvl_a50_json_tank`` sends 2.5-4.5 % of its reports while
+driven; the four beams are tilted :data:`BEAM_TILT_RAD` from z at the azimuths
 :data:`BEAM_AZIMUTHS_RAD` (ids in that order), their velocity the projection of the
 DVL's velocity on the beam; without a covariance of its own a report carries
 ``fom^2`` on the diagonal; a report is transmitted at its time of validity.
@@ -81,20 +84,23 @@ def transducers(vx: float, vy: float, vz: float, altitude_m: float,
 def velocity_report(vx: float, vy: float, vz: float, *, valid: bool, fom_mps: float,
                     altitude_m: float | None, dt_s: float, t_validity_s: float,
                     covariance: Sequence[float] | None = None,
-                    track: str = "bottom") -> bytes:
+                    track: str = "bottom", locked: bool | None = None) -> bytes:
     """One velocity-and-transducer report line: velocity (m/s, body frame), figure of
     merit (m/s), altitude (m; None: unknown), time since the previous report (s), time of
-    validity (Unix s), row-major covariance ((m/s)^2), ``track`` ``bottom`` or ``water``."""
-    if not valid:
+    validity (Unix s), row-major covariance ((m/s)^2), ``track`` ``bottom`` or ``water``.
+    ``locked`` (default: ``valid``): the beams see the surface; an invalid report flagged
+    while locked carries its velocity and altitude, one without lock zeros and -1."""
+    locked = valid if locked is None else locked
+    if not locked:
         vx = vy = vz = 0.0
-    alt = altitude_m if valid and altitude_m is not None else UNKNOWN_DISTANCE_M
+    alt = altitude_m if locked and altitude_m is not None else UNKNOWN_DISTANCE_M
     cov = list(covariance) if covariance is not None else [
         fom_mps ** 2 if i % 4 == 0 else 0.0 for i in range(9)]
     t_us = int(round(t_validity_s * US_PER_S))
     return _line({
         "time": dt_s * 1000.0, "vx": vx, "vy": vy, "vz": vz, "fom": fom_mps,
         "covariance": [cov[0:3], cov[3:6], cov[6:9]], "altitude": alt,
-        "transducers": transducers(vx, vy, vz, alt, valid and alt > 0.0),
+        "transducers": transducers(vx, vy, vz, alt, locked and alt > 0.0),
         "velocity_valid": valid, "status": 0, "tracking_mode": track, "format": FORMAT,
         "type": "velocity_water" if track == "water" else "velocity",
         "time_of_validity": t_us, "time_of_transmission": t_us,

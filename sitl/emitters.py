@@ -376,7 +376,8 @@ class NmeaEncoder:
 
 class DvlJsonEncoder:
     """DvlVelocity -> Water Linked velocity-and-transducer reports (``velocity``, or
-    ``velocity_water`` in water tracking); DvlPosition -> ``position_local`` dead
+    ``velocity_water`` in water tracking; an invalid one with an altitude was flagged while
+    locked and keeps its velocity, as the A50's); DvlPosition -> ``position_local`` dead
     reckoning reports: one JSON object per line, by :mod:`sitl.dvl_json_out`."""
 
     def __init__(self, epoch_s: float = DEFAULT_EPOCH_S, period_s: float = 0.2) -> None:
@@ -395,6 +396,7 @@ class DvlJsonEncoder:
                 out.append(dvl_json_out.velocity_report(
                     s.vx, s.vy, s.vz, valid=s.valid, fom_mps=s.fom_mps or 0.0,
                     altitude_m=s.altitude_m, covariance=s.covariance, track=s.track,
+                    locked=s.valid or s.altitude_m is not None,
                     dt_s=self.period_s if last is None else s.t - last,
                     t_validity_s=self.epoch_s + s.t))
             elif isinstance(s, DvlPosition):

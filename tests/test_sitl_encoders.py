@@ -252,6 +252,20 @@ def test_a_report_without_lock_is_invalid_never_a_zero_velocity():
     assert all(b["distance"] == -1.0 and not b["beam_valid"] for b in beams)
 
 
+def test_a_report_flagged_while_locked_keeps_its_velocity_as_the_a50_s():
+    """The A50 flags some reports invalid while its four beams see the bottom: they carry
+    their velocity and altitude (../shared/data/waterlinked_dvl_a50_json_tank); the
+    driver reads them as invalid with those values."""
+    enc = DvlJsonEncoder(epoch_s=PUBLISHED_T)
+    (line,) = enc.encode([DvlVelocity(t=0.2, source="dvl", vx=0.61, vy=-0.17, vz=0.033,
+                                      valid=False, fom_mps=0.004, altitude_m=7.5)])
+    obj = json.loads(line)
+    assert (obj["velocity_valid"], obj["vx"], obj["altitude"]) == (False, 0.61, 7.5)
+    assert all(b["beam_valid"] and b["distance"] > 7.5 for b in obj["transducers"])
+    (s,) = DvlJsonParser().feed(line, 0.0)
+    assert (s.valid, s.vx, s.altitude_m) == (False, 0.61, 7.5)
+
+
 def test_the_four_beam_velocities_give_back_the_velocity():
     """The beams' velocities are the projections of one velocity: least squares over the
     four beam directions recovers it (and the distances the altitude)."""

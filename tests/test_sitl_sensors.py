@@ -10,6 +10,7 @@ import pytest
 
 from onboard.core.messages import Attitude, DvlPosition, DvlVelocity, GnssFix, Heading, Imu
 from onboard.sitl.sensors import (
+    A50_FOM,
     ActuatorConfig,
     ActuatorModel,
     Compass,
@@ -205,6 +206,134 @@ def test_dvl_random_dropouts_and_water_track():
     assert np.mean([s.vx for s in water]) == pytest.approx(0.4, abs=0.005)
 
 
+def _dvl_run(seed: int = 5, n: int = 5000):
+    """A DVL with the A50's figure of merit 10 m above the bottom at 1 m/s: its
+    bottom-track reports, its noise's std (m/s)."""
+    cfg = DvlConfig(dropout_rate_hz=0.0, **A50_FOM)
+    d = Dvl(cfg, sensor_rng(seed, "dvl"))
+    tr = _truth(down=10.0, u=1.0)
+    out = [s for k in range(n) for s in d.measure(_view(k * 0.2, tr, altitude=10.0))
+           if isinstance(s, DvlVelocity)]
+    return out, cfg.velocity_std_mps + cfg.velocity_std_per_m * 10.0
+
+
+def test_dvl_figure_of_merit_is_an_estimate_that_wanders_not_the_noise():
+    """The fom (and the covariance, its square) varies report to report, log-normal
+    about 0.55 times the noise's std with a memory of ~0.15 s, independently of the
+    report's own error; the noise keeps the configured std."""
+    out, std = _dvl_run()
+    good = [s for s in out if s.valid]
+    fom = np.array([s.fom_mps for s in good])
+    log_ratio = np.log(fom / std)
+    assert 0.27 < log_ratio.std() < 0.33  # fom_log_std 0.3
+    assert 0.2 < np.corrcoef(log_ratio[:-1], log_ratio[1:])[0, 1] < 0.33  # exp(-0.2 / 0.15)
+    assert np.sqrt(np.mean(fom ** 2)) / std == pytest.approx(0.55, rel=0.03)  # fom_scale
+    assert all(s.covariance == (f * f, 0.0, 0.0, 0.0, f * f, 0.0, 0.0, 0.0, f * f)
+               for s, f in zip(good, fom))
+    err = np.array([s.vx - 1.0 for s in good])
+    assert err.std() == pytest.approx(std, rel=0.05)  # the noise is the configured one
+    assert abs(np.corrcoef(np.abs(err), fom)[0, 1]) < 0.05  # the fom does not know it
+
+
+def test_dvl_flags_a_few_locked_reports_invalid_as_the_a50_does():
+    """~3 % of the locked reports come flagged invalid with their altitude and a velocity
+    2.5 times noisier, their fom 1.5 times higher; they are not lock losses."""
+    out, std = _dvl_run()
+    flagged = [s for s in out if not s.valid]
+    assert 0.02 < len(flagged) / len(out) < 0.04
+    assert all(s.altitude_m is not None and s.altitude_m > 9.5 for s in flagged)
+    assert np.std([s.vx - 1.0 for s in flagged]) == pytest.approx(2.5 * std, rel=0.15)
+    assert np.median([s.fom_mps for s in flagged]) > 1.2 * np.median(
+        [s.fom_mps for s in out if s.valid])
+
+
+def _a50_reports(folder, name: str) -> list[dict]:
+    """A capture file's reports, consecutive duplicate lines (the capture's) dropped."""
+    import json
+
+    recs, prev = [], None
+    for line in (folder / name).read_text().splitlines():
+        if line.strip() and line != prev:
+            recs.append(json.loads(line))
+        prev = line
+    return recs
+
+
+def _neighbour_distance(v: np.ndarray) -> np.ndarray:
+    """Each report's velocity minus the mean of its 6 neighbours (3 each side), rows 3..n-4."""
+    return np.array([v[i] - np.r_[v[i - 3:i], v[i + 1:i + 4]].mean(axis=0)
+                     for i in range(3, len(v) - 3)])
+
+
+def _lag1_tau(log_f: np.ndarray, dt_s: float) -> float:
+    """Correlation time (s) from the lag-1 correlation of a series sampled every dt_s."""
+    return -dt_s / math.log(np.corrcoef(log_f[:-1], log_f[1:])[0, 1])
+
+
+def test_dvl_figure_of_merit_varies_as_the_a50_capture_s(shared_data):
+    """Ranges from the capture, the simulated DVL inside them. At rest (the first reports of
+    out20210528.txt, below 0.02 m/s): the fom's RMS over the velocity's scatter
+    (0.53 about its mean, 0.62 by its neighbours' distance / sqrt(7/6)), the fom's log-std
+    (0.10) and memory (0.30 s), and the correlation of the fom's log with the log of the
+    report's distance to its neighbours (-0.20: the fom does not predict the error).
+    Driven (the circle and straight runs, above 0.05 m/s): the fom's log about its
+    log-speed trend, std 0.33-0.34, memory 0.11-0.12 s. 0.4-4.5 % of reports flagged invalid
+    with four beams on the bottom. The simulation has no speed trend: its fom's log-std and
+    memory lie between the resting and the driven capture's."""
+    folder = shared_data / "waterlinked_dvl_a50_json_tank"
+    recs = _a50_reports(folder, "out20210528.txt")
+    v = np.array([[r["vx"], r["vy"], r["vz"]] for r in recs])
+    speed = np.linalg.norm(v, axis=1)
+    n_rest = int(np.argmax(speed >= 0.02))  # the ROV sits still, then is driven away
+    assert 100 <= n_rest <= 115 and all(r["velocity_valid"] for r in recs[:n_rest])
+    v_rest, f_rest = v[:n_rest], np.array([r["fom"] for r in recs[:n_rest]])
+    dt = np.median([r["time"] for r in recs]) / 1000.0
+    d = _neighbour_distance(v_rest)
+    fom_rms = np.sqrt(np.mean(f_rest ** 2))
+    scale_lo = fom_rms / np.sqrt(np.mean((v_rest - v_rest.mean(axis=0)) ** 2))
+    scale_hi = fom_rms / np.sqrt(np.mean(d ** 2) / (7.0 / 6.0))
+    log_std_rest = np.log(f_rest).std()
+    tau_rest = _lag1_tau(np.log(f_rest), dt)
+    corr_rest = np.corrcoef(np.log(f_rest[3:-3]),
+                            np.log(np.sqrt(np.mean(d ** 2, axis=1))))[0, 1]
+    assert 0.5 < scale_lo < scale_hi < 0.65
+    assert 0.08 < log_std_rest < 0.12 and 0.25 < tau_rest < 0.35
+    assert -0.3 < corr_rest < -0.1
+    log_std_driven, tau_driven, flagged = [], [], []
+    for name in ("out20210528.txt", "out20210528_circle.txt",
+                 "out20210528_straight+turn360.txt"):
+        recs = _a50_reports(folder, name)
+        flagged.append(np.mean([not r["velocity_valid"] and r["altitude"] > 0
+                                and all(b["beam_valid"] for b in r["transducers"])
+                                for r in recs]))
+        if name == "out20210528.txt":
+            continue
+        idx = np.array([i for i, r in enumerate(recs) if r["velocity_valid"]
+                        and math.hypot(r["vx"], r["vy"], r["vz"]) > 0.05])
+        lf = np.log([recs[i]["fom"] for i in idx])
+        ls = np.log([math.hypot(recs[i]["vx"], recs[i]["vy"], recs[i]["vz"]) for i in idx])
+        assert np.corrcoef(lf, ls)[0, 1] > 0.65  # the A50's fom follows the speed
+        e = lf - np.polyval(np.polyfit(ls, lf, 1), ls)
+        nxt = np.diff(idx) == 1
+        log_std_driven.append(e.std())
+        tau_driven.append(-dt / math.log(np.corrcoef(e[:-1][nxt], e[1:][nxt])[0, 1]))
+    assert 0.3 < min(log_std_driven) <= max(log_std_driven) < 0.37
+    assert 0.08 < min(tau_driven) <= max(tau_driven) < 0.15
+    assert 0.003 < min(flagged) and max(flagged) < 0.05
+
+    out, std = _dvl_run()
+    good = [s for s in out if s.valid]
+    lf = np.log([s.fom_mps for s in good])
+    err = np.array([[s.vx - 1.0, s.vy, s.vz] for s in good])
+    assert scale_lo < np.sqrt(np.mean(np.exp(2 * lf))) / err.std() < scale_hi
+    assert log_std_rest < lf.std() < max(log_std_driven)
+    assert min(tau_driven) < _lag1_tau(lf, 0.2) < tau_rest
+    d = _neighbour_distance(err)
+    corr = np.corrcoef(lf[3:-3], np.log(np.sqrt(np.mean(d ** 2, axis=1))))[0, 1]
+    assert abs(corr - corr_rest) < 3.0 / math.sqrt(n_rest - 6)  # as uninformative
+    assert min(flagged) < np.mean([not s.valid for s in out]) < max(flagged)
+
+
 def test_depth_sensor_pressure_is_consistent():
     ds = DepthSensor(DepthConfig(depth_std_m=0.02), sensor_rng(0, "depth"))
     vals = [ds.measure(_view(0.0, _truth(down=20.0)))[0] for _ in range(2000)]
@@ -227,3 +356,14 @@ def test_actuator_pwm_quantized_saturated_and_deadband_applied_to_the_plant():
     assert a.pwm[2] == 1549.0 and eff[1] == pytest.approx(-49 / 400)  # 1 us quantization
     out = a.measure(_view(0.0, _truth()))[0]
     assert out.pwm_us[:3] == (1900.0, 0.0, 1549.0)
+
+
+def test_dvl_default_figure_of_merit_is_the_noise_own_std_and_flags_nothing():
+    """Without :data:`A50_FOM` the figure of merit is the noise's std, report by report,
+    and no locked report is flagged (what the ESESO's figures are measured with)."""
+    d = Dvl(DvlConfig(dropout_rate_hz=0.0), sensor_rng(5, "dvl"))
+    tr = _truth(down=10.0, u=1.0)
+    out = [s for k in range(500) for s in d.measure(_view(k * 0.2, tr, altitude=10.0))
+           if isinstance(s, DvlVelocity)]
+    std = DvlConfig().velocity_std_mps + DvlConfig().velocity_std_per_m * 10.0
+    assert all(s.valid and s.fom_mps == pytest.approx(std, rel=1e-12) for s in out)
