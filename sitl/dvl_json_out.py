@@ -88,7 +88,7 @@ def velocity_report(vx: float, vy: float, vz: float, *, valid: bool, fom_mps: fl
     """One velocity-and-transducer report line: velocity (m/s, body frame), figure of
     merit (m/s), altitude (m; None: unknown), time since the previous report (s), time of
     validity (Unix s), row-major covariance ((m/s)^2), ``track`` ``bottom`` or ``water``.
-    ``locked`` (default: ``valid``): the beams see the surface; an invalid report flagged
+    ``locked`` (default: ``valid``): the beams see the bottom; an invalid report flagged
     while locked carries its velocity and altitude, one without lock zeros and -1."""
     locked = valid if locked is None else locked
     if not locked:

@@ -624,6 +624,7 @@ from the capture in ``../shared/data``): ``DvlConfig(**A50_FOM)``. Not the defau
 default figure of merit is the noise's own std, which the ESESO takes as each report's
 variance (docs/eseso-mpc.md, "DVL": what this one does to its closed loop)."""
 
+
 class Dvl(_Base):
     """DVL: :class:`DvlVelocity` (body frame) and :class:`DvlPosition` samples."""
 
