@@ -20,6 +20,7 @@ pyproject.toml.
 import importlib.util
 import os
 import shutil
+import sys
 
 from setuptools import setup
 
@@ -125,9 +126,22 @@ def staged(modules: list[str]) -> list[str]:
     return [os.path.join(STAGE, m) for m in modules]
 
 
+METADATA_COMMANDS = ("egg_info", "dist_info")
+"""The setup.py commands that write only the package's metadata. A PEP 517 build runs one
+first (pip's "Preparing metadata"), which needs no extension: mypyc's type check and C
+generation (about 20 s) then runs once, in the build itself, not twice."""
+
+
+def metadata_only(argv: list[str]) -> bool:
+    """Whether setup.py was run (``argv``) for a metadata command: its first argument that
+    is not an option is one of :data:`METADATA_COMMANDS`."""
+    command = next((a for a in argv[1:] if not a.startswith("-")), None)
+    return command in METADATA_COMMANDS
+
+
 def ext_modules() -> list:
-    """The compiled extensions when ``ONBOARD_COMPILE=1``, else none."""
-    if os.environ.get("ONBOARD_COMPILE") != "1":
+    """The compiled extensions when ``ONBOARD_COMPILE=1`` and setup.py builds, else none."""
+    if os.environ.get("ONBOARD_COMPILE") != "1" or metadata_only(sys.argv):
         return []
     try:
         from mypyc.build import mypycify
