@@ -211,3 +211,28 @@ def test_the_release_build_replays_as_pure(tmp_path_factory, tmp_path):
     venv = compiled_venv(tmp_path_factory.mktemp("release"), "3")
     test_the_listed_modules_and_only_they_are_compiled(venv)
     test_the_gnss_latency_forks_replay_compiled_as_pure(venv, tmp_path)
+
+
+def test_the_metadata_step_of_a_compiled_build_runs_no_mypyc(tmp_path):
+    """pip prepares a build's metadata by running setup.py ``dist_info`` before the build:
+    with ``ONBOARD_COMPILE=1`` that step writes the metadata without staging or compiling
+    anything (mypyc's 20 s are the build's alone)."""
+    import shutil
+
+    from onboard.apps.install import PACKAGE_FILES
+
+    src = tmp_path / "src"
+    src.mkdir()
+    for name in PACKAGE_FILES:
+        if (REPO / name).is_dir():
+            shutil.copytree(REPO / name, src / name,
+                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.so"))
+        else:
+            shutil.copy2(REPO / name, src / name)
+    (tmp_path / "meta").mkdir()
+    r = subprocess.run([sys.executable, "setup.py", "--quiet", "dist_info", "--output-dir",
+                        str(tmp_path / "meta")], cwd=src, capture_output=True, text=True,
+                       env={**clean_env(), "ONBOARD_COMPILE": "1"}, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert list((tmp_path / "meta").glob("onboard-*.dist-info/METADATA"))
+    assert not (src / "build").exists()  # nothing staged for mypyc (setup.py's STAGE)
