@@ -31,7 +31,7 @@ from onboard.service.publishers.zenoh_pub import open_router
 from onboard.service.recorder import replay_recording
 from onboard.sitl.link import ARDUSUB_TETHER
 from onboard.apps.service_bench import (
-    LinkedTraffic, TrafficGenerator, free_tcp_port, free_udp_port)
+    LinkedTraffic, TrafficGenerator, free_tcp_port, free_udp_port, receiver_floor)
 from tests.helpers.service_config import service_config
 
 REPO = Path(__file__).resolve().parent.parent
@@ -633,3 +633,13 @@ def test_onboard_log_level_is_read_in_any_case_and_a_bad_one_is_one_line(tmp_pat
     assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert ("vehicle.id" in r.stderr) == ok and ("ONBOARD_LOG_LEVEL" in r.stderr) != ok
+
+
+def test_the_bare_receiver_under_the_service_floor_gets_and_parses_every_datagram():
+    """``service_bench.receiver_floor`` (docs/performance.md, "The floor"): the CPU of a
+    process that only receives and parses the bench's traffic is a floor only if it got
+    all of it; every SCALED_IMU frame (50 of the 76 datagrams a second) is a sample."""
+    got = receiver_floor(2.0, parse=True, warmup_s=0.5)
+    assert got["datagrams"] == got["sent"] > 100
+    assert got["samples"] >= 0.6 * got["sent"]
+    assert 0.0 <= got["cpu_fraction"] < 1.0

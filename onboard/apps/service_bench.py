@@ -531,6 +531,92 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
     return out
 
 
+def bare_receiver(mav_port: int, nmea_port: int, parse: bool, rate_hz: float = 10.0) -> None:
+    """Receive the bench's traffic and do nothing else: wake on a ``rate_hz`` grid, as the
+    service's ticks do, drain both UDP sockets, and with ``parse`` feed each datagram to
+    the service's own parsers (:class:`drivers.mavlink.MavlinkParser`,
+    :class:`drivers.nmea.NmeaParser`). On SIGTERM it prints the datagrams and samples it
+    got (JSON) and exits. Its CPU is the floor under :func:`measure`'s:
+    :func:`receiver_floor`."""
+    import asyncio
+
+    from onboard.drivers.mavlink import MavlinkParser
+    from onboard.drivers.nmea import NmeaParser
+
+    socks = []
+    for port in (mav_port, nmea_port):
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind(("127.0.0.1", port))
+        sock.setblocking(False)
+        socks.append(sock)
+    feeds = ([MavlinkParser().feed, NmeaParser().feed] if parse
+             else [lambda data, t: (), lambda data, t: ()])
+    got = {"datagrams": 0, "samples": 0}
+
+    async def ticks() -> None:
+        loop = asyncio.get_running_loop()
+        stop = asyncio.Event()
+        loop.add_signal_handler(signal.SIGTERM, stop.set)
+        t0, k = loop.time(), 0
+        while not stop.is_set():
+            k += 1
+            await asyncio.sleep(max(0.0, t0 + k / rate_hz - loop.time()))
+            t = time.monotonic()
+            for sock, feed in zip(socks, feeds):
+                while True:
+                    try:
+                        data = sock.recv(65536)
+                    except BlockingIOError:
+                        break
+                    got["datagrams"] += 1
+                    got["samples"] += len(feed(data, t))
+
+    asyncio.run(ticks())
+    print(json.dumps(got), flush=True)
+
+
+def receiver_floor(duration_s: float = 20.0, *, parse: bool, warmup_s: float = 3.0,
+                   link: LinkDelay | None = None) -> dict[str, Any]:
+    """:func:`bare_receiver` (a child process) fed :func:`measure`'s traffic: what
+    receiving (and with ``parse``, parsing) that traffic costs a Python process on this
+    machine before any of the service's own work. ``cpu_fraction``: its CPU seconds per
+    wall second over the window; ``sent``: the datagrams sent in all; ``datagrams``,
+    ``samples``: what it received and parsed (every datagram sent, or the floor is
+    wrong)."""
+    mav_port, nmea_port = free_udp_port(), free_udp_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from onboard.apps.service_bench import bare_receiver; "
+         f"bare_receiver({mav_port}, {nmea_port}, {parse})"],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        time.sleep(1.5)  # the interpreter up and the sockets bound
+        if proc.poll() is not None:
+            raise RuntimeError(f"the bare receiver exited ({proc.returncode})")
+        cpu0 = wall0 = None
+        sent = 0
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            t0 = time.monotonic()
+            for t_send, port, frame in LinkedTraffic(mav_port, nmea_port, link).until(
+                    warmup_s + duration_s):
+                delay = t0 + t_send - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                if cpu0 is None and t_send >= warmup_s:
+                    cpu0, wall0 = _proc_cpu_s(proc.pid), time.monotonic()
+                tx.sendto(frame, ("127.0.0.1", port))
+                sent += 1
+        assert cpu0 is not None and wall0 is not None
+        fraction = (_proc_cpu_s(proc.pid) - cpu0) / (time.monotonic() - wall0)
+        time.sleep(0.25)  # its last tick drains what is in flight
+        proc.terminate()
+        out, _ = proc.communicate(timeout=10)
+        return {"cpu_fraction": fraction, "sent": sent, **json.loads(out)}
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
 if __name__ == "__main__":  # pragma: no cover
     import json
 
