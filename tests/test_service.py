@@ -31,7 +31,7 @@ from onboard.service.publishers.zenoh_pub import open_router
 from onboard.service.recorder import replay_recording
 from onboard.sitl.link import ARDUSUB_TETHER
 from onboard.apps.service_bench import (
-    LinkedTraffic, TrafficGenerator, free_tcp_port, free_udp_port, receiver_floor)
+    LinkedTraffic, TrafficGenerator, free_tcp_port, free_udp_port, paced, receiver_floor)
 from tests.helpers.service_config import service_config
 
 REPO = Path(__file__).resolve().parent.parent
@@ -318,9 +318,7 @@ def _ticks_fed(tmp_path: Path, link, seconds: float) -> tuple[Service, list]:
 
     def send() -> None:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
-            t0 = time.monotonic()
-            for t, to, f in traffic.until(seconds + 1.0):
-                time.sleep(max(0.0, t0 + t - time.monotonic()))
+            for _, to, f in paced(traffic, seconds + 1.0):
                 if stop.is_set():
                     return
                 udp.sendto(f, ("127.0.0.1", to))

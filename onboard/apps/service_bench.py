@@ -152,6 +152,17 @@ class LinkedTraffic:
             yield t_arrival, port, f
 
 
+def paced(traffic: LinkedTraffic, t_end: float) -> Iterator[tuple[float, int, bytes]]:
+    """``traffic``'s frames until ``t_end`` (s), each yielded at its arrival time (s after
+    the first call), sleeping until then."""
+    t0 = time.monotonic()
+    for t_send, port, frame in traffic.until(t_end):
+        delay = t0 + t_send - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        yield t_send, port, frame
+
+
 def free_udp_port() -> int:
     """A UDP port on 127.0.0.1 that was free a moment ago (bound, then released)."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -462,14 +473,10 @@ def measure(duration_s: float = 30.0, *, warmup_s: float = 3.0,
         if proc.poll() is not None:
             raise RuntimeError("service exited: " + proc.stderr.read().decode()[-500:])  # type: ignore[union-attr]
         tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        t0 = time.monotonic()
         cpu0 = wall0 = None
         threads0: dict[str, float] | None = None
-        for t_send, port, f in LinkedTraffic(mav_port, nmea_port, link).until(
-                warmup_s + duration_s):
-            delay = t0 + t_send - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
+        for t_send, port, f in paced(LinkedTraffic(mav_port, nmea_port, link),
+                                     warmup_s + duration_s):
             if cpu0 is None and t_send >= warmup_s:
                 cpu0, wall0 = _proc_cpu_s(proc.pid), time.monotonic()
                 threads0 = _threads_cpu_s(proc.pid)
@@ -595,12 +602,8 @@ def receiver_floor(duration_s: float = 20.0, *, parse: bool, warmup_s: float = 3
         cpu0 = wall0 = None
         sent = 0
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
-            t0 = time.monotonic()
-            for t_send, port, frame in LinkedTraffic(mav_port, nmea_port, link).until(
-                    warmup_s + duration_s):
-                delay = t0 + t_send - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
+            for t_send, port, frame in paced(LinkedTraffic(mav_port, nmea_port, link),
+                                             warmup_s + duration_s):
                 if cpu0 is None and t_send >= warmup_s:
                     cpu0, wall0 = _proc_cpu_s(proc.pid), time.monotonic()
                 tx.sendto(frame, ("127.0.0.1", port))
