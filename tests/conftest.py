@@ -28,13 +28,15 @@ default suite's figures recompute the AIE, current, closed-loop and diagnosis ru
 modules assert on): one unit of work for pytest-xdist, so each run is flown once."""
 FIGURE_RUN_GROUP = "figure-runs"
 
-LONGEST_FIRST = (FIGURE_RUN_GROUP, "test_faults", "test_demo", "test_real_logs",
-                 "test_autopilot_streams", "test_diagnose_real", "test_batch", "test_bench",
-                 "test_diagnose_roundtrip", "test_systemd_unit", "test_declination",
-                 "test_mcap", "test_gpsd")
-"""The units of work that take longest (``--durations`` of the default suite: the figure
-runs several minutes, test_faults two to three, test_demo one; the rest 20-60 s), handed
-out first; the others follow by their number of tests, as pytest-xdist orders them."""
+LONGEST_FIRST = ("test_compiled", "test_faults", FIGURE_RUN_GROUP, "test_batch",
+                 "test_real_logs", "test_demo", "test_fleet_history", "test_autopilot_streams",
+                 "test_service", "test_diagnose_real", "test_closure_synthetic", "test_bench",
+                 "test_wheel", "test_diagnose_robust", "test_service_sitl")
+"""The units of work that take longest, longest first (the default suite's
+``--durations=0`` summed per unit, 2026-12-03: test_compiled 129 s, its wheel built in
+its setup; test_faults and the figure runs 58 s each; test_batch 55 s; the rest 18-42 s),
+handed out first; the others follow by their number of tests, as pytest-xdist orders
+them."""
 
 
 def _unit(item: pytest.Item) -> str:
