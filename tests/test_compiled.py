@@ -217,18 +217,10 @@ def test_the_metadata_step_of_a_compiled_build_runs_no_mypyc(tmp_path):
     """pip prepares a build's metadata by running setup.py ``dist_info`` before the build:
     with ``ONBOARD_COMPILE=1`` that step writes the metadata without staging or compiling
     anything (mypyc's 20 s are the build's alone)."""
-    import shutil
-
-    from onboard.apps.install import PACKAGE_FILES
+    from onboard.apps.install import copy_package
 
     src = tmp_path / "src"
-    src.mkdir()
-    for name in PACKAGE_FILES:
-        if (REPO / name).is_dir():
-            shutil.copytree(REPO / name, src / name,
-                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.so"))
-        else:
-            shutil.copy2(REPO / name, src / name)
+    copy_package(REPO, src)
     (tmp_path / "meta").mkdir()
     r = subprocess.run([sys.executable, "setup.py", "--quiet", "dist_info", "--output-dir",
                         str(tmp_path / "meta")], cwd=src, capture_output=True, text=True,

@@ -105,6 +105,18 @@ WHEEL_GLOB = "onboard-*.whl"
 """The file name of this package's wheel (``onboard-VERSION-py3-none-any.whl``)."""
 
 
+def copy_package(source: Path, dest: Path) -> None:
+    """:data:`PACKAGE_FILES` of ``source`` copied into the new folder ``dest``, without
+    compiled files."""
+    dest.mkdir()
+    for name in PACKAGE_FILES:
+        if (source / name).is_dir():
+            shutil.copytree(source / name, dest / name,
+                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.so"))
+        else:
+            shutil.copy2(source / name, dest / name)
+
+
 def build_wheel(source: Path, out: Path, python: str, pip_args: list[str]) -> Path:
     """The wheel of the package in ``source``, built by ``python -m pip wheel --no-deps``
     (with ``pip_args``) from a copy of :data:`PACKAGE_FILES` in a temporary directory, so
@@ -112,13 +124,7 @@ def build_wheel(source: Path, out: Path, python: str, pip_args: list[str]) -> Pa
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="onboard-build-") as tmp:
         src, dist = Path(tmp) / "src", Path(tmp) / "dist"
-        src.mkdir()
-        for name in PACKAGE_FILES:
-            if (source / name).is_dir():
-                shutil.copytree(source / name, src / name,
-                                ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-            else:
-                shutil.copy2(source / name, src / name)
+        copy_package(source, src)
         subprocess.run([python, "-m", "pip", "wheel", "--quiet", "--disable-pip-version-check",
                         "--no-deps", "--wheel-dir", str(dist), *pip_args, str(src)], check=True)
         (built,) = dist.glob(WHEEL_GLOB)
