@@ -39,7 +39,8 @@ Error models (all one-sigma figures, per axis unless said otherwise):
   square 1), drawn from a stream of its own; the noise stays white with the configured
   std. A locked report is flagged invalid with probability ``quality_invalid_prob``: its
   beams see the bottom, it carries its altitude and a velocity
-  ``quality_invalid_noise_factor`` times noisier, its figure of merit 1.5 times higher.
+  ``quality_invalid_noise_factor`` times noisier, its figure of merit
+  ``quality_invalid_fom_factor`` times higher.
   Measured on the A50 capture in ``../shared/data/waterlinked_dvl_a50_json_tank``
   (BlueROV2 in a tank, 1.8 m up, ~8.5 reports/s). At rest (its first 110 reports): the
   velocity scatters 0.00053 m/s per axis about its mean (0.00045 by the report's distance
@@ -611,6 +612,8 @@ class DvlConfig:
     the capture, driven: 2.5-4.5 %)."""
     quality_invalid_noise_factor: float = 2.5
     """Velocity noise of such a report, in multiples of the noise's std."""
+    quality_invalid_fom_factor: float = 1.5
+    """Figure of merit of such a report over a valid one's (the capture: a median 1.4-1.7)."""
     lock_loss_windows: tuple[tuple[float, float], ...] = ()
     """Scheduled bottom-lock losses ``(start_s, duration_s)`` (the ``dvl_lock_loss``
     fault: soft mud, a steep slope, aeration)."""
@@ -674,7 +677,7 @@ class Dvl(_Base):
             k = 1.0
             if flagged:
                 self.quality_invalid += 1
-                k, fom = c.quality_invalid_noise_factor, 1.5 * fom
+                k, fom = c.quality_invalid_noise_factor, c.quality_invalid_fom_factor * fom
             vx = tr.u + k * std * n[0]
             vy = tr.v + k * std * n[1]
             vz = tr.w + k * std * n[2]

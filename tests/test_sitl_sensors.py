@@ -206,10 +206,10 @@ def test_dvl_random_dropouts_and_water_track():
     assert np.mean([s.vx for s in water]) == pytest.approx(0.4, abs=0.005)
 
 
-def _dvl_run(seed: int = 5, n: int = 5000):
-    """A DVL with the A50's figure of merit 10 m above the bottom at 1 m/s: its
-    bottom-track reports, its noise's std (m/s)."""
-    cfg = DvlConfig(dropout_rate_hz=0.0, **A50_FOM)
+def _dvl_run(fom: dict[str, float], seed: int = 5, n: int = 5000):
+    """A DVL with the figure of merit ``fom`` (:class:`DvlConfig` fields) 10 m above the
+    bottom at 1 m/s, without dropouts: its bottom-track reports, its noise's std (m/s)."""
+    cfg = DvlConfig(dropout_rate_hz=0.0, **fom)
     d = Dvl(cfg, sensor_rng(seed, "dvl"))
     tr = _truth(down=10.0, u=1.0)
     out = [s for k in range(n) for s in d.measure(_view(k * 0.2, tr, altitude=10.0))
@@ -221,7 +221,7 @@ def test_dvl_figure_of_merit_is_an_estimate_that_wanders_not_the_noise():
     """The fom (and the covariance, its square) varies report to report, log-normal
     about 0.55 times the noise's std with a memory of ~0.15 s, independently of the
     report's own error; the noise keeps the configured std."""
-    out, std = _dvl_run()
+    out, std = _dvl_run(A50_FOM)
     good = [s for s in out if s.valid]
     fom = np.array([s.fom_mps for s in good])
     log_ratio = np.log(fom / std)
@@ -238,7 +238,7 @@ def test_dvl_figure_of_merit_is_an_estimate_that_wanders_not_the_noise():
 def test_dvl_flags_a_few_locked_reports_invalid_as_the_a50_does():
     """~3 % of the locked reports come flagged invalid with their altitude and a velocity
     2.5 times noisier, their fom 1.5 times higher; they are not lock losses."""
-    out, std = _dvl_run()
+    out, std = _dvl_run(A50_FOM)
     flagged = [s for s in out if not s.valid]
     assert 0.02 < len(flagged) / len(out) < 0.04
     assert all(s.altitude_m is not None and s.altitude_m > 9.5 for s in flagged)
@@ -321,7 +321,7 @@ def test_dvl_figure_of_merit_varies_as_the_a50_capture_s(shared_data):
     assert 0.08 < min(tau_driven) <= max(tau_driven) < 0.15
     assert 0.003 < min(flagged) and max(flagged) < 0.05
 
-    out, std = _dvl_run()
+    out, std = _dvl_run(A50_FOM)
     good = [s for s in out if s.valid]
     lf = np.log([s.fom_mps for s in good])
     err = np.array([[s.vx - 1.0, s.vy, s.vz] for s in good])
@@ -361,9 +361,5 @@ def test_actuator_pwm_quantized_saturated_and_deadband_applied_to_the_plant():
 def test_dvl_default_figure_of_merit_is_the_noise_own_std_and_flags_nothing():
     """Without :data:`A50_FOM` the figure of merit is the noise's std, report by report,
     and no locked report is flagged (what the ESESO's figures are measured with)."""
-    d = Dvl(DvlConfig(dropout_rate_hz=0.0), sensor_rng(5, "dvl"))
-    tr = _truth(down=10.0, u=1.0)
-    out = [s for k in range(500) for s in d.measure(_view(k * 0.2, tr, altitude=10.0))
-           if isinstance(s, DvlVelocity)]
-    std = DvlConfig().velocity_std_mps + DvlConfig().velocity_std_per_m * 10.0
+    out, std = _dvl_run({}, n=500)
     assert all(s.valid and s.fom_mps == pytest.approx(std, rel=1e-12) for s in out)
