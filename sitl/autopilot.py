@@ -30,7 +30,8 @@ module reproduces:
 * **GPS_RAW_INT at the rate asked, fix or not**: asked faster than the receiver gives
   fixes, the newest fix is sent again, its ``time_usec`` unchanged (2 of the ArduSub
   tlog's 528 fixes); with no fix for :data:`GNSS_LOST_S` (an outage, a dive), fix_type
-  NO_FIX at the last fix's place, as ArduPilot keeps its receiver's last location.
+  NO_FIX at the last fix's place and ``time_usec``, as ArduPilot keeps its receiver's last
+  location and fix time (:meth:`sitl.emitters.MavlinkEncoder.gps_no_fix`).
 * **Reboot** (:meth:`SimAutopilot.reboot`): silent for ``REBOOT_S``, then heartbeats
   again with ``time_boot_ms`` counting from the reboot and every stream off until asked
   again.
@@ -97,8 +98,6 @@ RAW_IMU_ID = _ID["RAW_IMU"]
 SYSTEM_TIME_ID = _ID["SYSTEM_TIME"]
 PARAM_VALUE_ID = _ID["PARAM_VALUE"]
 GPS_RAW_INT_ID = _ID["GPS_RAW_INT"]
-GPS_FIX_TYPE_NO_FIX = 1
-UINT16_UNKNOWN = 65535
 GNSS_LOST_S = 1.0
 """Without a new fix for this long (s) the receiver reports no fix: a receiver at 1-10 Hz
 has then missed at least one epoch."""
@@ -302,14 +301,11 @@ class SimAutopilot:
         iv = self.intervals.get(GPS_RAW_INT_ID)
         if iv is None or self._fix is None or self.stream_unasked:
             return 0
-        t_fix, fix, frame = self._fix
+        t_fix, _, frame = self._fix
         if t - t_fix < RESEND_AFTER * iv or t - self._gps_sent < iv - TOLERANCE_S:
             return 0
         if t - t_fix >= GNSS_LOST_S:
-            frame = self._pack(self.enc.mav.gps_raw_int_encode(
-                int(round((t - self.enc.boot_t0) * 1e6)), GPS_FIX_TYPE_NO_FIX,
-                int(round(fix.lat_deg * 1e7)), int(round(fix.lon_deg * 1e7)), 0,
-                UINT16_UNKNOWN, UINT16_UNKNOWN, 0, UINT16_UNKNOWN, 0))
+            frame = self.enc.gps_no_fix()
         self._write(t, frame)
         self._gps_sent = t
         return 1

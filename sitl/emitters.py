@@ -27,6 +27,7 @@ sample                 MAVLink message
 VehicleInfo            HEARTBEAT (MAV_TYPE of the vehicle, MAV_AUTOPILOT_ARDUPILOTMEGA)
 Parameter              PARAM_VALUE (SERVOn_FUNCTION, as an ArduPilot INT16 parameter)
 GnssFix                GPS_RAW_INT (fix_type 3)
+GnssNoFix              GPS_RAW_INT (fix_type 1, NO_FIX: the last fix's place and time_usec)
 VelocityOverGround     GLOBAL_POSITION_INT (vx, vy, vz; lat/lon dead-reckoned from them;
                        hdg the sample's own heading, else the last attitude's yaw; alt
                        from the last depth)
@@ -103,6 +104,8 @@ SMART_RTL, GUIDED."""
 SUB_GUIDED_MODES = frozenset({3, 4, 7, 16})
 """ArduSub's modes flagged guided: AUTO, GUIDED, CIRCLE, POSHOLD."""
 MAV_PARAM_TYPE_INT16 = 4
+GPS_FIX_TYPE_NO_FIX = 1
+UINT16_UNKNOWN = 65535
 MAV_SENSOR_ROTATION_PITCH_270 = 25
 MAV_DISTANCE_SENSOR_ULTRASOUND = 1
 GRAVITY_MSS = 9.80665
@@ -188,6 +191,9 @@ class MavlinkEncoder:
         it (:class:`sitl.autopilot.SimAutopilot` moves it on a reboot)."""
         self.raw_imu = False
         """Send Imu samples as RAW_IMU (ArduPilot's RAW_SENSORS stream) instead of SCALED_IMU."""
+        self._last_fix = (0, 0, 0, 0)
+        """The newest GPS_RAW_INT fix's ``time_usec``, lat, lon (1e-7 deg) and alt (mm):
+        what AP_GPS keeps through a loss of the fix (zeros before the first)."""
 
     def _pack(self, msg, sender=None) -> bytes:
         """``msg`` packed by ``sender`` (a MAVLink instance; default the autopilot's)."""
@@ -196,6 +202,16 @@ class MavlinkEncoder:
         mav.seq = (mav.seq + 1) % 256
         self.frames += 1
         return buf
+
+    def gps_no_fix(self) -> bytes:
+        """GPS_RAW_INT of an epoch without a fix, as AP_GPS sends it at its stream rate
+        through a loss: fix_type NO_FIX, the last fix's place, and its ``time_usec``
+        (``last_fix_time_ms``, held: 768,005,000 in every frame of the ArduSub tlog's loss
+        at 79-82 s); accuracy, speed and course unknown, no satellites."""
+        time_usec, lat, lon, alt_mm = self._last_fix
+        return self._pack(self.mav.gps_raw_int_encode(
+            time_usec, GPS_FIX_TYPE_NO_FIX, lat, lon, alt_mm, UINT16_UNKNOWN, UINT16_UNKNOWN,
+            0, UINT16_UNKNOWN, 0))
 
     def set_parameters(self, params: Sequence[Parameter]) -> None:
         """The parameter set, so PARAM_VALUE carries the right count and indices."""
@@ -233,14 +249,18 @@ class MavlinkEncoder:
                 alt_mm = int(round((s.alt_m or 0.0) * 1000.0))
                 # time_usec: the fix's boot time, as AP_GPS sends it (last_fix_time_ms;
                 # 689,065,000 at the ArduSub tlog's first), not Unix time
+                self._last_fix = (max(0, int(round((t - self.boot_t0) * 1e6))),
+                                  int(round(s.lat_deg * 1e7)), int(round(s.lon_deg * 1e7)),
+                                  alt_mm)
+                time_usec, lat, lon, _ = self._last_fix
                 out.append(self._pack(m.gps_raw_int_encode(
-                    max(0, int(round((t - self.boot_t0) * 1e6))),
-                    3 if s.fix_quality == 1 else 4,
-                    int(round(s.lat_deg * 1e7)), int(round(s.lon_deg * 1e7)), alt_mm,
+                    time_usec, 3 if s.fix_quality == 1 else 4, lat, lon, alt_mm,
                     _u16((s.hdop or 0.0) * 100.0) if s.hdop is not None else 65535, 65535,
                     _u16((s.sog_mps or 0.0) * 100.0), cog, s.num_sats or 255, alt_mm,
                     int(round((s.h_acc_m or 0.0) * 1000.0)),
                     int(round((s.v_acc_m or 0.0) * 1000.0)), 0, 0, 0)))
+            elif isinstance(s, GnssNoFix):
+                out.append(self.gps_no_fix())
             elif isinstance(s, VelocityOverGround):
                 out.append(self._global_position(s, ms))
             elif isinstance(s, Heading):

@@ -32,10 +32,11 @@ bytes.
 
 ``Simulation(..., invalid_epochs=True)`` also yields the receivers' epochs without a
 fix (:class:`sitl.sensors.GnssNoFix`) and the heading epochs without a heading
-(:class:`sitl.sensors.HeadingInvalid`), for the NMEA output, which sends them (GGA quality
-0, RMC ``V``, VTG ``N``, an empty HDT; :func:`run` asks for them when it has NMEA sinks).
-They draw no random number and never reach the controller, so the samples, the truth and
-the other outputs are the same with and without them.
+(:class:`sitl.sensors.HeadingInvalid`), for the outputs that send them: NMEA (GGA quality
+0, RMC ``V``, VTG ``N``, an empty HDT) and the telemetry log (GPS_RAW_INT NO_FIX, as
+ArduPilot logs a loss of the fix); :func:`run` asks for them when it has NMEA or MAVLink
+sinks. They draw no random number and never reach the controller, so the samples, the
+truth and the other outputs are the same with and without them.
 """
 
 from __future__ import annotations
@@ -411,7 +412,7 @@ def run(scenario: Scenario | str, duration: float | None = None, seed: int = 0, 
     booted that long before t = 0 (the logged ``time_boot_ms``). Sinks are closed at the end.
     """
     sim = Simulation(scenario, seed, controller=controller, truth_rate_hz=truth_rate_hz,
-                     truth_latlon=False, invalid_epochs=bool(nmea))
+                     truth_latlon=False, invalid_epochs=bool(nmea or mavlink))
     sc = sim.scenario
     dur = sc.duration_s if duration is None else float(duration)
     summary = RunSummary(scenario=sc.name, seed=seed, duration_s=dur)

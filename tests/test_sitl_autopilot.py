@@ -298,8 +298,9 @@ def test_gps_raw_int_goes_out_at_the_rate_asked_fix_or_not() -> None:
     """ArduPilot sends GPS_RAW_INT at the rate asked whatever its receiver gives: asked
     faster than the receiver's fixes, the newest fix again with its time_usec (as 2 of
     the ArduSub tlog's 528), which the service's parser drops as one measurement; in an
-    outage, NO_FIX at the last fix's place, which it rejects as no fix. The simulator
-    sent fixes only as the receiver made them, and nothing at all in an outage."""
+    outage, NO_FIX at the last fix's place and time_usec (held, as the ArduSub tlog's
+    loss at 79-82 s), which it rejects as no fix. The simulator sent fixes only as the
+    receiver made them, and nothing at all in an outage."""
     sim = Simulation("fault-gnss-outage", 1)   # no fix from 30 s to 150 s
     sink = LoopSink()
     ap = autopilot_for(sim, [sink])
@@ -316,6 +317,10 @@ def test_gps_raw_int_goes_out_at_the_rate_asked_fix_or_not() -> None:
     lost = [m for m in decoded(sink, 31.5, 45.0) if m.get_type() == "GPS_RAW_INT"]
     assert len(lost) / 13.5 == pytest.approx(2 * fixes_hz, rel=0.05)
     assert {m.fix_type for m in lost} == {1} and all(m.lat != 0 for m in lost)
+    last_fix = [m for m in decoded(sink, 28.0, 31.5) if m.get_type() == "GPS_RAW_INT"
+                and m.fix_type == 3][-1]
+    assert {(m.time_usec, m.lat, m.lon) for m in lost} == {
+        (last_fix.time_usec, last_fix.lat, last_fix.lon)}
     parser = MavlinkParser()
     fixes = [x for t, f in sink.out for x in parser.feed(f, t) if isinstance(x, GnssFix)]
     sent = [m for m in decoded(sink) if m.get_type() == "GPS_RAW_INT"]

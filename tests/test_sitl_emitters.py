@@ -119,6 +119,32 @@ def test_the_nmea_output_goes_on_every_epoch_through_a_gnss_outage(tmp_path):
     assert parser.stats.rejected == {"no_fix": 2 * 21}  # each epoch, and its VTG
 
 
+def test_the_tlog_logs_each_epoch_without_a_fix_as_ardupilot_does(tmp_path):
+    """fault-gnss-outage loses the fix from 30 s: each receiver epoch without one is a
+    GPS_RAW_INT of fix_type NO_FIX at the last fix's place and ``time_usec``, held as
+    AP_GPS holds ``last_fix_time_ms`` (the ArduSub tlog of ../shared/data through its
+    loss at 79-82 s), where the simulator's tlog had nothing; the tlog reader counts each
+    ``no_fix`` and takes the same 150 fixes (docs/sitl.md)."""
+    from pymavlink import mavutil
+
+    from onboard.drivers.tlog import TlogReader
+
+    path = tmp_path / "a.tlog"
+    run_to_tlog("fault-gnss-outage", path, duration=34.0, seed=1)
+    log = mavutil.mavlink_connection(str(path))
+    gps = []
+    while (m := log.recv_match(type="GPS_RAW_INT")) is not None:
+        gps.append(m)
+    assert [m.fix_type for m in gps] == [3] * 150 + [1] * 21  # 5 Hz, the fix lost at 30 s
+    last = gps[149]
+    assert {(m.time_usec, m.lat, m.lon, m.alt) for m in gps[150:]} == {
+        (last.time_usec, last.lat, last.lon, last.alt)}
+    assert {(m.eph, m.cog, m.satellites_visible) for m in gps[150:]} == {(65535, 65535, 0)}
+    reader = TlogReader(path)
+    assert sum(isinstance(s, GnssFix) for s in reader) == 150
+    assert reader.stats.rejected["no_fix"] == 21
+
+
 def test_the_nmea_output_sends_an_empty_hdt_while_the_heading_is_invalid(tmp_path):
     """jaiabot-turns with the compass's ``invalid_windows`` option (2.0-2.5 s): an empty
     HDT every 0.1 s in the window, which the driver counts as ``empty``; the headings of
