@@ -109,7 +109,35 @@ def test_dvl_innovations_larger_than_expected_scale_the_imu_noise() -> None:
         f.v = rng.normal(0.0, 3.0 * np.sqrt(np.diag(f.P)[3:6]))
         f.update_body_velocity(np.zeros(3), 1e-8)
     assert f.process_scale > 3.0
-    assert "dvl" not in f.noise_scale  # the DVL's own noise is its figure of merit
+    assert f.noise_scale["dvl"] == 1.0  # the DVL's own noise is its figure of merit
+
+
+def _dvl_run(dvl_over_fom: float) -> EsesoFilter:
+    """A level filter at rest for 400 s: an IMU as noisy as configured, a DVL at 5 Hz whose
+    noise is ``dvl_over_fom`` times the 0.01 m/s its figure of merit reports."""
+    f = _level_filter(noise={"adapt_updates": 50, "scale_max": 9.0})
+    n = f.params.noise
+    rng = np.random.default_rng(2)
+    fom = 0.01
+    for _ in range(2000):
+        f.propagate(GRAVITY_ONLY + rng.normal(0.0, n.accel_std_mps2, 3),
+                    rng.normal(0.0, n.gyro_std_rps, 3), 0.2)
+        f.update_body_velocity(rng.normal(0.0, dvl_over_fom * fom, 3), fom ** 2)
+    return f
+
+
+def test_dvl_noise_larger_than_its_figure_of_merit_is_the_dvls_not_the_imus() -> None:
+    """A DVL whose noise is 1.8 times the sigma it reports (a Water Linked A50's figure of
+    merit is 0.53-0.62 of its scatter, docs/eseso-mpc.md): the gain is then too high and
+    successive innovations correlate negatively, which says the excess is the DVL's; its
+    scale is learnt (1.8^2 = 3.24) and the IMU's noise stays as configured, where the
+    DVL's excess used to raise the IMU's scale instead (measured: DVL 2.99, IMU 1.16; with
+    a figure of merit that is the noise's, both 1)."""
+    f = _dvl_run(1.8)
+    assert f.noise_scale["dvl"] == pytest.approx(1.8 ** 2, rel=0.2)
+    assert f.process_scale < 1.3
+    honest = _dvl_run(1.0)
+    assert honest.noise_scale["dvl"] == 1.0 and honest.process_scale < 1.1
 
 
 def test_a_thruster_noisier_than_the_imu_explains_is_learnt_up_to_its_own_ceiling() -> None:

@@ -264,7 +264,21 @@ PROCESS_ADAPT_CHANNEL = "dvl"
 and attitude; :meth:`EsesoFilter._adapt_process`): the DVL is the filter's velocity
 reference and reports its own noise per ping (its figure of merit, floored), while the
 IMU's noise is a configured number nobody measures on the vehicle, so DVL innovations
-larger than ``H P H^T + R`` say the propagated velocity is too confident."""
+larger than ``H P H^T + R`` say the propagated velocity is too confident, unless they say
+the figure of merit is what is too small (:data:`DVL_OWN_NOISE_LAG1`)."""
+DVL_OWN_NOISE_LAG1 = -0.2
+"""Below this correlation of successive normalized DVL innovations (their windowed lag-1,
+:meth:`EsesoFilter._adapt_dvl_noise`) the DVL's own noise is taken as larger than its
+figure of merit says, and learnt: a measurement noise set too small against the
+forecast's makes the gain too high and successive innovations correlate negatively, a
+process noise set too small positively (Mehra 1970). Measured on the 60-s closed loop
+(docs/eseso-mpc.md, "DVL"): -0.09 to -0.10 with a figure of merit that is the noise's
+sigma, -0.32 with a Water Linked A50's (0.55 of it); 0.1 is the standard error of a
+100-update mean of white innovations."""
+DVL_OWN_NOISE_RELEASE_LAG1 = 0.0
+"""Once :data:`DVL_OWN_NOISE_LAG1` has said the excess is the DVL's, it is until the lag-1
+turns positive (a process noise set too small): its scale learnt to the full excess takes
+the lag only back to the closed loop's own -0.1, not to zero."""
 NARROWING_MEMORY = 10
 """The thrust innovations' ratio that narrows the published disturbance sigma is their
 exponential mean over this many times ``noise.adapt_updates`` (the one that widens it
@@ -494,7 +508,8 @@ class EsesoFilter:
         R_tau: the thrust update's noise covariance at the last thrust update
             (:meth:`thrust_noise`, N^2), before the other states' share and the scales.
         noise_scale: per sensor channel, the variance scale its noise is multiplied by
-            (1 to ``noise.scale_max``; :meth:`update`).
+            (1 to ``noise.scale_max``; :meth:`update`; the DVL's,
+            :meth:`_adapt_dvl_noise`).
         process_scale: the variance scale of the IMU's white noise in the propagation
             (1 to ``noise.scale_max``; :data:`PROCESS_ADAPT_CHANNEL`).
         disturbance_excess: per body axis, the error variance of ``xi`` (N^2) that the
@@ -542,6 +557,14 @@ class EsesoFilter:
         self.noise_scale: dict[str, float] = {}
         self.process_scale = 1.0
         self._noise_mean: dict[str, float] = {}
+        self._dvl_w: Array | None = None  # the last DVL update's y / sqrt(tr S)
+        self._dvl_lag = 0.0  # E[w_k . w_(k-1)] of the DVL updates
+        self._dvl_power = 0.0  # E[w_k . w_k]
+        self._dvl_updates = 0
+        self.dvl_own_noise = False
+        """Whether the DVL's innovations say its own noise is larger than its figure of merit
+        (:meth:`_adapt_dvl_noise`): then its scale is learnt and the IMU's relaxes
+        (:meth:`_relax_process`), else the DVL's excess scales the IMU's noise."""
         self._model_terms: Array | None = None  # rows tau, D(nu) nu at the last update
         self.disturbance_excess = np.zeros(3)
         self._excess_ratio = np.ones(3)  # E[y_i^2] / S_ii of the thrust innovations
@@ -681,6 +704,8 @@ class EsesoFilter:
         if self.params.noise.adapt_updates > 0:
             if channel in NOISE_ADAPT_CHANNELS:
                 Rm = Rm * self._adapt_noise(channel, y, self._project(H), Rm)
+            elif channel == PROCESS_ADAPT_CHANNEL and self.dvl_own_noise:
+                self._relax_process()
             elif channel == PROCESS_ADAPT_CHANNEL:
                 self._adapt_process(y, self._project(H), Rm)
         up = self._kalman(y, H, Rm, only)
@@ -711,7 +736,10 @@ class EsesoFilter:
         if c.adapt_updates > 0 and channel in NOISE_ADAPT_CHANNELS:
             adapt = kernel.ADAPT_NOISE
         elif c.adapt_updates > 0 and channel == PROCESS_ADAPT_CHANNEL:
-            adapt, key = kernel.ADAPT_PROCESS, "process"
+            if self.dvl_own_noise:
+                self._relax_process()
+            else:
+                adapt, key = kernel.ADAPT_PROCESS, "process"
         n_rej = self._consecutive.get(channel, 0) + 1
         lo, hi = (0, N_ERR) if only is None else (only.start, only.stop)
         outcome, nis, S, mean, scale = kernel.fuse(
@@ -836,6 +864,52 @@ class EsesoFilter:
         p = np.maximum(np.diag(self.P)[XI], 0.0)
         return np.maximum(p + self.disturbance_excess, PUBLISHED_VAR_MIN_SHARE * p)
 
+    def _adapt_dvl_noise(self, var: float) -> None:
+        """Learn the DVL's own noise scale from the update just fused (:attr:`y`, :attr:`S`;
+        its noise ``var`` per axis before the scale): the windowed lag-1 correlation of
+        ``w = y / sqrt(tr S)`` over ``noise.adapt_updates`` updates; once that many are in
+        and it is below :data:`DVL_OWN_NOISE_LAG1` (:attr:`dvl_own_noise`, until it is above
+        :data:`DVL_OWN_NOISE_RELEASE_LAG1`), covariance matching on the DVL's noise,
+        ``E[y^T y] = tr(H P H^T) + s tr(R_0)``: ``s + (y^T y - tr S) / tr(R_0)`` is a sample
+        of ``s``, its exponential mean (samples capped at :data:`NOISE_SAMPLE_CAP`) clipped
+        to [1, ``noise.scale_max``] the scale of the next updates. Held otherwise: the
+        excess is then the process noise's (:meth:`_adapt_process`, which takes the DVL's
+        noise with this scale; while the DVL's, :meth:`_relax_process`)."""
+        y, S = self.y, self.S
+        assert y is not None and S is not None
+        c = self.params.noise
+        S_trace = float(S.trace())
+        w = y / math.sqrt(S_trace)
+        gain = 1.0 / c.adapt_updates
+        self._dvl_power += gain * (float(w @ w) - self._dvl_power)
+        if self._dvl_w is not None:
+            self._dvl_lag += gain * (float(w @ self._dvl_w) - self._dvl_lag)
+        self._dvl_w = w
+        self._dvl_updates += 1
+        if self._dvl_updates >= c.adapt_updates and self._dvl_power > 0.0:
+            lag1 = self._dvl_lag / self._dvl_power
+            if lag1 < DVL_OWN_NOISE_LAG1:
+                self.dvl_own_noise = True
+            elif lag1 > DVL_OWN_NOISE_RELEASE_LAG1:
+                self.dvl_own_noise = False
+        scale = self.noise_scale.get("dvl", 1.0)
+        if self.dvl_own_noise:
+            sample = min(scale + (float(y @ y) - S_trace) / (len(y) * var), NOISE_SAMPLE_CAP)
+            mean = self._noise_mean.get("dvl", 1.0)
+            mean += gain * (sample - mean)
+            self._noise_mean["dvl"] = mean
+            scale = min(max(mean, 1.0), c.scale_max)
+        self.noise_scale["dvl"] = scale
+
+    def _relax_process(self) -> None:
+        """A DVL update whose excess is the DVL's own (:attr:`dvl_own_noise`): the IMU's
+        noise scale's mean takes a sample of 1 instead of :meth:`_adapt_process`'s, so a
+        scale the DVL's excess had raised returns to the configured noise."""
+        mean = self._noise_mean.get("process", 1.0)
+        mean += (1.0 - mean) / self.params.noise.adapt_updates
+        self._noise_mean["process"] = mean
+        self.process_scale = min(max(mean, 1.0), self.params.noise.scale_max)
+
     def _adapt_process(self, y: Array, HPHt: Array, Rm: Array) -> None:
         """Scale the IMU's white noise from the DVL innovation ``y`` (a fading factor, Xia
         et al. 1994): ``(y^T y - tr(R)) / tr(H P H^T)`` is a sample of how much larger the
@@ -926,7 +1000,11 @@ class EsesoFilter:
         H = np.zeros((3, N_ERR))
         H[:, V_] = self.R.T
         H[:, TH] = skew(nu)
-        return self.update("dvl", z - nu, H, _I3 * var, t=t, source=source)
+        scale = self.noise_scale.get("dvl", 1.0)
+        outcome = self.update("dvl", z - nu, H, _I3 * (var * scale), t=t, source=source)
+        if outcome is Outcome.FUSED and self.params.noise.adapt_updates > 0:
+            self._adapt_dvl_noise(var)
+        return outcome
 
     def update_attitude(self, R_meas: Array, roll: float, pitch: float,
                         var_roll_pitch: float, var_yaw: float, *,

@@ -59,7 +59,8 @@ configuration (:class:`EsesoConfig`), sample handling, estimate records and heal
   covariance matching, ``EsesoFilter.disturbance_excess``), which the filter's gain does
   not use: the ``xi`` a controller consumes keeps its tuning, the sigma says how wrong
   it is (docs/eseso-mpc.md). The noise scales the filter learns from its innovations are
-  in health (``noise_scale.<channel>``, ``noise_scale.imu``; the thrust channel's too).
+  in health (``noise_scale.<channel>``, ``noise_scale.imu``; the thrust channel's and the
+  DVL's too: a DVL noisier than its figure of merit says, algorithms.md §5).
 * **Position**: from the first fused GNSS fix (the local origin), or without one from the
   configured start point, then dead-reckoned with the DVL; its std grows without GNSS.
 
