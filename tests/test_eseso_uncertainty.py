@@ -130,9 +130,8 @@ def test_dvl_noise_larger_than_its_figure_of_merit_is_the_dvls_not_the_imus() ->
     """A DVL whose noise is 1.8 times the sigma it reports (a Water Linked A50's figure of
     merit is 0.53-0.62 of its scatter, docs/eseso-mpc.md): the gain is then too high and
     successive innovations correlate negatively, which says the excess is the DVL's; its
-    scale is learnt (1.8^2 = 3.24) and the IMU's noise stays as configured, where the
-    DVL's excess used to raise the IMU's scale instead (measured: DVL 2.99, IMU 1.16; with
-    a figure of merit that is the noise's, both 1)."""
+    scale is learnt (1.8^2 = 3.24) and the IMU's noise stays as configured (measured: DVL
+    2.99, IMU 1.16; with a figure of merit that is the noise's, both 1)."""
     f = _dvl_run(1.8)
     assert f.noise_scale["dvl"] == pytest.approx(1.8 ** 2, rel=0.2)
     assert f.process_scale < 1.3

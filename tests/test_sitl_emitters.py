@@ -123,8 +123,8 @@ def test_the_tlog_logs_each_epoch_without_a_fix_as_ardupilot_does(tmp_path):
     """fault-gnss-outage loses the fix from 30 s: each receiver epoch without one is a
     GPS_RAW_INT of fix_type NO_FIX at the last fix's place and ``time_usec``, held as
     AP_GPS holds ``last_fix_time_ms`` (the ArduSub tlog of ../shared/data through its
-    loss at 79-82 s), where the simulator's tlog had nothing; the tlog reader counts each
-    ``no_fix`` and takes the same 150 fixes (docs/sitl.md)."""
+    loss at 79-82 s); the tlog reader counts each ``no_fix`` and takes the 150 fixes
+    (docs/sitl.md)."""
     from pymavlink import mavutil
 
     from onboard.drivers.tlog import TlogReader
