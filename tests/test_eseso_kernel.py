@@ -192,11 +192,13 @@ def test_compiled_thrust_model_agrees_with_the_reference(with_wdot: bool) -> Non
         assert _gap(h, h_ref) <= TOL and _gap(H, H_ref) <= TOL
 
 
-@pytest.mark.parametrize("channel", ["depth", "dvl", "zupt"])
-def test_compiled_update_agrees_with_the_reference(channel: str) -> None:
+@pytest.mark.parametrize("channel, dvl_own_noise", [("depth", False), ("dvl", False),
+                                                    ("dvl", True), ("zupt", False)])
+def test_compiled_update_agrees_with_the_reference(channel: str, dvl_own_noise: bool) -> None:
     """:meth:`EsesoFilter.update` whole (:func:`.eseso_kernel.fuse`): the noise
-    adaptation of a sensor channel (``depth``), of the IMU (``dvl``) and none (``zupt``),
-    the gate's three outcomes (fused, gated, recovered after the rejections in a row)."""
+    adaptation of a sensor channel (``depth``), of the IMU (``dvl``; with
+    ``dvl_own_noise``, the IMU's scale relaxing instead) and none (``zupt``), the gate's
+    three outcomes (fused, gated, recovered after the rejections in a row)."""
     rng = np.random.default_rng(len(channel))
     ref, fast = _filters()
     outcomes = set()
@@ -204,6 +206,7 @@ def test_compiled_update_agrees_with_the_reference(channel: str) -> None:
         _random_state(ref, rng)
         ref._noise_mean = {ch: float(rng.uniform(0.5, 5.0)) for ch in ("depth", "process")}
         ref.process_scale = float(rng.uniform(1.0, 3.0))
+        ref.dvl_own_noise = dvl_own_noise
         ref._consecutive = {channel: int(rng.integers(0, 6))}
         _same_state(ref, fast)
         rows = 1 if channel == "depth" else 3
