@@ -905,10 +905,7 @@ class EsesoFilter:
         """A DVL update whose excess is the DVL's own (:attr:`dvl_own_noise`): the IMU's
         noise scale's mean takes a sample of 1 instead of :meth:`_adapt_process`'s, so a
         scale the DVL's excess had raised returns to the configured noise."""
-        mean = self._noise_mean.get("process", 1.0)
-        mean += (1.0 - mean) / self.params.noise.adapt_updates
-        self._noise_mean["process"] = mean
-        self.process_scale = min(max(mean, 1.0), self.params.noise.scale_max)
+        self._process_sample(1.0)
 
     def _adapt_process(self, y: Array, HPHt: Array, Rm: Array) -> None:
         """Scale the IMU's white noise from the DVL innovation ``y`` (a fading factor, Xia
@@ -917,10 +914,15 @@ class EsesoFilter:
         (the prior already carries it); its exponential mean over ``noise.adapt_updates``
         updates, clipped to [1, ``noise.scale_max``], multiplies the accelerometer and
         gyro noise variances of the next propagations (:attr:`process_scale`)."""
-        c = self.params.noise
         ratio = (float(y @ y) - float(Rm.trace())) / max(float(HPHt.trace()), 1e-300)
         # P already carries the current scale: the sample is the scale times the ratio
-        sample = min(self.process_scale * ratio, NOISE_SAMPLE_CAP)
+        self._process_sample(min(self.process_scale * ratio, NOISE_SAMPLE_CAP))
+
+    def _process_sample(self, sample: float) -> None:
+        """One sample of the IMU's noise scale into its exponential mean over
+        ``noise.adapt_updates``; :attr:`process_scale` the mean clipped to [1,
+        ``noise.scale_max``]."""
+        c = self.params.noise
         mean = self._noise_mean.get("process", 1.0)
         mean += (sample - mean) / c.adapt_updates
         self._noise_mean["process"] = mean
