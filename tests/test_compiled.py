@@ -58,24 +58,9 @@ def test_the_test_extra_pins_the_mypyc_that_setup_py_names():
     assert f"mypy=={setup_constant('MYPYC_VERSION')}" in extras
 
 
-BUILD_NICENESS = 10
-"""The compiled build (mypyc and gcc, a minute of CPU) runs at this niceness: the live
-flights of the other test worker (simulator and service on a shared clock) then keep up
-beside it instead of flying again slower."""
-
-
-def niced_python(work: Path) -> str:
-    """A script that runs this interpreter at :data:`BUILD_NICENESS` (``nice``), for
-    :func:`.install.build_wheel`'s ``python``."""
-    script = work / "python-niced"
-    script.write_text(f'#!/bin/sh\nexec nice -n {BUILD_NICENESS} "{sys.executable}" "$@"\n')
-    script.chmod(0o755)
-    return str(script)
-
-
 def compiled_venv(work: Path, opt_level: str) -> Path:
-    """The compiled wheel, built at gcc's ``-O<opt_level>`` (niced: :data:`BUILD_NICENESS`),
-    installed into a fresh venv outside the checkout."""
+    """The compiled wheel, built at gcc's ``-O<opt_level>``, installed into a fresh venv
+    outside the checkout."""
     from onboard.apps.install import build_wheel, make_venv
     from tests.helpers.installed import OFFLINE_BUILD, fresh_venv
 
@@ -83,8 +68,7 @@ def compiled_venv(work: Path, opt_level: str) -> Path:
     mp.setenv("ONBOARD_COMPILE", "1")
     mp.setenv("ONBOARD_COMPILE_OPT", opt_level)
     try:
-        work.mkdir(parents=True, exist_ok=True)
-        wheel = build_wheel(REPO, work / "dist", niced_python(work), OFFLINE_BUILD)
+        wheel = build_wheel(REPO, work / "dist", sys.executable, OFFLINE_BUILD)
     finally:
         mp.undo()
     assert "-py3-none-any" not in wheel.name, wheel.name  # a platform wheel
