@@ -126,6 +126,14 @@ def test_onboard_shore_once_prints_a_snapshot_from_the_queryables(router, capsys
             vehicle="boat9", t=5.0, rates_hz={"gps": 5.0}, rejected={"gnss:nan": 1},
             mode="surface", innovations={"aie": {"surge.rate": ChannelHealth(
                 n=40, rejected=2, dof=1, nis_recent=0.85)}}))
+        # the snapshot says what the router knows when it asks: wait until the vehicle's
+        # liveliness token has reached it (a loaded machine took longer than the query)
+        probe = _client(endpoint)
+        try:
+            assert wait_for(lambda: [r for r in probe.liveliness().get(
+                "onboard/boat9/alive", timeout=5) if r.ok is not None])
+        finally:
+            probe.close()
         args = argparse.Namespace(connect=[endpoint], listen=None, mode=None, vehicle="boat9",
                                   once=True)
         rc = shore.main(args)
