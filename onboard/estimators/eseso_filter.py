@@ -869,12 +869,11 @@ class EsesoFilter:
         its noise ``var`` per axis before the scale): the windowed lag-1 correlation of
         ``w = y / sqrt(tr S)`` over ``noise.adapt_updates`` updates; once that many are in
         and it is below :data:`DVL_OWN_NOISE_LAG1` (:attr:`dvl_own_noise`, until it is above
-        :data:`DVL_OWN_NOISE_RELEASE_LAG1`), covariance matching on the DVL's noise,
-        ``E[y^T y] = tr(H P H^T) + s tr(R_0)``: ``s + (y^T y - tr S) / tr(R_0)`` is a sample
-        of ``s``, its exponential mean (samples capped at :data:`NOISE_SAMPLE_CAP`) clipped
-        to [1, ``noise.scale_max``] the scale of the next updates. Held otherwise: the
-        excess is then the process noise's (:meth:`_adapt_process`, which takes the DVL's
-        noise with this scale; while the DVL's, :meth:`_relax_process`)."""
+        :data:`DVL_OWN_NOISE_RELEASE_LAG1`), covariance matching on the DVL's noise as on
+        the other sensors' (:meth:`_adapt_noise`, ``H P H^T = S - s R_0``), its scale that
+        of the next updates. Held otherwise: the excess is then the process noise's
+        (:meth:`_adapt_process`, which takes the DVL's noise with this scale; while the
+        DVL's, :meth:`_relax_process`)."""
         y, S = self.y, self.S
         assert y is not None and S is not None
         c = self.params.noise
@@ -894,12 +893,10 @@ class EsesoFilter:
                 self.dvl_own_noise = False
         scale = self.noise_scale.get("dvl", 1.0)
         if self.dvl_own_noise:
-            sample = min(scale + (float(y @ y) - S_trace) / (len(y) * var), NOISE_SAMPLE_CAP)
-            mean = self._noise_mean.get("dvl", 1.0)
-            mean += gain * (sample - mean)
-            self._noise_mean["dvl"] = mean
-            scale = min(max(mean, 1.0), c.scale_max)
-        self.noise_scale["dvl"] = scale
+            R0 = _I3 * var
+            self._adapt_noise("dvl", y, S - scale * R0, R0)
+        else:
+            self.noise_scale["dvl"] = scale
 
     def _relax_process(self) -> None:
         """A DVL update whose excess is the DVL's own (:attr:`dvl_own_noise`): the IMU's
